@@ -1,0 +1,11 @@
+"""jaxexo: swing-foot trajectories for lower-limb exoskeletons over low obstacles, learned by TD(lambda).
+
+Importing ``jaxexo`` needs only NumPy and SciPy. The JAX parts (``jaxexo.env``, the trainer) are
+imported on demand and need the ``train`` extra."""
+
+__version__ = "0.1.0"
+
+from jaxexo.config import Config, ConfigError, load_config  # noqa: E402
+from jaxexo.geometry import GeometryError, Obstacle  # noqa: E402
+
+__all__ = ["Config", "ConfigError", "load_config", "Obstacle", "GeometryError", "__version__"]

@@ -1,0 +1,13 @@
+"""The JAX stepping environment (needs the ``train`` extra: jax, flax)."""
+
+from jaxexo.env.exo_step import (
+    LENGTH_SCALE,
+    NUM_ACTIONS,
+    EnvState,
+    ExoStepEnv,
+    Layout,
+    make_layout,
+)
+from jaxexo.env.params import EnvParams
+
+__all__ = ["ExoStepEnv", "EnvParams", "EnvState", "Layout", "make_layout", "NUM_ACTIONS", "LENGTH_SCALE"]

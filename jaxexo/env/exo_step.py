@@ -1,0 +1,259 @@
+"""ExoStepEnv: the swing heel of a lower-limb exoskeleton stepping over a low obstacle (thesis ch. 2).
+
+Pure JAX, gymnax 1.0 contract: ``reset(key, params) -> (obs, state)`` and
+``step(key, state, action, params) -> (obs, state, reward, terminated, truncated, info)`` with
+auto-reset; ``step_env``/``reset_env`` are the un-reset transitions. State, layout and params are
+frozen flax.struct pytrees, so everything jits and vmaps over thousands of episodes, and params vmap
+over configurations.
+
+Geometry, kinematics and reward terms come from jaxexo.geometry, jaxexo.kinematics and
+jaxexo.rewards (array-module generic, shared with the NumPy generator).
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from flax import struct
+
+from jaxexo import geometry, kinematics, rewards
+from jaxexo.config import PIVOT_CONDITIONS, Config
+from jaxexo.env import spaces
+from jaxexo.env.params import EnvParams
+
+NUM_ACTIONS = 36
+# Lengths in observations are divided by this (m), so that they are of order 1.
+LENGTH_SCALE = 0.5
+# Thesis-mode observation centre (m): the middle of a default step, a little above the ground.
+THESIS_OBS_CENTER = (0.35, 0.10)
+
+
+@struct.dataclass
+class Layout:
+    """One episode's scene. ``outline`` is world-frame (K, 2); ``shape`` the obstacle's heights (m)
+    at equally spaced fractions of its width; ``kind`` indexes the config's obstacle mixture
+    (-1 for an obstacle given directly); ``pivot_kind`` indexes PIVOT_CONDITIONS."""
+
+    outline: jnp.ndarray
+    shape: jnp.ndarray
+    center_y: jnp.ndarray
+    width: jnp.ndarray
+    height: jnp.ndarray
+    kind: jnp.ndarray
+    pivot_kind: jnp.ndarray
+    pivot_y: jnp.ndarray
+    start_y: jnp.ndarray
+    goal_y: jnp.ndarray
+
+
+@struct.dataclass
+class EnvState:
+    heel: jnp.ndarray          # (2,) swing heel (y, z), m
+    time: jnp.ndarray          # steps taken this episode (gymnax name)
+    visited_mid: jnp.ndarray   # bool: the heel has passed through the mid-goal box
+    layout: Layout
+
+
+def pivot_position(pivot_kind, start_y, center_y):
+    """The three thesis pivot conditions (3.1): aligned with the agent, with the obstacle centre,
+    or half-way between."""
+    return jnp.select(
+        [pivot_kind == 0, pivot_kind == 1], [start_y, center_y], 0.5 * (start_y + center_y)
+    )
+
+
+def make_layout(obstacle: geometry.Obstacle, pivot: str | float, start_y: float = 0.0,
+                step_length: float = 0.70, shape_points: int = geometry.DEFAULT_SHAPE_POINTS) -> Layout:
+    """A fixed layout from an Obstacle (NumPy side; use for evaluation on chosen scenes).
+
+    ``pivot`` is one of PIVOT_CONDITIONS or a pivot heel y in metres."""
+    if isinstance(pivot, str):
+        if pivot not in PIVOT_CONDITIONS:
+            raise ValueError(f"pivot must be one of {PIVOT_CONDITIONS} or a y in metres, got {pivot!r}")
+        pk = PIVOT_CONDITIONS.index(pivot)
+        py = [start_y, obstacle.center_y, 0.5 * (start_y + obstacle.center_y)][pk]
+    else:
+        pk, py = -1, float(pivot)
+    if not step_length > 0:
+        raise ValueError(f"step_length must be > 0 m, got {step_length}")
+    shape = obstacle.height * geometry.shape_descriptor(obstacle.unit_outline, shape_points)
+    f = lambda x: jnp.asarray(x, dtype=jnp.float32)  # noqa: E731
+    return Layout(
+        outline=f(obstacle.outline), shape=f(shape), center_y=f(obstacle.center_y),
+        width=f(obstacle.width), height=f(obstacle.height), kind=jnp.asarray(-1, jnp.int32),
+        pivot_kind=jnp.asarray(pk, jnp.int32), pivot_y=f(py), start_y=f(start_y),
+        goal_y=f(start_y + step_length),
+    )
+
+
+class ExoStepEnv:
+    """The stepping environment. Static settings (shapes) live on the instance; the rest in EnvParams.
+
+    ``obs_mode``: ``"thesis"`` observes the heel's (y, z) only, as the thesis network;
+    ``"conditioned"`` also observes the scene (obstacle extents and shape, goal, mid-goal and pivot
+    relative to the heel, progress), so one policy can serve every layout."""
+
+    def __init__(self, config: Config | None = None):
+        self.config = config if config is not None else Config()
+        self.obs_mode = self.config.env.obs_mode
+        self.shape_points = self.config.env.shape_points
+        self._default_params = None
+
+    # gymnax-style properties --------------------------------------------------------------
+    @property
+    def default_params(self) -> EnvParams:
+        if self._default_params is None:
+            self._default_params = EnvParams.from_config(self.config)
+        return self._default_params
+
+    @property
+    def name(self) -> str:
+        return "ExoStep-v0"
+
+    @property
+    def num_actions(self) -> int:
+        return NUM_ACTIONS
+
+    @property
+    def obs_dim(self) -> int:
+        return 2 if self.obs_mode == "thesis" else 14 + self.shape_points
+
+    def action_space(self, params: EnvParams | None = None):
+        return spaces.discrete(NUM_ACTIONS)
+
+    def observation_space(self, params: EnvParams | None = None):
+        return spaces.box(-np.inf, np.inf, (self.obs_dim,), jnp.float32)
+
+    # Layout sampling ----------------------------------------------------------------------
+    def sample_layout(self, key, params: EnvParams) -> Layout:
+        """Draw one scene from the layout distribution in params (obstacle kind and size, position
+        jitter, pivot condition, start shift, step length)."""
+        kk, kw, kh, kj, ko, kp, ks, kl = jax.random.split(key, 8)
+        kind = jax.random.categorical(kk, params.kind_logits)
+        u = lambda k, r: r[0] + (r[1] - r[0]) * jax.random.uniform(k)  # noqa: E731
+        jit_w, jit_h = jax.random.uniform(kj, (2,), minval=-1.0, maxval=1.0) * params.size_jitter
+        width = u(kw, params.kind_width[kind]) * (1.0 + jit_w)
+        height = u(kh, params.kind_height[kind]) * (1.0 + jit_h)
+        step_length = u(kl, params.step_length)
+        start_y = u(ks, params.start_shift)
+        center = 0.5 * (params.foot_length + step_length) + u(ko, params.obstacle_offset)
+        pivot_kind = jax.random.categorical(kp, params.pivot_logits)
+        unit = params.kind_outlines[kind]
+        outline = jnp.stack([center + width * unit[:, 0], height * unit[:, 1]], axis=-1)
+        return Layout(
+            outline=outline, shape=height * params.kind_shape[kind], center_y=center, width=width,
+            height=height, kind=kind.astype(jnp.int32), pivot_kind=pivot_kind.astype(jnp.int32),
+            pivot_y=pivot_position(pivot_kind, start_y, center), start_y=start_y,
+            goal_y=start_y + step_length,
+        )
+
+    def init_state(self, layout: Layout, params: EnvParams) -> tuple[jnp.ndarray, EnvState]:
+        """Start an episode on a given layout: the heel on the ground at the start."""
+        heel = jnp.stack([layout.start_y, jnp.zeros_like(layout.start_y)])
+        state = EnvState(heel=heel, time=jnp.asarray(0, jnp.int32), visited_mid=jnp.asarray(False),
+                         layout=layout)
+        return self.get_obs(state, params), state
+
+    # gymnax transitions ----------------------------------------------------------------------
+    def reset_env(self, key, params: EnvParams):
+        return self.init_state(self.sample_layout(key, params), params)
+
+    def reset(self, key, params: EnvParams | None = None):
+        params = self.default_params if params is None else params
+        return self.reset_env(key, params)
+
+    def mid_goal(self, layout: Layout, params: EnvParams):
+        """Centre of the mid-goal box (thesis 2.2): above the obstacle centre, at a safe height."""
+        return jnp.stack([layout.center_y, layout.height + params.mid_goal_clearance])
+
+    def step_env(self, key, state: EnvState, action, params: EnvParams):
+        lay = state.layout
+        prev = state.heel
+        lo = jnp.stack([params.bounds_y[0], 0.0])
+        hi = jnp.stack([params.bounds_y[1], params.max_z_world])
+        heel = jnp.clip(prev + params.step_size * params.directions[action], lo, hi)
+        time = state.time + 1
+
+        clearance = geometry.foot_clearance(jnp, heel, params.foot_length, lay.outline)
+        collided = geometry.foot_collides(jnp, clearance)
+        mid = self.mid_goal(lay, params)
+        in_mid = jnp.all(jnp.abs(heel - mid) <= params.mid_goal_half_size)
+        visited = state.visited_mid | in_mid
+        missed_mid = (heel[0] > mid[0] + params.mid_goal_half_size[0]) & ~visited
+        reached = (jnp.abs(heel[0] - lay.goal_y) <= params.goal_tolerance[0]) & (
+            heel[1] <= params.goal_tolerance[1])
+
+        kin = kinematics.leg_state(jnp, lay.pivot_y, heel, params.thigh, params.shin)
+        lim = lambda h, q: kinematics.joint_limit_violation(  # noqa: E731
+            jnp, h, q, params.hip_limits[0], params.hip_limits[1], params.knee_limits[0], params.knee_limits[1])
+        limits_violated = lim(kin["hip_swing"], kin["knee_swing_angle"]) | lim(
+            kin["hip_stance"], kin["knee_stance_angle"])
+
+        traj = rewards.trajectory_terms(
+            jnp, params, steps=time, prev_heel=prev, heel=heel, collided=collided, clearance=clearance,
+            reached_goal=reached, missed_mid=missed_mid, mid_y=mid[0],
+            max_z=lay.height + params.max_height_margin)
+        exo = rewards.exo_terms(
+            jnp, params, hip_z=kin["hip"][1], leg_swing=kin["leg_swing"], leg_stance=kin["leg_stance"],
+            limits_violated=limits_violated)
+        reward = rewards.total_reward(jnp, params, traj, exo)
+
+        terminated = reached | (collided & params.terminate_on_collision)
+        new_state = EnvState(heel=heel, time=time, visited_mid=visited, layout=lay)
+        info = {
+            "traj_terms": traj,
+            "exo_terms": exo,
+            "clearance": clearance,
+            "collision": collided,
+            "goal_reached": reached,
+            "joint_limit_violation": limits_violated,
+            "leg_length_violation": exo[1] < 0,
+            "joint_angles": jnp.stack([kin["hip_swing"], kin["knee_swing_angle"],
+                                       kin["hip_stance"], kin["knee_stance_angle"]]),
+            "heel": heel,
+            "hip": kin["hip"],
+        }
+        return self.get_obs(new_state, params), new_state, reward, terminated, info
+
+    def is_truncated(self, state: EnvState, params: EnvParams):
+        return state.time >= params.max_steps_in_episode
+
+    def step(self, key, state: EnvState, action, params: EnvParams | None = None):
+        """One transition with auto-reset (gymnax 1.0): a finished episode is replaced by a fresh one;
+        ``info["final_observation"]`` keeps the finished episode's last observation, so that a learner
+        can bootstrap through truncation."""
+        params = self.default_params if params is None else params
+        key_step, key_reset = jax.random.split(key)
+        obs_st, state_st, reward, terminated, info = self.step_env(key_step, state, action, params)
+        truncated = self.is_truncated(state_st, params) & ~terminated
+        done = terminated | truncated
+        obs_re, state_re = self.reset_env(key_reset, params)
+        state = jax.tree.map(lambda r, s: jax.lax.select(done, r, s), state_re, state_st)
+        obs = jax.lax.select(done, obs_re, obs_st)
+        info = {**info, "terminated": terminated, "truncated": truncated, "final_observation": obs_st}
+        return obs, state, reward, terminated, truncated, info
+
+    # Observations ---------------------------------------------------------------------------
+    def get_obs(self, state: EnvState, params: EnvParams):
+        heel = state.heel
+        center = jnp.asarray(THESIS_OBS_CENTER, dtype=heel.dtype)
+        base = (heel - center) / LENGTH_SCALE
+        if self.obs_mode == "thesis":
+            return base
+        lay = state.layout
+        mid = self.mid_goal(lay, params)
+        rel = jnp.stack([
+            heel[0] - lay.start_y, heel[1],                      # heel relative to its start
+            lay.goal_y - heel[0], -heel[1],                       # goal relative to the heel
+            mid[0] - heel[0], mid[1] - heel[1],                   # mid-goal relative to the heel
+            lay.pivot_y - heel[0],                                # pivot heel relative to the heel
+            lay.center_y - 0.5 * lay.width - heel[0],             # obstacle near edge
+            lay.center_y + 0.5 * lay.width - heel[0],             # obstacle far edge
+            lay.height - heel[1],                                 # obstacle top
+        ]) / LENGTH_SCALE
+        progress = (state.time / params.max_steps_in_episode).astype(heel.dtype)
+        return jnp.concatenate([
+            base, rel, lay.shape / LENGTH_SCALE,
+            jnp.stack([progress, state.visited_mid.astype(heel.dtype)]),
+        ])

@@ -1,0 +1,301 @@
+"""Obstacle geometry in the sagittal plane, shared by the JAX environment and the NumPy generator.
+
+Frame: y forward, z up, metres. The origin is the swing heel's default start on the ground.
+
+Every obstacle is a *ground obstacle*: the region between the ground (z = 0) and a height-profile
+polyline. Its one fixed-size array representation is the outline, a ``(K, 2)`` array of (y, z)
+vertices with y non-decreasing, the first and last vertex on the ground, padded by repeating the
+last vertex. Degenerate (zero-length) padding edges change neither distances nor inside tests, so
+rectangles (4 vertices), triangles (3), half-ellipses (K, sampled) and user profiles share one
+vmapped batch.
+
+The array functions below take the array module ``xp`` (``numpy`` or ``jax.numpy``) as an argument
+and use only the API both share: this file is the single definition of the geometry for the trainer
+and the NumPy generator (tests run both and compare).
+
+Decisions (thesis-notes "Decisions left to you"):
+- The foot is the heel-to-toe segment, kept parallel to the ground (flat foot, passive ankle): the
+  toe is ``heel + (foot_length, 0)``.
+- The foot-obstacle distance is the exact minimum distance between the heel-toe segment and the
+  obstacle outline (Algorithm 4 approximates it by sampling points of the obstacle). For the
+  half-ellipse the outline is a polygon of ``K`` vertices inscribed in the ellipse (with K = 16 it
+  lies within 1.5 mm of the true curve, inside it).
+- Touching counts as collision: a segment at distance 0 from the outline is in the obstacle.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+# Default number of outline vertices in the fixed-size representation.
+DEFAULT_MAX_VERTICES = 16
+# Number of points of the shape descriptor (heights at fractions of the obstacle's width) that the
+# conditioned observation carries.
+DEFAULT_SHAPE_POINTS = 9
+# Collision tolerance: a foot closer than this to the outline touches it (metres).
+TOUCH_EPS = 1e-6
+
+# The five obstacles of thesis Table 3.1: (shape, width m, height m, used in training).
+THESIS_OBSTACLES = {
+    "base1": ("rectangle", 0.20, 0.10),
+    "base2": ("rectangle", 0.10, 0.15),
+    "base3": ("rectangle", 0.05, 0.20),
+    "triangle": ("triangle", 0.20, 0.20),
+    "half_circle": ("half_ellipse", 0.20, 0.25),
+}
+SHAPES = ("rectangle", "triangle", "half_ellipse", "profile")
+
+
+class GeometryError(ValueError):
+    """An obstacle that cannot exist (bad size, NaN, malformed profile). Names the bad field."""
+
+
+# --------------------------------------------------------------------------------------------
+# Array-module-generic geometry (numpy or jax.numpy). Shapes: points (..., 2); outline (..., K, 2).
+# --------------------------------------------------------------------------------------------
+
+
+def _point_segment_dist2(xp, p, a, b):
+    """Squared distance from points p to segments [a, b]; broadcasts over leading axes."""
+    ab = b - a
+    ap = p - a
+    denom = xp.sum(ab * ab, axis=-1)
+    # Degenerate (padding) edges have denom 0: t = 0 gives the distance to the vertex.
+    t = xp.clip(xp.sum(ap * ab, axis=-1) / xp.maximum(denom, 1e-30), 0.0, 1.0)
+    d = ap - t[..., None] * ab
+    return xp.sum(d * d, axis=-1)
+
+
+def _cross(u, v):
+    return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+
+
+def segments_cross(xp, a, b, c, d):
+    """True where segment [a, b] properly intersects or touches segment [c, d].
+
+    Orientation test; collinear overlaps are caught by the distance test that uses it."""
+    d1 = _cross(b - a, c - a)
+    d2 = _cross(b - a, d - a)
+    d3 = _cross(d - c, a - c)
+    d4 = _cross(d - c, b - c)
+    return (d1 * d2 <= 0.0) & (d3 * d4 <= 0.0) & ((d1 != d2) | (d3 != d4))
+
+
+def segment_outline_distance(xp, p0, p1, outline):
+    """Exact minimum distance between segment [p0, p1] (..., 2) and the outline polyline (..., K, 2).
+
+    For two segments that do not cross, the minimum distance is attained at an endpoint of one of
+    them, so it is the least of: p0 and p1 to every edge, and every outline vertex to [p0, p1]."""
+    a = outline[..., :-1, :]
+    b = outline[..., 1:, :]
+    p0e = p0[..., None, :]
+    p1e = p1[..., None, :]
+    d2 = xp.minimum(_point_segment_dist2(xp, p0e, a, b), _point_segment_dist2(xp, p1e, a, b))
+    dv2 = _point_segment_dist2(xp, outline, p0e, p1e)
+    dmin = xp.sqrt(xp.minimum(xp.min(d2, axis=-1), xp.min(dv2, axis=-1)))
+    crossing = xp.any(segments_cross(xp, p0e, p1e, a, b), axis=-1)
+    return xp.where(crossing, 0.0, dmin)
+
+
+def point_in_obstacle(xp, p, outline):
+    """True where point p (..., 2) lies in the ground obstacle (region under the outline, z >= 0).
+
+    Crossing-number test with a ray towards +y over the outline edges; the closing edge along the
+    ground is horizontal and never crosses a horizontal ray, so it can be left out."""
+    a = outline[..., :-1, :]
+    b = outline[..., 1:, :]
+    py = p[..., None, 0]
+    pz = p[..., None, 1]
+    straddles = (a[..., 1] > pz) != (b[..., 1] > pz)
+    dz = b[..., 1] - a[..., 1]
+    y_at = a[..., 0] + (pz - a[..., 1]) * (b[..., 0] - a[..., 0]) / xp.where(dz == 0.0, 1.0, dz)
+    hits = straddles & (py < y_at)
+    inside = xp.sum(hits.astype(np.int32), axis=-1) % 2 == 1
+    return inside & (p[..., 1] >= 0.0)
+
+
+def foot_clearance(xp, heel, foot_length, outline):
+    """Signed clearance of the flat foot (heel-toe segment) from the obstacle, metres.
+
+    Positive: the exact distance to the outline. Zero or negative: the foot touches or is inside
+    (negative of the distance to the outline when the whole foot is buried)."""
+    toe = heel + xp.stack([foot_length + 0.0 * heel[..., 0], 0.0 * heel[..., 1]], axis=-1)
+    dist = segment_outline_distance(xp, heel, toe, outline)
+    inside = point_in_obstacle(xp, heel, outline)
+    return xp.where(inside, -dist, dist)
+
+
+def foot_collides(xp, clearance):
+    """The foot touches or enters the obstacle (thesis eq 2.30 / 3.1, with the foot's length)."""
+    return clearance <= TOUCH_EPS
+
+
+def profile_height(xp, y, outline):
+    """Height of the obstacle's upper profile at horizontal positions y (...,) -> (...,).
+
+    Over a vertical edge the higher end counts; outside the obstacle the height is 0."""
+    a = outline[..., :-1, :]
+    b = outline[..., 1:, :]
+    ye = y[..., None]
+    dy = b[..., 0] - a[..., 0]
+    within = (ye >= a[..., 0]) & (ye <= b[..., 0])
+    frac = xp.clip((ye - a[..., 0]) / xp.where(dy == 0.0, 1.0, dy), 0.0, 1.0)
+    z = xp.where(dy == 0.0, xp.maximum(a[..., 1], b[..., 1]), a[..., 1] + frac * (b[..., 1] - a[..., 1]))
+    return xp.max(xp.where(within, z, 0.0), axis=-1)
+
+
+# --------------------------------------------------------------------------------------------
+# Building obstacles (NumPy, at the boundary: every input is validated here, never in a jit).
+# --------------------------------------------------------------------------------------------
+
+
+def _finite_positive(name: str, value) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise GeometryError(f"{name} must be a number in metres, got {value!r}") from None
+    if not math.isfinite(v):
+        raise GeometryError(f"{name} must be finite, got {v}")
+    if v <= 0.0:
+        raise GeometryError(f"{name} must be > 0 metres, got {v}")
+    return v
+
+
+def _finite(name: str, value) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise GeometryError(f"{name} must be a number in metres, got {value!r}") from None
+    if not math.isfinite(v):
+        raise GeometryError(f"{name} must be finite, got {v}")
+    return v
+
+
+def unit_profile(shape: str, max_vertices: int = DEFAULT_MAX_VERTICES, points=None) -> np.ndarray:
+    """Outline of a shape in the unit frame: y in [-0.5, 0.5] (times width), z in [0, 1] (times height).
+
+    ``points`` (for ``profile``) are already in the unit frame."""
+    if shape == "rectangle":
+        pts = [(-0.5, 0.0), (-0.5, 1.0), (0.5, 1.0), (0.5, 0.0)]
+    elif shape == "triangle":
+        pts = [(-0.5, 0.0), (0.0, 1.0), (0.5, 0.0)]
+    elif shape == "half_ellipse":
+        # Vertices on the ellipse at equal angle steps from the left foot to the right foot.
+        ang = np.linspace(np.pi, 0.0, max_vertices)
+        pts = list(zip(0.5 * np.cos(ang), np.sin(ang)))
+        pts[0], pts[-1] = (-0.5, 0.0), (0.5, 0.0)
+    elif shape == "profile":
+        pts = [tuple(p) for p in np.asarray(points, dtype=np.float64)]
+    else:
+        raise GeometryError(f"shape must be one of {SHAPES}, got {shape!r}")
+    return pad_outline(np.asarray(pts, dtype=np.float64), max_vertices)
+
+
+def pad_outline(pts: np.ndarray, max_vertices: int) -> np.ndarray:
+    if len(pts) > max_vertices:
+        raise GeometryError(f"profile has {len(pts)} vertices, more than max_vertices={max_vertices}")
+    out = np.empty((max_vertices, 2), dtype=np.float64)
+    out[: len(pts)] = pts
+    out[len(pts):] = pts[-1]
+    return out
+
+
+def shape_descriptor(unit_outline: np.ndarray, n_points: int = DEFAULT_SHAPE_POINTS) -> np.ndarray:
+    """Heights (unit frame, 0..1) at n_points equally spaced fractions across the width.
+
+    Precomputed per obstacle kind so that the conditioned observation costs nothing per step: an
+    obstacle scaled to height h has descriptor h * this."""
+    u = np.linspace(-0.5, 0.5, n_points)
+    # Sample just inside the ends so that vertical sides count as the obstacle's height.
+    u = np.clip(u, -0.5 + 1e-6, 0.5 - 1e-6)
+    return profile_height(np, u, unit_outline)
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """One ground obstacle, in metres. ``outline`` is the fixed-size (K, 2) world-frame array."""
+
+    kind: str
+    shape: str
+    center_y: float
+    width: float
+    height: float
+    unit_outline: np.ndarray  # (K, 2), unit frame
+
+    @property
+    def outline(self) -> np.ndarray:
+        o = self.unit_outline.copy()
+        o[:, 0] = self.center_y + self.width * o[:, 0]
+        o[:, 1] = self.height * o[:, 1]
+        return o
+
+    @property
+    def left(self) -> float:
+        return self.center_y - 0.5 * self.width
+
+    @property
+    def right(self) -> float:
+        return self.center_y + 0.5 * self.width
+
+    # Constructors ---------------------------------------------------------------------------
+    @classmethod
+    def named(cls, kind: str, center_y: float = 0.45, max_vertices: int = DEFAULT_MAX_VERTICES) -> "Obstacle":
+        """One of the five thesis obstacles (Table 3.1): base1, base2, base3, triangle, half_circle."""
+        if kind not in THESIS_OBSTACLES:
+            raise GeometryError(f"kind must be one of {sorted(THESIS_OBSTACLES)}, got {kind!r}")
+        shape, w, h = THESIS_OBSTACLES[kind]
+        return cls._make(kind, shape, center_y, w, h, max_vertices)
+
+    @classmethod
+    def rectangle(cls, width: float, height: float, center_y: float = 0.45, max_vertices: int = DEFAULT_MAX_VERTICES):
+        return cls._make("rectangle", "rectangle", center_y, width, height, max_vertices)
+
+    @classmethod
+    def triangle(cls, width: float, height: float, center_y: float = 0.45, max_vertices: int = DEFAULT_MAX_VERTICES):
+        return cls._make("triangle", "triangle", center_y, width, height, max_vertices)
+
+    @classmethod
+    def half_ellipse(cls, width: float, height: float, center_y: float = 0.45, max_vertices: int = DEFAULT_MAX_VERTICES):
+        return cls._make("half_ellipse", "half_ellipse", center_y, width, height, max_vertices)
+
+    @classmethod
+    def profile(cls, points, max_vertices: int = DEFAULT_MAX_VERTICES) -> "Obstacle":
+        """Any ground obstacle from its height profile: world-frame (y, z) points, y non-decreasing.
+
+        Missing ground end points are added (the profile drops vertically to the ground)."""
+        try:
+            pts = np.asarray(points, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise GeometryError("points must be a sequence of (y, z) pairs in metres") from None
+        if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 2:
+            raise GeometryError(f"points must have shape (n >= 2, 2), got {pts.shape}")
+        if not np.all(np.isfinite(pts)):
+            raise GeometryError("points must be finite (no NaN or inf)")
+        if np.any(np.diff(pts[:, 0]) < 0):
+            raise GeometryError("points must have non-decreasing y (a height profile)")
+        if np.any(pts[:, 1] < 0):
+            raise GeometryError("points must have z >= 0 (a ground obstacle)")
+        if pts[0, 1] > 0:
+            pts = np.vstack([[pts[0, 0], 0.0], pts])
+        if pts[-1, 1] > 0:
+            pts = np.vstack([pts, [pts[-1, 0], 0.0]])
+        y0, y1 = pts[0, 0], pts[-1, 0]
+        width = _finite_positive("points (width)", y1 - y0)
+        height = _finite_positive("points (height)", pts[:, 1].max())
+        center = 0.5 * (y0 + y1)
+        unit = np.column_stack([(pts[:, 0] - center) / width, pts[:, 1] / height])
+        return cls("profile", "profile", center, width, height, pad_outline(unit, max_vertices))
+
+    @classmethod
+    def _make(cls, kind, shape, center_y, width, height, max_vertices):
+        width = _finite_positive("width", width)
+        height = _finite_positive("height", height)
+        center_y = _finite("center_y", center_y)
+        return cls(kind, shape, center_y, width, height, unit_profile(shape, max_vertices))
+
+    def clearance(self, heel: np.ndarray, foot_length: float) -> np.ndarray:
+        """Signed foot clearance (m) for heel positions (..., 2)."""
+        return foot_clearance(np, np.asarray(heel, dtype=np.float64), foot_length, self.outline)

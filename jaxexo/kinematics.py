@@ -1,0 +1,103 @@
+"""Exoskeleton kinematics in the sagittal plane, shared by the JAX environment and the NumPy generator.
+
+Functions take the array module ``xp`` (``numpy`` or ``jax.numpy``); positions are (..., 2) arrays
+of (y, z) in metres, angles are radians.
+
+Decisions (thesis-notes "Typos and contradictions", "Decisions left to you"):
+- Hip model (one for every term): eq 2.42 read as ``dist_y = (p_y - f_y) / 2``. The hip sits above
+  the midpoint of the two heels, at the height of a straight stance leg:
+  ``h = ((p_y + f_y) / 2, sqrt((t + s)^2 - dist_y^2))``, with the pivot heel on the ground. The
+  initial hip of eq 2.3 is the same formula at the start. With this model the stance leg is always
+  exactly one leg length long, so the leg-length term (eq 2.45) fires only when the heels are more
+  than two leg lengths apart, where the hip height is clamped to ``MIN_HIP_HEIGHT_FRACTION`` of the
+  leg and both legs are then too short.
+- Knee IK (eq 2.4-2.11): the knee is the intersection of the circle of radius t about the hip and
+  the circle of radius s about the heel, computed algebraically (no arccos). Of the two solutions we
+  keep the forward-bending one as a pair (the one with larger y), not y and z independently as eq
+  2.11 prints. An unreachable foot (|hip-heel| > t + s) gets the straight leg pointing at it, as the
+  clamp of eq 2.6 does.
+- Joint angles (eq 2.46-2.49, written with atan2 so that they hold beyond +-90 degrees): the hip
+  angle is the thigh's angle from the downward vertical, positive when the knee is ahead of the hip
+  (flexion); the knee angle is the shank's angle minus the thigh's, 0 for a straight leg and negative
+  in flexion. This matches the thesis's tables (knee about -50 deg, hip about +35 deg).
+"""
+
+from __future__ import annotations
+
+# Below this fraction of the leg length the hip height is clamped (heels over two legs apart).
+MIN_HIP_HEIGHT_FRACTION = 0.05
+
+
+def hip_position(xp, pivot_y, heel, thigh, shin):
+    """Hip (..., 2) from the pivot heel's y (on the ground) and the swing heel (eq 2.3, 2.42)."""
+    leg = thigh + shin
+    dist_y = 0.5 * (pivot_y - heel[..., 0])
+    hz2 = leg * leg - dist_y * dist_y
+    hz = xp.sqrt(xp.maximum(hz2, (MIN_HIP_HEIGHT_FRACTION * leg) ** 2))
+    return xp.stack([0.5 * (pivot_y + heel[..., 0]), hz], axis=-1)
+
+
+def knee_position(xp, hip, foot, thigh, shin):
+    """Forward-bending knee (..., 2) for a hip and a heel (eq 2.4-2.11), and |hip - heel| (eq 2.4, 2.44)."""
+    d = foot - hip
+    r = xp.sqrt(xp.sum(d * d, axis=-1))
+    r_safe = xp.maximum(r, 1e-12)
+    u = d / r_safe[..., None]
+    # Distance along hip->heel to the chord through both circle intersections (law of cosines,
+    # eq 2.5); clamped to the reachable range like eq 2.6.
+    a = xp.clip((thigh * thigh - shin * shin + r * r) / (2.0 * r_safe), -thigh, thigh)
+    h = xp.sqrt(xp.maximum(thigh * thigh - a * a, 0.0))
+    perp = xp.stack([-u[..., 1], u[..., 0]], axis=-1)
+    base = hip + a[..., None] * u
+    k1 = base + h[..., None] * perp
+    k2 = base - h[..., None] * perp
+    # Eq 2.11 as a pair: the solution with the larger y is the knee that bends forward.
+    knee = xp.where((k1[..., 0] >= k2[..., 0])[..., None], k1, k2)
+    return knee, r
+
+
+def joint_angles(xp, hip, knee, foot):
+    """Hip and knee angles (radians) of one leg (eq 2.49 with atan2): hip flexion +, knee flexion -."""
+    thigh_angle = xp.arctan2(knee[..., 0] - hip[..., 0], hip[..., 1] - knee[..., 1])
+    shank_angle = xp.arctan2(foot[..., 0] - knee[..., 0], knee[..., 1] - foot[..., 1])
+    return thigh_angle, shank_angle - thigh_angle
+
+
+def leg_state(xp, pivot_y, heel, thigh, shin):
+    """Full kinematic state for a swing heel and a pivot heel on the ground.
+
+    Returns a dict of arrays: hip (..., 2), knee_swing, knee_stance (..., 2), leg_swing and
+    leg_stance (|hip - heel|, eq 2.44), and the angles hip_swing, knee_swing_angle, hip_stance,
+    knee_stance_angle (radians)."""
+    hip = hip_position(xp, pivot_y, heel, thigh, shin)
+    pivot = xp.stack([pivot_y + 0.0 * heel[..., 0], 0.0 * heel[..., 1]], axis=-1)
+    k_sw, m_sw = knee_position(xp, hip, heel, thigh, shin)
+    k_st, m_st = knee_position(xp, hip, pivot, thigh, shin)
+    h_sw, q_sw = joint_angles(xp, hip, k_sw, heel)
+    h_st, q_st = joint_angles(xp, hip, k_st, pivot)
+    return {
+        "hip": hip,
+        "knee_swing": k_sw,
+        "knee_stance": k_st,
+        "leg_swing": m_sw,
+        "leg_stance": m_st,
+        "hip_swing": h_sw,
+        "knee_swing_angle": q_sw,
+        "hip_stance": h_st,
+        "knee_stance_angle": q_st,
+    }
+
+
+# Tolerance on joint limits: a straight leg is exactly at the knee's 0 limit, and float32 rounding
+# must not turn it into a violation.
+ANGLE_EPS = 1e-4
+
+
+def joint_limit_violation(xp, hip_angle, knee_angle, hip_min, hip_max, knee_min, knee_max):
+    """Eq 2.50's condition for one leg: any angle outside its limits."""
+    return (
+        (hip_angle > hip_max + ANGLE_EPS)
+        | (hip_angle < hip_min - ANGLE_EPS)
+        | (knee_angle > knee_max + ANGLE_EPS)
+        | (knee_angle < knee_min - ANGLE_EPS)
+    )

@@ -1,0 +1,82 @@
+"""The thesis's reward function (eq 2.1-2.2, 2.29-2.52), array-module generic (numpy or jax.numpy).
+
+``r = alpha . T + beta . E`` (eq 2.1) with eight trajectory terms T (eq 2.29-2.37) and four
+exoskeleton terms E (eq 2.43-2.51). The weight vectors are normalised so that each sums to 0.5
+(eq 2.2 with eq 2.38 and 2.52: ``alpha <- 0.5 * alpha / sum(alpha)``).
+
+Decisions (thesis-notes):
+- Terms are per step. r0 (eq 2.29) is s/n while s <= n and -s/n after, as printed; the positive goal
+  and step terms make r > 0 possible, contradicting eq 2.1's r <= 0 (a known typo).
+- r3: the goal is reached when the heel is in the goal region; the thesis also accepts the toe, but
+  with a flat foot that would land the heel a foot length short of the step.
+- r4 (eq 2.33 "foot in goal" read as "foot in mid-goal"): the penalty is paid on every step taken
+  beyond the mid-goal box's far edge while the heel has not yet passed through the box.
+- r7 (eq 2.36-2.37): the comparison of z before and after the move; "before the midpoint" means the
+  heel's y before the move is at most the mid-goal's y.
+- E: the hip model is ``kinematics.hip_position``; every term uses it. Leg length (eq 2.45) and joint
+  limits (eq 2.50) are checked on both legs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+TRAJECTORY_TERMS = (
+    "steps",          # r0, eq 2.29
+    "collision",      # r1, eq 2.30
+    "backward",       # r2, eq 2.31
+    "goal",           # r3, eq 2.32
+    "mid_goal",       # r4, eq 2.33
+    "max_height",     # r5, eq 2.34
+    "safety",         # r6, eq 2.35
+    "z_monotone",     # r7, eq 2.36-2.37
+)
+EXO_TERMS = (
+    "hip_lowering",   # e0, eq 2.43 (HLC)
+    "leg_length",     # e1, eq 2.45
+    "joint_limits",   # e2, eq 2.50
+    "hip_height",     # e3, eq 2.51
+)
+
+
+def normalize_weights(weights) -> np.ndarray:
+    """Eq 2.38 / 2.52 with eq 2.2: non-negative weights scaled to sum to 0.5."""
+    w = np.asarray(weights, dtype=np.float64)
+    return 0.5 * w / w.sum()
+
+
+def trajectory_terms(xp, c, *, steps, prev_heel, heel, collided, clearance, reached_goal, missed_mid,
+                     mid_y, max_z):
+    """The eight trajectory terms (..., 8). ``c`` holds the constants (attributes, see EnvParams)."""
+    n = c.step_threshold
+    s = steps.astype(heel.dtype)
+    zero = xp.zeros_like(heel[..., 0])
+    r0 = xp.where(s <= n, s / n, -s / n)                                          # eq 2.29
+    r1 = xp.where(collided, -c.collision_penalty, zero)                            # eq 2.30
+    r2 = xp.where(heel[..., 0] < prev_heel[..., 0], -c.backward_penalty, zero)     # eq 2.31
+    r3 = xp.where(reached_goal, c.goal_reward, zero)                               # eq 2.32
+    r4 = xp.where(missed_mid, -c.mid_goal_penalty, zero)                           # eq 2.33
+    r5 = xp.where(heel[..., 1] > max_z, -c.max_height_penalty, zero)              # eq 2.34
+    r6 = xp.where(clearance < c.safety_distance, -c.safety_penalty, zero)          # eq 2.35
+    rising = heel[..., 1] >= prev_heel[..., 1]
+    falling = heel[..., 1] <= prev_heel[..., 1]
+    before_mid = prev_heel[..., 0] <= mid_y
+    r7 = xp.where(xp.where(before_mid, rising, falling), zero, -c.z_monotone_penalty)  # eq 2.36-2.37
+    return xp.stack([r0, r1, r2, r3, r4, r5, r6, r7], axis=-1)
+
+
+def exo_terms(xp, c, *, hip_z, leg_swing, leg_stance, limits_violated):
+    """The four exoskeleton terms (..., 4) (eq 2.43, 2.45, 2.50, 2.51)."""
+    leg = c.thigh + c.shin
+    zero = xp.zeros_like(hip_z)
+    e0 = xp.where(hip_z / leg < c.hlc_threshold, -c.hlc_penalty * leg / hip_z, zero)           # eq 2.43
+    too_long = xp.maximum(leg_swing, leg_stance) - leg > c.leg_length_tolerance
+    e1 = xp.where(too_long, -c.leg_length_penalty, zero)                                        # eq 2.45
+    e2 = xp.where(limits_violated, -c.joint_limit_penalty, zero)                                # eq 2.50
+    e3 = xp.where(hip_z > c.max_hip_z, -c.hip_height_penalty, zero)                            # eq 2.51
+    return xp.stack([e0, e1, e2, e3], axis=-1)
+
+
+def total_reward(xp, c, traj, exo):
+    """Eq 2.1 / 2.39 / 2.52: alpha . T + beta . E with the normalised weights held in ``c``."""
+    return xp.sum(traj * c.traj_weights, axis=-1) + xp.sum(exo * c.exo_weights, axis=-1)
