@@ -46,7 +46,7 @@ class EnvConfig:
     max_steps: int = 100               # step limit -> truncated
     collision: str = "penalty"         # "penalty" (thesis: pay r1 and continue) or "terminate"
     obs_mode: str = "conditioned"      # "thesis" (heel y, z) or "conditioned"
-    max_vertices: int = geometry.DEFAULT_MAX_VERTICES
+    max_vertices: int = 0              # outline size K; 0: the largest count among the layout's kinds
     shape_points: int = geometry.DEFAULT_SHAPE_POINTS
     goal_tolerance: tuple[float, float] = (0.04, 0.02)   # goal box: |heel_y - goal_y| <= [0], heel_z <= [1]
     mid_goal_clearance: float = 0.10   # mid-goal centre height above the obstacle top, m
@@ -104,10 +104,10 @@ class ObstacleSpec:
     shape: str = "rectangle"
     points: tuple[tuple[float, float], ...] = ()
 
-    def unit_outline(self, max_vertices: int) -> np.ndarray:
+    def unit_vertices(self) -> np.ndarray:
         if self.shape == "profile":
-            return geometry.Obstacle.profile(self.points, max_vertices).unit_outline
-        return geometry.unit_profile(self.shape, max_vertices)
+            return geometry.Obstacle.profile(self.points).unit_vertices
+        return geometry.unit_profile(self.shape)
 
 
 @dataclass(frozen=True)
@@ -127,11 +127,18 @@ class LayoutConfig:
 
 @dataclass(frozen=True)
 class Config:
+    """The whole configuration. ``outline_vertices`` is the resolved fixed outline size K."""
+
     env: EnvConfig = field(default_factory=EnvConfig)
     kinematics: KinematicsConfig = field(default_factory=KinematicsConfig)
     reward: RewardConfig = field(default_factory=RewardConfig)
     layout: LayoutConfig = field(default_factory=lambda: LayoutConfig(obstacles=default_obstacles()))
     extra: dict = field(default_factory=dict)  # sections owned by later stages (e.g. [train])
+
+    @property
+    def outline_vertices(self) -> int:
+        need = max(len(o.unit_vertices()) for o in self.layout.obstacles)
+        return self.env.max_vertices or need
 
 
 def default_obstacles() -> tuple[ObstacleSpec, ...]:
@@ -203,7 +210,9 @@ def _section(cls, path: str, raw: dict, coerce) -> Any:
 
 
 def _coerce_env(path, k, v):
-    if k in ("max_steps", "max_vertices", "shape_points"):
+    if k == "max_vertices":
+        return _number(path, v, nonneg=True, integer=True)
+    if k in ("max_steps", "shape_points"):
         return _number(path, v, positive=True, integer=True)
     if k == "collision":
         return _choice(path, v, COLLISION_MODES)
@@ -367,7 +376,10 @@ def validate(cfg: Config) -> None:
         raise ConfigError("kinematics.hip_limits: lower limit must be below the upper one")
     if kin.knee_limits[0] >= kin.knee_limits[1]:
         raise ConfigError("kinematics.knee_limits: lower limit must be below the upper one")
-    leg = kin.thigh + kin.shin
+    need = max(len(o.unit_vertices()) for o in lay.obstacles)
+    if env.max_vertices and env.max_vertices < need:
+        raise ConfigError(f"env.max_vertices: {env.max_vertices} is fewer than the {need} outline vertices "
+                          "of an obstacle in layout.obstacles (0 picks the size automatically)")
     j = lay.size_jitter
     for i, ob in enumerate(lay.obstacles):
         p = f"layout.obstacles[{i}]"

@@ -30,8 +30,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-# Default number of outline vertices in the fixed-size representation.
-DEFAULT_MAX_VERTICES = 16
+# Vertices of the polygon inscribed in a half-ellipse; a user profile may have at most
+# MAX_PROFILE_VERTICES. The fixed size K of a batch is the largest count among its obstacle kinds.
+HALF_ELLIPSE_VERTICES = 16
+MAX_PROFILE_VERTICES = 64
 # Number of points of the shape descriptor (heights at fractions of the obstacle's width) that the
 # conditioned observation carries.
 DEFAULT_SHAPE_POINTS = 9
@@ -58,46 +60,48 @@ class GeometryError(ValueError):
 # --------------------------------------------------------------------------------------------
 
 
-def _point_segment_dist2(xp, p, a, b):
-    """Squared distance from points p to segments [a, b]; broadcasts over leading axes."""
-    ab = b - a
-    ap = p - a
-    denom = xp.sum(ab * ab, axis=-1)
-    # Degenerate (padding) edges have denom 0: t = 0 gives the distance to the vertex.
-    t = xp.clip(xp.sum(ap * ab, axis=-1) / xp.maximum(denom, 1e-30), 0.0, 1.0)
-    d = ap - t[..., None] * ab
-    return xp.sum(d * d, axis=-1)
+def _point_edge_dist2(py, pz, ay, az, ey, ez, inv_len2):
+    """Squared distance from a point to the edges a + t e, t in [0, 1] (components broadcast)."""
+    apy = py - ay
+    apz = pz - az
+    # Degenerate (padding) edges have inv_len2 = 0: t = 0 gives the distance to the vertex.
+    t = (apy * ey + apz * ez) * inv_len2
+    t = t.clip(0.0, 1.0)
+    dy = apy - t * ey
+    dz = apz - t * ez
+    return dy * dy + dz * dz
 
 
-def _cross(u, v):
-    return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
-
-
-def segments_cross(xp, a, b, c, d):
-    """True where segment [a, b] properly intersects or touches segment [c, d].
-
-    Orientation test; collinear overlaps are caught by the distance test that uses it."""
-    d1 = _cross(b - a, c - a)
-    d2 = _cross(b - a, d - a)
-    d3 = _cross(d - c, a - c)
-    d4 = _cross(d - c, b - c)
-    return (d1 * d2 <= 0.0) & (d3 * d4 <= 0.0) & ((d1 != d2) | (d3 != d4))
-
-
-def segment_outline_distance(xp, p0, p1, outline):
-    """Exact minimum distance between segment [p0, p1] (..., 2) and the outline polyline (..., K, 2).
+def flat_foot_distance(xp, heel, foot_length, outline):
+    """Exact minimum distance between the flat foot [heel, heel + (foot_length, 0)] and the outline.
 
     For two segments that do not cross, the minimum distance is attained at an endpoint of one of
-    them, so it is the least of: p0 and p1 to every edge, and every outline vertex to [p0, p1]."""
-    a = outline[..., :-1, :]
-    b = outline[..., 1:, :]
-    p0e = p0[..., None, :]
-    p1e = p1[..., None, :]
-    d2 = xp.minimum(_point_segment_dist2(xp, p0e, a, b), _point_segment_dist2(xp, p1e, a, b))
-    dv2 = _point_segment_dist2(xp, outline, p0e, p1e)
-    dmin = xp.sqrt(xp.minimum(xp.min(d2, axis=-1), xp.min(dv2, axis=-1)))
-    crossing = xp.any(segments_cross(xp, p0e, p1e, a, b), axis=-1)
-    return xp.where(crossing, 0.0, dmin)
+    them: the heel or the toe to an edge, or an outline vertex to the foot. The foot is horizontal,
+    so the vertex distances and the crossing test reduce to a few comparisons; components are kept
+    apart (structure of arrays) so that XLA vectorises them over the batch. Zero when they cross."""
+    y0 = heel[..., 0, None]
+    z = heel[..., 1, None]
+    y1 = y0 + foot_length
+    vy = outline[..., 0]
+    vz = outline[..., 1]
+    ay, az, by, bz = vy[..., :-1], vz[..., :-1], vy[..., 1:], vz[..., 1:]
+    ey = by - ay
+    ez = bz - az
+    len2 = ey * ey + ez * ez
+    inv_len2 = xp.where(len2 > 0.0, 1.0 / xp.where(len2 > 0.0, len2, 1.0), 0.0)
+    d_heel = _point_edge_dist2(y0, z, ay, az, ey, ez, inv_len2)
+    d_toe = _point_edge_dist2(y1, z, ay, az, ey, ez, inv_len2)
+    gap = xp.maximum(xp.maximum(y0 - vy, vy - y1), 0.0)
+    d_vert = gap * gap + (vz - z) * (vz - z)
+    # An edge crosses the foot's line strictly between its ends' heights, at y_cross.
+    sa = az - z
+    sb = bz - z
+    straddle = (sa * sb < 0.0)
+    frac = sa / xp.where(straddle, sa - sb, 1.0)
+    y_cross = ay + frac * ey
+    crossing = xp.any(straddle & (y_cross >= y0) & (y_cross <= y1), axis=-1)
+    d2 = xp.minimum(xp.minimum(xp.min(d_heel, axis=-1), xp.min(d_toe, axis=-1)), xp.min(d_vert, axis=-1))
+    return xp.where(crossing, 0.0, xp.sqrt(d2))
 
 
 def point_in_obstacle(xp, p, outline):
@@ -122,8 +126,7 @@ def foot_clearance(xp, heel, foot_length, outline):
 
     Positive: the exact distance to the outline. Zero or negative: the foot touches or is inside
     (negative of the distance to the outline when the whole foot is buried)."""
-    toe = heel + xp.stack([foot_length + 0.0 * heel[..., 0], 0.0 * heel[..., 1]], axis=-1)
-    dist = segment_outline_distance(xp, heel, toe, outline)
+    dist = flat_foot_distance(xp, heel, foot_length, outline)
     inside = point_in_obstacle(xp, heel, outline)
     return xp.where(inside, -dist, dist)
 
@@ -174,36 +177,34 @@ def _finite(name: str, value) -> float:
     return v
 
 
-def unit_profile(shape: str, max_vertices: int = DEFAULT_MAX_VERTICES, points=None) -> np.ndarray:
-    """Outline of a shape in the unit frame: y in [-0.5, 0.5] (times width), z in [0, 1] (times height).
-
-    ``points`` (for ``profile``) are already in the unit frame."""
+def unit_profile(shape: str) -> np.ndarray:
+    """Outline vertices of a shape in the unit frame: y in [-0.5, 0.5] (times width), z in [0, 1]
+    (times height), unpadded."""
     if shape == "rectangle":
         pts = [(-0.5, 0.0), (-0.5, 1.0), (0.5, 1.0), (0.5, 0.0)]
     elif shape == "triangle":
         pts = [(-0.5, 0.0), (0.0, 1.0), (0.5, 0.0)]
     elif shape == "half_ellipse":
         # Vertices on the ellipse at equal angle steps from the left foot to the right foot.
-        ang = np.linspace(np.pi, 0.0, max_vertices)
-        pts = list(zip(0.5 * np.cos(ang), np.sin(ang)))
+        ang = np.linspace(np.pi, 0.0, HALF_ELLIPSE_VERTICES)
+        pts = np.column_stack([0.5 * np.cos(ang), np.sin(ang)])
         pts[0], pts[-1] = (-0.5, 0.0), (0.5, 0.0)
-    elif shape == "profile":
-        pts = [tuple(p) for p in np.asarray(points, dtype=np.float64)]
     else:
-        raise GeometryError(f"shape must be one of {SHAPES}, got {shape!r}")
-    return pad_outline(np.asarray(pts, dtype=np.float64), max_vertices)
+        raise GeometryError(f"shape must be one of {SHAPES[:-1]} (profiles take points), got {shape!r}")
+    return np.asarray(pts, dtype=np.float64)
 
 
 def pad_outline(pts: np.ndarray, max_vertices: int) -> np.ndarray:
+    """The fixed-size (K, 2) representation: vertices padded by repeating the last one."""
     if len(pts) > max_vertices:
-        raise GeometryError(f"profile has {len(pts)} vertices, more than max_vertices={max_vertices}")
+        raise GeometryError(f"obstacle has {len(pts)} outline vertices, more than max_vertices={max_vertices}")
     out = np.empty((max_vertices, 2), dtype=np.float64)
     out[: len(pts)] = pts
     out[len(pts):] = pts[-1]
     return out
 
 
-def shape_descriptor(unit_outline: np.ndarray, n_points: int = DEFAULT_SHAPE_POINTS) -> np.ndarray:
+def shape_descriptor(unit_vertices: np.ndarray, n_points: int = DEFAULT_SHAPE_POINTS) -> np.ndarray:
     """Heights (unit frame, 0..1) at n_points equally spaced fractions across the width.
 
     Precomputed per obstacle kind so that the conditioned observation costs nothing per step: an
@@ -211,7 +212,7 @@ def shape_descriptor(unit_outline: np.ndarray, n_points: int = DEFAULT_SHAPE_POI
     u = np.linspace(-0.5, 0.5, n_points)
     # Sample just inside the ends so that vertical sides count as the obstacle's height.
     u = np.clip(u, -0.5 + 1e-6, 0.5 - 1e-6)
-    return profile_height(np, u, unit_outline)
+    return profile_height(np, u, unit_vertices)
 
 
 @dataclass(frozen=True)
@@ -223,14 +224,19 @@ class Obstacle:
     center_y: float
     width: float
     height: float
-    unit_outline: np.ndarray  # (K, 2), unit frame
+    unit_vertices: np.ndarray  # (n, 2), unit frame, unpadded
 
     @property
     def outline(self) -> np.ndarray:
-        o = self.unit_outline.copy()
+        """World-frame outline vertices (n, 2), unpadded."""
+        o = self.unit_vertices.copy()
         o[:, 0] = self.center_y + self.width * o[:, 0]
         o[:, 1] = self.height * o[:, 1]
         return o
+
+    def outline_array(self, max_vertices: int) -> np.ndarray:
+        """World-frame outline in the fixed-size (K, 2) representation."""
+        return pad_outline(self.outline, max_vertices)
 
     @property
     def left(self) -> float:
@@ -242,27 +248,27 @@ class Obstacle:
 
     # Constructors ---------------------------------------------------------------------------
     @classmethod
-    def named(cls, kind: str, center_y: float = 0.45, max_vertices: int = DEFAULT_MAX_VERTICES) -> "Obstacle":
+    def named(cls, kind: str, center_y: float = 0.45) -> "Obstacle":
         """One of the five thesis obstacles (Table 3.1): base1, base2, base3, triangle, half_circle."""
         if kind not in THESIS_OBSTACLES:
             raise GeometryError(f"kind must be one of {sorted(THESIS_OBSTACLES)}, got {kind!r}")
         shape, w, h = THESIS_OBSTACLES[kind]
-        return cls._make(kind, shape, center_y, w, h, max_vertices)
+        return cls._make(kind, shape, center_y, w, h)
 
     @classmethod
-    def rectangle(cls, width: float, height: float, center_y: float = 0.45, max_vertices: int = DEFAULT_MAX_VERTICES):
-        return cls._make("rectangle", "rectangle", center_y, width, height, max_vertices)
+    def rectangle(cls, width: float, height: float, center_y: float = 0.45):
+        return cls._make("rectangle", "rectangle", center_y, width, height)
 
     @classmethod
-    def triangle(cls, width: float, height: float, center_y: float = 0.45, max_vertices: int = DEFAULT_MAX_VERTICES):
-        return cls._make("triangle", "triangle", center_y, width, height, max_vertices)
+    def triangle(cls, width: float, height: float, center_y: float = 0.45):
+        return cls._make("triangle", "triangle", center_y, width, height)
 
     @classmethod
-    def half_ellipse(cls, width: float, height: float, center_y: float = 0.45, max_vertices: int = DEFAULT_MAX_VERTICES):
-        return cls._make("half_ellipse", "half_ellipse", center_y, width, height, max_vertices)
+    def half_ellipse(cls, width: float, height: float, center_y: float = 0.45):
+        return cls._make("half_ellipse", "half_ellipse", center_y, width, height)
 
     @classmethod
-    def profile(cls, points, max_vertices: int = DEFAULT_MAX_VERTICES) -> "Obstacle":
+    def profile(cls, points) -> "Obstacle":
         """Any ground obstacle from its height profile: world-frame (y, z) points, y non-decreasing.
 
         Missing ground end points are added (the profile drops vertically to the ground)."""
@@ -272,6 +278,8 @@ class Obstacle:
             raise GeometryError("points must be a sequence of (y, z) pairs in metres") from None
         if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 2:
             raise GeometryError(f"points must have shape (n >= 2, 2), got {pts.shape}")
+        if len(pts) > MAX_PROFILE_VERTICES - 2:
+            raise GeometryError(f"points: at most {MAX_PROFILE_VERTICES - 2} points, got {len(pts)}")
         if not np.all(np.isfinite(pts)):
             raise GeometryError("points must be finite (no NaN or inf)")
         if np.any(np.diff(pts[:, 0]) < 0):
@@ -287,14 +295,14 @@ class Obstacle:
         height = _finite_positive("points (height)", pts[:, 1].max())
         center = 0.5 * (y0 + y1)
         unit = np.column_stack([(pts[:, 0] - center) / width, pts[:, 1] / height])
-        return cls("profile", "profile", center, width, height, pad_outline(unit, max_vertices))
+        return cls("profile", "profile", center, width, height, unit)
 
     @classmethod
-    def _make(cls, kind, shape, center_y, width, height, max_vertices):
+    def _make(cls, kind, shape, center_y, width, height):
         width = _finite_positive("width", width)
         height = _finite_positive("height", height)
         center_y = _finite("center_y", center_y)
-        return cls(kind, shape, center_y, width, height, unit_profile(shape, max_vertices))
+        return cls(kind, shape, center_y, width, height, unit_profile(shape))
 
     def clearance(self, heel: np.ndarray, foot_length: float) -> np.ndarray:
         """Signed foot clearance (m) for heel positions (..., 2)."""

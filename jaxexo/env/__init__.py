@@ -6,8 +6,7 @@ from jaxexo.env.exo_step import (
     EnvState,
     ExoStepEnv,
     Layout,
-    make_layout,
 )
 from jaxexo.env.params import EnvParams
 
-__all__ = ["ExoStepEnv", "EnvParams", "EnvState", "Layout", "make_layout", "NUM_ACTIONS", "LENGTH_SCALE"]
+__all__ = ["ExoStepEnv", "EnvParams", "EnvState", "Layout", "NUM_ACTIONS", "LENGTH_SCALE"]

@@ -63,28 +63,9 @@ def pivot_position(pivot_kind, start_y, center_y):
     )
 
 
-def make_layout(obstacle: geometry.Obstacle, pivot: str | float, start_y: float = 0.0,
-                step_length: float = 0.70, shape_points: int = geometry.DEFAULT_SHAPE_POINTS) -> Layout:
-    """A fixed layout from an Obstacle (NumPy side; use for evaluation on chosen scenes).
-
-    ``pivot`` is one of PIVOT_CONDITIONS or a pivot heel y in metres."""
-    if isinstance(pivot, str):
-        if pivot not in PIVOT_CONDITIONS:
-            raise ValueError(f"pivot must be one of {PIVOT_CONDITIONS} or a y in metres, got {pivot!r}")
-        pk = PIVOT_CONDITIONS.index(pivot)
-        py = [start_y, obstacle.center_y, 0.5 * (start_y + obstacle.center_y)][pk]
-    else:
-        pk, py = -1, float(pivot)
-    if not step_length > 0:
-        raise ValueError(f"step_length must be > 0 m, got {step_length}")
-    shape = obstacle.height * geometry.shape_descriptor(obstacle.unit_outline, shape_points)
-    f = lambda x: jnp.asarray(x, dtype=jnp.float32)  # noqa: E731
-    return Layout(
-        outline=f(obstacle.outline), shape=f(shape), center_y=f(obstacle.center_y),
-        width=f(obstacle.width), height=f(obstacle.height), kind=jnp.asarray(-1, jnp.int32),
-        pivot_kind=jnp.asarray(pk, jnp.int32), pivot_y=f(py), start_y=f(start_y),
-        goal_y=f(start_y + step_length),
-    )
+def _categorical(u, cdf):
+    """Inverse-CDF draw of an index with one uniform number u in [0, 1)."""
+    return jnp.minimum(jnp.sum(u >= cdf), cdf.shape[0] - 1)
 
 
 class ExoStepEnv:
@@ -98,6 +79,7 @@ class ExoStepEnv:
         self.config = config if config is not None else Config()
         self.obs_mode = self.config.env.obs_mode
         self.shape_points = self.config.env.shape_points
+        self.max_vertices = self.config.outline_vertices
         self._default_params = None
 
     # gymnax-style properties --------------------------------------------------------------
@@ -129,16 +111,18 @@ class ExoStepEnv:
     def sample_layout(self, key, params: EnvParams) -> Layout:
         """Draw one scene from the layout distribution in params (obstacle kind and size, position
         jitter, pivot condition, start shift, step length)."""
-        kk, kw, kh, kj, ko, kp, ks, kl = jax.random.split(key, 8)
-        kind = jax.random.categorical(kk, params.kind_logits)
-        u = lambda k, r: r[0] + (r[1] - r[0]) * jax.random.uniform(k)  # noqa: E731
-        jit_w, jit_h = jax.random.uniform(kj, (2,), minval=-1.0, maxval=1.0) * params.size_jitter
-        width = u(kw, params.kind_width[kind]) * (1.0 + jit_w)
-        height = u(kh, params.kind_height[kind]) * (1.0 + jit_h)
-        step_length = u(kl, params.step_length)
-        start_y = u(ks, params.start_shift)
-        center = 0.5 * (params.foot_length + step_length) + u(ko, params.obstacle_offset)
-        pivot_kind = jax.random.categorical(kp, params.pivot_logits)
+        # One draw for every random choice of the layout: a single PRNG call per reset keeps the
+        # auto-reset (computed on every step, gymnax-style) cheap.
+        u = jax.random.uniform(key, (9,))
+        kind = _categorical(u[0], params.kind_cdf)
+        pivot_kind = _categorical(u[1], params.pivot_cdf)
+        lerp = lambda x, r: r[0] + (r[1] - r[0]) * x  # noqa: E731
+        jitter = (2.0 * u[2:4] - 1.0) * params.size_jitter
+        width = lerp(u[4], params.kind_width[kind]) * (1.0 + jitter[0])
+        height = lerp(u[5], params.kind_height[kind]) * (1.0 + jitter[1])
+        step_length = lerp(u[6], params.step_length)
+        start_y = lerp(u[7], params.start_shift)
+        center = 0.5 * (params.foot_length + step_length) + lerp(u[8], params.obstacle_offset)
         unit = params.kind_outlines[kind]
         outline = jnp.stack([center + width * unit[:, 0], height * unit[:, 1]], axis=-1)
         return Layout(
@@ -154,6 +138,37 @@ class ExoStepEnv:
         state = EnvState(heel=heel, time=jnp.asarray(0, jnp.int32), visited_mid=jnp.asarray(False),
                          layout=layout)
         return self.get_obs(state, params), state
+
+    def layout_for(self, obstacle: geometry.Obstacle, pivot: str | float = "obstacle", start_y: float = 0.0,
+                   step_length: float = 0.70, kind: int = -1) -> Layout:
+        """A fixed layout from an Obstacle, for evaluation on chosen scenes (validated here).
+
+        ``pivot`` is one of PIVOT_CONDITIONS or a pivot heel y in metres; ``kind`` tags the layout
+        for per-kind statistics."""
+        if isinstance(pivot, str):
+            if pivot not in PIVOT_CONDITIONS:
+                raise ValueError(f"pivot must be one of {PIVOT_CONDITIONS} or a y in metres, got {pivot!r}")
+            pk = PIVOT_CONDITIONS.index(pivot)
+            py = [start_y, obstacle.center_y, 0.5 * (start_y + obstacle.center_y)][pk]
+        else:
+            pk, py = -1, geometry._finite("pivot", pivot)
+        start_y = geometry._finite("start_y", start_y)
+        step_length = geometry._finite_positive("step_length", step_length)
+        foot = self.config.kinematics.foot_length
+        if obstacle.left <= start_y + foot:
+            raise ValueError(f"obstacle: its near edge ({obstacle.left:.3f} m) must lie ahead of the toe at "
+                             f"the start ({start_y + foot:.3f} m)")
+        if obstacle.right >= start_y + step_length:
+            raise ValueError(f"step_length: the goal ({start_y + step_length:.3f} m) must lie beyond the "
+                             f"obstacle's far edge ({obstacle.right:.3f} m)")
+        shape = obstacle.height * geometry.shape_descriptor(obstacle.unit_vertices, self.shape_points)
+        f = lambda x: jnp.asarray(x, dtype=jnp.float32)  # noqa: E731
+        return Layout(
+            outline=f(obstacle.outline_array(self.max_vertices)), shape=f(shape),
+            center_y=f(obstacle.center_y), width=f(obstacle.width), height=f(obstacle.height),
+            kind=jnp.asarray(kind, jnp.int32), pivot_kind=jnp.asarray(pk, jnp.int32), pivot_y=f(py),
+            start_y=f(start_y), goal_y=f(start_y + step_length),
+        )
 
     # gymnax transitions ----------------------------------------------------------------------
     def reset_env(self, key, params: EnvParams):
@@ -224,11 +239,11 @@ class ExoStepEnv:
         ``info["final_observation"]`` keeps the finished episode's last observation, so that a learner
         can bootstrap through truncation."""
         params = self.default_params if params is None else params
-        key_step, key_reset = jax.random.split(key)
-        obs_st, state_st, reward, terminated, info = self.step_env(key_step, state, action, params)
+        # step_env is deterministic, so the whole key goes to the auto-reset (no split needed).
+        obs_st, state_st, reward, terminated, info = self.step_env(key, state, action, params)
         truncated = self.is_truncated(state_st, params) & ~terminated
         done = terminated | truncated
-        obs_re, state_re = self.reset_env(key_reset, params)
+        obs_re, state_re = self.reset_env(key, params)
         state = jax.tree.map(lambda r, s: jax.lax.select(done, r, s), state_re, state_st)
         obs = jax.lax.select(done, obs_re, obs_st)
         info = {**info, "terminated": terminated, "truncated": truncated, "final_observation": obs_st}

@@ -57,12 +57,12 @@ class EnvParams:
     # Layout distribution (sampled in reset)
     kind_outlines: jnp.ndarray                 # (B, K, 2) unit-frame outlines
     kind_shape: jnp.ndarray                    # (B, P) unit-frame shape descriptors
-    kind_logits: jnp.ndarray                   # (B,)
+    kind_cdf: jnp.ndarray                      # (B,) cumulative probabilities of the kinds
     kind_width: jnp.ndarray                    # (B, 2) ranges, m
     kind_height: jnp.ndarray                   # (B, 2) ranges, m
     size_jitter: jnp.ndarray
     obstacle_offset: jnp.ndarray               # (2,)
-    pivot_logits: jnp.ndarray                  # (3,) over PIVOT_CONDITIONS
+    pivot_cdf: jnp.ndarray                     # (3,) cumulative probabilities of PIVOT_CONDITIONS
     start_shift: jnp.ndarray                   # (2,)
     step_length: jnp.ndarray                   # (2,)
 
@@ -72,13 +72,10 @@ class EnvParams:
         f = lambda x: jnp.asarray(x, dtype=jnp.float32)  # noqa: E731
         k = np.arange(36)
         directions = np.stack([np.cos(np.deg2rad(10.0 * k)), np.sin(np.deg2rad(10.0 * k))], axis=-1)
-        outlines = np.stack([o.unit_outline(env.max_vertices) for o in lay.obstacles])
+        outlines = np.stack([geometry.pad_outline(o.unit_vertices(), cfg.outline_vertices) for o in lay.obstacles])
         shapes = np.stack([geometry.shape_descriptor(u, env.shape_points) for u in outlines])
         weights = np.array([o.weight for o in lay.obstacles], dtype=np.float64)
         pivot = np.asarray(lay.pivot, dtype=np.float64)
-        with np.errstate(divide="ignore"):
-            kind_logits = np.log(weights / weights.sum())
-            pivot_logits = np.log(pivot / pivot.sum())
         assert len(PIVOT_CONDITIONS) == len(pivot)
         return cls(
             step_size=f(env.step_size),
@@ -116,12 +113,19 @@ class EnvParams:
             max_hip_z=f(rew.max_hip_z),
             kind_outlines=f(outlines),
             kind_shape=f(shapes),
-            kind_logits=f(kind_logits),
+            kind_cdf=f(_cdf(weights)),
             kind_width=f([o.width for o in lay.obstacles]),
             kind_height=f([o.height for o in lay.obstacles]),
             size_jitter=f(lay.size_jitter),
             obstacle_offset=f(lay.obstacle_offset),
-            pivot_logits=f(pivot_logits),
+            pivot_cdf=f(_cdf(pivot)),
             start_shift=f(lay.start_shift),
             step_length=f(lay.step_length),
         )
+
+
+def _cdf(weights) -> np.ndarray:
+    w = np.asarray(weights, dtype=np.float64)
+    c = np.cumsum(w / w.sum())
+    c[-1] = 1.0
+    return c
