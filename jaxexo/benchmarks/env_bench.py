@@ -90,3 +90,33 @@ def bench_env(num_envs_list=(1, 256, 4096, 16384), steps_per_call=None, repeats=
                  f"(median of {repeats}, {steps} steps/call, {ndev} device(s), compile {compile_s:.1f} s)")
         rows.append(row)
     return rows
+
+
+MIXED_KINDS = ["base1", "base2", "base3", "triangle", "half_circle",
+               {"kind": "rectangle", "width": [0.05, 0.20], "height": [0.05, 0.20]}]
+
+
+def mixed_config() -> Config:
+    """Every obstacle kind in one batch (outline size K = 16, the half-circle's), all pivots."""
+    from jaxexo.config import config_from_dict
+
+    return config_from_dict({"layout": {"obstacles": MIXED_KINDS, "pivot": ["agent", "obstacle", "between"]}})
+
+
+def run_env_benchmark(config: Config, config_name: str, sizes, out_dir, progress=print) -> dict:
+    """Benchmark the given config and, for comparison, the all-kinds mix; write the results."""
+    from jaxexo.benchmarks.machine import write_result
+
+    results = {}
+    for name, cfg in ((config_name, config), ("all obstacle kinds (K=16)", mixed_config())):
+        progress(f"{name}: outline size K = {cfg.outline_vertices}, obs_mode = {cfg.env.obs_mode}")
+        results[name] = bench_env(sizes, config=cfg, progress=progress)
+    lines = ["# Environment throughput (random actions, full reward, auto-reset)", "",
+             "| layout | envs | devices | M env-steps/s |", "|---|---:|---:|---:|"]
+    for name, rows in results.items():
+        for r in rows:
+            lines.append(f"| {name} | {r['num_envs']} | {r['devices']} | {r['env_steps_per_s'] / 1e6:.2f} |")
+    paths = write_result("env", {"results": results}, "\n".join(lines), out_dir)
+    progress("\n".join(lines))
+    progress(f"wrote {paths[0]} and {paths[1]}")
+    return results
