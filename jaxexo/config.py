@@ -49,8 +49,8 @@ class EnvConfig:
     max_vertices: int = 0              # outline size K; 0: the largest count among the layout's kinds
     shape_points: int = geometry.DEFAULT_SHAPE_POINTS
     goal_tolerance: tuple[float, float] = (0.04, 0.02)   # goal box: |heel_y - goal_y| <= [0], heel_z <= [1]
-    mid_goal_clearance: float = 0.10   # mid-goal centre height above the obstacle top, m
-    mid_goal_half_size: tuple[float, float] = (0.06, 0.05)  # half extents (y, z) of the mid-goal box, m
+    mid_goal_clearance: float = 0.08   # mid-goal centre height above the obstacle top, m
+    mid_goal_half_size: tuple[float, float] = (0.06, 0.04)  # half extents (y, z) of the mid-goal box, m
     max_height_margin: float = 0.20    # max_z of eq 2.34 = obstacle top + this, m
     bounds_y: tuple[float, float] = (-0.30, 1.30)  # the heel is kept inside these (m)
     max_z: float = 0.80                # ceiling for the heel (m); the ground is z = 0
@@ -86,6 +86,10 @@ class RewardConfig:
     joint_limit_penalty: float = 1.0   # j, eq 2.50
     hip_height_penalty: float = 1.0    # n, eq 2.51
     max_hip_z: float = 1.0             # max_hz, eq 2.51, m (the hip model never exceeds thigh+shin)
+    # Potential-based progress shaping per metre (not in the thesis; 0 = thesis reward), see
+    # jaxexo.rewards.shaping_reward for the choice of its discount.
+    progress_shaping: float = 0.0
+    shaping_discount: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -125,6 +129,48 @@ class LayoutConfig:
         return 0.5 * (foot_length + step_length)
 
 
+TRACE_VIEWS = ("forward", "backward")
+TRACE_KINDS = ("accumulating", "replacing")
+CONTROLS = ("off_policy", "on_policy")
+TARGETS = ("hard", "polyak")
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """[train]: the TD(lambda) agent (thesis 2.3-2.4).
+
+    Static settings fix the compiled program's shapes and structure; the hyperparameters below
+    ``lr`` are pytree leaves of ``jaxexo.train.Hyperparams`` and can be vmapped (sweeps)."""
+
+    # --- static ---
+    num_envs: int = 1024
+    rollout_steps: int = 16            # T: steps per environment between updates
+    num_minibatches: int = 4           # forward view: gradient steps per epoch over the T x N batch
+    num_epochs: int = 1
+    hidden: tuple[int, ...] = (64, 32, 32, 32)   # the thesis network (Fig. 2.2)
+    layer_norm: bool = False
+    trace: str = "forward"             # "forward": lambda-returns; "backward": eligibility traces
+    trace_kind: str = "accumulating"   # backward view: "accumulating" or "replacing"
+    control: str = "off_policy"        # "off_policy": Watkins Q(lambda) (eq 2.13, 2.28);
+                                       # "on_policy": SARSA(lambda) (eq 2.14, 2.27)
+    target: str = "hard"               # "hard": copy every target_period updates; "polyak": tau
+    budget_episodes: int = 0           # stop after this many finished episodes (0: no limit)
+    budget_env_steps: int = 20_000_000 # stop after this many env steps (0: no limit)
+    chunk_updates: int = 0             # updates per compiled chunk (progress, checkpoint); 0: auto
+    eval_episodes: int = 1000
+    # --- vmappable hyperparameters ---
+    lr: float = 1e-3
+    lr_end_fraction: float = 1.0       # linear decay of the learning rate to lr * this at the budget's end
+    gamma: float = 0.99
+    lam: float = 0.8
+    eps_start: float = 1.0
+    eps_end: float = 0.02
+    eps_decay_fraction: float = 0.5    # of the budget, linear
+    target_period: int = 10            # updates, "hard"
+    target_tau: float = 0.05           # "polyak"
+    max_grad_norm: float = 10.0
+
+
 @dataclass(frozen=True)
 class Config:
     """The whole configuration. ``outline_vertices`` is the resolved fixed outline size K."""
@@ -133,7 +179,8 @@ class Config:
     kinematics: KinematicsConfig = field(default_factory=KinematicsConfig)
     reward: RewardConfig = field(default_factory=RewardConfig)
     layout: LayoutConfig = field(default_factory=lambda: LayoutConfig(obstacles=default_obstacles()))
-    extra: dict = field(default_factory=dict)  # sections owned by later stages (e.g. [train])
+    train: TrainConfig = field(default_factory=TrainConfig)
+    extra: dict = field(default_factory=dict)  # sections owned by later stages
 
     @property
     def outline_vertices(self) -> int:
@@ -158,7 +205,7 @@ def named_spec(kind: str, weight: float = 1.0) -> ObstacleSpec:
 # Parsing
 # --------------------------------------------------------------------------------------------
 
-EXTRA_SECTIONS: set[str] = {"train", "eval", "sweep"}
+EXTRA_SECTIONS: set[str] = {"eval", "sweep"}
 
 
 def _number(path: str, v: Any, *, positive=False, nonneg=False, integer=False) -> float:
@@ -247,7 +294,36 @@ def _coerce_reward(path, k, v):
         return x
     if k in ("max_hip_z", "safety_distance"):
         return _number(path, v, positive=True)
+    if k == "shaping_discount":
+        x = _number(path, v, positive=True)
+        if x > 1:
+            raise ConfigError(f"{path}: must be in (0, 1], got {x}")
+        return x
     return _number(path, v, nonneg=True)
+
+
+def _coerce_train(path, k, v):
+    choices = {"trace": TRACE_VIEWS, "trace_kind": TRACE_KINDS, "control": CONTROLS, "target": TARGETS}
+    if k in choices:
+        return _choice(path, v, choices[k])
+    if k == "layer_norm":
+        if not isinstance(v, bool):
+            raise ConfigError(f"{path}: expected true or false, got {v!r}")
+        return v
+    if k == "hidden":
+        return tuple(int(x) for x in _vector(path, v, None, positive=True, integer=True))
+    if k in ("num_envs", "rollout_steps", "num_minibatches", "num_epochs", "eval_episodes", "target_period"):
+        return _number(path, v, positive=True, integer=True)
+    if k in ("budget_episodes", "budget_env_steps", "chunk_updates"):
+        return _number(path, v, nonneg=True, integer=True)
+    if k in ("gamma", "lam", "eps_start", "eps_end", "eps_decay_fraction", "target_tau", "lr_end_fraction"):
+        x = _number(path, v, nonneg=True)
+        if x > 1:
+            raise ConfigError(f"{path}: must be in [0, 1], got {x}")
+        if k in ("eps_decay_fraction", "target_tau") and x == 0:
+            raise ConfigError(f"{path}: must be > 0, got {x}")
+        return x
+    return _number(path, v, positive=True)
 
 
 def _obstacle_spec(path: str, raw: Any) -> ObstacleSpec:
@@ -305,11 +381,14 @@ def _coerce_layout(path, k, v):
             for x in v:
                 _choice(path, x, PIVOT_CONDITIONS)
             return tuple(1.0 if c in v else 0.0 for c in PIVOT_CONDITIONS)
+        if isinstance(v, list) and len(v) == len(PIVOT_CONDITIONS) and not any(isinstance(x, str) for x in v):
+            return _vector(path, v, len(PIVOT_CONDITIONS), nonneg=True)
         if isinstance(v, dict):
             for x in v:
                 _choice(f"{path}.{x}", x, PIVOT_CONDITIONS)
             return tuple(_number(f"{path}.{c}", v.get(c, 0.0), nonneg=True) for c in PIVOT_CONDITIONS)
-        raise ConfigError(f"{path}: expected a list of {list(PIVOT_CONDITIONS)} or a table of weights")
+        raise ConfigError(f"{path}: expected a list of names from {list(PIVOT_CONDITIONS)}, three weights "
+                          "in that order, or a table of weights")
     if k == "size_jitter":
         x = _number(path, v, nonneg=True)
         if x >= 1:
@@ -324,7 +403,7 @@ def config_from_dict(raw: dict) -> Config:
     """Build and validate a Config from a parsed TOML table."""
     if not isinstance(raw, dict):
         raise ConfigError(f"config: expected a table, got {raw!r}")
-    known = {"env", "kinematics", "reward", "layout"} | EXTRA_SECTIONS
+    known = {"env", "kinematics", "reward", "layout", "train"} | EXTRA_SECTIONS
     unknown = sorted(set(raw) - known)
     if unknown:
         raise ConfigError(f"{unknown[0]}: unknown section (known: {', '.join(sorted(known))})")
@@ -335,8 +414,9 @@ def config_from_dict(raw: dict) -> Config:
     lay = _section(LayoutConfig, "layout", lay_raw, _coerce_layout)
     if not lay.obstacles:
         lay = dataclasses.replace(lay, obstacles=default_obstacles())
+    train = _section(TrainConfig, "train", raw.get("train", {}), _coerce_train)
     extra = {k: raw[k] for k in EXTRA_SECTIONS if k in raw}
-    cfg = Config(env, kin, rew, lay, extra)
+    cfg = Config(env, kin, rew, lay, train, extra)
     validate(cfg)
     return cfg
 
@@ -363,7 +443,14 @@ def load_config(path: str | Path) -> Config:
 
 
 def validate(cfg: Config) -> None:
-    env, kin, rew, lay = cfg.env, cfg.kinematics, cfg.reward, cfg.layout
+    env, kin, rew, lay, tr = cfg.env, cfg.kinematics, cfg.reward, cfg.layout, cfg.train
+    if tr.budget_episodes == 0 and tr.budget_env_steps == 0:
+        raise ConfigError("train.budget_episodes: set a budget (budget_episodes and/or budget_env_steps > 0)")
+    if (tr.num_envs * tr.rollout_steps) % tr.num_minibatches:
+        raise ConfigError(f"train.num_minibatches: {tr.num_minibatches} does not divide the batch of "
+                          f"num_envs x rollout_steps = {tr.num_envs * tr.rollout_steps}")
+    if tr.eps_end > tr.eps_start:
+        raise ConfigError("train.eps_end: must not exceed train.eps_start")
     if sum(rew.traj_weights) <= 0:
         raise ConfigError("reward.traj_weights: at least one weight must be > 0 (eq 2.38 divides by the sum)")
     if sum(rew.exo_weights) <= 0:

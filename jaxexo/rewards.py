@@ -77,6 +77,29 @@ def exo_terms(xp, c, *, hip_z, leg_swing, leg_stance, limits_violated):
     return xp.stack([e0, e1, e2, e3], axis=-1)
 
 
+def progress_potential(xp, heel, mid, goal, visited_mid):
+    """Potential for optional shaping (not in the thesis): minus the path length still to go, through
+    the mid-goal until it is visited, then straight to the goal (m). Shaping with
+    F = gamma * Phi(s') - Phi(s) (Phi = 0 at termination) leaves the optimal policy unchanged
+    (Ng, Harada & Russell 1999) and gives the sparse goal reward a direction."""
+    def norm(v):
+        return xp.sqrt(xp.sum(v * v, axis=-1))
+    via_mid = norm(mid - heel) + norm(goal - mid)
+    return -xp.where(visited_mid, norm(goal - heel), via_mid)
+
+
+def shaping_reward(xp, c, phi_prev, phi_next, terminated):
+    """Potential-based shaping term, ``c.progress_shaping`` per metre of progress (0 disables it).
+
+    With ``c.shaping_discount`` equal to the learner's gamma the optimal policy is exactly unchanged,
+    but then a step that does not move (pushing into the ground) earns (1 - gamma) * |Phi| > 0, a
+    bonus for standing still that trapped training in practice. The default discount 1 pays
+    progress exactly when it is made and nothing for standing still; it favours reaching the goal
+    sooner, which the thesis wants anyway (r0, eq 2.29)."""
+    gamma = c.shaping_discount
+    return c.progress_shaping * (gamma * xp.where(terminated, 0.0, phi_next) - phi_prev)
+
+
 def total_reward(xp, c, traj, exo):
     """Eq 2.1 / 2.39 / 2.52: alpha . T + beta . E with the normalised weights held in ``c``."""
     return xp.sum(traj * c.traj_weights, axis=-1) + xp.sum(exo * c.exo_weights, axis=-1)

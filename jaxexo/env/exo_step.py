@@ -212,13 +212,18 @@ class ExoStepEnv:
         exo = rewards.exo_terms(
             jnp, params, hip_z=kin["hip"][1], leg_swing=kin["leg_swing"], leg_stance=kin["leg_stance"],
             limits_violated=limits_violated)
-        reward = rewards.total_reward(jnp, params, traj, exo)
-
         terminated = reached | (collided & params.terminate_on_collision)
+        goal = jnp.stack([lay.goal_y, 0.0])
+        shaping = rewards.shaping_reward(
+            jnp, params, rewards.progress_potential(jnp, prev, mid, goal, state.visited_mid),
+            rewards.progress_potential(jnp, heel, mid, goal, visited), terminated)
+        reward = rewards.total_reward(jnp, params, traj, exo) + shaping
+
         new_state = EnvState(heel=heel, time=time, visited_mid=visited, layout=lay)
         info = {
             "traj_terms": traj,
             "exo_terms": exo,
+            "shaping": shaping,
             "clearance": clearance,
             "collision": collided,
             "goal_reached": reached,

@@ -54,6 +54,8 @@ class EnvParams:
     joint_limit_penalty: jnp.ndarray
     hip_height_penalty: jnp.ndarray
     max_hip_z: jnp.ndarray
+    progress_shaping: jnp.ndarray
+    shaping_discount: jnp.ndarray
     # Layout distribution (sampled in reset)
     kind_outlines: jnp.ndarray                 # (B, K, 2) unit-frame outlines
     kind_shape: jnp.ndarray                    # (B, P) unit-frame shape descriptors
@@ -72,6 +74,8 @@ class EnvParams:
         f = lambda x: jnp.asarray(x, dtype=jnp.float32)  # noqa: E731
         k = np.arange(36)
         directions = np.stack([np.cos(np.deg2rad(10.0 * k)), np.sin(np.deg2rad(10.0 * k))], axis=-1)
+        # Exact zeros for the axis-aligned moves: cos(270 deg) = -1.8e-16 would count as "backward".
+        directions = np.where(np.abs(directions) < 1e-12, 0.0, directions)
         outlines = np.stack([geometry.pad_outline(o.unit_vertices(), cfg.outline_vertices) for o in lay.obstacles])
         shapes = np.stack([geometry.shape_descriptor(u, env.shape_points) for u in outlines])
         weights = np.array([o.weight for o in lay.obstacles], dtype=np.float64)
@@ -111,6 +115,8 @@ class EnvParams:
             joint_limit_penalty=f(rew.joint_limit_penalty),
             hip_height_penalty=f(rew.hip_height_penalty),
             max_hip_z=f(rew.max_hip_z),
+            progress_shaping=f(rew.progress_shaping),
+            shaping_discount=f(rew.shaping_discount),
             kind_outlines=f(outlines),
             kind_shape=f(shapes),
             kind_cdf=f(_cdf(weights)),

@@ -1,0 +1,196 @@
+"""``jaxexo train``: drive the compiled trainer in chunks, with progress, metrics, checkpoints and resume.
+
+Run directory:
+- config.toml        the resolved config
+- checkpoint.msgpack the TrainState after the last finished chunk (written atomically) and
+  checkpoint.json    its bookkeeping (chunks done, wall time so far)
+- metrics.jsonl      one line per chunk: counters and rates reduced inside the compiled scan
+- policy.npz         the exported greedy policy (jaxexo.policy; NumPy-only to load)
+- training_curve.png return and success rate against episodes (thesis Fig. 3.4)
+- eval.json          greedy rollouts on the test layouts (jaxexo.train.evaluate)
+
+Resume: the same chunk program runs from the restored state, so a resumed run ends bit-identical to
+an uninterrupted one (tests/test_train.py checks it).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+
+import jax
+import numpy as np
+from flax import serialization
+
+from jaxexo.config import Config, ConfigError, config_from_dict
+from jaxexo.config_io import config_to_toml
+from jaxexo.env.exo_step import LENGTH_SCALE, THESIS_OBS_CENTER
+from jaxexo.policy import save_policy
+from jaxexo.train.evaluate import evaluate
+from jaxexo.train.network import dense_layers, norm_layers
+from jaxexo.train.trainer import METRICS, Hyperparams, Trainer
+
+CHECKPOINT = "checkpoint.msgpack"
+BOOKKEEPING = "checkpoint.json"
+# Aim for chunks of about this many env steps: frequent enough for a live progress bar.
+CHUNK_ENV_STEPS = 1_000_000
+
+
+def chunk_updates(cfg: Config, trainer: Trainer) -> int:
+    if cfg.train.chunk_updates:
+        return min(cfg.train.chunk_updates, trainer.num_updates)
+    per = cfg.train.num_envs * cfg.train.rollout_steps
+    return max(1, min(trainer.num_updates, CHUNK_ENV_STEPS // per))
+
+
+def _atomic_write(path: Path, data: bytes) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_bytes(data)
+    tmp.replace(path)
+
+
+def _chunk_row(m: np.ndarray, ts, chunk: int, wall: float, seconds: float) -> dict:
+    d = dict(zip(METRICS, m.sum(0).tolist()))
+    n_upd = max(1, int((m[:, METRICS.index("env_steps")] > 0).sum()))
+    eps = max(d["episodes"], 1.0)
+    return {
+        "chunk": chunk,
+        "updates": int(ts.update),
+        "env_steps": int(ts.env_steps),
+        "episodes": int(ts.episodes),
+        "chunk_episodes": int(d["episodes"]),
+        "return_mean": d["return_sum"] / eps,
+        "success_rate": d["successes"] / eps,
+        "accuracy": d["accurate"] / eps,
+        "loss": d["loss"] / n_upd,
+        "q_mean": d["q_mean"] / n_upd,
+        "epsilon": d["epsilon"] / n_upd,
+        "env_steps_per_s": d["env_steps"] / max(seconds, 1e-9),
+        "wall_s": wall,
+    }
+
+
+def export_policy(path: Path, cfg: Config, trainer: Trainer, params) -> Path:
+    env = trainer.env
+    dense = [(np.asarray(w), np.asarray(b)) for w, b in dense_layers(params)]
+    norms = [(np.asarray(s), np.asarray(b)) for s, b in norm_layers(params)]
+    meta = {
+        "obs_mode": cfg.env.obs_mode,
+        "obs_dim": env.obs_dim,
+        "length_scale": LENGTH_SCALE,
+        "thesis_obs_center": list(THESIS_OBS_CENTER),
+        "num_actions": env.num_actions,
+        "action_angles_rad": [math.radians(10.0 * k) for k in range(env.num_actions)],
+        "layers": [env.obs_dim, *cfg.train.hidden, env.num_actions],
+        "layer_norm": cfg.train.layer_norm,
+        "activation": "relu",
+        "config_toml": config_to_toml(cfg),
+    }
+    return save_policy(path, [w for w, _ in dense], [b for _, b in dense],
+                       [s for s, _ in norms], [b for _, b in norms], meta)
+
+
+def plot_training_curve(path: Path, rows: list[dict]) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ep = [r["episodes"] for r in rows]
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
+    a1.plot(ep, [r["return_mean"] for r in rows], color="tab:blue")
+    a1.set_ylabel("mean episode return")
+    a1.set_title("Training (thesis Fig. 3.4): return and success per chunk")
+    a1.grid(alpha=0.3)
+    a2.plot(ep, [r["success_rate"] for r in rows], label="success (strict)", color="tab:green")
+    a2.plot(ep, [r["accuracy"] for r in rows], label="accuracy (eq 3.1)", color="tab:orange")
+    a2.set_ylim(-0.02, 1.02)
+    a2.set_xlabel("episodes")
+    a2.set_ylabel("share of finished episodes")
+    a2.legend(loc="lower right")
+    a2.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def run_training(cfg: Config, out: str | Path, seed: int = 0, resume: bool = False, progress: bool = True,
+                 eval_episodes: int | None = None) -> dict:
+    """Train, write the run directory, and return eval.json's content."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    cfg_path, ckpt, book = out / "config.toml", out / CHECKPOINT, out / BOOKKEEPING
+    if resume:
+        if not ckpt.exists() or not book.exists() or not cfg_path.exists():
+            raise ConfigError(f"--resume: {out} has no checkpoint to resume from")
+        import tomllib
+
+        saved = config_from_dict(tomllib.loads(cfg_path.read_text()))
+        if saved != cfg:
+            raise ConfigError(f"--resume: the config differs from the one in {cfg_path}; resume with that config")
+        state_book = json.loads(book.read_text())
+        if state_book["seed"] != seed:
+            raise ConfigError(f"--resume: the run used --seed {state_book['seed']}, not {seed}")
+    elif ckpt.exists():
+        raise ConfigError(f"--out: {out} already holds a run; pass --resume to continue it or pick a new folder")
+    else:
+        cfg_path.write_text(config_to_toml(cfg))
+
+    t_start = time.perf_counter()
+    trainer = Trainer(cfg)
+    hyper = Hyperparams.from_config(cfg)
+    ts = jax.jit(trainer.init)(jax.random.PRNGKey(seed), hyper)
+    n_chunk = chunk_updates(cfg, trainer)
+    total_chunks = math.ceil(trainer.num_updates / n_chunk)
+    rows: list[dict] = []
+    chunks_done, wall_before = 0, 0.0
+    metrics_path = out / "metrics.jsonl"
+    if resume:
+        ts = serialization.from_bytes(ts, ckpt.read_bytes())
+        chunks_done, wall_before = state_book["chunks_done"], state_book["train_seconds"]
+        lines = metrics_path.read_text().splitlines() if metrics_path.exists() else []
+        rows = [json.loads(x) for x in lines[:chunks_done]]
+        # Lines written after the checkpoint are recomputed identically: drop them.
+        metrics_path.write_text("".join(json.dumps(r) + "\n" for r in rows))
+    run = jax.jit(trainer.run, static_argnums=2)
+    active = jax.jit(trainer.active)
+
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=total_chunks, initial=chunks_done, unit="chunk", dynamic_ncols=True,
+                   desc=f"train {cfg.train.trace} {cfg.train.control}")
+    with metrics_path.open("a") as mf:
+        while chunks_done < total_chunks and bool(active(ts, hyper)):
+            n = min(n_chunk, trainer.num_updates - chunks_done * n_chunk)
+            t0 = time.perf_counter()
+            ts, m = run(ts, hyper, n)
+            m = np.asarray(m)
+            chunks_done += 1
+            wall = wall_before + time.perf_counter() - t_start
+            row = _chunk_row(m, ts, chunks_done, wall, time.perf_counter() - t0)
+            rows.append(row)
+            mf.write(json.dumps(row) + "\n")
+            mf.flush()
+            _atomic_write(ckpt, serialization.to_bytes(ts))
+            _atomic_write(book, json.dumps({"seed": seed, "chunks_done": chunks_done, "train_seconds": wall}).encode())
+            if bar is not None:
+                bar.update(1)
+                bar.set_postfix(episodes=row["episodes"], steps_per_s=f"{row['env_steps_per_s']:.3g}",
+                                ret=f"{row['return_mean']:.2f}", success=f"{row['success_rate']:.3f}",
+                                eps=f"{row['epsilon']:.3f}")
+    if bar is not None:
+        bar.close()
+    train_seconds = wall_before + time.perf_counter() - t_start
+
+    export_policy(out / "policy.npz", cfg, trainer, ts.params)
+    if rows:
+        plot_training_curve(out / "training_curve.png", rows)
+    result = evaluate(cfg, trainer.net, ts.params, eval_episodes or cfg.train.eval_episodes)
+    result.update({"episodes": int(ts.episodes), "env_steps": int(ts.env_steps),
+                   "train_seconds": round(train_seconds, 3), "seed": seed})
+    (out / "eval.json").write_text(json.dumps(result, indent=2) + "\n")
+    return result

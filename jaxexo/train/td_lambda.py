@@ -1,0 +1,82 @@
+"""TD(lambda) in its two views (thesis 2.3.4-2.3.5, eq 2.19-2.26), as pure functions.
+
+Forward view: lambda-returns (eq 2.19) from a reverse scan over a rollout. Backward view:
+eligibility traces over the Q-network's parameters (eq 2.22, 2.24-2.26). With a fixed Q over one
+episode the summed updates of the two views are equal (offline equivalence, Sutton & Barto 12.4);
+tests/test_td_lambda.py checks it to float precision.
+
+Control (thesis 2.3.1-2.3.2, 2.4.4):
+- on-policy SARSA(lambda): bootstrap on Q(s', a') with the action actually taken next (eq 2.27);
+- off-policy Watkins Q(lambda): bootstrap on max_a Q(s', a) (eq 2.28); the lambda-chain (forward)
+  and the traces (backward) are cut after an exploratory, non-greedy action.
+
+Conventions for one transition t of a rollout (arrays over time first):
+- ``boot[t]``: the value of the state reached by the step, the *final* observation before any
+  auto-reset: max_a Q or Q(s', a') or, where a' is not known (rollout end, truncation), the
+  epsilon-greedy expectation.
+- ``terminated[t]``: the goal ended the episode: no bootstrap. ``done[t]``: terminated or
+  truncated: the lambda-chain stops (a truncated episode bootstraps on ``boot[t]`` alone).
+- ``cont[t]``: 1 where the chain may continue into t+1 (on-policy: 1; Watkins: the action at t+1
+  was greedy).
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+
+def lambda_returns(rewards, boot, terminated, done, cont, gamma, lam):
+    """Lambda-returns G_t (eq 2.19, recursive form) over a rollout, by a reverse scan.
+
+    G_t = r_t + gamma * (1 - terminated_t) * [(1 - l_t) * boot_t + l_t * G_{t+1}]
+    with l_t = lam * cont_{t+1} * (1 - done_t), and at the rollout's last step G = r + gamma * boot."""
+    not_term = 1.0 - terminated.astype(rewards.dtype)
+    chain = (1.0 - done.astype(rewards.dtype))
+    # l_t uses cont of the *next* step; the last step has no next step in the rollout.
+    cont_next = jnp.concatenate([cont[1:], jnp.zeros_like(cont[:1])], axis=0).astype(rewards.dtype)
+    lt = lam * cont_next * chain
+
+    def body(g_next, x):
+        r, b, nt, l = x
+        g = r + gamma * nt * ((1.0 - l) * b + l * g_next)
+        return g, g
+
+    _, g = jax.lax.scan(body, jnp.zeros_like(rewards[-1]), (rewards, boot, not_term, lt), reverse=True)
+    return g
+
+
+def decay_traces(traces, gamma, lam, keep):
+    """e <- gamma * lam * e, zeroed where ``keep`` is 0 (episode start; Watkins cut). Per environment:
+    ``keep`` has shape (N,), every leaf of ``traces`` (N, ...)."""
+    def f(e):
+        k = keep.reshape(keep.shape + (1,) * (e.ndim - 1)).astype(e.dtype)
+        return gamma * lam * k * e
+    return jax.tree.map(f, traces)
+
+
+def add_gradient(traces, grads, kind: str):
+    """Eq 2.22 for function approximation: accumulate the gradient of Q(s_t, a_t) into the traces.
+
+    ``accumulating``: e + grad. ``replacing``: the elementwise generalisation of replacing traces to
+    signed gradients: where |grad| exceeds |e| the trace is replaced by grad, else kept (it reduces
+    to the tabular replacing trace for one-hot features)."""
+    if kind == "accumulating":
+        return jax.tree.map(jnp.add, traces, grads)
+    if kind == "replacing":
+        return jax.tree.map(lambda e, g: jnp.where(jnp.abs(g) > jnp.abs(e), g, e), traces, grads)
+    raise ValueError(f"trace kind must be 'accumulating' or 'replacing', got {kind!r}")
+
+
+def trace_update_direction(traces, td_errors):
+    """Eq 2.26 summed over environments: mean_i delta_i * e_i (the ascent direction)."""
+    def f(e):
+        d = td_errors.reshape(td_errors.shape + (1,) * (e.ndim - 1)).astype(e.dtype)
+        return jnp.mean(d * e, axis=0)
+    return jax.tree.map(f, traces)
+
+
+def epsilon_greedy_value(q, eps):
+    """Expected Q under the epsilon-greedy policy: (1 - eps) max Q + eps mean Q (for SARSA where
+    the next action is not known)."""
+    return (1.0 - eps) * jnp.max(q, axis=-1) + eps * jnp.mean(q, axis=-1)

@@ -1,0 +1,325 @@
+"""The TD(lambda) trainer as one compiled program (thesis 2.3-2.4, 3.1-3.2).
+
+``make_train(config)`` returns a pure ``train(key, hyper)``: one ``lax.scan`` over updates with the
+environment vmapped inside; jit it, vmap it over seeds or over ``Hyperparams`` (every leaf of which
+may differ: learning rate, gamma, lambda, epsilon schedule, target rate, reward weights...). Static
+settings (num_envs, rollout length, layer sizes, trace view, control) come from ``TrainConfig`` and
+fix the program's shapes.
+
+One *update* = a rollout of T steps in each of N environments, then:
+- forward view: lambda-returns by a reverse scan (jaxexo.train.td_lambda), then ``num_epochs`` passes
+  of ``num_minibatches`` Adam steps on 0.5 (G - Q(s, a))^2 (as PQN does, with a target network);
+- backward view: per-environment eligibility traces over the parameters, one Adam step per env step
+  along mean_i delta_i e_i (eq 2.26).
+The target network is copied every ``target_period`` updates ("hard") or moved by ``target_tau``
+("polyak"). Metrics are reduced inside the scan: one row of scalars per update.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import optax
+from flax import struct
+
+from jaxexo.config import Config
+from jaxexo.env import EnvParams, ExoStepEnv
+from jaxexo.train import td_lambda
+from jaxexo.train.network import QNetwork
+
+METRICS = ("episodes", "return_sum", "successes", "accurate", "env_steps", "loss", "q_mean", "epsilon")
+
+
+@struct.dataclass
+class Hyperparams:
+    """Vmappable hyperparameters (pytree leaves)."""
+
+    lr: jnp.ndarray
+    lr_end_fraction: jnp.ndarray
+    gamma: jnp.ndarray
+    lam: jnp.ndarray
+    eps_start: jnp.ndarray
+    eps_end: jnp.ndarray
+    eps_decay_fraction: jnp.ndarray
+    target_period: jnp.ndarray
+    target_tau: jnp.ndarray
+    max_grad_norm: jnp.ndarray
+    budget_episodes: jnp.ndarray     # 0: none
+    budget_env_steps: jnp.ndarray    # 0: none
+    env: EnvParams
+
+    @classmethod
+    def from_config(cls, cfg: Config) -> "Hyperparams":
+        t = cfg.train
+        f = lambda x: jnp.asarray(x, jnp.float32)  # noqa: E731
+        return cls(
+            lr=f(t.lr), lr_end_fraction=f(t.lr_end_fraction), gamma=f(t.gamma), lam=f(t.lam), eps_start=f(t.eps_start), eps_end=f(t.eps_end),
+            eps_decay_fraction=f(t.eps_decay_fraction), target_period=jnp.asarray(t.target_period, jnp.int32),
+            target_tau=f(t.target_tau), max_grad_norm=f(t.max_grad_norm),
+            budget_episodes=f(t.budget_episodes), budget_env_steps=f(t.budget_env_steps),
+            env=EnvParams.from_config(cfg),
+        )
+
+
+@struct.dataclass
+class EpisodeStats:
+    ret: jnp.ndarray        # (N,) running return
+    clean: jnp.ndarray      # (N,) no collision, joint-limit or leg-length violation so far
+    accurate: jnp.ndarray   # (N,) no collision so far (thesis eq 3.1)
+
+
+@struct.dataclass
+class TrainState:
+    params: Any
+    target_params: Any
+    opt_state: Any
+    env_state: Any
+    obs: jnp.ndarray
+    stats: EpisodeStats
+    traces: Any               # backward view: per-env traces; forward view: ()
+    action: jnp.ndarray       # backward view: the action chosen for ``obs`` (SARSA needs it ahead)
+    greedy: jnp.ndarray       # ...and whether it was greedy (Watkins cut)
+    fresh: jnp.ndarray        # ``obs`` starts an episode (traces reset)
+    key: jnp.ndarray
+    update: jnp.ndarray       # updates done
+    env_steps: jnp.ndarray    # float32 counters (exact below 2^24; used for schedules and budgets)
+    episodes: jnp.ndarray
+
+
+class Transition(NamedTuple):
+    obs: jnp.ndarray
+    action: jnp.ndarray
+    reward: jnp.ndarray
+    terminated: jnp.ndarray
+    truncated: jnp.ndarray
+    final_obs: jnp.ndarray
+    greedy: jnp.ndarray
+
+
+def num_updates(cfg: Config) -> int:
+    """Updates that the budget can need: env steps / (N T), or for an episode budget the bound at
+    which every episode ran to the step limit."""
+    t = cfg.train
+    per = t.num_envs * t.rollout_steps
+    bounds = []
+    if t.budget_env_steps:
+        bounds.append(math.ceil(t.budget_env_steps / per))
+    if t.budget_episodes:
+        bounds.append(math.ceil(t.budget_episodes * cfg.env.max_steps / per))
+    return max(1, min(bounds))
+
+
+class Trainer:
+    """The pieces of the compiled program, for the Python driver (chunks, resume) and for sweeps."""
+
+    def __init__(self, cfg: Config):
+        self.cfg = cfg
+        self.tc = cfg.train
+        self.env = ExoStepEnv(cfg)
+        self.net = QNetwork(hidden=self.tc.hidden, num_actions=self.env.num_actions,
+                            layer_norm=self.tc.layer_norm)
+        self.num_updates = num_updates(cfg)
+        self.off_policy = self.tc.control == "off_policy"
+
+    # --------------------------------------------------------------------------------------
+    def optimizer(self, hyper: Hyperparams):
+        """Adam with global-norm clipping; the learning rate decays linearly over the update budget."""
+        steps = self.num_updates * (self.tc.rollout_steps if self.tc.trace == "backward"
+                                    else self.tc.num_epochs * self.tc.num_minibatches)
+        lr = optax.linear_schedule(hyper.lr, hyper.lr * hyper.lr_end_fraction, steps)
+        return optax.chain(optax.clip_by_global_norm(hyper.max_grad_norm), optax.adam(lr))
+
+    def epsilon(self, ts: TrainState, hyper: Hyperparams):
+        """Linear decay from eps_start to eps_end over eps_decay_fraction of the budget."""
+        frac = jnp.maximum(
+            jnp.where(hyper.budget_env_steps > 0, ts.env_steps / jnp.maximum(hyper.budget_env_steps, 1.0), 0.0),
+            jnp.where(hyper.budget_episodes > 0, ts.episodes / jnp.maximum(hyper.budget_episodes, 1.0), 0.0))
+        w = jnp.clip(1.0 - frac / hyper.eps_decay_fraction, 0.0, 1.0)
+        return hyper.eps_end + (hyper.eps_start - hyper.eps_end) * w
+
+    def active(self, ts: TrainState, hyper: Hyperparams):
+        steps_left = (hyper.budget_env_steps <= 0) | (ts.env_steps < hyper.budget_env_steps)
+        eps_left = (hyper.budget_episodes <= 0) | (ts.episodes < hyper.budget_episodes)
+        return steps_left & eps_left
+
+    def init(self, key, hyper: Hyperparams) -> TrainState:
+        n = self.tc.num_envs
+        k_net, k_env, k_run = jax.random.split(key, 3)
+        obs, env_state = jax.vmap(self.env.reset, in_axes=(0, None))(jax.random.split(k_env, n), hyper.env)
+        params = self.net.init(k_net, obs[:1])
+        opt_state = self.optimizer(hyper).init(params)
+        backward = self.tc.trace == "backward"
+        traces = jax.tree.map(lambda p: jnp.zeros((n,) + p.shape, p.dtype), params) if backward else ()
+        stats = EpisodeStats(ret=jnp.zeros(n), clean=jnp.ones(n, bool), accurate=jnp.ones(n, bool))
+        ts = TrainState(params=params, target_params=params, opt_state=opt_state, env_state=env_state,
+                        obs=obs, stats=stats, traces=traces, action=jnp.zeros(n, jnp.int32),
+                        greedy=jnp.ones(n, bool), fresh=jnp.ones(n, bool), key=k_run,
+                        update=jnp.asarray(0, jnp.int32), env_steps=jnp.asarray(0.0), episodes=jnp.asarray(0.0))
+        if backward:
+            k_act, k_run = jax.random.split(k_run)
+            a, g = self._act(params, obs, k_act, self.epsilon(ts, hyper))
+            ts = ts.replace(action=a, greedy=g, key=k_run)
+        return ts
+
+    # --------------------------------------------------------------------------------------
+    def _act(self, params, obs, key, eps):
+        """Epsilon-greedy (thesis 2.4.2): returns the actions and whether each is the greedy one."""
+        q = self.net.apply(params, obs)
+        greedy = jnp.argmax(q, axis=-1)
+        ku, kr = jax.random.split(key)
+        explore = jax.random.uniform(ku, greedy.shape) < eps
+        a = jnp.where(explore, jax.random.randint(kr, greedy.shape, 0, self.env.num_actions), greedy)
+        return a.astype(jnp.int32), a == greedy
+
+    def _env_step(self, key, env_state, action, hyper):
+        n = self.tc.num_envs
+        return jax.vmap(self.env.step, in_axes=(0, 0, 0, None))(
+            jax.random.split(key, n), env_state, action, hyper.env)
+
+    @staticmethod
+    def _episode_stats(stats: EpisodeStats, reward, terminated, truncated, info):
+        ret = stats.ret + reward
+        clean = stats.clean & ~info["collision"] & ~info["joint_limit_violation"] & ~info["leg_length_violation"]
+        accurate = stats.accurate & ~info["collision"]
+        done = terminated | truncated
+        success = terminated & info["goal_reached"] & clean
+        row = jnp.stack([done.sum(), jnp.where(done, ret, 0.0).sum(), success.sum(), (done & accurate).sum()])
+        new = EpisodeStats(ret=jnp.where(done, 0.0, ret), clean=clean | done, accurate=accurate | done)
+        return new, row.astype(jnp.float32)
+
+    def _bootstrap(self, q_final, next_action, done, eps):
+        """Value of the state a step reached (its final observation), per the control mode."""
+        if self.off_policy:
+            return jnp.max(q_final, axis=-1)                               # eq 2.28
+        q_next = jnp.take_along_axis(q_final, next_action[..., None], axis=-1)[..., 0]
+        return jnp.where(done, td_lambda.epsilon_greedy_value(q_final, eps), q_next)  # eq 2.27
+
+    def _finish_update(self, ts: TrainState, new: TrainState, hyper, row_ep, loss, q_mean, eps):
+        upd = new.update + 1
+        if self.tc.target == "hard":
+            copy = (upd % hyper.target_period) == 0
+            target = jax.tree.map(lambda p, t: jnp.where(copy, p, t), new.params, new.target_params)
+        else:
+            target = optax.incremental_update(new.params, new.target_params, hyper.target_tau)
+        steps = float(self.tc.num_envs * self.tc.rollout_steps)
+        new = new.replace(target_params=target, update=upd, env_steps=new.env_steps + steps,
+                          episodes=new.episodes + row_ep[0])
+        # Past the budget the state is frozen (vmapped seeds and sweeps reach it at different times).
+        act = self.active(ts, hyper)
+        new = jax.tree.map(lambda a, b: jnp.where(act, a, b), new, ts)
+        metrics = jnp.concatenate([row_ep, jnp.stack([steps, loss, q_mean, eps])]) * act
+        return new, metrics
+
+    # --------------------------------------------------------------------------------------
+    def _update_forward(self, ts: TrainState, hyper: Hyperparams):
+        eps = self.epsilon(ts, hyper)
+
+        def step(carry, _):
+            env_state, obs, stats, key = carry
+            key, ka, ke = jax.random.split(key, 3)
+            a, greedy = self._act(ts.params, obs, ka, eps)
+            obs2, env_state, r, term, trunc, info = self._env_step(ke, env_state, a, hyper)
+            stats, row = self._episode_stats(stats, r, term, trunc, info)
+            return (env_state, obs2, stats, key), (Transition(obs, a, r, term, trunc, info["final_observation"], greedy), row)
+
+        (env_state, obs, stats, key), (tr, rows) = jax.lax.scan(
+            step, (ts.env_state, ts.obs, ts.stats, ts.key), None, length=self.tc.rollout_steps)
+        done = tr.terminated | tr.truncated
+        q_final = self.net.apply(ts.target_params, tr.final_obs)                 # (T, N, A)
+        next_action = jnp.concatenate([tr.action[1:], tr.action[-1:]], axis=0)
+        last = jnp.arange(self.tc.rollout_steps)[:, None] == self.tc.rollout_steps - 1
+        boot = self._bootstrap(q_final, next_action, done | last, eps)
+        cont = tr.greedy if self.off_policy else jnp.ones_like(tr.greedy)
+        returns = td_lambda.lambda_returns(tr.reward, boot, tr.terminated, done, cont, hyper.gamma, hyper.lam)
+
+        tx = self.optimizer(hyper)
+        batch = self.tc.num_envs * self.tc.rollout_steps
+        flat = lambda x: x.reshape((batch,) + x.shape[2:])  # noqa: E731
+        data = (flat(tr.obs), flat(tr.action), flat(returns))
+
+        def loss_fn(params, obs, action, target):
+            q = self.net.apply(params, obs)
+            qa = jnp.take_along_axis(q, action[:, None], axis=-1)[:, 0]
+            return 0.5 * jnp.mean((target - qa) ** 2), jnp.mean(qa)
+
+        def epoch(carry, key):
+            params, opt_state = carry
+            perm = jax.random.permutation(key, batch)
+            mb = jax.tree.map(lambda x: x[perm].reshape((self.tc.num_minibatches, -1) + x.shape[1:]), data)
+
+            def minibatch(carry, m):
+                params, opt_state = carry
+                (loss, qm), grads = jax.value_and_grad(loss_fn, has_aux=True)(params, *m)
+                updates, opt_state = tx.update(grads, opt_state, params)
+                return (optax.apply_updates(params, updates), opt_state), (loss, qm)
+
+            return jax.lax.scan(minibatch, (params, opt_state), mb)
+
+        key, kp = jax.random.split(key)
+        (params, opt_state), (losses, qms) = jax.lax.scan(
+            epoch, (ts.params, ts.opt_state), jax.random.split(kp, self.tc.num_epochs))
+        new = ts.replace(params=params, opt_state=opt_state, env_state=env_state, obs=obs, stats=stats, key=key)
+        return self._finish_update(ts, new, hyper, rows.sum(0), losses.mean(), qms.mean(), eps)
+
+    def _update_backward(self, ts: TrainState, hyper: Hyperparams):
+        eps = self.epsilon(ts, hyper)
+        tx = self.optimizer(hyper)
+
+        def q_sa(params, obs, action):
+            return self.net.apply(params, obs[None])[0, action]
+
+        grad_q = jax.vmap(jax.value_and_grad(q_sa), in_axes=(None, 0, 0))
+
+        def step(carry, _):
+            params, opt_state, traces, env_state, obs, a, greedy, fresh, stats, key = carry
+            key, ka, ke = jax.random.split(key, 3)
+            qsa, grads = grad_q(params, obs, a)
+            # Eq 2.22: decay by gamma * lambda, reset at episode start, cut after exploration (Watkins).
+            keep = ~fresh & (greedy if self.off_policy else True)
+            traces = td_lambda.add_gradient(
+                td_lambda.decay_traces(traces, hyper.gamma, hyper.lam, keep), grads, self.tc.trace_kind)
+            obs2, env_state, r, term, trunc, info = self._env_step(ke, env_state, a, hyper)
+            stats, row = self._episode_stats(stats, r, term, trunc, info)
+            done = term | trunc
+            a2, greedy2 = self._act(params, obs2, ka, eps)
+            q_final = self.net.apply(ts.target_params, info["final_observation"])
+            boot = self._bootstrap(q_final, a2, done, eps)
+            delta = r + hyper.gamma * (1.0 - term) * boot - qsa                     # eq 2.26
+            direction = td_lambda.trace_update_direction(traces, delta)
+            # Adam minimises: feed it the negative ascent direction of eq 2.26.
+            updates, opt_state = tx.update(jax.tree.map(jnp.negative, direction), opt_state, params)
+            params = optax.apply_updates(params, updates)
+            carry = (params, opt_state, traces, env_state, obs2, a2, greedy2, done, stats, key)
+            return carry, (row, 0.5 * jnp.mean(delta ** 2), jnp.mean(qsa))
+
+        init = (ts.params, ts.opt_state, ts.traces, ts.env_state, ts.obs, ts.action, ts.greedy, ts.fresh,
+                ts.stats, ts.key)
+        (params, opt_state, traces, env_state, obs, a, greedy, fresh, stats, key), (rows, losses, qms) = \
+            jax.lax.scan(step, init, None, length=self.tc.rollout_steps)
+        new = ts.replace(params=params, opt_state=opt_state, traces=traces, env_state=env_state, obs=obs,
+                         action=a, greedy=greedy, fresh=fresh, stats=stats, key=key)
+        return self._finish_update(ts, new, hyper, rows.sum(0), losses.mean(), qms.mean(), eps)
+
+    def update(self, ts: TrainState, hyper: Hyperparams):
+        if self.tc.trace == "forward":
+            return self._update_forward(ts, hyper)
+        return self._update_backward(ts, hyper)
+
+    def run(self, ts: TrainState, hyper: Hyperparams, n_updates: int):
+        """``n_updates`` updates in one scan; returns the state and a (n_updates, len(METRICS)) array."""
+        return jax.lax.scan(lambda s, _: self.update(s, hyper), ts, None, length=n_updates)
+
+
+def make_train(cfg: Config):
+    """A pure ``train(key, hyper) -> (TrainState, metrics)`` running the whole budget in one scan.
+
+    jit it; vmap it over keys (seeds) and/or Hyperparams (configurations of equal static settings)."""
+    trainer = Trainer(cfg)
+
+    def train(key, hyper: Hyperparams):
+        return trainer.run(trainer.init(key, hyper), hyper, trainer.num_updates)
+
+    return train
