@@ -24,6 +24,7 @@ from jaxexo.geometry import THESIS_OBSTACLES
 
 PIVOT_CONDITIONS = ("agent", "obstacle", "between")  # thesis 3.1: (b)/(2), (a)/(1), (c)/(3)
 OBS_MODES = ("thesis", "conditioned")
+OBS_PROFILES = ("bbox", "shape")
 COLLISION_MODES = ("penalty", "terminate")
 
 
@@ -46,6 +47,10 @@ class EnvConfig:
     max_steps: int = 100               # step limit -> truncated
     collision: str = "penalty"         # "penalty" (thesis: pay r1 and continue) or "terminate"
     obs_mode: str = "conditioned"      # "thesis" (heel y, z) or "conditioned"
+    # How the conditioned observation shows the obstacle's profile: "bbox" (its bounding rectangle:
+    # a policy trained on rectangles treats any unseen shape conservatively) or "shape" (the true
+    # profile, for policies trained on varied shapes). Collisions always use the true outline.
+    obs_profile: str = "bbox"
     max_vertices: int = 0              # outline size K; 0: the largest count among the layout's kinds
     shape_points: int = geometry.DEFAULT_SHAPE_POINTS
     goal_tolerance: tuple[float, float] = (0.04, 0.02)   # goal box: |heel_y - goal_y| <= [0], heel_z <= [1]
@@ -265,6 +270,8 @@ def _coerce_env(path, k, v):
         return _choice(path, v, COLLISION_MODES)
     if k == "obs_mode":
         return _choice(path, v, OBS_MODES)
+    if k == "obs_profile":
+        return _choice(path, v, OBS_PROFILES)
     if k in ("goal_tolerance", "mid_goal_half_size"):
         return _vector(path, v, 2, positive=True)
     if k == "bounds_y":

@@ -273,7 +273,8 @@ class ExoStepEnv:
             lay.height - heel[1],                                 # obstacle top
         ]) / LENGTH_SCALE
         progress = (state.time / params.max_steps_in_episode).astype(heel.dtype)
+        profile = jnp.where(params.obs_true_profile, lay.shape, jnp.full_like(lay.shape, lay.height))
         return jnp.concatenate([
-            base, rel, lay.shape / LENGTH_SCALE,
+            base, rel, profile / LENGTH_SCALE,
             jnp.stack([progress, state.visited_mid.astype(heel.dtype)]),
         ])

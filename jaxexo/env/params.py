@@ -22,6 +22,7 @@ class EnvParams:
     step_size: jnp.ndarray
     max_steps_in_episode: jnp.ndarray          # gymnax name for the step limit
     terminate_on_collision: jnp.ndarray        # bool
+    obs_true_profile: jnp.ndarray              # bool: observe the true profile, not the bounding box
     directions: jnp.ndarray                    # (36, 2): unit moves at k * 10 deg (thesis 2.1)
     bounds_y: jnp.ndarray                      # (2,)
     max_z_world: jnp.ndarray
@@ -85,6 +86,7 @@ class EnvParams:
             step_size=f(env.step_size),
             max_steps_in_episode=jnp.asarray(env.max_steps, dtype=jnp.int32),
             terminate_on_collision=jnp.asarray(env.collision == "terminate"),
+            obs_true_profile=jnp.asarray(env.obs_profile == "shape"),
             directions=f(directions),
             bounds_y=f(env.bounds_y),
             max_z_world=f(env.max_z),
