@@ -103,8 +103,8 @@ class ObstacleSpec:
 
     ``kind`` is a thesis obstacle (base1, base2, base3, triangle, half_circle: fixed size) or a shape
     (rectangle, triangle, half_ellipse, profile) with ``width`` and ``height`` ranges [lo, hi] in m.
-    A ``profile`` takes ``points`` (y, z), y relative to the obstacle centre, and is scaled by
-    width/height ranges relative to its own extents (give [1, 1] to keep it as drawn)."""
+    A ``profile`` takes ``points`` (y, z), y relative to the obstacle centre, and is scaled to
+    ``width`` and ``height`` ranges in metres (default: its own extents, as drawn)."""
 
     kind: str
     width: tuple[float, float]
@@ -519,26 +519,26 @@ def validate(cfg: Config) -> None:
 
 
 def _check_clearable(cfg: Config, path: str, h_max: float, w_max: float) -> None:
-    """Refuse an obstacle that the leg cannot clear: with the heel at the mid-goal over the obstacle
-    (the lowest point the reward asks the foot to pass), some allowed pivot condition must give a
-    reachable leg within the joint limits."""
+    """Refuse an obstacle that the leg cannot clear: with the heel at the bottom of the mid-goal box
+    over the obstacle (the lowest point the reward asks the foot to pass), every pivot condition the
+    layout can draw must give a reachable leg within the joint limits, at every extreme of the
+    start shift, step length and obstacle offset that reset can draw."""
+    import itertools
+
     env, kin, lay = cfg.env, cfg.kinematics, cfg.layout
-    L = lay.step_length[0]
-    center = lay.default_center(kin.foot_length, L) + lay.obstacle_offset[0]
-    heel = np.array([center, h_max + env.mid_goal_clearance - env.mid_goal_half_size[1]])
-    start = lay.start_shift[0]
-    pivots = {"agent": start, "obstacle": center, "between": 0.5 * (start + center)}
-    feasible = []
-    for name, weight in zip(PIVOT_CONDITIONS, lay.pivot):
-        if weight <= 0:
-            continue
-        ks = kinematics.leg_state(np, pivots[name], heel, kin.thigh, kin.shin)
-        ok = ks["leg_swing"] <= kin.thigh + kin.shin + 1e-9
-        ok &= not kinematics.joint_limit_violation(
-            np, ks["hip_swing"], ks["knee_swing_angle"], *kin.hip_limits, *kin.knee_limits)
-        feasible.append((name, bool(ok)))
-    bad = [n for n, ok in feasible if not ok]
-    if bad:
-        raise ConfigError(
-            f"{path}.height: an obstacle {h_max:.3f} m high cannot be cleared with pivot "
-            f"{bad[0]!r}: the heel over it ({heel[1]:.3f} m) is out of the leg's reach or joint limits")
+    heel_z = h_max + env.mid_goal_clearance - env.mid_goal_half_size[1]
+    for start, L, off in itertools.product(lay.start_shift, lay.step_length, lay.obstacle_offset):
+        center = lay.default_center(kin.foot_length, L) + off
+        pivots = {"agent": start, "obstacle": center, "between": 0.5 * (start + center)}
+        heel = np.array([center, heel_z])
+        for name, weight in zip(PIVOT_CONDITIONS, lay.pivot):
+            if weight <= 0:
+                continue
+            ks = kinematics.leg_state(np, pivots[name], heel, kin.thigh, kin.shin)
+            ok = ks["leg_swing"] <= kin.thigh + kin.shin + 1e-9 and not kinematics.joint_limit_violation(
+                np, ks["hip_swing"], ks["knee_swing_angle"], *kin.hip_limits, *kin.knee_limits)
+            if not ok:
+                raise ConfigError(
+                    f"{path}.height: an obstacle {h_max:.3f} m high cannot be cleared with pivot {name!r} "
+                    f"(start {start:.3f} m, step length {L:.3f} m): the heel over it at {heel_z:.3f} m is "
+                    "out of the leg's reach or joint limits")

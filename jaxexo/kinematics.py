@@ -13,8 +13,9 @@ Decisions (thesis-notes "Typos and contradictions", "Decisions left to you"):
   leg and both legs are then too short.
 - Knee IK (eq 2.4-2.11): the knee is the intersection of the circle of radius t about the hip and
   the circle of radius s about the heel, computed algebraically (no arccos). Of the two solutions we
-  keep the forward-bending one as a pair (the one with larger y), not y and z independently as eq
-  2.11 prints. An unreachable foot (|hip-heel| > t + s) gets the straight leg pointing at it, as the
+  keep the flexing one as a pair, not y and z independently as eq 2.11 prints: the one on the +90
+  degree side of the hip->heel direction, which is the larger-y (forward) knee of eq 2.11 whenever
+  the heel is below the hip. An unreachable foot (|hip-heel| > t + s) gets the straight leg pointing at it, as the
   clamp of eq 2.6 does.
 - Joint angles (eq 2.46-2.49, written with atan2 so that they hold beyond +-90 degrees): the hip
   angle is the thigh's angle from the downward vertical, positive when the knee is ahead of the hip
@@ -72,12 +73,12 @@ def knee_position(xp, hip, foot, thigh, shin):
     # eq 2.5); clamped to the reachable range like eq 2.6.
     a = xp.clip((thigh * thigh - shin * shin + r * r) / (2.0 * r_safe), -thigh, thigh)
     h = xp.sqrt(xp.maximum(thigh * thigh - a * a, 0.0))
+    # Eq 2.11 as a pair: of the two solutions, the knee on the +90 degree side of the hip->heel
+    # direction is the one that flexes (knee angle <= 0). With the heel below the hip it is the
+    # solution with the larger y, as eq 2.11 says; with the heel raised above the hip the larger-y
+    # solution would be a hyperextended knee.
     perp = xp.stack([-u[..., 1], u[..., 0]], axis=-1)
-    base = hip + a[..., None] * u
-    k1 = base + h[..., None] * perp
-    k2 = base - h[..., None] * perp
-    # Eq 2.11 as a pair: the solution with the larger y is the knee that bends forward.
-    knee = xp.where((k1[..., 0] >= k2[..., 0])[..., None], k1, k2)
+    knee = hip + a[..., None] * u + h[..., None] * perp
     return knee, r
 
 

@@ -27,6 +27,8 @@ NUM_ACTIONS = 36
 LENGTH_SCALE = 0.5
 # Thesis-mode observation centre (m): the middle of a default step, a little above the ground.
 THESIS_OBS_CENTER = (0.35, 0.10)
+# Every observation lies within +-OBS_BOUND (world bounds of a few metres over LENGTH_SCALE).
+OBS_BOUND = 10.0
 
 
 @struct.dataclass
@@ -105,7 +107,8 @@ class ExoStepEnv:
         return spaces.discrete(NUM_ACTIONS)
 
     def observation_space(self, params: EnvParams | None = None):
-        return spaces.box(-np.inf, np.inf, (self.obs_dim,), jnp.float32)
+        # Observations are lengths / LENGTH_SCALE inside the world bounds, flags and progress in [0, 1].
+        return spaces.box(-OBS_BOUND, OBS_BOUND, (self.obs_dim,), jnp.float32)
 
     # Layout sampling ----------------------------------------------------------------------
     def sample_layout(self, key, params: EnvParams) -> Layout:

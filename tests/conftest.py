@@ -1,0 +1,131 @@
+"""Shared fixtures for the jaxexo test suite.
+
+JAX is imported lazily inside the fixtures that need it, so that the NumPy-only tests (geometry,
+kinematics, rewards, config) do not pay for it, and so that test_package can check in a subprocess
+that ``import jaxexo`` stays free of JAX.
+"""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+
+import pytest
+from hypothesis import HealthCheck, settings
+
+ROOT = Path(__file__).resolve().parent.parent
+
+settings.register_profile(
+    "jaxexo",
+    deadline=None,
+    max_examples=200,
+    suppress_health_check=[HealthCheck.too_slow],
+    derandomize=False,
+)
+settings.load_profile("jaxexo")
+
+# Every obstacle kind the config accepts: the five thesis obstacles (Table 3.1), a rectangle range,
+# a half-ellipse range and a user profile; all three pivot conditions.
+PROFILE_POINTS = [[-0.08, 0.0], [-0.08, 0.06], [0.0, 0.12], [0.08, 0.06], [0.08, 0.0]]
+MIXED_KINDS = ("base1", "base2", "base3", "triangle", "half_circle", "rectangle", "half_ellipse", "profile")
+# Every constant the hand-computed env tests rely on is pinned here, so that changes to the package's
+# defaults do not silently change what those tests check.
+MIXED_RAW = {
+    "env": {
+        "obs_mode": "conditioned", "step_size": 0.03, "max_steps": 100, "collision": "penalty",
+        "goal_tolerance": [0.04, 0.02], "mid_goal_clearance": 0.10, "mid_goal_half_size": [0.06, 0.05],
+        "max_height_margin": 0.20, "bounds_y": [-0.30, 1.30], "max_z": 0.80, "shape_points": 9,
+    },
+    "kinematics": {
+        "thigh": 0.5, "shin": 0.5, "foot_length": 0.2, "hip_limits": [-0.5235987755982988, 2.007128639793479],
+        "knee_limits": [-1.7453292519943295, 0.0],
+    },
+    "reward": {
+        "traj_weights": [1.0] * 8, "exo_weights": [1.0] * 4, "step_threshold": 30.0, "collision_penalty": 10.0,
+        "backward_penalty": 1.0, "goal_reward": 10.0, "mid_goal_penalty": 1.0, "max_height_penalty": 1.0,
+        "safety_penalty": 2.0, "safety_distance": 0.03, "z_monotone_penalty": 0.5, "hlc_penalty": 1.0,
+        "hlc_threshold": 0.90, "leg_length_penalty": 1.0, "leg_length_tolerance": 0.0,
+        "joint_limit_penalty": 1.0, "hip_height_penalty": 1.0, "max_hip_z": 1.0,
+    },
+    "layout": {
+        "obstacles": [
+            "base1",
+            "base2",
+            "base3",
+            "triangle",
+            "half_circle",
+            {"kind": "rectangle", "width": [0.05, 0.20], "height": [0.05, 0.20]},
+            {"kind": "half_ellipse", "width": [0.10, 0.20], "height": [0.05, 0.20]},
+            {"kind": "profile", "points": PROFILE_POINTS},
+        ],
+        "pivot": ["agent", "obstacle", "between"],
+        "start_shift": [0.0, 0.05],
+        "obstacle_offset": [-0.03, 0.03],
+        "step_length": [0.65, 0.75],
+    },
+}
+
+
+@pytest.fixture
+def mixed_raw():
+    """A fresh (mutable) copy of the raw mixed config table."""
+    return copy.deepcopy(MIXED_RAW)
+
+
+_CACHE: dict = {}
+
+
+def get_mixed_config():
+    if "config" not in _CACHE:
+        from jaxexo.config import config_from_dict
+
+        _CACHE["config"] = config_from_dict(copy.deepcopy(MIXED_RAW))
+    return _CACHE["config"]
+
+
+def get_mixed_env():
+    """One ExoStepEnv on the mixed config per session (also for unittest-style chex tests)."""
+    if "env" not in _CACHE:
+        from jaxexo.env import ExoStepEnv
+
+        _CACHE["env"] = ExoStepEnv(get_mixed_config())
+    return _CACHE["env"]
+
+
+def get_mixed_step():
+    """The mixed env's auto-resetting step, jitted once per session: JAX compile time dominates the
+    suite, so every test that steps one env by hand shares this one."""
+    if "step" not in _CACHE:
+        import jax
+
+        _CACHE["step"] = jax.jit(get_mixed_env().step)
+    return _CACHE["step"]
+
+
+@pytest.fixture(scope="session")
+def mixed_config():
+    return get_mixed_config()
+
+
+@pytest.fixture(scope="session")
+def default_config():
+    from jaxexo.config import load_config
+
+    return load_config(ROOT / "configs" / "default.toml")
+
+
+@pytest.fixture(scope="session")
+def mixed_env():
+    return get_mixed_env()
+
+
+@pytest.fixture(scope="session")
+def default_env(default_config):
+    from jaxexo.env import ExoStepEnv
+
+    return ExoStepEnv(default_config)
+
+
+@pytest.fixture(scope="session")
+def mixed_step():
+    return get_mixed_step()
