@@ -86,7 +86,9 @@ def joint_angles(xp, hip, knee, foot):
     """Hip and knee angles (radians) of one leg (eq 2.49 with atan2): hip flexion +, knee flexion -."""
     thigh_angle = atan2(xp, knee[..., 0] - hip[..., 0], hip[..., 1] - knee[..., 1])
     shank_angle = atan2(xp, foot[..., 0] - knee[..., 0], knee[..., 1] - foot[..., 1])
-    return thigh_angle, shank_angle - thigh_angle
+    # Wrapped to [-pi, pi): both absolute angles lie in [-pi, pi], so their difference may not.
+    knee_angle = xp.mod(shank_angle - thigh_angle + math.pi, 2.0 * math.pi) - math.pi
+    return thigh_angle, knee_angle
 
 
 def leg_state(xp, pivot_y, heel, thigh, shin):
