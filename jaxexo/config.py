@@ -453,9 +453,9 @@ def validate(cfg: Config) -> None:
     env, kin, rew, lay, tr = cfg.env, cfg.kinematics, cfg.reward, cfg.layout, cfg.train
     if tr.budget_episodes == 0 and tr.budget_env_steps == 0:
         raise ConfigError("train.budget_episodes: set a budget (budget_episodes and/or budget_env_steps > 0)")
-    if (tr.num_envs * tr.rollout_steps) % tr.num_minibatches:
-        raise ConfigError(f"train.num_minibatches: {tr.num_minibatches} does not divide the batch of "
-                          f"num_envs x rollout_steps = {tr.num_envs * tr.rollout_steps}")
+    if tr.num_envs % tr.num_minibatches:
+        raise ConfigError(f"train.num_minibatches: {tr.num_minibatches} does not divide train.num_envs = "
+                          f"{tr.num_envs} (minibatches are blocks of environments)")
     if tr.eps_end > tr.eps_start:
         raise ConfigError("train.eps_end: must not exceed train.eps_start")
     if sum(rew.traj_weights) <= 0:

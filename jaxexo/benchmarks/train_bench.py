@@ -19,8 +19,8 @@ from jaxexo.config import Config
 from jaxexo.train.trainer import Hyperparams, Trainer
 
 
-def throughput(cfg: Config, updates_per_call: int, repeats: int = 3) -> dict:
-    tr = Trainer(cfg)
+def throughput(cfg: Config, updates_per_call: int, repeats: int = 3, devices=None) -> dict:
+    tr = Trainer(cfg, devices=devices)
     hyper = Hyperparams.from_config(cfg)
     ts = jax.jit(tr.init)(jax.random.PRNGKey(0), hyper)
     run = jax.jit(tr.run, static_argnums=2)
@@ -37,7 +37,7 @@ def throughput(cfg: Config, updates_per_call: int, repeats: int = 3) -> dict:
     return {"trace": cfg.train.trace, "control": cfg.train.control, "num_envs": cfg.train.num_envs,
             "hidden": list(cfg.train.hidden), "rollout_steps": cfg.train.rollout_steps,
             "env_steps_per_call": steps, "median_s": med, "env_steps_per_s": steps / med,
-            "compile_s": compile_s, "repeats": repeats}
+            "compile_s": compile_s, "repeats": repeats, "devices": len(tr.devices or [0])}
 
 
 def thesis_network_config(base: Config, trace: str, num_envs: int = 4096) -> Config:
@@ -46,3 +46,42 @@ def thesis_network_config(base: Config, trace: str, num_envs: int = 4096) -> Con
                              budget_env_steps=10**9, budget_episodes=0)
     env = dataclasses.replace(base.env, obs_mode="thesis")
     return dataclasses.replace(base, train=tc, env=env)
+
+
+def run_train_benchmark(out_dir, default_config: str = "configs/default.toml", thesis_config: str | None =
+                        "configs/thesis/a.toml", progress=print) -> dict:
+    """Throughput (thesis network, 4096 envs, forward and backward view) and time-to-result of the
+    default model and of a thesis config, each through the real `jaxexo train` driver."""
+    import tempfile
+
+    from jaxexo.benchmarks.machine import write_result
+    from jaxexo.config import load_config
+    from jaxexo.train.driver import run_training
+
+    base = load_config(default_config)
+    rows = []
+    for trace, updates in (("forward", 10), ("backward", 1)):
+        r = throughput(thesis_network_config(base, trace), updates, repeats=3 if trace == "forward" else 2)
+        progress(f"thesis network, {trace} view, 4096 envs: {r['env_steps_per_s'] / 1e6:.3f} M env-steps/s")
+        rows.append(r)
+    runs = {}
+    for name in [default_config] + ([thesis_config] if thesis_config else []):
+        with tempfile.TemporaryDirectory() as d:
+            res = run_training(load_config(name), d, seed=0, progress=False)
+        runs[name] = {k: res[k] for k in ("success", "accuracy", "held_out", "by_obstacle", "train_seconds",
+                                          "episodes", "env_steps")}
+        progress(f"{name}: trained in {res['train_seconds']:.1f} s, success {res['success']:.3f}, "
+                 f"held-out success {(res['held_out'] or {}).get('success')}")
+    lines = ["# Trainer benchmarks", "", "| what | figure |", "|---|---:|"]
+    for r in rows:
+        lines.append(f"| thesis network, {r['trace']} view, {r['num_envs']} envs | "
+                     f"{r['env_steps_per_s'] / 1e6:.3f} M env-steps/s |")
+    for name, r in runs.items():
+        held = (r["held_out"] or {}).get("success")
+        lines.append(f"| `jaxexo train {name}`: wall time incl. compilation | {r['train_seconds']:.1f} s |")
+        lines.append(f"| `{name}`: greedy success (all 1000 test layouts / held-out) | "
+                     f"{r['success']:.3f} / {held if held is None else f'{held:.3f}'} |")
+    md = "\n".join(lines)
+    write_result("train", {"throughput": rows, "runs": runs}, md, out_dir)
+    progress(md)
+    return {"throughput": rows, "runs": runs}

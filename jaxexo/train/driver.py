@@ -2,12 +2,16 @@
 
 Run directory:
 - config.toml        the resolved config
-- checkpoint.msgpack the TrainState after the last finished chunk (written atomically) and
-  checkpoint.json    its bookkeeping (chunks done, wall time so far)
+- checkpoint.msgpack the TrainState after the last finished chunk and the best parameters so far
+  checkpoint.json    (written atomically) and their bookkeeping (chunks done, wall time, best score)
 - metrics.jsonl      one line per chunk: counters and rates reduced inside the compiled scan
 - policy.npz         the exported greedy policy (jaxexo.policy; NumPy-only to load)
 - training_curve.png return and success rate against episodes (thesis Fig. 3.4)
 - eval.json          greedy rollouts on the test layouts (jaxexo.train.evaluate)
+
+Model selection: after every chunk the greedy policy is scored (strict success) on validation
+layouts drawn from the training distribution; the best parameters are exported (later chunks win
+ties). The held-out test obstacles are never used for this choice.
 
 Resume: the same chunk program runs from the restored state, so a resumed run ends bit-identical to
 an uninterrupted one (tests/test_train.py checks it).
@@ -28,7 +32,7 @@ from jaxexo.config import Config, ConfigError, config_from_dict
 from jaxexo.config_io import config_to_toml
 from jaxexo.env.exo_step import LENGTH_SCALE, THESIS_OBS_CENTER
 from jaxexo.policy import save_policy
-from jaxexo.train.evaluate import evaluate
+from jaxexo.train.evaluate import evaluate, make_validator
 from jaxexo.train.network import dense_layers, norm_layers
 from jaxexo.train.trainer import METRICS, Hyperparams, Trainer
 
@@ -38,11 +42,13 @@ BOOKKEEPING = "checkpoint.json"
 CHUNK_ENV_STEPS = 1_000_000
 
 
-def chunk_updates(cfg: Config, trainer: Trainer) -> int:
-    if cfg.train.chunk_updates:
-        return min(cfg.train.chunk_updates, trainer.num_updates)
+def chunking(cfg: Config, trainer: Trainer) -> tuple[int, int]:
+    """(updates per chunk, chunks): every chunk has the same length, so one program is compiled;
+    updates past the budget are masked inside the program."""
     per = cfg.train.num_envs * cfg.train.rollout_steps
-    return max(1, min(trainer.num_updates, CHUNK_ENV_STEPS // per))
+    target = cfg.train.chunk_updates or max(1, CHUNK_ENV_STEPS // per)
+    chunks = math.ceil(trainer.num_updates / min(target, trainer.num_updates))
+    return math.ceil(trainer.num_updates / chunks), chunks
 
 
 def _atomic_write(path: Path, data: bytes) -> None:
@@ -142,13 +148,15 @@ def run_training(cfg: Config, out: str | Path, seed: int = 0, resume: bool = Fal
     trainer = Trainer(cfg)
     hyper = Hyperparams.from_config(cfg)
     ts = jax.jit(trainer.init)(jax.random.PRNGKey(seed), hyper)
-    n_chunk = chunk_updates(cfg, trainer)
-    total_chunks = math.ceil(trainer.num_updates / n_chunk)
+    n_chunk, total_chunks = chunking(cfg, trainer)
     rows: list[dict] = []
     chunks_done, wall_before = 0, 0.0
     metrics_path = out / "metrics.jsonl"
+    best = {"params": ts.params, "score": -1.0, "chunk": 0}
     if resume:
-        ts = serialization.from_bytes(ts, ckpt.read_bytes())
+        restored = serialization.from_bytes({"state": ts, "best_params": ts.params}, ckpt.read_bytes())
+        ts, best["params"] = restored["state"], restored["best_params"]
+        best.update(score=state_book["best_score"], chunk=state_book["best_chunk"])
         chunks_done, wall_before = state_book["chunks_done"], state_book["train_seconds"]
         lines = metrics_path.read_text().splitlines() if metrics_path.exists() else []
         rows = [json.loads(x) for x in lines[:chunks_done]]
@@ -156,6 +164,7 @@ def run_training(cfg: Config, out: str | Path, seed: int = 0, resume: bool = Fal
         metrics_path.write_text("".join(json.dumps(r) + "\n" for r in rows))
     run = jax.jit(trainer.run, static_argnums=2)
     active = jax.jit(trainer.active)
+    validate = make_validator(cfg, trainer.net)
 
     bar = None
     if progress:
@@ -165,32 +174,36 @@ def run_training(cfg: Config, out: str | Path, seed: int = 0, resume: bool = Fal
                    desc=f"train {cfg.train.trace} {cfg.train.control}")
     with metrics_path.open("a") as mf:
         while chunks_done < total_chunks and bool(active(ts, hyper)):
-            n = min(n_chunk, trainer.num_updates - chunks_done * n_chunk)
             t0 = time.perf_counter()
-            ts, m = run(ts, hyper, n)
+            ts, m = run(ts, hyper, n_chunk)
             m = np.asarray(m)
             chunks_done += 1
             wall = wall_before + time.perf_counter() - t_start
             row = _chunk_row(m, ts, chunks_done, wall, time.perf_counter() - t0)
+            row["validation_success"] = validate(ts.params)
+            if row["validation_success"] >= best["score"]:
+                best.update(params=ts.params, score=row["validation_success"], chunk=chunks_done)
             rows.append(row)
             mf.write(json.dumps(row) + "\n")
             mf.flush()
-            _atomic_write(ckpt, serialization.to_bytes(ts))
-            _atomic_write(book, json.dumps({"seed": seed, "chunks_done": chunks_done, "train_seconds": wall}).encode())
+            _atomic_write(ckpt, serialization.to_bytes({"state": ts, "best_params": best["params"]}))
+            _atomic_write(book, json.dumps({"seed": seed, "chunks_done": chunks_done, "train_seconds": wall,
+                                            "best_score": best["score"], "best_chunk": best["chunk"]}).encode())
             if bar is not None:
                 bar.update(1)
                 bar.set_postfix(episodes=row["episodes"], steps_per_s=f"{row['env_steps_per_s']:.3g}",
                                 ret=f"{row['return_mean']:.2f}", success=f"{row['success_rate']:.3f}",
-                                eps=f"{row['epsilon']:.3f}")
+                                eps=f"{row['epsilon']:.3f}", val=f"{row['validation_success']:.3f}")
     if bar is not None:
         bar.close()
     train_seconds = wall_before + time.perf_counter() - t_start
 
-    export_policy(out / "policy.npz", cfg, trainer, ts.params)
+    export_policy(out / "policy.npz", cfg, trainer, best["params"])
     if rows:
         plot_training_curve(out / "training_curve.png", rows)
-    result = evaluate(cfg, trainer.net, ts.params, eval_episodes or cfg.train.eval_episodes)
+    result = evaluate(cfg, trainer.net, best["params"], eval_episodes or cfg.train.eval_episodes)
     result.update({"episodes": int(ts.episodes), "env_steps": int(ts.env_steps),
-                   "train_seconds": round(train_seconds, 3), "seed": seed})
+                   "train_seconds": round(train_seconds, 3), "seed": seed,
+                   "selected_chunk": best["chunk"], "validation_success": best["score"]})
     (out / "eval.json").write_text(json.dumps(result, indent=2) + "\n")
     return result

@@ -114,3 +114,18 @@ def evaluate(cfg: Config, net, q_params, n: int = 1000, seed: int = 12345) -> di
     out = jax.jit(jax.vmap(rollout, in_axes=(None, 0, None)))(q_params, layouts, params)
     out = jax.tree.map(np.asarray, out)
     return summarize(out, np.asarray(layouts.kind), np.asarray(layouts.pivot_kind))
+
+
+def make_validator(cfg: Config, net, n: int = 500, seed: int = 777):
+    """Greedy strict success on n layouts drawn from the *training* distribution (never the held-out
+    test obstacles), for choosing which parameters to export. Returns ``validate(q_params) -> float``."""
+    env = ExoStepEnv(cfg)
+    params = env.default_params
+    layouts = jax.vmap(env.sample_layout, in_axes=(0, None))(jax.random.split(jax.random.PRNGKey(seed), n), params)
+    rollout = jax.vmap(make_rollout(env, net.apply, cfg.env.max_steps), in_axes=(None, 0, None))
+
+    @jax.jit
+    def validate(q_params):
+        return jnp.mean(rollout(q_params, layouts, params)["success"])
+
+    return lambda q_params: float(validate(q_params))

@@ -17,11 +17,13 @@ The target network is copied every ``target_period`` updates ("hard") or moved b
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 import optax
 from flax import struct
 
@@ -101,22 +103,34 @@ class Transition(NamedTuple):
 
 def num_updates(cfg: Config) -> int:
     """Updates that the budget can need: env steps / (N T), or for an episode budget the bound at
-    which every episode ran to the step limit."""
+    which every environment has run ceil(budget / N) episodes to the step limit. Updates past the
+    budget are masked (``Trainer.active``), so the bound may be generous."""
     t = cfg.train
     per = t.num_envs * t.rollout_steps
     bounds = []
     if t.budget_env_steps:
         bounds.append(math.ceil(t.budget_env_steps / per))
     if t.budget_episodes:
-        bounds.append(math.ceil(t.budget_episodes * cfg.env.max_steps / per))
+        per_env_steps = math.ceil(t.budget_episodes / t.num_envs) * cfg.env.max_steps
+        bounds.append(math.ceil(per_env_steps / t.rollout_steps))
     return max(1, min(bounds))
 
 
 class Trainer:
     """The pieces of the compiled program, for the Python driver (chunks, resume) and for sweeps."""
 
-    def __init__(self, cfg: Config):
+    def __init__(self, cfg: Config, devices=None):
+        """``devices``: split the environments over these JAX devices (data parallel: each device steps
+        its share of the environments and averages gradients with the others). None: one device, and
+        the program stays a plain function that vmaps over seeds and hyperparameters."""
         self.cfg = cfg
+        self.devices = None
+        if devices is not None and len(devices) > 1:
+            d = len(devices)
+            while cfg.train.num_envs % d or (cfg.train.num_envs // d) % cfg.train.num_minibatches:
+                d -= 1
+            self.devices = list(devices)[:d] if d > 1 else None
+        self.axis = "envs" if self.devices else None
         self.tc = cfg.train
         self.env = ExoStepEnv(cfg)
         self.net = QNetwork(hidden=self.tc.hidden, num_actions=self.env.num_actions,
@@ -165,6 +179,16 @@ class Trainer:
         return ts
 
     # --------------------------------------------------------------------------------------
+    def _psum(self, x):
+        return jax.lax.psum(x, self.axis) if self.axis else x
+
+    def _pmean(self, x):
+        return jax.lax.pmean(x, self.axis) if self.axis else x
+
+    def _local_key(self, key):
+        """Per-device randomness for environments and exploration; the carried key stays shared."""
+        return jax.random.fold_in(key, jax.lax.axis_index(self.axis)) if self.axis else key
+
     def _act(self, params, obs, key, eps):
         """Epsilon-greedy (thesis 2.4.2): returns the actions and whether each is the greedy one."""
         q = self.net.apply(params, obs)
@@ -175,7 +199,7 @@ class Trainer:
         return a.astype(jnp.int32), a == greedy
 
     def _env_step(self, key, env_state, action, hyper):
-        n = self.tc.num_envs
+        n = action.shape[0]
         return jax.vmap(self.env.step, in_axes=(0, 0, 0, None))(
             jax.random.split(key, n), env_state, action, hyper.env)
 
@@ -219,7 +243,8 @@ class Trainer:
 
         def step(carry, _):
             env_state, obs, stats, key = carry
-            key, ka, ke = jax.random.split(key, 3)
+            key, kl = jax.random.split(key)
+            ka, ke = jax.random.split(self._local_key(kl))
             a, greedy = self._act(ts.params, obs, ka, eps)
             obs2, env_state, r, term, trunc, info = self._env_step(ke, env_state, a, hyper)
             stats, row = self._episode_stats(stats, r, term, trunc, info)
@@ -236,33 +261,38 @@ class Trainer:
         returns = td_lambda.lambda_returns(tr.reward, boot, tr.terminated, done, cont, hyper.gamma, hyper.lam)
 
         tx = self.optimizer(hyper)
-        batch = self.tc.num_envs * self.tc.rollout_steps
-        flat = lambda x: x.reshape((batch,) + x.shape[2:])  # noqa: E731
-        data = (flat(tr.obs), flat(tr.action), flat(returns))
+        n_mb = self.tc.num_minibatches
+        data = (tr.obs, tr.action, returns)  # (T, N, ...)
 
         def loss_fn(params, obs, action, target):
             q = self.net.apply(params, obs)
-            qa = jnp.take_along_axis(q, action[:, None], axis=-1)[:, 0]
+            qa = jnp.take_along_axis(q, action[..., None], axis=-1)[..., 0]
             return 0.5 * jnp.mean((target - qa) ** 2), jnp.mean(qa)
 
         def epoch(carry, key):
             params, opt_state = carry
-            perm = jax.random.permutation(key, batch)
-            mb = jax.tree.map(lambda x: x[perm].reshape((self.tc.num_minibatches, -1) + x.shape[1:]), data)
+            # Minibatches are blocks of environments (all T steps of each), shuffled by a permutation
+            # of the N environments: as random as a permutation of the T x N samples for i.i.d.
+            # environments, and far cheaper (no sort of T x N keys).
+            perm = jax.random.permutation(key, tr.obs.shape[1])
+            mb = jax.tree.map(
+                lambda x: jnp.swapaxes(x[:, perm].reshape((x.shape[0], n_mb, -1) + x.shape[2:]), 0, 1), data)
 
             def minibatch(carry, m):
                 params, opt_state = carry
                 (loss, qm), grads = jax.value_and_grad(loss_fn, has_aux=True)(params, *m)
+                grads, loss, qm = self._pmean((grads, loss, qm))  # data parallel: average over devices
                 updates, opt_state = tx.update(grads, opt_state, params)
                 return (optax.apply_updates(params, updates), opt_state), (loss, qm)
 
             return jax.lax.scan(minibatch, (params, opt_state), mb)
 
         key, kp = jax.random.split(key)
+        kp = self._local_key(kp)
         (params, opt_state), (losses, qms) = jax.lax.scan(
             epoch, (ts.params, ts.opt_state), jax.random.split(kp, self.tc.num_epochs))
         new = ts.replace(params=params, opt_state=opt_state, env_state=env_state, obs=obs, stats=stats, key=key)
-        return self._finish_update(ts, new, hyper, rows.sum(0), losses.mean(), qms.mean(), eps)
+        return self._finish_update(ts, new, hyper, self._psum(rows.sum(0)), losses.mean(), qms.mean(), eps)
 
     def _update_backward(self, ts: TrainState, hyper: Hyperparams):
         eps = self.epsilon(ts, hyper)
@@ -275,7 +305,8 @@ class Trainer:
 
         def step(carry, _):
             params, opt_state, traces, env_state, obs, a, greedy, fresh, stats, key = carry
-            key, ka, ke = jax.random.split(key, 3)
+            key, kl = jax.random.split(key)
+            ka, ke = jax.random.split(self._local_key(kl))
             qsa, grads = grad_q(params, obs, a)
             # Eq 2.22: decay by gamma * lambda, reset at episode start, cut after exploration (Watkins).
             keep = ~fresh & (greedy if self.off_policy else True)
@@ -288,12 +319,12 @@ class Trainer:
             q_final = self.net.apply(ts.target_params, info["final_observation"])
             boot = self._bootstrap(q_final, a2, done, eps)
             delta = r + hyper.gamma * (1.0 - term) * boot - qsa                     # eq 2.26
-            direction = td_lambda.trace_update_direction(traces, delta)
+            direction = self._pmean(td_lambda.trace_update_direction(traces, delta))
             # Adam minimises: feed it the negative ascent direction of eq 2.26.
             updates, opt_state = tx.update(jax.tree.map(jnp.negative, direction), opt_state, params)
             params = optax.apply_updates(params, updates)
             carry = (params, opt_state, traces, env_state, obs2, a2, greedy2, done, stats, key)
-            return carry, (row, 0.5 * jnp.mean(delta ** 2), jnp.mean(qsa))
+            return carry, (row, self._pmean(0.5 * jnp.mean(delta ** 2)), self._pmean(jnp.mean(qsa)))
 
         init = (ts.params, ts.opt_state, ts.traces, ts.env_state, ts.obs, ts.action, ts.greedy, ts.fresh,
                 ts.stats, ts.key)
@@ -301,7 +332,7 @@ class Trainer:
             jax.lax.scan(step, init, None, length=self.tc.rollout_steps)
         new = ts.replace(params=params, opt_state=opt_state, traces=traces, env_state=env_state, obs=obs,
                          action=a, greedy=greedy, fresh=fresh, stats=stats, key=key)
-        return self._finish_update(ts, new, hyper, rows.sum(0), losses.mean(), qms.mean(), eps)
+        return self._finish_update(ts, new, hyper, self._psum(rows.sum(0)), losses.mean(), qms.mean(), eps)
 
     def update(self, ts: TrainState, hyper: Hyperparams):
         if self.tc.trace == "forward":
@@ -310,7 +341,19 @@ class Trainer:
 
     def run(self, ts: TrainState, hyper: Hyperparams, n_updates: int):
         """``n_updates`` updates in one scan; returns the state and a (n_updates, len(METRICS)) array."""
-        return jax.lax.scan(lambda s, _: self.update(s, hyper), ts, None, length=n_updates)
+        def scan(ts, hyper):
+            return jax.lax.scan(lambda s, _: self.update(s, hyper), ts, None, length=n_updates)
+
+        if not self.axis:
+            return scan(ts, hyper)
+        from jax.sharding import Mesh, PartitionSpec as P
+
+        mesh = Mesh(np.array(self.devices), (self.axis,))
+        per_env = {"env_state", "obs", "stats", "traces", "action", "greedy", "fresh"}
+        spec = TrainState(**{f.name: (P(self.axis) if f.name in per_env else P())
+                             for f in dataclasses.fields(TrainState)})
+        fn = jax.shard_map(scan, mesh=mesh, in_specs=(spec, P()), out_specs=(spec, P()), check_vma=False)
+        return fn(ts, hyper)
 
 
 def make_train(cfg: Config):

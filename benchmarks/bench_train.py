@@ -1,0 +1,20 @@
+"""Trainer benchmarks: env-steps/s of the thesis network at 4096 environments (forward and backward
+view), and wall time and greedy success of `jaxexo train` on configs/default.toml and a thesis
+config. Writes benchmarks/results/train_<date>_<machine>.json and .md.
+
+Run: python benchmarks/bench_train.py"""
+
+import sys
+from pathlib import Path
+
+from jaxexo.devices import use_all_cpu_cores
+
+use_all_cpu_cores()
+
+from jaxexo.benchmarks.train_bench import run_train_benchmark  # noqa: E402
+
+if __name__ == "__main__":
+    root = Path(__file__).resolve().parent.parent
+    run_train_benchmark(root / "benchmarks" / "results", str(root / "configs" / "default.toml"),
+                        str(root / "configs" / "thesis" / "a.toml"))
+    sys.exit(0)
