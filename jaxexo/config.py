@@ -227,6 +227,14 @@ def _number(path: str, v: Any, *, positive=False, nonneg=False, integer=False) -
     return int(v) if integer else float(v)
 
 
+def _fraction(path: str, v: Any, positive: bool = False) -> float:
+    """A number in [0, 1] ((0, 1] if ``positive``)."""
+    x = _number(path, v, positive=positive, nonneg=True)
+    if x > 1:
+        raise ConfigError(f"{path}: a fraction, must be in {'(0' if positive else '[0'}, 1], got {x}")
+    return x
+
+
 def _vector(path: str, v: Any, n: int | None = None, **kw) -> tuple:
     if not isinstance(v, (list, tuple)):
         raise ConfigError(f"{path}: expected a list of numbers, got {v!r}")
@@ -294,18 +302,10 @@ def _coerce_reward(path, k, v):
         return _vector(path, v, 4, nonneg=True)
     if k == "step_threshold":
         return _number(path, v, positive=True)
-    if k == "hlc_threshold":
-        x = _number(path, v, positive=True)
-        if x > 1:
-            raise ConfigError(f"{path}: a fraction of the leg length, must be <= 1, got {x}")
-        return x
+    if k in ("hlc_threshold", "shaping_discount"):
+        return _fraction(path, v, positive=True)
     if k in ("max_hip_z", "safety_distance"):
         return _number(path, v, positive=True)
-    if k == "shaping_discount":
-        x = _number(path, v, positive=True)
-        if x > 1:
-            raise ConfigError(f"{path}: must be in (0, 1], got {x}")
-        return x
     return _number(path, v, nonneg=True)
 
 
@@ -323,13 +323,10 @@ def _coerce_train(path, k, v):
         return _number(path, v, positive=True, integer=True)
     if k in ("budget_episodes", "budget_env_steps", "chunk_updates"):
         return _number(path, v, nonneg=True, integer=True)
-    if k in ("gamma", "lam", "eps_start", "eps_end", "eps_decay_fraction", "target_tau", "lr_end_fraction"):
-        x = _number(path, v, nonneg=True)
-        if x > 1:
-            raise ConfigError(f"{path}: must be in [0, 1], got {x}")
-        if k in ("eps_decay_fraction", "target_tau") and x == 0:
-            raise ConfigError(f"{path}: must be > 0, got {x}")
-        return x
+    if k in ("gamma", "lam", "eps_start", "eps_end", "lr_end_fraction"):
+        return _fraction(path, v)
+    if k in ("eps_decay_fraction", "target_tau"):
+        return _fraction(path, v, positive=True)
     return _number(path, v, positive=True)
 
 

@@ -155,18 +155,6 @@ def profile_height(xp, y, outline):
 # --------------------------------------------------------------------------------------------
 
 
-def _finite_positive(name: str, value) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise GeometryError(f"{name} must be a number in metres, got {value!r}") from None
-    if not math.isfinite(v):
-        raise GeometryError(f"{name} must be finite, got {v}")
-    if v <= 0.0:
-        raise GeometryError(f"{name} must be > 0 metres, got {v}")
-    return v
-
-
 def _finite(name: str, value) -> float:
     try:
         v = float(value)
@@ -174,6 +162,13 @@ def _finite(name: str, value) -> float:
         raise GeometryError(f"{name} must be a number in metres, got {value!r}") from None
     if not math.isfinite(v):
         raise GeometryError(f"{name} must be finite, got {v}")
+    return v
+
+
+def _finite_positive(name: str, value) -> float:
+    v = _finite(name, value)
+    if v <= 0.0:
+        raise GeometryError(f"{name} must be > 0 metres, got {v}")
     return v
 
 
