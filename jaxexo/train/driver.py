@@ -145,7 +145,13 @@ def run_training(cfg: Config, out: str | Path, seed: int = 0, resume: bool = Fal
         cfg_path.write_text(config_to_toml(cfg))
 
     t_start = time.perf_counter()
-    trainer = Trainer(cfg)
+    # Data parallel over the CPU cores exposed as JAX devices (jaxexo.devices; the CLI sets this up).
+    # The device count changes the random streams: a run is reproducible on the same count.
+    trainer = Trainer(cfg, devices=jax.local_devices())
+    n_dev = len(trainer.devices or [0])
+    if resume and state_book.get("devices", 1) != n_dev:
+        raise ConfigError(f"--resume: the run used {state_book.get('devices', 1)} device(s), this process has "
+                          f"{n_dev}; resume it on the same number of CPU devices")
     hyper = Hyperparams.from_config(cfg)
     ts = jax.jit(trainer.init)(jax.random.PRNGKey(seed), hyper)
     n_chunk, total_chunks = chunking(cfg, trainer)
@@ -188,7 +194,8 @@ def run_training(cfg: Config, out: str | Path, seed: int = 0, resume: bool = Fal
             mf.flush()
             _atomic_write(ckpt, serialization.to_bytes({"state": ts, "best_params": best["params"]}))
             _atomic_write(book, json.dumps({"seed": seed, "chunks_done": chunks_done, "train_seconds": wall,
-                                            "best_score": best["score"], "best_chunk": best["chunk"]}).encode())
+                                            "best_score": best["score"], "best_chunk": best["chunk"],
+                                            "devices": n_dev}).encode())
             if bar is not None:
                 bar.update(1)
                 bar.set_postfix(episodes=row["episodes"], steps_per_s=f"{row['env_steps_per_s']:.3g}",
@@ -204,6 +211,6 @@ def run_training(cfg: Config, out: str | Path, seed: int = 0, resume: bool = Fal
     result = evaluate(cfg, trainer.net, best["params"], eval_episodes or cfg.train.eval_episodes)
     result.update({"episodes": int(ts.episodes), "env_steps": int(ts.env_steps),
                    "train_seconds": round(train_seconds, 3), "seed": seed,
-                   "selected_chunk": best["chunk"], "validation_success": best["score"]})
+                   "selected_chunk": best["chunk"], "validation_success": best["score"], "devices": n_dev})
     (out / "eval.json").write_text(json.dumps(result, indent=2) + "\n")
     return result
