@@ -1,6 +1,6 @@
 """Trainer benchmarks: env-steps/s of the thesis network at 4096 environments (forward and backward
 view), and wall time and greedy success of `jaxexo train` on configs/default.toml and a thesis
-config. Writes benchmarks/results/train_<date>_<machine>.json and .md.
+config and the seven thesis configs. Writes benchmarks/results/train_<date>_<machine>.json and .md.
 
 Run: python benchmarks/bench_train.py"""
 
@@ -15,6 +15,6 @@ from jaxexo.benchmarks.train_bench import run_train_benchmark  # noqa: E402
 
 if __name__ == "__main__":
     root = Path(__file__).resolve().parent.parent
-    run_train_benchmark(root / "benchmarks" / "results", str(root / "configs" / "default.toml"),
-                        str(root / "configs" / "thesis" / "a.toml"))
+    thesis = [str(root / "configs" / "thesis" / f"{n}.toml") for n in ("a", "b", "c", "1", "2", "3", "final")]
+    run_train_benchmark(root / "benchmarks" / "results", str(root / "configs" / "default.toml"), thesis)
     sys.exit(0)

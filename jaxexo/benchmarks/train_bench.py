@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from pathlib import Path
 
 import jax
 import numpy as np
@@ -48,10 +49,11 @@ def thesis_network_config(base: Config, trace: str, num_envs: int = 4096) -> Con
     return dataclasses.replace(base, train=tc, env=env)
 
 
-def run_train_benchmark(out_dir, default_config: str = "configs/default.toml", thesis_config: str | None =
-                        "configs/thesis/a.toml", progress=print) -> dict:
-    """Throughput (thesis network, 4096 envs, forward and backward view) and time-to-result of the
-    default model and of a thesis config, each through the real `jaxexo train` driver."""
+def run_train_benchmark(out_dir, default_config: str = "configs/default.toml", thesis_configs=(),
+                        progress=print) -> dict:
+    """Throughput (thesis network, 4096 envs, forward view with 4 and 1 minibatches, backward view)
+    and time-to-result of the default model and of the thesis configs, each through the real
+    `jaxexo train` driver (compilation included in the wall time)."""
     import tempfile
 
     from jaxexo.benchmarks.machine import write_result
@@ -60,12 +62,17 @@ def run_train_benchmark(out_dir, default_config: str = "configs/default.toml", t
 
     base = load_config(default_config)
     rows = []
-    for trace, updates in (("forward", 10), ("backward", 1)):
-        r = throughput(thesis_network_config(base, trace), updates, repeats=3 if trace == "forward" else 2)
-        progress(f"thesis network, {trace} view, 4096 envs: {r['env_steps_per_s'] / 1e6:.3f} M env-steps/s")
+    devices = jax.local_devices()
+    for trace, minibatches, updates in (("forward", 4, 10), ("forward", 1, 10), ("backward", 4, 1)):
+        cfg = thesis_network_config(base, trace)
+        cfg = dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, num_minibatches=minibatches))
+        r = throughput(cfg, updates, repeats=3 if trace == "forward" else 2, devices=devices)
+        r["num_minibatches"] = minibatches
+        progress(f"thesis network, {trace} view, {minibatches} minibatch(es), 4096 envs, {r['devices']} device(s): "
+                 f"{r['env_steps_per_s'] / 1e6:.3f} M env-steps/s")
         rows.append(r)
     runs = {}
-    for name in [default_config] + ([thesis_config] if thesis_config else []):
+    for name in [default_config, *thesis_configs]:
         with tempfile.TemporaryDirectory() as d:
             res = run_training(load_config(name), d, seed=0, progress=False)
         runs[name] = {k: res[k] for k in ("success", "accuracy", "held_out", "by_obstacle", "train_seconds",
@@ -74,13 +81,18 @@ def run_train_benchmark(out_dir, default_config: str = "configs/default.toml", t
                  f"held-out success {(res['held_out'] or {}).get('success')}")
     lines = ["# Trainer benchmarks", "", "| what | figure |", "|---|---:|"]
     for r in rows:
-        lines.append(f"| thesis network, {r['trace']} view, {r['num_envs']} envs | "
+        mb = "" if r["trace"] == "backward" else f", {r['num_minibatches']} minibatch(es)/update"
+        lines.append(f"| thesis network, {r['trace']} view{mb}, {r['num_envs']} envs, {r['devices']} CPU devices | "
                      f"{r['env_steps_per_s'] / 1e6:.3f} M env-steps/s |")
     for name, r in runs.items():
         held = (r["held_out"] or {}).get("success")
-        lines.append(f"| `jaxexo train {name}`: wall time incl. compilation | {r['train_seconds']:.1f} s |")
-        lines.append(f"| `{name}`: greedy success (all 1000 test layouts / held-out) | "
-                     f"{r['success']:.3f} / {held if held is None else f'{held:.3f}'} |")
+    lines += ["", "| config | train wall s (incl. compile) | episodes | env steps | accuracy (eq 3.1) | "
+              "strict success | held-out success |", "|---|---:|---:|---:|---:|---:|---:|"]
+    for name, r in runs.items():
+        held = (r["held_out"] or {}).get("success")
+        lines.append(f"| `{Path(name).relative_to(Path(name).parents[1]) if 'thesis' in name else Path(name).name}` | "
+                     f"{r['train_seconds']:.1f} | {r['episodes']} | {r['env_steps']:,} | {r['accuracy']:.3f} | "
+                     f"{r['success']:.3f} | {held:.3f} |")
     md = "\n".join(lines)
     write_result("train", {"throughput": rows, "runs": runs}, md, out_dir)
     progress(md)
