@@ -83,7 +83,10 @@ def load_policy(path: str | Path) -> QPolicy:
     if not path.is_file():
         raise PolicyFileError(f"{path}: no such policy file")
     try:
-        with np.load(path, allow_pickle=False) as z:
+        z = np.load(path, allow_pickle=False)
+        if not isinstance(z, np.lib.npyio.NpzFile):
+            raise PolicyFileError(f"{path}: a single array, not a policy archive (.npz)")
+        with z:
             files = {k: z[k] for k in z.files}
     except (zipfile.BadZipFile, OSError, EOFError, ValueError) as e:
         raise PolicyFileError(f"{path}: not a readable policy file (truncated or corrupt: {e})") from None
@@ -93,6 +96,8 @@ def load_policy(path: str | Path) -> QPolicy:
         meta = json.loads(str(files["metadata"]))
     except json.JSONDecodeError as e:
         raise PolicyFileError(f"{path}: metadata is not valid JSON ({e})") from None
+    if not isinstance(meta, dict):
+        raise PolicyFileError(f"{path}: metadata must be a JSON object, got {type(meta).__name__}")
     if meta.get("format") != FORMAT:
         raise PolicyFileError(f"{path}: format is {meta.get('format')!r}, expected {FORMAT!r}")
     if meta.get("format_version") != FORMAT_VERSION:

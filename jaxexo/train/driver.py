@@ -2,8 +2,9 @@
 
 Run directory:
 - config.toml        the resolved config
-- checkpoint.msgpack the TrainState after the last finished chunk and the best parameters so far
-  checkpoint.json    (written atomically) and their bookkeeping (chunks done, wall time, best score)
+- checkpoint.msgpack the TrainState after the last finished chunk, the best parameters so far and the
+                     bookkeeping (chunks done, wall time, best score), in one atomic write
+- checkpoint.json    a readable copy of that bookkeeping (informational; resume reads the msgpack)
 - metrics.jsonl      one line per chunk: counters and rates reduced inside the compiled scan
 - policy.npz         the exported greedy policy (jaxexo.policy; NumPy-only to load)
 - training_curve.png return and success rate against episodes (thesis Fig. 3.4)
@@ -129,14 +130,15 @@ def run_training(cfg: Config, out: str | Path, seed: int = 0, resume: bool = Fal
     out.mkdir(parents=True, exist_ok=True)
     cfg_path, ckpt, book = out / "config.toml", out / CHECKPOINT, out / BOOKKEEPING
     if resume:
-        if not ckpt.exists() or not book.exists() or not cfg_path.exists():
+        if not ckpt.exists() or not cfg_path.exists():
             raise ConfigError(f"--resume: {out} has no checkpoint to resume from")
         import tomllib
 
         saved = config_from_dict(tomllib.loads(cfg_path.read_text()))
         if saved != cfg:
             raise ConfigError(f"--resume: the config differs from the one in {cfg_path}; resume with that config")
-        state_book = json.loads(book.read_text())
+        raw = serialization.msgpack_restore(ckpt.read_bytes())
+        state_book = {k: (v.item() if hasattr(v, "item") else v) for k, v in raw["book"].items()}
         if state_book["seed"] != seed:
             raise ConfigError(f"--resume: the run used --seed {state_book['seed']}, not {seed}")
     elif ckpt.exists():
@@ -160,10 +162,17 @@ def run_training(cfg: Config, out: str | Path, seed: int = 0, resume: bool = Fal
     metrics_path = out / "metrics.jsonl"
     best = {"params": ts.params, "score": -1.0, "chunk": 0}
     if resume:
-        restored = serialization.from_bytes({"state": ts, "best_params": ts.params}, ckpt.read_bytes())
-        ts, best["params"] = restored["state"], restored["best_params"]
+        ts = serialization.from_state_dict(ts, raw["state"])
+        best["params"] = serialization.from_state_dict(ts.params, raw["best_params"])
         best.update(score=state_book["best_score"], chunk=state_book["best_chunk"])
-        chunks_done, wall_before = state_book["chunks_done"], state_book["train_seconds"]
+        chunks_done = state_book["chunks_done"]
+        # Wall time so far comes from the readable copy when it matches the checkpoint (it is
+        # informational: a missing or stale copy only restarts the clock).
+        try:
+            readable = json.loads(book.read_text())
+            wall_before = readable["train_seconds"] if readable.get("chunks_done") == chunks_done else 0.0
+        except (OSError, ValueError, KeyError):
+            wall_before = 0.0
         lines = metrics_path.read_text().splitlines() if metrics_path.exists() else []
         rows = [json.loads(x) for x in lines[:chunks_done]]
         # Lines written after the checkpoint are recomputed identically: drop them.
@@ -192,10 +201,15 @@ def run_training(cfg: Config, out: str | Path, seed: int = 0, resume: bool = Fal
             rows.append(row)
             mf.write(json.dumps(row) + "\n")
             mf.flush()
-            _atomic_write(ckpt, serialization.to_bytes({"state": ts, "best_params": best["params"]}))
-            _atomic_write(book, json.dumps({"seed": seed, "chunks_done": chunks_done, "train_seconds": wall,
-                                            "best_score": best["score"], "best_chunk": best["chunk"],
-                                            "devices": n_dev}).encode())
+            bookkeeping = {"seed": seed, "chunks_done": chunks_done, "best_score": best["score"],
+                           "best_chunk": best["chunk"], "devices": n_dev}
+            # State, best parameters and bookkeeping in one atomic write: a run stopped at any point
+            # resumes from a consistent checkpoint (wall time, which differs run to run, stays out).
+            _atomic_write(ckpt, serialization.msgpack_serialize({
+                "state": serialization.to_state_dict(ts),
+                "best_params": serialization.to_state_dict(best["params"]),
+                "book": bookkeeping}))
+            _atomic_write(book, json.dumps({**bookkeeping, "train_seconds": wall}, indent=1).encode())
             if bar is not None:
                 bar.update(1)
                 bar.set_postfix(episodes=row["episodes"], steps_per_s=f"{row['env_steps_per_s']:.3g}",

@@ -171,7 +171,10 @@ class Trainer:
         ts = TrainState(params=params, target_params=params, opt_state=opt_state, env_state=env_state,
                         obs=obs, stats=stats, traces=traces, action=jnp.zeros(n, jnp.int32),
                         greedy=jnp.ones(n, bool), fresh=jnp.ones(n, bool), key=k_run,
-                        update=jnp.asarray(0, jnp.int32), env_steps=jnp.asarray(0.0), episodes=jnp.asarray(0.0))
+                        update=jnp.asarray(0, jnp.int32),
+                        # Strongly typed: a weakly typed 0.0 would give jit a second signature after
+                        # the first update (and a second compilation of the chunk program).
+                        env_steps=jnp.asarray(0.0, jnp.float32), episodes=jnp.asarray(0.0, jnp.float32))
         if backward:
             k_act, k_run = jax.random.split(k_run)
             a, g = self._act(params, obs, k_act, self.epsilon(ts, hyper))
