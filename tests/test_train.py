@@ -508,9 +508,12 @@ def test_resume_is_bit_identical(driver_runs):
 
 
 def test_resume_after_an_interrupt_between_checkpoint_and_bookkeeping(driver_runs, tmp_path):
+    """Stopped after writing chunk 2's checkpoint but before its readable bookkeeping copy (stale:
+    chunk 1's): the run resumes from that checkpoint and ends as the uninterrupted one (when the
+    bookkeeping was a separate file that resume read, it lost a metrics row)."""
     out = tmp_path / "run"
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(driver, "_atomic_write", _Interrupt(2))
+        mp.setattr(driver, "_atomic_write", _Interrupt(4))
         with pytest.raises(KeyboardInterrupt):
             driver.run_training(driver_runs["cfg"], out, seed=SEED, progress=False, eval_episodes=20)
     driver.run_training(driver_runs["cfg"], out, seed=SEED, resume=True, progress=False, eval_episodes=20)
