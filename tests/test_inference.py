@@ -222,13 +222,18 @@ def test_smoothing_that_would_touch_the_obstacle_falls_back(policies):
     assert np.all(ob.clearance(raw, foot) > 0)
     smooth = sm.bspline_smooth(raw, 100, 0.05)
     assert ob.clearance(smooth, foot).min() <= geometry.TOUCH_EPS      # the premise: plain smoothing collides
-    path, used, notes = gen._smooth(scene, raw, 100, 0.05)
-    assert ob.clearance(path, foot).min() > geometry.TOUCH_EPS
-    assert (np.isnan(used) or used < 0.05) and notes
+    t = gen._finish([scene], [raw], 100, 0.05, 1.0)[0]
+    assert t.checks.collision_free and t.checks.min_clearance > geometry.TOUCH_EPS
+    assert (np.isnan(t.smoothing) or t.smoothing < 0.05) and t.notes
+    # A raw path that itself touches the obstacle keeps its smoothing, and the checks say so.
+    bad = raw.copy()
+    bad[len(up) + 4, 1] = 0.15
+    t = gen._finish([scene], [bad], 100, 0.05, 1.0)[0]
+    assert t.smoothing == 0.05 and not t.checks.collision_free and not t.notes
     # With no smoothing asked for, the raw polyline is returned as it is.
-    lin, used0, _ = gen._smooth(scene, raw, 100, 0.0)
-    assert np.isnan(used0)
-    np.testing.assert_allclose(lin[[0, -1]], raw[[0, -1]])
+    t = gen._finish([scene], [raw], 100, 0.0, 1.0)[0]
+    assert np.isnan(t.smoothing)
+    np.testing.assert_allclose(t.heel[[0, -1]], raw[[0, -1]])
 
 
 def test_bspline_smoothing_basics():
