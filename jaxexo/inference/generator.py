@@ -199,7 +199,7 @@ class TrajectoryGenerator:
     def _finish(self, scenes, raws, n_points: int, smoothing: float, duration: float) -> TrajectoryBatch:
         """Smooth every raw path, check them all at once, and redo the few that smoothing made collide."""
         if smoothing > 0:
-            paths = [sm.bspline_smooth(r, n_points, smoothing) for r in raws]
+            paths = list(sm.smooth_paths(raws, n_points, smoothing))
             used = [smoothing] * len(raws)
         else:
             paths = [sm.linear_resample(r, n_points) for r in raws]
