@@ -225,6 +225,13 @@ def test_smoothing_that_would_touch_the_obstacle_falls_back(policies):
     t = gen._finish([scene], [raw], 100, 0.05, 1.0)[0]
     assert t.checks.collision_free and t.checks.min_clearance > geometry.TOUCH_EPS
     assert (np.isnan(t.smoothing) or t.smoothing < 0.05) and t.notes
+    # In a batch, only the rows that need it fall back; the others keep the full smoothing.
+    arc = np.linspace(0.0, np.pi, 25)
+    plain = np.column_stack([0.35 * (1 - np.cos(arc)), 0.45 * np.sin(arc)])    # high above it
+    both = gen._finish([scene, scene], [plain, raw], 100, 0.05, 1.0)
+    assert both[0].smoothing == 0.05 and not both[0].notes and both[0].checks.collision_free
+    np.testing.assert_allclose(both[1].heel, t.heel)
+    assert both[1].smoothing == t.smoothing and both[1].checks == t.checks
     # A raw path that itself touches the obstacle keeps its smoothing, and the checks say so.
     bad = raw.copy()
     bad[len(up) + 4, 1] = 0.15

@@ -206,14 +206,17 @@ class TrajectoryGenerator:
             used = [float("nan")] * len(raws)
         notes = [()] * len(raws)
         batch = assemble("rl", self.sp, scenes, raws, np.stack(paths), used, duration, notes)
-        redo = False
+        redo = []
         for i in np.flatnonzero(~batch.collision_free) if smoothing > 0 else ():
             fb = self._fallback(scenes[i], raws[i], n_points, smoothing)
             if fb is not None:
-                paths[i], used[i], notes[i] = fb
-                redo = True
+                redo.append((i, fb))
         if redo:
-            batch = assemble("rl", self.sp, scenes, raws, np.stack(paths), used, duration, notes)
+            idx = [i for i, _ in redo]
+            sub = assemble("rl", self.sp, [scenes[i] for i in idx], [raws[i] for i in idx],
+                           np.stack([fb[0] for _, fb in redo]), [fb[1] for _, fb in redo], duration,
+                           [fb[2] for _, fb in redo])
+            batch = batch.with_rows(idx, sub)
         return batch
 
     def _touches(self, scene: Scene, path: np.ndarray) -> bool:
