@@ -257,6 +257,23 @@ def test_smoothing_spends_exactly_the_residual_budget(s):
     np.testing.assert_allclose(fit[[0, -1]], raw[[0, -1]])
 
 
+@pytest.mark.parametrize("m", [4, 5, 11, 60])
+def test_bspline_basis_matches_scipy(m):
+    from scipy.interpolate import BSpline
+    from scipy.linalg import eigh
+
+    t = np.concatenate([[0.0] * 3, np.linspace(0.0, 1.0, m - 2), [1.0] * 3])
+    u = np.concatenate([np.linspace(0.0, 1.0, 97), [0.0, 1.0, 0.5]])
+    np.testing.assert_allclose(sm.bspline_design(u, t, 3), BSpline.design_matrix(u, t, 3).toarray(), atol=1e-14)
+    b = sm.bspline_design(np.linspace(0, 1, m), t, 3)
+    a = b.T @ b + np.eye(m)
+    p = np.diff(np.eye(m), n=2, axis=0)
+    p = p.T @ p
+    d, v = sm._generalized_eigh(p, a)
+    np.testing.assert_allclose(d, eigh(p, a, eigvals_only=True), atol=1e-10)
+    np.testing.assert_allclose(v.T @ a @ v, np.eye(m), atol=1e-9)
+
+
 def test_smoothing_batches_handle_ragged_repeated_and_short_paths():
     t = np.linspace(0, np.pi, 30)
     raw = np.column_stack([0.35 * (1 - np.cos(t)), 0.25 * np.sin(t)])
@@ -341,7 +358,7 @@ BLOCK_JAX = """
 import sys, importlib.abc
 class Block(importlib.abc.MetaPathFinder):
     def find_spec(self, name, path, target=None):
-        if name.split('.')[0] in ('jax', 'jaxlib', 'flax', 'optax', 'chex', 'matplotlib'):
+        if name.split('.')[0] in ('jax', 'jaxlib', 'flax', 'optax', 'chex', 'matplotlib', 'torch', 'ray'):
             raise ImportError('blocked for this test: ' + name)
 sys.meta_path.insert(0, Block())
 """
