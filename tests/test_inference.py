@@ -84,6 +84,8 @@ def policies(tmp_path_factory, trained_run):
         "trained": trained_run / "policy.npz",
         "ln_signs": export_random(d / "ln.npz", small_config(hidden=[32, 24]), seed=3, scale_signs=True),
         "thesis": export_random(d / "thesis.npz", thesis, seed=4),
+        "terminate": export_random(d / "term.npz", dataclasses.replace(
+            small_config(hidden=[16]), env=dataclasses.replace(small_config().env, collision="terminate")), seed=5),
     }
 
 
@@ -132,7 +134,7 @@ def jax_paths(gen, scenes_args):
     return [np.vstack([start[i], np.asarray(path)[i, : steps[i]]]) for i in range(len(layouts))], out
 
 
-@pytest.mark.parametrize("which", ["trained", "thesis"])
+@pytest.mark.parametrize("which", ["trained", "thesis", "terminate"])
 def test_numpy_rollouts_take_the_jax_environments_actions(policies, which):
     gen = TrajectoryGenerator.load(policies[which])
     args = [(ob, pv, sy, 0.70) for ob in SCENE_OBSTACLES.values() for pv in PIVOT_CONDITIONS for sy in (0.0, 0.04)]
@@ -150,6 +152,10 @@ def test_numpy_rollouts_take_the_jax_environments_actions(policies, which):
         assert reached.sum() >= len(args) // 2
         lengths = np.array([len(a) - 1 for a in single])
         np.testing.assert_array_equal(lengths, np.asarray(out["steps"]))
+    if which == "terminate":
+        # Collisions end episodes early here, at the same step in both.
+        steps = np.asarray(out["steps"])
+        assert np.any(np.asarray(out["collided"]) & (steps < gen.max_steps))
 
 
 def test_batch_equals_single_generation(policies):
