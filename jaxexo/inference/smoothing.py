@@ -36,7 +36,7 @@ DEGREE = 3
 END_WEIGHT = 1000.0
 LOG_LAMBDA = (-12.0, 12.0)     # search range of log10(lambda)
 GRID_POINTS = 13
-NEWTON_STEPS = 6
+NEWTON_STEPS = 4
 
 
 def distinct(raw: np.ndarray) -> np.ndarray:
@@ -117,23 +117,23 @@ def _solve_lambda(d: np.ndarray, zz: np.ndarray, s: np.ndarray) -> np.ndarray:
     kept inside the bracket, refine it. inf when even r(inf) stays within s."""
     grid = np.linspace(*LOG_LAMBDA, GRID_POINTS)
     ld = 10.0 ** grid[None, :, None] * d[:, None, :]
-    r = np.sum((ld / (1.0 + ld)) ** 2 * zz[:, None, :], axis=2)          # (B, G), increasing
-    k = np.clip(np.sum(r <= s[:, None], axis=1), 1, GRID_POINTS - 1)     # r[k-1] <= s < r[k]
+    q = ld / (1.0 + ld)
+    r = np.einsum("bgm,bm->bg", q * q, zz)                                # (B, G), increasing in g
+    k = np.clip((r <= s[:, None]).sum(axis=1), 1, GRID_POINTS - 1)       # r[k-1] <= s < r[k]
     rows = np.arange(len(d))
     lo, hi = grid[k - 1], grid[k]
-    r_lo, r_hi = r[rows, k - 1], r[rows, k]
-    # Start from the interpolation in log(r), then Newton on x = log10(lambda).
-    x = lo + (hi - lo) * np.clip((np.log(np.maximum(s, 1e-300)) - np.log(np.maximum(r_lo, 1e-300))) /
-                                 np.maximum(np.log(np.maximum(r_hi, 1e-300)) - np.log(np.maximum(r_lo, 1e-300)), 1e-12), 0, 1)
+    log_lo, log_hi = np.log(np.maximum(r[rows, k - 1], 1e-300)), np.log(np.maximum(r[rows, k], 1e-300))
+    # Start from the interpolation in log(r), then Newton on x = log10(lambda):
+    # dr/dx = ln(10) * lambda * dr/dlambda = ln(10) * sum_j 2 q_j^2 (1 - q_j) zz_j.
+    x = lo + (hi - lo) * np.clip((np.log(np.maximum(s, 1e-300)) - log_lo) / np.maximum(log_hi - log_lo, 1e-12), 0, 1)
     for _ in range(NEWTON_STEPS):
-        lam = 10.0 ** x[:, None]
-        q = lam * d / (1.0 + lam * d)
-        rx = np.sum(q * q * zz, axis=1)
-        # dr/dx = ln(10) * lambda * dr/dlambda, dq/dlambda = d / (1 + lambda d)^2
-        drx = np.log(10.0) * np.sum(2.0 * q * q * (1.0 - q) * zz, axis=1)
+        ld = 10.0 ** x[:, None] * d
+        q = ld / (1.0 + ld)
+        q2zz = q * q * zz
+        rx = q2zz.sum(axis=1)
+        drx = (2.0 * np.log(10.0)) * np.einsum("bm,bm->b", q2zz, 1.0 - q)
         x = np.clip(x - (rx - s) / np.maximum(drx, 1e-300), lo, hi)
-    lam = 10.0 ** x
-    lam = np.where(r[:, -1] <= s, np.inf, lam)
+    lam = np.where(r[:, -1] <= s, np.inf, 10.0 ** x)
     return np.where(r[:, 0] > s, 10.0 ** LOG_LAMBDA[0], lam)
 
 
