@@ -18,7 +18,6 @@ The target network is copied every ``target_period`` updates ("hard") or moved b
 from __future__ import annotations
 
 import dataclasses
-import math
 from typing import Any, NamedTuple
 
 import jax
@@ -27,7 +26,7 @@ import numpy as np
 import optax
 from flax import struct
 
-from jaxexo.config import Config
+from jaxexo.config import Config, num_updates
 from jaxexo.env import EnvParams, ExoStepEnv
 from jaxexo.train import td_lambda
 from jaxexo.train.network import QNetwork
@@ -99,21 +98,6 @@ class Transition(NamedTuple):
     truncated: jnp.ndarray
     final_obs: jnp.ndarray
     greedy: jnp.ndarray
-
-
-def num_updates(cfg: Config) -> int:
-    """Updates that the budget can need: env steps / (N T), or for an episode budget the bound at
-    which every environment has run ceil(budget / N) episodes to the step limit. Updates past the
-    budget are masked (``Trainer.active``), so the bound may be generous."""
-    t = cfg.train
-    per = t.num_envs * t.rollout_steps
-    bounds = []
-    if t.budget_env_steps:
-        bounds.append(math.ceil(t.budget_env_steps / per))
-    if t.budget_episodes:
-        per_env_steps = math.ceil(t.budget_episodes / t.num_envs) * cfg.env.max_steps
-        bounds.append(math.ceil(per_env_steps / t.rollout_steps))
-    return max(1, min(bounds))
 
 
 class Trainer:
