@@ -3,7 +3,8 @@
 - summary.md ranks the configurations by mean greedy success over seeds (ties: held-out success, then
   training return), with the spread over seeds (standard deviation, min-max), and lists the diverged;
 - heatmap.png: mean success over two axes (sweep.heatmap, default the first two), averaged over seeds
-  and over every other axis; an axis drawn at random is shown as a scatter instead of a grid;
+  and over every other axis (a one-axis sweep: that axis x seed); an axis drawn at random is shown as
+  a scatter instead of a grid;
 - curves.png: training success rate and return against episodes of the ``top`` best configurations
   (mean over seeds of the learning curves reduced inside the compiled program);
 - ``--export-best``: DIR/best/policy.npz (final parameters of the best configuration's best seed),
@@ -73,11 +74,13 @@ def write_report(sweep: Sweep, out: Path, rows: list[dict], heatmap=None) -> dic
     chunk_wall = {int(r["chunk"]): float(r["wall_s"]) for r in rows}
     steps = sum(float(r["env_steps"]) for r in rows)
     wall = sum(chunk_wall.values())
-    axes = heatmap or sweep.heatmap
+    axes = tuple(heatmap or sweep.heatmap)
+    if len(axes) == 1:
+        axes = (axes[0], "seed")
     figures = []
-    if len(axes) == 2 and entries:
-        plot_heatmap(out / "heatmap.png", sweep, entries, tuple(axes))
-        figures.append(("heatmap.png", f"mean success over `{axes[0]}` × `{axes[1]}`"))
+    if entries:
+        plot_heatmap(out / "heatmap.png", sweep, entries, axes, rows)
+        figures.append(("heatmap.png", f"success over `{axes[0]}` × `{axes[1]}`"))
     if entries:
         plot_curves(out / "curves.png", sweep, out, rows, entries[: sweep.top])
         figures.append(("curves.png", f"learning curves of the top {min(sweep.top, len(entries))} configurations"))
@@ -126,21 +129,28 @@ def _pyplot():
     return plt
 
 
-def plot_heatmap(path: Path, sweep: Sweep, entries: list[dict], axes: tuple[str, str]) -> None:
+def plot_heatmap(path: Path, sweep: Sweep, entries: list[dict], axes: tuple[str, str], rows: list[dict]) -> None:
+    """Mean success over two axes; with ``seed`` as the second axis, each seed's own success (the
+    report's choice for a one-axis sweep)."""
     plt = _pyplot()
     kinds = {a.path: a.kind for a in sweep.axes}
+    kinds["seed"] = "grid"
     for a in axes:
         if a not in kinds:
             raise ConfigError(f"heatmap: {a!r} is not an axis of this sweep (axes: {', '.join(kinds)})")
     xa, ya = axes
+    if ya == "seed":
+        points = [(sweep.members[int(r["config_id"])].values[xa], int(r["seed"]), float(r["success"])) for r in rows]
+    else:
+        points = [(e["values"][xa], e["values"][ya], e["success_mean"]) for e in entries]
     fig, ax = plt.subplots(figsize=(7, 5.5))
     if kinds[xa] == "grid" and kinds[ya] == "grid":
-        xs, ys = _axis_levels([e["values"][xa] for e in entries]), _axis_levels([e["values"][ya] for e in entries])
+        xs, ys = _axis_levels([p[0] for p in points]), _axis_levels([p[1] for p in points])
         acc = np.zeros((len(ys), len(xs)))
         cnt = np.zeros_like(acc)
-        for e in entries:
-            i, j = ys.index(format_value(e["values"][ya])), xs.index(format_value(e["values"][xa]))
-            acc[i, j] += e["success_mean"]
+        for x, y, v in points:
+            i, j = ys.index(format_value(y)), xs.index(format_value(x))
+            acc[i, j] += v
             cnt[i, j] += 1
         grid = np.where(cnt > 0, acc / np.maximum(cnt, 1), np.nan)
         im = ax.imshow(grid, origin="lower", cmap="viridis", vmin=0.0, vmax=1.0, aspect="auto")
@@ -152,26 +162,23 @@ def plot_heatmap(path: Path, sweep: Sweep, entries: list[dict], axes: tuple[str,
                     ax.text(j, i, f"{grid[i, j]:.2f}", ha="center", va="center",
                             color="white" if grid[i, j] < 0.6 else "black", fontsize=9)
     else:
-        coords = {}
-        for k in (xa, ya):
-            vals = [e["values"][k] for e in entries]
+        coords = []
+        for k, axis in ((0, xa), (1, ya)):
+            vals = [p[k] for p in points]
             if all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in vals):
-                coords[k] = [float(v) for v in vals]
+                coords.append([float(v) for v in vals])
+                lo, hi = min(coords[-1]), max(coords[-1])
+                if kinds[axis] == "random" and lo > 0 and hi / lo > 20:
+                    (ax.set_xscale if k == 0 else ax.set_yscale)("log")
             else:   # categorical: one position per level, labelled
                 levels = _axis_levels(vals)
-                coords[k] = [float(levels.index(format_value(v))) for v in vals]
-                (ax.set_xticks if k == xa else ax.set_yticks)(range(len(levels)), levels)
-        x, y = coords[xa], coords[ya]
-        im = ax.scatter(x, y, c=[e["success_mean"] for e in entries], cmap="viridis", vmin=0.0, vmax=1.0, s=60)
-        for k, kind in ((xa, kinds[xa]), (ya, kinds[ya])):
-            if kind == "random" and all(isinstance(e["values"][k], float) and e["values"][k] > 0 for e in entries):
-                lo, hi = min(e["values"][k] for e in entries), max(e["values"][k] for e in entries)
-                if hi / lo > 20:
-                    (ax.set_xscale if k == xa else ax.set_yscale)("log")
-    fig.colorbar(im, ax=ax, label="mean greedy success (seeds, other axes)")
+                coords.append([float(levels.index(format_value(v))) for v in vals])
+                (ax.set_xticks if k == 0 else ax.set_yticks)(range(len(levels)), levels)
+        im = ax.scatter(coords[0], coords[1], c=[p[2] for p in points], cmap="viridis", vmin=0.0, vmax=1.0, s=60)
+    fig.colorbar(im, ax=ax, label="greedy success" + (" (mean over seeds and other axes)" if ya != "seed" else ""))
     ax.set_xlabel(xa)
     ax.set_ylabel(ya)
-    ax.set_title("Sweep: mean success")
+    ax.set_title("Sweep: success on the test layouts")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
