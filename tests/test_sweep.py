@@ -256,14 +256,17 @@ def test_bundled_sweeps_load():
 # --------------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("agents, devices, cap", [(12, 2, 5), (7, 2, 100), (64, 4, 16), (1, 2, 8), (9, 1, 4)])
-def test_chunk_sizes_are_equal_multiples_of_the_devices(agents, devices, cap):
+@pytest.mark.parametrize("agents, devices, cap", [(12, 2, 5), (7, 2, 100), (64, 4, 16), (1, 2, 8), (9, 1, 4),
+                                                  (256, 2, 30), (100, 2, 24)])
+def test_chunk_sizes_are_multiples_of_the_devices_and_pad_least(agents, devices, cap):
     size = P.group_chunk_size(agents, 1, 1, devices, budget=cap)
     assert size % devices == 0 and size <= max(cap, devices)
     chunks = -(-agents // size)
-    assert size * chunks >= agents and size * (chunks - 1) < agents   # no empty chunk
-    # balanced: no smaller chunk count fits the cap
-    assert chunks == -(-agents // max(devices, min(cap, agents) // devices * devices))
+    assert size * (chunks - 1) < agents   # no empty chunk
+    top = max(devices, min(cap, agents) // devices * devices)
+    waste = lambda s: -(-agents // s) * s - agents  # noqa: E731
+    assert all(waste(size) <= waste(s) for s in range(max(devices, top // 2), top + 1, devices))
+    assert size >= top // 2
 
 
 def test_plan_covers_every_agent_once_in_order():

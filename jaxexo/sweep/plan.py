@@ -7,8 +7,8 @@ each group compiles once. A chunk is the unit of progress, of results.csv and of
 
 Chunk size: as many agents as fit the memory budget (``agent_bytes``, a deliberately generous
 estimate of the compiled program's buffers; tests/test_sweep.py checks it against XLA's own figures),
-at most about CHUNK_ENV_STEPS env steps per chunk (so that the progress bar and the results file move
-every minute or so), a multiple of the device count. The plan is written to DIR/plan.json and reused
+about CHUNK_ENV_STEPS env steps per chunk (so that the progress bar and the results file move every
+minute or so), a multiple of the device count, padding the last chunk as little as possible. The plan is written to DIR/plan.json and reused
 by ``--resume``.
 """
 
@@ -97,19 +97,20 @@ class Chunk:
 
 def group_chunk_size(n_agents: int, per_agent_bytes: int, per_agent_steps: int, devices: int, budget: int,
                      fixed: int | None = None) -> int:
-    """Agents per chunk for a group: the memory cap, the progress cap, a multiple of ``devices``,
-    then balanced so that the chunks are as equal as possible."""
+    """Agents per chunk for a group: at most the memory cap and about the progress cap, a multiple of
+    ``devices``; among the sizes from half that cap up to it, the one that pads the last chunk least
+    (padding is computed and thrown away), the largest of those."""
     if fixed is not None:
         c = fixed
     else:
-        c = min(budget // per_agent_bytes, max(1, CHUNK_ENV_STEPS // max(per_agent_steps, 1)))
+        c = min(budget // per_agent_bytes, max(1, round(CHUNK_ENV_STEPS / max(per_agent_steps, 1))))
     c = max(devices, (min(c, n_agents) // devices) * devices)
     if fixed is None and c * per_agent_bytes > budget:
         need = devices * per_agent_bytes
         raise ConfigError(f"memory_budget: {devices} agent(s) (one per CPU device) need about {need / 2**20:.0f} MiB, "
                           f"more than the budget of {budget / 2**20:.0f} MiB; raise --memory-budget")
-    chunks = math.ceil(n_agents / c)
-    return math.ceil(math.ceil(n_agents / chunks) / devices) * devices
+    sizes = range(c, max(devices, c // 2) - 1, -devices)
+    return min(sizes, key=lambda s: (math.ceil(n_agents / s) * s - n_agents, -s))
 
 
 def make_plan(sweep: Sweep, devices: int, budget: int) -> list[Chunk]:

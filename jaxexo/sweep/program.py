@@ -81,8 +81,6 @@ def chunk_program(cfg: Config, devices):
 
 
 def _build(cfg: Config, devices):
-    from jax.sharding import Mesh, PartitionSpec as P
-
     trainer = Trainer(cfg)
     tcfg = test_config(cfg)
     tenv = ExoStepEnv(tcfg)
@@ -105,10 +103,17 @@ def _build(cfg: Config, devices):
         }
         return {"scalars": scalars, "curve": red["curve"], "params": ts.params}
 
-    mesh = Mesh(np.array(devices), ("agents",))
+    return over_agents(agent, devices, n_args=3)
+
+
+def over_agents(fn, devices, n_args: int):
+    """``jit(shard_map(vmap(fn)))``: every argument and output has a leading agent axis, split evenly
+    over ``devices`` (each device runs its share of the agents as one vmapped batch)."""
+    from jax.sharding import Mesh, PartitionSpec as P
+
     spec = P("agents")
-    return jax.jit(jax.shard_map(jax.vmap(agent), mesh=mesh, in_specs=(spec, spec, spec), out_specs=spec,
-                                 check_vma=False))
+    return jax.jit(jax.shard_map(jax.vmap(fn), mesh=Mesh(np.array(list(devices)), ("agents",)),
+                                 in_specs=(spec,) * n_args, out_specs=spec, check_vma=False))
 
 
 def _stack(trees):
