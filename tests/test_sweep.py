@@ -12,7 +12,6 @@ so one tiny sweep is compiled three times in all:
 
 from __future__ import annotations
 
-import copy
 import csv
 import json
 import os
@@ -33,7 +32,7 @@ from jaxexo.sweep import plan as P
 from jaxexo.sweep import results as R
 from jaxexo.sweep.spec import load_sweep, parse_bytes, sweep_from_dict
 
-from conftest import ROOT
+from conftest import ROOT, jax_compilation_cache
 
 # --------------------------------------------------------------------------------------------
 # The tiny sweep: 4 learning rates (one of them absurd: it diverges) x 2 seeds, 6 updates each.
@@ -300,20 +299,8 @@ jax = pytest.importorskip("jax")
 def jax_cache(tmp_path_factory):
     """A persistent compilation cache for this module (and its subprocesses, through the
     environment): the Ray worker reuses the program the CLI run compiled."""
-    from jax.experimental.compilation_cache import compilation_cache as cc
-
-    names = ("jax_compilation_cache_dir", "jax_persistent_cache_min_compile_time_secs",
-             "jax_persistent_cache_min_entry_size_bytes")
-    old = {n: getattr(jax.config, n) for n in names}
-    cache = tmp_path_factory.mktemp("jax_cache")
-    jax.config.update("jax_compilation_cache_dir", str(cache))
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
-    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
-    cc.reset_cache()
-    yield cache
-    for n, v in old.items():
-        jax.config.update(n, v)
-    cc.reset_cache()
+    with jax_compilation_cache(tmp_path_factory.mktemp("jax_cache")) as cache:
+        yield cache
 
 
 def _subprocess_env(cache) -> dict:

@@ -270,10 +270,6 @@ def parse_bytes(v: Any, where: str = "--memory-budget") -> int:
     return int(n * _BYTES[unit])
 
 
-def _section_class(section: str):
-    return {f.name: f.type for f in fields(Config)}[section]
-
-
 def _parse_axis(key: Any, kind: str, spec: Any, base: Config) -> Axis:
     where = f"sweep.{kind}.{key}"
     m = _AXIS.fullmatch(key) if isinstance(key, str) else None
