@@ -239,6 +239,16 @@ def test_parse_bytes(text, n):
     assert parse_bytes(text) == n
 
 
+def test_sweep_files_load_without_jax():
+    code = ("import sys\nfrom jaxexo.sweep.spec import load_sweep\nfrom jaxexo.sweep.plan import make_plan\n"
+            "import jaxexo.sweep.results\n"
+            "s = load_sweep('configs/sweeps/smoke.toml')\nmake_plan(s, 2, 2**30)\n"
+            "print('JAX' if any(m == 'jax' or m.startswith(('jax.', 'flax')) for m in sys.modules) else 'NOJAX')\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == "NOJAX"
+
+
 def test_bundled_sweeps_load():
     sweeps = {p.stem: load_sweep(p) for p in sorted((ROOT / "configs" / "sweeps").glob("*.toml"))}
     assert {"smoke", "lr_lambda", "reward_weights", "thesis_episodes_pivot"} <= set(sweeps)
@@ -489,6 +499,9 @@ def test_resume_skips_finished_chunks_and_ends_identical(inproc, tiny_sweep, tmp
         runner.run_sweep(other, out, resume=True, progress=False, devices=dev)
     with pytest.raises(ConfigError, match="no sweep to resume"):
         runner.run_sweep(tiny_sweep, tmp_path / "empty", resume=True, progress=False, devices=dev)
+    with pytest.raises(ConfigError, match="--heatmap: expected two different axes"):
+        runner.run_sweep(tiny_sweep, tmp_path / "h", heatmap=("train.lr", "train.gamma"), progress=False, devices=dev)
+    assert not (tmp_path / "h").exists()
 
 
 # --------------------------------------------------------------------------------------------

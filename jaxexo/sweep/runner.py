@@ -70,6 +70,11 @@ def run_sweep(sweep: Sweep, out: str | Path, *, resume: bool = False, backend: s
     if backend not in BACKENDS:
         raise ConfigError(f"--backend: must be one of {list(BACKENDS)}, got {backend!r}")
     out = Path(out)
+    if heatmap is not None:
+        axes = [a.path for a in sweep.axes] + ["seed"]
+        if len(heatmap) != 2 or any(h not in axes for h in heatmap) or heatmap[0] == heatmap[1]:
+            raise ConfigError(f"--heatmap: expected two different axes of the sweep ({', '.join(axes)}), "
+                              f"got {','.join(heatmap)}")
     budget = memory_budget or sweep.memory_budget or default_memory_budget()
     if backend == "local":
         import jax
