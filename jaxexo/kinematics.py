@@ -27,6 +27,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 # Below this fraction of the leg length the hip height is clamped (heels over two legs apart).
 MIN_HIP_HEIGHT_FRACTION = 0.05
 
@@ -38,7 +40,10 @@ def atan2(xp, y, x):
     """atan2 from multiply-adds and one division (Cephes atanf range reduction and polynomial).
 
     Accurate to float32 rounding (a few 1e-7 rad), and unlike the library atan2 it vectorises in
-    XLA's CPU code: joint angles are computed every environment step."""
+    XLA's CPU code: joint angles are computed every environment step. NumPy's own arctan2 is one
+    call and the same function to that rounding, so NumPy callers get it."""
+    if xp is np:
+        return np.arctan2(y, x)
     ax = xp.abs(x)
     ay = xp.abs(y)
     hi = xp.maximum(ax, ay)
@@ -129,3 +134,12 @@ def joint_limit_violation(xp, hip_angle, knee_angle, hip_min, hip_max, knee_min,
         | (knee_angle > knee_max + ANGLE_EPS)
         | (knee_angle < knee_min - ANGLE_EPS)
     )
+
+
+# A straight leg's |hip - heel| rounds to t + s plus an ulp: not a violation of eq 2.45 (m).
+LENGTH_EPS = 1e-5
+
+
+def leg_too_long(xp, leg_swing, leg_stance, thigh, shin, tolerance):
+    """Eq 2.45's condition: either leg's hip-heel distance exceeds thigh + shin by more than tolerance."""
+    return xp.maximum(leg_swing, leg_stance) - (thigh + shin) > tolerance + LENGTH_EPS

@@ -21,8 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-# A straight leg's |hip - heel| rounds to t + s plus an ulp: not a violation of eq 2.45 (m).
-LENGTH_EPS = 1e-5
+from jaxexo.kinematics import LENGTH_EPS, leg_too_long  # noqa: F401 (LENGTH_EPS re-exported)
 
 TRAJECTORY_TERMS = (
     "steps",          # r0, eq 2.29
@@ -73,7 +72,7 @@ def exo_terms(xp, c, *, hip_z, leg_swing, leg_stance, limits_violated):
     leg = c.thigh + c.shin
     zero = xp.zeros_like(hip_z)
     e0 = xp.where(hip_z / leg < c.hlc_threshold, -c.hlc_penalty * leg / hip_z, zero)           # eq 2.43
-    too_long = xp.maximum(leg_swing, leg_stance) - leg > c.leg_length_tolerance + LENGTH_EPS
+    too_long = leg_too_long(xp, leg_swing, leg_stance, c.thigh, c.shin, c.leg_length_tolerance)
     e1 = xp.where(too_long, -c.leg_length_penalty, zero)                                        # eq 2.45
     e2 = xp.where(limits_violated, -c.joint_limit_penalty, zero)                                # eq 2.50
     e3 = xp.where(hip_z > c.max_hip_z, -c.hip_height_penalty, zero)                            # eq 2.51

@@ -16,16 +16,11 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from jaxexo import geometry, kinematics, rewards
-from jaxexo.config import PIVOT_CONDITIONS, Config
+from jaxexo import dynamics, geometry, kinematics, rewards
+from jaxexo.config import Config
+from jaxexo.dynamics import LENGTH_SCALE, NUM_ACTIONS, THESIS_OBS_CENTER  # noqa: F401 (re-exported)
 from jaxexo.env import spaces
 from jaxexo.env.params import EnvParams
-
-NUM_ACTIONS = 36
-# Lengths in observations are divided by this (m), so that they are of order 1.
-LENGTH_SCALE = 0.5
-# Thesis-mode observation centre (m): the middle of a default step, a little above the ground.
-THESIS_OBS_CENTER = (0.35, 0.10)
 # Every observation lies within +-OBS_BOUND (world bounds of a few metres over LENGTH_SCALE).
 OBS_BOUND = 10.0
 
@@ -54,14 +49,6 @@ class EnvState:
     time: jnp.ndarray          # steps taken this episode (gymnax name)
     visited_mid: jnp.ndarray   # bool: the heel has passed through the mid-goal box
     layout: Layout
-
-
-def pivot_position(pivot_kind, start_y, center_y):
-    """The three thesis pivot conditions (3.1): aligned with the agent, with the obstacle centre,
-    or half-way between."""
-    return jnp.select(
-        [pivot_kind == 0, pivot_kind == 1], [start_y, center_y], 0.5 * (start_y + center_y)
-    )
 
 
 def _categorical(u, cdf):
@@ -130,7 +117,7 @@ class ExoStepEnv:
         return Layout(
             outline=outline, shape=height * params.kind_shape[kind], center_y=center, width=width,
             height=height, kind=kind.astype(jnp.int32), pivot_kind=pivot_kind.astype(jnp.int32),
-            pivot_y=pivot_position(pivot_kind, start_y, center), start_y=start_y,
+            pivot_y=dynamics.pivot_position(jnp, pivot_kind, start_y, center), start_y=start_y,
             goal_y=start_y + step_length,
         )
 
@@ -143,33 +130,19 @@ class ExoStepEnv:
 
     def layout_for(self, obstacle: geometry.Obstacle, pivot: str | float = "obstacle", start_y: float = 0.0,
                    step_length: float = 0.70, kind: int = -1) -> Layout:
-        """A fixed layout from an Obstacle, for evaluation on chosen scenes (validated here).
+        """A fixed layout from an Obstacle, for evaluation on chosen scenes (validated by
+        jaxexo.dynamics.make_scene, as the NumPy generator's scenes are).
 
         ``pivot`` is one of PIVOT_CONDITIONS or a pivot heel y in metres; ``kind`` tags the layout
         for per-kind statistics."""
-        if isinstance(pivot, str):
-            if pivot not in PIVOT_CONDITIONS:
-                raise ValueError(f"pivot must be one of {PIVOT_CONDITIONS} or a y in metres, got {pivot!r}")
-            pk = PIVOT_CONDITIONS.index(pivot)
-            py = [start_y, obstacle.center_y, 0.5 * (start_y + obstacle.center_y)][pk]
-        else:
-            pk, py = -1, geometry._finite("pivot", pivot)
-        start_y = geometry._finite("start_y", start_y)
-        step_length = geometry._finite_positive("step_length", step_length)
-        foot = self.config.kinematics.foot_length
-        if obstacle.left <= start_y + foot:
-            raise ValueError(f"obstacle: its near edge ({obstacle.left:.3f} m) must lie ahead of the toe at "
-                             f"the start ({start_y + foot:.3f} m)")
-        if obstacle.right >= start_y + step_length:
-            raise ValueError(f"step_length: the goal ({start_y + step_length:.3f} m) must lie beyond the "
-                             f"obstacle's far edge ({obstacle.right:.3f} m)")
-        shape = obstacle.height * geometry.shape_descriptor(obstacle.unit_vertices, self.shape_points)
+        sc = dynamics.make_scene(obstacle, pivot, start_y, step_length,
+                                 foot_length=self.config.kinematics.foot_length,
+                                 max_vertices=self.max_vertices, shape_points=self.shape_points)
         f = lambda x: jnp.asarray(x, dtype=jnp.float32)  # noqa: E731
         return Layout(
-            outline=f(obstacle.outline_array(self.max_vertices)), shape=f(shape),
-            center_y=f(obstacle.center_y), width=f(obstacle.width), height=f(obstacle.height),
-            kind=jnp.asarray(kind, jnp.int32), pivot_kind=jnp.asarray(pk, jnp.int32), pivot_y=f(py),
-            start_y=f(start_y), goal_y=f(start_y + step_length),
+            outline=f(sc.outline), shape=f(sc.shape), center_y=f(sc.center_y), width=f(sc.width),
+            height=f(sc.height), kind=jnp.asarray(kind, jnp.int32), pivot_kind=jnp.asarray(sc.pivot_kind, jnp.int32),
+            pivot_y=f(sc.pivot_y), start_y=f(sc.start_y), goal_y=f(sc.goal_y),
         )
 
     # gymnax transitions ----------------------------------------------------------------------
@@ -182,24 +155,21 @@ class ExoStepEnv:
 
     def mid_goal(self, layout: Layout, params: EnvParams):
         """Centre of the mid-goal box (thesis 2.2): above the obstacle centre, at a safe height."""
-        return jnp.stack([layout.center_y, layout.height + params.mid_goal_clearance])
+        return jnp.stack(dynamics.mid_goal(jnp, params, layout.center_y, layout.height))
 
     def step_env(self, key, state: EnvState, action, params: EnvParams):
         lay = state.layout
         prev = state.heel
-        lo = jnp.stack([params.bounds_y[0], 0.0])
-        hi = jnp.stack([params.bounds_y[1], params.max_z_world])
-        heel = jnp.clip(prev + params.step_size * params.directions[action], lo, hi)
+        d = params.directions[action]
+        heel = jnp.stack(dynamics.move_heel(jnp, params, prev[0], prev[1], d[0], d[1]))
         time = state.time + 1
 
         clearance = geometry.foot_clearance(jnp, heel, params.foot_length, lay.outline)
         collided = geometry.foot_collides(jnp, clearance)
         mid = self.mid_goal(lay, params)
-        in_mid = jnp.all(jnp.abs(heel - mid) <= params.mid_goal_half_size)
-        visited = state.visited_mid | in_mid
-        missed_mid = (heel[0] > mid[0] + params.mid_goal_half_size[0]) & ~visited
-        reached = (jnp.abs(heel[0] - lay.goal_y) <= params.goal_tolerance[0]) & (
-            heel[1] <= params.goal_tolerance[1])
+        visited = state.visited_mid | dynamics.in_mid_goal(jnp, params, heel[0], heel[1], mid[0], mid[1])
+        missed_mid = dynamics.beyond_mid_goal(jnp, params, heel[0], mid[0]) & ~visited
+        reached = dynamics.goal_reached(jnp, params, heel[0], heel[1], lay.goal_y)
 
         kin = kinematics.leg_state(jnp, lay.pivot_y, heel, params.thigh, params.shin)
         lim = lambda h, q: kinematics.joint_limit_violation(  # noqa: E731
@@ -258,25 +228,5 @@ class ExoStepEnv:
 
     # Observations ---------------------------------------------------------------------------
     def get_obs(self, state: EnvState, params: EnvParams):
-        heel = state.heel
-        center = jnp.asarray(THESIS_OBS_CENTER, dtype=heel.dtype)
-        base = (heel - center) / LENGTH_SCALE
-        if self.obs_mode == "thesis":
-            return base
-        lay = state.layout
-        mid = self.mid_goal(lay, params)
-        rel = jnp.stack([
-            heel[0] - lay.start_y, heel[1],                      # heel relative to its start
-            lay.goal_y - heel[0], -heel[1],                       # goal relative to the heel
-            mid[0] - heel[0], mid[1] - heel[1],                   # mid-goal relative to the heel
-            lay.pivot_y - heel[0],                                # pivot heel relative to the heel
-            lay.center_y - 0.5 * lay.width - heel[0],             # obstacle near edge
-            lay.center_y + 0.5 * lay.width - heel[0],             # obstacle far edge
-            lay.height - heel[1],                                 # obstacle top
-        ]) / LENGTH_SCALE
-        progress = (state.time / params.max_steps_in_episode).astype(heel.dtype)
-        profile = jnp.where(params.obs_true_profile, lay.shape, jnp.full_like(lay.shape, lay.height))
-        return jnp.concatenate([
-            base, rel, profile / LENGTH_SCALE,
-            jnp.stack([progress, state.visited_mid.astype(heel.dtype)]),
-        ])
+        return dynamics.observation(jnp, params, self.obs_mode, state.heel[0], state.heel[1], state.time,
+                                    state.visited_mid, state.layout)

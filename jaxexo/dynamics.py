@@ -1,0 +1,279 @@
+"""The environment's transition, observation and scene rules, written once for every array module.
+
+The JAX environment (jaxexo.env), the NumPy trajectory generator (jaxexo.inference) and the NumPy
+environment used by the thesis-style baseline all step the heel, test the mid-goal and the goal,
+and build observations with these functions. Each takes the array module ``xp`` first: ``numpy``,
+``jax.numpy``, or ``jaxexo.dynamics.scalar`` (plain Python floats, for the generator's fast
+single-trajectory loop). Heel coordinates are passed as separate y and z components so that the
+same code serves a scalar, a batch (B,) and a traced JAX value.
+
+``p`` is any object with the parameter attributes of ``param_values`` (``EnvParams`` in JAX, a
+``SimpleNamespace`` of NumPy arrays or Python floats elsewhere); ``layout`` any object with the
+``Scene``/``Layout`` fields (outline, shape, center_y, width, height, pivot_y, start_y, goal_y).
+
+Also here, because it is NumPy-only: ``make_scene``, the one place where a fixed scene (an Obstacle,
+a pivot condition or pivot y, a start and a step length) is validated and laid out.
+"""
+
+from __future__ import annotations
+
+import math
+import types
+from dataclasses import dataclass
+
+import numpy as np
+
+from jaxexo import geometry
+from jaxexo.config import PIVOT_CONDITIONS, Config
+from jaxexo.rewards import normalize_weights
+
+NUM_ACTIONS = 36
+# Lengths in observations are divided by this (m), so that they are of order 1.
+LENGTH_SCALE = 0.5
+# Thesis-mode observation centre (m): the middle of a default step, a little above the ground.
+THESIS_OBS_CENTER = (0.35, 0.10)
+
+# A scalar "array module" for the generator's per-step loop on Python floats: the few functions the
+# transition rules below use, with numpy's meaning.
+scalar = types.SimpleNamespace(
+    minimum=min, maximum=max, abs=abs, sqrt=math.sqrt,
+    clip=lambda x, lo, hi: min(max(x, lo), hi),
+    where=lambda c, a, b: a if c else b,
+)
+
+
+def action_directions(n: int = NUM_ACTIONS) -> np.ndarray:
+    """(n, 2) unit moves at k * 360/n degrees, k = 0..n-1 (thesis 2.1: 36 moves, 10 degrees apart).
+
+    Axis-aligned moves get exact zeros: cos(270 deg) = -1.8e-16 would count as "backward" (eq 2.31)."""
+    k = np.arange(n)
+    d = np.stack([np.cos(np.deg2rad(360.0 / n * k)), np.sin(np.deg2rad(360.0 / n * k))], axis=-1)
+    return np.where(np.abs(d) < 1e-12, 0.0, d)
+
+
+def _cdf(weights) -> np.ndarray:
+    w = np.asarray(weights, dtype=np.float64)
+    c = np.cumsum(w / w.sum())
+    c[-1] = 1.0
+    return c
+
+
+def param_values(cfg: Config) -> dict[str, np.ndarray]:
+    """Every environment parameter as a NumPy value (float32, int32 or bool), by EnvParams field name.
+
+    ``EnvParams.from_config`` wraps these in JAX arrays; NumPy code uses them as they are."""
+    env, kin, rew, lay = cfg.env, cfg.kinematics, cfg.reward, cfg.layout
+    f = lambda x: np.asarray(x, dtype=np.float32)  # noqa: E731
+    outlines = np.stack([geometry.pad_outline(o.unit_vertices(), cfg.outline_vertices) for o in lay.obstacles])
+    shapes = np.stack([geometry.shape_descriptor(u, env.shape_points) for u in outlines])
+    assert len(PIVOT_CONDITIONS) == len(lay.pivot)
+    return dict(
+        step_size=f(env.step_size),
+        max_steps_in_episode=np.asarray(env.max_steps, dtype=np.int32),
+        terminate_on_collision=np.asarray(env.collision == "terminate"),
+        obs_true_profile=np.asarray(env.obs_profile == "shape"),
+        directions=f(action_directions()),
+        bounds_y=f(env.bounds_y),
+        max_z_world=f(env.max_z),
+        goal_tolerance=f(env.goal_tolerance),
+        mid_goal_clearance=f(env.mid_goal_clearance),
+        mid_goal_half_size=f(env.mid_goal_half_size),
+        max_height_margin=f(env.max_height_margin),
+        thigh=f(kin.thigh),
+        shin=f(kin.shin),
+        foot_length=f(kin.foot_length),
+        hip_limits=f(kin.hip_limits),
+        knee_limits=f(kin.knee_limits),
+        traj_weights=f(normalize_weights(rew.traj_weights)),
+        exo_weights=f(normalize_weights(rew.exo_weights)),
+        step_threshold=f(rew.step_threshold),
+        collision_penalty=f(rew.collision_penalty),
+        backward_penalty=f(rew.backward_penalty),
+        goal_reward=f(rew.goal_reward),
+        mid_goal_penalty=f(rew.mid_goal_penalty),
+        max_height_penalty=f(rew.max_height_penalty),
+        safety_penalty=f(rew.safety_penalty),
+        safety_distance=f(rew.safety_distance),
+        z_monotone_penalty=f(rew.z_monotone_penalty),
+        hlc_penalty=f(rew.hlc_penalty),
+        hlc_threshold=f(rew.hlc_threshold),
+        leg_length_penalty=f(rew.leg_length_penalty),
+        leg_length_tolerance=f(rew.leg_length_tolerance),
+        joint_limit_penalty=f(rew.joint_limit_penalty),
+        hip_height_penalty=f(rew.hip_height_penalty),
+        max_hip_z=f(rew.max_hip_z),
+        progress_shaping=f(rew.progress_shaping),
+        shaping_discount=f(rew.shaping_discount),
+        kind_outlines=f(outlines),
+        kind_shape=f(shapes),
+        kind_cdf=f(_cdf([o.weight for o in lay.obstacles])),
+        kind_width=f([o.width for o in lay.obstacles]),
+        kind_height=f([o.height for o in lay.obstacles]),
+        size_jitter=f(lay.size_jitter),
+        obstacle_offset=f(lay.obstacle_offset),
+        pivot_cdf=f(_cdf(lay.pivot)),
+        start_shift=f(lay.start_shift),
+        step_length=f(lay.step_length),
+    )
+
+
+def numpy_params(cfg: Config) -> types.SimpleNamespace:
+    """The environment parameters as NumPy arrays, attribute-accessible like EnvParams."""
+    return types.SimpleNamespace(**param_values(cfg))
+
+
+def scalar_params(cfg: Config) -> types.SimpleNamespace:
+    """The transition constants as Python floats (for ``xp=scalar``); vectors become tuples.
+
+    Values are rounded through float32 first, so that the scalar loop starts from exactly the
+    constants the float32 JAX environment uses."""
+    out = {}
+    for k, v in param_values(cfg).items():
+        if v.dtype == np.float32 and v.ndim <= 1:
+            out[k] = float(v) if v.ndim == 0 else tuple(float(x) for x in v)
+    return types.SimpleNamespace(**out)
+
+
+# --------------------------------------------------------------------------------------------
+# Transition rules (thesis 2.1-2.2)
+# --------------------------------------------------------------------------------------------
+
+
+def move_heel(xp, p, heel_y, heel_z, dir_y, dir_z):
+    """One action: the heel moves step_size along its direction, kept inside the world (above the
+    ground, below max_z, within bounds_y)."""
+    y = xp.clip(heel_y + p.step_size * dir_y, p.bounds_y[0], p.bounds_y[1])
+    z = xp.clip(heel_z + p.step_size * dir_z, 0.0, p.max_z_world)
+    return y, z
+
+
+def pivot_position(xp, pivot_kind, start_y, center_y):
+    """The three thesis pivot conditions (3.1), indexed like PIVOT_CONDITIONS: the pivot heel aligned
+    with the swing heel's start, with the obstacle centre, or half-way between."""
+    return xp.where(pivot_kind == 0, start_y, xp.where(pivot_kind == 1, center_y, 0.5 * (start_y + center_y)))
+
+
+def mid_goal(xp, p, center_y, height):
+    """Centre (y, z) of the mid-goal box (thesis 2.2): above the obstacle centre, at a safe height."""
+    return center_y, height + p.mid_goal_clearance
+
+
+def in_mid_goal(xp, p, heel_y, heel_z, mid_y, mid_z):
+    return (xp.abs(heel_y - mid_y) <= p.mid_goal_half_size[0]) & (xp.abs(heel_z - mid_z) <= p.mid_goal_half_size[1])
+
+
+def beyond_mid_goal(xp, p, heel_y, mid_y):
+    """The heel has passed the mid-goal box's far side (eq 2.33 fires if it never went through)."""
+    return heel_y > mid_y + p.mid_goal_half_size[0]
+
+
+def goal_reached(xp, p, heel_y, heel_z, goal_y):
+    """The heel is back on the ground at the goal: |y - goal| <= tol_y and z <= tol_z."""
+    return (xp.abs(heel_y - goal_y) <= p.goal_tolerance[0]) & (heel_z <= p.goal_tolerance[1])
+
+
+def observation(xp, p, obs_mode: str, heel_y, heel_z, time, visited_mid, layout):
+    """The network's input (..., D).
+
+    ``thesis``: the heel (y, z) only, centred and scaled. ``conditioned``: also the scene relative
+    to the heel (start, goal, mid-goal, pivot, obstacle extents and top, the obstacle's profile or
+    its bounding box, episode progress and whether the mid-goal was visited). Every entry is affine
+    in (heel_y, heel_z, time, visited_mid) for a fixed scene; the generator relies on that."""
+    base = [(heel_y - THESIS_OBS_CENTER[0]) / LENGTH_SCALE, (heel_z - THESIS_OBS_CENTER[1]) / LENGTH_SCALE]
+    if obs_mode == "thesis":
+        return xp.stack(base, axis=-1)
+    lay = layout
+    mid_y, mid_z = mid_goal(xp, p, lay.center_y, lay.height)
+    rel = [
+        heel_y - lay.start_y, heel_z,                        # heel relative to its start
+        lay.goal_y - heel_y, -heel_z,                        # goal relative to the heel
+        mid_y - heel_y, mid_z - heel_z,                      # mid-goal relative to the heel
+        lay.pivot_y - heel_y,                                # pivot heel relative to the heel
+        lay.center_y - 0.5 * lay.width - heel_y,             # obstacle near edge
+        lay.center_y + 0.5 * lay.width - heel_y,             # obstacle far edge
+        lay.height - heel_z,                                 # obstacle top
+    ]
+    dtype = heel_y.dtype
+    progress = (time / p.max_steps_in_episode).astype(dtype)
+    # "bbox": the profile shown as the bounding box's constant height.
+    profile = xp.where(p.obs_true_profile, lay.shape, lay.height[..., None]) / LENGTH_SCALE
+    return xp.concatenate([
+        xp.stack(base + [r / LENGTH_SCALE for r in rel], axis=-1),
+        profile,
+        xp.stack([progress, visited_mid.astype(dtype)], axis=-1),
+    ], axis=-1)
+
+
+# --------------------------------------------------------------------------------------------
+# Fixed scenes
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Scene:
+    """One fixed scenario in world coordinates (metres): the obstacle, where the pivot (stance) heel
+    stands, where the swing heel starts and where it must land. Fields match the environment's
+    Layout, so the same observation and transition code reads either."""
+
+    obstacle: geometry.Obstacle
+    outline: np.ndarray        # (K, 2) world-frame outline, padded to K vertices
+    shape: np.ndarray          # (P,) heights at equally spaced fractions of the width
+    center_y: float
+    width: float
+    height: float
+    pivot_kind: int            # index into PIVOT_CONDITIONS, -1 for a pivot given as a y
+    pivot_y: float
+    start_y: float
+    goal_y: float
+
+    @property
+    def pivot(self) -> str:
+        return PIVOT_CONDITIONS[self.pivot_kind] if self.pivot_kind >= 0 else f"y={self.pivot_y:.3f} m"
+
+
+def make_scene(obstacle: geometry.Obstacle, pivot: str | float = "obstacle", start_y: float = 0.0,
+               step_length: float = 0.70, *, foot_length: float, max_vertices: int | None = None,
+               shape_points: int = geometry.DEFAULT_SHAPE_POINTS) -> Scene:
+    """Validate and lay out one scene. ``pivot`` is one of PIVOT_CONDITIONS (thesis 3.1) or the pivot
+    heel's y in metres. ``max_vertices`` pads the outline to a fixed K (the JAX environment's); None
+    keeps the obstacle's own vertex count. Raises ValueError naming the bad argument."""
+    if not isinstance(obstacle, geometry.Obstacle):
+        raise TypeError(f"obstacle: expected a jaxexo Obstacle, got {type(obstacle).__name__}")
+    start_y = geometry._finite("start_y", start_y)
+    step_length = geometry._finite_positive("step_length", step_length)
+    if isinstance(pivot, str):
+        if pivot not in PIVOT_CONDITIONS:
+            raise ValueError(f"pivot must be one of {PIVOT_CONDITIONS} or a y in metres, got {pivot!r}")
+        pk = PIVOT_CONDITIONS.index(pivot)
+        py = pivot_position(scalar, pk, start_y, obstacle.center_y)
+    else:
+        pk, py = -1, geometry._finite("pivot_y", pivot)
+    if obstacle.left <= start_y + foot_length:
+        raise ValueError(f"obstacle: its near edge ({obstacle.left:.3f} m) must lie ahead of the toe at "
+                         f"the start ({start_y + foot_length:.3f} m)")
+    if obstacle.right >= start_y + step_length:
+        raise ValueError(f"step_length: the goal ({start_y + step_length:.3f} m) must lie beyond the "
+                         f"obstacle's far edge ({obstacle.right:.3f} m)")
+    n_vertices = len(obstacle.unit_vertices)
+    max_vertices = n_vertices if max_vertices is None else max_vertices
+    if n_vertices > max_vertices:
+        raise ValueError(f"obstacle: its outline has {n_vertices} vertices, more than this model's "
+                         f"{max_vertices} (env.max_vertices)")
+    shape = obstacle.height * geometry.shape_descriptor(obstacle.unit_vertices, shape_points)
+    return Scene(obstacle=obstacle, outline=obstacle.outline_array(max_vertices), shape=shape,
+                 center_y=obstacle.center_y, width=obstacle.width, height=obstacle.height, pivot_kind=pk,
+                 pivot_y=float(py), start_y=start_y, goal_y=start_y + step_length)
+
+
+def stack_scenes(scenes, dtype=np.float32) -> types.SimpleNamespace:
+    """Scenes as arrays with a leading batch axis (outlines padded to the largest vertex count), in
+    the Layout field layout that ``observation`` and the checks read."""
+    k = max(len(s.outline) for s in scenes)
+    f = lambda name: np.asarray([getattr(s, name) for s in scenes], dtype=dtype)  # noqa: E731
+    return types.SimpleNamespace(
+        outline=np.stack([geometry.pad_outline(s.outline, k) for s in scenes]).astype(dtype),
+        shape=np.stack([s.shape for s in scenes]).astype(dtype),
+        center_y=f("center_y"), width=f("width"), height=f("height"), pivot_y=f("pivot_y"),
+        start_y=f("start_y"), goal_y=f("goal_y"),
+        pivot_kind=np.asarray([s.pivot_kind for s in scenes], dtype=np.int32),
+    )

@@ -1,0 +1,29 @@
+"""NumPy-only swing trajectory generation: an exported policy (policy.npz) in, a checked trajectory out.
+
+Needs numpy and scipy only (``pip install jaxexo`` without extras), so it runs on an exoskeleton's
+own computer::
+
+    from jaxexo.inference import Obstacle, TrajectoryGenerator
+    gen = TrajectoryGenerator.load("run/policy.npz")
+    traj = gen.generate(Obstacle.named("triangle"), pivot="obstacle", start_y=0.0, step_length=0.70)
+    traj.heel, traj.joint_angles, traj.checks.ok
+
+Units: metres, radians, seconds.
+"""
+
+from jaxexo.dynamics import Scene
+from jaxexo.geometry import Obstacle
+from jaxexo.inference.generator import TrajectoryGenerator
+from jaxexo.inference.trajectory import (
+    CSV_COLUMNS,
+    JOINT_NAMES,
+    Trajectory,
+    TrajectoryBatch,
+    TrajectoryChecks,
+    TrajectoryError,
+    assemble,
+)
+from jaxexo.policy import PolicyFileError
+
+__all__ = ["TrajectoryGenerator", "Trajectory", "TrajectoryBatch", "TrajectoryChecks", "TrajectoryError",
+           "Obstacle", "Scene", "PolicyFileError", "assemble", "CSV_COLUMNS", "JOINT_NAMES"]

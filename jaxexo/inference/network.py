@@ -1,0 +1,124 @@
+"""The exported Q-network rearranged for fast NumPy inference (same outputs as policy.QPolicy).
+
+A greedy trajectory is ~30 sequential network evaluations on one observation, where NumPy's cost is
+the number of calls, not the arithmetic. So the layers are folded once, at load time, into fewer
+operations with the same result (up to float32 rounding):
+
+- biases become an extra weight row (inputs carry a trailing 1): one matmul per layer;
+- LayerNorm's centring is linear, so it moves into the preceding weights (W <- W (I - 11'/H));
+- LayerNorm's scale s and bias b before the ReLU: s*n + b = |s| * (sign(s)*n + b/|s|), and
+  |s| * relu(.) moves into the next layer's rows while sign(s) moves into this layer's columns;
+  a unit with s = 0 outputs the constant relu(b), which moves into the next layer's bias.
+Each hidden layer is then matmul, one dot product for the variance, scale-and-shift and ReLU.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from jaxexo.policy import LAYER_NORM_EPS, QPolicy
+
+
+class FoldedQNetwork:
+    """``q(x)`` for x (..., D) like QPolicy.q_values; plus the pieces the single-step loop uses."""
+
+    def __init__(self, policy: QPolicy):
+        n = len(policy.kernels)
+        self.layer_norm = bool(policy.norm_scales)
+        self.eps = LAYER_NORM_EPS
+        weights, shifts = [], []
+        carry_rows = None     # per-unit factor |s| to apply to the next layer's rows
+        carry_bias = None     # constant contribution of s = 0 units to the next layer's bias
+        for i in range(n):
+            w = policy.kernels[i].astype(np.float64)
+            b = policy.biases[i].astype(np.float64)
+            if carry_rows is not None:
+                b = b + carry_bias @ w
+                w = carry_rows[:, None] * w
+            wa = np.vstack([w, b[None, :]])
+            shift = None
+            if self.layer_norm and i < n - 1:
+                h = w.shape[1]
+                wa = wa - wa.mean(axis=1, keepdims=True)          # centring folded in
+                s = policy.norm_scales[i].astype(np.float64)
+                beta = policy.norm_biases[i].astype(np.float64)
+                sign = np.where(s < 0.0, -1.0, 1.0)
+                mag = np.abs(s)
+                wa = wa * sign[None, :]
+                shift = np.where(mag > 0.0, beta / np.where(mag > 0.0, mag, 1.0), 0.0)
+                carry_rows = mag
+                carry_bias = np.where(mag > 0.0, 0.0, np.maximum(beta, 0.0))
+                assert wa.shape[1] == h
+            weights.append(wa.astype(np.float32))
+            shifts.append(None if shift is None else shift.astype(np.float32))
+        self.weights = weights            # (in + 1, out) each
+        self.shifts = shifts              # LayerNorm shift b/|s| per hidden layer (None without LN)
+        self.hidden = [w.shape[1] for w in weights[:-1]]
+        self.obs_dim = weights[0].shape[0] - 1
+        self.num_actions = weights[-1].shape[1]
+
+    def _hidden(self, i: int, pre: np.ndarray) -> np.ndarray:
+        """Activation of hidden layer i from its (centred, if LayerNorm) pre-activation (..., H)."""
+        if self.shifts[i] is not None:
+            var = np.einsum("...h,...h->...", pre, pre)[..., None] * (1.0 / pre.shape[-1])
+            pre = pre / np.sqrt(var + self.eps) + self.shifts[i]
+        return np.maximum(pre, 0.0)
+
+    def q(self, x) -> np.ndarray:
+        x = np.asarray(x, dtype=np.float32)
+        if x.shape[-1] != self.obs_dim:
+            raise ValueError(f"obs: expected last dimension {self.obs_dim}, got shape {x.shape}")
+        for i, wa in enumerate(self.weights):
+            x = x @ wa[:-1] + wa[-1]
+            if i < len(self.weights) - 1:
+                x = self._hidden(i, x)
+        return x
+
+    def first_layer_for(self, basis: np.ndarray) -> np.ndarray:
+        """Layer 0's pre-activation as a function of a few scalars: returns M (R, H) such that the
+        pre-activation for obs = c @ basis[:-1] + basis[-1] ... see StepNetwork."""
+        w0 = self.weights[0].astype(np.float64)
+        m = basis @ w0[:-1]
+        m[-1] += w0[-1]
+        return m.astype(np.float32)
+
+
+class StepNetwork:
+    """Greedy action for one observation given as affine coordinates, with preallocated buffers.
+
+    The generator's observation is affine in c = (heel_y, heel_z, time, visited, 1) for a fixed scene
+    (jaxexo.dynamics.observation), so ``set_scene(basis)`` folds that map into layer 0 and each step
+    costs one small matmul per layer and a handful of in-place operations."""
+
+    def __init__(self, net: FoldedQNetwork):
+        self.net = net
+        self.m0 = None
+        self.c = np.ones(5, np.float32)
+        self.bufs = [np.ones(h + 1, np.float32) for h in net.hidden]   # trailing 1 for the bias row
+        self.inv_h = [1.0 / h for h in net.hidden]
+
+    def set_scene(self, basis: np.ndarray) -> None:
+        self.m0 = self.net.first_layer_for(basis)
+
+    def greedy(self, heel_y: float, heel_z: float, time: float, visited: float) -> int:
+        c = self.c
+        c[0] = heel_y
+        c[1] = heel_z
+        c[2] = time
+        c[3] = visited
+        x = c
+        net = self.net
+        ws = net.weights
+        for i, buf in enumerate(self.bufs):
+            pre = x @ (self.m0 if i == 0 else ws[i])
+            out = buf[:-1]
+            shift = net.shifts[i]
+            if shift is not None:
+                r = 1.0 / math.sqrt(float(np.dot(pre, pre)) * self.inv_h[i] + net.eps)
+                pre *= r
+                pre += shift
+            np.maximum(pre, 0.0, out=out)
+            x = buf
+        return int(np.argmax(x @ ws[-1]))

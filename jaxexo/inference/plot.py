@@ -1,0 +1,64 @@
+"""Figures of a trajectory (needs matplotlib, imported here only): the exoskeleton's legs over the
+obstacle with the foot path and its arrows (thesis Fig. 2.3), beside the hip and knee angle
+profiles of both legs (thesis Fig. 3.11-3.30). Lengths in centimetres, angles in degrees."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from jaxexo.inference.trajectory import Trajectory
+
+CM = 100.0
+
+
+def plot_trajectory(traj: Trajectory, path: str | Path | None = None, n_poses: int = 6, title: str | None = None):
+    """Draw one trajectory; saves to ``path`` when given and returns the figure."""
+    import matplotlib
+
+    if path is not None:
+        matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax, ax_h, ax_k) = plt.subplots(1, 3, figsize=(15, 4.8), gridspec_kw={"width_ratios": [1.6, 1, 1]})
+    sc = traj.scene
+    o = sc.obstacle.outline * CM
+    ax.fill(o[:, 0], o[:, 1], color="0.55", alpha=0.8, label=f"obstacle ({sc.obstacle.kind})")
+    ax.axhline(0.0, color="k", lw=0.8)
+    for j in np.linspace(0, len(traj.heel) - 1, n_poses).round().astype(int):
+        a = 0.25 + 0.75 * j / (len(traj.heel) - 1)
+        hip, ks, kt = traj.hip[j] * CM, traj.knee_swing[j] * CM, traj.knee_stance[j] * CM
+        heel, toe = traj.heel[j] * CM, traj.toe[j] * CM
+        ax.plot([hip[0], ks[0], heel[0]], [hip[1], ks[1], heel[1]], "-o", color="tab:blue", alpha=a, ms=3)
+        ax.plot([hip[0], kt[0], sc.pivot_y * CM], [hip[1], kt[1], 0.0], "-o", color="tab:gray", alpha=a, ms=3)
+        ax.plot([heel[0], toe[0]], [heel[1], toe[1]], "-", color="tab:blue", alpha=a, lw=2.5)
+    raw = traj.raw * CM
+    d = np.diff(raw, axis=0)
+    ax.quiver(raw[:-1, 0], raw[:-1, 1], d[:, 0], d[:, 1], angles="xy", scale_units="xy", scale=1.0,
+              color="tab:orange", width=0.003, label="agent moves")
+    ax.plot(traj.heel[:, 0] * CM, traj.heel[:, 1] * CM, color="tab:red", lw=1.5, label="heel (smoothed)")
+    ax.plot(traj.toe[:, 0] * CM, traj.toe[:, 1] * CM, color="tab:red", lw=0.8, ls="--", label="toe")
+    ax.plot([sc.goal_y * CM], [0.0], "g*", ms=12, label="goal")
+    ax.set_aspect("equal")
+    ax.set_xlabel("y, forward (cm)")
+    ax.set_ylabel("z, up (cm)")
+    status = "ok" if traj.ok else "FAILED: " + "; ".join(traj.checks.reasons)
+    ax.set_title(title or f"{traj.method}: {sc.obstacle.kind}, pivot {sc.pivot} ({status})", fontsize=9)
+    ax.legend(fontsize=7, loc="upper left")
+    ang = np.degrees(traj.joint_angles)
+    for axis, col, name in ((ax_h, 0, "hip"), (ax_k, 1, "knee")):
+        axis.plot(traj.time, ang[:, col], color="tab:blue", label=f"swing {name}")
+        axis.plot(traj.time, ang[:, col + 2], color="tab:gray", label=f"stance {name}")
+        axis.set_xlabel("time (s)")
+        axis.set_ylabel(f"{name} angle (deg, flexion {'+' if name == 'hip' else '-'})")
+        axis.grid(alpha=0.3)
+        axis.legend(fontsize=8)
+    ax_h.set_title("Hip angles (thesis Fig. 3.11-3.30)", fontsize=9)
+    ax_k.set_title("Knee angles", fontsize=9)
+    fig.tight_layout()
+    if path is not None:
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+    return fig

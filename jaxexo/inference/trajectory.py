@@ -1,0 +1,246 @@
+"""A checked swing trajectory: the heel path with the exoskeleton's kinematics and its pass/fail checks.
+
+Every generator (the RL policy, CFFTG) produces a dense heel path per scene and hands it to
+``assemble``, so all trajectories are measured by one definition: the same kinematics
+(jaxexo.kinematics: hip eq 2.42, knees eq 2.4-2.11, angles eq 2.49), the same foot-obstacle
+clearance (jaxexo.geometry, the heel-toe segment against the outline) and the same goal, joint-limit
+and leg-length rules as the training environment (jaxexo.dynamics, eq 2.45, 2.50). Units: metres,
+radians, seconds.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from jaxexo import dynamics, geometry, kinematics
+from jaxexo.dynamics import Scene
+
+JOINT_NAMES = ("hip_swing", "knee_swing", "hip_stance", "knee_stance")
+DEFAULT_DURATION = 1.0   # s, swing duration for the time stamps
+
+CSV_COLUMNS = (
+    "time_s", "heel_y_m", "heel_z_m", "toe_y_m", "toe_z_m", "hip_y_m", "hip_z_m",
+    "knee_swing_y_m", "knee_swing_z_m", "knee_stance_y_m", "knee_stance_z_m",
+    "hip_swing_rad", "knee_swing_rad", "hip_stance_rad", "knee_stance_rad",
+)
+
+
+class TrajectoryError(RuntimeError):
+    """A trajectory failed its checks and ``strict=True`` was asked for; ``.trajectory`` holds it."""
+
+    def __init__(self, trajectory: "Trajectory"):
+        super().__init__("trajectory failed its checks: " + "; ".join(trajectory.checks.reasons))
+        self.trajectory = trajectory
+
+
+@dataclass(frozen=True)
+class TrajectoryChecks:
+    """Checks made on the final (smoothed) path at every sample."""
+
+    reached_goal: bool
+    collision_free: bool
+    min_clearance: float        # m, foot segment to obstacle (negative: inside)
+    joint_limits_ok: bool
+    leg_length_ok: bool
+    reasons: tuple[str, ...]    # empty when ok
+
+    @property
+    def ok(self) -> bool:
+        return not self.reasons
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """One swing. Arrays have one row per sample (N); ``raw`` holds the generator's own points."""
+
+    method: str
+    scene: Scene
+    raw: np.ndarray             # (M, 2) generator points (heel y, z), m
+    heel: np.ndarray            # (N, 2)
+    toe: np.ndarray             # (N, 2)
+    hip: np.ndarray             # (N, 2)
+    knee_swing: np.ndarray      # (N, 2)
+    knee_stance: np.ndarray     # (N, 2)
+    joint_angles: np.ndarray    # (N, 4) rad, columns JOINT_NAMES
+    time: np.ndarray            # (N,) s
+    checks: TrajectoryChecks
+    smoothing: float            # m^2 actually used; nan: the raw polyline (smoothing fell back)
+    notes: tuple[str, ...] = field(default=())
+
+    @property
+    def ok(self) -> bool:
+        return self.checks.ok
+
+    # Exports -----------------------------------------------------------------------------------
+    def table(self) -> np.ndarray:
+        """(N, len(CSV_COLUMNS)) array in CSV_COLUMNS order."""
+        return np.column_stack([self.time, self.heel, self.toe, self.hip, self.knee_swing, self.knee_stance,
+                                self.joint_angles])
+
+    def to_csv(self, path: str | Path | None = None) -> str:
+        buf = io.StringIO()
+        w = csv.writer(buf, lineterminator="\n")
+        w.writerow(CSV_COLUMNS)
+        for row in self.table():
+            w.writerow([f"{x:.6f}" for x in row])
+        text = buf.getvalue()
+        if path is not None:
+            _write_text(Path(path), text)
+        return text
+
+    def to_dict(self) -> dict:
+        c = self.checks
+        sc = self.scene
+        return {
+            "units": {"length": "m", "angle": "rad", "time": "s"},
+            "method": self.method,
+            "scene": {"obstacle": sc.obstacle.kind, "shape": sc.obstacle.shape, "center_y": sc.center_y,
+                      "width": sc.width, "height": sc.height, "outline": sc.obstacle.outline.tolist(),
+                      "pivot": sc.pivot, "pivot_y": sc.pivot_y, "start_y": sc.start_y, "goal_y": sc.goal_y},
+            "checks": {"ok": c.ok, "reached_goal": c.reached_goal, "collision_free": c.collision_free,
+                       "min_clearance": c.min_clearance, "joint_limits_ok": c.joint_limits_ok,
+                       "leg_length_ok": c.leg_length_ok, "reasons": list(c.reasons)},
+            "smoothing": None if math.isnan(self.smoothing) else self.smoothing,
+            "notes": list(self.notes),
+            "raw": self.raw.tolist(),
+            "columns": list(CSV_COLUMNS),
+            "samples": self.table().tolist(),
+        }
+
+    def to_json(self, path: str | Path | None = None) -> str:
+        text = json.dumps(self.to_dict(), indent=1)
+        if path is not None:
+            _write_text(Path(path), text)
+        return text
+
+
+def _write_text(path: Path, text: str) -> None:
+    """Atomic write: an interrupted export never leaves half a file in place of a good one."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    tmp.replace(path)
+
+
+@dataclass(frozen=True)
+class TrajectoryBatch:
+    """Many trajectories as stacked arrays (B, N, ...); ``batch[i]`` is the i-th Trajectory."""
+
+    method: str
+    scenes: tuple[Scene, ...]
+    raw: tuple[np.ndarray, ...]
+    heel: np.ndarray
+    toe: np.ndarray
+    hip: np.ndarray
+    knee_swing: np.ndarray
+    knee_stance: np.ndarray
+    joint_angles: np.ndarray
+    time: np.ndarray
+    reached_goal: np.ndarray
+    collision_free: np.ndarray
+    min_clearance: np.ndarray
+    joint_limits_ok: np.ndarray
+    leg_length_ok: np.ndarray
+    reasons: tuple[tuple[str, ...], ...]
+    smoothing: np.ndarray
+    notes: tuple[tuple[str, ...], ...]
+
+    def __len__(self) -> int:
+        return len(self.scenes)
+
+    @property
+    def ok(self) -> np.ndarray:
+        return np.array([not r for r in self.reasons], dtype=bool)
+
+    def __getitem__(self, i: int) -> Trajectory:
+        checks = TrajectoryChecks(bool(self.reached_goal[i]), bool(self.collision_free[i]),
+                                  float(self.min_clearance[i]), bool(self.joint_limits_ok[i]),
+                                  bool(self.leg_length_ok[i]), self.reasons[i])
+        return Trajectory(self.method, self.scenes[i], self.raw[i], self.heel[i], self.toe[i], self.hip[i],
+                          self.knee_swing[i], self.knee_stance[i], self.joint_angles[i], self.time,
+                          checks, float(self.smoothing[i]), self.notes[i])
+
+    def __iter__(self):
+        return (self[i] for i in range(len(self)))
+
+
+def measure(sp, heel: np.ndarray, outline: np.ndarray, pivot_y: np.ndarray, goal_y: np.ndarray) -> dict:
+    """Kinematics and checks of heel paths (B, N, 2) against outlines (B, K, 2), vectorised.
+
+    ``sp`` holds the constants (jaxexo.dynamics.scalar_params or numpy_params)."""
+    clearance = geometry.foot_clearance(np, heel, sp.foot_length, outline[:, None])
+    # kinematics.leg_state's equations, with both legs stacked on a leading axis (fewer NumPy calls).
+    hip = kinematics.hip_position(np, pivot_y[:, None], heel, sp.thigh, sp.shin)
+    pivot = np.zeros_like(heel)
+    pivot[..., 0] = pivot_y[:, None]
+    feet = np.stack([heel, pivot])
+    knees, legs = kinematics.knee_position(np, hip[None], feet, sp.thigh, sp.shin)
+    hips, qs = kinematics.joint_angles(np, hip[None], knees, feet)
+    angles = np.stack([hips[0], qs[0], hips[1], qs[1]], axis=-1)
+    kin = {"hip": hip, "knee_swing": knees[0], "knee_stance": knees[1], "leg_swing": legs[0], "leg_stance": legs[1]}
+    lim = lambda h, q: kinematics.joint_limit_violation(  # noqa: E731
+        np, h, q, sp.hip_limits[0], sp.hip_limits[1], sp.knee_limits[0], sp.knee_limits[1])
+    limit_bad = lim(angles[..., 0], angles[..., 1]) | lim(angles[..., 2], angles[..., 3])
+    leg_bad = kinematics.leg_too_long(np, kin["leg_swing"], kin["leg_stance"], sp.thigh, sp.shin,
+                                      sp.leg_length_tolerance)
+    return {
+        "clearance": clearance,
+        "kin": kin,
+        "angles": angles,
+        "limit_bad": limit_bad,
+        "leg_bad": leg_bad,
+        "collision_free": ~np.any(geometry.foot_collides(np, clearance), axis=-1),
+        "min_clearance": clearance.min(axis=-1),
+        "joint_limits_ok": ~np.any(limit_bad, axis=-1),
+        "leg_length_ok": ~np.any(leg_bad, axis=-1),
+        "reached_goal": dynamics.goal_reached(np, sp, heel[:, -1, 0], heel[:, -1, 1], goal_y),
+    }
+
+
+def _reasons(m: dict, i: int, heel: np.ndarray, goal_y: float, time: np.ndarray) -> tuple[str, ...]:
+    out = []
+    if not m["reached_goal"][i]:
+        y, z = heel[-1]
+        out.append(f"did not reach the goal: ends at y={y:.3f} m, z={z:.3f} m, goal y={goal_y:.3f} m")
+    if not m["collision_free"][i]:
+        j = int(np.argmin(m["clearance"][i]))
+        out.append(f"the foot touches the obstacle (min clearance {m['min_clearance'][i]:.4f} m at t={time[j]:.3f} s)")
+    if not m["joint_limits_ok"][i]:
+        j = int(np.argmax(m["limit_bad"][i]))
+        a = np.degrees(m["angles"][i, j])
+        out.append(f"joint limits exceeded at t={time[j]:.3f} s (hip/knee swing {a[0]:.1f}/{a[1]:.1f} deg, "
+                   f"stance {a[2]:.1f}/{a[3]:.1f} deg)")
+    if not m["leg_length_ok"][i]:
+        j = int(np.argmax(m["leg_bad"][i]))
+        out.append(f"a leg would have to stretch beyond thigh + shin at t={time[j]:.3f} s")
+    return tuple(out)
+
+
+def assemble(method: str, sp, scenes, raws, paths: np.ndarray, smoothing, duration: float = DEFAULT_DURATION,
+             notes=None) -> TrajectoryBatch:
+    """Checked trajectories from dense heel paths (B, N, 2), one per scene; ``raws`` the generator's
+    own points per scene, ``smoothing`` (B,) the smoothing each path used (nan for a raw polyline)."""
+    paths = np.asarray(paths, dtype=np.float64)
+    b, n = paths.shape[:2]
+    arr = dynamics.stack_scenes(scenes, np.float64)
+    m = measure(sp, paths, arr.outline, arr.pivot_y, arr.goal_y)
+    time = np.linspace(0.0, duration, n)
+    reasons = tuple(_reasons(m, i, paths[i], scenes[i].goal_y, time) for i in range(b))
+    kin = m["kin"]
+    toe = paths.copy()
+    toe[..., 0] += sp.foot_length
+    return TrajectoryBatch(
+        method=method, scenes=tuple(scenes), raw=tuple(np.asarray(r, np.float64) for r in raws), heel=paths,
+        toe=toe, hip=kin["hip"], knee_swing=kin["knee_swing"], knee_stance=kin["knee_stance"],
+        joint_angles=m["angles"], time=time, reached_goal=m["reached_goal"], collision_free=m["collision_free"],
+        min_clearance=m["min_clearance"], joint_limits_ok=m["joint_limits_ok"], leg_length_ok=m["leg_length_ok"],
+        reasons=reasons, smoothing=np.asarray(smoothing, np.float64).reshape(b),
+        notes=tuple(notes) if notes is not None else ((),) * b,
+    )
