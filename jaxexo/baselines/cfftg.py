@@ -52,6 +52,7 @@ import numpy as np
 
 from jaxexo import dynamics, geometry
 from jaxexo.config import Config, ConfigError, config_from_dict
+from jaxexo.inference.generator import check_options, scenes_for
 from jaxexo.inference.trajectory import DEFAULT_DURATION, Trajectory, TrajectoryBatch, TrajectoryError, assemble, measure
 from jaxexo.policy import PolicyFileError, load_policy
 
@@ -135,13 +136,13 @@ class CFFTG:
         """Validate one scenario (metres), as the RL generator does."""
         return dynamics.make_scene(obstacle, pivot if pivot_y is None else pivot_y, start_y, step_length,
                                    foot_length=self.config.kinematics.foot_length,
-                                   max_vertices=len(obstacle.unit_vertices),
                                    shape_points=self.config.env.shape_points)
 
     # Planning ---------------------------------------------------------------------------------------
-    def plan(self, scenes, n_points: int = DEFAULT_POINTS, duration: float = DEFAULT_DURATION):
+    def plan(self, scenes, n_points: int = DEFAULT_POINTS):
         """Plan, check and re-plan every scene. Returns the final paths (B, N, 2), the via points
-        (B, 3, 2), the number of plans each scene needed (B,) and whether it gave up (B,)."""
+        (B, 3, 2), the number of plans each scene needed (B,), whether it gave up (B,) and the checks
+        of the final paths (``jaxexo.inference.trajectory.measure``'s dict)."""
         arr = dynamics.stack_scenes(scenes, np.float64)
         b = len(scenes)
         foot = float(self.sp.foot_length)
@@ -158,12 +159,14 @@ class CFFTG:
         paths = np.zeros((b, n_points, 2))
         apex_h = np.zeros(b)
         todo = np.arange(b)
+        checks = None
         for _ in range(self.max_plans):
             p, h = plan_paths(arr.start_y[todo], arr.goal_y[todo], arr.outline[todo], frac[todo], margin[todo],
                               foot, n_points)
             paths[todo], apex_h[todo] = p, h
             plans[todo] += 1
             m = measure(self.sp, p, arr.outline[todo], arr.pivot_y[todo], arr.goal_y[todo])
+            checks = m if checks is None else _scatter(checks, m, todo)
             ok = m["collision_free"] & m["joint_limits_ok"] & m["leg_length_ok"] & m["reached_goal"]
             bad_kin = ~(m["joint_limits_ok"] & m["leg_length_ok"])
             fail = todo[~ok]
@@ -184,16 +187,17 @@ class CFFTG:
         frac_used = np.clip(frac, *APEX_FRAC_RANGE)
         apex = np.stack([arr.start_y + frac_used * step, apex_h], axis=-1)
         via = np.stack([np.stack([arr.start_y, np.zeros(b)], -1), apex, np.stack([arr.goal_y, np.zeros(b)], -1)], 1)
-        return paths, via, plans, gave_up
+        return paths, via, plans, gave_up, checks
 
     # Trajectories -----------------------------------------------------------------------------------
     def _finish(self, scenes, n_points, duration, strict) -> TrajectoryBatch:
-        paths, via, plans, gave_up = self.plan(scenes, n_points, duration)
+        paths, via, plans, gave_up, checks = self.plan(scenes, n_points)
         notes = []
         for i in range(len(scenes)):
             note = f"cfftg: {plans[i]} plan(s); apex y={via[i, 1, 0]:.3f} m, z={via[i, 1, 1]:.3f} m"
             notes.append((note + f"; gave up after {self.max_plans} plans",) if gave_up[i] else (note,))
-        batch = assemble(self.method, self.sp, scenes, list(via), paths, np.zeros(len(scenes)), duration, notes)
+        batch = assemble(self.method, self.sp, scenes, list(via), paths, np.zeros(len(scenes)), duration, notes,
+                         measured=checks)
         if strict and not batch.ok.all():
             raise TrajectoryError(batch[int(np.argmin(batch.ok))])
         return batch
@@ -216,25 +220,20 @@ class CFFTG:
                             strict)
 
     def scenes(self, obstacles, pivot="obstacle", pivot_y=None, start_y=0.0, step_length=0.70):
-        obstacles = list(obstacles)
-        n = len(obstacles)
-        if n == 0:
-            raise ValueError("obstacles: need at least one scenario")
+        return scenes_for(self.scene, obstacles, pivot, pivot_y, start_y, step_length)
 
-        def per(name, v):
-            if np.ndim(v) == 0 or isinstance(v, str):
-                return [v] * n
-            v = list(v)
-            if len(v) != n:
-                raise ValueError(f"{name}: {len(v)} values for {n} obstacles")
-            return v
 
-        return [self.scene(o, p, py, s, sl) for o, p, py, s, sl in zip(
-            obstacles, per("pivot", pivot), per("pivot_y", pivot_y), per("start_y", start_y),
-            per("step_length", step_length))]
+def _scatter(full: dict, part: dict, idx: np.ndarray) -> dict:
+    """Write the checks of re-planned scenes ``idx`` into the batch's checks (nested dicts of arrays)."""
+    for k, v in part.items():
+        if isinstance(v, dict):
+            _scatter(full[k], v, idx)
+        else:
+            full[k][idx] = v
+    return full
 
 
 def _check_options(n_points, duration):
-    if isinstance(n_points, bool) or not isinstance(n_points, (int, np.integer)) or n_points < 5:
-        raise ValueError(f"n_points must be an integer >= 5, got {n_points!r}")
-    return int(n_points), geometry._finite_positive("duration", duration)
+    """The RL generator's option checks (n_points, duration); CFFTG has no smoothing."""
+    n_points, _, duration = check_options(n_points, 0.0, duration)
+    return n_points, duration

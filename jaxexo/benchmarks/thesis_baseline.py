@@ -122,6 +122,82 @@ def truncated_lambda_returns(reward, boot, terminated, valid, cont, gamma: float
 
 
 # --------------------------------------------------------------------------------------------
+# The environment in NumPy, one episode at a time (the thesis's environment was plain Python)
+# --------------------------------------------------------------------------------------------
+
+
+class NumpyExoEnv:
+    """ExoStepEnv's rules stepped one environment at a time in NumPy (float32, like the JAX env):
+    the same move, transition, reward and observation functions (``jaxexo.dynamics``).
+
+    Layouts come from a pool drawn once by the JAX environment's own sampler (``layout_pool``), in
+    a fresh random order on every pass, so both trainers see the same layout distribution and no
+    sampling rule is written twice. ``reset() -> obs``; ``step(a) -> (obs, reward, terminated,
+    truncated, info)`` with ``info["success"]`` the strict success of a finished episode."""
+
+    def __init__(self, cfg, pool: dict, seed: int = 0):
+        from jaxexo import dynamics
+
+        self.dyn = dynamics
+        self.p = dynamics.numpy_params(cfg)
+        self.obs_mode = cfg.env.obs_mode
+        self.max_steps = int(cfg.env.max_steps)
+        self.pool = {k: np.asarray(v) for k, v in pool.items()}
+        self.n_layouts = len(self.pool["start_y"])
+        self.rng = np.random.default_rng(seed)
+        self.order = self.rng.permutation(self.n_layouts)
+        self.next = 0
+
+    def _layout(self, i: int):
+        import types
+
+        return types.SimpleNamespace(**{k: v[i] for k, v in self.pool.items()})
+
+    def _obs(self):
+        return self.dyn.observation(np, self.p, self.obs_mode, self.heel[0], self.heel[1], self.time,
+                                    self.visited, self.lay)
+
+    def reset(self) -> np.ndarray:
+        if self.next == self.n_layouts:
+            self.order, self.next = self.rng.permutation(self.n_layouts), 0
+        self.lay = self._layout(self.order[self.next])
+        self.next += 1
+        self.heel = np.stack([self.lay.start_y, np.float32(0.0)])
+        self.time = np.int32(0)
+        self.visited = np.bool_(False)
+        self.clean = True
+        return self._obs()
+
+    def step(self, action: int):
+        p = self.p
+        d = p.directions[action]
+        prev = self.heel
+        self.heel = np.stack(self.dyn.move_heel(np, p, prev[0], prev[1], d[0], d[1]))
+        self.time = self.time + np.int32(1)
+        out = self.dyn.transition(np, p, prev, self.heel, self.time, self.visited, self.lay)
+        self.visited = out["visited_mid"]
+        info = out["info"]
+        self.clean = self.clean and not (info["collision"] or info["joint_limit_violation"]
+                                         or info["leg_length_violation"])
+        terminated = bool(out["terminated"])
+        truncated = (not terminated) and int(self.time) >= self.max_steps
+        info["success"] = terminated and bool(info["goal_reached"]) and self.clean
+        return self._obs(), float(out["reward"]), terminated, truncated, info
+
+
+def layout_pool(cfg, n: int, seed: int = 0) -> dict:
+    """n layouts drawn by the JAX environment's sampler (``ExoStepEnv.sample_layout``), as NumPy arrays."""
+    import jax
+
+    from jaxexo.env import ExoStepEnv
+
+    env = ExoStepEnv(cfg)
+    lay = jax.vmap(env.sample_layout, in_axes=(0, None))(jax.random.split(jax.random.PRNGKey(seed), n),
+                                                         env.default_params)
+    return {k: np.asarray(v) for k, v in vars(lay).items()}
+
+
+# --------------------------------------------------------------------------------------------
 # The PyTorch learner
 # --------------------------------------------------------------------------------------------
 
