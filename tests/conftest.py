@@ -129,3 +129,22 @@ def default_env(default_config):
 @pytest.fixture(scope="session")
 def mixed_step():
     return get_mixed_step()
+
+
+# A small config trained briefly from configs/default.toml: a policy that reaches the goal on most
+# scenes and fails on some, for the generator and evaluation tests (one training per session).
+TRAINED_BUDGET = 1_000_000
+
+
+@pytest.fixture(scope="session")
+def trained_run(tmp_path_factory):
+    import dataclasses
+
+    from jaxexo.config import load_config
+    from jaxexo.train.driver import run_training
+
+    cfg = load_config(ROOT / "configs" / "default.toml")
+    cfg = dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, num_envs=512, budget_env_steps=TRAINED_BUDGET))
+    out = tmp_path_factory.mktemp("trained") / "run"
+    run_training(cfg, out, seed=0, progress=False, eval_episodes=200)
+    return out

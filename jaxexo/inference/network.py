@@ -96,11 +96,18 @@ class StepNetwork:
         self.net = net
         self.m0 = None
         self.c = np.ones(5, np.float32)
+        self.pre = [np.empty(h, np.float32) for h in net.hidden]
         self.bufs = [np.ones(h + 1, np.float32) for h in net.hidden]   # trailing 1 for the bias row
-        self.inv_h = [1.0 / h for h in net.hidden]
+        self.outs = [b[:-1] for b in self.bufs]
+        self.q = np.empty(net.num_actions, np.float32)
+        # Per hidden layer: (weights, pre-activation buffer, output view, LayerNorm shift, 1/H).
+        self._layers = None
 
     def set_scene(self, basis: np.ndarray) -> None:
         self.m0 = self.net.first_layer_for(basis)
+        net = self.net
+        self._layers = [((self.m0 if i == 0 else net.weights[i]), self.pre[i], self.outs[i], net.shifts[i],
+                         1.0 / len(self.pre[i])) for i in range(len(self.pre))]
 
     def greedy(self, heel_y: float, heel_z: float, time: float, visited: float) -> int:
         c = self.c
@@ -109,16 +116,14 @@ class StepNetwork:
         c[2] = time
         c[3] = visited
         x = c
-        net = self.net
-        ws = net.weights
-        for i, buf in enumerate(self.bufs):
-            pre = x @ (self.m0 if i == 0 else ws[i])
-            out = buf[:-1]
-            shift = net.shifts[i]
+        eps = self.net.eps
+        dot, maximum, sqrt = np.dot, np.maximum, math.sqrt
+        for (w, pre, out, shift, inv_h), buf in zip(self._layers, self.bufs):
+            dot(x, w, out=pre)
             if shift is not None:
-                r = 1.0 / math.sqrt(float(np.dot(pre, pre)) * self.inv_h[i] + net.eps)
-                pre *= r
+                pre *= 1.0 / sqrt(float(dot(pre, pre)) * inv_h + eps)
                 pre += shift
-            np.maximum(pre, 0.0, out=out)
+            maximum(pre, 0.0, out=out)
             x = buf
-        return int(np.argmax(x @ ws[-1]))
+        dot(x, self.net.weights[-1], out=self.q)
+        return int(self.q.argmax())
