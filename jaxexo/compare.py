@@ -2,12 +2,11 @@
 the thesis's metrics (3.3: generation time, hip and knee angles, accuracy eq 3.1) and more, per
 obstacle kind and pivot condition, written as report.md, report.json and figures (``jaxexo eval``).
 
-Scenarios are the trainer's own: ``test`` are the layouts of ``jaxexo.train.evaluate.test_layouts``
-(the five thesis obstacles of Table 3.1 cycled over the three pivot conditions, with the policy
-config's start shifts, step lengths and offsets, from a fixed key), so the RL figures here are
-those of the run's eval.json up to the smoothing of the path; ``train`` are layouts drawn from the
-policy's training distribution. Sampling them needs JAX (the ``train`` extra); generating and
-measuring the trajectories is NumPy only.
+Scenarios (jaxexo.inference.scenarios, NumPy): ``test`` are the five thesis obstacles of Table 3.1
+cycled over the three pivot conditions with the policy config's start shifts, step lengths and
+offsets, from a fixed seed, like the trainer's eval.json; ``train`` are drawn from the policy's
+training distribution (its obstacle mixture and pivot conditions). Everything here is NumPy only
+(matplotlib for the figures).
 
 Timing: each generator's ``generate`` is called once per scenario, the two generators alternating
 which goes first, in one process, with ``time.perf_counter`` around the call (scene validation,
@@ -26,83 +25,34 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from jaxexo import geometry
 from jaxexo.config import PIVOT_CONDITIONS, Config
+from jaxexo.inference.scenarios import sample_scenarios, training_scenarios
 
 BATCH = 1000
 BATCH_REPEATS = 3
 SCENARIO_SETS = ("train", "test", "all")
 
 
-@dataclass(frozen=True)
-class Scenario:
-    """One scenario as the generators take it (metres)."""
-
-    obstacle: geometry.Obstacle
-    pivot: str
-    start_y: float
-    step_length: float
-
-    @property
-    def kind(self) -> str:
-        return self.obstacle.kind
-
-    def kwargs(self) -> dict:
-        return {"pivot": self.pivot, "start_y": self.start_y, "step_length": self.step_length}
-
-
-# --------------------------------------------------------------------------------------------
-# Scenarios (JAX: the trainer's layout samplers)
-# --------------------------------------------------------------------------------------------
-
-
-def _scenarios_from_layouts(layouts, kinds: list[tuple[str, str, np.ndarray]]) -> list[Scenario]:
-    """Layouts (a batched jaxexo.env Layout) -> Scenarios; ``kinds[i]`` = (name, shape, unit vertices)
-    of the layout's kind index i."""
-    lay = {k: np.asarray(getattr(layouts, k), np.float64) for k in
-           ("center_y", "width", "height", "start_y", "goal_y")}
-    kind = np.asarray(layouts.kind)
-    pivot = np.asarray(layouts.pivot_kind)
-    out = []
-    for i in range(len(kind)):
-        name, shape, unit = kinds[int(kind[i])]
-        ob = geometry.Obstacle(name, shape, float(lay["center_y"][i]), float(lay["width"][i]),
-                               float(lay["height"][i]), unit)
-        out.append(Scenario(ob, PIVOT_CONDITIONS[int(pivot[i])], float(lay["start_y"][i]),
-                            float(lay["goal_y"][i] - lay["start_y"][i])))
-    return out
-
-
-def make_scenarios(cfg: Config, which: str, n: int, seed: int = 12345) -> list[Scenario]:
-    """``test``: the trainer's n test layouts; ``train``: n layouts of the training distribution;
-    ``all``: both (2 n)."""
+def make_scenarios(cfg: Config, which: str, n: int, seed: int = 12345) -> list[dict]:
+    """``test``: n scenarios of jaxexo.inference.scenarios.sample_scenarios (the five thesis obstacles
+    over the three pivot conditions); ``train``: n of the config's training distribution; ``all``:
+    both (2 n). Each a dict of ``generate``'s keyword arguments plus ``kind``."""
     if which not in SCENARIO_SETS:
         raise ValueError(f"scenarios must be one of {SCENARIO_SETS}, got {which!r}")
-    if n < 1:
-        raise ValueError(f"n must be >= 1, got {n}")
-    import jax
-
-    from jaxexo.env import ExoStepEnv
-    from jaxexo.train.evaluate import TEST_KINDS, test_config, test_layouts
-
-    out: list[Scenario] = []
+    out: list[dict] = []
     if which in ("test", "all"):
-        env = ExoStepEnv(test_config(cfg))
-        kinds = [(k, geometry.THESIS_OBSTACLES[k][0], geometry.unit_profile(geometry.THESIS_OBSTACLES[k][0]))
-                 for k in TEST_KINDS]
-        out += _scenarios_from_layouts(test_layouts(env, env.default_params, n, seed), kinds)
+        out += sample_scenarios(cfg, n, seed)
     if which in ("train", "all"):
-        env = ExoStepEnv(cfg)
-        kinds = [(o.kind, o.shape, o.unit_vertices()) for o in cfg.layout.obstacles]
-        keys = jax.random.split(jax.random.PRNGKey(seed + 1), n)
-        layouts = jax.vmap(env.sample_layout, in_axes=(0, None))(keys, env.default_params)
-        out += _scenarios_from_layouts(layouts, kinds)
+        out += training_scenarios(cfg, n, seed + 1)
     return out
+
+
+def _kwargs(s: dict) -> dict:
+    return {"pivot": s["pivot"], "start_y": s["start_y"], "step_length": s["step_length"]}
 
 
 # --------------------------------------------------------------------------------------------
@@ -162,27 +112,21 @@ def summarize(m: dict[str, np.ndarray], times_s: np.ndarray, mask: np.ndarray) -
     }
 
 
-def time_batch(gen, scenarios: list[Scenario], size: int = BATCH, repeats: int = BATCH_REPEATS) -> float:
-    """Median wall time (ms) of ``generate_batch`` on ``size`` scenarios (cycled if fewer)."""
-    sc = [scenarios[i % len(scenarios)] for i in range(size)]
-    obstacles = [s.obstacle for s in sc]
-    kw = {"pivot": [s.pivot for s in sc], "start_y": [s.start_y for s in sc],
-          "step_length": [s.step_length for s in sc]}
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        gen.generate_batch(obstacles, **kw)
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times)) * 1e3
+def batch_time(gen, scenarios: list[dict], size: int = BATCH, repeats: int = BATCH_REPEATS) -> float:
+    """Median wall time (ms) of ``generate_batch`` on ``size`` scenarios (cycled if fewer), timed by
+    the generator benchmark's own function."""
+    from jaxexo.benchmarks.generate_bench import time_batch
+
+    return float(np.median(time_batch(gen, [scenarios[i % len(scenarios)] for i in range(size)], repeats))) * 1e3
 
 
-def run_generators(generators: dict, scenarios: list[Scenario], warmup: int = 20):
+def run_generators(generators: dict, scenarios: list[dict], warmup: int = 20):
     """Generate every scenario with every generator, alternating their order per scenario.
     Returns {name: (trajectories, per-call seconds)}."""
     names = list(generators)
     for s in scenarios[:warmup]:
         for g in generators.values():
-            g.generate(s.obstacle, **s.kwargs())
+            g.generate(s["obstacle"], **_kwargs(s))
     trajs = {n: [] for n in names}
     times = {n: np.empty(len(scenarios)) for n in names}
     for i, s in enumerate(scenarios):
@@ -190,24 +134,24 @@ def run_generators(generators: dict, scenarios: list[Scenario], warmup: int = 20
         for n in order:
             g = generators[n]
             t0 = time.perf_counter()
-            tr = g.generate(s.obstacle, **s.kwargs())
+            tr = g.generate(s["obstacle"], **_kwargs(s))
             times[n][i] = time.perf_counter() - t0
             trajs[n].append(tr)
     return {n: (trajs[n], times[n]) for n in names}
 
 
-def evaluate_generators(generators: dict, scenarios: list[Scenario], batch_size: int = BATCH,
+def evaluate_generators(generators: dict, scenarios: list[dict], batch_size: int = BATCH,
                         batch_repeats: int = BATCH_REPEATS) -> tuple[dict, dict]:
     """The report's figures per generator, and the trajectories (for figures)."""
     runs = run_generators(generators, scenarios)
-    kinds = np.array([s.kind for s in scenarios])
-    pivots = np.array([s.pivot for s in scenarios])
+    kinds = np.array([s["kind"] for s in scenarios])
+    pivots = np.array([s["pivot"] for s in scenarios])
     report, trajs = {}, {}
     for name, (tr, times) in runs.items():
         m = trajectory_metrics(tr)
         everything = np.ones(len(tr), bool)
         entry = summarize(m, times, everything)
-        entry["batch_1000_ms"] = time_batch(generators[name], scenarios, batch_size, batch_repeats) \
+        entry["batch_1000_ms"] = batch_time(generators[name], scenarios, batch_size, batch_repeats) \
             if batch_size else None
         entry["batch_size"] = batch_size
         entry["by_kind"] = {k: summarize(m, times, kinds == k) for k in dict.fromkeys(kinds)}
@@ -267,20 +211,20 @@ def markdown(report: dict, title: str, context: list[str]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def plot_overlays(path: Path, trajs: dict, scenarios: list[Scenario], per_kind: int = 25) -> None:
+def plot_overlays(path: Path, trajs: dict, scenarios: list[dict], per_kind: int = 25) -> None:
     """Heel paths over the obstacle, one panel per kind, each generator in its colour (Fig. 3.29)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    kinds = list(dict.fromkeys(s.kind for s in scenarios))
+    kinds = list(dict.fromkeys(s["kind"] for s in scenarios))
     fig, axes = plt.subplots(1, len(kinds), figsize=(4.2 * len(kinds), 3.6), squeeze=False)
     colours = dict(zip(trajs, ("tab:blue", "tab:orange", "tab:green", "tab:red")))
     for ax, k in zip(axes[0], kinds):
-        idx = [i for i, s in enumerate(scenarios) if s.kind == k][:per_kind]
+        idx = [i for i, s in enumerate(scenarios) if s["kind"] == k][:per_kind]
         for i in idx:
-            o = scenarios[i].obstacle.outline
+            o = scenarios[i]["obstacle"].outline
             ax.fill(o[:, 0] * 100, o[:, 1] * 100, color="0.85", zorder=0)
         for name, tr in trajs.items():
             for j, i in enumerate(idx):
@@ -299,19 +243,19 @@ def plot_overlays(path: Path, trajs: dict, scenarios: list[Scenario], per_kind: 
     plt.close(fig)
 
 
-def plot_joint_profiles(path: Path, trajs: dict, scenarios: list[Scenario], per_kind: int = 10) -> None:
+def plot_joint_profiles(path: Path, trajs: dict, scenarios: list[dict], per_kind: int = 10) -> None:
     """Swing hip and knee angles over the swing, per generator and kind (thesis Fig. 3.11-3.28)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    kinds = list(dict.fromkeys(s.kind for s in scenarios))
+    kinds = list(dict.fromkeys(s["kind"] for s in scenarios))
     names = list(trajs)
     fig, axes = plt.subplots(2 * len(names), len(kinds), figsize=(3.6 * len(kinds), 2.6 * 2 * len(names)),
                              squeeze=False, sharex=True)
     for c, k in enumerate(kinds):
-        idx = [i for i, s in enumerate(scenarios) if s.kind == k][:per_kind]
+        idx = [i for i, s in enumerate(scenarios) if s["kind"] == k][:per_kind]
         for r, name in enumerate(names):
             for j, (col, label) in enumerate(((0, "hip swing"), (1, "knee swing"))):
                 ax = axes[2 * r + j, c]
@@ -330,7 +274,7 @@ def plot_joint_profiles(path: Path, trajs: dict, scenarios: list[Scenario], per_
     plt.close(fig)
 
 
-def write_report(out: str | Path, report: dict, trajs: dict, scenarios: list[Scenario], title: str,
+def write_report(out: str | Path, report: dict, trajs: dict, scenarios: list[dict], title: str,
                  context: list[str], figures: bool = True) -> dict:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

@@ -10,10 +10,13 @@ Decisions, each made here:
 
 - Path. The heel moves in the sagittal plane along two polynomials of normalised time s in [0, 1]
   (t = s * duration):
-      z(s) = h * 64 s^3 (1 - s)^3                       apex h at s = 1/2,
+      z(s) = h * 64 s^3 (1 - s)^3 (1 + k (1 - 2s)^2)      apex h at s = 1/2,
       y(s) = y0 + D (10 s^3 - 15 s^4 + 6 s^5 + c s^3 (1 - s)^3),   D = goal - start.
-  Both are of degree 6 with zero velocity and zero acceleration at lift-off and touch-down, so the
-  foot leaves and lands gently; y is the minimum-jerk (quintic) profile plus a term that moves the
+  Both have zero velocity and zero acceleration at lift-off and touch-down (triple roots at s = 0
+  and 1), so the foot leaves and lands gently. ``k`` in FLATNESS = {0, 1, 2, 3} widens the top of
+  the height profile (k = 3 is the flattest with a single apex); each plan uses the k that needs
+  the lowest apex, so a wide obstacle gets a flat-topped path instead of a tall bell.
+  y is the minimum-jerk (quintic) profile plus a term that moves the
   apex along y without touching those end conditions: y(1/2) = y0 + D (1/2 + c/64). ``c`` is kept
   in [-10, 10], where y is monotone (dy/ds = D s^2 (1-s)^2 (30 + 3c (1 - 2s)) >= 0): the foot never
   steps backwards. The path passes through the start (on the ground), the apex and the goal (on
@@ -23,8 +26,8 @@ Decisions, each made here:
 - Apex height. z is linear in h, so the lowest apex that keeps the foot ``margin`` above the
   obstacle is computed exactly on the samples: at every sample the foot segment, widened by the
   margin on both sides, must be above the highest point of the obstacle under it plus the margin;
-  h = max over samples of required height / (64 s^3 (1 - s)^3). The lowest apex means the least
-  joint excursion. The initial margin is the reward's safety distance (eq 2.35, ``min_dt``), so
+  h = max over samples of required height / z's shape. The lowest apex means the least joint
+  excursion. The initial margin is the reward's safety distance (eq 2.35, ``min_dt``), so
   both generators aim for the same clearance.
 - Check. Every plan goes through the same checks as the RL generator's trajectories (clearance of
   the heel-toe segment against the outline at every sample, joint limits and leg length of both
@@ -61,12 +64,21 @@ C_MAX = 10.0          # |c| bound for a monotone y(s)
 APEX_FRAC_RANGE = (0.5 - C_MAX / 64.0, 0.5 + C_MAX / 64.0)   # apex y as a fraction of the step
 
 
+# Shapes of the height profile: z = h * phi_k(s), phi_k = g(s) (1 + k (1 - 2s)^2) normalised to a
+# peak of 1 (g = s^3 (1-s)^3). k = 0 is the plain bell; k = 3 is the flattest top that keeps a single
+# apex at s = 1/2 (d phi / d(x^2) at x = s - 1/2 = 0 is proportional to k - 3).
+FLATNESS = (0.0, 1.0, 2.0, 3.0)
+
+
 def _basis(n_points: int):
-    """Samples s, the minimum-jerk profile, the apex-moving term g = s^3 (1-s)^3 and z's shape 64 g."""
+    """Samples s, the minimum-jerk profile, the apex-moving term g = s^3 (1-s)^3 and z's shapes
+    phi_k (len(FLATNESS), N), each with peak 1 at s = 1/2."""
     s = np.linspace(0.0, 1.0, n_points)
     mj = s**3 * (10.0 - 15.0 * s + 6.0 * s**2)
     g = s**3 * (1.0 - s) ** 3
-    return s, mj, g, 64.0 * g
+    k = np.asarray(FLATNESS)[:, None]
+    phi = 64.0 * g * (1.0 + k * (1.0 - 2.0 * s) ** 2)
+    return s, mj, g, phi
 
 
 def profile_max(lo: np.ndarray, hi: np.ndarray, outline: np.ndarray) -> np.ndarray:
@@ -85,7 +97,8 @@ def plan_paths(start_y, goal_y, outline, apex_frac, margin, foot_length: float, 
     """Heel paths (B, N, 2) and apex heights (B,) of the polynomial plan (see the module docstring).
 
     ``apex_frac`` (B,): the apex's y as a fraction of the step (clipped to the monotone range);
-    ``margin`` (B,): clearance asked of the foot, metres."""
+    ``margin`` (B,): clearance asked of the foot, metres. Of the height shapes FLATNESS, each scene
+    gets the one that needs the lowest apex."""
     s, mj, g, phi = _basis(n_points)
     frac = np.clip(apex_frac, *APEX_FRAC_RANGE)
     c = 64.0 * (frac - 0.5)
@@ -93,12 +106,14 @@ def plan_paths(start_y, goal_y, outline, apex_frac, margin, foot_length: float, 
     y = start_y[:, None] + d * (mj + c[:, None] * g)
     m = margin[:, None]
     need = profile_max(y - m, y + foot_length + m, outline)
-    req = np.where(need > 0.0, need + m, 0.0)
+    req = np.where(need > 0.0, need + m, 0.0)[:, None, :]   # (B, 1, N)
     with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.where(req > 0.0, req / phi, 0.0)         # inf where the foot must already be up at s = 0 or 1
-    h = np.maximum(ratio.max(axis=1), margin)
+        ratio = np.where(req > 0.0, req / phi, 0.0)          # inf where the foot must already be up at s = 0 or 1
+    h_k = ratio.max(axis=-1)                                 # (B, len(FLATNESS))
+    best = np.argmin(h_k, axis=1)
+    h = np.maximum(h_k[np.arange(len(best)), best], margin)
     h = np.where(np.isfinite(h), h, 0.0)                    # infeasible: flat path, the checks report it
-    return np.stack([y, h[:, None] * phi], axis=-1), h
+    return np.stack([y, h[:, None] * phi[best]], axis=-1), h
 
 
 class CFFTG:
