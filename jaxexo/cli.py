@@ -117,8 +117,10 @@ def cmd_eval(args) -> int:
 
     if args.n < 1:
         raise ValueError(f"--n: must be >= 1, got {args.n}")
+    if args.batch < 1:
+        raise ValueError(f"--batch: must be >= 1, got {args.batch}")
     report = run_eval(args.policy, args.out, against=args.against, scenarios=args.scenarios, n=args.n,
-                      figures=not args.no_figures)
+                      figures=not args.no_figures, batch_size=args.batch)
     for name, r in report.items():
         print(f"{name}: accuracy {r['accuracy']:.3f}, success {r['success']:.3f}, median {r['time_ms_median']:.3f} ms "
               f"per trajectory, {r['batch_1000_ms']:.1f} ms per batch of 1000")
@@ -197,6 +199,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="test: the five thesis obstacles x three pivots; train: the policy's training "
                         "distribution; all: both")
     e.add_argument("--n", type=int, default=1000, help="scenarios per set")
+    e.add_argument("--batch", type=int, default=1000,
+                   help="scenarios per timed generate_batch call (reported scaled to a batch of 1000)")
     e.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     e.add_argument("--out", required=True, help="report folder")
     e.set_defaults(func=cmd_eval)

@@ -99,8 +99,9 @@ def tables(results: dict) -> str:
 
 
 def run_reproduce(out: str | Path, models=THESIS_MODELS, n: int = 1000, seed: int = 0, include_default: bool = False,
-                  root: Path | None = None, progress=print) -> dict:
-    """Train (or reuse) each model, evaluate it, write OUT/reproduce.{md,json}; returns the results."""
+                  root: Path | None = None, batch_size: int = 1000, progress=print) -> dict:
+    """Train (or reuse) each model, evaluate it, write OUT/reproduce.{md,json}; returns the results.
+    ``batch_size``: scenarios of the timed batch for the models compared with CFFTG."""
     from jaxexo.baselines import CFFTG
     from jaxexo.compare import evaluate_generators, make_scenarios
     from jaxexo.inference import TrajectoryGenerator
@@ -125,7 +126,7 @@ def run_reproduce(out: str | Path, models=THESIS_MODELS, n: int = 1000, seed: in
         if name in ("final", "default"):
             gens["cfftg"] = CFFTG(gen.config)
         scenarios = make_scenarios(gen.config, "test", n)
-        report, _ = evaluate_generators(gens, scenarios, batch_size=1000 if len(gens) > 1 else 0)
+        report, _ = evaluate_generators(gens, scenarios, batch_size=batch_size if len(gens) > 1 else 0)
         results[name] = {**report, "train_seconds": ev["train_seconds"], "episodes": ev["episodes"],
                          "eval_json": {k: ev[k] for k in ("accuracy", "success")}}
         r = report["rl"]

@@ -42,7 +42,7 @@ def summary_rows(res: dict) -> list[tuple[str, str, str]]:
         rows.append(("`import jaxexo.inference`, cold", f"{g['import_s']['median']:.3f} s", "<= 0.3 s"))
     if "compare" in res:
         for name, r in res["compare"].items():
-            rows.append((f"{name} on 1000 test scenarios: success / accuracy / median ms / batch 1000 ms",
+            rows.append((f"{name} on {r['n']} test scenarios: success / accuracy / median ms / batch 1000 ms",
                          f"{r['success']:.3f} / {r['accuracy']:.3f} / {r['time_ms_median']:.3f} / {r['batch_1000_ms']:.1f}",
                          "RL success >= CFFTG's, median <= CFFTG's" if name == "rl" else "thesis CFFTG ~2 ms"))
     if "baseline" in res:
@@ -58,7 +58,10 @@ def summary_rows(res: dict) -> list[tuple[str, str, str]]:
     return rows
 
 
-def run_all(out_dir=None, policy=None, baseline_seconds: float = 600.0, skip: str = "", progress=print) -> dict:
+def run_all(out_dir=None, policy=None, baseline_seconds: float = 600.0, skip: str = "", n: int = 1000,
+            batch_size: int = 1000, progress=print) -> dict:
+    """Run the parts not in ``skip`` (comma-separated), write their results and the summary to
+    ``out_dir``; ``n`` scenarios for the generator parts, ``batch_size`` for the compare part's batch."""
     import json
 
     from jaxexo.benchmarks.machine import write_result
@@ -91,14 +94,14 @@ def run_all(out_dir=None, policy=None, baseline_seconds: float = 600.0, skip: st
         if "generate" not in skipped:
             from jaxexo.benchmarks.generate_bench import run_generate_benchmark
 
-            res["generate"] = run_generate_benchmark(policy, out_dir, 1000, progress)
+            res["generate"] = run_generate_benchmark(policy, out_dir, n, progress)
         if "compare" not in skipped:
             from jaxexo.compare import markdown, run_eval
 
-            report = run_eval(policy, Path(tmp) / "eval", "cfftg", "test", 1000, figures=False)
+            report = run_eval(policy, Path(tmp) / "eval", "cfftg", "test", n, figures=False, batch_size=batch_size)
             res["compare"] = report
             write_result("compare", json.loads(json.dumps(report)),
-                         markdown(report, "RL generator vs CFFTG, 1000 test scenarios", []), out_dir)
+                         markdown(report, f"RL generator vs CFFTG, {n} test scenarios", []), out_dir)
     if "baseline" not in skipped:
         try:
             import torch  # noqa: F401
