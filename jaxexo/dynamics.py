@@ -310,7 +310,7 @@ def make_scene(obstacle: geometry.Obstacle, pivot: str | float = "obstacle", sta
     if n_vertices > max_vertices:
         raise ValueError(f"obstacle: its outline has {n_vertices} vertices, more than this model's "
                          f"{max_vertices} (env.max_vertices)")
-    shape = obstacle.height * geometry.shape_descriptor(obstacle.unit_vertices, shape_points)
+    shape = obstacle.height * geometry.cached_shape_descriptor(obstacle.unit_vertices, shape_points)
     return Scene(obstacle=obstacle, outline=obstacle.outline_array(max_vertices), shape=shape,
                  center_y=obstacle.center_y, width=obstacle.width, height=obstacle.height, pivot_kind=pk,
                  pivot_y=float(py), start_y=start_y, goal_y=start_y + step_length)

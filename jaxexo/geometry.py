@@ -199,6 +199,21 @@ def pad_outline(pts: np.ndarray, max_vertices: int) -> np.ndarray:
     return out
 
 
+_DESCRIPTOR_CACHE: dict = {}
+
+
+def cached_shape_descriptor(unit_vertices: np.ndarray, n_points: int = DEFAULT_SHAPE_POINTS) -> np.ndarray:
+    """shape_descriptor, remembered per unit outline (the built-in shapes recur in every scene)."""
+    key = (unit_vertices.tobytes(), unit_vertices.shape, n_points)
+    out = _DESCRIPTOR_CACHE.get(key)
+    if out is None:
+        if len(_DESCRIPTOR_CACHE) > 256:
+            _DESCRIPTOR_CACHE.clear()
+        out = _DESCRIPTOR_CACHE[key] = shape_descriptor(unit_vertices, n_points)
+        out.setflags(write=False)
+    return out
+
+
 def shape_descriptor(unit_vertices: np.ndarray, n_points: int = DEFAULT_SHAPE_POINTS) -> np.ndarray:
     """Heights (unit frame, 0..1) at n_points equally spaced fractions across the width.
 

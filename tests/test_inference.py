@@ -222,30 +222,54 @@ def test_smoothing_that_would_touch_the_obstacle_falls_back(policies):
     assert np.all(ob.clearance(raw, foot) > 0)
     smooth = sm.bspline_smooth(raw, 100, 0.05)
     assert ob.clearance(smooth, foot).min() <= geometry.TOUCH_EPS      # the premise: plain smoothing collides
-    path, used, notes = gen._smooth(scene, raw, 100, 0.05)
-    assert ob.clearance(path, foot).min() > geometry.TOUCH_EPS
-    assert (np.isnan(used) or used < 0.05) and notes
+    t = gen._finish([scene], [raw], 100, 0.05, 1.0)[0]
+    assert t.checks.collision_free and t.checks.min_clearance > geometry.TOUCH_EPS
+    assert (np.isnan(t.smoothing) or t.smoothing < 0.05) and t.notes
+    # In a batch, only the rows that need it fall back; the others keep the full smoothing.
+    arc = np.linspace(0.0, np.pi, 25)
+    plain = np.column_stack([0.35 * (1 - np.cos(arc)), 0.45 * np.sin(arc)])    # high above it
+    both = gen._finish([scene, scene], [plain, raw], 100, 0.05, 1.0)
+    assert both[0].smoothing == 0.05 and not both[0].notes and both[0].checks.collision_free
+    np.testing.assert_allclose(both[1].heel, t.heel)
+    assert both[1].smoothing == t.smoothing and both[1].checks == t.checks
+    # A raw path that itself touches the obstacle keeps its smoothing, and the checks say so.
+    bad = raw.copy()
+    bad[len(up) + 4, 1] = 0.15
+    t = gen._finish([scene], [bad], 100, 0.05, 1.0)[0]
+    assert t.smoothing == 0.05 and not t.checks.collision_free and not t.notes
     # With no smoothing asked for, the raw polyline is returned as it is.
-    lin, used0, _ = gen._smooth(scene, raw, 100, 0.0)
-    assert np.isnan(used0)
-    np.testing.assert_allclose(lin[[0, -1]], raw[[0, -1]])
+    t = gen._finish([scene], [raw], 100, 0.0, 1.0)[0]
+    assert np.isnan(t.smoothing)
+    np.testing.assert_allclose(t.heel[[0, -1]], raw[[0, -1]])
 
 
-def test_bspline_smoothing_basics():
+@pytest.mark.parametrize("s", [0.0, 1e-4, sm.DEFAULT_SMOOTHING, 0.05])
+def test_smoothing_spends_exactly_the_residual_budget(s):
+    """Thesis 2.7's s bounds the (weighted) sum of squared residuals at the agent's points; the fit is
+    the smoothest that uses all of it. Sampled at the points' own parameters, the residual is s."""
+    t = np.linspace(0, np.pi, 33)
+    raw = np.column_stack([0.35 * (1 - np.cos(t)), 0.25 * np.sin(t)])
+    raw[1:-1] += np.random.default_rng(0).normal(scale=0.01, size=(31, 2))
+    fit = sm.bspline_smooth(raw, len(raw), s)
+    w = np.ones(len(raw))
+    w[[0, -1]] = sm.END_WEIGHT
+    assert np.sum((w[:, None] * (fit - raw)) ** 2) == pytest.approx(s, rel=1e-4, abs=1e-12)
+    np.testing.assert_allclose(fit[[0, -1]], raw[[0, -1]])
+
+
+def test_smoothing_batches_handle_ragged_repeated_and_short_paths():
     t = np.linspace(0, np.pi, 30)
     raw = np.column_stack([0.35 * (1 - np.cos(t)), 0.25 * np.sin(t)])
-    out = sm.bspline_smooth(raw, 50, sm.DEFAULT_SMOOTHING)
-    assert out.shape == (50, 2)
-    np.testing.assert_allclose(out[[0, -1]], raw[[0, -1]])
-    # s bounds the sum of squared residuals: a fine fit of a smooth curve stays within a few mm.
-    fine = sm.bspline_smooth(raw, 2000, 1e-5)
-    d = np.min(np.linalg.norm(raw[:, None] - fine[None], axis=-1), axis=1)
-    assert d.max() < 5e-3
-    # Repeated points and very short paths are handled.
-    rep = np.vstack([raw[:3], raw[2:3], raw[3:]])
-    assert np.isfinite(sm.bspline_smooth(rep, 20)).all()
-    assert sm.bspline_smooth(raw[:2], 10).shape == (10, 2)
-    assert sm.bspline_smooth(raw[:3], 10).shape == (10, 2)
+    rep = np.vstack([raw[:3], raw[2:3], raw[2:3], raw[3:]])           # a move clipped to nothing, twice
+    paths = [raw, raw[:17], rep, raw[:3], raw[:2], raw[:1]]
+    out = sm.smooth_paths(paths, 50, sm.DEFAULT_SMOOTHING)
+    assert out.shape == (6, 50, 2) and np.isfinite(out).all()
+    for p, o in zip(paths, out):
+        np.testing.assert_allclose(o, sm.bspline_smooth(p, 50), atol=1e-12)
+        np.testing.assert_allclose(o[[0, -1]], p[[0, -1]])
+    np.testing.assert_allclose(out[2], out[0], atol=1e-12)            # repeats change nothing
+    np.testing.assert_allclose(out[4], sm.linear_resample(raw[:2], 50))
+    assert (out[..., 1] >= 0).all()
 
 
 def test_exports_round_trip(policies, tmp_path):

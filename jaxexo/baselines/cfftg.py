@@ -56,7 +56,8 @@ import numpy as np
 from jaxexo import dynamics, geometry
 from jaxexo.config import Config, ConfigError, config_from_dict
 from jaxexo.inference.generator import check_options, scenes_for
-from jaxexo.inference.trajectory import DEFAULT_DURATION, Trajectory, TrajectoryBatch, TrajectoryError, assemble, measure
+from jaxexo.inference.trajectory import (DEFAULT_DURATION, Trajectory, TrajectoryBatch, TrajectoryError, assemble,
+                                         clearances, measure)
 from jaxexo.policy import PolicyFileError, load_policy
 
 DEFAULT_POINTS = 100
@@ -180,7 +181,7 @@ class CFFTG:
                               foot, n_points)
             paths[todo], apex_h[todo] = p, h
             plans[todo] += 1
-            m = measure(self.sp, p, arr.outline[todo], arr.pivot_y[todo], arr.goal_y[todo])
+            m = measure(self.sp, p, clearances(foot, p, [scenes[i] for i in todo]), arr.pivot_y[todo], arr.goal_y[todo])
             checks = m if checks is None else _scatter(checks, m, todo)
             ok = m["collision_free"] & m["joint_limits_ok"] & m["leg_length_ok"] & m["reached_goal"]
             bad_kin = ~(m["joint_limits_ok"] & m["leg_length_ok"])

@@ -167,15 +167,12 @@ class TrajectoryGenerator:
         return paths, [acts[: length[i] - 1, i] for i in range(b)]
 
     # Trajectories ---------------------------------------------------------------------------------
-    def _smooth(self, scene: Scene, raw: np.ndarray, n_points: int, smoothing: float):
-        """Smoothed path (N, 2), the smoothing used (nan: raw polyline) and notes. When smoothing makes
-        a collision-free raw path touch the obstacle it falls back (FALLBACK_FACTORS, then the raw
-        polyline); when the raw path itself touches it, smoothing is kept and the checks report it."""
-        if smoothing <= 0:
-            return sm.linear_resample(raw, n_points), float("nan"), ()
-        path = sm.bspline_smooth(raw, n_points, smoothing)
-        if not self._touches(scene, path) or self._touches(scene, raw):
-            return path, smoothing, ()
+    def _fallback(self, scene: Scene, raw: np.ndarray, n_points: int, smoothing: float):
+        """A smoothed path touched the obstacle: when the raw path does not, retry with less smoothing
+        (FALLBACK_FACTORS), then the raw polyline. Returns (path, smoothing used, notes), or None when
+        the raw path itself touches the obstacle (smoothing is then kept and the checks report it)."""
+        if self._touches(scene, raw):
+            return None
         for f in FALLBACK_FACTORS:
             cand = sm.bspline_smooth(raw, n_points, smoothing * f)
             if not self._touches(scene, cand):
@@ -183,6 +180,29 @@ class TrajectoryGenerator:
                                              f"{smoothing * f:g} m^2 used",)
         return sm.linear_resample(raw, n_points), float("nan"), (
             "every smoothing made the foot touch the obstacle; the raw polyline is used",)
+
+    def _finish(self, scenes, raws, n_points: int, smoothing: float, duration: float) -> TrajectoryBatch:
+        """Smooth every raw path, check them all at once, and redo the few that smoothing made collide."""
+        if smoothing > 0:
+            paths = list(sm.smooth_paths(raws, n_points, smoothing))
+            used = [smoothing] * len(raws)
+        else:
+            paths = [sm.linear_resample(r, n_points) for r in raws]
+            used = [float("nan")] * len(raws)
+        notes = [()] * len(raws)
+        batch = assemble("rl", self.sp, scenes, raws, np.stack(paths), used, duration, notes)
+        redo = []
+        for i in np.flatnonzero(~batch.collision_free) if smoothing > 0 else ():
+            fb = self._fallback(scenes[i], raws[i], n_points, smoothing)
+            if fb is not None:
+                redo.append((i, fb))
+        if redo:
+            idx = [i for i, _ in redo]
+            sub = assemble("rl", self.sp, [scenes[i] for i in idx], [raws[i] for i in idx],
+                           np.stack([fb[0] for _, fb in redo]), [fb[1] for _, fb in redo], duration,
+                           [fb[2] for _, fb in redo])
+            batch = batch.with_rows(idx, sub)
+        return batch
 
     def _touches(self, scene: Scene, path: np.ndarray) -> bool:
         # Cheap exclusion first: a path that never comes below the obstacle's top within its extent
@@ -204,8 +224,7 @@ class TrajectoryGenerator:
         n_points, smoothing, duration = check_options(n_points, smoothing, duration)
         scene = self.scene(obstacle, pivot, pivot_y, start_y, step_length)
         raw, _ = self.rollout(scene)
-        path, used, notes = self._smooth(scene, raw, n_points, smoothing)
-        traj = assemble("rl", self.sp, [scene], [raw], path[None], [used], duration, [notes])[0]
+        traj = self._finish([scene], [raw], n_points, smoothing, duration)[0]
         if strict and not traj.ok:
             raise TrajectoryError(traj)
         return traj
@@ -217,9 +236,7 @@ class TrajectoryGenerator:
         n_points, smoothing, duration = check_options(n_points, smoothing, duration)
         scenes = self._scenes(obstacles, pivot, pivot_y, start_y, step_length)
         raws, _ = self.rollout_batch(scenes)
-        out = [self._smooth(s, r, n_points, smoothing) for s, r in zip(scenes, raws)]
-        batch = assemble("rl", self.sp, scenes, raws, np.stack([o[0] for o in out]), [o[1] for o in out],
-                         duration, [o[2] for o in out])
+        batch = self._finish(scenes, raws, n_points, smoothing, duration)
         if strict and not batch.ok.all():
             raise TrajectoryError(batch[int(np.argmin(batch.ok))])
         return batch

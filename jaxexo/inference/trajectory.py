@@ -11,6 +11,7 @@ radians, seconds.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import json
 import math
@@ -170,12 +171,42 @@ class TrajectoryBatch:
     def __iter__(self):
         return (self[i] for i in range(len(self)))
 
+    def with_rows(self, idx, other: "TrajectoryBatch") -> "TrajectoryBatch":
+        """This batch with rows ``idx`` replaced by ``other``'s rows (in order)."""
+        idx = [int(i) for i in idx]
+        changes = {}
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if f.name in ("method", "time"):
+                continue
+            if isinstance(v, tuple):
+                v = list(v)
+                for j, i in enumerate(idx):
+                    v[i] = getattr(other, f.name)[j]
+                changes[f.name] = tuple(v)
+            else:
+                v = v.copy()
+                v[idx] = getattr(other, f.name)
+                changes[f.name] = v
+        return dataclasses.replace(self, **changes)
 
-def measure(sp, heel: np.ndarray, outline: np.ndarray, pivot_y: np.ndarray, goal_y: np.ndarray) -> dict:
-    """Kinematics and checks of heel paths (B, N, 2) against outlines (B, K, 2), vectorised.
+
+def clearances(foot_length: float, heel: np.ndarray, scenes) -> np.ndarray:
+    """Signed foot clearance (B, N) of heel paths (B, N, 2) from each scene's obstacle; scenes are
+    grouped by outline size so that a 16-vertex half-ellipse does not pad every rectangle."""
+    out = np.empty(heel.shape[:2])
+    sizes = np.array([len(sc.outline) for sc in scenes])
+    for k in np.unique(sizes):
+        idx = np.flatnonzero(sizes == k)
+        outline = np.stack([scenes[i].outline for i in idx])
+        out[idx] = geometry.foot_clearance(np, heel[idx], foot_length, outline[:, None])
+    return out
+
+
+def measure(sp, heel: np.ndarray, clearance: np.ndarray, pivot_y: np.ndarray, goal_y: np.ndarray) -> dict:
+    """Kinematics and checks of heel paths (B, N, 2) with their clearances (B, N), vectorised.
 
     ``sp`` holds the constants (jaxexo.dynamics.scalar_params or numpy_params)."""
-    clearance = geometry.foot_clearance(np, heel, sp.foot_length, outline[:, None])
     # kinematics.leg_state's equations, with both legs stacked on a leading axis (fewer NumPy calls).
     hip = kinematics.hip_position(np, pivot_y[:, None], heel, sp.thigh, sp.shin)
     pivot = np.zeros_like(heel)
@@ -232,8 +263,9 @@ def assemble(method: str, sp, scenes, raws, paths: np.ndarray, smoothing, durati
     paths = np.asarray(paths, dtype=np.float64)
     b, n = paths.shape[:2]
     if measured is None:
-        arr = dynamics.stack_scenes(scenes, np.float64)
-        measured = measure(sp, paths, arr.outline, arr.pivot_y, arr.goal_y)
+        pivot_y = np.array([sc.pivot_y for sc in scenes])
+        goal_y = np.array([sc.goal_y for sc in scenes])
+        measured = measure(sp, paths, clearances(sp.foot_length, paths, scenes), pivot_y, goal_y)
     m = measured
     time = np.linspace(0.0, duration, n)
     reasons = tuple(_reasons(m, i, paths[i], scenes[i].goal_y, time) for i in range(b))
