@@ -91,7 +91,9 @@ def profile_max(lo: np.ndarray, hi: np.ndarray, outline: np.ndarray) -> np.ndarr
     vy, vz = ol[..., 0], ol[..., 1]
     inside = (vy >= lo[..., None]) & (vy <= hi[..., None])
     top = np.max(np.where(inside, vz, 0.0), axis=-1)
-    return np.maximum(top, np.maximum(geometry.profile_height(np, lo, ol), geometry.profile_height(np, hi, ol)))
+    n = lo.shape[-1]
+    ends = geometry.profile_height(np, np.concatenate([lo, hi], axis=-1), ol)    # both ends in one pass
+    return np.maximum(top, np.maximum(ends[..., :n], ends[..., n:]))
 
 
 def plan_paths(start_y, goal_y, outline, apex_frac, margin, foot_length: float, n_points: int = DEFAULT_POINTS):
@@ -176,10 +178,15 @@ class CFFTG:
         apex_h = np.zeros(b)
         todo = np.arange(b)
         checks = None
+        sizes = np.array([len(sc.outline) for sc in scenes])
         for _ in range(self.max_plans):
-            p, h = plan_paths(arr.start_y[todo], arr.goal_y[todo], arr.outline[todo], frac[todo], margin[todo],
-                              foot, n_points)
-            paths[todo], apex_h[todo] = p, h
+            # Scenes grouped by outline size, so that a 16-vertex half-ellipse does not pad rectangles.
+            for k in np.unique(sizes[todo]):
+                g = todo[sizes[todo] == k]
+                outline = np.stack([scenes[i].outline for i in g])
+                paths[g], apex_h[g] = plan_paths(arr.start_y[g], arr.goal_y[g], outline, frac[g], margin[g], foot,
+                                                 n_points)
+            p = paths[todo]
             plans[todo] += 1
             m = measure(self.sp, p, clearances(foot, p, [scenes[i] for i in todo]), arr.pivot_y[todo], arr.goal_y[todo])
             checks = m if checks is None else _scatter(checks, m, todo)
