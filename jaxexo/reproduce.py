@@ -52,6 +52,11 @@ def _triple(t) -> str:
     return f"{t[0]:.2f} / {t[1]:.1f} / {t[2]:.1f}"
 
 
+def _cell(ref, fmt=_triple) -> str:
+    """A thesis value, or '-' where the thesis gives none."""
+    return "-" if ref is None else fmt(ref)
+
+
 def tables(results: dict) -> str:
     """The reproduction's Markdown: every table beside the thesis's values."""
     lines = ["# Thesis experiments reproduced with jaxexo", "",
@@ -62,7 +67,7 @@ def tables(results: dict) -> str:
              "| model | thesis | jaxexo | train s (jaxexo) | episodes |", "|---|---|---|---:|---:|"]
     for name, r in results.items():
         ref = THESIS_T32.get(name)
-        lines.append(f"| {name} | {_triple(ref) if ref else '-'} | {_triple(_fig(r['rl']))} | "
+        lines.append(f"| {name} | {_cell(ref)} | {_triple(_fig(r['rl']))} | "
                      f"{r['train_seconds']:.1f} | {r['episodes']} |")
     lines += ["", "## Tables 3.3-3.8: per pivot condition", "",
               "| model (trained on) | pivot | thesis | jaxexo | jaxexo accuracy % | jaxexo success % |",
@@ -74,14 +79,13 @@ def tables(results: dict) -> str:
             ref = THESIS_CROSS.get(name, {}).get(p)
             rp = r["rl"]["by_pivot"][p]
             own = " (trained)" if TRAINED_PIVOT.get(name) == p else ""
-            lines.append(f"| {name} ({TRAINED_PIVOT.get(name, 'all')}) | {p}{own} | {_triple(ref) if ref else '-'} | "
+            lines.append(f"| {name} ({TRAINED_PIVOT.get(name, 'all')}) | {p}{own} | {_cell(ref)} | "
                          f"{_triple(_fig(rp))} | {100 * rp['accuracy']:.1f} | {100 * rp['success']:.1f} |")
     lines += ["", "## Table 3.10: accuracy (eq 3.1) on the test scenarios", "",
               "| model | thesis accuracy % | jaxexo accuracy % | jaxexo strict success % | reached goal % |",
               "|---|---:|---:|---:|---:|"]
     for name, r in results.items():
-        ref = THESIS_ACCURACY.get(name)
-        lines.append(f"| {name} | {'-' if ref is None else f'{ref:.1f}'} | {100 * r['rl']['accuracy']:.1f} | "
+        lines.append(f"| {name} | {_cell(THESIS_ACCURACY.get(name), lambda x: f'{x:.1f}')} | {100 * r['rl']['accuracy']:.1f} | "
                      f"{100 * r['rl']['success']:.1f} | {100 * r['rl']['reached_goal']:.1f} |")
     final = results.get("final")
     if final and "cfftg" in final:

@@ -48,6 +48,7 @@ Decisions, each made here:
 
 from __future__ import annotations
 
+import functools
 import tomllib
 from pathlib import Path
 
@@ -71,14 +72,17 @@ APEX_FRAC_RANGE = (0.5 - C_MAX / 64.0, 0.5 + C_MAX / 64.0)   # apex y as a fract
 FLATNESS = (0.0, 1.0, 2.0, 3.0)
 
 
+@functools.lru_cache(maxsize=16)
 def _basis(n_points: int):
     """Samples s, the minimum-jerk profile, the apex-moving term g = s^3 (1-s)^3 and z's shapes
-    phi_k (len(FLATNESS), N), each with peak 1 at s = 1/2."""
+    phi_k (len(FLATNESS), N), each with peak 1 at s = 1/2 (computed once per n_points, read-only)."""
     s = np.linspace(0.0, 1.0, n_points)
     mj = s**3 * (10.0 - 15.0 * s + 6.0 * s**2)
     g = s**3 * (1.0 - s) ** 3
     k = np.asarray(FLATNESS)[:, None]
     phi = 64.0 * g * (1.0 + k * (1.0 - 2.0 * s) ** 2)
+    for a in (s, mj, g, phi):
+        a.flags.writeable = False
     return s, mj, g, phi
 
 
