@@ -22,6 +22,7 @@ success rate. Needs the ``bench`` extra (PyTorch).
 from __future__ import annotations
 
 import json
+import os
 import tempfile
 import time
 from pathlib import Path
@@ -75,7 +76,7 @@ def time_to_target(rows: list[dict], target: float, key: str = "validation_succe
 
 
 def run_baseline_benchmark(out_dir, default_config: str = "configs/default.toml", throughput_seconds: float = 60.0,
-                           baseline_seconds: float = 600.0, targets=(0.25, 0.9), validate_every: int = 20_000,
+                           baseline_seconds: float = 600.0, targets=(0.5, 0.9), validate_every: int = 20_000,
                            progress=print) -> dict:
     import jax
 
@@ -88,7 +89,8 @@ def run_baseline_benchmark(out_dir, default_config: str = "configs/default.toml"
     from jaxexo.train.network import QNetwork
 
     base = load_config(default_config)
-    result: dict = {"torch": torch.__version__, "targets": list(targets)}
+    # The load average before and after: other processes on the machine make every figure slower.
+    result: dict = {"torch": torch.__version__, "targets": list(targets), "load_avg_before": os.getloadavg()}
 
     # 1. Throughput, thesis network -------------------------------------------------------------
     tcfg = thesis_network_config(base, "forward")
@@ -151,6 +153,7 @@ def run_baseline_benchmark(out_dir, default_config: str = "configs/default.toml"
         "baseline_best_validation": max(r["validation_success"] for r in bl_curve),
         "jaxexo_train_seconds": res["train_seconds"]}
 
+    result["load_avg_after"] = os.getloadavg()
     md = markdown(result)
     write_result("baseline", result, md, out_dir)
     progress(md)
@@ -180,9 +183,16 @@ def markdown(r: dict) -> str:
             bs = f"~{e['baseline_s']:,.0f} (extrapolated: not reached in budget)"
         else:
             bs = f"{e['baseline_s']:.1f} ({e['baseline_env_steps']:,})"
-        sp = f"{e['speedup']:,.0f}x" if e.get("speedup") else "-"
+        x = e.get("speedup")
+        sp = "-" if not x else (f"{x:,.0f}x" if x >= 10 else f"{x:.2f}x")
         lines.append(f"| {e['target']:.2f} | {js} | {bs} | {sp} |")
-    lines += ["", "Extrapolated times assume the baseline learns as much per env step as jaxexo "
+    lines += ["", f"Load average (1, 5, 15 min) before / after: {_load(r['load_avg_before'])} / "
+              f"{_load(r['load_avg_after'])} on {os.cpu_count()} CPUs.", "",
+              "Extrapolated times assume the baseline learns as much per env step as jaxexo "
               "(it makes 32 sample-gradients per env step where jaxexo makes one, so it may need fewer steps; "
               "its measured curve is in the JSON)."]
     return "\n".join(lines)
+
+
+def _load(avg) -> str:
+    return ", ".join(f"{x:.1f}" for x in avg)
