@@ -84,6 +84,8 @@ def policies(tmp_path_factory, trained_run):
         "trained": trained_run / "policy.npz",
         "ln_signs": export_random(d / "ln.npz", small_config(hidden=[32, 24]), seed=3, scale_signs=True),
         "thesis": export_random(d / "thesis.npz", thesis, seed=4),
+        "terminate": export_random(d / "term.npz", dataclasses.replace(
+            small_config(hidden=[16]), env=dataclasses.replace(small_config().env, collision="terminate")), seed=5),
     }
 
 
@@ -132,7 +134,7 @@ def jax_paths(gen, scenes_args):
     return [np.vstack([start[i], np.asarray(path)[i, : steps[i]]]) for i in range(len(layouts))], out
 
 
-@pytest.mark.parametrize("which", ["trained", "thesis"])
+@pytest.mark.parametrize("which", ["trained", "thesis", "terminate"])
 def test_numpy_rollouts_take_the_jax_environments_actions(policies, which):
     gen = TrajectoryGenerator.load(policies[which])
     args = [(ob, pv, sy, 0.70) for ob in SCENE_OBSTACLES.values() for pv in PIVOT_CONDITIONS for sy in (0.0, 0.04)]
@@ -150,6 +152,10 @@ def test_numpy_rollouts_take_the_jax_environments_actions(policies, which):
         assert reached.sum() >= len(args) // 2
         lengths = np.array([len(a) - 1 for a in single])
         np.testing.assert_array_equal(lengths, np.asarray(out["steps"]))
+    if which == "terminate":
+        # Collisions end episodes early here, at the same step in both.
+        steps = np.asarray(out["steps"])
+        assert np.any(np.asarray(out["collided"]) & (steps < gen.max_steps))
 
 
 def test_batch_equals_single_generation(policies):
@@ -257,6 +263,23 @@ def test_smoothing_spends_exactly_the_residual_budget(s):
     np.testing.assert_allclose(fit[[0, -1]], raw[[0, -1]])
 
 
+@pytest.mark.parametrize("m", [4, 5, 11, 60])
+def test_bspline_basis_matches_scipy(m):
+    from scipy.interpolate import BSpline
+    from scipy.linalg import eigh
+
+    t = np.concatenate([[0.0] * 3, np.linspace(0.0, 1.0, m - 2), [1.0] * 3])
+    u = np.concatenate([np.linspace(0.0, 1.0, 97), [0.0, 1.0, 0.5]])
+    np.testing.assert_allclose(sm.bspline_design(u, t, 3), BSpline.design_matrix(u, t, 3).toarray(), atol=1e-14)
+    b = sm.bspline_design(np.linspace(0, 1, m), t, 3)
+    a = b.T @ b + np.eye(m)
+    p = np.diff(np.eye(m), n=2, axis=0)
+    p = p.T @ p
+    d, v = sm._generalized_eigh(p, a)
+    np.testing.assert_allclose(d, eigh(p, a, eigvals_only=True), atol=1e-10)
+    np.testing.assert_allclose(v.T @ a @ v, np.eye(m), atol=1e-9)
+
+
 def test_smoothing_batches_handle_ragged_repeated_and_short_paths():
     t = np.linspace(0, np.pi, 30)
     raw = np.column_stack([0.35 * (1 - np.cos(t)), 0.25 * np.sin(t)])
@@ -341,7 +364,7 @@ BLOCK_JAX = """
 import sys, importlib.abc
 class Block(importlib.abc.MetaPathFinder):
     def find_spec(self, name, path, target=None):
-        if name.split('.')[0] in ('jax', 'jaxlib', 'flax', 'optax', 'chex', 'matplotlib'):
+        if name.split('.')[0] in ('jax', 'jaxlib', 'flax', 'optax', 'chex', 'matplotlib', 'torch', 'ray'):
             raise ImportError('blocked for this test: ' + name)
 sys.meta_path.insert(0, Block())
 """

@@ -1,7 +1,7 @@
 """NumPy-only swing trajectory generation: an exported policy (policy.npz) in, a checked trajectory out.
 
-Needs numpy and scipy only (``pip install jaxexo`` without extras), so it runs on an exoskeleton's
-own computer::
+Needs NumPy only (``pip install jaxexo`` without extras; SciPy is not even imported, which keeps the
+import fast), so it runs on an exoskeleton's own computer::
 
     from jaxexo.inference import Obstacle, TrajectoryGenerator
     gen = TrajectoryGenerator.load("run/policy.npz")

@@ -29,8 +29,6 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
-from scipy.interpolate import BSpline
-from scipy.linalg import eigh
 
 DEFAULT_SMOOTHING = 0.005      # m^2: the thesis's s = 0.5 in decimetres
 DEFAULT_POINTS = 100
@@ -38,7 +36,7 @@ DEGREE = 3
 END_WEIGHT = 1000.0
 LOG_LAMBDA = (-12.0, 12.0)     # search range of log10(lambda)
 GRID_POINTS = 13
-NEWTON_STEPS = 6
+NEWTON_STEPS = 4
 
 
 def distinct(raw: np.ndarray) -> np.ndarray:
@@ -61,6 +59,35 @@ def linear_resample(raw: np.ndarray, n_points: int = DEFAULT_POINTS) -> np.ndarr
     return np.column_stack([np.interp(u, s, pts[:, 0]), np.interp(u, s, pts[:, 1])])
 
 
+def bspline_design(u: np.ndarray, knots: np.ndarray, k: int) -> np.ndarray:
+    """B-spline basis functions of degree k on ``knots`` at parameters u: (len(u), len(knots) - k - 1)
+    (Cox-de Boor recursion; the last knot interval is closed so that u = 1 belongs to it). NumPy
+    only: importing scipy.interpolate would cost the generator most of its import-time budget."""
+    u = np.asarray(u, dtype=np.float64)
+    t = np.asarray(knots, dtype=np.float64)
+    n_int = len(t) - 1
+    last = np.max(np.flatnonzero(t[1:] > t[:-1]))          # the last non-empty interval
+    b = ((u[:, None] >= t[None, :-1]) & (u[:, None] < t[None, 1:])).astype(np.float64)
+    b[u >= t[last + 1], :] = 0.0
+    b[u >= t[last + 1], last] = 1.0
+    for d in range(1, k + 1):
+        left_den = t[d:n_int] - t[: n_int - d]
+        right_den = t[d + 1: n_int + 1] - t[1: n_int - d + 1]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            left = np.where(left_den > 0, (u[:, None] - t[None, : n_int - d]) / left_den, 0.0)
+            right = np.where(right_den > 0, (t[None, d + 1: n_int + 1] - u[:, None]) / right_den, 0.0)
+        b = left * b[:, :-1] + right * b[:, 1:]
+    return b
+
+
+def _generalized_eigh(p: np.ndarray, a: np.ndarray):
+    """d, v with p v = d a v, v' a v = I (a symmetric positive definite), via a's Cholesky factor."""
+    lower = np.linalg.cholesky(a)
+    inv = np.linalg.inv(lower)
+    d, w = np.linalg.eigh(inv @ p @ inv.T)
+    return d, inv.T @ w
+
+
 @lru_cache(maxsize=512)
 def _basis(m: int, n_points: int):
     """For M points: Z (M, M) mapping the points to eigen-coordinates z, the eigenvalues d (M,), and
@@ -69,16 +96,16 @@ def _basis(m: int, n_points: int):
     interior = np.linspace(0.0, 1.0, m - k + 1)
     t = np.concatenate([[0.0] * k, interior, [1.0] * k])
     u = np.linspace(0.0, 1.0, m)
-    b = BSpline.design_matrix(u, t, k).toarray()                     # (M, M)
+    b = bspline_design(u, t, k)                                      # (M, M)
     w = np.ones(m)
     w[0] = w[-1] = END_WEIGHT ** 2
     a = b.T @ (w[:, None] * b)
     diff = np.diff(np.eye(m), n=2, axis=0)
     p = diff.T @ diff
-    d, v = eigh(p, a)                                                # v' a v = I, v' p v = diag(d)
+    d, v = _generalized_eigh(p, a)                                   # v' a v = I, v' p v = diag(d)
     d = np.maximum(d, 0.0)
     z = v.T @ (b.T * w[None, :])
-    e = BSpline.design_matrix(np.linspace(0.0, 1.0, n_points), t, k).toarray() @ v
+    e = bspline_design(np.linspace(0.0, 1.0, n_points), t, k) @ v
     for x in (z, d, e):
         x.setflags(write=False)
     return z, d, e
@@ -90,23 +117,23 @@ def _solve_lambda(d: np.ndarray, zz: np.ndarray, s: np.ndarray) -> np.ndarray:
     kept inside the bracket, refine it. inf when even r(inf) stays within s."""
     grid = np.linspace(*LOG_LAMBDA, GRID_POINTS)
     ld = 10.0 ** grid[None, :, None] * d[:, None, :]
-    r = np.sum((ld / (1.0 + ld)) ** 2 * zz[:, None, :], axis=2)          # (B, G), increasing
-    k = np.clip(np.sum(r <= s[:, None], axis=1), 1, GRID_POINTS - 1)     # r[k-1] <= s < r[k]
+    q = ld / (1.0 + ld)
+    r = np.einsum("bgm,bm->bg", q * q, zz)                                # (B, G), increasing in g
+    k = np.clip((r <= s[:, None]).sum(axis=1), 1, GRID_POINTS - 1)       # r[k-1] <= s < r[k]
     rows = np.arange(len(d))
     lo, hi = grid[k - 1], grid[k]
-    r_lo, r_hi = r[rows, k - 1], r[rows, k]
-    # Start from the interpolation in log(r), then Newton on x = log10(lambda).
-    x = lo + (hi - lo) * np.clip((np.log(np.maximum(s, 1e-300)) - np.log(np.maximum(r_lo, 1e-300))) /
-                                 np.maximum(np.log(np.maximum(r_hi, 1e-300)) - np.log(np.maximum(r_lo, 1e-300)), 1e-12), 0, 1)
+    log_lo, log_hi = np.log(np.maximum(r[rows, k - 1], 1e-300)), np.log(np.maximum(r[rows, k], 1e-300))
+    # Start from the interpolation in log(r), then Newton on x = log10(lambda):
+    # dr/dx = ln(10) * lambda * dr/dlambda = ln(10) * sum_j 2 q_j^2 (1 - q_j) zz_j.
+    x = lo + (hi - lo) * np.clip((np.log(np.maximum(s, 1e-300)) - log_lo) / np.maximum(log_hi - log_lo, 1e-12), 0, 1)
     for _ in range(NEWTON_STEPS):
-        lam = 10.0 ** x[:, None]
-        q = lam * d / (1.0 + lam * d)
-        rx = np.sum(q * q * zz, axis=1)
-        # dr/dx = ln(10) * lambda * dr/dlambda, dq/dlambda = d / (1 + lambda d)^2
-        drx = np.log(10.0) * np.sum(2.0 * q * q * (1.0 - q) * zz, axis=1)
+        ld = 10.0 ** x[:, None] * d
+        q = ld / (1.0 + ld)
+        q2zz = q * q * zz
+        rx = q2zz.sum(axis=1)
+        drx = (2.0 * np.log(10.0)) * np.einsum("bm,bm->b", q2zz, 1.0 - q)
         x = np.clip(x - (rx - s) / np.maximum(drx, 1e-300), lo, hi)
-    lam = 10.0 ** x
-    lam = np.where(r[:, -1] <= s, np.inf, lam)
+    lam = np.where(r[:, -1] <= s, np.inf, 10.0 ** x)
     return np.where(r[:, 0] > s, 10.0 ** LOG_LAMBDA[0], lam)
 
 
