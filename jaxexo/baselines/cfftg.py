@@ -49,17 +49,15 @@ Decisions, each made here:
 from __future__ import annotations
 
 import functools
-import tomllib
 from pathlib import Path
 
 import numpy as np
 
 from jaxexo import dynamics, geometry
-from jaxexo.config import Config, ConfigError, config_from_dict
+from jaxexo.config import Config
 from jaxexo.inference.generator import check_options, scenes_for
 from jaxexo.inference.trajectory import (DEFAULT_DURATION, Trajectory, TrajectoryBatch, TrajectoryError, assemble,
                                          clearances, measure)
-from jaxexo.policy import PolicyFileError, load_policy
 
 DEFAULT_POINTS = 100
 C_MAX = 10.0          # |c| bound for a monotone y(s)
@@ -144,13 +142,11 @@ class CFFTG:
 
     @classmethod
     def from_policy(cls, path: str | Path, **kwargs) -> "CFFTG":
-        """A CFFTG with the kinematics of an exported policy's config (NumPy only)."""
-        meta = load_policy(path).metadata
-        try:
-            cfg = config_from_dict(tomllib.loads(meta["config_toml"]))
-        except (KeyError, TypeError, tomllib.TOMLDecodeError, ConfigError) as e:
-            raise PolicyFileError(f"{path}: metadata.config_toml is not a valid jaxexo config ({e})") from None
-        return cls(cfg, **kwargs)
+        """A CFFTG with the kinematics of an exported policy's config (read and checked as the RL
+        generator reads it; NumPy only)."""
+        from jaxexo.inference import TrajectoryGenerator
+
+        return cls(TrajectoryGenerator.load(path).config, **kwargs)
 
     # Scenes ---------------------------------------------------------------------------------------
     def scene(self, obstacle: geometry.Obstacle, pivot: str = "obstacle", pivot_y: float | None = None,
