@@ -138,7 +138,7 @@ def cmd_reproduce(args) -> int:
     bad = [m for m in models if m not in THESIS_MODELS]
     if bad:
         raise ValueError(f"--models: unknown model {bad[0]!r} (known: {', '.join(THESIS_MODELS)})")
-    run_reproduce(args.out, models, n=args.n, seed=args.seed, include_default=args.default)
+    run_reproduce(args.out, models, n=args.n, seed=args.seed, include_default=args.default, results_dir=args.results)
     print(f"wrote {args.out}/reproduce.md, reproduce.json and the run directories under {args.out}/runs")
     return 0
 
@@ -211,6 +211,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--n", type=int, default=1000, help="test scenarios per model")
     r.add_argument("--seed", type=int, default=0)
     r.add_argument("--default", action="store_true", help="also train and tabulate configs/default.toml")
+    r.add_argument("--results", help="also write the tables to this folder as reproduce_<date>_<machine>.json/.md "
+                                     "(e.g. benchmarks/results)")
     r.set_defaults(func=cmd_reproduce)
     bb = sub.add_parser("bench", help="every benchmark (environment, trainer, generator, CFFTG, thesis-style "
                                       "baseline) into benchmarks/results with a summary table")

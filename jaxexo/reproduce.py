@@ -103,9 +103,11 @@ def tables(results: dict) -> str:
 
 
 def run_reproduce(out: str | Path, models=THESIS_MODELS, n: int = 1000, seed: int = 0, include_default: bool = False,
-                  root: Path | None = None, batch_size: int = 1000, progress=print) -> dict:
+                  root: Path | None = None, batch_size: int = 1000, results_dir: str | Path | None = None,
+                  progress=print) -> dict:
     """Train (or reuse) each model, evaluate it, write OUT/reproduce.{md,json}; returns the results.
-    ``batch_size``: scenarios of the timed batch for the models compared with CFFTG."""
+    ``batch_size``: scenarios of the timed batch for the models compared with CFFTG; ``results_dir``:
+    also write the tables as a benchmark result (reproduce_<date>_<machine>.{json,md})."""
     from jaxexo.baselines import CFFTG
     from jaxexo.compare import evaluate_generators, make_scenarios
     from jaxexo.inference import TrajectoryGenerator
@@ -139,4 +141,8 @@ def run_reproduce(out: str | Path, models=THESIS_MODELS, n: int = 1000, seed: in
     out.mkdir(parents=True, exist_ok=True)
     (out / "reproduce.json").write_text(json.dumps(results, indent=1) + "\n")
     (out / "reproduce.md").write_text(tables(results))
+    if results_dir is not None:
+        from jaxexo.benchmarks.machine import write_result
+
+        write_result("reproduce", json.loads(json.dumps(results)), tables(results), results_dir)
     return results

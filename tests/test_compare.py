@@ -120,3 +120,23 @@ def test_bench_summary_from_the_compare_part(trained_run, tmp_path):
     assert "| rl on 20 test scenarios" in summary and "| cfftg on 20 test scenarios" in summary
     assert f"{res['compare']['cfftg']['success']:.3f}" in summary
     assert next(tmp_path.glob("compare_*.json")).stat().st_size > 1000
+    # Skipped parts are summarised from their latest result files.
+    for f in tmp_path.glob("summary_*"):
+        f.unlink()
+    run_all(tmp_path, skip=",".join(("env", "train", "generate", "compare", "baseline")), progress=lambda *_: None)
+    again = next(tmp_path.glob("summary_*.md")).read_text()
+    assert "| rl on 20 test scenarios" in again and "compare: from compare_" in again
+
+
+def test_cli_generate_cfftg_with_a_policys_kinematics(trained_run, tmp_path):
+    from jaxexo.baselines import CFFTG
+    from jaxexo.cli import main
+    from jaxexo.inference import TrajectoryGenerator
+
+    g = CFFTG.from_policy(trained_run / "policy.npz")
+    assert g.config == TrajectoryGenerator.load(trained_run / "policy.npz").config
+    out = tmp_path / "c.json"
+    assert main(["generate", "--method", "cfftg", "--policy", str(trained_run / "policy.npz"), "--obstacle",
+                 "half_circle", "--pivot", "between", "--out", str(tmp_path / "c.csv"), "--json", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["method"] == "cfftg" and doc["checks"]["ok"] and len(doc["raw"]) == 3

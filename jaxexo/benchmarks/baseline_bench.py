@@ -147,7 +147,7 @@ def run_baseline_benchmark(out_dir, default_config: str = "configs/default.toml"
             entry["speedup"] = entry["baseline_s"] / entry["jaxexo_s"]
         reach[str(tgt)] = entry
     result["time_to_success"] = {
-        "config": default_config, "jaxexo_curve": jx_curve, "baseline_curve": bl_curve,
+        "config": Path(default_config).name, "jaxexo_curve": jx_curve, "baseline_curve": bl_curve,
         "baseline_budget_s": baseline_seconds, "baseline_env_steps_per_s": bres["env_steps_per_s"],
         "baseline_eps_decay_steps": learner.eps_decay_steps, "reach": reach,
         "baseline_best_validation": max(r["validation_success"] for r in bl_curve),

@@ -58,6 +58,19 @@ def summary_rows(res: dict) -> list[tuple[str, str, str]]:
     return rows
 
 
+def latest_result(out_dir: Path, name: str):
+    """(figures, path) of the newest ``<name>_<date>_<machine>.json`` in out_dir, or None."""
+    import json
+
+    paths = sorted(Path(out_dir).glob(f"{name}_*.json"), key=lambda p: p.stat().st_mtime)
+    if not paths:
+        return None
+    doc = json.loads(paths[-1].read_text())
+    doc.pop("machine", None)
+    doc.pop("date", None)
+    return (doc["results"] if name == "env" else doc), paths[-1]
+
+
 def run_all(out_dir=None, policy=None, baseline_seconds: float = 600.0, skip: str = "", n: int = 1000,
             batch_size: int = 1000, progress=print) -> dict:
     """Run the parts not in ``skip`` (comma-separated), write their results and the summary to
@@ -112,6 +125,13 @@ def run_all(out_dir=None, policy=None, baseline_seconds: float = 600.0, skip: st
 
             res["baseline"] = run_baseline_benchmark(out_dir, str(default), baseline_seconds=baseline_seconds,
                                                      progress=progress)
+    # Parts skipped this time: their latest results in out_dir, if any, so the summary stays whole.
+    for part in PARTS:
+        if part not in res:
+            found = latest_result(out_dir, part)
+            if found is not None:
+                res[part], path = found
+                notes.append(f"{part}: from {path.name} (not rerun)")
     lines = ["# jaxexo benchmark summary", "", "| figure | measured | target / thesis |", "|---|---|---|"]
     lines += [f"| {a} | {b} | {c} |" for a, b, c in summary_rows(res)]
     lines += [""] + [f"- {n}" for n in notes]
