@@ -53,8 +53,10 @@ def summary_rows(res: dict) -> list[tuple[str, str, str]]:
         for e in res["baseline"]["time_to_success"]["reach"].values():
             if e.get("speedup"):
                 how = " (baseline extrapolated)" if e["baseline_extrapolated"] else ""
+                x = e["speedup"]
                 rows.append((f"time to validation success {e['target']:.2f}: jaxexo vs baseline",
-                             f"{e['jaxexo_s']:.1f} s vs {e['baseline_s']:,.0f} s = {e['speedup']:,.0f}x{how}", ""))
+                             f"{e['jaxexo_s']:.1f} s vs {e['baseline_s']:,.0f} s = "
+                             f"{f'{x:,.0f}' if x >= 10 else f'{x:.1f}'}x{how}", ""))
     return rows
 
 
