@@ -34,12 +34,12 @@ def test_truncated_lambda_returns_equal_jaxexos_lambda_returns():
     terminated[np.arange(B), length - 1] = ends
     cont = rng.random((B, H)) < 0.7     # Watkins cuts
     got = truncated_lambda_returns(reward, boot, terminated, valid, cont, gamma, lam)
-    for b in range(B):
-        L = length[b]
-        col = lambda x: jnp.asarray(x[b, :L, None], jnp.float32)  # noqa: E731
-        ref = td_lambda.lambda_returns(col(reward), col(boot), col(terminated), jnp.zeros((L, 1), bool),
+    for L in np.unique(length):
+        rows = np.flatnonzero(length == L)      # jaxexo's rollouts are time-major: (L, rows)
+        col = lambda x: jnp.asarray(x[rows, :L].T, jnp.float32)  # noqa: E731
+        ref = td_lambda.lambda_returns(col(reward), col(boot), col(terminated), jnp.zeros((L, len(rows)), bool),
                                        col(cont), gamma, lam)
-        np.testing.assert_allclose(got[b], float(ref[0, 0]), rtol=1e-5, atol=1e-5)
+        np.testing.assert_allclose(got[rows], np.asarray(ref[0]), rtol=1e-5, atol=1e-5)
     # lambda = 0 is one-step Q-learning: r + gamma * (1 - term) * boot.
     one = truncated_lambda_returns(reward, boot, terminated, valid, cont, gamma, 0.0)
     np.testing.assert_allclose(one, reward[:, 0] + gamma * (1 - terminated[:, 0]) * boot[:, 0])
