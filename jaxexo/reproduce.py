@@ -57,46 +57,51 @@ def _cell(ref, fmt=_triple) -> str:
     return "-" if ref is None else fmt(ref)
 
 
+def _table(title: str, header: str, align: str, rows: list[str]) -> list[str]:
+    return ["", f"## {title}", "", header, align, *rows]
+
+
+def _pct(x: float) -> str:
+    return f"{100 * x:.1f}"
+
+
 def tables(results: dict) -> str:
     """The reproduction's Markdown: every table beside the thesis's values."""
     lines = ["# Thesis experiments reproduced with jaxexo", "",
              "Each cell: mean generation time (ms) / mean swing knee angle (deg) / mean swing hip angle (deg). "
              "Thesis values from Tables 3.2-3.11; jaxexo's from the NumPy generator on the same scenario set "
-             "for every model.", "",
-             "## Table 3.2 / 3.9: every pivot condition together", "",
-             "| model | thesis | jaxexo | train s (jaxexo) | episodes |", "|---|---|---|---:|---:|"]
+             "for every model."]
+    lines += _table("Table 3.2 / 3.9: every pivot condition together",
+                    "| model | thesis | jaxexo | train s (jaxexo) | episodes |", "|---|---|---|---:|---:|",
+                    [f"| {name} | {_cell(THESIS_T32.get(name))} | {_triple(_fig(r['rl']))} | "
+                     f"{r['train_seconds']:.1f} | {r['episodes']} |" for name, r in results.items()])
+    cross = []
     for name, r in results.items():
-        ref = THESIS_T32.get(name)
-        lines.append(f"| {name} | {_cell(ref)} | {_triple(_fig(r['rl']))} | "
-                     f"{r['train_seconds']:.1f} | {r['episodes']} |")
-    lines += ["", "## Tables 3.3-3.8: per pivot condition", "",
-              "| model (trained on) | pivot | thesis | jaxexo | jaxexo accuracy % | jaxexo success % |",
-              "|---|---|---|---|---:|---:|"]
-    for name, r in results.items():
-        for p in PIVOT_CONDITIONS:
-            if p not in r["rl"]["by_pivot"]:
-                continue
-            ref = THESIS_CROSS.get(name, {}).get(p)
-            rp = r["rl"]["by_pivot"][p]
-            own = " (trained)" if TRAINED_PIVOT.get(name) == p else ""
-            lines.append(f"| {name} ({TRAINED_PIVOT.get(name, 'all')}) | {p}{own} | {_cell(ref)} | "
-                         f"{_triple(_fig(rp))} | {100 * rp['accuracy']:.1f} | {100 * rp['success']:.1f} |")
-    lines += ["", "## Table 3.10: accuracy (eq 3.1) on the test scenarios", "",
-              "| model | thesis accuracy % | jaxexo accuracy % | jaxexo strict success % | reached goal % |",
-              "|---|---:|---:|---:|---:|"]
-    for name, r in results.items():
-        lines.append(f"| {name} | {_cell(THESIS_ACCURACY.get(name), lambda x: f'{x:.1f}')} | {100 * r['rl']['accuracy']:.1f} | "
-                     f"{100 * r['rl']['success']:.1f} | {100 * r['rl']['reached_goal']:.1f} |")
+        trained = TRAINED_PIVOT.get(name)
+        for p, rp in ((p, r["rl"]["by_pivot"][p]) for p in PIVOT_CONDITIONS if p in r["rl"]["by_pivot"]):
+            cross.append(f"| {name} ({trained or 'all'}) | {p}{' (trained)' if trained == p else ''} | "
+                         f"{_cell(THESIS_CROSS.get(name, {}).get(p))} | {_triple(_fig(rp))} | "
+                         f"{_pct(rp['accuracy'])} | {_pct(rp['success'])} |")
+    lines += _table("Tables 3.3-3.8: per pivot condition",
+                    "| model (trained on) | pivot | thesis | jaxexo | jaxexo accuracy % | jaxexo success % |",
+                    "|---|---|---|---|---:|---:|", cross)
+    lines += _table("Table 3.10: accuracy (eq 3.1) on the test scenarios",
+                    "| model | thesis accuracy % | jaxexo accuracy % | jaxexo strict success % | reached goal % |",
+                    "|---|---:|---:|---:|---:|",
+                    [f"| {name} | {_cell(THESIS_ACCURACY.get(name), lambda x: f'{x:.1f}')} | "
+                     f"{_pct(r['rl']['accuracy'])} | {_pct(r['rl']['success'])} | {_pct(r['rl']['reached_goal'])} |"
+                     for name, r in results.items()])
     final = results.get("final")
     if final and "cfftg" in final:
-        lines += ["", "## Table 3.11: generation time per obstacle (ms, mean), final model vs CFFTG", "",
-                  "| obstacle | thesis CFFTG | thesis final | jaxexo CFFTG | jaxexo final (RL) | "
-                  "jaxexo CFFTG success % | jaxexo RL success % |", "|---|---:|---:|---:|---:|---:|---:|"]
+        rows = []
         for k, rk in final["rl"]["by_kind"].items():
             ck = final["cfftg"]["by_kind"][k]
             ref = THESIS_T311.get(k, (float("nan"),) * 2)
-            lines.append(f"| {k} | {ref[0]:.3f} | {ref[1]:.3f} | {ck['time_ms_mean']:.3f} | {rk['time_ms_mean']:.3f} | "
-                         f"{100 * ck['success']:.1f} | {100 * rk['success']:.1f} |")
+            rows.append(f"| {k} | {ref[0]:.3f} | {ref[1]:.3f} | {ck['time_ms_mean']:.3f} | {rk['time_ms_mean']:.3f} | "
+                        f"{_pct(ck['success'])} | {_pct(rk['success'])} |")
+        lines += _table("Table 3.11: generation time per obstacle (ms, mean), final model vs CFFTG",
+                        "| obstacle | thesis CFFTG | thesis final | jaxexo CFFTG | jaxexo final (RL) | "
+                        "jaxexo CFFTG success % | jaxexo RL success % |", "|---|---:|---:|---:|---:|---:|---:|", rows)
         lines += ["", f"Batch of 1000 (median): RL {final['rl']['batch_1000_ms']:.0f} ms, CFFTG "
                   f"{final['cfftg']['batch_1000_ms']:.0f} ms (thesis final model: 1764 ms)."]
     return "\n".join(lines) + "\n"
