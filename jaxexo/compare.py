@@ -11,7 +11,8 @@ training distribution (its obstacle mixture and pivot conditions). Everything he
 Timing: each generator's ``generate`` is called once per scenario, the two generators alternating
 which goes first, in one process, with ``time.perf_counter`` around the call (scene validation,
 generation, smoothing and every check included); ``generate_batch`` on 1000 scenarios is timed the
-same way (median of ``BATCH_REPEATS``). Metrics are computed on the trajectories of the single calls.
+same way (median of ``BATCH_REPEATS``), and per kind and pivot each group's own scenarios in one
+``generate_batch`` call, scaled to 1000. Metrics are computed on the trajectories of the single calls.
 
 Per generator, overall, per kind and per pivot: accuracy (eq 3.1: the foot never touches the
 obstacle), strict success (goal reached, collision-free, joint limits and leg length respected),
@@ -148,18 +149,25 @@ def evaluate_generators(generators: dict, scenarios: list[dict], batch_size: int
     kinds = np.array([s["kind"] for s in scenarios])
     pivots = np.array([s["pivot"] for s in scenarios])
     report, trajs = {}, {}
+    groups = {
+        "by_kind": {k: kinds == k for k in dict.fromkeys(kinds)},
+        "by_pivot": {p: pivots == p for p in PIVOT_CONDITIONS if (pivots == p).any()},
+        "by_kind_pivot": {f"{k}/{p}": (kinds == k) & (pivots == p) for k in dict.fromkeys(kinds)
+                          for p in PIVOT_CONDITIONS if ((kinds == k) & (pivots == p)).any()},
+    }
     for name, (tr, times) in runs.items():
+        gen = generators[name]
         m = trajectory_metrics(tr)
-        everything = np.ones(len(tr), bool)
-        entry = summarize(m, times, everything)
-        entry["batch_1000_ms"] = batch_time(generators[name], scenarios, batch_size, batch_repeats) \
-            if batch_size else None
+        entry = summarize(m, times, np.ones(len(tr), bool))
+        entry["batch_1000_ms"] = batch_time(gen, scenarios, batch_size, batch_repeats) if batch_size else None
         entry["batch_size"] = batch_size
-        entry["by_kind"] = {k: summarize(m, times, kinds == k) for k in dict.fromkeys(kinds)}
-        entry["by_pivot"] = {p: summarize(m, times, pivots == p) for p in PIVOT_CONDITIONS if (pivots == p).any()}
-        entry["by_kind_pivot"] = {f"{k}/{p}": summarize(m, times, (kinds == k) & (pivots == p))
-                                  for k in dict.fromkeys(kinds) for p in PIVOT_CONDITIONS
-                                  if ((kinds == k) & (pivots == p)).any()}
+        for key, masks in groups.items():
+            entry[key] = {}
+            for g, mask in masks.items():
+                entry[key][g] = summarize(m, times, mask)
+                # The group's own scenarios in one generate_batch call, scaled to 1000.
+                sub = [scenarios[i] for i in np.flatnonzero(mask)]
+                entry[key][g]["batch_1000_ms"] = batch_time(gen, sub, len(sub), 1) if batch_size else None
         entry["failures"] = [{"scenario": i, "kind": str(kinds[i]), "pivot": str(pivots[i]),
                               "reasons": list(t.checks.reasons)} for i, t in enumerate(tr) if not t.ok][:20]
         report[name] = entry
@@ -173,16 +181,18 @@ def evaluate_generators(generators: dict, scenarios: list[dict], batch_size: int
 
 
 def _row(name: str, r: dict) -> str:
+    b = r.get("batch_1000_ms")
     return (f"| {name} | {r['n']} | {100 * r['accuracy']:.1f} | {100 * r['success']:.1f} | {r['time_ms_mean']:.3f} | "
             f"{r['time_ms_median']:.3f} | {r['time_ms_p95']:.3f} | {r['hip_swing_mean_deg']:.1f} | "
             f"{r['knee_swing_mean_deg']:.1f} | {r['hip_swing_max_deg']:.1f} | {r['knee_swing_min_deg']:.1f} | "
-            f"{100 * r['min_clearance_m_mean']:.2f} | {100 * r['path_length_m_mean']:.1f} | {r['squared_jerk_mean']:.3g} |")
+            f"{100 * r['min_clearance_m_mean']:.2f} | {100 * r['path_length_m_mean']:.1f} | {r['squared_jerk_mean']:.3g} | "
+            f"{'-' if b is None else f'{b:.1f}'} |")
 
 
 TABLE_HEAD = ("| {what} | n | accuracy % (eq 3.1) | strict success % | time mean ms | median ms | p95 ms | "
               "hip swing mean deg | knee swing mean deg | hip swing max deg | knee swing min deg | "
-              "min clearance cm | path length cm | sq. jerk m²/s⁵ |\n"
-              "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+              "min clearance cm | path length cm | sq. jerk m²/s⁵ | batch of 1000 ms |\n"
+              "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
 
 
 def markdown(report: dict, title: str, context: list[str]) -> str:

@@ -57,6 +57,7 @@ def test_eval_numbers_are_consistent(eval_out):
         for key in ("by_kind", "by_pivot", "by_kind_pivot"):
             groups = r[key].values()
             assert sum(g["n"] for g in groups) == r["n"]
+            assert all(g["batch_1000_ms"] > 0 for g in groups)
             for fig in ("accuracy", "success", "time_ms_mean", "hip_swing_mean_deg", "path_length_m_mean"):
                 np.testing.assert_allclose(sum(g[fig] * g["n"] for g in groups) / r["n"], r[fig], rtol=1e-9)
         assert r["success"] <= r["accuracy"]
