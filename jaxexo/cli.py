@@ -76,12 +76,21 @@ def obstacle_from_args(args):
 
 
 def cmd_generate(args) -> int:
-    from jaxexo.inference import TrajectoryGenerator
+    common = dict(pivot=args.pivot, pivot_y=args.pivot_y, start_y=args.start_y, step_length=args.step_length,
+                  n_points=args.points, duration=args.duration)
+    if args.method == "cfftg":
+        from jaxexo.baselines import CFFTG
 
-    gen = TrajectoryGenerator.load(args.policy)
-    traj = gen.generate(obstacle_from_args(args), pivot=args.pivot, pivot_y=args.pivot_y, start_y=args.start_y,
-                        step_length=args.step_length, n_points=args.points, smoothing=args.smoothing,
-                        duration=args.duration)
+        # The kinematics (and joint limits) of the policy's config when one is given.
+        gen = CFFTG.from_policy(args.policy) if args.policy else CFFTG(_load(None)[0])
+        traj = gen.generate(obstacle_from_args(args), **common)
+    else:
+        if not args.policy:
+            raise ValueError("--policy: required with --method rl (the trained policy.npz)")
+        from jaxexo.inference import TrajectoryGenerator
+
+        gen = TrajectoryGenerator.load(args.policy)
+        traj = gen.generate(obstacle_from_args(args), smoothing=args.smoothing, **common)
     traj.to_csv(args.out)
     written = [args.out]
     if args.json:
@@ -93,8 +102,9 @@ def cmd_generate(args) -> int:
         plot_trajectory(traj, args.plot)
         written.append(args.plot)
     c = traj.checks
+    moves = f"{len(traj.raw) - 1} agent moves" if args.method == "rl" else "polynomial path (CFFTG)"
     print(f"{traj.scene.obstacle.kind} {traj.scene.width * 100:.1f} x {traj.scene.height * 100:.1f} cm, pivot "
-          f"{traj.scene.pivot}: {len(traj.raw) - 1} agent moves, min clearance {c.min_clearance * 100:.1f} cm, "
+          f"{traj.scene.pivot}: {moves}, min clearance {c.min_clearance * 100:.1f} cm, "
           f"{'ok' if c.ok else 'FAILED'}")
     for r in c.reasons + traj.notes:
         print(f"  {r}")
@@ -129,6 +139,46 @@ def cmd_sweep(args) -> int:
               f"({res['env_steps_this_run'] / res['wall_s_this_run'] / 1e6:.3f} M env-steps/s)")
     print(f"wrote {args.out}/results.csv, summary.md, " + ", ".join(res["figures"])
           + (", best/policy.npz, best/config.toml" if "exported" in res else ""))
+
+
+def cmd_eval(args) -> int:
+    from jaxexo.compare import run_eval
+
+    if args.n < 1:
+        raise ValueError(f"--n: must be >= 1, got {args.n}")
+    if args.batch < 1:
+        raise ValueError(f"--batch: must be >= 1, got {args.batch}")
+    report = run_eval(args.policy, args.out, against=args.against, scenarios=args.scenarios, n=args.n,
+                      figures=not args.no_figures, batch_size=args.batch)
+    for name, r in report.items():
+        print(f"{name}: accuracy {r['accuracy']:.3f}, success {r['success']:.3f}, median {r['time_ms_median']:.3f} ms "
+              f"per trajectory, {r['batch_1000_ms']:.1f} ms per batch of 1000")
+    print(f"wrote {args.out}/report.md, report.json" + ("" if args.no_figures else ", trajectories.png, joint_angles.png"))
+    return 0
+
+
+def cmd_reproduce(args) -> int:
+    from jaxexo.devices import use_all_cpu_cores
+
+    use_all_cpu_cores()
+    from jaxexo.reproduce import THESIS_MODELS, run_reproduce
+
+    models = [m.strip() for m in args.models.split(",") if m.strip()]
+    bad = [m for m in models if m not in THESIS_MODELS]
+    if bad:
+        raise ValueError(f"--models: unknown model {bad[0]!r} (known: {', '.join(THESIS_MODELS)})")
+    run_reproduce(args.out, models, n=args.n, seed=args.seed, include_default=args.default, results_dir=args.results)
+    print(f"wrote {args.out}/reproduce.md, reproduce.json and the run directories under {args.out}/runs")
+    return 0
+
+
+def cmd_bench(args) -> int:
+    from jaxexo.devices import use_all_cpu_cores
+
+    use_all_cpu_cores()
+    from jaxexo.benchmarks.run_all import run_all
+
+    run_all(args.out, policy=args.policy, baseline_seconds=args.baseline_seconds, skip=args.skip)
     return 0
 
 
@@ -148,7 +198,10 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--quiet", action="store_true", help="no progress bar")
     t.set_defaults(func=cmd_train)
     g = sub.add_parser("generate", help="a smoothed, checked swing trajectory from policy.npz (NumPy only)")
-    g.add_argument("--policy", required=True, help="policy.npz written by jaxexo train")
+    g.add_argument("--policy", help="policy.npz written by jaxexo train (required for --method rl; for cfftg "
+                                    "it supplies the kinematics, default: configs/default.toml)")
+    g.add_argument("--method", choices=("rl", "cfftg"), default="rl",
+                   help="rl: the trained policy; cfftg: the polynomial baseline (jaxexo.baselines.cfftg)")
     g.add_argument("--obstacle", required=True, choices=OBSTACLE_KINDS)
     g.add_argument("--width", type=float, help="obstacle width, m")
     g.add_argument("--height", type=float, help="obstacle height, m")
@@ -160,7 +213,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--start-y", type=float, default=0.0, help="swing heel start y, m")
     g.add_argument("--step-length", type=float, default=0.70, help="goal = start + this, m")
     g.add_argument("--points", type=int, default=100, help="samples of the smoothed path")
-    g.add_argument("--smoothing", type=float, default=0.005, help="B-spline smoothing s, m^2 (0: raw polyline)")
+    g.add_argument("--smoothing", type=float, default=0.005,
+                   help="B-spline smoothing s, m^2 (0: raw polyline); rl only")
     g.add_argument("--duration", type=float, default=1.0, help="swing duration for the time stamps, s")
     g.add_argument("--out", required=True, help="CSV file (time, heel, toe, hip, knees, joint angles; SI units)")
     g.add_argument("--json", help="also write JSON (scene, checks, raw points, samples)")
@@ -179,6 +233,37 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--heatmap", help="two axes for heatmap.png, e.g. train.lr,train.lam (default: sweep.heatmap)")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=cmd_sweep)
+    e = sub.add_parser("eval", help="evaluate the RL generator (and CFFTG) side by side; writes report.md/.json "
+                                    "and figures (NumPy only)")
+    e.add_argument("--policy", required=True, help="policy.npz written by jaxexo train")
+    e.add_argument("--against", choices=("cfftg",), help="also evaluate this baseline on the same scenarios")
+    e.add_argument("--scenarios", choices=("train", "test", "all"), default="test",
+                   help="test: the five thesis obstacles x three pivots; train: the policy's training "
+                        "distribution; all: both")
+    e.add_argument("--n", type=int, default=1000, help="scenarios per set")
+    e.add_argument("--batch", type=int, default=1000,
+                   help="scenarios per timed generate_batch call (reported scaled to a batch of 1000)")
+    e.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    e.add_argument("--out", required=True, help="report folder")
+    e.set_defaults(func=cmd_eval)
+    r = sub.add_parser("reproduce", help="train the seven thesis configs and tabulate them beside the thesis's "
+                                         "Tables 3.2-3.11")
+    r.add_argument("--out", required=True, help="folder for runs/ and reproduce.md/.json (reuses finished runs)")
+    r.add_argument("--models", default="a,b,c,1,2,3,final", help="comma-separated thesis models")
+    r.add_argument("--n", type=int, default=1000, help="test scenarios per model")
+    r.add_argument("--seed", type=int, default=0)
+    r.add_argument("--default", action="store_true", help="also train and tabulate configs/default.toml")
+    r.add_argument("--results", help="also write the tables to this folder as reproduce_<date>_<machine>.json/.md "
+                                     "(e.g. benchmarks/results)")
+    r.set_defaults(func=cmd_reproduce)
+    bb = sub.add_parser("bench", help="every benchmark (environment, trainer, generator, CFFTG, thesis-style "
+                                      "baseline) into benchmarks/results with a summary table")
+    bb.add_argument("--out", default="benchmarks/results", help="folder for the JSON and Markdown results")
+    bb.add_argument("--policy", help="policy.npz for the generator benchmarks (default: train configs/default.toml)")
+    bb.add_argument("--baseline-seconds", type=float, default=600.0,
+                    help="time budget of the thesis-style baseline's training run")
+    bb.add_argument("--skip", default="", help="comma-separated parts to skip: env,train,generate,compare,baseline")
+    bb.set_defaults(func=cmd_bench)
     return p
 
 

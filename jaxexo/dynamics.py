@@ -23,9 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from jaxexo import geometry
+from jaxexo import geometry, kinematics, rewards
 from jaxexo.config import PIVOT_CONDITIONS, Config
-from jaxexo.rewards import normalize_weights
 
 NUM_ACTIONS = 36
 # Lengths in observations are divided by this (m), so that they are of order 1.
@@ -84,8 +83,8 @@ def param_values(cfg: Config) -> dict[str, np.ndarray]:
         foot_length=f(kin.foot_length),
         hip_limits=f(kin.hip_limits),
         knee_limits=f(kin.knee_limits),
-        traj_weights=f(normalize_weights(rew.traj_weights)),
-        exo_weights=f(normalize_weights(rew.exo_weights)),
+        traj_weights=f(rewards.normalize_weights(rew.traj_weights)),
+        exo_weights=f(rewards.normalize_weights(rew.exo_weights)),
         step_threshold=f(rew.step_threshold),
         collision_penalty=f(rew.collision_penalty),
         backward_penalty=f(rew.backward_penalty),
@@ -202,6 +201,58 @@ def observation(xp, p, obs_mode: str, heel_y, heel_z, time, visited_mid, layout)
         profile,
         xp.stack([progress, visited_mid.astype(dtype)], axis=-1),
     ], axis=-1)
+
+
+def transition(xp, p, prev, heel, time, visited_mid, layout) -> dict:
+    """Everything a step from heel ``prev`` to ``heel`` (..., 2) decides (thesis 2.1-2.5), for the
+    JAX environment and the NumPy environment alike: collision, mid-goal, goal, kinematics, the 8 + 4
+    reward terms (eq 2.29-2.52), optional shaping, the reward and termination. ``time`` is the step
+    count after the move, ``visited_mid`` whether the mid-goal was visited before it.
+
+    Returns ``{"visited_mid", "reward", "terminated", "info"}`` with ``info`` the environment's
+    per-step diagnostics (reward terms, clearance, collision, goal, limit and leg-length flags, joint
+    angles, heel, hip)."""
+    lay = layout
+    clearance = geometry.foot_clearance(xp, heel, p.foot_length, lay.outline)
+    collided = geometry.foot_collides(xp, clearance)
+    mid_y, mid_z = mid_goal(xp, p, lay.center_y, lay.height)
+    visited = visited_mid | in_mid_goal(xp, p, heel[..., 0], heel[..., 1], mid_y, mid_z)
+    missed_mid = beyond_mid_goal(xp, p, heel[..., 0], mid_y) & ~visited
+    reached = goal_reached(xp, p, heel[..., 0], heel[..., 1], lay.goal_y)
+
+    kin = kinematics.leg_state(xp, lay.pivot_y, heel, p.thigh, p.shin)
+    lim = lambda h, q: kinematics.joint_limit_violation(  # noqa: E731
+        xp, h, q, p.hip_limits[0], p.hip_limits[1], p.knee_limits[0], p.knee_limits[1])
+    limits_violated = lim(kin["hip_swing"], kin["knee_swing_angle"]) | lim(kin["hip_stance"], kin["knee_stance_angle"])
+
+    traj = rewards.trajectory_terms(
+        xp, p, steps=time, prev_heel=prev, heel=heel, collided=collided, clearance=clearance,
+        reached_goal=reached, missed_mid=missed_mid, mid_y=mid_y, max_z=lay.height + p.max_height_margin)
+    exo = rewards.exo_terms(
+        xp, p, hip_z=kin["hip"][..., 1], leg_swing=kin["leg_swing"], leg_stance=kin["leg_stance"],
+        limits_violated=limits_violated)
+    terminated = reached | (collided & p.terminate_on_collision)
+    mid = xp.stack([mid_y, mid_z], axis=-1)
+    goal = xp.stack([lay.goal_y, 0.0 * lay.goal_y], axis=-1)
+    shaping = rewards.shaping_reward(
+        xp, p, rewards.progress_potential(xp, prev, mid, goal, visited_mid),
+        rewards.progress_potential(xp, heel, mid, goal, visited), terminated)
+    reward = rewards.total_reward(xp, p, traj, exo) + shaping
+    info = {
+        "traj_terms": traj,
+        "exo_terms": exo,
+        "shaping": shaping,
+        "clearance": clearance,
+        "collision": collided,
+        "goal_reached": reached,
+        "joint_limit_violation": limits_violated,
+        "leg_length_violation": exo[..., 1] < 0,
+        "joint_angles": xp.stack([kin["hip_swing"], kin["knee_swing_angle"],
+                                  kin["hip_stance"], kin["knee_stance_angle"]], axis=-1),
+        "heel": heel,
+        "hip": kin["hip"],
+    }
+    return {"visited_mid": visited, "reward": reward, "terminated": terminated, "info": info}
 
 
 # --------------------------------------------------------------------------------------------

@@ -16,7 +16,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from jaxexo import dynamics, geometry, kinematics, rewards
+from jaxexo import dynamics, geometry
 from jaxexo.config import Config
 from jaxexo.dynamics import LENGTH_SCALE, NUM_ACTIONS, THESIS_OBS_CENTER  # noqa: F401 (re-exported)
 from jaxexo.env import spaces
@@ -164,48 +164,10 @@ class ExoStepEnv:
         heel = jnp.stack(dynamics.move_heel(jnp, params, prev[0], prev[1], d[0], d[1]))
         time = state.time + 1
 
-        clearance = geometry.foot_clearance(jnp, heel, params.foot_length, lay.outline)
-        collided = geometry.foot_collides(jnp, clearance)
-        mid = self.mid_goal(lay, params)
-        visited = state.visited_mid | dynamics.in_mid_goal(jnp, params, heel[0], heel[1], mid[0], mid[1])
-        missed_mid = dynamics.beyond_mid_goal(jnp, params, heel[0], mid[0]) & ~visited
-        reached = dynamics.goal_reached(jnp, params, heel[0], heel[1], lay.goal_y)
-
-        kin = kinematics.leg_state(jnp, lay.pivot_y, heel, params.thigh, params.shin)
-        lim = lambda h, q: kinematics.joint_limit_violation(  # noqa: E731
-            jnp, h, q, params.hip_limits[0], params.hip_limits[1], params.knee_limits[0], params.knee_limits[1])
-        limits_violated = lim(kin["hip_swing"], kin["knee_swing_angle"]) | lim(
-            kin["hip_stance"], kin["knee_stance_angle"])
-
-        traj = rewards.trajectory_terms(
-            jnp, params, steps=time, prev_heel=prev, heel=heel, collided=collided, clearance=clearance,
-            reached_goal=reached, missed_mid=missed_mid, mid_y=mid[0],
-            max_z=lay.height + params.max_height_margin)
-        exo = rewards.exo_terms(
-            jnp, params, hip_z=kin["hip"][1], leg_swing=kin["leg_swing"], leg_stance=kin["leg_stance"],
-            limits_violated=limits_violated)
-        terminated = reached | (collided & params.terminate_on_collision)
-        goal = jnp.stack([lay.goal_y, 0.0])
-        shaping = rewards.shaping_reward(
-            jnp, params, rewards.progress_potential(jnp, prev, mid, goal, state.visited_mid),
-            rewards.progress_potential(jnp, heel, mid, goal, visited), terminated)
-        reward = rewards.total_reward(jnp, params, traj, exo) + shaping
-
+        out = dynamics.transition(jnp, params, prev, heel, time, state.visited_mid, lay)
+        visited, reward, terminated = out["visited_mid"], out["reward"], out["terminated"]
         new_state = EnvState(heel=heel, time=time, visited_mid=visited, layout=lay)
-        info = {
-            "traj_terms": traj,
-            "exo_terms": exo,
-            "shaping": shaping,
-            "clearance": clearance,
-            "collision": collided,
-            "goal_reached": reached,
-            "joint_limit_violation": limits_violated,
-            "leg_length_violation": exo[1] < 0,
-            "joint_angles": jnp.stack([kin["hip_swing"], kin["knee_swing_angle"],
-                                       kin["hip_stance"], kin["knee_stance_angle"]]),
-            "heel": heel,
-            "hip": kin["hip"],
-        }
+        info = out["info"]
         return self.get_obs(new_state, params), new_state, reward, terminated, info
 
     def is_truncated(self, state: EnvState, params: EnvParams):

@@ -89,22 +89,7 @@ class TrajectoryGenerator:
                                    shape_points=self.config.env.shape_points)
 
     def _scenes(self, obstacles, pivot, pivot_y, start_y, step_length) -> list[Scene]:
-        obstacles = list(obstacles)
-        n = len(obstacles)
-        if n == 0:
-            raise ValueError("obstacles: need at least one scenario")
-
-        def per(name, v):
-            if np.ndim(v) == 0 or isinstance(v, str):
-                return [v] * n
-            v = list(v)
-            if len(v) != n:
-                raise ValueError(f"{name}: {len(v)} values for {n} obstacles")
-            return v
-
-        return [self.scene(o, p, py, s, sl) for o, p, py, s, sl in zip(
-            obstacles, per("pivot", pivot), per("pivot_y", pivot_y), per("start_y", start_y),
-            per("step_length", step_length))]
+        return scenes_for(self.scene, obstacles, pivot, pivot_y, start_y, step_length)
 
     def _basis(self, scene: Scene) -> np.ndarray:
         """(5, D): the observation as c @ basis for c = (heel_y, heel_z, time, visited, 1).
@@ -236,7 +221,7 @@ class TrajectoryGenerator:
                  strict: bool = False) -> Trajectory:
         """One smoothed, checked trajectory (metres, radians, seconds). ``strict`` raises
         TrajectoryError instead of returning a trajectory that fails a check."""
-        n_points, smoothing, duration = _check_options(n_points, smoothing, duration)
+        n_points, smoothing, duration = check_options(n_points, smoothing, duration)
         scene = self.scene(obstacle, pivot, pivot_y, start_y, step_length)
         raw, _ = self.rollout(scene)
         traj = self._finish([scene], [raw], n_points, smoothing, duration)[0]
@@ -248,7 +233,7 @@ class TrajectoryGenerator:
                        n_points: int = sm.DEFAULT_POINTS, smoothing: float = sm.DEFAULT_SMOOTHING,
                        duration: float = DEFAULT_DURATION, strict: bool = False) -> TrajectoryBatch:
         """Trajectories for many scenarios; every option is one value or one per obstacle."""
-        n_points, smoothing, duration = _check_options(n_points, smoothing, duration)
+        n_points, smoothing, duration = check_options(n_points, smoothing, duration)
         scenes = self._scenes(obstacles, pivot, pivot_y, start_y, step_length)
         raws, _ = self.rollout_batch(scenes)
         batch = self._finish(scenes, raws, n_points, smoothing, duration)
@@ -257,11 +242,32 @@ class TrajectoryGenerator:
         return batch
 
 
+def scenes_for(make, obstacles, pivot, pivot_y, start_y, step_length) -> list[Scene]:
+    """Scenes for many obstacles with ``make(obstacle, pivot, pivot_y, start_y, step_length)``; every
+    option is one value for all or one per obstacle (shared by every generator's generate_batch)."""
+    obstacles = list(obstacles)
+    n = len(obstacles)
+    if n == 0:
+        raise ValueError("obstacles: need at least one scenario")
+
+    def per(name, v):
+        if np.ndim(v) == 0 or isinstance(v, str):
+            return [v] * n
+        v = list(v)
+        if len(v) != n:
+            raise ValueError(f"{name}: {len(v)} values for {n} obstacles")
+        return v
+
+    return [make(o, p, py, s, sl) for o, p, py, s, sl in zip(
+        obstacles, per("pivot", pivot), per("pivot_y", pivot_y), per("start_y", start_y),
+        per("step_length", step_length))]
+
+
 def _take(lay, idx):
     return type(lay)(**{k: v[idx] for k, v in vars(lay).items()})
 
 
-def _check_options(n_points, smoothing, duration):
+def check_options(n_points, smoothing, duration):
     if isinstance(n_points, bool) or not isinstance(n_points, (int, np.integer)) or n_points < 2:
         raise ValueError(f"n_points must be an integer >= 2, got {n_points!r}")
     smoothing = geometry._finite("smoothing", smoothing)

@@ -255,14 +255,18 @@ def _reasons(m: dict, i: int, heel: np.ndarray, goal_y: float, time: np.ndarray)
 
 
 def assemble(method: str, sp, scenes, raws, paths: np.ndarray, smoothing, duration: float = DEFAULT_DURATION,
-             notes=None) -> TrajectoryBatch:
+             notes=None, measured: dict | None = None) -> TrajectoryBatch:
     """Checked trajectories from dense heel paths (B, N, 2), one per scene; ``raws`` the generator's
-    own points per scene, ``smoothing`` (B,) the smoothing each path used (nan for a raw polyline)."""
+    own points per scene, ``smoothing`` (B,) the smoothing each path used (nan for a raw polyline).
+    ``measured``: ``measure``'s result for exactly these paths, when the generator already has it
+    (CFFTG checks every plan while planning); otherwise it is computed here."""
     paths = np.asarray(paths, dtype=np.float64)
     b, n = paths.shape[:2]
-    pivot_y = np.array([sc.pivot_y for sc in scenes])
-    goal_y = np.array([sc.goal_y for sc in scenes])
-    m = measure(sp, paths, clearances(sp.foot_length, paths, scenes), pivot_y, goal_y)
+    if measured is None:
+        pivot_y = np.array([sc.pivot_y for sc in scenes])
+        goal_y = np.array([sc.goal_y for sc in scenes])
+        measured = measure(sp, paths, clearances(sp.foot_length, paths, scenes), pivot_y, goal_y)
+    m = measured
     time = np.linspace(0.0, duration, n)
     reasons = tuple(_reasons(m, i, paths[i], scenes[i].goal_y, time) for i in range(b))
     kin = m["kin"]

@@ -1,0 +1,262 @@
+"""CFFTG: a polynomial Collision-Free Foot Trajectory Generator, the baseline of thesis 3.1-3.4.
+
+The generator the thesis compares against (its ref. [11]) is not public; the thesis says only that
+it is polynomial, always finds a trajectory given enough time, and takes about 2 ms (Table 3.11).
+This is the standard form of such a generator, in NumPy only (importable without JAX), returning
+the same checked ``Trajectory`` as the RL generator (``jaxexo.inference.assemble``: the same
+kinematics, clearance, goal, joint-limit and leg-length checks), so every metric applies to both.
+
+Decisions, each made here:
+
+- Path. The heel moves in the sagittal plane along two polynomials of normalised time s in [0, 1]
+  (t = s * duration):
+      z(s) = h * 64 s^3 (1 - s)^3 (1 + k (1 - 2s)^2)      apex h at s = 1/2,
+      y(s) = y0 + D (10 s^3 - 15 s^4 + 6 s^5 + c s^3 (1 - s)^3),   D = goal - start.
+  Both have zero velocity and zero acceleration at lift-off and touch-down (triple roots at s = 0
+  and 1), so the foot leaves and lands gently. ``k`` in FLATNESS = {0, 1, 2, 3} widens the top of
+  the height profile (k = 3 is the flattest with a single apex); each plan uses the k that needs
+  the lowest apex, so a wide obstacle gets a flat-topped path instead of a tall bell.
+  y is the minimum-jerk (quintic) profile plus a term that moves the
+  apex along y without touching those end conditions: y(1/2) = y0 + D (1/2 + c/64). ``c`` is kept
+  in [-10, 10], where y is monotone (dy/ds = D s^2 (1-s)^2 (30 + 3c (1 - 2s)) >= 0): the foot never
+  steps backwards. The path passes through the start (on the ground), the apex and the goal (on
+  the ground).
+- Apex position. Initially over the middle of the span of heel positions at which the flat foot
+  (heel to toe, ``foot_length``) overlaps the obstacle: y_apex = (left - foot_length + right) / 2.
+- Apex height. z is linear in h, so the lowest apex that keeps the foot ``margin`` above the
+  obstacle is computed exactly on the samples: at every sample the foot segment, widened by the
+  margin on both sides, must be above the highest point of the obstacle under it plus the margin;
+  h = max over samples of required height / z's shape. The lowest apex means the least joint
+  excursion. The initial margin is the reward's safety distance (eq 2.35, ``min_dt``), so
+  both generators aim for the same clearance.
+- Check. Every plan goes through the same checks as the RL generator's trajectories (clearance of
+  the heel-toe segment against the outline at every sample, joint limits and leg length of both
+  legs, goal reached).
+- Re-plan. A plan that fails is re-planned, per scene:
+  the foot touches the obstacle -> raise the apex (margin += ``margin_step``);
+  joint limits or leg length exceeded -> move the apex along y, alternately towards and away from
+  the pivot heel (the hip sits above the midpoint of the heels, so an apex nearer the pivot keeps
+  the swing leg nearer under the hip), by ``apex_step`` metres, 1, 1, 2, 2, 3... steps out.
+  After ``max_plans`` plans without success the last plan is returned with ``ok`` False, its
+  failed checks in ``checks.reasons`` and a note that the planner gave up: a reported failure,
+  never a silent one.
+- Batch. ``generate_batch`` plans every scene at once with NumPy arrays (B, N); each round re-plans
+  only the scenes still failing. ``generate`` is the same code on a batch of one.
+- ``raw`` of the returned Trajectory holds the three via points (start, apex, goal); there is no
+  smoothing (``smoothing`` = 0: the polynomial is the path).
+"""
+
+from __future__ import annotations
+
+import functools
+from pathlib import Path
+
+import numpy as np
+
+from jaxexo import dynamics, geometry
+from jaxexo.config import Config
+from jaxexo.inference.generator import check_options, scenes_for
+from jaxexo.inference.trajectory import (DEFAULT_DURATION, Trajectory, TrajectoryBatch, TrajectoryError, assemble,
+                                         clearances, measure)
+
+DEFAULT_POINTS = 100
+C_MAX = 10.0          # |c| bound for a monotone y(s)
+APEX_FRAC_RANGE = (0.5 - C_MAX / 64.0, 0.5 + C_MAX / 64.0)   # apex y as a fraction of the step
+
+
+# Shapes of the height profile: z = h * phi_k(s), phi_k = g(s) (1 + k (1 - 2s)^2) normalised to a
+# peak of 1 (g = s^3 (1-s)^3). k = 0 is the plain bell; k = 3 is the flattest top that keeps a single
+# apex at s = 1/2 (d phi / d(x^2) at x = s - 1/2 = 0 is proportional to k - 3).
+FLATNESS = (0.0, 1.0, 2.0, 3.0)
+
+
+@functools.lru_cache(maxsize=16)
+def _basis(n_points: int):
+    """Samples s, the minimum-jerk profile, the apex-moving term g = s^3 (1-s)^3 and z's shapes
+    phi_k (len(FLATNESS), N), each with peak 1 at s = 1/2 (computed once per n_points, read-only)."""
+    s = np.linspace(0.0, 1.0, n_points)
+    mj = s**3 * (10.0 - 15.0 * s + 6.0 * s**2)
+    g = s**3 * (1.0 - s) ** 3
+    k = np.asarray(FLATNESS)[:, None]
+    phi = 64.0 * g * (1.0 + k * (1.0 - 2.0 * s) ** 2)
+    for a in (s, mj, g, phi):
+        a.flags.writeable = False
+    return s, mj, g, phi
+
+
+def profile_max(lo: np.ndarray, hi: np.ndarray, outline: np.ndarray) -> np.ndarray:
+    """Highest point of the obstacles' profiles over the intervals [lo, hi] (B, N), outlines (B, K, 2).
+
+    The profile is piecewise linear, so its maximum over an interval is at an end of the interval
+    or at an outline vertex inside it (jaxexo.geometry.profile_height gives the ends)."""
+    ol = outline[:, None]                                   # (B, 1, K, 2)
+    vy, vz = ol[..., 0], ol[..., 1]
+    inside = (vy >= lo[..., None]) & (vy <= hi[..., None])
+    top = np.max(np.where(inside, vz, 0.0), axis=-1)
+    n = lo.shape[-1]
+    ends = geometry.profile_height(np, np.concatenate([lo, hi], axis=-1), ol)    # both ends in one pass
+    return np.maximum(top, np.maximum(ends[..., :n], ends[..., n:]))
+
+
+def plan_paths(start_y, goal_y, outline, apex_frac, margin, foot_length: float, n_points: int = DEFAULT_POINTS):
+    """Heel paths (B, N, 2) and apex heights (B,) of the polynomial plan (see the module docstring).
+
+    ``apex_frac`` (B,): the apex's y as a fraction of the step (clipped to the monotone range);
+    ``margin`` (B,): clearance asked of the foot, metres. Of the height shapes FLATNESS, each scene
+    gets the one that needs the lowest apex."""
+    s, mj, g, phi = _basis(n_points)
+    frac = np.clip(apex_frac, *APEX_FRAC_RANGE)
+    c = 64.0 * (frac - 0.5)
+    d = (goal_y - start_y)[:, None]
+    y = start_y[:, None] + d * (mj + c[:, None] * g)
+    m = margin[:, None]
+    need = profile_max(y - m, y + foot_length + m, outline)
+    req = np.where(need > 0.0, need + m, 0.0)[:, None, :]   # (B, 1, N)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(req > 0.0, req / phi, 0.0)          # inf where the foot must already be up at s = 0 or 1
+    h_k = ratio.max(axis=-1)                                 # (B, len(FLATNESS))
+    best = np.argmin(h_k, axis=1)
+    h = np.maximum(h_k[np.arange(len(best)), best], margin)
+    h = np.where(np.isfinite(h), h, 0.0)                    # infeasible: flat path, the checks report it
+    return np.stack([y, h[:, None] * phi[best]], axis=-1), h
+
+
+class CFFTG:
+    """The polynomial generator. ``config`` supplies the kinematics (thigh, shin, foot, joint limits),
+    the goal tolerance and the safety distance; pass the RL policy's config to compare like with like."""
+
+    method = "cfftg"
+
+    def __init__(self, config: Config | None = None, *, margin: float | None = None, margin_step: float = 0.01,
+                 apex_step: float = 0.02, max_plans: int = 10):
+        self.config = config if config is not None else Config()
+        self.sp = dynamics.scalar_params(self.config)
+        self.margin = geometry._finite("margin", self.config.reward.safety_distance if margin is None else margin)
+        if self.margin < 0:
+            raise ValueError(f"margin must be >= 0 metres, got {self.margin}")
+        self.margin_step = geometry._finite_positive("margin_step", margin_step)
+        self.apex_step = geometry._finite_positive("apex_step", apex_step)
+        if isinstance(max_plans, bool) or not isinstance(max_plans, (int, np.integer)) or max_plans < 1:
+            raise ValueError(f"max_plans must be an integer >= 1, got {max_plans!r}")
+        self.max_plans = int(max_plans)
+
+    @classmethod
+    def from_policy(cls, path: str | Path, **kwargs) -> "CFFTG":
+        """A CFFTG with the kinematics of an exported policy's config (read and checked as the RL
+        generator reads it; NumPy only)."""
+        from jaxexo.inference import TrajectoryGenerator
+
+        return cls(TrajectoryGenerator.load(path).config, **kwargs)
+
+    # Scenes ---------------------------------------------------------------------------------------
+    def scene(self, obstacle: geometry.Obstacle, pivot: str = "obstacle", pivot_y: float | None = None,
+              start_y: float = 0.0, step_length: float = 0.70) -> dynamics.Scene:
+        """Validate one scenario (metres), as the RL generator does."""
+        return dynamics.make_scene(obstacle, pivot if pivot_y is None else pivot_y, start_y, step_length,
+                                   foot_length=self.config.kinematics.foot_length,
+                                   shape_points=self.config.env.shape_points)
+
+    # Planning ---------------------------------------------------------------------------------------
+    def plan(self, scenes, n_points: int = DEFAULT_POINTS):
+        """Plan, check and re-plan every scene. Returns the final paths (B, N, 2), the via points
+        (B, 3, 2), the number of plans each scene needed (B,), whether it gave up (B,) and the checks
+        of the final paths (``jaxexo.inference.trajectory.measure``'s dict)."""
+        arr = dynamics.stack_scenes(scenes, np.float64)
+        b = len(scenes)
+        foot = float(self.sp.foot_length)
+        # Initial apex: over the middle of the heel positions at which the foot overlaps the obstacle.
+        left = arr.center_y - 0.5 * arr.width
+        right = arr.center_y + 0.5 * arr.width
+        step = arr.goal_y - arr.start_y
+        frac0 = (0.5 * (left - foot + right) - arr.start_y) / step
+        toward_pivot = np.where(arr.pivot_y > arr.start_y + frac0 * step, 1.0, -1.0)
+        margin = np.full(b, self.margin)
+        moves = np.zeros(b, np.int64)                        # apex moves so far
+        frac = frac0.copy()
+        plans = np.zeros(b, np.int64)
+        paths = np.zeros((b, n_points, 2))
+        apex_h = np.zeros(b)
+        todo = np.arange(b)
+        checks = None
+        sizes = np.array([len(sc.outline) for sc in scenes])
+        for _ in range(self.max_plans):
+            # Scenes grouped by outline size, so that a 16-vertex half-ellipse does not pad rectangles.
+            for k in np.unique(sizes[todo]):
+                g = todo[sizes[todo] == k]
+                outline = np.stack([scenes[i].outline for i in g])
+                paths[g], apex_h[g] = plan_paths(arr.start_y[g], arr.goal_y[g], outline, frac[g], margin[g], foot,
+                                                 n_points)
+            p = paths[todo]
+            plans[todo] += 1
+            m = measure(self.sp, p, clearances(foot, p, [scenes[i] for i in todo]), arr.pivot_y[todo], arr.goal_y[todo])
+            checks = m if checks is None else _scatter(checks, m, todo)
+            ok = m["collision_free"] & m["joint_limits_ok"] & m["leg_length_ok"] & m["reached_goal"]
+            bad_kin = ~(m["joint_limits_ok"] & m["leg_length_ok"])
+            fail = todo[~ok]
+            # Joint limits or leg length: move the apex (alternately towards and away from the pivot).
+            mv = fail[bad_kin[~ok]]
+            moves[mv] += 1
+            k = moves[mv]
+            sign = np.where(k % 2 == 1, 1.0, -1.0) * toward_pivot[mv]
+            frac[mv] = frac0[mv] + sign * ((k + 1) // 2) * self.apex_step / step[mv]
+            # The foot touches the obstacle (kinematics fine): raise the apex.
+            up = fail[~bad_kin[~ok]]
+            margin[up] += self.margin_step
+            todo = fail
+            if todo.size == 0:
+                break
+        gave_up = np.zeros(b, bool)
+        gave_up[todo] = True
+        frac_used = np.clip(frac, *APEX_FRAC_RANGE)
+        apex = np.stack([arr.start_y + frac_used * step, apex_h], axis=-1)
+        via = np.stack([np.stack([arr.start_y, np.zeros(b)], -1), apex, np.stack([arr.goal_y, np.zeros(b)], -1)], 1)
+        return paths, via, plans, gave_up, checks
+
+    # Trajectories -----------------------------------------------------------------------------------
+    def _finish(self, scenes, n_points, duration, strict) -> TrajectoryBatch:
+        paths, via, plans, gave_up, checks = self.plan(scenes, n_points)
+        notes = []
+        for i in range(len(scenes)):
+            note = f"cfftg: {plans[i]} plan(s); apex y={via[i, 1, 0]:.3f} m, z={via[i, 1, 1]:.3f} m"
+            notes.append((note + f"; gave up after {self.max_plans} plans",) if gave_up[i] else (note,))
+        batch = assemble(self.method, self.sp, scenes, list(via), paths, np.zeros(len(scenes)), duration, notes,
+                         measured=checks)
+        if strict and not batch.ok.all():
+            raise TrajectoryError(batch[int(np.argmin(batch.ok))])
+        return batch
+
+    def generate(self, obstacle: geometry.Obstacle, *, pivot: str = "obstacle", pivot_y: float | None = None,
+                 start_y: float = 0.0, step_length: float = 0.70, n_points: int = DEFAULT_POINTS,
+                 duration: float = DEFAULT_DURATION, strict: bool = False) -> Trajectory:
+        """One checked trajectory (metres, radians, seconds); ``strict`` raises TrajectoryError instead
+        of returning one that fails a check."""
+        n_points, duration = _check_options(n_points, duration)
+        return self._finish([self.scene(obstacle, pivot, pivot_y, start_y, step_length)], n_points, duration,
+                            strict)[0]
+
+    def generate_batch(self, obstacles, *, pivot="obstacle", pivot_y=None, start_y=0.0, step_length=0.70,
+                       n_points: int = DEFAULT_POINTS, duration: float = DEFAULT_DURATION,
+                       strict: bool = False) -> TrajectoryBatch:
+        """Trajectories for many scenarios, vectorised; every option is one value or one per obstacle."""
+        n_points, duration = _check_options(n_points, duration)
+        return self._finish(self.scenes(obstacles, pivot, pivot_y, start_y, step_length), n_points, duration,
+                            strict)
+
+    def scenes(self, obstacles, pivot="obstacle", pivot_y=None, start_y=0.0, step_length=0.70):
+        return scenes_for(self.scene, obstacles, pivot, pivot_y, start_y, step_length)
+
+
+def _scatter(full: dict, part: dict, idx: np.ndarray) -> dict:
+    """Write the checks of re-planned scenes ``idx`` into the batch's checks (nested dicts of arrays)."""
+    for k, v in part.items():
+        if isinstance(v, dict):
+            _scatter(full[k], v, idx)
+        else:
+            full[k][idx] = v
+    return full
+
+
+def _check_options(n_points, duration):
+    """The RL generator's option checks (n_points, duration); CFFTG has no smoothing."""
+    n_points, _, duration = check_options(n_points, 0.0, duration)
+    return n_points, duration

@@ -1,0 +1,328 @@
+"""Side-by-side evaluation of trajectory generators (the RL policy and CFFTG) on the same scenarios:
+the thesis's metrics (3.3: generation time, hip and knee angles, accuracy eq 3.1) and more, per
+obstacle kind and pivot condition, written as report.md, report.json and figures (``jaxexo eval``).
+
+Scenarios (jaxexo.inference.scenarios, NumPy): ``test`` are the five thesis obstacles of Table 3.1
+cycled over the three pivot conditions with the policy config's start shifts, step lengths and
+offsets, from a fixed seed, like the trainer's eval.json; ``train`` are drawn from the policy's
+training distribution (its obstacle mixture and pivot conditions). Everything here is NumPy only
+(matplotlib for the figures).
+
+Timing: each generator's ``generate`` is called once per scenario, the two generators alternating
+which goes first, in one process, with ``time.perf_counter`` around the call (scene validation,
+generation, smoothing and every check included); ``generate_batch`` on 1000 scenarios is timed the
+same way (median of ``BATCH_REPEATS``), and per kind and pivot each group's own scenarios in one
+``generate_batch`` call, scaled to 1000. Metrics are computed on the trajectories of the single calls.
+
+Per generator, overall, per kind and per pivot: accuracy (eq 3.1: the foot never touches the
+obstacle), strict success (goal reached, collision-free, joint limits and leg length respected),
+time per trajectory (mean, median, p95, ms), mean hip and knee angle of the swing leg (deg, as
+Tables 3.2-3.9), the swing knee's deepest flexion and the swing hip's largest flexion (deg, the
+ranges of Table 3.2), minimum clearance (m), heel path length (m) and integrated squared jerk of the
+heel (m^2/s^5, finite differences over the trajectory's time stamps).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from jaxexo.config import PIVOT_CONDITIONS, Config
+from jaxexo.inference.scenarios import sample_scenarios, training_scenarios
+
+BATCH = 1000
+BATCH_REPEATS = 3
+SCENARIO_SETS = ("train", "test", "all")
+
+
+def make_scenarios(cfg: Config, which: str, n: int, seed: int = 12345) -> list[dict]:
+    """``test``: n scenarios of jaxexo.inference.scenarios.sample_scenarios (the five thesis obstacles
+    over the three pivot conditions); ``train``: n of the config's training distribution; ``all``:
+    both (2 n). Each a dict of ``generate``'s keyword arguments plus ``kind``."""
+    if which not in SCENARIO_SETS:
+        raise ValueError(f"scenarios must be one of {SCENARIO_SETS}, got {which!r}")
+    out: list[dict] = []
+    if which in ("test", "all"):
+        out += sample_scenarios(cfg, n, seed)
+    if which in ("train", "all"):
+        out += training_scenarios(cfg, n, seed + 1)
+    return out
+
+
+def _kwargs(s: dict) -> dict:
+    return {"pivot": s["pivot"], "start_y": s["start_y"], "step_length": s["step_length"]}
+
+
+# --------------------------------------------------------------------------------------------
+# Metrics
+# --------------------------------------------------------------------------------------------
+
+
+def path_length(heel: np.ndarray) -> np.ndarray:
+    """Length of heel paths (..., N, 2), metres."""
+    return np.linalg.norm(np.diff(heel, axis=-2), axis=-1).sum(axis=-1)
+
+
+def squared_jerk(heel: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Integrated squared jerk of heel paths (..., N, 2) sampled at equally spaced times t (N,):
+    sum over the third differences of |d^3 p / dt^3|^2 dt, m^2/s^5."""
+    dt = float(t[1] - t[0])
+    j = np.diff(heel, n=3, axis=-2) / dt**3
+    return (j * j).sum(axis=(-1, -2)) * dt
+
+
+def trajectory_metrics(trajs) -> dict[str, np.ndarray]:
+    """Per-trajectory figures (arrays over the trajectories)."""
+    return {
+        "accurate": np.array([t.checks.collision_free for t in trajs]),
+        "success": np.array([t.ok for t in trajs]),
+        "reached_goal": np.array([t.checks.reached_goal for t in trajs]),
+        "hip_mean": np.array([t.joint_angles[:, 0].mean() for t in trajs]),
+        "knee_mean": np.array([t.joint_angles[:, 1].mean() for t in trajs]),
+        "hip_max": np.array([t.joint_angles[:, 0].max() for t in trajs]),
+        "knee_min": np.array([t.joint_angles[:, 1].min() for t in trajs]),
+        "min_clearance": np.array([t.checks.min_clearance for t in trajs]),
+        "path_length": np.array([path_length(t.heel) for t in trajs]),
+        "jerk": np.array([squared_jerk(t.heel, t.time) for t in trajs]),
+    }
+
+
+def summarize(m: dict[str, np.ndarray], times_s: np.ndarray, mask: np.ndarray) -> dict:
+    """Figures of one group of trajectories (angles in degrees, lengths in metres, times in ms)."""
+    t = times_s[mask] * 1e3
+    d = np.degrees
+    return {
+        "n": int(mask.sum()),
+        "accuracy": float(m["accurate"][mask].mean()),
+        "success": float(m["success"][mask].mean()),
+        "reached_goal": float(m["reached_goal"][mask].mean()),
+        "time_ms_mean": float(t.mean()),
+        "time_ms_median": float(np.median(t)),
+        "time_ms_p95": float(np.percentile(t, 95)),
+        "hip_swing_mean_deg": float(d(m["hip_mean"][mask].mean())),
+        "knee_swing_mean_deg": float(d(m["knee_mean"][mask].mean())),
+        "hip_swing_max_deg": float(d(m["hip_max"][mask].mean())),
+        "knee_swing_min_deg": float(d(m["knee_min"][mask].mean())),
+        "min_clearance_m_mean": float(m["min_clearance"][mask].mean()),
+        "min_clearance_m_worst": float(m["min_clearance"][mask].min()),
+        "path_length_m_mean": float(m["path_length"][mask].mean()),
+        "squared_jerk_mean": float(m["jerk"][mask].mean()),
+    }
+
+
+def batch_time(gen, scenarios: list[dict], size: int = BATCH, repeats: int = BATCH_REPEATS) -> float:
+    """Median wall time (ms) of ``generate_batch`` on ``size`` scenarios (cycled if fewer), timed by
+    the generator benchmark's own function, scaled to a batch of 1000 (exact when size = 1000)."""
+    from jaxexo.benchmarks.generate_bench import time_batch
+
+    t = np.median(time_batch(gen, [scenarios[i % len(scenarios)] for i in range(size)], repeats))
+    return float(t) * 1e3 * BATCH / size
+
+
+def run_generators(generators: dict, scenarios: list[dict], warmup: int = 20):
+    """Generate every scenario with every generator, alternating their order per scenario.
+    Returns {name: (trajectories, per-call seconds)}."""
+    names = list(generators)
+    for s in scenarios[:warmup]:
+        for g in generators.values():
+            g.generate(s["obstacle"], **_kwargs(s))
+    trajs = {n: [] for n in names}
+    times = {n: np.empty(len(scenarios)) for n in names}
+    for i, s in enumerate(scenarios):
+        order = names if i % 2 == 0 else names[::-1]
+        for n in order:
+            g = generators[n]
+            t0 = time.perf_counter()
+            tr = g.generate(s["obstacle"], **_kwargs(s))
+            times[n][i] = time.perf_counter() - t0
+            trajs[n].append(tr)
+    return {n: (trajs[n], times[n]) for n in names}
+
+
+def evaluate_generators(generators: dict, scenarios: list[dict], batch_size: int = BATCH,
+                        batch_repeats: int = BATCH_REPEATS) -> tuple[dict, dict]:
+    """The report's figures per generator, and the trajectories (for figures)."""
+    runs = run_generators(generators, scenarios)
+    kinds = np.array([s["kind"] for s in scenarios])
+    pivots = np.array([s["pivot"] for s in scenarios])
+    report, trajs = {}, {}
+    groups = {
+        "by_kind": {k: kinds == k for k in dict.fromkeys(kinds)},
+        "by_pivot": {p: pivots == p for p in PIVOT_CONDITIONS if (pivots == p).any()},
+        "by_kind_pivot": {f"{k}/{p}": (kinds == k) & (pivots == p) for k in dict.fromkeys(kinds)
+                          for p in PIVOT_CONDITIONS if ((kinds == k) & (pivots == p)).any()},
+    }
+    for name, (tr, times) in runs.items():
+        gen = generators[name]
+        m = trajectory_metrics(tr)
+        entry = summarize(m, times, np.ones(len(tr), bool))
+        entry["batch_1000_ms"] = batch_time(gen, scenarios, batch_size, batch_repeats) if batch_size else None
+        entry["batch_size"] = batch_size
+        for key, masks in groups.items():
+            entry[key] = {}
+            for g, mask in masks.items():
+                entry[key][g] = summarize(m, times, mask)
+                # The group's own scenarios in one generate_batch call, scaled to 1000.
+                sub = [scenarios[i] for i in np.flatnonzero(mask)]
+                entry[key][g]["batch_1000_ms"] = batch_time(gen, sub, len(sub), 1) if batch_size else None
+        entry["failures"] = [{"scenario": i, "kind": str(kinds[i]), "pivot": str(pivots[i]),
+                              "reasons": list(t.checks.reasons)} for i, t in enumerate(tr) if not t.ok][:20]
+        report[name] = entry
+        trajs[name] = tr
+    return report, trajs
+
+
+# --------------------------------------------------------------------------------------------
+# Report files
+# --------------------------------------------------------------------------------------------
+
+
+def _row(name: str, r: dict) -> str:
+    b = r.get("batch_1000_ms")
+    return (f"| {name} | {r['n']} | {100 * r['accuracy']:.1f} | {100 * r['success']:.1f} | {r['time_ms_mean']:.3f} | "
+            f"{r['time_ms_median']:.3f} | {r['time_ms_p95']:.3f} | {r['hip_swing_mean_deg']:.1f} | "
+            f"{r['knee_swing_mean_deg']:.1f} | {r['hip_swing_max_deg']:.1f} | {r['knee_swing_min_deg']:.1f} | "
+            f"{100 * r['min_clearance_m_mean']:.2f} | {100 * r['path_length_m_mean']:.1f} | {r['squared_jerk_mean']:.3g} | "
+            f"{'-' if b is None else f'{b:.1f}'} |")
+
+
+TABLE_HEAD = ("| {what} | n | accuracy % (eq 3.1) | strict success % | time mean ms | median ms | p95 ms | "
+              "hip swing mean deg | knee swing mean deg | hip swing max deg | knee swing min deg | "
+              "min clearance cm | path length cm | sq. jerk m²/s⁵ | batch of 1000 ms |\n"
+              "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+
+
+def markdown(report: dict, title: str, context: list[str]) -> str:
+    lines = [f"# {title}", "", *context, "", "## Overall", "", TABLE_HEAD.format(what="generator")]
+    for name, r in report.items():
+        lines.append(_row(name, r))
+    lines += ["", "| generator | batch of 1000 (ms, median) |", "|---|---:|"]
+    for name, r in report.items():
+        b = r["batch_1000_ms"]
+        scaled = "" if r["batch_size"] in (BATCH, 0) else f" (timed on {r['batch_size']}, scaled)"
+        lines.append(f"| {name} | {'-' if b is None else f'{b:.1f}'}{scaled} |")
+    for key, label in (("by_kind", "obstacle kind"), ("by_pivot", "pivot condition"),
+                       ("by_kind_pivot", "kind / pivot")):
+        lines += ["", f"## By {label}", "", TABLE_HEAD.format(what=f"{label} (generator)")]
+        groups = list(next(iter(report.values()))[key])
+        for g in groups:
+            for name, r in report.items():
+                if g in r[key]:
+                    lines.append(_row(f"{g} ({name})", r[key][g]))
+    for name, r in report.items():
+        if r["failures"]:
+            lines += ["", f"## First failures of {name}", ""]
+            lines += [f"- scenario {f['scenario']} ({f['kind']}, pivot {f['pivot']}): {'; '.join(f['reasons'])}"
+                      for f in r["failures"]]
+    lines += ["", "Units: angles in degrees (hip flexion +, knee flexion -), clearance and path length in cm, "
+              "times in ms; accuracy counts trajectories whose foot never touches the obstacle (thesis eq 3.1), "
+              "strict success also needs the goal, the joint limits and the leg length."]
+    return "\n".join(lines) + "\n"
+
+
+def plot_overlays(path: Path, trajs: dict, scenarios: list[dict], per_kind: int = 25) -> None:
+    """Heel paths over the obstacle, one panel per kind, each generator in its colour (Fig. 3.29)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    kinds = list(dict.fromkeys(s["kind"] for s in scenarios))
+    fig, axes = plt.subplots(1, len(kinds), figsize=(4.2 * len(kinds), 3.6), squeeze=False)
+    colours = dict(zip(trajs, ("tab:blue", "tab:orange", "tab:green", "tab:red")))
+    for ax, k in zip(axes[0], kinds):
+        idx = [i for i, s in enumerate(scenarios) if s["kind"] == k][:per_kind]
+        for i in idx:
+            o = scenarios[i]["obstacle"].outline
+            ax.fill(o[:, 0] * 100, o[:, 1] * 100, color="0.85", zorder=0)
+        for name, tr in trajs.items():
+            for j, i in enumerate(idx):
+                h = tr[i].heel * 100
+                ax.plot(h[:, 0], h[:, 1], color=colours[name], lw=0.8, alpha=0.6,
+                        label=name if j == 0 else None)
+        ax.set_title(k)
+        ax.set_xlabel("y (cm)")
+        ax.set_aspect("equal")
+        ax.grid(alpha=0.3)
+    axes[0, 0].set_ylabel("heel z (cm)")
+    axes[0, 0].legend(loc="upper left", fontsize=8)
+    fig.suptitle("Heel paths over each obstacle (thesis Fig. 3.29); obstacles grey")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_joint_profiles(path: Path, trajs: dict, scenarios: list[dict], per_kind: int = 10) -> None:
+    """Swing hip and knee angles over the swing, per generator and kind (thesis Fig. 3.11-3.28)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    kinds = list(dict.fromkeys(s["kind"] for s in scenarios))
+    names = list(trajs)
+    fig, axes = plt.subplots(2 * len(names), len(kinds), figsize=(3.6 * len(kinds), 2.6 * 2 * len(names)),
+                             squeeze=False, sharex=True)
+    for c, k in enumerate(kinds):
+        idx = [i for i, s in enumerate(scenarios) if s["kind"] == k][:per_kind]
+        for r, name in enumerate(names):
+            for j, (col, label) in enumerate(((0, "hip swing"), (1, "knee swing"))):
+                ax = axes[2 * r + j, c]
+                for i in idx:
+                    t = trajs[name][i]
+                    ax.plot(t.time / t.time[-1], np.degrees(t.joint_angles[:, col]), lw=0.8, alpha=0.7)
+                ax.set_title(f"{name}: {label}, {k}", fontsize=9)
+                ax.grid(alpha=0.3)
+                if c == 0:
+                    ax.set_ylabel("angle (deg)")
+    for ax in axes[-1]:
+        ax.set_xlabel("swing phase (t / duration)")
+    fig.suptitle("Swing-leg joint angles (thesis Fig. 3.11-3.28): hip flexion +, knee flexion -")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def write_report(out: str | Path, report: dict, trajs: dict, scenarios: list[dict], title: str,
+                 context: list[str], figures: bool = True) -> dict:
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "report.json").write_text(json.dumps(report, indent=1, allow_nan=False) + "\n")
+    (out / "report.md").write_text(markdown(report, title, context))
+    if figures:
+        plot_overlays(out / "trajectories.png", trajs, scenarios)
+        plot_joint_profiles(out / "joint_angles.png", trajs, scenarios)
+    return report
+
+
+def run_eval(policy: str | Path, out: str | Path, against: str | None = "cfftg", scenarios: str = "test",
+             n: int = 1000, seed: int = 12345, figures: bool = True, batch_size: int = BATCH) -> dict:
+    """``batch_size``: scenarios per timed ``generate_batch`` call (the figure is scaled to 1000)."""
+    """``jaxexo eval``: the policy (and CFFTG) on the chosen scenarios; writes the report."""
+    from jaxexo.baselines import CFFTG
+    from jaxexo.benchmarks.machine import machine_info
+    from jaxexo.inference import TrajectoryGenerator
+
+    rl = TrajectoryGenerator.load(policy)
+    gens = {"rl": rl}
+    if against == "cfftg":
+        gens["cfftg"] = CFFTG(rl.config)
+    elif against is not None:
+        raise ValueError(f"against must be 'cfftg' or None, got {against!r}")
+    sc = make_scenarios(rl.config, scenarios, n, seed)
+    report, trajs = evaluate_generators(gens, sc, batch_size)
+    info = machine_info()
+    context = [f"Policy `{policy}`; scenarios `{scenarios}` ({len(sc)}, seed {seed}); both generators in one "
+               f"process, alternating; {info['cpu']}, {info['cores']} cores.",
+               "Thesis reference (Tables 3.9-3.11): final model accuracy 94.7 %, 2.31 ms per trajectory, "
+               "1.764 s per 1000; CFFTG about 2 ms per trajectory."]
+    for entry in report.values():
+        entry["scenarios"] = scenarios
+        entry["policy"] = str(policy)
+    return write_report(out, report, trajs, sc, "jaxexo eval: RL generator" + (" vs CFFTG" if against else ""),
+                        context, figures)
+
+

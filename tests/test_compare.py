@@ -1,0 +1,143 @@
+"""``jaxexo eval`` (jaxexo.compare), ``jaxexo reproduce`` and ``jaxexo bench``'s summary, end to end on
+the small policy trained once per session (conftest.trained_run)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from jaxexo.compare import evaluate_generators, make_scenarios, path_length, squared_jerk
+
+pytest.importorskip("jax")
+
+
+def test_path_length_and_jerk_are_exact_on_known_paths():
+    t = np.linspace(0.0, 2.0, 41)
+    line = np.stack([0.3 * t, 0.4 * t], -1)
+    np.testing.assert_allclose(path_length(line), 0.5 * 2.0)
+    np.testing.assert_allclose(squared_jerk(line, t), 0.0, atol=1e-9)
+    a = 0.7
+    cubic = np.stack([a * t**3, 0 * t], -1)          # jerk 6a everywhere
+    np.testing.assert_allclose(squared_jerk(cubic, t), (6 * a) ** 2 * (len(t) - 3) * (t[1] - t[0]), rtol=1e-9)
+
+
+@pytest.fixture(scope="module")
+def eval_out(trained_run, tmp_path_factory):
+    from jaxexo.cli import main
+
+    out = tmp_path_factory.mktemp("eval")
+    assert main(["eval", "--policy", str(trained_run / "policy.npz"), "--against", "cfftg", "--scenarios", "all",
+                 "--n", "30", "--batch", "100", "--out", str(out)]) == 0
+    return out
+
+
+def test_eval_writes_report_json_md_and_figures(eval_out):
+    report = json.loads((eval_out / "report.json").read_text())
+    assert set(report) == {"rl", "cfftg"}
+    for name, r in report.items():
+        for key in ("accuracy", "success", "time_ms_median", "batch_1000_ms", "by_kind", "by_pivot"):
+            assert key in r, (name, key)
+        assert r["n"] == 60 and r["batch_size"] == 100 and r["batch_1000_ms"] > 0
+        # Test set (five thesis obstacles) and the training distribution (Base 1-3, rectangles).
+        assert set(r["by_kind"]) == {"base1", "base2", "base3", "triangle", "half_circle", "rectangle"}
+        assert set(r["by_pivot"]) == {"agent", "obstacle", "between"}
+    md = (eval_out / "report.md").read_text()
+    assert "| rl | 60 |" in md and "| cfftg | 60 |" in md and "By obstacle kind" in md
+    assert "(timed on 100, scaled)" in md
+    for fig in ("trajectories.png", "joint_angles.png"):
+        assert (eval_out / fig).stat().st_size > 10_000
+
+
+def test_eval_numbers_are_consistent(eval_out):
+    report = json.loads((eval_out / "report.json").read_text())
+    for r in report.values():
+        for key in ("by_kind", "by_pivot", "by_kind_pivot"):
+            groups = r[key].values()
+            assert sum(g["n"] for g in groups) == r["n"]
+            assert all(g["batch_1000_ms"] > 0 for g in groups)
+            for fig in ("accuracy", "success", "time_ms_mean", "hip_swing_mean_deg", "path_length_m_mean"):
+                np.testing.assert_allclose(sum(g[fig] * g["n"] for g in groups) / r["n"], r[fig], rtol=1e-9)
+        assert r["success"] <= r["accuracy"]
+        assert r["time_ms_median"] <= r["time_ms_p95"]
+        assert r["knee_swing_min_deg"] <= r["knee_swing_mean_deg"] <= 0.0 <= r["hip_swing_mean_deg"]
+        assert r["min_clearance_m_worst"] <= r["min_clearance_m_mean"]
+        assert r["path_length_m_mean"] > 0.6           # at least the step length
+    # CFFTG plans every thesis and training obstacle of this config.
+    assert report["cfftg"]["success"] == 1.0
+
+
+def test_eval_figures_match_the_generators_own_outputs(trained_run):
+    # The report's figures are those of the trajectories the generators return.
+    from jaxexo.baselines import CFFTG
+    from jaxexo.inference import TrajectoryGenerator
+
+    rl = TrajectoryGenerator.load(trained_run / "policy.npz")
+    gens = {"rl": rl, "cfftg": CFFTG(rl.config)}
+    sc = make_scenarios(rl.config, "test", 20)
+    report, trajs = evaluate_generators(gens, sc, batch_size=0)
+    for name, g in gens.items():
+        b = g.generate_batch([s["obstacle"] for s in sc], pivot=[s["pivot"] for s in sc],
+                             start_y=[s["start_y"] for s in sc], step_length=[s["step_length"] for s in sc])
+        assert report[name]["success"] == pytest.approx(b.ok.mean())
+        assert report[name]["accuracy"] == pytest.approx(b.collision_free.mean())
+        np.testing.assert_allclose(report[name]["hip_swing_mean_deg"],
+                                   np.degrees(b.joint_angles[..., 0].mean(axis=1).mean()), rtol=1e-6)
+        assert report[name]["batch_1000_ms"] is None
+    with pytest.raises(ValueError, match="scenarios"):
+        make_scenarios(rl.config, "everything", 5)
+
+
+def test_reproduce_tabulates_beside_the_thesis(trained_run, tmp_path):
+    from jaxexo.reproduce import run_reproduce
+
+    # Finished runs are reused: stand the session's small policy in for models (a) and final.
+    for name in ("a", "final"):
+        d = tmp_path / "runs" / name
+        d.mkdir(parents=True)
+        for f in ("policy.npz", "eval.json"):
+            shutil.copy(trained_run / f, d / f)
+    res = run_reproduce(tmp_path, models=("a", "final"), n=15, batch_size=50, progress=lambda *_: None)
+    assert set(res) == {"a", "final"} and "cfftg" in res["final"] and "cfftg" not in res["a"]
+    md = (tmp_path / "reproduce.md").read_text()
+    # Thesis values beside jaxexo's: Table 3.2 (a), 3.3, 3.10 accuracies, 3.11 CFFTG times.
+    for thesis_value in ("2.46 / -51.0 / 35.4", "2.53 / -47.2 / 41.1", "| a | 58.2 |", "| final | 94.7 |", "2.055"):
+        assert thesis_value in md, thesis_value
+    acc = 100 * res["final"]["rl"]["accuracy"]
+    assert f"| final | 94.7 | {acc:.1f} |" in md
+    assert json.loads((tmp_path / "reproduce.json").read_text())["a"]["rl"]["n"] == 15
+
+
+def test_bench_summary_from_the_compare_part(trained_run, tmp_path):
+    from jaxexo.benchmarks.run_all import run_all
+
+    with pytest.raises(ValueError, match="--skip"):
+        run_all(tmp_path, skip="gpu")
+    res = run_all(tmp_path, policy=trained_run / "policy.npz", skip="env,train,generate,baseline", n=20,
+                  batch_size=50, progress=lambda *_: None)
+    summary = next(tmp_path.glob("summary_*.md")).read_text()
+    assert "| rl on 20 test scenarios" in summary and "| cfftg on 20 test scenarios" in summary
+    assert f"{res['compare']['cfftg']['success']:.3f}" in summary
+    assert next(tmp_path.glob("compare_*.json")).stat().st_size > 1000
+    # Skipped parts are summarised from their latest result files.
+    for f in tmp_path.glob("summary_*"):
+        f.unlink()
+    run_all(tmp_path, skip=",".join(("env", "train", "generate", "compare", "baseline")), progress=lambda *_: None)
+    again = next(tmp_path.glob("summary_*.md")).read_text()
+    assert "| rl on 20 test scenarios" in again and "compare: from compare_" in again
+
+
+def test_cli_generate_cfftg_with_a_policys_kinematics(trained_run, tmp_path):
+    from jaxexo.baselines import CFFTG
+    from jaxexo.cli import main
+    from jaxexo.inference import TrajectoryGenerator
+
+    g = CFFTG.from_policy(trained_run / "policy.npz")
+    assert g.config == TrajectoryGenerator.load(trained_run / "policy.npz").config
+    out = tmp_path / "c.json"
+    assert main(["generate", "--method", "cfftg", "--policy", str(trained_run / "policy.npz"), "--obstacle",
+                 "half_circle", "--pivot", "between", "--out", str(tmp_path / "c.csv"), "--json", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["method"] == "cfftg" and doc["checks"]["ok"] and len(doc["raw"]) == 3
