@@ -629,6 +629,9 @@ def ray_cluster(jax_cache):
     pytest.importorskip("ray")
     tmp = tempfile.mkdtemp(prefix="jxr", dir="/tmp")   # short: Ray's socket paths must fit 107 bytes
     env = _subprocess_env(jax_cache)
+    # A private HOME: a token in the user's ~/.ray/auth_token (Ray's token authentication) must not
+    # leak into this loopback cluster, whose nodes and client would then disagree about it.
+    env["HOME"] = tmp
     port = _free_port()
     common = ["--node-ip-address=127.0.0.1", "--object-store-memory=100000000"]
     head = _RayNode(["--head", f"--port={port}", "--num-cpus=0", "--include-dashboard=false", f"--temp-dir={tmp}",
