@@ -335,8 +335,11 @@ def jax_cache(tmp_path_factory):
 
 def _subprocess_env(cache) -> dict:
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    # RAY_AUTH_MODE: the test cluster listens on loopback only; without it Ray turns token
+    # authentication on whenever ~/.ray/auth_token exists, a file other Ray runs on this machine
+    # create and replace (a cluster and its client could then hold different tokens).
     env.update(JAX_COMPILATION_CACHE_DIR=str(cache), JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="0.5",
-               JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES="0", RAY_USAGE_STATS_ENABLED="0")
+               JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES="0", RAY_USAGE_STATS_ENABLED="0", RAY_AUTH_MODE="disabled")
     return env
 
 
