@@ -27,12 +27,10 @@ import optax
 from flax import struct
 
 from jaxexo.config import Config, num_updates
-from jaxexo.devices import unrolled_threefry_on_cpu
 from jaxexo.env import EnvParams, ExoStepEnv
 from jaxexo.train import td_lambda
 from jaxexo.train.network import QNetwork
 
-unrolled_threefry_on_cpu()
 
 METRICS = ("episodes", "return_sum", "successes", "accurate", "env_steps", "loss", "q_mean", "epsilon")
 
