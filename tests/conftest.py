@@ -7,6 +7,7 @@ that ``import jaxexo`` stays free of JAX.
 
 from __future__ import annotations
 
+import contextlib
 import copy
 from pathlib import Path
 
@@ -148,3 +149,26 @@ def trained_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("trained") / "run"
     run_training(cfg, out, seed=0, progress=False, eval_episodes=200)
     return out
+
+
+@contextlib.contextmanager
+def jax_compilation_cache(directory):
+    """A persistent JAX compilation cache in ``directory`` while the block runs (the previous settings
+    after): identical programs compiled again, in this process or in subprocesses given the same
+    directory, are read back instead."""
+    import jax
+    from jax.experimental.compilation_cache import compilation_cache as cc
+
+    names = ("jax_compilation_cache_dir", "jax_persistent_cache_min_compile_time_secs",
+             "jax_persistent_cache_min_entry_size_bytes")
+    old = {n: getattr(jax.config, n) for n in names}
+    jax.config.update("jax_compilation_cache_dir", str(directory))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    cc.reset_cache()
+    try:
+        yield directory
+    finally:
+        for n, v in old.items():
+            jax.config.update(n, v)
+        cc.reset_cache()

@@ -29,7 +29,7 @@ from jaxexo.config import ConfigError, config_from_dict, load_config
 from jaxexo.config_io import config_to_toml
 from jaxexo.policy import FORMAT_VERSION, PolicyFileError, load_policy
 
-from conftest import ROOT
+from conftest import ROOT, jax_compilation_cache
 
 jax = pytest.importorskip("jax")
 import jax.numpy as jnp  # noqa: E402
@@ -45,20 +45,8 @@ COL = {m: i for i, m in enumerate(METRICS)}
 def _compilation_cache(tmp_path_factory):
     """A persistent compilation cache for this module only: identical programs (the driver's init,
     chunk and evaluation programs, run again by the resume and CLI tests) are compiled once."""
-    from jax.experimental.compilation_cache import compilation_cache as cc
-
-    names = ("jax_compilation_cache_dir", "jax_persistent_cache_min_compile_time_secs",
-             "jax_persistent_cache_min_entry_size_bytes")
-    old = {n: getattr(jax.config, n) for n in names}
-    cache = tmp_path_factory.mktemp("jax_cache")
-    jax.config.update("jax_compilation_cache_dir", str(cache))
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
-    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
-    cc.reset_cache()
-    yield cache
-    for n, v in old.items():
-        jax.config.update(n, v)
-    cc.reset_cache()
+    with jax_compilation_cache(tmp_path_factory.mktemp("jax_cache")) as cache:
+        yield cache
 
 
 # A fixed scene: Base 1 at the default place, pivot under the obstacle, no start shift or jitter.

@@ -18,7 +18,6 @@ The target network is copied every ``target_period`` updates ("hard") or moved b
 from __future__ import annotations
 
 import dataclasses
-import math
 from typing import Any, NamedTuple
 
 import jax
@@ -27,10 +26,13 @@ import numpy as np
 import optax
 from flax import struct
 
-from jaxexo.config import Config
+from jaxexo.config import Config, num_updates
+from jaxexo.devices import unrolled_threefry_on_cpu
 from jaxexo.env import EnvParams, ExoStepEnv
 from jaxexo.train import td_lambda
 from jaxexo.train.network import QNetwork
+
+unrolled_threefry_on_cpu()
 
 METRICS = ("episodes", "return_sum", "successes", "accurate", "env_steps", "loss", "q_mean", "epsilon")
 
@@ -97,23 +99,8 @@ class Transition(NamedTuple):
     reward: jnp.ndarray
     terminated: jnp.ndarray
     truncated: jnp.ndarray
-    final_obs: jnp.ndarray
+    target_q: jnp.ndarray     # target network at the step's final observation: max_a (off-policy) or all of Q
     greedy: jnp.ndarray
-
-
-def num_updates(cfg: Config) -> int:
-    """Updates that the budget can need: env steps / (N T), or for an episode budget the bound at
-    which every environment has run ceil(budget / N) episodes to the step limit. Updates past the
-    budget are masked (``Trainer.active``), so the bound may be generous."""
-    t = cfg.train
-    per = t.num_envs * t.rollout_steps
-    bounds = []
-    if t.budget_env_steps:
-        bounds.append(math.ceil(t.budget_env_steps / per))
-    if t.budget_episodes:
-        per_env_steps = math.ceil(t.budget_episodes / t.num_envs) * cfg.env.max_steps
-        bounds.append(math.ceil(per_env_steps / t.rollout_steps))
-    return max(1, min(bounds))
 
 
 class Trainer:
@@ -251,15 +238,21 @@ class Trainer:
             a, greedy = self._act(ts.params, obs, ka, eps)
             obs2, env_state, r, term, trunc, info = self._env_step(ke, env_state, a, hyper)
             stats, row = self._episode_stats(stats, r, term, trunc, info)
-            return (env_state, obs2, stats, key), (Transition(obs, a, r, term, trunc, info["final_observation"], greedy), row)
+            # The bootstrap's target-network pass runs here, on this step's N observations, rather than
+            # on all T x N after the rollout: the same arithmetic on a working set that stays in cache.
+            q_final = self.net.apply(ts.target_params, info["final_observation"])    # (N, A)
+            target_q = jnp.max(q_final, axis=-1) if self.off_policy else q_final
+            return (env_state, obs2, stats, key), (Transition(obs, a, r, term, trunc, target_q, greedy), row)
 
         (env_state, obs, stats, key), (tr, rows) = jax.lax.scan(
             step, (ts.env_state, ts.obs, ts.stats, ts.key), None, length=self.tc.rollout_steps)
         done = tr.terminated | tr.truncated
-        q_final = self.net.apply(ts.target_params, tr.final_obs)                 # (T, N, A)
-        next_action = jnp.concatenate([tr.action[1:], tr.action[-1:]], axis=0)
-        last = jnp.arange(self.tc.rollout_steps)[:, None] == self.tc.rollout_steps - 1
-        boot = self._bootstrap(q_final, next_action, done | last, eps)
+        if self.off_policy:
+            boot = tr.target_q                                                        # eq 2.28
+        else:
+            next_action = jnp.concatenate([tr.action[1:], tr.action[-1:]], axis=0)
+            last = jnp.arange(self.tc.rollout_steps)[:, None] == self.tc.rollout_steps - 1
+            boot = self._bootstrap(tr.target_q, next_action, done | last, eps)        # eq 2.27
         cont = tr.greedy if self.off_policy else jnp.ones_like(tr.greedy)
         returns = td_lambda.lambda_returns(tr.reward, boot, tr.terminated, done, cont, hyper.gamma, hyper.lam)
 
@@ -277,9 +270,12 @@ class Trainer:
             # Minibatches are blocks of environments (all T steps of each), shuffled by a permutation
             # of the N environments: as random as a permutation of the T x N samples for i.i.d.
             # environments, and far cheaper (no sort of T x N keys).
-            perm = jax.random.permutation(key, tr.obs.shape[1])
-            mb = jax.tree.map(
-                lambda x: jnp.swapaxes(x[:, perm].reshape((x.shape[0], n_mb, -1) + x.shape[2:]), 0, 1), data)
+            if n_mb == 1:   # one minibatch of every sample: its order does not matter
+                mb = jax.tree.map(lambda x: x[None], data)
+            else:
+                perm = jax.random.permutation(key, tr.obs.shape[1])
+                mb = jax.tree.map(
+                    lambda x: jnp.swapaxes(x[:, perm].reshape((x.shape[0], n_mb, -1) + x.shape[2:]), 0, 1), data)
 
             def minibatch(carry, m):
                 params, opt_state = carry

@@ -1,0 +1,22 @@
+"""Sweep benchmarks: 64 vmapped configurations against one large run, one CPU device against all,
+agents trained per minute for 1, 8, 64 and 256 configurations, and the 64 x 4 seeds x 256 envs x
+2 M env-steps run of configs/sweeps/benchmark.toml timed against 10 minutes. Writes
+benchmarks/results/sweep_<date>_<machine>.json and .md. Takes about 20 minutes on 2 cores; run it on
+an otherwise idle machine.
+
+Run: python benchmarks/bench_sweep.py [--no-target]"""
+
+import sys
+from pathlib import Path
+
+from jaxexo.devices import use_all_cpu_cores
+
+use_all_cpu_cores()
+
+from jaxexo.benchmarks.sweep_bench import run_sweep_benchmark  # noqa: E402
+
+if __name__ == "__main__":
+    root = Path(__file__).resolve().parent.parent
+    run_sweep_benchmark(root / "benchmarks" / "results", root / "configs" / "sweeps" / "benchmark.toml",
+                        target="--no-target" not in sys.argv[1:])
+    sys.exit(0)

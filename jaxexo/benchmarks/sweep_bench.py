@@ -1,0 +1,147 @@
+"""Sweep benchmarks (issue targets for ``jaxexo sweep``), on the static settings of
+configs/sweeps/benchmark.toml (the thesis network 2-64-32-32-32-36, heel (y, z) observation, 256
+environments, T = 16, 2 minibatches):
+
+- vmapping costs nothing: training env-steps/s of 64 agents (configurations) x 256 environments,
+  vmapped and split over the CPU devices, against one large single run of 64 x 256 = 16384
+  environments (data parallel over the same devices, as ``jaxexo train`` runs);
+- devices: the same 64-agent program on one CPU device and on all of them;
+- agents trained per minute for 1, 8, 64 and 256 configurations (one seed each, a smaller budget per
+  agent), each a whole ``run_sweep`` (planning, compilation, training, evaluation, results, report);
+- the target run: configs/sweeps/benchmark.toml (64 configurations x 4 seeds x 2 M env steps,
+  512 M env steps) through ``run_sweep``, wall time including compilation, against 10 minutes.
+
+Throughputs are medians over repeated compiled calls after a warm-up call that compiles.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import tempfile
+import time
+from pathlib import Path
+
+import jax
+import numpy as np
+
+from jaxexo.benchmarks.train_bench import throughput
+from jaxexo.config import Config
+from jaxexo.sweep.program import over_agents
+from jaxexo.sweep.spec import load_sweep, sweep_from_dict
+from jaxexo.train.trainer import Hyperparams, Trainer
+
+TARGET_S = 600.0
+
+
+def agents_throughput(cfg: Config, n_agents: int, devices, updates: int, repeats: int = 3) -> dict:
+    """Training env-steps/s of ``n_agents`` agents (learning rates spread over a decade, one seed
+    each) vmapped and split over ``devices``: the sweep's training program without its evaluation."""
+    tr = Trainer(cfg)
+    h = Hyperparams.from_config(cfg)
+    hyper = jax.tree.map(lambda x: np.broadcast_to(np.asarray(x), (n_agents,) + np.shape(x)).copy(), h)
+    hyper = hyper.replace(lr=np.asarray(cfg.train.lr * np.logspace(-0.5, 0.5, n_agents), np.float32))
+    keys = np.stack([np.asarray(jax.random.PRNGKey(s)) for s in range(n_agents)])
+    ts = over_agents(tr.init, devices, 2)(keys, hyper)
+    run = over_agents(lambda t, hh: tr.run(t, hh, updates), devices, 2)
+    t0 = time.perf_counter()
+    ts, _ = jax.block_until_ready(run(ts, hyper))
+    compile_s = time.perf_counter() - t0
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        ts, _ = jax.block_until_ready(run(ts, hyper))
+        times.append(time.perf_counter() - t0)
+    steps = n_agents * updates * cfg.train.num_envs * cfg.train.rollout_steps
+    med = float(np.median(times))
+    return {"agents": n_agents, "devices": len(devices), "env_steps_per_call": steps, "median_s": med,
+            "env_steps_per_s": steps / med, "compile_s": compile_s, "repeats": repeats}
+
+
+def agents_per_minute(base_raw: dict, n_configs: int, budget_env_steps: int, progress=print) -> dict:
+    """A whole sweep of ``n_configs`` learning rates x 1 seed at ``budget_env_steps`` each."""
+    from jaxexo.sweep.runner import run_sweep
+
+    raw = copy.deepcopy(base_raw)
+    raw["train"]["budget_env_steps"] = budget_env_steps
+    lrs = [float(x) for x in np.logspace(-4, -2, n_configs)]
+    raw["sweep"] = {"seeds": 1, "grid": {"train.lr": lrs}}
+    sweep = sweep_from_dict(raw)
+    with tempfile.TemporaryDirectory() as d:
+        t0 = time.perf_counter()
+        res = run_sweep(sweep, Path(d) / "sweep", progress=False)
+        wall = time.perf_counter() - t0
+    row = {"configs": n_configs, "agents": sweep.num_agents, "env_steps": res["env_steps"], "wall_s": wall,
+           "agents_per_min": sweep.num_agents / wall * 60.0, "env_steps_per_s": res["env_steps"] / wall,
+           "best_success": res["ranking"][0]["success_mean"]}
+    progress(f"  {n_configs:4d} configurations: {wall:7.1f} s, {row['agents_per_min']:7.1f} agents/min, "
+             f"{row['env_steps_per_s'] / 1e6:.3f} M env-steps/s (all included)")
+    return row
+
+
+def run_sweep_benchmark(out_dir, sweep_file: str | Path, target: bool = True, per_minute_budget: int = 500_000,
+                        progress=print) -> dict:
+    from jaxexo.benchmarks.machine import write_result
+    from jaxexo.sweep.runner import run_sweep
+
+    sweep = load_sweep(sweep_file)
+    cfg = sweep.members[0].config
+    tc = cfg.train
+    devices = jax.local_devices()
+    progress(f"static settings: hidden {list(tc.hidden)}, obs {cfg.env.obs_mode}, {tc.num_envs} envs/agent, "
+             f"T = {tc.rollout_steps}, {tc.num_minibatches} minibatch(es); {len(devices)} CPU device(s)")
+    updates = 10
+    sweep64 = agents_throughput(cfg, 64, devices, updates)
+    progress(f"64 agents x {tc.num_envs} envs, {len(devices)} devices: {sweep64['env_steps_per_s'] / 1e6:.3f} M env-steps/s")
+    one_dev = agents_throughput(cfg, 64, devices[:1], updates)
+    progress(f"64 agents x {tc.num_envs} envs, 1 device: {one_dev['env_steps_per_s'] / 1e6:.3f} M env-steps/s")
+    big = dataclasses.replace(cfg, train=dataclasses.replace(tc, num_envs=64 * tc.num_envs))
+    single = throughput(big, updates, repeats=3, devices=devices)
+    progress(f"one run of {big.train.num_envs} envs, {single['devices']} devices: "
+             f"{single['env_steps_per_s'] / 1e6:.3f} M env-steps/s")
+
+    progress(f"agents trained per minute ({per_minute_budget:,} env steps each, one seed, everything included):")
+    base_raw = {k: v for k, v in sweep.to_dict().items() if k != "sweep"}
+    per_minute = [agents_per_minute(base_raw, n, per_minute_budget, progress) for n in (1, 8, 64, 256)]
+
+    full = None
+    if target:
+        with tempfile.TemporaryDirectory() as d:
+            t0 = time.perf_counter()
+            res = run_sweep(sweep, Path(d) / "sweep", progress=True)
+            wall = time.perf_counter() - t0
+        full = {"agents": sweep.num_agents, "env_steps": res["env_steps"], "wall_s": wall,
+                "env_steps_per_s": res["env_steps"] / wall, "target_s": TARGET_S,
+                "best": {k: res["ranking"][0][k] for k in ("label", "success_mean", "success_std", "held_out_success")},
+                "diverged_agents": sum(e["diverged"] for e in res["ranking"])}
+        progress(f"target run: {sweep.num_agents} agents, {res['env_steps']:,.0f} env steps in {wall:.1f} s "
+                 f"({'within' if wall <= TARGET_S else 'over'} the {TARGET_S:.0f} s target)")
+
+    lines = ["# Sweep benchmarks", "",
+             f"Static settings (configs/sweeps/benchmark.toml): network 2-{'-'.join(map(str, tc.hidden))}-36, "
+             f"observation `{cfg.env.obs_mode}`, {tc.num_envs} environments per agent, T = {tc.rollout_steps}, "
+             f"{tc.num_minibatches} minibatch(es) per update, forward view, {tc.control}.", "",
+             "| what | M env-steps/s |", "|---|---:|",
+             f"| 64 agents × {tc.num_envs} envs (vmapped), {len(devices)} CPU devices | {sweep64['env_steps_per_s'] / 1e6:.3f} |",
+             f"| 64 agents × {tc.num_envs} envs (vmapped), 1 CPU device | {one_dev['env_steps_per_s'] / 1e6:.3f} |",
+             f"| one run of {big.train.num_envs} envs, {single['devices']} CPU devices (data parallel) | "
+             f"{single['env_steps_per_s'] / 1e6:.3f} |", "",
+             f"| configurations (1 seed, {per_minute_budget:,} env steps each) | wall s (all included) | agents per minute | "
+             "M env-steps/s |", "|---:|---:|---:|---:|"]
+    lines += [f"| {r['configs']} | {r['wall_s']:.1f} | {r['agents_per_min']:.1f} | {r['env_steps_per_s'] / 1e6:.3f} |"
+              for r in per_minute]
+    if full:
+        lines += ["", f"Target run (64 configurations × 4 seeds × {tc.num_envs} envs × {tc.budget_env_steps:,} env "
+                  f"steps): {full['env_steps']:,.0f} env steps in **{full['wall_s']:.1f} s** "
+                  f"(target ≤ {TARGET_S:.0f} s), {full['env_steps_per_s'] / 1e6:.3f} M env-steps/s including "
+                  f"compilation, evaluation and the report; best: {full['best']['label']} "
+                  f"(success {full['best']['success_mean']:.3f} ± {full['best']['success_std']:.3f})."]
+    md = "\n".join(lines)
+    payload = {"settings": {"hidden": list(tc.hidden), "obs_mode": cfg.env.obs_mode, "num_envs": tc.num_envs,
+                            "rollout_steps": tc.rollout_steps, "num_minibatches": tc.num_minibatches},
+               "sweep_64": sweep64, "sweep_64_one_device": one_dev, "single_run": single,
+               "agents_per_minute": per_minute, "target_run": full}
+    write_result("sweep", payload, md, out_dir)
+    progress(md)
+    return payload
+

@@ -1,0 +1,125 @@
+"""How a sweep is cut into chunks: the memory one agent needs, the budget, and the chunk sizes (NumPy only).
+
+A *chunk* is a batch of agents (configuration, seed) of one group, trained by one call of the group's
+compiled program, vmapped over the agents and split over the CPU devices. Every chunk of a group has
+the same size (the last is padded with copies of its first agent, whose results are dropped), so
+each group compiles once. A chunk is the unit of progress, of results.csv and of ``--resume``.
+
+Chunk size: as many agents as fit the memory budget (``agent_bytes``, a deliberately generous
+estimate of the compiled program's buffers; tests/test_sweep.py checks it against XLA's own figures),
+about CHUNK_ENV_STEPS env steps per chunk (so that the progress bar and the results file move every
+minute or so), a multiple of the device count, padding the last chunk as little as possible. The plan is written to DIR/plan.json and reused
+by ``--resume``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from jaxexo.config import Config, ConfigError, num_updates
+from jaxexo.sweep.spec import Sweep
+
+# About this many env steps per chunk (a minute or so at ~1 M env-steps/s).
+CHUNK_ENV_STEPS = 64_000_000
+# Outline edges and reward terms make the environment step's temporaries about this many floats per
+# environment and outline vertex, plus a constant (measured from XLA's buffer assignment, rounded up).
+_STEP_FLOATS_PER_VERTEX, _STEP_FLOATS = 32, 256
+_SAFETY = 2.0
+NUM_ACTIONS = 36
+
+
+def default_memory_budget() -> int:
+    """Half the memory available now (MemAvailable), or 2 GiB where /proc/meminfo is missing."""
+    try:
+        m = re.search(r"MemAvailable:\s*(\d+) kB", Path("/proc/meminfo").read_text())
+        if m:
+            return int(m.group(1)) * 1024 // 2
+    except OSError:
+        pass
+    return 2 * 2**30
+
+
+def local_cpu_count() -> int:
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+def param_count(cfg: Config) -> int:
+    t = cfg.train
+    obs_dim = 2 if cfg.env.obs_mode == "thesis" else 14 + cfg.env.shape_points
+    sizes = [obs_dim, *t.hidden, NUM_ACTIONS]
+    n = sum(a * b + b for a, b in zip(sizes[:-1], sizes[1:]))
+    return n + (2 * sum(t.hidden) if t.layer_norm else 0)
+
+
+def agent_bytes(cfg: Config) -> int:
+    """Generous estimate of the memory one agent takes in a compiled chunk: its training state,
+    rollout buffers, network activations, the environment step's temporaries, the per-update
+    metrics and the greedy evaluation, times two for XLA's temporaries and the scan's carries."""
+    t, e = cfg.train, cfg.env
+    obs_dim = 2 if e.obs_mode == "thesis" else 14 + e.shape_points
+    n_env, T = t.num_envs, t.rollout_steps
+    k = max(cfg.outline_vertices, 16)   # the evaluation's outlines (the half-circle's 16 vertices)
+    p = param_count(cfg)
+    width = sum(t.hidden) + NUM_ACTIONS
+    env_state = 2 * k + e.shape_points + 16 + obs_dim
+    step = k * _STEP_FLOATS_PER_VERTEX + _STEP_FLOATS
+    state = 4 * p + n_env * env_state + (n_env * p if t.trace == "backward" else 0)
+    if t.trace == "forward":
+        work = T * n_env * (2 * obs_dim + 8 + NUM_ACTIONS) + 3 * (T * n_env // t.num_minibatches) * width
+    else:
+        work = 3 * n_env * p + 2 * n_env * width
+    work += n_env * (step + width)
+    evaluation = t.eval_episodes * (env_state + step + width)
+    floats = 2 * state + work + evaluation + 8 * num_updates(cfg) + 64 * 8
+    return int(4 * floats * _SAFETY)
+
+
+@dataclass(frozen=True)
+class Chunk:
+    chunk_id: int
+    group_id: int
+    size: int                                  # agents in the compiled batch (padded)
+    agents: tuple[tuple[int, int], ...]        # (config_id, seed), the real ones
+
+    def to_json(self) -> dict:
+        d = asdict(self)
+        d["agents"] = [list(a) for a in self.agents]
+        return d
+
+    @classmethod
+    def from_json(cls, d: dict) -> "Chunk":
+        return cls(int(d["chunk_id"]), int(d["group_id"]), int(d["size"]), tuple((int(c), int(s)) for c, s in d["agents"]))
+
+
+def group_chunk_size(n_agents: int, per_agent_bytes: int, per_agent_steps: int, devices: int, budget: int,
+                     fixed: int | None = None) -> int:
+    """Agents per chunk for a group: at most the memory cap and about the progress cap, a multiple of
+    ``devices``; among the sizes from half that cap up to it, the one that pads the last chunk least
+    (padding is computed and thrown away), the largest of those."""
+    if fixed is not None:
+        c = fixed
+    else:
+        c = min(budget // per_agent_bytes, max(1, round(CHUNK_ENV_STEPS / max(per_agent_steps, 1))))
+    c = max(devices, (min(c, n_agents) // devices) * devices)
+    if fixed is None and c * per_agent_bytes > budget:
+        need = devices * per_agent_bytes
+        raise ConfigError(f"memory_budget: {devices} agent(s) (one per CPU device) need about {need / 2**20:.0f} MiB, "
+                          f"more than the budget of {budget / 2**20:.0f} MiB; raise --memory-budget")
+    sizes = range(c, max(devices, c // 2) - 1, -devices)
+    return min(sizes, key=lambda s: (math.ceil(n_agents / s) * s - n_agents, -s))
+
+
+def make_plan(sweep: Sweep, devices: int, budget: int) -> list[Chunk]:
+    """The chunks of every group, in order; chunk ids run over the whole sweep."""
+    chunks: list[Chunk] = []
+    for g in sweep.groups:
+        cfg = sweep.members[g.config_ids[0]].config
+        steps = num_updates(cfg) * cfg.train.num_envs * cfg.train.rollout_steps
+        size = group_chunk_size(len(g.agents), agent_bytes(cfg), steps, devices, budget, sweep.chunk_size)
+        for i in range(0, len(g.agents), size):
+            chunks.append(Chunk(len(chunks), g.group_id, size, g.agents[i:i + size]))
+    return chunks

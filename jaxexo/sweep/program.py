@@ -1,0 +1,179 @@
+"""A sweep group's compiled program and the run of one chunk (JAX).
+
+``chunk_program(cfg, devices)`` is ``jit(shard_map(vmap(agent)))``: ``agent(key, hyper, test_params)``
+is ``make_train``'s whole training scan followed by greedy evaluation on the fixed test layouts
+(jaxexo.train.evaluate), with everything reduced inside the program: per agent a few scalars, a
+learning curve of CURVE_POINTS bins (sums of the per-update metrics) and the final parameters. The
+agents of a chunk are split over the CPU devices (the ``agents`` mesh axis); the program is cached
+per static settings, so every chunk of a group reuses one compilation.
+
+Agents never interact: a configuration whose parameters or loss become NaN is flagged ``diverged``
+and the others are untouched (each vmapped lane computes alone).
+"""
+
+from __future__ import annotations
+
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from flax import serialization
+
+from jaxexo.config import Config, static_settings
+from jaxexo.env import ExoStepEnv
+from jaxexo.sweep.plan import Chunk
+from jaxexo.sweep.results import SCALARS
+from jaxexo.sweep.spec import Sweep
+from jaxexo.train.evaluate import HELD_OUT, TEST_KINDS, make_rollout, test_config, test_layouts
+from jaxexo.train.trainer import METRICS, Hyperparams, Trainer
+
+CURVE_POINTS = 50
+# Episodes to reach this training success rate (strict success, under the behaviour policy), over a
+# trailing window of about 1 % of the updates that finished at least MIN_WINDOW_EPISODES episodes.
+TARGET_SUCCESS = 0.9
+MIN_WINDOW_EPISODES = 20
+_COL = {m: i for i, m in enumerate(METRICS)}
+_PROGRAMS: dict = {}
+
+
+def _finite(tree) -> jnp.ndarray:
+    return jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in jax.tree.leaves(tree)]))
+
+
+def reduce_metrics(m: jnp.ndarray, min_episodes: int) -> dict:
+    """Per-update metrics (U, len(METRICS)) -> the agent's training figures and its learning curve.
+    The active updates (before the budget ran out) are a prefix of the scan. The final training
+    figures cover the last tenth of the active updates, widened backwards until at least
+    ``min_episodes`` episodes finished in it (nan if none did)."""
+    n_upd = m.shape[0]
+    idx = jnp.arange(n_upd)
+    n_active = jnp.sum(m[:, _COL["env_steps"]] > 0)
+    ep = m[:, _COL["episodes"]]
+    after = jnp.cumsum(ep[::-1])[::-1] - ep          # episodes finished after each update
+    last = (idx < n_active) & ((idx >= n_active - jnp.maximum(1, n_active // 10)) | (after < min_episodes))
+    ep_last = jnp.sum(jnp.where(last, ep, 0.0))
+    per_episode = lambda col: jnp.where(  # noqa: E731
+        ep_last > 0, jnp.sum(jnp.where(last, m[:, _COL[col]], 0.0)) / jnp.maximum(ep_last, 1.0), jnp.nan)
+    train_success, train_return = per_episode("successes"), per_episode("return_sum")
+    # Episodes to reach TARGET_SUCCESS: the first update whose trailing window (about 1 % of the
+    # updates) succeeds that often; the count is of all episodes finished up to that update.
+    window = max(1, n_upd // 100)
+    cum_ep = jnp.cumsum(m[:, _COL["episodes"]])
+    cum_su = jnp.cumsum(m[:, _COL["successes"]])
+    shift = lambda x: jnp.concatenate([jnp.zeros(window), x[:-window]]) if window < n_upd else jnp.zeros_like(x)  # noqa: E731
+    ep_w, su_w = cum_ep - shift(cum_ep), cum_su - shift(cum_su)
+    hit = (ep_w >= MIN_WINDOW_EPISODES) & (su_w >= TARGET_SUCCESS * ep_w)
+    episodes_to = jnp.where(jnp.any(hit), cum_ep[jnp.argmax(hit)], jnp.nan)
+    bins = np.minimum(np.arange(n_upd) * CURVE_POINTS // n_upd, CURVE_POINTS - 1)
+    curve = jax.ops.segment_sum(m, jnp.asarray(bins), num_segments=CURVE_POINTS)
+    finite = jnp.all(jnp.isfinite(m))
+    return {"train_success": train_success, "train_return": train_return, "episodes_to_90": episodes_to,
+            "updates": n_active.astype(jnp.float32), "curve": curve, "metrics_finite": finite}
+
+
+def chunk_program(cfg: Config, devices):
+    """The compiled chunk program for cfg's static settings on ``devices`` (cached)."""
+    key = (static_settings(cfg), tuple(str(d) for d in devices))
+    if key not in _PROGRAMS:
+        _PROGRAMS[key] = _build(cfg, list(devices))
+    return _PROGRAMS[key]
+
+
+def _build(cfg: Config, devices):
+    trainer = Trainer(cfg)
+    tcfg = test_config(cfg)
+    tenv = ExoStepEnv(tcfg)
+    rollout = jax.vmap(make_rollout(tenv, trainer.net.apply, tcfg.env.max_steps), in_axes=(None, 0, None))
+    n_eval = cfg.train.eval_episodes
+    kinds = np.arange(n_eval) % len(TEST_KINDS)
+    held = jnp.asarray(np.isin(np.asarray(TEST_KINDS)[kinds], HELD_OUT), jnp.float32)
+
+    def agent(key, hyper, test_params):
+        ts, m = trainer.run(trainer.init(key, hyper), hyper, trainer.num_updates)
+        out = rollout(ts.params, test_layouts(tenv, test_params, n_eval), test_params)
+        suc, acc = out["success"].astype(jnp.float32), out["accurate"].astype(jnp.float32)
+        red = reduce_metrics(m, cfg.train.num_envs)
+        diverged = ~(_finite(ts.params) & _finite(ts.target_params) & red.pop("metrics_finite"))
+        scalars = {
+            "success": suc.mean(), "accuracy": acc.mean(),
+            "held_out_success": jnp.sum(suc * held) / held.sum(), "held_out_accuracy": jnp.sum(acc * held) / held.sum(),
+            "eval_return": out["return"].mean(), "episodes": ts.episodes, "env_steps": ts.env_steps,
+            "diverged": diverged, **{k: v for k, v in red.items() if k != "curve"},
+        }
+        return {"scalars": scalars, "curve": red["curve"], "params": ts.params}
+
+    return over_agents(agent, devices, n_args=3)
+
+
+def over_agents(fn, devices, n_args: int):
+    """``jit(shard_map(vmap(fn)))``: every argument and output has a leading agent axis, split evenly
+    over ``devices`` (each device runs its share of the agents as one vmapped batch)."""
+    from jax.sharding import Mesh, PartitionSpec as P
+
+    spec = P("agents")
+    return jax.jit(jax.shard_map(jax.vmap(fn), mesh=Mesh(np.array(list(devices)), ("agents",)),
+                                 in_specs=(spec,) * n_args, out_specs=spec, check_vma=False))
+
+
+def _stack(trees):
+    return jax.tree.map(lambda *x: np.stack([np.asarray(v) for v in x]), *trees)
+
+
+def chunk_inputs(sweep: Sweep, chunk: Chunk):
+    """Keys, Hyperparams and test-environment params of the chunk's agents, padded to its size with
+    copies of the first agent."""
+    agents = list(chunk.agents) + [chunk.agents[0]] * (chunk.size - len(chunk.agents))
+    cfgs = {c: sweep.members[c].config for c in {c for c, _ in agents}}
+    hyper = {c: Hyperparams.from_config(cfg) for c, cfg in cfgs.items()}
+    test = {c: ExoStepEnv(test_config(cfg)).default_params for c, cfg in cfgs.items()}
+    keys = np.stack([np.asarray(jax.random.PRNGKey(s)) for _, s in agents])
+    return keys, _stack([hyper[c] for c, _ in agents]), _stack([test[c] for c, _ in agents])
+
+
+def run_chunk(sweep: Sweep, chunk: Chunk, devices=None) -> dict:
+    """Train and evaluate one chunk. Returns NumPy arrays for the real agents: ``scalars`` (name ->
+    (n,)), ``curves`` (n, CURVE_POINTS, len(METRICS)), ``params`` (flattened state dict, leaves with a
+    leading agent axis), ``wall_s`` (the call, compilation included when it happened here)."""
+    devices = list(devices if devices is not None else jax.local_devices())
+    if chunk.size % len(devices):
+        raise ValueError(f"chunk {chunk.chunk_id}: {chunk.size} agents do not split over {len(devices)} devices")
+    cfg = sweep.members[chunk.agents[0][0]].config
+    t0 = time.perf_counter()
+    program = chunk_program(cfg, devices)
+    out = jax.block_until_ready(program(*chunk_inputs(sweep, chunk)))
+    wall = time.perf_counter() - t0
+    n = len(chunk.agents)
+    out = jax.tree.map(lambda x: np.asarray(x)[:n], out)
+    flat = serialization.to_state_dict(out["params"])
+    return {
+        "chunk_id": chunk.chunk_id,
+        "agents": [list(a) for a in chunk.agents],
+        "scalars": {k: out["scalars"][k].astype(np.float64) for k in SCALARS},
+        "curves": out["curve"],
+        "metrics": list(METRICS),
+        "params": _flatten(flat),
+        "wall_s": wall,
+    }
+
+
+def _flatten(d: dict, prefix: str = "") -> dict:
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out.update(_flatten(v, f"{prefix}{k}/"))
+        else:
+            out[f"{prefix}{k}"] = np.asarray(v)
+    return out
+
+
+def unflatten(flat: dict, index: int) -> dict:
+    """One agent's parameter tree from ``run_chunk``'s flattened params (or the saved chunk file)."""
+    tree: dict = {}
+    for path, v in flat.items():
+        node = tree
+        *parents, leaf = path.split("/")
+        for p in parents:
+            node = node.setdefault(p, {})
+        node[leaf] = np.asarray(v)[index]
+    return tree

@@ -1,0 +1,411 @@
+"""Sweep files: a base config plus axes over hyperparameters and seeds (NumPy only).
+
+A sweep file is a config file (sections [env], [kinematics], [reward], [layout], [train], optionally
+on top of another config named by ``sweep.base``) with a [sweep] table::
+
+    [sweep]
+    base = "../default.toml"      # optional, relative to this file; the sections here override it
+    seeds = 4                     # seeds 0..3, or a list such as [0, 7, 9]
+    samples = 8                   # random draws per grid point (with [sweep.random] only)
+    sample_seed = 0               # the draws are reproducible
+    heatmap = ["train.lr", "train.lam"]   # report: the two axes of the heatmap (default: the first two)
+    top = 5                       # report: learning curves of the best configurations
+    chunk_size = 16               # agents per compiled chunk (default: from the memory budget)
+    memory_budget = "4GiB"        # default: half the machine's available memory
+
+    [sweep.grid]                  # every combination of these values
+    "train.lr" = [1e-4, 3e-4, 1e-3]
+    "reward.traj_weights[3]" = [2.0, 4.0]   # one element of a vector field
+
+    [sweep.random]                # per grid point, ``samples`` draws of these
+    "train.gamma" = { low = 0.95, high = 0.995 }
+    "train.target_tau" = { low = 0.005, high = 0.1, log = true }
+    "layout.pivot" = { choices = ["agent", "obstacle"] }
+
+An axis names any config field as ``section.field`` (a vector element as ``section.field[i]``); its
+values go through the same validation as a config file, so a bad value is refused at load time with
+the axis and the field named. Fields that change the compiled program's shapes or structure (see
+``jaxexo.config.static_settings``: num_envs, layer sizes, trace view, the number of updates the
+budget needs...) may be swept too: configurations are grouped by static settings, and each group is
+one compiled program. Every configuration runs with every seed; an *agent* is one (configuration,
+seed) pair.
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import itertools
+import json
+import math
+import re
+import tomllib
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from jaxexo.config import Config, ConfigError, config_from_dict, static_settings
+
+SECTIONS = ("env", "kinematics", "reward", "layout", "train")
+SWEEP_KEYS = ("base", "seeds", "samples", "sample_seed", "grid", "random", "heatmap", "top", "chunk_size",
+              "memory_budget")
+RANDOM_KEYS = ("low", "high", "log", "choices")
+_AXIS = re.compile(r"([a-z_]+)\.([a-z_0-9]+)(?:\[(\d+)\])?")
+
+
+@dataclass(frozen=True)
+class Axis:
+    path: str                  # "train.lr", "reward.traj_weights[3]"
+    section: str
+    field: str
+    index: int | None
+    kind: str                  # "grid" or "random"
+    values: tuple = ()         # grid: the values; random: the choices (if any)
+    low: float | None = None   # random range
+    high: float | None = None
+    log: bool = False
+    integer: bool = False      # random range over an integer field: integers in [low, high]
+
+    @property
+    def where(self) -> str:
+        return f"sweep.{self.kind}.{self.path}"
+
+
+@dataclass(frozen=True)
+class Member:
+    """One configuration of the sweep: its axis values and the full validated config."""
+
+    config_id: int
+    values: dict
+    config: Config
+
+    @property
+    def label(self) -> str:
+        return ", ".join(f"{k}={format_value(v)}" for k, v in self.values.items())
+
+
+@dataclass(frozen=True)
+class Group:
+    """Configurations with equal static settings: one compiled program. ``agents`` lists
+    (config_id, seed) in order: configuration by configuration, every seed of each."""
+
+    group_id: int
+    config_ids: tuple[int, ...]
+    agents: tuple[tuple[int, int], ...]
+
+
+@dataclass(frozen=True)
+class Sweep:
+    raw: dict                  # the merged base config table (without [sweep])
+    table: dict                # the [sweep] table as written (base resolved)
+    axes: tuple[Axis, ...]
+    seeds: tuple[int, ...]
+    members: tuple[Member, ...]
+    groups: tuple[Group, ...]
+    heatmap: tuple[str, ...]
+    top: int
+    chunk_size: int | None
+    memory_budget: int | None  # bytes
+
+    @property
+    def num_agents(self) -> int:
+        return len(self.members) * len(self.seeds)
+
+    def fingerprint(self) -> str:
+        """Hash of everything that decides the results (not the report options or the chunking)."""
+        keep = {k: v for k, v in self.table.items() if k in ("seeds", "samples", "sample_seed", "grid", "random")}
+        text = json.dumps({"raw": self.raw, "sweep": keep}, sort_keys=True, default=repr)
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+    def to_dict(self) -> dict:
+        """The self-contained sweep (base merged in), which ``sweep_from_dict`` rebuilds exactly: what
+        a Ray worker receives."""
+        return {**copy.deepcopy(self.raw), "sweep": {k: v for k, v in self.table.items() if k != "base"}}
+
+
+def format_value(v: Any) -> str:
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    if isinstance(v, (list, tuple)):
+        return "[" + ",".join(format_value(x) for x in v) + "]"
+    return str(v)
+
+
+# --------------------------------------------------------------------------------------------
+# Loading
+# --------------------------------------------------------------------------------------------
+
+
+def _read_toml(path: Path, what: str) -> dict:
+    try:
+        text = path.read_text()
+    except OSError as e:
+        raise ConfigError(f"{what}: cannot read {path} ({e.strerror})") from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(f"{what}: {path} is not valid TOML ({e})") from None
+
+
+def deep_merge(base: dict, over: dict) -> dict:
+    """``over`` on top of ``base``: tables merge key by key, any other value replaces."""
+    out = copy.deepcopy(base)
+    for k, v in over.items():
+        out[k] = deep_merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else copy.deepcopy(v)
+    return out
+
+
+def load_sweep(path: str | Path) -> Sweep:
+    """Read, validate and expand a sweep file; errors name the file and the field."""
+    path = Path(path)
+    raw = _read_toml(path, "sweep file")
+    try:
+        table = raw.pop("sweep", None)
+        if table is None:
+            raise ConfigError("sweep: missing [sweep] table (axes and seeds)")
+        if not isinstance(table, dict):
+            raise ConfigError(f"sweep: expected a table, got {table!r}")
+        table = dict(table)
+        if "base" in table:
+            base = table["base"]
+            if not isinstance(base, str):
+                raise ConfigError(f"sweep.base: expected a path to a config file, got {base!r}")
+            base_raw = _read_toml((path.parent / base).resolve(), "sweep.base")
+            base_raw.pop("sweep", None)
+            raw = deep_merge(base_raw, raw)
+        return sweep_from_dict({**raw, "sweep": table})
+    except ConfigError as e:
+        raise ConfigError(f"{path}: {e}") from None
+
+
+def sweep_from_dict(raw: dict) -> Sweep:
+    """Build a Sweep from a parsed sweep table (config sections plus [sweep]; ``sweep.base`` is
+    ignored here: load_sweep resolves it)."""
+    raw = copy.deepcopy(raw)
+    table = raw.pop("sweep", None)
+    if not isinstance(table, dict):
+        raise ConfigError("sweep: missing [sweep] table (axes and seeds)")
+    unknown = sorted(set(table) - set(SWEEP_KEYS))
+    if unknown:
+        raise ConfigError(f"sweep.{unknown[0]}: unknown field (known: {', '.join(SWEEP_KEYS)})")
+    base = config_from_dict(raw)
+    axes = _axes(table, base)
+    seeds = _seeds(table.get("seeds", 1))
+    samples = _samples(table, axes)
+    sample_seed = _int("sweep.sample_seed", table.get("sample_seed", 0), minimum=0)
+    members = _expand(raw, base, axes, samples, sample_seed)
+    paths = [a.path for a in axes]
+    heatmap = tuple(table.get("heatmap", paths[:2]))
+    if "heatmap" in table:
+        if not isinstance(table["heatmap"], list) or len(heatmap) != 2 or not all(isinstance(h, str) for h in heatmap):
+            raise ConfigError(f"sweep.heatmap: expected two axis names, got {table['heatmap']!r}")
+        for h in heatmap:
+            if h not in paths:
+                raise ConfigError(f"sweep.heatmap: {h!r} is not an axis of this sweep (axes: {', '.join(paths)})")
+        if heatmap[0] == heatmap[1]:
+            raise ConfigError("sweep.heatmap: needs two different axes")
+    top = _int("sweep.top", table.get("top", 5), minimum=1)
+    chunk = table.get("chunk_size")
+    chunk = None if chunk is None else _int("sweep.chunk_size", chunk, minimum=1)
+    budget = table.get("memory_budget")
+    budget = None if budget is None else parse_bytes(budget, "sweep.memory_budget")
+    return Sweep(raw=raw, table=table, axes=axes, seeds=seeds, members=members,
+                 groups=group_members(members, seeds), heatmap=heatmap, top=top, chunk_size=chunk,
+                 memory_budget=budget)
+
+
+# --------------------------------------------------------------------------------------------
+# Validation helpers
+# --------------------------------------------------------------------------------------------
+
+
+def _int(where: str, v: Any, minimum: int) -> int:
+    if isinstance(v, bool) or not isinstance(v, int):
+        raise ConfigError(f"{where}: expected an integer, got {v!r}")
+    if v < minimum:
+        raise ConfigError(f"{where}: must be >= {minimum}, got {v}")
+    return v
+
+
+def _seeds(v: Any) -> tuple[int, ...]:
+    if isinstance(v, int) and not isinstance(v, bool):
+        return tuple(range(_int("sweep.seeds", v, minimum=1)))
+    if not isinstance(v, list) or not v:
+        raise ConfigError(f"sweep.seeds: expected a count or a non-empty list of seeds, got {v!r}")
+    seeds = tuple(_int(f"sweep.seeds[{i}]", s, minimum=0) for i, s in enumerate(v))
+    if len(set(seeds)) != len(seeds):
+        raise ConfigError(f"sweep.seeds: seeds repeat: {list(seeds)}")
+    return seeds
+
+
+def _samples(table: dict, axes) -> int:
+    random_axes = any(a.kind == "random" for a in axes)
+    if "samples" not in table:
+        if random_axes:
+            raise ConfigError("sweep.samples: required with [sweep.random] (random draws per grid point)")
+        return 1
+    if not random_axes:
+        raise ConfigError("sweep.samples: only meaningful with [sweep.random] axes")
+    return _int("sweep.samples", table["samples"], minimum=1)
+
+
+_BYTES = {"": 1, "b": 1, "kb": 10**3, "mb": 10**6, "gb": 10**9, "tb": 10**12,
+          "kib": 2**10, "mib": 2**20, "gib": 2**30, "tib": 2**40}
+
+
+def parse_bytes(v: Any, where: str = "--memory-budget") -> int:
+    """A memory size: a number of bytes or a string such as "512MiB", "4 GiB", "2GB"."""
+    if isinstance(v, (int, float)) and not isinstance(v, bool):
+        n, unit = float(v), ""
+    elif isinstance(v, str) and (m := re.fullmatch(r"\s*([0-9]*\.?[0-9]+)\s*([a-zA-Z]*)\s*", v)):
+        n, unit = float(m.group(1)), m.group(2).lower()
+    else:
+        raise ConfigError(f"{where}: expected a size such as \"4GiB\" or \"512MiB\", got {v!r}")
+    if unit not in _BYTES:
+        raise ConfigError(f"{where}: unknown unit {unit!r} (use B, KiB, MiB, GiB, TiB, KB, MB, GB, TB)")
+    if not math.isfinite(n) or n <= 0:
+        raise ConfigError(f"{where}: must be > 0, got {v!r}")
+    return int(n * _BYTES[unit])
+
+
+def _parse_axis(key: Any, kind: str, spec: Any, base: Config) -> Axis:
+    where = f"sweep.{kind}.{key}"
+    m = _AXIS.fullmatch(key) if isinstance(key, str) else None
+    if not m:
+        raise ConfigError(f"{where}: an axis is named section.field or section.field[i], e.g. \"train.lr\"")
+    section, name, index = m.group(1), m.group(2), m.group(3)
+    if section not in SECTIONS:
+        raise ConfigError(f"{where}: unknown axis: no config section {section!r} (sections: {', '.join(SECTIONS)})")
+    obj = getattr(base, section)
+    names = [f.name for f in fields(obj)]
+    if name not in names:
+        raise ConfigError(f"{where}: unknown axis: [{section}] has no field {name!r} (known: {', '.join(names)})")
+    current = getattr(obj, name)
+    if index is not None:
+        index = int(index)
+        if not isinstance(current, tuple) or not all(isinstance(x, (int, float)) for x in current):
+            raise ConfigError(f"{where}: {section}.{name} is not a vector of numbers; sweep it whole")
+        if index >= len(current):
+            raise ConfigError(f"{where}: index {index} is out of range ({section}.{name} has {len(current)} elements)")
+        current = current[index]
+    if kind == "grid":
+        if not isinstance(spec, list):
+            raise ConfigError(f"{where}: expected a list of values, got {spec!r}")
+        if not spec:
+            raise ConfigError(f"{where}: empty grid (give at least one value)")
+        return Axis(key, section, name, index, kind, values=tuple(spec))
+    if not isinstance(spec, dict):
+        raise ConfigError(f"{where}: expected a table {{ low = ..., high = ..., log = false }} or {{ choices = [...] }}, "
+                          f"got {spec!r}")
+    unknown = sorted(set(spec) - set(RANDOM_KEYS))
+    if unknown:
+        raise ConfigError(f"{where}.{unknown[0]}: unknown field (known: {', '.join(RANDOM_KEYS)})")
+    if "choices" in spec:
+        if set(spec) != {"choices"}:
+            raise ConfigError(f"{where}: give either choices or a range (low, high), not both")
+        if not isinstance(spec["choices"], list) or not spec["choices"]:
+            raise ConfigError(f"{where}.choices: expected a non-empty list, got {spec['choices']!r}")
+        return Axis(key, section, name, index, kind, values=tuple(spec["choices"]))
+    for k in ("low", "high"):
+        if k not in spec:
+            raise ConfigError(f"{where}.{k}: required for a random range")
+        v = spec[k]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise ConfigError(f"{where}.{k}: expected a finite number, got {v!r}")
+    low, high, log = spec["low"], spec["high"], spec.get("log", False)
+    if not isinstance(log, bool):
+        raise ConfigError(f"{where}.log: expected true or false, got {log!r}")
+    if not low < high:
+        raise ConfigError(f"{where}: bad range: low ({low}) must be below high ({high})")
+    if log and low <= 0:
+        raise ConfigError(f"{where}.low: a log range needs low > 0, got {low}")
+    if isinstance(current, bool) or not isinstance(current, (int, float)):
+        raise ConfigError(f"{where}: {section}.{name} is not a number; use choices = [...]")
+    integer = isinstance(current, int)
+    if integer and not (float(low).is_integer() and float(high).is_integer()):
+        raise ConfigError(f"{where}: {section}.{name} is an integer field; low and high must be integers")
+    return Axis(key, section, name, index, kind, low=float(low), high=float(high), log=log, integer=integer)
+
+
+def _axes(table: dict, base: Config) -> tuple[Axis, ...]:
+    axes = []
+    for kind in ("grid", "random"):
+        t = table.get(kind, {})
+        if not isinstance(t, dict):
+            raise ConfigError(f"sweep.{kind}: expected a table of axes, got {t!r}")
+        axes += [_parse_axis(k, kind, v, base) for k, v in t.items()]
+    paths = [a.path for a in axes]
+    for p in paths:
+        if paths.count(p) > 1:
+            raise ConfigError(f"sweep.random.{p}: already a grid axis (an axis is either grid or random)")
+    fields_swept = [(a.section, a.field) for a in axes]
+    for a in axes:
+        if a.index is not None and fields_swept.count((a.section, a.field)) > 1 and any(
+                b.index is None and (b.section, b.field) == (a.section, a.field) for b in axes):
+            raise ConfigError(f"{a.where}: {a.section}.{a.field} is also swept whole")
+    if not axes:
+        raise ConfigError("sweep.grid: no axes (add [sweep.grid] or [sweep.random] entries)")
+    return tuple(axes)
+
+
+# --------------------------------------------------------------------------------------------
+# Expansion and grouping
+# --------------------------------------------------------------------------------------------
+
+
+def _draw(axis: Axis, rng: np.random.Generator):
+    if axis.values:
+        return axis.values[int(rng.integers(len(axis.values)))]
+    if axis.integer:
+        return int(rng.integers(int(axis.low), int(axis.high) + 1))
+    if axis.log:
+        return float(math.exp(rng.uniform(math.log(axis.low), math.log(axis.high))))
+    return float(rng.uniform(axis.low, axis.high))
+
+
+def _apply(raw: dict, base: Config, values: dict, axes) -> dict:
+    out = copy.deepcopy(raw)
+    for a in axes:
+        sec = out.setdefault(a.section, {})
+        if a.index is None:
+            sec[a.field] = copy.deepcopy(values[a.path])
+        else:
+            vec = sec.get(a.field)
+            if not (isinstance(vec, list) and len(vec) == len(getattr(getattr(base, a.section), a.field))
+                    and all(isinstance(x, (int, float)) for x in vec)):
+                vec = list(getattr(getattr(base, a.section), a.field))
+            vec[a.index] = values[a.path]
+            sec[a.field] = vec
+    return out
+
+
+def _expand(raw: dict, base: Config, axes, samples: int, sample_seed: int) -> tuple[Member, ...]:
+    grid = [a for a in axes if a.kind == "grid"]
+    rand = [a for a in axes if a.kind == "random"]
+    rng = np.random.default_rng(sample_seed)
+    members = []
+    for combo in itertools.product(*(a.values for a in grid)):
+        for _ in range(samples if rand else 1):
+            values = dict(zip((a.path for a in grid), combo))
+            values.update((a.path, _draw(a, rng)) for a in rand)
+            values = {a.path: values[a.path] for a in axes}   # in the order written
+            try:
+                cfg = config_from_dict(_apply(raw, base, values, axes))
+            except ConfigError as e:
+                first = next((a for a in axes if str(e).startswith(f"{a.section}.{a.field}")), axes[0])
+                raise ConfigError(f"{first.where}: configuration {len(members)} "
+                                  f"({', '.join(f'{k}={format_value(v)}' for k, v in values.items())}): {e}") from None
+            members.append(Member(len(members), values, cfg))
+    return tuple(members)
+
+
+def group_members(members, seeds) -> tuple[Group, ...]:
+    """Group configurations by static settings (jaxexo.config.static_settings), in order of first
+    appearance; within a group, agents run configuration by configuration, every seed of each."""
+    by_sig: dict = {}
+    for m in members:
+        by_sig.setdefault(static_settings(m.config), []).append(m.config_id)
+    return tuple(Group(g, tuple(ids), tuple((c, s) for c in ids for s in seeds))
+                 for g, ids in enumerate(by_sig.values()))
