@@ -36,7 +36,8 @@ def unrolled_threefry_on_cpu() -> bool:
     On CPU JAX lowers the hash as a rolled loop of five iterations (for smaller programs). The
     trainer draws random numbers for every environment at every step (exploration, auto-reset
     layouts), and each rolled draw stays a separate small loop that XLA cannot fuse with its
-    neighbours; unrolled, a trainer update costs about 10-15 % less CPU time and compiles no slower.
+    neighbours; unrolled, a trainer update took 10-15 % less CPU time in A/B runs on a 2-core machine
+    (thesis network, 16 x 256 vmapped environments) and compiled no slower.
     This reaches into JAX internals: where they have moved it does nothing and returns False."""
     try:
         from jax._src.interpreters import mlir

@@ -260,6 +260,26 @@ def test_bundled_sweeps_load():
     assert all(m.config.env.obs_mode == "thesis" for m in thesis.members)
 
 
+def test_ranking_by_mean_success_then_divergence():
+    from jaxexo.sweep.report import rank
+
+    sw = sweep_from_dict(tiny_raw())
+
+    def row(cid, seed, success, diverged=0, ret=0.0, reach="nan"):
+        return {"config_id": str(cid), "seed": str(seed), "success": repr(success), "held_out_success": "0.0",
+                "accuracy": "1.0", "train_return": repr(ret), "episodes_to_90": reach, "diverged": str(diverged)}
+
+    rows = [row(0, 0, 0.5), row(0, 1, 0.7, reach="1000.0"), row(1, 0, 0.0, 1, ret=9.0), row(1, 1, 0.0, 1, ret=9.0),
+            row(2, 0, 0.0, ret=-5.0), row(2, 1, 0.0, ret=-5.0), row(3, 0, 0.9), row(3, 1, 0.1, reach="3000.0")]
+    entries = rank(sw, rows)
+    assert [e["config_id"] for e in entries] == [0, 3, 2, 1]   # 0.6 > 0.5 (wider spread); 0.0 healthy > diverged
+    e0, e3 = entries[0], entries[1]
+    assert e0["success_mean"] == pytest.approx(0.6) and e0["success_std"] == pytest.approx(0.1)
+    assert (e0["success_min"], e0["success_max"]) == (0.5, 0.7)
+    assert e0["episodes_to_90"] == 1000.0 and e0["reached_90"] == 1 and e3["success_std"] == pytest.approx(0.4)
+    assert entries[3]["diverged"] == 2 and entries[2]["reached_90"] == 0
+
+
 # --------------------------------------------------------------------------------------------
 # Chunk plans (NumPy only)
 # --------------------------------------------------------------------------------------------
@@ -609,6 +629,9 @@ def ray_cluster(jax_cache):
     pytest.importorskip("ray")
     tmp = tempfile.mkdtemp(prefix="jxr", dir="/tmp")   # short: Ray's socket paths must fit 107 bytes
     env = _subprocess_env(jax_cache)
+    # A private HOME: a token in the user's ~/.ray/auth_token (Ray's token authentication) must not
+    # leak into this loopback cluster, whose nodes and client would then disagree about it.
+    env["HOME"] = tmp
     port = _free_port()
     common = ["--node-ip-address=127.0.0.1", "--object-store-memory=100000000"]
     head = _RayNode(["--head", f"--port={port}", "--num-cpus=0", "--include-dashboard=false", f"--temp-dir={tmp}",

@@ -1,7 +1,7 @@
 """A finished sweep's report: DIR/summary.md, DIR/heatmap.png, DIR/curves.png, and ``--export-best``.
 
-- summary.md ranks the configurations by mean greedy success over seeds (ties: held-out success, then
-  training return), with the spread over seeds (standard deviation, min-max), and lists the diverged;
+- summary.md ranks the configurations by mean greedy success over seeds (ties: fewer diverged seeds,
+  held-out success, then training return), with the spread over seeds (standard deviation, min-max), and lists the diverged;
 - heatmap.png: mean success over two axes (sweep.heatmap, default the first two), averaged over seeds
   and over every other axis (a one-axis sweep: that axis x seed); an axis drawn at random is shown as
   a scatter instead of a grid;
@@ -48,7 +48,7 @@ def rank(sweep: Sweep, rows: list[dict]) -> list[dict]:
             "episodes_to_90": float(reached.mean()) if reached.size else math.nan, "reached_90": int(reached.size),
             "diverged": int(col("diverged").sum()),
         })
-    entries.sort(key=lambda e: (-_nan_key(e["success_mean"]), -_nan_key(e["held_out_success"]),
+    entries.sort(key=lambda e: (-_nan_key(e["success_mean"]), e["diverged"], -_nan_key(e["held_out_success"]),
                                 -_nan_key(e["train_return"]), e["config_id"]))
     return entries
 
