@@ -34,10 +34,15 @@ def plot_trajectory(traj: Trajectory, path: str | Path | None = None, n_poses: i
         ax.plot([hip[0], kt[0], sc.pivot_y * CM], [hip[1], kt[1], 0.0], "-o", color="tab:gray", alpha=a, ms=3)
         ax.plot([heel[0], toe[0]], [heel[1], toe[1]], "-", color="tab:blue", alpha=a, lw=2.5)
     raw = traj.raw * CM
-    d = np.diff(raw, axis=0)
-    ax.quiver(raw[:-1, 0], raw[:-1, 1], d[:, 0], d[:, 1], angles="xy", scale_units="xy", scale=1.0,
-              color="tab:orange", width=0.003, label="agent moves")
-    ax.plot(traj.heel[:, 0] * CM, traj.heel[:, 1] * CM, color="tab:red", lw=1.5, label="heel (smoothed)")
+    rl = traj.method == "rl"
+    if rl:
+        d = np.diff(raw, axis=0)
+        ax.quiver(raw[:-1, 0], raw[:-1, 1], d[:, 0], d[:, 1], angles="xy", scale_units="xy", scale=1.0,
+                  color="tab:orange", width=0.003, label="agent moves")
+    else:
+        ax.plot(raw[:, 0], raw[:, 1], "o", color="tab:orange", ms=4, label=f"{traj.method} plan points")
+    ax.plot(traj.heel[:, 0] * CM, traj.heel[:, 1] * CM, color="tab:red", lw=1.5,
+            label="heel (smoothed)" if rl else "heel")
     ax.plot(traj.toe[:, 0] * CM, traj.toe[:, 1] * CM, color="tab:red", lw=0.8, ls="--", label="toe")
     ax.plot([sc.goal_y * CM], [0.0], "g*", ms=12, label="goal")
     ax.set_aspect("equal")
