@@ -118,7 +118,7 @@ def batch_time(gen, scenarios: list[dict], size: int = BATCH, repeats: int = BAT
     the generator benchmark's own function, scaled to a batch of 1000 (exact when size = 1000)."""
     from jaxexo.benchmarks.generate_bench import time_batch
 
-    t = np.median(time_batch(gen, [scenarios[i % len(scenarios)] for i in range(size)], repeats))
+    t = np.median(time_batch(gen, [scenarios[i % len(scenarios)] for i in range(size)], repeats)[0])
     return float(t) * 1e3 * BATCH / size
 
 

@@ -198,16 +198,22 @@ def test_intermediate_lambda_by_hand():
     np.testing.assert_allclose(g, [g0, g1, g2, g3], rtol=1e-6)
 
 
+def _chain_cut_after_step_1():
+    """Returns for R, B with gamma 0.5, lambda 1 when G_1 bootstraps on boot_1 alone (the chain is
+    cut after step 1) and every other step chains into the next."""
+    g3 = 4 + 0.5 * 40
+    g2 = 3 + 0.5 * g3
+    g1 = 2 + 0.5 * 20
+    g0 = 1 + 0.5 * g1
+    return [g0, g1, g2, g3]
+
+
 def test_truncation_bootstraps_on_boot_alone_and_cuts_the_chain():
     # Step 1 is truncated (done, not terminated): G_1 = r_1 + gamma * boot_1 whatever follows;
     # step 0 still chains into G_1 (lambda = 1).
     done = [False, True, False, False]
     g = _returns(R, B, F, done, T, 0.5, 1.0)
-    g3 = 4 + 0.5 * 40
-    g2 = 3 + 0.5 * g3
-    g1 = 2 + 0.5 * 20
-    g0 = 1 + 0.5 * g1
-    np.testing.assert_allclose(g, [g0, g1, g2, g3])
+    np.testing.assert_allclose(g, _chain_cut_after_step_1())
     # The steps after the truncation (a new episode) do not leak into G_1: change them, G_0 and G_1 stay.
     g_other = _returns([1.0, 2.0, -50.0, 80.0], [10.0, 20.0, 1e4, -1e4], F, done, T, 0.5, 1.0)
     np.testing.assert_allclose(g_other[:2], g[:2])
@@ -228,11 +234,7 @@ def test_watkins_cut_uses_the_next_steps_greediness():
     # while G_2 itself still chains into G_3 (cont[3] = 1).
     cont = [True, True, False, True]
     g = _returns(R, B, F, F, cont, 0.5, 1.0)
-    g3 = 4 + 0.5 * 40
-    g2 = 3 + 0.5 * g3
-    g1 = 2 + 0.5 * 20
-    g0 = 1 + 0.5 * g1
-    np.testing.assert_allclose(g, [g0, g1, g2, g3])
+    np.testing.assert_allclose(g, _chain_cut_after_step_1())
     # cont[0] is never used (no step before the rollout's first).
     np.testing.assert_allclose(_returns(R, B, F, F, [False, True, False, True], 0.5, 1.0), g)
 

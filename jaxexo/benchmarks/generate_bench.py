@@ -31,15 +31,16 @@ def time_single(gen: TrajectoryGenerator, scenarios: list[dict], repeats: int = 
     return np.median(times, axis=0)
 
 
-def time_batch(gen: TrajectoryGenerator, scenarios: list[dict], repeats: int = 5) -> list[float]:
+def time_batch(gen: TrajectoryGenerator, scenarios: list[dict], repeats: int = 5):
+    """Seconds per ``generate_batch`` of all scenarios (one per repeat), and the last batch."""
     args = {k: [s[k] for s in scenarios] for k in ("obstacle", "pivot", "start_y", "step_length")}
     out = []
     for _ in range(repeats):
         t0 = time.perf_counter()
-        gen.generate_batch(args["obstacle"], pivot=args["pivot"], start_y=args["start_y"],
-                           step_length=args["step_length"])
+        batch = gen.generate_batch(args["obstacle"], pivot=args["pivot"], start_y=args["start_y"],
+                                   step_length=args["step_length"])
         out.append(time.perf_counter() - t0)
-    return out
+    return out, batch
 
 
 def time_import(repeats: int = 7) -> list[float]:
@@ -56,11 +57,9 @@ def run_generate_benchmark(policy: str | Path, out_dir, n: int = 1000, progress=
     scenarios = sample_scenarios(gen.config, n)
     gen.generate(scenarios[0]["obstacle"])      # warm-up (first-call allocations)
     single = time_single(gen, scenarios)
-    batch = time_batch(gen, scenarios)
+    batch, last = time_batch(gen, scenarios)
     imports = time_import()
-    ok = gen.generate_batch([s["obstacle"] for s in scenarios], pivot=[s["pivot"] for s in scenarios],
-                            start_y=[s["start_y"] for s in scenarios],
-                            step_length=[s["step_length"] for s in scenarios]).ok
+    ok = last.ok
     kinds = np.array([s["kind"] for s in scenarios])
     res = {
         "policy": str(policy), "n": n,
