@@ -40,7 +40,6 @@ class FoldedQNetwork:
             wa = np.vstack([w, b[None, :]])
             shift = None
             if self.layer_norm and i < n - 1:
-                h = w.shape[1]
                 wa = wa - wa.mean(axis=1, keepdims=True)          # centring folded in
                 s = policy.norm_scales[i].astype(np.float64)
                 beta = policy.norm_biases[i].astype(np.float64)
@@ -50,7 +49,6 @@ class FoldedQNetwork:
                 shift = np.where(mag > 0.0, beta / np.where(mag > 0.0, mag, 1.0), 0.0)
                 carry_rows = mag
                 carry_bias = np.where(mag > 0.0, 0.0, np.maximum(beta, 0.0))
-                assert wa.shape[1] == h
             weights.append(wa.astype(np.float32))
             shifts.append(None if shift is None else shift.astype(np.float32))
         self.weights = weights            # (in + 1, out) each
@@ -77,8 +75,8 @@ class FoldedQNetwork:
         return x
 
     def first_layer_for(self, basis: np.ndarray) -> np.ndarray:
-        """Layer 0's pre-activation as a function of a few scalars: returns M (R, H) such that the
-        pre-activation for obs = c @ basis[:-1] + basis[-1] ... see StepNetwork."""
+        """Layer 0 for an observation given as obs = c @ basis with c[-1] = 1: returns M (R, H) with
+        layer 0's (folded) pre-activation = c @ M (the bias goes into the last row)."""
         w0 = self.weights[0].astype(np.float64)
         m = basis @ w0[:-1]
         m[-1] += w0[-1]
