@@ -8,7 +8,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from jaxexo.devices import use_all_cpu_cores
+from jaxexo.train.devices import use_all_cpu_cores
 
 use_all_cpu_cores()
 

@@ -7,7 +7,7 @@ Run: python benchmarks/bench_train.py"""
 import sys
 from pathlib import Path
 
-from jaxexo.devices import use_all_cpu_cores
+from jaxexo.train.devices import use_all_cpu_cores
 
 use_all_cpu_cores()
 

@@ -6,6 +6,6 @@ imported on demand and need the ``train`` extra."""
 __version__ = "0.1.0"
 
 from jaxexo.config import Config, ConfigError, load_config  # noqa: E402
-from jaxexo.geometry import GeometryError, Obstacle  # noqa: E402
+from jaxexo.physics.geometry import GeometryError, Obstacle  # noqa: E402
 
 __all__ = ["Config", "ConfigError", "load_config", "Obstacle", "GeometryError", "__version__"]

@@ -28,7 +28,7 @@ def _sizes(text: str) -> list[int]:
 
 
 def cmd_bench_env(args) -> int:
-    from jaxexo.devices import use_all_cpu_cores
+    from jaxexo.train.devices import use_all_cpu_cores
 
     use_all_cpu_cores()
     cfg, name = _load(args.config)
@@ -39,7 +39,7 @@ def cmd_bench_env(args) -> int:
 
 
 def cmd_train(args) -> int:
-    from jaxexo.devices import use_all_cpu_cores
+    from jaxexo.train.devices import use_all_cpu_cores
 
     use_all_cpu_cores()
     cfg, name = _load(args.config)
@@ -62,7 +62,7 @@ OBSTACLE_KINDS = ("base1", "base2", "base3", "triangle", "half_circle", "rectang
 def obstacle_from_args(args):
     """An Obstacle from --obstacle/--width/--height/--center-y (metres); thesis shapes keep their
     Table 3.1 size unless --width/--height are given."""
-    from jaxexo.geometry import THESIS_OBSTACLES, Obstacle
+    from jaxexo.physics.geometry import THESIS_OBSTACLES, Obstacle
 
     kind = args.obstacle
     center = 0.45 if args.center_y is None else args.center_y
@@ -118,7 +118,7 @@ def cmd_sweep(args) -> int:
     budget = parse_bytes(args.memory_budget) if args.memory_budget else None
     sweep = load_sweep(args.sweep)      # validated (NumPy only) before JAX starts
     if args.backend == "local":
-        from jaxexo.devices import use_all_cpu_cores
+        from jaxexo.train.devices import use_all_cpu_cores
 
         use_all_cpu_cores()
     from jaxexo.sweep.runner import run_sweep
@@ -142,7 +142,7 @@ def cmd_sweep(args) -> int:
 
 
 def cmd_eval(args) -> int:
-    from jaxexo.compare import run_eval
+    from jaxexo.evaluation.compare import run_eval
 
     if args.n < 1:
         raise ValueError(f"--n: must be >= 1, got {args.n}")
@@ -158,10 +158,10 @@ def cmd_eval(args) -> int:
 
 
 def cmd_reproduce(args) -> int:
-    from jaxexo.devices import use_all_cpu_cores
+    from jaxexo.train.devices import use_all_cpu_cores
 
     use_all_cpu_cores()
-    from jaxexo.reproduce import THESIS_MODELS, run_reproduce
+    from jaxexo.evaluation.reproduce import THESIS_MODELS, run_reproduce
 
     models = [m.strip() for m in args.models.split(",") if m.strip()]
     bad = [m for m in models if m not in THESIS_MODELS]
@@ -173,7 +173,7 @@ def cmd_reproduce(args) -> int:
 
 
 def cmd_bench(args) -> int:
-    from jaxexo.devices import use_all_cpu_cores
+    from jaxexo.train.devices import use_all_cpu_cores
 
     use_all_cpu_cores()
     from jaxexo.benchmarks.run_all import run_all
@@ -270,8 +270,8 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     from jaxexo.config import ConfigError
-    from jaxexo.geometry import GeometryError
-    from jaxexo.policy import PolicyFileError
+    from jaxexo.physics.geometry import GeometryError
+    from jaxexo.storage.policy_file import PolicyFileError
 
     try:
         return args.func(args)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from conftest import ROOT
-from jaxexo import geometry
+from jaxexo.physics import geometry
 from jaxexo.baselines import CFFTG
 from jaxexo.baselines.cfftg import APEX_FRAC_RANGE, FLATNESS, _basis, plan_paths
 from jaxexo.config import PIVOT_CONDITIONS, load_config
@@ -131,7 +131,7 @@ def test_batch_equals_single(gen, cfg):
 
 
 def test_checks_are_the_shared_ones(gen):
-    # The clearance reported is the exact foot-segment distance of jaxexo.geometry on the path.
+    # The clearance reported is the exact foot-segment distance of jaxexo.physics.geometry on the path.
     t = gen.generate(Obstacle.named("triangle"), pivot="between")
     c = geometry.foot_clearance(np, t.heel, gen.sp.foot_length, t.scene.outline)
     np.testing.assert_allclose(t.checks.min_clearance, c.min())

@@ -1,4 +1,4 @@
-"""``jaxexo eval`` (jaxexo.compare), ``jaxexo reproduce`` and ``jaxexo bench``'s summary, end to end on
+"""``jaxexo eval`` (jaxexo.evaluation.compare), ``jaxexo reproduce`` and ``jaxexo bench``'s summary, end to end on
 the small policy trained once per session (conftest.trained_run)."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import shutil
 import numpy as np
 import pytest
 
-from jaxexo.compare import evaluate_generators, make_scenarios, path_length, squared_jerk
+from jaxexo.evaluation.compare import evaluate_generators, make_scenarios, path_length, squared_jerk
 
 pytest.importorskip("jax")
 
@@ -91,7 +91,7 @@ def test_eval_figures_match_the_generators_own_outputs(trained_run):
 
 
 def test_reproduce_tabulates_beside_the_thesis(trained_run, tmp_path):
-    from jaxexo.reproduce import run_reproduce
+    from jaxexo.evaluation.reproduce import run_reproduce
 
     # Finished runs are reused: stand the session's small policy in for models (a) and final.
     for name in ("a", "final"):

@@ -259,7 +259,7 @@ def _mid_goal_box_reachable(pivot_y, center, height):
     """Whether any heel in the mid-goal box over the obstacle is reachable within the joint limits."""
     import numpy as np
 
-    from jaxexo import kinematics
+    from jaxexo.physics import kinematics
 
     lim = (math.radians(-30), math.radians(115), math.radians(-100), 0.0)
     ys = np.linspace(center - 0.06, center + 0.06, 61)

@@ -10,10 +10,10 @@ import pytest
 jax = pytest.importorskip("jax")
 jnp = pytest.importorskip("jax.numpy")
 
-from jaxexo import geometry  # noqa: E402
+from jaxexo.physics import geometry  # noqa: E402
 from jaxexo.config import PIVOT_CONDITIONS, config_from_dict  # noqa: E402
 from jaxexo.env import NUM_ACTIONS, ExoStepEnv  # noqa: E402
-from jaxexo.geometry import Obstacle  # noqa: E402
+from jaxexo.physics.geometry import Obstacle  # noqa: E402
 
 from conftest import MIXED_KINDS, MIXED_RAW, get_mixed_env, get_mixed_step  # noqa: E402
 

@@ -1,4 +1,4 @@
-"""jaxexo.geometry: obstacles, exact flat-foot distance, clearance, inside test, height profile."""
+"""jaxexo.physics.geometry: obstacles, exact flat-foot distance, clearance, inside test, height profile."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import pytest
 from hypothesis import assume, given
 from hypothesis import strategies as st
 
-from jaxexo import geometry
-from jaxexo.geometry import (
+from jaxexo.physics import geometry
+from jaxexo.physics.geometry import (
     MAX_PROFILE_VERTICES,
     THESIS_OBSTACLES,
     TOUCH_EPS,

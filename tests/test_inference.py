@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 
 from conftest import ROOT
-from jaxexo import dynamics, geometry, kinematics
+from jaxexo.physics import dynamics, geometry, kinematics
 from jaxexo.config import PIVOT_CONDITIONS, load_config
 from jaxexo.inference import Obstacle, TrajectoryError, TrajectoryGenerator
 from jaxexo.inference import smoothing as sm
 from jaxexo.inference.network import FoldedQNetwork, StepNetwork
-from jaxexo.policy import PolicyFileError, load_policy
+from jaxexo.storage.policy_file import PolicyFileError, load_policy
 
 jax = pytest.importorskip("jax")
 import jax.numpy as jnp  # noqa: E402

@@ -1,4 +1,4 @@
-"""jaxexo.kinematics: hip model (eq 2.3, 2.42), knee IK (eq 2.4-2.11), joint angles, limits, atan2."""
+"""jaxexo.physics.kinematics: hip model (eq 2.3, 2.42), knee IK (eq 2.4-2.11), joint angles, limits, atan2."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 from hypothesis import assume, given
 from hypothesis import strategies as st
 
-from jaxexo.kinematics import (
+from jaxexo.physics.kinematics import (
     ANGLE_EPS,
     MIN_HIP_HEIGHT_FRACTION,
     atan2,

@@ -18,7 +18,7 @@ def _run(code: str) -> subprocess.CompletedProcess:
 def test_import_does_not_pull_in_jax():
     code = (
         "import sys\n"
-        "import jaxexo, jaxexo.config, jaxexo.geometry, jaxexo.kinematics, jaxexo.rewards\n"
+        "import jaxexo, jaxexo.config, jaxexo.physics.geometry, jaxexo.physics.kinematics, jaxexo.physics.rewards\n"
         "from jaxexo import Config, ConfigError, load_config, Obstacle, GeometryError\n"
         "cfg = load_config('configs/default.toml')\n"
         "Obstacle.named('half_circle').clearance([[0.0, 0.0]], 0.2)\n"

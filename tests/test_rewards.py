@@ -1,4 +1,4 @@
-"""jaxexo.rewards: the 8 trajectory terms (eq 2.29-2.37), the 4 exoskeleton terms (eq 2.43-2.51),
+"""jaxexo.physics.rewards: the 8 trajectory terms (eq 2.29-2.37), the 4 exoskeleton terms (eq 2.43-2.51),
 the weight normalisation (eq 2.2, 2.38, 2.52) and the total (eq 2.1); by hand and through the env."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from jaxexo.rewards import EXO_TERMS, TRAJECTORY_TERMS, exo_terms, normalize_weights, total_reward, trajectory_terms
+from jaxexo.physics.rewards import EXO_TERMS, TRAJECTORY_TERMS, exo_terms, normalize_weights, total_reward, trajectory_terms
 
 C = SimpleNamespace(
     step_threshold=30.0,
@@ -208,7 +208,7 @@ def test_e3_hip_height():
 
 def test_e1_not_fired_by_rounding_within_two_legs():
     from jaxexo.config import RewardConfig
-    from jaxexo.kinematics import leg_state
+    from jaxexo.physics.kinematics import leg_state
 
     c = SimpleNamespace(**{**vars(C), "leg_length_tolerance": RewardConfig().leg_length_tolerance})
     # Hand case (float64): pivot heel at y = 0.06, swing heel on the ground at 1.172: 1.112 m apart,
@@ -271,7 +271,7 @@ def env_tools(mixed_env, mixed_step):
     import jax
     import jax.numpy as jnp
 
-    from jaxexo.geometry import Obstacle
+    from jaxexo.physics.geometry import Obstacle
 
     # The mixed config pins the thesis-default reward and mid-goal constants (conftest.MIXED_RAW);
     # its outline size (16) fits every named obstacle.
@@ -366,7 +366,7 @@ def test_env_z_monotone(env_tools):
 
 
 def test_env_hip_lowering(env_tools):
-    from jaxexo.geometry import Obstacle
+    from jaxexo.physics.geometry import Obstacle
 
     # Pivot at the agent's start (y = 0), heel moved to 0.90: dist_y 0.45, h_z = sqrt(1 - 0.45^2) < 0.9.
     out = env_tools.run([0.87, 0.0], RIGHT, obstacle=Obstacle.named("base1"), pivot="agent")

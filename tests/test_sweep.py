@@ -27,7 +27,7 @@ import numpy as np
 import pytest
 
 from jaxexo.config import HYPER_FIELDS, ConfigError, static_settings
-from jaxexo.config_io import config_to_toml
+from jaxexo.config.toml_io import config_to_toml
 from jaxexo.sweep import plan as P
 from jaxexo.sweep import results as R
 from jaxexo.sweep.spec import load_sweep, parse_bytes, sweep_from_dict
@@ -534,7 +534,7 @@ def test_resume_skips_finished_chunks_and_ends_identical(inproc, tiny_sweep, tmp
 
 def test_cli_sweep_writes_results_report_and_best_policy(cli_local, tiny_sweep):
     from jaxexo.config import load_config
-    from jaxexo.policy import load_policy
+    from jaxexo.storage.policy_file import load_policy
 
     stdout, stderr = cli_local["wait"]()
     out = cli_local["out"]

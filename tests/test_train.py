@@ -1,4 +1,4 @@
-"""The TD(lambda) trainer, its driver and the exported policy (jaxexo.train, jaxexo.policy, CLI train).
+"""The TD(lambda) trainer, its driver and the exported policy (jaxexo.train, jaxexo.storage.policy_file, CLI train).
 
 JAX compile time dominates this file (a trainer update takes 5-6 s to compile on two CPU cores,
 most of it the environment step), so:
@@ -26,8 +26,8 @@ import numpy as np
 import pytest
 
 from jaxexo.config import ConfigError, config_from_dict, load_config
-from jaxexo.config_io import config_to_toml
-from jaxexo.policy import FORMAT_VERSION, PolicyFileError, load_policy
+from jaxexo.config.toml_io import config_to_toml
+from jaxexo.storage.policy_file import FORMAT_VERSION, PolicyFileError, load_policy
 
 from conftest import ROOT, jax_compilation_cache
 
@@ -109,7 +109,7 @@ def test_trainer_learns_to_step_over_a_fixed_obstacle():
     behaviour) to a success rate above 0.8 in the last tenth of a 600 k env-step budget, and the
     greedy policy clears the obstacle. Observed over seeds 0-9: first tenth 0.000 on every seed, last
     tenth 0.979-1.000, greedy success in 28-34 steps on every seed."""
-    from jaxexo.geometry import Obstacle
+    from jaxexo.physics.geometry import Obstacle
 
     cfg = config_from_dict({"env": {"obs_mode": "conditioned"}, "layout": dict(FIXED_LAYOUT),
                             "reward": dict(REWARD), "train": LEARN_TRAIN})
@@ -367,7 +367,7 @@ class _Background:
         self.cfg, self.cfg_path, self.out = cfg, tmp / "config_in.toml", tmp / "run"
         self.cfg_path.write_text(config_to_toml(cfg))
         env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
-        if devices is not None:   # else the CLI exposes every CPU core (jaxexo.devices)
+        if devices is not None:   # else the CLI exposes every CPU core (jaxexo.train.devices)
             env["XLA_FLAGS"] = f"--xla_force_host_platform_device_count={devices}"
         self.proc = subprocess.Popen(_cli_cmd("train", self.cfg_path, "--out", self.out, "--quiet", "--seed", seed),
                                      cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

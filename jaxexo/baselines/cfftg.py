@@ -53,7 +53,7 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxexo import dynamics, geometry
+from jaxexo.physics import dynamics, geometry
 from jaxexo.config import Config
 from jaxexo.inference.generator import check_options, scenes_for
 from jaxexo.inference.trajectory import (DEFAULT_DURATION, Trajectory, TrajectoryBatch, TrajectoryError, assemble,
@@ -88,7 +88,7 @@ def profile_max(lo: np.ndarray, hi: np.ndarray, outline: np.ndarray) -> np.ndarr
     """Highest point of the obstacles' profiles over the intervals [lo, hi] (B, N), outlines (B, K, 2).
 
     The profile is piecewise linear, so its maximum over an interval is at an end of the interval
-    or at an outline vertex inside it (jaxexo.geometry.profile_height gives the ends)."""
+    or at an outline vertex inside it (jaxexo.physics.geometry.profile_height gives the ends)."""
     ol = outline[:, None]                                   # (B, 1, K, 2)
     vy, vz = ol[..., 0], ol[..., 1]
     inside = (vy >= lo[..., None]) & (vy <= hi[..., None])

@@ -82,7 +82,7 @@ def run_baseline_benchmark(out_dir, default_config: str = "configs/default.toml"
 
     import torch
 
-    from jaxexo.benchmarks.machine import write_result
+    from jaxexo.evaluation.machine import write_result
     from jaxexo.benchmarks.train_bench import thesis_network_config, throughput
     from jaxexo.train.driver import run_training
     from jaxexo.train.evaluate import make_validator

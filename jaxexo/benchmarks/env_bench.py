@@ -105,7 +105,7 @@ def mixed_config() -> Config:
 
 def run_env_benchmark(config: Config, config_name: str, sizes, out_dir, progress=print) -> dict:
     """Benchmark the given config and, for comparison, the all-kinds mix; write the results."""
-    from jaxexo.benchmarks.machine import write_result
+    from jaxexo.evaluation.machine import write_result
 
     results = {}
     for name, cfg in ((config_name, config), ("all obstacle kinds (K=16)", mixed_config())):

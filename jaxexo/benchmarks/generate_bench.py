@@ -9,38 +9,15 @@ from __future__ import annotations
 import statistics
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.inference.scenarios import TEST_KINDS, sample_scenarios
+from jaxexo.evaluation.timing import time_batch, time_single
 
 THESIS_MS = {"rl_single": 3.0, "cfftg_single": 2.0, "rl_batch_1000": 1764.0}   # Table 3.11, §3.4
-
-
-def time_single(gen: TrajectoryGenerator, scenarios: list[dict], repeats: int = 3) -> np.ndarray:
-    """Seconds per ``generate`` call, per scenario (the median of ``repeats`` passes)."""
-    times = np.empty((repeats, len(scenarios)))
-    for r in range(repeats):
-        for i, s in enumerate(scenarios):
-            t0 = time.perf_counter()
-            gen.generate(s["obstacle"], pivot=s["pivot"], start_y=s["start_y"], step_length=s["step_length"])
-            times[r, i] = time.perf_counter() - t0
-    return np.median(times, axis=0)
-
-
-def time_batch(gen: TrajectoryGenerator, scenarios: list[dict], repeats: int = 5):
-    """Seconds per ``generate_batch`` of all scenarios (one per repeat), and the last batch."""
-    args = {k: [s[k] for s in scenarios] for k in ("obstacle", "pivot", "start_y", "step_length")}
-    out = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        batch = gen.generate_batch(args["obstacle"], pivot=args["pivot"], start_y=args["start_y"],
-                                   step_length=args["step_length"])
-        out.append(time.perf_counter() - t0)
-    return out, batch
 
 
 def time_import(repeats: int = 7) -> list[float]:
@@ -51,7 +28,7 @@ def time_import(repeats: int = 7) -> list[float]:
 
 
 def run_generate_benchmark(policy: str | Path, out_dir, n: int = 1000, progress=print) -> dict:
-    from jaxexo.benchmarks.machine import write_result
+    from jaxexo.evaluation.machine import write_result
 
     gen = TrajectoryGenerator.load(policy)
     scenarios = sample_scenarios(gen.config, n)

@@ -2,7 +2,7 @@
 
 Parts (``skip`` any of them): ``env`` (jaxexo.benchmarks.env_bench), ``train`` (train_bench: trainer
 throughput and the default and thesis configs' training runs), ``generate`` (generate_bench: the
-NumPy generator), ``compare`` (jaxexo.compare: RL generator against CFFTG on the same 1000 test
+NumPy generator), ``compare`` (jaxexo.evaluation.compare: RL generator against CFFTG on the same 1000 test
 scenarios, timed in one process), ``baseline`` (baseline_bench: jaxexo's trainer against the
 thesis-style PyTorch trainer; skipped with a note when torch is not installed). The summary table
 (summary_<date>_<machine>.md, shown in the README) is built from the figures the parts return.
@@ -79,7 +79,7 @@ def run_all(out_dir=None, policy=None, baseline_seconds: float = 600.0, skip: st
     ``out_dir``; ``n`` scenarios for the generator parts, ``batch_size`` for the compare part's batch."""
     import json
 
-    from jaxexo.benchmarks.machine import write_result
+    from jaxexo.evaluation.machine import write_result
     from jaxexo.config import load_config
 
     out_dir = Path(out_dir or ROOT / "benchmarks" / "results")
@@ -111,7 +111,7 @@ def run_all(out_dir=None, policy=None, baseline_seconds: float = 600.0, skip: st
 
             res["generate"] = run_generate_benchmark(policy, out_dir, n, progress)
         if "compare" not in skipped:
-            from jaxexo.compare import markdown, run_eval
+            from jaxexo.evaluation.compare import markdown, run_eval
 
             report = run_eval(policy, Path(tmp) / "eval", "cfftg", "test", n, figures=False, batch_size=batch_size)
             res["compare"] = report

@@ -81,7 +81,7 @@ def agents_per_minute(base_raw: dict, n_configs: int, budget_env_steps: int, pro
 
 def run_sweep_benchmark(out_dir, sweep_file: str | Path, target: bool = True, per_minute_budget: int = 500_000,
                         progress=print) -> dict:
-    from jaxexo.benchmarks.machine import write_result
+    from jaxexo.evaluation.machine import write_result
     from jaxexo.sweep.runner import run_sweep
 
     sweep = load_sweep(sweep_file)

@@ -128,7 +128,7 @@ def truncated_lambda_returns(reward, boot, terminated, valid, cont, gamma: float
 
 class NumpyExoEnv:
     """ExoStepEnv's rules stepped one environment at a time in NumPy (float32, like the JAX env):
-    the same move, transition, reward and observation functions (``jaxexo.dynamics``).
+    the same move, transition, reward and observation functions (``jaxexo.physics.dynamics``).
 
     Layouts come from a pool drawn once by the JAX environment's own sampler (``layout_pool``), in
     a fresh random order on every pass, so both trainers see the same layout distribution and no
@@ -136,7 +136,7 @@ class NumpyExoEnv:
     truncated, info)`` with ``info["success"]`` the strict success of a finished episode."""
 
     def __init__(self, cfg, pool: dict, seed: int = 0):
-        from jaxexo import dynamics
+        from jaxexo.physics import dynamics
 
         self.dyn = dynamics
         self.p = dynamics.numpy_params(cfg)
@@ -225,7 +225,7 @@ def build_torch_network(obs_dim: int, hidden, num_actions: int, layer_norm: bool
     for h in hidden:
         layers.append(torch.nn.Linear(d, h))
         if layer_norm:
-            from jaxexo.policy import LAYER_NORM_EPS
+            from jaxexo.storage.policy_file import LAYER_NORM_EPS
 
             layers.append(torch.nn.LayerNorm(h, eps=LAYER_NORM_EPS))
         layers.append(torch.nn.ReLU())

@@ -56,7 +56,7 @@ def run_train_benchmark(out_dir, default_config: str = "configs/default.toml", t
     `jaxexo train` driver (compilation included in the wall time)."""
     import tempfile
 
-    from jaxexo.benchmarks.machine import write_result
+    from jaxexo.evaluation.machine import write_result
     from jaxexo.config import load_config
     from jaxexo.train.driver import run_training
 

@@ -6,8 +6,8 @@ auto-reset; ``step_env``/``reset_env`` are the un-reset transitions. State, layo
 frozen flax.struct pytrees, so everything jits and vmaps over thousands of episodes, and params vmap
 over configurations.
 
-Geometry, kinematics and reward terms come from jaxexo.geometry, jaxexo.kinematics and
-jaxexo.rewards (array-module generic, shared with the NumPy generator).
+Geometry, kinematics and reward terms come from jaxexo.physics.geometry, jaxexo.physics.kinematics and
+jaxexo.physics.rewards (array-module generic, shared with the NumPy generator).
 """
 
 from __future__ import annotations
@@ -16,9 +16,9 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from jaxexo import dynamics, geometry
+from jaxexo.physics import dynamics, geometry
 from jaxexo.config import Config
-from jaxexo.dynamics import LENGTH_SCALE, NUM_ACTIONS, THESIS_OBS_CENTER  # noqa: F401 (re-exported)
+from jaxexo.physics.dynamics import LENGTH_SCALE, NUM_ACTIONS, THESIS_OBS_CENTER  # noqa: F401 (re-exported)
 from jaxexo.env import spaces
 from jaxexo.env.params import EnvParams
 # Every observation lies within +-OBS_BOUND (world bounds of a few metres over LENGTH_SCALE).
@@ -131,7 +131,7 @@ class ExoStepEnv:
     def layout_for(self, obstacle: geometry.Obstacle, pivot: str | float = "obstacle", start_y: float = 0.0,
                    step_length: float = 0.70, kind: int = -1) -> Layout:
         """A fixed layout from an Obstacle, for evaluation on chosen scenes (validated by
-        jaxexo.dynamics.make_scene, as the NumPy generator's scenes are).
+        jaxexo.physics.dynamics.make_scene, as the NumPy generator's scenes are).
 
         ``pivot`` is one of PIVOT_CONDITIONS or a pivot heel y in metres; ``kind`` tags the layout
         for per-kind statistics."""

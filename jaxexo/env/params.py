@@ -11,7 +11,7 @@ import jax.numpy as jnp
 from flax import struct
 
 from jaxexo.config import Config
-from jaxexo.dynamics import param_values
+from jaxexo.physics.dynamics import param_values
 
 
 @struct.dataclass
@@ -69,5 +69,5 @@ class EnvParams:
 
     @classmethod
     def from_config(cls, cfg: Config) -> "EnvParams":
-        # One list of values (jaxexo.dynamics.param_values) for the JAX and the NumPy side.
+        # One list of values (jaxexo.physics.dynamics.param_values) for the JAX and the NumPy side.
         return cls(**{k: jnp.asarray(v) for k, v in param_values(cfg).items()})

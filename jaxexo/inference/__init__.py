@@ -11,8 +11,8 @@ import fast), so it runs on an exoskeleton's own computer::
 Units: metres, radians, seconds.
 """
 
-from jaxexo.dynamics import Scene
-from jaxexo.geometry import Obstacle
+from jaxexo.physics.dynamics import Scene
+from jaxexo.physics.geometry import Obstacle
 from jaxexo.inference.generator import TrajectoryGenerator
 from jaxexo.inference.trajectory import (
     CSV_COLUMNS,
@@ -23,7 +23,7 @@ from jaxexo.inference.trajectory import (
     TrajectoryError,
     assemble,
 )
-from jaxexo.policy import PolicyFileError
+from jaxexo.storage.policy_file import PolicyFileError
 
 __all__ = ["TrajectoryGenerator", "Trajectory", "TrajectoryBatch", "TrajectoryChecks", "TrajectoryError",
            "Obstacle", "Scene", "PolicyFileError", "assemble", "CSV_COLUMNS", "JOINT_NAMES"]

@@ -1,6 +1,6 @@
 """TrajectoryGenerator: an exported policy (policy.npz) driven greedily in NumPy, smoothed and checked.
 
-The rollout follows the training environment's rules exactly (jaxexo.dynamics: the same move, goal,
+The rollout follows the training environment's rules exactly (jaxexo.physics.dynamics: the same move, goal,
 mid-goal and observation functions, the same step limit and collision handling), with the greedy
 action of the exported Q-network. Two loops share those rules:
 
@@ -23,13 +23,13 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxexo import dynamics, geometry
+from jaxexo.physics import dynamics, geometry
 from jaxexo.config import ConfigError, config_from_dict
-from jaxexo.dynamics import Scene, scalar
+from jaxexo.physics.dynamics import Scene, scalar
 from jaxexo.inference import smoothing as sm
 from jaxexo.inference.network import FoldedQNetwork, StepNetwork
 from jaxexo.inference.trajectory import DEFAULT_DURATION, Trajectory, TrajectoryBatch, TrajectoryError, assemble
-from jaxexo.policy import PolicyFileError, QPolicy, load_policy
+from jaxexo.storage.policy_file import PolicyFileError, QPolicy, load_policy
 
 FALLBACK_FACTORS = (0.25, 1.0 / 16.0, 0.0)   # smoothing multipliers tried before the raw polyline
 

@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from jaxexo.policy import LAYER_NORM_EPS, QPolicy
+from jaxexo.storage.policy_file import LAYER_NORM_EPS, QPolicy
 
 
 class FoldedQNetwork:
@@ -87,7 +87,7 @@ class StepNetwork:
     """Greedy action for one observation given as affine coordinates, with preallocated buffers.
 
     The generator's observation is affine in c = (heel_y, heel_z, time, visited, 1) for a fixed scene
-    (jaxexo.dynamics.observation), so ``set_scene(basis)`` folds that map into layer 0 and each step
+    (jaxexo.physics.dynamics.observation), so ``set_scene(basis)`` folds that map into layer 0 and each step
     costs one small matmul per layer and a handful of in-place operations."""
 
     def __init__(self, net: FoldedQNetwork):

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from jaxexo.config import PIVOT_CONDITIONS, Config, named_spec
-from jaxexo.geometry import Obstacle
+from jaxexo.physics.geometry import Obstacle
 
 TEST_KINDS = ("base1", "base2", "base3", "triangle", "half_circle")
 HELD_OUT = ("triangle", "half_circle")

@@ -2,9 +2,9 @@
 
 Every generator (the RL policy, CFFTG) produces a dense heel path per scene and hands it to
 ``assemble``, so all trajectories are measured by one definition: the same kinematics
-(jaxexo.kinematics: hip eq 2.42, knees eq 2.4-2.11, angles eq 2.49), the same foot-obstacle
-clearance (jaxexo.geometry, the heel-toe segment against the outline) and the same goal, joint-limit
-and leg-length rules as the training environment (jaxexo.dynamics, eq 2.45, 2.50). Units: metres,
+(jaxexo.physics.kinematics: hip eq 2.42, knees eq 2.4-2.11, angles eq 2.49), the same foot-obstacle
+clearance (jaxexo.physics.geometry, the heel-toe segment against the outline) and the same goal, joint-limit
+and leg-length rules as the training environment (jaxexo.physics.dynamics, eq 2.45, 2.50). Units: metres,
 radians, seconds.
 """
 
@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxexo import dynamics, geometry, kinematics
-from jaxexo.dynamics import Scene
+from jaxexo.physics import dynamics, geometry, kinematics
+from jaxexo.physics.dynamics import Scene
 
 JOINT_NAMES = ("hip_swing", "knee_swing", "hip_stance", "knee_stance")
 DEFAULT_DURATION = 1.0   # s, swing duration for the time stamps
@@ -206,7 +206,7 @@ def clearances(foot_length: float, heel: np.ndarray, scenes) -> np.ndarray:
 def measure(sp, heel: np.ndarray, clearance: np.ndarray, pivot_y: np.ndarray, goal_y: np.ndarray) -> dict:
     """Kinematics and checks of heel paths (B, N, 2) with their clearances (B, N), vectorised.
 
-    ``sp`` holds the constants (jaxexo.dynamics.scalar_params or numpy_params)."""
+    ``sp`` holds the constants (jaxexo.physics.dynamics.scalar_params or numpy_params)."""
     # kinematics.leg_state's equations, with both legs stacked on a leading axis (fewer NumPy calls).
     hip = kinematics.hip_position(np, pivot_y[:, None], heel, sp.thigh, sp.shin)
     pivot = np.zeros_like(heel)

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxexo.config import ConfigError
-from jaxexo.config_io import config_to_toml
+from jaxexo.config.toml_io import config_to_toml
 from jaxexo.sweep import results as R
 from jaxexo.sweep.spec import Sweep, format_value
 

@@ -3,7 +3,7 @@ results streamed to DIR/results.csv, ``--resume``, then the report (jaxexo.sweep
 
 Backends:
 - ``local``: the chunks one after the other, each split over every local CPU device (the CLI exposes
-  each core as a JAX device, jaxexo.devices);
+  each core as a JAX device, jaxexo.train.devices);
 - ``ray``: each chunk is a Ray task asking for ``task_cpus`` CPUs on an existing cluster
   (``--address``; none: a local Ray instance), whose worker exposes that many JAX devices. With the
   same device count a chunk is the same compiled program on the same inputs as locally, so the
@@ -149,7 +149,7 @@ _WORKER_SWEEPS: dict = {}
 
 def ray_chunk_task(sweep_dict: dict, chunk: dict, devices: int) -> dict:
     """A Ray task: one chunk on a worker exposing ``devices`` CPU devices to JAX."""
-    from jaxexo.devices import use_all_cpu_cores
+    from jaxexo.train.devices import use_all_cpu_cores
 
     use_all_cpu_cores(devices)
     import jax

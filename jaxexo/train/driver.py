@@ -6,7 +6,7 @@ Run directory:
                      bookkeeping (chunks done, wall time, best score), in one atomic write
 - checkpoint.json    a readable copy of that bookkeeping (informational; resume reads the msgpack)
 - metrics.jsonl      one line per chunk: counters and rates reduced inside the compiled scan
-- policy.npz         the exported greedy policy (jaxexo.policy; NumPy-only to load)
+- policy.npz         the exported greedy policy (jaxexo.storage.policy_file; NumPy-only to load)
 - training_curve.png return and success rate against episodes (thesis Fig. 3.4)
 - eval.json          greedy rollouts on the test layouts (jaxexo.train.evaluate)
 
@@ -30,9 +30,9 @@ import numpy as np
 from flax import serialization
 
 from jaxexo.config import Config, ConfigError, config_from_dict
-from jaxexo.config_io import config_to_toml
+from jaxexo.config.toml_io import config_to_toml
 from jaxexo.env.exo_step import LENGTH_SCALE, THESIS_OBS_CENTER
-from jaxexo.policy import save_policy
+from jaxexo.storage.policy_file import save_policy
 from jaxexo.train.evaluate import evaluate, make_validator
 from jaxexo.train.network import dense_layers, norm_layers
 from jaxexo.train.trainer import METRICS, Hyperparams, Trainer
@@ -147,7 +147,7 @@ def run_training(cfg: Config, out: str | Path, seed: int = 0, resume: bool = Fal
         cfg_path.write_text(config_to_toml(cfg))
 
     t_start = time.perf_counter()
-    # Data parallel over the CPU cores exposed as JAX devices (jaxexo.devices; the CLI sets this up).
+    # Data parallel over the CPU cores exposed as JAX devices (jaxexo.train.devices; the CLI sets this up).
     # The device count changes the random streams: a run is reproducible on the same count.
     trainer = Trainer(cfg, devices=jax.local_devices())
     n_dev = len(trainer.devices or [0])

@@ -3,7 +3,7 @@
 The JAX environment (jaxexo.env), the NumPy trajectory generator (jaxexo.inference) and the NumPy
 environment used by the thesis-style baseline all step the heel, test the mid-goal and the goal,
 and build observations with these functions. Each takes the array module ``xp`` first: ``numpy``,
-``jax.numpy``, or ``jaxexo.dynamics.scalar`` (plain Python floats, for the generator's fast
+``jax.numpy``, or ``jaxexo.physics.dynamics.scalar`` (plain Python floats, for the generator's fast
 single-trajectory loop). Heel coordinates are passed as separate y and z components so that the
 same code serves a scalar, a batch (B,) and a traced JAX value.
 
@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from jaxexo import geometry, kinematics, rewards
+from jaxexo.physics import geometry, kinematics, rewards
 from jaxexo.config import PIVOT_CONDITIONS, Config
 
 NUM_ACTIONS = 36

@@ -1,7 +1,7 @@
 """``jaxexo reproduce``: the thesis's experiments, rerun and tabulated beside its published values.
 
 Trains the seven thesis configs (configs/thesis/{a,b,c,1,2,3,final}.toml, thesis 3.2), then for each
-model generates the n test scenarios of ``jaxexo.compare`` (the five obstacles of Table 3.1 over the
+model generates the n test scenarios of ``jaxexo.evaluation.compare`` (the five obstacles of Table 3.1 over the
 three pivot conditions, the model's own starts) with the NumPy generator, and writes:
 
 - Table 3.2 / 3.9: per model, mean generation time and mean swing knee and hip angles;
@@ -114,11 +114,11 @@ def run_reproduce(out: str | Path, models=THESIS_MODELS, n: int = 1000, seed: in
     ``batch_size``: scenarios of the timed batch for the models compared with CFFTG; ``results_dir``:
     also write the tables as a benchmark result (reproduce_<date>_<machine>.{json,md})."""
     from jaxexo.baselines import CFFTG
-    from jaxexo.compare import evaluate_generators, make_scenarios
+    from jaxexo.evaluation.compare import evaluate_generators, make_scenarios
     from jaxexo.inference import TrajectoryGenerator
     from jaxexo.train.driver import run_training
 
-    root = root or Path(__file__).resolve().parent.parent
+    root = root or Path(__file__).resolve().parents[2]
     out = Path(out)
     paths = {m: root / "configs" / "thesis" / f"{m}.toml" for m in models}
     if include_default:
@@ -147,7 +147,7 @@ def run_reproduce(out: str | Path, models=THESIS_MODELS, n: int = 1000, seed: in
     (out / "reproduce.json").write_text(json.dumps(results, indent=1) + "\n")
     (out / "reproduce.md").write_text(tables(results))
     if results_dir is not None:
-        from jaxexo.benchmarks.machine import write_result
+        from jaxexo.evaluation.machine import write_result
 
         write_result("reproduce", json.loads(json.dumps(results)), tables(results), results_dir)
     return results

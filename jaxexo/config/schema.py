@@ -19,8 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from jaxexo import geometry, kinematics
-from jaxexo.geometry import THESIS_OBSTACLES
+from jaxexo.physics import geometry, kinematics
+from jaxexo.physics.geometry import THESIS_OBSTACLES
 
 PIVOT_CONDITIONS = ("agent", "obstacle", "between")  # thesis 3.1: (b)/(2), (a)/(1), (c)/(3)
 OBS_MODES = ("thesis", "conditioned")
@@ -92,7 +92,7 @@ class RewardConfig:
     hip_height_penalty: float = 1.0    # n, eq 2.51
     max_hip_z: float = 1.0             # max_hz, eq 2.51, m (the hip model never exceeds thigh+shin)
     # Potential-based progress shaping per metre (not in the thesis; 0 = thesis reward), see
-    # jaxexo.rewards.shaping_reward for the choice of its discount.
+    # jaxexo.physics.rewards.shaping_reward for the choice of its discount.
     progress_shaping: float = 0.0
     shaping_discount: float = 1.0
 

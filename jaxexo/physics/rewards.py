@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from jaxexo.kinematics import LENGTH_EPS, leg_too_long  # noqa: F401 (LENGTH_EPS re-exported)
+from jaxexo.physics.kinematics import LENGTH_EPS, leg_too_long  # noqa: F401 (LENGTH_EPS re-exported)
 
 TRAJECTORY_TERMS = (
     "steps",          # r0, eq 2.29

@@ -116,7 +116,7 @@ def summarize(m: dict[str, np.ndarray], times_s: np.ndarray, mask: np.ndarray) -
 def batch_time(gen, scenarios: list[dict], size: int = BATCH, repeats: int = BATCH_REPEATS) -> float:
     """Median wall time (ms) of ``generate_batch`` on ``size`` scenarios (cycled if fewer), timed by
     the generator benchmark's own function, scaled to a batch of 1000 (exact when size = 1000)."""
-    from jaxexo.benchmarks.generate_bench import time_batch
+    from jaxexo.evaluation.timing import time_batch
 
     t = np.median(time_batch(gen, [scenarios[i % len(scenarios)] for i in range(size)], repeats)[0])
     return float(t) * 1e3 * BATCH / size
@@ -303,7 +303,7 @@ def run_eval(policy: str | Path, out: str | Path, against: str | None = "cfftg",
     """``batch_size``: scenarios per timed ``generate_batch`` call (the figure is scaled to 1000)."""
     """``jaxexo eval``: the policy (and CFFTG) on the chosen scenarios; writes the report."""
     from jaxexo.baselines import CFFTG
-    from jaxexo.benchmarks.machine import machine_info
+    from jaxexo.evaluation.machine import machine_info
     from jaxexo.inference import TrajectoryGenerator
 
     rl = TrajectoryGenerator.load(policy)

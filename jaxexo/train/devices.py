@@ -23,7 +23,7 @@ def use_all_cpu_cores(count: int | None = None) -> int:
     if _FLAG in flags:
         return n
     if "jax" in sys.modules:
-        warnings.warn("jaxexo.devices.use_all_cpu_cores() called after JAX was imported; using the "
+        warnings.warn("jaxexo.train.devices.use_all_cpu_cores() called after JAX was imported; using the "
                       "devices JAX already has", stacklevel=2)
         return n
     os.environ["XLA_FLAGS"] = f"{flags} {_FLAG}={n}".strip()

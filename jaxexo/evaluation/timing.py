@@ -1,0 +1,35 @@
+"""Timing of the NumPy generators: seconds per ``generate`` call and per ``generate_batch``, used by
+``jaxexo eval`` and the generator benchmark alike."""
+
+from __future__ import annotations
+
+import time
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from jaxexo.inference import TrajectoryGenerator
+
+
+def time_single(gen: TrajectoryGenerator, scenarios: list[dict], repeats: int = 3) -> np.ndarray:
+    """Seconds per ``generate`` call, per scenario (the median of ``repeats`` passes)."""
+    times = np.empty((repeats, len(scenarios)))
+    for r in range(repeats):
+        for i, s in enumerate(scenarios):
+            t0 = time.perf_counter()
+            gen.generate(s["obstacle"], pivot=s["pivot"], start_y=s["start_y"], step_length=s["step_length"])
+            times[r, i] = time.perf_counter() - t0
+    return np.median(times, axis=0)
+
+
+def time_batch(gen: TrajectoryGenerator, scenarios: list[dict], repeats: int = 5):
+    """Seconds per ``generate_batch`` of all scenarios (one per repeat), and the last batch."""
+    args = {k: [s[k] for s in scenarios] for k in ("obstacle", "pivot", "start_y", "step_length")}
+    out = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        batch = gen.generate_batch(args["obstacle"], pivot=args["pivot"], start_y=args["start_y"],
+                                   step_length=args["step_length"])
+        out.append(time.perf_counter() - t0)
+    return out, batch
