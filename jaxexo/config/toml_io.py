@@ -18,7 +18,7 @@ def _value(v) -> str:
     if isinstance(v, float):
         if math.isinf(v):
             return "inf" if v > 0 else "-inf"
-        return repr(v)
+        return repr(float(v))  # np.float64 is a float whose repr is "np.float64(...)"
     if isinstance(v, str):
         return json.dumps(v)
     if isinstance(v, (list, tuple)):
