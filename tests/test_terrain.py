@@ -13,7 +13,6 @@ import pytest
 
 from jaxexo.physics import geometry, kinematics, terrain
 from jaxexo.physics.terrain import (
-    D_MAX,
     FAMILIES,
     FAMILY_NAMES,
     HELD_OUT_FAMILIES,
