@@ -49,8 +49,9 @@ TARGETS = ("hard", "polyak")
 INT32_MAX = 2**31 - 1   # integers that reach JAX as int32 (or index a scan) stay below this
 SECTIONS = ("env", "kinematics", "reward", "layout", "train")
 # Sections that other commands read; a train config refuses them, saying where they belong.
-OTHER_COMMANDS = {"sweep": "jaxexo sweep (a sweep file: configs/sweeps/*.toml)",
-                  "eval": "no command: evaluation settings are train.eval_episodes and jaxexo eval's options"}
+OTHER_COMMANDS = {"sweep": "it is read by jaxexo sweep (a sweep file, see configs/sweeps/*.toml)",
+                  "eval": "no command reads it: jaxexo eval takes its settings as options (--n, --scenarios, "
+                          "--against), and training's greedy evaluation size is train.eval_episodes"}
 
 
 class ConfigError(ValueError):
@@ -583,7 +584,7 @@ def config_from_dict(raw: dict) -> Config:
         raise ConfigError(f"config: expected a table, got {raw!r}")
     for name in raw:
         if name in OTHER_COMMANDS:
-            raise ConfigError(f"{name}: a [{name}] section does not belong in a train config; it is read by "
+            raise ConfigError(f"{name}: a [{name}] section does not belong in a train config; "
                               f"{OTHER_COMMANDS[name]}")
     unknown = sorted(set(raw) - set(SECTIONS))
     if unknown:
