@@ -1,6 +1,7 @@
 """``jaxexo reproduce``: the thesis's experiments, rerun and tabulated beside its published values.
 
-Trains the seven thesis configs (jaxexo/config/thesis/{a,b,c,1,2,3,final}.toml, shipped with the package; configs/thesis/ holds copies; thesis 3.2), then for each
+Trains the seven thesis configs (jaxexo/config/thesis/{a,b,c,1,2,3,final}.toml, shipped with the package;
+configs/thesis/ holds byte-equal copies; thesis 3.2), then for each
 model generates the n test scenarios of ``jaxexo.evaluation.compare`` (the five obstacles of Table 3.1 over the
 three pivot conditions, the model's own starts) with the NumPy generator, and writes:
 
