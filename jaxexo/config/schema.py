@@ -4,7 +4,7 @@ Everything here is NumPy-only (``import jaxexo`` must not import JAX). Every val
 the config is built, and an error names the bad field (``ConfigError: layout.obstacles[1].height:
 ...``), so an impossible layout never shows up as a NaN inside a jitted run.
 
-Units: metres, radians, steps. Sections: [env], [kinematics], [reward], [layout]; later issues add
+Units: metres, radians, steps. Sections: [env], [kinematics], [reward], [layout], [device]; later issues add
 their own sections (e.g. [train]) through ``EXTRA_SECTIONS``.
 """
 
@@ -68,6 +68,25 @@ class KinematicsConfig:
     foot_length: float = 0.20          # heel-to-toe, m
     hip_limits: tuple[float, float] = (_deg(-30.0), _deg(115.0))   # rad
     knee_limits: tuple[float, float] = (_deg(-100.0), 0.0)         # rad
+
+
+@dataclass(frozen=True)
+class DeviceConfig:
+    """[device]: the exoskeleton's joint drives, for timing swings (jaxexo.inference.swing_timing).
+
+    Limits are per joint kind (hip, knee) and apply to both legs, in rad/s and rad/s^2. The defaults
+    are conservative, order-of-magnitude figures, not one device's data sheet: lower-limb
+    exoskeletons for paraplegic gait (ReWalk, Ekso, Indego, TWIICE) walk at about 0.2-0.5 m/s with
+    swings near one second, far slower than able-bodied gait, whose swing knee peaks at the order of
+    6 rad/s (~350 deg/s) and 50-100 rad/s^2 (Winter, Biomechanics and Motor Control of Human Movement,
+    4th ed., 2009, ch. 4); their drives (brushless motor + harmonic drive, ratio of the order of 100)
+    reach the order of 3-5 rad/s at the joint. We take the order's lower end: hip 3 rad/s (172 deg/s),
+    knee 4 rad/s (229 deg/s), both under 300 deg/s, and 15 / 20 rad/s^2. Set your device's own."""
+
+    joint_velocity: tuple[float, float] = (3.0, 4.0)          # rad/s, (hip, knee)
+    joint_acceleration: tuple[float, float] = (15.0, 20.0)    # rad/s^2, (hip, knee)
+    min_swing_duration: float = 0.0    # s; a swing never takes less (0: as fast as the limits allow)
+    control_rate: float = 100.0        # Hz, default rate of timed exports (jaxexo generate --rate)
 
 
 @dataclass(frozen=True)
@@ -191,6 +210,7 @@ class Config:
     reward: RewardConfig = field(default_factory=RewardConfig)
     layout: LayoutConfig = field(default_factory=lambda: LayoutConfig(obstacles=default_obstacles()))
     train: TrainConfig = field(default_factory=TrainConfig)
+    device: DeviceConfig = field(default_factory=DeviceConfig)
     extra: dict = field(default_factory=dict)  # sections owned by later stages
 
     @property
@@ -330,6 +350,14 @@ def _coerce_kin(path, k, v):
     return _number(path, v, positive=True)
 
 
+def _coerce_device(path, k, v):
+    if k in ("joint_velocity", "joint_acceleration"):
+        return _vector(path, v, 2, positive=True)
+    if k == "min_swing_duration":
+        return _number(path, v, nonneg=True)
+    return _number(path, v, positive=True)
+
+
 def _coerce_reward(path, k, v):
     if k == "traj_weights":
         return _vector(path, v, 8, nonneg=True)
@@ -442,7 +470,7 @@ def config_from_dict(raw: dict) -> Config:
     """Build and validate a Config from a parsed TOML table."""
     if not isinstance(raw, dict):
         raise ConfigError(f"config: expected a table, got {raw!r}")
-    known = {"env", "kinematics", "reward", "layout", "train"} | EXTRA_SECTIONS
+    known = {"env", "kinematics", "reward", "layout", "train", "device"} | EXTRA_SECTIONS
     unknown = sorted(set(raw) - known)
     if unknown:
         raise ConfigError(f"{unknown[0]}: unknown section (known: {', '.join(sorted(known))})")
@@ -454,8 +482,9 @@ def config_from_dict(raw: dict) -> Config:
     if not lay.obstacles:
         lay = dataclasses.replace(lay, obstacles=default_obstacles())
     train = _section(TrainConfig, "train", raw.get("train", {}), _coerce_train)
+    device = _section(DeviceConfig, "device", raw.get("device", {}), _coerce_device)
     extra = {k: raw[k] for k in EXTRA_SECTIONS if k in raw}
-    cfg = Config(env, kin, rew, lay, train, extra)
+    cfg = Config(env, kin, rew, lay, train, device, extra)
     validate(cfg)
     return cfg
 

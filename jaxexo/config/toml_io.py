@@ -40,7 +40,7 @@ def _obstacle(o) -> dict:
 
 def config_to_toml(cfg: Config) -> str:
     lines = ["# Resolved jaxexo configuration (metres, radians, steps)."]
-    for section in ("env", "kinematics", "reward", "train"):
+    for section in ("env", "kinematics", "reward", "train", "device"):
         lines += ["", f"[{section}]"]
         for f in dataclasses.fields(getattr(cfg, section)):
             lines.append(f"{f.name} = {_value(getattr(getattr(cfg, section), f.name))}")
