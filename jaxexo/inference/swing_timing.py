@@ -341,7 +341,8 @@ def time_law(s_grid: np.ndarray, x: np.ndarray, v_floor: np.ndarray | None = Non
 
 
 def _arc_length_map(sp, pivot_y: float, heel: np.ndarray, slopes: np.ndarray):
-    """(s, u) table: joint-space arc-length fraction s against the heel's sample coordinate u.
+    """(s, v) table: joint-space arc-length fraction s against v, the heel's sample coordinate
+    u = (N - 1) smoothstep(v).
 
     Why joint space: a straight leg makes the joints move like the square root of the heel's
     displacement at lift-off and touch-down (the knee must bend at once to lift the heel), so in
@@ -358,11 +359,14 @@ def _arc_length_map(sp, pivot_y: float, heel: np.ndarray, slopes: np.ndarray):
         raise ValueError("trajectory: the joints do not move along this path; nothing to time")
     # Stretches where no joint moves get a sliver of length so that s -> u is a function.
     length += 1e-9 * length[-1] * v
-    return length / length[-1], u
+    return length / length[-1], v
 
 
 def _heel_at(heel, slopes, table, s):
-    return pchip_eval(heel, slopes, np.interp(s, table[0], table[1]))
+    """Heel at joint-arc-length fractions s: linear in v between table points (s is about linear in
+    v near the ends too, where it is about the square root of u)."""
+    v = np.interp(s, table[0], table[1])
+    return pchip_eval(heel, slopes, (len(heel) - 1) * v * v * (3.0 - 2.0 * v))
 
 
 def _joint_paths(sp, pivot_y: float, heel: np.ndarray):
