@@ -27,7 +27,7 @@ while a variable-speed law slows only where the path bends in joint space):
    time-optimal path parametrisation, Bobrow 1985 / Pfeiffer-Johanni 1987), with the limits shrunk by
    SAFETY.
 3. Rest with zero acceleration: the optimal law starts with a jump in s''; its speed s'(t) is
-   averaged over a sliding window of BLEND_FRACTION of the duration (a box filter), which keeps
+   averaged over a sliding window of BLEND_S = 30 ms (at most a tenth of the swing; a box filter), which keeps
    s' and s'' bounded by the averaged values, adds the window to the duration, and makes s'' = 0 at
    both ends (s''(t) = (s'(t) - s'(t - w)) / w, zero where both speeds are the rest speed).
 4. Exported samples: the law is sampled at the control rate (the duration rounded up to whole
@@ -60,9 +60,11 @@ from jaxexo.inference.trajectory import (
 FINE_PER_SAMPLE = 8        # fine s-grid points per interval of the path's samples
 TIME_NODES = 2000          # nodes of the time-law table over the optimal duration
 SAFETY = 0.95              # the TOPP passes use this fraction of each limit
-BLEND_FRACTION = 0.03      # box-filter window, fraction of the optimal duration (ramps s'' over ~35 ms)
+BLEND_S = 0.03             # s, box-filter window (s'' ramps from rest over 30 ms) ...
+BLEND_FRACTION = 0.1       # ... at most this fraction of the optimal duration
 CHECK_MARGIN = 1e-3        # exported samples must stay within (1 - this) of each limit
-MAX_SLOWDOWNS = 12
+LOCAL_PASSES = 6           # local corrections of the law where exported samples exceed a limit ...
+MAX_SLOWDOWNS = 12         # ... then uniform slow-downs (the safety net)
 ARC_TABLE_PER_SAMPLE = 32  # arc-length table points per sample interval
 X_CAP = 1e6                # 1/s^2: cap on s'^2 where no joint moves (s' <= 1000 /s)
 
@@ -134,7 +136,7 @@ class TimedSwing:
     within_limits: bool            # chain-rule columns and finite differences within the limits
     peak_velocity: np.ndarray      # (4,) rad/s, max of |column| and |finite difference| per joint
     peak_acceleration: np.ndarray  # (4,) rad/s^2, likewise
-    slowdown: float                # uniform slow-down applied after the TOPP passes (>= 1)
+    slowdown: float                # uniform slow-down applied after the TOPP passes and local corrections (>= 1)
     notes: tuple[str, ...] = field(default=())
 
     @property
@@ -244,15 +246,19 @@ def max_speed_curve(dq: np.ndarray, ddq: np.ndarray, vmax: np.ndarray, amax: np.
     return np.minimum(np.minimum(x_vel, still), np.minimum(x_acc, X_CAP))
 
 
-def topp(dq: np.ndarray, ddq: np.ndarray, vmax, amax, ds: float) -> tuple[np.ndarray, np.ndarray]:
+def topp(dq: np.ndarray, ddq: np.ndarray, vmax, amax, ds: float, cap: np.ndarray | None = None
+         ) -> tuple[np.ndarray, np.ndarray]:
     """The time-optimal rest-to-rest law on a uniform s grid (spacing ds) for joint derivatives
     dq, ddq (B, K, J): s'^2 (B, K), and per cell the least speed (B, K-1) of a cell crossed from
     rest to rest. A backward pass from rest at the end at the smallest admissible s'' bounds the
     speeds from which the end can still be reached; the forward pass from rest at the start
-    accelerates at the largest admissible s'' under that bound (as TOPP-RA orders the passes)."""
+    accelerates at the largest admissible s'' under that bound (as TOPP-RA orders the passes).
+    ``cap`` (B, K): further upper bounds on s'^2."""
     vmax = np.asarray(vmax, np.float64)
     amax = np.asarray(amax, np.float64)
     xmax = max_speed_curve(dq, ddq, vmax, amax)
+    if cap is not None:
+        xmax = np.minimum(xmax, cap)
     b, k = xmax.shape
     reach = np.empty((b, k))
     reach[:, -1] = 0.0
@@ -267,7 +273,12 @@ def topp(dq: np.ndarray, ddq: np.ndarray, vmax, amax, ds: float) -> tuple[np.nda
     # A cell entered and left at rest (a cusp, or the two ends of a very short path) takes
     # 2 sqrt(ds / u0) at the largest s'' from rest, u0: its mean speed is sqrt(ds u0) / 2.
     _, u0 = _accel_bounds(dq[:, :-1], ddq[:, :-1], amax, np.zeros((b, k - 1)))
-    return x, 0.5 * np.sqrt(ds * np.minimum(u0, X_CAP))
+    floor = 0.5 * np.sqrt(ds * np.minimum(u0, X_CAP))
+    if cap is not None:
+        # A capped cell (see time_swings) is crossed no faster than its caps allow, cusps included.
+        root = np.sqrt(cap)
+        floor = np.minimum(floor, 0.5 * (root[:, :-1] + root[:, 1:]))
+    return x, floor
 
 
 # --------------------------------------------------------------------------------------------
@@ -300,11 +311,11 @@ class TimeLaw:
 
 
 def time_law(s_grid: np.ndarray, x: np.ndarray, v_floor: np.ndarray | None = None,
-             blend_fraction: float | None = None, nodes: int = TIME_NODES) -> TimeLaw:
+             blend_s: float | None = None, nodes: int = TIME_NODES) -> TimeLaw:
     """The rest-to-rest law from s'^2 = x on s_grid: cell times from constant s'' per cell
     (2 ds / (v0 + v1), the mean speed at least ``v_floor`` per cell), s' at uniform time nodes,
     then averaged over a window w (zero s'' at both ends)."""
-    blend_fraction = BLEND_FRACTION if blend_fraction is None else blend_fraction
+    blend_s = BLEND_S if blend_s is None else blend_s
     v = np.sqrt(np.maximum(x, 0.0))
     mean = 0.5 * (v[:-1] + v[1:])
     if v_floor is not None:
@@ -313,7 +324,9 @@ def time_law(s_grid: np.ndarray, x: np.ndarray, v_floor: np.ndarray | None = Non
     t_grid = np.concatenate([[0.0], np.cumsum(dt_cells)])
     t0 = float(t_grid[-1])
     dt = t0 / nodes
-    m = max(1, int(round(blend_fraction * nodes)))
+    # A short window: averaging over longer stretches would carry speed into the places (cusps,
+    # sharp bends) where the optimal law must nearly stop.
+    m = max(1, int(round(min(blend_s / dt, BLEND_FRACTION * nodes))))
     w = m * dt
     tn = np.arange(nodes + 1) * dt
     vn = np.interp(tn, t_grid, v)
@@ -413,17 +426,45 @@ def time_swings(trajs, config, rate: float | None = None, limits: DeviceLimits |
         if h.ndim != 2 or h.shape[1] != 2 or len(h) < 2 or not np.all(np.isfinite(h)):
             raise ValueError(f"trajs[{i}].heel: expected a finite (N >= 2, 2) path, got shape {h.shape}")
     paths = [_joint_paths(sp, t.scene.pivot_y, h) for t, h in zip(trajs, heels)]
-    # One batched TOPP per grid size (paths of equal sample counts share it).
-    xs: list = [None] * len(trajs)
-    sizes = np.array([len(p[0]) for p in paths])
+    caps = [np.full(len(p[0]), np.inf) for p in paths]
+    laws = _topp_laws(paths, list(range(len(paths))), caps, vmax, amax)
+    t_opt = [law.duration for law in laws]
+    slow = [1.0] * len(trajs)       # uniform slow-down beyond the (locally corrected) TOPP law
+    evals: list = [None] * len(trajs)
+    todo = list(range(len(trajs)))
+    for it in range(LOCAL_PASSES + MAX_SLOWDOWNS):
+        redo = []
+        for i in todo:
+            e = evals[i] = _evaluate(trajs[i], heels[i], paths[i], laws[i], slow[i], sp, limits, rate)
+            if e["ratio"] <= 1.0 - CHECK_MARGIN:
+                continue
+            if it < LOCAL_PASSES:
+                _lower_cap(caps[i], paths[i][0], e, vmax, amax)
+                redo.append(i)
+            else:
+                slow[i] *= e["ratio"] / (1.0 - 2.0 * CHECK_MARGIN)
+        if redo:
+            for i, law in zip(redo, _topp_laws(paths, redo, caps, vmax, amax)):
+                laws[i] = law
+        todo = [i for i in todo if evals[i]["ratio"] > 1.0 - CHECK_MARGIN]
+        if not todo:
+            break
+    return [_finish(trajs[i], evals[i], sp, limits, rate, t_opt[i], slow[i]) for i in range(len(trajs))]
+
+
+def _topp_laws(paths, idx, caps, vmax, amax) -> list[TimeLaw]:
+    """Time laws of paths[idx], one batched TOPP per grid size."""
+    out = {}
+    sizes = np.array([len(paths[i][0]) for i in idx])
     for k in np.unique(sizes):
-        idx = np.flatnonzero(sizes == k)
-        dq = np.stack([paths[i][2] for i in idx])
-        ddq = np.stack([paths[i][3] for i in idx])
-        x, floor = topp(dq, ddq, SAFETY * vmax, SAFETY * amax, 1.0 / (k - 1))
-        for j, i in enumerate(idx):
-            xs[i] = (x[j], floor[j])
-    return [_sample(t, h, p, x, sp, limits, rate) for t, h, p, x in zip(trajs, heels, paths, xs)]
+        sub = [i for i, n in zip(idx, sizes) if n == k]
+        dq = np.stack([paths[i][2] for i in sub])
+        ddq = np.stack([paths[i][3] for i in sub])
+        cap = np.stack([caps[i] for i in sub])
+        x, floor = topp(dq, ddq, SAFETY * vmax, SAFETY * amax, 1.0 / (k - 1), cap)
+        for j, i in enumerate(sub):
+            out[i] = time_law(paths[i][0], x[j], floor[j])
+    return [out[i] for i in idx]
 
 
 def time_swing(traj, config, rate: float | None = None, limits: DeviceLimits | None = None) -> TimedSwing:
@@ -431,41 +472,60 @@ def time_swing(traj, config, rate: float | None = None, limits: DeviceLimits | N
     return time_swings([traj], config, rate, limits)[0]
 
 
-def _sample(traj, heel, path, x, sp, limits: DeviceLimits, rate: float) -> TimedSwing:
+def _evaluate(traj, heel, path, law: TimeLaw, slow: float, sp, limits: DeviceLimits, rate: float) -> dict:
+    """The exported samples of a law (stretched to the minimum duration and whole control periods,
+    and by ``slow``), and how far they are from the limits: ``ratio`` the largest of |v| / v_max and
+    sqrt(|a| / a_max) over the chain-rule columns and the finite differences."""
     s_grid, (slopes, table), dq, ddq = path
-    n = len(heel)
     vmax = np.asarray(limits.velocity)
     amax = np.asarray(limits.acceleration)
-    law = time_law(s_grid, *x)
+    scale = max(1.0, limits.min_duration / law.duration) * slow
+    cur = law.slowed(scale)
+    periods = max(2, math.ceil(cur.duration * rate - 1e-9))
+    cur = cur.slowed(periods / (cur.duration * rate))      # whole control periods: never faster
+    t = np.arange(periods + 1) / rate
+    s, sd, sdd = cur.at(t)
+    s[0], s[-1] = 0.0, 1.0
+    h = _heel_at(heel, slopes, table, s)
+    h[0], h[-1] = heel[0], heel[-1]
+    q = leg_angles(sp, traj.scene.pivot_y, h)
+    dq_t = np.stack([np.interp(s, s_grid, dq[:, j]) for j in range(dq.shape[1])], axis=-1)
+    ddq_t = np.stack([np.interp(s, s_grid, ddq[:, j]) for j in range(ddq.shape[1])], axis=-1)
+    vel = dq_t * sd[:, None]
+    acc = ddq_t * (sd * sd)[:, None] + dq_t * sdd[:, None]
+    vel[0] = vel[-1] = acc[0] = acc[-1] = 0.0        # s' = s'' = 0 exactly at the ends
+    fv, fa = _finite_differences(np.unwrap(q, axis=0), 1.0 / rate)
+    peak_v = np.maximum(np.abs(vel).max(axis=0), np.abs(fv).max(axis=0))
+    peak_a = np.maximum(np.abs(acc).max(axis=0), np.abs(fa).max(axis=0))
+    ratio = max(float(np.max(peak_v / vmax)), math.sqrt(float(np.max(peak_a / amax))))
+    return {"t": t, "s": s, "sd": sd / scale, "h": h, "vel": vel, "acc": acc, "fv": fv, "fa": fa,
+            "peak_v": peak_v, "peak_a": peak_a, "ratio": ratio}
+
+
+def _lower_cap(cap, s_grid, e: dict, vmax, amax) -> None:
+    """Where exported samples exceed a limit (a bend too tight for the grid's q''), lower the speed
+    bound around them by the excess; the passes are then run again for this path."""
+    vel, acc, fv, fa, s = e["vel"], e["acc"], e["fv"], e["fa"], e["s"]
+    r = np.maximum(np.abs(vel) / vmax, np.sqrt(np.abs(acc) / amax)).max(axis=1)
+    rv = (np.abs(fv) / vmax).max(axis=1)
+    ra = np.sqrt(np.abs(fa) / amax).max(axis=1)
+    r[:-1] = np.maximum(r[:-1], rv)
+    r[1:] = np.maximum(r[1:], rv)
+    for k in range(3):
+        r[k: len(r) - 2 + k] = np.maximum(r[k: len(r) - 2 + k], ra)
+    x_now = np.interp(s_grid, s, e["sd"] ** 2)       # the law's own s'^2 (before stretching)
+    for k in np.flatnonzero(r > 1.0 - CHECK_MARGIN):
+        sel = (s_grid >= s[max(k - 2, 0)]) & (s_grid <= s[min(k + 2, len(s) - 1)])
+        cap[sel] = np.minimum(cap[sel], x_now[sel] * ((1.0 - 4.0 * CHECK_MARGIN) / r[k]) ** 2)
+
+
+def _finish(traj, e: dict, sp, limits: DeviceLimits, rate: float, t_opt: float, slow: float) -> TimedSwing:
     notes = []
-    slow = 1.0
-    if law.duration < limits.min_duration:
-        slow = limits.min_duration / law.duration
-        notes.append(f"the limits allow {law.duration:.3f} s; the minimum swing duration {limits.min_duration:.3f} s is used")
-    for _ in range(MAX_SLOWDOWNS):
-        cur = law.slowed(slow)
-        periods = max(2, math.ceil(cur.duration * rate - 1e-9))
-        # Whole control periods: a slightly longer swing, never faster.
-        slow *= periods / (cur.duration * rate)
-        cur = law.slowed(slow)
-        t = np.arange(periods + 1) / rate
-        s, sd, sdd = cur.at(t)
-        s[0], s[-1] = 0.0, 1.0
-        h = _heel_at(heel, slopes, table, s)
-        h[0], h[-1] = heel[0], heel[-1]
-        q = leg_angles(sp, traj.scene.pivot_y, h)
-        dq_t = np.stack([np.interp(s, s_grid, dq[:, j]) for j in range(dq.shape[1])], axis=-1)
-        ddq_t = np.stack([np.interp(s, s_grid, ddq[:, j]) for j in range(ddq.shape[1])], axis=-1)
-        vel = dq_t * sd[:, None]
-        acc = ddq_t * (sd * sd)[:, None] + dq_t * sdd[:, None]
-        vel[0] = vel[-1] = acc[0] = acc[-1] = 0.0        # s' = s'' = 0 exactly at the ends
-        fv, fa = _finite_differences(np.unwrap(q, axis=0), 1.0 / rate)
-        peak_v = np.maximum(np.abs(vel).max(axis=0), np.abs(fv).max(axis=0))
-        peak_a = np.maximum(np.abs(acc).max(axis=0), np.abs(fa).max(axis=0))
-        ratio = max(float(np.max(peak_v / vmax)), math.sqrt(float(np.max(peak_a / amax))))
-        if ratio <= 1.0 - CHECK_MARGIN:
-            break
-        slow *= ratio / (1.0 - 2.0 * CHECK_MARGIN)
+    if limits.min_duration > t_opt:
+        notes.append(f"the limits allow {t_opt:.3f} s; the minimum swing duration {limits.min_duration:.3f} s is used")
+    vmax = np.asarray(limits.velocity)
+    amax = np.asarray(limits.acceleration)
+    t, s, h, vel, acc, peak_v, peak_a = (e[k] for k in ("t", "s", "h", "vel", "acc", "peak_v", "peak_a"))
     within = bool(np.all(peak_v <= vmax) and np.all(peak_a <= amax))
     sc = traj.scene
     m = measure(sp, h[None], clearances(sp.foot_length, h[None], [sc]), np.array([sc.pivot_y]),
