@@ -90,7 +90,7 @@ def test_eval_figures_match_the_generators_own_outputs(trained_run):
         from jaxexo.inference.swing_timing import time_swings
 
         dev = report[name]["device"]
-        timed = time_swings(b, rl.config)
+        timed = time_swings(trajs[name], rl.config)
         assert dev["swing_s_mean"] == pytest.approx(np.mean([t.duration for t in timed]))
         assert dev["device_within_limits"] == 1.0
         assert dev["peak_knee_vel_deg_s_mean"] <= np.degrees(rl.config.device.joint_velocity[1]) + 1e-9
