@@ -138,6 +138,10 @@ def test_samples_lie_on_the_path():
     ks = kinematics.leg_state(np, tr.scene.pivot_y, sw.heel, SP.thigh, SP.shin)
     np.testing.assert_allclose(sw.joint_angles[:, 1], ks["knee_swing_angle"], atol=1e-9)
     np.testing.assert_allclose(sw.toe[:, 0] - sw.heel[:, 0], SP.foot_length)
+    # The heel's velocity column against central differences of the exported heel positions.
+    cd = (sw.heel[2:] - sw.heel[:-2]) * 250 / 2
+    np.testing.assert_allclose(sw.heel_velocity[1:-1], cd, atol=0.02 * np.abs(cd).max())
+    assert np.all(sw.heel_velocity[[0, -1]] == 0) and np.all(sw.heel_acceleration[[0, -1]] == 0)
 
 
 def test_durations_scale_with_the_limits():

@@ -107,7 +107,8 @@ def run_timing_benchmark(policy: str | Path, out_dir: str | Path, n: int = 1000,
             f = fig
             lines.append(f"| {set_name} | {name} | {f['n']} | {100 * f['path_ok']:.1f} | {100 * f['timed_ok']:.1f} | "
                          f"{f['swing_s_mean']:.3f} | {f['swing_s_median']:.3f} | {f['swing_s_p95']:.3f} | "
-                         f"{f['swing_s_max']:.3f} | {100 * f['fd_within_limits']:.1f} | {f['peak_hip_vel_deg_s_mean']:.0f} | "
+                         f"{f['swing_s_max']:.3f} | {100 * f['fd_within_limits']:.1f} | "
+                         f"{f['peak_hip_vel_deg_s_mean']:.0f} | "
                          f"{f['peak_knee_vel_deg_s_mean']:.0f} | {f['end_step_vel_deg_s_max']:.2f} | {ms:.1f} | "
                          f"{f['uniform_peak_vel_deg_s_median']:.0f} / {f['uniform_peak_acc_deg_s2_median']:.0f} |")
         ratio = durs["rl"] / durs["cfftg"]

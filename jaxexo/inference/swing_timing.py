@@ -131,6 +131,8 @@ class TimedSwing:
     joint_angles: np.ndarray       # (n, 4) rad, JOINT_NAMES
     joint_velocity: np.ndarray     # (n, 4) rad/s (chain rule: q'(s) s')
     joint_acceleration: np.ndarray # (n, 4) rad/s^2 (q''(s) s'^2 + q'(s) s'')
+    heel_velocity: np.ndarray      # (n, 2) m/s, the same chain rule on the heel path
+    heel_acceleration: np.ndarray  # (n, 2) m/s^2
     path_parameter: np.ndarray     # (n,) s(t) in [0, 1]
     checks: TrajectoryChecks       # path checks (goal, clearance, joint range, leg length) on these samples
     within_limits: bool            # chain-rule columns and finite differences within the limits
@@ -390,11 +392,14 @@ def _joint_paths(sp, pivot_y: float, heel: np.ndarray):
     s = np.linspace(0.0, 1.0, k)
     m = pchip_slopes(heel)
     table = _arc_length_map(sp, pivot_y, heel, m)
-    q = np.unwrap(leg_angles(sp, pivot_y, _heel_at(heel, m, table, s)), axis=0)
+    h = _heel_at(heel, m, table, s)
+    q = np.unwrap(leg_angles(sp, pivot_y, h), axis=0)
     ds = 1.0 / (k - 1)
     dq = np.gradient(q, ds, axis=0, edge_order=2)
     ddq = np.gradient(dq, ds, axis=0, edge_order=2)
-    return s, (m, table), dq, ddq
+    dh = np.gradient(h, ds, axis=0, edge_order=2)
+    ddh = np.gradient(dh, ds, axis=0, edge_order=2)
+    return s, (m, table, dh, ddh), dq, ddq
 
 
 def _finite_differences(q: np.ndarray, dt: float):
@@ -476,7 +481,7 @@ def _evaluate(traj, heel, path, law: TimeLaw, slow: float, sp, limits: DeviceLim
     """The exported samples of a law (stretched to the minimum duration and whole control periods,
     and by ``slow``), and how far they are from the limits: ``ratio`` the largest of |v| / v_max and
     sqrt(|a| / a_max) over the chain-rule columns and the finite differences."""
-    s_grid, (slopes, table), dq, ddq = path
+    s_grid, (slopes, table, dh, ddh), dq, ddq = path
     vmax = np.asarray(limits.velocity)
     amax = np.asarray(limits.acceleration)
     scale = max(1.0, limits.min_duration / law.duration) * slow
@@ -494,11 +499,17 @@ def _evaluate(traj, heel, path, law: TimeLaw, slow: float, sp, limits: DeviceLim
     vel = dq_t * sd[:, None]
     acc = ddq_t * (sd * sd)[:, None] + dq_t * sdd[:, None]
     vel[0] = vel[-1] = acc[0] = acc[-1] = 0.0        # s' = s'' = 0 exactly at the ends
+    dh_t = np.stack([np.interp(s, s_grid, dh[:, j]) for j in range(2)], axis=-1)
+    ddh_t = np.stack([np.interp(s, s_grid, ddh[:, j]) for j in range(2)], axis=-1)
+    heel_vel = dh_t * sd[:, None]
+    heel_acc = ddh_t * (sd * sd)[:, None] + dh_t * sdd[:, None]
+    heel_vel[0] = heel_vel[-1] = heel_acc[0] = heel_acc[-1] = 0.0
     fv, fa = _finite_differences(np.unwrap(q, axis=0), 1.0 / rate)
     peak_v = np.maximum(np.abs(vel).max(axis=0), np.abs(fv).max(axis=0))
     peak_a = np.maximum(np.abs(acc).max(axis=0), np.abs(fa).max(axis=0))
     ratio = max(float(np.max(peak_v / vmax)), math.sqrt(float(np.max(peak_a / amax))))
     return {"t": t, "s": s, "sd": sd / scale, "h": h, "vel": vel, "acc": acc, "fv": fv, "fa": fa,
+            "heel_vel": heel_vel, "heel_acc": heel_acc,
             "peak_v": peak_v, "peak_a": peak_a, "ratio": ratio}
 
 
@@ -540,7 +551,8 @@ def _finish(traj, e: dict, sp, limits: DeviceLimits, rate: float, t_opt: float, 
     return TimedSwing(
         method=traj.method, scene=sc, rate=rate, duration=float(t[-1]), limits=limits, time=t, heel=h, toe=toe,
         hip=kin["hip"][0], knee_swing=kin["knee_swing"][0], knee_stance=kin["knee_stance"][0],
-        joint_angles=m["angles"][0], joint_velocity=vel, joint_acceleration=acc, path_parameter=s, checks=checks,
+        joint_angles=m["angles"][0], joint_velocity=vel, joint_acceleration=acc, heel_velocity=e["heel_vel"],
+        heel_acceleration=e["heel_acc"], path_parameter=s, checks=checks,
         within_limits=within, peak_velocity=peak_v, peak_acceleration=peak_a, slowdown=slow,
         notes=tuple(getattr(traj, "notes", ())) + tuple(notes))
 

@@ -285,14 +285,15 @@ def assemble(method: str, sp, scenes, raws, paths: np.ndarray, smoothing, durati
 # Timed (device-ready) swings: exports of jaxexo.inference.swing_timing.TimedSwing ------------------
 
 TIMED_CSV_COLUMNS = CSV_COLUMNS + tuple(f"{j}_vel_rad_s" for j in JOINT_NAMES) + tuple(
-    f"{j}_acc_rad_s2" for j in JOINT_NAMES)
+    f"{j}_acc_rad_s2" for j in JOINT_NAMES) + ("heel_vel_y_m_s", "heel_vel_z_m_s", "heel_acc_y_m_s2", "heel_acc_z_m_s2")
 
 
 def timed_table(swing) -> np.ndarray:
     """(n, len(TIMED_CSV_COLUMNS)) array of a TimedSwing: the path columns, then joint velocities
-    and accelerations, one row per control period."""
+    and accelerations and the heel's velocity and acceleration, one row per control period."""
     return np.column_stack([swing.time, swing.heel, swing.toe, swing.hip, swing.knee_swing, swing.knee_stance,
-                            swing.joint_angles, swing.joint_velocity, swing.joint_acceleration])
+                            swing.joint_angles, swing.joint_velocity, swing.joint_acceleration,
+                            swing.heel_velocity, swing.heel_acceleration])
 
 
 def write_timed_csv(swing, path: str | Path | None = None) -> str:
@@ -311,8 +312,8 @@ def timed_dict(swing) -> dict:
     c = swing.checks
     sc = swing.scene
     return {
-        "units": {"length": "m", "angle": "rad", "time": "s", "velocity": "rad/s", "acceleration": "rad/s^2",
-                  "rate": "Hz"},
+        "units": {"length": "m", "angle": "rad", "time": "s", "joint velocity": "rad/s",
+                  "joint acceleration": "rad/s^2", "heel velocity": "m/s", "heel acceleration": "m/s^2", "rate": "Hz"},
         "method": swing.method,
         "scene": {"obstacle": sc.obstacle.kind, "shape": sc.obstacle.shape, "center_y": sc.center_y,
                   "width": sc.width, "height": sc.height, "outline": sc.obstacle.outline.tolist(),
