@@ -280,9 +280,10 @@ def build_parser() -> argparse.ArgumentParser:
                                     "and figures (NumPy only)")
     e.add_argument("--policy", required=True, help="policy.npz written by jaxexo train")
     e.add_argument("--against", choices=("cfftg",), help="also evaluate this baseline on the same scenarios")
-    e.add_argument("--scenarios", choices=("train", "test", "all"), default="test",
+    e.add_argument("--scenarios", choices=("train", "test", "all", "unseen"), default="test",
                    help="test: the five thesis obstacles x three pivots; train: the policy's training "
-                        "distribution; all: both")
+                        "distribution; all: both; unseen: the fixed held-out obstacle families "
+                        "(jaxexo.evaluation.unseen), reported per family")
     e.add_argument("--n", type=int, default=1000, help="scenarios per set")
     e.add_argument("--batch", type=int, default=1000,
                    help="scenarios per timed generate_batch call (reported scaled to a batch of 1000)")

@@ -37,15 +37,21 @@ from jaxexo.inference.scenarios import sample_scenarios, training_scenarios
 
 BATCH = 1000
 BATCH_REPEATS = 3
-SCENARIO_SETS = ("train", "test", "all")
+SCENARIO_SETS = ("train", "test", "all", "unseen")
 
 
 def make_scenarios(cfg: Config, which: str, n: int, seed: int = 12345) -> list[dict]:
     """``test``: n scenarios of jaxexo.inference.scenarios.sample_scenarios (the five thesis obstacles
     over the three pivot conditions); ``train``: n of the config's training distribution; ``all``:
-    both (2 n). Each a dict of ``generate``'s keyword arguments plus ``kind``."""
+    both (2 n); ``unseen``: the fixed held-out benchmark of jaxexo.evaluation.unseen (at least n
+    scenes; its seed is fixed, ``seed`` does not apply). Each a dict of ``generate``'s keyword
+    arguments plus ``kind``."""
     if which not in SCENARIO_SETS:
         raise ValueError(f"scenarios must be one of {SCENARIO_SETS}, got {which!r}")
+    if which == "unseen":
+        from jaxexo.evaluation.unseen import repeats_for, unseen_scenarios
+
+        return unseen_scenarios(cfg.kinematics.foot_length, repeats_for(n))
     out: list[dict] = []
     if which in ("test", "all"):
         out += sample_scenarios(cfg, n, seed)
@@ -384,6 +390,14 @@ def run_eval(policy: str | Path, out: str | Path, against: str | None = "cfftg",
     for entry in report.values():
         entry["scenarios"] = scenarios
         entry["policy"] = str(policy)
+    if scenarios == "unseen":
+        from jaxexo.evaluation.unseen import UNSEEN_SEED, family_table, markdown_lines
+
+        table = family_table(trajs, sc)
+        for name, entry in report.items():
+            entry["by_family"] = {fam: gens[name] for fam, gens in table.items()}
+        context[0] = context[0].replace(f"seed {seed}", f"fixed seed {UNSEEN_SEED}")
+        context += ["", *markdown_lines(table)]
     return write_report(out, report, trajs, sc, "jaxexo eval: RL generator" + (" vs CFFTG" if against else ""),
                         context, figures)
 
