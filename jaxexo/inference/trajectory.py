@@ -22,6 +22,7 @@ import numpy as np
 
 from jaxexo.physics import dynamics, geometry, kinematics
 from jaxexo.physics.dynamics import Scene
+from jaxexo.storage.atomic import atomic_write
 
 JOINT_NAMES = ("hip_swing", "knee_swing", "hip_stance", "knee_stance")
 DEFAULT_DURATION = 1.0   # s, swing duration for the time stamps
@@ -93,7 +94,7 @@ class Trajectory:
             w.writerow([f"{x:.6f}" for x in row])
         text = buf.getvalue()
         if path is not None:
-            _write_text(Path(path), text)
+            atomic_write(path, text)
         return text
 
     def to_dict(self) -> dict:
@@ -118,16 +119,8 @@ class Trajectory:
     def to_json(self, path: str | Path | None = None) -> str:
         text = json.dumps(self.to_dict(), indent=1)
         if path is not None:
-            _write_text(Path(path), text)
+            atomic_write(path, text)
         return text
-
-
-def _write_text(path: Path, text: str) -> None:
-    """Atomic write: an interrupted export never leaves half a file in place of a good one."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    tmp.replace(path)
 
 
 @dataclass(frozen=True)

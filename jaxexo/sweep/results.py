@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxexo.config import HYPER_FIELDS, RewardConfig
+from jaxexo.storage.atomic import atomic_write  # noqa: F401 (the one atomic write; R.atomic_write)
 from jaxexo.sweep.spec import Sweep
 
 PLAN, SWEEP_FILE, RESULTS, CHUNKS = "plan.json", "sweep.json", "results.csv", "chunks"
@@ -93,15 +94,6 @@ def _csv_text(cols, rows, header: bool) -> str:
         w.writeheader()
     w.writerows(rows)
     return buf.getvalue()
-
-
-def atomic_write(path: Path, data: bytes | str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    with tmp.open("wb") as f:
-        f.write(data.encode() if isinstance(data, str) else data)
-        f.flush()
-        os.fsync(f.fileno())
-    tmp.replace(path)
 
 
 def write_rows(path: Path, cols, rows) -> None:

@@ -32,6 +32,7 @@ from flax import serialization
 from jaxexo.config import Config, ConfigError, config_from_dict
 from jaxexo.config.toml_io import config_to_toml
 from jaxexo.env.exo_step import LENGTH_SCALE, THESIS_OBS_CENTER
+from jaxexo.storage.atomic import atomic_write as _atomic_write  # module-level name: tests patch it
 from jaxexo.storage.policy_file import save_policy
 from jaxexo.train.evaluate import evaluate, make_validator
 from jaxexo.train.network import dense_layers, norm_layers
@@ -50,12 +51,6 @@ def chunking(cfg: Config, trainer: Trainer) -> tuple[int, int]:
     target = cfg.train.chunk_updates or max(1, CHUNK_ENV_STEPS // per)
     chunks = math.ceil(trainer.num_updates / min(target, trainer.num_updates))
     return math.ceil(trainer.num_updates / chunks), chunks
-
-
-def _atomic_write(path: Path, data: bytes) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_bytes(data)
-    tmp.replace(path)
 
 
 def _chunk_row(m: np.ndarray, ts, chunk: int, wall: float, seconds: float) -> dict:
