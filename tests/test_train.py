@@ -472,7 +472,7 @@ def test_run_directory_is_complete(driver_runs, which):
     assert [r["chunk"] for r in rows] == [1, 2, 3]
     assert [r["updates"] for r in rows] == [2, 4, 6]
     assert [r["env_steps"] for r in rows] == [k * 2 * TINY_N * TINY_T for k in (1, 2, 3)]
-    assert all(0.0 <= r["validation_success"] <= 1.0 for r in rows)
+    assert all(0.0 <= r["validation_success_raw"] <= 1.0 for r in rows)
     book = json.loads((out / driver.BOOKKEEPING).read_text())
     assert book["chunks_done"] == 3 and book["seed"] == SEED
     assert (out / "training_curve.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -511,7 +511,7 @@ def test_resume_after_an_interrupt_between_checkpoint_and_bookkeeping(driver_run
 
 def test_eval_json(driver_runs):
     res = json.loads((driver_runs["full"] / "eval.json").read_text())
-    for key in ("accuracy", "success", "by_obstacle", "by_pivot", "episodes", "env_steps", "train_seconds",
+    for key in ("accuracy", "success_raw", "success", "by_obstacle", "by_pivot", "episodes", "env_steps", "train_seconds",
                 "held_out"):
         assert key in res, key
     assert set(res["by_obstacle"]) == set(TEST_KINDS) and len(TEST_KINDS) == 5
@@ -520,7 +520,8 @@ def test_eval_json(driver_runs):
     assert sum(v["n"] for v in res["by_pivot"].values()) == 20
     assert res["held_out"]["n"] == sum(res["by_obstacle"][k]["n"] for k in HELD_OUT)
     for fig in [res, res["held_out"], *res["by_obstacle"].values(), *res["by_pivot"].values()]:
-        assert 0.0 <= fig["success"] <= fig["accuracy"] <= 1.0
+        assert 0.0 <= fig["success_raw"] <= fig["accuracy"] <= 1.0
+    assert res["success"] == res["success_raw"]   # the old name, kept for existing readers
     assert res["env_steps"] == TINY_UPDATES * TINY_N * TINY_T
     ck = json.loads((driver_runs["full"] / "metrics.jsonl").read_text().splitlines()[-1])
     assert res["episodes"] == ck["episodes"]

@@ -107,10 +107,10 @@ def run_baseline_benchmark(out_dir, default_config: str = "configs/default.toml"
     with tempfile.TemporaryDirectory() as d:
         res = run_training(base, d, seed=0, progress=False)
         rows = [json.loads(x) for x in (Path(d) / "metrics.jsonl").read_text().splitlines()]
-    jx_curve = [{"env_steps": r["env_steps"], "wall_s": r["wall_s"], "validation_success": r["validation_success"]}
+    jx_curve = [{"env_steps": r["env_steps"], "wall_s": r["wall_s"], "validation_success": r["validation_success_raw"]}
                 for r in rows]
     progress(f"jaxexo default model: {res['train_seconds']:.1f} s, final validation "
-             f"{rows[-1]['validation_success']:.3f}")
+             f"{rows[-1]['validation_success_raw']:.3f}")
 
     pool = layout_pool(base, POOL)
     rate = baseline_throughput(base, pool, min(20.0, throughput_seconds))["env_steps_per_s"]

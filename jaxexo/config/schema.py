@@ -129,9 +129,8 @@ class LayoutConfig:
     step_length: tuple[float, float] = (0.70, 0.70)  # m; the goal is start + step length
 
     def default_center(self, foot_length: float, step_length: float) -> float:
-        """Default obstacle centre: the middle of the free gap between the toe at the (unshifted)
-        start and the heel at the goal."""
-        return 0.5 * (foot_length + step_length)
+        """Default obstacle centre (jaxexo.physics.geometry.default_center, the one definition)."""
+        return geometry.default_center(foot_length, step_length)
 
 
 TRACE_VIEWS = ("forward", "backward")
@@ -561,7 +560,7 @@ def _check_clearable(cfg: Config, path: str, h_max: float, w_max: float) -> None
     heel_z = h_max + env.mid_goal_clearance - env.mid_goal_half_size[1]
     for start, L, off in itertools.product(lay.start_shift, lay.step_length, lay.obstacle_offset):
         center = lay.default_center(kin.foot_length, L) + off
-        pivots = {"agent": start, "obstacle": center, "between": 0.5 * (start + center)}
+        pivots = {name: float(kinematics.pivot_position(np, i, start, center)) for i, name in enumerate(PIVOT_CONDITIONS)}
         heel = np.array([center, heel_z])
         for name, weight in zip(PIVOT_CONDITIONS, lay.pivot):
             if weight <= 0:

@@ -32,7 +32,10 @@ PLAN, SWEEP_FILE, RESULTS, CHUNKS = "plan.json", "sweep.json", "results.csv", "c
 IDENTITY = ("config_id", "seed", "group", "chunk", "label")
 # The results of one agent, reduced inside the compiled program (jaxexo.sweep.program):
 # success/accuracy: greedy rollouts on the fixed test layouts (the five thesis obstacles x the three
-# pivot conditions; held_out_*: triangle and half-circle only, never trained on by default);
+# pivot conditions; held_out_*: triangle and half-circle only, never trained on by default), judged
+# by jaxexo.physics.outcome on the agent's raw moves: eval.json's ``success_raw``, on the same scenes
+# as ``jaxexo eval`` (whose ``success`` is of the smoothed trajectories). The column names are kept so
+# that existing results.csv files resume;
 # eval_return: their mean return; train_success/train_return: the last tenth of training (behaviour
 # policy); episodes_to_90: episodes finished when training success first reached 90 % (nan: never);
 # diverged: 1 if the parameters or the loss became NaN or infinite.
