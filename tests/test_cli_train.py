@@ -25,6 +25,8 @@ import jax.numpy as jnp  # noqa: E402
 from jaxexo.train import driver  # noqa: E402
 from jaxexo.train.evaluate import HELD_OUT, TEST_KINDS, make_rollout  # noqa: E402
 from jaxexo.train.trainer import METRICS, Hyperparams, Trainer, make_train  # noqa: E402
+pytestmark = pytest.mark.slow   # subprocess CLI runs
+
 from train_helpers import *  # noqa: F401,F403 (the shared tiny config, helpers and fixtures)
 from train_helpers import _cli_cmd
 

@@ -27,6 +27,8 @@ import jax.numpy as jnp  # noqa: E402
 from jaxexo.train import driver  # noqa: E402
 from jaxexo.train.evaluate import HELD_OUT, TEST_KINDS, make_rollout  # noqa: E402
 from jaxexo.train.trainer import METRICS, Hyperparams, Trainer, make_train  # noqa: E402
+pytestmark = pytest.mark.slow   # training runs and a background ``jaxexo train`` subprocess
+
 from train_helpers import *  # noqa: F401,F403 (the shared tiny config, helpers and fixtures)
 from train_helpers import _compilation_cache, _npz  # noqa: F401 (module-scoped compilation cache)
 
