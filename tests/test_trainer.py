@@ -188,6 +188,7 @@ def compiled_runs(tiny):
 
 
 @pytest.mark.parametrize("combo", COMBOS, ids=["-".join(c) for c in COMBOS])
+@pytest.mark.slow   # compiles every trace view x control x trace kind (~1 min)
 def test_views_and_controls_run(compiled_runs, combo):
     r = compiled_runs[combo]
     ts0, ts, m = r["ts0"], r["ts"], r["m"]
@@ -210,6 +211,7 @@ def test_views_and_controls_run(compiled_runs, combo):
         assert ts.traces == ()
 
 
+@pytest.mark.slow   # compiles every trace view x control x trace kind (~1 min)
 def test_controls_and_trace_kinds_are_different_algorithms(compiled_runs):
     # From the same initial state and keys: accumulating vs replacing, Watkins vs SARSA differ.
     final = {c: leaves(compiled_runs[c]["ts"].params)[0] for c in COMBOS[:3]}
@@ -218,6 +220,7 @@ def test_controls_and_trace_kinds_are_different_algorithms(compiled_runs):
 
 
 @pytest.mark.parametrize("control", ["on_policy", "off_policy"])
+@pytest.mark.slow   # compiles every trace view x control x trace kind (~1 min)
 def test_backward_traces_reset_at_episode_start_and_watkins_cut(compiled_runs, control):
     """Stale traces never leak into a fresh episode (bitwise: the reset multiplies them by 0), and
     under Watkins Q(lambda) an exploratory action cuts them the same way; without either, they do
@@ -240,6 +243,7 @@ def test_backward_traces_reset_at_episode_start_and_watkins_cut(compiled_runs, c
         assert not np.array_equal(leaves(cut.params)[0], leaves(ref.params)[0])
 
 
+@pytest.mark.slow   # compiles every trace view x control x trace kind (~1 min)
 def test_make_train_jit_vmaps_over_seeds(compiled_runs):
     ts, m = compiled_runs[COMBOS[3]]["vmapped"]
     assert m.shape == (2, TINY_UPDATES, len(METRICS))

@@ -38,6 +38,9 @@ from jaxexo.train import driver  # noqa: E402
 from jaxexo.train.evaluate import HELD_OUT, TEST_KINDS, make_rollout  # noqa: E402
 from jaxexo.train.trainer import METRICS, Hyperparams, Trainer, make_train  # noqa: E402
 
+COL = {m: i for i, m in enumerate(METRICS)}
+
+
 @pytest.fixture(scope="module", autouse=True)
 def _compilation_cache(tmp_path_factory):
     """A persistent compilation cache for this module only: identical programs (the driver's init,
