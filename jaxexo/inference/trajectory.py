@@ -307,7 +307,7 @@ def write_timed_csv(swing, path: str | Path | None = None) -> str:
         w.writerow([f"{x:.9g}" for x in row])
     text = buf.getvalue()
     if path is not None:
-        _write_text(Path(path), text)
+        atomic_write(path, text)
     return text
 
 
@@ -339,5 +339,5 @@ def timed_dict(swing) -> dict:
 def write_timed_json(swing, path: str | Path | None = None) -> str:
     text = json.dumps(timed_dict(swing), indent=1)
     if path is not None:
-        _write_text(Path(path), text)
+        atomic_write(path, text)
     return text
