@@ -55,8 +55,8 @@ def cmd_train(args) -> int:
     held = res.get("held_out") or {}
     print(f"trained {res['episodes']} episodes, {res['env_steps']:,} env steps in {res['train_seconds']:.1f} s")
     print(f"greedy eval on {sum(v['n'] for v in res['by_obstacle'].values())} test layouts: "
-          f"success {res['success']:.3f}, accuracy {res['accuracy']:.3f}"
-          + (f"; held-out triangle/half-circle success {held['success']:.3f}" if held else ""))
+          f"success_raw {res['success_raw']:.3f}, accuracy {res['accuracy']:.3f}"
+          + (f"; held-out triangle/half-circle success_raw {held['success_raw']:.3f}" if held else ""))
     print(f"wrote {args.out}/policy.npz, eval.json, metrics.jsonl, training_curve.png")
     return 0
 

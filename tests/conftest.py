@@ -172,3 +172,19 @@ def jax_compilation_cache(directory):
         for n, v in old.items():
             jax.config.update(n, v)
         cc.reset_cache()
+
+
+@pytest.fixture(scope="session", autouse=True)
+def train_background(request, tmp_path_factory):
+    """Started with the session if a selected test needs it: the uninterrupted run of the tiny
+    training config on one device, by the CLI in a niced subprocess, that the driver tests compare a
+    resumed run with (bit for bit) and that the CLI test checks (tests/train_helpers.py)."""
+    runs = {}
+    if any("driver_runs" in i.fixturenames or i.name == "test_cli_train_writes_the_run_directory"
+           for i in request.session.items):
+        from train_helpers import SEED, _Background, tiny_config
+
+        runs["reference"] = _Background(tiny_config(), tmp_path_factory.mktemp("reference"), SEED, devices=1)
+    yield runs
+    for r in runs.values():
+        r.stop()

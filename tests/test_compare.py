@@ -34,6 +34,7 @@ def eval_out(trained_run, tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_eval_writes_report_json_md_and_figures(eval_out):
     report = json.loads((eval_out / "report.json").read_text())
     assert set(report) == {"rl", "cfftg"}
@@ -51,6 +52,7 @@ def test_eval_writes_report_json_md_and_figures(eval_out):
         assert (eval_out / fig).stat().st_size > 10_000
 
 
+@pytest.mark.slow
 def test_eval_numbers_are_consistent(eval_out):
     report = json.loads((eval_out / "report.json").read_text())
     for r in report.values():
@@ -69,6 +71,7 @@ def test_eval_numbers_are_consistent(eval_out):
     assert report["cfftg"]["success"] == 1.0
 
 
+@pytest.mark.slow
 def test_eval_figures_match_the_generators_own_outputs(trained_run):
     # The report's figures are those of the trajectories the generators return.
     from jaxexo.baselines import CFFTG
@@ -99,6 +102,7 @@ def test_eval_figures_match_the_generators_own_outputs(trained_run):
         make_scenarios(rl.config, "everything", 5)
 
 
+@pytest.mark.slow
 def test_reproduce_tabulates_beside_the_thesis(trained_run, tmp_path):
     from jaxexo.evaluation.reproduce import run_reproduce
 
@@ -120,6 +124,7 @@ def test_reproduce_tabulates_beside_the_thesis(trained_run, tmp_path):
     assert json.loads((tmp_path / "reproduce.json").read_text())["a"]["rl"]["n"] == 15
 
 
+@pytest.mark.slow
 def test_bench_summary_from_the_compare_part(trained_run, tmp_path):
     from jaxexo.benchmarks.run_all import run_all
 
@@ -139,6 +144,7 @@ def test_bench_summary_from_the_compare_part(trained_run, tmp_path):
     assert "| rl on 20 test scenarios" in again and "compare: from compare_" in again
 
 
+@pytest.mark.slow
 def test_cli_generate_cfftg_with_a_policys_kinematics(trained_run, tmp_path):
     from jaxexo.baselines import CFFTG
     from jaxexo.cli import main

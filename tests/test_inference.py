@@ -77,11 +77,25 @@ def small_config(**train):
 
 
 @pytest.fixture(scope="module")
-def policies(tmp_path_factory, trained_run):
+def trained_policy(trained_run):
+    """The session's trained default model (a training run: the tests that need it are slow)."""
+    return trained_run / "policy.npz"
+
+
+def _policy(request, policies, which):
+    return request.getfixturevalue("trained_policy") if which == "trained" else policies[which]
+
+
+SLOW_TRAINED = pytest.param("trained", marks=pytest.mark.slow)
+
+
+@pytest.fixture(scope="module")
+def policies(tmp_path_factory):
+    """Policies with random weights (no training): LayerNorm scales of every sign, the thesis network,
+    collisions that terminate. The trained model is ``trained_policy``."""
     d = tmp_path_factory.mktemp("policies")
     thesis = load_config(ROOT / "configs" / "thesis" / "final.toml")
     return {
-        "trained": trained_run / "policy.npz",
         "ln_signs": export_random(d / "ln.npz", small_config(hidden=[32, 24]), seed=3, scale_signs=True),
         "thesis": export_random(d / "thesis.npz", thesis, seed=4),
         "terminate": export_random(d / "term.npz", dataclasses.replace(
@@ -93,9 +107,9 @@ def policies(tmp_path_factory, trained_run):
 # Network parity
 # --------------------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("which", ["trained", "ln_signs", "thesis"])
-def test_numpy_network_matches_flax(policies, which):
-    policy = load_policy(policies[which])
+@pytest.mark.parametrize("which", [SLOW_TRAINED, "ln_signs", "thesis"])
+def test_numpy_network_matches_flax(request, policies, which):
+    policy = load_policy(_policy(request, policies, which))
     layers = policy.metadata["layers"]
     net = QNetwork(hidden=tuple(layers[1:-1]), num_actions=layers[-1], layer_norm=policy.metadata["layer_norm"])
     x = np.random.default_rng(0).normal(size=(256, policy.obs_dim)).astype(np.float32)
@@ -134,9 +148,9 @@ def jax_paths(gen, scenes_args):
     return [np.vstack([start[i], np.asarray(path)[i, : steps[i]]]) for i in range(len(layouts))], out
 
 
-@pytest.mark.parametrize("which", ["trained", "thesis", "terminate"])
-def test_numpy_rollouts_take_the_jax_environments_actions(policies, which):
-    gen = TrajectoryGenerator.load(policies[which])
+@pytest.mark.parametrize("which", [SLOW_TRAINED, "thesis", "terminate"])
+def test_numpy_rollouts_take_the_jax_environments_actions(request, policies, which):
+    gen = TrajectoryGenerator.load(_policy(request, policies, which))
     args = [(ob, pv, sy, 0.70) for ob in SCENE_OBSTACLES.values() for pv in PIVOT_CONDITIONS for sy in (0.0, 0.04)]
     ref, out = jax_paths(gen, args)
     scenes = [gen.scene(ob, pivot=pv, start_y=sy, step_length=sl) for ob, pv, sy, sl in args]
@@ -158,8 +172,9 @@ def test_numpy_rollouts_take_the_jax_environments_actions(policies, which):
         assert np.any(np.asarray(out["collided"]) & (steps < gen.max_steps))
 
 
-def test_batch_equals_single_generation(policies):
-    gen = TrajectoryGenerator.load(policies["trained"])
+@pytest.mark.slow
+def test_batch_equals_single_generation(trained_policy):
+    gen = TrajectoryGenerator.load(trained_policy)
     obs = list(SCENE_OBSTACLES.values())
     pivots = [PIVOT_CONDITIONS[i % 3] for i in range(len(obs))]
     batch = gen.generate_batch(obs, pivot=pivots, start_y=0.02)
@@ -176,8 +191,9 @@ def test_batch_equals_single_generation(policies):
 # Trajectories: kinematics, checks, smoothing, exports
 # --------------------------------------------------------------------------------------------
 
-def test_trajectory_fields_follow_the_shared_kinematics(policies):
-    gen = TrajectoryGenerator.load(policies["trained"])
+@pytest.mark.slow
+def test_trajectory_fields_follow_the_shared_kinematics(trained_policy):
+    gen = TrajectoryGenerator.load(trained_policy)
     ob = Obstacle.named("base2")
     t = gen.generate(ob, pivot="between", n_points=80, duration=0.8)
     n = 80
@@ -214,8 +230,9 @@ def test_a_failed_trajectory_says_why_and_strict_raises(policies):
     assert not e.value.trajectory.ok
 
 
-def test_smoothing_that_would_touch_the_obstacle_falls_back(policies):
-    gen = TrajectoryGenerator.load(policies["trained"])
+@pytest.mark.slow
+def test_smoothing_that_would_touch_the_obstacle_falls_back(trained_policy):
+    gen = TrajectoryGenerator.load(trained_policy)
     ob = Obstacle.rectangle(0.10, 0.20, center_y=0.40)
     scene = gen.scene(ob, pivot="obstacle")
     foot = gen.sp.foot_length
@@ -295,8 +312,9 @@ def test_smoothing_batches_handle_ragged_repeated_and_short_paths():
     assert (out[..., 1] >= 0).all()
 
 
-def test_exports_round_trip(policies, tmp_path):
-    gen = TrajectoryGenerator.load(policies["trained"])
+@pytest.mark.slow
+def test_exports_round_trip(trained_policy, tmp_path):
+    gen = TrajectoryGenerator.load(trained_policy)
     t = gen.generate(Obstacle.named("triangle"), pivot="agent")
     text = t.to_csv(tmp_path / "sub" / "t.csv")
     data = np.loadtxt(tmp_path / "sub" / "t.csv", delimiter=",", skiprows=1)
@@ -323,8 +341,9 @@ def _rewrite_meta(src, dst, **changes):
     return dst
 
 
-def test_load_refuses_what_it_cannot_drive(policies, tmp_path):
-    src = policies["trained"]
+@pytest.mark.slow
+def test_load_refuses_what_it_cannot_drive(trained_policy, tmp_path):
+    src = trained_policy
     cases = {
         "config": (_rewrite_meta(src, tmp_path / "a.npz", config_toml="[env]\nstep_size = -1\n"), "config_toml"),
         "no_config": (_rewrite_meta(src, tmp_path / "b.npz", config_toml=None), "config_toml is missing"),
@@ -341,8 +360,9 @@ def test_load_refuses_what_it_cannot_drive(policies, tmp_path):
             TrajectoryGenerator.load(path)
 
 
-def test_bad_generation_arguments_name_the_field(policies):
-    gen = TrajectoryGenerator.load(policies["trained"])
+@pytest.mark.slow
+def test_bad_generation_arguments_name_the_field(trained_policy):
+    gen = TrajectoryGenerator.load(trained_policy)
     ob = Obstacle.named("base1")
     for kwargs, msg in [({"pivot": "left"}, "pivot must be one of"), ({"start_y": float("nan")}, "start_y"),
                         ({"step_length": 0.3}, "step_length"), ({"n_points": 1}, "n_points"),
@@ -370,10 +390,11 @@ sys.meta_path.insert(0, Block())
 """
 
 
-def test_inference_runs_where_jax_cannot_be_imported(policies):
+@pytest.mark.slow
+def test_inference_runs_where_jax_cannot_be_imported(trained_policy):
     code = BLOCK_JAX + (
         "from jaxexo.inference import TrajectoryGenerator, Obstacle\n"
-        f"gen = TrajectoryGenerator.load({str(policies['trained'])!r})\n"
+        f"gen = TrajectoryGenerator.load({str(trained_policy)!r})\n"
         "t = gen.generate(Obstacle.profile([[0.38, 0.0], [0.45, 0.1], [0.52, 0.0]]), pivot='between')\n"
         "b = gen.generate_batch([Obstacle.named('base3')] * 3, start_y=[0.0, 0.02, 0.04])\n"
         "print('OK', t.heel.shape, len(b), sorted(m for m in sys.modules if m.split('.')[0] in ('jax', 'flax')))\n"
@@ -386,11 +407,12 @@ def test_inference_runs_where_jax_cannot_be_imported(policies):
     assert out.returncode != 0 and "blocked for this test" in out.stderr
 
 
-def test_cli_generate_writes_csv_json_and_plot(policies, tmp_path):
+@pytest.mark.slow
+def test_cli_generate_writes_csv_json_and_plot(trained_policy, tmp_path):
     from jaxexo.cli import main
 
     out = tmp_path / "t.csv"
-    rc = main(["generate", "--policy", str(policies["trained"]), "--obstacle", "triangle", "--width", "0.16",
+    rc = main(["generate", "--policy", str(trained_policy), "--obstacle", "triangle", "--width", "0.16",
                "--height", "0.12", "--center-y", "0.42", "--pivot-y", "0.3", "--out", str(out),
                "--json", str(tmp_path / "t.json"), "--plot", str(tmp_path / "t.png")])
     doc = json.loads((tmp_path / "t.json").read_text())

@@ -400,6 +400,7 @@ def _without_wall(rows):
 # --------------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_agents_match_solo_make_train_runs_and_divergence_is_contained(inproc, tiny_sweep):
     """Every agent of the chunk program (vmapped with its neighbours, evaluation fused in) ends where
     ``make_train`` alone ends for its config and seed, up to float reassociation in batched matrix
@@ -445,6 +446,7 @@ def test_agents_match_solo_make_train_runs_and_divergence_is_contained(inproc, t
     assert "Diverged" in summary and f"train.lr={HUGE_LR:.4g}" in summary
 
 
+@pytest.mark.slow
 def test_memory_estimate_covers_the_compiled_program(inproc, tiny_sweep):
     """agent_bytes x chunk size is at least what XLA allocates for the chunk program (arguments,
     outputs and temporaries), and not absurdly more."""
@@ -480,6 +482,7 @@ class _StopAfter:
         return self.real(*args)
 
 
+@pytest.mark.slow
 def test_resume_skips_finished_chunks_and_ends_identical(inproc, tiny_sweep, tmp_path):
     from jaxexo.sweep import program, runner
 
@@ -532,6 +535,7 @@ def test_resume_skips_finished_chunks_and_ends_identical(inproc, tiny_sweep, tmp
 # --------------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_cli_sweep_writes_results_report_and_best_policy(cli_local, tiny_sweep):
     from jaxexo.config import load_config
     from jaxexo.storage.policy_file import load_policy
@@ -573,6 +577,7 @@ def test_cli_sweep_writes_results_report_and_best_policy(cli_local, tiny_sweep):
     assert "\r" not in stderr   # --quiet: no progress bar
 
 
+@pytest.mark.slow
 def test_cli_bad_sweep_exits_2_naming_the_field(tmp_path):
     p = tmp_path / "bad.toml"
     p.write_text('[sweep]\nseeds = 2\n[sweep.grid]\n"train.lamda" = [0.5]\n')
@@ -662,6 +667,7 @@ def _wait_for_port(port, node, timeout):
     raise TimeoutError("the Ray head did not open its port")
 
 
+@pytest.mark.slow
 def test_ray_backend_gives_the_local_results(ray_cluster, cli_local, tmp_path):
     """The tiny sweep through a Ray cluster (head + worker processes on 127.0.0.1): each chunk a task
     on the worker with two CPUs exposed as JAX devices, as the local run had: identical results."""

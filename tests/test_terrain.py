@@ -214,7 +214,7 @@ def test_every_family_is_clearable_by_the_default_leg_dense_independent_sweep():
         s, L, c = terrain.place(np, rng.random((n, 3)), width, spec.start_shift, spec.step_length, FOOT)
         heel = np.column_stack([c + (rng.random(n) - 0.5) * width, np.full(n, fam.height[1] + 0.04)])
         for k in range(3):
-            ks = kinematics.leg_state(np, terrain.pivot_y(np, k, s, c), heel, 0.5, 0.5)
+            ks = kinematics.leg_state(np, kinematics.pivot_position(np, k, s, c), heel, 0.5, 0.5)
             assert np.all(ks["leg_swing"] <= 1.0 + 1e-9), (name, k)
             assert not np.any(kinematics.joint_limit_violation(np, ks["hip_swing"], ks["knee_swing_angle"],
                                                                *HIP, *KNEE)), (name, k)

@@ -190,7 +190,7 @@ class CFFTG:
             plans[todo] += 1
             m = measure(self.sp, p, clearances(foot, p, [scenes[i] for i in todo]), arr.pivot_y[todo], arr.goal_y[todo])
             checks = m if checks is None else _scatter(checks, m, todo)
-            ok = m["collision_free"] & m["joint_limits_ok"] & m["leg_length_ok"] & m["reached_goal"]
+            ok = m["ok"]   # the one strict-success verdict (jaxexo.physics.outcome)
             bad_kin = ~(m["joint_limits_ok"] & m["leg_length_ok"])
             fail = todo[~ok]
             # Joint limits or leg length: move the apex (alternately towards and away from the pivot).

@@ -31,6 +31,7 @@ import numpy as np
 
 from jaxexo.benchmarks.thesis_baseline import BaselineSettings, NumpyExoEnv, SequentialTDLambda, layout_pool
 from jaxexo.config import Config, load_config
+from jaxexo.physics.dynamics import NUM_ACTIONS
 
 POOL = 20_000
 
@@ -41,7 +42,7 @@ def make_baseline(cfg: Config, pool: dict, eps_decay_steps: int, seed: int = 0) 
     env = NumpyExoEnv(cfg, pool, seed)
     obs_dim = len(env.reset())
     return SequentialTDLambda(
-        env, obs_dim, 36, t.hidden, t.layer_norm, lr=t.lr, gamma=t.gamma, lam=t.lam, eps_start=t.eps_start,
+        env, obs_dim, NUM_ACTIONS, t.hidden, t.layer_norm, lr=t.lr, gamma=t.gamma, lam=t.lam, eps_start=t.eps_start,
         eps_end=t.eps_end, eps_decay_steps=eps_decay_steps, max_grad_norm=t.max_grad_norm,
         off_policy=t.control == "off_policy",
         settings=BaselineSettings(horizon=t.rollout_steps, seed=seed))
@@ -58,7 +59,7 @@ def baseline_throughput(cfg: Config, pool: dict, seconds: float, warmup_steps: i
     rng = np.random.default_rng(0)
     n, t0 = 0, time.perf_counter()
     while time.perf_counter() - t0 < min(5.0, seconds):
-        _, _, term, trunc, _ = env.step(int(rng.integers(36)))
+        _, _, term, trunc, _ = env.step(int(rng.integers(NUM_ACTIONS)))
         n += 1
         if term or trunc:
             env.reset()
@@ -107,16 +108,16 @@ def run_baseline_benchmark(out_dir, default_config: str = "configs/default.toml"
     with tempfile.TemporaryDirectory() as d:
         res = run_training(base, d, seed=0, progress=False)
         rows = [json.loads(x) for x in (Path(d) / "metrics.jsonl").read_text().splitlines()]
-    jx_curve = [{"env_steps": r["env_steps"], "wall_s": r["wall_s"], "validation_success": r["validation_success"]}
+    jx_curve = [{"env_steps": r["env_steps"], "wall_s": r["wall_s"], "validation_success": r["validation_success_raw"]}
                 for r in rows]
     progress(f"jaxexo default model: {res['train_seconds']:.1f} s, final validation "
-             f"{rows[-1]['validation_success']:.3f}")
+             f"{rows[-1]['validation_success_raw']:.3f}")
 
     pool = layout_pool(base, POOL)
     rate = baseline_throughput(base, pool, min(20.0, throughput_seconds))["env_steps_per_s"]
     planned = int(rate * baseline_seconds)
     learner = make_baseline(base, pool, eps_decay_steps=max(1, int(base.train.eps_decay_fraction * planned)))
-    net = QNetwork(hidden=base.train.hidden, num_actions=36, layer_norm=base.train.layer_norm)
+    net = QNetwork(hidden=base.train.hidden, num_actions=NUM_ACTIONS, layer_norm=base.train.layer_norm)
     validate = make_validator(base, net)
     bl_curve: list[dict] = []
 

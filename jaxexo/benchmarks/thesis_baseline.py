@@ -130,15 +130,15 @@ class NumpyExoEnv:
     """ExoStepEnv's rules stepped one environment at a time in NumPy (float32, like the JAX env):
     the same move, transition, reward and observation functions (``jaxexo.physics.dynamics``).
 
-    Layouts come from a pool drawn once by the JAX environment's own sampler (``layout_pool``), in
+    Layouts come from a pool drawn once by the one scenario generator (``layout_pool``), in
     a fresh random order on every pass, so both trainers see the same layout distribution and no
     sampling rule is written twice. ``reset() -> obs``; ``step(a) -> (obs, reward, terminated,
     truncated, info)`` with ``info["success"]`` the strict success of a finished episode."""
 
     def __init__(self, cfg, pool: dict, seed: int = 0):
-        from jaxexo.physics import dynamics
+        from jaxexo.physics import dynamics, outcome
 
-        self.dyn = dynamics
+        self.dyn, self.dyn_outcome = dynamics, outcome
         self.p = dynamics.numpy_params(cfg)
         self.obs_mode = cfg.env.obs_mode
         self.max_steps = int(cfg.env.max_steps)
@@ -165,7 +165,7 @@ class NumpyExoEnv:
         self.heel = np.stack([self.lay.start_y, np.float32(0.0)])
         self.time = np.int32(0)
         self.visited = np.bool_(False)
-        self.clean = True
+        self.outcome = self.dyn_outcome.start(np)
         return self._obs()
 
     def step(self, action: int):
@@ -177,24 +177,20 @@ class NumpyExoEnv:
         out = self.dyn.transition(np, p, prev, self.heel, self.time, self.visited, self.lay)
         self.visited = out["visited_mid"]
         info = out["info"]
-        self.clean = self.clean and not (info["collision"] or info["joint_limit_violation"]
-                                         or info["leg_length_violation"])
+        self.outcome = self.dyn_outcome.accumulate(np, self.outcome, info)
         terminated = bool(out["terminated"])
         truncated = (not terminated) and int(self.time) >= self.max_steps
-        info["success"] = terminated and bool(info["goal_reached"]) and self.clean
+        # The one strict-success verdict (jaxexo.physics.outcome), as the JAX trainer counts it.
+        info["success"] = (terminated or truncated) and bool(self.dyn_outcome.episode_verdict(np, self.outcome)["success"])
         return self._obs(), float(out["reward"]), terminated, truncated, info
 
 
 def layout_pool(cfg, n: int, seed: int = 0) -> dict:
-    """n layouts drawn by the JAX environment's sampler (``ExoStepEnv.sample_layout``), as NumPy arrays."""
-    import jax
+    """n layouts of the config's distribution (jaxexo.physics.scenarios, the scenes the JAX
+    environment's reset draws for the key words (seed, i)), as NumPy arrays."""
+    from jaxexo.physics import dynamics, scenarios
 
-    from jaxexo.env import ExoStepEnv
-
-    env = ExoStepEnv(cfg)
-    lay = jax.vmap(env.sample_layout, in_axes=(0, None))(jax.random.split(jax.random.PRNGKey(seed), n),
-                                                         env.default_params)
-    return {k: np.asarray(v) for k, v in vars(lay).items()}
+    return scenarios.scenario_layouts(np, dynamics.numpy_params(cfg), seed, n)
 
 
 # --------------------------------------------------------------------------------------------

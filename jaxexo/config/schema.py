@@ -37,7 +37,7 @@ import numpy as np
 from jaxexo.physics import geometry, kinematics, rewards
 from jaxexo.physics.geometry import THESIS_OBSTACLES
 
-PIVOT_CONDITIONS = ("agent", "obstacle", "between")  # thesis 3.1: (b)/(2), (a)/(1), (c)/(3)
+PIVOT_CONDITIONS = kinematics.PIVOT_CONDITIONS  # thesis 3.1, defined with the rule that places the pivot
 OBS_MODES = ("thesis", "conditioned")
 OBS_PROFILES = ("bbox", "shape")
 COLLISION_MODES = ("penalty", "terminate")
@@ -471,9 +471,8 @@ class LayoutConfig:
     step_length: tuple[float, float] = declare((0.70, 0.70), range_(positive=True), unit="m")  # goal = start + this
 
     def default_center(self, foot_length: float, step_length: float) -> float:
-        """Default obstacle centre: the middle of the free gap between the toe at the (unshifted)
-        start and the heel at the goal."""
-        return 0.5 * (foot_length + step_length)
+        """Default obstacle centre (jaxexo.physics.geometry.default_center, the one definition)."""
+        return geometry.default_center(foot_length, step_length)
 
 
 @dataclass(frozen=True)
@@ -777,7 +776,7 @@ def _check_clearable(cfg: Config, path: str, h_max: float, w_max: float) -> None
     heel_z = h_max + env.mid_goal_clearance - env.mid_goal_half_size[1]
     for start, L, off in itertools.product(lay.start_shift, lay.step_length, lay.obstacle_offset):
         center = lay.default_center(kin.foot_length, L) + off
-        pivots = {"agent": start, "obstacle": center, "between": 0.5 * (start + center)}
+        pivots = {name: float(kinematics.pivot_position(np, i, start, center)) for i, name in enumerate(PIVOT_CONDITIONS)}
         heel = np.array([center, heel_z])
         for name, weight in zip(PIVOT_CONDITIONS, lay.pivot):
             if weight <= 0:

@@ -16,7 +16,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from jaxexo.physics import dynamics, geometry
+from jaxexo.physics import dynamics, geometry, scenarios
 from jaxexo.config import Config
 from jaxexo.physics.dynamics import LENGTH_SCALE, NUM_ACTIONS, THESIS_OBS_CENTER  # noqa: F401 (re-exported)
 from jaxexo.env import spaces
@@ -51,11 +51,6 @@ class EnvState:
     layout: Layout
 
 
-def _categorical(u, cdf):
-    """Inverse-CDF draw of an index with one uniform number u in [0, 1)."""
-    return jnp.minimum(jnp.sum(u >= cdf), cdf.shape[0] - 1)
-
-
 class ExoStepEnv:
     """The stepping environment. Static settings (shapes) live on the instance; the rest in EnvParams.
 
@@ -87,7 +82,7 @@ class ExoStepEnv:
 
     @property
     def obs_dim(self) -> int:
-        return 2 if self.obs_mode == "thesis" else 14 + self.shape_points
+        return dynamics.obs_dim(self.obs_mode, self.shape_points)
 
     def action_space(self, params: EnvParams | None = None):
         return spaces.discrete(NUM_ACTIONS)
@@ -99,27 +94,14 @@ class ExoStepEnv:
     # Layout sampling ----------------------------------------------------------------------
     def sample_layout(self, key, params: EnvParams) -> Layout:
         """Draw one scene from the layout distribution in params (obstacle kind and size, position
-        jitter, pivot condition, start shift, step length)."""
-        # One draw for every random choice of the layout: a single PRNG call per reset keeps the
-        # auto-reset (computed on every step, gymnax-style) cheap.
-        u = jax.random.uniform(key, (9,))
-        kind = _categorical(u[0], params.kind_cdf)
-        pivot_kind = _categorical(u[1], params.pivot_cdf)
-        lerp = lambda x, r: r[0] + (r[1] - r[0]) * x  # noqa: E731
-        jitter = (2.0 * u[2:4] - 1.0) * params.size_jitter
-        width = lerp(u[4], params.kind_width[kind]) * (1.0 + jitter[0])
-        height = lerp(u[5], params.kind_height[kind]) * (1.0 + jitter[1])
-        step_length = lerp(u[6], params.step_length)
-        start_y = lerp(u[7], params.start_shift)
-        center = 0.5 * (params.foot_length + step_length) + lerp(u[8], params.obstacle_offset)
-        unit = params.kind_outlines[kind]
-        outline = jnp.stack([center + width * unit[:, 0], height * unit[:, 1]], axis=-1)
-        return Layout(
-            outline=outline, shape=height * params.kind_shape[kind], center_y=center, width=width,
-            height=height, kind=kind.astype(jnp.int32), pivot_kind=pivot_kind.astype(jnp.int32),
-            pivot_y=dynamics.pivot_position(jnp, pivot_kind, start_y, center), start_y=start_y,
-            goal_y=start_y + step_length,
-        )
+        jitter, pivot condition, start shift, step length) by jaxexo.physics.scenarios, the one
+        scenario generator: the scene of the key's two words, which NumPy tools draw identically."""
+        words = jax.random.key_data(key) if jnp.issubdtype(key.dtype, jax.dtypes.prng_key) else key
+        return self.layout_from_uniforms(scenarios.uniforms(jnp, words[..., 0], words[..., 1]), params)
+
+    def layout_from_uniforms(self, u, params: EnvParams, kind=None, pivot_kind=None) -> Layout:
+        """The scene of uniform numbers u (..., N_UNIFORMS) (jaxexo.physics.scenarios.layout_from_uniforms)."""
+        return Layout(**scenarios.layout_from_uniforms(jnp, params, u, kind, pivot_kind))
 
     def init_state(self, layout: Layout, params: EnvParams) -> tuple[jnp.ndarray, EnvState]:
         """Start an episode on a given layout: the heel on the ground at the start."""
@@ -171,7 +153,7 @@ class ExoStepEnv:
         return self.get_obs(new_state, params), new_state, reward, terminated, info
 
     def is_truncated(self, state: EnvState, params: EnvParams):
-        return state.time >= params.max_steps_in_episode
+        return dynamics.truncated(state.time, params.max_steps_in_episode)
 
     def step(self, key, state: EnvState, action, params: EnvParams | None = None):
         """One transition with auto-reset (gymnax 1.0): a finished episode is replaced by a fresh one;
@@ -180,7 +162,9 @@ class ExoStepEnv:
         params = self.default_params if params is None else params
         # step_env is deterministic, so the whole key goes to the auto-reset (no split needed).
         obs_st, state_st, reward, terminated, info = self.step_env(key, state, action, params)
-        truncated = self.is_truncated(state_st, params) & ~terminated
+        # As gymnax 1.0.1: truncation from the step count alone, so a goal reached on the step that
+        # hits the limit is both terminated and truncated (learners mask bootstrapping on terminated).
+        truncated = self.is_truncated(state_st, params)
         done = terminated | truncated
         obs_re, state_re = self.reset_env(key, params)
         state = jax.tree.map(lambda r, s: jax.lax.select(done, r, s), state_re, state_st)

@@ -63,16 +63,17 @@ class TrajectoryGenerator:
             config = config_from_dict(tomllib.loads(text))
         except (tomllib.TOMLDecodeError, ConfigError) as e:
             raise PolicyFileError(f"{path}: metadata.config_toml is not a valid jaxexo config ({e})") from None
-        obs_dim = 2 if config.env.obs_mode == "thesis" else 14 + config.env.shape_points
+        obs_dim = dynamics.obs_dim(config.env.obs_mode, config.env.shape_points)
         if policy.obs_dim != obs_dim or meta.get("obs_dim") != obs_dim:
             raise PolicyFileError(f"{path}: the network takes {policy.obs_dim} inputs (metadata.obs_dim "
                                   f"{meta.get('obs_dim')!r}) but its config's {config.env.obs_mode!r} observation "
                                   f"has {obs_dim}")
         angles = meta.get("action_angles_rad")
-        expected = np.arctan2(*dynamics.action_directions()[:, ::-1].T)
+        expected = dynamics.action_angles()
         if (not isinstance(angles, list) or len(angles) != len(expected)
                 or not np.allclose(np.mod(np.asarray(angles, float) - expected + np.pi, 2 * np.pi) - np.pi, 0, atol=1e-9)):
-            raise PolicyFileError(f"{path}: metadata.action_angles_rad does not match the 36 moves at k*10 deg")
+            raise PolicyFileError(f"{path}: metadata.action_angles_rad does not match the "
+                                  f"{dynamics.NUM_ACTIONS} moves of jaxexo.physics.dynamics.action_angles")
         for key, value in (("length_scale", dynamics.LENGTH_SCALE),
                            ("thesis_obs_center", list(dynamics.THESIS_OBS_CENTER))):
             if meta.get(key) != value:
@@ -122,9 +123,11 @@ class TrajectoryGenerator:
             visited = visited or dynamics.in_mid_goal(scalar, sp, hy, hz, mid_y, mid_z)
             pts.append((hy, hz))
             acts.append(a)
-            if dynamics.goal_reached(scalar, sp, hy, hz, scene.goal_y) or t >= self.max_steps:
-                break
-            if self.terminate_on_collision and self._touches(scene, np.array([[hy, hz]])):
+            # The environment's termination (dynamics.terminated, .truncated); the clearance is
+            # only computed where a collision ends the episode.
+            collided = self.terminate_on_collision and self._touches(scene, np.array([[hy, hz]]))
+            if (dynamics.terminated(scalar, self.np_params, dynamics.goal_reached(scalar, sp, hy, hz, scene.goal_y),
+                                    collided) or dynamics.truncated(t, self.max_steps)):
                 break
         return np.asarray(pts), np.asarray(acts, dtype=np.int64)
 
@@ -156,10 +159,12 @@ class TrajectoryGenerator:
             path[k + 1, alive, 0], path[k + 1, alive, 1] = ny, nz
             acts[k, alive] = a
             length[alive] += 1
-            done = dynamics.goal_reached(np, p, ny, nz, sub.goal_y) | (t[alive] >= self.max_steps)
-            if self.terminate_on_collision:
+            collided = False
+            if self.terminate_on_collision:   # the clearance only where a collision ends the episode
                 c = geometry.foot_clearance(np, np.stack([ny, nz], -1), p.foot_length, sub.outline)
-                done |= geometry.foot_collides(np, c)
+                collided = geometry.foot_collides(np, c)
+            done = (dynamics.terminated(np, p, dynamics.goal_reached(np, p, ny, nz, sub.goal_y), collided)
+                    | dynamics.truncated(t[alive], self.max_steps))
             alive = alive[~done]
             if alive.size == 0:
                 break

@@ -20,8 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxexo.physics import dynamics, geometry, kinematics
+from jaxexo.physics import dynamics, geometry, kinematics, outcome
 from jaxexo.physics.dynamics import Scene
+from jaxexo.storage.atomic import atomic_write
 
 JOINT_NAMES = ("hip_swing", "knee_swing", "hip_stance", "knee_stance")
 DEFAULT_DURATION = 1.0   # s, swing duration for the time stamps
@@ -93,7 +94,7 @@ class Trajectory:
             w.writerow([f"{x:.6f}" for x in row])
         text = buf.getvalue()
         if path is not None:
-            _write_text(Path(path), text)
+            atomic_write(path, text)
         return text
 
     def to_dict(self) -> dict:
@@ -118,16 +119,8 @@ class Trajectory:
     def to_json(self, path: str | Path | None = None) -> str:
         text = json.dumps(self.to_dict(), indent=1)
         if path is not None:
-            _write_text(Path(path), text)
+            atomic_write(path, text)
         return text
-
-
-def _write_text(path: Path, text: str) -> None:
-    """Atomic write: an interrupted export never leaves half a file in place of a good one."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    tmp.replace(path)
 
 
 @dataclass(frozen=True)
@@ -216,41 +209,51 @@ def measure(sp, heel: np.ndarray, clearance: np.ndarray, pivot_y: np.ndarray, go
     hips, qs = kinematics.joint_angles(np, hip[None], knees, feet)
     angles = np.stack([hips[0], qs[0], hips[1], qs[1]], axis=-1)
     kin = {"hip": hip, "knee_swing": knees[0], "knee_stance": knees[1], "leg_swing": legs[0], "leg_stance": legs[1]}
-    lim = lambda h, q: kinematics.joint_limit_violation(  # noqa: E731
-        np, h, q, sp.hip_limits[0], sp.hip_limits[1], sp.knee_limits[0], sp.knee_limits[1])
-    limit_bad = lim(angles[..., 0], angles[..., 1]) | lim(angles[..., 2], angles[..., 3])
+    limit_bad = kinematics.legs_outside_limits(np, angles, sp.hip_limits, sp.knee_limits)
     leg_bad = kinematics.leg_too_long(np, kin["leg_swing"], kin["leg_stance"], sp.thigh, sp.shin,
                                       sp.leg_length_tolerance)
+    reached = dynamics.goal_reached(np, sp, heel[:, -1, 0], heel[:, -1, 1], goal_y)
+    # The one strict-success verdict (jaxexo.physics.outcome), on every sample of the paths.
+    v = outcome.from_samples(np, reached, clearance, limit_bad, leg_bad, heel[..., 0])
     return {
         "clearance": clearance,
         "kin": kin,
         "angles": angles,
         "limit_bad": limit_bad,
         "leg_bad": leg_bad,
-        "collision_free": ~np.any(geometry.foot_collides(np, clearance), axis=-1),
-        "min_clearance": clearance.min(axis=-1),
-        "joint_limits_ok": ~np.any(limit_bad, axis=-1),
-        "leg_length_ok": ~np.any(leg_bad, axis=-1),
-        "reached_goal": dynamics.goal_reached(np, sp, heel[:, -1, 0], heel[:, -1, 1], goal_y),
+        "verdict": v,
+        "ok": v["success"],
+        "collision_free": v["collision_free"],
+        "min_clearance": v["min_clearance"],
+        "joint_limits_ok": v["joint_limits_ok"],
+        "leg_length_ok": v["leg_length_ok"],
+        "reached_goal": reached,
     }
 
 
 def _reasons(m: dict, i: int, heel: np.ndarray, goal_y: float, time: np.ndarray) -> tuple[str, ...]:
+    """The failed checks of path i (jaxexo.physics.outcome.CHECKS, in order), each with where it failed."""
     out = []
-    if not m["reached_goal"][i]:
-        y, z = heel[-1]
-        out.append(f"did not reach the goal: ends at y={y:.3f} m, z={z:.3f} m, goal y={goal_y:.3f} m")
-    if not m["collision_free"][i]:
-        j = int(np.argmin(m["clearance"][i]))
-        out.append(f"the foot touches the obstacle (min clearance {m['min_clearance'][i]:.4f} m at t={time[j]:.3f} s)")
-    if not m["joint_limits_ok"][i]:
-        j = int(np.argmax(m["limit_bad"][i]))
-        a = np.degrees(m["angles"][i, j])
-        out.append(f"joint limits exceeded at t={time[j]:.3f} s (hip/knee swing {a[0]:.1f}/{a[1]:.1f} deg, "
-                   f"stance {a[2]:.1f}/{a[3]:.1f} deg)")
-    if not m["leg_length_ok"][i]:
-        j = int(np.argmax(m["leg_bad"][i]))
-        out.append(f"a leg would have to stretch beyond thigh + shin at t={time[j]:.3f} s")
+    for check in outcome.failed_checks(m["verdict"], i):
+        if check == "reached_goal":
+            y, z = heel[-1]
+            out.append(f"did not reach the goal: ends at y={y:.3f} m, z={z:.3f} m, goal y={goal_y:.3f} m")
+        elif check == "clearance_ok":
+            j = int(np.argmin(m["clearance"][i]))
+            what = ("the foot touches the obstacle" if not m["collision_free"][i] else
+                    f"the foot comes closer than {outcome.DEFAULT_MIN_CLEARANCE:.3f} m to the obstacle")
+            out.append(f"{what} (min clearance {m['min_clearance'][i]:.4f} m at t={time[j]:.3f} s)")
+        elif check == "joint_limits_ok":
+            j = int(np.argmax(m["limit_bad"][i]))
+            a = np.degrees(m["angles"][i, j])
+            out.append(f"joint limits exceeded at t={time[j]:.3f} s (hip/knee swing {a[0]:.1f}/{a[1]:.1f} deg, "
+                       f"stance {a[2]:.1f}/{a[3]:.1f} deg)")
+        elif check == "leg_length_ok":
+            j = int(np.argmax(m["leg_bad"][i]))
+            out.append(f"a leg would have to stretch beyond thigh + shin at t={time[j]:.3f} s")
+        else:
+            out.append(f"the heel moves backwards by {m['verdict']['max_backward'][i]:.4f} m, more than "
+                       f"{outcome.DEFAULT_BACKWARD_TOLERANCE:.4f} m")
     return tuple(out)
 
 
@@ -304,7 +307,7 @@ def write_timed_csv(swing, path: str | Path | None = None) -> str:
         w.writerow([f"{x:.9g}" for x in row])
     text = buf.getvalue()
     if path is not None:
-        _write_text(Path(path), text)
+        atomic_write(path, text)
     return text
 
 
@@ -336,5 +339,5 @@ def timed_dict(swing) -> dict:
 def write_timed_json(swing, path: str | Path | None = None) -> str:
     text = json.dumps(timed_dict(swing), indent=1)
     if path is not None:
-        _write_text(Path(path), text)
+        atomic_write(path, text)
     return text

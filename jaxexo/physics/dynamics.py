@@ -26,7 +26,10 @@ import numpy as np
 from jaxexo.physics import geometry, kinematics, rewards
 from jaxexo.config import ENV_SECTIONS, PIVOT_CONDITIONS, SECTION_CLASSES, Config, declared_fields
 
-NUM_ACTIONS = 36
+NUM_ACTIONS = 36          # thesis 2.1: 36 moves, 10 degrees apart
+# Observation entries besides the obstacle profile (``observation``, conditioned mode): heel (2),
+# scene relative to the heel (10), progress and mid-goal flag (2).
+OBS_SCENE_ENTRIES = 14
 # Lengths in observations are divided by this (m), so that they are of order 1.
 LENGTH_SCALE = 0.5
 # Thesis-mode observation centre (m): the middle of a default step, a little above the ground.
@@ -41,13 +44,24 @@ scalar = types.SimpleNamespace(
 )
 
 
+def action_angles(n: int = NUM_ACTIONS) -> np.ndarray:
+    """(n,) move directions (rad): k * 2 pi / n, k = 0..n-1 (thesis 2.1: 36 moves, 10 degrees apart)."""
+    return np.deg2rad(360.0 / n * np.arange(n))
+
+
 def action_directions(n: int = NUM_ACTIONS) -> np.ndarray:
-    """(n, 2) unit moves at k * 360/n degrees, k = 0..n-1 (thesis 2.1: 36 moves, 10 degrees apart).
+    """(n, 2) unit moves along ``action_angles``.
 
     Axis-aligned moves get exact zeros: cos(270 deg) = -1.8e-16 would count as "backward" (eq 2.31)."""
-    k = np.arange(n)
-    d = np.stack([np.cos(np.deg2rad(360.0 / n * k)), np.sin(np.deg2rad(360.0 / n * k))], axis=-1)
+    a = action_angles(n)
+    d = np.stack([np.cos(a), np.sin(a)], axis=-1)
     return np.where(np.abs(d) < 1e-12, 0.0, d)
+
+
+def obs_dim(obs_mode: str, shape_points: int) -> int:
+    """Length of ``observation``'s output: the heel (2) in ``thesis`` mode, else the scene entries and
+    the obstacle profile's ``shape_points`` heights."""
+    return 2 if obs_mode == "thesis" else OBS_SCENE_ENTRIES + shape_points
 
 
 def param_values(cfg: Config) -> dict[str, np.ndarray]:
@@ -95,10 +109,18 @@ def move_heel(xp, p, heel_y, heel_z, dir_y, dir_z):
     return y, z
 
 
-def pivot_position(xp, pivot_kind, start_y, center_y):
-    """The three thesis pivot conditions (3.1), indexed like PIVOT_CONDITIONS: the pivot heel aligned
-    with the swing heel's start, with the obstacle centre, or half-way between."""
-    return xp.where(pivot_kind == 0, start_y, xp.where(pivot_kind == 1, center_y, 0.5 * (start_y + center_y)))
+pivot_position = kinematics.pivot_position   # the three pivot conditions -> pivot y (one definition)
+
+
+def terminated(xp, p, reached, collided):
+    """An episode ends at the goal, or at a collision when collisions terminate (thesis 2.2)."""
+    return reached | (collided & p.terminate_on_collision)
+
+
+def truncated(time, max_steps):
+    """The step limit: ``time`` steps taken of at most ``max_steps`` (gymnax's truncation, from the
+    step count alone, even on a step that also terminates)."""
+    return time >= max_steps
 
 
 def mid_goal(xp, p, center_y, height):
@@ -170,9 +192,8 @@ def transition(xp, p, prev, heel, time, visited_mid, layout) -> dict:
     reached = goal_reached(xp, p, heel[..., 0], heel[..., 1], lay.goal_y)
 
     kin = kinematics.leg_state(xp, lay.pivot_y, heel, p.thigh, p.shin)
-    lim = lambda h, q: kinematics.joint_limit_violation(  # noqa: E731
-        xp, h, q, p.hip_limits[0], p.hip_limits[1], p.knee_limits[0], p.knee_limits[1])
-    limits_violated = lim(kin["hip_swing"], kin["knee_swing_angle"]) | lim(kin["hip_stance"], kin["knee_stance_angle"])
+    angles = xp.stack([kin["hip_swing"], kin["knee_swing_angle"], kin["hip_stance"], kin["knee_stance_angle"]], axis=-1)
+    limits_violated = kinematics.legs_outside_limits(xp, angles, p.hip_limits, p.knee_limits)
 
     traj = rewards.trajectory_terms(
         xp, p, steps=time, prev_heel=prev, heel=heel, collided=collided, clearance=clearance,
@@ -180,12 +201,12 @@ def transition(xp, p, prev, heel, time, visited_mid, layout) -> dict:
     exo = rewards.exo_terms(
         xp, p, hip_z=kin["hip"][..., 1], leg_swing=kin["leg_swing"], leg_stance=kin["leg_stance"],
         limits_violated=limits_violated)
-    terminated = reached | (collided & p.terminate_on_collision)
+    done = terminated(xp, p, reached, collided)
     mid = xp.stack([mid_y, mid_z], axis=-1)
     goal = xp.stack([lay.goal_y, 0.0 * lay.goal_y], axis=-1)
     shaping = rewards.shaping_reward(
         xp, p, rewards.progress_potential(xp, prev, mid, goal, visited_mid),
-        rewards.progress_potential(xp, heel, mid, goal, visited), terminated)
+        rewards.progress_potential(xp, heel, mid, goal, visited), done)
     reward = rewards.total_reward(xp, p, traj, exo) + shaping
     info = {
         "traj_terms": traj,
@@ -196,12 +217,12 @@ def transition(xp, p, prev, heel, time, visited_mid, layout) -> dict:
         "goal_reached": reached,
         "joint_limit_violation": limits_violated,
         "leg_length_violation": exo[..., 1] < 0,
-        "joint_angles": xp.stack([kin["hip_swing"], kin["knee_swing_angle"],
-                                  kin["hip_stance"], kin["knee_stance_angle"]], axis=-1),
+        "joint_angles": angles,
         "heel": heel,
         "hip": kin["hip"],
+        "backward": prev[..., 0] - heel[..., 0],   # m the heel moved backwards (eq 2.31's condition)
     }
-    return {"visited_mid": visited, "reward": reward, "terminated": terminated, "info": info}
+    return {"visited_mid": visited, "reward": reward, "terminated": done, "info": info}
 
 
 # --------------------------------------------------------------------------------------------

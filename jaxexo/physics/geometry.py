@@ -131,6 +131,12 @@ def foot_clearance(xp, heel, foot_length, outline):
     return xp.where(inside, -dist, dist)
 
 
+def default_center(foot_length, step_length):
+    """Default obstacle centre (m): the middle of the free gap between the toe at the (unshifted)
+    start and the heel at the goal (any array module: plain arithmetic)."""
+    return 0.5 * (foot_length + step_length)
+
+
 def foot_collides(xp, clearance):
     """The foot touches or enters the obstacle (thesis eq 2.30 / 3.1, with the foot's length)."""
     return clearance <= TOUCH_EPS

@@ -126,6 +126,16 @@ def leg_state(xp, pivot_y, heel, thigh, shin):
 ANGLE_EPS = 1e-4
 
 
+# The thesis pivot conditions (3.1), in the order pivot_position indexes them: (b)/(2), (a)/(1), (c)/(3).
+PIVOT_CONDITIONS = ("agent", "obstacle", "between")
+
+
+def pivot_position(xp, pivot_kind, start_y, center_y):
+    """The three thesis pivot conditions (3.1), indexed like PIVOT_CONDITIONS: the pivot
+    heel aligned with the swing heel's start, with the obstacle centre, or half-way between (m)."""
+    return xp.where(pivot_kind == 0, start_y, xp.where(pivot_kind == 1, center_y, 0.5 * (start_y + center_y)))
+
+
 def joint_limit_violation(xp, hip_angle, knee_angle, hip_min, hip_max, knee_min, knee_max):
     """Eq 2.50's condition for one leg: any angle outside its limits."""
     return (
@@ -134,6 +144,14 @@ def joint_limit_violation(xp, hip_angle, knee_angle, hip_min, hip_max, knee_min,
         | (knee_angle > knee_max + ANGLE_EPS)
         | (knee_angle < knee_min - ANGLE_EPS)
     )
+
+
+def legs_outside_limits(xp, angles, hip_limits, knee_limits):
+    """Eq 2.50's condition for both legs: ``angles`` (..., 4) as [hip_swing, knee_swing, hip_stance,
+    knee_stance] (rad); True where either leg has an angle outside its limits."""
+    lim = lambda h, q: joint_limit_violation(  # noqa: E731
+        xp, h, q, hip_limits[0], hip_limits[1], knee_limits[0], knee_limits[1])
+    return lim(angles[..., 0], angles[..., 1]) | lim(angles[..., 2], angles[..., 3])
 
 
 # A straight leg's |hip - heel| rounds to t + s plus an ulp: not a violation of eq 2.45 (m).

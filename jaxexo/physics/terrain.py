@@ -50,7 +50,7 @@ from jaxexo.physics import geometry, kinematics
 # uniform numbers, so one (K_MAX, 2) array and one (D_MAX,) draw serve every family in a batch.
 K_MAX = 16
 D_MAX = 16
-PIVOTS = ("agent", "obstacle", "between")   # = jaxexo.config.PIVOT_CONDITIONS (config is a layer above)
+PIVOTS = kinematics.PIVOT_CONDITIONS
 
 
 class TerrainError(ValueError):
@@ -351,11 +351,6 @@ def place(xp, u, width, start_shift, step_length, foot_length: float, near_margi
     return start, L, c_lo + (c_hi - c_lo) * u[..., 2]
 
 
-def pivot_y(xp, pivot_kind, start_y, center_y):
-    """Pivot heel y for PIVOTS index ``pivot_kind`` (the rule of jaxexo.physics.dynamics.pivot_position)."""
-    return xp.where(pivot_kind == 0, start_y, xp.where(pivot_kind == 1, center_y, 0.5 * (start_y + center_y)))
-
-
 # --------------------------------------------------------------------------------------------
 # The validated description a config embeds
 # --------------------------------------------------------------------------------------------
@@ -486,7 +481,7 @@ def unclearable(spec: TerrainSpec, *, foot_length, thigh, shin, hip_limits, knee
             for k, piv in enumerate(PIVOTS):
                 if spec.pivot[k] <= 0:
                     continue
-                ks = kinematics.leg_state(np, pivot_y(np, k, start, c), heel, thigh, shin)
+                ks = kinematics.leg_state(np, kinematics.pivot_position(np, k, start, c), heel, thigh, shin)
                 bad = (ks["leg_swing"] > thigh + shin + 1e-9) | kinematics.joint_limit_violation(
                     np, ks["hip_swing"], ks["knee_swing_angle"], *hip_limits, *knee_limits)
                 for i in np.flatnonzero(bad):

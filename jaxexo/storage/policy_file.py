@@ -9,12 +9,15 @@ size, kinematic constants, layer sizes.
 
 from __future__ import annotations
 
+import io
 import json
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from jaxexo.storage.atomic import atomic_write
 
 FORMAT = "jaxexo-policy"
 FORMAT_VERSION = 1
@@ -71,10 +74,9 @@ def save_policy(path: str | Path, kernels, biases, norm_scales, norm_biases, met
     for i, (s, b) in enumerate(zip(norm_scales, norm_biases)):
         arrays[f"norm_{i}_scale"] = np.asarray(s, np.float32)
         arrays[f"norm_{i}_bias"] = np.asarray(b, np.float32)
-    tmp = path.with_name(path.name + ".tmp.npz")
-    np.savez(tmp, **arrays)
-    tmp.replace(path)
-    return path
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    return atomic_write(path, buf.getvalue())
 
 
 def load_policy(path: str | Path) -> QPolicy:

@@ -21,6 +21,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from jaxexo.config import Config, ConfigError, num_updates
+from jaxexo.physics.dynamics import NUM_ACTIONS, obs_dim as _obs_dim  # one definition each
 from jaxexo.sweep.spec import Sweep
 
 # About this many env steps per chunk (a minute or so at ~1 M env-steps/s).
@@ -29,7 +30,6 @@ CHUNK_ENV_STEPS = 64_000_000
 # environment and outline vertex, plus a constant (measured from XLA's buffer assignment, rounded up).
 _STEP_FLOATS_PER_VERTEX, _STEP_FLOATS = 32, 256
 _SAFETY = 2.0
-NUM_ACTIONS = 36
 
 
 def default_memory_budget() -> int:
@@ -49,7 +49,7 @@ def local_cpu_count() -> int:
 
 def param_count(cfg: Config) -> int:
     t = cfg.train
-    obs_dim = 2 if cfg.env.obs_mode == "thesis" else 14 + cfg.env.shape_points
+    obs_dim = _obs_dim(cfg.env.obs_mode, cfg.env.shape_points)
     sizes = [obs_dim, *t.hidden, NUM_ACTIONS]
     n = sum(a * b + b for a, b in zip(sizes[:-1], sizes[1:]))
     return n + (2 * sum(t.hidden) if t.layer_norm else 0)
@@ -60,7 +60,7 @@ def agent_bytes(cfg: Config) -> int:
     rollout buffers, network activations, the environment step's temporaries, the per-update
     metrics and the greedy evaluation, times two for XLA's temporaries and the scan's carries."""
     t, e = cfg.train, cfg.env
-    obs_dim = 2 if e.obs_mode == "thesis" else 14 + e.shape_points
+    obs_dim = _obs_dim(e.obs_mode, e.shape_points)
     n_env, T = t.num_envs, t.rollout_steps
     k = max(cfg.outline_vertices, 16)   # the evaluation's outlines (the half-circle's 16 vertices)
     p = param_count(cfg)

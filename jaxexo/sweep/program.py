@@ -89,9 +89,10 @@ def _build(cfg: Config, devices):
     kinds = np.arange(n_eval) % len(TEST_KINDS)
     held = jnp.asarray(np.isin(np.asarray(TEST_KINDS)[kinds], HELD_OUT), jnp.float32)
 
-    def agent(key, hyper, test_params):
+    def agent(key, hyper, test):
+        test_params, test_lay = test
         ts, m = trainer.run(trainer.init(key, hyper), hyper, trainer.num_updates)
-        out = rollout(ts.params, test_layouts(tenv, test_params, n_eval), test_params)
+        out = rollout(ts.params, test_lay, test_params)
         suc, acc = out["success"].astype(jnp.float32), out["accurate"].astype(jnp.float32)
         red = reduce_metrics(m, cfg.train.num_envs)
         diverged = ~(_finite(ts.params) & _finite(ts.target_params) & red.pop("metrics_finite"))
@@ -121,12 +122,15 @@ def _stack(trees):
 
 
 def chunk_inputs(sweep: Sweep, chunk: Chunk):
-    """Keys, Hyperparams and test-environment params of the chunk's agents, padded to its size with
+    """Keys, Hyperparams and test-environment (params, layouts) of the chunk's agents, padded to its size with
     copies of the first agent."""
     agents = list(chunk.agents) + [chunk.agents[0]] * (chunk.size - len(chunk.agents))
     cfgs = {c: sweep.members[c].config for c in {c for c, _ in agents}}
     hyper = {c: Hyperparams.from_config(cfg) for c, cfg in cfgs.items()}
-    test = {c: ExoStepEnv(test_config(cfg)).default_params for c, cfg in cfgs.items()}
+    # The test layouts drawn in NumPy (jaxexo.train.evaluate.test_layouts): eval.json's and
+    # ``jaxexo eval``'s scenes.
+    test = {c: (ExoStepEnv(test_config(cfg)).default_params, test_layouts(test_config(cfg), cfg.train.eval_episodes))
+            for c, cfg in cfgs.items()}
     keys = np.stack([np.asarray(jax.random.PRNGKey(s)) for _, s in agents])
     return keys, _stack([hyper[c] for c, _ in agents]), _stack([test[c] for c, _ in agents])
 

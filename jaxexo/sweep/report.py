@@ -95,8 +95,8 @@ def write_report(sweep: Sweep, out: Path, rows: list[dict], heatmap=None) -> dic
         "Axes: " + ", ".join(f"`{a.path}` ({a.kind}{', ' + str(len(a.values)) + ' values' if a.kind == 'grid' else ''})"
                              for a in sweep.axes) + ".",
         "",
-        "Ranked by mean greedy strict success on the test layouts (five thesis obstacles × three pivot "
-        "conditions) over seeds; held-out: triangle and half-circle only. Train return: mean episode return "
+        "Ranked by mean greedy strict success on the agent's raw moves (eval.json's `success_raw`, not "
+        "smoothed) on the test layouts (five thesis obstacles × three pivot conditions) over seeds; held-out: triangle and half-circle only. Train return: mean episode return "
         "over the last tenth of training. Episodes to 90 %: episodes finished when the training success rate "
         "first reached 90 % (mean over the seeds that reached it).", "",
         *_table(sweep, entries), "",

@@ -25,13 +25,17 @@ from pathlib import Path
 import numpy as np
 
 from jaxexo.config import HYPER_FIELDS, RewardConfig
+from jaxexo.storage.atomic import atomic_write  # noqa: F401 (the one atomic write; R.atomic_write)
 from jaxexo.sweep.spec import Sweep
 
 PLAN, SWEEP_FILE, RESULTS, CHUNKS = "plan.json", "sweep.json", "results.csv", "chunks"
 IDENTITY = ("config_id", "seed", "group", "chunk", "label")
 # The results of one agent, reduced inside the compiled program (jaxexo.sweep.program):
 # success/accuracy: greedy rollouts on the fixed test layouts (the five thesis obstacles x the three
-# pivot conditions; held_out_*: triangle and half-circle only, never trained on by default);
+# pivot conditions; held_out_*: triangle and half-circle only, never trained on by default), judged
+# by jaxexo.physics.outcome on the agent's raw moves: eval.json's ``success_raw``, on the same scenes
+# as ``jaxexo eval`` (whose ``success`` is of the smoothed trajectories). The column names are kept so
+# that existing results.csv files resume;
 # eval_return: their mean return; train_success/train_return: the last tenth of training (behaviour
 # policy); episodes_to_90: episodes finished when training success first reached 90 % (nan: never);
 # diverged: 1 if the parameters or the loss became NaN or infinite.
@@ -93,15 +97,6 @@ def _csv_text(cols, rows, header: bool) -> str:
         w.writeheader()
     w.writerows(rows)
     return buf.getvalue()
-
-
-def atomic_write(path: Path, data: bytes | str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    with tmp.open("wb") as f:
-        f.write(data.encode() if isinstance(data, str) else data)
-        f.flush()
-        os.fsync(f.fileno())
-    tmp.replace(path)
 
 
 def write_rows(path: Path, cols, rows) -> None:

@@ -32,6 +32,8 @@ from flax import serialization
 from jaxexo.config import Config, ConfigError, config_from_dict
 from jaxexo.config.toml_io import config_to_toml
 from jaxexo.env.exo_step import LENGTH_SCALE, THESIS_OBS_CENTER
+from jaxexo.physics import dynamics
+from jaxexo.storage.atomic import atomic_write as _atomic_write  # module-level name: tests patch it
 from jaxexo.storage.policy_file import save_policy
 from jaxexo.train.evaluate import evaluate, make_validator
 from jaxexo.train.network import dense_layers, norm_layers
@@ -52,12 +54,6 @@ def chunking(cfg: Config, trainer: Trainer) -> tuple[int, int]:
     return math.ceil(trainer.num_updates / chunks), chunks
 
 
-def _atomic_write(path: Path, data: bytes) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_bytes(data)
-    tmp.replace(path)
-
-
 def _chunk_row(m: np.ndarray, ts, chunk: int, wall: float, seconds: float) -> dict:
     d = dict(zip(METRICS, m.sum(0).tolist()))
     n_upd = max(1, int((m[:, METRICS.index("env_steps")] > 0).sum()))
@@ -69,7 +65,7 @@ def _chunk_row(m: np.ndarray, ts, chunk: int, wall: float, seconds: float) -> di
         "episodes": int(ts.episodes),
         "chunk_episodes": int(d["episodes"]),
         "return_mean": d["return_sum"] / eps,
-        "success_rate": d["successes"] / eps,
+        "success_raw_rate": d["successes"] / eps,    # behaviour policy, raw moves
         "accuracy": d["accurate"] / eps,
         "loss": d["loss"] / n_upd,
         "q_mean": d["q_mean"] / n_upd,
@@ -89,7 +85,7 @@ def export_policy(path: Path, cfg: Config, trainer: Trainer, params) -> Path:
         "length_scale": LENGTH_SCALE,
         "thesis_obs_center": list(THESIS_OBS_CENTER),
         "num_actions": env.num_actions,
-        "action_angles_rad": [math.radians(10.0 * k) for k in range(env.num_actions)],
+        "action_angles_rad": dynamics.action_angles(env.num_actions).tolist(),
         "layers": [env.obs_dim, *cfg.train.hidden, env.num_actions],
         "layer_norm": cfg.train.layer_norm,
         "activation": "relu",
@@ -111,7 +107,7 @@ def plot_training_curve(path: Path, rows: list[dict]) -> None:
     a1.set_ylabel("mean episode return")
     a1.set_title("Training (thesis Fig. 3.4): return and success per chunk")
     a1.grid(alpha=0.3)
-    a2.plot(ep, [r["success_rate"] for r in rows], label="success (strict)", color="tab:green")
+    a2.plot(ep, [r["success_raw_rate"] for r in rows], label="strict success, raw moves", color="tab:green")
     a2.plot(ep, [r["accuracy"] for r in rows], label="accuracy (eq 3.1)", color="tab:orange")
     a2.set_ylim(-0.02, 1.02)
     a2.set_xlabel("episodes")
@@ -195,9 +191,9 @@ def run_training(cfg: Config, out: str | Path, seed: int = 0, resume: bool = Fal
             chunks_done += 1
             wall = wall_before + time.perf_counter() - t_start
             row = _chunk_row(m, ts, chunks_done, wall, time.perf_counter() - t0)
-            row["validation_success"] = validate(ts.params)
-            if row["validation_success"] >= best["score"]:
-                best.update(params=ts.params, score=row["validation_success"], chunk=chunks_done)
+            row["validation_success_raw"] = validate(ts.params)
+            if row["validation_success_raw"] >= best["score"]:
+                best.update(params=ts.params, score=row["validation_success_raw"], chunk=chunks_done)
             rows.append(row)
             mf.write(json.dumps(row) + "\n")
             mf.flush()
@@ -213,8 +209,8 @@ def run_training(cfg: Config, out: str | Path, seed: int = 0, resume: bool = Fal
             if bar is not None:
                 bar.update(1)
                 bar.set_postfix(episodes=row["episodes"], steps_per_s=f"{row['env_steps_per_s']:.3g}",
-                                ret=f"{row['return_mean']:.2f}", success=f"{row['success_rate']:.3f}",
-                                eps=f"{row['epsilon']:.3f}", val=f"{row['validation_success']:.3f}")
+                                ret=f"{row['return_mean']:.2f}", success_raw=f"{row['success_raw_rate']:.3f}",
+                                eps=f"{row['epsilon']:.3f}", val=f"{row['validation_success_raw']:.3f}")
     if bar is not None:
         bar.close()
     train_seconds = wall_before + time.perf_counter() - t_start
@@ -225,6 +221,6 @@ def run_training(cfg: Config, out: str | Path, seed: int = 0, resume: bool = Fal
     result = evaluate(cfg, trainer.net, best["params"], eval_episodes or cfg.train.eval_episodes)
     result.update({"episodes": int(ts.episodes), "env_steps": int(ts.env_steps),
                    "train_seconds": round(train_seconds, 3), "seed": seed,
-                   "selected_chunk": best["chunk"], "validation_success": best["score"], "devices": n_dev})
-    (out / "eval.json").write_text(json.dumps(result, indent=2) + "\n")
+                   "selected_chunk": best["chunk"], "validation_success_raw": best["score"], "devices": n_dev})
+    _atomic_write(out / "eval.json", json.dumps(result, indent=2) + "\n")
     return result

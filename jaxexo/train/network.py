@@ -8,6 +8,8 @@ import flax.linen as nn
 import jax
 import jax.numpy as jnp
 
+from jaxexo.physics.dynamics import NUM_ACTIONS
+
 # Inputs this narrow (the thesis observation: heel y, z) enter the first layer as a sum of scaled rows
 # of its kernel instead of a matrix product: the same arithmetic, but its gradient becomes a fused
 # elementwise reduction. XLA's CPU dot for that gradient (a contraction over the whole minibatch into
@@ -29,7 +31,7 @@ def _narrow_dot_general(x, kernel, dimension_numbers, precision=None, preferred_
 
 class QNetwork(nn.Module):
     hidden: Sequence[int] = (64, 32, 32, 32)
-    num_actions: int = 36
+    num_actions: int = NUM_ACTIONS
     layer_norm: bool = False
 
     @nn.compact

@@ -28,6 +28,7 @@ from flax import struct
 
 from jaxexo.config import HYPER_FIELDS, Config, TrainConfig, declared_fields, num_updates
 from jaxexo.env import EnvParams, ExoStepEnv
+from jaxexo.physics import outcome
 from jaxexo.train import td_lambda
 from jaxexo.train.network import QNetwork
 
@@ -54,8 +55,7 @@ Hyperparams = struct.dataclass(type("Hyperparams", (), {
 @struct.dataclass
 class EpisodeStats:
     ret: jnp.ndarray        # (N,) running return
-    clean: jnp.ndarray      # (N,) no collision, joint-limit or leg-length violation so far
-    accurate: jnp.ndarray   # (N,) no collision so far (thesis eq 3.1)
+    outcome: dict           # (N,) running aggregates of jaxexo.physics.outcome (clearance, limits, goal)
 
 
 @struct.dataclass
@@ -137,7 +137,7 @@ class Trainer:
         opt_state = self.optimizer(hyper).init(params)
         backward = self.tc.trace == "backward"
         traces = jax.tree.map(lambda p: jnp.zeros((n,) + p.shape, p.dtype), params) if backward else ()
-        stats = EpisodeStats(ret=jnp.zeros(n), clean=jnp.ones(n, bool), accurate=jnp.ones(n, bool))
+        stats = EpisodeStats(ret=jnp.zeros(n), outcome=outcome.start(jnp, (n,)))
         ts = TrainState(params=params, target_params=params, opt_state=opt_state, env_state=env_state,
                         obs=obs, stats=stats, traces=traces, action=jnp.zeros(n, jnp.int32),
                         greedy=jnp.ones(n, bool), fresh=jnp.ones(n, bool), key=k_run,
@@ -179,12 +179,16 @@ class Trainer:
     @staticmethod
     def _episode_stats(stats: EpisodeStats, reward, terminated, truncated, info):
         ret = stats.ret + reward
-        clean = stats.clean & ~info["collision"] & ~info["joint_limit_violation"] & ~info["leg_length_violation"]
-        accurate = stats.accurate & ~info["collision"]
+        acc = outcome.accumulate(jnp, stats.outcome, info)
+        # The strict-success verdict of the episodes that ended here (jaxexo.physics.outcome, the one
+        # definition), on the agent's raw moves under the behaviour policy.
+        v = outcome.episode_verdict(jnp, acc)
         done = terminated | truncated
-        success = terminated & info["goal_reached"] & clean
-        row = jnp.stack([done.sum(), jnp.where(done, ret, 0.0).sum(), success.sum(), (done & accurate).sum()])
-        new = EpisodeStats(ret=jnp.where(done, 0.0, ret), clean=clean | done, accurate=accurate | done)
+        row = jnp.stack([done.sum(), jnp.where(done, ret, 0.0).sum(), (done & v["success"]).sum(),
+                         (done & v["collision_free"]).sum()])
+        fresh = outcome.start(jnp, ret.shape)
+        new = EpisodeStats(ret=jnp.where(done, 0.0, ret),
+                           outcome=jax.tree.map(lambda f, a: jnp.where(done, f, a), fresh, acc))
         return new, row.astype(jnp.float32)
 
     def _bootstrap(self, q_final, next_action, done, eps):
