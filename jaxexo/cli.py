@@ -43,10 +43,14 @@ def cmd_train(args) -> int:
 
     use_all_cpu_cores()
     cfg, name = _load(args.config)
-    from jaxexo.train.driver import run_training
+    from jaxexo.train.driver import TrainingDiverged, run_training
 
     print(f"jaxexo train: {name} -> {args.out} (seed {args.seed}{', resume' if args.resume else ''})")
-    res = run_training(cfg, args.out, seed=args.seed, resume=args.resume, progress=not args.quiet)
+    try:
+        res = run_training(cfg, args.out, seed=args.seed, resume=args.resume, progress=not args.quiet)
+    except TrainingDiverged as e:
+        print(f"jaxexo: error: {e}", file=sys.stderr)
+        return 3
     held = res.get("held_out") or {}
     print(f"trained {res['episodes']} episodes, {res['env_steps']:,} env steps in {res['train_seconds']:.1f} s")
     print(f"greedy eval on {sum(v['n'] for v in res['by_obstacle'].values())} test layouts: "
@@ -75,7 +79,22 @@ def obstacle_from_args(args):
     return getattr(Obstacle, shape)(w, h, center_y=center)
 
 
+def _check_output_file(option: str, value) -> None:
+    """An output path must name a file in an existing folder: refused before any work (and before any
+    temporary file is made next to it)."""
+    if value is None:
+        return
+    text = str(value)
+    p = Path(value)
+    if text.endswith(("/", "\\")) or p.is_dir():
+        raise ValueError(f"{option}: {text} is a directory; give a file name (e.g. {p / 'trajectory.csv'})")
+    if not p.parent.is_dir():
+        raise ValueError(f"{option}: the folder {p.parent} does not exist (for {text})")
+
+
 def cmd_generate(args) -> int:
+    for option, value in (("--out", args.out), ("--json", args.json), ("--plot", args.plot)):
+        _check_output_file(option, value)
     common = dict(pivot=args.pivot, pivot_y=args.pivot_y, start_y=args.start_y, step_length=args.step_length,
                   n_points=args.points, duration=args.duration)
     if args.method == "cfftg":
@@ -139,6 +158,7 @@ def cmd_sweep(args) -> int:
               f"({res['env_steps_this_run'] / res['wall_s_this_run'] / 1e6:.3f} M env-steps/s)")
     print(f"wrote {args.out}/results.csv, summary.md, " + ", ".join(res["figures"])
           + (", best/policy.npz, best/config.toml" if "exported" in res else ""))
+    return 0
 
 
 def cmd_eval(args) -> int:
@@ -276,8 +296,13 @@ def main(argv=None) -> int:
     try:
         return args.func(args)
     except (ConfigError, GeometryError, PolicyFileError, ValueError) as e:
+        # Bad input (config, files, options, a checkpoint or run directory that cannot be used).
         print(f"jaxexo: error: {e}", file=sys.stderr)
         return 2
+    except OSError as e:
+        # A write that failed (full disk, file-size limit, permissions): what was written before is intact.
+        print(f"jaxexo: error: {e}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

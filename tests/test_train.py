@@ -27,7 +27,7 @@ import pytest
 
 from jaxexo.config import ConfigError, config_from_dict, load_config
 from jaxexo.config.toml_io import config_to_toml
-from jaxexo.storage.policy_file import FORMAT_VERSION, PolicyFileError, load_policy
+from jaxexo.storage.policy_file import FORMAT_VERSION, PolicyFileError, load_policy, policy_checksum
 
 from conftest import ROOT, jax_compilation_cache
 
@@ -119,7 +119,7 @@ def test_trainer_learns_to_step_over_a_fixed_obstacle():
     ts = jax.jit(trainer.init)(jax.random.PRNGKey(LEARN_SEED), hyper)
     ts, m = jax.jit(trainer.run, static_argnums=2)(ts, hyper, trainer.num_updates)
     m = np.asarray(m)
-    assert int(ts.env_steps) == trainer.num_updates * 128 * 8
+    assert int(trainer.env_steps(ts)) == trainer.num_updates * 128 * 8
     tenth = len(m) // 10
 
     def rate(rows):
@@ -315,7 +315,7 @@ def test_make_train_jit_vmaps_over_seeds(compiled_runs):
     assert m.shape == (2, TINY_UPDATES, len(METRICS))
     assert np.all(np.isfinite(m)) and all_finite(ts.params)
     np.testing.assert_array_equal(np.asarray(ts.update), [TINY_UPDATES] * 2)
-    np.testing.assert_array_equal(np.asarray(ts.env_steps), [TINY_UPDATES * TINY_N * TINY_T] * 2)
+    np.testing.assert_array_equal(Trainer(tiny_config()).env_steps(ts), [TINY_UPDATES * TINY_N * TINY_T] * 2)
     for leaf in leaves(ts.params):
         assert leaf.shape[0] == 2 and not np.array_equal(leaf[0], leaf[1])
     assert not np.array_equal(m[0], m[1])
@@ -531,11 +531,13 @@ def test_exported_policy_matches_the_checkpoint(driver_runs, tiny):
     """policy.npz holds the checkpoint's selected (best validation) parameters, computing the same Q."""
     from flax import serialization
 
+    from jaxexo.storage.checkpoint import unpack_checkpoint
+
     cfg, full = driver_runs["cfg"], driver_runs["full"]
     trainer, hyper = tiny["trainer"], tiny["hyper"]
     template = tiny["init"](jax.random.PRNGKey(0), hyper)
     saved = serialization.from_bytes({"state": template, "best_params": template.params},
-                                     (full / driver.CHECKPOINT).read_bytes())
+                                     unpack_checkpoint((full / driver.CHECKPOINT).read_bytes(), "ckpt"))
     assert int(saved["state"].update) == TINY_UPDATES
     pol = load_policy(full / "policy.npz")
     assert pol.metadata["layer_norm"] is True and pol.metadata["layers"] == [trainer.env.obs_dim, 32, 32, 36]
@@ -616,17 +618,29 @@ def good_policy(tmp_path_factory):
     return path
 
 
-def _rewrite(src, dst, meta=None, **arrays):
+def _rewrite(src, dst, meta=None, fix_checksum=True, **arrays):
+    """A copy of the policy file with metadata fields replaced (None: removed) and arrays replaced (None:
+    removed); its checksum recomputed unless ``fix_checksum`` is False, so that the check under test is
+    the one that refuses the file (tampering without a new checksum is test_reliability's)."""
     files = _npz(src)
     if meta is not None:
         m = json.loads(str(files["metadata"]))
         m.update(meta)
+        m = {k: v for k, v in m.items() if v is not None}
         files["metadata"] = np.array(json.dumps(m))
     for k, v in arrays.items():
         if v is None:
             files.pop(k)
         else:
             files[k] = v
+    if fix_checksum and "metadata" not in arrays:
+        try:
+            m = json.loads(str(files["metadata"]))
+        except (KeyError, ValueError):
+            m = None
+        if isinstance(m, dict):
+            m["sha256"] = policy_checksum({k: v for k, v in files.items() if k != "metadata"}, m)
+            files["metadata"] = np.array(json.dumps(m))
     np.savez(dst, **files)
     return dst
 
@@ -737,9 +751,11 @@ def test_run_training_refuses_to_overwrite_or_mix_runs(driver_runs, tmp_path):
     # A run made on another number of devices (different random streams) is not resumed here.
     from flax import serialization
 
-    raw = serialization.msgpack_restore((run / driver.CHECKPOINT).read_bytes())
+    from jaxexo.storage.checkpoint import pack_checkpoint, unpack_checkpoint
+
+    raw = serialization.msgpack_restore(unpack_checkpoint((run / driver.CHECKPOINT).read_bytes(), "ckpt"))
     raw["book"]["devices"] = 2
-    (run / driver.CHECKPOINT).write_bytes(serialization.msgpack_serialize(raw))
+    (run / driver.CHECKPOINT).write_bytes(pack_checkpoint(serialization.msgpack_serialize(raw)))
     with pytest.raises(ConfigError, match="2 device"):
         driver.run_training(cfg, run, seed=SEED, resume=True, progress=False)
 

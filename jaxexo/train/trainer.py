@@ -49,8 +49,9 @@ class Hyperparams:
     target_period: jnp.ndarray
     target_tau: jnp.ndarray
     max_grad_norm: jnp.ndarray
-    budget_episodes: jnp.ndarray     # 0: none
-    budget_env_steps: jnp.ndarray    # 0: none
+    budget_episodes: jnp.ndarray     # int32; 0: none
+    budget_env_steps: jnp.ndarray    # float32, for the epsilon schedule only; 0: none
+    budget_updates: jnp.ndarray      # int32: ceil(budget_env_steps / (N T)), the exact step budget; 0: none
     env: EnvParams
 
     @classmethod
@@ -61,7 +62,10 @@ class Hyperparams:
             lr=f(t.lr), lr_end_fraction=f(t.lr_end_fraction), gamma=f(t.gamma), lam=f(t.lam), eps_start=f(t.eps_start), eps_end=f(t.eps_end),
             eps_decay_fraction=f(t.eps_decay_fraction), target_period=jnp.asarray(t.target_period, jnp.int32),
             target_tau=f(t.target_tau), max_grad_norm=f(t.max_grad_norm),
-            budget_episodes=f(t.budget_episodes), budget_env_steps=f(t.budget_env_steps),
+            budget_episodes=jnp.asarray(t.budget_episodes, jnp.int32), budget_env_steps=f(t.budget_env_steps),
+            # Budgets are compared in integers: float32 counts drift past 2^24 env steps and could stop
+            # a run an update early (or late) when N T is not a power of two.
+            budget_updates=jnp.asarray(-(-t.budget_env_steps // (t.num_envs * t.rollout_steps)), jnp.int32),
             env=EnvParams.from_config(cfg),
         )
 
@@ -86,9 +90,8 @@ class TrainState:
     greedy: jnp.ndarray       # ...and whether it was greedy (Watkins cut)
     fresh: jnp.ndarray        # ``obs`` starts an episode (traces reset)
     key: jnp.ndarray
-    update: jnp.ndarray       # updates done
-    env_steps: jnp.ndarray    # float32 counters (exact below 2^24; used for schedules and budgets)
-    episodes: jnp.ndarray
+    update: jnp.ndarray       # int32: updates done (env steps done = update * N * T, Trainer.env_steps)
+    episodes: jnp.ndarray     # int32: episodes finished
 
 
 class Transition(NamedTuple):
@@ -121,6 +124,7 @@ class Trainer:
         self.net = QNetwork(hidden=self.tc.hidden, num_actions=self.env.num_actions,
                             layer_norm=self.tc.layer_norm)
         self.num_updates = num_updates(cfg)
+        self.steps_per_update = self.tc.num_envs * self.tc.rollout_steps
         self.off_policy = self.tc.control == "off_policy"
 
     # --------------------------------------------------------------------------------------
@@ -131,16 +135,26 @@ class Trainer:
         lr = optax.linear_schedule(hyper.lr, hyper.lr * hyper.lr_end_fraction, steps)
         return optax.chain(optax.clip_by_global_norm(hyper.max_grad_norm), optax.adam(lr))
 
+    def env_steps(self, ts: TrainState) -> np.ndarray:
+        """Env steps done, exactly (int64, on the host; any leading agent axes of ``ts`` kept): an update
+        is N T steps and the state freezes once the budget is spent."""
+        return np.asarray(ts.update).astype(np.int64) * self.steps_per_update
+
     def epsilon(self, ts: TrainState, hyper: Hyperparams):
-        """Linear decay from eps_start to eps_end over eps_decay_fraction of the budget."""
+        """Linear decay from eps_start to eps_end over eps_decay_fraction of the budget (a schedule:
+        float32 is fine here, the budget itself is counted in integers, ``active``)."""
+        steps = ts.update.astype(jnp.float32) * jnp.float32(self.steps_per_update)
+        episodes = ts.episodes.astype(jnp.float32)
+        budget_episodes = hyper.budget_episodes.astype(jnp.float32)
         frac = jnp.maximum(
-            jnp.where(hyper.budget_env_steps > 0, ts.env_steps / jnp.maximum(hyper.budget_env_steps, 1.0), 0.0),
-            jnp.where(hyper.budget_episodes > 0, ts.episodes / jnp.maximum(hyper.budget_episodes, 1.0), 0.0))
+            jnp.where(hyper.budget_env_steps > 0, steps / jnp.maximum(hyper.budget_env_steps, 1.0), 0.0),
+            jnp.where(budget_episodes > 0, episodes / jnp.maximum(budget_episodes, 1.0), 0.0))
         w = jnp.clip(1.0 - frac / hyper.eps_decay_fraction, 0.0, 1.0)
         return hyper.eps_end + (hyper.eps_start - hyper.eps_end) * w
 
     def active(self, ts: TrainState, hyper: Hyperparams):
-        steps_left = (hyper.budget_env_steps <= 0) | (ts.env_steps < hyper.budget_env_steps)
+        # update * N T < budget  <=>  update < ceil(budget / (N T)): integers throughout.
+        steps_left = (hyper.budget_updates <= 0) | (ts.update < hyper.budget_updates)
         eps_left = (hyper.budget_episodes <= 0) | (ts.episodes < hyper.budget_episodes)
         return steps_left & eps_left
 
@@ -156,10 +170,9 @@ class Trainer:
         ts = TrainState(params=params, target_params=params, opt_state=opt_state, env_state=env_state,
                         obs=obs, stats=stats, traces=traces, action=jnp.zeros(n, jnp.int32),
                         greedy=jnp.ones(n, bool), fresh=jnp.ones(n, bool), key=k_run,
-                        update=jnp.asarray(0, jnp.int32),
-                        # Strongly typed: a weakly typed 0.0 would give jit a second signature after
+                        # Strongly typed: a weakly typed 0 would give jit a second signature after
                         # the first update (and a second compilation of the chunk program).
-                        env_steps=jnp.asarray(0.0, jnp.float32), episodes=jnp.asarray(0.0, jnp.float32))
+                        update=jnp.asarray(0, jnp.int32), episodes=jnp.asarray(0, jnp.int32))
         if backward:
             k_act, k_run = jax.random.split(k_run)
             a, g = self._act(params, obs, k_act, self.epsilon(ts, hyper))
@@ -217,8 +230,8 @@ class Trainer:
         else:
             target = optax.incremental_update(new.params, new.target_params, hyper.target_tau)
         steps = float(self.tc.num_envs * self.tc.rollout_steps)
-        new = new.replace(target_params=target, update=upd, env_steps=new.env_steps + steps,
-                          episodes=new.episodes + row_ep[0])
+        # row_ep[0] counts this update's finished episodes (<= N): exact in float32, added as an integer.
+        new = new.replace(target_params=target, update=upd, episodes=new.episodes + row_ep[0].astype(jnp.int32))
         # Past the budget the state is frozen (vmapped seeds and sweeps reach it at different times).
         act = self.active(ts, hyper)
         new = jax.tree.map(lambda a, b: jnp.where(act, a, b), new, ts)
