@@ -14,7 +14,6 @@ from __future__ import annotations
 import io
 import json
 import os
-import resource
 import shutil
 import signal
 import subprocess
@@ -76,13 +75,18 @@ def snapshot(directory) -> dict:
     return {p.name: p.read_bytes() for p in sorted(directory.iterdir()) if p.name != LOCK_NAME}
 
 
-def limited_fsize(limit: int):
-    """preexec_fn: files may not grow past ``limit`` bytes, and a write past it raises (EFBIG) instead of
-    killing the process with SIGXFSZ: a full disk as the process sees it."""
-    def pre():
-        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
-        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
-    return pre
+# Runs a command whose files may not grow past a limit, a write past it raising (EFBIG) instead of
+# killing the process with SIGXFSZ: a full disk as the process sees it. The limit and the ignored signal
+# are set in a fresh interpreter that then execs the command (both survive exec), rather than in a
+# preexec_fn, which would fork this JAX-threaded process.
+_LIMITED = ("import os, resource, signal, sys\n"
+            "signal.signal(signal.SIGXFSZ, signal.SIG_IGN)\n"
+            "n = int(sys.argv[1]); resource.setrlimit(resource.RLIMIT_FSIZE, (n, n))\n"
+            "os.execv(sys.argv[2], sys.argv[2:])\n")
+
+
+def limited_fsize(limit: int, cmd: list) -> list:
+    return [sys.executable, "-c", _LIMITED, str(limit), *map(str, cmd)]
 
 
 # --------------------------------------------------------------------------------------------
@@ -95,8 +99,8 @@ def test_atomic_write_on_a_full_disk_keeps_the_old_file_and_leaves_no_tmp(tmp_pa
     code = ("import sys; from jaxexo.storage.atomic import atomic_write\n"
             "try:\n    atomic_write(sys.argv[1], b'x' * 100000)\n"
             "except OSError as e:\n    print(e); sys.exit(7)\n")
-    r = subprocess.run([sys.executable, "-c", code, str(target)], capture_output=True, text=True, cwd=ROOT,
-                       preexec_fn=limited_fsize(4096), timeout=60)
+    r = subprocess.run(limited_fsize(4096, [sys.executable, "-c", code, target]), capture_output=True, text=True,
+                       cwd=ROOT, timeout=60)
     assert r.returncode == 7, r.stderr
     assert "could not write" in r.stdout and str(target) in r.stdout and "File too large" in r.stdout
     assert target.read_bytes() == b"old content\n"
@@ -516,9 +520,8 @@ def test_sigkill_mid_run_then_resume_is_bit_identical(reference, tmp_path):
     run = tmp_path / "run"
     p = subprocess.Popen(cli("train", cfg_path, "--out", run, "--quiet", "--seed", SEED), cwd=ROOT,
                          env=one_device_env(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    metrics = run / "metrics.jsonl"
     t0 = time.monotonic()
-    while not (metrics.exists() and metrics.read_text().count("\n") >= 1):
+    while not (run / "checkpoint.msgpack").exists():
         assert p.poll() is None, p.stderr.read()[-3000:]
         assert time.monotonic() - t0 < 600
         time.sleep(0.01)
@@ -532,6 +535,33 @@ def test_sigkill_mid_run_then_resume_is_bit_identical(reference, tmp_path):
     assert r.returncode == 0, r.stderr[-3000:]
     assert_same_run(reference["run"], run)
     assert not any(p.name.endswith(".tmp") for p in run.iterdir())
+
+
+@pytest.mark.slow
+def test_run_stopped_before_its_first_checkpoint_resumes_from_scratch(reference, cache, tmp_path):
+    """Killed (here: interrupted) after chunk 1's metrics row but before its checkpoint: a new run there is
+    refused (it is not empty) with a hint, --resume starts again and ends as the uninterrupted run."""
+    from jaxexo.train import driver
+
+    cfg = tiny_config()
+    run = tmp_path / "run"
+
+    def interrupt(path, data):
+        raise KeyboardInterrupt
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(driver, "_atomic_write", interrupt)
+        with pytest.raises(KeyboardInterrupt):
+            driver.run_training(cfg, run, seed=SEED, progress=False)
+    (run / "checkpoint.msgpack.tmp").write_bytes(b"half a checkpoint")   # as a SIGKILL mid-write leaves it
+    assert sorted(snapshot(run)) == ["checkpoint.msgpack.tmp", "config.toml", "metrics.jsonl"]
+    with pytest.raises(ConfigError, match="--resume starts it again"):
+        driver.run_training(cfg, run, seed=SEED, progress=False)
+    with pytest.raises(ConfigError, match="config differs"):
+        driver.run_training(tiny_config(lr=5e-4), run, seed=SEED, resume=True, progress=False)
+    driver.run_training(cfg, run, seed=SEED, resume=True, progress=False)
+    assert not (run / "checkpoint.msgpack.tmp").exists()
+    assert_same_run(reference["run"], run)
 
 
 @pytest.mark.slow
@@ -577,9 +607,9 @@ def test_full_disk_fails_cleanly_and_keeps_the_last_checkpoint(reference, cache,
     ckpt = run / driver.CHECKPOINT
     saved = ckpt.read_bytes()
     assert driver.read_checkpoint(ckpt)["book"]["chunks_done"] == 1
-    r = subprocess.run(cli("train", reference["cfg_path"], "--out", run, "--quiet", "--seed", SEED, "--resume"),
-                       capture_output=True, text=True, cwd=ROOT, env=one_device_env(), timeout=900,
-                       preexec_fn=limited_fsize(len(saved) - 1))
+    r = subprocess.run(limited_fsize(len(saved) - 1, cli("train", reference["cfg_path"], "--out", run, "--quiet",
+                                                          "--seed", SEED, "--resume")),
+                       capture_output=True, text=True, cwd=ROOT, env=one_device_env(), timeout=900)
     assert_clean_refusal(r, f"could not write {ckpt}", "File too large", code=1)
     assert ckpt.read_bytes() == saved
     assert not any(p.name.endswith(".tmp") for p in run.iterdir())

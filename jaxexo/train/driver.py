@@ -197,12 +197,28 @@ def read_checkpoint(path: Path) -> dict:
     return raw
 
 
+# What a run writes before its first checkpoint: a run stopped then (killed, a full disk) is resumed
+# from the beginning.
+BEFORE_FIRST_CHECKPOINT = {"config.toml", "metrics.jsonl", BOOKKEEPING}
+WRITTEN = ("config.toml", "metrics.jsonl", CHECKPOINT, BOOKKEEPING, "policy.npz", "training_curve.png", "eval.json")
+
+
 def _prepare_dir(out: Path, cfg: Config, seed: int, resume: bool):
-    """Check the (locked) run directory; return the checkpoint's content on resume, else None."""
+    """Check the (locked) run directory; return the checkpoint's content on resume, else None (a new
+    run, or a resume of a run stopped before its first checkpoint: it starts again from scratch)."""
     cfg_path, ckpt = out / "config.toml", out / CHECKPOINT
+    if resume:
+        # Temporary files of a killed writer (atomic_write removes its own on an error, not on SIGKILL);
+        # with the lock held nobody else is writing them.
+        for name in WRITTEN:
+            (out / f"{name}.tmp").unlink(missing_ok=True)
     present = contents(out)
     if resume:
         if not ckpt.exists():
+            if "config.toml" in present and set(present) <= BEFORE_FIRST_CHECKPOINT:
+                if load_config(cfg_path) != cfg:
+                    raise ConfigError(f"--resume: the config differs from the one in {cfg_path}; resume with that config")
+                return None    # stopped before its first checkpoint: nothing to keep, start again
             raise ConfigError(f"--resume: {out} has no checkpoint to resume from (no {CHECKPOINT}"
                               + (f"; it holds {describe(present)})" if present else "; it is empty)"))
         if not cfg_path.exists():
@@ -218,8 +234,11 @@ def _prepare_dir(out: Path, cfg: Config, seed: int, resume: bool):
     if ckpt.exists():
         raise ConfigError(f"--out: {out} already holds a run; pass --resume to continue it or pick a new folder")
     if present:
+        stale = {f"{name}.tmp" for name in WRITTEN}
+        hint = (" (a run stopped before its first checkpoint: --resume starts it again)"
+                if "config.toml" in present and set(present) - stale <= BEFORE_FIRST_CHECKPOINT else "")
         raise RunDirError(f"--out: {out} is not empty ({describe(present)}) and has no {CHECKPOINT} to resume "
-                          "from; a new run needs an empty or absent directory, so that nothing there is "
+                          f"from{hint}; a new run needs an empty or absent directory, so that nothing there is "
                           "overwritten: pick another --out, or move those files away")
     atomic_write(cfg_path, config_to_toml(cfg))
     return None
@@ -249,7 +268,7 @@ def _run_locked(cfg: Config, out: Path, seed: int, resume: bool, progress: bool,
     # The device count changes the random streams: a run is reproducible on the same count.
     trainer = Trainer(cfg, devices=jax.local_devices())
     n_dev = len(trainer.devices or [0])
-    if resume and state_book["devices"] != n_dev:
+    if raw is not None and state_book["devices"] != n_dev:
         raise ConfigError(f"--resume: the run used {state_book['devices']} device(s), this process has "
                           f"{n_dev}; resume it on the same number of CPU devices")
     hyper = Hyperparams.from_config(cfg)
@@ -259,7 +278,9 @@ def _run_locked(cfg: Config, out: Path, seed: int, resume: bool, progress: bool,
     chunks_done, wall_before = 0, 0.0
     metrics_path = out / "metrics.jsonl"
     best = {"params": ts.params, "score": -1.0, "chunk": 0}
-    if resume:
+    if resume and raw is None:
+        atomic_write(metrics_path, "")   # rows of a run that never reached its first checkpoint
+    if raw is not None:
         # A checkpoint of another network or state layout (another config's, a foreign file) must not
         # be poured into this one: flax would accept mismatched shapes silently.
         for name, template in (("state", serialization.to_state_dict(ts)),
