@@ -9,9 +9,9 @@ bytes) and of the rest of the metadata, verified on load.
 
 Loading trusts nothing: every metadata field the network needs is required and type-checked, the
 array set must be exactly the one the layers describe, arrays must be real floating point, and they
-must be finite after the cast to float32. Format version 1 (no checksum) is refused: its arrays cannot
-be verified, and a policy drives an exoskeleton; a run directory's ``jaxexo train --resume`` (or a
-new training) writes version 2.
+must be finite after the cast to float32. Format version 1 (no checksum) is refused rather than
+accepted with a warning: its arrays cannot be verified, and a policy drives an exoskeleton (a warning
+on a robot's computer is easily never read). Training again writes version 2.
 """
 
 from __future__ import annotations
@@ -167,8 +167,7 @@ def load_policy(path: str | Path) -> QPolicy:
         raise PolicyFileError(f"{path}: format is {meta.get('format')!r}, expected {FORMAT!r}")
     if meta.get("format_version") == 1:
         raise PolicyFileError(f"{path}: format_version 1 (written by an older jaxexo, without a checksum) is no "
-                              f"longer read: its weights cannot be verified. Export it again with this jaxexo "
-                              f"(jaxexo train --resume on its run directory) or train a new policy")
+                              f"longer read: its weights cannot be verified. Train the policy again with this jaxexo")
     if meta.get("format_version") != FORMAT_VERSION:
         raise PolicyFileError(f"{path}: format_version {meta.get('format_version')!r} is not supported "
                               f"(this jaxexo reads version {FORMAT_VERSION})")
