@@ -43,14 +43,10 @@ def cmd_train(args) -> int:
 
     use_all_cpu_cores()
     cfg, name = _load(args.config)
-    from jaxexo.train.driver import TrainingDiverged, run_training
+    from jaxexo.train.driver import run_training
 
     print(f"jaxexo train: {name} -> {args.out} (seed {args.seed}{', resume' if args.resume else ''})")
-    try:
-        res = run_training(cfg, args.out, seed=args.seed, resume=args.resume, progress=not args.quiet)
-    except TrainingDiverged as e:
-        print(f"jaxexo: error: {e}", file=sys.stderr)
-        return 3
+    res = run_training(cfg, args.out, seed=args.seed, resume=args.resume, progress=not args.quiet)
     held = res.get("held_out") or {}
     print(f"trained {res['episodes']} episodes, {res['env_steps']:,} env steps in {res['train_seconds']:.1f} s")
     print(f"greedy eval on {sum(v['n'] for v in res['by_obstacle'].values())} test layouts: "
@@ -292,6 +288,7 @@ def main(argv=None) -> int:
     from jaxexo.config import ConfigError
     from jaxexo.physics.geometry import GeometryError
     from jaxexo.storage.policy_file import PolicyFileError
+    from jaxexo.storage.rundir import TrainingDiverged
 
     try:
         return args.func(args)
@@ -299,6 +296,9 @@ def main(argv=None) -> int:
         # Bad input (config, files, options, a checkpoint or run directory that cannot be used).
         print(f"jaxexo: error: {e}", file=sys.stderr)
         return 2
+    except TrainingDiverged as e:
+        print(f"jaxexo: error: {e}", file=sys.stderr)
+        return 3
     except OSError as e:
         # A write that failed (full disk, file-size limit, permissions): what was written before is intact.
         print(f"jaxexo: error: {e}", file=sys.stderr)

@@ -4,6 +4,8 @@
   process on the same directory is refused at once (it would interleave metrics and overwrite
   checkpoints); the operating system releases the lock when its holder exits or is killed, so a lock
   file left behind by a killed run never blocks its ``--resume``.
+- ``TrainingDiverged``: the run's outcome when its loss or parameters became non-finite (raised by
+  jaxexo.train.driver; defined here, without JAX, so that the CLI can catch it).
 - ``contents``: what a directory holds besides the lock file, for the "a new run needs an empty
   directory" rule.
 """
@@ -21,6 +23,10 @@ LOCK_NAME = ".jaxexo.lock"
 
 class RunDirError(ConfigError):
     """A run directory (the --out option) that is in use, or cannot hold a new run."""
+
+
+class TrainingDiverged(RuntimeError):
+    """The loss or the parameters became NaN or infinite (the message says where, and what was kept)."""
 
 
 def contents(directory: Path) -> list[str]:

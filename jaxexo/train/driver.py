@@ -47,7 +47,7 @@ from jaxexo.env.exo_step import LENGTH_SCALE, THESIS_OBS_CENTER
 from jaxexo.storage.atomic import append_line, atomic_write
 from jaxexo.storage.checkpoint import CheckpointError, pack_checkpoint, unpack_checkpoint
 from jaxexo.storage.policy_file import save_policy
-from jaxexo.storage.rundir import RunDirError, contents, describe, run_lock
+from jaxexo.storage.rundir import RunDirError, TrainingDiverged, contents, describe, run_lock  # noqa: F401
 from jaxexo.train.evaluate import evaluate, make_validator
 from jaxexo.train.network import dense_layers, norm_layers
 from jaxexo.train.trainer import METRICS, Hyperparams, Trainer
@@ -69,10 +69,6 @@ def chunking(cfg: Config, trainer: Trainer) -> tuple[int, int]:
 
 # The checkpoint and bookkeeping writes (a name of its own so tests can interrupt between them).
 _atomic_write = atomic_write
-
-
-class TrainingDiverged(RuntimeError):
-    """The loss or the parameters became NaN or infinite."""
 
 
 def _chunk_row(m: np.ndarray, ts, env_steps: int, chunk: int, wall: float, seconds: float) -> dict:
