@@ -660,7 +660,7 @@ def test_policy_file_errors(good_policy, tmp_path):
     cases["format"] = (_rewrite(good_policy, tmp_path / "f.npz", {"format": "other"}), "format is 'other'")
     k0 = _npz(good_policy)["dense_0_kernel"]
     cases["shape"] = (_rewrite(good_policy, tmp_path / "s.npz", dense_0_kernel=k0.T), "dense_0 has shapes")
-    cases["layers"] = (_rewrite(good_policy, tmp_path / "l.npz", {"layers": [5, 8, 36]}), "dense_0 has shapes")
+    cases["layers"] = (_rewrite(good_policy, tmp_path / "l.npz", {"layers": [5, 8, 36], "obs_dim": 5}), "dense_0 has shapes")
     cases["missing_array"] = (_rewrite(good_policy, tmp_path / "m.npz", dense_1_bias=None), "missing array 'dense_1_bias'")
     cases["nan"] = (_rewrite(good_policy, tmp_path / "n.npz", dense_1_bias=np.full(36, np.nan, np.float32)),
                     "dense_1 holds NaN")
