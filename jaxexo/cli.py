@@ -6,14 +6,15 @@ import argparse
 import sys
 from pathlib import Path
 
-DEFAULT_CONFIG = Path(__file__).resolve().parent.parent / "configs" / "default.toml"
+# Shipped inside the package (package data), so the default model is the same however jaxexo is
+# installed; the repository's configs/default.toml is a byte-equal copy.
+DEFAULT_CONFIG = Path(__file__).resolve().parent / "config" / "default.toml"
 
 
 def _load(path):
-    from jaxexo.config import Config, load_config
+    from jaxexo.config import load_config
 
-    if path is None:
-        return (load_config(DEFAULT_CONFIG), str(DEFAULT_CONFIG)) if DEFAULT_CONFIG.exists() else (Config(), "defaults")
+    path = DEFAULT_CONFIG if path is None else path
     return load_config(path), str(path)
 
 
@@ -43,6 +44,9 @@ def cmd_train(args) -> int:
 
     use_all_cpu_cores()
     cfg, name = _load(args.config)
+    from jaxexo.config.memory import check_memory
+
+    check_memory(cfg)       # before JAX allocates: a run the machine cannot hold is refused here
     from jaxexo.train.driver import run_training
 
     print(f"jaxexo train: {name} -> {args.out} (seed {args.seed}{', resume' if args.resume else ''})")
@@ -202,12 +206,12 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="jaxexo", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
     b = sub.add_parser("bench-env", help="environment steps per second (random actions, full reward)")
-    b.add_argument("--config", help="TOML config (default: configs/default.toml)")
+    b.add_argument("--config", help="TOML config (default: the packaged default, configs/default.toml)")
     b.add_argument("--envs", type=_sizes, default=[1, 256, 4096, 16384], help="batch sizes, e.g. 1,256,4096")
     b.add_argument("--out", default="benchmarks/results", help="folder for the JSON and Markdown results")
     b.set_defaults(func=cmd_bench_env)
     t = sub.add_parser("train", help="train a policy (TD(lambda)); writes a run directory")
-    t.add_argument("config", nargs="?", help="TOML config (default: configs/default.toml)")
+    t.add_argument("config", nargs="?", help="TOML config (default: the packaged default, configs/default.toml)")
     t.add_argument("--out", required=True, help="run directory")
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--resume", action="store_true", help="continue the run in --out from its checkpoint")

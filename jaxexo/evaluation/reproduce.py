@@ -1,6 +1,7 @@
 """``jaxexo reproduce``: the thesis's experiments, rerun and tabulated beside its published values.
 
-Trains the seven thesis configs (configs/thesis/{a,b,c,1,2,3,final}.toml, thesis 3.2), then for each
+Trains the seven thesis configs (jaxexo/config/thesis/{a,b,c,1,2,3,final}.toml, shipped with the package;
+configs/thesis/ holds byte-equal copies; thesis 3.2), then for each
 model generates the n test scenarios of ``jaxexo.evaluation.compare`` (the five obstacles of Table 3.1 over the
 three pivot conditions, the model's own starts) with the NumPy generator, and writes:
 
@@ -19,7 +20,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from jaxexo.config import PIVOT_CONDITIONS, load_config
+from jaxexo.config import PIVOT_CONDITIONS, load_config, packaged_config
 
 THESIS_MODELS = ("a", "b", "c", "1", "2", "3", "final")
 # The pivot condition each single-condition model was trained on (thesis 3.2; configs/thesis/*.toml).
@@ -119,11 +120,13 @@ def run_reproduce(out: str | Path, models=THESIS_MODELS, n: int = 1000, seed: in
     from jaxexo.storage.rundir import contents
     from jaxexo.train.driver import run_training
 
-    root = root or Path(__file__).resolve().parents[2]
+    # The thesis and default configs ship inside the package (jaxexo/config/); ``root``: a tree with
+    # its own configs/thesis/*.toml and configs/default.toml instead.
+    base = root / "configs" if root else Path(packaged_config("default")).parent
     out = Path(out)
-    paths = {m: root / "configs" / "thesis" / f"{m}.toml" for m in models}
+    paths = {m: base / "thesis" / f"{m}.toml" for m in models}
     if include_default:
-        paths["default"] = root / "configs" / "default.toml"
+        paths["default"] = base / "default.toml"
     results: dict = {}
     for name, cfg_path in paths.items():
         run = out / "runs" / name

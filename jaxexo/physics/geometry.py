@@ -156,6 +156,9 @@ def profile_height(xp, y, outline):
 
 
 def _finite(name: str, value) -> float:
+    # A bool is an int to Python (True == 1): Obstacle.rectangle(True, 0.1) would be 1 m wide.
+    if isinstance(value, (bool, np.bool_)):
+        raise GeometryError(f"{name} must be a number in metres, got the boolean {value!r}")
     try:
         v = float(value)
     except (TypeError, ValueError):
@@ -282,10 +285,15 @@ class Obstacle:
         """Any ground obstacle from its height profile: world-frame (y, z) points, y non-decreasing.
 
         Missing ground end points are added (the profile drops vertically to the ground)."""
+        if isinstance(points, (list, tuple)) and any(
+                isinstance(x, (bool, np.bool_)) for p in points if isinstance(p, (list, tuple)) for x in p):
+            raise GeometryError("points must be (y, z) numbers in metres, got a boolean")
         try:
             pts = np.asarray(points, dtype=np.float64)
         except (TypeError, ValueError):
             raise GeometryError("points must be a sequence of (y, z) pairs in metres") from None
+        if np.asarray(points).dtype == np.bool_:
+            raise GeometryError("points must be (y, z) numbers in metres, got booleans")
         if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 2:
             raise GeometryError(f"points must have shape (n >= 2, 2), got {pts.shape}")
         if len(pts) > MAX_PROFILE_VERTICES - 2:
