@@ -52,7 +52,8 @@ def run_lock(directory: str | Path, what: str, create: bool = True):
     if directory.exists() and not directory.is_dir():
         raise RunDirError(f"--out: {directory} is a file, not a directory")
     if not create and not directory.is_dir():
-        raise RunDirError(f"--resume: {directory} does not exist: no checkpoint to resume from")
+        missing = "no sweep to resume" if what == "sweep" else "no checkpoint to resume from"
+        raise RunDirError(f"--resume: {directory} does not exist: {missing}")
     try:
         directory.mkdir(parents=True, exist_ok=True)
         fd = os.open(directory / LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o644)
