@@ -216,7 +216,8 @@ def test_policy_tampering_is_refused(policy, tmp_path):
     ("activation", "metadata.activation must be one of"),
     ("layer_norm_string", "metadata.layer_norm must be true or false"),
     ("layers_float", "metadata.layers must be"),
-    ("obs_dim", "metadata.layers starts with 5 but metadata.obs_dim is 6"),
+    ("obs_dim", "metadata.obs_dim is 6 but the network \\(metadata.layers\\) has 5 inputs"),
+    ("null_layers", "metadata.layers is missing"),
     ("angles", "lists 35 angles for 36 actions"),
     ("int8", "'dense_0_kernel' has dtype int8"),
     ("complex", "'dense_1_bias' has dtype complex64"),
@@ -238,6 +239,8 @@ def test_policy_fields_and_dtypes_are_checked(policy, tmp_path, case, message):
         meta = {"layer_norm": "yes"}
     elif case == "layers_float":
         meta = {"layers": [5, 8.0, 8, 36]}
+    elif case == "null_layers":
+        meta = {"layers": None}
     elif case == "obs_dim":
         meta = {"obs_dim": 6}
     elif case == "angles":

@@ -663,7 +663,7 @@ def test_policy_file_errors(good_policy, tmp_path):
     cases["layers"] = (_rewrite(good_policy, tmp_path / "l.npz", {"layers": [5, 8, 36], "obs_dim": 5}), "dense_0 has shapes")
     cases["missing_array"] = (_rewrite(good_policy, tmp_path / "m.npz", dense_1_bias=None), "missing array 'dense_1_bias'")
     cases["nan"] = (_rewrite(good_policy, tmp_path / "n.npz", dense_1_bias=np.full(36, np.nan, np.float32)),
-                    "dense_1 holds NaN")
+                    "'dense_1_bias' holds NaN")
     cases["norm"] = (_rewrite(good_policy, tmp_path / "ln.npz", norm_0_scale=None), "norm_0")
     cases["actions"] = (_rewrite(good_policy, tmp_path / "a.npz", {"num_actions": 35}), "num_actions 35")
     cases["no_meta"] = (_rewrite(good_policy, tmp_path / "nm.npz", metadata=None), "no 'metadata'")

@@ -172,7 +172,7 @@ def load_policy(path: str | Path) -> QPolicy:
         raise PolicyFileError(f"{path}: format_version {meta.get('format_version')!r} is not supported "
                               f"(this jaxexo reads version {FORMAT_VERSION})")
     for key, (ok, what) in REQUIRED.items():
-        if key not in meta:
+        if meta.get(key) is None:
             raise PolicyFileError(f"{path}: metadata.{key} is missing (it must be {what})")
         if not ok(meta[key]):
             raise PolicyFileError(f"{path}: metadata.{key} must be {what}, got {meta[key]!r:.80}")
@@ -181,7 +181,8 @@ def load_policy(path: str | Path) -> QPolicy:
                               "after export (metadata.sha256 does not match the content)")
     layers = meta["layers"]
     if layers[0] != meta["obs_dim"]:
-        raise PolicyFileError(f"{path}: metadata.layers starts with {layers[0]} but metadata.obs_dim is {meta['obs_dim']}")
+        raise PolicyFileError(f"{path}: metadata.obs_dim is {meta['obs_dim']} but the network (metadata.layers) "
+                              f"has {layers[0]} inputs")
     n_norm = len(layers) - 2 if meta["layer_norm"] else 0
     expected = {f"dense_{i}_{p}" for i in range(len(layers) - 1) for p in ("kernel", "bias")}
     expected |= {f"norm_{i}_{p}" for i in range(n_norm) for p in ("scale", "bias")}
