@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
@@ -93,8 +94,11 @@ def _check_output_file(option: str, value) -> None:
 
 
 def cmd_generate(args) -> int:
-    for option, value in (("--out", args.out), ("--json", args.json), ("--plot", args.plot)):
+    for option, value in (("--out", args.out), ("--json", args.json), ("--plot", args.plot),
+                          ("--animate", args.animate)):
         _check_output_file(option, value)
+    import numpy as np
+
     common = dict(pivot=args.pivot, pivot_y=args.pivot_y, start_y=args.start_y, step_length=args.step_length,
                   n_points=args.points, duration=args.duration)
     if args.method == "cfftg":
@@ -110,16 +114,22 @@ def cmd_generate(args) -> int:
 
         gen = TrajectoryGenerator.load(args.policy)
         traj = gen.generate(obstacle_from_args(args), smoothing=args.smoothing, **common)
-    traj.to_csv(args.out)
+    timed = _timed_swing(args, traj, gen.config)
+    (timed or traj).to_csv(args.out)
     written = [args.out]
     if args.json:
-        traj.to_json(args.json)
+        (timed or traj).to_json(args.json)
         written.append(args.json)
     if args.plot:
         from jaxexo.inference.plot import plot_trajectory
 
         plot_trajectory(traj, args.plot)
         written.append(args.plot)
+    if args.animate:
+        from jaxexo.inference.animate import animate_swing
+
+        animate_swing(timed, args.animate)
+        written.append(args.animate)
     c = traj.checks
     moves = f"{len(traj.raw) - 1} agent moves" if args.method == "rl" else "polynomial path (CFFTG)"
     print(f"{traj.scene.obstacle.kind} {traj.scene.width * 100:.1f} x {traj.scene.height * 100:.1f} cm, pivot "
@@ -127,8 +137,31 @@ def cmd_generate(args) -> int:
           f"{'ok' if c.ok else 'FAILED'}")
     for r in c.reasons + traj.notes:
         print(f"  {r}")
+    if timed is not None:
+        print(f"device timing: {timed.duration:.2f} s swing at {timed.rate:g} Hz, peak joint velocity "
+              f"{np.degrees(timed.peak_velocity.max()):.0f} deg/s, acceleration "
+              f"{np.degrees(timed.peak_acceleration.max()):.0f} deg/s^2, "
+              f"{'within' if timed.within_limits else 'OUTSIDE'} the limits")
+        for r in timed.reasons:
+            if r not in c.reasons:
+                print(f"  {r}")
+        ok = c.ok and timed.ok
+    else:
+        ok = c.ok
     print("wrote " + ", ".join(written))
-    return 0 if c.ok else 1
+    return 0 if ok else 1
+
+
+def _timed_swing(args, traj, config):
+    """The swing timed for the device ([device] limits of the config) at --rate (default: the
+    config's control_rate) when --rate or --animate is asked for; else None (uniform time stamps)."""
+    if args.rate is None and not args.animate:
+        return None
+    if args.rate is not None and not (math.isfinite(args.rate) and args.rate > 0):
+        raise ValueError(f"--rate: control rate must be > 0 Hz, got {args.rate}")
+    from jaxexo.inference.swing_timing import time_swing
+
+    return time_swing(traj, config, rate=args.rate)
 
 
 def cmd_sweep(args) -> int:
@@ -235,7 +268,13 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--points", type=int, default=100, help="samples of the smoothed path")
     g.add_argument("--smoothing", type=float, default=0.005,
                    help="B-spline smoothing s, m^2 (0: raw polyline); rl only")
-    g.add_argument("--duration", type=float, default=1.0, help="swing duration for the time stamps, s")
+    g.add_argument("--duration", type=float, default=1.0, help="swing duration for the time stamps, s "
+                                                                "(ignored with --rate)")
+    g.add_argument("--rate", type=float, help="device-ready output: the shortest rest-to-rest timing within the "
+                                              "config's [device] joint limits, sampled at this rate (Hz); the CSV "
+                                              "and JSON gain joint velocities and accelerations")
+    g.add_argument("--animate", help="also write a GIF of both legs stepping over the obstacle in real time at "
+                                     "the device timing (needs matplotlib and Pillow)")
     g.add_argument("--out", required=True, help="CSV file (time, heel, toe, hip, knees, joint angles; SI units)")
     g.add_argument("--json", help="also write JSON (scene, checks, raw points, samples)")
     g.add_argument("--plot", help="also draw the legs, the foot path and the joint angles (PNG)")
@@ -257,9 +296,10 @@ def build_parser() -> argparse.ArgumentParser:
                                     "and figures (NumPy only)")
     e.add_argument("--policy", required=True, help="policy.npz written by jaxexo train")
     e.add_argument("--against", choices=("cfftg",), help="also evaluate this baseline on the same scenarios")
-    e.add_argument("--scenarios", choices=("train", "test", "all"), default="test",
+    e.add_argument("--scenarios", choices=("train", "test", "all", "unseen"), default="test",
                    help="test: the five thesis obstacles x three pivots; train: the policy's training "
-                        "distribution; all: both")
+                        "distribution; all: both; unseen: the fixed held-out obstacle families "
+                        "(jaxexo.evaluation.unseen), reported per family")
     e.add_argument("--n", type=int, default=1000, help="scenarios per set")
     e.add_argument("--batch", type=int, default=1000,
                    help="scenarios per timed generate_batch call (reported scaled to a batch of 1000)")

@@ -7,6 +7,6 @@ from jaxexo.config.schema import (  # noqa: F401
     COLLISION_MODES, CONTROLS, ENV_SECTIONS, HYPER_FIELDS, INT32_MAX, OBS_MODES, OBS_PROFILES,
     PIVOT_CONDITIONS, SECTION_CLASSES, SECTIONS, TARGETS, TRACE_KINDS, TRACE_VIEWS, Config, ConfigError,
     EnvConfig, FieldSpec, KinematicsConfig, LayoutConfig, ObstacleSpec, RewardConfig, TrainConfig,
-    config_from_dict, declared_fields, default_obstacles, load_config, named_spec, num_updates,
+    DeviceConfig, config_from_dict, declared_fields, default_obstacles, load_config, named_spec, num_updates,
     packaged_config, static_settings, validate,
 )

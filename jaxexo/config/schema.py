@@ -18,7 +18,7 @@ Parsing and its messages (``config_from_dict``), the TOML writer (``jaxexo.confi
 built, and an error names the bad field (``ConfigError: layout.obstacles[1].height: ...``), so an
 impossible layout never shows up as a NaN inside a jitted run.
 
-Units: metres, radians, steps. Sections: [env], [kinematics], [reward], [layout], [train]. A sweep
+Units: metres, radians, steps. Sections: [env], [kinematics], [reward], [layout], [train], [device]. A sweep
 file's [sweep] table is read by ``jaxexo sweep`` (jaxexo.sweep.spec), which removes it before the
 rest reaches ``config_from_dict``; a train config refuses it.
 """
@@ -47,7 +47,7 @@ CONTROLS = ("off_policy", "on_policy")
 TARGETS = ("hard", "polyak")
 
 INT32_MAX = 2**31 - 1   # integers that reach JAX as int32 (or index a scan) stay below this
-SECTIONS = ("env", "kinematics", "reward", "layout", "train")
+SECTIONS = ("env", "kinematics", "reward", "layout", "train", "device")
 # Sections that other commands read; a train config refuses them, saying where they belong.
 OTHER_COMMANDS = {"sweep": "it is read by jaxexo sweep (a sweep file, see configs/sweeps/*.toml)",
                   "eval": "no command reads it: jaxexo eval takes its settings as options (--n, --scenarios, "
@@ -284,6 +284,31 @@ class KinematicsConfig:
     knee_limits: tuple[float, float] = declare((_deg(-100.0), 0.0), range_(), unit="rad")
 
 
+@dataclass(frozen=True)
+class DeviceConfig:
+    """[device]: the exoskeleton's joint drives, for timing swings (jaxexo.inference.swing_timing).
+
+    Limits are per joint kind (hip, knee) and apply to both legs, in rad/s and rad/s^2. The defaults
+    are conservative, order-of-magnitude figures, not one device's data sheet: lower-limb
+    exoskeletons for paraplegic gait (ReWalk, Ekso, Indego, TWIICE) walk at about 0.2-0.5 m/s with
+    swings near one second, far slower than able-bodied gait, whose swing knee peaks at the order of
+    6 rad/s (~350 deg/s) and 50-100 rad/s^2 (Winter, Biomechanics and Motor Control of Human Movement,
+    4th ed., 2009, ch. 4); their drives (brushless motor + harmonic drive, ratio of the order of 100)
+    reach the order of 3-5 rad/s at the joint. We take the order's lower end: hip 3 rad/s (172 deg/s),
+    knee 4 rad/s (229 deg/s), both under 300 deg/s, and 15 / 20 rad/s^2. Set your device's own.
+
+    Read by the NumPy timing code only: every field is a Python-side setting, never a pytree leaf."""
+
+    joint_velocity: tuple[float, float] = declare((3.0, 4.0), vector(2, positive=True), unit="rad/s",
+                                                  role="setting")          # (hip, knee)
+    joint_acceleration: tuple[float, float] = declare((15.0, 20.0), vector(2, positive=True), unit="rad/s^2",
+                                                      role="setting")      # (hip, knee)
+    # a swing never takes less (0: as fast as the limits allow)
+    min_swing_duration: float = declare(0.0, number(nonneg=True), unit="s", role="setting")
+    # default rate of timed exports (jaxexo generate --rate)
+    control_rate: float = declare(100.0, number(positive=True), unit="Hz", role="setting")
+
+
 def _penalty(default):
     """A penalty or reward magnitude of eq 2.29-2.52 (>= 0)."""
     return declare(default, number(nonneg=True))
@@ -514,6 +539,7 @@ class Config:
     reward: RewardConfig = field(default_factory=RewardConfig)
     layout: LayoutConfig = field(default_factory=lambda: LayoutConfig(obstacles=default_obstacles()))
     train: TrainConfig = field(default_factory=TrainConfig)
+    device: DeviceConfig = field(default_factory=DeviceConfig)
 
     @property
     def outline_vertices(self) -> int:
@@ -522,7 +548,7 @@ class Config:
 
 
 SECTION_CLASSES = {"env": EnvConfig, "kinematics": KinematicsConfig, "reward": RewardConfig,
-                   "layout": LayoutConfig, "train": TrainConfig}
+                   "layout": LayoutConfig, "train": TrainConfig, "device": DeviceConfig}
 
 
 def num_updates(cfg: Config) -> int:

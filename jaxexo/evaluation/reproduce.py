@@ -66,6 +66,22 @@ def _pct(x: float) -> str:
     return f"{100 * x:.1f}"
 
 
+def device_table(results: dict) -> list[str]:
+    """Not in the thesis: each model's swings timed for the exoskeleton (jaxexo.inference.swing_timing,
+    the config's [device] joint limits), beside CFFTG's where it was run."""
+    rows = []
+    for name, r in results.items():
+        for gen in ("rl", "cfftg"):
+            d = r.get(gen, {}).get("device")
+            if d:
+                rows.append(f"| {name} ({gen}) | {d['swing_s_mean']:.3f} | {d['swing_s_max']:.3f} | "
+                            f"{d['peak_hip_vel_deg_s_mean']:.0f} | {d['peak_knee_vel_deg_s_mean']:.0f} | "
+                            f"{_pct(d['device_within_limits'])} | {d['uniform_peak_joint_vel_deg_s_median']:.0f} |")
+    return _table("Device timing (not in the thesis): shortest rest-to-rest swing within the [device] joint limits",
+                  "| model (generator) | swing s mean | swing s max | peak hip vel deg/s | peak knee vel deg/s | "
+                  "within limits % | uniform 1 s peak deg/s (median) |", "|---|---:|---:|---:|---:|---:|---:|", rows)
+
+
 def tables(results: dict) -> str:
     """The reproduction's Markdown: every table beside the thesis's values."""
     lines = ["# Thesis experiments reproduced with jaxexo", "",
@@ -92,6 +108,7 @@ def tables(results: dict) -> str:
                     [f"| {name} | {_cell(THESIS_ACCURACY.get(name), lambda x: f'{x:.1f}')} | "
                      f"{_pct(r['rl']['accuracy'])} | {_pct(r['rl']['success'])} | {_pct(r['rl']['reached_goal'])} |"
                      for name, r in results.items()])
+    lines += device_table(results)
     final = results.get("final")
     if final and "cfftg" in final:
         rows = []

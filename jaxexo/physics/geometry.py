@@ -222,10 +222,13 @@ def shape_descriptor(unit_vertices: np.ndarray, n_points: int = DEFAULT_SHAPE_PO
 
     Precomputed per obstacle kind so that the conditioned observation costs nothing per step: an
     obstacle scaled to height h has descriptor h * this."""
-    u = np.linspace(-0.5, 0.5, n_points)
-    # Sample just inside the ends so that vertical sides count as the obstacle's height.
-    u = np.clip(u, -0.5 + 1e-6, 0.5 - 1e-6)
-    return profile_height(np, u, unit_vertices)
+    return profile_height(np, descriptor_fractions(n_points), unit_vertices)
+
+
+def descriptor_fractions(n_points: int = DEFAULT_SHAPE_POINTS) -> np.ndarray:
+    """The n_points fractions of the width (centre 0, ends -0.5 and 0.5) where the shape descriptor
+    samples the height: equally spaced, just inside the ends so that vertical sides count."""
+    return np.clip(np.linspace(-0.5, 0.5, n_points), -0.5 + 1e-6, 0.5 - 1e-6)
 
 
 @dataclass(frozen=True)
