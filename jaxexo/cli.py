@@ -80,7 +80,23 @@ def obstacle_from_args(args):
     return getattr(Obstacle, shape)(w, h, center_y=center)
 
 
+def _check_output_file(option: str, value) -> None:
+    """An output path must name a file in an existing folder: refused before any work (and before any
+    temporary file is made next to it)."""
+    if value is None:
+        return
+    text = str(value)
+    p = Path(value)
+    if text.endswith(("/", "\\")) or p.is_dir():
+        raise ValueError(f"{option}: {text} is a directory; give a file name (e.g. {p / 'trajectory.csv'})")
+    if not p.parent.is_dir():
+        raise ValueError(f"{option}: the folder {p.parent} does not exist (for {text})")
+
+
 def cmd_generate(args) -> int:
+    for option, value in (("--out", args.out), ("--json", args.json), ("--plot", args.plot),
+                          ("--animate", args.animate)):
+        _check_output_file(option, value)
     import numpy as np
 
     common = dict(pivot=args.pivot, pivot_y=args.pivot_y, start_y=args.start_y, step_length=args.step_length,
@@ -316,12 +332,21 @@ def main(argv=None) -> int:
     from jaxexo.config import ConfigError
     from jaxexo.physics.geometry import GeometryError
     from jaxexo.storage.policy_file import PolicyFileError
+    from jaxexo.storage.rundir import TrainingDiverged
 
     try:
         return args.func(args)
     except (ConfigError, GeometryError, PolicyFileError, ValueError) as e:
+        # Bad input (config, files, options, a checkpoint or run directory that cannot be used).
         print(f"jaxexo: error: {e}", file=sys.stderr)
         return 2
+    except TrainingDiverged as e:
+        print(f"jaxexo: error: {e}", file=sys.stderr)
+        return 3
+    except OSError as e:
+        # A write that failed (full disk, file-size limit, permissions): what was written before is intact.
+        print(f"jaxexo: error: {e}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

@@ -160,8 +160,10 @@ def test_exported_policy_matches_the_checkpoint(driver_runs, tiny):
     cfg, full = driver_runs["cfg"], driver_runs["full"]
     trainer, hyper = tiny["trainer"], tiny["hyper"]
     template = tiny["init"](jax.random.PRNGKey(0), hyper)
+    from jaxexo.storage.checkpoint import unpack_checkpoint
+
     saved = serialization.from_bytes({"state": template, "best_params": template.params},
-                                     (full / driver.CHECKPOINT).read_bytes())
+                                     unpack_checkpoint((full / driver.CHECKPOINT).read_bytes(), "ckpt"))
     assert int(saved["state"].update) == TINY_UPDATES
     pol = load_policy(full / "policy.npz")
     assert pol.metadata["layer_norm"] is True and pol.metadata["layers"] == [trainer.env.obs_dim, 32, 32, 36]
@@ -189,8 +191,10 @@ def test_run_training_refuses_to_overwrite_or_mix_runs(driver_runs, tmp_path):
     # A run made on another number of devices (different random streams) is not resumed here.
     from flax import serialization
 
-    raw = serialization.msgpack_restore((run / driver.CHECKPOINT).read_bytes())
+    from jaxexo.storage.checkpoint import pack_checkpoint, unpack_checkpoint
+
+    raw = serialization.msgpack_restore(unpack_checkpoint((run / driver.CHECKPOINT).read_bytes(), "ckpt"))
     raw["book"]["devices"] = 2
-    (run / driver.CHECKPOINT).write_bytes(serialization.msgpack_serialize(raw))
+    (run / driver.CHECKPOINT).write_bytes(pack_checkpoint(serialization.msgpack_serialize(raw)))
     with pytest.raises(ConfigError, match="2 device"):
         driver.run_training(cfg, run, seed=SEED, resume=True, progress=False)

@@ -336,6 +336,10 @@ def _rewrite_meta(src, dst, **changes):
         files = {k: z[k] for k in z.files}
     meta = json.loads(str(files["metadata"]))
     meta.update(changes)
+    # A valid checksum for the changed file, so that the check under test is the one that refuses it.
+    from jaxexo.storage.policy_file import policy_checksum
+
+    meta["sha256"] = policy_checksum({k: v for k, v in files.items() if k != "metadata"}, meta)
     files["metadata"] = np.array(json.dumps(meta))
     np.savez(dst, **files)
     return dst

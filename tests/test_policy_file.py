@@ -16,7 +16,7 @@ import pytest
 
 from jaxexo.config import ConfigError, config_from_dict, load_config
 from jaxexo.config.toml_io import config_to_toml
-from jaxexo.storage.policy_file import FORMAT_VERSION, PolicyFileError, load_policy
+from jaxexo.storage.policy_file import FORMAT_VERSION, PolicyFileError, load_policy, policy_checksum
 
 from conftest import ROOT, jax_compilation_cache
 
@@ -69,17 +69,29 @@ def good_policy(tmp_path_factory):
     return path
 
 
-def _rewrite(src, dst, meta=None, **arrays):
+def _rewrite(src, dst, meta=None, fix_checksum=True, **arrays):
+    """A copy of the policy file with metadata fields replaced (None: removed) and arrays replaced (None:
+    removed); its checksum recomputed unless ``fix_checksum`` is False, so that the check under test is
+    the one that refuses the file (tampering without a new checksum is test_reliability's)."""
     files = _npz(src)
     if meta is not None:
         m = json.loads(str(files["metadata"]))
         m.update(meta)
+        m = {k: v for k, v in m.items() if v is not None}
         files["metadata"] = np.array(json.dumps(m))
     for k, v in arrays.items():
         if v is None:
             files.pop(k)
         else:
             files[k] = v
+    if fix_checksum and "metadata" not in arrays:
+        try:
+            m = json.loads(str(files["metadata"]))
+        except (KeyError, ValueError):
+            m = None
+        if isinstance(m, dict):
+            m["sha256"] = policy_checksum({k: v for k, v in files.items() if k != "metadata"}, m)
+            files["metadata"] = np.array(json.dumps(m))
     np.savez(dst, **files)
     return dst
 
@@ -99,10 +111,10 @@ def test_policy_file_errors(good_policy, tmp_path):
     cases["format"] = (_rewrite(good_policy, tmp_path / "f.npz", {"format": "other"}), "format is 'other'")
     k0 = _npz(good_policy)["dense_0_kernel"]
     cases["shape"] = (_rewrite(good_policy, tmp_path / "s.npz", dense_0_kernel=k0.T), "dense_0 has shapes")
-    cases["layers"] = (_rewrite(good_policy, tmp_path / "l.npz", {"layers": [5, 8, 36]}), "dense_0 has shapes")
+    cases["layers"] = (_rewrite(good_policy, tmp_path / "l.npz", {"layers": [5, 8, 36], "obs_dim": 5}), "dense_0 has shapes")
     cases["missing_array"] = (_rewrite(good_policy, tmp_path / "m.npz", dense_1_bias=None), "missing array 'dense_1_bias'")
     cases["nan"] = (_rewrite(good_policy, tmp_path / "n.npz", dense_1_bias=np.full(36, np.nan, np.float32)),
-                    "dense_1 holds NaN")
+                    "'dense_1_bias' holds NaN")
     cases["norm"] = (_rewrite(good_policy, tmp_path / "ln.npz", norm_0_scale=None), "norm_0")
     cases["actions"] = (_rewrite(good_policy, tmp_path / "a.npz", {"num_actions": 35}), "num_actions 35")
     cases["no_meta"] = (_rewrite(good_policy, tmp_path / "nm.npz", metadata=None), "no 'metadata'")

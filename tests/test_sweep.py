@@ -143,7 +143,8 @@ def test_hyper_fields_are_the_hyperparams_leaves():
 
     from jaxexo.train.trainer import Hyperparams
 
-    assert tuple(f.name for f in dataclasses.fields(Hyperparams) if f.name != "env") == HYPER_FIELDS
+    # ...and budget_updates, the env-step budget in whole updates (integer budgets, issue 13).
+    assert tuple(f.name for f in dataclasses.fields(Hyperparams) if f.name != "env") == HYPER_FIELDS + ("budget_updates",)
 
 
 BAD = [

@@ -58,7 +58,7 @@ def test_trainer_learns_to_step_over_a_fixed_obstacle():
     ts = jax.jit(trainer.init)(jax.random.PRNGKey(LEARN_SEED), hyper)
     ts, m = jax.jit(trainer.run, static_argnums=2)(ts, hyper, trainer.num_updates)
     m = np.asarray(m)
-    assert int(ts.env_steps) == trainer.num_updates * 128 * 8
+    assert int(trainer.env_steps(ts)) == trainer.num_updates * 128 * 8
     tenth = len(m) // 10
 
     def rate(rows):
@@ -249,7 +249,7 @@ def test_make_train_jit_vmaps_over_seeds(compiled_runs):
     assert m.shape == (2, TINY_UPDATES, len(METRICS))
     assert np.all(np.isfinite(m)) and all_finite(ts.params)
     np.testing.assert_array_equal(np.asarray(ts.update), [TINY_UPDATES] * 2)
-    np.testing.assert_array_equal(np.asarray(ts.env_steps), [TINY_UPDATES * TINY_N * TINY_T] * 2)
+    np.testing.assert_array_equal(Trainer(tiny_config()).env_steps(ts), [TINY_UPDATES * TINY_N * TINY_T] * 2)
     for leaf in leaves(ts.params):
         assert leaf.shape[0] == 2 and not np.array_equal(leaf[0], leaf[1])
     assert not np.array_equal(m[0], m[1])

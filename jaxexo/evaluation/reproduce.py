@@ -134,6 +134,7 @@ def run_reproduce(out: str | Path, models=THESIS_MODELS, n: int = 1000, seed: in
     from jaxexo.baselines import CFFTG
     from jaxexo.evaluation.compare import evaluate_generators, make_scenarios
     from jaxexo.inference import TrajectoryGenerator
+    from jaxexo.storage.rundir import contents
     from jaxexo.train.driver import run_training
 
     # The thesis and default configs ship inside the package (jaxexo/config/); ``root``: a tree with
@@ -151,7 +152,9 @@ def run_reproduce(out: str | Path, models=THESIS_MODELS, n: int = 1000, seed: in
             progress(f"{name}: reusing {run}")
         else:
             progress(f"{name}: training {cfg_path}")
-            ev = run_training(load_config(cfg_path), run, seed=seed, progress=False)
+            # A run stopped part way (killed, full disk) is continued, not refused.
+            started = run.is_dir() and bool(contents(run))
+            ev = run_training(load_config(cfg_path), run, seed=seed, resume=started, progress=False)
         gen = TrajectoryGenerator.load(run / "policy.npz")
         gens = {"rl": gen}
         if name in ("final", "default"):

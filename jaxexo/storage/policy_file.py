@@ -4,13 +4,22 @@ A policy file is a plain ``.npz`` (no pickle: loading never executes code) holdi
 arrays ``dense_{i}_kernel``, ``dense_{i}_bias`` (and ``norm_{i}_scale``, ``norm_{i}_bias`` with
 LayerNorm), and ``metadata``: a JSON document with everything inference needs to rebuild the
 observation and the actions: format version, observation mode and normalisation, action set, step
-size, kinematic constants, layer sizes.
+size, kinematic constants, layer sizes, and ``sha256``: a checksum of every array (name, dtype, shape,
+bytes) and of the rest of the metadata, verified on load.
+
+Loading trusts nothing: every metadata field the network needs is required and type-checked, the
+array set must be exactly the one the layers describe, arrays must be real floating point, and they
+must be finite after the cast to float32. Format version 1 (no checksum) is refused rather than
+accepted with a warning: its arrays cannot be verified, and a policy drives an exoskeleton (a warning
+on a robot's computer is easily never read). Training again writes version 2.
 """
 
 from __future__ import annotations
 
+import hashlib
 import io
 import json
+import numbers
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,7 +29,8 @@ import numpy as np
 from jaxexo.storage.atomic import atomic_write
 
 FORMAT = "jaxexo-policy"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2    # 2: sha256 checksum in the metadata, every network field required
+ACTIVATIONS = ("relu",)
 LAYER_NORM_EPS = 1e-6  # flax.linen.LayerNorm's default epsilon
 
 
@@ -63,20 +73,73 @@ class QPolicy:
         return np.argmax(self.q_values(obs), axis=-1)
 
 
+def policy_checksum(arrays: dict, metadata: dict) -> str:
+    """SHA-256 over the metadata (canonical JSON, without its ``sha256`` field) and every array's name,
+    dtype, shape and bytes, in name order."""
+    h = hashlib.sha256()
+    h.update(json.dumps({k: v for k, v in metadata.items() if k != "sha256"}, sort_keys=True).encode())
+    for name in sorted(arrays):
+        a = np.ascontiguousarray(arrays[name])
+        h.update(f"\n{name} {a.dtype.str} {a.shape}\n".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def _as_float32(name: str, a, path) -> np.ndarray:
+    """``a`` as float32 if it is a real floating-point array that stays finite in float32."""
+    a = np.asarray(a)
+    if not np.issubdtype(a.dtype, np.floating):
+        raise PolicyFileError(f"{path}: array {name!r} has dtype {a.dtype}; weights must be real floating point")
+    with np.errstate(over="ignore", invalid="ignore"):
+        f = a.astype(np.float32)
+    if not np.all(np.isfinite(f)):
+        raise PolicyFileError(f"{path}: array {name!r} holds NaN or inf" + (
+            "" if not np.all(np.isfinite(a)) else " after the cast to float32 (values beyond float32's range)"))
+    return f
+
+
 def save_policy(path: str | Path, kernels, biases, norm_scales, norm_biases, metadata: dict) -> Path:
-    """Write policy.npz atomically (a partial file never replaces a good one)."""
+    """Write policy.npz atomically (a partial file never replaces a good one). Refuses arrays that are
+    not finite in float32: a diverged training must not export a policy."""
     path = Path(path)
     meta = {"format": FORMAT, "format_version": FORMAT_VERSION, **metadata}
-    arrays = {"metadata": np.array(json.dumps(meta, sort_keys=True))}
+    arrays = {}
     for i, (w, b) in enumerate(zip(kernels, biases)):
-        arrays[f"dense_{i}_kernel"] = np.asarray(w, np.float32)
-        arrays[f"dense_{i}_bias"] = np.asarray(b, np.float32)
+        arrays[f"dense_{i}_kernel"] = _as_float32(f"dense_{i}_kernel", w, path)
+        arrays[f"dense_{i}_bias"] = _as_float32(f"dense_{i}_bias", b, path)
     for i, (s, b) in enumerate(zip(norm_scales, norm_biases)):
-        arrays[f"norm_{i}_scale"] = np.asarray(s, np.float32)
-        arrays[f"norm_{i}_bias"] = np.asarray(b, np.float32)
+        arrays[f"norm_{i}_scale"] = _as_float32(f"norm_{i}_scale", s, path)
+        arrays[f"norm_{i}_bias"] = _as_float32(f"norm_{i}_bias", b, path)
+    meta["sha256"] = policy_checksum(arrays, meta)
     buf = io.BytesIO()
-    np.savez(buf, **arrays)
-    return atomic_write(path, buf.getvalue())
+    np.savez(buf, metadata=np.array(json.dumps(meta, sort_keys=True)), **arrays)
+    atomic_write(path, buf.getvalue())
+    return path
+
+
+# Metadata fields the network and the generator need: name -> (check, what it must be).
+def _is_int(x) -> bool:
+    return isinstance(x, int) and not isinstance(x, bool)
+
+
+def _is_num(x) -> bool:
+    return isinstance(x, numbers.Real) and not isinstance(x, bool) and np.isfinite(x)
+
+
+REQUIRED = {
+    "obs_mode": (lambda x: isinstance(x, str), "a string"),
+    "obs_dim": (lambda x: _is_int(x) and x > 0, "a positive integer"),
+    "num_actions": (lambda x: _is_int(x) and x > 0, "a positive integer"),
+    "layers": (lambda x: isinstance(x, list) and len(x) >= 2 and all(_is_int(v) and v > 0 for v in x),
+               "a list of at least two positive integers (the layer sizes)"),
+    "layer_norm": (lambda x: isinstance(x, bool), "true or false"),
+    "activation": (lambda x: x in ACTIVATIONS, f"one of {list(ACTIVATIONS)}"),
+    "action_angles_rad": (lambda x: isinstance(x, list) and all(_is_num(v) for v in x), "a list of angles (rad)"),
+    "length_scale": (lambda x: _is_num(x) and x > 0, "a positive number (m)"),
+    "thesis_obs_center": (lambda x: isinstance(x, list) and all(_is_num(v) for v in x), "a list of numbers"),
+    "config_toml": (lambda x: isinstance(x, str), "the training config as TOML text"),
+    "sha256": (lambda x: isinstance(x, str) and len(x) == 64, "a 64-digit hex checksum"),
+}
 
 
 def load_policy(path: str | Path) -> QPolicy:
@@ -95,39 +158,60 @@ def load_policy(path: str | Path) -> QPolicy:
     if "metadata" not in files:
         raise PolicyFileError(f"{path}: no 'metadata' entry; not a jaxexo policy file")
     try:
-        meta = json.loads(str(files["metadata"]))
+        meta = json.loads(str(files.pop("metadata")))
     except json.JSONDecodeError as e:
         raise PolicyFileError(f"{path}: metadata is not valid JSON ({e})") from None
     if not isinstance(meta, dict):
         raise PolicyFileError(f"{path}: metadata must be a JSON object, got {type(meta).__name__}")
     if meta.get("format") != FORMAT:
         raise PolicyFileError(f"{path}: format is {meta.get('format')!r}, expected {FORMAT!r}")
+    if meta.get("format_version") == 1:
+        raise PolicyFileError(f"{path}: format_version 1 (written by an older jaxexo, without a checksum) is no "
+                              f"longer read: its weights cannot be verified. Train the policy again with this jaxexo")
     if meta.get("format_version") != FORMAT_VERSION:
         raise PolicyFileError(f"{path}: format_version {meta.get('format_version')!r} is not supported "
                               f"(this jaxexo reads version {FORMAT_VERSION})")
-    layers = meta.get("layers")
-    if not isinstance(layers, list) or len(layers) < 2:
-        raise PolicyFileError(f"{path}: metadata.layers must list the layer sizes, got {layers!r}")
+    for key, (ok, what) in REQUIRED.items():
+        if meta.get(key) is None:
+            raise PolicyFileError(f"{path}: metadata.{key} is missing (it must be {what})")
+        if not ok(meta[key]):
+            raise PolicyFileError(f"{path}: metadata.{key} must be {what}, got {meta[key]!r:.80}")
+    if policy_checksum(files, meta) != meta["sha256"]:
+        raise PolicyFileError(f"{path}: checksum mismatch: the arrays or the metadata were changed or corrupted "
+                              "after export (metadata.sha256 does not match the content)")
+    layers = meta["layers"]
+    if layers[0] != meta["obs_dim"]:
+        raise PolicyFileError(f"{path}: metadata.obs_dim is {meta['obs_dim']} but the network (metadata.layers) "
+                              f"has {layers[0]} inputs")
+    n_norm = len(layers) - 2 if meta["layer_norm"] else 0
+    expected = {f"dense_{i}_{p}" for i in range(len(layers) - 1) for p in ("kernel", "bias")}
+    expected |= {f"norm_{i}_{p}" for i in range(n_norm) for p in ("scale", "bias")}
+    for name in sorted(expected):
+        if name not in files:
+            raise PolicyFileError(f"{path}: missing array {name!r}")
+    extra = sorted(set(files) - expected)
+    if extra:
+        raise PolicyFileError(f"{path}: unexpected arrays {extra} for metadata.layers {layers} and "
+                              f"metadata.layer_norm {meta['layer_norm']}")
     kernels, biases, scales, nbiases = [], [], [], []
     for i in range(len(layers) - 1):
-        for name in (f"dense_{i}_kernel", f"dense_{i}_bias"):
-            if name not in files:
-                raise PolicyFileError(f"{path}: missing array {name!r}")
         w, b = files[f"dense_{i}_kernel"], files[f"dense_{i}_bias"]
         if w.shape != (layers[i], layers[i + 1]) or b.shape != (layers[i + 1],):
             raise PolicyFileError(f"{path}: dense_{i} has shapes {w.shape}, {b.shape}; metadata.layers "
                                   f"says ({layers[i]}, {layers[i + 1]})")
-        if not (np.all(np.isfinite(w)) and np.all(np.isfinite(b))):
-            raise PolicyFileError(f"{path}: dense_{i} holds NaN or inf")
-        kernels.append(w.astype(np.float32))
-        biases.append(b.astype(np.float32))
-        if meta.get("layer_norm") and i < len(layers) - 2:
-            s, nb = files.get(f"norm_{i}_scale"), files.get(f"norm_{i}_bias")
-            if s is None or nb is None or s.shape != (layers[i + 1],) or nb.shape != (layers[i + 1],):
-                raise PolicyFileError(f"{path}: missing or misshaped norm_{i} arrays")
-            scales.append(s.astype(np.float32))
-            nbiases.append(nb.astype(np.float32))
-    if meta.get("num_actions") != layers[-1]:
-        raise PolicyFileError(f"{path}: metadata.num_actions {meta.get('num_actions')!r} does not match "
+        kernels.append(_as_float32(f"dense_{i}_kernel", w, path))
+        biases.append(_as_float32(f"dense_{i}_bias", b, path))
+        if i < n_norm:
+            s, nb = files[f"norm_{i}_scale"], files[f"norm_{i}_bias"]
+            if s.shape != (layers[i + 1],) or nb.shape != (layers[i + 1],):
+                raise PolicyFileError(f"{path}: misshaped norm_{i} arrays {s.shape}, {nb.shape}; expected "
+                                      f"({layers[i + 1]},)")
+            scales.append(_as_float32(f"norm_{i}_scale", s, path))
+            nbiases.append(_as_float32(f"norm_{i}_bias", nb, path))
+    if meta["num_actions"] != layers[-1]:
+        raise PolicyFileError(f"{path}: metadata.num_actions {meta['num_actions']!r} does not match "
                               f"the output layer ({layers[-1]})")
+    if len(meta["action_angles_rad"]) != meta["num_actions"]:
+        raise PolicyFileError(f"{path}: metadata.action_angles_rad lists {len(meta['action_angles_rad'])} "
+                              f"angles for {meta['num_actions']} actions")
     return QPolicy(tuple(kernels), tuple(biases), tuple(scales), tuple(nbiases), meta)

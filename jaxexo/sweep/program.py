@@ -99,7 +99,8 @@ def _build(cfg: Config, devices):
         scalars = {
             "success": suc.mean(), "accuracy": acc.mean(),
             "held_out_success": jnp.sum(suc * held) / held.sum(), "held_out_accuracy": jnp.sum(acc * held) / held.sum(),
-            "eval_return": out["return"].mean(), "episodes": ts.episodes, "env_steps": ts.env_steps,
+            "eval_return": out["return"].mean(), "episodes": ts.episodes,
+            "env_steps": ts.update,   # updates done: run_chunk scales it to env steps in integers
             "diverged": diverged, **{k: v for k, v in red.items() if k != "curve"},
         }
         return {"scalars": scalars, "curve": red["curve"], "params": ts.params}
@@ -148,12 +149,14 @@ def run_chunk(sweep: Sweep, chunk: Chunk, devices=None) -> dict:
     out = jax.block_until_ready(program(*chunk_inputs(sweep, chunk)))
     wall = time.perf_counter() - t0
     n = len(chunk.agents)
+    per = cfg.train.num_envs * cfg.train.rollout_steps
     out = jax.tree.map(lambda x: np.asarray(x)[:n], out)
     flat = serialization.to_state_dict(out["params"])
     return {
         "chunk_id": chunk.chunk_id,
         "agents": [list(a) for a in chunk.agents],
-        "scalars": {k: out["scalars"][k].astype(np.float64) for k in SCALARS},
+        "scalars": {k: (out["scalars"][k].astype(np.int64) * per if k == "env_steps" else out["scalars"][k])
+                    .astype(np.float64) for k in SCALARS},
         "curves": out["curve"],
         "metrics": list(METRICS),
         "params": _flatten(flat),

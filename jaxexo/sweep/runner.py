@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 from jaxexo.config import ConfigError
+from jaxexo.storage.rundir import RunDirError, contents, describe, run_lock
 from jaxexo.sweep import results as R
 from jaxexo.sweep.plan import Chunk, default_memory_budget, local_cpu_count, make_plan
 from jaxexo.sweep.spec import Sweep, sweep_from_dict
@@ -49,6 +50,10 @@ def _prepare(sweep: Sweep, out: Path, resume: bool, devices: int, budget: int) -
         return plan, rows
     if plan_path.exists():
         raise ConfigError(f"--out: {out} already holds a sweep; pass --resume to continue it or pick a new folder")
+    present = contents(out)
+    if present:
+        raise RunDirError(f"--out: {out} is not empty ({describe(present)}) and holds no sweep ({R.PLAN}); a new "
+                          "sweep needs an empty or absent directory: pick another --out, or move those files away")
     chunks = make_plan(sweep, devices, budget)
     plan = {"fingerprint": sweep.fingerprint(), "devices": devices, "memory_budget": budget,
             "agents": sweep.num_agents, "chunks": [c.to_json() for c in chunks]}
@@ -83,61 +88,64 @@ def run_sweep(sweep: Sweep, out: str | Path, *, resume: bool = False, backend: s
         n_dev = len(devices)
     else:
         n_dev = task_cpus or local_cpu_count()
-    plan, rows = _prepare(sweep, out, resume, n_dev, budget)
-    chunks = [Chunk.from_json(c) for c in plan["chunks"]]
-    done = {int(r["chunk"]) for r in rows}
-    pending = [c for c in chunks if c.chunk_id not in done]
-    if backend == "local" and plan["devices"] != n_dev:
-        raise ConfigError(f"--resume: the sweep was planned for {plan['devices']} device(s), this process has "
-                          f"{n_dev}; resume it on the same number of CPU devices")
-    group_of = {cid: g.group_id for g in sweep.groups for cid in g.config_ids}
-    cols = R.columns(sweep)
+    # One sweep process per directory for the whole run (jaxexo.storage.rundir): a second one would
+    # interleave results.csv rows and overwrite chunk files.
+    with run_lock(out, "sweep", create=not resume):
+        plan, rows = _prepare(sweep, out, resume, n_dev, budget)
+        chunks = [Chunk.from_json(c) for c in plan["chunks"]]
+        done = {int(r["chunk"]) for r in rows}
+        pending = [c for c in chunks if c.chunk_id not in done]
+        if backend == "local" and plan["devices"] != n_dev:
+            raise ConfigError(f"--resume: the sweep was planned for {plan['devices']} device(s), this process has "
+                              f"{n_dev}; resume it on the same number of CPU devices")
+        group_of = {cid: g.group_id for g in sweep.groups for cid in g.config_ids}
+        cols = R.columns(sweep)
 
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
+        bar = None
+        if progress:
+            from tqdm.auto import tqdm
 
-        bar = tqdm(total=sweep.num_agents, initial=len(rows), unit="agent", dynamic_ncols=True,
-                   desc=f"sweep ({len(chunks)} chunks, {backend})")
-    t_start, steps_run = time.perf_counter(), 0.0
-    best = max((float(r["success"]) for r in rows if r["diverged"] == "0"), default=float("-inf"))
-    diverged = sum(int(r["diverged"]) for r in rows)
+            bar = tqdm(total=sweep.num_agents, initial=len(rows), unit="agent", dynamic_ncols=True,
+                       desc=f"sweep ({len(chunks)} chunks, {backend})")
+        t_start, steps_run = time.perf_counter(), 0.0
+        best = max((float(r["success"]) for r in rows if r["diverged"] == "0"), default=float("-inf"))
+        diverged = sum(int(r["diverged"]) for r in rows)
 
-    def finished(result: dict) -> None:
-        nonlocal steps_run, best, diverged
-        R.save_chunk(out, result)
-        new = R.chunk_rows(sweep, result, group_of)
-        R.append_rows(out / R.RESULTS, cols, new)
-        rows.extend(new)
-        steps_run += float(result["scalars"]["env_steps"].sum())
-        best = max([best] + [float(r["success"]) for r in new if r["diverged"] == "0"])
-        diverged += sum(int(r["diverged"]) for r in new)
+        def finished(result: dict) -> None:
+            nonlocal steps_run, best, diverged
+            R.save_chunk(out, result)
+            new = R.chunk_rows(sweep, result, group_of)
+            R.append_rows(out / R.RESULTS, cols, new)
+            rows.extend(new)
+            steps_run += float(result["scalars"]["env_steps"].sum())
+            best = max([best] + [float(r["success"]) for r in new if r["diverged"] == "0"])
+            diverged += sum(int(r["diverged"]) for r in new)
+            if bar is not None:
+                bar.update(len(new))
+                bar.set_postfix(steps_per_s=f"{steps_run / (time.perf_counter() - t_start):.3g}",
+                                best_success=f"{best:.3f}", diverged=diverged)
+
+        if pending:
+            if backend == "local":
+                from jaxexo.sweep.program import run_chunk
+
+                for c in pending:
+                    finished(run_chunk(sweep, c, devices))
+            else:
+                _run_ray(sweep, pending, plan["devices"], address, finished)
         if bar is not None:
-            bar.update(len(new))
-            bar.set_postfix(steps_per_s=f"{steps_run / (time.perf_counter() - t_start):.3g}",
-                            best_success=f"{best:.3f}", diverged=diverged)
+            bar.close()
+        rows.sort(key=lambda r: (int(r["config_id"]), int(r["seed"])))
+        R.write_rows(out / R.RESULTS, cols, rows)
 
-    if pending:
-        if backend == "local":
-            from jaxexo.sweep.program import run_chunk
+        from jaxexo.sweep import report
 
-            for c in pending:
-                finished(run_chunk(sweep, c, devices))
-        else:
-            _run_ray(sweep, pending, plan["devices"], address, finished)
-    if bar is not None:
-        bar.close()
-    rows.sort(key=lambda r: (int(r["config_id"]), int(r["seed"])))
-    R.write_rows(out / R.RESULTS, cols, rows)
-
-    from jaxexo.sweep import report
-
-    summary = report.write_report(sweep, out, rows, heatmap=heatmap)
-    summary["wall_s_this_run"] = time.perf_counter() - t_start
-    summary["env_steps_this_run"] = steps_run
-    if export_best:
-        summary["exported"] = report.export_best(sweep, out, rows)
-    return summary
+        summary = report.write_report(sweep, out, rows, heatmap=heatmap)
+        summary["wall_s_this_run"] = time.perf_counter() - t_start
+        summary["env_steps_this_run"] = steps_run
+        if export_best:
+            summary["exported"] = report.export_best(sweep, out, rows)
+        return summary
 
 
 # --------------------------------------------------------------------------------------------

@@ -15,7 +15,19 @@ layouts drawn from the training distribution; the best parameters are exported (
 ties). The held-out test obstacles are never used for this choice.
 
 Resume: the same chunk program runs from the restored state, so a resumed run ends bit-identical to
-an uninterrupted one (tests/test_train.py checks it).
+an uninterrupted one (tests/test_train.py checks it). metrics.jsonl is cut back to the checkpoint's
+chunks first (rows written after it are recomputed identically).
+
+Reliability (README "Reliability"; tests/test_reliability.py):
+- the run holds an exclusive lock on the directory (jaxexo.storage.rundir) from start to end: a second
+  ``jaxexo train``/``sweep`` there is refused; a killed run's lock vanishes with it;
+- a new run needs an empty or absent directory (a finished policy.npz, a sweep's best/, the remains of a
+  crashed run are never overwritten or appended to);
+- the checkpoint carries a sha256 (jaxexo.storage.checkpoint) and its trees must match this config's
+  network and state in structure, shape and dtype, or resume is refused naming the file;
+- a chunk whose loss or parameters are not finite marks the run diverged: the row says so, training
+  stops, no checkpoint is written for it, only the best finite parameters (if a chunk produced any)
+  are exported, and TrainingDiverged is raised (the CLI exits 3).
 """
 
 from __future__ import annotations
@@ -29,12 +41,14 @@ import jax
 import numpy as np
 from flax import serialization
 
-from jaxexo.config import Config, ConfigError, config_from_dict
+from jaxexo.config import Config, ConfigError, load_config
 from jaxexo.config.toml_io import config_to_toml
 from jaxexo.env.exo_step import LENGTH_SCALE, THESIS_OBS_CENTER
 from jaxexo.physics import dynamics
-from jaxexo.storage.atomic import atomic_write as _atomic_write  # module-level name: tests patch it
+from jaxexo.storage.atomic import append_line, atomic_write, stale_temps
+from jaxexo.storage.checkpoint import CheckpointError, pack_checkpoint, unpack_checkpoint
 from jaxexo.storage.policy_file import save_policy
+from jaxexo.storage.rundir import RunDirError, TrainingDiverged, contents, describe, run_lock  # noqa: F401
 from jaxexo.train.evaluate import evaluate, make_validator
 from jaxexo.train.network import dense_layers, norm_layers
 from jaxexo.train.trainer import METRICS, Hyperparams, Trainer
@@ -54,14 +68,18 @@ def chunking(cfg: Config, trainer: Trainer) -> tuple[int, int]:
     return math.ceil(trainer.num_updates / chunks), chunks
 
 
-def _chunk_row(m: np.ndarray, ts, chunk: int, wall: float, seconds: float) -> dict:
-    d = dict(zip(METRICS, m.sum(0).tolist()))
+# The checkpoint and bookkeeping writes (a name of its own so tests can interrupt between them).
+_atomic_write = atomic_write
+
+
+def _chunk_row(m: np.ndarray, ts, env_steps: int, chunk: int, wall: float, seconds: float) -> dict:
+    d = dict(zip(METRICS, m.astype(np.float64).sum(0).tolist()))
     n_upd = max(1, int((m[:, METRICS.index("env_steps")] > 0).sum()))
     eps = max(d["episodes"], 1.0)
     return {
         "chunk": chunk,
         "updates": int(ts.update),
-        "env_steps": int(ts.env_steps),
+        "env_steps": int(env_steps),
         "episodes": int(ts.episodes),
         "chunk_episodes": int(d["episodes"]),
         "return_mean": d["return_sum"] / eps,
@@ -115,40 +133,141 @@ def plot_training_curve(path: Path, rows: list[dict]) -> None:
     a2.legend(loc="lower right")
     a2.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    import io
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
     plt.close(fig)
+    atomic_write(path, buf.getvalue())
+
+
+def _tree_mismatch(template, loaded, where: str = "") -> str | None:
+    """Where two state dicts (nested dicts of arrays) differ in keys, shapes or dtypes; None if they agree."""
+    if isinstance(template, dict):
+        if not isinstance(loaded, dict):
+            return f"{where or '/'}: expected a table, found {type(loaded).__name__}"
+        if set(template) != set(loaded):
+            missing, extra = sorted(set(template) - set(loaded)), sorted(set(loaded) - set(template))
+            return f"{where or '/'}: keys differ (missing {missing[:4]}, unexpected {extra[:4]})"
+        for k in template:
+            bad = _tree_mismatch(template[k], loaded[k], f"{where}/{k}")
+            if bad:
+                return bad
+        return None
+    t, x = np.asarray(template), loaded
+    if not isinstance(x, np.ndarray) and not np.isscalar(x):
+        return f"{where}: expected an array, found {type(x).__name__}"
+    x = np.asarray(x)
+    if x.shape != t.shape or x.dtype != t.dtype:
+        return f"{where}: {x.dtype}{list(x.shape)} where this config's network has {t.dtype}{list(t.shape)}"
+    return None
+
+
+BOOK_FIELDS = {"seed": int, "chunks_done": int, "best_score": float, "best_chunk": int, "devices": int}
+
+
+def read_checkpoint(path: Path) -> dict:
+    """The verified checkpoint: its checksum (jaxexo.storage.checkpoint), then its msgpack content;
+    CheckpointError naming the file otherwise (never a bare msgpack or flax traceback)."""
+    try:
+        data = path.read_bytes()
+    except OSError as e:
+        raise CheckpointError(f"{path}: cannot read the checkpoint ({e.strerror})") from None
+    payload = unpack_checkpoint(data, path)
+    try:
+        raw = serialization.msgpack_restore(payload)
+    except Exception as e:   # msgpack raises several unrelated types on a bad payload
+        raise CheckpointError(f"{path}: the checkpoint's content cannot be decoded ({type(e).__name__}: {e})") from None
+    if not isinstance(raw, dict) or not {"state", "best_params", "book"} <= set(raw):
+        raise CheckpointError(f"{path}: not a training checkpoint (expected state, best_params and book)")
+    book = raw["book"]
+    if not isinstance(book, dict):
+        raise CheckpointError(f"{path}: the checkpoint's bookkeeping is damaged")
+    out = {}
+    for k, typ in BOOK_FIELDS.items():
+        v = book.get(k, 1 if k == "devices" else None)
+        v = v.item() if hasattr(v, "item") else v
+        if not isinstance(v, (int, float)) or isinstance(v, bool):
+            raise CheckpointError(f"{path}: the checkpoint's bookkeeping lacks {k!r} (or it is not a number)")
+        out[k] = typ(v)
+    raw["book"] = out
+    return raw
+
+
+# What a run writes before its first checkpoint: a run stopped then (killed, a full disk) is resumed
+# from the beginning.
+BEFORE_FIRST_CHECKPOINT = {"config.toml", "metrics.jsonl", BOOKKEEPING}
+WRITTEN = ("config.toml", "metrics.jsonl", CHECKPOINT, BOOKKEEPING, "policy.npz", "training_curve.png", "eval.json")
+
+
+def _prepare_dir(out: Path, cfg: Config, seed: int, resume: bool):
+    """Check the (locked) run directory; return the checkpoint's content on resume, else None (a new
+    run, or a resume of a run stopped before its first checkpoint: it starts again from scratch)."""
+    cfg_path, ckpt = out / "config.toml", out / CHECKPOINT
+    if resume:
+        # Temporary files of a killed writer (atomic_write removes its own on an error, not on SIGKILL);
+        # with the lock held nobody else is writing them.
+        for name in WRITTEN:
+            for tmp in stale_temps(out / name):
+                tmp.unlink(missing_ok=True)
+    present = contents(out)
+    if resume:
+        if not ckpt.exists():
+            if "config.toml" in present and set(present) <= BEFORE_FIRST_CHECKPOINT:
+                if load_config(cfg_path) != cfg:
+                    raise ConfigError(f"--resume: the config differs from the one in {cfg_path}; resume with that config")
+                return None    # stopped before its first checkpoint: nothing to keep, start again
+            raise ConfigError(f"--resume: {out} has no checkpoint to resume from (no {CHECKPOINT}"
+                              + (f"; it holds {describe(present)})" if present else "; it is empty)"))
+        if not cfg_path.exists():
+            raise ConfigError(f"--resume: {out} has {CHECKPOINT} but no config.toml (the run's resolved config, "
+                              f"which resume checks the config against); put it back, or start a new run elsewhere")
+        saved = load_config(cfg_path)
+        if saved != cfg:
+            raise ConfigError(f"--resume: the config differs from the one in {cfg_path}; resume with that config")
+        raw = read_checkpoint(ckpt)
+        if raw["book"]["seed"] != seed:
+            raise ConfigError(f"--resume: the run used --seed {raw['book']['seed']}, not {seed}")
+        return raw
+    if ckpt.exists():
+        raise ConfigError(f"--out: {out} already holds a run; pass --resume to continue it or pick a new folder")
+    if present:
+        stale = {tmp.name for name in WRITTEN for tmp in stale_temps(out / name)}
+        hint = (" (a run stopped before its first checkpoint: --resume starts it again)"
+                if "config.toml" in present and set(present) - stale <= BEFORE_FIRST_CHECKPOINT else "")
+        raise RunDirError(f"--out: {out} is not empty ({describe(present)}) and has no {CHECKPOINT} to resume "
+                          f"from{hint}; a new run needs an empty or absent directory, so that nothing there is "
+                          "overwritten: pick another --out, or move those files away")
+    atomic_write(cfg_path, config_to_toml(cfg))
+    return None
 
 
 def run_training(cfg: Config, out: str | Path, seed: int = 0, resume: bool = False, progress: bool = True,
                  eval_episodes: int | None = None) -> dict:
-    """Train, write the run directory, and return eval.json's content."""
+    """Train, write the run directory, and return eval.json's content. Holds the directory's lock
+    throughout; raises TrainingDiverged (after writing what can be trusted) if the run diverged."""
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    cfg_path, ckpt, book = out / "config.toml", out / CHECKPOINT, out / BOOKKEEPING
-    if resume:
-        if not ckpt.exists() or not cfg_path.exists():
-            raise ConfigError(f"--resume: {out} has no checkpoint to resume from")
-        import tomllib
+    with run_lock(out, "train", create=not resume):
+        return _run_locked(cfg, out, seed, resume, progress, eval_episodes)
 
-        saved = config_from_dict(tomllib.loads(cfg_path.read_text()))
-        if saved != cfg:
-            raise ConfigError(f"--resume: the config differs from the one in {cfg_path}; resume with that config")
-        raw = serialization.msgpack_restore(ckpt.read_bytes())
-        state_book = {k: (v.item() if hasattr(v, "item") else v) for k, v in raw["book"].items()}
-        if state_book["seed"] != seed:
-            raise ConfigError(f"--resume: the run used --seed {state_book['seed']}, not {seed}")
-    elif ckpt.exists():
-        raise ConfigError(f"--out: {out} already holds a run; pass --resume to continue it or pick a new folder")
-    else:
-        cfg_path.write_text(config_to_toml(cfg))
+
+def _all_finite(tree) -> bool:
+    return all(bool(np.all(np.isfinite(np.asarray(x)))) for x in jax.tree.leaves(tree)
+               if np.issubdtype(np.asarray(x).dtype, np.inexact))
+
+
+def _run_locked(cfg: Config, out: Path, seed: int, resume: bool, progress: bool, eval_episodes) -> dict:
+    ckpt, book = out / CHECKPOINT, out / BOOKKEEPING
+    raw = _prepare_dir(out, cfg, seed, resume)
+    state_book = raw["book"] if raw is not None else None
 
     t_start = time.perf_counter()
     # Data parallel over the CPU cores exposed as JAX devices (jaxexo.train.devices; the CLI sets this up).
     # The device count changes the random streams: a run is reproducible on the same count.
     trainer = Trainer(cfg, devices=jax.local_devices())
     n_dev = len(trainer.devices or [0])
-    if resume and state_book.get("devices", 1) != n_dev:
-        raise ConfigError(f"--resume: the run used {state_book.get('devices', 1)} device(s), this process has "
+    if raw is not None and state_book["devices"] != n_dev:
+        raise ConfigError(f"--resume: the run used {state_book['devices']} device(s), this process has "
                           f"{n_dev}; resume it on the same number of CPU devices")
     hyper = Hyperparams.from_config(cfg)
     ts = jax.jit(trainer.init)(jax.random.PRNGKey(seed), hyper)
@@ -157,22 +276,37 @@ def run_training(cfg: Config, out: str | Path, seed: int = 0, resume: bool = Fal
     chunks_done, wall_before = 0, 0.0
     metrics_path = out / "metrics.jsonl"
     best = {"params": ts.params, "score": -1.0, "chunk": 0}
-    if resume:
+    if resume and raw is None:
+        atomic_write(metrics_path, "")   # rows of a run that never reached its first checkpoint
+    if raw is not None:
+        # A checkpoint of another network or state layout (another config's, a foreign file) must not
+        # be poured into this one: flax would accept mismatched shapes silently.
+        for name, template in (("state", serialization.to_state_dict(ts)),
+                               ("best_params", serialization.to_state_dict(ts.params))):
+            bad = _tree_mismatch(template, raw[name])
+            if bad:
+                raise CheckpointError(f"{ckpt}: does not fit this config's training state ({name}{bad})")
         ts = serialization.from_state_dict(ts, raw["state"])
         best["params"] = serialization.from_state_dict(ts.params, raw["best_params"])
         best.update(score=state_book["best_score"], chunk=state_book["best_chunk"])
         chunks_done = state_book["chunks_done"]
+        if not 0 <= chunks_done <= total_chunks:
+            raise CheckpointError(f"{ckpt}: chunks_done {chunks_done} is outside this run's 0..{total_chunks}")
         # Wall time so far comes from the readable copy when it matches the checkpoint (it is
         # informational: a missing or stale copy only restarts the clock).
         try:
             readable = json.loads(book.read_text())
             wall_before = readable["train_seconds"] if readable.get("chunks_done") == chunks_done else 0.0
-        except (OSError, ValueError, KeyError):
+        except (OSError, ValueError, KeyError, TypeError):
             wall_before = 0.0
         lines = metrics_path.read_text().splitlines() if metrics_path.exists() else []
-        rows = [json.loads(x) for x in lines[:chunks_done]]
-        # Lines written after the checkpoint are recomputed identically: drop them.
-        metrics_path.write_text("".join(json.dumps(r) + "\n" for r in rows))
+        try:
+            rows = [json.loads(x) for x in lines[:chunks_done]]
+        except ValueError:
+            raise ConfigError(f"--resume: {metrics_path} is damaged within the checkpoint's {chunks_done} "
+                              "chunk(s); it cannot be rebuilt, start a new run") from None
+        # Lines written after the checkpoint are recomputed identically: drop them (a torn last line too).
+        atomic_write(metrics_path, "".join(json.dumps(r) + "\n" for r in rows))
     run = jax.jit(trainer.run, static_argnums=2)
     active = jax.jit(trainer.active)
     validate = make_validator(cfg, trainer.net)
@@ -183,44 +317,66 @@ def run_training(cfg: Config, out: str | Path, seed: int = 0, resume: bool = Fal
 
         bar = tqdm(total=total_chunks, initial=chunks_done, unit="chunk", dynamic_ncols=True,
                    desc=f"train {cfg.train.trace} {cfg.train.control}")
-    with metrics_path.open("a") as mf:
+    diverged = None
+    try:
         while chunks_done < total_chunks and bool(active(ts, hyper)):
             t0 = time.perf_counter()
             ts, m = run(ts, hyper, n_chunk)
             m = np.asarray(m)
             chunks_done += 1
             wall = wall_before + time.perf_counter() - t_start
-            row = _chunk_row(m, ts, chunks_done, wall, time.perf_counter() - t0)
-            row["validation_success_raw"] = validate(ts.params)
+            row = _chunk_row(m, ts, trainer.env_steps(ts), chunks_done, wall, time.perf_counter() - t0)
+            finite = bool(np.all(np.isfinite(m))) and _all_finite(ts.params)
+            row["diverged"] = not finite
+            row["validation_success_raw"] = validate(ts.params) if finite else None
+            rows.append(row)
+            append_line(metrics_path, json.dumps(row) + "\n")
+            if not finite:
+                # No checkpoint of a diverged state: a resume would only diverge again.
+                diverged = chunks_done
+                if bar is not None:
+                    bar.set_postfix(diverged=f"chunk {chunks_done}", loss=row["loss"])
+                break
             if row["validation_success_raw"] >= best["score"]:
                 best.update(params=ts.params, score=row["validation_success_raw"], chunk=chunks_done)
-            rows.append(row)
-            mf.write(json.dumps(row) + "\n")
-            mf.flush()
             bookkeeping = {"seed": seed, "chunks_done": chunks_done, "best_score": best["score"],
                            "best_chunk": best["chunk"], "devices": n_dev}
-            # State, best parameters and bookkeeping in one atomic write: a run stopped at any point
-            # resumes from a consistent checkpoint (wall time, which differs run to run, stays out).
-            _atomic_write(ckpt, serialization.msgpack_serialize({
+            # State, best parameters and bookkeeping in one atomic write, checksummed: a run stopped at
+            # any point resumes from a consistent checkpoint (wall time, which differs run to run, stays out).
+            _atomic_write(ckpt, pack_checkpoint(serialization.msgpack_serialize({
                 "state": serialization.to_state_dict(ts),
                 "best_params": serialization.to_state_dict(best["params"]),
-                "book": bookkeeping}))
+                "book": bookkeeping})))
             _atomic_write(book, json.dumps({**bookkeeping, "train_seconds": wall}, indent=1).encode())
             if bar is not None:
                 bar.update(1)
                 bar.set_postfix(episodes=row["episodes"], steps_per_s=f"{row['env_steps_per_s']:.3g}",
                                 ret=f"{row['return_mean']:.2f}", success_raw=f"{row['success_raw_rate']:.3f}",
                                 eps=f"{row['epsilon']:.3f}", val=f"{row['validation_success_raw']:.3f}")
-    if bar is not None:
-        bar.close()
+    finally:
+        if bar is not None:
+            bar.close()
     train_seconds = wall_before + time.perf_counter() - t_start
 
-    export_policy(out / "policy.npz", cfg, trainer, best["params"])
     if rows:
-        plot_training_curve(out / "training_curve.png", rows)
+        plot_training_curve(out / "training_curve.png", [r for r in rows if not r["diverged"]] or rows)
+    if diverged is not None and best["chunk"] == 0:
+        raise TrainingDiverged(
+            f"training diverged in chunk {diverged} (non-finite loss or parameters; {metrics_path} row "
+            f"{diverged} has \"diverged\": true); no chunk finished with finite parameters, so no policy was "
+            f"exported. Lower train.lr (it is {cfg.train.lr:g}) or train.max_grad_norm")
+    export_policy(out / "policy.npz", cfg, trainer, best["params"])
     result = evaluate(cfg, trainer.net, best["params"], eval_episodes or cfg.train.eval_episodes)
-    result.update({"episodes": int(ts.episodes), "env_steps": int(ts.env_steps),
+    result.update({"episodes": int(ts.episodes), "env_steps": int(trainer.env_steps(ts)),
                    "train_seconds": round(train_seconds, 3), "seed": seed,
                    "selected_chunk": best["chunk"], "validation_success_raw": best["score"], "devices": n_dev})
-    _atomic_write(out / "eval.json", json.dumps(result, indent=2) + "\n")
+    if diverged is not None:
+        result["diverged_chunk"] = diverged
+    atomic_write(out / "eval.json", json.dumps(result, indent=2) + "\n")
+    if diverged is not None:
+        raise TrainingDiverged(
+            f"training diverged in chunk {diverged} (non-finite loss or parameters; {metrics_path} row "
+            f"{diverged} has \"diverged\": true); policy.npz and eval.json hold the best finite parameters, "
+            f"from chunk {best['chunk']} (validation success on raw moves {best['score']:.3f}). Lower train.lr "
+            f"(it is {cfg.train.lr:g}) or train.max_grad_norm")
     return result

@@ -41,15 +41,24 @@ def _hyper_from_config(cls, cfg: Config) -> "Hyperparams":
     and the environment's parameters."""
     specs = dict(declared_fields(TrainConfig))
     leaves = {k: jnp.asarray(getattr(cfg.train, k), specs[k].dtype) for k in HYPER_FIELDS}
+    # Budgets are compared in integers (Trainer.active): float32 counts drift past 2^24 and could stop a
+    # run an update early (or late) when N T is not a power of two. budget_env_steps stays a float32
+    # leaf for the epsilon schedule only; the step budget is counted in updates (clipped to int32: the
+    # update counter is int32, and 2^31 updates is beyond any run).
+    t = cfg.train
+    leaves["budget_episodes"] = jnp.asarray(t.budget_episodes, jnp.int32)
+    leaves["budget_updates"] = jnp.asarray(min(-(-t.budget_env_steps // (t.num_envs * t.rollout_steps)),
+                                               2**31 - 1), jnp.int32)
     return cls(**leaves, env=EnvParams.from_config(cfg))
 
 
 # Vmappable hyperparameters (pytree leaves): the fields of TrainConfig declared as leaves
 # (jaxexo.config.HYPER_FIELDS; budgets: 0 means none), then the environment's parameters.
 Hyperparams = struct.dataclass(type("Hyperparams", (), {
-    "__annotations__": {**{k: jnp.ndarray for k in HYPER_FIELDS}, "env": EnvParams},
+    "__annotations__": {**{k: jnp.ndarray for k in HYPER_FIELDS}, "budget_updates": jnp.ndarray, "env": EnvParams},
     "from_config": classmethod(_hyper_from_config), "__module__": __name__,
-    "__doc__": "Vmappable hyperparameters (pytree leaves): HYPER_FIELDS, then env (EnvParams)."}))
+    "__doc__": "Vmappable hyperparameters (pytree leaves): HYPER_FIELDS, budget_updates (int32: the "
+               "env-step budget in updates, 0: none), then env (EnvParams)."}))
 
 
 @struct.dataclass
@@ -71,9 +80,8 @@ class TrainState:
     greedy: jnp.ndarray       # ...and whether it was greedy (Watkins cut)
     fresh: jnp.ndarray        # ``obs`` starts an episode (traces reset)
     key: jnp.ndarray
-    update: jnp.ndarray       # updates done
-    env_steps: jnp.ndarray    # float32 counters (exact below 2^24; used for schedules and budgets)
-    episodes: jnp.ndarray
+    update: jnp.ndarray       # int32: updates done (env steps done = update * N * T, Trainer.env_steps)
+    episodes: jnp.ndarray     # int32: episodes finished
 
 
 class Transition(NamedTuple):
@@ -106,6 +114,7 @@ class Trainer:
         self.net = QNetwork(hidden=self.tc.hidden, num_actions=self.env.num_actions,
                             layer_norm=self.tc.layer_norm)
         self.num_updates = num_updates(cfg)
+        self.steps_per_update = self.tc.num_envs * self.tc.rollout_steps
         self.off_policy = self.tc.control == "off_policy"
 
     # --------------------------------------------------------------------------------------
@@ -116,16 +125,26 @@ class Trainer:
         lr = optax.linear_schedule(hyper.lr, hyper.lr * hyper.lr_end_fraction, steps)
         return optax.chain(optax.clip_by_global_norm(hyper.max_grad_norm), optax.adam(lr))
 
+    def env_steps(self, ts: TrainState) -> np.ndarray:
+        """Env steps done, exactly (int64, on the host; any leading agent axes of ``ts`` kept): an update
+        is N T steps and the state freezes once the budget is spent."""
+        return np.asarray(ts.update).astype(np.int64) * self.steps_per_update
+
     def epsilon(self, ts: TrainState, hyper: Hyperparams):
-        """Linear decay from eps_start to eps_end over eps_decay_fraction of the budget."""
+        """Linear decay from eps_start to eps_end over eps_decay_fraction of the budget (a schedule:
+        float32 is fine here, the budget itself is counted in integers, ``active``)."""
+        steps = ts.update.astype(jnp.float32) * jnp.float32(self.steps_per_update)
+        episodes = ts.episodes.astype(jnp.float32)
+        budget_episodes = hyper.budget_episodes.astype(jnp.float32)
         frac = jnp.maximum(
-            jnp.where(hyper.budget_env_steps > 0, ts.env_steps / jnp.maximum(hyper.budget_env_steps, 1.0), 0.0),
-            jnp.where(hyper.budget_episodes > 0, ts.episodes / jnp.maximum(hyper.budget_episodes, 1.0), 0.0))
+            jnp.where(hyper.budget_env_steps > 0, steps / jnp.maximum(hyper.budget_env_steps, 1.0), 0.0),
+            jnp.where(budget_episodes > 0, episodes / jnp.maximum(budget_episodes, 1.0), 0.0))
         w = jnp.clip(1.0 - frac / hyper.eps_decay_fraction, 0.0, 1.0)
         return hyper.eps_end + (hyper.eps_start - hyper.eps_end) * w
 
     def active(self, ts: TrainState, hyper: Hyperparams):
-        steps_left = (hyper.budget_env_steps <= 0) | (ts.env_steps < hyper.budget_env_steps)
+        # update * N T < budget  <=>  update < ceil(budget / (N T)): integers throughout.
+        steps_left = (hyper.budget_updates <= 0) | (ts.update < hyper.budget_updates)
         eps_left = (hyper.budget_episodes <= 0) | (ts.episodes < hyper.budget_episodes)
         return steps_left & eps_left
 
@@ -141,10 +160,9 @@ class Trainer:
         ts = TrainState(params=params, target_params=params, opt_state=opt_state, env_state=env_state,
                         obs=obs, stats=stats, traces=traces, action=jnp.zeros(n, jnp.int32),
                         greedy=jnp.ones(n, bool), fresh=jnp.ones(n, bool), key=k_run,
-                        update=jnp.asarray(0, jnp.int32),
-                        # Strongly typed: a weakly typed 0.0 would give jit a second signature after
+                        # Strongly typed: a weakly typed 0 would give jit a second signature after
                         # the first update (and a second compilation of the chunk program).
-                        env_steps=jnp.asarray(0.0, jnp.float32), episodes=jnp.asarray(0.0, jnp.float32))
+                        update=jnp.asarray(0, jnp.int32), episodes=jnp.asarray(0, jnp.int32))
         if backward:
             k_act, k_run = jax.random.split(k_run)
             a, g = self._act(params, obs, k_act, self.epsilon(ts, hyper))
@@ -206,8 +224,8 @@ class Trainer:
         else:
             target = optax.incremental_update(new.params, new.target_params, hyper.target_tau)
         steps = float(self.tc.num_envs * self.tc.rollout_steps)
-        new = new.replace(target_params=target, update=upd, env_steps=new.env_steps + steps,
-                          episodes=new.episodes + row_ep[0])
+        # row_ep[0] counts this update's finished episodes (<= N): exact in float32, added as an integer.
+        new = new.replace(target_params=target, update=upd, episodes=new.episodes + row_ep[0].astype(jnp.int32))
         # Past the budget the state is frozen (vmapped seeds and sweeps reach it at different times).
         act = self.active(ts, hyper)
         new = jax.tree.map(lambda a, b: jnp.where(act, a, b), new, ts)

@@ -1,0 +1,74 @@
+"""Run directories (``jaxexo train``, ``jaxexo sweep``): one writer at a time, and no mixing of runs.
+
+- ``run_lock``: an exclusive ``fcntl.flock`` on ``DIR/.jaxexo.lock`` held for the whole run. A second
+  process on the same directory is refused at once (it would interleave metrics and overwrite
+  checkpoints); the operating system releases the lock when its holder exits or is killed, so a lock
+  file left behind by a killed run never blocks its ``--resume``.
+- ``TrainingDiverged``: the run's outcome when its loss or parameters became non-finite (raised by
+  jaxexo.train.driver; defined here, without JAX, so that the CLI can catch it).
+- ``contents``: what a directory holds besides the lock file, for the "a new run needs an empty
+  directory" rule.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from pathlib import Path
+
+from jaxexo.config import ConfigError
+
+LOCK_NAME = ".jaxexo.lock"
+
+
+class RunDirError(ConfigError):
+    """A run directory (the --out option) that is in use, or cannot hold a new run."""
+
+
+class TrainingDiverged(RuntimeError):
+    """The loss or the parameters became NaN or infinite (the message says where, and what was kept)."""
+
+
+def contents(directory: Path) -> list[str]:
+    """Names in ``directory`` other than the lock file, sorted (empty if it does not exist)."""
+    directory = Path(directory)
+    if not directory.is_dir():
+        return []
+    return sorted(p.name for p in directory.iterdir() if p.name != LOCK_NAME)
+
+
+def describe(names: list[str], limit: int = 6) -> str:
+    shown = ", ".join(names[:limit])
+    return shown + (f" and {len(names) - limit} more" if len(names) > limit else "")
+
+
+@contextlib.contextmanager
+def run_lock(directory: str | Path, what: str, create: bool = True):
+    """Hold the exclusive lock of ``directory`` while the block runs. ``create``: make the directory if
+    it is absent (a new run); else (a resume) its absence is an error."""
+    import fcntl
+
+    directory = Path(directory)
+    if directory.exists() and not directory.is_dir():
+        raise RunDirError(f"--out: {directory} is a file, not a directory")
+    if not create and not directory.is_dir():
+        missing = "no sweep to resume" if what == "sweep" else "no checkpoint to resume from"
+        raise RunDirError(f"--resume: {directory} does not exist: {missing}")
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+        fd = os.open(directory / LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o644)
+    except OSError as e:
+        raise RunDirError(f"--out: cannot use {directory} as a run directory ({e.strerror})") from None
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 200, 0).decode(errors="replace").strip() or "unknown"
+            raise RunDirError(f"--out: {directory} is in use by another jaxexo process ({holder}); wait for "
+                              "it to finish (or stop it) and pass --resume, or pick another directory") from None
+        # Who holds it, for the message above (informational: the flock is the lock).
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"pid {os.getpid()}, jaxexo {what}\n".encode(), 0)
+        yield directory
+    finally:
+        os.close(fd)   # releases the flock
