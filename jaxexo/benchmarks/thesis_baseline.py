@@ -166,6 +166,7 @@ class NumpyExoEnv:
         self.time = np.int32(0)
         self.visited = np.bool_(False)
         self.clean = True
+        self.max_y = self.heel[0]
         return self._obs()
 
     def step(self, action: int):
@@ -174,11 +175,11 @@ class NumpyExoEnv:
         prev = self.heel
         self.heel = np.stack(self.dyn.move_heel(np, p, prev[0], prev[1], d[0], d[1]))
         self.time = self.time + np.int32(1)
-        out = self.dyn.transition(np, p, prev, self.heel, self.time, self.visited, self.lay)
-        self.visited = out["visited_mid"]
+        out = self.dyn.transition(np, p, prev, self.heel, self.time, self.visited, self.lay, self.max_y)
+        self.visited, self.max_y = out["visited_mid"], out["max_y"]
         info = out["info"]
         self.clean = self.clean and not (info["collision"] or info["joint_limit_violation"]
-                                         or info["leg_length_violation"])
+                                         or info["leg_length_violation"] or info["unsafe"])
         terminated = bool(out["terminated"])
         truncated = (not terminated) and int(self.time) >= self.max_steps
         info["success"] = terminated and bool(info["goal_reached"]) and self.clean

@@ -59,6 +59,11 @@ class EnvConfig:
     max_height_margin: float = 0.20    # max_z of eq 2.34 = obstacle top + this, m
     bounds_y: tuple[float, float] = (-0.30, 1.30)  # the heel is kept inside these (m)
     max_z: float = 0.80                # ceiling for the heel (m); the ground is z = 0
+    # The safe-swing definition (issue 11, jaxexo.physics.swept): the foot's motion between samples
+    # never comes closer than min_clearance to the obstacle, and the heel never moves backward by
+    # more than backward_tolerance. The environment's success flag and the generators' ``ok`` use both.
+    min_clearance: float = 0.02        # m
+    backward_tolerance: float = 0.005  # m
 
 
 @dataclass(frozen=True)
@@ -319,7 +324,7 @@ def _coerce_env(path, k, v):
         return _vector(path, v, 2, positive=True)
     if k == "bounds_y":
         return _range(path, v)
-    if k in ("max_height_margin", "mid_goal_clearance"):
+    if k in ("max_height_margin", "mid_goal_clearance", "min_clearance", "backward_tolerance"):
         return _number(path, v, nonneg=True)
     return _number(path, v, positive=True)
 
@@ -546,6 +551,10 @@ def validate(cfg: Config) -> None:
     goal_far = lay.start_shift[1] + lay.step_length[1] + env.goal_tolerance[0]
     if env.bounds_y[1] <= goal_far:
         raise ConfigError(f"env.bounds_y: the upper bound must lie beyond the goal region ({goal_far:.3f} m)")
+    if rew.safety_distance < env.min_clearance:
+        raise ConfigError(f"reward.safety_distance: {rew.safety_distance} m is below env.min_clearance = "
+                          f"{env.min_clearance} m; the safety term (eq 2.35) must pay the policy to keep the "
+                          "margin that a safe swing needs, not only to avoid contact")
     if env.max_steps < rew.step_threshold:
         raise ConfigError(f"env.max_steps: {env.max_steps} is below reward.step_threshold = {rew.step_threshold}")
 

@@ -28,6 +28,8 @@ class EnvParams:
     mid_goal_clearance: jnp.ndarray
     mid_goal_half_size: jnp.ndarray            # (2,)
     max_height_margin: jnp.ndarray
+    min_clearance: jnp.ndarray
+    backward_tolerance: jnp.ndarray
     # Kinematics
     thigh: jnp.ndarray
     shin: jnp.ndarray

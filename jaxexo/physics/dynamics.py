@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from jaxexo.physics import geometry, kinematics, rewards
+from jaxexo.physics import geometry, kinematics, rewards, swept
 from jaxexo.config import PIVOT_CONDITIONS, Config
 
 NUM_ACTIONS = 36
@@ -78,6 +78,8 @@ def param_values(cfg: Config) -> dict[str, np.ndarray]:
         mid_goal_clearance=f(env.mid_goal_clearance),
         mid_goal_half_size=f(env.mid_goal_half_size),
         max_height_margin=f(env.max_height_margin),
+        min_clearance=f(env.min_clearance),
+        backward_tolerance=f(env.backward_tolerance),
         thigh=f(kin.thigh),
         shin=f(kin.shin),
         foot_length=f(kin.foot_length),
@@ -203,18 +205,28 @@ def observation(xp, p, obs_mode: str, heel_y, heel_z, time, visited_mid, layout)
     ], axis=-1)
 
 
-def transition(xp, p, prev, heel, time, visited_mid, layout) -> dict:
+def transition(xp, p, prev, heel, time, visited_mid, layout, max_y=None) -> dict:
     """Everything a step from heel ``prev`` to ``heel`` (..., 2) decides (thesis 2.1-2.5), for the
     JAX environment and the NumPy environment alike: collision, mid-goal, goal, kinematics, the 8 + 4
     reward terms (eq 2.29-2.52), optional shaping, the reward and termination. ``time`` is the step
-    count after the move, ``visited_mid`` whether the mid-goal was visited before it.
+    count after the move, ``visited_mid`` whether the mid-goal was visited before it, ``max_y`` the
+    heel's largest y so far (None: ``prev``'s y).
+
+    Collision and clearance are those of the whole move (jaxexo.physics.swept: the region the flat
+    foot sweeps from ``prev`` to ``heel``), so a move cannot jump through a corner of the obstacle.
+    ``info["unsafe"]`` marks a move that breaks the safe-swing definition (issue 11) besides the
+    joint-limit and leg-length rules: closer than ``p.min_clearance`` to the obstacle, or the heel
+    more than ``p.backward_tolerance`` behind its largest y so far; a successful episode has none.
 
     Returns ``{"visited_mid", "reward", "terminated", "info"}`` with ``info`` the environment's
     per-step diagnostics (reward terms, clearance, collision, goal, limit and leg-length flags, joint
     angles, heel, hip)."""
     lay = layout
-    clearance = geometry.foot_clearance(xp, heel, p.foot_length, lay.outline)
+    clearance = swept.swept_clearance(xp, prev, heel, p.foot_length, lay.outline)
     collided = geometry.foot_collides(xp, clearance)
+    run_max = xp.maximum(prev[..., 0] if max_y is None else max_y, prev[..., 0])
+    backward = run_max - heel[..., 0] > p.backward_tolerance
+    unsafe = (clearance < p.min_clearance) | backward
     mid_y, mid_z = mid_goal(xp, p, lay.center_y, lay.height)
     visited = visited_mid | in_mid_goal(xp, p, heel[..., 0], heel[..., 1], mid_y, mid_z)
     missed_mid = beyond_mid_goal(xp, p, heel[..., 0], mid_y) & ~visited
@@ -252,7 +264,10 @@ def transition(xp, p, prev, heel, time, visited_mid, layout) -> dict:
         "heel": heel,
         "hip": kin["hip"],
     }
-    return {"visited_mid": visited, "reward": reward, "terminated": terminated, "info": info}
+    info["unsafe"] = unsafe
+    info["backward_violation"] = backward
+    return {"visited_mid": visited, "reward": reward, "terminated": terminated, "info": info,
+            "max_y": xp.maximum(run_max, heel[..., 0])}
 
 
 # --------------------------------------------------------------------------------------------

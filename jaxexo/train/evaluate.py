@@ -63,6 +63,7 @@ def make_rollout(env: ExoStepEnv, q_apply, max_steps: int, record: bool = False)
                 "collided": out["collided"] | (alive & info["collision"]),
                 "limits": out["limits"] | (alive & info["joint_limit_violation"]),
                 "leg": out["leg"] | (alive & info["leg_length_violation"]),
+                "unsafe": out["unsafe"] | (alive & info["unsafe"]),
                 "steps": out["steps"] + alive,
                 "return": out["return"] + jnp.where(alive, r, 0.0),
                 "min_clearance": jnp.where(alive, jnp.minimum(out["min_clearance"], info["clearance"]), out["min_clearance"]),
@@ -72,11 +73,11 @@ def make_rollout(env: ExoStepEnv, q_apply, max_steps: int, record: bool = False)
             alive = alive & ~term & ~truncated
             return (state, obs, alive, out), (state.heel if record else None)
 
-        out0 = {"reached": False, "collided": False, "limits": False, "leg": False,
+        out0 = {"reached": False, "collided": False, "limits": False, "leg": False, "unsafe": False,
                 "steps": jnp.asarray(0), "return": jnp.asarray(0.0), "min_clearance": jnp.asarray(jnp.inf)}
         (_, _, _, out), path = jax.lax.scan(step, (state, obs, jnp.asarray(True), out0), None, length=max_steps)
         out["accurate"] = ~out["collided"]
-        out["success"] = out["reached"] & ~out["collided"] & ~out["limits"] & ~out["leg"]
+        out["success"] = out["reached"] & ~out["collided"] & ~out["limits"] & ~out["leg"] & ~out["unsafe"]
         return (out, path) if record else out
 
     return rollout

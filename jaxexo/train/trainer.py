@@ -194,7 +194,8 @@ class Trainer:
     @staticmethod
     def _episode_stats(stats: EpisodeStats, reward, terminated, truncated, info):
         ret = stats.ret + reward
-        clean = stats.clean & ~info["collision"] & ~info["joint_limit_violation"] & ~info["leg_length_violation"]
+        clean = (stats.clean & ~info["collision"] & ~info["joint_limit_violation"] & ~info["leg_length_violation"]
+                 & ~info["unsafe"])   # the safe-swing definition (issue 11), margin included
         accurate = stats.accurate & ~info["collision"]
         done = terminated | truncated
         success = terminated & info["goal_reached"] & clean
