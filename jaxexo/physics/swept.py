@@ -26,8 +26,10 @@ from jaxexo.physics.geometry import _point_edge_dist2, foot_clearance
 
 
 def _inv_len2(xp, ey, ez):
+    # Sides shorter than 1e-12 m count as points (1 / len2 would overflow; t = 0 gives the vertex).
     len2 = ey * ey + ez * ez
-    return xp.where(len2 > 0.0, 1.0 / xp.where(len2 > 0.0, len2, 1.0), 0.0)
+    ok = len2 > 1e-24
+    return xp.where(ok, 1.0 / xp.where(ok, len2, 1.0), 0.0)
 
 
 def swept_distance(xp, h0, h1, foot_length, outline):
