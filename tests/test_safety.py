@@ -222,20 +222,26 @@ def test_no_rl_trajectory_flagged_safe_fails_at_10x_density(trained_run, unseen)
 def test_cfftg_fallback_replaces_an_unsafe_rl_swing(trained_run):
     gen = TrajectoryGenerator.load(trained_run / "policy.npz")
     ob = Obstacle.named("triangle")
-    # Two samples: the RL swing becomes the straight line from start to goal, through the triangle.
-    rl = gen.generate(ob, pivot="between", n_points=2, fallback=None)
-    assert not rl.ok and rl.method == "rl"
-    t = gen.generate(ob, pivot="between", n_points=2)
+    # Two samples: the RL swing is the straight line from start to goal, through the triangle; CFFTG's
+    # polynomial at two samples is that line too: neither is safe, and the result says so.
+    t2 = gen.generate(ob, pivot="between", n_points=2)
+    assert not t2.ok and any("CFFTG fallback failed too" in n for n in t2.notes)
+    rl2 = gen.generate(ob, pivot="between", n_points=2, fallback=None)
+    assert not rl2.ok and rl2.method == "rl" and not rl2.checks.collision_free
+    # An RL swing that skims the triangle's apex (1 cm above it) is replaced by CFFTG's plan.
+    scene = gen.scene(ob, pivot="between")
+    raw = np.array([[0.0, 0.0], [0.05, 0.1], [0.25, 0.21], [0.45, 0.21], [0.65, 0.1], [0.70, 0.0]])
+    rl = gen._finish([scene], [raw], 100, 0.0, 1.0, None)[0]
+    assert not rl.ok and rl.checks.collision_free and not rl.checks.clearance_ok
+    t = gen._finish([scene], [raw], 100, 0.0, 1.0, "cfftg")[0]
     assert t.method == "cfftg-fallback" and t.ok and t.checks.min_clearance >= gen.config.env.min_clearance
     assert any(n.startswith("RL swing failed the safe-swing check") for n in t.notes)
-    # The batch falls back row by row; "none" keeps the RL rows.
-    obs = [ob, Obstacle.named("base1")]
-    b = gen.generate_batch(obs, n_points=2)
-    assert [b[i].method for i in range(2)] == ["cfftg-fallback", "cfftg-fallback"] and b.ok.all()
-    b_none = gen.generate_batch(obs, n_points=2, fallback="none")
-    assert [b_none[i].method for i in range(2)] == ["rl", "rl"] and not b_none.ok.any()
+    # The batch falls back row by row; a safe RL row stays RL.
+    high = np.array([[0.0, 0.0], [0.05, 0.15], [0.25, 0.30], [0.45, 0.30], [0.65, 0.15], [0.70, 0.0]])
+    b = gen._finish([scene, scene], [raw, high], 100, 0.0, 1.0, "cfftg")
+    assert b[1].ok, b.reasons[1]
+    assert [b[i].method for i in range(2)] == ["cfftg-fallback", "rl"] and b.ok.all()
+    np.testing.assert_array_equal(b[0].heel, t.heel)
     with pytest.raises(ValueError, match="fallback"):
         gen.generate(ob, fallback="polynomial")
-    # When CFFTG fails too, the swing is not ok and the notes say both failed.
-    high = gen.generate(Obstacle.rectangle(0.20, 0.50), pivot="obstacle", n_points=2)
-    assert not high.ok and any("CFFTG fallback failed too" in n for n in high.notes)
+    assert gen.generate_batch([ob], n_points=2, fallback="none")[0].method == "rl"
