@@ -45,7 +45,7 @@ def test_eval_writes_report_json_md_and_figures(eval_out):
         assert set(r["by_kind"]) == {"base1", "base2", "base3", "triangle", "half_circle", "rectangle"}
         assert set(r["by_pivot"]) == {"agent", "obstacle", "between"}
     md = (eval_out / "report.md").read_text()
-    assert "| rl | 60 |" in md and "| cfftg | 60 |" in md and "By obstacle kind" in md
+    assert "| rl | 60 |" in md and "| cfftg | 60 |" in md and "| rl+cfftg | 60 |" in md and "By obstacle kind" in md
     assert "(timed on 100, scaled)" in md
     for fig in ("trajectories.png", "joint_angles.png"):
         assert (eval_out / fig).stat().st_size > 10_000
@@ -65,8 +65,12 @@ def test_eval_numbers_are_consistent(eval_out):
         assert r["knee_swing_min_deg"] <= r["knee_swing_mean_deg"] <= 0.0 <= r["hip_swing_mean_deg"]
         assert r["min_clearance_m_worst"] <= r["min_clearance_m_mean"]
         assert r["path_length_m_mean"] > 0.6           # at least the step length
-    # CFFTG plans every thesis and training obstacle of this config.
+    # CFFTG plans every thesis and training obstacle of this config; the RL swing with the CFFTG
+    # fallback is safe wherever either is (issue 11).
     assert report["cfftg"]["success"] == 1.0
+    assert report["rl+cfftg"]["success"] == 1.0 >= report["rl"]["success"]
+    assert report["rl"]["fallback_rate"] == 0.0
+    assert abs(report["rl+cfftg"]["fallback_rate"] - (1.0 - report["rl"]["success"])) < 1e-12
 
 
 def test_eval_figures_match_the_generators_own_outputs(trained_run):
