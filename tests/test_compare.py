@@ -36,7 +36,7 @@ def eval_out(trained_run, tmp_path_factory):
 
 def test_eval_writes_report_json_md_and_figures(eval_out):
     report = json.loads((eval_out / "report.json").read_text())
-    assert set(report) == {"rl", "cfftg"}
+    assert set(report) == {"rl", "rl+cfftg", "cfftg"}
     for name, r in report.items():
         for key in ("accuracy", "success", "time_ms_median", "batch_1000_ms", "by_kind", "by_pivot"):
             assert key in r, (name, key)
