@@ -224,12 +224,14 @@ def test_smoothing_that_would_touch_the_obstacle_falls_back(policies):
     scene = gen.scene(ob, pivot="obstacle")
     foot = gen.sp.foot_length
     # A raw path that hugs the obstacle's near-top corner: straight up just before it, across just
-    # above it, straight down after it. Smoothing cuts the corners into the obstacle.
-    up = [(0.14, z) for z in np.arange(0.0, 0.231, 0.03)]
-    over = [(y, 0.23) for y in np.arange(0.17, 0.46, 0.03)]
-    down = [(0.47, z) for z in np.arange(0.20, -0.001, -0.03)] + [(0.47, 0.0)]
-    raw = np.array([(0.0, 0.0), (0.07, 0.0)] + up + over + down + [(0.70, 0.0)])
+    # above it, straight down after it, keeping the 2 cm safety margin (issue 11: the fallback keeps
+    # the raw path's margin). Smoothing cuts the corners into the obstacle.
+    up = [(0.12, z) for z in np.arange(0.0, 0.231, 0.03)]
+    over = [(y, 0.23) for y in np.arange(0.15, 0.46, 0.03)]
+    down = [(0.48, z) for z in np.arange(0.20, -0.001, -0.03)] + [(0.48, 0.0)]
+    raw = np.array([(0.0, 0.0), (0.06, 0.0)] + up + over + down + [(0.70, 0.0)])
     assert np.all(ob.clearance(raw, foot) > 0)
+    assert swept.path_swept_clearance(np, raw, foot, scene.outline).min() >= gen.config.env.min_clearance
     smooth = sm.bspline_smooth(raw, 100, 0.05)
     assert ob.clearance(smooth, foot).min() <= geometry.TOUCH_EPS      # the premise: plain smoothing collides
     t = gen._finish([scene], [raw], 100, 0.05, 1.0, None)[0]
@@ -241,14 +243,15 @@ def test_smoothing_that_would_touch_the_obstacle_falls_back(policies):
     both = gen._finish([scene, scene], [plain, raw], 100, 0.05, 1.0, None)
     assert both[0].smoothing == 0.05 and not both[0].notes and both[0].checks.collision_free
     np.testing.assert_allclose(both[1].heel, t.heel)
-    assert both[1].smoothing == t.smoothing and both[1].checks == t.checks
+    np.testing.assert_equal(both[1].smoothing, t.smoothing)      # nan (the raw polyline) equals nan
+    assert both[1].checks == t.checks
     # A raw path that itself touches the obstacle keeps its smoothing, and the checks say so.
     bad = raw.copy()
     bad[len(up) + 4, 1] = 0.15
     t = gen._finish([scene], [bad], 100, 0.05, 1.0, None)[0]
     assert t.smoothing == 0.05 and not t.checks.collision_free and not t.notes
     # With no smoothing asked for, the raw polyline is returned as it is.
-    t = gen._finish([scene], [raw], 100, 0.0, 1.0)[0]
+    t = gen._finish([scene], [raw], 100, 0.0, 1.0, None)[0]
     assert np.isnan(t.smoothing)
     np.testing.assert_allclose(t.heel[[0, -1]], raw[[0, -1]])
 
