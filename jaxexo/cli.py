@@ -3,17 +3,19 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
-DEFAULT_CONFIG = Path(__file__).resolve().parent.parent / "configs" / "default.toml"
+# Shipped inside the package (package data), so the default model is the same however jaxexo is
+# installed; the repository's configs/default.toml is a byte-equal copy.
+DEFAULT_CONFIG = Path(__file__).resolve().parent / "config" / "default.toml"
 
 
 def _load(path):
-    from jaxexo.config import Config, load_config
+    from jaxexo.config import load_config
 
-    if path is None:
-        return (load_config(DEFAULT_CONFIG), str(DEFAULT_CONFIG)) if DEFAULT_CONFIG.exists() else (Config(), "defaults")
+    path = DEFAULT_CONFIG if path is None else path
     return load_config(path), str(path)
 
 
@@ -43,6 +45,9 @@ def cmd_train(args) -> int:
 
     use_all_cpu_cores()
     cfg, name = _load(args.config)
+    from jaxexo.config.memory import check_memory
+
+    check_memory(cfg)       # before JAX allocates: a run the machine cannot hold is refused here
     from jaxexo.train.driver import run_training
 
     print(f"jaxexo train: {name} -> {args.out} (seed {args.seed}{', resume' if args.resume else ''})")
@@ -76,6 +81,8 @@ def obstacle_from_args(args):
 
 
 def cmd_generate(args) -> int:
+    import numpy as np
+
     common = dict(pivot=args.pivot, pivot_y=args.pivot_y, start_y=args.start_y, step_length=args.step_length,
                   n_points=args.points, duration=args.duration)
     if args.method == "cfftg":
@@ -92,16 +99,22 @@ def cmd_generate(args) -> int:
         gen = TrajectoryGenerator.load(args.policy)
         traj = gen.generate(obstacle_from_args(args), smoothing=args.smoothing,
                             fallback=None if args.fallback == "none" else args.fallback, **common)
-    traj.to_csv(args.out)
+    timed = _timed_swing(args, traj, gen.config)
+    (timed or traj).to_csv(args.out)
     written = [args.out]
     if args.json:
-        traj.to_json(args.json)
+        (timed or traj).to_json(args.json)
         written.append(args.json)
     if args.plot:
         from jaxexo.inference.plot import plot_trajectory
 
         plot_trajectory(traj, args.plot)
         written.append(args.plot)
+    if args.animate:
+        from jaxexo.inference.animate import animate_swing
+
+        animate_swing(timed, args.animate)
+        written.append(args.animate)
     c = traj.checks
     moves = f"{len(traj.raw) - 1} agent moves" if traj.method == "rl" else (
         "polynomial path (CFFTG fallback: the RL swing was not safe)" if traj.method == "cfftg-fallback"
@@ -111,8 +124,31 @@ def cmd_generate(args) -> int:
           f"{'ok' if c.ok else 'FAILED'}")
     for r in c.reasons + traj.notes:
         print(f"  {r}")
+    if timed is not None:
+        print(f"device timing: {timed.duration:.2f} s swing at {timed.rate:g} Hz, peak joint velocity "
+              f"{np.degrees(timed.peak_velocity.max()):.0f} deg/s, acceleration "
+              f"{np.degrees(timed.peak_acceleration.max()):.0f} deg/s^2, "
+              f"{'within' if timed.within_limits else 'OUTSIDE'} the limits")
+        for r in timed.reasons:
+            if r not in c.reasons:
+                print(f"  {r}")
+        ok = c.ok and timed.ok
+    else:
+        ok = c.ok
     print("wrote " + ", ".join(written))
-    return 0 if c.ok else 1
+    return 0 if ok else 1
+
+
+def _timed_swing(args, traj, config):
+    """The swing timed for the device ([device] limits of the config) at --rate (default: the
+    config's control_rate) when --rate or --animate is asked for; else None (uniform time stamps)."""
+    if args.rate is None and not args.animate:
+        return None
+    if args.rate is not None and not (math.isfinite(args.rate) and args.rate > 0):
+        raise ValueError(f"--rate: control rate must be > 0 Hz, got {args.rate}")
+    from jaxexo.inference.swing_timing import time_swing
+
+    return time_swing(traj, config, rate=args.rate)
 
 
 def cmd_sweep(args) -> int:
@@ -142,6 +178,7 @@ def cmd_sweep(args) -> int:
               f"({res['env_steps_this_run'] / res['wall_s_this_run'] / 1e6:.3f} M env-steps/s)")
     print(f"wrote {args.out}/results.csv, summary.md, " + ", ".join(res["figures"])
           + (", best/policy.npz, best/config.toml" if "exported" in res else ""))
+    return 0
 
 
 def cmd_eval(args) -> int:
@@ -189,12 +226,12 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="jaxexo", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
     b = sub.add_parser("bench-env", help="environment steps per second (random actions, full reward)")
-    b.add_argument("--config", help="TOML config (default: configs/default.toml)")
+    b.add_argument("--config", help="TOML config (default: the packaged default, configs/default.toml)")
     b.add_argument("--envs", type=_sizes, default=[1, 256, 4096, 16384], help="batch sizes, e.g. 1,256,4096")
     b.add_argument("--out", default="benchmarks/results", help="folder for the JSON and Markdown results")
     b.set_defaults(func=cmd_bench_env)
     t = sub.add_parser("train", help="train a policy (TD(lambda)); writes a run directory")
-    t.add_argument("config", nargs="?", help="TOML config (default: configs/default.toml)")
+    t.add_argument("config", nargs="?", help="TOML config (default: the packaged default, configs/default.toml)")
     t.add_argument("--out", required=True, help="run directory")
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--resume", action="store_true", help="continue the run in --out from its checkpoint")
@@ -220,7 +257,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="when the RL swing is not safe, return CFFTG's plan (cfftg) or the RL swing alone (none)")
     g.add_argument("--smoothing", type=float, default=0.005,
                    help="B-spline smoothing s, m^2 (0: raw polyline); rl only")
-    g.add_argument("--duration", type=float, default=1.0, help="swing duration for the time stamps, s")
+    g.add_argument("--duration", type=float, default=1.0, help="swing duration for the time stamps, s "
+                                                                "(ignored with --rate)")
+    g.add_argument("--rate", type=float, help="device-ready output: the shortest rest-to-rest timing within the "
+                                              "config's [device] joint limits, sampled at this rate (Hz); the CSV "
+                                              "and JSON gain joint velocities and accelerations")
+    g.add_argument("--animate", help="also write a GIF of both legs stepping over the obstacle in real time at "
+                                     "the device timing (needs matplotlib and Pillow)")
     g.add_argument("--out", required=True, help="CSV file (time, heel, toe, hip, knees, joint angles; SI units)")
     g.add_argument("--json", help="also write JSON (scene, checks, raw points, samples)")
     g.add_argument("--plot", help="also draw the legs, the foot path and the joint angles (PNG)")
@@ -242,9 +285,10 @@ def build_parser() -> argparse.ArgumentParser:
                                     "and figures (NumPy only)")
     e.add_argument("--policy", required=True, help="policy.npz written by jaxexo train")
     e.add_argument("--against", choices=("cfftg",), help="also evaluate this baseline on the same scenarios")
-    e.add_argument("--scenarios", choices=("train", "test", "all"), default="test",
+    e.add_argument("--scenarios", choices=("train", "test", "all", "unseen"), default="test",
                    help="test: the five thesis obstacles x three pivots; train: the policy's training "
-                        "distribution; all: both")
+                        "distribution; all: both; unseen: the fixed held-out obstacle families "
+                        "(jaxexo.evaluation.unseen), reported per family")
     e.add_argument("--n", type=int, default=1000, help="scenarios per set")
     e.add_argument("--batch", type=int, default=1000,
                    help="scenarios per timed generate_batch call (reported scaled to a batch of 1000)")

@@ -90,6 +90,15 @@ def test_eval_figures_match_the_generators_own_outputs(trained_run):
         np.testing.assert_allclose(report[name]["hip_swing_mean_deg"],
                                    np.degrees(b.joint_angles[..., 0].mean(axis=1).mean()), rtol=1e-6)
         assert report[name]["batch_1000_ms"] is None
+        # Device timing: the swings of the same paths timed for the [device] limits.
+        from jaxexo.inference.swing_timing import time_swings
+
+        dev = report[name]["device"]
+        timed = time_swings(trajs[name], rl.config)
+        assert dev["swing_s_mean"] == pytest.approx(np.mean([t.duration for t in timed]))
+        assert dev["device_within_limits"] == 1.0
+        assert dev["peak_knee_vel_deg_s_mean"] <= np.degrees(rl.config.device.joint_velocity[1]) + 1e-9
+        assert dev["uniform_peak_joint_vel_deg_s_median"] > dev["peak_knee_vel_deg_s_mean"]
     with pytest.raises(ValueError, match="scenarios"):
         make_scenarios(rl.config, "everything", 5)
 
@@ -109,6 +118,7 @@ def test_reproduce_tabulates_beside_the_thesis(trained_run, tmp_path):
     # Thesis values beside jaxexo's: Table 3.2 (a), 3.3, 3.10 accuracies, 3.11 CFFTG times.
     for thesis_value in ("2.46 / -51.0 / 35.4", "2.53 / -47.2 / 41.1", "| a | 58.2 |", "| final | 94.7 |", "2.055"):
         assert thesis_value in md, thesis_value
+    assert "Device timing" in md and f"| final (cfftg) | {res['final']['cfftg']['device']['swing_s_mean']:.3f} |" in md
     acc = 100 * res["final"]["rl"]["accuracy"]
     assert f"| final | 94.7 | {acc:.1f} |" in md
     assert json.loads((tmp_path / "reproduce.json").read_text())["a"]["rl"]["n"] == 15

@@ -293,3 +293,169 @@ def test_profile_size_defaults_to_drawn_extents_and_ranges_are_metres():
     with pytest.raises(ConfigError, match=r"layout\.(start_shift|step_length)"):
         config_from_dict({"layout": {"obstacles": [{"kind": "profile", "points": PROFILE_POINTS,
                                                     "width": [1, 1], "height": [1, 1]}]}})
+
+
+# --------------------------------------------------------------------------------------------
+# Issue 13: errors at the boundary, naming the field or file
+# --------------------------------------------------------------------------------------------
+
+
+def test_non_utf8_config_names_the_file(tmp_path):
+    path = tmp_path / "latin1.toml"
+    path.write_bytes('[env]\n# m\xe8tres\nstep_size = 0.03\n'.encode("latin-1"))
+    with pytest.raises(ConfigError, match=r"latin1\.toml: not UTF-8"):
+        load_config(path)
+
+
+@pytest.mark.parametrize("raw, field", [
+    ({"train": {"target_period": 10_000_000_000}}, r"^train\.target_period: must be <= 2147483647"),
+    ({"train": {"num_envs": 100_000_000_000}}, r"^train\.num_envs: must be <= 16777216"),
+    ({"train": {"hidden": [64, 10**9]}}, r"^train\.hidden\[1\]: must be <= 65536"),
+    ({"env": {"max_steps": 10**12}}, r"^env\.max_steps: must be <= 100000"),
+    ({"train": {"budget_env_steps": 10**15}}, r"^train\.budget_env_steps: must be <="),
+    ({"train": {"num_envs": 1, "rollout_steps": 1, "num_minibatches": 1, "budget_env_steps": 2**40}},
+     r"^train\.budget_env_steps: needs 1099511627776 updates"),
+])
+def test_integers_are_bounded(raw, field):
+    with pytest.raises(ConfigError, match=field):
+        config_from_dict(raw)
+
+
+def test_every_integer_field_declares_a_bound():
+    """An int field without an upper bound could overflow int32 inside JAX."""
+    from jaxexo.config import SECTION_CLASSES, declared_fields
+
+    for section, cls in SECTION_CLASSES.items():
+        for name, spec in declared_fields(cls):
+            default = getattr(cls(), name) if section != "layout" else None
+            if isinstance(default, int) and not isinstance(default, bool):
+                with pytest.raises(ConfigError, match=rf"^{section}\.{name}: must be <="):
+                    spec.check(f"{section}.{name}", 2**63)
+
+
+@pytest.mark.parametrize("raw, field", [
+    # The step is too short for the obstacle: the fault is the step length, not the start shift.
+    ({"layout": {"obstacles": ["base1"], "step_length": [0.35, 0.7]}}, r"^layout\.step_length: 0\.35 m is too short"),
+    # A jitter that shrinks an obstacle below one step: the jitter, not the step size.
+    ({"layout": {"size_jitter": 0.99}}, r"^layout\.size_jitter: 0\.99 shrinks layout\.obstacles\[0\]"),
+    # A start shift onto an obstacle that fits without it still blames the shift.
+    ({"layout": {"start_shift": [0.0, 0.3]}}, r"^layout\.start_shift: with layout\.obstacles\[0\]"),
+    ({"layout": {"obstacles": ["base1"], "obstacle_offset": [-0.2, 0.0]}}, r"^layout\.obstacle_offset: -0\.2 m"),
+    # No jitter: the step size itself is too large.
+    ({"env": {"step_size": 0.06}, "layout": {"obstacles": ["base3"]}}, r"^env\.step_size: "),
+])
+def test_validation_blames_the_field_at_fault(raw, field):
+    with pytest.raises(ConfigError, match=field):
+        config_from_dict(raw)
+
+
+@pytest.mark.parametrize("section, command", [("sweep", "jaxexo sweep"), ("eval", "jaxexo eval")])
+def test_sections_of_other_commands_are_refused(tmp_path, section, command):
+    path = tmp_path / "c.toml"
+    path.write_text(f"[{section}]\nseeds = 2\n")
+    with pytest.raises(ConfigError, match=rf"c\.toml: {section}: a \[{section}\] section does not belong in a "
+                                          rf"train config; .*{command}"):
+        load_config(path)
+
+
+@pytest.mark.parametrize("make", [
+    lambda O: O.rectangle(True, 0.1), lambda O: O.triangle(0.1, True), lambda O: O.half_ellipse(0.1, 0.1, False),
+    lambda O: O.named("base1", True), lambda O: O.profile([[0.0, 0.1], [True, 0.1]]),
+])
+def test_obstacles_refuse_booleans(make):
+    from jaxexo.physics.geometry import GeometryError, Obstacle
+
+    with pytest.raises(GeometryError, match=r"(width|height|center_y|points) must be .*(boolean|booleans)"):
+        make(Obstacle)
+
+
+# --------------------------------------------------------------------------------------------
+# One declaration per field
+# --------------------------------------------------------------------------------------------
+
+
+def test_env_params_and_hyperparams_come_from_the_declarations(mixed_config):
+    from jaxexo.config import ENV_SECTIONS, HYPER_FIELDS, SECTION_CLASSES, TrainConfig, declared_fields
+    from jaxexo.physics.dynamics import param_values
+
+    values = param_values(mixed_config)
+    leaves = [(s, n, spec) for s in ENV_SECTIONS for n, spec in declared_fields(SECTION_CLASSES[s]) if spec.leaf]
+    names = {"directions"}
+    for s, n, spec in leaves:
+        out = spec.params(n, getattr(getattr(mixed_config, s), n), mixed_config)
+        names |= set(out)
+    assert set(values) == names
+    # Independent spot checks of the conversions (thesis eq 2.38: weights normalised to sum 0.5).
+    assert values["traj_weights"].sum() == pytest.approx(0.5) and values["max_z_world"] == pytest.approx(0.8)
+    assert values["max_steps_in_episode"].dtype.name == "int32" and values["terminate_on_collision"].dtype == bool
+    assert values["kind_outlines"].shape == (len(MIXED_KINDS), mixed_config.outline_vertices, 2)
+    assert values["pivot_cdf"][-1] == 1.0 and values["kind_cdf"][-1] == 1.0
+    assert HYPER_FIELDS == tuple(n for n, s in declared_fields(TrainConfig) if s.leaf)
+    assert "num_envs" not in HYPER_FIELDS and "chunk_updates" not in HYPER_FIELDS and "lr" in HYPER_FIELDS
+
+
+def test_static_settings_follow_the_declarations():
+    from jaxexo.config import static_settings
+
+    base = config_from_dict({})
+    names = dict(static_settings(base))
+    assert names["train.num_envs"] == base.train.num_envs and names["env.obs_mode"] == base.env.obs_mode
+    # Leaves do not change the static settings; statics do.
+    assert static_settings(config_from_dict({"train": {"lr": 0.5}, "reward": {"goal_reward": 3.0}})) == \
+        static_settings(base)
+    assert static_settings(config_from_dict({"train": {"hidden": [8]}})) != static_settings(base)
+    assert static_settings(config_from_dict({"train": {"chunk_updates": 7}})) == static_settings(base)
+
+
+# --------------------------------------------------------------------------------------------
+# Memory estimate (jaxexo.config.memory)
+# --------------------------------------------------------------------------------------------
+
+
+def test_memory_estimate_refuses_what_does_not_fit():
+    from jaxexo.config.memory import check_memory, estimate_memory_bytes, machine_memory_bytes
+
+    small = config_from_dict({})
+    need = estimate_memory_bytes(small)
+    assert 0 < need < 2**30 and check_memory(small, available=2**34) == need
+    big = config_from_dict({"train": {"num_envs": 2**24, "rollout_steps": 64}})
+    assert estimate_memory_bytes(big) > 2**36
+    with pytest.raises(ConfigError, match=r"^train\.num_envs: the run needs at least .* GiB .* but this machine has "
+                                          r"1\.00 GiB of memory"):
+        check_memory(big, available=2**30)
+    # Linear in the number of environments (every part but the network and eval scale with N).
+    a, b = (estimate_memory_bytes(config_from_dict({"train": {"num_envs": n}})) for n in (1024, 2048))
+    assert 1.8 * a < b < 2 * a
+    assert machine_memory_bytes() is None or machine_memory_bytes() > 2**26
+
+
+@pytest.mark.parametrize("raw", [{}, {"env": {"obs_mode": "thesis"}, "train": {"hidden": [64, 32, 32, 32]}},
+                                 {"env": {"shape_points": 5}, "train": {"layer_norm": True, "hidden": [16, 8]}}])
+def test_memory_estimate_sizes_match_the_real_network_and_env(raw):
+    """Independent reference: the network JAX builds and the environment's observation size."""
+    jax = pytest.importorskip("jax")
+    from jaxexo.config.memory import NUM_ACTIONS, network_size, observation_size
+    from jaxexo.env import ExoStepEnv
+    from jaxexo.physics.dynamics import NUM_ACTIONS as ENV_ACTIONS
+    from jaxexo.train.network import QNetwork
+
+    cfg = config_from_dict(raw)
+    d = ExoStepEnv(cfg).obs_dim
+    assert observation_size(cfg) == d and NUM_ACTIONS == ENV_ACTIONS
+    net = QNetwork(hidden=cfg.train.hidden, layer_norm=cfg.train.layer_norm)
+    params = net.init(jax.random.PRNGKey(0), jax.numpy.zeros((1, d)))
+    assert network_size(cfg) == sum(x.size for x in jax.tree_util.tree_leaves(params))
+
+
+def test_cmd_sweep_returns_an_exit_status(monkeypatch, tmp_path):
+    import argparse
+
+    from jaxexo import cli
+    import jaxexo.sweep.runner as runner
+
+    monkeypatch.setattr(runner, "run_sweep", lambda *a, **k: {
+        "ranking": [], "wall_s_this_run": 0.0, "env_steps_this_run": 0, "figures": []})
+    args = argparse.Namespace(memory_budget=None, sweep=str(ROOT / "configs" / "sweeps" / "smoke.toml"),
+                              backend="ray", out=str(tmp_path), resume=False, heatmap=None, address=None,
+                              task_cpus=None, quiet=True, export_best=False)
+    assert cli.cmd_sweep(args) == 0

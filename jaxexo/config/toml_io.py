@@ -1,23 +1,26 @@
 """Writing a resolved Config back to TOML (tomllib only reads), so a run directory records exactly
-what it trained with. ``load_config(write)`` gives back an equal Config."""
+what it trained with. Every field is written from its declaration (jaxexo.config.schema), and
+``load_config`` of the text gives back an equal Config (tests/test_config_roundtrip.py)."""
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 
-from jaxexo.config import Config
+from jaxexo.config.schema import SECTION_CLASSES, SECTIONS, Config, to_toml_values
 
 
 def _value(v) -> str:
     if isinstance(v, bool):
         return "true" if v else "false"
     if isinstance(v, int):
-        return str(v)
+        return str(int(v))
     if isinstance(v, float):
+        v = float(v)   # np.float64 is a float whose repr is "np.float64(...)"
         if math.isinf(v):
             return "inf" if v > 0 else "-inf"
+        if math.isnan(v):
+            return "nan"
         return repr(v)
     if isinstance(v, str):
         return json.dumps(v)
@@ -28,28 +31,14 @@ def _value(v) -> str:
     raise TypeError(f"cannot write {type(v).__name__} to TOML")
 
 
-def _obstacle(o) -> dict:
-    d = {"kind": o.kind, "weight": o.weight}
-    if o.kind in ("rectangle", "triangle", "half_ellipse", "profile"):
-        d["width"] = list(o.width)
-        d["height"] = list(o.height)
-    if o.kind == "profile":
-        d["points"] = [list(p) for p in o.points]
-    return d
-
-
 def config_to_toml(cfg: Config) -> str:
     lines = ["# Resolved jaxexo configuration (metres, radians, steps)."]
-    for section in ("env", "kinematics", "reward", "train"):
+    for section in SECTIONS:
+        assert SECTION_CLASSES[section] is type(getattr(cfg, section))
         lines += ["", f"[{section}]"]
-        for f in dataclasses.fields(getattr(cfg, section)):
-            lines.append(f"{f.name} = {_value(getattr(getattr(cfg, section), f.name))}")
-    lines += ["", "[layout]", "obstacles = ["]
-    lines += [f"  {_value(_obstacle(o))}," for o in cfg.layout.obstacles]
-    lines.append("]")
-    for f in dataclasses.fields(cfg.layout):
-        if f.name != "obstacles":
-            lines.append(f"{f.name} = {_value(getattr(cfg.layout, f.name))}")
-    for name, table in cfg.extra.items():
-        lines += ["", f"[{name}]"] + [f"{k} = {_value(v)}" for k, v in table.items()]
+        for name, v in to_toml_values(getattr(cfg, section)):
+            if isinstance(v, list) and v and isinstance(v[0], dict):   # the obstacle list, one per line
+                lines += [f"{name} = ["] + [f"  {_value(x)}," for x in v] + ["]"]
+            else:
+                lines.append(f"{name} = {_value(v)}")
     return "\n".join(lines) + "\n"

@@ -19,7 +19,9 @@ obstacle), strict success (goal reached, collision-free, joint limits and leg le
 time per trajectory (mean, median, p95, ms), mean hip and knee angle of the swing leg (deg, as
 Tables 3.2-3.9), the swing knee's deepest flexion and the swing hip's largest flexion (deg, the
 ranges of Table 3.2), minimum clearance (m), heel path length (m) and integrated squared jerk of the
-heel (m^2/s^5, finite differences over the trajectory's time stamps).
+heel (m^2/s^5, finite differences over the trajectory's time stamps); and under ``device`` the
+swing timed for the exoskeleton (jaxexo.inference.swing_timing, the policy config's [device]
+limits, applied alike to both generators' paths): swing duration (s) and peak joint velocities.
 """
 
 from __future__ import annotations
@@ -36,15 +38,21 @@ from jaxexo.inference.scenarios import sample_scenarios, training_scenarios
 
 BATCH = 1000
 BATCH_REPEATS = 3
-SCENARIO_SETS = ("train", "test", "all")
+SCENARIO_SETS = ("train", "test", "all", "unseen")
 
 
 def make_scenarios(cfg: Config, which: str, n: int, seed: int = 12345) -> list[dict]:
     """``test``: n scenarios of jaxexo.inference.scenarios.sample_scenarios (the five thesis obstacles
     over the three pivot conditions); ``train``: n of the config's training distribution; ``all``:
-    both (2 n). Each a dict of ``generate``'s keyword arguments plus ``kind``."""
+    both (2 n); ``unseen``: the fixed held-out benchmark of jaxexo.evaluation.unseen (at least n
+    scenes; its seed is fixed, ``seed`` does not apply). Each a dict of ``generate``'s keyword
+    arguments plus ``kind``."""
     if which not in SCENARIO_SETS:
         raise ValueError(f"scenarios must be one of {SCENARIO_SETS}, got {which!r}")
+    if which == "unseen":
+        from jaxexo.evaluation.unseen import repeats_for, unseen_scenarios
+
+        return unseen_scenarios(cfg.kinematics.foot_length, repeats_for(n))
     out: list[dict] = []
     if which in ("test", "all"):
         out += sample_scenarios(cfg, n, seed)
@@ -111,6 +119,37 @@ def trajectory_metrics(trajs) -> dict[str, np.ndarray]:
         "fallback": np.array([t.method == "cfftg-fallback" for t in trajs]),
         "path_length": np.array([path_length(t.heel) for t in trajs]),
         "jerk": np.array([squared_jerk(t.heel, t.time) for t in trajs]),
+    }
+
+
+def device_metrics(trajs, config) -> dict[str, np.ndarray]:
+    """Per-trajectory device timing (jaxexo.inference.swing_timing, the config's [device] limits):
+    the shortest rest-to-rest swing duration (s), the timed swing's peak hip and knee velocity over
+    both legs (rad/s), whether its exported samples stay within the limits, and the peak joint
+    velocity of the path at its own uniform time stamps (rad/s), for contrast."""
+    from jaxexo.inference.swing_timing import time_swings, uniform_peaks
+
+    timed = time_swings(trajs, config)
+    return {
+        "swing_s": np.array([t.duration for t in timed]),
+        "peak_hip_vel": np.array([max(t.peak_velocity[0], t.peak_velocity[2]) for t in timed]),
+        "peak_knee_vel": np.array([max(t.peak_velocity[1], t.peak_velocity[3]) for t in timed]),
+        "within_limits": np.array([t.within_limits for t in timed]),
+        "uniform_peak_vel": np.array([uniform_peaks(t)[0].max() for t in trajs]),
+    }
+
+
+def summarize_device(m: dict[str, np.ndarray], mask: np.ndarray) -> dict:
+    """Device-timing figures of one group (seconds; velocities in deg/s)."""
+    d = np.degrees
+    return {
+        "swing_s_mean": float(m["swing_s"][mask].mean()),
+        "swing_s_median": float(np.median(m["swing_s"][mask])),
+        "swing_s_max": float(m["swing_s"][mask].max()),
+        "peak_hip_vel_deg_s_mean": float(d(m["peak_hip_vel"][mask].mean())),
+        "peak_knee_vel_deg_s_mean": float(d(m["peak_knee_vel"][mask].mean())),
+        "device_within_limits": float(m["within_limits"][mask].mean()),
+        "uniform_peak_joint_vel_deg_s_median": float(d(np.median(m["uniform_peak_vel"][mask]))),
     }
 
 
@@ -187,13 +226,16 @@ def evaluate_generators(generators: dict, scenarios: list[dict], batch_size: int
     for name, (tr, times) in runs.items():
         gen = generators[name]
         m = trajectory_metrics(tr)
+        dm = device_metrics(tr, gen.config)
         entry = summarize(m, times, np.ones(len(tr), bool))
+        entry["device"] = summarize_device(dm, np.ones(len(tr), bool))
         entry["batch_1000_ms"] = batch_time(gen, scenarios, batch_size, batch_repeats) if batch_size else None
         entry["batch_size"] = batch_size
         for key, masks in groups.items():
             entry[key] = {}
             for g, mask in masks.items():
                 entry[key][g] = summarize(m, times, mask)
+                entry[key][g]["device"] = summarize_device(dm, mask)
                 # The group's own scenarios in one generate_batch call, scaled to 1000.
                 sub = [scenarios[i] for i in np.flatnonzero(mask)]
                 entry[key][g]["batch_1000_ms"] = batch_time(gen, sub, len(sub), 1) if batch_size else None
@@ -244,6 +286,7 @@ def markdown(report: dict, title: str, context: list[str]) -> str:
             for name, r in report.items():
                 if g in r[key]:
                     lines.append(_row(f"{g} ({name})", r[key][g]))
+    lines += device_markdown(report)
     for name, r in report.items():
         if r["failures"]:
             lines += ["", f"## First failures of {name}", ""]
@@ -257,6 +300,31 @@ def markdown(report: dict, title: str, context: list[str]) -> str:
               "`rl` is the RL swing alone, `rl+cfftg` the generator's default (CFFTG's plan when the RL swing "
               "is not safe)."]
     return "\n".join(lines) + "\n"
+
+
+DEVICE_HEAD = ("| {what} | swing s mean | median | max | peak hip vel deg/s | peak knee vel deg/s | "
+               "within limits % | uniform-time peak deg/s (median) |\n|---|---:|---:|---:|---:|---:|---:|---:|")
+
+
+def _device_row(name: str, d: dict) -> str:
+    return (f"| {name} | {d['swing_s_mean']:.3f} | {d['swing_s_median']:.3f} | {d['swing_s_max']:.3f} | "
+            f"{d['peak_hip_vel_deg_s_mean']:.0f} | {d['peak_knee_vel_deg_s_mean']:.0f} | "
+            f"{100 * d['device_within_limits']:.1f} | {d['uniform_peak_joint_vel_deg_s_median']:.0f} |")
+
+
+def device_markdown(report: dict) -> list[str]:
+    """The device-timing table (jaxexo.inference.swing_timing): overall and by obstacle kind."""
+    lines = ["", "## Device timing (shortest rest-to-rest swing within the [device] joint limits)", "",
+             DEVICE_HEAD.format(what="generator")]
+    lines += [_device_row(name, r["device"]) for name, r in report.items() if "device" in r]
+    groups = list(next(iter(report.values()))["by_kind"])
+    for g in groups:
+        for name, r in report.items():
+            if "device" in r["by_kind"].get(g, {}):
+                lines.append(_device_row(f"{g} ({name})", r["by_kind"][g]["device"]))
+    lines += ["", "Peak velocities are those of the timed swing (both legs); the last column is the same path "
+              "at its uniform time stamps (1 s), which no joint drive follows."]
+    return lines
 
 
 def plot_overlays(path: Path, trajs: dict, scenarios: list[dict], per_kind: int = 25) -> None:
@@ -359,6 +427,14 @@ def run_eval(policy: str | Path, out: str | Path, against: str | None = "cfftg",
     for entry in report.values():
         entry["scenarios"] = scenarios
         entry["policy"] = str(policy)
+    if scenarios == "unseen":
+        from jaxexo.evaluation.unseen import UNSEEN_SEED, family_table, markdown_lines
+
+        table = family_table(trajs, sc)
+        for name, entry in report.items():
+            entry["by_family"] = {fam: gens[name] for fam, gens in table.items()}
+        context[0] = context[0].replace(f"seed {seed}", f"fixed seed {UNSEEN_SEED}")
+        context += ["", *markdown_lines(table)]
     return write_report(out, report, trajs, sc, "jaxexo eval: RL generator" + (" vs CFFTG" if against else ""),
                         context, figures)
 

@@ -1,6 +1,7 @@
 """``jaxexo reproduce``: the thesis's experiments, rerun and tabulated beside its published values.
 
-Trains the seven thesis configs (configs/thesis/{a,b,c,1,2,3,final}.toml, thesis 3.2), then for each
+Trains the seven thesis configs (jaxexo/config/thesis/{a,b,c,1,2,3,final}.toml, shipped with the package;
+configs/thesis/ holds byte-equal copies; thesis 3.2), then for each
 model generates the n test scenarios of ``jaxexo.evaluation.compare`` (the five obstacles of Table 3.1 over the
 three pivot conditions, the model's own starts) with the NumPy generator, and writes:
 
@@ -19,7 +20,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from jaxexo.config import PIVOT_CONDITIONS, load_config
+from jaxexo.config import PIVOT_CONDITIONS, load_config, packaged_config
 
 THESIS_MODELS = ("a", "b", "c", "1", "2", "3", "final")
 # The pivot condition each single-condition model was trained on (thesis 3.2; configs/thesis/*.toml).
@@ -65,6 +66,22 @@ def _pct(x: float) -> str:
     return f"{100 * x:.1f}"
 
 
+def device_table(results: dict) -> list[str]:
+    """Not in the thesis: each model's swings timed for the exoskeleton (jaxexo.inference.swing_timing,
+    the config's [device] joint limits), beside CFFTG's where it was run."""
+    rows = []
+    for name, r in results.items():
+        for gen in ("rl", "cfftg"):
+            d = r.get(gen, {}).get("device")
+            if d:
+                rows.append(f"| {name} ({gen}) | {d['swing_s_mean']:.3f} | {d['swing_s_max']:.3f} | "
+                            f"{d['peak_hip_vel_deg_s_mean']:.0f} | {d['peak_knee_vel_deg_s_mean']:.0f} | "
+                            f"{_pct(d['device_within_limits'])} | {d['uniform_peak_joint_vel_deg_s_median']:.0f} |")
+    return _table("Device timing (not in the thesis): shortest rest-to-rest swing within the [device] joint limits",
+                  "| model (generator) | swing s mean | swing s max | peak hip vel deg/s | peak knee vel deg/s | "
+                  "within limits % | uniform 1 s peak deg/s (median) |", "|---|---:|---:|---:|---:|---:|---:|", rows)
+
+
 def tables(results: dict) -> str:
     """The reproduction's Markdown: every table beside the thesis's values."""
     lines = ["# Thesis experiments reproduced with jaxexo", "",
@@ -91,6 +108,7 @@ def tables(results: dict) -> str:
                     [f"| {name} | {_cell(THESIS_ACCURACY.get(name), lambda x: f'{x:.1f}')} | "
                      f"{_pct(r['rl']['accuracy'])} | {_pct(r['rl']['success'])} | {_pct(r['rl']['reached_goal'])} |"
                      for name, r in results.items()])
+    lines += device_table(results)
     final = results.get("final")
     if final and "cfftg" in final:
         rows = []
@@ -118,11 +136,13 @@ def run_reproduce(out: str | Path, models=THESIS_MODELS, n: int = 1000, seed: in
     from jaxexo.inference import TrajectoryGenerator
     from jaxexo.train.driver import run_training
 
-    root = root or Path(__file__).resolve().parents[2]
+    # The thesis and default configs ship inside the package (jaxexo/config/); ``root``: a tree with
+    # its own configs/thesis/*.toml and configs/default.toml instead.
+    base = root / "configs" if root else Path(packaged_config("default")).parent
     out = Path(out)
-    paths = {m: root / "configs" / "thesis" / f"{m}.toml" for m in models}
+    paths = {m: base / "thesis" / f"{m}.toml" for m in models}
     if include_default:
-        paths["default"] = root / "configs" / "default.toml"
+        paths["default"] = base / "default.toml"
     results: dict = {}
     for name, cfg_path in paths.items():
         run = out / "runs" / name

@@ -23,7 +23,9 @@ from jaxexo.inference.trajectory import (
     TrajectoryError,
     assemble,
 )
+from jaxexo.inference.swing_timing import DeviceLimits, TimedSwing, time_swing, time_swings
 from jaxexo.storage.policy_file import PolicyFileError
 
 __all__ = ["TrajectoryGenerator", "Trajectory", "TrajectoryBatch", "TrajectoryChecks", "TrajectoryError",
-           "Obstacle", "Scene", "PolicyFileError", "assemble", "CSV_COLUMNS", "JOINT_NAMES"]
+           "Obstacle", "Scene", "PolicyFileError", "assemble", "CSV_COLUMNS", "JOINT_NAMES",
+           "DeviceLimits", "TimedSwing", "time_swing", "time_swings"]

@@ -365,3 +365,61 @@ def assemble(method: str, sp, scenes, raws, paths: np.ndarray, smoothing, durati
         clearance_ok=m["clearance_ok"], above_ground=m["above_ground"], heel_backward=m["heel_backward"],
         deviation=m["deviation"],
     )
+
+
+# Timed (device-ready) swings: exports of jaxexo.inference.swing_timing.TimedSwing ------------------
+
+TIMED_CSV_COLUMNS = CSV_COLUMNS + tuple(f"{j}_vel_rad_s" for j in JOINT_NAMES) + tuple(
+    f"{j}_acc_rad_s2" for j in JOINT_NAMES) + ("heel_vel_y_m_s", "heel_vel_z_m_s", "heel_acc_y_m_s2", "heel_acc_z_m_s2")
+
+
+def timed_table(swing) -> np.ndarray:
+    """(n, len(TIMED_CSV_COLUMNS)) array of a TimedSwing: the path columns, then joint velocities
+    and accelerations and the heel's velocity and acceleration, one row per control period."""
+    return np.column_stack([swing.time, swing.heel, swing.toe, swing.hip, swing.knee_swing, swing.knee_stance,
+                            swing.joint_angles, swing.joint_velocity, swing.joint_acceleration,
+                            swing.heel_velocity, swing.heel_acceleration])
+
+
+def write_timed_csv(swing, path: str | Path | None = None) -> str:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(TIMED_CSV_COLUMNS)
+    for row in timed_table(swing):
+        w.writerow([f"{x:.9g}" for x in row])
+    text = buf.getvalue()
+    if path is not None:
+        _write_text(Path(path), text)
+    return text
+
+
+def timed_dict(swing) -> dict:
+    c = swing.checks
+    sc = swing.scene
+    return {
+        "units": {"length": "m", "angle": "rad", "time": "s", "joint velocity": "rad/s",
+                  "joint acceleration": "rad/s^2", "heel velocity": "m/s", "heel acceleration": "m/s^2", "rate": "Hz"},
+        "method": swing.method,
+        "scene": {"obstacle": sc.obstacle.kind, "shape": sc.obstacle.shape, "center_y": sc.center_y,
+                  "width": sc.width, "height": sc.height, "outline": sc.obstacle.outline.tolist(),
+                  "pivot": sc.pivot, "pivot_y": sc.pivot_y, "start_y": sc.start_y, "goal_y": sc.goal_y},
+        "rate_hz": swing.rate,
+        "duration_s": swing.duration,
+        "limits": swing.limits.to_dict(),
+        "peak_joint_velocity_rad_s": [float(x) for x in swing.peak_velocity],
+        "peak_joint_acceleration_rad_s2": [float(x) for x in swing.peak_acceleration],
+        "checks": {"ok": swing.ok, "within_limits": swing.within_limits, "reached_goal": c.reached_goal,
+                   "collision_free": c.collision_free, "min_clearance": c.min_clearance,
+                   "joint_limits_ok": c.joint_limits_ok, "leg_length_ok": c.leg_length_ok,
+                   "reasons": list(swing.reasons)},
+        "notes": list(swing.notes),
+        "columns": list(TIMED_CSV_COLUMNS),
+        "samples": timed_table(swing).tolist(),
+    }
+
+
+def write_timed_json(swing, path: str | Path | None = None) -> str:
+    text = json.dumps(timed_dict(swing), indent=1)
+    if path is not None:
+        _write_text(Path(path), text)
+    return text

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from jaxexo.physics import geometry, kinematics, rewards, swept
-from jaxexo.config import PIVOT_CONDITIONS, Config
+from jaxexo.config import ENV_SECTIONS, PIVOT_CONDITIONS, SECTION_CLASSES, Config, declared_fields
 
 NUM_ACTIONS = 36
 # Lengths in observations are divided by this (m), so that they are of order 1.
@@ -50,72 +50,19 @@ def action_directions(n: int = NUM_ACTIONS) -> np.ndarray:
     return np.where(np.abs(d) < 1e-12, 0.0, d)
 
 
-def _cdf(weights) -> np.ndarray:
-    w = np.asarray(weights, dtype=np.float64)
-    c = np.cumsum(w / w.sum())
-    c[-1] = 1.0
-    return c
-
-
 def param_values(cfg: Config) -> dict[str, np.ndarray]:
     """Every environment parameter as a NumPy value (float32, int32 or bool), by EnvParams field name.
 
-    ``EnvParams.from_config`` wraps these in JAX arrays; NumPy code uses them as they are."""
-    env, kin, rew, lay = cfg.env, cfg.kinematics, cfg.reward, cfg.layout
-    f = lambda x: np.asarray(x, dtype=np.float32)  # noqa: E731
-    outlines = np.stack([geometry.pad_outline(o.unit_vertices(), cfg.outline_vertices) for o in lay.obstacles])
-    shapes = np.stack([geometry.shape_descriptor(u, env.shape_points) for u in outlines])
-    assert len(PIVOT_CONDITIONS) == len(lay.pivot)
-    return dict(
-        step_size=f(env.step_size),
-        max_steps_in_episode=np.asarray(env.max_steps, dtype=np.int32),
-        terminate_on_collision=np.asarray(env.collision == "terminate"),
-        obs_true_profile=np.asarray(env.obs_profile == "shape"),
-        directions=f(action_directions()),
-        bounds_y=f(env.bounds_y),
-        max_z_world=f(env.max_z),
-        goal_tolerance=f(env.goal_tolerance),
-        mid_goal_clearance=f(env.mid_goal_clearance),
-        mid_goal_half_size=f(env.mid_goal_half_size),
-        max_height_margin=f(env.max_height_margin),
-        min_clearance=f(env.min_clearance),
-        backward_tolerance=f(env.backward_tolerance),
-        thigh=f(kin.thigh),
-        shin=f(kin.shin),
-        foot_length=f(kin.foot_length),
-        hip_limits=f(kin.hip_limits),
-        knee_limits=f(kin.knee_limits),
-        traj_weights=f(rewards.normalize_weights(rew.traj_weights)),
-        exo_weights=f(rewards.normalize_weights(rew.exo_weights)),
-        step_threshold=f(rew.step_threshold),
-        collision_penalty=f(rew.collision_penalty),
-        backward_penalty=f(rew.backward_penalty),
-        goal_reward=f(rew.goal_reward),
-        mid_goal_penalty=f(rew.mid_goal_penalty),
-        max_height_penalty=f(rew.max_height_penalty),
-        safety_penalty=f(rew.safety_penalty),
-        safety_distance=f(rew.safety_distance),
-        z_monotone_penalty=f(rew.z_monotone_penalty),
-        hlc_penalty=f(rew.hlc_penalty),
-        hlc_threshold=f(rew.hlc_threshold),
-        leg_length_penalty=f(rew.leg_length_penalty),
-        leg_length_tolerance=f(rew.leg_length_tolerance),
-        joint_limit_penalty=f(rew.joint_limit_penalty),
-        hip_height_penalty=f(rew.hip_height_penalty),
-        max_hip_z=f(rew.max_hip_z),
-        progress_shaping=f(rew.progress_shaping),
-        shaping_discount=f(rew.shaping_discount),
-        kind_outlines=f(outlines),
-        kind_shape=f(shapes),
-        kind_cdf=f(_cdf([o.weight for o in lay.obstacles])),
-        kind_width=f([o.width for o in lay.obstacles]),
-        kind_height=f([o.height for o in lay.obstacles]),
-        size_jitter=f(lay.size_jitter),
-        obstacle_offset=f(lay.obstacle_offset),
-        pivot_cdf=f(_cdf(lay.pivot)),
-        start_shift=f(lay.start_shift),
-        step_length=f(lay.step_length),
-    )
+    Derived from the config's declarations: each leaf field of ENV_SECTIONS becomes one or more
+    parameters (``FieldSpec.params``), plus the fixed action set (thesis 2.1). ``EnvParams`` is built
+    from these names (jaxexo.env.params); NumPy code uses the values as they are."""
+    out = {"directions": np.asarray(action_directions(), dtype=np.float32)}
+    for section in ENV_SECTIONS:
+        obj = getattr(cfg, section)
+        for name, spec in declared_fields(SECTION_CLASSES[section]):
+            if spec.leaf:
+                out.update(spec.params(name, getattr(obj, name), cfg))
+    return out
 
 
 def numpy_params(cfg: Config) -> types.SimpleNamespace:

@@ -156,6 +156,9 @@ def profile_height(xp, y, outline):
 
 
 def _finite(name: str, value) -> float:
+    # A bool is an int to Python (True == 1): Obstacle.rectangle(True, 0.1) would be 1 m wide.
+    if isinstance(value, (bool, np.bool_)):
+        raise GeometryError(f"{name} must be a number in metres, got the boolean {value!r}")
     try:
         v = float(value)
     except (TypeError, ValueError):
@@ -219,10 +222,13 @@ def shape_descriptor(unit_vertices: np.ndarray, n_points: int = DEFAULT_SHAPE_PO
 
     Precomputed per obstacle kind so that the conditioned observation costs nothing per step: an
     obstacle scaled to height h has descriptor h * this."""
-    u = np.linspace(-0.5, 0.5, n_points)
-    # Sample just inside the ends so that vertical sides count as the obstacle's height.
-    u = np.clip(u, -0.5 + 1e-6, 0.5 - 1e-6)
-    return profile_height(np, u, unit_vertices)
+    return profile_height(np, descriptor_fractions(n_points), unit_vertices)
+
+
+def descriptor_fractions(n_points: int = DEFAULT_SHAPE_POINTS) -> np.ndarray:
+    """The n_points fractions of the width (centre 0, ends -0.5 and 0.5) where the shape descriptor
+    samples the height: equally spaced, just inside the ends so that vertical sides count."""
+    return np.clip(np.linspace(-0.5, 0.5, n_points), -0.5 + 1e-6, 0.5 - 1e-6)
 
 
 @dataclass(frozen=True)
@@ -282,10 +288,15 @@ class Obstacle:
         """Any ground obstacle from its height profile: world-frame (y, z) points, y non-decreasing.
 
         Missing ground end points are added (the profile drops vertically to the ground)."""
+        if isinstance(points, (list, tuple)) and any(
+                isinstance(x, (bool, np.bool_)) for p in points if isinstance(p, (list, tuple)) for x in p):
+            raise GeometryError("points must be (y, z) numbers in metres, got a boolean")
         try:
             pts = np.asarray(points, dtype=np.float64)
         except (TypeError, ValueError):
             raise GeometryError("points must be a sequence of (y, z) pairs in metres") from None
+        if np.asarray(points).dtype == np.bool_:
+            raise GeometryError("points must be (y, z) numbers in metres, got booleans")
         if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 2:
             raise GeometryError(f"points must have shape (n >= 2, 2), got {pts.shape}")
         if len(pts) > MAX_PROFILE_VERTICES - 2:

@@ -26,7 +26,7 @@ import numpy as np
 import optax
 from flax import struct
 
-from jaxexo.config import Config, num_updates
+from jaxexo.config import HYPER_FIELDS, Config, TrainConfig, declared_fields, num_updates
 from jaxexo.env import EnvParams, ExoStepEnv
 from jaxexo.train import td_lambda
 from jaxexo.train.network import QNetwork
@@ -35,35 +35,20 @@ from jaxexo.train.network import QNetwork
 METRICS = ("episodes", "return_sum", "successes", "accurate", "env_steps", "loss", "q_mean", "epsilon")
 
 
-@struct.dataclass
-class Hyperparams:
-    """Vmappable hyperparameters (pytree leaves)."""
+def _hyper_from_config(cls, cfg: Config) -> "Hyperparams":
+    """Each leaf of [train] (HYPER_FIELDS) at its declared dtype (float32; int32 for target_period),
+    and the environment's parameters."""
+    specs = dict(declared_fields(TrainConfig))
+    leaves = {k: jnp.asarray(getattr(cfg.train, k), specs[k].dtype) for k in HYPER_FIELDS}
+    return cls(**leaves, env=EnvParams.from_config(cfg))
 
-    lr: jnp.ndarray
-    lr_end_fraction: jnp.ndarray
-    gamma: jnp.ndarray
-    lam: jnp.ndarray
-    eps_start: jnp.ndarray
-    eps_end: jnp.ndarray
-    eps_decay_fraction: jnp.ndarray
-    target_period: jnp.ndarray
-    target_tau: jnp.ndarray
-    max_grad_norm: jnp.ndarray
-    budget_episodes: jnp.ndarray     # 0: none
-    budget_env_steps: jnp.ndarray    # 0: none
-    env: EnvParams
 
-    @classmethod
-    def from_config(cls, cfg: Config) -> "Hyperparams":
-        t = cfg.train
-        f = lambda x: jnp.asarray(x, jnp.float32)  # noqa: E731
-        return cls(
-            lr=f(t.lr), lr_end_fraction=f(t.lr_end_fraction), gamma=f(t.gamma), lam=f(t.lam), eps_start=f(t.eps_start), eps_end=f(t.eps_end),
-            eps_decay_fraction=f(t.eps_decay_fraction), target_period=jnp.asarray(t.target_period, jnp.int32),
-            target_tau=f(t.target_tau), max_grad_norm=f(t.max_grad_norm),
-            budget_episodes=f(t.budget_episodes), budget_env_steps=f(t.budget_env_steps),
-            env=EnvParams.from_config(cfg),
-        )
+# Vmappable hyperparameters (pytree leaves): the fields of TrainConfig declared as leaves
+# (jaxexo.config.HYPER_FIELDS; budgets: 0 means none), then the environment's parameters.
+Hyperparams = struct.dataclass(type("Hyperparams", (), {
+    "__annotations__": {**{k: jnp.ndarray for k in HYPER_FIELDS}, "env": EnvParams},
+    "from_config": classmethod(_hyper_from_config), "__module__": __name__,
+    "__doc__": "Vmappable hyperparameters (pytree leaves): HYPER_FIELDS, then env (EnvParams)."}))
 
 
 @struct.dataclass

@@ -1,0 +1,133 @@
+"""Device-timing benchmark: the RL generator and CFFTG on the same scenes, every swing timed for the
+exoskeleton (jaxexo.inference.swing_timing, the policy config's [device] limits) and sampled at a
+control rate. Reports swing durations side by side, peak joint velocities and accelerations of the
+exported samples (finite differences at the control rate), rest at both ends, the path checks on the
+exported samples, and the uniform 1 s timing's peaks for contrast. Writes
+timing_<date>_<machine>.{json,md} via jaxexo.evaluation.machine."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from jaxexo.physics.geometry import Obstacle
+
+
+def unseen_scenarios(n: int, seed: int = 2024) -> list[dict]:
+    """Shapes and sizes outside the thesis set: triangles, half-ellipses and four-point profiles of
+    random size (width 8-22 cm, height 5-25 cm), the three pivot conditions in turn."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for i in range(n):
+        w, h, c = rng.uniform(0.08, 0.22), rng.uniform(0.05, 0.25), 0.45 + rng.uniform(-0.03, 0.03)
+        k = i % 3
+        if k == 0:
+            ob, kind = Obstacle.triangle(w, h, center_y=c), "triangle"
+        elif k == 1:
+            ob, kind = Obstacle.half_ellipse(w, h, center_y=c), "half_ellipse"
+        else:
+            a, b = sorted(rng.uniform(-0.4, 0.4, 2) * w)
+            ob = Obstacle.profile([(c - w / 2, 0.0), (c + a, h), (c + b, rng.uniform(0.5, 1.0) * h), (c + w / 2, 0.0)])
+            kind = "profile"
+        out.append({"obstacle": ob, "kind": kind, "pivot": ("agent", "obstacle", "between")[(i // 3) % 3],
+                    "start_y": 0.0, "step_length": 0.70})
+    return out
+
+
+def _figures(trajs, timed, rate: float) -> dict:
+    from jaxexo.inference.swing_timing import uniform_peaks
+
+    d = np.degrees
+    dur = np.array([t.duration for t in timed])
+    vmax = np.array(timed[0].limits.velocity)
+    amax = np.array(timed[0].limits.acceleration)
+    fd_v = np.array([np.abs(np.diff(t.joint_angles, axis=0) * rate).max(axis=0) for t in timed])
+    fd_a = np.array([np.abs(np.diff(t.joint_angles, n=2, axis=0) * rate**2).max(axis=0) for t in timed])
+    end_v = np.array([np.abs(np.diff(t.joint_angles, axis=0)[[0, -1]] * rate).max() for t in timed])
+    uni = [uniform_peaks(t) for t in trajs]
+    return {
+        "n": len(timed),
+        "path_ok": float(np.mean([t.ok for t in trajs])),
+        "timed_ok": float(np.mean([t.ok for t in timed])),
+        "swing_s_mean": float(dur.mean()), "swing_s_median": float(np.median(dur)),
+        "swing_s_p95": float(np.percentile(dur, 95)), "swing_s_max": float(dur.max()),
+        "within_limits": float(np.mean([t.within_limits for t in timed])),
+        "fd_within_limits": float(np.mean(np.all(fd_v <= vmax, axis=1) & np.all(fd_a <= amax, axis=1))),
+        "fd_peak_vel_ratio_max": float((fd_v / vmax).max()),
+        "fd_peak_acc_ratio_max": float((fd_a / amax).max()),
+        "peak_hip_vel_deg_s_mean": float(d(np.maximum(fd_v[:, 0], fd_v[:, 2]).mean())),
+        "peak_knee_vel_deg_s_mean": float(d(np.maximum(fd_v[:, 1], fd_v[:, 3]).mean())),
+        "end_step_vel_deg_s_max": float(d(end_v.max())),
+        "slowdown_mean": float(np.mean([t.slowdown for t in timed])),
+        "uniform_peak_vel_deg_s_median": float(d(np.median([u[0].max() for u in uni]))),
+        "uniform_peak_acc_deg_s2_median": float(d(np.median([u[1].max() for u in uni]))),
+    }, dur
+
+
+def run_timing_benchmark(policy: str | Path, out_dir: str | Path, n: int = 1000, n_unseen: int = 300,
+                         rate: float = 100.0) -> dict:
+    from jaxexo.baselines import CFFTG
+    from jaxexo.evaluation.compare import make_scenarios
+    from jaxexo.evaluation.machine import write_result
+    from jaxexo.inference import TrajectoryGenerator
+    from jaxexo.inference.swing_timing import DeviceLimits, time_swings
+
+    rl = TrajectoryGenerator.load(policy)
+    gens = {"rl": rl, "cfftg": CFFTG(rl.config)}
+    sets = {"thesis": make_scenarios(rl.config, "test", n), "unseen": unseen_scenarios(n_unseen)}
+    lim = DeviceLimits.from_config(rl.config)
+    payload = {"policy": str(policy), "rate_hz": rate, "limits": lim.to_dict(), "sets": {}}
+    lines = ["# Device-ready swings: RL vs CFFTG, same scenes, same device limits", "",
+             f"Policy `{policy}`; every swing timed by jaxexo.inference.swing_timing (TOPP on the joint path, "
+             f"rest-to-rest) and sampled at {rate:g} Hz. Limits (hip, knee): "
+             f"{np.degrees(lim.velocity[0]):.0f}, {np.degrees(lim.velocity[1]):.0f} deg/s; "
+             f"{np.degrees(lim.acceleration[0]):.0f}, {np.degrees(lim.acceleration[1]):.0f} deg/s². "
+             "Peaks and limit checks are finite differences of the exported joint angles at the control rate.", "",
+             "| set | generator | n | path ok % | timed ok % | swing s mean | median | p95 | max | within limits % "
+             "(FD) | peak hip deg/s | peak knee deg/s | end step deg/s max | timing ms/swing | uniform 1 s: peak "
+             "deg/s / deg/s² (median) |",
+             "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
+    for set_name, sc in sets.items():
+        args = {k: [s[k] for s in sc] for k in ("obstacle", "pivot", "start_y", "step_length")}
+        res, durs = {}, {}
+        for name, g in gens.items():
+            batch = g.generate_batch(args["obstacle"], pivot=args["pivot"], start_y=args["start_y"],
+                                     step_length=args["step_length"])
+            trajs = list(batch)
+            t0 = time.perf_counter()
+            timed = time_swings(trajs, g.config, rate=rate)
+            ms = (time.perf_counter() - t0) * 1e3 / len(trajs)
+            fig, durs[name] = _figures(trajs, timed, rate)
+            fig["timing_ms_per_swing"] = ms
+            kinds = np.array([s["kind"] for s in sc])
+            fig["by_kind_swing_s_mean"] = {k: float(durs[name][kinds == k].mean()) for k in dict.fromkeys(kinds)}
+            res[name] = fig
+            f = fig
+            lines.append(f"| {set_name} | {name} | {f['n']} | {100 * f['path_ok']:.1f} | {100 * f['timed_ok']:.1f} | "
+                         f"{f['swing_s_mean']:.3f} | {f['swing_s_median']:.3f} | {f['swing_s_p95']:.3f} | "
+                         f"{f['swing_s_max']:.3f} | {100 * f['fd_within_limits']:.1f} | "
+                         f"{f['peak_hip_vel_deg_s_mean']:.0f} | "
+                         f"{f['peak_knee_vel_deg_s_mean']:.0f} | {f['end_step_vel_deg_s_max']:.2f} | {ms:.1f} | "
+                         f"{f['uniform_peak_vel_deg_s_median']:.0f} / {f['uniform_peak_acc_deg_s2_median']:.0f} |")
+        ratio = durs["rl"] / durs["cfftg"]
+        res["rl_vs_cfftg"] = {"rl_not_longer_fraction": float(np.mean(durs["rl"] <= durs["cfftg"] + 1e-9)),
+                              "duration_ratio_mean": float(ratio.mean()),
+                              "duration_ratio_median": float(np.median(ratio))}
+        payload["sets"][set_name] = res
+    lines += ["", "| set | RL swing ≤ CFFTG swing (% of scenes) | RL / CFFTG duration, mean | median |",
+              "|---|---:|---:|---:|"]
+    for set_name, res in payload["sets"].items():
+        c = res["rl_vs_cfftg"]
+        lines.append(f"| {set_name} | {100 * c['rl_not_longer_fraction']:.1f} | {c['duration_ratio_mean']:.3f} | "
+                     f"{c['duration_ratio_median']:.3f} |")
+    lines += ["", "Swing mean by obstacle kind (s):", "", "| set | kind | RL | CFFTG |", "|---|---|---:|---:|"]
+    for set_name, res in payload["sets"].items():
+        for k, v in res["rl"]["by_kind_swing_s_mean"].items():
+            lines.append(f"| {set_name} | {k} | {v:.3f} | {res['cfftg']['by_kind_swing_s_mean'][k]:.3f} |")
+    md = "\n".join(lines)
+    jpath, mpath = write_result("timing", payload, md, out_dir)
+    print(md)
+    print(f"wrote {jpath}, {mpath}")
+    return payload

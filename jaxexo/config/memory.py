@@ -1,0 +1,111 @@
+"""How much memory a training run needs, estimated from its config before JAX allocates anything,
+so that ``jaxexo train`` refuses a run the machine cannot hold with a message naming the field to
+change (instead of an out-of-memory traceback minutes later). NumPy-only.
+
+The estimate is rough but honest: it sums the arrays a run keeps alive at once, in float32 (4 bytes):
+the network (parameters, target copy, Adam's two moments, a gradient: 5 P), the per-environment
+state and observations, the T x N rollout buffer of the forward view with its lambda-returns and the
+activations of one minibatch's gradient, or, for the backward view, one eligibility trace and one
+gradient per environment (2 N P), and the greedy evaluation's environments. XLA's temporaries and
+the Python process itself come on top, so the true peak is higher; a run refused here would not fit.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from jaxexo.config.schema import Config, ConfigError
+
+FLOAT = 4                  # bytes: float32 / int32
+NUM_ACTIONS = 36           # thesis 2.1 (jaxexo.physics.dynamics.NUM_ACTIONS; asserted in the tests)
+ENV_SCALARS = 24           # per-environment scalars of the env state and episode statistics (heel, time,
+                           # scene numbers, flags, return): a generous count
+
+
+def observation_size(cfg: Config) -> int:
+    """The network's input size D, from the one definition of the observation
+    (jaxexo.physics.dynamics.observation) applied to a scene of the config."""
+    from jaxexo.physics import dynamics, geometry
+
+    scene = dynamics.stack_scenes([dynamics.make_scene(geometry.Obstacle.named("base1"), "obstacle", 0.0, 0.70,
+                                                       foot_length=0.2, shape_points=cfg.env.shape_points)])
+    zero = np.zeros(1, np.float32)
+    obs = dynamics.observation(np, dynamics.numpy_params(cfg), cfg.env.obs_mode, zero, zero,
+                               np.zeros(1, np.int32), np.zeros(1, bool), scene)
+    return int(np.shape(obs)[-1])
+
+
+def network_size(cfg: Config, obs_dim: int | None = None) -> int:
+    """Parameters P of the Q-network D -> hidden... -> 36 (Dense kernels and biases, LayerNorm scale
+    and bias after each hidden layer when layer_norm)."""
+    d = observation_size(cfg) if obs_dim is None else obs_dim
+    sizes = (d, *cfg.train.hidden, NUM_ACTIONS)
+    dense = sum((a + 1) * b for a, b in zip(sizes[:-1], sizes[1:]))
+    norm = 2 * sum(cfg.train.hidden) if cfg.train.layer_norm else 0
+    return dense + norm
+
+
+def memory_breakdown(cfg: Config) -> dict[str, int]:
+    """Bytes by part (see the module doc); ``estimate_memory_bytes`` is their sum."""
+    t = cfg.train
+    n, T = t.num_envs, t.rollout_steps
+    d = observation_size(cfg)
+    P = network_size(cfg, d)
+    width = sum(t.hidden) + NUM_ACTIONS
+    env_state = cfg.outline_vertices * 2 + cfg.env.shape_points + ENV_SCALARS + d
+    parts = {
+        "network": 5 * P * FLOAT,
+        "env_state": n * env_state * FLOAT,
+        "eval_envs": t.eval_episodes * env_state * FLOAT,
+    }
+    if t.trace == "forward":
+        # per step: obs, action, reward, terminated, truncated, greedy, target (max_a or all of Q),
+        # the lambda-return; activations and their gradients for one minibatch of T x N/M samples
+        target = 1 if t.control == "off_policy" else NUM_ACTIONS
+        parts["rollout_buffer"] = T * n * (d + 6 + target) * FLOAT
+        parts["activations"] = 2 * T * (n // t.num_minibatches) * width * FLOAT
+    else:
+        parts["traces"] = 2 * n * P * FLOAT
+        parts["activations"] = 2 * n * width * FLOAT
+    return parts
+
+
+def estimate_memory_bytes(cfg: Config) -> int:
+    """A lower bound on the bytes a training run with this config keeps alive at once."""
+    return int(sum(memory_breakdown(cfg).values()))
+
+
+def machine_memory_bytes() -> int | None:
+    """Physical memory of this machine (os.sysconf, else /proc/meminfo); None if unknown."""
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        pass
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemTotal:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return None
+
+
+def check_memory(cfg: Config, available: int | None = None) -> int:
+    """Refuse (ConfigError) a config whose estimate exceeds ``available`` bytes (default: this
+    machine's memory); returns the estimate. The error names the field behind the largest part."""
+    need = estimate_memory_bytes(cfg)
+    have = machine_memory_bytes() if available is None else available
+    if have is not None and need > have:
+        parts = memory_breakdown(cfg)
+        top = max(parts, key=parts.get)
+        field = {"traces": "train.num_envs", "rollout_buffer": "train.num_envs", "activations": "train.num_envs",
+                 "env_state": "train.num_envs", "eval_envs": "train.eval_episodes",
+                 "network": "train.hidden"}[top]
+        detail = ", ".join(f"{k} {v / 2**30:.2f}" for k, v in sorted(parts.items(), key=lambda kv: -kv[1]))
+        raise ConfigError(f"{field}: the run needs at least {need / 2**30:.2f} GiB ({detail} GiB) but this machine "
+                          f"has {have / 2**30:.2f} GiB of memory; reduce {field}"
+                          + (" or train.rollout_steps" if top == "rollout_buffer" else ""))
+    return need

@@ -1,0 +1,77 @@
+"""Animation of a timed swing (needs matplotlib and Pillow, imported here only): both legs step over
+the obstacle in real time at the computed timing (jaxexo.inference.swing_timing), the heel's path
+traced behind, with the swing knee's velocity against its limit beside it. Lengths in centimetres,
+angles in degrees, velocities in deg/s (labelled)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+CM = 100.0
+
+
+def animate_swing(swing, path: str | Path, fps: float = 25.0, hold_s: float = 0.4, dpi: int = 64) -> Path:
+    """Write a GIF of ``swing`` (a TimedSwing) to ``path``: one frame every 1/fps s of swing time
+    (the GIF plays in real time), the last pose held ``hold_s``. Returns the path."""
+    if not np.isfinite(fps) or fps <= 0:
+        raise ValueError(f"fps: must be > 0, got {fps!r}")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.animation import FuncAnimation, PillowWriter
+
+    sc = swing.scene
+    t_frames = np.arange(0.0, swing.duration + 1e-9, 1.0 / fps)
+    idx = np.searchsorted(swing.time, t_frames).clip(0, len(swing.time) - 1)
+    idx = np.concatenate([idx, np.full(int(round(hold_s * fps)), len(swing.time) - 1)])
+    fig, (ax, axv) = plt.subplots(1, 2, figsize=(9, 3.6), gridspec_kw={"width_ratios": [1.7, 1]})
+    o = sc.obstacle.outline * CM
+    ax.fill(o[:, 0], o[:, 1], color="0.6")
+    ax.axhline(0.0, color="k", lw=0.8)
+    heel = swing.heel * CM
+    ax.plot(heel[:, 0], heel[:, 1], color="tab:red", lw=0.6, alpha=0.35)
+    trace, = ax.plot([], [], color="tab:red", lw=1.4)
+    swing_leg, = ax.plot([], [], "-o", color="tab:blue", ms=3, lw=2.5)
+    stance_leg, = ax.plot([], [], "-o", color="0.35", ms=3, lw=2.5)
+    label = ax.text(0.02, 0.95, "", transform=ax.transAxes, fontsize=8, va="top")
+    ys = np.concatenate([swing.hip[:, 0], swing.toe[:, 0], [sc.pivot_y + 0.2]]) * CM
+    ax.set_xlim(ys.min() - 10, ys.max() + 10)
+    ax.set_ylim(-3, max(swing.hip[:, 1].max() * CM + 5, 30))
+    ax.set_aspect("equal")
+    ax.set_xlabel("y, forward (cm)")
+    ax.set_ylabel("z, up (cm)")
+    ax.set_title(f"{swing.method}: {sc.obstacle.kind}, pivot {sc.pivot}, {swing.duration:.2f} s swing", fontsize=9)
+    vel = np.degrees(swing.joint_velocity)
+    lim = np.degrees(swing.limits.velocity)
+    for col, name, c in ((0, "hip", "tab:green"), (1, "knee", "tab:blue")):
+        axv.plot(swing.time, vel[:, col], color=c, label=f"swing {name}")
+        axv.axhline(lim[col], color=c, ls=":", lw=0.8)
+        axv.axhline(-lim[col], color=c, ls=":", lw=0.8)
+    cursor = axv.axvline(0.0, color="k", lw=0.8)
+    axv.set_xlabel("time (s)")
+    axv.set_ylabel("joint velocity (deg/s); dotted: limits")
+    axv.legend(fontsize=7, loc="lower left")
+    axv.grid(alpha=0.3)
+    fig.tight_layout()
+
+    def draw(k):
+        j = idx[k]
+        hip, ks, kt = swing.hip[j] * CM, swing.knee_swing[j] * CM, swing.knee_stance[j] * CM
+        h, toe = heel[j], swing.toe[j] * CM
+        swing_leg.set_data([hip[0], ks[0], h[0], toe[0]], [hip[1], ks[1], h[1], toe[1]])
+        p = sc.pivot_y * CM
+        stance_leg.set_data([hip[0], kt[0], p, p + swing.toe[0, 0] * CM - heel[0, 0]], [hip[1], kt[1], 0.0, 0.0])
+        trace.set_data(heel[: j + 1, 0], heel[: j + 1, 1])
+        cursor.set_xdata([swing.time[j], swing.time[j]])
+        label.set_text(f"t = {swing.time[j]:.2f} s")
+        return swing_leg, stance_leg, trace, cursor, label
+
+    anim = FuncAnimation(fig, draw, frames=len(idx), blit=False)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    anim.save(str(path), writer=PillowWriter(fps=fps), dpi=dpi)
+    plt.close(fig)
+    return path

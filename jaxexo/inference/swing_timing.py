@@ -1,0 +1,577 @@
+"""Device-ready swings: the shortest rest-to-rest timing of a swing path within joint velocity and
+acceleration limits, sampled at a controller's rate (NumPy only).
+
+The generators (RL, CFFTG) produce *paths*: heel positions with uniform time stamps over a fixed
+duration, which ask the joint drives for thousands of deg/s. This module gives any path a time law
+s(t) (s in [0, 1] along the path) such that every joint q_j(s(t)) of both legs obeys
+|dq/dt| = |q'(s) s'| <= v_max and |d2q/dt2| = |q''(s) s'^2 + q'(s) s''| <= a_max, starting and
+ending at rest (zero joint velocity AND acceleration), so the comparison of generators is about their
+paths. Neither the thesis nor CFFTG times a swing; the limits come from the config's [device]
+section (jaxexo.config.DeviceConfig).
+
+Method (time-optimal up to the end blends and a safety factor, not a fixed time-law shape; a fixed
+shape such as a quintic smoothstep must run the whole path at the speed its worst point allows,
+while a variable-speed law slows only where the path bends in joint space):
+
+1. Path: the heel samples (N, 2) are interpolated by a monotone cubic in the sample index (PCHIP,
+   C1), which never overshoots a sample, so the heel stays above the ground where the smoothed
+   path rests on it, and re-parametrised by the arc length s of the joint path (see
+   ``_arc_length_map``: in any heel parameter the joints move like a square root at a straight-leg
+   lift-off, and a generator's own parameter may crawl, as CFFTG's polynomials do near the ends);
+   the joints are the project's kinematics (jaxexo.physics.kinematics,
+   thesis eq 2.4-2.11, 2.42, 2.49) of the interpolated heel on a fine s grid (FINE_PER_SAMPLE
+   points per sample interval), differentiated there by central differences (q', q'').
+2. TOPP: on that grid, with x = s'^2, the velocity limits cap x by (v_j / |q'_j|)^2 and the
+   acceleration limits make the admissible s'' an interval [L(x), U(x)]; a backward pass from rest
+   at the end decelerating at L bounds the speeds from which the end can still be reached, and a
+   forward pass from rest accelerates at U under that bound (the numerical-integration time-optimal
+   path parametrisation of Bobrow 1985 / Pfeiffer-Johanni 1987, passes ordered as in TOPP-RA), with
+   the limits shrunk by SAFETY. Time per grid cell assumes constant s'' in the cell.
+3. Rest with zero acceleration: the optimal law starts with a jump in s''; its speed s'(t) is
+   averaged over a sliding window of BLEND_S = 30 ms (at most a tenth of the swing; a box filter),
+   which keeps s' and s'' bounded by the averaged values, adds the window to the duration, and
+   makes s'' = 0 at both ends (s''(t) = (s'(t) - s'(t - w)) / w, zero where both speeds are the
+   rest speed).
+4. Exported samples: the law is sampled at the control rate (the duration rounded up to whole
+   periods, never below ``min_duration``); positions come from the path and kinematics, velocities
+   and accelerations from the chain rule; then every exported sample is checked, both the
+   chain-rule columns and finite differences of the exported positions at the control rate. Where
+   samples exceed a limit (a bend tighter than the grid resolves, a reversal of the joints), the
+   bound on s'^2 is lowered around them by the excess and the passes run again (LOCAL_PASSES
+   times, all such swings in one batch); after that the whole law is slowed uniformly (t -> k t
+   scales velocities by 1/k, accelerations by 1/k^2), which keeps the ends at rest. So the
+   guarantee (every exported sample within the limits, ``within_limits``) is measured on what is
+   exported, not assumed from the discretised passes.
+
+Known cost: the path interpolant is C1, so q'' jumps at the path's samples; at higher control rates
+finite differences resolve those jumps and the corrections lengthen a swing (measured: 500 Hz swings
+2-11 % longer than 100 Hz ones on the tests' random paths, 1-2 % on CFFTG's thesis-obstacle paths).
+
+Units: m, rad, s; limits in rad/s and rad/s^2, one value per joint of JOINT_NAMES (hip and knee
+limits apply to both legs).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from jaxexo.physics import kinematics
+from jaxexo.physics.dynamics import Scene
+from jaxexo.inference.trajectory import (
+    JOINT_NAMES, TrajectoryChecks, _reasons, clearances, measure, timed_dict, timed_table, write_timed_csv,
+    write_timed_json,
+)
+
+FINE_PER_SAMPLE = 8        # fine s-grid points per interval of the path's samples
+TIME_NODES = 2000          # nodes of the time-law table over the optimal duration
+SAFETY = 0.95              # the TOPP passes use this fraction of each limit
+BLEND_S = 0.03             # s, box-filter window (s'' ramps from rest over 30 ms) ...
+BLEND_FRACTION = 0.1       # ... at most this fraction of the optimal duration
+CHECK_MARGIN = 1e-3        # exported samples must stay within (1 - this) of each limit
+LOCAL_PASSES = 6           # local corrections of the law where exported samples exceed a limit ...
+MAX_SLOWDOWNS = 12         # ... then uniform slow-downs (the safety net)
+ARC_TABLE_PER_SAMPLE = 32  # arc-length table points per sample interval
+X_CAP = 1e6                # 1/s^2: cap on s'^2 where no joint moves (s' <= 1000 /s)
+
+
+@dataclass(frozen=True)
+class DeviceLimits:
+    """Peak joint velocity (rad/s) and acceleration (rad/s^2) per joint of JOINT_NAMES, and the
+    shortest swing allowed (s)."""
+
+    velocity: tuple[float, float, float, float]
+    acceleration: tuple[float, float, float, float]
+    min_duration: float = 0.0
+
+    def __post_init__(self):
+        for name in ("velocity", "acceleration"):
+            v = getattr(self, name)
+            try:
+                arr = np.asarray(v, dtype=np.float64)
+            except (TypeError, ValueError):
+                raise ValueError(f"limits.{name}: expected {len(JOINT_NAMES)} numbers, got {v!r}") from None
+            if arr.shape != (len(JOINT_NAMES),):
+                raise ValueError(f"limits.{name}: expected {len(JOINT_NAMES)} numbers ({', '.join(JOINT_NAMES)}), "
+                                 f"got {v!r}")
+            if not np.all(np.isfinite(arr)) or np.any(arr <= 0):
+                raise ValueError(f"limits.{name}: every limit must be finite and > 0, got {v!r}")
+            object.__setattr__(self, name, tuple(float(x) for x in arr))
+        d = self.min_duration
+        if isinstance(d, bool) or not isinstance(d, (int, float)) or not math.isfinite(d) or d < 0:
+            raise ValueError(f"limits.min_duration: must be a finite number >= 0 (s), got {d!r}")
+        object.__setattr__(self, "min_duration", float(d))
+
+    @classmethod
+    def from_config(cls, config) -> "DeviceLimits":
+        """The [device] section's (hip, knee) limits, applied to both legs."""
+        dev = config.device
+        (vh, vk), (ah, ak) = dev.joint_velocity, dev.joint_acceleration
+        return cls((vh, vk, vh, vk), (ah, ak, ah, ak), dev.min_swing_duration)
+
+    def scaled(self, velocity: float = 1.0, acceleration: float = 1.0) -> "DeviceLimits":
+        return DeviceLimits(tuple(velocity * v for v in self.velocity),
+                            tuple(acceleration * a for a in self.acceleration), self.min_duration)
+
+    def to_dict(self) -> dict:
+        return {"joints": list(JOINT_NAMES), "joint_velocity_rad_s": list(self.velocity),
+                "joint_acceleration_rad_s2": list(self.acceleration), "min_duration_s": self.min_duration}
+
+
+@dataclass(frozen=True)
+class TimedSwing:
+    """A swing sampled at a control rate: one row per control period from lift-off (t = 0) to
+    touch-down (t = duration), both at rest. Checks are made on these samples."""
+
+    method: str
+    scene: Scene
+    rate: float                    # Hz
+    duration: float                # s
+    limits: DeviceLimits
+    time: np.ndarray               # (n,) s
+    heel: np.ndarray               # (n, 2) m
+    toe: np.ndarray
+    hip: np.ndarray
+    knee_swing: np.ndarray
+    knee_stance: np.ndarray
+    joint_angles: np.ndarray       # (n, 4) rad, JOINT_NAMES
+    joint_velocity: np.ndarray     # (n, 4) rad/s (chain rule: q'(s) s')
+    joint_acceleration: np.ndarray # (n, 4) rad/s^2 (q''(s) s'^2 + q'(s) s'')
+    heel_velocity: np.ndarray      # (n, 2) m/s, the same chain rule on the heel path
+    heel_acceleration: np.ndarray  # (n, 2) m/s^2
+    path_parameter: np.ndarray     # (n,) s(t) in [0, 1]
+    checks: TrajectoryChecks       # path checks (goal, clearance, joint range, leg length) on these samples
+    within_limits: bool            # chain-rule columns and finite differences within the limits
+    peak_velocity: np.ndarray      # (4,) rad/s, max of |column| and |finite difference| per joint
+    peak_acceleration: np.ndarray  # (4,) rad/s^2, likewise
+    slowdown: float                # uniform slow-down applied after the TOPP passes and local corrections (>= 1)
+    notes: tuple[str, ...] = field(default=())
+
+    @property
+    def ok(self) -> bool:
+        return self.checks.ok and self.within_limits
+
+    @property
+    def reasons(self) -> tuple[str, ...]:
+        extra = () if self.within_limits else (
+            "joint velocity/acceleration limits exceeded on the exported samples",)
+        return self.checks.reasons + extra
+
+    def table(self) -> np.ndarray:
+        return timed_table(self)
+
+    def to_csv(self, path=None) -> str:
+        return write_timed_csv(self, path)
+
+    def to_dict(self) -> dict:
+        return timed_dict(self)
+
+    def to_json(self, path=None) -> str:
+        return write_timed_json(self, path)
+
+
+# --------------------------------------------------------------------------------------------
+# Path interpolation and joint paths
+# --------------------------------------------------------------------------------------------
+
+
+def pchip_slopes(y: np.ndarray) -> np.ndarray:
+    """Fritsch-Carlson slopes (per unit sample index) of samples y (N, D): the harmonic mean of the
+    neighbouring differences where they share a sign, zero at local extrema, so the interpolant
+    never overshoots the samples; shape-preserving three-point ends."""
+    d = np.diff(y, axis=0)
+    if len(d) == 1:
+        return np.repeat(d, 2, axis=0)
+    d0, d1 = d[:-1], d[1:]
+    same = d0 * d1 > 0
+    m = np.zeros_like(y)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        m[1:-1] = np.where(same, 2.0 * d0 * d1 / np.where(same, d0 + d1, 1.0), 0.0)
+    for end, a, b in ((0, d[0], d[1]), (-1, d[-1], d[-2])):
+        e = 0.5 * (3.0 * a - b)
+        e = np.where(np.sign(e) != np.sign(a), 0.0, e)
+        e = np.where((np.sign(a) != np.sign(b)) & (np.abs(e) > 3.0 * np.abs(a)), 3.0 * a, e)
+        m[end] = e
+    return m
+
+
+def pchip_eval(y: np.ndarray, m: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Cubic Hermite interpolant of samples y (N, D) with slopes m at sample coordinates u (K,)
+    in [0, N-1]: (K, D)."""
+    n = y.shape[0]
+    u = np.clip(np.asarray(u, np.float64), 0.0, n - 1)
+    i = np.minimum(np.floor(u).astype(np.int64), n - 2)
+    t = (u - i)[:, None]
+    t2, t3 = t * t, t * t * t
+    return ((2 * t3 - 3 * t2 + 1) * y[i] + (t3 - 2 * t2 + t) * m[i]
+            + (-2 * t3 + 3 * t2) * y[i + 1] + (t3 - t2) * m[i + 1])
+
+
+def leg_angles(sp, pivot_y: float, heel: np.ndarray) -> np.ndarray:
+    """Joint angles (K, 4) in JOINT_NAMES order for swing heels (K, 2) and a pivot heel at pivot_y,
+    by jaxexo.physics.kinematics (the same calls as trajectory.measure)."""
+    hip = kinematics.hip_position(np, pivot_y, heel, sp.thigh, sp.shin)
+    pivot = np.zeros_like(heel)
+    pivot[:, 0] = pivot_y
+    feet = np.stack([heel, pivot])
+    knees, _ = kinematics.knee_position(np, hip[None], feet, sp.thigh, sp.shin)
+    hips, qs = kinematics.joint_angles(np, hip[None], knees, feet)
+    return np.stack([hips[0], qs[0], hips[1], qs[1]], axis=-1)
+
+
+# --------------------------------------------------------------------------------------------
+# Time-optimal parametrisation (TOPP) on a grid
+# --------------------------------------------------------------------------------------------
+
+
+def _accel_bounds(dq, ddq, amax, x):
+    """The admissible s'' interval [L, U] at s'^2 = x for joint paths with derivatives dq, ddq
+    (..., J); joints with q' = 0 do not bound s''."""
+    moving = np.abs(dq) > 1e-12
+    safe = np.where(moving, dq, 1.0)
+    lo = (-amax - ddq * x[..., None]) / safe
+    hi = (amax - ddq * x[..., None]) / safe
+    lo, hi = np.minimum(lo, hi), np.maximum(lo, hi)
+    return (np.where(moving, lo, -np.inf).max(axis=-1), np.where(moving, hi, np.inf).min(axis=-1))
+
+
+def max_speed_curve(dq: np.ndarray, ddq: np.ndarray, vmax: np.ndarray, amax: np.ndarray) -> np.ndarray:
+    """Largest admissible x = s'^2 at each grid point (..., K) from joint derivatives (..., K, J):
+    the velocity limits, and the acceleration limits' condition that some s'' satisfies every joint
+    (L_j(x) <= U_k(x) for every pair, each linear in x)."""
+    adq = np.abs(dq)
+    moving = adq > 1e-12
+    with np.errstate(divide="ignore"):
+        x_vel = np.where(moving, (vmax / np.where(moving, adq, 1.0)) ** 2, np.inf).min(axis=-1)
+        # Joints that do not move: |q'' x| <= a.
+        still = np.where(~moving & (np.abs(ddq) > 0), amax / np.abs(np.where(moving, 1.0, ddq)), np.inf).min(axis=-1)
+        # L_j(x) = -a_j/|q'_j| - (q''_j/q'_j) x, U_k(x) = a_k/|q'_k| - (q''_k/q'_k) x.
+        r = np.where(moving, amax / np.where(moving, adq, 1.0), np.inf)
+        c = np.where(moving, ddq / np.where(moving, dq, 1.0), 0.0)
+        slope = c[..., None, :] - c[..., :, None]          # (..., j, k): (c_k - c_j) x <= r_j + r_k
+        room = r[..., :, None] + r[..., None, :]
+        x_acc = np.where(slope > 0, room / np.where(slope > 0, slope, 1.0), np.inf).min(axis=(-1, -2))
+    return np.minimum(np.minimum(x_vel, still), np.minimum(x_acc, X_CAP))
+
+
+def topp(dq: np.ndarray, ddq: np.ndarray, vmax, amax, ds: float, cap: np.ndarray | None = None
+         ) -> tuple[np.ndarray, np.ndarray]:
+    """The time-optimal rest-to-rest law on a uniform s grid (spacing ds) for joint derivatives
+    dq, ddq (B, K, J): s'^2 (B, K), and per cell the least speed (B, K-1) of a cell crossed from
+    rest to rest. A backward pass from rest at the end at the smallest admissible s'' bounds the
+    speeds from which the end can still be reached; the forward pass from rest at the start
+    accelerates at the largest admissible s'' under that bound (as TOPP-RA orders the passes).
+    ``cap`` (B, K): further upper bounds on s'^2."""
+    vmax = np.asarray(vmax, np.float64)
+    amax = np.asarray(amax, np.float64)
+    xmax = max_speed_curve(dq, ddq, vmax, amax)
+    if cap is not None:
+        xmax = np.minimum(xmax, cap)
+    b, k = xmax.shape
+    reach = np.empty((b, k))
+    reach[:, -1] = 0.0
+    for i in range(k - 1, 0, -1):
+        lo, _ = _accel_bounds(dq[:, i], ddq[:, i], amax, reach[:, i])
+        reach[:, i - 1] = np.clip(reach[:, i] - 2.0 * ds * lo, 0.0, xmax[:, i - 1])
+    x = np.empty((b, k))
+    x[:, 0] = 0.0
+    for i in range(k - 1):
+        _, hi = _accel_bounds(dq[:, i], ddq[:, i], amax, x[:, i])
+        x[:, i + 1] = np.clip(x[:, i] + 2.0 * ds * hi, 0.0, reach[:, i + 1])
+    # A cell entered and left at rest (a cusp, or the two ends of a very short path) takes
+    # 2 sqrt(ds / u0) at the largest s'' from rest, u0: its mean speed is sqrt(ds u0) / 2.
+    _, u0 = _accel_bounds(dq[:, :-1], ddq[:, :-1], amax, np.zeros((b, k - 1)))
+    floor = 0.5 * np.sqrt(ds * np.minimum(u0, X_CAP))
+    if cap is not None:
+        # A capped cell (see time_swings) is crossed no faster than its caps allow, cusps included.
+        root = np.sqrt(cap)
+        floor = np.minimum(floor, 0.5 * (root[:, :-1] + root[:, 1:]))
+    return x, floor
+
+
+# --------------------------------------------------------------------------------------------
+# Time law
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class TimeLaw:
+    """s(t) as a table at uniform times (step dt): s, s', s'' at every node; ``at`` interpolates
+    (cubic Hermite in s with the node speeds, linear in s' and s''). ``slowed(k)`` is s(t / k)."""
+
+    dt: float
+    s: np.ndarray
+    sdot: np.ndarray
+    sddot: np.ndarray
+
+    @property
+    def duration(self) -> float:
+        return self.dt * (len(self.s) - 1)
+
+    def slowed(self, k: float) -> "TimeLaw":
+        return TimeLaw(self.dt * k, self.s, self.sdot / k, self.sddot / (k * k))
+
+    def at(self, t: np.ndarray):
+        u = np.clip(np.asarray(t, np.float64) / self.dt, 0.0, len(self.s) - 1)
+        s = pchip_eval(self.s[:, None], self.sdot[:, None] * self.dt, u)[:, 0]
+        grid = np.arange(len(self.s))
+        return (np.clip(s, 0.0, 1.0), np.interp(u, grid, self.sdot), np.interp(u, grid, self.sddot))
+
+
+def time_law(s_grid: np.ndarray, x: np.ndarray, v_floor: np.ndarray | None = None,
+             blend_s: float | None = None, nodes: int = TIME_NODES) -> TimeLaw:
+    """The rest-to-rest law from s'^2 = x on s_grid: cell times from constant s'' per cell
+    (2 ds / (v0 + v1), the mean speed at least ``v_floor`` per cell), s' at uniform time nodes,
+    then averaged over a window w (zero s'' at both ends)."""
+    blend_s = BLEND_S if blend_s is None else blend_s
+    v = np.sqrt(np.maximum(x, 0.0))
+    mean = 0.5 * (v[:-1] + v[1:])
+    if v_floor is not None:
+        mean = np.maximum(mean, v_floor)
+    dt_cells = np.diff(s_grid) / np.maximum(mean, 1e-12)
+    t_grid = np.concatenate([[0.0], np.cumsum(dt_cells)])
+    t0 = float(t_grid[-1])
+    dt = t0 / nodes
+    # A short window: averaging over longer stretches would carry speed into the places (cusps,
+    # sharp bends) where the optimal law must nearly stop.
+    m = max(1, int(round(min(blend_s / dt, BLEND_FRACTION * nodes))))
+    w = m * dt
+    tn = np.arange(nodes + 1) * dt
+    vn = np.interp(tn, t_grid, v)
+    vn[0] = vn[-1] = 0.0
+    # Box filter of the piecewise-linear speed: sdot(t) = (V(t) - V(t - w)) / w, V its integral.
+    big_v = np.concatenate([[0.0], np.cumsum(0.5 * (vn[1:] + vn[:-1]) * dt)])
+    total = nodes + m
+    idx = np.arange(total + 1)
+    V = big_v[np.clip(idx, 0, nodes)]
+    Vlag = np.where(idx - m >= 0, big_v[np.clip(idx - m, 0, nodes)], 0.0)
+    sdot = (V - Vlag) / w
+    vpad = np.concatenate([vn, np.zeros(m)])
+    vlag = np.where(idx - m >= 0, vpad[np.clip(idx - m, 0, total)], 0.0)
+    sddot = (vpad[idx] - vlag) / w
+    s = np.concatenate([[0.0], np.cumsum(0.5 * (sdot[1:] + sdot[:-1]) * dt)])
+    # Trapezoid error makes s end a hair off 1: rescale s and its derivatives together.
+    scale = 1.0 / s[-1]
+    sdot[0] = sdot[-1] = sddot[0] = sddot[-1] = 0.0
+    return TimeLaw(dt, s * scale, sdot * scale, sddot * scale)
+
+
+# --------------------------------------------------------------------------------------------
+# Timing a swing
+# --------------------------------------------------------------------------------------------
+
+
+def _arc_length_map(sp, pivot_y: float, heel: np.ndarray, slopes: np.ndarray):
+    """(s, v) table: joint-space arc-length fraction s against v, the heel's sample coordinate
+    u = (N - 1) smoothstep(v).
+
+    Why joint space: a straight leg makes the joints move like the square root of the heel's
+    displacement at lift-off and touch-down (the knee must bend at once to lift the heel), so in
+    any heel parameter q'(s) is unbounded at the ends and no smooth time law can start there with
+    bounded joint acceleration; along the joint path itself |q'(s)| is constant and q'' is its
+    curvature. The table is dense near the ends (u = smoothstep of a uniform grid), where s grows
+    like the square root of u."""
+    n = len(heel)
+    v = np.linspace(0.0, 1.0, ARC_TABLE_PER_SAMPLE * (n - 1) + 1)
+    u = (n - 1) * v * v * (3.0 - 2.0 * v)
+    q = np.unwrap(leg_angles(sp, pivot_y, pchip_eval(heel, slopes, u)), axis=0)
+    length = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(q, axis=0), axis=1))])
+    if length[-1] <= 0:
+        raise ValueError("trajectory: the joints do not move along this path; nothing to time")
+    # Stretches where no joint moves get a sliver of length so that s -> u is a function.
+    length += 1e-9 * length[-1] * v
+    return length / length[-1], v
+
+
+def _heel_at(heel, slopes, table, s):
+    """Heel at joint-arc-length fractions s: linear in v between table points (s is about linear in
+    v near the ends too, where it is about the square root of u)."""
+    v = np.interp(s, table[0], table[1])
+    return pchip_eval(heel, slopes, (len(heel) - 1) * v * v * (3.0 - 2.0 * v))
+
+
+def _joint_paths(sp, pivot_y: float, heel: np.ndarray):
+    """The path by joint-space arc length: fine s grid (K,), the interpolation data, and the joint
+    angles' s-derivatives (K, 4) each."""
+    n = len(heel)
+    k = FINE_PER_SAMPLE * (n - 1) + 1
+    s = np.linspace(0.0, 1.0, k)
+    m = pchip_slopes(heel)
+    table = _arc_length_map(sp, pivot_y, heel, m)
+    h = _heel_at(heel, m, table, s)
+    q = np.unwrap(leg_angles(sp, pivot_y, h), axis=0)
+    ds = 1.0 / (k - 1)
+    dq = np.gradient(q, ds, axis=0, edge_order=2)
+    ddq = np.gradient(dq, ds, axis=0, edge_order=2)
+    dh = np.gradient(h, ds, axis=0, edge_order=2)
+    ddh = np.gradient(dh, ds, axis=0, edge_order=2)
+    return s, (m, table, dh, ddh), dq, ddq
+
+
+def _finite_differences(q: np.ndarray, dt: float):
+    return np.diff(q, axis=0) / dt, np.diff(q, n=2, axis=0) / (dt * dt)
+
+
+def time_swings(trajs, config, rate: float | None = None, limits: DeviceLimits | None = None,
+                sp=None) -> list[TimedSwing]:
+    """Time every swing of ``trajs`` (Trajectory objects or a TrajectoryBatch) with the device
+    limits (default: ``config.device``) and sample each at ``rate`` Hz (default:
+    ``config.device.control_rate``). ``config`` also supplies the kinematics (pass the generator's
+    ``config``). The TOPP passes run on all swings at once."""
+    from jaxexo.physics import dynamics
+
+    trajs = list(trajs)
+    if not trajs:
+        raise ValueError("trajs: need at least one trajectory")
+    rate = float(config.device.control_rate if rate is None else rate)
+    if not math.isfinite(rate) or rate <= 0:
+        raise ValueError(f"rate: control rate must be a finite number > 0 (Hz), got {rate!r}")
+    limits = DeviceLimits.from_config(config) if limits is None else limits
+    if not isinstance(limits, DeviceLimits):
+        raise ValueError(f"limits: expected a DeviceLimits, got {type(limits).__name__}")
+    sp = dynamics.scalar_params(config) if sp is None else sp
+    vmax = np.asarray(limits.velocity)
+    amax = np.asarray(limits.acceleration)
+    heels = [np.asarray(t.heel, np.float64) for t in trajs]
+    for i, h in enumerate(heels):
+        if h.ndim != 2 or h.shape[1] != 2 or len(h) < 2 or not np.all(np.isfinite(h)):
+            raise ValueError(f"trajs[{i}].heel: expected a finite (N >= 2, 2) path, got shape {h.shape}")
+    paths = [_joint_paths(sp, t.scene.pivot_y, h) for t, h in zip(trajs, heels)]
+    caps = [np.full(len(p[0]), np.inf) for p in paths]
+    laws = _topp_laws(paths, list(range(len(paths))), caps, vmax, amax)
+    t_opt = [law.duration for law in laws]
+    slow = [1.0] * len(trajs)       # uniform slow-down beyond the (locally corrected) TOPP law
+    evals: list = [None] * len(trajs)
+    todo = list(range(len(trajs)))
+    for it in range(LOCAL_PASSES + MAX_SLOWDOWNS):
+        redo = []
+        for i in todo:
+            e = evals[i] = _evaluate(trajs[i], heels[i], paths[i], laws[i], slow[i], sp, limits, rate)
+            if e["ratio"] <= 1.0 - CHECK_MARGIN:
+                continue
+            if it < LOCAL_PASSES:
+                _lower_cap(caps[i], paths[i][0], e, vmax, amax)
+                redo.append(i)
+            else:
+                slow[i] *= e["ratio"] / (1.0 - 2.0 * CHECK_MARGIN)
+        if redo:
+            for i, law in zip(redo, _topp_laws(paths, redo, caps, vmax, amax)):
+                laws[i] = law
+        todo = [i for i in todo if evals[i]["ratio"] > 1.0 - CHECK_MARGIN]
+        if not todo:
+            break
+    return [_finish(trajs[i], evals[i], sp, limits, rate, t_opt[i], slow[i]) for i in range(len(trajs))]
+
+
+def _topp_laws(paths, idx, caps, vmax, amax) -> list[TimeLaw]:
+    """Time laws of paths[idx], one batched TOPP per grid size."""
+    out = {}
+    sizes = np.array([len(paths[i][0]) for i in idx])
+    for k in np.unique(sizes):
+        sub = [i for i, n in zip(idx, sizes) if n == k]
+        dq = np.stack([paths[i][2] for i in sub])
+        ddq = np.stack([paths[i][3] for i in sub])
+        cap = np.stack([caps[i] for i in sub])
+        x, floor = topp(dq, ddq, SAFETY * vmax, SAFETY * amax, 1.0 / (k - 1), cap)
+        for j, i in enumerate(sub):
+            out[i] = time_law(paths[i][0], x[j], floor[j])
+    return [out[i] for i in idx]
+
+
+def time_swing(traj, config, rate: float | None = None, limits: DeviceLimits | None = None) -> TimedSwing:
+    """One swing: ``time_swings([traj], ...)[0]``."""
+    return time_swings([traj], config, rate, limits)[0]
+
+
+def _evaluate(traj, heel, path, law: TimeLaw, slow: float, sp, limits: DeviceLimits, rate: float) -> dict:
+    """The exported samples of a law (stretched to the minimum duration and whole control periods,
+    and by ``slow``), and how far they are from the limits: ``ratio`` the largest of |v| / v_max and
+    sqrt(|a| / a_max) over the chain-rule columns and the finite differences."""
+    s_grid, (slopes, table, dh, ddh), dq, ddq = path
+    vmax = np.asarray(limits.velocity)
+    amax = np.asarray(limits.acceleration)
+    scale = max(1.0, limits.min_duration / law.duration) * slow
+    cur = law.slowed(scale)
+    periods = max(2, math.ceil(cur.duration * rate - 1e-9))
+    cur = cur.slowed(periods / (cur.duration * rate))      # whole control periods: never faster
+    t = np.arange(periods + 1) / rate
+    s, sd, sdd = cur.at(t)
+    s[0], s[-1] = 0.0, 1.0
+    h = _heel_at(heel, slopes, table, s)
+    h[0], h[-1] = heel[0], heel[-1]
+    q = leg_angles(sp, traj.scene.pivot_y, h)
+    dq_t = np.stack([np.interp(s, s_grid, dq[:, j]) for j in range(dq.shape[1])], axis=-1)
+    ddq_t = np.stack([np.interp(s, s_grid, ddq[:, j]) for j in range(ddq.shape[1])], axis=-1)
+    vel = dq_t * sd[:, None]
+    acc = ddq_t * (sd * sd)[:, None] + dq_t * sdd[:, None]
+    vel[0] = vel[-1] = acc[0] = acc[-1] = 0.0        # s' = s'' = 0 exactly at the ends
+    dh_t = np.stack([np.interp(s, s_grid, dh[:, j]) for j in range(2)], axis=-1)
+    ddh_t = np.stack([np.interp(s, s_grid, ddh[:, j]) for j in range(2)], axis=-1)
+    heel_vel = dh_t * sd[:, None]
+    heel_acc = ddh_t * (sd * sd)[:, None] + dh_t * sdd[:, None]
+    heel_vel[0] = heel_vel[-1] = heel_acc[0] = heel_acc[-1] = 0.0
+    fv, fa = _finite_differences(np.unwrap(q, axis=0), 1.0 / rate)
+    peak_v = np.maximum(np.abs(vel).max(axis=0), np.abs(fv).max(axis=0))
+    peak_a = np.maximum(np.abs(acc).max(axis=0), np.abs(fa).max(axis=0))
+    ratio = max(float(np.max(peak_v / vmax)), math.sqrt(float(np.max(peak_a / amax))))
+    return {"t": t, "s": s, "sd": sd / scale, "h": h, "vel": vel, "acc": acc, "fv": fv, "fa": fa,
+            "heel_vel": heel_vel, "heel_acc": heel_acc,
+            "peak_v": peak_v, "peak_a": peak_a, "ratio": ratio}
+
+
+def _lower_cap(cap, s_grid, e: dict, vmax, amax) -> None:
+    """Where exported samples exceed a limit (a bend too tight for the grid's q''), lower the speed
+    bound around them by the excess; the passes are then run again for this path."""
+    vel, acc, fv, fa, s = e["vel"], e["acc"], e["fv"], e["fa"], e["s"]
+    r = np.maximum(np.abs(vel) / vmax, np.sqrt(np.abs(acc) / amax)).max(axis=1)
+    rv = (np.abs(fv) / vmax).max(axis=1)
+    ra = np.sqrt(np.abs(fa) / amax).max(axis=1)
+    r[:-1] = np.maximum(r[:-1], rv)
+    r[1:] = np.maximum(r[1:], rv)
+    for k in range(3):
+        r[k: len(r) - 2 + k] = np.maximum(r[k: len(r) - 2 + k], ra)
+    x_now = np.interp(s_grid, s, e["sd"] ** 2)       # the law's own s'^2 (before stretching)
+    for k in np.flatnonzero(r > 1.0 - CHECK_MARGIN):
+        sel = (s_grid >= s[max(k - 2, 0)]) & (s_grid <= s[min(k + 2, len(s) - 1)])
+        cap[sel] = np.minimum(cap[sel], x_now[sel] * ((1.0 - 4.0 * CHECK_MARGIN) / r[k]) ** 2)
+
+
+def _finish(traj, e: dict, sp, limits: DeviceLimits, rate: float, t_opt: float, slow: float) -> TimedSwing:
+    notes = []
+    if limits.min_duration > t_opt:
+        notes.append(f"the limits allow {t_opt:.3f} s; the minimum swing duration {limits.min_duration:.3f} s is used")
+    vmax = np.asarray(limits.velocity)
+    amax = np.asarray(limits.acceleration)
+    t, s, h, vel, acc, peak_v, peak_a = (e[k] for k in ("t", "s", "h", "vel", "acc", "peak_v", "peak_a"))
+    within = bool(np.all(peak_v <= vmax) and np.all(peak_a <= amax))
+    sc = traj.scene
+    m = measure(sp, h[None], clearances(sp.foot_length, h[None], [sc]), np.array([sc.pivot_y]),
+                np.array([sc.goal_y]))
+    reasons = _reasons(m, 0, h, sc.goal_y, t)
+    checks = TrajectoryChecks(bool(m["reached_goal"][0]), bool(m["collision_free"][0]),
+                              float(m["min_clearance"][0]), bool(m["joint_limits_ok"][0]),
+                              bool(m["leg_length_ok"][0]), reasons)
+    kin = m["kin"]
+    toe = h.copy()
+    toe[:, 0] += sp.foot_length
+    return TimedSwing(
+        method=traj.method, scene=sc, rate=rate, duration=float(t[-1]), limits=limits, time=t, heel=h, toe=toe,
+        hip=kin["hip"][0], knee_swing=kin["knee_swing"][0], knee_stance=kin["knee_stance"][0],
+        joint_angles=m["angles"][0], joint_velocity=vel, joint_acceleration=acc, heel_velocity=e["heel_vel"],
+        heel_acceleration=e["heel_acc"], path_parameter=s, checks=checks,
+        within_limits=within, peak_velocity=peak_v, peak_acceleration=peak_a, slowdown=slow,
+        notes=tuple(getattr(traj, "notes", ())) + tuple(notes))
+
+
+def uniform_peaks(traj) -> tuple[np.ndarray, np.ndarray]:
+    """Peak |joint velocity| (4,) and |acceleration| (4,) of a trajectory as generated, at its own
+    uniform time stamps (finite differences), for comparison with a timed swing."""
+    dt = float(traj.time[1] - traj.time[0])
+    fv, fa = _finite_differences(np.unwrap(np.asarray(traj.joint_angles), axis=0), dt)
+    return np.abs(fv).max(axis=0), np.abs(fa).max(axis=0)
+
+
+__all__ = ["DeviceLimits", "TimedSwing", "TimeLaw", "time_swing", "time_swings", "topp", "time_law",
+           "max_speed_curve", "pchip_slopes", "pchip_eval", "leg_angles", "uniform_peaks"]

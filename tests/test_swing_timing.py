@@ -1,0 +1,279 @@
+"""Device-ready swings (jaxexo.inference.swing_timing): joint velocity and acceleration limits held on
+the exported samples (checked here by finite differences of the exported positions, independently
+of the module's own columns), rest at both ends, samples on the path, durations that scale with the
+limits, a shorter swing than a fixed-shape (quintic) time law found by brute force, config and
+argument errors, exports and the CLI."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+
+import numpy as np
+import pytest
+
+from jaxexo.baselines import CFFTG
+from jaxexo.config import ConfigError, Config, config_from_dict, load_config
+from jaxexo.config.toml_io import config_to_toml
+from jaxexo.inference import Obstacle
+from jaxexo.inference.swing_timing import DeviceLimits, time_swing, time_swings, uniform_peaks
+from jaxexo.inference.trajectory import TIMED_CSV_COLUMNS, assemble
+from jaxexo.physics import dynamics, kinematics
+
+from conftest import ROOT
+
+CFG = load_config(ROOT / "configs" / "default.toml")
+SP = dynamics.scalar_params(CFG)
+THESIS = ("base1", "base2", "base3", "triangle", "half_circle")
+
+
+def fd(q, rate):
+    """Independent check: finite differences of exported positions at the control rate."""
+    dt = 1.0 / rate
+    return np.diff(q, axis=0) / dt, np.diff(q, n=2, axis=0) / dt**2
+
+
+def assert_device_ready(sw, limits: DeviceLimits, rate: float):
+    vmax, amax = np.array(limits.velocity), np.array(limits.acceleration)
+    v, a = fd(sw.joint_angles, rate)
+    assert np.all(np.abs(v) <= vmax), (np.abs(v).max(0), vmax)
+    assert np.all(np.abs(a) <= amax), (np.abs(a).max(0), amax)
+    assert np.all(np.abs(sw.joint_velocity) <= vmax) and np.all(np.abs(sw.joint_acceleration) <= amax)
+    assert sw.within_limits
+    # Rest at lift-off and touch-down: zero velocity and acceleration, and the positions barely move
+    # over the first and last control period (s ~ t^3 there).
+    for end in (0, -1):
+        assert np.all(sw.joint_velocity[end] == 0) and np.all(sw.joint_acceleration[end] == 0)
+    assert np.all(np.abs(v[[0, -1]]) <= 0.05 * vmax)
+    assert np.all(np.abs(a[[0, -1]]) <= 0.5 * amax)
+    # Uniform control periods from 0 to the duration.
+    assert sw.time[0] == 0 and sw.time[-1] == pytest.approx(sw.duration)
+    np.testing.assert_allclose(np.diff(sw.time), 1.0 / rate, rtol=1e-9)
+
+
+def random_path(rng, n=100, dense=None):
+    """A random smooth swing (n, 2) from (0, 0) to (0.70, 0), z >= 0; with ``dense``, also the same
+    curve at that many points (the reference for "on the path")."""
+    k = np.arange(1, 4)[:, None]
+    cy, h, cz, p = rng.uniform(-0.03, 0.03, (3, 1)), rng.uniform(0.05, 0.30), rng.uniform(-0.01, 0.01, (3, 1)), \
+        rng.uniform(0.6, 2.0)
+
+    def curve(tau):
+        y = 0.70 * tau + (cy * np.sin(k * np.pi * tau)).sum(0)
+        z = (h + (cz * np.sin(k * np.pi * tau)).sum(0)) * np.sin(np.pi * tau) ** p
+        return np.column_stack([y, z])
+
+    path = curve(np.linspace(0.0, 1.0, n))
+    return path if dense is None else (path, curve(np.linspace(0.0, 1.0, dense)))
+
+
+def synthetic(paths, pivot="between"):
+    ob = Obstacle.rectangle(0.05, 0.05, center_y=0.45)
+    scenes = [dynamics.make_scene(ob, pivot, 0.0, 0.70, foot_length=SP.foot_length) for _ in paths]
+    return list(assemble("test", SP, scenes, list(paths), np.stack(paths), [float("nan")] * len(paths)))
+
+
+def test_limits_hold_on_random_paths_and_ends_rest():
+    rng = np.random.default_rng(3)
+    trajs = synthetic([random_path(rng) for _ in range(12)])
+    lim = DeviceLimits.from_config(CFG)
+    for rate in (100.0, 500.0):
+        for sw in time_swings(trajs, CFG, rate=rate):
+            assert_device_ready(sw, lim, rate)
+            # At 100 Hz the TOPP passes, not the safety net, set the timing; at 500 Hz finite
+            # differences resolve the C1 path interpolant's jumps in q'' and the net slows more.
+            assert sw.slowdown < (1.25 if rate == 100 else 1.6)
+
+
+def test_limits_hold_on_polylines_with_corners():
+    # The generator's last fallback is the raw polyline: corners in joint space, where the law must
+    # nearly stop; the exported samples are held within the limits all the same.
+    rng = np.random.default_rng(11)
+    paths = []
+    for _ in range(4):
+        pts = np.array([[0, 0], [0.1, rng.uniform(0.1, 0.25)], [0.45, rng.uniform(0.25, 0.35)],
+                        [0.62, rng.uniform(0.05, 0.15)], [0.70, 0.0]])
+        seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+        arc = np.concatenate([[0], np.cumsum(seg)])
+        u = np.linspace(0, arc[-1], 100)
+        paths.append(np.column_stack([np.interp(u, arc, pts[:, 0]), np.interp(u, arc, pts[:, 1])]))
+    lim = DeviceLimits.from_config(CFG)
+    for sw in time_swings(synthetic(paths), CFG, rate=100):
+        assert_device_ready(sw, lim, 100)
+
+
+def test_thesis_obstacles_and_unseen_shapes_cfftg():
+    cf = CFFTG(CFG)
+    obs = [Obstacle.named(k) for k in THESIS] + [Obstacle.rectangle(0.08, 0.25), Obstacle.triangle(0.22, 0.10),
+                                                 Obstacle.half_ellipse(0.18, 0.22),
+                                                 Obstacle.profile([(0.35, 0), (0.40, 0.15), (0.50, 0.08), (0.55, 0)])]
+    batch = cf.generate_batch(obs, pivot=["agent", "obstacle", "between"] * 3)
+    lim = DeviceLimits.from_config(CFG)
+    for tr, sw in zip(batch, time_swings(batch, CFG, rate=200)):
+        assert_device_ready(sw, lim, 200)
+        assert sw.checks.ok == tr.checks.ok     # the exported samples pass the path's checks too
+        assert sw.checks.min_clearance == pytest.approx(tr.checks.min_clearance, abs=2e-3)
+        # The uniform 1 s timing of the same path asks for more than the device gives.
+        assert uniform_peaks(tr)[0].max() > sw.peak_velocity.max()
+
+
+def test_samples_lie_on_the_path():
+    rng = np.random.default_rng(5)
+    path, ref = random_path(rng, dense=10_000)
+    (tr,) = synthetic([path])
+    sw = time_swing(tr, CFG, rate=250)
+    np.testing.assert_array_equal(sw.heel[0], tr.heel[0])
+    np.testing.assert_array_equal(sw.heel[-1], tr.heel[-1])
+    # Distance of every exported heel to the same curve sampled 100 times as densely (brute force).
+    a, b = ref[:-1], ref[1:]
+    d = b - a
+    p = sw.heel[:, None, :]
+    t = np.clip(np.sum((p - a) * d, -1) / np.maximum(np.sum(d * d, -1), 1e-18), 0.0, 1.0)
+    dist = np.linalg.norm(p - (a + t[..., None] * d), axis=-1).min(axis=1)
+    # 1 mm: between its 100 samples the path is a monotone cubic (PCHIP), which flattens at extrema.
+    assert dist.max() < 1e-3
+    assert np.all(np.diff(sw.path_parameter) >= 0)      # forward along the path, never back
+    # The exported kinematics are the project's kinematics of the exported heel.
+    ks = kinematics.leg_state(np, tr.scene.pivot_y, sw.heel, SP.thigh, SP.shin)
+    np.testing.assert_allclose(sw.joint_angles[:, 1], ks["knee_swing_angle"], atol=1e-9)
+    np.testing.assert_allclose(sw.toe[:, 0] - sw.heel[:, 0], SP.foot_length)
+    # The heel's velocity column against central differences of the exported heel positions.
+    cd = (sw.heel[2:] - sw.heel[:-2]) * 250 / 2
+    np.testing.assert_allclose(sw.heel_velocity[1:-1], cd, atol=0.02 * np.abs(cd).max())
+    assert np.all(sw.heel_velocity[[0, -1]] == 0) and np.all(sw.heel_acceleration[[0, -1]] == 0)
+
+
+def test_durations_scale_with_the_limits():
+    rng = np.random.default_rng(7)
+    trajs = synthetic([random_path(rng) for _ in range(3)])
+    base = DeviceLimits.from_config(CFG)
+    # Velocity-bound (accelerations practically unlimited): half the speed, twice the time.
+    vb = base.scaled(acceleration=1e4)
+    t1 = np.array([s.duration for s in time_swings(trajs, CFG, rate=200, limits=vb)])
+    t2 = np.array([s.duration for s in time_swings(trajs, CFG, rate=200, limits=vb.scaled(velocity=0.5))])
+    assert np.all((t2 / t1 > 1.85) & (t2 / t1 < 2.15)), t2 / t1
+    # Acceleration-bound: a quarter of the acceleration, twice the time.
+    ab = base.scaled(velocity=1e3)
+    t3 = np.array([s.duration for s in time_swings(trajs, CFG, rate=200, limits=ab)])
+    t4 = np.array([s.duration for s in time_swings(trajs, CFG, rate=200, limits=ab.scaled(acceleration=0.25))])
+    assert np.all((t4 / t3 > 1.85) & (t4 / t3 < 2.15)), t4 / t3
+    # A minimum duration is honoured (and the swing is still at rest at both ends).
+    sw = time_swing(trajs[0], CFG, rate=100, limits=dataclasses.replace(base, min_duration=3.0))
+    assert sw.duration == pytest.approx(3.0, abs=0.011)
+    assert_device_ready(sw, base, 100)
+
+
+def quintic_duration(tr, limits, rate=1000.0):
+    """Brute-force reference: the shortest T for which the fixed rest-to-rest quintic time law
+    s = 10 x^3 - 15 x^4 + 6 x^5 (x = t / T) along the path's polyline by arc length keeps the finite
+    differences of the joint angles within the limits (bisection on T)."""
+    seg = np.linalg.norm(np.diff(tr.heel, axis=0), axis=1)
+    arc = np.concatenate([[0.0], np.cumsum(seg)]) / seg.sum()
+    dense = np.linspace(0, 1, 20001)
+    heel = np.column_stack([np.interp(dense, arc, tr.heel[:, 0]), np.interp(dense, arc, tr.heel[:, 1])])
+    q = np.stack(list(kinematics.leg_state(np, tr.scene.pivot_y, heel, SP.thigh, SP.shin)[k] for k in
+                      ("hip_swing", "knee_swing_angle", "hip_stance", "knee_stance_angle")), -1)
+    vmax, amax = np.array(limits.velocity), np.array(limits.acceleration)
+
+    def ok(T):
+        x = np.linspace(0, 1, int(T * rate) + 1)
+        s = 10 * x**3 - 15 * x**4 + 6 * x**5
+        qs = np.stack([np.interp(s, dense, q[:, j]) for j in range(4)], -1)
+        v, a = fd(qs, (len(x) - 1) / T)
+        return np.all(np.abs(v) <= vmax) and np.all(np.abs(a) <= amax)
+
+    lo, hi = 0.05, 20.0
+    for _ in range(30):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (lo, mid) if ok(mid) else (mid, hi)
+    return hi
+
+
+def test_variable_speed_beats_a_fixed_time_law():
+    cf = CFFTG(CFG)
+    lim = DeviceLimits.from_config(CFG)
+    for kind in ("base2", "triangle"):
+        tr = cf.generate(Obstacle.named(kind), pivot="between")
+        t_opt = time_swing(tr, CFG, rate=1000).duration
+        t_fixed = quintic_duration(tr, lim)
+        assert t_opt < t_fixed, (kind, t_opt, t_fixed)
+
+
+def test_exports_carry_velocities_accelerations_and_limits(tmp_path):
+    tr = CFFTG(CFG).generate(Obstacle.named("base1"), pivot="agent")
+    sw = time_swing(tr, CFG, rate=100)
+    text = sw.to_csv(tmp_path / "s.csv")
+    header = text.splitlines()[0].split(",")
+    assert header == list(TIMED_CSV_COLUMNS)
+    assert "hip_swing_vel_rad_s" in header and "knee_stance_acc_rad_s2" in header
+    data = np.loadtxt(tmp_path / "s.csv", delimiter=",", skiprows=1)
+    assert data.shape == (len(sw.time), len(TIMED_CSV_COLUMNS))
+    np.testing.assert_allclose(data[:, header.index("knee_swing_vel_rad_s")], sw.joint_velocity[:, 1], rtol=1e-8,
+                               atol=1e-8)
+    doc = json.loads(sw.to_json(tmp_path / "s.json"))
+    assert doc["limits"]["joint_velocity_rad_s"] == list(CFG.device.joint_velocity) * 2
+    assert doc["limits"]["joint_acceleration_rad_s2"] == list(CFG.device.joint_acceleration) * 2
+    assert doc["rate_hz"] == 100 and doc["duration_s"] == pytest.approx(sw.duration)
+    assert doc["checks"]["within_limits"] is True and len(doc["samples"]) == len(sw.time)
+
+
+def test_device_config_section_and_bad_input():
+    assert max(Config().device.joint_velocity) <= math.radians(300)
+    cfg = config_from_dict({"device": {"joint_velocity": [2.0, 2.5], "joint_acceleration": [10, 12],
+                                       "min_swing_duration": 0.8, "control_rate": 250}})
+    assert cfg.device.joint_velocity == (2.0, 2.5) and cfg.device.control_rate == 250.0
+    import tomllib
+    assert config_from_dict(tomllib.loads(config_to_toml(cfg))).device == cfg.device
+    lim = DeviceLimits.from_config(cfg)
+    assert lim.velocity == (2.0, 2.5, 2.0, 2.5) and lim.min_duration == 0.8
+    with pytest.raises(ConfigError, match=r"device\.joint_velocity\[1\]"):
+        config_from_dict({"device": {"joint_velocity": [2.0, -1.0]}})
+    with pytest.raises(ConfigError, match=r"device\.joint_acceleration"):
+        config_from_dict({"device": {"joint_acceleration": [2.0]}})
+    with pytest.raises(ConfigError, match=r"device\.control_rate"):
+        config_from_dict({"device": {"control_rate": 0}})
+    with pytest.raises(ConfigError, match=r"device\.speed"):
+        config_from_dict({"device": {"speed": 1}})
+    with pytest.raises(ValueError, match=r"limits\.velocity"):
+        DeviceLimits((1.0, 2.0, float("nan"), 1.0), (1.0,) * 4)
+    with pytest.raises(ValueError, match=r"limits\.acceleration"):
+        DeviceLimits((1.0,) * 4, (1.0, 2.0))
+    with pytest.raises(ValueError, match=r"limits\.min_duration"):
+        DeviceLimits((1.0,) * 4, (1.0,) * 4, -1.0)
+    tr = CFFTG(CFG).generate(Obstacle.named("base1"))
+    with pytest.raises(ValueError, match=r"rate"):
+        time_swing(tr, CFG, rate=0.0)
+    with pytest.raises(ValueError, match=r"heel"):
+        time_swing(dataclasses.replace(tr, heel=tr.heel * np.nan), CFG)
+
+
+def test_rl_swings_on_the_thesis_obstacles(trained_run):
+    from jaxexo.inference import TrajectoryGenerator
+
+    gen = TrajectoryGenerator.load(trained_run / "policy.npz")
+    batch = gen.generate_batch([Obstacle.named(k) for k in THESIS] * 3,
+                               pivot=[p for p in ("agent", "obstacle", "between") for _ in THESIS])
+    lim = DeviceLimits.from_config(gen.config)
+    for tr, sw in zip(batch, time_swings(batch, gen.config, rate=100)):
+        assert_device_ready(sw, lim, 100)
+        assert sw.checks.collision_free == tr.checks.collision_free
+
+
+def test_cli_generate_rate_and_animation(trained_run, tmp_path):
+    from jaxexo.cli import main
+
+    out = tmp_path / "t.csv"
+    rc = main(["generate", "--policy", str(trained_run / "policy.npz"), "--obstacle", "base2", "--rate", "200",
+               "--out", str(out), "--json", str(tmp_path / "t.json"), "--animate", str(tmp_path / "s.gif")])
+    doc = json.loads((tmp_path / "t.json").read_text())
+    assert rc == (0 if doc["checks"]["ok"] else 1)
+    assert doc["rate_hz"] == 200 and doc["columns"] == list(TIMED_CSV_COLUMNS)
+    data = np.loadtxt(out, delimiter=",", skiprows=1)
+    assert data.shape[1] == len(TIMED_CSV_COLUMNS) and data[-1, 0] == pytest.approx(doc["duration_s"])
+    from PIL import Image
+
+    with Image.open(tmp_path / "s.gif") as im:
+        assert im.n_frames >= 10
+    assert main(["generate", "--policy", str(trained_run / "policy.npz"), "--obstacle", "base2", "--rate", "-5",
+                 "--out", str(out)]) == 2
