@@ -113,7 +113,8 @@ def cmd_generate(args) -> int:
         from jaxexo.inference import TrajectoryGenerator
 
         gen = TrajectoryGenerator.load(args.policy)
-        traj = gen.generate(obstacle_from_args(args), smoothing=args.smoothing, **common)
+        traj = gen.generate(obstacle_from_args(args), smoothing=args.smoothing,
+                            fallback=None if args.fallback == "none" else args.fallback, **common)
     timed = _timed_swing(args, traj, gen.config)
     (timed or traj).to_csv(args.out)
     written = [args.out]
@@ -131,9 +132,11 @@ def cmd_generate(args) -> int:
         animate_swing(timed, args.animate)
         written.append(args.animate)
     c = traj.checks
-    moves = f"{len(traj.raw) - 1} agent moves" if args.method == "rl" else "polynomial path (CFFTG)"
+    moves = f"{len(traj.raw) - 1} agent moves" if traj.method == "rl" else (
+        "polynomial path (CFFTG fallback: the RL swing was not safe)" if traj.method == "cfftg-fallback"
+        else "polynomial path (CFFTG)")
     print(f"{traj.scene.obstacle.kind} {traj.scene.width * 100:.1f} x {traj.scene.height * 100:.1f} cm, pivot "
-          f"{traj.scene.pivot}: {moves}, min clearance {c.min_clearance * 100:.1f} cm, "
+          f"{traj.scene.pivot}: {moves}, min clearance (between samples, guaranteed) {c.min_clearance * 100:.1f} cm, "
           f"{'ok' if c.ok else 'FAILED'}")
     for r in c.reasons + traj.notes:
         print(f"  {r}")
@@ -266,6 +269,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--start-y", type=float, default=0.0, help="swing heel start y, m")
     g.add_argument("--step-length", type=float, default=0.70, help="goal = start + this, m")
     g.add_argument("--points", type=int, default=100, help="samples of the smoothed path")
+    g.add_argument("--fallback", choices=("cfftg", "none"), default="cfftg",
+                   help="when the RL swing is not safe, return CFFTG's plan (cfftg) or the RL swing alone (none)")
     g.add_argument("--smoothing", type=float, default=0.005,
                    help="B-spline smoothing s, m^2 (0: raw polyline); rl only")
     g.add_argument("--duration", type=float, default=1.0, help="swing duration for the time stamps, s "

@@ -37,7 +37,7 @@ def eval_out(trained_run, tmp_path_factory):
 @pytest.mark.slow
 def test_eval_writes_report_json_md_and_figures(eval_out):
     report = json.loads((eval_out / "report.json").read_text())
-    assert set(report) == {"rl", "cfftg"}
+    assert set(report) == {"rl", "rl+cfftg", "cfftg"}
     for name, r in report.items():
         for key in ("accuracy", "success", "time_ms_median", "batch_1000_ms", "by_kind", "by_pivot"):
             assert key in r, (name, key)
@@ -46,7 +46,7 @@ def test_eval_writes_report_json_md_and_figures(eval_out):
         assert set(r["by_kind"]) == {"base1", "base2", "base3", "triangle", "half_circle", "rectangle"}
         assert set(r["by_pivot"]) == {"agent", "obstacle", "between"}
     md = (eval_out / "report.md").read_text()
-    assert "| rl | 60 |" in md and "| cfftg | 60 |" in md and "By obstacle kind" in md
+    assert "| rl | 60 |" in md and "| cfftg | 60 |" in md and "| rl+cfftg | 60 |" in md and "By obstacle kind" in md
     assert "(timed on 100, scaled)" in md
     for fig in ("trajectories.png", "joint_angles.png"):
         assert (eval_out / fig).stat().st_size > 10_000
@@ -67,8 +67,12 @@ def test_eval_numbers_are_consistent(eval_out):
         assert r["knee_swing_min_deg"] <= r["knee_swing_mean_deg"] <= 0.0 <= r["hip_swing_mean_deg"]
         assert r["min_clearance_m_worst"] <= r["min_clearance_m_mean"]
         assert r["path_length_m_mean"] > 0.6           # at least the step length
-    # CFFTG plans every thesis and training obstacle of this config.
+    # CFFTG plans every thesis and training obstacle of this config; the RL swing with the CFFTG
+    # fallback is safe wherever either is (issue 11).
     assert report["cfftg"]["success"] == 1.0
+    assert report["rl+cfftg"]["success"] == 1.0 >= report["rl"]["success"]
+    assert report["rl"]["fallback_rate"] == 0.0
+    assert abs(report["rl+cfftg"]["fallback_rate"] - (1.0 - report["rl"]["success"])) < 1e-12
 
 
 @pytest.mark.slow

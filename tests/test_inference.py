@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from conftest import ROOT
-from jaxexo.physics import dynamics, geometry, kinematics
+from jaxexo.physics import dynamics, geometry, kinematics, swept
 from jaxexo.config import PIVOT_CONDITIONS, load_config
 from jaxexo.inference import Obstacle, TrajectoryError, TrajectoryGenerator
 from jaxexo.inference import smoothing as sm
@@ -210,9 +210,13 @@ def test_trajectory_fields_follow_the_shared_kinematics(trained_policy):
     np.testing.assert_allclose(t.joint_angles[:, 2], kin["hip_stance"], atol=1e-6)
     # Thigh and shin keep their lengths wherever the leg can reach.
     np.testing.assert_allclose(np.linalg.norm(t.knee_swing - t.hip, axis=1), sp.thigh, atol=1e-6)
+    # The clearance is the exact swept clearance over the moves between samples (issue 11) less the
+    # spline's chord-deviation bound: never more than the samples' own clearance.
     clear = ob.clearance(t.heel, sp.foot_length)
-    assert t.checks.min_clearance == pytest.approx(clear.min(), abs=1e-9)
-    assert t.checks.collision_free == bool(np.all(clear > geometry.TOUCH_EPS))
+    sw = swept.path_swept_clearance(np, t.heel, sp.foot_length, t.scene.outline)
+    assert t.checks.min_clearance == pytest.approx(sw.min() - t.checks.deviation, abs=1e-9)
+    assert t.checks.min_clearance <= clear.min()
+    assert t.checks.collision_free == bool(t.checks.min_clearance > geometry.TOUCH_EPS)
     # Starts at the start, ends where the agent ended, never below the ground.
     np.testing.assert_allclose(t.heel[0], t.raw[0])
     np.testing.assert_allclose(t.heel[-1], t.raw[-1])
@@ -222,11 +226,11 @@ def test_trajectory_fields_follow_the_shared_kinematics(trained_policy):
 def test_a_failed_trajectory_says_why_and_strict_raises(policies):
     gen = TrajectoryGenerator.load(policies["ln_signs"])     # an untrained network: it cannot get there
     ob = Obstacle.named("base1")
-    t = gen.generate(ob)
+    t = gen.generate(ob, fallback=None)      # the RL swing alone (the CFFTG fallback is tested apart)
     assert not t.ok and not t.checks.reached_goal
     assert any("did not reach the goal" in r for r in t.checks.reasons)
     with pytest.raises(TrajectoryError, match="did not reach the goal") as e:
-        gen.generate(ob, strict=True)
+        gen.generate(ob, strict=True, fallback=None)
     assert not e.value.trajectory.ok
 
 
@@ -237,31 +241,34 @@ def test_smoothing_that_would_touch_the_obstacle_falls_back(trained_policy):
     scene = gen.scene(ob, pivot="obstacle")
     foot = gen.sp.foot_length
     # A raw path that hugs the obstacle's near-top corner: straight up just before it, across just
-    # above it, straight down after it. Smoothing cuts the corners into the obstacle.
-    up = [(0.14, z) for z in np.arange(0.0, 0.231, 0.03)]
-    over = [(y, 0.23) for y in np.arange(0.17, 0.46, 0.03)]
-    down = [(0.47, z) for z in np.arange(0.20, -0.001, -0.03)] + [(0.47, 0.0)]
-    raw = np.array([(0.0, 0.0), (0.07, 0.0)] + up + over + down + [(0.70, 0.0)])
+    # above it, straight down after it, keeping the 2 cm safety margin (issue 11: the fallback keeps
+    # the raw path's margin). Smoothing cuts the corners into the obstacle.
+    up = [(0.12, z) for z in np.arange(0.0, 0.231, 0.03)]
+    over = [(y, 0.23) for y in np.arange(0.15, 0.46, 0.03)]
+    down = [(0.48, z) for z in np.arange(0.20, -0.001, -0.03)] + [(0.48, 0.0)]
+    raw = np.array([(0.0, 0.0), (0.06, 0.0)] + up + over + down + [(0.70, 0.0)])
     assert np.all(ob.clearance(raw, foot) > 0)
+    assert swept.path_swept_clearance(np, raw, foot, scene.outline).min() >= gen.config.env.min_clearance
     smooth = sm.bspline_smooth(raw, 100, 0.05)
     assert ob.clearance(smooth, foot).min() <= geometry.TOUCH_EPS      # the premise: plain smoothing collides
-    t = gen._finish([scene], [raw], 100, 0.05, 1.0)[0]
+    t = gen._finish([scene], [raw], 100, 0.05, 1.0, None)[0]
     assert t.checks.collision_free and t.checks.min_clearance > geometry.TOUCH_EPS
     assert (np.isnan(t.smoothing) or t.smoothing < 0.05) and t.notes
     # In a batch, only the rows that need it fall back; the others keep the full smoothing.
     arc = np.linspace(0.0, np.pi, 25)
     plain = np.column_stack([0.35 * (1 - np.cos(arc)), 0.45 * np.sin(arc)])    # high above it
-    both = gen._finish([scene, scene], [plain, raw], 100, 0.05, 1.0)
+    both = gen._finish([scene, scene], [plain, raw], 100, 0.05, 1.0, None)
     assert both[0].smoothing == 0.05 and not both[0].notes and both[0].checks.collision_free
     np.testing.assert_allclose(both[1].heel, t.heel)
-    assert both[1].smoothing == t.smoothing and both[1].checks == t.checks
+    np.testing.assert_equal(both[1].smoothing, t.smoothing)      # nan (the raw polyline) equals nan
+    assert both[1].checks == t.checks
     # A raw path that itself touches the obstacle keeps its smoothing, and the checks say so.
     bad = raw.copy()
     bad[len(up) + 4, 1] = 0.15
-    t = gen._finish([scene], [bad], 100, 0.05, 1.0)[0]
+    t = gen._finish([scene], [bad], 100, 0.05, 1.0, None)[0]
     assert t.smoothing == 0.05 and not t.checks.collision_free and not t.notes
     # With no smoothing asked for, the raw polyline is returned as it is.
-    t = gen._finish([scene], [raw], 100, 0.0, 1.0)[0]
+    t = gen._finish([scene], [raw], 100, 0.0, 1.0, None)[0]
     assert np.isnan(t.smoothing)
     np.testing.assert_allclose(t.heel[[0, -1]], raw[[0, -1]])
 

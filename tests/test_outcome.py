@@ -1,6 +1,8 @@
-"""jaxexo.physics.outcome: the one strict-success verdict, checked against a plain-Python reference,
+"""jaxexo.physics.outcome: the one safe-swing verdict, checked against a plain-Python reference,
 the same in NumPy and JAX, the same whether folded step by step or reduced over samples, and used
 by the trainer's per-episode counts."""
+
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -9,12 +11,15 @@ from jaxexo.physics import geometry, outcome
 
 
 def _reference(reached, clearance, limit_bad, leg_bad, heel_y, margin=0.0, back_tol=np.inf):
-    """Strict success written out sample by sample."""
+    """A safe swing written out sample by sample: the heel must not fall back more than ``back_tol``
+    behind the furthest y it reached before."""
     ok = bool(reached)
+    furthest = -np.inf
     for j in range(len(clearance)):
         if clearance[j] - margin <= geometry.TOUCH_EPS or limit_bad[j] or leg_bad[j]:
             ok = False
-        if j and heel_y[j - 1] - heel_y[j] > back_tol:
+        furthest = max(furthest, heel_y[j])
+        if furthest - heel_y[j] > back_tol:
             ok = False
     return ok
 
@@ -38,22 +43,33 @@ def test_from_samples_matches_reference(rule):
     rng = np.random.default_rng(0)
     reached, c, lb, gb, hy = _random_paths(rng)
     v = outcome.from_samples(np, reached, c, lb, gb, hy, **rule)
-    ref = [_reference(reached[i], c[i], lb[i], gb[i], hy[i], rule.get("min_clearance_margin", 0.0),
-                      rule.get("backward_tolerance", np.inf)) for i in range(len(reached))]
+    ref = [_reference(reached[i], c[i], lb[i], gb[i], hy[i],
+                      rule.get("min_clearance_margin", outcome.DEFAULT_MIN_CLEARANCE),
+                      rule.get("backward_tolerance", outcome.DEFAULT_BACKWARD_TOLERANCE)) for i in range(len(reached))]
     np.testing.assert_array_equal(v["success"], ref)
     assert 0.05 < np.mean(ref) < 0.95, "the random paths must exercise both verdicts"
     # Accuracy (eq 3.1) ignores the margin.
     np.testing.assert_array_equal(v["collision_free"], (c > geometry.TOUCH_EPS).all(axis=1))
 
 
-def test_defaults_are_todays_rule():
-    """Margin 0 and no backward check: success = goal & never touched & limits & leg length."""
+def test_margin_zero_and_no_backward_check_is_the_contact_rule():
+    """Margin 0 and an infinite backward tolerance: success = goal & never touched & limits & leg length
+    (the rule before the safe-swing margin, kept reachable through the config)."""
     rng = np.random.default_rng(1)
     reached, c, lb, gb, hy = _random_paths(rng)
-    v = outcome.from_samples(np, reached, c, lb, gb, hy)
-    today = reached & ~(c <= geometry.TOUCH_EPS).any(1) & ~lb.any(1) & ~gb.any(1)
-    np.testing.assert_array_equal(v["success"], today)
-    assert outcome.DEFAULT_MIN_CLEARANCE == 0.0 and np.isinf(outcome.DEFAULT_BACKWARD_TOLERANCE)
+    v = outcome.from_samples(np, reached, c, lb, gb, hy, min_clearance_margin=0.0, backward_tolerance=np.inf)
+    contact_rule = reached & ~(c <= geometry.TOUCH_EPS).any(1) & ~lb.any(1) & ~gb.any(1)
+    np.testing.assert_array_equal(v["success"], contact_rule)
+
+
+def test_defaults_are_the_configs_safe_swing():
+    """The rule's defaults are declared once (here) and are the config's env defaults."""
+    from jaxexo.config import Config
+
+    env = Config().env
+    assert (env.min_clearance, env.backward_tolerance) == (outcome.DEFAULT_MIN_CLEARANCE,
+                                                           outcome.DEFAULT_BACKWARD_TOLERANCE) == (0.02, 0.005)
+    assert outcome.rule(env) == {"min_clearance_margin": 0.02, "backward_tolerance": 0.005}
 
 
 def test_margin_and_backward_tolerance_fail_the_right_check():
@@ -61,14 +77,13 @@ def test_margin_and_backward_tolerance_fail_the_right_check():
     c = np.array([[0.05, 0.015, 0.03, 0.05]])         # 1.5 cm closest approach
     no = np.zeros((1, 4), bool)
     yes = np.array([True])
-    assert outcome.from_samples(np, yes, c, no, no, hy)["success"][0]
-    v = outcome.from_samples(np, yes, c, no, no, hy, min_clearance_margin=0.02)
+    contact_rule = {"min_clearance_margin": 0.0, "backward_tolerance": np.inf}
+    assert outcome.from_samples(np, yes, c, no, no, hy, **contact_rule)["success"][0]
+    v = outcome.from_samples(np, yes, c, no, no, hy, min_clearance_margin=0.02, backward_tolerance=np.inf)
     assert outcome.failed_checks(v, 0) == ("clearance_ok",) and v["collision_free"][0]
-    v = outcome.from_samples(np, yes, c, no, no, hy, backward_tolerance=0.005)
+    v = outcome.from_samples(np, yes, c, no, no, hy, min_clearance_margin=0.0, backward_tolerance=0.005)
     assert outcome.failed_checks(v, 0) == ("backward_ok",)
     np.testing.assert_allclose(v["max_backward"], [0.01])
-    with pytest.raises(ValueError, match="max_backward"):
-        outcome.verdict(np, yes, c.min(1), yes, yes, None, backward_tolerance=0.01)
 
 
 def test_step_by_step_equals_samples_and_jax_equals_numpy():
@@ -80,14 +95,15 @@ def test_step_by_step_equals_samples_and_jax_equals_numpy():
     end = rng.integers(5, 20, size=200)                 # episode length; later steps are junk
     goal_step = np.zeros((200, 20), bool)
     goal_step[np.arange(200), end - 1] = reached
-    prev = np.concatenate([hy[:, :1], hy[:, :-1]], axis=1)
+    # transition's info["backward"]: how far the heel is behind its furthest y before the step
+    furthest = np.maximum.accumulate(np.concatenate([hy[:, :1], hy[:, :-1]], axis=1), axis=1)
     rule = {"min_clearance_margin": 0.01, "backward_tolerance": 0.02}
     for xp in (np, jnp):
         acc = outcome.start(xp, (200,))
         for j in range(20):
             info = {"goal_reached": xp.asarray(goal_step[:, j]), "clearance": xp.asarray(c[:, j], dtype=xp.float32),
                     "joint_limit_violation": xp.asarray(lb[:, j]), "leg_length_violation": xp.asarray(gb[:, j]),
-                    "backward": xp.asarray(prev[:, j] - hy[:, j], dtype=xp.float32)}
+                    "backward": xp.asarray(furthest[:, j] - hy[:, j], dtype=xp.float32)}
             acc = outcome.accumulate(xp, acc, info, xp.asarray(j < end))
         v = outcome.episode_verdict(xp, acc, **rule)
         ref = [_reference(reached[i], c[i, :end[i]].astype(np.float32), lb[i, :end[i]], gb[i, :end[i]],
@@ -108,7 +124,9 @@ def test_trainer_counts_successes_with_the_verdict():
     steps_in_ep = np.zeros(n, int)
     ep = [dict(c=[], lb=[], gb=[]) for _ in range(n)]
     want_succ = want_acc = want_done = 0
-    step = jax.jit(Trainer._episode_stats)
+    # The contact rule (margin 0, no backward check), which _reference's defaults write out.
+    contact_rule = SimpleNamespace(min_clearance=0.0, backward_tolerance=np.inf)
+    step = jax.jit(lambda *a: Trainer._episode_stats(*a, contact_rule))
     total = np.zeros(4)
     for _ in range(T):
         goal = rng.uniform(size=n) < 0.15

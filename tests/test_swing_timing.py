@@ -71,7 +71,8 @@ def random_path(rng, n=100, dense=None):
 def synthetic(paths, pivot="between"):
     ob = Obstacle.rectangle(0.05, 0.05, center_y=0.45)
     scenes = [dynamics.make_scene(ob, pivot, 0.0, 0.70, foot_length=SP.foot_length) for _ in paths]
-    return list(assemble("test", SP, scenes, list(paths), np.stack(paths), [float("nan")] * len(paths)))
+    return list(assemble("test", SP, scenes, list(paths), np.stack(paths), [float("nan")] * len(paths),
+                         deviation=np.zeros(len(paths))))   # the paths are the polylines themselves
 
 
 def test_limits_hold_on_random_paths_and_ends_rest():

@@ -294,7 +294,7 @@ def test_eval_unseen_reports_per_family_end_to_end(unseen_eval):
     from jaxexo.inference import TrajectoryGenerator
 
     report = json.loads((unseen_eval / "report.json").read_text())
-    assert set(report) == {"rl", "cfftg"}
+    assert set(report) == {"rl", "rl+cfftg", "cfftg"}      # the RL swing alone, with the CFFTG fallback, CFFTG
     n = len(HELD_OUT_FAMILIES) * CELLS_PER_FAMILY
     for name, r in report.items():
         assert r["n"] == n and r["scenarios"] == "unseen"
@@ -309,7 +309,8 @@ def test_eval_unseen_reports_per_family_end_to_end(unseen_eval):
     # Recompute one family's figures independently from fresh trajectories of the same scenes.
     gen = TrajectoryGenerator.load(report["rl"]["policy"])
     sc = [s for s in unseen_scenarios(gen.config.kinematics.foot_length, 1) if s["kind"] == "stairs"]
-    tr = [gen.generate(s["obstacle"], pivot=s["pivot"], start_y=s["start_y"], step_length=s["step_length"]) for s in sc]
+    tr = [gen.generate(s["obstacle"], pivot=s["pivot"], start_y=s["start_y"], step_length=s["step_length"],
+                       fallback=None) for s in sc]          # report["rl"] is the RL swing alone
     clr = np.array([t.checks.min_clearance for t in tr])
     f = report["rl"]["by_family"]["stairs"]
     assert f["success"] == pytest.approx(np.mean([t.ok for t in tr]))

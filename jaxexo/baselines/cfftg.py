@@ -29,11 +29,12 @@ Decisions, each made here:
   h = max over samples of required height / z's shape. The lowest apex means the least joint
   excursion. The initial margin is the reward's safety distance (eq 2.35, ``min_dt``), so
   both generators aim for the same clearance.
-- Check. Every plan goes through the same checks as the RL generator's trajectories (clearance of
-  the heel-toe segment against the outline at every sample, joint limits and leg length of both
-  legs, goal reached).
+- Check. Every plan goes through the same safe-swing check as the RL generator's trajectories
+  (jaxexo.inference.trajectory: exact clearance of the moving foot between samples less the
+  polynomial's chord-deviation bound ``plan_deviation``, margin env.min_clearance; heel backward
+  motion; joint limits and leg length of both legs; goal reached).
 - Re-plan. A plan that fails is re-planned, per scene:
-  the foot touches the obstacle -> raise the apex (margin += ``margin_step``);
+  the foot comes within the margin -> raise the apex (margin += ``margin_step``);
   joint limits or leg length exceeded -> move the apex along y, alternately towards and away from
   the pivot heel (the hip sits above the midpoint of the heels, so an apex nearer the pivot keeps
   the swing leg nearer under the hip), by ``apex_step`` metres, 1, 1, 2, 2, 3... steps out.
@@ -57,7 +58,7 @@ from jaxexo.physics import dynamics, geometry
 from jaxexo.config import Config
 from jaxexo.inference.generator import check_options, scenes_for
 from jaxexo.inference.trajectory import (DEFAULT_DURATION, Trajectory, TrajectoryBatch, TrajectoryError, assemble,
-                                         clearances, measure)
+                                         measure_paths)
 
 DEFAULT_POINTS = 100
 C_MAX = 10.0          # |c| bound for a monotone y(s)
@@ -82,6 +83,31 @@ def _basis(n_points: int):
     for a in (s, mj, g, phi):
         a.flags.writeable = False
     return s, mj, g, phi
+
+
+@functools.lru_cache(maxsize=16)
+def _curvature(n_points: int):
+    """Bounds on max |d^2/ds^2| over s in [0, 1] of the minimum-jerk profile, of g and of each phi_k,
+    and the chord factor (1 / (n - 1))^2 / 8 of samples at s = i / (n - 1): the plan's deviation from
+    the polyline through its samples is at most factor * max|c''| (issue 11). Each bound is the
+    maximum on a grid of G points plus half the grid step times a bound on the third derivative
+    (the sum of its monomial coefficients' magnitudes, valid on [0, 1])."""
+    P = np.polynomial.Polynomial
+    s = P([0.0, 1.0])
+    g = s**3 * (1 - s) ** 3
+    polys = [s**3 * (10 - 15 * s + 6 * s**2), g] + [64.0 * g * (1 + k * (1 - 2 * s) ** 2) for k in FLATNESS]
+    grid = np.linspace(0.0, 1.0, 2001)
+    bounds = np.array([np.abs(p.deriv(2)(grid)).max() + 0.5 / 2000 * np.abs(p.deriv(3).coef).sum() for p in polys])
+    return bounds, (1.0 / (n_points - 1)) ** 2 / 8.0
+
+
+def plan_deviation(start_y, goal_y, apex_frac, apex_h, n_points: int) -> np.ndarray:
+    """Bound (B,) in metres on each plan's distance from the polyline through its N samples."""
+    b, f = _curvature(n_points)
+    c = 64.0 * (np.clip(apex_frac, *APEX_FRAC_RANGE) - 0.5)
+    ypp = np.abs(goal_y - start_y) * (b[0] + np.abs(c) * b[1])
+    zpp = np.abs(apex_h) * b[2:].max()
+    return f * np.sqrt(ypp * ypp + zpp * zpp)
 
 
 def profile_max(lo: np.ndarray, hi: np.ndarray, outline: np.ndarray) -> np.ndarray:
@@ -188,7 +214,8 @@ class CFFTG:
                                                  n_points)
             p = paths[todo]
             plans[todo] += 1
-            m = measure(self.sp, p, clearances(foot, p, [scenes[i] for i in todo]), arr.pivot_y[todo], arr.goal_y[todo])
+            dev = plan_deviation(arr.start_y[todo], arr.goal_y[todo], frac[todo], apex_h[todo], n_points)
+            m = measure_paths(self.sp, p, [scenes[i] for i in todo], dev)
             checks = m if checks is None else _scatter(checks, m, todo)
             ok = m["ok"]   # the one strict-success verdict (jaxexo.physics.outcome)
             bad_kin = ~(m["joint_limits_ok"] & m["leg_length_ok"])

@@ -166,6 +166,7 @@ class NumpyExoEnv:
         self.time = np.int32(0)
         self.visited = np.bool_(False)
         self.outcome = self.dyn_outcome.start(np)
+        self.max_y = self.heel[0]
         return self._obs()
 
     def step(self, action: int):
@@ -174,14 +175,15 @@ class NumpyExoEnv:
         prev = self.heel
         self.heel = np.stack(self.dyn.move_heel(np, p, prev[0], prev[1], d[0], d[1]))
         self.time = self.time + np.int32(1)
-        out = self.dyn.transition(np, p, prev, self.heel, self.time, self.visited, self.lay)
-        self.visited = out["visited_mid"]
+        out = self.dyn.transition(np, p, prev, self.heel, self.time, self.visited, self.lay, self.max_y)
+        self.visited, self.max_y = out["visited_mid"], out["max_y"]
         info = out["info"]
         self.outcome = self.dyn_outcome.accumulate(np, self.outcome, info)
         terminated = bool(out["terminated"])
         truncated = (not terminated) and int(self.time) >= self.max_steps
         # The one strict-success verdict (jaxexo.physics.outcome), as the JAX trainer counts it.
-        info["success"] = (terminated or truncated) and bool(self.dyn_outcome.episode_verdict(np, self.outcome)["success"])
+        info["success"] = (terminated or truncated) and bool(
+            self.dyn_outcome.episode_verdict(np, self.outcome, **self.dyn_outcome.rule(p))["success"])
         return self._obs(), float(out["reward"]), terminated, truncated, info
 
 

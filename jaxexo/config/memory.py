@@ -14,27 +14,20 @@ from __future__ import annotations
 
 import os
 
-import numpy as np
+
 
 from jaxexo.config.schema import Config, ConfigError
+from jaxexo.physics import dynamics
+from jaxexo.physics.dynamics import NUM_ACTIONS
 
 FLOAT = 4                  # bytes: float32 / int32
-NUM_ACTIONS = 36           # thesis 2.1 (jaxexo.physics.dynamics.NUM_ACTIONS; asserted in the tests)
 ENV_SCALARS = 24           # per-environment scalars of the env state and episode statistics (heel, time,
                            # scene numbers, flags, return): a generous count
 
 
 def observation_size(cfg: Config) -> int:
-    """The network's input size D, from the one definition of the observation
-    (jaxexo.physics.dynamics.observation) applied to a scene of the config."""
-    from jaxexo.physics import dynamics, geometry
-
-    scene = dynamics.stack_scenes([dynamics.make_scene(geometry.Obstacle.named("base1"), "obstacle", 0.0, 0.70,
-                                                       foot_length=0.2, shape_points=cfg.env.shape_points)])
-    zero = np.zeros(1, np.float32)
-    obs = dynamics.observation(np, dynamics.numpy_params(cfg), cfg.env.obs_mode, zero, zero,
-                               np.zeros(1, np.int32), np.zeros(1, bool), scene)
-    return int(np.shape(obs)[-1])
+    """The network's input size D (jaxexo.physics.dynamics.obs_dim, the one definition)."""
+    return dynamics.obs_dim(cfg.env.obs_mode, cfg.env.shape_points)
 
 
 def network_size(cfg: Config, obs_dim: int | None = None) -> int:

@@ -34,7 +34,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from jaxexo.physics import geometry, kinematics, rewards
+from jaxexo.physics import geometry, kinematics, outcome, rewards
 from jaxexo.physics.geometry import THESIS_OBSTACLES
 
 PIVOT_CONDITIONS = kinematics.PIVOT_CONDITIONS  # thesis 3.1, defined with the rule that places the pivot
@@ -273,6 +273,11 @@ class EnvConfig:
     bounds_y: tuple[float, float] = declare((-0.30, 1.30), range_(), unit="m")  # the heel is kept inside
     # ceiling for the heel; the ground is z = 0
     max_z: float = declare(0.80, number(positive=True), unit="m", param="max_z_world")
+    # The safe-swing definition (issue 11, jaxexo.physics.swept): the foot's motion between samples
+    # never comes closer than min_clearance to the obstacle, and the heel never moves backward by
+    # more than backward_tolerance. The environment's success flag and the generators' ``ok`` use both.
+    min_clearance: float = declare(outcome.DEFAULT_MIN_CLEARANCE, number(nonneg=True), unit="m")
+    backward_tolerance: float = declare(outcome.DEFAULT_BACKWARD_TOLERANCE, number(nonneg=True), unit="m")
 
 
 @dataclass(frozen=True)
@@ -719,6 +724,10 @@ def validate(cfg: Config) -> None:
     goal_far = lay.start_shift[1] + lay.step_length[1] + env.goal_tolerance[0]
     if env.bounds_y[1] <= goal_far:
         raise ConfigError(f"env.bounds_y: the upper bound must lie beyond the goal region ({goal_far:.3f} m)")
+    if rew.safety_distance < env.min_clearance:
+        raise ConfigError(f"reward.safety_distance: {rew.safety_distance} m is below env.min_clearance = "
+                          f"{env.min_clearance} m; the safety term (eq 2.35) must pay the policy to keep the "
+                          "margin that a safe swing needs, not only to avoid contact")
     if env.max_steps < rew.step_threshold:
         raise ConfigError(f"env.max_steps: {env.max_steps} is below reward.step_threshold = {rew.step_threshold}")
 

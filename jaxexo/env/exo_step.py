@@ -48,6 +48,7 @@ class EnvState:
     heel: jnp.ndarray          # (2,) swing heel (y, z), m
     time: jnp.ndarray          # steps taken this episode (gymnax name)
     visited_mid: jnp.ndarray   # bool: the heel has passed through the mid-goal box
+    max_y: jnp.ndarray         # the heel's largest y this episode (backward motion, issue 11)
     layout: Layout
 
 
@@ -107,7 +108,7 @@ class ExoStepEnv:
         """Start an episode on a given layout: the heel on the ground at the start."""
         heel = jnp.stack([layout.start_y, jnp.zeros_like(layout.start_y)])
         state = EnvState(heel=heel, time=jnp.asarray(0, jnp.int32), visited_mid=jnp.asarray(False),
-                         layout=layout)
+                         max_y=heel[0], layout=layout)
         return self.get_obs(state, params), state
 
     def layout_for(self, obstacle: geometry.Obstacle, pivot: str | float = "obstacle", start_y: float = 0.0,
@@ -146,9 +147,9 @@ class ExoStepEnv:
         heel = jnp.stack(dynamics.move_heel(jnp, params, prev[0], prev[1], d[0], d[1]))
         time = state.time + 1
 
-        out = dynamics.transition(jnp, params, prev, heel, time, state.visited_mid, lay)
+        out = dynamics.transition(jnp, params, prev, heel, time, state.visited_mid, lay, state.max_y)
         visited, reward, terminated = out["visited_mid"], out["reward"], out["terminated"]
-        new_state = EnvState(heel=heel, time=time, visited_mid=visited, layout=lay)
+        new_state = EnvState(heel=heel, time=time, visited_mid=visited, max_y=out["max_y"], layout=lay)
         info = out["info"]
         return self.get_obs(new_state, params), new_state, reward, terminated, info
 

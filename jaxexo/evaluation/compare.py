@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxexo.config import PIVOT_CONDITIONS, Config
+from jaxexo.physics import swept
 from jaxexo.inference.scenarios import sample_scenarios, training_scenarios
 
 BATCH = 1000
@@ -82,6 +83,25 @@ def squared_jerk(heel: np.ndarray, t: np.ndarray) -> np.ndarray:
     return (j * j).sum(axis=(-1, -2)) * dt
 
 
+# Backward heel motion counted in the report (m, at the samples): the default env.backward_tolerance.
+BACKWARD_REPORT = 0.005
+
+
+class WithFallback:
+    """A TrajectoryGenerator with its ``fallback`` fixed, so that compare can time and score the RL
+    swing alone ("rl", fallback None) and the combination ("rl+cfftg") side by side."""
+
+    def __init__(self, gen, fallback):
+        self.gen, self.fallback = gen, fallback
+        self.config = gen.config
+
+    def generate(self, *a, **kw):
+        return self.gen.generate(*a, fallback=self.fallback, **kw)
+
+    def generate_batch(self, *a, **kw):
+        return self.gen.generate_batch(*a, fallback=self.fallback, **kw)
+
+
 def trajectory_metrics(trajs) -> dict[str, np.ndarray]:
     """Per-trajectory figures (arrays over the trajectories)."""
     return {
@@ -93,6 +113,10 @@ def trajectory_metrics(trajs) -> dict[str, np.ndarray]:
         "hip_max": np.array([t.joint_angles[:, 0].max() for t in trajs]),
         "knee_min": np.array([t.joint_angles[:, 1].min() for t in trajs]),
         "min_clearance": np.array([t.checks.min_clearance for t in trajs]),
+        "clearance_ok": np.array([t.checks.clearance_ok for t in trajs]),
+        "peak_above": np.array([t.heel[:, 1].max() - t.scene.height for t in trajs]),
+        "backward": np.array([float(swept.backward_motion(np, t.heel[:, 0])) for t in trajs]),
+        "fallback": np.array([t.method == "cfftg-fallback" for t in trajs]),
         "path_length": np.array([path_length(t.heel) for t in trajs]),
         "jerk": np.array([squared_jerk(t.heel, t.time) for t in trajs]),
     }
@@ -146,7 +170,12 @@ def summarize(m: dict[str, np.ndarray], times_s: np.ndarray, mask: np.ndarray) -
         "hip_swing_max_deg": float(d(m["hip_max"][mask].mean())),
         "knee_swing_min_deg": float(d(m["knee_min"][mask].mean())),
         "min_clearance_m_mean": float(m["min_clearance"][mask].mean()),
+        "min_clearance_m_median": float(np.median(m["min_clearance"][mask])),
         "min_clearance_m_worst": float(m["min_clearance"][mask].min()),
+        "clearance_ok": float(m["clearance_ok"][mask].mean()),
+        "peak_above_obstacle_m_median": float(np.median(m["peak_above"][mask])),
+        "heel_backward_rate": float((m["backward"][mask] > BACKWARD_REPORT).mean()),
+        "fallback_rate": float(m["fallback"][mask].mean()),
         "path_length_m_mean": float(m["path_length"][mask].mean()),
         "squared_jerk_mean": float(m["jerk"][mask].mean()),
     }
@@ -224,17 +253,20 @@ def evaluate_generators(generators: dict, scenarios: list[dict], batch_size: int
 
 def _row(name: str, r: dict) -> str:
     b = r.get("batch_1000_ms")
-    return (f"| {name} | {r['n']} | {100 * r['accuracy']:.1f} | {100 * r['success']:.1f} | {r['time_ms_mean']:.3f} | "
+    return (f"| {name} | {r['n']} | {100 * r['accuracy']:.1f} | {100 * r['success']:.1f} | "
+            f"{100 * r['min_clearance_m_median']:.2f} | {100 * r['peak_above_obstacle_m_median']:.1f} | "
+            f"{100 * r['heel_backward_rate']:.1f} | {100 * r['fallback_rate']:.1f} | {r['time_ms_mean']:.3f} | "
             f"{r['time_ms_median']:.3f} | {r['time_ms_p95']:.3f} | {r['hip_swing_mean_deg']:.1f} | "
             f"{r['knee_swing_mean_deg']:.1f} | {r['hip_swing_max_deg']:.1f} | {r['knee_swing_min_deg']:.1f} | "
             f"{100 * r['min_clearance_m_mean']:.2f} | {100 * r['path_length_m_mean']:.1f} | {r['squared_jerk_mean']:.3g} | "
             f"{'-' if b is None else f'{b:.1f}'} |")
 
 
-TABLE_HEAD = ("| {what} | n | accuracy % (eq 3.1) | strict success % | time mean ms | median ms | p95 ms | "
+TABLE_HEAD = ("| {what} | n | accuracy % (eq 3.1) | safe swing % | median guaranteed clearance cm | "
+              "median peak above obstacle cm | heel backward > 5 mm % | CFFTG fallback % | time mean ms | median ms | p95 ms | "
               "hip swing mean deg | knee swing mean deg | hip swing max deg | knee swing min deg | "
               "min clearance cm | path length cm | sq. jerk m²/s⁵ | batch of 1000 ms |\n"
-              "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+              "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
 
 
 def markdown(report: dict, title: str, context: list[str]) -> str:
@@ -261,8 +293,12 @@ def markdown(report: dict, title: str, context: list[str]) -> str:
             lines += [f"- scenario {f['scenario']} ({f['kind']}, pivot {f['pivot']}): {'; '.join(f['reasons'])}"
                       for f in r["failures"]]
     lines += ["", "Units: angles in degrees (hip flexion +, knee flexion -), clearance and path length in cm, "
-              "times in ms; accuracy counts trajectories whose foot never touches the obstacle (thesis eq 3.1), "
-              "strict success also needs the goal, the joint limits and the leg length."]
+              "times in ms; accuracy counts trajectories whose foot never touches the obstacle (thesis eq 3.1); "
+              "a safe swing (issue 11) also keeps env.min_clearance over the whole motion (exact between "
+              "samples, less the curve's deviation bound), reaches the goal, keeps the heel from moving "
+              "backward by more than env.backward_tolerance, and respects the joint limits and the leg length. "
+              "`rl` is the RL swing alone, `rl+cfftg` the generator's default (CFFTG's plan when the RL swing "
+              "is not safe)."]
     return "\n".join(lines) + "\n"
 
 
@@ -375,8 +411,9 @@ def run_eval(policy: str | Path, out: str | Path, against: str | None = "cfftg",
     from jaxexo.inference import TrajectoryGenerator
 
     rl = TrajectoryGenerator.load(policy)
-    gens = {"rl": rl}
+    gens = {"rl": WithFallback(rl, None)}
     if against == "cfftg":
+        gens["rl+cfftg"] = WithFallback(rl, "cfftg")
         gens["cfftg"] = CFFTG(rl.config)
     elif against is not None:
         raise ValueError(f"against must be 'cfftg' or None, got {against!r}")

@@ -10,20 +10,27 @@ action of the exported Q-network. Two loops share those rules:
 - ``generate_batch`` (many scenes): NumPy arrays over the scenes still moving, one batched network
   call per step.
 
-The raw path is then smoothed (thesis 2.7, jaxexo.inference.smoothing) and checked on the smoothed
-samples (jaxexo.inference.trajectory). If smoothing turns a collision-free raw path into a colliding
-one, the generator retries with a quarter of the smoothing, then a sixteenth, then an interpolating
-spline, then the raw polyline, and records which it used (``Trajectory.smoothing``, ``notes``).
+The raw path is then smoothed (thesis 2.7, jaxexo.inference.smoothing) and checked as a safe swing
+(jaxexo.inference.trajectory: exact clearance of the moving foot, margin env.min_clearance). If
+smoothing brings a raw path that keeps the margin closer than the margin, the generator retries
+with a quarter of the smoothing, then a sixteenth, then an interpolating spline, then the raw
+polyline, and records which it used (``Trajectory.smoothing``, ``notes``).
+
+Fallback (issue 11): with ``fallback="cfftg"`` (the default) an RL swing that still fails the
+safe-swing check is replaced by CFFTG's plan for the same scene (jaxexo.baselines.cfftg), with
+``method`` "cfftg-fallback" and the RL failure in ``notes``; when CFFTG fails too, the RL swing is
+returned, not ok. ``fallback=None`` returns the RL result alone.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import tomllib
 from pathlib import Path
 
 import numpy as np
 
-from jaxexo.physics import dynamics, geometry
+from jaxexo.physics import dynamics, geometry, swept
 from jaxexo.config import ConfigError, config_from_dict
 from jaxexo.physics.dynamics import Scene, scalar
 from jaxexo.inference import smoothing as sm
@@ -32,6 +39,7 @@ from jaxexo.inference.trajectory import DEFAULT_DURATION, Trajectory, Trajectory
 from jaxexo.storage.policy_file import PolicyFileError, QPolicy, load_policy
 
 FALLBACK_FACTORS = (0.25, 1.0 / 16.0, 0.0)   # smoothing multipliers tried before the raw polyline
+FALLBACKS = ("cfftg", None)
 
 
 class TrajectoryGenerator:
@@ -173,31 +181,37 @@ class TrajectoryGenerator:
 
     # Trajectories ---------------------------------------------------------------------------------
     def _fallback(self, scene: Scene, raw: np.ndarray, n_points: int, smoothing: float):
-        """A smoothed path touched the obstacle: when the raw path does not, retry with less smoothing
-        (FALLBACK_FACTORS), then the raw polyline. Returns (path, smoothing used, notes), or None when
-        the raw path itself touches the obstacle (smoothing is then kept and the checks report it)."""
-        if self._touches(scene, raw):
+        """A smoothed path came closer than the margin: when the raw path keeps it, retry with less
+        smoothing (FALLBACK_FACTORS), then the raw polyline. Returns (path, smoothing used, notes,
+        deviation bound), or None when the raw path itself breaks the margin (smoothing is then kept
+        and the checks report it)."""
+        if not self._keeps_margin(scene, sm.distinct(raw), 0.0):
             return None
         for f in FALLBACK_FACTORS:
-            cand = sm.bspline_smooth(raw, n_points, smoothing * f)
-            if not self._touches(scene, cand):
-                return cand, smoothing * f, (f"smoothing {smoothing:g} m^2 made the foot touch the obstacle; "
-                                             f"{smoothing * f:g} m^2 used",)
-        return sm.linear_resample(raw, n_points), float("nan"), (
-            "every smoothing made the foot touch the obstacle; the raw polyline is used",)
+            cand, dev = sm.smooth_paths([raw], n_points, smoothing * f, with_deviation=True)
+            if self._keeps_margin(scene, cand[0], dev[0]):
+                return cand[0], smoothing * f, (f"smoothing {smoothing:g} m^2 brought the foot within the "
+                                                f"safety margin; {smoothing * f:g} m^2 used",), dev[0]
+        path, dev = sm.linear_resample(raw, n_points, with_deviation=True)
+        return path, float("nan"), (
+            "every smoothing brought the foot within the safety margin; the raw polyline is used",), dev
 
-    def _finish(self, scenes, raws, n_points: int, smoothing: float, duration: float) -> TrajectoryBatch:
-        """Smooth every raw path, check them all at once, and redo the few that smoothing made collide."""
+    def _finish(self, scenes, raws, n_points: int, smoothing: float, duration: float,
+                fallback: str | None = "cfftg") -> TrajectoryBatch:
+        """Smooth every raw path, check them all at once, redo the few that smoothing brought within the
+        margin, then hand the swings that still fail to CFFTG (``fallback``)."""
         if smoothing > 0:
-            paths = list(sm.smooth_paths(raws, n_points, smoothing))
+            paths, dev = sm.smooth_paths(raws, n_points, smoothing, with_deviation=True)
+            paths = list(paths)
             used = [smoothing] * len(raws)
         else:
-            paths = [sm.linear_resample(r, n_points) for r in raws]
+            both = [sm.linear_resample(r, n_points, with_deviation=True) for r in raws]
+            paths, dev = [p for p, _ in both], np.array([d for _, d in both])
             used = [float("nan")] * len(raws)
         notes = [()] * len(raws)
-        batch = assemble("rl", self.sp, scenes, raws, np.stack(paths), used, duration, notes)
+        batch = assemble("rl", self.sp, scenes, raws, np.stack(paths), used, duration, notes, deviation=dev)
         redo = []
-        for i in np.flatnonzero(~batch.collision_free) if smoothing > 0 else ():
+        for i in np.flatnonzero(~batch.clearance_ok) if smoothing > 0 else ():
             fb = self._fallback(scenes[i], raws[i], n_points, smoothing)
             if fb is not None:
                 redo.append((i, fb))
@@ -205,9 +219,37 @@ class TrajectoryGenerator:
             idx = [i for i, _ in redo]
             sub = assemble("rl", self.sp, [scenes[i] for i in idx], [raws[i] for i in idx],
                            np.stack([fb[0] for _, fb in redo]), [fb[1] for _, fb in redo], duration,
-                           [fb[2] for _, fb in redo])
+                           [fb[2] for _, fb in redo], deviation=np.array([fb[3] for _, fb in redo]))
             batch = batch.with_rows(idx, sub)
+        if fallback == "cfftg" and not batch.ok.all():
+            batch = self._cfftg_fallback(batch, n_points, duration)
         return batch
+
+    def _cfftg_fallback(self, batch: TrajectoryBatch, n_points: int, duration: float) -> TrajectoryBatch:
+        # Imported here: jaxexo.baselines imports jaxexo.inference (a cycle at import time).
+        from jaxexo.baselines.cfftg import CFFTG
+
+        bad = np.flatnonzero(~batch.ok)
+        plan = CFFTG(self.config)._finish([batch.scenes[i] for i in bad], n_points, duration, False)
+        take = [j for j in range(len(bad)) if plan.ok[j]]
+        notes = list(batch.notes)
+        for j, i in enumerate(bad):
+            rl_fail = "RL swing failed the safe-swing check: " + "; ".join(batch.reasons[i])
+            notes[i] = notes[i] + ((rl_fail + "; CFFTG's plan is returned",) if j in take else
+                                   (rl_fail, "CFFTG fallback failed too: " + "; ".join(plan.reasons[j])))
+        batch = dataclasses.replace(batch, notes=tuple(notes))
+        if not take:
+            return batch
+        sub = dataclasses.replace(plan, method="cfftg-fallback", row_methods=())
+        keep = [int(x) for x in take]
+        sub = _rows(sub, keep)
+        sub = dataclasses.replace(sub, notes=tuple(notes[bad[j]] + sub.notes[n] for n, j in enumerate(keep)))
+        return batch.with_rows([bad[j] for j in keep], sub)
+
+    def _keeps_margin(self, scene: Scene, path: np.ndarray, deviation: float) -> bool:
+        """The path (a polyline through its points, less ``deviation``) keeps the safety margin."""
+        c = swept.path_swept_clearance(np, path, self.sp.foot_length, scene.outline)
+        return bool(c.size == 0 or c.min() - deviation >= self.sp.min_clearance)
 
     def _touches(self, scene: Scene, path: np.ndarray) -> bool:
         # Cheap exclusion first: a path that never comes below the obstacle's top within its extent
@@ -223,25 +265,30 @@ class TrajectoryGenerator:
     def generate(self, obstacle: geometry.Obstacle, *, pivot: str = "obstacle", pivot_y: float | None = None,
                  start_y: float = 0.0, step_length: float = 0.70, n_points: int = sm.DEFAULT_POINTS,
                  smoothing: float = sm.DEFAULT_SMOOTHING, duration: float = DEFAULT_DURATION,
-                 strict: bool = False) -> Trajectory:
+                 strict: bool = False, fallback: str | None = "cfftg") -> Trajectory:
         """One smoothed, checked trajectory (metres, radians, seconds). ``strict`` raises
-        TrajectoryError instead of returning a trajectory that fails a check."""
+        TrajectoryError instead of returning a trajectory that fails a check; ``fallback``: "cfftg"
+        (CFFTG's plan when the RL swing is not safe) or None (module docstring)."""
         n_points, smoothing, duration = check_options(n_points, smoothing, duration)
+        fallback = check_fallback(fallback)
         scene = self.scene(obstacle, pivot, pivot_y, start_y, step_length)
         raw, _ = self.rollout(scene)
-        traj = self._finish([scene], [raw], n_points, smoothing, duration)[0]
+        traj = self._finish([scene], [raw], n_points, smoothing, duration, fallback)[0]
         if strict and not traj.ok:
             raise TrajectoryError(traj)
         return traj
 
     def generate_batch(self, obstacles, *, pivot="obstacle", pivot_y=None, start_y=0.0, step_length=0.70,
                        n_points: int = sm.DEFAULT_POINTS, smoothing: float = sm.DEFAULT_SMOOTHING,
-                       duration: float = DEFAULT_DURATION, strict: bool = False) -> TrajectoryBatch:
-        """Trajectories for many scenarios; every option is one value or one per obstacle."""
+                       duration: float = DEFAULT_DURATION, strict: bool = False,
+                       fallback: str | None = "cfftg") -> TrajectoryBatch:
+        """Trajectories for many scenarios; every option is one value or one per obstacle (``fallback``
+        one value, as in ``generate``)."""
         n_points, smoothing, duration = check_options(n_points, smoothing, duration)
+        fallback = check_fallback(fallback)
         scenes = self._scenes(obstacles, pivot, pivot_y, start_y, step_length)
         raws, _ = self.rollout_batch(scenes)
-        batch = self._finish(scenes, raws, n_points, smoothing, duration)
+        batch = self._finish(scenes, raws, n_points, smoothing, duration, fallback)
         if strict and not batch.ok.all():
             raise TrajectoryError(batch[int(np.argmin(batch.ok))])
         return batch
@@ -270,6 +317,25 @@ def scenes_for(make, obstacles, pivot, pivot_y, start_y, step_length) -> list[Sc
 
 def _take(lay, idx):
     return type(lay)(**{k: v[idx] for k, v in vars(lay).items()})
+
+
+def check_fallback(fallback):
+    if fallback == "none":
+        return None
+    if fallback not in FALLBACKS:
+        raise ValueError(f"fallback must be 'cfftg' or None, got {fallback!r}")
+    return fallback
+
+
+def _rows(batch: TrajectoryBatch, idx) -> TrajectoryBatch:
+    """The sub-batch of rows ``idx`` (in order)."""
+    changes = {}
+    for f in dataclasses.fields(batch):
+        v = getattr(batch, f.name)
+        if f.name in ("method", "time") or (f.name == "row_methods" and not v):
+            continue
+        changes[f.name] = tuple(v[i] for i in idx) if isinstance(v, tuple) else v[idx]
+    return dataclasses.replace(batch, **changes)
 
 
 def check_options(n_points, smoothing, duration):

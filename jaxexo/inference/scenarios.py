@@ -51,3 +51,50 @@ def _as_kwargs(cfg: Config, lay: dict) -> list[dict]:
         out.append({"kind": spec.kind, "obstacle": ob, "pivot": PIVOT_CONDITIONS[int(lay["pivot_kind"][i])],
                     "start_y": start_y, "step_length": float(lay["goal_y"][i]) - start_y})
     return out
+
+
+UNSEEN_SHAPES = ("rectangle", "wedge", "pole", "bumps")
+
+
+def _unseen_obstacle(rng, shape: str, center: float) -> Obstacle:
+    """An obstacle of a family the default policy never trained on (issue 11's safety checks)."""
+    if shape == "rectangle":
+        return Obstacle.rectangle(rng.uniform(0.04, 0.25), rng.uniform(0.04, 0.20), center_y=center)
+    if shape == "pole":
+        return Obstacle.rectangle(rng.uniform(0.01, 0.04), rng.uniform(0.05, 0.20), center_y=center)
+    w, h = rng.uniform(0.08, 0.25), rng.uniform(0.05, 0.20)
+    if shape == "wedge":        # a ramp rising (or falling) to a vertical face
+        z = [0.0, h] if rng.uniform() < 0.5 else [h, 0.0]
+        return Obstacle.profile([[center - w / 2, z[0]], [center + w / 2, z[1]]])
+    k = int(rng.integers(2, 4))  # "bumps": k humps of random heights with dips between them
+    y = np.linspace(center - w / 2, center + w / 2, 2 * k + 1)
+    z = np.zeros(2 * k + 1)
+    z[1::2] = h * rng.uniform(0.5, 1.0, k)
+    z[2:-1:2] = h * rng.uniform(0.0, 0.4, k - 1)
+    return Obstacle.profile(np.column_stack([y, z]))
+
+
+def safety_scenarios(config: Config, n: int, seed: int = 2024, unseen: bool = False) -> list[dict]:
+    """n shifted layouts for the safe-swing checks: the start anywhere in 0-10 cm, the obstacle anywhere
+    in the gap between the toe at the start and the goal (1 cm from either), every pivot condition in
+    turn; the five thesis obstacles (kind i % 5) or, with ``unseen``, shapes never trained on
+    (UNSEEN_SHAPES in turn: random rectangles, wedges, thin poles, profiles with several bumps)."""
+    if n < 1:
+        raise ValueError(f"n must be >= 1, got {n}")
+    rng = np.random.default_rng(seed)
+    foot, (l_lo, l_hi) = config.kinematics.foot_length, config.layout.step_length
+    kinds = UNSEEN_SHAPES if unseen else TEST_KINDS
+    out = []
+    for i in range(n):
+        kind = kinds[i % len(kinds)]
+        start, step = rng.uniform(0.0, 0.10), rng.uniform(l_lo, l_hi)
+        probe = _unseen_obstacle(rng, kind, 0.0) if unseen else Obstacle.named(kind, center_y=0.0)
+        lo, hi = start + foot + 0.01 + probe.width / 2, start + step - 0.01 - probe.width / 2
+        center = rng.uniform(lo, max(lo, hi))
+        ob = Obstacle.profile(probe.outline + [center, 0.0]) if probe.shape == "profile" else (
+            getattr(Obstacle, probe.shape)(probe.width, probe.height, center_y=center))
+        if not unseen:
+            ob = Obstacle.named(kind, center_y=center)
+        out.append({"kind": kind, "obstacle": ob, "pivot": PIVOT_CONDITIONS[(i // len(kinds)) % 3],
+                    "start_y": float(start), "step_length": float(step)})
+    return out

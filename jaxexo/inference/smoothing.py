@@ -19,6 +19,15 @@ few matrix products, so that a batch of paths is smoothed at once:
   overshoot near lift-off and touch-down is clipped to z = 0 (a foot resting on the floor).
 - Paths of fewer than four distinct points are resampled as polylines.
 
+- Between samples (issue 11): the checks measure the polyline through the returned samples exactly
+  (jaxexo.physics.swept) and subtract a bound on how far the curve strays from that polyline:
+  for a C2 curve c(u) the chord over a parameter step L deviates by at most L^2 max|c''| / 8, and
+  the second derivative of the cubic B-spline is a linear B-spline whose coefficients bound it
+  (convex hull), so ``smooth_padded(..., with_deviation=True)`` returns that bound per path. For a
+  polyline resampled at arc lengths the bound is exact: the largest distance of a skipped corner
+  from the chord that cuts it. Not covered: the clipping of z at the ground and the pinned ends,
+  which move the curve towards its own end points (away from any obstacle ahead of the toe).
+
 Per M, the generalised eigenbasis of (penalty, B'WB) is computed once (Demmler-Reinsch): in it the
 residual is sum_j (lambda d_j / (1 + lambda d_j))^2 |z_j|^2, so solving for lambda is a scalar
 root search per path, vectorised over the batch.
@@ -49,14 +58,28 @@ def distinct(raw: np.ndarray) -> np.ndarray:
     return raw[keep]
 
 
-def linear_resample(raw: np.ndarray, n_points: int = DEFAULT_POINTS) -> np.ndarray:
-    """The polyline through the raw points, sampled at n equally spaced arc lengths (n, 2)."""
+def linear_resample(raw: np.ndarray, n_points: int = DEFAULT_POINTS, with_deviation: bool = False):
+    """The polyline through the raw points, sampled at n equally spaced arc lengths (n, 2); with
+    ``with_deviation`` also the largest distance (m) of the raw polyline from the polyline through
+    the samples (a corner skipped between two samples is cut by their chord)."""
     pts = distinct(raw)
     if len(pts) == 1:
-        return np.repeat(pts, n_points, axis=0)
+        out = np.repeat(pts, n_points, axis=0)
+        return (out, 0.0) if with_deviation else out
     s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
     u = np.linspace(0.0, s[-1], n_points)
-    return np.column_stack([np.interp(u, s, pts[:, 0]), np.interp(u, s, pts[:, 1])])
+    out = np.column_stack([np.interp(u, s, pts[:, 0]), np.interp(u, s, pts[:, 1])])
+    if not with_deviation:
+        return out
+    # Each raw vertex against the chord of the two samples around it: the raw piece between two
+    # samples is a chain of segments, and a point's distance to a segment is convex along a segment,
+    # so the piece's largest distance from its chord is at one of its vertices.
+    i = np.clip(np.searchsorted(u, s, side="right") - 1, 0, n_points - 2)
+    a, b = out[i], out[i + 1]
+    e = b - a
+    len2 = np.sum(e * e, axis=-1)
+    t = np.clip(np.sum((pts - a) * e, axis=-1) / np.where(len2 > 0, len2, 1.0), 0.0, 1.0)
+    return out, float(np.max(np.linalg.norm(pts - a - t[:, None] * e, axis=-1)))
 
 
 def bspline_design(u: np.ndarray, knots: np.ndarray, k: int) -> np.ndarray:
@@ -106,9 +129,14 @@ def _basis(m: int, n_points: int):
     d = np.maximum(d, 0.0)
     z = v.T @ (b.T * w[None, :])
     e = bspline_design(np.linspace(0.0, 1.0, n_points), t, k) @ v
-    for x in (z, d, e):
+    # Coefficients of c'' (a degree-1 B-spline) from c's: differentiate twice (de Boor),
+    # P'_j = 3 (P_j+1 - P_j) / (t_j+4 - t_j+1), P''_j = 2 (P'_j+1 - P'_j) / (t_j+4 - t_j+2).
+    d1 = 3.0 * np.diff(np.eye(m), axis=0) / (t[4: m + 3] - t[1: m])[:, None]
+    d2 = 2.0 * np.diff(d1, axis=0) / (t[4: m + 2] - t[2: m])[:, None]
+    q = d2 @ v
+    for x in (z, d, e, q):
         x.setflags(write=False)
-    return z, d, e
+    return z, d, e, q
 
 
 def _solve_lambda(d: np.ndarray, zz: np.ndarray, s: np.ndarray) -> np.ndarray:
@@ -144,18 +172,20 @@ def _apply(mat: np.ndarray, x: np.ndarray) -> np.ndarray:
     return y.reshape(len(mat), g, 2).transpose(1, 0, 2)
 
 
-def smooth_paths(raws, n_points: int = DEFAULT_POINTS, smoothing: float | np.ndarray = DEFAULT_SMOOTHING) -> np.ndarray:
+def smooth_paths(raws, n_points: int = DEFAULT_POINTS, smoothing: float | np.ndarray = DEFAULT_SMOOTHING,
+                 with_deviation: bool = False):
     """Smoothed heel paths (B, n_points, 2) for a list of raw agent paths (M_i, 2), metres;
-    ``smoothing`` one value or one per path (m^2)."""
+    ``smoothing`` one value or one per path (m^2). ``with_deviation``: also (B,) bounds (m) on the
+    curve's distance from the polyline through its samples (module docstring)."""
     lengths = np.array([len(r) for r in raws])
     pts = np.zeros((len(raws), lengths.max(), 2))
     for i, r in enumerate(raws):
         pts[i, : len(r)] = r
-    return smooth_padded(pts, lengths, n_points, smoothing)
+    return smooth_padded(pts, lengths, n_points, smoothing, with_deviation)
 
 
 def smooth_padded(pts: np.ndarray, lengths: np.ndarray, n_points: int = DEFAULT_POINTS,
-                  smoothing: float | np.ndarray = DEFAULT_SMOOTHING) -> np.ndarray:
+                  smoothing: float | np.ndarray = DEFAULT_SMOOTHING, with_deviation: bool = False):
     """``smooth_paths`` for paths given as one padded array (B, T, 2) and their lengths (B,)."""
     b, t = pts.shape[:2]
     s_all = np.broadcast_to(np.asarray(smoothing, np.float64), (b,))
@@ -166,8 +196,9 @@ def smooth_padded(pts: np.ndarray, lengths: np.ndarray, n_points: int = DEFAULT_
     pts = np.take_along_axis(pts, order[..., None], axis=1)
     m_all = keep.sum(axis=1)
     out = np.empty((b, n_points, 2))
+    dev = np.zeros(b)
     for i in np.flatnonzero(m_all < DEGREE + 1):
-        out[i] = linear_resample(pts[i, : m_all[i]], n_points)
+        out[i], dev[i] = linear_resample(pts[i, : m_all[i]], n_points, with_deviation=True)
     ms = [m for m in np.unique(m_all) if m >= DEGREE + 1]
     if ms:
         mmax = max(ms)
@@ -175,7 +206,7 @@ def smooth_padded(pts: np.ndarray, lengths: np.ndarray, n_points: int = DEFAULT_
         z = np.zeros((b, mmax, 2))
         d = np.zeros((b, mmax))
         for m, idx in zip(ms, idxs):
-            zm, dm, _ = _basis(int(m), n_points)
+            zm, dm, _, _ = _basis(int(m), n_points)
             z[idx, :m] = _apply(zm, pts[idx, :m])
             d[idx, :m] = dm
         smooth = np.concatenate(idxs)
@@ -184,12 +215,16 @@ def smooth_padded(pts: np.ndarray, lengths: np.ndarray, n_points: int = DEFAULT_
             shrink = np.where(np.isinf(lam)[:, None], (d[smooth] == 0.0).astype(float),
                               1.0 / (1.0 + lam[:, None] * d[smooth]))
         z[smooth] *= shrink[..., None]
+        h2_8 = (1.0 / (n_points - 1)) ** 2 / 8.0      # samples at u = i / (n - 1): L^2 / 8
         for m, idx in zip(ms, idxs):
-            out[idx] = _apply(_basis(int(m), n_points)[2], z[idx, :m])
+            _, _, em, qm = _basis(int(m), n_points)
+            out[idx] = _apply(em, z[idx, :m])
+            curv = np.max(np.abs(_apply(qm, z[idx, :m])), axis=1)      # (G, 2): max |c''| per axis
+            dev[idx] = h2_8 * np.sqrt(np.sum(curv * curv, axis=-1))
     np.maximum(out[..., 1], 0.0, out=out[..., 1])
     out[:, 0] = pts[:, 0]
     out[:, -1] = pts[np.arange(b), m_all - 1]
-    return out
+    return (out, dev) if with_deviation else out
 
 
 def bspline_smooth(raw: np.ndarray, n_points: int = DEFAULT_POINTS, smoothing: float = DEFAULT_SMOOTHING) -> np.ndarray:

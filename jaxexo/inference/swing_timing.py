@@ -61,7 +61,7 @@ import numpy as np
 from jaxexo.physics import kinematics
 from jaxexo.physics.dynamics import Scene
 from jaxexo.inference.trajectory import (
-    JOINT_NAMES, TrajectoryChecks, _reasons, clearances, measure, timed_dict, timed_table, write_timed_csv,
+    JOINT_NAMES, TrajectoryChecks, _reasons, measure_paths, timed_dict, timed_table, write_timed_csv,
     write_timed_json,
 )
 
@@ -547,12 +547,15 @@ def _finish(traj, e: dict, sp, limits: DeviceLimits, rate: float, t_opt: float, 
     t, s, h, vel, acc, peak_v, peak_a = (e[k] for k in ("t", "s", "h", "vel", "acc", "peak_v", "peak_a"))
     within = bool(np.all(peak_v <= vmax) and np.all(peak_a <= amax))
     sc = traj.scene
-    m = measure(sp, h[None], clearances(sp.foot_length, h[None], [sc]), np.array([sc.pivot_y]),
-                np.array([sc.goal_y]))
-    reasons = _reasons(m, 0, h, sc.goal_y, t)
+    # The safe-swing checks (issue 11) of the retimed samples, with the trajectory's own bound on its
+    # curve's distance from the polyline through its samples.
+    m = measure_paths(sp, h[None], [sc], traj.checks.deviation)
+    reasons = _reasons(m, 0, h, sc.goal_y, t, sp)
     checks = TrajectoryChecks(bool(m["reached_goal"][0]), bool(m["collision_free"][0]),
                               float(m["min_clearance"][0]), bool(m["joint_limits_ok"][0]),
-                              bool(m["leg_length_ok"][0]), reasons)
+                              bool(m["leg_length_ok"][0]), reasons, bool(m["clearance_ok"][0]),
+                              bool(m["above_ground"][0]), float(m["heel_backward"][0]),
+                              float(m["deviation"][0]))
     kin = m["kin"]
     toe = h.copy()
     toe[:, 0] += sp.foot_length

@@ -6,6 +6,17 @@ Every generator (the RL policy, CFFTG) produces a dense heel path per scene and 
 clearance (jaxexo.physics.geometry, the heel-toe segment against the outline) and the same goal, joint-limit
 and leg-length rules as the training environment (jaxexo.physics.dynamics, eq 2.45, 2.50). Units: metres,
 radians, seconds.
+
+A safe swing (issue 11; ``TrajectoryChecks.ok``): the goal is reached; nothing is below the ground; the
+heel never moves backward by more than ``env.backward_tolerance``; joint limits and leg length are
+respected; and the foot's motion never comes closer than ``env.min_clearance`` to the obstacle. The
+clearance is not taken at the samples: between two samples the flat foot sweeps a parallelogram whose
+distance to the outline is exact (jaxexo.physics.swept), and the bound on how far the generator's
+curve strays from the polyline through its samples (``deviation``: the spline's chord bound
+L^2 max|c''| / 8, a resampled polyline's cut corners, CFFTG's polynomial's bound) is subtracted, so
+``min_clearance`` is a clearance that no denser sampling of the same curve can undercut. The heel's
+backward motion is measured the same way (polyline drawdown plus twice the deviation). Joint limits
+and leg length are checked at the samples (the kinematics are not linear between them).
 """
 
 from __future__ import annotations
@@ -20,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxexo.physics import dynamics, geometry, kinematics, outcome
+from jaxexo.physics import dynamics, geometry, kinematics, outcome, swept
 from jaxexo.physics.dynamics import Scene
 from jaxexo.storage.atomic import atomic_write
 
@@ -44,14 +55,18 @@ class TrajectoryError(RuntimeError):
 
 @dataclass(frozen=True)
 class TrajectoryChecks:
-    """Checks made on the final (smoothed) path at every sample."""
+    """The safe-swing checks of the final (smoothed) path (module docstring)."""
 
     reached_goal: bool
-    collision_free: bool
-    min_clearance: float        # m, foot segment to obstacle (negative: inside)
+    collision_free: bool        # the foot's motion never touches the obstacle
+    min_clearance: float        # m, guaranteed clearance of the moving foot (negative: inside)
     joint_limits_ok: bool
     leg_length_ok: bool
     reasons: tuple[str, ...]    # empty when ok
+    clearance_ok: bool = True   # min_clearance >= env.min_clearance
+    above_ground: bool = True
+    heel_backward: float = 0.0  # m, largest backward heel motion (deviation bound included)
+    deviation: float = 0.0      # m, bound on the curve's distance from the polyline through the samples
 
     @property
     def ok(self) -> bool:
@@ -107,7 +122,9 @@ class Trajectory:
                       "width": sc.width, "height": sc.height, "outline": sc.obstacle.outline.tolist(),
                       "pivot": sc.pivot, "pivot_y": sc.pivot_y, "start_y": sc.start_y, "goal_y": sc.goal_y},
             "checks": {"ok": c.ok, "reached_goal": c.reached_goal, "collision_free": c.collision_free,
-                       "min_clearance": c.min_clearance, "joint_limits_ok": c.joint_limits_ok,
+                       "min_clearance": c.min_clearance, "clearance_ok": c.clearance_ok,
+                       "above_ground": c.above_ground, "heel_backward": c.heel_backward,
+                       "deviation": c.deviation, "joint_limits_ok": c.joint_limits_ok,
                        "leg_length_ok": c.leg_length_ok, "reasons": list(c.reasons)},
             "smoothing": None if math.isnan(self.smoothing) else self.smoothing,
             "notes": list(self.notes),
@@ -145,6 +162,11 @@ class TrajectoryBatch:
     reasons: tuple[tuple[str, ...], ...]
     smoothing: np.ndarray
     notes: tuple[tuple[str, ...], ...]
+    clearance_ok: np.ndarray
+    above_ground: np.ndarray
+    heel_backward: np.ndarray
+    deviation: np.ndarray
+    row_methods: tuple[str, ...] = ()   # per-row method when rows differ (e.g. "cfftg-fallback")
 
     def __len__(self) -> int:
         return len(self.scenes)
@@ -156,8 +178,10 @@ class TrajectoryBatch:
     def __getitem__(self, i: int) -> Trajectory:
         checks = TrajectoryChecks(bool(self.reached_goal[i]), bool(self.collision_free[i]),
                                   float(self.min_clearance[i]), bool(self.joint_limits_ok[i]),
-                                  bool(self.leg_length_ok[i]), self.reasons[i])
-        return Trajectory(self.method, self.scenes[i], self.raw[i], self.heel[i], self.toe[i], self.hip[i],
+                                  bool(self.leg_length_ok[i]), self.reasons[i], bool(self.clearance_ok[i]),
+                                  bool(self.above_ground[i]), float(self.heel_backward[i]),
+                                  float(self.deviation[i]))
+        return Trajectory(self.row_methods[i] if self.row_methods else self.method, self.scenes[i], self.raw[i], self.heel[i], self.toe[i], self.hip[i],
                           self.knee_swing[i], self.knee_stance[i], self.joint_angles[i], self.time,
                           checks, float(self.smoothing[i]), self.notes[i])
 
@@ -171,6 +195,13 @@ class TrajectoryBatch:
         for f in dataclasses.fields(self):
             v = getattr(self, f.name)
             if f.name in ("method", "time"):
+                continue
+            if f.name == "row_methods":
+                mine = list(v) if v else [self.method] * len(self)
+                theirs = other.row_methods or (other.method,) * len(idx)
+                for j, i in enumerate(idx):
+                    mine[i] = theirs[j]
+                changes[f.name] = tuple(mine)
                 continue
             if isinstance(v, tuple):
                 v = list(v)
@@ -196,10 +227,31 @@ def clearances(foot_length: float, heel: np.ndarray, scenes) -> np.ndarray:
     return out
 
 
-def measure(sp, heel: np.ndarray, clearance: np.ndarray, pivot_y: np.ndarray, goal_y: np.ndarray) -> dict:
-    """Kinematics and checks of heel paths (B, N, 2) with their clearances (B, N), vectorised.
+def swept_clearances(foot_length: float, heel: np.ndarray, scenes, point_clearance: np.ndarray) -> np.ndarray:
+    """Exact signed clearance (B, N-1) of the foot over each move between consecutive samples
+    (jaxexo.physics.swept), grouped by outline size like ``clearances``."""
+    b, n = heel.shape[:2]
+    out = np.empty((b, max(n - 1, 0)))
+    sizes = np.array([len(sc.outline) for sc in scenes])
+    for k in np.unique(sizes):
+        idx = np.flatnonzero(sizes == k)
+        outline = np.stack([scenes[i].outline for i in idx])
+        out[idx] = swept.path_swept_clearance(np, heel[idx], foot_length, outline, point_clearance[idx])
+    return out
+
+
+def measure(sp, heel: np.ndarray, clearance: np.ndarray, pivot_y: np.ndarray, goal_y: np.ndarray,
+            swept_clearance: np.ndarray, deviation) -> dict:
+    """Kinematics and safe-swing checks of heel paths (B, N, 2), vectorised, from their clearances at
+    the samples (B, N), over the moves between them (B, N-1, ``swept_clearances``) and the bound
+    ``deviation`` (B,) of the curve from the polyline through the samples (m).
 
     ``sp`` holds the constants (jaxexo.physics.dynamics.scalar_params or numpy_params)."""
+    dev = np.broadcast_to(np.asarray(deviation, np.float64), heel.shape[:1])
+    # The guaranteed clearance: the polyline's exact swept clearance (or the samples' own, for a
+    # path of one sample) less the deviation bound.
+    guaranteed = (swept_clearance.min(axis=-1) if swept_clearance.shape[-1] else clearance.min(axis=-1)) - dev
+    backward = swept.backward_motion(np, heel[..., 0]) + 2.0 * dev
     # kinematics.leg_state's equations, with both legs stacked on a leading axis (fewer NumPy calls).
     hip = kinematics.hip_position(np, pivot_y[:, None], heel, sp.thigh, sp.shin)
     pivot = np.zeros_like(heel)
@@ -213,8 +265,10 @@ def measure(sp, heel: np.ndarray, clearance: np.ndarray, pivot_y: np.ndarray, go
     leg_bad = kinematics.leg_too_long(np, kin["leg_swing"], kin["leg_stance"], sp.thigh, sp.shin,
                                       sp.leg_length_tolerance)
     reached = dynamics.goal_reached(np, sp, heel[:, -1, 0], heel[:, -1, 1], goal_y)
-    # The one strict-success verdict (jaxexo.physics.outcome), on every sample of the paths.
-    v = outcome.from_samples(np, reached, clearance, limit_bad, leg_bad, heel[..., 0])
+    above_ground = heel[..., 1].min(axis=-1) >= 0.0
+    # The one safe-swing verdict (jaxexo.physics.outcome), on what is guaranteed between the samples.
+    v = outcome.verdict(np, reached, guaranteed, ~np.any(limit_bad, axis=-1), ~np.any(leg_bad, axis=-1), backward,
+                        above_ground, **outcome.rule(sp))
     return {
         "clearance": clearance,
         "kin": kin,
@@ -223,15 +277,21 @@ def measure(sp, heel: np.ndarray, clearance: np.ndarray, pivot_y: np.ndarray, go
         "leg_bad": leg_bad,
         "verdict": v,
         "ok": v["success"],
+        "swept_clearance": swept_clearance,
         "collision_free": v["collision_free"],
-        "min_clearance": v["min_clearance"],
+        "min_clearance": guaranteed,
+        "clearance_ok": v["clearance_ok"],
+        "above_ground": v["above_ground"],
+        "heel_backward": backward,
+        "backward_ok": v["backward_ok"],
+        "deviation": dev.copy(),
         "joint_limits_ok": v["joint_limits_ok"],
         "leg_length_ok": v["leg_length_ok"],
         "reached_goal": reached,
     }
 
 
-def _reasons(m: dict, i: int, heel: np.ndarray, goal_y: float, time: np.ndarray) -> tuple[str, ...]:
+def _reasons(m: dict, i: int, heel: np.ndarray, goal_y: float, time: np.ndarray, sp) -> tuple[str, ...]:
     """The failed checks of path i (jaxexo.physics.outcome.CHECKS, in order), each with where it failed."""
     out = []
     for check in outcome.failed_checks(m["verdict"], i):
@@ -239,39 +299,54 @@ def _reasons(m: dict, i: int, heel: np.ndarray, goal_y: float, time: np.ndarray)
             y, z = heel[-1]
             out.append(f"did not reach the goal: ends at y={y:.3f} m, z={z:.3f} m, goal y={goal_y:.3f} m")
         elif check == "clearance_ok":
-            j = int(np.argmin(m["clearance"][i]))
-            what = ("the foot touches the obstacle" if not m["collision_free"][i] else
-                    f"the foot comes closer than {outcome.DEFAULT_MIN_CLEARANCE:.3f} m to the obstacle")
-            out.append(f"{what} (min clearance {m['min_clearance'][i]:.4f} m at t={time[j]:.3f} s)")
+            sw = m["swept_clearance"][i]
+            j = int(np.argmin(sw)) if sw.size else 0
+            when = f"between t={time[j]:.3f} s and t={time[min(j + 1, len(time) - 1)]:.3f} s"
+            if not m["collision_free"][i]:
+                out.append(f"the foot touches the obstacle (min clearance {m['min_clearance'][i]:.4f} m {when})")
+            else:
+                out.append(f"the foot passes within {m['min_clearance'][i]:.4f} m of the obstacle {when}, closer "
+                           f"than the safety margin env.min_clearance = {sp.min_clearance:.4f} m")
+        elif check == "above_ground":
+            out.append(f"the heel goes below the ground (z={heel[:, 1].min():.4f} m)")
+        elif check == "backward_ok":
+            out.append(f"the heel moves backward by {m['heel_backward'][i]:.4f} m, more than env.backward_tolerance "
+                       f"= {sp.backward_tolerance:.4f} m")
         elif check == "joint_limits_ok":
             j = int(np.argmax(m["limit_bad"][i]))
             a = np.degrees(m["angles"][i, j])
             out.append(f"joint limits exceeded at t={time[j]:.3f} s (hip/knee swing {a[0]:.1f}/{a[1]:.1f} deg, "
                        f"stance {a[2]:.1f}/{a[3]:.1f} deg)")
-        elif check == "leg_length_ok":
+        else:
             j = int(np.argmax(m["leg_bad"][i]))
             out.append(f"a leg would have to stretch beyond thigh + shin at t={time[j]:.3f} s")
-        else:
-            out.append(f"the heel moves backwards by {m['verdict']['max_backward'][i]:.4f} m, more than "
-                       f"{outcome.DEFAULT_BACKWARD_TOLERANCE:.4f} m")
     return tuple(out)
 
 
+def measure_paths(sp, paths: np.ndarray, scenes, deviation) -> dict:
+    """``measure`` of heel paths (B, N, 2) on their scenes, clearances included."""
+    pivot_y = np.array([sc.pivot_y for sc in scenes])
+    goal_y = np.array([sc.goal_y for sc in scenes])
+    c = clearances(sp.foot_length, paths, scenes)
+    return measure(sp, paths, c, pivot_y, goal_y, swept_clearances(sp.foot_length, paths, scenes, c), deviation)
+
+
 def assemble(method: str, sp, scenes, raws, paths: np.ndarray, smoothing, duration: float = DEFAULT_DURATION,
-             notes=None, measured: dict | None = None) -> TrajectoryBatch:
+             notes=None, measured: dict | None = None, deviation=None) -> TrajectoryBatch:
     """Checked trajectories from dense heel paths (B, N, 2), one per scene; ``raws`` the generator's
-    own points per scene, ``smoothing`` (B,) the smoothing each path used (nan for a raw polyline).
-    ``measured``: ``measure``'s result for exactly these paths, when the generator already has it
-    (CFFTG checks every plan while planning); otherwise it is computed here."""
+    own points per scene, ``smoothing`` (B,) the smoothing each path used (nan for a raw polyline),
+    ``deviation`` (B,) the bound (m) on each curve's distance from the polyline through its samples
+    (required unless ``measured`` is given). ``measured``: ``measure``'s result for exactly these
+    paths, when the generator already has it (CFFTG checks every plan while planning)."""
     paths = np.asarray(paths, dtype=np.float64)
     b, n = paths.shape[:2]
     if measured is None:
-        pivot_y = np.array([sc.pivot_y for sc in scenes])
-        goal_y = np.array([sc.goal_y for sc in scenes])
-        measured = measure(sp, paths, clearances(sp.foot_length, paths, scenes), pivot_y, goal_y)
+        if deviation is None:
+            raise ValueError("deviation: the bound on the curve's distance from its samples' polyline is needed")
+        measured = measure_paths(sp, paths, scenes, deviation)
     m = measured
     time = np.linspace(0.0, duration, n)
-    reasons = tuple(_reasons(m, i, paths[i], scenes[i].goal_y, time) for i in range(b))
+    reasons = tuple(_reasons(m, i, paths[i], scenes[i].goal_y, time, sp) for i in range(b))
     kin = m["kin"]
     toe = paths.copy()
     toe[..., 0] += sp.foot_length
@@ -282,6 +357,8 @@ def assemble(method: str, sp, scenes, raws, paths: np.ndarray, smoothing, durati
         min_clearance=m["min_clearance"], joint_limits_ok=m["joint_limits_ok"], leg_length_ok=m["leg_length_ok"],
         reasons=reasons, smoothing=np.asarray(smoothing, np.float64).reshape(b),
         notes=tuple(notes) if notes is not None else ((),) * b,
+        clearance_ok=m["clearance_ok"], above_ground=m["above_ground"], heel_backward=m["heel_backward"],
+        deviation=m["deviation"],
     )
 
 

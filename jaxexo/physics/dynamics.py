@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from jaxexo.physics import geometry, kinematics, rewards
+from jaxexo.physics import geometry, kinematics, rewards, swept
 from jaxexo.config import ENV_SECTIONS, PIVOT_CONDITIONS, SECTION_CLASSES, Config, declared_fields
 
 NUM_ACTIONS = 36          # thesis 2.1: 36 moves, 10 degrees apart
@@ -174,18 +174,26 @@ def observation(xp, p, obs_mode: str, heel_y, heel_z, time, visited_mid, layout)
     ], axis=-1)
 
 
-def transition(xp, p, prev, heel, time, visited_mid, layout) -> dict:
+def transition(xp, p, prev, heel, time, visited_mid, layout, max_y=None) -> dict:
     """Everything a step from heel ``prev`` to ``heel`` (..., 2) decides (thesis 2.1-2.5), for the
     JAX environment and the NumPy environment alike: collision, mid-goal, goal, kinematics, the 8 + 4
     reward terms (eq 2.29-2.52), optional shaping, the reward and termination. ``time`` is the step
-    count after the move, ``visited_mid`` whether the mid-goal was visited before it.
+    count after the move, ``visited_mid`` whether the mid-goal was visited before it, ``max_y`` the
+    heel's largest y so far (None: ``prev``'s y).
 
-    Returns ``{"visited_mid", "reward", "terminated", "info"}`` with ``info`` the environment's
-    per-step diagnostics (reward terms, clearance, collision, goal, limit and leg-length flags, joint
-    angles, heel, hip)."""
+    Collision and clearance are those of the whole move (jaxexo.physics.swept: the region the flat
+    foot sweeps from ``prev`` to ``heel``), so a move cannot jump through a corner of the obstacle.
+    The per-step ``info`` feeds the one safe-swing verdict (jaxexo.physics.outcome.accumulate):
+    ``clearance`` of the move, ``backward`` (how far the heel is behind its furthest y), the goal,
+    joint-limit and leg-length flags.
+
+    Returns ``{"visited_mid", "reward", "terminated", "info", "max_y"}`` with ``info`` the
+    environment's per-step diagnostics (reward terms, clearance, collision, goal, limit and leg-length
+    flags, backward, joint angles, heel, hip) and ``max_y`` the running maximum to pass to the next step."""
     lay = layout
-    clearance = geometry.foot_clearance(xp, heel, p.foot_length, lay.outline)
+    clearance = swept.swept_clearance(xp, prev, heel, p.foot_length, lay.outline)
     collided = geometry.foot_collides(xp, clearance)
+    run_max = xp.maximum(prev[..., 0] if max_y is None else max_y, prev[..., 0])
     mid_y, mid_z = mid_goal(xp, p, lay.center_y, lay.height)
     visited = visited_mid | in_mid_goal(xp, p, heel[..., 0], heel[..., 1], mid_y, mid_z)
     missed_mid = beyond_mid_goal(xp, p, heel[..., 0], mid_y) & ~visited
@@ -220,9 +228,11 @@ def transition(xp, p, prev, heel, time, visited_mid, layout) -> dict:
         "joint_angles": angles,
         "heel": heel,
         "hip": kin["hip"],
-        "backward": prev[..., 0] - heel[..., 0],   # m the heel moved backwards (eq 2.31's condition)
+        # m the heel is behind its furthest y so far (eq 2.31's condition; the safe-swing rule's measure)
+        "backward": run_max - heel[..., 0],
     }
-    return {"visited_mid": visited, "reward": reward, "terminated": done, "info": info}
+    return {"visited_mid": visited, "reward": reward, "terminated": done, "info": info,
+            "max_y": xp.maximum(run_max, heel[..., 0])}
 
 
 # --------------------------------------------------------------------------------------------

@@ -7,14 +7,16 @@ baseline's NumPy environment, CFFTG's planning loop and the checked trajectories
 jax.numpy) like the rest of jaxexo.physics, so the JAX environment's episode flags and the NumPy
 trajectory samples are judged by the same code.
 
-Strict success (thesis 3.3, eq 3.1 extended): the heel reached the goal (eq 2.32's goal), the heel-toe
-segment kept at least ``min_clearance`` from the obstacle (eq 2.30 with the foot's length; 0 m: it
-never touched), both legs stayed inside their joint limits (eq 2.50) and no leg had to stretch beyond
-thigh + shin (eq 2.45), and the heel never moved backwards by more than ``backward_tolerance``
-(eq 2.31's condition; not checked by default). Accuracy (eq 3.1) is ``collision_free``: never touched.
+A safe swing (thesis 3.3, eq 3.1 extended; issue 11): the heel reached the goal (eq 2.32's goal),
+the flat foot's motion kept at least ``min_clearance`` from the obstacle outline (eq 2.30 with the
+foot's length, measured over the region the foot sweeps between samples or steps, jaxexo.physics.swept),
+the heel stayed above the ground, it never fell back more than ``backward_tolerance`` behind the
+furthest y it had reached (eq 2.31's condition), both legs stayed inside their joint limits (eq 2.50)
+and no leg had to stretch beyond thigh + shin (eq 2.45). Accuracy (eq 3.1) is ``collision_free``:
+never touched, whatever the margin.
 
-The two rule parameters have today's behaviour as defaults (DEFAULT_MIN_CLEARANCE,
-DEFAULT_BACKWARD_TOLERANCE); tightening what a safe swing is changes those two constants only.
+The two rule parameters are the config's ``env.min_clearance`` and ``env.backward_tolerance``
+(``rule(p)`` reads them from environment parameters); their defaults are declared here once.
 
 Two ways in: ``from_samples`` reduces per-sample arrays (..., N) of a finished path; ``start`` /
 ``accumulate`` / ``episode_verdict`` fold per-step flags of an environment episode as it runs.
@@ -22,50 +24,50 @@ Two ways in: ``from_samples`` reduces per-sample arrays (..., N) of a finished p
 
 from __future__ import annotations
 
-import math
+from jaxexo.physics import geometry, swept
 
-from jaxexo.physics import geometry
-
-# m: the clearance a successful swing keeps from the obstacle (0: it must not touch, eq 3.1).
-DEFAULT_MIN_CLEARANCE = 0.0
-# m: how far the heel may move backwards in one step or between two samples (inf: not checked).
-DEFAULT_BACKWARD_TOLERANCE = math.inf
+# m: the clearance a safe swing keeps from the obstacle outline (config env.min_clearance).
+DEFAULT_MIN_CLEARANCE = 0.02
+# m: how far the heel may fall back behind its furthest y so far (config env.backward_tolerance).
+DEFAULT_BACKWARD_TOLERANCE = 0.005
 
 # The checks, in the order their reasons are reported.
-CHECKS = ("reached_goal", "clearance_ok", "joint_limits_ok", "leg_length_ok", "backward_ok")
+CHECKS = ("reached_goal", "clearance_ok", "above_ground", "backward_ok", "joint_limits_ok", "leg_length_ok")
 
 
-def verdict(xp, reached_goal, min_clearance, joint_limits_ok, leg_length_ok, max_backward=None, *,
-            min_clearance_margin: float = DEFAULT_MIN_CLEARANCE,
-            backward_tolerance: float = DEFAULT_BACKWARD_TOLERANCE) -> dict:
+def rule(p) -> dict:
+    """The rule parameters of ``verdict`` from environment parameters ``p`` (EnvParams, or any object
+    with ``min_clearance`` and ``backward_tolerance``, m)."""
+    return {"min_clearance_margin": p.min_clearance, "backward_tolerance": p.backward_tolerance}
+
+
+def verdict(xp, reached_goal, min_clearance, joint_limits_ok, leg_length_ok, max_backward, above_ground=True, *,
+            min_clearance_margin=DEFAULT_MIN_CLEARANCE, backward_tolerance=DEFAULT_BACKWARD_TOLERANCE) -> dict:
     """The verdict on whole swings from their aggregates (any shape, broadcast together).
 
-    ``min_clearance`` (m) the smallest foot-obstacle clearance over the swing; ``max_backward`` (m)
-    the largest backward heel move (None: not measured, only allowed with an infinite tolerance).
-    Returns the flags of CHECKS, ``collision_free`` (eq 3.1: never touched, whatever the margin) and
-    ``success`` (all CHECKS hold)."""
+    ``min_clearance`` (m) the smallest clearance of the foot's motion from the obstacle (for a sampled
+    path: guaranteed between the samples); ``max_backward`` (m) the largest fall of the heel behind its
+    furthest y so far; ``above_ground`` whether the heel stayed at z >= 0. Returns the flags of
+    CHECKS, ``collision_free`` (eq 3.1: never touched, whatever the margin) and ``success`` (all
+    CHECKS hold; a margin >= 0 implies collision_free)."""
     collision_free = ~geometry.foot_collides(xp, min_clearance)
-    clearance_ok = ~geometry.foot_collides(xp, min_clearance - min_clearance_margin)
-    if math.isinf(backward_tolerance):
-        backward_ok = xp.ones_like(collision_free)
-    elif max_backward is None:
-        raise ValueError("verdict: a finite backward_tolerance needs max_backward (m)")
-    else:
-        backward_ok = max_backward <= backward_tolerance
-    success = reached_goal & clearance_ok & joint_limits_ok & leg_length_ok & backward_ok
+    clearance_ok = collision_free & ~geometry.foot_collides(xp, min_clearance - min_clearance_margin)
+    backward_ok = max_backward <= backward_tolerance
+    above_ground = xp.ones_like(collision_free) & above_ground
+    success = reached_goal & clearance_ok & above_ground & backward_ok & joint_limits_ok & leg_length_ok
     return {"success": success, "collision_free": collision_free, "reached_goal": reached_goal,
-            "clearance_ok": clearance_ok, "joint_limits_ok": joint_limits_ok, "leg_length_ok": leg_length_ok,
-            "backward_ok": backward_ok}
+            "clearance_ok": clearance_ok, "above_ground": above_ground, "backward_ok": backward_ok,
+            "joint_limits_ok": joint_limits_ok, "leg_length_ok": leg_length_ok}
 
 
 def from_samples(xp, reached_goal, clearance, limit_bad, leg_bad, heel_y, **rule) -> dict:
     """The verdict on finished paths from per-sample values along the last axis (..., N):
     ``clearance`` (m), ``limit_bad`` / ``leg_bad`` (either leg outside its joint limits / too long),
     ``heel_y`` (m); ``reached_goal`` (...) whether the path ends at the goal. Also returns
-    ``min_clearance`` and ``max_backward``."""
+    ``min_clearance`` and ``max_backward``. (Checked trajectories use ``verdict`` directly, with the
+    clearance guaranteed between samples: jaxexo.inference.trajectory.measure.)"""
     min_clearance = xp.min(clearance, axis=-1)
-    back = heel_y[..., :-1] - heel_y[..., 1:]
-    max_backward = xp.max(back, axis=-1) if back.shape[-1] else xp.zeros_like(min_clearance)
+    max_backward = swept.backward_motion(xp, heel_y)
     v = verdict(xp, reached_goal, min_clearance, ~xp.any(limit_bad, axis=-1), ~xp.any(leg_bad, axis=-1),
                 max_backward, **rule)
     return {**v, "min_clearance": min_clearance, "max_backward": max_backward}
@@ -86,6 +88,7 @@ def accumulate(xp, acc: dict, info: dict, alive=True) -> dict:
         "limits": acc["limits"] | (alive & info["joint_limit_violation"]),
         "leg": acc["leg"] | (alive & info["leg_length_violation"]),
         "min_clearance": xp.where(alive, xp.minimum(acc["min_clearance"], info["clearance"]), acc["min_clearance"]),
+        # info["backward"]: how far the heel is behind its furthest y so far (transition's running max)
         "max_backward": xp.where(alive, xp.maximum(acc["max_backward"], info["backward"]), acc["max_backward"]),
     }
 

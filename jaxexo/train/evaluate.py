@@ -63,7 +63,7 @@ def make_rollout(env: ExoStepEnv, q_apply, max_steps: int, record: bool = False)
         out0 = {"outcome": outcome.start(jnp), "steps": jnp.asarray(0), "return": jnp.asarray(0.0)}
         (_, _, _, out), path = jax.lax.scan(step, (state, obs, jnp.asarray(True), out0), None, length=max_steps)
         acc = out.pop("outcome")
-        v = outcome.episode_verdict(jnp, acc)
+        v = outcome.episode_verdict(jnp, acc, **outcome.rule(params))
         out.update(reached=acc["reached_goal"], collided=~v["collision_free"], limits=acc["limits"], leg=acc["leg"],
                    min_clearance=acc["min_clearance"], accurate=v["collision_free"], success=v["success"])
         return (out, path) if record else out

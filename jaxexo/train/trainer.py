@@ -195,12 +195,12 @@ class Trainer:
             jax.random.split(key, n), env_state, action, hyper.env)
 
     @staticmethod
-    def _episode_stats(stats: EpisodeStats, reward, terminated, truncated, info):
+    def _episode_stats(stats: EpisodeStats, reward, terminated, truncated, info, env_params):
         ret = stats.ret + reward
         acc = outcome.accumulate(jnp, stats.outcome, info)
         # The strict-success verdict of the episodes that ended here (jaxexo.physics.outcome, the one
         # definition), on the agent's raw moves under the behaviour policy.
-        v = outcome.episode_verdict(jnp, acc)
+        v = outcome.episode_verdict(jnp, acc, **outcome.rule(env_params))
         done = terminated | truncated
         row = jnp.stack([done.sum(), jnp.where(done, ret, 0.0).sum(), (done & v["success"]).sum(),
                          (done & v["collision_free"]).sum()])
@@ -242,7 +242,7 @@ class Trainer:
             ka, ke = jax.random.split(self._local_key(kl))
             a, greedy = self._act(ts.params, obs, ka, eps)
             obs2, env_state, r, term, trunc, info = self._env_step(ke, env_state, a, hyper)
-            stats, row = self._episode_stats(stats, r, term, trunc, info)
+            stats, row = self._episode_stats(stats, r, term, trunc, info, hyper.env)
             # The bootstrap's target-network pass runs here, on this step's N observations, rather than
             # on all T x N after the rollout: the same arithmetic on a working set that stays in cache.
             q_final = self.net.apply(ts.target_params, info["final_observation"])    # (N, A)
@@ -317,7 +317,7 @@ class Trainer:
             traces = td_lambda.add_gradient(
                 td_lambda.decay_traces(traces, hyper.gamma, hyper.lam, keep), grads, self.tc.trace_kind)
             obs2, env_state, r, term, trunc, info = self._env_step(ke, env_state, a, hyper)
-            stats, row = self._episode_stats(stats, r, term, trunc, info)
+            stats, row = self._episode_stats(stats, r, term, trunc, info, hyper.env)
             done = term | trunc
             a2, greedy2 = self._act(params, obs2, ka, eps)
             q_final = self.net.apply(ts.target_params, info["final_observation"])

@@ -1,0 +1,111 @@
+"""Exact clearance of the flat foot while it moves between two samples (issue 11: a safe swing is safe
+under any finer look), written once for any array module ``xp`` (numpy, jax.numpy).
+
+Between two consecutive heel positions h0 and h1 the flat foot (the horizontal heel-toe segment of
+length foot_length, jaxexo.physics.geometry) translates along the chord h0 -> h1, so it sweeps the
+parallelogram P = {h0 + s (foot_length, 0) + t (h1 - h0) : s, t in [0, 1]} (degenerate, a segment,
+when the move is horizontal). Its distance to the obstacle outline (a polyline) is exact and
+sampling-free:
+
+- zero when an outline edge crosses one of P's four sides, or an outline vertex lies inside P;
+- otherwise the distance between two convex sets that do not meet, which is attained between a
+  side of P and an outline edge, and for two segments that do not cross at an endpoint of one of
+  them: P's four corners (heel and toe at h0 and h1) against the outline edges, and the outline
+  vertices against P's four sides.
+
+``swept_clearance`` signs it like ``geometry.foot_clearance``: negative when the foot is inside the
+obstacle at either end of the move. Every function broadcasts: h0, h1 (..., 2), outline (..., K, 2)
+(padded outlines: degenerate padding edges change nothing, as in geometry).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from jaxexo.physics.geometry import _point_edge_dist2, foot_clearance
+
+
+def _inv_len2(xp, ey, ez):
+    # Sides shorter than 1e-12 m count as points (1 / len2 would overflow; t = 0 gives the vertex).
+    len2 = ey * ey + ez * ez
+    ok = len2 > 1e-24
+    return xp.where(ok, 1.0 / xp.where(ok, len2, 1.0), 0.0)
+
+
+def swept_distance(xp, h0, h1, foot_length, outline):
+    """Exact minimum distance (m) between the region the flat foot sweeps from heel h0 to heel h1
+    (a parallelogram) and the outline polyline; zero when they meet. Shapes: (..., 2), (..., K, 2)."""
+    vy = outline[..., 0]
+    vz = outline[..., 1]
+    # Outline edges c -> c + e, (..., 1, K-1): a leading axis of 1 for P's sides or corners.
+    cy, cz = vy[..., None, :-1], vz[..., None, :-1]
+    ey, ez = vy[..., None, 1:] - cy, vz[..., None, 1:] - cz
+    inv_e = _inv_len2(xp, ey, ez)
+    y0, z0 = h0[..., 0], h0[..., 1]
+    dy, dz = h1[..., 0] - y0, h1[..., 1] - z0
+    f = foot_length + 0.0 * y0
+    # P's four corners (..., 4) and its four sides a -> a + u (..., 4): the foot at h0 and at h1, the
+    # heel's and the toe's chords.
+    py = xp.stack([y0, y0 + f, y0 + dy, y0 + f + dy], axis=-1)
+    pz = xp.stack([z0, z0, z0 + dz, z0 + dz], axis=-1)
+    ay = xp.stack([y0, y0 + dy, y0, y0 + f], axis=-1)
+    az = xp.stack([z0, z0 + dz, z0, z0], axis=-1)
+    uy = xp.stack([f, f, dy, dy], axis=-1)
+    uz = xp.stack([0.0 * z0, 0.0 * z0, dz, dz], axis=-1)
+    inv_u = _inv_len2(xp, uy, uz)
+    # Corners of P against the outline edges: (..., 4, K-1).
+    d_corner = _point_edge_dist2(py[..., :, None], pz[..., :, None], cy, cz, ey, ez, inv_e)
+    # Outline vertices against P's sides: (..., 4, K).
+    d_vertex = _point_edge_dist2(vy[..., None, :], vz[..., None, :], ay[..., :, None], az[..., :, None],
+                                 uy[..., :, None], uz[..., :, None], inv_u[..., :, None])
+    # Proper crossings of a side of P and an outline edge (strict orientation tests; touching cases
+    # are caught by the endpoint distances being zero): (..., 4, K-1).
+    ay_, az_, uy_, uz_ = ay[..., :, None], az[..., :, None], uy[..., :, None], uz[..., :, None]
+    o1 = uy_ * (cz - az_) - uz_ * (cy - ay_)
+    o2 = uy_ * (cz + ez - az_) - uz_ * (cy + ey - ay_)
+    o3 = ey * (az_ - cz) - ez * (ay_ - cy)
+    o4 = ey * (az_ + uz_ - cz) - ez * (ay_ + uy_ - cy)
+    crossing = xp.any((o1 * o2 < 0.0) & (o3 * o4 < 0.0), axis=(-2, -1))
+    # Outline vertices strictly inside P: v - h0 = s (f, 0) + t (dy, dz) with s, t in [0, 1]
+    # (only for a move with a vertical component; a flat P has no interior).
+    has_area = xp.abs(dz) > 0.0
+    safe_dz = xp.where(has_area, dz, 1.0)[..., None]
+    t = (vz - z0[..., None]) / safe_dz
+    s = (vy - y0[..., None] - t * dy[..., None]) / xp.where(f > 0.0, f, 1.0)[..., None]
+    inside = xp.any((t >= 0.0) & (t <= 1.0) & (s >= 0.0) & (s <= 1.0), axis=-1) & has_area
+    d2 = xp.minimum(xp.min(d_corner, axis=(-2, -1)), xp.min(d_vertex, axis=(-2, -1)))
+    return xp.where(crossing | inside, 0.0, xp.sqrt(d2))
+
+
+def swept_clearance(xp, h0, h1, foot_length, outline, c0=None, c1=None):
+    """Signed clearance (m) of the foot over the whole move h0 -> h1: the exact swept distance, or the
+    (negative) clearance at an end where the foot is inside the obstacle. ``c0``, ``c1``: the ends'
+    ``geometry.foot_clearance`` when the caller has them already."""
+    if c0 is None:
+        c0 = foot_clearance(xp, h0, foot_length, outline)
+    if c1 is None:
+        c1 = foot_clearance(xp, h1, foot_length, outline)
+    return xp.minimum(swept_distance(xp, h0, h1, foot_length, outline), xp.minimum(c0, c1))
+
+
+def path_swept_clearance(xp, path, foot_length, outline, point_clearance=None):
+    """Per-move signed clearance (..., N-1) along heel paths (..., N, 2) taken as polylines;
+    ``outline`` (..., K, 2) broadcasts against the path's leading axes (add an axis for the moves)."""
+    c = foot_clearance(xp, path, foot_length, outline[..., None, :, :]) if point_clearance is None \
+        else point_clearance
+    return swept_clearance(xp, path[..., :-1, :], path[..., 1:, :], foot_length, outline[..., None, :, :],
+                           c[..., :-1], c[..., 1:])
+
+
+def backward_motion(xp, y):
+    """Largest backward heel motion (m) along heel y samples (..., N): max over i < j of y_i - y_j (the
+    drop below the running maximum); exact for the polyline through the samples (its extremes are at
+    samples). Zero for a path that never moves backward."""
+    run = np.maximum.accumulate(np.asarray(y), axis=-1) if xp is np else _cummax(xp, y)
+    return xp.max(run - y, axis=-1)
+
+
+def _cummax(xp, y):
+    import jax
+
+    return jax.lax.cummax(y, axis=y.ndim - 1)
