@@ -14,8 +14,6 @@ from __future__ import annotations
 
 import os
 
-
-
 from jaxexo.config.schema import Config, ConfigError
 from jaxexo.physics import dynamics
 from jaxexo.physics.dynamics import NUM_ACTIONS
