@@ -102,15 +102,7 @@ class Trajectory:
                                 self.joint_angles])
 
     def to_csv(self, path: str | Path | None = None) -> str:
-        buf = io.StringIO()
-        w = csv.writer(buf, lineterminator="\n")
-        w.writerow(CSV_COLUMNS)
-        for row in self.table():
-            w.writerow([f"{x:.6f}" for x in row])
-        text = buf.getvalue()
-        if path is not None:
-            atomic_write(path, text)
-        return text
+        return write_csv(CSV_COLUMNS, self.table(), "{:.6f}", path)
 
     def to_dict(self) -> dict:
         c = self.checks
@@ -377,11 +369,17 @@ def timed_table(swing) -> np.ndarray:
 
 
 def write_timed_csv(swing, path: str | Path | None = None) -> str:
+    return write_csv(TIMED_CSV_COLUMNS, timed_table(swing), "{:.9g}", path)
+
+
+def write_csv(columns, table: np.ndarray, fmt: str, path: str | Path | None = None) -> str:
+    """CSV text of a (N, len(columns)) table, each number formatted by ``fmt``; written atomically to
+    ``path`` when given."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(TIMED_CSV_COLUMNS)
-    for row in timed_table(swing):
-        w.writerow([f"{x:.9g}" for x in row])
+    w.writerow(columns)
+    for row in table:
+        w.writerow([fmt.format(x) for x in row])
     text = buf.getvalue()
     if path is not None:
         atomic_write(path, text)
