@@ -634,7 +634,7 @@ def test_diverged_run_says_so_and_exports_nothing_non_finite(cache, tmp_path):
                        text=True, cwd=ROOT, env=one_device_env(), timeout=900)
     assert_clean_refusal(r, "training diverged in chunk 1", "train.lr", code=3)
     rows = [json.loads(x) for x in (run / "metrics.jsonl").read_text().splitlines()]
-    assert [x["diverged"] for x in rows] == [True] and rows[0]["validation_success"] is None
+    assert [x["diverged"] for x in rows] == [True] and rows[0]["validation_success_raw"] is None
     assert not (run / "policy.npz").exists() and not (run / "checkpoint.msgpack").exists()
 
 
