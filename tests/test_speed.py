@@ -42,15 +42,23 @@ def test_pruned_swept_minimum_matches_the_full_swept_clearance():
     rng = np.random.default_rng(0)
     kinds = [geometry.Obstacle.rectangle, geometry.Obstacle.triangle, geometry.Obstacle.half_ellipse]
     pruned_any = 0
+    rects = []
     for i, path in enumerate(_random_paths(rng, 3000, int(rng.integers(5, 120)))):
         ob = kinds[i % 3](rng.uniform(0.02, 0.25), rng.uniform(0.02, 0.25), center_y=rng.uniform(0.35, 0.55))
         c = geometry.foot_clearance(np, path, FOOT, ob.outline[None])
         full = swept.path_swept_clearance(np, path, FOOT, ob.outline, c)
-        fast = swept.path_swept_min(path, FOOT, ob.outline, c)
+        fast = swept.path_swept_min(path[None], FOOT, ob.outline[None], c[None])[0]
         assert fast.shape == full.shape
         assert fast.min() == full.min()
         assert np.argmin(fast) == np.argmin(full)
         assert np.all(fast <= full + 1e-12)            # elsewhere a lower bound ...
         assert np.all(fast[fast != full] > full.min())  # ... that stays above the minimum
         pruned_any += int(np.sum(fast != full))
+        if i % 3 == 0:
+            rects.append((path, ob.outline, c, full))
     assert pruned_any > 0
+    # Many paths at once (one vectorised geometry call for all candidate moves): the same per path.
+    path, outline, c, full = (np.stack(x) for x in zip(*rects))
+    fast = swept.path_swept_min(path, FOOT, outline, c)
+    assert np.array_equal(fast.min(axis=1), full.min(axis=1))
+    assert np.array_equal(np.argmin(fast, axis=1), np.argmin(full, axis=1))

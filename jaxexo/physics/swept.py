@@ -101,24 +101,28 @@ def swept_lower_bound(xp, c0, c1, move_length):
 
 
 def path_swept_min(path, foot_length, outline, point_clearance, slack=1e-9):
-    """NumPy: per-move clearances (N-1,) of one heel path (N, 2) that agree with
-    ``path_swept_clearance`` where it matters for the verdict: its minimum and the move attaining it
-    are exact. Moves whose ``swept_lower_bound`` exceeds the smallest end clearance (an upper bound
-    on the minimum) by more than ``slack`` cannot be the closest; they get that lower bound instead
-    of the exact value. Moves with an end inside the obstacle get min(c0, c1), which is exact."""
+    """NumPy: per-move clearances (B, N-1) of heel paths (B, N, 2) on outlines (B, K, 2) that agree
+    with ``path_swept_clearance`` where the verdict looks: each path's minimum and the move attaining
+    it are exact. A move whose ``swept_lower_bound`` exceeds its path's smallest end clearance (an
+    upper bound on the minimum) by more than ``slack`` cannot be the closest; it gets that lower
+    bound (above the minimum) instead of the exact value, so only the few candidate moves of all
+    paths go through the geometry, in one vectorised call. Moves with an end inside the obstacle
+    get min(c0, c1), which is exact there."""
     c = point_clearance
-    c0, c1 = c[:-1], c[1:]
+    c0, c1 = c[:, :-1], c[:, 1:]
     ends = np.minimum(c0, c1)
-    d = path[1:] - path[:-1]
-    length = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1])
+    d = path[:, 1:] - path[:, :-1]
+    length = np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1])
     lb = swept_lower_bound(np, c0, c1, length)
     out = np.maximum(lb, 0.0)
-    upper = ends.min() if ends.size else np.inf
-    todo = np.flatnonzero((ends > 0.0) & (lb <= upper + slack))
+    if ends.shape[1] == 0:
+        return out
+    upper = ends.min(axis=1, keepdims=True)
     inside = ends <= 0.0
     out[inside] = ends[inside]
-    if todo.size:
-        out[todo] = np.minimum(swept_distance(np, path[todo], path[todo + 1], foot_length, outline), ends[todo])
+    r, j = np.nonzero(~inside & (lb <= upper + slack))
+    if r.size:
+        out[r, j] = np.minimum(swept_distance(np, path[r, j], path[r, j + 1], foot_length, outline[r]), ends[r, j])
     return out
 
 
