@@ -180,16 +180,16 @@ class TrajectoryGenerator:
         return paths, [acts[: length[i] - 1, i] for i in range(b)]
 
     # Trajectories ---------------------------------------------------------------------------------
-    def _fallback(self, scene: Scene, raw: np.ndarray, n_points: int, smoothing: float):
+    def _fallback(self, scene: Scene, raw: np.ndarray, n_points: int, smoothing: float, fast: bool = True):
         """A smoothed path came closer than the margin: when the raw path keeps it, retry with less
         smoothing (FALLBACK_FACTORS), then the raw polyline. Returns (path, smoothing used, notes,
         deviation bound), or None when the raw path itself breaks the margin (smoothing is then kept
         and the checks report it)."""
-        if not self._keeps_margin(scene, sm.distinct(raw), 0.0):
+        if not self._keeps_margin(scene, sm.distinct(raw), 0.0, fast):
             return None
         for f in FALLBACK_FACTORS:
             cand, dev = sm.smooth_paths([raw], n_points, smoothing * f, with_deviation=True)
-            if self._keeps_margin(scene, cand[0], dev[0]):
+            if self._keeps_margin(scene, cand[0], dev[0], fast):
                 return cand[0], smoothing * f, (f"smoothing {smoothing:g} m^2 brought the foot within the "
                                                 f"safety margin; {smoothing * f:g} m^2 used",), dev[0]
         path, dev = sm.linear_resample(raw, n_points, with_deviation=True)
@@ -197,7 +197,7 @@ class TrajectoryGenerator:
             "every smoothing brought the foot within the safety margin; the raw polyline is used",), dev
 
     def _finish(self, scenes, raws, n_points: int, smoothing: float, duration: float,
-                fallback: str | None = "cfftg") -> TrajectoryBatch:
+                fallback: str | None = "cfftg", fast: bool = True) -> TrajectoryBatch:
         """Smooth every raw path, check them all at once, redo the few that smoothing brought within the
         margin, then hand the swings that still fail to CFFTG (``fallback``)."""
         if smoothing > 0:
@@ -209,17 +209,17 @@ class TrajectoryGenerator:
             paths, dev = [p for p, _ in both], np.array([d for _, d in both])
             used = [float("nan")] * len(raws)
         notes = [()] * len(raws)
-        batch = assemble("rl", self.sp, scenes, raws, np.stack(paths), used, duration, notes, deviation=dev)
+        batch = assemble("rl", self.sp, scenes, raws, np.stack(paths), used, duration, notes, deviation=dev, fast=fast)
         redo = []
         for i in np.flatnonzero(~batch.clearance_ok) if smoothing > 0 else ():
-            fb = self._fallback(scenes[i], raws[i], n_points, smoothing)
+            fb = self._fallback(scenes[i], raws[i], n_points, smoothing, fast)
             if fb is not None:
                 redo.append((i, fb))
         if redo:
             idx = [i for i, _ in redo]
             sub = assemble("rl", self.sp, [scenes[i] for i in idx], [raws[i] for i in idx],
                            np.stack([fb[0] for _, fb in redo]), [fb[1] for _, fb in redo], duration,
-                           [fb[2] for _, fb in redo], deviation=np.array([fb[3] for _, fb in redo]))
+                           [fb[2] for _, fb in redo], deviation=np.array([fb[3] for _, fb in redo]), fast=fast)
             batch = batch.with_rows(idx, sub)
         if fallback == "cfftg" and not batch.ok.all():
             batch = self._cfftg_fallback(batch, n_points, duration)
@@ -246,9 +246,13 @@ class TrajectoryGenerator:
         sub = dataclasses.replace(sub, notes=tuple(notes[bad[j]] + sub.notes[n] for n, j in enumerate(keep)))
         return batch.with_rows([bad[j] for j in keep], sub)
 
-    def _keeps_margin(self, scene: Scene, path: np.ndarray, deviation: float) -> bool:
+    def _keeps_margin(self, scene: Scene, path: np.ndarray, deviation: float, fast: bool = True) -> bool:
         """The path (a polyline through its points, less ``deviation``) keeps the safety margin."""
-        c = swept.path_swept_clearance(np, path, self.sp.foot_length, scene.outline)
+        if fast:
+            pc = geometry.foot_clearance(np, path, self.sp.foot_length, scene.outline[None])
+            c = swept.path_swept_min(path[None], self.sp.foot_length, scene.outline[None], pc[None])
+        else:
+            c = swept.path_swept_clearance(np, path, self.sp.foot_length, scene.outline)
         return bool(c.size == 0 or c.min() - deviation >= self.sp.min_clearance)
 
     def _touches(self, scene: Scene, path: np.ndarray) -> bool:
@@ -265,15 +269,17 @@ class TrajectoryGenerator:
     def generate(self, obstacle: geometry.Obstacle, *, pivot: str = "obstacle", pivot_y: float | None = None,
                  start_y: float = 0.0, step_length: float = 0.70, n_points: int = sm.DEFAULT_POINTS,
                  smoothing: float = sm.DEFAULT_SMOOTHING, duration: float = DEFAULT_DURATION,
-                 strict: bool = False, fallback: str | None = "cfftg") -> Trajectory:
+                 strict: bool = False, fallback: str | None = "cfftg", fast: bool = True) -> Trajectory:
         """One smoothed, checked trajectory (metres, radians, seconds). ``strict`` raises
         TrajectoryError instead of returning a trajectory that fails a check; ``fallback``: "cfftg"
-        (CFFTG's plan when the RL swing is not safe) or None (module docstring)."""
+        (CFFTG's plan when the RL swing is not safe) or None (module docstring). ``fast=False`` runs
+        the plain reference implementation (every move's swept clearance computed exactly), which
+        gives the same actions, samples and verdicts."""
         n_points, smoothing, duration = check_options(n_points, smoothing, duration)
         fallback = check_fallback(fallback)
         scene = self.scene(obstacle, pivot, pivot_y, start_y, step_length)
         raw, _ = self.rollout(scene)
-        traj = self._finish([scene], [raw], n_points, smoothing, duration, fallback)[0]
+        traj = self._finish([scene], [raw], n_points, smoothing, duration, fallback, fast)[0]
         if strict and not traj.ok:
             raise TrajectoryError(traj)
         return traj
@@ -281,14 +287,14 @@ class TrajectoryGenerator:
     def generate_batch(self, obstacles, *, pivot="obstacle", pivot_y=None, start_y=0.0, step_length=0.70,
                        n_points: int = sm.DEFAULT_POINTS, smoothing: float = sm.DEFAULT_SMOOTHING,
                        duration: float = DEFAULT_DURATION, strict: bool = False,
-                       fallback: str | None = "cfftg") -> TrajectoryBatch:
+                       fallback: str | None = "cfftg", fast: bool = True) -> TrajectoryBatch:
         """Trajectories for many scenarios; every option is one value or one per obstacle (``fallback``
-        one value, as in ``generate``)."""
+        and ``fast`` one value, as in ``generate``)."""
         n_points, smoothing, duration = check_options(n_points, smoothing, duration)
         fallback = check_fallback(fallback)
         scenes = self._scenes(obstacles, pivot, pivot_y, start_y, step_length)
         raws, _ = self.rollout_batch(scenes)
-        batch = self._finish(scenes, raws, n_points, smoothing, duration, fallback)
+        batch = self._finish(scenes, raws, n_points, smoothing, duration, fallback, fast)
         if strict and not batch.ok.all():
             raise TrajectoryError(batch[int(np.argmin(batch.ok))])
         return batch
