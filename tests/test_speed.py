@@ -62,3 +62,38 @@ def test_pruned_swept_minimum_matches_the_full_swept_clearance():
     fast = swept.path_swept_min(path, FOOT, outline, c)
     assert np.array_equal(fast.min(axis=1), full.min(axis=1))
     assert np.array_equal(np.argmin(fast, axis=1), np.argmin(full, axis=1))
+
+
+def _same(a, b):
+    """Two trajectories agree: samples to 1e-9 m, every check and reason, the method used."""
+    assert a.method == b.method
+    np.testing.assert_allclose(a.heel, b.heel, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(a.joint_angles, b.joint_angles, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(a.raw, b.raw)
+    assert a.checks == b.checks
+    assert a.notes == b.notes
+    assert (np.isnan(a.smoothing) and np.isnan(b.smoothing)) or a.smoothing == b.smoothing
+
+
+@pytest.mark.slow
+def test_fast_generation_matches_the_reference_on_thousands_of_scenes(trained_run):
+    from jaxexo.inference import TrajectoryGenerator
+    from jaxexo.inference.scenarios import sample_scenarios
+
+    gen = TrajectoryGenerator.load(trained_run / "policy.npz")
+    sc = sample_scenarios(gen.config, 2000, seed=7)
+    args = {k: [s[k] for s in sc] for k in ("obstacle", "pivot", "start_y", "step_length")}
+    fast = gen.generate_batch(args["obstacle"], pivot=args["pivot"], start_y=args["start_y"],
+                              step_length=args["step_length"])
+    ref = gen.generate_batch(args["obstacle"], pivot=args["pivot"], start_y=args["start_y"],
+                             step_length=args["step_length"], fast=False)
+    assert len(fast) == len(ref) == 2000
+    for a, b in zip(fast, ref):
+        _same(a, b)
+    # Both verdicts occur, so the comparison covers failing swings and the fallbacks too.
+    assert 0 < fast.ok.sum() < len(fast) or any(m == "cfftg-fallback" for m in fast.row_methods)
+    for fallback in ("cfftg", None):
+        for s in sc[:1000]:
+            kw = {k: s[k] for k in ("pivot", "start_y", "step_length")}
+            _same(gen.generate(s["obstacle"], fallback=fallback, **kw),
+                  gen.generate(s["obstacle"], fallback=fallback, fast=False, **kw))
