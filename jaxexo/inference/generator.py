@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import dataclasses
 import tomllib
+import types
 from pathlib import Path
 
 import numpy as np
@@ -33,7 +34,7 @@ import numpy as np
 from jaxexo.physics import dynamics, geometry, swept
 from jaxexo.config import ConfigError, config_from_dict
 from jaxexo.physics.dynamics import Scene, scalar
-from jaxexo.inference import smoothing as sm
+from jaxexo.inference import smoothing as sm, trajectory
 from jaxexo.inference.network import FoldedQNetwork, StepNetwork
 from jaxexo.inference.trajectory import DEFAULT_DURATION, Trajectory, TrajectoryBatch, TrajectoryError, assemble
 from jaxexo.storage.policy_file import PolicyFileError, QPolicy, load_policy
@@ -58,6 +59,10 @@ class TrajectoryGenerator:
         self.net = FoldedQNetwork(policy)
         self.step_net = StepNetwork(self.net)
         self._linear = None
+        self._cfftg = None      # built on the first fallback (its constants cost ~ms to derive)
+        # terminated()'s one parameter as a Python bool: a NumPy bool would make every step's test
+        # a NumPy scalar operation.
+        self._term_p = types.SimpleNamespace(terminate_on_collision=bool(self.np_params.terminate_on_collision))
 
     @classmethod
     def load(cls, path: str | Path) -> "TrajectoryGenerator":
@@ -134,7 +139,7 @@ class TrajectoryGenerator:
             # The environment's termination (dynamics.terminated, .truncated); the clearance is
             # only computed where a collision ends the episode.
             collided = self.terminate_on_collision and self._touches(scene, np.array([[hy, hz]]))
-            if (dynamics.terminated(scalar, self.np_params, dynamics.goal_reached(scalar, sp, hy, hz, scene.goal_y),
+            if (dynamics.terminated(scalar, self._term_p, dynamics.goal_reached(scalar, sp, hy, hz, scene.goal_y),
                                     collided) or dynamics.truncated(t, self.max_steps)):
                 break
         return np.asarray(pts), np.asarray(acts, dtype=np.int64)
@@ -196,6 +201,43 @@ class TrajectoryGenerator:
         return path, float("nan"), (
             "every smoothing brought the foot within the safety margin; the raw polyline is used",), dev
 
+    def _fallback_batch(self, scenes, raws, rows, n_points: int, smoothing: float):
+        """``_fallback`` for the rows ``rows`` at once: each smoothing factor is tried on every row
+        still waiting, smoothed together and checked in one vectorised call. Returns the same
+        (row, (path, smoothing, notes, deviation)) list, in row order."""
+        fl = self.sp.foot_length
+        pts = [sm.distinct(raws[i]) for i in rows]
+        # Raw paths padded with their last point (a repeated point adds a zero-length move, whose
+        # swept clearance is that point's own: the polyline's minimum is unchanged).
+        n = max(len(p) for p in pts)
+        padded = np.stack([np.concatenate([p, np.repeat(p[-1:], n - len(p), axis=0)]) for p in pts])
+        keeps = self._keep_margin_rows([scenes[i] for i in rows], padded, np.zeros(len(rows)))
+        wait = [j for j, ok in enumerate(keeps) if ok or len(pts[j]) == 1]   # one point: no move to check
+        out = {}
+        for f in FALLBACK_FACTORS:
+            if not wait:
+                break
+            cand, dev = sm.smooth_paths([raws[rows[j]] for j in wait], n_points, smoothing * f, with_deviation=True)
+            ok = self._keep_margin_rows([scenes[rows[j]] for j in wait], cand, dev)
+            for k, j in enumerate(wait):
+                if ok[k]:
+                    out[j] = (cand[k], smoothing * f, (f"smoothing {smoothing:g} m^2 brought the foot within the "
+                                                       f"safety margin; {smoothing * f:g} m^2 used",), dev[k])
+            wait = [j for k, j in enumerate(wait) if not ok[k]]
+        for j in wait:
+            path, dev = sm.linear_resample(raws[rows[j]], n_points, with_deviation=True)
+            out[j] = (path, float("nan"), (
+                "every smoothing brought the foot within the safety margin; the raw polyline is used",), dev)
+        return [(int(rows[j]), out[j]) for j in sorted(out)]
+
+    def _keep_margin_rows(self, scenes, paths: np.ndarray, deviation: np.ndarray) -> np.ndarray:
+        """``_keeps_margin`` of many paths (B, N, 2) at once (B,)."""
+        fl = self.sp.foot_length
+        c = trajectory.clearances(fl, paths, scenes)
+        sw = trajectory.swept_clearances(fl, paths, scenes, c, fast=True)
+        low = sw.min(axis=1) if sw.shape[1] else c.min(axis=1)
+        return low - deviation >= self.sp.min_clearance
+
     def _finish(self, scenes, raws, n_points: int, smoothing: float, duration: float,
                 fallback: str | None = "cfftg", fast: bool = True) -> TrajectoryBatch:
         """Smooth every raw path, check them all at once, redo the few that smoothing brought within the
@@ -210,11 +252,15 @@ class TrajectoryGenerator:
             used = [float("nan")] * len(raws)
         notes = [()] * len(raws)
         batch = assemble("rl", self.sp, scenes, raws, np.stack(paths), used, duration, notes, deviation=dev, fast=fast)
-        redo = []
-        for i in np.flatnonzero(~batch.clearance_ok) if smoothing > 0 else ():
-            fb = self._fallback(scenes[i], raws[i], n_points, smoothing, fast)
-            if fb is not None:
-                redo.append((i, fb))
+        bad = np.flatnonzero(~batch.clearance_ok) if smoothing > 0 else np.zeros(0, np.int64)
+        if fast and bad.size:
+            redo = self._fallback_batch(scenes, raws, bad, n_points, smoothing)
+        else:
+            redo = []
+            for i in bad:
+                fb = self._fallback(scenes[i], raws[i], n_points, smoothing, fast)
+                if fb is not None:
+                    redo.append((i, fb))
         if redo:
             idx = [i for i, _ in redo]
             sub = assemble("rl", self.sp, [scenes[i] for i in idx], [raws[i] for i in idx],
@@ -230,7 +276,9 @@ class TrajectoryGenerator:
         from jaxexo.baselines.cfftg import CFFTG
 
         bad = np.flatnonzero(~batch.ok)
-        plan = CFFTG(self.config)._finish([batch.scenes[i] for i in bad], n_points, duration, False)
+        if self._cfftg is None:
+            self._cfftg = CFFTG(self.config)
+        plan = self._cfftg._finish([batch.scenes[i] for i in bad], n_points, duration, False)
         take = [j for j in range(len(bad)) if plan.ok[j]]
         notes = list(batch.notes)
         for j, i in enumerate(bad):

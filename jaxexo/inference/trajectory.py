@@ -219,12 +219,20 @@ def clearances(foot_length: float, heel: np.ndarray, scenes) -> np.ndarray:
     """Signed foot clearance (B, N) of heel paths (B, N, 2) from each scene's obstacle; scenes are
     grouped by outline size so that a 16-vertex half-ellipse does not pad every rectangle."""
     out = np.empty(heel.shape[:2])
-    sizes = np.array([len(sc.outline) for sc in scenes])
-    for k in np.unique(sizes):
-        idx = np.flatnonzero(sizes == k)
-        outline = np.stack([scenes[i].outline for i in idx])
+    for idx, outline in _outline_groups(scenes):
         out[idx] = geometry.foot_clearance(np, heel[idx], foot_length, outline[:, None])
     return out
+
+
+def _outline_groups(scenes):
+    """(rows, stacked outlines) per outline size; one group without sorting when all sizes agree
+    (the common case, and always for one scene)."""
+    sizes = [len(sc.outline) for sc in scenes]
+    if len(set(sizes)) == 1:
+        return [(slice(None), np.stack([sc.outline for sc in scenes]))]
+    sizes = np.array(sizes)
+    return [(idx, np.stack([scenes[i].outline for i in idx]))
+            for idx in (np.flatnonzero(sizes == k) for k in np.unique(sizes))]
 
 
 def swept_clearances(foot_length: float, heel: np.ndarray, scenes, point_clearance: np.ndarray,
@@ -236,10 +244,7 @@ def swept_clearances(foot_length: float, heel: np.ndarray, scenes, point_clearan
     verdict and its reasons read."""
     b, n = heel.shape[:2]
     out = np.empty((b, max(n - 1, 0)))
-    sizes = np.array([len(sc.outline) for sc in scenes])
-    for k in np.unique(sizes):
-        idx = np.flatnonzero(sizes == k)
-        outline = np.stack([scenes[i].outline for i in idx])
+    for idx, outline in _outline_groups(scenes):
         if fast:
             out[idx] = swept.path_swept_min(heel[idx], foot_length, outline, point_clearance[idx])
         else:
