@@ -217,7 +217,7 @@ class TrajectoryGenerator:
         for f in FALLBACK_FACTORS:
             if not wait:
                 break
-            cand, dev = sm.smooth_paths([raws[rows[j]] for j in wait], n_points, smoothing * f, with_deviation=True)
+            cand, dev = _smooth([raws[rows[j]] for j in wait], n_points, smoothing * f, True)
             ok = self._keep_margin_rows([scenes[rows[j]] for j in wait], cand, dev)
             for k, j in enumerate(wait):
                 if ok[k]:
@@ -243,7 +243,7 @@ class TrajectoryGenerator:
         """Smooth every raw path, check them all at once, redo the few that smoothing brought within the
         margin, then hand the swings that still fail to CFFTG (``fallback``)."""
         if smoothing > 0:
-            paths, dev = sm.smooth_paths(raws, n_points, smoothing, with_deviation=True)
+            paths, dev = _smooth(raws, n_points, smoothing, fast)
             paths = list(paths)
             used = [smoothing] * len(raws)
         else:
@@ -346,6 +346,14 @@ class TrajectoryGenerator:
         if strict and not batch.ok.all():
             raise TrajectoryError(batch[int(np.argmin(batch.ok))])
         return batch
+
+
+def _smooth(raws, n_points, smoothing, fast):
+    """smooth_paths(..., with_deviation=True); one path on the fast path goes through smooth_one
+    (the same numbers, fewer NumPy calls)."""
+    if fast and len(raws) == 1:
+        return sm.smooth_one(raws[0], n_points, smoothing)
+    return sm.smooth_paths(raws, n_points, smoothing, with_deviation=True)
 
 
 def scenes_for(make, obstacles, pivot, pivot_y, start_y, step_length) -> list[Scene]:
