@@ -120,3 +120,31 @@ def test_smooth_one_is_smooth_paths_for_one_path():
                 b, db = sm.smooth_one(path, 100, s)
                 np.testing.assert_array_equal(a, b)
                 np.testing.assert_array_equal(da, db)
+
+
+def test_pruned_point_clearances_keep_the_exact_minimum():
+    rng = np.random.default_rng(2)
+    kinds = [geometry.Obstacle.rectangle, geometry.Obstacle.triangle, geometry.Obstacle.half_ellipse]
+    for n in (1, 2, 7, 60, 100):
+        rows = []
+        for i, path in enumerate(_random_paths(rng, 600, n)):
+            ob = kinds[i % 3](rng.uniform(0.02, 0.25), rng.uniform(0.02, 0.25), center_y=rng.uniform(0.35, 0.55))
+            rows.append((path, ob.outline))
+        for k in range(3):     # one outline size per call
+            path = np.stack([p for p, _ in rows[k::3]])
+            outline = np.stack([o for _, o in rows[k::3]])
+            c_full = geometry.foot_clearance(np, path, FOOT, outline[:, None])
+            # the box bound is a lower bound wherever it is positive, and then the foot is outside
+            box = swept.box_lower_bound(path, FOOT, outline)
+            pos = box > 0.0
+            assert np.all(box[pos] <= c_full[pos] + 1e-12) and np.all(c_full[pos] > 0.0)
+            c, sw = swept.path_clearance_pruned(path, FOOT, outline)
+            if n == 1:
+                np.testing.assert_array_equal(c, c_full)
+                continue
+            full = swept.path_swept_clearance(np, path, FOOT, outline, c_full)
+            assert np.array_equal(sw.min(axis=1), full.min(axis=1))
+            assert np.array_equal(np.argmin(sw, axis=1), np.argmin(full, axis=1))
+            assert np.all(sw <= full + 1e-12)
+            assert np.all((c == c_full) | ((c <= c_full + 1e-12) & (c > 0.0)))
+            assert np.all(sw[sw != full] > full.min(axis=1, keepdims=True).repeat(n - 1, 1)[sw != full])

@@ -340,8 +340,29 @@ def measure_paths(sp, paths: np.ndarray, scenes, deviation, fast: bool = True) -
     ``swept_clearances``)."""
     pivot_y = np.array([sc.pivot_y for sc in scenes])
     goal_y = np.array([sc.goal_y for sc in scenes])
-    c = clearances(sp.foot_length, paths, scenes)
-    return measure(sp, paths, c, pivot_y, goal_y, swept_clearances(sp.foot_length, paths, scenes, c, fast), deviation)
+    if fast and len(scenes) >= PRUNE_POINTS_FROM:
+        c, sw = pruned_clearances(sp.foot_length, paths, scenes)
+    else:
+        c = clearances(sp.foot_length, paths, scenes)
+        sw = swept_clearances(sp.foot_length, paths, scenes, c, fast)
+    return measure(sp, paths, c, pivot_y, goal_y, sw, deviation)
+
+
+# From this many paths on, ``fast`` also skips the exact point clearances that cannot matter
+# (swept.path_clearance_pruned): worth it where the arrays are large; for a few paths the extra
+# NumPy calls cost more than they save.
+PRUNE_POINTS_FROM = 8
+
+
+def pruned_clearances(foot_length: float, heel: np.ndarray, scenes):
+    """(point clearances (B, N), per-move clearances (B, N-1)) by ``swept.path_clearance_pruned``,
+    grouped by outline size: exact at each path's closest move; elsewhere lower bounds above it."""
+    b, n = heel.shape[:2]
+    c = np.empty((b, n))
+    sw = np.empty((b, max(n - 1, 0)))
+    for idx, outline in _outline_groups(scenes):
+        c[idx], sw[idx] = swept.path_clearance_pruned(heel[idx], foot_length, outline)
+    return c, sw
 
 
 def assemble(method: str, sp, scenes, raws, paths: np.ndarray, smoothing, duration: float = DEFAULT_DURATION,
