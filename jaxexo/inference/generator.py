@@ -20,6 +20,12 @@ Fallback (issue 11): with ``fallback="cfftg"`` (the default) an RL swing that st
 safe-swing check is replaced by CFFTG's plan for the same scene (jaxexo.baselines.cfftg), with
 ``method`` "cfftg-fallback" and the RL failure in ``notes``; when CFFTG fails too, the RL swing is
 returned, not ok. ``fallback=None`` returns the RL result alone.
+
+Speed (issue 12): ``fast=True`` (default) computes the swept clearance exactly only for the moves
+that can be a path's closest (jaxexo.physics.swept.swept_lower_bound), smooths one path without the
+batch bookkeeping and checks the smoothing retries of all rows at once; ``fast=False`` is the plain
+reference (every move's clearance exact, one retry at a time). Both give the same actions, samples
+and verdicts (tests/test_speed.py).
 """
 
 from __future__ import annotations
@@ -185,16 +191,16 @@ class TrajectoryGenerator:
         return paths, [acts[: length[i] - 1, i] for i in range(b)]
 
     # Trajectories ---------------------------------------------------------------------------------
-    def _fallback(self, scene: Scene, raw: np.ndarray, n_points: int, smoothing: float, fast: bool = True):
+    def _fallback(self, scene: Scene, raw: np.ndarray, n_points: int, smoothing: float):
         """A smoothed path came closer than the margin: when the raw path keeps it, retry with less
         smoothing (FALLBACK_FACTORS), then the raw polyline. Returns (path, smoothing used, notes,
         deviation bound), or None when the raw path itself breaks the margin (smoothing is then kept
         and the checks report it)."""
-        if not self._keeps_margin(scene, sm.distinct(raw), 0.0, fast):
+        if not self._keeps_margin(scene, sm.distinct(raw), 0.0):
             return None
         for f in FALLBACK_FACTORS:
             cand, dev = sm.smooth_paths([raw], n_points, smoothing * f, with_deviation=True)
-            if self._keeps_margin(scene, cand[0], dev[0], fast):
+            if self._keeps_margin(scene, cand[0], dev[0]):
                 return cand[0], smoothing * f, (f"smoothing {smoothing:g} m^2 brought the foot within the "
                                                 f"safety margin; {smoothing * f:g} m^2 used",), dev[0]
         path, dev = sm.linear_resample(raw, n_points, with_deviation=True)
@@ -258,7 +264,7 @@ class TrajectoryGenerator:
         else:
             redo = []
             for i in bad:
-                fb = self._fallback(scenes[i], raws[i], n_points, smoothing, fast)
+                fb = self._fallback(scenes[i], raws[i], n_points, smoothing)
                 if fb is not None:
                     redo.append((i, fb))
         if redo:
@@ -294,13 +300,10 @@ class TrajectoryGenerator:
         sub = dataclasses.replace(sub, notes=tuple(notes[bad[j]] + sub.notes[n] for n, j in enumerate(keep)))
         return batch.with_rows([bad[j] for j in keep], sub)
 
-    def _keeps_margin(self, scene: Scene, path: np.ndarray, deviation: float, fast: bool = True) -> bool:
-        """The path (a polyline through its points, less ``deviation``) keeps the safety margin."""
-        if fast:
-            pc = geometry.foot_clearance(np, path, self.sp.foot_length, scene.outline[None])
-            c = swept.path_swept_min(path[None], self.sp.foot_length, scene.outline[None], pc[None])
-        else:
-            c = swept.path_swept_clearance(np, path, self.sp.foot_length, scene.outline)
+    def _keeps_margin(self, scene: Scene, path: np.ndarray, deviation: float) -> bool:
+        """The path (a polyline through its points, less ``deviation``) keeps the safety margin
+        (the reference; the fast path checks many at once, ``_keep_margin_rows``)."""
+        c = swept.path_swept_clearance(np, path, self.sp.foot_length, scene.outline)
         return bool(c.size == 0 or c.min() - deviation >= self.sp.min_clearance)
 
     def _touches(self, scene: Scene, path: np.ndarray) -> bool:
