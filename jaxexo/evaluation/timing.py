@@ -23,13 +23,14 @@ def time_single(gen: TrajectoryGenerator, scenarios: list[dict], repeats: int = 
     return np.median(times, axis=0)
 
 
-def time_batch(gen: TrajectoryGenerator, scenarios: list[dict], repeats: int = 5):
-    """Seconds per ``generate_batch`` of all scenarios (one per repeat), and the last batch."""
+def time_batch(gen: TrajectoryGenerator, scenarios: list[dict], repeats: int = 5, **options):
+    """Seconds per ``generate_batch`` of all scenarios (one per repeat), and the last batch;
+    ``options`` go to generate_batch (e.g. ``fast=False``)."""
     args = {k: [s[k] for s in scenarios] for k in ("obstacle", "pivot", "start_y", "step_length")}
     out = []
     for _ in range(repeats):
         t0 = time.perf_counter()
         batch = gen.generate_batch(args["obstacle"], pivot=args["pivot"], start_y=args["start_y"],
-                                   step_length=args["step_length"])
+                                   step_length=args["step_length"], **options)
         out.append(time.perf_counter() - t0)
     return out, batch

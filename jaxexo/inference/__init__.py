@@ -23,8 +23,19 @@ from jaxexo.inference.trajectory import (
     TrajectoryError,
     assemble,
 )
-from jaxexo.inference.swing_timing import DeviceLimits, TimedSwing, time_swing, time_swings
 from jaxexo.storage.policy_file import PolicyFileError
+
+_LAZY = {"DeviceLimits", "TimedSwing", "time_swing", "time_swings"}   # jaxexo.inference.swing_timing
+
+
+def __getattr__(name):
+    # Device timing is imported on first use: it is not needed to generate, and loading it would
+    # add to every process's import time (issue 12's 0.3 s budget).
+    if name in _LAZY:
+        from jaxexo.inference import swing_timing
+
+        return getattr(swing_timing, name)
+    raise AttributeError(f"module 'jaxexo.inference' has no attribute {name!r}")
 
 __all__ = ["TrajectoryGenerator", "Trajectory", "TrajectoryBatch", "TrajectoryChecks", "TrajectoryError",
            "Obstacle", "Scene", "PolicyFileError", "assemble", "CSV_COLUMNS", "JOINT_NAMES",

@@ -20,12 +20,19 @@ Fallback (issue 11): with ``fallback="cfftg"`` (the default) an RL swing that st
 safe-swing check is replaced by CFFTG's plan for the same scene (jaxexo.baselines.cfftg), with
 ``method`` "cfftg-fallback" and the RL failure in ``notes``; when CFFTG fails too, the RL swing is
 returned, not ok. ``fallback=None`` returns the RL result alone.
+
+Speed (issue 12): ``fast=True`` (default) computes the swept clearance exactly only for the moves
+that can be a path's closest (jaxexo.physics.swept.swept_lower_bound), smooths one path without the
+batch bookkeeping and checks the smoothing retries of all rows at once; ``fast=False`` is the plain
+reference (every move's clearance exact, one retry at a time). Both give the same actions, samples
+and verdicts (tests/test_speed.py).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import tomllib
+import types
 from pathlib import Path
 
 import numpy as np
@@ -33,7 +40,7 @@ import numpy as np
 from jaxexo.physics import dynamics, geometry, swept
 from jaxexo.config import ConfigError, config_from_dict
 from jaxexo.physics.dynamics import Scene, scalar
-from jaxexo.inference import smoothing as sm
+from jaxexo.inference import smoothing as sm, trajectory
 from jaxexo.inference.network import FoldedQNetwork, StepNetwork
 from jaxexo.inference.trajectory import DEFAULT_DURATION, Trajectory, TrajectoryBatch, TrajectoryError, assemble
 from jaxexo.storage.policy_file import PolicyFileError, QPolicy, load_policy
@@ -58,6 +65,10 @@ class TrajectoryGenerator:
         self.net = FoldedQNetwork(policy)
         self.step_net = StepNetwork(self.net)
         self._linear = None
+        self._cfftg = None      # built on the first fallback (its constants cost ~ms to derive)
+        # terminated()'s one parameter as a Python bool: a NumPy bool would make every step's test
+        # a NumPy scalar operation.
+        self._term_p = types.SimpleNamespace(terminate_on_collision=bool(self.np_params.terminate_on_collision))
 
     @classmethod
     def load(cls, path: str | Path) -> "TrajectoryGenerator":
@@ -134,7 +145,7 @@ class TrajectoryGenerator:
             # The environment's termination (dynamics.terminated, .truncated); the clearance is
             # only computed where a collision ends the episode.
             collided = self.terminate_on_collision and self._touches(scene, np.array([[hy, hz]]))
-            if (dynamics.terminated(scalar, self.np_params, dynamics.goal_reached(scalar, sp, hy, hz, scene.goal_y),
+            if (dynamics.terminated(scalar, self._term_p, dynamics.goal_reached(scalar, sp, hy, hz, scene.goal_y),
                                     collided) or dynamics.truncated(t, self.max_steps)):
                 break
         return np.asarray(pts), np.asarray(acts, dtype=np.int64)
@@ -196,12 +207,49 @@ class TrajectoryGenerator:
         return path, float("nan"), (
             "every smoothing brought the foot within the safety margin; the raw polyline is used",), dev
 
+    def _fallback_batch(self, scenes, raws, rows, n_points: int, smoothing: float):
+        """``_fallback`` for the rows ``rows`` at once: each smoothing factor is tried on every row
+        still waiting, smoothed together and checked in one vectorised call. Returns the same
+        (row, (path, smoothing, notes, deviation)) list, in row order."""
+        fl = self.sp.foot_length
+        pts = [sm.distinct(raws[i]) for i in rows]
+        # Raw paths padded with their last point (a repeated point adds a zero-length move, whose
+        # swept clearance is that point's own: the polyline's minimum is unchanged).
+        n = max(len(p) for p in pts)
+        padded = np.stack([np.concatenate([p, np.repeat(p[-1:], n - len(p), axis=0)]) for p in pts])
+        keeps = self._keep_margin_rows([scenes[i] for i in rows], padded, np.zeros(len(rows)))
+        wait = [j for j, ok in enumerate(keeps) if ok or len(pts[j]) == 1]   # one point: no move to check
+        out = {}
+        for f in FALLBACK_FACTORS:
+            if not wait:
+                break
+            cand, dev = _smooth([raws[rows[j]] for j in wait], n_points, smoothing * f, True)
+            ok = self._keep_margin_rows([scenes[rows[j]] for j in wait], cand, dev)
+            for k, j in enumerate(wait):
+                if ok[k]:
+                    out[j] = (cand[k], smoothing * f, (f"smoothing {smoothing:g} m^2 brought the foot within the "
+                                                       f"safety margin; {smoothing * f:g} m^2 used",), dev[k])
+            wait = [j for k, j in enumerate(wait) if not ok[k]]
+        for j in wait:
+            path, dev = sm.linear_resample(raws[rows[j]], n_points, with_deviation=True)
+            out[j] = (path, float("nan"), (
+                "every smoothing brought the foot within the safety margin; the raw polyline is used",), dev)
+        return [(int(rows[j]), out[j]) for j in sorted(out)]
+
+    def _keep_margin_rows(self, scenes, paths: np.ndarray, deviation: np.ndarray) -> np.ndarray:
+        """``_keeps_margin`` of many paths (B, N, 2) at once (B,)."""
+        fl = self.sp.foot_length
+        c = trajectory.clearances(fl, paths, scenes)
+        sw = trajectory.swept_clearances(fl, paths, scenes, c, fast=True)
+        low = sw.min(axis=1) if sw.shape[1] else c.min(axis=1)
+        return low - deviation >= self.sp.min_clearance
+
     def _finish(self, scenes, raws, n_points: int, smoothing: float, duration: float,
-                fallback: str | None = "cfftg") -> TrajectoryBatch:
+                fallback: str | None = "cfftg", fast: bool = True) -> TrajectoryBatch:
         """Smooth every raw path, check them all at once, redo the few that smoothing brought within the
         margin, then hand the swings that still fail to CFFTG (``fallback``)."""
         if smoothing > 0:
-            paths, dev = sm.smooth_paths(raws, n_points, smoothing, with_deviation=True)
+            paths, dev = _smooth(raws, n_points, smoothing, fast)
             paths = list(paths)
             used = [smoothing] * len(raws)
         else:
@@ -209,17 +257,21 @@ class TrajectoryGenerator:
             paths, dev = [p for p, _ in both], np.array([d for _, d in both])
             used = [float("nan")] * len(raws)
         notes = [()] * len(raws)
-        batch = assemble("rl", self.sp, scenes, raws, np.stack(paths), used, duration, notes, deviation=dev)
-        redo = []
-        for i in np.flatnonzero(~batch.clearance_ok) if smoothing > 0 else ():
-            fb = self._fallback(scenes[i], raws[i], n_points, smoothing)
-            if fb is not None:
-                redo.append((i, fb))
+        batch = assemble("rl", self.sp, scenes, raws, np.stack(paths), used, duration, notes, deviation=dev, fast=fast)
+        bad = np.flatnonzero(~batch.clearance_ok) if smoothing > 0 else np.zeros(0, np.int64)
+        if fast and bad.size:
+            redo = self._fallback_batch(scenes, raws, bad, n_points, smoothing)
+        else:
+            redo = []
+            for i in bad:
+                fb = self._fallback(scenes[i], raws[i], n_points, smoothing)
+                if fb is not None:
+                    redo.append((i, fb))
         if redo:
             idx = [i for i, _ in redo]
             sub = assemble("rl", self.sp, [scenes[i] for i in idx], [raws[i] for i in idx],
                            np.stack([fb[0] for _, fb in redo]), [fb[1] for _, fb in redo], duration,
-                           [fb[2] for _, fb in redo], deviation=np.array([fb[3] for _, fb in redo]))
+                           [fb[2] for _, fb in redo], deviation=np.array([fb[3] for _, fb in redo]), fast=fast)
             batch = batch.with_rows(idx, sub)
         if fallback == "cfftg" and not batch.ok.all():
             batch = self._cfftg_fallback(batch, n_points, duration)
@@ -230,7 +282,9 @@ class TrajectoryGenerator:
         from jaxexo.baselines.cfftg import CFFTG
 
         bad = np.flatnonzero(~batch.ok)
-        plan = CFFTG(self.config)._finish([batch.scenes[i] for i in bad], n_points, duration, False)
+        if self._cfftg is None:
+            self._cfftg = CFFTG(self.config)
+        plan = self._cfftg._finish([batch.scenes[i] for i in bad], n_points, duration, False)
         take = [j for j in range(len(bad)) if plan.ok[j]]
         notes = list(batch.notes)
         for j, i in enumerate(bad):
@@ -247,7 +301,8 @@ class TrajectoryGenerator:
         return batch.with_rows([bad[j] for j in keep], sub)
 
     def _keeps_margin(self, scene: Scene, path: np.ndarray, deviation: float) -> bool:
-        """The path (a polyline through its points, less ``deviation``) keeps the safety margin."""
+        """The path (a polyline through its points, less ``deviation``) keeps the safety margin
+        (the reference; the fast path checks many at once, ``_keep_margin_rows``)."""
         c = swept.path_swept_clearance(np, path, self.sp.foot_length, scene.outline)
         return bool(c.size == 0 or c.min() - deviation >= self.sp.min_clearance)
 
@@ -265,15 +320,17 @@ class TrajectoryGenerator:
     def generate(self, obstacle: geometry.Obstacle, *, pivot: str = "obstacle", pivot_y: float | None = None,
                  start_y: float = 0.0, step_length: float = 0.70, n_points: int = sm.DEFAULT_POINTS,
                  smoothing: float = sm.DEFAULT_SMOOTHING, duration: float = DEFAULT_DURATION,
-                 strict: bool = False, fallback: str | None = "cfftg") -> Trajectory:
+                 strict: bool = False, fallback: str | None = "cfftg", fast: bool = True) -> Trajectory:
         """One smoothed, checked trajectory (metres, radians, seconds). ``strict`` raises
         TrajectoryError instead of returning a trajectory that fails a check; ``fallback``: "cfftg"
-        (CFFTG's plan when the RL swing is not safe) or None (module docstring)."""
+        (CFFTG's plan when the RL swing is not safe) or None (module docstring). ``fast=False`` runs
+        the plain reference implementation (every move's swept clearance computed exactly), which
+        gives the same actions, samples and verdicts."""
         n_points, smoothing, duration = check_options(n_points, smoothing, duration)
         fallback = check_fallback(fallback)
         scene = self.scene(obstacle, pivot, pivot_y, start_y, step_length)
         raw, _ = self.rollout(scene)
-        traj = self._finish([scene], [raw], n_points, smoothing, duration, fallback)[0]
+        traj = self._finish([scene], [raw], n_points, smoothing, duration, fallback, fast)[0]
         if strict and not traj.ok:
             raise TrajectoryError(traj)
         return traj
@@ -281,17 +338,25 @@ class TrajectoryGenerator:
     def generate_batch(self, obstacles, *, pivot="obstacle", pivot_y=None, start_y=0.0, step_length=0.70,
                        n_points: int = sm.DEFAULT_POINTS, smoothing: float = sm.DEFAULT_SMOOTHING,
                        duration: float = DEFAULT_DURATION, strict: bool = False,
-                       fallback: str | None = "cfftg") -> TrajectoryBatch:
+                       fallback: str | None = "cfftg", fast: bool = True) -> TrajectoryBatch:
         """Trajectories for many scenarios; every option is one value or one per obstacle (``fallback``
-        one value, as in ``generate``)."""
+        and ``fast`` one value, as in ``generate``)."""
         n_points, smoothing, duration = check_options(n_points, smoothing, duration)
         fallback = check_fallback(fallback)
         scenes = self._scenes(obstacles, pivot, pivot_y, start_y, step_length)
         raws, _ = self.rollout_batch(scenes)
-        batch = self._finish(scenes, raws, n_points, smoothing, duration, fallback)
+        batch = self._finish(scenes, raws, n_points, smoothing, duration, fallback, fast)
         if strict and not batch.ok.all():
             raise TrajectoryError(batch[int(np.argmin(batch.ok))])
         return batch
+
+
+def _smooth(raws, n_points, smoothing, fast):
+    """smooth_paths(..., with_deviation=True); one path on the fast path goes through smooth_one
+    (the same numbers, fewer NumPy calls)."""
+    if fast and len(raws) == 1:
+        return sm.smooth_one(raws[0], n_points, smoothing)
+    return sm.smooth_paths(raws, n_points, smoothing, with_deviation=True)
 
 
 def scenes_for(make, obstacles, pivot, pivot_y, start_y, step_length) -> list[Scene]:

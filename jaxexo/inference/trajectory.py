@@ -211,24 +211,36 @@ def clearances(foot_length: float, heel: np.ndarray, scenes) -> np.ndarray:
     """Signed foot clearance (B, N) of heel paths (B, N, 2) from each scene's obstacle; scenes are
     grouped by outline size so that a 16-vertex half-ellipse does not pad every rectangle."""
     out = np.empty(heel.shape[:2])
-    sizes = np.array([len(sc.outline) for sc in scenes])
-    for k in np.unique(sizes):
-        idx = np.flatnonzero(sizes == k)
-        outline = np.stack([scenes[i].outline for i in idx])
+    for idx, outline in _outline_groups(scenes):
         out[idx] = geometry.foot_clearance(np, heel[idx], foot_length, outline[:, None])
     return out
 
 
-def swept_clearances(foot_length: float, heel: np.ndarray, scenes, point_clearance: np.ndarray) -> np.ndarray:
-    """Exact signed clearance (B, N-1) of the foot over each move between consecutive samples
-    (jaxexo.physics.swept), grouped by outline size like ``clearances``."""
+def _outline_groups(scenes):
+    """(rows, stacked outlines) per outline size; one group without sorting when all sizes agree
+    (the common case, and always for one scene)."""
+    sizes = [len(sc.outline) for sc in scenes]
+    if len(set(sizes)) == 1:
+        return [(slice(None), np.stack([sc.outline for sc in scenes]))]
+    sizes = np.array(sizes)
+    return [(idx, np.stack([scenes[i].outline for i in idx]))
+            for idx in (np.flatnonzero(sizes == k) for k in np.unique(sizes))]
+
+
+def swept_clearances(foot_length: float, heel: np.ndarray, scenes, point_clearance: np.ndarray,
+                     fast: bool = True) -> np.ndarray:
+    """Signed clearance (B, N-1) of the foot over each move between consecutive samples
+    (jaxexo.physics.swept), grouped by outline size like ``clearances``. ``fast=False``: exact for
+    every move; ``fast`` (default): exact for each path's closest move, a lower bound above that
+    minimum for the moves that cannot be the closest (``swept.path_swept_min``), which is all the
+    verdict and its reasons read."""
     b, n = heel.shape[:2]
     out = np.empty((b, max(n - 1, 0)))
-    sizes = np.array([len(sc.outline) for sc in scenes])
-    for k in np.unique(sizes):
-        idx = np.flatnonzero(sizes == k)
-        outline = np.stack([scenes[i].outline for i in idx])
-        out[idx] = swept.path_swept_clearance(np, heel[idx], foot_length, outline, point_clearance[idx])
+    for idx, outline in _outline_groups(scenes):
+        if fast:
+            out[idx] = swept.path_swept_min(heel[idx], foot_length, outline, point_clearance[idx])
+        else:
+            out[idx] = swept.path_swept_clearance(np, heel[idx], foot_length, outline, point_clearance[idx])
     return out
 
 
@@ -315,16 +327,38 @@ def _reasons(m: dict, i: int, heel: np.ndarray, goal_y: float, time: np.ndarray,
     return tuple(out)
 
 
-def measure_paths(sp, paths: np.ndarray, scenes, deviation) -> dict:
-    """``measure`` of heel paths (B, N, 2) on their scenes, clearances included."""
+def measure_paths(sp, paths: np.ndarray, scenes, deviation, fast: bool = True) -> dict:
+    """``measure`` of heel paths (B, N, 2) on their scenes, clearances included (``fast``: see
+    ``swept_clearances``)."""
     pivot_y = np.array([sc.pivot_y for sc in scenes])
     goal_y = np.array([sc.goal_y for sc in scenes])
-    c = clearances(sp.foot_length, paths, scenes)
-    return measure(sp, paths, c, pivot_y, goal_y, swept_clearances(sp.foot_length, paths, scenes, c), deviation)
+    if fast and len(scenes) >= PRUNE_POINTS_FROM:
+        c, sw = pruned_clearances(sp.foot_length, paths, scenes)
+    else:
+        c = clearances(sp.foot_length, paths, scenes)
+        sw = swept_clearances(sp.foot_length, paths, scenes, c, fast)
+    return measure(sp, paths, c, pivot_y, goal_y, sw, deviation)
+
+
+# From this many paths on, ``fast`` also skips the exact point clearances that cannot matter
+# (swept.path_clearance_pruned): worth it where the arrays are large; for a few paths the extra
+# NumPy calls cost more than they save.
+PRUNE_POINTS_FROM = 8
+
+
+def pruned_clearances(foot_length: float, heel: np.ndarray, scenes):
+    """(point clearances (B, N), per-move clearances (B, N-1)) by ``swept.path_clearance_pruned``,
+    grouped by outline size: exact at each path's closest move; elsewhere lower bounds above it."""
+    b, n = heel.shape[:2]
+    c = np.empty((b, n))
+    sw = np.empty((b, max(n - 1, 0)))
+    for idx, outline in _outline_groups(scenes):
+        c[idx], sw[idx] = swept.path_clearance_pruned(heel[idx], foot_length, outline)
+    return c, sw
 
 
 def assemble(method: str, sp, scenes, raws, paths: np.ndarray, smoothing, duration: float = DEFAULT_DURATION,
-             notes=None, measured: dict | None = None, deviation=None) -> TrajectoryBatch:
+             notes=None, measured: dict | None = None, deviation=None, fast: bool = True) -> TrajectoryBatch:
     """Checked trajectories from dense heel paths (B, N, 2), one per scene; ``raws`` the generator's
     own points per scene, ``smoothing`` (B,) the smoothing each path used (nan for a raw polyline),
     ``deviation`` (B,) the bound (m) on each curve's distance from the polyline through its samples
@@ -335,7 +369,7 @@ def assemble(method: str, sp, scenes, raws, paths: np.ndarray, smoothing, durati
     if measured is None:
         if deviation is None:
             raise ValueError("deviation: the bound on the curve's distance from its samples' polyline is needed")
-        measured = measure_paths(sp, paths, scenes, deviation)
+        measured = measure_paths(sp, paths, scenes, deviation, fast)
     m = measured
     time = np.linspace(0.0, duration, n)
     reasons = tuple(_reasons(m, i, paths[i], scenes[i].goal_y, time, sp) for i in range(b))

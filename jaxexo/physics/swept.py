@@ -88,6 +88,103 @@ def swept_clearance(xp, h0, h1, foot_length, outline, c0=None, c1=None):
     return xp.minimum(swept_distance(xp, h0, h1, foot_length, outline), xp.minimum(c0, c1))
 
 
+def swept_lower_bound(xp, c0, c1, move_length):
+    """A lower bound (m) on ``swept_clearance`` of a move of length ``move_length`` whose ends have
+    foot clearances c0, c1 > 0, without the geometry (used to skip moves that cannot be the closest).
+
+    The foot at h0 + t d is the foot at h0 moved by t d, and the distance to a fixed set is
+    1-Lipschitz, so every point of it is at least c0 - t |d| from the outline, and (from the other
+    end) at least c1 - (1 - t) |d|. The larger of the two is smallest where they are equal:
+    swept distance >= (c0 + c1 - |d|) / 2 (and the clearance is also <= min(c0, c1)). Not valid
+    for an end inside the obstacle (c <= 0), where the exact clearance is min(c0, c1) anyway."""
+    return 0.5 * (c0 + c1 - move_length)
+
+
+def path_swept_min(path, foot_length, outline, point_clearance, slack=1e-9):
+    """NumPy: per-move clearances (B, N-1) of heel paths (B, N, 2) on outlines (B, K, 2) that agree
+    with ``path_swept_clearance`` where the verdict looks: each path's minimum and the move attaining
+    it are exact. A move whose ``swept_lower_bound`` exceeds its path's smallest end clearance (an
+    upper bound on the minimum) by more than ``slack`` cannot be the closest; it gets that lower
+    bound (above the minimum) instead of the exact value, so only the few candidate moves of all
+    paths go through the geometry, in one vectorised call. Moves with an end inside the obstacle
+    get min(c0, c1), which is exact there."""
+    c = point_clearance
+    c0, c1 = c[:, :-1], c[:, 1:]
+    ends = np.minimum(c0, c1)
+    d = path[:, 1:] - path[:, :-1]
+    length = np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1])
+    lb = swept_lower_bound(np, c0, c1, length)
+    out = np.maximum(lb, 0.0)
+    if ends.shape[1] == 0:
+        return out
+    upper = ends.min(axis=1, keepdims=True)
+    inside = ends <= 0.0
+    out[inside] = ends[inside]
+    r, j = np.nonzero(~inside & (lb <= upper + slack))
+    if r.size:
+        out[r, j] = np.minimum(swept_distance(np, path[r, j], path[r, j + 1], foot_length, outline[r]), ends[r, j])
+    return out
+
+
+def box_lower_bound(heel, foot_length, outline):
+    """NumPy: a lower bound (m) on ``geometry.foot_clearance`` of the foot at heels (B, N, 2) from
+    outlines (B, K, 2), positive only where it is a bound on a foot outside the obstacle.
+
+    The outline and the region under it (down to the ground) lie in the box [min y, max y] x
+    [min(0, min z), max z], so the distance from the foot segment to that box is at most the distance
+    to the outline, and a foot at a positive distance from the box is not inside the obstacle."""
+    vy, vz = outline[..., 0], outline[..., 1]
+    y0, y1 = vy.min(axis=-1)[:, None], vy.max(axis=-1)[:, None]
+    z0, z1 = np.minimum(vz.min(axis=-1), 0.0)[:, None], vz.max(axis=-1)[:, None]
+    hy, hz = heel[..., 0], heel[..., 1]
+    dy = np.maximum(np.maximum(y0 - (hy + foot_length), hy - y1), 0.0)
+    dz = np.maximum(np.maximum(z0 - hz, hz - z1), 0.0)
+    return np.sqrt(dy * dy + dz * dz)
+
+
+def path_clearance_pruned(path, foot_length, outline, slack=1e-9):
+    """NumPy: (point clearances (B, N), per-move clearances (B, N-1)) of heel paths (B, N, 2) on
+    outlines (B, K, 2) with ``path_swept_min``'s guarantee (each path's minimum over its moves, and
+    the move attaining it, exact), computing the exact foot clearance only at the samples that can
+    matter. Elsewhere the point clearance is ``box_lower_bound`` (a lower bound, > 0).
+
+    1. the box bound d at every sample; exact clearances where d is within two moves of the
+       path's smallest d (always including that sample): their minimum U bounds the path's
+       minimum from above (a move's swept clearance is at most its end clearances);
+    2. a move whose ``swept_lower_bound`` from its ends' lower bounds exceeds U + slack cannot be
+       the closest (the bound is monotone in the end clearances);
+    3. the remaining moves get exact end clearances and the exact swept distance."""
+    b, n = path.shape[:2]
+    c = box_lower_bound(path, foot_length, outline)
+    if n < 2:
+        return foot_clearance(np, path, foot_length, outline[:, None]), np.zeros((b, 0))
+    d = path[:, 1:] - path[:, :-1]
+    length = np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1])
+    exact = c <= c.min(axis=1, keepdims=True) + 2.0 * length.max(axis=1, keepdims=True)
+    r, i = np.nonzero(exact)
+    c[r, i] = foot_clearance(np, path[r, i], foot_length, outline[r])
+    upper = np.where(exact, c, np.inf).min(axis=1, keepdims=True)
+    c0, c1 = c[:, :-1], c[:, 1:]
+    ends = np.minimum(c0, c1)
+    # An end inside the obstacle (c <= 0) is always exact (d > 0 means outside): min(c0, c1) is
+    # then that end's clearance, the exact swept clearance of the move.
+    inside = ends <= 0.0
+    lb = swept_lower_bound(np, c0, c1, length)
+    out = np.maximum(lb, 0.0)
+    out[inside] = ends[inside]
+    r, j = np.nonzero(~inside & (lb <= upper + slack))
+    if r.size:
+        for k in (j, j + 1):             # exact clearances at the candidates' ends
+            miss = ~exact[r, k]
+            if miss.any():
+                rm, km = r[miss], k[miss]
+                c[rm, km] = foot_clearance(np, path[rm, km], foot_length, outline[rm])
+                exact[rm, km] = True
+        e = np.minimum(c[r, j], c[r, j + 1])
+        out[r, j] = np.minimum(swept_distance(np, path[r, j], path[r, j + 1], foot_length, outline[r]), e)
+    return c, out
+
+
 def path_swept_clearance(xp, path, foot_length, outline, point_clearance=None):
     """Per-move signed clearance (..., N-1) along heel paths (..., N, 2) taken as polylines;
     ``outline`` (..., K, 2) broadcasts against the path's leading axes (add an axis for the moves)."""

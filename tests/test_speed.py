@@ -1,0 +1,150 @@
+"""The generator's fast paths (issue 12) against the plain reference implementation: the swept
+check's pruning bound against the exact swept clearance, the pruned per-path minimum against the
+full one, and ``generate`` / ``generate_batch`` (fast) against ``fast=False`` on thousands of scenes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from jaxexo.physics import geometry, swept
+from test_safety import FOOT, outlines
+
+
+@settings(max_examples=300, deadline=None)
+@given(outline=outlines(), h0=st.tuples(st.floats(-0.1, 0.8), st.floats(0.0, 0.35)),
+       move=st.tuples(st.floats(-0.15, 0.15), st.floats(-0.15, 0.15)))
+def test_swept_lower_bound_never_exceeds_the_exact_clearance(outline, h0, move):
+    h0 = np.array(h0)
+    h1 = h0 + np.array(move)
+    c0 = float(geometry.foot_clearance(np, h0, FOOT, outline))
+    c1 = float(geometry.foot_clearance(np, h1, FOOT, outline))
+    exact = float(swept.swept_clearance(np, h0, h1, FOOT, outline))
+    if min(c0, c1) > 0.0:
+        assert float(swept.swept_lower_bound(np, c0, c1, np.linalg.norm(move))) <= exact + 1e-12
+    assert exact <= min(c0, c1) + 1e-12
+
+
+def _random_paths(rng, n_paths, n):
+    """Heel paths that rise over the obstacle region and land, with noise (some through the obstacle)."""
+    u = np.linspace(0.0, 1.0, n)
+    for _ in range(n_paths):
+        start, goal = rng.uniform(-0.1, 0.1), rng.uniform(0.6, 0.9)
+        apex = rng.uniform(0.0, 0.35)
+        y = start + (goal - start) * u + rng.normal(0, 0.01, n)
+        z = np.maximum(apex * np.sin(np.pi * u) ** rng.uniform(0.5, 2.0) + rng.normal(0, 0.005, n), 0.0)
+        yield np.column_stack([y, z])
+
+
+def test_pruned_swept_minimum_matches_the_full_swept_clearance():
+    rng = np.random.default_rng(0)
+    kinds = [geometry.Obstacle.rectangle, geometry.Obstacle.triangle, geometry.Obstacle.half_ellipse]
+    pruned_any = 0
+    rects = []
+    for i, path in enumerate(_random_paths(rng, 3000, int(rng.integers(5, 120)))):
+        ob = kinds[i % 3](rng.uniform(0.02, 0.25), rng.uniform(0.02, 0.25), center_y=rng.uniform(0.35, 0.55))
+        c = geometry.foot_clearance(np, path, FOOT, ob.outline[None])
+        full = swept.path_swept_clearance(np, path, FOOT, ob.outline, c)
+        fast = swept.path_swept_min(path[None], FOOT, ob.outline[None], c[None])[0]
+        assert fast.shape == full.shape
+        assert fast.min() == full.min()
+        assert np.argmin(fast) == np.argmin(full)
+        assert np.all(fast <= full + 1e-12)            # elsewhere a lower bound ...
+        assert np.all(fast[fast != full] > full.min())  # ... that stays above the minimum
+        pruned_any += int(np.sum(fast != full))
+        if i % 3 == 0:
+            rects.append((path, ob.outline, c, full))
+    assert pruned_any > 0
+    # Many paths at once (one vectorised geometry call for all candidate moves): the same per path.
+    path, outline, c, full = (np.stack(x) for x in zip(*rects))
+    fast = swept.path_swept_min(path, FOOT, outline, c)
+    assert np.array_equal(fast.min(axis=1), full.min(axis=1))
+    assert np.array_equal(np.argmin(fast, axis=1), np.argmin(full, axis=1))
+
+
+def _same(a, b):
+    """Two trajectories agree: samples to 1e-9 m, every check and reason, the method used."""
+    assert a.method == b.method
+    np.testing.assert_allclose(a.heel, b.heel, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(a.joint_angles, b.joint_angles, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(a.raw, b.raw)
+    # The verdict exactly; the clearance figures to float rounding (the fast path may smooth the
+    # retried rows together, in one matrix product, where the reference smooths them one by one).
+    ca, cb = a.checks, b.checks
+    for f in ("reached_goal", "collision_free", "joint_limits_ok", "leg_length_ok", "clearance_ok", "above_ground"):
+        assert getattr(ca, f) == getattr(cb, f), f
+    assert ca.ok == cb.ok and len(ca.reasons) == len(cb.reasons)
+    for f in ("min_clearance", "heel_backward", "deviation"):
+        assert abs(getattr(ca, f) - getattr(cb, f)) <= 1e-12, f
+    assert a.notes == b.notes
+    assert (np.isnan(a.smoothing) and np.isnan(b.smoothing)) or a.smoothing == b.smoothing
+
+
+@pytest.mark.slow
+def test_fast_generation_matches_the_reference_on_thousands_of_scenes(trained_run):
+    from jaxexo.inference import TrajectoryGenerator
+    from jaxexo.inference.scenarios import sample_scenarios
+
+    gen = TrajectoryGenerator.load(trained_run / "policy.npz")
+    sc = sample_scenarios(gen.config, 2000, seed=7)
+    args = {k: [s[k] for s in sc] for k in ("obstacle", "pivot", "start_y", "step_length")}
+    fast = gen.generate_batch(args["obstacle"], pivot=args["pivot"], start_y=args["start_y"],
+                              step_length=args["step_length"])
+    ref = gen.generate_batch(args["obstacle"], pivot=args["pivot"], start_y=args["start_y"],
+                             step_length=args["step_length"], fast=False)
+    assert len(fast) == len(ref) == 2000
+    for a, b in zip(fast, ref):
+        _same(a, b)
+    # Both verdicts occur, so the comparison covers failing swings and the fallbacks too.
+    assert 0 < fast.ok.sum() < len(fast) or any(m == "cfftg-fallback" for m in fast.row_methods)
+    for fallback in ("cfftg", None):
+        for s in sc[:1000]:
+            kw = {k: s[k] for k in ("pivot", "start_y", "step_length")}
+            _same(gen.generate(s["obstacle"], fallback=fallback, **kw),
+                  gen.generate(s["obstacle"], fallback=fallback, fast=False, **kw))
+
+
+def test_smooth_one_is_smooth_paths_for_one_path():
+    from jaxexo.inference import smoothing as sm
+
+    rng = np.random.default_rng(1)
+    for n in (1, 2, 3, 4, 5, 12, 31, 45):
+        for path in _random_paths(rng, 30, n):
+            path = path.copy()
+            if n > 3:
+                path[n // 2] = path[n // 2 - 1]       # a repeated point (a move clipped to nothing)
+            for s in (0.005, 0.001, 1e-6, 0.0):
+                a, da = sm.smooth_paths([path], 100, s, with_deviation=True)
+                b, db = sm.smooth_one(path, 100, s)
+                np.testing.assert_array_equal(a, b)
+                np.testing.assert_array_equal(da, db)
+
+
+def test_pruned_point_clearances_keep_the_exact_minimum():
+    rng = np.random.default_rng(2)
+    kinds = [geometry.Obstacle.rectangle, geometry.Obstacle.triangle, geometry.Obstacle.half_ellipse]
+    for n in (1, 2, 7, 60, 100):
+        rows = []
+        for i, path in enumerate(_random_paths(rng, 600, n)):
+            ob = kinds[i % 3](rng.uniform(0.02, 0.25), rng.uniform(0.02, 0.25), center_y=rng.uniform(0.35, 0.55))
+            rows.append((path, ob.outline))
+        for k in range(3):     # one outline size per call
+            path = np.stack([p for p, _ in rows[k::3]])
+            outline = np.stack([o for _, o in rows[k::3]])
+            c_full = geometry.foot_clearance(np, path, FOOT, outline[:, None])
+            # the box bound is a lower bound wherever it is positive, and then the foot is outside
+            box = swept.box_lower_bound(path, FOOT, outline)
+            pos = box > 0.0
+            assert np.all(box[pos] <= c_full[pos] + 1e-12) and np.all(c_full[pos] > 0.0)
+            c, sw = swept.path_clearance_pruned(path, FOOT, outline)
+            if n == 1:
+                np.testing.assert_array_equal(c, c_full)
+                continue
+            full = swept.path_swept_clearance(np, path, FOOT, outline, c_full)
+            assert np.array_equal(sw.min(axis=1), full.min(axis=1))
+            assert np.array_equal(np.argmin(sw, axis=1), np.argmin(full, axis=1))
+            assert np.all(sw <= full + 1e-12)
+            assert np.all((c == c_full) | ((c <= c_full + 1e-12) & (c > 0.0)))
+            assert np.all(sw[sw != full] > full.min(axis=1, keepdims=True).repeat(n - 1, 1)[sw != full])
