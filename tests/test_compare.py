@@ -120,7 +120,10 @@ def test_reproduce_tabulates_beside_the_thesis(trained_run, tmp_path):
     acc, suc = 100 * res["final"]["rl"]["accuracy"], 100 * res["final"]["rl"]["success"]
     assert f"| final | faithful | 94.7 | {acc:.1f} | {suc:.1f} |" in md
     # The thesis's epsilon-greedy test (2.6) beside the greedy one, with its epsilon stated.
-    assert res["a"]["test_epsilon"] == 0.05 and "ε = 0.05" in md
+    from jaxexo.inference import TrajectoryGenerator
+
+    eps = TrajectoryGenerator.load(trained_run / "policy.npz").config.train.eps_end
+    assert res["a"]["test_epsilon"] == eps and f"ε = {eps:g}" in md
     assert res["a"]["rl_eps"]["n"] == 15 and "by_kind_pivot" not in res["a"]["rl"]
     assert json.loads((tmp_path / "reproduce.json").read_text())["a"]["rl"]["n"] == 15
 

@@ -21,7 +21,8 @@ use the config's final training epsilon, ``train.eps_end``, 0.05), and writes:
 - the same tables for jaxexo's default model when ``--default`` is given (configs/default.toml).
 
 Run directories go under OUT/runs/<name> (name: ``a`` or ``a-learns``); an existing policy.npz there is
-reused, so an interrupted reproduction continues where it stopped. OUT/reproduce.md and
+reused, and so is its evaluation (runs/<name>/reproduce_entry.json, for the same n, seed and batch
+size), so an interrupted reproduction continues where it stopped. OUT/reproduce.md and
 OUT/reproduce.json hold the tables.
 """
 
@@ -34,6 +35,7 @@ from jaxexo.config import PIVOT_CONDITIONS, load_config, packaged_config
 
 THESIS_MODELS = ("a", "b", "c", "1", "2", "3", "final")
 VARIANTS = ("faithful", "learns")
+ENTRY = "reproduce_entry.json"   # a run's evaluated figures, beside its policy
 # The changes from the thesis's text in the ``learns`` variant, each a named config switch (the
 # faithful setting first); the evidence is benchmarks/results/thesis-learning_*.md.
 LEARNS_CHANGES = ()
@@ -229,6 +231,15 @@ def run_reproduce(out: str | Path, models=THESIS_MODELS, n: int = 1000, seed: in
         else:
             progress(f"{name}: training {cfg_path}")
             ev = run_training(load_config(cfg_path), run, seed=seed, progress=False)
+        # A run's evaluation is kept beside it (ENTRY), so that rerunning reproduce to tabulate more models
+        # does not re-evaluate the finished ones; it is reused only for the same n, seed and batch size.
+        key = {"n": n, "seed": seed, "batch_size": batch_size if model_of(name) in ("final", "default") else 0}
+        entry = run / ENTRY
+        if entry.exists() and (cached := json.loads(entry.read_text())).get("key") == key and \
+                cached.get("train_seconds") == ev["train_seconds"]:
+            results[name] = cached["result"]
+            progress(f"{name}: reusing its evaluation {entry}")
+            continue
         gen = TrajectoryGenerator.load(run / "policy.npz")
         gens = {"rl": gen}
         if model_of(name) in ("final", "default"):
@@ -242,6 +253,7 @@ def run_reproduce(out: str | Path, models=THESIS_MODELS, n: int = 1000, seed: in
                          "test_epsilon": eps, "model": model_of(name), "variant": variant_of(name),
                          "train_seconds": ev["train_seconds"], "episodes": ev["episodes"],
                          "env_steps": ev.get("env_steps"), "eval_json": {k: ev[k] for k in ("accuracy", "success")}}
+        entry.write_text(json.dumps({"key": key, "train_seconds": ev["train_seconds"], "result": results[name]}) + "\n")
         r, re_ = report["rl"], eps_report["rl"]
         progress(f"{name}: greedy accuracy {r['accuracy']:.3f}, success {r['success']:.3f}, reached goal "
                  f"{r['reached_goal']:.3f}; eps-greedy ({eps:g}) success {re_['success']:.3f}; "
