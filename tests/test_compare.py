@@ -126,6 +126,14 @@ def test_reproduce_tabulates_beside_the_thesis(trained_run, tmp_path):
     assert res["a"]["test_epsilon"] == eps and f"ε = {eps:g}" in md
     assert res["a"]["rl_eps"]["n"] == 15 and "by_kind_pivot" not in res["a"]["rl"]
     assert json.loads((tmp_path / "reproduce.json").read_text())["a"]["rl"]["n"] == 15
+    # A second call reuses each run's kept evaluation (same n, seed, batch size), and only then.
+    said = []
+    again = run_reproduce(tmp_path, models=("a", "final"), n=15, batch_size=50, progress=said.append)
+    assert json.dumps(again, sort_keys=True) == json.dumps(res, sort_keys=True)
+    assert sum("reusing its evaluation" in m for m in said) == 2
+    said.clear()
+    run_reproduce(tmp_path, models=("a",), n=10, batch_size=50, progress=said.append)
+    assert not any("reusing its evaluation" in m for m in said)
 
 
 def test_reproduce_refuses_unknown_models_and_variants():
