@@ -197,9 +197,11 @@ def run_names(models=THESIS_MODELS, variant: str = "both") -> list[str]:
 
 def _compact(report: dict) -> dict:
     """A generator's figures without the per-(kind, pivot) groups and with at most 5 failures, so
-    that the committed JSON stays small."""
+    that the committed JSON stays small (the device figures only overall)."""
     out = {k: v for k, v in report.items() if k != "by_kind_pivot"}
     out["failures"] = report.get("failures", [])[:5]
+    for group in ("by_kind", "by_pivot"):
+        out[group] = {g: {k: v for k, v in r.items() if k != "device"} for g, r in report.get(group, {}).items()}
     return out
 
 
