@@ -217,13 +217,12 @@ def cmd_reproduce(args) -> int:
     from jaxexo.train.devices import use_all_cpu_cores
 
     use_all_cpu_cores()
-    from jaxexo.evaluation.reproduce import THESIS_MODELS, run_reproduce
+    from jaxexo.evaluation.reproduce import run_names, run_reproduce
 
     models = [m.strip() for m in args.models.split(",") if m.strip()]
-    bad = [m for m in models if m not in THESIS_MODELS]
-    if bad:
-        raise ValueError(f"--models: unknown model {bad[0]!r} (known: {', '.join(THESIS_MODELS)})")
-    run_reproduce(args.out, models, n=args.n, seed=args.seed, include_default=args.default, results_dir=args.results)
+    run_names(models, args.variant)     # checks --models and --variant before anything trains
+    run_reproduce(args.out, models, n=args.n, seed=args.seed, include_default=args.default, results_dir=args.results,
+                  variant=args.variant)
     print(f"wrote {args.out}/reproduce.md, reproduce.json and the run directories under {args.out}/runs")
     return 0
 
@@ -317,6 +316,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--models", default="a,b,c,1,2,3,final", help="comma-separated thesis models")
     r.add_argument("--n", type=int, default=1000, help="test scenarios per model")
     r.add_argument("--seed", type=int, default=0)
+    r.add_argument("--variant", default="both", choices=("faithful", "learns", "both"),
+                   help="faithful: configs/thesis/<m>.toml as the thesis wrote it; learns: <m>-learns.toml, with "
+                        "the named switches that make it learn; both (default): side by side")
     r.add_argument("--default", action="store_true", help="also train and tabulate configs/default.toml")
     r.add_argument("--results", help="also write the tables to this folder as reproduce_<date>_<machine>.json/.md "
                                      "(e.g. benchmarks/results)")

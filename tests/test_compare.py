@@ -120,12 +120,57 @@ def test_reproduce_tabulates_beside_the_thesis(trained_run, tmp_path):
     assert set(res) == {"a", "final"} and "cfftg" in res["final"] and "cfftg" not in res["a"]
     md = (tmp_path / "reproduce.md").read_text()
     # Thesis values beside jaxexo's: Table 3.2 (a), 3.3, 3.10 accuracies, 3.11 CFFTG times.
-    for thesis_value in ("2.46 / -51.0 / 35.4", "2.53 / -47.2 / 41.1", "| a | 58.2 |", "| final | 94.7 |", "2.055"):
+    for thesis_value in ("2.46 / -51.0 / 35.4", "2.53 / -47.2 / 41.1", "| a | faithful | 58.2 |",
+                         "| final | faithful | 94.7 |", "2.055", "| a | faithful | 12 ± 3 min |",
+                         "| final | faithful | 55 min 27 s |"):
         assert thesis_value in md, thesis_value
     assert "Device timing" in md and f"| final (cfftg) | {res['final']['cfftg']['device']['swing_s_mean']:.3f} |" in md
-    acc = 100 * res["final"]["rl"]["accuracy"]
-    assert f"| final | 94.7 | {acc:.1f} |" in md
+    acc, suc = 100 * res["final"]["rl"]["accuracy"], 100 * res["final"]["rl"]["success"]
+    assert f"| final | faithful | 94.7 | {acc:.1f} | {suc:.1f} |" in md
+    # The thesis's epsilon-greedy test (2.6) beside the greedy one, with its epsilon stated.
+    from jaxexo.inference import TrajectoryGenerator
+
+    eps = TrajectoryGenerator.load(trained_run / "policy.npz").config.train.eps_end
+    assert res["a"]["test_epsilon"] == eps and f"ε = {eps:g}" in md
+    assert res["a"]["rl_eps"]["n"] == 15 and "by_kind_pivot" not in res["a"]["rl"]
     assert json.loads((tmp_path / "reproduce.json").read_text())["a"]["rl"]["n"] == 15
+    # A second call reuses each run's kept evaluation (same n, seed, batch size), and only then.
+    said = []
+    again = run_reproduce(tmp_path, models=("a", "final"), n=15, batch_size=50, progress=said.append)
+    assert json.dumps(again, sort_keys=True) == json.dumps(res, sort_keys=True)
+    assert sum("reusing its evaluation" in m for m in said) == 2
+    said.clear()
+    run_reproduce(tmp_path, models=("a",), n=10, batch_size=50, progress=said.append)
+    assert not any("reusing its evaluation" in m for m in said)
+
+
+def test_reproduce_refuses_unknown_models_and_variants():
+    from jaxexo.evaluation.reproduce import run_names
+
+    assert run_names(("a", "final"), "both") == ["a", "a-learns", "final", "final-learns"]
+    assert run_names(("b",), "learns") == ["b-learns"]
+    with pytest.raises(ValueError, match="--variant"):
+        run_names(("a",), "fast")
+    with pytest.raises(ValueError, match="--models: unknown model 'z'"):
+        run_names(("z",), "both")
+
+
+def test_exploring_generator_is_seeded_and_differs_from_greedy(trained_run):
+    """Epsilon-greedy testing (thesis 2.6): the same seed gives the same paths; epsilon 1 is a random
+    walk that leaves the greedy path; the greedy generator is untouched by the copy."""
+    from jaxexo.inference import Obstacle, TrajectoryGenerator
+
+    gen = TrajectoryGenerator.load(trained_run / "policy.npz")
+    scenes = [gen.scene(Obstacle.named("base1"), "obstacle", None, 0.0, 0.70)] * 4
+    greedy = gen.rollout_batch(scenes)[0]
+    a = gen.exploring(1.0, seed=3).rollout_batch(scenes)[0]
+    b = gen.exploring(1.0, seed=3).rollout_batch(scenes)[0]
+    assert all(np.array_equal(x, y) for x, y in zip(a, b))
+    assert any(len(x) != len(g) or not np.allclose(x, g) for x, g in zip(a, greedy))
+    assert all(np.array_equal(x, g) for x, g in zip(gen.rollout_batch(scenes)[0], greedy))
+    assert all(np.array_equal(x, g) for x, g in zip(gen.exploring(0.0).rollout_batch(scenes)[0], greedy))
+    with pytest.raises(ValueError, match="epsilon"):
+        gen.exploring(1.5)
 
 
 @pytest.mark.slow

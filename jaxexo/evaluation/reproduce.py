@@ -1,18 +1,29 @@
 """``jaxexo reproduce``: the thesis's experiments, rerun and tabulated beside its published values.
 
-Trains the seven thesis configs (jaxexo/config/thesis/{a,b,c,1,2,3,final}.toml, shipped with the package;
-configs/thesis/ holds byte-equal copies; thesis 3.2), then for each
-model generates the n test scenarios of ``jaxexo.evaluation.compare`` (the five obstacles of Table 3.1 over the
-three pivot conditions, the model's own starts) with the NumPy generator, and writes:
+Trains the seven thesis configs (thesis 3.2) in one or both variants, shipped with the package
+(jaxexo/config/thesis/; configs/thesis/ holds byte-equal copies):
+
+- ``faithful``: ``<m>.toml``, the thesis's text as written (heel (y, z) observation, the
+  2-64-32-32-32-36 network, equal reward weights with the r0 step term, 10,000-50,000 episodes);
+- ``learns``: ``<m>-learns.toml``, the same with the few named switches that make it learn
+  (``LEARNS_CHANGES``; each has an ablation row in benchmarks/results/thesis-learning_*.md),
+
+then for each model generates the n test scenarios of ``jaxexo.evaluation.compare`` (the five obstacles of
+Table 3.1 over the three pivot conditions, the model's own starts) with the NumPy generator, greedily (a
+device's generator) and epsilon-greedily as the thesis tested (§2.6; it does not state its epsilon: we
+use the config's final training epsilon, ``train.eps_end``, 0.05), and writes:
 
 - Table 3.2 / 3.9: per model, mean generation time and mean swing knee and hip angles;
 - Tables 3.3-3.8: per model and pivot condition (the thesis gives the two it was not trained on);
-- Table 3.10: accuracy (eq 3.1) per model, and jaxexo's strict success beside it;
+- Table 3.10: accuracy (eq 3.1) per model, with jaxexo's strict success and goal reaching beside it;
+- training time per model beside the thesis's (a laptop GPU; jaxexo's on this machine);
 - Table 3.11: generation time per obstacle, final model against CFFTG, timed in one process;
 - the same tables for jaxexo's default model when ``--default`` is given (configs/default.toml).
 
-Run directories go under OUT/runs/<name>; an existing policy.npz there is reused, so an interrupted
-reproduction continues where it stopped. OUT/reproduce.md and OUT/reproduce.json hold the tables.
+Run directories go under OUT/runs/<name> (name: ``a`` or ``a-learns``); an existing policy.npz there is
+reused, and so is its evaluation (runs/<name>/reproduce_entry.json, for the same n, seed and batch
+size), so an interrupted reproduction continues where it stopped. OUT/reproduce.md and
+OUT/reproduce.json hold the tables.
 """
 
 from __future__ import annotations
@@ -23,6 +34,11 @@ from pathlib import Path
 from jaxexo.config import PIVOT_CONDITIONS, load_config, packaged_config
 
 THESIS_MODELS = ("a", "b", "c", "1", "2", "3", "final")
+VARIANTS = ("faithful", "learns")
+ENTRY = "reproduce_entry.json"   # a run's evaluated figures, beside its policy
+# The changes from the thesis's text in the ``learns`` variant, each a named config switch (the
+# faithful setting first); the evidence is benchmarks/results/thesis-learning_*.md.
+LEARNS_CHANGES = ()
 # The pivot condition each single-condition model was trained on (thesis 3.2; configs/thesis/*.toml).
 TRAINED_PIVOT = {"a": "obstacle", "b": "agent", "c": "between", "1": "obstacle", "2": "agent", "3": "between"}
 
@@ -39,6 +55,9 @@ THESIS_CROSS = {
     "2": {"obstacle": (2.49, -8.377, 11.367), "between": (1.23, -11.675, 16.849)},     # Table 3.7
     "3": {"obstacle": (2.14, -49.266, 29.942), "agent": (2.52, -49.424, 41.001)},      # Table 3.8
 }
+# Training time on the thesis's laptop (Ryzen 7, RTX 4060), thesis 3.2 and 3.4.
+THESIS_TRAIN_TIME = {**dict.fromkeys(("a", "b", "c"), "12 ± 3 min"), **dict.fromkeys(("1", "2", "3"), "29 ± 5 min"),
+                     "final": "55 min 27 s"}
 THESIS_ACCURACY = {"final": 94.7, "a": 58.2, "b": 75.8, "c": 74.1, "1": 56.9, "2": 3.8, "3": 58.0}  # Table 3.10
 # Table 3.11: generation time per obstacle (ms), CFFTG and the final model.
 THESIS_T311 = {"base1": (2.055, 3.001), "base2": (1.974, 3.028), "base3": (2.003, 3.002),
@@ -82,42 +101,82 @@ def device_table(results: dict) -> list[str]:
                   "within limits % | uniform 1 s peak deg/s (median) |", "|---|---:|---:|---:|---:|---:|---:|", rows)
 
 
+def model_of(name: str) -> str:
+    """Thesis model of a result name ("a", "a-learns" -> "a"; "default" stays)."""
+    return name.removesuffix("-learns")
+
+
+def variant_of(name: str) -> str:
+    return "learns" if name.endswith("-learns") else ("faithful" if name in THESIS_MODELS else "-")
+
+
+def _minutes(seconds: float) -> str:
+    return f"{seconds / 60:.1f} min" if seconds >= 60 else f"{seconds:.0f} s"
+
+
 def tables(results: dict) -> str:
-    """The reproduction's Markdown: every table beside the thesis's values."""
+    """The reproduction's Markdown: every table beside the thesis's values. ``results`` maps a run name
+    ("a", "a-learns", "default") to its figures: ``rl`` greedy, ``rl_eps`` epsilon-greedy (thesis 2.6)."""
+    eps = sorted({r["test_epsilon"] for r in results.values() if "test_epsilon" in r})
+    eps_txt = ", ".join(f"{e:g}" for e in eps) or "-"
     lines = ["# Thesis experiments reproduced with jaxexo", "",
-             "Each cell: mean generation time (ms) / mean swing knee angle (deg) / mean swing hip angle (deg). "
+             "Each triple: mean generation time (ms) / mean swing knee angle (deg) / mean swing hip angle (deg). "
              "Thesis values from Tables 3.2-3.11; jaxexo's from the NumPy generator on the same scenario set "
-             "for every model."]
+             "for every model. Variant *faithful*: the thesis's text as written (configs/thesis/<m>.toml); "
+             "*learns*: with the switches listed below (configs/thesis/<m>-learns.toml). *greedy*: the policy's "
+             "best action at every step (what a device runs); *ε-greedy*: the thesis's test protocol (§2.6), a "
+             f"random action with probability ε = {eps_txt} (the configs' final training ε; the thesis does not "
+             "state its test ε)."]
+    changes = [f"- `{key}`: {text}" for key, text in LEARNS_CHANGES]
+    if changes and any(variant_of(n) == "learns" for n in results):
+        lines += ["", "Switches of the *learns* variant (thesis setting -> learns setting):", "", *changes]
+    lines += _table("Table 3.10: accuracy (eq 3.1) on the test scenarios, greedy and ε-greedy",
+                    "| model | variant | thesis accuracy % | greedy accuracy % | greedy strict success % | "
+                    "greedy reached goal % | ε-greedy accuracy % | ε-greedy strict success % | "
+                    "ε-greedy reached goal % |", "|---|---|---:|---:|---:|---:|---:|---:|---:|",
+                    [f"| {model_of(name)} | {variant_of(name)} | "
+                     f"{_cell(THESIS_ACCURACY.get(model_of(name)), lambda x: f'{x:.1f}')} | "
+                     f"{_pct(r['rl']['accuracy'])} | {_pct(r['rl']['success'])} | {_pct(r['rl']['reached_goal'])} | "
+                     + (f"{_pct(r['rl_eps']['accuracy'])} | {_pct(r['rl_eps']['success'])} | "
+                        f"{_pct(r['rl_eps']['reached_goal'])} |" if "rl_eps" in r else "- | - | - |")
+                     for name, r in results.items()])
+    lines += _table("Training time per model (thesis: laptop GPU, Ryzen 7 + RTX 4060; jaxexo: this machine's CPU)",
+                    "| model | variant | thesis | jaxexo | jaxexo s | episodes | env steps |",
+                    "|---|---|---|---|---:|---:|---:|",
+                    [f"| {model_of(name)} | {variant_of(name)} | {THESIS_TRAIN_TIME.get(model_of(name), '-')} | "
+                     f"{_minutes(r['train_seconds'])} | {r['train_seconds']:.1f} | {r['episodes']} | "
+                     f"{r.get('env_steps', '-')} |" for name, r in results.items()])
     lines += _table("Table 3.2 / 3.9: every pivot condition together",
-                    "| model | thesis | jaxexo | train s (jaxexo) | episodes |", "|---|---|---|---:|---:|",
-                    [f"| {name} | {_cell(THESIS_T32.get(name))} | {_triple(_fig(r['rl']))} | "
-                     f"{r['train_seconds']:.1f} | {r['episodes']} |" for name, r in results.items()])
+                    "| model | variant | thesis | jaxexo greedy | jaxexo ε-greedy |", "|---|---|---|---|---|",
+                    [f"| {model_of(name)} | {variant_of(name)} | {_cell(THESIS_T32.get(model_of(name)))} | "
+                     f"{_triple(_fig(r['rl']))} | {_triple(_fig(r['rl_eps'])) if 'rl_eps' in r else '-'} |"
+                     for name, r in results.items()])
     cross = []
     for name, r in results.items():
-        trained = TRAINED_PIVOT.get(name)
+        model = model_of(name)
+        trained = TRAINED_PIVOT.get(model)
         for p, rp in ((p, r["rl"]["by_pivot"][p]) for p in PIVOT_CONDITIONS if p in r["rl"]["by_pivot"]):
-            cross.append(f"| {name} ({trained or 'all'}) | {p}{' (trained)' if trained == p else ''} | "
-                         f"{_cell(THESIS_CROSS.get(name, {}).get(p))} | {_triple(_fig(rp))} | "
-                         f"{_pct(rp['accuracy'])} | {_pct(rp['success'])} |")
+            re_ = r.get("rl_eps", {}).get("by_pivot", {}).get(p)
+            cross.append(f"| {model} ({trained or 'all'}) | {variant_of(name)} | {p}{' (trained)' if trained == p else ''} | "
+                         f"{_cell(THESIS_CROSS.get(model, {}).get(p))} | {_triple(_fig(rp))} | "
+                         f"{_pct(rp['accuracy'])} | {_pct(rp['success'])} | "
+                         f"{_triple(_fig(re_)) if re_ else '-'} | {_pct(re_['success']) if re_ else '-'} |")
     lines += _table("Tables 3.3-3.8: per pivot condition",
-                    "| model (trained on) | pivot | thesis | jaxexo | jaxexo accuracy % | jaxexo success % |",
-                    "|---|---|---|---|---:|---:|", cross)
-    lines += _table("Table 3.10: accuracy (eq 3.1) on the test scenarios",
-                    "| model | thesis accuracy % | jaxexo accuracy % | jaxexo strict success % | reached goal % |",
-                    "|---|---:|---:|---:|---:|",
-                    [f"| {name} | {_cell(THESIS_ACCURACY.get(name), lambda x: f'{x:.1f}')} | "
-                     f"{_pct(r['rl']['accuracy'])} | {_pct(r['rl']['success'])} | {_pct(r['rl']['reached_goal'])} |"
-                     for name, r in results.items()])
+                    "| model (trained on) | variant | pivot | thesis | jaxexo greedy | greedy accuracy % | "
+                    "greedy success % | jaxexo ε-greedy | ε-greedy success % |",
+                    "|---|---|---|---|---|---:|---:|---|---:|", cross)
     lines += device_table(results)
-    final = results.get("final")
-    if final and "cfftg" in final:
+    for name in ("final", "final-learns"):
+        final = results.get(name)
+        if not (final and "cfftg" in final):
+            continue
         rows = []
         for k, rk in final["rl"]["by_kind"].items():
             ck = final["cfftg"]["by_kind"][k]
             ref = THESIS_T311.get(k, (float("nan"),) * 2)
             rows.append(f"| {k} | {ref[0]:.3f} | {ref[1]:.3f} | {ck['time_ms_mean']:.3f} | {rk['time_ms_mean']:.3f} | "
                         f"{_pct(ck['success'])} | {_pct(rk['success'])} |")
-        lines += _table("Table 3.11: generation time per obstacle (ms, mean), final model vs CFFTG",
+        lines += _table(f"Table 3.11: generation time per obstacle (ms, mean), {name} model vs CFFTG",
                         "| obstacle | thesis CFFTG | thesis final | jaxexo CFFTG | jaxexo final (RL) | "
                         "jaxexo CFFTG success % | jaxexo RL success % |", "|---|---:|---:|---:|---:|---:|---:|", rows)
         lines += ["", f"Batch of 1000 (median): RL {final['rl']['batch_1000_ms']:.0f} ms, CFFTG "
@@ -125,10 +184,32 @@ def tables(results: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def run_names(models=THESIS_MODELS, variant: str = "both") -> list[str]:
+    """Run names in table order: per model, the faithful run ("a") then the learns run ("a-learns")."""
+    if variant not in (*VARIANTS, "both"):
+        raise ValueError(f"--variant: must be one of {[*VARIANTS, 'both']}, got {variant!r}")
+    for m in models:
+        if m not in THESIS_MODELS:
+            raise ValueError(f"--models: unknown model {m!r} (known: {', '.join(THESIS_MODELS)})")
+    kinds = VARIANTS if variant == "both" else (variant,)
+    return [m if v == "faithful" else f"{m}-learns" for m in models for v in kinds]
+
+
+def _compact(report: dict) -> dict:
+    """A generator's figures without the per-(kind, pivot) groups and with at most 5 failures, so
+    that the committed JSON stays small (the device figures only overall)."""
+    out = {k: v for k, v in report.items() if k != "by_kind_pivot"}
+    out["failures"] = report.get("failures", [])[:5]
+    for group in ("by_kind", "by_pivot"):
+        out[group] = {g: {k: v for k, v in r.items() if k != "device"} for g, r in report.get(group, {}).items()}
+    return out
+
+
 def run_reproduce(out: str | Path, models=THESIS_MODELS, n: int = 1000, seed: int = 0, include_default: bool = False,
                   root: Path | None = None, batch_size: int = 1000, results_dir: str | Path | None = None,
-                  progress=print) -> dict:
-    """Train (or reuse) each model, evaluate it, write OUT/reproduce.{md,json}; returns the results.
+                  variant: str = "faithful", progress=print) -> dict:
+    """Train (or reuse) each model, evaluate it greedily and epsilon-greedily, write
+    OUT/reproduce.{md,json}; returns the results. ``variant``: "faithful", "learns" or "both";
     ``batch_size``: scenarios of the timed batch for the models compared with CFFTG; ``results_dir``:
     also write the tables as a benchmark result (reproduce_<date>_<machine>.{json,md})."""
     from jaxexo.baselines import CFFTG
@@ -141,7 +222,7 @@ def run_reproduce(out: str | Path, models=THESIS_MODELS, n: int = 1000, seed: in
     # its own configs/thesis/*.toml and configs/default.toml instead.
     base = root / "configs" if root else Path(packaged_config("default")).parent
     out = Path(out)
-    paths = {m: base / "thesis" / f"{m}.toml" for m in models}
+    paths = {name: base / "thesis" / f"{name}.toml" for name in run_names(models, variant)}
     if include_default:
         paths["default"] = base / "default.toml"
     results: dict = {}
@@ -155,16 +236,33 @@ def run_reproduce(out: str | Path, models=THESIS_MODELS, n: int = 1000, seed: in
             # A run stopped part way (killed, full disk) is continued, not refused.
             started = run.is_dir() and bool(contents(run))
             ev = run_training(load_config(cfg_path), run, seed=seed, resume=started, progress=False)
+        # A run's evaluation is kept beside it (ENTRY), so that rerunning reproduce to tabulate more models
+        # does not re-evaluate the finished ones; it is reused only for the same n, seed and batch size.
+        key = {"n": n, "seed": seed, "batch_size": batch_size if model_of(name) in ("final", "default") else 0}
+        entry = run / ENTRY
+        if entry.exists() and (cached := json.loads(entry.read_text())).get("key") == key and \
+                cached.get("train_seconds") == ev["train_seconds"]:
+            results[name] = cached["result"]
+            progress(f"{name}: reusing its evaluation {entry}")
+            continue
         gen = TrajectoryGenerator.load(run / "policy.npz")
         gens = {"rl": WithFallback(gen, None)}     # the thesis tables score the RL swing alone
-        if name in ("final", "default"):
+        if model_of(name) in ("final", "default"):
             gens["cfftg"] = CFFTG(gen.config)
         scenarios = make_scenarios(gen.config, "test", n)
         report, _ = evaluate_generators(gens, scenarios, batch_size=batch_size if len(gens) > 1 else 0)
-        results[name] = {**report, "train_seconds": ev["train_seconds"], "episodes": ev["episodes"],
-                         "eval_json": {k: ev[k] for k in ("accuracy", "success")}}
-        r = report["rl"]
-        progress(f"{name}: accuracy {r['accuracy']:.3f}, success {r['success']:.3f}, "
+        # The thesis's test protocol (2.6): epsilon-greedy, with the run's final training epsilon.
+        eps = float(gen.config.train.eps_end)
+        eps_report, _ = evaluate_generators({"rl": WithFallback(gen.exploring(eps, seed=seed), None)}, scenarios,
+                                           batch_size=0)
+        results[name] = {**{k: _compact(v) for k, v in report.items()}, "rl_eps": _compact(eps_report["rl"]),
+                         "test_epsilon": eps, "model": model_of(name), "variant": variant_of(name),
+                         "train_seconds": ev["train_seconds"], "episodes": ev["episodes"],
+                         "env_steps": ev.get("env_steps"), "eval_json": {k: ev[k] for k in ("accuracy", "success")}}
+        entry.write_text(json.dumps({"key": key, "train_seconds": ev["train_seconds"], "result": results[name]}) + "\n")
+        r, re_ = report["rl"], eps_report["rl"]
+        progress(f"{name}: greedy accuracy {r['accuracy']:.3f}, success {r['success']:.3f}, reached goal "
+                 f"{r['reached_goal']:.3f}; eps-greedy ({eps:g}) success {re_['success']:.3f}; "
                  f"{r['time_ms_mean']:.2f} ms per trajectory")
     out.mkdir(parents=True, exist_ok=True)
     (out / "reproduce.json").write_text(json.dumps(results, indent=1) + "\n")

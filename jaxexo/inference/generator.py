@@ -69,6 +69,30 @@ class TrajectoryGenerator:
         # terminated()'s one parameter as a Python bool: a NumPy bool would make every step's test
         # a NumPy scalar operation.
         self._term_p = types.SimpleNamespace(terminate_on_collision=bool(self.np_params.terminate_on_collision))
+        self.epsilon = 0.0      # 0: greedy (the default; a device's generator must not explore)
+        self._rng = None
+
+    def exploring(self, epsilon: float, seed: int = 0) -> "TrajectoryGenerator":
+        """A copy that acts epsilon-greedily (thesis 2.6 tests that way): each step a uniformly
+        random action with probability ``epsilon``, from its own seeded stream (deterministic for a
+        given seed and scenario order). For reproducing the thesis's test protocol only."""
+        import copy
+
+        eps = float(epsilon)
+        if not 0.0 <= eps <= 1.0:
+            raise ValueError(f"epsilon must be in [0, 1], got {epsilon!r}")
+        out = copy.copy(self)
+        out.epsilon, out._rng = eps, np.random.default_rng(seed)
+        return out
+
+    def _explore(self, greedy):
+        """Replace greedy actions (an int or an array) by random ones with probability epsilon."""
+        if self.epsilon <= 0.0:
+            return greedy
+        g = np.asarray(greedy)
+        rand = self._rng.integers(len(self.directions), size=g.shape)
+        pick = np.where(self._rng.uniform(size=g.shape) < self.epsilon, rand, g)
+        return int(pick) if pick.ndim == 0 else pick
 
     @classmethod
     def load(cls, path: str | Path) -> "TrajectoryGenerator":
@@ -136,7 +160,7 @@ class TrajectoryGenerator:
         hy, hz, t, visited = float(scene.start_y), 0.0, 0, False
         pts, acts = [(hy, hz)], []
         while True:
-            a = step.greedy(hy, hz, t, 1.0 if visited else 0.0)
+            a = self._explore(step.greedy(hy, hz, t, 1.0 if visited else 0.0))
             hy, hz = dynamics.move_heel(scalar, sp, hy, hz, *self.directions[a])
             t += 1
             visited = visited or dynamics.in_mid_goal(scalar, sp, hy, hz, mid_y, mid_z)
@@ -170,7 +194,7 @@ class TrajectoryGenerator:
         for k in range(self.max_steps):
             sub = _take(lay, alive)
             obs = dynamics.observation(np, p, self.obs_mode, hy[alive], hz[alive], t[alive], visited[alive], sub)
-            a = np.argmax(self.net.q(obs), axis=-1)
+            a = self._explore(np.argmax(self.net.q(obs), axis=-1))
             ny, nz = dynamics.move_heel(np, p, hy[alive], hz[alive], dirs[a, 0], dirs[a, 1])
             hy[alive], hz[alive] = ny, nz
             t[alive] += 1
