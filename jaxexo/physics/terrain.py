@@ -305,7 +305,8 @@ def shape(xp, outline, width, n_points: int = geometry.DEFAULT_SHAPE_POINTS):
     """The observation's height-profile descriptor (..., n_points), metres: the outline's height at
     ``geometry.descriptor_fractions`` of its width (= height * geometry.shape_descriptor(unit))."""
     frac = geometry.descriptor_fractions(n_points)
-    return geometry.profile_height(xp, width[..., None] * frac, outline)
+    # outline[..., None, :, :]: one outline per batch entry, evaluated at its n_points positions.
+    return geometry.profile_height(xp, width[..., None] * frac, outline[..., None, :, :])
 
 
 def unpad(outline: np.ndarray) -> np.ndarray:
