@@ -158,13 +158,14 @@ def test_env_steps_on_terrain_scenes_and_is_deterministic():
     cfg = _cfg()
     env = ExoStepEnv(cfg)
     key = jax.random.PRNGKey(9)
+    params = env.default_params
 
     def episode(key):
-        obs, st = env.reset(key)
+        obs, st = env.reset(key, params)
 
         def body(c, k):
             st, obs = c
-            obs, st, r, term, trunc, info = env.step(k, st, jnp.asarray(9), env.default_params)
+            obs, st, r, term, trunc, info = env.step(k, st, jnp.asarray(9), params)
             return (st, obs), r
         (_, obs), r = jax.lax.scan(body, (st, obs), jax.random.split(key, 40))
         return obs, r
