@@ -652,7 +652,7 @@ def static_settings(cfg: Config) -> tuple:
             if s.static:
                 out.append((f"{section}.{name}", getattr(getattr(cfg, section), name)))
     return tuple(out) + (("outline_vertices", cfg.outline_vertices), ("obstacle_kinds", len(cfg.layout.obstacles)),
-                         ("terrain_families", 0 if cfg.layout.terrain is None else len(cfg.layout.terrain.families)),
+                         ("terrain_families", () if cfg.layout.terrain is None else cfg.layout.terrain.families),
                          ("num_updates", num_updates(cfg)))
 
 

@@ -104,7 +104,9 @@ class ExoStepEnv:
     def layout_from_uniforms(self, u, params: EnvParams, kind=None, pivot_kind=None) -> Layout:
         """The scene of uniform numbers u (..., scenarios.n_uniforms(params))
         (jaxexo.physics.scenarios.layout_from_uniforms; procedural terrain when the config has it)."""
-        return Layout(**scenarios.layout_from_uniforms(jnp, params, u, kind, pivot_kind))
+        t = self.config.layout.terrain   # static: evaluate only the outlines of its families
+        return Layout(**scenarios.layout_from_uniforms(jnp, params, u, kind, pivot_kind,
+                                                       None if t is None else t.families))
 
     def init_state(self, layout: Layout, params: EnvParams) -> tuple[jnp.ndarray, EnvState]:
         """Start an episode on a given layout: the heel on the ground at the start."""

@@ -98,12 +98,13 @@ def n_uniforms(p) -> int:
     return N_TERRAIN_UNIFORMS if uses_terrain(p) else N_UNIFORMS
 
 
-def terrain_layout_from_uniforms(xp, p, u, kind=None, pivot_kind=None) -> dict:
+def terrain_layout_from_uniforms(xp, p, u, kind=None, pivot_kind=None, families=None) -> dict:
     """A procedural-terrain scene from uniform numbers u (..., N_TERRAIN_UNIFORMS): the family (by
     ``terrain_cdf`` over ``terrain_ids``; ``kind`` fixes the index into terrain_ids), its outline
     (terrain.family_outline), the pivot condition, and the placement (terrain.place: start shift,
     step length that fits the width, centre anywhere in the gap). ``kind`` of the result is the
-    family id (terrain.FAMILIES)."""
+    family id (terrain.FAMILIES). ``families``: the config's family names (static), to evaluate
+    only those outlines (the same scenes, a smaller program)."""
     D = terrain.D_MAX
     if kind is None:
         kind = _categorical(xp, u[..., 0], p.terrain_cdf)
@@ -112,7 +113,7 @@ def terrain_layout_from_uniforms(xp, p, u, kind=None, pivot_kind=None) -> dict:
     kind = xp.asarray(kind, dtype=xp.int32)
     pivot_kind = xp.asarray(pivot_kind, dtype=xp.int32)
     fid = p.terrain_ids[kind]
-    local, width, height = terrain.family_outline(xp, fid, u[..., 2:2 + D])
+    local, width, height = terrain.family_outline(xp, fid, u[..., 2:2 + D], families)
     start_y, step_length, center = terrain.place(
         xp, u[..., 2 + D:2 + D + 3], width, p.terrain_start_shift, p.terrain_step_length, p.foot_length,
         p.terrain_margins[..., 0], p.terrain_margins[..., 1])
@@ -123,13 +124,13 @@ def terrain_layout_from_uniforms(xp, p, u, kind=None, pivot_kind=None) -> dict:
                 goal_y=start_y + step_length)
 
 
-def layout_from_uniforms(xp, p, u, kind=None, pivot_kind=None) -> dict:
+def layout_from_uniforms(xp, p, u, kind=None, pivot_kind=None, families=None) -> dict:
     """A scene from uniform numbers u (..., N_UNIFORMS) and the layout distribution in ``p``
     (param_values' fields): the Layout fields as a dict of arrays (...). ``kind``/``pivot_kind``
     (...) fix the obstacle kind / pivot condition instead of drawing them from u[0] / u[1]. With
     procedural terrain (``uses_terrain(p)``) the scene is terrain_layout_from_uniforms'."""
     if uses_terrain(p):
-        return terrain_layout_from_uniforms(xp, p, u, kind, pivot_kind)
+        return terrain_layout_from_uniforms(xp, p, u, kind, pivot_kind, families)
     if kind is None:
         kind = _categorical(xp, u[..., 0], p.kind_cdf)
     if pivot_kind is None:
