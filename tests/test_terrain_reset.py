@@ -86,8 +86,13 @@ def _jax_scenes(cfg, seed, n):
     return env, jax.jit(jax.vmap(env.sample_layout, (0, None)))(keys, env.default_params)
 
 
-def test_reset_draws_the_numpy_tools_scenes():
-    cfg = _cfg()
+@pytest.mark.parametrize("terrain_kw", [{}, {"families": ["polyline", "wedge"], "weights": [1.0, 3.0],
+                                          "pivot": ["between"]}])
+def test_reset_draws_the_numpy_tools_scenes(terrain_kw):
+    """The env evaluates only its config's families (a static subset); the NumPy tools evaluate
+    every family: the same scenes."""
+    cfg = _cfg(**terrain_kw)
+    t = cfg.layout.terrain
     n = 64
     _, lj = _jax_scenes(cfg, 11, n)
     ln = scenarios.scenario_layouts(np, dynamics.numpy_params(cfg), 11, n)
@@ -98,14 +103,16 @@ def test_reset_draws_the_numpy_tools_scenes():
     # the NumPy tools' scenarios are these scenes, as Obstacles of the same outline
     from jaxexo.inference.scenarios import training_scenarios
     sc = training_scenarios(cfg, 12, seed=11)
+    pivots = [i for i, w in enumerate(t.pivot) if w > 0]
     lc = scenarios.scenario_layouts(np, dynamics.numpy_params(cfg), 11, 12, cycle=True,
-                                    kinds=list(range(6)), pivots=[0, 1, 2])
+                                    kinds=list(range(len(t.families))), pivots=pivots)
     for i, s in enumerate(sc):
         assert s["kind"] == terrain.FAMILY_NAMES[int(lc["kind"][i])]
         assert s["obstacle"].width == pytest.approx(float(lc["width"][i]), abs=1e-6)
         assert s["obstacle"].height == pytest.approx(float(lc["height"][i]), abs=1e-6)
         assert s["step_length"] == pytest.approx(float(lc["goal_y"][i] - lc["start_y"][i]), abs=1e-6)
-    assert {s["kind"] for s in sc} == set(terrain.TRAIN_FAMILIES)
+    assert {s["kind"] for s in sc} == set(t.families)
+    assert {terrain.FAMILY_NAMES[k] for k in np.asarray(lj.kind)} == set(t.families)
 
 
 def test_reset_draws_every_training_family_and_pivot_within_the_ranges():
