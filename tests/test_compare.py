@@ -35,15 +35,21 @@ def eval_out(trained_run, tmp_path_factory):
 
 
 @pytest.mark.slow
-def test_eval_writes_report_json_md_and_figures(eval_out):
+def test_eval_writes_report_json_md_and_figures(eval_out, trained_run):
+    from jaxexo.config import load_config
+
+    lay = load_config(trained_run / "config.toml").layout
+    train_kinds = set(lay.terrain.families) if lay.terrain is not None else {o.kind for o in lay.obstacles}
+    assert train_kinds
     report = json.loads((eval_out / "report.json").read_text())
     assert set(report) == {"rl", "rl+cfftg", "cfftg"}
     for name, r in report.items():
         for key in ("accuracy", "success", "time_ms_median", "batch_1000_ms", "by_kind", "by_pivot"):
             assert key in r, (name, key)
         assert r["n"] == 60 and r["batch_size"] == 100 and r["batch_1000_ms"] > 0
-        # Test set (five thesis obstacles) and the training distribution (Base 1-3, rectangles).
-        assert set(r["by_kind"]) == {"base1", "base2", "base3", "triangle", "half_circle", "rectangle"}
+        # Test set (five thesis obstacles) and the training distribution: the run's procedural
+        # terrain families (the default config) or its obstacle mixture's kinds.
+        assert set(r["by_kind"]) == {"base1", "base2", "base3", "triangle", "half_circle"} | train_kinds
         assert set(r["by_pivot"]) == {"agent", "obstacle", "between"}
     md = (eval_out / "report.md").read_text()
     assert "| rl | 60 |" in md and "| cfftg | 60 |" in md and "| rl+cfftg | 60 |" in md and "By obstacle kind" in md

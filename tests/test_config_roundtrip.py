@@ -61,6 +61,17 @@ OBSTACLE = st.one_of(
                                                 _lohi(0.05, 0.2), _lohi(0.05, 0.25)))),
 )
 
+TERRAIN = st.one_of(
+    st.just(False),
+    st.builds(lambda fams, w, s, L, piv: {"families": fams, "weights": w[:len(fams)], "start_shift": s,
+                                          "step_length": L, "pivot": piv},
+              st.lists(st.sampled_from(["rectangle", "trapezoid", "wedge", "step", "bump", "polyline"]),
+                       min_size=1, max_size=6, unique=True),
+              st.lists(st.floats(0.1, 3.0), min_size=6, max_size=6), _lohi(0.0, 0.12),
+              st.tuples(st.floats(0.55, 0.70), st.floats(0.75, 0.85)).map(list),
+              st.lists(st.floats(0.1, 2.0), min_size=3, max_size=3)),
+)
+
 RAW = st.fixed_dictionaries({
     "env": st.fixed_dictionaries({}, optional={
         "step_size": st.floats(0.01, 0.04), "max_steps": st.integers(30, 300), "obs_mode": st.sampled_from(OBS_MODES),
@@ -79,7 +90,7 @@ RAW = st.fixed_dictionaries({
         "pivot": st.one_of(st.lists(st.sampled_from(PIVOT_CONDITIONS), min_size=1, unique=True),
                            st.lists(st.floats(0.1, 2.0), min_size=3, max_size=3)),
         "size_jitter": st.floats(0.0, 0.2), "start_shift": _lohi(0.0, 0.03), "obstacle_offset": _lohi(-0.02, 0.02),
-        "step_length": _lohi(0.7, 0.8)}),
+        "step_length": _lohi(0.7, 0.8), "terrain": TERRAIN}),
     "train": st.fixed_dictionaries({}, optional={
         "num_envs": st.sampled_from([1, 8, 64, 1024]), "rollout_steps": st.integers(1, 64),
         "hidden": st.lists(st.integers(1, 256), min_size=1, max_size=4), "layer_norm": st.booleans(),

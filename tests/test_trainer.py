@@ -44,10 +44,19 @@ LEARN_TRAIN = {
 
 @pytest.mark.slow
 def test_trainer_learns_to_step_over_a_fixed_obstacle():
-    """Watkins Q(lambda), forward view, on one fixed layout: from ~0 training successes (random
-    behaviour) to a success rate above 0.8 in the last tenth of a 600 k env-step budget, and the
-    greedy policy clears the obstacle. Observed over seeds 0-9: first tenth 0.000 on every seed, last
-    tenth 0.979-1.000, greedy success in 28-34 steps on every seed."""
+    """Watkins Q(lambda), forward view, on one fixed layout: the GREEDY policy fails the scene before
+    training and clears it safely (2 cm margin, no step back) after a 600 k env-step budget, and the
+    behaviour policy's success rises from ~0 (random behaviour) in the first tenth to near what
+    epsilon-exploration allows in the last tenth.
+
+    Why not "last-tenth behaviour success > 0.8" (the check before the safe-swing verdict): a safe
+    swing now also forbids the heel falling back more than env.backward_tolerance (5 mm), so one
+    exploratory move with a backward component (17 of the 36 directions, cos < 0, each moves the heel
+    back >= 0.03 * cos(100 deg) = 5.2 mm) spoils an episode. Even a perfect greedy policy then
+    succeeds with behaviour probability cap = (1 - eps * 17/36) ** steps (~0.75 at eps = 0.02 over
+    ~30 steps). The old threshold, 0.8 of episodes, becomes 0.8 of that cap, the same relative
+    strength; the greedy policy, which exploration does not cap, must succeed outright. Observed on
+    seed 0 before this change: first tenth 0.000, last tenth 0.744."""
     from jaxexo.physics.geometry import Obstacle
 
     cfg = config_from_dict({"env": {"obs_mode": "conditioned"}, "layout": dict(FIXED_LAYOUT),
@@ -55,7 +64,17 @@ def test_trainer_learns_to_step_over_a_fixed_obstacle():
     trainer = Trainer(cfg)
     hyper = Hyperparams.from_config(cfg)
     assert trainer.num_updates == 586
+    env = trainer.env
+    # Greedy evaluation on the same fixed scene, built by hand: it is the scene training saw.
+    layout = env.layout_for(Obstacle.named("base1"), pivot="obstacle", start_y=0.0, step_length=0.70)
+    obs_fixed, _ = env.init_state(layout, env.default_params)
+    obs_reset, _ = env.reset(jax.random.PRNGKey(1), env.default_params)
+    np.testing.assert_allclose(obs_fixed, obs_reset, atol=1e-6)
+    greedy = jax.jit(make_rollout(env, trainer.net.apply, cfg.env.max_steps))
+
     ts = jax.jit(trainer.init)(jax.random.PRNGKey(LEARN_SEED), hyper)
+    before = greedy(ts.params, layout, env.default_params)
+    assert not bool(before["success"]), "the untrained greedy policy already clears the scene: nothing to learn"
     ts, m = jax.jit(trainer.run, static_argnums=2)(ts, hyper, trainer.num_updates)
     m = np.asarray(m)
     assert int(trainer.env_steps(ts)) == trainer.num_updates * 128 * 8
@@ -66,19 +85,16 @@ def test_trainer_learns_to_step_over_a_fixed_obstacle():
         return rows[:, COL["successes"]].sum() / rows[:, COL["episodes"]].sum()
 
     first, last = rate(m[:tenth]), rate(m[-tenth:])
-    assert first < 0.05, (first, last)
-    assert last > 0.8, (first, last)
     assert m[-1, COL["epsilon"]] == pytest.approx(0.02)
-
-    # Greedy evaluation on the same fixed scene, built by hand: it is the scene training saw.
-    env = trainer.env
-    layout = env.layout_for(Obstacle.named("base1"), pivot="obstacle", start_y=0.0, step_length=0.70)
-    obs_fixed, _ = env.init_state(layout, env.default_params)
-    obs_reset, _ = env.reset(jax.random.PRNGKey(1), env.default_params)
-    np.testing.assert_allclose(obs_fixed, obs_reset, atol=1e-6)
-    out = jax.jit(make_rollout(env, trainer.net.apply, cfg.env.max_steps))(ts.params, layout, env.default_params)
+    out = greedy(ts.params, layout, env.default_params)
     assert bool(out["reached"]) and bool(out["success"]), {k: np.asarray(v).tolist() for k, v in out.items()}
     assert int(out["steps"]) < cfg.env.max_steps
+    steps = int(out["steps"])
+    backward = int(np.sum(np.asarray(env.default_params.directions)[:, 0] < -1e-6))
+    assert backward == 17
+    cap = (1.0 - 0.02 * backward / 36) ** steps
+    assert first < 0.05, (first, last, cap)
+    assert last > 0.8 * cap, (first, last, cap, steps)
 
 
 # --------------------------------------------------------------------------------------------

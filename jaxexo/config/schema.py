@@ -34,7 +34,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from jaxexo.physics import geometry, kinematics, outcome, rewards
+from jaxexo.physics import geometry, kinematics, outcome, rewards, terrain
 from jaxexo.physics.geometry import THESIS_OBSTACLES
 
 PIVOT_CONDITIONS = kinematics.PIVOT_CONDITIONS  # thesis 3.1, defined with the rule that places the pivot
@@ -462,6 +462,70 @@ def default_obstacles() -> tuple[ObstacleSpec, ...]:
     )
 
 
+TERRAIN_KEYS = ("families", "weights", "start_shift", "step_length", "pivot", "near_margin", "far_margin")
+
+
+def parse_terrain(path: str, v: Any) -> "terrain.TerrainSpec | None":
+    """[layout] terrain: ``false`` (off: reset draws the obstacle mixture) or a table of
+    jaxexo.physics.terrain.TerrainSpec fields (families by name, weights, start_shift and step_length
+    ranges in m, pivot weights, near/far margins in m): reset then draws a procedural obstacle
+    family, its outline and its placement instead of the mixture. Held-out families are refused."""
+    if v is None or v is False:
+        return None
+    if isinstance(v, terrain.TerrainSpec):
+        return v
+    if v is True:
+        v = {}
+    if not isinstance(v, dict):
+        raise ConfigError(f"{path}: expected false or a table of {', '.join(TERRAIN_KEYS)}, got {v!r}")
+    unknown = sorted(set(v) - set(TERRAIN_KEYS))
+    if unknown:
+        raise ConfigError(f"{path}.{unknown[0]}: unknown field (known: {', '.join(TERRAIN_KEYS)})")
+    kw = dict(v)
+    if "families" in kw:
+        f = kw["families"]
+        if isinstance(f, str):
+            f = [f]
+        if not isinstance(f, (list, tuple)) or not all(isinstance(x, str) for x in f):
+            raise ConfigError(f"{path}.families: expected a list of family names, got {f!r}")
+        kw["families"] = tuple(f)
+    if "weights" in kw:
+        kw["weights"] = _vector(f"{path}.weights", kw["weights"], nonneg=True)
+    if "pivot" in kw:
+        kw["pivot"] = pivot_weights(f"{path}.pivot", kw["pivot"])
+    for k in ("start_shift", "step_length"):
+        if k in kw:
+            kw[k] = _range(f"{path}.{k}", kw[k], nonneg=True)
+    for k in ("near_margin", "far_margin"):
+        if k in kw:
+            kw[k] = _number(f"{path}.{k}", kw[k], positive=True)
+    try:
+        return terrain.TerrainSpec(**kw, path=path)
+    except terrain.TerrainError as e:
+        raise ConfigError(str(e)) from None
+
+
+def write_terrain(spec) -> Any:
+    if spec is None:
+        return False
+    return {"families": list(spec.families), "weights": list(spec.weights), "start_shift": list(spec.start_shift),
+            "step_length": list(spec.step_length), "pivot": list(spec.pivot), "near_margin": spec.near_margin,
+            "far_margin": spec.far_margin}
+
+
+def terrain_params(spec, cfg) -> dict[str, np.ndarray]:
+    """The terrain description as EnvParams leaves. Off: ``terrain_ids`` has length 0, which
+    jaxexo.physics.scenarios reads as a static (shape) switch back to the obstacle mixture."""
+    f = lambda x: np.asarray(x, dtype=np.float32)  # noqa: E731
+    if spec is None:
+        return {"terrain_ids": np.zeros((0,), np.int32), "terrain_cdf": f(np.zeros((0,))),
+                "terrain_start_shift": f([0.0, 0.0]), "terrain_step_length": f([0.0, 0.0]),
+                "terrain_pivot_cdf": _cdf([1.0, 1.0, 1.0]), "terrain_margins": f([0.0, 0.0])}
+    return {"terrain_ids": spec.ids.astype(np.int32), "terrain_cdf": f(spec.cdf),
+            "terrain_start_shift": f(spec.start_shift), "terrain_step_length": f(spec.step_length),
+            "terrain_pivot_cdf": _cdf(spec.pivot), "terrain_margins": f([spec.near_margin, spec.far_margin])}
+
+
 @dataclass(frozen=True)
 class LayoutConfig:
     # The obstacle mixture; an empty tuple (the dataclass default) means default_obstacles().
@@ -474,6 +538,9 @@ class LayoutConfig:
                                                 to_param=lambda v, cfg: {"pivot_cdf": _cdf(v)})
     start_shift: tuple[float, float] = declare((0.0, 0.0), range_(), unit="m")   # agent start moved towards the obstacle
     step_length: tuple[float, float] = declare((0.70, 0.70), range_(positive=True), unit="m")  # goal = start + this
+    # Procedural obstacle families (jaxexo.physics.terrain): false, or a table (parse_terrain) that
+    # replaces the obstacle mixture, start_shift, step_length, obstacle_offset and pivot in reset.
+    terrain: Any = declare(None, parse_terrain, to_param=terrain_params, write=write_terrain)
 
     def default_center(self, foot_length: float, step_length: float) -> float:
         """Default obstacle centre (jaxexo.physics.geometry.default_center, the one definition)."""
@@ -547,8 +614,12 @@ class Config:
 
     @property
     def outline_vertices(self) -> int:
-        need = max(len(o.unit_vertices()) for o in self.layout.obstacles)
-        return self.env.max_vertices or need
+        return self.env.max_vertices or _vertices_needed(self.layout)
+
+
+def _vertices_needed(lay: LayoutConfig) -> int:
+    need = max(len(o.unit_vertices()) for o in lay.obstacles)
+    return max(need, terrain.K_MAX) if lay.terrain is not None else need
 
 
 SECTION_CLASSES = {"env": EnvConfig, "kinematics": KinematicsConfig, "reward": RewardConfig,
@@ -581,6 +652,7 @@ def static_settings(cfg: Config) -> tuple:
             if s.static:
                 out.append((f"{section}.{name}", getattr(getattr(cfg, section), name)))
     return tuple(out) + (("outline_vertices", cfg.outline_vertices), ("obstacle_kinds", len(cfg.layout.obstacles)),
+                         ("terrain_families", () if cfg.layout.terrain is None else cfg.layout.terrain.families),
                          ("num_updates", num_updates(cfg)))
 
 
@@ -692,6 +764,8 @@ def validate(cfg: Config) -> None:
     if env.max_vertices and env.max_vertices < need:
         raise ConfigError(f"env.max_vertices: {env.max_vertices} is fewer than the {need} outline vertices "
                           "of an obstacle in layout.obstacles (0 picks the size automatically)")
+    if lay.terrain is not None:
+        _check_terrain(cfg)
     j = lay.size_jitter
     for i, ob in enumerate(lay.obstacles):
         p = f"layout.obstacles[{i}]"
@@ -730,6 +804,31 @@ def validate(cfg: Config) -> None:
                           "margin that a safe swing needs, not only to avoid contact")
     if env.max_steps < rew.step_threshold:
         raise ConfigError(f"env.max_steps: {env.max_steps} is below reward.step_threshold = {rew.step_threshold}")
+
+
+def _check_terrain(cfg: Config) -> None:
+    """A terrain spec must fit the env: outlines of terrain.K_MAX vertices, obstacles larger than a
+    step, the mid-goal over the tallest below env.max_z, the goal inside env.bounds_y, and every
+    family clearable at every placement extreme and pivot (TerrainSpec.check)."""
+    env, kin, t = cfg.env, cfg.kinematics, cfg.layout.terrain
+    if env.max_vertices and env.max_vertices < terrain.K_MAX:
+        raise ConfigError(f"env.max_vertices: {env.max_vertices} is fewer than the {terrain.K_MAX} outline vertices "
+                          "of layout.terrain's families (0 picks the size automatically)")
+    if env.step_size >= t.min_size:
+        raise ConfigError(f"env.step_size: {env.step_size} m is not smaller than the smallest width or height "
+                          f"of layout.terrain.families ({t.min_size:.3f} m): a step could jump through the obstacle")
+    if t.max_height + env.mid_goal_clearance + env.mid_goal_half_size[1] >= env.max_z:
+        raise ConfigError(f"layout.terrain.families: obstacles up to {t.max_height:.3f} m put the mid-goal above "
+                          f"env.max_z = {env.max_z} m")
+    goal_far = t.start_shift[1] + t.step_length[1] + env.goal_tolerance[0]
+    if env.bounds_y[1] <= goal_far:
+        raise ConfigError(f"env.bounds_y: the upper bound must lie beyond layout.terrain's goal region ({goal_far:.3f} m)")
+    try:
+        t.check(foot_length=kin.foot_length, thigh=kin.thigh, shin=kin.shin, hip_limits=kin.hip_limits,
+                knee_limits=kin.knee_limits, heel_lift=env.mid_goal_clearance - env.mid_goal_half_size[1],
+                goal_tolerance=env.goal_tolerance[0])
+    except terrain.TerrainError as e:
+        raise ConfigError(str(e)) from None
 
 
 def _check_room(cfg: Config, p: str, w_max: float) -> None:

@@ -98,11 +98,15 @@ class ExoStepEnv:
         jitter, pivot condition, start shift, step length) by jaxexo.physics.scenarios, the one
         scenario generator: the scene of the key's two words, which NumPy tools draw identically."""
         words = jax.random.key_data(key) if jnp.issubdtype(key.dtype, jax.dtypes.prng_key) else key
-        return self.layout_from_uniforms(scenarios.uniforms(jnp, words[..., 0], words[..., 1]), params)
+        u = scenarios.uniforms(jnp, words[..., 0], words[..., 1], scenarios.n_uniforms(params))
+        return self.layout_from_uniforms(u, params)
 
     def layout_from_uniforms(self, u, params: EnvParams, kind=None, pivot_kind=None) -> Layout:
-        """The scene of uniform numbers u (..., N_UNIFORMS) (jaxexo.physics.scenarios.layout_from_uniforms)."""
-        return Layout(**scenarios.layout_from_uniforms(jnp, params, u, kind, pivot_kind))
+        """The scene of uniform numbers u (..., scenarios.n_uniforms(params))
+        (jaxexo.physics.scenarios.layout_from_uniforms; procedural terrain when the config has it)."""
+        t = self.config.layout.terrain   # static: evaluate only the outlines of its families
+        return Layout(**scenarios.layout_from_uniforms(jnp, params, u, kind, pivot_kind,
+                                                       None if t is None else t.families))
 
     def init_state(self, layout: Layout, params: EnvParams) -> tuple[jnp.ndarray, EnvState]:
         """Start an episode on a given layout: the heel on the ground at the start."""

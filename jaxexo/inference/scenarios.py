@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from jaxexo.config import PIVOT_CONDITIONS, Config
-from jaxexo.physics import dynamics, scenarios
+from jaxexo.physics import dynamics, scenarios, terrain
 from jaxexo.physics.geometry import Obstacle
 from jaxexo.physics.scenarios import HELD_OUT, TEST_KINDS, test_config  # noqa: F401 (one definition, re-exported)
 
@@ -31,8 +31,13 @@ def training_scenarios(config: Config, n: int, seed: int = 54321) -> list[dict]:
     """n scenarios of the config's own training distribution: its obstacle mixture (every entry of
     positive weight in turn, sizes drawn from its ranges) and the pivot conditions it trains on (in
     turn), the rest drawn as the environment's reset draws it."""
-    kinds = [i for i, o in enumerate(config.layout.obstacles) if o.weight > 0]
-    pivots = [i for i, w in enumerate(config.layout.pivot) if w > 0]
+    t = config.layout.terrain
+    if t is not None:   # procedural terrain: its families (indices into t.families) and pivots
+        kinds = [i for i, w in enumerate(t.weights) if w > 0]
+        pivots = [i for i, w in enumerate(t.pivot) if w > 0]
+    else:
+        kinds = [i for i, o in enumerate(config.layout.obstacles) if o.weight > 0]
+        pivots = [i for i, w in enumerate(config.layout.pivot) if w > 0]
     return _as_kwargs(config, scenarios.scenario_layouts(np, dynamics.numpy_params(config), seed, n, cycle=True,
                                                          kinds=kinds, pivots=pivots))
 
@@ -41,13 +46,19 @@ def _as_kwargs(cfg: Config, lay: dict) -> list[dict]:
     specs = cfg.layout.obstacles
     out = []
     for i in range(len(lay["start_y"])):
-        spec = specs[int(lay["kind"][i])]
         w, h, center = (float(lay[k][i]) for k in ("width", "height", "center_y"))
+        start_y = float(lay["start_y"][i])
+        if cfg.layout.terrain is not None:   # kind is the family id; the outline is world-frame
+            local = np.asarray(lay["outline"][i], dtype=np.float64) - np.array([center, 0.0])
+            out.append({"kind": terrain.FAMILY_NAMES[int(lay["kind"][i])], "obstacle": terrain.to_obstacle(local, center),
+                        "pivot": PIVOT_CONDITIONS[int(lay["pivot_kind"][i])], "start_y": start_y,
+                        "step_length": float(lay["goal_y"][i]) - start_y})
+            continue
+        spec = specs[int(lay["kind"][i])]
         if spec.shape == "profile":
             ob = Obstacle("profile", "profile", center, w, h, spec.unit_vertices())
         else:
             ob = getattr(Obstacle, spec.shape)(w, h, center_y=center)
-        start_y = float(lay["start_y"][i])
         out.append({"kind": spec.kind, "obstacle": ob, "pivot": PIVOT_CONDITIONS[int(lay["pivot_kind"][i])],
                     "start_y": start_y, "step_length": float(lay["goal_y"][i]) - start_y})
     return out

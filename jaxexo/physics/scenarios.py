@@ -26,7 +26,7 @@ from __future__ import annotations
 import dataclasses
 
 from jaxexo.config import Config, named_spec
-from jaxexo.physics import geometry
+from jaxexo.physics import geometry, terrain
 from jaxexo.physics.dynamics import pivot_position
 
 # The five thesis obstacles (Table 3.1; Base 1-3 seen in training, triangle and half-circle held out).
@@ -36,6 +36,9 @@ N_PIVOTS = 3
 # Uniform numbers per scene: kind, pivot, width and height jitter, width, height, step length,
 # start shift, obstacle offset.
 N_UNIFORMS = 9
+# With [layout] terrain: family, pivot, D_MAX shape numbers (terrain.family_outline), then start
+# shift, step length and centre (terrain.place).
+N_TERRAIN_UNIFORMS = 2 + terrain.D_MAX + 3
 
 _ROTATIONS = (13, 15, 26, 6, 17, 29, 16, 24)
 _PARITY = 0x1BD11BDA
@@ -84,10 +87,50 @@ def _categorical(xp, u, cdf):
     return xp.minimum(xp.sum((u[..., None] >= cdf).astype(xp.int32), axis=-1), cdf.shape[-1] - 1)
 
 
-def layout_from_uniforms(xp, p, u, kind=None, pivot_kind=None) -> dict:
+def uses_terrain(p) -> bool:
+    """Whether the params describe procedural terrain ([layout] terrain): a static switch, read from
+    the shape of ``terrain_ids`` (length 0 when off), so that it holds under jit and vmap."""
+    return p.terrain_ids.shape[-1] > 0
+
+
+def n_uniforms(p) -> int:
+    """Uniform numbers per scene for these params."""
+    return N_TERRAIN_UNIFORMS if uses_terrain(p) else N_UNIFORMS
+
+
+def terrain_layout_from_uniforms(xp, p, u, kind=None, pivot_kind=None, families=None) -> dict:
+    """A procedural-terrain scene from uniform numbers u (..., N_TERRAIN_UNIFORMS): the family (by
+    ``terrain_cdf`` over ``terrain_ids``; ``kind`` fixes the index into terrain_ids), its outline
+    (terrain.family_outline), the pivot condition, and the placement (terrain.place: start shift,
+    step length that fits the width, centre anywhere in the gap). ``kind`` of the result is the
+    family id (terrain.FAMILIES). ``families``: the config's family names (static), to evaluate
+    only those outlines (the same scenes, a smaller program)."""
+    D = terrain.D_MAX
+    if kind is None:
+        kind = _categorical(xp, u[..., 0], p.terrain_cdf)
+    if pivot_kind is None:
+        pivot_kind = _categorical(xp, u[..., 1], p.terrain_pivot_cdf)
+    kind = xp.asarray(kind, dtype=xp.int32)
+    pivot_kind = xp.asarray(pivot_kind, dtype=xp.int32)
+    fid = p.terrain_ids[kind]
+    local, width, height = terrain.family_outline(xp, fid, u[..., 2:2 + D], families)
+    start_y, step_length, center = terrain.place(
+        xp, u[..., 2 + D:2 + D + 3], width, p.terrain_start_shift, p.terrain_step_length, p.foot_length,
+        p.terrain_margins[..., 0], p.terrain_margins[..., 1])
+    outline = xp.stack([local[..., 0] + center[..., None], local[..., 1]], axis=-1)
+    return dict(outline=outline, shape=terrain.shape(xp, local, width, p.kind_shape.shape[-1]), center_y=center,
+                width=width, height=height, kind=xp.asarray(fid, dtype=xp.int32), pivot_kind=pivot_kind,
+                pivot_y=pivot_position(xp, pivot_kind, start_y, center), start_y=start_y,
+                goal_y=start_y + step_length)
+
+
+def layout_from_uniforms(xp, p, u, kind=None, pivot_kind=None, families=None) -> dict:
     """A scene from uniform numbers u (..., N_UNIFORMS) and the layout distribution in ``p``
     (param_values' fields): the Layout fields as a dict of arrays (...). ``kind``/``pivot_kind``
-    (...) fix the obstacle kind / pivot condition instead of drawing them from u[0] / u[1]."""
+    (...) fix the obstacle kind / pivot condition instead of drawing them from u[0] / u[1]. With
+    procedural terrain (``uses_terrain(p)``) the scene is terrain_layout_from_uniforms'."""
+    if uses_terrain(p):
+        return terrain_layout_from_uniforms(xp, p, u, kind, pivot_kind, families)
     if kind is None:
         kind = _categorical(xp, u[..., 0], p.kind_cdf)
     if pivot_kind is None:
@@ -119,10 +162,11 @@ def scenario_layouts(xp, p, seed: int, n: int, cycle: bool = False, kinds=None, 
     if not 0 <= int(seed) < 2 ** 32:
         raise ValueError(f"seed must be in [0, 2**32), got {seed}")
     i = xp.arange(n, dtype=xp.uint32)
-    u = uniforms(xp, xp.full((n,), int(seed), dtype=xp.uint32), i)
+    u = uniforms(xp, xp.full((n,), int(seed), dtype=xp.uint32), i, n_uniforms(p))
     if not cycle:
         return layout_from_uniforms(xp, p, u)
-    kinds = xp.asarray(range(p.kind_cdf.shape[-1]) if kinds is None else kinds, dtype=xp.int32)
+    n_kinds = p.terrain_ids.shape[-1] if uses_terrain(p) else p.kind_cdf.shape[-1]
+    kinds = xp.asarray(range(n_kinds) if kinds is None else kinds, dtype=xp.int32)
     pivots = xp.asarray(range(N_PIVOTS) if pivots is None else pivots, dtype=xp.int32)
     idx = xp.arange(n, dtype=xp.int32)
     return layout_from_uniforms(xp, p, u, kind=kinds[idx % len(kinds)],
@@ -134,9 +178,10 @@ def test_config(cfg: Config) -> Config:
     and all three pivot conditions (same jitter, start shifts and step lengths)."""
     lay = dataclasses.replace(cfg.layout, obstacles=tuple(named_spec(k) for k in TEST_KINDS),
                               pivot=(1.0, 1.0, 1.0))
+    lay = dataclasses.replace(lay, terrain=None)
     env = dataclasses.replace(cfg.env, max_vertices=0)
     return dataclasses.replace(cfg, layout=lay, env=env)
 
 
-__all__ = ["TEST_KINDS", "HELD_OUT", "N_UNIFORMS", "threefry2x32", "uniforms", "seed_words",
-           "layout_from_uniforms", "scenario_layouts", "test_config"]
+__all__ = ["TEST_KINDS", "HELD_OUT", "N_UNIFORMS", "N_TERRAIN_UNIFORMS", "threefry2x32", "uniforms", "seed_words",
+           "uses_terrain", "n_uniforms", "layout_from_uniforms", "terrain_layout_from_uniforms", "scenario_layouts", "test_config"]

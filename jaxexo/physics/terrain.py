@@ -281,15 +281,17 @@ def one_family_outline(xp, name: str, u):
     return _stack(xp, verts).astype(dt), w.astype(dt), h.astype(dt)
 
 
-def family_outline(xp, fid, u):
+def family_outline(xp, fid, u, names=None):
     """The outline of family ``fid`` (int or int array (...)) from uniforms ``u`` (..., D_MAX):
     (outline (..., K_MAX, 2) in the obstacle frame, width (...), height (...)), metres.
 
     Every family is evaluated and the result selected with ``xp.where`` (a few hundred flops), so a
-    traced ``fid`` jits and vmaps; an id outside the table gives family 0."""
+    traced ``fid`` jits and vmaps; an id outside the table gives family 0. ``names`` (static) limits
+    the evaluation to those families (the ones a config can draw: a smaller program, same result
+    for their ids; an id outside them gives the first)."""
     fid = xp.asarray(fid)
     out = w_out = h_out = None
-    for fam in FAMILIES.values():
+    for fam in (FAMILIES.values() if names is None else [FAMILIES[n] for n in names]):
         o, w, h = one_family_outline(xp, fam.name, u)
         if out is None:
             out, w_out, h_out = o, w, h
@@ -305,7 +307,8 @@ def shape(xp, outline, width, n_points: int = geometry.DEFAULT_SHAPE_POINTS):
     """The observation's height-profile descriptor (..., n_points), metres: the outline's height at
     ``geometry.descriptor_fractions`` of its width (= height * geometry.shape_descriptor(unit))."""
     frac = geometry.descriptor_fractions(n_points)
-    return geometry.profile_height(xp, width[..., None] * frac, outline)
+    # outline[..., None, :, :]: one outline per batch entry, evaluated at its n_points positions.
+    return geometry.profile_height(xp, width[..., None] * frac, outline[..., None, :, :])
 
 
 def unpad(outline: np.ndarray) -> np.ndarray:
