@@ -122,7 +122,12 @@ def test_a_verdict_at_n_samples_holds_at_10n(outline, seed, n, smoothing):
         fine = np.concatenate([fine, raw])
     guaranteed = swept.path_swept_clearance(np, coarse, FOOT, outline).min() - dev
     dense = geometry.foot_clearance(np, fine, FOOT, outline).min()
-    assert guaranteed <= dense + 1e-9
+    # The swept distance is 0 for a move that crosses the outline between two clear samples (it is a
+    # distance, signed only through the samples' own clearance), so against a denser look that finds
+    # the foot inside, the guarantee is compared where that look finds it clear or touching.
+    assert guaranteed <= max(dense, 0.0) + 1e-9
+    if dense <= 0.0:
+        assert guaranteed <= 0.0         # contact is never hidden between samples
     if guaranteed >= 0.02:
         assert dense >= 0.02
 
