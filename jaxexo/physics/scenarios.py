@@ -98,6 +98,16 @@ def n_uniforms(p) -> int:
     return N_TERRAIN_UNIFORMS if uses_terrain(p) else N_UNIFORMS
 
 
+def _kind_and_pivot(xp, u, kind, pivot_kind, kind_cdf, pivot_cdf):
+    """The obstacle kind and pivot condition of a scene (int32): drawn from u[0] / u[1] by their CDFs
+    unless given."""
+    if kind is None:
+        kind = _categorical(xp, u[..., 0], kind_cdf)
+    if pivot_kind is None:
+        pivot_kind = _categorical(xp, u[..., 1], pivot_cdf)
+    return xp.asarray(kind, dtype=xp.int32), xp.asarray(pivot_kind, dtype=xp.int32)
+
+
 def terrain_layout_from_uniforms(xp, p, u, kind=None, pivot_kind=None, families=None) -> dict:
     """A procedural-terrain scene from uniform numbers u (..., N_TERRAIN_UNIFORMS): the family (by
     ``terrain_cdf`` over ``terrain_ids``; ``kind`` fixes the index into terrain_ids), its outline
@@ -106,12 +116,7 @@ def terrain_layout_from_uniforms(xp, p, u, kind=None, pivot_kind=None, families=
     family id (terrain.FAMILIES). ``families``: the config's family names (static), to evaluate
     only those outlines (the same scenes, a smaller program)."""
     D = terrain.D_MAX
-    if kind is None:
-        kind = _categorical(xp, u[..., 0], p.terrain_cdf)
-    if pivot_kind is None:
-        pivot_kind = _categorical(xp, u[..., 1], p.terrain_pivot_cdf)
-    kind = xp.asarray(kind, dtype=xp.int32)
-    pivot_kind = xp.asarray(pivot_kind, dtype=xp.int32)
+    kind, pivot_kind = _kind_and_pivot(xp, u, kind, pivot_kind, p.terrain_cdf, p.terrain_pivot_cdf)
     fid = p.terrain_ids[kind]
     local, width, height = terrain.family_outline(xp, fid, u[..., 2:2 + D], families)
     start_y, step_length, center = terrain.place(
@@ -131,12 +136,7 @@ def layout_from_uniforms(xp, p, u, kind=None, pivot_kind=None, families=None) ->
     procedural terrain (``uses_terrain(p)``) the scene is terrain_layout_from_uniforms'."""
     if uses_terrain(p):
         return terrain_layout_from_uniforms(xp, p, u, kind, pivot_kind, families)
-    if kind is None:
-        kind = _categorical(xp, u[..., 0], p.kind_cdf)
-    if pivot_kind is None:
-        pivot_kind = _categorical(xp, u[..., 1], p.pivot_cdf)
-    kind = xp.asarray(kind, dtype=xp.int32)
-    pivot_kind = xp.asarray(pivot_kind, dtype=xp.int32)
+    kind, pivot_kind = _kind_and_pivot(xp, u, kind, pivot_kind, p.kind_cdf, p.pivot_cdf)
     lerp = lambda x, r: r[..., 0] + (r[..., 1] - r[..., 0]) * x  # noqa: E731
     width = lerp(u[..., 4], p.kind_width[kind]) * (1.0 + (2.0 * u[..., 2] - 1.0) * p.size_jitter)
     height = lerp(u[..., 5], p.kind_height[kind]) * (1.0 + (2.0 * u[..., 3] - 1.0) * p.size_jitter)
