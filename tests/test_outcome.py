@@ -7,7 +7,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from jaxexo.physics import geometry, outcome
+from jaxexo.physics import geometry, outcome, swept
 
 
 def _reference(reached, clearance, limit_bad, leg_bad, heel_y, margin=0.0, back_tol=np.inf):
@@ -22,6 +22,14 @@ def _reference(reached, clearance, limit_bad, leg_bad, heel_y, margin=0.0, back_
         if furthest - heel_y[j] > back_tol:
             ok = False
     return ok
+
+
+def _from_samples(xp, reached, clearance, limit_bad, leg_bad, heel_y, **rule):
+    """The verdict on per-sample arrays (..., N), reduced the way a sampled path is: the smallest
+    clearance, the largest fall behind the furthest y (jaxexo.physics.swept.backward_motion)."""
+    v = outcome.verdict(xp, reached, clearance.min(-1), ~limit_bad.any(-1), ~leg_bad.any(-1),
+                        swept.backward_motion(xp, heel_y), **rule)
+    return {**v, "max_backward": swept.backward_motion(xp, heel_y)}
 
 
 def _random_paths(rng, b=400, n=30):
@@ -39,10 +47,10 @@ def _random_paths(rng, b=400, n=30):
 
 @pytest.mark.parametrize("rule", [{}, {"min_clearance_margin": 0.02}, {"backward_tolerance": 0.005},
                                   {"min_clearance_margin": 0.01, "backward_tolerance": 0.0}])
-def test_from_samples_matches_reference(rule):
+def test_verdict_on_samples_matches_reference(rule):
     rng = np.random.default_rng(0)
     reached, c, lb, gb, hy = _random_paths(rng)
-    v = outcome.from_samples(np, reached, c, lb, gb, hy, **rule)
+    v = _from_samples(np, reached, c, lb, gb, hy, **rule)
     ref = [_reference(reached[i], c[i], lb[i], gb[i], hy[i],
                       rule.get("min_clearance_margin", outcome.DEFAULT_MIN_CLEARANCE),
                       rule.get("backward_tolerance", outcome.DEFAULT_BACKWARD_TOLERANCE)) for i in range(len(reached))]
@@ -57,7 +65,7 @@ def test_margin_zero_and_no_backward_check_is_the_contact_rule():
     (the rule before the safe-swing margin, kept reachable through the config)."""
     rng = np.random.default_rng(1)
     reached, c, lb, gb, hy = _random_paths(rng)
-    v = outcome.from_samples(np, reached, c, lb, gb, hy, min_clearance_margin=0.0, backward_tolerance=np.inf)
+    v = _from_samples(np, reached, c, lb, gb, hy, min_clearance_margin=0.0, backward_tolerance=np.inf)
     contact_rule = reached & ~(c <= geometry.TOUCH_EPS).any(1) & ~lb.any(1) & ~gb.any(1)
     np.testing.assert_array_equal(v["success"], contact_rule)
 
@@ -78,10 +86,10 @@ def test_margin_and_backward_tolerance_fail_the_right_check():
     no = np.zeros((1, 4), bool)
     yes = np.array([True])
     contact_rule = {"min_clearance_margin": 0.0, "backward_tolerance": np.inf}
-    assert outcome.from_samples(np, yes, c, no, no, hy, **contact_rule)["success"][0]
-    v = outcome.from_samples(np, yes, c, no, no, hy, min_clearance_margin=0.02, backward_tolerance=np.inf)
+    assert _from_samples(np, yes, c, no, no, hy, **contact_rule)["success"][0]
+    v = _from_samples(np, yes, c, no, no, hy, min_clearance_margin=0.02, backward_tolerance=np.inf)
     assert outcome.failed_checks(v, 0) == ("clearance_ok",) and v["collision_free"][0]
-    v = outcome.from_samples(np, yes, c, no, no, hy, min_clearance_margin=0.0, backward_tolerance=0.005)
+    v = _from_samples(np, yes, c, no, no, hy, min_clearance_margin=0.0, backward_tolerance=0.005)
     assert outcome.failed_checks(v, 0) == ("backward_ok",)
     np.testing.assert_allclose(v["max_backward"], [0.01])
 

@@ -18,13 +18,14 @@ never touched, whatever the margin.
 The two rule parameters are the config's ``env.min_clearance`` and ``env.backward_tolerance``
 (``rule(p)`` reads them from environment parameters); their defaults are declared here once.
 
-Two ways in: ``from_samples`` reduces per-sample arrays (..., N) of a finished path; ``start`` /
-``accumulate`` / ``episode_verdict`` fold per-step flags of an environment episode as it runs.
+Two ways in: ``verdict`` judges finished paths from their aggregates (jaxexo.inference.trajectory
+reduces its samples, with the clearance guaranteed between them); ``start`` / ``accumulate`` /
+``episode_verdict`` fold per-step flags of an environment episode as it runs.
 """
 
 from __future__ import annotations
 
-from jaxexo.physics import geometry, swept
+from jaxexo.physics import geometry
 
 # m: the clearance a safe swing keeps from the obstacle outline (config env.min_clearance).
 DEFAULT_MIN_CLEARANCE = 0.02
@@ -58,19 +59,6 @@ def verdict(xp, reached_goal, min_clearance, joint_limits_ok, leg_length_ok, max
     return {"success": success, "collision_free": collision_free, "reached_goal": reached_goal,
             "clearance_ok": clearance_ok, "above_ground": above_ground, "backward_ok": backward_ok,
             "joint_limits_ok": joint_limits_ok, "leg_length_ok": leg_length_ok}
-
-
-def from_samples(xp, reached_goal, clearance, limit_bad, leg_bad, heel_y, **rule) -> dict:
-    """The verdict on finished paths from per-sample values along the last axis (..., N):
-    ``clearance`` (m), ``limit_bad`` / ``leg_bad`` (either leg outside its joint limits / too long),
-    ``heel_y`` (m); ``reached_goal`` (...) whether the path ends at the goal. Also returns
-    ``min_clearance`` and ``max_backward``. (Checked trajectories use ``verdict`` directly, with the
-    clearance guaranteed between samples: jaxexo.inference.trajectory.measure.)"""
-    min_clearance = xp.min(clearance, axis=-1)
-    max_backward = swept.backward_motion(xp, heel_y)
-    v = verdict(xp, reached_goal, min_clearance, ~xp.any(limit_bad, axis=-1), ~xp.any(leg_bad, axis=-1),
-                max_backward, **rule)
-    return {**v, "min_clearance": min_clearance, "max_backward": max_backward}
 
 
 def start(xp, shape=(), dtype="float32") -> dict:
