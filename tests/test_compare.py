@@ -161,6 +161,7 @@ def test_reproduce_refuses_unknown_models_and_variants():
         run_names(("z",), "both")
 
 
+@pytest.mark.slow
 def test_exploring_generator_is_seeded_and_differs_from_greedy(trained_run):
     """Epsilon-greedy testing (thesis 2.6): the same seed gives the same paths; epsilon 1 is a random
     walk that leaves the greedy path; the greedy generator is untouched by the copy."""

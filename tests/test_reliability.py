@@ -393,6 +393,7 @@ def test_cli_generate_refuses_directories_and_missing_folders(tmp_path, option, 
 # Integer counters (no float32 drift past 2^24)
 # --------------------------------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_counters_are_exact_past_2_24_with_an_odd_rollout_size():
     """N T = 12 x 7 = 84 (not a power of two) and a budget just past 2^24 env steps: the run stops after
     exactly ceil(budget / 84) updates, the env-step and episode counts are exact integers (Python's

@@ -261,6 +261,7 @@ def test_rl_swings_on_the_thesis_obstacles(trained_run):
         assert sw.checks.collision_free == tr.checks.collision_free
 
 
+@pytest.mark.slow
 def test_cli_generate_rate_and_animation(trained_run, tmp_path):
     from jaxexo.cli import main
 

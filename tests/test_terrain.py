@@ -289,6 +289,7 @@ def unseen_eval(trained_run, tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_eval_unseen_reports_per_family_end_to_end(unseen_eval):
     from jaxexo.evaluation.unseen import CELLS_PER_FAMILY, unseen_scenarios
     from jaxexo.inference import TrajectoryGenerator

@@ -161,6 +161,7 @@ def test_observed_shape_matches_a_dense_reference():
         np.testing.assert_allclose(ln["shape"][i], ref, atol=1e-4)
 
 
+@pytest.mark.slow
 def test_env_steps_on_terrain_scenes_and_is_deterministic():
     cfg = _cfg()
     env = ExoStepEnv(cfg)
