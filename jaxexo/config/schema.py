@@ -889,10 +889,8 @@ def _check_clearable(cfg: Config, path: str, h_max: float, w_max: float) -> None
         for name, weight in zip(PIVOT_CONDITIONS, lay.pivot):
             if weight <= 0:
                 continue
-            ks = kinematics.leg_state(np, pivots[name], heel, kin.thigh, kin.shin)
-            ok = ks["leg_swing"] <= kin.thigh + kin.shin + 1e-9 and not kinematics.joint_limit_violation(
-                np, ks["hip_swing"], ks["knee_swing_angle"], *kin.hip_limits, *kin.knee_limits)
-            if not ok:
+            if kinematics.swing_heel_unreachable(np, pivots[name], heel, kin.thigh, kin.shin, kin.hip_limits,
+                                                 kin.knee_limits):
                 raise ConfigError(
                     f"{path}.height: an obstacle {h_max:.3f} m high cannot be cleared with pivot {name!r} "
                     f"(start {start:.3f} m, step length {L:.3f} m): the heel over it at {heel_z:.3f} m is "

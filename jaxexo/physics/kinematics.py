@@ -136,6 +136,15 @@ def pivot_position(xp, pivot_kind, start_y, center_y):
     return xp.where(pivot_kind == 0, start_y, xp.where(pivot_kind == 1, center_y, 0.5 * (start_y + center_y)))
 
 
+def swing_heel_unreachable(xp, pivot_y, heel, thigh, shin, hip_limits, knee_limits):
+    """Whether the swing leg cannot put its heel at ``heel`` (..., 2) with the pivot foot at
+    ``pivot_y``: out of reach (longer than thigh + shin, eq 2.45) or outside its joint limits (eq 2.50).
+    The feasibility rule of the config's obstacles and of the terrain families."""
+    ks = leg_state(xp, pivot_y, heel, thigh, shin)
+    return (ks["leg_swing"] > thigh + shin + 1e-9) | joint_limit_violation(
+        xp, ks["hip_swing"], ks["knee_swing_angle"], *hip_limits, *knee_limits)
+
+
 def joint_limit_violation(xp, hip_angle, knee_angle, hip_min, hip_max, knee_min, knee_max):
     """Eq 2.50's condition for one leg: any angle outside its limits."""
     return (

@@ -470,8 +470,8 @@ def unclearable(spec: TerrainSpec, *, foot_length, thigh, shin, hip_limits, knee
                 grid: int = 3) -> list[tuple]:
     """NumPy: the (family, pivot, start, step length, centre) placements, on a grid x grid x grid
     of each family's placement range at its widest and narrowest, where the heel over the centre at
-    the family's tallest top + heel_lift is out of reach or joint limits (the rule of
-    jaxexo.config.schema._check_clearable). Empty when every pivot with weight > 0 clears."""
+    the family's tallest top + heel_lift is out of reach or joint limits (kinematics.swing_heel_unreachable,
+    as jaxexo.config.schema._check_clearable). Empty when every pivot with weight > 0 clears."""
     out = []
     t = np.linspace(0.0, 1.0, grid)
     uu = np.stack(np.meshgrid(t, t, t, indexing="ij"), -1).reshape(-1, 3)
@@ -484,9 +484,8 @@ def unclearable(spec: TerrainSpec, *, foot_length, thigh, shin, hip_limits, knee
             for k, piv in enumerate(PIVOTS):
                 if spec.pivot[k] <= 0:
                     continue
-                ks = kinematics.leg_state(np, kinematics.pivot_position(np, k, start, c), heel, thigh, shin)
-                bad = (ks["leg_swing"] > thigh + shin + 1e-9) | kinematics.joint_limit_violation(
-                    np, ks["hip_swing"], ks["knee_swing_angle"], *hip_limits, *knee_limits)
+                bad = kinematics.swing_heel_unreachable(np, kinematics.pivot_position(np, k, start, c), heel,
+                                                        thigh, shin, hip_limits, knee_limits)
                 for i in np.flatnonzero(bad):
                     out.append((name, piv, float(start[i]), float(L[i]), float(c[i])))
     return out
