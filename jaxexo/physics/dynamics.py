@@ -152,10 +152,13 @@ def admissible_moves(xp, p, heel_y, heel_z, layout, over_moves=_stacked):
     c_here = geometry.foot_clearance(xp, here, p.foot_length, layout.outline)
     # the moves' axis first, for over_moves: (F, ..., 2)
     ends = xp.moveaxis(new, -2, 0)
-    c_move = xp.moveaxis(over_moves(
-        lambda end: swept.swept_clearance(xp, here + 0.0 * end, end, p.foot_length, layout.outline, c0=c_here),
+    # The swept distance alone decides: it is zero for a move into the obstacle and at most the
+    # clearance at either end, so ">= need" (need <= c_here) is swept_clearance's ">= need" whenever
+    # the foot starts outside; from inside (c_here <= 0, never reached under the shield) every move passes.
+    d_move = xp.moveaxis(over_moves(
+        lambda end: swept.swept_distance(xp, here + 0.0 * end, end, p.foot_length, layout.outline),
         (ends,)), 0, -1)                                             # (..., F)
-    clear = c_move >= xp.minimum(p.shield_clearance, c_here)[..., None] - SHIELD_SLACK
+    clear = d_move >= xp.minimum(p.shield_clearance, c_here)[..., None] - SHIELD_SLACK
     kin = kinematics.leg_state(xp, layout.pivot_y[..., None], new, p.thigh, p.shin)
     angles = xp.stack([kin["hip_swing"], kin["knee_swing_angle"], kin["hip_stance"], kin["knee_stance_angle"]], axis=-1)
     reachable = ~(kinematics.legs_outside_limits(xp, angles, p.hip_limits, p.knee_limits)
