@@ -132,8 +132,9 @@ def mixed_step():
     return get_mixed_step()
 
 
-# A small config trained briefly from configs/default.toml: a policy that reaches the goal on most
-# scenes and fails on some, for the generator and evaluation tests (one training per session).
+# A small config trained briefly from configs/quick.toml (unshielded, so it trains in seconds): a
+# policy that reaches the goal on most scenes and fails on some, for the generator and evaluation
+# tests (one training per session). The shielded default has its own tests (tests/test_shield.py).
 TRAINED_BUDGET = 1_000_000
 
 
@@ -144,7 +145,7 @@ def trained_run(tmp_path_factory):
     from jaxexo.config import load_config
     from jaxexo.train.driver import run_training
 
-    cfg = load_config(ROOT / "configs" / "default.toml")
+    cfg = load_config(ROOT / "configs" / "quick.toml")
     cfg = dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, num_envs=512, budget_env_steps=TRAINED_BUDGET))
     out = tmp_path_factory.mktemp("trained") / "run"
     run_training(cfg, out, seed=0, progress=False, eval_episodes=200)
