@@ -40,7 +40,7 @@ import numpy as np
 from jaxexo.physics import dynamics, geometry, swept
 from jaxexo.config import ConfigError, config_from_dict
 from jaxexo.physics.dynamics import Scene, scalar
-from jaxexo.inference import smoothing as sm, trajectory
+from jaxexo.inference import blas, smoothing as sm, trajectory
 from jaxexo.inference.network import FoldedQNetwork, StepNetwork
 from jaxexo.inference.trajectory import DEFAULT_DURATION, Trajectory, TrajectoryBatch, TrajectoryError, assemble
 from jaxexo.storage.policy_file import PolicyFileError, QPolicy, load_policy
@@ -51,6 +51,10 @@ FALLBACKS = ("cfftg", None)
 
 class TrajectoryGenerator:
     """Greedy trajectories from an exported Q-network. Build with ``TrajectoryGenerator.load(path)``."""
+
+    # BLAS threads for generate_batch (jaxexo.inference.blas: default threads were 4x slower on a
+    # busy 2-core machine); None leaves the process's BLAS as it is.
+    batch_blas_threads: int | None = 1
 
     def __init__(self, policy: QPolicy, config, source: str = "<policy>"):
         self.policy = policy
@@ -368,8 +372,9 @@ class TrajectoryGenerator:
         n_points, smoothing, duration = check_options(n_points, smoothing, duration)
         fallback = check_fallback(fallback)
         scenes = self._scenes(obstacles, pivot, pivot_y, start_y, step_length)
-        raws, _ = self.rollout_batch(scenes)
-        batch = self._finish(scenes, raws, n_points, smoothing, duration, fallback, fast)
+        with blas.limited(self.batch_blas_threads):
+            raws, _ = self.rollout_batch(scenes)
+            batch = self._finish(scenes, raws, n_points, smoothing, duration, fallback, fast)
         if strict and not batch.ok.all():
             raise TrajectoryError(batch[int(np.argmin(batch.ok))])
         return batch
