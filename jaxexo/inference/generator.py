@@ -278,14 +278,13 @@ class TrajectoryGenerator:
         margin, then hand the swings that still fail to CFFTG (``fallback``)."""
         if smoothing > 0:
             paths, dev = _smooth(raws, n_points, smoothing, fast)
-            paths = list(paths)
             used = [smoothing] * len(raws)
         else:
             both = [sm.linear_resample(r, n_points, with_deviation=True) for r in raws]
-            paths, dev = [p for p, _ in both], np.array([d for _, d in both])
+            paths, dev = np.stack([p for p, _ in both]), np.array([d for _, d in both])
             used = [float("nan")] * len(raws)
         notes = [()] * len(raws)
-        batch = assemble("rl", self.sp, scenes, raws, np.stack(paths), used, duration, notes, deviation=dev, fast=fast)
+        batch = assemble("rl", self.sp, scenes, raws, paths, used, duration, notes, deviation=dev, fast=fast)
         bad = np.flatnonzero(~batch.clearance_ok) if smoothing > 0 else np.zeros(0, np.int64)
         if fast and bad.size:
             redo = self._fallback_batch(scenes, raws, bad, n_points, smoothing)

@@ -65,7 +65,7 @@ def hip_position(xp, pivot_y, heel, thigh, shin):
     dist_y = 0.5 * (pivot_y - heel[..., 0])
     hz2 = leg * leg - dist_y * dist_y
     hz = xp.sqrt(xp.maximum(hz2, (MIN_HIP_HEIGHT_FRACTION * leg) ** 2))
-    return xp.stack([0.5 * (pivot_y + heel[..., 0]), hz], axis=-1)
+    return xp.concatenate([(0.5 * (pivot_y + heel[..., 0]))[..., None], hz[..., None]], axis=-1)
 
 
 def knee_position(xp, hip, foot, thigh, shin):
@@ -82,7 +82,7 @@ def knee_position(xp, hip, foot, thigh, shin):
     # direction is the one that flexes (knee angle <= 0). With the heel below the hip it is the
     # solution with the larger y, as eq 2.11 says; with the heel raised above the hip the larger-y
     # solution would be a hyperextended knee.
-    perp = xp.stack([-u[..., 1], u[..., 0]], axis=-1)
+    perp = xp.concatenate([-u[..., 1:2], u[..., 0:1]], axis=-1)   # concatenate: cheaper than stack in NumPy
     knee = hip + a[..., None] * u + h[..., None] * perp
     return knee, r
 

@@ -32,6 +32,12 @@ def _inv_len2(xp, ey, ez):
     return xp.where(ok, 1.0 / xp.where(ok, len2, 1.0), 0.0)
 
 
+def _last_axis(xp, *arrays):
+    """xp.stack(arrays, axis=-1) for arrays of one shape, as one concatenate (NumPy's stack is a
+    Python function costing several microseconds a call; one path's check makes dozens, issue 12)."""
+    return xp.concatenate([a[..., None] for a in arrays], axis=-1)
+
+
 def swept_distance(xp, h0, h1, foot_length, outline):
     """Exact minimum distance (m) between the region the flat foot sweeps from heel h0 to heel h1
     (a parallelogram) and the outline polyline; zero when they meet. Shapes: (..., 2), (..., K, 2)."""
@@ -46,12 +52,12 @@ def swept_distance(xp, h0, h1, foot_length, outline):
     f = foot_length + 0.0 * y0
     # P's four corners (..., 4) and its four sides a -> a + u (..., 4): the foot at h0 and at h1, the
     # heel's and the toe's chords.
-    py = xp.stack([y0, y0 + f, y0 + dy, y0 + f + dy], axis=-1)
-    pz = xp.stack([z0, z0, z0 + dz, z0 + dz], axis=-1)
-    ay = xp.stack([y0, y0 + dy, y0, y0 + f], axis=-1)
-    az = xp.stack([z0, z0 + dz, z0, z0], axis=-1)
-    uy = xp.stack([f, f, dy, dy], axis=-1)
-    uz = xp.stack([0.0 * z0, 0.0 * z0, dz, dz], axis=-1)
+    py = _last_axis(xp, y0, y0 + f, y0 + dy, y0 + f + dy)
+    pz = _last_axis(xp, z0, z0, z0 + dz, z0 + dz)
+    ay = _last_axis(xp, y0, y0 + dy, y0, y0 + f)
+    az = _last_axis(xp, z0, z0 + dz, z0, z0)
+    uy = _last_axis(xp, f, f, dy, dy)
+    uz = _last_axis(xp, 0.0 * z0, 0.0 * z0, dz, dz)
     inv_u = _inv_len2(xp, uy, uz)
     # Corners of P against the outline edges: (..., 4, K-1).
     d_corner = _point_edge_dist2(py[..., :, None], pz[..., :, None], cy, cz, ey, ez, inv_e)
