@@ -148,3 +148,34 @@ def test_pruned_point_clearances_keep_the_exact_minimum():
             assert np.all(sw <= full + 1e-12)
             assert np.all((c == c_full) | ((c <= c_full + 1e-12) & (c > 0.0)))
             assert np.all(sw[sw != full] > full.min(axis=1, keepdims=True).repeat(n - 1, 1)[sw != full])
+
+
+def test_generate_batch_runs_blas_on_one_thread_and_restores_it(tmp_path, monkeypatch):
+    """generate_batch limits BLAS to one thread while it runs (jaxexo.inference.blas), puts the
+    process's setting back afterwards, and ``batch_blas_threads = None`` leaves BLAS alone; the
+    trajectories are the same either way."""
+    pytest.importorskip("jax")
+    from test_inference import export_random, small_config
+
+    from jaxexo.inference import Obstacle, TrajectoryGenerator, blas
+
+    gen = TrajectoryGenerator.load(export_random(tmp_path / "p.npz", small_config(hidden=[16]), seed=1))
+    before = blas.blas_threads()
+    assert before, "threadpoolctl (a jaxexo dependency) finds no BLAS in this process"
+    seen = []
+    rollout_batch = gen.rollout_batch
+
+    def spy(scenes):
+        seen.append(blas.blas_threads())
+        return rollout_batch(scenes)
+
+    monkeypatch.setattr(gen, "rollout_batch", spy)
+    obstacles = [Obstacle.named("triangle"), Obstacle.named("base1"), Obstacle.named("half_circle")]
+    limited = gen.generate_batch(obstacles)
+    assert seen == [[1] * len(before)]
+    assert blas.blas_threads() == before
+    gen.batch_blas_threads = None
+    free = gen.generate_batch(obstacles)
+    assert seen[-1] == before
+    np.testing.assert_array_equal(limited.heel, free.heel)
+    np.testing.assert_array_equal(limited.ok, free.ok)
