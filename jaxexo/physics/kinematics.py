@@ -71,7 +71,7 @@ def hip_position(xp, pivot_y, heel, thigh, shin):
 def knee_position(xp, hip, foot, thigh, shin):
     """Forward-bending knee (..., 2) for a hip and a heel (eq 2.4-2.11), and |hip - heel| (eq 2.4, 2.44)."""
     d = foot - hip
-    r = xp.sqrt(xp.sum(d * d, axis=-1))
+    r = xp.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1])   # not xp.sum over 2: slow in NumPy
     r_safe = xp.maximum(r, 1e-12)
     u = d / r_safe[..., None]
     # Distance along hip->heel to the chord through both circle intersections (law of cosines,

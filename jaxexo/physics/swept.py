@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from jaxexo.physics.geometry import _point_edge_dist2, foot_clearance
+from jaxexo.physics.geometry import _point_edge_dist2, any_last, foot_clearance, min_last
 
 
 def _inv_len2(xp, ey, ez):
@@ -71,15 +71,15 @@ def swept_distance(xp, h0, h1, foot_length, outline):
     o2 = uy_ * (cz + ez - az_) - uz_ * (cy + ey - ay_)
     o3 = ey * (az_ - cz) - ez * (ay_ - cy)
     o4 = ey * (az_ + uz_ - cz) - ez * (ay_ + uy_ - cy)
-    crossing = xp.any((o1 * o2 < 0.0) & (o3 * o4 < 0.0), axis=(-2, -1))
+    crossing = any_last(xp, (o1 * o2 < 0.0) & (o3 * o4 < 0.0), axes=2)
     # Outline vertices strictly inside P: v - h0 = s (f, 0) + t (dy, dz) with s, t in [0, 1]
     # (only for a move with a vertical component; a flat P has no interior).
     has_area = xp.abs(dz) > 0.0
     safe_dz = xp.where(has_area, dz, 1.0)[..., None]
     t = (vz - z0[..., None]) / safe_dz
     s = (vy - y0[..., None] - t * dy[..., None]) / xp.where(f > 0.0, f, 1.0)[..., None]
-    inside = xp.any((t >= 0.0) & (t <= 1.0) & (s >= 0.0) & (s <= 1.0), axis=-1) & has_area
-    d2 = xp.minimum(xp.min(d_corner, axis=(-2, -1)), xp.min(d_vertex, axis=(-2, -1)))
+    inside = any_last(xp, (t >= 0.0) & (t <= 1.0) & (s >= 0.0) & (s <= 1.0)) & has_area
+    d2 = xp.minimum(min_last(xp, d_corner, axes=2), min_last(xp, d_vertex, axes=2))
     return xp.where(crossing | inside, 0.0, xp.sqrt(d2))
 
 
