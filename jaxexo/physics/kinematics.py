@@ -76,7 +76,7 @@ def knee_position(xp, hip, foot, thigh, shin):
     u = d / r_safe[..., None]
     # Distance along hip->heel to the chord through both circle intersections (law of cosines,
     # eq 2.5); clamped to the reachable range like eq 2.6.
-    a = xp.clip((thigh * thigh - shin * shin + r * r) / (2.0 * r_safe), -thigh, thigh)
+    a = xp.minimum(xp.maximum((thigh * thigh - shin * shin + r * r) / (2.0 * r_safe), -thigh), thigh)   # clip
     h = xp.sqrt(xp.maximum(thigh * thigh - a * a, 0.0))
     # Eq 2.11 as a pair: of the two solutions, the knee on the +90 degree side of the hip->heel
     # direction is the one that flexes (knee angle <= 0). With the heel below the hip it is the

@@ -60,9 +60,9 @@ def swept_distance(xp, h0, h1, foot_length, outline):
     uz = _last_axis(xp, 0.0 * z0, 0.0 * z0, dz, dz)
     inv_u = _inv_len2(xp, uy, uz)
     # Corners of P against the outline edges: (..., 4, K-1).
-    d_corner = _point_edge_dist2(py[..., :, None], pz[..., :, None], cy, cz, ey, ez, inv_e)
+    d_corner = _point_edge_dist2(xp, py[..., :, None], pz[..., :, None], cy, cz, ey, ez, inv_e)
     # Outline vertices against P's sides: (..., 4, K).
-    d_vertex = _point_edge_dist2(vy[..., None, :], vz[..., None, :], ay[..., :, None], az[..., :, None],
+    d_vertex = _point_edge_dist2(xp, vy[..., None, :], vz[..., None, :], ay[..., :, None], az[..., :, None],
                                  uy[..., :, None], uz[..., :, None], inv_u[..., :, None])
     # Proper crossings of a side of P and an outline edge (strict orientation tests; touching cases
     # are caught by the endpoint distances being zero): (..., 4, K-1).
