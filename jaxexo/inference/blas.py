@@ -21,23 +21,28 @@ batch, not at ``import jaxexo.inference`` (issue 12's import budget).
 from __future__ import annotations
 
 import contextlib
+import sys
 
-_controller = None     # threadpoolctl.ThreadpoolController, built on first use (it lists the loaded BLAS)
+_controller = None     # threadpoolctl.ThreadpoolController: the BLAS libraries loaded when it was built
+_modules = -1          # len(sys.modules) then: a BLAS loaded later (SciPy's, JAX's) comes with new modules
 _missing = False       # threadpoolctl is not installed
 
 
 def limited(threads: int | None):
     """A context manager that runs its body with at most ``threads`` BLAS threads (None: unchanged)."""
-    global _controller, _missing
+    global _controller, _modules, _missing
     if threads is None or _missing:
         return contextlib.nullcontext()
-    if _controller is None:
+    if _controller is None or len(sys.modules) != _modules:
         try:
             import threadpoolctl
         except ImportError:
             _missing = True
             return contextlib.nullcontext()
+        # Listing the loaded libraries takes ~1 ms, so it is redone only when modules were imported
+        # since (a library that another import loaded would otherwise keep its threads).
         _controller = threadpoolctl.ThreadpoolController()
+        _modules = len(sys.modules)
     return _controller.limit(limits=int(threads), user_api="blas")
 
 
