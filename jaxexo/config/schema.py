@@ -278,6 +278,14 @@ class EnvConfig:
     # more than backward_tolerance. The environment's success flag and the generators' ``ok`` use both.
     min_clearance: float = declare(outcome.DEFAULT_MIN_CLEARANCE, number(nonneg=True), unit="m")
     backward_tolerance: float = declare(outcome.DEFAULT_BACKWARD_TOLERANCE, number(nonneg=True), unit="m")
+    # The shield (issue 11; not in the thesis): the agent chooses only among admissible moves
+    # (jaxexo.physics.dynamics.admissible_moves): no backward component, the exact clearance of the
+    # whole move at least shield_clearance, joint limits and reach respected at its end. The same
+    # mask in training, evaluation and the NumPy generator; off reproduces the thesis's free choice.
+    shield: bool = declare(False, boolean, dtype="bool")
+    # m: the clearance a shielded move keeps; above min_clearance so that the smoothed curve, which
+    # cuts corners, still keeps min_clearance without falling back to the raw polyline.
+    shield_clearance: float = declare(0.025, number(nonneg=True), unit="m")
 
 
 @dataclass(frozen=True)

@@ -64,6 +64,8 @@ class ExoStepEnv:
         self.obs_mode = self.config.env.obs_mode
         self.shape_points = self.config.env.shape_points
         self.max_vertices = self.config.outline_vertices
+        # static: without the shield no mask is computed at all (its cost is a swept check per move)
+        self.shield = bool(self.config.env.shield)
         self._default_params = None
 
     # gymnax-style properties --------------------------------------------------------------
@@ -176,6 +178,15 @@ class ExoStepEnv:
         obs = jax.lax.select(done, obs_re, obs_st)
         info = {**info, "terminated": terminated, "truncated": truncated, "final_observation": obs_st}
         return obs, state, reward, terminated, truncated, info
+
+    def action_mask(self, state: EnvState, params: EnvParams | None = None):
+        """(NUM_ACTIONS,) bool: the moves the agent may choose in ``state``
+        (jaxexo.physics.dynamics.admissible_moves); every move without the shield."""
+        params = self.default_params if params is None else params
+        if not self.shield:
+            return jnp.ones(NUM_ACTIONS, bool)
+        return dynamics.admissible_moves(jnp, params, state.heel[0], state.heel[1], state.layout,
+                                         over_moves=lambda f, xs: jax.lax.map(lambda x: f(*x), xs))
 
     # Observations ---------------------------------------------------------------------------
     def get_obs(self, state: EnvState, params: EnvParams):

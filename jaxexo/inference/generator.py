@@ -74,6 +74,7 @@ class TrajectoryGenerator:
         # a NumPy scalar operation.
         self._term_p = types.SimpleNamespace(terminate_on_collision=bool(self.np_params.terminate_on_collision))
         self.epsilon = 0.0      # 0: greedy (the default; a device's generator must not explore)
+        self.shield = bool(config.env.shield)
         self._rng = None
 
     def exploring(self, epsilon: float, seed: int = 0) -> "TrajectoryGenerator":
@@ -89,12 +90,18 @@ class TrajectoryGenerator:
         out.epsilon, out._rng = eps, np.random.default_rng(seed)
         return out
 
-    def _explore(self, greedy):
-        """Replace greedy actions (an int or an array) by random ones with probability epsilon."""
+    def _explore(self, greedy, mask=None):
+        """Replace greedy actions (an int or an array) by random ones with probability epsilon (uniform
+        over the admissible moves ``mask`` (..., A) with the shield)."""
         if self.epsilon <= 0.0:
             return greedy
         g = np.asarray(greedy)
-        rand = self._rng.integers(len(self.directions), size=g.shape)
+        if mask is None:
+            rand = self._rng.integers(len(self.directions), size=g.shape)
+        else:   # the k-th admissible move, k uniform
+            m = np.asarray(mask).reshape(g.shape + (-1,))
+            k = np.floor(self._rng.uniform(size=g.shape) * m.sum(-1)).astype(np.int64)
+            rand = np.argmax(np.cumsum(m, axis=-1) > k[..., None], axis=-1)
         pick = np.where(self._rng.uniform(size=g.shape) < self.epsilon, rand, g)
         return int(pick) if pick.ndim == 0 else pick
 
@@ -164,7 +171,11 @@ class TrajectoryGenerator:
         hy, hz, t, visited = float(scene.start_y), 0.0, 0, False
         pts, acts = [(hy, hz)], []
         while True:
-            a = self._explore(step.greedy(hy, hz, t, 1.0 if visited else 0.0))
+            if self.shield:
+                mask = self._admissible(scene, hy, hz)
+                a = self._explore(step.greedy(hy, hz, t, 1.0 if visited else 0.0, mask), mask)
+            else:
+                a = self._explore(step.greedy(hy, hz, t, 1.0 if visited else 0.0))
             hy, hz = dynamics.move_heel(scalar, sp, hy, hz, *self.directions[a])
             t += 1
             visited = visited or dynamics.in_mid_goal(scalar, sp, hy, hz, mid_y, mid_z)
@@ -178,6 +189,12 @@ class TrajectoryGenerator:
                 break
         return np.asarray(pts), np.asarray(acts, dtype=np.int64)
 
+
+    def _admissible(self, scene: Scene, heel_y: float, heel_z: float) -> np.ndarray:
+        """(A,) the shield's admissible moves at one heel position (jaxexo.physics.dynamics.admissible_moves,
+        in float32 like the training environment)."""
+        lay = types.SimpleNamespace(outline=scene.outline.astype(np.float32), pivot_y=np.float32(scene.pivot_y))
+        return dynamics.admissible_moves(np, self.np_params, np.float32(heel_y), np.float32(heel_z), lay)
 
     def rollout_batch(self, scenes) -> tuple[list[np.ndarray], list[np.ndarray]]:
         """Greedy raw paths of many scenes at once (float32 NumPy, like the JAX environment)."""
@@ -198,7 +215,8 @@ class TrajectoryGenerator:
         for k in range(self.max_steps):
             sub = _take(lay, alive)
             obs = dynamics.observation(np, p, self.obs_mode, hy[alive], hz[alive], t[alive], visited[alive], sub)
-            a = self._explore(np.argmax(self.net.q(obs), axis=-1))
+            mask = dynamics.admissible_moves(np, p, hy[alive], hz[alive], sub) if self.shield else None
+            a = self._explore(dynamics.greedy_action(np, self.net.q(obs), mask), mask)
             ny, nz = dynamics.move_heel(np, p, hy[alive], hz[alive], dirs[a, 0], dirs[a, 1])
             hy[alive], hz[alive] = ny, nz
             t[alive] += 1

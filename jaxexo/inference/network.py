@@ -18,6 +18,7 @@ import math
 
 import numpy as np
 
+from jaxexo.physics import dynamics
 from jaxexo.storage.policy_file import LAYER_NORM_EPS, QPolicy
 
 
@@ -107,7 +108,7 @@ class StepNetwork:
         self._layers = [((self.m0 if i == 0 else net.weights[i]), self.pre[i], self.outs[i], net.shifts[i],
                          1.0 / len(self.pre[i])) for i in range(len(self.pre))]
 
-    def greedy(self, heel_y: float, heel_z: float, time: float, visited: float) -> int:
+    def greedy(self, heel_y: float, heel_z: float, time: float, visited: float, mask=None) -> int:
         c = self.c
         c[0] = heel_y
         c[1] = heel_z
@@ -124,4 +125,6 @@ class StepNetwork:
             maximum(pre, 0.0, out=out)
             x = buf
         dot(x, self.net.weights[-1], out=self.q)
+        if mask is not None:   # the shield's admissible moves (jaxexo.physics.dynamics.greedy_action)
+            return int(dynamics.greedy_action(np, self.q, mask))
         return int(self.q.argmax())

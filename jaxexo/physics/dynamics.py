@@ -109,6 +109,75 @@ def move_heel(xp, p, heel_y, heel_z, dir_y, dir_z):
     return y, z
 
 
+# The moves with no backward component (0-90 and 270-350 deg): a contiguous head and tail of the action
+# list, so the shield's mask is assembled with a static concatenation (no scatter, same for every xp).
+_FORWARD = np.flatnonzero(action_directions()[:, 0] >= 0.0)
+_FORWARD_HEAD = int(np.sum(_FORWARD < NUM_ACTIONS // 2))
+assert np.array_equal(_FORWARD, np.r_[0:_FORWARD_HEAD, NUM_ACTIONS - (len(_FORWARD) - _FORWARD_HEAD):NUM_ACTIONS])
+# m: a move "keeps" the clearance it starts with up to this rounding (vertical moves beside a wall).
+SHIELD_SLACK = 1e-6
+
+
+def forward_moves() -> np.ndarray:
+    """(NUM_ACTIONS,) bool: the moves with no backward component, the shield's first condition."""
+    out = np.zeros(NUM_ACTIONS, bool)
+    out[_FORWARD] = True
+    return out
+
+
+def _stacked(f, xs):
+    """f over the leading axis of every array in xs at once (the default ``over_moves``)."""
+    return f(*xs)
+
+
+def admissible_moves(xp, p, heel_y, heel_z, layout, over_moves=_stacked):
+    """(..., NUM_ACTIONS) bool: the moves the agent may choose from heel (y, z) (issue 11's shield).
+
+    Without the shield (``p.shield`` False, the thesis) every move. With it, a move must
+    - not go backward (its direction has no -y component: eq 2.31's condition cannot arise);
+    - keep the exact clearance of the whole move (jaxexo.physics.swept) at least ``p.shield_clearance``,
+      or, where the foot already starts closer (a stance foot near the obstacle), not bring it closer;
+    - end where both legs are inside their joint limits (eq 2.50) and within reach (eq 2.45).
+    Where no move passes all three, the forward moves that keep the clearance are offered; where
+    none does either, every move (so a greedy choice always exists). The training environment, the
+    JAX evaluation and the NumPy generator choose among these moves with the same function.
+
+    ``over_moves(f, xs)`` maps f over the leading (move) axis of the arrays xs; the default evaluates
+    all moves in one broadcast call, the JAX environment passes a loop (jax.lax.map), whose working set
+    stays in cache (several times faster on a CPU for thousands of environments)."""
+    dirs = p.directions[_FORWARD]                                    # (F, 2)
+    y, z = move_heel(xp, p, heel_y[..., None], heel_z[..., None], dirs[:, 0], dirs[:, 1])   # (..., F)
+    here = xp.stack([heel_y, heel_z], axis=-1)
+    new = xp.stack([y, z], axis=-1)                                  # (..., F, 2)
+    c_here = geometry.foot_clearance(xp, here, p.foot_length, layout.outline)
+    # the moves' axis first, for over_moves: (F, ..., 2)
+    ends = xp.moveaxis(new, -2, 0)
+    c_move = xp.moveaxis(over_moves(
+        lambda end: swept.swept_clearance(xp, here + 0.0 * end, end, p.foot_length, layout.outline, c0=c_here),
+        (ends,)), 0, -1)                                             # (..., F)
+    clear = c_move >= xp.minimum(p.shield_clearance, c_here)[..., None] - SHIELD_SLACK
+    kin = kinematics.leg_state(xp, layout.pivot_y[..., None], new, p.thigh, p.shin)
+    angles = xp.stack([kin["hip_swing"], kin["knee_swing_angle"], kin["hip_stance"], kin["knee_stance_angle"]], axis=-1)
+    reachable = ~(kinematics.legs_outside_limits(xp, angles, p.hip_limits, p.knee_limits)
+                  | kinematics.leg_too_long(xp, kin["leg_swing"], kin["leg_stance"], p.thigh, p.shin,
+                                            p.leg_length_tolerance))
+    ok = clear & reachable
+    ok = xp.where(xp.any(ok, axis=-1, keepdims=True), ok, clear)
+    ok = xp.where(xp.any(ok, axis=-1, keepdims=True), ok, True)
+    shape = ok.shape[:-1]
+    back = xp.zeros(shape + (NUM_ACTIONS - len(_FORWARD),), dtype=bool)
+    mask = xp.concatenate([ok[..., :_FORWARD_HEAD], back, ok[..., _FORWARD_HEAD:]], axis=-1)
+    return xp.where(p.shield, mask, True)
+
+
+def greedy_action(xp, q, mask=None):
+    """The greedy move: argmax of Q (..., NUM_ACTIONS) over the admissible moves ``mask`` (None: all),
+    for the trainer, the JAX evaluation and the NumPy generator alike."""
+    if mask is None:
+        return xp.argmax(q, axis=-1)
+    return xp.argmax(xp.where(mask, q, -xp.inf), axis=-1)
+
+
 pivot_position = kinematics.pivot_position   # the three pivot conditions -> pivot y (one definition)
 
 

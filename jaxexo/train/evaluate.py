@@ -47,7 +47,9 @@ def make_rollout(env: ExoStepEnv, q_apply, max_steps: int, record: bool = False)
 
         def step(carry, _):
             state, obs, alive, out = carry
-            a = jnp.argmax(q_apply(q_params, obs))
+            # greedy over the admissible moves (all of them without the shield)
+            mask = env.action_mask(state, params) if env.shield else None
+            a = dynamics.greedy_action(jnp, q_apply(q_params, obs), mask)
             obs2, state2, r, term, info = env.step_env(jax.random.PRNGKey(0), state, a, params)
             truncated = env.is_truncated(state2, params)
             out = {

@@ -80,3 +80,15 @@ def epsilon_greedy_value(q, eps):
     """Expected Q under the epsilon-greedy policy: (1 - eps) max Q + eps mean Q (for SARSA where
     the next action is not known)."""
     return (1.0 - eps) * jnp.max(q, axis=-1) + eps * jnp.mean(q, axis=-1)
+
+
+def restrict(q, mask):
+    """Q (..., A) for bootstrapping over the admissible actions ``mask`` only (None: all): inadmissible
+    entries are replaced by the admissible mean, so max Q, the epsilon-greedy expectation (an
+    exploratory action is uniform over the admissible ones) and any admissible action's value read
+    as over the admissible set."""
+    if mask is None:
+        return q
+    m = mask.astype(q.dtype)
+    mean = jnp.sum(q * m, axis=-1, keepdims=True) / jnp.maximum(jnp.sum(m, axis=-1, keepdims=True), 1.0)
+    return jnp.where(mask, q, mean)

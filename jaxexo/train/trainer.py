@@ -28,7 +28,7 @@ from flax import struct
 
 from jaxexo.config import HYPER_FIELDS, Config, TrainConfig, declared_fields, num_updates
 from jaxexo.env import EnvParams, ExoStepEnv
-from jaxexo.physics import outcome
+from jaxexo.physics import dynamics, outcome
 from jaxexo.train import td_lambda
 from jaxexo.train.network import QNetwork
 
@@ -165,7 +165,7 @@ class Trainer:
                         update=jnp.asarray(0, jnp.int32), episodes=jnp.asarray(0, jnp.int32))
         if backward:
             k_act, k_run = jax.random.split(k_run)
-            a, g = self._act(params, obs, k_act, self.epsilon(ts, hyper))
+            a, g = self._act(params, obs, k_act, self.epsilon(ts, hyper), self._mask(env_state, hyper))
             ts = ts.replace(action=a, greedy=g, key=k_run)
         return ts
 
@@ -180,13 +180,33 @@ class Trainer:
         """Per-device randomness for environments and exploration; the carried key stays shared."""
         return jax.random.fold_in(key, jax.lax.axis_index(self.axis)) if self.axis else key
 
-    def _act(self, params, obs, key, eps):
-        """Epsilon-greedy (thesis 2.4.2): returns the actions and whether each is the greedy one."""
+    def _mask(self, env_state, hyper):
+        """(N, A) admissible moves of the environments' states with the shield, else None (all)."""
+        if not self.env.shield:
+            return None
+        return jax.vmap(self.env.action_mask, in_axes=(0, None))(env_state, hyper.env)
+
+    def _final_mask(self, mask_next, done):
+        """The admissible moves of the state each step reached, for its bootstrap: ``mask_next`` (the
+        next state's, which is the reached state unless the episode ended), and where it ended (auto-
+        reset) the forward moves: a truncated episode's last state bootstraps on its best forward move,
+        so that each step computes one mask, not two (terminated steps do not bootstrap at all)."""
+        if mask_next is None:
+            return None
+        return jnp.where(done[:, None], jnp.asarray(dynamics.forward_moves()), mask_next)
+
+    def _act(self, params, obs, key, eps, mask=None):
+        """Epsilon-greedy (thesis 2.4.2) over the admissible moves ``mask`` (None: all): returns the
+        actions and whether each is the greedy one."""
         q = self.net.apply(params, obs)
-        greedy = jnp.argmax(q, axis=-1)
+        greedy = dynamics.greedy_action(jnp, q, mask)
         ku, kr = jax.random.split(key)
         explore = jax.random.uniform(ku, greedy.shape) < eps
-        a = jnp.where(explore, jax.random.randint(kr, greedy.shape, 0, self.env.num_actions), greedy)
+        if mask is None:
+            rand = jax.random.randint(kr, greedy.shape, 0, self.env.num_actions)
+        else:   # uniform over the admissible moves
+            rand = jax.random.categorical(kr, jnp.where(mask, 0.0, -jnp.inf), axis=-1)
+        a = jnp.where(explore, rand, greedy)
         return a.astype(jnp.int32), a == greedy
 
     def _env_step(self, key, env_state, action, hyper):
@@ -237,20 +257,23 @@ class Trainer:
         eps = self.epsilon(ts, hyper)
 
         def step(carry, _):
-            env_state, obs, stats, key = carry
+            env_state, obs, mask, stats, key = carry
             key, kl = jax.random.split(key)
             ka, ke = jax.random.split(self._local_key(kl))
-            a, greedy = self._act(ts.params, obs, ka, eps)
+            a, greedy = self._act(ts.params, obs, ka, eps, mask)
             obs2, env_state, r, term, trunc, info = self._env_step(ke, env_state, a, hyper)
             stats, row = self._episode_stats(stats, r, term, trunc, info, hyper.env)
+            mask2 = self._mask(env_state, hyper)
             # The bootstrap's target-network pass runs here, on this step's N observations, rather than
             # on all T x N after the rollout: the same arithmetic on a working set that stays in cache.
-            q_final = self.net.apply(ts.target_params, info["final_observation"])    # (N, A)
+            q_final = td_lambda.restrict(self.net.apply(ts.target_params, info["final_observation"]),
+                                         self._final_mask(mask2, term | trunc))     # (N, A)
             target_q = jnp.max(q_final, axis=-1) if self.off_policy else q_final
-            return (env_state, obs2, stats, key), (Transition(obs, a, r, term, trunc, target_q, greedy), row)
+            return (env_state, obs2, mask2, stats, key), (Transition(obs, a, r, term, trunc, target_q, greedy), row)
 
-        (env_state, obs, stats, key), (tr, rows) = jax.lax.scan(
-            step, (ts.env_state, ts.obs, ts.stats, ts.key), None, length=self.tc.rollout_steps)
+        (env_state, obs, _, stats, key), (tr, rows) = jax.lax.scan(
+            step, (ts.env_state, ts.obs, self._mask(ts.env_state, hyper), ts.stats, ts.key), None,
+            length=self.tc.rollout_steps)
         done = tr.terminated | tr.truncated
         if self.off_policy:
             boot = tr.target_q                                                        # eq 2.28
@@ -319,8 +342,10 @@ class Trainer:
             obs2, env_state, r, term, trunc, info = self._env_step(ke, env_state, a, hyper)
             stats, row = self._episode_stats(stats, r, term, trunc, info, hyper.env)
             done = term | trunc
-            a2, greedy2 = self._act(params, obs2, ka, eps)
-            q_final = self.net.apply(ts.target_params, info["final_observation"])
+            mask2 = self._mask(env_state, hyper)
+            a2, greedy2 = self._act(params, obs2, ka, eps, mask2)
+            q_final = td_lambda.restrict(self.net.apply(ts.target_params, info["final_observation"]),
+                                         self._final_mask(mask2, done))
             boot = self._bootstrap(q_final, a2, done, eps)
             delta = r + hyper.gamma * (1.0 - term) * boot - qsa                     # eq 2.26
             direction = self._pmean(td_lambda.trace_update_direction(traces, delta))

@@ -1,0 +1,161 @@
+"""The shield (issue 11): the admissible moves of jaxexo.physics.dynamics.admissible_moves checked
+against a dense brute-force look at each move (independent of jaxexo.physics.swept), the same mask in
+JAX and NumPy, exploration and greedy choice inside the mask in the trainer and the generator, and
+shielded raw paths that never fall back and keep the clearance."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from jaxexo.config import config_from_dict, load_config
+from jaxexo.physics import dynamics, geometry, kinematics, terrain  # noqa: F401
+from conftest import ROOT
+
+SHIELD = 0.025
+
+
+def _config(**env):
+    raw = {"env": {"shield": True, "shield_clearance": SHIELD, **env},
+           "layout": {"terrain": {"start_shift": [0.0, 0.12], "step_length": [0.55, 0.85]}}}
+    return config_from_dict(raw)
+
+
+def _states(cfg, n, seed):
+    """n terrain scenes (jaxexo.physics.scenarios, NumPy) and heel positions around their obstacles."""
+    from jaxexo.physics import scenarios
+    p = dynamics.numpy_params(cfg)
+    lay = scenarios.scenario_layouts(np, p, seed, n, False)
+    rng = np.random.default_rng(seed)
+    hy = (lay["center_y"] + rng.uniform(-0.4, 0.15, n)).astype(np.float32)
+    hz = rng.uniform(0.0, 0.45, n).astype(np.float32)
+    return p, lay, hy, hz
+
+
+def _dense_clearance(p, h0, h1, outline, n=600):
+    """Min foot clearance over n + 1 positions along the move (geometry.foot_clearance, no swept code):
+    at most |h1 - h0| / n above the exact clearance of the move."""
+    t = np.linspace(0.0, 1.0, n + 1)[:, None]
+    heels = h0 + t * (h1 - h0)
+    return float(geometry.foot_clearance(np, heels, float(p.foot_length), outline[None].astype(np.float64)).min())
+
+
+def test_admissible_moves_against_dense_sampling():
+    cfg = _config()
+    p, lay, hy, hz = _states(cfg, 300, 3)
+    import types
+    m = dynamics.admissible_moves(np, p, hy, hz, types.SimpleNamespace(**lay))
+    d = p.directions.astype(np.float64)
+    step = float(p.step_size)
+    blocked_near = 0
+    for i in range(len(hy)):
+        h0 = np.array([hy[i], hz[i]], np.float64)
+        c_here = float(geometry.foot_clearance(np, h0, float(p.foot_length), lay["outline"][i].astype(np.float64)))
+        if c_here <= 1e-4:
+            continue     # a heel inside or on the obstacle: not a state a shielded agent reaches
+        need = min(SHIELD, c_here)
+        for a in range(dynamics.NUM_ACTIONS):
+            y, z = dynamics.move_heel(np, p, hy[i], hz[i], d[a, 0], d[a, 1])
+            h1 = np.array([y, z], np.float64)
+            dense = _dense_clearance(p, h0, h1, lay["outline"][i])
+            reach = not bool(kinematics.swing_heel_unreachable(
+                np, float(lay["pivot_y"][i]), h1, float(p.thigh), float(p.shin), p.hip_limits, p.knee_limits))
+            if m[i, a]:
+                assert d[a, 0] >= 0.0, "a backward move was admitted"
+                # admitted: even the dense look keeps the clearance (float32 rounding aside)
+                assert dense >= need - 1e-5, (i, a, dense, need)
+            elif d[a, 0] >= 0.0 and reach:
+                # refused while forward and reachable: the dense look finds it closer than needed
+                assert dense < need + step / 600 + 1e-5 or not m[i].any(), (i, a, dense, need)
+                blocked_near += 1
+        assert m[i].any(), "some move is always offered"
+    assert blocked_near > 50, "the scenes must exercise the clearance condition"
+
+
+def test_shield_off_admits_every_move():
+    cfg = config_from_dict({"env": {"shield": False}})
+    p, lay, hy, hz = _states(cfg, 20, 1)
+    import types
+    assert dynamics.admissible_moves(np, p, hy, hz, types.SimpleNamespace(**lay)).all()
+
+
+def test_vertical_move_up_is_admissible_from_any_safe_pose():
+    """Terrain is closed downward, so lifting the foot never brings it closer: a shielded agent is
+    never cornered below the ceiling."""
+    cfg = _config()
+    p, lay, hy, hz = _states(cfg, 400, 5)
+    import types
+    m = dynamics.admissible_moves(np, p, hy, hz, types.SimpleNamespace(**lay))
+    up = int(np.argmin(np.abs(dynamics.action_angles() - np.pi / 2)))
+    c = geometry.foot_clearance(np, np.stack([hy, hz], -1).astype(np.float64), float(p.foot_length),
+                                lay["outline"].astype(np.float64))
+    kin_ok = ~kinematics.swing_heel_unreachable(np, lay["pivot_y"], np.stack([hy, hz + float(p.step_size)], -1),
+                                                float(p.thigh), float(p.shin), p.hip_limits, p.knee_limits)
+    free = (c > 0) & (hz + float(p.step_size) < float(p.max_z_world)) & kin_ok
+    assert free.sum() > 100
+    assert m[free, up].all()
+
+
+@pytest.mark.slow
+def test_jax_mask_equals_numpy_and_exploration_stays_inside():
+    import jax
+    import jax.numpy as jnp
+    from jaxexo.env import ExoStepEnv
+    from jaxexo.train.trainer import Hyperparams, Trainer
+
+    cfg = _config()
+    env = ExoStepEnv(cfg)
+    p = env.default_params
+    obs, st = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(jax.random.PRNGKey(0), 512), p)
+    rng = np.random.default_rng(0)
+    heel = np.stack([np.asarray(st.layout.center_y) + rng.uniform(-0.35, 0.1, 512),
+                     rng.uniform(0, 0.4, 512)], -1).astype(np.float32)
+    st = st.replace(heel=jnp.asarray(heel))
+    m_jax = np.asarray(jax.jit(jax.vmap(env.action_mask, in_axes=(0, None)))(st, p))
+    import types
+    lay = types.SimpleNamespace(**{k: np.asarray(v) for k, v in vars(st.layout).items()
+                                   if not k.startswith("_")} if hasattr(st.layout, "__dict__") else {})
+    lay = types.SimpleNamespace(outline=np.asarray(st.layout.outline), pivot_y=np.asarray(st.layout.pivot_y))
+    m_np = dynamics.admissible_moves(np, dynamics.numpy_params(cfg), heel[:, 0], heel[:, 1], lay)
+    assert (m_jax == m_np).mean() > 0.999    # float32 fused arithmetic may flip a move on the boundary
+    assert (~m_jax).sum() > 512 * 17          # the backward moves, and some more
+
+    trainer = Trainer(cfg)
+    hyper = Hyperparams.from_config(cfg)
+    params = trainer.net.init(jax.random.PRNGKey(1), obs[:1])
+    mask = jnp.asarray(m_jax)
+    for eps in (1.0, 0.0):
+        a, _ = jax.jit(trainer._act)(params, obs, jax.random.PRNGKey(2), eps, mask)
+        assert np.asarray(mask)[np.arange(512), np.asarray(a)].all()
+    del hyper
+
+
+def test_shielded_generator_never_falls_back_and_keeps_clearance(tmp_path):
+    """A shielded policy (here random weights: the shield alone must guarantee this) never moves the
+    heel backward and keeps the shield's clearance over every raw move, by the dense look."""
+    from jaxexo.inference import TrajectoryGenerator
+    from jaxexo.inference.scenarios import safety_scenarios
+    from jaxexo.storage.policy_file import QPolicy
+
+    cfg = _config()
+    d = dynamics.obs_dim(cfg.env.obs_mode, cfg.env.shape_points)
+    rng = np.random.default_rng(0)
+    sizes = [d, 32, 32, dynamics.NUM_ACTIONS]
+    pol = QPolicy(kernels=[rng.normal(size=(a, b)).astype(np.float32) * 0.3 for a, b in zip(sizes, sizes[1:])],
+                  biases=[np.zeros(b, np.float32) for b in sizes[1:]], norm_scales=[], norm_biases=[],
+                  metadata={})
+    gen = TrajectoryGenerator(pol, cfg)
+    sc = safety_scenarios(cfg, 60, seed=11)
+    n_checked = 0
+    for s in sc:
+        scene = gen.scene(s["obstacle"], pivot=s["pivot"], start_y=s["start_y"], step_length=s["step_length"])
+        raw, acts = gen.rollout(scene)
+        assert np.all(np.diff(raw[:, 0]) >= -1e-6)
+        c0 = float(geometry.foot_clearance(np, raw[0], float(cfg.kinematics.foot_length), scene.outline))
+        for k in range(len(raw) - 1):
+            dense = _dense_clearance(gen.np_params, raw[k], raw[k + 1], scene.outline)
+            assert dense >= min(SHIELD, c0) - 1e-5
+            n_checked += 1
+        raws_b, acts_b = gen.rollout_batch([scene])
+        np.testing.assert_array_equal(acts_b[0], acts)
+    assert n_checked > 500
