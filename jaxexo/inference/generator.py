@@ -248,10 +248,11 @@ class TrajectoryGenerator:
             cand, dev = sm.smooth_paths([raw], n_points, smoothing * f, with_deviation=True)
             if self._keeps_margin(scene, cand[0], dev[0]):
                 return cand[0], smoothing * f, (f"smoothing {smoothing:g} m^2 brought the foot within the "
-                                                f"safety margin; {smoothing * f:g} m^2 used",), dev[0]
+                                                f"safety margin or moved the heel back; {smoothing * f:g} m^2 used",), dev[0]
         path, dev = sm.linear_resample(raw, n_points, with_deviation=True)
         return path, float("nan"), (
-            "every smoothing brought the foot within the safety margin; the raw polyline is used",), dev
+            "every smoothing brought the foot within the safety margin or moved the heel back; the raw "
+                "polyline is used",), dev
 
     def _fallback_batch(self, scenes, raws, rows, n_points: int, smoothing: float):
         """``_fallback`` for the rows ``rows`` at once: each smoothing factor is tried on every row
@@ -274,12 +275,13 @@ class TrajectoryGenerator:
             for k, j in enumerate(wait):
                 if ok[k]:
                     out[j] = (cand[k], smoothing * f, (f"smoothing {smoothing:g} m^2 brought the foot within the "
-                                                       f"safety margin; {smoothing * f:g} m^2 used",), dev[k])
+                                                       f"safety margin or moved the heel back; {smoothing * f:g} m^2 used",), dev[k])
             wait = [j for k, j in enumerate(wait) if not ok[k]]
         for j in wait:
             path, dev = sm.linear_resample(raws[rows[j]], n_points, with_deviation=True)
             out[j] = (path, float("nan"), (
-                "every smoothing brought the foot within the safety margin; the raw polyline is used",), dev)
+                "every smoothing brought the foot within the safety margin or moved the heel back; the raw "
+                "polyline is used",), dev)
         return [(int(rows[j]), out[j]) for j in sorted(out)]
 
     def _keep_margin_rows(self, scenes, paths: np.ndarray, deviation: np.ndarray) -> np.ndarray:
@@ -288,7 +290,13 @@ class TrajectoryGenerator:
         c = trajectory.clearances(fl, paths, scenes)
         sw = trajectory.swept_clearances(fl, paths, scenes, c, fast=True)
         low = sw.min(axis=1) if sw.shape[1] else c.min(axis=1)
-        return low - deviation >= self.sp.min_clearance
+        return (low - deviation >= self.sp.min_clearance) & self._keeps_forward(paths, deviation)
+
+    def _keeps_forward(self, paths: np.ndarray, deviation) -> np.ndarray:
+        """Paths (..., N, 2) whose heel falls back at most env.backward_tolerance (trajectory.measure's
+        measure: the polyline's drawdown plus twice the deviation bound)."""
+        back = swept.backward_motion(np, paths[..., 0]) + 2.0 * np.asarray(deviation)
+        return back <= self.sp.backward_tolerance
 
     def _finish(self, scenes, raws, n_points: int, smoothing: float, duration: float,
                 fallback: str | None = "cfftg", fast: bool = True) -> TrajectoryBatch:
@@ -303,7 +311,10 @@ class TrajectoryGenerator:
             used = [float("nan")] * len(raws)
         notes = [()] * len(raws)
         batch = assemble("rl", self.sp, scenes, raws, paths, used, duration, notes, deviation=dev, fast=fast)
-        bad = np.flatnonzero(~batch.clearance_ok) if smoothing > 0 else np.zeros(0, np.int64)
+        # Smoothing cuts corners (clearance) and overshoots (backward heel motion): both are retried
+        # with less smoothing, down to the raw polyline.
+        bad = (np.flatnonzero(~batch.clearance_ok | (batch.heel_backward > self.sp.backward_tolerance)) if smoothing > 0
+               else np.zeros(0, np.int64))
         if fast and bad.size:
             redo = self._fallback_batch(scenes, raws, bad, n_points, smoothing)
         else:
@@ -349,7 +360,8 @@ class TrajectoryGenerator:
         """The path (a polyline through its points, less ``deviation``) keeps the safety margin
         (the reference; the fast path checks many at once, ``_keep_margin_rows``)."""
         c = swept.path_swept_clearance(np, path, self.sp.foot_length, scene.outline)
-        return bool(c.size == 0 or c.min() - deviation >= self.sp.min_clearance)
+        return bool((c.size == 0 or c.min() - deviation >= self.sp.min_clearance)
+                    and self._keeps_forward(path, deviation))
 
     def _touches(self, scene: Scene, path: np.ndarray) -> bool:
         # Cheap exclusion first: a path that never comes below the obstacle's top within its extent

@@ -59,14 +59,32 @@ def distinct(raw: np.ndarray) -> np.ndarray:
 
 
 def linear_resample(raw: np.ndarray, n_points: int = DEFAULT_POINTS, with_deviation: bool = False):
-    """The polyline through the raw points, sampled at n equally spaced arc lengths (n, 2); with
-    ``with_deviation`` also the largest distance (m) of the raw polyline from the polyline through
-    the samples (a corner skipped between two samples is cut by their chord)."""
+    """The polyline through the raw points, sampled at n points (n, 2); with ``with_deviation`` also
+    the largest distance (m) of the raw polyline from the polyline through the samples.
+
+    When the raw path has at most n distinct points, every raw vertex is a sample and the other
+    samples divide each segment evenly, in proportion to its length: the polyline through the samples
+    is the raw polyline itself (deviation 0, so its checks lose nothing to a bound). Longer paths are
+    sampled at n equally spaced arc lengths, where a corner skipped between two samples is cut by
+    their chord (the deviation bounds it)."""
     pts = distinct(raw)
     if len(pts) == 1:
         out = np.repeat(pts, n_points, axis=0)
         return (out, 0.0) if with_deviation else out
-    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
+    seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    if len(pts) <= n_points:
+        # n - m extra samples over the m - 1 segments by length (largest remainders), then each segment
+        # i contributes its start vertex and k_i evenly spaced interior points; the last vertex closes.
+        extra = n_points - len(pts)
+        share = seg / s[-1] * extra
+        k = np.floor(share).astype(np.int64)
+        k[np.argsort(k - share, kind="stable")[: extra - int(k.sum())]] += 1
+        idx = np.repeat(np.arange(len(seg)), k + 1)
+        j = np.arange(len(idx)) - np.repeat(np.cumsum(k + 1) - (k + 1), k + 1)
+        frac = (j / (k[idx] + 1.0))[:, None]
+        out = np.vstack([pts[idx] + frac * (pts[idx + 1] - pts[idx]), pts[-1:]])
+        return (out, 0.0) if with_deviation else out
     u = np.linspace(0.0, s[-1], n_points)
     out = np.column_stack([np.interp(u, s, pts[:, 0]), np.interp(u, s, pts[:, 1])])
     if not with_deviation:
