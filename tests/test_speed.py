@@ -148,3 +148,67 @@ def test_pruned_point_clearances_keep_the_exact_minimum():
             assert np.all(sw <= full + 1e-12)
             assert np.all((c == c_full) | ((c <= c_full + 1e-12) & (c > 0.0)))
             assert np.all(sw[sw != full] > full.min(axis=1, keepdims=True).repeat(n - 1, 1)[sw != full])
+
+
+def test_generate_batch_runs_blas_on_one_thread_and_restores_it(tmp_path, monkeypatch):
+    """generate_batch limits BLAS to one thread while it runs (jaxexo.inference.blas), puts the
+    process's setting back afterwards, and ``batch_blas_threads = None`` leaves BLAS alone; the
+    trajectories are the same either way."""
+    pytest.importorskip("jax")
+    from test_inference import export_random, small_config
+
+    from jaxexo.inference import Obstacle, TrajectoryGenerator, blas
+
+    gen = TrajectoryGenerator.load(export_random(tmp_path / "p.npz", small_config(hidden=[16]), seed=1))
+    before = blas.blas_threads()
+    assert before, "threadpoolctl (a jaxexo dependency) finds no BLAS in this process"
+    seen = []
+    rollout_batch = gen.rollout_batch
+
+    def spy(scenes):
+        seen.append(blas.blas_threads())
+        return rollout_batch(scenes)
+
+    monkeypatch.setattr(gen, "rollout_batch", spy)
+    obstacles = [Obstacle.named("triangle"), Obstacle.named("base1"), Obstacle.named("half_circle")]
+    limited = gen.generate_batch(obstacles)
+    assert seen == [[1] * len(before)]
+    assert blas.blas_threads() == before
+    gen.batch_blas_threads = None
+    free = gen.generate_batch(obstacles)
+    assert seen[-1] == before
+    np.testing.assert_array_equal(limited.heel, free.heel)
+    np.testing.assert_array_equal(limited.ok, free.ok)
+
+
+@pytest.mark.parametrize("k", [1, 2, 3, 4, 5, 8, 9, 16, 17])
+def test_chained_reductions_equal_numpys_reductions(k):
+    """geometry.min_last / any_last / odd_last (chains of elementwise operations over a short last
+    axis, issue 12) against NumPy's own reductions, bit for bit, NaN and signed zeros included."""
+    rng = np.random.default_rng(k)
+    for shape in ((k,), (7, k), (3, 5, k), (2, 4, 6, k)):
+        x = rng.normal(size=shape)
+        x[rng.uniform(size=shape) < 0.1] = 0.0
+        x[rng.uniform(size=shape) < 0.05] = -0.0
+        x[rng.uniform(size=shape) < 0.02] = np.nan
+        b = rng.uniform(size=shape) < 0.3
+        np.testing.assert_array_equal(geometry.min_last(np, x), np.min(x, axis=-1))
+        assert np.array_equal(np.signbit(geometry.min_last(np, x)), np.signbit(np.min(x, axis=-1)))
+        np.testing.assert_array_equal(geometry.any_last(np, b), np.any(b, axis=-1))
+        np.testing.assert_array_equal(geometry.odd_last(np, b), np.sum(b, axis=-1) % 2 == 1)
+        if len(shape) >= 2:
+            np.testing.assert_array_equal(geometry.min_last(np, x, axes=2), np.min(x, axis=(-2, -1)))
+            np.testing.assert_array_equal(geometry.any_last(np, b, axes=2), np.any(b, axis=(-2, -1)))
+
+
+def test_chained_reductions_under_jax_jit():
+    jax = pytest.importorskip("jax")
+    jnp = jax.numpy
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(6, 4, 5)).astype(np.float32)
+    b = rng.uniform(size=(6, 5)) < 0.5
+    got = jax.jit(lambda a, c: (geometry.min_last(jnp, a, axes=2), geometry.any_last(jnp, c),
+                                geometry.odd_last(jnp, c)))(x, b)
+    np.testing.assert_array_equal(np.asarray(got[0]), x.min(axis=(-2, -1)))
+    np.testing.assert_array_equal(np.asarray(got[1]), b.any(axis=-1))
+    np.testing.assert_array_equal(np.asarray(got[2]), b.sum(axis=-1) % 2 == 1)

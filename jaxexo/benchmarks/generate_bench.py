@@ -3,7 +3,8 @@ same scenes: time per trajectory (rollout, smoothing, every safe-swing check, ki
 angles; a CFFTG fallback at its real cost), per batch of 1000 scenarios with the default BLAS threads
 and with single-threaded BLAS, and the cold import of jaxexo.inference, all in NumPy (no JAX in the
 timed code). The plain reference implementation (``fast=False``) is timed too, so that each speed-up
-shows.
+shows. ``generate_batch`` runs its BLAS on one thread (jaxexo.inference.blas); the batch with the
+process's own BLAS threads (``batch_blas_threads = None``) is timed too.
 
 The scenarios are the test set (jaxexo.inference.scenarios: the five thesis obstacles x three pivot
 conditions, jittered like training). Figures are medians over repeated runs; the single-trajectory
@@ -23,6 +24,7 @@ import numpy as np
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.inference.scenarios import TEST_KINDS, sample_scenarios
 from jaxexo.evaluation.timing import time_batch
+from jaxexo.inference.blas import blas_threads
 
 THESIS_MS = {"rl_single": 3.0, "cfftg_single": 2.0, "rl_batch_1000": 1764.0}   # Table 3.11, §3.4
 TARGETS = {"rl_single_ms": 0.5, "rl_batch_1000_ms": 50.0, "import_s": 0.3}     # issue 12
@@ -50,14 +52,21 @@ print(json.dumps(_batch_ms(sys.argv[1], int(sys.argv[2]))))
 
 
 def _batch_ms(policy, n: int) -> dict:
-    """Median ms per generate_batch of n scenes (fast and reference) and per CFFTG batch, this process."""
+    """Median ms per generate_batch of n scenes (fast and reference) and per CFFTG batch, this process.
+    ``rl_process_blas``: the fast batch with ``batch_blas_threads = None``, i.e. on the process's own
+    BLAS threads instead of generate_batch's one (jaxexo.inference.blas)."""
+    import copy
+
     from jaxexo.baselines.cfftg import CFFTG
 
     gen = TrajectoryGenerator.load(policy)
+    free = copy.copy(gen)
+    free.batch_blas_threads = None
     sc = sample_scenarios(gen.config, n)
     cf = CFFTG(gen.config)
     out = {}
-    for name, g, kw in (("rl", gen, {}), ("rl_reference", gen, {"fast": False}), ("cfftg", cf, {})):
+    for name, g, kw in (("rl", gen, {}), ("rl_process_blas", free, {}), ("rl_reference", gen, {"fast": False}),
+                        ("cfftg", cf, {})):
         g.generate_batch([s["obstacle"] for s in sc[:20]], **kw)       # warm-up
         out[name] = statistics.median(time_batch(g, sc, 5, **kw)[0]) * 1e3
     return out
@@ -107,6 +116,7 @@ def run_generate_benchmark(policy: str | Path, out_dir, n: int = 1000, progress=
         "rl_over_cfftg_scenes": float(np.mean(single["rl"] > single["cfftg"])),
         "batch_ms": {"default_threads": batch, "single_thread_blas": batch_1t},
         "import_s": {"median": statistics.median(imports), "runs": imports},
+        "blas_threads_default": blas_threads(),
         "success": float(np.mean([t.ok for t in trajs])),
         "fallback_rate": float(fell_back.mean()),
         "targets": TARGETS, "thesis_ms": THESIS_MS,
@@ -129,6 +139,8 @@ def run_generate_benchmark(policy: str | Path, out_dir, n: int = 1000, progress=
         f"{b(batch, 'cfftg'):.1f} ms | <= 50 ms | {miss(b(batch, 'rl') <= 50)} |",
         f"| batch of 1000, single-threaded BLAS | {b(batch_1t, 'rl'):.1f} ms | {b(batch_1t, 'rl_reference'):.1f} ms | "
         f"{b(batch_1t, 'cfftg'):.1f} ms | <= 50 ms | {miss(b(batch_1t, 'rl') <= 50)} |",
+        f"| batch of 1000, RL left on the process's BLAS threads (`batch_blas_threads = None`): default threads / "
+        f"single-threaded | {b(batch, 'rl_process_blas'):.1f} / {b(batch_1t, 'rl_process_blas'):.1f} ms | | | | |",
         f"| `import jaxexo.inference`, cold process | {i:.3f} s | | | <= 0.3 s | {miss(i <= 0.3)} |", "",
         f"RL slower than CFFTG on {res['rl_over_cfftg_scenes']:.1%} of the scenes (per-scene medians)."
         + (f" Scenes where the RL swing fell back to CFFTG: median {res['rl_single_ms_fallback_scenes']['median']:.3f} ms."

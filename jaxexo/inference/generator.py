@@ -40,7 +40,7 @@ import numpy as np
 from jaxexo.physics import dynamics, geometry, swept
 from jaxexo.config import ConfigError, config_from_dict
 from jaxexo.physics.dynamics import Scene, scalar
-from jaxexo.inference import smoothing as sm, trajectory
+from jaxexo.inference import blas, smoothing as sm, trajectory
 from jaxexo.inference.network import FoldedQNetwork, StepNetwork
 from jaxexo.inference.trajectory import DEFAULT_DURATION, Trajectory, TrajectoryBatch, TrajectoryError, assemble
 from jaxexo.storage.policy_file import PolicyFileError, QPolicy, load_policy
@@ -51,6 +51,10 @@ FALLBACKS = ("cfftg", None)
 
 class TrajectoryGenerator:
     """Greedy trajectories from an exported Q-network. Build with ``TrajectoryGenerator.load(path)``."""
+
+    # BLAS threads for generate_batch (jaxexo.inference.blas: default threads were 4x slower on a
+    # busy 2-core machine); None leaves the process's BLAS as it is.
+    batch_blas_threads: int | None = 1
 
     def __init__(self, policy: QPolicy, config, source: str = "<policy>"):
         self.policy = policy
@@ -300,14 +304,13 @@ class TrajectoryGenerator:
         margin, then hand the swings that still fail to CFFTG (``fallback``)."""
         if smoothing > 0:
             paths, dev = _smooth(raws, n_points, smoothing, fast)
-            paths = list(paths)
             used = [smoothing] * len(raws)
         else:
             both = [sm.linear_resample(r, n_points, with_deviation=True) for r in raws]
-            paths, dev = [p for p, _ in both], np.array([d for _, d in both])
+            paths, dev = np.stack([p for p, _ in both]), np.array([d for _, d in both])
             used = [float("nan")] * len(raws)
         notes = [()] * len(raws)
-        batch = assemble("rl", self.sp, scenes, raws, np.stack(paths), used, duration, notes, deviation=dev, fast=fast)
+        batch = assemble("rl", self.sp, scenes, raws, paths, used, duration, notes, deviation=dev, fast=fast)
         # Smoothing cuts corners (clearance) and overshoots (backward heel motion): both are retried
         # with less smoothing, down to the raw polyline.
         bad = (np.flatnonzero(~batch.clearance_ok | (batch.heel_backward > self.sp.backward_tolerance)) if smoothing > 0
@@ -398,8 +401,9 @@ class TrajectoryGenerator:
         n_points, smoothing, duration = check_options(n_points, smoothing, duration)
         fallback = check_fallback(fallback)
         scenes = self._scenes(obstacles, pivot, pivot_y, start_y, step_length)
-        raws, _ = self.rollout_batch(scenes)
-        batch = self._finish(scenes, raws, n_points, smoothing, duration, fallback, fast)
+        with blas.limited(self.batch_blas_threads):
+            raws, _ = self.rollout_batch(scenes)
+            batch = self._finish(scenes, raws, n_points, smoothing, duration, fallback, fast)
         if strict and not batch.ok.all():
             raise TrajectoryError(batch[int(np.argmin(batch.ok))])
         return batch

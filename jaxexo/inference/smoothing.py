@@ -157,12 +157,19 @@ def _basis(m: int, n_points: int):
     return z, d, e, q
 
 
+_GRID = np.linspace(*LOG_LAMBDA, GRID_POINTS)     # log10(lambda) of the bracketing grid
+_GRID_LAMBDA = 10.0 ** _GRID
+_TWO_LN10 = 2.0 * np.log(10.0)
+for _a in (_GRID, _GRID_LAMBDA):
+    _a.setflags(write=False)
+
+
 def _solve_lambda(d: np.ndarray, zz: np.ndarray, s: np.ndarray) -> np.ndarray:
     """Per row: lambda with r(lambda) = sum_j (lambda d_j / (1 + lambda d_j))^2 zz_j = s. r grows
     monotonically in lambda, so a coarse grid brackets the root and Newton steps in log(lambda),
     kept inside the bracket, refine it. inf when even r(inf) stays within s."""
-    grid = np.linspace(*LOG_LAMBDA, GRID_POINTS)
-    ld = 10.0 ** grid[None, :, None] * d[:, None, :]
+    grid = _GRID
+    ld = _GRID_LAMBDA[None, :, None] * d[:, None, :]
     q = ld / (1.0 + ld)
     r = np.einsum("bgm,bm->bg", q * q, zz)                                # (B, G), increasing in g
     k = np.clip((r <= s[:, None]).sum(axis=1), 1, GRID_POINTS - 1)       # r[k-1] <= s < r[k]
@@ -171,14 +178,16 @@ def _solve_lambda(d: np.ndarray, zz: np.ndarray, s: np.ndarray) -> np.ndarray:
     log_lo, log_hi = np.log(np.maximum(r[rows, k - 1], 1e-300)), np.log(np.maximum(r[rows, k], 1e-300))
     # Start from the interpolation in log(r), then Newton on x = log10(lambda):
     # dr/dx = ln(10) * lambda * dr/dlambda = ln(10) * sum_j 2 q_j^2 (1 - q_j) zz_j.
-    x = lo + (hi - lo) * np.clip((np.log(np.maximum(s, 1e-300)) - log_lo) / np.maximum(log_hi - log_lo, 1e-12), 0, 1)
+    # (np.minimum/np.maximum rather than np.clip: the same values, without np.clip's Python wrapper)
+    x = lo + (hi - lo) * np.minimum(np.maximum(
+        (np.log(np.maximum(s, 1e-300)) - log_lo) / np.maximum(log_hi - log_lo, 1e-12), 0), 1)
     for _ in range(NEWTON_STEPS):
         ld = 10.0 ** x[:, None] * d
         q = ld / (1.0 + ld)
         q2zz = q * q * zz
         rx = q2zz.sum(axis=1)
-        drx = (2.0 * np.log(10.0)) * np.einsum("bm,bm->b", q2zz, 1.0 - q)
-        x = np.clip(x - (rx - s) / np.maximum(drx, 1e-300), lo, hi)
+        drx = _TWO_LN10 * np.einsum("bm,bm->b", q2zz, 1.0 - q)
+        x = np.minimum(np.maximum(x - (rx - s) / np.maximum(drx, 1e-300), lo), hi)
     lam = np.where(r[:, -1] <= s, np.inf, 10.0 ** x)
     return np.where(r[:, 0] > s, 10.0 ** LOG_LAMBDA[0], lam)
 

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import functools
 import io
 import json
 import math
@@ -219,6 +220,8 @@ def clearances(foot_length: float, heel: np.ndarray, scenes) -> np.ndarray:
 def _outline_groups(scenes):
     """(rows, stacked outlines) per outline size; one group without sorting when all sizes agree
     (the common case, and always for one scene)."""
+    if len(scenes) == 1:
+        return [(slice(None), scenes[0].outline[None])]
     sizes = [len(sc.outline) for sc in scenes]
     if len(set(sizes)) == 1:
         return [(slice(None), np.stack([sc.outline for sc in scenes]))]
@@ -251,19 +254,21 @@ def measure(sp, heel: np.ndarray, clearance: np.ndarray, pivot_y: np.ndarray, go
     ``deviation`` (B,) of the curve from the polyline through the samples (m).
 
     ``sp`` holds the constants (jaxexo.physics.dynamics.scalar_params or numpy_params)."""
-    dev = np.broadcast_to(np.asarray(deviation, np.float64), heel.shape[:1])
+    dev = np.zeros(heel.shape[:1])
+    dev[:] = deviation
     # The guaranteed clearance: the polyline's exact swept clearance (or the samples' own, for a
     # path of one sample) less the deviation bound.
     guaranteed = (swept_clearance.min(axis=-1) if swept_clearance.shape[-1] else clearance.min(axis=-1)) - dev
     backward = swept.backward_motion(np, heel[..., 0]) + 2.0 * dev
     # kinematics.leg_state's equations, with both legs stacked on a leading axis (fewer NumPy calls).
     hip = kinematics.hip_position(np, pivot_y[:, None], heel, sp.thigh, sp.shin)
-    pivot = np.zeros_like(heel)
-    pivot[..., 0] = pivot_y[:, None]
-    feet = np.stack([heel, pivot])
+    feet = np.zeros((2,) + heel.shape)     # the swing heel, then the pivot heel on the ground
+    feet[0] = heel
+    feet[1, ..., 0] = pivot_y[:, None]
     knees, legs = kinematics.knee_position(np, hip[None], feet, sp.thigh, sp.shin)
     hips, qs = kinematics.joint_angles(np, hip[None], knees, feet)
-    angles = np.stack([hips[0], qs[0], hips[1], qs[1]], axis=-1)
+    angles = np.empty(heel.shape[:-1] + (4,))   # JOINT_NAMES order (filled in place: cheaper than stack)
+    angles[..., 0], angles[..., 1], angles[..., 2], angles[..., 3] = hips[0], qs[0], hips[1], qs[1]
     kin = {"hip": hip, "knee_swing": knees[0], "knee_stance": knees[1], "leg_swing": legs[0], "leg_stance": legs[1]}
     limit_bad = kinematics.legs_outside_limits(np, angles, sp.hip_limits, sp.knee_limits)
     leg_bad = kinematics.leg_too_long(np, kin["leg_swing"], kin["leg_stance"], sp.thigh, sp.shin,
@@ -288,7 +293,7 @@ def measure(sp, heel: np.ndarray, clearance: np.ndarray, pivot_y: np.ndarray, go
         "above_ground": v["above_ground"],
         "heel_backward": backward,
         "backward_ok": v["backward_ok"],
-        "deviation": dev.copy(),
+        "deviation": dev,
         "joint_limits_ok": v["joint_limits_ok"],
         "leg_length_ok": v["leg_length_ok"],
         "reached_goal": reached,
@@ -357,6 +362,14 @@ def pruned_clearances(foot_length: float, heel: np.ndarray, scenes):
     return c, sw
 
 
+@functools.lru_cache(maxsize=64)
+def _time_stamps(n: int, duration: float) -> np.ndarray:
+    """np.linspace(0, duration, n), computed once per (n, duration) (read-only; callers copy it)."""
+    t = np.linspace(0.0, duration, n)
+    t.setflags(write=False)
+    return t
+
+
 def assemble(method: str, sp, scenes, raws, paths: np.ndarray, smoothing, duration: float = DEFAULT_DURATION,
              notes=None, measured: dict | None = None, deviation=None, fast: bool = True) -> TrajectoryBatch:
     """Checked trajectories from dense heel paths (B, N, 2), one per scene; ``raws`` the generator's
@@ -371,7 +384,7 @@ def assemble(method: str, sp, scenes, raws, paths: np.ndarray, smoothing, durati
             raise ValueError("deviation: the bound on the curve's distance from its samples' polyline is needed")
         measured = measure_paths(sp, paths, scenes, deviation, fast)
     m = measured
-    time = np.linspace(0.0, duration, n)
+    time = _time_stamps(n, float(duration)).copy()
     reasons = tuple(_reasons(m, i, paths[i], scenes[i].goal_y, time, sp) for i in range(b))
     kin = m["kin"]
     toe = paths.copy()

@@ -60,13 +60,52 @@ class GeometryError(ValueError):
 # --------------------------------------------------------------------------------------------
 
 
-def _point_edge_dist2(py, pz, ay, az, ey, ez, inv_len2):
+# NumPy reduces over a short last axis one outer element at a time, 4-15x slower than elementwise
+# operations across it (issue 12: an outline has 3-17 vertices, and one checked trajectory makes
+# dozens of such reductions). Up to CHAIN_MAX entries, min / any / parity over the last axis are
+# therefore a chain of elementwise operations: exactly the same values (min, or and xor are exact),
+# any array module (under jit the chain is unrolled over a static length).
+CHAIN_MAX = 8
+
+
+def _chain_last(xp, op, reduce, x):
+    k = x.shape[-1]
+    if not 0 < k <= CHAIN_MAX:
+        return reduce(x, axis=-1)
+    out = x[..., 0]
+    for j in range(1, k):
+        out = op(out, x[..., j])
+    return out
+
+
+def min_last(xp, x, axes: int = 1):
+    """xp.min over the last ``axes`` axes (module note above CHAIN_MAX)."""
+    for _ in range(axes):
+        x = _chain_last(xp, xp.minimum, xp.min, x)
+    return x
+
+
+def any_last(xp, x, axes: int = 1):
+    """xp.any over the last ``axes`` axes."""
+    for _ in range(axes):
+        x = _chain_last(xp, xp.logical_or, xp.any, x)
+    return x
+
+
+def odd_last(xp, x):
+    """Whether an odd number of the booleans along the last axis are True (xp.sum(x, -1) % 2 == 1)."""
+    if not 0 < x.shape[-1] <= CHAIN_MAX:
+        return xp.sum(x.astype(np.int32), axis=-1) % 2 == 1
+    return _chain_last(xp, xp.logical_xor, None, x)
+
+
+def _point_edge_dist2(xp, py, pz, ay, az, ey, ez, inv_len2):
     """Squared distance from a point to the edges a + t e, t in [0, 1] (components broadcast)."""
     apy = py - ay
     apz = pz - az
     # Degenerate (padding) edges have inv_len2 = 0: t = 0 gives the distance to the vertex.
     t = (apy * ey + apz * ez) * inv_len2
-    t = t.clip(0.0, 1.0)
+    t = xp.minimum(xp.maximum(t, 0.0), 1.0)    # = clip(t, 0, 1); NumPy's clip is several times slower
     dy = apy - t * ey
     dz = apz - t * ez
     return dy * dy + dz * dz
@@ -89,8 +128,8 @@ def flat_foot_distance(xp, heel, foot_length, outline):
     ez = bz - az
     len2 = ey * ey + ez * ez
     inv_len2 = xp.where(len2 > 0.0, 1.0 / xp.where(len2 > 0.0, len2, 1.0), 0.0)
-    d_heel = _point_edge_dist2(y0, z, ay, az, ey, ez, inv_len2)
-    d_toe = _point_edge_dist2(y1, z, ay, az, ey, ez, inv_len2)
+    d_heel = _point_edge_dist2(xp, y0, z, ay, az, ey, ez, inv_len2)
+    d_toe = _point_edge_dist2(xp, y1, z, ay, az, ey, ez, inv_len2)
     gap = xp.maximum(xp.maximum(y0 - vy, vy - y1), 0.0)
     d_vert = gap * gap + (vz - z) * (vz - z)
     # An edge crosses the foot's line strictly between its ends' heights, at y_cross.
@@ -99,8 +138,8 @@ def flat_foot_distance(xp, heel, foot_length, outline):
     straddle = (sa * sb < 0.0)
     frac = sa / xp.where(straddle, sa - sb, 1.0)
     y_cross = ay + frac * ey
-    crossing = xp.any(straddle & (y_cross >= y0) & (y_cross <= y1), axis=-1)
-    d2 = xp.minimum(xp.minimum(xp.min(d_heel, axis=-1), xp.min(d_toe, axis=-1)), xp.min(d_vert, axis=-1))
+    crossing = any_last(xp, straddle & (y_cross >= y0) & (y_cross <= y1))
+    d2 = xp.minimum(xp.minimum(min_last(xp, d_heel), min_last(xp, d_toe)), min_last(xp, d_vert))
     return xp.where(crossing, 0.0, xp.sqrt(d2))
 
 
@@ -117,7 +156,7 @@ def point_in_obstacle(xp, p, outline):
     dz = b[..., 1] - a[..., 1]
     y_at = a[..., 0] + (pz - a[..., 1]) * (b[..., 0] - a[..., 0]) / xp.where(dz == 0.0, 1.0, dz)
     hits = straddles & (py < y_at)
-    inside = xp.sum(hits.astype(np.int32), axis=-1) % 2 == 1
+    inside = odd_last(xp, hits)
     return inside & (p[..., 1] >= 0.0)
 
 

@@ -65,24 +65,24 @@ def hip_position(xp, pivot_y, heel, thigh, shin):
     dist_y = 0.5 * (pivot_y - heel[..., 0])
     hz2 = leg * leg - dist_y * dist_y
     hz = xp.sqrt(xp.maximum(hz2, (MIN_HIP_HEIGHT_FRACTION * leg) ** 2))
-    return xp.stack([0.5 * (pivot_y + heel[..., 0]), hz], axis=-1)
+    return xp.concatenate([(0.5 * (pivot_y + heel[..., 0]))[..., None], hz[..., None]], axis=-1)
 
 
 def knee_position(xp, hip, foot, thigh, shin):
     """Forward-bending knee (..., 2) for a hip and a heel (eq 2.4-2.11), and |hip - heel| (eq 2.4, 2.44)."""
     d = foot - hip
-    r = xp.sqrt(xp.sum(d * d, axis=-1))
+    r = xp.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1])   # not xp.sum over 2: slow in NumPy
     r_safe = xp.maximum(r, 1e-12)
     u = d / r_safe[..., None]
     # Distance along hip->heel to the chord through both circle intersections (law of cosines,
     # eq 2.5); clamped to the reachable range like eq 2.6.
-    a = xp.clip((thigh * thigh - shin * shin + r * r) / (2.0 * r_safe), -thigh, thigh)
+    a = xp.minimum(xp.maximum((thigh * thigh - shin * shin + r * r) / (2.0 * r_safe), -thigh), thigh)   # clip
     h = xp.sqrt(xp.maximum(thigh * thigh - a * a, 0.0))
     # Eq 2.11 as a pair: of the two solutions, the knee on the +90 degree side of the hip->heel
     # direction is the one that flexes (knee angle <= 0). With the heel below the hip it is the
     # solution with the larger y, as eq 2.11 says; with the heel raised above the hip the larger-y
     # solution would be a hyperextended knee.
-    perp = xp.stack([-u[..., 1], u[..., 0]], axis=-1)
+    perp = xp.concatenate([-u[..., 1:2], u[..., 0:1]], axis=-1)   # concatenate: cheaper than stack in NumPy
     knee = hip + a[..., None] * u + h[..., None] * perp
     return knee, r
 

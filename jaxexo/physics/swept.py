@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from jaxexo.physics.geometry import _point_edge_dist2, foot_clearance
+from jaxexo.physics.geometry import _point_edge_dist2, any_last, foot_clearance, min_last
 
 
 def _inv_len2(xp, ey, ez):
@@ -30,6 +30,12 @@ def _inv_len2(xp, ey, ez):
     len2 = ey * ey + ez * ez
     ok = len2 > 1e-24
     return xp.where(ok, 1.0 / xp.where(ok, len2, 1.0), 0.0)
+
+
+def _last_axis(xp, *arrays):
+    """xp.stack(arrays, axis=-1) for arrays of one shape, as one concatenate (NumPy's stack is a
+    Python function costing several microseconds a call; one path's check makes dozens, issue 12)."""
+    return xp.concatenate([a[..., None] for a in arrays], axis=-1)
 
 
 def swept_distance(xp, h0, h1, foot_length, outline):
@@ -46,17 +52,17 @@ def swept_distance(xp, h0, h1, foot_length, outline):
     f = foot_length + 0.0 * y0
     # P's four corners (..., 4) and its four sides a -> a + u (..., 4): the foot at h0 and at h1, the
     # heel's and the toe's chords.
-    py = xp.stack([y0, y0 + f, y0 + dy, y0 + f + dy], axis=-1)
-    pz = xp.stack([z0, z0, z0 + dz, z0 + dz], axis=-1)
-    ay = xp.stack([y0, y0 + dy, y0, y0 + f], axis=-1)
-    az = xp.stack([z0, z0 + dz, z0, z0], axis=-1)
-    uy = xp.stack([f, f, dy, dy], axis=-1)
-    uz = xp.stack([0.0 * z0, 0.0 * z0, dz, dz], axis=-1)
+    py = _last_axis(xp, y0, y0 + f, y0 + dy, y0 + f + dy)
+    pz = _last_axis(xp, z0, z0, z0 + dz, z0 + dz)
+    ay = _last_axis(xp, y0, y0 + dy, y0, y0 + f)
+    az = _last_axis(xp, z0, z0 + dz, z0, z0)
+    uy = _last_axis(xp, f, f, dy, dy)
+    uz = _last_axis(xp, 0.0 * z0, 0.0 * z0, dz, dz)
     inv_u = _inv_len2(xp, uy, uz)
     # Corners of P against the outline edges: (..., 4, K-1).
-    d_corner = _point_edge_dist2(py[..., :, None], pz[..., :, None], cy, cz, ey, ez, inv_e)
+    d_corner = _point_edge_dist2(xp, py[..., :, None], pz[..., :, None], cy, cz, ey, ez, inv_e)
     # Outline vertices against P's sides: (..., 4, K).
-    d_vertex = _point_edge_dist2(vy[..., None, :], vz[..., None, :], ay[..., :, None], az[..., :, None],
+    d_vertex = _point_edge_dist2(xp, vy[..., None, :], vz[..., None, :], ay[..., :, None], az[..., :, None],
                                  uy[..., :, None], uz[..., :, None], inv_u[..., :, None])
     # Proper crossings of a side of P and an outline edge (strict orientation tests; touching cases
     # are caught by the endpoint distances being zero): (..., 4, K-1).
@@ -65,15 +71,15 @@ def swept_distance(xp, h0, h1, foot_length, outline):
     o2 = uy_ * (cz + ez - az_) - uz_ * (cy + ey - ay_)
     o3 = ey * (az_ - cz) - ez * (ay_ - cy)
     o4 = ey * (az_ + uz_ - cz) - ez * (ay_ + uy_ - cy)
-    crossing = xp.any((o1 * o2 < 0.0) & (o3 * o4 < 0.0), axis=(-2, -1))
+    crossing = any_last(xp, (o1 * o2 < 0.0) & (o3 * o4 < 0.0), axes=2)
     # Outline vertices strictly inside P: v - h0 = s (f, 0) + t (dy, dz) with s, t in [0, 1]
     # (only for a move with a vertical component; a flat P has no interior).
     has_area = xp.abs(dz) > 0.0
     safe_dz = xp.where(has_area, dz, 1.0)[..., None]
     t = (vz - z0[..., None]) / safe_dz
     s = (vy - y0[..., None] - t * dy[..., None]) / xp.where(f > 0.0, f, 1.0)[..., None]
-    inside = xp.any((t >= 0.0) & (t <= 1.0) & (s >= 0.0) & (s <= 1.0), axis=-1) & has_area
-    d2 = xp.minimum(xp.min(d_corner, axis=(-2, -1)), xp.min(d_vertex, axis=(-2, -1)))
+    inside = any_last(xp, (t >= 0.0) & (t <= 1.0) & (s >= 0.0) & (s <= 1.0)) & has_area
+    d2 = xp.minimum(min_last(xp, d_corner, axes=2), min_last(xp, d_vertex, axes=2))
     return xp.where(crossing | inside, 0.0, xp.sqrt(d2))
 
 

@@ -1,0 +1,55 @@
+"""BLAS threads for the batch generator (issue 12): ``generate_batch`` runs its matrix products on one
+BLAS thread.
+
+Measured on the 2-core development machine (shared, so often busy): OpenBLAS's default threads
+made ``generate_batch`` of 1000 scenes about 4x slower than one thread (1000 ms against 256 ms). Its
+products are small to medium ((alive scenes, 23..128) @ (.., 128) per rollout step, (100, M) @
+(M, 2B) for the smoothing) and finish in tens to hundreds of microseconds on one core, while
+OpenBLAS's worker threads spin-wait for each other: with the cores shared, a product that one
+thread does in 0.4 ms took 5-7 ms on two (benchmarks/results/generate_*). One thread is also what an
+exoskeleton's controller wants from a library call. ``generate`` (one scene) is not affected: its
+vector-matrix products are below OpenBLAS's threading threshold.
+
+The limit is set with threadpoolctl (a small pure-Python package, a dependency of jaxexo) for the
+duration of the call and restored afterwards; it is process-wide while it lasts, so another Python
+thread's BLAS work at the same moment runs on one thread too. Without threadpoolctl the BLAS is
+left as it is (then ``OMP_NUM_THREADS=1`` or ``OPENBLAS_NUM_THREADS=1`` in the environment, read
+at NumPy's import, does the same for the whole process). threadpoolctl is imported on the first
+batch, not at ``import jaxexo.inference`` (issue 12's import budget).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import sys
+
+_controller = None     # threadpoolctl.ThreadpoolController: the BLAS libraries loaded when it was built
+_modules = -1          # len(sys.modules) then: a BLAS loaded later (SciPy's, JAX's) comes with new modules
+_missing = False       # threadpoolctl is not installed
+
+
+def limited(threads: int | None):
+    """A context manager that runs its body with at most ``threads`` BLAS threads (None: unchanged)."""
+    global _controller, _modules, _missing
+    if threads is None or _missing:
+        return contextlib.nullcontext()
+    if _controller is None or len(sys.modules) != _modules:
+        try:
+            import threadpoolctl
+        except ImportError:
+            _missing = True
+            return contextlib.nullcontext()
+        # Listing the loaded libraries takes ~1 ms, so it is redone only when modules were imported
+        # since (a library that another import loaded would otherwise keep its threads).
+        _controller = threadpoolctl.ThreadpoolController()
+        _modules = len(sys.modules)
+    return _controller.limit(limits=int(threads), user_api="blas")
+
+
+def blas_threads() -> list[int]:
+    """The thread counts of the BLAS libraries loaded in this process ([] without threadpoolctl)."""
+    try:
+        import threadpoolctl
+    except ImportError:
+        return []
+    return [int(i["num_threads"]) for i in threadpoolctl.threadpool_info() if i.get("user_api") == "blas"]
