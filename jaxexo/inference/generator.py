@@ -31,6 +31,7 @@ and verdicts (tests/test_speed.py).
 from __future__ import annotations
 
 import dataclasses
+import math
 import tomllib
 import types
 from pathlib import Path
@@ -75,6 +76,7 @@ class TrajectoryGenerator:
         self._term_p = types.SimpleNamespace(terminate_on_collision=bool(self.np_params.terminate_on_collision))
         self.epsilon = 0.0      # 0: greedy (the default; a device's generator must not explore)
         self.shield = bool(config.env.shield)
+        self._all_clear = np.ones(int(dynamics.forward_moves().sum()), bool)
         self._rng = None
 
     def exploring(self, epsilon: float, seed: int = 0) -> "TrajectoryGenerator":
@@ -194,7 +196,15 @@ class TrajectoryGenerator:
         """(A,) the shield's admissible moves at one heel position (jaxexo.physics.dynamics.admissible_moves,
         in float32 like the training environment)."""
         lay = types.SimpleNamespace(outline=scene.outline.astype(np.float32), pivot_y=np.float32(scene.pivot_y))
-        return dynamics.admissible_moves(np, self.np_params, np.float32(heel_y), np.float32(heel_z), lay)
+        # Far from the obstacle's bounding box every move of one step keeps the clearance (the exact
+        # check is skipped; the same mask, since none of the moves could fail it).
+        sp = self.sp
+        half = 0.5 * scene.width
+        dy = max(scene.center_y - half - (heel_y + sp.foot_length), heel_y - (scene.center_y + half), 0.0)
+        dz = max(heel_z - scene.height, 0.0)
+        far = math.hypot(dy, dz) >= sp.shield_clearance + sp.step_size + 1e-4
+        return dynamics.admissible_moves(np, self.np_params, np.float32(heel_y), np.float32(heel_z), lay,
+                                         clear=self._all_clear if far else None)
 
     def rollout_batch(self, scenes) -> tuple[list[np.ndarray], list[np.ndarray]]:
         """Greedy raw paths of many scenes at once (float32 NumPy, like the JAX environment)."""

@@ -130,7 +130,7 @@ def _stacked(f, xs):
     return f(*xs)
 
 
-def admissible_moves(xp, p, heel_y, heel_z, layout, over_moves=_stacked):
+def admissible_moves(xp, p, heel_y, heel_z, layout, over_moves=_stacked, clear=None):
     """(..., NUM_ACTIONS) bool: the moves the agent may choose from heel (y, z) (issue 11's shield).
 
     Without the shield (``p.shield`` False, the thesis) every move. With it, a move must
@@ -144,21 +144,25 @@ def admissible_moves(xp, p, heel_y, heel_z, layout, over_moves=_stacked):
 
     ``over_moves(f, xs)`` maps f over the leading (move) axis of the arrays xs; the default evaluates
     all moves in one broadcast call, the JAX environment passes a loop (jax.lax.map), whose working set
-    stays in cache (several times faster on a CPU for thousands of environments)."""
+    stays in cache (several times faster on a CPU for thousands of environments). ``clear`` (..., F),
+    when given, is the clearance condition already known: the NumPy generator passes all-True for a
+    heel whose foot is at least shield_clearance + step_size from the obstacle's bounding box, where no
+    move of one step can come closer than shield_clearance (the distance is 1-Lipschitz)."""
     dirs = p.directions[_FORWARD]                                    # (F, 2)
     y, z = move_heel(xp, p, heel_y[..., None], heel_z[..., None], dirs[:, 0], dirs[:, 1])   # (..., F)
-    here = xp.stack([heel_y, heel_z], axis=-1)
     new = xp.stack([y, z], axis=-1)                                  # (..., F, 2)
-    c_here = geometry.foot_clearance(xp, here, p.foot_length, layout.outline)
-    # the moves' axis first, for over_moves: (F, ..., 2)
-    ends = xp.moveaxis(new, -2, 0)
-    # The swept distance alone decides: it is zero for a move into the obstacle and at most the
-    # clearance at either end, so ">= need" (need <= c_here) is swept_clearance's ">= need" whenever
-    # the foot starts outside; from inside (c_here <= 0, never reached under the shield) every move passes.
-    d_move = xp.moveaxis(over_moves(
-        lambda end: swept.swept_distance(xp, here + 0.0 * end, end, p.foot_length, layout.outline),
-        (ends,)), 0, -1)                                             # (..., F)
-    clear = d_move >= xp.minimum(p.shield_clearance, c_here)[..., None] - SHIELD_SLACK
+    if clear is None:
+        here = xp.stack([heel_y, heel_z], axis=-1)
+        c_here = geometry.foot_clearance(xp, here, p.foot_length, layout.outline)
+        # the moves' axis first, for over_moves: (F, ..., 2)
+        ends = xp.moveaxis(new, -2, 0)
+        # The swept distance alone decides: it is zero for a move into the obstacle and at most the
+        # clearance at either end, so ">= need" (need <= c_here) is swept_clearance's ">= need" whenever
+        # the foot starts outside; from inside (c_here <= 0, never reached under the shield) every move passes.
+        d_move = xp.moveaxis(over_moves(
+            lambda end: swept.swept_distance(xp, here + 0.0 * end, end, p.foot_length, layout.outline),
+            (ends,)), 0, -1)                                         # (..., F)
+        clear = d_move >= xp.minimum(p.shield_clearance, c_here)[..., None] - SHIELD_SLACK
     kin = kinematics.leg_state(xp, layout.pivot_y[..., None], new, p.thigh, p.shin)
     angles = xp.stack([kin["hip_swing"], kin["knee_swing_angle"], kin["hip_stance"], kin["knee_stance_angle"]], axis=-1)
     reachable = ~(kinematics.legs_outside_limits(xp, angles, p.hip_limits, p.knee_limits)
