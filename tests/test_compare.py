@@ -213,3 +213,28 @@ def test_cli_generate_cfftg_with_a_policys_kinematics(trained_run, tmp_path):
                  "half_circle", "--pivot", "between", "--out", str(tmp_path / "c.csv"), "--json", str(out)]) == 0
     doc = json.loads(out.read_text())
     assert doc["method"] == "cfftg" and doc["checks"]["ok"] and len(doc["raw"]) == 3
+
+
+def test_device_metrics_time_the_moving_swings_and_count_a_still_one_as_zero(trained_run):
+    # A policy that stands still (the faithful thesis configs learn to) makes a path the swing timer
+    # cannot time; the report must still be written: that swing counts 0 s, the others are timed as alone.
+    import dataclasses
+
+    from jaxexo.evaluation.compare import device_metrics
+    from jaxexo.inference import TrajectoryGenerator
+    from jaxexo.inference.swing_timing import time_swings
+
+    rl = TrajectoryGenerator.load(trained_run / "policy.npz")
+    sc = make_scenarios(rl.config, "test", 2)
+    moving = [rl.generate(s["obstacle"], pivot=s["pivot"], start_y=s["start_y"], step_length=s["step_length"])
+              for s in sc]
+    t = moving[0]
+    still = dataclasses.replace(t, heel=np.repeat(t.heel[:1], len(t.heel), 0),
+                                joint_angles=np.repeat(t.joint_angles[:1], len(t.joint_angles), 0))
+    with pytest.raises(ValueError, match="do not move"):
+        time_swings([still], rl.config)
+    m = device_metrics([moving[0], still, moving[1]], rl.config)
+    alone = time_swings(moving, rl.config)
+    np.testing.assert_allclose(m["swing_s"], [alone[0].duration, 0.0, alone[1].duration])
+    assert m["swing_s"][0] > 0 and m["peak_hip_vel"][1] == 0 and m["uniform_peak_vel"][1] == 0
+    assert m["within_limits"].tolist() == [alone[0].within_limits, True, alone[1].within_limits]

@@ -126,17 +126,26 @@ def device_metrics(trajs, config) -> dict[str, np.ndarray]:
     """Per-trajectory device timing (jaxexo.inference.swing_timing, the config's [device] limits):
     the shortest rest-to-rest swing duration (s), the timed swing's peak hip and knee velocity over
     both legs (rad/s), whether its exported samples stay within the limits, and the peak joint
-    velocity of the path at its own uniform time stamps (rad/s), for contrast."""
+    velocity of the path at its own uniform time stamps (rad/s), for contrast.
+
+    A generator that stood still (the heel never leaves its start: a policy that learned not to move,
+    e.g. the faithful thesis configs) has nothing to time: its swing counts as 0 s at zero velocity,
+    within the limits; its success and goal figures already say it failed."""
     from jaxexo.inference.swing_timing import time_swings, uniform_peaks
 
-    timed = time_swings(trajs, config)
-    return {
-        "swing_s": np.array([t.duration for t in timed]),
-        "peak_hip_vel": np.array([max(t.peak_velocity[0], t.peak_velocity[2]) for t in timed]),
-        "peak_knee_vel": np.array([max(t.peak_velocity[1], t.peak_velocity[3]) for t in timed]),
-        "within_limits": np.array([t.within_limits for t in timed]),
-        "uniform_peak_vel": np.array([uniform_peaks(t)[0].max() for t in trajs]),
-    }
+    trajs = list(trajs)
+    n = len(trajs)
+    moves = [i for i, t in enumerate(trajs) if np.any(np.asarray(t.heel) != np.asarray(t.heel)[0])]
+    out = {"swing_s": np.zeros(n), "peak_hip_vel": np.zeros(n), "peak_knee_vel": np.zeros(n),
+           "within_limits": np.ones(n, bool), "uniform_peak_vel": np.zeros(n)}
+    if moves:
+        timed = time_swings([trajs[i] for i in moves], config)
+        out["swing_s"][moves] = [t.duration for t in timed]
+        out["peak_hip_vel"][moves] = [max(t.peak_velocity[0], t.peak_velocity[2]) for t in timed]
+        out["peak_knee_vel"][moves] = [max(t.peak_velocity[1], t.peak_velocity[3]) for t in timed]
+        out["within_limits"][moves] = [t.within_limits for t in timed]
+        out["uniform_peak_vel"][moves] = [uniform_peaks(trajs[i])[0].max() for i in moves]
+    return out
 
 
 def summarize_device(m: dict[str, np.ndarray], mask: np.ndarray) -> dict:
