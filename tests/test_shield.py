@@ -47,29 +47,40 @@ def test_admissible_moves_against_dense_sampling():
     m = dynamics.admissible_moves(np, p, hy, hz, types.SimpleNamespace(**lay))
     d = p.directions.astype(np.float64)
     step = float(p.step_size)
-    blocked_near = 0
+    blocked_near = fallback = checked = 0
     for i in range(len(hy)):
         h0 = np.array([hy[i], hz[i]], np.float64)
         c_here = float(geometry.foot_clearance(np, h0, float(p.foot_length), lay["outline"][i].astype(np.float64)))
         if c_here <= 1e-4:
             continue     # a heel inside or on the obstacle: not a state a shielded agent reaches
         need = min(SHIELD, c_here)
+        dense, reach, before_goal = [], [], []
         for a in range(dynamics.NUM_ACTIONS):
             y, z = dynamics.move_heel(np, p, hy[i], hz[i], d[a, 0], d[a, 1])
             h1 = np.array([y, z], np.float64)
-            dense = _dense_clearance(p, h0, h1, lay["outline"][i])
-            reach = not bool(kinematics.swing_heel_unreachable(
-                np, float(lay["pivot_y"][i]), h1, float(p.thigh), float(p.shin), p.hip_limits, p.knee_limits))
-            if m[i, a]:
-                assert d[a, 0] >= 0.0, "a backward move was admitted"
-                # admitted: even the dense look keeps the clearance (float32 rounding aside)
-                assert dense >= need - 1e-5, (i, a, dense, need)
-            elif d[a, 0] >= 0.0 and reach:
-                # refused while forward and reachable: the dense look finds it closer than needed
-                assert dense < need + step / 600 + 1e-5 or not m[i].any(), (i, a, dense, need)
-                blocked_near += 1
+            dense.append(_dense_clearance(p, h0, h1, lay["outline"][i]))
+            reach.append(not bool(kinematics.swing_heel_unreachable(
+                np, float(lay["pivot_y"][i]), h1, float(p.thigh), float(p.shin), p.hip_limits, p.knee_limits)))
+            before_goal.append(h1[0] <= float(lay["goal_y"][i]) + float(p.goal_tolerance[0]))
+        dense, reach, before_goal = np.array(dense), np.array(reach), np.array(before_goal)
+        forward = d[:, 0] >= 0.0
         assert m[i].any(), "some move is always offered"
+        assert not (m[i] & ~forward).any(), "a backward move was admitted"
+        # Where a move passes every condition by the independent look (with a rounding margin either
+        # way), the mask is exactly the moves that pass them all.
+        sure_ok = forward & reach & before_goal & (dense >= need + step / 600 + 1e-5)
+        if not sure_ok.any():
+            fallback += 1
+            continue
+        checked += 1
+        admitted = m[i]
+        assert (dense[admitted] >= need - 1e-5).all(), (i, dense[admitted], need)
+        assert (reach[admitted] & before_goal[admitted]).all(), i
+        refused = forward & reach & before_goal & ~admitted
+        assert (dense[refused] < need + step / 600 + 1e-5).all(), (i, dense[refused], need)
+        blocked_near += int(refused.sum())
     assert blocked_near > 50, "the scenes must exercise the clearance condition"
+    assert checked > 120, (checked, fallback)   # enough states with a move passing every condition
 
 
 def test_shield_off_admits_every_move():
@@ -115,7 +126,8 @@ def test_jax_mask_equals_numpy_and_exploration_stays_inside():
     import types
     lay = types.SimpleNamespace(**{k: np.asarray(v) for k, v in vars(st.layout).items()
                                    if not k.startswith("_")} if hasattr(st.layout, "__dict__") else {})
-    lay = types.SimpleNamespace(outline=np.asarray(st.layout.outline), pivot_y=np.asarray(st.layout.pivot_y))
+    lay = types.SimpleNamespace(outline=np.asarray(st.layout.outline), pivot_y=np.asarray(st.layout.pivot_y),
+                                goal_y=np.asarray(st.layout.goal_y))
     m_np = dynamics.admissible_moves(np, dynamics.numpy_params(cfg), heel[:, 0], heel[:, 1], lay)
     assert (m_jax == m_np).mean() > 0.999    # float32 fused arithmetic may flip a move on the boundary
     assert (~m_jax).sum() > 512 * 17          # the backward moves, and some more

@@ -195,7 +195,8 @@ class TrajectoryGenerator:
     def _admissible(self, scene: Scene, heel_y: float, heel_z: float) -> np.ndarray:
         """(A,) the shield's admissible moves at one heel position (jaxexo.physics.dynamics.admissible_moves,
         in float32 like the training environment)."""
-        lay = types.SimpleNamespace(outline=scene.outline.astype(np.float32), pivot_y=np.float32(scene.pivot_y))
+        lay = types.SimpleNamespace(outline=scene.outline.astype(np.float32), pivot_y=np.float32(scene.pivot_y),
+                                    goal_y=np.float32(scene.goal_y))
         # Far from the obstacle's bounding box every move of one step keeps the clearance (the exact
         # check is skipped; the same mask, since none of the moves could fail it).
         sp = self.sp

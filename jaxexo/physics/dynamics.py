@@ -137,8 +137,10 @@ def admissible_moves(xp, p, heel_y, heel_z, layout, over_moves=_stacked, clear=N
     - not go backward (its direction has no -y component: eq 2.31's condition cannot arise);
     - keep the exact clearance of the whole move (jaxexo.physics.swept) at least ``p.shield_clearance``,
       or, where the foot already starts closer (a stance foot near the obstacle), not bring it closer;
-    - end where both legs are inside their joint limits (eq 2.50) and within reach (eq 2.45).
-    Where no move passes all three, the forward moves that keep the clearance are offered; where
+    - end where both legs are inside their joint limits (eq 2.50) and within reach (eq 2.45);
+    - not end beyond the goal box's far side (goal_y + goal_tolerance[0]): with no move backward the
+      goal could never be reached from there (a dead end, like a collision).
+    Where no move passes all four, the forward moves that keep the clearance are offered; where
     none does either, every move (so a greedy choice always exists). The training environment, the
     JAX evaluation and the NumPy generator choose among these moves with the same function.
 
@@ -168,7 +170,7 @@ def admissible_moves(xp, p, heel_y, heel_z, layout, over_moves=_stacked, clear=N
     reachable = ~(kinematics.legs_outside_limits(xp, angles, p.hip_limits, p.knee_limits)
                   | kinematics.leg_too_long(xp, kin["leg_swing"], kin["leg_stance"], p.thigh, p.shin,
                                             p.leg_length_tolerance))
-    ok = clear & reachable
+    ok = clear & reachable & (y <= layout.goal_y[..., None] + p.goal_tolerance[0])
     ok = xp.where(xp.any(ok, axis=-1, keepdims=True), ok, clear)
     ok = xp.where(xp.any(ok, axis=-1, keepdims=True), ok, True)
     shape = ok.shape[:-1]
