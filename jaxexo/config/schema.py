@@ -282,7 +282,7 @@ class EnvConfig:
     # (jaxexo.physics.dynamics.admissible_moves): no backward component, the exact clearance of the
     # whole move at least shield_clearance, joint limits and reach respected at its end. The same
     # mask in training, evaluation and the NumPy generator; off reproduces the thesis's free choice.
-    shield: bool = declare(False, boolean, dtype="bool")
+    shield: bool = declare(False, boolean, role="static+leaf", dtype="bool")
     # m: the clearance a shielded move keeps; above min_clearance so that the smoothed curve, which
     # cuts corners, still keeps min_clearance without falling back to the raw polyline.
     shield_clearance: float = declare(0.025, number(nonneg=True), unit="m")
