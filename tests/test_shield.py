@@ -171,3 +171,18 @@ def test_shielded_generator_never_falls_back_and_keeps_clearance(tmp_path):
         raws_b, acts_b = gen.rollout_batch([scene])
         np.testing.assert_array_equal(acts_b[0], acts)
     assert n_checked > 500
+
+
+def test_pruned_numpy_clearance_rule_decides_like_the_exact_one():
+    """NumPy's moves_keep_clearance skips the exact swept distance where the ends' clearances decide;
+    the generic path (any other array module: here NumPy behind a namespace) computes every move."""
+    import types
+
+    cfg = _config()
+    p, lay, hy, hz = _states(cfg, 3000, 9)
+    ends = dynamics.forward_ends(np, p, hy, hz)
+    pruned = dynamics.moves_keep_clearance(np, p, hy, hz, ends, lay["outline"])
+    generic = types.SimpleNamespace(**{k: getattr(np, k) for k in dir(np) if not k.startswith("_")})
+    exact = dynamics.moves_keep_clearance(generic, p, hy, hz, ends, lay["outline"])
+    np.testing.assert_array_equal(pruned, exact)
+    assert 0.05 < (~exact).mean() < 0.95     # both outcomes exercised

@@ -207,6 +207,21 @@ class TrajectoryGenerator:
         return dynamics.admissible_moves(np, self.np_params, np.float32(heel_y), np.float32(heel_z), lay,
                                          clear=self._all_clear if far else None)
 
+    def _admissible_rows(self, hy, hz, lay) -> np.ndarray:
+        """(B, A) the shield's admissible moves of many heels (float32 rows of stacked scenes); the
+        exact clearance is computed only for the rows whose foot is within a step plus the shield's
+        clearance of the obstacle's bounding box (elsewhere no move can fail it)."""
+        p = self.np_params
+        half = 0.5 * lay.width
+        dy = np.maximum(np.maximum(lay.center_y - half - (hy + p.foot_length), hy - (lay.center_y + half)), 0.0)
+        dz = np.maximum(hz - lay.height, 0.0)
+        near = np.hypot(dy, dz) < self.sp.shield_clearance + self.sp.step_size + 1e-4
+        clear = np.ones((len(hy), len(self._all_clear)), bool)
+        if near.any():
+            ends = dynamics.forward_ends(np, p, hy[near], hz[near])
+            clear[near] = dynamics.moves_keep_clearance(np, p, hy[near], hz[near], ends, lay.outline[near])
+        return dynamics.admissible_moves(np, p, hy, hz, lay, clear=clear)
+
     def rollout_batch(self, scenes) -> tuple[list[np.ndarray], list[np.ndarray]]:
         """Greedy raw paths of many scenes at once (float32 NumPy, like the JAX environment)."""
         p = self.np_params
@@ -226,7 +241,7 @@ class TrajectoryGenerator:
         for k in range(self.max_steps):
             sub = _take(lay, alive)
             obs = dynamics.observation(np, p, self.obs_mode, hy[alive], hz[alive], t[alive], visited[alive], sub)
-            mask = dynamics.admissible_moves(np, p, hy[alive], hz[alive], sub) if self.shield else None
+            mask = self._admissible_rows(hy[alive], hz[alive], sub) if self.shield else None
             a = self._explore(dynamics.greedy_action(np, self.net.q(obs), mask), mask)
             ny, nz = dynamics.move_heel(np, p, hy[alive], hz[alive], dirs[a, 0], dirs[a, 1])
             hy[alive], hz[alive] = ny, nz

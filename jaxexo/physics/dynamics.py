@@ -130,6 +130,53 @@ def _stacked(f, xs):
     return f(*xs)
 
 
+def forward_ends(xp, p, heel_y, heel_z):
+    """(..., F, 2): where each forward move (the shield's candidates) takes the heel."""
+    dirs = p.directions[_FORWARD]
+    y, z = move_heel(xp, p, heel_y[..., None], heel_z[..., None], dirs[:, 0], dirs[:, 1])
+    return xp.stack([y, z], axis=-1)
+
+
+def moves_keep_clearance(xp, p, heel_y, heel_z, ends, outline, over_moves=_stacked):
+    """(..., F) bool: the shield's clearance condition for the moves from heel (y, z) to ``ends``
+    (..., F, 2): the exact swept distance at least min(shield_clearance, the clearance where the foot
+    starts), against ``outline`` (..., K, 2).
+
+    The swept distance alone decides: it is zero for a move into the obstacle and at most the
+    clearance at either end, so ">= need" (need <= the start's clearance) is swept_clearance's
+    ">= need" whenever the foot starts outside; from inside (never reached under the shield) every
+    move passes."""
+    here = xp.stack([heel_y, heel_z], axis=-1)
+    c_here = geometry.foot_clearance(xp, here, p.foot_length, outline)
+    if xp is np:
+        return _moves_keep_clearance_pruned(p, here, c_here, ends, outline)
+    moves = xp.moveaxis(ends, -2, 0)                                 # the moves' axis first: (F, ..., 2)
+    d_move = xp.moveaxis(over_moves(
+        lambda end: swept.swept_distance(xp, here + 0.0 * end, end, p.foot_length, outline),
+        (moves,)), 0, -1)                                            # (..., F)
+    return d_move >= xp.minimum(p.shield_clearance, c_here)[..., None] - SHIELD_SLACK
+
+
+def _moves_keep_clearance_pruned(p, here, c_here, ends, outline):
+    """``moves_keep_clearance`` in NumPy with the same decisions, computing the exact swept distance
+    only where the ends' clearances leave it open: a move whose end is closer than needed fails (the
+    swept region contains the foot at the end), and one whose ends satisfy the 1-Lipschitz bound
+    (c_here + c_end - |move|) / 2 >= need passes (jaxexo.physics.swept.swept_lower_bound)."""
+    c_end = geometry.foot_clearance(np, ends, p.foot_length, outline[..., None, :, :])     # (..., F)
+    need = np.broadcast_to(np.minimum(p.shield_clearance, c_here)[..., None] - SHIELD_SLACK, c_end.shape)
+    length = np.sqrt(((ends - here[..., None, :]) ** 2).sum(-1))
+    ok = (c_here[..., None] > 0.0) & (swept.swept_lower_bound(np, c_here[..., None], c_end, length) >= need)
+    todo = ~ok & (c_end >= need) & (c_here[..., None] > 0.0)
+    if todo.any():
+        idx = np.nonzero(todo)
+        h0 = np.broadcast_to(here[..., None, :], ends.shape)[idx]
+        ol = np.broadcast_to(outline[..., None, :, :], ends.shape[:-1] + outline.shape[-2:])[idx]
+        ok[idx] = swept.swept_distance(np, h0, ends[idx], p.foot_length, ol) >= need[idx]
+    # a foot starting inside the obstacle (never under the shield): every move passes, as in the
+    # unpruned rule (its need is <= 0 and a distance is >= 0)
+    return ok | (c_here[..., None] <= 0.0)
+
+
 def admissible_moves(xp, p, heel_y, heel_z, layout, over_moves=_stacked, clear=None):
     """(..., NUM_ACTIONS) bool: the moves the agent may choose from heel (y, z) (issue 11's shield).
 
@@ -150,21 +197,10 @@ def admissible_moves(xp, p, heel_y, heel_z, layout, over_moves=_stacked, clear=N
     when given, is the clearance condition already known: the NumPy generator passes all-True for a
     heel whose foot is at least shield_clearance + step_size from the obstacle's bounding box, where no
     move of one step can come closer than shield_clearance (the distance is 1-Lipschitz)."""
-    dirs = p.directions[_FORWARD]                                    # (F, 2)
-    y, z = move_heel(xp, p, heel_y[..., None], heel_z[..., None], dirs[:, 0], dirs[:, 1])   # (..., F)
-    new = xp.stack([y, z], axis=-1)                                  # (..., F, 2)
+    new = forward_ends(xp, p, heel_y, heel_z)                        # (..., F, 2)
+    y = new[..., 0]
     if clear is None:
-        here = xp.stack([heel_y, heel_z], axis=-1)
-        c_here = geometry.foot_clearance(xp, here, p.foot_length, layout.outline)
-        # the moves' axis first, for over_moves: (F, ..., 2)
-        ends = xp.moveaxis(new, -2, 0)
-        # The swept distance alone decides: it is zero for a move into the obstacle and at most the
-        # clearance at either end, so ">= need" (need <= c_here) is swept_clearance's ">= need" whenever
-        # the foot starts outside; from inside (c_here <= 0, never reached under the shield) every move passes.
-        d_move = xp.moveaxis(over_moves(
-            lambda end: swept.swept_distance(xp, here + 0.0 * end, end, p.foot_length, layout.outline),
-            (ends,)), 0, -1)                                         # (..., F)
-        clear = d_move >= xp.minimum(p.shield_clearance, c_here)[..., None] - SHIELD_SLACK
+        clear = moves_keep_clearance(xp, p, heel_y, heel_z, new, layout.outline, over_moves)
     kin = kinematics.leg_state(xp, layout.pivot_y[..., None], new, p.thigh, p.shin)
     angles = xp.stack([kin["hip_swing"], kin["knee_swing_angle"], kin["hip_stance"], kin["knee_stance_angle"]], axis=-1)
     reachable = ~(kinematics.legs_outside_limits(xp, angles, p.hip_limits, p.knee_limits)
