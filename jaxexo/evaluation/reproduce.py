@@ -228,14 +228,20 @@ def run_reproduce(out: str | Path, models=THESIS_MODELS, n: int = 1000, seed: in
     results: dict = {}
     for name, cfg_path in paths.items():
         run = out / "runs" / name
+        cfg = load_config(cfg_path)
         if (run / "policy.npz").exists() and (run / "eval.json").exists():
+            # A finished run is reused only if it trained this very config: a config edited since
+            # would otherwise be tabulated with the old one's numbers.
+            if (run / "config.toml").exists() and load_config(run / "config.toml") != cfg:
+                raise ValueError(f"{run}: trained with a different config than {cfg_path} (edited since?); "
+                                 f"remove that run or choose another --out")
             ev = json.loads((run / "eval.json").read_text())
             progress(f"{name}: reusing {run}")
         else:
             progress(f"{name}: training {cfg_path}")
             # A run stopped part way (killed, full disk) is continued, not refused.
             started = run.is_dir() and bool(contents(run))
-            ev = run_training(load_config(cfg_path), run, seed=seed, resume=started, progress=False)
+            ev = run_training(cfg, run, seed=seed, resume=started, progress=False)
         # A run's evaluation is kept beside it (ENTRY), so that rerunning reproduce to tabulate more models
         # does not re-evaluate the finished ones; it is reused only for the same n, seed and batch size.
         key = {"n": n, "seed": seed, "batch_size": batch_size if model_of(name) in ("final", "default") else 0}
