@@ -238,3 +238,16 @@ def test_device_metrics_time_the_moving_swings_and_count_a_still_one_as_zero(tra
     np.testing.assert_allclose(m["swing_s"], [alone[0].duration, 0.0, alone[1].duration])
     assert m["swing_s"][0] > 0 and m["peak_hip_vel"][1] == 0 and m["uniform_peak_vel"][1] == 0
     assert m["within_limits"].tolist() == [alone[0].within_limits, True, alone[1].within_limits]
+
+
+def test_reproduce_refuses_a_finished_run_of_another_config(trained_run, tmp_path):
+    """A run directory trained with a config other than the model's (the thesis file edited since, or a
+    stray run) must not be tabulated under that model's name."""
+    from jaxexo.evaluation.reproduce import run_reproduce
+
+    d = tmp_path / "runs" / "a"
+    d.mkdir(parents=True)
+    for f in ("policy.npz", "eval.json", "config.toml"):
+        shutil.copy(trained_run / f, d / f)      # the quick model's config, not thesis (a)'s
+    with pytest.raises(ValueError, match=r"runs/a: trained with a different config than .*a\.toml"):
+        run_reproduce(tmp_path, models=("a",), variant="faithful", n=5, progress=lambda *_: None)

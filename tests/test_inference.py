@@ -71,9 +71,12 @@ def export_random(path, cfg, seed=0, scale_signs=False):
     return driver.export_policy(path, cfg, trainer, params)
 
 
-def small_config(**train):
+def small_config(shield: bool = False, **train):
+    """configs/default.toml with ``train`` overrides; unshielded unless ``shield`` (collisions and
+    free moves are what most tests here exercise; the "shield" policy covers the shielded rollout)."""
     cfg = load_config(ROOT / "configs" / "default.toml")
-    return dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, **train))
+    return dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, shield=shield),
+                               train=dataclasses.replace(cfg.train, **train))
 
 
 @pytest.fixture(scope="module")
@@ -100,6 +103,7 @@ def policies(tmp_path_factory):
         "thesis": export_random(d / "thesis.npz", thesis, seed=4),
         "terminate": export_random(d / "term.npz", dataclasses.replace(
             small_config(hidden=[16]), env=dataclasses.replace(small_config().env, collision="terminate")), seed=5),
+        "shield": export_random(d / "shield.npz", small_config(shield=True, hidden=[32, 32]), seed=6),
     }
 
 
@@ -148,7 +152,7 @@ def jax_paths(gen, scenes_args):
     return [np.vstack([start[i], np.asarray(path)[i, : steps[i]]]) for i in range(len(layouts))], out
 
 
-@pytest.mark.parametrize("which", [SLOW_TRAINED, "thesis", "terminate"])
+@pytest.mark.parametrize("which", [SLOW_TRAINED, "thesis", "terminate", "shield"])
 def test_numpy_rollouts_take_the_jax_environments_actions(request, policies, which):
     gen = TrajectoryGenerator.load(_policy(request, policies, which))
     args = [(ob, pv, sy, 0.70) for ob in SCENE_OBSTACLES.values() for pv in PIVOT_CONDITIONS for sy in (0.0, 0.04)]
