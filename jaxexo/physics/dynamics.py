@@ -148,13 +148,18 @@ def moves_keep_clearance(xp, p, heel_y, heel_z, ends, outline, over_moves=_stack
     move passes."""
     here = xp.stack([heel_y, heel_z], axis=-1)
     c_here = geometry.foot_clearance(xp, here, p.foot_length, outline)
-    if xp is np:
+    if xp is np and ends.size > _PRUNE_FROM:
         return _moves_keep_clearance_pruned(p, here, c_here, ends, outline)
     moves = xp.moveaxis(ends, -2, 0)                                 # the moves' axis first: (F, ..., 2)
     d_move = xp.moveaxis(over_moves(
         lambda end: swept.swept_distance(xp, here + 0.0 * end, end, p.foot_length, outline),
         (moves,)), 0, -1)                                            # (..., F)
     return d_move >= xp.minimum(p.shield_clearance, c_here)[..., None] - SHIELD_SLACK
+
+
+# Entries of ``ends`` from which NumPy's pruning pays (a batch of rows); for one heel's 19 moves the
+# unpruned call is cheaper: NumPy's cost there is its number of calls, not the arithmetic.
+_PRUNE_FROM = 2 * len(_FORWARD) * 16
 
 
 def _moves_keep_clearance_pruned(p, here, c_here, ends, outline):
