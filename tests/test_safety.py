@@ -127,7 +127,10 @@ def test_a_verdict_at_n_samples_holds_at_10n(outline, seed, n, smoothing):
     # the foot inside, the guarantee is compared where that look finds it clear or touching.
     assert guaranteed <= max(dense, 0.0) + 1e-9
     if dense <= 0.0:
-        assert guaranteed <= 0.0         # contact is never hidden between samples
+        # contact is never hidden between samples: the verdict's contact rule (geometry.foot_collides,
+        # within TOUCH_EPS) holds; a foot sliding along the obstacle's base line computes a swept
+        # distance of ~1e-17 m, not exactly 0 (hypothesis found it)
+        assert geometry.foot_collides(np, guaranteed)
     if guaranteed >= 0.02:
         assert dense >= 0.02
 
