@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from conftest import ROOT
@@ -103,6 +103,8 @@ def test_a_two_sample_line_through_the_triangle_fails():
 @settings(max_examples=60)
 @given(outline=outlines(), seed=st.integers(0, 2**31 - 1), n=st.integers(2, 12),
        smoothing=st.sampled_from([0.0, 0.001, 0.005]))
+# a 2-sample move along the ground through a rectangle's base (swept distance 7e-18 m, not 0)
+@example(outline=np.array([[0.25, 0.0], [0.25, 0.25], [0.5, 0.25], [0.5, 0.0]]), seed=90981, n=2, smoothing=0.0)
 def test_a_verdict_at_n_samples_holds_at_10n(outline, seed, n, smoothing):
     """Every path the verdict calls clear at N samples is clear at 10 N samples of the same curve (the
     per-sample exact foot distance of jaxexo.physics.geometry, not the swept one), and the guaranteed
