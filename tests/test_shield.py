@@ -190,3 +190,13 @@ def test_pruned_numpy_clearance_rule_decides_like_the_exact_one():
     for i in range(0, 3000, 150):
         one = dynamics.moves_keep_clearance(np, p, hy[i], hz[i], ends[i], lay["outline"][i])
         np.testing.assert_array_equal(one, exact[i])
+
+
+@pytest.mark.parametrize("env, field", [({"shield": "yes"}, "env.shield"), ({"shield": 1}, "env.shield"),
+                                        ({"shield_clearance": -0.01}, "env.shield_clearance"),
+                                        ({"shield_clearance": float("nan")}, "env.shield_clearance")])
+def test_bad_shield_settings_are_refused_naming_the_field(env, field):
+    from jaxexo.config import ConfigError
+
+    with pytest.raises(ConfigError, match=rf"^{field}"):
+        config_from_dict({"env": env})

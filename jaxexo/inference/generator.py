@@ -31,7 +31,6 @@ and verdicts (tests/test_speed.py).
 from __future__ import annotations
 
 import dataclasses
-import math
 import tomllib
 import types
 from pathlib import Path
@@ -76,7 +75,7 @@ class TrajectoryGenerator:
         self._term_p = types.SimpleNamespace(terminate_on_collision=bool(self.np_params.terminate_on_collision))
         self.epsilon = 0.0      # 0: greedy (the default; a device's generator must not explore)
         self.shield = bool(config.env.shield)
-        self._all_clear = np.ones(int(dynamics.forward_moves().sum()), bool)
+        self._n_forward = int(dynamics.forward_moves().sum())
         self._rng = None
 
     def exploring(self, epsilon: float, seed: int = 0) -> "TrajectoryGenerator":
@@ -172,9 +171,10 @@ class TrajectoryGenerator:
         mid_y, mid_z = dynamics.mid_goal(scalar, sp, scene.center_y, scene.height)
         hy, hz, t, visited = float(scene.start_y), 0.0, 0, False
         pts, acts = [(hy, hz)], []
+        one = dynamics.stack_scenes([scene], np.float32) if self.shield else None
         while True:
             if self.shield:
-                mask = self._admissible(scene, hy, hz)
+                mask = self._admissible_rows(np.array([hy], np.float32), np.array([hz], np.float32), one)[0]
                 a = self._explore(step.greedy(hy, hz, t, 1.0 if visited else 0.0, mask), mask)
             else:
                 a = self._explore(step.greedy(hy, hz, t, 1.0 if visited else 0.0))
@@ -192,31 +192,17 @@ class TrajectoryGenerator:
         return np.asarray(pts), np.asarray(acts, dtype=np.int64)
 
 
-    def _admissible(self, scene: Scene, heel_y: float, heel_z: float) -> np.ndarray:
-        """(A,) the shield's admissible moves at one heel position (jaxexo.physics.dynamics.admissible_moves,
-        in float32 like the training environment)."""
-        lay = types.SimpleNamespace(outline=scene.outline.astype(np.float32), pivot_y=np.float32(scene.pivot_y),
-                                    goal_y=np.float32(scene.goal_y))
-        # Far from the obstacle's bounding box every move of one step keeps the clearance (the exact
-        # check is skipped; the same mask, since none of the moves could fail it).
-        sp = self.sp
-        half = 0.5 * scene.width
-        dy = max(scene.center_y - half - (heel_y + sp.foot_length), heel_y - (scene.center_y + half), 0.0)
-        dz = max(heel_z - scene.height, 0.0)
-        far = math.hypot(dy, dz) >= sp.shield_clearance + sp.step_size + 1e-4
-        return dynamics.admissible_moves(np, self.np_params, np.float32(heel_y), np.float32(heel_z), lay,
-                                         clear=self._all_clear if far else None)
-
     def _admissible_rows(self, hy, hz, lay) -> np.ndarray:
-        """(B, A) the shield's admissible moves of many heels (float32 rows of stacked scenes); the
-        exact clearance is computed only for the rows whose foot is within a step plus the shield's
-        clearance of the obstacle's bounding box (elsewhere no move can fail it)."""
+        """(B, A) the shield's admissible moves (jaxexo.physics.dynamics.admissible_moves) of many heels,
+        float32 rows of stacked scenes like the training environment; the exact clearance is computed
+        only for the rows whose foot is within a step plus the shield's clearance of the obstacle's
+        bounding box (elsewhere no move can fail it, so the mask is the same)."""
         p = self.np_params
         half = 0.5 * lay.width
         dy = np.maximum(np.maximum(lay.center_y - half - (hy + p.foot_length), hy - (lay.center_y + half)), 0.0)
         dz = np.maximum(hz - lay.height, 0.0)
         near = np.hypot(dy, dz) < self.sp.shield_clearance + self.sp.step_size + 1e-4
-        clear = np.ones((len(hy), len(self._all_clear)), bool)
+        clear = np.ones((len(hy), self._n_forward), bool)
         if near.any():
             ends = dynamics.forward_ends(np, p, hy[near], hz[near])
             clear[near] = dynamics.moves_keep_clearance(np, p, hy[near], hz[near], ends, lay.outline[near])
@@ -284,7 +270,6 @@ class TrajectoryGenerator:
         """``_fallback`` for the rows ``rows`` at once: each smoothing factor is tried on every row
         still waiting, smoothed together and checked in one vectorised call. Returns the same
         (row, (path, smoothing, notes, deviation)) list, in row order."""
-        fl = self.sp.foot_length
         pts = [sm.distinct(raws[i]) for i in rows]
         # Raw paths padded with their last point (a repeated point adds a zero-length move, whose
         # swept clearance is that point's own: the polyline's minimum is unchanged).

@@ -87,8 +87,8 @@ def _unseen_obstacle(rng, shape: str, center: float) -> Obstacle:
 
 def safety_scenarios(config: Config, n: int, seed: int = 2024, unseen: bool = False) -> list[dict]:
     """n shifted layouts for the safe-swing checks: the start anywhere in 0-10 cm, the obstacle anywhere
-    in the gap between the toe at the start and the goal (2 cm from the toe, 6 cm from the goal:
-    jaxexo.physics.terrain's placement margins), every pivot condition in
+    in the gap between the toe at the start and the goal (terrain.NEAR_MARGIN = 2.5 cm from the toe,
+    terrain.FAR_MARGIN = 6 cm from the goal: procedural terrain's placement margins), every pivot condition in
     turn; the five thesis obstacles (kind i % 5) or, with ``unseen``, shapes never trained on
     (UNSEEN_SHAPES in turn: random rectangles, wedges, thin poles, profiles with several bumps)."""
     if n < 1:
@@ -101,8 +101,8 @@ def safety_scenarios(config: Config, n: int, seed: int = 2024, unseen: bool = Fa
         kind = kinds[i % len(kinds)]
         start, step = rng.uniform(0.0, 0.10), rng.uniform(l_lo, l_hi)
         probe = _unseen_obstacle(rng, kind, 0.0) if unseen else Obstacle.named(kind, center_y=0.0)
-        # the gap as procedural terrain places obstacles (terrain.place's margins): the stance feet at
-        # the start and the goal keep env.min_clearance, so every scene admits a safe swing
+        # the gap as procedural terrain places obstacles (terrain.place's margins): the foot at the
+        # start clears the default 2 cm margin with 5 mm to spare, so every scene admits a safe swing
         lo = start + foot + terrain.NEAR_MARGIN + probe.width / 2
         hi = start + step - terrain.FAR_MARGIN - probe.width / 2
         center = rng.uniform(lo, max(lo, hi))

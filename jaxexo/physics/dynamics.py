@@ -116,6 +116,9 @@ _FORWARD_HEAD = int(np.sum(_FORWARD < NUM_ACTIONS // 2))
 assert np.array_equal(_FORWARD, np.r_[0:_FORWARD_HEAD, NUM_ACTIONS - (len(_FORWARD) - _FORWARD_HEAD):NUM_ACTIONS])
 # m: a move "keeps" the clearance it starts with up to this rounding (vertical moves beside a wall).
 SHIELD_SLACK = 1e-6
+# Entries of ``ends`` from which NumPy's pruning pays (a batch of rows); for one heel's 19 moves the
+# unpruned call is cheaper: NumPy's cost there is its number of calls, not the arithmetic.
+_PRUNE_FROM = 2 * len(_FORWARD) * 16
 
 
 def forward_moves() -> np.ndarray:
@@ -157,11 +160,6 @@ def moves_keep_clearance(xp, p, heel_y, heel_z, ends, outline, over_moves=_stack
     return d_move >= xp.minimum(p.shield_clearance, c_here)[..., None] - SHIELD_SLACK
 
 
-# Entries of ``ends`` from which NumPy's pruning pays (a batch of rows); for one heel's 19 moves the
-# unpruned call is cheaper: NumPy's cost there is its number of calls, not the arithmetic.
-_PRUNE_FROM = 2 * len(_FORWARD) * 16
-
-
 def _moves_keep_clearance_pruned(p, here, c_here, ends, outline):
     """``moves_keep_clearance`` in NumPy with the same decisions, computing the exact swept distance
     only where the ends' clearances leave it open: a move whose end is closer than needed fails (the
@@ -199,15 +197,15 @@ def admissible_moves(xp, p, heel_y, heel_z, layout, over_moves=_stacked, clear=N
     ``over_moves(f, xs)`` maps f over the leading (move) axis of the arrays xs; the default evaluates
     all moves in one broadcast call, the JAX environment passes a loop (jax.lax.map), whose working set
     stays in cache (several times faster on a CPU for thousands of environments). ``clear`` (..., F),
-    when given, is the clearance condition already known: the NumPy generator passes all-True for a
-    heel whose foot is at least shield_clearance + step_size from the obstacle's bounding box, where no
+    when given, is the clearance condition already known: the NumPy generator passes True for the rows
+    whose foot is at least shield_clearance + step_size from the obstacle's bounding box, where no
     move of one step can come closer than shield_clearance (the distance is 1-Lipschitz)."""
     new = forward_ends(xp, p, heel_y, heel_z)                        # (..., F, 2)
     y = new[..., 0]
     if clear is None:
         clear = moves_keep_clearance(xp, p, heel_y, heel_z, new, layout.outline, over_moves)
     kin = kinematics.leg_state(xp, layout.pivot_y[..., None], new, p.thigh, p.shin)
-    angles = xp.stack([kin["hip_swing"], kin["knee_swing_angle"], kin["hip_stance"], kin["knee_stance_angle"]], axis=-1)
+    angles = kinematics.both_legs_angles(xp, kin)
     reachable = ~(kinematics.legs_outside_limits(xp, angles, p.hip_limits, p.knee_limits)
                   | kinematics.leg_too_long(xp, kin["leg_swing"], kin["leg_stance"], p.thigh, p.shin,
                                             p.leg_length_tolerance))
@@ -319,7 +317,7 @@ def transition(xp, p, prev, heel, time, visited_mid, layout, max_y=None) -> dict
     reached = goal_reached(xp, p, heel[..., 0], heel[..., 1], lay.goal_y)
 
     kin = kinematics.leg_state(xp, lay.pivot_y, heel, p.thigh, p.shin)
-    angles = xp.stack([kin["hip_swing"], kin["knee_swing_angle"], kin["hip_stance"], kin["knee_stance_angle"]], axis=-1)
+    angles = kinematics.both_legs_angles(xp, kin)
     limits_violated = kinematics.legs_outside_limits(xp, angles, p.hip_limits, p.knee_limits)
 
     traj = rewards.trajectory_terms(

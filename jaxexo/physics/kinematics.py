@@ -155,6 +155,13 @@ def joint_limit_violation(xp, hip_angle, knee_angle, hip_min, hip_max, knee_min,
     )
 
 
+def both_legs_angles(xp, state):
+    """(..., 4) [hip_swing, knee_swing, hip_stance, knee_stance] (rad) of a ``leg_state``: the layout
+    ``legs_outside_limits`` and the environment's info["joint_angles"] use."""
+    return xp.stack([state["hip_swing"], state["knee_swing_angle"], state["hip_stance"], state["knee_stance_angle"]],
+                    axis=-1)
+
+
 def legs_outside_limits(xp, angles, hip_limits, knee_limits):
     """Eq 2.50's condition for both legs: ``angles`` (..., 4) as [hip_swing, knee_swing, hip_stance,
     knee_stance] (rad); True where either leg has an angle outside its limits."""
