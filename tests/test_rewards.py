@@ -402,3 +402,66 @@ def test_env_hip_height(env_tools):
     out = env_tools.run([0.42, 0.0], RIGHT, p=p)          # heel at the pivot's y: hip at 1.0
     assert out["exo"][3] == -1.0
     assert env_tools.run([0.42, 0.0], RIGHT)["exo"][3] == 0.0   # default max_hip_z = 1.0
+
+
+# --------------------------------------------------------------------------------------------
+# The wearer's costs (not in the thesis): lift above what the clearance needs, and move time
+# --------------------------------------------------------------------------------------------
+
+
+def _two_link_angles(hip, heel, thigh, shin):
+    """Reference hip and knee angles of one leg by the law of cosines (independent of kinematics.py):
+    hip angle from the downward vertical, positive forward; knee <= 0 in flexion."""
+    d = np.asarray(heel, float) - np.asarray(hip, float)
+    r = min(float(np.hypot(*d)), thigh + shin)
+    to_heel = math.atan2(d[0], -d[1])                         # from the downward vertical, forward +
+    inner = math.acos(np.clip((thigh**2 + r**2 - shin**2) / (2 * thigh * r), -1, 1))
+    knee = -(math.pi - math.acos(np.clip((thigh**2 + shin**2 - r**2) / (2 * thigh * shin), -1, 1)))
+    return to_heel + inner, knee
+
+
+def test_wearer_lift_by_hand():
+    from jaxexo.physics.rewards import WEARER_TERMS, wearer_terms
+
+    assert WEARER_TERMS == ("lift", "move_time")
+    c = SimpleNamespace(shield_clearance=0.025, joint_speed=np.array([3.0, 4.0, 3.0, 4.0]))
+    heel = np.array([[0.4, 0.10], [0.4, 0.125], [0.4, 0.165], [0.9, 0.0]])
+    out = wearer_terms(np, c, heel=heel, top=np.full(4, 0.10), angles_prev=np.zeros((4, 4)), angles=np.zeros((4, 4)))
+    # below top + clearance: nothing; 4 cm above it: -0.04; no joint motion: no time
+    np.testing.assert_allclose(out[:, 0], [0.0, 0.0, -0.04, 0.0], atol=1e-12)
+    np.testing.assert_array_equal(out[:, 1], np.zeros(4))
+
+
+def test_wearer_move_time_matches_two_link_reference(env_tools):
+    """Through the environment: a move's time is the largest |dq| / v_max over both legs' hip and knee,
+    against a law-of-cosines reference of the joint angles at both ends."""
+    from jaxexo.physics import kinematics
+
+    p = env_tools.params
+    thigh, shin = float(p.thigh), float(p.shin)
+    for heel, action in (([0.30, 0.10], UP), ([0.20, 0.05], RIGHT), ([0.50, 0.20], DOWN)):
+        out = env_tools.run(heel, action)
+        new = np.asarray(out["info"]["heel"], float)
+        pivot = float(out["state"].layout.pivot_y)
+        q = []
+        for h in (np.asarray(heel, float), new):
+            hip = np.asarray(kinematics.hip_position(np, np.float64(pivot), h, thigh, shin), float)
+            sw = _two_link_angles(hip, h, thigh, shin)
+            st = _two_link_angles(hip, [pivot, 0.0], thigh, shin)
+            q.append(np.array([sw[0], sw[1], st[0], st[1]]))
+        speed = np.array([3.0, 4.0, 3.0, 4.0])      # the config's [device] defaults (hip, knee) x 2
+        expected = np.max(np.abs(q[1] - q[0]) / speed)
+        got = -float(np.asarray(out["info"]["wearer_terms"])[1])
+        assert expected > 0.003
+        assert got == pytest.approx(expected, rel=2e-3, abs=2e-5)
+
+
+def test_wearer_costs_enter_the_reward(env_tools):
+    """lift_cost and time_cost weigh the wearer's terms in the reward (0: the thesis reward)."""
+    p0 = env_tools.params
+    base = env_tools.run([0.40, 0.20], UP)
+    p1 = p0.replace(lift_cost=p0.lift_cost + 10.0, time_cost=p0.time_cost + 2.0)
+    out = env_tools.run([0.40, 0.20], UP, p=p1)
+    w = np.asarray(out["info"]["wearer_terms"])
+    assert w[0] < 0 and w[1] < 0
+    assert out["reward"] - base["reward"] == pytest.approx(10.0 * w[0] + 2.0 * w[1], rel=1e-4, abs=1e-6)

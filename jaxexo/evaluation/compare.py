@@ -131,19 +131,20 @@ def device_metrics(trajs, config) -> dict[str, np.ndarray]:
     A generator that stood still (the heel never leaves its start: a policy that learned not to move,
     e.g. the faithful thesis configs) has nothing to time: its swing counts as 0 s at zero velocity,
     within the limits; its success and goal figures already say it failed."""
-    from jaxexo.inference.swing_timing import time_swings, uniform_peaks
+    from jaxexo.inference.swing_timing import joint_jerk, time_swings, uniform_peaks
 
     trajs = list(trajs)
     n = len(trajs)
     moves = [i for i, t in enumerate(trajs) if np.any(np.asarray(t.heel) != np.asarray(t.heel)[0])]
     out = {"swing_s": np.zeros(n), "peak_hip_vel": np.zeros(n), "peak_knee_vel": np.zeros(n),
-           "within_limits": np.ones(n, bool), "uniform_peak_vel": np.zeros(n)}
+           "within_limits": np.ones(n, bool), "uniform_peak_vel": np.zeros(n), "joint_jerk": np.zeros(n)}
     if moves:
         timed = time_swings([trajs[i] for i in moves], config)
         out["swing_s"][moves] = [t.duration for t in timed]
         out["peak_hip_vel"][moves] = [max(t.peak_velocity[0], t.peak_velocity[2]) for t in timed]
         out["peak_knee_vel"][moves] = [max(t.peak_velocity[1], t.peak_velocity[3]) for t in timed]
         out["within_limits"][moves] = [t.within_limits for t in timed]
+        out["joint_jerk"][moves] = [joint_jerk(t) for t in timed]
         out["uniform_peak_vel"][moves] = [uniform_peaks(trajs[i])[0].max() for i in moves]
     return out
 
@@ -154,7 +155,10 @@ def summarize_device(m: dict[str, np.ndarray], mask: np.ndarray) -> dict:
     return {
         "swing_s_mean": float(m["swing_s"][mask].mean()),
         "swing_s_median": float(np.median(m["swing_s"][mask])),
+        "swing_s_p95": float(np.percentile(m["swing_s"][mask], 95)),
         "swing_s_max": float(m["swing_s"][mask].max()),
+        "joint_jerk_median": float(np.median(m["joint_jerk"][mask])),
+        "joint_jerk_p95": float(np.percentile(m["joint_jerk"][mask], 95)),
         "peak_hip_vel_deg_s_mean": float(d(m["peak_hip_vel"][mask].mean())),
         "peak_knee_vel_deg_s_mean": float(d(m["peak_knee_vel"][mask].mean())),
         "device_within_limits": float(m["within_limits"][mask].mean()),
@@ -183,6 +187,7 @@ def summarize(m: dict[str, np.ndarray], times_s: np.ndarray, mask: np.ndarray) -
         "min_clearance_m_worst": float(m["min_clearance"][mask].min()),
         "clearance_ok": float(m["clearance_ok"][mask].mean()),
         "peak_above_obstacle_m_median": float(np.median(m["peak_above"][mask])),
+        "peak_above_obstacle_m_p95": float(np.percentile(m["peak_above"][mask], 95)),
         "heel_backward_rate": float((m["backward"][mask] > BACKWARD_REPORT).mean()),
         "fallback_rate": float(m["fallback"][mask].mean()),
         "path_length_m_mean": float(m["path_length"][mask].mean()),
@@ -311,28 +316,37 @@ def markdown(report: dict, title: str, context: list[str]) -> str:
     return "\n".join(lines) + "\n"
 
 
-DEVICE_HEAD = ("| {what} | swing s mean | median | max | peak hip vel deg/s | peak knee vel deg/s | "
-               "within limits % | uniform-time peak deg/s (median) |\n|---|---:|---:|---:|---:|---:|---:|---:|")
+DEVICE_HEAD = ("| {what} | lift median cm | lift p95 cm | swing s mean | median | p95 | max | "
+               "joint jerk median rad²/s⁵ | p95 | peak hip vel deg/s | peak knee vel deg/s | "
+               "within limits % | uniform-time peak deg/s (median) |\n"
+               "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
 
 
-def _device_row(name: str, d: dict) -> str:
-    return (f"| {name} | {d['swing_s_mean']:.3f} | {d['swing_s_median']:.3f} | {d['swing_s_max']:.3f} | "
+def _device_row(name: str, r: dict) -> str:
+    d = r["device"]
+    return (f"| {name} | {100 * r['peak_above_obstacle_m_median']:.2f} | {100 * r['peak_above_obstacle_m_p95']:.2f} | "
+            f"{d['swing_s_mean']:.3f} | {d['swing_s_median']:.3f} | {d['swing_s_p95']:.3f} | {d['swing_s_max']:.3f} | "
+            f"{d['joint_jerk_median']:.3g} | {d['joint_jerk_p95']:.3g} | "
             f"{d['peak_hip_vel_deg_s_mean']:.0f} | {d['peak_knee_vel_deg_s_mean']:.0f} | "
             f"{100 * d['device_within_limits']:.1f} | {d['uniform_peak_joint_vel_deg_s_median']:.0f} |")
 
 
 def device_markdown(report: dict) -> list[str]:
-    """The device-timing table (jaxexo.inference.swing_timing): overall and by obstacle kind."""
-    lines = ["", "## Device timing (shortest rest-to-rest swing within the [device] joint limits)", "",
-             DEVICE_HEAD.format(what="generator")]
-    lines += [_device_row(name, r["device"]) for name, r in report.items() if "device" in r]
-    groups = list(next(iter(report.values()))["by_kind"])
-    for g in groups:
-        for name, r in report.items():
-            if "device" in r["by_kind"].get(g, {}):
-                lines.append(_device_row(f"{g} ({name})", r["by_kind"][g]["device"]))
-    lines += ["", "Peak velocities are those of the timed swing (both legs); the last column is the same path "
-              "at its uniform time stamps (1 s), which no joint drive follows."]
+    """What a wearer feels, per generator, overall, by obstacle kind (or family) and by pivot: the lift
+    (heel peak above the obstacle's highest point), the device timing (jaxexo.inference.swing_timing)
+    and the smoothness of the timed joint trajectories."""
+    lines = ["", "## Lift, device timing and smoothness (shortest rest-to-rest swing within the [device] "
+             "joint limits)", "", DEVICE_HEAD.format(what="generator")]
+    lines += [_device_row(name, r) for name, r in report.items() if "device" in r]
+    for key in ("by_kind", "by_pivot"):
+        for g in list(next(iter(report.values()))[key]):
+            for name, r in report.items():
+                if "device" in r[key].get(g, {}):
+                    lines.append(_device_row(f"{g} ({name})", r[key][g]))
+    lines += ["", "Lift: the heel's peak height above the obstacle's highest point. Joint jerk: integrated "
+              "squared third derivative of the four timed joint angles. Peak velocities are those of the "
+              "timed swing (both legs); the last column is the same path at its uniform time stamps (1 s), "
+              "which no joint drive follows."]
     return lines
 
 

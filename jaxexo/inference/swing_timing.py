@@ -568,6 +568,18 @@ def _finish(traj, e: dict, sp, limits: DeviceLimits, rate: float, t_opt: float, 
         notes=tuple(getattr(traj, "notes", ())) + tuple(notes))
 
 
+def joint_jerk(swing: TimedSwing) -> float:
+    """Integrated squared jerk of a timed swing's four joint angles (rad^2/s^5): the third finite
+    difference of the exported samples at the control rate, squared, summed over the joints, times
+    the period. What a wearer feels as the smoothness of the delivered motion."""
+    q = np.asarray(swing.joint_angles, dtype=np.float64)
+    if len(q) < 4:
+        return 0.0
+    dt = 1.0 / swing.rate
+    j = np.diff(q, n=3, axis=0) / dt**3
+    return float((j * j).sum() * dt)
+
+
 def uniform_peaks(traj) -> tuple[np.ndarray, np.ndarray]:
     """Peak |joint velocity| (4,) and |acceleration| (4,) of a trajectory as generated, at its own
     uniform time stamps (finite differences), for comparison with a timed swing."""
@@ -576,5 +588,5 @@ def uniform_peaks(traj) -> tuple[np.ndarray, np.ndarray]:
     return np.abs(fv).max(axis=0), np.abs(fa).max(axis=0)
 
 
-__all__ = ["DeviceLimits", "TimedSwing", "TimeLaw", "time_swing", "time_swings", "topp", "time_law",
+__all__ = ["DeviceLimits", "TimedSwing", "TimeLaw", "time_swing", "time_swings", "joint_jerk", "topp", "time_law",
            "max_speed_curve", "pchip_slopes", "pchip_eval", "leg_angles", "uniform_peaks"]

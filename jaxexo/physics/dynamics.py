@@ -294,7 +294,7 @@ def observation(xp, p, obs_mode: str, heel_y, heel_z, time, visited_mid, layout)
 def transition(xp, p, prev, heel, time, visited_mid, layout, max_y=None) -> dict:
     """Everything a step from heel ``prev`` to ``heel`` (..., 2) decides (thesis 2.1-2.5), for the
     JAX environment and the NumPy environment alike: collision, mid-goal, goal, kinematics, the 8 + 4
-    reward terms (eq 2.29-2.52), optional shaping, the reward and termination. ``time`` is the step
+    reward terms (eq 2.29-2.52), the wearer's costs (rewards.wearer_terms), optional shaping, the reward and termination. ``time`` is the step
     count after the move, ``visited_mid`` whether the mid-goal was visited before it, ``max_y`` the
     heel's largest y so far (None: ``prev``'s y).
 
@@ -318,6 +318,7 @@ def transition(xp, p, prev, heel, time, visited_mid, layout, max_y=None) -> dict
 
     kin = kinematics.leg_state(xp, lay.pivot_y, heel, p.thigh, p.shin)
     angles = kinematics.both_legs_angles(xp, kin)
+    angles_prev = kinematics.both_legs_angles(xp, kinematics.leg_state(xp, lay.pivot_y, prev, p.thigh, p.shin))
     limits_violated = kinematics.legs_outside_limits(xp, angles, p.hip_limits, p.knee_limits)
 
     traj = rewards.trajectory_terms(
@@ -326,16 +327,18 @@ def transition(xp, p, prev, heel, time, visited_mid, layout, max_y=None) -> dict
     exo = rewards.exo_terms(
         xp, p, hip_z=kin["hip"][..., 1], leg_swing=kin["leg_swing"], leg_stance=kin["leg_stance"],
         limits_violated=limits_violated)
+    wearer = rewards.wearer_terms(xp, p, heel=heel, top=lay.height, angles_prev=angles_prev, angles=angles)
     done = terminated(xp, p, reached, collided)
     mid = xp.stack([mid_y, mid_z], axis=-1)
     goal = xp.stack([lay.goal_y, 0.0 * lay.goal_y], axis=-1)
     shaping = rewards.shaping_reward(
         xp, p, rewards.progress_potential(xp, prev, mid, goal, visited_mid),
         rewards.progress_potential(xp, heel, mid, goal, visited), done)
-    reward = rewards.total_reward(xp, p, traj, exo) + shaping
+    reward = rewards.total_reward(xp, p, traj, exo, wearer) + shaping
     info = {
         "traj_terms": traj,
         "exo_terms": exo,
+        "wearer_terms": wearer,
         "shaping": shaping,
         "clearance": clearance,
         "collision": collided,

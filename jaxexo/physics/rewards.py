@@ -79,6 +79,27 @@ def exo_terms(xp, c, *, hip_z, leg_swing, leg_stance, limits_violated):
     return xp.stack([e0, e1, e2, e3], axis=-1)
 
 
+# Costs a wearer feels (not in the thesis; added to eq 2.1's reward like the shaping term). The thesis
+# reward was designed for an agent that could walk into the obstacle; under the shield (issue 11) a
+# greedy move can no longer come within the clearance, so the reward is free to pay for how the swing
+# feels: how high the foot is lifted and how long the device takes for each move.
+WEARER_TERMS = (
+    "lift",           # m of heel height above the obstacle's top plus the shield's clearance
+    "move_time",      # s the joint drives need for the move at their velocity limits
+)
+
+
+def wearer_terms(xp, c, *, heel, top, angles_prev, angles):
+    """The wearer's costs (..., 2), both <= 0: minus the heel's height above what the clearance needs
+    over the obstacle's highest point (top + ``c.shield_clearance``; nothing below it), and minus the
+    move's time at the drives' velocity limits, max over the four joints of |dq| / v_max (the
+    joint-space distance of the move over ``c.joint_speed`` = (hip, knee, hip, knee) rad/s), so that a
+    sum over the swing approximates its timed duration at the device."""
+    lift = xp.maximum(heel[..., 1] - (top + c.shield_clearance), 0.0)
+    move_time = xp.max(xp.abs(angles - angles_prev) / c.joint_speed, axis=-1)
+    return xp.stack([-lift, -move_time], axis=-1)
+
+
 def progress_potential(xp, heel, mid, goal, visited_mid):
     """Potential for optional shaping (not in the thesis): minus the path length still to go, through
     the mid-goal until it is visited, then straight to the goal (m). Shaping with
@@ -102,6 +123,10 @@ def shaping_reward(xp, c, phi_prev, phi_next, terminated):
     return c.progress_shaping * (gamma * xp.where(terminated, 0.0, phi_next) - phi_prev)
 
 
-def total_reward(xp, c, traj, exo):
-    """Eq 2.1 / 2.39 / 2.52: alpha . T + beta . E with the normalised weights held in ``c``."""
-    return xp.sum(traj * c.traj_weights, axis=-1) + xp.sum(exo * c.exo_weights, axis=-1)
+def total_reward(xp, c, traj, exo, wearer=None):
+    """Eq 2.1 / 2.39 / 2.52: alpha . T + beta . E with the normalised weights held in ``c``, plus the
+    wearer's costs weighted by ``c.lift_cost`` (1/m) and ``c.time_cost`` (1/s) (0, 0: the thesis)."""
+    r = xp.sum(traj * c.traj_weights, axis=-1) + xp.sum(exo * c.exo_weights, axis=-1)
+    if wearer is not None:
+        r = r + c.lift_cost * wearer[..., 0] + c.time_cost * wearer[..., 1]
+    return r
