@@ -49,6 +49,8 @@ Decisions, each made here:
 
 from __future__ import annotations
 
+import copy
+
 import functools
 from pathlib import Path
 
@@ -239,6 +241,18 @@ class CFFTG:
         via = np.stack([np.stack([arr.start_y, np.zeros(b)], -1), apex, np.stack([arr.goal_y, np.zeros(b)], -1)], 1)
         return paths, via, plans, gave_up, checks
 
+    def at_clearance(self, clearance: float | None) -> "CFFTG":
+        """This generator for swings that must keep ``clearance`` (m; None: env.min_clearance): the
+        verdict judges against it, and the plan's margin keeps the same excess above it as the
+        config's (reward.safety_distance over env.min_clearance)."""
+        c = dynamics.check_clearance(clearance, self.config.env.min_clearance)
+        if c is None:
+            return self
+        out = copy.copy(self)
+        out.sp = dynamics.with_clearance(self.sp, c)
+        out.margin = self.margin + (c - self.config.env.min_clearance)
+        return out
+
     # Trajectories -----------------------------------------------------------------------------------
     def _finish(self, scenes, n_points, duration, strict) -> TrajectoryBatch:
         paths, via, plans, gave_up, checks = self.plan(scenes, n_points)
@@ -254,19 +268,21 @@ class CFFTG:
 
     def generate(self, obstacle: geometry.Obstacle, *, pivot: str = "obstacle", pivot_y: float | None = None,
                  start_y: float = 0.0, step_length: float = 0.70, n_points: int = DEFAULT_POINTS,
-                 duration: float = DEFAULT_DURATION, strict: bool = False) -> Trajectory:
+                 duration: float = DEFAULT_DURATION, strict: bool = False,
+                 clearance: float | None = None) -> Trajectory:
         """One checked trajectory (metres, radians, seconds); ``strict`` raises TrajectoryError instead
-        of returning one that fails a check."""
+        of returning one that fails a check; ``clearance`` (m) the margin to keep (``at_clearance``)."""
         n_points, duration = _check_options(n_points, duration)
-        return self._finish([self.scene(obstacle, pivot, pivot_y, start_y, step_length)], n_points, duration,
+        return self.at_clearance(clearance)._finish([self.scene(obstacle, pivot, pivot_y, start_y, step_length)], n_points, duration,
                             strict)[0]
 
     def generate_batch(self, obstacles, *, pivot="obstacle", pivot_y=None, start_y=0.0, step_length=0.70,
                        n_points: int = DEFAULT_POINTS, duration: float = DEFAULT_DURATION,
-                       strict: bool = False) -> TrajectoryBatch:
-        """Trajectories for many scenarios, vectorised; every option is one value or one per obstacle."""
+                       strict: bool = False, clearance: float | None = None) -> TrajectoryBatch:
+        """Trajectories for many scenarios, vectorised; every option is one value or one per obstacle
+        (``clearance`` one value, as in ``generate``)."""
         n_points, duration = _check_options(n_points, duration)
-        return self._finish(self.scenes(obstacles, pivot, pivot_y, start_y, step_length), n_points, duration,
+        return self.at_clearance(clearance)._finish(self.scenes(obstacles, pivot, pivot_y, start_y, step_length), n_points, duration,
                             strict)
 
     def scenes(self, obstacles, pivot="obstacle", pivot_y=None, start_y=0.0, step_length=0.70):

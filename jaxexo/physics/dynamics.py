@@ -96,6 +96,40 @@ def scalar_params(cfg: Config) -> types.SimpleNamespace:
     return types.SimpleNamespace(**out)
 
 
+# m: the largest clearance a caller may ask of a swing (``generate(..., clearance=C)``). The obstacles
+# jaxexo trains on reach 0.28 m, and a heel lifted 10 cm above such a top is near the hip and knee
+# limits of the default leg; beyond that the clearance is a different task (stepping onto it).
+MAX_CLEARANCE = 0.10
+
+
+def check_clearance(clearance, min_clearance: float) -> float | None:
+    """The clearance (m) a caller asks of a swing, validated: None (the config's env.min_clearance), or
+    a number in [min_clearance, MAX_CLEARANCE]. Raises ValueError naming ``clearance``."""
+    if clearance is None:
+        return None
+    if isinstance(clearance, bool) or not isinstance(clearance, (int, float, np.integer, np.floating)):
+        raise TypeError(f"clearance: expected a number of metres, got {type(clearance).__name__}")
+    c = float(clearance)
+    if not math.isfinite(c) or c < float(min_clearance) - 1e-12 or c > MAX_CLEARANCE:
+        raise ValueError(f"clearance must be between env.min_clearance = {float(min_clearance):g} m and "
+                         f"{MAX_CLEARANCE:g} m, got {clearance!r}")
+    return c
+
+
+def with_clearance(p, clearance: float | None):
+    """The parameter view ``p`` (``numpy_params`` or ``scalar_params``) for a swing that must keep
+    ``clearance`` (m; None: unchanged): the verdict's margin ``min_clearance`` becomes it, and the shield
+    keeps the same excess above it as the config's (``shield_clearance - min_clearance``, the budget
+    the smoothed curve may cut)."""
+    if clearance is None:
+        return p
+    extra = clearance - float(p.min_clearance)
+    cast = (lambda v: np.asarray(v, dtype=np.asarray(p.min_clearance).dtype)) if isinstance(
+        p.min_clearance, np.ndarray) else float
+    return types.SimpleNamespace(**{**vars(p), "min_clearance": cast(clearance),
+                                    "shield_clearance": cast(float(p.shield_clearance) + extra)})
+
+
 # --------------------------------------------------------------------------------------------
 # Transition rules (thesis 2.1-2.2)
 # --------------------------------------------------------------------------------------------
