@@ -12,8 +12,8 @@ For a fixed penalty weight lambda the spline's coefficients a minimise
 ||W^1/2 (B a - P)||^2 + lambda ||D a||^2 = a' H a - 2 a' B' W P + const (P the agent's points).
 A correction da that moves the sampled curve E a by at least ``need_k`` along direction w_k at the
 samples of constraint k, at the least cost da' H da, is da = H^-1 sum_k mu_k F_k with F_k = E' w_k
-and mu >= 0 the solution of the dual  min 1/2 mu' A mu - need' mu, A_kl = F_k' H^-1 F_l  (solved by
-coordinate ascent: a few constraints per round). In the Demmler-Reinsch basis of
+and mu >= 0 the solution of the dual  min 1/2 mu' A mu - need' mu, A_kl = F_k' H^-1 F_l  (an active-set
+solve: a few constraints per round). In the Demmler-Reinsch basis of
 jaxexo.inference.smoothing, H^-1 is diag(1 / (1 + lambda d)), so A costs a few small products.
 Constraints, each round, at the samples that fail:
 - clearance: the foot at a sample moves along the outward normal of the foot-obstacle distance (its
@@ -37,7 +37,7 @@ from jaxexo.physics import geometry, swept
 ROUNDS = 4
 SLACK = 1e-3          # m asked above the margin, so that the next round's curve does not land on it
 _GROW = 1.2           # each round asks this multiple of the shortfall (rounding of the normals)
-_DUAL_SWEEPS = 60
+_ACTIVE_SET_STEPS = 8
 _NORMAL_EPS = 1e-4    # m, central-difference step of the clearance gradient
 _MIN_DIAG = 1e-9      # relative: constraints with less freedom than this are left to the retries
 MAX_SHIFT = 0.10      # m: a correction moving a sample further than this is not a small one; not made
@@ -55,15 +55,21 @@ def _outward(path_points, foot_length, outline):
 
 
 def _dual(a: np.ndarray, need: np.ndarray) -> np.ndarray:
-    """mu >= 0 minimising 1/2 mu' a mu - need' mu (coordinate ascent; a is small and positive definite)."""
+    """mu >= 0 minimising 1/2 mu' a mu - need' mu (a small, positive semi-definite): an active-set
+    solve, every constraint active first and the ones whose multiplier comes out negative dropped."""
     mu = np.zeros(len(need))
     diag = np.diag(a)
     # A constraint the spline cannot meet (no freedom along it: a path smoothed to its straight line
     # keeps only the linear modes) gets no multiplier; the verdict then sends the path to the retries.
-    live = np.flatnonzero(diag > _MIN_DIAG * max(float(diag.max()), 1e-300))
-    for _ in range(_DUAL_SWEEPS):
-        for k in live:
-            mu[k] = max(0.0, mu[k] + (need[k] - a[k] @ mu) / diag[k])
+    act = np.flatnonzero(diag > _MIN_DIAG * max(float(diag.max()), 1e-300))
+    for _ in range(_ACTIVE_SET_STEPS):
+        if act.size == 0:
+            break
+        sol = np.linalg.lstsq(a[np.ix_(act, act)], need[act], rcond=None)[0]
+        if np.all(sol >= 0.0):
+            mu[act] = sol
+            break
+        act = act[sol > 0.0]
     return mu
 
 
