@@ -23,6 +23,10 @@ def _temp_prefix(path: Path) -> str:
 TEMP_SUFFIX = ".tmp"
 
 
+class SymlinkRefused(ValueError):
+    """A file jaxexo would write through a symbolic link it did not create."""
+
+
 def _named(e: OSError, path: Path, what: str) -> OSError:
     # write() errors (ENOSPC, EFBIG) carry no file name: name the file being written.
     return OSError(e.errno, f"could not {what} {path}: {e.strerror}") if e.filename is None else e
@@ -66,7 +70,15 @@ def append_line(path: str | Path, text: str) -> None:
     last checkpoint (jaxexo.train.driver does)."""
     path = Path(path)
     try:
-        with open(path, "a", encoding="utf-8") as f:
+        # O_NOFOLLOW: a log replaced by a symbolic link is never appended to through it.
+        fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW, 0o644)
+    except OSError as e:
+        if path.is_symlink():
+            raise SymlinkRefused(f"{path} is a symbolic link; jaxexo writes no file through a link it did not "
+                                 "make: remove the link") from None
+        raise _named(e, path, "append to") from None
+    try:
+        with os.fdopen(fd, "a", encoding="utf-8") as f:
             f.write(text)
             f.flush()
             os.fsync(f.fileno())

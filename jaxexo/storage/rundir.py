@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import stat
 from pathlib import Path
 
 from jaxexo.config import ConfigError
@@ -54,11 +55,20 @@ def run_lock(directory: str | Path, what: str, create: bool = True):
     if not create and not directory.is_dir():
         missing = "no sweep to resume" if what == "sweep" else "no checkpoint to resume from"
         raise RunDirError(f"--resume: {directory} does not exist: {missing}")
+    lock = directory / LOCK_NAME
     try:
         directory.mkdir(parents=True, exist_ok=True)
-        fd = os.open(directory / LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o644)
+        # O_NOFOLLOW: a symbolic link planted at the lock's name is never followed (the pid line
+        # would overwrite whatever file it points to).
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
     except OSError as e:
+        if lock.is_symlink():
+            raise RunDirError(f"--out: {lock} is a symbolic link; jaxexo writes no file through a link it did "
+                              "not make: remove the link") from None
         raise RunDirError(f"--out: cannot use {directory} as a run directory ({e.strerror})") from None
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        raise RunDirError(f"--out: {lock} is not a regular file; remove it")
     try:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
