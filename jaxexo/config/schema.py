@@ -47,6 +47,8 @@ CONTROLS = ("off_policy", "on_policy")
 TARGETS = ("hard", "polyak")
 
 INT32_MAX = 2**31 - 1   # integers that reach JAX as int32 (or index a scan) stay below this
+MAX_CONTROL_RATE = 10_000.0   # Hz: a timed export's rate ([device] control_rate, jaxexo generate --rate)
+MAX_SWING_DURATION = 60.0     # s: one swing (about 1 s on today's exoskeletons), not a walk
 SECTIONS = ("env", "kinematics", "reward", "layout", "train", "device")
 # Sections that other commands read; a train config refuses them, saying where they belong.
 OTHER_COMMANDS = {"sweep": "it is read by jaxexo sweep (a sweep file, see configs/sweeps/*.toml)",
@@ -68,7 +70,7 @@ def _deg(d: float) -> float:
 # --------------------------------------------------------------------------------------------
 
 
-def _number(path: str, v: Any, *, positive=False, nonneg=False, integer=False, hi=None) -> float:
+def _number(path: str, v: Any, *, positive=False, nonneg=False, integer=False, lo=None, hi=None) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise ConfigError(f"{path}: expected a number, got {v!r}")
     if integer and not (isinstance(v, int) or float(v).is_integer()):
@@ -79,15 +81,17 @@ def _number(path: str, v: Any, *, positive=False, nonneg=False, integer=False, h
         raise ConfigError(f"{path}: must be > 0, got {v!r}")
     if nonneg and v < 0:
         raise ConfigError(f"{path}: must be >= 0, got {v!r}")
+    if lo is not None and v < lo:
+        raise ConfigError(f"{path}: must be >= {lo}, got {v!r}")
     if hi is not None and v > hi:
         raise ConfigError(f"{path}: must be <= {hi}, got {v!r}")
     return int(v) if integer else float(v)
 
 
-def number(*, positive=False, nonneg=False, integer=False, hi=None) -> Callable:
+def number(*, positive=False, nonneg=False, integer=False, lo=None, hi=None) -> Callable:
     if integer and hi is None:
         raise TypeError("an integer field needs an upper bound (hi)")
-    return lambda path, v: _number(path, v, positive=positive, nonneg=nonneg, integer=integer, hi=hi)
+    return lambda path, v: _number(path, v, positive=positive, nonneg=nonneg, integer=integer, lo=lo, hi=hi)
 
 
 def fraction(positive: bool = False) -> Callable:
@@ -277,22 +281,28 @@ class EnvConfig:
     # never comes closer than min_clearance to the obstacle, and the heel never moves backward by
     # more than backward_tolerance. The environment's success flag and the generators' ``ok`` use both.
     min_clearance: float = declare(outcome.DEFAULT_MIN_CLEARANCE, number(nonneg=True), unit="m")
-    backward_tolerance: float = declare(outcome.DEFAULT_BACKWARD_TOLERANCE, number(nonneg=True), unit="m")
+    # At most 10 m: any value beyond env.bounds_y's span turns the check off, and the thesis configs
+    # write 10 m for that.
+    backward_tolerance: float = declare(outcome.DEFAULT_BACKWARD_TOLERANCE, number(nonneg=True, hi=10.0), unit="m")
     # The shield (issue 11; not in the thesis): the agent chooses only among admissible moves
     # (jaxexo.physics.dynamics.admissible_moves): no backward component, the exact clearance of the
     # whole move at least shield_clearance, joint limits and reach respected at its end. The same
     # mask in training, evaluation and the NumPy generator; off reproduces the thesis's free choice.
     shield: bool = declare(False, boolean, role="static+leaf", dtype="bool")
     # m: the clearance a shielded move keeps; above min_clearance so that the smoothed curve, which
-    # cuts corners, still keeps min_clearance without falling back to the raw polyline.
-    shield_clearance: float = declare(0.025, number(nonneg=True), unit="m")
+    # cuts corners, still keeps min_clearance without falling back to the raw polyline. With the shield
+    # on it must be at least min_clearance (validate); at most 10 cm, above that no step over an
+    # obstacle remains admissible.
+    shield_clearance: float = declare(0.025, number(nonneg=True, hi=0.10), unit="m")
 
 
 @dataclass(frozen=True)
 class KinematicsConfig:
-    thigh: float = declare(0.50, number(positive=True), unit="m")
-    shin: float = declare(0.50, number(positive=True), unit="m")
-    foot_length: float = declare(0.20, number(positive=True), unit="m")   # heel-to-toe
+    # Human segments (an adult's thigh or shin is about 0.4-0.55 m, a foot 0.2-0.3 m): at most 1 m each,
+    # a foot at most 0.5 m.
+    thigh: float = declare(0.50, number(positive=True, hi=1.0), unit="m")
+    shin: float = declare(0.50, number(positive=True, hi=1.0), unit="m")
+    foot_length: float = declare(0.20, number(positive=True, hi=0.5), unit="m")   # heel-to-toe
     hip_limits: tuple[float, float] = declare((_deg(-30.0), _deg(115.0)), range_(), unit="rad")
     knee_limits: tuple[float, float] = declare((_deg(-100.0), 0.0), range_(), unit="rad")
 
@@ -312,14 +322,16 @@ class DeviceConfig:
 
     Read by the NumPy timing code only: every field is a Python-side setting, never a pytree leaf."""
 
-    joint_velocity: tuple[float, float] = declare((3.0, 4.0), vector(2, positive=True), unit="rad/s",
-                                                  role="setting")          # (hip, knee)
-    joint_acceleration: tuple[float, float] = declare((15.0, 20.0), vector(2, positive=True), unit="rad/s^2",
-                                                      role="setting")      # (hip, knee)
-    # a swing never takes less (0: as fast as the limits allow)
-    min_swing_duration: float = declare(0.0, number(nonneg=True), unit="s", role="setting")
-    # default rate of timed exports (jaxexo generate --rate)
-    control_rate: float = declare(100.0, number(positive=True), unit="Hz", role="setting")
+    # Bounds: a drive slower than 0.1 rad/s (6 deg/s) or 0.1 rad/s^2 cannot swing a leg within a
+    # minute; 50 rad/s and 1000 rad/s^2 are beyond any joint drive.
+    joint_velocity: tuple[float, float] = declare((3.0, 4.0), vector(2, positive=True, lo=0.1, hi=50.0),
+                                                  unit="rad/s", role="setting")          # (hip, knee)
+    joint_acceleration: tuple[float, float] = declare((15.0, 20.0), vector(2, positive=True, lo=0.1, hi=1000.0),
+                                                      unit="rad/s^2", role="setting")      # (hip, knee)
+    # a swing never takes less (0: as fast as the limits allow); at most MAX_SWING_DURATION
+    min_swing_duration: float = declare(0.0, number(nonneg=True, hi=MAX_SWING_DURATION), unit="s", role="setting")
+    # default rate of timed exports (jaxexo generate --rate); at most MAX_CONTROL_RATE
+    control_rate: float = declare(100.0, number(positive=True, hi=MAX_CONTROL_RATE), unit="Hz", role="setting")
 
 
 def _penalty(default):
@@ -806,6 +818,9 @@ def validate(cfg: Config) -> None:
     goal_far = lay.start_shift[1] + lay.step_length[1] + env.goal_tolerance[0]
     if env.bounds_y[1] <= goal_far:
         raise ConfigError(f"env.bounds_y: the upper bound must lie beyond the goal region ({goal_far:.3f} m)")
+    if env.shield and env.shield_clearance < env.min_clearance:
+        raise ConfigError(f"env.shield_clearance: {env.shield_clearance} m is below env.min_clearance = "
+                          f"{env.min_clearance} m; the shield must keep at least the margin that a safe swing needs")
     if rew.safety_distance < env.min_clearance:
         raise ConfigError(f"reward.safety_distance: {rew.safety_distance} m is below env.min_clearance = "
                           f"{env.min_clearance} m; the safety term (eq 2.35) must pay the policy to keep the "

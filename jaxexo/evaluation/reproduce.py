@@ -195,6 +195,21 @@ def run_names(models=THESIS_MODELS, variant: str = "both") -> list[str]:
     return [m if v == "faithful" else f"{m}-learns" for m in models for v in kinds]
 
 
+def check_reproduce_options(out, n, results_dir=None) -> None:
+    """Every option of ``jaxexo reproduce`` that no model needs to be trained to judge, checked before
+    any work: --n, and --out and --results naming folders (not files)."""
+    if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+        raise ValueError(f"--n: test scenarios per model must be an integer >= 1, got {n!r}")
+    for option, folder in (("--out", out), ("--results", results_dir)):
+        if folder is None:
+            continue
+        q = Path(folder)
+        while not q.exists() and q != q.parent:
+            q = q.parent
+        if q.exists() and not q.is_dir():
+            raise ValueError(f"{option}: {q} is a file, not a folder (for {folder})")
+
+
 def _compact(report: dict) -> dict:
     """A generator's figures without the per-(kind, pivot) groups and with at most 5 failures, so
     that the committed JSON stays small (the device figures only overall)."""
@@ -212,6 +227,7 @@ def run_reproduce(out: str | Path, models=THESIS_MODELS, n: int = 1000, seed: in
     OUT/reproduce.{md,json}; returns the results. ``variant``: "faithful", "learns" or "both";
     ``batch_size``: scenarios of the timed batch for the models compared with CFFTG; ``results_dir``:
     also write the tables as a benchmark result (reproduce_<date>_<machine>.{json,md})."""
+    check_reproduce_options(out, n, results_dir)
     from jaxexo.baselines import CFFTG
     from jaxexo.evaluation.compare import WithFallback, evaluate_generators, make_scenarios
     from jaxexo.inference import TrajectoryGenerator
