@@ -348,3 +348,72 @@ def test_every_size_from_input_is_bounded_before_allocating(generator):
     slow = DeviceLimits((3.0, 4.0, 3.0, 4.0), (15.0, 20.0, 15.0, 20.0), min_duration=1e6)
     with pytest.raises(ValueError, match="samples, more than"):
         time_swing(traj, generator.config, limits=slow)
+
+
+# --------------------------------------------------------------------------------------------
+# Configs: one default, every shipped config unchanged in meaning, physical bounds
+# --------------------------------------------------------------------------------------------
+
+def test_an_empty_config_config_and_the_packaged_default_are_one_default(tmp_path):
+    from jaxexo.config import Config, load_config, packaged_config
+
+    default = load_config(packaged_config("default"))
+    empty = tmp_path / "empty.toml"
+    empty.write_text("")
+    assert Config() == default == config_from_dict({}) == load_config(empty) == load_config("/dev/null")
+    assert load_config(ROOT / "configs" / "default.toml") == default
+
+
+def test_the_environment_defaults_to_the_default_model():
+    pytest.importorskip("jax")
+    from jaxexo.config import Config
+    from jaxexo.env import ExoStepEnv
+
+    assert ExoStepEnv().config == Config()
+
+
+def test_every_shipped_config_resolves_as_it_did_before_the_defaults_changed():
+    """tests/data/resolved_configs.json was generated from main before the schema's declared defaults
+    became the default model's: every config file (and every sweep member) means what it meant."""
+    sys.path.insert(0, str(ROOT / "tests"))
+    from resolved_snapshot import SNAPSHOT, resolved
+
+    snap = json.loads(SNAPSHOT.read_text())
+    now = resolved()
+    assert sorted(now["configs"]) == sorted(snap["configs"]) and sorted(now["sweeps"]) == sorted(snap["sweeps"])
+    for name, text in snap["configs"].items():
+        assert now["configs"][name] == text, name
+    for name, digests in snap["sweeps"].items():
+        assert now["sweeps"][name] == digests, name
+
+
+def test_the_tests_legacy_base_is_the_former_schema_defaults():
+    """The tests' raw configs are stated on top of conftest.legacy_raw: the former Config()."""
+    from jaxexo.config.toml_io import config_to_toml
+
+    from conftest import legacy_raw
+
+    snap = json.loads((ROOT / "tests" / "data" / "resolved_configs.json").read_text())
+    assert config_to_toml(config_from_dict(legacy_raw({}))) == snap["schema_defaults"]
+
+
+@pytest.mark.parametrize("raw, message", [
+    ({"env": {"backward_tolerance": 100}}, r"env\.backward_tolerance: must be <= 10"),
+    ({"env": {"shield_clearance": 5.0}}, r"env\.shield_clearance: must be <= 0.1"),
+    ({"env": {"shield_clearance": 0.001}}, r"env\.shield_clearance: 0.001 m is below env\.min_clearance"),
+    ({"kinematics": {"thigh": 1e9}}, r"kinematics\.thigh: must be <= 1.0"),
+    ({"kinematics": {"shin": 2.0}}, r"kinematics\.shin: must be <= 1.0"),
+    ({"kinematics": {"foot_length": 3.0}}, r"kinematics\.foot_length: must be <= 0.5"),
+    ({"device": {"joint_velocity": [1e-9, 1e-9]}}, r"device\.joint_velocity\[0\]: must be >= 0.1"),
+    ({"device": {"joint_acceleration": [1e9, 20.0]}}, r"device\.joint_acceleration\[0\]: must be <= 1000"),
+    ({"device": {"min_swing_duration": 1e9}}, r"device\.min_swing_duration: must be <= 60"),
+    ({"device": {"control_rate": 1e12}}, r"device\.control_rate: must be <= 10000"),
+])
+def test_physically_meaningless_settings_are_refused_naming_the_field(raw, message):
+    with pytest.raises(ConfigError, match=message):
+        config_from_dict(raw)
+
+
+def test_shield_clearance_below_min_clearance_is_accepted_only_without_the_shield():
+    cfg = config_from_dict({"env": {"shield": False, "shield_clearance": 0.001}})
+    assert cfg.env.shield_clearance == 0.001
