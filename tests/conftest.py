@@ -99,7 +99,7 @@ def get_mixed_config():
     if "config" not in _CACHE:
         from jaxexo.config import config_from_dict
 
-        _CACHE["config"] = config_from_dict(copy.deepcopy(MIXED_RAW))
+        _CACHE["config"] = config_from_dict(legacy_raw(copy.deepcopy(MIXED_RAW)))
     return _CACHE["config"]
 
 

@@ -30,7 +30,7 @@ from jaxexo.storage.checkpoint import CheckpointError, pack_checkpoint, unpack_c
 from jaxexo.storage.policy_file import PolicyFileError, load_policy, policy_checksum
 from jaxexo.storage.rundir import LOCK_NAME, RunDirError, run_lock
 
-from conftest import ROOT, jax_compilation_cache
+from conftest import ROOT, jax_compilation_cache, legacy_raw
 
 # The tiny config of tests/test_train.py: backward-view Watkins Q(lambda), 6 updates in 3 chunks of 2.
 TINY_N, TINY_T, TINY_UPDATES = 64, 8, 6
@@ -50,7 +50,7 @@ SEED = 3
 def tiny_config(**train):
     raw = json.loads(json.dumps(TINY_RAW))
     raw["train"].update(train)
-    return config_from_dict(raw)
+    return config_from_dict(legacy_raw(raw))
 
 
 def cli(*args):
