@@ -75,7 +75,7 @@ CHECK_MARGIN = 1e-3        # exported samples must stay within (1 - this) of eac
 LOCAL_PASSES = 6           # local corrections of the law where exported samples exceed a limit ...
 MAX_SLOWDOWNS = 12         # ... then uniform slow-downs (the safety net)
 ARC_TABLE_PER_SAMPLE = 32  # arc-length table points per sample interval
-MAX_SAMPLES = 100_000      # exported samples of one swing (10 s at 10 kHz): refused beyond, before allocating
+BYTES_PER_SAMPLE = 1024    # timing holds about 500 B per exported sample (measured); the bound counts twice that
 X_CAP = 1e6                # 1/s^2: cap on s'^2 where no joint moves (s' <= 1000 /s)
 
 
@@ -498,6 +498,14 @@ def _topp_laws(paths, idx, caps, vmax, amax) -> list[TimeLaw]:
     return [out[i] for i in idx]
 
 
+def max_samples() -> int:
+    """The most samples one timed swing may have: half the machine's memory (8 GiB if unknown) at
+    BYTES_PER_SAMPLE, and at least 100,000 (10 s at 10 kHz)."""
+    from jaxexo.config.memory import machine_memory_bytes
+
+    return max(100_000, (machine_memory_bytes() or 8 * 2**30) // 2 // BYTES_PER_SAMPLE)
+
+
 def _is_trajectory(t) -> bool:
     return hasattr(t, "heel") and hasattr(t, "scene")
 
@@ -520,10 +528,10 @@ def _evaluate(traj, heel, path, law: TimeLaw, slow: float, sp, limits: DeviceLim
     scale = max(1.0, limits.min_duration / law.duration) * slow
     cur = law.slowed(scale)
     n = cur.duration * rate
-    if not n < MAX_SAMPLES:     # bounded before anything is allocated (an inf or NaN is refused too)
+    if not n < max_samples():     # bounded before anything is allocated (an inf or NaN is refused too)
         raise ValueError(f"rate: a {cur.duration:.4g} s swing at {rate:g} Hz needs {n:.4g} samples, more than "
-                         f"{MAX_SAMPLES}; lower the rate or check the device limits (joint_velocity, "
-                         "joint_acceleration, min_swing_duration)")
+                         f"half this machine's memory holds ({max_samples()}); lower the rate or check the device "
+                         "limits (joint_velocity, joint_acceleration, min_swing_duration)")
     periods = max(2, math.ceil(n - 1e-9))
     cur = cur.slowed(periods / (cur.duration * rate))      # whole control periods: never faster
     t = np.arange(periods + 1) / rate
