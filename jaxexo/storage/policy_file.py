@@ -151,8 +151,8 @@ def _check_archive(path: Path) -> None:
     pickle and suggest allow_pickle), and no member's header claims more data than the member holds
     (a crafted shape of 10^12 would be allocated before the read fails)."""
     if not zipfile.is_zipfile(path):
-        raise PolicyFileError(f"{path}: not a jaxexo policy (policy.npz is a zip archive of arrays; this file "
-                              "is not one)")
+        raise PolicyFileError(f"{path}: not a jaxexo policy: not a readable policy file (truncated or corrupt, "
+                              "or not the zip archive of arrays that policy.npz is)")
     try:
         with zipfile.ZipFile(path) as zf:
             for info in zf.infolist():
