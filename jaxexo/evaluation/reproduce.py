@@ -32,6 +32,7 @@ import json
 from pathlib import Path
 
 from jaxexo.config import PIVOT_CONDITIONS, load_config, packaged_config
+from jaxexo.storage.atomic import atomic_write
 
 THESIS_MODELS = ("a", "b", "c", "1", "2", "3", "final")
 VARIANTS = ("faithful", "learns")
@@ -281,14 +282,14 @@ def run_reproduce(out: str | Path, models=THESIS_MODELS, n: int = 1000, seed: in
                          "test_epsilon": eps, "model": model_of(name), "variant": variant_of(name),
                          "train_seconds": ev["train_seconds"], "episodes": ev["episodes"],
                          "env_steps": ev.get("env_steps"), "eval_json": {k: ev[k] for k in ("accuracy", "success")}}
-        entry.write_text(json.dumps({"key": key, "train_seconds": ev["train_seconds"], "result": results[name]}) + "\n")
+        atomic_write(entry, json.dumps({"key": key, "train_seconds": ev["train_seconds"], "result": results[name]}) + "\n")
         r, re_ = report["rl"], eps_report["rl"]
         progress(f"{name}: greedy accuracy {r['accuracy']:.3f}, success {r['success']:.3f}, reached goal "
                  f"{r['reached_goal']:.3f}; eps-greedy ({eps:g}) success {re_['success']:.3f}; "
                  f"{r['time_ms_mean']:.2f} ms per trajectory")
     out.mkdir(parents=True, exist_ok=True)
-    (out / "reproduce.json").write_text(json.dumps(results, indent=1) + "\n")
-    (out / "reproduce.md").write_text(tables(results))
+    atomic_write(out / "reproduce.json", json.dumps(results, indent=1) + "\n")
+    atomic_write(out / "reproduce.md", tables(results))
     if results_dir is not None:
         from jaxexo.evaluation.machine import write_result
 

@@ -21,6 +21,7 @@ import numpy as np
 
 from jaxexo.config import ConfigError
 from jaxexo.config.toml_io import config_to_toml
+from jaxexo.storage.atomic import atomic_write
 from jaxexo.sweep import results as R
 from jaxexo.sweep.spec import Sweep, format_value
 
@@ -247,9 +248,9 @@ def export_best(sweep: Sweep, out: Path, rows: list[dict]) -> dict:
     best = Path(out) / "best"
     best.mkdir(exist_ok=True)
     export_policy(best / "policy.npz", cfg, Trainer(cfg), params)
-    (best / "config.toml").write_text(config_to_toml(cfg))
+    atomic_write(best / "config.toml", config_to_toml(cfg))
     selection = {"config_id": cid, "seed": seed, "label": sweep.members[cid].label,
                  "success": float(best_row["success"]), "held_out_success": float(best_row["held_out_success"]),
                  "mean_success_over_seeds": e["success_mean"]}
-    (best / "selection.json").write_text(json.dumps(selection, indent=1) + "\n")
+    atomic_write(best / "selection.json", json.dumps(selection, indent=1) + "\n")
     return selection
