@@ -417,3 +417,20 @@ def test_physically_meaningless_settings_are_refused_naming_the_field(raw, messa
 def test_shield_clearance_below_min_clearance_is_accepted_only_without_the_shield():
     cfg = config_from_dict({"env": {"shield": False, "shield_clearance": 0.001}})
     assert cfg.env.shield_clearance == 0.001
+
+
+def test_sweep_results_and_named_files_never_write_through_a_link(tmp_path):
+    from jaxexo.storage.atomic import atomic_write
+    from jaxexo.sweep import results as R
+
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious\n")
+    out = tmp_path / "sweep"
+    out.mkdir()
+    (out / R.RESULTS).symlink_to(victim)
+    with pytest.raises(SymlinkRefused, match="results.csv is a symbolic link"):
+        R.append_rows(out / R.RESULTS, ["a"], [{"a": 1}])
+    # an atomic write replaces the link itself (the reproduce tables, sweep best/, figures)
+    (out / "reproduce.md").symlink_to(victim)
+    atomic_write(out / "reproduce.md", "tables\n")
+    assert not (out / "reproduce.md").is_symlink() and victim.read_text() == "precious\n"

@@ -22,6 +22,15 @@ import numpy as np
 from jaxexo.config import ConfigError
 from jaxexo.config.toml_io import config_to_toml
 from jaxexo.storage.atomic import atomic_write
+
+
+def _save(fig, path) -> None:
+    """A figure as PNG, written atomically (a link in its place is replaced, never written through)."""
+    import io
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    atomic_write(path, buf.getvalue())
 from jaxexo.sweep import results as R
 from jaxexo.sweep.spec import Sweep, format_value
 
@@ -181,7 +190,7 @@ def plot_heatmap(path: Path, sweep: Sweep, entries: list[dict], axes: tuple[str,
     ax.set_ylabel(ya)
     ax.set_title("Sweep: success on the test layouts")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    _save(fig, path)
     plt.close(fig)
 
 
@@ -220,7 +229,7 @@ def plot_curves(path: Path, sweep: Sweep, out: Path, rows: list[dict], entries: 
     a2.set_xlabel("episodes")
     a2.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    _save(fig, path)
     plt.close(fig)
 
 
