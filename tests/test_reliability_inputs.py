@@ -61,6 +61,15 @@ def test_a_symlinked_lock_file_is_refused_and_its_target_untouched(tmp_path):
     assert victim.read_text() == "precious\n"
 
 
+def test_a_run_directory_below_a_file_is_refused_naming_the_file(tmp_path):
+    afile = tmp_path / "afile"
+    afile.write_text("x\n")
+    with pytest.raises(RunDirError, match=f"--out: {afile} is a file, not a folder"):
+        with run_lock(afile / "run", "train"):
+            pass
+    assert afile.read_text() == "x\n"
+
+
 def test_an_append_only_log_replaced_by_a_symlink_is_refused(tmp_path):
     victim = tmp_path / "victim.txt"
     victim.write_text("precious\n")

@@ -55,6 +55,11 @@ def run_lock(directory: str | Path, what: str, create: bool = True):
     if not create and not directory.is_dir():
         missing = "no sweep to resume" if what == "sweep" else "no checkpoint to resume from"
         raise RunDirError(f"--resume: {directory} does not exist: {missing}")
+    q = directory.parent
+    while not q.exists() and q != q.parent:
+        q = q.parent
+    if q.exists() and not q.is_dir():
+        raise RunDirError(f"--out: {q} is a file, not a folder (for {directory})")
     lock = directory / LOCK_NAME
     try:
         directory.mkdir(parents=True, exist_ok=True)
