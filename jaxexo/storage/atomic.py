@@ -7,6 +7,9 @@ one file system; ``tempfile.mkstemp`` gives every writer its own name), is flush
 replaces the target. On any failure (a full disk, a file-size limit, KeyboardInterrupt) the temporary
 file is removed and the target is left as it was; an OSError raised names the target file. Only a
 SIGKILL can leave a temporary file behind: ``stale_temps`` finds those for a run's resume to remove.
+
+Symbolic links: ``atomic_write`` replaces a link at the target's name (the file it points to is never
+written); ``append_line`` opens with O_NOFOLLOW and refuses a link (SymlinkRefused, a ValueError).
 """
 
 from __future__ import annotations

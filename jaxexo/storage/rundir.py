@@ -2,7 +2,7 @@
 
 - ``run_lock``: an exclusive ``fcntl.flock`` on ``DIR/.jaxexo.lock`` held for the whole run. A second
   process on the same directory is refused at once (it would interleave metrics and overwrite
-  checkpoints); the operating system releases the lock when its holder exits or is killed, so a lock
+  checkpoints); a symbolic link at the lock's name is refused, never followed; the operating system releases the lock when its holder exits or is killed, so a lock
   file left behind by a killed run never blocks its ``--resume``.
 - ``TrainingDiverged``: the run's outcome when its loss or parameters became non-finite (raised by
   jaxexo.train.driver; defined here, without JAX, so that the CLI can catch it).

@@ -25,6 +25,9 @@ Reliability (README "Reliability"; tests/test_reliability.py):
   crashed run are never overwritten or appended to);
 - the checkpoint carries a sha256 (jaxexo.storage.checkpoint) and its trees must match this config's
   network and state in structure, shape and dtype, or resume is refused naming the file;
+- the checkpoint records the config the run started with: a resume with any other config (config.toml
+  edited along with it) is refused naming the first differing field; a run past its first chunk
+  whose checkpoint was deleted (checkpoint.json, or more than one metrics row, remain) is refused;
 - a chunk whose loss or parameters are not finite marks the run diverged: the row says so, training
   stops, no checkpoint is written for it, only the best finite parameters (if a chunk produced any)
   are exported, and TrainingDiverged is raised (the CLI exits 3).
