@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -90,14 +91,63 @@ def _check_output_file(option: str, value) -> None:
     if text.endswith(("/", "\\")) or p.is_dir():
         raise ValueError(f"{option}: {text} is a directory; give a file name (e.g. {p / 'trajectory.csv'})")
     if not p.parent.is_dir():
+        _check_folder_part(option, p.parent, text)
         raise ValueError(f"{option}: the folder {p.parent} does not exist (for {text})")
 
 
+def _check_folder_part(option: str, folder: Path, text: str) -> None:
+    """Refuse a path whose nearest existing ancestor is a file (``afile/t.csv``), saying so."""
+    q = folder
+    while not q.exists() and q != q.parent:
+        q = q.parent
+    if q.exists() and not q.is_dir():
+        raise ValueError(f"{option}: {q} is a file, not a folder (for {text})")
+
+
+def _same_file(a, b) -> bool:
+    """Whether two paths name one file: the same path after symbolic links, or the same inode."""
+    if os.path.realpath(a) == os.path.realpath(b):
+        return True
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def _check_outputs(inputs, outputs) -> None:
+    """Outputs never replace an input, and no two outputs share a path: refused before any work.
+    ``inputs``, ``outputs``: (option, path or None) pairs."""
+    outs = [(o, v) for o, v in outputs if v is not None]
+    for i, (option, value) in enumerate(outs):
+        for other, v in outs[:i]:
+            if _same_file(value, v):
+                raise ValueError(f"{option}: {value} is also the {other} output; give each output its own path")
+        for other, v in inputs:
+            if v is not None and _same_file(value, v):
+                raise ValueError(f"{option}: {value} is the {other} input; an output never replaces an input, "
+                                 "pick another path")
+
+
 def cmd_generate(args) -> int:
-    for option, value in (("--out", args.out), ("--json", args.json), ("--plot", args.plot),
-                          ("--animate", args.animate)):
+    outputs = (("--out", args.out), ("--json", args.json), ("--plot", args.plot), ("--animate", args.animate))
+    for option, value in outputs:
         _check_output_file(option, value)
+    _check_outputs([("--policy", args.policy)], outputs)
+    if args.method == "cfftg" and args.smoothing is not None:
+        raise ValueError("--smoothing: applies to --method rl only (CFFTG's polynomial path is not smoothed)")
+    from jaxexo.config.schema import MAX_CONTROL_RATE
+
+    if args.rate is not None and not (math.isfinite(args.rate) and 0 < args.rate <= MAX_CONTROL_RATE):
+        raise ValueError(f"--rate: control rate must be > 0 and <= {MAX_CONTROL_RATE:g} Hz, got {args.rate:g}")
+    from jaxexo.inference.generator import MAX_DURATION, MAX_POINTS
+
+    if not 2 <= args.points <= MAX_POINTS:
+        raise ValueError(f"--points: samples of the path must be in [2, {MAX_POINTS}], got {args.points}")
+    if not (math.isfinite(args.duration) and 0 < args.duration <= MAX_DURATION):
+        raise ValueError(f"--duration: a swing's duration must be > 0 and <= {MAX_DURATION:g} s, got {args.duration:g}")
     import numpy as np
+
+    from jaxexo.inference.smoothing import DEFAULT_SMOOTHING
 
     common = dict(pivot=args.pivot, pivot_y=args.pivot_y, start_y=args.start_y, step_length=args.step_length,
                   n_points=args.points, duration=args.duration)
@@ -113,7 +163,8 @@ def cmd_generate(args) -> int:
         from jaxexo.inference import TrajectoryGenerator
 
         gen = TrajectoryGenerator.load(args.policy)
-        traj = gen.generate(obstacle_from_args(args), smoothing=args.smoothing,
+        smoothing = DEFAULT_SMOOTHING if args.smoothing is None else args.smoothing
+        traj = gen.generate(obstacle_from_args(args), smoothing=smoothing,
                             fallback=None if args.fallback == "none" else args.fallback, **common)
     timed = _timed_swing(args, traj, gen.config)
     (timed or traj).to_csv(args.out)
@@ -160,8 +211,6 @@ def _timed_swing(args, traj, config):
     config's control_rate) when --rate or --animate is asked for; else None (uniform time stamps)."""
     if args.rate is None and not args.animate:
         return None
-    if args.rate is not None and not (math.isfinite(args.rate) and args.rate > 0):
-        raise ValueError(f"--rate: control rate must be > 0 Hz, got {args.rate}")
     from jaxexo.inference.swing_timing import time_swing
 
     return time_swing(traj, config, rate=args.rate)
@@ -198,14 +247,15 @@ def cmd_sweep(args) -> int:
 
 
 def cmd_eval(args) -> int:
-    from jaxexo.evaluation.compare import run_eval
+    from jaxexo.evaluation.compare import check_report_folder, run_eval
 
     if args.n < 1:
         raise ValueError(f"--n: must be >= 1, got {args.n}")
     if args.batch < 1:
         raise ValueError(f"--batch: must be >= 1, got {args.batch}")
+    check_report_folder(args.out, args.policy, force=args.force)
     report = run_eval(args.policy, args.out, against=args.against, scenarios=args.scenarios, n=args.n,
-                      figures=not args.no_figures, batch_size=args.batch)
+                      figures=not args.no_figures, batch_size=args.batch, force=args.force)
     for name, r in report.items():
         print(f"{name}: accuracy {r['accuracy']:.3f}, success {r['success']:.3f}, median {r['time_ms_median']:.3f} ms "
               f"per trajectory, {r['batch_1000_ms']:.1f} ms per batch of 1000")
@@ -217,10 +267,11 @@ def cmd_reproduce(args) -> int:
     from jaxexo.train.devices import use_all_cpu_cores
 
     use_all_cpu_cores()
-    from jaxexo.evaluation.reproduce import run_names, run_reproduce
+    from jaxexo.evaluation.reproduce import check_reproduce_options, run_names, run_reproduce
 
     models = [m.strip() for m in args.models.split(",") if m.strip()]
     run_names(models, args.variant)     # checks --models and --variant before anything trains
+    check_reproduce_options(args.out, args.n, args.results)
     run_reproduce(args.out, models, n=args.n, seed=args.seed, include_default=args.default, results_dir=args.results,
                   variant=args.variant)
     print(f"wrote {args.out}/reproduce.md, reproduce.json and the run directories under {args.out}/runs")
@@ -262,16 +313,16 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--height", type=float, help="obstacle height, m")
     g.add_argument("--center-y", type=float, help="obstacle centre, m ahead of the start (default 0.45)")
     pv = g.add_mutually_exclusive_group()
-    pv.add_argument("--pivot", choices=("agent", "obstacle", "between"), default="obstacle",
-                    help="stance-foot condition (thesis 3.1)")
+    pv.add_argument("--pivot", choices=("agent", "obstacle", "between"),
+                    help="stance-foot condition (thesis 3.1; default: obstacle)")
     pv.add_argument("--pivot-y", type=float, help="stance heel y, m")
     g.add_argument("--start-y", type=float, default=0.0, help="swing heel start y, m")
     g.add_argument("--step-length", type=float, default=0.70, help="goal = start + this, m")
     g.add_argument("--points", type=int, default=100, help="samples of the smoothed path")
     g.add_argument("--fallback", choices=("cfftg", "none"), default="cfftg",
                    help="when the RL swing is not safe, return CFFTG's plan (cfftg) or the RL swing alone (none)")
-    g.add_argument("--smoothing", type=float, default=0.005,
-                   help="B-spline smoothing s, m^2 (0: raw polyline); rl only")
+    g.add_argument("--smoothing", type=float,
+                   help="B-spline smoothing s, m^2 (0: raw polyline; default 0.005); rl only")
     g.add_argument("--duration", type=float, default=1.0, help="swing duration for the time stamps, s "
                                                                 "(ignored with --rate)")
     g.add_argument("--rate", type=float, help="device-ready output: the shortest rest-to-rest timing within the "
@@ -308,6 +359,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--batch", type=int, default=1000,
                    help="scenarios per timed generate_batch call (reported scaled to a batch of 1000)")
     e.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    e.add_argument("--force", action="store_true", help="replace an earlier report in --out")
     e.add_argument("--out", required=True, help="report folder")
     e.set_defaults(func=cmd_eval)
     r = sub.add_parser("reproduce", help="train the seven thesis configs and tabulate them beside the thesis's "

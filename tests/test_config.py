@@ -16,7 +16,7 @@ from jaxexo.config import (
     validate,
 )
 
-from conftest import MIXED_KINDS, PROFILE_POINTS, ROOT
+from conftest import MIXED_KINDS, PROFILE_POINTS, ROOT, legacy_raw
 
 
 def test_default_toml_loads():
@@ -41,9 +41,10 @@ def test_default_toml_loads():
 
 
 def test_empty_config_is_the_defaults():
+    # One default (issue 22): an empty config, Config() and the packaged default are the same model.
     cfg = config_from_dict({})
-    assert cfg.env == Config().env and cfg.kinematics == Config().kinematics
-    assert [o.kind for o in cfg.layout.obstacles] == ["base1", "base2", "base3", "rectangle"]
+    assert cfg == Config() == load_config(ROOT / "configs" / "default.toml")
+    assert [o.kind for o in cfg.layout.obstacles] == ["base1", "base2", "base3", "rectangle", "rectangle"]
     validate(Config())
 
 
@@ -61,20 +62,20 @@ def test_mixed_config(mixed_config):
 
 
 def test_pivot_forms():
-    assert config_from_dict({"layout": {"pivot": "agent"}}).layout.pivot == (1.0, 0.0, 0.0)
-    assert config_from_dict({"layout": {"pivot": ["obstacle", "between"]}}).layout.pivot == (0.0, 1.0, 1.0)
-    assert config_from_dict({"layout": {"pivot": {"between": 2.0}}}).layout.pivot == (0.0, 0.0, 2.0)
+    assert config_from_dict(legacy_raw({"layout": {"pivot": "agent"}})).layout.pivot == (1.0, 0.0, 0.0)
+    assert config_from_dict(legacy_raw({"layout": {"pivot": ["obstacle", "between"]}})).layout.pivot == (0.0, 1.0, 1.0)
+    assert config_from_dict(legacy_raw({"layout": {"pivot": {"between": 2.0}}})).layout.pivot == (0.0, 0.0, 2.0)
     assert PIVOT_CONDITIONS == ("agent", "obstacle", "between")
 
 
 def test_max_vertices_explicit():
-    cfg = config_from_dict({"env": {"max_vertices": 20}})
+    cfg = config_from_dict(legacy_raw({"env": {"max_vertices": 20}}))
     assert cfg.outline_vertices == 20
 
 
 def test_scalar_range_and_weights():
-    cfg = config_from_dict({"layout": {"obstacles": [{"kind": "rectangle", "width": 0.1, "height": 0.1,
-                                                      "weight": 2.0}, {"kind": "base1", "weight": 0.5}]}})
+    cfg = config_from_dict(legacy_raw({"layout": {"obstacles": [{"kind": "rectangle", "width": 0.1, "height": 0.1,
+                                                      "weight": 2.0}, {"kind": "base1", "weight": 0.5}]}}))
     assert cfg.layout.obstacles[0].width == (0.1, 0.1)
     assert cfg.layout.obstacles[0].weight == 2.0 and cfg.layout.obstacles[1].weight == 0.5
 
@@ -174,23 +175,23 @@ def obstacles(*obs):
 )
 def test_config_errors_name_the_field(raw, field):
     with pytest.raises(ConfigError, match=field):
-        config_from_dict(raw)
+        config_from_dict(legacy_raw(raw))
 
 
 def test_mixed_config_errors_point_at_the_right_obstacle(mixed_raw):
     raw = copy.deepcopy(mixed_raw)
     raw["layout"]["obstacles"][6]["height"] = [0.05, 0.6]
     with pytest.raises(ConfigError, match=r"^layout\.obstacles\[6\]\.height"):
-        config_from_dict(raw)
+        config_from_dict(legacy_raw(raw))
     raw = copy.deepcopy(mixed_raw)
     raw["layout"]["obstacles"][7]["points"] = [[0.0, 0.1]]
     with pytest.raises(ConfigError, match=r"^layout\.obstacles\[7\]\.points"):
-        config_from_dict(raw)
+        config_from_dict(legacy_raw(raw))
 
 
 def test_zero_weight_obstacle_is_not_checked():
     # An impossible obstacle with weight 0 is never drawn, so it is not refused.
-    cfg = config_from_dict(obstacles("base1", {"kind": "rectangle", "width": 0.1, "height": 0.6, "weight": 0.0}))
+    cfg = config_from_dict(legacy_raw(obstacles("base1", {"kind": "rectangle", "width": 0.1, "height": 0.6, "weight": 0.0})))
     assert cfg.layout.obstacles[1].weight == 0.0
 
 
@@ -235,7 +236,7 @@ def test_load_config_toml_values(tmp_path, text, field):
 def test_load_config_roundtrip(tmp_path):
     path = tmp_path / "ok.toml"
     path.write_text('[env]\nobs_mode = "thesis"\nmax_steps = 50\n[layout]\nobstacles = ["triangle"]\n'
-                    'pivot = ["between"]\n')
+                    'pivot = ["between"]\nterrain = false\n')
     cfg = load_config(path)
     assert cfg.env.obs_mode == "thesis" and cfg.env.max_steps == 50
     assert cfg.layout.obstacles[0].kind == "triangle" and cfg.layout.obstacles[0].shape == "triangle"
@@ -281,18 +282,18 @@ def test_unclearable_layout_premise():
 
 def test_unclearable_obstacle_at_shifted_start_is_refused():
     with pytest.raises(ConfigError, match=r"layout\.obstacles\[0\]\.height"):
-        config_from_dict(copy.deepcopy(UNCLEARABLE))
+        config_from_dict(legacy_raw(copy.deepcopy(UNCLEARABLE)))
 
 
 def test_profile_size_defaults_to_drawn_extents_and_ranges_are_metres():
-    cfg = config_from_dict({"layout": {"obstacles": [{"kind": "profile", "points": PROFILE_POINTS}]}})
+    cfg = config_from_dict(legacy_raw({"layout": {"obstacles": [{"kind": "profile", "points": PROFILE_POINTS}]}}))
     ob = cfg.layout.obstacles[0]
     assert ob.width[0] == ob.width[1] == pytest.approx(0.16)
     assert ob.height[0] == ob.height[1] == pytest.approx(0.12)
     # Ranges are metres: a 1 m wide profile cannot fit between the start and the goal.
     with pytest.raises(ConfigError, match=r"layout\.(start_shift|step_length)"):
-        config_from_dict({"layout": {"obstacles": [{"kind": "profile", "points": PROFILE_POINTS,
-                                                    "width": [1, 1], "height": [1, 1]}]}})
+        config_from_dict(legacy_raw({"layout": {"obstacles": [{"kind": "profile", "points": PROFILE_POINTS,
+                                                    "width": [1, 1], "height": [1, 1]}]}}))
 
 
 # --------------------------------------------------------------------------------------------
@@ -318,7 +319,7 @@ def test_non_utf8_config_names_the_file(tmp_path):
 ])
 def test_integers_are_bounded(raw, field):
     with pytest.raises(ConfigError, match=field):
-        config_from_dict(raw)
+        config_from_dict(legacy_raw(raw))
 
 
 def test_every_integer_field_declares_a_bound():
@@ -346,7 +347,7 @@ def test_every_integer_field_declares_a_bound():
 ])
 def test_validation_blames_the_field_at_fault(raw, field):
     with pytest.raises(ConfigError, match=field):
-        config_from_dict(raw)
+        config_from_dict(legacy_raw(raw))
 
 
 @pytest.mark.parametrize("section, command", [("sweep", "jaxexo sweep"), ("eval", "jaxexo eval")])
@@ -397,14 +398,14 @@ def test_env_params_and_hyperparams_come_from_the_declarations(mixed_config):
 def test_static_settings_follow_the_declarations():
     from jaxexo.config import static_settings
 
-    base = config_from_dict({})
+    base = config_from_dict(legacy_raw({}))
     names = dict(static_settings(base))
     assert names["train.num_envs"] == base.train.num_envs and names["env.obs_mode"] == base.env.obs_mode
     # Leaves do not change the static settings; statics do.
-    assert static_settings(config_from_dict({"train": {"lr": 0.5}, "reward": {"goal_reward": 3.0}})) == \
+    assert static_settings(config_from_dict(legacy_raw({"train": {"lr": 0.5}, "reward": {"goal_reward": 3.0}}))) == \
         static_settings(base)
-    assert static_settings(config_from_dict({"train": {"hidden": [8]}})) != static_settings(base)
-    assert static_settings(config_from_dict({"train": {"chunk_updates": 7}})) == static_settings(base)
+    assert static_settings(config_from_dict(legacy_raw({"train": {"hidden": [8]}}))) != static_settings(base)
+    assert static_settings(config_from_dict(legacy_raw({"train": {"chunk_updates": 7}}))) == static_settings(base)
 
 
 # --------------------------------------------------------------------------------------------
@@ -415,16 +416,16 @@ def test_static_settings_follow_the_declarations():
 def test_memory_estimate_refuses_what_does_not_fit():
     from jaxexo.config.memory import check_memory, estimate_memory_bytes, machine_memory_bytes
 
-    small = config_from_dict({})
+    small = config_from_dict(legacy_raw({}))
     need = estimate_memory_bytes(small)
     assert 0 < need < 2**30 and check_memory(small, available=2**34) == need
-    big = config_from_dict({"train": {"num_envs": 2**24, "rollout_steps": 64}})
+    big = config_from_dict(legacy_raw({"train": {"num_envs": 2**24, "rollout_steps": 64}}))
     assert estimate_memory_bytes(big) > 2**36
     with pytest.raises(ConfigError, match=r"^train\.num_envs: the run needs at least .* GiB .* but this machine has "
                                           r"1\.00 GiB of memory"):
         check_memory(big, available=2**30)
     # Linear in the number of environments (every part but the network and eval scale with N).
-    a, b = (estimate_memory_bytes(config_from_dict({"train": {"num_envs": n}})) for n in (1024, 2048))
+    a, b = (estimate_memory_bytes(config_from_dict(legacy_raw({"train": {"num_envs": n}}))) for n in (1024, 2048))
     assert 1.8 * a < b < 2 * a
     assert machine_memory_bytes() is None or machine_memory_bytes() > 2**26
 
@@ -439,7 +440,7 @@ def test_memory_estimate_sizes_match_the_real_network_and_env(raw):
     from jaxexo.physics.dynamics import NUM_ACTIONS as ENV_ACTIONS
     from jaxexo.train.network import QNetwork
 
-    cfg = config_from_dict(raw)
+    cfg = config_from_dict(legacy_raw(raw))
     d = ExoStepEnv(cfg).obs_dim
     assert observation_size(cfg) == d and NUM_ACTIONS == ENV_ACTIONS
     net = QNetwork(hidden=cfg.train.hidden, layer_norm=cfg.train.layer_norm)

@@ -15,7 +15,7 @@ from jaxexo.config import PIVOT_CONDITIONS, config_from_dict  # noqa: E402
 from jaxexo.env import NUM_ACTIONS, ExoStepEnv  # noqa: E402
 from jaxexo.physics.geometry import Obstacle  # noqa: E402
 
-from conftest import MIXED_KINDS, MIXED_RAW, get_mixed_env, get_mixed_step  # noqa: E402
+from conftest import MIXED_KINDS, MIXED_RAW, get_mixed_env, get_mixed_step, legacy_raw  # noqa: E402
 
 BATCH = 512
 ROLLOUT = 110          # > max_steps = 100: every episode that does not reach the goal is truncated
@@ -24,7 +24,7 @@ RIGHT, UP, DOWN = 0, 9, 27
 
 def _mixed_env(**env_overrides):
     raw = {**MIXED_RAW, "env": {**MIXED_RAW["env"], **env_overrides}}
-    return ExoStepEnv(config_from_dict(raw))
+    return ExoStepEnv(config_from_dict(legacy_raw(raw)))
 
 
 # --------------------------------------------------------------------------------------------

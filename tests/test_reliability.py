@@ -30,7 +30,7 @@ from jaxexo.storage.checkpoint import CheckpointError, pack_checkpoint, unpack_c
 from jaxexo.storage.policy_file import PolicyFileError, load_policy, policy_checksum
 from jaxexo.storage.rundir import LOCK_NAME, RunDirError, run_lock
 
-from conftest import ROOT, jax_compilation_cache
+from conftest import ROOT, jax_compilation_cache, legacy_raw
 
 # The tiny config of tests/test_train.py: backward-view Watkins Q(lambda), 6 updates in 3 chunks of 2.
 TINY_N, TINY_T, TINY_UPDATES = 64, 8, 6
@@ -50,7 +50,7 @@ SEED = 3
 def tiny_config(**train):
     raw = json.loads(json.dumps(TINY_RAW))
     raw["train"].update(train)
-    return config_from_dict(raw)
+    return config_from_dict(legacy_raw(raw))
 
 
 def cli(*args):
@@ -672,3 +672,37 @@ def test_divergence_after_a_good_chunk_keeps_the_best_finite_parameters(cache, t
     trainer = Trainer(tiny_config())
     obs = np.random.default_rng(0).normal(size=(64, trainer.env.obs_dim)).astype(np.float32)
     np.testing.assert_allclose(pol.q_values(obs), np.asarray(trainer.net.apply(best, obs)), rtol=1e-5, atol=1e-5)
+
+
+@pytest.mark.slow
+def test_resume_refuses_an_edited_config_a_deleted_checkpoint_and_undecodable_metrics(reference, cache, tmp_path):
+    """Issue 22: config.toml edited together with the config passed (a changed lr would mix two
+    learning rates), checkpoint.msgpack deleted from a run of several chunks (it used to restart from
+    scratch silently), random bytes in metrics.jsonl (named, not "'utf-8' codec can't decode")."""
+    from jaxexo.train.driver import BOOKKEEPING, CHECKPOINT, run_training
+
+    run = tmp_path / "run"
+    shutil.copytree(reference["run"], run)
+    edited = tiny_config(lr=5e-4)
+    (run / "config.toml").write_text(config_to_toml(edited))
+    with pytest.raises(ConfigError, match="train.lr differs from the value the run .* started with"):
+        run_training(edited, run, seed=SEED, resume=True, progress=False)
+    (run / "config.toml").write_bytes((reference["run"] / "config.toml").read_bytes())
+
+    good = (run / "metrics.jsonl").read_bytes()
+    (run / "metrics.jsonl").write_bytes(np.random.default_rng(0).bytes(300))
+    with pytest.raises(ConfigError, match=f"{run / 'metrics.jsonl'} is damaged"):
+        run_training(tiny_config(), run, seed=SEED, resume=True, progress=False)
+    (run / "metrics.jsonl").write_bytes(good)
+
+    (run / CHECKPOINT).unlink()
+    with pytest.raises(ConfigError, match="checkpoint was deleted"):
+        run_training(tiny_config(), run, seed=SEED, resume=True, progress=False)
+    for name in (BOOKKEEPING, "policy.npz", "eval.json", "training_curve.png"):
+        (run / name).unlink()
+    with pytest.raises(ConfigError, match="metrics.jsonl records 3 finished chunks"):
+        run_training(tiny_config(), run, seed=SEED, resume=True, progress=False)
+    with pytest.raises(ConfigError, match="is not empty") as info:     # a new run there: no restart hint
+        run_training(tiny_config(), run, seed=SEED, progress=False)
+    assert "--resume starts it again" not in str(info.value)
+    assert (run / "metrics.jsonl").read_bytes() == good

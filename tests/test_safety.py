@@ -9,8 +9,8 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from conftest import ROOT
-from jaxexo.config import ConfigError, Config, config_from_dict, load_config
+from conftest import ROOT, legacy_raw
+from jaxexo.config import ConfigError, config_from_dict, load_config
 from jaxexo.inference import Obstacle, TrajectoryGenerator
 from jaxexo.inference import smoothing as sm
 from jaxexo.inference.scenarios import safety_scenarios
@@ -89,7 +89,7 @@ def test_swept_distance_under_jit_matches_numpy():
 
 
 def test_a_two_sample_line_through_the_triangle_fails():
-    cfg = Config()
+    cfg = config_from_dict(legacy_raw())
     sp = dynamics.scalar_params(cfg)
     scene = dynamics.make_scene(Obstacle.named("triangle"), "between", foot_length=FOOT)
     line = np.array([[[0.0, 0.0], [0.70, 0.0]]])
@@ -167,7 +167,7 @@ def test_an_env_move_cannot_jump_through_a_corner(xp_name):
     import importlib
 
     xp = np if xp_name == "numpy" else importlib.import_module("jax.numpy")
-    cfg = Config()
+    cfg = config_from_dict(legacy_raw())
     # The toe goes from 1 cm left of base1's near wall (below its top) to 1.5 cm above its top: both
     # ends are clear, the chord passes 5 mm under the corner (0.35, 0.10).
     prev, heel = np.array([0.34 - FOOT, 0.085]), np.array([0.37 - FOOT, 0.115])
@@ -192,12 +192,12 @@ def test_an_env_move_cannot_jump_through_a_corner(xp_name):
 def test_the_margin_is_validated_at_config_load():
     raw = {"env": {"min_clearance": 0.04}, "reward": {"safety_distance": 0.03}}
     with pytest.raises(ConfigError, match="reward.safety_distance"):
-        config_from_dict(raw)
+        config_from_dict(legacy_raw(raw))
     with pytest.raises(ConfigError, match="env.min_clearance"):
-        config_from_dict({"env": {"min_clearance": -0.01}})
+        config_from_dict(legacy_raw({"env": {"min_clearance": -0.01}}))
     with pytest.raises(ConfigError, match="env.backward_tolerance"):
-        config_from_dict({"env": {"backward_tolerance": float("nan")}})
-    cfg = config_from_dict({"env": {"min_clearance": 0.03}})
+        config_from_dict(legacy_raw({"env": {"backward_tolerance": float("nan")}}))
+    cfg = config_from_dict(legacy_raw({"env": {"min_clearance": 0.03}}))
     assert cfg.env.min_clearance == 0.03 and cfg.env.backward_tolerance == 0.005
 
 

@@ -5,8 +5,10 @@ sweeps and ``jaxexo eval`` score, drawn identically by the JAX and the NumPy sid
 import numpy as np
 import pytest
 
-from jaxexo.config import PIVOT_CONDITIONS, Config
+from jaxexo.config import PIVOT_CONDITIONS, config_from_dict
 from jaxexo.physics import dynamics, scenarios
+
+from conftest import legacy_raw
 
 jax = pytest.importorskip("jax")
 jnp = pytest.importorskip("jax.numpy")
@@ -43,7 +45,7 @@ def test_seed_words_are_jax_key_words():
     for seed in (0, 7, 12345, 2 ** 32 - 1):
         np.testing.assert_array_equal(jax.random.key_data(jax.random.PRNGKey(seed)), scenarios.seed_words(seed))
     with pytest.raises(ValueError, match="seed"):
-        scenarios.scenario_layouts(np, dynamics.numpy_params(Config()), 2 ** 32, 3)
+        scenarios.scenario_layouts(np, dynamics.numpy_params(config_from_dict(legacy_raw())), 2 ** 32, 3)
 
 
 @pytest.mark.parametrize("which", ["default", "mixed"])
@@ -52,7 +54,7 @@ def test_env_reset_draws_the_numpy_scenario_list(which, mixed_config):
     bit eagerly; under jit (XLA fuses multiply-adds) the same kinds and pivots, sizes within 2 ulp."""
     from jaxexo.env import ExoStepEnv
 
-    cfg = Config() if which == "default" else mixed_config
+    cfg = config_from_dict(legacy_raw()) if which == "default" else mixed_config
     env = ExoStepEnv(cfg)
     n, seed = 300, 777
     ref = scenarios.scenario_layouts(np, dynamics.numpy_params(cfg), seed, n)
@@ -91,7 +93,7 @@ def test_eval_test_set_is_the_numpy_test_set():
     from jaxexo.inference.scenarios import TEST_KINDS, sample_scenarios
     from jaxexo.train.evaluate import test_config, test_layouts
 
-    cfg = Config()
+    cfg = config_from_dict(legacy_raw())
     n, seed = 60, 12345
     lay = test_layouts(test_config(cfg), n, seed)
     sc = sample_scenarios(cfg, n, seed)

@@ -10,7 +10,7 @@ import pytest
 
 from jaxexo.config import config_from_dict, load_config
 from jaxexo.physics import dynamics, geometry, kinematics, terrain  # noqa: F401
-from conftest import ROOT
+from conftest import ROOT, legacy_raw
 
 SHIELD = 0.025
 
@@ -18,7 +18,7 @@ SHIELD = 0.025
 def _config(**env):
     raw = {"env": {"shield": True, "shield_clearance": SHIELD, **env},
            "layout": {"terrain": {"start_shift": [0.0, 0.12], "step_length": [0.55, 0.85]}}}
-    return config_from_dict(raw)
+    return config_from_dict(legacy_raw(raw))
 
 
 def _states(cfg, n, seed):
@@ -84,7 +84,7 @@ def test_admissible_moves_against_dense_sampling():
 
 
 def test_shield_off_admits_every_move():
-    cfg = config_from_dict({"env": {"shield": False}})
+    cfg = config_from_dict(legacy_raw({"env": {"shield": False}}))
     p, lay, hy, hz = _states(cfg, 20, 1)
     import types
     assert dynamics.admissible_moves(np, p, hy, hz, types.SimpleNamespace(**lay)).all()
@@ -199,4 +199,4 @@ def test_bad_shield_settings_are_refused_naming_the_field(env, field):
     from jaxexo.config import ConfigError
 
     with pytest.raises(ConfigError, match=rf"^{field}"):
-        config_from_dict({"env": env})
+        config_from_dict(legacy_raw({"env": env}))

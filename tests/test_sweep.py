@@ -32,7 +32,7 @@ from jaxexo.sweep import plan as P
 from jaxexo.sweep import results as R
 from jaxexo.sweep.spec import load_sweep, parse_bytes, sweep_from_dict
 
-from conftest import ROOT, jax_compilation_cache
+from conftest import ROOT, jax_compilation_cache, legacy_raw
 
 # --------------------------------------------------------------------------------------------
 # The tiny sweep: 4 learning rates (one of them absurd: it diverges) x 2 seeds, 6 updates each.
@@ -44,13 +44,13 @@ LRS = [1e-3, HUGE_LR, 3e-3, 1e-2]
 
 
 def tiny_raw(**sweep) -> dict:
-    return {
+    return legacy_raw({
         "env": {"obs_mode": "thesis"},
         "layout": {"obstacles": ["base1"], "pivot": ["obstacle"]},
         "train": {"num_envs": N, "rollout_steps": T, "num_minibatches": 2, "hidden": [16], "layer_norm": False,
                   "budget_env_steps": N * T * UPDATES, "eval_episodes": 10},
         "sweep": {"seeds": 2, "chunk_size": 4, "grid": {"train.lr": list(LRS)}, **sweep},
-    }
+    })
 
 
 def tiny_toml(path) -> None:

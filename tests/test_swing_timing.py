@@ -21,7 +21,7 @@ from jaxexo.inference.swing_timing import DeviceLimits, time_swing, time_swings,
 from jaxexo.inference.trajectory import TIMED_CSV_COLUMNS, assemble
 from jaxexo.physics import dynamics, kinematics
 
-from conftest import ROOT
+from conftest import ROOT, legacy_raw
 
 CFG = load_config(ROOT / "configs" / "default.toml")
 SP = dynamics.scalar_params(CFG)
@@ -221,21 +221,21 @@ def test_exports_carry_velocities_accelerations_and_limits(tmp_path):
 
 def test_device_config_section_and_bad_input():
     assert max(Config().device.joint_velocity) <= math.radians(300)
-    cfg = config_from_dict({"device": {"joint_velocity": [2.0, 2.5], "joint_acceleration": [10, 12],
-                                       "min_swing_duration": 0.8, "control_rate": 250}})
+    cfg = config_from_dict(legacy_raw({"device": {"joint_velocity": [2.0, 2.5], "joint_acceleration": [10, 12],
+                                       "min_swing_duration": 0.8, "control_rate": 250}}))
     assert cfg.device.joint_velocity == (2.0, 2.5) and cfg.device.control_rate == 250.0
     import tomllib
     assert config_from_dict(tomllib.loads(config_to_toml(cfg))).device == cfg.device
     lim = DeviceLimits.from_config(cfg)
     assert lim.velocity == (2.0, 2.5, 2.0, 2.5) and lim.min_duration == 0.8
     with pytest.raises(ConfigError, match=r"device\.joint_velocity\[1\]"):
-        config_from_dict({"device": {"joint_velocity": [2.0, -1.0]}})
+        config_from_dict(legacy_raw({"device": {"joint_velocity": [2.0, -1.0]}}))
     with pytest.raises(ConfigError, match=r"device\.joint_acceleration"):
-        config_from_dict({"device": {"joint_acceleration": [2.0]}})
+        config_from_dict(legacy_raw({"device": {"joint_acceleration": [2.0]}}))
     with pytest.raises(ConfigError, match=r"device\.control_rate"):
-        config_from_dict({"device": {"control_rate": 0}})
+        config_from_dict(legacy_raw({"device": {"control_rate": 0}}))
     with pytest.raises(ConfigError, match=r"device\.speed"):
-        config_from_dict({"device": {"speed": 1}})
+        config_from_dict(legacy_raw({"device": {"speed": 1}}))
     with pytest.raises(ValueError, match=r"limits\.velocity"):
         DeviceLimits((1.0, 2.0, float("nan"), 1.0), (1.0,) * 4)
     with pytest.raises(ValueError, match=r"limits\.acceleration"):

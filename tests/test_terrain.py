@@ -253,8 +253,10 @@ def test_spec_validation_names_the_field():
 
 def test_unseen_set_is_fixed_held_out_and_accepted_by_the_generators():
     from jaxexo.baselines import CFFTG
-    from jaxexo.config import Config
+    from jaxexo.config import config_from_dict
     from jaxexo.evaluation.unseen import CELLS_PER_FAMILY, repeats_for, unseen_scenarios
+
+    from conftest import legacy_raw
 
     a = unseen_scenarios(FOOT, 2)
     b = unseen_scenarios(FOOT, 2)
@@ -272,7 +274,7 @@ def test_unseen_set_is_fixed_held_out_and_accepted_by_the_generators():
         starts = {round(s["start_y"], 9) for s in a if s["pivot"] == p}
         assert starts == {0.0, 0.06, 0.12}
     assert repeats_for(1) == 1 and repeats_for(len(HELD_OUT_FAMILIES) * CELLS_PER_FAMILY + 1) == 2
-    cf = CFFTG(Config())
+    cf = CFFTG(config_from_dict(legacy_raw()))
     batch = cf.generate_batch([s["obstacle"] for s in a[:40]], pivot=[s["pivot"] for s in a[:40]],
                               start_y=[s["start_y"] for s in a[:40]], step_length=[s["step_length"] for s in a[:40]])
     assert len(batch.ok) == 40

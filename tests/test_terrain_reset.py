@@ -14,6 +14,8 @@ from jaxexo.config import ConfigError, config_from_dict
 from jaxexo.config.toml_io import config_to_toml
 from jaxexo.physics import dynamics, geometry, scenarios, terrain
 
+from conftest import legacy_raw
+
 jax = pytest.importorskip("jax")
 import jax.numpy as jnp  # noqa: E402
 
@@ -23,7 +25,7 @@ TERRAIN = {"start_shift": [0.0, 0.12], "step_length": [0.55, 0.85]}
 
 
 def _cfg(**terrain_kw):
-    return config_from_dict({"layout": {"terrain": {**TERRAIN, **terrain_kw}}})
+    return config_from_dict(legacy_raw({"layout": {"terrain": {**TERRAIN, **terrain_kw}}}))
 
 
 # --------------------------------------------------------------------------------------------
@@ -37,7 +39,7 @@ def test_terrain_table_parses_defaults_and_roundtrips():
     assert cfg.outline_vertices == terrain.K_MAX
     again = config_from_dict(__import__("tomllib").loads(config_to_toml(cfg)))
     assert again == cfg
-    off = config_from_dict({})
+    off = config_from_dict(legacy_raw({}))
     assert off.layout.terrain is None
     assert config_from_dict(__import__("tomllib").loads(config_to_toml(off))).layout.terrain is None
     # static settings tell configs with and without terrain apart (different param shapes)
@@ -58,18 +60,18 @@ def test_terrain_table_parses_defaults_and_roundtrips():
 ])
 def test_bad_terrain_is_refused_naming_the_field(terrain_raw, field):
     with pytest.raises(ConfigError) as e:
-        config_from_dict({"layout": {"terrain": terrain_raw}})
+        config_from_dict(legacy_raw({"layout": {"terrain": terrain_raw}}))
     assert str(e.value).startswith(field), str(e.value)
 
 
 def test_terrain_needs_room_for_its_outlines_and_a_small_enough_step():
     with pytest.raises(ConfigError, match=r"^env\.max_vertices"):
-        config_from_dict({"env": {"max_vertices": 8}, "layout": {"terrain": TERRAIN}})
-    assert config_from_dict({"env": {"max_vertices": 16}, "layout": {"terrain": TERRAIN}}).outline_vertices == 16
+        config_from_dict(legacy_raw({"env": {"max_vertices": 8}, "layout": {"terrain": TERRAIN}}))
+    assert config_from_dict(legacy_raw({"env": {"max_vertices": 16}, "layout": {"terrain": TERRAIN}})).outline_vertices == 16
     with pytest.raises(ConfigError, match=r"^env\.step_size"):
-        config_from_dict({"env": {"step_size": 0.07}, "layout": {"terrain": TERRAIN}})
+        config_from_dict(legacy_raw({"env": {"step_size": 0.07}, "layout": {"terrain": TERRAIN}}))
     with pytest.raises(ConfigError, match=r"^env\.bounds_y"):
-        config_from_dict({"env": {"bounds_y": [-0.3, 0.9]}, "layout": {"terrain": TERRAIN}})
+        config_from_dict(legacy_raw({"env": {"bounds_y": [-0.3, 0.9]}, "layout": {"terrain": TERRAIN}}))
 
 
 def test_test_config_drops_the_terrain():
@@ -147,7 +149,7 @@ def test_reset_draws_every_training_family_and_pivot_within_the_ranges():
 def test_observed_shape_matches_a_dense_reference():
     """The observation's height profile of a terrain scene against Obstacle.profile heights sampled
     independently (geometry.Obstacle built from the unpadded outline, np.interp along its edges)."""
-    cfg = config_from_dict({"env": {"obs_profile": "shape"}, "layout": {"terrain": TERRAIN}})
+    cfg = config_from_dict(legacy_raw({"env": {"obs_profile": "shape"}, "layout": {"terrain": TERRAIN}}))
     ln = scenarios.scenario_layouts(np, dynamics.numpy_params(cfg), 3, 60)
     frac = geometry.descriptor_fractions(cfg.env.shape_points)
     for i in range(60):

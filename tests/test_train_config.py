@@ -17,7 +17,7 @@ from jaxexo.config import ConfigError, config_from_dict, load_config
 from jaxexo.config.toml_io import config_to_toml
 from jaxexo.storage.policy_file import FORMAT_VERSION, PolicyFileError, load_policy
 
-from conftest import ROOT, jax_compilation_cache
+from conftest import ROOT, jax_compilation_cache, legacy_raw
 
 jax = pytest.importorskip("jax")
 import jax.numpy as jnp  # noqa: E402
@@ -59,7 +59,7 @@ def test_train_config_errors_name_the_field(train, field, text):
     raw = tiny_raw()
     raw["train"].update(train)
     with pytest.raises(ConfigError, match=field) as info:
-        config_from_dict(raw)
+        config_from_dict(legacy_raw(raw))
     assert str(info.value).startswith(field.replace("\\", "").split("[")[0])
     assert text in str(info.value)
 

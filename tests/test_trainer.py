@@ -18,7 +18,7 @@ from jaxexo.config import ConfigError, config_from_dict, load_config
 from jaxexo.config.toml_io import config_to_toml
 from jaxexo.storage.policy_file import FORMAT_VERSION, PolicyFileError, load_policy
 
-from conftest import ROOT, jax_compilation_cache
+from conftest import ROOT, jax_compilation_cache, legacy_raw
 
 jax = pytest.importorskip("jax")
 import jax.numpy as jnp  # noqa: E402
@@ -59,8 +59,8 @@ def test_trainer_learns_to_step_over_a_fixed_obstacle():
     seed 0 before this change: first tenth 0.000, last tenth 0.744."""
     from jaxexo.physics.geometry import Obstacle
 
-    cfg = config_from_dict({"env": {"obs_mode": "conditioned"}, "layout": dict(FIXED_LAYOUT),
-                            "reward": dict(REWARD), "train": LEARN_TRAIN})
+    cfg = config_from_dict(legacy_raw({"env": {"obs_mode": "conditioned"}, "layout": dict(FIXED_LAYOUT),
+                            "reward": dict(REWARD), "train": LEARN_TRAIN}))
     trainer = Trainer(cfg)
     hyper = Hyperparams.from_config(cfg)
     assert trainer.num_updates == 586

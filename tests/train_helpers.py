@@ -29,7 +29,7 @@ from jaxexo.config import ConfigError, config_from_dict, load_config
 from jaxexo.config.toml_io import config_to_toml
 from jaxexo.storage.policy_file import FORMAT_VERSION, PolicyFileError, load_policy
 
-from conftest import ROOT, jax_compilation_cache
+from conftest import ROOT, jax_compilation_cache, legacy_raw
 
 jax = pytest.importorskip("jax")
 import jax.numpy as jnp  # noqa: E402
@@ -66,8 +66,8 @@ TINY_TRAIN = {
 
 
 def tiny_raw(**train) -> dict:
-    return {"env": {"obs_mode": "conditioned"}, "layout": dict(FIXED_LAYOUT), "reward": dict(REWARD),
-            "train": {**TINY_TRAIN, **train}}
+    return legacy_raw({"env": {"obs_mode": "conditioned"}, "layout": dict(FIXED_LAYOUT), "reward": dict(REWARD),
+                       "train": {**TINY_TRAIN, **train}})
 
 
 def tiny_config(**train):

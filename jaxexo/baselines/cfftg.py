@@ -52,13 +52,14 @@ from __future__ import annotations
 import copy
 
 import functools
+import os
 from pathlib import Path
 
 import numpy as np
 
 from jaxexo.physics import dynamics, geometry
-from jaxexo.config import Config
-from jaxexo.inference.generator import check_options, scenes_for
+from jaxexo.config import Config, load_config
+from jaxexo.inference.generator import check_options, pivot_of, scenes_for
 from jaxexo.inference.trajectory import (DEFAULT_DURATION, Trajectory, TrajectoryBatch, TrajectoryError, assemble,
                                          measure_paths)
 
@@ -157,7 +158,13 @@ class CFFTG:
 
     def __init__(self, config: Config | None = None, *, margin: float | None = None, margin_step: float = 0.01,
                  apex_step: float = 0.02, max_plans: int = 10):
-        self.config = config if config is not None else Config()
+        if isinstance(config, (str, os.PathLike)):
+            config = load_config(config)     # a config file's path: the obvious intent
+        elif config is None:
+            config = Config()                # the default model's settings (configs/default.toml)
+        elif not isinstance(config, Config):
+            raise TypeError(f"config: expected a jaxexo Config or a config file's path, got {type(config).__name__}")
+        self.config = config
         self.sp = dynamics.scalar_params(self.config)
         self.margin = geometry._finite("margin", self.config.reward.safety_distance if margin is None else margin)
         if self.margin < 0:
@@ -177,10 +184,10 @@ class CFFTG:
         return cls(TrajectoryGenerator.load(path).config, **kwargs)
 
     # Scenes ---------------------------------------------------------------------------------------
-    def scene(self, obstacle: geometry.Obstacle, pivot: str = "obstacle", pivot_y: float | None = None,
+    def scene(self, obstacle: geometry.Obstacle, pivot: str | float | None = None, pivot_y: float | None = None,
               start_y: float = 0.0, step_length: float = 0.70) -> dynamics.Scene:
         """Validate one scenario (metres), as the RL generator does."""
-        return dynamics.make_scene(obstacle, pivot if pivot_y is None else pivot_y, start_y, step_length,
+        return dynamics.make_scene(obstacle, pivot_of(pivot, pivot_y), start_y, step_length,
                                    foot_length=self.config.kinematics.foot_length,
                                    shape_points=self.config.env.shape_points)
 
@@ -266,7 +273,7 @@ class CFFTG:
             raise TrajectoryError(batch[int(np.argmin(batch.ok))])
         return batch
 
-    def generate(self, obstacle: geometry.Obstacle, *, pivot: str = "obstacle", pivot_y: float | None = None,
+    def generate(self, obstacle: geometry.Obstacle, *, pivot: str | float | None = None, pivot_y: float | None = None,
                  start_y: float = 0.0, step_length: float = 0.70, n_points: int = DEFAULT_POINTS,
                  duration: float = DEFAULT_DURATION, strict: bool = False,
                  clearance: float | None = None) -> Trajectory:
@@ -276,7 +283,7 @@ class CFFTG:
         return self.at_clearance(clearance)._finish([self.scene(obstacle, pivot, pivot_y, start_y, step_length)], n_points, duration,
                             strict)[0]
 
-    def generate_batch(self, obstacles, *, pivot="obstacle", pivot_y=None, start_y=0.0, step_length=0.70,
+    def generate_batch(self, obstacles, *, pivot=None, pivot_y=None, start_y=0.0, step_length=0.70,
                        n_points: int = DEFAULT_POINTS, duration: float = DEFAULT_DURATION,
                        strict: bool = False, clearance: float | None = None) -> TrajectoryBatch:
         """Trajectories for many scenarios, vectorised; every option is one value or one per obstacle
@@ -285,7 +292,7 @@ class CFFTG:
         return self.at_clearance(clearance)._finish(self.scenes(obstacles, pivot, pivot_y, start_y, step_length), n_points, duration,
                             strict)
 
-    def scenes(self, obstacles, pivot="obstacle", pivot_y=None, start_y=0.0, step_length=0.70):
+    def scenes(self, obstacles, pivot=None, pivot_y=None, start_y=0.0, step_length=0.70):
         return scenes_for(self.scene, obstacles, pivot, pivot_y, start_y, step_length)
 
 

@@ -100,7 +100,16 @@ def mixed_config() -> Config:
     """Every obstacle kind in one batch (outline size K = 16, the half-circle's), all pivots."""
     from jaxexo.config import config_from_dict
 
-    return config_from_dict({"layout": {"obstacles": MIXED_KINDS, "pivot": ["agent", "obstacle", "between"]}})
+    # Stated in full (the env-step settings of the recorded results): unshielded, obstacle mixture, no
+    # placement jitter, thesis-like reward weights; a field left out would take the default model's value.
+    return config_from_dict({
+        "env": {"shield": False, "obs_profile": "bbox"},
+        "kinematics": {"hip_limits": [-0.5235987755982988, 2.007128639793479],
+                       "knee_limits": [-1.7453292519943295, 0.0]},
+        "reward": {"traj_weights": [1.0] * 8, "exo_weights": [1.0] * 4, "goal_reward": 10.0,
+                   "joint_limit_penalty": 1.0, "progress_shaping": 0.0},
+        "layout": {"obstacles": MIXED_KINDS, "pivot": ["agent", "obstacle", "between"], "terrain": False,
+                   "obstacle_offset": [0.0, 0.0], "start_shift": [0.0, 0.0], "step_length": [0.70, 0.70]}})
 
 
 def run_env_benchmark(config: Config, config_name: str, sizes, out_dir, progress=print) -> dict:

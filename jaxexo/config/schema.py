@@ -47,6 +47,8 @@ CONTROLS = ("off_policy", "on_policy")
 TARGETS = ("hard", "polyak")
 
 INT32_MAX = 2**31 - 1   # integers that reach JAX as int32 (or index a scan) stay below this
+MAX_CONTROL_RATE = 10_000.0   # Hz: a timed export's rate ([device] control_rate, jaxexo generate --rate)
+MAX_SWING_DURATION = 60.0     # s: one swing (about 1 s on today's exoskeletons), not a walk
 SECTIONS = ("env", "kinematics", "reward", "layout", "train", "device")
 # Sections that other commands read; a train config refuses them, saying where they belong.
 OTHER_COMMANDS = {"sweep": "it is read by jaxexo sweep (a sweep file, see configs/sweeps/*.toml)",
@@ -68,7 +70,7 @@ def _deg(d: float) -> float:
 # --------------------------------------------------------------------------------------------
 
 
-def _number(path: str, v: Any, *, positive=False, nonneg=False, integer=False, hi=None) -> float:
+def _number(path: str, v: Any, *, positive=False, nonneg=False, integer=False, lo=None, hi=None) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise ConfigError(f"{path}: expected a number, got {v!r}")
     if integer and not (isinstance(v, int) or float(v).is_integer()):
@@ -79,15 +81,17 @@ def _number(path: str, v: Any, *, positive=False, nonneg=False, integer=False, h
         raise ConfigError(f"{path}: must be > 0, got {v!r}")
     if nonneg and v < 0:
         raise ConfigError(f"{path}: must be >= 0, got {v!r}")
+    if lo is not None and v < lo:
+        raise ConfigError(f"{path}: must be >= {lo}, got {v!r}")
     if hi is not None and v > hi:
         raise ConfigError(f"{path}: must be <= {hi}, got {v!r}")
     return int(v) if integer else float(v)
 
 
-def number(*, positive=False, nonneg=False, integer=False, hi=None) -> Callable:
+def number(*, positive=False, nonneg=False, integer=False, lo=None, hi=None) -> Callable:
     if integer and hi is None:
         raise TypeError("an integer field needs an upper bound (hi)")
-    return lambda path, v: _number(path, v, positive=positive, nonneg=nonneg, integer=integer, hi=hi)
+    return lambda path, v: _number(path, v, positive=positive, nonneg=nonneg, integer=integer, lo=lo, hi=hi)
 
 
 def fraction(positive: bool = False) -> Callable:
@@ -255,7 +259,7 @@ class EnvConfig:
     # How the conditioned observation shows the obstacle's profile: "bbox" (its bounding rectangle:
     # a policy trained on rectangles treats any unseen shape conservatively) or "shape" (the true
     # profile, for policies trained on varied shapes). Collisions always use the true outline.
-    obs_profile: str = declare("bbox", choice(OBS_PROFILES), to_param=lambda v, cfg: {
+    obs_profile: str = declare("shape", choice(OBS_PROFILES), to_param=lambda v, cfg: {
         "obs_true_profile": np.asarray(v == "shape")})
     # outline size K; 0: the largest count among the layout's kinds (resolved: Config.outline_vertices)
     max_vertices: int = declare(0, number(nonneg=True, integer=True, hi=geometry.MAX_PROFILE_VERTICES),
@@ -277,24 +281,30 @@ class EnvConfig:
     # never comes closer than min_clearance to the obstacle, and the heel never moves backward by
     # more than backward_tolerance. The environment's success flag and the generators' ``ok`` use both.
     min_clearance: float = declare(outcome.DEFAULT_MIN_CLEARANCE, number(nonneg=True), unit="m")
-    backward_tolerance: float = declare(outcome.DEFAULT_BACKWARD_TOLERANCE, number(nonneg=True), unit="m")
+    # At most 10 m: any value beyond env.bounds_y's span turns the check off, and the thesis configs
+    # write 10 m for that.
+    backward_tolerance: float = declare(outcome.DEFAULT_BACKWARD_TOLERANCE, number(nonneg=True, hi=10.0), unit="m")
     # The shield (issue 11; not in the thesis): the agent chooses only among admissible moves
     # (jaxexo.physics.dynamics.admissible_moves): no backward component, the exact clearance of the
     # whole move at least shield_clearance, joint limits and reach respected at its end. The same
     # mask in training, evaluation and the NumPy generator; off reproduces the thesis's free choice.
-    shield: bool = declare(False, boolean, role="static+leaf", dtype="bool")
+    shield: bool = declare(True, boolean, role="static+leaf", dtype="bool")
     # m: the clearance a shielded move keeps; above min_clearance so that the smoothed curve, which
-    # cuts corners, still keeps min_clearance without falling back to the raw polyline.
-    shield_clearance: float = declare(0.025, number(nonneg=True), unit="m")
+    # cuts corners, still keeps min_clearance without falling back to the raw polyline. With the shield
+    # on it must be at least min_clearance (validate); at most 10 cm, above that no step over an
+    # obstacle remains admissible.
+    shield_clearance: float = declare(0.025, number(nonneg=True, hi=0.10), unit="m")
 
 
 @dataclass(frozen=True)
 class KinematicsConfig:
-    thigh: float = declare(0.50, number(positive=True), unit="m")
-    shin: float = declare(0.50, number(positive=True), unit="m")
-    foot_length: float = declare(0.20, number(positive=True), unit="m")   # heel-to-toe
-    hip_limits: tuple[float, float] = declare((_deg(-30.0), _deg(115.0)), range_(), unit="rad")
-    knee_limits: tuple[float, float] = declare((_deg(-100.0), 0.0), range_(), unit="rad")
+    # Human segments (an adult's thigh or shin is about 0.4-0.55 m, a foot 0.2-0.3 m): at most 1 m each,
+    # a foot at most 0.5 m.
+    thigh: float = declare(0.50, number(positive=True, hi=1.0), unit="m")
+    shin: float = declare(0.50, number(positive=True, hi=1.0), unit="m")
+    foot_length: float = declare(0.20, number(positive=True, hi=0.5), unit="m")   # heel-to-toe
+    hip_limits: tuple[float, float] = declare((-0.5236, 2.0071), range_(), unit="rad")     # -30 .. 115 deg
+    knee_limits: tuple[float, float] = declare((-1.7453, 0.0), range_(), unit="rad")       # -100 .. 0 deg
 
 
 @dataclass(frozen=True)
@@ -312,14 +322,16 @@ class DeviceConfig:
 
     Read by the NumPy timing code only: every field is a Python-side setting, never a pytree leaf."""
 
-    joint_velocity: tuple[float, float] = declare((3.0, 4.0), vector(2, positive=True), unit="rad/s",
-                                                  role="setting")          # (hip, knee)
-    joint_acceleration: tuple[float, float] = declare((15.0, 20.0), vector(2, positive=True), unit="rad/s^2",
-                                                      role="setting")      # (hip, knee)
-    # a swing never takes less (0: as fast as the limits allow)
-    min_swing_duration: float = declare(0.0, number(nonneg=True), unit="s", role="setting")
-    # default rate of timed exports (jaxexo generate --rate)
-    control_rate: float = declare(100.0, number(positive=True), unit="Hz", role="setting")
+    # Bounds: a drive slower than 0.1 rad/s (6 deg/s) or 0.1 rad/s^2 cannot swing a leg within a
+    # minute; 50 rad/s and 1000 rad/s^2 are beyond any joint drive.
+    joint_velocity: tuple[float, float] = declare((3.0, 4.0), vector(2, positive=True, lo=0.1, hi=50.0),
+                                                  unit="rad/s", role="setting")          # (hip, knee)
+    joint_acceleration: tuple[float, float] = declare((15.0, 20.0), vector(2, positive=True, lo=0.1, hi=1000.0),
+                                                      unit="rad/s^2", role="setting")      # (hip, knee)
+    # a swing never takes less (0: as fast as the limits allow); at most MAX_SWING_DURATION
+    min_swing_duration: float = declare(0.0, number(nonneg=True, hi=MAX_SWING_DURATION), unit="s", role="setting")
+    # default rate of timed exports (jaxexo generate --rate); at most MAX_CONTROL_RATE
+    control_rate: float = declare(100.0, number(positive=True, hi=MAX_CONTROL_RATE), unit="Hz", role="setting")
 
 
 def _penalty(default):
@@ -330,12 +342,14 @@ def _penalty(default):
 @dataclass(frozen=True)
 class RewardConfig:
     # Weights alpha (eq 2.38) over TRAJECTORY_TERMS and beta (eq 2.52) over EXO_TERMS, normalised.
-    traj_weights: tuple[float, ...] = declare((1.0,) * 8, vector(8, nonneg=True), to_param=_normalized("traj_weights"))
-    exo_weights: tuple[float, ...] = declare((1.0,) * 4, vector(4, nonneg=True), to_param=_normalized("exo_weights"))
+    traj_weights: tuple[float, ...] = declare((0.0, 2.0, 0.5, 4.0, 0.5, 0.5, 1.0, 0.5), vector(8, nonneg=True),
+                                              to_param=_normalized("traj_weights"))
+    exo_weights: tuple[float, ...] = declare((1.0, 1.0, 2.0, 1.0), vector(4, nonneg=True),
+                                             to_param=_normalized("exo_weights"))
     step_threshold: float = declare(30.0, number(positive=True), unit="steps")   # n of eq 2.29
     collision_penalty: float = _penalty(10.0)      # c, eq 2.30
     backward_penalty: float = _penalty(1.0)        # y, eq 2.31
-    goal_reward: float = _penalty(10.0)            # g, eq 2.32
+    goal_reward: float = _penalty(20.0)            # g, eq 2.32
     mid_goal_penalty: float = _penalty(1.0)        # m, eq 2.33
     max_height_penalty: float = _penalty(1.0)      # z, eq 2.34
     safety_penalty: float = _penalty(2.0)          # f, eq 2.35
@@ -346,13 +360,13 @@ class RewardConfig:
     hlc_threshold: float = declare(0.90, fraction(positive=True))
     leg_length_penalty: float = _penalty(1.0)      # l, eq 2.45
     leg_length_tolerance: float = declare(0.0, number(nonneg=True), unit="m")   # n, eq 2.45
-    joint_limit_penalty: float = _penalty(1.0)     # j, eq 2.50
+    joint_limit_penalty: float = _penalty(4.0)     # j, eq 2.50
     hip_height_penalty: float = _penalty(1.0)      # n, eq 2.51
     # max_hz, eq 2.51 (the hip model never exceeds thigh+shin)
     max_hip_z: float = declare(1.0, number(positive=True), unit="m")
     # Potential-based progress shaping per metre (not in the thesis; 0 = thesis reward), see
     # jaxexo.physics.rewards.shaping_reward for the choice of its discount.
-    progress_shaping: float = declare(0.0, number(nonneg=True), unit="1/m")
+    progress_shaping: float = declare(5.0, number(nonneg=True), unit="1/m")
     shaping_discount: float = declare(1.0, fraction(positive=True))
     # The wearer's costs (not in the thesis, jaxexo.physics.rewards.wearer_terms; 0 = thesis reward):
     # per metre of heel height above the obstacle's top plus env.shield_clearance, per step (a low
@@ -471,11 +485,18 @@ def obstacle_params(obstacles: tuple[ObstacleSpec, ...], cfg) -> dict[str, np.nd
 
 
 def default_obstacles() -> tuple[ObstacleSpec, ...]:
-    """Training mixture of the default config: Base 1-3 and random rectangles (triangle and
-    half-circle are held out for testing)."""
+    """Obstacle mixture of the default model (configs/default.toml): Base 1-3 and random rectangles
+    up to 22 cm wide and 28 cm high (triangle and half-circle are held out for testing). With the
+    default terrain it sets the thesis-five test set only; reset draws the terrain families."""
     return tuple(named_spec(k) for k in ("base1", "base2", "base3")) + (
-        ObstacleSpec("rectangle", (0.05, 0.20), (0.05, 0.20), 1.0, "rectangle"),
+        ObstacleSpec("rectangle", (0.05, 0.22), (0.05, 0.28), 1.0, "rectangle"),
+        ObstacleSpec("rectangle", (0.15, 0.22), (0.18, 0.28), 1.0, "rectangle"),
     )
+
+
+# [layout] terrain of the default model (configs/default.toml); the other TerrainSpec fields keep
+# jaxexo.physics.terrain's defaults.
+DEFAULT_TERRAIN = {"start_shift": [0.0, 0.12], "step_length": [0.55, 0.85]}
 
 
 TERRAIN_KEYS = ("families", "weights", "start_shift", "step_length", "pivot", "near_margin", "far_margin")
@@ -548,15 +569,16 @@ class LayoutConfig:
     obstacles: tuple[ObstacleSpec, ...] = declare((), parse_obstacles, to_param=obstacle_params,
                                                  write=lambda obs: [o.to_toml() for o in obs])
     size_jitter: float = declare(0.0, below_one)   # relative +- jitter of every width and height
-    obstacle_offset: tuple[float, float] = declare((0.0, 0.0), range_(), unit="m")  # added to the default centre
+    obstacle_offset: tuple[float, float] = declare((-0.03, 0.03), range_(), unit="m")  # added to the default centre
     # weights of PIVOT_CONDITIONS
     pivot: tuple[float, float, float] = declare((1.0, 1.0, 1.0), pivot_weights,
                                                 to_param=lambda v, cfg: {"pivot_cdf": _cdf(v)})
-    start_shift: tuple[float, float] = declare((0.0, 0.0), range_(), unit="m")   # agent start moved towards the obstacle
-    step_length: tuple[float, float] = declare((0.70, 0.70), range_(positive=True), unit="m")  # goal = start + this
+    start_shift: tuple[float, float] = declare((0.0, 0.05), range_(), unit="m")   # agent start moved towards the obstacle
+    step_length: tuple[float, float] = declare((0.65, 0.75), range_(positive=True), unit="m")  # goal = start + this
     # Procedural obstacle families (jaxexo.physics.terrain): false, or a table (parse_terrain) that
     # replaces the obstacle mixture, start_shift, step_length, obstacle_offset and pivot in reset.
-    terrain: Any = declare(None, parse_terrain, to_param=terrain_params, write=write_terrain)
+    terrain: Any = declare(check=parse_terrain, to_param=terrain_params, write=write_terrain,
+                           default_factory=lambda: parse_terrain("layout.terrain", DEFAULT_TERRAIN))
 
     def default_center(self, foot_length: float, step_length: float) -> float:
         """Default obstacle centre (jaxexo.physics.geometry.default_center, the one definition)."""
@@ -578,9 +600,9 @@ class TrainConfig:
     num_minibatches: int = declare(4, number(positive=True, integer=True, hi=2**24), role="static")
     num_epochs: int = declare(1, number(positive=True, integer=True, hi=10_000), role="static")
     # the thesis network (Fig. 2.2)
-    hidden: tuple[int, ...] = declare((64, 32, 32, 32), vector(positive=True, integer=True, hi=65_536, max_len=64),
+    hidden: tuple[int, ...] = declare((128, 128), vector(positive=True, integer=True, hi=65_536, max_len=64),
                                       unit="units", role="static")
-    layer_norm: bool = declare(False, boolean, role="static")
+    layer_norm: bool = declare(True, boolean, role="static")
     # "forward": lambda-returns; "backward": eligibility traces
     trace: str = declare("forward", choice(TRACE_VIEWS), role="static")
     # backward view: "accumulating" or "replacing"
@@ -592,16 +614,16 @@ class TrainConfig:
     # stop after this many finished episodes (0: no limit)
     budget_episodes: int = declare(0, number(nonneg=True, integer=True, hi=INT32_MAX), unit="episodes")
     # stop after this many env steps (0: no limit)
-    budget_env_steps: int = declare(20_000_000, number(nonneg=True, integer=True, hi=2**40), unit="steps")
+    budget_env_steps: int = declare(5_000_000, number(nonneg=True, integer=True, hi=2**40), unit="steps")
     # updates per compiled chunk (progress, checkpoint); 0: auto
     chunk_updates: int = declare(0, number(nonneg=True, integer=True, hi=INT32_MAX), unit="updates", role="setting")
     eval_episodes: int = declare(1000, number(positive=True, integer=True, hi=10_000_000), unit="episodes",
                                  role="static")
-    lr: float = declare(1e-3, number(positive=True))
+    lr: float = declare(3e-4, number(positive=True))
     # linear decay of the learning rate to lr * this at the budget's end
-    lr_end_fraction: float = declare(1.0, fraction())
-    gamma: float = declare(0.99, fraction())
-    lam: float = declare(0.8, fraction())
+    lr_end_fraction: float = declare(0.1, fraction())
+    gamma: float = declare(0.98, fraction())
+    lam: float = declare(0.9, fraction())
     eps_start: float = declare(1.0, fraction())
     eps_end: float = declare(0.02, fraction())
     eps_decay_fraction: float = declare(0.5, fraction(positive=True))   # of the budget, linear
@@ -814,6 +836,9 @@ def validate(cfg: Config) -> None:
     goal_far = lay.start_shift[1] + lay.step_length[1] + env.goal_tolerance[0]
     if env.bounds_y[1] <= goal_far:
         raise ConfigError(f"env.bounds_y: the upper bound must lie beyond the goal region ({goal_far:.3f} m)")
+    if env.shield and env.shield_clearance < env.min_clearance:
+        raise ConfigError(f"env.shield_clearance: {env.shield_clearance} m is below env.min_clearance = "
+                          f"{env.min_clearance} m; the shield must keep at least the margin that a safe swing needs")
     if rew.safety_distance < env.min_clearance:
         raise ConfigError(f"reward.safety_distance: {rew.safety_distance} m is below env.min_clearance = "
                           f"{env.min_clearance} m; the safety term (eq 2.35) must pay the policy to keep the "

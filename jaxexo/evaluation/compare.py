@@ -27,6 +27,7 @@ limits, applied alike to both generators' paths): swing duration (s) and peak jo
 from __future__ import annotations
 
 import json
+import os
 import time
 from pathlib import Path
 
@@ -35,6 +36,7 @@ import numpy as np
 from jaxexo.config import PIVOT_CONDITIONS, Config
 from jaxexo.physics import swept
 from jaxexo.inference.scenarios import sample_scenarios, training_scenarios
+from jaxexo.storage.atomic import atomic_write
 
 BATCH = 1000
 BATCH_REPEATS = 3
@@ -413,12 +415,40 @@ def plot_joint_profiles(path: Path, trajs: dict, scenarios: list[dict], per_kind
     plt.close(fig)
 
 
+REPORT_FILES = ("report.json", "report.md", "trajectories.png", "joint_angles.png")
+
+
+def check_report_folder(out: str | Path, policy: str | Path | None = None, force: bool = False) -> None:
+    """Before any work: ``out`` must be a folder (or absent, in an existing folder or not), an earlier
+    report there is replaced only with ``force``, the policy is never one of the report's files, and
+    no report file is a symbolic link (it would be written through). ValueError naming --out."""
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"--out: {out} is a file, not a folder (the report folder)")
+    q = out.parent
+    while not q.exists() and q != q.parent:
+        q = q.parent
+    if q.exists() and not q.is_dir():
+        raise ValueError(f"--out: {q} is a file, not a folder (for {out})")
+    for name in REPORT_FILES:
+        f = out / name
+        if policy is not None and (os.path.realpath(f) == os.path.realpath(policy)
+                                   or (f.exists() and os.path.samefile(f, policy))):
+            raise ValueError(f"--out: the report would replace its input {policy} ({name}); pick another --out")
+        if f.is_symlink():
+            raise ValueError(f"--out: {f} is a symbolic link; jaxexo writes no file through a link it did not make")
+    earlier = [name for name in REPORT_FILES if (out / name).exists()]
+    if earlier and not force:
+        raise ValueError(f"--out: {out} already holds a report ({', '.join(earlier)}); pass --force to replace "
+                         "it, or pick another folder")
+
+
 def write_report(out: str | Path, report: dict, trajs: dict, scenarios: list[dict], title: str,
                  context: list[str], figures: bool = True) -> dict:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "report.json").write_text(json.dumps(report, indent=1, allow_nan=False) + "\n")
-    (out / "report.md").write_text(markdown(report, title, context))
+    atomic_write(out / "report.json", json.dumps(report, indent=1, allow_nan=False) + "\n")
+    atomic_write(out / "report.md", markdown(report, title, context))
     if figures:
         plot_overlays(out / "trajectories.png", trajs, scenarios)
         plot_joint_profiles(out / "joint_angles.png", trajs, scenarios)
@@ -426,9 +456,12 @@ def write_report(out: str | Path, report: dict, trajs: dict, scenarios: list[dic
 
 
 def run_eval(policy: str | Path, out: str | Path, against: str | None = "cfftg", scenarios: str = "test",
-             n: int = 1000, seed: int = 12345, figures: bool = True, batch_size: int = BATCH) -> dict:
-    """``batch_size``: scenarios per timed ``generate_batch`` call (the figure is scaled to 1000)."""
-    """``jaxexo eval``: the policy (and CFFTG) on the chosen scenarios; writes the report."""
+             n: int = 1000, seed: int = 12345, figures: bool = True, batch_size: int = BATCH,
+             force: bool = False) -> dict:
+    """``jaxexo eval``: the policy (and CFFTG) on the chosen scenarios; writes the report.
+    ``batch_size``: scenarios per timed ``generate_batch`` call (the figure is scaled to 1000);
+    ``force``: replace an earlier report in ``out`` (else refused, as is a report over its policy)."""
+    check_report_folder(out, policy, force)
     from jaxexo.baselines import CFFTG
     from jaxexo.evaluation.machine import machine_info
     from jaxexo.inference import TrajectoryGenerator

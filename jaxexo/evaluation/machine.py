@@ -9,6 +9,8 @@ import platform
 import re
 from pathlib import Path
 
+from jaxexo.storage.atomic import atomic_write
+
 
 def machine_info() -> dict:
     cpu = platform.processor() or platform.machine()
@@ -52,7 +54,7 @@ def write_result(name: str, payload: dict, markdown: str, out_dir: str | Path) -
     payload.setdefault("date", date)
     stem = f"{name}_{date}_{machine_tag(info)}"
     jpath, mpath = out / f"{stem}.json", out / f"{stem}.md"
-    jpath.write_text(json.dumps(payload, indent=2) + "\n")
-    mpath.write_text(markdown + f"\n\nMachine: {info['cpu']}, {info['cores']} cores, "
-                     f"{info.get('memory_gib')} GiB, JAX {info.get('jax', '-')}; {date}.\n")
+    atomic_write(jpath, json.dumps(payload, indent=2) + "\n")
+    atomic_write(mpath, markdown + f"\n\nMachine: {info['cpu']}, {info['cores']} cores, "
+                 f"{info.get('memory_gib')} GiB, JAX {info.get('jax', '-')}; {date}.\n")
     return jpath, mpath

@@ -32,6 +32,7 @@ import json
 from pathlib import Path
 
 from jaxexo.config import PIVOT_CONDITIONS, load_config, packaged_config
+from jaxexo.storage.atomic import atomic_write
 
 THESIS_MODELS = ("a", "b", "c", "1", "2", "3", "final")
 VARIANTS = ("faithful", "learns")
@@ -195,6 +196,21 @@ def run_names(models=THESIS_MODELS, variant: str = "both") -> list[str]:
     return [m if v == "faithful" else f"{m}-learns" for m in models for v in kinds]
 
 
+def check_reproduce_options(out, n, results_dir=None) -> None:
+    """Every option of ``jaxexo reproduce`` that no model needs to be trained to judge, checked before
+    any work: --n, and --out and --results naming folders (not files)."""
+    if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+        raise ValueError(f"--n: test scenarios per model must be an integer >= 1, got {n!r}")
+    for option, folder in (("--out", out), ("--results", results_dir)):
+        if folder is None:
+            continue
+        q = Path(folder)
+        while not q.exists() and q != q.parent:
+            q = q.parent
+        if q.exists() and not q.is_dir():
+            raise ValueError(f"{option}: {q} is a file, not a folder (for {folder})")
+
+
 def _compact(report: dict) -> dict:
     """A generator's figures without the per-(kind, pivot) groups and with at most 5 failures, so
     that the committed JSON stays small (the device figures only overall)."""
@@ -212,6 +228,7 @@ def run_reproduce(out: str | Path, models=THESIS_MODELS, n: int = 1000, seed: in
     OUT/reproduce.{md,json}; returns the results. ``variant``: "faithful", "learns" or "both";
     ``batch_size``: scenarios of the timed batch for the models compared with CFFTG; ``results_dir``:
     also write the tables as a benchmark result (reproduce_<date>_<machine>.{json,md})."""
+    check_reproduce_options(out, n, results_dir)
     from jaxexo.baselines import CFFTG
     from jaxexo.evaluation.compare import WithFallback, evaluate_generators, make_scenarios
     from jaxexo.inference import TrajectoryGenerator
@@ -265,14 +282,14 @@ def run_reproduce(out: str | Path, models=THESIS_MODELS, n: int = 1000, seed: in
                          "test_epsilon": eps, "model": model_of(name), "variant": variant_of(name),
                          "train_seconds": ev["train_seconds"], "episodes": ev["episodes"],
                          "env_steps": ev.get("env_steps"), "eval_json": {k: ev[k] for k in ("accuracy", "success")}}
-        entry.write_text(json.dumps({"key": key, "train_seconds": ev["train_seconds"], "result": results[name]}) + "\n")
+        atomic_write(entry, json.dumps({"key": key, "train_seconds": ev["train_seconds"], "result": results[name]}) + "\n")
         r, re_ = report["rl"], eps_report["rl"]
         progress(f"{name}: greedy accuracy {r['accuracy']:.3f}, success {r['success']:.3f}, reached goal "
                  f"{r['reached_goal']:.3f}; eps-greedy ({eps:g}) success {re_['success']:.3f}; "
                  f"{r['time_ms_mean']:.2f} ms per trajectory")
     out.mkdir(parents=True, exist_ok=True)
-    (out / "reproduce.json").write_text(json.dumps(results, indent=1) + "\n")
-    (out / "reproduce.md").write_text(tables(results))
+    atomic_write(out / "reproduce.json", json.dumps(results, indent=1) + "\n")
+    atomic_write(out / "reproduce.md", tables(results))
     if results_dir is not None:
         from jaxexo.evaluation.machine import write_result
 

@@ -31,19 +31,18 @@ and verdicts (tests/test_speed.py).
 from __future__ import annotations
 
 import dataclasses
-import tomllib
 import types
 from pathlib import Path
 
 import numpy as np
 
 from jaxexo.physics import dynamics, geometry, swept
-from jaxexo.config import ConfigError, config_from_dict
+from jaxexo.config.schema import MAX_SWING_DURATION
 from jaxexo.physics.dynamics import Scene, scalar
 from jaxexo.inference import blas, smoothing as sm, trajectory
 from jaxexo.inference.network import FoldedQNetwork, StepNetwork
 from jaxexo.inference.trajectory import DEFAULT_DURATION, Trajectory, TrajectoryBatch, TrajectoryError, assemble
-from jaxexo.storage.policy_file import PolicyFileError, QPolicy, load_policy
+from jaxexo.storage.policy_file import PolicyFileError, QPolicy, load_policy, policy_config
 
 FALLBACK_FACTORS = (0.25, 1.0 / 16.0, 0.0)   # smoothing multipliers tried before the raw polyline
 FALLBACKS = ("cfftg", None)
@@ -111,13 +110,7 @@ class TrajectoryGenerator:
         """Read policy.npz (no pickle) and check that it is a policy this generator can drive."""
         policy = load_policy(path)
         meta = policy.metadata
-        text = meta.get("config_toml")
-        if not isinstance(text, str):
-            raise PolicyFileError(f"{path}: metadata.config_toml is missing; cannot rebuild the environment")
-        try:
-            config = config_from_dict(tomllib.loads(text))
-        except (tomllib.TOMLDecodeError, ConfigError) as e:
-            raise PolicyFileError(f"{path}: metadata.config_toml is not a valid jaxexo config ({e})") from None
+        config = policy_config(meta, path)      # complete, and agreeing with the metadata
         obs_dim = dynamics.obs_dim(config.env.obs_mode, config.env.shape_points)
         if policy.obs_dim != obs_dim or meta.get("obs_dim") != obs_dim:
             raise PolicyFileError(f"{path}: the network takes {policy.obs_dim} inputs (metadata.obs_dim "
@@ -137,10 +130,10 @@ class TrajectoryGenerator:
         return cls(policy, config, str(path))
 
     # Scenes -------------------------------------------------------------------------------------
-    def scene(self, obstacle: geometry.Obstacle, pivot: str = "obstacle", pivot_y: float | None = None,
+    def scene(self, obstacle: geometry.Obstacle, pivot: str | float | None = None, pivot_y: float | None = None,
               start_y: float = 0.0, step_length: float = 0.70) -> Scene:
         """Validate one scenario (metres). ``pivot_y``, when given, overrides the ``pivot`` condition."""
-        return dynamics.make_scene(obstacle, pivot if pivot_y is None else pivot_y, start_y, step_length,
+        return dynamics.make_scene(obstacle, pivot_of(pivot, pivot_y), start_y, step_length,
                                    foot_length=self.config.kinematics.foot_length,
                                    shape_points=self.config.env.shape_points)
 
@@ -385,7 +378,7 @@ class TrajectoryGenerator:
         c = geometry.foot_clearance(np, path[near], self.sp.foot_length, scene.outline)
         return bool(np.any(geometry.foot_collides(np, c)))
 
-    def generate(self, obstacle: geometry.Obstacle, *, pivot: str = "obstacle", pivot_y: float | None = None,
+    def generate(self, obstacle: geometry.Obstacle, *, pivot: str | float | None = None, pivot_y: float | None = None,
                  start_y: float = 0.0, step_length: float = 0.70, n_points: int = sm.DEFAULT_POINTS,
                  smoothing: float = sm.DEFAULT_SMOOTHING, duration: float = DEFAULT_DURATION,
                  strict: bool = False, fallback: str | None = "cfftg", fast: bool = True) -> Trajectory:
@@ -403,7 +396,7 @@ class TrajectoryGenerator:
             raise TrajectoryError(traj)
         return traj
 
-    def generate_batch(self, obstacles, *, pivot="obstacle", pivot_y=None, start_y=0.0, step_length=0.70,
+    def generate_batch(self, obstacles, *, pivot=None, pivot_y=None, start_y=0.0, step_length=0.70,
                        n_points: int = sm.DEFAULT_POINTS, smoothing: float = sm.DEFAULT_SMOOTHING,
                        duration: float = DEFAULT_DURATION, strict: bool = False,
                        fallback: str | None = "cfftg", fast: bool = True) -> TrajectoryBatch:
@@ -428,10 +421,26 @@ def _smooth(raws, n_points, smoothing, fast):
     return sm.smooth_paths(raws, n_points, smoothing, with_deviation=True)
 
 
+def pivot_of(pivot, pivot_y):
+    """The scene's pivot: a condition (default "obstacle") or ``pivot_y`` in metres, not both."""
+    if pivot_y is None:
+        return "obstacle" if pivot is None else pivot
+    if pivot is not None:
+        raise ValueError(f"pivot, pivot_y: give one of them (a condition or a y in metres), got pivot={pivot!r} "
+                         f"and pivot_y={pivot_y!r}")
+    return pivot_y
+
+
 def scenes_for(make, obstacles, pivot, pivot_y, start_y, step_length) -> list[Scene]:
     """Scenes for many obstacles with ``make(obstacle, pivot, pivot_y, start_y, step_length)``; every
     option is one value for all or one per obstacle (shared by every generator's generate_batch)."""
-    obstacles = list(obstacles)
+    if isinstance(obstacles, geometry.Obstacle):
+        raise TypeError("obstacles: expected a list of Obstacle objects, got one Obstacle (use generate() for "
+                        "one scenario, or pass [obstacle])")
+    try:
+        obstacles = list(obstacles)
+    except TypeError:
+        raise TypeError(f"obstacles: expected a list of Obstacle objects, got {type(obstacles).__name__}") from None
     n = len(obstacles)
     if n == 0:
         raise ValueError("obstacles: need at least one scenario")
@@ -472,10 +481,18 @@ def _rows(batch: TrajectoryBatch, idx) -> TrajectoryBatch:
     return dataclasses.replace(batch, **changes)
 
 
+# Bounds of the sizes taken from input, checked before anything is allocated.
+MAX_POINTS = 100_000        # samples of one smoothed path
+MAX_DURATION = MAX_SWING_DURATION   # s: a swing, not a walk (jaxexo.config.schema)
+
+
 def check_options(n_points, smoothing, duration):
-    if isinstance(n_points, bool) or not isinstance(n_points, (int, np.integer)) or n_points < 2:
-        raise ValueError(f"n_points must be an integer >= 2, got {n_points!r}")
-    smoothing = geometry._finite("smoothing", smoothing)
+    if isinstance(n_points, bool) or not isinstance(n_points, (int, np.integer)) or not 2 <= n_points <= MAX_POINTS:
+        raise ValueError(f"n_points must be an integer in [2, {MAX_POINTS}], got {n_points!r}")
+    smoothing = geometry._finite("smoothing", smoothing, "m^2")
     if smoothing < 0:
         raise ValueError(f"smoothing must be >= 0 (m^2), got {smoothing}")
-    return int(n_points), smoothing, geometry._finite_positive("duration", duration)
+    duration = geometry._finite_positive("duration", duration, "s")
+    if duration > MAX_DURATION:
+        raise ValueError(f"duration must be <= {MAX_DURATION:g} s (one swing), got {duration:g}")
+    return int(n_points), smoothing, duration

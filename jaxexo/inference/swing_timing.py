@@ -58,10 +58,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from jaxexo.config.schema import MAX_CONTROL_RATE
 from jaxexo.physics import kinematics
 from jaxexo.physics.dynamics import Scene
 from jaxexo.inference.trajectory import (
-    JOINT_NAMES, TrajectoryChecks, _reasons, measure_paths, timed_dict, timed_table, write_timed_csv,
+    JOINT_NAMES, TrajectoryBatch, TrajectoryChecks, _reasons, measure_paths, timed_dict, timed_table, write_timed_csv,
     write_timed_json,
 )
 
@@ -74,6 +75,7 @@ CHECK_MARGIN = 1e-3        # exported samples must stay within (1 - this) of eac
 LOCAL_PASSES = 6           # local corrections of the law where exported samples exceed a limit ...
 MAX_SLOWDOWNS = 12         # ... then uniform slow-downs (the safety net)
 ARC_TABLE_PER_SAMPLE = 32  # arc-length table points per sample interval
+BYTES_PER_SAMPLE = 1024    # timing holds about 500 B per exported sample (measured); the bound counts twice that
 X_CAP = 1e6                # 1/s^2: cap on s'^2 where no joint moves (s' <= 1000 /s)
 
 
@@ -420,14 +422,30 @@ def time_swings(trajs, config, rate: float | None = None, limits: DeviceLimits |
     limits (default: ``config.device``) and sample each at ``rate`` Hz (default:
     ``config.device.control_rate``). ``config`` also supplies the kinematics (pass the generator's
     ``config``). The TOPP passes run on all swings at once."""
+    from jaxexo.config import Config
     from jaxexo.physics import dynamics
 
-    trajs = list(trajs)
+    if _is_trajectory(trajs) and not isinstance(trajs, TrajectoryBatch):
+        raise TypeError("trajs: expected a list of trajectories or a TrajectoryBatch, got one trajectory "
+                        "(time_swing times one)")
+    try:
+        trajs = list(trajs)
+    except TypeError:
+        raise TypeError(f"trajs: expected a list of trajectories or a TrajectoryBatch, got "
+                        f"{type(trajs).__name__}") from None
     if not trajs:
         raise ValueError("trajs: need at least one trajectory")
-    rate = float(config.device.control_rate if rate is None else rate)
-    if not math.isfinite(rate) or rate <= 0:
-        raise ValueError(f"rate: control rate must be a finite number > 0 (Hz), got {rate!r}")
+    for i, t in enumerate(trajs):
+        if not _is_trajectory(t):
+            raise TypeError(f"trajs[{i}]: expected a Trajectory (from generate), got {type(t).__name__}")
+    if not isinstance(config, Config):
+        raise TypeError(f"config: expected a jaxexo Config (the generator's .config), got {type(config).__name__}")
+    rate = config.device.control_rate if rate is None else rate
+    if isinstance(rate, (bool, np.bool_)) or not isinstance(rate, (int, float, np.integer, np.floating)):
+        raise TypeError(f"rate: expected a number in Hz, got {rate!r}")
+    rate = float(rate)
+    if not math.isfinite(rate) or not 0 < rate <= MAX_CONTROL_RATE:
+        raise ValueError(f"rate: control rate must be a finite number > 0 and <= {MAX_CONTROL_RATE:g} Hz, got {rate!r}")
     limits = DeviceLimits.from_config(config) if limits is None else limits
     if not isinstance(limits, DeviceLimits):
         raise ValueError(f"limits: expected a DeviceLimits, got {type(limits).__name__}")
@@ -480,8 +498,23 @@ def _topp_laws(paths, idx, caps, vmax, amax) -> list[TimeLaw]:
     return [out[i] for i in idx]
 
 
+def max_samples() -> int:
+    """The most samples one timed swing may have: half the machine's memory (8 GiB if unknown) at
+    BYTES_PER_SAMPLE, and at least 100,000 (10 s at 10 kHz)."""
+    from jaxexo.config.memory import machine_memory_bytes
+
+    return max(100_000, (machine_memory_bytes() or 8 * 2**30) // 2 // BYTES_PER_SAMPLE)
+
+
+def _is_trajectory(t) -> bool:
+    return hasattr(t, "heel") and hasattr(t, "scene")
+
+
 def time_swing(traj, config, rate: float | None = None, limits: DeviceLimits | None = None) -> TimedSwing:
     """One swing: ``time_swings([traj], ...)[0]``."""
+    if not _is_trajectory(traj) or isinstance(traj, TrajectoryBatch):
+        raise TypeError(f"traj: expected one Trajectory (from generate), got {type(traj).__name__}"
+                        + (" (time_swings times a batch)" if isinstance(traj, TrajectoryBatch) else ""))
     return time_swings([traj], config, rate, limits)[0]
 
 
@@ -494,7 +527,12 @@ def _evaluate(traj, heel, path, law: TimeLaw, slow: float, sp, limits: DeviceLim
     amax = np.asarray(limits.acceleration)
     scale = max(1.0, limits.min_duration / law.duration) * slow
     cur = law.slowed(scale)
-    periods = max(2, math.ceil(cur.duration * rate - 1e-9))
+    n = cur.duration * rate
+    if not n < max_samples():     # bounded before anything is allocated (an inf or NaN is refused too)
+        raise ValueError(f"rate: a {cur.duration:.4g} s swing at {rate:g} Hz needs {n:.4g} samples, more than "
+                         f"half this machine's memory holds ({max_samples()}); lower the rate or check the device "
+                         "limits (joint_velocity, joint_acceleration, min_swing_duration)")
+    periods = max(2, math.ceil(n - 1e-9))
     cur = cur.slowed(periods / (cur.duration * rate))      # whole control periods: never faster
     t = np.arange(periods + 1) / rate
     s, sd, sdd = cur.at(t)

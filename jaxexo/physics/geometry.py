@@ -200,23 +200,26 @@ def profile_height(xp, y, outline):
 # --------------------------------------------------------------------------------------------
 
 
-def _finite(name: str, value) -> float:
+def _finite(name: str, value, unit: str = "metres") -> float:
     # A bool is an int to Python (True == 1): Obstacle.rectangle(True, 0.1) would be 1 m wide.
     if isinstance(value, (bool, np.bool_)):
-        raise GeometryError(f"{name} must be a number in metres, got the boolean {value!r}")
+        raise GeometryError(f"{name} must be a number in {unit}, got the boolean {value!r}")
+    # float("0.1") would parse a string: a number is never taken from text.
+    if isinstance(value, (str, bytes, np.str_, np.bytes_)):
+        raise GeometryError(f"{name} must be a number in {unit}, got the string {value!r}")
     try:
         v = float(value)
     except (TypeError, ValueError):
-        raise GeometryError(f"{name} must be a number in metres, got {value!r}") from None
+        raise GeometryError(f"{name} must be a number in {unit}, got {value!r}") from None
     if not math.isfinite(v):
         raise GeometryError(f"{name} must be finite, got {v}")
     return v
 
 
-def _finite_positive(name: str, value) -> float:
-    v = _finite(name, value)
+def _finite_positive(name: str, value, unit: str = "metres") -> float:
+    v = _finite(name, value, unit)
     if v <= 0.0:
-        raise GeometryError(f"{name} must be > 0 metres, got {v}")
+        raise GeometryError(f"{name} must be > 0 {unit}, got {v}")
     return v
 
 
@@ -342,6 +345,9 @@ class Obstacle:
             raise GeometryError("points must be a sequence of (y, z) pairs in metres") from None
         if np.asarray(points).dtype == np.bool_:
             raise GeometryError("points must be (y, z) numbers in metres, got booleans")
+        if np.asarray(points).dtype.kind in "USO" and any(
+                isinstance(x, (str, bytes)) for x in np.asarray(points, dtype=object).ravel()):
+            raise GeometryError("points must be (y, z) numbers in metres, got strings")
         if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 2:
             raise GeometryError(f"points must have shape (n >= 2, 2), got {pts.shape}")
         if len(pts) > MAX_PROFILE_VERTICES - 2:

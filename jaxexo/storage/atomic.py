@@ -7,6 +7,9 @@ one file system; ``tempfile.mkstemp`` gives every writer its own name), is flush
 replaces the target. On any failure (a full disk, a file-size limit, KeyboardInterrupt) the temporary
 file is removed and the target is left as it was; an OSError raised names the target file. Only a
 SIGKILL can leave a temporary file behind: ``stale_temps`` finds those for a run's resume to remove.
+
+Symbolic links: ``atomic_write`` replaces a link at the target's name (the file it points to is never
+written); ``append_line`` opens with O_NOFOLLOW and refuses a link (SymlinkRefused, a ValueError).
 """
 
 from __future__ import annotations
@@ -21,6 +24,10 @@ def _temp_prefix(path: Path) -> str:
 
 
 TEMP_SUFFIX = ".tmp"
+
+
+class SymlinkRefused(ValueError):
+    """A file jaxexo would write through a symbolic link it did not create."""
 
 
 def _named(e: OSError, path: Path, what: str) -> OSError:
@@ -66,7 +73,15 @@ def append_line(path: str | Path, text: str) -> None:
     last checkpoint (jaxexo.train.driver does)."""
     path = Path(path)
     try:
-        with open(path, "a", encoding="utf-8") as f:
+        # O_NOFOLLOW: a log replaced by a symbolic link is never appended to through it.
+        fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW, 0o644)
+    except OSError as e:
+        if path.is_symlink():
+            raise SymlinkRefused(f"{path} is a symbolic link; jaxexo writes no file through a link it did not "
+                                 "make: remove the link") from None
+        raise _named(e, path, "append to") from None
+    try:
+        with os.fdopen(fd, "a", encoding="utf-8") as f:
             f.write(text)
             f.flush()
             os.fsync(f.fileno())

@@ -142,11 +142,83 @@ REQUIRED = {
 }
 
 
+# The largest array a policy may hold (a Q-network of 65,536-unit layers is far below it).
+MAX_ARRAY_BYTES = 2**31
+
+
+def _check_archive(path: Path) -> None:
+    """Before NumPy reads anything: the file is a zip archive (np.load would try a non-archive as a
+    pickle and suggest allow_pickle), and no member's header claims more data than the member holds
+    (a crafted shape of 10^12 would be allocated before the read fails)."""
+    if not zipfile.is_zipfile(path):
+        raise PolicyFileError(f"{path}: not a jaxexo policy: not a readable policy file (truncated or corrupt, "
+                              "or not the zip archive of arrays that policy.npz is)")
+    try:
+        with zipfile.ZipFile(path) as zf:
+            for info in zf.infolist():
+                with zf.open(info) as f:
+                    version = np.lib.format.read_magic(f)
+                    if version == (1, 0):
+                        shape, _, dtype = np.lib.format.read_array_header_1_0(f)
+                    else:
+                        shape, _, dtype = np.lib.format.read_array_header_2_0(f)
+                count = 1
+                for n in shape:
+                    count *= int(n)
+                nbytes = count * dtype.itemsize
+                if nbytes > min(info.file_size, MAX_ARRAY_BYTES):
+                    raise PolicyFileError(f"{path}: array {info.filename!r} claims shape {tuple(shape)} "
+                                          f"({nbytes} bytes) but holds {info.file_size} bytes; not a valid policy")
+    except (zipfile.BadZipFile, OSError, EOFError, ValueError, RuntimeError) as e:
+        if isinstance(e, PolicyFileError):
+            raise
+        raise PolicyFileError(f"{path}: not a readable jaxexo policy (truncated or corrupt: {e})") from None
+
+
+def policy_config(meta: dict, path):
+    """The policy's training config from ``metadata.config_toml``: the complete resolved config that
+    ``jaxexo train`` writes (every field stated, so that no default fills a gap), agreeing with every
+    metadata field that it also states (obs_mode, layer_norm, the hidden layers). PolicyFileError
+    naming the field otherwise."""
+    import tomllib
+
+    from jaxexo.config import ConfigError, config_from_dict
+    from jaxexo.config.schema import SECTION_CLASSES, SECTIONS, declared_fields
+
+    text = meta.get("config_toml")
+    if not isinstance(text, str):
+        raise PolicyFileError(f"{path}: metadata.config_toml is missing; cannot rebuild the environment")
+    if not text.strip():
+        raise PolicyFileError(f"{path}: metadata.config_toml is empty; the policy's training config is needed "
+                              "to rebuild its environment")
+    try:
+        raw = tomllib.loads(text)
+        for section in SECTIONS:
+            for name, _ in declared_fields(SECTION_CLASSES[section]):
+                if not isinstance(raw.get(section), dict) or name not in raw[section]:
+                    raise ConfigError(f"{section}.{name} is not stated: not the resolved training config that "
+                                      "jaxexo train writes")
+        config = config_from_dict(raw)
+    except (tomllib.TOMLDecodeError, ConfigError) as e:
+        raise PolicyFileError(f"{path}: metadata.config_toml is not a valid jaxexo config ({e})") from None
+    for key, field_, value in (("obs_mode", "env.obs_mode", config.env.obs_mode),
+                               ("layer_norm", "train.layer_norm", config.train.layer_norm),
+                               ("layers", "train.hidden", list(config.train.hidden))):
+        have = meta.get(key)
+        if key == "layers" and isinstance(have, list):
+            have = have[1:-1]
+        if have != value:
+            raise PolicyFileError(f"{path}: metadata.{key} ({meta.get(key)!r}) contradicts its config_toml's "
+                                  f"{field_} = {value!r}")
+    return config
+
+
 def load_policy(path: str | Path) -> QPolicy:
     """Read and check policy.npz; raises PolicyFileError saying what is wrong."""
     path = Path(path)
     if not path.is_file():
         raise PolicyFileError(f"{path}: no such policy file")
+    _check_archive(path)
     try:
         z = np.load(path, allow_pickle=False)
         if not isinstance(z, np.lib.npyio.NpzFile):

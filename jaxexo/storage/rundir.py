@@ -2,7 +2,7 @@
 
 - ``run_lock``: an exclusive ``fcntl.flock`` on ``DIR/.jaxexo.lock`` held for the whole run. A second
   process on the same directory is refused at once (it would interleave metrics and overwrite
-  checkpoints); the operating system releases the lock when its holder exits or is killed, so a lock
+  checkpoints); a symbolic link at the lock's name is refused, never followed; the operating system releases the lock when its holder exits or is killed, so a lock
   file left behind by a killed run never blocks its ``--resume``.
 - ``TrainingDiverged``: the run's outcome when its loss or parameters became non-finite (raised by
   jaxexo.train.driver; defined here, without JAX, so that the CLI can catch it).
@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import stat
 from pathlib import Path
 
 from jaxexo.config import ConfigError
@@ -54,11 +55,25 @@ def run_lock(directory: str | Path, what: str, create: bool = True):
     if not create and not directory.is_dir():
         missing = "no sweep to resume" if what == "sweep" else "no checkpoint to resume from"
         raise RunDirError(f"--resume: {directory} does not exist: {missing}")
+    q = directory.parent
+    while not q.exists() and q != q.parent:
+        q = q.parent
+    if q.exists() and not q.is_dir():
+        raise RunDirError(f"--out: {q} is a file, not a folder (for {directory})")
+    lock = directory / LOCK_NAME
     try:
         directory.mkdir(parents=True, exist_ok=True)
-        fd = os.open(directory / LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o644)
+        # O_NOFOLLOW: a symbolic link planted at the lock's name is never followed (the pid line
+        # would overwrite whatever file it points to).
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
     except OSError as e:
+        if lock.is_symlink():
+            raise RunDirError(f"--out: {lock} is a symbolic link; jaxexo writes no file through a link it did "
+                              "not make: remove the link") from None
         raise RunDirError(f"--out: cannot use {directory} as a run directory ({e.strerror})") from None
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        raise RunDirError(f"--out: {lock} is not a regular file; remove it")
     try:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)

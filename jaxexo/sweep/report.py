@@ -21,6 +21,16 @@ import numpy as np
 
 from jaxexo.config import ConfigError
 from jaxexo.config.toml_io import config_to_toml
+from jaxexo.storage.atomic import atomic_write
+
+
+def _save(fig, path) -> None:
+    """A figure as PNG, written atomically (a link in its place is replaced, never written through)."""
+    import io
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    atomic_write(path, buf.getvalue())
 from jaxexo.sweep import results as R
 from jaxexo.sweep.spec import Sweep, format_value
 
@@ -180,7 +190,7 @@ def plot_heatmap(path: Path, sweep: Sweep, entries: list[dict], axes: tuple[str,
     ax.set_ylabel(ya)
     ax.set_title("Sweep: success on the test layouts")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    _save(fig, path)
     plt.close(fig)
 
 
@@ -219,7 +229,7 @@ def plot_curves(path: Path, sweep: Sweep, out: Path, rows: list[dict], entries: 
     a2.set_xlabel("episodes")
     a2.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    _save(fig, path)
     plt.close(fig)
 
 
@@ -247,9 +257,9 @@ def export_best(sweep: Sweep, out: Path, rows: list[dict]) -> dict:
     best = Path(out) / "best"
     best.mkdir(exist_ok=True)
     export_policy(best / "policy.npz", cfg, Trainer(cfg), params)
-    (best / "config.toml").write_text(config_to_toml(cfg))
+    atomic_write(best / "config.toml", config_to_toml(cfg))
     selection = {"config_id": cid, "seed": seed, "label": sweep.members[cid].label,
                  "success": float(best_row["success"]), "held_out_success": float(best_row["held_out_success"]),
                  "mean_success_over_seeds": e["success_mean"]}
-    (best / "selection.json").write_text(json.dumps(selection, indent=1) + "\n")
+    atomic_write(best / "selection.json", json.dumps(selection, indent=1) + "\n")
     return selection

@@ -18,14 +18,13 @@ from __future__ import annotations
 import csv
 import io
 import json
-import os
 from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
 
 from jaxexo.config import HYPER_FIELDS, RewardConfig
-from jaxexo.storage.atomic import atomic_write  # noqa: F401 (the one atomic write; R.atomic_write)
+from jaxexo.storage.atomic import append_line, atomic_write  # noqa: F401 (the one atomic write; R.atomic_write)
 from jaxexo.sweep.spec import Sweep
 
 PLAN, SWEEP_FILE, RESULTS, CHUNKS = "plan.json", "sweep.json", "results.csv", "chunks"
@@ -105,11 +104,8 @@ def write_rows(path: Path, cols, rows) -> None:
 
 
 def append_rows(path: Path, cols, rows) -> None:
-    """One chunk's rows in one write, flushed to disk."""
-    with path.open("a") as f:
-        f.write(_csv_text(cols, rows, header=False))
-        f.flush()
-        os.fsync(f.fileno())
+    """One chunk's rows in one write, flushed to disk (never through a symbolic link)."""
+    append_line(path, _csv_text(cols, rows, header=False))
 
 
 def read_rows(path: Path) -> list[dict]:

@@ -25,6 +25,9 @@ Reliability (README "Reliability"; tests/test_reliability.py):
   crashed run are never overwritten or appended to);
 - the checkpoint carries a sha256 (jaxexo.storage.checkpoint) and its trees must match this config's
   network and state in structure, shape and dtype, or resume is refused naming the file;
+- the checkpoint records the config the run started with: a resume with any other config (config.toml
+  edited along with it) is refused naming the first differing field; a run past its first chunk
+  whose checkpoint was deleted (checkpoint.json, or more than one metrics row, remain) is refused;
 - a chunk whose loss or parameters are not finite marks the run diverged: the row says so, training
   stops, no checkpoint is written for it, only the best finite parameters (if a chunk produced any)
   are exported, and TrainingDiverged is raised (the CLI exits 3).
@@ -35,13 +38,14 @@ from __future__ import annotations
 import json
 import math
 import time
+import tomllib
 from pathlib import Path
 
 import jax
 import numpy as np
 from flax import serialization
 
-from jaxexo.config import Config, ConfigError, load_config
+from jaxexo.config import Config, ConfigError, config_from_dict, load_config
 from jaxexo.config.toml_io import config_to_toml
 from jaxexo.env.exo_step import LENGTH_SCALE, THESIS_OBS_CENTER
 from jaxexo.physics import dynamics
@@ -213,6 +217,10 @@ def _prepare_dir(out: Path, cfg: Config, seed: int, resume: bool):
     present = contents(out)
     if resume:
         if not ckpt.exists():
+            done = _chunks_recorded(out)
+            if done:
+                raise ConfigError(f"--resume: {out} has no {CHECKPOINT} but {done}; its checkpoint was deleted, "
+                                  "so the run cannot be continued: start a new run in another directory")
             if "config.toml" in present and set(present) <= BEFORE_FIRST_CHECKPOINT:
                 if load_config(cfg_path) != cfg:
                     raise ConfigError(f"--resume: the config differs from the one in {cfg_path}; resume with that config")
@@ -226,6 +234,20 @@ def _prepare_dir(out: Path, cfg: Config, seed: int, resume: bool):
         if saved != cfg:
             raise ConfigError(f"--resume: the config differs from the one in {cfg_path}; resume with that config")
         raw = read_checkpoint(ckpt)
+        started = raw.get("config_toml")
+        if isinstance(started, bytes):
+            started = started.decode()
+        if isinstance(started, str):
+            # config.toml may have been edited together with the config passed: the checkpoint's
+            # own copy is what the state was trained with.
+            try:
+                first = config_from_dict(tomllib.loads(started))
+            except (tomllib.TOMLDecodeError, ConfigError) as e:
+                raise CheckpointError(f"{ckpt}: its config cannot be read ({e})") from None
+            if first != cfg:
+                raise ConfigError(f"--resume: {_first_difference(first, cfg)} differs from the value the run in {out} "
+                                  f"started with (its checkpoint records the config); the training state depends on "
+                                  f"it: resume with the run's config, or start a new run")
         if raw["book"]["seed"] != seed:
             raise ConfigError(f"--resume: the run used --seed {raw['book']['seed']}, not {seed}")
         return raw
@@ -234,12 +256,37 @@ def _prepare_dir(out: Path, cfg: Config, seed: int, resume: bool):
     if present:
         stale = {tmp.name for name in WRITTEN for tmp in stale_temps(out / name)}
         hint = (" (a run stopped before its first checkpoint: --resume starts it again)"
-                if "config.toml" in present and set(present) - stale <= BEFORE_FIRST_CHECKPOINT else "")
+                if "config.toml" in present and set(present) - stale <= BEFORE_FIRST_CHECKPOINT
+                and not _chunks_recorded(out) else "")
         raise RunDirError(f"--out: {out} is not empty ({describe(present)}) and has no {CHECKPOINT} to resume "
                           f"from{hint}; a new run needs an empty or absent directory, so that nothing there is "
                           "overwritten: pick another --out, or move those files away")
     atomic_write(cfg_path, config_to_toml(cfg))
     return None
+
+
+def _chunks_recorded(out: Path) -> str:
+    """What shows that a run got past its first checkpoint (checkpoint.json, or more than one row in
+    metrics.jsonl: row k is appended just before checkpoint k), in words; "" if nothing does."""
+    if (out / BOOKKEEPING).exists():
+        return f"{BOOKKEEPING} records a checkpoint"
+    try:
+        rows = (out / "metrics.jsonl").read_bytes().count(b"\n")
+    except OSError:
+        return ""
+    return f"metrics.jsonl records {rows} finished chunks" if rows > 1 else ""
+
+
+def _first_difference(a: Config, b: Config) -> str:
+    """The first field (``section.name``) whose value differs between two configs."""
+    import dataclasses
+
+    for section in ("env", "kinematics", "reward", "layout", "train", "device"):
+        x, y = getattr(a, section), getattr(b, section)
+        for f in dataclasses.fields(x):
+            if getattr(x, f.name) != getattr(y, f.name):
+                return f"{section}.{f.name}"
+    return "the config"
 
 
 def run_training(cfg: Config, out: str | Path, seed: int = 0, resume: bool = False, progress: bool = True,
@@ -299,7 +346,11 @@ def _run_locked(cfg: Config, out: Path, seed: int, resume: bool, progress: bool,
             wall_before = readable["train_seconds"] if readable.get("chunks_done") == chunks_done else 0.0
         except (OSError, ValueError, KeyError, TypeError):
             wall_before = 0.0
-        lines = metrics_path.read_text().splitlines() if metrics_path.exists() else []
+        try:
+            lines = metrics_path.read_text(encoding="utf-8").splitlines() if metrics_path.exists() else []
+        except UnicodeDecodeError as e:
+            raise ConfigError(f"--resume: {metrics_path} is damaged (not UTF-8 text at byte {e.start}); it cannot "
+                              "be rebuilt, start a new run") from None
         try:
             rows = [json.loads(x) for x in lines[:chunks_done]]
         except ValueError:
@@ -346,7 +397,7 @@ def _run_locked(cfg: Config, out: Path, seed: int, resume: bool, progress: bool,
             _atomic_write(ckpt, pack_checkpoint(serialization.msgpack_serialize({
                 "state": serialization.to_state_dict(ts),
                 "best_params": serialization.to_state_dict(best["params"]),
-                "book": bookkeeping})))
+                "book": bookkeeping, "config_toml": config_to_toml(cfg)})))
             _atomic_write(book, json.dumps({**bookkeeping, "train_seconds": wall}, indent=1).encode())
             if bar is not None:
                 bar.update(1)
