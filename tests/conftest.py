@@ -83,6 +83,9 @@ def legacy_raw(raw: dict | None = None) -> dict:
     if not _LEGACY:
         snap = json.loads((ROOT / "tests" / "data" / "resolved_configs.json").read_text())
         _LEGACY.update(tomllib.loads(snap["schema_defaults"]))
+        from resolved_snapshot import ADDED_SINCE   # fields declared since, at their former meaning
+
+        _LEGACY.update(deep_merge(_LEGACY, ADDED_SINCE))
     return deep_merge(_LEGACY, raw or {})
 
 

@@ -269,9 +269,9 @@ class EnvConfig:
     # goal box: |heel_y - goal_y| <= [0], heel_z <= [1]
     goal_tolerance: tuple[float, float] = declare((0.04, 0.02), vector(2, positive=True), unit="m")
     # mid-goal centre height above the obstacle top
-    mid_goal_clearance: float = declare(0.08, number(nonneg=True), unit="m")
+    mid_goal_clearance: float = declare(0.045, number(nonneg=True), unit="m")
     # half extents (y, z) of the mid-goal box
-    mid_goal_half_size: tuple[float, float] = declare((0.06, 0.04), vector(2, positive=True), unit="m")
+    mid_goal_half_size: tuple[float, float] = declare((0.06, 0.02), vector(2, positive=True), unit="m")
     # max_z of eq 2.34 = obstacle top + this
     max_height_margin: float = declare(0.20, number(nonneg=True), unit="m")
     bounds_y: tuple[float, float] = declare((-0.30, 1.30), range_(), unit="m")  # the heel is kept inside
@@ -368,12 +368,12 @@ class RewardConfig:
     # jaxexo.physics.rewards.shaping_reward for the choice of its discount.
     progress_shaping: float = declare(5.0, number(nonneg=True), unit="1/m")
     shaping_discount: float = declare(1.0, fraction(positive=True))
-    # The wearer's costs (not in the thesis, jaxexo.physics.rewards.wearer_terms; 0 = thesis reward):
+    # The wearer's costs (not in the thesis, jaxexo.physics.rewards.wearer_terms; 0, 0 = thesis reward):
     # per metre of heel height above the obstacle's top plus env.shield_clearance, per step (a low
     # swing), and per second the joint drives need for each move at [device] joint_velocity (a quick,
     # straight swing). The velocities enter the environment as ``joint_speed`` (hip, knee, hip, knee).
-    lift_cost: float = declare(0.0, number(nonneg=True, hi=1e3), unit="1/m")
-    time_cost: float = declare(0.0, number(nonneg=True, hi=1e3), unit="1/s", to_param=lambda v, cfg: {
+    lift_cost: float = declare(10.0, number(nonneg=True, hi=1e3), unit="1/m")
+    time_cost: float = declare(2.0, number(nonneg=True, hi=1e3), unit="1/s", to_param=lambda v, cfg: {
         "time_cost": np.asarray(v, dtype=np.float32),
         "joint_speed": np.asarray(tuple(cfg.device.joint_velocity) * 2, dtype=np.float32)})
 
