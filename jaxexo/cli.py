@@ -128,6 +128,16 @@ def _check_outputs(inputs, outputs) -> None:
                                  "pick another path")
 
 
+def _check_clearance(clearance, config) -> None:
+    """--clearance against the model's env.min_clearance, before any work (names the option)."""
+    from jaxexo.physics.dynamics import check_clearance
+
+    try:
+        check_clearance(clearance, config.env.min_clearance)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"--{e}") from None
+
+
 def cmd_generate(args) -> int:
     outputs = (("--out", args.out), ("--json", args.json), ("--plot", args.plot), ("--animate", args.animate))
     for option, value in outputs:
@@ -150,12 +160,13 @@ def cmd_generate(args) -> int:
     from jaxexo.inference.smoothing import DEFAULT_SMOOTHING
 
     common = dict(pivot=args.pivot, pivot_y=args.pivot_y, start_y=args.start_y, step_length=args.step_length,
-                  n_points=args.points, duration=args.duration)
+                  n_points=args.points, duration=args.duration, clearance=args.clearance)
     if args.method == "cfftg":
         from jaxexo.baselines import CFFTG
 
         # The kinematics (and joint limits) of the policy's config when one is given.
         gen = CFFTG.from_policy(args.policy) if args.policy else CFFTG(_load(None)[0])
+        _check_clearance(args.clearance, gen.config)
         traj = gen.generate(obstacle_from_args(args), **common)
     else:
         if not args.policy:
@@ -163,6 +174,7 @@ def cmd_generate(args) -> int:
         from jaxexo.inference import TrajectoryGenerator
 
         gen = TrajectoryGenerator.load(args.policy)
+        _check_clearance(args.clearance, gen.config)
         smoothing = DEFAULT_SMOOTHING if args.smoothing is None else args.smoothing
         traj = gen.generate(obstacle_from_args(args), smoothing=smoothing,
                             fallback=None if args.fallback == "none" else args.fallback, **common)
@@ -323,6 +335,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="when the RL swing is not safe, return CFFTG's plan (cfftg) or the RL swing alone (none)")
     g.add_argument("--smoothing", type=float,
                    help="B-spline smoothing s, m^2 (0: raw polyline; default 0.005); rl only")
+    g.add_argument("--clearance", type=float, help="m the swing keeps from the obstacle (default: the model's "
+                                                   "env.min_clearance; at most 0.10); the verdict judges against it")
     g.add_argument("--duration", type=float, default=1.0, help="swing duration for the time stamps, s "
                                                                 "(ignored with --rate)")
     g.add_argument("--rate", type=float, help="device-ready output: the shortest rest-to-rest timing within the "

@@ -45,11 +45,10 @@ MAX_SHIFT = 0.10      # m: a correction moving a sample further than this is not
 
 def _outward(path_points, foot_length, outline):
     """Unit outward normals (k, 2) of the foot's distance to the outline at heel points (k, 2)."""
-    def c(x):
-        return geometry.foot_clearance(np, x, foot_length, outline[None])
     e = _NORMAL_EPS
-    g = np.stack([c(path_points + [e, 0.0]) - c(path_points - [e, 0.0]),
-                  c(path_points + [0.0, e]) - c(path_points - [0.0, e])], axis=-1)
+    probe = path_points[None, :, :] + np.array([[e, 0.0], [-e, 0.0], [0.0, e], [0.0, -e]])[:, None, :]
+    c = geometry.foot_clearance(np, probe.reshape(-1, 2), foot_length, outline[None]).reshape(4, -1)
+    g = np.stack([c[0] - c[1], c[2] - c[3]], axis=-1)
     norm = np.linalg.norm(g, axis=-1, keepdims=True)
     return np.where(norm > 0.0, g / np.maximum(norm, 1e-300), [0.0, 1.0])
 
