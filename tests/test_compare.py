@@ -9,7 +9,7 @@ import shutil
 import numpy as np
 import pytest
 
-from jaxexo.evaluation.compare import evaluate_generators, make_scenarios, path_length, squared_jerk
+from jaxexo.evaluation.compare import evaluate_generators, make_scenarios, markdown, path_length, squared_jerk
 
 pytest.importorskip("jax")
 
@@ -108,6 +108,22 @@ def test_eval_figures_match_the_generators_own_outputs(trained_run):
         assert dev["device_within_limits"] == 1.0
         assert dev["peak_knee_vel_deg_s_mean"] <= np.degrees(rl.config.device.joint_velocity[1]) + 1e-9
         assert dev["uniform_peak_joint_vel_deg_s_median"] > dev["peak_knee_vel_deg_s_mean"]
+        # What a wearer feels, recomputed here from the timed swings and the paths: duration p95 and max,
+        # joint jerk (third differences of the exported angles at the control rate), lift above the top.
+        dur = np.array([t.duration for t in timed])
+        jerk = np.array([float(((np.diff(t.joint_angles, n=3, axis=0) * t.rate**3) ** 2).sum() / t.rate)
+                         for t in timed])
+        lift = np.array([t.heel[:, 1].max() - t.scene.obstacle.height for t in trajs[name]])
+        assert dev["swing_s_p95"] == pytest.approx(np.percentile(dur, 95))
+        assert dev["swing_s_max"] == pytest.approx(dur.max())
+        assert dev["joint_jerk_median"] == pytest.approx(np.median(jerk), rel=1e-9)
+        assert report[name]["peak_above_obstacle_m_p95"] == pytest.approx(np.percentile(lift, 95))
+        for group in ("by_kind", "by_pivot"):
+            for g, r in report[name][group].items():
+                assert {"swing_s_p95", "joint_jerk_median", "joint_jerk_p95"} <= set(r["device"]), g
+                assert "peak_above_obstacle_m_median" in r
+    md = markdown(report, "t", [])
+    assert "lift median cm" in md and "joint jerk median" in md
     with pytest.raises(ValueError, match="scenarios"):
         make_scenarios(rl.config, "everything", 5)
 
