@@ -30,6 +30,7 @@ and verdicts (tests/test_speed.py).
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import types
 from pathlib import Path
@@ -69,6 +70,7 @@ class TrajectoryGenerator:
         self.step_net = StepNetwork(self.net)
         self._linear = None
         self._cfftg = None      # built on the first fallback (its constants cost ~ms to derive)
+        self.clearance = None   # m, or None: env.min_clearance (at_clearance)
         # terminated()'s one parameter as a Python bool: a NumPy bool would make every step's test
         # a NumPy scalar operation.
         self._term_p = types.SimpleNamespace(terminate_on_collision=bool(self.np_params.terminate_on_collision))
@@ -81,8 +83,6 @@ class TrajectoryGenerator:
         """A copy that acts epsilon-greedily (thesis 2.6 tests that way): each step a uniformly
         random action with probability ``epsilon``, from its own seeded stream (deterministic for a
         given seed and scenario order). For reproducing the thesis's test protocol only."""
-        import copy
-
         eps = float(epsilon)
         if not 0.0 <= eps <= 1.0:
             raise ValueError(f"epsilon must be in [0, 1], got {epsilon!r}")
@@ -343,7 +343,7 @@ class TrajectoryGenerator:
 
         bad = np.flatnonzero(~batch.ok)
         if self._cfftg is None:
-            self._cfftg = CFFTG(self.config)
+            self._cfftg = CFFTG(self.config).at_clearance(self.clearance)
         plan = self._cfftg._finish([batch.scenes[i] for i in bad], n_points, duration, False)
         take = [j for j in range(len(bad)) if plan.ok[j]]
         notes = list(batch.notes)
@@ -378,17 +378,35 @@ class TrajectoryGenerator:
         c = geometry.foot_clearance(np, path[near], self.sp.foot_length, scene.outline)
         return bool(np.any(geometry.foot_collides(np, c)))
 
+    def at_clearance(self, clearance: float | None) -> "TrajectoryGenerator":
+        """This generator for swings that must keep ``clearance`` (m; None: the model's env.min_clearance;
+        refused below it or above dynamics.MAX_CLEARANCE): the verdict judges against it, the shield
+        keeps the same excess above it as in training (env.shield_clearance - env.min_clearance), and
+        the CFFTG fallback plans for it too. The policy's input is unchanged."""
+        c = dynamics.check_clearance(clearance, self.config.env.min_clearance)
+        if c is None:
+            return self
+        out = copy.copy(self)
+        out.sp = dynamics.with_clearance(self.sp, c)
+        out.np_params = dynamics.with_clearance(self.np_params, c)
+        out._cfftg = None
+        out.clearance = c
+        return out
+
     def generate(self, obstacle: geometry.Obstacle, *, pivot: str | float | None = None, pivot_y: float | None = None,
                  start_y: float = 0.0, step_length: float = 0.70, n_points: int = sm.DEFAULT_POINTS,
                  smoothing: float = sm.DEFAULT_SMOOTHING, duration: float = DEFAULT_DURATION,
-                 strict: bool = False, fallback: str | None = "cfftg", fast: bool = True) -> Trajectory:
+                 strict: bool = False, fallback: str | None = "cfftg", fast: bool = True,
+                 clearance: float | None = None) -> Trajectory:
         """One smoothed, checked trajectory (metres, radians, seconds). ``strict`` raises
         TrajectoryError instead of returning a trajectory that fails a check; ``fallback``: "cfftg"
         (CFFTG's plan when the RL swing is not safe) or None (module docstring). ``fast=False`` runs
         the plain reference implementation (every move's swept clearance computed exactly), which
-        gives the same actions, samples and verdicts."""
+        gives the same actions, samples and verdicts. ``clearance`` (m): the margin the swing keeps
+        (``at_clearance``)."""
         n_points, smoothing, duration = check_options(n_points, smoothing, duration)
         fallback = check_fallback(fallback)
+        self = self.at_clearance(clearance)
         scene = self.scene(obstacle, pivot, pivot_y, start_y, step_length)
         raw, _ = self.rollout(scene)
         traj = self._finish([scene], [raw], n_points, smoothing, duration, fallback, fast)[0]
@@ -399,11 +417,13 @@ class TrajectoryGenerator:
     def generate_batch(self, obstacles, *, pivot=None, pivot_y=None, start_y=0.0, step_length=0.70,
                        n_points: int = sm.DEFAULT_POINTS, smoothing: float = sm.DEFAULT_SMOOTHING,
                        duration: float = DEFAULT_DURATION, strict: bool = False,
-                       fallback: str | None = "cfftg", fast: bool = True) -> TrajectoryBatch:
-        """Trajectories for many scenarios; every option is one value or one per obstacle (``fallback``
-        and ``fast`` one value, as in ``generate``)."""
+                       fallback: str | None = "cfftg", fast: bool = True,
+                       clearance: float | None = None) -> TrajectoryBatch:
+        """Trajectories for many scenarios; every option is one value or one per obstacle (``fallback``,
+        ``fast`` and ``clearance`` one value, as in ``generate``)."""
         n_points, smoothing, duration = check_options(n_points, smoothing, duration)
         fallback = check_fallback(fallback)
+        self = self.at_clearance(clearance)
         scenes = self._scenes(obstacles, pivot, pivot_y, start_y, step_length)
         with blas.limited(self.batch_blas_threads):
             raws, _ = self.rollout_batch(scenes)
