@@ -1,0 +1,310 @@
+"""The shield's greedy choice for one heel, checking only the move that will be taken (issue 19).
+
+The shielded greedy action is ``argmax(where(mask, q, -inf))`` with ``mask`` the admissible moves of
+jaxexo.physics.dynamics.admissible_moves, evaluated in float32 on the heel rounded to float32 (the
+generator's reference, ``TrajectoryGenerator._admissible_rows``). Checking all 19 forward moves every
+step costs ~200 us in NumPy calls; the chosen move, however, is simply the first move, in order of
+decreasing Q (ties by index, as argmax), that is admissible. ``ScalarShield.choose`` walks that order
+and checks one move at a time in plain Python floats:
+
+- the goal-box condition exactly (the move's end is rounded to float32 exactly like the reference's
+  float32 arithmetic: a sum of two float32 values is exact in float64, so one rounding gives the
+  float32 sum);
+- the clearance and the joint limits / reach from float64 arithmetic on the same float32 inputs,
+  *certified*: each comparison is decided only when the float64 value lies further from its
+  threshold than a bound on float32's rounding error (``MARGIN`` for lengths, a per-leg bound for the
+  angles that grows where the knee's square root is ill-conditioned); a comparison that is too close
+  to call makes ``choose`` return None, and the caller computes the reference mask (float32 NumPy)
+  for that step. The result is therefore always the reference's move.
+
+Cheap exact shortcuts keep the geometry rare: far from the obstacle's bounding box no move can come
+within the shield's clearance (the distance is 1-Lipschitz); outline edges whose bounding box is
+further than the threshold from the swept region's bounding box are skipped; a move whose end
+clearance is already below the threshold fails, and one whose ends' clearances certify the swept
+bound (jaxexo.physics.swept.swept_lower_bound) passes.
+
+Where no forward move passes all four conditions the reference falls back (the forward moves that
+keep the clearance, then every move): ``choose`` returns None there too, so those steps take the
+reference path. Exploration (epsilon > 0) always takes it.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from jaxexo.physics import dynamics, kinematics
+
+# m: a float64 length decides a float32 comparison only when it is at least this far from the
+# threshold. float32 rounding of the clearance geometry on coordinates of order 1 m is a few 1e-7 m.
+MARGIN = 1e-5
+# m: the same for a leg's length (float32 rounding of |hip - heel| is a few 1e-7 m; the stance leg is
+# always one leg length long, 1e-5 m (kinematics.LENGTH_EPS) inside its threshold).
+LENGTH_MARGIN = 2e-6
+# rad: the same for an angle whose legs are well conditioned (added to the per-leg bound).
+ANGLE_MARGIN = 1e-5
+# (m^2) bound on float32's error in thigh^2 - a^2 (knee_position); its square root bounds the
+# error in the knee's offset h where h is near 0 (a straight leg).
+_G_ERR = 4e-6
+# Orientation products closer to 0 than this (m^2) are treated as undecidable (float32 sign noise).
+_ORIENT_TOL = 1e-9
+
+
+def _f32(x: float) -> float:
+    return float(np.float32(x))
+
+
+class ScalarShield:
+    """Per-scene constants (Python floats, the float32 values the reference uses) and ``choose``."""
+
+    def __init__(self, sp, np_params, scene):
+        p = np_params
+        self.sp = sp
+        self.fl = sp.foot_length
+        self.step = sp.step_size
+        self.b0, self.b1 = sp.bounds_y
+        self.zmax = sp.max_z_world
+        self.shield_c = sp.shield_clearance
+        self.slack = dynamics.SHIELD_SLACK
+        self.t, self.s = sp.thigh, sp.shin
+        self.leg = _f32(np.float32(sp.thigh) + np.float32(sp.shin))
+        self.hip_lim = sp.hip_limits
+        self.knee_lim = sp.knee_limits
+        self.leg_tol = sp.leg_length_tolerance + kinematics.LENGTH_EPS
+        # every forward move: (action, float32 step * direction per axis)
+        fwd = np.flatnonzero(dynamics.forward_moves())
+        prod = (p.step_size * p.directions).astype(np.float32)
+        self.forward = np.zeros(dynamics.NUM_ACTIONS, bool)
+        self.forward[fwd] = True
+        self.fwd_list = self.forward.tolist()
+        self.prod = [(float(prod[a, 0]), float(prod[a, 1])) for a in range(dynamics.NUM_ACTIONS)]
+        # the scene as float32 values
+        f = lambda v: float(np.float32(v))  # noqa: E731
+        self.pivot = f(scene.pivot_y)
+        self.goal_limit = float(np.float32(scene.goal_y) + p.goal_tolerance[0])
+        ol = np.asarray(scene.outline, np.float32).astype(np.float64)
+        self.vy, self.vz = ol[:, 0].tolist(), ol[:, 1].tolist()
+        self.box = (min(self.vy), max(self.vy), min(min(self.vz), 0.0), max(self.vz))
+        edges = []
+        for i in range(len(ol) - 1):
+            cy, cz = self.vy[i], self.vz[i]
+            ey, ez = self.vy[i + 1] - cy, self.vz[i + 1] - cz
+            len2 = ey * ey + ez * ez
+            if len2 > 1e-24:   # padding (repeated vertices): their distances are the vertices'
+                edges.append((cy, cz, ey, ez, 1.0 / len2,
+                              min(cy, cy + ey), max(cy, cy + ey), min(cz, cz + ez), max(cz, cz + ez)))
+        self.edges = edges
+        self.pairs = [(self.vy[i], self.vz[i], self.vy[i + 1], self.vz[i + 1]) for i in range(len(ol) - 1)]
+        self.unsure = 0     # steps handed to the reference (diagnostics)
+
+    # Geometry (float64 on float32 inputs) -------------------------------------------------------
+    def _box_distance(self, y0, y1, z0, z1):
+        """Distance between the box [y0, y1] x [z0, z1] and the obstacle's bounding box (which holds the
+        outline and the region under it)."""
+        by0, by1, bz0, bz1 = self.box
+        dy = max(by0 - y1, y0 - by1, 0.0)
+        dz = max(bz0 - z1, z0 - bz1, 0.0)
+        return math.sqrt(dy * dy + dz * dz)
+
+    def foot_distance(self, y0, z):
+        """geometry.flat_foot_distance of the foot at heel (y0, z): 0 when crossing."""
+        y1 = y0 + self.fl
+        best = math.inf
+        for cy, cz, ey, ez, inv, *_ in self.edges:
+            for py in (y0, y1):
+                apy, apz = py - cy, z - cz
+                t = (apy * ey + apz * ez) * inv
+                t = 0.0 if t < 0.0 else (1.0 if t > 1.0 else t)
+                dy, dz = apy - t * ey, apz - t * ez
+                d = dy * dy + dz * dz
+                if d < best:
+                    best = d
+        for vy, vz in zip(self.vy, self.vz):
+            gap = max(y0 - vy, vy - y1, 0.0)
+            d = gap * gap + (vz - z) * (vz - z)
+            if d < best:
+                best = d
+        for ay, az, by, bz in self.pairs:
+            sa, sb = az - z, bz - z
+            if sa * sb < 0.0:
+                yc = ay + sa / (sa - sb) * (by - ay)
+                if y0 <= yc <= y1:
+                    return 0.0
+        return math.sqrt(best)
+
+    def inside(self, py, pz):
+        """geometry.point_in_obstacle."""
+        odd = False
+        for ay, az, by, bz in self.pairs:
+            if (az > pz) != (bz > pz):
+                dz = bz - az
+                if py < ay + (pz - az) * (by - ay) / (1.0 if dz == 0.0 else dz):
+                    odd = not odd
+        return odd and pz >= 0.0
+
+    def swept_vs(self, y0, z0, dy, dz, lo, hi):
+        """Compare swept.swept_distance of the move (y0, z0) -> (y0 + dy, z0 + dz) with the band
+        [lo, hi]: -1 if certainly below lo, +1 if certainly at least hi, 0 otherwise."""
+        f = self.fl
+        py0, py1 = min(y0, y0 + dy), max(y0, y0 + dy) + f
+        pz0, pz1 = min(z0, z0 + dz), max(z0, z0 + dz)
+        corners = ((y0, z0), (y0 + f, z0), (y0 + dy, z0 + dz), (y0 + f + dy, z0 + dz))
+        sides = ((y0, z0, f, 0.0), (y0 + dy, z0 + dz, f, 0.0), (y0, z0, dy, dz), (y0 + f, z0, dy, dz))
+        hi2 = hi * hi
+        best = math.inf
+        near_edges = []
+        for e in self.edges:
+            cy, cz, ey, ez, inv, ey0, ey1, ez0, ez1 = e
+            gy = max(ey0 - py1, py0 - ey1, 0.0)
+            gz = max(ez0 - pz1, pz0 - ez1, 0.0)
+            if gy * gy + gz * gz >= hi2:
+                continue            # this edge (and its vertices) is at least hi from P
+            near_edges.append(e)
+        if not near_edges:
+            return 1
+        for cy, cz, ey, ez, inv, *_ in near_edges:
+            for py, pz in corners:
+                apy, apz = py - cy, pz - cz
+                t = (apy * ey + apz * ez) * inv
+                t = 0.0 if t < 0.0 else (1.0 if t > 1.0 else t)
+                ddy, ddz = apy - t * ey, apz - t * ez
+                d = ddy * ddy + ddz * ddz
+                if d < best:
+                    best = d
+            for vy, vz in ((cy, cz), (cy + ey, cz + ez)):
+                for ay, az, uy, uz in sides:
+                    len2 = uy * uy + uz * uz
+                    iu = 1.0 / len2 if len2 > 1e-24 else 0.0
+                    apy, apz = vy - ay, vz - az
+                    t = (apy * uy + apz * uz) * iu
+                    t = 0.0 if t < 0.0 else (1.0 if t > 1.0 else t)
+                    ddy, ddz = apy - t * uy, apz - t * uz
+                    d = ddy * ddy + ddz * ddz
+                    if d < best:
+                        best = d
+            for ay, az, uy, uz in sides:
+                o1 = uy * (cz - az) - uz * (cy - ay)
+                o2 = uy * (cz + ez - az) - uz * (cy + ey - ay)
+                o3 = ey * (az - cz) - ez * (ay - cy)
+                o4 = ey * (az + uz - cz) - ez * (ay + uy - cy)
+                if min(abs(o1), abs(o2)) < _ORIENT_TOL and min(abs(o3), abs(o4)) < _ORIENT_TOL:
+                    return 0        # collinear within rounding: float32 might decide either way
+                if o1 * o2 < 0.0 and o3 * o4 < 0.0:
+                    return -1 if lo > 0.0 else 0
+            if dz != 0.0:
+                for vy, vz in ((cy, cz), (cy + ey, cz + ez)):
+                    t = (vz - z0) / dz
+                    s = (vy - y0 - t * dy) / f
+                    if 0.0 <= t <= 1.0 and 0.0 <= s <= 1.0:
+                        return -1 if lo > 0.0 else 0
+        d = math.sqrt(best)
+        if d < lo:
+            return -1
+        return 1 if d >= hi else 0
+
+    # Kinematics --------------------------------------------------------------------------------
+    def _leg(self, hy, hz, fy, fz):
+        """(r, hip angle, knee angle, hip-angle error bound, knee-angle error bound, near straight) of
+        the leg from hip (hy, hz) to the heel (fy, fz): kinematics.knee_position and joint_angles."""
+        t, s = self.t, self.s
+        dy, dz = fy - hy, fz - hz
+        r = math.sqrt(dy * dy + dz * dz)
+        rs = max(r, 1e-12)
+        uy, uz = dy / rs, dz / rs
+        a = min(max((t * t - s * s + r * r) / (2.0 * rs), -t), t)
+        g = t * t - a * a
+        h = math.sqrt(max(g, 0.0))
+        ky, kz = hy + a * uy - h * uz, hz + a * uz + h * uy
+        thigh = math.atan2(ky - hy, hz - kz)
+        shank = math.atan2(fy - ky, kz - fz)
+        knee = (shank - thigh + math.pi) % (2.0 * math.pi) - math.pi
+        # float32 error in h: |dg| / (2 h) where h is well away from 0, else sqrt(|dg|)
+        dh = min(math.sqrt(_G_ERR), _G_ERR / (2.0 * h)) if h > 0.0 else math.sqrt(_G_ERR)
+        dk = dh + 1e-5                                   # the knee's position error (m)
+        e_thigh = dk / t + ANGLE_MARGIN
+        e_shank = dk / s + ANGLE_MARGIN
+        return r, thigh, knee, e_thigh, e_thigh + e_shank, g < 1e-3
+
+    def reachable(self, y, z):
+        """1 / 0 / -1: the end (y, z) certainly within the joint limits and reach / too close to call /
+        certainly not (dynamics.admissible_moves' kinematic conditions)."""
+        t, s, leg = self.t, self.s, self.leg
+        p = self.pivot
+        dist = 0.5 * (p - y)
+        hz = math.sqrt(max(leg * leg - dist * dist, (kinematics.MIN_HIP_HEIGHT_FRACTION * leg) ** 2))
+        hy = 0.5 * (p + y)
+        unsure = False
+        worst_r = -math.inf
+        for fy, fz in ((y, z), (p, 0.0)):
+            r, hip, knee, e_hip, e_knee, straight = self._leg(hy, hz, fy, fz)
+            worst_r = max(worst_r, r)
+            lo_h, hi_h = self.hip_lim[0] - kinematics.ANGLE_EPS, self.hip_lim[1] + kinematics.ANGLE_EPS
+            lo_k, hi_k = self.knee_lim[0] - kinematics.ANGLE_EPS, self.knee_lim[1] + kinematics.ANGLE_EPS
+            if hip > hi_h + e_hip or hip < lo_h - e_hip:
+                return -1
+            if hip > hi_h - e_hip or hip < lo_h + e_hip:
+                unsure = True
+            if knee < lo_k - e_knee:
+                return -1
+            if knee < lo_k + e_knee:
+                unsure = True
+            # The knee is built on its flexing side (knee angle <= 0 up to rounding of a few 1e-7
+            # rad), so a near-straight leg never exceeds an upper limit >= 1e-5 rad.
+            if not (straight and hi_k >= 1e-5 and knee <= 1e-5):
+                if knee > hi_k + e_knee:
+                    return -1
+                if knee > hi_k - e_knee:
+                    unsure = True
+        over = worst_r - leg
+        if over > self.leg_tol + LENGTH_MARGIN:
+            return -1
+        if over > self.leg_tol - LENGTH_MARGIN:
+            unsure = True
+        return 0 if unsure else 1
+
+    # The choice ---------------------------------------------------------------------------------
+    def choose(self, hy: float, hz: float, q: np.ndarray):
+        """The reference's shielded greedy action for heel (hy, hz) (Python floats; rounded to float32
+        here as the reference does) and Q-values ``q`` (NUM_ACTIONS,), or None when some needed
+        comparison is too close to call or the reference's fallbacks would apply."""
+        if not math.isfinite(float(q.sum(dtype=np.float64))):    # a nan or an infinity: argmax's own rules
+            return self._miss()
+        hy, hz = _f32(hy), _f32(hz)
+        order = np.argsort(-q, kind="stable").tolist()      # stable: ties by index, as argmax
+        fl, step = self.fl, self.step
+        # Far from the obstacle's box no move of one step comes within the shield's clearance.
+        far = self._box_distance(hy, hy + fl, hz, hz) - step >= self.shield_c + MARGIN
+        need = None
+        for a in order:
+            if not self.fwd_list[a]:
+                continue
+            py, pz = self.prod[a]
+            y = min(max(_f32(hy + py), self.b0), self.b1)
+            if y > self.goal_limit:
+                continue
+            z = min(max(_f32(hz + pz), 0.0), self.zmax)
+            k = self.reachable(y, z)
+            if k == 0:
+                return self._miss()
+            if k < 0:
+                continue
+            if not far:
+                if need is None:
+                    c_here = self.foot_distance(hy, hz)
+                    if c_here < MARGIN:
+                        return self._miss()      # touching or inside: the sign may be rounding
+                    if self.inside(hy, hz):
+                        c_here = -c_here
+                    need = min(self.shield_c, c_here) - self.slack
+                v = self.swept_vs(hy, hz, y - hy, z - hz, need - MARGIN, need + MARGIN)
+                if v == 0:
+                    return self._miss()
+                if v < 0:
+                    continue
+            return a
+        return self._miss()     # no forward move passes everything: the reference's fallbacks
+
+    def _miss(self):
+        self.unsure += 1
+        return None
