@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxexo.physics import dynamics, geometry, swept
+from jaxexo.physics import dynamics, geometry, kinematics, swept
 from jaxexo.config import ConfigError, config_from_dict
 from jaxexo.physics.dynamics import Scene, scalar
 from jaxexo.inference import blas, smoothing as sm, trajectory
@@ -79,7 +79,9 @@ class TrajectoryGenerator:
         self._n_forward = int(dynamics.forward_moves().sum())
         self._rng = None
         # single-swing shield steps: [decided by jaxexo.inference.shield, handed to the full mask]
-        self.shield_stats = [0, 0]
+        # and batch rows: [rows, rows whose best forward move was not admissible (full mask)]
+        self.shield_stats = [0, 0, 0, 0]
+        self._fwd_idx = np.flatnonzero(dynamics.forward_moves())
 
     def exploring(self, epsilon: float, seed: int = 0) -> "TrajectoryGenerator":
         """A copy that acts epsilon-greedily (thesis 2.6 tests that way): each step a uniformly
@@ -209,24 +211,99 @@ class TrajectoryGenerator:
         return np.asarray(pts), np.asarray(acts, dtype=np.int64)
 
 
-    def _admissible_rows(self, hy, hz, lay) -> np.ndarray:
-        """(B, A) the shield's admissible moves (jaxexo.physics.dynamics.admissible_moves) of many heels,
-        float32 rows of stacked scenes like the training environment; the exact clearance is computed
-        only for the rows whose foot is within a step plus the shield's clearance of the obstacle's
-        bounding box (elsewhere no move can fail it, so the mask is the same)."""
+    def _near(self, hy, hz, lay) -> np.ndarray:
+        """(B,) rows whose foot is within a step plus the shield's clearance of the obstacle's bounding
+        box (elsewhere no move can fail the clearance condition)."""
         p = self.np_params
         half = 0.5 * lay.width
         dy = np.maximum(np.maximum(lay.center_y - half - (hy + p.foot_length), hy - (lay.center_y + half)), 0.0)
         dz = np.maximum(hz - lay.height, 0.0)
-        near = np.hypot(dy, dz) < self.sp.shield_clearance + self.sp.step_size + 1e-4
+        return np.hypot(dy, dz) < self.sp.shield_clearance + self.sp.step_size + 1e-4
+
+    def _clear(self, hy, hz, ends, outline, pruned: bool) -> np.ndarray:
+        """dynamics.moves_keep_clearance for heels (B,) and move ends (B, F, 2), with its NumPy branch
+        (pruned or not: the same decisions, issue 12) given rather than chosen by the array's size,
+        so that a subset of the moves or rows is decided exactly as in the whole step's call."""
+        p = self.np_params
+        if pruned:
+            here = np.stack([hy, hz], axis=-1)
+            c_here = geometry.foot_clearance(np, here, p.foot_length, outline)
+            return dynamics._moves_keep_clearance_pruned(p, here, c_here, ends, outline)
+        # the unpruned branch of moves_keep_clearance, written out (the same elementwise arithmetic)
+        here = np.stack([hy, hz], axis=-1)
+        c_here = geometry.foot_clearance(np, here, p.foot_length, outline)
+        moves = np.moveaxis(ends, -2, 0)
+        d_move = np.moveaxis(swept.swept_distance(np, here + 0.0 * moves, moves, p.foot_length, outline), 0, -1)
+        return d_move >= np.minimum(p.shield_clearance, c_here)[..., None] - dynamics.SHIELD_SLACK
+
+    def _admissible_rows(self, hy, hz, lay, pruned: bool | None = None, near=None) -> np.ndarray:
+        """(B, A) the shield's admissible moves (jaxexo.physics.dynamics.admissible_moves) of many heels,
+        float32 rows of stacked scenes like the training environment; the exact clearance is computed
+        only for the ``_near`` rows (elsewhere no move can fail it, so the mask is the same).
+        ``pruned``: the clearance's NumPy branch (None: by size, as moves_keep_clearance chooses)."""
+        p = self.np_params
+        near = self._near(hy, hz, lay) if near is None else near
         clear = np.ones((len(hy), self._n_forward), bool)
         if near.any():
             ends = dynamics.forward_ends(np, p, hy[near], hz[near])
-            clear[near] = dynamics.moves_keep_clearance(np, p, hy[near], hz[near], ends, lay.outline[near])
+            if pruned is None:
+                clear[near] = dynamics.moves_keep_clearance(np, p, hy[near], hz[near], ends, lay.outline[near])
+            else:
+                clear[near] = self._clear(hy[near], hz[near], ends, lay.outline[near], pruned)
         return dynamics.admissible_moves(np, p, hy, hz, lay, clear=clear)
 
-    def rollout_batch(self, scenes) -> tuple[list[np.ndarray], list[np.ndarray]]:
-        """Greedy raw paths of many scenes at once (float32 NumPy, like the JAX environment)."""
+    def _batch_choice(self, hy, hz, lay, q) -> np.ndarray:
+        """The shielded greedy actions (B,) of ``_admissible_rows`` + greedy_action, checking first only
+        each row's best forward move (one move per row instead of 19, in the same float32
+        elementwise arithmetic); the full mask only for the rows where that move is not admissible."""
+        p = self.np_params
+        fwd = self._fwd_idx
+        # forward moves by decreasing Q, ties by index (as argmax over the mask picks the first)
+        order = fwd[np.argsort(-q[:, fwd], axis=1, kind="stable")[:, :self.BATCH_ROUNDS]]
+        near = self._near(hy, hz, lay)
+        # the branch the whole step's moves_keep_clearance call takes (by its array's size)
+        pruned = int(near.sum()) * self._n_forward * 2 > dynamics._PRUNE_FROM
+        out = order[:, 0].copy()
+        miss = np.arange(len(hy))
+        for r in range(self.BATCH_ROUNDS):     # the r-th best move of the rows still undecided
+            a = order[miss, r]
+            ok = self._one_move_ok(hy[miss], hz[miss], _take(lay, miss), near[miss], a, pruned)
+            out[miss[ok]] = a[ok]
+            miss = miss[~ok]
+            if not miss.size:
+                break
+        if miss.size:
+            sub = _take(lay, miss)
+            mask = self._admissible_rows(hy[miss], hz[miss], sub, pruned, near[miss])
+            out[miss] = dynamics.greedy_action(np, q[miss], mask)
+        self.shield_stats[2] += len(hy)
+        self.shield_stats[3] += miss.size
+        return out
+
+    # forward moves checked one at a time per row before the full mask (``_batch_choice``)
+    BATCH_ROUNDS = 4
+
+    def _one_move_ok(self, hy, hz, lay, near, a, pruned: bool) -> np.ndarray:
+        """(B,) whether move a (B,) passes all four of admissible_moves' conditions (its column of the
+        mask before the fallbacks), in the same float32 elementwise arithmetic."""
+        p = self.np_params
+        d = p.directions[a]
+        y, z = dynamics.move_heel(np, p, hy, hz, d[:, 0], d[:, 1])
+        new = np.stack([y, z], axis=-1)[:, None, :]      # (B, 1, 2)
+        clear = np.ones((len(hy), 1), bool)
+        if near.any():
+            clear[near] = self._clear(hy[near], hz[near], new[near], lay.outline[near], pruned)
+        kin = kinematics.leg_state(np, lay.pivot_y[..., None], new, p.thigh, p.shin)
+        angles = kinematics.both_legs_angles(np, kin)
+        reach = ~(kinematics.legs_outside_limits(np, angles, p.hip_limits, p.knee_limits)
+                  | kinematics.leg_too_long(np, kin["leg_swing"], kin["leg_stance"], p.thigh, p.shin,
+                                            p.leg_length_tolerance))
+        return (clear & reach & (new[..., 0] <= lay.goal_y[..., None] + p.goal_tolerance[0]))[:, 0]
+
+    def rollout_batch(self, scenes, fast: bool = True) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        """Greedy raw paths of many scenes at once (float32 NumPy, like the JAX environment). With the
+        shield, ``fast`` (greedy only) checks each row's best forward move first (``_batch_choice``);
+        ``fast=False`` computes the full mask of every row every step (the reference)."""
         p = self.np_params
         lay = dynamics.stack_scenes(scenes, np.float32)
         b = len(scenes)
@@ -244,8 +321,11 @@ class TrajectoryGenerator:
         for k in range(self.max_steps):
             sub = _take(lay, alive)
             obs = dynamics.observation(np, p, self.obs_mode, hy[alive], hz[alive], t[alive], visited[alive], sub)
-            mask = self._admissible_rows(hy[alive], hz[alive], sub) if self.shield else None
-            a = self._explore(dynamics.greedy_action(np, self.net.q(obs), mask), mask)
+            if self.shield and fast and self.epsilon <= 0.0:
+                a = self._batch_choice(hy[alive], hz[alive], sub, self.net.q(obs))
+            else:
+                mask = self._admissible_rows(hy[alive], hz[alive], sub) if self.shield else None
+                a = self._explore(dynamics.greedy_action(np, self.net.q(obs), mask), mask)
             ny, nz = dynamics.move_heel(np, p, hy[alive], hz[alive], dirs[a, 0], dirs[a, 1])
             hy[alive], hz[alive] = ny, nz
             t[alive] += 1
@@ -339,14 +419,19 @@ class TrajectoryGenerator:
         return (~geometry.foot_collides(np, g) & ~geometry.foot_collides(np, g - self.sp.min_clearance)
                 & (backward <= self.sp.backward_tolerance))
 
-    def _margin_ok(self, scenes, paths: np.ndarray, deviation) -> np.ndarray:
-        """``_passes`` of many paths (B, N, 2) at once (fast: each path's minimum exact)."""
+    def _margin_ok(self, scenes, paths: np.ndarray, deviation, with_clearances: bool = False):
+        """``_passes`` of many paths (B, N, 2) at once (fast: each path's minimum exact); with
+        ``with_clearances`` also the point and move clearances (trajectory.measure's inputs)."""
         deviation = np.asarray(deviation, np.float64)
         fl = self.sp.foot_length
-        c = trajectory.clearances(fl, paths, scenes)
-        sw = trajectory.swept_clearances(fl, paths, scenes, c, fast=True)
+        if len(paths) >= trajectory.PRUNE_POINTS_FROM and not with_clearances:
+            c, sw = trajectory.pruned_clearances(fl, paths, scenes)    # exact at each path's minimum
+        else:
+            c = trajectory.clearances(fl, paths, scenes)
+            sw = trajectory.swept_clearances(fl, paths, scenes, c, fast=True)
         low = sw.min(axis=1) if sw.shape[1] else c.min(axis=1)
-        return self._passes(low, deviation, swept.backward_motion(np, paths[..., 0]) + 2.0 * deviation)
+        ok = self._passes(low, deviation, swept.backward_motion(np, paths[..., 0]) + 2.0 * deviation)
+        return (ok, c, sw) if with_clearances else ok
 
     def _candidate_note(self, smoothing, used):
         return (f"smoothing {smoothing:g} m^2 would bring the foot within the safety margin or move the heel "
@@ -360,30 +445,41 @@ class TrajectoryGenerator:
         p0, d0 = sm.smooth_one(raw, n_points, smoothing)
         p1, d1 = sm.smooth_paths([raw] * (len(cands) - 1), n_points, np.array(cands[1:]), with_deviation=True)
         paths, dev = np.concatenate([p0, p1]), np.concatenate([d0, d1])
-        ok = self._margin_ok([scene] * len(cands), paths, dev)
+        ok, c, sw = self._margin_ok([scene] * len(cands), paths, dev, with_clearances=True)
         j = int(np.argmax(ok)) if ok.any() else 0
         notes = [self._candidate_note(smoothing, cands[j])] if j else [()]
-        return paths[j: j + 1], dev[j: j + 1], [cands[j]], notes
+        # the chosen path's clearances as measure_paths computes them for it alone (the same
+        # elementwise arithmetic per row), so assemble need not compute them again
+        measured = trajectory.measure(self.sp, paths[j: j + 1], c[j: j + 1], np.array([scene.pivot_y]),
+                                      np.array([scene.goal_y]), sw[j: j + 1], dev[j: j + 1])
+        return paths[j: j + 1], dev[j: j + 1], [cands[j]], notes, measured
 
     def _candidate_rows(self, scenes, raws, rows, n_points: int, smoothing: float, fast: bool):
         """Rows whose requested smoothing failed: the first of their other candidates that passes,
-        as (row, (path, smoothing, notes, deviation)); ``fast`` smooths and checks all rows'
-        candidates together, the reference one at a time."""
-        pairs = [(int(i), c) for i in rows for c in self._candidates(raws[i], smoothing)[1:]]
-        if not pairs:
-            return []
-        # One smoothing call for every pair (both paths: the same numbers), checked together (fast) or
-        # one at a time with every move's swept clearance exact (the reference).
-        paths, dev = sm.smooth_paths([raws[i] for i, _ in pairs], n_points, np.array([c for _, c in pairs]),
-                                     with_deviation=True)
-        if fast:
-            ok = self._margin_ok([scenes[i] for i, _ in pairs], paths, dev)
-        else:
-            ok = np.array([self._margin_ok_reference(scenes[i], paths[k], dev[k]) for k, (i, _) in enumerate(pairs)])
+        as (row, (path, smoothing, notes, deviation)). One swing: all its candidates smoothed in one
+        call (as ``_one_pass``); many: candidate by candidate over the rows still failing, each level
+        in one call. ``fast`` checks each call's paths together, the reference one at a time with
+        every move's swept clearance exact; both smooth the same paths in the same calls."""
+        cands = {int(i): self._candidates(raws[i], smoothing)[1:] for i in rows}
         out = {}
-        for k, (i, c) in enumerate(pairs):
-            if ok[k] and i not in out:
-                out[i] = (paths[k], c, self._candidate_note(smoothing, c), dev[k])
+        wait = [i for i in cands if cands[i]]
+        level = 0
+        while wait:
+            if len(scenes) == 1:
+                pairs = [(i, c) for i in wait for c in cands[i]]
+            else:
+                pairs = [(i, cands[i][level]) for i in wait]
+            paths, dev = sm.smooth_paths([raws[i] for i, _ in pairs], n_points, np.array([c for _, c in pairs]),
+                                         with_deviation=True)
+            if fast:
+                ok = self._margin_ok([scenes[i] for i, _ in pairs], paths, dev)
+            else:
+                ok = np.array([self._margin_ok_reference(scenes[i], paths[k], dev[k]) for k, (i, _) in enumerate(pairs)])
+            for k, (i, c) in enumerate(pairs):
+                if ok[k] and i not in out:
+                    out[i] = (paths[k], c, self._candidate_note(smoothing, c), dev[k])
+            level += 1
+            wait = [] if len(scenes) == 1 else [i for i in wait if i not in out and level < len(cands[i])]
         return sorted(out.items())
 
     def _margin_ok_reference(self, scene, path, deviation) -> bool:
@@ -410,9 +506,10 @@ class TrajectoryGenerator:
         """Smooth every raw path, check them all at once, redo the few that smoothing brought within the
         margin, then hand the swings that still fail to CFFTG (``fallback``)."""
         notes = [()] * len(raws)
+        measured = None
         if smoothing > 0 and fast and len(raws) == 1 and len(self._candidates(raws[0], smoothing)) > 1:
             # One swing: every candidate smoothing at once, the first that keeps the margin is used.
-            paths, dev, used, notes = self._one_pass(scenes[0], raws[0], n_points, smoothing)
+            paths, dev, used, notes, measured = self._one_pass(scenes[0], raws[0], n_points, smoothing)
         elif smoothing > 0:
             paths, dev = _smooth(raws, n_points, smoothing, fast)
             used = [smoothing] * len(raws)
@@ -420,7 +517,7 @@ class TrajectoryGenerator:
             both = [sm.linear_resample(r, n_points, with_deviation=True) for r in raws]
             paths, dev = np.stack([p for p, _ in both]), np.array([d for _, d in both])
             used = [float("nan")] * len(raws)
-        batch = assemble("rl", self.sp, scenes, raws, paths, used, duration, notes, deviation=dev, fast=fast)
+        batch = assemble("rl", self.sp, scenes, raws, paths, used, duration, notes, measured, deviation=dev, fast=fast)
         # Smoothing cuts corners (clearance) and overshoots (backward heel motion): first the per-path
         # candidate smoothings (CANDIDATE_RESIDUALS), then less smoothing, down to the raw polyline.
         bad = (np.flatnonzero(~batch.clearance_ok | (batch.heel_backward > self.sp.backward_tolerance)) if smoothing > 0
@@ -521,7 +618,7 @@ class TrajectoryGenerator:
         fallback = check_fallback(fallback)
         scenes = self._scenes(obstacles, pivot, pivot_y, start_y, step_length)
         with blas.limited(self.batch_blas_threads):
-            raws, _ = self.rollout_batch(scenes)
+            raws, _ = self.rollout_batch(scenes, fast)
             batch = self._finish(scenes, raws, n_points, smoothing, duration, fallback, fast)
         if strict and not batch.ok.all():
             raise TrajectoryError(batch[int(np.argmin(batch.ok))])

@@ -31,6 +31,7 @@ reference path. Exploration (epsilon > 0) always takes it.
 from __future__ import annotations
 
 import math
+import struct
 
 import numpy as np
 
@@ -47,12 +48,20 @@ ANGLE_MARGIN = 1e-5
 # (m^2) bound on float32's error in thigh^2 - a^2 (knee_position); its square root bounds the
 # error in the knee's offset h where h is near 0 (a straight leg).
 _G_ERR = 4e-6
+_SQRT_G_ERR = math.sqrt(_G_ERR)
+_H_SMALL = _G_ERR / (2.0 * _SQRT_G_ERR)     # below this h, sqrt(|dg|) is the smaller bound
+_TWO_PI = 2.0 * math.pi
 # Orientation products closer to 0 than this (m^2) are treated as undecidable (float32 sign noise).
 _ORIENT_TOL = 1e-9
 
 
+_F32 = struct.Struct("f")
+_pack, _unpack = _F32.pack, _F32.unpack
+
+
 def _f32(x: float) -> float:
-    return float(np.float32(x))
+    """x rounded to float32 (to nearest, as NumPy's float32 arithmetic rounds each result)."""
+    return _unpack(_pack(x))[0]
 
 
 class ScalarShield:
@@ -72,12 +81,18 @@ class ScalarShield:
         self.hip_lim = sp.hip_limits
         self.knee_lim = sp.knee_limits
         self.leg_tol = sp.leg_length_tolerance + kinematics.LENGTH_EPS
+        self.hip_lo = self.hip_lim[0] - kinematics.ANGLE_EPS
+        self.hip_hi = self.hip_lim[1] + kinematics.ANGLE_EPS
+        self.knee_lo = self.knee_lim[0] - kinematics.ANGLE_EPS
+        self.knee_hi = self.knee_lim[1] + kinematics.ANGLE_EPS
+        self.min_hz2 = (kinematics.MIN_HIP_HEIGHT_FRACTION * self.leg) ** 2
         # every forward move: (action, float32 step * direction per axis)
         fwd = np.flatnonzero(dynamics.forward_moves())
         prod = (p.step_size * p.directions).astype(np.float32)
         self.forward = np.zeros(dynamics.NUM_ACTIONS, bool)
         self.forward[fwd] = True
         self.fwd_list = self.forward.tolist()
+        self.fwd_idx = fwd.tolist()
         self.prod = [(float(prod[a, 0]), float(prod[a, 1])) for a in range(dynamics.NUM_ACTIONS)]
         # the scene as float32 values
         f = lambda v: float(np.float32(v))  # noqa: E731
@@ -210,44 +225,39 @@ class ScalarShield:
         t, s = self.t, self.s
         dy, dz = fy - hy, fz - hz
         r = math.sqrt(dy * dy + dz * dz)
-        rs = max(r, 1e-12)
+        rs = r if r > 1e-12 else 1e-12
         uy, uz = dy / rs, dz / rs
-        a = min(max((t * t - s * s + r * r) / (2.0 * rs), -t), t)
+        a = (t * t - s * s + r * r) / (2.0 * rs)
+        a = -t if a < -t else (t if a > t else a)
         g = t * t - a * a
-        h = math.sqrt(max(g, 0.0))
+        h = math.sqrt(g) if g > 0.0 else 0.0
         ky, kz = hy + a * uy - h * uz, hz + a * uz + h * uy
         thigh = math.atan2(ky - hy, hz - kz)
-        shank = math.atan2(fy - ky, kz - fz)
-        knee = (shank - thigh + math.pi) % (2.0 * math.pi) - math.pi
+        knee = (math.atan2(fy - ky, kz - fz) - thigh + math.pi) % _TWO_PI - math.pi
         # float32 error in h: |dg| / (2 h) where h is well away from 0, else sqrt(|dg|)
-        dh = min(math.sqrt(_G_ERR), _G_ERR / (2.0 * h)) if h > 0.0 else math.sqrt(_G_ERR)
-        dk = dh + 1e-5                                   # the knee's position error (m)
-        e_thigh = dk / t + ANGLE_MARGIN
-        e_shank = dk / s + ANGLE_MARGIN
-        return r, thigh, knee, e_thigh, e_thigh + e_shank, g < 1e-3
+        dh = _G_ERR / (2.0 * h) if h > _H_SMALL else _SQRT_G_ERR
+        e_thigh = (dh + 1e-5) / t + ANGLE_MARGIN          # the knee's position error (m) over the thigh
+        return r, thigh, knee, e_thigh, e_thigh + (dh + 1e-5) / s + ANGLE_MARGIN, g < 1e-3
 
     def reachable(self, y, z):
         """1 / 0 / -1: the end (y, z) certainly within the joint limits and reach / too close to call /
         certainly not (dynamics.admissible_moves' kinematic conditions)."""
-        t, s, leg = self.t, self.s, self.leg
+        leg = self.leg
         p = self.pivot
         dist = 0.5 * (p - y)
-        hz = math.sqrt(max(leg * leg - dist * dist, (kinematics.MIN_HIP_HEIGHT_FRACTION * leg) ** 2))
+        hz2 = leg * leg - dist * dist
+        hz = math.sqrt(hz2 if hz2 > self.min_hz2 else self.min_hz2)
         hy = 0.5 * (p + y)
         unsure = False
-        worst_r = -math.inf
+        worst_r = 0.0
+        lo_h, hi_h, lo_k, hi_k = self.hip_lo, self.hip_hi, self.knee_lo, self.knee_hi
         for fy, fz in ((y, z), (p, 0.0)):
             r, hip, knee, e_hip, e_knee, straight = self._leg(hy, hz, fy, fz)
-            worst_r = max(worst_r, r)
-            lo_h, hi_h = self.hip_lim[0] - kinematics.ANGLE_EPS, self.hip_lim[1] + kinematics.ANGLE_EPS
-            lo_k, hi_k = self.knee_lim[0] - kinematics.ANGLE_EPS, self.knee_lim[1] + kinematics.ANGLE_EPS
-            if hip > hi_h + e_hip or hip < lo_h - e_hip:
+            if r > worst_r:
+                worst_r = r
+            if hip > hi_h + e_hip or hip < lo_h - e_hip or knee < lo_k - e_knee:
                 return -1
-            if hip > hi_h - e_hip or hip < lo_h + e_hip:
-                unsure = True
-            if knee < lo_k - e_knee:
-                return -1
-            if knee < lo_k + e_knee:
+            if hip > hi_h - e_hip or hip < lo_h + e_hip or knee < lo_k + e_knee:
                 unsure = True
             # The knee is built on its flexing side (knee angle <= 0 up to rounding of a few 1e-7
             # rad), so a near-straight leg never exceeds an upper limit >= 1e-5 rad.
@@ -268,42 +278,52 @@ class ScalarShield:
         """The reference's shielded greedy action for heel (hy, hz) (Python floats; rounded to float32
         here as the reference does) and Q-values ``q`` (NUM_ACTIONS,), or None when some needed
         comparison is too close to call or the reference's fallbacks would apply."""
-        if not math.isfinite(float(q.sum(dtype=np.float64))):    # a nan or an infinity: argmax's own rules
+        ql = q.tolist()
+        total = sum(ql)
+        if total - total != 0.0:         # a nan or an infinity: argmax's own rules
             return self._miss()
         hy, hz = _f32(hy), _f32(hz)
-        order = np.argsort(-q, kind="stable").tolist()      # stable: ties by index, as argmax
-        fl, step = self.fl, self.step
         # Far from the obstacle's box no move of one step comes within the shield's clearance.
-        far = self._box_distance(hy, hy + fl, hz, hz) - step >= self.shield_c + MARGIN
-        need = None
-        for a in order:
-            if not self.fwd_list[a]:
+        far = self._box_distance(hy, hy + self.fl, hz, hz) - self.step >= self.shield_c + MARGIN
+        state = [None]      # the clearance threshold, computed once when needed
+        # The best forward move first (max returns the first of equal values, as argmax); only on a
+        # miss the rest in order of Q (a stable sort: ties by index).
+        best = max(self.fwd_idx, key=ql.__getitem__)
+        v = self._admissible(best, hy, hz, far, state)
+        if v is not False:
+            return best if v else self._miss()
+        for a in sorted(self.fwd_idx, key=ql.__getitem__, reverse=True):
+            if a == best:
                 continue
-            py, pz = self.prod[a]
-            y = min(max(_f32(hy + py), self.b0), self.b1)
-            if y > self.goal_limit:
-                continue
-            z = min(max(_f32(hz + pz), 0.0), self.zmax)
-            k = self.reachable(y, z)
-            if k == 0:
-                return self._miss()
-            if k < 0:
-                continue
-            if not far:
-                if need is None:
-                    c_here = self.foot_distance(hy, hz)
-                    if c_here < MARGIN:
-                        return self._miss()      # touching or inside: the sign may be rounding
-                    if self.inside(hy, hz):
-                        c_here = -c_here
-                    need = min(self.shield_c, c_here) - self.slack
-                v = self.swept_vs(hy, hz, y - hy, z - hz, need - MARGIN, need + MARGIN)
-                if v == 0:
-                    return self._miss()
-                if v < 0:
-                    continue
-            return a
+            v = self._admissible(a, hy, hz, far, state)
+            if v is not False:
+                return a if v else self._miss()
         return self._miss()     # no forward move passes everything: the reference's fallbacks
+
+    def _admissible(self, a, hy, hz, far, state):
+        """True / False / None (too close to call) for forward move a from the float32 heel (hy, hz)."""
+        py, pz = self.prod[a]
+        y = _f32(hy + py)
+        y = self.b0 if y < self.b0 else (self.b1 if y > self.b1 else y)
+        if y > self.goal_limit:
+            return False
+        z = _f32(hz + pz)
+        z = 0.0 if z < 0.0 else (self.zmax if z > self.zmax else z)
+        k = self.reachable(y, z)
+        if k <= 0:
+            return None if k == 0 else False
+        if far:
+            return True
+        need = state[0]
+        if need is None:
+            c_here = self.foot_distance(hy, hz)
+            if c_here < MARGIN:
+                return None      # touching or inside: the sign may be rounding
+            if self.inside(hy, hz):
+                c_here = -c_here
+            need = state[0] = min(self.shield_c, c_here) - self.slack
+        v = self.swept_vs(hy, hz, y - hy, z - hz, need - MARGIN, need + MARGIN)
+        return None if v == 0 else v > 0
 
     def _miss(self):
         self.unsure += 1
