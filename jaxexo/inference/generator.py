@@ -21,6 +21,16 @@ safe-swing check is replaced by CFFTG's plan for the same scene (jaxexo.baseline
 ``method`` "cfftg-fallback" and the RL failure in ``notes``; when CFFTG fails too, the RL swing is
 returned, not ok. ``fallback=None`` returns the RL result alone.
 
+Speed (issue 19): with the shield, the chosen move is the first admissible move in order of Q, so
+``fast`` checks the moves one at a time in that order instead of computing all 19 forward moves'
+mask: one swing in plain Python floats certified against the reference's float32 rounding
+(jaxexo.inference.shield; the full mask on the rare steps too close to call), a batch in the
+reference's own float32 arithmetic one move per row (``_batch_choice``; the full mask for the rows
+whose first BATCH_ROUNDS moves fail). Smoothing: besides the requested s, per-path candidates
+(CANDIDATE_RESIDUALS: s = M rho^2) are smoothed and checked in one pass and the smoothest that keeps
+the margin is used (``Trajectory.smoothing`` reports it; a note says a candidate was used); the
+retries below remain for the rest.
+
 Speed (issue 12): ``fast=True`` (default) computes the swept clearance exactly only for the moves
 that can be a path's closest (jaxexo.physics.swept.swept_lower_bound), smooths one path without the
 batch bookkeeping and checks the smoothing retries of all rows at once; ``fast=False`` is the plain

@@ -322,6 +322,10 @@ class ScalarShield:
             if self.inside(hy, hz):
                 c_here = -c_here
             need = state[0] = min(self.shield_c, c_here) - self.slack
+            state.append(c_here)
+        # 1-Lipschitz: the foot moved by at most a step stays at least c_here - step from the outline
+        if state[1] - self.step >= need + MARGIN:
+            return True
         v = self.swept_vs(hy, hz, y - hy, z - hz, need - MARGIN, need + MARGIN)
         return None if v == 0 else v > 0
 
