@@ -140,3 +140,16 @@ def test_candidate_smoothings_are_decreasing_and_per_path():
     assert c[1:] == [30 * r * r for r in gen.CANDIDATE_RESIDUALS if 30 * r * r < 0.005]
     assert gen._candidates(raw[:3], 0.005) == [0.005]        # too short to smooth
     assert gen._candidates(raw, 1e-6) == [1e-6]
+
+
+def test_smooth_candidates_is_smooth_paths_of_the_repeated_path():
+    rng = np.random.default_rng(3)
+    for n in (2, 3, 4, 9, 31, 60):
+        u = np.linspace(0.0, 1.0, n)
+        raw = np.column_stack([0.7 * u + rng.normal(0, 0.005, n), 0.2 * np.sin(np.pi * u) + rng.normal(0, 0.005, n)])
+        raw[:, 1] = np.maximum(raw[:, 1], 0.0)
+        s = [0.005, n * 0.008 ** 2, n * 0.0025 ** 2, 0.0]
+        a, da = sm.smooth_candidates(raw, 100, s)
+        b, db = sm.smooth_paths([raw] * len(s), 100, np.array(s), with_deviation=True)
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(da, db, rtol=0, atol=1e-12)

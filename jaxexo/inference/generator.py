@@ -408,6 +408,7 @@ class TrajectoryGenerator:
     # on a 30-point path) cuts its corners by more than that, much smaller ones wiggle the heel back.
     # On the default model these four rescue all but ~1 % of the swings the requested s fails.
     CANDIDATE_RESIDUALS = (0.008, 0.005, 0.004, 0.0025)
+    PRUNE_CANDIDATES_FROM = trajectory.PRUNE_POINTS_FROM   # paths from which _margin_ok prunes point clearances
 
     def _candidates(self, raw, smoothing: float) -> list[float]:
         """The smoothings tried in one pass, smoothest first: ``smoothing`` and the smaller per-path
@@ -434,8 +435,10 @@ class TrajectoryGenerator:
         ``with_clearances`` also the point and move clearances (trajectory.measure's inputs)."""
         deviation = np.asarray(deviation, np.float64)
         fl = self.sp.foot_length
-        if len(paths) >= trajectory.PRUNE_POINTS_FROM and not with_clearances:
-            c, sw = trajectory.pruned_clearances(fl, paths, scenes)    # exact at each path's minimum
+        if len(paths) >= self.PRUNE_CANDIDATES_FROM:
+            # exact at each path's closest move and sample, lower bounds above them elsewhere (all that
+            # the verdict and its reasons read: trajectory.measure_paths does the same for many paths)
+            c, sw = trajectory.pruned_clearances(fl, paths, scenes)
         else:
             c = trajectory.clearances(fl, paths, scenes)
             sw = trajectory.swept_clearances(fl, paths, scenes, c, fast=True)
@@ -447,21 +450,22 @@ class TrajectoryGenerator:
         return (f"smoothing {smoothing:g} m^2 would bring the foot within the safety margin or move the heel "
                 f"back; the per-path candidate {used:g} m^2 is used",)
 
-    def _one_pass(self, scene, raw, n_points: int, smoothing: float):
-        """One swing's candidates smoothed and checked together; the first that passes is used (the
-        requested smoothing when none does: the retries then follow)."""
+    def _one_pass(self, scene, raw, n_points: int, smoothing: float, fast: bool = True):
+        """One swing's candidates smoothed together (smoothing.smooth_candidates); the first that passes
+        is used (the requested smoothing when none does: the retries then follow). ``fast`` checks them
+        all at once, each path's closest move exact (and hands the chosen one's clearances to
+        assemble); the reference checks them one at a time, every move's swept clearance exact."""
         cands = self._candidates(raw, smoothing)
-        # the requested smoothing as on its own, the others as the reference smooths them (bit for bit)
-        p0, d0 = sm.smooth_one(raw, n_points, smoothing)
-        p1, d1 = sm.smooth_paths([raw] * (len(cands) - 1), n_points, np.array(cands[1:]), with_deviation=True)
-        paths, dev = np.concatenate([p0, p1]), np.concatenate([d0, d1])
-        ok, c, sw = self._margin_ok([scene] * len(cands), paths, dev, with_clearances=True)
-        j = int(np.argmax(ok)) if ok.any() else 0
+        paths, dev = sm.smooth_candidates(raw, n_points, cands)
+        measured = None
+        if fast:
+            ok, c, sw = self._margin_ok([scene] * len(cands), paths, dev, with_clearances=True)
+            j = int(np.argmax(ok)) if ok.any() else 0
+            measured = trajectory.measure(self.sp, paths[j: j + 1], c[j: j + 1], np.array([scene.pivot_y]),
+                                          np.array([scene.goal_y]), sw[j: j + 1], dev[j: j + 1])
+        else:
+            j = next((k for k in range(len(cands)) if self._margin_ok_reference(scene, paths[k], dev[k])), 0)
         notes = [self._candidate_note(smoothing, cands[j])] if j else [()]
-        # the chosen path's clearances as measure_paths computes them for it alone (the same
-        # elementwise arithmetic per row), so assemble need not compute them again
-        measured = trajectory.measure(self.sp, paths[j: j + 1], c[j: j + 1], np.array([scene.pivot_y]),
-                                      np.array([scene.goal_y]), sw[j: j + 1], dev[j: j + 1])
         return paths[j: j + 1], dev[j: j + 1], [cands[j]], notes, measured
 
     def _candidate_rows(self, scenes, raws, rows, n_points: int, smoothing: float, fast: bool):
@@ -517,9 +521,10 @@ class TrajectoryGenerator:
         margin, then hand the swings that still fail to CFFTG (``fallback``)."""
         notes = [()] * len(raws)
         measured = None
-        if smoothing > 0 and fast and len(raws) == 1 and len(self._candidates(raws[0], smoothing)) > 1:
+        one = smoothing > 0 and len(raws) == 1 and len(self._candidates(raws[0], smoothing)) > 1
+        if one:
             # One swing: every candidate smoothing at once, the first that keeps the margin is used.
-            paths, dev, used, notes, measured = self._one_pass(scenes[0], raws[0], n_points, smoothing)
+            paths, dev, used, notes, measured = self._one_pass(scenes[0], raws[0], n_points, smoothing, fast)
         elif smoothing > 0:
             paths, dev = _smooth(raws, n_points, smoothing, fast)
             used = [smoothing] * len(raws)
@@ -532,7 +537,7 @@ class TrajectoryGenerator:
         # candidate smoothings (CANDIDATE_RESIDUALS), then less smoothing, down to the raw polyline.
         bad = (np.flatnonzero(~batch.clearance_ok | (batch.heel_backward > self.sp.backward_tolerance)) if smoothing > 0
                else np.zeros(0, np.int64))
-        if bad.size and not (fast and len(raws) == 1):
+        if bad.size and not one:
             redo = self._candidate_rows(scenes, raws, bad, n_points, smoothing, fast)
             if redo:
                 idx = [i for i, _ in redo]
