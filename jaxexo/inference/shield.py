@@ -162,24 +162,34 @@ class ScalarShield:
         """Compare swept.swept_distance of the move (y0, z0) -> (y0 + dy, z0 + dz) with the band
         [lo, hi]: -1 if certainly below lo, +1 if certainly at least hi, 0 otherwise."""
         f = self.fl
-        py0, py1 = min(y0, y0 + dy), max(y0, y0 + dy) + f
-        pz0, pz1 = min(z0, z0 + dz), max(z0, z0 + dz)
-        corners = ((y0, z0), (y0 + f, z0), (y0 + dy, z0 + dz), (y0 + f + dy, z0 + dz))
-        sides = ((y0, z0, f, 0.0), (y0 + dy, z0 + dz, f, 0.0), (y0, z0, dy, dz), (y0 + f, z0, dy, dz))
+        y1, z1 = y0 + dy, z0 + dz
+        py0, py1 = (y0, y1 + f) if dy >= 0.0 else (y1, y0 + f)
+        pz0, pz1 = (z0, z1) if dz >= 0.0 else (z1, z0)
         hi2 = hi * hi
-        best = math.inf
-        near_edges = []
+        # Only the outline edges whose bounding box comes within hi of P's bounding box can matter
+        # (edges further away, and their vertices, are at least hi from P).
+        near = []
         for e in self.edges:
-            cy, cz, ey, ez, inv, ey0, ey1, ez0, ez1 = e
-            gy = max(ey0 - py1, py0 - ey1, 0.0)
-            gz = max(ez0 - pz1, pz0 - ez1, 0.0)
-            if gy * gy + gz * gz >= hi2:
-                continue            # this edge (and its vertices) is at least hi from P
-            near_edges.append(e)
-        if not near_edges:
+            ey0, ey1, ez0, ez1 = e[5], e[6], e[7], e[8]
+            gy = ey0 - py1 if ey0 > py1 else (py0 - ey1 if py0 > ey1 else 0.0)
+            gz = ez0 - pz1 if ez0 > pz1 else (pz0 - ez1 if pz0 > ez1 else 0.0)
+            if gy * gy + gz * gz < hi2:
+                near.append(e)
+        if not near:
             return 1
-        for cy, cz, ey, ez, inv, *_ in near_edges:
-            for py, pz in corners:
+        lo2 = lo * lo if lo > 0.0 else -1.0
+        best = math.inf
+        corners = ((y0, z0), (y0 + f, z0), (y1, z1), (y1 + f, z1))
+        len2 = dy * dy + dz * dz
+        iu = 1.0 / len2 if len2 > 1e-24 else 0.0
+        i_f = 1.0 / (f * f)
+        # P's sides a -> a + u with 1 / |u|^2: the foot at both ends, the heel's and the toe's chords
+        sides = ((y0, z0, f, 0.0, i_f), (y1, z1, f, 0.0, i_f), (y0, z0, dy, dz, iu), (y0 + f, z0, dy, dz, iu))
+        verts = set()
+        for cy, cz, ey, ez, inv, *_ in near:
+            verts.add((cy, cz))
+            verts.add((cy + ey, cz + ez))
+            for py, pz in corners:       # P's corners against the edge
                 apy, apz = py - cy, pz - cz
                 t = (apy * ey + apz * ez) * inv
                 t = 0.0 if t < 0.0 else (1.0 if t > 1.0 else t)
@@ -187,32 +197,34 @@ class ScalarShield:
                 d = ddy * ddy + ddz * ddz
                 if d < best:
                     best = d
-            for vy, vz in ((cy, cz), (cy + ey, cz + ez)):
-                for ay, az, uy, uz in sides:
-                    len2 = uy * uy + uz * uz
-                    iu = 1.0 / len2 if len2 > 1e-24 else 0.0
-                    apy, apz = vy - ay, vz - az
-                    t = (apy * uy + apz * uz) * iu
-                    t = 0.0 if t < 0.0 else (1.0 if t > 1.0 else t)
-                    ddy, ddz = apy - t * uy, apz - t * uz
-                    d = ddy * ddy + ddz * ddz
-                    if d < best:
-                        best = d
-            for ay, az, uy, uz in sides:
+            for ay, az, uy, uz, _ in sides:     # proper crossings of P's sides and the edge
                 o1 = uy * (cz - az) - uz * (cy - ay)
                 o2 = uy * (cz + ez - az) - uz * (cy + ey - ay)
                 o3 = ey * (az - cz) - ez * (ay - cy)
                 o4 = ey * (az + uz - cz) - ez * (ay + uy - cy)
-                if min(abs(o1), abs(o2)) < _ORIENT_TOL and min(abs(o3), abs(o4)) < _ORIENT_TOL:
+                if (abs(o1) < _ORIENT_TOL or abs(o2) < _ORIENT_TOL) and (abs(o3) < _ORIENT_TOL or abs(o4) < _ORIENT_TOL):
                     return 0        # collinear within rounding: float32 might decide either way
                 if o1 * o2 < 0.0 and o3 * o4 < 0.0:
                     return -1 if lo > 0.0 else 0
-            if dz != 0.0:
-                for vy, vz in ((cy, cz), (cy + ey, cz + ez)):
-                    t = (vz - z0) / dz
+            if best < lo2:
+                return -1
+        for vy, vz in verts:
+            for ay, az, uy, uz, iv in sides:    # the outline's vertices against P's sides
+                apy, apz = vy - ay, vz - az
+                t = (apy * uy + apz * uz) * iv
+                t = 0.0 if t < 0.0 else (1.0 if t > 1.0 else t)
+                ddy, ddz = apy - t * uy, apz - t * uz
+                d = ddy * ddy + ddz * ddz
+                if d < best:
+                    best = d
+            if dz != 0.0:                       # ... and strictly inside P
+                t = (vz - z0) / dz
+                if 0.0 <= t <= 1.0:
                     s = (vy - y0 - t * dy) / f
-                    if 0.0 <= t <= 1.0 and 0.0 <= s <= 1.0:
+                    if 0.0 <= s <= 1.0:
                         return -1 if lo > 0.0 else 0
+        if best < lo2:
+            return -1
         d = math.sqrt(best)
         if d < lo:
             return -1
