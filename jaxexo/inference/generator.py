@@ -528,6 +528,16 @@ class TrajectoryGenerator:
         elif smoothing > 0:
             paths, dev = _smooth(raws, n_points, smoothing, fast)
             used = [smoothing] * len(raws)
+            if len(raws) > 1:
+                # Many swings: the requested smoothing checked first (fast: all at once), then the
+                # candidates of the rows it fails, level by level; one assemble for all rows after.
+                ok = (self._margin_ok(scenes, paths, dev) if fast else
+                      np.array([self._margin_ok_reference(scenes[i], paths[i], dev[i]) for i in range(len(raws))]))
+                redo = self._candidate_rows(scenes, raws, np.flatnonzero(~ok), n_points, smoothing, fast)
+                if redo:
+                    paths, dev, notes = paths.copy(), np.array(dev, np.float64), list(notes)
+                    for i, (path, c, note, d) in redo:
+                        paths[i], dev[i], used[i], notes[i] = path, d, c, note
         else:
             both = [sm.linear_resample(r, n_points, with_deviation=True) for r in raws]
             paths, dev = np.stack([p for p, _ in both]), np.array([d for _, d in both])
@@ -537,15 +547,6 @@ class TrajectoryGenerator:
         # candidate smoothings (CANDIDATE_RESIDUALS), then less smoothing, down to the raw polyline.
         bad = (np.flatnonzero(~batch.clearance_ok | (batch.heel_backward > self.sp.backward_tolerance)) if smoothing > 0
                else np.zeros(0, np.int64))
-        if bad.size and not one:
-            redo = self._candidate_rows(scenes, raws, bad, n_points, smoothing, fast)
-            if redo:
-                idx = [i for i, _ in redo]
-                sub = assemble("rl", self.sp, [scenes[i] for i in idx], [raws[i] for i in idx],
-                               np.stack([c[0] for _, c in redo]), [c[1] for _, c in redo], duration,
-                               [c[2] for _, c in redo], deviation=np.array([c[3] for _, c in redo]), fast=fast)
-                batch = batch.with_rows(idx, sub)
-                bad = np.flatnonzero(~batch.clearance_ok | (batch.heel_backward > self.sp.backward_tolerance))
         if fast and bad.size:
             redo = self._fallback_batch(scenes, raws, bad, n_points, smoothing)
         else:
