@@ -103,6 +103,27 @@ def _ms(x) -> dict:
     return {"median": float(np.median(x)), "mean": float(x.mean()), "p95": float(np.percentile(x, 95))}
 
 
+def alternate(generators: dict, scenarios: list[dict], warmup: int = 20):
+    """jaxexo.evaluation.compare.run_generators with the CPU time of each call too (time.process_time:
+    on a shared machine a long call is preempted more often than a short one, which the wall clock
+    charges to it). Returns {name: (trajectories, wall seconds, CPU seconds)}."""
+    import time
+
+    kw = lambda s: {k: s[k] for k in ("pivot", "start_y", "step_length")}   # noqa: E731
+    names = list(generators)
+    for s in scenarios[:warmup]:
+        for g in generators.values():
+            g.generate(s["obstacle"], **kw(s))
+    out = {n: ([], np.empty(len(scenarios)), np.empty(len(scenarios))) for n in names}
+    for i, s in enumerate(scenarios):
+        for n in (names if i % 2 == 0 else names[::-1]):
+            c0, t0 = time.process_time(), time.perf_counter()
+            tr = generators[n].generate(s["obstacle"], **kw(s))
+            out[n][1][i], out[n][2][i] = time.perf_counter() - t0, time.process_time() - c0
+            out[n][0].append(tr)
+    return out
+
+
 def smoothing_counts(trajs) -> dict:
     """Fractions of RL swings: smoothed in one pass (no retry with less smoothing), with the requested
     smoothing itself, with a per-path candidate, on the raw polyline; safe (the verdict)."""
@@ -123,6 +144,7 @@ def run_generate_benchmark(policy: str | Path, out_dir, n: int = 1000, progress=
     from jaxexo.evaluation.compare import WithFallback, run_generators
     from jaxexo.evaluation.machine import write_result
 
+    load = [round(x, 2) for x in os.getloadavg()]
     gen = TrajectoryGenerator.load(policy)
     cf = CFFTG(gen.config)
 
@@ -135,15 +157,18 @@ def run_generate_benchmark(policy: str | Path, out_dir, n: int = 1000, progress=
         scenarios = scene_set(gen.config, which, n)
         gens = {"rl": WithFallback(gen, None), "cfftg": cf}
         before = list(gen.shield_stats)
-        passes = [run_generators(gens, scenarios) for _ in range(3)]
+        passes = [alternate(gens, scenarios) for _ in range(3)]
         steps = [a - b for a, b in zip(gen.shield_stats, before)]
         single = {k: np.median([p[k][1] for p in passes], axis=0) for k in gens}
+        cpu = {k: np.median([p[k][2] for p in passes], axis=0) for k in gens}
         ref = run_generators({"rl": WithFallback(gen, None), "rl_reference": _Reference()}, scenarios[: max(1, n // 4)])
         trajs = passes[-1]["rl"][0]
         sets[which] = {
             "n": len(scenarios),
             "single_ms": {k: _ms(v) for k, v in single.items()},
             "ratio_rl_over_cfftg": float(np.median(single["rl"]) / np.median(single["cfftg"])),
+            "single_cpu_ms": {k: _ms(v) for k, v in cpu.items()},
+            "cpu_ratio_rl_over_cfftg": float(np.median(cpu["rl"]) / np.median(cpu["cfftg"])),
             "reference_ms": {"rl": _ms(ref["rl"][1]), "rl_reference": _ms(ref["rl_reference"][1]),
                              "n": len(ref["rl"][1])},
             "rl_over_cfftg_scenes": float(np.mean(single["rl"] > single["cfftg"])),
@@ -162,6 +187,7 @@ def run_generate_benchmark(policy: str | Path, out_dir, n: int = 1000, progress=
         "batch_ms": {"default_threads": batch, "single_thread_blas": batch_1t},
         "import_s": {"median": statistics.median(imports), "runs": imports},
         "blas_threads_default": blas_threads(),
+        "load_average": load,
         "targets": TARGETS, "thesis_ms": THESIS_MS,
     }
     b = lambda d, k: d[k] * 1000 / n      # noqa: E731  (scaled to 1000 scenes; exact for n = 1000)
@@ -170,7 +196,8 @@ def run_generate_benchmark(policy: str | Path, out_dir, n: int = 1000, progress=
         "# Generator benchmark (NumPy only): the shielded RL generator against CFFTG, side by side", "",
         f"Policy `{policy}`; RL alone (`fallback=None`). One swing: `generate` (rollout, smoothing, every "
         "safe-swing check, joint angles), RL and CFFTG alternating per scene, median of 3 passes per scene. "
-        f"Batch: `generate_batch` of {n} held-out scenes, RL and CFFTG alternating, median of 5.", "",
+        f"Batch: `generate_batch` of {n} held-out scenes, RL and CFFTG alternating, median of 5. "
+        f"Load average at the start: {res['load_average']}.", "",
         "| figure | unseen (held-out families) | safety scenes | target |", "|---|---:|---:|---|",
         "| one swing, RL / CFFTG median ratio | " + " | ".join(
             f"**{sets[w]['ratio_rl_over_cfftg']:.2f}** ({miss(sets[w]['ratio_rl_over_cfftg'] <= 1.5)})" for w in SETS)
@@ -178,6 +205,9 @@ def run_generate_benchmark(policy: str | Path, out_dir, n: int = 1000, progress=
         "| one swing, RL median | " + " | ".join(
             f"{sets[w]['single_ms']['rl']['median']:.3f} ms ({miss(sets[w]['single_ms']['rl']['median'] <= 1.0)})"
             for w in SETS) + " | <= 1.0 ms |",
+        "| one swing, CPU time (process_time): RL / CFFTG ratio, RL and CFFTG medians | " + " | ".join(
+            f"**{sets[w]['cpu_ratio_rl_over_cfftg']:.2f}**: {sets[w]['single_cpu_ms']['rl']['median']:.3f} / "
+            f"{sets[w]['single_cpu_ms']['cfftg']['median']:.3f} ms" for w in SETS) + " | |",
         "| one swing, CFFTG median | " + " | ".join(f"{sets[w]['single_ms']['cfftg']['median']:.3f} ms" for w in SETS)
         + " | |",
         "| one swing, RL mean / p95 | " + " | ".join(
