@@ -388,7 +388,11 @@ class TrajectoryGenerator:
         for f in FALLBACK_FACTORS:
             if not wait:
                 break
-            cand, dev = _smooth([raws[rows[j]] for j in wait], n_points, smoothing * f, True)
+            # each row smoothed on its own, as the reference's retry does (bit for bit: a straight leg's
+            # joint angles amplify a last-bit difference in the samples to ~1e-8 rad); the retries
+            # are rare (the candidates come first), so the checks are what is vectorised
+            one = [sm.smooth_one(raws[rows[j]], n_points, smoothing * f) for j in wait]
+            cand, dev = np.concatenate([c for c, _ in one]), np.concatenate([d for _, d in one])
             ok = self._keep_margin_rows([scenes[rows[j]] for j in wait], cand, dev)
             for k, j in enumerate(wait):
                 if ok[k]:
