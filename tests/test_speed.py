@@ -165,9 +165,9 @@ def test_generate_batch_runs_blas_on_one_thread_and_restores_it(tmp_path, monkey
     seen = []
     rollout_batch = gen.rollout_batch
 
-    def spy(scenes):
+    def spy(scenes, *args):
         seen.append(blas.blas_threads())
-        return rollout_batch(scenes)
+        return rollout_batch(scenes, *args)
 
     monkeypatch.setattr(gen, "rollout_batch", spy)
     obstacles = [Obstacle.named("triangle"), Obstacle.named("base1"), Obstacle.named("half_circle")]

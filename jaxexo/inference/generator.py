@@ -21,6 +21,16 @@ safe-swing check is replaced by CFFTG's plan for the same scene (jaxexo.baseline
 ``method`` "cfftg-fallback" and the RL failure in ``notes``; when CFFTG fails too, the RL swing is
 returned, not ok. ``fallback=None`` returns the RL result alone.
 
+Speed (issue 19): with the shield, the chosen move is the first admissible move in order of Q, so
+``fast`` checks the moves one at a time in that order instead of computing all 19 forward moves'
+mask: one swing in plain Python floats certified against the reference's float32 rounding
+(jaxexo.inference.shield; the full mask on the rare steps too close to call), a batch in the
+reference's own float32 arithmetic one move per row (``_batch_choice``; the full mask for the rows
+whose first BATCH_ROUNDS moves fail). Smoothing: besides the requested s, per-path candidates
+(CANDIDATE_RESIDUALS: s = M rho^2) are smoothed and checked in one pass and the smoothest that keeps
+the margin is used (``Trajectory.smoothing`` reports it; a note says a candidate was used); the
+retries below remain for the rest.
+
 Speed (issue 12): ``fast=True`` (default) computes the swept clearance exactly only for the moves
 that can be a path's closest (jaxexo.physics.swept.swept_lower_bound), smooths one path without the
 batch bookkeeping and checks the smoothing retries of all rows at once; ``fast=False`` is the plain
@@ -37,11 +47,12 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxexo.physics import dynamics, geometry, swept
+from jaxexo.physics import dynamics, geometry, kinematics, swept
 from jaxexo.config.schema import MAX_SWING_DURATION
 from jaxexo.physics.dynamics import Scene, scalar
 from jaxexo.inference import blas, smoothing as sm, trajectory
 from jaxexo.inference.network import FoldedQNetwork, StepNetwork
+from jaxexo.inference.shield import ScalarShield
 from jaxexo.inference.trajectory import DEFAULT_DURATION, Trajectory, TrajectoryBatch, TrajectoryError, assemble
 from jaxexo.storage.policy_file import PolicyFileError, QPolicy, load_policy, policy_config
 
@@ -78,6 +89,10 @@ class TrajectoryGenerator:
         self.shield = bool(config.env.shield)
         self._n_forward = int(dynamics.forward_moves().sum())
         self._rng = None
+        # single-swing shield steps: [decided by jaxexo.inference.shield, handed to the full mask]
+        # and batch rows: [rows, rows whose best forward move was not admissible (full mask)]
+        self.shield_stats = [0, 0, 0, 0]
+        self._fwd_idx = np.flatnonzero(dynamics.forward_moves())
 
     def exploring(self, epsilon: float, seed: int = 0) -> "TrajectoryGenerator":
         """A copy that acts epsilon-greedily (thesis 2.6 tests that way): each step a uniformly
@@ -157,16 +172,30 @@ class TrajectoryGenerator:
         return np.vstack([self._linear, origin])
 
     # Rollouts -----------------------------------------------------------------------------------
-    def rollout(self, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
-        """Greedy raw path of one scene: heel points (M, 2) from the start, and the actions (M-1,)."""
+    def rollout(self, scene: Scene, fast: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """Greedy raw path of one scene: heel points (M, 2) from the start, and the actions (M-1,).
+
+        With the shield, ``fast`` (greedy only) checks the moves one at a time in order of Q until
+        one is admissible (jaxexo.inference.shield: the same move as the full mask, which it
+        computes instead on the rare steps it cannot decide); ``fast=False`` computes the full
+        mask every step (the reference)."""
         sp, step = self.sp, self.step_net
         step.set_scene(self._basis(scene))
         mid_y, mid_z = dynamics.mid_goal(scalar, sp, scene.center_y, scene.height)
         hy, hz, t, visited = float(scene.start_y), 0.0, 0, False
         pts, acts = [(hy, hz)], []
         one = dynamics.stack_scenes([scene], np.float32) if self.shield else None
+        single = ScalarShield(self.sp, self.np_params, scene) if self.shield and fast and self.epsilon <= 0.0 else None
         while True:
-            if self.shield:
+            if single is not None:
+                q = step.q_values(hy, hz, t, 1.0 if visited else 0.0)
+                a = single.choose(hy, hz, q)
+                if a is None:
+                    mask = self._admissible_rows(np.array([hy], np.float32), np.array([hz], np.float32), one)[0]
+                    a = int(dynamics.greedy_action(np, q, mask))
+                    self.shield_stats[1] += 1
+                self.shield_stats[0] += 1
+            elif self.shield:
                 mask = self._admissible_rows(np.array([hy], np.float32), np.array([hz], np.float32), one)[0]
                 a = self._explore(step.greedy(hy, hz, t, 1.0 if visited else 0.0, mask), mask)
             else:
@@ -185,24 +214,98 @@ class TrajectoryGenerator:
         return np.asarray(pts), np.asarray(acts, dtype=np.int64)
 
 
-    def _admissible_rows(self, hy, hz, lay) -> np.ndarray:
-        """(B, A) the shield's admissible moves (jaxexo.physics.dynamics.admissible_moves) of many heels,
-        float32 rows of stacked scenes like the training environment; the exact clearance is computed
-        only for the rows whose foot is within a step plus the shield's clearance of the obstacle's
-        bounding box (elsewhere no move can fail it, so the mask is the same)."""
+    def _near(self, hy, hz, lay) -> np.ndarray:
+        """(B,) rows whose foot is within a step plus the shield's clearance of the obstacle's bounding
+        box (elsewhere no move can fail the clearance condition)."""
         p = self.np_params
         half = 0.5 * lay.width
         dy = np.maximum(np.maximum(lay.center_y - half - (hy + p.foot_length), hy - (lay.center_y + half)), 0.0)
         dz = np.maximum(hz - lay.height, 0.0)
-        near = np.hypot(dy, dz) < self.sp.shield_clearance + self.sp.step_size + 1e-4
+        return np.hypot(dy, dz) < self.sp.shield_clearance + self.sp.step_size + 1e-4
+
+    def _clear(self, hy, hz, ends, outline, pruned: bool) -> np.ndarray:
+        """dynamics.moves_keep_clearance for heels (B,) and move ends (B, F, 2), with its NumPy branch
+        (pruned or not: the same decisions, issue 12) given rather than chosen by the array's size,
+        so that a subset of the moves or rows is decided exactly as in the whole step's call."""
+        p = self.np_params
+        if pruned:
+            here = np.stack([hy, hz], axis=-1)
+            c_here = geometry.foot_clearance(np, here, p.foot_length, outline)
+            return dynamics._moves_keep_clearance_pruned(p, here, c_here, ends, outline)
+        # the unpruned branch of moves_keep_clearance, written out (the same elementwise arithmetic)
+        here = np.stack([hy, hz], axis=-1)
+        c_here = geometry.foot_clearance(np, here, p.foot_length, outline)
+        moves = np.moveaxis(ends, -2, 0)
+        d_move = np.moveaxis(swept.swept_distance(np, here + 0.0 * moves, moves, p.foot_length, outline), 0, -1)
+        return d_move >= np.minimum(p.shield_clearance, c_here)[..., None] - dynamics.SHIELD_SLACK
+
+    def _admissible_rows(self, hy, hz, lay, pruned: bool | None = None, near=None) -> np.ndarray:
+        """(B, A) the shield's admissible moves (jaxexo.physics.dynamics.admissible_moves) of many heels,
+        float32 rows of stacked scenes like the training environment; the exact clearance is computed
+        only for the ``_near`` rows (elsewhere no move can fail it, so the mask is the same).
+        ``pruned``: the clearance's NumPy branch (None: by size, as moves_keep_clearance chooses)."""
+        p = self.np_params
+        near = self._near(hy, hz, lay) if near is None else near
         clear = np.ones((len(hy), self._n_forward), bool)
         if near.any():
             ends = dynamics.forward_ends(np, p, hy[near], hz[near])
-            clear[near] = dynamics.moves_keep_clearance(np, p, hy[near], hz[near], ends, lay.outline[near])
+            if pruned is None:
+                clear[near] = dynamics.moves_keep_clearance(np, p, hy[near], hz[near], ends, lay.outline[near])
+            else:
+                clear[near] = self._clear(hy[near], hz[near], ends, lay.outline[near], pruned)
         return dynamics.admissible_moves(np, p, hy, hz, lay, clear=clear)
 
-    def rollout_batch(self, scenes) -> tuple[list[np.ndarray], list[np.ndarray]]:
-        """Greedy raw paths of many scenes at once (float32 NumPy, like the JAX environment)."""
+    def _batch_choice(self, hy, hz, lay, q) -> np.ndarray:
+        """The shielded greedy actions (B,) of ``_admissible_rows`` + greedy_action, checking first only
+        each row's best forward move (one move per row instead of 19, in the same float32
+        elementwise arithmetic); the full mask only for the rows where that move is not admissible."""
+        fwd = self._fwd_idx
+        # forward moves by decreasing Q, ties by index (as argmax over the mask picks the first)
+        order = fwd[np.argsort(-q[:, fwd], axis=1, kind="stable")[:, :self.BATCH_ROUNDS]]
+        near = self._near(hy, hz, lay)
+        # the branch the whole step's moves_keep_clearance call takes (by its array's size)
+        pruned = int(near.sum()) * self._n_forward * 2 > dynamics._PRUNE_FROM
+        out = order[:, 0].copy()
+        miss = np.arange(len(hy))
+        for r in range(self.BATCH_ROUNDS):     # the r-th best move of the rows still undecided
+            a = order[miss, r]
+            ok = self._one_move_ok(hy[miss], hz[miss], _take(lay, miss), near[miss], a, pruned)
+            out[miss[ok]] = a[ok]
+            miss = miss[~ok]
+            if not miss.size:
+                break
+        if miss.size:
+            sub = _take(lay, miss)
+            mask = self._admissible_rows(hy[miss], hz[miss], sub, pruned, near[miss])
+            out[miss] = dynamics.greedy_action(np, q[miss], mask)
+        self.shield_stats[2] += len(hy)
+        self.shield_stats[3] += miss.size
+        return out
+
+    # forward moves checked one at a time per row before the full mask (``_batch_choice``)
+    BATCH_ROUNDS = 4
+
+    def _one_move_ok(self, hy, hz, lay, near, a, pruned: bool) -> np.ndarray:
+        """(B,) whether move a (B,) passes all four of admissible_moves' conditions (its column of the
+        mask before the fallbacks), in the same float32 elementwise arithmetic."""
+        p = self.np_params
+        d = p.directions[a]
+        y, z = dynamics.move_heel(np, p, hy, hz, d[:, 0], d[:, 1])
+        new = np.stack([y, z], axis=-1)[:, None, :]      # (B, 1, 2)
+        clear = np.ones((len(hy), 1), bool)
+        if near.any():
+            clear[near] = self._clear(hy[near], hz[near], new[near], lay.outline[near], pruned)
+        kin = kinematics.leg_state(np, lay.pivot_y[..., None], new, p.thigh, p.shin)
+        angles = kinematics.both_legs_angles(np, kin)
+        reach = ~(kinematics.legs_outside_limits(np, angles, p.hip_limits, p.knee_limits)
+                  | kinematics.leg_too_long(np, kin["leg_swing"], kin["leg_stance"], p.thigh, p.shin,
+                                            p.leg_length_tolerance))
+        return (clear & reach & (new[..., 0] <= lay.goal_y[..., None] + p.goal_tolerance[0]))[:, 0]
+
+    def rollout_batch(self, scenes, fast: bool = True) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        """Greedy raw paths of many scenes at once (float32 NumPy, like the JAX environment). With the
+        shield, ``fast`` (greedy only) checks each row's best forward move first (``_batch_choice``);
+        ``fast=False`` computes the full mask of every row every step (the reference)."""
         p = self.np_params
         lay = dynamics.stack_scenes(scenes, np.float32)
         b = len(scenes)
@@ -220,8 +323,11 @@ class TrajectoryGenerator:
         for k in range(self.max_steps):
             sub = _take(lay, alive)
             obs = dynamics.observation(np, p, self.obs_mode, hy[alive], hz[alive], t[alive], visited[alive], sub)
-            mask = self._admissible_rows(hy[alive], hz[alive], sub) if self.shield else None
-            a = self._explore(dynamics.greedy_action(np, self.net.q(obs), mask), mask)
+            if self.shield and fast and self.epsilon <= 0.0:
+                a = self._batch_choice(hy[alive], hz[alive], sub, self.net.q(obs))
+            else:
+                mask = self._admissible_rows(hy[alive], hz[alive], sub) if self.shield else None
+                a = self._explore(dynamics.greedy_action(np, self.net.q(obs), mask), mask)
             ny, nz = dynamics.move_heel(np, p, hy[alive], hz[alive], dirs[a, 0], dirs[a, 1])
             hy[alive], hz[alive] = ny, nz
             t[alive] += 1
@@ -274,7 +380,11 @@ class TrajectoryGenerator:
         for f in FALLBACK_FACTORS:
             if not wait:
                 break
-            cand, dev = _smooth([raws[rows[j]] for j in wait], n_points, smoothing * f, True)
+            # each row smoothed on its own, as the reference's retry does (bit for bit: a straight leg's
+            # joint angles amplify a last-bit difference in the samples to ~1e-8 rad); the retries
+            # are rare (the candidates come first), so the checks are what is vectorised
+            one = [sm.smooth_one(raws[rows[j]], n_points, smoothing * f) for j in wait]
+            cand, dev = np.concatenate([c for c, _ in one]), np.concatenate([d for _, d in one])
             ok = self._keep_margin_rows([scenes[rows[j]] for j in wait], cand, dev)
             for k, j in enumerate(wait):
                 if ok[k]:
@@ -287,6 +397,105 @@ class TrajectoryGenerator:
                 "every smoothing brought the foot within the safety margin or moved the heel back; the raw "
                 "polyline is used",), dev)
         return [(int(rows[j]), out[j]) for j in sorted(out)]
+
+    # Candidate smoothings (issue 19): besides the requested s, the per-path s = M * rho^2 (M points)
+    # for these rho (m): a root-mean-square residual of rho per point. A shielded raw path keeps
+    # env.shield_clearance, 5 mm above the verdict's margin; the thesis's s (an RMS residual of ~1 cm
+    # on a 30-point path) cuts its corners by more than that, much smaller ones wiggle the heel back.
+    # On the default model these four rescue all but ~1 % of the swings the requested s fails.
+    CANDIDATE_RESIDUALS = (0.008, 0.005, 0.004, 0.0025)
+    PRUNE_CANDIDATES_FROM = trajectory.PRUNE_POINTS_FROM   # paths from which _margin_ok prunes point clearances
+
+    def _candidates(self, raw, smoothing: float) -> list[float]:
+        """The smoothings tried in one pass, smoothest first: ``smoothing`` and the smaller per-path
+        M * rho^2 of CANDIDATE_RESIDUALS (paths of fewer than 4 points are not smoothed: one)."""
+        m = len(sm.distinct(raw))
+        out = [float(smoothing)]
+        if m < sm.DEGREE + 1:
+            return out
+        for rho in self.CANDIDATE_RESIDUALS:
+            c = m * rho * rho
+            if c < out[-1]:
+                out.append(c)
+        return out
+
+    def _passes(self, low, deviation, backward) -> np.ndarray:
+        """The verdict's clearance and backward checks (jaxexo.physics.outcome.verdict) of paths with
+        polyline clearance ``low``, deviation bound and backward motion (bound included)."""
+        g = low - deviation
+        return (~geometry.foot_collides(np, g) & ~geometry.foot_collides(np, g - self.sp.min_clearance)
+                & (backward <= self.sp.backward_tolerance))
+
+    def _margin_ok(self, scenes, paths: np.ndarray, deviation, with_clearances: bool = False):
+        """``_passes`` of many paths (B, N, 2) at once (fast: each path's minimum exact); with
+        ``with_clearances`` also the point and move clearances (trajectory.measure's inputs)."""
+        deviation = np.asarray(deviation, np.float64)
+        fl = self.sp.foot_length
+        if len(paths) >= self.PRUNE_CANDIDATES_FROM:
+            # exact at each path's closest move and sample, lower bounds above them elsewhere (all that
+            # the verdict and its reasons read: trajectory.measure_paths does the same for many paths)
+            c, sw = trajectory.pruned_clearances(fl, paths, scenes)
+        else:
+            c = trajectory.clearances(fl, paths, scenes)
+            sw = trajectory.swept_clearances(fl, paths, scenes, c, fast=True)
+        low = sw.min(axis=1) if sw.shape[1] else c.min(axis=1)
+        ok = self._passes(low, deviation, swept.backward_motion(np, paths[..., 0]) + 2.0 * deviation)
+        return (ok, c, sw) if with_clearances else ok
+
+    def _candidate_note(self, smoothing, used):
+        return (f"smoothing {smoothing:g} m^2 would bring the foot within the safety margin or move the heel "
+                f"back; the per-path candidate {used:g} m^2 is used",)
+
+    def _one_pass(self, scene, raw, n_points: int, smoothing: float, fast: bool = True):
+        """One swing's candidates smoothed together (smoothing.smooth_candidates); the first that passes
+        is used (the requested smoothing when none does: the retries then follow). ``fast`` checks them
+        all at once, each path's closest move exact (and hands the chosen one's clearances to
+        assemble); the reference checks them one at a time, every move's swept clearance exact."""
+        cands = self._candidates(raw, smoothing)
+        paths, dev = sm.smooth_candidates(raw, n_points, cands)
+        measured = None
+        if fast:
+            ok, c, sw = self._margin_ok([scene] * len(cands), paths, dev, with_clearances=True)
+            j = int(np.argmax(ok)) if ok.any() else 0
+            measured = trajectory.measure(self.sp, paths[j: j + 1], c[j: j + 1], np.array([scene.pivot_y]),
+                                          np.array([scene.goal_y]), sw[j: j + 1], dev[j: j + 1])
+        else:
+            j = next((k for k in range(len(cands)) if self._margin_ok_reference(scene, paths[k], dev[k])), 0)
+        notes = [self._candidate_note(smoothing, cands[j])] if j else [()]
+        return paths[j: j + 1], dev[j: j + 1], [cands[j]], notes, measured
+
+    def _candidate_rows(self, scenes, raws, rows, n_points: int, smoothing: float, fast: bool):
+        """Rows whose requested smoothing failed: the first of their other candidates that passes,
+        as (row, (path, smoothing, notes, deviation)). One swing: all its candidates smoothed in one
+        call (as ``_one_pass``); many: candidate by candidate over the rows still failing, each level
+        in one call. ``fast`` checks each call's paths together, the reference one at a time with
+        every move's swept clearance exact; both smooth the same paths in the same calls."""
+        cands = {int(i): self._candidates(raws[i], smoothing)[1:] for i in rows}
+        out = {}
+        wait = [i for i in cands if cands[i]]
+        level = 0
+        while wait:
+            if len(scenes) == 1:
+                pairs = [(i, c) for i in wait for c in cands[i]]
+            else:
+                pairs = [(i, cands[i][level]) for i in wait]
+            paths, dev = sm.smooth_paths([raws[i] for i, _ in pairs], n_points, np.array([c for _, c in pairs]),
+                                         with_deviation=True)
+            if fast:
+                ok = self._margin_ok([scenes[i] for i, _ in pairs], paths, dev)
+            else:
+                ok = np.array([self._margin_ok_reference(scenes[i], paths[k], dev[k]) for k, (i, _) in enumerate(pairs)])
+            for k, (i, c) in enumerate(pairs):
+                if ok[k] and i not in out:
+                    out[i] = (paths[k], c, self._candidate_note(smoothing, c), dev[k])
+            level += 1
+            wait = [] if len(scenes) == 1 else [i for i in wait if i not in out and level < len(cands[i])]
+        return sorted(out.items())
+
+    def _margin_ok_reference(self, scene, path, deviation) -> bool:
+        c = swept.path_swept_clearance(np, path, self.sp.foot_length, scene.outline)
+        low = c.min() if c.size else geometry.foot_clearance(np, path, self.sp.foot_length, scene.outline).min()
+        return bool(self._passes(low, deviation, swept.backward_motion(np, path[:, 0]) + 2.0 * deviation))
 
     def _keep_margin_rows(self, scenes, paths: np.ndarray, deviation: np.ndarray) -> np.ndarray:
         """``_keeps_margin`` of many paths (B, N, 2) at once (B,)."""
@@ -306,17 +515,32 @@ class TrajectoryGenerator:
                 fallback: str | None = "cfftg", fast: bool = True) -> TrajectoryBatch:
         """Smooth every raw path, check them all at once, redo the few that smoothing brought within the
         margin, then hand the swings that still fail to CFFTG (``fallback``)."""
-        if smoothing > 0:
+        notes = [()] * len(raws)
+        measured = None
+        one = smoothing > 0 and len(raws) == 1 and len(self._candidates(raws[0], smoothing)) > 1
+        if one:
+            # One swing: every candidate smoothing at once, the first that keeps the margin is used.
+            paths, dev, used, notes, measured = self._one_pass(scenes[0], raws[0], n_points, smoothing, fast)
+        elif smoothing > 0:
             paths, dev = _smooth(raws, n_points, smoothing, fast)
             used = [smoothing] * len(raws)
+            if len(raws) > 1:
+                # Many swings: the requested smoothing checked first (fast: all at once), then the
+                # candidates of the rows it fails, level by level; one assemble for all rows after.
+                ok = (self._margin_ok(scenes, paths, dev) if fast else
+                      np.array([self._margin_ok_reference(scenes[i], paths[i], dev[i]) for i in range(len(raws))]))
+                redo = self._candidate_rows(scenes, raws, np.flatnonzero(~ok), n_points, smoothing, fast)
+                if redo:
+                    paths, dev, notes = paths.copy(), np.array(dev, np.float64), list(notes)
+                    for i, (path, c, note, d) in redo:
+                        paths[i], dev[i], used[i], notes[i] = path, d, c, note
         else:
             both = [sm.linear_resample(r, n_points, with_deviation=True) for r in raws]
             paths, dev = np.stack([p for p, _ in both]), np.array([d for _, d in both])
             used = [float("nan")] * len(raws)
-        notes = [()] * len(raws)
-        batch = assemble("rl", self.sp, scenes, raws, paths, used, duration, notes, deviation=dev, fast=fast)
-        # Smoothing cuts corners (clearance) and overshoots (backward heel motion): both are retried
-        # with less smoothing, down to the raw polyline.
+        batch = assemble("rl", self.sp, scenes, raws, paths, used, duration, notes, measured, deviation=dev, fast=fast)
+        # Smoothing cuts corners (clearance) and overshoots (backward heel motion): first the per-path
+        # candidate smoothings (CANDIDATE_RESIDUALS), then less smoothing, down to the raw polyline.
         bad = (np.flatnonzero(~batch.clearance_ok | (batch.heel_backward > self.sp.backward_tolerance)) if smoothing > 0
                else np.zeros(0, np.int64))
         if fast and bad.size:
@@ -408,7 +632,7 @@ class TrajectoryGenerator:
         fallback = check_fallback(fallback)
         self = self.at_clearance(clearance)
         scene = self.scene(obstacle, pivot, pivot_y, start_y, step_length)
-        raw, _ = self.rollout(scene)
+        raw, _ = self.rollout(scene, fast)
         traj = self._finish([scene], [raw], n_points, smoothing, duration, fallback, fast)[0]
         if strict and not traj.ok:
             raise TrajectoryError(traj)
@@ -426,7 +650,7 @@ class TrajectoryGenerator:
         self = self.at_clearance(clearance)
         scenes = self._scenes(obstacles, pivot, pivot_y, start_y, step_length)
         with blas.limited(self.batch_blas_threads):
-            raws, _ = self.rollout_batch(scenes)
+            raws, _ = self.rollout_batch(scenes, fast)
             batch = self._finish(scenes, raws, n_points, smoothing, duration, fallback, fast)
         if strict and not batch.ok.all():
             raise TrajectoryError(batch[int(np.argmin(batch.ok))])

@@ -109,6 +109,13 @@ class StepNetwork:
                          1.0 / len(self.pre[i])) for i in range(len(self.pre))]
 
     def greedy(self, heel_y: float, heel_z: float, time: float, visited: float, mask=None) -> int:
+        q = self.q_values(heel_y, heel_z, time, visited)
+        if mask is not None:   # the shield's admissible moves (jaxexo.physics.dynamics.greedy_action)
+            return int(dynamics.greedy_action(np, q, mask))
+        return int(q.argmax())
+
+    def q_values(self, heel_y: float, heel_z: float, time: float, visited: float) -> np.ndarray:
+        """Q (NUM_ACTIONS,) float32 for one observation (a buffer, overwritten by the next call)."""
         c = self.c
         c[0] = heel_y
         c[1] = heel_z
@@ -125,6 +132,4 @@ class StepNetwork:
             maximum(pre, 0.0, out=out)
             x = buf
         dot(x, self.net.weights[-1], out=self.q)
-        if mask is not None:   # the shield's admissible moves (jaxexo.physics.dynamics.greedy_action)
-            return int(dynamics.greedy_action(np, self.q, mask))
-        return int(self.q.argmax())
+        return self.q

@@ -285,3 +285,31 @@ def smooth_one(raw: np.ndarray, n_points: int = DEFAULT_POINTS, smoothing: float
 def bspline_smooth(raw: np.ndarray, n_points: int = DEFAULT_POINTS, smoothing: float = DEFAULT_SMOOTHING) -> np.ndarray:
     """One smoothed heel path (n_points, 2): ``smooth_paths`` for a single raw path."""
     return smooth_paths([raw], n_points, smoothing)[0]
+
+
+def smooth_candidates(raw: np.ndarray, n_points: int, smoothings) -> tuple[np.ndarray, np.ndarray]:
+    """One raw path smoothed with each of K smoothings (m^2): ((K, n_points, 2), (K,) deviation
+    bounds), as ``smooth_paths([raw] * K, n_points, smoothings, with_deviation=True)`` computes them
+    (the same operators and lambda search), with the path's eigen-coordinates computed once and the K
+    curves in one matrix product (the generator's candidate smoothings, issue 19)."""
+    s = np.asarray(smoothings, np.float64).reshape(-1)
+    k = len(s)
+    pts = distinct(raw)
+    m = len(pts)
+    if m < DEGREE + 1:
+        out, dev = linear_resample(pts, n_points, with_deviation=True)
+        return np.repeat(out[None], k, axis=0), np.full(k, dev, dtype=np.float64)
+    zm, dm, em, qm = _basis(m, n_points)
+    z = zm @ pts                                                         # (M, 2)
+    zz = np.sum(z * z, axis=-1)
+    lam = _solve_lambda(np.broadcast_to(dm, (k, m)), np.broadcast_to(zz, (k, m)), s)
+    with np.errstate(invalid="ignore"):
+        shrink = np.where(np.isinf(lam)[:, None], (dm == 0.0).astype(float)[None], 1.0 / (1.0 + lam[:, None] * dm))
+    zk = z[None] * shrink[..., None]                                     # (K, M, 2)
+    out = np.matmul(em, zk)                                              # (K, n, 2)
+    curv = np.max(np.abs(np.matmul(qm, zk)), axis=1)                     # (K, 2)
+    dev = (1.0 / (n_points - 1)) ** 2 / 8.0 * np.sqrt(np.sum(curv * curv, axis=-1))
+    np.maximum(out[..., 1], 0.0, out=out[..., 1])
+    out[:, 0] = pts[0]
+    out[:, -1] = pts[-1]
+    return out, dev

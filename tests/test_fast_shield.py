@@ -1,0 +1,155 @@
+"""Issue 19's fast paths against their plain references: the shield's move checked one at a time
+(jaxexo.inference.shield for one swing, ``_batch_choice`` for a batch) against the full mask, and the
+generator's one-pass candidate smoothings, on thousands of scenes of the training distribution and
+of the held-out families. Policies: random weights (no training), shielded default config."""
+
+from __future__ import annotations
+
+import types
+
+import numpy as np
+import pytest
+
+from jaxexo.config import load_config
+from jaxexo.physics import dynamics, scenarios
+from jaxexo.inference import TrajectoryGenerator
+from jaxexo.inference import smoothing as sm
+from jaxexo.inference.shield import ScalarShield
+from jaxexo.storage.policy_file import QPolicy
+from conftest import ROOT
+from test_speed import _same
+
+
+def _random_generator(seed=0, hidden=(32, 32), scale=0.3, layer_norm=False):
+    """A generator on configs/default.toml (shielded) with random weights."""
+    cfg = load_config(ROOT / "configs" / "default.toml")
+    assert cfg.env.shield
+    d = dynamics.obs_dim(cfg.env.obs_mode, cfg.env.shape_points)
+    rng = np.random.default_rng(seed)
+    sizes = [d, *hidden, dynamics.NUM_ACTIONS]
+    pol = QPolicy(kernels=[rng.normal(size=(a, b)).astype(np.float32) * scale for a, b in zip(sizes, sizes[1:])],
+                  biases=[rng.normal(size=b).astype(np.float32) * 0.1 for b in sizes[1:]],
+                  norm_scales=[rng.normal(size=h).astype(np.float32) for h in hidden] if layer_norm else [],
+                  norm_biases=[rng.normal(size=h).astype(np.float32) * 0.1 for h in hidden] if layer_norm else [],
+                  metadata={})
+    return TrajectoryGenerator(pol, cfg)
+
+
+def _scenes(gen, n_train, n_unseen, seed=5):
+    from jaxexo.evaluation.compare import make_scenarios
+
+    sc = make_scenarios(gen.config, "train", n_train, seed) + make_scenarios(gen.config, "unseen", n_unseen)[:n_unseen]
+    return sc, [gen.scene(s["obstacle"], s["pivot"], None, s["start_y"], s["step_length"]) for s in sc]
+
+
+def test_scalar_shield_picks_the_full_masks_greedy_move():
+    """At random heels around terrain obstacles (close to the shield's clearance too) and random
+    Q-values (ties included), ``ScalarShield.choose`` returns the greedy move of the full float32
+    mask, or None (then the generator computes that mask)."""
+    gen = _random_generator()
+    p = gen.np_params
+    n = 4000
+    lay = scenarios.scenario_layouts(np, p, 3, n, False)
+    rng = np.random.default_rng(1)
+    hy = (lay["center_y"] + rng.uniform(-0.45, 0.2, n)).astype(np.float32)
+    hz = rng.uniform(0.0, 0.45, n).astype(np.float32)
+    # a quarter of the heels on the shield's boundary: the foot 2.5 cm (+-1 mm) left of or above the obstacle
+    k = n // 4
+    near = rng.uniform(0.024, 0.026, k)
+    side = rng.uniform(size=k) < 0.5
+    left = lay["center_y"][:k] - 0.5 * lay["width"][:k] - p.foot_length - near
+    hy[:k] = np.where(side, left, hy[:k]).astype(np.float32)
+    hz[:k] = np.where(side, rng.uniform(0, 1, k) * lay["height"][:k], lay["height"][:k] + near).astype(np.float32)
+    ok = (hy > lay["start_y"] - 0.05) & (hy < lay["goal_y"])
+    q = rng.normal(size=(n, dynamics.NUM_ACTIONS)).astype(np.float32)
+    q[::3] = np.round(q[::3] * 2) / 2                      # ties between moves
+    mask = dynamics.admissible_moves(np, p, hy, hz, types.SimpleNamespace(**lay))
+    want = dynamics.greedy_action(np, q, mask)
+    decided = agree = 0
+    for i in np.flatnonzero(ok):
+        scene = types.SimpleNamespace(outline=lay["outline"][i], pivot_y=lay["pivot_y"][i], goal_y=lay["goal_y"][i])
+        a = ScalarShield(gen.sp, p, scene).choose(float(hy[i]), float(hz[i]), q[i])
+        if a is not None:
+            decided += 1
+            agree += a == want[i]
+            assert a == want[i], (i, a, want[i])
+    assert decided == agree
+    # undecided: heels inside or touching the obstacle, steps where no forward move passes every
+    # condition (the mask's fallbacks), and comparisons within rounding of their threshold
+    assert decided > 0.6 * ok.sum()
+    # a nan among the Q-values: argmax's own rules, left to the full mask
+    scene = types.SimpleNamespace(outline=lay["outline"][0], pivot_y=lay["pivot_y"][0], goal_y=lay["goal_y"][0])
+    bad = q[0].copy()
+    bad[3] = np.nan
+    assert ScalarShield(gen.sp, p, scene).choose(float(hy[0]), float(hz[0]), bad) is None
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("layer_norm", [False, True])
+def test_fast_rollouts_take_the_references_actions(layer_norm):
+    """One swing (``rollout``) and a batch (``rollout_batch``), fast against ``fast=False`` (the full
+    mask every step): the same actions and points, on the training distribution and the held-out
+    families."""
+    gen = _random_generator(seed=2 if layer_norm else 4, layer_norm=layer_norm)
+    sc, scenes = _scenes(gen, 1000, 1000)
+    fb, ab = gen.rollout_batch(scenes)
+    rb, rab = gen.rollout_batch(scenes, fast=False)
+    for x, y, u, v in zip(fb, rb, ab, rab):
+        np.testing.assert_array_equal(u, v)
+        np.testing.assert_array_equal(x, y)
+    assert gen.shield_stats[3] > 0          # some rows needed the full mask
+    steps = 0
+    for scene in scenes[::8] + scenes[1::40]:
+        pf, af = gen.rollout(scene)
+        pr, ar = gen.rollout(scene, fast=False)
+        np.testing.assert_array_equal(af, ar)
+        np.testing.assert_array_equal(pf, pr)
+        steps += len(af)
+    assert steps > 3000
+    assert 0 < gen.shield_stats[1] < 0.2 * gen.shield_stats[0]     # steps left to the full mask
+
+
+@pytest.mark.slow
+def test_fast_generation_with_candidate_smoothings_matches_the_reference():
+    """``generate`` and ``generate_batch`` against ``fast=False``: the same samples, checks, notes and
+    smoothing; the per-path candidate smoothings occur, and each swing's curve is reproduced by
+    smoothing its raw path with its reported smoothing."""
+    gen = _random_generator(seed=6)
+    sc, _ = _scenes(gen, 700, 700)
+    args = {k: [s[k] for s in sc] for k in ("obstacle", "pivot", "start_y", "step_length")}
+    kw = {k: args[k] for k in ("pivot", "start_y", "step_length")}
+    fast = gen.generate_batch(args["obstacle"], fallback=None, **kw)
+    ref = gen.generate_batch(args["obstacle"], fallback=None, fast=False, **kw)
+    for a, b in zip(fast, ref):
+        _same(a, b)
+    used = [any("per-path candidate" in n for n in t.notes) for t in fast]
+    assert any(used)
+    for s in sc[::7]:
+        one = {k: s[k] for k in ("pivot", "start_y", "step_length")}
+        a = gen.generate(s["obstacle"], fallback=None, **one)
+        _same(a, gen.generate(s["obstacle"], fallback=None, fast=False, **one))
+        if not np.isnan(a.smoothing) and a.smoothing > 0:
+            np.testing.assert_allclose(sm.smooth_paths([a.raw], len(a.heel), a.smoothing)[0], a.heel, rtol=0, atol=1e-9)
+
+
+def test_candidate_smoothings_are_decreasing_and_per_path():
+    gen = _random_generator()
+    raw = np.column_stack([np.linspace(0, 0.7, 30), np.sin(np.linspace(0, np.pi, 30)) * 0.2])
+    c = gen._candidates(raw, 0.005)
+    assert c[0] == 0.005 and all(a > b for a, b in zip(c, c[1:]))
+    assert c[1:] == [30 * r * r for r in gen.CANDIDATE_RESIDUALS if 30 * r * r < 0.005]
+    assert gen._candidates(raw[:3], 0.005) == [0.005]        # too short to smooth
+    assert gen._candidates(raw, 1e-6) == [1e-6]
+
+
+def test_smooth_candidates_is_smooth_paths_of_the_repeated_path():
+    rng = np.random.default_rng(3)
+    for n in (2, 3, 4, 9, 31, 60):
+        u = np.linspace(0.0, 1.0, n)
+        raw = np.column_stack([0.7 * u + rng.normal(0, 0.005, n), 0.2 * np.sin(np.pi * u) + rng.normal(0, 0.005, n)])
+        raw[:, 1] = np.maximum(raw[:, 1], 0.0)
+        s = [0.005, n * 0.008 ** 2, n * 0.0025 ** 2, 0.0]
+        a, da = sm.smooth_candidates(raw, 100, s)
+        b, db = sm.smooth_paths([raw] * len(s), 100, np.array(s), with_deviation=True)
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(da, db, rtol=0, atol=1e-12)
