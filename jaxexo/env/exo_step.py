@@ -188,6 +188,18 @@ class ExoStepEnv:
         return dynamics.admissible_moves(jnp, params, state.heel[0], state.heel[1], state.layout,
                                          over_moves=lambda f, xs: jax.lax.map(lambda x: f(*x), xs))
 
+    def action_masks(self, states: EnvState, params: EnvParams | None = None):
+        """(N, NUM_ACTIONS) bool: ``action_mask`` of a batch of N states (leading axis), the same
+        decisions at a fraction of the cost: the exact swept check only for the moves a cheap bound
+        leaves open (jaxexo.env.shield). The trainer's mask, every step."""
+        params = self.default_params if params is None else params
+        n = states.heel.shape[0]
+        if not self.shield:
+            return jnp.ones((n, NUM_ACTIONS), bool)
+        from jaxexo.env import shield
+
+        return shield.admissible_moves_batch(params, states.heel[:, 0], states.heel[:, 1], states.layout)
+
     # Observations ---------------------------------------------------------------------------
     def get_obs(self, state: EnvState, params: EnvParams):
         return dynamics.observation(jnp, params, self.obs_mode, state.heel[0], state.heel[1], state.time,

@@ -184,7 +184,8 @@ class Trainer:
         """(N, A) admissible moves of the environments' states with the shield, else None (all)."""
         if not self.env.shield:
             return None
-        return jax.vmap(self.env.action_mask, in_axes=(0, None))(env_state, hyper.env)
+        # The batched mask: action_mask's decisions with the exact swept check only where needed.
+        return self.env.action_masks(env_state, hyper.env)
 
     def _final_mask(self, mask_next, done):
         """The admissible moves of the state each step reached, for its bootstrap: ``mask_next`` (the
