@@ -55,10 +55,10 @@ def _foot_box_distance(hy, hz, foot_length, y0, y1, z0, z1):
     return jnp.sqrt(dy * dy + dz * dz)
 
 
-def _point_foot_distance(py, pz, hy, hz, foot_length):
-    """Distance (m) from points (py, pz) to the flat foot [hy, hy + foot_length] x {hz}."""
+def _point_foot_distance2(py, pz, hy, hz, foot_length):
+    """Squared distance (m^2) from points (py, pz) to the flat foot [hy, hy + foot_length] x {hz}."""
     gap = jnp.maximum(jnp.maximum(hy - py, py - (hy + foot_length)), 0.0)
-    return jnp.sqrt(gap * gap + (pz - hz) * (pz - hz))
+    return gap * gap + (pz - hz) * (pz - hz)
 
 
 def _nearest_outline_point(heel_y, heel_z, foot_length, outline):
@@ -76,7 +76,7 @@ def _nearest_outline_point(heel_y, heel_z, foot_length, outline):
         cy.append(ay + t * ey)
         cz.append(az + t * ez)
     cy, cz = jnp.concatenate(cy, axis=-1), jnp.concatenate(cz, axis=-1)
-    j = jnp.argmin(_point_foot_distance(cy, cz, heel_y[:, None], heel_z[:, None], foot_length), axis=-1)
+    j = jnp.argmin(_point_foot_distance2(cy, cz, heel_y[:, None], heel_z[:, None], foot_length), axis=-1)
     return (jnp.take_along_axis(cy, j[:, None], axis=-1)[:, 0], jnp.take_along_axis(cz, j[:, None], axis=-1)[:, 0])
 
 
@@ -96,10 +96,10 @@ def bounds(p, heel_y, heel_z, ends, outline, c_here):
     lower = jnp.maximum(ch - step, 0.5 * (ch + b1 - step))
     sure_pass = lower >= p.shield_clearance + BOUND_MARGIN
     ny, nz = _nearest_outline_point(heel_y, heel_z, p.foot_length, outline)
-    upper = jnp.minimum(
-        _point_foot_distance(ny[:, None], nz[:, None], ends[..., 0], ends[..., 1], p.foot_length),
-        _point_foot_distance(outline[:, None, :, 0], outline[:, None, :, 1], ends[..., 0, None], ends[..., 1, None],
-                             p.foot_length).min(-1))
+    upper = jnp.sqrt(jnp.minimum(     # squared distances compared first: one square root per move
+        _point_foot_distance2(ny[:, None], nz[:, None], ends[..., 0], ends[..., 1], p.foot_length),
+        _point_foot_distance2(outline[:, None, :, 0], outline[:, None, :, 1], ends[..., 0, None], ends[..., 1, None],
+                              p.foot_length).min(-1)))
     need = jnp.minimum(p.shield_clearance, ch) - dynamics.SHIELD_SLACK
     # From inside the obstacle (c_here <= 0) every move passes: never a sure failure there.
     sure_fail = (ch > 0.0) & (upper < need - BOUND_MARGIN)
