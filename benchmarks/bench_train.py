@@ -10,7 +10,11 @@ the rate of each chunk (chunk 1 includes compilation), the steady rate (median o
       [--label NAME]
 writes benchmarks/results/train-steady[-NAME]_<date>_<machine>.json and .md. This part only uses
 jaxexo's public driver, so it can measure an older checkout too (run it from outside the repository
-with PYTHONPATH pointing at that checkout)."""
+with PYTHONPATH pointing at that checkout).
+
+The shield's mask inside the trainer, plain rule against the batched one, alternated in one process:
+  python benchmarks/bench_train.py --mask-ab configs/default.toml [--updates 30] [--rounds 2]
+writes benchmarks/results/train-mask-ab_<date>_<machine>.json and .md."""
 
 import sys
 from pathlib import Path
@@ -82,9 +86,66 @@ def steady(paths, budget: int, label: str, out_dir: Path) -> dict:
     return {"rows": rows}
 
 
+def mask_ab(path, updates: int, rounds: int, out_dir: Path) -> dict:
+    """Steady env-steps/s of the shielded trainer with the plain mask (vmap(env.action_mask)) and with
+    the batched one (env.action_masks, the trainer's), compiled once each and alternated A B A B so
+    that a shared machine's load hits both alike; the medians of each."""
+    import time
+
+    import jax
+    import numpy as np
+
+    from jaxexo.config import load_config
+    from jaxexo.evaluation.machine import write_result
+    from jaxexo.train.trainer import Hyperparams, Trainer
+
+    cfg = load_config(path)
+    hyper = Hyperparams.from_config(cfg)
+    progs = {}
+    for kind in ("plain", "batched"):
+        tr = Trainer(cfg, devices=jax.local_devices())
+        if kind == "plain":
+            tr._mask = lambda st, h, tr=tr: jax.vmap(tr.env.action_mask, in_axes=(0, None))(st, h.env)
+        ts = tr.place(jax.jit(tr.init)(jax.random.PRNGKey(0), hyper))
+        run = jax.jit(tr.run, static_argnums=2)
+        ts, _ = jax.block_until_ready(run(ts, hyper, updates))      # compiles
+        progs[kind] = [run, ts, []]
+    steps = updates * cfg.train.num_envs * cfg.train.rollout_steps
+    for _ in range(rounds):
+        for kind, prog in progs.items():
+            run, ts, times = prog
+            t0 = time.perf_counter()
+            prog[1], _ = jax.block_until_ready(run(ts, hyper, updates))
+            times.append(time.perf_counter() - t0)
+    rates = {k: steps / float(np.median(v[2])) for k, v in progs.items()}
+    out = {"config": Path(path).name, "updates_per_call": updates, "rounds": rounds, "env_steps_per_call": steps,
+           "devices": len(jax.local_devices()), "env_steps_per_s": rates,
+           "times_s": {k: v[2] for k, v in progs.items()}, "ratio": rates["batched"] / rates["plain"]}
+    md = "\n".join([
+        f"# Shielded trainer, plain mask vs batched mask ({out['config']}, {out['devices']} CPU devices)", "",
+        "| mask | steady env-steps/s (median) |", "|---|---:|",
+        *(f"| {k} | {v / 1e3:.0f}k |" for k, v in rates.items()), "",
+        f"Batched / plain: {out['ratio']:.2f}x; {rounds} alternated calls of {steps:,} env steps each. Shared "
+        "machine: other jobs ran at the same time; the alternation exposes both to the same load."])
+    write_result("train-mask-ab", out, md, out_dir)
+    print(md)
+    return out
+
+
 if __name__ == "__main__":
     root = Path(__file__).resolve().parent.parent
     args = sys.argv[1:]
+    if args and args[0] == "--mask-ab":
+        import argparse
+
+        ap = argparse.ArgumentParser()
+        ap.add_argument("--mask-ab", required=True)
+        ap.add_argument("--updates", type=int, default=30)
+        ap.add_argument("--rounds", type=int, default=2)
+        ap.add_argument("--out", default=str(root / "benchmarks" / "results"))
+        a = ap.parse_args(args)
+        mask_ab(a.mask_ab, a.updates, a.rounds, Path(a.out))
+        sys.exit(0)
     if args and args[0] == "--steady":
         import argparse
 
