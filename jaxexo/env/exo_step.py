@@ -19,7 +19,7 @@ from flax import struct
 from jaxexo.physics import dynamics, geometry, scenarios
 from jaxexo.config import Config
 from jaxexo.physics.dynamics import LENGTH_SCALE, NUM_ACTIONS, THESIS_OBS_CENTER  # noqa: F401 (re-exported)
-from jaxexo.env import spaces
+from jaxexo.env import shield, spaces
 from jaxexo.env.params import EnvParams
 # Every observation lies within +-OBS_BOUND (world bounds of a few metres over LENGTH_SCALE).
 OBS_BOUND = 10.0
@@ -196,8 +196,6 @@ class ExoStepEnv:
         n = states.heel.shape[0]
         if not self.shield:
             return jnp.ones((n, NUM_ACTIONS), bool)
-        from jaxexo.env import shield
-
         return shield.admissible_moves_batch(params, states.heel[:, 0], states.heel[:, 1], states.layout)
 
     # Observations ---------------------------------------------------------------------------

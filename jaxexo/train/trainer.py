@@ -386,7 +386,7 @@ class Trainer:
         programs on the inputs' shardings: a state fresh from ``init`` (one device) or from a
         checkpoint (host arrays) has another layout than the state a chunk returns (split over the
         mesh), so without this the second chunk compiles the whole program again. Placing the state
-        first gives every call one signature: one compilation per run (tests/test_trainer.py counts
+        first gives every call one signature: one compilation per run (tests/test_compile_once.py counts
         them). Only where the data lives changes, never a value."""
         if not self.axis:
             return ts
