@@ -37,7 +37,7 @@ def cmd_bench_env(args) -> int:
     cfg, name = _load(args.config)
     from jaxexo.benchmarks.env_bench import run_env_benchmark
 
-    run_env_benchmark(cfg, Path(name).stem, args.envs, args.out)
+    run_env_benchmark(cfg, Path(name).stem, args.envs, args.out, name=args.name, mixed=not args.no_mixed)
     return 0
 
 
@@ -307,6 +307,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--config", help="TOML config (default: the packaged default, configs/default.toml)")
     b.add_argument("--envs", type=_sizes, default=[1, 256, 4096, 16384], help="batch sizes, e.g. 1,256,4096")
     b.add_argument("--out", default="benchmarks/results", help="folder for the JSON and Markdown results")
+    b.add_argument("--name", default="env", help="result files' name: NAME_<date>_<machine>.json and .md")
+    b.add_argument("--no-mixed", action="store_true", help="skip the all-obstacle-kinds comparison rows")
     b.set_defaults(func=cmd_bench_env)
     t = sub.add_parser("train", help="train a policy (TD(lambda)); writes a run directory")
     t.add_argument("config", nargs="?", help="TOML config (default: the packaged default, configs/default.toml)")

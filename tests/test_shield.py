@@ -200,3 +200,62 @@ def test_bad_shield_settings_are_refused_naming_the_field(env, field):
 
     with pytest.raises(ConfigError, match=rf"^{field}"):
         config_from_dict(legacy_raw({"env": env}))
+
+
+@pytest.mark.slow
+def test_batched_jax_mask_decides_exactly_like_the_plain_one():
+    """The trainer's batched mask (jaxexo.env.shield: bounds decide most moves, the exact swept check
+    the rest, gathered into a buffer) equals ``action_mask`` (the plain rule, every move checked) bit
+    for bit, on thousands of states: heels around the obstacles of the training distribution
+    (configs/default.toml's terrain), the states a shielded random policy visits there, and heels
+    around the held-out terrain families; with the default buffer and with one small enough that
+    a step takes many rounds."""
+    import jax
+    import jax.numpy as jnp
+    from jaxexo.env import ExoStepEnv, shield
+    from jaxexo.evaluation.unseen import unseen_scenarios
+
+    cfg = load_config(ROOT / "configs" / "default.toml")
+    env = ExoStepEnv(cfg)
+    p = env.default_params
+    plain = jax.jit(jax.vmap(env.action_mask, in_axes=(0, None)))
+    fast = jax.jit(env.action_masks)
+    small = jax.jit(lambda st: shield.admissible_moves_batch(p, st.heel[:, 0], st.heel[:, 1], st.layout, buffer=64))
+    rng = np.random.default_rng(24)
+
+    def around(st, n):
+        heel = np.stack([np.asarray(st.layout.center_y) + rng.uniform(-0.4, 0.15, n), rng.uniform(0.0, 0.45, n)], -1)
+        return st.replace(heel=jnp.asarray(heel, jnp.float32))
+
+    n = 2048
+    _, st = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(jax.random.PRNGKey(7), n), p)
+    batches = [around(st, n)]
+
+    def visit(st, key):   # a shielded random policy: the states training sees early on
+        k1, k2 = jax.random.split(key)
+        a = jax.random.categorical(k1, jnp.where(env.action_masks(st, p), 0.0, -jnp.inf))
+        _, st, *_ = jax.vmap(env.step, in_axes=(0, 0, 0, None))(jax.random.split(k2, n), st, a, p)
+        return st, st
+
+    _, seen = jax.jit(lambda st: jax.lax.scan(visit, st, jax.random.split(jax.random.PRNGKey(8), 24)))(st)
+    batches += [jax.tree.map(lambda x, t=t: x[t], seen) for t in range(0, 24, 3)]
+    scenes = unseen_scenarios(cfg.kinematics.foot_length, repeats=4)
+    held = [env.layout_for(s["obstacle"], s["pivot"], s["start_y"], s["step_length"]) for s in scenes]
+    lay = jax.tree.map(lambda *x: jnp.stack(x), *held)
+    st_held = jax.tree.map(lambda x: x[: len(held)], st).replace(layout=lay)
+    batches += [around(st_held, len(held)) for _ in range(4)]
+
+    pairs = decided = 0
+    for b in batches:
+        ref = np.asarray(plain(b, p))
+        np.testing.assert_array_equal(np.asarray(fast(b, p)), ref)
+        np.testing.assert_array_equal(np.asarray(small(b)), ref)
+        heel, out = b.heel, b.layout.outline
+        ends = dynamics.forward_ends(jnp, p, heel[:, 0], heel[:, 1])
+        c = geometry.foot_clearance(jnp, heel, p.foot_length, out)
+        sp, sf = shield.bounds(p, heel[:, 0], heel[:, 1], ends, out, c)
+        pairs += sp.size
+        decided += int(np.sum(np.asarray(sp | sf)))
+    assert sum(len(b.heel) for b in batches) > 20000
+    # the bounds decide most moves, and leave some to the exact check
+    assert 0.5 < decided / pairs < 0.99, decided / pairs

@@ -18,9 +18,12 @@ from jaxexo.config import Config
 from jaxexo.env import ExoStepEnv
 
 
-def make_rollout(env: ExoStepEnv, num_envs: int, num_steps: int, devices=None):
+def make_rollout(env: ExoStepEnv, num_envs: int, num_steps: int, devices=None, mask: str = "none"):
     """Compiled random-action rollout of ``num_envs`` environments for ``num_steps`` steps, the batch
-    split evenly over ``devices`` (default: every local device that divides it)."""
+    split evenly over ``devices`` (default: every local device that divides it). ``mask``: "none"
+    (any move), or the shield's mask computed every step as the trainer does, the action drawn among
+    the admissible moves: "plain" (``vmap(env.action_mask)``, every move checked exactly) or
+    "batched" (``env.action_masks``, the trainer's: bounds, then the exact check where they leave it open)."""
     devices = devices or jax.local_devices()
     d = len(devices)
     while num_envs % d:
@@ -29,7 +32,7 @@ def make_rollout(env: ExoStepEnv, num_envs: int, num_steps: int, devices=None):
     per_device = num_envs // d
 
     def rollout(key, params):
-        return _rollout(env, per_device, num_steps, key[0], params)[None]
+        return _rollout(env, per_device, num_steps, key[0], params, mask)[None]
 
     mesh = Mesh(np.array(devices), ("envs",))
     sharded = jax.shard_map(rollout, mesh=mesh, in_specs=(P("envs"), P()), out_specs=P("envs"),
@@ -41,14 +44,26 @@ def make_rollout(env: ExoStepEnv, num_envs: int, num_steps: int, devices=None):
     return jax.jit(run), d
 
 
-def _rollout(env, num_envs, num_steps, key, params):
+def _mask_fn(env, mask):
+    if mask == "plain":
+        return jax.vmap(env.action_mask, in_axes=(0, None))
+    if mask == "batched":
+        return env.action_masks
+    return None
+
+
+def _rollout(env, num_envs, num_steps, key, params, mask="none"):
     k0, key = jax.random.split(key)
     _, state = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(k0, num_envs), params)
+    masks = _mask_fn(env, mask)
 
     def body(carry, _):
         state, key, acc = carry
         key, ka, ks = jax.random.split(key, 3)
-        actions = jax.random.randint(ka, (num_envs,), 0, env.num_actions)
+        if masks is None:
+            actions = jax.random.randint(ka, (num_envs,), 0, env.num_actions)
+        else:   # uniform over the admissible moves of the current state (the trainer's exploration)
+            actions = jax.random.categorical(ka, jnp.where(masks(state, params), 0.0, -jnp.inf), axis=-1)
         _, state, reward, term, trunc, info = jax.vmap(env.step, in_axes=(0, 0, 0, None))(
             jax.random.split(ks, num_envs), state, actions, params)
         acc = acc + jnp.stack([reward.sum(), term.sum(), info["collision"].sum()])
@@ -59,14 +74,14 @@ def _rollout(env, num_envs, num_steps, key, params):
 
 
 def bench_env(num_envs_list=(1, 256, 4096, 16384), steps_per_call=None, repeats=5, config=None,
-              progress=print) -> list[dict]:
-    """Measure env-steps/s for each batch size; returns one row per size."""
+              progress=print, mask: str = "none") -> list[dict]:
+    """Measure env-steps/s for each batch size; returns one row per size (``mask``: make_rollout's)."""
     env = ExoStepEnv(config or Config())
     params = env.default_params
     rows = []
     for n in num_envs_list:
         steps = steps_per_call or max(50, min(2000, 2_000_000 // n))
-        fn, ndev = make_rollout(env, n, steps)
+        fn, ndev = make_rollout(env, n, steps, mask=mask)
         key = jax.random.PRNGKey(0)
         t0 = time.perf_counter()
         jax.block_until_ready(fn(key, params))
@@ -85,6 +100,7 @@ def bench_env(num_envs_list=(1, 256, 4096, 16384), steps_per_call=None, repeats=
             "compile_s": compile_s,
             "devices": ndev,
             "episodes_finished": float(out[1]),
+            "mask": mask,
         }
         progress(f"  {n:>6} envs: {row['env_steps_per_s'] / 1e6:8.3f} M env-steps/s "
                  f"(median of {repeats}, {steps} steps/call, {ndev} device(s), compile {compile_s:.1f} s)")
@@ -112,20 +128,31 @@ def mixed_config() -> Config:
                    "obstacle_offset": [0.0, 0.0], "start_shift": [0.0, 0.0], "step_length": [0.70, 0.70]}})
 
 
-def run_env_benchmark(config: Config, config_name: str, sizes, out_dir, progress=print) -> dict:
-    """Benchmark the given config and, for comparison, the all-kinds mix; write the results."""
+def run_env_benchmark(config: Config, config_name: str, sizes, out_dir, progress=print, name: str = "env",
+                      mixed: bool = True) -> dict:
+    """Benchmark the given config and, for comparison, the all-kinds mix; write the results. A
+    shielded config is also measured with the shield's mask computed every step, as the trainer
+    does: the plain rule and the trainer's batched one, back to back."""
     from jaxexo.evaluation.machine import write_result
 
     results = {}
-    for name, cfg in ((config_name, config), ("all obstacle kinds (K=16)", mixed_config())):
-        progress(f"{name}: outline size K = {cfg.outline_vertices}, obs_mode = {cfg.env.obs_mode}")
-        results[name] = bench_env(sizes, config=cfg, progress=progress)
+    runs = [(config_name, config, "none")]
+    if config.env.shield:
+        runs += [(f"{config_name} + mask (plain)", config, "plain"), (f"{config_name} + mask (batched)", config, "batched")]
+    if mixed:
+        runs.append(("all obstacle kinds (K=16)", mixed_config(), "none"))
+    for label, cfg, mask in runs:
+        progress(f"{label}: outline size K = {cfg.outline_vertices}, obs_mode = {cfg.env.obs_mode}")
+        results[label] = bench_env(sizes, config=cfg, progress=progress, mask=mask)
     lines = ["# Environment throughput (random actions, full reward, auto-reset)", "",
              "| layout | envs | devices | M env-steps/s |", "|---|---:|---:|---:|"]
-    for name, rows in results.items():
+    for label, rows in results.items():
         for r in rows:
-            lines.append(f"| {name} | {r['num_envs']} | {r['devices']} | {r['env_steps_per_s'] / 1e6:.2f} |")
-    paths = write_result("env", {"results": results}, "\n".join(lines), out_dir)
+            lines.append(f"| {label} | {r['num_envs']} | {r['devices']} | {r['env_steps_per_s'] / 1e6:.2f} |")
+    lines.append("")
+    lines.append("Shared machine: other jobs ran at the same time, so figures are noisy; rows of one file were "
+                 "measured back to back in one process.")
+    paths = write_result(name, {"results": results}, "\n".join(lines), out_dir)
     progress("\n".join(lines))
     progress(f"wrote {paths[0]} and {paths[1]}")
     return results

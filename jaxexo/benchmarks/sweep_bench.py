@@ -145,3 +145,56 @@ def run_sweep_benchmark(out_dir, sweep_file: str | Path, target: bool = True, pe
     progress(md)
     return payload
 
+
+
+# Greedy success on the test layouts an agent must reach to count as having learned (the sweep's
+# TARGET_SUCCESS, which its training-curve figure episodes_to_90 uses too).
+LEARNED_SUCCESS = 0.9
+
+
+def run_learning_benchmark(out_dir, sweep_file: str | Path, progress=print) -> dict:
+    """A whole ``run_sweep`` of agents that learn (configs/sweeps/learning_benchmark.toml): wall time
+    (compilation, training, evaluation and the report included), agents per minute, env-steps/s, the
+    agents that met LEARNED_SUCCESS, and the compilations of each group's chunk program (one each)."""
+    import collections
+    import csv
+
+    from jax import monitoring
+
+    from jaxexo.evaluation.machine import write_result
+    from jaxexo.sweep.runner import run_sweep
+
+    counts = collections.Counter()
+
+    def listen(event, duration, **kw):
+        if event == "/jax/core/compile/backend_compile_duration":
+            counts[kw.get("fun_name")] += 1
+
+    monitoring.register_event_duration_secs_listener(listen)
+    sweep = load_sweep(sweep_file)
+    with tempfile.TemporaryDirectory() as d:
+        t0 = time.perf_counter()
+        res = run_sweep(sweep, Path(d) / "sweep", progress=False)
+        wall = time.perf_counter() - t0
+        with open(Path(d) / "sweep" / "results.csv") as f:
+            rows = list(csv.DictReader(f))
+    success = np.array([float(r["success"]) for r in rows])
+    program = sum(v for k, v in counts.items() if "agent" in k)
+    out = {"sweep_file": str(Path(sweep_file).name), "agents": sweep.num_agents, "groups": len(sweep.groups),
+           "env_steps": res["env_steps"], "wall_s": wall, "agents_per_min": sweep.num_agents / wall * 60.0,
+           "env_steps_per_s": res["env_steps"] / wall, "learned_success": LEARNED_SUCCESS,
+           "agents_learned": int(np.sum(success >= LEARNED_SUCCESS)), "success": success.tolist(),
+           "compilations_per_group": program / max(1, len(sweep.groups)), "devices": len(jax.local_devices())}
+    md = "\n".join([
+        f"# Learning sweep benchmark ({out['sweep_file']})", "",
+        "| agents | groups | env steps | wall s (all included) | agents per minute | M env-steps/s | "
+        f"agents with greedy success >= {LEARNED_SUCCESS} | compilations per group |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|",
+        f"| {out['agents']} | {out['groups']} | {out['env_steps']:,.0f} | {wall:.1f} | {out['agents_per_min']:.1f} | "
+        f"{out['env_steps_per_s'] / 1e6:.3f} | {out['agents_learned']} of {out['agents']} | "
+        f"{out['compilations_per_group']:g} |", "",
+        "Greedy success per agent (test layouts): " + ", ".join(f"{x:.3f}" for x in success) + ".", "",
+        "Shared machine: other jobs ran at the same time, so times are noisy."])
+    write_result("sweep-learning", out, md, out_dir)
+    progress(md)
+    return out

@@ -19,7 +19,7 @@ from flax import struct
 from jaxexo.physics import dynamics, geometry, scenarios
 from jaxexo.config import Config
 from jaxexo.physics.dynamics import LENGTH_SCALE, NUM_ACTIONS, THESIS_OBS_CENTER  # noqa: F401 (re-exported)
-from jaxexo.env import spaces
+from jaxexo.env import shield, spaces
 from jaxexo.env.params import EnvParams
 # Every observation lies within +-OBS_BOUND (world bounds of a few metres over LENGTH_SCALE).
 OBS_BOUND = 10.0
@@ -187,6 +187,16 @@ class ExoStepEnv:
             return jnp.ones(NUM_ACTIONS, bool)
         return dynamics.admissible_moves(jnp, params, state.heel[0], state.heel[1], state.layout,
                                          over_moves=lambda f, xs: jax.lax.map(lambda x: f(*x), xs))
+
+    def action_masks(self, states: EnvState, params: EnvParams | None = None):
+        """(N, NUM_ACTIONS) bool: ``action_mask`` of a batch of N states (leading axis), the same
+        decisions at a fraction of the cost: the exact swept check only for the moves a cheap bound
+        leaves open (jaxexo.env.shield). The trainer's mask, every step."""
+        params = self.default_params if params is None else params
+        n = states.heel.shape[0]
+        if not self.shield:
+            return jnp.ones((n, NUM_ACTIONS), bool)
+        return shield.admissible_moves_batch(params, states.heel[:, 0], states.heel[:, 1], states.layout)
 
     # Observations ---------------------------------------------------------------------------
     def get_obs(self, state: EnvState, params: EnvParams):

@@ -358,6 +358,9 @@ def _run_locked(cfg: Config, out: Path, seed: int, resume: bool, progress: bool,
                               "chunk(s); it cannot be rebuilt, start a new run") from None
         # Lines written after the checkpoint are recomputed identically: drop them (a torn last line too).
         atomic_write(metrics_path, "".join(json.dumps(r) + "\n" for r in rows))
+    # The state laid out as the chunks return it, so that every chunk calls one compiled program
+    # (Trainer.place: else the second chunk, on a state split over the devices, compiles it again).
+    ts = trainer.place(ts)
     run = jax.jit(trainer.run, static_argnums=2)
     active = jax.jit(trainer.active)
     validate = make_validator(cfg, trainer.net)

@@ -184,7 +184,8 @@ class Trainer:
         """(N, A) admissible moves of the environments' states with the shield, else None (all)."""
         if not self.env.shield:
             return None
-        return jax.vmap(self.env.action_mask, in_axes=(0, None))(env_state, hyper.env)
+        # The batched mask: action_mask's decisions with the exact swept check only where needed.
+        return self.env.action_masks(env_state, hyper.env)
 
     def _final_mask(self, mask_next, done):
         """The admissible moves of the state each step reached, for its bootstrap: ``mask_next`` (the
@@ -368,19 +369,45 @@ class Trainer:
             return self._update_forward(ts, hyper)
         return self._update_backward(ts, hyper)
 
-    def run(self, ts: TrainState, hyper: Hyperparams, n_updates: int):
-        """``n_updates`` updates in one scan; returns the state and a (n_updates, len(METRICS)) array."""
-        def scan(ts, hyper):
-            return jax.lax.scan(lambda s, _: self.update(s, hyper), ts, None, length=n_updates)
-
-        if not self.axis:
-            return scan(ts, hyper)
+    def _mesh_specs(self):
+        """The device mesh and the TrainState of PartitionSpecs the data-parallel program uses: the
+        per-environment fields split over the ``envs`` axis, the rest (parameters, optimizer, key,
+        counters) replicated."""
         from jax.sharding import Mesh, PartitionSpec as P
 
         mesh = Mesh(np.array(self.devices), (self.axis,))
         per_env = {"env_state", "obs", "stats", "traces", "action", "greedy", "fresh"}
         spec = TrainState(**{f.name: (P(self.axis) if f.name in per_env else P())
                              for f in dataclasses.fields(TrainState)})
+        return mesh, spec
+
+    def place(self, ts: TrainState) -> TrainState:
+        """``ts`` laid out as ``run`` returns it (a no-op on one device). ``jit(run)`` keys its compiled
+        programs on the inputs' shardings: a state fresh from ``init`` (one device) or from a
+        checkpoint (host arrays) has another layout than the state a chunk returns (split over the
+        mesh), so without this the second chunk compiles the whole program again. Placing the state
+        first gives every call one signature: one compilation per run (tests/test_compile_once.py counts
+        them). Only where the data lives changes, never a value."""
+        if not self.axis:
+            return ts
+        from jax.sharding import NamedSharding
+
+        mesh, spec = self._mesh_specs()
+        shardings = jax.tree.map(lambda p: NamedSharding(mesh, p), spec,
+                                 is_leaf=lambda x: isinstance(x, jax.sharding.PartitionSpec))
+        return jax.device_put(ts, shardings)
+
+    def run(self, ts: TrainState, hyper: Hyperparams, n_updates: int):
+        """``n_updates`` updates in one scan; returns the state and a (n_updates, len(METRICS)) array.
+        With several devices, pass ``place(ts)`` on the first call (one compilation, see ``place``)."""
+        def scan(ts, hyper):
+            return jax.lax.scan(lambda s, _: self.update(s, hyper), ts, None, length=n_updates)
+
+        if not self.axis:
+            return scan(ts, hyper)
+        from jax.sharding import PartitionSpec as P
+
+        mesh, spec = self._mesh_specs()
         fn = jax.shard_map(scan, mesh=mesh, in_specs=(spec, P()), out_specs=(spec, P()), check_vma=False)
         return fn(ts, hyper)
 

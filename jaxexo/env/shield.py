@@ -1,0 +1,149 @@
+"""The shield's mask for a batch of environments, JAX only (issue 24): the decisions of
+``jaxexo.physics.dynamics.admissible_moves``, with the exact swept clearance computed only for the
+moves that a cheap bound leaves open.
+
+Why: the trainer asks for the mask of every environment at every step, and the exact swept check
+(jaxexo.physics.swept) of the 19 forward moves costs several environment steps. Under ``vmap``/``jit``
+a ``jnp.where`` computes both of its branches, so skipping work needs compaction: the open (env, move)
+pairs are gathered into a buffer of static size, checked exactly there, and scattered back; a loop
+takes as many rounds of the buffer as there are open pairs (one round in most steps, more when a
+batch has unusually many pairs near its obstacles), so no state is ever decided by the bound alone
+unless the bound is conclusive.
+
+The bound (per move, sufficient for "keeps the clearance"): the outline and the region under it lie
+in the box B = [min y, max y] x [min(0, min z), max z] of its vertices, so the foot's distance to B is
+a lower bound on its distance to the obstacle, and it is 1-Lipschitz in the heel's position. Along a
+move of length |d| <= step_size from ends with box distances b0, b1 every foot is at least
+(b0 + b1 - |d|) / 2 from B (jaxexo.physics.swept.swept_lower_bound's argument). Where that is at
+least shield_clearance + BOUND_MARGIN the exact rule passes the move too: it asks for the swept
+distance to be >= min(shield_clearance, c_here) - SHIELD_SLACK, and float32 rounding of the exact
+distance (about 1e-6 m at these scales) is far below BOUND_MARGIN. tests/test_shield.py checks, on
+states across the training distribution and the held-out terrain families, that the masks are equal.
+
+The moves left open are decided by the same function on the same inputs as the plain rule
+(``dynamics.moves_keep_clearance``'s comparison, on ``swept.swept_distance`` and
+``geometry.foot_clearance``), and the rest of the shield (kinematic limits, goal, fall-backs) is
+``dynamics.admissible_moves`` itself, given the clearance condition through its ``clear`` argument.
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+
+from jaxexo.physics import dynamics, geometry, swept
+
+# m: the box bound must clear shield_clearance by this much before the exact check is skipped.
+BOUND_MARGIN = 1e-4
+# Open (env, move) pairs checked exactly per round, as a fraction of all pairs of the batch.
+BUFFER_FRACTION = 0.0625
+
+
+def _box(outline):
+    """(y0, y1, z0, z1) (..., ) of the box holding the outline and the region under it (padding
+    repeats a vertex, so it changes nothing)."""
+    vy, vz = outline[..., 0], outline[..., 1]
+    return vy.min(-1), vy.max(-1), jnp.minimum(vz.min(-1), 0.0), vz.max(-1)
+
+
+def _foot_box_distance(hy, hz, foot_length, y0, y1, z0, z1):
+    """Distance (m) from the flat foot [hy, hy + foot_length] x {hz} to the box."""
+    dy = jnp.maximum(jnp.maximum(y0 - (hy + foot_length), hy - y1), 0.0)
+    dz = jnp.maximum(jnp.maximum(z0 - hz, hz - z1), 0.0)
+    return jnp.sqrt(dy * dy + dz * dz)
+
+
+def _point_foot_distance2(py, pz, hy, hz, foot_length):
+    """Squared distance (m^2) from points (py, pz) to the flat foot [hy, hy + foot_length] x {hz}."""
+    gap = jnp.maximum(jnp.maximum(hy - py, py - (hy + foot_length)), 0.0)
+    return gap * gap + (pz - hz) * (pz - hz)
+
+
+def _nearest_outline_point(heel_y, heel_z, foot_length, outline):
+    """(N,) y, z of a point on the outline nearest the foot at the heel (exact for a foot that does
+    not cross the outline: then the nearest pair has an outline vertex, or the projection of the
+    heel or the toe on an edge, in it; any candidate would do for an upper bound)."""
+    vy, vz = outline[..., 0], outline[..., 1]
+    ay, az = vy[:, :-1], vz[:, :-1]
+    ey, ez = vy[:, 1:] - ay, vz[:, 1:] - az
+    len2 = ey * ey + ez * ez
+    inv = jnp.where(len2 > 0.0, 1.0 / jnp.where(len2 > 0.0, len2, 1.0), 0.0)
+    cy, cz = [vy], [vz]
+    for py in (heel_y, heel_y + foot_length):
+        t = jnp.clip(((py[:, None] - ay) * ey + (heel_z[:, None] - az) * ez) * inv, 0.0, 1.0)
+        cy.append(ay + t * ey)
+        cz.append(az + t * ez)
+    cy, cz = jnp.concatenate(cy, axis=-1), jnp.concatenate(cz, axis=-1)
+    j = jnp.argmin(_point_foot_distance2(cy, cz, heel_y[:, None], heel_z[:, None], foot_length), axis=-1)
+    return (jnp.take_along_axis(cy, j[:, None], axis=-1)[:, 0], jnp.take_along_axis(cz, j[:, None], axis=-1)[:, 0])
+
+
+def bounds(p, heel_y, heel_z, ends, outline, c_here):
+    """(sure_pass, sure_fail), (N, F) bool each: the moves whose clearance condition the bounds decide
+    (sure_pass only where ``dynamics.moves_keep_clearance`` is True, sure_fail only where it is False).
+
+    Lower bound on the swept distance (the distance to the outline is 1-Lipschitz in the heel's
+    position; the box distance b1 at the end is at most the end's clearance):
+    max(c_here - |d|, (c_here + b1 - |d|) / 2), |d| <= step_size (move_heel only clips a step).
+    Upper bound: the swept region holds the foot at the end, so the swept distance is at most the end
+    foot's distance to any outline point: the vertices, and the point nearest the foot at the start."""
+    y0, y1, z0, z1 = (b[:, None] for b in _box(outline))
+    b1 = _foot_box_distance(ends[..., 0], ends[..., 1], p.foot_length, y0, y1, z0, z1)
+    step = p.step_size * (1.0 + 1e-6)     # 1e-6: a unit direction rounded to float32
+    ch = c_here[:, None]
+    lower = jnp.maximum(ch - step, 0.5 * (ch + b1 - step))
+    sure_pass = lower >= p.shield_clearance + BOUND_MARGIN
+    ny, nz = _nearest_outline_point(heel_y, heel_z, p.foot_length, outline)
+    upper = jnp.sqrt(jnp.minimum(     # squared distances compared first: one square root per move
+        _point_foot_distance2(ny[:, None], nz[:, None], ends[..., 0], ends[..., 1], p.foot_length),
+        _point_foot_distance2(outline[:, None, :, 0], outline[:, None, :, 1], ends[..., 0, None], ends[..., 1, None],
+                              p.foot_length).min(-1)))
+    need = jnp.minimum(p.shield_clearance, ch) - dynamics.SHIELD_SLACK
+    # From inside the obstacle (c_here <= 0) every move passes: never a sure failure there.
+    sure_fail = (ch > 0.0) & (upper < need - BOUND_MARGIN)
+    return sure_pass, sure_fail
+
+
+def _exact_pairs(p, heel, ends, outline, c_here):
+    """``moves_keep_clearance``'s comparison for gathered pairs: heel (M, 2), ends (M, 2), outline
+    (M, K, 2), c_here (M,) (the foot's clearance at the heel, geometry.foot_clearance)."""
+    d_move = swept.swept_distance(jnp, heel + 0.0 * ends, ends, p.foot_length, outline)
+    return d_move >= jnp.minimum(p.shield_clearance, c_here) - dynamics.SHIELD_SLACK
+
+
+def keep_clearance(p, heel_y, heel_z, ends, outline, buffer: int | None = None):
+    """(N, F) bool, equal to ``dynamics.moves_keep_clearance`` for a batch: the bounds where they are
+    conclusive, the exact rule on the open pairs in rounds of ``buffer`` pairs."""
+    n, f = ends.shape[:2]
+    total = n * f
+    m = buffer or max(1, min(total, math.ceil(BUFFER_FRACTION * total)))
+    heel = jnp.stack([heel_y, heel_z], axis=-1)
+    c_here = geometry.foot_clearance(jnp, heel, p.foot_length, outline)   # as moves_keep_clearance
+    sure_pass, sure_fail = bounds(p, heel_y, heel_z, ends, outline, c_here)
+    open_ = ~(sure_pass | sure_fail).reshape(total)
+    count = jnp.sum(open_, dtype=jnp.int32)
+    # The open pairs' flat indices first, in order; padded so every round's slice is in bounds.
+    order = jnp.nonzero(open_, size=total, fill_value=total)[0].astype(jnp.int32)
+    order = jnp.concatenate([order, jnp.full((m,), total, jnp.int32)])
+    flat_ends = ends.reshape(total, 2)
+
+    def round_(r, clear):
+        idx = jax.lax.dynamic_slice(order, (r * m,), (m,))
+        pair = jnp.minimum(idx, total - 1)       # padding reads a valid pair; its result is dropped
+        env = pair // f
+        ok = _exact_pairs(p, heel[env], flat_ends[pair], outline[env], c_here[env])
+        return clear.at[idx].set(ok, mode="drop")
+
+    rounds = (count + m - 1) // m
+    clear = jax.lax.fori_loop(0, rounds, round_, sure_pass.reshape(total))
+    return clear.reshape(n, f)
+
+
+def admissible_moves_batch(p, heel_y, heel_z, layout, buffer: int | None = None):
+    """(N, NUM_ACTIONS) bool: ``dynamics.admissible_moves`` of N environments (heel_y, heel_z (N,),
+    layout fields with a leading N), the clearance condition computed by ``keep_clearance``."""
+    ends = dynamics.forward_ends(jnp, p, heel_y, heel_z)
+    clear = keep_clearance(p, heel_y, heel_z, ends, layout.outline, buffer)
+    return dynamics.admissible_moves(jnp, p, heel_y, heel_z, layout, clear=clear)
