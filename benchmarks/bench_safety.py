@@ -24,6 +24,7 @@ from jaxexo.baselines.cfftg import _basis
 from jaxexo.evaluation.machine import machine_info, write_result
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.inference import smoothing as sm
+from jaxexo.inference.clearing import clear_smooth
 from jaxexo.inference.scenarios import safety_scenarios
 from jaxexo.physics import geometry, swept
 
@@ -44,6 +45,10 @@ def dense_curve(t, cfftg: CFFTG, factor: int = FACTOR) -> np.ndarray:
         s, mj, g, phi = _basis(dense_n)
         y = sc.start_y + (sc.goal_y - sc.start_y) * (mj + 64.0 * (frac - 0.5) * g)
         return np.column_stack([y, h * phi[k]])
+    if any("jaxexo.inference.clearing" in note for note in t.notes):
+        # the corrected spline, evaluated from the same coefficients at the dense parameters
+        return clear_smooth(t.raw, t.scene.outline, cfftg.sp.foot_length, cfftg.sp.min_clearance, len(t.heel),
+                            t.smoothing, dense_points=dense_n)[3]
     if np.isnan(t.smoothing) or t.smoothing == 0:
         return np.concatenate([sm.linear_resample(t.raw, dense_n), sm.distinct(t.raw)])
     return sm.smooth_paths([t.raw], dense_n, t.smoothing)[0]

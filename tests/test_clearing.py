@@ -102,3 +102,10 @@ def test_degenerate_paths_stay_finite(raw):
     path, dev, _ = clear_smooth(raw, outline, FOOT, MARGIN)
     assert np.all(np.isfinite(path)) and np.isfinite(dev)
     assert np.max(np.abs(path - sm.distinct(raw)[0])) <= 1.5
+
+
+def test_two_samples_have_nothing_to_move():
+    outline = np.asarray(geometry.Obstacle.triangle(0.2, 0.2, center_y=0.35).outline, float)
+    raw = np.array([[0.0, 0.0], [0.05, 0.1], [0.25, 0.21], [0.45, 0.21], [0.65, 0.1], [0.70, 0.0]])
+    path, dev, rounds = clear_smooth(raw, outline, FOOT, MARGIN, n_points=2)
+    np.testing.assert_array_equal(path, [raw[0], raw[-1]])

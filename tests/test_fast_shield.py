@@ -110,11 +110,16 @@ def test_fast_rollouts_take_the_references_actions(layer_norm):
 
 
 @pytest.mark.slow
-def test_fast_generation_with_candidate_smoothings_matches_the_reference():
+@pytest.mark.parametrize("clearing", [False, True])
+def test_fast_generation_with_candidate_smoothings_matches_the_reference(clearing):
     """``generate`` and ``generate_batch`` against ``fast=False``: the same samples, checks, notes and
-    smoothing; the per-path candidate smoothings occur, and each swing's curve is reproduced by
-    smoothing its raw path with its reported smoothing."""
+    smoothing; the per-path candidate smoothings occur (without the corrected spline, which comes
+    first when on) or the corrected splines do, and each swing's curve is reproduced from its raw
+    path: by smoothing it with its reported smoothing, or by the correction (jaxexo.inference.clearing)."""
+    from jaxexo.inference.clearing import clear_smooth
+
     gen = _random_generator(seed=6)
+    gen.clearing = clearing
     sc, _ = _scenes(gen, 700, 700)
     args = {k: [s[k] for s in sc] for k in ("obstacle", "pivot", "start_y", "step_length")}
     kw = {k: args[k] for k in ("pivot", "start_y", "step_length")}
@@ -122,13 +127,17 @@ def test_fast_generation_with_candidate_smoothings_matches_the_reference():
     ref = gen.generate_batch(args["obstacle"], fallback=None, fast=False, **kw)
     for a, b in zip(fast, ref):
         _same(a, b)
-    used = [any("per-path candidate" in n for n in t.notes) for t in fast]
-    assert any(used)
+    marker = "jaxexo.inference.clearing" if clearing else "per-path candidate"
+    assert any(any(marker in n for n in t.notes) for t in fast)
     for s in sc[::7]:
         one = {k: s[k] for k in ("pivot", "start_y", "step_length")}
         a = gen.generate(s["obstacle"], fallback=None, **one)
         _same(a, gen.generate(s["obstacle"], fallback=None, fast=False, **one))
-        if not np.isnan(a.smoothing) and a.smoothing > 0:
+        if any("jaxexo.inference.clearing" in n for n in a.notes):
+            again = clear_smooth(a.raw, a.scene.outline, gen.sp.foot_length, gen.sp.min_clearance, len(a.heel),
+                                 a.smoothing)[0]
+            np.testing.assert_allclose(again, a.heel, rtol=0, atol=1e-9)
+        elif not np.isnan(a.smoothing) and a.smoothing > 0:
             np.testing.assert_allclose(sm.smooth_paths([a.raw], len(a.heel), a.smoothing)[0], a.heel, rtol=0, atol=1e-9)
 
 

@@ -255,6 +255,13 @@ def test_smoothing_that_would_touch_the_obstacle_falls_back(trained_policy):
     assert swept.path_swept_clearance(np, raw, foot, scene.outline).min() >= gen.config.env.min_clearance
     smooth = sm.bspline_smooth(raw, 100, 0.05)
     assert ob.clearance(smooth, foot).min() <= geometry.TOUCH_EPS      # the premise: plain smoothing collides
+    # First the corrected spline (jaxexo.inference.clearing, on by default): the same smoothing, moved
+    # away from the obstacle where it cut the margin.
+    t = gen._finish([scene], [raw], 100, 0.05, 1.0, None)[0]
+    assert t.smoothing == 0.05 and any("jaxexo.inference.clearing" in n for n in t.notes)
+    assert t.checks.clearance_ok and t.checks.min_clearance >= gen.config.env.min_clearance
+    # The retries below it (less smoothing, down to the raw polyline), with the correction off.
+    gen.clearing = False
     t = gen._finish([scene], [raw], 100, 0.05, 1.0, None)[0]
     assert t.checks.collision_free and t.checks.min_clearance > geometry.TOUCH_EPS
     assert (np.isnan(t.smoothing) or t.smoothing < 0.05) and t.notes

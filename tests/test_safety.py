@@ -209,7 +209,16 @@ def _dense_recheck(gen, t, factor=10):
     """Clearance and backward motion of trajectory t's own curve at factor x denser sampling."""
     n = len(t.heel)
     dense_n = factor * (n - 1) + 1
-    if np.isnan(t.smoothing):
+    if any("jaxexo.inference.clearing" in note for note in t.notes):
+        # the corrected spline (jaxexo.inference.clearing), its own coefficients at the dense parameters
+        from jaxexo.inference.clearing import clear_smooth
+
+        out = clear_smooth(t.raw, t.scene.outline, gen.sp.foot_length, gen.sp.min_clearance, n, t.smoothing,
+                           dense_points=dense_n)
+        np.testing.assert_allclose(out[0], t.heel, rtol=0, atol=1e-9)   # the same curve
+        fine = out[3]
+        y = fine[:, 0]
+    elif np.isnan(t.smoothing):
         fine = np.concatenate([sm.linear_resample(t.raw, dense_n), t.raw])
         y = sm.linear_resample(t.raw, dense_n)[:, 0]
     else:

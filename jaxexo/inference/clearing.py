@@ -73,13 +73,17 @@ def _dual(a: np.ndarray, need: np.ndarray) -> np.ndarray:
 
 
 def clear_smooth(raw: np.ndarray, outline: np.ndarray, foot_length: float, margin: float,
-                 n_points: int = sm.DEFAULT_POINTS, smoothing: float = sm.DEFAULT_SMOOTHING):
+                 n_points: int = sm.DEFAULT_POINTS, smoothing: float = sm.DEFAULT_SMOOTHING,
+                 dense_points: int | None = None):
     """The smoothed heel path (n_points, 2) of a raw agent path, corrected to keep ``margin`` (m) from
-    ``outline`` and to move forward; returns (path, deviation bound m, rounds of correction used)."""
+    ``outline`` and to move forward; returns (path, deviation bound m, rounds of correction used), and
+    with ``dense_points`` also the same curve sampled at that many parameters (for a denser look)."""
     pts = sm.distinct(raw)
     m = len(pts)
     if m < sm.DEGREE + 1:
         path, dev = sm.linear_resample(pts, n_points, with_deviation=True)
+        if dense_points:
+            return path, dev, 0, sm.linear_resample(pts, dense_points)
         return path, dev, 0
     zm, dm, em, qm = sm._basis(m, n_points)
     z = zm @ pts
@@ -96,12 +100,12 @@ def clear_smooth(raw: np.ndarray, outline: np.ndarray, foot_length: float, margi
         short = margin + SLACK - (swept.path_swept_clearance(np, out, foot_length, outline) - dev)   # (n-1,)
         fall = out[:-1, 0] - out[1:, 0]                                                               # (n-1,)
         if (short.max() <= 0.0 and fall.max() <= 0.0) or r == ROUNDS:
-            return out, dev, r
+            return _result(out, dev, r, zc, pts, m, dense_points)
         rows, needs = [], []
         bad = np.flatnonzero(short > 0.0)
-        if bad.size:
-            idx = np.unique(np.concatenate([bad, bad + 1]))
-            idx = idx[(idx > 0) & (idx < n_points - 1)]
+        idx = np.unique(np.concatenate([bad, bad + 1]))
+        idx = idx[(idx > 0) & (idx < n_points - 1)]      # the pinned ends do not move
+        if idx.size:
             s_pad = np.concatenate([[0.0], short, [0.0]])
             need = _GROW * np.maximum(np.maximum(s_pad[idx], s_pad[idx + 1]), 0.0)
             normal = _outward(out[idx], foot_length, outline)
@@ -115,7 +119,7 @@ def clear_smooth(raw: np.ndarray, outline: np.ndarray, foot_length: float, margi
             rows.append(f)
             needs.append(_GROW * fall[back])
         if not rows:
-            return out, dev, r
+            return _result(out, dev, r, zc, pts, m, dense_points)
         f = np.concatenate(rows)
         need = np.concatenate(needs)
         fs = f * shrink[None, :, None]
@@ -123,6 +127,15 @@ def clear_smooth(raw: np.ndarray, outline: np.ndarray, foot_length: float, margi
         mu = _dual(a, need)
         step = np.einsum("k,kmc->mc", mu, fs)
         if not np.all(np.isfinite(step)) or np.max(np.abs(em @ step)) > MAX_SHIFT:
-            return out, dev, r
+            return _result(out, dev, r, zc, pts, m, dense_points)
         zc = zc + step
-    return out, dev, ROUNDS
+    raise AssertionError("unreachable: the last round returns")
+
+
+def _result(out, dev, rounds, zc, pts, m, dense_points):
+    if not dense_points:
+        return out, dev, rounds
+    dense = sm._basis(m, dense_points)[2] @ zc
+    np.maximum(dense[:, 1], 0.0, out=dense[:, 1])
+    dense[0], dense[-1] = pts[0], pts[-1]
+    return out, dev, rounds, dense

@@ -82,6 +82,9 @@ class TrajectoryGenerator:
         self._linear = None
         self._cfftg = None      # built on the first fallback (its constants cost ~ms to derive)
         self.clearance = None   # m, or None: env.min_clearance (at_clearance)
+        # the requested spline corrected where it cuts the margin (jaxexo.inference.clearing) before
+        # any smaller smoothing is tried; False: the candidates and retries alone
+        self.clearing = True
         # terminated()'s one parameter as a Python bool: a NumPy bool would make every step's test
         # a NumPy scalar operation.
         self._term_p = types.SimpleNamespace(terminate_on_collision=bool(self.np_params.terminate_on_collision))
@@ -453,16 +456,50 @@ class TrajectoryGenerator:
         assemble); the reference checks them one at a time, every move's swept clearance exact."""
         cands = self._candidates(raw, smoothing)
         paths, dev = sm.smooth_candidates(raw, n_points, cands)
-        measured = None
         if fast:
             ok, c, sw = self._margin_ok([scene] * len(cands), paths, dev, with_clearances=True)
-            j = int(np.argmax(ok)) if ok.any() else 0
+        else:
+            ok = np.array([self._margin_ok_reference(scene, paths[k], dev[k]) for k in range(len(cands))])
+        j = int(np.argmax(ok)) if ok.any() else 0
+        if not ok[0]:
+            # the requested smoothing cuts the margin: its spline corrected comes before any candidate
+            cleared = self._cleared_rows([scene], [raw], [0], n_points, smoothing, fast)
+            if cleared:
+                path, used, note, d = cleared[0][1]
+                measured = None
+                if fast:
+                    _, c1, sw1 = self._margin_ok([scene], path[None], np.array([d]), with_clearances=True)
+                    measured = trajectory.measure(self.sp, path[None], c1, np.array([scene.pivot_y]),
+                                                  np.array([scene.goal_y]), sw1, np.array([d]))
+                return path[None], np.array([d]), [used], [note], measured
+        measured = None
+        if fast:
             measured = trajectory.measure(self.sp, paths[j: j + 1], c[j: j + 1], np.array([scene.pivot_y]),
                                           np.array([scene.goal_y]), sw[j: j + 1], dev[j: j + 1])
-        else:
-            j = next((k for k in range(len(cands)) if self._margin_ok_reference(scene, paths[k], dev[k])), 0)
         notes = [self._candidate_note(smoothing, cands[j])] if j else [()]
         return paths[j: j + 1], dev[j: j + 1], [cands[j]], notes, measured
+
+    CLEARED_NOTE = ("the spline of smoothing {s:g} m^2 is corrected where it came within the safety margin or "
+                    "moved the heel back (jaxexo.inference.clearing)")
+
+    def _cleared_rows(self, scenes, raws, rows, n_points: int, smoothing: float, fast: bool):
+        """Rows whose requested smoothing failed: the requested spline corrected to keep the margin and
+        move forward (jaxexo.inference.clearing), as (row, (path, smoothing, notes, deviation)) for the
+        rows whose corrected curve passes the verdict's clearance and backward checks."""
+        if not self.clearing or len(rows) == 0:
+            return []
+        from jaxexo.inference.clearing import clear_smooth
+
+        got = [(int(i), clear_smooth(raws[i], scenes[i].outline, self.sp.foot_length, self.sp.min_clearance,
+                                     n_points, smoothing)) for i in rows]
+        paths = np.stack([r[0] for _, r in got])
+        dev = np.array([r[1] for _, r in got])
+        if fast:
+            ok = self._margin_ok([scenes[i] for i, _ in got], paths, dev)
+        else:
+            ok = np.array([self._margin_ok_reference(scenes[i], paths[k], dev[k]) for k, (i, _) in enumerate(got)])
+        note = (self.CLEARED_NOTE.format(s=smoothing),)
+        return [(i, (paths[k], float(smoothing), note, dev[k])) for k, (i, _) in enumerate(got) if ok[k]]
 
     def _candidate_rows(self, scenes, raws, rows, n_points: int, smoothing: float, fast: bool):
         """Rows whose requested smoothing failed: the first of their other candidates that passes,
@@ -529,7 +566,10 @@ class TrajectoryGenerator:
                 # candidates of the rows it fails, level by level; one assemble for all rows after.
                 ok = (self._margin_ok(scenes, paths, dev) if fast else
                       np.array([self._margin_ok_reference(scenes[i], paths[i], dev[i]) for i in range(len(raws))]))
-                redo = self._candidate_rows(scenes, raws, np.flatnonzero(~ok), n_points, smoothing, fast)
+                cleared = self._cleared_rows(scenes, raws, np.flatnonzero(~ok), n_points, smoothing, fast)
+                done = {i for i, _ in cleared}
+                redo = cleared + self._candidate_rows(scenes, raws, [i for i in np.flatnonzero(~ok) if i not in done],
+                                                      n_points, smoothing, fast)
                 if redo:
                     paths, dev, notes = paths.copy(), np.array(dev, np.float64), list(notes)
                     for i, (path, c, note, d) in redo:

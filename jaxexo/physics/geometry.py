@@ -127,7 +127,10 @@ def flat_foot_distance(xp, heel, foot_length, outline):
     ey = by - ay
     ez = bz - az
     len2 = ey * ey + ez * ez
-    inv_len2 = xp.where(len2 > 0.0, 1.0 / xp.where(len2 > 0.0, len2, 1.0), 0.0)
+    # Edges shorter than 1e-12 m count as points (as in swept._inv_len2): 1 / len2 of a shorter one
+    # overflows to inf and t = 0 * inf is nan (hypothesis found an edge of 5e-158 m).
+    ok = len2 > 1e-24
+    inv_len2 = xp.where(ok, 1.0 / xp.where(ok, len2, 1.0), 0.0)
     d_heel = _point_edge_dist2(xp, y0, z, ay, az, ey, ez, inv_len2)
     d_toe = _point_edge_dist2(xp, y1, z, ay, az, ey, ez, inv_len2)
     gap = xp.maximum(xp.maximum(y0 - vy, vy - y1), 0.0)
