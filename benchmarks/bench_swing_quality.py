@@ -66,7 +66,7 @@ def scene_sets(cfg, n: int) -> dict[str, list[dict]]:
     }
 
 
-def run_set(gens: dict, scenes: list[dict], cfg, clearance, error: float) -> dict:
+def run_set(gens: dict, scenes: list[dict], cfg, clearance, error: float, smoothing=None) -> dict:
     out = {}
     true = [s["obstacle"] for s in scenes]
     seen = true if error == 0 else [perturbed(o, error, 1.0 if i % 2 else -1.0) for i, o in enumerate(true)]
@@ -77,6 +77,8 @@ def run_set(gens: dict, scenes: list[dict], cfg, clearance, error: float) -> dic
     for name, gen in gens.items():
         t0 = time.perf_counter()
         extra = {"fallback": None} if name == "rl" else {}
+        if name == "rl" and smoothing is not None:
+            extra["smoothing"] = smoothing
         batch = gen.generate_batch(seen, **kw, **extra)
         gen_s = time.perf_counter() - t0
         trajs = list(batch)
@@ -118,7 +120,9 @@ def run_set(gens: dict, scenes: list[dict], cfg, clearance, error: float) -> dic
             "generate_s": gen_s,
         }
         if name == "rl":
-            r["smoothed_once"] = float(np.mean(asked & (smooth == sm.DEFAULT_SMOOTHING)))
+            asked_s = sm.DEFAULT_SMOOTHING if smoothing is None else smoothing
+            r["smoothed_once"] = float(np.mean(asked & (smooth == asked_s)))
+            r["corrected"] = float(np.mean([any("jaxexo.inference.clearing" in n for n in t.notes) for t in trajs]))
             r["raw_polyline"] = float(np.mean(np.isnan(smooth)))
         out[name] = r
     return out
@@ -155,6 +159,7 @@ def main():
     ap.add_argument("--n", type=int, default=600, help="scenes per set")
     ap.add_argument("--clearance", type=float, default=None, help="m; default env.min_clearance (+ the error)")
     ap.add_argument("--perception-error", type=float, default=0.0, help="m")
+    ap.add_argument("--smoothing", type=float, default=None, help="m^2, the RL spline's (default: the generator's)")
     ap.add_argument("--tag", default="")
     ap.add_argument("--out", default=str(OUT))
     a = ap.parse_args()
@@ -165,9 +170,10 @@ def main():
         clearance = cfg.env.min_clearance + a.perception_error
     gens = {"rl": gen, "cfftg": CFFTG(cfg)}
     res = {"policy": str(a.policy), "clearance": clearance, "perception_error": a.perception_error,
+           "smoothing": a.smoothing,
            "sets": {}, "machine": machine_info()}
     for name, scenes in scene_sets(cfg, a.n).items():
-        res["sets"][name] = run_set(gens, scenes, cfg, clearance, a.perception_error)
+        res["sets"][name] = run_set(gens, scenes, cfg, clearance, a.perception_error, a.smoothing)
         print(name, {g: {k: round(v, 4) for k, v in r.items()} for g, r in res["sets"][name].items()}, flush=True)
     title = "Swing quality" + (f" at clearance {100 * clearance:.1f} cm" if clearance else "") + (
         f", perception error {100 * a.perception_error:.1f} cm" if a.perception_error else "")
