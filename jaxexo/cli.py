@@ -97,10 +97,10 @@ def _check_output_file(option: str, value) -> None:
 
 def _check_folder_part(option: str, folder: Path, text: str) -> None:
     """Refuse a path whose nearest existing ancestor is a file (``afile/t.csv``), saying so."""
-    q = folder
-    while not q.exists() and q != q.parent:
-        q = q.parent
-    if q.exists() and not q.is_dir():
+    from jaxexo.storage.rundir import blocking_file
+
+    q = blocking_file(folder)
+    if q is not None:
         raise ValueError(f"{option}: {q} is a file, not a folder (for {text})")
 
 

@@ -37,6 +37,7 @@ from jaxexo.config import PIVOT_CONDITIONS, Config
 from jaxexo.physics import swept
 from jaxexo.inference.scenarios import sample_scenarios, training_scenarios
 from jaxexo.storage.atomic import atomic_write
+from jaxexo.storage.rundir import blocking_file
 
 BATCH = 1000
 BATCH_REPEATS = 3
@@ -425,10 +426,8 @@ def check_report_folder(out: str | Path, policy: str | Path | None = None, force
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out: {out} is a file, not a folder (the report folder)")
-    q = out.parent
-    while not q.exists() and q != q.parent:
-        q = q.parent
-    if q.exists() and not q.is_dir():
+    q = blocking_file(out.parent)
+    if q is not None:
         raise ValueError(f"--out: {q} is a file, not a folder (for {out})")
     for name in REPORT_FILES:
         f = out / name

@@ -33,6 +33,7 @@ from pathlib import Path
 
 from jaxexo.config import PIVOT_CONDITIONS, load_config, packaged_config
 from jaxexo.storage.atomic import atomic_write
+from jaxexo.storage.rundir import blocking_file
 
 THESIS_MODELS = ("a", "b", "c", "1", "2", "3", "final")
 VARIANTS = ("faithful", "learns")
@@ -204,10 +205,8 @@ def check_reproduce_options(out, n, results_dir=None) -> None:
     for option, folder in (("--out", out), ("--results", results_dir)):
         if folder is None:
             continue
-        q = Path(folder)
-        while not q.exists() and q != q.parent:
-            q = q.parent
-        if q.exists() and not q.is_dir():
+        q = blocking_file(folder)
+        if q is not None:
             raise ValueError(f"{option}: {q} is a file, not a folder (for {folder})")
 
 

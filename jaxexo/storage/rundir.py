@@ -30,6 +30,15 @@ class TrainingDiverged(RuntimeError):
     """The loss or the parameters became NaN or infinite (the message says where, and what was kept)."""
 
 
+
+def blocking_file(folder: str | Path) -> Path | None:
+    """The nearest existing ancestor of ``folder`` (itself included) when it is a file, not a folder:
+    nothing can be written below it (``afile/t.csv``). None when the path can be created."""
+    q = Path(folder)
+    while not q.exists() and q != q.parent:
+        q = q.parent
+    return q if q.exists() and not q.is_dir() else None
+
 def contents(directory: Path) -> list[str]:
     """Names in ``directory`` other than the lock file, sorted (empty if it does not exist)."""
     directory = Path(directory)
@@ -55,10 +64,8 @@ def run_lock(directory: str | Path, what: str, create: bool = True):
     if not create and not directory.is_dir():
         missing = "no sweep to resume" if what == "sweep" else "no checkpoint to resume from"
         raise RunDirError(f"--resume: {directory} does not exist: {missing}")
-    q = directory.parent
-    while not q.exists() and q != q.parent:
-        q = q.parent
-    if q.exists() and not q.is_dir():
+    q = blocking_file(directory.parent)
+    if q is not None:
         raise RunDirError(f"--out: {q} is a file, not a folder (for {directory})")
     lock = directory / LOCK_NAME
     try:
