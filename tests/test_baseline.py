@@ -62,6 +62,11 @@ def test_replay_windows_stay_inside_an_episode_and_the_written_data():
     assert valid[0].tolist() == [True, False, False, False]      # nothing written after the newest slot
 
 
+# s: float32 rounding of a move's drive time near a straight knee: 2e-3 rad over the slowest drive
+# (3 rad/s), about four times the ~5e-4 rad that the square-root conditioning gives.
+KNEE_STRAIGHT_S = 2e-3 / 3.0
+
+
 @pytest.mark.parametrize("which", ["default", "mixed_thesis_obs"])
 def test_numpy_environment_steps_like_the_jax_environment(which):
     cfg = load_config(ROOT / "configs" / "default.toml")
@@ -85,7 +90,14 @@ def test_numpy_environment_steps_like_the_jax_environment(which):
             obs, r, term, trunc, info = env.step(a)
             jobs, st, jr, jterm, jinfo = step(jax.random.PRNGKey(0), st, a, p)
             np.testing.assert_allclose(obs, jobs, atol=1e-5)
-            np.testing.assert_allclose(r, float(jr), rtol=1e-5, atol=1e-5)
+            # The wearer's move time (rewards.wearer_terms) differs by float32 rounding amplified at a
+            # straight knee (a flexion angle grows as the square root of the leg's length deficit, so a
+            # 1e-7 m rounding is ~5e-4 rad): compared at that conditioning; the rest of the reward at 1e-5.
+            w, jw = np.asarray(info["wearer_terms"]), np.asarray(jinfo["wearer_terms"])
+            np.testing.assert_allclose(w[1], jw[1], atol=KNEE_STRAIGHT_S)
+            np.testing.assert_allclose(w[0], jw[0], atol=1e-6)
+            tc = cfg.reward.time_cost
+            np.testing.assert_allclose(r - tc * w[1], float(jr) - tc * float(jw[1]), rtol=1e-5, atol=1e-5)
             np.testing.assert_allclose(info["traj_terms"], jinfo["traj_terms"], atol=1e-5)
             assert term == bool(jterm) and bool(info["collision"]) == bool(jinfo["collision"])
             steps += 1
