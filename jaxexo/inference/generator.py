@@ -12,9 +12,12 @@ action of the exported Q-network. Two loops share those rules:
 
 The raw path is then smoothed (thesis 2.7, jaxexo.inference.smoothing) and checked as a safe swing
 (jaxexo.inference.trajectory: exact clearance of the moving foot, margin env.min_clearance). If
-smoothing brings a raw path that keeps the margin closer than the margin, the generator retries
-with a quarter of the smoothing, then a sixteenth, then an interpolating spline, then the raw
-polyline, and records which it used (``Trajectory.smoothing``, ``notes``).
+smoothing brings a raw path that keeps the margin closer than the margin (or moves the heel back),
+the spline is first corrected as little as possible to keep it (jaxexo.inference.clearing; off with
+``clearing = False``), then the per-path candidate smoothings below are tried, then a quarter of
+the smoothing, a sixteenth, an interpolating spline and the raw polyline; ``Trajectory.smoothing``
+and ``notes`` record which was used. ``clearance=C`` asks for a margin C instead
+(``at_clearance``).
 
 Fallback (issue 11): with ``fallback="cfftg"`` (the default) an RL swing that still fails the
 safe-swing check is replaced by CFFTG's plan for the same scene (jaxexo.baselines.cfftg), with
@@ -51,6 +54,7 @@ from jaxexo.physics import dynamics, geometry, kinematics, swept
 from jaxexo.config.schema import MAX_SWING_DURATION
 from jaxexo.physics.dynamics import Scene, scalar
 from jaxexo.inference import blas, smoothing as sm, trajectory
+from jaxexo.inference.clearing import clear_smooth
 from jaxexo.inference.network import FoldedQNetwork, StepNetwork
 from jaxexo.inference.shield import ScalarShield
 from jaxexo.inference.trajectory import DEFAULT_DURATION, Trajectory, TrajectoryBatch, TrajectoryError, assemble
@@ -488,8 +492,6 @@ class TrajectoryGenerator:
         rows whose corrected curve passes the verdict's clearance and backward checks."""
         if not self.clearing or len(rows) == 0:
             return []
-        from jaxexo.inference.clearing import clear_smooth
-
         got = [(int(i), clear_smooth(raws[i], scenes[i].outline, self.sp.foot_length, self.sp.min_clearance,
                                      n_points, smoothing)) for i in rows]
         paths = np.stack([r[0] for _, r in got])
