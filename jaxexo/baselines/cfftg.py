@@ -50,7 +50,6 @@ Decisions, each made here:
 from __future__ import annotations
 
 import copy
-
 import functools
 import os
 from pathlib import Path
@@ -280,8 +279,8 @@ class CFFTG:
         """One checked trajectory (metres, radians, seconds); ``strict`` raises TrajectoryError instead
         of returning one that fails a check; ``clearance`` (m) the margin to keep (``at_clearance``)."""
         n_points, duration = _check_options(n_points, duration)
-        return self.at_clearance(clearance)._finish([self.scene(obstacle, pivot, pivot_y, start_y, step_length)], n_points, duration,
-                            strict)[0]
+        scene = self.scene(obstacle, pivot, pivot_y, start_y, step_length)
+        return self.at_clearance(clearance)._finish([scene], n_points, duration, strict)[0]
 
     def generate_batch(self, obstacles, *, pivot=None, pivot_y=None, start_y=0.0, step_length=0.70,
                        n_points: int = DEFAULT_POINTS, duration: float = DEFAULT_DURATION,
@@ -289,8 +288,8 @@ class CFFTG:
         """Trajectories for many scenarios, vectorised; every option is one value or one per obstacle
         (``clearance`` one value, as in ``generate``)."""
         n_points, duration = _check_options(n_points, duration)
-        return self.at_clearance(clearance)._finish(self.scenes(obstacles, pivot, pivot_y, start_y, step_length), n_points, duration,
-                            strict)
+        scenes = self.scenes(obstacles, pivot, pivot_y, start_y, step_length)
+        return self.at_clearance(clearance)._finish(scenes, n_points, duration, strict)
 
     def scenes(self, obstacles, pivot=None, pivot_y=None, start_y=0.0, step_length=0.70):
         return scenes_for(self.scene, obstacles, pivot, pivot_y, start_y, step_length)

@@ -328,9 +328,9 @@ def observation(xp, p, obs_mode: str, heel_y, heel_z, time, visited_mid, layout)
 def transition(xp, p, prev, heel, time, visited_mid, layout, max_y=None) -> dict:
     """Everything a step from heel ``prev`` to ``heel`` (..., 2) decides (thesis 2.1-2.5), for the
     JAX environment and the NumPy environment alike: collision, mid-goal, goal, kinematics, the 8 + 4
-    reward terms (eq 2.29-2.52), the wearer's costs (rewards.wearer_terms), optional shaping, the reward and termination. ``time`` is the step
-    count after the move, ``visited_mid`` whether the mid-goal was visited before it, ``max_y`` the
-    heel's largest y so far (None: ``prev``'s y).
+    reward terms (eq 2.29-2.52), the wearer's costs (rewards.wearer_terms), optional shaping, the
+    reward and termination. ``time`` is the step count after the move, ``visited_mid`` whether the
+    mid-goal was visited before it, ``max_y`` the heel's largest y so far (None: ``prev``'s y).
 
     Collision and clearance are those of the whole move (jaxexo.physics.swept: the region the flat
     foot sweeps from ``prev`` to ``heel``), so a move cannot jump through a corner of the obstacle.
