@@ -60,15 +60,19 @@ def test_scalar_shield_picks_the_full_masks_greedy_move():
     left = lay["center_y"][:k] - 0.5 * lay["width"][:k] - p.foot_length - near
     hy[:k] = np.where(side, left, hy[:k]).astype(np.float32)
     hz[:k] = np.where(side, rng.uniform(0, 1, k) * lay["height"][:k], lay["height"][:k] + near).astype(np.float32)
+    hz[k: 2 * k: 3] = 0.0          # on the ground: a move down is cancelled (dynamics.moves_heel)
     ok = (hy > lay["start_y"] - 0.05) & (hy < lay["goal_y"])
     q = rng.normal(size=(n, dynamics.NUM_ACTIONS)).astype(np.float32)
     q[::3] = np.round(q[::3] * 2) / 2                      # ties between moves
-    mask = dynamics.admissible_moves(np, p, hy, hz, types.SimpleNamespace(**lay))
+    q[1::5, 27] = 10.0                                     # straight down is the best move ...
+    last = rng.choice(np.array([-1, 0, 9, 27, 30, 5]), size=n)
+    last[1::5] = 9                                         # ... right after straight up
+    mask = dynamics.admissible_moves(np, p, hy, hz, types.SimpleNamespace(**lay), last_action=last)
     want = dynamics.greedy_action(np, q, mask)
     decided = agree = 0
     for i in np.flatnonzero(ok):
         scene = types.SimpleNamespace(outline=lay["outline"][i], pivot_y=lay["pivot_y"][i], goal_y=lay["goal_y"][i])
-        a = ScalarShield(gen.sp, p, scene).choose(float(hy[i]), float(hz[i]), q[i])
+        a = ScalarShield(gen.sp, p, scene).choose(float(hy[i]), float(hz[i]), q[i], int(last[i]))
         if a is not None:
             decided += 1
             agree += a == want[i]
@@ -77,6 +81,10 @@ def test_scalar_shield_picks_the_full_masks_greedy_move():
     # undecided: heels inside or touching the obstacle, steps where no forward move passes every
     # condition (the mask's fallbacks), and comparisons within rounding of their threshold
     assert decided > 0.6 * ok.sum()
+    # the rule is exercised: rows whose best move (down) undoes the last one (up) get another move
+    # (down stays only where no move passes every condition: the mask's fall-backs)
+    assert (~mask[1::5, 27]).mean() > 0.8 and (want[1::5] != 27).mean() > 0.8
+    assert (~mask[k: 2 * k: 3, 27]).mean() > 0.8
     # a nan among the Q-values: argmax's own rules, left to the full mask
     scene = types.SimpleNamespace(outline=lay["outline"][0], pivot_y=lay["pivot_y"][0], goal_y=lay["goal_y"][0])
     bad = q[0].copy()

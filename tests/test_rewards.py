@@ -277,11 +277,11 @@ def env_tools(mixed_env, mixed_step):
     # its outline size (16) fits every named obstacle.
     env, params = mixed_env, mixed_env.default_params
 
-    def run(heel, action, *, obstacle=None, pivot="obstacle", time=0, visited=False, p=None):
+    def run(heel, action, *, obstacle=None, pivot="obstacle", time=0, visited=False, p=None, last=-1):
         lay = env.layout_for(obstacle or Obstacle.named("base1"), pivot=pivot)
         _, state = env.init_state(lay, params)
         state = state.replace(heel=jnp.asarray(heel, jnp.float32), time=jnp.asarray(time, jnp.int32),
-                              visited_mid=jnp.asarray(visited))
+                              visited_mid=jnp.asarray(visited), last_action=jnp.asarray(last, jnp.int32))
         obs, new_state, reward, terminated, truncated, info = mixed_step(jax.random.PRNGKey(0), state, action,
                                                                           params if p is None else p)
         return dict(obs=obs, state=new_state, reward=float(reward), terminated=bool(terminated),
@@ -423,13 +423,28 @@ def _two_link_angles(hip, heel, thigh, shin):
 def test_wearer_lift_by_hand():
     from jaxexo.physics.rewards import WEARER_TERMS, wearer_terms
 
-    assert WEARER_TERMS == ("lift", "move_time")
+    assert WEARER_TERMS == ("lift", "move_time", "turn")
     c = SimpleNamespace(shield_clearance=0.025, joint_speed=np.array([3.0, 4.0, 3.0, 4.0]))
     heel = np.array([[0.4, 0.10], [0.4, 0.125], [0.4, 0.165], [0.9, 0.0]])
     out = wearer_terms(np, c, heel=heel, top=np.full(4, 0.10), angles_prev=np.zeros((4, 4)), angles=np.zeros((4, 4)))
     # below top + clearance: nothing; 4 cm above it: -0.04; no joint motion: no time
     np.testing.assert_allclose(out[:, 0], [0.0, 0.0, -0.04, 0.0], atol=1e-12)
     np.testing.assert_array_equal(out[:, 1], np.zeros(4))
+    np.testing.assert_array_equal(out[:, 2], np.zeros(4))     # no turn given: none counted
+
+
+def test_wearer_turn_by_hand():
+    """A move's turn is 1 - cos of its angle to the last move: 0 straight on, 1 at a right angle, 2
+    reversed, 1 - cos(10 deg) for the neighbouring direction; none at the first move."""
+    from jaxexo.physics import dynamics
+    from jaxexo.physics.rewards import turn_of
+
+    dirs = dynamics.action_directions()
+    a = np.array([0, 9, 27, 1, 35, 4])
+    last = np.array([0, 0, 9, 0, 0, -1])
+    np.testing.assert_allclose(turn_of(np, dirs, a, last),
+                               [0.0, 1.0, 2.0, 1 - math.cos(math.radians(10)), 1 - math.cos(math.radians(10)), 0.0],
+                               atol=1e-12)
 
 
 def test_wearer_move_time_matches_two_link_reference(env_tools):
@@ -460,8 +475,9 @@ def test_wearer_costs_enter_the_reward(env_tools):
     """lift_cost and time_cost weigh the wearer's terms in the reward (0: the thesis reward)."""
     p0 = env_tools.params
     base = env_tools.run([0.40, 0.20], UP)
-    p1 = p0.replace(lift_cost=p0.lift_cost + 10.0, time_cost=p0.time_cost + 2.0)
-    out = env_tools.run([0.40, 0.20], UP, p=p1)
+    p1 = p0.replace(lift_cost=p0.lift_cost + 10.0, time_cost=p0.time_cost + 2.0, turn_cost=p0.turn_cost + 3.0)
+    base = env_tools.run([0.40, 0.20], UP, last=RIGHT)
+    out = env_tools.run([0.40, 0.20], UP, p=p1, last=RIGHT)
     w = np.asarray(out["info"]["wearer_terms"])
-    assert w[0] < 0 and w[1] < 0
-    assert out["reward"] - base["reward"] == pytest.approx(10.0 * w[0] + 2.0 * w[1], rel=1e-4, abs=1e-6)
+    assert w[0] < 0 and w[1] < 0 and w[2] == pytest.approx(-1.0, abs=1e-6)    # a right-angle turn
+    assert out["reward"] - base["reward"] == pytest.approx(10.0 * w[0] + 2.0 * w[1] + 3.0 * w[2], rel=1e-4, abs=1e-6)

@@ -167,6 +167,7 @@ class NumpyExoEnv:
         self.visited = np.bool_(False)
         self.outcome = self.dyn_outcome.start(np)
         self.max_y = self.heel[0]
+        self.last = -1          # the move just made (rewards.turn_of)
         return self._obs()
 
     def step(self, action: int):
@@ -175,7 +176,9 @@ class NumpyExoEnv:
         prev = self.heel
         self.heel = np.stack(self.dyn.move_heel(np, p, prev[0], prev[1], d[0], d[1]))
         self.time = self.time + np.int32(1)
-        out = self.dyn.transition(np, p, prev, self.heel, self.time, self.visited, self.lay, self.max_y)
+        out = self.dyn.transition(np, p, prev, self.heel, self.time, self.visited, self.lay, self.max_y,
+                                  action=action, last_action=self.last)
+        self.last = action
         self.visited, self.max_y = out["visited_mid"], out["max_y"]
         info = out["info"]
         self.outcome = self.dyn_outcome.accumulate(np, self.outcome, info)

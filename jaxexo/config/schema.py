@@ -376,6 +376,9 @@ class RewardConfig:
     time_cost: float = declare(2.0, number(nonneg=True, hi=1e3), unit="1/s", to_param=lambda v, cfg: {
         "time_cost": np.asarray(v, dtype=np.float32),
         "joint_speed": np.asarray(tuple(cfg.device.joint_velocity) * 2, dtype=np.float32)})
+    # per unit of a move's change of direction, 1 - cos of its angle to the last move (a path without
+    # corners: quicker at the device, and smoothed without cutting towards the obstacle; 0 = thesis)
+    turn_cost: float = declare(0.0, number(nonneg=True, hi=1e3))
 
 
 @dataclass(frozen=True)

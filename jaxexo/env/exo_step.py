@@ -49,6 +49,7 @@ class EnvState:
     time: jnp.ndarray          # steps taken this episode (gymnax name)
     visited_mid: jnp.ndarray   # bool: the heel has passed through the mid-goal box
     max_y: jnp.ndarray         # the heel's largest y this episode (backward motion, issue 11)
+    last_action: jnp.ndarray   # the move just made (-1 at the start): the shield never undoes it
     layout: Layout
 
 
@@ -114,7 +115,7 @@ class ExoStepEnv:
         """Start an episode on a given layout: the heel on the ground at the start."""
         heel = jnp.stack([layout.start_y, jnp.zeros_like(layout.start_y)])
         state = EnvState(heel=heel, time=jnp.asarray(0, jnp.int32), visited_mid=jnp.asarray(False),
-                         max_y=heel[0], layout=layout)
+                         max_y=heel[0], last_action=jnp.asarray(-1, jnp.int32), layout=layout)
         return self.get_obs(state, params), state
 
     def layout_for(self, obstacle: geometry.Obstacle, pivot: str | float = "obstacle", start_y: float = 0.0,
@@ -153,9 +154,11 @@ class ExoStepEnv:
         heel = jnp.stack(dynamics.move_heel(jnp, params, prev[0], prev[1], d[0], d[1]))
         time = state.time + 1
 
-        out = dynamics.transition(jnp, params, prev, heel, time, state.visited_mid, lay, state.max_y)
+        out = dynamics.transition(jnp, params, prev, heel, time, state.visited_mid, lay, state.max_y,
+                                  action=action, last_action=state.last_action)
         visited, reward, terminated = out["visited_mid"], out["reward"], out["terminated"]
-        new_state = EnvState(heel=heel, time=time, visited_mid=visited, max_y=out["max_y"], layout=lay)
+        new_state = EnvState(heel=heel, time=time, visited_mid=visited, max_y=out["max_y"],
+                             last_action=jnp.asarray(action, jnp.int32), layout=lay)
         info = out["info"]
         return self.get_obs(new_state, params), new_state, reward, terminated, info
 
@@ -186,7 +189,8 @@ class ExoStepEnv:
         if not self.shield:
             return jnp.ones(NUM_ACTIONS, bool)
         return dynamics.admissible_moves(jnp, params, state.heel[0], state.heel[1], state.layout,
-                                         over_moves=lambda f, xs: jax.lax.map(lambda x: f(*x), xs))
+                                         over_moves=lambda f, xs: jax.lax.map(lambda x: f(*x), xs),
+                                         last_action=state.last_action)
 
     def action_masks(self, states: EnvState, params: EnvParams | None = None):
         """(N, NUM_ACTIONS) bool: ``action_mask`` of a batch of N states (leading axis), the same
@@ -196,7 +200,8 @@ class ExoStepEnv:
         n = states.heel.shape[0]
         if not self.shield:
             return jnp.ones((n, NUM_ACTIONS), bool)
-        return shield.admissible_moves_batch(params, states.heel[:, 0], states.heel[:, 1], states.layout)
+        return shield.admissible_moves_batch(params, states.heel[:, 0], states.heel[:, 1], states.layout,
+                                             last_action=states.last_action)
 
     # Observations ---------------------------------------------------------------------------
     def get_obs(self, state: EnvState, params: EnvParams):

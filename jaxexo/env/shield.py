@@ -141,9 +141,10 @@ def keep_clearance(p, heel_y, heel_z, ends, outline, buffer: int | None = None):
     return clear.reshape(n, f)
 
 
-def admissible_moves_batch(p, heel_y, heel_z, layout, buffer: int | None = None):
+def admissible_moves_batch(p, heel_y, heel_z, layout, buffer: int | None = None, last_action=None):
     """(N, NUM_ACTIONS) bool: ``dynamics.admissible_moves`` of N environments (heel_y, heel_z (N,),
-    layout fields with a leading N), the clearance condition computed by ``keep_clearance``."""
+    layout fields with a leading N, ``last_action`` (N,) or None), the clearance condition computed by
+    ``keep_clearance``."""
     ends = dynamics.forward_ends(jnp, p, heel_y, heel_z)
     clear = keep_clearance(p, heel_y, heel_z, ends, layout.outline, buffer)
-    return dynamics.admissible_moves(jnp, p, heel_y, heel_z, layout, clear=clear)
+    return dynamics.admissible_moves(jnp, p, heel_y, heel_z, layout, clear=clear, last_action=last_action)

@@ -50,7 +50,7 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxexo.physics import dynamics, geometry, kinematics, swept
+from jaxexo.physics import dynamics, geometry, swept
 from jaxexo.config.schema import MAX_SWING_DURATION
 from jaxexo.physics.dynamics import Scene, scalar
 from jaxexo.inference import blas, smoothing as sm, trajectory
@@ -191,19 +191,22 @@ class TrajectoryGenerator:
         mid_y, mid_z = dynamics.mid_goal(scalar, sp, scene.center_y, scene.height)
         hy, hz, t, visited = float(scene.start_y), 0.0, 0, False
         pts, acts = [(hy, hz)], []
+        last = -1           # the move just made (the shield never undoes it)
         one = dynamics.stack_scenes([scene], np.float32) if self.shield else None
         single = ScalarShield(self.sp, self.np_params, scene) if self.shield and fast and self.epsilon <= 0.0 else None
         while True:
             if single is not None:
                 q = step.q_values(hy, hz, t, 1.0 if visited else 0.0)
-                a = single.choose(hy, hz, q)
+                a = single.choose(hy, hz, q, last)
                 if a is None:
-                    mask = self._admissible_rows(np.array([hy], np.float32), np.array([hz], np.float32), one)[0]
+                    mask = self._admissible_rows(np.array([hy], np.float32), np.array([hz], np.float32), one,
+                                                 last=np.array([last]))[0]
                     a = int(dynamics.greedy_action(np, q, mask))
                     self.shield_stats[1] += 1
                 self.shield_stats[0] += 1
             elif self.shield:
-                mask = self._admissible_rows(np.array([hy], np.float32), np.array([hz], np.float32), one)[0]
+                mask = self._admissible_rows(np.array([hy], np.float32), np.array([hz], np.float32), one,
+                                             last=np.array([last]))[0]
                 a = self._explore(step.greedy(hy, hz, t, 1.0 if visited else 0.0, mask), mask)
             else:
                 a = self._explore(step.greedy(hy, hz, t, 1.0 if visited else 0.0))
@@ -212,6 +215,7 @@ class TrajectoryGenerator:
             visited = visited or dynamics.in_mid_goal(scalar, sp, hy, hz, mid_y, mid_z)
             pts.append((hy, hz))
             acts.append(a)
+            last = int(a)
             # The environment's termination (dynamics.terminated, .truncated); the clearance is
             # only computed where a collision ends the episode.
             collided = self.terminate_on_collision and self._touches(scene, np.array([[hy, hz]]))
@@ -246,11 +250,12 @@ class TrajectoryGenerator:
         d_move = np.moveaxis(swept.swept_distance(np, here + 0.0 * moves, moves, p.foot_length, outline), 0, -1)
         return d_move >= np.minimum(p.shield_clearance, c_here)[..., None] - dynamics.SHIELD_SLACK
 
-    def _admissible_rows(self, hy, hz, lay, pruned: bool | None = None, near=None) -> np.ndarray:
+    def _admissible_rows(self, hy, hz, lay, pruned: bool | None = None, near=None, last=None) -> np.ndarray:
         """(B, A) the shield's admissible moves (jaxexo.physics.dynamics.admissible_moves) of many heels,
         float32 rows of stacked scenes like the training environment; the exact clearance is computed
         only for the ``_near`` rows (elsewhere no move can fail it, so the mask is the same).
-        ``pruned``: the clearance's NumPy branch (None: by size, as moves_keep_clearance chooses)."""
+        ``pruned``: the clearance's NumPy branch (None: by size, as moves_keep_clearance chooses);
+        ``last`` (B,): the moves just made (-1: none)."""
         p = self.np_params
         near = self._near(hy, hz, lay) if near is None else near
         clear = np.ones((len(hy), self._n_forward), bool)
@@ -260,9 +265,9 @@ class TrajectoryGenerator:
                 clear[near] = dynamics.moves_keep_clearance(np, p, hy[near], hz[near], ends, lay.outline[near])
             else:
                 clear[near] = self._clear(hy[near], hz[near], ends, lay.outline[near], pruned)
-        return dynamics.admissible_moves(np, p, hy, hz, lay, clear=clear)
+        return dynamics.admissible_moves(np, p, hy, hz, lay, clear=clear, last_action=last)
 
-    def _batch_choice(self, hy, hz, lay, q) -> np.ndarray:
+    def _batch_choice(self, hy, hz, lay, q, last) -> np.ndarray:
         """The shielded greedy actions (B,) of ``_admissible_rows`` + greedy_action, checking first only
         each row's best forward move (one move per row instead of 19, in the same float32
         elementwise arithmetic); the full mask only for the rows where that move is not admissible."""
@@ -276,14 +281,14 @@ class TrajectoryGenerator:
         miss = np.arange(len(hy))
         for r in range(self.BATCH_ROUNDS):     # the r-th best move of the rows still undecided
             a = order[miss, r]
-            ok = self._one_move_ok(hy[miss], hz[miss], _take(lay, miss), near[miss], a, pruned)
+            ok = self._one_move_ok(hy[miss], hz[miss], _take(lay, miss), near[miss], a, pruned, last[miss])
             out[miss[ok]] = a[ok]
             miss = miss[~ok]
             if not miss.size:
                 break
         if miss.size:
             sub = _take(lay, miss)
-            mask = self._admissible_rows(hy[miss], hz[miss], sub, pruned, near[miss])
+            mask = self._admissible_rows(hy[miss], hz[miss], sub, pruned, near[miss], last[miss])
             out[miss] = dynamics.greedy_action(np, q[miss], mask)
         self.shield_stats[2] += len(hy)
         self.shield_stats[3] += miss.size
@@ -292,9 +297,10 @@ class TrajectoryGenerator:
     # forward moves checked one at a time per row before the full mask (``_batch_choice``)
     BATCH_ROUNDS = 4
 
-    def _one_move_ok(self, hy, hz, lay, near, a, pruned: bool) -> np.ndarray:
-        """(B,) whether move a (B,) passes all four of admissible_moves' conditions (its column of the
-        mask before the fallbacks), in the same float32 elementwise arithmetic."""
+    def _one_move_ok(self, hy, hz, lay, near, a, pruned: bool, last) -> np.ndarray:
+        """(B,) whether move a (B,) passes all of admissible_moves' conditions (its column of the
+        mask before the fallbacks; ``last`` (B,) the moves just made), in the same float32 elementwise
+        arithmetic."""
         p = self.np_params
         d = p.directions[a]
         y, z = dynamics.move_heel(np, p, hy, hz, d[:, 0], d[:, 1])
@@ -302,12 +308,7 @@ class TrajectoryGenerator:
         clear = np.ones((len(hy), 1), bool)
         if near.any():
             clear[near] = self._clear(hy[near], hz[near], new[near], lay.outline[near], pruned)
-        kin = kinematics.leg_state(np, lay.pivot_y[..., None], new, p.thigh, p.shin)
-        angles = kinematics.both_legs_angles(np, kin)
-        reach = ~(kinematics.legs_outside_limits(np, angles, p.hip_limits, p.knee_limits)
-                  | kinematics.leg_too_long(np, kin["leg_swing"], kin["leg_stance"], p.thigh, p.shin,
-                                            p.leg_length_tolerance))
-        return (clear & reach & (new[..., 0] <= lay.goal_y[..., None] + p.goal_tolerance[0]))[:, 0]
+        return dynamics.shield_conditions(np, p, hy, hz, lay, a[:, None], new, clear, last)[:, 0]
 
     def rollout_batch(self, scenes, fast: bool = True) -> tuple[list[np.ndarray], list[np.ndarray]]:
         """Greedy raw paths of many scenes at once (float32 NumPy, like the JAX environment). With the
@@ -324,6 +325,7 @@ class TrajectoryGenerator:
         mid_y, mid_z = dynamics.mid_goal(np, p, lay.center_y, lay.height)
         path = np.empty((self.max_steps + 1, b, 2), np.float32)
         acts = np.zeros((self.max_steps, b), np.int64)
+        last = np.full(b, -1, np.int64)     # the move just made (the shield never undoes it)
         path[0, :, 0], path[0, :, 1] = hy, hz
         length = np.ones(b, np.int64)
         alive = np.arange(b)
@@ -331,9 +333,9 @@ class TrajectoryGenerator:
             sub = _take(lay, alive)
             obs = dynamics.observation(np, p, self.obs_mode, hy[alive], hz[alive], t[alive], visited[alive], sub)
             if self.shield and fast and self.epsilon <= 0.0:
-                a = self._batch_choice(hy[alive], hz[alive], sub, self.net.q(obs))
+                a = self._batch_choice(hy[alive], hz[alive], sub, self.net.q(obs), last[alive])
             else:
-                mask = self._admissible_rows(hy[alive], hz[alive], sub) if self.shield else None
+                mask = self._admissible_rows(hy[alive], hz[alive], sub, last=last[alive]) if self.shield else None
                 a = self._explore(dynamics.greedy_action(np, self.net.q(obs), mask), mask)
             ny, nz = dynamics.move_heel(np, p, hy[alive], hz[alive], dirs[a, 0], dirs[a, 1])
             hy[alive], hz[alive] = ny, nz
@@ -341,6 +343,7 @@ class TrajectoryGenerator:
             visited[alive] |= dynamics.in_mid_goal(np, p, ny, nz, mid_y[alive], mid_z[alive])
             path[k + 1, alive, 0], path[k + 1, alive, 1] = ny, nz
             acts[k, alive] = a
+            last[alive] = a
             length[alive] += 1
             collided = False
             if self.terminate_on_collision:   # the clearance only where a collision ends the episode

@@ -55,6 +55,11 @@ _TWO_PI = 2.0 * math.pi
 _ORIENT_TOL = 1e-9
 
 
+# dynamics.moves_heel's threshold, and the band around it left to the reference (float32 rounding of
+# a difference of coordinates below 1 m is under 1e-7 m).
+_MOVE_EPS = dynamics.MOVE_EPS
+MARGIN_MOVE = 1e-7
+
 _F32 = struct.Struct("f")
 _pack, _unpack = _F32.pack, _F32.unpack
 
@@ -286,10 +291,11 @@ class ScalarShield:
         return 0 if unsure else 1
 
     # The choice ---------------------------------------------------------------------------------
-    def choose(self, hy: float, hz: float, q: np.ndarray):
+    def choose(self, hy: float, hz: float, q: np.ndarray, last: int = -1):
         """The reference's shielded greedy action for heel (hy, hz) (Python floats; rounded to float32
-        here as the reference does) and Q-values ``q`` (NUM_ACTIONS,), or None when some needed
-        comparison is too close to call or the reference's fallbacks would apply."""
+        here as the reference does), Q-values ``q`` (NUM_ACTIONS,) and the move just made ``last`` (-1:
+        none), or None when some needed comparison is too close to call or the reference's fallbacks
+        would apply."""
         ql = q.tolist()
         total = sum(ql)
         if total - total != 0.0:         # a nan or an infinity: argmax's own rules
@@ -298,14 +304,16 @@ class ScalarShield:
         # Far from the obstacle's box no move of one step comes within the shield's clearance.
         far = self._box_distance(hy, hy + self.fl, hz, hz) - self.step >= self.shield_c + MARGIN
         state = [None]      # the clearance threshold, computed once when needed
+        # the move that would undo the last one (dynamics.undoes) is never admissible
+        undo = (last + dynamics.NUM_ACTIONS // 2) % dynamics.NUM_ACTIONS if last >= 0 else -1
         # The best forward move first (max returns the first of equal values, as argmax); only on a
         # miss the rest in order of Q (a stable sort: ties by index).
         best = max(self.fwd_idx, key=ql.__getitem__)
-        v = self._admissible(best, hy, hz, far, state)
+        v = best != undo and self._admissible(best, hy, hz, far, state)
         if v is not False:
             return best if v else self._miss()
         for a in sorted(self.fwd_idx, key=ql.__getitem__, reverse=True):
-            if a == best:
+            if a == best or a == undo:
                 continue
             v = self._admissible(a, hy, hz, far, state)
             if v is not False:
@@ -321,6 +329,9 @@ class ScalarShield:
             return False
         z = _f32(hz + pz)
         z = 0.0 if z < 0.0 else (self.zmax if z > self.zmax else z)
+        moved = max(abs(y - hy), abs(z - hz))       # dynamics.moves_heel, certified like the rest
+        if moved <= _MOVE_EPS + MARGIN_MOVE:
+            return False if moved <= _MOVE_EPS - MARGIN_MOVE else None
         k = self.reachable(y, z)
         if k <= 0:
             return None if k == 0 else False

@@ -214,7 +214,7 @@ def _moves_keep_clearance_pruned(p, here, c_here, ends, outline):
     return ok | (c_here[..., None] <= 0.0)
 
 
-def admissible_moves(xp, p, heel_y, heel_z, layout, over_moves=_stacked, clear=None):
+def admissible_moves(xp, p, heel_y, heel_z, layout, over_moves=_stacked, clear=None, last_action=None):
     """(..., NUM_ACTIONS) bool: the moves the agent may choose from heel (y, z) (issue 11's shield).
 
     Without the shield (``p.shield`` False, the thesis) every move. With it, a move must
@@ -223,9 +223,16 @@ def admissible_moves(xp, p, heel_y, heel_z, layout, over_moves=_stacked, clear=N
       or, where the foot already starts closer (a stance foot near the obstacle), not bring it closer;
     - end where both legs are inside their joint limits (eq 2.50) and within reach (eq 2.45);
     - not end beyond the goal box's far side (goal_y + goal_tolerance[0]): with no move backward the
-      goal could never be reached from there (a dead end, like a collision).
-    Where no move passes all four, the forward moves that keep the clearance are offered; where
-    none does either, every move (so a greedy choice always exists). The training environment, the
+      goal could never be reached from there (a dead end, like a collision);
+    - move the heel (``moves_heel``: not a move the ground or the world's bounds cancel) and not undo
+      ``last_action`` (..., int; -1 or None: none), the move just made: the only forward move that
+      undoes another is straight down after straight up or the reverse, so with this rule the heel's y
+      never falls, it rises or falls at one y in one direction only, and no point of a swing is
+      visited twice: a greedy swing cannot dither between two heights until the step limit.
+    Where no move passes all five, the forward moves that keep the clearance and move the heel are
+    offered (a foot stopped short of a wall, in front of an obstacle, goes up again rather than
+    pushing into the ground); where none does, those that keep the clearance; where none does
+    either, every move (so a greedy choice always exists). The training environment, the
     JAX evaluation and the NumPy generator choose among these moves with the same function.
 
     ``over_moves(f, xs)`` maps f over the leading (move) axis of the arrays xs; the default evaluates
@@ -235,21 +242,51 @@ def admissible_moves(xp, p, heel_y, heel_z, layout, over_moves=_stacked, clear=N
     whose foot is at least shield_clearance + step_size from the obstacle's bounding box, where no
     move of one step can come closer than shield_clearance (the distance is 1-Lipschitz)."""
     new = forward_ends(xp, p, heel_y, heel_z)                        # (..., F, 2)
-    y = new[..., 0]
     if clear is None:
         clear = moves_keep_clearance(xp, p, heel_y, heel_z, new, layout.outline, over_moves)
-    kin = kinematics.leg_state(xp, layout.pivot_y[..., None], new, p.thigh, p.shin)
-    angles = kinematics.both_legs_angles(xp, kin)
-    reachable = ~(kinematics.legs_outside_limits(xp, angles, p.hip_limits, p.knee_limits)
-                  | kinematics.leg_too_long(xp, kin["leg_swing"], kin["leg_stance"], p.thigh, p.shin,
-                                            p.leg_length_tolerance))
-    ok = clear & reachable & (y <= layout.goal_y[..., None] + p.goal_tolerance[0])
-    ok = xp.where(xp.any(ok, axis=-1, keepdims=True), ok, clear)
-    ok = xp.where(xp.any(ok, axis=-1, keepdims=True), ok, True)
+    ok = shield_conditions(xp, p, heel_y, heel_z, layout, _FORWARD, new, clear, last_action)
+    for fallback in (clear & moves_heel(xp, heel_y, heel_z, new), clear, True):
+        ok = xp.where(xp.any(ok, axis=-1, keepdims=True), ok, fallback)
     shape = ok.shape[:-1]
     back = xp.zeros(shape + (NUM_ACTIONS - len(_FORWARD),), dtype=bool)
     mask = xp.concatenate([ok[..., :_FORWARD_HEAD], back, ok[..., _FORWARD_HEAD:]], axis=-1)
     return xp.where(p.shield, mask, True)
+
+
+def shield_conditions(xp, p, heel_y, heel_z, layout, actions, ends, clear, last_action=None):
+    """(..., F) bool: moves ``actions`` ((F,) or (..., F)) from heel (y, z) (...,) to ``ends`` (..., F, 2)
+    that pass all of ``admissible_moves``' conditions, the clearance one given as ``clear`` (..., F)."""
+    kin = kinematics.leg_state(xp, layout.pivot_y[..., None], ends, p.thigh, p.shin)
+    angles = kinematics.both_legs_angles(xp, kin)
+    reachable = ~(kinematics.legs_outside_limits(xp, angles, p.hip_limits, p.knee_limits)
+                  | kinematics.leg_too_long(xp, kin["leg_swing"], kin["leg_stance"], p.thigh, p.shin,
+                                            p.leg_length_tolerance))
+    ok = (clear & reachable & (ends[..., 0] <= layout.goal_y[..., None] + p.goal_tolerance[0])
+          & moves_heel(xp, heel_y, heel_z, ends))
+    if last_action is not None:
+        ok = ok & ~undoes(xp, actions, last_action)
+    return ok
+
+
+# m: a move shorter than this along both axes does not move the heel. Only a vertical move at the
+# ground or a bound is ever that short (any other move keeps >= step_size * sin(10 deg) of its length
+# along y), so the threshold decides nothing else; it makes the rule indifferent to a heel a few ulps
+# above the ground (float32 and float64 rollouts of one swing agree).
+MOVE_EPS = 1e-6
+
+
+def moves_heel(xp, heel_y, heel_z, ends):
+    """(..., F) bool: the forward moves whose end ``ends`` (..., F, 2) is not the heel itself (a move
+    into the ground, or past the world's bounds, that ``move_heel``'s clipping cancels)."""
+    return ((xp.abs(ends[..., 0] - heel_y[..., None]) > MOVE_EPS)
+            | (xp.abs(ends[..., 1] - heel_z[..., None]) > MOVE_EPS))
+
+
+def undoes(xp, actions, last_action):
+    """(..., F) bool: which of ``actions`` ((F,) or (..., F)) undo ``last_action`` (...,; -1: no move
+    yet): the move in the opposite direction, NUM_ACTIONS / 2 away."""
+    last = xp.asarray(last_action)[..., None]
+    return (last >= 0) & (xp.asarray(actions) == (last + NUM_ACTIONS // 2) % NUM_ACTIONS)
 
 
 def greedy_action(xp, q, mask=None):
@@ -325,12 +362,13 @@ def observation(xp, p, obs_mode: str, heel_y, heel_z, time, visited_mid, layout)
     ], axis=-1)
 
 
-def transition(xp, p, prev, heel, time, visited_mid, layout, max_y=None) -> dict:
+def transition(xp, p, prev, heel, time, visited_mid, layout, max_y=None, action=None, last_action=None) -> dict:
     """Everything a step from heel ``prev`` to ``heel`` (..., 2) decides (thesis 2.1-2.5), for the
     JAX environment and the NumPy environment alike: collision, mid-goal, goal, kinematics, the 8 + 4
     reward terms (eq 2.29-2.52), the wearer's costs (rewards.wearer_terms), optional shaping, the
     reward and termination. ``time`` is the step count after the move, ``visited_mid`` whether the
-    mid-goal was visited before it, ``max_y`` the heel's largest y so far (None: ``prev``'s y).
+    mid-goal was visited before it, ``max_y`` the heel's largest y so far (None: ``prev``'s y),
+    ``action`` the move and ``last_action`` the one before it (-1: none; None: no turn is counted).
 
     Collision and clearance are those of the whole move (jaxexo.physics.swept: the region the flat
     foot sweeps from ``prev`` to ``heel``), so a move cannot jump through a corner of the obstacle.
@@ -361,7 +399,9 @@ def transition(xp, p, prev, heel, time, visited_mid, layout, max_y=None) -> dict
     exo = rewards.exo_terms(
         xp, p, hip_z=kin["hip"][..., 1], leg_swing=kin["leg_swing"], leg_stance=kin["leg_stance"],
         limits_violated=limits_violated)
-    wearer = rewards.wearer_terms(xp, p, heel=heel, top=lay.height, angles_prev=angles_prev, angles=angles)
+    turn = None if action is None or last_action is None else rewards.turn_of(xp, p.directions, action, last_action)
+    wearer = rewards.wearer_terms(xp, p, heel=heel, top=lay.height, angles_prev=angles_prev, angles=angles,
+                                  turn=turn)
     done = terminated(xp, p, reached, collided)
     mid = xp.stack([mid_y, mid_z], axis=-1)
     goal = xp.stack([lay.goal_y, 0.0 * lay.goal_y], axis=-1)

@@ -86,18 +86,31 @@ def exo_terms(xp, c, *, hip_z, leg_swing, leg_stance, limits_violated):
 WEARER_TERMS = (
     "lift",           # m of heel height above the obstacle's top plus the shield's clearance
     "move_time",      # s the joint drives need for the move at their velocity limits
+    "turn",           # 1 - cos of the angle between this move and the last (0: straight on; 2: reversed)
 )
 
 
-def wearer_terms(xp, c, *, heel, top, angles_prev, angles):
-    """The wearer's costs (..., 2), both <= 0: minus the heel's height above what the clearance needs
-    over the obstacle's highest point (top + ``c.shield_clearance``; nothing below it), and minus the
+def wearer_terms(xp, c, *, heel, top, angles_prev, angles, turn=None):
+    """The wearer's costs (..., 3), all <= 0: minus the heel's height above what the clearance needs
+    over the obstacle's highest point (top + ``c.shield_clearance``; nothing below it); minus the
     move's time at the drives' velocity limits, max over the four joints of |dq| / v_max (the
     joint-space distance of the move over ``c.joint_speed`` = (hip, knee, hip, knee) rad/s), so that a
-    sum over the swing approximates its timed duration at the device."""
+    sum over the swing approximates its timed duration at the device; and minus ``turn``, the move's
+    change of direction (``turn_of``; None: 0). The drives must slow down at every corner of the path,
+    and the smoothing spline cuts corners (and must then be corrected away from the obstacle): a
+    path that turns gently is quicker at the device and keeps its shape when smoothed."""
     lift = xp.maximum(heel[..., 1] - (top + c.shield_clearance), 0.0)
     move_time = xp.max(xp.abs(angles - angles_prev) / c.joint_speed, axis=-1)
-    return xp.stack([-lift, -move_time], axis=-1)
+    turn = xp.zeros_like(lift) if turn is None else turn
+    return xp.stack([-lift, -move_time, -turn], axis=-1)
+
+
+def turn_of(xp, directions, action, last_action):
+    """1 - cos of the angle between move ``action`` and the move before it, ``last_action`` (-1: none,
+    no turn), both indices into ``directions`` (NUM_ACTIONS, 2) of unit vectors."""
+    last = xp.asarray(last_action)
+    cos = xp.sum(directions[action] * directions[xp.maximum(last, 0)], axis=-1)
+    return xp.where(last >= 0, 1.0 - cos, 0.0)
 
 
 def progress_potential(xp, heel, mid, goal, visited_mid):
@@ -125,8 +138,9 @@ def shaping_reward(xp, c, phi_prev, phi_next, terminated):
 
 def total_reward(xp, c, traj, exo, wearer=None):
     """Eq 2.1 / 2.39 / 2.52: alpha . T + beta . E with the normalised weights held in ``c``, plus the
-    wearer's costs weighted by ``c.lift_cost`` (1/m) and ``c.time_cost`` (1/s) (0, 0: the thesis)."""
+    wearer's costs weighted by ``c.lift_cost`` (1/m), ``c.time_cost`` (1/s) and ``c.turn_cost`` (per
+    unit of 1 - cos) (0, 0, 0: the thesis)."""
     r = xp.sum(traj * c.traj_weights, axis=-1) + xp.sum(exo * c.exo_weights, axis=-1)
     if wearer is not None:
-        r = r + c.lift_cost * wearer[..., 0] + c.time_cost * wearer[..., 1]
+        r = r + c.lift_cost * wearer[..., 0] + c.time_cost * wearer[..., 1] + c.turn_cost * wearer[..., 2]
     return r
