@@ -37,7 +37,6 @@ from jaxexo.baselines import CFFTG
 from jaxexo.evaluation import unseen
 from jaxexo.evaluation.machine import machine_info, write_result
 from jaxexo.inference import TrajectoryGenerator, time_swings
-from jaxexo.inference import smoothing as sm
 from jaxexo.inference.swing_timing import joint_jerk
 from jaxexo.inference.scenarios import safety_scenarios
 from jaxexo.physics import geometry, swept
@@ -120,7 +119,7 @@ def run_set(gens: dict, scenes: list[dict], cfg, clearance, error: float, smooth
             "generate_s": gen_s,
         }
         if name == "rl":
-            asked_s = sm.DEFAULT_SMOOTHING if smoothing is None else smoothing
+            asked_s = gen.smoothing if smoothing is None else smoothing
             r["smoothed_once"] = float(np.mean(asked & (smooth == asked_s)))
             r["corrected"] = float(np.mean([any("jaxexo.inference.clearing" in n for n in t.notes) for t in trajs]))
             r["raw_polyline"] = float(np.mean(np.isnan(smooth)))

@@ -157,8 +157,6 @@ def cmd_generate(args) -> int:
         raise ValueError(f"--duration: a swing's duration must be > 0 and <= {MAX_DURATION:g} s, got {args.duration:g}")
     import numpy as np
 
-    from jaxexo.inference.smoothing import DEFAULT_SMOOTHING
-
     common = dict(pivot=args.pivot, pivot_y=args.pivot_y, start_y=args.start_y, step_length=args.step_length,
                   n_points=args.points, duration=args.duration, clearance=args.clearance)
     if args.method == "cfftg":
@@ -175,8 +173,7 @@ def cmd_generate(args) -> int:
 
         gen = TrajectoryGenerator.load(args.policy)
         _check_clearance(args.clearance, gen.config)
-        smoothing = DEFAULT_SMOOTHING if args.smoothing is None else args.smoothing
-        traj = gen.generate(obstacle_from_args(args), smoothing=smoothing,
+        traj = gen.generate(obstacle_from_args(args), smoothing=args.smoothing,
                             fallback=None if args.fallback == "none" else args.fallback, **common)
     timed = _timed_swing(args, traj, gen.config)
     (timed or traj).to_csv(args.out)
@@ -336,7 +333,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--fallback", choices=("cfftg", "none"), default="cfftg",
                    help="when the RL swing is not safe, return CFFTG's plan (cfftg) or the RL swing alone (none)")
     g.add_argument("--smoothing", type=float,
-                   help="B-spline smoothing s, m^2 (0: raw polyline; default 0.005); rl only")
+                   help="B-spline smoothing s, m^2 (0: raw polyline; default: the model's, 0.001 for a "
+                        "shielded model, the thesis's 0.005 otherwise); rl only")
     g.add_argument("--clearance", type=float, help="m the swing keeps from the obstacle (default: the model's "
                                                    "env.min_clearance; at most 0.10); the verdict judges against it")
     g.add_argument("--duration", type=float, default=1.0, help="swing duration for the time stamps, s "

@@ -170,3 +170,28 @@ def test_smooth_candidates_is_smooth_paths_of_the_repeated_path():
         b, db = sm.smooth_paths([raw] * len(s), 100, np.array(s), with_deviation=True)
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
         np.testing.assert_allclose(da, db, rtol=0, atol=1e-12)
+
+
+def test_a_shielded_models_smoothing_is_its_clearance_budget():
+    """Without a smoothing given, a shielded model's spline asks for the residual whose RMS over a
+    40-point swing is the shield's excess over the margin (jaxexo.inference.generator.model_smoothing);
+    an unshielded model keeps the thesis's s."""
+    from jaxexo.config import config_from_dict
+    from jaxexo.evaluation.compare import make_scenarios
+    from jaxexo.inference.generator import SHIELD_SMOOTHING_POINTS, model_smoothing
+
+    gen = _random_generator()
+    excess = gen.config.env.shield_clearance - gen.config.env.min_clearance
+    assert excess > 0
+    assert gen.smoothing == pytest.approx(SHIELD_SMOOTHING_POINTS * excess ** 2, rel=1e-5)   # float32 params
+    assert gen.smoothing < sm.DEFAULT_SMOOTHING
+    thesis = config_from_dict({"env": {"shield": False}})
+    assert model_smoothing(dynamics.scalar_params(thesis), False) == sm.DEFAULT_SMOOTHING
+    s = make_scenarios(gen.config, "train", 3, 11)
+    kw = [dict(pivot=x["pivot"], start_y=x["start_y"], step_length=x["step_length"]) for x in s]
+    for x, k in zip(s, kw):
+        a = gen.generate(x["obstacle"], fallback=None, **k)
+        _same(a, gen.generate(x["obstacle"], fallback=None, smoothing=gen.smoothing, **k))
+    batch = gen.generate_batch([x["obstacle"] for x in s], fallback=None, **{key: [k[key] for k in kw] for key in kw[0]})
+    for a, x, k in zip(batch, s, kw):
+        _same(a, gen.generate_batch([x["obstacle"]], fallback=None, smoothing=gen.smoothing, **k)[0])

@@ -368,7 +368,7 @@ class RewardConfig:
     # jaxexo.physics.rewards.shaping_reward for the choice of its discount.
     progress_shaping: float = declare(5.0, number(nonneg=True), unit="1/m")
     shaping_discount: float = declare(1.0, fraction(positive=True))
-    # The wearer's costs (not in the thesis, jaxexo.physics.rewards.wearer_terms; 0, 0 = thesis reward):
+    # The wearer's costs (not in the thesis, jaxexo.physics.rewards.wearer_terms; 0 = thesis reward):
     # per metre of heel height above the obstacle's top plus env.shield_clearance, per step (a low
     # swing), and per second the joint drives need for each move at [device] joint_velocity (a quick,
     # straight swing). The velocities enter the environment as ``joint_speed`` (hip, knee, hip, knee).
@@ -378,7 +378,7 @@ class RewardConfig:
         "joint_speed": np.asarray(tuple(cfg.device.joint_velocity) * 2, dtype=np.float32)})
     # per unit of a move's change of direction, 1 - cos of its angle to the last move (a path without
     # corners: quicker at the device, and smoothed without cutting towards the obstacle; 0 = thesis)
-    turn_cost: float = declare(0.0, number(nonneg=True, hi=1e3))
+    turn_cost: float = declare(2.0, number(nonneg=True, hi=1e3))
 
 
 @dataclass(frozen=True)

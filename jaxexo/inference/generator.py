@@ -94,6 +94,8 @@ class TrajectoryGenerator:
         self._term_p = types.SimpleNamespace(terminate_on_collision=bool(self.np_params.terminate_on_collision))
         self.epsilon = 0.0      # 0: greedy (the default; a device's generator must not explore)
         self.shield = bool(config.env.shield)
+        # The spline's smoothing when a call does not give one (m^2, thesis 2.7's s).
+        self.smoothing = model_smoothing(self.sp, self.shield)
         self._n_forward = int(dynamics.forward_moves().sum())
         self._rng = None
         # single-swing shield steps: [decided by jaxexo.inference.shield, handed to the full mask]
@@ -659,7 +661,7 @@ class TrajectoryGenerator:
 
     def generate(self, obstacle: geometry.Obstacle, *, pivot: str | float | None = None, pivot_y: float | None = None,
                  start_y: float = 0.0, step_length: float = 0.70, n_points: int = sm.DEFAULT_POINTS,
-                 smoothing: float = sm.DEFAULT_SMOOTHING, duration: float = DEFAULT_DURATION,
+                 smoothing: float | None = None, duration: float = DEFAULT_DURATION,
                  strict: bool = False, fallback: str | None = "cfftg", fast: bool = True,
                  clearance: float | None = None) -> Trajectory:
         """One smoothed, checked trajectory (metres, radians, seconds). ``strict`` raises
@@ -667,8 +669,9 @@ class TrajectoryGenerator:
         (CFFTG's plan when the RL swing is not safe) or None (module docstring). ``fast=False`` runs
         the plain reference implementation (every move's swept clearance computed exactly), which
         gives the same actions, samples and verdicts. ``clearance`` (m): the margin the swing keeps
-        (``at_clearance``)."""
-        n_points, smoothing, duration = check_options(n_points, smoothing, duration)
+        (``at_clearance``). ``smoothing`` (m^2; None: the model's, ``self.smoothing``)."""
+        n_points, smoothing, duration = check_options(n_points, self.smoothing if smoothing is None else smoothing,
+                                                      duration)
         fallback = check_fallback(fallback)
         self = self.at_clearance(clearance)
         scene = self.scene(obstacle, pivot, pivot_y, start_y, step_length)
@@ -679,13 +682,14 @@ class TrajectoryGenerator:
         return traj
 
     def generate_batch(self, obstacles, *, pivot=None, pivot_y=None, start_y=0.0, step_length=0.70,
-                       n_points: int = sm.DEFAULT_POINTS, smoothing: float = sm.DEFAULT_SMOOTHING,
+                       n_points: int = sm.DEFAULT_POINTS, smoothing: float | None = None,
                        duration: float = DEFAULT_DURATION, strict: bool = False,
                        fallback: str | None = "cfftg", fast: bool = True,
                        clearance: float | None = None) -> TrajectoryBatch:
         """Trajectories for many scenarios; every option is one value or one per obstacle (``fallback``,
         ``fast`` and ``clearance`` one value, as in ``generate``)."""
-        n_points, smoothing, duration = check_options(n_points, smoothing, duration)
+        n_points, smoothing, duration = check_options(n_points, self.smoothing if smoothing is None else smoothing,
+                                                      duration)
         fallback = check_fallback(fallback)
         self = self.at_clearance(clearance)
         scenes = self._scenes(obstacles, pivot, pivot_y, start_y, step_length)
@@ -695,6 +699,25 @@ class TrajectoryGenerator:
         if strict and not batch.ok.all():
             raise TrajectoryError(batch[int(np.argmin(batch.ok))])
         return batch
+
+
+# Points of a long swing (a typical one has 25-35): the budget below holds for swings up to this long.
+SHIELD_SMOOTHING_POINTS = 40
+
+
+def model_smoothing(sp, shield: bool) -> float:
+    """The spline's default smoothing s (m^2, the sum of squared residuals at the agent's points,
+    thesis 2.7) for a model: the thesis's 0.005 m^2 without the shield; with it, the s whose RMS
+    residual over a swing of SHIELD_SMOOTHING_POINTS points equals the shield's excess over the margin
+    (env.shield_clearance - env.min_clearance: 5 mm, s = 40 x 0.005^2 = 0.001 m^2 by default). The
+    shielded raw path keeps that excess everywhere, so a spline that strays no further than it from
+    the agent's points rarely cuts into the margin; the thesis's s (an RMS of 1.1-1.4 cm over 25-40
+    points) cuts corners by more than the excess, and its correction (jaxexo.inference.clearing) then
+    lifts the whole swing (about 1 cm higher on the held-out families, measured)."""
+    if not shield:
+        return sm.DEFAULT_SMOOTHING
+    excess = float(sp.shield_clearance) - float(sp.min_clearance)
+    return SHIELD_SMOOTHING_POINTS * excess * excess if excess > 0.0 else 0.0
 
 
 def _smooth(raws, n_points, smoothing, fast):
