@@ -109,3 +109,19 @@ def test_two_samples_have_nothing_to_move():
     raw = np.array([[0.0, 0.0], [0.05, 0.1], [0.25, 0.21], [0.45, 0.21], [0.65, 0.1], [0.70, 0.0]])
     path, dev, rounds = clear_smooth(raw, outline, FOOT, MARGIN, n_points=2)
     np.testing.assert_array_equal(path, [raw[0], raw[-1]])
+
+
+def test_a_smoothed_path_is_accepted_with_headroom_above_the_margin():
+    """The generator accepts a smoothed path only ACCEPT_HEADROOM above the margin (so that its
+    device-ready retiming, which resamples an interpolant of the samples, keeps the margin too): a path
+    whose guaranteed clearance is between the margin and margin + headroom is sent on to the spline's
+    correction, one above is accepted, one below is not."""
+    from test_fast_shield import _random_generator
+
+    gen = _random_generator()
+    m, h = gen.sp.min_clearance, gen.ACCEPT_HEADROOM
+    assert 0 < h < 1e-3
+    low = np.array([m + 2 * h, m + 0.5 * h, m - 0.5 * h, m + 2 * h])
+    dev = np.array([0.0, 0.0, 0.0, 1.5 * h])
+    back = np.zeros(4)
+    np.testing.assert_array_equal(gen._passes(low, dev, back), [True, False, False, False])
