@@ -66,7 +66,7 @@ def scene_sets(cfg, n: int) -> dict[str, list[dict]]:
 
 
 def run_set(gens: dict, scenes: list[dict], cfg, clearance, error: float, smoothing=None) -> dict:
-    out = {}
+    out, per = {}, {}
     true = [s["obstacle"] for s in scenes]
     seen = true if error == 0 else [perturbed(o, error, 1.0 if i % 2 else -1.0) for i, o in enumerate(true)]
     kw = dict(pivot=[s["pivot"] for s in scenes], start_y=[s["start_y"] for s in scenes],
@@ -124,6 +124,13 @@ def run_set(gens: dict, scenes: list[dict], cfg, clearance, error: float, smooth
             r["corrected"] = float(np.mean([any("jaxexo.inference.clearing" in n for n in t.notes) for t in trajs]))
             r["raw_polyline"] = float(np.mean(np.isnan(smooth)))
         out[name] = r
+        per[name] = (np.array([t.ok for t in trajs]), lift, dur)
+    # The scenes every generator swings safely: lift and duration compared where neither fails.
+    both = np.logical_and.reduce([ok for ok, _, _ in per.values()])
+    for name, (_, lift, dur) in per.items():
+        out[name]["n_all_safe"] = int(both.sum())
+        out[name]["lift_cm_median_all_safe"] = 100 * float(np.median(lift[both])) if both.any() else float("nan")
+        out[name]["duration_s_median_all_safe"] = float(np.median(dur[both])) if both.any() else float("nan")
     return out
 
 
@@ -149,6 +156,12 @@ def markdown(res: dict, title: str) -> str:
                          f"{r['duration_s_p95']:.3f} | {r['duration_s_max']:.2f} | {r['jerk_median']:.3g} | "
                          f"{r['jerk_p95']:.3g} | {once} | {raw} | {100 * r['true_contact']:.1f} | "
                          f"{100 * r['true_within_1cm']:.1f} |")
+    lines += ["", "On the scenes that every generator swings safely:", "",
+              "| set | generator | n | lift median cm | duration median s |", "|---|---|---:|---:|---:|"]
+    for s, gens in res["sets"].items():
+        for g, r in gens.items():
+            lines.append(f"| {s} | {g} | {r['n_all_safe']} | {r['lift_cm_median_all_safe']:.2f} | "
+                         f"{r['duration_s_median_all_safe']:.3f} |")
     return "\n".join(lines)
 
 
