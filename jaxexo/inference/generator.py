@@ -95,7 +95,7 @@ class TrajectoryGenerator:
         self.epsilon = 0.0      # 0: greedy (the default; a device's generator must not explore)
         self.shield = bool(config.env.shield)
         # The spline's smoothing when a call does not give one (m^2, thesis 2.7's s).
-        self.smoothing = model_smoothing(self.sp, self.shield)
+        self.smoothing = model_smoothing(config.env.shield_clearance, config.env.min_clearance, self.shield)
         self._n_forward = int(dynamics.forward_moves().sum())
         self._rng = None
         # single-swing shield steps: [decided by jaxexo.inference.shield, handed to the full mask]
@@ -717,7 +717,7 @@ class TrajectoryGenerator:
 SHIELD_SMOOTHING_POINTS = 40
 
 
-def model_smoothing(sp, shield: bool) -> float:
+def model_smoothing(shield_clearance: float, min_clearance: float, shield: bool) -> float:
     """The spline's default smoothing s (m^2, the sum of squared residuals at the agent's points,
     thesis 2.7) for a model: the thesis's 0.005 m^2 without the shield; with it, the s whose RMS
     residual over a swing of SHIELD_SMOOTHING_POINTS points equals the shield's excess over the margin
@@ -728,7 +728,7 @@ def model_smoothing(sp, shield: bool) -> float:
     lifts the whole swing (about 1 cm higher on the held-out families, measured)."""
     if not shield:
         return sm.DEFAULT_SMOOTHING
-    excess = float(sp.shield_clearance) - float(sp.min_clearance)
+    excess = float(shield_clearance) - float(min_clearance)
     return SHIELD_SMOOTHING_POINTS * excess * excess if excess > 0.0 else 0.0
 
 
