@@ -197,7 +197,8 @@ def policy_config(meta: dict, path):
             for name, _ in declared_fields(SECTION_CLASSES[section]):
                 if not isinstance(raw.get(section), dict) or name not in raw[section]:
                     raise ConfigError(f"{section}.{name} is not stated: not the resolved training config that "
-                                      "jaxexo train writes")
+                                      "this jaxexo's train writes (a policy trained by an older jaxexo, before "
+                                      "the field existed, must be retrained)")
         config = config_from_dict(raw)
     except (tomllib.TOMLDecodeError, ConfigError) as e:
         raise PolicyFileError(f"{path}: metadata.config_toml is not a valid jaxexo config ({e})") from None
