@@ -19,7 +19,8 @@ wrong obstacle estimate (its outline lowered by E and shifted by E along y, alte
 the judge sees the true obstacle; the swing's clearance is asked as ``C`` (default 2 cm + E), and the
 report counts contact with the true obstacle, and swings within 1 cm of it.
 
-Writes benchmarks/results/swing_quality[_tag]_<date>_<machine>.{json,md}.
+Writes benchmarks/results/swing_quality[_tag]_<date>_<machine>.{json,md,png} (the figure: the
+distributions of lift and timed swing, RL beside CFFTG, per set).
 
 Run: python benchmarks/bench_swing_quality.py RUN_DIR/policy.npz [--n 600] [--clearance C]
      [--perception-error E] [--tag NAME]
@@ -65,7 +66,9 @@ def scene_sets(cfg, n: int) -> dict[str, list[dict]]:
     }
 
 
-def run_set(gens: dict, scenes: list[dict], cfg, clearance, error: float, smoothing=None) -> dict:
+def run_set(gens: dict, scenes: list[dict], cfg, clearance, error: float, smoothing=None, arrays=None) -> dict:
+    """Both generators' figures on one scene set; ``arrays`` (a dict), when given, receives each
+    generator's per-scene (safe, lift m, duration s) for the figure."""
     out, per = {}, {}
     true = [s["obstacle"] for s in scenes]
     seen = true if error == 0 else [perturbed(o, error, 1.0 if i % 2 else -1.0) for i, o in enumerate(true)]
@@ -131,7 +134,43 @@ def run_set(gens: dict, scenes: list[dict], cfg, clearance, error: float, smooth
         out[name]["n_all_safe"] = int(both.sum())
         out[name]["lift_cm_median_all_safe"] = 100 * float(np.median(lift[both])) if both.any() else float("nan")
         out[name]["duration_s_median_all_safe"] = float(np.median(dur[both])) if both.any() else float("nan")
+    if arrays is not None:
+        arrays.update(per)
     return out
+
+
+def figure(arrays: dict, title: str, path: Path) -> None:
+    """Per scene set: the distribution (share of swings at or below) of the lift and of the timed swing,
+    RL against CFFTG, each generator's unsafe swings marked on the lift panel."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axs = plt.subplots(2, len(arrays), figsize=(4.2 * len(arrays), 6.4), squeeze=False)
+    colours = {"rl": "tab:green", "cfftg": "tab:red"}
+    for col, (set_name, per) in enumerate(arrays.items()):
+        for name, (ok, lift, dur) in per.items():
+            label = "RL" if name == "rl" else "CFFTG"
+            for row, (values, scale) in enumerate(((lift, 100.0), (dur, 1.0))):
+                v = np.sort(values * scale)
+                axs[row, col].step(v, np.arange(1, len(v) + 1) / len(v), where="post", color=colours[name],
+                                   label=f"{label} (unsafe {100 * np.mean(~ok):.1f} %)" if row == 0 else label)
+            bad = np.sort(lift[~ok] * 100.0)
+            if bad.size:
+                axs[0, col].plot(bad, np.zeros_like(bad), "|", color=colours[name], ms=10)
+        axs[0, col].set_title(set_name)
+        axs[0, col].set_xlabel("lift: heel peak above the obstacle's top (cm)")
+        axs[0, col].set_xlim(-6.0, 12.0)     # below 0: a plan whose peak is under the top (it hits)
+        axs[1, col].set_xlabel("timed swing at the [device] limits (s)")
+        axs[1, col].set_xlim(0.3, 2.5)
+        for row in range(2):
+            axs[row, col].set_ylabel("share of swings at or below")
+            axs[row, col].grid(alpha=0.3)
+            axs[row, col].legend(fontsize=8, loc="lower right")
+    fig.suptitle(title + " (ticks on the lift axis: unsafe swings)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
 
 
 def markdown(res: dict, title: str) -> str:
@@ -184,8 +223,10 @@ def main():
     res = {"policy": str(a.policy), "clearance": clearance, "perception_error": a.perception_error,
            "smoothing": a.smoothing,
            "sets": {}, "machine": machine_info()}
+    arrays = {}
     for name, scenes in scene_sets(cfg, a.n).items():
-        res["sets"][name] = run_set(gens, scenes, cfg, clearance, a.perception_error, a.smoothing)
+        arrays[name] = {}
+        res["sets"][name] = run_set(gens, scenes, cfg, clearance, a.perception_error, a.smoothing, arrays[name])
         print(name, {g: {k: round(v, 4) for k, v in r.items()} for g, r in res["sets"][name].items()}, flush=True)
     title = "Swing quality" + (f" at clearance {100 * clearance:.1f} cm" if clearance else "") + (
         f", perception error {100 * a.perception_error:.1f} cm" if a.perception_error else "")
@@ -193,7 +234,9 @@ def main():
     print(md)
     if a.out:
         name = "swing_quality" + (f"_{a.tag}" if a.tag else "")
-        print(write_result(name, res, md, a.out))
+        paths = write_result(name, res, md, a.out)
+        figure(arrays, title, paths[1].with_suffix(".png"))
+        print(*paths, paths[1].with_suffix(".png"))
 
 
 if __name__ == "__main__":
