@@ -54,7 +54,7 @@ from jaxexo.physics import dynamics, geometry, kinematics, swept
 from jaxexo.config.schema import MAX_SWING_DURATION
 from jaxexo.physics.dynamics import Scene, scalar
 from jaxexo.inference import blas, smoothing as sm, trajectory
-from jaxexo.inference.clearing import clear_smooth
+from jaxexo.inference.clearing import clear_rows
 from jaxexo.inference.network import FoldedQNetwork, StepNetwork
 from jaxexo.inference.shield import ScalarShield
 from jaxexo.inference.trajectory import DEFAULT_DURATION, Trajectory, TrajectoryBatch, TrajectoryError, assemble
@@ -455,48 +455,79 @@ class TrajectoryGenerator:
 
     def _one_pass(self, scene, raw, n_points: int, smoothing: float, fast: bool = True):
         """One swing's candidates smoothed together (smoothing.smooth_candidates); the first that passes
-        is used (the requested smoothing when none does: the retries then follow). ``fast`` checks them
-        all at once, each path's closest move exact (and hands the chosen one's clearances to
-        assemble); the reference checks them one at a time, every move's swept clearance exact."""
+        is used (the requested smoothing when none does: the retries then follow), except that the
+        requested smoothing's spline corrected (jaxexo.inference.clearing) comes before the other
+        candidates when the requested one fails. ``fast`` checks the requested smoothing alone first
+        (it is the answer when it passes), then the correction, and the other candidates together
+        only when both fail, each path's closest move exact, and hands the chosen curve's clearances
+        to assemble; the reference checks every candidate one at a time, every move's swept
+        clearance exact. Both choose the same curve."""
         cands = self._candidates(raw, smoothing)
         paths, dev = sm.smooth_candidates(raw, n_points, cands)
         if fast:
-            ok, c, sw = self._margin_ok([scene] * len(cands), paths, dev, with_clearances=True)
+            ok, c, sw = self._margin_ok([scene], paths[:1], dev[:1], with_clearances=True)
+            if not ok[0]:
+                cleared = self._cleared_rows([scene], [raw], [0], n_points, smoothing, fast)
+                if cleared:
+                    path, used, note, d, clear = cleared[0][1]
+                    measured = (None if clear is None else
+                                self._measured(scene, path[None], clear[0][None], clear[1][None], np.array([d])))
+                    return path[None], np.array([d]), [used], [note], measured
+                if len(cands) > 1:
+                    rest, c_rest, sw_rest = self._margin_ok([scene] * (len(cands) - 1), paths[1:], dev[1:],
+                                                            with_clearances=True)
+                    ok = np.concatenate([ok, rest])
+                    c, sw = np.concatenate([c, c_rest]), np.concatenate([sw, sw_rest])
         else:
             ok = np.array([self._margin_ok_reference(scene, paths[k], dev[k]) for k in range(len(cands))])
+            if not ok[0]:
+                # the requested smoothing cuts the margin: its spline corrected comes before any candidate
+                cleared = self._cleared_rows([scene], [raw], [0], n_points, smoothing, fast)
+                if cleared:
+                    path, used, note, d, _ = cleared[0][1]
+                    return path[None], np.array([d]), [used], [note], None      # assemble measures it
         j = int(np.argmax(ok)) if ok.any() else 0
-        if not ok[0]:
-            # the requested smoothing cuts the margin: its spline corrected comes before any candidate
-            cleared = self._cleared_rows([scene], [raw], [0], n_points, smoothing, fast)
-            if cleared:
-                path, used, note, d = cleared[0][1]
-                return path[None], np.array([d]), [used], [note], None      # assemble measures it
-        measured = None
-        if fast:
-            measured = trajectory.measure(self.sp, paths[j: j + 1], c[j: j + 1], np.array([scene.pivot_y]),
-                                          np.array([scene.goal_y]), sw[j: j + 1], dev[j: j + 1])
+        measured = self._measured(scene, paths[j: j + 1], c[j: j + 1], sw[j: j + 1], dev[j: j + 1]) if fast else None
         notes = [self._candidate_note(smoothing, cands[j])] if j else [()]
         return paths[j: j + 1], dev[j: j + 1], [cands[j]], notes, measured
+
+    def _measured(self, scene, path, c, sw, dev):
+        """trajectory.measure of one scene's path (1, N, 2) from its clearances, for assemble."""
+        return trajectory.measure(self.sp, path, c, np.array([scene.pivot_y]), np.array([scene.goal_y]), sw, dev)
 
     CLEARED_NOTE = ("the spline of smoothing {s:g} m^2 is corrected where it came within the safety margin or "
                     "moved the heel back (jaxexo.inference.clearing)")
 
     def _cleared_rows(self, scenes, raws, rows, n_points: int, smoothing: float, fast: bool):
         """Rows whose requested smoothing failed: the requested spline corrected to keep the margin and
-        move forward (jaxexo.inference.clearing), as (row, (path, smoothing, notes, deviation)) for the
-        rows whose corrected curve passes the verdict's clearance and backward checks."""
+        move forward (jaxexo.inference.clearing, all rows' rounds together), as (row, (path, smoothing,
+        notes, deviation, clearances)) for the rows whose corrected curve passes the verdict's
+        clearance and backward checks. ``fast`` judges each curve on the clearances that the
+        correction's last round measured (each path's closest move exact, as ``_margin_ok``) and
+        returns them as (point, move) clearances for assemble (None where the path was resampled,
+        not corrected); the reference re-measures each curve on its own, every move exact."""
         if not self.clearing or len(rows) == 0:
             return []
-        got = [(int(i), clear_smooth(raws[i], scenes[i].outline, self.sp.foot_length, self.sp.min_clearance,
-                                     n_points, smoothing)) for i in rows]
-        paths = np.stack([r[0] for _, r in got])
-        dev = np.array([r[1] for _, r in got])
+        rows = [int(i) for i in rows]
+        got = clear_rows([raws[i] for i in rows], [scenes[i].outline for i in rows], self.sp.foot_length,
+                         self.sp.min_clearance, n_points, smoothing, fast)
+        paths = np.stack([g.path for g in got])
+        dev = np.array([g.deviation for g in got], np.float64)
         if fast:
-            ok = self._margin_ok([scenes[i] for i, _ in got], paths, dev)
+            ok = np.zeros(len(rows), bool)
+            have = [k for k, g in enumerate(got) if g.move_clearance is not None and g.move_clearance.size]
+            if have:
+                low = np.array([got[k].move_clearance.min() for k in have])
+                ok[have] = self._passes(low, dev[have], swept.backward_motion(np, paths[have, :, 0]) + 2.0 * dev[have])
+            rest = [k for k in range(len(rows)) if k not in set(have)]
+            if rest:
+                ok[rest] = self._margin_ok([scenes[rows[k]] for k in rest], paths[rest], dev[rest])
+            clear = [None if g.move_clearance is None else (g.point_clearance, g.move_clearance) for g in got]
         else:
-            ok = np.array([self._margin_ok_reference(scenes[i], paths[k], dev[k]) for k, (i, _) in enumerate(got)])
+            ok = np.array([self._margin_ok_reference(scenes[i], paths[k], dev[k]) for k, i in enumerate(rows)])
+            clear = [None] * len(rows)
         note = (self.CLEARED_NOTE.format(s=smoothing),)
-        return [(i, (paths[k], float(smoothing), note, dev[k])) for k, (i, _) in enumerate(got) if ok[k]]
+        return [(i, (paths[k], float(smoothing), note, dev[k], clear[k])) for k, i in enumerate(rows) if ok[k]]
 
     def _candidate_rows(self, scenes, raws, rows, n_points: int, smoothing: float, fast: bool):
         """Rows whose requested smoothing failed: the first of their other candidates that passes,
@@ -565,6 +596,7 @@ class TrajectoryGenerator:
                       np.array([self._margin_ok_reference(scenes[i], paths[i], dev[i]) for i in range(len(raws))]))
                 cleared = self._cleared_rows(scenes, raws, np.flatnonzero(~ok), n_points, smoothing, fast)
                 done = {i for i, _ in cleared}
+                cleared = [(i, r[:4]) for i, r in cleared]
                 redo = cleared + self._candidate_rows(scenes, raws, [i for i in np.flatnonzero(~ok) if i not in done],
                                                       n_points, smoothing, fast)
                 if redo:
