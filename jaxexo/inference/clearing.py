@@ -269,12 +269,13 @@ def clear_rows(raws, outlines, foot_length: float, margin: float, n_points: int 
         short = margin + SLACK - (sw - dev[:, None])                      # (A, n-1)
         fall = out[:, :-1, 0] - out[:, 1:, 0]                             # (A, n-1)
         going = ~(((short.max(axis=1) <= 0.0) & (fall.max(axis=1) <= 0.0)) | (r == ROUNDS))
-        normal = _normals(out, short, going, row, lib, foot_length)
+        normal = _normals(out, short, going, row, lib, foot_length) if going.any() else None
         off = 0
         for g in live:
             span = slice(off, off + len(g.alive))
             off += len(g.alive)
-            moved = _correct(g, short[span], fall[span], going[span], normal[span], n_points)
+            moved = (_correct(g, short[span], fall[span], going[span], normal[span], n_points) if normal is not None
+                     else np.zeros(len(g.alive), bool))
             for j, k in enumerate(g.alive):
                 if not moved[j]:
                     a = span.start + j

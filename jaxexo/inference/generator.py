@@ -592,17 +592,31 @@ class TrajectoryGenerator:
             if len(raws) > 1:
                 # Many swings: the requested smoothing checked first (fast: all at once), then the
                 # candidates of the rows it fails, level by level; one assemble for all rows after.
-                ok = (self._margin_ok(scenes, paths, dev) if fast else
-                      np.array([self._margin_ok_reference(scenes[i], paths[i], dev[i]) for i in range(len(raws))]))
+                if fast:
+                    ok, c_all, sw_all = self._margin_ok(scenes, paths, dev, with_clearances=True)
+                else:
+                    ok = np.array([self._margin_ok_reference(scenes[i], paths[i], dev[i]) for i in range(len(raws))])
                 cleared = self._cleared_rows(scenes, raws, np.flatnonzero(~ok), n_points, smoothing, fast)
                 done = {i for i, _ in cleared}
-                cleared = [(i, r[:4]) for i, r in cleared]
-                redo = cleared + self._candidate_rows(scenes, raws, [i for i in np.flatnonzero(~ok) if i not in done],
-                                                      n_points, smoothing, fast)
+                redo = [(i, r[:4]) for i, r in cleared] + self._candidate_rows(
+                    scenes, raws, [i for i in np.flatnonzero(~ok) if i not in done], n_points, smoothing, fast)
                 if redo:
                     paths, dev, notes = paths.copy(), np.array(dev, np.float64), list(notes)
                     for i, (path, c, note, d) in redo:
                         paths[i], dev[i], used[i], notes[i] = path, d, c, note
+                if fast:
+                    # assemble measures from the clearances already computed: the requested smoothing's
+                    # (each path's closest move exact), the corrected curves' own; the rest afresh
+                    known = {i for i, r in cleared if r[4] is not None}
+                    for i, r in cleared:
+                        if r[4] is not None:
+                            c_all[i], sw_all[i] = r[4]
+                    fresh = sorted({i for i, _ in redo} - known)
+                    if fresh:
+                        _, c_all[fresh], sw_all[fresh] = self._margin_ok([scenes[i] for i in fresh], paths[fresh],
+                                                                         dev[fresh], with_clearances=True)
+                    measured = trajectory.measure(self.sp, paths, c_all, np.array([sc.pivot_y for sc in scenes]),
+                                                  np.array([sc.goal_y for sc in scenes]), sw_all, dev)
         else:
             both = [sm.linear_resample(r, n_points, with_deviation=True) for r in raws]
             paths, dev = np.stack([p for p, _ in both]), np.array([d for _, d in both])
