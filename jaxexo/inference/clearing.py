@@ -72,6 +72,11 @@ def _solve_stack(a: np.ndarray, b: np.ndarray, act: np.ndarray) -> np.ndarray:
     ill-conditioned enough to amplify a last-bit difference)."""
     g, k = act.shape
     x = np.zeros((g, k))
+    if g == 1:      # one swing: the same system, fewer NumPy calls
+        on = np.flatnonzero(act[0])
+        if on.size:
+            x[0, on] = _solve_same(a[0][np.ix_(on, on)][None], b[0, on][None])[0]
+        return x
     order = np.argsort(~act, axis=1, kind="stable")      # each row's active constraints first, in order
     count = act.sum(axis=1)
     for kk in np.unique(count):
