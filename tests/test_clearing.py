@@ -238,3 +238,29 @@ def test_bad_input_to_clear_rows_is_refused(args, match):
     kw.update(args)
     with pytest.raises(ValueError, match=match):
         clear_rows(**kw)
+
+
+def test_the_first_round_measures_the_requested_smoothings_own_spline():
+    """Cleared.initial (the generator's one swing takes the requested smoothing from it when it passes)
+    is smoothing.smooth_candidates' curve of that smoothing, bit for bit, with its deviation bound,
+    and its clearances' minimum and place are the full swept clearance's."""
+    from jaxexo.inference.clearing import clear_rows
+
+    rows = _mixed_scenes(300, seed=21)
+    got = clear_rows([r for _, r in rows], [o for o, _ in rows], FOOT, MARGIN)
+    checked = 0
+    for (outline, raw), g in zip(rows, got):
+        m = len(sm.distinct(raw))
+        if m < sm.DEGREE + 1:
+            assert g.initial is None
+            continue
+        paths, dev = sm.smooth_candidates(raw, 100, [sm.DEFAULT_SMOOTHING, m * 0.004 ** 2])
+        p0, d0, c0, sw0 = g.initial
+        np.testing.assert_array_equal(p0, paths[0])
+        assert d0 == dev[0]
+        full = swept.path_swept_clearance(np, p0, FOOT, outline)
+        assert sw0.min() == full.min() and np.argmin(sw0) == np.argmin(full)
+        if g.rounds == 0:
+            np.testing.assert_array_equal(g.path, p0)
+        checked += 1
+    assert checked > 250

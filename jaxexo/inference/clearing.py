@@ -157,12 +157,18 @@ class Cleared:
     entries may be lower bounds above the minimum and above the margin; None for a path too short
     for a spline, which is resampled, not corrected)."""
 
-    __slots__ = ("path", "deviation", "rounds", "point_clearance", "move_clearance", "_coef", "_ends", "_m")
+    __slots__ = ("path", "deviation", "rounds", "point_clearance", "move_clearance", "initial", "_coef", "_ends",
+                 "_m")
 
-    def __init__(self, path, deviation, rounds, point_clearance=None, move_clearance=None, coef=None, ends=None, m=0):
+    def __init__(self, path, deviation, rounds, point_clearance=None, move_clearance=None, coef=None, ends=None, m=0,
+                 initial=None):
         self.path, self.deviation, self.rounds = path, deviation, rounds
         self.point_clearance, self.move_clearance = point_clearance, move_clearance
         self._coef, self._ends, self._m = coef, ends, m
+        # (path, deviation, point clearances, move clearances) of the plain spline, before any
+        # correction (the same numbers as smoothing.smooth_candidates' curve of this smoothing),
+        # measured like the last round's; None for a path resampled, not smoothed
+        self.initial = initial
 
     def dense(self, dense_points: int) -> np.ndarray:
         """The same curve sampled at ``dense_points`` parameters (for a denser look)."""
@@ -271,6 +277,8 @@ def clear_rows(raws, outlines, foot_length: float, margin: float, n_points: int 
         dev = np.concatenate([g.dev for g in live])
         row = np.concatenate([g.rows[g.alive] for g in live])
         c, sw = _clearances(out, dev, row, lib, foot_length, margin, fast)
+        if r == 0:
+            initial = {int(i): (out[a], float(dev[a]), c[a], sw[a]) for a, i in enumerate(row)}
         short = margin + SLACK - (sw - dev[:, None])                      # (A, n-1)
         fall = out[:, :-1, 0] - out[:, 1:, 0]                             # (A, n-1)
         going = ~(((short.max(axis=1) <= 0.0) & (fall.max(axis=1) <= 0.0)) | (r == ROUNDS))
@@ -284,7 +292,8 @@ def clear_rows(raws, outlines, foot_length: float, margin: float, n_points: int 
             for j, k in enumerate(g.alive):
                 if not moved[j]:
                     a = span.start + j
-                    res[g.rows[k]] = Cleared(out[a], float(dev[a]), r, c[a], sw[a], g.zc[k], pts_all[g.rows[k]], g.m)
+                    i = int(g.rows[k])
+                    res[i] = Cleared(out[a], float(dev[a]), r, c[a], sw[a], g.zc[k], pts_all[i], g.m, initial[i])
             g.alive = g.alive[moved]
     return res
 

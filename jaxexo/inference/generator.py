@@ -463,6 +463,33 @@ class TrajectoryGenerator:
         to assemble; the reference checks every candidate one at a time, every move's swept
         clearance exact. Both choose the same curve."""
         cands = self._candidates(raw, smoothing)
+        if fast and self.clearing:
+            # The correction first: its first round measures the requested smoothing's own spline (the
+            # same numbers as smooth_candidates' first curve, tests/test_clearing.py), which is the
+            # answer when it passes; the other candidates are smoothed only when the correction fails.
+            got = clear_rows([raw], [scene.outline], self.sp.foot_length, self.sp.min_clearance, n_points,
+                             smoothing, fast)[0]
+            if got.initial is not None:
+                p0, d0, c0, sw0 = got.initial
+                if self._passes(sw0.min(), d0, swept.backward_motion(np, p0[:, 0]) + 2.0 * d0):
+                    return (p0[None], np.array([d0]), [cands[0]], [()],
+                            self._measured(scene, p0[None], c0[None], sw0[None], np.array([d0])))
+                cleared = self._judge_cleared([scene], [raw], [0], [got], smoothing, fast)
+                if cleared:
+                    path, used, note, d, clear = cleared[0][1]
+                    return path[None], np.array([d]), [used], [note], self._measured(
+                        scene, path[None], clear[0][None], clear[1][None], np.array([d]))
+                paths, dev = sm.smooth_candidates(raw, n_points, cands)
+                ok, c, sw = np.zeros(1, bool), c0[None], sw0[None]
+                if len(cands) > 1:
+                    rest, c_rest, sw_rest = self._margin_ok([scene] * (len(cands) - 1), paths[1:], dev[1:],
+                                                            with_clearances=True)
+                    ok = np.concatenate([ok, rest])
+                    c, sw = np.concatenate([c, c_rest]), np.concatenate([sw, sw_rest])
+                j = int(np.argmax(ok)) if ok.any() else 0
+                notes = [self._candidate_note(smoothing, cands[j])] if j else [()]
+                return (paths[j: j + 1], dev[j: j + 1], [cands[j]], notes,
+                        self._measured(scene, paths[j: j + 1], c[j: j + 1], sw[j: j + 1], dev[j: j + 1]))
         paths, dev = sm.smooth_candidates(raw, n_points, cands)
         if fast:
             ok, c, sw = self._margin_ok([scene], paths[:1], dev[:1], with_clearances=True)
@@ -511,6 +538,10 @@ class TrajectoryGenerator:
         rows = [int(i) for i in rows]
         got = clear_rows([raws[i] for i in rows], [scenes[i].outline for i in rows], self.sp.foot_length,
                          self.sp.min_clearance, n_points, smoothing, fast)
+        return self._judge_cleared(scenes, raws, rows, got, smoothing, fast)
+
+    def _judge_cleared(self, scenes, raws, rows, got, smoothing: float, fast: bool):
+        """``_cleared_rows``' verdict on the corrections ``got`` (clearing.Cleared) of rows ``rows``."""
         paths = np.stack([g.path for g in got])
         dev = np.array([g.deviation for g in got], np.float64)
         if fast:
