@@ -230,27 +230,28 @@ class TrajectoryGenerator:
         dz = np.maximum(hz - lay.height, 0.0)
         return np.hypot(dy, dz) < self.sp.shield_clearance + self.sp.step_size + 1e-4
 
-    def _clear(self, hy, hz, ends, outline, pruned: bool) -> np.ndarray:
+    def _clear(self, hy, hz, ends, outline, pruned: bool, c_here=None) -> np.ndarray:
         """dynamics.moves_keep_clearance for heels (B,) and move ends (B, F, 2), with its NumPy branch
         (pruned or not: the same decisions, issue 12) given rather than chosen by the array's size,
-        so that a subset of the moves or rows is decided exactly as in the whole step's call."""
+        so that a subset of the moves or rows is decided exactly as in the whole step's call.
+        ``c_here``: the heels' foot clearances when known (elementwise, so the same numbers)."""
         p = self.np_params
-        if pruned:
-            here = np.stack([hy, hz], axis=-1)
+        here = np.stack([hy, hz], axis=-1)
+        if c_here is None:
             c_here = geometry.foot_clearance(np, here, p.foot_length, outline)
+        if pruned:
             return dynamics._moves_keep_clearance_pruned(p, here, c_here, ends, outline)
         # the unpruned branch of moves_keep_clearance, written out (the same elementwise arithmetic)
-        here = np.stack([hy, hz], axis=-1)
-        c_here = geometry.foot_clearance(np, here, p.foot_length, outline)
         moves = np.moveaxis(ends, -2, 0)
         d_move = np.moveaxis(swept.swept_distance(np, here + 0.0 * moves, moves, p.foot_length, outline), 0, -1)
         return d_move >= np.minimum(p.shield_clearance, c_here)[..., None] - dynamics.SHIELD_SLACK
 
-    def _admissible_rows(self, hy, hz, lay, pruned: bool | None = None, near=None) -> np.ndarray:
+    def _admissible_rows(self, hy, hz, lay, pruned: bool | None = None, near=None, c_here=None) -> np.ndarray:
         """(B, A) the shield's admissible moves (jaxexo.physics.dynamics.admissible_moves) of many heels,
         float32 rows of stacked scenes like the training environment; the exact clearance is computed
         only for the ``_near`` rows (elsewhere no move can fail it, so the mask is the same).
-        ``pruned``: the clearance's NumPy branch (None: by size, as moves_keep_clearance chooses)."""
+        ``pruned``: the clearance's NumPy branch (None: by size, as moves_keep_clearance chooses);
+        ``c_here`` (B,): the heels' foot clearances where ``near`` (with ``pruned`` given)."""
         p = self.np_params
         near = self._near(hy, hz, lay) if near is None else near
         clear = np.ones((len(hy), self._n_forward), bool)
@@ -259,7 +260,8 @@ class TrajectoryGenerator:
             if pruned is None:
                 clear[near] = dynamics.moves_keep_clearance(np, p, hy[near], hz[near], ends, lay.outline[near])
             else:
-                clear[near] = self._clear(hy[near], hz[near], ends, lay.outline[near], pruned)
+                clear[near] = self._clear(hy[near], hz[near], ends, lay.outline[near], pruned,
+                                          None if c_here is None else c_here[near])
         return dynamics.admissible_moves(np, p, hy, hz, lay, clear=clear)
 
     def _batch_choice(self, hy, hz, lay, q) -> np.ndarray:
@@ -272,18 +274,23 @@ class TrajectoryGenerator:
         near = self._near(hy, hz, lay)
         # the branch the whole step's moves_keep_clearance call takes (by its array's size)
         pruned = int(near.sum()) * self._n_forward * 2 > dynamics._PRUNE_FROM
+        # the near heels' foot clearances once per step (every round and the full mask read them)
+        c_here = np.zeros(len(hy), np.float32)
+        if near.any():
+            c_here[near] = geometry.foot_clearance(np, np.stack([hy[near], hz[near]], axis=-1), self.np_params.foot_length,
+                                                   lay.outline[near])
         out = order[:, 0].copy()
         miss = np.arange(len(hy))
         for r in range(self.BATCH_ROUNDS):     # the r-th best move of the rows still undecided
             a = order[miss, r]
-            ok = self._one_move_ok(hy[miss], hz[miss], _take(lay, miss), near[miss], a, pruned)
+            ok = self._one_move_ok(hy[miss], hz[miss], _take(lay, miss), near[miss], a, pruned, c_here[miss])
             out[miss[ok]] = a[ok]
             miss = miss[~ok]
             if not miss.size:
                 break
         if miss.size:
             sub = _take(lay, miss)
-            mask = self._admissible_rows(hy[miss], hz[miss], sub, pruned, near[miss])
+            mask = self._admissible_rows(hy[miss], hz[miss], sub, pruned, near[miss], c_here[miss])
             out[miss] = dynamics.greedy_action(np, q[miss], mask)
         self.shield_stats[2] += len(hy)
         self.shield_stats[3] += miss.size
@@ -292,7 +299,7 @@ class TrajectoryGenerator:
     # forward moves checked one at a time per row before the full mask (``_batch_choice``)
     BATCH_ROUNDS = 4
 
-    def _one_move_ok(self, hy, hz, lay, near, a, pruned: bool) -> np.ndarray:
+    def _one_move_ok(self, hy, hz, lay, near, a, pruned: bool, c_here=None) -> np.ndarray:
         """(B,) whether move a (B,) passes all four of admissible_moves' conditions (its column of the
         mask before the fallbacks), in the same float32 elementwise arithmetic."""
         p = self.np_params
@@ -301,7 +308,8 @@ class TrajectoryGenerator:
         new = np.stack([y, z], axis=-1)[:, None, :]      # (B, 1, 2)
         clear = np.ones((len(hy), 1), bool)
         if near.any():
-            clear[near] = self._clear(hy[near], hz[near], new[near], lay.outline[near], pruned)
+            clear[near] = self._clear(hy[near], hz[near], new[near], lay.outline[near], pruned,
+                                      None if c_here is None else c_here[near])
         kin = kinematics.leg_state(np, lay.pivot_y[..., None], new, p.thigh, p.shin)
         angles = kinematics.both_legs_angles(np, kin)
         reach = ~(kinematics.legs_outside_limits(np, angles, p.hip_limits, p.knee_limits)
