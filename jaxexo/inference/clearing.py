@@ -21,10 +21,20 @@ Constraints, each round, at the samples that fail:
   to it (jaxexo.physics.swept, less the curve's deviation bound), plus ``SLACK``;
 - forward motion: where the heel's y falls, the next sample's y is raised to the previous one's.
 After ``ROUNDS`` rounds, or as soon as nothing fails, or when a correction would move a sample more
-than ``MAX_SHIFT``, the curve is returned with its deviation bound (the same bound as the plain
-spline's: jaxexo.inference.smoothing). The result is only a candidate:
-the generator's verdict (jaxexo.inference.trajectory) judges it exactly like any other curve, and
-a curve that still fails goes through the usual retries.
+than ``MAX_SHIFT`` (or needs more than ``MAX_CONSTRAINTS`` constraints at once), the curve is
+returned with its deviation bound (the same bound as the plain spline's: jaxexo.inference.smoothing).
+The result is only a candidate: the generator's verdict (jaxexo.inference.trajectory) judges it
+exactly like any other curve, and a curve that still fails goes through the usual retries.
+
+Speed (issue 19): ``clear_rows`` corrects many paths at once, each path's arithmetic its own (the
+same curve, bit for bit, in any batch as alone): the splines of one point count in stacked
+products, the exact clearances of all paths in one vectorised call per round and outline size,
+computed exactly only for the moves that can be under the margin's threshold or be the path's
+closest (``fast``; ``fast=False`` computes every move, the reference), and the dual systems in
+stacked Cholesky / LU solves of one size (lstsq's minimum-norm solution where a system is not
+safely positive definite). The last round's clearances of each curve come back with it
+(``Cleared``), so the generator's verdict does not measure the curve again, and the first round's
+(the plain spline of the requested smoothing) decide whether the plain spline already passes.
 """
 
 from __future__ import annotations

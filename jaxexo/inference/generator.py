@@ -32,7 +32,11 @@ reference's own float32 arithmetic one move per row (``_batch_choice``; the full
 whose first BATCH_ROUNDS moves fail). Smoothing: besides the requested s, per-path candidates
 (CANDIDATE_RESIDUALS: s = M rho^2) are smoothed and checked in one pass and the smoothest that keeps
 the margin is used (``Trajectory.smoothing`` reports it; a note says a candidate was used); the
-retries below remain for the rest.
+retries below remain for the rest. The spline correction runs on all of a batch's rows at once
+(jaxexo.inference.clearing.clear_rows) and hands back the clearances its last round measured, which
+the verdict reads instead of measuring the curve again; one swing runs the correction first, its
+first round measuring the requested smoothing's own spline (the answer when it passes), and smooths
+the other candidates only when the correction fails.
 
 Speed (issue 12): ``fast=True`` (default) computes the swept clearance exactly only for the moves
 that can be a path's closest (jaxexo.physics.swept.swept_lower_bound), smooths one path without the
@@ -663,8 +667,10 @@ class TrajectoryGenerator:
         batch = assemble("rl", self.sp, scenes, raws, paths, used, duration, notes, measured, deviation=dev, fast=fast)
         # Smoothing cuts corners (clearance) and overshoots (backward heel motion): first the per-path
         # candidate smoothings (CANDIDATE_RESIDUALS), then less smoothing, down to the raw polyline.
-        bad = (np.flatnonzero(~batch.clearance_ok | (batch.heel_backward > self.sp.backward_tolerance)) if smoothing > 0
-               else np.zeros(0, np.int64))
+        # Not for a swing that ends short of the goal: every curve ends where its raw path does, so no
+        # smoothing can make it pass (the policy's failure, not the smoothing's; CFFTG's fallback follows).
+        bad = (np.flatnonzero((~batch.clearance_ok | (batch.heel_backward > self.sp.backward_tolerance))
+                              & batch.reached_goal) if smoothing > 0 else np.zeros(0, np.int64))
         if fast and bad.size:
             redo = self._fallback_batch(scenes, raws, bad, n_points, smoothing)
         else:
