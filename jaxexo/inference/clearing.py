@@ -242,7 +242,7 @@ def clear_rows(raws, outlines, foot_length: float, margin: float, n_points: int 
 
     Each path's correction is its own; the arithmetic runs on all paths at once: the splines of the
     paths with the same point count in stacked products, the exact clearances in one vectorised call
-    per outline size, the dual systems in one stacked solve (``_dual``). ``fast`` computes a move's
+    per outline size, the dual systems in stacked solves (``_dual``). ``fast`` computes a move's
     swept clearance exactly only where it can be under the threshold ``margin + SLACK + deviation``
     or be the path's closest (jaxexo.physics.swept.path_clearance_pruned: the shortfalls that steer
     the correction are the same numbers, and every other move is certainly above the threshold);

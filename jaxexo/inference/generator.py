@@ -281,8 +281,8 @@ class TrajectoryGenerator:
         # the near heels' foot clearances once per step (every round and the full mask read them)
         c_here = np.zeros(len(hy), np.float32)
         if near.any():
-            c_here[near] = geometry.foot_clearance(np, np.stack([hy[near], hz[near]], axis=-1), self.np_params.foot_length,
-                                                   lay.outline[near])
+            c_here[near] = geometry.foot_clearance(np, np.stack([hy[near], hz[near]], axis=-1),
+                                                   self.np_params.foot_length, lay.outline[near])
         out = order[:, 0].copy()
         miss = np.arange(len(hy))
         for r in range(self.BATCH_ROUNDS):     # the r-th best move of the rows still undecided
@@ -562,7 +562,8 @@ class TrajectoryGenerator:
             if have:
                 low = np.array([got[k].move_clearance.min() for k in have])
                 ok[have] = self._passes(low, dev[have], swept.backward_motion(np, paths[have, :, 0]) + 2.0 * dev[have])
-            rest = [k for k in range(len(rows)) if k not in set(have)]
+            known = set(have)
+            rest = [k for k in range(len(rows)) if k not in known]
             if rest:
                 ok[rest] = self._margin_ok([scenes[rows[k]] for k in rest], paths[rest], dev[rest])
             clear = [None if g.move_clearance is None else (g.point_clearance, g.move_clearance) for g in got]
