@@ -234,6 +234,7 @@ class _Group:
         self.zc = z * self.shrink[..., None]
         self.first, self.last = pts[:, 0], pts[:, -1]
         self.alive = np.arange(len(rows))
+        self.out = self.dev = None      # the live rows' curves (G, n, 2) and deviation bounds, per round
 
 
 def clear_rows(raws, outlines, foot_length: float, margin: float, n_points: int = sm.DEFAULT_POINTS,
