@@ -9,7 +9,7 @@ import pytest
 
 from jaxexo.inference import smoothing as sm
 from jaxexo.inference.clearing import clear_smooth
-from jaxexo.physics import geometry
+from jaxexo.physics import geometry, swept
 
 FOOT = 0.20
 MARGIN = 0.02
@@ -125,3 +125,158 @@ def test_a_smoothed_path_is_accepted_with_headroom_above_the_margin():
     dev = np.array([0.0, 0.0, 0.0, 1.5 * h])
     back = np.zeros(4)
     np.testing.assert_array_equal(gen._passes(low, dev, back), [True, False, False, False])
+
+
+# --------------------------------------------------------------------------------------------
+# Issue 19: many paths corrected together, the pruned clearances, the stacked dual solve
+# --------------------------------------------------------------------------------------------
+
+def _mixed_scenes(n, seed):
+    """Agent-like hugging paths and noisy arcs (some through the obstacle, some too short for a
+    spline, some with repeated points) on rectangles, triangles and half-ellipses."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for i, (outline, raw) in enumerate(scenes(n, seed)):
+        if i % 4 == 3:      # a noisy arc instead: heavier corrections, backward wiggles
+            m = int(rng.integers(2, 45))
+            u = np.linspace(0.0, 1.0, m)
+            raw = np.column_stack([0.75 * u + rng.normal(0, 0.01, m),
+                                   np.maximum(rng.uniform(0.05, 0.3) * np.sin(np.pi * u) + rng.normal(0, 0.01, m), 0)])
+            if m > 5:
+                raw[m // 2] = raw[m // 2 - 1]
+        out.append((outline, raw))
+    return out
+
+
+def test_many_paths_corrected_together_equal_each_corrected_alone_and_the_reference():
+    """clear_rows (the paths' rounds together, fast clearances) against clear_rows(fast=False) (every
+    move's swept clearance exact: the same curves, bit for bit, since the shortfalls that steer the
+    correction are the same numbers) and against each path corrected on its own (the same curve, bit
+    for bit: the stacked products and the dual systems, solved at their own size, do the same
+    arithmetic in any batch)."""
+    from jaxexo.inference.clearing import clear_rows
+
+    rows = _mixed_scenes(400, seed=11)
+    outlines, raws = [o for o, _ in rows], [r for _, r in rows]
+    fast = clear_rows(raws, outlines, FOOT, MARGIN)
+    ref = clear_rows(raws, outlines, FOOT, MARGIN, fast=False)
+    corrected = 0
+    for (outline, raw), a, b in zip(rows, fast, ref):
+        np.testing.assert_array_equal(a.path, b.path)
+        assert a.deviation == b.deviation and a.rounds == b.rounds
+        one = clear_smooth(raw, outline, FOOT, MARGIN)
+        np.testing.assert_array_equal(a.path, one[0])
+        assert a.deviation == one[1] and a.rounds == one[2]
+        corrected += a.rounds > 0
+        if a.move_clearance is not None:
+            # the last round's clearances are those of the returned curve: minimum and place exact
+            full = swept.path_swept_clearance(np, a.path, FOOT, outline)
+            assert a.move_clearance.min() == full.min() and np.argmin(a.move_clearance) == np.argmin(full)
+            assert np.all(a.move_clearance <= full + 1e-12)
+    assert corrected > 200
+
+
+def test_pruned_clearances_are_exact_under_the_threshold():
+    """path_clearance_pruned(below=...): every move closer than its path's threshold is exact, every
+    other one is reported at or above the threshold (and never above its exact value), the minimum
+    and its place exact, against the full swept clearance on random paths."""
+    rng = np.random.default_rng(5)
+    kinds = [geometry.Obstacle.rectangle, geometry.Obstacle.triangle, geometry.Obstacle.half_ellipse]
+    pruned = 0
+    for k, kind in enumerate(kinds):
+        for n in (2, 9, 100):
+            paths, outlines = [], []
+            for _ in range(200):
+                u = np.linspace(0.0, 1.0, n)
+                y = rng.uniform(-0.1, 0.1) + rng.uniform(0.6, 0.9) * u + rng.normal(0, 0.01, n)
+                z = np.maximum(rng.uniform(0, 0.35) * np.sin(np.pi * u) + rng.normal(0, 0.005, n), 0.0)
+                paths.append(np.column_stack([y, z]))
+                outlines.append(kind(rng.uniform(0.02, 0.25), rng.uniform(0.02, 0.25),
+                                     center_y=rng.uniform(0.35, 0.55)).outline)
+            path, outline = np.stack(paths), np.stack(outlines)
+            below = rng.uniform(0.0, 0.08, len(path))
+            c, sw = swept.path_clearance_pruned(path, FOOT, outline, below=below)
+            full = swept.path_swept_clearance(np, path, FOOT, outline)
+            exact = sw == full
+            assert np.all(exact | (sw >= below[:, None]))
+            assert np.all(exact[full < below[:, None]])
+            assert np.all(sw <= full + 1e-12)
+            np.testing.assert_array_equal(sw.min(axis=1), full.min(axis=1))
+            np.testing.assert_array_equal(np.argmin(sw, axis=1), np.argmin(full, axis=1))
+            pruned += int(np.sum(~exact))
+    assert pruned > 1000
+
+
+def test_stacked_dual_solve_equals_lstsq():
+    """The dual's stacked solve (LU where the system is safely positive definite, lstsq's minimum-norm
+    solution elsewhere) against np.linalg.lstsq on each active subsystem: well-conditioned, rank
+    deficient (more constraints than freedoms) and repeated constraints, with inactive ones."""
+    from jaxexo.inference.clearing import _solve_stack
+
+    rng = np.random.default_rng(2)
+    for rank, k in ((12, 8), (6, 10), (3, 9), (20, 20)):
+        f = rng.normal(size=(50, k, rank))
+        f[::5, 1] = f[::5, 0]                     # a repeated constraint
+        a = f @ f.transpose(0, 2, 1)
+        b = rng.normal(size=(50, k))
+        act = rng.uniform(size=(50, k)) < 0.8
+        act[:, 0] = True
+        for stack in (a, a[:1]):                  # many systems, and one (its own branch)
+            g = len(stack)
+            x = _solve_stack(stack, b[:g], act[:g])
+            for i in range(g):
+                on = np.flatnonzero(act[i])
+                ref = np.linalg.lstsq(stack[i][np.ix_(on, on)], b[i, on], rcond=None)[0]
+                assert np.all(x[i, ~act[i]] == 0.0)
+                sub = stack[i][np.ix_(on, on)]
+                # the same solution where it is unique; the same least-squares fit either way
+                np.testing.assert_allclose(sub @ x[i, on], sub @ ref, rtol=0, atol=1e-6 * (1 + np.abs(b[i]).max()))
+                if np.linalg.matrix_rank(sub) == len(on):
+                    np.testing.assert_allclose(x[i, on], ref, rtol=1e-6, atol=1e-8)
+
+
+@pytest.mark.parametrize("args, match", [
+    (dict(raws=[np.zeros((5, 2))], outlines=[]), "1 raw paths but 0 outlines"),
+    (dict(n_points=1), "n_points"),
+    (dict(n_points=True), "n_points"),
+    (dict(margin=-0.01), "margin"),
+    (dict(smoothing=float("nan")), "smoothing"),
+    (dict(raws=[np.zeros((5, 3))]), r"raws\[0\]"),
+    (dict(raws=[np.zeros((0, 2))]), r"raws\[0\]"),
+    (dict(outlines=[np.zeros((1, 2))]), r"outlines\[0\]"),
+])
+def test_bad_input_to_clear_rows_is_refused(args, match):
+    from jaxexo.inference.clearing import clear_rows
+
+    outline = np.asarray(geometry.Obstacle.rectangle(0.1, 0.1, center_y=0.4).outline, float)
+    kw = dict(raws=[np.array([[0.0, 0.0], [0.2, 0.1], [0.4, 0.2], [0.6, 0.1], [0.75, 0.0]])], outlines=[outline],
+              foot_length=FOOT, margin=MARGIN, n_points=100, smoothing=0.005)
+    kw.update(args)
+    with pytest.raises(ValueError, match=match):
+        clear_rows(**kw)
+
+
+def test_the_first_round_measures_the_requested_smoothings_own_spline():
+    """Cleared.initial (the generator's one swing takes the requested smoothing from it when it passes)
+    is smoothing.smooth_candidates' curve of that smoothing, bit for bit, with its deviation bound,
+    and its clearances' minimum and place are the full swept clearance's."""
+    from jaxexo.inference.clearing import clear_rows
+
+    rows = _mixed_scenes(300, seed=21)
+    got = clear_rows([r for _, r in rows], [o for o, _ in rows], FOOT, MARGIN)
+    checked = 0
+    for (outline, raw), g in zip(rows, got):
+        m = len(sm.distinct(raw))
+        if m < sm.DEGREE + 1:
+            assert g.initial is None
+            continue
+        paths, dev = sm.smooth_candidates(raw, 100, [sm.DEFAULT_SMOOTHING, m * 0.004 ** 2])
+        p0, d0, c0, sw0 = g.initial
+        np.testing.assert_array_equal(p0, paths[0])
+        assert d0 == dev[0]
+        full = swept.path_swept_clearance(np, p0, FOOT, outline)
+        assert sw0.min() == full.min() and np.argmin(sw0) == np.argmin(full)
+        if g.rounds == 0:
+            np.testing.assert_array_equal(g.path, p0)
+        checked += 1
+    assert checked > 250

@@ -190,6 +190,40 @@ def test_a_shielded_models_smoothing_is_its_clearance_budget():
     for x, k in zip(s, kw):
         a = gen.generate(x["obstacle"], fallback=None, **k)
         _same(a, gen.generate(x["obstacle"], fallback=None, smoothing=gen.smoothing, **k))
-    batch = gen.generate_batch([x["obstacle"] for x in s], fallback=None, **{key: [k[key] for k in kw] for key in kw[0]})
-    for a, x, k in zip(batch, s, kw):
-        _same(a, gen.generate_batch([x["obstacle"]], fallback=None, smoothing=gen.smoothing, **k)[0])
+    obstacles, per = [x["obstacle"] for x in s], {key: [k[key] for k in kw] for key in kw[0]}
+    for a, b in zip(gen.generate_batch(obstacles, fallback=None, **per),
+                    gen.generate_batch(obstacles, fallback=None, smoothing=gen.smoothing, **per)):
+        _same(a, b)
+
+
+@pytest.mark.parametrize("clearing", [False, True])
+def test_a_swing_short_of_the_goal_is_not_retried_down_to_the_raw_polyline(clearing):
+    """A raw path that stops short of the goal fails whatever its smoothing (every curve ends where the
+    raw path does): it keeps the requested smoothing (corrected or not), no retry note, the verdict
+    says the goal was not reached; the same raw path continued to the goal is retried as before
+    (without the correction: down to less smoothing), and fast equals the reference."""
+    from jaxexo.inference import Obstacle
+
+    gen = _random_generator()
+    gen.clearing = clearing
+    scene = gen.scene(Obstacle.rectangle(0.10, 0.20, center_y=0.40), pivot="obstacle")
+    up = [(0.12, z) for z in np.arange(0.0, 0.231, 0.03)]
+    over = [(y, 0.23) for y in np.arange(0.15, 0.46, 0.03)]
+    down = [(0.48, z) for z in np.arange(0.20, -0.001, -0.03)] + [(0.48, 0.0)]
+    whole = np.array([(0.0, 0.0), (0.06, 0.0)] + up + over + down + [(0.70, 0.0)])
+    short = whole[: 2 + len(up) + len(over)]                    # stops on top of the obstacle
+    for fast in (True, False):
+        t = gen._finish([scene], [short], 100, 0.05, 1.0, None, fast=fast)[0]
+        assert not t.ok and not t.checks.reached_goal and t.smoothing == 0.05
+        assert not any("brought the foot" in n for n in t.notes)
+        w = gen._finish([scene], [whole], 100, 0.05, 1.0, None, fast=fast)[0]
+        assert w.checks.reached_goal and w.checks.clearance_ok
+        if not clearing:
+            assert np.isnan(w.smoothing) or w.smoothing < 0.05
+            assert any("brought the foot" in n for n in w.notes)
+    _same(gen._finish([scene], [short], 100, 0.05, 1.0, None)[0],
+          gen._finish([scene], [short], 100, 0.05, 1.0, None, fast=False)[0])
+    # in a batch too, beside a row that is retried
+    b = gen._finish([scene, scene], [short, whole], 100, 0.05, 1.0, None)
+    assert b[0].smoothing == 0.05 and not b[0].checks.reached_goal
+    assert b[1].checks.clearance_ok

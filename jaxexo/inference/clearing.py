@@ -21,10 +21,20 @@ Constraints, each round, at the samples that fail:
   to it (jaxexo.physics.swept, less the curve's deviation bound), plus ``SLACK``;
 - forward motion: where the heel's y falls, the next sample's y is raised to the previous one's.
 After ``ROUNDS`` rounds, or as soon as nothing fails, or when a correction would move a sample more
-than ``MAX_SHIFT``, the curve is returned with its deviation bound (the same bound as the plain
-spline's: jaxexo.inference.smoothing). The result is only a candidate:
-the generator's verdict (jaxexo.inference.trajectory) judges it exactly like any other curve, and
-a curve that still fails goes through the usual retries.
+than ``MAX_SHIFT`` (or needs more than ``MAX_CONSTRAINTS`` constraints at once), the curve is
+returned with its deviation bound (the same bound as the plain spline's: jaxexo.inference.smoothing).
+The result is only a candidate: the generator's verdict (jaxexo.inference.trajectory) judges it
+exactly like any other curve, and a curve that still fails goes through the usual retries.
+
+Speed (issue 19): ``clear_rows`` corrects many paths at once, each path's arithmetic its own (the
+same curve, bit for bit, in any batch as alone): the splines of one point count in stacked
+products, the exact clearances of all paths in one vectorised call per round and outline size,
+computed exactly only for the moves that can be under the margin's threshold or be the path's
+closest (``fast``; ``fast=False`` computes every move, the reference), and the dual systems in
+stacked Cholesky / LU solves of one size (lstsq's minimum-norm solution where a system is not
+safely positive definite). The last round's clearances of each curve come back with it
+(``Cleared``), so the generator's verdict does not measure the curve again, and the first round's
+(the plain spline of the requested smoothing) decide whether the plain spline already passes.
 """
 
 from __future__ import annotations
@@ -41,101 +51,348 @@ _ACTIVE_SET_STEPS = 8
 _NORMAL_EPS = 1e-4    # m, central-difference step of the clearance gradient
 _MIN_DIAG = 1e-9      # relative: constraints with less freedom than this are left to the retries
 MAX_SHIFT = 0.10      # m: a correction moving a sample further than this is not a small one; not made
+# A correction that needs more constraints than this at once (a curve far inside the margin over most
+# of its length: seen only on paths that never reach the goal) is not a small one either; not made,
+# which also spares a dual system whose solve costs tens of milliseconds.
+MAX_CONSTRAINTS = 64
 
 
 def _outward(path_points, foot_length, outline):
-    """Unit outward normals (k, 2) of the foot's distance to the outline at heel points (k, 2)."""
+    """Unit outward normals (k, 2) of the foot's distance to the outline at heel points (k, 2);
+    ``outline`` (K, 2), or (k, K, 2): one per point."""
     e = _NORMAL_EPS
     probe = path_points[None, :, :] + np.array([[e, 0.0], [-e, 0.0], [0.0, e], [0.0, -e]])[:, None, :]
-    c = geometry.foot_clearance(np, probe.reshape(-1, 2), foot_length, outline[None]).reshape(4, -1)
+    ol = outline[None] if outline.ndim == 3 else outline[None, None]
+    c = geometry.foot_clearance(np, probe, foot_length, ol)                 # (4, k)
     g = np.stack([c[0] - c[1], c[2] - c[3]], axis=-1)
     norm = np.linalg.norm(g, axis=-1, keepdims=True)
     return np.where(norm > 0.0, g / np.maximum(norm, 1e-300), [0.0, 1.0])
 
 
-def _dual(a: np.ndarray, need: np.ndarray) -> np.ndarray:
-    """mu >= 0 minimising 1/2 mu' a mu - need' mu (a small, positive semi-definite): an active-set
-    solve, every constraint active first and the ones whose multiplier comes out negative dropped."""
-    mu = np.zeros(len(need))
-    diag = np.diag(a)
+# Smallest ratio of a Cholesky factor's diagonal entries (squared) for which _solve_stack trusts an
+# LU solve; below it the matrix may be nearly singular and lstsq's minimum-norm solution is taken.
+_PD_RATIO = 1e-10
+
+
+def _solve_stack(a: np.ndarray, b: np.ndarray, act: np.ndarray) -> np.ndarray:
+    """Solutions x of a[act, act] x = b[act] for a stack of small symmetric positive semi-definite a
+    (G, k, k), b (G, k) and the active constraints ``act`` (G, k) (x = 0 elsewhere). Each system is
+    solved on its active constraints alone, in stacks of one size (LAPACK's arithmetic depends on
+    the size, so a path gets the same numbers in any batch as on its own: these systems can be
+    ill-conditioned enough to amplify a last-bit difference)."""
+    g, k = act.shape
+    x = np.zeros((g, k))
+    if g == 1:      # one swing: the same system, fewer NumPy calls
+        on = np.flatnonzero(act[0])
+        if on.size:
+            x[0, on] = _solve_same(a[0][np.ix_(on, on)][None], b[0, on][None])[0]
+        return x
+    order = np.argsort(~act, axis=1, kind="stable")      # each row's active constraints first, in order
+    count = act.sum(axis=1)
+    for kk in np.unique(count):
+        if kk == 0:
+            continue
+        sel = np.flatnonzero(count == kk)
+        idx = order[sel, :kk]
+        sub = a[sel[:, None, None], idx[:, :, None], idx[:, None, :]]
+        x[sel[:, None], idx] = _solve_same(sub, np.take_along_axis(b[sel], idx, axis=1))
+    return x
+
+
+def _solve_same(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Solutions of a x = b for a stack (G, k, k) of symmetric positive semi-definite systems of one
+    size: one stacked LU solve for those whose Cholesky factor exists with a diagonal that is not
+    degenerate (there LU and lstsq agree), lstsq's minimum-norm solution one by one for the others.
+    Why: LAPACK's SVD-based lstsq costs 20-1000 us a call on these 5-60 constraint systems (far
+    more when OpenBLAS's threads compete on a busy machine), a stacked Cholesky and LU a few us a
+    system; the curve is judged by the exact verdict whatever the solve."""
+    g = len(a)
+    try:
+        low = np.linalg.cholesky(a)
+        pd = np.ones(g, bool)
+    except np.linalg.LinAlgError:     # some are not positive definite: find which, one by one
+        low = np.zeros_like(a)
+        pd = np.zeros(g, bool)
+        for i in range(g):
+            try:
+                low[i] = np.linalg.cholesky(a[i: i + 1])[0]
+                pd[i] = True
+            except np.linalg.LinAlgError:
+                pass
+    d = np.diagonal(low, axis1=1, axis2=2)
+    pd &= np.min(d, axis=1) ** 2 > _PD_RATIO * np.max(d, axis=1) ** 2
+    x = np.zeros(b.shape)
+    if pd.any():
+        x[pd] = np.linalg.solve(a[pd], b[pd][..., None])[..., 0]
+    for i in np.flatnonzero(~pd | ~np.all(np.isfinite(x), axis=1)):
+        x[i] = np.linalg.lstsq(a[i], b[i], rcond=None)[0]
+    return x
+
+
+def _dual(a: np.ndarray, need: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """Per row, mu >= 0 minimising 1/2 mu' a mu - need' mu over the ``valid`` constraints (a (G, k, k)
+    positive semi-definite, padded past each row's constraints): an active-set solve, every
+    constraint active first and the ones whose multiplier comes out negative dropped (mu = 0 for a
+    row that does not settle within _ACTIVE_SET_STEPS)."""
+    g, k = need.shape
+    mu = np.zeros((g, k))
+    diag = np.diagonal(a, axis1=1, axis2=2)
+    top = np.max(np.where(valid, diag, 0.0), axis=1, keepdims=True)
     # A constraint the spline cannot meet (no freedom along it: a path smoothed to its straight line
     # keeps only the linear modes) gets no multiplier; the verdict then sends the path to the retries.
-    act = np.flatnonzero(diag > _MIN_DIAG * max(float(diag.max()), 1e-300))
+    act = valid & (diag > _MIN_DIAG * np.maximum(top, 1e-300))
+    todo = np.arange(g)
     for _ in range(_ACTIVE_SET_STEPS):
-        if act.size == 0:
+        todo = todo[act[todo].any(axis=1)]
+        if todo.size == 0:
             break
-        sol = np.linalg.lstsq(a[np.ix_(act, act)], need[act], rcond=None)[0]
-        if np.all(sol >= 0.0):
-            mu[act] = sol
-            break
-        act = act[sol > 0.0]
+        ac = act[todo]
+        sol = _solve_stack(a[todo], need[todo], ac)
+        settled = np.all((sol >= 0.0) | ~ac, axis=1)
+        mu[todo[settled]] = np.where(ac[settled], sol[settled], 0.0)
+        act[todo] = ac & (sol > 0.0)
+        todo = todo[~settled]
     return mu
+
+
+# m added to the threshold below which clear_rows asks for exact move clearances (fast): a move
+# reported at or above the padded threshold has a shortfall below zero however its value rounds.
+_BELOW_PAD = 1e-7
+
+
+class Cleared:
+    """One path's correction (``clear_rows``): the curve ``path`` (n, 2), its deviation bound, the
+    rounds of correction used, and the clearances its last round measured: ``point_clearance`` (n,)
+    and ``move_clearance`` (n-1,), each path's minimum and the move attaining it exact (fast: other
+    entries may be lower bounds above the minimum and above the margin; None for a path too short
+    for a spline, which is resampled, not corrected)."""
+
+    __slots__ = ("path", "deviation", "rounds", "point_clearance", "move_clearance", "initial", "_coef", "_ends",
+                 "_m")
+
+    def __init__(self, path, deviation, rounds, point_clearance=None, move_clearance=None, coef=None, ends=None, m=0,
+                 initial=None):
+        self.path, self.deviation, self.rounds = path, deviation, rounds
+        self.point_clearance, self.move_clearance = point_clearance, move_clearance
+        self._coef, self._ends, self._m = coef, ends, m
+        # (path, deviation, point clearances, move clearances) of the plain spline, before any
+        # correction (the same numbers as smoothing.smooth_candidates' curve of this smoothing),
+        # measured like the last round's; None for a path resampled, not smoothed
+        self.initial = initial
+
+    def dense(self, dense_points: int) -> np.ndarray:
+        """The same curve sampled at ``dense_points`` parameters (for a denser look)."""
+        if self._coef is None:
+            return sm.linear_resample(self._ends, dense_points)
+        out = sm._basis(self._m, dense_points)[2] @ self._coef
+        np.maximum(out[:, 1], 0.0, out=out[:, 1])
+        out[0], out[-1] = self._ends[0], self._ends[-1]
+        return out
 
 
 def clear_smooth(raw: np.ndarray, outline: np.ndarray, foot_length: float, margin: float,
                  n_points: int = sm.DEFAULT_POINTS, smoothing: float = sm.DEFAULT_SMOOTHING,
-                 dense_points: int | None = None):
+                 dense_points: int | None = None, fast: bool = True):
     """The smoothed heel path (n_points, 2) of a raw agent path, corrected to keep ``margin`` (m) from
     ``outline`` and to move forward; returns (path, deviation bound m, rounds of correction used), and
-    with ``dense_points`` also the same curve sampled at that many parameters (for a denser look)."""
-    pts = sm.distinct(raw)
-    m = len(pts)
-    if m < sm.DEGREE + 1:
-        path, dev = sm.linear_resample(pts, n_points, with_deviation=True)
-        if dense_points:
-            return path, dev, 0, sm.linear_resample(pts, dense_points)
-        return path, dev, 0
-    zm, dm, em, qm = sm._basis(m, n_points)
-    z = zm @ pts
-    lam = sm._solve_lambda(dm[None], np.sum(z * z, axis=-1)[None], np.array([float(smoothing)]))[0]
-    shrink = (dm == 0.0).astype(float) if np.isinf(lam) else 1.0 / (1.0 + lam * dm)
-    zc = z * shrink[:, None]
+    with ``dense_points`` also the same curve sampled at that many parameters (for a denser look).
+    ``fast``: see ``clear_rows`` (the same curve either way)."""
+    got = clear_rows([raw], [outline], foot_length, margin, n_points, smoothing, fast)[0]
+    if dense_points:
+        return got.path, got.deviation, got.rounds, got.dense(int(dense_points))
+    return got.path, got.deviation, got.rounds
+
+
+def _check(raws, outlines, foot_length, margin, n_points, smoothing):
+    if len(raws) != len(outlines):
+        raise ValueError(f"clear_rows: {len(raws)} raw paths but {len(outlines)} outlines")
+    if isinstance(n_points, bool) or not isinstance(n_points, (int, np.integer)) or n_points < 2:
+        raise ValueError(f"n_points must be an integer >= 2, got {n_points!r}")
+    for name, v in (("foot_length", foot_length), ("margin", margin), ("smoothing", smoothing)):
+        if not np.isfinite(v) or v < 0.0:
+            raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
+    for i, (raw, outline) in enumerate(zip(raws, outlines)):
+        if np.ndim(raw) != 2 or np.shape(raw)[1] != 2 or len(raw) == 0:
+            raise ValueError(f"raws[{i}]: expected heel points (M, 2) with M >= 1, got shape {np.shape(raw)}")
+        if np.ndim(outline) != 2 or np.shape(outline)[1] != 2 or len(outline) < 2:
+            raise ValueError(f"outlines[{i}]: expected an outline (K, 2) with K >= 2, got shape {np.shape(outline)}")
+
+
+class _Group:
+    """The paths of one point count M (one spline basis): their coefficients (G, M, 2) and the rows
+    still being corrected (``alive``, indices into the group)."""
+
+    def __init__(self, m, rows, pts, n_points, smoothing):
+        self.m, self.rows = m, np.asarray(rows)
+        zm, dm, self.em, self.qm = sm._basis(m, n_points)
+        z = np.matmul(zm, pts)                                            # (G, M, 2)
+        lam = sm._solve_lambda(np.broadcast_to(dm, (len(rows), m)), np.sum(z * z, axis=-1),
+                               np.full(len(rows), float(smoothing)))
+        with np.errstate(invalid="ignore"):
+            self.shrink = np.where(np.isinf(lam)[:, None], (dm == 0.0).astype(float)[None],
+                                   1.0 / (1.0 + lam[:, None] * dm))
+        self.zc = z * self.shrink[..., None]
+        self.first, self.last = pts[:, 0], pts[:, -1]
+        self.alive = np.arange(len(rows))
+        self.out = self.dev = None      # the live rows' curves (G, n, 2) and deviation bounds, per round
+
+
+def clear_rows(raws, outlines, foot_length: float, margin: float, n_points: int = sm.DEFAULT_POINTS,
+               smoothing: float = sm.DEFAULT_SMOOTHING, fast: bool = True) -> list[Cleared]:
+    """``clear_smooth`` of many raw paths (M_i, 2) on their outlines (K_i, 2): a ``Cleared`` per path.
+
+    Each path's correction is its own; the arithmetic runs on all paths at once: the splines of the
+    paths with the same point count in stacked products, the exact clearances in one vectorised call
+    per outline size, the dual systems in stacked solves (``_dual``). ``fast`` computes a move's
+    swept clearance exactly only where it can be under the threshold ``margin + SLACK + deviation``
+    or be the path's closest (jaxexo.physics.swept.path_clearance_pruned: the shortfalls that steer
+    the correction are the same numbers, and every other move is certainly above the threshold);
+    ``fast=False`` computes every move exactly (the reference). Both give the same curves."""
+    _check(raws, outlines, foot_length, margin, n_points, smoothing)
+    outlines = [np.asarray(o, np.float64) for o in outlines]
+    res: list[Cleared | None] = [None] * len(raws)
+    by_m: dict[int, list[int]] = {}
+    pts_all = []
+    for i, raw in enumerate(raws):
+        pts = sm.distinct(raw)
+        pts_all.append(pts)
+        if len(pts) < sm.DEGREE + 1:
+            path, dev = sm.linear_resample(pts, n_points, with_deviation=True)
+            res[i] = Cleared(path, dev, 0, ends=pts)
+        else:
+            by_m.setdefault(len(pts), []).append(i)
+    groups = [_Group(m, rows, np.stack([pts_all[i] for i in rows]), n_points, smoothing) for m, rows in by_m.items()]
     h2_8 = (1.0 / (n_points - 1)) ** 2 / 8.0
+    sizes = np.array([len(o) for o in outlines])
+    # every outline of one size stacked once (k -> (rows of that size, K, 2)), and each row's place in it
+    place = np.zeros(len(outlines), np.int64)
+    stacks = {}
+    for k in np.unique(sizes):
+        rows_k = np.flatnonzero(sizes == k)
+        place[rows_k] = np.arange(len(rows_k))
+        stacks[int(k)] = np.stack([outlines[i] for i in rows_k])
+    lib = (sizes, place, stacks)
     for r in range(ROUNDS + 1):
-        out = em @ zc
-        curv = np.max(np.abs(qm @ zc), axis=0)
-        dev = h2_8 * float(np.sqrt(np.sum(curv * curv)))
-        np.maximum(out[:, 1], 0.0, out=out[:, 1])
-        out[0], out[-1] = pts[0], pts[-1]
-        short = margin + SLACK - (swept.path_swept_clearance(np, out, foot_length, outline) - dev)   # (n-1,)
-        fall = out[:-1, 0] - out[1:, 0]                                                               # (n-1,)
-        if (short.max() <= 0.0 and fall.max() <= 0.0) or r == ROUNDS:
-            return _result(out, dev, r, zc, pts, m, dense_points)
-        rows, needs = [], []
-        bad = np.flatnonzero(short > 0.0)
-        idx = np.unique(np.concatenate([bad, bad + 1]))
-        idx = idx[(idx > 0) & (idx < n_points - 1)]      # the pinned ends do not move
-        if idx.size:
-            s_pad = np.concatenate([[0.0], short, [0.0]])
-            need = _GROW * np.maximum(np.maximum(s_pad[idx], s_pad[idx + 1]), 0.0)
-            normal = _outward(out[idx], foot_length, outline)
-            rows.append(em[idx][:, :, None] * normal[:, None, :])             # (k, M, 2)
-            needs.append(need)
-        back = np.flatnonzero(fall > 0.0)
-        back = back[back + 1 < n_points - 1]
-        if back.size:
-            f = np.zeros((len(back), m, 2))
-            f[:, :, 0] = em[back + 1] - em[back]
-            rows.append(f)
-            needs.append(_GROW * fall[back])
-        if not rows:
-            return _result(out, dev, r, zc, pts, m, dense_points)
-        f = np.concatenate(rows)
-        need = np.concatenate(needs)
-        fs = f * shrink[None, :, None]
-        a = np.einsum("kmc,lmc->kl", fs, f)
-        mu = _dual(a, need)
-        step = np.einsum("k,kmc->mc", mu, fs)
-        if not np.all(np.isfinite(step)) or np.max(np.abs(em @ step)) > MAX_SHIFT:
-            return _result(out, dev, r, zc, pts, m, dense_points)
-        zc = zc + step
-    raise AssertionError("unreachable: the last round returns")
+        live = [g for g in groups if g.alive.size]
+        if not live:
+            break
+        for g in live:
+            zc = g.zc[g.alive]
+            out = np.matmul(g.em, zc)                                     # (G, n, 2)
+            curv = np.max(np.abs(np.matmul(g.qm, zc)), axis=1)            # (G, 2): max |c''| per axis
+            g.dev = h2_8 * np.sqrt(np.sum(curv * curv, axis=-1))
+            np.maximum(out[..., 1], 0.0, out=out[..., 1])
+            out[:, 0], out[:, -1] = g.first[g.alive], g.last[g.alive]
+            g.out = out
+        out = np.concatenate([g.out for g in live])                      # (A, n, 2): every live row
+        dev = np.concatenate([g.dev for g in live])
+        row = np.concatenate([g.rows[g.alive] for g in live])
+        c, sw = _clearances(out, dev, row, lib, foot_length, margin, fast)
+        if r == 0:
+            initial = {int(i): (out[a], float(dev[a]), c[a], sw[a]) for a, i in enumerate(row)}
+        short = margin + SLACK - (sw - dev[:, None])                      # (A, n-1)
+        fall = out[:, :-1, 0] - out[:, 1:, 0]                             # (A, n-1)
+        going = ~(((short.max(axis=1) <= 0.0) & (fall.max(axis=1) <= 0.0)) | (r == ROUNDS))
+        normal = _normals(out, short, going, row, lib, foot_length) if going.any() else None
+        off = 0
+        for g in live:
+            span = slice(off, off + len(g.alive))
+            off += len(g.alive)
+            moved = (_correct(g, short[span], fall[span], going[span], normal[span], n_points) if normal is not None
+                     else np.zeros(len(g.alive), bool))
+            for j, k in enumerate(g.alive):
+                if not moved[j]:
+                    a = span.start + j
+                    i = int(g.rows[k])
+                    res[i] = Cleared(out[a], float(dev[a]), r, c[a], sw[a], g.zc[k], pts_all[i], g.m, initial[i])
+            g.alive = g.alive[moved]
+    return res
 
 
-def _result(out, dev, rounds, zc, pts, m, dense_points):
-    if not dense_points:
-        return out, dev, rounds
-    dense = sm._basis(m, dense_points)[2] @ zc
-    np.maximum(dense[:, 1], 0.0, out=dense[:, 1])
-    dense[0], dense[-1] = pts[0], pts[-1]
-    return out, dev, rounds, dense
+def _clearances(out, dev, row, lib, foot_length, margin, fast):
+    """(point clearances (A, n), move clearances (A, n-1)) of the live rows' curves, one call per
+    outline size."""
+    sizes, place, stacks = lib
+    a, n = out.shape[:2]
+    c = np.empty((a, n))
+    sw = np.empty((a, n - 1))
+    rs = sizes[row]
+    for k in np.unique(rs):
+        sel = np.flatnonzero(rs == k)
+        ol = stacks[int(k)][place[row[sel]]]
+        if fast:
+            c[sel], sw[sel] = swept.path_clearance_pruned(out[sel], foot_length, ol,
+                                                          below=margin + SLACK + dev[sel] + _BELOW_PAD)
+        else:
+            c[sel] = geometry.foot_clearance(np, out[sel], foot_length, ol[:, None])
+            sw[sel] = swept.path_swept_clearance(np, out[sel], foot_length, ol, c[sel])
+    return c, sw
+
+
+def _clear_samples(short, going, n_points):
+    """(A, n) the samples that get a clearance constraint: both ends of every move short of the
+    margin, the pinned ends excepted, in rows still ``going``."""
+    bad = (short > 0.0) & going[:, None]
+    s = np.zeros((len(short), n_points), bool)
+    s[:, :-1] |= bad
+    s[:, 1:] |= bad
+    s[:, 0] = s[:, -1] = False          # the pinned ends do not move
+    return s
+
+
+def _normals(out, short, going, row, lib, foot_length):
+    """(A, n, 2) outward normals at the constrained samples (zero elsewhere), one foot-clearance call
+    per outline size."""
+    sizes, place, stacks = lib
+    normal = np.zeros(out.shape)
+    ra, ia = np.nonzero(_clear_samples(short, going, out.shape[1]))
+    if ra.size:
+        rs = sizes[row[ra]]
+        for k in np.unique(rs):
+            sel = np.flatnonzero(rs == k)
+            ol = stacks[int(k)][place[row[ra[sel]]]]
+            normal[ra[sel], ia[sel]] = _outward(out[ra[sel], ia[sel]], foot_length, ol)
+    return normal
+
+
+def _correct(g, short, fall, going, normal, n_points) -> np.ndarray:
+    """One round's correction of group g's live rows (short, fall (G, n-1), going (G,), normal
+    (G, n, 2)): their coefficients moved in place; returns (G,) which rows were moved (the others
+    are finished: nothing fails, nothing can be done, or the correction would not be a small one)."""
+    em, m = g.em, g.m
+    moved = going.copy()
+    samp = _clear_samples(short, going, n_points)
+    back = (fall > 0.0) & going[:, None]
+    back[:, n_points - 2:] = False                  # the last sample is pinned
+    k_clear = samp.sum(axis=1)
+    k = k_clear + back.sum(axis=1)
+    moved &= (k > 0) & (k <= MAX_CONSTRAINTS)
+    rows = np.flatnonzero(moved)
+    if rows.size == 0:
+        return moved
+    kmax = int(k[rows].max())
+    f = np.zeros((len(rows), kmax, m, 2))
+    need = np.zeros((len(rows), kmax))
+    # clearance constraints first, then the forward ones, each in sample order (one slot each)
+    lr, ia = np.nonzero(samp[rows])
+    if lr.size:
+        slot = np.arange(lr.size) - np.searchsorted(lr, lr)
+        s_pad = np.pad(short[rows], ((0, 0), (1, 1)))
+        need[lr, slot] = _GROW * np.maximum(np.maximum(s_pad[lr, ia], s_pad[lr, ia + 1]), 0.0)
+        f[lr, slot] = em[ia][:, :, None] * normal[rows[lr], ia][:, None, :]
+    lb, jb = np.nonzero(back[rows])
+    if lb.size:
+        slot = k_clear[rows][lb] + np.arange(lb.size) - np.searchsorted(lb, lb)
+        need[lb, slot] = _GROW * fall[rows[lb], jb]
+        f[lb, slot, :, 0] = em[jb + 1] - em[jb]
+    valid = np.arange(kmax)[None, :] < k[rows][:, None]
+    live = g.alive[rows]
+    fs = f * g.shrink[live][:, None, :, None]
+    a = np.einsum("gkmc,glmc->gkl", fs, f)
+    mu = _dual(a, need, valid)
+    step = np.einsum("gk,gkmc->gmc", mu, fs)
+    shift = np.max(np.abs(np.matmul(em, step)), axis=(1, 2))
+    ok = np.all(np.isfinite(step), axis=(1, 2)) & (shift <= MAX_SHIFT)
+    g.zc[live[ok]] += step[ok]
+    moved[rows[~ok]] = False
+    return moved

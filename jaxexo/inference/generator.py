@@ -32,7 +32,11 @@ reference's own float32 arithmetic one move per row (``_batch_choice``; the full
 whose first BATCH_ROUNDS moves fail). Smoothing: besides the requested s, per-path candidates
 (CANDIDATE_RESIDUALS: s = M rho^2) are smoothed and checked in one pass and the smoothest that keeps
 the margin is used (``Trajectory.smoothing`` reports it; a note says a candidate was used); the
-retries below remain for the rest.
+retries below remain for the rest. The spline correction runs on all of a batch's rows at once
+(jaxexo.inference.clearing.clear_rows) and hands back the clearances its last round measured, which
+the verdict reads instead of measuring the curve again; one swing runs the correction first, its
+first round measuring the requested smoothing's own spline (the answer when it passes), and smooths
+the other candidates only when the correction fails.
 
 Speed (issue 12): ``fast=True`` (default) computes the swept clearance exactly only for the moves
 that can be a path's closest (jaxexo.physics.swept.swept_lower_bound), smooths one path without the
@@ -54,7 +58,7 @@ from jaxexo.physics import dynamics, geometry, swept
 from jaxexo.config.schema import MAX_SWING_DURATION
 from jaxexo.physics.dynamics import Scene, scalar
 from jaxexo.inference import blas, smoothing as sm, trajectory
-from jaxexo.inference.clearing import clear_smooth
+from jaxexo.inference.clearing import clear_rows
 from jaxexo.inference.network import FoldedQNetwork, StepNetwork
 from jaxexo.inference.shield import ScalarShield
 from jaxexo.inference.trajectory import DEFAULT_DURATION, Trajectory, TrajectoryBatch, TrajectoryError, assemble
@@ -236,28 +240,30 @@ class TrajectoryGenerator:
         dz = np.maximum(hz - lay.height, 0.0)
         return np.hypot(dy, dz) < self.sp.shield_clearance + self.sp.step_size + 1e-4
 
-    def _clear(self, hy, hz, ends, outline, pruned: bool) -> np.ndarray:
+    def _clear(self, hy, hz, ends, outline, pruned: bool, c_here=None) -> np.ndarray:
         """dynamics.moves_keep_clearance for heels (B,) and move ends (B, F, 2), with its NumPy branch
         (pruned or not: the same decisions, issue 12) given rather than chosen by the array's size,
-        so that a subset of the moves or rows is decided exactly as in the whole step's call."""
+        so that a subset of the moves or rows is decided exactly as in the whole step's call.
+        ``c_here``: the heels' foot clearances when known (elementwise, so the same numbers)."""
         p = self.np_params
-        if pruned:
-            here = np.stack([hy, hz], axis=-1)
+        here = np.stack([hy, hz], axis=-1)
+        if c_here is None:
             c_here = geometry.foot_clearance(np, here, p.foot_length, outline)
+        if pruned:
             return dynamics._moves_keep_clearance_pruned(p, here, c_here, ends, outline)
         # the unpruned branch of moves_keep_clearance, written out (the same elementwise arithmetic)
-        here = np.stack([hy, hz], axis=-1)
-        c_here = geometry.foot_clearance(np, here, p.foot_length, outline)
         moves = np.moveaxis(ends, -2, 0)
         d_move = np.moveaxis(swept.swept_distance(np, here + 0.0 * moves, moves, p.foot_length, outline), 0, -1)
         return d_move >= np.minimum(p.shield_clearance, c_here)[..., None] - dynamics.SHIELD_SLACK
 
-    def _admissible_rows(self, hy, hz, lay, pruned: bool | None = None, near=None, last=None) -> np.ndarray:
+    def _admissible_rows(self, hy, hz, lay, pruned: bool | None = None, near=None, c_here=None,
+                         last=None) -> np.ndarray:
         """(B, A) the shield's admissible moves (jaxexo.physics.dynamics.admissible_moves) of many heels,
         float32 rows of stacked scenes like the training environment; the exact clearance is computed
         only for the ``_near`` rows (elsewhere no move can fail it, so the mask is the same).
         ``pruned``: the clearance's NumPy branch (None: by size, as moves_keep_clearance chooses);
-        ``last`` (B,): the moves just made (-1: none)."""
+        ``c_here`` (B,): the heels' foot clearances where ``near`` (with ``pruned`` given); ``last``
+        (B,): the moves just made (-1: none)."""
         p = self.np_params
         near = self._near(hy, hz, lay) if near is None else near
         clear = np.ones((len(hy), self._n_forward), bool)
@@ -266,7 +272,8 @@ class TrajectoryGenerator:
             if pruned is None:
                 clear[near] = dynamics.moves_keep_clearance(np, p, hy[near], hz[near], ends, lay.outline[near])
             else:
-                clear[near] = self._clear(hy[near], hz[near], ends, lay.outline[near], pruned)
+                clear[near] = self._clear(hy[near], hz[near], ends, lay.outline[near], pruned,
+                                          None if c_here is None else c_here[near])
         return dynamics.admissible_moves(np, p, hy, hz, lay, clear=clear, last_action=last)
 
     def _batch_choice(self, hy, hz, lay, q, last) -> np.ndarray:
@@ -279,18 +286,24 @@ class TrajectoryGenerator:
         near = self._near(hy, hz, lay)
         # the branch the whole step's moves_keep_clearance call takes (by its array's size)
         pruned = int(near.sum()) * self._n_forward * 2 > dynamics._PRUNE_FROM
+        # the near heels' foot clearances once per step (every round and the full mask read them)
+        c_here = np.zeros(len(hy), np.float32)
+        if near.any():
+            c_here[near] = geometry.foot_clearance(np, np.stack([hy[near], hz[near]], axis=-1),
+                                                   self.np_params.foot_length, lay.outline[near])
         out = order[:, 0].copy()
         miss = np.arange(len(hy))
         for r in range(self.BATCH_ROUNDS):     # the r-th best move of the rows still undecided
             a = order[miss, r]
-            ok = self._one_move_ok(hy[miss], hz[miss], _take(lay, miss), near[miss], a, pruned, last[miss])
+            ok = self._one_move_ok(hy[miss], hz[miss], _take(lay, miss), near[miss], a, pruned, last[miss],
+                                   c_here[miss])
             out[miss[ok]] = a[ok]
             miss = miss[~ok]
             if not miss.size:
                 break
         if miss.size:
             sub = _take(lay, miss)
-            mask = self._admissible_rows(hy[miss], hz[miss], sub, pruned, near[miss], last[miss])
+            mask = self._admissible_rows(hy[miss], hz[miss], sub, pruned, near[miss], c_here[miss], last[miss])
             out[miss] = dynamics.greedy_action(np, q[miss], mask)
         self.shield_stats[2] += len(hy)
         self.shield_stats[3] += miss.size
@@ -299,17 +312,18 @@ class TrajectoryGenerator:
     # forward moves checked one at a time per row before the full mask (``_batch_choice``)
     BATCH_ROUNDS = 4
 
-    def _one_move_ok(self, hy, hz, lay, near, a, pruned: bool, last) -> np.ndarray:
+    def _one_move_ok(self, hy, hz, lay, near, a, pruned: bool, last, c_here=None) -> np.ndarray:
         """(B,) whether move a (B,) passes all of admissible_moves' conditions (its column of the
-        mask before the fallbacks; ``last`` (B,) the moves just made), in the same float32 elementwise
-        arithmetic."""
+        mask before the fallbacks; ``last`` (B,) the moves just made, ``c_here`` as ``_admissible_rows``),
+        in the same float32 elementwise arithmetic."""
         p = self.np_params
         d = p.directions[a]
         y, z = dynamics.move_heel(np, p, hy, hz, d[:, 0], d[:, 1])
         new = np.stack([y, z], axis=-1)[:, None, :]      # (B, 1, 2)
         clear = np.ones((len(hy), 1), bool)
         if near.any():
-            clear[near] = self._clear(hy[near], hz[near], new[near], lay.outline[near], pruned)
+            clear[near] = self._clear(hy[near], hz[near], new[near], lay.outline[near], pruned,
+                                      None if c_here is None else c_here[near])
         return dynamics.shield_conditions(np, p, hy, hz, lay, a[:, None], new, clear, last)[:, 0]
 
     def rollout_batch(self, scenes, fast: bool = True) -> tuple[list[np.ndarray], list[np.ndarray]]:
@@ -469,48 +483,111 @@ class TrajectoryGenerator:
 
     def _one_pass(self, scene, raw, n_points: int, smoothing: float, fast: bool = True):
         """One swing's candidates smoothed together (smoothing.smooth_candidates); the first that passes
-        is used (the requested smoothing when none does: the retries then follow). ``fast`` checks them
-        all at once, each path's closest move exact (and hands the chosen one's clearances to
-        assemble); the reference checks them one at a time, every move's swept clearance exact."""
+        is used (the requested smoothing when none does: the retries then follow), except that the
+        requested smoothing's spline corrected (jaxexo.inference.clearing) comes before the other
+        candidates when the requested one fails. ``fast`` checks the requested smoothing alone first
+        (it is the answer when it passes), then the correction, and the other candidates together
+        only when both fail, each path's closest move exact, and hands the chosen curve's clearances
+        to assemble; the reference checks every candidate one at a time, every move's swept
+        clearance exact. Both choose the same curve."""
         cands = self._candidates(raw, smoothing)
+        if fast and self.clearing:
+            # The correction first: its first round measures the requested smoothing's own spline (the
+            # same numbers as smooth_candidates' first curve, tests/test_clearing.py), which is the
+            # answer when it passes; the other candidates are smoothed only when the correction fails.
+            got = clear_rows([raw], [scene.outline], self.sp.foot_length, self.sp.min_clearance, n_points,
+                             smoothing, fast)[0]
+            if got.initial is not None:
+                p0, d0, c0, sw0 = got.initial
+                if self._passes(sw0.min(), d0, swept.backward_motion(np, p0[:, 0]) + 2.0 * d0):
+                    return (p0[None], np.array([d0]), [cands[0]], [()],
+                            self._measured(scene, p0[None], c0[None], sw0[None], np.array([d0])))
+                cleared = self._judge_cleared([scene], [raw], [0], [got], smoothing, fast)
+                if cleared:
+                    path, used, note, d, clear = cleared[0][1]
+                    return path[None], np.array([d]), [used], [note], self._measured(
+                        scene, path[None], clear[0][None], clear[1][None], np.array([d]))
+                paths, dev = sm.smooth_candidates(raw, n_points, cands)
+                ok, c, sw = np.zeros(1, bool), c0[None], sw0[None]
+                if len(cands) > 1:
+                    rest, c_rest, sw_rest = self._margin_ok([scene] * (len(cands) - 1), paths[1:], dev[1:],
+                                                            with_clearances=True)
+                    ok = np.concatenate([ok, rest])
+                    c, sw = np.concatenate([c, c_rest]), np.concatenate([sw, sw_rest])
+                j = int(np.argmax(ok)) if ok.any() else 0
+                notes = [self._candidate_note(smoothing, cands[j])] if j else [()]
+                return (paths[j: j + 1], dev[j: j + 1], [cands[j]], notes,
+                        self._measured(scene, paths[j: j + 1], c[j: j + 1], sw[j: j + 1], dev[j: j + 1]))
         paths, dev = sm.smooth_candidates(raw, n_points, cands)
         if fast:
-            ok, c, sw = self._margin_ok([scene] * len(cands), paths, dev, with_clearances=True)
+            ok, c, sw = self._margin_ok([scene], paths[:1], dev[:1], with_clearances=True)
+            if not ok[0]:
+                cleared = self._cleared_rows([scene], [raw], [0], n_points, smoothing, fast)
+                if cleared:
+                    path, used, note, d, clear = cleared[0][1]
+                    measured = (None if clear is None else
+                                self._measured(scene, path[None], clear[0][None], clear[1][None], np.array([d])))
+                    return path[None], np.array([d]), [used], [note], measured
+                if len(cands) > 1:
+                    rest, c_rest, sw_rest = self._margin_ok([scene] * (len(cands) - 1), paths[1:], dev[1:],
+                                                            with_clearances=True)
+                    ok = np.concatenate([ok, rest])
+                    c, sw = np.concatenate([c, c_rest]), np.concatenate([sw, sw_rest])
         else:
             ok = np.array([self._margin_ok_reference(scene, paths[k], dev[k]) for k in range(len(cands))])
+            if not ok[0]:
+                # the requested smoothing cuts the margin: its spline corrected comes before any candidate
+                cleared = self._cleared_rows([scene], [raw], [0], n_points, smoothing, fast)
+                if cleared:
+                    path, used, note, d, _ = cleared[0][1]
+                    return path[None], np.array([d]), [used], [note], None      # assemble measures it
         j = int(np.argmax(ok)) if ok.any() else 0
-        if not ok[0]:
-            # the requested smoothing cuts the margin: its spline corrected comes before any candidate
-            cleared = self._cleared_rows([scene], [raw], [0], n_points, smoothing, fast)
-            if cleared:
-                path, used, note, d = cleared[0][1]
-                return path[None], np.array([d]), [used], [note], None      # assemble measures it
-        measured = None
-        if fast:
-            measured = trajectory.measure(self.sp, paths[j: j + 1], c[j: j + 1], np.array([scene.pivot_y]),
-                                          np.array([scene.goal_y]), sw[j: j + 1], dev[j: j + 1])
+        measured = self._measured(scene, paths[j: j + 1], c[j: j + 1], sw[j: j + 1], dev[j: j + 1]) if fast else None
         notes = [self._candidate_note(smoothing, cands[j])] if j else [()]
         return paths[j: j + 1], dev[j: j + 1], [cands[j]], notes, measured
+
+    def _measured(self, scene, path, c, sw, dev):
+        """trajectory.measure of one scene's path (1, N, 2) from its clearances, for assemble."""
+        return trajectory.measure(self.sp, path, c, np.array([scene.pivot_y]), np.array([scene.goal_y]), sw, dev)
 
     CLEARED_NOTE = ("the spline of smoothing {s:g} m^2 is corrected where it came within the safety margin or "
                     "moved the heel back (jaxexo.inference.clearing)")
 
     def _cleared_rows(self, scenes, raws, rows, n_points: int, smoothing: float, fast: bool):
         """Rows whose requested smoothing failed: the requested spline corrected to keep the margin and
-        move forward (jaxexo.inference.clearing), as (row, (path, smoothing, notes, deviation)) for the
-        rows whose corrected curve passes the verdict's clearance and backward checks."""
+        move forward (jaxexo.inference.clearing, all rows' rounds together), as (row, (path, smoothing,
+        notes, deviation, clearances)) for the rows whose corrected curve passes the verdict's
+        clearance and backward checks. ``fast`` judges each curve on the clearances that the
+        correction's last round measured (each path's closest move exact, as ``_margin_ok``) and
+        returns them as (point, move) clearances for assemble (None where the path was resampled,
+        not corrected); the reference re-measures each curve on its own, every move exact."""
         if not self.clearing or len(rows) == 0:
             return []
-        got = [(int(i), clear_smooth(raws[i], scenes[i].outline, self.sp.foot_length, self.sp.min_clearance,
-                                     n_points, smoothing)) for i in rows]
-        paths = np.stack([r[0] for _, r in got])
-        dev = np.array([r[1] for _, r in got])
+        rows = [int(i) for i in rows]
+        got = clear_rows([raws[i] for i in rows], [scenes[i].outline for i in rows], self.sp.foot_length,
+                         self.sp.min_clearance, n_points, smoothing, fast)
+        return self._judge_cleared(scenes, raws, rows, got, smoothing, fast)
+
+    def _judge_cleared(self, scenes, raws, rows, got, smoothing: float, fast: bool):
+        """``_cleared_rows``' verdict on the corrections ``got`` (clearing.Cleared) of rows ``rows``."""
+        paths = np.stack([g.path for g in got])
+        dev = np.array([g.deviation for g in got], np.float64)
         if fast:
-            ok = self._margin_ok([scenes[i] for i, _ in got], paths, dev)
+            ok = np.zeros(len(rows), bool)
+            have = [k for k, g in enumerate(got) if g.move_clearance is not None and g.move_clearance.size]
+            if have:
+                low = np.array([got[k].move_clearance.min() for k in have])
+                ok[have] = self._passes(low, dev[have], swept.backward_motion(np, paths[have, :, 0]) + 2.0 * dev[have])
+            known = set(have)
+            rest = [k for k in range(len(rows)) if k not in known]
+            if rest:
+                ok[rest] = self._margin_ok([scenes[rows[k]] for k in rest], paths[rest], dev[rest])
+            clear = [None if g.move_clearance is None else (g.point_clearance, g.move_clearance) for g in got]
         else:
-            ok = np.array([self._margin_ok_reference(scenes[i], paths[k], dev[k]) for k, (i, _) in enumerate(got)])
+            ok = np.array([self._margin_ok_reference(scenes[i], paths[k], dev[k]) for k, i in enumerate(rows)])
+            clear = [None] * len(rows)
         note = (self.CLEARED_NOTE.format(s=smoothing),)
-        return [(i, (paths[k], float(smoothing), note, dev[k])) for k, (i, _) in enumerate(got) if ok[k]]
+        return [(i, (paths[k], float(smoothing), note, dev[k], clear[k])) for k, i in enumerate(rows) if ok[k]]
 
     def _candidate_rows(self, scenes, raws, rows, n_points: int, smoothing: float, fast: bool):
         """Rows whose requested smoothing failed: the first of their other candidates that passes,
@@ -576,16 +653,31 @@ class TrajectoryGenerator:
             if len(raws) > 1:
                 # Many swings: the requested smoothing checked first (fast: all at once), then the
                 # candidates of the rows it fails, level by level; one assemble for all rows after.
-                ok = (self._margin_ok(scenes, paths, dev) if fast else
-                      np.array([self._margin_ok_reference(scenes[i], paths[i], dev[i]) for i in range(len(raws))]))
+                if fast:
+                    ok, c_all, sw_all = self._margin_ok(scenes, paths, dev, with_clearances=True)
+                else:
+                    ok = np.array([self._margin_ok_reference(scenes[i], paths[i], dev[i]) for i in range(len(raws))])
                 cleared = self._cleared_rows(scenes, raws, np.flatnonzero(~ok), n_points, smoothing, fast)
                 done = {i for i, _ in cleared}
-                redo = cleared + self._candidate_rows(scenes, raws, [i for i in np.flatnonzero(~ok) if i not in done],
-                                                      n_points, smoothing, fast)
+                redo = [(i, r[:4]) for i, r in cleared] + self._candidate_rows(
+                    scenes, raws, [i for i in np.flatnonzero(~ok) if i not in done], n_points, smoothing, fast)
                 if redo:
                     paths, dev, notes = paths.copy(), np.array(dev, np.float64), list(notes)
                     for i, (path, c, note, d) in redo:
                         paths[i], dev[i], used[i], notes[i] = path, d, c, note
+                if fast:
+                    # assemble measures from the clearances already computed: the requested smoothing's
+                    # (each path's closest move exact), the corrected curves' own; the rest afresh
+                    known = {i for i, r in cleared if r[4] is not None}
+                    for i, r in cleared:
+                        if r[4] is not None:
+                            c_all[i], sw_all[i] = r[4]
+                    fresh = sorted({i for i, _ in redo} - known)
+                    if fresh:
+                        _, c_all[fresh], sw_all[fresh] = self._margin_ok([scenes[i] for i in fresh], paths[fresh],
+                                                                         dev[fresh], with_clearances=True)
+                    measured = trajectory.measure(self.sp, paths, c_all, np.array([sc.pivot_y for sc in scenes]),
+                                                  np.array([sc.goal_y for sc in scenes]), sw_all, dev)
         else:
             both = [sm.linear_resample(r, n_points, with_deviation=True) for r in raws]
             paths, dev = np.stack([p for p, _ in both]), np.array([d for _, d in both])
@@ -593,8 +685,10 @@ class TrajectoryGenerator:
         batch = assemble("rl", self.sp, scenes, raws, paths, used, duration, notes, measured, deviation=dev, fast=fast)
         # Smoothing cuts corners (clearance) and overshoots (backward heel motion): first the per-path
         # candidate smoothings (CANDIDATE_RESIDUALS), then less smoothing, down to the raw polyline.
-        bad = (np.flatnonzero(~batch.clearance_ok | (batch.heel_backward > self.sp.backward_tolerance)) if smoothing > 0
-               else np.zeros(0, np.int64))
+        # Not for a swing that ends short of the goal: every curve ends where its raw path does, so no
+        # smoothing can make it pass (the policy's failure, not the smoothing's; CFFTG's fallback follows).
+        bad = (np.flatnonzero((~batch.clearance_ok | (batch.heel_backward > self.sp.backward_tolerance))
+                              & batch.reached_goal) if smoothing > 0 else np.zeros(0, np.int64))
         if fast and bad.size:
             redo = self._fallback_batch(scenes, raws, bad, n_points, smoothing)
         else:

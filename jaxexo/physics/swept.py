@@ -148,7 +148,7 @@ def box_lower_bound(heel, foot_length, outline):
     return np.sqrt(dy * dy + dz * dz)
 
 
-def path_clearance_pruned(path, foot_length, outline, slack=1e-9):
+def path_clearance_pruned(path, foot_length, outline, slack=1e-9, below=None):
     """NumPy: (point clearances (B, N), per-move clearances (B, N-1)) of heel paths (B, N, 2) on
     outlines (B, K, 2) with ``path_swept_min``'s guarantee (each path's minimum over its moves, and
     the move attaining it, exact), computing the exact foot clearance only at the samples that can
@@ -159,7 +159,12 @@ def path_clearance_pruned(path, foot_length, outline, slack=1e-9):
        minimum from above (a move's swept clearance is at most its end clearances);
     2. a move whose ``swept_lower_bound`` from its ends' lower bounds exceeds U + slack cannot be
        the closest (the bound is monotone in the end clearances);
-    3. the remaining moves get exact end clearances and the exact swept distance."""
+    3. the remaining moves get exact end clearances and the exact swept distance.
+
+    ``below`` (B,), optional: moves whose lower bound is under their path's ``below`` are computed
+    exactly too, so every move whose clearance is under ``below`` is exact and every other one is
+    reported at or above ``below`` (what a caller acting on each move closer than a threshold
+    needs: jaxexo.inference.clearing asks for the moves closer than its margin)."""
     b, n = path.shape[:2]
     c = box_lower_bound(path, foot_length, outline)
     if n < 2:
@@ -178,7 +183,10 @@ def path_clearance_pruned(path, foot_length, outline, slack=1e-9):
     lb = swept_lower_bound(np, c0, c1, length)
     out = np.maximum(lb, 0.0)
     out[inside] = ends[inside]
-    r, j = np.nonzero(~inside & (lb <= upper + slack))
+    cand = lb <= upper + slack
+    if below is not None:
+        cand |= lb < np.asarray(below, np.float64).reshape(b, 1)
+    r, j = np.nonzero(~inside & cand)
     if r.size:
         for k in (j, j + 1):             # exact clearances at the candidates' ends
             miss = ~exact[r, k]
