@@ -617,6 +617,10 @@ class TrainConfig:
     budget_env_steps: int = declare(5_000_000, number(nonneg=True, integer=True, hi=2**40), unit="steps")
     # updates per compiled chunk (progress, checkpoint); 0: auto
     chunk_updates: int = declare(0, number(nonneg=True, integer=True, hi=INT32_MAX), unit="updates", role="setting")
+    # Agents of this config trained together as one compiled program (seeds seed .. seed + K - 1), the best
+    # on validation exported (jaxexo.train.population); 1: one agent, the data-parallel driver. Bounded
+    # here only loosely: the memory estimate (jaxexo.config.memory.check_memory) is the real limit.
+    population: int = declare(1, number(positive=True, integer=True, hi=4096), unit="agents", role="setting")
     eval_episodes: int = declare(1000, number(positive=True, integer=True, hi=10_000_000), unit="episodes",
                                  role="static")
     lr: float = declare(3e-4, number(positive=True))
