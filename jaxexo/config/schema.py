@@ -683,6 +683,13 @@ def num_updates(cfg: Config) -> int:
     return max(1, min(bounds))
 
 
+def with_population(cfg: Config, k, where: str = "train.population") -> Config:
+    """``cfg`` with ``[train] population = k``, checked by the field's declaration (the error names
+    ``where``, e.g. the command-line option that gave it)."""
+    check = dict(declared_fields(TrainConfig))["population"].check
+    return dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, population=check(where, k)))
+
+
 def static_settings(cfg: Config) -> tuple:
     """Everything about a config that fixes the compiled trainer (and its greedy evaluation): the
     fields declared static, the resolved outline size, the number of obstacle kinds and the scan
