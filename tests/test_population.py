@@ -143,3 +143,67 @@ def test_the_driver_exports_the_best_member_and_records_every_member(tmp_path):
     assert len(chosen) == 2
     for j, (w, b) in enumerate(chosen):
         assert np.array_equal(policy[f"dense_{j}_kernel"], w) and np.array_equal(policy[f"dense_{j}_bias"], b)
+
+
+def _without_clock(text: str) -> list:
+    """metrics.jsonl rows without the wall-clock fields (the only ones a resumed run may change)."""
+    clock = {"wall_s", "env_steps_per_s"}
+    rows = [json.loads(x) for x in text.splitlines()]
+    return [{**{k: v for k, v in r.items() if k not in clock},
+             "members": [{k: v for k, v in m.items() if k not in clock} for m in r["members"]]} for r in rows]
+
+
+def test_an_interrupted_population_resumes_to_the_same_files(tmp_path, monkeypatch):
+    cfg = config_from_dict(raw(population=3))
+    full = driver.run_training(cfg, tmp_path / "full", seed=SEED, progress=False)
+    real, calls = driver._atomic_write, []
+
+    def killed_after_second_checkpoint(path, data):
+        if path.name == driver.BOOKKEEPING:
+            calls.append(path)
+            if len(calls) == 2:
+                raise RuntimeError("killed")
+        return real(path, data)
+
+    monkeypatch.setattr(driver, "_atomic_write", killed_after_second_checkpoint)
+    with pytest.raises(RuntimeError, match="killed"):
+        driver.run_training(cfg, tmp_path / "cut", seed=SEED, progress=False)
+    monkeypatch.setattr(driver, "_atomic_write", real)
+    with pytest.raises(ConfigError, match="--seed 3"):
+        driver.run_training(cfg, tmp_path / "cut", seed=SEED + 1, resume=True, progress=False)
+    resumed = driver.run_training(cfg, tmp_path / "cut", seed=SEED, resume=True, progress=False)
+    clock = ("train_seconds",)
+    assert {k: v for k, v in resumed.items() if k not in clock} == {k: v for k, v in full.items() if k not in clock}
+    assert (tmp_path / "cut" / "policy.npz").read_bytes() == (tmp_path / "full" / "policy.npz").read_bytes()
+    assert _without_clock((tmp_path / "cut" / "metrics.jsonl").read_text()) == \
+        _without_clock((tmp_path / "full" / "metrics.jsonl").read_text())
+
+
+def test_a_sweep_refuses_a_population():
+    r = raw(population=2)
+    r["sweep"] = {"seeds": 2, "grid": {"train.lr": [1e-3]}}
+    with pytest.raises(ConfigError, match=r"train\.population: a sweep trains its seeds itself"):
+        sweep_from_dict(r)
+
+
+def test_a_diverged_member_is_dropped_from_the_choice_not_the_run(tmp_path, monkeypatch):
+    from jaxexo.train import population
+
+    class OneDiverges(population.Population):
+        """The second member's learning rate absurd (a leaf: the same compiled program)."""
+
+        def __init__(self, *a, **kw):
+            super().__init__(*a, **kw)
+            lr = np.array(self.hyper.lr, copy=True)
+            lr[1] = 1e30
+            self.hyper = self.hyper.replace(lr=lr)
+
+    monkeypatch.setattr(population, "Population", OneDiverges)
+    res = driver.run_training(config_from_dict(raw(population=3)), tmp_path / "run", seed=SEED, progress=False)
+    rows = [json.loads(x) for x in (tmp_path / "run" / "metrics.jsonl").read_text().splitlines()]
+    assert len(rows) == UPDATES // CHUNK                      # the others trained to the end
+    assert [r["members"][1]["diverged"] for r in rows] == [True] * len(rows)
+    assert res["members"][1]["diverged_chunk"] == 1 and res["members"][1]["selected_chunk"] == 0
+    assert res["members"][1]["validation_curve"] == [None] * len(rows)
+    assert res["exported_member"] != 1
+    assert all(res["members"][i]["diverged_chunk"] is None for i in (0, 2))

@@ -285,9 +285,9 @@ def run_population(cfg: Config, out: Path, seed: int, resume: bool, progress: bo
         plot_population_curve(out / "training_curve.png", rows, exported)
     if exported is None:
         raise TrainingDiverged(
-            f"every member of the population of {K} diverged (non-finite loss or parameters; see {metrics_path}: "
-            f"members' \"diverged\") before finishing a chunk with finite parameters, so no policy was exported. "
-            f"Lower train.lr (it is {cfg.train.lr:g}) or train.max_grad_norm")
+            f"every member of the population of {K} diverged (non-finite loss or parameters; {metrics_path}: the "
+            f"members' \"diverged\"), and a diverged member is never exported, so no policy was. Lower train.lr "
+            f"(it is {cfg.train.lr:g}) or train.max_grad_norm")
     member_params = lambda i: jax.tree.map(lambda x: np.asarray(x)[i], best_params)  # noqa: E731
     D.export_policy(out / "policy.npz", cfg, pop.trainer, member_params(exported))
     # Each member scored by the same compiled evaluation, one at a time (its figures never depend on K).
