@@ -208,9 +208,10 @@ def run_population(cfg: Config, out: Path, seed: int, resume: bool, progress: bo
         start = serialization.from_state_dict(start, raw["state"])
         ts = jax.device_put(pop.pad(start))
         best_params = serialization.from_state_dict(best_params, raw["best_params"])
-        best_score = np.asarray(members["best_score"], np.float64)
-        best_chunk = np.asarray(members["best_chunk"], np.int64)
-        diverged = np.asarray(members["diverged"], np.int64)
+        # Copies: arrays restored from msgpack are read-only, these are updated in place.
+        best_score = np.array(members["best_score"], np.float64)
+        best_chunk = np.array(members["best_chunk"], np.int64)
+        diverged = np.array(members["diverged"], np.int64)
         chunks_done = raw["book"]["chunks_done"]
         if not 0 <= chunks_done <= total_chunks:
             raise CheckpointError(f"{ckpt}: chunks_done {chunks_done} is outside this run's 0..{total_chunks}")
