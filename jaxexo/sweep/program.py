@@ -159,6 +159,8 @@ def over_lanes(fn, devices, n_args: int, shared: int = 0, lanes: int = LANES):
         out = jax.lax.map(lambda b: block(*b), blocks)
         return jax.tree.map(lambda x: x.reshape((n,) + x.shape[2:]), out)
 
+    # Compilation events name the program by this function: keep the agent function's name in it.
+    local.__name__ = f"{getattr(fn, '__name__', 'fn')}_in_lanes"
     spec = P("agents")
     return jax.jit(jax.shard_map(local, mesh=Mesh(np.array(list(devices)), ("agents",)),
                                  in_specs=(spec,) * n_args + (P(),) * shared, out_specs=spec, check_vma=False))
