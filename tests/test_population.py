@@ -89,8 +89,8 @@ def sweep_from_plan(sweep):
     return chunk
 
 
-@pytest.mark.parametrize("members, devices, used, padded", [(1, 2, 1, LANES), (4, 2, 2, 4), (5, 2, 2, 8), (8, 8, 4, 8),
-                                                             (3, 1, 1, 4)])
+@pytest.mark.parametrize("members, devices, used, padded", [(1, 2, 2, 4), (1, 1, 1, 2), (4, 2, 2, 4), (5, 2, 2, 8),
+                                                             (8, 8, 4, 8), (2, 8, 2, 4), (3, 1, 1, 4)])
 def test_population_layout_is_whole_blocks_of_lanes(members, devices, used, padded):
     assert LANES == 2
     assert len(population_devices(members, list(range(devices)))) == used

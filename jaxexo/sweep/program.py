@@ -17,8 +17,10 @@ move with the size), so the same agent ends a few ulps apart, and after a thousa
 different outcome, in batches of 1, 2, 5 or 8. No XLA flag removes it. So no agent is ever computed
 in a batch whose shape depends on who else is in the program: every device runs its agents LANES at
 a time, ``lax.map`` over fixed ``vmap(LANES)`` blocks (padded with copies of the first agent, whose
-results are dropped). An agent's arithmetic is then the same in a population of any size, in a sweep
-chunk of any size and on any device count (tests/test_population.py checks it bit for bit).
+results are dropped). An agent's arithmetic is then the same in a population of any size and in a
+sweep chunk of any size (tests/test_population.py checks it bit for bit), and on any device count from
+two up (measured on 2 and 4; a program over a single device is compiled without partitioning and
+differs in the last bits, so populations use at least two devices where there are two).
 """
 
 from __future__ import annotations

@@ -11,9 +11,9 @@ The program: ``jit(shard_map(lax.map(vmap(member))))`` (jaxexo.sweep.program.ove
 layouts (drawn from the training distribution: jaxexo.train.evaluate.validation_set; never the test
 or held-out obstacles). The members are split over the CPU devices and run in fixed blocks of
 ``LANES``, so a member's arithmetic is the same whether it trains alone, with 3 or 15 others, or in a
-sweep chunk (the group-size independence of jaxexo.sweep.program; tests/test_population.py). Unlike
-the one-agent driver (data parallel over the devices), a population's result does not depend on the
-device count either.
+sweep chunk (the group-size independence of jaxexo.sweep.program; tests/test_population.py), and on
+any number of devices from two up (``population_devices``; a process with one CPU device compiles an
+unpartitioned program, whose members agree with each other but not with a partitioned one's).
 
 The run directory is the one-agent driver's (jaxexo.train.driver), with per-member content:
 - metrics.jsonl: one line per chunk: ``members``, each member's row (the one-agent row plus its
@@ -57,10 +57,13 @@ def _finite(tree) -> jnp.ndarray:
 
 
 def population_devices(n_members: int, devices) -> list:
-    """The devices a population uses: no more than it fills with whole blocks of LANES members (a
-    population of 2 on 8 cores takes one; the others stay free)."""
+    """The devices a population uses: as many as it fills with whole blocks of LANES members, but at
+    least two where there are two. XLA compiles a program over one device without partitioning and
+    over several with it, and the two differ in the last bits (measured: a member's bytes are equal
+    on 2 and 4 devices, not on 1 and 2), so a population never drops to one device because it is
+    small: its members then train as they do in a larger population or a sweep on the same machine."""
     devices = list(devices)
-    return devices[:max(1, min(len(devices), -(-n_members // LANES)))]
+    return devices[:min(len(devices), max(2, -(-n_members // LANES)))]
 
 
 class Population:
