@@ -204,3 +204,14 @@ def test_a_diverged_member_is_dropped_from_the_choice_not_the_run(tmp_path, monk
     assert res["members"][1]["diverged_chunk"] == 1 and res["members"][1]["selected_chunk"] == 0
     assert res["members"][1]["validation_curve"] == [None] * len(rows)
     assert res["exported_member"] == 0 and res["members"][0]["diverged_chunk"] is None
+
+
+@pytest.mark.parametrize("command", [["train", "--out", "{tmp}/run"], ["reproduce", "--out", "{tmp}/repro"]])
+def test_the_cli_refuses_a_bad_population_before_training(tmp_path, command):
+    import subprocess
+    import sys
+
+    args = [a.format(tmp=tmp_path) for a in command] + ["--population", "0"]
+    out = subprocess.run([sys.executable, "-m", "jaxexo.cli", *args], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2 and "--population: must be > 0, got 0" in out.stderr
+    assert not (tmp_path / "run").exists() and not (tmp_path / "repro").exists()
