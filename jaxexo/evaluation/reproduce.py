@@ -20,6 +20,10 @@ use the config's final training epsilon, ``train.eps_end``, 0.05), and writes:
 - Table 3.11: generation time per obstacle, final model against CFFTG, timed in one process;
 - the same tables for jaxexo's default model when ``--default`` is given (configs/default.toml).
 
+Each learns config trains as a population (REPRODUCE_POPULATION members, seeds seed..seed+K-1; the best
+on validation exported: jaxexo.train.population) and the tables add, per model, the exported member and
+how many members meet the target (``population_table``); the faithful configs train one agent.
+
 Run directories go under OUT/runs/<name> (name: ``a`` or ``a-learns``); an existing policy.npz there is
 reused, and so is its evaluation (runs/<name>/reproduce_entry.json, for the same n, seed and batch
 size), so an interrupted reproduction continues where it stopped. OUT/reproduce.md and
