@@ -49,7 +49,7 @@ from jaxexo.storage.rundir import TrainingDiverged
 from jaxexo.sweep.program import LANES, over_lanes, padded_agents
 from jaxexo.train import driver as D
 from jaxexo.train.evaluate import make_evaluator, make_rollout, validation_set
-from jaxexo.train.trainer import METRICS, Hyperparams, Trainer
+from jaxexo.train.trainer import Hyperparams, Trainer
 
 
 def _finite(tree) -> jnp.ndarray:
@@ -304,7 +304,8 @@ def run_population(cfg: Config, out: Path, seed: int, resume: bool, progress: bo
         members.append({
             "seed": pop.seeds[i],
             "validation_curve": [r["members"][i]["validation_success_raw"] for r in rows],
-            "selected_chunk": int(best_chunk[i]), "validation_success_raw": float(best_score[i]) if best_chunk[i] else None,
+            "selected_chunk": int(best_chunk[i]),
+            "validation_success_raw": float(best_score[i]) if best_chunk[i] else None,
             "diverged_chunk": int(diverged[i]) or None,
             "episodes": int(episodes[i]), "env_steps": int(updates[i]) * steps_per_update,
             "test": None if f is None else {k: f[k] for k in ("accuracy", "success_raw", "reached_goal", "held_out",
