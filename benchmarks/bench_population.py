@@ -11,7 +11,8 @@ loaded core are slower.
 
 Writes benchmarks/results/population_<date>_<machine>.{json,md}.
 
-Run: python benchmarks/bench_population.py [CONFIG] [K,K,...]   (default: the thesis (b) learns config, 1,4,8)
+Run: python benchmarks/bench_population.py [CONFIG] [K,K,...] [NAME]   (default: the thesis (b) learns
+config, 1,4,8, results named ``population``)
 """
 
 from __future__ import annotations
@@ -38,7 +39,7 @@ def target(k: int) -> float:
     return 1.5 + (k - 1) * 0.25
 
 
-def main(config: str | None = None, ks=(1, 4, 8)) -> None:
+def main(config: str | None = None, ks=(1, 4, 8), name: str = "population") -> None:
     from jaxexo.train.driver import run_training
 
     path = config or str(Path(packaged_config("default")).parent / "thesis" / "b-learns.toml")
@@ -84,10 +85,11 @@ def main(config: str | None = None, ks=(1, 4, 8)) -> None:
                      f"{r['exported_seed']} | "
                      + ", ".join("-" if s is None else f"{s:.2f}" for s in r["test_success_raw"]) + " |")
     payload = {"config": Path(path).name, "rows": rows, "load_before": load_before, "load_after": load_after}
-    for p in write_result("population", payload, "\n".join(lines), ROOT / "results"):
+    for p in write_result(name, payload, "\n".join(lines), ROOT / "results"):
         print(p)
 
 
 if __name__ == "__main__":
     main(sys.argv[1] if len(sys.argv) > 1 else None,
-         tuple(int(x) for x in sys.argv[2].split(",")) if len(sys.argv) > 2 else (1, 4, 8))
+         tuple(int(x) for x in sys.argv[2].split(",")) if len(sys.argv) > 2 else (1, 4, 8),
+         sys.argv[3] if len(sys.argv) > 3 else "population")

@@ -199,6 +199,12 @@ def run_population(cfg: Config, out: Path, seed: int, resume: bool, progress: bo
     if raw is not None:
         if "members" not in raw:
             raise CheckpointError(f"{ckpt}: a one-agent checkpoint; this config trains a population of {K}")
+        if (raw["book"]["devices"] == 1) != (len(pop.devices) == 1):
+            # One device compiles an unpartitioned program, several a partitioned one: their arithmetic
+            # differs in the last bits (population_devices), so the rest of the run would not be this run's.
+            need = "one CPU device" if raw["book"]["devices"] == 1 else "two or more CPU devices"
+            raise ConfigError(f"--resume: the population ran on {raw['book']['devices']} device(s), this process "
+                              f"gives it {len(pop.devices)}; resume it with {need}")
         for name, template in (("state", serialization.to_state_dict(start)),
                                ("best_params", serialization.to_state_dict(best_params))):
             bad = D._tree_mismatch(template, raw[name])
