@@ -44,7 +44,8 @@ THESIS_MODELS = ("a", "b", "c", "1", "2", "3", "final")
 # chance (benchmarks/results/thesis-seeds_*), so each learns config trains this many seeds as one
 # program and keeps the best on validation. Four, by measurement: at base seed 0 every learns model
 # had 2 to 4 of its 4 members meet the target (benchmarks/results/reproduce-population-seed0_*), and
-# four cost 2.0x one agent's training time against 2.9x for eight (thesis (b), population_*).
+# four cost 1.5-2.0x one agent's training time against 2.5-2.9x for eight (thesis (b), population_* and
+# population-rerun_*).
 REPRODUCE_POPULATION = 4
 VARIANTS = ("faithful", "learns")
 ENTRY = "reproduce_entry.json"   # a run's evaluated figures, beside its policy
