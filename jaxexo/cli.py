@@ -46,18 +46,29 @@ def cmd_train(args) -> int:
 
     use_all_cpu_cores()
     cfg, name = _load(args.config)
+    if args.population is not None:
+        from jaxexo.config import with_population
+
+        cfg = with_population(cfg, args.population, "--population")
     from jaxexo.config.memory import check_memory
 
     check_memory(cfg)       # before JAX allocates: a run the machine cannot hold is refused here
     from jaxexo.train.driver import run_training
 
-    print(f"jaxexo train: {name} -> {args.out} (seed {args.seed}{', resume' if args.resume else ''})")
+    k = cfg.train.population
+    seeds = f"seeds {args.seed}..{args.seed + k - 1}, population of {k}" if k > 1 else f"seed {args.seed}"
+    print(f"jaxexo train: {name} -> {args.out} ({seeds}{', resume' if args.resume else ''})")
     res = run_training(cfg, args.out, seed=args.seed, resume=args.resume, progress=not args.quiet)
     held = res.get("held_out") or {}
     print(f"trained {res['episodes']} episodes, {res['env_steps']:,} env steps in {res['train_seconds']:.1f} s")
     print(f"greedy eval on {sum(v['n'] for v in res['by_obstacle'].values())} test layouts: "
           f"success_raw {res['success_raw']:.3f}, accuracy {res['accuracy']:.3f}"
           + (f"; held-out triangle/half-circle success_raw {held['success_raw']:.3f}" if held else ""))
+    if "members" in res:
+        ok = [m for m in res["members"] if m["diverged_chunk"] is None]
+        print(f"exported member {res['exported_member']} (seed {res['seed']}, chunk {res['selected_chunk']}, "
+              f"validation {res['validation_success_raw']:.3f}); {len(ok)} of {k} members finite, test success_raw "
+              + ", ".join(f"{m['test']['success_raw']:.2f}" if m["test"] else "-" for m in res["members"]))
     print(f"wrote {args.out}/policy.npz, eval.json, metrics.jsonl, training_curve.png")
     return 0
 
@@ -280,9 +291,9 @@ def cmd_reproduce(args) -> int:
 
     models = [m.strip() for m in args.models.split(",") if m.strip()]
     run_names(models, args.variant)     # checks --models and --variant before anything trains
-    check_reproduce_options(args.out, args.n, args.results)
+    check_reproduce_options(args.out, args.n, args.results, args.population)
     run_reproduce(args.out, models, n=args.n, seed=args.seed, include_default=args.default, results_dir=args.results,
-                  variant=args.variant)
+                  variant=args.variant, population=args.population)
     print(f"wrote {args.out}/reproduce.md, reproduce.json and the run directories under {args.out}/runs")
     return 0
 
@@ -311,6 +322,8 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("config", nargs="?", help="TOML config (default: the packaged default, configs/default.toml)")
     t.add_argument("--out", required=True, help="run directory")
     t.add_argument("--seed", type=int, default=0)
+    t.add_argument("--population", type=int, help="train K agents (seeds SEED..SEED+K-1) as one program and export the "
+                                                  "best on validation (overrides [train] population; default 1)")
     t.add_argument("--resume", action="store_true", help="continue the run in --out from its checkpoint")
     t.add_argument("--quiet", action="store_true", help="no progress bar")
     t.set_defaults(func=cmd_train)
@@ -386,6 +399,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="faithful: configs/thesis/<m>.toml as the thesis wrote it; learns: <m>-learns.toml, with "
                         "the named switches that make it learn; both (default): side by side")
     r.add_argument("--default", action="store_true", help="also train and tabulate configs/default.toml")
+    r.add_argument("--population", type=int, default=None,
+                   help="members per learns model (seeds SEED..SEED+K-1, the best on validation kept; default "
+                        "4); the faithful configs always train one agent")
     r.add_argument("--results", help="also write the tables to this folder as reproduce_<date>_<machine>.json/.md "
                                      "(e.g. benchmarks/results)")
     r.set_defaults(func=cmd_reproduce)

@@ -34,16 +34,18 @@ from jaxexo.train.trainer import Hyperparams, Trainer
 TARGET_S = 600.0
 
 
-def agents_throughput(cfg: Config, n_agents: int, devices, updates: int, repeats: int = 3) -> dict:
+def agents_throughput(cfg: Config, n_agents: int, devices, updates: int, repeats: int = 3, wrap=over_agents) -> dict:
     """Training env-steps/s of ``n_agents`` agents (learning rates spread over a decade, one seed
-    each) vmapped and split over ``devices``: the sweep's training program without its evaluation."""
+    each) vmapped and split over ``devices``: the sweep's training program without its evaluation.
+    ``wrap``: over_agents (one vmapped batch per device) or over_lanes (fixed blocks, what sweeps and
+    populations run since issue 21)."""
     tr = Trainer(cfg)
     h = Hyperparams.from_config(cfg)
     hyper = jax.tree.map(lambda x: np.broadcast_to(np.asarray(x), (n_agents,) + np.shape(x)).copy(), h)
     hyper = hyper.replace(lr=np.asarray(cfg.train.lr * np.logspace(-0.5, 0.5, n_agents), np.float32))
     keys = np.stack([np.asarray(jax.random.PRNGKey(s)) for s in range(n_agents)])
-    ts = over_agents(tr.init, devices, 2)(keys, hyper)
-    run = over_agents(lambda t, hh: tr.run(t, hh, updates), devices, 2)
+    ts = wrap(tr.init, devices, 2)(keys, hyper)
+    run = wrap(lambda t, hh: tr.run(t, hh, updates), devices, 2)
     t0 = time.perf_counter()
     ts, _ = jax.block_until_ready(run(ts, hyper))
     compile_s = time.perf_counter() - t0

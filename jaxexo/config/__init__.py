@@ -8,5 +8,5 @@ from jaxexo.config.schema import (  # noqa: F401
     PIVOT_CONDITIONS, SECTION_CLASSES, SECTIONS, TARGETS, TRACE_KINDS, TRACE_VIEWS, Config, ConfigError,
     EnvConfig, FieldSpec, KinematicsConfig, LayoutConfig, ObstacleSpec, RewardConfig, TrainConfig,
     DeviceConfig, config_from_dict, declared_fields, default_obstacles, load_config, named_spec, num_updates,
-    packaged_config, static_settings, validate,
+    packaged_config, static_settings, validate, with_population,
 )

@@ -86,9 +86,19 @@ def machine_memory_bytes() -> int | None:
 
 def check_memory(cfg: Config, available: int | None = None) -> int:
     """Refuse (ConfigError) a config whose estimate exceeds ``available`` bytes (default: this
-    machine's memory); returns the estimate. The error names the field behind the largest part."""
-    need = estimate_memory_bytes(cfg)
+    machine's memory); returns the estimate. The error names the field behind the largest part, or
+    ``train.population`` when one agent fits but the population's K do not (every member's state and
+    best parameters are alive at once: K times one agent's estimate, generous since the members'
+    working sets are computed a few at a time)."""
+    one = estimate_memory_bytes(cfg)
+    k = cfg.train.population
+    need = one * k
     have = machine_memory_bytes() if available is None else available
+    if have is not None and k > 1 and one <= have < need:
+        raise ConfigError(f"train.population: {k} members need at least {need / 2**30:.2f} GiB ({one / 2**30:.3f} "
+                          f"GiB each) but this machine has {have / 2**30:.2f} GiB of memory; at most "
+                          f"{have // one} members fit")
+    need = one
     if have is not None and need > have:
         parts = memory_breakdown(cfg)
         top = max(parts, key=parts.get)
@@ -99,4 +109,4 @@ def check_memory(cfg: Config, available: int | None = None) -> int:
         raise ConfigError(f"{field}: the run needs at least {need / 2**30:.2f} GiB ({detail} GiB) but this machine "
                           f"has {have / 2**30:.2f} GiB of memory; reduce {field}"
                           + (" or train.rollout_steps" if top == "rollout_buffer" else ""))
-    return need
+    return one * k

@@ -620,6 +620,10 @@ class TrainConfig:
     budget_env_steps: int = declare(5_000_000, number(nonneg=True, integer=True, hi=2**40), unit="steps")
     # updates per compiled chunk (progress, checkpoint); 0: auto
     chunk_updates: int = declare(0, number(nonneg=True, integer=True, hi=INT32_MAX), unit="updates", role="setting")
+    # Agents of this config trained together as one compiled program (seeds seed .. seed + K - 1), the best
+    # on validation exported (jaxexo.train.population); 1: one agent, the data-parallel driver. Bounded
+    # here only loosely: the memory estimate (jaxexo.config.memory.check_memory) is the real limit.
+    population: int = declare(1, number(positive=True, integer=True, hi=4096), unit="agents", role="setting")
     eval_episodes: int = declare(1000, number(positive=True, integer=True, hi=10_000_000), unit="episodes",
                                  role="static")
     lr: float = declare(3e-4, number(positive=True))
@@ -680,6 +684,13 @@ def num_updates(cfg: Config) -> int:
         per_env_steps = math.ceil(t.budget_episodes / t.num_envs) * cfg.env.max_steps
         bounds.append(math.ceil(per_env_steps / t.rollout_steps))
     return max(1, min(bounds))
+
+
+def with_population(cfg: Config, k, where: str = "train.population") -> Config:
+    """``cfg`` with ``[train] population = k``, checked by the field's declaration (the error names
+    ``where``, e.g. the command-line option that gave it)."""
+    check = dict(declared_fields(TrainConfig))["population"].check
+    return dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, population=check(where, k)))
 
 
 def static_settings(cfg: Config) -> tuple:

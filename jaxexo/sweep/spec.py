@@ -196,6 +196,11 @@ def sweep_from_dict(raw: dict) -> Sweep:
     samples = _samples(table, axes)
     sample_seed = _int("sweep.sample_seed", table.get("sample_seed", 0), minimum=0)
     members = _expand(raw, base, axes, samples, sample_seed)
+    if any(m.config.train.population != 1 for m in members):
+        # A sweep's agents are its configurations x [sweep] seeds; each trains once, its final parameters
+        # kept. A population inside a sweep cell would be a second, silent seed axis.
+        raise ConfigError("train.population: a sweep trains its seeds itself (sweep.seeds); population must be 1 "
+                          "in a sweep (use `jaxexo train --population K` for a population of one config)")
     paths = [a.path for a in axes]
     heatmap = tuple(table.get("heatmap", paths[:2]))
     if "heatmap" in table:

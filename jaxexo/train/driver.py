@@ -10,6 +10,9 @@ Run directory:
 - training_curve.png return and success rate against episodes (thesis Fig. 3.4)
 - eval.json          greedy rollouts on the test layouts (jaxexo.train.evaluate)
 
+Population (``[train] population = K > 1``): K seeds of the config trained together, the best member's
+best chunk exported; jaxexo.train.population has the program and the per-member files.
+
 Model selection: after every chunk the greedy policy is scored (strict success) on validation
 layouts drawn from the training distribution; the best parameters are exported (later chunks win
 ties). The held-out test obstacles are never used for this choice.
@@ -295,6 +298,11 @@ def run_training(cfg: Config, out: str | Path, seed: int = 0, resume: bool = Fal
     throughout; raises TrainingDiverged (after writing what can be trusted) if the run diverged."""
     out = Path(out)
     with run_lock(out, "train", create=not resume):
+        if cfg.train.population > 1:
+            # K agents as one compiled program, the best on validation exported (jaxexo.train.population).
+            from jaxexo.train.population import run_population
+
+            return run_population(cfg, out, seed, resume, progress, eval_episodes)
         return _run_locked(cfg, out, seed, resume, progress, eval_episodes)
 
 

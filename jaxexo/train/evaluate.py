@@ -96,24 +96,43 @@ def summarize(out: dict, kinds: np.ndarray, pivots: np.ndarray, kind_names=TEST_
     }
 
 
-def evaluate(cfg: Config, net, q_params, n: int = 1000, seed: int = 12345) -> dict:
-    """Greedy rollouts of the Q-network on n test layouts; returns the eval.json figures."""
+def make_evaluator(cfg: Config, net, n: int = 1000, seed: int = 12345):
+    """``evaluate`` for many parameter sets of one network: one compiled program, called per set
+    (a population's members are scored one by one, so that each member's figures come from the same
+    program whatever the population's size)."""
     tcfg = test_config(cfg)
     env = ExoStepEnv(tcfg)
     params = env.default_params
     layouts = test_layouts(tcfg, n, seed)
     rollout = make_rollout(env, net.apply, tcfg.env.max_steps)
-    out = jax.jit(jax.vmap(rollout, in_axes=(None, 0, None)))(q_params, layouts, params)
-    out = jax.tree.map(np.asarray, out)
-    return summarize(out, np.asarray(layouts.kind), np.asarray(layouts.pivot_kind))
+    run = jax.jit(jax.vmap(rollout, in_axes=(None, 0, None)))
+
+    def evaluate_params(q_params) -> dict:
+        out = jax.tree.map(np.asarray, run(q_params, layouts, params))
+        return summarize(out, np.asarray(layouts.kind), np.asarray(layouts.pivot_kind))
+
+    return evaluate_params
 
 
-def make_validator(cfg: Config, net, n: int = 500, seed: int = 777):
+def evaluate(cfg: Config, net, q_params, n: int = 1000, seed: int = 12345) -> dict:
+    """Greedy rollouts of the Q-network on n test layouts; returns the eval.json figures."""
+    return make_evaluator(cfg, net, n, seed)(q_params)
+
+
+VALIDATION_EPISODES, VALIDATION_SEED = 500, 777
+
+
+def validation_set(cfg: Config, n: int = VALIDATION_EPISODES, seed: int = VALIDATION_SEED):
+    """(env, env params, layouts) of the validation scenes: n layouts drawn from the *training*
+    distribution (never the held-out test obstacles)."""
+    env = ExoStepEnv(cfg)
+    return env, env.default_params, layout_set(cfg, n, seed)
+
+
+def make_validator(cfg: Config, net, n: int = VALIDATION_EPISODES, seed: int = VALIDATION_SEED):
     """Greedy strict success on n layouts drawn from the *training* distribution (never the held-out
     test obstacles), for choosing which parameters to export. Returns ``validate(q_params) -> float``."""
-    env = ExoStepEnv(cfg)
-    params = env.default_params
-    layouts = layout_set(cfg, n, seed)
+    env, params, layouts = validation_set(cfg, n, seed)
     rollout = jax.vmap(make_rollout(env, net.apply, cfg.env.max_steps), in_axes=(None, 0, None))
 
     @jax.jit
