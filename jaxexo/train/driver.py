@@ -201,6 +201,19 @@ def read_checkpoint(path: Path) -> dict:
     return raw
 
 
+def resumed_clock(ckpt: Path, book: Path, chunks_done: int, total_chunks: int) -> float:
+    """A resumed run's wall time so far (s), after checking the checkpoint's ``chunks_done`` against the
+    run's chunks. The time comes from the readable copy ``book`` when it matches the checkpoint (it is
+    informational: a missing or stale copy only restarts the clock)."""
+    if not 0 <= chunks_done <= total_chunks:
+        raise CheckpointError(f"{ckpt}: chunks_done {chunks_done} is outside this run's 0..{total_chunks}")
+    try:
+        readable = json.loads(book.read_text())
+        return readable["train_seconds"] if readable.get("chunks_done") == chunks_done else 0.0
+    except (OSError, ValueError, KeyError, TypeError):
+        return 0.0
+
+
 # What a run writes before its first checkpoint: a run stopped then (killed, a full disk) is resumed
 # from the beginning.
 BEFORE_FIRST_CHECKPOINT = {"config.toml", "metrics.jsonl", BOOKKEEPING}
@@ -345,15 +358,7 @@ def _run_locked(cfg: Config, out: Path, seed: int, resume: bool, progress: bool,
         best["params"] = serialization.from_state_dict(ts.params, raw["best_params"])
         best.update(score=state_book["best_score"], chunk=state_book["best_chunk"])
         chunks_done = state_book["chunks_done"]
-        if not 0 <= chunks_done <= total_chunks:
-            raise CheckpointError(f"{ckpt}: chunks_done {chunks_done} is outside this run's 0..{total_chunks}")
-        # Wall time so far comes from the readable copy when it matches the checkpoint (it is
-        # informational: a missing or stale copy only restarts the clock).
-        try:
-            readable = json.loads(book.read_text())
-            wall_before = readable["train_seconds"] if readable.get("chunks_done") == chunks_done else 0.0
-        except (OSError, ValueError, KeyError, TypeError):
-            wall_before = 0.0
+        wall_before = resumed_clock(ckpt, book, chunks_done, total_chunks)
         try:
             lines = metrics_path.read_text(encoding="utf-8").splitlines() if metrics_path.exists() else []
         except UnicodeDecodeError as e:

@@ -222,13 +222,7 @@ def run_population(cfg: Config, out: Path, seed: int, resume: bool, progress: bo
         best_chunk = np.array(members["best_chunk"], np.int64)
         diverged = np.array(members["diverged"], np.int64)
         chunks_done = raw["book"]["chunks_done"]
-        if not 0 <= chunks_done <= total_chunks:
-            raise CheckpointError(f"{ckpt}: chunks_done {chunks_done} is outside this run's 0..{total_chunks}")
-        try:
-            readable = json.loads(book_path.read_text())
-            wall_before = readable["train_seconds"] if readable.get("chunks_done") == chunks_done else 0.0
-        except (OSError, ValueError, KeyError, TypeError):
-            wall_before = 0.0
+        wall_before = D.resumed_clock(ckpt, book_path, chunks_done, total_chunks)
         try:
             lines = metrics_path.read_text(encoding="utf-8").splitlines() if metrics_path.exists() else []
             rows = [json.loads(x) for x in lines[:chunks_done]]
