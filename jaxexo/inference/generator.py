@@ -474,7 +474,7 @@ class TrajectoryGenerator:
             c = trajectory.clearances(fl, paths, scenes)
             sw = trajectory.swept_clearances(fl, paths, scenes, c, fast=True)
         low = sw.min(axis=1) if sw.shape[1] else c.min(axis=1)
-        ok = self._passes(low, deviation, swept.backward_motion(np, paths[..., 0]) + 2.0 * deviation)
+        ok = self._passes(low, deviation, trajectory.backward_bound(paths, deviation))
         return (ok, c, sw) if with_clearances else ok
 
     def _candidate_note(self, smoothing, used):
@@ -499,7 +499,7 @@ class TrajectoryGenerator:
                              smoothing, fast)[0]
             if got.initial is not None:
                 p0, d0, c0, sw0 = got.initial
-                if self._passes(sw0.min(), d0, swept.backward_motion(np, p0[:, 0]) + 2.0 * d0):
+                if self._passes(sw0.min(), d0, trajectory.backward_bound(p0, d0)):
                     return (p0[None], np.array([d0]), [cands[0]], [()],
                             self._measured(scene, p0[None], c0[None], sw0[None], np.array([d0])))
                 cleared = self._judge_cleared([scene], [raw], [0], [got], smoothing, fast)
@@ -508,12 +508,7 @@ class TrajectoryGenerator:
                     return path[None], np.array([d]), [used], [note], self._measured(
                         scene, path[None], clear[0][None], clear[1][None], np.array([d]))
                 paths, dev = sm.smooth_candidates(raw, n_points, cands)
-                ok, c, sw = np.zeros(1, bool), c0[None], sw0[None]
-                if len(cands) > 1:
-                    rest, c_rest, sw_rest = self._margin_ok([scene] * (len(cands) - 1), paths[1:], dev[1:],
-                                                            with_clearances=True)
-                    ok = np.concatenate([ok, rest])
-                    c, sw = np.concatenate([c, c_rest]), np.concatenate([sw, sw_rest])
+                ok, c, sw = self._other_candidates(scene, paths, dev, np.zeros(1, bool), c0[None], sw0[None])
                 j = int(np.argmax(ok)) if ok.any() else 0
                 notes = [self._candidate_note(smoothing, cands[j])] if j else [()]
                 return (paths[j: j + 1], dev[j: j + 1], [cands[j]], notes,
@@ -528,11 +523,7 @@ class TrajectoryGenerator:
                     measured = (None if clear is None else
                                 self._measured(scene, path[None], clear[0][None], clear[1][None], np.array([d])))
                     return path[None], np.array([d]), [used], [note], measured
-                if len(cands) > 1:
-                    rest, c_rest, sw_rest = self._margin_ok([scene] * (len(cands) - 1), paths[1:], dev[1:],
-                                                            with_clearances=True)
-                    ok = np.concatenate([ok, rest])
-                    c, sw = np.concatenate([c, c_rest]), np.concatenate([sw, sw_rest])
+                ok, c, sw = self._other_candidates(scene, paths, dev, ok, c, sw)
         else:
             ok = np.array([self._margin_ok_reference(scene, paths[k], dev[k]) for k in range(len(cands))])
             if not ok[0]:
@@ -545,6 +536,14 @@ class TrajectoryGenerator:
         measured = self._measured(scene, paths[j: j + 1], c[j: j + 1], sw[j: j + 1], dev[j: j + 1]) if fast else None
         notes = [self._candidate_note(smoothing, cands[j])] if j else [()]
         return paths[j: j + 1], dev[j: j + 1], [cands[j]], notes, measured
+
+    def _other_candidates(self, scene, paths, dev, ok, c, sw):
+        """The requested smoothing's check (ok, point and move clearances, each (1, ...)) followed by
+        those of the other candidates ``paths[1:]`` (checked together, ``_margin_ok``)."""
+        if len(paths) == 1:
+            return ok, c, sw
+        rest, c_rest, sw_rest = self._margin_ok([scene] * (len(paths) - 1), paths[1:], dev[1:], with_clearances=True)
+        return np.concatenate([ok, rest]), np.concatenate([c, c_rest]), np.concatenate([sw, sw_rest])
 
     def _measured(self, scene, path, c, sw, dev):
         """trajectory.measure of one scene's path (1, N, 2) from its clearances, for assemble."""
@@ -577,7 +576,7 @@ class TrajectoryGenerator:
             have = [k for k, g in enumerate(got) if g.move_clearance is not None and g.move_clearance.size]
             if have:
                 low = np.array([got[k].move_clearance.min() for k in have])
-                ok[have] = self._passes(low, dev[have], swept.backward_motion(np, paths[have, :, 0]) + 2.0 * dev[have])
+                ok[have] = self._passes(low, dev[have], trajectory.backward_bound(paths[have], dev[have]))
             known = set(have)
             rest = [k for k in range(len(rows)) if k not in known]
             if rest:
@@ -620,7 +619,7 @@ class TrajectoryGenerator:
     def _margin_ok_reference(self, scene, path, deviation) -> bool:
         c = swept.path_swept_clearance(np, path, self.sp.foot_length, scene.outline)
         low = c.min() if c.size else geometry.foot_clearance(np, path, self.sp.foot_length, scene.outline).min()
-        return bool(self._passes(low, deviation, swept.backward_motion(np, path[:, 0]) + 2.0 * deviation))
+        return bool(self._passes(low, deviation, trajectory.backward_bound(path, deviation)))
 
     def _keep_margin_rows(self, scenes, paths: np.ndarray, deviation: np.ndarray, headroom=None) -> np.ndarray:
         """``_keeps_margin`` of many paths (B, N, 2) at once (B,)."""
@@ -634,8 +633,7 @@ class TrajectoryGenerator:
     def _keeps_forward(self, paths: np.ndarray, deviation) -> np.ndarray:
         """Paths (..., N, 2) whose heel falls back at most env.backward_tolerance (trajectory.measure's
         measure: the polyline's drawdown plus twice the deviation bound)."""
-        back = swept.backward_motion(np, paths[..., 0]) + 2.0 * np.asarray(deviation)
-        return back <= self.sp.backward_tolerance
+        return trajectory.backward_bound(paths, deviation) <= self.sp.backward_tolerance
 
     def _finish(self, scenes, raws, n_points: int, smoothing: float, duration: float,
                 fallback: str | None = "cfftg", fast: bool = True) -> TrajectoryBatch:

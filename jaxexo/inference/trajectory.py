@@ -247,6 +247,12 @@ def swept_clearances(foot_length: float, heel: np.ndarray, scenes, point_clearan
     return out
 
 
+def backward_bound(heel: np.ndarray, deviation) -> np.ndarray:
+    """How far the heel moves backward (m) on the curve through paths (..., N, 2): the samples' y
+    drawdown (jaxexo.physics.swept.backward_motion) plus twice the curve's deviation bound (...,)."""
+    return swept.backward_motion(np, heel[..., 0]) + 2.0 * np.asarray(deviation)
+
+
 def measure(sp, heel: np.ndarray, clearance: np.ndarray, pivot_y: np.ndarray, goal_y: np.ndarray,
             swept_clearance: np.ndarray, deviation) -> dict:
     """Kinematics and safe-swing checks of heel paths (B, N, 2), vectorised, from their clearances at
@@ -259,7 +265,7 @@ def measure(sp, heel: np.ndarray, clearance: np.ndarray, pivot_y: np.ndarray, go
     # The guaranteed clearance: the polyline's exact swept clearance (or the samples' own, for a
     # path of one sample) less the deviation bound.
     guaranteed = (swept_clearance.min(axis=-1) if swept_clearance.shape[-1] else clearance.min(axis=-1)) - dev
-    backward = swept.backward_motion(np, heel[..., 0]) + 2.0 * dev
+    backward = backward_bound(heel, dev)
     # kinematics.leg_state's equations, with both legs stacked on a leading axis (fewer NumPy calls).
     hip = kinematics.hip_position(np, pivot_y[:, None], heel, sp.thigh, sp.shin)
     feet = np.zeros((2,) + heel.shape)     # the swing heel, then the pivot heel on the ground
