@@ -3,7 +3,7 @@
 Each fault is produced for real: a process killed with SIGKILL mid-run, two processes on one
 directory, corrupted files, a full disk (a small RLIMIT_FSIZE in a subprocess, SIGXFSZ ignored so the
 write raises). Every refusal must exit non-zero, name the file or field, print no traceback, and leave
-what was already written intact. The README's "Reliability" table lists these cases.
+what was already written intact. docs/reliability.md lists these cases.
 
 The tests that train in subprocesses are marked slow and share one tiny config (tests/test_train.py's
 pattern) with a persistent compilation cache for the in-process runs.

@@ -3,7 +3,7 @@ output, no setting that silently means something else, every bad input refused b
 one line naming the field, option or file (no traceback, no kill for memory).
 
 Fast: no training (the one CLI run that reaches training stops at its lock); subprocesses only where
-the exit code and stderr are what is checked. The README's "Reliability" table lists these cases.
+the exit code and stderr are what is checked. docs/reliability.md lists these cases.
 """
 
 from __future__ import annotations
