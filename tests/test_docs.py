@@ -25,15 +25,15 @@ def doc_files(root: Path = ROOT) -> list[Path]:
     return [root / "README.md", *sorted((root / "docs").glob("*.md"))]
 
 
-def _prose_lines(text: str) -> list[tuple[int, str]]:
-    """(line number, line) outside fenced code blocks, with inline code spans removed."""
+def _prose_lines(text: str, keep_code: bool = False) -> list[tuple[int, str]]:
+    """(line number, line) outside fenced code blocks; inline code spans removed unless keep_code."""
     out, fenced = [], False
     for n, line in enumerate(text.splitlines(), 1):
         if _FENCE.match(line.lstrip()):
             fenced = not fenced
             continue
         if not fenced:
-            out.append((n, re.sub(r"`[^`]*`", "", line)))
+            out.append((n, line if keep_code else re.sub(r"`[^`]*`", "", line)))
     return out
 
 
@@ -50,7 +50,7 @@ def anchors(path: Path) -> set[str]:
     """Every heading anchor of a markdown file (repeated headings get -1, -2, ... as on GitHub)."""
     seen: dict[str, int] = {}
     out = set()
-    for _, line in _prose_lines_keep_code(path.read_text()):
+    for _, line in _prose_lines(path.read_text(), keep_code=True):   # headings may hold code
         m = _HEADING.match(line)
         if not m:
             continue
@@ -58,18 +58,6 @@ def anchors(path: Path) -> set[str]:
         k = seen.get(base, 0)
         seen[base] = k + 1
         out.add(base if k == 0 else f"{base}-{k}")
-    return out
-
-
-def _prose_lines_keep_code(text: str) -> list[tuple[int, str]]:
-    """Lines outside fenced code blocks, inline code kept (headings may contain it)."""
-    out, fenced = [], False
-    for n, line in enumerate(text.splitlines(), 1):
-        if _FENCE.match(line.lstrip()):
-            fenced = not fenced
-            continue
-        if not fenced:
-            out.append((n, line))
     return out
 
 
@@ -120,7 +108,7 @@ def test_a_broken_link_is_caught(tmp_path):
     (tmp_path / "docs").mkdir()
     (tmp_path / "docs" / "page.md").write_text("# A page\n\n## Some `code` heading, here\n")
     (tmp_path / "README.md").write_text(
-        "[ok](docs/page.md) [ok](docs/page.md#some-code-heading-here) [ok](#top) [web](https://x.org/a)\n"
+        "[`ok`](docs/page.md) [ok](docs/page.md#some-code-heading-here) [ok](#top) [web](https://x.org/a)\n"
         "```\n[inside a fence](nowhere.md)\n```\n"
         "[missing](docs/nope.md) [bad anchor](docs/page.md#nope) ![img](docs/gone.gif)\n"
         "# Top\n")
