@@ -8,13 +8,13 @@ import math
 import pytest
 
 from jaxexo.config import (
-    PIVOT_CONDITIONS,
     Config,
     ConfigError,
     config_from_dict,
     load_config,
     validate,
 )
+from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 
 from conftest import MIXED_KINDS, PROFILE_POINTS, ROOT, legacy_raw
 
@@ -376,8 +376,7 @@ def test_obstacles_refuse_booleans(make):
 
 
 def test_env_params_and_hyperparams_come_from_the_declarations(mixed_config):
-    from jaxexo.config import ENV_SECTIONS, HYPER_FIELDS, SECTION_CLASSES, TrainConfig, declared_fields
-    from jaxexo.physics.dynamics import param_values
+    from jaxexo.config import ENV_SECTIONS, HYPER_FIELDS, SECTION_CLASSES, TrainConfig, declared_fields, param_values
 
     values = param_values(mixed_config)
     leaves = [(s, n, spec) for s in ENV_SECTIONS for n, spec in declared_fields(SECTION_CLASSES[s]) if spec.leaf]

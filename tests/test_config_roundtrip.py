@@ -16,10 +16,11 @@ from hypothesis import strategies as st
 
 import jaxexo.config
 from jaxexo.config import (
-    CONTROLS, OBS_MODES, OBS_PROFILES, PIVOT_CONDITIONS, TARGETS, TRACE_KINDS, TRACE_VIEWS, Config, ConfigError,
+    CONTROLS, OBS_MODES, OBS_PROFILES, TARGETS, TRACE_KINDS, TRACE_VIEWS, Config, ConfigError,
     config_from_dict, load_config,
 )
 from jaxexo.config.toml_io import config_to_toml
+from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 from jaxexo.physics.geometry import THESIS_OBSTACLES
 
 from conftest import ROOT, legacy_raw

@@ -11,7 +11,8 @@ jax = pytest.importorskip("jax")
 jnp = pytest.importorskip("jax.numpy")
 
 from jaxexo.physics import geometry  # noqa: E402
-from jaxexo.config import PIVOT_CONDITIONS, config_from_dict  # noqa: E402
+from jaxexo.config import config_from_dict  # noqa: E402
+from jaxexo.physics.kinematics import PIVOT_CONDITIONS  # noqa: E402
 from jaxexo.env import NUM_ACTIONS, ExoStepEnv  # noqa: E402
 from jaxexo.physics.geometry import Obstacle  # noqa: E402
 

@@ -10,7 +10,7 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from conftest import ROOT, legacy_raw
-from jaxexo.config import ConfigError, config_from_dict, load_config
+from jaxexo.config import ConfigError, config_from_dict, load_config, numpy_params, scalar_params
 from jaxexo.inference import Obstacle, TrajectoryGenerator
 from jaxexo.inference import smoothing as sm
 from jaxexo.inference.scenarios import safety_scenarios
@@ -90,7 +90,7 @@ def test_swept_distance_under_jit_matches_numpy():
 
 def test_a_two_sample_line_through_the_triangle_fails():
     cfg = config_from_dict(legacy_raw())
-    sp = dynamics.scalar_params(cfg)
+    sp = scalar_params(cfg)
     scene = dynamics.make_scene(Obstacle.named("triangle"), "between", foot_length=FOOT)
     line = np.array([[[0.0, 0.0], [0.70, 0.0]]])
     # Both samples are 15 cm clear of the triangle; the move between them goes through it.
@@ -142,7 +142,7 @@ def test_a_verdict_at_n_samples_holds_at_10n(outline, seed, n, smoothing):
 # --------------------------------------------------------------------------------------------
 
 def _step(xp, cfg, prev, heel, max_y=None):
-    p = dynamics.numpy_params(cfg)
+    p = numpy_params(cfg)
     scene = dynamics.make_scene(Obstacle.named("base1"), "obstacle", foot_length=FOOT)   # [0.35, 0.55] x 0.10
     lay = dynamics.stack_scenes([scene], np.float32)
     lay = type(lay)(**{k: v[0] for k, v in vars(lay).items()})

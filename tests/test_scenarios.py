@@ -5,8 +5,9 @@ sweeps and ``jaxexo eval`` score, drawn identically by the JAX and the NumPy sid
 import numpy as np
 import pytest
 
-from jaxexo.config import PIVOT_CONDITIONS, config_from_dict
-from jaxexo.physics import dynamics, scenarios
+from jaxexo.config import config_from_dict, numpy_params, views
+from jaxexo.physics.kinematics import PIVOT_CONDITIONS
+from jaxexo.physics import scenarios
 
 from conftest import legacy_raw
 
@@ -45,7 +46,7 @@ def test_seed_words_are_jax_key_words():
     for seed in (0, 7, 12345, 2 ** 32 - 1):
         np.testing.assert_array_equal(jax.random.key_data(jax.random.PRNGKey(seed)), scenarios.seed_words(seed))
     with pytest.raises(ValueError, match="seed"):
-        scenarios.scenario_layouts(np, dynamics.numpy_params(config_from_dict(legacy_raw())), 2 ** 32, 3)
+        scenarios.scenario_layouts(np, numpy_params(config_from_dict(legacy_raw())), 2 ** 32, 3)
 
 
 @pytest.mark.parametrize("which", ["default", "mixed"])
@@ -57,7 +58,7 @@ def test_env_reset_draws_the_numpy_scenario_list(which, mixed_config):
     cfg = config_from_dict(legacy_raw()) if which == "default" else mixed_config
     env = ExoStepEnv(cfg)
     n, seed = 300, 777
-    ref = scenarios.scenario_layouts(np, dynamics.numpy_params(cfg), seed, n)
+    ref = scenarios.scenario_layouts(np, numpy_params(cfg), seed, n)
     key = lambda i: jax.random.wrap_key_data(jnp.stack([jnp.uint32(seed), jnp.uint32(i)]))  # noqa: E731
     for i in (0, 1, 17, 299):
         _, st = env.reset(key(i), env.default_params)
@@ -79,7 +80,7 @@ def test_env_reset_draws_the_numpy_scenario_list(which, mixed_config):
 def test_kind_frequencies_follow_the_mixture(mixed_config):
     """Independent reference: the config's weights (not the CDF the sampler uses)."""
     cfg = mixed_config
-    lay = scenarios.scenario_layouts(np, dynamics.numpy_params(cfg), 5, 20000)
+    lay = scenarios.scenario_layouts(np, numpy_params(cfg), 5, 20000)
     w = np.array([o.weight for o in cfg.layout.obstacles], float)
     freq = np.bincount(lay["kind"], minlength=len(w)) / 20000
     np.testing.assert_allclose(freq, w / w.sum(), atol=0.015)
@@ -91,11 +92,11 @@ def test_eval_test_set_is_the_numpy_test_set():
     """eval.json's layouts (jaxexo.train.evaluate.test_layouts) and ``jaxexo eval``'s scenarios
     (jaxexo.inference.scenarios.sample_scenarios) are one set for a seed."""
     from jaxexo.inference.scenarios import TEST_KINDS, sample_scenarios
-    from jaxexo.train.evaluate import test_config, test_layouts
+    from jaxexo.train.evaluate import test_layouts
 
     cfg = config_from_dict(legacy_raw())
     n, seed = 60, 12345
-    lay = test_layouts(test_config(cfg), n, seed)
+    lay = test_layouts(views.test_config(cfg), n, seed)
     sc = sample_scenarios(cfg, n, seed)
     assert [s["kind"] for s in sc] == [TEST_KINDS[k] for k in np.asarray(lay.kind)]
     assert [s["kind"] for s in sc[:5]] == list(TEST_KINDS)
@@ -107,7 +108,7 @@ def test_eval_test_set_is_the_numpy_test_set():
     np.testing.assert_array_equal(f32([s["start_y"] for s in sc]), lay.start_y)
     np.testing.assert_array_equal(f32([s["start_y"] + s["step_length"] for s in sc]), lay.goal_y)
     # And the JAX side drawing the same set itself agrees (kinds, pivots exactly; sizes to 2 ulp).
-    tenv_params = dynamics.numpy_params(test_config(cfg))
+    tenv_params = numpy_params(views.test_config(cfg))
     jl = scenarios.scenario_layouts(jnp, tenv_params, seed, n, cycle=True)
     np.testing.assert_array_equal(np.asarray(jl["kind"]), lay.kind)
     np.testing.assert_allclose(np.asarray(jl["width"]), lay.width, rtol=2.5e-7)

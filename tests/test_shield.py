@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from jaxexo.config import config_from_dict, load_config
+from jaxexo.config import config_from_dict, load_config, numpy_params
 from jaxexo.physics import dynamics, geometry, kinematics, terrain  # noqa: F401
 from conftest import ROOT, legacy_raw
 
@@ -24,7 +24,7 @@ def _config(**env):
 def _states(cfg, n, seed):
     """n terrain scenes (jaxexo.physics.scenarios, NumPy) and heel positions around their obstacles."""
     from jaxexo.physics import scenarios
-    p = dynamics.numpy_params(cfg)
+    p = numpy_params(cfg)
     lay = scenarios.scenario_layouts(np, p, seed, n, False)
     rng = np.random.default_rng(seed)
     hy = (lay["center_y"] + rng.uniform(-0.4, 0.15, n)).astype(np.float32)
@@ -128,7 +128,7 @@ def test_jax_mask_equals_numpy_and_exploration_stays_inside():
                                    if not k.startswith("_")} if hasattr(st.layout, "__dict__") else {})
     lay = types.SimpleNamespace(outline=np.asarray(st.layout.outline), pivot_y=np.asarray(st.layout.pivot_y),
                                 goal_y=np.asarray(st.layout.goal_y))
-    m_np = dynamics.admissible_moves(np, dynamics.numpy_params(cfg), heel[:, 0], heel[:, 1], lay)
+    m_np = dynamics.admissible_moves(np, numpy_params(cfg), heel[:, 0], heel[:, 1], lay)
     assert (m_jax == m_np).mean() > 0.999    # float32 fused arithmetic may flip a move on the boundary
     assert (~m_jax).sum() > 512 * 17          # the backward moves, and some more
 

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from jaxexo.baselines import CFFTG
-from jaxexo.config import ConfigError, Config, config_from_dict, load_config
+from jaxexo.config import ConfigError, Config, config_from_dict, load_config, scalar_params
 from jaxexo.config.toml_io import config_to_toml
 from jaxexo.inference import Obstacle
 from jaxexo.inference.swing_timing import DeviceLimits, time_swing, time_swings, uniform_peaks
@@ -24,7 +24,7 @@ from jaxexo.physics import dynamics, kinematics
 from conftest import ROOT, legacy_raw
 
 CFG = load_config(ROOT / "configs" / "default.toml")
-SP = dynamics.scalar_params(CFG)
+SP = scalar_params(CFG)
 THESIS = ("base1", "base2", "base3", "triangle", "half_circle")
 
 

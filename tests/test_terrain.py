@@ -270,7 +270,7 @@ def test_unseen_set_is_fixed_held_out_and_accepted_by_the_generators():
         o, _, _ = terrain.one_family_outline(np, s["kind"], np.asarray(s["family_u"], np.float32).astype(np.float64))
         got = s["obstacle"].outline - [s["obstacle"].center_y, 0.0]
         np.testing.assert_allclose(got, terrain.unpad(o), atol=1e-12)
-    for p in terrain.PIVOTS:
+    for p in kinematics.PIVOT_CONDITIONS:
         starts = {round(s["start_y"], 9) for s in a if s["pivot"] == p}
         assert starts == {0.0, 0.06, 0.12}
     assert repeats_for(1) == 1 and repeats_for(len(HELD_OUT_FAMILIES) * CELLS_PER_FAMILY + 1) == 2

@@ -10,9 +10,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from jaxexo.config import ConfigError, config_from_dict
+from jaxexo.config import ConfigError, config_from_dict, numpy_params, views
 from jaxexo.config.toml_io import config_to_toml
-from jaxexo.physics import dynamics, geometry, scenarios, terrain
+from jaxexo.physics import geometry, scenarios, terrain
 
 from conftest import legacy_raw
 
@@ -75,7 +75,7 @@ def test_terrain_needs_room_for_its_outlines_and_a_small_enough_step():
 
 
 def test_test_config_drops_the_terrain():
-    assert scenarios.test_config(_cfg()).layout.terrain is None
+    assert views.test_config(_cfg()).layout.terrain is None
 
 
 # --------------------------------------------------------------------------------------------
@@ -97,7 +97,7 @@ def test_reset_draws_the_numpy_tools_scenes(terrain_kw):
     t = cfg.layout.terrain
     n = 64
     _, lj = _jax_scenes(cfg, 11, n)
-    ln = scenarios.scenario_layouts(np, dynamics.numpy_params(cfg), 11, n)
+    ln = scenarios.scenario_layouts(np, numpy_params(cfg), 11, n)
     np.testing.assert_array_equal(np.asarray(lj.kind), ln["kind"])
     np.testing.assert_array_equal(np.asarray(lj.pivot_kind), ln["pivot_kind"])
     for k in ("outline", "shape", "center_y", "width", "height", "start_y", "goal_y", "pivot_y"):
@@ -106,7 +106,7 @@ def test_reset_draws_the_numpy_tools_scenes(terrain_kw):
     from jaxexo.inference.scenarios import training_scenarios
     sc = training_scenarios(cfg, 12, seed=11)
     pivots = [i for i, w in enumerate(t.pivot) if w > 0]
-    lc = scenarios.scenario_layouts(np, dynamics.numpy_params(cfg), 11, 12, cycle=True,
+    lc = scenarios.scenario_layouts(np, numpy_params(cfg), 11, 12, cycle=True,
                                     kinds=list(range(len(t.families))), pivots=pivots)
     for i, s in enumerate(sc):
         assert s["kind"] == terrain.FAMILY_NAMES[int(lc["kind"][i])]
@@ -150,7 +150,7 @@ def test_observed_shape_matches_a_dense_reference():
     """The observation's height profile of a terrain scene against Obstacle.profile heights sampled
     independently (geometry.Obstacle built from the unpadded outline, np.interp along its edges)."""
     cfg = config_from_dict(legacy_raw({"env": {"obs_profile": "shape"}, "layout": {"terrain": TERRAIN}}))
-    ln = scenarios.scenario_layouts(np, dynamics.numpy_params(cfg), 3, 60)
+    ln = scenarios.scenario_layouts(np, numpy_params(cfg), 3, 60)
     frac = geometry.descriptor_fractions(cfg.env.shape_points)
     for i in range(60):
         o = terrain.unpad(ln["outline"][i]).astype(np.float64)

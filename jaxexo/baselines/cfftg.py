@@ -57,7 +57,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxexo.physics import dynamics, geometry
-from jaxexo.config import Config, load_config
+from jaxexo.config import Config, load_config, scalar_params
 from jaxexo.inference.generator import check_options, pivot_of, scenes_for
 from jaxexo.inference.trajectory import (DEFAULT_DURATION, Trajectory, TrajectoryBatch, TrajectoryError, assemble,
                                          measure_paths)
@@ -164,7 +164,7 @@ class CFFTG:
         elif not isinstance(config, Config):
             raise TypeError(f"config: expected a jaxexo Config or a config file's path, got {type(config).__name__}")
         self.config = config
-        self.sp = dynamics.scalar_params(self.config)
+        self.sp = scalar_params(self.config)
         self.margin = geometry._finite("margin", self.config.reward.safety_distance if margin is None else margin)
         if self.margin < 0:
             raise ValueError(f"margin must be >= 0 metres, got {self.margin}")

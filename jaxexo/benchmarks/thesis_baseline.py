@@ -136,10 +136,11 @@ class NumpyExoEnv:
     truncated, info)`` with ``info["success"]`` the strict success of a finished episode."""
 
     def __init__(self, cfg, pool: dict, seed: int = 0):
+        from jaxexo.config import numpy_params
         from jaxexo.physics import dynamics, outcome
 
         self.dyn, self.dyn_outcome = dynamics, outcome
-        self.p = dynamics.numpy_params(cfg)
+        self.p = numpy_params(cfg)
         self.obs_mode = cfg.env.obs_mode
         self.max_steps = int(cfg.env.max_steps)
         self.pool = {k: np.asarray(v) for k, v in pool.items()}
@@ -193,9 +194,10 @@ class NumpyExoEnv:
 def layout_pool(cfg, n: int, seed: int = 0) -> dict:
     """n layouts of the config's distribution (jaxexo.physics.scenarios, the scenes the JAX
     environment's reset draws for the key words (seed, i)), as NumPy arrays."""
-    from jaxexo.physics import dynamics, scenarios
+    from jaxexo.config import numpy_params
+    from jaxexo.physics import scenarios
 
-    return scenarios.scenario_layouts(np, dynamics.numpy_params(cfg), seed, n)
+    return scenarios.scenario_layouts(np, numpy_params(cfg), seed, n)
 
 
 # --------------------------------------------------------------------------------------------

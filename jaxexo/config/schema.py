@@ -13,7 +13,7 @@ with ``declare(default, check, unit=..., role=...)``: its type (the dataclass an
   derived static setting (``env.max_vertices`` -> ``Config.outline_vertices``).
 
 Parsing and its messages (``config_from_dict``), the TOML writer (``jaxexo.config.toml_io``),
-``HYPER_FIELDS``, ``EnvParams`` (``jaxexo.physics.dynamics.param_values``), ``Hyperparams`` and
+``HYPER_FIELDS``, ``EnvParams`` (``jaxexo.config.views.param_values``), ``Hyperparams`` and
 ``static_settings`` all iterate these declarations. Every value is checked when the config is
 built, and an error names the bad field (``ConfigError: layout.obstacles[1].height: ...``), so an
 impossible layout never shows up as a NaN inside a jitted run.
@@ -36,8 +36,8 @@ import numpy as np
 
 from jaxexo.physics import geometry, kinematics, outcome, rewards, terrain
 from jaxexo.physics.geometry import THESIS_OBSTACLES
+from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 
-PIVOT_CONDITIONS = kinematics.PIVOT_CONDITIONS  # thesis 3.1, defined with the rule that places the pivot
 OBS_MODES = ("thesis", "conditioned")
 OBS_PROFILES = ("bbox", "shape")
 COLLISION_MODES = ("penalty", "terminate")
@@ -642,7 +642,7 @@ class TrainConfig:
 
 # TrainConfig fields that are leaves of jaxexo.train.Hyperparams (vmappable), in declaration order.
 HYPER_FIELDS = tuple(name for name, s in declared_fields(TrainConfig) if s.leaf)
-# EnvParams come from the leaves of these sections (jaxexo.physics.dynamics.param_values).
+# EnvParams come from the leaves of these sections (jaxexo.config.views.param_values).
 ENV_SECTIONS = ("env", "kinematics", "reward", "layout")
 
 

@@ -2,7 +2,7 @@
 
 Every field here is a pytree leaf (vmappable: reward weights and constants, kinematic constants, the
 layout distribution). The fields are not listed a second time: they are the names that
-``jaxexo.physics.dynamics.param_values`` derives from the config declarations (jaxexo.config.schema,
+``jaxexo.config.param_values`` derives from the config declarations (jaxexo.config.schema,
 each leaf field of [env], [kinematics], [reward], [layout], plus the action directions). Shapes (the
 number of outline vertices, shape-descriptor points, obstacle kinds, the observation mode) are fixed
 by the arrays themselves or by the ExoStepEnv instance.
@@ -14,8 +14,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 from flax import struct
 
-from jaxexo.config import Config
-from jaxexo.physics.dynamics import param_values
+from jaxexo.config import Config, param_values
 
 # The names and their order do not depend on the config's values, so the default config fixes them.
 PARAM_NAMES = tuple(param_values(Config()))

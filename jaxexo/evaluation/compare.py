@@ -33,7 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxexo.config import PIVOT_CONDITIONS, Config
+from jaxexo.config import Config
+from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 from jaxexo.physics import swept
 from jaxexo.inference.scenarios import sample_scenarios, training_scenarios
 from jaxexo.storage.atomic import atomic_write

@@ -35,7 +35,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from jaxexo.config import PIVOT_CONDITIONS, load_config, packaged_config
+from jaxexo.config import load_config, packaged_config
+from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 from jaxexo.storage.atomic import atomic_write
 from jaxexo.storage.rundir import blocking_file
 

@@ -21,12 +21,13 @@ import math
 import numpy as np
 
 from jaxexo.physics import terrain
+from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 
 UNSEEN_SEED = 20_261_122
 START_SHIFT = (0.0, 0.12)      # m, the agent starts up to 12 cm closer to the obstacle
 STEP_LENGTH = (0.55, 0.85)     # m
 LEVELS = (0.0, 0.5, 1.0)       # fractions of the start and step-length ranges
-CELLS_PER_FAMILY = len(terrain.PIVOTS) * len(LEVELS) * len(LEVELS)
+CELLS_PER_FAMILY = len(PIVOT_CONDITIONS) * len(LEVELS) * len(LEVELS)
 
 
 def repeats_for(n: int, families=terrain.HELD_OUT_FAMILIES) -> int:
@@ -53,7 +54,7 @@ def unseen_scenarios(foot_length: float, repeats: int = 2, seed: int = UNSEEN_SE
         u_shape, u_place = terrain.draw_uniforms(rng, n)
         outline, width, _ = terrain.one_family_outline(np, fam, u_shape.astype(np.float64))
         i = 0
-        for pk, pivot in enumerate(terrain.PIVOTS):
+        for pk, pivot in enumerate(PIVOT_CONDITIONS):
             for a in LEVELS:
                 for b in LEVELS:
                     for _ in range(repeats):

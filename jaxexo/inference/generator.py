@@ -55,6 +55,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxexo.physics import dynamics, geometry, swept
+from jaxexo.config import numpy_params, scalar_params
 from jaxexo.config.schema import MAX_SWING_DURATION
 from jaxexo.physics.dynamics import Scene, scalar
 from jaxexo.inference import blas, smoothing as sm, trajectory
@@ -79,8 +80,8 @@ class TrajectoryGenerator:
         self.policy = policy
         self.config = config
         self.source = source
-        self.np_params = dynamics.numpy_params(config)
-        self.sp = dynamics.scalar_params(config)
+        self.np_params = numpy_params(config)
+        self.sp = scalar_params(config)
         self.obs_mode = config.env.obs_mode
         self.max_steps = int(config.env.max_steps)
         self.terminate_on_collision = config.env.collision == "terminate"

@@ -14,17 +14,18 @@ from __future__ import annotations
 
 import numpy as np
 
-from jaxexo.config import PIVOT_CONDITIONS, Config
-from jaxexo.physics import dynamics, scenarios, terrain
+from jaxexo.config import Config, numpy_params, test_config
+from jaxexo.physics import scenarios, terrain
 from jaxexo.physics.geometry import Obstacle
-from jaxexo.physics.scenarios import HELD_OUT, TEST_KINDS, test_config  # noqa: F401 (one definition, re-exported)
+from jaxexo.physics.kinematics import PIVOT_CONDITIONS
+from jaxexo.physics.scenarios import HELD_OUT, TEST_KINDS  # noqa: F401 (one definition, re-exported)
 
 
 def sample_scenarios(config: Config, n: int, seed: int = 12345) -> list[dict]:
     """n test scenarios as keyword arguments of ``TrajectoryGenerator.generate`` plus ``kind``: kind
     i % 5, pivot (i // 5) % 3, the rest drawn from the config's layout distribution."""
     tcfg = test_config(config)
-    return _as_kwargs(tcfg, scenarios.scenario_layouts(np, dynamics.numpy_params(tcfg), seed, n, cycle=True))
+    return _as_kwargs(tcfg, scenarios.scenario_layouts(np, numpy_params(tcfg), seed, n, cycle=True))
 
 
 def training_scenarios(config: Config, n: int, seed: int = 54321) -> list[dict]:
@@ -38,7 +39,7 @@ def training_scenarios(config: Config, n: int, seed: int = 54321) -> list[dict]:
     else:
         kinds = [i for i, o in enumerate(config.layout.obstacles) if o.weight > 0]
         pivots = [i for i, w in enumerate(config.layout.pivot) if w > 0]
-    return _as_kwargs(config, scenarios.scenario_layouts(np, dynamics.numpy_params(config), seed, n, cycle=True,
+    return _as_kwargs(config, scenarios.scenario_layouts(np, numpy_params(config), seed, n, cycle=True,
                                                          kinds=kinds, pivots=pivots))
 
 

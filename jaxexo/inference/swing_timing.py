@@ -422,8 +422,7 @@ def time_swings(trajs, config, rate: float | None = None, limits: DeviceLimits |
     limits (default: ``config.device``) and sample each at ``rate`` Hz (default:
     ``config.device.control_rate``). ``config`` also supplies the kinematics (pass the generator's
     ``config``). The TOPP passes run on all swings at once."""
-    from jaxexo.config import Config
-    from jaxexo.physics import dynamics
+    from jaxexo.config import Config, scalar_params
 
     if _is_trajectory(trajs) and not isinstance(trajs, TrajectoryBatch):
         raise TypeError("trajs: expected a list of trajectories or a TrajectoryBatch, got one trajectory "
@@ -449,7 +448,7 @@ def time_swings(trajs, config, rate: float | None = None, limits: DeviceLimits |
     limits = DeviceLimits.from_config(config) if limits is None else limits
     if not isinstance(limits, DeviceLimits):
         raise ValueError(f"limits: expected a DeviceLimits, got {type(limits).__name__}")
-    sp = dynamics.scalar_params(config) if sp is None else sp
+    sp = scalar_params(config) if sp is None else sp
     vmax = np.asarray(limits.velocity)
     amax = np.asarray(limits.acceleration)
     heels = [np.asarray(t.heel, np.float64) for t in trajs]

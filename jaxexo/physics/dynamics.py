@@ -7,8 +7,8 @@ and build observations with these functions. Each takes the array module ``xp`` 
 single-trajectory loop). Heel coordinates are passed as separate y and z components so that the
 same code serves a scalar, a batch (B,) and a traced JAX value.
 
-``p`` is any object with the parameter attributes of ``param_values`` (``EnvParams`` in JAX, a
-``SimpleNamespace`` of NumPy arrays or Python floats elsewhere); ``layout`` any object with the
+``p`` is any object with the parameter attributes of ``jaxexo.config.param_values`` (``EnvParams``
+in JAX, a ``SimpleNamespace`` of NumPy arrays or Python floats elsewhere); ``layout`` any object with the
 ``Scene``/``Layout`` fields (outline, shape, center_y, width, height, pivot_y, start_y, goal_y).
 
 Also here, because it is NumPy-only: ``make_scene``, the one place where a fixed scene (an Obstacle,
@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from jaxexo.physics import geometry, kinematics, rewards, swept
-from jaxexo.config import ENV_SECTIONS, PIVOT_CONDITIONS, SECTION_CLASSES, Config, declared_fields
+from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 
 NUM_ACTIONS = 36          # thesis 2.1: 36 moves, 10 degrees apart
 # Observation entries besides the obstacle profile (``observation``, conditioned mode): heel (2),
@@ -64,38 +64,6 @@ def obs_dim(obs_mode: str, shape_points: int) -> int:
     return 2 if obs_mode == "thesis" else OBS_SCENE_ENTRIES + shape_points
 
 
-def param_values(cfg: Config) -> dict[str, np.ndarray]:
-    """Every environment parameter as a NumPy value (float32, int32 or bool), by EnvParams field name.
-
-    Derived from the config's declarations: each leaf field of ENV_SECTIONS becomes one or more
-    parameters (``FieldSpec.params``), plus the fixed action set (thesis 2.1). ``EnvParams`` is built
-    from these names (jaxexo.env.params); NumPy code uses the values as they are."""
-    out = {"directions": np.asarray(action_directions(), dtype=np.float32)}
-    for section in ENV_SECTIONS:
-        obj = getattr(cfg, section)
-        for name, spec in declared_fields(SECTION_CLASSES[section]):
-            if spec.leaf:
-                out.update(spec.params(name, getattr(obj, name), cfg))
-    return out
-
-
-def numpy_params(cfg: Config) -> types.SimpleNamespace:
-    """The environment parameters as NumPy arrays, attribute-accessible like EnvParams."""
-    return types.SimpleNamespace(**param_values(cfg))
-
-
-def scalar_params(cfg: Config) -> types.SimpleNamespace:
-    """The transition constants as Python floats (for ``xp=scalar``); vectors become tuples.
-
-    Values are rounded through float32 first, so that the scalar loop starts from exactly the
-    constants the float32 JAX environment uses."""
-    out = {}
-    for k, v in param_values(cfg).items():
-        if v.dtype == np.float32 and v.ndim <= 1:
-            out[k] = float(v) if v.ndim == 0 else tuple(float(x) for x in v)
-    return types.SimpleNamespace(**out)
-
-
 # m: the largest clearance a caller may ask of a swing (``generate(..., clearance=C)``). The obstacles
 # jaxexo trains on reach 0.28 m, and a heel lifted 10 cm above such a top is near the hip and knee
 # limits of the default leg; beyond that the clearance is a different task (stepping onto it).
@@ -117,7 +85,7 @@ def check_clearance(clearance, min_clearance: float) -> float | None:
 
 
 def with_clearance(p, clearance: float | None):
-    """The parameter view ``p`` (``numpy_params`` or ``scalar_params``) for a swing that must keep
+    """The parameter view ``p`` (jaxexo.config's ``numpy_params`` or ``scalar_params``) for a swing that must keep
     ``clearance`` (m; None: unchanged): the verdict's margin ``min_clearance`` becomes it, and the shield
     keeps the same excess above it as the config's (``shield_clearance - min_clearance``, the budget
     the smoothed curve may cut)."""

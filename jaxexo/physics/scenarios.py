@@ -17,22 +17,19 @@ arithmetic that NumPy and JAX compute bit for bit alike. So
   set, bit for bit.
 
 Test sets (``cycle=True``) fix the kind and pivot condition of scene i (kind i % kinds, pivot
-(i // kinds) % 3, so every pair is equally represented) and draw the rest; ``test_config`` is the
-training config with the five thesis obstacles (Table 3.1) and all three pivot conditions.
+(i // kinds) % 3, so every pair is equally represented) and draw the rest; the config of such a set
+is ``jaxexo.config.test_config``: the five thesis obstacles (Table 3.1), all three pivot conditions.
 """
 
 from __future__ import annotations
 
-import dataclasses
-
-from jaxexo.config import Config, named_spec
 from jaxexo.physics import geometry, terrain
 from jaxexo.physics.dynamics import pivot_position
+from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 
 # The five thesis obstacles (Table 3.1; Base 1-3 seen in training, triangle and half-circle held out).
 TEST_KINDS = ("base1", "base2", "base3", "triangle", "half_circle")
 HELD_OUT = ("triangle", "half_circle")
-N_PIVOTS = 3
 # Uniform numbers per scene: kind, pivot, width and height jitter, width, height, step length,
 # start shift, obstacle offset.
 N_UNIFORMS = 9
@@ -131,7 +128,7 @@ def terrain_layout_from_uniforms(xp, p, u, kind=None, pivot_kind=None, families=
 
 def layout_from_uniforms(xp, p, u, kind=None, pivot_kind=None, families=None) -> dict:
     """A scene from uniform numbers u (..., N_UNIFORMS) and the layout distribution in ``p``
-    (param_values' fields): the Layout fields as a dict of arrays (...). ``kind``/``pivot_kind``
+    (jaxexo.config.param_values' fields): the Layout fields as a dict of arrays (...). ``kind``/``pivot_kind``
     (...) fix the obstacle kind / pivot condition instead of drawing them from u[0] / u[1]. With
     procedural terrain (``uses_terrain(p)``) the scene is terrain_layout_from_uniforms'."""
     if uses_terrain(p):
@@ -167,21 +164,11 @@ def scenario_layouts(xp, p, seed: int, n: int, cycle: bool = False, kinds=None, 
         return layout_from_uniforms(xp, p, u)
     n_kinds = p.terrain_ids.shape[-1] if uses_terrain(p) else p.kind_cdf.shape[-1]
     kinds = xp.asarray(range(n_kinds) if kinds is None else kinds, dtype=xp.int32)
-    pivots = xp.asarray(range(N_PIVOTS) if pivots is None else pivots, dtype=xp.int32)
+    pivots = xp.asarray(range(len(PIVOT_CONDITIONS)) if pivots is None else pivots, dtype=xp.int32)
     idx = xp.arange(n, dtype=xp.int32)
     return layout_from_uniforms(xp, p, u, kind=kinds[idx % len(kinds)],
                                 pivot_kind=pivots[(idx // len(kinds)) % len(pivots)])
 
 
-def test_config(cfg: Config) -> Config:
-    """The training config with the layout's obstacle mixture replaced by the five thesis obstacles
-    and all three pivot conditions (same jitter, start shifts and step lengths)."""
-    lay = dataclasses.replace(cfg.layout, obstacles=tuple(named_spec(k) for k in TEST_KINDS),
-                              pivot=(1.0, 1.0, 1.0))
-    lay = dataclasses.replace(lay, terrain=None)
-    env = dataclasses.replace(cfg.env, max_vertices=0)
-    return dataclasses.replace(cfg, layout=lay, env=env)
-
-
 __all__ = ["TEST_KINDS", "HELD_OUT", "N_UNIFORMS", "N_TERRAIN_UNIFORMS", "threefry2x32", "uniforms", "seed_words",
-           "uses_terrain", "n_uniforms", "layout_from_uniforms", "terrain_layout_from_uniforms", "scenario_layouts", "test_config"]
+           "uses_terrain", "n_uniforms", "layout_from_uniforms", "terrain_layout_from_uniforms", "scenario_layouts"]

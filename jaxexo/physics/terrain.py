@@ -50,7 +50,6 @@ from jaxexo.physics import geometry, kinematics
 # uniform numbers, so one (K_MAX, 2) array and one (D_MAX,) draw serve every family in a batch.
 K_MAX = 16
 D_MAX = 16
-PIVOTS = kinematics.PIVOT_CONDITIONS
 
 
 class TerrainError(ValueError):
@@ -378,7 +377,7 @@ def _range(path, v, lo_bound=0.0):
 class TerrainSpec:
     """Procedural obstacles for training: which families (by name; held-out ones are refused unless
     ``allow_held_out``), their weights, the start shift and step length ranges (m), the pivot
-    condition weights (PIVOTS order) and the placement margins (m). Validated on construction;
+    condition weights (kinematics.PIVOT_CONDITIONS order) and the placement margins (m). Validated on construction;
     ``path`` prefixes error messages (the config field it came from)."""
 
     families: tuple[str, ...] = TRAIN_FAMILIES
@@ -484,7 +483,7 @@ def unclearable(spec: TerrainSpec, *, foot_length, thigh, shin, hip_limits, knee
             start, L, c = place(np, uu, np.full(len(uu), width), spec.start_shift, spec.step_length, foot_length,
                                 spec.near_margin, spec.far_margin)
             heel = np.stack([c, np.full_like(c, fam.height[1] + heel_lift)], -1)
-            for k, piv in enumerate(PIVOTS):
+            for k, piv in enumerate(kinematics.PIVOT_CONDITIONS):
                 if spec.pivot[k] <= 0:
                     continue
                 bad = kinematics.swing_heel_unreachable(np, kinematics.pivot_position(np, k, start, c), heel,

@@ -32,12 +32,13 @@ import jax.numpy as jnp
 import numpy as np
 from flax import serialization
 
-from jaxexo.config import Config, static_settings
+from jaxexo.config import Config, static_settings, test_config
 from jaxexo.env import ExoStepEnv
 from jaxexo.sweep.plan import Chunk
 from jaxexo.sweep.results import SCALARS
 from jaxexo.sweep.spec import Sweep
-from jaxexo.train.evaluate import HELD_OUT, TEST_KINDS, make_rollout, test_config, test_layouts
+from jaxexo.physics.scenarios import HELD_OUT, TEST_KINDS
+from jaxexo.train.evaluate import make_rollout, test_layouts
 from jaxexo.train.trainer import METRICS, Hyperparams, Trainer
 
 CURVE_POINTS = 50

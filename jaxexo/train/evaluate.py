@@ -17,11 +17,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxexo.config import PIVOT_CONDITIONS, Config
+from jaxexo.config import Config, numpy_params, test_config
 from jaxexo.env import ExoStepEnv
 from jaxexo.env.exo_step import Layout
 from jaxexo.physics import dynamics, outcome, scenarios
-from jaxexo.physics.scenarios import HELD_OUT, TEST_KINDS, test_config  # noqa: F401 (one definition, re-exported)
+from jaxexo.physics.kinematics import PIVOT_CONDITIONS
+from jaxexo.physics.scenarios import HELD_OUT, TEST_KINDS  # noqa: F401 (one definition, re-exported)
 
 
 def layout_set(cfg: Config, n: int, seed: int, cycle: bool = False) -> Layout:
@@ -29,7 +30,7 @@ def layout_set(cfg: Config, n: int, seed: int, cycle: bool = False) -> Layout:
     arrays in a Layout. Drawn in NumPy and fed to JAX, so that they are bit for bit the scenes
     jaxexo.inference.scenarios gives NumPy tools (under jit, XLA fuses multiply-adds, which would
     move a size by an ulp); ``cycle``: kinds and pivot conditions in turn (a test set)."""
-    return Layout(**scenarios.scenario_layouts(np, dynamics.numpy_params(cfg), seed, n, cycle))
+    return Layout(**scenarios.scenario_layouts(np, numpy_params(cfg), seed, n, cycle))
 
 
 def test_layouts(tcfg: Config, n: int, seed: int = 12345) -> Layout:

@@ -1,0 +1,61 @@
+"""A Config seen as the environment's parameters, and the configs derived from it.
+
+``param_values`` turns the leaf fields of the environment sections into the arrays the transition
+rules read (jaxexo.physics.dynamics, thesis 2.1-2.5); ``numpy_params`` and ``scalar_params`` are the
+NumPy and plain-float views of the same values, ``EnvParams`` (jaxexo.env.params) the JAX one.
+``test_config`` is the training config evaluated on the five thesis obstacles (Table 3.1).
+NumPy-only: the physics below is given the values, it never reads a Config.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import types
+
+import numpy as np
+
+from jaxexo.config.schema import ENV_SECTIONS, SECTION_CLASSES, Config, declared_fields, named_spec
+from jaxexo.physics.dynamics import action_directions
+from jaxexo.physics.scenarios import TEST_KINDS
+
+
+def param_values(cfg: Config) -> dict[str, np.ndarray]:
+    """Every environment parameter as a NumPy value (float32, int32 or bool), by EnvParams field name.
+
+    Derived from the config's declarations: each leaf field of ENV_SECTIONS becomes one or more
+    parameters (``FieldSpec.params``), plus the fixed action set (thesis 2.1). ``EnvParams`` is built
+    from these names (jaxexo.env.params); NumPy code uses the values as they are."""
+    out = {"directions": np.asarray(action_directions(), dtype=np.float32)}
+    for section in ENV_SECTIONS:
+        obj = getattr(cfg, section)
+        for name, spec in declared_fields(SECTION_CLASSES[section]):
+            if spec.leaf:
+                out.update(spec.params(name, getattr(obj, name), cfg))
+    return out
+
+
+def numpy_params(cfg: Config) -> types.SimpleNamespace:
+    """The environment parameters as NumPy arrays, attribute-accessible like EnvParams."""
+    return types.SimpleNamespace(**param_values(cfg))
+
+
+def scalar_params(cfg: Config) -> types.SimpleNamespace:
+    """The transition constants as Python floats (for ``xp=dynamics.scalar``); vectors become tuples.
+
+    Values are rounded through float32 first, so that the scalar loop starts from exactly the
+    constants the float32 JAX environment uses."""
+    out = {}
+    for k, v in param_values(cfg).items():
+        if v.dtype == np.float32 and v.ndim <= 1:
+            out[k] = float(v) if v.ndim == 0 else tuple(float(x) for x in v)
+    return types.SimpleNamespace(**out)
+
+
+def test_config(cfg: Config) -> Config:
+    """The training config with the layout's obstacle mixture replaced by the five thesis obstacles
+    and all three pivot conditions (same jitter, start shifts and step lengths)."""
+    lay = dataclasses.replace(cfg.layout, obstacles=tuple(named_spec(k) for k in TEST_KINDS),
+                              pivot=(1.0, 1.0, 1.0))
+    lay = dataclasses.replace(lay, terrain=None)
+    env = dataclasses.replace(cfg.env, max_vertices=0)
+    return dataclasses.replace(cfg, layout=lay, env=env)
