@@ -24,7 +24,7 @@ import jax  # noqa: E402
 from jaxexo.benchmarks.sweep_bench import agents_throughput  # noqa: E402
 from jaxexo.config import load_config, packaged_config  # noqa: E402
 from jaxexo.evaluation.machine import write_result  # noqa: E402
-from jaxexo.sweep.program import LANES, over_agents, over_lanes  # noqa: E402
+from jaxexo.train.lanes import LANES, over_agents, over_lanes  # noqa: E402
 from jaxexo.sweep.spec import load_sweep  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent

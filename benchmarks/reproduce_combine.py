@@ -19,10 +19,10 @@ for name in run_names(("a", "b", "c", "1", "2", "3", "final"), "both"):
             j = d / "reproduce.json"
             if j.exists() and name in (data := json.loads(j.read_text())):
                 results[name] = data[name]; break
-from jaxexo.evaluation.reproduce import _compact
+from jaxexo.evaluation.reproduce import compact
 for r in results.values():
     for g in ("rl", "rl_eps", "cfftg"):
-        if g in r: r[g] = _compact(r[g])
+        if g in r: r[g] = compact(r[g])
 print("have", list(results))
 md = tables(results)
 Path("/tmp/repro/reproduce.md").write_text(md)

@@ -9,7 +9,8 @@ import shutil
 import numpy as np
 import pytest
 
-from jaxexo.evaluation.compare import evaluate_generators, make_scenarios, markdown, path_length, squared_jerk
+from jaxexo.evaluation.compare import evaluate_generators, make_scenarios, markdown, squared_jerk
+from jaxexo.evaluation.metrics import path_length
 
 pytest.importorskip("jax")
 

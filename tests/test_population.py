@@ -18,7 +18,8 @@ from train_helpers import _compilation_cache, leaves  # noqa: F401 (the module's
 
 jax = pytest.importorskip("jax")
 
-from jaxexo.sweep.program import LANES, padded_agents, run_chunk, unflatten  # noqa: E402
+from jaxexo.sweep.program import run_chunk, unflatten  # noqa: E402
+from jaxexo.train.lanes import LANES, padded_agents  # noqa: E402
 from jaxexo.sweep.spec import sweep_from_dict  # noqa: E402
 from jaxexo.train import driver  # noqa: E402
 from jaxexo.train.network import dense_layers  # noqa: E402

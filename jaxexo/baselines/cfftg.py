@@ -74,7 +74,7 @@ FLATNESS = (0.0, 1.0, 2.0, 3.0)
 
 
 @functools.lru_cache(maxsize=16)
-def _basis(n_points: int):
+def basis(n_points: int):
     """Samples s, the minimum-jerk profile, the apex-moving term g = s^3 (1-s)^3 and z's shapes
     phi_k (len(FLATNESS), N), each with peak 1 at s = 1/2 (computed once per n_points, read-only)."""
     s = np.linspace(0.0, 1.0, n_points)
@@ -132,7 +132,7 @@ def plan_paths(start_y, goal_y, outline, apex_frac, margin, foot_length: float, 
     ``apex_frac`` (B,): the apex's y as a fraction of the step (clipped to the monotone range);
     ``margin`` (B,): clearance asked of the foot, metres. Of the height shapes FLATNESS, each scene
     gets the one that needs the lowest apex."""
-    s, mj, g, phi = _basis(n_points)
+    s, mj, g, phi = basis(n_points)
     frac = np.clip(apex_frac, *APEX_FRAC_RANGE)
     c = 64.0 * (frac - 0.5)
     d = (goal_y - start_y)[:, None]
@@ -165,11 +165,11 @@ class CFFTG:
             raise TypeError(f"config: expected a jaxexo Config or a config file's path, got {type(config).__name__}")
         self.config = config
         self.sp = scalar_params(self.config)
-        self.margin = geometry._finite("margin", self.config.reward.safety_distance if margin is None else margin)
+        self.margin = geometry.finite("margin", self.config.reward.safety_distance if margin is None else margin)
         if self.margin < 0:
             raise ValueError(f"margin must be >= 0 metres, got {self.margin}")
-        self.margin_step = geometry._finite_positive("margin_step", margin_step)
-        self.apex_step = geometry._finite_positive("apex_step", apex_step)
+        self.margin_step = geometry.finite_positive("margin_step", margin_step)
+        self.apex_step = geometry.finite_positive("apex_step", apex_step)
         if isinstance(max_plans, bool) or not isinstance(max_plans, (int, np.integer)) or max_plans < 1:
             raise ValueError(f"max_plans must be an integer >= 1, got {max_plans!r}")
         self.max_plans = int(max_plans)

@@ -27,7 +27,7 @@ import numpy as np
 
 from jaxexo.benchmarks.train_bench import throughput
 from jaxexo.config import Config
-from jaxexo.sweep.program import over_agents
+from jaxexo.train.lanes import over_agents
 from jaxexo.sweep.spec import load_sweep, sweep_from_dict
 from jaxexo.train.trainer import Hyperparams, Trainer
 

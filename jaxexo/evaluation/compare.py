@@ -36,6 +36,7 @@ import numpy as np
 from jaxexo.config import Config
 from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 from jaxexo.physics import swept
+from jaxexo.evaluation.metrics import path_length
 from jaxexo.inference.scenarios import sample_scenarios, training_scenarios
 from jaxexo.storage.atomic import atomic_write
 from jaxexo.storage.rundir import blocking_file
@@ -72,11 +73,6 @@ def _kwargs(s: dict) -> dict:
 # --------------------------------------------------------------------------------------------
 # Metrics
 # --------------------------------------------------------------------------------------------
-
-
-def path_length(heel: np.ndarray) -> np.ndarray:
-    """Length of heel paths (..., N, 2), metres."""
-    return np.linalg.norm(np.diff(heel, axis=-2), axis=-1).sum(axis=-1)
 
 
 def squared_jerk(heel: np.ndarray, t: np.ndarray) -> np.ndarray:

@@ -275,7 +275,7 @@ def check_reproduce_options(out, n, results_dir=None, population=None) -> None:
             raise ValueError(f"{option}: {q} is a file, not a folder (for {folder})")
 
 
-def _compact(report: dict) -> dict:
+def compact(report: dict) -> dict:
     """A generator's figures without the per-(kind, pivot) groups and with at most 5 failures, so
     that the committed JSON stays small (the device figures only overall)."""
     out = {k: v for k, v in report.items() if k != "by_kind_pivot"}
@@ -348,7 +348,7 @@ def run_reproduce(out: str | Path, models=THESIS_MODELS, n: int = 1000, seed: in
         eps = float(gen.config.train.eps_end)
         eps_report, _ = evaluate_generators({"rl": WithFallback(gen.exploring(eps, seed=seed), None)}, scenarios,
                                            batch_size=0)
-        results[name] = {**{k: _compact(v) for k, v in report.items()}, "rl_eps": _compact(eps_report["rl"]),
+        results[name] = {**{k: compact(v) for k, v in report.items()}, "rl_eps": compact(eps_report["rl"]),
                          "test_epsilon": eps, "model": model_of(name), "variant": variant_of(name),
                          "train_seconds": ev["train_seconds"], "episodes": ev["episodes"],
                          "env_steps": ev.get("env_steps"), "eval_json": {k: ev[k] for k in ("accuracy", "success")}}

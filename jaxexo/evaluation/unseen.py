@@ -20,6 +20,7 @@ import math
 
 import numpy as np
 
+from jaxexo.evaluation.metrics import path_length
 from jaxexo.physics import terrain
 from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 
@@ -70,8 +71,6 @@ def unseen_scenarios(foot_length: float, repeats: int = 2, seed: int = UNSEEN_SE
 def family_table(trajs: dict, scenarios: list[dict]) -> dict:
     """Per family and generator: n, success, accuracy, clearance min/p5/median (m), path length
     mean/median (m). ``trajs``: {generator: [Trajectory per scenario]}."""
-    from jaxexo.evaluation.compare import path_length
-
     kinds = np.array([s["kind"] for s in scenarios])
     table = {}
     for fam in dict.fromkeys(kinds):

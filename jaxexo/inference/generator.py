@@ -901,10 +901,10 @@ MAX_DURATION = MAX_SWING_DURATION   # s: a swing, not a walk (jaxexo.config.sche
 def check_options(n_points, smoothing, duration):
     if isinstance(n_points, bool) or not isinstance(n_points, (int, np.integer)) or not 2 <= n_points <= MAX_POINTS:
         raise ValueError(f"n_points must be an integer in [2, {MAX_POINTS}], got {n_points!r}")
-    smoothing = geometry._finite("smoothing", smoothing, "m^2")
+    smoothing = geometry.finite("smoothing", smoothing, "m^2")
     if smoothing < 0:
         raise ValueError(f"smoothing must be >= 0 (m^2), got {smoothing}")
-    duration = geometry._finite_positive("duration", duration, "s")
+    duration = geometry.finite_positive("duration", duration, "s")
     if duration > MAX_DURATION:
         raise ValueError(f"duration must be <= {MAX_DURATION:g} s (one swing), got {duration:g}")
     return int(n_points), smoothing, duration

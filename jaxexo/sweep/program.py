@@ -10,17 +10,8 @@ per static settings, so every chunk of a group reuses one compilation.
 Agents never interact: a configuration whose parameters or loss become NaN is flagged ``diverged``
 and the others are untouched (each vmapped lane computes alone).
 
-Group-size independence (issue 21): XLA on CPU compiles a vmapped batch differently for different
-batch sizes (a dot over a batch of one is a library matrix product, over two or more a fused
-multiply-add loop; fusion boundaries, and so where a multiply and an add become one rounded FMA,
-move with the size), so the same agent ends a few ulps apart, and after a thousand updates at a
-different outcome, in batches of 1, 2, 5 or 8. No XLA flag removes it. So no agent is ever computed
-in a batch whose shape depends on who else is in the program: every device runs its agents LANES at
-a time, ``lax.map`` over fixed ``vmap(LANES)`` blocks (padded with copies of the first agent, whose
-results are dropped). An agent's arithmetic is then the same in a population of any size and in a
-sweep chunk of any size (tests/test_population.py checks it bit for bit), and on any device count from
-two up (measured on 2 and 4; a program over a single device is compiled without partitioning and
-differs in the last bits, so populations use at least two devices where there are two).
+Agents run in fixed blocks of ``LANES`` (jaxexo.train.lanes), so an agent's arithmetic is the same
+in a chunk of any size and in a population.
 """
 
 from __future__ import annotations
@@ -39,6 +30,7 @@ from jaxexo.sweep.results import SCALARS
 from jaxexo.sweep.spec import Sweep
 from jaxexo.physics.scenarios import HELD_OUT, TEST_KINDS
 from jaxexo.train.evaluate import make_rollout, test_layouts
+from jaxexo.train.lanes import over_lanes, padded_agents
 from jaxexo.train.trainer import METRICS, Hyperparams, Trainer
 
 CURVE_POINTS = 50
@@ -48,12 +40,7 @@ TARGET_SUCCESS = 0.9
 MIN_WINDOW_EPISODES = 20
 _COL = {m: i for i, m in enumerate(METRICS)}
 _PROGRAMS: dict = {}
-# Agents per vmapped block (see the module doc): fixed, so that an agent's arithmetic never depends on
-# how many agents share its program. Two: a chunk of thesis (b) learns on one core took 0.97 s for one
-# unbatched agent, 1.54 s for a block of two and 2.26 s for a block of four (measured while choosing,
-# on the shared machine): two buys most of the batching gain while a lone member (a population of one,
-# a sweep's last odd agent) pays for one padding lane, not three.
-LANES = 2
+
 
 
 def _finite(tree) -> jnp.ndarray:
@@ -125,50 +112,6 @@ def _build(cfg: Config, devices):
         return {"scalars": scalars, "curve": red["curve"], "params": ts.params}
 
     return over_lanes(agent, devices, n_args=3)
-
-
-def over_agents(fn, devices, n_args: int):
-    """``jit(shard_map(vmap(fn)))``: every argument and output has a leading agent axis, split evenly
-    over ``devices`` (each device runs its share of the agents as one vmapped batch). An agent's
-    arithmetic depends on that batch's size: throughput benchmarks only; training uses ``over_lanes``."""
-    from jax.sharding import Mesh, PartitionSpec as P
-
-    spec = P("agents")
-    return jax.jit(jax.shard_map(jax.vmap(fn), mesh=Mesh(np.array(list(devices)), ("agents",)),
-                                 in_specs=(spec,) * n_args, out_specs=spec, check_vma=False))
-
-
-def padded_agents(n_agents: int, n_devices: int, lanes: int = LANES) -> int:
-    """The agent count ``over_lanes`` runs for ``n_agents`` on ``n_devices``: the next multiple of
-    devices x lanes (the extra agents are padding)."""
-    unit = n_devices * lanes
-    return -(-n_agents // unit) * unit
-
-
-def over_lanes(fn, devices, n_args: int, shared: int = 0, lanes: int = LANES):
-    """``jit(shard_map(lax.map(vmap(fn))))``: like ``over_agents``, but each device runs its share of
-    the agents ``lanes`` at a time (``lax.map`` over blocks of ``vmap(fn)`` of exactly ``lanes``
-    agents), so that an agent's arithmetic does not depend on how many agents the program holds (the
-    module doc). The first ``n_args`` arguments have a leading agent axis of a multiple of
-    len(devices) x lanes (``padded_agents``); the ``shared`` arguments after them are the same for
-    every agent (replicated, not batched)."""
-    from jax.sharding import Mesh, PartitionSpec as P
-
-    def local(*args):
-        batched, common = args[:n_args], args[n_args:]
-        n = jax.tree.leaves(batched)[0].shape[0]
-        if n % lanes:
-            raise ValueError(f"over_lanes: {n} agents per device is not a multiple of {lanes} lanes")
-        blocks = jax.tree.map(lambda x: x.reshape((n // lanes, lanes) + x.shape[1:]), batched)
-        block = jax.vmap(lambda *b: fn(*b, *common))
-        out = jax.lax.map(lambda b: block(*b), blocks)
-        return jax.tree.map(lambda x: x.reshape((n,) + x.shape[2:]), out)
-
-    # Compilation events name the program by this function: keep the agent function's name in it.
-    local.__name__ = f"{getattr(fn, '__name__', 'fn')}_in_lanes"
-    spec = P("agents")
-    return jax.jit(jax.shard_map(local, mesh=Mesh(np.array(list(devices)), ("agents",)),
-                                 in_specs=(spec,) * n_args + (P(),) * shared, out_specs=spec, check_vma=False))
 
 
 def _stack(trees):

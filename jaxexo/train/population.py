@@ -6,12 +6,12 @@ Why: whether a heel-only thesis learner learns depends on its seed (benchmarks/r
 a practitioner trains several and keeps the best on validation. Seeds vmap, so a population costs
 far less wall time than K runs one after the other (benchmarks/results/population_*).
 
-The program: ``jit(shard_map(lax.map(vmap(member))))`` (jaxexo.sweep.program.over_lanes), where
+The program: ``jit(shard_map(lax.map(vmap(member))))`` (jaxexo.train.lanes.over_lanes), where
 ``member`` runs one chunk of the trainer's scan and scores the greedy policy on the validation
 layouts (drawn from the training distribution: jaxexo.train.evaluate.validation_set; never the test
 or held-out obstacles). The members are split over the CPU devices and run in fixed blocks of
 ``LANES``, so a member's arithmetic is the same whether it trains alone, with 3 or 15 others, or in a
-sweep chunk (the group-size independence of jaxexo.sweep.program; tests/test_population.py), and on
+sweep chunk (the group-size independence of jaxexo.train.lanes; tests/test_population.py), and on
 any number of devices from two up (``population_devices``; a process with one CPU device compiles an
 unpartitioned program, whose members agree with each other but not with a partitioned one's).
 
@@ -46,7 +46,7 @@ from jaxexo.config.toml_io import config_to_toml
 from jaxexo.storage.atomic import append_line, atomic_write
 from jaxexo.storage.checkpoint import CheckpointError, pack_checkpoint
 from jaxexo.storage.rundir import TrainingDiverged
-from jaxexo.sweep.program import LANES, over_lanes, padded_agents
+from jaxexo.train.lanes import LANES, over_lanes, padded_agents
 from jaxexo.train import driver as D
 from jaxexo.train.evaluate import make_evaluator, make_rollout, validation_set
 from jaxexo.train.trainer import Hyperparams, Trainer
