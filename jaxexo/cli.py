@@ -156,7 +156,7 @@ def cmd_generate(args) -> int:
     _check_outputs([("--policy", args.policy)], outputs)
     if args.method == "cfftg" and args.smoothing is not None:
         raise ValueError("--smoothing: applies to --method rl only (CFFTG's polynomial path is not smoothed)")
-    from jaxexo.config.schema import MAX_CONTROL_RATE
+    from jaxexo.config import MAX_CONTROL_RATE
 
     if args.rate is not None and not (math.isfinite(args.rate) and 0 < args.rate <= MAX_CONTROL_RATE):
         raise ValueError(f"--rate: control rate must be > 0 and <= {MAX_CONTROL_RATE:g} Hz, got {args.rate:g}")

@@ -13,7 +13,8 @@ from conftest import ROOT
 from jaxexo.physics import geometry
 from jaxexo.baselines import CFFTG
 from jaxexo.baselines.cfftg import APEX_FRAC_RANGE, FLATNESS, basis, plan_paths
-from jaxexo.config import PIVOT_CONDITIONS, load_config
+from jaxexo.config import load_config
+from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 from jaxexo.inference import Obstacle, TrajectoryError
 from jaxexo.inference.scenarios import sample_scenarios, training_scenarios
 

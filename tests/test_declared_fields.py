@@ -1,6 +1,6 @@
 """EnvParams and Hyperparams list their fields in the source, generated from the config declarations.
 
-Each config field is declared once (jaxexo.config.schema); the pytree classes' fields follow from
+Each config field is declared once (jaxexo.config.sections); the pytree classes' fields follow from
 those declarations (``jaxexo.config.param_values``' names for EnvParams, ``HYPER_FIELDS`` for
 Hyperparams). They are written out between GENERATED markers so that a reader and a type checker
 see them; this test renders them again and fails when the source differs.

@@ -14,7 +14,8 @@ import pytest
 
 from conftest import ROOT
 from jaxexo.physics import dynamics, geometry, kinematics, swept
-from jaxexo.config import PIVOT_CONDITIONS, load_config
+from jaxexo.config import load_config
+from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 from jaxexo.inference import Obstacle, TrajectoryError, TrajectoryGenerator
 from jaxexo.inference import smoothing as sm
 from jaxexo.inference.network import FoldedQNetwork, StepNetwork

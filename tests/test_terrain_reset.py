@@ -43,7 +43,7 @@ def test_terrain_table_parses_defaults_and_roundtrips():
     assert off.layout.terrain is None
     assert config_from_dict(__import__("tomllib").loads(config_to_toml(off))).layout.terrain is None
     # static settings tell configs with and without terrain apart (different param shapes)
-    from jaxexo.config.schema import static_settings
+    from jaxexo.config import static_settings
     assert static_settings(cfg) != static_settings(off)
 
 

@@ -14,7 +14,8 @@ from __future__ import annotations
 
 import os
 
-from jaxexo.config.schema import Config, ConfigError
+from jaxexo.config.checks import ConfigError
+from jaxexo.config.sections import Config
 from jaxexo.physics import dynamics
 from jaxexo.physics.dynamics import NUM_ACTIONS
 

@@ -1,5 +1,5 @@
 """Writing a resolved Config back to TOML (tomllib only reads), so a run directory records exactly
-what it trained with. Every field is written from its declaration (jaxexo.config.schema), and
+what it trained with. Every field is written from its declaration (jaxexo.config.sections), and
 ``load_config`` of the text gives back an equal Config (tests/test_config_roundtrip.py)."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ from __future__ import annotations
 import json
 import math
 
-from jaxexo.config.schema import SECTION_CLASSES, SECTIONS, Config, to_toml_values
+from jaxexo.config.sections import SECTION_CLASSES, SECTIONS, Config, to_toml_values
 
 
 def _value(v) -> str:

@@ -14,7 +14,9 @@ import types
 
 import numpy as np
 
-from jaxexo.config.schema import ENV_SECTIONS, SECTION_CLASSES, Config, declared_fields, named_spec
+from jaxexo.config.declarations import declared_fields
+from jaxexo.config.obstacles import named_spec
+from jaxexo.config.sections import ENV_SECTIONS, SECTION_CLASSES, Config
 from jaxexo.physics.dynamics import action_directions
 from jaxexo.physics.scenarios import TEST_KINDS
 

@@ -2,7 +2,7 @@
 
 Every field here is a pytree leaf (vmappable: reward weights and constants, kinematic constants, the
 layout distribution). The fields are the names that ``jaxexo.config.param_values`` derives from the
-config declarations (jaxexo.config.schema: each leaf field of [env], [kinematics], [reward],
+config declarations (jaxexo.config.sections: each leaf field of [env], [kinematics], [reward],
 [layout], plus the action directions), written out by tests/test_declared_fields.py, which fails
 when they differ. Shapes (the
 number of outline vertices, shape-descriptor points, obstacle kinds, the observation mode) are fixed

@@ -55,8 +55,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxexo.physics import dynamics, geometry, swept
-from jaxexo.config import numpy_params, scalar_params
-from jaxexo.config.schema import MAX_SWING_DURATION
+from jaxexo.config import MAX_SWING_DURATION, numpy_params, scalar_params
 from jaxexo.physics.dynamics import Scene, scalar
 from jaxexo.inference import blas, smoothing as sm, trajectory
 from jaxexo.inference.clearing import clear_rows
@@ -895,7 +894,7 @@ def _rows(batch: TrajectoryBatch, idx) -> TrajectoryBatch:
 
 # Bounds of the sizes taken from input, checked before anything is allocated.
 MAX_POINTS = 100_000        # samples of one smoothed path
-MAX_DURATION = MAX_SWING_DURATION   # s: a swing, not a walk (jaxexo.config.schema)
+MAX_DURATION = MAX_SWING_DURATION   # s: a swing, not a walk (jaxexo.config.sections)
 
 
 def check_options(n_points, smoothing, duration):

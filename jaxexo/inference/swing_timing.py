@@ -58,7 +58,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from jaxexo.config.schema import MAX_CONTROL_RATE
+from jaxexo.config import MAX_CONTROL_RATE
 from jaxexo.physics import kinematics
 from jaxexo.physics.dynamics import Scene
 from jaxexo.inference.trajectory import (

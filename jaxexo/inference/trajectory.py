@@ -259,7 +259,7 @@ def measure(sp, heel: np.ndarray, clearance: np.ndarray, pivot_y: np.ndarray, go
     the samples (B, N), over the moves between them (B, N-1, ``swept_clearances``) and the bound
     ``deviation`` (B,) of the curve from the polyline through the samples (m).
 
-    ``sp`` holds the constants (jaxexo.physics.dynamics.scalar_params or numpy_params)."""
+    ``sp`` holds the constants (jaxexo.config.scalar_params or numpy_params)."""
     dev = np.zeros(heel.shape[:1])
     dev[:] = deviation
     # The guaranteed clearance: the polyline's exact swept clearance (or the samples' own, for a

@@ -28,7 +28,7 @@ training and is a different *shape*, not another size of a training one:
 Sizes (metres) are within what the default leg clears: ``clearable`` checks the heel held
 ``heel_lift`` above the tallest top of a spec's families (the mid-goal box's bottom), at the extremes
 of the placement, reachable within the leg's length and joint limits for every pivot condition
-(jaxexo.physics.kinematics; the same test as jaxexo.config.schema's ``_check_clearable``).
+(jaxexo.physics.kinematics; the same test as jaxexo.config.consistency's ``_check_clearable``).
 
 ``place`` puts an obstacle of a drawn width into a drawn scene "anywhere the gap allows": start
 shift, step length (at least long enough for the width) and centre between the toe at the start
@@ -473,7 +473,7 @@ def unclearable(spec: TerrainSpec, *, foot_length, thigh, shin, hip_limits, knee
     """NumPy: the (family, pivot, start, step length, centre) placements, on a grid x grid x grid
     of each family's placement range at its widest and narrowest, where the heel over the centre at
     the family's tallest top + heel_lift is out of reach or joint limits (kinematics.swing_heel_unreachable,
-    as jaxexo.config.schema._check_clearable). Empty when every pivot with weight > 0 clears."""
+    as jaxexo.config.consistency._check_clearable). Empty when every pivot with weight > 0 clears."""
     out = []
     t = np.linspace(0.0, 1.0, grid)
     uu = np.stack(np.meshgrid(t, t, t, indexing="ij"), -1).reshape(-1, 3)

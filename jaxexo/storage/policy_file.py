@@ -183,7 +183,7 @@ def policy_config(meta: dict, path):
     import tomllib
 
     from jaxexo.config import ConfigError, config_from_dict
-    from jaxexo.config.schema import SECTION_CLASSES, SECTIONS, declared_fields
+    from jaxexo.config import SECTION_CLASSES, SECTIONS, declared_fields
 
     text = meta.get("config_toml")
     if not isinstance(text, str):

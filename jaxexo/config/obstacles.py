@@ -1,0 +1,207 @@
+"""The [layout] section's obstacle mixture and procedural terrain: parsing, writing back, and the
+EnvParams leaves they become (the kinds' outlines, shapes, sizes and cumulative weights; the terrain
+families of jaxexo.physics.terrain). The obstacles of thesis Table 3.1 are named by their kind alone.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from jaxexo.config.checks import ConfigError, _number, _range, _vector, pivot_weights
+from jaxexo.physics import geometry, terrain
+from jaxexo.physics.geometry import THESIS_OBSTACLES
+
+
+def cdf(weights) -> np.ndarray:
+    w = np.asarray(weights, dtype=np.float64)
+    c = np.cumsum(w / w.sum())
+    c[-1] = 1.0
+    return c.astype(np.float32)
+
+
+@dataclass(frozen=True)
+class ObstacleSpec:
+    """One entry of the layout's obstacle mixture.
+
+    ``kind`` is a thesis obstacle (base1, base2, base3, triangle, half_circle: the fixed size of thesis
+    Table 3.1) or a shape (rectangle, triangle, half_ellipse, profile) with ``width`` and ``height``
+    ranges [lo, hi] in m. The name "triangle" is both: without a size it is the thesis triangle, with
+    ``width`` and ``height`` the shape (the thesis triangle is the shape at 0.20 x 0.20 m, so both
+    readings of an equal spec agree). A ``profile`` takes ``points`` (y, z), y relative to the
+    obstacle centre, and is scaled to ``width`` and ``height`` ranges in metres (default: its own
+    extents, as drawn)."""
+
+    kind: str
+    width: tuple[float, float]
+    height: tuple[float, float]
+    weight: float = 1.0
+    shape: str = "rectangle"
+    points: tuple[tuple[float, float], ...] = ()
+
+    def unit_vertices(self) -> np.ndarray:
+        if self.shape == "profile":
+            return geometry.Obstacle.profile(self.points).unit_vertices
+        return geometry.unit_profile(self.shape)
+
+    @property
+    def is_thesis(self) -> bool:
+        """Exactly a thesis obstacle of Table 3.1 (written as its name alone)."""
+        return self.kind in THESIS_OBSTACLES and self == named_spec(self.kind, self.weight)
+
+    def to_toml(self) -> dict:
+        """The TOML table that ``parse_obstacle`` reads back to this spec."""
+        if self.is_thesis:
+            return {"kind": self.kind, "weight": self.weight}
+        d = {"kind": self.kind, "weight": self.weight, "width": list(self.width), "height": list(self.height)}
+        if self.kind == "profile":
+            d["points"] = [list(p) for p in self.points]
+        return d
+
+
+def named_spec(kind: str, weight: float = 1.0) -> ObstacleSpec:
+    shape, w, h = THESIS_OBSTACLES[kind]
+    return ObstacleSpec(kind, (w, w), (h, h), weight, shape)
+
+
+def parse_obstacle(path: str, raw: Any) -> ObstacleSpec:
+    if isinstance(raw, str):
+        raw = {"kind": raw}
+    if not isinstance(raw, dict):
+        raise ConfigError(f"{path}: expected a table or a thesis obstacle name, got {raw!r}")
+    known = {"kind", "width", "height", "weight", "points"}
+    unknown = sorted(set(raw) - known)
+    if unknown:
+        raise ConfigError(f"{path}.{unknown[0]}: unknown field (known: {', '.join(sorted(known))})")
+    kind = raw.get("kind")
+    weight = _number(f"{path}.weight", raw.get("weight", 1.0), nonneg=True)
+    sized = any(k in raw for k in ("width", "height", "points"))
+    if kind in THESIS_OBSTACLES and not sized:
+        return named_spec(kind, weight)
+    shapes = geometry.SHAPES
+    if kind in THESIS_OBSTACLES and kind not in shapes:
+        k = next(k for k in ("width", "height", "points") if k in raw)
+        raise ConfigError(f"{path}.{k}: {kind} has the fixed size of thesis Table 3.1; "
+                          f"use kind = \"{THESIS_OBSTACLES[kind][0]}\" for other sizes")
+    if kind not in shapes:
+        raise ConfigError(f"{path}.kind: must be a thesis obstacle {sorted(THESIS_OBSTACLES)} "
+                          f"or a shape {list(shapes)}, got {kind!r}")
+    if kind != "profile":
+        if "points" in raw:
+            raise ConfigError(f"{path}.points: only kind = \"profile\" takes points")
+        for k in ("width", "height"):
+            if k not in raw:
+                raise ConfigError(f"{path}.{k}: required for kind = \"{kind}\" (a range [lo, hi] in m)")
+        width = _range(f"{path}.width", raw["width"], positive=True)
+        height = _range(f"{path}.height", raw["height"], positive=True)
+        return ObstacleSpec(kind, width, height, weight, kind)
+    if "points" not in raw:
+        raise ConfigError(f"{path}.points: required for kind = \"profile\"")
+    pts = raw["points"]
+    if not isinstance(pts, (list, tuple)) or not all(isinstance(p, (list, tuple)) for p in pts):
+        raise ConfigError(f"{path}.points: expected a list of [y, z] pairs in m, got {pts!r}")
+    points = tuple(_vector(f"{path}.points[{i}]", p, 2) for i, p in enumerate(pts))
+    try:
+        ob = geometry.Obstacle.profile(points)
+    except geometry.GeometryError as e:
+        raise ConfigError(f"{path}.points: {e}") from None
+    width = _range(f"{path}.width", raw.get("width", [ob.width, ob.width]), positive=True)
+    height = _range(f"{path}.height", raw.get("height", [ob.height, ob.height]), positive=True)
+    return ObstacleSpec(kind, width, height, weight, kind, points)
+
+
+def parse_obstacles(path: str, v: Any) -> tuple[ObstacleSpec, ...]:
+    if not isinstance(v, (list, tuple)) or not v:
+        raise ConfigError(f"{path}: expected a non-empty list of obstacles")
+    return tuple(o if isinstance(o, ObstacleSpec) else parse_obstacle(f"{path}[{i}]", o) for i, o in enumerate(v))
+
+
+def obstacle_params(obstacles: tuple[ObstacleSpec, ...], cfg) -> dict[str, np.ndarray]:
+    """The layout's obstacle mixture as EnvParams leaves: padded unit outlines (B, K, 2), shape
+    descriptors (B, P), the kinds' cumulative probabilities and their size ranges (m)."""
+    outlines = np.stack([geometry.pad_outline(o.unit_vertices(), cfg.outline_vertices) for o in obstacles])
+    shapes = np.stack([geometry.shape_descriptor(u, cfg.env.shape_points) for u in outlines])
+    f = lambda x: np.asarray(x, dtype=np.float32)  # noqa: E731
+    return {"kind_outlines": f(outlines), "kind_shape": f(shapes), "kind_cdf": cdf([o.weight for o in obstacles]),
+            "kind_width": f([o.width for o in obstacles]), "kind_height": f([o.height for o in obstacles])}
+
+
+def default_obstacles() -> tuple[ObstacleSpec, ...]:
+    """Obstacle mixture of the default model (configs/default.toml): Base 1-3 and random rectangles
+    up to 22 cm wide and 28 cm high (triangle and half-circle are held out for testing). With the
+    default terrain it sets the thesis-five test set only; reset draws the terrain families."""
+    return tuple(named_spec(k) for k in ("base1", "base2", "base3")) + (
+        ObstacleSpec("rectangle", (0.05, 0.22), (0.05, 0.28), 1.0, "rectangle"),
+        ObstacleSpec("rectangle", (0.15, 0.22), (0.18, 0.28), 1.0, "rectangle"),
+    )
+
+
+# [layout] terrain of the default model (configs/default.toml); the other TerrainSpec fields keep
+# jaxexo.physics.terrain's defaults.
+DEFAULT_TERRAIN = {"start_shift": [0.0, 0.12], "step_length": [0.55, 0.85]}
+
+
+TERRAIN_KEYS = ("families", "weights", "start_shift", "step_length", "pivot", "near_margin", "far_margin")
+
+
+def parse_terrain(path: str, v: Any) -> "terrain.TerrainSpec | None":
+    """[layout] terrain: ``false`` (off: reset draws the obstacle mixture) or a table of
+    jaxexo.physics.terrain.TerrainSpec fields (families by name, weights, start_shift and step_length
+    ranges in m, pivot weights, near/far margins in m): reset then draws a procedural obstacle
+    family, its outline and its placement instead of the mixture. Held-out families are refused."""
+    if v is None or v is False:
+        return None
+    if isinstance(v, terrain.TerrainSpec):
+        return v
+    if v is True:
+        v = {}
+    if not isinstance(v, dict):
+        raise ConfigError(f"{path}: expected false or a table of {', '.join(TERRAIN_KEYS)}, got {v!r}")
+    unknown = sorted(set(v) - set(TERRAIN_KEYS))
+    if unknown:
+        raise ConfigError(f"{path}.{unknown[0]}: unknown field (known: {', '.join(TERRAIN_KEYS)})")
+    kw = dict(v)
+    if "families" in kw:
+        f = kw["families"]
+        if isinstance(f, str):
+            f = [f]
+        if not isinstance(f, (list, tuple)) or not all(isinstance(x, str) for x in f):
+            raise ConfigError(f"{path}.families: expected a list of family names, got {f!r}")
+        kw["families"] = tuple(f)
+    if "weights" in kw:
+        kw["weights"] = _vector(f"{path}.weights", kw["weights"], nonneg=True)
+    if "pivot" in kw:
+        kw["pivot"] = pivot_weights(f"{path}.pivot", kw["pivot"])
+    for k in ("start_shift", "step_length"):
+        if k in kw:
+            kw[k] = _range(f"{path}.{k}", kw[k], nonneg=True)
+    for k in ("near_margin", "far_margin"):
+        if k in kw:
+            kw[k] = _number(f"{path}.{k}", kw[k], positive=True)
+    try:
+        return terrain.TerrainSpec(**kw, path=path)
+    except terrain.TerrainError as e:
+        raise ConfigError(str(e)) from None
+
+
+def write_terrain(spec) -> Any:
+    if spec is None:
+        return False
+    return {"families": list(spec.families), "weights": list(spec.weights), "start_shift": list(spec.start_shift),
+            "step_length": list(spec.step_length), "pivot": list(spec.pivot), "near_margin": spec.near_margin,
+            "far_margin": spec.far_margin}
+
+
+def terrain_params(spec, cfg) -> dict[str, np.ndarray]:
+    """The terrain description as EnvParams leaves. Off: ``terrain_ids`` has length 0, which
+    jaxexo.physics.scenarios reads as a static (shape) switch back to the obstacle mixture."""
+    f = lambda x: np.asarray(x, dtype=np.float32)  # noqa: E731
+    if spec is None:
+        return {"terrain_ids": np.zeros((0,), np.int32), "terrain_cdf": f(np.zeros((0,))),
+                "terrain_start_shift": f([0.0, 0.0]), "terrain_step_length": f([0.0, 0.0]),
+                "terrain_pivot_cdf": cdf([1.0, 1.0, 1.0]), "terrain_margins": f([0.0, 0.0])}
+    return {"terrain_ids": spec.ids.astype(np.int32), "terrain_cdf": f(spec.cdf),
+            "terrain_start_shift": f(spec.start_shift), "terrain_step_length": f(spec.step_length),
+            "terrain_pivot_cdf": cdf(spec.pivot), "terrain_margins": f([spec.near_margin, spec.far_margin])}

@@ -1,0 +1,329 @@
+"""The config's sections as frozen dataclasses, each field declared once (jaxexo.config.declarations):
+[env], [kinematics], [reward] (the thesis reward, eq 2.29-2.52, and the wearer's costs), [layout],
+[train] (the TD(lambda) agent, thesis 2.3-2.4) and [device], and the whole ``Config`` with the values
+derived from it (the scan length, the static settings that fix a compiled program).
+
+Units: metres, radians, steps. Everything here is NumPy-only (``import jaxexo`` must not import JAX).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+import numpy as np
+
+from jaxexo.config.checks import (below_one, boolean, choice, fraction, number, pivot_weights, range_,
+                                  vector)
+from jaxexo.config.declarations import declare, declared_fields, spec_of
+from jaxexo.config.obstacles import (DEFAULT_TERRAIN, ObstacleSpec, cdf, default_obstacles, obstacle_params,
+                                     parse_obstacles, parse_terrain, terrain_params, write_terrain)
+from jaxexo.physics import geometry, outcome, rewards, terrain
+
+OBS_MODES = ("thesis", "conditioned")
+OBS_PROFILES = ("bbox", "shape")
+COLLISION_MODES = ("penalty", "terminate")
+TRACE_VIEWS = ("forward", "backward")
+TRACE_KINDS = ("accumulating", "replacing")
+CONTROLS = ("off_policy", "on_policy")
+TARGETS = ("hard", "polyak")
+
+INT32_MAX = 2**31 - 1   # integers that reach JAX as int32 (or index a scan) stay below this
+MAX_CONTROL_RATE = 10_000.0   # Hz: a timed export's rate ([device] control_rate, jaxexo generate --rate)
+MAX_SWING_DURATION = 60.0     # s: one swing (about 1 s on today's exoskeletons), not a walk
+SECTIONS = ("env", "kinematics", "reward", "layout", "train", "device")
+
+def _normalized(name):
+    # eq 2.38 / 2.52: the weights enter the reward normalised to sum 0.5
+    return lambda v, cfg: {name: np.asarray(rewards.normalize_weights(v), dtype=np.float32)}
+
+
+
+@dataclass(frozen=True)
+class EnvConfig:
+    # m per action; about 30 steps for a 0.70 m step over 0.2 m
+    step_size: float = declare(0.03, number(positive=True), unit="m")
+    # step limit -> truncated; a leaf (EnvParams.max_steps_in_episode) and a static (episode budgets)
+    max_steps: int = declare(100, number(positive=True, integer=True, hi=100_000), unit="steps",
+                             role="static+leaf", param="max_steps_in_episode", dtype="int32")
+    # "penalty" (thesis: pay r1 and continue) or "terminate"
+    collision: str = declare("penalty", choice(COLLISION_MODES), to_param=lambda v, cfg: {
+        "terminate_on_collision": np.asarray(v == "terminate")})
+    # "thesis" (heel y, z) or "conditioned"
+    obs_mode: str = declare("conditioned", choice(OBS_MODES), role="static")
+    # How the conditioned observation shows the obstacle's profile: "bbox" (its bounding rectangle:
+    # a policy trained on rectangles treats any unseen shape conservatively) or "shape" (the true
+    # profile, for policies trained on varied shapes). Collisions always use the true outline.
+    obs_profile: str = declare("shape", choice(OBS_PROFILES), to_param=lambda v, cfg: {
+        "obs_true_profile": np.asarray(v == "shape")})
+    # outline size K; 0: the largest count among the layout's kinds (resolved: Config.outline_vertices)
+    max_vertices: int = declare(0, number(nonneg=True, integer=True, hi=geometry.MAX_PROFILE_VERTICES),
+                                unit="vertices", role="setting")
+    shape_points: int = declare(geometry.DEFAULT_SHAPE_POINTS, number(positive=True, integer=True, hi=1024),
+                                unit="points", role="static")
+    # goal box: |heel_y - goal_y| <= [0], heel_z <= [1]
+    goal_tolerance: tuple[float, float] = declare((0.04, 0.02), vector(2, positive=True), unit="m")
+    # mid-goal centre height above the obstacle top
+    mid_goal_clearance: float = declare(0.045, number(nonneg=True), unit="m")
+    # half extents (y, z) of the mid-goal box
+    mid_goal_half_size: tuple[float, float] = declare((0.06, 0.02), vector(2, positive=True), unit="m")
+    # max_z of eq 2.34 = obstacle top + this
+    max_height_margin: float = declare(0.20, number(nonneg=True), unit="m")
+    bounds_y: tuple[float, float] = declare((-0.30, 1.30), range_(), unit="m")  # the heel is kept inside
+    # ceiling for the heel; the ground is z = 0
+    max_z: float = declare(0.80, number(positive=True), unit="m", param="max_z_world")
+    # The safe-swing definition (issue 11, jaxexo.physics.swept): the foot's motion between samples
+    # never comes closer than min_clearance to the obstacle, and the heel never moves backward by
+    # more than backward_tolerance. The environment's success flag and the generators' ``ok`` use both.
+    min_clearance: float = declare(outcome.DEFAULT_MIN_CLEARANCE, number(nonneg=True), unit="m")
+    # At most 10 m: any value beyond env.bounds_y's span turns the check off, and the thesis configs
+    # write 10 m for that.
+    backward_tolerance: float = declare(outcome.DEFAULT_BACKWARD_TOLERANCE, number(nonneg=True, hi=10.0), unit="m")
+    # The shield (issue 11; not in the thesis): the agent chooses only among admissible moves
+    # (jaxexo.physics.dynamics.admissible_moves): no backward component, the exact clearance of the
+    # whole move at least shield_clearance, joint limits and reach respected at its end. The same
+    # mask in training, evaluation and the NumPy generator; off reproduces the thesis's free choice.
+    shield: bool = declare(True, boolean, role="static+leaf", dtype="bool")
+    # m: the clearance a shielded move keeps; above min_clearance so that the smoothed curve, which
+    # cuts corners, still keeps min_clearance without falling back to the raw polyline. With the shield
+    # on it must be at least min_clearance (validate); at most 10 cm, above that no step over an
+    # obstacle remains admissible.
+    shield_clearance: float = declare(0.025, number(nonneg=True, hi=0.10), unit="m")
+
+
+@dataclass(frozen=True)
+class KinematicsConfig:
+    # Human segments (an adult's thigh or shin is about 0.4-0.55 m, a foot 0.2-0.3 m): at most 1 m each,
+    # a foot at most 0.5 m.
+    thigh: float = declare(0.50, number(positive=True, hi=1.0), unit="m")
+    shin: float = declare(0.50, number(positive=True, hi=1.0), unit="m")
+    foot_length: float = declare(0.20, number(positive=True, hi=0.5), unit="m")   # heel-to-toe
+    hip_limits: tuple[float, float] = declare((-0.5236, 2.0071), range_(), unit="rad")     # -30 .. 115 deg
+    knee_limits: tuple[float, float] = declare((-1.7453, 0.0), range_(), unit="rad")       # -100 .. 0 deg
+
+
+@dataclass(frozen=True)
+class DeviceConfig:
+    """[device]: the exoskeleton's joint drives, for timing swings (jaxexo.inference.swing_timing).
+
+    Limits are per joint kind (hip, knee) and apply to both legs, in rad/s and rad/s^2. The defaults
+    are conservative, order-of-magnitude figures, not one device's data sheet: lower-limb
+    exoskeletons for paraplegic gait (ReWalk, Ekso, Indego, TWIICE) walk at about 0.2-0.5 m/s with
+    swings near one second, far slower than able-bodied gait, whose swing knee peaks at the order of
+    6 rad/s (~350 deg/s) and 50-100 rad/s^2 (Winter, Biomechanics and Motor Control of Human Movement,
+    4th ed., 2009, ch. 4); their drives (brushless motor + harmonic drive, ratio of the order of 100)
+    reach the order of 3-5 rad/s at the joint. We take the order's lower end: hip 3 rad/s (172 deg/s),
+    knee 4 rad/s (229 deg/s), both under 300 deg/s, and 15 / 20 rad/s^2. Set your device's own.
+
+    Read by the NumPy timing code only: every field is a Python-side setting, never a pytree leaf."""
+
+    # Bounds: a drive slower than 0.1 rad/s (6 deg/s) or 0.1 rad/s^2 cannot swing a leg within a
+    # minute; 50 rad/s and 1000 rad/s^2 are beyond any joint drive.
+    joint_velocity: tuple[float, float] = declare((3.0, 4.0), vector(2, positive=True, lo=0.1, hi=50.0),
+                                                  unit="rad/s", role="setting")          # (hip, knee)
+    joint_acceleration: tuple[float, float] = declare((15.0, 20.0), vector(2, positive=True, lo=0.1, hi=1000.0),
+                                                      unit="rad/s^2", role="setting")      # (hip, knee)
+    # a swing never takes less (0: as fast as the limits allow); at most MAX_SWING_DURATION
+    min_swing_duration: float = declare(0.0, number(nonneg=True, hi=MAX_SWING_DURATION), unit="s", role="setting")
+    # default rate of timed exports (jaxexo generate --rate); at most MAX_CONTROL_RATE
+    control_rate: float = declare(100.0, number(positive=True, hi=MAX_CONTROL_RATE), unit="Hz", role="setting")
+
+
+def _penalty(default):
+    """A penalty or reward magnitude of eq 2.29-2.52 (>= 0)."""
+    return declare(default, number(nonneg=True))
+
+
+@dataclass(frozen=True)
+class RewardConfig:
+    # Weights alpha (eq 2.38) over TRAJECTORY_TERMS and beta (eq 2.52) over EXO_TERMS, normalised.
+    traj_weights: tuple[float, ...] = declare((0.0, 2.0, 0.5, 4.0, 0.5, 0.5, 1.0, 0.5), vector(8, nonneg=True),
+                                              to_param=_normalized("traj_weights"))
+    exo_weights: tuple[float, ...] = declare((1.0, 1.0, 2.0, 1.0), vector(4, nonneg=True),
+                                             to_param=_normalized("exo_weights"))
+    step_threshold: float = declare(30.0, number(positive=True), unit="steps")   # n of eq 2.29
+    collision_penalty: float = _penalty(10.0)      # c, eq 2.30
+    backward_penalty: float = _penalty(1.0)        # y, eq 2.31
+    goal_reward: float = _penalty(20.0)            # g, eq 2.32
+    mid_goal_penalty: float = _penalty(1.0)        # m, eq 2.33
+    max_height_penalty: float = _penalty(1.0)      # z, eq 2.34
+    safety_penalty: float = _penalty(2.0)          # f, eq 2.35
+    safety_distance: float = declare(0.03, number(positive=True), unit="m")     # min_dt, eq 2.35
+    z_monotone_penalty: float = _penalty(0.5)      # k, eq 2.36
+    hlc_penalty: float = _penalty(1.0)             # o, eq 2.43
+    # hlc, eq 2.43 (fraction of the leg length)
+    hlc_threshold: float = declare(0.90, fraction(positive=True))
+    leg_length_penalty: float = _penalty(1.0)      # l, eq 2.45
+    leg_length_tolerance: float = declare(0.0, number(nonneg=True), unit="m")   # n, eq 2.45
+    joint_limit_penalty: float = _penalty(4.0)     # j, eq 2.50
+    hip_height_penalty: float = _penalty(1.0)      # n, eq 2.51
+    # max_hz, eq 2.51 (the hip model never exceeds thigh+shin)
+    max_hip_z: float = declare(1.0, number(positive=True), unit="m")
+    # Potential-based progress shaping per metre (not in the thesis; 0 = thesis reward), see
+    # jaxexo.physics.rewards.shaping_reward for the choice of its discount.
+    progress_shaping: float = declare(5.0, number(nonneg=True), unit="1/m")
+    shaping_discount: float = declare(1.0, fraction(positive=True))
+    # The wearer's costs (not in the thesis, jaxexo.physics.rewards.wearer_terms; 0 = thesis reward):
+    # per metre of heel height above the obstacle's top plus env.shield_clearance, per step (a low
+    # swing), and per second the joint drives need for each move at [device] joint_velocity (a quick,
+    # straight swing). The velocities enter the environment as ``joint_speed`` (hip, knee, hip, knee).
+    lift_cost: float = declare(10.0, number(nonneg=True, hi=1e3), unit="1/m")
+    time_cost: float = declare(2.0, number(nonneg=True, hi=1e3), unit="1/s", to_param=lambda v, cfg: {
+        "time_cost": np.asarray(v, dtype=np.float32),
+        "joint_speed": np.asarray(tuple(cfg.device.joint_velocity) * 2, dtype=np.float32)})
+    # per unit of a move's change of direction, 1 - cos of its angle to the last move (a path without
+    # corners: quicker at the device, and smoothed without cutting towards the obstacle; 0 = thesis)
+    turn_cost: float = declare(2.0, number(nonneg=True, hi=1e3))
+
+
+@dataclass(frozen=True)
+class LayoutConfig:
+    # The obstacle mixture; an empty tuple (the dataclass default) means default_obstacles().
+    obstacles: tuple[ObstacleSpec, ...] = declare((), parse_obstacles, to_param=obstacle_params,
+                                                 write=lambda obs: [o.to_toml() for o in obs])
+    size_jitter: float = declare(0.0, below_one)   # relative +- jitter of every width and height
+    obstacle_offset: tuple[float, float] = declare((-0.03, 0.03), range_(), unit="m")  # added to the default centre
+    # weights of PIVOT_CONDITIONS
+    pivot: tuple[float, float, float] = declare((1.0, 1.0, 1.0), pivot_weights,
+                                                to_param=lambda v, cfg: {"pivot_cdf": cdf(v)})
+    start_shift: tuple[float, float] = declare((0.0, 0.05), range_(), unit="m")   # agent start moved towards the obstacle
+    step_length: tuple[float, float] = declare((0.65, 0.75), range_(positive=True), unit="m")  # goal = start + this
+    # Procedural obstacle families (jaxexo.physics.terrain): false, or a table (parse_terrain) that
+    # replaces the obstacle mixture, start_shift, step_length, obstacle_offset and pivot in reset.
+    terrain: Any = declare(check=parse_terrain, to_param=terrain_params, write=write_terrain,
+                           default_factory=lambda: parse_terrain("layout.terrain", DEFAULT_TERRAIN))
+
+    def default_center(self, foot_length: float, step_length: float) -> float:
+        """Default obstacle centre (jaxexo.physics.geometry.default_center, the one definition)."""
+        return geometry.default_center(foot_length, step_length)
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """[train]: the TD(lambda) agent (thesis 2.3-2.4).
+
+    Static settings fix the compiled program's shapes and structure; the leaves are the vmappable
+    fields of ``jaxexo.train.Hyperparams`` (sweeps). The budgets are leaves too, but the number of
+    updates they need (num_updates) is static: it is the length of the scan."""
+
+    num_envs: int = declare(1024, number(positive=True, integer=True, hi=2**24), unit="envs", role="static")
+    # T: steps per environment between updates
+    rollout_steps: int = declare(16, number(positive=True, integer=True, hi=100_000), unit="steps", role="static")
+    # forward view: gradient steps per epoch over the T x N batch
+    num_minibatches: int = declare(4, number(positive=True, integer=True, hi=2**24), role="static")
+    num_epochs: int = declare(1, number(positive=True, integer=True, hi=10_000), role="static")
+    # the thesis network (Fig. 2.2)
+    hidden: tuple[int, ...] = declare((128, 128), vector(positive=True, integer=True, hi=65_536, max_len=64),
+                                      unit="units", role="static")
+    layer_norm: bool = declare(True, boolean, role="static")
+    # "forward": lambda-returns; "backward": eligibility traces
+    trace: str = declare("forward", choice(TRACE_VIEWS), role="static")
+    # backward view: "accumulating" or "replacing"
+    trace_kind: str = declare("accumulating", choice(TRACE_KINDS), role="static")
+    # "off_policy": Watkins Q(lambda) (eq 2.13, 2.28); "on_policy": SARSA(lambda) (eq 2.14, 2.27)
+    control: str = declare("off_policy", choice(CONTROLS), role="static")
+    # "hard": copy every target_period updates; "polyak": tau
+    target: str = declare("hard", choice(TARGETS), role="static")
+    # stop after this many finished episodes (0: no limit)
+    budget_episodes: int = declare(0, number(nonneg=True, integer=True, hi=INT32_MAX), unit="episodes")
+    # stop after this many env steps (0: no limit)
+    budget_env_steps: int = declare(5_000_000, number(nonneg=True, integer=True, hi=2**40), unit="steps")
+    # updates per compiled chunk (progress, checkpoint); 0: auto
+    chunk_updates: int = declare(0, number(nonneg=True, integer=True, hi=INT32_MAX), unit="updates", role="setting")
+    # Agents of this config trained together as one compiled program (seeds seed .. seed + K - 1), the best
+    # on validation exported (jaxexo.train.population); 1: one agent, the data-parallel driver. Bounded
+    # here only loosely: the memory estimate (jaxexo.config.memory.check_memory) is the real limit.
+    population: int = declare(1, number(positive=True, integer=True, hi=4096), unit="agents", role="setting")
+    eval_episodes: int = declare(1000, number(positive=True, integer=True, hi=10_000_000), unit="episodes",
+                                 role="static")
+    lr: float = declare(3e-4, number(positive=True))
+    # linear decay of the learning rate to lr * this at the budget's end
+    lr_end_fraction: float = declare(0.1, fraction())
+    gamma: float = declare(0.98, fraction())
+    lam: float = declare(0.9, fraction())
+    eps_start: float = declare(1.0, fraction())
+    eps_end: float = declare(0.02, fraction())
+    eps_decay_fraction: float = declare(0.5, fraction(positive=True))   # of the budget, linear
+    # "hard" target copies every this many updates (int32 in the program)
+    target_period: int = declare(10, number(positive=True, integer=True, hi=INT32_MAX), unit="updates", dtype="int32")
+    target_tau: float = declare(0.05, fraction(positive=True))          # "polyak"
+    max_grad_norm: float = declare(10.0, number(positive=True))
+
+
+# TrainConfig fields that are leaves of jaxexo.train.Hyperparams (vmappable), in declaration order.
+HYPER_FIELDS = tuple(name for name, s in declared_fields(TrainConfig) if s.leaf)
+# EnvParams come from the leaves of these sections (jaxexo.config.views.param_values).
+ENV_SECTIONS = ("env", "kinematics", "reward", "layout")
+
+
+@dataclass(frozen=True)
+class Config:
+    """The whole configuration. ``outline_vertices`` is the resolved fixed outline size K."""
+
+    env: EnvConfig = field(default_factory=EnvConfig)
+    kinematics: KinematicsConfig = field(default_factory=KinematicsConfig)
+    reward: RewardConfig = field(default_factory=RewardConfig)
+    layout: LayoutConfig = field(default_factory=lambda: LayoutConfig(obstacles=default_obstacles()))
+    train: TrainConfig = field(default_factory=TrainConfig)
+    device: DeviceConfig = field(default_factory=DeviceConfig)
+
+    @property
+    def outline_vertices(self) -> int:
+        return self.env.max_vertices or _vertices_needed(self.layout)
+
+
+def _vertices_needed(lay: LayoutConfig) -> int:
+    need = max(len(o.unit_vertices()) for o in lay.obstacles)
+    return max(need, terrain.K_MAX) if lay.terrain is not None else need
+
+
+SECTION_CLASSES = {"env": EnvConfig, "kinematics": KinematicsConfig, "reward": RewardConfig,
+                   "layout": LayoutConfig, "train": TrainConfig, "device": DeviceConfig}
+
+
+def num_updates(cfg: Config) -> int:
+    """Updates that the budget can need: env steps / (N T), or for an episode budget the bound at
+    which every environment has run ceil(budget / N) episodes to the step limit. Updates past the
+    budget are masked (``Trainer.active``), so the bound may be generous."""
+    t = cfg.train
+    per = t.num_envs * t.rollout_steps
+    bounds = []
+    if t.budget_env_steps:
+        bounds.append(math.ceil(t.budget_env_steps / per))
+    if t.budget_episodes:
+        per_env_steps = math.ceil(t.budget_episodes / t.num_envs) * cfg.env.max_steps
+        bounds.append(math.ceil(per_env_steps / t.rollout_steps))
+    return max(1, min(bounds))
+
+
+def with_population(cfg: Config, k, where: str = "train.population") -> Config:
+    """``cfg`` with ``[train] population = k``, checked by the field's declaration (the error names
+    ``where``, e.g. the command-line option that gave it)."""
+    check = dict(declared_fields(TrainConfig))["population"].check
+    return dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, population=check(where, k)))
+
+
+def static_settings(cfg: Config) -> tuple:
+    """Everything about a config that fixes the compiled trainer (and its greedy evaluation): the
+    fields declared static, the resolved outline size, the number of obstacle kinds and the scan
+    length. Configs with equal static settings differ only in pytree leaves (jaxexo.train.Hyperparams,
+    EnvParams) and can be vmapped together as one program."""
+    out = []
+    for section in SECTIONS:
+        for name, s in declared_fields(SECTION_CLASSES[section]):
+            if s.static:
+                out.append((f"{section}.{name}", getattr(getattr(cfg, section), name)))
+    return tuple(out) + (("outline_vertices", cfg.outline_vertices), ("obstacle_kinds", len(cfg.layout.obstacles)),
+                         ("terrain_families", () if cfg.layout.terrain is None else cfg.layout.terrain.families),
+                         ("num_updates", num_updates(cfg)))
+
+
+def to_toml_values(section_obj) -> list[tuple[str, Any]]:
+    """(name, TOML-writable value) for every field of a section, by its declaration."""
+    out = []
+    for f in fields(section_obj):
+        s, v = spec_of(f), getattr(section_obj, f.name)
+        out.append((f.name, s.write(v) if s.write else v))
+    return out
