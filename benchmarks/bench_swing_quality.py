@@ -10,7 +10,7 @@ training distribution. RL alone (``fallback=None``) and CFFTG on the same scenes
   and p95; the share of RL swings smoothed once (no retry) and of those that fell back to the raw
   polyline.
 
-Sets: the held-out terrain families (jaxexo.evaluation.unseen: pole, stairs, curb, bumps,
+Sets: the held-out terrain families (jaxexo.physics.scenarios.unseen_scenarios: pole, stairs, curb, bumps,
 smooth_bump; never drawn in training), and the two safety sets of benchmarks/bench_safety.py (the
 thesis five with shifted layouts, and shapes never trained on).
 
@@ -35,12 +35,11 @@ from pathlib import Path
 import numpy as np
 
 from jaxexo.baselines import CFFTG
-from jaxexo.evaluation import unseen
 from jaxexo.evaluation.machine import machine_info, write_result
 from jaxexo.inference import TrajectoryGenerator, time_swings
 from jaxexo.inference.swing_timing import joint_jerk
 from jaxexo.inference.scenarios import safety_scenarios
-from jaxexo.physics import geometry, swept
+from jaxexo.physics import geometry, scenarios, swept
 
 OUT = Path(__file__).resolve().parent / "results"
 
@@ -56,7 +55,7 @@ def perturbed(obstacle: geometry.Obstacle, error: float, sign: float) -> geometr
 
 
 def scene_sets(cfg, n: int) -> dict[str, list[dict]]:
-    fam = unseen.unseen_scenarios(cfg.kinematics.foot_length, repeats=unseen.repeats_for(n))
+    fam = scenarios.unseen_scenarios(cfg.kinematics.foot_length, repeats=scenarios.repeats_for(n))
     rng = np.random.default_rng(0)
     pick = lambda s: [s[i] for i in np.sort(rng.choice(len(s), size=min(n, len(s)), replace=False))]  # noqa: E731
     return {

@@ -91,7 +91,8 @@ def test_kind_frequencies_follow_the_mixture(mixed_config):
 def test_eval_test_set_is_the_numpy_test_set():
     """eval.json's layouts (jaxexo.train.evaluate.test_layouts) and ``jaxexo eval``'s scenarios
     (jaxexo.inference.scenarios.sample_scenarios) are one set for a seed."""
-    from jaxexo.inference.scenarios import TEST_KINDS, sample_scenarios
+    from jaxexo.inference.scenarios import sample_scenarios
+    from jaxexo.physics.scenarios import TEST_KINDS
     from jaxexo.train.evaluate import test_layouts
 
     cfg = config_from_dict(legacy_raw())

@@ -213,7 +213,7 @@ def test_batched_jax_mask_decides_exactly_like_the_plain_one():
     import jax
     import jax.numpy as jnp
     from jaxexo.env import ExoStepEnv, shield
-    from jaxexo.evaluation.unseen import unseen_scenarios
+    from jaxexo.physics.scenarios import unseen_scenarios
 
     cfg = load_config(ROOT / "configs" / "default.toml")
     env = ExoStepEnv(cfg)

@@ -254,7 +254,7 @@ def test_spec_validation_names_the_field():
 def test_unseen_set_is_fixed_held_out_and_accepted_by_the_generators():
     from jaxexo.baselines import CFFTG
     from jaxexo.config import config_from_dict
-    from jaxexo.evaluation.unseen import CELLS_PER_FAMILY, repeats_for, unseen_scenarios
+    from jaxexo.physics.scenarios import CELLS_PER_FAMILY, repeats_for, unseen_scenarios
 
     from conftest import legacy_raw
 
@@ -293,7 +293,7 @@ def unseen_eval(trained_run, tmp_path_factory):
 
 @pytest.mark.slow
 def test_eval_unseen_reports_per_family_end_to_end(unseen_eval):
-    from jaxexo.evaluation.unseen import CELLS_PER_FAMILY, unseen_scenarios
+    from jaxexo.physics.scenarios import CELLS_PER_FAMILY, unseen_scenarios
     from jaxexo.inference import TrajectoryGenerator
 
     report = json.loads((unseen_eval / "report.json").read_text())

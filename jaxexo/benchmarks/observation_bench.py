@@ -61,7 +61,8 @@ def run_observation_study(out_dir: str | Path, base_toml: str | Path, runs_dir: 
     from jaxexo.baselines import CFFTG
     from jaxexo.evaluation.compare import run_generators
     from jaxexo.evaluation.machine import write_result
-    from jaxexo.evaluation.unseen import family_table, unseen_scenarios
+    from jaxexo.evaluation.unseen import family_table
+    from jaxexo.physics.scenarios import unseen_scenarios
     from jaxexo.inference import TrajectoryGenerator
     from jaxexo.train.driver import run_training
 

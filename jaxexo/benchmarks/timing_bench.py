@@ -12,28 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxexo.physics.geometry import Obstacle
-
-
-def unseen_scenarios(n: int, seed: int = 2024) -> list[dict]:
-    """Shapes and sizes outside the thesis set: triangles, half-ellipses and four-point profiles of
-    random size (width 8-22 cm, height 5-25 cm), the three pivot conditions in turn."""
-    rng = np.random.default_rng(seed)
-    out = []
-    for i in range(n):
-        w, h, c = rng.uniform(0.08, 0.22), rng.uniform(0.05, 0.25), 0.45 + rng.uniform(-0.03, 0.03)
-        k = i % 3
-        if k == 0:
-            ob, kind = Obstacle.triangle(w, h, center_y=c), "triangle"
-        elif k == 1:
-            ob, kind = Obstacle.half_ellipse(w, h, center_y=c), "half_ellipse"
-        else:
-            a, b = sorted(rng.uniform(-0.4, 0.4, 2) * w)
-            ob = Obstacle.profile([(c - w / 2, 0.0), (c + a, h), (c + b, rng.uniform(0.5, 1.0) * h), (c + w / 2, 0.0)])
-            kind = "profile"
-        out.append({"obstacle": ob, "kind": kind, "pivot": ("agent", "obstacle", "between")[(i // 3) % 3],
-                    "start_y": 0.0, "step_length": 0.70})
-    return out
+from jaxexo.physics.scenarios import shape_scenarios
 
 
 def _figures(trajs, timed, rate: float) -> dict:
@@ -76,7 +55,7 @@ def run_timing_benchmark(policy: str | Path, out_dir: str | Path, n: int = 1000,
 
     rl = TrajectoryGenerator.load(policy)
     gens = {"rl": rl, "cfftg": CFFTG(rl.config)}
-    sets = {"thesis": make_scenarios(rl.config, "test", n), "unseen": unseen_scenarios(n_unseen)}
+    sets = {"thesis": make_scenarios(rl.config, "test", n), "unseen": shape_scenarios(n_unseen)}
     lim = DeviceLimits.from_config(rl.config)
     payload = {"policy": str(policy), "rate_hz": rate, "limits": lim.to_dict(), "sets": {}}
     lines = ["# Device-ready swings: RL vs CFFTG, same scenes, same device limits", "",

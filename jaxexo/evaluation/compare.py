@@ -55,7 +55,7 @@ def make_scenarios(cfg: Config, which: str, n: int, seed: int = 12345) -> list[d
     if which not in SCENARIO_SETS:
         raise ValueError(f"scenarios must be one of {SCENARIO_SETS}, got {which!r}")
     if which == "unseen":
-        from jaxexo.evaluation.unseen import repeats_for, unseen_scenarios
+        from jaxexo.physics.scenarios import repeats_for, unseen_scenarios
 
         return unseen_scenarios(cfg.kinematics.foot_length, repeats_for(n))
     out: list[dict] = []
@@ -480,7 +480,8 @@ def run_eval(policy: str | Path, out: str | Path, against: str | None = "cfftg",
         entry["scenarios"] = scenarios
         entry["policy"] = str(policy)
     if scenarios == "unseen":
-        from jaxexo.evaluation.unseen import UNSEEN_SEED, family_table, markdown_lines
+        from jaxexo.evaluation.unseen import family_table, markdown_lines
+        from jaxexo.physics.scenarios import UNSEEN_SEED
 
         table = family_table(trajs, sc)
         for name, entry in report.items():

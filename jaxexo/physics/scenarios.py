@@ -19,11 +19,21 @@ arithmetic that NumPy and JAX compute bit for bit alike. So
 Test sets (``cycle=True``) fix the kind and pivot condition of scene i (kind i % kinds, pivot
 (i // kinds) % 3, so every pair is equally represented) and draw the rest; the config of such a set
 is ``jaxexo.config.test_config``: the five thesis obstacles (Table 3.1), all three pivot conditions.
+
+Every scene set the tools use is drawn here too, as keyword arguments of ``generate`` (NumPy only):
+the layouts above (``scene_kwargs``), the shifted layouts of the safe-swing checks
+(``safety_scenes``), the held-out benchmark's families (``unseen_scenarios``) and the shapes of
+the device-timing benchmark (``shape_scenarios``).
 """
 
 from __future__ import annotations
 
+import math
+
+import numpy as np
+
 from jaxexo.physics import geometry, terrain
+from jaxexo.physics.geometry import Obstacle
 from jaxexo.physics.dynamics import pivot_position
 from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 
@@ -170,5 +180,162 @@ def scenario_layouts(xp, p, seed: int, n: int, cycle: bool = False, kinds=None, 
                                 pivot_kind=pivots[(idx // len(kinds)) % len(pivots)])
 
 
+# --------------------------------------------------------------------------------------------
+# Scene sets as keyword arguments of ``generate`` (NumPy only: tools, tests, benchmarks)
+# --------------------------------------------------------------------------------------------
+
+
+def scene_kwargs(lay: dict, obstacles=None) -> list[dict]:
+    """Layouts ``lay`` (``scenario_layouts``' dict of arrays) as keyword arguments of ``generate`` plus
+    ``kind``: ``obstacles`` are the layout's obstacle mixture (objects with ``kind``, ``shape`` and
+    ``unit_vertices()``, indexed by the layouts' ``kind``), None for procedural terrain (``kind`` is
+    the family id and the outline is in the world frame)."""
+    out = []
+    for i in range(len(lay["start_y"])):
+        w, h, center = (float(lay[k][i]) for k in ("width", "height", "center_y"))
+        start_y = float(lay["start_y"][i])
+        if obstacles is None:   # kind is the family id; the outline is world-frame
+            local = np.asarray(lay["outline"][i], dtype=np.float64) - np.array([center, 0.0])
+            out.append({"kind": terrain.FAMILY_NAMES[int(lay["kind"][i])], "obstacle": terrain.to_obstacle(local, center),
+                        "pivot": PIVOT_CONDITIONS[int(lay["pivot_kind"][i])], "start_y": start_y,
+                        "step_length": float(lay["goal_y"][i]) - start_y})
+            continue
+        spec = obstacles[int(lay["kind"][i])]
+        if spec.shape == "profile":
+            ob = Obstacle("profile", "profile", center, w, h, spec.unit_vertices())
+        else:
+            ob = getattr(Obstacle, spec.shape)(w, h, center_y=center)
+        out.append({"kind": spec.kind, "obstacle": ob, "pivot": PIVOT_CONDITIONS[int(lay["pivot_kind"][i])],
+                    "start_y": start_y, "step_length": float(lay["goal_y"][i]) - start_y})
+    return out
+
+
+UNSEEN_SHAPES = ("rectangle", "wedge", "pole", "bumps")
+
+
+def _unseen_obstacle(rng, shape: str, center: float) -> Obstacle:
+    """An obstacle of a family the default policy never trained on (issue 11's safety checks)."""
+    if shape == "rectangle":
+        return Obstacle.rectangle(rng.uniform(0.04, 0.25), rng.uniform(0.04, 0.20), center_y=center)
+    if shape == "pole":
+        return Obstacle.rectangle(rng.uniform(0.01, 0.04), rng.uniform(0.05, 0.20), center_y=center)
+    w, h = rng.uniform(0.08, 0.25), rng.uniform(0.05, 0.20)
+    if shape == "wedge":        # a ramp rising (or falling) to a vertical face
+        z = [0.0, h] if rng.uniform() < 0.5 else [h, 0.0]
+        return Obstacle.profile([[center - w / 2, z[0]], [center + w / 2, z[1]]])
+    k = int(rng.integers(2, 4))  # "bumps": k humps of random heights with dips between them
+    y = np.linspace(center - w / 2, center + w / 2, 2 * k + 1)
+    z = np.zeros(2 * k + 1)
+    z[1::2] = h * rng.uniform(0.5, 1.0, k)
+    z[2:-1:2] = h * rng.uniform(0.0, 0.4, k - 1)
+    return Obstacle.profile(np.column_stack([y, z]))
+
+
+def safety_scenes(foot_length: float, step_length, n: int, seed: int = 2024, unseen: bool = False) -> list[dict]:
+    """n shifted layouts for the safe-swing checks (``foot_length`` m, ``step_length`` a range [lo, hi] m): the start anywhere in 0-10 cm, the obstacle anywhere
+    in the gap between the toe at the start and the goal (terrain.NEAR_MARGIN = 2.5 cm from the toe,
+    terrain.FAR_MARGIN = 6 cm from the goal: procedural terrain's placement margins), every pivot condition in
+    turn; the five thesis obstacles (kind i % 5) or, with ``unseen``, shapes never trained on
+    (UNSEEN_SHAPES in turn: random rectangles, wedges, thin poles, profiles with several bumps)."""
+    if n < 1:
+        raise ValueError(f"n must be >= 1, got {n}")
+    rng = np.random.default_rng(seed)
+    foot, (l_lo, l_hi) = foot_length, step_length
+    kinds = UNSEEN_SHAPES if unseen else TEST_KINDS
+    out = []
+    for i in range(n):
+        kind = kinds[i % len(kinds)]
+        start, step = rng.uniform(0.0, 0.10), rng.uniform(l_lo, l_hi)
+        probe = _unseen_obstacle(rng, kind, 0.0) if unseen else Obstacle.named(kind, center_y=0.0)
+        # the gap as procedural terrain places obstacles (terrain.place's margins): the foot at the
+        # start clears the default 2 cm margin with 5 mm to spare, so every scene admits a safe swing
+        lo = start + foot + terrain.NEAR_MARGIN + probe.width / 2
+        hi = start + step - terrain.FAR_MARGIN - probe.width / 2
+        center = rng.uniform(lo, max(lo, hi))
+        ob = Obstacle.profile(probe.outline + [center, 0.0]) if probe.shape == "profile" else (
+            getattr(Obstacle, probe.shape)(probe.width, probe.height, center_y=center))
+        if not unseen:
+            ob = Obstacle.named(kind, center_y=center)
+        out.append({"kind": kind, "obstacle": ob, "pivot": PIVOT_CONDITIONS[(i // len(kinds)) % 3],
+                    "start_y": float(start), "step_length": float(step)})
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# The held-out benchmark's scenes: families no training draws (terrain.HELD_OUT_FAMILIES)
+# --------------------------------------------------------------------------------------------
+
+UNSEEN_SEED = 20_261_122
+UNSEEN_START_SHIFT = (0.0, 0.12)      # m, the agent starts up to 12 cm closer to the obstacle
+UNSEEN_STEP_LENGTH = (0.55, 0.85)     # m
+UNSEEN_LEVELS = (0.0, 0.5, 1.0)    # fractions of the start and step-length ranges
+CELLS_PER_FAMILY = len(PIVOT_CONDITIONS) * len(UNSEEN_LEVELS) * len(UNSEEN_LEVELS)
+
+
+def repeats_for(n: int, families=terrain.HELD_OUT_FAMILIES) -> int:
+    """Draws per (family, pivot, start, step length) cell so that the set has at least n scenes."""
+    if n < 1:
+        raise ValueError(f"n must be >= 1, got {n}")
+    return max(1, math.ceil(n / (len(families) * CELLS_PER_FAMILY)))
+
+
+def unseen_scenarios(foot_length: float, repeats: int = 2, seed: int = UNSEEN_SEED,
+                     families=terrain.HELD_OUT_FAMILIES) -> list[dict]:
+    """The held-out scene set: families x pivots x starts x step lengths x ``repeats`` draws (shape
+    and position). The families are terrain.HELD_OUT_FAMILIES (excluded from training by
+    construction), the starts 0, 6 and 12 cm closer to the obstacle, the step lengths the shortest
+    that fits the drawn obstacle, the middle and the longest of 0.55-0.85 m; shapes and positions in
+    the gap come from NumPy Generators seeded with the fixed ``UNSEEN_SEED``, so numbers are
+    comparable between models (do not tune a model to it). Scenes are dicts of ``generate``'s keyword
+    arguments plus ``kind`` (the family name) and ``family_u`` (the shape's uniform numbers, for
+    reproducing it with terrain.family_outline)."""
+    if repeats < 1:
+        raise ValueError(f"repeats must be >= 1, got {repeats}")
+    for f in families:
+        terrain.family_id(f)   # names the bad family
+    out = []
+    for fi, fam in enumerate(families):
+        # One Generator per family: adding a family never changes another family's scenes.
+        rng = np.random.default_rng([seed, fi])
+        n = CELLS_PER_FAMILY * repeats
+        u_shape, u_place = terrain.draw_uniforms(rng, n)
+        outline, width, _ = terrain.one_family_outline(np, fam, u_shape.astype(np.float64))
+        i = 0
+        for pk, pivot in enumerate(PIVOT_CONDITIONS):
+            for a in UNSEEN_LEVELS:
+                for b in UNSEEN_LEVELS:
+                    for _ in range(repeats):
+                        u = np.array([a, b, u_place[i, 2]], dtype=np.float64)
+                        start, L, c = terrain.place(np, u, width[i], UNSEEN_START_SHIFT, UNSEEN_STEP_LENGTH, foot_length)
+                        out.append({"kind": fam, "obstacle": terrain.to_obstacle(outline[i], float(c)),
+                                    "pivot": pivot, "start_y": float(start), "step_length": float(L),
+                                    "family_u": u_shape[i].tolist()})
+                        i += 1
+    return out
+
+
+def shape_scenarios(n: int, seed: int = 2024) -> list[dict]:
+    """n scenes for device timing, shapes and sizes outside the thesis set: triangles, half-ellipses and four-point profiles of
+    random size (width 8-22 cm, height 5-25 cm), the three pivot conditions in turn."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for i in range(n):
+        w, h, c = rng.uniform(0.08, 0.22), rng.uniform(0.05, 0.25), 0.45 + rng.uniform(-0.03, 0.03)
+        k = i % 3
+        if k == 0:
+            ob, kind = Obstacle.triangle(w, h, center_y=c), "triangle"
+        elif k == 1:
+            ob, kind = Obstacle.half_ellipse(w, h, center_y=c), "half_ellipse"
+        else:
+            a, b = sorted(rng.uniform(-0.4, 0.4, 2) * w)
+            ob = Obstacle.profile([(c - w / 2, 0.0), (c + a, h), (c + b, rng.uniform(0.5, 1.0) * h), (c + w / 2, 0.0)])
+            kind = "profile"
+        out.append({"obstacle": ob, "kind": kind, "pivot": PIVOT_CONDITIONS[(i // 3) % 3],
+                    "start_y": 0.0, "step_length": 0.70})
+    return out
+
+
 __all__ = ["TEST_KINDS", "HELD_OUT", "N_UNIFORMS", "N_TERRAIN_UNIFORMS", "threefry2x32", "uniforms", "seed_words",
-           "uses_terrain", "n_uniforms", "layout_from_uniforms", "terrain_layout_from_uniforms", "scenario_layouts"]
+           "uses_terrain", "n_uniforms", "layout_from_uniforms", "terrain_layout_from_uniforms", "scenario_layouts",
+           "scene_kwargs", "safety_scenes", "UNSEEN_SHAPES", "UNSEEN_SEED", "CELLS_PER_FAMILY", "repeats_for",
+           "unseen_scenarios", "shape_scenarios"]
