@@ -19,9 +19,9 @@ from jaxexo.physics.terrain import (
     K_MAX,
     TRAIN_FAMILIES,
     TerrainError,
-    TerrainSpec,
     family_outline,
 )
+from jaxexo.config import TerrainSpec
 
 FOOT = 0.20
 HIP = (-0.5236, 2.0071)

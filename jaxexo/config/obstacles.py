@@ -1,18 +1,21 @@
-"""The [layout] section's obstacle mixture and procedural terrain: parsing, writing back, and the
-EnvParams leaves they become (the kinds' outlines, shapes, sizes and cumulative weights; the terrain
-families of jaxexo.physics.terrain). The obstacles of thesis Table 3.1 are named by their kind alone.
+"""The [layout] section's obstacle mixture and procedural terrain (``TerrainSpec``): parsing, writing
+back, and the EnvParams leaves they become (the kinds' outlines, shapes, sizes and cumulative
+weights; the terrain families of jaxexo.physics.terrain). The obstacles of thesis Table 3.1 are named by their kind alone.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from jaxexo.config.checks import ConfigError, _number, _range, _vector, pivot_weights
-from jaxexo.physics import geometry, terrain
+from jaxexo.physics import geometry
 from jaxexo.physics.geometry import THESIS_OBSTACLES
+from jaxexo.physics.terrain import (FAMILIES, FAMILY_NAMES, FAR_MARGIN, NEAR_MARGIN, TRAIN_FAMILIES, TerrainError,
+                                    min_step_length, unclearable)
 
 
 def cdf(weights) -> np.ndarray:
@@ -138,6 +141,114 @@ def default_obstacles() -> tuple[ObstacleSpec, ...]:
     )
 
 
+def _terrain_range(path, v, lo_bound=0.0):
+    try:
+        a, b = (float(x) for x in v)
+    except (TypeError, ValueError):
+        raise TerrainError(f"{path}: expected [lo, hi] in metres, got {v!r}") from None
+    if not (math.isfinite(a) and math.isfinite(b)):
+        raise TerrainError(f"{path}: must be finite, got {v!r}")
+    if a < lo_bound or b < a:
+        raise TerrainError(f"{path}: need {lo_bound} <= lo <= hi, got [{a}, {b}]")
+    return (a, b)
+
+
+@dataclass(frozen=True)
+class TerrainSpec:
+    """Procedural obstacles for training: which families (by name; held-out ones are refused unless
+    ``allow_held_out``), their weights, the start shift and step length ranges (m), the pivot
+    condition weights (PIVOT_CONDITIONS order) and the placement margins (m). Validated on
+    construction; ``path`` prefixes error messages (the config field it came from). The families
+    and their placement are jaxexo.physics.terrain's."""
+
+    families: tuple[str, ...] = TRAIN_FAMILIES
+    weights: tuple[float, ...] = ()
+    start_shift: tuple[float, float] = (0.0, 0.12)
+    step_length: tuple[float, float] = (0.55, 0.85)
+    pivot: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    near_margin: float = NEAR_MARGIN
+    far_margin: float = FAR_MARGIN
+    allow_held_out: bool = False
+    path: str = "layout.terrain"
+
+    def __post_init__(self):
+        p = self.path
+        fams = tuple(self.families)
+        if not fams:
+            raise TerrainError(f"{p}.families: name at least one of {TRAIN_FAMILIES}")
+        for f in fams:
+            if f not in FAMILIES:
+                raise TerrainError(f"{p}.families: unknown family {f!r} (known: {', '.join(FAMILY_NAMES)})")
+            if FAMILIES[f].held_out and not self.allow_held_out:
+                raise TerrainError(f"{p}.families: {f!r} is held out for the unseen benchmark "
+                                   f"(training families: {', '.join(TRAIN_FAMILIES)})")
+        if len(set(fams)) != len(fams):
+            raise TerrainError(f"{p}.families: a family is listed twice")
+        weights = tuple(self.weights) if self.weights else (1.0,) * len(fams)
+        if len(weights) != len(fams):
+            raise TerrainError(f"{p}.weights: {len(weights)} weights for {len(fams)} families")
+        if any(not (isinstance(w, (int, float)) and math.isfinite(w) and w >= 0) for w in weights) or sum(weights) <= 0:
+            raise TerrainError(f"{p}.weights: need finite weights >= 0 with a positive sum, got {list(weights)}")
+        piv = tuple(float(x) for x in self.pivot)
+        if len(piv) != 3 or any(not math.isfinite(x) or x < 0 for x in piv) or sum(piv) <= 0:
+            raise TerrainError(f"{p}.pivot: three weights >= 0 (agent, obstacle, between) with a positive sum, "
+                               f"got {list(self.pivot)}")
+        for name in ("near_margin", "far_margin"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise TerrainError(f"{p}.{name}: must be > 0 metres, got {v!r}")
+        object.__setattr__(self, "families", fams)
+        object.__setattr__(self, "weights", tuple(float(w) for w in weights))
+        object.__setattr__(self, "pivot", piv)
+        object.__setattr__(self, "start_shift", _terrain_range(f"{p}.start_shift", self.start_shift))
+        object.__setattr__(self, "step_length", _terrain_range(f"{p}.step_length", self.step_length, 1e-9))
+
+    @property
+    def ids(self) -> np.ndarray:
+        return np.asarray([FAMILIES[f].fid for f in self.families], dtype=np.int32)
+
+    @property
+    def cdf(self) -> np.ndarray:
+        c = np.cumsum(np.asarray(self.weights) / sum(self.weights))
+        c[-1] = 1.0
+        return c
+
+    @property
+    def max_width(self) -> float:
+        return max(FAMILIES[f].width[1] for f in self.families)
+
+    @property
+    def max_height(self) -> float:
+        return max(FAMILIES[f].height[1] for f in self.families)
+
+    @property
+    def min_size(self) -> float:
+        """The smallest width or height any family draws (compare with the env's step size)."""
+        return min(min(FAMILIES[f].width[0], FAMILIES[f].height[0]) for f in self.families)
+
+    def check(self, *, foot_length: float, thigh: float, shin: float, hip_limits, knee_limits,
+              heel_lift: float, goal_tolerance: float) -> None:
+        """Refuse a spec the scene cannot hold or the leg cannot clear (raises TerrainError naming
+        the field). ``heel_lift``: env.mid_goal_clearance - env.mid_goal_half_size[1];
+        ``goal_tolerance``: env.goal_tolerance[0]."""
+        p = self.path
+        if self.far_margin <= goal_tolerance:
+            raise TerrainError(f"{p}.far_margin: {self.far_margin} m must exceed the goal tolerance "
+                               f"{goal_tolerance} m, or the goal box reaches the obstacle")
+        need = min_step_length(self.max_width, foot_length, self.near_margin, self.far_margin)
+        if self.step_length[1] < need:
+            raise TerrainError(f"{p}.step_length: the longest step {self.step_length[1]} m cannot hold the "
+                               f"widest obstacle ({self.max_width} m): it needs {need:.3f} m")
+        bad = unclearable(self, foot_length=foot_length, thigh=thigh, shin=shin, hip_limits=hip_limits,
+                          knee_limits=knee_limits, heel_lift=heel_lift)
+        if bad:
+            fam, piv, start, L, c = bad[0]
+            raise TerrainError(
+                f"{p}.families: {fam!r} up to {FAMILIES[fam].height[1]:.3f} m high cannot be cleared with pivot "
+                f"{piv!r} (start {start:.3f} m, step length {L:.3f} m, centre {c:.3f} m): the heel "
+                f"{heel_lift:.3f} m over its top is out of the leg's reach or joint limits")
+
+
 # [layout] terrain of the default model (configs/default.toml); the other TerrainSpec fields keep
 # jaxexo.physics.terrain's defaults.
 DEFAULT_TERRAIN = {"start_shift": [0.0, 0.12], "step_length": [0.55, 0.85]}
@@ -146,14 +257,14 @@ DEFAULT_TERRAIN = {"start_shift": [0.0, 0.12], "step_length": [0.55, 0.85]}
 TERRAIN_KEYS = ("families", "weights", "start_shift", "step_length", "pivot", "near_margin", "far_margin")
 
 
-def parse_terrain(path: str, v: Any) -> "terrain.TerrainSpec | None":
-    """[layout] terrain: ``false`` (off: reset draws the obstacle mixture) or a table of
-    jaxexo.physics.terrain.TerrainSpec fields (families by name, weights, start_shift and step_length
-    ranges in m, pivot weights, near/far margins in m): reset then draws a procedural obstacle
-    family, its outline and its placement instead of the mixture. Held-out families are refused."""
+def parse_terrain(path: str, v: Any) -> "TerrainSpec | None":
+    """[layout] terrain: ``false`` (off: reset draws the obstacle mixture) or a table of TerrainSpec
+    fields (families by name, weights, start_shift and step_length ranges in m, pivot weights,
+    near/far margins in m): reset then draws a procedural obstacle family, its outline and its
+    placement instead of the mixture. Held-out families are refused."""
     if v is None or v is False:
         return None
-    if isinstance(v, terrain.TerrainSpec):
+    if isinstance(v, TerrainSpec):
         return v
     if v is True:
         v = {}
@@ -181,8 +292,8 @@ def parse_terrain(path: str, v: Any) -> "terrain.TerrainSpec | None":
         if k in kw:
             kw[k] = _number(f"{path}.{k}", kw[k], positive=True)
     try:
-        return terrain.TerrainSpec(**kw, path=path)
-    except terrain.TerrainError as e:
+        return TerrainSpec(**kw, path=path)
+    except TerrainError as e:
         raise ConfigError(str(e)) from None
 
 

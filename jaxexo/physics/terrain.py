@@ -32,8 +32,8 @@ of the placement, reachable within the leg's length and joint limits for every p
 
 ``place`` puts an obstacle of a drawn width into a drawn scene "anywhere the gap allows": start
 shift, step length (at least long enough for the width) and centre between the toe at the start
-and the goal. ``TerrainSpec`` is the validated description a config embeds (families, weights,
-ranges); ``TerrainError`` names the bad field.
+and the goal. ``TerrainError`` names the bad field of a terrain description (the config's
+``TerrainSpec``, jaxexo.config.obstacles).
 """
 
 from __future__ import annotations
@@ -347,7 +347,7 @@ def place(xp, u, width, start_shift, step_length, foot_length: float, near_margi
     """(start_y, step_length, center_y), metres, from uniforms u (..., 3): the start shift drawn from
     its range, the step length from [max(lo, min_step_length(width)), hi] (a wide obstacle only gets
     steps it fits in), and the centre anywhere between the toe at the start + near_margin and the
-    goal - far_margin. ``TerrainSpec`` guarantees the widest family fits the longest step."""
+    goal - far_margin. A config's ``TerrainSpec`` guarantees the widest family fits the longest step."""
     start = _lerp(start_shift[0], start_shift[1], u[..., 0])
     lo = xp.maximum(step_length[0], min_step_length(width, foot_length, near_margin, far_margin))
     L = lo + (step_length[1] - lo) * u[..., 1]
@@ -356,119 +356,7 @@ def place(xp, u, width, start_shift, step_length, foot_length: float, near_margi
     return start, L, c_lo + (c_hi - c_lo) * u[..., 2]
 
 
-# --------------------------------------------------------------------------------------------
-# The validated description a config embeds
-# --------------------------------------------------------------------------------------------
-
-
-def _range(path, v, lo_bound=0.0):
-    try:
-        a, b = (float(x) for x in v)
-    except (TypeError, ValueError):
-        raise TerrainError(f"{path}: expected [lo, hi] in metres, got {v!r}") from None
-    if not (math.isfinite(a) and math.isfinite(b)):
-        raise TerrainError(f"{path}: must be finite, got {v!r}")
-    if a < lo_bound or b < a:
-        raise TerrainError(f"{path}: need {lo_bound} <= lo <= hi, got [{a}, {b}]")
-    return (a, b)
-
-
-@dataclass(frozen=True)
-class TerrainSpec:
-    """Procedural obstacles for training: which families (by name; held-out ones are refused unless
-    ``allow_held_out``), their weights, the start shift and step length ranges (m), the pivot
-    condition weights (kinematics.PIVOT_CONDITIONS order) and the placement margins (m). Validated on construction;
-    ``path`` prefixes error messages (the config field it came from)."""
-
-    families: tuple[str, ...] = TRAIN_FAMILIES
-    weights: tuple[float, ...] = ()
-    start_shift: tuple[float, float] = (0.0, 0.12)
-    step_length: tuple[float, float] = (0.55, 0.85)
-    pivot: tuple[float, float, float] = (1.0, 1.0, 1.0)
-    near_margin: float = NEAR_MARGIN
-    far_margin: float = FAR_MARGIN
-    allow_held_out: bool = False
-    path: str = "layout.terrain"
-
-    def __post_init__(self):
-        p = self.path
-        fams = tuple(self.families)
-        if not fams:
-            raise TerrainError(f"{p}.families: name at least one of {TRAIN_FAMILIES}")
-        for f in fams:
-            if f not in FAMILIES:
-                raise TerrainError(f"{p}.families: unknown family {f!r} (known: {', '.join(FAMILY_NAMES)})")
-            if FAMILIES[f].held_out and not self.allow_held_out:
-                raise TerrainError(f"{p}.families: {f!r} is held out for the unseen benchmark "
-                                   f"(training families: {', '.join(TRAIN_FAMILIES)})")
-        if len(set(fams)) != len(fams):
-            raise TerrainError(f"{p}.families: a family is listed twice")
-        weights = tuple(self.weights) if self.weights else (1.0,) * len(fams)
-        if len(weights) != len(fams):
-            raise TerrainError(f"{p}.weights: {len(weights)} weights for {len(fams)} families")
-        if any(not (isinstance(w, (int, float)) and math.isfinite(w) and w >= 0) for w in weights) or sum(weights) <= 0:
-            raise TerrainError(f"{p}.weights: need finite weights >= 0 with a positive sum, got {list(weights)}")
-        piv = tuple(float(x) for x in self.pivot)
-        if len(piv) != 3 or any(not math.isfinite(x) or x < 0 for x in piv) or sum(piv) <= 0:
-            raise TerrainError(f"{p}.pivot: three weights >= 0 (agent, obstacle, between) with a positive sum, "
-                               f"got {list(self.pivot)}")
-        for name in ("near_margin", "far_margin"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise TerrainError(f"{p}.{name}: must be > 0 metres, got {v!r}")
-        object.__setattr__(self, "families", fams)
-        object.__setattr__(self, "weights", tuple(float(w) for w in weights))
-        object.__setattr__(self, "pivot", piv)
-        object.__setattr__(self, "start_shift", _range(f"{p}.start_shift", self.start_shift))
-        object.__setattr__(self, "step_length", _range(f"{p}.step_length", self.step_length, 1e-9))
-
-    @property
-    def ids(self) -> np.ndarray:
-        return np.asarray([FAMILIES[f].fid for f in self.families], dtype=np.int32)
-
-    @property
-    def cdf(self) -> np.ndarray:
-        c = np.cumsum(np.asarray(self.weights) / sum(self.weights))
-        c[-1] = 1.0
-        return c
-
-    @property
-    def max_width(self) -> float:
-        return max(FAMILIES[f].width[1] for f in self.families)
-
-    @property
-    def max_height(self) -> float:
-        return max(FAMILIES[f].height[1] for f in self.families)
-
-    @property
-    def min_size(self) -> float:
-        """The smallest width or height any family draws (compare with the env's step size)."""
-        return min(min(FAMILIES[f].width[0], FAMILIES[f].height[0]) for f in self.families)
-
-    def check(self, *, foot_length: float, thigh: float, shin: float, hip_limits, knee_limits,
-              heel_lift: float, goal_tolerance: float) -> None:
-        """Refuse a spec the scene cannot hold or the leg cannot clear (raises TerrainError naming
-        the field). ``heel_lift``: env.mid_goal_clearance - env.mid_goal_half_size[1];
-        ``goal_tolerance``: env.goal_tolerance[0]."""
-        p = self.path
-        if self.far_margin <= goal_tolerance:
-            raise TerrainError(f"{p}.far_margin: {self.far_margin} m must exceed the goal tolerance "
-                               f"{goal_tolerance} m, or the goal box reaches the obstacle")
-        need = min_step_length(self.max_width, foot_length, self.near_margin, self.far_margin)
-        if self.step_length[1] < need:
-            raise TerrainError(f"{p}.step_length: the longest step {self.step_length[1]} m cannot hold the "
-                               f"widest obstacle ({self.max_width} m): it needs {need:.3f} m")
-        bad = unclearable(self, foot_length=foot_length, thigh=thigh, shin=shin, hip_limits=hip_limits,
-                          knee_limits=knee_limits, heel_lift=heel_lift)
-        if bad:
-            fam, piv, start, L, c = bad[0]
-            raise TerrainError(
-                f"{p}.families: {fam!r} up to {FAMILIES[fam].height[1]:.3f} m high cannot be cleared with pivot "
-                f"{piv!r} (start {start:.3f} m, step length {L:.3f} m, centre {c:.3f} m): the heel "
-                f"{heel_lift:.3f} m over its top is out of the leg's reach or joint limits")
-
-
-def unclearable(spec: TerrainSpec, *, foot_length, thigh, shin, hip_limits, knee_limits, heel_lift,
+def unclearable(spec, *, foot_length, thigh, shin, hip_limits, knee_limits, heel_lift,
                 grid: int = 3) -> list[tuple]:
     """NumPy: the (family, pivot, start, step length, centre) placements, on a grid x grid x grid
     of each family's placement range at its widest and narrowest, where the heel over the centre at
