@@ -74,14 +74,14 @@ class EnvConfig:
     bounds_y: tuple[float, float] = declare((-0.30, 1.30), range_(), unit="m")  # the heel is kept inside
     # ceiling for the heel; the ground is z = 0
     max_z: float = declare(0.80, number(positive=True), unit="m", param="max_z_world")
-    # The safe-swing definition (issue 11, jaxexo.physics.swept): the foot's motion between samples
+    # The safe-swing definition (jaxexo.physics.swept): the foot's motion between samples
     # never comes closer than min_clearance to the obstacle, and the heel never moves backward by
     # more than backward_tolerance. The environment's success flag and the generators' ``ok`` use both.
     min_clearance: float = declare(outcome.DEFAULT_MIN_CLEARANCE, number(nonneg=True), unit="m")
     # At most 10 m: any value beyond env.bounds_y's span turns the check off, and the thesis configs
     # write 10 m for that.
     backward_tolerance: float = declare(outcome.DEFAULT_BACKWARD_TOLERANCE, number(nonneg=True, hi=10.0), unit="m")
-    # The shield (issue 11; not in the thesis): the agent chooses only among admissible moves
+    # The shield (not in the thesis): the agent chooses only among admissible moves
     # (jaxexo.physics.dynamics.admissible_moves): no backward component, the exact clearance of the
     # whole move at least shield_clearance, joint limits and reach respected at its end. The same
     # mask in training, evaluation and the NumPy generator; off reproduces the thesis's free choice.

@@ -214,7 +214,7 @@ UNSEEN_SHAPES = ("rectangle", "wedge", "pole", "bumps")
 
 
 def _unseen_obstacle(rng, shape: str, center: float) -> Obstacle:
-    """An obstacle of a family the default policy never trained on (issue 11's safety checks)."""
+    """An obstacle of a family the default policy never trained on (the safe-swing checks)."""
     if shape == "rectangle":
         return Obstacle.rectangle(rng.uniform(0.04, 0.25), rng.uniform(0.04, 0.20), center_y=center)
     if shape == "pole":
