@@ -39,9 +39,6 @@ KNOWN_EXCEPTIONS = {
     # The generator reaches into the shield's pruned clearance rule and its batch threshold.
     ("jaxexo.inference.generator", "jaxexo.physics.dynamics._PRUNE_FROM"),
     ("jaxexo.inference.generator", "jaxexo.physics.dynamics._moves_keep_clearance_pruned"),
-    # Training's driver hands a population run to jaxexo.train.population, which uses the driver's
-    # run-directory helpers: a circle inside jaxexo.train.
-    ("jaxexo.train.driver", "jaxexo.train.population"),
 }
 
 SCRIPT_DIRS = ("benchmarks",)     # scripts outside the package: any import, but no private names

@@ -40,5 +40,5 @@ def test_every_writer_uses_it():
     assert results.atomic_write is atomic.atomic_write
     assert trajectory.atomic_write is atomic.atomic_write
     assert policy_file.atomic_write is atomic.atomic_write
-    import jaxexo.train.driver as driver
-    assert driver._atomic_write is atomic.atomic_write
+    from jaxexo.train import run_files
+    assert run_files.checkpoint_write is atomic.atomic_write

@@ -22,7 +22,7 @@ from conftest import ROOT, jax_compilation_cache
 jax = pytest.importorskip("jax")
 import jax.numpy as jnp  # noqa: E402
 
-from jaxexo.train import driver  # noqa: E402
+from jaxexo.train import driver, run_files  # noqa: E402
 from jaxexo.train.evaluate import HELD_OUT, TEST_KINDS, make_rollout  # noqa: E402
 from jaxexo.train.trainer import METRICS, Hyperparams, Trainer, make_train  # noqa: E402
 pytestmark = pytest.mark.slow   # subprocess CLI runs
@@ -42,7 +42,7 @@ def test_cli_train_writes_the_run_directory(train_background):
     ref = train_background["reference"]
     stdout, stderr = ref.wait()
     for name in ("config.toml", "metrics.jsonl", "policy.npz", "training_curve.png", "eval.json",
-                 driver.CHECKPOINT, driver.BOOKKEEPING):
+                 run_files.CHECKPOINT, run_files.BOOKKEEPING):
         assert (ref.out / name).is_file(), name
     assert load_config(ref.out / "config.toml") == load_config(ref.cfg_path) == ref.cfg
     assert len((ref.out / "metrics.jsonl").read_text().splitlines()) == 3

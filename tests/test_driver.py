@@ -24,7 +24,7 @@ from conftest import ROOT, jax_compilation_cache
 jax = pytest.importorskip("jax")
 import jax.numpy as jnp  # noqa: E402
 
-from jaxexo.train import driver  # noqa: E402
+from jaxexo.train import driver, run_files  # noqa: E402
 from jaxexo.train.evaluate import HELD_OUT, TEST_KINDS, make_rollout  # noqa: E402
 from jaxexo.train.trainer import METRICS, Hyperparams, Trainer, make_train  # noqa: E402
 pytestmark = pytest.mark.slow   # training runs and a background ``jaxexo train`` subprocess
@@ -38,12 +38,12 @@ from train_helpers import _compilation_cache, _npz  # noqa: F401 (module-scoped 
 # --------------------------------------------------------------------------------------------
 
 class _Interrupt:
-    """Patches driver._atomic_write to raise KeyboardInterrupt on its ``at``-th call (calls go
+    """Patches run_files.checkpoint_write to raise KeyboardInterrupt on its ``at``-th call (calls go
     checkpoint, bookkeeping, checkpoint, bookkeeping, ... one pair per finished chunk)."""
 
     def __init__(self, at: int):
         self.at, self.calls = at, 0
-        self.real = driver._atomic_write
+        self.real = run_files.checkpoint_write
 
     def __call__(self, path, data):
         self.calls += 1
@@ -54,11 +54,11 @@ class _Interrupt:
 
 def _interrupted_then_resumed(cfg, out, at: int) -> dict:
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(driver, "_atomic_write", _Interrupt(at))
+        mp.setattr(run_files, "checkpoint_write", _Interrupt(at))
         with pytest.raises(KeyboardInterrupt):
             driver.run_training(cfg, out, seed=SEED, progress=False, eval_episodes=20)
     before = {
-        "book": json.loads((out / driver.BOOKKEEPING).read_text()),
+        "book": json.loads((out / run_files.BOOKKEEPING).read_text()),
         "metric_lines": len((out / "metrics.jsonl").read_text().splitlines()),
         "policy": (out / "policy.npz").exists(),
     }
@@ -90,7 +90,7 @@ def _counters(path) -> list[dict]:
 def test_run_directory_is_complete(driver_runs, which):
     out = driver_runs[which]
     for name in ("config.toml", "metrics.jsonl", "policy.npz", "training_curve.png", "eval.json",
-                 driver.CHECKPOINT, driver.BOOKKEEPING):
+                 run_files.CHECKPOINT, run_files.BOOKKEEPING):
         assert (out / name).is_file(), name
     assert load_config(out / "config.toml") == driver_runs["cfg"]
     rows = _counters(out / "metrics.jsonl")
@@ -98,7 +98,7 @@ def test_run_directory_is_complete(driver_runs, which):
     assert [r["updates"] for r in rows] == [2, 4, 6]
     assert [r["env_steps"] for r in rows] == [k * 2 * TINY_N * TINY_T for k in (1, 2, 3)]
     assert all(0.0 <= r["validation_success_raw"] <= 1.0 for r in rows)
-    book = json.loads((out / driver.BOOKKEEPING).read_text())
+    book = json.loads((out / run_files.BOOKKEEPING).read_text())
     assert book["chunks_done"] == 3 and book["seed"] == SEED
     assert (out / "training_curve.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
@@ -109,7 +109,7 @@ def test_resume_is_bit_identical(driver_runs):
     # The interruption happened where intended: chunk 1 saved, chunk 2's metrics line written but
     # its checkpoint not, no policy yet.
     assert before["book"]["chunks_done"] == 1 and before["metric_lines"] == 2 and not before["policy"]
-    assert (full / driver.CHECKPOINT).read_bytes() == (part / driver.CHECKPOINT).read_bytes()
+    assert (full / run_files.CHECKPOINT).read_bytes() == (part / run_files.CHECKPOINT).read_bytes()
     pf, pp = _npz(full / "policy.npz"), _npz(part / "policy.npz")
     assert sorted(pf) == sorted(pp) and len(pf) >= 7
     for k in pf:
@@ -126,12 +126,12 @@ def test_resume_after_an_interrupt_between_checkpoint_and_bookkeeping(driver_run
     bookkeeping was a separate file that resume read, it lost a metrics row)."""
     out = tmp_path / "run"
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(driver, "_atomic_write", _Interrupt(4))
+        mp.setattr(run_files, "checkpoint_write", _Interrupt(4))
         with pytest.raises(KeyboardInterrupt):
             driver.run_training(driver_runs["cfg"], out, seed=SEED, progress=False, eval_episodes=20)
     driver.run_training(driver_runs["cfg"], out, seed=SEED, resume=True, progress=False, eval_episodes=20)
     assert _counters(driver_runs["full"] / "metrics.jsonl") == _counters(out / "metrics.jsonl")
-    assert (driver_runs["full"] / driver.CHECKPOINT).read_bytes() == (out / driver.CHECKPOINT).read_bytes()
+    assert (driver_runs["full"] / run_files.CHECKPOINT).read_bytes() == (out / run_files.CHECKPOINT).read_bytes()
 
 
 def test_eval_json(driver_runs):
@@ -163,7 +163,7 @@ def test_exported_policy_matches_the_checkpoint(driver_runs, tiny):
     from jaxexo.storage.checkpoint import unpack_checkpoint
 
     saved = serialization.from_bytes({"state": template, "best_params": template.params},
-                                     unpack_checkpoint((full / driver.CHECKPOINT).read_bytes(), "ckpt"))
+                                     unpack_checkpoint((full / run_files.CHECKPOINT).read_bytes(), "ckpt"))
     assert int(saved["state"].update) == TINY_UPDATES
     pol = load_policy(full / "policy.npz")
     assert pol.metadata["layer_norm"] is True and pol.metadata["layers"] == [trainer.env.obs_dim, 32, 32, 36]
@@ -193,8 +193,8 @@ def test_run_training_refuses_to_overwrite_or_mix_runs(driver_runs, tmp_path):
 
     from jaxexo.storage.checkpoint import pack_checkpoint, unpack_checkpoint
 
-    raw = serialization.msgpack_restore(unpack_checkpoint((run / driver.CHECKPOINT).read_bytes(), "ckpt"))
+    raw = serialization.msgpack_restore(unpack_checkpoint((run / run_files.CHECKPOINT).read_bytes(), "ckpt"))
     raw["book"]["devices"] = 2
-    (run / driver.CHECKPOINT).write_bytes(pack_checkpoint(serialization.msgpack_serialize(raw)))
+    (run / run_files.CHECKPOINT).write_bytes(pack_checkpoint(serialization.msgpack_serialize(raw)))
     with pytest.raises(ConfigError, match="2 device"):
         driver.run_training(cfg, run, seed=SEED, resume=True, progress=False)

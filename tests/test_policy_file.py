@@ -23,7 +23,7 @@ from conftest import ROOT, jax_compilation_cache
 jax = pytest.importorskip("jax")
 import jax.numpy as jnp  # noqa: E402
 
-from jaxexo.train import driver  # noqa: E402
+from jaxexo.train import driver, run_files  # noqa: E402
 from jaxexo.train.evaluate import HELD_OUT, TEST_KINDS, make_rollout  # noqa: E402
 from jaxexo.train.trainer import METRICS, Hyperparams, Trainer, make_train  # noqa: E402
 from train_helpers import *  # noqa: F401,F403 (the shared tiny config, helpers and fixtures)
@@ -36,7 +36,7 @@ def test_policy_round_trip(tmp_path, layer_norm):
     trainer = Trainer(cfg)
     d = trainer.env.obs_dim
     params = random_params(trainer.net, d, seed=1)
-    path = driver.export_policy(tmp_path / "policy.npz", cfg, trainer, params)
+    path = run_files.export_policy(tmp_path / "policy.npz", cfg, trainer, params)
     with zipfile.ZipFile(path) as z:   # plain arrays, no pickled objects
         assert all(n.endswith(".npy") for n in z.namelist())
     pol = load_policy(path)
@@ -64,7 +64,7 @@ def good_policy(tmp_path_factory):
     cfg = tiny_config(hidden=[8], layer_norm=True)
     trainer = Trainer(cfg)
     params = random_params(trainer.net, trainer.env.obs_dim, seed=0)
-    path = driver.export_policy(tmp_path_factory.mktemp("pol") / "policy.npz", cfg, trainer, params)
+    path = run_files.export_policy(tmp_path_factory.mktemp("pol") / "policy.npz", cfg, trainer, params)
     load_policy(path)
     return path
 

@@ -21,7 +21,7 @@ jax = pytest.importorskip("jax")
 from jaxexo.sweep.program import run_chunk, unflatten  # noqa: E402
 from jaxexo.train.lanes import LANES, padded_agents  # noqa: E402
 from jaxexo.sweep.spec import sweep_from_dict  # noqa: E402
-from jaxexo.train import driver  # noqa: E402
+from jaxexo.train import driver, run_files  # noqa: E402
 from jaxexo.train.network import dense_layers  # noqa: E402
 from jaxexo.train.population import Population, choose, population_devices  # noqa: E402
 
@@ -146,19 +146,19 @@ def test_the_driver_exports_the_best_member_records_every_member_and_resumes(tmp
     for j, (w, b) in enumerate(chosen):
         assert np.array_equal(policy[f"dense_{j}_kernel"], w) and np.array_equal(policy[f"dense_{j}_bias"], b)
     # Interrupted after its second checkpoint and resumed: the same files as the uninterrupted run.
-    real, calls = driver._atomic_write, []
+    real, calls = run_files.checkpoint_write, []
 
     def killed_after_second_checkpoint(path, data):
-        if path.name == driver.BOOKKEEPING:
+        if path.name == run_files.BOOKKEEPING:
             calls.append(path)
             if len(calls) == 2:
                 raise RuntimeError("killed")
         return real(path, data)
 
-    monkeypatch.setattr(driver, "_atomic_write", killed_after_second_checkpoint)
+    monkeypatch.setattr(run_files, "checkpoint_write", killed_after_second_checkpoint)
     with pytest.raises(RuntimeError, match="killed"):
         driver.run_training(cfg, tmp_path / "cut", seed=SEED, progress=False)
-    monkeypatch.setattr(driver, "_atomic_write", real)
+    monkeypatch.setattr(run_files, "checkpoint_write", real)
     with pytest.raises(ConfigError, match="--seed 3"):
         driver.run_training(cfg, tmp_path / "cut", seed=SEED + 1, resume=True, progress=False)
     resumed = driver.run_training(cfg, tmp_path / "cut", seed=SEED, resume=True, progress=False)

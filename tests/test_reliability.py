@@ -460,7 +460,7 @@ def _counters(path) -> list[dict]:
 
 def assert_same_run(a, b):
     """Bit-identical results: checkpoint, policy arrays, metrics counters, evaluation."""
-    from jaxexo.train.driver import CHECKPOINT
+    from jaxexo.train.run_files import CHECKPOINT
 
     assert (a / CHECKPOINT).read_bytes() == (b / CHECKPOINT).read_bytes()
     pa, pb = _files(a / "policy.npz"), _files(b / "policy.npz")
@@ -476,7 +476,8 @@ def assert_same_run(a, b):
 def test_resume_refuses_foreign_corrupt_and_incomplete_run_directories(reference, cache, tmp_path):
     from flax import serialization
 
-    from jaxexo.train.driver import CHECKPOINT, read_checkpoint, run_training
+    from jaxexo.train.driver import run_training
+    from jaxexo.train.run_files import CHECKPOINT, read_checkpoint
 
     cfg = tiny_config()
     run = tmp_path / "run"
@@ -545,7 +546,7 @@ def test_sigkill_mid_run_then_resume_is_bit_identical(reference, tmp_path):
 def test_run_stopped_before_its_first_checkpoint_resumes_from_scratch(reference, cache, tmp_path):
     """Killed (here: interrupted) after chunk 1's metrics row but before its checkpoint: a new run there is
     refused (it is not empty) with a hint, --resume starts again and ends as the uninterrupted run."""
-    from jaxexo.train import driver
+    from jaxexo.train import driver, run_files
 
     cfg = tiny_config()
     run = tmp_path / "run"
@@ -554,7 +555,7 @@ def test_run_stopped_before_its_first_checkpoint_resumes_from_scratch(reference,
         raise KeyboardInterrupt
 
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(driver, "_atomic_write", interrupt)
+        mp.setattr(run_files, "checkpoint_write", interrupt)
         with pytest.raises(KeyboardInterrupt):
             driver.run_training(cfg, run, seed=SEED, progress=False)
     # as a SIGKILL mid-write leaves it (atomic_write's temporary name for checkpoint.msgpack)
@@ -592,12 +593,12 @@ def test_full_disk_fails_cleanly_and_keeps_the_last_checkpoint(reference, cache,
     """Chunk 1 checkpointed; the resumed process may not write files as large as a checkpoint: it fails
     on chunk 2's checkpoint with a message naming the file (exit 1, no traceback), the chunk-1 checkpoint
     is intact, no temporary file is left, and a later resume ends bit-identical to the uninterrupted run."""
-    from jaxexo.train import driver
+    from jaxexo.train import driver, run_files
 
     cfg = tiny_config()
     run = tmp_path / "run"
     calls = {"n": 0}
-    real = driver._atomic_write
+    real = run_files.checkpoint_write
 
     def stop_after_chunk_1(path, data):    # checkpoint, bookkeeping of chunk 1, then stop
         calls["n"] += 1
@@ -606,12 +607,12 @@ def test_full_disk_fails_cleanly_and_keeps_the_last_checkpoint(reference, cache,
         return real(path, data)
 
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(driver, "_atomic_write", stop_after_chunk_1)
+        mp.setattr(run_files, "checkpoint_write", stop_after_chunk_1)
         with pytest.raises(KeyboardInterrupt):
             driver.run_training(cfg, run, seed=SEED, progress=False)
-    ckpt = run / driver.CHECKPOINT
+    ckpt = run / run_files.CHECKPOINT
     saved = ckpt.read_bytes()
-    assert driver.read_checkpoint(ckpt)["book"]["chunks_done"] == 1
+    assert run_files.read_checkpoint(ckpt)["book"]["chunks_done"] == 1
     r = subprocess.run(limited_fsize(len(saved) - 1, cli("train", reference["cfg_path"], "--out", run, "--quiet",
                                                           "--seed", SEED, "--resume")),
                        capture_output=True, text=True, cwd=ROOT, env=one_device_env(), timeout=900)
@@ -646,7 +647,7 @@ def test_divergence_after_a_good_chunk_keeps_the_best_finite_parameters(cache, t
     import jax
     import jax.numpy as jnp
 
-    from jaxexo.train import driver
+    from jaxexo.train import driver, run_files
     from jaxexo.train.trainer import Trainer
 
     real_run = Trainer.run
@@ -662,13 +663,13 @@ def test_divergence_after_a_good_chunk_keeps_the_best_finite_parameters(cache, t
         driver.run_training(tiny_config(), run, seed=SEED, progress=False)
     rows = [json.loads(x) for x in (run / "metrics.jsonl").read_text().splitlines()]
     assert [x["diverged"] for x in rows] == [False, True]
-    assert driver.read_checkpoint(run / driver.CHECKPOINT)["book"]["chunks_done"] == 1
+    assert run_files.read_checkpoint(run / run_files.CHECKPOINT)["book"]["chunks_done"] == 1
     pol = load_policy(run / "policy.npz")
     assert all(np.all(np.isfinite(k)) for k in pol.kernels)
     res = json.loads((run / "eval.json").read_text())
     assert res["selected_chunk"] == 1 and res["diverged_chunk"] == 2
     # The exported network is chunk 1's (the checkpoint's best parameters): the same Q-values.
-    best = driver.read_checkpoint(run / driver.CHECKPOINT)["best_params"]
+    best = run_files.read_checkpoint(run / run_files.CHECKPOINT)["best_params"]
     trainer = Trainer(tiny_config())
     obs = np.random.default_rng(0).normal(size=(64, trainer.env.obs_dim)).astype(np.float32)
     np.testing.assert_allclose(pol.q_values(obs), np.asarray(trainer.net.apply(best, obs)), rtol=1e-5, atol=1e-5)
@@ -679,7 +680,8 @@ def test_resume_refuses_an_edited_config_a_deleted_checkpoint_and_undecodable_me
     """Issue 22: config.toml edited together with the config passed (a changed lr would mix two
     learning rates), checkpoint.msgpack deleted from a run of several chunks (it used to restart from
     scratch silently), random bytes in metrics.jsonl (named, not "'utf-8' codec can't decode")."""
-    from jaxexo.train.driver import BOOKKEEPING, CHECKPOINT, run_training
+    from jaxexo.train.driver import run_training
+    from jaxexo.train.run_files import BOOKKEEPING, CHECKPOINT
 
     run = tmp_path / "run"
     shutil.copytree(reference["run"], run)

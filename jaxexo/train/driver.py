@@ -9,6 +9,7 @@ Run directory:
 - policy.npz         the exported greedy policy (jaxexo.storage.policy_file; NumPy-only to load)
 - training_curve.png return and success rate against episodes (thesis Fig. 3.4)
 - eval.json          greedy rollouts on the test layouts (jaxexo.train.evaluate)
+(names, checkpoint reading and checks, rows, export: jaxexo.train.run_files, shared with populations)
 
 Population (``[train] population = K > 1``): K seeds of the config trained together, the best member's
 best chunk exported; jaxexo.train.population has the program and the per-member files.
@@ -18,10 +19,10 @@ layouts drawn from the training distribution; the best parameters are exported (
 ties). The held-out test obstacles are never used for this choice.
 
 Resume: the same chunk program runs from the restored state, so a resumed run ends bit-identical to
-an uninterrupted one (tests/test_train.py checks it). metrics.jsonl is cut back to the checkpoint's
+an uninterrupted one (tests/test_driver.py checks it). metrics.jsonl is cut back to the checkpoint's
 chunks first (rows written after it are recomputed identically).
 
-Reliability (README "Reliability"; tests/test_reliability.py):
+Reliability (docs/reliability.md; tests/test_reliability.py):
 - the run holds an exclusive lock on the directory (jaxexo.storage.rundir) from start to end: a second
   ``jaxexo train``/``sweep`` there is refused; a killed run's lock vanishes with it;
 - a new run needs an empty or absent directory (a finished policy.npz, a sweep's best/, the remains of a
@@ -39,270 +40,21 @@ Reliability (README "Reliability"; tests/test_reliability.py):
 from __future__ import annotations
 
 import json
-import math
 import time
-import tomllib
 from pathlib import Path
 
 import jax
 import numpy as np
 from flax import serialization
 
-from jaxexo.config import Config, ConfigError, config_from_dict, load_config
+from jaxexo.config import Config, ConfigError
 from jaxexo.config.toml_io import config_to_toml
-from jaxexo.env.exo_step import LENGTH_SCALE, THESIS_OBS_CENTER
-from jaxexo.physics import dynamics
-from jaxexo.storage.atomic import append_line, atomic_write, stale_temps
-from jaxexo.storage.checkpoint import CheckpointError, pack_checkpoint, unpack_checkpoint
-from jaxexo.storage.policy_file import save_policy
-from jaxexo.storage.rundir import RunDirError, TrainingDiverged, contents, describe, run_lock  # noqa: F401
+from jaxexo.storage.atomic import append_line, atomic_write
+from jaxexo.storage.checkpoint import CheckpointError, pack_checkpoint
+from jaxexo.storage.rundir import TrainingDiverged, run_lock
+from jaxexo.train import run_files
 from jaxexo.train.evaluate import evaluate, make_validator
-from jaxexo.train.network import dense_layers, norm_layers
-from jaxexo.train.trainer import METRICS, Hyperparams, Trainer
-
-CHECKPOINT = "checkpoint.msgpack"
-BOOKKEEPING = "checkpoint.json"
-# Aim for chunks of about this many env steps: frequent enough for a live progress bar.
-CHUNK_ENV_STEPS = 1_000_000
-
-
-def chunking(cfg: Config, trainer: Trainer) -> tuple[int, int]:
-    """(updates per chunk, chunks): every chunk has the same length, so one program is compiled;
-    updates past the budget are masked inside the program."""
-    per = cfg.train.num_envs * cfg.train.rollout_steps
-    target = cfg.train.chunk_updates or max(1, CHUNK_ENV_STEPS // per)
-    chunks = math.ceil(trainer.num_updates / min(target, trainer.num_updates))
-    return math.ceil(trainer.num_updates / chunks), chunks
-
-
-# The checkpoint and bookkeeping writes (a name of its own so tests can interrupt between them).
-_atomic_write = atomic_write
-
-
-def _chunk_row(m: np.ndarray, ts, env_steps: int, chunk: int, wall: float, seconds: float) -> dict:
-    d = dict(zip(METRICS, m.astype(np.float64).sum(0).tolist()))
-    n_upd = max(1, int((m[:, METRICS.index("env_steps")] > 0).sum()))
-    eps = max(d["episodes"], 1.0)
-    return {
-        "chunk": chunk,
-        "updates": int(ts.update),
-        "env_steps": int(env_steps),
-        "episodes": int(ts.episodes),
-        "chunk_episodes": int(d["episodes"]),
-        "return_mean": d["return_sum"] / eps,
-        "success_raw_rate": d["successes"] / eps,    # behaviour policy, raw moves
-        "accuracy": d["accurate"] / eps,
-        "loss": d["loss"] / n_upd,
-        "q_mean": d["q_mean"] / n_upd,
-        "epsilon": d["epsilon"] / n_upd,
-        "env_steps_per_s": d["env_steps"] / max(seconds, 1e-9),
-        "wall_s": wall,
-    }
-
-
-def export_policy(path: Path, cfg: Config, trainer: Trainer, params) -> Path:
-    env = trainer.env
-    dense = [(np.asarray(w), np.asarray(b)) for w, b in dense_layers(params)]
-    norms = [(np.asarray(s), np.asarray(b)) for s, b in norm_layers(params)]
-    meta = {
-        "obs_mode": cfg.env.obs_mode,
-        "obs_dim": env.obs_dim,
-        "length_scale": LENGTH_SCALE,
-        "thesis_obs_center": list(THESIS_OBS_CENTER),
-        "num_actions": env.num_actions,
-        "action_angles_rad": dynamics.action_angles(env.num_actions).tolist(),
-        "layers": [env.obs_dim, *cfg.train.hidden, env.num_actions],
-        "layer_norm": cfg.train.layer_norm,
-        "activation": "relu",
-        "config_toml": config_to_toml(cfg),
-    }
-    return save_policy(path, [w for w, _ in dense], [b for _, b in dense],
-                       [s for s, _ in norms], [b for _, b in norms], meta)
-
-
-def plot_training_curve(path: Path, rows: list[dict]) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    ep = [r["episodes"] for r in rows]
-    fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
-    a1.plot(ep, [r["return_mean"] for r in rows], color="tab:blue")
-    a1.set_ylabel("mean episode return")
-    a1.set_title("Training (thesis Fig. 3.4): return and success per chunk")
-    a1.grid(alpha=0.3)
-    a2.plot(ep, [r["success_raw_rate"] for r in rows], label="strict success, raw moves", color="tab:green")
-    a2.plot(ep, [r["accuracy"] for r in rows], label="accuracy (eq 3.1)", color="tab:orange")
-    a2.set_ylim(-0.02, 1.02)
-    a2.set_xlabel("episodes")
-    a2.set_ylabel("share of finished episodes")
-    a2.legend(loc="lower right")
-    a2.grid(alpha=0.3)
-    fig.tight_layout()
-    import io
-
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    plt.close(fig)
-    atomic_write(path, buf.getvalue())
-
-
-def _tree_mismatch(template, loaded, where: str = "") -> str | None:
-    """Where two state dicts (nested dicts of arrays) differ in keys, shapes or dtypes; None if they agree."""
-    if isinstance(template, dict):
-        if not isinstance(loaded, dict):
-            return f"{where or '/'}: expected a table, found {type(loaded).__name__}"
-        if set(template) != set(loaded):
-            missing, extra = sorted(set(template) - set(loaded)), sorted(set(loaded) - set(template))
-            return f"{where or '/'}: keys differ (missing {missing[:4]}, unexpected {extra[:4]})"
-        for k in template:
-            bad = _tree_mismatch(template[k], loaded[k], f"{where}/{k}")
-            if bad:
-                return bad
-        return None
-    t, x = np.asarray(template), loaded
-    if not isinstance(x, np.ndarray) and not np.isscalar(x):
-        return f"{where}: expected an array, found {type(x).__name__}"
-    x = np.asarray(x)
-    if x.shape != t.shape or x.dtype != t.dtype:
-        return f"{where}: {x.dtype}{list(x.shape)} where this config's network has {t.dtype}{list(t.shape)}"
-    return None
-
-
-BOOK_FIELDS = {"seed": int, "chunks_done": int, "best_score": float, "best_chunk": int, "devices": int}
-
-
-def read_checkpoint(path: Path) -> dict:
-    """The verified checkpoint: its checksum (jaxexo.storage.checkpoint), then its msgpack content;
-    CheckpointError naming the file otherwise (never a bare msgpack or flax traceback)."""
-    try:
-        data = path.read_bytes()
-    except OSError as e:
-        raise CheckpointError(f"{path}: cannot read the checkpoint ({e.strerror})") from None
-    payload = unpack_checkpoint(data, path)
-    try:
-        raw = serialization.msgpack_restore(payload)
-    except Exception as e:   # msgpack raises several unrelated types on a bad payload
-        raise CheckpointError(f"{path}: the checkpoint's content cannot be decoded ({type(e).__name__}: {e})") from None
-    if not isinstance(raw, dict) or not {"state", "best_params", "book"} <= set(raw):
-        raise CheckpointError(f"{path}: not a training checkpoint (expected state, best_params and book)")
-    book = raw["book"]
-    if not isinstance(book, dict):
-        raise CheckpointError(f"{path}: the checkpoint's bookkeeping is damaged")
-    out = {}
-    for k, typ in BOOK_FIELDS.items():
-        v = book.get(k, 1 if k == "devices" else None)
-        v = v.item() if hasattr(v, "item") else v
-        if not isinstance(v, (int, float)) or isinstance(v, bool):
-            raise CheckpointError(f"{path}: the checkpoint's bookkeeping lacks {k!r} (or it is not a number)")
-        out[k] = typ(v)
-    raw["book"] = out
-    return raw
-
-
-def resumed_clock(ckpt: Path, book: Path, chunks_done: int, total_chunks: int) -> float:
-    """A resumed run's wall time so far (s), after checking the checkpoint's ``chunks_done`` against the
-    run's chunks. The time comes from the readable copy ``book`` when it matches the checkpoint (it is
-    informational: a missing or stale copy only restarts the clock)."""
-    if not 0 <= chunks_done <= total_chunks:
-        raise CheckpointError(f"{ckpt}: chunks_done {chunks_done} is outside this run's 0..{total_chunks}")
-    try:
-        readable = json.loads(book.read_text())
-        return readable["train_seconds"] if readable.get("chunks_done") == chunks_done else 0.0
-    except (OSError, ValueError, KeyError, TypeError):
-        return 0.0
-
-
-# What a run writes before its first checkpoint: a run stopped then (killed, a full disk) is resumed
-# from the beginning.
-BEFORE_FIRST_CHECKPOINT = {"config.toml", "metrics.jsonl", BOOKKEEPING}
-WRITTEN = ("config.toml", "metrics.jsonl", CHECKPOINT, BOOKKEEPING, "policy.npz", "training_curve.png", "eval.json")
-
-
-def _prepare_dir(out: Path, cfg: Config, seed: int, resume: bool):
-    """Check the (locked) run directory; return the checkpoint's content on resume, else None (a new
-    run, or a resume of a run stopped before its first checkpoint: it starts again from scratch)."""
-    cfg_path, ckpt = out / "config.toml", out / CHECKPOINT
-    if resume:
-        # Temporary files of a killed writer (atomic_write removes its own on an error, not on SIGKILL);
-        # with the lock held nobody else is writing them.
-        for name in WRITTEN:
-            for tmp in stale_temps(out / name):
-                tmp.unlink(missing_ok=True)
-    present = contents(out)
-    if resume:
-        if not ckpt.exists():
-            done = _chunks_recorded(out)
-            if done:
-                raise ConfigError(f"--resume: {out} has no {CHECKPOINT} but {done}; its checkpoint was deleted, "
-                                  "so the run cannot be continued: start a new run in another directory")
-            if "config.toml" in present and set(present) <= BEFORE_FIRST_CHECKPOINT:
-                if load_config(cfg_path) != cfg:
-                    raise ConfigError(f"--resume: the config differs from the one in {cfg_path}; resume with that config")
-                return None    # stopped before its first checkpoint: nothing to keep, start again
-            raise ConfigError(f"--resume: {out} has no checkpoint to resume from (no {CHECKPOINT}"
-                              + (f"; it holds {describe(present)})" if present else "; it is empty)"))
-        if not cfg_path.exists():
-            raise ConfigError(f"--resume: {out} has {CHECKPOINT} but no config.toml (the run's resolved config, "
-                              f"which resume checks the config against); put it back, or start a new run elsewhere")
-        saved = load_config(cfg_path)
-        if saved != cfg:
-            raise ConfigError(f"--resume: the config differs from the one in {cfg_path}; resume with that config")
-        raw = read_checkpoint(ckpt)
-        started = raw.get("config_toml")
-        if isinstance(started, bytes):
-            started = started.decode()
-        if isinstance(started, str):
-            # config.toml may have been edited together with the config passed: the checkpoint's
-            # own copy is what the state was trained with.
-            try:
-                first = config_from_dict(tomllib.loads(started))
-            except (tomllib.TOMLDecodeError, ConfigError) as e:
-                raise CheckpointError(f"{ckpt}: its config cannot be read ({e})") from None
-            if first != cfg:
-                raise ConfigError(f"--resume: {_first_difference(first, cfg)} differs from the value the run in {out} "
-                                  f"started with (its checkpoint records the config); the training state depends on "
-                                  f"it: resume with the run's config, or start a new run")
-        if raw["book"]["seed"] != seed:
-            raise ConfigError(f"--resume: the run used --seed {raw['book']['seed']}, not {seed}")
-        return raw
-    if ckpt.exists():
-        raise ConfigError(f"--out: {out} already holds a run; pass --resume to continue it or pick a new folder")
-    if present:
-        stale = {tmp.name for name in WRITTEN for tmp in stale_temps(out / name)}
-        hint = (" (a run stopped before its first checkpoint: --resume starts it again)"
-                if "config.toml" in present and set(present) - stale <= BEFORE_FIRST_CHECKPOINT
-                and not _chunks_recorded(out) else "")
-        raise RunDirError(f"--out: {out} is not empty ({describe(present)}) and has no {CHECKPOINT} to resume "
-                          f"from{hint}; a new run needs an empty or absent directory, so that nothing there is "
-                          "overwritten: pick another --out, or move those files away")
-    atomic_write(cfg_path, config_to_toml(cfg))
-    return None
-
-
-def _chunks_recorded(out: Path) -> str:
-    """What shows that a run got past its first checkpoint (checkpoint.json, or more than one row in
-    metrics.jsonl: row k is appended just before checkpoint k), in words; "" if nothing does."""
-    if (out / BOOKKEEPING).exists():
-        return f"{BOOKKEEPING} records a checkpoint"
-    try:
-        rows = (out / "metrics.jsonl").read_bytes().count(b"\n")
-    except OSError:
-        return ""
-    return f"metrics.jsonl records {rows} finished chunks" if rows > 1 else ""
-
-
-def _first_difference(a: Config, b: Config) -> str:
-    """The first field (``section.name``) whose value differs between two configs."""
-    import dataclasses
-
-    for section in ("env", "kinematics", "reward", "layout", "train", "device"):
-        x, y = getattr(a, section), getattr(b, section)
-        for f in dataclasses.fields(x):
-            if getattr(x, f.name) != getattr(y, f.name):
-                return f"{section}.{f.name}"
-    return "the config"
+from jaxexo.train.trainer import METRICS, Hyperparams, Trainer  # noqa: F401 (METRICS: the metrics rows' order)
 
 
 def run_training(cfg: Config, out: str | Path, seed: int = 0, resume: bool = False, progress: bool = True,
@@ -325,8 +77,8 @@ def _all_finite(tree) -> bool:
 
 
 def _run_locked(cfg: Config, out: Path, seed: int, resume: bool, progress: bool, eval_episodes) -> dict:
-    ckpt, book = out / CHECKPOINT, out / BOOKKEEPING
-    raw = _prepare_dir(out, cfg, seed, resume)
+    ckpt, book = out / run_files.CHECKPOINT, out / run_files.BOOKKEEPING
+    raw = run_files.prepare_dir(out, cfg, seed, resume)
     state_book = raw["book"] if raw is not None else None
 
     t_start = time.perf_counter()
@@ -339,7 +91,7 @@ def _run_locked(cfg: Config, out: Path, seed: int, resume: bool, progress: bool,
                           f"{n_dev}; resume it on the same number of CPU devices")
     hyper = Hyperparams.from_config(cfg)
     ts = jax.jit(trainer.init)(jax.random.PRNGKey(seed), hyper)
-    n_chunk, total_chunks = chunking(cfg, trainer)
+    n_chunk, total_chunks = run_files.chunking(cfg, trainer)
     rows: list[dict] = []
     chunks_done, wall_before = 0, 0.0
     metrics_path = out / "metrics.jsonl"
@@ -351,14 +103,14 @@ def _run_locked(cfg: Config, out: Path, seed: int, resume: bool, progress: bool,
         # be poured into this one: flax would accept mismatched shapes silently.
         for name, template in (("state", serialization.to_state_dict(ts)),
                                ("best_params", serialization.to_state_dict(ts.params))):
-            bad = _tree_mismatch(template, raw[name])
+            bad = run_files.tree_mismatch(template, raw[name])
             if bad:
                 raise CheckpointError(f"{ckpt}: does not fit this config's training state ({name}{bad})")
         ts = serialization.from_state_dict(ts, raw["state"])
         best["params"] = serialization.from_state_dict(ts.params, raw["best_params"])
         best.update(score=state_book["best_score"], chunk=state_book["best_chunk"])
         chunks_done = state_book["chunks_done"]
-        wall_before = resumed_clock(ckpt, book, chunks_done, total_chunks)
+        wall_before = run_files.resumed_clock(ckpt, book, chunks_done, total_chunks)
         try:
             lines = metrics_path.read_text(encoding="utf-8").splitlines() if metrics_path.exists() else []
         except UnicodeDecodeError as e:
@@ -392,7 +144,7 @@ def _run_locked(cfg: Config, out: Path, seed: int, resume: bool, progress: bool,
             m = np.asarray(m)
             chunks_done += 1
             wall = wall_before + time.perf_counter() - t_start
-            row = _chunk_row(m, ts, trainer.env_steps(ts), chunks_done, wall, time.perf_counter() - t0)
+            row = run_files.chunk_row(m, ts, trainer.env_steps(ts), chunks_done, wall, time.perf_counter() - t0)
             finite = bool(np.all(np.isfinite(m))) and _all_finite(ts.params)
             row["diverged"] = not finite
             row["validation_success_raw"] = validate(ts.params) if finite else None
@@ -410,11 +162,11 @@ def _run_locked(cfg: Config, out: Path, seed: int, resume: bool, progress: bool,
                            "best_chunk": best["chunk"], "devices": n_dev}
             # State, best parameters and bookkeeping in one atomic write, checksummed: a run stopped at
             # any point resumes from a consistent checkpoint (wall time, which differs run to run, stays out).
-            _atomic_write(ckpt, pack_checkpoint(serialization.msgpack_serialize({
+            run_files.checkpoint_write(ckpt, pack_checkpoint(serialization.msgpack_serialize({
                 "state": serialization.to_state_dict(ts),
                 "best_params": serialization.to_state_dict(best["params"]),
                 "book": bookkeeping, "config_toml": config_to_toml(cfg)})))
-            _atomic_write(book, json.dumps({**bookkeeping, "train_seconds": wall}, indent=1).encode())
+            run_files.checkpoint_write(book, json.dumps({**bookkeeping, "train_seconds": wall}, indent=1).encode())
             if bar is not None:
                 bar.update(1)
                 bar.set_postfix(episodes=row["episodes"], steps_per_s=f"{row['env_steps_per_s']:.3g}",
@@ -426,13 +178,13 @@ def _run_locked(cfg: Config, out: Path, seed: int, resume: bool, progress: bool,
     train_seconds = wall_before + time.perf_counter() - t_start
 
     if rows:
-        plot_training_curve(out / "training_curve.png", [r for r in rows if not r["diverged"]] or rows)
+        run_files.plot_training_curve(out / "training_curve.png", [r for r in rows if not r["diverged"]] or rows)
     if diverged is not None and best["chunk"] == 0:
         raise TrainingDiverged(
             f"training diverged in chunk {diverged} (non-finite loss or parameters; {metrics_path} row "
             f"{diverged} has \"diverged\": true); no chunk finished with finite parameters, so no policy was "
             f"exported. Lower train.lr (it is {cfg.train.lr:g}) or train.max_grad_norm")
-    export_policy(out / "policy.npz", cfg, trainer, best["params"])
+    run_files.export_policy(out / "policy.npz", cfg, trainer, best["params"])
     result = evaluate(cfg, trainer.net, best["params"], eval_episodes or cfg.train.eval_episodes)
     result.update({"episodes": int(ts.episodes), "env_steps": int(trainer.env_steps(ts)),
                    "train_seconds": round(train_seconds, 3), "seed": seed,

@@ -1,6 +1,6 @@
 """``[train] population = K``: K agents of one config (seeds seed .. seed + K - 1) trained as one
 compiled program, every member scored on the same validation scenes after each chunk, the best
-member's best chunk exported (issue 21).
+member's best chunk exported.
 
 Why: whether a heel-only thesis learner learns depends on its seed (benchmarks/results/thesis-seeds_*);
 a practitioner trains several and keeps the best on validation. Seeds vmap, so a population costs
@@ -47,7 +47,7 @@ from jaxexo.storage.atomic import append_line, atomic_write
 from jaxexo.storage.checkpoint import CheckpointError, pack_checkpoint
 from jaxexo.storage.rundir import TrainingDiverged
 from jaxexo.train.lanes import LANES, over_lanes, padded_agents
-from jaxexo.train import driver as D
+from jaxexo.train import run_files as F
 from jaxexo.train.evaluate import make_evaluator, make_rollout, validation_set
 from jaxexo.train.trainer import Hyperparams, Trainer
 
@@ -79,7 +79,7 @@ class Population:
         self.trainer = Trainer(cfg)     # one device per member: no data parallelism inside a member
         self.devices = population_devices(len(self.seeds), devices if devices is not None else jax.local_devices())
         self.padded = padded_agents(len(self.seeds), len(self.devices))
-        self.n_chunk = n_chunk if n_chunk is not None else D.chunking(cfg, self.trainer)[0]
+        self.n_chunk = n_chunk if n_chunk is not None else F.chunking(cfg, self.trainer)[0]
         hyper = Hyperparams.from_config(cfg)
         self.hyper = jax.tree.map(lambda x: np.stack([np.asarray(x)] * self.padded), hyper)
         env, self.val_params, self.val_layouts = validation_set(cfg)
@@ -122,7 +122,7 @@ class Population:
 
 
 class _Counters:
-    """The two counters ``driver._chunk_row`` reads from a state, for one member."""
+    """The two counters ``run_files.chunk_row`` reads from a state, for one member."""
 
     def __init__(self, update, episodes):
         self.update, self.episodes = update, episodes
@@ -181,11 +181,11 @@ def run_population(cfg: Config, out: Path, seed: int, resume: bool, progress: bo
 
     check_memory(cfg)
     K = cfg.train.population
-    ckpt, book_path, metrics_path = out / D.CHECKPOINT, out / D.BOOKKEEPING, out / "metrics.jsonl"
-    raw = D._prepare_dir(out, cfg, seed, resume)
+    ckpt, book_path, metrics_path = out / F.CHECKPOINT, out / F.BOOKKEEPING, out / "metrics.jsonl"
+    raw = F.prepare_dir(out, cfg, seed, resume)
     t_start = time.perf_counter()
     pop = Population(cfg, range(seed, seed + K))
-    n_chunk, total_chunks = D.chunking(cfg, pop.trainer)
+    n_chunk, total_chunks = F.chunking(cfg, pop.trainer)
     ts = pop.init()
     start = pop.real(ts)
     best_params = pop.real(ts.params)
@@ -207,7 +207,7 @@ def run_population(cfg: Config, out: Path, seed: int, resume: bool, progress: bo
                               f"gives it {len(pop.devices)}; resume it with {need}")
         for name, template in (("state", serialization.to_state_dict(start)),
                                ("best_params", serialization.to_state_dict(best_params))):
-            bad = D._tree_mismatch(template, raw[name])
+            bad = F.tree_mismatch(template, raw[name])
             if bad:
                 raise CheckpointError(f"{ckpt}: does not fit this config's population state ({name}{bad})")
         members = raw["members"]
@@ -222,7 +222,7 @@ def run_population(cfg: Config, out: Path, seed: int, resume: bool, progress: bo
         best_chunk = np.array(members["best_chunk"], np.int64)
         diverged = np.array(members["diverged"], np.int64)
         chunks_done = raw["book"]["chunks_done"]
-        wall_before = D.resumed_clock(ckpt, book_path, chunks_done, total_chunks)
+        wall_before = F.resumed_clock(ckpt, book_path, chunks_done, total_chunks)
         try:
             lines = metrics_path.read_text(encoding="utf-8").splitlines() if metrics_path.exists() else []
             rows = [json.loads(x) for x in lines[:chunks_done]]
@@ -252,7 +252,7 @@ def run_population(cfg: Config, out: Path, seed: int, resume: bool, progress: bo
                 ok = bool(finite[i]) and diverged[i] == 0
                 if not ok and diverged[i] == 0:
                     diverged[i] = chunks_done
-                row = D._chunk_row(m[i], _Counters(updates[i], episodes[i]),
+                row = F.chunk_row(m[i], _Counters(updates[i], episodes[i]),
                                    int(updates[i]) * steps_per_update, chunks_done, wall, seconds)
                 row.update(seed=pop.seeds[i], diverged=not ok, validation_success_raw=float(score[i]) if ok else None)
                 members.append(row)
@@ -269,12 +269,12 @@ def run_population(cfg: Config, out: Path, seed: int, resume: bool, progress: bo
             lead_i = lead if lead is not None else 0
             bookkeeping = {"seed": seed, "chunks_done": chunks_done, "best_score": float(best_score[lead_i]),
                            "best_chunk": int(best_chunk[lead_i]), "devices": len(pop.devices), "population": K}
-            D._atomic_write(ckpt, pack_checkpoint(serialization.msgpack_serialize({
+            F.checkpoint_write(ckpt, pack_checkpoint(serialization.msgpack_serialize({
                 "state": serialization.to_state_dict(pop.real(ts)),
                 "best_params": serialization.to_state_dict(best_params),
                 "members": {"best_score": best_score, "best_chunk": best_chunk, "diverged": diverged},
                 "book": bookkeeping, "config_toml": config_to_toml(cfg)})))
-            D._atomic_write(book_path, json.dumps({**bookkeeping, "train_seconds": wall}, indent=1).encode())
+            F.checkpoint_write(book_path, json.dumps({**bookkeeping, "train_seconds": wall}, indent=1).encode())
             if bar is not None:
                 bar.update(1)
                 bar.set_postfix(best=f"seed {pop.seeds[lead_i]}: {best_score[lead_i]:.3f}",
@@ -293,7 +293,7 @@ def run_population(cfg: Config, out: Path, seed: int, resume: bool, progress: bo
             f"members' \"diverged\"), and a diverged member is never exported, so no policy was. Lower train.lr "
             f"(it is {cfg.train.lr:g}) or train.max_grad_norm")
     member_params = lambda i: jax.tree.map(lambda x: np.asarray(x)[i], best_params)  # noqa: E731
-    D.export_policy(out / "policy.npz", cfg, pop.trainer, member_params(exported))
+    F.export_policy(out / "policy.npz", cfg, pop.trainer, member_params(exported))
     # Each member scored by the same compiled evaluation, one at a time (its figures never depend on K).
     evaluate_params = make_evaluator(cfg, pop.trainer.net, eval_episodes or cfg.train.eval_episodes)
     figures = [evaluate_params(member_params(i)) if best_chunk[i] > 0 else None for i in range(K)]

@@ -1,0 +1,270 @@
+"""The run directory's files, for one agent (jaxexo.train.driver) and a population
+(jaxexo.train.population): their names, the chunking of a budget, a chunk's metrics row, the
+checkpoint (read, checked against the state it must fill, written), the exported policy, the
+training curve, and the checks a new or resumed run makes of its directory."""
+
+from __future__ import annotations
+
+import json
+import math
+import tomllib
+from pathlib import Path
+
+import numpy as np
+from flax import serialization
+
+from jaxexo.config import Config, ConfigError, config_from_dict, load_config
+from jaxexo.config.toml_io import config_to_toml
+from jaxexo.env.exo_step import LENGTH_SCALE, THESIS_OBS_CENTER
+from jaxexo.physics import dynamics
+from jaxexo.storage.atomic import atomic_write, stale_temps
+from jaxexo.storage.checkpoint import CheckpointError, unpack_checkpoint
+from jaxexo.storage.policy_file import save_policy
+from jaxexo.storage.rundir import RunDirError, contents, describe
+from jaxexo.train.network import dense_layers, norm_layers
+from jaxexo.train.trainer import METRICS, Trainer
+
+CHECKPOINT = "checkpoint.msgpack"
+BOOKKEEPING = "checkpoint.json"
+# Aim for chunks of about this many env steps: frequent enough for a live progress bar.
+CHUNK_ENV_STEPS = 1_000_000
+
+
+def chunking(cfg: Config, trainer: Trainer) -> tuple[int, int]:
+    """(updates per chunk, chunks): every chunk has the same length, so one program is compiled;
+    updates past the budget are masked inside the program."""
+    per = cfg.train.num_envs * cfg.train.rollout_steps
+    target = cfg.train.chunk_updates or max(1, CHUNK_ENV_STEPS // per)
+    chunks = math.ceil(trainer.num_updates / min(target, trainer.num_updates))
+    return math.ceil(trainer.num_updates / chunks), chunks
+
+
+# The checkpoint and bookkeeping writes, for one agent and a population (a name of its own so tests
+# can interrupt between them; callers look it up on this module at each call).
+checkpoint_write = atomic_write
+
+
+def chunk_row(m: np.ndarray, ts, env_steps: int, chunk: int, wall: float, seconds: float) -> dict:
+    d = dict(zip(METRICS, m.astype(np.float64).sum(0).tolist()))
+    n_upd = max(1, int((m[:, METRICS.index("env_steps")] > 0).sum()))
+    eps = max(d["episodes"], 1.0)
+    return {
+        "chunk": chunk,
+        "updates": int(ts.update),
+        "env_steps": int(env_steps),
+        "episodes": int(ts.episodes),
+        "chunk_episodes": int(d["episodes"]),
+        "return_mean": d["return_sum"] / eps,
+        "success_raw_rate": d["successes"] / eps,    # behaviour policy, raw moves
+        "accuracy": d["accurate"] / eps,
+        "loss": d["loss"] / n_upd,
+        "q_mean": d["q_mean"] / n_upd,
+        "epsilon": d["epsilon"] / n_upd,
+        "env_steps_per_s": d["env_steps"] / max(seconds, 1e-9),
+        "wall_s": wall,
+    }
+
+
+def export_policy(path: Path, cfg: Config, trainer: Trainer, params) -> Path:
+    env = trainer.env
+    dense = [(np.asarray(w), np.asarray(b)) for w, b in dense_layers(params)]
+    norms = [(np.asarray(s), np.asarray(b)) for s, b in norm_layers(params)]
+    meta = {
+        "obs_mode": cfg.env.obs_mode,
+        "obs_dim": env.obs_dim,
+        "length_scale": LENGTH_SCALE,
+        "thesis_obs_center": list(THESIS_OBS_CENTER),
+        "num_actions": env.num_actions,
+        "action_angles_rad": dynamics.action_angles(env.num_actions).tolist(),
+        "layers": [env.obs_dim, *cfg.train.hidden, env.num_actions],
+        "layer_norm": cfg.train.layer_norm,
+        "activation": "relu",
+        "config_toml": config_to_toml(cfg),
+    }
+    return save_policy(path, [w for w, _ in dense], [b for _, b in dense],
+                       [s for s, _ in norms], [b for _, b in norms], meta)
+
+
+def plot_training_curve(path: Path, rows: list[dict]) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ep = [r["episodes"] for r in rows]
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
+    a1.plot(ep, [r["return_mean"] for r in rows], color="tab:blue")
+    a1.set_ylabel("mean episode return")
+    a1.set_title("Training (thesis Fig. 3.4): return and success per chunk")
+    a1.grid(alpha=0.3)
+    a2.plot(ep, [r["success_raw_rate"] for r in rows], label="strict success, raw moves", color="tab:green")
+    a2.plot(ep, [r["accuracy"] for r in rows], label="accuracy (eq 3.1)", color="tab:orange")
+    a2.set_ylim(-0.02, 1.02)
+    a2.set_xlabel("episodes")
+    a2.set_ylabel("share of finished episodes")
+    a2.legend(loc="lower right")
+    a2.grid(alpha=0.3)
+    fig.tight_layout()
+    import io
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    plt.close(fig)
+    atomic_write(path, buf.getvalue())
+
+
+def tree_mismatch(template, loaded, where: str = "") -> str | None:
+    """Where two state dicts (nested dicts of arrays) differ in keys, shapes or dtypes; None if they agree."""
+    if isinstance(template, dict):
+        if not isinstance(loaded, dict):
+            return f"{where or '/'}: expected a table, found {type(loaded).__name__}"
+        if set(template) != set(loaded):
+            missing, extra = sorted(set(template) - set(loaded)), sorted(set(loaded) - set(template))
+            return f"{where or '/'}: keys differ (missing {missing[:4]}, unexpected {extra[:4]})"
+        for k in template:
+            bad = tree_mismatch(template[k], loaded[k], f"{where}/{k}")
+            if bad:
+                return bad
+        return None
+    t, x = np.asarray(template), loaded
+    if not isinstance(x, np.ndarray) and not np.isscalar(x):
+        return f"{where}: expected an array, found {type(x).__name__}"
+    x = np.asarray(x)
+    if x.shape != t.shape or x.dtype != t.dtype:
+        return f"{where}: {x.dtype}{list(x.shape)} where this config's network has {t.dtype}{list(t.shape)}"
+    return None
+
+
+BOOK_FIELDS = {"seed": int, "chunks_done": int, "best_score": float, "best_chunk": int, "devices": int}
+
+
+def read_checkpoint(path: Path) -> dict:
+    """The verified checkpoint: its checksum (jaxexo.storage.checkpoint), then its msgpack content;
+    CheckpointError naming the file otherwise (never a bare msgpack or flax traceback)."""
+    try:
+        data = path.read_bytes()
+    except OSError as e:
+        raise CheckpointError(f"{path}: cannot read the checkpoint ({e.strerror})") from None
+    payload = unpack_checkpoint(data, path)
+    try:
+        raw = serialization.msgpack_restore(payload)
+    except Exception as e:   # msgpack raises several unrelated types on a bad payload
+        raise CheckpointError(f"{path}: the checkpoint's content cannot be decoded ({type(e).__name__}: {e})") from None
+    if not isinstance(raw, dict) or not {"state", "best_params", "book"} <= set(raw):
+        raise CheckpointError(f"{path}: not a training checkpoint (expected state, best_params and book)")
+    book = raw["book"]
+    if not isinstance(book, dict):
+        raise CheckpointError(f"{path}: the checkpoint's bookkeeping is damaged")
+    out = {}
+    for k, typ in BOOK_FIELDS.items():
+        v = book.get(k, 1 if k == "devices" else None)
+        v = v.item() if hasattr(v, "item") else v
+        if not isinstance(v, (int, float)) or isinstance(v, bool):
+            raise CheckpointError(f"{path}: the checkpoint's bookkeeping lacks {k!r} (or it is not a number)")
+        out[k] = typ(v)
+    raw["book"] = out
+    return raw
+
+
+def resumed_clock(ckpt: Path, book: Path, chunks_done: int, total_chunks: int) -> float:
+    """A resumed run's wall time so far (s), after checking the checkpoint's ``chunks_done`` against the
+    run's chunks. The time comes from the readable copy ``book`` when it matches the checkpoint (it is
+    informational: a missing or stale copy only restarts the clock)."""
+    if not 0 <= chunks_done <= total_chunks:
+        raise CheckpointError(f"{ckpt}: chunks_done {chunks_done} is outside this run's 0..{total_chunks}")
+    try:
+        readable = json.loads(book.read_text())
+        return readable["train_seconds"] if readable.get("chunks_done") == chunks_done else 0.0
+    except (OSError, ValueError, KeyError, TypeError):
+        return 0.0
+
+
+# What a run writes before its first checkpoint: a run stopped then (killed, a full disk) is resumed
+# from the beginning.
+BEFORE_FIRST_CHECKPOINT = {"config.toml", "metrics.jsonl", BOOKKEEPING}
+WRITTEN = ("config.toml", "metrics.jsonl", CHECKPOINT, BOOKKEEPING, "policy.npz", "training_curve.png", "eval.json")
+
+
+def prepare_dir(out: Path, cfg: Config, seed: int, resume: bool):
+    """Check the (locked) run directory; return the checkpoint's content on resume, else None (a new
+    run, or a resume of a run stopped before its first checkpoint: it starts again from scratch)."""
+    cfg_path, ckpt = out / "config.toml", out / CHECKPOINT
+    if resume:
+        # Temporary files of a killed writer (atomic_write removes its own on an error, not on SIGKILL);
+        # with the lock held nobody else is writing them.
+        for name in WRITTEN:
+            for tmp in stale_temps(out / name):
+                tmp.unlink(missing_ok=True)
+    present = contents(out)
+    if resume:
+        if not ckpt.exists():
+            done = _chunks_recorded(out)
+            if done:
+                raise ConfigError(f"--resume: {out} has no {CHECKPOINT} but {done}; its checkpoint was deleted, "
+                                  "so the run cannot be continued: start a new run in another directory")
+            if "config.toml" in present and set(present) <= BEFORE_FIRST_CHECKPOINT:
+                if load_config(cfg_path) != cfg:
+                    raise ConfigError(f"--resume: the config differs from the one in {cfg_path}; resume with that config")
+                return None    # stopped before its first checkpoint: nothing to keep, start again
+            raise ConfigError(f"--resume: {out} has no checkpoint to resume from (no {CHECKPOINT}"
+                              + (f"; it holds {describe(present)})" if present else "; it is empty)"))
+        if not cfg_path.exists():
+            raise ConfigError(f"--resume: {out} has {CHECKPOINT} but no config.toml (the run's resolved config, "
+                              f"which resume checks the config against); put it back, or start a new run elsewhere")
+        saved = load_config(cfg_path)
+        if saved != cfg:
+            raise ConfigError(f"--resume: the config differs from the one in {cfg_path}; resume with that config")
+        raw = read_checkpoint(ckpt)
+        started = raw.get("config_toml")
+        if isinstance(started, bytes):
+            started = started.decode()
+        if isinstance(started, str):
+            # config.toml may have been edited together with the config passed: the checkpoint's
+            # own copy is what the state was trained with.
+            try:
+                first = config_from_dict(tomllib.loads(started))
+            except (tomllib.TOMLDecodeError, ConfigError) as e:
+                raise CheckpointError(f"{ckpt}: its config cannot be read ({e})") from None
+            if first != cfg:
+                raise ConfigError(f"--resume: {_first_difference(first, cfg)} differs from the value the run in {out} "
+                                  f"started with (its checkpoint records the config); the training state depends on "
+                                  f"it: resume with the run's config, or start a new run")
+        if raw["book"]["seed"] != seed:
+            raise ConfigError(f"--resume: the run used --seed {raw['book']['seed']}, not {seed}")
+        return raw
+    if ckpt.exists():
+        raise ConfigError(f"--out: {out} already holds a run; pass --resume to continue it or pick a new folder")
+    if present:
+        stale = {tmp.name for name in WRITTEN for tmp in stale_temps(out / name)}
+        hint = (" (a run stopped before its first checkpoint: --resume starts it again)"
+                if "config.toml" in present and set(present) - stale <= BEFORE_FIRST_CHECKPOINT
+                and not _chunks_recorded(out) else "")
+        raise RunDirError(f"--out: {out} is not empty ({describe(present)}) and has no {CHECKPOINT} to resume "
+                          f"from{hint}; a new run needs an empty or absent directory, so that nothing there is "
+                          "overwritten: pick another --out, or move those files away")
+    atomic_write(cfg_path, config_to_toml(cfg))
+    return None
+
+
+def _chunks_recorded(out: Path) -> str:
+    """What shows that a run got past its first checkpoint (checkpoint.json, or more than one row in
+    metrics.jsonl: row k is appended just before checkpoint k), in words; "" if nothing does."""
+    if (out / BOOKKEEPING).exists():
+        return f"{BOOKKEEPING} records a checkpoint"
+    try:
+        rows = (out / "metrics.jsonl").read_bytes().count(b"\n")
+    except OSError:
+        return ""
+    return f"metrics.jsonl records {rows} finished chunks" if rows > 1 else ""
+
+
+def _first_difference(a: Config, b: Config) -> str:
+    """The first field (``section.name``) whose value differs between two configs."""
+    import dataclasses
+
+    for section in ("env", "kinematics", "reward", "layout", "train", "device"):
+        x, y = getattr(a, section), getattr(b, section)
+        for f in dataclasses.fields(x):
+            if getattr(x, f.name) != getattr(y, f.name):
+                return f"{section}.{f.name}"
+    return "the config"
