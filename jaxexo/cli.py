@@ -160,7 +160,7 @@ def cmd_generate(args) -> int:
 
     if args.rate is not None and not (math.isfinite(args.rate) and 0 < args.rate <= MAX_CONTROL_RATE):
         raise ValueError(f"--rate: control rate must be > 0 and <= {MAX_CONTROL_RATE:g} Hz, got {args.rate:g}")
-    from jaxexo.inference.generator import MAX_DURATION, MAX_POINTS
+    from jaxexo.inference.options import MAX_DURATION, MAX_POINTS
 
     if not 2 <= args.points <= MAX_POINTS:
         raise ValueError(f"--points: samples of the path must be in [2, {MAX_POINTS}], got {args.points}")

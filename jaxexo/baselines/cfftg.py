@@ -58,7 +58,7 @@ import numpy as np
 
 from jaxexo.physics import dynamics, geometry
 from jaxexo.config import Config, load_config
-from jaxexo.inference.generator import check_options, pivot_of, scenes_for
+from jaxexo.inference.options import START_Y, STEP_LENGTH, check_options, pivot_of, scenes_for
 from jaxexo.inference.trajectory import (DEFAULT_DURATION, Trajectory, TrajectoryBatch, TrajectoryError, assemble,
                                          measure_paths)
 
@@ -165,11 +165,11 @@ class CFFTG:
             raise TypeError(f"config: expected a jaxexo Config or a config file's path, got {type(config).__name__}")
         self.config = config
         self.sp = dynamics.scalar_params(self.config)
-        self.margin = geometry._finite("margin", self.config.reward.safety_distance if margin is None else margin)
+        self.margin = geometry.finite("margin", self.config.reward.safety_distance if margin is None else margin)
         if self.margin < 0:
             raise ValueError(f"margin must be >= 0 metres, got {self.margin}")
-        self.margin_step = geometry._finite_positive("margin_step", margin_step)
-        self.apex_step = geometry._finite_positive("apex_step", apex_step)
+        self.margin_step = geometry.finite_positive("margin_step", margin_step)
+        self.apex_step = geometry.finite_positive("apex_step", apex_step)
         if isinstance(max_plans, bool) or not isinstance(max_plans, (int, np.integer)) or max_plans < 1:
             raise ValueError(f"max_plans must be an integer >= 1, got {max_plans!r}")
         self.max_plans = int(max_plans)
@@ -184,7 +184,7 @@ class CFFTG:
 
     # Scenes ---------------------------------------------------------------------------------------
     def scene(self, obstacle: geometry.Obstacle, pivot: str | float | None = None, pivot_y: float | None = None,
-              start_y: float = 0.0, step_length: float = 0.70) -> dynamics.Scene:
+              start_y: float = START_Y, step_length: float = STEP_LENGTH) -> dynamics.Scene:
         """Validate one scenario (metres), as the RL generator does."""
         return dynamics.make_scene(obstacle, pivot_of(pivot, pivot_y), start_y, step_length,
                                    foot_length=self.config.kinematics.foot_length,
@@ -260,38 +260,43 @@ class CFFTG:
         return out
 
     # Trajectories -----------------------------------------------------------------------------------
-    def _finish(self, scenes, n_points, duration, strict) -> TrajectoryBatch:
+    def finish(self, scenes, n_points: int, duration: float) -> TrajectoryBatch:
+        """Checked trajectories of validated scenes: planned, checked and re-planned (``plan``), with a
+        note per scene of the plans it took and where the apex is."""
         paths, via, plans, gave_up, checks = self.plan(scenes, n_points)
         notes = []
         for i in range(len(scenes)):
             note = f"cfftg: {plans[i]} plan(s); apex y={via[i, 1, 0]:.3f} m, z={via[i, 1, 1]:.3f} m"
             notes.append((note + f"; gave up after {self.max_plans} plans",) if gave_up[i] else (note,))
-        batch = assemble(self.method, self.sp, scenes, list(via), paths, np.zeros(len(scenes)), duration, notes,
-                         measured=checks)
-        if strict and not batch.ok.all():
-            raise TrajectoryError(batch[int(np.argmin(batch.ok))])
-        return batch
+        return assemble(self.method, self.sp, scenes, list(via), paths, np.zeros(len(scenes)), duration, notes,
+                        measured=checks)
 
     def generate(self, obstacle: geometry.Obstacle, *, pivot: str | float | None = None, pivot_y: float | None = None,
-                 start_y: float = 0.0, step_length: float = 0.70, n_points: int = DEFAULT_POINTS,
+                 start_y: float = START_Y, step_length: float = STEP_LENGTH, n_points: int = DEFAULT_POINTS,
                  duration: float = DEFAULT_DURATION, strict: bool = False,
                  clearance: float | None = None) -> Trajectory:
         """One checked trajectory (metres, radians, seconds); ``strict`` raises TrajectoryError instead
         of returning one that fails a check; ``clearance`` (m) the margin to keep (``at_clearance``)."""
         n_points, duration = _check_options(n_points, duration)
         scene = self.scene(obstacle, pivot, pivot_y, start_y, step_length)
-        return self.at_clearance(clearance)._finish([scene], n_points, duration, strict)[0]
+        traj = self.at_clearance(clearance).finish([scene], n_points, duration)[0]
+        if strict and not traj.ok:
+            raise TrajectoryError(traj)
+        return traj
 
-    def generate_batch(self, obstacles, *, pivot=None, pivot_y=None, start_y=0.0, step_length=0.70,
+    def generate_batch(self, obstacles, *, pivot=None, pivot_y=None, start_y=START_Y, step_length=STEP_LENGTH,
                        n_points: int = DEFAULT_POINTS, duration: float = DEFAULT_DURATION,
                        strict: bool = False, clearance: float | None = None) -> TrajectoryBatch:
         """Trajectories for many scenarios, vectorised; every option is one value or one per obstacle
         (``clearance`` one value, as in ``generate``)."""
         n_points, duration = _check_options(n_points, duration)
         scenes = self.scenes(obstacles, pivot, pivot_y, start_y, step_length)
-        return self.at_clearance(clearance)._finish(scenes, n_points, duration, strict)
+        batch = self.at_clearance(clearance).finish(scenes, n_points, duration)
+        if strict and not batch.ok.all():
+            raise TrajectoryError(batch[int(np.argmin(batch.ok))])
+        return batch
 
-    def scenes(self, obstacles, pivot=None, pivot_y=None, start_y=0.0, step_length=0.70):
+    def scenes(self, obstacles, pivot=None, pivot_y=None, start_y=START_Y, step_length=STEP_LENGTH):
         return scenes_for(self.scene, obstacles, pivot, pivot_y, start_y, step_length)
 
 

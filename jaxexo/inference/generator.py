@@ -48,24 +48,21 @@ and verdicts (tests/test_speed.py).
 from __future__ import annotations
 
 import copy
-import dataclasses
 import types
 from pathlib import Path
 
 import numpy as np
 
 from jaxexo.physics import dynamics, geometry, swept
-from jaxexo.config.schema import MAX_SWING_DURATION
 from jaxexo.physics.dynamics import Scene, scalar
-from jaxexo.inference import blas, smoothing as sm, trajectory
-from jaxexo.inference.clearing import clear_rows
+from jaxexo.inference import blas, smoothing as sm
+from jaxexo.inference.fallback import replace_failures
+from jaxexo.inference.finish import PathFinisher
 from jaxexo.inference.network import FoldedQNetwork, StepNetwork
+from jaxexo.inference.options import PIVOT, START_Y, STEP_LENGTH, check_fallback, check_options, pivot_of, scenes_for
 from jaxexo.inference.shield import ScalarShield
-from jaxexo.inference.trajectory import DEFAULT_DURATION, Trajectory, TrajectoryBatch, TrajectoryError, assemble
+from jaxexo.inference.trajectory import DEFAULT_DURATION, Trajectory, TrajectoryBatch, TrajectoryError
 from jaxexo.storage.policy_file import PolicyFileError, QPolicy, load_policy, policy_config
-
-FALLBACK_FACTORS = (0.25, 1.0 / 16.0, 0.0)   # smoothing multipliers tried before the raw polyline
-FALLBACKS = ("cfftg", None)
 
 
 class TrajectoryGenerator:
@@ -159,7 +156,7 @@ class TrajectoryGenerator:
 
     # Scenes -------------------------------------------------------------------------------------
     def scene(self, obstacle: geometry.Obstacle, pivot: str | float | None = None, pivot_y: float | None = None,
-              start_y: float = 0.0, step_length: float = 0.70) -> Scene:
+              start_y: float = START_Y, step_length: float = STEP_LENGTH) -> Scene:
         """Validate one scenario (metres). ``pivot_y``, when given, overrides the ``pivot`` condition."""
         return dynamics.make_scene(obstacle, pivot_of(pivot, pivot_y), start_y, step_length,
                                    foot_length=self.config.kinematics.foot_length,
@@ -373,369 +370,14 @@ class TrajectoryGenerator:
         paths = [path[: length[i], i].astype(np.float64) for i in range(b)]
         return paths, [acts[: length[i] - 1, i] for i in range(b)]
 
-    # Trajectories ---------------------------------------------------------------------------------
-    def _fallback(self, scene: Scene, raw: np.ndarray, n_points: int, smoothing: float):
-        """A smoothed path came closer than the margin: when the raw path keeps it, retry with less
-        smoothing (FALLBACK_FACTORS), then the raw polyline. Returns (path, smoothing used, notes,
-        deviation bound), or None when the raw path itself breaks the margin (smoothing is then kept
-        and the checks report it)."""
-        if not self._keeps_margin(scene, sm.distinct(raw), 0.0, headroom=0.0):
-            return None
-        for f in FALLBACK_FACTORS:
-            cand, dev = sm.smooth_paths([raw], n_points, smoothing * f, with_deviation=True)
-            if self._keeps_margin(scene, cand[0], dev[0]):
-                return cand[0], smoothing * f, (f"smoothing {smoothing:g} m^2 brought the foot within the "
-                                                f"safety margin or moved the heel back; {smoothing * f:g} m^2 used",), dev[0]
-        path, dev = sm.linear_resample(raw, n_points, with_deviation=True)
-        return path, float("nan"), (
-            "every smoothing brought the foot within the safety margin or moved the heel back; the raw "
-                "polyline is used",), dev
-
-    def _fallback_batch(self, scenes, raws, rows, n_points: int, smoothing: float):
-        """``_fallback`` for the rows ``rows`` at once: each smoothing factor is tried on every row
-        still waiting, smoothed together and checked in one vectorised call. Returns the same
-        (row, (path, smoothing, notes, deviation)) list, in row order."""
-        pts = [sm.distinct(raws[i]) for i in rows]
-        # Raw paths padded with their last point (a repeated point adds a zero-length move, whose
-        # swept clearance is that point's own: the polyline's minimum is unchanged).
-        n = max(len(p) for p in pts)
-        padded = np.stack([np.concatenate([p, np.repeat(p[-1:], n - len(p), axis=0)]) for p in pts])
-        keeps = self._keep_margin_rows([scenes[i] for i in rows], padded, np.zeros(len(rows)), headroom=0.0)
-        wait = [j for j, ok in enumerate(keeps) if ok or len(pts[j]) == 1]   # one point: no move to check
-        out = {}
-        for f in FALLBACK_FACTORS:
-            if not wait:
-                break
-            # each row smoothed on its own, as the reference's retry does (bit for bit: a straight leg's
-            # joint angles amplify a last-bit difference in the samples to ~1e-8 rad); the retries
-            # are rare (the candidates come first), so the checks are what is vectorised
-            one = [sm.smooth_one(raws[rows[j]], n_points, smoothing * f) for j in wait]
-            cand, dev = np.concatenate([c for c, _ in one]), np.concatenate([d for _, d in one])
-            ok = self._keep_margin_rows([scenes[rows[j]] for j in wait], cand, dev)
-            for k, j in enumerate(wait):
-                if ok[k]:
-                    out[j] = (cand[k], smoothing * f, (f"smoothing {smoothing:g} m^2 brought the foot within the "
-                                                       f"safety margin or moved the heel back; {smoothing * f:g} m^2 used",), dev[k])
-            wait = [j for k, j in enumerate(wait) if not ok[k]]
-        for j in wait:
-            path, dev = sm.linear_resample(raws[rows[j]], n_points, with_deviation=True)
-            out[j] = (path, float("nan"), (
-                "every smoothing brought the foot within the safety margin or moved the heel back; the raw "
-                "polyline is used",), dev)
-        return [(int(rows[j]), out[j]) for j in sorted(out)]
-
-    # Candidate smoothings (issue 19): besides the requested s, the per-path s = M * rho^2 (M points)
-    # for these rho (m): a root-mean-square residual of rho per point. A shielded raw path keeps
-    # env.shield_clearance, 5 mm above the verdict's margin; the thesis's s (an RMS residual of ~1 cm
-    # on a 30-point path) cuts its corners by more than that, much smaller ones wiggle the heel back.
-    # On the default model these four rescue all but ~1 % of the swings the requested s fails.
-    CANDIDATE_RESIDUALS = (0.008, 0.005, 0.004, 0.0025)
-    PRUNE_CANDIDATES_FROM = trajectory.PRUNE_POINTS_FROM   # paths from which _margin_ok prunes point clearances
-
-    def _candidates(self, raw, smoothing: float) -> list[float]:
-        """The smoothings tried in one pass, smoothest first: ``smoothing`` and the smaller per-path
-        M * rho^2 of CANDIDATE_RESIDUALS (paths of fewer than 4 points are not smoothed: one)."""
-        m = len(sm.distinct(raw))
-        out = [float(smoothing)]
-        if m < sm.DEGREE + 1:
-            return out
-        for rho in self.CANDIDATE_RESIDUALS:
-            c = m * rho * rho
-            if c < out[-1]:
-                out.append(c)
-        return out
-
-    # m a smoothed path must keep above the margin to be accepted (the verdict itself asks for none):
-    # the device-ready swing (jaxexo.inference.swing_timing) resamples a C1 interpolant of the samples,
-    # which can pass a little closer than their polyline (measured 0.02-0.07 mm, 4 of 1000 thesis-five
-    # swings at s = 0.001, whose timed verdict then failed); a path accepted only with this much to
-    # spare keeps the margin when timed. The raw polyline keeps the shield's 5 mm in any case.
-    ACCEPT_HEADROOM = 5e-4
-
-    def _passes(self, low, deviation, backward) -> np.ndarray:
-        """The verdict's clearance and backward checks (jaxexo.physics.outcome.verdict) of paths with
-        polyline clearance ``low``, deviation bound and backward motion (bound included), the margin
-        with ACCEPT_HEADROOM to spare."""
-        g = low - deviation
-        return (~geometry.foot_collides(np, g)
-                & ~geometry.foot_collides(np, g - self.sp.min_clearance - self.ACCEPT_HEADROOM)
-                & (backward <= self.sp.backward_tolerance))
-
-    def _margin_ok(self, scenes, paths: np.ndarray, deviation, with_clearances: bool = False):
-        """``_passes`` of many paths (B, N, 2) at once (fast: each path's minimum exact); with
-        ``with_clearances`` also the point and move clearances (trajectory.measure's inputs)."""
-        deviation = np.asarray(deviation, np.float64)
-        fl = self.sp.foot_length
-        if len(paths) >= self.PRUNE_CANDIDATES_FROM:
-            # exact at each path's closest move and sample, lower bounds above them elsewhere (all that
-            # the verdict and its reasons read: trajectory.measure_paths does the same for many paths)
-            c, sw = trajectory.pruned_clearances(fl, paths, scenes)
-        else:
-            c = trajectory.clearances(fl, paths, scenes)
-            sw = trajectory.swept_clearances(fl, paths, scenes, c, fast=True)
-        low = sw.min(axis=1) if sw.shape[1] else c.min(axis=1)
-        ok = self._passes(low, deviation, trajectory.backward_bound(paths, deviation))
-        return (ok, c, sw) if with_clearances else ok
-
-    def _candidate_note(self, smoothing, used):
-        return (f"smoothing {smoothing:g} m^2 would bring the foot within the safety margin or move the heel "
-                f"back; the per-path candidate {used:g} m^2 is used",)
-
-    def _one_pass(self, scene, raw, n_points: int, smoothing: float, fast: bool = True):
-        """One swing's candidates smoothed together (smoothing.smooth_candidates); the first that passes
-        is used (the requested smoothing when none does: the retries then follow), except that the
-        requested smoothing's spline corrected (jaxexo.inference.clearing) comes before the other
-        candidates when the requested one fails. ``fast`` checks the requested smoothing alone first
-        (it is the answer when it passes), then the correction, and the other candidates together
-        only when both fail, each path's closest move exact, and hands the chosen curve's clearances
-        to assemble; the reference checks every candidate one at a time, every move's swept
-        clearance exact. Both choose the same curve."""
-        cands = self._candidates(raw, smoothing)
-        if fast and self.clearing:
-            # The correction first: its first round measures the requested smoothing's own spline (the
-            # same numbers as smooth_candidates' first curve, tests/test_clearing.py), which is the
-            # answer when it passes; the other candidates are smoothed only when the correction fails.
-            got = clear_rows([raw], [scene.outline], self.sp.foot_length, self.sp.min_clearance, n_points,
-                             smoothing, fast)[0]
-            if got.initial is not None:
-                p0, d0, c0, sw0 = got.initial
-                if self._passes(sw0.min(), d0, trajectory.backward_bound(p0, d0)):
-                    return (p0[None], np.array([d0]), [cands[0]], [()],
-                            self._measured(scene, p0[None], c0[None], sw0[None], np.array([d0])))
-                cleared = self._judge_cleared([scene], [raw], [0], [got], smoothing, fast)
-                if cleared:
-                    path, used, note, d, clear = cleared[0][1]
-                    return path[None], np.array([d]), [used], [note], self._measured(
-                        scene, path[None], clear[0][None], clear[1][None], np.array([d]))
-                paths, dev = sm.smooth_candidates(raw, n_points, cands)
-                ok, c, sw = self._other_candidates(scene, paths, dev, np.zeros(1, bool), c0[None], sw0[None])
-                j = int(np.argmax(ok)) if ok.any() else 0
-                notes = [self._candidate_note(smoothing, cands[j])] if j else [()]
-                return (paths[j: j + 1], dev[j: j + 1], [cands[j]], notes,
-                        self._measured(scene, paths[j: j + 1], c[j: j + 1], sw[j: j + 1], dev[j: j + 1]))
-        paths, dev = sm.smooth_candidates(raw, n_points, cands)
-        if fast:
-            ok, c, sw = self._margin_ok([scene], paths[:1], dev[:1], with_clearances=True)
-            if not ok[0]:
-                cleared = self._cleared_rows([scene], [raw], [0], n_points, smoothing, fast)
-                if cleared:
-                    path, used, note, d, clear = cleared[0][1]
-                    measured = (None if clear is None else
-                                self._measured(scene, path[None], clear[0][None], clear[1][None], np.array([d])))
-                    return path[None], np.array([d]), [used], [note], measured
-                ok, c, sw = self._other_candidates(scene, paths, dev, ok, c, sw)
-        else:
-            ok = np.array([self._margin_ok_reference(scene, paths[k], dev[k]) for k in range(len(cands))])
-            if not ok[0]:
-                # the requested smoothing cuts the margin: its spline corrected comes before any candidate
-                cleared = self._cleared_rows([scene], [raw], [0], n_points, smoothing, fast)
-                if cleared:
-                    path, used, note, d, _ = cleared[0][1]
-                    return path[None], np.array([d]), [used], [note], None      # assemble measures it
-        j = int(np.argmax(ok)) if ok.any() else 0
-        measured = self._measured(scene, paths[j: j + 1], c[j: j + 1], sw[j: j + 1], dev[j: j + 1]) if fast else None
-        notes = [self._candidate_note(smoothing, cands[j])] if j else [()]
-        return paths[j: j + 1], dev[j: j + 1], [cands[j]], notes, measured
-
-    def _other_candidates(self, scene, paths, dev, ok, c, sw):
-        """The requested smoothing's check (ok, point and move clearances, each (1, ...)) followed by
-        those of the other candidates ``paths[1:]`` (checked together, ``_margin_ok``)."""
-        if len(paths) == 1:
-            return ok, c, sw
-        rest, c_rest, sw_rest = self._margin_ok([scene] * (len(paths) - 1), paths[1:], dev[1:], with_clearances=True)
-        return np.concatenate([ok, rest]), np.concatenate([c, c_rest]), np.concatenate([sw, sw_rest])
-
-    def _measured(self, scene, path, c, sw, dev):
-        """trajectory.measure of one scene's path (1, N, 2) from its clearances, for assemble."""
-        return trajectory.measure(self.sp, path, c, np.array([scene.pivot_y]), np.array([scene.goal_y]), sw, dev)
-
-    CLEARED_NOTE = ("the spline of smoothing {s:g} m^2 is corrected where it came within the safety margin or "
-                    "moved the heel back (jaxexo.inference.clearing)")
-
-    def _cleared_rows(self, scenes, raws, rows, n_points: int, smoothing: float, fast: bool):
-        """Rows whose requested smoothing failed: the requested spline corrected to keep the margin and
-        move forward (jaxexo.inference.clearing, all rows' rounds together), as (row, (path, smoothing,
-        notes, deviation, clearances)) for the rows whose corrected curve passes the verdict's
-        clearance and backward checks. ``fast`` judges each curve on the clearances that the
-        correction's last round measured (each path's closest move exact, as ``_margin_ok``) and
-        returns them as (point, move) clearances for assemble (None where the path was resampled,
-        not corrected); the reference re-measures each curve on its own, every move exact."""
-        if not self.clearing or len(rows) == 0:
-            return []
-        rows = [int(i) for i in rows]
-        got = clear_rows([raws[i] for i in rows], [scenes[i].outline for i in rows], self.sp.foot_length,
-                         self.sp.min_clearance, n_points, smoothing, fast)
-        return self._judge_cleared(scenes, raws, rows, got, smoothing, fast)
-
-    def _judge_cleared(self, scenes, raws, rows, got, smoothing: float, fast: bool):
-        """``_cleared_rows``' verdict on the corrections ``got`` (clearing.Cleared) of rows ``rows``."""
-        paths = np.stack([g.path for g in got])
-        dev = np.array([g.deviation for g in got], np.float64)
-        if fast:
-            ok = np.zeros(len(rows), bool)
-            have = [k for k, g in enumerate(got) if g.move_clearance is not None and g.move_clearance.size]
-            if have:
-                low = np.array([got[k].move_clearance.min() for k in have])
-                ok[have] = self._passes(low, dev[have], trajectory.backward_bound(paths[have], dev[have]))
-            known = set(have)
-            rest = [k for k in range(len(rows)) if k not in known]
-            if rest:
-                ok[rest] = self._margin_ok([scenes[rows[k]] for k in rest], paths[rest], dev[rest])
-            clear = [None if g.move_clearance is None else (g.point_clearance, g.move_clearance) for g in got]
-        else:
-            ok = np.array([self._margin_ok_reference(scenes[i], paths[k], dev[k]) for k, i in enumerate(rows)])
-            clear = [None] * len(rows)
-        note = (self.CLEARED_NOTE.format(s=smoothing),)
-        return [(i, (paths[k], float(smoothing), note, dev[k], clear[k])) for k, i in enumerate(rows) if ok[k]]
-
-    def _candidate_rows(self, scenes, raws, rows, n_points: int, smoothing: float, fast: bool):
-        """Rows whose requested smoothing failed: the first of their other candidates that passes,
-        as (row, (path, smoothing, notes, deviation)). One swing: all its candidates smoothed in one
-        call (as ``_one_pass``); many: candidate by candidate over the rows still failing, each level
-        in one call. ``fast`` checks each call's paths together, the reference one at a time with
-        every move's swept clearance exact; both smooth the same paths in the same calls."""
-        cands = {int(i): self._candidates(raws[i], smoothing)[1:] for i in rows}
-        out = {}
-        wait = [i for i in cands if cands[i]]
-        level = 0
-        while wait:
-            if len(scenes) == 1:
-                pairs = [(i, c) for i in wait for c in cands[i]]
-            else:
-                pairs = [(i, cands[i][level]) for i in wait]
-            paths, dev = sm.smooth_paths([raws[i] for i, _ in pairs], n_points, np.array([c for _, c in pairs]),
-                                         with_deviation=True)
-            if fast:
-                ok = self._margin_ok([scenes[i] for i, _ in pairs], paths, dev)
-            else:
-                ok = np.array([self._margin_ok_reference(scenes[i], paths[k], dev[k]) for k, (i, _) in enumerate(pairs)])
-            for k, (i, c) in enumerate(pairs):
-                if ok[k] and i not in out:
-                    out[i] = (paths[k], c, self._candidate_note(smoothing, c), dev[k])
-            level += 1
-            wait = [] if len(scenes) == 1 else [i for i in wait if i not in out and level < len(cands[i])]
-        return sorted(out.items())
-
-    def _margin_ok_reference(self, scene, path, deviation) -> bool:
-        c = swept.path_swept_clearance(np, path, self.sp.foot_length, scene.outline)
-        low = c.min() if c.size else geometry.foot_clearance(np, path, self.sp.foot_length, scene.outline).min()
-        return bool(self._passes(low, deviation, trajectory.backward_bound(path, deviation)))
-
-    def _keep_margin_rows(self, scenes, paths: np.ndarray, deviation: np.ndarray, headroom=None) -> np.ndarray:
-        """``_keeps_margin`` of many paths (B, N, 2) at once (B,)."""
-        headroom = self.ACCEPT_HEADROOM if headroom is None else headroom
-        fl = self.sp.foot_length
-        c = trajectory.clearances(fl, paths, scenes)
-        sw = trajectory.swept_clearances(fl, paths, scenes, c, fast=True)
-        low = sw.min(axis=1) if sw.shape[1] else c.min(axis=1)
-        return (low - deviation >= self.sp.min_clearance + headroom) & self._keeps_forward(paths, deviation)
-
-    def _keeps_forward(self, paths: np.ndarray, deviation) -> np.ndarray:
-        """Paths (..., N, 2) whose heel falls back at most env.backward_tolerance (trajectory.measure's
-        measure: the polyline's drawdown plus twice the deviation bound)."""
-        return trajectory.backward_bound(paths, deviation) <= self.sp.backward_tolerance
-
-    def _finish(self, scenes, raws, n_points: int, smoothing: float, duration: float,
-                fallback: str | None = "cfftg", fast: bool = True) -> TrajectoryBatch:
-        """Smooth every raw path, check them all at once, redo the few that smoothing brought within the
-        margin, then hand the swings that still fail to CFFTG (``fallback``)."""
-        notes = [()] * len(raws)
-        measured = None
-        one = smoothing > 0 and len(raws) == 1 and len(self._candidates(raws[0], smoothing)) > 1
-        if one:
-            # One swing: every candidate smoothing at once, the first that keeps the margin is used.
-            paths, dev, used, notes, measured = self._one_pass(scenes[0], raws[0], n_points, smoothing, fast)
-        elif smoothing > 0:
-            paths, dev = _smooth(raws, n_points, smoothing, fast)
-            used = [smoothing] * len(raws)
-            if len(raws) > 1:
-                # Many swings: the requested smoothing checked first (fast: all at once), then the
-                # candidates of the rows it fails, level by level; one assemble for all rows after.
-                if fast:
-                    ok, c_all, sw_all = self._margin_ok(scenes, paths, dev, with_clearances=True)
-                else:
-                    ok = np.array([self._margin_ok_reference(scenes[i], paths[i], dev[i]) for i in range(len(raws))])
-                cleared = self._cleared_rows(scenes, raws, np.flatnonzero(~ok), n_points, smoothing, fast)
-                done = {i for i, _ in cleared}
-                redo = [(i, r[:4]) for i, r in cleared] + self._candidate_rows(
-                    scenes, raws, [i for i in np.flatnonzero(~ok) if i not in done], n_points, smoothing, fast)
-                if redo:
-                    paths, dev, notes = paths.copy(), np.array(dev, np.float64), list(notes)
-                    for i, (path, c, note, d) in redo:
-                        paths[i], dev[i], used[i], notes[i] = path, d, c, note
-                if fast:
-                    # assemble measures from the clearances already computed: the requested smoothing's
-                    # (each path's closest move exact), the corrected curves' own; the rest afresh
-                    known = {i for i, r in cleared if r[4] is not None}
-                    for i, r in cleared:
-                        if r[4] is not None:
-                            c_all[i], sw_all[i] = r[4]
-                    fresh = sorted({i for i, _ in redo} - known)
-                    if fresh:
-                        _, c_all[fresh], sw_all[fresh] = self._margin_ok([scenes[i] for i in fresh], paths[fresh],
-                                                                         dev[fresh], with_clearances=True)
-                    measured = trajectory.measure(self.sp, paths, c_all, np.array([sc.pivot_y for sc in scenes]),
-                                                  np.array([sc.goal_y for sc in scenes]), sw_all, dev)
-        else:
-            both = [sm.linear_resample(r, n_points, with_deviation=True) for r in raws]
-            paths, dev = np.stack([p for p, _ in both]), np.array([d for _, d in both])
-            used = [float("nan")] * len(raws)
-        batch = assemble("rl", self.sp, scenes, raws, paths, used, duration, notes, measured, deviation=dev, fast=fast)
-        # Smoothing cuts corners (clearance) and overshoots (backward heel motion): first the per-path
-        # candidate smoothings (CANDIDATE_RESIDUALS), then less smoothing, down to the raw polyline.
-        # Not for a swing that ends short of the goal: every curve ends where its raw path does, so no
-        # smoothing can make it pass (the policy's failure, not the smoothing's; CFFTG's fallback follows).
-        bad = (np.flatnonzero((~batch.clearance_ok | (batch.heel_backward > self.sp.backward_tolerance))
-                              & batch.reached_goal) if smoothing > 0 else np.zeros(0, np.int64))
-        if fast and bad.size:
-            redo = self._fallback_batch(scenes, raws, bad, n_points, smoothing)
-        else:
-            redo = []
-            for i in bad:
-                fb = self._fallback(scenes[i], raws[i], n_points, smoothing)
-                if fb is not None:
-                    redo.append((i, fb))
-        if redo:
-            idx = [i for i, _ in redo]
-            sub = assemble("rl", self.sp, [scenes[i] for i in idx], [raws[i] for i in idx],
-                           np.stack([fb[0] for _, fb in redo]), [fb[1] for _, fb in redo], duration,
-                           [fb[2] for _, fb in redo], deviation=np.array([fb[3] for _, fb in redo]), fast=fast)
-            batch = batch.with_rows(idx, sub)
-        if fallback == "cfftg" and not batch.ok.all():
-            batch = self._cfftg_fallback(batch, n_points, duration)
-        return batch
-
-    def _cfftg_fallback(self, batch: TrajectoryBatch, n_points: int, duration: float) -> TrajectoryBatch:
-        # Imported here: jaxexo.baselines imports jaxexo.inference (a cycle at import time).
-        from jaxexo.baselines.cfftg import CFFTG
-
-        bad = np.flatnonzero(~batch.ok)
+    def _fallback_planner(self):
+        """CFFTG for this generator's config and clearance, built on the first fallback (its constants
+        cost ~ms to derive)."""
         if self._cfftg is None:
-            self._cfftg = CFFTG(self.config).at_clearance(self.clearance)
-        plan = self._cfftg._finish([batch.scenes[i] for i in bad], n_points, duration, False)
-        take = [j for j in range(len(bad)) if plan.ok[j]]
-        notes = list(batch.notes)
-        for j, i in enumerate(bad):
-            rl_fail = "RL swing failed the safe-swing check: " + "; ".join(batch.reasons[i])
-            notes[i] = notes[i] + ((rl_fail + "; CFFTG's plan is returned",) if j in take else
-                                   (rl_fail, "CFFTG fallback failed too: " + "; ".join(plan.reasons[j])))
-        batch = dataclasses.replace(batch, notes=tuple(notes))
-        if not take:
-            return batch
-        sub = dataclasses.replace(plan, method="cfftg-fallback", row_methods=())
-        keep = [int(x) for x in take]
-        sub = _rows(sub, keep)
-        sub = dataclasses.replace(sub, notes=tuple(notes[bad[j]] + sub.notes[n] for n, j in enumerate(keep)))
-        return batch.with_rows([bad[j] for j in keep], sub)
+            from jaxexo.baselines.cfftg import CFFTG    # a baseline, built only when a swing falls back
 
-    def _keeps_margin(self, scene: Scene, path: np.ndarray, deviation: float, headroom=None) -> bool:
-        """The path (a polyline through its points, less ``deviation``) keeps the safety margin plus
-        ``headroom`` (None: ACCEPT_HEADROOM; the raw path's own test asks for none) (the reference; the
-        fast path checks many at once, ``_keep_margin_rows``)."""
-        headroom = self.ACCEPT_HEADROOM if headroom is None else headroom
-        c = swept.path_swept_clearance(np, path, self.sp.foot_length, scene.outline)
-        return bool((c.size == 0 or c.min() - deviation >= self.sp.min_clearance + headroom)
-                    and self._keeps_forward(path, deviation))
+            self._cfftg = CFFTG(self.config).at_clearance(self.clearance)
+        return self._cfftg
 
     def _touches(self, scene: Scene, path: np.ndarray) -> bool:
         # Cheap exclusion first: a path that never comes below the obstacle's top within its extent
@@ -763,8 +405,19 @@ class TrajectoryGenerator:
         out.clearance = c
         return out
 
+    # Trajectories ---------------------------------------------------------------------------------
+    def finish(self, scenes, raws, n_points: int, smoothing: float, duration: float,
+               fallback: str | None = "cfftg", fast: bool = True) -> TrajectoryBatch:
+        """Checked trajectories of raw paths on their scenes: smoothed, checked and retried
+        (jaxexo.inference.finish), then, with ``fallback="cfftg"``, CFFTG's plan wherever the RL
+        swing still fails (jaxexo.inference.fallback)."""
+        batch = PathFinisher(self.sp, self.clearing).finish("rl", scenes, raws, n_points, smoothing, duration, fast)
+        if fallback == "cfftg":
+            batch = replace_failures(batch, self._fallback_planner(), n_points, duration)
+        return batch
+
     def generate(self, obstacle: geometry.Obstacle, *, pivot: str | float | None = None, pivot_y: float | None = None,
-                 start_y: float = 0.0, step_length: float = 0.70, n_points: int = sm.DEFAULT_POINTS,
+                 start_y: float = START_Y, step_length: float = STEP_LENGTH, n_points: int = sm.DEFAULT_POINTS,
                  smoothing: float | None = None, duration: float = DEFAULT_DURATION,
                  strict: bool = False, fallback: str | None = "cfftg", fast: bool = True,
                  clearance: float | None = None) -> Trajectory:
@@ -780,12 +433,12 @@ class TrajectoryGenerator:
         self = self.at_clearance(clearance)
         scene = self.scene(obstacle, pivot, pivot_y, start_y, step_length)
         raw, _ = self.rollout(scene, fast)
-        traj = self._finish([scene], [raw], n_points, smoothing, duration, fallback, fast)[0]
+        traj = self.finish([scene], [raw], n_points, smoothing, duration, fallback, fast)[0]
         if strict and not traj.ok:
             raise TrajectoryError(traj)
         return traj
 
-    def generate_batch(self, obstacles, *, pivot=None, pivot_y=None, start_y=0.0, step_length=0.70,
+    def generate_batch(self, obstacles, *, pivot=None, pivot_y=None, start_y=START_Y, step_length=STEP_LENGTH,
                        n_points: int = sm.DEFAULT_POINTS, smoothing: float | None = None,
                        duration: float = DEFAULT_DURATION, strict: bool = False,
                        fallback: str | None = "cfftg", fast: bool = True,
@@ -799,7 +452,7 @@ class TrajectoryGenerator:
         scenes = self._scenes(obstacles, pivot, pivot_y, start_y, step_length)
         with blas.limited(self.batch_blas_threads):
             raws, _ = self.rollout_batch(scenes, fast)
-            batch = self._finish(scenes, raws, n_points, smoothing, duration, fallback, fast)
+            batch = self.finish(scenes, raws, n_points, smoothing, duration, fallback, fast)
         if strict and not batch.ok.all():
             raise TrajectoryError(batch[int(np.argmin(batch.ok))])
         return batch
@@ -824,86 +477,5 @@ def model_smoothing(shield_clearance: float, min_clearance: float, shield: bool)
     return SHIELD_SMOOTHING_POINTS * excess * excess if excess > 0.0 else 0.0
 
 
-def _smooth(raws, n_points, smoothing, fast):
-    """smooth_paths(..., with_deviation=True); one path on the fast path goes through smooth_one
-    (the same numbers, fewer NumPy calls)."""
-    if fast and len(raws) == 1:
-        return sm.smooth_one(raws[0], n_points, smoothing)
-    return sm.smooth_paths(raws, n_points, smoothing, with_deviation=True)
-
-
-def pivot_of(pivot, pivot_y):
-    """The scene's pivot: a condition (default "obstacle") or ``pivot_y`` in metres, not both."""
-    if pivot_y is None:
-        return "obstacle" if pivot is None else pivot
-    if pivot is not None:
-        raise ValueError(f"pivot, pivot_y: give one of them (a condition or a y in metres), got pivot={pivot!r} "
-                         f"and pivot_y={pivot_y!r}")
-    return pivot_y
-
-
-def scenes_for(make, obstacles, pivot, pivot_y, start_y, step_length) -> list[Scene]:
-    """Scenes for many obstacles with ``make(obstacle, pivot, pivot_y, start_y, step_length)``; every
-    option is one value for all or one per obstacle (shared by every generator's generate_batch)."""
-    if isinstance(obstacles, geometry.Obstacle):
-        raise TypeError("obstacles: expected a list of Obstacle objects, got one Obstacle (use generate() for "
-                        "one scenario, or pass [obstacle])")
-    try:
-        obstacles = list(obstacles)
-    except TypeError:
-        raise TypeError(f"obstacles: expected a list of Obstacle objects, got {type(obstacles).__name__}") from None
-    n = len(obstacles)
-    if n == 0:
-        raise ValueError("obstacles: need at least one scenario")
-
-    def per(name, v):
-        if np.ndim(v) == 0 or isinstance(v, str):
-            return [v] * n
-        v = list(v)
-        if len(v) != n:
-            raise ValueError(f"{name}: {len(v)} values for {n} obstacles")
-        return v
-
-    return [make(o, p, py, s, sl) for o, p, py, s, sl in zip(
-        obstacles, per("pivot", pivot), per("pivot_y", pivot_y), per("start_y", start_y),
-        per("step_length", step_length))]
-
-
 def _take(lay, idx):
     return type(lay)(**{k: v[idx] for k, v in vars(lay).items()})
-
-
-def check_fallback(fallback):
-    if fallback == "none":
-        return None
-    if fallback not in FALLBACKS:
-        raise ValueError(f"fallback must be 'cfftg' or None, got {fallback!r}")
-    return fallback
-
-
-def _rows(batch: TrajectoryBatch, idx) -> TrajectoryBatch:
-    """The sub-batch of rows ``idx`` (in order)."""
-    changes = {}
-    for f in dataclasses.fields(batch):
-        v = getattr(batch, f.name)
-        if f.name in ("method", "time") or (f.name == "row_methods" and not v):
-            continue
-        changes[f.name] = tuple(v[i] for i in idx) if isinstance(v, tuple) else v[idx]
-    return dataclasses.replace(batch, **changes)
-
-
-# Bounds of the sizes taken from input, checked before anything is allocated.
-MAX_POINTS = 100_000        # samples of one smoothed path
-MAX_DURATION = MAX_SWING_DURATION   # s: a swing, not a walk (jaxexo.config.schema)
-
-
-def check_options(n_points, smoothing, duration):
-    if isinstance(n_points, bool) or not isinstance(n_points, (int, np.integer)) or not 2 <= n_points <= MAX_POINTS:
-        raise ValueError(f"n_points must be an integer in [2, {MAX_POINTS}], got {n_points!r}")
-    smoothing = geometry._finite("smoothing", smoothing, "m^2")
-    if smoothing < 0:
-        raise ValueError(f"smoothing must be >= 0 (m^2), got {smoothing}")
-    duration = geometry._finite_positive("duration", duration, "s")
-    if duration > MAX_DURATION:
-        raise ValueError(f"duration must be <= {MAX_DURATION:g} s (one swing), got {duration:g}")
-    return int(n_points), smoothing, duration

@@ -254,34 +254,6 @@ def smooth_padded(pts: np.ndarray, lengths: np.ndarray, n_points: int = DEFAULT_
     return (out, dev) if with_deviation else out
 
 
-def smooth_one(raw: np.ndarray, n_points: int = DEFAULT_POINTS, smoothing: float = DEFAULT_SMOOTHING):
-    """``smooth_paths([raw], n_points, smoothing, with_deviation=True)`` for one path, returned as
-    ((1, n_points, 2), (1,)), without the batch bookkeeping (padding, sorting, grouping by length):
-    the same operators and the same lambda search on the same (1, M) arrays, so the same numbers,
-    at a fraction of the NumPy calls (issue 12: one trajectory is dominated by per-call overhead)."""
-    pts = distinct(raw)
-    m = len(pts)
-    if m < DEGREE + 1:
-        out, dev = linear_resample(pts, n_points, with_deviation=True)
-        out = out.copy()
-    else:
-        zm, dm, em, qm = _basis(m, n_points)
-        z = zm @ pts                                                     # (M, 2)
-        lam = _solve_lambda(dm[None], np.sum(z * z, axis=-1)[None], np.array([float(smoothing)]))[0]
-        if np.isinf(lam):
-            shrink = (dm == 0.0).astype(float)
-        else:
-            shrink = 1.0 / (1.0 + lam * dm)
-        z *= shrink[:, None]
-        out = em @ z
-        curv = np.max(np.abs(qm @ z), axis=0)
-        dev = (1.0 / (n_points - 1)) ** 2 / 8.0 * np.sqrt(np.sum(curv * curv))
-    np.maximum(out[:, 1], 0.0, out=out[:, 1])
-    out[0] = pts[0]
-    out[-1] = pts[-1]
-    return out[None], np.array([dev], dtype=np.float64)
-
-
 def bspline_smooth(raw: np.ndarray, n_points: int = DEFAULT_POINTS, smoothing: float = DEFAULT_SMOOTHING) -> np.ndarray:
     """One smoothed heel path (n_points, 2): ``smooth_paths`` for a single raw path."""
     return smooth_paths([raw], n_points, smoothing)[0]

@@ -264,7 +264,7 @@ def measure(sp, heel: np.ndarray, clearance: np.ndarray, pivot_y: np.ndarray, go
     dev[:] = deviation
     # The guaranteed clearance: the polyline's exact swept clearance (or the samples' own, for a
     # path of one sample) less the deviation bound.
-    guaranteed = (swept_clearance.min(axis=-1) if swept_clearance.shape[-1] else clearance.min(axis=-1)) - dev
+    guaranteed = lowest_clearance(clearance, swept_clearance) - dev
     backward = backward_bound(heel, dev)
     # kinematics.leg_state's equations, with both legs stacked on a leading axis (fewer NumPy calls).
     hip = kinematics.hip_position(np, pivot_y[:, None], heel, sp.thigh, sp.shin)
@@ -339,16 +339,37 @@ def _reasons(m: dict, i: int, heel: np.ndarray, goal_y: float, time: np.ndarray,
 
 
 def measure_paths(sp, paths: np.ndarray, scenes, deviation, fast: bool = True) -> dict:
-    """``measure`` of heel paths (B, N, 2) on their scenes, clearances included (``fast``: see
-    ``swept_clearances``)."""
+    """``measure`` of heel paths (B, N, 2) on their scenes, clearances included (``path_clearances``)."""
     pivot_y = np.array([sc.pivot_y for sc in scenes])
     goal_y = np.array([sc.goal_y for sc in scenes])
-    if fast and len(scenes) >= PRUNE_POINTS_FROM:
-        c, sw = pruned_clearances(sp.foot_length, paths, scenes)
-    else:
-        c = clearances(sp.foot_length, paths, scenes)
-        sw = swept_clearances(sp.foot_length, paths, scenes, c, fast)
+    c, sw = path_clearances(sp.foot_length, paths, scenes, fast)
     return measure(sp, paths, c, pivot_y, goal_y, sw, deviation)
+
+
+def path_clearances(foot_length: float, paths: np.ndarray, scenes, fast: bool = True):
+    """The one entry point for a path's clearances: (at the samples (B, N), over the moves (B, N-1))
+    of heel paths (B, N, 2) on their scenes. ``fast``: each path's closest move and sample exact,
+    lower bounds above that minimum elsewhere (all that the verdict and its reasons read);
+    ``fast=False``, the reference: every sample and move exact."""
+    if fast and len(scenes) >= PRUNE_POINTS_FROM:
+        return pruned_clearances(foot_length, paths, scenes)
+    c = clearances(foot_length, paths, scenes)
+    return c, swept_clearances(foot_length, paths, scenes, c, fast)
+
+
+def lowest_clearance(point_clearance: np.ndarray, move_clearance: np.ndarray) -> np.ndarray:
+    """The polyline's clearance (...,): its moves' minimum, or its one sample's for a path of one."""
+    return move_clearance.min(axis=-1) if move_clearance.shape[-1] else point_clearance.min(axis=-1)
+
+
+def passes(sp, low, deviation, backward, headroom: float = 0.0) -> np.ndarray:
+    """The verdict's clearance and backward checks (jaxexo.physics.outcome.verdict: clearance_ok and
+    backward_ok) of curves whose polyline keeps ``low`` (m) from the obstacle, with ``deviation`` the
+    curve's bound and ``backward`` its backward motion, the margin env.min_clearance kept with
+    ``headroom`` (m) to spare. The generators' retries accept a curve by this rule."""
+    g = low - deviation
+    return (~geometry.foot_collides(np, g) & ~geometry.foot_collides(np, g - sp.min_clearance - headroom)
+            & (backward <= sp.backward_tolerance))
 
 
 # From this many paths on, ``fast`` also skips the exact point clearances that cannot matter

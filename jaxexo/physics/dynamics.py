@@ -464,15 +464,15 @@ def make_scene(obstacle: geometry.Obstacle, pivot: str | float = "obstacle", sta
     keeps the obstacle's own vertex count. Raises ValueError naming the bad argument."""
     if not isinstance(obstacle, geometry.Obstacle):
         raise TypeError(f"obstacle: expected a jaxexo Obstacle, got {type(obstacle).__name__}")
-    start_y = geometry._finite("start_y", start_y)
-    step_length = geometry._finite_positive("step_length", step_length)
+    start_y = geometry.finite("start_y", start_y)
+    step_length = geometry.finite_positive("step_length", step_length)
     if isinstance(pivot, str):
         if pivot not in PIVOT_CONDITIONS:
             raise ValueError(f"pivot must be one of {PIVOT_CONDITIONS} or a y in metres, got {pivot!r}")
         pk = PIVOT_CONDITIONS.index(pivot)
         py = pivot_position(scalar, pk, start_y, obstacle.center_y)
     else:
-        pk, py = -1, geometry._finite("pivot_y", pivot)
+        pk, py = -1, geometry.finite("pivot_y", pivot)
     if obstacle.left <= start_y + foot_length:
         raise ValueError(f"obstacle: its near edge ({obstacle.left:.3f} m) must lie ahead of the toe at "
                          f"the start ({start_y + foot_length:.3f} m)")

@@ -203,7 +203,8 @@ def profile_height(xp, y, outline):
 # --------------------------------------------------------------------------------------------
 
 
-def _finite(name: str, value, unit: str = "metres") -> float:
+def finite(name: str, value, unit: str = "metres") -> float:
+    """``value`` as a finite float; GeometryError naming ``name`` otherwise (bools and strings refused)."""
     # A bool is an int to Python (True == 1): Obstacle.rectangle(True, 0.1) would be 1 m wide.
     if isinstance(value, (bool, np.bool_)):
         raise GeometryError(f"{name} must be a number in {unit}, got the boolean {value!r}")
@@ -219,8 +220,9 @@ def _finite(name: str, value, unit: str = "metres") -> float:
     return v
 
 
-def _finite_positive(name: str, value, unit: str = "metres") -> float:
-    v = _finite(name, value, unit)
+def finite_positive(name: str, value, unit: str = "metres") -> float:
+    """``finite`` and > 0."""
+    v = finite(name, value, unit)
     if v <= 0.0:
         raise GeometryError(f"{name} must be > 0 {unit}, got {v}")
     return v
@@ -366,17 +368,17 @@ class Obstacle:
         if pts[-1, 1] > 0:
             pts = np.vstack([pts, [pts[-1, 0], 0.0]])
         y0, y1 = pts[0, 0], pts[-1, 0]
-        width = _finite_positive("points (width)", y1 - y0)
-        height = _finite_positive("points (height)", pts[:, 1].max())
+        width = finite_positive("points (width)", y1 - y0)
+        height = finite_positive("points (height)", pts[:, 1].max())
         center = 0.5 * (y0 + y1)
         unit = np.column_stack([(pts[:, 0] - center) / width, pts[:, 1] / height])
         return cls("profile", "profile", center, width, height, unit)
 
     @classmethod
     def _make(cls, kind, shape, center_y, width, height):
-        width = _finite_positive("width", width)
-        height = _finite_positive("height", height)
-        center_y = _finite("center_y", center_y)
+        width = finite_positive("width", width)
+        height = finite_positive("height", height)
+        center_y = finite("center_y", center_y)
         return cls(kind, shape, center_y, width, height, unit_profile(shape))
 
     def clearance(self, heel: np.ndarray, foot_length: float) -> np.ndarray:
