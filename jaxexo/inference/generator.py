@@ -1,48 +1,18 @@
-"""TrajectoryGenerator: an exported policy (policy.npz) driven greedily in NumPy, smoothed and checked.
+"""TrajectoryGenerator: an exported policy (policy.npz) driven greedily in NumPy, finished and checked.
 
-The rollout follows the training environment's rules exactly (jaxexo.physics.dynamics: the same move, goal,
-mid-goal and observation functions, the same step limit and collision handling), with the greedy
-action of the exported Q-network. Two loops share those rules:
+The rollout follows the training environment's rules exactly (jaxexo.physics.dynamics: the same move,
+goal, mid-goal and observation functions, step limit and collision handling) with the exported
+Q-network's greedy action (thesis 2.6). ``generate`` runs one scene in Python floats with the
+observation folded into the network's first layer (jaxexo.inference.network); ``generate_batch``
+runs NumPy arrays over the scenes still moving. With the shield, the chosen move is the first
+admissible one in order of Q, so ``fast`` checks moves in that order instead of all 19
+(jaxexo.inference.shield for one swing; ``ShieldRows.choose`` for a batch, in the reference's float32
+arithmetic); ``fast=False`` computes the whole mask every step. Both choose the same moves.
 
-- ``generate`` (one scene): the heel and the step counter are Python floats and the observation,
-  which is affine in (heel y, heel z, time, visited) for a fixed scene, is folded into the network's
-  first layer, so a step is a few small matmuls (see jaxexo.inference.network);
-- ``generate_batch`` (many scenes): NumPy arrays over the scenes still moving, one batched network
-  call per step.
-
-The raw path is then smoothed (thesis 2.7, jaxexo.inference.smoothing) and checked as a safe swing
-(jaxexo.inference.trajectory: exact clearance of the moving foot, margin env.min_clearance). If
-smoothing brings a raw path that keeps the margin closer than the margin (or moves the heel back),
-the spline is first corrected as little as possible to keep it (jaxexo.inference.clearing; off with
-``clearing = False``), then the per-path candidate smoothings below are tried, then a quarter of
-the smoothing, a sixteenth, an interpolating spline and the raw polyline; ``Trajectory.smoothing``
-and ``notes`` record which was used. ``clearance=C`` asks for a margin C instead
-(``at_clearance``).
-
-Fallback (issue 11): with ``fallback="cfftg"`` (the default) an RL swing that still fails the
-safe-swing check is replaced by CFFTG's plan for the same scene (jaxexo.baselines.cfftg), with
-``method`` "cfftg-fallback" and the RL failure in ``notes``; when CFFTG fails too, the RL swing is
-returned, not ok. ``fallback=None`` returns the RL result alone.
-
-Speed (issue 19): with the shield, the chosen move is the first admissible move in order of Q, so
-``fast`` checks the moves one at a time in that order instead of computing all 19 forward moves'
-mask: one swing in plain Python floats certified against the reference's float32 rounding
-(jaxexo.inference.shield; the full mask on the rare steps too close to call), a batch in the
-reference's own float32 arithmetic one move per row (``_batch_choice``; the full mask for the rows
-whose first BATCH_ROUNDS moves fail). Smoothing: besides the requested s, per-path candidates
-(CANDIDATE_RESIDUALS: s = M rho^2) are smoothed and checked in one pass and the smoothest that keeps
-the margin is used (``Trajectory.smoothing`` reports it; a note says a candidate was used); the
-retries below remain for the rest. The spline correction runs on all of a batch's rows at once
-(jaxexo.inference.clearing.clear_rows) and hands back the clearances its last round measured, which
-the verdict reads instead of measuring the curve again; one swing runs the correction first, its
-first round measuring the requested smoothing's own spline (the answer when it passes), and smooths
-the other candidates only when the correction fails.
-
-Speed (issue 12): ``fast=True`` (default) computes the swept clearance exactly only for the moves
-that can be a path's closest (jaxexo.physics.swept.swept_lower_bound), smooths one path without the
-batch bookkeeping and checks the smoothing retries of all rows at once; ``fast=False`` is the plain
-reference (every move's clearance exact, one retry at a time). Both give the same actions, samples
-and verdicts (tests/test_speed.py).
+The raw path is then finished (jaxexo.inference.finish: smoothed, thesis 2.7; checked as a safe swing;
+retried) and, with ``fallback="cfftg"`` (the default), a swing that still fails is replaced by CFFTG's
+plan for its scene (jaxexo.inference.fallback). ``clearance=C`` asks for a margin C instead of the
+model's (``at_clearance``).
 """
 
 from __future__ import annotations
@@ -53,14 +23,15 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxexo.physics import dynamics, geometry, swept
+from jaxexo.physics import dynamics, geometry
 from jaxexo.physics.dynamics import Scene, scalar
 from jaxexo.inference import blas, smoothing as sm
 from jaxexo.inference.fallback import replace_failures
 from jaxexo.inference.finish import PathFinisher
 from jaxexo.inference.network import FoldedQNetwork, StepNetwork
-from jaxexo.inference.options import PIVOT, START_Y, STEP_LENGTH, check_fallback, check_options, pivot_of, scenes_for
+from jaxexo.inference.options import START_Y, STEP_LENGTH, check_fallback, check_options, pivot_of, scenes_for
 from jaxexo.inference.shield import ScalarShield
+from jaxexo.inference.shield_rows import ShieldRows, take_rows
 from jaxexo.inference.trajectory import DEFAULT_DURATION, Trajectory, TrajectoryBatch, TrajectoryError
 from jaxexo.storage.policy_file import PolicyFileError, QPolicy, load_policy, policy_config
 
@@ -97,12 +68,10 @@ class TrajectoryGenerator:
         self.shield = bool(config.env.shield)
         # The spline's smoothing when a call does not give one (m^2, thesis 2.7's s).
         self.smoothing = model_smoothing(config.env.shield_clearance, config.env.min_clearance, self.shield)
-        self._n_forward = int(dynamics.forward_moves().sum())
         self._rng = None
         # single-swing shield steps: [decided by jaxexo.inference.shield, handed to the full mask]
         # and batch rows: [rows, rows whose best forward move was not admissible (full mask)]
         self.shield_stats = [0, 0, 0, 0]
-        self._fwd_idx = np.flatnonzero(dynamics.forward_moves())
 
     def exploring(self, epsilon: float, seed: int = 0) -> "TrajectoryGenerator":
         """A copy that acts epsilon-greedily (thesis 2.6 tests that way): each step a uniformly
@@ -196,20 +165,21 @@ class TrajectoryGenerator:
         pts, acts = [(hy, hz)], []
         last = -1           # the move just made (the shield never undoes it)
         one = dynamics.stack_scenes([scene], np.float32) if self.shield else None
+        rows = ShieldRows(self.np_params, self.sp, self.shield_stats) if self.shield else None
         single = ScalarShield(self.sp, self.np_params, scene) if self.shield and fast and self.epsilon <= 0.0 else None
         while True:
             if single is not None:
                 q = step.q_values(hy, hz, t, 1.0 if visited else 0.0)
                 a = single.choose(hy, hz, q, last)
                 if a is None:
-                    mask = self._admissible_rows(np.array([hy], np.float32), np.array([hz], np.float32), one,
-                                                 last=np.array([last]))[0]
+                    mask = rows.admissible(np.array([hy], np.float32), np.array([hz], np.float32), one,
+                                           last=np.array([last]))[0]
                     a = int(dynamics.greedy_action(np, q, mask))
                     self.shield_stats[1] += 1
                 self.shield_stats[0] += 1
             elif self.shield:
-                mask = self._admissible_rows(np.array([hy], np.float32), np.array([hz], np.float32), one,
-                                             last=np.array([last]))[0]
+                mask = rows.admissible(np.array([hy], np.float32), np.array([hz], np.float32), one,
+                                       last=np.array([last]))[0]
                 a = self._explore(step.greedy(hy, hz, t, 1.0 if visited else 0.0, mask), mask)
             else:
                 a = self._explore(step.greedy(hy, hz, t, 1.0 if visited else 0.0))
@@ -228,107 +198,13 @@ class TrajectoryGenerator:
         return np.asarray(pts), np.asarray(acts, dtype=np.int64)
 
 
-    def _near(self, hy, hz, lay) -> np.ndarray:
-        """(B,) rows whose foot is within a step plus the shield's clearance of the obstacle's bounding
-        box (elsewhere no move can fail the clearance condition)."""
-        p = self.np_params
-        half = 0.5 * lay.width
-        dy = np.maximum(np.maximum(lay.center_y - half - (hy + p.foot_length), hy - (lay.center_y + half)), 0.0)
-        dz = np.maximum(hz - lay.height, 0.0)
-        return np.hypot(dy, dz) < self.sp.shield_clearance + self.sp.step_size + 1e-4
-
-    def _clear(self, hy, hz, ends, outline, pruned: bool, c_here=None) -> np.ndarray:
-        """dynamics.moves_keep_clearance for heels (B,) and move ends (B, F, 2), with its NumPy branch
-        (pruned or not: the same decisions, issue 12) given rather than chosen by the array's size,
-        so that a subset of the moves or rows is decided exactly as in the whole step's call.
-        ``c_here``: the heels' foot clearances when known (elementwise, so the same numbers)."""
-        p = self.np_params
-        here = np.stack([hy, hz], axis=-1)
-        if c_here is None:
-            c_here = geometry.foot_clearance(np, here, p.foot_length, outline)
-        if pruned:
-            return dynamics._moves_keep_clearance_pruned(p, here, c_here, ends, outline)
-        # the unpruned branch of moves_keep_clearance, written out (the same elementwise arithmetic)
-        moves = np.moveaxis(ends, -2, 0)
-        d_move = np.moveaxis(swept.swept_distance(np, here + 0.0 * moves, moves, p.foot_length, outline), 0, -1)
-        return d_move >= np.minimum(p.shield_clearance, c_here)[..., None] - dynamics.SHIELD_SLACK
-
-    def _admissible_rows(self, hy, hz, lay, pruned: bool | None = None, near=None, c_here=None,
-                         last=None) -> np.ndarray:
-        """(B, A) the shield's admissible moves (jaxexo.physics.dynamics.admissible_moves) of many heels,
-        float32 rows of stacked scenes like the training environment; the exact clearance is computed
-        only for the ``_near`` rows (elsewhere no move can fail it, so the mask is the same).
-        ``pruned``: the clearance's NumPy branch (None: by size, as moves_keep_clearance chooses);
-        ``c_here`` (B,): the heels' foot clearances where ``near`` (with ``pruned`` given); ``last``
-        (B,): the moves just made (-1: none)."""
-        p = self.np_params
-        near = self._near(hy, hz, lay) if near is None else near
-        clear = np.ones((len(hy), self._n_forward), bool)
-        if near.any():
-            ends = dynamics.forward_ends(np, p, hy[near], hz[near])
-            if pruned is None:
-                clear[near] = dynamics.moves_keep_clearance(np, p, hy[near], hz[near], ends, lay.outline[near])
-            else:
-                clear[near] = self._clear(hy[near], hz[near], ends, lay.outline[near], pruned,
-                                          None if c_here is None else c_here[near])
-        return dynamics.admissible_moves(np, p, hy, hz, lay, clear=clear, last_action=last)
-
-    def _batch_choice(self, hy, hz, lay, q, last) -> np.ndarray:
-        """The shielded greedy actions (B,) of ``_admissible_rows`` + greedy_action, checking first only
-        each row's best forward move (one move per row instead of 19, in the same float32
-        elementwise arithmetic); the full mask only for the rows where that move is not admissible."""
-        fwd = self._fwd_idx
-        # forward moves by decreasing Q, ties by index (as argmax over the mask picks the first)
-        order = fwd[np.argsort(-q[:, fwd], axis=1, kind="stable")[:, :self.BATCH_ROUNDS]]
-        near = self._near(hy, hz, lay)
-        # the branch the whole step's moves_keep_clearance call takes (by its array's size)
-        pruned = int(near.sum()) * self._n_forward * 2 > dynamics._PRUNE_FROM
-        # the near heels' foot clearances once per step (every round and the full mask read them)
-        c_here = np.zeros(len(hy), np.float32)
-        if near.any():
-            c_here[near] = geometry.foot_clearance(np, np.stack([hy[near], hz[near]], axis=-1),
-                                                   self.np_params.foot_length, lay.outline[near])
-        out = order[:, 0].copy()
-        miss = np.arange(len(hy))
-        for r in range(self.BATCH_ROUNDS):     # the r-th best move of the rows still undecided
-            a = order[miss, r]
-            ok = self._one_move_ok(hy[miss], hz[miss], _take(lay, miss), near[miss], a, pruned, last[miss],
-                                   c_here[miss])
-            out[miss[ok]] = a[ok]
-            miss = miss[~ok]
-            if not miss.size:
-                break
-        if miss.size:
-            sub = _take(lay, miss)
-            mask = self._admissible_rows(hy[miss], hz[miss], sub, pruned, near[miss], c_here[miss], last[miss])
-            out[miss] = dynamics.greedy_action(np, q[miss], mask)
-        self.shield_stats[2] += len(hy)
-        self.shield_stats[3] += miss.size
-        return out
-
-    # forward moves checked one at a time per row before the full mask (``_batch_choice``)
-    BATCH_ROUNDS = 4
-
-    def _one_move_ok(self, hy, hz, lay, near, a, pruned: bool, last, c_here=None) -> np.ndarray:
-        """(B,) whether move a (B,) passes all of admissible_moves' conditions (its column of the
-        mask before the fallbacks; ``last`` (B,) the moves just made, ``c_here`` as ``_admissible_rows``),
-        in the same float32 elementwise arithmetic."""
-        p = self.np_params
-        d = p.directions[a]
-        y, z = dynamics.move_heel(np, p, hy, hz, d[:, 0], d[:, 1])
-        new = np.stack([y, z], axis=-1)[:, None, :]      # (B, 1, 2)
-        clear = np.ones((len(hy), 1), bool)
-        if near.any():
-            clear[near] = self._clear(hy[near], hz[near], new[near], lay.outline[near], pruned,
-                                      None if c_here is None else c_here[near])
-        return dynamics.shield_conditions(np, p, hy, hz, lay, a[:, None], new, clear, last)[:, 0]
-
     def rollout_batch(self, scenes, fast: bool = True) -> tuple[list[np.ndarray], list[np.ndarray]]:
         """Greedy raw paths of many scenes at once (float32 NumPy, like the JAX environment). With the
-        shield, ``fast`` (greedy only) checks each row's best forward move first (``_batch_choice``);
+        shield, ``fast`` (greedy only) checks each row's best forward move first (``ShieldRows.choose``);
         ``fast=False`` computes the full mask of every row every step (the reference)."""
         p = self.np_params
         lay = dynamics.stack_scenes(scenes, np.float32)
+        rows = ShieldRows(self.np_params, self.sp, self.shield_stats) if self.shield else None
         b = len(scenes)
         dirs = p.directions
         hy = lay.start_y.copy()
@@ -343,12 +219,12 @@ class TrajectoryGenerator:
         length = np.ones(b, np.int64)
         alive = np.arange(b)
         for k in range(self.max_steps):
-            sub = _take(lay, alive)
+            sub = take_rows(lay, alive)
             obs = dynamics.observation(np, p, self.obs_mode, hy[alive], hz[alive], t[alive], visited[alive], sub)
             if self.shield and fast and self.epsilon <= 0.0:
-                a = self._batch_choice(hy[alive], hz[alive], sub, self.net.q(obs), last[alive])
+                a = rows.choose(hy[alive], hz[alive], sub, self.net.q(obs), last[alive])
             else:
-                mask = self._admissible_rows(hy[alive], hz[alive], sub, last=last[alive]) if self.shield else None
+                mask = rows.admissible(hy[alive], hz[alive], sub, last=last[alive]) if self.shield else None
                 a = self._explore(dynamics.greedy_action(np, self.net.q(obs), mask), mask)
             ny, nz = dynamics.move_heel(np, p, hy[alive], hz[alive], dirs[a, 0], dirs[a, 1])
             hy[alive], hz[alive] = ny, nz
@@ -475,7 +351,3 @@ def model_smoothing(shield_clearance: float, min_clearance: float, shield: bool)
         return sm.DEFAULT_SMOOTHING
     excess = float(shield_clearance) - float(min_clearance)
     return SHIELD_SMOOTHING_POINTS * excess * excess if excess > 0.0 else 0.0
-
-
-def _take(lay, idx):
-    return type(lay)(**{k: v[idx] for k, v in vars(lay).items()})

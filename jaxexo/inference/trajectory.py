@@ -208,7 +208,7 @@ class TrajectoryBatch:
         return dataclasses.replace(self, **changes)
 
 
-def clearances(foot_length: float, heel: np.ndarray, scenes) -> np.ndarray:
+def _point_clearances(foot_length: float, heel: np.ndarray, scenes) -> np.ndarray:
     """Signed foot clearance (B, N) of heel paths (B, N, 2) from each scene's obstacle; scenes are
     grouped by outline size so that a 16-vertex half-ellipse does not pad every rectangle."""
     out = np.empty(heel.shape[:2])
@@ -230,10 +230,10 @@ def _outline_groups(scenes):
             for idx in (np.flatnonzero(sizes == k) for k in np.unique(sizes))]
 
 
-def swept_clearances(foot_length: float, heel: np.ndarray, scenes, point_clearance: np.ndarray,
+def _move_clearances(foot_length: float, heel: np.ndarray, scenes, point_clearance: np.ndarray,
                      fast: bool = True) -> np.ndarray:
     """Signed clearance (B, N-1) of the foot over each move between consecutive samples
-    (jaxexo.physics.swept), grouped by outline size like ``clearances``. ``fast=False``: exact for
+    (jaxexo.physics.swept), grouped by outline size like ``_point_clearances``. ``fast=False``: exact for
     every move; ``fast`` (default): exact for each path's closest move, a lower bound above that
     minimum for the moves that cannot be the closest (``swept.path_swept_min``), which is all the
     verdict and its reasons read."""
@@ -256,7 +256,7 @@ def backward_bound(heel: np.ndarray, deviation) -> np.ndarray:
 def measure(sp, heel: np.ndarray, clearance: np.ndarray, pivot_y: np.ndarray, goal_y: np.ndarray,
             swept_clearance: np.ndarray, deviation) -> dict:
     """Kinematics and safe-swing checks of heel paths (B, N, 2), vectorised, from their clearances at
-    the samples (B, N), over the moves between them (B, N-1, ``swept_clearances``) and the bound
+    the samples (B, N), over the moves between them (B, N-1, ``path_clearances``) and the bound
     ``deviation`` (B,) of the curve from the polyline through the samples (m).
 
     ``sp`` holds the constants (jaxexo.physics.dynamics.scalar_params or numpy_params)."""
@@ -352,9 +352,9 @@ def path_clearances(foot_length: float, paths: np.ndarray, scenes, fast: bool = 
     lower bounds above that minimum elsewhere (all that the verdict and its reasons read);
     ``fast=False``, the reference: every sample and move exact."""
     if fast and len(scenes) >= PRUNE_POINTS_FROM:
-        return pruned_clearances(foot_length, paths, scenes)
-    c = clearances(foot_length, paths, scenes)
-    return c, swept_clearances(foot_length, paths, scenes, c, fast)
+        return _pruned_clearances(foot_length, paths, scenes)
+    c = _point_clearances(foot_length, paths, scenes)
+    return c, _move_clearances(foot_length, paths, scenes, c, fast)
 
 
 def lowest_clearance(point_clearance: np.ndarray, move_clearance: np.ndarray) -> np.ndarray:
@@ -378,7 +378,7 @@ def passes(sp, low, deviation, backward, headroom: float = 0.0) -> np.ndarray:
 PRUNE_POINTS_FROM = 8
 
 
-def pruned_clearances(foot_length: float, heel: np.ndarray, scenes):
+def _pruned_clearances(foot_length: float, heel: np.ndarray, scenes):
     """(point clearances (B, N), per-move clearances (B, N-1)) by ``swept.path_clearance_pruned``,
     grouped by outline size: exact at each path's closest move; elsewhere lower bounds above it."""
     b, n = heel.shape[:2]
