@@ -91,7 +91,7 @@ def _basis(n_points: int):
 def _curvature(n_points: int):
     """Bounds on max |d^2/ds^2| over s in [0, 1] of the minimum-jerk profile, of g and of each phi_k,
     and the chord factor (1 / (n - 1))^2 / 8 of samples at s = i / (n - 1): the plan's deviation from
-    the polyline through its samples is at most factor * max|c''| (issue 11). Each bound is the
+    the polyline through its samples is at most factor * max|c''|. Each bound is the
     maximum on a grid of G points plus half the grid step times a bound on the third derivative
     (the sum of its monomial coefficients' magnitudes, valid on [0, 1])."""
     P = np.polynomial.Polynomial

@@ -30,7 +30,7 @@ _LAZY = {"DeviceLimits", "TimedSwing", "time_swing", "time_swings"}   # jaxexo.i
 
 def __getattr__(name):
     # Device timing is imported on first use: it is not needed to generate, and loading it would
-    # add to every process's import time (issue 12's 0.3 s budget).
+    # add to every process's import time (its budget is 0.3 s).
     if name in _LAZY:
         from jaxexo.inference import swing_timing
 

@@ -26,7 +26,7 @@ returned with its deviation bound (the same bound as the plain spline's: jaxexo.
 The result is only a candidate: the generator's verdict (jaxexo.inference.trajectory) judges it
 exactly like any other curve, and a curve that still fails goes through the usual retries.
 
-Speed (issue 19): ``clear_rows`` corrects many paths at once, each path's arithmetic its own (the
+Speed: ``clear_rows`` corrects many paths at once, each path's arithmetic its own (the
 same curve, bit for bit, in any batch as alone): the splines of one point count in stacked
 products, the exact clearances of all paths in one vectorised call per round and outline size,
 computed exactly only for the moves that can be under the margin's threshold or be the path's

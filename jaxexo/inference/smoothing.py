@@ -19,7 +19,7 @@ few matrix products, so that a batch of paths is smoothed at once:
   overshoot near lift-off and touch-down is clipped to z = 0 (a foot resting on the floor).
 - Paths of fewer than four distinct points are resampled as polylines.
 
-- Between samples (issue 11): the checks measure the polyline through the returned samples exactly
+- Between samples: the checks measure the polyline through the returned samples exactly
   (jaxexo.physics.swept) and subtract a bound on how far the curve strays from that polyline:
   for a C2 curve c(u) the chord over a parameter step L deviates by at most L^2 max|c''| / 8, and
   the second derivative of the cubic B-spline is a linear B-spline whose coefficients bound it
@@ -263,7 +263,7 @@ def smooth_candidates(raw: np.ndarray, n_points: int, smoothings) -> tuple[np.nd
     """One raw path smoothed with each of K smoothings (m^2): ((K, n_points, 2), (K,) deviation
     bounds), as ``smooth_paths([raw] * K, n_points, smoothings, with_deviation=True)`` computes them
     (the same operators and lambda search), with the path's eigen-coordinates computed once and the K
-    curves in one matrix product (the generator's candidate smoothings, issue 19)."""
+    curves in one matrix product (the generator's candidate smoothings)."""
     s = np.asarray(smoothings, np.float64).reshape(-1)
     k = len(s)
     pts = distinct(raw)

@@ -7,7 +7,7 @@ clearance (jaxexo.physics.geometry, the heel-toe segment against the outline) an
 and leg-length rules as the training environment (jaxexo.physics.dynamics, eq 2.45, 2.50). Units: metres,
 radians, seconds.
 
-A safe swing (issue 11; ``TrajectoryChecks.ok``): the goal is reached; nothing is below the ground; the
+A safe swing (``TrajectoryChecks.ok``; jaxexo.physics.outcome): the goal is reached; nothing is below the ground; the
 heel never moves backward by more than ``env.backward_tolerance``; joint limits and leg length are
 respected; and the foot's motion never comes closer than ``env.min_clearance`` to the obstacle. The
 clearance is not taken at the samples: between two samples the flat foot sweeps a parallelogram whose
