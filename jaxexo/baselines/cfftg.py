@@ -59,6 +59,7 @@ import numpy as np
 from jaxexo.physics import dynamics, geometry
 from jaxexo.config import Config, load_config
 from jaxexo.inference.options import START_Y, STEP_LENGTH, check_options, pivot_of, scenes_for
+from jaxexo.inference.policy_check import load_checked
 from jaxexo.inference.trajectory import (DEFAULT_DURATION, Trajectory, TrajectoryBatch, TrajectoryError, assemble,
                                          measure_paths)
 
@@ -178,9 +179,7 @@ class CFFTG:
     def from_policy(cls, path: str | Path, **kwargs) -> "CFFTG":
         """A CFFTG with the kinematics of an exported policy's config (read and checked as the RL
         generator reads it; NumPy only)."""
-        from jaxexo.inference import TrajectoryGenerator
-
-        return cls(TrajectoryGenerator.load(path).config, **kwargs)
+        return cls(load_checked(path)[1], **kwargs)
 
     # Scenes ---------------------------------------------------------------------------------------
     def scene(self, obstacle: geometry.Obstacle, pivot: str | float | None = None, pivot_y: float | None = None,

@@ -130,7 +130,7 @@ def _generalized_eigh(p: np.ndarray, a: np.ndarray):
 
 
 @lru_cache(maxsize=512)
-def _basis(m: int, n_points: int):
+def spline_operators(m: int, n_points: int):
     """For M points: Z (M, M) mapping the points to eigen-coordinates z, the eigenvalues d (M,), and
     E (n_points, M) mapping shrunk eigen-coordinates to the sampled curve."""
     k = DEGREE
@@ -164,7 +164,7 @@ for _a in (_GRID, _GRID_LAMBDA):
     _a.setflags(write=False)
 
 
-def _solve_lambda(d: np.ndarray, zz: np.ndarray, s: np.ndarray) -> np.ndarray:
+def solve_lambda(d: np.ndarray, zz: np.ndarray, s: np.ndarray) -> np.ndarray:
     """Per row: lambda with r(lambda) = sum_j (lambda d_j / (1 + lambda d_j))^2 zz_j = s. r grows
     monotonically in lambda, so a coarse grid brackets the root and Newton steps in log(lambda),
     kept inside the bracket, refine it. inf when even r(inf) stays within s."""
@@ -233,18 +233,18 @@ def smooth_padded(pts: np.ndarray, lengths: np.ndarray, n_points: int = DEFAULT_
         z = np.zeros((b, mmax, 2))
         d = np.zeros((b, mmax))
         for m, idx in zip(ms, idxs):
-            zm, dm, _, _ = _basis(int(m), n_points)
+            zm, dm, _, _ = spline_operators(int(m), n_points)
             z[idx, :m] = _apply(zm, pts[idx, :m])
             d[idx, :m] = dm
         smooth = np.concatenate(idxs)
-        lam = _solve_lambda(d[smooth], np.sum(z[smooth] ** 2, axis=-1), s_all[smooth])
+        lam = solve_lambda(d[smooth], np.sum(z[smooth] ** 2, axis=-1), s_all[smooth])
         with np.errstate(invalid="ignore"):
             shrink = np.where(np.isinf(lam)[:, None], (d[smooth] == 0.0).astype(float),
                               1.0 / (1.0 + lam[:, None] * d[smooth]))
         z[smooth] *= shrink[..., None]
         h2_8 = (1.0 / (n_points - 1)) ** 2 / 8.0      # samples at u = i / (n - 1): L^2 / 8
         for m, idx in zip(ms, idxs):
-            _, _, em, qm = _basis(int(m), n_points)
+            _, _, em, qm = spline_operators(int(m), n_points)
             out[idx] = _apply(em, z[idx, :m])
             curv = np.max(np.abs(_apply(qm, z[idx, :m])), axis=1)      # (G, 2): max |c''| per axis
             dev[idx] = h2_8 * np.sqrt(np.sum(curv * curv, axis=-1))
@@ -271,10 +271,10 @@ def smooth_candidates(raw: np.ndarray, n_points: int, smoothings) -> tuple[np.nd
     if m < DEGREE + 1:
         out, dev = linear_resample(pts, n_points, with_deviation=True)
         return np.repeat(out[None], k, axis=0), np.full(k, dev, dtype=np.float64)
-    zm, dm, em, qm = _basis(m, n_points)
+    zm, dm, em, qm = spline_operators(m, n_points)
     z = zm @ pts                                                         # (M, 2)
     zz = np.sum(z * z, axis=-1)
-    lam = _solve_lambda(np.broadcast_to(dm, (k, m)), np.broadcast_to(zz, (k, m)), s)
+    lam = solve_lambda(np.broadcast_to(dm, (k, m)), np.broadcast_to(zz, (k, m)), s)
     with np.errstate(invalid="ignore"):
         shrink = np.where(np.isinf(lam)[:, None], (dm == 0.0).astype(float)[None], 1.0 / (1.0 + lam[:, None] * dm))
     zk = z[None] * shrink[..., None]                                     # (K, M, 2)
