@@ -14,9 +14,8 @@ Units: metres, radians, seconds.
 from jaxexo.physics.dynamics import Scene
 from jaxexo.physics.geometry import Obstacle
 from jaxexo.inference.generator import TrajectoryGenerator
+from jaxexo.inference.export import CSV_COLUMNS, JOINT_NAMES
 from jaxexo.inference.trajectory import (
-    CSV_COLUMNS,
-    JOINT_NAMES,
     Trajectory,
     TrajectoryBatch,
     TrajectoryChecks,

@@ -62,10 +62,8 @@ from jaxexo.config.schema import MAX_CONTROL_RATE
 from jaxexo.physics import kinematics
 from jaxexo.physics.dynamics import Scene
 from jaxexo.inference.time_law import TimeLaw, pchip_eval, pchip_slopes, time_law, topp
-from jaxexo.inference.trajectory import (
-    JOINT_NAMES, TrajectoryBatch, TrajectoryChecks, _reasons, measure_paths, timed_dict, timed_table, write_timed_csv,
-    write_timed_json,
-)
+from jaxexo.inference.export import JOINT_NAMES, timed_dict, timed_table, write_timed_csv, write_timed_json
+from jaxexo.inference.trajectory import TrajectoryBatch, TrajectoryChecks, failure_reasons, measure_paths
 
 FINE_PER_SAMPLE = 8        # fine s-grid points per interval of the path's samples
 SAFETY = 0.95              # the TOPP passes use this fraction of each limit
@@ -416,7 +414,7 @@ def _finish(traj, e: dict, sp, limits: DeviceLimits, rate: float, t_opt: float, 
     # The safe-swing checks of the retimed samples, with the trajectory's own bound on its
     # curve's distance from the polyline through its samples.
     m = measure_paths(sp, h[None], [sc], traj.checks.deviation)
-    reasons = _reasons(m, 0, h, sc.goal_y, t, sp)
+    reasons = failure_reasons(m, 0, h, sc.goal_y, t, sp)
     checks = TrajectoryChecks(bool(m["reached_goal"][0]), bool(m["collision_free"][0]),
                               float(m["min_clearance"][0]), bool(m["joint_limits_ok"][0]),
                               bool(m["leg_length_ok"][0]), reasons, bool(m["clearance_ok"][0]),

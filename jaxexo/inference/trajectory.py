@@ -21,11 +21,8 @@ and leg length are checked at the samples (the kinematics are not linear between
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import functools
-import io
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,16 +31,10 @@ import numpy as np
 
 from jaxexo.physics import dynamics, geometry, kinematics, outcome, swept
 from jaxexo.physics.dynamics import Scene
-from jaxexo.storage.atomic import atomic_write
+from jaxexo.inference.export import CSV_COLUMNS, scene_dict, write_csv, write_json
 
-JOINT_NAMES = ("hip_swing", "knee_swing", "hip_stance", "knee_stance")
 DEFAULT_DURATION = 1.0   # s, swing duration for the time stamps
 
-CSV_COLUMNS = (
-    "time_s", "heel_y_m", "heel_z_m", "toe_y_m", "toe_z_m", "hip_y_m", "hip_z_m",
-    "knee_swing_y_m", "knee_swing_z_m", "knee_stance_y_m", "knee_stance_z_m",
-    "hip_swing_rad", "knee_swing_rad", "hip_stance_rad", "knee_stance_rad",
-)
 
 
 class TrajectoryError(RuntimeError):
@@ -107,13 +98,10 @@ class Trajectory:
 
     def to_dict(self) -> dict:
         c = self.checks
-        sc = self.scene
         return {
             "units": {"length": "m", "angle": "rad", "time": "s"},
             "method": self.method,
-            "scene": {"obstacle": sc.obstacle.kind, "shape": sc.obstacle.shape, "center_y": sc.center_y,
-                      "width": sc.width, "height": sc.height, "outline": sc.obstacle.outline.tolist(),
-                      "pivot": sc.pivot, "pivot_y": sc.pivot_y, "start_y": sc.start_y, "goal_y": sc.goal_y},
+            "scene": scene_dict(self.scene),
             "checks": {"ok": c.ok, "reached_goal": c.reached_goal, "collision_free": c.collision_free,
                        "min_clearance": c.min_clearance, "clearance_ok": c.clearance_ok,
                        "above_ground": c.above_ground, "heel_backward": c.heel_backward,
@@ -127,10 +115,7 @@ class Trajectory:
         }
 
     def to_json(self, path: str | Path | None = None) -> str:
-        text = json.dumps(self.to_dict(), indent=1)
-        if path is not None:
-            atomic_write(path, text)
-        return text
+        return write_json(self.to_dict(), path)
 
 
 @dataclass(frozen=True)
@@ -306,7 +291,7 @@ def measure(sp, heel: np.ndarray, clearance: np.ndarray, pivot_y: np.ndarray, go
     }
 
 
-def _reasons(m: dict, i: int, heel: np.ndarray, goal_y: float, time: np.ndarray, sp) -> tuple[str, ...]:
+def failure_reasons(m: dict, i: int, heel: np.ndarray, goal_y: float, time: np.ndarray, sp) -> tuple[str, ...]:
     """The failed checks of path i (jaxexo.physics.outcome.CHECKS, in order), each with where it failed."""
     out = []
     for check in outcome.failed_checks(m["verdict"], i):
@@ -412,7 +397,7 @@ def assemble(method: str, sp, scenes, raws, paths: np.ndarray, smoothing, durati
         measured = measure_paths(sp, paths, scenes, deviation, fast)
     m = measured
     time = _time_stamps(n, float(duration)).copy()
-    reasons = tuple(_reasons(m, i, paths[i], scenes[i].goal_y, time, sp) for i in range(b))
+    reasons = tuple(failure_reasons(m, i, paths[i], scenes[i].goal_y, time, sp) for i in range(b))
     kin = m["kin"]
     toe = paths.copy()
     toe[..., 0] += sp.foot_length
@@ -426,67 +411,3 @@ def assemble(method: str, sp, scenes, raws, paths: np.ndarray, smoothing, durati
         clearance_ok=m["clearance_ok"], above_ground=m["above_ground"], heel_backward=m["heel_backward"],
         deviation=m["deviation"],
     )
-
-
-# Timed (device-ready) swings: exports of jaxexo.inference.swing_timing.TimedSwing ------------------
-
-TIMED_CSV_COLUMNS = CSV_COLUMNS + tuple(f"{j}_vel_rad_s" for j in JOINT_NAMES) + tuple(
-    f"{j}_acc_rad_s2" for j in JOINT_NAMES) + ("heel_vel_y_m_s", "heel_vel_z_m_s", "heel_acc_y_m_s2", "heel_acc_z_m_s2")
-
-
-def timed_table(swing) -> np.ndarray:
-    """(n, len(TIMED_CSV_COLUMNS)) array of a TimedSwing: the path columns, then joint velocities
-    and accelerations and the heel's velocity and acceleration, one row per control period."""
-    return np.column_stack([swing.time, swing.heel, swing.toe, swing.hip, swing.knee_swing, swing.knee_stance,
-                            swing.joint_angles, swing.joint_velocity, swing.joint_acceleration,
-                            swing.heel_velocity, swing.heel_acceleration])
-
-
-def write_timed_csv(swing, path: str | Path | None = None) -> str:
-    return write_csv(TIMED_CSV_COLUMNS, timed_table(swing), "{:.9g}", path)
-
-
-def write_csv(columns, table: np.ndarray, fmt: str, path: str | Path | None = None) -> str:
-    """CSV text of a (N, len(columns)) table, each number formatted by ``fmt``; written atomically to
-    ``path`` when given."""
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(columns)
-    for row in table:
-        w.writerow([fmt.format(x) for x in row])
-    text = buf.getvalue()
-    if path is not None:
-        atomic_write(path, text)
-    return text
-
-
-def timed_dict(swing) -> dict:
-    c = swing.checks
-    sc = swing.scene
-    return {
-        "units": {"length": "m", "angle": "rad", "time": "s", "joint velocity": "rad/s",
-                  "joint acceleration": "rad/s^2", "heel velocity": "m/s", "heel acceleration": "m/s^2", "rate": "Hz"},
-        "method": swing.method,
-        "scene": {"obstacle": sc.obstacle.kind, "shape": sc.obstacle.shape, "center_y": sc.center_y,
-                  "width": sc.width, "height": sc.height, "outline": sc.obstacle.outline.tolist(),
-                  "pivot": sc.pivot, "pivot_y": sc.pivot_y, "start_y": sc.start_y, "goal_y": sc.goal_y},
-        "rate_hz": swing.rate,
-        "duration_s": swing.duration,
-        "limits": swing.limits.to_dict(),
-        "peak_joint_velocity_rad_s": [float(x) for x in swing.peak_velocity],
-        "peak_joint_acceleration_rad_s2": [float(x) for x in swing.peak_acceleration],
-        "checks": {"ok": swing.ok, "within_limits": swing.within_limits, "reached_goal": c.reached_goal,
-                   "collision_free": c.collision_free, "min_clearance": c.min_clearance,
-                   "joint_limits_ok": c.joint_limits_ok, "leg_length_ok": c.leg_length_ok,
-                   "reasons": list(swing.reasons)},
-        "notes": list(swing.notes),
-        "columns": list(TIMED_CSV_COLUMNS),
-        "samples": timed_table(swing).tolist(),
-    }
-
-
-def write_timed_json(swing, path: str | Path | None = None) -> str:
-    text = json.dumps(timed_dict(swing), indent=1)
-    if path is not None:
-        atomic_write(path, text)
-    return text
