@@ -309,7 +309,7 @@ def cmd_bench(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from jaxexo.inference.options import PIVOT, START_Y, STEP_LENGTH
+    from jaxexo.physics.dynamics import DEFAULT_PIVOT, DEFAULT_START_Y, DEFAULT_STEP_LENGTH
     from jaxexo.physics.geometry import THESIS_OBSTACLES
 
     p = argparse.ArgumentParser(prog="jaxexo", description=__doc__)
@@ -341,10 +341,10 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--center-y", type=float, help="obstacle centre, m ahead of the start (default 0.45)")
     pv = g.add_mutually_exclusive_group()
     pv.add_argument("--pivot", choices=("agent", "obstacle", "between"),
-                    help=f"stance-foot condition (thesis 3.1; default: {PIVOT})")
+                    help=f"stance-foot condition (thesis 3.1; default: {DEFAULT_PIVOT})")
     pv.add_argument("--pivot-y", type=float, help="stance heel y, m")
-    g.add_argument("--start-y", type=float, default=START_Y, help="swing heel start y, m")
-    g.add_argument("--step-length", type=float, default=STEP_LENGTH, help="goal = start + this, m")
+    g.add_argument("--start-y", type=float, default=DEFAULT_START_Y, help="swing heel start y, m")
+    g.add_argument("--step-length", type=float, default=DEFAULT_STEP_LENGTH, help="goal = start + this, m")
     g.add_argument("--points", type=int, default=100, help="samples of the smoothed path")
     g.add_argument("--fallback", choices=("cfftg", "none"), default="cfftg",
                    help="when the RL swing is not safe, return CFFTG's plan (cfftg) or the RL swing alone (none)")

@@ -57,8 +57,9 @@ from pathlib import Path
 import numpy as np
 
 from jaxexo.physics import dynamics, geometry
+from jaxexo.physics.dynamics import DEFAULT_START_Y, DEFAULT_STEP_LENGTH
 from jaxexo.config import Config, load_config
-from jaxexo.inference.options import START_Y, STEP_LENGTH, check_options, pivot_of, scenes_for
+from jaxexo.inference.options import check_options, pivot_of, scenes_for
 from jaxexo.inference.policy_check import load_checked
 from jaxexo.inference.trajectory import (DEFAULT_DURATION, Trajectory, TrajectoryBatch, TrajectoryError, assemble,
                                          measure_paths)
@@ -183,7 +184,7 @@ class CFFTG:
 
     # Scenes ---------------------------------------------------------------------------------------
     def scene(self, obstacle: geometry.Obstacle, pivot: str | float | None = None, pivot_y: float | None = None,
-              start_y: float = START_Y, step_length: float = STEP_LENGTH) -> dynamics.Scene:
+              start_y: float = DEFAULT_START_Y, step_length: float = DEFAULT_STEP_LENGTH) -> dynamics.Scene:
         """Validate one scenario (metres), as the RL generator does."""
         return dynamics.make_scene(obstacle, pivot_of(pivot, pivot_y), start_y, step_length,
                                    foot_length=self.config.kinematics.foot_length,
@@ -271,7 +272,8 @@ class CFFTG:
                         measured=checks)
 
     def generate(self, obstacle: geometry.Obstacle, *, pivot: str | float | None = None, pivot_y: float | None = None,
-                 start_y: float = START_Y, step_length: float = STEP_LENGTH, n_points: int = DEFAULT_POINTS,
+                 start_y: float = DEFAULT_START_Y, step_length: float = DEFAULT_STEP_LENGTH,
+                 n_points: int = DEFAULT_POINTS,
                  duration: float = DEFAULT_DURATION, strict: bool = False,
                  clearance: float | None = None) -> Trajectory:
         """One checked trajectory (metres, radians, seconds); ``strict`` raises TrajectoryError instead
@@ -283,7 +285,8 @@ class CFFTG:
             raise TrajectoryError(traj)
         return traj
 
-    def generate_batch(self, obstacles, *, pivot=None, pivot_y=None, start_y=START_Y, step_length=STEP_LENGTH,
+    def generate_batch(self, obstacles, *, pivot=None, pivot_y=None, start_y=DEFAULT_START_Y,
+                       step_length=DEFAULT_STEP_LENGTH,
                        n_points: int = DEFAULT_POINTS, duration: float = DEFAULT_DURATION,
                        strict: bool = False, clearance: float | None = None) -> TrajectoryBatch:
         """Trajectories for many scenarios, vectorised; every option is one value or one per obstacle
@@ -295,7 +298,7 @@ class CFFTG:
             raise TrajectoryError(batch[int(np.argmin(batch.ok))])
         return batch
 
-    def scenes(self, obstacles, pivot=None, pivot_y=None, start_y=START_Y, step_length=STEP_LENGTH):
+    def scenes(self, obstacles, pivot=None, pivot_y=None, start_y=DEFAULT_START_Y, step_length=DEFAULT_STEP_LENGTH):
         return scenes_for(self.scene, obstacles, pivot, pivot_y, start_y, step_length)
 
 

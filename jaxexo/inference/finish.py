@@ -234,8 +234,9 @@ class PathFinisher:
             ok = self.margin_ok([scenes[rows[j]] for j in wait], cand, dev, fast)
             for k, j in enumerate(wait):
                 if ok[k]:
-                    out[j] = (cand[k], smoothing * f, (f"smoothing {smoothing:g} m^2 brought the foot within the "
-                                                       f"safety margin or moved the heel back; {smoothing * f:g} m^2 used",), dev[k])
+                    note = (f"smoothing {smoothing:g} m^2 brought the foot within the safety margin or moved the "
+                            f"heel back; {smoothing * f:g} m^2 used",)
+                    out[j] = (cand[k], smoothing * f, note, dev[k])
             wait = [j for k, j in enumerate(wait) if not ok[k]]
         for j in wait:
             path, dev = sm.linear_resample(raws[rows[j]], n_points, with_deviation=True)

@@ -24,12 +24,12 @@ from pathlib import Path
 import numpy as np
 
 from jaxexo.physics import dynamics, geometry
-from jaxexo.physics.dynamics import Scene, scalar
+from jaxexo.physics.dynamics import DEFAULT_START_Y, DEFAULT_STEP_LENGTH, Scene, scalar
 from jaxexo.inference import blas, smoothing as sm
 from jaxexo.inference.fallback import replace_failures
 from jaxexo.inference.finish import PathFinisher
 from jaxexo.inference.network import FoldedQNetwork, StepNetwork
-from jaxexo.inference.options import START_Y, STEP_LENGTH, check_fallback, check_options, pivot_of, scenes_for
+from jaxexo.inference.options import check_fallback, check_options, pivot_of, scenes_for
 from jaxexo.inference.policy_check import load_checked
 from jaxexo.inference.shield import ScalarShield
 from jaxexo.inference.shield_rows import ShieldRows, take_rows
@@ -108,7 +108,7 @@ class TrajectoryGenerator:
 
     # Scenes -------------------------------------------------------------------------------------
     def scene(self, obstacle: geometry.Obstacle, pivot: str | float | None = None, pivot_y: float | None = None,
-              start_y: float = START_Y, step_length: float = STEP_LENGTH) -> Scene:
+              start_y: float = DEFAULT_START_Y, step_length: float = DEFAULT_STEP_LENGTH) -> Scene:
         """Validate one scenario (metres). ``pivot_y``, when given, overrides the ``pivot`` condition."""
         return dynamics.make_scene(obstacle, pivot_of(pivot, pivot_y), start_y, step_length,
                                    foot_length=self.config.kinematics.foot_length,
@@ -276,7 +276,8 @@ class TrajectoryGenerator:
         return batch
 
     def generate(self, obstacle: geometry.Obstacle, *, pivot: str | float | None = None, pivot_y: float | None = None,
-                 start_y: float = START_Y, step_length: float = STEP_LENGTH, n_points: int = sm.DEFAULT_POINTS,
+                 start_y: float = DEFAULT_START_Y, step_length: float = DEFAULT_STEP_LENGTH,
+                 n_points: int = sm.DEFAULT_POINTS,
                  smoothing: float | None = None, duration: float = DEFAULT_DURATION,
                  strict: bool = False, fallback: str | None = "cfftg", fast: bool = True,
                  clearance: float | None = None) -> Trajectory:
@@ -297,7 +298,8 @@ class TrajectoryGenerator:
             raise TrajectoryError(traj)
         return traj
 
-    def generate_batch(self, obstacles, *, pivot=None, pivot_y=None, start_y=START_Y, step_length=STEP_LENGTH,
+    def generate_batch(self, obstacles, *, pivot=None, pivot_y=None, start_y=DEFAULT_START_Y,
+                       step_length=DEFAULT_STEP_LENGTH,
                        n_points: int = sm.DEFAULT_POINTS, smoothing: float | None = None,
                        duration: float = DEFAULT_DURATION, strict: bool = False,
                        fallback: str | None = "cfftg", fast: bool = True,

@@ -1,8 +1,10 @@
-"""Scene defaults and the option checks shared by every generator (the RL policy, CFFTG).
+"""The options shared by every generator (the RL policy, CFFTG): scene defaults and checks.
 
 A swing is asked for by an obstacle and where the feet are: the pivot (stance) heel, the swing
-heel's start and the step length. Their defaults are declared here once; ``scenes_for`` turns the
-per-obstacle options of ``generate_batch`` into validated scenes (jaxexo.physics.dynamics.make_scene).
+heel's start and the step length; their defaults are jaxexo.physics.dynamics's (DEFAULT_PIVOT,
+DEFAULT_START_Y, DEFAULT_STEP_LENGTH). ``scenes_for`` turns the per-obstacle options of
+``generate_batch`` into validated scenes (jaxexo.physics.dynamics.make_scene); ``check_options``
+bounds the sizes taken from input.
 """
 
 from __future__ import annotations
@@ -11,13 +13,7 @@ import numpy as np
 
 from jaxexo.config.schema import MAX_SWING_DURATION
 from jaxexo.physics import geometry
-from jaxexo.physics.dynamics import Scene
-
-# Scene defaults (metres): the pivot heel beside the obstacle, the swing heel at the origin, and
-# the thesis's step (Table 3.1's layouts).
-PIVOT = "obstacle"
-START_Y = 0.0
-STEP_LENGTH = 0.70
+from jaxexo.physics.dynamics import DEFAULT_PIVOT, Scene
 
 # Bounds of the sizes taken from input, checked before anything is allocated.
 MAX_POINTS = 100_000                 # samples of one path
@@ -27,9 +23,9 @@ FALLBACKS = ("cfftg", None)
 
 
 def pivot_of(pivot, pivot_y):
-    """The scene's pivot: a condition (default PIVOT) or ``pivot_y`` in metres, not both."""
+    """The scene's pivot: a condition (default DEFAULT_PIVOT) or ``pivot_y`` in metres, not both."""
     if pivot_y is None:
-        return PIVOT if pivot is None else pivot
+        return DEFAULT_PIVOT if pivot is None else pivot
     if pivot is not None:
         raise ValueError(f"pivot, pivot_y: give one of them (a condition or a y in metres), got pivot={pivot!r} "
                          f"and pivot_y={pivot_y!r}")

@@ -456,8 +456,15 @@ class Scene:
         return PIVOT_CONDITIONS[self.pivot_kind] if self.pivot_kind >= 0 else f"y={self.pivot_y:.3f} m"
 
 
-def make_scene(obstacle: geometry.Obstacle, pivot: str | float = "obstacle", start_y: float = 0.0,
-               step_length: float = 0.70, *, foot_length: float, max_vertices: int | None = None,
+# A scene's defaults (m): the pivot heel beside the obstacle, the swing heel at the origin, the
+# thesis's step (Table 3.1's layouts). Every generator and the environment's layout_for read these.
+DEFAULT_PIVOT = "obstacle"
+DEFAULT_START_Y = 0.0
+DEFAULT_STEP_LENGTH = 0.70
+
+
+def make_scene(obstacle: geometry.Obstacle, pivot: str | float = DEFAULT_PIVOT, start_y: float = DEFAULT_START_Y,
+               step_length: float = DEFAULT_STEP_LENGTH, *, foot_length: float, max_vertices: int | None = None,
                shape_points: int = geometry.DEFAULT_SHAPE_POINTS) -> Scene:
     """Validate and lay out one scene. ``pivot`` is one of PIVOT_CONDITIONS (thesis 3.1) or the pivot
     heel's y in metres. ``max_vertices`` pads the outline to a fixed K (the JAX environment's); None
