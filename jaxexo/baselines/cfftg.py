@@ -76,7 +76,7 @@ FLATNESS = (0.0, 1.0, 2.0, 3.0)
 
 
 @functools.lru_cache(maxsize=16)
-def _basis(n_points: int):
+def plan_basis(n_points: int):
     """Samples s, the minimum-jerk profile, the apex-moving term g = s^3 (1-s)^3 and z's shapes
     phi_k (len(FLATNESS), N), each with peak 1 at s = 1/2 (computed once per n_points, read-only)."""
     s = np.linspace(0.0, 1.0, n_points)
@@ -134,7 +134,7 @@ def plan_paths(start_y, goal_y, outline, apex_frac, margin, foot_length: float, 
     ``apex_frac`` (B,): the apex's y as a fraction of the step (clipped to the monotone range);
     ``margin`` (B,): clearance asked of the foot, metres. Of the height shapes FLATNESS, each scene
     gets the one that needs the lowest apex."""
-    s, mj, g, phi = _basis(n_points)
+    s, mj, g, phi = plan_basis(n_points)
     frac = np.clip(apex_frac, *APEX_FRAC_RANGE)
     c = 64.0 * (frac - 0.5)
     d = (goal_y - start_y)[:, None]
