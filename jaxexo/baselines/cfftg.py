@@ -59,7 +59,7 @@ import numpy as np
 from jaxexo.physics import dynamics, geometry
 from jaxexo.physics.dynamics import DEFAULT_START_Y, DEFAULT_STEP_LENGTH
 from jaxexo.config import Config, load_config
-from jaxexo.inference.options import check_options, pivot_of, scenes_for
+from jaxexo.inference.options import check_options, scene_for, scenes_for
 from jaxexo.inference.policy_check import load_checked
 from jaxexo.inference.trajectory import (DEFAULT_DURATION, Trajectory, TrajectoryBatch, TrajectoryError, assemble,
                                          measure_paths)
@@ -186,9 +186,7 @@ class CFFTG:
     def scene(self, obstacle: geometry.Obstacle, pivot: str | float | None = None, pivot_y: float | None = None,
               start_y: float = DEFAULT_START_Y, step_length: float = DEFAULT_STEP_LENGTH) -> dynamics.Scene:
         """Validate one scenario (metres), as the RL generator does."""
-        return dynamics.make_scene(obstacle, pivot_of(pivot, pivot_y), start_y, step_length,
-                                   foot_length=self.config.kinematics.foot_length,
-                                   shape_points=self.config.env.shape_points)
+        return scene_for(self.config, obstacle, pivot, pivot_y, start_y, step_length)
 
     # Planning ---------------------------------------------------------------------------------------
     def plan(self, scenes, n_points: int = DEFAULT_POINTS):

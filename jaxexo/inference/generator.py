@@ -29,7 +29,7 @@ from jaxexo.inference import blas, smoothing as sm
 from jaxexo.inference.fallback import replace_failures
 from jaxexo.inference.finish import PathFinisher
 from jaxexo.inference.network import FoldedQNetwork, StepNetwork
-from jaxexo.inference.options import check_fallback, check_options, pivot_of, scenes_for
+from jaxexo.inference.options import check_fallback, check_options, scene_for, scenes_for
 from jaxexo.inference.policy_check import load_checked
 from jaxexo.inference.shield import ScalarShield
 from jaxexo.inference.shield_rows import ShieldRows, take_rows
@@ -110,9 +110,7 @@ class TrajectoryGenerator:
     def scene(self, obstacle: geometry.Obstacle, pivot: str | float | None = None, pivot_y: float | None = None,
               start_y: float = DEFAULT_START_Y, step_length: float = DEFAULT_STEP_LENGTH) -> Scene:
         """Validate one scenario (metres). ``pivot_y``, when given, overrides the ``pivot`` condition."""
-        return dynamics.make_scene(obstacle, pivot_of(pivot, pivot_y), start_y, step_length,
-                                   foot_length=self.config.kinematics.foot_length,
-                                   shape_points=self.config.env.shape_points)
+        return scene_for(self.config, obstacle, pivot, pivot_y, start_y, step_length)
 
     def _scenes(self, obstacles, pivot, pivot_y, start_y, step_length) -> list[Scene]:
         return scenes_for(self.scene, obstacles, pivot, pivot_y, start_y, step_length)

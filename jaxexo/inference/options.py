@@ -13,7 +13,7 @@ import numpy as np
 
 from jaxexo.config.schema import MAX_SWING_DURATION
 from jaxexo.physics import geometry
-from jaxexo.physics.dynamics import DEFAULT_PIVOT, Scene
+from jaxexo.physics.dynamics import DEFAULT_PIVOT, DEFAULT_START_Y, DEFAULT_STEP_LENGTH, Scene, make_scene
 
 # Bounds of the sizes taken from input, checked before anything is allocated.
 MAX_POINTS = 100_000                 # samples of one path
@@ -30,6 +30,14 @@ def pivot_of(pivot, pivot_y):
         raise ValueError(f"pivot, pivot_y: give one of them (a condition or a y in metres), got pivot={pivot!r} "
                          f"and pivot_y={pivot_y!r}")
     return pivot_y
+
+
+def scene_for(config, obstacle, pivot=None, pivot_y=None, start_y=DEFAULT_START_Y,
+              step_length=DEFAULT_STEP_LENGTH) -> Scene:
+    """One validated scene (metres) for a generator of ``config`` (its foot length and shape
+    descriptor); ``pivot_y``, when given, replaces the ``pivot`` condition."""
+    return make_scene(obstacle, pivot_of(pivot, pivot_y), start_y, step_length,
+                      foot_length=config.kinematics.foot_length, shape_points=config.env.shape_points)
 
 
 def scenes_for(make, obstacles, pivot, pivot_y, start_y, step_length) -> list[Scene]:
