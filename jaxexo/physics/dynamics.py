@@ -457,7 +457,7 @@ class Scene:
 
 
 # A scene's defaults (m): the pivot heel beside the obstacle, the swing heel at the origin, the
-# thesis's step (Table 3.1's layouts). Every generator and the environment's layout_for read these.
+# thesis's step (Table 3.1's layouts): make_scene's, and every generator's (jaxexo.inference.options).
 DEFAULT_PIVOT = "obstacle"
 DEFAULT_START_Y = 0.0
 DEFAULT_STEP_LENGTH = 0.70
