@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxexo.baselines import CFFTG
-from jaxexo.baselines.cfftg import basis
+from jaxexo.baselines.cfftg import plan_basis
 from jaxexo.evaluation.machine import machine_info, write_result
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.inference import smoothing as sm
@@ -40,9 +40,9 @@ def dense_curve(t, cfftg: CFFTG, factor: int = FACTOR) -> np.ndarray:
         sc = t.scene
         frac = (t.raw[1, 0] - sc.start_y) / (sc.goal_y - sc.start_y)
         h = t.raw[1, 1]
-        phi_n = basis(len(t.heel))[3]
+        phi_n = plan_basis(len(t.heel))[3]
         k = int(np.argmin(np.abs(h * phi_n - t.heel[None, :, 1]).max(axis=1)))
-        s, mj, g, phi = basis(dense_n)
+        s, mj, g, phi = plan_basis(dense_n)
         y = sc.start_y + (sc.goal_y - sc.start_y) * (mj + 64.0 * (frac - 0.5) * g)
         return np.column_stack([y, h * phi[k]])
     if any("jaxexo.inference.clearing" in note for note in t.notes):

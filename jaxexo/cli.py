@@ -73,7 +73,8 @@ def cmd_train(args) -> int:
     return 0
 
 
-OBSTACLE_KINDS = ("base1", "base2", "base3", "triangle", "half_circle", "rectangle", "half_ellipse")
+GENERAL_SHAPES = ("rectangle", "half_ellipse")    # --obstacle kinds of any size besides the thesis's five
+DEFAULT_SIZE = (0.20, 0.15)                       # m, width and height of a general shape
 
 
 def obstacle_from_args(args):
@@ -85,8 +86,7 @@ def obstacle_from_args(args):
     center = 0.45 if args.center_y is None else args.center_y
     if kind in THESIS_OBSTACLES and args.width is None and args.height is None:
         return Obstacle.named(kind, center_y=center)
-    shape = {"base1": "rectangle", "base2": "rectangle", "base3": "rectangle", "half_circle": "half_ellipse"}.get(kind, kind)
-    default_w, default_h = THESIS_OBSTACLES[kind][1:] if kind in THESIS_OBSTACLES else (0.20, 0.15)
+    shape, default_w, default_h = THESIS_OBSTACLES[kind] if kind in THESIS_OBSTACLES else (kind, *DEFAULT_SIZE)
     w = default_w if args.width is None else args.width
     h = default_h if args.height is None else args.height
     return getattr(Obstacle, shape)(w, h, center_y=center)
@@ -160,7 +160,7 @@ def cmd_generate(args) -> int:
 
     if args.rate is not None and not (math.isfinite(args.rate) and 0 < args.rate <= MAX_CONTROL_RATE):
         raise ValueError(f"--rate: control rate must be > 0 and <= {MAX_CONTROL_RATE:g} Hz, got {args.rate:g}")
-    from jaxexo.inference.generator import MAX_DURATION, MAX_POINTS
+    from jaxexo.inference.options import MAX_DURATION, MAX_POINTS
 
     if not 2 <= args.points <= MAX_POINTS:
         raise ValueError(f"--points: samples of the path must be in [2, {MAX_POINTS}], got {args.points}")
@@ -309,6 +309,9 @@ def cmd_bench(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from jaxexo.physics.dynamics import DEFAULT_PIVOT, DEFAULT_START_Y, DEFAULT_STEP_LENGTH
+    from jaxexo.physics.geometry import THESIS_OBSTACLES
+
     p = argparse.ArgumentParser(prog="jaxexo", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
     b = sub.add_parser("bench-env", help="environment steps per second (random actions, full reward)")
@@ -332,16 +335,16 @@ def build_parser() -> argparse.ArgumentParser:
                                     "it supplies the kinematics, default: configs/default.toml)")
     g.add_argument("--method", choices=("rl", "cfftg"), default="rl",
                    help="rl: the trained policy; cfftg: the polynomial baseline (jaxexo.baselines.cfftg)")
-    g.add_argument("--obstacle", required=True, choices=OBSTACLE_KINDS)
+    g.add_argument("--obstacle", required=True, choices=(*THESIS_OBSTACLES, *GENERAL_SHAPES))
     g.add_argument("--width", type=float, help="obstacle width, m")
     g.add_argument("--height", type=float, help="obstacle height, m")
     g.add_argument("--center-y", type=float, help="obstacle centre, m ahead of the start (default 0.45)")
     pv = g.add_mutually_exclusive_group()
     pv.add_argument("--pivot", choices=("agent", "obstacle", "between"),
-                    help="stance-foot condition (thesis 3.1; default: obstacle)")
+                    help=f"stance-foot condition (thesis 3.1; default: {DEFAULT_PIVOT})")
     pv.add_argument("--pivot-y", type=float, help="stance heel y, m")
-    g.add_argument("--start-y", type=float, default=0.0, help="swing heel start y, m")
-    g.add_argument("--step-length", type=float, default=0.70, help="goal = start + this, m")
+    g.add_argument("--start-y", type=float, default=DEFAULT_START_Y, help="swing heel start y, m")
+    g.add_argument("--step-length", type=float, default=DEFAULT_STEP_LENGTH, help="goal = start + this, m")
     g.add_argument("--points", type=int, default=100, help="samples of the smoothed path")
     g.add_argument("--fallback", choices=("cfftg", "none"), default="cfftg",
                    help="when the RL swing is not safe, return CFFTG's plan (cfftg) or the RL swing alone (none)")

@@ -12,7 +12,7 @@ import pytest
 from conftest import ROOT
 from jaxexo.physics import geometry
 from jaxexo.baselines import CFFTG
-from jaxexo.baselines.cfftg import APEX_FRAC_RANGE, FLATNESS, basis, plan_paths
+from jaxexo.baselines.cfftg import APEX_FRAC_RANGE, FLATNESS, plan_basis, plan_paths
 from jaxexo.config import load_config
 from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 from jaxexo.inference import Obstacle, TrajectoryError
@@ -86,7 +86,7 @@ def test_path_starts_and_ends_on_the_ground_at_rest_and_never_steps_back(gen):
 
 
 def test_plan_polynomials_hit_their_apex():
-    s, mj, g, phi = basis(101)
+    s, mj, g, phi = plan_basis(101)
     assert phi.shape == (len(FLATNESS), 101)
     np.testing.assert_allclose(phi[:, 50], 1.0)
     assert np.all(phi.argmax(axis=1) == 50)            # one apex at s = 1/2 for every flatness

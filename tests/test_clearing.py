@@ -86,7 +86,7 @@ def test_no_correction_where_the_plain_spline_keeps_the_margin():
     raw = np.array([[0.0, 0.0], [0.1, 0.08], [0.2, 0.14], [0.3, 0.17], [0.4, 0.18], [0.5, 0.17], [0.6, 0.13],
                     [0.7, 0.06], [0.75, 0.0]])
     path, dev, rounds = clear_smooth(raw, outline, FOOT, MARGIN)
-    ref, ref_dev = sm.smooth_one(raw, 100, sm.DEFAULT_SMOOTHING)
+    ref, ref_dev = sm.smooth_paths([raw], 100, sm.DEFAULT_SMOOTHING, with_deviation=True)
     assert rounds == 0
     np.testing.assert_allclose(path, ref[0], atol=1e-12)
     assert dev == pytest.approx(ref_dev[0], abs=1e-15)
@@ -112,19 +112,22 @@ def test_two_samples_have_nothing_to_move():
 
 
 def test_a_smoothed_path_is_accepted_with_headroom_above_the_margin():
-    """The generator accepts a smoothed path only ACCEPT_HEADROOM above the margin (so that its
+    """The generator accepts a retried path only ACCEPT_HEADROOM above the margin (so that its
     device-ready retiming, which resamples an interpolant of the samples, keeps the margin too): a path
     whose guaranteed clearance is between the margin and margin + headroom is sent on to the spline's
     correction, one above is accepted, one below is not."""
     from test_fast_shield import _random_generator
 
+    from jaxexo.inference.finish import ACCEPT_HEADROOM
+    from jaxexo.inference.trajectory import passes
+
     gen = _random_generator()
-    m, h = gen.sp.min_clearance, gen.ACCEPT_HEADROOM
+    m, h = gen.sp.min_clearance, ACCEPT_HEADROOM
     assert 0 < h < 1e-3
     low = np.array([m + 2 * h, m + 0.5 * h, m - 0.5 * h, m + 2 * h])
     dev = np.array([0.0, 0.0, 0.0, 1.5 * h])
     back = np.zeros(4)
-    np.testing.assert_array_equal(gen._passes(low, dev, back), [True, False, False, False])
+    np.testing.assert_array_equal(passes(gen.sp, low, dev, back, h), [True, False, False, False])
 
 
 # --------------------------------------------------------------------------------------------

@@ -9,8 +9,9 @@ import shutil
 import numpy as np
 import pytest
 
-from jaxexo.evaluation.compare import evaluate_generators, make_scenarios, markdown, squared_jerk
-from jaxexo.evaluation.metrics import path_length
+from jaxexo.evaluation.compare import evaluate_generators, make_scenarios
+from jaxexo.evaluation.metrics import path_length, squared_jerk
+from jaxexo.evaluation.report import markdown
 
 pytest.importorskip("jax")
 
@@ -237,7 +238,7 @@ def test_device_metrics_time_the_moving_swings_and_count_a_still_one_as_zero(tra
     # cannot time; the report must still be written: that swing counts 0 s, the others are timed as alone.
     import dataclasses
 
-    from jaxexo.evaluation.compare import device_metrics
+    from jaxexo.evaluation.metrics import device_metrics
     from jaxexo.inference import TrajectoryGenerator
     from jaxexo.inference.swing_timing import time_swings
 

@@ -150,13 +150,14 @@ def test_fast_generation_with_candidate_smoothings_matches_the_reference(clearin
 
 
 def test_candidate_smoothings_are_decreasing_and_per_path():
-    gen = _random_generator()
+    from jaxexo.inference.finish import CANDIDATE_RESIDUALS, candidates
+
     raw = np.column_stack([np.linspace(0, 0.7, 30), np.sin(np.linspace(0, np.pi, 30)) * 0.2])
-    c = gen._candidates(raw, 0.005)
+    c = candidates(raw, 0.005)
     assert c[0] == 0.005 and all(a > b for a, b in zip(c, c[1:]))
-    assert c[1:] == [30 * r * r for r in gen.CANDIDATE_RESIDUALS if 30 * r * r < 0.005]
-    assert gen._candidates(raw[:3], 0.005) == [0.005]        # too short to smooth
-    assert gen._candidates(raw, 1e-6) == [1e-6]
+    assert c[1:] == [30 * r * r for r in CANDIDATE_RESIDUALS if 30 * r * r < 0.005]
+    assert candidates(raw[:3], 0.005) == [0.005]        # too short to smooth
+    assert candidates(raw, 1e-6) == [1e-6]
 
 
 def test_smooth_candidates_is_smooth_paths_of_the_repeated_path():
@@ -213,17 +214,17 @@ def test_a_swing_short_of_the_goal_is_not_retried_down_to_the_raw_polyline(clear
     whole = np.array([(0.0, 0.0), (0.06, 0.0)] + up + over + down + [(0.70, 0.0)])
     short = whole[: 2 + len(up) + len(over)]                    # stops on top of the obstacle
     for fast in (True, False):
-        t = gen._finish([scene], [short], 100, 0.05, 1.0, None, fast=fast)[0]
+        t = gen.finish([scene], [short], 100, 0.05, 1.0, None, fast=fast)[0]
         assert not t.ok and not t.checks.reached_goal and t.smoothing == 0.05
         assert not any("brought the foot" in n for n in t.notes)
-        w = gen._finish([scene], [whole], 100, 0.05, 1.0, None, fast=fast)[0]
+        w = gen.finish([scene], [whole], 100, 0.05, 1.0, None, fast=fast)[0]
         assert w.checks.reached_goal and w.checks.clearance_ok
         if not clearing:
             assert np.isnan(w.smoothing) or w.smoothing < 0.05
             assert any("brought the foot" in n for n in w.notes)
-    _same(gen._finish([scene], [short], 100, 0.05, 1.0, None)[0],
-          gen._finish([scene], [short], 100, 0.05, 1.0, None, fast=False)[0])
+    _same(gen.finish([scene], [short], 100, 0.05, 1.0, None)[0],
+          gen.finish([scene], [short], 100, 0.05, 1.0, None, fast=False)[0])
     # in a batch too, beside a row that is retried
-    b = gen._finish([scene, scene], [short, whole], 100, 0.05, 1.0, None)
+    b = gen.finish([scene, scene], [short, whole], 100, 0.05, 1.0, None)
     assert b[0].smoothing == 0.05 and not b[0].checks.reached_goal
     assert b[1].checks.clearance_ok

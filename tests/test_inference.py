@@ -258,18 +258,18 @@ def test_smoothing_that_would_touch_the_obstacle_falls_back(trained_policy):
     assert ob.clearance(smooth, foot).min() <= geometry.TOUCH_EPS      # the premise: plain smoothing collides
     # First the corrected spline (jaxexo.inference.clearing, on by default): the same smoothing, moved
     # away from the obstacle where it cut the margin.
-    t = gen._finish([scene], [raw], 100, 0.05, 1.0, None)[0]
+    t = gen.finish([scene], [raw], 100, 0.05, 1.0, None)[0]
     assert t.smoothing == 0.05 and any("jaxexo.inference.clearing" in n for n in t.notes)
     assert t.checks.clearance_ok and t.checks.min_clearance >= gen.config.env.min_clearance
     # The retries below it (less smoothing, down to the raw polyline), with the correction off.
     gen.clearing = False
-    t = gen._finish([scene], [raw], 100, 0.05, 1.0, None)[0]
+    t = gen.finish([scene], [raw], 100, 0.05, 1.0, None)[0]
     assert t.checks.collision_free and t.checks.min_clearance > geometry.TOUCH_EPS
     assert (np.isnan(t.smoothing) or t.smoothing < 0.05) and t.notes
     # In a batch, only the rows that need it fall back; the others keep the full smoothing.
     arc = np.linspace(0.0, np.pi, 25)
     plain = np.column_stack([0.35 * (1 - np.cos(arc)), 0.45 * np.sin(arc)])    # high above it
-    both = gen._finish([scene, scene], [plain, raw], 100, 0.05, 1.0, None)
+    both = gen.finish([scene, scene], [plain, raw], 100, 0.05, 1.0, None)
     assert both[0].smoothing == 0.05 and not both[0].notes and both[0].checks.collision_free
     np.testing.assert_allclose(both[1].heel, t.heel)
     np.testing.assert_equal(both[1].smoothing, t.smoothing)      # nan (the raw polyline) equals nan
@@ -277,10 +277,10 @@ def test_smoothing_that_would_touch_the_obstacle_falls_back(trained_policy):
     # A raw path that itself touches the obstacle keeps its smoothing, and the checks say so.
     bad = raw.copy()
     bad[len(up) + 4, 1] = 0.15
-    t = gen._finish([scene], [bad], 100, 0.05, 1.0, None)[0]
+    t = gen.finish([scene], [bad], 100, 0.05, 1.0, None)[0]
     assert t.smoothing == 0.05 and not t.checks.collision_free and not t.notes
     # With no smoothing asked for, the raw polyline is returned as it is.
-    t = gen._finish([scene], [raw], 100, 0.0, 1.0, None)[0]
+    t = gen.finish([scene], [raw], 100, 0.0, 1.0, None)[0]
     assert np.isnan(t.smoothing)
     np.testing.assert_allclose(t.heel[[0, -1]], raw[[0, -1]])
 

@@ -255,14 +255,14 @@ def test_cfftg_fallback_replaces_an_unsafe_rl_swing(trained_run):
     # An RL swing that skims the triangle's apex (1 cm above it) is replaced by CFFTG's plan.
     scene = gen.scene(ob, pivot="between")
     raw = np.array([[0.0, 0.0], [0.05, 0.1], [0.25, 0.21], [0.45, 0.21], [0.65, 0.1], [0.70, 0.0]])
-    rl = gen._finish([scene], [raw], 100, 0.0, 1.0, None)[0]
+    rl = gen.finish([scene], [raw], 100, 0.0, 1.0, None)[0]
     assert not rl.ok and rl.checks.collision_free and not rl.checks.clearance_ok
-    t = gen._finish([scene], [raw], 100, 0.0, 1.0, "cfftg")[0]
+    t = gen.finish([scene], [raw], 100, 0.0, 1.0, "cfftg")[0]
     assert t.method == "cfftg-fallback" and t.ok and t.checks.min_clearance >= gen.config.env.min_clearance
     assert any(n.startswith("RL swing failed the safe-swing check") for n in t.notes)
     # The batch falls back row by row; a safe RL row stays RL.
     high = np.array([[0.0, 0.0], [0.05, 0.15], [0.25, 0.30], [0.45, 0.30], [0.65, 0.15], [0.70, 0.0]])
-    b = gen._finish([scene, scene], [raw, high], 100, 0.0, 1.0, "cfftg")
+    b = gen.finish([scene, scene], [raw, high], 100, 0.0, 1.0, "cfftg")
     assert b[1].ok, b.reasons[1]
     assert [b[i].method for i in range(2)] == ["cfftg-fallback", "rl"] and b.ok.all()
     np.testing.assert_array_equal(b[0].heel, t.heel)

@@ -106,22 +106,6 @@ def test_fast_generation_matches_the_reference_on_thousands_of_scenes(trained_ru
                   gen.generate(s["obstacle"], fallback=fallback, fast=False, **kw))
 
 
-def test_smooth_one_is_smooth_paths_for_one_path():
-    from jaxexo.inference import smoothing as sm
-
-    rng = np.random.default_rng(1)
-    for n in (1, 2, 3, 4, 5, 12, 31, 45):
-        for path in _random_paths(rng, 30, n):
-            path = path.copy()
-            if n > 3:
-                path[n // 2] = path[n // 2 - 1]       # a repeated point (a move clipped to nothing)
-            for s in (0.005, 0.001, 1e-6, 0.0):
-                a, da = sm.smooth_paths([path], 100, s, with_deviation=True)
-                b, db = sm.smooth_one(path, 100, s)
-                np.testing.assert_array_equal(a, b)
-                np.testing.assert_array_equal(da, db)
-
-
 def test_pruned_point_clearances_keep_the_exact_minimum():
     rng = np.random.default_rng(2)
     kinds = [geometry.Obstacle.rectangle, geometry.Obstacle.triangle, geometry.Obstacle.half_ellipse]

@@ -18,7 +18,8 @@ from jaxexo.config import ConfigError, Config, config_from_dict, load_config, sc
 from jaxexo.config.toml_io import config_to_toml
 from jaxexo.inference import Obstacle
 from jaxexo.inference.swing_timing import DeviceLimits, time_swing, time_swings, uniform_peaks
-from jaxexo.inference.trajectory import TIMED_CSV_COLUMNS, assemble
+from jaxexo.inference.export import TIMED_CSV_COLUMNS
+from jaxexo.inference.trajectory import assemble
 from jaxexo.physics import dynamics, kinematics
 
 from conftest import ROOT, legacy_raw

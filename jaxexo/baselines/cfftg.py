@@ -57,8 +57,10 @@ from pathlib import Path
 import numpy as np
 
 from jaxexo.physics import dynamics, geometry
+from jaxexo.physics.dynamics import DEFAULT_START_Y, DEFAULT_STEP_LENGTH
 from jaxexo.config import Config, load_config, scalar_params
-from jaxexo.inference.generator import check_options, pivot_of, scenes_for
+from jaxexo.inference.options import check_options, scene_for, scenes_for
+from jaxexo.inference.policy_check import load_checked
 from jaxexo.inference.trajectory import (DEFAULT_DURATION, Trajectory, TrajectoryBatch, TrajectoryError, assemble,
                                          measure_paths)
 
@@ -74,7 +76,7 @@ FLATNESS = (0.0, 1.0, 2.0, 3.0)
 
 
 @functools.lru_cache(maxsize=16)
-def basis(n_points: int):
+def plan_basis(n_points: int):
     """Samples s, the minimum-jerk profile, the apex-moving term g = s^3 (1-s)^3 and z's shapes
     phi_k (len(FLATNESS), N), each with peak 1 at s = 1/2 (computed once per n_points, read-only)."""
     s = np.linspace(0.0, 1.0, n_points)
@@ -91,7 +93,7 @@ def basis(n_points: int):
 def _curvature(n_points: int):
     """Bounds on max |d^2/ds^2| over s in [0, 1] of the minimum-jerk profile, of g and of each phi_k,
     and the chord factor (1 / (n - 1))^2 / 8 of samples at s = i / (n - 1): the plan's deviation from
-    the polyline through its samples is at most factor * max|c''| (issue 11). Each bound is the
+    the polyline through its samples is at most factor * max|c''|. Each bound is the
     maximum on a grid of G points plus half the grid step times a bound on the third derivative
     (the sum of its monomial coefficients' magnitudes, valid on [0, 1])."""
     P = np.polynomial.Polynomial
@@ -132,7 +134,7 @@ def plan_paths(start_y, goal_y, outline, apex_frac, margin, foot_length: float, 
     ``apex_frac`` (B,): the apex's y as a fraction of the step (clipped to the monotone range);
     ``margin`` (B,): clearance asked of the foot, metres. Of the height shapes FLATNESS, each scene
     gets the one that needs the lowest apex."""
-    s, mj, g, phi = basis(n_points)
+    s, mj, g, phi = plan_basis(n_points)
     frac = np.clip(apex_frac, *APEX_FRAC_RANGE)
     c = 64.0 * (frac - 0.5)
     d = (goal_y - start_y)[:, None]
@@ -178,17 +180,13 @@ class CFFTG:
     def from_policy(cls, path: str | Path, **kwargs) -> "CFFTG":
         """A CFFTG with the kinematics of an exported policy's config (read and checked as the RL
         generator reads it; NumPy only)."""
-        from jaxexo.inference import TrajectoryGenerator
-
-        return cls(TrajectoryGenerator.load(path).config, **kwargs)
+        return cls(load_checked(path)[1], **kwargs)
 
     # Scenes ---------------------------------------------------------------------------------------
     def scene(self, obstacle: geometry.Obstacle, pivot: str | float | None = None, pivot_y: float | None = None,
-              start_y: float = 0.0, step_length: float = 0.70) -> dynamics.Scene:
+              start_y: float = DEFAULT_START_Y, step_length: float = DEFAULT_STEP_LENGTH) -> dynamics.Scene:
         """Validate one scenario (metres), as the RL generator does."""
-        return dynamics.make_scene(obstacle, pivot_of(pivot, pivot_y), start_y, step_length,
-                                   foot_length=self.config.kinematics.foot_length,
-                                   shape_points=self.config.env.shape_points)
+        return scene_for(self.config, obstacle, pivot, pivot_y, start_y, step_length)
 
     # Planning ---------------------------------------------------------------------------------------
     def plan(self, scenes, n_points: int = DEFAULT_POINTS):
@@ -260,38 +258,45 @@ class CFFTG:
         return out
 
     # Trajectories -----------------------------------------------------------------------------------
-    def _finish(self, scenes, n_points, duration, strict) -> TrajectoryBatch:
+    def finish(self, scenes, n_points: int, duration: float) -> TrajectoryBatch:
+        """Checked trajectories of validated scenes: planned, checked and re-planned (``plan``), with a
+        note per scene of the plans it took and where the apex is."""
         paths, via, plans, gave_up, checks = self.plan(scenes, n_points)
         notes = []
         for i in range(len(scenes)):
             note = f"cfftg: {plans[i]} plan(s); apex y={via[i, 1, 0]:.3f} m, z={via[i, 1, 1]:.3f} m"
             notes.append((note + f"; gave up after {self.max_plans} plans",) if gave_up[i] else (note,))
-        batch = assemble(self.method, self.sp, scenes, list(via), paths, np.zeros(len(scenes)), duration, notes,
-                         measured=checks)
-        if strict and not batch.ok.all():
-            raise TrajectoryError(batch[int(np.argmin(batch.ok))])
-        return batch
+        return assemble(self.method, self.sp, scenes, list(via), paths, np.zeros(len(scenes)), duration, notes,
+                        measured=checks)
 
     def generate(self, obstacle: geometry.Obstacle, *, pivot: str | float | None = None, pivot_y: float | None = None,
-                 start_y: float = 0.0, step_length: float = 0.70, n_points: int = DEFAULT_POINTS,
+                 start_y: float = DEFAULT_START_Y, step_length: float = DEFAULT_STEP_LENGTH,
+                 n_points: int = DEFAULT_POINTS,
                  duration: float = DEFAULT_DURATION, strict: bool = False,
                  clearance: float | None = None) -> Trajectory:
         """One checked trajectory (metres, radians, seconds); ``strict`` raises TrajectoryError instead
         of returning one that fails a check; ``clearance`` (m) the margin to keep (``at_clearance``)."""
         n_points, duration = _check_options(n_points, duration)
         scene = self.scene(obstacle, pivot, pivot_y, start_y, step_length)
-        return self.at_clearance(clearance)._finish([scene], n_points, duration, strict)[0]
+        traj = self.at_clearance(clearance).finish([scene], n_points, duration)[0]
+        if strict and not traj.ok:
+            raise TrajectoryError(traj)
+        return traj
 
-    def generate_batch(self, obstacles, *, pivot=None, pivot_y=None, start_y=0.0, step_length=0.70,
+    def generate_batch(self, obstacles, *, pivot=None, pivot_y=None, start_y=DEFAULT_START_Y,
+                       step_length=DEFAULT_STEP_LENGTH,
                        n_points: int = DEFAULT_POINTS, duration: float = DEFAULT_DURATION,
                        strict: bool = False, clearance: float | None = None) -> TrajectoryBatch:
         """Trajectories for many scenarios, vectorised; every option is one value or one per obstacle
         (``clearance`` one value, as in ``generate``)."""
         n_points, duration = _check_options(n_points, duration)
         scenes = self.scenes(obstacles, pivot, pivot_y, start_y, step_length)
-        return self.at_clearance(clearance)._finish(scenes, n_points, duration, strict)
+        batch = self.at_clearance(clearance).finish(scenes, n_points, duration)
+        if strict and not batch.ok.all():
+            raise TrajectoryError(batch[int(np.argmin(batch.ok))])
+        return batch
 
-    def scenes(self, obstacles, pivot=None, pivot_y=None, start_y=0.0, step_length=0.70):
+    def scenes(self, obstacles, pivot=None, pivot_y=None, start_y=DEFAULT_START_Y, step_length=DEFAULT_STEP_LENGTH):
         return scenes_for(self.scene, obstacles, pivot, pivot_y, start_y, step_length)
 
 

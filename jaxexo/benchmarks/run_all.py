@@ -116,7 +116,8 @@ def run_all(out_dir=None, policy=None, baseline_seconds: float = 600.0, skip: st
 
             res["generate"] = run_generate_benchmark(policy, out_dir, n, progress)
         if "compare" not in skipped:
-            from jaxexo.evaluation.compare import markdown, run_eval
+            from jaxexo.evaluation.compare import run_eval
+            from jaxexo.evaluation.report import markdown
 
             report = run_eval(policy, Path(tmp) / "eval", "cfftg", "test", n, figures=False, batch_size=batch_size)
             res["compare"] = report

@@ -1,13 +1,118 @@
-"""Measures of a heel path that the comparison and the held-out benchmark report alike.
-
-NumPy only; kept apart from ``compare`` so that the benchmarks that use them do not import each other.
-"""
+"""The figures of ``jaxexo eval`` per trajectory and per group: the thesis's metrics (3.3: accuracy
+eq 3.1, hip and knee angles of Tables 3.2-3.9), the safe-swing verdict, clearance, lift, path length,
+heel jerk, and the swing timed for the exoskeleton (jaxexo.inference.swing_timing)."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from jaxexo.physics import outcome, swept
+
+# Backward heel motion (m, at the samples) counted in the report: the default env.backward_tolerance.
+BACKWARD_REPORT = outcome.DEFAULT_BACKWARD_TOLERANCE
+
 
 def path_length(heel: np.ndarray) -> np.ndarray:
     """Length of heel paths (..., N, 2), metres."""
     return np.linalg.norm(np.diff(heel, axis=-2), axis=-1).sum(axis=-1)
+
+
+def squared_jerk(heel: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Integrated squared jerk of heel paths (..., N, 2) sampled at equally spaced times t (N,):
+    sum over the third differences of |d^3 p / dt^3|^2 dt, m^2/s^5."""
+    dt = float(t[1] - t[0])
+    j = np.diff(heel, n=3, axis=-2) / dt**3
+    return (j * j).sum(axis=(-1, -2)) * dt
+
+
+def trajectory_metrics(trajs) -> dict[str, np.ndarray]:
+    """Per-trajectory figures (arrays over the trajectories)."""
+    return {
+        "accurate": np.array([t.checks.collision_free for t in trajs]),
+        "success": np.array([t.ok for t in trajs]),
+        "reached_goal": np.array([t.checks.reached_goal for t in trajs]),
+        "hip_mean": np.array([t.joint_angles[:, 0].mean() for t in trajs]),
+        "knee_mean": np.array([t.joint_angles[:, 1].mean() for t in trajs]),
+        "hip_max": np.array([t.joint_angles[:, 0].max() for t in trajs]),
+        "knee_min": np.array([t.joint_angles[:, 1].min() for t in trajs]),
+        "min_clearance": np.array([t.checks.min_clearance for t in trajs]),
+        "clearance_ok": np.array([t.checks.clearance_ok for t in trajs]),
+        "peak_above": np.array([t.heel[:, 1].max() - t.scene.height for t in trajs]),
+        "backward": np.array([float(swept.backward_motion(np, t.heel[:, 0])) for t in trajs]),
+        "fallback": np.array([t.method == "cfftg-fallback" for t in trajs]),
+        "path_length": np.array([path_length(t.heel) for t in trajs]),
+        "jerk": np.array([squared_jerk(t.heel, t.time) for t in trajs]),
+    }
+
+
+def device_metrics(trajs, config) -> dict[str, np.ndarray]:
+    """Per-trajectory device timing (jaxexo.inference.swing_timing, the config's [device] limits):
+    the shortest rest-to-rest swing duration (s), the timed swing's peak hip and knee velocity over
+    both legs (rad/s), whether its exported samples stay within the limits, and the peak joint
+    velocity of the path at its own uniform time stamps (rad/s), for contrast.
+
+    A generator that stood still (the heel never leaves its start: a policy that learned not to move,
+    e.g. the faithful thesis configs) has nothing to time: its swing counts as 0 s at zero velocity,
+    within the limits; its success and goal figures already say it failed."""
+    from jaxexo.inference.swing_timing import joint_jerk, time_swings, uniform_peaks
+
+    trajs = list(trajs)
+    n = len(trajs)
+    moves = [i for i, t in enumerate(trajs) if np.any(np.asarray(t.heel) != np.asarray(t.heel)[0])]
+    out = {"swing_s": np.zeros(n), "peak_hip_vel": np.zeros(n), "peak_knee_vel": np.zeros(n),
+           "within_limits": np.ones(n, bool), "uniform_peak_vel": np.zeros(n), "joint_jerk": np.zeros(n)}
+    if moves:
+        timed = time_swings([trajs[i] for i in moves], config)
+        out["swing_s"][moves] = [t.duration for t in timed]
+        out["peak_hip_vel"][moves] = [max(t.peak_velocity[0], t.peak_velocity[2]) for t in timed]
+        out["peak_knee_vel"][moves] = [max(t.peak_velocity[1], t.peak_velocity[3]) for t in timed]
+        out["within_limits"][moves] = [t.within_limits for t in timed]
+        out["joint_jerk"][moves] = [joint_jerk(t) for t in timed]
+        out["uniform_peak_vel"][moves] = [uniform_peaks(trajs[i])[0].max() for i in moves]
+    return out
+
+
+def summarize_device(m: dict[str, np.ndarray], mask: np.ndarray) -> dict:
+    """Device-timing figures of one group (seconds; velocities in deg/s)."""
+    d = np.degrees
+    return {
+        "swing_s_mean": float(m["swing_s"][mask].mean()),
+        "swing_s_median": float(np.median(m["swing_s"][mask])),
+        "swing_s_p95": float(np.percentile(m["swing_s"][mask], 95)),
+        "swing_s_max": float(m["swing_s"][mask].max()),
+        "joint_jerk_median": float(np.median(m["joint_jerk"][mask])),
+        "joint_jerk_p95": float(np.percentile(m["joint_jerk"][mask], 95)),
+        "peak_hip_vel_deg_s_mean": float(d(m["peak_hip_vel"][mask].mean())),
+        "peak_knee_vel_deg_s_mean": float(d(m["peak_knee_vel"][mask].mean())),
+        "device_within_limits": float(m["within_limits"][mask].mean()),
+        "uniform_peak_joint_vel_deg_s_median": float(d(np.median(m["uniform_peak_vel"][mask]))),
+    }
+
+
+def summarize(m: dict[str, np.ndarray], times_s: np.ndarray, mask: np.ndarray) -> dict:
+    """Figures of one group of trajectories (angles in degrees, lengths in metres, times in ms)."""
+    t = times_s[mask] * 1e3
+    d = np.degrees
+    return {
+        "n": int(mask.sum()),
+        "accuracy": float(m["accurate"][mask].mean()),
+        "success": float(m["success"][mask].mean()),
+        "reached_goal": float(m["reached_goal"][mask].mean()),
+        "time_ms_mean": float(t.mean()),
+        "time_ms_median": float(np.median(t)),
+        "time_ms_p95": float(np.percentile(t, 95)),
+        "hip_swing_mean_deg": float(d(m["hip_mean"][mask].mean())),
+        "knee_swing_mean_deg": float(d(m["knee_mean"][mask].mean())),
+        "hip_swing_max_deg": float(d(m["hip_max"][mask].mean())),
+        "knee_swing_min_deg": float(d(m["knee_min"][mask].mean())),
+        "min_clearance_m_mean": float(m["min_clearance"][mask].mean()),
+        "min_clearance_m_median": float(np.median(m["min_clearance"][mask])),
+        "min_clearance_m_worst": float(m["min_clearance"][mask].min()),
+        "clearance_ok": float(m["clearance_ok"][mask].mean()),
+        "peak_above_obstacle_m_median": float(np.median(m["peak_above"][mask])),
+        "peak_above_obstacle_m_p95": float(np.percentile(m["peak_above"][mask], 95)),
+        "heel_backward_rate": float((m["backward"][mask] > BACKWARD_REPORT).mean()),
+        "fallback_rate": float(m["fallback"][mask].mean()),
+        "path_length_m_mean": float(m["path_length"][mask].mean()),
+        "squared_jerk_mean": float(m["jerk"][mask].mean()),
+    }

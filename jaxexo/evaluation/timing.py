@@ -11,6 +11,13 @@ import numpy as np
 if TYPE_CHECKING:
     from jaxexo.inference import TrajectoryGenerator
 
+BATCH = 1000    # scenarios per timed generate_batch (thesis Table 3.11 times 1000)
+
+
+def scene_options(s: dict) -> dict:
+    """``generate``'s keyword arguments of a scenario dict (jaxexo.inference.scenarios)."""
+    return {"pivot": s["pivot"], "start_y": s["start_y"], "step_length": s["step_length"]}
+
 
 def time_single(gen: TrajectoryGenerator, scenarios: list[dict], repeats: int = 3) -> np.ndarray:
     """Seconds per ``generate`` call, per scenario (the median of ``repeats`` passes)."""
@@ -18,7 +25,7 @@ def time_single(gen: TrajectoryGenerator, scenarios: list[dict], repeats: int = 
     for r in range(repeats):
         for i, s in enumerate(scenarios):
             t0 = time.perf_counter()
-            gen.generate(s["obstacle"], pivot=s["pivot"], start_y=s["start_y"], step_length=s["step_length"])
+            gen.generate(s["obstacle"], **scene_options(s))
             times[r, i] = time.perf_counter() - t0
     return np.median(times, axis=0)
 

@@ -14,9 +14,8 @@ Units: metres, radians, seconds.
 from jaxexo.physics.dynamics import Scene
 from jaxexo.physics.geometry import Obstacle
 from jaxexo.inference.generator import TrajectoryGenerator
+from jaxexo.inference.export import CSV_COLUMNS, JOINT_NAMES
 from jaxexo.inference.trajectory import (
-    CSV_COLUMNS,
-    JOINT_NAMES,
     Trajectory,
     TrajectoryBatch,
     TrajectoryChecks,
@@ -30,7 +29,7 @@ _LAZY = {"DeviceLimits", "TimedSwing", "time_swing", "time_swings"}   # jaxexo.i
 
 def __getattr__(name):
     # Device timing is imported on first use: it is not needed to generate, and loading it would
-    # add to every process's import time (issue 12's 0.3 s budget).
+    # add to every process's import time (its budget is 0.3 s).
     if name in _LAZY:
         from jaxexo.inference import swing_timing
 

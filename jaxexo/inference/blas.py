@@ -1,4 +1,4 @@
-"""BLAS threads for the batch generator (issue 12): ``generate_batch`` runs its matrix products on one
+"""BLAS threads for the batch generator: ``generate_batch`` runs its matrix products on one
 BLAS thread.
 
 Measured on the 2-core development machine (shared, so often busy): OpenBLAS's default threads
@@ -15,7 +15,7 @@ duration of the call and restored afterwards; it is process-wide while it lasts,
 thread's BLAS work at the same moment runs on one thread too. Without threadpoolctl the BLAS is
 left as it is (then ``OMP_NUM_THREADS=1`` or ``OPENBLAS_NUM_THREADS=1`` in the environment, read
 at NumPy's import, does the same for the whole process). threadpoolctl is imported on the first
-batch, not at ``import jaxexo.inference`` (issue 12's import budget).
+batch, not at ``import jaxexo.inference`` (the import time budget).
 """
 
 from __future__ import annotations

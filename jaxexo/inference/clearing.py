@@ -26,7 +26,7 @@ returned with its deviation bound (the same bound as the plain spline's: jaxexo.
 The result is only a candidate: the generator's verdict (jaxexo.inference.trajectory) judges it
 exactly like any other curve, and a curve that still fails goes through the usual retries.
 
-Speed (issue 19): ``clear_rows`` corrects many paths at once, each path's arithmetic its own (the
+Speed: ``clear_rows`` corrects many paths at once, each path's arithmetic its own (the
 same curve, bit for bit, in any batch as alone): the splines of one point count in stacked
 products, the exact clearances of all paths in one vectorised call per round and outline size,
 computed exactly only for the moves that can be under the margin's threshold or be the path's
@@ -184,7 +184,7 @@ class Cleared:
         """The same curve sampled at ``dense_points`` parameters (for a denser look)."""
         if self._coef is None:
             return sm.linear_resample(self._ends, dense_points)
-        out = sm._basis(self._m, dense_points)[2] @ self._coef
+        out = sm.spline_operators(self._m, dense_points)[2] @ self._coef
         np.maximum(out[:, 1], 0.0, out=out[:, 1])
         out[0], out[-1] = self._ends[0], self._ends[-1]
         return out
@@ -224,9 +224,9 @@ class _Group:
 
     def __init__(self, m, rows, pts, n_points, smoothing):
         self.m, self.rows = m, np.asarray(rows)
-        zm, dm, self.em, self.qm = sm._basis(m, n_points)
+        zm, dm, self.em, self.qm = sm.spline_operators(m, n_points)
         z = np.matmul(zm, pts)                                            # (G, M, 2)
-        lam = sm._solve_lambda(np.broadcast_to(dm, (len(rows), m)), np.sum(z * z, axis=-1),
+        lam = sm.solve_lambda(np.broadcast_to(dm, (len(rows), m)), np.sum(z * z, axis=-1),
                                np.full(len(rows), float(smoothing)))
         with np.errstate(invalid="ignore"):
             self.shrink = np.where(np.isinf(lam)[:, None], (dm == 0.0).astype(float)[None],

@@ -1,8 +1,8 @@
-"""The shield's greedy choice for one heel, checking only the move that will be taken (issue 19).
+"""The shield's greedy choice for one heel, checking only the move that will be taken.
 
 The shielded greedy action is ``argmax(where(mask, q, -inf))`` with ``mask`` the admissible moves of
 jaxexo.physics.dynamics.admissible_moves, evaluated in float32 on the heel rounded to float32 (the
-generator's reference, ``TrajectoryGenerator._admissible_rows``). Checking all 19 forward moves every
+generator's reference, ``ShieldRows.admissible``, jaxexo.inference.shield_rows). Checking all 19 forward moves every
 step costs ~200 us in NumPy calls; the chosen move, however, is simply the first move, in order of
 decreasing Q (ties by index, as argmax), that is admissible. ``ScalarShield.choose`` walks that order
 and checks one move at a time in plain Python floats:

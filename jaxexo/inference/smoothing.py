@@ -19,7 +19,7 @@ few matrix products, so that a batch of paths is smoothed at once:
   overshoot near lift-off and touch-down is clipped to z = 0 (a foot resting on the floor).
 - Paths of fewer than four distinct points are resampled as polylines.
 
-- Between samples (issue 11): the checks measure the polyline through the returned samples exactly
+- Between samples: the checks measure the polyline through the returned samples exactly
   (jaxexo.physics.swept) and subtract a bound on how far the curve strays from that polyline:
   for a C2 curve c(u) the chord over a parameter step L deviates by at most L^2 max|c''| / 8, and
   the second derivative of the cubic B-spline is a linear B-spline whose coefficients bound it
@@ -130,7 +130,7 @@ def _generalized_eigh(p: np.ndarray, a: np.ndarray):
 
 
 @lru_cache(maxsize=512)
-def _basis(m: int, n_points: int):
+def spline_operators(m: int, n_points: int):
     """For M points: Z (M, M) mapping the points to eigen-coordinates z, the eigenvalues d (M,), and
     E (n_points, M) mapping shrunk eigen-coordinates to the sampled curve."""
     k = DEGREE
@@ -164,7 +164,7 @@ for _a in (_GRID, _GRID_LAMBDA):
     _a.setflags(write=False)
 
 
-def _solve_lambda(d: np.ndarray, zz: np.ndarray, s: np.ndarray) -> np.ndarray:
+def solve_lambda(d: np.ndarray, zz: np.ndarray, s: np.ndarray) -> np.ndarray:
     """Per row: lambda with r(lambda) = sum_j (lambda d_j / (1 + lambda d_j))^2 zz_j = s. r grows
     monotonically in lambda, so a coarse grid brackets the root and Newton steps in log(lambda),
     kept inside the bracket, refine it. inf when even r(inf) stays within s."""
@@ -233,18 +233,18 @@ def smooth_padded(pts: np.ndarray, lengths: np.ndarray, n_points: int = DEFAULT_
         z = np.zeros((b, mmax, 2))
         d = np.zeros((b, mmax))
         for m, idx in zip(ms, idxs):
-            zm, dm, _, _ = _basis(int(m), n_points)
+            zm, dm, _, _ = spline_operators(int(m), n_points)
             z[idx, :m] = _apply(zm, pts[idx, :m])
             d[idx, :m] = dm
         smooth = np.concatenate(idxs)
-        lam = _solve_lambda(d[smooth], np.sum(z[smooth] ** 2, axis=-1), s_all[smooth])
+        lam = solve_lambda(d[smooth], np.sum(z[smooth] ** 2, axis=-1), s_all[smooth])
         with np.errstate(invalid="ignore"):
             shrink = np.where(np.isinf(lam)[:, None], (d[smooth] == 0.0).astype(float),
                               1.0 / (1.0 + lam[:, None] * d[smooth]))
         z[smooth] *= shrink[..., None]
         h2_8 = (1.0 / (n_points - 1)) ** 2 / 8.0      # samples at u = i / (n - 1): L^2 / 8
         for m, idx in zip(ms, idxs):
-            _, _, em, qm = _basis(int(m), n_points)
+            _, _, em, qm = spline_operators(int(m), n_points)
             out[idx] = _apply(em, z[idx, :m])
             curv = np.max(np.abs(_apply(qm, z[idx, :m])), axis=1)      # (G, 2): max |c''| per axis
             dev[idx] = h2_8 * np.sqrt(np.sum(curv * curv, axis=-1))
@@ -252,34 +252,6 @@ def smooth_padded(pts: np.ndarray, lengths: np.ndarray, n_points: int = DEFAULT_
     out[:, 0] = pts[:, 0]
     out[:, -1] = pts[np.arange(b), m_all - 1]
     return (out, dev) if with_deviation else out
-
-
-def smooth_one(raw: np.ndarray, n_points: int = DEFAULT_POINTS, smoothing: float = DEFAULT_SMOOTHING):
-    """``smooth_paths([raw], n_points, smoothing, with_deviation=True)`` for one path, returned as
-    ((1, n_points, 2), (1,)), without the batch bookkeeping (padding, sorting, grouping by length):
-    the same operators and the same lambda search on the same (1, M) arrays, so the same numbers,
-    at a fraction of the NumPy calls (issue 12: one trajectory is dominated by per-call overhead)."""
-    pts = distinct(raw)
-    m = len(pts)
-    if m < DEGREE + 1:
-        out, dev = linear_resample(pts, n_points, with_deviation=True)
-        out = out.copy()
-    else:
-        zm, dm, em, qm = _basis(m, n_points)
-        z = zm @ pts                                                     # (M, 2)
-        lam = _solve_lambda(dm[None], np.sum(z * z, axis=-1)[None], np.array([float(smoothing)]))[0]
-        if np.isinf(lam):
-            shrink = (dm == 0.0).astype(float)
-        else:
-            shrink = 1.0 / (1.0 + lam * dm)
-        z *= shrink[:, None]
-        out = em @ z
-        curv = np.max(np.abs(qm @ z), axis=0)
-        dev = (1.0 / (n_points - 1)) ** 2 / 8.0 * np.sqrt(np.sum(curv * curv))
-    np.maximum(out[:, 1], 0.0, out=out[:, 1])
-    out[0] = pts[0]
-    out[-1] = pts[-1]
-    return out[None], np.array([dev], dtype=np.float64)
 
 
 def bspline_smooth(raw: np.ndarray, n_points: int = DEFAULT_POINTS, smoothing: float = DEFAULT_SMOOTHING) -> np.ndarray:
@@ -291,7 +263,7 @@ def smooth_candidates(raw: np.ndarray, n_points: int, smoothings) -> tuple[np.nd
     """One raw path smoothed with each of K smoothings (m^2): ((K, n_points, 2), (K,) deviation
     bounds), as ``smooth_paths([raw] * K, n_points, smoothings, with_deviation=True)`` computes them
     (the same operators and lambda search), with the path's eigen-coordinates computed once and the K
-    curves in one matrix product (the generator's candidate smoothings, issue 19)."""
+    curves in one matrix product (the generator's candidate smoothings)."""
     s = np.asarray(smoothings, np.float64).reshape(-1)
     k = len(s)
     pts = distinct(raw)
@@ -299,10 +271,10 @@ def smooth_candidates(raw: np.ndarray, n_points: int, smoothings) -> tuple[np.nd
     if m < DEGREE + 1:
         out, dev = linear_resample(pts, n_points, with_deviation=True)
         return np.repeat(out[None], k, axis=0), np.full(k, dev, dtype=np.float64)
-    zm, dm, em, qm = _basis(m, n_points)
+    zm, dm, em, qm = spline_operators(m, n_points)
     z = zm @ pts                                                         # (M, 2)
     zz = np.sum(z * z, axis=-1)
-    lam = _solve_lambda(np.broadcast_to(dm, (k, m)), np.broadcast_to(zz, (k, m)), s)
+    lam = solve_lambda(np.broadcast_to(dm, (k, m)), np.broadcast_to(zz, (k, m)), s)
     with np.errstate(invalid="ignore"):
         shrink = np.where(np.isinf(lam)[:, None], (dm == 0.0).astype(float)[None], 1.0 / (1.0 + lam[:, None] * dm))
     zk = z[None] * shrink[..., None]                                     # (K, M, 2)

@@ -21,7 +21,7 @@ while a variable-speed law slows only where the path bends in joint space):
    the joints are the project's kinematics (jaxexo.physics.kinematics,
    thesis eq 2.4-2.11, 2.42, 2.49) of the interpolated heel on a fine s grid (FINE_PER_SAMPLE
    points per sample interval), differentiated there by central differences (q', q'').
-2. TOPP: on that grid, with x = s'^2, the velocity limits cap x by (v_j / |q'_j|)^2 and the
+2. TOPP (jaxexo.inference.time_law): on that grid, with x = s'^2, the velocity limits cap x by (v_j / |q'_j|)^2 and the
    acceleration limits make the admissible s'' an interval [L(x), U(x)]; a backward pass from rest
    at the end decelerating at L bounds the speeds from which the end can still be reached, and a
    forward pass from rest accelerates at U under that bound (the numerical-integration time-optimal
@@ -61,22 +61,17 @@ import numpy as np
 from jaxexo.config import MAX_CONTROL_RATE
 from jaxexo.physics import kinematics
 from jaxexo.physics.dynamics import Scene
-from jaxexo.inference.trajectory import (
-    JOINT_NAMES, TrajectoryBatch, TrajectoryChecks, _reasons, measure_paths, timed_dict, timed_table, write_timed_csv,
-    write_timed_json,
-)
+from jaxexo.inference.time_law import TimeLaw, pchip_eval, pchip_slopes, time_law, topp
+from jaxexo.inference.export import JOINT_NAMES, timed_dict, timed_table, write_timed_csv, write_timed_json
+from jaxexo.inference.trajectory import TrajectoryBatch, TrajectoryChecks, failure_reasons, measure_paths
 
 FINE_PER_SAMPLE = 8        # fine s-grid points per interval of the path's samples
-TIME_NODES = 2000          # nodes of the time-law table over the optimal duration
 SAFETY = 0.95              # the TOPP passes use this fraction of each limit
-BLEND_S = 0.03             # s, box-filter window (s'' ramps from rest over 30 ms) ...
-BLEND_FRACTION = 0.1       # ... at most this fraction of the optimal duration
 CHECK_MARGIN = 1e-3        # exported samples must stay within (1 - this) of each limit
 LOCAL_PASSES = 6           # local corrections of the law where exported samples exceed a limit ...
 MAX_SLOWDOWNS = 12         # ... then uniform slow-downs (the safety net)
 ARC_TABLE_PER_SAMPLE = 32  # arc-length table points per sample interval
 BYTES_PER_SAMPLE = 1024    # timing holds about 500 B per exported sample (measured); the bound counts twice that
-X_CAP = 1e6                # 1/s^2: cap on s'^2 where no joint moves (s' <= 1000 /s)
 
 
 @dataclass(frozen=True)
@@ -179,38 +174,6 @@ class TimedSwing:
 # --------------------------------------------------------------------------------------------
 
 
-def pchip_slopes(y: np.ndarray) -> np.ndarray:
-    """Fritsch-Carlson slopes (per unit sample index) of samples y (N, D): the harmonic mean of the
-    neighbouring differences where they share a sign, zero at local extrema, so the interpolant
-    never overshoots the samples; shape-preserving three-point ends."""
-    d = np.diff(y, axis=0)
-    if len(d) == 1:
-        return np.repeat(d, 2, axis=0)
-    d0, d1 = d[:-1], d[1:]
-    same = d0 * d1 > 0
-    m = np.zeros_like(y)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        m[1:-1] = np.where(same, 2.0 * d0 * d1 / np.where(same, d0 + d1, 1.0), 0.0)
-    for end, a, b in ((0, d[0], d[1]), (-1, d[-1], d[-2])):
-        e = 0.5 * (3.0 * a - b)
-        e = np.where(np.sign(e) != np.sign(a), 0.0, e)
-        e = np.where((np.sign(a) != np.sign(b)) & (np.abs(e) > 3.0 * np.abs(a)), 3.0 * a, e)
-        m[end] = e
-    return m
-
-
-def pchip_eval(y: np.ndarray, m: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """Cubic Hermite interpolant of samples y (N, D) with slopes m at sample coordinates u (K,)
-    in [0, N-1]: (K, D)."""
-    n = y.shape[0]
-    u = np.clip(np.asarray(u, np.float64), 0.0, n - 1)
-    i = np.minimum(np.floor(u).astype(np.int64), n - 2)
-    t = (u - i)[:, None]
-    t2, t3 = t * t, t * t * t
-    return ((2 * t3 - 3 * t2 + 1) * y[i] + (t3 - 2 * t2 + t) * m[i]
-            + (-2 * t3 + 3 * t2) * y[i + 1] + (t3 - t2) * m[i + 1])
-
-
 def leg_angles(sp, pivot_y: float, heel: np.ndarray) -> np.ndarray:
     """Joint angles (K, 4) in JOINT_NAMES order for swing heels (K, 2) and a pivot heel at pivot_y,
     by jaxexo.physics.kinematics (the same calls as trajectory.measure)."""
@@ -221,143 +184,6 @@ def leg_angles(sp, pivot_y: float, heel: np.ndarray) -> np.ndarray:
     knees, _ = kinematics.knee_position(np, hip[None], feet, sp.thigh, sp.shin)
     hips, qs = kinematics.joint_angles(np, hip[None], knees, feet)
     return np.stack([hips[0], qs[0], hips[1], qs[1]], axis=-1)
-
-
-# --------------------------------------------------------------------------------------------
-# Time-optimal parametrisation (TOPP) on a grid
-# --------------------------------------------------------------------------------------------
-
-
-def _accel_bounds(dq, ddq, amax, x):
-    """The admissible s'' interval [L, U] at s'^2 = x for joint paths with derivatives dq, ddq
-    (..., J); joints with q' = 0 do not bound s''."""
-    moving = np.abs(dq) > 1e-12
-    safe = np.where(moving, dq, 1.0)
-    lo = (-amax - ddq * x[..., None]) / safe
-    hi = (amax - ddq * x[..., None]) / safe
-    lo, hi = np.minimum(lo, hi), np.maximum(lo, hi)
-    return (np.where(moving, lo, -np.inf).max(axis=-1), np.where(moving, hi, np.inf).min(axis=-1))
-
-
-def max_speed_curve(dq: np.ndarray, ddq: np.ndarray, vmax: np.ndarray, amax: np.ndarray) -> np.ndarray:
-    """Largest admissible x = s'^2 at each grid point (..., K) from joint derivatives (..., K, J):
-    the velocity limits, and the acceleration limits' condition that some s'' satisfies every joint
-    (L_j(x) <= U_k(x) for every pair, each linear in x)."""
-    adq = np.abs(dq)
-    moving = adq > 1e-12
-    with np.errstate(divide="ignore"):
-        x_vel = np.where(moving, (vmax / np.where(moving, adq, 1.0)) ** 2, np.inf).min(axis=-1)
-        # Joints that do not move: |q'' x| <= a.
-        still = np.where(~moving & (np.abs(ddq) > 0), amax / np.abs(np.where(moving, 1.0, ddq)), np.inf).min(axis=-1)
-        # L_j(x) = -a_j/|q'_j| - (q''_j/q'_j) x, U_k(x) = a_k/|q'_k| - (q''_k/q'_k) x.
-        r = np.where(moving, amax / np.where(moving, adq, 1.0), np.inf)
-        c = np.where(moving, ddq / np.where(moving, dq, 1.0), 0.0)
-        slope = c[..., None, :] - c[..., :, None]          # (..., j, k): (c_k - c_j) x <= r_j + r_k
-        room = r[..., :, None] + r[..., None, :]
-        x_acc = np.where(slope > 0, room / np.where(slope > 0, slope, 1.0), np.inf).min(axis=(-1, -2))
-    return np.minimum(np.minimum(x_vel, still), np.minimum(x_acc, X_CAP))
-
-
-def topp(dq: np.ndarray, ddq: np.ndarray, vmax, amax, ds: float, cap: np.ndarray | None = None
-         ) -> tuple[np.ndarray, np.ndarray]:
-    """The time-optimal rest-to-rest law on a uniform s grid (spacing ds) for joint derivatives
-    dq, ddq (B, K, J): s'^2 (B, K), and per cell the least speed (B, K-1) of a cell crossed from
-    rest to rest. A backward pass from rest at the end at the smallest admissible s'' bounds the
-    speeds from which the end can still be reached; the forward pass from rest at the start
-    accelerates at the largest admissible s'' under that bound (as TOPP-RA orders the passes).
-    ``cap`` (B, K): further upper bounds on s'^2."""
-    vmax = np.asarray(vmax, np.float64)
-    amax = np.asarray(amax, np.float64)
-    xmax = max_speed_curve(dq, ddq, vmax, amax)
-    if cap is not None:
-        xmax = np.minimum(xmax, cap)
-    b, k = xmax.shape
-    reach = np.empty((b, k))
-    reach[:, -1] = 0.0
-    for i in range(k - 1, 0, -1):
-        lo, _ = _accel_bounds(dq[:, i], ddq[:, i], amax, reach[:, i])
-        reach[:, i - 1] = np.clip(reach[:, i] - 2.0 * ds * lo, 0.0, xmax[:, i - 1])
-    x = np.empty((b, k))
-    x[:, 0] = 0.0
-    for i in range(k - 1):
-        _, hi = _accel_bounds(dq[:, i], ddq[:, i], amax, x[:, i])
-        x[:, i + 1] = np.clip(x[:, i] + 2.0 * ds * hi, 0.0, reach[:, i + 1])
-    # A cell entered and left at rest (a cusp, or the two ends of a very short path) takes
-    # 2 sqrt(ds / u0) at the largest s'' from rest, u0: its mean speed is sqrt(ds u0) / 2.
-    _, u0 = _accel_bounds(dq[:, :-1], ddq[:, :-1], amax, np.zeros((b, k - 1)))
-    floor = 0.5 * np.sqrt(ds * np.minimum(u0, X_CAP))
-    if cap is not None:
-        # A capped cell (see time_swings) is crossed no faster than its caps allow, cusps included.
-        root = np.sqrt(cap)
-        floor = np.minimum(floor, 0.5 * (root[:, :-1] + root[:, 1:]))
-    return x, floor
-
-
-# --------------------------------------------------------------------------------------------
-# Time law
-# --------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class TimeLaw:
-    """s(t) as a table at uniform times (step dt): s, s', s'' at every node; ``at`` interpolates
-    (cubic Hermite in s with the node speeds, linear in s' and s''). ``slowed(k)`` is s(t / k)."""
-
-    dt: float
-    s: np.ndarray
-    sdot: np.ndarray
-    sddot: np.ndarray
-
-    @property
-    def duration(self) -> float:
-        return self.dt * (len(self.s) - 1)
-
-    def slowed(self, k: float) -> "TimeLaw":
-        return TimeLaw(self.dt * k, self.s, self.sdot / k, self.sddot / (k * k))
-
-    def at(self, t: np.ndarray):
-        u = np.clip(np.asarray(t, np.float64) / self.dt, 0.0, len(self.s) - 1)
-        s = pchip_eval(self.s[:, None], self.sdot[:, None] * self.dt, u)[:, 0]
-        grid = np.arange(len(self.s))
-        return (np.clip(s, 0.0, 1.0), np.interp(u, grid, self.sdot), np.interp(u, grid, self.sddot))
-
-
-def time_law(s_grid: np.ndarray, x: np.ndarray, v_floor: np.ndarray | None = None,
-             blend_s: float | None = None, nodes: int = TIME_NODES) -> TimeLaw:
-    """The rest-to-rest law from s'^2 = x on s_grid: cell times from constant s'' per cell
-    (2 ds / (v0 + v1), the mean speed at least ``v_floor`` per cell), s' at uniform time nodes,
-    then averaged over a window w (zero s'' at both ends)."""
-    blend_s = BLEND_S if blend_s is None else blend_s
-    v = np.sqrt(np.maximum(x, 0.0))
-    mean = 0.5 * (v[:-1] + v[1:])
-    if v_floor is not None:
-        mean = np.maximum(mean, v_floor)
-    dt_cells = np.diff(s_grid) / np.maximum(mean, 1e-12)
-    t_grid = np.concatenate([[0.0], np.cumsum(dt_cells)])
-    t0 = float(t_grid[-1])
-    dt = t0 / nodes
-    # A short window: averaging over longer stretches would carry speed into the places (cusps,
-    # sharp bends) where the optimal law must nearly stop.
-    m = max(1, int(round(min(blend_s / dt, BLEND_FRACTION * nodes))))
-    w = m * dt
-    tn = np.arange(nodes + 1) * dt
-    vn = np.interp(tn, t_grid, v)
-    vn[0] = vn[-1] = 0.0
-    # Box filter of the piecewise-linear speed: sdot(t) = (V(t) - V(t - w)) / w, V its integral.
-    big_v = np.concatenate([[0.0], np.cumsum(0.5 * (vn[1:] + vn[:-1]) * dt)])
-    total = nodes + m
-    idx = np.arange(total + 1)
-    V = big_v[np.clip(idx, 0, nodes)]
-    Vlag = np.where(idx - m >= 0, big_v[np.clip(idx - m, 0, nodes)], 0.0)
-    sdot = (V - Vlag) / w
-    vpad = np.concatenate([vn, np.zeros(m)])
-    vlag = np.where(idx - m >= 0, vpad[np.clip(idx - m, 0, total)], 0.0)
-    sddot = (vpad[idx] - vlag) / w
-    s = np.concatenate([[0.0], np.cumsum(0.5 * (sdot[1:] + sdot[:-1]) * dt)])
-    # Trapezoid error makes s end a hair off 1: rescale s and its derivatives together.
-    scale = 1.0 / s[-1]
-    sdot[0] = sdot[-1] = sddot[0] = sddot[-1] = 0.0
-    return TimeLaw(dt, s * scale, sdot * scale, sddot * scale)
 
 
 # --------------------------------------------------------------------------------------------
@@ -584,10 +410,10 @@ def _finish(traj, e: dict, sp, limits: DeviceLimits, rate: float, t_opt: float, 
     t, s, h, vel, acc, peak_v, peak_a = (e[k] for k in ("t", "s", "h", "vel", "acc", "peak_v", "peak_a"))
     within = bool(np.all(peak_v <= vmax) and np.all(peak_a <= amax))
     sc = traj.scene
-    # The safe-swing checks (issue 11) of the retimed samples, with the trajectory's own bound on its
+    # The safe-swing checks of the retimed samples, with the trajectory's own bound on its
     # curve's distance from the polyline through its samples.
     m = measure_paths(sp, h[None], [sc], traj.checks.deviation)
-    reasons = _reasons(m, 0, h, sc.goal_y, t, sp)
+    reasons = failure_reasons(m, 0, h, sc.goal_y, t, sp)
     checks = TrajectoryChecks(bool(m["reached_goal"][0]), bool(m["collision_free"][0]),
                               float(m["min_clearance"][0]), bool(m["joint_limits_ok"][0]),
                               bool(m["leg_length_ok"][0]), reasons, bool(m["clearance_ok"][0]),
@@ -625,5 +451,4 @@ def uniform_peaks(traj) -> tuple[np.ndarray, np.ndarray]:
     return np.abs(fv).max(axis=0), np.abs(fa).max(axis=0)
 
 
-__all__ = ["DeviceLimits", "TimedSwing", "TimeLaw", "time_swing", "time_swings", "joint_jerk", "topp", "time_law",
-           "max_speed_curve", "pchip_slopes", "pchip_eval", "leg_angles", "uniform_peaks"]
+__all__ = ["DeviceLimits", "TimedSwing", "time_swing", "time_swings", "joint_jerk", "leg_angles", "uniform_peaks"]

@@ -7,7 +7,7 @@ clearance (jaxexo.physics.geometry, the heel-toe segment against the outline) an
 and leg-length rules as the training environment (jaxexo.physics.dynamics, eq 2.45, 2.50). Units: metres,
 radians, seconds.
 
-A safe swing (issue 11; ``TrajectoryChecks.ok``): the goal is reached; nothing is below the ground; the
+A safe swing (``TrajectoryChecks.ok``; jaxexo.physics.outcome): the goal is reached; nothing is below the ground; the
 heel never moves backward by more than ``env.backward_tolerance``; joint limits and leg length are
 respected; and the foot's motion never comes closer than ``env.min_clearance`` to the obstacle. The
 clearance is not taken at the samples: between two samples the flat foot sweeps a parallelogram whose
@@ -21,11 +21,8 @@ and leg length are checked at the samples (the kinematics are not linear between
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import functools
-import io
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,16 +31,10 @@ import numpy as np
 
 from jaxexo.physics import dynamics, geometry, kinematics, outcome, swept
 from jaxexo.physics.dynamics import Scene
-from jaxexo.storage.atomic import atomic_write
+from jaxexo.inference.export import CSV_COLUMNS, scene_dict, write_csv, write_json
 
-JOINT_NAMES = ("hip_swing", "knee_swing", "hip_stance", "knee_stance")
 DEFAULT_DURATION = 1.0   # s, swing duration for the time stamps
 
-CSV_COLUMNS = (
-    "time_s", "heel_y_m", "heel_z_m", "toe_y_m", "toe_z_m", "hip_y_m", "hip_z_m",
-    "knee_swing_y_m", "knee_swing_z_m", "knee_stance_y_m", "knee_stance_z_m",
-    "hip_swing_rad", "knee_swing_rad", "hip_stance_rad", "knee_stance_rad",
-)
 
 
 class TrajectoryError(RuntimeError):
@@ -107,13 +98,10 @@ class Trajectory:
 
     def to_dict(self) -> dict:
         c = self.checks
-        sc = self.scene
         return {
             "units": {"length": "m", "angle": "rad", "time": "s"},
             "method": self.method,
-            "scene": {"obstacle": sc.obstacle.kind, "shape": sc.obstacle.shape, "center_y": sc.center_y,
-                      "width": sc.width, "height": sc.height, "outline": sc.obstacle.outline.tolist(),
-                      "pivot": sc.pivot, "pivot_y": sc.pivot_y, "start_y": sc.start_y, "goal_y": sc.goal_y},
+            "scene": scene_dict(self.scene),
             "checks": {"ok": c.ok, "reached_goal": c.reached_goal, "collision_free": c.collision_free,
                        "min_clearance": c.min_clearance, "clearance_ok": c.clearance_ok,
                        "above_ground": c.above_ground, "heel_backward": c.heel_backward,
@@ -127,10 +115,7 @@ class Trajectory:
         }
 
     def to_json(self, path: str | Path | None = None) -> str:
-        text = json.dumps(self.to_dict(), indent=1)
-        if path is not None:
-            atomic_write(path, text)
-        return text
+        return write_json(self.to_dict(), path)
 
 
 @dataclass(frozen=True)
@@ -208,7 +193,7 @@ class TrajectoryBatch:
         return dataclasses.replace(self, **changes)
 
 
-def clearances(foot_length: float, heel: np.ndarray, scenes) -> np.ndarray:
+def _point_clearances(foot_length: float, heel: np.ndarray, scenes) -> np.ndarray:
     """Signed foot clearance (B, N) of heel paths (B, N, 2) from each scene's obstacle; scenes are
     grouped by outline size so that a 16-vertex half-ellipse does not pad every rectangle."""
     out = np.empty(heel.shape[:2])
@@ -230,10 +215,10 @@ def _outline_groups(scenes):
             for idx in (np.flatnonzero(sizes == k) for k in np.unique(sizes))]
 
 
-def swept_clearances(foot_length: float, heel: np.ndarray, scenes, point_clearance: np.ndarray,
+def _move_clearances(foot_length: float, heel: np.ndarray, scenes, point_clearance: np.ndarray,
                      fast: bool = True) -> np.ndarray:
     """Signed clearance (B, N-1) of the foot over each move between consecutive samples
-    (jaxexo.physics.swept), grouped by outline size like ``clearances``. ``fast=False``: exact for
+    (jaxexo.physics.swept), grouped by outline size like ``_point_clearances``. ``fast=False``: exact for
     every move; ``fast`` (default): exact for each path's closest move, a lower bound above that
     minimum for the moves that cannot be the closest (``swept.path_swept_min``), which is all the
     verdict and its reasons read."""
@@ -256,7 +241,7 @@ def backward_bound(heel: np.ndarray, deviation) -> np.ndarray:
 def measure(sp, heel: np.ndarray, clearance: np.ndarray, pivot_y: np.ndarray, goal_y: np.ndarray,
             swept_clearance: np.ndarray, deviation) -> dict:
     """Kinematics and safe-swing checks of heel paths (B, N, 2), vectorised, from their clearances at
-    the samples (B, N), over the moves between them (B, N-1, ``swept_clearances``) and the bound
+    the samples (B, N), over the moves between them (B, N-1, ``path_clearances``) and the bound
     ``deviation`` (B,) of the curve from the polyline through the samples (m).
 
     ``sp`` holds the constants (jaxexo.config.scalar_params or numpy_params)."""
@@ -264,7 +249,7 @@ def measure(sp, heel: np.ndarray, clearance: np.ndarray, pivot_y: np.ndarray, go
     dev[:] = deviation
     # The guaranteed clearance: the polyline's exact swept clearance (or the samples' own, for a
     # path of one sample) less the deviation bound.
-    guaranteed = (swept_clearance.min(axis=-1) if swept_clearance.shape[-1] else clearance.min(axis=-1)) - dev
+    guaranteed = lowest_clearance(clearance, swept_clearance) - dev
     backward = backward_bound(heel, dev)
     # kinematics.leg_state's equations, with both legs stacked on a leading axis (fewer NumPy calls).
     hip = kinematics.hip_position(np, pivot_y[:, None], heel, sp.thigh, sp.shin)
@@ -306,7 +291,7 @@ def measure(sp, heel: np.ndarray, clearance: np.ndarray, pivot_y: np.ndarray, go
     }
 
 
-def _reasons(m: dict, i: int, heel: np.ndarray, goal_y: float, time: np.ndarray, sp) -> tuple[str, ...]:
+def failure_reasons(m: dict, i: int, heel: np.ndarray, goal_y: float, time: np.ndarray, sp) -> tuple[str, ...]:
     """The failed checks of path i (jaxexo.physics.outcome.CHECKS, in order), each with where it failed."""
     out = []
     for check in outcome.failed_checks(m["verdict"], i):
@@ -339,16 +324,37 @@ def _reasons(m: dict, i: int, heel: np.ndarray, goal_y: float, time: np.ndarray,
 
 
 def measure_paths(sp, paths: np.ndarray, scenes, deviation, fast: bool = True) -> dict:
-    """``measure`` of heel paths (B, N, 2) on their scenes, clearances included (``fast``: see
-    ``swept_clearances``)."""
+    """``measure`` of heel paths (B, N, 2) on their scenes, clearances included (``path_clearances``)."""
     pivot_y = np.array([sc.pivot_y for sc in scenes])
     goal_y = np.array([sc.goal_y for sc in scenes])
-    if fast and len(scenes) >= PRUNE_POINTS_FROM:
-        c, sw = pruned_clearances(sp.foot_length, paths, scenes)
-    else:
-        c = clearances(sp.foot_length, paths, scenes)
-        sw = swept_clearances(sp.foot_length, paths, scenes, c, fast)
+    c, sw = path_clearances(sp.foot_length, paths, scenes, fast)
     return measure(sp, paths, c, pivot_y, goal_y, sw, deviation)
+
+
+def path_clearances(foot_length: float, paths: np.ndarray, scenes, fast: bool = True):
+    """The one entry point for a path's clearances: (at the samples (B, N), over the moves (B, N-1))
+    of heel paths (B, N, 2) on their scenes. ``fast``: each path's closest move and sample exact,
+    lower bounds above that minimum elsewhere (all that the verdict and its reasons read);
+    ``fast=False``, the reference: every sample and move exact."""
+    if fast and len(scenes) >= PRUNE_POINTS_FROM:
+        return _pruned_clearances(foot_length, paths, scenes)
+    c = _point_clearances(foot_length, paths, scenes)
+    return c, _move_clearances(foot_length, paths, scenes, c, fast)
+
+
+def lowest_clearance(point_clearance: np.ndarray, move_clearance: np.ndarray) -> np.ndarray:
+    """The polyline's clearance (...,): its moves' minimum, or its one sample's for a path of one."""
+    return move_clearance.min(axis=-1) if move_clearance.shape[-1] else point_clearance.min(axis=-1)
+
+
+def passes(sp, low, deviation, backward, headroom: float = 0.0) -> np.ndarray:
+    """The verdict's clearance and backward checks (jaxexo.physics.outcome.verdict: clearance_ok and
+    backward_ok) of curves whose polyline keeps ``low`` (m) from the obstacle, with ``deviation`` the
+    curve's bound and ``backward`` its backward motion, the margin env.min_clearance kept with
+    ``headroom`` (m) to spare. The generators' retries accept a curve by this rule."""
+    g = low - deviation
+    return (~geometry.foot_collides(np, g) & ~geometry.foot_collides(np, g - sp.min_clearance - headroom)
+            & (backward <= sp.backward_tolerance))
 
 
 # From this many paths on, ``fast`` also skips the exact point clearances that cannot matter
@@ -357,7 +363,7 @@ def measure_paths(sp, paths: np.ndarray, scenes, deviation, fast: bool = True) -
 PRUNE_POINTS_FROM = 8
 
 
-def pruned_clearances(foot_length: float, heel: np.ndarray, scenes):
+def _pruned_clearances(foot_length: float, heel: np.ndarray, scenes):
     """(point clearances (B, N), per-move clearances (B, N-1)) by ``swept.path_clearance_pruned``,
     grouped by outline size: exact at each path's closest move; elsewhere lower bounds above it."""
     b, n = heel.shape[:2]
@@ -391,7 +397,7 @@ def assemble(method: str, sp, scenes, raws, paths: np.ndarray, smoothing, durati
         measured = measure_paths(sp, paths, scenes, deviation, fast)
     m = measured
     time = _time_stamps(n, float(duration)).copy()
-    reasons = tuple(_reasons(m, i, paths[i], scenes[i].goal_y, time, sp) for i in range(b))
+    reasons = tuple(failure_reasons(m, i, paths[i], scenes[i].goal_y, time, sp) for i in range(b))
     kin = m["kin"]
     toe = paths.copy()
     toe[..., 0] += sp.foot_length
@@ -405,67 +411,3 @@ def assemble(method: str, sp, scenes, raws, paths: np.ndarray, smoothing, durati
         clearance_ok=m["clearance_ok"], above_ground=m["above_ground"], heel_backward=m["heel_backward"],
         deviation=m["deviation"],
     )
-
-
-# Timed (device-ready) swings: exports of jaxexo.inference.swing_timing.TimedSwing ------------------
-
-TIMED_CSV_COLUMNS = CSV_COLUMNS + tuple(f"{j}_vel_rad_s" for j in JOINT_NAMES) + tuple(
-    f"{j}_acc_rad_s2" for j in JOINT_NAMES) + ("heel_vel_y_m_s", "heel_vel_z_m_s", "heel_acc_y_m_s2", "heel_acc_z_m_s2")
-
-
-def timed_table(swing) -> np.ndarray:
-    """(n, len(TIMED_CSV_COLUMNS)) array of a TimedSwing: the path columns, then joint velocities
-    and accelerations and the heel's velocity and acceleration, one row per control period."""
-    return np.column_stack([swing.time, swing.heel, swing.toe, swing.hip, swing.knee_swing, swing.knee_stance,
-                            swing.joint_angles, swing.joint_velocity, swing.joint_acceleration,
-                            swing.heel_velocity, swing.heel_acceleration])
-
-
-def write_timed_csv(swing, path: str | Path | None = None) -> str:
-    return write_csv(TIMED_CSV_COLUMNS, timed_table(swing), "{:.9g}", path)
-
-
-def write_csv(columns, table: np.ndarray, fmt: str, path: str | Path | None = None) -> str:
-    """CSV text of a (N, len(columns)) table, each number formatted by ``fmt``; written atomically to
-    ``path`` when given."""
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(columns)
-    for row in table:
-        w.writerow([fmt.format(x) for x in row])
-    text = buf.getvalue()
-    if path is not None:
-        atomic_write(path, text)
-    return text
-
-
-def timed_dict(swing) -> dict:
-    c = swing.checks
-    sc = swing.scene
-    return {
-        "units": {"length": "m", "angle": "rad", "time": "s", "joint velocity": "rad/s",
-                  "joint acceleration": "rad/s^2", "heel velocity": "m/s", "heel acceleration": "m/s^2", "rate": "Hz"},
-        "method": swing.method,
-        "scene": {"obstacle": sc.obstacle.kind, "shape": sc.obstacle.shape, "center_y": sc.center_y,
-                  "width": sc.width, "height": sc.height, "outline": sc.obstacle.outline.tolist(),
-                  "pivot": sc.pivot, "pivot_y": sc.pivot_y, "start_y": sc.start_y, "goal_y": sc.goal_y},
-        "rate_hz": swing.rate,
-        "duration_s": swing.duration,
-        "limits": swing.limits.to_dict(),
-        "peak_joint_velocity_rad_s": [float(x) for x in swing.peak_velocity],
-        "peak_joint_acceleration_rad_s2": [float(x) for x in swing.peak_acceleration],
-        "checks": {"ok": swing.ok, "within_limits": swing.within_limits, "reached_goal": c.reached_goal,
-                   "collision_free": c.collision_free, "min_clearance": c.min_clearance,
-                   "joint_limits_ok": c.joint_limits_ok, "leg_length_ok": c.leg_length_ok,
-                   "reasons": list(swing.reasons)},
-        "notes": list(swing.notes),
-        "columns": list(TIMED_CSV_COLUMNS),
-        "samples": timed_table(swing).tolist(),
-    }
-
-
-def write_timed_json(swing, path: str | Path | None = None) -> str:
-    text = json.dumps(timed_dict(swing), indent=1)
-    if path is not None:
-        atomic_write(path, text)
-    return text

@@ -120,7 +120,7 @@ assert np.array_equal(_FORWARD, np.r_[0:_FORWARD_HEAD, NUM_ACTIONS - (len(_FORWA
 SHIELD_SLACK = 1e-6
 # Entries of ``ends`` from which NumPy's pruning pays (a batch of rows); for one heel's 19 moves the
 # unpruned call is cheaper: NumPy's cost there is its number of calls, not the arithmetic.
-_PRUNE_FROM = 2 * len(_FORWARD) * 16
+PRUNE_FROM = 2 * len(_FORWARD) * 16
 
 
 def forward_moves() -> np.ndarray:
@@ -153,8 +153,8 @@ def moves_keep_clearance(xp, p, heel_y, heel_z, ends, outline, over_moves=_stack
     move passes."""
     here = xp.stack([heel_y, heel_z], axis=-1)
     c_here = geometry.foot_clearance(xp, here, p.foot_length, outline)
-    if xp is np and ends.size > _PRUNE_FROM:
-        return _moves_keep_clearance_pruned(p, here, c_here, ends, outline)
+    if xp is np and ends.size > PRUNE_FROM:
+        return moves_keep_clearance_pruned(p, here, c_here, ends, outline)
     moves = xp.moveaxis(ends, -2, 0)                                 # the moves' axis first: (F, ..., 2)
     d_move = xp.moveaxis(over_moves(
         lambda end: swept.swept_distance(xp, here + 0.0 * end, end, p.foot_length, outline),
@@ -162,7 +162,7 @@ def moves_keep_clearance(xp, p, heel_y, heel_z, ends, outline, over_moves=_stack
     return d_move >= xp.minimum(p.shield_clearance, c_here)[..., None] - SHIELD_SLACK
 
 
-def _moves_keep_clearance_pruned(p, here, c_here, ends, outline):
+def moves_keep_clearance_pruned(p, here, c_here, ends, outline):
     """``moves_keep_clearance`` in NumPy with the same decisions, computing the exact swept distance
     only where the ends' clearances leave it open: a move whose end is closer than needed fails (the
     swept region contains the foot at the end), and one whose ends satisfy the 1-Lipschitz bound
@@ -424,8 +424,15 @@ class Scene:
         return PIVOT_CONDITIONS[self.pivot_kind] if self.pivot_kind >= 0 else f"y={self.pivot_y:.3f} m"
 
 
-def make_scene(obstacle: geometry.Obstacle, pivot: str | float = "obstacle", start_y: float = 0.0,
-               step_length: float = 0.70, *, foot_length: float, max_vertices: int | None = None,
+# A scene's defaults (m): the pivot heel beside the obstacle, the swing heel at the origin, the
+# thesis's step (Table 3.1's layouts): make_scene's, and every generator's (jaxexo.inference.options).
+DEFAULT_PIVOT = "obstacle"
+DEFAULT_START_Y = 0.0
+DEFAULT_STEP_LENGTH = 0.70
+
+
+def make_scene(obstacle: geometry.Obstacle, pivot: str | float = DEFAULT_PIVOT, start_y: float = DEFAULT_START_Y,
+               step_length: float = DEFAULT_STEP_LENGTH, *, foot_length: float, max_vertices: int | None = None,
                shape_points: int = geometry.DEFAULT_SHAPE_POINTS) -> Scene:
     """Validate and lay out one scene. ``pivot`` is one of PIVOT_CONDITIONS (thesis 3.1) or the pivot
     heel's y in metres. ``max_vertices`` pads the outline to a fixed K (the JAX environment's); None

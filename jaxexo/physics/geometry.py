@@ -204,8 +204,7 @@ def profile_height(xp, y, outline):
 
 
 def finite(name: str, value, unit: str = "metres") -> float:
-    """``value`` as a finite float, or GeometryError naming ``name``: every number a caller gives the
-    geometry, the scene or a generator is checked here once."""
+    """``value`` as a finite float; GeometryError naming ``name`` otherwise (bools and strings refused)."""
     # A bool is an int to Python (True == 1): Obstacle.rectangle(True, 0.1) would be 1 m wide.
     if isinstance(value, (bool, np.bool_)):
         raise GeometryError(f"{name} must be a number in {unit}, got the boolean {value!r}")
@@ -222,7 +221,7 @@ def finite(name: str, value, unit: str = "metres") -> float:
 
 
 def finite_positive(name: str, value, unit: str = "metres") -> float:
-    """``finite``, and > 0."""
+    """``finite`` and > 0."""
     v = finite(name, value, unit)
     if v <= 0.0:
         raise GeometryError(f"{name} must be > 0 {unit}, got {v}")

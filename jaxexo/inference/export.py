@@ -1,0 +1,93 @@
+"""Exports of swings: the CSV columns and JSON documents of a checked trajectory
+(jaxexo.inference.trajectory.Trajectory) and of a device-ready timed swing
+(jaxexo.inference.swing_timing.TimedSwing). Units: metres, radians, seconds."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+
+from jaxexo.storage.atomic import atomic_write
+
+JOINT_NAMES = ("hip_swing", "knee_swing", "hip_stance", "knee_stance")
+
+CSV_COLUMNS = (
+    "time_s", "heel_y_m", "heel_z_m", "toe_y_m", "toe_z_m", "hip_y_m", "hip_z_m",
+    "knee_swing_y_m", "knee_swing_z_m", "knee_stance_y_m", "knee_stance_z_m",
+    "hip_swing_rad", "knee_swing_rad", "hip_stance_rad", "knee_stance_rad",
+)
+
+
+def scene_dict(sc) -> dict:
+    """A scene (jaxexo.physics.dynamics.Scene) as JSON values."""
+    return {"obstacle": sc.obstacle.kind, "shape": sc.obstacle.shape, "center_y": sc.center_y,
+            "width": sc.width, "height": sc.height, "outline": sc.obstacle.outline.tolist(),
+            "pivot": sc.pivot, "pivot_y": sc.pivot_y, "start_y": sc.start_y, "goal_y": sc.goal_y}
+
+
+TIMED_CSV_COLUMNS = CSV_COLUMNS + tuple(f"{j}_vel_rad_s" for j in JOINT_NAMES) + tuple(
+    f"{j}_acc_rad_s2" for j in JOINT_NAMES) + ("heel_vel_y_m_s", "heel_vel_z_m_s", "heel_acc_y_m_s2", "heel_acc_z_m_s2")
+
+
+def timed_table(swing) -> np.ndarray:
+    """(n, len(TIMED_CSV_COLUMNS)) array of a TimedSwing: the path columns, then joint velocities
+    and accelerations and the heel's velocity and acceleration, one row per control period."""
+    return np.column_stack([swing.time, swing.heel, swing.toe, swing.hip, swing.knee_swing, swing.knee_stance,
+                            swing.joint_angles, swing.joint_velocity, swing.joint_acceleration,
+                            swing.heel_velocity, swing.heel_acceleration])
+
+
+def write_timed_csv(swing, path: str | Path | None = None) -> str:
+    return write_csv(TIMED_CSV_COLUMNS, timed_table(swing), "{:.9g}", path)
+
+
+def write_csv(columns, table: np.ndarray, fmt: str, path: str | Path | None = None) -> str:
+    """CSV text of a (N, len(columns)) table, each number formatted by ``fmt``; written atomically to
+    ``path`` when given."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(columns)
+    for row in table:
+        w.writerow([fmt.format(x) for x in row])
+    text = buf.getvalue()
+    if path is not None:
+        atomic_write(path, text)
+    return text
+
+
+def timed_dict(swing) -> dict:
+    c = swing.checks
+    return {
+        "units": {"length": "m", "angle": "rad", "time": "s", "joint velocity": "rad/s",
+                  "joint acceleration": "rad/s^2", "heel velocity": "m/s", "heel acceleration": "m/s^2", "rate": "Hz"},
+        "method": swing.method,
+        "scene": scene_dict(swing.scene),
+        "rate_hz": swing.rate,
+        "duration_s": swing.duration,
+        "limits": swing.limits.to_dict(),
+        "peak_joint_velocity_rad_s": [float(x) for x in swing.peak_velocity],
+        "peak_joint_acceleration_rad_s2": [float(x) for x in swing.peak_acceleration],
+        "checks": {"ok": swing.ok, "within_limits": swing.within_limits, "reached_goal": c.reached_goal,
+                   "collision_free": c.collision_free, "min_clearance": c.min_clearance,
+                   "joint_limits_ok": c.joint_limits_ok, "leg_length_ok": c.leg_length_ok,
+                   "reasons": list(swing.reasons)},
+        "notes": list(swing.notes),
+        "columns": list(TIMED_CSV_COLUMNS),
+        "samples": timed_table(swing).tolist(),
+    }
+
+
+def write_timed_json(swing, path: str | Path | None = None) -> str:
+    return write_json(timed_dict(swing), path)
+
+
+def write_json(doc: dict, path: str | Path | None = None) -> str:
+    """JSON text of ``doc``; written atomically to ``path`` when given."""
+    text = json.dumps(doc, indent=1)
+    if path is not None:
+        atomic_write(path, text)
+    return text

@@ -1,0 +1,47 @@
+"""The fallback composition: the RL generator's swings, with a planner's swing wherever the RL one
+fails the safe-swing check (jaxexo.inference.trajectory).
+
+The planner (CFFTG, jaxexo.baselines.cfftg, for ``fallback="cfftg"``) is anything with
+``finish(scenes, n_points, duration) -> TrajectoryBatch``. A row is replaced only when the planner's
+swing passes; the method then reads "cfftg-fallback" and the notes keep the RL failure. When the
+planner fails too, the RL swing is kept, not ok, with both failures in its notes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from jaxexo.inference.trajectory import TrajectoryBatch
+
+
+def rows(batch: TrajectoryBatch, idx) -> TrajectoryBatch:
+    """The sub-batch of rows ``idx`` (in order)."""
+    changes = {}
+    for f in dataclasses.fields(batch):
+        v = getattr(batch, f.name)
+        if f.name in ("method", "time") or (f.name == "row_methods" and not v):
+            continue
+        changes[f.name] = tuple(v[i] for i in idx) if isinstance(v, tuple) else v[idx]
+    return dataclasses.replace(batch, **changes)
+
+
+def replace_failures(batch: TrajectoryBatch, planner, n_points: int, duration: float) -> TrajectoryBatch:
+    """``batch`` with each failing row replaced by ``planner``'s swing for its scene where that passes."""
+    bad = np.flatnonzero(~batch.ok)
+    if not bad.size:
+        return batch
+    plan = planner.finish([batch.scenes[i] for i in bad], n_points, duration)
+    take = [j for j in range(len(bad)) if plan.ok[j]]
+    notes = list(batch.notes)
+    for j, i in enumerate(bad):
+        rl_fail = "RL swing failed the safe-swing check: " + "; ".join(batch.reasons[i])
+        notes[i] = notes[i] + ((rl_fail + "; CFFTG's plan is returned",) if j in take else
+                               (rl_fail, "CFFTG fallback failed too: " + "; ".join(plan.reasons[j])))
+    batch = dataclasses.replace(batch, notes=tuple(notes))
+    if not take:
+        return batch
+    sub = rows(dataclasses.replace(plan, method="cfftg-fallback", row_methods=()), take)
+    sub = dataclasses.replace(sub, notes=tuple(notes[bad[j]] + sub.notes[n] for n, j in enumerate(take)))
+    return batch.with_rows([bad[j] for j in take], sub)

@@ -1,0 +1,124 @@
+"""The shield's admissible moves for many heels at once, in the training environment's float32.
+
+The generator's batch rollout and its reference: ``admissible`` is jaxexo.physics.dynamics.admissible_moves
+on rows of stacked scenes, with the exact swept clearance (jaxexo.physics.swept) computed only for the
+heels near the obstacle (elsewhere no move can fail it). ``choose`` is the shielded greedy action,
+checking first only each row's best forward moves (one move per row instead of 19, in the same
+float32 elementwise arithmetic) and the full mask only for the rows where none of them passes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from jaxexo.physics import dynamics, geometry, swept
+
+
+def take_rows(lay, idx):
+    """Rows ``idx`` of stacked scenes (dynamics.stack_scenes)."""
+    return type(lay)(**{k: v[idx] for k, v in vars(lay).items()})
+
+
+class ShieldRows:
+    """Admissible moves of many heels for parameters ``p`` (jaxexo.config.numpy_params) and ``sp``
+    (jaxexo.config.scalar_params); ``stats`` (a list of 4, the generator's shield_stats) counts the
+    rows ``choose`` decided [2] and those it handed to the full mask [3]."""
+
+    # forward moves checked one at a time per row before the full mask (``choose``)
+    BATCH_ROUNDS = 4
+
+    def __init__(self, p, sp, stats):
+        self.p, self.sp, self.stats = p, sp, stats
+        self._fwd_idx = np.flatnonzero(dynamics.forward_moves())
+        self._n_forward = len(self._fwd_idx)
+
+    def _near(self, hy, hz, lay) -> np.ndarray:
+        """(B,) rows whose foot is within a step plus the shield's clearance of the obstacle's bounding
+        box (elsewhere no move can fail the clearance condition)."""
+        p = self.p
+        half = 0.5 * lay.width
+        dy = np.maximum(np.maximum(lay.center_y - half - (hy + p.foot_length), hy - (lay.center_y + half)), 0.0)
+        dz = np.maximum(hz - lay.height, 0.0)
+        return np.hypot(dy, dz) < self.sp.shield_clearance + self.sp.step_size + 1e-4
+
+    def _clear(self, hy, hz, ends, outline, pruned: bool, c_here=None) -> np.ndarray:
+        """dynamics.moves_keep_clearance for heels (B,) and move ends (B, F, 2), with its NumPy branch
+        (pruned or not: the same decisions) given rather than chosen by the array's size,
+        so that a subset of the moves or rows is decided exactly as in the whole step's call.
+        ``c_here``: the heels' foot clearances when known (elementwise, so the same numbers)."""
+        p = self.p
+        here = np.stack([hy, hz], axis=-1)
+        if c_here is None:
+            c_here = geometry.foot_clearance(np, here, p.foot_length, outline)
+        if pruned:
+            return dynamics.moves_keep_clearance_pruned(p, here, c_here, ends, outline)
+        # the unpruned branch of moves_keep_clearance, written out (the same elementwise arithmetic)
+        moves = np.moveaxis(ends, -2, 0)
+        d_move = np.moveaxis(swept.swept_distance(np, here + 0.0 * moves, moves, p.foot_length, outline), 0, -1)
+        return d_move >= np.minimum(p.shield_clearance, c_here)[..., None] - dynamics.SHIELD_SLACK
+
+    def admissible(self, hy, hz, lay, pruned: bool | None = None, near=None, c_here=None, last=None) -> np.ndarray:
+        """(B, A) the shield's admissible moves (jaxexo.physics.dynamics.admissible_moves) of many heels,
+        float32 rows of stacked scenes like the training environment; the exact clearance is computed
+        only for the ``_near`` rows (elsewhere no move can fail it, so the mask is the same).
+        ``pruned``: the clearance's NumPy branch (None: by size, as moves_keep_clearance chooses);
+        ``c_here`` (B,): the heels' foot clearances where ``near`` (with ``pruned`` given); ``last``
+        (B,): the moves just made (-1: none)."""
+        p = self.p
+        near = self._near(hy, hz, lay) if near is None else near
+        clear = np.ones((len(hy), self._n_forward), bool)
+        if near.any():
+            ends = dynamics.forward_ends(np, p, hy[near], hz[near])
+            if pruned is None:
+                clear[near] = dynamics.moves_keep_clearance(np, p, hy[near], hz[near], ends, lay.outline[near])
+            else:
+                clear[near] = self._clear(hy[near], hz[near], ends, lay.outline[near], pruned,
+                                          None if c_here is None else c_here[near])
+        return dynamics.admissible_moves(np, p, hy, hz, lay, clear=clear, last_action=last)
+
+    def choose(self, hy, hz, lay, q, last) -> np.ndarray:
+        """The shielded greedy actions (B,) of ``admissible`` + greedy_action, checking first only
+        each row's best forward move (one move per row instead of 19, in the same float32
+        elementwise arithmetic); the full mask only for the rows where that move is not admissible."""
+        fwd = self._fwd_idx
+        # forward moves by decreasing Q, ties by index (as argmax over the mask picks the first)
+        order = fwd[np.argsort(-q[:, fwd], axis=1, kind="stable")[:, :self.BATCH_ROUNDS]]
+        near = self._near(hy, hz, lay)
+        # the branch the whole step's moves_keep_clearance call takes (by its array's size)
+        pruned = int(near.sum()) * self._n_forward * 2 > dynamics.PRUNE_FROM
+        # the near heels' foot clearances once per step (every round and the full mask read them)
+        c_here = np.zeros(len(hy), np.float32)
+        if near.any():
+            c_here[near] = geometry.foot_clearance(np, np.stack([hy[near], hz[near]], axis=-1),
+                                                   self.p.foot_length, lay.outline[near])
+        out = order[:, 0].copy()
+        miss = np.arange(len(hy))
+        for r in range(self.BATCH_ROUNDS):     # the r-th best move of the rows still undecided
+            a = order[miss, r]
+            ok = self._one_move_ok(hy[miss], hz[miss], take_rows(lay, miss), near[miss], a, pruned, last[miss],
+                                   c_here[miss])
+            out[miss[ok]] = a[ok]
+            miss = miss[~ok]
+            if not miss.size:
+                break
+        if miss.size:
+            sub = take_rows(lay, miss)
+            mask = self.admissible(hy[miss], hz[miss], sub, pruned, near[miss], c_here[miss], last[miss])
+            out[miss] = dynamics.greedy_action(np, q[miss], mask)
+        self.stats[2] += len(hy)
+        self.stats[3] += miss.size
+        return out
+
+    def _one_move_ok(self, hy, hz, lay, near, a, pruned: bool, last, c_here=None) -> np.ndarray:
+        """(B,) whether move a (B,) passes all of admissible_moves' conditions (its column of the
+        mask before the fallbacks; ``last`` (B,) the moves just made, ``c_here`` as ``admissible``),
+        in the same float32 elementwise arithmetic."""
+        p = self.p
+        d = p.directions[a]
+        y, z = dynamics.move_heel(np, p, hy, hz, d[:, 0], d[:, 1])
+        new = np.stack([y, z], axis=-1)[:, None, :]      # (B, 1, 2)
+        clear = np.ones((len(hy), 1), bool)
+        if near.any():
+            clear[near] = self._clear(hy[near], hz[near], new[near], lay.outline[near], pruned,
+                                      None if c_here is None else c_here[near])
+        return dynamics.shield_conditions(np, p, hy, hz, lay, a[:, None], new, clear, last)[:, 0]
