@@ -1,4 +1,4 @@
-"""What issue 21's group-size independence costs in throughput: the same agents trained by one
+"""What group-size independence costs in throughput: the same agents trained by one
 vmapped batch per device (``over_agents``, what sweeps ran before) and by fixed blocks of LANES
 (``over_lanes``, what sweeps and populations run now), in one process, medians of repeated compiled
 calls after a compiling one (jaxexo.benchmarks.sweep_bench.agents_throughput).
@@ -43,7 +43,7 @@ def main() -> None:
             r = agents_throughput(cfg, n, devices, updates, repeats=3, wrap=wrap)
             rows.append({"case": name, "program": label, **r})
             print(name, label, f"{r['env_steps_per_s'] / 1e6:.3f} M env-steps/s", flush=True)
-    lines = ["# Fixed vmap blocks against one batch per device (issue 21)", "",
+    lines = ["# Fixed vmap blocks against one batch per device", "",
              f"{len(devices)} CPU devices; load average before {tuple(round(x, 2) for x in load_before)}, after "
              f"{tuple(round(x, 2) for x in os.getloadavg())} (a shared machine). Training only (no evaluation); "
              "median of 3 compiled calls.", "",

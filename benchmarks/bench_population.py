@@ -1,4 +1,4 @@
-"""Issue 21's cost target: a population of K costs at most 1.5 + (K - 1) x 0.25 times the wall time of
+"""The population cost target: a population of K costs at most 1.5 + (K - 1) x 0.25 times the wall time of
 one agent of the same config (``jaxexo train`` with population 1, data parallel over the cores).
 
 For each K, ``jaxexo train``'s driver (jaxexo.train.driver.run_training, as the CLI runs it: every
@@ -71,7 +71,7 @@ def main(config: str | None = None, ks=(1, 4, 8), name: str = "population") -> N
         r["steady_ratio"] = r["steady_chunk_s"] / one["steady_chunk_s"]
         r["target"] = target(r["k"])
         r["meets_target"] = r["ratio"] <= r["target"]
-    lines = ["# Population cost (issue 21)", "",
+    lines = ["# Population cost", "",
              f"Config `{Path(path).name}`; seeds 0..K-1; `jaxexo train`'s driver in one process, the CPU cores as JAX "
              "devices. K = 1 is one agent (data parallel over the devices); K > 1 a population "
              "(jaxexo.train.population: members in fixed blocks of 2 lanes per device). Wall time: eval.json's "

@@ -1,4 +1,4 @@
-"""Safe-swing benchmark (issue 11): how often each generator returns a safe swing (exact clearance of
+"""Safe-swing benchmark: how often each generator returns a safe swing (exact clearance of
 the moving foot >= env.min_clearance, goal, no backward heel, joint limits, leg length), and the
 number of swings flagged safe that a 10x denser look at the same curve contradicts (must be 0).
 
@@ -108,7 +108,7 @@ def main():
     info = machine_info()
     payload["machine"] = info
     md = "\n".join([
-        "# Safe-swing benchmark (issue 11)", "",
+        "# Safe-swing benchmark", "",
         f"Policy `{a.policy}`; margin env.min_clearance = {100 * margin:.1f} cm, backward tolerance "
         f"{1000 * tol:.1f} mm; {info['cpu']}, {info['cores']} cores. A swing is safe when the exact clearance "
         "of the moving foot (between samples, less the curve's deviation bound) keeps the margin, the goal is "

@@ -4,7 +4,7 @@ config and the seven thesis configs. Writes benchmarks/results/train_<date>_<mac
 
 Run: python benchmarks/bench_train.py
 
-Steady rate of given configs through the real driver (issue 24): compilations of the chunk program,
+Steady rate of given configs through the real driver: compilations of the chunk program,
 the rate of each chunk (chunk 1 includes compilation), the steady rate (median of chunks 3 on):
   python benchmarks/bench_train.py --steady configs/quick.toml configs/default.toml [--budget 4000000]
       [--label NAME]

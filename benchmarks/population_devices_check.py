@@ -1,4 +1,4 @@
-"""Issue 21: does a population member's arithmetic depend on the number of CPU devices?
+"""Does a population member's arithmetic depend on the number of CPU devices?
 
 tests/test_population.py checks group-size independence in one process (one device). This script
 trains the test's tiny config in fresh processes with 1, 2 and 4 CPU devices: seed 3 alone and as
@@ -53,7 +53,7 @@ def main() -> None:
     from jaxexo.evaluation.machine import write_result
 
     rows = [run(d) for d in (1, 2, 4)]
-    lines = ["# Population members across device counts (issue 21)", "",
+    lines = ["# Population members across device counts", "",
              "The tiny config of tests/test_population.py, seed 3, trained alone and as the fourth member of a "
              "population of 5, in a fresh process with 1, 2 and 4 CPU devices (the population spread over all of "
              "them); sha256 of the final parameters and per-update metrics.", "",

@@ -1,4 +1,4 @@
-"""Issue 14: why the heel-only thesis models need a wider safety margin to clear the test obstacles.
+"""Why the heel-only thesis models need a wider safety margin to clear the test obstacles.
 
 A policy that sees only the heel (y, z) cannot tell Base 1-3 apart, so the best it can do is keep the
 safety distance min_dt (eq 2.35) from all three at once (same centre, as in the thesis layouts). This

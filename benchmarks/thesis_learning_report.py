@@ -1,4 +1,4 @@
-"""Issue 14 evidence: why the faithful thesis configs do not learn, and which switches make them learn.
+"""Evidence: why the faithful thesis configs do not learn, and which switches make them learn.
 
 Turns finished ``jaxexo sweep`` directories (configs/sweeps/thesis_*.toml) into one result per study,
 benchmarks/results/thesis-learning-<study>_<date>_<machine>.{json,md}: the sweep file, the command, every

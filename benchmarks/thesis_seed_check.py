@@ -1,4 +1,4 @@
-"""Issue 14 evidence: the thesis learns configs trained by ``jaxexo train`` (the driver ``jaxexo reproduce``
+"""Evidence: the thesis learns configs trained by ``jaxexo train`` (the driver ``jaxexo reproduce``
 uses: model selection on validation layouts, the best chunk exported) with several seeds, so that a
 target met or missed by ``jaxexo reproduce``'s seed 0 is not read as a property of the config.
 

@@ -67,7 +67,7 @@ MIXED_RAW = {
 }
 
 
-# The schema's former declared defaults (Config() before they became the default model's, issue 22),
+# The schema's former declared defaults (Config() before they became the default model's),
 # resolved from main: tests/data/resolved_configs.json "schema_defaults". The tests' raw configs are
 # stated on top of it (legacy_raw), so that each means what it meant when the test was written.
 _LEGACY: dict = {}

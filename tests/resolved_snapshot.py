@@ -17,9 +17,9 @@ SNAPSHOT = ROOT / "tests" / "data" / "resolved_configs.json"
 # Fields declared after the snapshot was taken, at the value that means what every config meant
 # before them (the wearer's costs: 0 is the thesis reward). A config that states them so, or a
 # resolved text that has them so, means what it meant.
-# train.population (issue 21): 1 is one agent, what every config trained before it.
+# train.population: 1 is one agent, what every config trained before it.
 ADDED_SINCE = {"reward": {"lift_cost": 0.0, "time_cost": 0.0, "turn_cost": 0.0}, "train": {"population": 1}}
-# Configs deliberately redefined since: the default model (a new reward and mid-goal, issue 20) and
+# Configs deliberately redefined since: the default model (a new reward and mid-goal) and
 # the sweeps built on it. Their meaning is the default's (tests/test_config_roundtrip.py).
 REDEFINED = {"configs/default.toml", "jaxexo/config/default.toml", "configs/sweeps/backward.toml",
              "configs/sweeps/lr_lambda.toml", "configs/sweeps/reward_weights.toml", "configs/sweeps/smoke.toml"}

@@ -49,7 +49,7 @@ def test_always_valid_on_training_and_test_obstacles(gen, cfg, which):
     b = _batch(gen, sc)
     assert b.ok.all(), [b[i].checks.reasons for i in np.flatnonzero(~b.ok)[:3]]
     # Planned with the safety distance as margin: the exact clearance at every sample is at least that,
-    # and the guaranteed clearance between samples (issue 11) keeps the safe-swing margin.
+    # and the guaranteed clearance between samples keeps the safe-swing margin.
     c = np.stack([geometry.foot_clearance(np, b.heel[i], gen.sp.foot_length, b.scenes[i].outline) for i in range(len(b))])
     assert c.min() >= gen.margin - 1e-9
     assert b.min_clearance.min() >= cfg.env.min_clearance

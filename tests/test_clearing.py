@@ -131,7 +131,7 @@ def test_a_smoothed_path_is_accepted_with_headroom_above_the_margin():
 
 
 # --------------------------------------------------------------------------------------------
-# Issue 19: many paths corrected together, the pruned clearances, the stacked dual solve
+# Many paths corrected together, the pruned clearances, the stacked dual solve
 # --------------------------------------------------------------------------------------------
 
 def _mixed_scenes(n, seed):

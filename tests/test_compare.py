@@ -76,7 +76,7 @@ def test_eval_numbers_are_consistent(eval_out):
         assert r["min_clearance_m_worst"] <= r["min_clearance_m_mean"]
         assert r["path_length_m_mean"] > 0.6           # at least the step length
     # CFFTG plans every thesis and training obstacle of this config; the RL swing with the CFFTG
-    # fallback is safe wherever either is (issue 11).
+    # fallback is safe wherever either is.
     assert report["cfftg"]["success"] == 1.0
     assert report["rl+cfftg"]["success"] == 1.0 >= report["rl"]["success"]
     assert report["rl"]["fallback_rate"] == 0.0

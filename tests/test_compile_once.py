@@ -1,4 +1,4 @@
-"""One compilation of the training program per run (issue 24).
+"""One compilation of the training program per run.
 
 ``jit(run)`` keys its compiled programs on the inputs' shardings. On two CPU devices the state a chunk
 returns is split over the device mesh; a state straight from ``init`` (one device) or from a

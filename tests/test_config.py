@@ -41,7 +41,7 @@ def test_default_toml_loads():
 
 
 def test_empty_config_is_the_defaults():
-    # One default (issue 22): an empty config, Config() and the packaged default are the same model.
+    # One default: an empty config, Config() and the packaged default are the same model.
     cfg = config_from_dict({})
     assert cfg == Config() == load_config(ROOT / "configs" / "default.toml")
     assert [o.kind for o in cfg.layout.obstacles] == ["base1", "base2", "base3", "rectangle", "rectangle"]
@@ -297,7 +297,7 @@ def test_profile_size_defaults_to_drawn_extents_and_ranges_are_metres():
 
 
 # --------------------------------------------------------------------------------------------
-# Issue 13: errors at the boundary, naming the field or file
+# Errors at the boundary, naming the field or file
 # --------------------------------------------------------------------------------------------
 
 

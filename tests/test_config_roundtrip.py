@@ -198,7 +198,7 @@ def test_cli_default_is_the_packaged_file():
     assert cli.DEFAULT_CONFIG.resolve() == (PACKAGE / "default.toml").resolve()
     cfg, name = cli._load(None)
     assert cfg == load_config(ROOT / "configs" / "default.toml") and name == str(cli.DEFAULT_CONFIG)
-    # One default (issue 22): the packaged default is Config(), and a missing file is refused
+    # One default: the packaged default is Config(), and a missing file is refused
     # (tests/test_config.py), never read as an empty one.
     assert cfg == Config()
 

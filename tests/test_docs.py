@@ -145,3 +145,26 @@ def test_configuration_reference_names_every_field():
             if f"| `{f.name}` |" not in body:
                 missing.append(f"{section.name}.{f.name}")
     assert missing == [], f"docs/configuration.md does not document: {missing}"
+
+
+# A tracker's issue number ("issue" and a number) means nothing to a reader of the repository: the
+# code, tests, configs, benchmarks and documentation say what and why instead (history is in git).
+_ISSUE_NUMBER = re.compile(r"\bissues?\s*#?\s*\d+", re.IGNORECASE)
+
+
+def _prose_files():
+    for folder, pattern in (("jaxexo", "**/*.py"), ("jaxexo", "**/*.toml"), ("tests", "*.py"),
+                            ("benchmarks", "*.py"), ("configs", "**/*.toml"), ("docs", "*.md")):
+        yield from sorted((ROOT / folder).glob(pattern))
+    yield ROOT / "README.md"
+
+
+def test_no_issue_numbers_in_code_or_docs():
+    found = [f"{p.relative_to(ROOT)}:{i}: {line.strip()}" for p in _prose_files()
+             for i, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1) if _ISSUE_NUMBER.search(line)]
+    assert not found, "issue numbers (say what and why instead):\n" + "\n".join(found[:20])
+
+
+def test_the_issue_number_check_catches_one():
+    assert _ISSUE_NUMBER.search("the shield (Iss" + "ue 11)") and _ISSUE_NUMBER.search("iss" + "ues 12, 19")
+    assert not _ISSUE_NUMBER.search("an issue with 3 vertices") and not _ISSUE_NUMBER.search("tissue 4")

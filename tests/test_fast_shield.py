@@ -1,4 +1,4 @@
-"""Issue 19's fast paths against their plain references: the shield's move checked one at a time
+"""The generator's fast paths against their plain references: the shield's move checked one at a time
 (jaxexo.inference.shield for one swing, ``_batch_choice`` for a batch) against the full mask, and the
 generator's one-pass candidate smoothings, on thousands of scenes of the training distribution and
 of the held-out families. Policies: random weights (no training), shielded default config."""

@@ -215,7 +215,7 @@ def test_trajectory_fields_follow_the_shared_kinematics(trained_policy):
     np.testing.assert_allclose(t.joint_angles[:, 2], kin["hip_stance"], atol=1e-6)
     # Thigh and shin keep their lengths wherever the leg can reach.
     np.testing.assert_allclose(np.linalg.norm(t.knee_swing - t.hip, axis=1), sp.thigh, atol=1e-6)
-    # The clearance is the exact swept clearance over the moves between samples (issue 11) less the
+    # The clearance is the exact swept clearance over the moves between samples less the
     # spline's chord-deviation bound: never more than the samples' own clearance.
     clear = ob.clearance(t.heel, sp.foot_length)
     sw = swept.path_swept_clearance(np, t.heel, sp.foot_length, t.scene.outline)
@@ -246,7 +246,7 @@ def test_smoothing_that_would_touch_the_obstacle_falls_back(trained_policy):
     scene = gen.scene(ob, pivot="obstacle")
     foot = gen.sp.foot_length
     # A raw path that hugs the obstacle's near-top corner: straight up just before it, across just
-    # above it, straight down after it, keeping the 2 cm safety margin (issue 11: the fallback keeps
+    # above it, straight down after it, keeping the 2 cm safety margin (the fallback keeps
     # the raw path's margin). Smoothing cuts the corners into the obstacle.
     up = [(0.12, z) for z in np.arange(0.0, 0.231, 0.03)]
     over = [(y, 0.23) for y in np.arange(0.15, 0.46, 0.03)]

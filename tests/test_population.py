@@ -1,4 +1,4 @@
-"""Populations (issue 21): a member's result does not depend on who shares its program, the driver
+"""Populations: a member's result does not depend on who shares its program, the driver
 exports the best member's best chunk and records every member, bad values are refused.
 
 One tiny forward-view config (16 environments, 6 updates in 3 chunks of 2); the programs are shared

@@ -1,4 +1,4 @@
-"""Nothing lost, nothing faked (issue 13): run directories, locks, checksums, divergence, counters.
+"""Nothing lost, nothing faked: run directories, locks, checksums, divergence, counters.
 
 Each fault is produced for real: a process killed with SIGKILL mid-run, two processes on one
 directory, corrupted files, a full disk (a small RLIMIT_FSIZE in a subprocess, SIGXFSZ ignored so the
@@ -677,7 +677,7 @@ def test_divergence_after_a_good_chunk_keeps_the_best_finite_parameters(cache, t
 
 @pytest.mark.slow
 def test_resume_refuses_an_edited_config_a_deleted_checkpoint_and_undecodable_metrics(reference, cache, tmp_path):
-    """Issue 22: config.toml edited together with the config passed (a changed lr would mix two
+    """config.toml edited together with the config passed (a changed lr would mix two
     learning rates), checkpoint.msgpack deleted from a run of several chunks (it used to restart from
     scratch silently), random bytes in metrics.jsonl (named, not "'utf-8' codec can't decode")."""
     from jaxexo.train.driver import run_training

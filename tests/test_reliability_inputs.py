@@ -1,4 +1,4 @@
-"""Nothing lost, round two (issue 22): no file outside the run touched, no input overwritten by an
+"""Nothing lost: no file outside the run touched, no input overwritten by an
 output, no setting that silently means something else, every bad input refused before any work with
 one line naming the field, option or file (no traceback, no kill for memory).
 

@@ -1,4 +1,4 @@
-"""The safe-swing definition (issue 11): the exact swept clearance of jaxexo.physics.swept against dense
+"""The safe-swing definition: the exact swept clearance of jaxexo.physics.swept against dense
 brute force, a verdict that no denser sampling of the same curve contradicts, the environment's moves
 that cannot jump through a corner, the margin in the config, and the generator's CFFTG fallback."""
 

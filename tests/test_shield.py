@@ -1,4 +1,4 @@
-"""The shield (issue 11): the admissible moves of jaxexo.physics.dynamics.admissible_moves checked
+"""The shield: the admissible moves of jaxexo.physics.dynamics.admissible_moves checked
 against a dense brute-force look at each move (independent of jaxexo.physics.swept), the same mask in
 JAX and NumPy, exploration and greedy choice inside the mask in the trainer and the generator, and
 shielded raw paths that never fall back and keep the clearance."""

@@ -1,4 +1,4 @@
-"""The generator's fast paths (issue 12) against the plain reference implementation: the swept
+"""The generator's fast paths against the plain reference implementation: the swept
 check's pruning bound against the exact swept clearance, the pruned per-path minimum against the
 full one, and ``generate`` / ``generate_batch`` (fast) against ``fast=False`` on thousands of scenes."""
 
@@ -168,7 +168,7 @@ def test_generate_batch_runs_blas_on_one_thread_and_restores_it(tmp_path, monkey
 @pytest.mark.parametrize("k", [1, 2, 3, 4, 5, 8, 9, 16, 17])
 def test_chained_reductions_equal_numpys_reductions(k):
     """geometry.min_last / any_last / odd_last (chains of elementwise operations over a short last
-    axis, issue 12) against NumPy's own reductions, bit for bit, NaN and signed zeros included."""
+    axis) against NumPy's own reductions, bit for bit, NaN and signed zeros included."""
     rng = np.random.default_rng(k)
     for shape in ((k,), (7, k), (3, 5, k), (2, 4, 6, k)):
         x = rng.normal(size=shape)

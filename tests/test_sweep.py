@@ -143,7 +143,7 @@ def test_hyper_fields_are_the_hyperparams_leaves():
 
     from jaxexo.train.trainer import Hyperparams
 
-    # ...and budget_updates, the env-step budget in whole updates (integer budgets, issue 13).
+    # ...and budget_updates, the env-step budget in whole updates (integer budgets).
     assert tuple(f.name for f in dataclasses.fields(Hyperparams) if f.name != "env") == HYPER_FIELDS + ("budget_updates",)
 
 

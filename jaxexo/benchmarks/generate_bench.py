@@ -1,4 +1,4 @@
-"""Generator benchmark (issues 12, 19): the shielded RL generator against CFFTG, side by side in one
+"""Generator benchmark: the shielded RL generator against CFFTG, side by side in one
 process, on the same scenes: one swing (rollout, smoothing, every safe-swing check, kinematics, joint
 angles), RL alone (``fallback=None``), RL and CFFTG alternating per scene, on the held-out families
 (jaxexo.evaluation.unseen) and on the safety scenes (jaxexo.inference.scenarios.safety_scenarios);
@@ -26,7 +26,7 @@ from jaxexo.evaluation.timing import time_batch
 from jaxexo.inference.blas import blas_threads
 
 THESIS_MS = {"rl_single": 3.0, "cfftg_single": 2.0, "rl_batch_1000": 1764.0}   # Table 3.11, §3.4
-# issue 19: one swing <= 1 ms and <= 1.5x CFFTG's; a batch of 1000 no slower than CFFTG's and <= 150 ms;
+# Targets: one swing <= 1 ms and <= 1.5x CFFTG's; a batch of 1000 no slower than CFFTG's and <= 150 ms;
 # >= 99 % of swings smoothed in one pass, none on the raw polyline; import <= 0.3 s
 TARGETS = {"rl_single_ms": 1.0, "rl_over_cfftg_single": 1.5, "rl_batch_1000_ms": 150.0, "smoothed_once": 0.99,
            "import_s": 0.3}

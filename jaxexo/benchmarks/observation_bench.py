@@ -1,4 +1,4 @@
-"""Observation study (issue 11): does seeing the obstacle's height profile (env.obs_profile = "shape")
+"""Observation study: does seeing the obstacle's height profile (env.obs_profile = "shape")
 beat seeing its bounding box ("bbox") on shapes the policy never trained on?
 
 Two models are trained from configs/default.toml with one difference, env.obs_profile, on the same

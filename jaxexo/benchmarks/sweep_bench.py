@@ -38,7 +38,7 @@ def agents_throughput(cfg: Config, n_agents: int, devices, updates: int, repeats
     """Training env-steps/s of ``n_agents`` agents (learning rates spread over a decade, one seed
     each) vmapped and split over ``devices``: the sweep's training program without its evaluation.
     ``wrap``: over_agents (one vmapped batch per device) or over_lanes (fixed blocks, what sweeps and
-    populations run since issue 21)."""
+    populations run)."""
     tr = Trainer(cfg)
     h = Hyperparams.from_config(cfg)
     hyper = jax.tree.map(lambda x: np.broadcast_to(np.asarray(x), (n_agents,) + np.shape(x)).copy(), h)

@@ -48,7 +48,7 @@ class EnvState:
     heel: jnp.ndarray          # (2,) swing heel (y, z), m
     time: jnp.ndarray          # steps taken this episode (gymnax name)
     visited_mid: jnp.ndarray   # bool: the heel has passed through the mid-goal box
-    max_y: jnp.ndarray         # the heel's largest y this episode (backward motion, issue 11)
+    max_y: jnp.ndarray         # the heel's largest y this episode (backward motion)
     last_action: jnp.ndarray   # the move just made (-1 at the start): the shield never undoes it
     layout: Layout
 

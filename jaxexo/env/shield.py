@@ -1,4 +1,4 @@
-"""The shield's mask for a batch of environments, JAX only (issue 24): the decisions of
+"""The shield's mask for a batch of environments, JAX only: the decisions of
 ``jaxexo.physics.dynamics.admissible_moves``, with the exact swept clearance computed only for the
 moves that a cheap bound leaves open.
 

@@ -200,7 +200,7 @@ def tables(results: dict) -> str:
 
 
 def meets_target(model: str, success: float, reached_goal: float) -> bool | None:
-    """Issue 21's target for a thesis model: the goal reached in >= 95 % of the test trajectories and
+    """The target for a thesis model: the goal reached in >= 95 % of the test trajectories and
     strict success >= the thesis's accuracy (Table 3.10); None for a model the thesis gives none for."""
     ref = THESIS_ACCURACY.get(model)
     return None if ref is None else bool(reached_goal >= 0.95 and 100 * success >= ref)

@@ -183,7 +183,7 @@ def moves_keep_clearance_pruned(p, here, c_here, ends, outline):
 
 
 def admissible_moves(xp, p, heel_y, heel_z, layout, over_moves=_stacked, clear=None, last_action=None):
-    """(..., NUM_ACTIONS) bool: the moves the agent may choose from heel (y, z) (issue 11's shield).
+    """(..., NUM_ACTIONS) bool: the moves the agent may choose from heel (y, z) (the shield).
 
     Without the shield (``p.shield`` False, the thesis) every move. With it, a move must
     - not go backward (its direction has no -y component: eq 2.31's condition cannot arise);

@@ -61,7 +61,7 @@ class GeometryError(ValueError):
 
 
 # NumPy reduces over a short last axis one outer element at a time, 4-15x slower than elementwise
-# operations across it (issue 12: an outline has 3-17 vertices, and one checked trajectory makes
+# operations across it (an outline has 3-17 vertices, and one checked trajectory makes
 # dozens of such reductions). Up to CHAIN_MAX entries, min / any / parity over the last axis are
 # therefore a chain of elementwise operations: exactly the same values (min, or and xor are exact),
 # any array module (under jit the chain is unrolled over a static length).

@@ -7,7 +7,7 @@ baseline's NumPy environment, CFFTG's planning loop and the checked trajectories
 jax.numpy) like the rest of jaxexo.physics, so the JAX environment's episode flags and the NumPy
 trajectory samples are judged by the same code.
 
-A safe swing (thesis 3.3, eq 3.1 extended; issue 11): the heel reached the goal (eq 2.32's goal),
+A safe swing (thesis 3.3, eq 3.1 extended): the heel reached the goal (eq 2.32's goal),
 the flat foot's motion kept at least ``min_clearance`` from the obstacle outline (eq 2.30 with the
 foot's length, measured over the region the foot sweeps between samples or steps, jaxexo.physics.swept),
 the heel stayed above the ground, it never fell back more than ``backward_tolerance`` behind the

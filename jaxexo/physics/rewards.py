@@ -80,7 +80,7 @@ def exo_terms(xp, c, *, hip_z, leg_swing, leg_stance, limits_violated):
 
 
 # Costs a wearer feels (not in the thesis; added to eq 2.1's reward like the shaping term). The thesis
-# reward was designed for an agent that could walk into the obstacle; under the shield (issue 11) a
+# reward was designed for an agent that could walk into the obstacle; under the shield a
 # greedy move can no longer come within the clearance, so the reward is free to pay for how the swing
 # feels: how high the foot is lifted and how long the device takes for each move.
 WEARER_TERMS = (

@@ -1,4 +1,4 @@
-"""Exact clearance of the flat foot while it moves between two samples (issue 11: a safe swing is safe
+"""Exact clearance of the flat foot while it moves between two samples (a safe swing is safe
 under any finer look), written once for any array module ``xp`` (numpy, jax.numpy).
 
 Between two consecutive heel positions h0 and h1 the flat foot (the horizontal heel-toe segment of
@@ -34,7 +34,7 @@ def _inv_len2(xp, ey, ez):
 
 def _last_axis(xp, *arrays):
     """xp.stack(arrays, axis=-1) for arrays of one shape, as one concatenate (NumPy's stack is a
-    Python function costing several microseconds a call; one path's check makes dozens, issue 12)."""
+    Python function costing several microseconds a call; one path's check makes dozens)."""
     return xp.concatenate([a[..., None] for a in arrays], axis=-1)
 
 
