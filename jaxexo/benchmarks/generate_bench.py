@@ -192,6 +192,11 @@ def run_generate_benchmark(policy: str | Path, out_dir, n: int = 1000, progress=
     }
     b = lambda d, k: d[k] * 1000 / n      # noqa: E731  (scaled to 1000 scenes; exact for n = 1000)
     miss = lambda ok: "met" if ok else "**missed**"    # noqa: E731
+
+    def row(label, cell, target=""):
+        """A table row: the label, ``cell`` of each scene set's figures, the target."""
+        return f"| {label} | " + " | ".join(cell(sets[w]) for w in SETS) + (f" | {target} |" if target else " | |")
+
     lines = [
         "# Generator benchmark (NumPy only): the shielded RL generator against CFFTG, side by side", "",
         f"Policy `{policy}`; RL alone (`fallback=None`). One swing: `generate` (rollout, smoothing, every "
@@ -199,35 +204,27 @@ def run_generate_benchmark(policy: str | Path, out_dir, n: int = 1000, progress=
         f"Batch: `generate_batch` of {n} held-out scenes, RL and CFFTG alternating, median of 5. "
         f"Load average at the start: {res['load_average']}.", "",
         "| figure | unseen (held-out families) | safety scenes | target |", "|---|---:|---:|---|",
-        "| one swing, RL / CFFTG median ratio | " + " | ".join(
-            f"**{sets[w]['ratio_rl_over_cfftg']:.2f}** ({miss(sets[w]['ratio_rl_over_cfftg'] <= 1.5)})" for w in SETS)
-        + " | <= 1.5 |",
-        "| one swing, RL median | " + " | ".join(
-            f"{sets[w]['single_ms']['rl']['median']:.3f} ms ({miss(sets[w]['single_ms']['rl']['median'] <= 1.0)})"
-            for w in SETS) + " | <= 1.0 ms |",
-        "| one swing, CPU time (process_time): RL / CFFTG ratio, RL and CFFTG medians | " + " | ".join(
-            f"**{sets[w]['cpu_ratio_rl_over_cfftg']:.2f}**: {sets[w]['single_cpu_ms']['rl']['median']:.3f} / "
-            f"{sets[w]['single_cpu_ms']['cfftg']['median']:.3f} ms" for w in SETS) + " | |",
-        "| one swing, CFFTG median | " + " | ".join(f"{sets[w]['single_ms']['cfftg']['median']:.3f} ms" for w in SETS)
-        + " | |",
-        "| one swing, RL mean / p95 | " + " | ".join(
-            f"{sets[w]['single_ms']['rl']['mean']:.3f} / {sets[w]['single_ms']['rl']['p95']:.3f} ms" for w in SETS) + " | |",
-        "| one swing, plain reference (`fast=False`) vs fast, median (first quarter of the scenes) | " + " | ".join(
-            f"{sets[w]['reference_ms']['rl_reference']['median']:.3f} vs {sets[w]['reference_ms']['rl']['median']:.3f} ms"
-            for w in SETS) + " | |",
-        "| RL swings smoothed in one pass (no retry) | " + " | ".join(
-            f"{sets[w]['smoothing']['smoothed_once']:.1%} ({miss(sets[w]['smoothing']['smoothed_once'] >= 0.99)})"
-            for w in SETS) + " | >= 99 % |",
-        "| ... with the requested smoothing / a per-path candidate | " + " | ".join(
-            f"{sets[w]['smoothing']['requested_smoothing']:.1%} / {sets[w]['smoothing']['candidate_smoothing']:.1%}"
-            for w in SETS) + " | |",
-        "| RL swings on the raw polyline (every smoothing failed) | " + " | ".join(
-            f"{sets[w]['smoothing']['raw_polyline']:.1%} ({miss(sets[w]['smoothing']['raw_polyline'] == 0)})"
-            for w in SETS) + " | 0 |",
-        "| safe swings, RL alone / CFFTG | " + " | ".join(
-            f"{sets[w]['smoothing']['safe']:.1%} / {sets[w]['cfftg_safe']:.1%}" for w in SETS) + " | RL >= 99.5 % |",
-        "| shield steps left to the full mask (one swing) | " + " | ".join(
-            f"{sets[w]['shield_steps_full_mask']:.2%}" for w in SETS) + " | |", "",
+        row("one swing, RL / CFFTG median ratio", lambda d: f"**{d['ratio_rl_over_cfftg']:.2f}** "
+            f"({miss(d['ratio_rl_over_cfftg'] <= 1.5)})", "<= 1.5"),
+        row("one swing, RL median", lambda d: f"{d['single_ms']['rl']['median']:.3f} ms "
+            f"({miss(d['single_ms']['rl']['median'] <= 1.0)})", "<= 1.0 ms"),
+        row("one swing, CPU time (process_time): RL / CFFTG ratio, RL and CFFTG medians",
+            lambda d: f"**{d['cpu_ratio_rl_over_cfftg']:.2f}**: {d['single_cpu_ms']['rl']['median']:.3f} / "
+            f"{d['single_cpu_ms']['cfftg']['median']:.3f} ms"),
+        row("one swing, CFFTG median", lambda d: f"{d['single_ms']['cfftg']['median']:.3f} ms"),
+        row("one swing, RL mean / p95",
+            lambda d: f"{d['single_ms']['rl']['mean']:.3f} / {d['single_ms']['rl']['p95']:.3f} ms"),
+        row("one swing, plain reference (`fast=False`) vs fast, median (first quarter of the scenes)",
+            lambda d: f"{d['reference_ms']['rl_reference']['median']:.3f} vs {d['reference_ms']['rl']['median']:.3f} ms"),
+        row("RL swings smoothed in one pass (no retry)", lambda d: f"{d['smoothing']['smoothed_once']:.1%} "
+            f"({miss(d['smoothing']['smoothed_once'] >= 0.99)})", ">= 99 %"),
+        row("... with the requested smoothing / a per-path candidate",
+            lambda d: f"{d['smoothing']['requested_smoothing']:.1%} / {d['smoothing']['candidate_smoothing']:.1%}"),
+        row("RL swings on the raw polyline (every smoothing failed)", lambda d: f"{d['smoothing']['raw_polyline']:.1%} "
+            f"({miss(d['smoothing']['raw_polyline'] == 0)})", "0"),
+        row("safe swings, RL alone / CFFTG", lambda d: f"{d['smoothing']['safe']:.1%} / {d['cfftg_safe']:.1%}",
+            "RL >= 99.5 %"),
+        row("shield steps left to the full mask (one swing)", lambda d: f"{d['shield_steps_full_mask']:.2%}"), "",
         "| batch of 1000 held-out scenes | RL | CFFTG | RL / CFFTG | target |", "|---|---:|---:|---:|---|",
         f"| default BLAS threads (this process) | {b(batch, 'rl'):.1f} ms | {b(batch, 'cfftg'):.1f} ms | "
         f"**{batch['rl'] / batch['cfftg']:.2f}** | <= 1 and <= 150 ms: {miss(batch['rl'] <= batch['cfftg'] and b(batch, 'rl') <= 150)} |",
