@@ -5,7 +5,7 @@ directory, corrupted files, a full disk (a small RLIMIT_FSIZE in a subprocess, S
 write raises). Every refusal must exit non-zero, name the file or field, print no traceback, and leave
 what was already written intact. docs/reliability.md lists these cases.
 
-The tests that train in subprocesses are marked slow and share one tiny config (tests/test_train.py's
+The tests that train in subprocesses are marked slow and share one tiny config (tests/train_helpers.py's
 pattern) with a persistent compilation cache for the in-process runs.
 """
 
@@ -32,7 +32,7 @@ from jaxexo.storage.rundir import LOCK_NAME, RunDirError, run_lock
 
 from conftest import ROOT, jax_compilation_cache, legacy_raw
 
-# The tiny config of tests/test_train.py: backward-view Watkins Q(lambda), 6 updates in 3 chunks of 2.
+# The tiny config of tests/train_helpers.py: backward-view Watkins Q(lambda), 6 updates in 3 chunks of 2.
 TINY_N, TINY_T, TINY_UPDATES = 64, 8, 6
 TINY_RAW = {
     "env": {"obs_mode": "conditioned"},
