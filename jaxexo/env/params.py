@@ -4,9 +4,8 @@ Every field here is a pytree leaf (vmappable: reward weights and constants, kine
 layout distribution). The fields are the names that ``jaxexo.config.param_values`` derives from the
 config declarations (jaxexo.config.sections: each leaf field of [env], [kinematics], [reward],
 [layout], plus the action directions), written out by tests/test_declared_fields.py, which fails
-when they differ. Shapes (the
-number of outline vertices, shape-descriptor points, obstacle kinds, the observation mode) are fixed
-by the arrays themselves or by the ExoStepEnv instance.
+when they differ. Shapes (the number of outline vertices, shape-descriptor points, obstacle kinds,
+the observation mode) are fixed by the arrays themselves or by the ExoStepEnv instance.
 """
 
 from __future__ import annotations
