@@ -33,12 +33,12 @@ def test_failure_keeps_the_old_file_and_removes_the_temp(tmp_path, monkeypatch, 
 
 def test_every_writer_uses_it():
     """The four writers that used to carry their own copy call this one."""
-    from jaxexo.inference import trajectory
+    from jaxexo.inference import export
     from jaxexo.storage import policy_file
     from jaxexo.sweep import results
+    from jaxexo.train import run_files
 
     assert results.atomic_write is atomic.atomic_write
-    assert trajectory.atomic_write is atomic.atomic_write
+    assert export.atomic_write is atomic.atomic_write
     assert policy_file.atomic_write is atomic.atomic_write
-    from jaxexo.train import run_files
     assert run_files.checkpoint_write is atomic.atomic_write

@@ -236,7 +236,7 @@ def plot_curves(path: Path, sweep: Sweep, out: Path, rows: list[dict], entries: 
 def export_best(sweep: Sweep, out: Path, rows: list[dict]) -> dict:
     """Write the best configuration's policy (its best seed's final parameters) and resolved config."""
     from jaxexo.sweep.program import unflatten
-    from jaxexo.train.driver import export_policy
+    from jaxexo.train.run_files import export_policy
     from jaxexo.train.trainer import Trainer
 
     entries = rank(sweep, rows)
