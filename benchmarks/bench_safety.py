@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxexo.baselines import CFFTG
-from jaxexo.baselines.cfftg import plan_basis
+from jaxexo.inference.cfftg import plan_basis
 from jaxexo.evaluation.machine import machine_info, write_result
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.inference import smoothing as sm

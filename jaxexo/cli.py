@@ -334,7 +334,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--policy", help="policy.npz written by jaxexo train (required for --method rl; for cfftg "
                                     "it supplies the kinematics, default: configs/default.toml)")
     g.add_argument("--method", choices=("rl", "cfftg"), default="rl",
-                   help="rl: the trained policy; cfftg: the polynomial baseline (jaxexo.baselines.cfftg)")
+                   help="rl: the trained policy; cfftg: the polynomial baseline (jaxexo.inference.cfftg)")
     g.add_argument("--obstacle", required=True, choices=(*THESIS_OBSTACLES, *GENERAL_SHAPES))
     g.add_argument("--width", type=float, help="obstacle width, m")
     g.add_argument("--height", type=float, help="obstacle height, m")

@@ -32,11 +32,7 @@ LAYERS = (
 # The one allow-list: imports (importer, module) and private names (importer, module._name) that break
 # the rules today. Remove an entry when its use is gone; the test fails on an entry that no longer
 # matches anything, so this list can only shrink.
-KNOWN_EXCEPTIONS = {
-    # The RL generator builds CFFTG, lazily, as its fallback planner (jaxexo.inference.fallback does the
-    # replacing): an upward import. CFFTG imports nothing of the generator, so there is no circle.
-    ("jaxexo.inference.generator", "jaxexo.baselines.cfftg"),
-}
+KNOWN_EXCEPTIONS: set = set()
 
 SCRIPT_DIRS = ("benchmarks",)     # scripts outside the package: any import, but no private names
 

@@ -60,7 +60,7 @@ def _batch_ms(policy, n: int, repeats: int = 5) -> dict:
     i.e. on the process's own BLAS threads instead of generate_batch's one (jaxexo.inference.blas)."""
     import copy
 
-    from jaxexo.baselines.cfftg import CFFTG
+    from jaxexo.inference.cfftg import CFFTG
 
     gen = TrajectoryGenerator.load(policy)
     free = copy.copy(gen)
@@ -140,7 +140,7 @@ def run_generate_benchmark(policy: str | Path, out_dir, n: int = 1000, progress=
     held-out families and on the safety scenes (and the plain reference, ``fast=False``, on a
     quarter of them); batches of 1000 with default and single-threaded BLAS; smoothing counts; the
     cold import."""
-    from jaxexo.baselines.cfftg import CFFTG
+    from jaxexo.inference.cfftg import CFFTG
     from jaxexo.evaluation.compare import WithFallback, run_generators
     from jaxexo.evaluation.machine import write_result
 

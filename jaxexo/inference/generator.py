@@ -232,7 +232,7 @@ class TrajectoryGenerator:
         """CFFTG for this generator's config and clearance, built on the first fallback (its constants
         cost ~ms to derive)."""
         if self._cfftg is None:
-            from jaxexo.baselines.cfftg import CFFTG    # a baseline, built only when a swing falls back
+            from jaxexo.inference.cfftg import CFFTG    # built only when a swing falls back
 
             self._cfftg = CFFTG(self.config).at_clearance(self.clearance)
         return self._cfftg

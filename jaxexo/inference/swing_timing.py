@@ -399,20 +399,19 @@ def _lower_cap(cap, s_grid, e: dict, vmax, amax) -> None:
     k = np.flatnonzero(r > 1.0 - CHECK_MARGIN)
     if k.size == 0:
         return
-    # Each flagged sample k lowers the cap on the grid points in [s[k-2], s[k+2]] to x (c / r[k])^2,
-    # which falls as r[k] grows: a grid point takes the largest r[k] of the samples covering it (the
-    # same value, bit for bit, as lowering it once per sample; one pass, not a loop over samples).
+    # Each flagged sample k lowers the cap on the grid points in [s[k-2], s[k+2]] to x (c / r[k])^2:
+    # all (sample, grid point) pairs at once, then the smallest per grid point (min is exact, so this
+    # is the per-sample loop's result bit for bit). The square is the scalar pow the loop took (NumPy's
+    # array square can differ from it in the last bit).
     lo = np.searchsorted(s_grid, s[np.maximum(k - 2, 0)], side="left")
     hi = np.searchsorted(s_grid, s[np.minimum(k + 2, len(s) - 1)], side="right")
     count = np.maximum(hi - lo, 0)
     total = int(count.sum())
     if total == 0:
         return
-    start = np.repeat(lo - (np.cumsum(count) - count), count)
-    r_max = np.full(len(s_grid), -np.inf)
-    np.maximum.at(r_max, start + np.arange(total), np.repeat(r[k], count))
-    sel = r_max > -np.inf
-    cap[sel] = np.minimum(cap[sel], x_now[sel] * ((1.0 - 4.0 * CHECK_MARGIN) / r_max[sel]) ** 2)
+    grid = np.repeat(lo - (np.cumsum(count) - count), count) + np.arange(total)
+    factor = np.fromiter((math.pow(q, 2.0) for q in ((1.0 - 4.0 * CHECK_MARGIN) / r[k]).tolist()), float, k.size)
+    np.minimum.at(cap, grid, x_now[grid] * np.repeat(factor, count))
 
 
 def _finish(traj, e: dict, sp, limits: DeviceLimits, rate: float, t_opt: float, slow: float) -> TimedSwing:
