@@ -69,6 +69,21 @@ def _f32(x: float) -> float:
     return _unpack(_pack(x))[0]
 
 
+def _nearest2(points, cy, cz, ey, ez, inv, best):
+    """The smallest of ``best`` and the squared distances (m^2) from ``points`` ((y, z) pairs) to the
+    segment (cy, cz) + t (ey, ez), t in [0, 1], with inv = 1 / |e|^2: geometry's point-edge distance in
+    Python floats (the shield's hot loop; NumPy calls would cost more than the arithmetic)."""
+    for py, pz in points:
+        apy, apz = py - cy, pz - cz
+        t = (apy * ey + apz * ez) * inv
+        t = 0.0 if t < 0.0 else (1.0 if t > 1.0 else t)
+        dy, dz = apy - t * ey, apz - t * ez
+        d = dy * dy + dz * dz
+        if d < best:
+            best = d
+    return best
+
+
 class ScalarShield:
     """Per-scene constants (Python floats, the float32 values the reference uses) and ``choose``."""
 
@@ -131,15 +146,9 @@ class ScalarShield:
         """geometry.flat_foot_distance of the foot at heel (y0, z): 0 when crossing."""
         y1 = y0 + self.fl
         best = math.inf
+        ends = ((y0, z), (y1, z))
         for cy, cz, ey, ez, inv, *_ in self.edges:
-            for py in (y0, y1):
-                apy, apz = py - cy, z - cz
-                t = (apy * ey + apz * ez) * inv
-                t = 0.0 if t < 0.0 else (1.0 if t > 1.0 else t)
-                dy, dz = apy - t * ey, apz - t * ez
-                d = dy * dy + dz * dz
-                if d < best:
-                    best = d
+            best = _nearest2(ends, cy, cz, ey, ez, inv, best)
         for vy, vz in zip(self.vy, self.vz):
             gap = max(y0 - vy, vy - y1, 0.0)
             d = gap * gap + (vz - z) * (vz - z)
@@ -194,14 +203,7 @@ class ScalarShield:
         for cy, cz, ey, ez, inv, *_ in near:
             verts.add((cy, cz))
             verts.add((cy + ey, cz + ez))
-            for py, pz in corners:       # P's corners against the edge
-                apy, apz = py - cy, pz - cz
-                t = (apy * ey + apz * ez) * inv
-                t = 0.0 if t < 0.0 else (1.0 if t > 1.0 else t)
-                ddy, ddz = apy - t * ey, apz - t * ez
-                d = ddy * ddy + ddz * ddz
-                if d < best:
-                    best = d
+            best = _nearest2(corners, cy, cz, ey, ez, inv, best)     # P's corners against the edge
             for ay, az, uy, uz, _ in sides:     # proper crossings of P's sides and the edge
                 o1 = uy * (cz - az) - uz * (cy - ay)
                 o2 = uy * (cz + ez - az) - uz * (cy + ey - ay)
@@ -214,14 +216,9 @@ class ScalarShield:
             if best < lo2:
                 return -1
         for vy, vz in verts:
+            vertex = ((vy, vz),)
             for ay, az, uy, uz, iv in sides:    # the outline's vertices against P's sides
-                apy, apz = vy - ay, vz - az
-                t = (apy * uy + apz * uz) * iv
-                t = 0.0 if t < 0.0 else (1.0 if t > 1.0 else t)
-                ddy, ddz = apy - t * uy, apz - t * uz
-                d = ddy * ddy + ddz * ddz
-                if d < best:
-                    best = d
+                best = _nearest2(vertex, ay, az, uy, uz, iv, best)
             if dz != 0.0:                       # ... and strictly inside P
                 t = (vz - z0) / dz
                 if 0.0 <= t <= 1.0:
