@@ -65,8 +65,8 @@ def test_a_member_trains_identically_alone_in_populations_of_2_and_5_and_in_a_sw
     alone = train_members([SEED])[0]
     pair = train_members([SEED - 1, SEED])[1]          # second lane of the block
     five = train_members([0, 1, 2, SEED, 4])[SEED]     # second block of three, on one device
-    assert alone["metrics"].shape == (UPDATES // CHUNK, CHUNK, len(driver.METRICS))
-    assert alone["metrics"][..., driver.METRICS.index("loss")].all()   # it trained: every update had a loss
+    assert alone["metrics"].shape == (UPDATES // CHUNK, CHUNK, len(run_files.METRICS))
+    assert alone["metrics"][..., run_files.METRICS.index("loss")].all()   # it trained: every update had a loss
     for other in (pair, five):
         assert same(alone["params"], other["params"])
         assert np.array_equal(alone["metrics"], other["metrics"])

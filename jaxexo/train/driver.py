@@ -54,7 +54,7 @@ from jaxexo.storage.checkpoint import CheckpointError, pack_checkpoint
 from jaxexo.storage.rundir import TrainingDiverged, run_lock
 from jaxexo.train import run_files
 from jaxexo.train.evaluate import evaluate, make_validator
-from jaxexo.train.trainer import METRICS, Hyperparams, Trainer  # noqa: F401 (METRICS: the metrics rows' order)
+from jaxexo.train.trainer import Hyperparams, Trainer
 
 
 def run_training(cfg: Config, out: str | Path, seed: int = 0, resume: bool = False, progress: bool = True,
