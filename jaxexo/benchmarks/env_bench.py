@@ -1,6 +1,7 @@
 """Environment throughput benchmark: env-steps/s with random actions and the full reward.
 
-The whole rollout is one compiled ``lax.scan`` over ``jax.vmap(env.step)``; the scan carries a
+The whole rollout is one compiled ``lax.scan`` over ``env.step_batch`` (the trainer's step:
+``jax.vmap(env.step)``'s transitions, fresh scenes drawn only where an episode ended); the scan carries a
 reduced metric (the summed reward) so nothing per-step is stacked and nothing is dead-code
 eliminated. Times are medians over repeats, after a warm-up call that compiles.
 """
@@ -64,8 +65,7 @@ def _rollout(env, num_envs, num_steps, key, params, mask="none"):
             actions = jax.random.randint(ka, (num_envs,), 0, env.num_actions)
         else:   # uniform over the admissible moves of the current state (the trainer's exploration)
             actions = jax.random.categorical(ka, jnp.where(masks(state, params), 0.0, -jnp.inf), axis=-1)
-        _, state, reward, term, trunc, info = jax.vmap(env.step, in_axes=(0, 0, 0, None))(
-            jax.random.split(ks, num_envs), state, actions, params)
+        _, state, reward, term, trunc, info = env.step_batch(jax.random.split(ks, num_envs), state, actions, params)
         acc = acc + jnp.stack([reward.sum(), term.sum(), info["collision"].sum()])
         return (state, key, acc), None
 

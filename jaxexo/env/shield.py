@@ -4,11 +4,11 @@ moves that a cheap bound leaves open.
 
 Why: the trainer asks for the mask of every environment at every step, and the exact swept check
 (jaxexo.physics.swept) of the 19 forward moves costs several environment steps. Under ``vmap``/``jit``
-a ``jnp.where`` computes both of its branches, so skipping work needs compaction: the open (env, move)
-pairs are gathered into a buffer of static size, checked exactly there, and scattered back; a loop
-takes as many rounds of the buffer as there are open pairs (one round in most steps, more when a
-batch has unusually many pairs near its obstacles), so no state is ever decided by the bound alone
-unless the bound is conclusive.
+a ``jnp.where`` computes both of its branches, so skipping work needs compaction (jaxexo.env.compact):
+the open (env, move) pairs are gathered into a buffer of static size, checked exactly there, and
+scattered back; a loop takes as many rounds of the buffer as there are open pairs (one round in most
+steps, more when a batch has unusually many pairs near its obstacles), so no state is ever decided by
+the bound alone unless the bound is conclusive.
 
 The bound (per move, sufficient for "keeps the clearance"): the outline and the region under it lie
 in the box B = [min y, max y] x [min(0, min z), max z] of its vertices, so the foot's distance to B is
@@ -28,11 +28,9 @@ The moves left open are decided by the same function on the same inputs as the p
 
 from __future__ import annotations
 
-import math
-
-import jax
 import jax.numpy as jnp
 
+from jaxexo.env import compact
 from jaxexo.physics import dynamics, geometry, swept
 
 # m: the box bound must clear shield_clearance by this much before the exact check is skipped.
@@ -115,29 +113,20 @@ def _exact_pairs(p, heel, ends, outline, c_here):
 
 def keep_clearance(p, heel_y, heel_z, ends, outline, buffer: int | None = None):
     """(N, F) bool, equal to ``dynamics.moves_keep_clearance`` for a batch: the bounds where they are
-    conclusive, the exact rule on the open pairs in rounds of ``buffer`` pairs."""
+    conclusive, the exact rule on the open pairs in rounds of ``buffer`` pairs (jaxexo.env.compact)."""
     n, f = ends.shape[:2]
     total = n * f
-    m = buffer or max(1, min(total, math.ceil(BUFFER_FRACTION * total)))
     heel = jnp.stack([heel_y, heel_z], axis=-1)
     c_here = geometry.foot_clearance(jnp, heel, p.foot_length, outline)   # as moves_keep_clearance
     sure_pass, sure_fail = bounds(p, heel_y, heel_z, ends, outline, c_here)
-    open_ = ~(sure_pass | sure_fail).reshape(total)
-    count = jnp.sum(open_, dtype=jnp.int32)
-    # The open pairs' flat indices first, in order; padded so every round's slice is in bounds.
-    order = jnp.nonzero(open_, size=total, fill_value=total)[0].astype(jnp.int32)
-    order = jnp.concatenate([order, jnp.full((m,), total, jnp.int32)])
     flat_ends = ends.reshape(total, 2)
 
-    def round_(r, clear):
-        idx = jax.lax.dynamic_slice(order, (r * m,), (m,))
-        pair = jnp.minimum(idx, total - 1)       # padding reads a valid pair; its result is dropped
+    def exact(pair):
         env = pair // f
-        ok = _exact_pairs(p, heel[env], flat_ends[pair], outline[env], c_here[env])
-        return clear.at[idx].set(ok, mode="drop")
+        return _exact_pairs(p, heel[env], flat_ends[pair], outline[env], c_here[env])
 
-    rounds = (count + m - 1) // m
-    clear = jax.lax.fori_loop(0, rounds, round_, sure_pass.reshape(total))
+    clear = compact.compacted(~(sure_pass | sure_fail).reshape(total), exact, sure_pass.reshape(total),
+                              buffer or compact.buffer_size(total, BUFFER_FRACTION))
     return clear.reshape(n, f)
 
 

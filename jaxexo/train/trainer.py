@@ -227,9 +227,8 @@ class Trainer:
         return a.astype(jnp.int32), a == greedy
 
     def _env_step(self, key, env_state, action, hyper):
-        n = action.shape[0]
-        return jax.vmap(self.env.step, in_axes=(0, 0, 0, None))(
-            jax.random.split(key, n), env_state, action, hyper.env)
+        # vmap(env.step)'s transitions, drawing fresh scenes only where an episode ended.
+        return self.env.step_batch(jax.random.split(key, action.shape[0]), env_state, action, hyper.env)
 
     @staticmethod
     def _episode_stats(stats: EpisodeStats, reward, terminated, truncated, info, env_params):
