@@ -24,6 +24,44 @@ from jaxexo.train.devices import use_all_cpu_cores
 use_all_cpu_cores()
 
 
+def matmul_roofline(rows: int = 1024, width: int = 128, length: int = 200, repeats: int = 5) -> float:
+    """The machine's float32 matmul rate (FLOP/s): (rows, width) x (width, width) products in a jitted
+    loop on every host device at once (one block of rows each), median of ``repeats`` timed calls.
+    A 128-wide MLP layer is this product, so it bounds what the trainer's network work can reach."""
+    import time
+
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+    from jax.sharding import Mesh, PartitionSpec as P
+
+    devs = jax.local_devices()
+
+    def loop(x, w):
+        return jax.lax.scan(lambda c, _: ((c @ w) * 0.01, None), x, None, length=length)[0]
+
+    f = jax.jit(jax.shard_map(loop, mesh=Mesh(np.array(devs), ("d",)), in_specs=(P("d"), P()), out_specs=P("d")))
+    x, w = jnp.ones((rows * len(devs), width)), jnp.full((width, width), 0.01)
+    f(x, w).block_until_ready()
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        f(x, w).block_until_ready()
+        times.append(time.perf_counter() - t0)
+    return 2.0 * rows * len(devs) * width * width * length / float(np.median(times))
+
+
+def network_flops_per_step(cfg) -> float:
+    """Matmul FLOPs of the trainer's network per env step (forward view): the acting pass and the
+    target network's bootstrap pass (one forward each), and num_epochs passes of the update (forward
+    and backward: three forwards' worth). LayerNorm, biases and activations are not counted."""
+    from jaxexo.env import ExoStepEnv
+
+    widths = [ExoStepEnv(cfg).obs_dim, *cfg.train.hidden, 36]
+    forward = sum(2.0 * a * b for a, b in zip(widths[:-1], widths[1:]))
+    return forward * (2 + 3 * cfg.train.num_epochs)
+
+
 def steady(paths, budget: int, label: str, out_dir: Path) -> dict:
     import collections
     import dataclasses
@@ -66,22 +104,34 @@ def steady(paths, budget: int, label: str, out_dir: Path) -> dict:
                "chunks": len(chunks), "chunk_env_steps_per_s": rates,
                "steady_env_steps_per_s": float(np.median(rates[2:])) if len(rates) > 2 else None,
                "compilations_run": counts.get("jit(run)", 0), "train_seconds": res["train_seconds"],
-               "validation_success_raw": res["validation_success_raw"], "success_raw": res["success_raw"]}
+               "validation_success_raw": res["validation_success_raw"], "success_raw": res["success_raw"],
+               "network_flops_per_env_step": network_flops_per_step(cfg)}
         rows.append(row)
         print(json.dumps(row), flush=True)
+    roof = matmul_roofline()
+    for r in rows:
+        r["network_flop_per_s"] = (r["steady_env_steps_per_s"] or 0.0) * r["network_flops_per_env_step"]
+        r["fraction_of_roofline"] = r["network_flop_per_s"] / roof
     lines = [f"# Trainer steady rate through `jaxexo train` ({label}, jaxexo at {commit})", "",
              "| config | env steps | chunks | compilations of the chunk program | chunk 1 (incl. compile) | chunk 2 | "
-             "steady (median of chunks 3+) | train s |", "|---|---:|---:|---:|---:|---:|---:|---:|"]
+             "steady (median of chunks 3+) | network GFLOP/s at the steady rate | of the matmul roofline | train s |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
         c = r["chunk_env_steps_per_s"]
         lines.append(f"| {r['config']} | {r['budget_env_steps']:,} | {r['chunks']} | {r['compilations_run']} | "
                      f"{c[0] / 1e3:.0f}k | {c[1] / 1e3 if len(c) > 1 else float('nan'):.0f}k | "
-                     f"{(r['steady_env_steps_per_s'] or float('nan')) / 1e3:.0f}k | {r['train_seconds']:.1f} |")
-    lines += ["", "Env-steps/s per chunk as metrics.jsonl reports them. Shared machine: other jobs ran at the same "
-              "time, so rates are noisy; compare rows measured back to back."]
+                     f"{(r['steady_env_steps_per_s'] or float('nan')) / 1e3:.0f}k | {r['network_flop_per_s'] / 1e9:.0f} | "
+                     f"{100 * r['fraction_of_roofline']:.0f} % | {r['train_seconds']:.1f} |")
+    lines += ["", "Env-steps/s per chunk as metrics.jsonl reports them. Network GFLOP/s: the steady rate times the "
+              "matmul FLOPs of the acting, bootstrap and update passes per env step (LayerNorm, biases and the "
+              "environment not counted). Matmul roofline: (1024, 128) x (128, 128) float32 products in a jitted loop "
+              f"on every host device, measured in the same process after the runs: {roof / 1e9:.0f} GFLOP/s. "
+              "Shared machine: other jobs may run at the same time, so rates are noisy; compare rows measured back "
+              "to back."]
     md = "\n".join(lines)
     name = "train-steady" + (f"-{label}" if label else "")
-    write_result(name, {"rows": rows, "commit": commit, "label": label}, md, out_dir)
+    write_result(name, {"rows": rows, "commit": commit, "label": label, "matmul_roofline_flop_per_s": roof}, md,
+                 out_dir)
     print(md)
     return {"rows": rows}
 
