@@ -53,6 +53,9 @@ def cmd_train(args) -> int:
     from jaxexo.config.memory import check_memory
 
     check_memory(cfg)       # before JAX allocates: a run the machine cannot hold is refused here
+    from jaxexo.train.devices import use_compilation_cache
+
+    use_compilation_cache()  # a later run of these static settings loads its programs
     from jaxexo.train.driver import run_training
 
     k = cfg.train.population
@@ -242,9 +245,10 @@ def cmd_sweep(args) -> int:
     budget = parse_bytes(args.memory_budget) if args.memory_budget else None
     sweep = load_sweep(args.sweep)      # validated (NumPy only) before JAX starts
     if args.backend == "local":
-        from jaxexo.train.devices import use_all_cpu_cores
+        from jaxexo.train.devices import use_all_cpu_cores, use_compilation_cache
 
         use_all_cpu_cores()
+        use_compilation_cache()
     from jaxexo.sweep.runner import run_sweep
 
     print(f"jaxexo sweep: {args.sweep} -> {args.out}: {len(sweep.members)} configurations x {len(sweep.seeds)} "
@@ -284,9 +288,10 @@ def cmd_eval(args) -> int:
 
 
 def cmd_reproduce(args) -> int:
-    from jaxexo.train.devices import use_all_cpu_cores
+    from jaxexo.train.devices import use_all_cpu_cores, use_compilation_cache
 
     use_all_cpu_cores()
+    use_compilation_cache()
     from jaxexo.evaluation.reproduce import check_reproduce_options, run_names, run_reproduce
 
     models = [m.strip() for m in args.models.split(",") if m.strip()]

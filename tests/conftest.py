@@ -9,12 +9,18 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import os
 from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, settings
 
 ROOT = Path(__file__).resolve().parent.parent
+
+# The CLI keeps compiled programs in ~/.cache/jaxexo/xla (jaxexo.train.devices.use_compilation_cache);
+# the CLI runs of the tests (subprocesses inherit this) write nothing there. Tests that want a cache
+# set their own (jax_compilation_cache below, or the variable itself).
+os.environ["JAXEXO_COMPILATION_CACHE"] = "off"
 
 settings.register_profile(
     "jaxexo",

@@ -61,3 +61,70 @@ def test_cli_train_bad_config_exits_2_naming_the_field(tmp_path):
                        text=True, cwd=ROOT, timeout=120)
     assert r.returncode == 2
     assert "train.control" in r.stderr and "sarsa" in r.stderr
+
+
+def test_cli_train_loads_its_programs_from_the_compilation_cache(tmp_path):
+    """``jaxexo train`` keeps its compiled programs in $JAXEXO_COMPILATION_CACHE: a second run of the
+    same static settings with another learning rate (a pytree leaf) writes no new program (the cache
+    writes only what it compiles) and reads every one (their access times move), and a third,
+    identical to the first, exports the same bytes as the first. "off" writes nothing."""
+    from conftest import ROOT as root
+    from train_helpers import tiny_config
+
+    cache = tmp_path / "cache"
+    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "JAX_COMPILATION_CACHE_DIR")}
+    env.update(XLA_FLAGS="--xla_force_host_platform_device_count=1", JAXEXO_COMPILATION_CACHE=str(cache))
+
+    def train(name, cfg, env=env):
+        path = tmp_path / f"{name}.toml"
+        path.write_text(config_to_toml(cfg))
+        r = subprocess.run(_cli_cmd("train", path, "--out", tmp_path / name, "--quiet", "--seed", 3), cwd=root,
+                           env=env, capture_output=True, text=True, timeout=600)
+        assert r.returncode == 0, r.stderr[-3000:]
+        return tmp_path / name
+
+    def entries(suffix):
+        return {p.name: p.stat().st_mtime_ns for p in cache.iterdir() if p.name.endswith(suffix)}
+
+    first = train("first", tiny_config())
+    programs, read = entries("-cache"), entries("-atime")
+    assert {n.split("-")[0] for n in programs} >= {"jit_run", "jit_init", "jit_validate", "jit_rollout"}, programs
+    assert any(n.startswith("jit_run-") for n in read), read
+    train("other_lr", tiny_config(lr=3e-3))
+    assert entries("-cache") == programs
+    later = entries("-atime")
+    assert all(later[n] > t for n, t in read.items() if n.split("-")[0] in ("jit_run", "jit_validate")), (read, later)
+    again = train("again", tiny_config())
+    assert (again / "policy.npz").read_bytes() == (first / "policy.npz").read_bytes()
+    off = tmp_path / "off_cache"
+    train("off", tiny_config(), env={**env, "JAXEXO_COMPILATION_CACHE": "off"})
+    assert not off.exists()
+
+
+def test_compilation_cache_setting(monkeypatch, tmp_path):
+    """use_compilation_cache: "off" leaves JAX's setting alone, a directory that cannot be made is
+    refused with a warning naming the variable (the run compiles as without a cache), a usable one is
+    created and set."""
+    from jax.experimental.compilation_cache import compilation_cache as cc
+
+    from jaxexo.train.devices import CACHE_ENV, use_compilation_cache
+
+    names = ("jax_compilation_cache_dir", "jax_compilation_cache_max_size")
+    old = {n: getattr(jax.config, n) for n in names}
+    try:
+        jax.config.update("jax_compilation_cache_dir", None)
+        monkeypatch.setenv(CACHE_ENV, "off")
+        assert use_compilation_cache() is None and jax.config.jax_compilation_cache_dir is None
+        blocker = tmp_path / "a_file"
+        blocker.write_text("x")
+        monkeypatch.setenv(CACHE_ENV, str(blocker / "xla"))
+        with pytest.warns(UserWarning, match=CACHE_ENV):
+            assert use_compilation_cache() is None
+        assert jax.config.jax_compilation_cache_dir is None
+        monkeypatch.setenv(CACHE_ENV, str(tmp_path / "xla"))
+        assert use_compilation_cache() == str(tmp_path / "xla") == jax.config.jax_compilation_cache_dir
+        assert (tmp_path / "xla").is_dir() and jax.config.jax_compilation_cache_max_size > 0
+    finally:
+        for n, v in old.items():
+            jax.config.update(n, v)
+        cc.reset_cache()
