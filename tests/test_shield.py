@@ -321,3 +321,34 @@ def test_shielded_swings_visit_no_point_twice():
             assert not np.array_equal(pts[k + 1], pts[k]), "a move that did not move the heel"
             assert not np.array_equal(pts[k + 1], pts[k - 1]), "the last move undone"
     assert steps - fallbacks > 5000
+
+
+def test_greedy_rollouts_with_the_batched_mask_equal_the_plain_mask_bit_for_bit():
+    """Validation and evaluation roll a batch of layouts out greedily with the batched mask
+    (jaxexo.train.evaluate.make_rollouts): every output, heel paths included, equals the same rollouts
+    with the plain rule (``vmap(action_mask)``, every move checked exactly), for a shielded policy on
+    the default model's validation scenes; one layout's rollout (``make_rollout``) is its row."""
+    import jax
+    import jax.numpy as jnp
+    from jaxexo.env import ExoStepEnv
+    from jaxexo.train.evaluate import make_rollout, make_rollouts, validation_set
+    from jaxexo.train.network import QNetwork
+
+    cfg = load_config(ROOT / "configs" / "default.toml")
+    env, params, layouts = validation_set(cfg, n=96)
+    net = QNetwork(hidden=(32, 32), layer_norm=True)
+    q = net.init(jax.random.PRNGKey(3), jnp.zeros((1, env.obs_dim)))
+    fast = jax.jit(make_rollouts(env, net.apply, cfg.env.max_steps, record=True))(q, layouts, params)
+    plain_env = ExoStepEnv(cfg)
+    plain_env.action_masks = lambda st, p=None: jax.vmap(plain_env.action_mask, in_axes=(0, None))(st, p)
+    plain = jax.jit(make_rollouts(plain_env, net.apply, cfg.env.max_steps, record=True))(q, layouts, params)
+    for a, b in zip(jax.tree.leaves(fast), jax.tree.leaves(plain), strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    assert fast[1].shape == (96, cfg.env.max_steps, 2)
+    # random weights: some episodes end early, some run to the limit, so both paths are exercised
+    steps = np.asarray(fast[0]["steps"])
+    assert steps.min() < cfg.env.max_steps and (steps == cfg.env.max_steps).any(), np.unique(steps)
+    one = jax.jit(make_rollout(env, net.apply, cfg.env.max_steps, record=True))(
+        q, jax.tree.map(lambda x: x[5], layouts), params)
+    for a, b in zip(jax.tree.leaves(one), jax.tree.leaves(jax.tree.map(lambda x: x[5], fast)), strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))

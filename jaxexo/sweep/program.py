@@ -29,7 +29,7 @@ from jaxexo.sweep.plan import Chunk
 from jaxexo.sweep.results import SCALARS
 from jaxexo.sweep.spec import Sweep
 from jaxexo.physics.scenarios import HELD_OUT, TEST_KINDS
-from jaxexo.train.evaluate import make_rollout, test_layouts
+from jaxexo.train.evaluate import make_rollouts, test_layouts
 from jaxexo.train.lanes import over_lanes, padded_agents
 from jaxexo.train.trainer import METRICS, Hyperparams, Trainer
 
@@ -90,7 +90,7 @@ def _build(cfg: Config, devices):
     trainer = Trainer(cfg)
     tcfg = test_config(cfg)
     tenv = ExoStepEnv(tcfg)
-    rollout = jax.vmap(make_rollout(tenv, trainer.net.apply, tcfg.env.max_steps), in_axes=(None, 0, None))
+    rollout = make_rollouts(tenv, trainer.net.apply, tcfg.env.max_steps)
     n_eval = cfg.train.eval_episodes
     kinds = np.arange(n_eval) % len(TEST_KINDS)
     held = jnp.asarray(np.isin(np.asarray(TEST_KINDS)[kinds], HELD_OUT), jnp.float32)

@@ -40,36 +40,59 @@ def test_layouts(tcfg: Config, n: int, seed: int = 12345) -> Layout:
     return layout_set(tcfg, n, seed, cycle=True)
 
 
-def make_rollout(env: ExoStepEnv, q_apply, max_steps: int, record: bool = False):
-    """Greedy rollout of one layout: returns per-episode outcomes (and the heel path if ``record``)."""
+def make_rollouts(env: ExoStepEnv, q_apply, max_steps: int, record: bool = False):
+    """Greedy rollouts of a batch of layouts: ``rollouts(q_params, layouts, params)`` with layout
+    fields of leading axis N returns per-episode outcomes (N,) (and the heel paths (N, max_steps, 2) if
+    ``record``), as ``jax.vmap`` of one layout's rollout would. The shield's mask is computed for the
+    whole batch at once (``env.action_masks``: ``action_mask``'s decisions, the exact swept check only
+    for the moves its bounds leave open), about three times cheaper per step than one layout's mask
+    vmapped."""
 
-    def rollout(q_params, layout, params):
-        obs, state = env.init_state(layout, params)
+    def rollouts(q_params, layouts, params):
+        obs, state = jax.vmap(env.init_state, in_axes=(0, None))(layouts, params)
+        n = obs.shape[0]
+
+        def rows(alive, x):   # alive (N,) against a leaf with leading axis N
+            return alive.reshape(alive.shape + (1,) * (x.ndim - 1))
 
         def step(carry, _):
             state, obs, alive, out = carry
             # greedy over the admissible moves (all of them without the shield)
-            mask = env.action_mask(state, params) if env.shield else None
+            mask = env.action_masks(state, params) if env.shield else None
             a = dynamics.greedy_action(jnp, q_apply(q_params, obs), mask)
-            obs2, state2, r, term, info = env.step_env(jax.random.PRNGKey(0), state, a, params)
-            truncated = env.is_truncated(state2, params)
+            obs2, state2, r, term, info = jax.vmap(env.step_env, in_axes=(None, 0, 0, None))(
+                jax.random.PRNGKey(0), state, a, params)
+            truncated = jax.vmap(env.is_truncated, in_axes=(0, None))(state2, params)
             out = {
                 "outcome": outcome.accumulate(jnp, out["outcome"], info, alive),
                 "steps": out["steps"] + alive,
                 "return": out["return"] + jnp.where(alive, r, 0.0),
             }
-            state = jax.tree.map(lambda n, o: jnp.where(alive, n, o), state2, state)
-            obs = jnp.where(alive, obs2, obs)
+            state = jax.tree.map(lambda new, old: jnp.where(rows(alive, new), new, old), state2, state)
+            obs = jnp.where(alive[:, None], obs2, obs)
             alive = alive & ~term & ~truncated
             return (state, obs, alive, out), (state.heel if record else None)
 
-        out0 = {"outcome": outcome.start(jnp), "steps": jnp.asarray(0), "return": jnp.asarray(0.0)}
-        (_, _, _, out), path = jax.lax.scan(step, (state, obs, jnp.asarray(True), out0), None, length=max_steps)
+        out0 = {"outcome": outcome.start(jnp, (n,)), "steps": jnp.zeros(n, jnp.int32),
+                "return": jnp.zeros(n, jnp.float32)}
+        (_, _, _, out), path = jax.lax.scan(step, (state, obs, jnp.ones(n, bool), out0), None, length=max_steps)
         acc = out.pop("outcome")
         v = outcome.episode_verdict(jnp, acc, **outcome.rule(params))
         out.update(reached=acc["reached_goal"], collided=~v["collision_free"], limits=acc["limits"], leg=acc["leg"],
                    min_clearance=acc["min_clearance"], accurate=v["collision_free"], success=v["success"])
-        return (out, path) if record else out
+        return (out, jnp.swapaxes(path, 0, 1)) if record else out
+
+    return rollouts
+
+
+def make_rollout(env: ExoStepEnv, q_apply, max_steps: int, record: bool = False):
+    """Greedy rollout of one layout (``make_rollouts`` of a batch of one): per-episode outcomes (and
+    the heel path (max_steps, 2) if ``record``)."""
+    rollouts = make_rollouts(env, q_apply, max_steps, record)
+
+    def rollout(q_params, layout, params):
+        res = rollouts(q_params, jax.tree.map(lambda x: jnp.asarray(x)[None], layout), params)
+        return jax.tree.map(lambda x: x[0], res)
 
     return rollout
 
@@ -105,8 +128,7 @@ def make_evaluator(cfg: Config, net, n: int = 1000, seed: int = 12345):
     env = ExoStepEnv(tcfg)
     params = env.default_params
     layouts = test_layouts(tcfg, n, seed)
-    rollout = make_rollout(env, net.apply, tcfg.env.max_steps)
-    run = jax.jit(jax.vmap(rollout, in_axes=(None, 0, None)))
+    run = jax.jit(make_rollouts(env, net.apply, tcfg.env.max_steps))
 
     def evaluate_params(q_params) -> dict:
         out = jax.tree.map(np.asarray, run(q_params, layouts, params))
@@ -134,7 +156,7 @@ def make_validator(cfg: Config, net, n: int = VALIDATION_EPISODES, seed: int = V
     """Greedy strict success on n layouts drawn from the *training* distribution (never the held-out
     test obstacles), for choosing which parameters to export. Returns ``validate(q_params) -> float``."""
     env, params, layouts = validation_set(cfg, n, seed)
-    rollout = jax.vmap(make_rollout(env, net.apply, cfg.env.max_steps), in_axes=(None, 0, None))
+    rollout = make_rollouts(env, net.apply, cfg.env.max_steps)
 
     @jax.jit
     def validate(q_params):

@@ -48,7 +48,7 @@ from jaxexo.storage.checkpoint import CheckpointError, pack_checkpoint
 from jaxexo.storage.rundir import TrainingDiverged
 from jaxexo.train.lanes import LANES, over_lanes, padded_agents
 from jaxexo.train import run_files as F
-from jaxexo.train.evaluate import make_evaluator, make_rollout, validation_set
+from jaxexo.train.evaluate import make_evaluator, make_rollouts, validation_set
 from jaxexo.train.trainer import Hyperparams, Trainer
 
 
@@ -83,7 +83,7 @@ class Population:
         hyper = Hyperparams.from_config(cfg)
         self.hyper = jax.tree.map(lambda x: np.stack([np.asarray(x)] * self.padded), hyper)
         env, self.val_params, self.val_layouts = validation_set(cfg)
-        rollout = jax.vmap(make_rollout(env, self.trainer.net.apply, cfg.env.max_steps), in_axes=(None, 0, None))
+        rollout = make_rollouts(env, self.trainer.net.apply, cfg.env.max_steps)
         trainer, n_chunk_ = self.trainer, self.n_chunk
 
         def member(ts, hyper, layouts, vparams):
