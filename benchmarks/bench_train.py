@@ -52,14 +52,18 @@ def matmul_roofline(rows: int = 1024, width: int = 128, length: int = 200, repea
 
 
 def network_flops_per_step(cfg) -> float:
-    """Matmul FLOPs of the trainer's network per env step (forward view): the acting pass and the
-    target network's bootstrap pass (one forward each), and num_epochs passes of the update (forward
-    and backward: three forwards' worth). LayerNorm, biases and activations are not counted."""
+    """Matmul FLOPs of the trainer's network per env step: the acting pass and the target network's
+    bootstrap pass (one forward each), and the gradient passes (forward and backward: three forwards'
+    worth), num_epochs of them in the forward view, one per step in the backward view (each
+    environment's gradient of Q(s, a) for its traces). LayerNorm, biases and activations are not
+    counted."""
     from jaxexo.env import ExoStepEnv
 
-    widths = [ExoStepEnv(cfg).obs_dim, *cfg.train.hidden, 36]
+    env = ExoStepEnv(cfg)
+    widths = [env.obs_dim, *cfg.train.hidden, env.num_actions]
     forward = sum(2.0 * a * b for a, b in zip(widths[:-1], widths[1:]))
-    return forward * (2 + 3 * cfg.train.num_epochs)
+    gradient_passes = cfg.train.num_epochs if cfg.train.trace == "forward" else 1
+    return forward * (2 + 3 * gradient_passes)
 
 
 def steady(paths, budget: int, label: str, out_dir: Path) -> dict:

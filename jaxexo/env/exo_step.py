@@ -166,7 +166,14 @@ class ExoStepEnv:
         return self.get_obs(new_state, params), new_state, reward, terminated, info
 
     def is_truncated(self, state: EnvState, params: EnvParams):
+        """The step limit (elementwise: a batch of states gives a batch of flags)."""
         return dynamics.truncated(state.time, params.max_steps_in_episode)
+
+    @staticmethod
+    def _step_info(info, terminated, truncated, obs_st):
+        """The info ``step`` and ``step_batch`` return: the transition's, the two flags, and the
+        finished episode's last observation (for bootstrapping through truncation)."""
+        return {**info, "terminated": terminated, "truncated": truncated, "final_observation": obs_st}
 
     def step(self, key, state: EnvState, action, params: EnvParams | None = None):
         """One transition with auto-reset (gymnax 1.0): a finished episode is replaced by a fresh one;
@@ -182,8 +189,7 @@ class ExoStepEnv:
         obs_re, state_re = self.reset_env(key, params)
         state = jax.tree.map(lambda r, s: jax.lax.select(done, r, s), state_re, state_st)
         obs = jax.lax.select(done, obs_re, obs_st)
-        info = {**info, "terminated": terminated, "truncated": truncated, "final_observation": obs_st}
-        return obs, state, reward, terminated, truncated, info
+        return obs, state, reward, terminated, truncated, self._step_info(info, terminated, truncated, obs_st)
 
     def step_batch(self, keys, states: EnvState, actions, params: EnvParams | None = None):
         """``step`` of a batch of N environments (keys, states and actions with a leading N), equal to
@@ -195,7 +201,7 @@ class ExoStepEnv:
         n = actions.shape[0]
         obs_st, state_st, reward, terminated, info = jax.vmap(self.step_env, in_axes=(0, 0, 0, None))(
             keys, states, actions, params)
-        truncated = jax.vmap(self.is_truncated, in_axes=(0, None))(state_st, params)
+        truncated = self.is_truncated(state_st, params)
         done = terminated | truncated
 
         def fresh(idx):
@@ -203,8 +209,7 @@ class ExoStepEnv:
 
         obs, state = compact.compacted(done, fresh, (obs_st, state_st),
                                        compact.buffer_size(n, RESET_BUFFER_FRACTION))
-        info = {**info, "terminated": terminated, "truncated": truncated, "final_observation": obs_st}
-        return obs, state, reward, terminated, truncated, info
+        return obs, state, reward, terminated, truncated, self._step_info(info, terminated, truncated, obs_st)
 
     def action_mask(self, state: EnvState, params: EnvParams | None = None):
         """(NUM_ACTIONS,) bool: the moves the agent may choose in ``state``
