@@ -99,9 +99,9 @@ def test_cli_train_loads_its_programs_from_the_compilation_cache(tmp_path):
 
 
 def test_compilation_cache_setting(monkeypatch, tmp_path):
-    """use_compilation_cache: "off" leaves JAX's setting alone, a directory that cannot be made is
-    refused with a warning naming the variable (the run compiles as without a cache), a usable one is
-    created and set."""
+    """use_compilation_cache: "off" leaves JAX's setting alone, a directory that cannot be made and a
+    symbolic link jaxexo did not make are refused with a warning (the run compiles as without a
+    cache), a usable one is created and set."""
     from jax.experimental.compilation_cache import compilation_cache as cc
 
     from jaxexo.train.devices import CACHE_ENV, use_compilation_cache
@@ -118,6 +118,13 @@ def test_compilation_cache_setting(monkeypatch, tmp_path):
         with pytest.warns(UserWarning, match=CACHE_ENV):
             assert use_compilation_cache() is None
         assert jax.config.jax_compilation_cache_dir is None
+        elsewhere = tmp_path / "elsewhere"
+        elsewhere.mkdir()
+        (tmp_path / "link").symlink_to(elsewhere, target_is_directory=True)
+        monkeypatch.setenv(CACHE_ENV, str(tmp_path / "link"))
+        with pytest.warns(UserWarning, match="symbolic link"):
+            assert use_compilation_cache() is None
+        assert jax.config.jax_compilation_cache_dir is None and not any(elsewhere.iterdir())
         monkeypatch.setenv(CACHE_ENV, str(tmp_path / "xla"))
         assert use_compilation_cache() == str(tmp_path / "xla") == jax.config.jax_compilation_cache_dir
         assert (tmp_path / "xla").is_dir() and jax.config.jax_compilation_cache_max_size > 0

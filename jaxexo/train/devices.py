@@ -58,6 +58,12 @@ def use_compilation_cache() -> str | None:
         return jax.config.jax_compilation_cache_dir
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
     path = os.path.abspath(os.path.expanduser(setting or os.path.join(base, "jaxexo", "xla")))
+    if os.path.islink(path):
+        # JAX writes its files into this folder: never through a link jaxexo did not make.
+        warnings.warn(f"{CACHE_ENV}: {path} is a symbolic link; jaxexo writes nothing through a link it did not "
+                      f"make, so every program is compiled (point {CACHE_ENV} at a real folder, or set it to off)",
+                      stacklevel=2)
+        return None
     try:
         os.makedirs(path, exist_ok=True)
     except OSError as e:
