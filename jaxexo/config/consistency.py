@@ -1,6 +1,10 @@
 """Cross-field validation: a config whose fields are each valid but cannot work together (an obstacle
 a step could jump through, one that does not fit between the toe and the goal, one the leg cannot
 clear, a budget no scan can count) is refused here, naming the field to change.
+
+A shielded config (env.shield) may take steps longer than its smallest obstacle: the shield admits a
+move only where the exact swept clearance of the whole move keeps env.shield_clearance
+(jaxexo.physics.dynamics.admissible_moves), so no move can pass through an obstacle however thin.
 """
 
 from __future__ import annotations
@@ -53,7 +57,7 @@ def validate(cfg: Config) -> None:
             continue
         w_min, w_max = ob.width[0] * (1 - j), ob.width[1] * (1 + j)
         h_min, h_max = ob.height[0] * (1 - j), ob.height[1] * (1 + j)
-        if env.step_size >= min(w_min, h_min):
+        if not env.shield and env.step_size >= min(w_min, h_min):
             field_ = "width" if w_min <= h_min else "height"
             smallest = min(w_min, h_min)
             if j > 0 and env.step_size < min(ob.width[0], ob.height[0]):
@@ -73,6 +77,11 @@ def validate(cfg: Config) -> None:
             raise ConfigError("env.mid_goal_half_size: the mid-goal box must lie above the obstacle "
                               "(mid_goal_clearance must exceed its half height)")
         _check_clearable(cfg, p, h_max, w_max)
+    if env.step_size > 2.0 * env.goal_tolerance[0]:
+        # a heel moving along the ground must be able to land inside the goal window (eq 2.32)
+        raise ConfigError(f"env.step_size: {env.step_size} m is longer than the goal window "
+                          f"(2 x env.goal_tolerance[0] = {2.0 * env.goal_tolerance[0]:.3f} m): a step could "
+                          "jump over the goal")
     if env.bounds_y[0] > 0.0:
         raise ConfigError("env.bounds_y: the lower bound must be at or behind the start (y = 0)")
     goal_far = lay.start_shift[1] + lay.step_length[1] + env.goal_tolerance[0]
@@ -97,7 +106,7 @@ def _check_terrain(cfg: Config) -> None:
     if env.max_vertices and env.max_vertices < terrain.K_MAX:
         raise ConfigError(f"env.max_vertices: {env.max_vertices} is fewer than the {terrain.K_MAX} outline vertices "
                           "of layout.terrain's families (0 picks the size automatically)")
-    if env.step_size >= t.min_size:
+    if not env.shield and env.step_size >= t.min_size:
         raise ConfigError(f"env.step_size: {env.step_size} m is not smaller than the smallest width or height "
                           f"of layout.terrain.families ({t.min_size:.3f} m): a step could jump through the obstacle")
     if t.max_height + env.mid_goal_clearance + env.mid_goal_half_size[1] >= env.max_z:
