@@ -257,7 +257,7 @@ def cmd_sweep(args) -> int:
     heatmap = tuple(args.heatmap.split(",")) if args.heatmap else None
     res = run_sweep(sweep, args.out, resume=args.resume, backend=args.backend, address=args.address,
                     memory_budget=budget, task_cpus=args.task_cpus, progress=not args.quiet,
-                    export_best=args.export_best, heatmap=heatmap)
+                    export_best=args.export_best, export_all=args.export_all, heatmap=heatmap)
     for i, e in enumerate(res["ranking"][:5], 1):
         print(f"  #{i} config {e['config_id']} ({e['label']}): success {e['success_mean']:.3f} "
               f"± {e['success_std']:.3f} over {e['seeds']} seeds, held-out {e['held_out_success']:.3f}"
@@ -374,6 +374,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True, help="sweep directory (results.csv, summary.md, figures)")
     s.add_argument("--resume", action="store_true", help="run only the chunks of --out without results")
     s.add_argument("--export-best", action="store_true", help="write best/policy.npz and best/config.toml")
+    s.add_argument("--export-all", action="store_true",
+                   help="write every agent's policy.npz and config.toml under agents/ (and agents/index.json)")
     s.add_argument("--backend", choices=["local", "ray"], default="local",
                    help="local: chunks over this machine's CPU cores; ray: chunks as tasks on a Ray cluster")
     s.add_argument("--address", help="Ray cluster address (default: start a local Ray instance)")

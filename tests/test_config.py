@@ -457,5 +457,19 @@ def test_cmd_sweep_returns_an_exit_status(monkeypatch, tmp_path):
         "ranking": [], "wall_s_this_run": 0.0, "env_steps_this_run": 0, "figures": []})
     args = argparse.Namespace(memory_budget=None, sweep=str(ROOT / "configs" / "sweeps" / "smoke.toml"),
                               backend="ray", out=str(tmp_path), resume=False, heatmap=None, address=None,
-                              task_cpus=None, quiet=True, export_best=False)
+                              task_cpus=None, quiet=True, export_best=False, export_all=False)
     assert cli.cmd_sweep(args) == 0
+
+
+def test_shielded_steps_may_exceed_the_smallest_obstacle_but_not_the_goal_window():
+    """The shield checks each move's exact swept clearance, so a shielded model may step 6 cm over 5 cm
+    obstacles (the same step unshielded is refused: test_validation_blames_the_field_at_fault); no
+    model may step past the goal window (2 x env.goal_tolerance[0])."""
+    raw = {"env": {"step_size": 0.06, "shield": True}, "layout": {"obstacles": ["base3"]}}
+    assert config_from_dict(legacy_raw(raw)).env.step_size == 0.06
+    assert config_from_dict({"env": {"step_size": 0.06}}).env.step_size == 0.06    # the default's terrain
+    for shield in (True, False):
+        bad = {"env": {"step_size": 0.09, "shield": shield, "goal_tolerance": [0.04, 0.02]},
+               "layout": {"obstacles": [{"kind": "rectangle", "width": 0.2, "height": 0.2}]}}
+        with pytest.raises(ConfigError, match=r"^env\.step_size: 0\.09 m is longer than the goal window \(.*0\.080 m\)"):
+            config_from_dict(legacy_raw(bad))

@@ -688,3 +688,33 @@ def test_ray_backend_gives_the_local_results(ray_cluster, cli_local, tmp_path):
     for c in range(len(ray_plan["chunks"])):
         a, b = R.load_chunk(out, c), R.load_chunk(local, c)
         assert all(np.array_equal(a["params"][k], b["params"][k], equal_nan=True) for k in a["params"])
+
+
+@pytest.mark.slow
+def test_export_all_writes_each_agent_and_skips_the_diverged(inproc, tiny_sweep):
+    """``--export-all``: every agent that did not diverge gets its own final parameters and resolved
+    config (checked against the chunk file and the sweep's member); the diverged are indexed, not
+    exported."""
+    from jaxexo.config import load_config
+    from jaxexo.storage.policy_file import load_policy
+    from jaxexo.sweep.program import unflatten
+    from jaxexo.sweep.report import agent_dir, export_all
+
+    out = inproc["out"]
+    rows = _rows(out / R.RESULTS)
+    got = export_all(tiny_sweep, out, rows)
+    index = json.loads((out / "agents" / "index.json").read_text())
+    diverged = {(int(r["config_id"]), int(r["seed"])) for r in rows if r["diverged"] == "1"}
+    assert got == {"agents": 8, "exported": 8 - len(diverged)} and diverged
+    assert [(e["config_id"], e["seed"]) for e in index] == [(c, s) for c in range(4) for s in (0, 1)]
+    for e, r in zip(index, sorted(rows, key=lambda r: (int(r["config_id"]), int(r["seed"])))):
+        key = (e["config_id"], e["seed"])
+        d = agent_dir(out, *key)
+        assert e["exported"] == (key not in diverged) == (d / "policy.npz").exists()
+        if not e["exported"]:
+            continue
+        data = R.load_chunk(out, int(r["chunk"]))
+        params = unflatten(data["params"], data["agents"].index(key))
+        np.testing.assert_array_equal(load_policy(d / "policy.npz").kernels[-1],
+                                      params["params"][f"dense_{len(tiny_sweep.members[0].config.train.hidden)}"]["kernel"])
+        assert load_config(d / "config.toml") == tiny_sweep.members[key[0]].config

@@ -1,4 +1,4 @@
-"""A finished sweep's report: DIR/summary.md, DIR/heatmap.png, DIR/curves.png, and ``--export-best``.
+"""A finished sweep's report: DIR/summary.md, DIR/heatmap.png, DIR/curves.png, ``--export-best``, ``--export-all``.
 
 - summary.md ranks the configurations by mean greedy success over seeds (ties: fewer diverged seeds,
   held-out success, then training return), with the spread over seeds (standard deviation, min-max), and lists the diverged;
@@ -8,7 +8,9 @@
 - curves.png: training success rate and return against episodes of the ``top`` best configurations
   (mean over seeds of the learning curves reduced inside the compiled program);
 - ``--export-best``: DIR/best/policy.npz (final parameters of the best configuration's best seed),
-  DIR/best/config.toml (its resolved config) and DIR/best/selection.json.
+  DIR/best/config.toml (its resolved config) and DIR/best/selection.json;
+- ``--export-all``: every agent's policy.npz and config.toml under DIR/agents/ (``agent_dir``), and
+  DIR/agents/index.json, so that each agent can be measured with the benchmarks.
 """
 
 from __future__ import annotations
@@ -233,12 +235,23 @@ def plot_curves(path: Path, sweep: Sweep, out: Path, rows: list[dict], entries: 
     plt.close(fig)
 
 
-def export_best(sweep: Sweep, out: Path, rows: list[dict]) -> dict:
-    """Write the best configuration's policy (its best seed's final parameters) and resolved config."""
+def _export_agent(sweep: Sweep, out: Path, row: dict, dest: Path) -> None:
+    """Write one agent's final parameters as dest/policy.npz and its resolved config as dest/config.toml."""
     from jaxexo.sweep.program import unflatten
     from jaxexo.train.run_files import export_policy
     from jaxexo.train.trainer import Trainer
 
+    cid, seed, chunk_id = int(row["config_id"]), int(row["seed"]), int(row["chunk"])
+    data = R.load_chunk(out, chunk_id)
+    params = unflatten(data["params"], data["agents"].index((cid, seed)))
+    cfg = sweep.members[cid].config
+    dest.mkdir(parents=True, exist_ok=True)
+    export_policy(dest / "policy.npz", cfg, Trainer(cfg), params)
+    atomic_write(dest / "config.toml", config_to_toml(cfg))
+
+
+def export_best(sweep: Sweep, out: Path, rows: list[dict]) -> dict:
+    """Write the best configuration's policy (its best seed's final parameters) and resolved config."""
     entries = rank(sweep, rows)
     if not entries:
         raise ConfigError("--export-best: the sweep has no results yet")
@@ -249,17 +262,38 @@ def export_best(sweep: Sweep, out: Path, rows: list[dict]) -> dict:
     else:
         raise ConfigError("--export-best: every agent of the sweep diverged; nothing to export")
     best_row = max(cands, key=lambda r: (float(r["success"]), -int(r["seed"])))
-    cid, seed, chunk_id = int(best_row["config_id"]), int(best_row["seed"]), int(best_row["chunk"])
-    data = R.load_chunk(out, chunk_id)
-    index = data["agents"].index((cid, seed))
-    params = unflatten(data["params"], index)
-    cfg = sweep.members[cid].config
+    cid, seed = int(best_row["config_id"]), int(best_row["seed"])
     best = Path(out) / "best"
-    best.mkdir(exist_ok=True)
-    export_policy(best / "policy.npz", cfg, Trainer(cfg), params)
-    atomic_write(best / "config.toml", config_to_toml(cfg))
+    _export_agent(sweep, out, best_row, best)
     selection = {"config_id": cid, "seed": seed, "label": sweep.members[cid].label,
                  "success": float(best_row["success"]), "held_out_success": float(best_row["held_out_success"]),
                  "mean_success_over_seeds": e["success_mean"]}
     atomic_write(best / "selection.json", json.dumps(selection, indent=1) + "\n")
     return selection
+
+
+AGENTS = "agents"
+
+
+def agent_dir(out: Path, config_id: int, seed: int) -> Path:
+    """Where ``--export-all`` writes one agent: DIR/agents/config_CCC_seed_S/."""
+    return Path(out) / AGENTS / f"config_{config_id:03d}_seed_{seed}"
+
+
+def export_all(sweep: Sweep, out: Path, rows: list[dict]) -> dict:
+    """Write every agent's policy and config (``agent_dir``) and DIR/agents/index.json (each agent's
+    directory, label, axes' values and success); diverged agents are listed but not exported."""
+    if not rows:
+        raise ConfigError("--export-all: the sweep has no results yet")
+    index = []
+    for r in sorted(rows, key=lambda r: (int(r["config_id"]), int(r["seed"]))):
+        cid, seed = int(r["config_id"]), int(r["seed"])
+        dest = agent_dir(out, cid, seed)
+        diverged = r["diverged"] != "0"
+        if not diverged:
+            _export_agent(sweep, out, r, dest)
+        index.append({"config_id": cid, "seed": seed, "label": sweep.members[cid].label,
+                      "dir": str(dest.relative_to(out)), "exported": not diverged,
+                      "success": float(r["success"]), "held_out_success": float(r["held_out_success"])})
+    atomic_write(Path(out) / AGENTS / "index.json", json.dumps(index, indent=1) + "\n")
+    return {"agents": len(index), "exported": sum(e["exported"] for e in index)}

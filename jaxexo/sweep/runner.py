@@ -66,7 +66,8 @@ def _prepare(sweep: Sweep, out: Path, resume: bool, devices: int, budget: int) -
 
 def run_sweep(sweep: Sweep, out: str | Path, *, resume: bool = False, backend: str = "local",
               address: str | None = None, memory_budget: int | None = None, task_cpus: int | None = None,
-              progress: bool = True, export_best: bool = False, heatmap=None, devices=None) -> dict:
+              progress: bool = True, export_best: bool = False, export_all: bool = False, heatmap=None,
+              devices=None) -> dict:
     """Run (or finish) the sweep into ``out``; write the report; return the report's figures.
 
     ``devices``: local backend only, the JAX devices to split chunks over (default: all local ones).
@@ -145,6 +146,8 @@ def run_sweep(sweep: Sweep, out: str | Path, *, resume: bool = False, backend: s
         summary["env_steps_this_run"] = steps_run
         if export_best:
             summary["exported"] = report.export_best(sweep, out, rows)
+        if export_all:
+            summary["exported_all"] = report.export_all(sweep, out, rows)
         return summary
 
 
