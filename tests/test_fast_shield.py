@@ -175,15 +175,18 @@ def test_smooth_candidates_is_smooth_paths_of_the_repeated_path():
 
 def test_a_shielded_models_smoothing_is_its_clearance_budget():
     """Without a smoothing given, a shielded model's spline asks for the residual whose RMS over a
-    40-point swing is the shield's excess over the margin (jaxexo.inference.generator.model_smoothing);
-    an unshielded model keeps the thesis's s."""
+    long swing (1.2 m of raw path: 40 points of 3 cm, 20 of 6 cm) is the shield's excess over the margin
+    (jaxexo.inference.generator.model_smoothing); an unshielded model keeps the thesis's s."""
     from jaxexo.evaluation.compare import make_scenarios
-    from jaxexo.inference.generator import SHIELD_SMOOTHING_POINTS, model_smoothing
+    from jaxexo.inference.generator import model_smoothing
 
     gen = _random_generator()
     excess = gen.config.env.shield_clearance - gen.config.env.min_clearance
     assert excess > 0
-    assert gen.smoothing == pytest.approx(SHIELD_SMOOTHING_POINTS * excess ** 2, rel=1e-12)
+    points = 1.2 / gen.config.env.step_size
+    assert gen.smoothing == pytest.approx(points * excess ** 2, rel=1e-12)
+    assert model_smoothing(0.025, 0.02, True, 0.03) == pytest.approx(40 * 0.005 ** 2, rel=1e-12)
+    assert model_smoothing(0.025, 0.02, True, 0.06) == pytest.approx(20 * 0.005 ** 2, rel=1e-12)
     assert gen.smoothing < sm.DEFAULT_SMOOTHING
     assert model_smoothing(0.025, 0.02, False) == sm.DEFAULT_SMOOTHING
     s = make_scenarios(gen.config, "train", 3, 11)

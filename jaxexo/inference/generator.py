@@ -69,7 +69,8 @@ class TrajectoryGenerator:
         self.epsilon = 0.0      # 0: greedy (the default; a device's generator must not explore)
         self.shield = bool(config.env.shield)
         # The spline's smoothing when a call does not give one (m^2, thesis 2.7's s).
-        self.smoothing = model_smoothing(config.env.shield_clearance, config.env.min_clearance, self.shield)
+        self.smoothing = model_smoothing(config.env.shield_clearance, config.env.min_clearance, self.shield,
+                                         config.env.step_size)
         self._rng = None
         # single-swing shield steps: [decided by jaxexo.inference.shield, handed to the full mask]
         # and batch rows: [rows, rows whose best forward move was not admissible (full mask)]
@@ -318,20 +319,23 @@ class TrajectoryGenerator:
         return batch
 
 
-# Points of a long swing (a typical one has 25-35): the budget below holds for swings up to this long.
-SHIELD_SMOOTHING_POINTS = 40
+# The raw path of a long swing (m): 40 moves of 3 cm (a typical one has 25-35): the budget below holds
+# for swings up to this long.
+LONG_SWING_PATH = 1.2
 
 
-def model_smoothing(shield_clearance: float, min_clearance: float, shield: bool) -> float:
+def model_smoothing(shield_clearance: float, min_clearance: float, shield: bool, step_size: float = 0.03) -> float:
     """The spline's default smoothing s (m^2, the sum of squared residuals at the agent's points,
     thesis 2.7) for a model: the thesis's 0.005 m^2 without the shield; with it, the s whose RMS
-    residual over a swing of SHIELD_SMOOTHING_POINTS points equals the shield's excess over the margin
-    (env.shield_clearance - env.min_clearance: 5 mm, s = 40 x 0.005^2 = 0.001 m^2 by default). The
-    shielded raw path keeps that excess everywhere, so a spline that strays no further than it from
-    the agent's points rarely cuts into the margin; the thesis's s (an RMS of 1.1-1.4 cm over 25-40
-    points) cuts corners by more than the excess, and its correction (jaxexo.inference.clearing) then
-    lifts the whole swing (about 1 cm higher on the held-out families, measured)."""
+    residual over a long swing (LONG_SWING_PATH / step_size points: 40 at 3 cm) equals the shield's
+    excess over the margin (env.shield_clearance - env.min_clearance: 5 mm, s = 40 x 0.005^2 = 0.001 m^2
+    by default). The shielded raw path keeps that excess everywhere, so a spline that strays no further
+    than it from the agent's points rarely cuts into the margin; the thesis's s (an RMS of 1.1-1.4 cm
+    over 25-40 points) cuts corners by more than the excess, and its correction
+    (jaxexo.inference.clearing) then lifts the whole swing (about 1 cm higher on the held-out families,
+    measured). Longer steps give fewer points for the same swing, hence a smaller s."""
     if not shield:
         return sm.DEFAULT_SMOOTHING
     excess = float(shield_clearance) - float(min_clearance)
-    return SHIELD_SMOOTHING_POINTS * excess * excess if excess > 0.0 else 0.0
+    points = LONG_SWING_PATH / float(step_size)
+    return points * excess * excess if excess > 0.0 else 0.0

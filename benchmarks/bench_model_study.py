@@ -1,0 +1,200 @@
+"""The model study's measurements: every agent of a finished model-study sweep (exported with
+``jaxexo sweep configs/sweeps/model_study.toml --out DIR --export-all``) measured with the project's
+benchmarks, RL alone (``fallback=None``) beside CFFTG on the same scenes:
+
+- safe swings (the strict verdict at the model's margin) on the held-out terrain families, the thesis
+  five shifted and unseen shapes (bench_swing_quality's sets, ``--n`` scenes each);
+- the wearer's figures on the scenes both generators swing safely: heel lift median, timed swing
+  (the config's [device] limits) median and p95; CFFTG's safety shortfall beside them; the longest
+  timed RL swing on all scenes;
+- one swing (``generate``): RL and CFFTG alternating per scene in this process, ``--time-n`` scenes of
+  the held-out families and of the unseen shapes, median ms and the RL / CFFTG ratio;
+- the sweep's own figures: greedy validation success (results.csv ``success``) and held-out success.
+
+Writes benchmarks/results/model_study_<date>_<machine>.{json,md,png}; the figure plots each agent's
+generation time against its timed-swing p95 and its lift (the default's configuration marked).
+
+Run: python benchmarks/bench_model_study.py SWEEP_DIR [--n 120] [--time-n 80] [--configs 0,3,...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from bench_swing_quality import run_set, scene_sets
+from jaxexo.baselines import CFFTG
+from jaxexo.benchmarks.generate_bench import alternate
+from jaxexo.evaluation.compare import WithFallback
+from jaxexo.evaluation.machine import machine_info, write_result
+from jaxexo.inference import TrajectoryGenerator
+
+OUT = Path(__file__).resolve().parent / "results"
+# The wearer's targets against CFFTG on the scenes both swing safely (lift and timed median <= CFFTG's,
+# timed p95 <= 1.1x), the longest RL swing on all scenes, RL alone's safe share on every set.
+P95_FACTOR, LONGEST_S, SAFE_MIN = 1.1, 2.5, 0.999
+
+
+def _both_safe(per: dict) -> dict:
+    """Lift (cm) and timed swing (s) median / p95 of each generator on the scenes both swing safely."""
+    both = per["rl"][0] & per["cfftg"][0]
+    out = {"n_both_safe": int(both.sum())}
+    for g, (_, lift, dur) in per.items():
+        out[g] = {"lift_cm": 100 * float(np.median(lift[both])), "dur_median_s": float(np.median(dur[both])),
+                  "dur_p95_s": float(np.percentile(dur[both], 95))}
+    return out
+
+
+def measure_agent(policy: Path, n: int, time_n: int) -> dict:
+    gen = TrajectoryGenerator.load(policy)
+    cfg = gen.config
+    cf = CFFTG(cfg)
+    gens = {"rl": gen, "cfftg": cf}
+    sets, pooled, longest = {}, {"rl": [[], [], []], "cfftg": [[], [], []]}, 0.0
+    scenes = scene_sets(cfg, n)
+    for name, sc in scenes.items():
+        arrays = {}
+        r = run_set(gens, sc, cfg, None, 0.0, None, arrays)
+        sets[name] = {"rl_safe": r["rl"]["safe"], "cfftg_safe": r["cfftg"]["safe"],
+                      "rl_goal": r["rl"]["reached_goal"], "rl_longest_s": r["rl"]["duration_s_max"],
+                      "rl_corrected": r["rl"]["corrected"], **_both_safe(arrays)}
+        longest = max(longest, r["rl"]["duration_s_max"])
+        for g, (ok, lift, dur) in arrays.items():
+            for k, v in enumerate((ok, lift, dur)):
+                pooled[g][k].append(v)
+    per = {g: tuple(np.concatenate(v) for v in vals) for g, vals in pooled.items()}
+    timing = {}
+    for name in ("held-out families", "unseen shapes"):
+        runs = alternate({"rl": WithFallback(gen, None), "cfftg": cf}, scenes[name][:time_n], warmup=10)
+        rl, c = np.median(runs["rl"][1]) * 1e3, np.median(runs["cfftg"][1]) * 1e3
+        rl_cpu, c_cpu = np.median(runs["rl"][2]) * 1e3, np.median(runs["cfftg"][2]) * 1e3
+        timing[name] = {"rl_ms": float(rl), "cfftg_ms": float(c), "ratio": float(rl / c),
+                        "cpu_ratio": float(rl_cpu / c_cpu),
+                        "raw_points": float(np.mean([len(t.raw) for t in runs["rl"][0]]))}
+    return {"sets": sets, "pooled": _both_safe(per), "rl_longest_s": longest, "timing": timing,
+            "smoothing": gen.smoothing}
+
+
+def verdicts(m: dict, success: float) -> dict:
+    """Which of the study's targets an agent meets (pooled over the three sets)."""
+    p = m["pooled"]
+    return {
+        "validation": success >= 0.99,
+        "safe": all(s["rl_safe"] >= SAFE_MIN and s["rl_goal"] == 1.0 for s in m["sets"].values()),
+        "lift": p["rl"]["lift_cm"] <= p["cfftg"]["lift_cm"],
+        "timed_median": p["rl"]["dur_median_s"] <= p["cfftg"]["dur_median_s"],
+        "timed_p95": p["rl"]["dur_p95_s"] <= P95_FACTOR * p["cfftg"]["dur_p95_s"],
+        "longest": m["rl_longest_s"] <= LONGEST_S,
+    }
+
+
+def figure(rows: list[dict], path: Path, default_label: str) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axs = plt.subplots(1, 2, figsize=(11, 4.6))
+    for r in rows:
+        x = r["timing"]["held-out families"]["rl_ms"] / r["timing"]["held-out families"]["cfftg_ms"]
+        ok = all(r["meets"].values())
+        for ax, y in zip(axs, (r["pooled"]["rl"]["dur_p95_s"] / r["pooled"]["cfftg"]["dur_p95_s"],
+                               r["pooled"]["rl"]["lift_cm"] - r["pooled"]["cfftg"]["lift_cm"])):
+            ax.scatter(x, y, s=18 + 30 * r["step_size"] / 0.03, marker="o" if r["layer_norm"] else "s",
+                       color={32: "tab:blue", 64: "tab:orange", 128: "tab:green"}.get(r["hidden"][0], "k"),
+                       edgecolors="k" if ok else "none", alpha=0.8)
+            if r["label"] == default_label:
+                ax.scatter(x, y, s=220, facecolors="none", edgecolors="red", linewidths=1.5)
+    axs[0].axhline(P95_FACTOR, color="grey", ls="--", lw=1)
+    axs[1].axhline(0.0, color="grey", ls="--", lw=1)
+    axs[0].set_ylabel("timed swing p95, RL / CFFTG (both safe)")
+    axs[1].set_ylabel("heel lift median, RL - CFFTG (cm, both safe)")
+    for ax in axs:
+        ax.set_xlabel("one swing, RL / CFFTG time (median, held-out families)")
+        ax.grid(alpha=0.3)
+    from matplotlib.lines import Line2D
+    handles = [Line2D([], [], marker="o", ls="", color=c, label=f"{h}-{h}") for h, c in
+               ((32, "tab:blue"), (64, "tab:orange"), (128, "tab:green"))]
+    handles += [Line2D([], [], marker="o", ls="", color="grey", label="LayerNorm"),
+                Line2D([], [], marker="s", ls="", color="grey", label="no LayerNorm"),
+                Line2D([], [], marker="o", ls="", mfc="none", mec="red", ms=12, label="today's default config"),
+                Line2D([], [], marker="o", ls="", mfc="w", mec="k", label="black edge: meets every target")]
+    axs[1].legend(handles=handles, fontsize=7, loc="upper right")
+    fig.suptitle("Model study: one point per agent (marker size: step size 3 / 4.5 / 6 cm)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def markdown(rows: list[dict], meta: dict) -> str:
+    lines = ["# Model study: network x LayerNorm x step size, 3 seeds, measured agent by agent", "",
+             f"Sweep `{meta['sweep']}`; {meta['n']} scenes per set (held-out families, thesis five shifted, unseen "
+             f"shapes), RL alone beside CFFTG; one swing timed on {meta['time_n']} held-out and unseen scenes each, "
+             f"RL and CFFTG alternating. Load average at the start: {meta['load']}. Lift and timed swing pooled over "
+             "the three sets on the scenes both generators swing safely.", "",
+             "| config | seed | val. success | RL safe % (fam / five / shapes) | CFFTG safe % | lift cm RL / CFFTG | "
+             "timed median s RL / CFFTG | p95 s RL / CFFTG | longest RL s | one swing ms RL / CFFTG (fam) | ratio "
+             "fam / shapes | raw pts | meets |", "|---|---:|---:|---|---|---|---|---|---:|---|---|---:|---|"]
+    for r in rows:
+        s, p, t = r["sets"], r["pooled"], r["timing"]
+        safe = " / ".join(f"{100 * v['rl_safe']:.1f}" for v in s.values())
+        csafe = " / ".join(f"{100 * v['cfftg_safe']:.1f}" for v in s.values())
+        missed = [k for k, v in r["meets"].items() if not v]
+        lines.append(
+            f"| {r['label']} | {r['seed']} | {r['success']:.3f} | {safe} | {csafe} | "
+            f"{p['rl']['lift_cm']:.2f} / {p['cfftg']['lift_cm']:.2f} | {p['rl']['dur_median_s']:.3f} / "
+            f"{p['cfftg']['dur_median_s']:.3f} | {p['rl']['dur_p95_s']:.3f} / {p['cfftg']['dur_p95_s']:.3f} | "
+            f"{r['rl_longest_s']:.2f} | {t['held-out families']['rl_ms']:.2f} / {t['held-out families']['cfftg_ms']:.2f} | "
+            f"{t['held-out families']['ratio']:.2f} / {t['unseen shapes']['ratio']:.2f} | "
+            f"{t['held-out families']['raw_points']:.1f} | {'all' if not missed else 'not ' + ', '.join(missed)} |")
+    return "\n".join(lines)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("sweep_dir")
+    ap.add_argument("--n", type=int, default=120, help="scenes per set")
+    ap.add_argument("--time-n", type=int, default=80, help="scenes per set for the one-swing timing")
+    ap.add_argument("--configs", default="", help="comma-separated config ids (default: all)")
+    ap.add_argument("--tag", default="")
+    ap.add_argument("--out", default=str(OUT))
+    a = ap.parse_args()
+    d = Path(a.sweep_dir)
+    index = json.loads((d / "agents" / "index.json").read_text())
+    with open(d / "results.csv") as f:
+        results = {(int(r["config_id"]), int(r["seed"])): r for r in csv.DictReader(f)}
+    want = {int(c) for c in a.configs.split(",") if c} or None
+    meta = {"sweep": str(d), "n": a.n, "time_n": a.time_n, "load": [round(x, 2) for x in os.getloadavg()]}
+    rows = []
+    for e in index:
+        if not e["exported"] or (want is not None and e["config_id"] not in want):
+            continue
+        t0 = time.perf_counter()
+        policy = d / e["dir"] / "policy.npz"
+        m = measure_agent(policy, a.n, a.time_n)
+        gen_cfg = TrajectoryGenerator.load(policy).config
+        row = {"config_id": e["config_id"], "seed": e["seed"], "label": e["label"], "success": e["success"],
+               "held_out_success": e["held_out_success"], "hidden": list(gen_cfg.train.hidden),
+               "layer_norm": bool(gen_cfg.train.layer_norm), "step_size": float(gen_cfg.env.step_size),
+               "sweep_wall_s": float(results[(e["config_id"], e["seed"])]["wall_s"]), **m}
+        row["meets"] = verdicts(m, e["success"])
+        rows.append(row)
+        print(f"{e['label']} seed {e['seed']}: {json.dumps(row['meets'])} "
+              f"ratio {m['timing']['held-out families']['ratio']:.2f} ({time.perf_counter() - t0:.0f} s)", flush=True)
+    default_label = "train.hidden=[128,128], train.layer_norm=True, env.step_size=0.03"
+    md = markdown(rows, meta)
+    print(md)
+    res = {**meta, "rows": rows, "machine": machine_info()}
+    name = "model_study" + (f"_{a.tag}" if a.tag else "")
+    paths = write_result(name, res, md, a.out)
+    figure(rows, paths[1].with_suffix(".png"), default_label)
+    print(*paths, paths[1].with_suffix(".png"))
+
+
+if __name__ == "__main__":
+    main()
