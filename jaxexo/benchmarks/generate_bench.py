@@ -124,6 +124,88 @@ def alternate(generators: dict, scenarios: list[dict], warmup: int = 20):
     return out
 
 
+def time_breakdown(gen, cf, scenarios: list[dict], repeats: int = 3) -> dict:
+    """Where one swing's time goes, per generator (medians over the scenes of the best of ``repeats``
+    timings each, microseconds). RL (``fallback=None``): the rollout per swing and its steps; per step
+    the network (``StepNetwork.q_values``) and the shield's choice (``ScalarShield.choose``), replayed on
+    the rollout's own states; per swing the observation's scene part (folded into the first layer), the
+    smoothing and correction (``clear_rows``) and the rest of the finishing (verdict, retries,
+    kinematics and joint angles). CFFTG: the plan with its checks and re-plans (``plan``) and the
+    rest (``assemble``: kinematics and joint angles)."""
+    import time
+
+    from jaxexo.inference.clearing import clear_rows
+    from jaxexo.inference.shield import ScalarShield
+    from jaxexo.physics import dynamics
+    from jaxexo.physics.dynamics import scalar
+
+    def best(fn):
+        out = float("inf")
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            fn()
+            out = min(out, time.perf_counter() - t0)
+        return out * 1e6
+
+    sp, step, n_pts, smooth = gen.sp, gen.step_net, 100, gen.smoothing
+    rows = {k: [] for k in ("steps", "rollout", "network_per_step", "shield_per_step", "observation",
+                            "smoothing_correction", "verdict_angles", "rl_total", "cfftg_plan", "cfftg_assemble",
+                            "cfftg_total")}
+    for s in scenarios:
+        scene = gen.scene(s["obstacle"], s["pivot"], None, s["start_y"], s["step_length"])
+        raw, acts = gen.rollout(scene)
+        k = len(acts)
+        mid_y, mid_z = dynamics.mid_goal(scalar, sp, scene.center_y, scene.height)
+        visited, states = False, []
+        for j in range(k):
+            hy, hz = float(raw[j, 0]), float(raw[j, 1])
+            states.append((hy, hz, float(j), 1.0 if visited else 0.0, int(acts[j - 1]) if j else -1))
+            visited = visited or dynamics.in_mid_goal(scalar, sp, float(raw[j + 1, 0]), float(raw[j + 1, 1]),
+                                                      mid_y, mid_z)
+        basis = gen._basis(scene)
+        step.set_scene(basis)
+        qs = [step.q_values(*st[:4]).copy() for st in states]
+        rows["steps"].append(k)
+        rows["rollout"].append(best(lambda: gen.rollout(scene)))
+        rows["observation"].append(best(lambda: step.set_scene(gen._basis(scene))))
+        rows["network_per_step"].append(best(lambda: [step.q_values(*st[:4]) for st in states]) / k)
+        if gen.shield:
+            sh = ScalarShield(sp, gen.np_params, scene)
+            rows["shield_per_step"].append(best(lambda: [sh.choose(st[0], st[1], q, st[4])
+                                                         for st, q in zip(states, qs)]) / k)
+        fin = best(lambda: gen.finish([scene], [raw], n_pts, smooth, 1.0, None))
+        cl = best(lambda: clear_rows([raw], [scene.outline], sp.foot_length, sp.min_clearance, n_pts, smooth))
+        rows["smoothing_correction"].append(cl)
+        rows["verdict_angles"].append(max(fin - cl, 0.0))
+        rows["rl_total"].append(best(lambda: gen.generate(s["obstacle"], pivot=s["pivot"], start_y=s["start_y"],
+                                                          step_length=s["step_length"], fallback=None)))
+        plan = best(lambda: cf.plan([scene]))
+        tot = best(lambda: cf.finish([scene], n_pts, 1.0))
+        rows["cfftg_plan"].append(plan)
+        rows["cfftg_assemble"].append(max(tot - plan, 0.0))
+        rows["cfftg_total"].append(best(lambda: cf.generate(s["obstacle"], pivot=s["pivot"], start_y=s["start_y"],
+                                                            step_length=s["step_length"])))
+    return {k: float(np.median(v)) for k, v in rows.items() if v}
+
+
+def breakdown_lines(b: dict) -> list[str]:
+    """The breakdown's table (microseconds, medians; the parts are medians of their own, so they need
+    not add up to the total exactly)."""
+    rl_steps = b["steps"]
+    shield = b.get("shield_per_step", float("nan"))
+    return [
+        "| where one swing's time goes (median us) | RL | CFFTG |", "|---|---:|---:|",
+        f"| total (`generate`) | {b['rl_total']:.0f} | {b['cfftg_total']:.0f} |",
+        f"| rollout: {rl_steps:.0f} steps per swing | {b['rollout']:.0f} | |",
+        f"| ... per step: network | {b['network_per_step']:.1f} | |",
+        f"| ... per step: shield's choice | {shield:.1f} | |",
+        f"| ... per swing: the observation's scene part (first layer) | {b['observation']:.0f} | |",
+        f"| plan with its checks and re-plans (CFFTG) | | {b['cfftg_plan']:.0f} |",
+        f"| finishing: smoothing and correction (`clear_rows`) | {b['smoothing_correction']:.0f} | |",
+        f"| finishing: verdict, retries, kinematics, joint angles | {b['verdict_angles']:.0f} | {b['cfftg_assemble']:.0f} |",
+    ]
+
+
 def smoothing_counts(trajs) -> dict:
     """Fractions of RL swings: smoothed in one pass (no retry with less smoothing), with the requested
     smoothing itself, with a per-path candidate, on the raw polyline; safe (the verdict)."""
@@ -176,6 +258,7 @@ def run_generate_benchmark(policy: str | Path, out_dir, n: int = 1000, progress=
             "cfftg_safe": float(np.mean([t.ok for t in passes[-1]["cfftg"][0]])),
             "shield_steps_full_mask": steps[1] / max(steps[0], 1),
         }
+    breakdown = time_breakdown(gen, cf, scene_set(gen.config, "unseen", n)[: max(1, n // 5)])
     batch = _batch_ms(policy, n)
     batch_1t = batch_single_thread(policy, n)
     imports = time_import()
@@ -186,6 +269,7 @@ def run_generate_benchmark(policy: str | Path, out_dir, n: int = 1000, progress=
         "single_ms": u["single_ms"],
         "batch_ms": {"default_threads": batch, "single_thread_blas": batch_1t},
         "import_s": {"median": statistics.median(imports), "runs": imports},
+        "breakdown_us": breakdown,
         "blas_threads_default": blas_threads(),
         "load_average": load,
         "targets": TARGETS, "thesis_ms": THESIS_MS,
@@ -233,7 +317,9 @@ def run_generate_benchmark(policy: str | Path, out_dir, n: int = 1000, progress=
         f"| RL on the process's BLAS threads (`batch_blas_threads = None`): default / single-threaded | "
         f"{b(batch, 'rl_process_blas'):.1f} / {b(batch_1t, 'rl_process_blas'):.1f} ms | | | |", "",
         f"`import jaxexo.inference`, cold process: {res['import_s']['median']:.3f} s (<= 0.3 s: "
-        f"{miss(res['import_s']['median'] <= 0.3)}).",
+        f"{miss(res['import_s']['median'] <= 0.3)}).", "",
+        f"Where the time goes, {max(1, n // 5)} held-out scenes, each part timed alone (best of 3):", "",
+        *breakdown_lines(breakdown),
     ]
     jpath, _ = write_result("generate", res, "\n".join(lines), out_dir)
     progress("\n".join(lines))
