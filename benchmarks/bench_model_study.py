@@ -51,7 +51,27 @@ def _both_safe(per: dict) -> dict:
     return out
 
 
-def measure_agent(policy: Path, n: int, time_n: int) -> dict:
+def screen_agent(policy: Path, time_n: int) -> dict:
+    """The screen: one swing timed (RL alone and CFFTG alternating) on ``time_n`` held-out and unseen
+    scenes each, and the RL swings' safe share and goal on those same scenes."""
+    gen = TrajectoryGenerator.load(policy)
+    cf = CFFTG(gen.config)
+    scenes = scene_sets(gen.config, time_n)
+    timing = {}
+    for name in ("held-out families", "unseen shapes"):
+        runs = alternate({"rl": WithFallback(gen, None), "cfftg": cf}, scenes[name][:time_n], warmup=10)
+        rl, c = np.median(runs["rl"][1]) * 1e3, np.median(runs["cfftg"][1]) * 1e3
+        rl_cpu, c_cpu = np.median(runs["rl"][2]) * 1e3, np.median(runs["cfftg"][2]) * 1e3
+        trajs = runs["rl"][0]
+        timing[name] = {"rl_ms": float(rl), "cfftg_ms": float(c), "ratio": float(rl / c),
+                        "cpu_ratio": float(rl_cpu / c_cpu), "raw_points": float(np.mean([len(t.raw) for t in trajs])),
+                        "rl_safe": float(np.mean([t.ok for t in trajs])),
+                        "rl_goal": float(np.mean([t.checks.reached_goal for t in trajs])),
+                        "cfftg_safe": float(np.mean([t.ok for t in runs["cfftg"][0]]))}
+    return {"timing": timing, "smoothing": gen.smoothing}
+
+
+def measure_agent(policy: Path, n: int) -> dict:
     gen = TrajectoryGenerator.load(policy)
     cfg = gen.config
     cf = CFFTG(cfg)
@@ -69,16 +89,7 @@ def measure_agent(policy: Path, n: int, time_n: int) -> dict:
             for k, v in enumerate((ok, lift, dur)):
                 pooled[g][k].append(v)
     per = {g: tuple(np.concatenate(v) for v in vals) for g, vals in pooled.items()}
-    timing = {}
-    for name in ("held-out families", "unseen shapes"):
-        runs = alternate({"rl": WithFallback(gen, None), "cfftg": cf}, scenes[name][:time_n], warmup=10)
-        rl, c = np.median(runs["rl"][1]) * 1e3, np.median(runs["cfftg"][1]) * 1e3
-        rl_cpu, c_cpu = np.median(runs["rl"][2]) * 1e3, np.median(runs["cfftg"][2]) * 1e3
-        timing[name] = {"rl_ms": float(rl), "cfftg_ms": float(c), "ratio": float(rl / c),
-                        "cpu_ratio": float(rl_cpu / c_cpu),
-                        "raw_points": float(np.mean([len(t.raw) for t in runs["rl"][0]]))}
-    return {"sets": sets, "pooled": _both_safe(per), "rl_longest_s": longest, "timing": timing,
-            "smoothing": gen.smoothing}
+    return {"sets": sets, "pooled": _both_safe(per), "rl_longest_s": longest}
 
 
 def verdicts(m: dict, success: float) -> dict:
@@ -100,7 +111,7 @@ def figure(rows: list[dict], path: Path, default_label: str) -> None:
     import matplotlib.pyplot as plt
 
     fig, axs = plt.subplots(1, 2, figsize=(11, 4.6))
-    for r in rows:
+    for r in (r for r in rows if r["screened"]):
         x = r["timing"]["held-out families"]["rl_ms"] / r["timing"]["held-out families"]["cfftg_ms"]
         ok = all(r["meets"].values())
         for ax, y in zip(axs, (r["pooled"]["rl"]["dur_p95_s"] / r["pooled"]["cfftg"]["dur_p95_s"],
@@ -131,27 +142,65 @@ def figure(rows: list[dict], path: Path, default_label: str) -> None:
     plt.close(fig)
 
 
+def config_summary(rows: list[dict]) -> list[dict]:
+    """Per configuration: its seeds, how many pass the screen and meet every target, and the medians
+    over seeds of the one-swing time and ratio (held-out families)."""
+    out = {}
+    for r in rows:
+        e = out.setdefault(r["config_id"], {"config_id": r["config_id"], "label": r["label"], "hidden": r["hidden"],
+                                            "layer_norm": r["layer_norm"], "step_size": r["step_size"], "seeds": 0,
+                                            "screened": 0, "meets_all": 0, "ms": [], "ratio": [], "success": []})
+        e["seeds"] += 1
+        e["screened"] += bool(r["screened"])
+        e["meets_all"] += bool(r.get("meets")) and all(r["meets"].values())
+        e["ms"].append(r["timing"]["held-out families"]["rl_ms"])
+        e["ratio"].append(r["timing"]["held-out families"]["ratio"])
+        e["success"].append(r["success"])
+    for e in out.values():
+        e["ms"], e["ratio"] = float(np.median(e["ms"])), float(np.median(e["ratio"]))
+        e["success_min"] = float(min(e.pop("success")))
+    return sorted(out.values(), key=lambda e: e["ratio"])
+
+
 def markdown(rows: list[dict], meta: dict) -> str:
     lines = ["# Model study: network x LayerNorm x step size, 3 seeds, measured agent by agent", "",
-             f"Sweep `{meta['sweep']}`; {meta['n']} scenes per set (held-out families, thesis five shifted, unseen "
-             f"shapes), RL alone beside CFFTG; one swing timed on {meta['time_n']} held-out and unseen scenes each, "
-             f"RL and CFFTG alternating. Load average at the start: {meta['load']}. Lift and timed swing pooled over "
-             "the three sets on the scenes both generators swing safely.", "",
-             "| config | seed | val. success | RL safe % (fam / five / shapes) | CFFTG safe % | lift cm RL / CFFTG | "
-             "timed median s RL / CFFTG | p95 s RL / CFFTG | longest RL s | one swing ms RL / CFFTG (fam) | ratio "
-             "fam / shapes | raw pts | meets |", "|---|---:|---:|---|---|---|---|---|---:|---|---|---:|---|"]
+             f"Sweep `{meta['sweep']}`. Screen: one swing timed on {meta['time_n']} held-out-family and "
+             f"{meta['time_n']} unseen-shape scenes, RL alone (`fallback=None`) and CFFTG alternating in one process, "
+             "and the RL swings' verdict on those scenes; an agent passes with validation success >= 0.99 and every "
+             f"screened RL swing safe. Agents that pass are measured on {meta['n']} scenes per set (held-out "
+             "families, thesis five shifted, unseen shapes) beside CFFTG: lift and timed swing (default [device] "
+             "limits) pooled over the three sets on the scenes both swing safely. Load average at the start: "
+             f"{meta['load']}.", "",
+             "## Per configuration (ratios: RL / CFFTG one swing, held-out families, median over seeds)", "",
+             "| config | seeds passing the screen | seeds meeting every target | min validation success | "
+             "one swing ms | ratio |", "|---|---:|---:|---:|---:|---:|"]
+    for e in config_summary(rows):
+        lines.append(f"| {e['label']} | {e['screened']} of {e['seeds']} | {e['meets_all']} of {e['seeds']} | "
+                     f"{e['success_min']:.3f} | {e['ms']:.2f} | {e['ratio']:.2f} |")
+    lines += ["", "## Per agent", "",
+              "| config | seed | val. success | screen: RL safe % fam / shapes | RL safe % (fam / five / shapes) | "
+              "CFFTG safe % | lift cm RL / CFFTG | timed median s RL / CFFTG | p95 s RL / CFFTG | longest RL s | "
+              "one swing ms RL / CFFTG (fam) | ratio fam / shapes | raw pts | meets |",
+              "|---|---:|---:|---|---|---|---|---|---|---:|---|---|---:|---|"]
     for r in rows:
-        s, p, t = r["sets"], r["pooled"], r["timing"]
+        t = r["timing"]
+        head = (f"| {r['label']} | {r['seed']} | {r['success']:.3f} | "
+                f"{100 * t['held-out families']['rl_safe']:.1f} / {100 * t['unseen shapes']['rl_safe']:.1f} | ")
+        tail = (f"{t['held-out families']['rl_ms']:.2f} / {t['held-out families']['cfftg_ms']:.2f} | "
+                f"{t['held-out families']['ratio']:.2f} / {t['unseen shapes']['ratio']:.2f} | "
+                f"{t['held-out families']['raw_points']:.1f} | ")
+        if not r["screened"]:
+            lines.append(head + "| | | | | | " + tail + "screen failed |")
+            continue
+        s, p = r["sets"], r["pooled"]
         safe = " / ".join(f"{100 * v['rl_safe']:.1f}" for v in s.values())
         csafe = " / ".join(f"{100 * v['cfftg_safe']:.1f}" for v in s.values())
         missed = [k for k, v in r["meets"].items() if not v]
         lines.append(
-            f"| {r['label']} | {r['seed']} | {r['success']:.3f} | {safe} | {csafe} | "
-            f"{p['rl']['lift_cm']:.2f} / {p['cfftg']['lift_cm']:.2f} | {p['rl']['dur_median_s']:.3f} / "
-            f"{p['cfftg']['dur_median_s']:.3f} | {p['rl']['dur_p95_s']:.3f} / {p['cfftg']['dur_p95_s']:.3f} | "
-            f"{r['rl_longest_s']:.2f} | {t['held-out families']['rl_ms']:.2f} / {t['held-out families']['cfftg_ms']:.2f} | "
-            f"{t['held-out families']['ratio']:.2f} / {t['unseen shapes']['ratio']:.2f} | "
-            f"{t['held-out families']['raw_points']:.1f} | {'all' if not missed else 'not ' + ', '.join(missed)} |")
+            head + f"{safe} | {csafe} | {p['rl']['lift_cm']:.2f} / {p['cfftg']['lift_cm']:.2f} | "
+            f"{p['rl']['dur_median_s']:.3f} / {p['cfftg']['dur_median_s']:.3f} | {p['rl']['dur_p95_s']:.3f} / "
+            f"{p['cfftg']['dur_p95_s']:.3f} | {r['rl_longest_s']:.2f} | " + tail +
+            f"{'all' if not missed else 'not ' + ', '.join(missed)} |")
     return "\n".join(lines)
 
 
@@ -176,20 +225,25 @@ def main():
             continue
         t0 = time.perf_counter()
         policy = d / e["dir"] / "policy.npz"
-        m = measure_agent(policy, a.n, a.time_n)
         gen_cfg = TrajectoryGenerator.load(policy).config
         row = {"config_id": e["config_id"], "seed": e["seed"], "label": e["label"], "success": e["success"],
                "held_out_success": e["held_out_success"], "hidden": list(gen_cfg.train.hidden),
                "layer_norm": bool(gen_cfg.train.layer_norm), "step_size": float(gen_cfg.env.step_size),
-               "sweep_wall_s": float(results[(e["config_id"], e["seed"])]["wall_s"]), **m}
-        row["meets"] = verdicts(m, e["success"])
+               "sweep_wall_s": float(results[(e["config_id"], e["seed"])]["wall_s"]),
+               **screen_agent(policy, a.time_n)}
+        # measured in full only where the screen passes: validation and RL alone safe on the screen's scenes
+        row["screened"] = e["success"] >= 0.99 and all(t["rl_safe"] == 1.0 and t["rl_goal"] == 1.0
+                                                      for t in row["timing"].values())
+        if row["screened"]:
+            row.update(measure_agent(policy, a.n))
+            row["meets"] = verdicts(row, e["success"])
         rows.append(row)
-        print(f"{e['label']} seed {e['seed']}: {json.dumps(row['meets'])} "
-              f"ratio {m['timing']['held-out families']['ratio']:.2f} ({time.perf_counter() - t0:.0f} s)", flush=True)
+        print(f"{e['label']} seed {e['seed']}: screened {row['screened']} {json.dumps(row.get('meets'))} "
+              f"ratio {row['timing']['held-out families']['ratio']:.2f} ({time.perf_counter() - t0:.0f} s)", flush=True)
     default_label = "train.hidden=[128,128], train.layer_norm=True, env.step_size=0.03"
     md = markdown(rows, meta)
     print(md)
-    res = {**meta, "rows": rows, "machine": machine_info()}
+    res = {**meta, "rows": rows, "configs": config_summary(rows), "machine": machine_info()}
     name = "model_study" + (f"_{a.tag}" if a.tag else "")
     paths = write_result(name, res, md, a.out)
     figure(rows, paths[1].with_suffix(".png"), default_label)
