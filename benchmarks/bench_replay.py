@@ -10,9 +10,10 @@ limits), then:
   flagged ok (the timed swing's checks) that come within env.min_clearance in MuJoCo (target 0);
   the largest difference between MuJoCo's and jaxexo's distance at the same pose, and at that pose a
   third, brute-force distance (jaxexo.sim.replay.brute_force_distance) says which is nearer;
-- driven replay of every swing flagged ok, at the default [device] limits and at half of them:
-  heel and toe tracking error (p95 and max over swings of each swing's max), contacts with the
-  obstacle, MuJoCo's smallest distance, saturation of a limit.
+- driven replay of every swing flagged ok, at the default [device] limits, and of every swing
+  flagged ok when timed for half the limits, driven at half the limits (a device with half the
+  drives): heel and toe tracking error (p95 and max over swings of each swing's max), contacts with
+  the obstacle, MuJoCo's smallest distance, saturation of a limit.
 
 Writes benchmarks/results/replay_<date>_<machine>.{json,md}.
 Run: python benchmarks/bench_replay.py RUN_DIR/policy.npz [--n 1000] [--rate 100]
@@ -32,7 +33,8 @@ from jaxexo.inference import TrajectoryGenerator
 from jaxexo.inference.scenarios import safety_scenarios
 from jaxexo.inference.swing_timing import DeviceLimits, time_swings
 from jaxexo.physics import geometry, scenarios
-from jaxexo.sim.replay import Legs, brute_force_distance, driven_replay, kinematic_replay
+from jaxexo.sim.replay import (Legs, brute_force_distance, driven_replay, kinematic_replay, summarize_driven,
+                               summarize_kinematic)
 
 
 def scene_sets(config, n: int) -> dict:
@@ -56,6 +58,8 @@ def replay_set(sc, rl, cfftg, config, rate: float, driven: bool) -> dict:
         t0 = time.perf_counter()
         timed = time_swings(batch, config, rate=rate)
         t_timing = time.perf_counter() - t0
+        # A device with half the drives: its swings timed for its own limits, then driven at them.
+        timed_half = time_swings(batch, config, rate=rate, limits=half) if driven else [None] * len(timed)
         kin, drv, drv_half, build_s = [], [], [], []
         disagree = []
         for i, ts in enumerate(timed):
@@ -80,23 +84,13 @@ def replay_set(sc, rl, cfftg, config, rate: float, driven: bool) -> dict:
                                                                   ts.scene.outline)
             if driven and ts.ok:
                 drv.append(driven_replay(ts, config, legs=legs, limits=default))
-                drv_half.append(driven_replay(ts, config, legs=legs, limits=half))
+            if driven and timed_half[i].ok:
+                drv_half.append(driven_replay(timed_half[i], config, legs=legs, limits=half))
         ok = np.array([t.ok for t in timed])
         r = {"n": len(timed), "flagged_ok": int(ok.sum()), "timing_seconds": t_timing,
              "model_build_ms_median": 1e3 * float(np.median(build_s)) if build_s else None,
-             "kinematic": {
-                 "flagged_ok_within_margin": int(sum(k["flagged_ok_but_within_margin"] for k in kin)),
-                 "violations": [k for k in kin if k["flagged_ok_but_within_margin"]],
-                 "min_mujoco_distance_of_ok_m": float(min((k["mujoco_min_distance_m"] for k, o in zip(kin, ok) if o),
-                                                          default=np.nan)),
-                 "min_mujoco_minus_guaranteed_of_ok_m": float(min(
-                     (k["mujoco_min_distance_m"] - k["jaxexo_guaranteed_clearance_m"] for k, o in zip(kin, ok) if o),
-                     default=np.nan)),
-                 "max_disagreement_m": float(max(k["max_disagreement_m"] for k in kin)),
-                 "max_heel_offset_m": float(max(k["max_heel_offset_m"] for k in kin)),
-                 "seconds_median": float(np.median([k["seconds"] for k in kin])),
-                 "poses_median": float(np.median([k["poses"] for k in kin])),
-             }}
+             "kinematic": {**summarize_kinematic(kin),
+                           "violations": [k for k in kin if k["flagged_ok_but_within_margin"]]}}
         if disagree:
             w = max(disagree, key=lambda x: abs(x["jaxexo"] - x["mujoco"]))
             r["kinematic"]["worst_disagreement"] = {
@@ -104,21 +98,10 @@ def replay_set(sc, rl, cfftg, config, rate: float, driven: bool) -> dict:
             r["kinematic"]["brute_nearer_jaxexo_share"] = float(np.mean(
                 [abs(x["jaxexo"] - x["brute"]) <= abs(x["mujoco"] - x["brute"]) for x in disagree]))
         for name, rows in (("driven", drv), ("driven_half_limits", drv_half)):
-            if not rows:
-                continue
-            he = np.array([d["heel_error_max_m"] for d in rows])
-            te = np.array([d["toe_error_max_m"] for d in rows])
-            md = np.array([d["mujoco_min_distance_m"] for d in rows])
-            r[name] = {"n": len(rows), "heel_error_p95_m": float(np.percentile(he, 95)), "heel_error_max_m": float(he.max()),
-                       "toe_error_p95_m": float(np.percentile(te, 95)), "toe_error_max_m": float(te.max()),
-                       "contacts": int(sum(d["contact"] for d in rows)),
-                       "within_margin": int(np.sum(md < rows[0]["margin_m"])),
-                       "min_distance_m": float(md.min()), "median_min_distance_m": float(np.median(md)),
-                       "saturated": int(sum(d["saturated"] for d in rows)),
-                       "stance_heel_slip_max_m": float(max(d["stance_heel_slip_max_m"] for d in rows)),
-                       "seconds_median": float(np.median([d["seconds"] for d in rows]))}
+            if rows:
+                r[name] = summarize_driven(rows)
         out[gname] = r
-        print(gname, {k: v for k, v in r.items() if k != "kinematic"}, {k: v for k, v in r["kinematic"].items()
+        print(f"[{time.strftime('%H:%M:%S')}]", gname, {k: v for k, v in r.items() if k != "kinematic"}, {k: v for k, v in r["kinematic"].items()
                                                                           if k != "violations"}, flush=True)
     return out
 
@@ -176,6 +159,8 @@ def main():
         "replay ms (median) |",
         "|---|---|---:|---:|---:|---:|---:|---:|---|---:|", *rows_k, "",
         "## Driven replay of the swings flagged ok (position actuators, setpoints within the [device] limits)", "",
+        "Default: swings timed for the [device] limits, driven at them; half: swings timed for half the limits, "
+        "driven at half (a device with half the drives).", "",
         "| scenes | generator | limits | n | heel error p95 / max, mm | toe error p95 / max, mm | contacts | "
         "within margin | min distance, mm | saturated | replay ms (median) |",
         "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|", *rows_d, ""])

@@ -363,7 +363,7 @@ def cmd_eval(args) -> int:
         raise ValueError(f"--batch: must be >= 1, got {args.batch}")
     check_report_folder(args.out, args.policy, force=args.force)
     report = run_eval(args.policy, args.out, against=args.against, scenarios=args.scenarios, n=args.n,
-                      figures=not args.no_figures, batch_size=args.batch, force=args.force)
+                      figures=not args.no_figures, batch_size=args.batch, force=args.force, replay=args.replay)
     for name, r in report.items():
         print(f"{name}: accuracy {r['accuracy']:.3f}, success {r['success']:.3f}, median {r['time_ms_median']:.3f} ms "
               f"per trajectory, {r['batch_1000_ms']:.1f} ms per batch of 1000")
@@ -508,6 +508,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="scenarios per timed generate_batch call (reported scaled to a batch of 1000)")
     e.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     e.add_argument("--force", action="store_true", help="replace an earlier report in --out")
+    e.add_argument("--replay", action="store_true", help="also replay every swing in MuJoCo, kinematically and "
+                                                         "driven at the [device] limits (needs the sim extra)")
     e.add_argument("--out", required=True, help="report folder")
     e.set_defaults(func=cmd_eval)
     r = sub.add_parser("reproduce", help="train the seven thesis configs and tabulate them beside the thesis's "

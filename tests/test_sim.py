@@ -198,3 +198,19 @@ def test_cli_mjcf_writes_a_model_mujoco_loads(tmp_path, config):
     assert main(["mjcf", "--obstacle", "triangle", "--pivot", "between", "--out", str(out)]) == 0
     m = mujoco.MjModel.from_xml_path(str(out))
     assert m.nkey == 1 and m.nu == 4
+
+
+def test_eval_replay_figures_count_the_swings(config):
+    from jaxexo.baselines import CFFTG
+    from jaxexo.evaluation.compare import mujoco_lines
+    from jaxexo.inference.swing_timing import time_swings
+    from jaxexo.sim.replay import replay_trajectories
+
+    gen = CFFTG(config)
+    trajs = [gen.generate(Obstacle.named(k), pivot="obstacle") for k in ("base1", "triangle")]
+    r = replay_trajectories(trajs, config)
+    ok = sum(t.ok for t in time_swings(trajs, config))
+    assert r["kinematic"]["n"] == 2 and r["kinematic"]["flagged_ok"] == ok == r["driven"]["n"]
+    assert r["kinematic"]["flagged_ok_within_margin"] == 0 and r["driven"]["contacts"] == 0
+    lines = mujoco_lines({"cfftg": {"mujoco": r}}, 100.0)
+    assert lines[-1].startswith(f"| cfftg | 2 | {ok} | 0 |")

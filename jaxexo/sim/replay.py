@@ -266,6 +266,63 @@ def driven_replay(timed, config, limits=None, legs: Legs | None = None, settle: 
     }
 
 
+def summarize_kinematic(rows: list[dict]) -> dict:
+    """Figures of many kinematic replays (``kinematic_replay``'s dicts): the swings jaxexo flags ok
+    that come within the margin in MuJoCo (the target is 0), MuJoCo's smallest distance among the ok
+    swings and its smallest excess over jaxexo's guaranteed clearance, the largest disagreement
+    between the two geometries at the samples, and the replay's median cost."""
+    ok = [r for r in rows if r["flagged_ok"]]
+    return {
+        "n": len(rows), "flagged_ok": len(ok),
+        "flagged_ok_within_margin": int(sum(r["flagged_ok_but_within_margin"] for r in rows)),
+        "min_mujoco_distance_of_ok_m": min((r["mujoco_min_distance_m"] for r in ok), default=None),
+        "min_mujoco_minus_guaranteed_of_ok_m": min(
+            (r["mujoco_min_distance_m"] - r["jaxexo_guaranteed_clearance_m"] for r in ok), default=None),
+        "max_disagreement_m": max((r["max_disagreement_m"] for r in rows), default=None),
+        "max_heel_offset_m": max((r["max_heel_offset_m"] for r in rows), default=None),
+        "seconds_median": float(np.median([r["seconds"] for r in rows])) if rows else None,
+        "poses_median": float(np.median([r["poses"] for r in rows])) if rows else None,
+    }
+
+
+def summarize_driven(rows: list[dict]) -> dict:
+    """Figures of many driven replays (``driven_replay``'s dicts): heel and toe tracking error (p95
+    and max over the swings of each swing's largest), contacts, swings within the margin, MuJoCo's
+    smallest distance, saturated swings, the stance heel's largest slip and the median cost."""
+    if not rows:
+        return {"n": 0}
+    he = np.array([d["heel_error_max_m"] for d in rows])
+    te = np.array([d["toe_error_max_m"] for d in rows])
+    md = np.array([d["mujoco_min_distance_m"] for d in rows])
+    return {"n": len(rows), "heel_error_p95_m": float(np.percentile(he, 95)), "heel_error_max_m": float(he.max()),
+            "toe_error_p95_m": float(np.percentile(te, 95)), "toe_error_max_m": float(te.max()),
+            "contacts": int(sum(d["contact"] for d in rows)),
+            "within_margin": int(np.sum(md < rows[0]["margin_m"])),
+            "min_distance_m": float(md.min()), "median_min_distance_m": float(np.median(md)),
+            "saturated": int(sum(d["saturated"] for d in rows)),
+            "stance_heel_slip_max_m": float(max(d["stance_heel_slip_max_m"] for d in rows)),
+            "seconds_median": float(np.median([d["seconds"] for d in rows]))}
+
+
+def replay_trajectories(trajs, config, rate: float | None = None, driven: bool = True) -> dict:
+    """Trajectories (one generator's) timed for the device at ``rate`` and replayed in MuJoCo:
+    ``summarize_kinematic`` of all of them and ``summarize_driven`` of those flagged ok, at the
+    config's [device] limits (``jaxexo eval --replay``)."""
+    from jaxexo.inference.swing_timing import time_swings
+
+    require_mujoco()
+    kin, drv = [], []
+    for ts in time_swings(list(trajs), config, rate=rate):
+        legs = Legs(config, ts.scene)
+        kin.append(kinematic_replay(ts, config, legs=legs))
+        if driven and ts.ok:
+            drv.append(driven_replay(ts, config, legs=legs))
+    out = {"kinematic": summarize_kinematic(kin)}
+    if driven:
+        out["driven"] = summarize_driven(drv)
+    return out
+
+
 def brute_force_distance(heel, foot_length: float, outline, iterations: int = 200) -> float:
     """Distance (m) from the flat foot [heel, heel + (foot_length, 0)] to the outline's edges (the
     boundary, unsigned), by ternary search of the foot position on each edge (module docstring):
