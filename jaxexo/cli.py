@@ -397,10 +397,24 @@ def cmd_bench(args) -> int:
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
+def _add_scene_args(g) -> None:
+    """The scene's options (obstacle, pivot, start, step length) of generate, mjcf and replay."""
     from jaxexo.physics.dynamics import DEFAULT_PIVOT, DEFAULT_START_Y, DEFAULT_STEP_LENGTH
     from jaxexo.physics.geometry import THESIS_OBSTACLES
 
+    g.add_argument("--obstacle", required=True, choices=(*THESIS_OBSTACLES, *GENERAL_SHAPES))
+    g.add_argument("--width", type=float, help="obstacle width, m")
+    g.add_argument("--height", type=float, help="obstacle height, m")
+    g.add_argument("--center-y", type=float, help="obstacle centre, m ahead of the start (default 0.45)")
+    pv = g.add_mutually_exclusive_group()
+    pv.add_argument("--pivot", choices=("agent", "obstacle", "between"),
+                    help=f"stance-foot condition (thesis 3.1; default: {DEFAULT_PIVOT})")
+    pv.add_argument("--pivot-y", type=float, help="stance heel y, m")
+    g.add_argument("--start-y", type=float, default=DEFAULT_START_Y, help="swing heel start y, m")
+    g.add_argument("--step-length", type=float, default=DEFAULT_STEP_LENGTH, help="goal = start + this, m")
+
+
+def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="jaxexo", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
     b = sub.add_parser("bench-env", help="environment steps per second (random actions, full reward)")
@@ -424,16 +438,7 @@ def build_parser() -> argparse.ArgumentParser:
                                     "it supplies the kinematics, default: configs/default.toml)")
     g.add_argument("--method", choices=("rl", "cfftg"), default="rl",
                    help="rl: the trained policy; cfftg: the polynomial baseline (jaxexo.inference.cfftg)")
-    g.add_argument("--obstacle", required=True, choices=(*THESIS_OBSTACLES, *GENERAL_SHAPES))
-    g.add_argument("--width", type=float, help="obstacle width, m")
-    g.add_argument("--height", type=float, help="obstacle height, m")
-    g.add_argument("--center-y", type=float, help="obstacle centre, m ahead of the start (default 0.45)")
-    pv = g.add_mutually_exclusive_group()
-    pv.add_argument("--pivot", choices=("agent", "obstacle", "between"),
-                    help=f"stance-foot condition (thesis 3.1; default: {DEFAULT_PIVOT})")
-    pv.add_argument("--pivot-y", type=float, help="stance heel y, m")
-    g.add_argument("--start-y", type=float, default=DEFAULT_START_Y, help="swing heel start y, m")
-    g.add_argument("--step-length", type=float, default=DEFAULT_STEP_LENGTH, help="goal = start + this, m")
+    _add_scene_args(g)
     g.add_argument("--points", type=int, default=100, help="samples of the smoothed path")
     g.add_argument("--fallback", choices=("cfftg", "none"), default="cfftg",
                    help="when the RL swing is not safe, return CFFTG's plan (cfftg) or the RL swing alone (none)")
@@ -460,16 +465,7 @@ def build_parser() -> argparse.ArgumentParser:
         x.add_argument("--policy", required=name == "replay", help="policy.npz (its config: legs, limits, margin)")
         if name == "mjcf":
             x.add_argument("--config", help="TOML config when no --policy (default: the packaged default)")
-        x.add_argument("--obstacle", required=True, choices=(*THESIS_OBSTACLES, *GENERAL_SHAPES))
-        x.add_argument("--width", type=float, help="obstacle width, m")
-        x.add_argument("--height", type=float, help="obstacle height, m")
-        x.add_argument("--center-y", type=float, help="obstacle centre, m ahead of the start (default 0.45)")
-        xp = x.add_mutually_exclusive_group()
-        xp.add_argument("--pivot", choices=("agent", "obstacle", "between"),
-                        help=f"stance-foot condition (thesis 3.1; default: {DEFAULT_PIVOT})")
-        xp.add_argument("--pivot-y", type=float, help="stance heel y, m")
-        x.add_argument("--start-y", type=float, default=DEFAULT_START_Y, help="swing heel start y, m")
-        x.add_argument("--step-length", type=float, default=DEFAULT_STEP_LENGTH, help="goal = start + this, m")
+        _add_scene_args(x)
         if name == "mjcf":
             x.add_argument("--out", required=True, help="MJCF file to write (e.g. legs.xml)")
             x.set_defaults(func=cmd_mjcf)

@@ -25,8 +25,10 @@ MuJoCo's smallest foot-obstacle distance over every physics step, contacts of th
 the obstacle, and whether the setpoint generator had to clip its velocity or acceleration to a limit
 (saturation: the swing asks for more than the drive gives).
 
-A walk (a course of swings) is replayed as its swings one after another with the legs' roles
-swapped at each step; that needs the course feature and is not built yet (``replay_walk`` raises).
+Not built yet: a walk (a course of swings). The hook: the model already has two identical legs,
+and jaxexo.sim.mjcf's SWING_LEG / STANCE_LEG name which one swings; a walk's replay would run its
+swings one after another with those roles swapped at each step (the stance heel's equality moved to
+the other leg), continuing from the previous swing's final state. It waits for the course feature.
 
 ``brute_force_distance`` is the third, independent look: the distance from the flat foot to each
 outline edge minimised over the foot by ternary search (the distance from a point moving along a
@@ -348,8 +350,3 @@ def brute_force_distance(heel, foot_length: float, outline, iterations: int = 20
         hi = np.where(left, m2, hi)
         lo = np.where(left, lo, m1)
     return float(min(dist(lo).min(), dist(np.zeros(len(a))).min(), dist(np.ones(len(a))).min()))
-
-
-def replay_walk(*_args, **_kwargs):
-    """A whole course replayed swing by swing: waits for the course feature (see the module docstring)."""
-    raise NotImplementedError("replaying a walk needs a course of swings, which jaxexo does not have yet")
