@@ -28,11 +28,9 @@ config has no masses and the replay's figures depend on them only through the dr
 from __future__ import annotations
 
 import math
-from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from jaxexo.physics.geometry import GeometryError
 from jaxexo.sim.pieces import convex_pieces
 
 SWING_LEG, STANCE_LEG = "right", "left"
