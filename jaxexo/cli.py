@@ -239,6 +239,90 @@ def _timed_swing(args, traj, config):
     return time_swing(traj, config, rate=args.rate)
 
 
+def _scene_args(args, config):
+    """The scene of --obstacle/--width/--height/--center-y, --pivot/--pivot-y, --start-y, --step-length."""
+    from jaxexo.physics.dynamics import DEFAULT_PIVOT, make_scene
+
+    pivot = args.pivot_y if args.pivot_y is not None else (args.pivot or DEFAULT_PIVOT)
+    return make_scene(obstacle_from_args(args), pivot, args.start_y, args.step_length,
+                      foot_length=config.kinematics.foot_length)
+
+
+def cmd_mjcf(args) -> int:
+    _check_output_file("--out", args.out)
+    _check_outputs([("--policy", args.policy)], [("--out", args.out)])
+    if args.policy:
+        from jaxexo.inference.policy_check import load_checked
+
+        config = load_checked(args.policy)[1]
+    else:
+        config = _load(args.config)[0]
+    from jaxexo.sim.mjcf import scene_mjcf
+    from jaxexo.storage.atomic import atomic_write
+
+    scene = _scene_args(args, config)
+    atomic_write(args.out, scene_mjcf(config, scene))
+    print(f"wrote {args.out} (open it with: python -m mujoco.viewer --mjcf={args.out}; keyframe 'start')")
+    return 0
+
+
+def cmd_replay(args) -> int:
+    outputs = [("--json", args.json)]
+    for option, value in outputs:
+        _check_output_file(option, value)
+    _check_outputs([("--policy", args.policy)], outputs)
+    from jaxexo.config import MAX_CONTROL_RATE
+
+    if args.rate is not None and not (math.isfinite(args.rate) and 0 < args.rate <= MAX_CONTROL_RATE):
+        raise ValueError(f"--rate: control rate must be > 0 and <= {MAX_CONTROL_RATE:g} Hz, got {args.rate:g}")
+    from jaxexo.sim.replay import require_mujoco
+
+    require_mujoco()        # a clear error before any work
+    from jaxexo.baselines import CFFTG
+    from jaxexo.inference import TrajectoryGenerator
+    from jaxexo.inference.swing_timing import DeviceLimits, time_swing
+    from jaxexo.sim.replay import Legs, driven_replay, kinematic_replay
+
+    rl = TrajectoryGenerator.load(args.policy)
+    config = rl.config
+    scene = _scene_args(args, config)
+    common = dict(pivot=scene.pivot_y if args.pivot_y is not None else (args.pivot or None), start_y=args.start_y,
+                  step_length=args.step_length)
+    gens = {"rl": lambda: rl.generate(scene.obstacle, fallback=None, **common),
+            "cfftg": lambda: CFFTG(config).generate(scene.obstacle, **common)}
+    methods = ("rl", "cfftg") if args.method == "both" else (args.method,)
+    report, ok = {}, True
+    for name in methods:
+        timed = time_swing(gens[name](), config, rate=args.rate)
+        legs = Legs(config, timed.scene)
+        r = {"flagged_ok": bool(timed.ok), "duration_s": timed.duration, "rate_hz": timed.rate,
+             "kinematic": kinematic_replay(timed, config, legs=legs)}
+        k = r["kinematic"]
+        print(f"{name}: {timed.duration:.2f} s swing at {timed.rate:g} Hz, jaxexo {'ok' if timed.ok else 'FAILED'} "
+              f"(guaranteed clearance {100 * timed.checks.min_clearance:.2f} cm); MuJoCo kinematic replay: smallest "
+              f"distance {100 * k['mujoco_min_distance_m']:.2f} cm over {k['poses']} poses, largest difference from "
+              f"jaxexo at the samples {1e6 * k['max_disagreement_m']:.3f} um, {1e3 * k['seconds']:.1f} ms")
+        ok &= not k["flagged_ok_but_within_margin"]
+        if args.driven:
+            for label, scale in (("driven", 1.0), ("driven_half_limits", 0.5))[: 2 if args.half_limits else 1]:
+                lim = DeviceLimits.from_config(config).scaled(scale, scale)
+                d = r[label] = driven_replay(timed, config, limits=lim, legs=legs)
+                print(f"  {label.replace('_', ' ')}: heel error max {100 * d['heel_error_max_m']:.2f} cm, toe "
+                      f"{100 * d['toe_error_max_m']:.2f} cm; smallest distance {100 * d['mujoco_min_distance_m']:.2f} "
+                      f"cm; {'CONTACT' if d['contact'] else 'no contact'}; "
+                      f"{'a limit saturates' if d['saturated'] else 'no limit saturates'}; {1e3 * d['seconds']:.0f} ms")
+                ok &= not (timed.ok and d["contact"]) or scale != 1.0
+        report[name] = r
+    if args.json:
+        from jaxexo.inference.export import write_json
+
+        write_json({"units": {"length": "m", "angle": "rad", "time": "s"}, "scene": {
+            "obstacle": scene.obstacle.kind, "pivot_y": scene.pivot_y, "start_y": scene.start_y,
+            "goal_y": scene.goal_y}, "replays": report}, args.json)
+        print(f"wrote {args.json}")
+    return 0 if ok else 1
+
+
 def cmd_sweep(args) -> int:
     from jaxexo.sweep.spec import load_sweep, parse_bytes
 
@@ -279,7 +363,7 @@ def cmd_eval(args) -> int:
         raise ValueError(f"--batch: must be >= 1, got {args.batch}")
     check_report_folder(args.out, args.policy, force=args.force)
     report = run_eval(args.policy, args.out, against=args.against, scenarios=args.scenarios, n=args.n,
-                      figures=not args.no_figures, batch_size=args.batch, force=args.force)
+                      figures=not args.no_figures, batch_size=args.batch, force=args.force, replay=args.replay)
     for name, r in report.items():
         print(f"{name}: accuracy {r['accuracy']:.3f}, success {r['success']:.3f}, median {r['time_ms_median']:.3f} ms "
               f"per trajectory, {r['batch_1000_ms']:.1f} ms per batch of 1000")
@@ -313,10 +397,24 @@ def cmd_bench(args) -> int:
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
+def _add_scene_args(g) -> None:
+    """The scene's options (obstacle, pivot, start, step length) of generate, mjcf and replay."""
     from jaxexo.physics.dynamics import DEFAULT_PIVOT, DEFAULT_START_Y, DEFAULT_STEP_LENGTH
     from jaxexo.physics.geometry import THESIS_OBSTACLES
 
+    g.add_argument("--obstacle", required=True, choices=(*THESIS_OBSTACLES, *GENERAL_SHAPES))
+    g.add_argument("--width", type=float, help="obstacle width, m")
+    g.add_argument("--height", type=float, help="obstacle height, m")
+    g.add_argument("--center-y", type=float, help="obstacle centre, m ahead of the start (default 0.45)")
+    pv = g.add_mutually_exclusive_group()
+    pv.add_argument("--pivot", choices=("agent", "obstacle", "between"),
+                    help=f"stance-foot condition (thesis 3.1; default: {DEFAULT_PIVOT})")
+    pv.add_argument("--pivot-y", type=float, help="stance heel y, m")
+    g.add_argument("--start-y", type=float, default=DEFAULT_START_Y, help="swing heel start y, m")
+    g.add_argument("--step-length", type=float, default=DEFAULT_STEP_LENGTH, help="goal = start + this, m")
+
+
+def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="jaxexo", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
     b = sub.add_parser("bench-env", help="environment steps per second (random actions, full reward)")
@@ -340,16 +438,7 @@ def build_parser() -> argparse.ArgumentParser:
                                     "it supplies the kinematics, default: configs/default.toml)")
     g.add_argument("--method", choices=("rl", "cfftg"), default="rl",
                    help="rl: the trained policy; cfftg: the polynomial baseline (jaxexo.inference.cfftg)")
-    g.add_argument("--obstacle", required=True, choices=(*THESIS_OBSTACLES, *GENERAL_SHAPES))
-    g.add_argument("--width", type=float, help="obstacle width, m")
-    g.add_argument("--height", type=float, help="obstacle height, m")
-    g.add_argument("--center-y", type=float, help="obstacle centre, m ahead of the start (default 0.45)")
-    pv = g.add_mutually_exclusive_group()
-    pv.add_argument("--pivot", choices=("agent", "obstacle", "between"),
-                    help=f"stance-foot condition (thesis 3.1; default: {DEFAULT_PIVOT})")
-    pv.add_argument("--pivot-y", type=float, help="stance heel y, m")
-    g.add_argument("--start-y", type=float, default=DEFAULT_START_Y, help="swing heel start y, m")
-    g.add_argument("--step-length", type=float, default=DEFAULT_STEP_LENGTH, help="goal = start + this, m")
+    _add_scene_args(g)
     g.add_argument("--points", type=int, default=100, help="samples of the smoothed path")
     g.add_argument("--fallback", choices=("cfftg", "none"), default="cfftg",
                    help="when the RL swing is not safe, return CFFTG's plan (cfftg) or the RL swing alone (none)")
@@ -369,6 +458,26 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--json", help="also write JSON (scene, checks, raw points, samples)")
     g.add_argument("--plot", help="also draw the legs, the foot path and the joint angles (PNG)")
     g.set_defaults(func=cmd_generate)
+    for name, helptext in (("mjcf", "the legs and the obstacle as a MuJoCo model (MJCF), for MuJoCo's viewer"),
+                           ("replay", "a swing replayed in MuJoCo: its distance to the obstacle, and driven at the "
+                                      "[device] limits with --driven (needs the sim extra)")):
+        x = sub.add_parser(name, help=helptext)
+        x.add_argument("--policy", required=name == "replay", help="policy.npz (its config: legs, limits, margin)")
+        if name == "mjcf":
+            x.add_argument("--config", help="TOML config when no --policy (default: the packaged default)")
+        _add_scene_args(x)
+        if name == "mjcf":
+            x.add_argument("--out", required=True, help="MJCF file to write (e.g. legs.xml)")
+            x.set_defaults(func=cmd_mjcf)
+        else:
+            x.add_argument("--method", choices=("rl", "cfftg", "both"), default="rl",
+                           help="the RL swing alone (no fallback), CFFTG's, or both")
+            x.add_argument("--rate", type=float, help="control rate, Hz (default: the config's control_rate)")
+            x.add_argument("--driven", action="store_true", help="also drive the legs with position actuators "
+                                                                 "within the [device] limits")
+            x.add_argument("--half-limits", action="store_true", help="with --driven: also at half the limits")
+            x.add_argument("--json", help="write the figures (SI units) to this JSON file")
+            x.set_defaults(func=cmd_replay)
     s = sub.add_parser("sweep", help="train a grid of configurations x seeds as compiled, vmapped programs")
     s.add_argument("sweep", help="sweep file (a config with a [sweep] table; see configs/sweeps/)")
     s.add_argument("--out", required=True, help="sweep directory (results.csv, summary.md, figures)")
@@ -397,6 +506,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="scenarios per timed generate_batch call (reported scaled to a batch of 1000)")
     e.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     e.add_argument("--force", action="store_true", help="replace an earlier report in --out")
+    e.add_argument("--replay", action="store_true", help="also replay every swing in MuJoCo, kinematically and "
+                                                         "driven at the [device] limits (needs the sim extra)")
     e.add_argument("--out", required=True, help="report folder")
     e.set_defaults(func=cmd_eval)
     r = sub.add_parser("reproduce", help="train the seven thesis configs and tabulate them beside the thesis's "

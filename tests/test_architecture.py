@@ -23,7 +23,7 @@ LAYERS = (
     ("jaxexo.storage",),
     ("jaxexo.env",),
     ("jaxexo.inference", "jaxexo.train"),
-    ("jaxexo.baselines",),
+    ("jaxexo.baselines", "jaxexo.sim"),
     ("jaxexo.sweep", "jaxexo.evaluation"),
     ("jaxexo.benchmarks",),
     ("jaxexo.cli", "jaxexo"),

@@ -134,11 +134,16 @@ def evaluate_generators(generators: dict, scenarios: list[dict], batch_size: int
 
 def run_eval(policy: str | Path, out: str | Path, against: str | None = "cfftg", scenarios: str = "test",
              n: int = 1000, seed: int = 12345, figures: bool = True, batch_size: int = BATCH,
-             force: bool = False) -> dict:
+             force: bool = False, replay: bool = False) -> dict:
     """``jaxexo eval``: the policy (and CFFTG) on the chosen scenarios; writes the report.
     ``batch_size``: scenarios per timed ``generate_batch`` call (the figure is scaled to 1000);
-    ``force``: replace an earlier report in ``out`` (else refused, as is a report over its policy)."""
+    ``force``: replace an earlier report in ``out`` (else refused, as is a report over its policy);
+    ``replay``: also replay every swing in MuJoCo (jaxexo.sim.replay; needs the sim extra)."""
     check_report_folder(out, policy, force)
+    if replay:
+        from jaxexo.sim.replay import require_mujoco
+
+        require_mujoco()       # refused before any work
     from jaxexo.baselines import CFFTG
     from jaxexo.evaluation.machine import machine_info
     from jaxexo.inference import TrajectoryGenerator
@@ -169,7 +174,33 @@ def run_eval(policy: str | Path, out: str | Path, against: str | None = "cfftg",
             entry["by_family"] = {fam: gens[name] for fam, gens in table.items()}
         context[0] = context[0].replace(f"seed {seed}", f"fixed seed {UNSEEN_SEED}")
         context += ["", *markdown_lines(table)]
+    if replay:
+        from jaxexo.sim.replay import replay_trajectories
+
+        for name, entry in report.items():
+            entry["mujoco"] = replay_trajectories(trajs[name], gens[name].config)
+        context += ["", *mujoco_lines(report, rl.config.device.control_rate)]
     return write_report(out, report, trajs, sc, "jaxexo eval: RL generator" + (" vs CFFTG" if against else ""),
                         context, figures)
 
 
+
+
+def mujoco_lines(report: dict, rate: float) -> list[str]:
+    """The report's MuJoCo figures (``replay``), one row per generator, as Markdown."""
+    mm = lambda x: "-" if x is None else f"{1000 * x:.1f}"  # noqa: E731
+    rows = []
+    for name, entry in report.items():
+        k, d = entry["mujoco"]["kinematic"], entry["mujoco"].get("driven", {"n": 0})
+        drv = (f"{mm(d['heel_error_p95_m'])} / {mm(d['heel_error_max_m'])} | {mm(d['toe_error_p95_m'])} / "
+               f"{mm(d['toe_error_max_m'])} | {d['contacts']} | {mm(d['min_distance_m'])} | {d['saturated']}"
+               if d["n"] else "- | - | - | - | -")
+        rows.append(f"| {name} | {k['n']} | {k['flagged_ok']} | {k['flagged_ok_within_margin']} | "
+                    f"{mm(k['min_mujoco_distance_of_ok_m'])} | {1e6 * (k['max_disagreement_m'] or 0.0):.3f} | {drv} |")
+    return [f"Replayed in MuJoCo (jaxexo.sim.replay): every swing timed for the [device] limits at {rate:g} Hz; "
+            "kinematic: MuJoCo's own distance at every sample and 3 poses between; driven (swings flagged ok): "
+            "position actuators, setpoints within the limits.", "",
+            "| generator | n | flagged ok | ok, within margin in MuJoCo | min MuJoCo distance of ok, mm | "
+            "max disagreement, um | heel error p95 / max, mm | toe error p95 / max, mm | contacts | "
+            "min distance driven, mm | saturated |",
+            "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|", *rows]

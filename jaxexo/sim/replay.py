@@ -1,0 +1,355 @@
+"""A timed swing replayed in MuJoCo: kinematically (MuJoCo's own distance query at every pose) and
+driven (position actuators within the device's velocity and acceleration limits, the stance heel
+held on the ground). Needs the ``sim`` extra (``pip install -e ".[sim]"``: mujoco >= 4.0).
+
+Kinematic replay (``kinematic_replay``): the model's joints are set to the swing's joint angles at
+every control sample and at ``substeps`` poses between two samples, the angles interpolated
+linearly (what a drive fed setpoints at the control rate follows to first order); the pelvis is
+placed where the stance leg's angles put it with the stance heel on its pivot, so at a sample the
+feet are exactly jaxexo's (the hip of eq 2.42 keeps the stance leg straight on the pivot). At every
+pose, MuJoCo's ``mj_geomDistance`` between the swing foot (a capsule around the heel-toe segment;
+its radius added back) and each convex obstacle piece gives the foot-obstacle distance, with no
+jaxexo geometry involved. The figures: the largest difference between MuJoCo's distance and
+jaxexo's (jaxexo.physics.geometry.foot_clearance) at the samples, where both measure the same
+pose; and MuJoCo's smallest distance over all poses, which a swing that jaxexo flags ok must keep
+at env.min_clearance or more.
+
+Driven replay (``driven_replay``): the physics runs at ``physics_per_sample`` steps per control
+period; the swing's joint angles, interpolated between the samples, are the reference of a setpoint
+generator that moves each actuator's command towards it no faster than the device's joint velocity
+and with no more than its acceleration (``DeviceLimits``: the [device] section, or scaled); the
+position actuators (kp SERVO_KP, critically damped) pull the joints to the command against the
+legs' inertia and gravity, and the stance heel is held on its pivot by an equality constraint. The
+figures: heel and toe tracking error at the control samples (simulated foot against the swing's),
+MuJoCo's smallest foot-obstacle distance over every physics step, contacts of the swing foot with
+the obstacle, and whether the setpoint generator had to clip its velocity or acceleration to a limit
+(saturation: the swing asks for more than the drive gives).
+
+Not built yet: a walk (a course of swings). The hook: the model already has two identical legs,
+and jaxexo.sim.mjcf's SWING_LEG / STANCE_LEG name which one swings; a walk's replay would run its
+swings one after another with those roles swapped at each step (the stance heel's equality moved to
+the other leg), continuing from the previous swing's final state. It waits for the course feature.
+
+``brute_force_distance`` is the third, independent look: the distance from the flat foot to each
+outline edge minimised over the foot by ternary search (the distance from a point moving along a
+line to a segment is convex in the point's position), used where the other two disagree.
+Units: m, rad, s.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from jaxexo.physics import geometry
+from jaxexo.sim.mjcf import (ACTUATED, DISTMAX, FOOT_RADIUS, LEGS, QPOS_NAMES, STANCE_LEG, SWING_LEG, SimError, legs_mjcf,
+                             pose_qpos)
+
+SUBSTEPS = 4                 # kinematic poses per control period (the sample and 3 between)
+PHYSICS_PER_SAMPLE_MAX_DT = 0.001   # s: the driven replay's physics step is at most this
+SETTLE = 0.2                 # s the driven replay holds the last setpoint after the swing
+SAME_POSE = 1e-6             # m: MuJoCo's heel this close to jaxexo's is the same pose
+CLIP_TOL = 1e-9              # rad/s: a setpoint speed changed by more than this by a limit counts as saturated
+
+
+def require_mujoco():
+    """The mujoco module, or SimError saying how to install it."""
+    try:
+        import mujoco
+    except ImportError:
+        raise SimError('MuJoCo is not installed; install the sim extra: pip install -e ".[sim]" '
+                       '(or pip install "mujoco>=4.0")') from None
+    return mujoco
+
+
+class Legs:
+    """The MuJoCo model of a config's legs on one scene (the obstacle and the stance heel's pivot)."""
+
+    def __init__(self, config, scene):
+        mujoco = self.mujoco = require_mujoco()
+        self.config = config
+        self.scene = scene
+        k = config.kinematics
+        self.thigh, self.shin, self.foot_length = float(k.thigh), float(k.shin), float(k.foot_length)
+        self.xml = legs_mjcf(config, scene.outline, scene.pivot_y)
+        self.model = mujoco.MjModel.from_xml_string(self.xml)
+        self.data = mujoco.MjData(self.model)
+        gid = lambda n: mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_GEOM, n)  # noqa: E731
+        self.foot = gid(f"{SWING_LEG}_foot")
+        self.pieces = [gid(f"obstacle_{i}") for i in range(int(self.model.numeric("obstacle_pieces").data[0]))]
+        adr = [int(self.model.jnt_qposadr[mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_JOINT, n)])
+               for n in QPOS_NAMES]
+        if adr != list(range(len(QPOS_NAMES))):     # pose_qpos writes the columns in this order
+            raise RuntimeError(f"the model's qpos layout {adr} is not QPOS_NAMES")
+        self.site = {n: mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_SITE, n)
+                     for n in (f"{leg}_{p}" for leg in LEGS for p in ("heel", "toe"))}
+        self.stance_eq = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_EQUALITY, f"{STANCE_LEG}_on_pivot")
+        self.actuators = [mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_ACTUATOR, n) for n in ACTUATED]
+
+    def qpos(self, angles) -> np.ndarray:
+        """qpos (..., nq) of joint angles (..., 4) in JOINT_NAMES order (jaxexo.sim.mjcf.pose_qpos)."""
+        return pose_qpos(angles, self.scene.pivot_y, self.thigh, self.shin)
+
+    def foot_distance(self, distmax: float = DISTMAX) -> float:
+        """MuJoCo's smallest distance (m) between the swing foot's heel-toe segment and the obstacle
+        at the data's current pose (negative: penetration); ``distmax`` when farther (or no obstacle)."""
+        d = distmax
+        for g in self.pieces:
+            d = min(d, self.mujoco.mj_geomDistance(self.model, self.data, self.foot, g, distmax, None) + FOOT_RADIUS)
+        return d
+
+    def set_pose(self, qpos) -> None:
+        self.data.qpos[:] = qpos
+        self.mujoco.mj_kinematics(self.model, self.data)
+
+    def site_yz(self, name: str) -> np.ndarray:
+        """A site's (y, z) in jaxexo's frame (MuJoCo's x, z)."""
+        p = self.data.site_xpos[self.site[name]]
+        return np.array([p[0], p[2]])
+
+
+def fine_angles(angles: np.ndarray, substeps: int) -> np.ndarray:
+    """Joint angles (n, 4) at the control samples -> ((n - 1) substeps + 1, 4), linear in between."""
+    n = len(angles)
+    f = np.arange(substeps) / substeps
+    mid = angles[:-1, None, :] + f[None, :, None] * np.diff(angles, axis=0)[:, None, :]
+    return np.concatenate([mid.reshape((n - 1) * substeps, angles.shape[1]), angles[-1:]])
+
+
+def kinematic_replay(timed, config, substeps: int = SUBSTEPS, legs: Legs | None = None) -> dict:
+    """The kinematic replay of a TimedSwing (module docstring). ``legs``: a Legs of the same scene to
+    reuse. Returns SI figures; ``flagged_ok`` is jaxexo's verdict, ``margin_kept`` MuJoCo's."""
+    if not isinstance(substeps, int) or isinstance(substeps, bool) or substeps < 1:
+        raise SimError(f"substeps: must be an integer >= 1, got {substeps!r}")
+    t0 = time.perf_counter()
+    legs = Legs(config, timed.scene) if legs is None else legs
+    angles = np.asarray(timed.joint_angles, dtype=np.float64)
+    q = legs.qpos(fine_angles(angles, substeps))
+    dist = np.empty(len(q))
+    heel = np.empty((len(q), 2))
+    for i, qi in enumerate(q):
+        legs.set_pose(qi)
+        dist[i] = legs.foot_distance()
+        heel[i] = legs.site_yz(f"{SWING_LEG}_heel")
+    at_samples = dist[::substeps]
+    jx = geometry.foot_clearance(np, np.asarray(timed.heel), legs.foot_length, timed.scene.outline)
+    offset = np.linalg.norm(heel[::substeps] - np.asarray(timed.heel), axis=1)
+    # Compared where both measure a distance of one pose: MuJoCo caps at DISTMAX, the foot is outside,
+    # and the angles put MuJoCo's heel on jaxexo's (not so where a failed swing's heel is out of reach).
+    both = (at_samples < DISTMAX) & (jx > 0.0) & (offset < SAME_POSE)
+    diff = np.abs(at_samples - jx)
+    worst = int(np.argmax(np.where(both, diff, -1.0))) if both.any() else -1
+    margin = float(config.env.min_clearance)
+    k = int(np.argmin(dist))
+    return {
+        "method": timed.method, "flagged_ok": bool(timed.ok), "margin_m": margin,
+        "jaxexo_guaranteed_clearance_m": float(timed.checks.min_clearance),
+        "mujoco_min_distance_m": float(dist[k]), "mujoco_min_time_s": float(k / substeps / timed.rate),
+        "mujoco_min_heel": heel[k].tolist(),
+        "margin_kept": bool(dist[k] >= margin),
+        "flagged_ok_but_within_margin": bool(timed.ok and dist[k] < margin),
+        "max_disagreement_m": float(diff[worst]) if worst >= 0 else 0.0,
+        "max_disagreement_sample": worst,
+        "max_heel_offset_m": float(offset.max()), "samples_compared": int(both.sum()),
+        "poses": int(len(q)), "substeps": substeps,
+        "seconds": time.perf_counter() - t0,
+    }
+
+
+def hermite(ref: np.ndarray, ref_v: np.ndarray, period: float, t: np.ndarray) -> np.ndarray:
+    """Joint angles (len(t), 4) at times t: the cubic Hermite through the control samples ``ref``
+    (n, 4) with their velocities ``ref_v`` (the swing's chain-rule columns), held after the last."""
+    x = np.clip(np.asarray(t) / period, 0.0, len(ref) - 1)
+    k = np.minimum(x.astype(int), len(ref) - 2)
+    u = (x - k)[:, None]
+    h00, h10, h01, h11 = 2 * u**3 - 3 * u**2 + 1, u**3 - 2 * u**2 + u, -2 * u**3 + 3 * u**2, u**3 - u**2
+    return h00 * ref[k] + h10 * period * ref_v[k] + h01 * ref[k + 1] + h11 * period * ref_v[k + 1]
+
+
+def setpoints(ref: np.ndarray, dt: float, vmax, amax):
+    """The drives' commands (steps, 4) following the reference ``ref`` (steps + 1, 4) sampled every
+    ``dt``: each step feeds the reference's own step forward and catches up on the error no faster
+    than the drive can stop (v^2 = 2 a |e|), then clips to the acceleration and velocity limits.
+    Returns the commands and, per step, whether an acceleration or a velocity limit clipped."""
+    steps = len(ref) - 1
+    out = np.empty((steps, ref.shape[1]))
+    clip_a = np.zeros(steps, dtype=bool)
+    clip_v = np.zeros(steps, dtype=bool)
+    cmd = ref[0].tolist()
+    vel = [0.0] * ref.shape[1]
+    vmax, amax = [float(x) for x in vmax], [float(x) for x in amax]
+    rows = ref.tolist()
+    for i in range(steps):
+        r, r_next = rows[i], rows[i + 1]
+        for j in range(len(cmd)):
+            e = r[j] - cmd[j]
+            want = (r_next[j] - r[j]) / dt + math.copysign(min(abs(e) / dt, math.sqrt(2.0 * amax[j] * abs(e))), e)
+            v = min(max(want, vel[j] - amax[j] * dt), vel[j] + amax[j] * dt)
+            if abs(v - want) > CLIP_TOL:
+                clip_a[i] = True
+            w = min(max(v, -vmax[j]), vmax[j])
+            if abs(w - v) > CLIP_TOL:
+                clip_v[i] = True
+            vel[j] = w
+            cmd[j] += w * dt
+        out[i] = cmd
+    return out, clip_a, clip_v
+
+
+def driven_replay(timed, config, limits=None, legs: Legs | None = None, settle: float = SETTLE) -> dict:
+    """The driven replay of a TimedSwing (module docstring) with the drives' ``limits`` (a
+    DeviceLimits; default: the config's [device]). The commands are computed first (they do not
+    depend on the simulation), then MuJoCo rolls the model out in one call (mujoco.rollout) and its
+    sensors give the sites and the foot-obstacle distances. Returns SI figures."""
+    from jaxexo.inference.swing_timing import DeviceLimits
+
+    limits = DeviceLimits.from_config(config) if limits is None else limits
+    if not isinstance(limits, DeviceLimits):
+        raise SimError(f"limits: expected a DeviceLimits, got {type(limits).__name__}")
+    if isinstance(settle, bool) or not (isinstance(settle, (int, float)) and math.isfinite(settle) and settle >= 0):
+        raise SimError(f"settle: must be a finite number >= 0 (s), got {settle!r}")
+    t0 = time.perf_counter()
+    legs = Legs(config, timed.scene) if legs is None else legs
+    mujoco, m, d = legs.mujoco, legs.model, legs.data
+    from mujoco import rollout
+
+    rate = float(timed.rate)
+    sub = max(1, math.ceil(1.0 / (rate * PHYSICS_PER_SAMPLE_MAX_DT) - 1e-9))
+    dt = 1.0 / (rate * sub)
+    m.opt.timestep = dt
+    ref = np.asarray(timed.joint_angles, dtype=np.float64)
+    n = len(ref)
+    steps = (n - 1) * sub + int(round(settle / dt))
+    cmd, clip_a, clip_v = setpoints(hermite(ref, np.asarray(timed.joint_velocity, np.float64), 1.0 / rate,
+                                            np.arange(steps + 1) * dt),
+                                    dt, limits.velocity, limits.acceleration)
+    m.eq_active0[:] = 0
+    m.eq_active0[legs.stance_eq] = 1
+    for name in (f"{leg}_level" for leg in LEGS):
+        m.eq_active0[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_EQUALITY, name)] = 1
+    mujoco.mj_resetData(m, d)
+    d.qpos[:] = legs.qpos(ref[0])
+    mujoco.mj_forward(m, d)
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    state0 = np.empty(mujoco.mj_stateSize(m, spec))
+    mujoco.mj_getState(m, d, state0, spec)
+    first = d.sensordata.copy()
+    control = np.zeros((1, steps, m.nu))
+    control[0][:, legs.actuators] = cmd
+    _, sensors = rollout.rollout(m, d, state0[None], control)
+    sens = np.concatenate([first[None], sensors[0]])          # (steps + 1, nsensordata), after each step
+    col = lambda name: sens[:, m.sensor_adr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, name)]:][:, :3]  # noqa: E731
+    heel = col(f"{SWING_LEG}_heel")[::sub][:n][:, [0, 2]]
+    toe = col(f"{SWING_LEG}_toe")[::sub][:n][:, [0, 2]]
+    heel_err = np.linalg.norm(heel - timed.heel, axis=1)
+    toe_err = np.linalg.norm(toe - timed.toe, axis=1)
+    pivot = np.array([timed.scene.pivot_y, 0.0])
+    slip = np.linalg.norm(col(f"{STANCE_LEG}_heel")[:, [0, 2]] - pivot, axis=1).max()
+    dist = np.full(len(sens), DISTMAX)
+    for i in range(len(legs.pieces)):
+        dist = np.minimum(dist, col(f"foot_obstacle_{i}")[:, 0] + FOOT_RADIUS)
+    qv = np.stack([col(j)[:, 0] for j in ACTUATED], axis=1)
+    k = int(np.argmin(dist))
+    margin = float(config.env.min_clearance)
+    return {
+        "method": timed.method, "flagged_ok": bool(timed.ok), "margin_m": margin,
+        "limits": limits.to_dict(), "physics_dt_s": dt, "settle_s": float(settle),
+        "heel_error_max_m": float(heel_err.max()), "toe_error_max_m": float(toe_err.max()),
+        "heel_error_p95_m": float(np.percentile(heel_err, 95)), "toe_error_p95_m": float(np.percentile(toe_err, 95)),
+        "final_heel_error_m": float(np.linalg.norm(col(f"{SWING_LEG}_heel")[-1, [0, 2]] - timed.heel[-1])),
+        "mujoco_min_distance_m": float(dist[k]), "mujoco_min_time_s": float(k * dt),
+        "margin_kept": bool(dist[k] >= margin),
+        # The foot's capsule touches a piece where the segment comes within its radius: MuJoCo makes a contact.
+        "contact_steps": int(np.sum(dist <= FOOT_RADIUS)), "contact": bool(dist[k] <= FOOT_RADIUS),
+        "saturated_velocity_steps": int(clip_v.sum()), "saturated_acceleration_steps": int(clip_a.sum()),
+        "saturated": bool(clip_v.any() or clip_a.any()), "steps": steps,
+        "peak_joint_velocity_rad_s": np.abs(qv).max(axis=0).tolist(), "stance_heel_slip_max_m": float(slip),
+        "seconds": time.perf_counter() - t0,
+    }
+
+
+def summarize_kinematic(rows: list[dict]) -> dict:
+    """Figures of many kinematic replays (``kinematic_replay``'s dicts): the swings jaxexo flags ok
+    that come within the margin in MuJoCo (the target is 0), MuJoCo's smallest distance among the ok
+    swings and its smallest excess over jaxexo's guaranteed clearance, the largest disagreement
+    between the two geometries at the samples, and the replay's median cost."""
+    ok = [r for r in rows if r["flagged_ok"]]
+    return {
+        "n": len(rows), "flagged_ok": len(ok),
+        "flagged_ok_within_margin": int(sum(r["flagged_ok_but_within_margin"] for r in rows)),
+        "min_mujoco_distance_of_ok_m": min((r["mujoco_min_distance_m"] for r in ok), default=None),
+        "min_mujoco_minus_guaranteed_of_ok_m": min(
+            (r["mujoco_min_distance_m"] - r["jaxexo_guaranteed_clearance_m"] for r in ok), default=None),
+        "max_disagreement_m": max((r["max_disagreement_m"] for r in rows), default=None),
+        # Over the swings flagged ok: a failed swing may ask for a heel out of the leg's reach.
+        "max_heel_offset_of_ok_m": max((r["max_heel_offset_m"] for r in ok), default=None),
+        "seconds_median": float(np.median([r["seconds"] for r in rows])) if rows else None,
+        "poses_median": float(np.median([r["poses"] for r in rows])) if rows else None,
+    }
+
+
+def summarize_driven(rows: list[dict]) -> dict:
+    """Figures of many driven replays (``driven_replay``'s dicts): heel and toe tracking error (p95
+    and max over the swings of each swing's largest), contacts, swings within the margin, MuJoCo's
+    smallest distance, saturated swings, the stance heel's largest slip and the median cost."""
+    if not rows:
+        return {"n": 0}
+    he = np.array([d["heel_error_max_m"] for d in rows])
+    te = np.array([d["toe_error_max_m"] for d in rows])
+    md = np.array([d["mujoco_min_distance_m"] for d in rows])
+    return {"n": len(rows), "heel_error_p95_m": float(np.percentile(he, 95)), "heel_error_max_m": float(he.max()),
+            "toe_error_p95_m": float(np.percentile(te, 95)), "toe_error_max_m": float(te.max()),
+            "contacts": int(sum(d["contact"] for d in rows)),
+            "within_margin": int(np.sum(md < rows[0]["margin_m"])),
+            "min_distance_m": float(md.min()), "median_min_distance_m": float(np.median(md)),
+            "saturated": int(sum(d["saturated"] for d in rows)),
+            "stance_heel_slip_max_m": float(max(d["stance_heel_slip_max_m"] for d in rows)),
+            "seconds_median": float(np.median([d["seconds"] for d in rows]))}
+
+
+def replay_trajectories(trajs, config, rate: float | None = None, driven: bool = True) -> dict:
+    """Trajectories (one generator's) timed for the device at ``rate`` and replayed in MuJoCo:
+    ``summarize_kinematic`` of all of them and ``summarize_driven`` of those flagged ok, at the
+    config's [device] limits (``jaxexo eval --replay``)."""
+    from jaxexo.inference.swing_timing import time_swings
+
+    require_mujoco()
+    kin, drv = [], []
+    for ts in time_swings(list(trajs), config, rate=rate):
+        legs = Legs(config, ts.scene)
+        kin.append(kinematic_replay(ts, config, legs=legs))
+        if driven and ts.ok:
+            drv.append(driven_replay(ts, config, legs=legs))
+    out = {"kinematic": summarize_kinematic(kin)}
+    if driven:
+        out["driven"] = summarize_driven(drv)
+    return out
+
+
+def brute_force_distance(heel, foot_length: float, outline, iterations: int = 200) -> float:
+    """Distance (m) from the flat foot [heel, heel + (foot_length, 0)] to the outline's edges (the
+    boundary, unsigned), by ternary search of the foot position on each edge (module docstring):
+    independent of jaxexo.physics.geometry's closed form and of MuJoCo. 0 where they cross."""
+    o = np.asarray(outline, dtype=np.float64)
+    a, b = o[:-1], o[1:]
+    e = b - a
+    len2 = np.maximum((e * e).sum(axis=1), 1e-300)
+    heel = np.asarray(heel, dtype=np.float64)
+
+    def dist(u):            # u (E,): the foot point at heel + u (L, 0) to each edge
+        p = heel[None, :] + np.stack([u * foot_length, np.zeros_like(u)], axis=1)
+        t = np.clip(((p - a) * e).sum(axis=1) / len2, 0.0, 1.0)
+        r = p - (a + t[:, None] * e)
+        return np.sqrt((r * r).sum(axis=1))
+
+    lo = np.zeros(len(a))
+    hi = np.ones(len(a))
+    for _ in range(iterations):
+        m1 = lo + (hi - lo) / 3.0
+        m2 = hi - (hi - lo) / 3.0
+        left = dist(m1) <= dist(m2)
+        hi = np.where(left, m2, hi)
+        lo = np.where(left, lo, m1)
+    return float(min(dist(lo).min(), dist(np.zeros(len(a))).min(), dist(np.ones(len(a))).min()))

@@ -1,0 +1,216 @@
+"""The legs in MuJoCo (jaxexo.sim): the MJCF against the config, the obstacle's convex pieces against
+jaxexo's inside test, MuJoCo's distance against hand-made poses, a swing through the obstacle reported
+as a contact, and bad input refused before MuJoCo is called."""
+
+from __future__ import annotations
+
+import dataclasses
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from conftest import ROOT
+from jaxexo.config import load_config, scalar_params
+from jaxexo.physics import geometry, scenarios
+from jaxexo.physics.dynamics import make_scene
+from jaxexo.physics.geometry import GeometryError, Obstacle
+from jaxexo.sim.mjcf import SimError, legs_mjcf, scene_mjcf
+from jaxexo.sim.pieces import convex_pieces
+
+mujoco = pytest.importorskip("mujoco")
+
+from jaxexo.sim.replay import Legs, brute_force_distance, driven_replay, kinematic_replay  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def config():
+    cfg = load_config(ROOT / "configs" / "default.toml")
+    # Unequal lengths and limits unlike the defaults, so that a mix-up shows.
+    return dataclasses.replace(cfg, kinematics=dataclasses.replace(
+        cfg.kinematics, thigh=0.46, shin=0.53, foot_length=0.22, hip_limits=(-0.6, 1.9), knee_limits=(-1.6, 0.05)))
+
+
+def _scene(config, obstacle, pivot="between"):
+    return make_scene(obstacle, pivot, 0.0, 0.70, foot_length=config.kinematics.foot_length)
+
+
+def test_mjcf_links_and_limits_are_the_configs(config):
+    m = mujoco.MjModel.from_xml_string(legs_mjcf(config, Obstacle.named("triangle").outline, 0.3))
+    k, dev = config.kinematics, config.device
+    name = lambda kind, n: mujoco.mj_name2id(m, kind, n)  # noqa: E731
+    for leg in ("right", "left"):
+        assert m.body_pos[name(mujoco.mjtObj.mjOBJ_BODY, f"{leg}_shin")][2] == pytest.approx(-k.thigh, abs=1e-12)
+        assert m.body_pos[name(mujoco.mjtObj.mjOBJ_BODY, f"{leg}_foot")][2] == pytest.approx(-k.shin, abs=1e-12)
+        toe = m.site_pos[name(mujoco.mjtObj.mjOBJ_SITE, f"{leg}_toe")]
+        assert toe[0] == pytest.approx(k.foot_length, abs=1e-12)
+        np.testing.assert_allclose(m.jnt_range[name(mujoco.mjtObj.mjOBJ_JOINT, f"{leg}_hip")], k.hip_limits, atol=1e-12)
+        np.testing.assert_allclose(m.jnt_range[name(mujoco.mjtObj.mjOBJ_JOINT, f"{leg}_knee")], k.knee_limits, atol=1e-12)
+    (vh, vk), (ah, ak) = dev.joint_velocity, dev.joint_acceleration
+    np.testing.assert_allclose(m.numeric("device_joint_velocity").data, [vh, vk, vh, vk])
+    np.testing.assert_allclose(m.numeric("device_joint_acceleration").data, [ah, ak, ah, ak])
+    assert m.nu == 4
+
+
+def test_keyframe_puts_the_feet_where_jaxexo_does(config):
+    sc = _scene(config, Obstacle.named("base2"))
+    m = mujoco.MjModel.from_xml_string(scene_mjcf(config, sc))
+    d = mujoco.MjData(m)
+    mujoco.mj_resetDataKeyframe(m, d, 0)
+    mujoco.mj_forward(m, d)
+    site = lambda n: d.site_xpos[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, n)][[0, 2]]  # noqa: E731
+    # 1e-7: jaxexo's angles come from the float32 scalar parameters (jaxexo.config.scalar_params),
+    # which round this config's 0.46 m and 0.53 m by ~1e-8 m; the model has the float64 lengths.
+    np.testing.assert_allclose(site("right_heel"), [sc.start_y, 0.0], atol=1e-7)
+    np.testing.assert_allclose(site("right_toe"), [sc.start_y + config.kinematics.foot_length, 0.0], atol=1e-7)
+    np.testing.assert_allclose(site("left_heel"), [sc.pivot_y, 0.0], atol=1e-7)
+
+
+def _inside_piece(p, poly):
+    """Inside a counter-clockwise convex polygon (or on its boundary): left of every edge."""
+    a, b = poly, np.roll(poly, -1, axis=0)
+    cross = (b[:, 0] - a[:, 0]) * (p[:, None, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (p[:, None, 0] - a[:, 0])
+    return np.all(cross >= -1e-15, axis=1)
+
+
+def test_convex_pieces_cover_the_outline_exactly():
+    rng = np.random.default_rng(0)
+    outlines = [Obstacle.named(k).outline for k in geometry.THESIS_OBSTACLES]
+    outlines += [s["obstacle"].outline for s in scenarios.unseen_scenarios(0.2, 1)[::9]]
+    for o in outlines:
+        pieces = convex_pieces(o)
+        lo, hi = o.min(axis=0), o.max(axis=0)
+        p = rng.uniform(lo - 0.01, hi + 0.01, size=(4000, 2))
+        inside = geometry.point_in_obstacle(np, p, o)
+        in_pieces = np.zeros(len(p), dtype=bool)
+        for poly in pieces:
+            in_pieces |= _inside_piece(p, poly)
+        # Points on a boundary may go either way; none of 4000 random points lands on one.
+        assert np.array_equal(inside, in_pieces)
+    assert len(convex_pieces(Obstacle.named("half_circle").outline)) == 1     # a convex outline is one piece
+
+
+@pytest.mark.parametrize("points, match", [
+    ([[0.0, 0.0], [0.0, 0.1], [0.0, 0.05], [0.1, 0.05], [0.1, 0.0]], "fold back"),
+    ([[0.0, 0.0], [0.05, 0.1], [0.1, 0.0], [0.15, 0.1], [0.2, 0.0]], "touches the ground"),
+    ([[0.0, 0.0], [0.1, 0.1], [0.05, 0.1], [0.2, 0.0]], "backwards"),
+])
+def test_an_outline_that_is_not_a_simple_polygon_is_refused(config, points, match):
+    with pytest.raises(GeometryError, match=match):
+        legs_mjcf(config, np.asarray(points), 0.3)
+
+
+def test_a_config_whose_legs_cannot_be_built_is_refused(config):
+    bad = dataclasses.replace(config, kinematics=dataclasses.replace(config.kinematics, shin=0.0))
+    with pytest.raises(SimError, match="kinematics.shin"):
+        legs_mjcf(bad)
+    bad = dataclasses.replace(config, kinematics=dataclasses.replace(config.kinematics, knee_limits=(0.1, -0.5)))
+    with pytest.raises(SimError, match="kinematics.knee_limits"):
+        legs_mjcf(bad)
+
+
+def _hand_made(config, scene, heel: np.ndarray, rate: float = 100.0):
+    """A TimedSwing of a hand-made heel path (N, 2), timed for the device."""
+    from jaxexo.inference import assemble
+    from jaxexo.inference.swing_timing import time_swing
+
+    sp = scalar_params(config)
+    batch = assemble("hand", sp, [scene], [heel], heel[None], smoothing=[0.0], deviation=[0.0])
+    return time_swing(batch[0], config, rate=rate)
+
+
+def _over(scene, height: float) -> np.ndarray:
+    """A heel path straight up from the start to ``height``, level to above the goal, straight down."""
+    up = np.linspace(0.0, height, 12)
+    level = np.linspace(scene.start_y, scene.goal_y, 40)[1:-1]
+    return np.concatenate([np.column_stack([np.full(12, scene.start_y), up]),
+                           np.column_stack([level, np.full(len(level), height)]),
+                           np.column_stack([np.full(12, scene.goal_y), up[::-1]])])
+
+
+def test_a_pose_at_a_known_distance_measures_it(config):
+    sc = _scene(config, Obstacle.rectangle(0.10, 0.08, center_y=0.40))
+    legs = Legs(config, sc)
+    from jaxexo.inference.swing_timing import leg_angles
+
+    sp = scalar_params(config)
+    for heel, want in (((0.25, 0.08 + 0.037), 0.037),            # above the top
+                       ((0.05, 0.02), 0.35 - 0.05 - 0.22),        # on the ground's level, toe short of the side
+                       ((0.46, 0.09), 0.01)):                     # heel past the right edge's corner: vertex distance
+        heel = np.asarray(heel)
+        if want == 0.01:
+            want = float(np.hypot(0.46 - 0.45, 0.09 - 0.08))
+        legs.set_pose(legs.qpos(leg_angles(sp, sc.pivot_y, heel[None])[0]))
+        np.testing.assert_allclose(legs.site_yz("right_heel"), heel, atol=1e-7)     # float32 scalar params
+        assert abs(legs.foot_distance() - want) < 1e-6
+        assert abs(brute_force_distance(heel, config.kinematics.foot_length, sc.outline) - want) < 1e-9
+
+
+def test_a_hand_made_swing_at_a_known_distance_measures_it(config):
+    sc = _scene(config, Obstacle.rectangle(0.10, 0.08, center_y=0.40))
+    heel = _over(sc, 0.08 + 0.045)
+    timed = _hand_made(config, sc, heel)
+    r = kinematic_replay(timed, config, substeps=1)
+    # The level stretch passes over the whole top: the smallest distance is the 4.5 cm gap.
+    assert abs(r["mujoco_min_distance_m"] - 0.045) < 1e-6
+    assert r["max_disagreement_m"] < 1e-6
+    assert r["max_heel_offset_m"] < 1e-7
+
+
+def test_a_swing_through_the_obstacle_is_a_contact(config):
+    sc = _scene(config, Obstacle.rectangle(0.10, 0.08, center_y=0.40))
+    timed = _hand_made(config, sc, _over(sc, 0.04))      # half the obstacle's height: straight through it
+    assert not timed.ok
+    k = kinematic_replay(timed, config)
+    assert k["mujoco_min_distance_m"] <= 0.0 and not k["margin_kept"]
+    d = driven_replay(timed, config, settle=0.0)
+    assert d["contact"] and d["contact_steps"] > 0
+
+
+def test_a_safe_swing_tracks_at_the_limits_and_keeps_clear(config):
+    from jaxexo.baselines import CFFTG
+    from jaxexo.inference.swing_timing import time_swing
+
+    traj = CFFTG(config).generate(Obstacle.named("base1"), pivot="between")
+    timed = time_swing(traj, config, rate=100.0)
+    assert timed.ok
+    k = kinematic_replay(timed, config)
+    assert k["margin_kept"] and k["max_disagreement_m"] < 1e-6
+    d = driven_replay(timed, config, settle=0.05)
+    assert not d["contact"]
+    assert d["heel_error_max_m"] < 0.10 and d["stance_heel_slip_max_m"] < 0.005
+    # At a tenth of the limits the drive cannot follow: a limit saturates.
+    slow = driven_replay(timed, config, limits=timed.limits.scaled(0.1, 0.1), settle=0.0)
+    assert slow["saturated"] and slow["heel_error_max_m"] > d["heel_error_max_m"]
+
+
+def test_jaxexo_and_its_inference_never_import_mujoco():
+    code = ("import sys, jaxexo, jaxexo.inference, jaxexo.sim, jaxexo.sim.mjcf; "
+            "assert 'mujoco' not in sys.modules, 'mujoco imported'")
+    subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT)
+
+
+def test_cli_mjcf_writes_a_model_mujoco_loads(tmp_path, config):
+    from jaxexo.cli import main
+
+    out = tmp_path / "legs.xml"
+    assert main(["mjcf", "--obstacle", "triangle", "--pivot", "between", "--out", str(out)]) == 0
+    m = mujoco.MjModel.from_xml_path(str(out))
+    assert m.nkey == 1 and m.nu == 4
+
+
+def test_eval_replay_figures_count_the_swings(config):
+    from jaxexo.baselines import CFFTG
+    from jaxexo.evaluation.compare import mujoco_lines
+    from jaxexo.inference.swing_timing import time_swings
+    from jaxexo.sim.replay import replay_trajectories
+
+    gen = CFFTG(config)
+    trajs = [gen.generate(Obstacle.named(k), pivot="obstacle") for k in ("base1", "triangle")]
+    r = replay_trajectories(trajs, config)
+    ok = sum(t.ok for t in time_swings(trajs, config))
+    assert r["kinematic"]["n"] == 2 and r["kinematic"]["flagged_ok"] == ok == r["driven"]["n"]
+    assert r["kinematic"]["flagged_ok_within_margin"] == 0 and r["driven"]["contacts"] == 0
+    lines = mujoco_lines({"cfftg": {"mujoco": r}}, 100.0)
+    assert lines[-1].startswith(f"| cfftg | 2 | {ok} | 0 |")
