@@ -715,6 +715,5 @@ def test_export_all_writes_each_agent_and_skips_the_diverged(inproc, tiny_sweep)
             continue
         data = R.load_chunk(out, int(r["chunk"]))
         params = unflatten(data["params"], data["agents"].index(key))
-        np.testing.assert_array_equal(load_policy(d / "policy.npz").kernels[-1],
-                                      params["params"][f"dense_{len(tiny_sweep.members[0].config.train.hidden)}"]["kernel"])
+        np.testing.assert_array_equal(load_policy(d / "policy.npz").kernels[0], params["params"]["dense_0"]["kernel"])
         assert load_config(d / "config.toml") == tiny_sweep.members[key[0]].config
