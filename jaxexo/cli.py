@@ -52,6 +52,9 @@ def cmd_train(args) -> int:
         from jaxexo.config import with_population
 
         cfg = with_population(cfg, args.population, "--population")
+    from jaxexo.config import check_seed
+
+    check_seed(args.seed, "--seed", cfg.train.population)   # before JAX starts (run_training checks it too)
     from jaxexo.config.memory import check_memory
 
     check_memory(cfg)       # before JAX allocates: a run the machine cannot hold is refused here
@@ -307,7 +310,6 @@ def cmd_reproduce(args) -> int:
     from jaxexo.train.devices import use_all_cpu_cores, use_compilation_cache
 
     use_all_cpu_cores()
-    use_compilation_cache()
     from jaxexo.evaluation.reproduce import check_reproduce_options, run_names, run_reproduce
 
     models = [m.strip() for m in args.models.split(",") if m.strip()]
@@ -315,6 +317,7 @@ def cmd_reproduce(args) -> int:
         raise ValueError(f"--models: name at least one model, got {args.models!r}")
     run_names(models, args.variant)     # checks --models and --variant before anything trains
     check_reproduce_options(args.out, args.n, args.results, args.population, args.seed)
+    use_compilation_cache()
     run_reproduce(args.out, models, n=args.n, seed=args.seed, include_default=args.default, results_dir=args.results,
                   variant=args.variant, population=args.population)
     print(f"wrote {args.out}/reproduce.md, reproduce.json and the run directories under {args.out}/runs")
@@ -455,12 +458,12 @@ def main(argv=None) -> int:
     import warnings
 
     args = build_parser().parse_args(argv)
-    warnings.showwarning = _warning_line
     from jaxexo.config import ConfigError
     from jaxexo.physics.geometry import GeometryError
     from jaxexo.storage.policy_file import PolicyFileError
     from jaxexo.storage.rundir import TrainingDiverged
 
+    shown, warnings.showwarning = warnings.showwarning, _warning_line
     try:
         return args.func(args)
     except (ConfigError, GeometryError, PolicyFileError, ValueError) as e:
@@ -474,6 +477,8 @@ def main(argv=None) -> int:
         # A write that failed (full disk, file-size limit, permissions): what was written before is intact.
         print(f"jaxexo: error: {e}", file=sys.stderr)
         return 1
+    finally:
+        warnings.showwarning = shown
 
 
 if __name__ == "__main__":
