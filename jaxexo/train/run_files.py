@@ -14,8 +14,7 @@ import numpy as np
 from flax import serialization
 
 from jaxexo.config import Config, ConfigError, config_from_dict, load_config
-from jaxexo.config.input_files import (MAX_CHECKPOINT_BYTES, MAX_LOG_BYTES, InputFileError, read_input,
-                                       read_text_input)
+from jaxexo.config.input_files import MAX_CHECKPOINT_BYTES, MAX_LOG_BYTES, InputFileError, read_input
 from jaxexo.config.toml_io import config_to_toml
 from jaxexo.env.exo_step import LENGTH_SCALE, THESIS_OBS_CENTER
 from jaxexo.physics import dynamics
@@ -143,11 +142,14 @@ def read_metrics_rows(metrics_path: Path, chunks_done: int) -> list[dict]:
     if not metrics_path.exists() and not metrics_path.is_symlink():
         return []
     try:
-        text = read_text_input(metrics_path, "metrics log", MAX_LOG_BYTES, follow_links=False)
+        data = read_input(metrics_path, "metrics log", MAX_LOG_BYTES, follow_links=False)
     except InputFileError as e:
         raise ConfigError(f"--resume: {e}; it cannot be rebuilt, start a new run") from None
     try:
-        return [json.loads(x) for x in text.splitlines()[:chunks_done]]
+        return [json.loads(x) for x in data.decode("utf-8").splitlines()[:chunks_done]]
+    except UnicodeDecodeError as e:
+        raise ConfigError(f"--resume: {metrics_path} is damaged (not UTF-8 text at byte {e.start}); it cannot "
+                          "be rebuilt, start a new run") from None
     except ValueError:
         raise ConfigError(f"--resume: {metrics_path} is damaged within the checkpoint's {chunks_done} "
                           "chunk(s); it cannot be rebuilt, start a new run") from None
