@@ -271,3 +271,15 @@ def test_cli_warnings_are_one_line_without_a_source_line(tmp_path):
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=60)
     assert r.returncode == 0, r.stderr
     assert r.stderr.strip() == "jaxexo: warning: careful"
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes through any permission; needs a non-root user")
+def test_a_cache_folder_that_cannot_be_written_is_a_warning_not_a_crash(tmp_path, monkeypatch):
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o500)
+    try:
+        msg = _cache_warning(monkeypatch, locked / "xla")
+    finally:
+        locked.chmod(0o700)
+    assert "cannot use" in msg and "Permission denied" in msg and not (locked / "xla").exists()
