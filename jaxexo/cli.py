@@ -45,11 +45,16 @@ def cmd_train(args) -> int:
     from jaxexo.train.devices import use_all_cpu_cores
 
     use_all_cpu_cores()
+    if args.config is None and args.resume and (Path(args.out) / "config.toml").is_file():
+        args.config = Path(args.out) / "config.toml"     # the run's own resolved config
     cfg, name = _load(args.config)
     if args.population is not None:
         from jaxexo.config import with_population
 
         cfg = with_population(cfg, args.population, "--population")
+    from jaxexo.config import check_seed
+
+    check_seed(args.seed, "--seed", cfg.train.population)   # before JAX starts (run_training checks it too)
     from jaxexo.config.memory import check_memory
 
     check_memory(cfg)       # before JAX allocates: a run the machine cannot hold is refused here
@@ -82,17 +87,27 @@ DEFAULT_SIZE = (0.20, 0.15)                       # m, width and height of a gen
 
 def obstacle_from_args(args):
     """An Obstacle from --obstacle/--width/--height/--center-y (metres); thesis shapes keep their
-    Table 3.1 size unless --width/--height are given."""
-    from jaxexo.physics.geometry import THESIS_OBSTACLES, Obstacle
+    Table 3.1 size unless --width/--height are given. Sizes within the one obstacle-size bound
+    (jaxexo.physics.geometry.MAX_OBSTACLE_WIDTH, _HEIGHT); errors name the option."""
+    from jaxexo.physics.geometry import THESIS_OBSTACLES, GeometryError, Obstacle
 
     kind = args.obstacle
     center = 0.45 if args.center_y is None else args.center_y
-    if kind in THESIS_OBSTACLES and args.width is None and args.height is None:
-        return Obstacle.named(kind, center_y=center)
-    shape, default_w, default_h = THESIS_OBSTACLES[kind] if kind in THESIS_OBSTACLES else (kind, *DEFAULT_SIZE)
-    w = default_w if args.width is None else args.width
-    h = default_h if args.height is None else args.height
-    return getattr(Obstacle, shape)(w, h, center_y=center)
+    try:
+        if kind in THESIS_OBSTACLES and args.width is None and args.height is None:
+            return Obstacle.named(kind, center_y=center)
+        shape, default_w, default_h = THESIS_OBSTACLES[kind] if kind in THESIS_OBSTACLES else (kind, *DEFAULT_SIZE)
+        w = default_w if args.width is None else args.width
+        h = default_h if args.height is None else args.height
+        return getattr(Obstacle, shape)(w, h, center_y=center)
+    except GeometryError as e:
+        option = {"width": "--width", "height": "--height", "center_y": "--center-y"}.get(str(e).split()[0], "--obstacle")
+        raise ValueError(f"{option}: {e}") from None
+
+
+# A file name to suggest for each output of jaxexo generate (its kind's suffix).
+OUTPUT_EXAMPLES = {"--out": "trajectory.csv", "--json": "trajectory.json", "--plot": "swing.png",
+                   "--animate": "swing.gif"}
 
 
 def _check_output_file(option: str, value) -> None:
@@ -103,7 +118,7 @@ def _check_output_file(option: str, value) -> None:
     text = str(value)
     p = Path(value)
     if text.endswith(("/", "\\")) or p.is_dir():
-        raise ValueError(f"{option}: {text} is a directory; give a file name (e.g. {p / 'trajectory.csv'})")
+        raise ValueError(f"{option}: {text} is a directory; give a file name (e.g. {p / OUTPUT_EXAMPLES[option]})")
     if not p.parent.is_dir():
         _check_folder_part(option, p.parent, text)
         raise ValueError(f"{option}: the folder {p.parent} does not exist (for {text})")
@@ -159,16 +174,18 @@ def cmd_generate(args) -> int:
     _check_outputs([("--policy", args.policy)], outputs)
     if args.method == "cfftg" and args.smoothing is not None:
         raise ValueError("--smoothing: applies to --method rl only (CFFTG's polynomial path is not smoothed)")
-    from jaxexo.config import MAX_CONTROL_RATE
+    from jaxexo.inference.options import check_duration, check_points
+    from jaxexo.inference.swing_timing import check_rate
+    from jaxexo.storage.atomic import writes_to_stdout
 
-    if args.rate is not None and not (math.isfinite(args.rate) and 0 < args.rate <= MAX_CONTROL_RATE):
-        raise ValueError(f"--rate: control rate must be > 0 and <= {MAX_CONTROL_RATE:g} Hz, got {args.rate:g}")
-    from jaxexo.inference.options import MAX_DURATION, MAX_POINTS
-
-    if not 2 <= args.points <= MAX_POINTS:
-        raise ValueError(f"--points: samples of the path must be in [2, {MAX_POINTS}], got {args.points}")
-    if not (math.isfinite(args.duration) and 0 < args.duration <= MAX_DURATION):
-        raise ValueError(f"--duration: a swing's duration must be > 0 and <= {MAX_DURATION:g} s, got {args.duration:g}")
+    # The generators' own checks, before any policy is read (the message names the option).
+    if args.rate is not None:
+        check_rate(args.rate, "--rate")
+    check_points(args.points, "--points")
+    check_duration(args.duration, "--duration")
+    obstacle = obstacle_from_args(args)
+    # An output on standard output (-, /dev/stdout) keeps it for the data: messages go to stderr.
+    report = sys.stderr if any(writes_to_stdout(v) for _, v in outputs) else sys.stdout
     import numpy as np
 
     common = dict(pivot=args.pivot, pivot_y=args.pivot_y, start_y=args.start_y, step_length=args.step_length,
@@ -179,7 +196,7 @@ def cmd_generate(args) -> int:
         # The kinematics (and joint limits) of the policy's config when one is given.
         gen = CFFTG.from_policy(args.policy) if args.policy else CFFTG(_load(None)[0])
         _check_clearance(args.clearance, gen.config)
-        traj = gen.generate(obstacle_from_args(args), **common)
+        traj = gen.generate(obstacle, **common)
     else:
         if not args.policy:
             raise ValueError("--policy: required with --method rl (the trained policy.npz)")
@@ -187,7 +204,7 @@ def cmd_generate(args) -> int:
 
         gen = TrajectoryGenerator.load(args.policy)
         _check_clearance(args.clearance, gen.config)
-        traj = gen.generate(obstacle_from_args(args), smoothing=args.smoothing,
+        traj = gen.generate(obstacle, smoothing=args.smoothing,
                             fallback=None if args.fallback == "none" else args.fallback, **common)
     timed = _timed_swing(args, traj, gen.config)
     (timed or traj).to_csv(args.out)
@@ -211,21 +228,21 @@ def cmd_generate(args) -> int:
         else "polynomial path (CFFTG)")
     print(f"{traj.scene.obstacle.kind} {traj.scene.width * 100:.1f} x {traj.scene.height * 100:.1f} cm, pivot "
           f"{traj.scene.pivot}: {moves}, min clearance (between samples, guaranteed) {c.min_clearance * 100:.1f} cm, "
-          f"{'ok' if c.ok else 'FAILED'}")
+          f"{'ok' if c.ok else 'FAILED'}", file=report)
     for r in c.reasons + traj.notes:
-        print(f"  {r}")
+        print(f"  {r}", file=report)
     if timed is not None:
         print(f"device timing: {timed.duration:.2f} s swing at {timed.rate:g} Hz, peak joint velocity "
               f"{np.degrees(timed.peak_velocity.max()):.0f} deg/s, acceleration "
               f"{np.degrees(timed.peak_acceleration.max()):.0f} deg/s^2, "
-              f"{'within' if timed.within_limits else 'OUTSIDE'} the limits")
+              f"{'within' if timed.within_limits else 'OUTSIDE'} the limits", file=report)
         for r in timed.reasons:
             if r not in c.reasons:
-                print(f"  {r}")
+                print(f"  {r}", file=report)
         ok = c.ok and timed.ok
     else:
         ok = c.ok
-    print("wrote " + ", ".join(written))
+    print("wrote " + ", ".join(written), file=report)
     return 0 if ok else 1
 
 
@@ -326,6 +343,8 @@ def cmd_replay(args) -> int:
 def cmd_sweep(args) -> int:
     from jaxexo.sweep.spec import load_sweep, parse_bytes
 
+    if args.task_cpus is not None and args.task_cpus < 1:
+        raise ValueError(f"--task-cpus: must be >= 1, got {args.task_cpus}")
     budget = parse_bytes(args.memory_budget) if args.memory_budget else None
     sweep = load_sweep(args.sweep)      # validated (NumPy only) before JAX starts
     if args.backend == "local":
@@ -375,12 +394,14 @@ def cmd_reproduce(args) -> int:
     from jaxexo.train.devices import use_all_cpu_cores, use_compilation_cache
 
     use_all_cpu_cores()
-    use_compilation_cache()
     from jaxexo.evaluation.reproduce import check_reproduce_options, run_names, run_reproduce
 
     models = [m.strip() for m in args.models.split(",") if m.strip()]
+    if not models:
+        raise ValueError(f"--models: name at least one model, got {args.models!r}")
     run_names(models, args.variant)     # checks --models and --variant before anything trains
-    check_reproduce_options(args.out, args.n, args.results, args.population)
+    check_reproduce_options(args.out, args.n, args.results, args.population, args.seed)
+    use_compilation_cache()
     run_reproduce(args.out, models, n=args.n, seed=args.seed, include_default=args.default, results_dir=args.results,
                   variant=args.variant, population=args.population)
     print(f"wrote {args.out}/reproduce.md, reproduce.json and the run directories under {args.out}/runs")
@@ -390,6 +411,9 @@ def cmd_reproduce(args) -> int:
 def cmd_bench(args) -> int:
     from jaxexo.train.devices import use_all_cpu_cores
 
+    if not (math.isfinite(args.baseline_seconds) and args.baseline_seconds > 0):
+        raise ValueError(f"--baseline-seconds: a time budget must be a finite number of seconds > 0, "
+                         f"got {args.baseline_seconds:g}")
     use_all_cpu_cores()
     from jaxexo.benchmarks.run_all import run_all
 
@@ -425,7 +449,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--no-mixed", action="store_true", help="skip the all-obstacle-kinds comparison rows")
     b.set_defaults(func=cmd_bench_env)
     t = sub.add_parser("train", help="train a policy (TD(lambda)); writes a run directory")
-    t.add_argument("config", nargs="?", help="TOML config (default: the packaged default, configs/default.toml)")
+    t.add_argument("config", nargs="?", help="TOML config (default: the packaged default, configs/default.toml; "
+                                             "with --resume, the run's own config.toml)")
     t.add_argument("--out", required=True, help="run directory")
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--population", type=int, help="train K agents (seeds SEED..SEED+K-1) as one program and export the "
@@ -537,13 +562,21 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _warning_line(message, category, filename, lineno, file=None, line=None) -> None:
+    """A warning as one line ``jaxexo: warning: ...`` (not Python's source-line form)."""
+    print(f"jaxexo: warning: {message}", file=sys.stderr if file is None else file)
+
+
 def main(argv=None) -> int:
+    import warnings
+
     args = build_parser().parse_args(argv)
     from jaxexo.config import ConfigError
     from jaxexo.physics.geometry import GeometryError
     from jaxexo.storage.policy_file import PolicyFileError
     from jaxexo.storage.rundir import TrainingDiverged
 
+    shown, warnings.showwarning = warnings.showwarning, _warning_line
     try:
         return args.func(args)
     except (ConfigError, GeometryError, PolicyFileError, ValueError) as e:
@@ -557,6 +590,8 @@ def main(argv=None) -> int:
         # A write that failed (full disk, file-size limit, permissions): what was written before is intact.
         print(f"jaxexo: error: {e}", file=sys.stderr)
         return 1
+    finally:
+        warnings.showwarning = shown
 
 
 if __name__ == "__main__":

@@ -157,7 +157,7 @@ def obstacles(*obs):
          r"^env\.step_size: .*layout\.obstacles\[0\]\.height"),
         ({**MID, **obstacles({"kind": "rectangle", "width": 0.1, "height": 0.6})},
          r"^layout\.obstacles\[0\]\.height: .*cannot be cleared"),
-        ({**MID, **obstacles("base1", {"kind": "rectangle", "width": 0.1, "height": 0.7})},
+        ({"env": {**MID["env"], "max_z": 0.6}, **obstacles("base1", {"kind": "rectangle", "width": 0.1, "height": 0.55})},
          r"^layout\.obstacles\[1\]\.height: .*above env\.max_z"),
         ({"layout": {"step_length": [0.45, 0.7]}}, r"^layout\.step_length: the goal .* not beyond layout\.obstacles\[0\]"),
         ({"layout": {"start_shift": [0.0, 0.3]}}, r"^layout\.start_shift: with layout\.obstacles\[0\]"),
@@ -293,7 +293,7 @@ def test_profile_size_defaults_to_drawn_extents_and_ranges_are_metres():
     # Ranges are metres: a 1 m wide profile cannot fit between the start and the goal.
     with pytest.raises(ConfigError, match=r"layout\.(start_shift|step_length)"):
         config_from_dict(legacy_raw({"layout": {"obstacles": [{"kind": "profile", "points": PROFILE_POINTS,
-                                                    "width": [1, 1], "height": [1, 1]}]}}))
+                                                    "width": [1, 1], "height": [0.5, 0.5]}]}}))
 
 
 # --------------------------------------------------------------------------------------------

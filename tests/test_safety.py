@@ -246,14 +246,16 @@ def test_no_rl_trajectory_flagged_safe_fails_at_10x_density(trained_run, unseen)
 def test_cfftg_fallback_replaces_an_unsafe_rl_swing(trained_run):
     gen = TrajectoryGenerator.load(trained_run / "policy.npz")
     ob = Obstacle.named("triangle")
-    # Two samples: the RL swing is the straight line from start to goal, through the triangle; CFFTG's
-    # polynomial at two samples is that line too: neither is safe, and the result says so.
-    t2 = gen.generate(ob, pivot="between", n_points=2)
+    # Two samples (below generate's MIN_POINTS, so through finish): the RL swing is the straight line
+    # from start to goal, through the triangle; CFFTG's polynomial at two samples is that line too:
+    # neither is safe, and the result says so.
+    scene = gen.scene(ob, pivot="between")
+    line = np.array([[scene.start_y, 0.0], [scene.goal_y, 0.0]])
+    t2 = gen.finish([scene], [line], 2, 0.0, 1.0, "cfftg")[0]
     assert not t2.ok and any("CFFTG fallback failed too" in n for n in t2.notes)
-    rl2 = gen.generate(ob, pivot="between", n_points=2, fallback=None)
+    rl2 = gen.finish([scene], [line], 2, 0.0, 1.0, None)[0]
     assert not rl2.ok and rl2.method == "rl" and not rl2.checks.collision_free
     # An RL swing that skims the triangle's apex (1 cm above it) is replaced by CFFTG's plan.
-    scene = gen.scene(ob, pivot="between")
     raw = np.array([[0.0, 0.0], [0.05, 0.1], [0.25, 0.21], [0.45, 0.21], [0.65, 0.1], [0.70, 0.0]])
     rl = gen.finish([scene], [raw], 100, 0.0, 1.0, None)[0]
     assert not rl.ok and rl.checks.collision_free and not rl.checks.clearance_ok
@@ -268,4 +270,4 @@ def test_cfftg_fallback_replaces_an_unsafe_rl_swing(trained_run):
     np.testing.assert_array_equal(b[0].heel, t.heel)
     with pytest.raises(ValueError, match="fallback"):
         gen.generate(ob, fallback="polynomial")
-    assert gen.generate_batch([ob], n_points=2, fallback="none")[0].method == "rl"
+    assert gen.generate_batch([ob], fallback="none")[0].method == "rl"

@@ -44,6 +44,32 @@ def validate(cfg: Config) -> None:
         raise ConfigError("kinematics.hip_limits: lower limit must be below the upper one")
     if kin.knee_limits[0] >= kin.knee_limits[1]:
         raise ConfigError("kinematics.knee_limits: lower limit must be below the upper one")
+    key = (env, kin, lay)
+    if key not in _SCENES_OK:
+        _check_scene(cfg)
+        if len(_SCENES_OK) >= 4096:
+            _SCENES_OK.clear()
+        _SCENES_OK.add(key)
+    if env.shield and env.shield_clearance < env.min_clearance:
+        raise ConfigError(f"env.shield_clearance: {env.shield_clearance} m is below env.min_clearance = "
+                          f"{env.min_clearance} m; the shield must keep at least the margin that a safe swing needs")
+    if rew.safety_distance < env.min_clearance:
+        raise ConfigError(f"reward.safety_distance: {rew.safety_distance} m is below env.min_clearance = "
+                          f"{env.min_clearance} m; the safety term (eq 2.35) must pay the policy to keep the "
+                          "margin that a safe swing needs, not only to avoid contact")
+    if env.max_steps < rew.step_threshold:
+        raise ConfigError(f"env.max_steps: {env.max_steps} is below reward.step_threshold = {rew.step_threshold}")
+
+
+# (env, kinematics, layout) sections that passed _check_scene: its reach and room checks cost ~40 ms
+# and depend on these alone, so the configurations of a sweep that share them are checked once.
+_SCENES_OK: set = set()
+
+
+def _check_scene(cfg: Config) -> None:
+    """The obstacles and terrain against the step, the room between the feet, the ceiling and the
+    leg's reach (env, kinematics and layout only)."""
+    env, kin, lay = cfg.env, cfg.kinematics, cfg.layout
     need = max(len(o.unit_vertices()) for o in lay.obstacles)
     if env.max_vertices and env.max_vertices < need:
         raise ConfigError(f"env.max_vertices: {env.max_vertices} is fewer than the {need} outline vertices "
@@ -87,15 +113,6 @@ def validate(cfg: Config) -> None:
     goal_far = lay.start_shift[1] + lay.step_length[1] + env.goal_tolerance[0]
     if env.bounds_y[1] <= goal_far:
         raise ConfigError(f"env.bounds_y: the upper bound must lie beyond the goal region ({goal_far:.3f} m)")
-    if env.shield and env.shield_clearance < env.min_clearance:
-        raise ConfigError(f"env.shield_clearance: {env.shield_clearance} m is below env.min_clearance = "
-                          f"{env.min_clearance} m; the shield must keep at least the margin that a safe swing needs")
-    if rew.safety_distance < env.min_clearance:
-        raise ConfigError(f"reward.safety_distance: {rew.safety_distance} m is below env.min_clearance = "
-                          f"{env.min_clearance} m; the safety term (eq 2.35) must pay the policy to keep the "
-                          "margin that a safe swing needs, not only to avoid contact")
-    if env.max_steps < rew.step_threshold:
-        raise ConfigError(f"env.max_steps: {env.max_steps} is below reward.step_threshold = {rew.step_threshold}")
 
 
 def _check_terrain(cfg: Config) -> None:

@@ -14,6 +14,7 @@ from typing import Any
 from jaxexo.config.checks import ConfigError
 from jaxexo.config.consistency import validate
 from jaxexo.config.declarations import declared_fields
+from jaxexo.config.input_files import check_path_type, read_text_input
 from jaxexo.config.obstacles import default_obstacles
 from jaxexo.config.sections import SECTION_CLASSES, SECTIONS, Config
 
@@ -54,16 +55,10 @@ def config_from_dict(raw: dict) -> Config:
 
 
 def load_config(path: str | Path) -> Config:
-    path = Path(path)
-    try:
-        data = path.read_bytes()
-    except OSError as e:
-        raise ConfigError(f"{path}: cannot read config ({e.strerror})") from None
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError as e:
-        raise ConfigError(f"{path}: not UTF-8 text (byte {e.start}: {data[e.start:e.start + 1]!r}); "
-                          "TOML files are UTF-8") from None
+    """Read, parse and validate a TOML config file (a regular file of at most MAX_TEXT_BYTES,
+    jaxexo.config.input_files; UTF-8, a leading byte-order mark allowed)."""
+    path = check_path_type(path, "config")
+    text = read_text_input(path, "config")
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:

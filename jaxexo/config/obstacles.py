@@ -69,6 +69,14 @@ def named_spec(kind: str, weight: float = 1.0) -> ObstacleSpec:
     return ObstacleSpec(kind, (w, w), (h, h), weight, shape)
 
 
+# Width and height ranges: the one obstacle-size bound (jaxexo.physics.geometry), as for the generators.
+SIZE = {"width": dict(positive=True, hi=geometry.MAX_OBSTACLE_WIDTH),
+        "height": dict(positive=True, hi=geometry.MAX_OBSTACLE_HEIGHT)}
+# Placement ranges of the terrain (m): a start shift within a metre, a step of at most 2 m.
+MAX_SHIFT = 1.0
+MAX_STEP_LENGTH = 2.0
+
+
 def parse_obstacle(path: str, raw: Any) -> ObstacleSpec:
     if isinstance(raw, str):
         raw = {"kind": raw}
@@ -97,8 +105,8 @@ def parse_obstacle(path: str, raw: Any) -> ObstacleSpec:
         for k in ("width", "height"):
             if k not in raw:
                 raise ConfigError(f"{path}.{k}: required for kind = \"{kind}\" (a range [lo, hi] in m)")
-        width = _range(f"{path}.width", raw["width"], positive=True)
-        height = _range(f"{path}.height", raw["height"], positive=True)
+        width = _range(f"{path}.width", raw["width"], **SIZE["width"])
+        height = _range(f"{path}.height", raw["height"], **SIZE["height"])
         return ObstacleSpec(kind, width, height, weight, kind)
     if "points" not in raw:
         raise ConfigError(f"{path}.points: required for kind = \"profile\"")
@@ -110,8 +118,8 @@ def parse_obstacle(path: str, raw: Any) -> ObstacleSpec:
         ob = geometry.Obstacle.profile(points)
     except geometry.GeometryError as e:
         raise ConfigError(f"{path}.points: {e}") from None
-    width = _range(f"{path}.width", raw.get("width", [ob.width, ob.width]), positive=True)
-    height = _range(f"{path}.height", raw.get("height", [ob.height, ob.height]), positive=True)
+    width = _range(f"{path}.width", raw.get("width", [ob.width, ob.width]), **SIZE["width"])
+    height = _range(f"{path}.height", raw.get("height", [ob.height, ob.height]), **SIZE["height"])
     return ObstacleSpec(kind, width, height, weight, kind, points)
 
 
@@ -285,12 +293,12 @@ def parse_terrain(path: str, v: Any) -> "TerrainSpec | None":
         kw["weights"] = _vector(f"{path}.weights", kw["weights"], nonneg=True)
     if "pivot" in kw:
         kw["pivot"] = pivot_weights(f"{path}.pivot", kw["pivot"])
-    for k in ("start_shift", "step_length"):
+    for k, hi in (("start_shift", MAX_SHIFT), ("step_length", MAX_STEP_LENGTH)):
         if k in kw:
-            kw[k] = _range(f"{path}.{k}", kw[k], nonneg=True)
+            kw[k] = _range(f"{path}.{k}", kw[k], nonneg=True, hi=hi)
     for k in ("near_margin", "far_margin"):
         if k in kw:
-            kw[k] = _number(f"{path}.{k}", kw[k], positive=True)
+            kw[k] = _number(f"{path}.{k}", kw[k], positive=True, hi=MAX_SHIFT)
     try:
         return TerrainSpec(**kw, path=path)
     except TerrainError as e:

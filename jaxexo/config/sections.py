@@ -15,12 +15,13 @@ from typing import Any
 
 import numpy as np
 
-from jaxexo.config.checks import (below_one, boolean, choice, fraction, number, pivot_weights, range_,
+from jaxexo.config.checks import (ConfigError, below_one, boolean, choice, fraction, number, pivot_weights, range_,
                                   vector)
 from jaxexo.config.declarations import declare, declared_fields, spec_of
-from jaxexo.config.obstacles import (DEFAULT_TERRAIN, ObstacleSpec, cdf, default_obstacles, obstacle_params,
-                                     parse_obstacles, parse_terrain, terrain_params, write_terrain)
-from jaxexo.physics import geometry, outcome, rewards, terrain
+from jaxexo.config.obstacles import (DEFAULT_TERRAIN, MAX_SHIFT, MAX_STEP_LENGTH, ObstacleSpec, cdf,
+                                     default_obstacles, obstacle_params, parse_obstacles, parse_terrain,
+                                     terrain_params, write_terrain)
+from jaxexo.physics import dynamics, geometry, outcome, rewards, terrain
 
 OBS_MODES = ("thesis", "conditioned")
 OBS_PROFILES = ("bbox", "shape")
@@ -33,6 +34,14 @@ TARGETS = ("hard", "polyak")
 INT32_MAX = 2**31 - 1   # integers that reach JAX as int32 (or index a scan) stay below this
 MAX_CONTROL_RATE = 10_000.0   # Hz: a timed export's rate ([device] control_rate, jaxexo generate --rate)
 MAX_SWING_DURATION = 60.0     # s: one swing (about 1 s on today's exoskeletons), not a walk
+# Hz: the slowest rate of a timed export. A swing sampled more coarsely is not a control signal
+# (at 1e-9 Hz a 1 s swing became one period of 2e9 s).
+MIN_CONTROL_RATE = 10.0
+# Every physical field has a physical bound (docs/reliability.md). Lengths: two segments of at most
+# 1 m make a leg of at most MAX_LEG; heights, ceilings and hip heights stay within it.
+MAX_LEG = 2.0
+# Reward magnitudes and weights (dimensionless): far beyond any useful scale, below float32's reach.
+MAX_REWARD_SCALE = 1e6
 SECTIONS = ("env", "kinematics", "reward", "layout", "train", "device")
 
 def _normalized(name):
@@ -44,7 +53,7 @@ def _normalized(name):
 @dataclass(frozen=True)
 class EnvConfig:
     # m per action; about 30 steps for a 0.70 m step over 0.2 m
-    step_size: float = declare(0.03, number(positive=True), unit="m")
+    step_size: float = declare(0.03, number(positive=True, hi=0.1), unit="m")
     # step limit -> truncated; a leaf (EnvParams.max_steps_in_episode) and a static (episode budgets)
     max_steps: int = declare(100, number(positive=True, integer=True, hi=100_000), unit="steps",
                              role="static+leaf", param="max_steps_in_episode", dtype="int32")
@@ -64,20 +73,22 @@ class EnvConfig:
     shape_points: int = declare(geometry.DEFAULT_SHAPE_POINTS, number(positive=True, integer=True, hi=1024),
                                 unit="points", role="static")
     # goal box: |heel_y - goal_y| <= [0], heel_z <= [1]
-    goal_tolerance: tuple[float, float] = declare((0.04, 0.02), vector(2, positive=True), unit="m")
+    goal_tolerance: tuple[float, float] = declare((0.04, 0.02), vector(2, positive=True, hi=0.5), unit="m")
     # mid-goal centre height above the obstacle top
-    mid_goal_clearance: float = declare(0.045, number(nonneg=True), unit="m")
+    mid_goal_clearance: float = declare(0.045, number(nonneg=True, hi=0.5), unit="m")
     # half extents (y, z) of the mid-goal box
-    mid_goal_half_size: tuple[float, float] = declare((0.06, 0.02), vector(2, positive=True), unit="m")
+    mid_goal_half_size: tuple[float, float] = declare((0.06, 0.02), vector(2, positive=True, hi=0.5), unit="m")
     # max_z of eq 2.34 = obstacle top + this
-    max_height_margin: float = declare(0.20, number(nonneg=True), unit="m")
-    bounds_y: tuple[float, float] = declare((-0.30, 1.30), range_(), unit="m")  # the heel is kept inside
+    max_height_margin: float = declare(0.20, number(nonneg=True, hi=MAX_LEG), unit="m")
+    bounds_y: tuple[float, float] = declare((-0.30, 1.30), range_(lo=-10.0, hi=10.0), unit="m")  # the heel is kept inside
     # ceiling for the heel; the ground is z = 0
-    max_z: float = declare(0.80, number(positive=True), unit="m", param="max_z_world")
+    max_z: float = declare(0.80, number(positive=True, hi=MAX_LEG), unit="m", param="max_z_world")
     # The safe-swing definition (jaxexo.physics.swept): the foot's motion between samples
     # never comes closer than min_clearance to the obstacle, and the heel never moves backward by
     # more than backward_tolerance. The environment's success flag and the generators' ``ok`` use both.
-    min_clearance: float = declare(outcome.DEFAULT_MIN_CLEARANCE, number(nonneg=True), unit="m")
+    # At most dynamics.MAX_CLEARANCE (10 cm), the most a generator may be asked to keep.
+    min_clearance: float = declare(outcome.DEFAULT_MIN_CLEARANCE, number(nonneg=True, hi=dynamics.MAX_CLEARANCE),
+                                   unit="m")
     # At most 10 m: any value beyond env.bounds_y's span turns the check off, and the thesis configs
     # write 10 m for that.
     backward_tolerance: float = declare(outcome.DEFAULT_BACKWARD_TOLERANCE, number(nonneg=True, hi=10.0), unit="m")
@@ -100,8 +111,9 @@ class KinematicsConfig:
     thigh: float = declare(0.50, number(positive=True, hi=1.0), unit="m")
     shin: float = declare(0.50, number(positive=True, hi=1.0), unit="m")
     foot_length: float = declare(0.20, number(positive=True, hi=0.5), unit="m")   # heel-to-toe
-    hip_limits: tuple[float, float] = declare((-0.5236, 2.0071), range_(), unit="rad")     # -30 .. 115 deg
-    knee_limits: tuple[float, float] = declare((-1.7453, 0.0), range_(), unit="rad")       # -100 .. 0 deg
+    # Joint limits within one turn, [-pi, pi] rad: a hinge has no more.
+    hip_limits: tuple[float, float] = declare((-0.5236, 2.0071), range_(lo=-math.pi, hi=math.pi), unit="rad")  # -30 .. 115 deg
+    knee_limits: tuple[float, float] = declare((-1.7453, 0.0), range_(lo=-math.pi, hi=math.pi), unit="rad")    # -100 .. 0 deg
 
 
 @dataclass(frozen=True)
@@ -128,42 +140,44 @@ class DeviceConfig:
     # a swing never takes less (0: as fast as the limits allow); at most MAX_SWING_DURATION
     min_swing_duration: float = declare(0.0, number(nonneg=True, hi=MAX_SWING_DURATION), unit="s", role="setting")
     # default rate of timed exports (jaxexo generate --rate); at most MAX_CONTROL_RATE
-    control_rate: float = declare(100.0, number(positive=True, hi=MAX_CONTROL_RATE), unit="Hz", role="setting")
+    control_rate: float = declare(100.0, number(positive=True, lo=MIN_CONTROL_RATE, hi=MAX_CONTROL_RATE), unit="Hz",
+                                  role="setting")
 
 
 def _penalty(default):
-    """A penalty or reward magnitude of eq 2.29-2.52 (>= 0)."""
-    return declare(default, number(nonneg=True))
+    """A penalty or reward magnitude of eq 2.29-2.52 (>= 0, at most MAX_REWARD_SCALE)."""
+    return declare(default, number(nonneg=True, hi=MAX_REWARD_SCALE))
 
 
 @dataclass(frozen=True)
 class RewardConfig:
     # Weights alpha (eq 2.38) over TRAJECTORY_TERMS and beta (eq 2.52) over EXO_TERMS, normalised.
-    traj_weights: tuple[float, ...] = declare((0.0, 2.0, 0.5, 4.0, 0.5, 0.5, 1.0, 0.5), vector(8, nonneg=True),
+    traj_weights: tuple[float, ...] = declare((0.0, 2.0, 0.5, 4.0, 0.5, 0.5, 1.0, 0.5),
+                                              vector(8, nonneg=True, hi=MAX_REWARD_SCALE),
                                               to_param=_normalized("traj_weights"))
-    exo_weights: tuple[float, ...] = declare((1.0, 1.0, 2.0, 1.0), vector(4, nonneg=True),
+    exo_weights: tuple[float, ...] = declare((1.0, 1.0, 2.0, 1.0), vector(4, nonneg=True, hi=MAX_REWARD_SCALE),
                                              to_param=_normalized("exo_weights"))
-    step_threshold: float = declare(30.0, number(positive=True), unit="steps")   # n of eq 2.29
+    step_threshold: float = declare(30.0, number(positive=True, hi=100_000), unit="steps")   # n of eq 2.29
     collision_penalty: float = _penalty(10.0)      # c, eq 2.30
     backward_penalty: float = _penalty(1.0)        # y, eq 2.31
     goal_reward: float = _penalty(20.0)            # g, eq 2.32
     mid_goal_penalty: float = _penalty(1.0)        # m, eq 2.33
     max_height_penalty: float = _penalty(1.0)      # z, eq 2.34
     safety_penalty: float = _penalty(2.0)          # f, eq 2.35
-    safety_distance: float = declare(0.03, number(positive=True), unit="m")     # min_dt, eq 2.35
+    safety_distance: float = declare(0.03, number(positive=True, hi=0.5), unit="m")     # min_dt, eq 2.35
     z_monotone_penalty: float = _penalty(0.5)      # k, eq 2.36
     hlc_penalty: float = _penalty(1.0)             # o, eq 2.43
     # hlc, eq 2.43 (fraction of the leg length)
     hlc_threshold: float = declare(0.90, fraction(positive=True))
     leg_length_penalty: float = _penalty(1.0)      # l, eq 2.45
-    leg_length_tolerance: float = declare(0.0, number(nonneg=True), unit="m")   # n, eq 2.45
+    leg_length_tolerance: float = declare(0.0, number(nonneg=True, hi=MAX_LEG), unit="m")   # n, eq 2.45
     joint_limit_penalty: float = _penalty(4.0)     # j, eq 2.50
     hip_height_penalty: float = _penalty(1.0)      # n, eq 2.51
     # max_hz, eq 2.51 (the hip model never exceeds thigh+shin)
-    max_hip_z: float = declare(1.0, number(positive=True), unit="m")
+    max_hip_z: float = declare(1.0, number(positive=True, hi=MAX_LEG), unit="m")
     # Potential-based progress shaping per metre (not in the thesis; 0 = thesis reward), see
     # jaxexo.physics.rewards.shaping_reward for the choice of its discount.
-    progress_shaping: float = declare(5.0, number(nonneg=True), unit="1/m")
+    progress_shaping: float = declare(5.0, number(nonneg=True, hi=1e3), unit="1/m")
     shaping_discount: float = declare(1.0, fraction(positive=True))
     # The wearer's costs (not in the thesis, jaxexo.physics.rewards.wearer_terms; 0 = thesis reward):
     # per metre of heel height above the obstacle's top plus env.shield_clearance, per step (a low
@@ -184,12 +198,15 @@ class LayoutConfig:
     obstacles: tuple[ObstacleSpec, ...] = declare((), parse_obstacles, to_param=obstacle_params,
                                                  write=lambda obs: [o.to_toml() for o in obs])
     size_jitter: float = declare(0.0, below_one)   # relative +- jitter of every width and height
-    obstacle_offset: tuple[float, float] = declare((-0.03, 0.03), range_(), unit="m")  # added to the default centre
+    obstacle_offset: tuple[float, float] = declare((-0.03, 0.03), range_(lo=-MAX_SHIFT, hi=MAX_SHIFT),
+                                                   unit="m")  # added to the default centre
     # weights of PIVOT_CONDITIONS
     pivot: tuple[float, float, float] = declare((1.0, 1.0, 1.0), pivot_weights,
                                                 to_param=lambda v, cfg: {"pivot_cdf": cdf(v)})
-    start_shift: tuple[float, float] = declare((0.0, 0.05), range_(), unit="m")   # agent start moved towards the obstacle
-    step_length: tuple[float, float] = declare((0.65, 0.75), range_(positive=True), unit="m")  # goal = start + this
+    start_shift: tuple[float, float] = declare((0.0, 0.05), range_(lo=-MAX_SHIFT, hi=MAX_SHIFT),
+                                               unit="m")   # agent start moved towards the obstacle
+    step_length: tuple[float, float] = declare((0.65, 0.75), range_(positive=True, hi=MAX_STEP_LENGTH),
+                                               unit="m")  # goal = start + this
     # Procedural obstacle families (jaxexo.physics.terrain): false, or a table (parse_terrain) that
     # replaces the obstacle mixture, start_shift, step_length, obstacle_offset and pivot in reset.
     terrain: Any = declare(check=parse_terrain, to_param=terrain_params, write=write_terrain,
@@ -305,17 +322,35 @@ def with_population(cfg: Config, k, where: str = "train.population") -> Config:
     return dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, population=check(where, k)))
 
 
+# Seeds reach jax.random.PRNGKey (a population's members take seed .. seed + K - 1).
+MAX_SEED = INT32_MAX
+
+
+def check_seed(seed, where: str = "--seed", count: int = 1) -> int:
+    """``seed`` when it and the ``count - 1`` seeds after it lie in [0, MAX_SEED]; ConfigError naming
+    ``where`` otherwise."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+        raise ConfigError(f"{where}: expected an integer seed, got {seed!r}")
+    hi = MAX_SEED - (count - 1)
+    if not 0 <= seed <= hi:
+        more = f" (with {count - 1} more seeds after it)" if count > 1 else ""
+        raise ConfigError(f"{where}: a seed must be in [0, {hi}]{more}, got {seed}")
+    return int(seed)
+
+
+# (section, field) of every field declared static, in declaration order (read once: a sweep asks
+# for the static settings of each of its configurations).
+_STATIC_FIELDS = tuple((section, name) for section in SECTIONS
+                       for name, s in declared_fields(SECTION_CLASSES[section]) if s.static)
+
+
 def static_settings(cfg: Config) -> tuple:
     """Everything about a config that fixes the compiled trainer (and its greedy evaluation): the
     fields declared static, the resolved outline size, the number of obstacle kinds and the scan
     length. Configs with equal static settings differ only in pytree leaves (jaxexo.train.Hyperparams,
     EnvParams) and can be vmapped together as one program."""
-    out = []
-    for section in SECTIONS:
-        for name, s in declared_fields(SECTION_CLASSES[section]):
-            if s.static:
-                out.append((f"{section}.{name}", getattr(getattr(cfg, section), name)))
-    return tuple(out) + (("outline_vertices", cfg.outline_vertices), ("obstacle_kinds", len(cfg.layout.obstacles)),
+    out = tuple((f"{section}.{name}", getattr(getattr(cfg, section), name)) for section, name in _STATIC_FIELDS)
+    return out + (("outline_vertices", cfg.outline_vertices), ("obstacle_kinds", len(cfg.layout.obstacles)),
                          ("terrain_families", () if cfg.layout.terrain is None else cfg.layout.terrain.families),
                          ("num_updates", num_updates(cfg)))
 

@@ -12,7 +12,7 @@ import numpy as np
 
 from jaxexo.evaluation.metrics import BACKWARD_REPORT
 from jaxexo.evaluation.timing import BATCH
-from jaxexo.storage.atomic import atomic_write
+from jaxexo.storage.atomic import atomic_write, write_figure
 from jaxexo.storage.rundir import blocking_file
 
 
@@ -130,7 +130,7 @@ def plot_overlays(path: Path, trajs: dict, scenarios: list[dict], per_kind: int 
     axes[0, 0].legend(loc="upper left", fontsize=8)
     fig.suptitle("Heel paths over each obstacle (thesis Fig. 3.29); obstacles grey")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    write_figure(path, fig, dpi=110)
     plt.close(fig)
 
 
@@ -161,7 +161,7 @@ def plot_joint_profiles(path: Path, trajs: dict, scenarios: list[dict], per_kind
         ax.set_xlabel("swing phase (t / duration)")
     fig.suptitle("Swing-leg joint angles (thesis Fig. 3.11-3.28): hip flexion +, knee flexion -")
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    write_figure(path, fig, dpi=100)
     plt.close(fig)
 
 

@@ -258,15 +258,17 @@ def run_names(models=THESIS_MODELS, variant: str = "both") -> list[str]:
     return [m if v == "faithful" else f"{m}-learns" for m in models for v in kinds]
 
 
-def check_reproduce_options(out, n, results_dir=None, population=None) -> None:
+def check_reproduce_options(out, n, results_dir=None, population=None, seed: int = 0) -> None:
     """Every option of ``jaxexo reproduce`` that no model needs to be trained to judge, checked before
-    any work: --n, --population, and --out and --results naming folders (not files)."""
+    any work: --n, --population, --seed (with the population's seeds after it), and --out and
+    --results naming folders (not files)."""
+    from jaxexo.config import Config, check_seed, with_population
+
     if isinstance(n, bool) or not isinstance(n, int) or n < 1:
         raise ValueError(f"--n: test scenarios per model must be an integer >= 1, got {n!r}")
     if population is not None:
-        from jaxexo.config import Config, with_population
-
         with_population(Config(), population, "--population")
+    check_seed(seed, "--seed", REPRODUCE_POPULATION if population is None else population)
     for option, folder in (("--out", out), ("--results", results_dir)):
         if folder is None:
             continue

@@ -5,9 +5,12 @@ angles in degrees, velocities in deg/s (labelled)."""
 
 from __future__ import annotations
 
+import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from jaxexo.storage.atomic import atomic_write
 
 CM = 100.0
 
@@ -70,8 +73,9 @@ def animate_swing(swing, path: str | Path, fps: float = 25.0, hold_s: float = 0.
         return swing_leg, stance_leg, trace, cursor, label
 
     anim = FuncAnimation(fig, draw, frames=len(idx), blit=False)
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    anim.save(str(path), writer=PillowWriter(fps=fps), dpi=dpi)
-    plt.close(fig)
-    return path
+    # Pillow writes to a file name: a private one, then the one output rule (jaxexo.storage.atomic).
+    with tempfile.TemporaryDirectory(prefix="jaxexo-gif-") as tmp:
+        gif = Path(tmp) / "swing.gif"
+        anim.save(str(gif), writer=PillowWriter(fps=fps), dpi=dpi)
+        plt.close(fig)
+        return atomic_write(path, gif.read_bytes())

@@ -59,7 +59,7 @@ import numpy as np
 from jaxexo.physics import dynamics, geometry
 from jaxexo.physics.dynamics import DEFAULT_START_Y, DEFAULT_STEP_LENGTH
 from jaxexo.config import Config, load_config, scalar_params
-from jaxexo.inference.options import check_options, scene_for, scenes_for
+from jaxexo.inference.options import check_flag, check_options, scene_for, scenes_for
 from jaxexo.inference.policy_check import load_checked
 from jaxexo.inference.trajectory import (DEFAULT_DURATION, Trajectory, TrajectoryBatch, TrajectoryError, assemble,
                                          measure_paths)
@@ -277,6 +277,7 @@ class CFFTG:
         """One checked trajectory (metres, radians, seconds); ``strict`` raises TrajectoryError instead
         of returning one that fails a check; ``clearance`` (m) the margin to keep (``at_clearance``)."""
         n_points, duration = _check_options(n_points, duration)
+        strict = check_flag(strict, "strict")
         scene = self.scene(obstacle, pivot, pivot_y, start_y, step_length)
         traj = self.at_clearance(clearance).finish([scene], n_points, duration)[0]
         if strict and not traj.ok:
@@ -290,6 +291,7 @@ class CFFTG:
         """Trajectories for many scenarios, vectorised; every option is one value or one per obstacle
         (``clearance`` one value, as in ``generate``)."""
         n_points, duration = _check_options(n_points, duration)
+        strict = check_flag(strict, "strict")
         scenes = self.scenes(obstacles, pivot, pivot_y, start_y, step_length)
         batch = self.at_clearance(clearance).finish(scenes, n_points, duration)
         if strict and not batch.ok.all():

@@ -30,7 +30,7 @@ from jaxexo.inference import blas, smoothing as sm
 from jaxexo.inference.fallback import replace_failures
 from jaxexo.inference.finish import PathFinisher
 from jaxexo.inference.network import FoldedQNetwork, StepNetwork
-from jaxexo.inference.options import check_fallback, check_options, scene_for, scenes_for
+from jaxexo.inference.options import check_fallback, check_flag, check_options, scene_for, scenes_for
 from jaxexo.inference.policy_check import load_checked
 from jaxexo.inference.shield import ScalarShield
 from jaxexo.inference.shield_rows import ShieldRows, take_rows
@@ -290,6 +290,7 @@ class TrajectoryGenerator:
         n_points, smoothing, duration = check_options(n_points, self.smoothing if smoothing is None else smoothing,
                                                       duration)
         fallback = check_fallback(fallback)
+        strict, fast = check_flag(strict, "strict"), check_flag(fast, "fast")
         self = self.at_clearance(clearance)
         scene = self.scene(obstacle, pivot, pivot_y, start_y, step_length)
         raw, _ = self.rollout(scene, fast)
@@ -309,6 +310,7 @@ class TrajectoryGenerator:
         n_points, smoothing, duration = check_options(n_points, self.smoothing if smoothing is None else smoothing,
                                                       duration)
         fallback = check_fallback(fallback)
+        strict, fast = check_flag(strict, "strict"), check_flag(fast, "fast")
         self = self.at_clearance(clearance)
         scenes = self._scenes(obstacles, pivot, pivot_y, start_y, step_length)
         with blas.limited(self.batch_blas_threads):

@@ -18,6 +18,11 @@ from jaxexo.physics.dynamics import DEFAULT_PIVOT, DEFAULT_START_Y, DEFAULT_STEP
 # Bounds of the sizes taken from input, checked before anything is allocated.
 MAX_POINTS = 100_000                 # samples of one path
 MAX_DURATION = MAX_SWING_DURATION    # s: a swing, not a walk (jaxexo.config)
+# Fewer samples cannot follow a swing over an obstacle: with 2-10 the checks judged the path between
+# them with clearances and backward moves of metres.
+MIN_POINTS = 20
+# s: no joint drive swings a leg in less (below about 1e-4 s the CSV's time column read all zeros).
+MIN_DURATION = 0.01
 
 FALLBACKS = ("cfftg", None)
 
@@ -67,17 +72,38 @@ def scenes_for(make, obstacles, pivot, pivot_y, start_y, step_length) -> list[Sc
         per("step_length", step_length))]
 
 
+def check_points(n_points, name: str = "n_points") -> int:
+    """Samples of a path: an integer in [MIN_POINTS, MAX_POINTS]; ValueError naming ``name``."""
+    if isinstance(n_points, bool) or not isinstance(n_points, (int, np.integer)) or not (
+            MIN_POINTS <= n_points <= MAX_POINTS):
+        raise ValueError(f"{name} must be an integer in [{MIN_POINTS}, {MAX_POINTS}], got {n_points!r}")
+    return int(n_points)
+
+
+def check_duration(duration, name: str = "duration") -> float:
+    """A swing's duration in [MIN_DURATION, MAX_DURATION] s; ValueError naming ``name``."""
+    duration = geometry.finite_positive(name, duration, "s")
+    if duration > MAX_DURATION:
+        raise ValueError(f"{name} must be <= {MAX_DURATION:g} s (one swing), got {duration:g}")
+    if duration < MIN_DURATION:
+        raise ValueError(f"{name} must be >= {MIN_DURATION:g} s (no drive swings a leg faster), got {duration:g}")
+    return duration
+
+
+def check_flag(value, name: str) -> bool:
+    """A yes/no option: True or False only (``strict="yes"`` or ``fast="no"`` would be taken as true)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name}: expected True or False, got {value!r}")
+    return bool(value)
+
+
 def check_options(n_points, smoothing, duration):
     """(n_points, smoothing m^2, duration s) checked: ValueError naming the option."""
-    if isinstance(n_points, bool) or not isinstance(n_points, (int, np.integer)) or not 2 <= n_points <= MAX_POINTS:
-        raise ValueError(f"n_points must be an integer in [2, {MAX_POINTS}], got {n_points!r}")
+    n_points = check_points(n_points)
     smoothing = geometry.finite("smoothing", smoothing, "m^2")
     if smoothing < 0:
         raise ValueError(f"smoothing must be >= 0 (m^2), got {smoothing}")
-    duration = geometry.finite_positive("duration", duration, "s")
-    if duration > MAX_DURATION:
-        raise ValueError(f"duration must be <= {MAX_DURATION:g} s (one swing), got {duration:g}")
-    return int(n_points), smoothing, duration
+    return n_points, smoothing, check_duration(duration)
 
 
 def check_fallback(fallback):

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxexo.inference.trajectory import Trajectory
+from jaxexo.storage.atomic import write_figure
 
 CM = 100.0
 
@@ -63,7 +64,6 @@ def plot_trajectory(traj: Trajectory, path: str | Path | None = None, n_poses: i
     ax_k.set_title("Knee angles", fontsize=9)
     fig.tight_layout()
     if path is not None:
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path, dpi=110)
+        write_figure(path, fig, dpi=110)
         plt.close(fig)
     return fig

@@ -58,7 +58,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from jaxexo.config import MAX_CONTROL_RATE
+from jaxexo.config import MAX_CONTROL_RATE, MIN_CONTROL_RATE
 from jaxexo.physics import kinematics
 from jaxexo.physics.dynamics import Scene
 from jaxexo.inference.time_law import TimeLaw, pchip_eval, pchip_slopes, time_law, topp
@@ -242,6 +242,18 @@ def _finite_differences(q: np.ndarray, dt: float):
     return np.diff(q, axis=0) / dt, np.diff(q, n=2, axis=0) / (dt * dt)
 
 
+def check_rate(rate, name: str = "rate") -> float:
+    """A control rate (Hz) in [MIN_CONTROL_RATE, MAX_CONTROL_RATE], the bounds of [device]
+    control_rate; TypeError or ValueError naming ``name``."""
+    if isinstance(rate, (bool, np.bool_)) or not isinstance(rate, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{name}: expected a number in Hz, got {rate!r}")
+    rate = float(rate)
+    if not (math.isfinite(rate) and MIN_CONTROL_RATE <= rate <= MAX_CONTROL_RATE):
+        raise ValueError(f"{name}: control rate must be between {MIN_CONTROL_RATE:g} and {MAX_CONTROL_RATE:g} Hz, "
+                         f"got {rate:g}")
+    return rate
+
+
 def time_swings(trajs, config, rate: float | None = None, limits: DeviceLimits | None = None,
                 sp=None) -> list[TimedSwing]:
     """Time every swing of ``trajs`` (Trajectory objects or a TrajectoryBatch) with the device
@@ -265,12 +277,7 @@ def time_swings(trajs, config, rate: float | None = None, limits: DeviceLimits |
             raise TypeError(f"trajs[{i}]: expected a Trajectory (from generate), got {type(t).__name__}")
     if not isinstance(config, Config):
         raise TypeError(f"config: expected a jaxexo Config (the generator's .config), got {type(config).__name__}")
-    rate = config.device.control_rate if rate is None else rate
-    if isinstance(rate, (bool, np.bool_)) or not isinstance(rate, (int, float, np.integer, np.floating)):
-        raise TypeError(f"rate: expected a number in Hz, got {rate!r}")
-    rate = float(rate)
-    if not math.isfinite(rate) or not 0 < rate <= MAX_CONTROL_RATE:
-        raise ValueError(f"rate: control rate must be a finite number > 0 and <= {MAX_CONTROL_RATE:g} Hz, got {rate!r}")
+    rate = check_rate(config.device.control_rate if rate is None else rate)
     limits = DeviceLimits.from_config(config) if limits is None else limits
     if not isinstance(limits, DeviceLimits):
         raise ValueError(f"limits: expected a DeviceLimits, got {type(limits).__name__}")

@@ -449,11 +449,11 @@ def make_scene(obstacle: geometry.Obstacle, pivot: str | float = DEFAULT_PIVOT, 
     else:
         pk, py = -1, geometry.finite("pivot_y", pivot)
     if obstacle.left <= start_y + foot_length:
-        raise ValueError(f"obstacle: its near edge ({obstacle.left:.3f} m) must lie ahead of the toe at "
-                         f"the start ({start_y + foot_length:.3f} m)")
+        raise ValueError(f"obstacle: its near edge ({obstacle.left:.4g} m) must lie ahead of the toe at "
+                         f"the start ({start_y + foot_length:.4g} m)")
     if obstacle.right >= start_y + step_length:
-        raise ValueError(f"step_length: the goal ({start_y + step_length:.3f} m) must lie beyond the "
-                         f"obstacle's far edge ({obstacle.right:.3f} m)")
+        raise ValueError(f"step_length: the goal ({start_y + step_length:.4g} m) must lie beyond the "
+                         f"obstacle's far edge ({obstacle.right:.4g} m)")
     n_vertices = len(obstacle.unit_vertices)
     max_vertices = n_vertices if max_vertices is None else max_vertices
     if n_vertices > max_vertices:

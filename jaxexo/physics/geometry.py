@@ -49,6 +49,13 @@ THESIS_OBSTACLES = {
     "half_circle": ("half_ellipse", 0.20, 0.25),
 }
 SHAPES = ("rectangle", "triangle", "half_ellipse", "profile")
+# The one bound of an obstacle's size (m), for the config's [layout] and every generator's input: a
+# swing of a lower-limb exoskeleton (legs of at most 2 m, kinematics' bounds) steps over nothing
+# taller than 0.6 m or wider than 1 m. With the default legs the config's reach check refuses
+# obstacles above about 0.6 m anyway; far larger ones gave nonsense diagnostics (clearances of
+# hundreds of metres).
+MAX_OBSTACLE_HEIGHT = 0.6
+MAX_OBSTACLE_WIDTH = 1.0
 
 
 class GeometryError(ValueError):
@@ -220,12 +227,19 @@ def finite(name: str, value, unit: str = "metres") -> float:
     return v
 
 
-def finite_positive(name: str, value, unit: str = "metres") -> float:
-    """``finite`` and > 0."""
+def finite_positive(name: str, value, unit: str = "metres", hi: float | None = None) -> float:
+    """``finite`` and > 0 (and <= ``hi`` when given)."""
     v = finite(name, value, unit)
     if v <= 0.0:
-        raise GeometryError(f"{name} must be > 0 {unit}, got {v}")
+        raise GeometryError(f"{name} must be > 0 {unit}, got {v:.6g}")
+    if hi is not None and v > hi:
+        raise GeometryError(f"{name} must be <= {hi:g} {unit}, got {v:.6g}")
     return v
+
+
+def obstacle_size(name: str, value) -> float:
+    """An obstacle's width or height (m) within the one size bound (MAX_OBSTACLE_WIDTH, _HEIGHT)."""
+    return finite_positive(name, value, hi=MAX_OBSTACLE_HEIGHT if "height" in name else MAX_OBSTACLE_WIDTH)
 
 
 def unit_profile(shape: str) -> np.ndarray:
@@ -368,16 +382,16 @@ class Obstacle:
         if pts[-1, 1] > 0:
             pts = np.vstack([pts, [pts[-1, 0], 0.0]])
         y0, y1 = pts[0, 0], pts[-1, 0]
-        width = finite_positive("points (width)", y1 - y0)
-        height = finite_positive("points (height)", pts[:, 1].max())
+        width = obstacle_size("points (width)", y1 - y0)
+        height = obstacle_size("points (height)", pts[:, 1].max())
         center = 0.5 * (y0 + y1)
         unit = np.column_stack([(pts[:, 0] - center) / width, pts[:, 1] / height])
         return cls("profile", "profile", center, width, height, unit)
 
     @classmethod
     def _make(cls, kind, shape, center_y, width, height):
-        width = finite_positive("width", width)
-        height = finite_positive("height", height)
+        width = obstacle_size("width", width)
+        height = obstacle_size("height", height)
         center_y = finite("center_y", center_y)
         return cls(kind, shape, center_y, width, height, unit_profile(shape))
 

@@ -10,13 +10,24 @@ SIGKILL can leave a temporary file behind: ``stale_temps`` finds those for a run
 
 Symbolic links: ``atomic_write`` replaces a link at the target's name (the file it points to is never
 written); ``append_line`` opens with O_NOFOLLOW and refuses a link (SymlinkRefused, a ValueError).
+
+Special outputs (the one rule for every writer: exports, reports, figures, GIFs): ``-`` is standard
+output; an existing path that is not a regular file (a device such as /dev/null, a FIFO, a socket)
+or a link to a file descriptor (``/dev/stdout``, ``/proc/self/fd/1``) is written into directly, as
+GNU tools do. Write-by-rename would replace the node itself by a regular file (it once replaced a
+machine's /dev/null).
 """
 
 from __future__ import annotations
 
+import io
 import os
+import stat
+import sys
 import tempfile
 from pathlib import Path
+
+STDOUT = "-"   # an output named "-" is standard output
 
 
 def _temp_prefix(path: Path) -> str:
@@ -35,11 +46,74 @@ def _named(e: OSError, path: Path, what: str) -> OSError:
     return OSError(e.errno, f"could not {what} {path}: {e.strerror}") if e.filename is None else e
 
 
+def _fd_link(path: Path) -> bool:
+    """Whether ``path`` is a symbolic link whose chain passes through /dev or /proc (``/dev/stdout``,
+    ``/proc/self/fd/1``, a link to either): it names an open file descriptor, not a file to replace."""
+    p = str(path)
+    for _ in range(40):
+        if not os.path.islink(p):
+            return False
+        target = os.readlink(p)
+        p = os.path.normpath(os.path.join(os.path.dirname(os.path.abspath(p)), target))
+        if p.startswith(("/dev/", "/proc/")):
+            return True
+    return False
+
+
+def direct_output(path: str | Path) -> bool:
+    """Whether an output is written into directly rather than replaced (module note): ``-``, an
+    existing non-regular file other than a folder, or a link to a file descriptor."""
+    if str(path) == STDOUT:
+        return True
+    try:
+        mode = os.stat(path).st_mode       # follows links: a link to a FIFO is a FIFO
+    except OSError:
+        return False
+    return (not stat.S_ISREG(mode) and not stat.S_ISDIR(mode)) or _fd_link(Path(path))
+
+
+def writes_to_stdout(path: str | Path | None) -> bool:
+    """Whether an output goes to this process's standard output (``-``, /dev/stdout, a link to fd 1):
+    a command then prints its messages to standard error instead."""
+    if path is None:
+        return False
+    if str(path) == STDOUT:
+        return True
+    try:
+        a, b = os.stat(path), os.fstat(1)
+    except OSError:
+        return False
+    return (a.st_dev, a.st_ino) == (b.st_dev, b.st_ino) and direct_output(path)
+
+
+def _write_direct(path: str | Path, payload: bytes) -> None:
+    if str(path) == STDOUT:
+        out = sys.stdout.buffer
+        out.write(payload)
+        out.flush()
+        return
+    path = Path(path)
+    try:
+        regular = stat.S_ISREG(os.stat(path).st_mode)     # a descriptor link to a regular file
+        fd = os.open(path, os.O_WRONLY | (os.O_TRUNC if regular else 0) | getattr(os, "O_CLOEXEC", 0))
+    except OSError as e:
+        raise _named(e, path, "write") from None
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(payload)
+    except OSError as e:
+        raise _named(e, path, "write") from None
+
+
 def atomic_write(path: str | Path, data: bytes | str) -> Path:
-    """Write ``data`` (str: UTF-8) to ``path`` atomically, creating its directory; returns the path."""
+    """Write ``data`` (str: UTF-8) to ``path`` atomically, creating its directory; returns the path.
+    A special output (``-``, a device, a FIFO, a descriptor link) is written into directly."""
+    payload = data.encode("utf-8") if isinstance(data, str) else bytes(data)
+    if direct_output(path):
+        _write_direct(path, payload)
+        return Path(path)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    payload = data.encode("utf-8") if isinstance(data, str) else bytes(data)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=_temp_prefix(path), suffix=TEMP_SUFFIX)
     try:
         with os.fdopen(fd, "wb") as f:
@@ -87,3 +161,14 @@ def append_line(path: str | Path, text: str) -> None:
             os.fsync(f.fileno())
     except OSError as e:
         raise _named(e, path, "append to") from None
+
+
+def write_figure(path: str | Path, fig, dpi: int = 110) -> Path:
+    """A matplotlib figure written by ``atomic_write`` (so by the special-output rule too), in the
+    format its name's suffix gives (PNG for no suffix, ``-`` and special outputs of another suffix)."""
+    suffix = Path(str(path)).suffix.lstrip(".").lower()
+    supported = fig.canvas.get_supported_filetypes()
+    fmt = suffix if suffix in supported else ("png" if not suffix or direct_output(path) else suffix)
+    buf = io.BytesIO()
+    fig.savefig(buf, format=fmt, dpi=dpi)
+    return atomic_write(path, buf.getvalue())

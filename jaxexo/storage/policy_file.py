@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from jaxexo.config.input_files import MAX_POLICY_BYTES, InputFileError, check_path_type, read_input
 from jaxexo.storage.atomic import atomic_write
 
 FORMAT = "jaxexo-policy"
@@ -146,15 +147,21 @@ REQUIRED = {
 MAX_ARRAY_BYTES = 2**31
 
 
-def _check_archive(path: Path) -> None:
+def _check_archive(data: bytes, path: Path) -> None:
     """Before NumPy reads anything: the file is a zip archive (np.load would try a non-archive as a
-    pickle and suggest allow_pickle), and no member's header claims more data than the member holds
-    (a crafted shape of 10^12 would be allocated before the read fails)."""
-    if not zipfile.is_zipfile(path):
+    pickle and suggest allow_pickle), no member name appears twice (a reader would take one of
+    them), and no member's header claims more data than the member holds (a crafted shape of 10^12
+    would be allocated before the read fails)."""
+    if not zipfile.is_zipfile(io.BytesIO(data)):
         raise PolicyFileError(f"{path}: not a jaxexo policy: not a readable policy file (truncated or corrupt, "
                               "or not the zip archive of arrays that policy.npz is)")
     try:
-        with zipfile.ZipFile(path) as zf:
+        with zipfile.ZipFile(io.BytesIO(data)) as zf:
+            names = [info.filename for info in zf.infolist()]
+            twice = sorted({n for n in names if names.count(n) > 1})
+            if twice:
+                raise PolicyFileError(f"{path}: the archive holds the member {twice[0]!r} more than once; not a "
+                                      "policy that jaxexo wrote (it writes each array once)")
             for info in zf.infolist():
                 with zf.open(info) as f:
                     version = np.lib.format.read_magic(f)
@@ -216,12 +223,14 @@ def policy_config(meta: dict, path):
 
 def load_policy(path: str | Path) -> QPolicy:
     """Read and check policy.npz; raises PolicyFileError saying what is wrong."""
-    path = Path(path)
-    if not path.is_file():
-        raise PolicyFileError(f"{path}: no such policy file")
-    _check_archive(path)
+    path = check_path_type(path, "path")
     try:
-        z = np.load(path, allow_pickle=False)
+        data = read_input(path, "policy file", MAX_POLICY_BYTES)
+    except InputFileError as e:
+        raise PolicyFileError(str(e)) from None
+    _check_archive(data, path)
+    try:
+        z = np.load(io.BytesIO(data), allow_pickle=False)
         if not isinstance(z, np.lib.npyio.NpzFile):
             raise PolicyFileError(f"{path}: a single array, not a policy archive (.npz)")
         with z:

@@ -52,13 +52,55 @@ def describe(names: list[str], limit: int = 6) -> str:
     return shown + (f" and {len(names) - limit} more" if len(names) > limit else "")
 
 
+def _missing_folders(directory: Path) -> list[Path]:
+    """``directory`` and its ancestors that do not exist yet, innermost first."""
+    out, q = [], directory
+    while not q.exists() and q != q.parent:
+        out.append(q)
+        q = q.parent
+    return out
+
+
+def _undo(made: list[Path], scratch: tuple[str, ...]) -> None:
+    """Remove a run directory this process made when it holds nothing but its lock and ``scratch``
+    files: no half-made folder is left to refuse the next attempt. Anything else in it is kept."""
+    directory = made[0]
+    names = contents(directory)
+    if not set(names) <= set(scratch):
+        return
+    for name in [*names, LOCK_NAME]:
+        p = directory / name
+        if p.is_file() and not p.is_symlink():
+            p.unlink()
+    for d in made:
+        try:
+            d.rmdir()
+        except OSError:
+            return
+
+
 @contextlib.contextmanager
-def run_lock(directory: str | Path, what: str, create: bool = True):
+def run_lock(directory: str | Path, what: str, create: bool = True, scratch: tuple[str, ...] = ()):
     """Hold the exclusive lock of ``directory`` while the block runs. ``create``: make the directory if
-    it is absent (a new run); else (a resume) its absence is an error."""
+    it is absent (a new run); else (a resume) its absence is an error. When this call made the
+    directory and the block refuses its input (a ValueError: a bad seed, config or checkpoint), the
+    directory is removed again if it holds only ``scratch`` files. A failed write or an interrupt
+    keeps it (docs/reliability.md: a run stopped before its first checkpoint is resumed)."""
+    directory = Path(directory)
+    made = _missing_folders(directory) if create else []
+    try:
+        with _locked(directory, what, create):
+            yield directory
+    except ValueError:
+        if made:
+            _undo(made, scratch)
+        raise
+
+
+@contextlib.contextmanager
+def _locked(directory: Path, what: str, create: bool):
     import fcntl
 
-    directory = Path(directory)
     if directory.exists() and not directory.is_dir():
         raise RunDirError(f"--out: {directory} is a file, not a directory")
     if not create and not directory.is_dir():

@@ -23,16 +23,12 @@ import numpy as np
 
 from jaxexo.config import ConfigError
 from jaxexo.config.toml_io import config_to_toml
-from jaxexo.storage.atomic import atomic_write
+from jaxexo.storage.atomic import atomic_write, write_figure
 
 
 def _save(fig, path) -> None:
     """A figure as PNG, written atomically (a link in its place is replaced, never written through)."""
-    import io
-
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    atomic_write(path, buf.getvalue())
+    write_figure(path, fig, dpi=110)
 from jaxexo.sweep import results as R
 from jaxexo.sweep.spec import Sweep, format_value
 

@@ -34,6 +34,7 @@ seed) pair.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import hashlib
 import itertools
 import json
@@ -46,12 +47,15 @@ from typing import Any
 
 import numpy as np
 
-from jaxexo.config import Config, ConfigError, config_from_dict, static_settings
+from jaxexo.config import Config, ConfigError, check_seed, config_from_dict, declared_fields, static_settings, validate
+from jaxexo.config.input_files import InputFileError, read_text_input
 
 SECTIONS = ("env", "kinematics", "reward", "layout", "train")
 SWEEP_KEYS = ("base", "seeds", "samples", "sample_seed", "grid", "random", "heatmap", "top", "chunk_size",
               "memory_budget")
 RANDOM_KEYS = ("low", "high", "log", "choices")
+# Configurations of one sweep (grid points x samples), counted from the axes before any is built.
+MAX_CONFIGURATIONS = 10_000
 _AXIS = re.compile(r"([a-z_]+)\.([a-z_0-9]+)(?:\[(\d+)\])?")
 
 
@@ -140,9 +144,9 @@ def format_value(v: Any) -> str:
 
 def _read_toml(path: Path, what: str) -> dict:
     try:
-        text = path.read_text()
-    except OSError as e:
-        raise ConfigError(f"{what}: cannot read {path} ({e.strerror})") from None
+        text = read_text_input(path, "sweep file" if what == "sweep file" else "config")
+    except InputFileError as e:
+        raise ConfigError(f"{what}: {e}") from None
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
@@ -194,6 +198,7 @@ def sweep_from_dict(raw: dict) -> Sweep:
     axes = _axes(table, base)
     seeds = _seeds(table.get("seeds", 1))
     samples = _samples(table, axes)
+    _check_size(axes, samples)
     sample_seed = _int("sweep.sample_seed", table.get("sample_seed", 0), minimum=0)
     members = _expand(raw, base, axes, samples, sample_seed)
     if any(m.config.train.population != 1 for m in members):
@@ -236,10 +241,12 @@ def _int(where: str, v: Any, minimum: int) -> int:
 
 def _seeds(v: Any) -> tuple[int, ...]:
     if isinstance(v, int) and not isinstance(v, bool):
-        return tuple(range(_int("sweep.seeds", v, minimum=1)))
+        n = _int("sweep.seeds", v, minimum=1)
+        check_seed(0, "sweep.seeds", n)
+        return tuple(range(n))
     if not isinstance(v, list) or not v:
         raise ConfigError(f"sweep.seeds: expected a count or a non-empty list of seeds, got {v!r}")
-    seeds = tuple(_int(f"sweep.seeds[{i}]", s, minimum=0) for i, s in enumerate(v))
+    seeds = tuple(check_seed(_int(f"sweep.seeds[{i}]", s, minimum=0), f"sweep.seeds[{i}]") for i, s in enumerate(v))
     if len(set(seeds)) != len(seeds):
         raise ConfigError(f"sweep.seeds: seeds repeat: {list(seeds)}")
     return seeds
@@ -300,6 +307,13 @@ def _parse_axis(key: Any, kind: str, spec: Any, base: Config) -> Axis:
             raise ConfigError(f"{where}: expected a list of values, got {spec!r}")
         if not spec:
             raise ConfigError(f"{where}: empty grid (give at least one value)")
+        seen: dict = {}
+        for i, v in enumerate(spec):
+            k = _value_key(v)
+            if k in seen:
+                raise ConfigError(f"{where}: the value {format_value(v)} is listed twice (values {seen[k]} and {i}); "
+                                  "each configuration is trained once, list each value once")
+            seen[k] = i
         return Axis(key, section, name, index, kind, values=tuple(spec))
     if not isinstance(spec, dict):
         raise ConfigError(f"{where}: expected a table {{ low = ..., high = ..., log = false }} or {{ choices = [...] }}, "
@@ -332,6 +346,26 @@ def _parse_axis(key: Any, kind: str, spec: Any, base: Config) -> Axis:
     if integer and not (float(low).is_integer() and float(high).is_integer()):
         raise ConfigError(f"{where}: {section}.{name} is an integer field; low and high must be integers")
     return Axis(key, section, name, index, kind, low=float(low), high=float(high), log=log, integer=integer)
+
+
+def _value_key(v: Any):
+    """A hashable key under which equal axis values (1e-3 and 0.001, 1 and 1.0) coincide."""
+    if isinstance(v, (int, float)) and not isinstance(v, bool):
+        return ("number", float(v))
+    return ("value", json.dumps(v, sort_keys=True, default=repr))
+
+
+def _check_size(axes, samples: int) -> None:
+    """Refuse a sweep of more than MAX_CONFIGURATIONS configurations, counted from its axes before
+    any is built (a grid of 1000 x 1000 values was checked for minutes without a word)."""
+    sizes = [len(a.values) for a in axes if a.kind == "grid"]
+    if any(a.kind == "random" for a in axes):
+        sizes.append(samples)
+    n = math.prod(sizes)
+    if n > MAX_CONFIGURATIONS:
+        shape = " x ".join(f"{k:,}" for k in sizes)
+        raise ConfigError(f"sweep.grid: {n:,} configurations ({shape}), more than the {MAX_CONFIGURATIONS:,} a "
+                          "sweep may have; split it into several sweeps")
 
 
 def _axes(table: dict, base: Config) -> tuple[Axis, ...]:
@@ -370,26 +404,47 @@ def _draw(axis: Axis, rng: np.random.Generator):
     return float(rng.uniform(axis.low, axis.high))
 
 
-def _apply(raw: dict, base: Config, values: dict, axes) -> dict:
-    out = copy.deepcopy(raw)
-    for a in axes:
-        sec = out.setdefault(a.section, {})
-        if a.index is None:
-            sec[a.field] = copy.deepcopy(values[a.path])
-        else:
-            vec = sec.get(a.field)
-            if not (isinstance(vec, list) and len(vec) == len(getattr(getattr(base, a.section), a.field))
-                    and all(isinstance(x, (int, float)) for x in vec)):
-                vec = list(getattr(getattr(base, a.section), a.field))
-            vec[a.index] = values[a.path]
-            sec[a.field] = vec
-    return out
+class _Builder:
+    """Member configs built from the base config: each axis value is parsed once by its field's
+    declared check (the same check a config file's value goes through; fields are parsed
+    independently, so replacing one in the parsed base equals parsing the edited table), and the
+    whole is cross-checked by ``validate``, whose costly scene checks run once per distinct scene
+    (jaxexo.config.consistency). The cost of a member is then a few dataclass replacements."""
+
+    def __init__(self, base: Config, axes):
+        self.base, self.axes = base, axes
+        self.fields = {}
+        for a in axes:
+            self.fields.setdefault(a.section, {}).setdefault(a.field, []).append(a)
+        self.checks = {s: dict(declared_fields(type(getattr(base, s)))) for s in self.fields}
+        self.parsed: dict = {}
+
+    def __call__(self, values: dict) -> Config:
+        sections = {}
+        for section, by_field in self.fields.items():
+            obj, changes = getattr(self.base, section), {}
+            for name, axes in by_field.items():
+                if axes[0].index is None:
+                    v = values[axes[0].path]
+                else:
+                    v = list(getattr(obj, name))
+                    for a in axes:
+                        v[a.index] = values[a.path]
+                key = (section, name, _value_key(v))
+                if key not in self.parsed:
+                    self.parsed[key] = self.checks[section][name].check(f"{section}.{name}", copy.deepcopy(v))
+                changes[name] = self.parsed[key]
+            sections[section] = dataclasses.replace(obj, **changes)
+        cfg = dataclasses.replace(self.base, **sections)
+        validate(cfg)
+        return cfg
 
 
 def _expand(raw: dict, base: Config, axes, samples: int, sample_seed: int) -> tuple[Member, ...]:
     grid = [a for a in axes if a.kind == "grid"]
     rand = [a for a in axes if a.kind == "random"]
     rng = np.random.default_rng(sample_seed)
+    build = _Builder(base, axes)
     members = []
     for combo in itertools.product(*(a.values for a in grid)):
         for _ in range(samples if rand else 1):
@@ -397,7 +452,7 @@ def _expand(raw: dict, base: Config, axes, samples: int, sample_seed: int) -> tu
             values.update((a.path, _draw(a, rng)) for a in rand)
             values = {a.path: values[a.path] for a in axes}   # in the order written
             try:
-                cfg = config_from_dict(_apply(raw, base, values, axes))
+                cfg = build(values)
             except ConfigError as e:
                 first = next((a for a in axes if str(e).startswith(f"{a.section}.{a.field}")), axes[0])
                 raise ConfigError(f"{first.where}: configuration {len(members)} "

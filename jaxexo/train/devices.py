@@ -38,6 +38,22 @@ CACHE_ENV = "JAXEXO_COMPILATION_CACHE"
 CACHE_MAX_BYTES = 1 << 30
 
 
+def _cache_folder_problem(path: str) -> str | None:
+    """Why ``path`` cannot be the cache folder, or None. JAX writes its files into it: never through a
+    symbolic link jaxexo did not make, at any component the user named below ``$HOME`` or the
+    cache root (a link higher up, such as /home -> /data/home, is the machine's own layout); and a
+    file where a folder is needed is said so."""
+    home = os.path.expanduser("~")
+    q = path
+    while q != os.path.dirname(q):
+        if os.path.islink(q) and not os.path.commonpath([home, q]) == q:
+            return f"{q} is a symbolic link; jaxexo writes nothing through a link it did not make"
+        if os.path.exists(q) and not os.path.isdir(q):
+            return f"{q} is a file, not a folder (for {path})"
+        q = os.path.dirname(q)
+    return None
+
+
 def use_compilation_cache() -> str | None:
     """Keep compiled programs on disk (JAX's persistent compilation cache), so that a later run with
     the same static settings (any seed, any pytree-leaf hyperparameter: learning rate, gamma, reward
@@ -58,17 +74,15 @@ def use_compilation_cache() -> str | None:
         return jax.config.jax_compilation_cache_dir
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
     path = os.path.abspath(os.path.expanduser(setting or os.path.join(base, "jaxexo", "xla")))
-    if os.path.islink(path):
-        # JAX writes its files into this folder: never through a link jaxexo did not make.
-        warnings.warn(f"{CACHE_ENV}: {path} is a symbolic link; jaxexo writes nothing through a link it did not "
-                      f"make, so every program is compiled (point {CACHE_ENV} at a real folder, or set it to off)",
-                      stacklevel=2)
-        return None
-    try:
-        os.makedirs(path, exist_ok=True)
-    except OSError as e:
-        warnings.warn(f"{CACHE_ENV}: cannot use {path} as the compilation cache ({e.strerror}); compiling "
-                      f"every program (set {CACHE_ENV}=off to silence this)", stacklevel=2)
+    problem = _cache_folder_problem(path)
+    if problem is None:
+        try:
+            os.makedirs(path, exist_ok=True)
+        except OSError as e:
+            problem = f"cannot use {path} as the compilation cache ({e.strerror})"
+    if problem is not None:
+        warnings.warn(f"{CACHE_ENV}: {problem}; compiling every program (point {CACHE_ENV} at a real folder, or "
+                      "set it to off)", stacklevel=2)
         return None
     jax.config.update("jax_compilation_cache_dir", path)
     if jax.config.jax_compilation_cache_max_size < 0:

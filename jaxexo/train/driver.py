@@ -47,7 +47,7 @@ import jax
 import numpy as np
 from flax import serialization
 
-from jaxexo.config import Config, ConfigError
+from jaxexo.config import Config, ConfigError, check_seed
 from jaxexo.config.toml_io import config_to_toml
 from jaxexo.storage.atomic import append_line, atomic_write
 from jaxexo.storage.checkpoint import CheckpointError, pack_checkpoint
@@ -62,7 +62,8 @@ def run_training(cfg: Config, out: str | Path, seed: int = 0, resume: bool = Fal
     """Train, write the run directory, and return eval.json's content. Holds the directory's lock
     throughout; raises TrainingDiverged (after writing what can be trusted) if the run diverged."""
     out = Path(out)
-    with run_lock(out, "train", create=not resume):
+    check_seed(seed, "--seed", cfg.train.population)   # before anything is made (PRNGKey overflows past it)
+    with run_lock(out, "train", create=not resume, scratch=("config.toml",)):
         if cfg.train.population > 1:
             # K agents as one compiled program, the best on validation exported (jaxexo.train.population).
             from jaxexo.train.population import run_population
@@ -111,16 +112,7 @@ def _run_locked(cfg: Config, out: Path, seed: int, resume: bool, progress: bool,
         best.update(score=state_book["best_score"], chunk=state_book["best_chunk"])
         chunks_done = state_book["chunks_done"]
         wall_before = run_files.resumed_clock(ckpt, book, chunks_done, total_chunks)
-        try:
-            lines = metrics_path.read_text(encoding="utf-8").splitlines() if metrics_path.exists() else []
-        except UnicodeDecodeError as e:
-            raise ConfigError(f"--resume: {metrics_path} is damaged (not UTF-8 text at byte {e.start}); it cannot "
-                              "be rebuilt, start a new run") from None
-        try:
-            rows = [json.loads(x) for x in lines[:chunks_done]]
-        except ValueError:
-            raise ConfigError(f"--resume: {metrics_path} is damaged within the checkpoint's {chunks_done} "
-                              "chunk(s); it cannot be rebuilt, start a new run") from None
+        rows = run_files.read_metrics_rows(metrics_path, chunks_done)
         # Lines written after the checkpoint are recomputed identically: drop them (a torn last line too).
         atomic_write(metrics_path, "".join(json.dumps(r) + "\n" for r in rows))
     # The state laid out as the chunks return it, so that every chunk calls one compiled program

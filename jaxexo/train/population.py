@@ -43,7 +43,7 @@ from flax import serialization
 
 from jaxexo.config import Config, ConfigError
 from jaxexo.config.toml_io import config_to_toml
-from jaxexo.storage.atomic import append_line, atomic_write
+from jaxexo.storage.atomic import append_line, atomic_write, write_figure
 from jaxexo.storage.checkpoint import CheckpointError, pack_checkpoint
 from jaxexo.storage.rundir import TrainingDiverged
 from jaxexo.train.lanes import LANES, over_lanes, padded_agents
@@ -135,8 +135,6 @@ def _member_state(ts, i: int):
 def plot_population_curve(path: Path, rows: list[dict], exported: int | None) -> None:
     """Every member's training success and validation success against its episodes; the exported
     member drawn bold."""
-    import io
-
     import matplotlib
 
     matplotlib.use("Agg")
@@ -160,10 +158,8 @@ def plot_population_curve(path: Path, rows: list[dict], exported: int | None) ->
         a.grid(alpha=0.3)
     a2.legend(loc="lower right", fontsize=7, ncol=2)
     fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
+    write_figure(path, fig, dpi=110)
     plt.close(fig)
-    atomic_write(path, buf.getvalue())
 
 
 def choose(best_score: np.ndarray, best_chunk: np.ndarray, diverged: np.ndarray) -> int | None:
@@ -223,12 +219,7 @@ def run_population(cfg: Config, out: Path, seed: int, resume: bool, progress: bo
         diverged = np.array(members["diverged"], np.int64)
         chunks_done = raw["book"]["chunks_done"]
         wall_before = F.resumed_clock(ckpt, book_path, chunks_done, total_chunks)
-        try:
-            lines = metrics_path.read_text(encoding="utf-8").splitlines() if metrics_path.exists() else []
-            rows = [json.loads(x) for x in lines[:chunks_done]]
-        except (UnicodeDecodeError, ValueError):
-            raise ConfigError(f"--resume: {metrics_path} is damaged within the checkpoint's {chunks_done} "
-                              "chunk(s); it cannot be rebuilt, start a new run") from None
+        rows = F.read_metrics_rows(metrics_path, chunks_done)
         atomic_write(metrics_path, "".join(json.dumps(r) + "\n" for r in rows))
 
     bar = None

@@ -14,10 +14,11 @@ import numpy as np
 from flax import serialization
 
 from jaxexo.config import Config, ConfigError, config_from_dict, load_config
+from jaxexo.config.input_files import MAX_CHECKPOINT_BYTES, MAX_LOG_BYTES, InputFileError, read_input
 from jaxexo.config.toml_io import config_to_toml
 from jaxexo.env.exo_step import LENGTH_SCALE, THESIS_OBS_CENTER
 from jaxexo.physics import dynamics
-from jaxexo.storage.atomic import atomic_write, stale_temps
+from jaxexo.storage.atomic import atomic_write, stale_temps, write_figure
 from jaxexo.storage.checkpoint import CheckpointError, unpack_checkpoint
 from jaxexo.storage.policy_file import save_policy
 from jaxexo.storage.rundir import RunDirError, contents, describe
@@ -105,12 +106,8 @@ def plot_training_curve(path: Path, rows: list[dict]) -> None:
     a2.legend(loc="lower right")
     a2.grid(alpha=0.3)
     fig.tight_layout()
-    import io
-
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
+    write_figure(path, fig, dpi=110)
     plt.close(fig)
-    atomic_write(path, buf.getvalue())
 
 
 def tree_mismatch(template, loaded, where: str = "") -> str | None:
@@ -138,13 +135,33 @@ def tree_mismatch(template, loaded, where: str = "") -> str | None:
 BOOK_FIELDS = {"seed": int, "chunks_done": int, "best_score": float, "best_chunk": int, "devices": int}
 
 
+def read_metrics_rows(metrics_path: Path, chunks_done: int) -> list[dict]:
+    """The rows of a run's metrics.jsonl up to its checkpoint's ``chunks_done`` (later lines, a torn
+    last line among them, are recomputed by the resumed run). ConfigError naming the file when it is
+    damaged within those rows, or not a regular file (a symbolic link in its place is named)."""
+    if not metrics_path.exists() and not metrics_path.is_symlink():
+        return []
+    try:
+        data = read_input(metrics_path, "metrics log", MAX_LOG_BYTES, follow_links=False)
+    except InputFileError as e:
+        raise ConfigError(f"--resume: {e}; it cannot be rebuilt, start a new run") from None
+    try:
+        return [json.loads(x) for x in data.decode("utf-8").splitlines()[:chunks_done]]
+    except UnicodeDecodeError as e:
+        raise ConfigError(f"--resume: {metrics_path} is damaged (not UTF-8 text at byte {e.start}); it cannot "
+                          "be rebuilt, start a new run") from None
+    except ValueError:
+        raise ConfigError(f"--resume: {metrics_path} is damaged within the checkpoint's {chunks_done} "
+                          "chunk(s); it cannot be rebuilt, start a new run") from None
+
+
 def read_checkpoint(path: Path) -> dict:
     """The verified checkpoint: its checksum (jaxexo.storage.checkpoint), then its msgpack content;
     CheckpointError naming the file otherwise (never a bare msgpack or flax traceback)."""
     try:
-        data = path.read_bytes()
-    except OSError as e:
-        raise CheckpointError(f"{path}: cannot read the checkpoint ({e.strerror})") from None
+        data = read_input(path, "checkpoint", MAX_CHECKPOINT_BYTES, follow_links=False)
+    except InputFileError as e:
+        raise CheckpointError(str(e)) from None
     payload = unpack_checkpoint(data, path)
     try:
         raw = serialization.msgpack_restore(payload)
@@ -203,17 +220,14 @@ def prepare_dir(out: Path, cfg: Config, seed: int, resume: bool):
                 raise ConfigError(f"--resume: {out} has no {CHECKPOINT} but {done}; its checkpoint was deleted, "
                                   "so the run cannot be continued: start a new run in another directory")
             if "config.toml" in present and set(present) <= BEFORE_FIRST_CHECKPOINT:
-                if load_config(cfg_path) != cfg:
-                    raise ConfigError(f"--resume: the config differs from the one in {cfg_path}; resume with that config")
+                _check_same_config(load_config(cfg_path), cfg, cfg_path)
                 return None    # stopped before its first checkpoint: nothing to keep, start again
             raise ConfigError(f"--resume: {out} has no checkpoint to resume from (no {CHECKPOINT}"
                               + (f"; it holds {describe(present)})" if present else "; it is empty)"))
         if not cfg_path.exists():
             raise ConfigError(f"--resume: {out} has {CHECKPOINT} but no config.toml (the run's resolved config, "
                               f"which resume checks the config against); put it back, or start a new run elsewhere")
-        saved = load_config(cfg_path)
-        if saved != cfg:
-            raise ConfigError(f"--resume: the config differs from the one in {cfg_path}; resume with that config")
+        _check_same_config(load_config(cfg_path), cfg, cfg_path)
         raw = read_checkpoint(ckpt)
         started = raw.get("config_toml")
         if isinstance(started, bytes):
@@ -226,9 +240,10 @@ def prepare_dir(out: Path, cfg: Config, seed: int, resume: bool):
             except (tomllib.TOMLDecodeError, ConfigError) as e:
                 raise CheckpointError(f"{ckpt}: its config cannot be read ({e})") from None
             if first != cfg:
-                raise ConfigError(f"--resume: {_first_difference(first, cfg)} differs from the value the run in {out} "
-                                  f"started with (its checkpoint records the config); the training state depends on "
-                                  f"it: resume with the run's config, or start a new run")
+                name, given, run = _first_difference(first, cfg)
+                raise ConfigError(f"--resume: {name} differs from the value the run in {out} started with (given "
+                                  f"{given}, the run started with {run}; its checkpoint records the config); the "
+                                  "training state depends on it: resume with the run's config, or start a new run")
         if raw["book"]["seed"] != seed:
             raise ConfigError(f"--resume: the run used --seed {raw['book']['seed']}, not {seed}")
         return raw
@@ -258,13 +273,27 @@ def _chunks_recorded(out: Path) -> str:
     return f"metrics.jsonl records {rows} finished chunks" if rows > 1 else ""
 
 
-def _first_difference(a: Config, b: Config) -> str:
-    """The first field (``section.name``) whose value differs between two configs."""
+def _first_difference(a: Config, b: Config) -> tuple[str, str, str]:
+    """The first field whose value differs between the run's config ``a`` and the given ``b``:
+    (``section.name``, the given value, the run's value)."""
     import dataclasses
 
     for section in ("env", "kinematics", "reward", "layout", "train", "device"):
         x, y = getattr(a, section), getattr(b, section)
         for f in dataclasses.fields(x):
             if getattr(x, f.name) != getattr(y, f.name):
-                return f"{section}.{f.name}"
-    return "the config"
+                return f"{section}.{f.name}", _short(getattr(y, f.name)), _short(getattr(x, f.name))
+    return "the config", "", ""
+
+
+def _short(v) -> str:
+    text = repr(v)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _check_same_config(saved: Config, cfg: Config, cfg_path: Path) -> None:
+    """A resume's config must be the run's config.toml; ConfigError naming the first differing field."""
+    if saved != cfg:
+        name, given, run = _first_difference(saved, cfg)
+        raise ConfigError(f"--resume: the config differs from the run's config {cfg_path} in {name} (given {given}, "
+                          f"the run has {run}); resume with that config (--resume without a config path uses it)")
