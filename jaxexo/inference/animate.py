@@ -75,3 +75,62 @@ def animate_swing(swing, path: str | Path, fps: float = 25.0, hold_s: float = 0.
     anim.save(str(path), writer=PillowWriter(fps=fps), dpi=dpi)
     plt.close(fig)
     return path
+
+
+def animate_course(course, path: str | Path, fps: float = 20.0, hold_s: float = 0.5, dpi: int = 60) -> Path:
+    """Write a GIF of a whole walk (jaxexo.inference.course.Course) to ``path`` in real time: both
+    legs over the terrain at the walk's timing, the left leg blue, the right orange, the heels'
+    paths traced behind. Returns the path."""
+    if not np.isfinite(fps) or fps <= 0:
+        raise ValueError(f"fps: must be > 0, got {fps!r}")
+    if not len(course.samples):
+        raise ValueError("course: no timed samples to animate (its first swing failed)")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.animation import FuncAnimation, PillowWriter
+
+    s = course.samples * CM
+    t = course.samples[:, 0]
+    t_frames = np.arange(0.0, t[-1] + 1e-9, 1.0 / fps)
+    idx = np.searchsorted(t, t_frames).clip(0, len(t) - 1)
+    idx = np.concatenate([idx, np.full(int(round(hold_s * fps)), len(t) - 1)])
+    ter = course.terrain
+    length = float(ter.y[-1] - ter.y[0])
+    fig, ax = plt.subplots(figsize=(min(2.0 + 1.6 * length, 16.0), 3.2))
+    ax.fill_between(ter.y * CM, 0.0, ter.z * CM, color="0.6", lw=0)
+    ax.axhline(0.0, color="k", lw=0.8)
+    legs, traces = [], []
+    for base, knee, c in ((3, 13, "tab:blue"), (7, 15, "tab:orange")):
+        legs.append((base, knee, ax.plot([], [], "-o", color=c, ms=2, lw=2)[0]))
+        traces.append((base, ax.plot([], [], color=c, lw=0.8, alpha=0.5)[0]))
+    label = ax.text(0.01, 0.93, "", transform=ax.transAxes, fontsize=8, va="top")
+    ax.set_xlim(ter.y[0] * CM - 10, ter.y[-1] * CM + 10)
+    ax.set_ylim(-3, max(s[:, 12].max() + 5, 30))
+    ax.set_aspect("equal")
+    ax.set_xlabel("y, along the course (cm)")
+    ax.set_title(f"{course.method}: {len(course.steps)} swings in {course.duration:.1f} s at the device limits "
+                 "(real time)", fontsize=9)
+    fig.tight_layout()
+
+    def draw(k):
+        j = idx[k]
+        hip = s[j, 11:13]
+        out = []
+        for base, knee, line in legs:
+            line.set_data([hip[0], s[j, knee], s[j, base], s[j, base + 2]],
+                          [hip[1], s[j, knee + 1], s[j, base + 1], s[j, base + 3]])
+            out.append(line)
+        for base, line in traces:
+            line.set_data(s[: j + 1, base], s[: j + 1, base + 1])
+            out.append(line)
+        label.set_text(f"t = {t[j]:.2f} s, step {int(course.samples[j, 1])}")
+        return out + [label]
+
+    anim = FuncAnimation(fig, draw, frames=len(idx), blit=False)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    anim.save(str(path), writer=PillowWriter(fps=fps), dpi=dpi)
+    plt.close(fig)
+    return path
