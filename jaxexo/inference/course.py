@@ -212,22 +212,25 @@ def footholds(terrain: Terrain, config, *, start_y: float | None = None, goal_y:
         if not valid[g]:
             raise CourseError(f"goal_y: a foot at y = {ys[g]:.3f} m does not stand on flat ground clear of "
                               f"{_describe(obs[over[g]])}")
-    elif steps is None:
-        g = int(np.flatnonzero(valid)[-1])
-        beyond = np.flatnonzero(lefts > ys[g])
-        if g == 0 or beyond.size:
-            j = int(beyond[0]) if beyond.size else int(np.flatnonzero(rights > start)[0])
-            raise CourseError(f"terrain: no flat ground to land on after {_describe(obs[j])} (a foot needs "
-                              f"{(r.foot + 2 * (r.tolerance + r.stand)) * 100:.0f} cm of flat ground)")
     planner = _Planner(r, ys, valid, obs, lefts, rights)
     if steps is not None:
         path = planner.fixed_steps(steps)
         if path is None:
             raise CourseError(planner.why_not(f"no walk of {steps} swings on this course"))
-    else:
+    elif goal_y is not None:
         path = planner.to_goal(g)
         if path is None:
             raise CourseError(planner.why_not(f"no walk reaches the goal y = {ys[g]:.2f} m"))
+    else:
+        # The default goal: the furthest place both feet can stand together, past every obstacle.
+        path = planner.to_goal(None)
+        if not path:
+            raise CourseError(planner.why_not(f"terrain: no walk from y = {start:.2f} m ends with both feet together "
+                                              f"(steps of {r.lo:.2f}-{r.hi:.2f} m)"))
+        end = ys[path[-1]]
+        left_out = np.flatnonzero(rights > end)
+        if left_out.size:
+            raise CourseError(planner.why_not(f"no walk gets past {_describe(obs[int(left_out[0])])}"))
     return Footholds(float(start), tuple(float(ys[k]) for k in path))
 
 
@@ -321,9 +324,12 @@ class _Planner:
         best = np.argmin(tot, axis=0)
         return tot[best, np.arange(tot.shape[1])], best
 
-    def to_goal(self, g: int):
-        """Grid indices of the landings of the least-cost walk to both feet at g, or None."""
+    def to_goal(self, g: int | None):
+        """Grid indices of the landings of the least-cost walk to both feet at g (None: the furthest
+        grid point where both feet can stand together; [] when none), or None."""
         H, n = self.hi, self.n
+        furthest = g is None
+        g = n - 1 if furthest else g
         cost = np.full((n, H + 1), np.inf)
         pred = np.full((n, H + 1), -1, np.int64)
         cost[0, 0] = 0.0
@@ -343,6 +349,9 @@ class _Planner:
                 c = b + e + 1
                 if c <= g and tc[e] < cost[c, e + 1]:
                     cost[c, e + 1], pred[c, e + 1] = tc[e], td[e]
+        if furthest:
+            ends = np.flatnonzero(np.isfinite(cost[1:, 0]))
+            return self._back(pred, int(ends[-1]) + 1, 0) if ends.size else []
         if not np.isfinite(cost[g, 0]):
             return None
         return self._back(pred, g, 0)
@@ -418,8 +427,9 @@ class _Planner:
             gap_to = f"the next is at y = {self.ys[self.reach + 1 + ahead[0]]:.2f} m" if ahead.size else "there is none"
             return (f"{what}: no flat foothold within a step of y = {y:.2f} m ({gap_to}; the longest step is "
                     f"{r.hi:.2f} m)")
-        where = f" before {_describe(self.obs[int(nxt[0])])}" if nxt.size else ""
-        return f"{what}: the walk gets no further than y = {y:.2f} m{where}"
+        where = f" across {_describe(self.obs[int(nxt[0])])}" if nxt.size else ""
+        return (f"{what}: the walk gets no further than y = {y:.2f} m: no footholds with swings of "
+                f"{r.lo:.2f}-{r.hi:.2f} m lead on from there{where}")
 
 
 # --------------------------------------------------------------------------------------------
@@ -689,5 +699,5 @@ def _walk_table(timed, meta, double_support: float, rate: float):
     return np.concatenate(rows), spans, jump
 
 
-__all__ = ["Course", "CourseError", "CourseStep", "Footholds", "FootholdRules", "WALK_COLUMNS", "footholds",
-           "obstacles_of", "plan_course", "flat_obstacle"]
+__all__ = ["Course", "CourseError", "CourseStep", "Footholds", "FootholdRules", "Terrain", "WALK_COLUMNS",
+           "footholds", "obstacles_of", "plan_course", "flat_obstacle", "read_terrain"]
