@@ -382,7 +382,9 @@ def cmd_bench(args) -> int:
     use_all_cpu_cores()
     from jaxexo.benchmarks.run_all import run_all
 
-    run_all(args.out, policy=args.policy, baseline_seconds=args.baseline_seconds, skip=args.skip)
+    if args.courses < 1:
+        raise ValueError(f"--courses: must be >= 1, got {args.courses}")
+    run_all(args.out, policy=args.policy, baseline_seconds=args.baseline_seconds, skip=args.skip, courses=args.courses)
     return 0
 
 
@@ -521,7 +523,9 @@ def build_parser() -> argparse.ArgumentParser:
     bb.add_argument("--policy", help="policy.npz for the generator benchmarks (default: train configs/default.toml)")
     bb.add_argument("--baseline-seconds", type=float, default=600.0,
                     help="time budget of the thesis-style baseline's training run")
-    bb.add_argument("--skip", default="", help="comma-separated parts to skip: env,train,generate,compare,baseline")
+    bb.add_argument("--skip", default="", help="comma-separated parts to skip: env,train,generate,compare,baseline,course")
+    bb.add_argument("--courses", type=int, default=200, help="courses drawn for the course part (walks, RL alone "
+                                                             "against CFFTG)")
     bb.set_defaults(func=cmd_bench)
     return p
 

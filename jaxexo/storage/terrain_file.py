@@ -7,8 +7,8 @@ Two formats, chosen by the suffix (``.json``; anything else is read as CSV):
   first other line may be a header (``y_m,z_m``).
 - JSON: ``{"points": [[y, z], ...]}`` or the bare list ``[[y, z], ...]``.
 
-The profile is the ground's height above the floor along the course: y increasing (two points
-may share a y, a vertical riser), z >= 0 (the floor is z = 0; flat ground is exactly 0), every
+The profile is the ground's height above the floor along the course: y non-decreasing (points
+sharing a y make a vertical riser), z >= 0 (the floor is z = 0; flat ground is exactly 0), every
 number finite. Every rule is checked here and a bad file is refused with a ``TerrainFileError``
 that names the file and the line of the offending point, before any planning.
 """
@@ -171,11 +171,6 @@ def _checked(pts: np.ndarray, where: list[str], name: str) -> Terrain:
         i = int(back[0]) + 1
         raise TerrainFileError(f"{name}, {where[i]}: y = {pts[i, 0]:g} m is behind the point before it "
                                f"(y = {pts[i - 1, 0]:g} m); y must increase along the course")
-    same = np.flatnonzero((pts[2:, 0] == pts[1:-1, 0]) & (pts[1:-1, 0] == pts[:-2, 0]))
-    if same.size:
-        i = int(same[0]) + 2
-        raise TerrainFileError(f"{name}, {where[i]}: a third point at y = {pts[i, 0]:g} m (a vertical riser has "
-                               "two points at one y)")
     length = pts[-1, 0] - pts[0, 0]
     if length <= 0.0:
         raise TerrainFileError(f"{name}: the profile has no length (every y is {pts[0, 0]:g} m)")
