@@ -283,7 +283,7 @@ def cmd_walk(args) -> int:
 
         plot_course(course, args.plot)
         written.append(args.plot)
-    if args.animate:
+    if args.animate and len(course.samples):
         from jaxexo.inference.animate import animate_course
 
         animate_course(course, args.animate)

@@ -256,6 +256,8 @@ def test_double_support_holds_each_landing():
     _check_walk_samples(held.samples, 50.0, held.limits)
     with pytest.raises(CourseError, match="double_support"):
         plan_course(CFFTG(CFG), ter, double_support=-1.0)
+    with pytest.raises(CourseError, match="generator: expected"):
+        plan_course(object(), ter)
 
 
 # --------------------------------------------------------------------------------------------
@@ -287,6 +289,10 @@ def test_cli_walk_refuses_an_infeasible_course_writing_nothing(tmp_path, capsys)
     assert "--fallback" in capsys.readouterr().err
     assert main(["walk", "--method", "cfftg", "--terrain", str(t), "--out", str(t)]) == 2
     assert "--terrain input" in capsys.readouterr().err
+    assert main(["walk", "--method", "cfftg", "--terrain", str(t), "--steps", "0", "--out", str(out)]) == 2
+    assert "steps: must be" in capsys.readouterr().err and not out.exists()
+    assert main(["walk", "--terrain", str(t), "--out", str(out)]) == 2
+    assert "--policy: required" in capsys.readouterr().err
 
 
 def test_cli_generate_takes_a_profile_file(tmp_path, capsys):
@@ -302,3 +308,47 @@ def test_cli_generate_takes_a_profile_file(tmp_path, capsys):
         assert "--profile" in capsys.readouterr().err
     assert main(["generate", "--method", "cfftg", "--out", str(out)]) == 2
     assert "--obstacle or --profile" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------------------------
+# The benchmark part
+# --------------------------------------------------------------------------------------------
+
+
+def test_course_benchmark_figures_follow_from_its_rows(tmp_path, monkeypatch):
+    from test_reliability_inputs import make_policy
+
+    from jaxexo.benchmarks import course_bench
+    from jaxexo.benchmarks.run_all import summary_rows
+
+    # One short course with one obstacle: a few swings (the part's own sizes are for `jaxexo bench`).
+    monkeypatch.setattr(course_bench, "LENGTH", (2.0, 2.0))
+    monkeypatch.setattr(course_bench, "OBSTACLES", (1, 1))
+    monkeypatch.setattr(course_bench, "START_FLAT", (0.9, 0.9))
+    monkeypatch.setattr(course_bench, "REFERENCE_COURSES", 1)
+    pol = make_policy(tmp_path / "policy.npz", cfg=CFG)
+    log = tmp_path / "log.jsonl"
+    res = course_bench.run_course_benchmark(pol, tmp_path, n=1, seed=3, progress=None, log=log)
+    assert res["planned"] + res["refused"] == 1
+    rows = res["courses"]
+    assert res["rl_alone_success"] == (sum(r["rl"]["ok"] for r in rows) / len(rows) if rows else res["rl_alone_success"])
+    assert course_bench.summarize_log(log, 3)["planned"] == res["planned"]
+    assert next(tmp_path.glob("course_*.md")).read_text().startswith("# Walks over courses")
+    assert any("walks over" in r[0] for r in summary_rows({"course": res}))
+    with pytest.raises(ValueError, match="n: the number of courses"):
+        course_bench.run_course_benchmark(pol, None, n=0)
+
+
+def test_drawn_courses_have_their_obstacles_on_the_floor():
+    from jaxexo.benchmarks.course_bench import GAP, draw_course
+
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        pts, kinds = draw_course(rng)
+        ter = Terrain.from_points(pts)            # a valid terrain: y non-decreasing, z >= 0, finite
+        from jaxexo.inference.course import obstacles_of
+
+        obs = obstacles_of(ter)
+        assert len(obs) <= len(kinds) and 3.0 <= ter.y[-1] <= 8.0 + 1e-9 or ter.y[-1] > 8.0
+        gaps = [b[0, 0] - a[-1, 0] for a, b in zip(obs, obs[1:])]
+        assert all(g >= GAP[0] - 1e-9 or g == 0.0 for g in gaps)

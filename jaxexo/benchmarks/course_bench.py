@@ -298,3 +298,54 @@ def markdown(res: dict) -> str:
         lines += [f"- course {r['course']} ({r['length_m']:.2f} m, {', '.join(r['kinds'])}): {r['message']}"
                   for r in res["refusals"][:10]]
     return "\n".join(lines) + "\n"
+
+
+PIVOT_PLACES = ("agent", "before", "after", "goal")
+
+
+def run_pivot_benchmark(policy, out_dir=None, n: int = 60, seed: int = 0, name: str = "course-pivots") -> dict:
+    """Does the policy handle the pivots a course produces? RL alone on ``n`` scenes per terrain
+    family (held-out and training) with the stance heel at the swing's start (``agent``, the
+    training's own condition), on the floor before the obstacle (the first leg over it), after it
+    (the second leg: the stance foot ahead of the obstacle, never drawn in training) and at the goal
+    (the swing that brings the feet together). Writes ``<name>_<date>_<machine>.json/.md``."""
+    from jaxexo.inference import TrajectoryGenerator
+    from jaxexo.inference.course import FootholdRules
+    from jaxexo.physics import terrain
+
+    gen = TrajectoryGenerator.load(policy)
+    r = FootholdRules.of(gen.config)
+    room = r.stand + r.tolerance
+    rng = np.random.default_rng(seed)
+    table = {}
+    for fam in terrain.HELD_OUT_FAMILIES + terrain.TRAIN_FAMILIES:
+        u = rng.random((n, terrain.D_MAX), dtype=np.float32)
+        out, w, _ = terrain.one_family_outline(np, fam, u)
+        obs, piv, steps, places = [], [], [], []
+        for i in range(n):
+            wi = float(w[i])
+            s = min(r.hi, max(r.lo, r.foot + 2 * room + wi) + rng.random() * 0.15)
+            c = r.foot + room + 0.5 * wi + rng.random() * max(0.0, s - 2 * room - wi - r.foot)
+            o = terrain.to_obstacle(out[i], c)
+            before = rng.random() * max(0.0, o.left - r.foot - room)
+            after = o.right + room + rng.random() * max(0.0, s - o.right - room)
+            for place, p in zip(PIVOT_PLACES, (0.0, before, after, s)):
+                obs.append(o)
+                piv.append(p)
+                steps.append(s)
+                places.append(place)
+        ok = gen.generate_batch(obs, pivot_y=piv, start_y=0.0, step_length=steps, fallback=None).ok
+        places = np.array(places)
+        table[fam] = {p: [int(ok[places == p].sum()), int((places == p).sum())] for p in PIVOT_PLACES}
+    total = {p: [sum(t[p][0] for t in table.values()), sum(t[p][1] for t in table.values())] for p in PIVOT_PLACES}
+    res = {"n_per_family": n, "seed": seed, "by_family": table, "total": total}
+    if out_dir is not None:
+        from jaxexo.evaluation.machine import write_result
+
+        lines = ["# The pivots a course produces: RL alone, safe swings (strict verdict, 2 cm)", "",
+                 f"{n} scenes per family; the same obstacle and step with the stance heel at each place.", "",
+                 "| family | " + " | ".join(PIVOT_PLACES) + " |", "|---" * (len(PIVOT_PLACES) + 1) + "|"]
+        for fam, t in list(table.items()) + [("all", total)]:
+            lines.append(f"| {fam} | " + " | ".join(f"{a}/{b}" for a, b in (t[p] for p in PIVOT_PLACES)) + " |")
+        write_result(name, res, "\n".join(lines) + "\n", Path(out_dir))
+    return res

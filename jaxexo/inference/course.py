@@ -589,14 +589,16 @@ def plan_course(generator, terrain, *, start_y: float | None = None, goal_y: flo
     (default: its control rate), with a ``double_support`` dwell (s) at each landing. Infeasible
     courses and bad options raise CourseError (TerrainFileError for bad points) before any swing is
     planned; a walk whose swings fail is returned with ``ok`` False and the reasons."""
+    from jaxexo.inference.cfftg import CFFTG
+    from jaxexo.inference.generator import TrajectoryGenerator
     from jaxexo.inference.options import check_fallback
     from jaxexo.inference.swing_timing import DeviceLimits, time_swings
 
     t0 = _time.perf_counter()
-    config = getattr(generator, "config", None)
-    if config is None or not hasattr(generator, "generate"):
+    if not isinstance(generator, (TrajectoryGenerator, CFFTG)):
         raise CourseError(f"generator: expected a TrajectoryGenerator or CFFTG, got {type(generator).__name__}")
-    rl = generator.__class__.__name__ == "TrajectoryGenerator"
+    config = generator.config
+    rl = isinstance(generator, TrajectoryGenerator)
     fallback = check_fallback(fallback)
     terrain = _as_terrain(terrain)
     ds = _check_number("double_support", double_support, 0.0)
