@@ -427,7 +427,8 @@ class _Planner:
             gap_to = f"the next is at y = {self.ys[self.reach + 1 + ahead[0]]:.2f} m" if ahead.size else "there is none"
             return (f"{what}: no flat foothold within a step of y = {y:.2f} m ({gap_to}; the longest step is "
                     f"{r.hi:.2f} m)")
-        where = f" across {_describe(self.obs[int(nxt[0])])}" if nxt.size else ""
+        ob = _describe(self.obs[int(nxt[0])]) if nxt.size else ""
+        where = f" across {ob}" if ob and ob not in what else ""
         return (f"{what}: the walk gets no further than y = {y:.2f} m: no footholds with swings of "
                 f"{r.lo:.2f}-{r.hi:.2f} m lead on from there{where}")
 
