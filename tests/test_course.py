@@ -36,44 +36,32 @@ def _write(tmp_path, name, text):
 # Terrain files
 # --------------------------------------------------------------------------------------------
 
-BAD_CSV = [
-    ("y_m,z_m\n0,0\n1,0\n0.5,0\n2,0\n", "line 4", "behind"),
-    ("0,0\n1,nan\n2,0\n", "line 2", "finite"),
-    ("0,0\n1,-0.01\n2,0\n", "line 2", "below the floor"),
-    ("0,0\n", "1 point", "at least 2"),
-    ("0,0\n1,0\n500,0\n", "line 3", "long"),
-    ("0,0\n1,abc\n", "line 2", "not a number"),
-    ("0,0\n1,0,3\n", "line 2", "two numbers"),
-    ("0,0\n1,5\n", "line 2", "higher"),
-    ("# nothing\n", "0 points", "at least 2"),
-    ("0,0\n0,0\n", "no length", "no length"),
+BAD_FILES = [
+    ("t.csv", "y_m,z_m\n0,0\n1,0\n0.5,0\n2,0\n", "line 4", "behind"),
+    ("t.csv", "0,0\n1,nan\n2,0\n", "line 2", "finite"),
+    ("t.csv", "0,0\n1,-0.01\n2,0\n", "line 2", "below the floor"),
+    ("t.csv", "0,0\n", "1 point", "at least 2"),
+    ("t.csv", "0,0\n1,0\n500,0\n", "line 3", "long"),
+    ("t.csv", "0,0\n1,abc\n", "line 2", "not a number"),
+    ("t.csv", "0,0\n1,0,3\n", "line 2", "two numbers"),
+    ("t.csv", "0,0\n1,5\n", "line 2", "higher"),
+    ("t.csv", "# nothing\n", "0 points", "at least 2"),
+    ("t.csv", "0,0\n0,0\n", "no length", "no length"),
+    ("t.json", '{"points": [[0, 0],\n [1, NaN],\n [2, 0]]}', "line 2", "finite"),
+    ("t.json", '{"points": [[0, 0],\n [1, 0],\n [0.5, 0]]}', "line 3", "behind"),
+    ("t.json", '{"points": [[0, 0],\n [1, "x"]]}', "line 2", "pair"),
+    ("t.json", '{"points": [[0, 0],\n [1, 0]\n', "line 3", "not valid JSON"),
+    ("t.json", '{"pts": []}', "t.json", "points"),
+    ("t.json", '[[0, 0], [1, -1]]', "points[1]", "below the floor"),
 ]
 
 
-@pytest.mark.parametrize("text,where,what", BAD_CSV)
-def test_bad_csv_terrain_is_refused_naming_the_line(tmp_path, text, where, what):
-    p = _write(tmp_path, "t.csv", text)
+@pytest.mark.parametrize("name,text,where,what", BAD_FILES)
+def test_a_bad_terrain_file_is_refused_naming_the_line(tmp_path, name, text, where, what):
+    p = _write(tmp_path, name, text)
     with pytest.raises(TerrainFileError) as e:
         read_terrain(p)
     assert str(p) in str(e.value) and where in str(e.value) and what in str(e.value)
-
-
-BAD_JSON = [
-    ('{"points": [[0, 0],\n [1, NaN],\n [2, 0]]}', "line 2", "finite"),
-    ('{"points": [[0, 0],\n [1, 0],\n [0.5, 0]]}', "line 3", "behind"),
-    ('{"points": [[0, 0],\n [1, "x"]]}', "line 2", "pair"),
-    ('{"points": [[0, 0],\n [1, 0]\n', "line 3", "not valid JSON"),
-    ('{"pts": []}', "t.json", "points"),
-    ('[[0, 0], [1, -1]]', "points[1]", "below the floor"),
-]
-
-
-@pytest.mark.parametrize("text,where,what", BAD_JSON)
-def test_bad_json_terrain_is_refused_naming_the_line(tmp_path, text, where, what):
-    p = _write(tmp_path, "t.json", text)
-    with pytest.raises(TerrainFileError) as e:
-        read_terrain(p)
-    assert where in str(e.value) and what in str(e.value)
 
 
 def test_too_many_points_and_odd_files_are_refused(tmp_path, monkeypatch):
@@ -352,3 +340,21 @@ def test_drawn_courses_have_their_obstacles_on_the_floor():
         assert len(obs) <= len(kinds) and 3.0 <= ter.y[-1] <= 8.0 + 1e-9 or ter.y[-1] > 8.0
         gaps = [b[0, 0] - a[-1, 0] for a, b in zip(obs, obs[1:])]
         assert all(g >= GAP[0] - 1e-9 or g == 0.0 for g in gaps)
+
+
+def test_plot_and_animation_of_a_walk(tmp_path):
+    pytest.importorskip("matplotlib")
+    from PIL import Image
+
+    from jaxexo.inference.animate import animate_course
+    from jaxexo.inference.plot import plot_course
+
+    course = plan_course(CFFTG(CFG), Terrain.from_points(BLOCK), rate=50)
+    plot_course(course, tmp_path / "w.png")
+    animate_course(course, tmp_path / "w.gif", fps=3.0, hold_s=0.0, dpi=30)
+    with Image.open(tmp_path / "w.png") as im:
+        assert im.size[0] > im.size[1]
+    with Image.open(tmp_path / "w.gif") as im:
+        assert im.n_frames == len(np.arange(0.0, course.duration + 1e-9, 1 / 3.0))
+    with pytest.raises(ValueError, match="fps"):
+        animate_course(course, tmp_path / "x.gif", fps=0.0)

@@ -21,12 +21,9 @@ def animate_swing(swing, path: str | Path, fps: float = 25.0, hold_s: float = 0.
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib.animation import FuncAnimation, PillowWriter
 
     sc = swing.scene
-    t_frames = np.arange(0.0, swing.duration + 1e-9, 1.0 / fps)
-    idx = np.searchsorted(swing.time, t_frames).clip(0, len(swing.time) - 1)
-    idx = np.concatenate([idx, np.full(int(round(hold_s * fps)), len(swing.time) - 1)])
+    idx = _frames(swing.time, fps, hold_s)
     fig, (ax, axv) = plt.subplots(1, 2, figsize=(9, 3.6), gridspec_kw={"width_ratios": [1.7, 1]})
     o = sc.obstacle.outline * CM
     ax.fill(o[:, 0], o[:, 1], color="0.6")
@@ -69,12 +66,7 @@ def animate_swing(swing, path: str | Path, fps: float = 25.0, hold_s: float = 0.
         label.set_text(f"t = {swing.time[j]:.2f} s")
         return swing_leg, stance_leg, trace, cursor, label
 
-    anim = FuncAnimation(fig, draw, frames=len(idx), blit=False)
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    anim.save(str(path), writer=PillowWriter(fps=fps), dpi=dpi)
-    plt.close(fig)
-    return path
+    return _save(fig, draw, len(idx), path, fps, dpi)
 
 
 def animate_course(course, path: str | Path, fps: float = 20.0, hold_s: float = 0.5, dpi: int = 60) -> Path:
@@ -89,13 +81,10 @@ def animate_course(course, path: str | Path, fps: float = 20.0, hold_s: float = 
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib.animation import FuncAnimation, PillowWriter
 
     s = course.samples * CM
     t = course.samples[:, 0]
-    t_frames = np.arange(0.0, t[-1] + 1e-9, 1.0 / fps)
-    idx = np.searchsorted(t, t_frames).clip(0, len(t) - 1)
-    idx = np.concatenate([idx, np.full(int(round(hold_s * fps)), len(t) - 1)])
+    idx = _frames(t, fps, hold_s)
     ter = course.terrain
     length = float(ter.y[-1] - ter.y[0])
     fig, ax = plt.subplots(figsize=(min(2.0 + 1.6 * length, 16.0), 3.2))
@@ -128,7 +117,21 @@ def animate_course(course, path: str | Path, fps: float = 20.0, hold_s: float = 
         label.set_text(f"t = {t[j]:.2f} s, step {int(course.samples[j, 1])}")
         return out + [label]
 
-    anim = FuncAnimation(fig, draw, frames=len(idx), blit=False)
+    return _save(fig, draw, len(idx), path, fps, dpi)
+
+
+def _frames(time: np.ndarray, fps: float, hold_s: float) -> np.ndarray:
+    """The sample shown in each frame: one frame every 1/fps s of ``time`` (real time), the last
+    sample held ``hold_s``."""
+    idx = np.searchsorted(time, np.arange(0.0, time[-1] + 1e-9, 1.0 / fps)).clip(0, len(time) - 1)
+    return np.concatenate([idx, np.full(int(round(hold_s * fps)), len(time) - 1)])
+
+
+def _save(fig, draw, frames: int, path, fps: float, dpi: int) -> Path:
+    import matplotlib.pyplot as plt
+    from matplotlib.animation import FuncAnimation, PillowWriter
+
+    anim = FuncAnimation(fig, draw, frames=frames, blit=False)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     anim.save(str(path), writer=PillowWriter(fps=fps), dpi=dpi)

@@ -61,12 +61,7 @@ def plot_trajectory(traj: Trajectory, path: str | Path | None = None, n_poses: i
         axis.legend(fontsize=8)
     ax_h.set_title("Hip angles (thesis Fig. 3.11-3.30)", fontsize=9)
     ax_k.set_title("Knee angles", fontsize=9)
-    fig.tight_layout()
-    if path is not None:
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-    return fig
+    return _save(fig, path, 110)
 
 
 LEG_COLORS = {"left": "tab:blue", "right": "tab:orange"}
@@ -120,9 +115,16 @@ def plot_course(course, path: str | Path | None = None):
     axq.set_ylabel("joint angle (deg)")
     axq.legend(fontsize=7, ncol=4)
     axq.grid(alpha=0.3)
+    return _save(fig, path, 100)
+
+
+def _save(fig, path, dpi: int):
+    """Lay ``fig`` out and, when ``path`` is given, write it there and close it; returns the figure."""
     fig.tight_layout()
     if path is not None:
+        import matplotlib.pyplot as plt
+
         Path(path).parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path, dpi=100)
+        fig.savefig(path, dpi=dpi)
         plt.close(fig)
     return fig
