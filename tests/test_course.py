@@ -358,3 +358,19 @@ def test_plot_and_animation_of_a_walk(tmp_path):
         assert im.n_frames == len(np.arange(0.0, course.duration + 1e-9, 1 / 3.0))
     with pytest.raises(ValueError, match="fps"):
         animate_course(course, tmp_path / "x.gif", fps=0.0)
+
+
+def test_a_walk_needs_numpy_only():
+    import subprocess
+    import sys
+
+    from conftest import ROOT
+
+    # A module set to None in sys.modules cannot be imported: JAX (and SciPy) are unavailable here.
+    code = ("import sys\nfor m in ('jax', 'jaxlib', 'flax', 'optax', 'scipy'): sys.modules[m] = None\n"
+            "from jaxexo.inference import plan_course, Terrain\nfrom jaxexo.baselines import CFFTG\n"
+            f"c = plan_course(CFFTG(), Terrain.from_points({BLOCK!r}), rate=50)\n"
+            "print('OK', c.ok, len(c.steps))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert "OK True 2" in out.stdout
