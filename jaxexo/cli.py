@@ -91,6 +91,17 @@ def obstacle_from_args(args):
     (jaxexo.physics.geometry.MAX_OBSTACLE_WIDTH, _HEIGHT); errors name the option."""
     from jaxexo.physics.geometry import THESIS_OBSTACLES, GeometryError, Obstacle
 
+    if getattr(args, "profile", None) is not None:
+        given = [o for o, v in (("--width", args.width), ("--height", args.height), ("--center-y", args.center_y))
+                 if v is not None]
+        if given:
+            raise ValueError(f"{given[0]}: not with --profile (the profile file gives the obstacle's shape and place)")
+        from jaxexo.storage.terrain_file import read_terrain
+
+        t = read_terrain(args.profile)
+        return Obstacle.profile(t.points)
+    if args.obstacle is None:
+        raise ValueError("--obstacle or --profile: give the obstacle (a named shape, or a profile file)")
     kind = args.obstacle
     center = 0.45 if args.center_y is None else args.center_y
     try:
@@ -171,7 +182,9 @@ def cmd_generate(args) -> int:
     outputs = (("--out", args.out), ("--json", args.json), ("--plot", args.plot), ("--animate", args.animate))
     for option, value in outputs:
         _check_output_file(option, value)
-    _check_outputs([("--policy", args.policy)], outputs)
+    _check_outputs([("--policy", args.policy), ("--profile", args.profile)], outputs)
+    if args.obstacle is not None and args.profile is not None:
+        raise ValueError("--obstacle, --profile: give one of them (a named shape, or a profile file)")
     if args.method == "cfftg" and args.smoothing is not None:
         raise ValueError("--smoothing: applies to --method rl only (CFFTG's polynomial path is not smoothed)")
     from jaxexo.inference.options import check_duration, check_points
@@ -244,6 +257,66 @@ def cmd_generate(args) -> int:
         ok = c.ok
     print("wrote " + ", ".join(written), file=report)
     return 0 if ok else 1
+
+
+def cmd_walk(args) -> int:
+    outputs = (("--out", args.out), ("--json", args.json), ("--plot", args.plot), ("--animate", args.animate))
+    for option, value in outputs:
+        _check_output_file(option, value)
+    _check_outputs([("--policy", args.policy), ("--terrain", args.terrain)], outputs)
+    from jaxexo.config import MAX_CONTROL_RATE
+
+    if args.rate is not None and not (math.isfinite(args.rate) and 0 < args.rate <= MAX_CONTROL_RATE):
+        raise ValueError(f"--rate: control rate must be > 0 and <= {MAX_CONTROL_RATE:g} Hz, got {args.rate:g}")
+    if args.method == "cfftg":
+        if args.fallback != "cfftg":
+            raise ValueError("--fallback: applies to --method rl only (CFFTG plans every swing itself)")
+        from jaxexo.baselines import CFFTG
+
+        gen = CFFTG.from_policy(args.policy) if args.policy else CFFTG(_load(None)[0])
+    else:
+        if not args.policy:
+            raise ValueError("--policy: required with --method rl (the trained policy.npz)")
+        from jaxexo.inference import TrajectoryGenerator
+
+        gen = TrajectoryGenerator.load(args.policy)
+    _check_clearance(args.clearance, gen.config)
+    from jaxexo.inference.course import plan_course
+    from jaxexo.storage.terrain_file import read_terrain
+
+    terrain = read_terrain(args.terrain)
+    kw = dict(start_y=args.start_y, goal_y=args.goal_y, steps=args.steps, rate=args.rate, clearance=args.clearance,
+              double_support=args.double_support)
+    if args.method == "rl":
+        kw["fallback"] = None if args.fallback == "none" else args.fallback
+    course = plan_course(gen, terrain, **kw)      # an infeasible course is refused here: nothing written
+    course.to_csv(args.out)
+    written = [args.out]
+    if args.json:
+        course.to_json(args.json)
+        written.append(args.json)
+    if args.plot:
+        from jaxexo.inference.plot import plot_course
+
+        plot_course(course, args.plot)
+        written.append(args.plot)
+    if args.animate and len(course.samples):
+        from jaxexo.inference.animate import animate_course
+
+        animate_course(course, args.animate)
+        written.append(args.animate)
+    fb = sum(s.method == "cfftg-fallback" for s in course.steps)
+    print(f"{terrain.source}: {len(course.footholds)} swings from y = {course.footholds.start_y:.2f} m to "
+          f"{course.footholds.landings[-1]:.2f} m ({course.method}"
+          + (f", {fb} CFFTG fallback{'s' * (fb != 1)}" if fb else "") + f"), {course.duration:.2f} s at "
+          f"{course.rate:g} Hz, {'ok' if course.ok else 'FAILED'}")
+    for st in course.steps:
+        print(f"  step {st.index + 1:2d} {st.leg:5s} {st.start_y:6.2f} -> {st.landing_y:6.2f} m (pivot {st.pivot_y:.2f} m)"
+              f" {st.method:14s} {st.end_s - st.start_s:5.2f} s{'' if st.ok else '  FAILED'}")
+    for r in course.reasons:
+        print(f"  {r}")
+    print("wrote " + ", ".join(written))
+    return 0 if course.ok else 1
 
 
 def _timed_swing(args, traj, config):
@@ -417,7 +490,9 @@ def cmd_bench(args) -> int:
     use_all_cpu_cores()
     from jaxexo.benchmarks.run_all import run_all
 
-    run_all(args.out, policy=args.policy, baseline_seconds=args.baseline_seconds, skip=args.skip)
+    if args.courses < 1:
+        raise ValueError(f"--courses: must be >= 1, got {args.courses}")
+    run_all(args.out, policy=args.policy, baseline_seconds=args.baseline_seconds, skip=args.skip, courses=args.courses)
     return 0
 
 
@@ -426,7 +501,9 @@ def _add_scene_args(g) -> None:
     from jaxexo.physics.dynamics import DEFAULT_PIVOT, DEFAULT_START_Y, DEFAULT_STEP_LENGTH
     from jaxexo.physics.geometry import THESIS_OBSTACLES
 
-    g.add_argument("--obstacle", required=True, choices=(*THESIS_OBSTACLES, *GENERAL_SHAPES))
+    g.add_argument("--obstacle", choices=(*THESIS_OBSTACLES, *GENERAL_SHAPES), help="a named obstacle (or --profile)")
+    g.add_argument("--profile", help="the obstacle as a measured height profile: a CSV (y,z per line) or JSON "
+                                     "({\"points\": [[y, z], ...]}) file, m, y increasing, z >= 0")
     g.add_argument("--width", type=float, help="obstacle width, m")
     g.add_argument("--height", type=float, help="obstacle height, m")
     g.add_argument("--center-y", type=float, help="obstacle centre, m ahead of the start (default 0.45)")
@@ -503,6 +580,32 @@ def build_parser() -> argparse.ArgumentParser:
             x.add_argument("--half-limits", action="store_true", help="with --driven: also at half the limits")
             x.add_argument("--json", help="write the figures (SI units) to this JSON file")
             x.set_defaults(func=cmd_replay)
+    w = sub.add_parser("walk", help="a walk over a measured course: footholds, every swing and both legs timed "
+                                    "for the device (NumPy only)")
+    w.add_argument("--policy", help="policy.npz written by jaxexo train (required for --method rl; for cfftg it "
+                                    "supplies the kinematics, default: configs/default.toml)")
+    w.add_argument("--terrain", required=True, help="the ground profile: a CSV (y,z per line) or JSON "
+                                                    "({\"points\": [[y, z], ...]}) file, m, y increasing, z >= 0")
+    w.add_argument("--method", choices=("rl", "cfftg"), default="rl",
+                   help="rl: the trained policy's swings; cfftg: CFFTG's swings on the same footholds")
+    w.add_argument("--fallback", choices=("cfftg", "none"), default="cfftg",
+                   help="when an RL swing is not safe, use CFFTG's (cfftg, reported per step) or stop (none)")
+    w.add_argument("--start-y", type=float, help="where both feet stand at first, m (default: the terrain's first point)")
+    end = w.add_mutually_exclusive_group()
+    end.add_argument("--goal-y", type=float, help="where both feet stand at the end, m (default: the furthest "
+                                                  "foothold on the terrain)")
+    end.add_argument("--steps", type=int, help="walk exactly this many swings instead")
+    w.add_argument("--rate", type=float, help="control rate, Hz (default: the config's [device] control_rate)")
+    w.add_argument("--clearance", type=float, help="m every swing keeps from the terrain (default: the model's "
+                                                   "env.min_clearance)")
+    w.add_argument("--double-support", type=float, default=0.0,
+                   help="s both feet stand still at each landing (default 0: the swings meet at rest)")
+    w.add_argument("--out", required=True, help="CSV file: both legs' heels, toes, hip, knees, joint angles, "
+                                                "velocities and accelerations at the control rate (SI units)")
+    w.add_argument("--json", help="also write JSON (footholds, ok, and each step's samples, landing and method)")
+    w.add_argument("--plot", help="also draw the footholds and the swings over the terrain (PNG)")
+    w.add_argument("--animate", help="also write a GIF of the whole walk in real time (needs matplotlib and Pillow)")
+    w.set_defaults(func=cmd_walk)
     s = sub.add_parser("sweep", help="train a grid of configurations x seeds as compiled, vmapped programs")
     s.add_argument("sweep", help="sweep file (a config with a [sweep] table; see configs/sweeps/)")
     s.add_argument("--out", required=True, help="sweep directory (results.csv, summary.md, figures)")
@@ -557,7 +660,9 @@ def build_parser() -> argparse.ArgumentParser:
     bb.add_argument("--policy", help="policy.npz for the generator benchmarks (default: train configs/default.toml)")
     bb.add_argument("--baseline-seconds", type=float, default=600.0,
                     help="time budget of the thesis-style baseline's training run")
-    bb.add_argument("--skip", default="", help="comma-separated parts to skip: env,train,generate,compare,baseline")
+    bb.add_argument("--skip", default="", help="comma-separated parts to skip: env,train,generate,compare,baseline,course")
+    bb.add_argument("--courses", type=int, default=200, help="courses drawn for the course part (walks, RL alone "
+                                                             "against CFFTG)")
     bb.set_defaults(func=cmd_bench)
     return p
 

@@ -204,7 +204,7 @@ def test_bench_summary_from_the_compare_part(trained_run, tmp_path):
 
     with pytest.raises(ValueError, match="--skip"):
         run_all(tmp_path, skip="gpu")
-    res = run_all(tmp_path, policy=trained_run / "policy.npz", skip="env,train,generate,baseline", n=20,
+    res = run_all(tmp_path, policy=trained_run / "policy.npz", skip="env,train,generate,baseline,course", n=20,
                   batch_size=50, progress=lambda *_: None)
     summary = next(tmp_path.glob("summary_*.md")).read_text()
     assert "| rl on 20 test scenarios" in summary and "| cfftg on 20 test scenarios" in summary
@@ -213,7 +213,8 @@ def test_bench_summary_from_the_compare_part(trained_run, tmp_path):
     # Skipped parts are summarised from their latest result files.
     for f in tmp_path.glob("summary_*"):
         f.unlink()
-    run_all(tmp_path, skip=",".join(("env", "train", "generate", "compare", "baseline")), progress=lambda *_: None)
+    run_all(tmp_path, skip=",".join(("env", "train", "generate", "compare", "baseline", "course")),
+            progress=lambda *_: None)
     again = next(tmp_path.glob("summary_*.md")).read_text()
     assert "| rl on 20 test scenarios" in again and "compare: from compare_" in again
 

@@ -4,7 +4,8 @@ Parts (``skip`` any of them): ``env`` (jaxexo.benchmarks.env_bench), ``train`` (
 throughput and the default and thesis configs' training runs), ``generate`` (generate_bench: the
 NumPy generator), ``compare`` (jaxexo.evaluation.compare: RL generator against CFFTG on the same 1000 test
 scenarios, timed in one process), ``baseline`` (baseline_bench: jaxexo's trainer against the
-thesis-style PyTorch trainer; skipped with a note when torch is not installed). The summary table
+thesis-style PyTorch trainer; skipped with a note when torch is not installed), ``course``
+(course_bench: walks over drawn courses, RL alone against CFFTG on the same footholds). The summary table
 (summary_<date>_<machine>.md, shown in the README) is built from the figures the parts return.
 """
 
@@ -13,7 +14,7 @@ from __future__ import annotations
 import tempfile
 from pathlib import Path
 
-PARTS = ("env", "train", "generate", "compare", "baseline")
+PARTS = ("env", "train", "generate", "compare", "baseline", "course")
 ROOT = Path(__file__).resolve().parent.parent.parent
 
 
@@ -62,6 +63,16 @@ def summary_rows(res: dict) -> list[tuple[str, str, str]]:
                 rows.append((f"time to validation success {e['target']:.2f}: jaxexo vs baseline",
                              f"{e['jaxexo_s']:.1f} s vs {e['baseline_s']:,.0f} s = "
                              f"{f'{x:,.0f}' if x >= 10 else f'{x:.1f}'}x{how}", ""))
+    if "course" in res:
+        c = res["course"]
+        rows.append((f"walks over {c['planned']} courses ({c['courses_drawn']} drawn, {c['refused']} refused): every "
+                     "swing safe, RL alone / CFFTG", f"{100 * c['rl_alone_success']:.1f} % / {100 * c['cfftg_success']:.1f} %",
+                     "RL >= 99 %"))
+        r = c["duration_ratio_rl_over_cfftg"]["median"]
+        rows.append(("walk duration at the device limits, RL / CFFTG, median over courses",
+                     "-" if r is None else f"{r:.3f}", "<= 1"))
+        x = c["per_step_over_one_swing_median"]
+        rows.append(("walk planning time per step / one swing's (CPU time)", "-" if x is None else f"{x:.2f}x", "<= 1.5x"))
     return rows
 
 
@@ -79,9 +90,10 @@ def latest_result(out_dir: Path, name: str):
 
 
 def run_all(out_dir=None, policy=None, baseline_seconds: float = 600.0, skip: str = "", n: int = 1000,
-            batch_size: int = 1000, progress=print) -> dict:
+            batch_size: int = 1000, progress=print, courses: int = 200) -> dict:
     """Run the parts not in ``skip`` (comma-separated), write their results and the summary to
-    ``out_dir``; ``n`` scenarios for the generator parts, ``batch_size`` for the compare part's batch."""
+    ``out_dir``; ``n`` scenarios for the generator parts, ``batch_size`` for the compare part's batch,
+    ``courses`` drawn courses for the course part."""
     import json
 
     from jaxexo.evaluation.machine import write_result
@@ -105,7 +117,7 @@ def run_all(out_dir=None, policy=None, baseline_seconds: float = 600.0, skip: st
         thesis = [str(ROOT / "configs" / "thesis" / f"{n}.toml") for n in ("a", "b", "c", "1", "2", "3", "final")]
         res["train"] = run_train_benchmark(out_dir, str(default), thesis, progress)
     with tempfile.TemporaryDirectory() as tmp:
-        if policy is None and ({"generate", "compare"} - skipped):
+        if policy is None and ({"generate", "compare", "course"} - skipped):
             from jaxexo.train.driver import run_training
 
             progress("training configs/default.toml for the generator benchmarks")
@@ -123,6 +135,10 @@ def run_all(out_dir=None, policy=None, baseline_seconds: float = 600.0, skip: st
             res["compare"] = report
             write_result("compare", json.loads(json.dumps(report)),
                          markdown(report, f"RL generator vs CFFTG, {n} test scenarios", []), out_dir)
+    if "course" not in skipped:
+        from jaxexo.benchmarks.course_bench import run_course_benchmark
+
+        res["course"] = run_course_benchmark(policy, out_dir, courses, progress=progress)
     if "baseline" not in skipped:
         try:
             import torch  # noqa: F401

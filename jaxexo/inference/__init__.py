@@ -24,18 +24,21 @@ from jaxexo.inference.trajectory import (
 )
 from jaxexo.storage.policy_file import PolicyFileError
 
-_LAZY = {"DeviceLimits", "TimedSwing", "time_swing", "time_swings"}   # jaxexo.inference.swing_timing
+_LAZY = {"DeviceLimits": "swing_timing", "TimedSwing": "swing_timing", "time_swing": "swing_timing",
+         "time_swings": "swing_timing", "plan_course": "course", "Course": "course", "CourseError": "course",
+         "footholds": "course", "Terrain": "course", "read_terrain": "course"}
 
 
 def __getattr__(name):
-    # Device timing is imported on first use: it is not needed to generate, and loading it would
-    # add to every process's import time (its budget is 0.3 s).
+    # Device timing and walks are imported on first use: they are not needed to generate, and
+    # loading them would add to every process's import time (its budget is 0.3 s).
     if name in _LAZY:
-        from jaxexo.inference import swing_timing
+        import importlib
 
-        return getattr(swing_timing, name)
+        return getattr(importlib.import_module(f"jaxexo.inference.{_LAZY[name]}"), name)
     raise AttributeError(f"module 'jaxexo.inference' has no attribute {name!r}")
 
 __all__ = ["TrajectoryGenerator", "Trajectory", "TrajectoryBatch", "TrajectoryChecks", "TrajectoryError",
            "Obstacle", "Scene", "PolicyFileError", "assemble", "CSV_COLUMNS", "JOINT_NAMES",
-           "DeviceLimits", "TimedSwing", "time_swing", "time_swings"]
+           "DeviceLimits", "TimedSwing", "time_swing", "time_swings", "plan_course", "Course", "CourseError",
+           "footholds", "Terrain", "read_terrain"]

@@ -24,12 +24,9 @@ def animate_swing(swing, path: str | Path, fps: float = 25.0, hold_s: float = 0.
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib.animation import FuncAnimation, PillowWriter
 
     sc = swing.scene
-    t_frames = np.arange(0.0, swing.duration + 1e-9, 1.0 / fps)
-    idx = np.searchsorted(swing.time, t_frames).clip(0, len(swing.time) - 1)
-    idx = np.concatenate([idx, np.full(int(round(hold_s * fps)), len(swing.time) - 1)])
+    idx = _frames(swing.time, fps, hold_s)
     fig, (ax, axv) = plt.subplots(1, 2, figsize=(9, 3.6), gridspec_kw={"width_ratios": [1.7, 1]})
     o = sc.obstacle.outline * CM
     ax.fill(o[:, 0], o[:, 1], color="0.6")
@@ -72,10 +69,75 @@ def animate_swing(swing, path: str | Path, fps: float = 25.0, hold_s: float = 0.
         label.set_text(f"t = {swing.time[j]:.2f} s")
         return swing_leg, stance_leg, trace, cursor, label
 
-    anim = FuncAnimation(fig, draw, frames=len(idx), blit=False)
+    return _save(fig, draw, len(idx), path, fps, dpi)
+
+
+def animate_course(course, path: str | Path, fps: float = 20.0, hold_s: float = 0.5, dpi: int = 60) -> Path:
+    """Write a GIF of a whole walk (jaxexo.inference.course.Course) to ``path`` in real time: both
+    legs over the terrain at the walk's timing, the left leg blue, the right orange, the heels'
+    paths traced behind. Returns the path."""
+    if not np.isfinite(fps) or fps <= 0:
+        raise ValueError(f"fps: must be > 0, got {fps!r}")
+    if not len(course.samples):
+        raise ValueError("course: no timed samples to animate (its first swing failed)")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    s = course.samples * CM
+    t = course.samples[:, 0]
+    idx = _frames(t, fps, hold_s)
+    ter = course.terrain
+    length = float(ter.y[-1] - ter.y[0])
+    fig, ax = plt.subplots(figsize=(min(2.0 + 1.6 * length, 16.0), 3.2))
+    ax.fill_between(ter.y * CM, 0.0, ter.z * CM, color="0.6", lw=0)
+    ax.axhline(0.0, color="k", lw=0.8)
+    legs, traces = [], []
+    for base, knee, c in ((3, 13, "tab:blue"), (7, 15, "tab:orange")):
+        legs.append((base, knee, ax.plot([], [], "-o", color=c, ms=2, lw=2)[0]))
+        traces.append((base, ax.plot([], [], color=c, lw=0.8, alpha=0.5)[0]))
+    label = ax.text(0.01, 0.93, "", transform=ax.transAxes, fontsize=8, va="top")
+    ax.set_xlim(ter.y[0] * CM - 10, ter.y[-1] * CM + 10)
+    ax.set_ylim(-3, max(s[:, 12].max() + 5, 30))
+    ax.set_aspect("equal")
+    ax.set_xlabel("y, along the course (cm)")
+    ax.set_title(f"{course.method}: {len(course.steps)} swings in {course.duration:.1f} s at the device limits "
+                 "(real time)", fontsize=9)
+    fig.tight_layout()
+
+    def draw(k):
+        j = idx[k]
+        hip = s[j, 11:13]
+        out = []
+        for base, knee, line in legs:
+            line.set_data([hip[0], s[j, knee], s[j, base], s[j, base + 2]],
+                          [hip[1], s[j, knee + 1], s[j, base + 1], s[j, base + 3]])
+            out.append(line)
+        for base, line in traces:
+            line.set_data(s[: j + 1, base], s[: j + 1, base + 1])
+            out.append(line)
+        label.set_text(f"t = {t[j]:.2f} s, step {int(course.samples[j, 1])}")
+        return out + [label]
+
+    return _save(fig, draw, len(idx), path, fps, dpi)
+
+
+def _frames(time: np.ndarray, fps: float, hold_s: float) -> np.ndarray:
+    """The sample shown in each frame: one frame every 1/fps s of ``time`` (real time), the last
+    sample held ``hold_s``."""
+    idx = np.searchsorted(time, np.arange(0.0, time[-1] + 1e-9, 1.0 / fps)).clip(0, len(time) - 1)
+    return np.concatenate([idx, np.full(int(round(hold_s * fps)), len(time) - 1)])
+
+
+def _save(fig, draw, frames: int, path, fps: float, dpi: int):
+    import matplotlib.pyplot as plt
+    from matplotlib.animation import FuncAnimation, PillowWriter
+
+    anim = FuncAnimation(fig, draw, frames=frames, blit=False)
     # Pillow writes to a file name: a private one, then the one output rule (jaxexo.storage.atomic).
     with tempfile.TemporaryDirectory(prefix="jaxexo-gif-") as tmp:
-        gif = Path(tmp) / "swing.gif"
+        gif = Path(tmp) / "animation.gif"
         anim.save(str(gif), writer=PillowWriter(fps=fps), dpi=dpi)
         plt.close(fig)
         return atomic_write(path, gif.read_bytes())

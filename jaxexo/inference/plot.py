@@ -62,8 +62,69 @@ def plot_trajectory(traj: Trajectory, path: str | Path | None = None, n_poses: i
         axis.legend(fontsize=8)
     ax_h.set_title("Hip angles (thesis Fig. 3.11-3.30)", fontsize=9)
     ax_k.set_title("Knee angles", fontsize=9)
+    return _save(fig, path, 110)
+
+
+LEG_COLORS = {"left": "tab:blue", "right": "tab:orange"}
+
+
+def plot_course(course, path: str | Path | None = None):
+    """Draw a walk (jaxexo.inference.course.Course): the terrain, each swing's heel path and the
+    footholds, coloured by leg; below, both legs' joint angles over the walk. Saves to ``path``
+    when given and returns the figure."""
+    import matplotlib
+
+    if path is not None:
+        matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ter = course.terrain
+    length = float(ter.y[-1] - ter.y[0])
+    fig, (ax, axq) = plt.subplots(2, 1, figsize=(min(4.0 + 2.2 * length, 22.0), 6.4),
+                                  gridspec_kw={"height_ratios": [1.2, 1]})
+    ax.fill_between(ter.y * CM, 0.0, ter.z * CM, color="0.55", lw=0, label="terrain")
+    ax.axhline(0.0, color="k", lw=0.8)
+    foot = course.steps[0].trajectory.toe[0, 0] - course.steps[0].trajectory.heel[0, 0] if course.steps else 0.2
+    ax.plot([course.footholds.start_y * CM] * 2, [0.0, 0.0], "ks", ms=6, label="start (both feet)")
+    for st in course.steps:
+        c = LEG_COLORS[st.leg]
+        h = st.trajectory.heel * CM
+        ax.plot(h[:, 0], h[:, 1], color=c, lw=1.2, ls="-" if st.method == "rl" else "--")
+        y = st.landing_y * CM
+        ax.plot([y, y + foot * CM], [0.0, 0.0], color=c, lw=4, solid_capstyle="butt")
+        ax.annotate(str(st.index + 1), (y, 0.0), xytext=(0, -11), textcoords="offset points", fontsize=7,
+                    ha="left", color=c)
+    for leg, c in LEG_COLORS.items():
+        ax.plot([], [], color=c, lw=3, label=f"{leg} foot: heel path, foothold")
+    ax.set_aspect("equal")
+    ax.set_ylim(-15, max(float(ter.z.max()) * CM + 25, 30))
+    ax.set_xlabel("y, along the course (cm)")
+    ax.set_ylabel("z (cm)")
+    fb = sum(s.method == "cfftg-fallback" for s in course.steps)
+    ax.set_title(f"{course.method}: {len(course.steps)} swings, {course.duration:.1f} s at the device limits"
+                 + (f", {fb} CFFTG fallbacks (dashed)" if fb else "") + f" ({'ok' if course.ok else 'FAILED'})",
+                 fontsize=9)
+    ax.legend(fontsize=7, loc="upper right", ncol=3)
+    t = course.samples[:, 0]
+    ang = np.degrees(course.samples[:, 17:21])
+    for col, name, c, ls in ((0, "left hip", "tab:blue", "-"), (1, "left knee", "tab:blue", ":"),
+                             (2, "right hip", "tab:orange", "-"), (3, "right knee", "tab:orange", ":")):
+        axq.plot(t, ang[:, col], color=c, ls=ls, label=name)
+    for st in course.steps:
+        axq.axvline(st.start_s, color="0.8", lw=0.6)
+    axq.set_xlabel("time (s)")
+    axq.set_ylabel("joint angle (deg)")
+    axq.legend(fontsize=7, ncol=4)
+    axq.grid(alpha=0.3)
+    return _save(fig, path, 100)
+
+
+def _save(fig, path, dpi: int):
+    """Lay ``fig`` out and, when ``path`` is given, write it there and close it; returns the figure."""
     fig.tight_layout()
     if path is not None:
-        write_figure(path, fig, dpi=110)
+        import matplotlib.pyplot as plt
+
+        write_figure(path, fig, dpi=dpi)
         plt.close(fig)
     return fig
