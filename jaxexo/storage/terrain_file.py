@@ -17,12 +17,13 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from jaxexo.config.input_files import InputFileError, read_input
 
 MIN_POINTS = 2
 MAX_POINTS = 100_000          # a 100 m course measured every millimetre
@@ -64,21 +65,10 @@ def read_terrain(path: str | Path) -> Terrain:
     """The terrain in ``path`` (module docstring), checked; TerrainFileError naming the line otherwise."""
     p = Path(path)
     name = str(path)
-    try:
-        st = os.stat(p)
-    except OSError as e:
-        raise TerrainFileError(f"{name}: cannot read the terrain file ({e.strerror})") from None
-    import stat
-
-    if not stat.S_ISREG(st.st_mode):
-        raise TerrainFileError(f"{name}: not a regular file")
-    if st.st_size > MAX_FILE_BYTES:
-        raise TerrainFileError(f"{name}: {st.st_size} bytes, more than a terrain file may have "
-                               f"({MAX_FILE_BYTES} bytes)")
-    try:
-        raw = p.read_bytes()[: MAX_FILE_BYTES + 1]
-    except OSError as e:
-        raise TerrainFileError(f"{name}: cannot read the terrain file ({e.strerror})") from None
+    try:    # the one read of an input file: a regular file, at most MAX_FILE_BYTES
+        raw = read_input(p, "terrain file", MAX_FILE_BYTES)
+    except InputFileError as e:
+        raise TerrainFileError(f"{name}: {e.reason}") from None
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as e:
