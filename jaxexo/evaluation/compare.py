@@ -160,6 +160,7 @@ def run_eval(policy: str | Path, out: str | Path, against: str | None = "cfftg",
     for entry in report.values():
         entry["scenarios"] = scenarios
         entry["policy"] = str(policy)
+    sections: list[str] = []
     if scenarios == "unseen":
         from jaxexo.evaluation.unseen import family_table, markdown_lines
         from jaxexo.physics.scenarios import UNSEEN_SEED
@@ -168,8 +169,8 @@ def run_eval(policy: str | Path, out: str | Path, against: str | None = "cfftg",
         for name, entry in report.items():
             entry["by_family"] = {fam: gens[name] for fam, gens in table.items()}
         context[0] = context[0].replace(f"seed {seed}", f"fixed seed {UNSEEN_SEED}")
-        context += ["", *markdown_lines(table)]
+        sections = markdown_lines(table)
     return write_report(out, report, trajs, sc, "jaxexo eval: RL generator" + (" vs CFFTG" if against else ""),
-                        context, figures)
+                        context, figures, sections)
 
 
