@@ -166,8 +166,36 @@ def mixed_step():
 TRAINED_BUDGET = 1_000_000
 
 
+def session_folder(tmp_path_factory, name: str) -> Path:
+    """A folder that every pytest-xdist worker of this session shares (their common temporary root),
+    or this session's own without xdist."""
+    base = tmp_path_factory.getbasetemp()
+    folder = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / name
+    folder.mkdir(exist_ok=True)
+    return folder
+
+
+def built_once(folder: Path, build) -> Path:
+    """``folder / "out"``, made by ``build(path)`` in the first process of the session that asks for it;
+    the others wait for it (a lock file) and reuse it. An unfinished one (its builder failed) is
+    built again."""
+    import fcntl
+    import shutil
+
+    out, done = folder / "out", folder / "done"
+    with open(folder / "lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not done.exists():
+            shutil.rmtree(out, ignore_errors=True)
+            build(out)
+            done.touch()
+    return out
+
+
 @pytest.fixture(scope="session")
 def trained_run(tmp_path_factory):
+    """The run directory (read-only to the tests); trained once per session, however many xdist
+    workers ask for it."""
     import dataclasses
 
     from jaxexo.config import load_config
@@ -175,9 +203,8 @@ def trained_run(tmp_path_factory):
 
     cfg = load_config(ROOT / "configs" / "quick.toml")
     cfg = dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, num_envs=512, budget_env_steps=TRAINED_BUDGET))
-    out = tmp_path_factory.mktemp("trained") / "run"
-    run_training(cfg, out, seed=0, progress=False, eval_episodes=200)
-    return out
+    return built_once(session_folder(tmp_path_factory, "trained_run"),
+                      lambda out: run_training(cfg, out, seed=0, progress=False, eval_episodes=200))
 
 
 @contextlib.contextmanager
@@ -203,17 +230,31 @@ def jax_compilation_cache(directory):
         cc.reset_cache()
 
 
-@pytest.fixture(scope="session", autouse=True)
-def train_background(request, tmp_path_factory):
-    """Started with the session if a selected test needs it: the uninterrupted run of the tiny
-    training config on one device, by the CLI in a niced subprocess, that the driver tests compare a
-    resumed run with (bit for bit) and that the CLI test checks (tests/train_helpers.py)."""
-    runs = {}
-    if any("driver_runs" in i.fixturenames or i.name == "test_cli_train_writes_the_run_directory"
-           for i in request.session.items):
-        from train_helpers import SEED, _Background, tiny_config
+@pytest.fixture(scope="session")
+def tiny_reference(tmp_path_factory):
+    """``jaxexo train`` (a subprocess on one CPU device) of the tiny training config
+    (tests/train_helpers.py), seed 3, once per session: the uninterrupted run that the driver's and the
+    reliability tests' interrupted runs must equal bit for bit, and the CLI test's run.
+    {"run", "cfg", "cfg_path", "stdout", "stderr"}."""
+    import subprocess
+    import sys
 
-        runs["reference"] = _Background(tiny_config(), tmp_path_factory.mktemp("reference"), SEED, devices=1)
-    yield runs
-    for r in runs.values():
-        r.stop()
+    from jaxexo.config.toml_io import config_to_toml
+    from train_helpers import SEED, tiny_config
+
+    cfg = tiny_config()
+
+    def build(out):
+        out.mkdir()
+        (out / "config_in.toml").write_text(config_to_toml(cfg))
+        env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=1"}
+        r = subprocess.run([sys.executable, "-m", "jaxexo.cli", "train", str(out / "config_in.toml"), "--out",
+                            str(out / "run"), "--quiet", "--seed", str(SEED)],
+                           cwd=ROOT, env=env, capture_output=True, text=True, timeout=900)
+        assert r.returncode == 0, r.stderr[-3000:]
+        (out / "stdout.txt").write_text(r.stdout)
+        (out / "stderr.txt").write_text(r.stderr)
+
+    out = built_once(session_folder(tmp_path_factory, "tiny_reference"), build)
+    return {"run": out / "run", "cfg": cfg, "cfg_path": out / "config_in.toml",
+            "stdout": (out / "stdout.txt").read_text(), "stderr": (out / "stderr.txt").read_text()}

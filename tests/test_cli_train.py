@@ -36,20 +36,20 @@ from train_helpers import _cli_cmd
 # --------------------------------------------------------------------------------------------
 
 
-def test_cli_train_writes_the_run_directory(train_background):
-    """``python -m jaxexo.cli train CONFIG --out DIR --quiet --seed 3``: the background reference run
+def test_cli_train_writes_the_run_directory(tiny_reference):
+    """``python -m jaxexo.cli train CONFIG --out DIR --quiet --seed 3``: the session's reference run
     (on one CPU device, so that the in-process driver tests can compare with it bit for bit)."""
-    ref = train_background["reference"]
-    stdout, stderr = ref.wait()
+    ref, out = tiny_reference, tiny_reference["run"]
+    stdout, stderr = ref["stdout"], ref["stderr"]
     for name in ("config.toml", "metrics.jsonl", "policy.npz", "training_curve.png", "eval.json",
                  run_files.CHECKPOINT, run_files.BOOKKEEPING):
-        assert (ref.out / name).is_file(), name
-    assert load_config(ref.out / "config.toml") == load_config(ref.cfg_path) == ref.cfg
-    assert len((ref.out / "metrics.jsonl").read_text().splitlines()) == 3
-    res = json.loads((ref.out / "eval.json").read_text())
+        assert (out / name).is_file(), name
+    assert load_config(out / "config.toml") == load_config(ref["cfg_path"]) == ref["cfg"]
+    assert len((out / "metrics.jsonl").read_text().splitlines()) == 3
+    res = json.loads((out / "eval.json").read_text())
     assert res["env_steps"] == TINY_UPDATES * TINY_N * TINY_T and res["seed"] == SEED and res["devices"] == 1
     assert sum(v["n"] for v in res["by_obstacle"].values()) == TINY_TRAIN["eval_episodes"]
-    assert load_policy(ref.out / "policy.npz").num_actions == 36
+    assert load_policy(out / "policy.npz").num_actions == 36
     assert f"{res['env_steps']:,} env steps" in stdout and "policy.npz" in stdout
     assert "\r" not in stderr and "it/s" not in stderr   # --quiet: no progress bar
 
@@ -63,11 +63,12 @@ def test_cli_train_bad_config_exits_2_naming_the_field(tmp_path):
     assert "train.control" in r.stderr and "sarsa" in r.stderr
 
 
-def test_cli_train_loads_its_programs_from_the_compilation_cache(tmp_path):
-    """``jaxexo train`` keeps its compiled programs in $JAXEXO_COMPILATION_CACHE: a second run of the
-    same static settings with another learning rate (a pytree leaf) writes no new program (the cache
-    writes only what it compiles) and reads every one (their access times move), and a third,
-    identical to the first, exports the same bytes as the first ("off": test_compilation_cache_setting)."""
+def test_cli_train_loads_its_programs_from_the_compilation_cache(tiny_reference, tmp_path):
+    """``jaxexo train`` keeps its compiled programs in $JAXEXO_COMPILATION_CACHE: after a run with
+    another learning rate (a pytree leaf), a run of the same static settings writes no new program (the
+    cache writes only what it compiles), reads every one (their access times move), and exports the
+    same bytes as the session's reference run of its config, which compiled its own programs (cache
+    "off": test_compilation_cache_setting)."""
     from conftest import ROOT as root
     from train_helpers import tiny_config
 
@@ -78,7 +79,7 @@ def test_cli_train_loads_its_programs_from_the_compilation_cache(tmp_path):
     def train(name, cfg):
         path = tmp_path / f"{name}.toml"
         path.write_text(config_to_toml(cfg))
-        r = subprocess.run(_cli_cmd("train", path, "--out", tmp_path / name, "--quiet", "--seed", 3), cwd=root,
+        r = subprocess.run(_cli_cmd("train", path, "--out", tmp_path / name, "--quiet", "--seed", SEED), cwd=root,
                            env=env, capture_output=True, text=True, timeout=600)
         assert r.returncode == 0, r.stderr[-3000:]
         return tmp_path / name
@@ -86,16 +87,16 @@ def test_cli_train_loads_its_programs_from_the_compilation_cache(tmp_path):
     def entries(suffix):
         return {p.name: p.stat().st_mtime_ns for p in cache.iterdir() if p.name.endswith(suffix)}
 
-    first = train("first", tiny_config())
+    train("other_lr", tiny_config(lr=3e-3))
     programs, read = entries("-cache"), entries("-atime")
     assert {n.split("-")[0] for n in programs} >= {"jit_run", "jit_init", "jit_validate", "jit_rollouts"}, programs
     assert any(n.startswith("jit_run-") for n in read), read
-    train("other_lr", tiny_config(lr=3e-3))
+    assert tiny_reference["cfg"] == tiny_config()
+    again = train("again", tiny_config())
     assert entries("-cache") == programs
     later = entries("-atime")
     assert all(later[n] > t for n, t in read.items() if n.split("-")[0] in ("jit_run", "jit_validate")), (read, later)
-    again = train("again", tiny_config())
-    assert (again / "policy.npz").read_bytes() == (first / "policy.npz").read_bytes()
+    assert (again / "policy.npz").read_bytes() == (tiny_reference["run"] / "policy.npz").read_bytes()
 
 
 def test_compilation_cache_setting(monkeypatch, tmp_path):

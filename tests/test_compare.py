@@ -54,8 +54,22 @@ def test_eval_writes_report_json_md_and_figures(eval_out, trained_run):
         assert set(r["by_kind"]) == {"base1", "base2", "base3", "triangle", "half_circle"} | train_kinds
         assert set(r["by_pivot"]) == {"agent", "obstacle", "between"}
     md = (eval_out / "report.md").read_text()
-    assert "| rl | 60 |" in md and "| cfftg | 60 |" in md and "| rl+cfftg | 60 |" in md and "By obstacle kind" in md
+    assert "| rl | 60 |" in md and "| cfftg | 60 |" in md and "| rl+cfftg | 60 |" in md
     assert "(timed on 100, scaled)" in md
+    # The summary first, then one table per concern, each narrow enough for a screen.
+    heads = [ln for ln in md.splitlines() if ln.startswith("## ")]
+    assert heads[:6] == ["## RL vs CFFTG", "## Safety and clearance", "## Wearer: lift and heel path",
+                         "## Wearer: device timing and smoothness", "## Generation time", "## Joint angles"]
+    tables = [ln for ln in md.splitlines() if ln.startswith("|")]
+    assert max(ln.count("|") - 1 for ln in tables) <= 8
+    # Cells read back against report.json: the summary's safe-swing column and a per-pivot row of
+    # the safety table (each label's first row).
+    cells: dict = {}
+    for ln in tables:
+        cells.setdefault(ln.split(" | ")[0][2:], ln.strip("| ").split(" | "))
+    for name, r in report.items():
+        assert cells[name][2] == f"{100 * r['success']:.1f}"
+        assert cells[f"pivot between ({name})"][1] == str(r["by_pivot"]["between"]["n"])
     for fig in ("trajectories.png", "joint_angles.png"):
         assert (eval_out / fig).stat().st_size > 10_000
 

@@ -1,6 +1,6 @@
 """The training driver (jaxexo.train.driver): run directory, bit-identical resume after an interrupt,
-eval.json, the exported policy, refusals to overwrite or mix runs. Compared with the background
-``jaxexo train`` reference run (conftest's ``train_background``)."""
+eval.json, the exported policy, refusals to overwrite or mix runs. Compared with the session's
+``jaxexo train`` reference run (conftest's ``tiny_reference``)."""
 
 from __future__ import annotations
 
@@ -67,18 +67,17 @@ def _interrupted_then_resumed(cfg, out, at: int) -> dict:
 
 
 @pytest.fixture(scope="module")
-def driver_runs(train_background, tmp_path_factory):
+def driver_runs(tiny_reference, tmp_path_factory):
     """A 6-update run in 3 chunks of 2, run straight through (by the CLI, in the background), and
     the same run here, killed while saving the checkpoint of chunk 2 (its metrics line already
     written) and resumed."""
     cfg = tiny_config()
     part = tmp_path_factory.mktemp("runs") / "part"
     resumed = _interrupted_then_resumed(cfg, part, at=3)
-    ref = train_background["reference"]
-    ref.wait()
-    assert load_config(ref.out / "config.toml") == cfg
-    res_full = json.loads((ref.out / "eval.json").read_text())
-    return {"cfg": cfg, "full": ref.out, "part": part, "res_full": res_full, **resumed}
+    full = tiny_reference["run"]
+    assert load_config(full / "config.toml") == cfg
+    res_full = json.loads((full / "eval.json").read_text())
+    return {"cfg": cfg, "full": full, "part": part, "res_full": res_full, **resumed}
 
 
 def _counters(path) -> list[dict]:

@@ -63,7 +63,7 @@ def same(a, b) -> bool:
 
 def test_a_member_trains_identically_alone_in_populations_of_2_and_5_and_in_a_sweep_group_of_8():
     alone = train_members([SEED])[0]
-    pair = train_members([SEED - 1, SEED])[1]          # second lane of the block
+    neighbour, pair = train_members([SEED - 1, SEED])  # pair: the second lane of the block
     five = train_members([0, 1, 2, SEED, 4])[SEED]     # second block of three, on one device
     assert alone["metrics"].shape == (UPDATES // CHUNK, CHUNK, len(run_files.METRICS))
     assert alone["metrics"][..., run_files.METRICS.index("loss")].all()   # it trained: every update had a loss
@@ -72,7 +72,7 @@ def test_a_member_trains_identically_alone_in_populations_of_2_and_5_and_in_a_sw
         assert np.array_equal(alone["metrics"], other["metrics"])
         assert np.array_equal(alone["scores"], other["scores"])
     # The other members are other agents (the comparison above could not pass by everything being equal).
-    assert not same(alone["params"], train_members([SEED + 1])[0]["params"])
+    assert not same(alone["params"], neighbour["params"])
     # In a sweep chunk of 8 agents (seeds 0..7, the whole budget in one scan): the same final parameters.
     r = raw()
     r["sweep"] = {"seeds": 8, "chunk_size": 8, "grid": {"train.lr": [3e-3]}}

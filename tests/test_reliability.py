@@ -442,15 +442,11 @@ def cache(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def reference(tmp_path_factory):
-    """The uninterrupted tiny run by the CLI on one device (what every interrupted run must equal)."""
-    tmp = tmp_path_factory.mktemp("reference")
-    cfg_path = tmp / "tiny.toml"
-    cfg_path.write_text(config_to_toml(tiny_config()))
-    r = subprocess.run(cli("train", cfg_path, "--out", tmp / "run", "--quiet", "--seed", SEED), capture_output=True,
-                       text=True, cwd=ROOT, env=one_device_env(), timeout=900)
-    assert r.returncode == 0, r.stderr[-3000:]
-    return {"run": tmp / "run", "cfg_path": cfg_path}
+def reference(tiny_reference):
+    """The uninterrupted tiny run by the CLI on one device (what every interrupted run must equal):
+    the session's (conftest.tiny_reference), whose config is this module's tiny config."""
+    assert tiny_reference["cfg"] == tiny_config()
+    return {"run": tiny_reference["run"], "cfg_path": tiny_reference["cfg_path"]}
 
 
 def _counters(path) -> list[dict]:

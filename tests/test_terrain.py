@@ -308,7 +308,8 @@ def test_eval_unseen_reports_per_family_end_to_end(unseen_eval):
             assert f["success"] == pytest.approx(r["by_kind"][fam]["success"])
             assert f["path_length_m_mean"] == pytest.approx(r["by_kind"][fam]["path_length_m_mean"])
     md = (unseen_eval / "report.md").read_text()
-    assert "## Unseen families" in md and "| pole | rl |" in md and "| curb | cfftg |" in md
+    assert "| pole (rl) |" in md and "| curb (cfftg) |" in md
+    assert md.index("## RL vs CFFTG") < md.index("## Unseen families") < md.index("## Safety and clearance")
     # Recompute one family's figures independently from fresh trajectories of the same scenes.
     gen = TrajectoryGenerator.load(report["rl"]["policy"])
     sc = [s for s in unseen_scenarios(gen.config.kinematics.foot_length, 1) if s["kind"] == "stairs"]

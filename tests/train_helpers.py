@@ -1,15 +1,15 @@
 """Shared pieces of the training tests (test_trainer, test_driver, test_policy_file, test_network,
-test_train_config, test_cli_train): the tiny config, tree helpers, the module-scoped compilation
-cache, and the background ``jaxexo train`` reference run.
+test_train_config, test_cli_train): the tiny config, tree helpers and the module-scoped compilation
+cache (the uninterrupted ``jaxexo train`` reference run of the tiny config is conftest's
+``tiny_reference``).
 
 JAX compile time dominates these tests (a trainer update takes 5-6 s to compile on two CPU cores,
 most of it the environment step), so:
 - the runs are tiny and share one config (``tiny``) wherever they can;
 - a persistent compilation cache in a temporary folder (per module, ``_compilation_cache``, imported
   by each module that compiles) lets runs reuse programs that other tests compiled;
-- the uninterrupted reference run of the resume test is ``jaxexo train`` in a niced subprocess,
-  started with the session when a test needs it (conftest's ``train_background``), so that it runs on
-  the core this process leaves idle (it is also the CLI test's run).
+- the uninterrupted reference run (conftest's ``tiny_reference``) is made once per session, whichever
+  xdist worker asks first, and shared by the driver, reliability and CLI tests.
 """
 
 from __future__ import annotations
@@ -110,43 +110,11 @@ def random_params(net, obs_dim: int, seed: int):
                         shapes)
 
 
-
 SEED = 3
-CLI_TEST = "test_cli_train_writes_the_run_directory"
 
 
 def _cli_cmd(*args):
     return [sys.executable, "-m", "jaxexo.cli", *map(str, args)]
-
-
-class _Background:
-    """``jaxexo train CONFIG --out OUT --quiet`` in a niced subprocess: it takes the core this process
-    leaves idle while the tests here run."""
-
-    def __init__(self, cfg, tmp, seed: int, devices: int | None):
-        self.cfg, self.cfg_path, self.out = cfg, tmp / "config_in.toml", tmp / "run"
-        self.cfg_path.write_text(config_to_toml(cfg))
-        env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
-        if devices is not None:   # else the CLI exposes every CPU core (jaxexo.train.devices)
-            env["XLA_FLAGS"] = f"--xla_force_host_platform_device_count={devices}"
-        self.proc = subprocess.Popen(_cli_cmd("train", self.cfg_path, "--out", self.out, "--quiet", "--seed", seed),
-                                     cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        try:
-            os.setpriority(os.PRIO_PROCESS, self.proc.pid, 15)
-        except (AttributeError, OSError):   # no setpriority on this platform: run at normal priority
-            pass
-        self.result = None
-
-    def wait(self):
-        if self.result is None:
-            self.result = self.proc.communicate(timeout=600)
-        assert self.proc.returncode == 0, self.result[1][-3000:]
-        return self.result
-
-    def stop(self):
-        if self.proc.poll() is None:
-            self.proc.kill()
-            self.proc.communicate()
 
 
 def _npz(path) -> dict:

@@ -283,10 +283,6 @@ class SequentialTDLambda:
             q = self.q(self.torch.from_numpy(obs)[None])
         return int(q.argmax())
 
-    def greedy_actions(self, obs: np.ndarray) -> np.ndarray:
-        with self.torch.inference_mode():
-            return self.q(self.torch.from_numpy(np.asarray(obs, np.float32))).argmax(-1).numpy()
-
     def targets(self, idx: np.ndarray) -> np.ndarray:
         """Truncated lambda-returns of the sampled transitions (see the module docstring)."""
         torch, b = self.torch, self.buffer

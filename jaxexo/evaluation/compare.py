@@ -165,6 +165,7 @@ def run_eval(policy: str | Path, out: str | Path, against: str | None = "cfftg",
     for entry in report.values():
         entry["scenarios"] = scenarios
         entry["policy"] = str(policy)
+    sections: list[str] = []
     if scenarios == "unseen":
         from jaxexo.evaluation.unseen import family_table, markdown_lines
         from jaxexo.physics.scenarios import UNSEEN_SEED
@@ -173,15 +174,15 @@ def run_eval(policy: str | Path, out: str | Path, against: str | None = "cfftg",
         for name, entry in report.items():
             entry["by_family"] = {fam: gens[name] for fam, gens in table.items()}
         context[0] = context[0].replace(f"seed {seed}", f"fixed seed {UNSEEN_SEED}")
-        context += ["", *markdown_lines(table)]
+        sections = markdown_lines(table)
     if replay:
         from jaxexo.sim.replay import replay_trajectories
 
         for name, entry in report.items():
             entry["mujoco"] = replay_trajectories(trajs[name], gens[name].config)
-        context += ["", *mujoco_lines(report, rl.config.device.control_rate)]
+        sections = [*sections, *([""] if sections else []), *mujoco_lines(report, rl.config.device.control_rate)]
     return write_report(out, report, trajs, sc, "jaxexo eval: RL generator" + (" vs CFFTG" if against else ""),
-                        context, figures)
+                        context, figures, sections)
 
 
 

@@ -19,17 +19,6 @@ def scene_options(s: dict) -> dict:
     return {"pivot": s["pivot"], "start_y": s["start_y"], "step_length": s["step_length"]}
 
 
-def time_single(gen: TrajectoryGenerator, scenarios: list[dict], repeats: int = 3) -> np.ndarray:
-    """Seconds per ``generate`` call, per scenario (the median of ``repeats`` passes)."""
-    times = np.empty((repeats, len(scenarios)))
-    for r in range(repeats):
-        for i, s in enumerate(scenarios):
-            t0 = time.perf_counter()
-            gen.generate(s["obstacle"], **scene_options(s))
-            times[r, i] = time.perf_counter() - t0
-    return np.median(times, axis=0)
-
-
 def time_batch(gen: TrajectoryGenerator, scenarios: list[dict], repeats: int = 5, **options):
     """Seconds per ``generate_batch`` of all scenarios (one per repeat), and the last batch;
     ``options`` go to generate_batch (e.g. ``fast=False``)."""

@@ -128,10 +128,6 @@ class _Counters:
         self.update, self.episodes = update, episodes
 
 
-def _member_state(ts, i: int):
-    return jax.tree.map(lambda x: np.asarray(x)[i], ts)
-
-
 def plot_population_curve(path: Path, rows: list[dict], exported: int | None) -> None:
     """Every member's training success and validation success against its episodes; the exported
     member drawn bold."""
