@@ -464,16 +464,15 @@ def cmd_eval(args) -> int:
 
 
 def cmd_reproduce(args) -> int:
-    from jaxexo.train.devices import use_all_cpu_cores, use_compilation_cache
-
-    use_all_cpu_cores()
     from jaxexo.evaluation.reproduce import check_reproduce_options, run_names, run_reproduce
+    from jaxexo.train.devices import use_all_cpu_cores, use_compilation_cache
 
     models = [m.strip() for m in args.models.split(",") if m.strip()]
     if not models:
         raise ValueError(f"--models: name at least one model, got {args.models!r}")
     run_names(models, args.variant)     # checks --models and --variant before anything trains
     check_reproduce_options(args.out, args.n, args.results, args.population, args.seed)
+    use_all_cpu_cores()                 # after the checks (NumPy only): a refusal starts no JAX
     use_compilation_cache()
     run_reproduce(args.out, models, n=args.n, seed=args.seed, include_default=args.default, results_dir=args.results,
                   variant=args.variant, population=args.population)
@@ -487,11 +486,11 @@ def cmd_bench(args) -> int:
     if not (math.isfinite(args.baseline_seconds) and args.baseline_seconds > 0):
         raise ValueError(f"--baseline-seconds: a time budget must be a finite number of seconds > 0, "
                          f"got {args.baseline_seconds:g}")
+    if args.courses < 1:
+        raise ValueError(f"--courses: must be >= 1, got {args.courses}")
     use_all_cpu_cores()
     from jaxexo.benchmarks.run_all import run_all
 
-    if args.courses < 1:
-        raise ValueError(f"--courses: must be >= 1, got {args.courses}")
     run_all(args.out, policy=args.policy, baseline_seconds=args.baseline_seconds, skip=args.skip, courses=args.courses)
     return 0
 
