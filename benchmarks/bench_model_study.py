@@ -51,10 +51,9 @@ def _both_safe(per: dict) -> dict:
     return out
 
 
-def screen_agent(policy: Path, time_n: int) -> dict:
+def screen_agent(gen: TrajectoryGenerator, time_n: int) -> dict:
     """The screen: one swing timed (RL alone and CFFTG alternating) on ``time_n`` held-out and unseen
     scenes each, and the RL swings' safe share and goal on those same scenes."""
-    gen = TrajectoryGenerator.load(policy)
     cf = CFFTG(gen.config)
     scenes = scene_sets(gen.config, time_n)
     timing = {}
@@ -71,8 +70,7 @@ def screen_agent(policy: Path, time_n: int) -> dict:
     return {"timing": timing, "smoothing": gen.smoothing}
 
 
-def measure_agent(policy: Path, n: int) -> dict:
-    gen = TrajectoryGenerator.load(policy)
+def measure_agent(gen: TrajectoryGenerator, n: int) -> dict:
     cfg = gen.config
     cf = CFFTG(cfg)
     gens = {"rl": gen, "cfftg": cf}
@@ -241,17 +239,18 @@ def main():
             continue
         t0 = time.perf_counter()
         policy = d / e["dir"] / "policy.npz"
-        gen_cfg = TrajectoryGenerator.load(policy).config
+        gen = TrajectoryGenerator.load(policy)
+        gen_cfg = gen.config
         row = {"config_id": e["config_id"], "seed": e["seed"], "label": e["label"], "success": e["success"],
                "held_out_success": e["held_out_success"], "hidden": list(gen_cfg.train.hidden),
                "layer_norm": bool(gen_cfg.train.layer_norm), "step_size": float(gen_cfg.env.step_size),
                "sweep_wall_s": float(results[(e["config_id"], e["seed"])]["wall_s"]),
-               **screen_agent(policy, a.time_n)}
+               **screen_agent(gen, a.time_n)}
         # measured in full only where the screen passes: validation and RL alone safe on the screen's scenes
         row["screened"] = e["success"] >= 0.99 and all(t["rl_safe"] == 1.0 and t["rl_goal"] == 1.0
                                                       for t in row["timing"].values())
         if row["screened"]:
-            row.update(measure_agent(policy, a.n))
+            row.update(measure_agent(gen, a.n))
             row["meets"] = verdicts(row, e["success"])
         rows.append(row)
         print(f"{e['label']} seed {e['seed']}: screened {row['screened']} {json.dumps(row.get('meets'))} "

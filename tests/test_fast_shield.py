@@ -231,3 +231,20 @@ def test_a_swing_short_of_the_goal_is_not_retried_down_to_the_raw_polyline(clear
     b = gen.finish([scene, scene], [short, whole], 100, 0.05, 1.0, None)
     assert b[0].smoothing == 0.05 and not b[0].checks.reached_goal
     assert b[1].checks.clearance_ok
+
+
+def test_time_breakdown_replays_the_rollouts_own_steps():
+    """bench_generate's breakdown (jaxexo.benchmarks.generate_bench.time_breakdown) times the parts of
+    real swings: its step count is the rollout's own (an independent count here), every part positive."""
+    from jaxexo.baselines import CFFTG
+    from jaxexo.benchmarks.generate_bench import scene_set, time_breakdown
+
+    gen = _random_generator()
+    sc = scene_set(gen.config, "unseen", 3)
+    b = time_breakdown(gen, CFFTG(gen.config), sc, repeats=1)
+    steps = [len(gen.rollout(gen.scene(s["obstacle"], s["pivot"], None, s["start_y"], s["step_length"]))[1])
+             for s in sc]
+    assert b["steps"] == float(np.median(steps))
+    for k in ("rollout", "network_per_step", "shield_per_step", "observation", "smoothing_correction",
+              "rl_total", "cfftg_plan", "cfftg_total"):
+        assert b[k] > 0.0, k

@@ -235,8 +235,9 @@ def run_generate_benchmark(policy: str | Path, out_dir, n: int = 1000, progress=
             return gen.generate(obstacle, fast=False, fallback=None, **kw)
 
     sets = {}
+    scene_sets = {which: scene_set(gen.config, which, n) for which in SETS}
     for which in SETS:
-        scenarios = scene_set(gen.config, which, n)
+        scenarios = scene_sets[which]
         gens = {"rl": WithFallback(gen, None), "cfftg": cf}
         before = list(gen.shield_stats)
         passes = [alternate(gens, scenarios) for _ in range(3)]
@@ -258,7 +259,7 @@ def run_generate_benchmark(policy: str | Path, out_dir, n: int = 1000, progress=
             "cfftg_safe": float(np.mean([t.ok for t in passes[-1]["cfftg"][0]])),
             "shield_steps_full_mask": steps[1] / max(steps[0], 1),
         }
-    breakdown = time_breakdown(gen, cf, scene_set(gen.config, "unseen", n)[: max(1, n // 5)])
+    breakdown = time_breakdown(gen, cf, scene_sets["unseen"][: max(1, n // 5)])
     batch = _batch_ms(policy, n)
     batch_1t = batch_single_thread(policy, n)
     imports = time_import()

@@ -231,18 +231,18 @@ def plot_curves(path: Path, sweep: Sweep, out: Path, rows: list[dict], entries: 
     plt.close(fig)
 
 
-def _export_agent(sweep: Sweep, out: Path, row: dict, dest: Path) -> None:
-    """Write one agent's final parameters as dest/policy.npz and its resolved config as dest/config.toml."""
+def _export_agent(sweep: Sweep, chunk: dict, row: dict, dest: Path, trainer=None) -> None:
+    """Write one agent's final parameters (from its loaded ``chunk``, ``R.load_chunk``) as dest/policy.npz
+    and its resolved config as dest/config.toml; ``trainer``: its configuration's Trainer, if built."""
     from jaxexo.sweep.program import unflatten
     from jaxexo.train.run_files import export_policy
     from jaxexo.train.trainer import Trainer
 
-    cid, seed, chunk_id = int(row["config_id"]), int(row["seed"]), int(row["chunk"])
-    data = R.load_chunk(out, chunk_id)
-    params = unflatten(data["params"], data["agents"].index((cid, seed)))
+    cid, seed = int(row["config_id"]), int(row["seed"])
+    params = unflatten(chunk["params"], chunk["agents"].index((cid, seed)))
     cfg = sweep.members[cid].config
     dest.mkdir(parents=True, exist_ok=True)
-    export_policy(dest / "policy.npz", cfg, Trainer(cfg), params)
+    export_policy(dest / "policy.npz", cfg, trainer or Trainer(cfg), params)
     atomic_write(dest / "config.toml", config_to_toml(cfg))
 
 
@@ -260,7 +260,7 @@ def export_best(sweep: Sweep, out: Path, rows: list[dict]) -> dict:
     best_row = max(cands, key=lambda r: (float(r["success"]), -int(r["seed"])))
     cid, seed = int(best_row["config_id"]), int(best_row["seed"])
     best = Path(out) / "best"
-    _export_agent(sweep, out, best_row, best)
+    _export_agent(sweep, R.load_chunk(out, int(best_row["chunk"])), best_row, best)
     selection = {"config_id": cid, "seed": seed, "label": sweep.members[cid].label,
                  "success": float(best_row["success"]), "held_out_success": float(best_row["held_out_success"]),
                  "mean_success_over_seeds": e["success_mean"]}
@@ -278,18 +278,27 @@ def agent_dir(out: Path, config_id: int, seed: int) -> Path:
 
 def export_all(sweep: Sweep, out: Path, rows: list[dict]) -> dict:
     """Write every agent's policy and config (``agent_dir``) and DIR/agents/index.json (each agent's
-    directory, label, axes' values and success); diverged agents are listed but not exported."""
+    directory, label, and success, by configuration and seed); diverged agents are listed but not
+    exported. Agents are written chunk by chunk, so each chunk file is read once and only one is held."""
+    from jaxexo.train.trainer import Trainer
+
     if not rows:
         raise ConfigError("--export-all: the sweep has no results yet")
-    index = []
-    for r in sorted(rows, key=lambda r: (int(r["config_id"]), int(r["seed"]))):
+    trainers, index = {}, []
+    chunk_id, chunk = None, None
+    for r in sorted(rows, key=lambda r: (int(r["chunk"]), int(r["config_id"]), int(r["seed"]))):
         cid, seed = int(r["config_id"]), int(r["seed"])
         dest = agent_dir(out, cid, seed)
         diverged = r["diverged"] != "0"
         if not diverged:
-            _export_agent(sweep, out, r, dest)
+            if int(r["chunk"]) != chunk_id:
+                chunk_id, chunk = int(r["chunk"]), R.load_chunk(out, int(r["chunk"]))
+            if cid not in trainers:
+                trainers[cid] = Trainer(sweep.members[cid].config)
+            _export_agent(sweep, chunk, r, dest, trainers[cid])
         index.append({"config_id": cid, "seed": seed, "label": sweep.members[cid].label,
                       "dir": str(dest.relative_to(out)), "exported": not diverged,
                       "success": float(r["success"]), "held_out_success": float(r["held_out_success"])})
+    index.sort(key=lambda e: (e["config_id"], e["seed"]))
     atomic_write(Path(out) / AGENTS / "index.json", json.dumps(index, indent=1) + "\n")
     return {"agents": len(index), "exported": sum(e["exported"] for e in index)}
