@@ -34,6 +34,7 @@ from jaxexo.benchmarks.generate_bench import alternate
 from jaxexo.evaluation.compare import WithFallback
 from jaxexo.evaluation.machine import machine_info, write_result
 from jaxexo.inference import TrajectoryGenerator
+from jaxexo.storage.atomic import atomic_write, write_figure
 
 OUT = Path(__file__).resolve().parent / "results"
 # The wearer's targets against CFFTG on the scenes both swing safely (lift and timed median <= CFFTG's,
@@ -137,7 +138,7 @@ def figure(rows: list[dict], path: Path, default_label: str) -> None:
     axs[1].legend(handles=handles, fontsize=7, loc="upper right")
     fig.suptitle("Model study: one point per agent (marker size: step size 3 / 4.5 / 6 cm)")
     fig.tight_layout()
-    fig.savefig(path, dpi=90)
+    write_figure(path, fig, dpi=90)
     plt.close(fig)
 
 
@@ -221,8 +222,8 @@ def main():
         res = json.loads(Path(a.from_json).read_text())
         md = markdown(res["rows"], res)
         res["configs"] = config_summary(res["rows"])
-        Path(a.from_json).write_text(json.dumps(res, indent=2) + "\n")
-        Path(a.from_json).with_suffix(".md").write_text(md + f"\n\nMachine: {res['machine']['cpu']}, "
+        atomic_write(a.from_json, json.dumps(res, indent=2) + "\n")
+        atomic_write(Path(a.from_json).with_suffix(".md"), md + f"\n\nMachine: {res['machine']['cpu']}, "
                                                        f"{res['machine']['cores']} cores; {res['date']}.\n")
         figure(res["rows"], Path(a.from_json).with_suffix(".png"), default_label)
         print(md)

@@ -37,6 +37,7 @@ import numpy as np
 from jaxexo.baselines import CFFTG
 from jaxexo.evaluation.machine import machine_info, write_result
 from jaxexo.inference import TrajectoryGenerator, time_swings
+from jaxexo.storage.atomic import write_figure
 from jaxexo.inference.swing_timing import joint_jerk
 from jaxexo.inference.scenarios import safety_scenarios
 from jaxexo.physics import geometry, scenarios, swept
@@ -168,7 +169,7 @@ def figure(arrays: dict, title: str, path: Path) -> None:
             axs[row, col].legend(fontsize=8, loc="lower right")
     fig.suptitle(title + " (ticks on the lift axis: unsafe swings)")
     fig.tight_layout()
-    fig.savefig(path, dpi=90)
+    write_figure(path, fig, dpi=90)
     plt.close(fig)
 
 
