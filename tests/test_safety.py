@@ -70,6 +70,8 @@ def test_swept_distance_is_exact_against_dense_brute_force(outline, h0, move):
     # distance, and within its sampling resolution above it.
     assert exact <= brute + 1e-12
     assert brute - exact <= res + 1e-9
+    # the term-by-term form the shield and the environment use under XLA: the same terms, the same value
+    assert float(swept.swept_distance_by_edge(np, h0, h1, FOOT, outline[:, 0], outline[:, 1])) == exact
 
 
 def test_swept_distance_under_jit_matches_numpy():

@@ -20,9 +20,10 @@ distance to be >= min(shield_clearance, c_here) - SHIELD_SLACK, and float32 roun
 distance (about 1e-6 m at these scales) is far below BOUND_MARGIN. tests/test_shield.py checks, on
 states across the training distribution and the held-out terrain families, that the masks are equal.
 
-The moves left open are decided by the same function on the same inputs as the plain rule
-(``dynamics.moves_keep_clearance``'s comparison, on ``swept.swept_distance`` and
-``geometry.foot_clearance``), and the rest of the shield (kinematic limits, goal, fall-backs) is
+The moves left open are decided by the same comparison as the plain rule
+(``dynamics.moves_keep_clearance``'s, on ``geometry.foot_clearance`` and the exact swept distance, here
+in its term-by-term form ``swept.swept_distance_by_edge``, the same terms evaluated edge by edge so
+that the arrays stay in cache), and the rest of the shield (kinematic limits, goal, fall-backs) is
 ``dynamics.admissible_moves`` itself, given the clearance condition through its ``clear`` argument.
 """
 
@@ -96,20 +97,24 @@ def bounds(p, heel_y, heel_z, ends, outline, c_here):
     lower = jnp.maximum(ch - step, 0.5 * (ch + b1 - step))
     sure_pass = lower >= p.shield_clearance + BOUND_MARGIN
     ny, nz = _nearest_outline_point(heel_y, heel_z, p.foot_length, outline)
-    upper = jnp.sqrt(jnp.minimum(     # squared distances compared first: one square root per move
-        _point_foot_distance2(ny[:, None], nz[:, None], ends[..., 0], ends[..., 1], p.foot_length),
-        _point_foot_distance2(outline[:, None, :, 0], outline[:, None, :, 1], ends[..., 0, None], ends[..., 1, None],
-                              p.foot_length).min(-1)))
+    # Squared distances compared first (one square root per move), vertex by vertex: an (N, F, K)
+    # array of them would leave the cache (as in swept.swept_distance_by_edge).
+    upper2 = _point_foot_distance2(ny[:, None], nz[:, None], ends[..., 0], ends[..., 1], p.foot_length)
+    for k in range(outline.shape[-2]):
+        upper2 = jnp.minimum(upper2, _point_foot_distance2(outline[:, None, k, 0], outline[:, None, k, 1], ends[..., 0],
+                                                           ends[..., 1], p.foot_length))
+    upper = jnp.sqrt(upper2)
     need = jnp.minimum(p.shield_clearance, ch) - dynamics.SHIELD_SLACK
     # From inside the obstacle (c_here <= 0) every move passes: never a sure failure there.
     sure_fail = (ch > 0.0) & (upper < need - BOUND_MARGIN)
     return sure_pass, sure_fail
 
 
-def _exact_pairs(p, heel, ends, outline, c_here):
-    """``moves_keep_clearance``'s comparison for gathered pairs: heel (M, 2), ends (M, 2), outline
-    (M, K, 2), c_here (M,) (the foot's clearance at the heel, geometry.foot_clearance)."""
-    d_move = swept.swept_distance(jnp, heel + 0.0 * ends, ends, p.foot_length, outline)
+def _exact_pairs(p, heel, ends, vy, vz, c_here):
+    """``moves_keep_clearance``'s comparison for gathered pairs: heel (M, 2), ends (M, 2), the outline
+    vertex-major, vy, vz (K, M), c_here (M,) (the foot's clearance at the heel,
+    geometry.foot_clearance)."""
+    d_move = swept.swept_distance_by_edge(jnp, heel + 0.0 * ends, ends, p.foot_length, vy, vz)
     return d_move >= jnp.minimum(p.shield_clearance, c_here) - dynamics.SHIELD_SLACK
 
 
@@ -123,9 +128,12 @@ def keep_clearance(p, heel_y, heel_z, ends, outline, buffer: int | None = None):
     sure_pass, sure_fail = bounds(p, heel_y, heel_z, ends, outline, c_here)
     flat_ends = ends.reshape(total, 2)
 
+    # The outline vertex-major, (K, N) per coordinate: each gathered vertex row is contiguous.
+    table_y, table_z = outline[..., 0].T, outline[..., 1].T
+
     def exact(pair):
         env = pair // f
-        return _exact_pairs(p, heel[env], flat_ends[pair], outline[env], c_here[env])
+        return _exact_pairs(p, heel[env], flat_ends[pair], table_y[:, env], table_z[:, env], c_here[env])
 
     clear = compact.compacted(~(sure_pass | sure_fail).reshape(total), exact, sure_pass.reshape(total),
                               buffer or compact.buffer_size(total, BUFFER_FRACTION))

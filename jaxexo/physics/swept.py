@@ -25,6 +25,10 @@ import numpy as np
 from jaxexo.physics.geometry import _point_edge_dist2, any_last, foot_clearance, min_last
 
 
+# Vertices per iteration of swept_distance_by_edge's loop under JAX.
+BY_EDGE_UNROLL = 3
+
+
 def _inv_len2(xp, ey, ez):
     # Sides shorter than 1e-12 m count as points (1 / len2 would overflow; t = 0 gives the vertex).
     len2 = ey * ey + ez * ez
@@ -38,49 +42,106 @@ def _last_axis(xp, *arrays):
     return xp.concatenate([a[..., None] for a in arrays], axis=-1)
 
 
+def _parallelogram(xp, h0, h1, foot_length):
+    """The region the foot sweeps from heel h0 to heel h1, as tuples of four arrays (...,): its
+    corners (py, pz) (the heel and the toe at h0 and at h1) and its sides a -> a + u (ay, az, uy, uz,
+    inv_u) (the foot at h0 and at h1, the heel's and the toe's chords); and, for the inside test,
+    (y0, z0, dy, safe_dz, f_safe, has_area)."""
+    y0, z0 = h0[..., 0], h0[..., 1]
+    dy, dz = h1[..., 0] - y0, h1[..., 1] - z0
+    f = foot_length + 0.0 * y0
+    zero = 0.0 * z0
+    corners = ((y0, y0 + f, y0 + dy, y0 + f + dy), (z0, z0, z0 + dz, z0 + dz))
+    ay, az = (y0, y0 + dy, y0, y0 + f), (z0, z0 + dz, z0, z0)
+    uy, uz = (f, f, dy, dy), (zero, zero, dz, dz)
+    inv_u = tuple(_inv_len2(xp, a, b) for a, b in zip(uy, uz))
+    # Only a move with a vertical component has an interior: v - h0 = s (f, 0) + t (dy, dz).
+    has_area = xp.abs(dz) > 0.0
+    inside = (y0, z0, dy, xp.where(has_area, dz, 1.0), xp.where(f > 0.0, f, 1.0), has_area)
+    return corners, (ay, az, uy, uz, inv_u), inside
+
+
+def _crosses(ay, az, uy, uz, cy, cz, ey, ez):
+    """Proper crossing of the side a -> a + u and the outline edge c -> c + e (strict orientation
+    tests; touching cases are caught by the endpoint distances being zero)."""
+    o1 = uy * (cz - az) - uz * (cy - ay)
+    o2 = uy * (cz + ez - az) - uz * (cy + ey - ay)
+    o3 = ey * (az - cz) - ez * (ay - cy)
+    o4 = ey * (az + uz - cz) - ez * (ay + uy - cy)
+    return (o1 * o2 < 0.0) & (o3 * o4 < 0.0)
+
+
+def _vertex_inside(vy, vz, y0, z0, dy, safe_dz, f_safe, has_area):
+    """Whether outline vertices (vy, vz) lie in the parallelogram (s, t in [0, 1])."""
+    t = (vz - z0) / safe_dz
+    s = (vy - y0 - t * dy) / f_safe
+    return (t >= 0.0) & (t <= 1.0) & (s >= 0.0) & (s <= 1.0) & has_area
+
+
 def swept_distance(xp, h0, h1, foot_length, outline):
     """Exact minimum distance (m) between the region the flat foot sweeps from heel h0 to heel h1
-    (a parallelogram) and the outline polyline; zero when they meet. Shapes: (..., 2), (..., K, 2)."""
+    (a parallelogram) and the outline polyline; zero when they meet. Shapes: (..., 2), (..., K, 2).
+    Every term at once, broadcast over (corner or side, edge or vertex): few array operations, the
+    form for NumPy (``swept_distance_by_edge`` is the same equation for XLA)."""
     vy = outline[..., 0]
     vz = outline[..., 1]
     # Outline edges c -> c + e, (..., 1, K-1): a leading axis of 1 for P's sides or corners.
     cy, cz = vy[..., None, :-1], vz[..., None, :-1]
     ey, ez = vy[..., None, 1:] - cy, vz[..., None, 1:] - cz
     inv_e = _inv_len2(xp, ey, ez)
-    y0, z0 = h0[..., 0], h0[..., 1]
-    dy, dz = h1[..., 0] - y0, h1[..., 1] - z0
-    f = foot_length + 0.0 * y0
-    # P's four corners (..., 4) and its four sides a -> a + u (..., 4): the foot at h0 and at h1, the
-    # heel's and the toe's chords.
-    py = _last_axis(xp, y0, y0 + f, y0 + dy, y0 + f + dy)
-    pz = _last_axis(xp, z0, z0, z0 + dz, z0 + dz)
-    ay = _last_axis(xp, y0, y0 + dy, y0, y0 + f)
-    az = _last_axis(xp, z0, z0 + dz, z0, z0)
-    uy = _last_axis(xp, f, f, dy, dy)
-    uz = _last_axis(xp, 0.0 * z0, 0.0 * z0, dz, dz)
-    inv_u = _inv_len2(xp, uy, uz)
-    # Corners of P against the outline edges: (..., 4, K-1).
-    d_corner = _point_edge_dist2(xp, py[..., :, None], pz[..., :, None], cy, cz, ey, ez, inv_e)
-    # Outline vertices against P's sides: (..., 4, K).
-    d_vertex = _point_edge_dist2(xp, vy[..., None, :], vz[..., None, :], ay[..., :, None], az[..., :, None],
-                                 uy[..., :, None], uz[..., :, None], inv_u[..., :, None])
-    # Proper crossings of a side of P and an outline edge (strict orientation tests; touching cases
-    # are caught by the endpoint distances being zero): (..., 4, K-1).
-    ay_, az_, uy_, uz_ = ay[..., :, None], az[..., :, None], uy[..., :, None], uz[..., :, None]
-    o1 = uy_ * (cz - az_) - uz_ * (cy - ay_)
-    o2 = uy_ * (cz + ez - az_) - uz_ * (cy + ey - ay_)
-    o3 = ey * (az_ - cz) - ez * (ay_ - cy)
-    o4 = ey * (az_ + uz_ - cz) - ez * (ay_ + uy_ - cy)
-    crossing = any_last(xp, (o1 * o2 < 0.0) & (o3 * o4 < 0.0), axes=2)
-    # Outline vertices strictly inside P: v - h0 = s (f, 0) + t (dy, dz) with s, t in [0, 1]
-    # (only for a move with a vertical component; a flat P has no interior).
-    has_area = xp.abs(dz) > 0.0
-    safe_dz = xp.where(has_area, dz, 1.0)[..., None]
-    t = (vz - z0[..., None]) / safe_dz
-    s = (vy - y0[..., None] - t * dy[..., None]) / xp.where(f > 0.0, f, 1.0)[..., None]
-    inside = any_last(xp, (t >= 0.0) & (t <= 1.0) & (s >= 0.0) & (s <= 1.0)) & has_area
+    (py, pz), (ay, az, uy, uz, inv_u), (y0, z0, dy, safe_dz, f_safe, has_area) = _parallelogram(
+        xp, h0, h1, foot_length)
+    # Corners and sides (..., 4, 1) against the outline's edges (..., 1, K-1) and vertices (..., 1, K).
+    py, pz, ay, az, uy, uz, inv_u = (_last_axis(xp, *x)[..., :, None] for x in (py, pz, ay, az, uy, uz, inv_u))
+    d_corner = _point_edge_dist2(xp, py, pz, cy, cz, ey, ez, inv_e)
+    d_vertex = _point_edge_dist2(xp, vy[..., None, :], vz[..., None, :], ay, az, uy, uz, inv_u)
+    crossing = any_last(xp, _crosses(ay, az, uy, uz, cy, cz, ey, ez), axes=2)
+    inside = any_last(xp, _vertex_inside(vy, vz, y0[..., None], z0[..., None], dy[..., None], safe_dz[..., None],
+                                         f_safe[..., None], has_area[..., None]))
     d2 = xp.minimum(min_last(xp, d_corner, axes=2), min_last(xp, d_vertex, axes=2))
     return xp.where(crossing | inside, 0.0, xp.sqrt(d2))
+
+
+def swept_distance_by_edge(xp, h0, h1, foot_length, vy, vz):
+    """``swept_distance`` term by term: one outline vertex and edge at a time against the four
+    corners and sides, the minimum and the crossing and inside flags carried along; each term is the
+    same expression as there. Why: under XLA on a CPU the broadcast form materialises (..., 4, K)
+    arrays that leave the cache for thousands of (environment, move) pairs; this form keeps arrays
+    of the batch's shape (the shield's mask, jaxexo.env.shield, and the environment's step run
+    several times faster). The outline comes vertex-major, ``vy``, ``vz`` (K, ...) broadcasting
+    against the heels' (...,): a vertex row is then contiguous, where column k of a (..., K, 2) array
+    is a strided access (3-4x slower). Under JAX the vertices are a ``fori_loop`` (a few unrolled
+    per iteration: most of the speed of a full unroll at a fraction of its compile time)."""
+    (py, pz), (ay, az, uy, uz, inv_u), inside = _parallelogram(xp, h0, h1, foot_length)
+
+    def vertex(k, d2, hit):
+        wy, wz = vy[k], vz[k]
+        for i in range(4):
+            d2 = xp.minimum(d2, _point_edge_dist2(xp, wy, wz, ay[i], az[i], uy[i], uz[i], inv_u[i]))
+        return d2, hit | _vertex_inside(wy, wz, *inside)
+
+    def vertex_and_edge(k, carry):
+        d2, hit = vertex(k, *carry)
+        cy, cz = vy[k], vz[k]
+        ey, ez = vy[k + 1] - cy, vz[k + 1] - cz
+        inv_e = _inv_len2(xp, ey, ez)
+        for i in range(4):
+            d2 = xp.minimum(d2, _point_edge_dist2(xp, py[i], pz[i], cy, cz, ey, ez, inv_e))
+            hit = hit | _crosses(ay[i], az[i], uy[i], uz[i], cy, cz, ey, ez)
+        return d2, hit
+
+    k_last = vy.shape[0] - 1
+    shape = xp.broadcast_shapes(py[0].shape, vy.shape[1:])
+    carry = (xp.full(shape, np.inf, dtype=py[0].dtype), xp.zeros(shape, dtype=bool))
+    if xp is np:
+        for k in range(k_last):
+            carry = vertex_and_edge(k, carry)
+    else:
+        import jax   # only under JAX: jaxexo.physics stays importable without it
+
+        carry = jax.lax.fori_loop(0, k_last, vertex_and_edge, carry, unroll=BY_EDGE_UNROLL)
+    d2, hit = vertex(k_last, *carry)
+    return xp.where(hit, 0.0, xp.sqrt(d2))
 
 
 def swept_clearance(xp, h0, h1, foot_length, outline, c0=None, c1=None):
@@ -91,7 +152,12 @@ def swept_clearance(xp, h0, h1, foot_length, outline, c0=None, c1=None):
         c0 = foot_clearance(xp, h0, foot_length, outline)
     if c1 is None:
         c1 = foot_clearance(xp, h1, foot_length, outline)
-    return xp.minimum(swept_distance(xp, h0, h1, foot_length, outline), xp.minimum(c0, c1))
+    if xp is np:
+        d = swept_distance(xp, h0, h1, foot_length, outline)
+    else:   # XLA: the environment checks every step's move this way
+        d = swept_distance_by_edge(xp, h0, h1, foot_length, xp.moveaxis(outline[..., 0], -1, 0),
+                                   xp.moveaxis(outline[..., 1], -1, 0))
+    return xp.minimum(d, xp.minimum(c0, c1))
 
 
 def swept_lower_bound(xp, c0, c1, move_length):
