@@ -18,6 +18,7 @@ from jaxexo.physics.geometry import (
     Obstacle,
     flat_foot_distance,
     foot_clearance,
+    foot_clearance_by_edge,
     foot_collides,
     point_in_obstacle,
     profile_height,
@@ -514,6 +515,9 @@ def test_flat_foot_distance_matches_brute_force(scene):
         assert c == pytest.approx(-exact, abs=1e-15)
     else:
         assert c == pytest.approx(exact, abs=1e-15)
+    # the term-by-term form JAX uses: the same terms, the same value
+    by_edge = foot_clearance_by_edge(np, np.asarray(heel, np.float64), foot, ob.outline[:, 0], ob.outline[:, 1])
+    assert float(by_edge) == c
     # Collision iff touching/inside: any foot sample strictly inside the region collides.
     s = np.linspace(0.0, 1.0, 51)[:, None]
     pts = np.asarray(heel) + s * np.array([foot, 0.0])

@@ -22,18 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from jaxexo.physics.geometry import _point_edge_dist2, any_last, foot_clearance, min_last
-
-
-# Vertices per iteration of swept_distance_by_edge's loop under JAX.
-BY_EDGE_UNROLL = 3
-
-
-def _inv_len2(xp, ey, ez):
-    # Sides shorter than 1e-12 m count as points (1 / len2 would overflow; t = 0 gives the vertex).
-    len2 = ey * ey + ez * ez
-    ok = len2 > 1e-24
-    return xp.where(ok, 1.0 / xp.where(ok, len2, 1.0), 0.0)
+from jaxexo.physics.geometry import BY_EDGE_UNROLL, _inv_edge_len2, _point_edge_dist2, any_last, foot_clearance, min_last
 
 
 def _last_axis(xp, *arrays):
@@ -54,7 +43,7 @@ def _parallelogram(xp, h0, h1, foot_length):
     corners = ((y0, y0 + f, y0 + dy, y0 + f + dy), (z0, z0, z0 + dz, z0 + dz))
     ay, az = (y0, y0 + dy, y0, y0 + f), (z0, z0 + dz, z0, z0)
     uy, uz = (f, f, dy, dy), (zero, zero, dz, dz)
-    inv_u = tuple(_inv_len2(xp, a, b) for a, b in zip(uy, uz))
+    inv_u = tuple(_inv_edge_len2(xp, a, b) for a, b in zip(uy, uz))
     # Only a move with a vertical component has an interior: v - h0 = s (f, 0) + t (dy, dz).
     has_area = xp.abs(dz) > 0.0
     inside = (y0, z0, dy, xp.where(has_area, dz, 1.0), xp.where(f > 0.0, f, 1.0), has_area)
@@ -88,7 +77,7 @@ def swept_distance(xp, h0, h1, foot_length, outline):
     # Outline edges c -> c + e, (..., 1, K-1): a leading axis of 1 for P's sides or corners.
     cy, cz = vy[..., None, :-1], vz[..., None, :-1]
     ey, ez = vy[..., None, 1:] - cy, vz[..., None, 1:] - cz
-    inv_e = _inv_len2(xp, ey, ez)
+    inv_e = _inv_edge_len2(xp, ey, ez)
     (py, pz), (ay, az, uy, uz, inv_u), (y0, z0, dy, safe_dz, f_safe, has_area) = _parallelogram(
         xp, h0, h1, foot_length)
     # Corners and sides (..., 4, 1) against the outline's edges (..., 1, K-1) and vertices (..., 1, K).
@@ -124,7 +113,7 @@ def swept_distance_by_edge(xp, h0, h1, foot_length, vy, vz):
         d2, hit = vertex(k, *carry)
         cy, cz = vy[k], vz[k]
         ey, ez = vy[k + 1] - cy, vz[k + 1] - cz
-        inv_e = _inv_len2(xp, ey, ez)
+        inv_e = _inv_edge_len2(xp, ey, ez)
         for i in range(4):
             d2 = xp.minimum(d2, _point_edge_dist2(xp, py[i], pz[i], cy, cz, ey, ez, inv_e))
             hit = hit | _crosses(ay[i], az[i], uy[i], uz[i], cy, cz, ey, ez)
