@@ -14,7 +14,11 @@ with PYTHONPATH pointing at that checkout).
 
 The shield's mask inside the trainer, plain rule against the batched one, alternated in one process:
   python benchmarks/bench_train.py --mask-ab configs/default.toml [--updates 30] [--rounds 2]
-writes benchmarks/results/train-mask-ab_<date>_<machine>.json and .md."""
+writes benchmarks/results/train-mask-ab_<date>_<machine>.json and .md.
+
+Where an update's time goes (rollout, environment, network passes, optimizer), per config:
+  python benchmarks/bench_train.py --breakdown configs/quick.toml configs/default.toml [--label NAME]
+writes benchmarks/results/train-breakdown[-NAME]_<date>_<machine>.json and .md."""
 
 import sys
 from pathlib import Path
@@ -186,9 +190,51 @@ def mask_ab(path, updates: int, rounds: int, out_dir: Path) -> dict:
     return out
 
 
+def breakdown(paths, label: str, out_dir: Path) -> dict:
+    """Where an update's time goes (jaxexo.benchmarks.train_bench.update_breakdown), per config."""
+    import jax
+
+    from jaxexo.benchmarks.train_bench import update_breakdown
+    from jaxexo.config import load_config
+    from jaxexo.evaluation.machine import write_result
+
+    rows = []
+    for path in paths:
+        r = update_breakdown(load_config(path))
+        r["config"] = Path(path).name
+        rows.append(r)
+        print(r, flush=True)
+    lines = [f"# Where a training update's time goes ({label or 'one device'})", "",
+             "One forward-view update (T steps of N environments, then the learning part) on one CPU device "
+             f"(of {len(jax.local_devices())}), each part timed alone on the update's own shapes in a jitted loop; "
+             "milliseconds per update and share of the whole update. The parts inside the rollout and the "
+             "learning part are measured alone, so they need not add up to their totals exactly.", ""]
+    for r in rows:
+        parts = r["ms_per_update"]
+        lines += [f"## {r['config']} (N = {r['num_envs']}, T = {r['rollout_steps']}, {r['num_minibatches']} "
+                  f"minibatches x {r['num_epochs']} epoch(s), hidden {r['hidden']}, shield {r['shield']})", "",
+                  "| part | ms per update | share of the update |", "|---|---:|---:|"]
+        lines += [f"| {k} | {v:.2f} | {100 * v / parts['update']:.0f} % |" for k, v in parts.items()]
+        lines += ["", f"One device: {r['env_steps_per_s_one_device'] / 1e3:.0f}k env-steps/s.", ""]
+    md = "\n".join(lines)
+    write_result("train-breakdown" + (f"-{label}" if label else ""), {"rows": rows}, md, out_dir)
+    print(md)
+    return {"rows": rows}
+
+
 if __name__ == "__main__":
     root = Path(__file__).resolve().parent.parent
     args = sys.argv[1:]
+    if args and args[0] == "--breakdown":
+        import argparse
+
+        ap = argparse.ArgumentParser()
+        ap.add_argument("--breakdown", nargs="+", required=True)
+        ap.add_argument("--label", default="")
+        ap.add_argument("--out", default=str(root / "benchmarks" / "results"))
+        a = ap.parse_args(args)
+        breakdown(a.breakdown, a.label, Path(a.out))
+        sys.exit(0)
     if args and args[0] == "--mask-ab":
         import argparse
 

@@ -98,3 +98,89 @@ def run_train_benchmark(out_dir, default_config: str = "configs/default.toml", t
     write_result("train", {"throughput": rows, "runs": runs}, md, out_dir)
     progress(md)
     return {"throughput": rows, "runs": runs}
+
+
+def update_breakdown(cfg: Config, repeats: int = 5, calls: int = 4) -> dict:
+    """Where one forward-view update's time goes, on one device at the config's batch: the whole
+    update; its rollout (T steps of acting, environment, mask, target pass) and its learning part
+    (lambda-returns, minibatch gradients, clipping and Adam) as the trainer runs them
+    (``Trainer._rollout``, ``Trainer._learn``); and inside those, timed alone on the same shapes, the
+    environment's steps (with the shield's mask where the config has it), the network's acting and
+    target passes, its forward-and-backward passes over the minibatches, and the optimizer's steps.
+    Medians of ``repeats`` jitted loops of ``calls`` iterations each, in milliseconds per update."""
+    import jax.numpy as jnp
+    import optax
+
+    from jaxexo.train import td_lambda
+
+    if cfg.train.trace != "forward":
+        raise ValueError("update_breakdown: the forward view only (train.trace = 'forward')")
+    tr = Trainer(cfg)
+    hyper = Hyperparams.from_config(cfg)
+    ts = jax.jit(tr.init)(jax.random.PRNGKey(0), hyper)
+    eps = jnp.float32(0.1)
+    t, n = cfg.train.rollout_steps, cfg.train.num_envs
+    n_mb, epochs = cfg.train.num_minibatches, cfg.train.num_epochs
+    _, trans, _ = jax.jit(lambda s: tr._rollout(s, hyper, eps))(ts)
+    tx = tr.optimizer(hyper)
+    mb = n * t // n_mb
+
+    def timed(fn, *args):
+        loop = jax.jit(lambda *a: jax.lax.fori_loop(0, calls, lambda i, acc: acc + fn(i, *a), 0.0))
+        jax.block_until_ready(loop(*args))
+        times = []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            jax.block_until_ready(loop(*args))
+            times.append(time.perf_counter() - t0)
+        return 1e3 * float(np.median(times)) / calls
+
+    def total(tree):
+        return sum(jnp.sum(x).astype(jnp.float32) for x in jax.tree.leaves(tree))
+
+    def env_steps(i, s):
+        def one(c, k):
+            es = c
+            mask = tr._mask(es, hyper)
+            a = jax.random.randint(k, (n,), 0, tr.env.num_actions) if mask is None else \
+                jax.random.categorical(k, jnp.where(mask, 0.0, -jnp.inf), axis=-1).astype(jnp.int32)
+            _, es, r, *_ = tr._env_step(k, es, a, hyper)
+            return es, r.sum()
+        _, r = jax.lax.scan(one, s.env_state, jax.random.split(jax.random.fold_in(s.key, i), t))
+        return r.sum()
+
+    def acting(i, s):   # each pass on its own input (identical passes would be computed once)
+        return sum(tr.net.apply(s.params, s.obs + 1e-6 * (i + j)).sum()
+                   + tr.net.apply(s.target_params, s.obs - 1e-6 * (i + j)).sum() for j in range(t))
+
+    def grads(i, s, tr_):
+        obs = tr_.obs.reshape((n_mb * epochs, -1) + tr_.obs.shape[2:])[:, :mb] + 1e-9 * i
+
+        def loss(p, o):
+            return 0.5 * jnp.mean(tr.net.apply(p, o) ** 2)
+        return sum(total(jax.grad(loss)(s.params, obs[j % obs.shape[0]])) for j in range(n_mb * epochs))
+
+    def optimizer(i, s):
+        g = jax.tree.map(lambda p: p * (1.0 + 1e-9 * i), s.params)
+        p, o = s.params, s.opt_state
+        for _ in range(n_mb * epochs):
+            u, o = tx.update(g, o, p)
+            p = optax.apply_updates(p, u)
+        return total(p)
+
+    parts = {
+        "update": timed(lambda i, s: total(tr.update(s.replace(update=s.update * 0 + i), hyper)[1]), ts),
+        "rollout": timed(lambda i, s: total(tr._rollout(s.replace(key=jax.random.fold_in(s.key, i)), hyper, eps)[1]), ts),
+        "learn": timed(lambda i, s, tr_: total(tr._learn(s.replace(key=jax.random.fold_in(s.key, i)), tr_, hyper,
+                                                         eps)[1:]), ts, trans),
+        "environment steps" + (" with the mask" if tr.env.shield else ""): timed(env_steps, ts),
+        "network: acting and target passes": timed(acting, ts),
+        "network: forward and backward passes": timed(grads, ts, trans),
+        "optimizer: clipping and Adam": timed(optimizer, ts),
+        "lambda-returns": timed(lambda i, s, tr_: td_lambda.lambda_returns(
+            tr_.reward + 1e-9 * i, tr_.target_q, tr_.terminated, tr_.terminated | tr_.truncated, tr_.greedy,
+            hyper.gamma, hyper.lam).sum(), ts, trans),
+    }
+    return {"num_envs": n, "rollout_steps": t, "num_minibatches": n_mb, "num_epochs": epochs,
+            "hidden": list(cfg.train.hidden), "shield": bool(tr.env.shield), "ms_per_update": parts,
+            "env_steps_per_s_one_device": n * t / (parts["update"] / 1e3)}

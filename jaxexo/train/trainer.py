@@ -269,9 +269,9 @@ class Trainer:
         return new, metrics
 
     # --------------------------------------------------------------------------------------
-    def _update_forward(self, ts: TrainState, hyper: Hyperparams):
-        eps = self.epsilon(ts, hyper)
-
+    def _rollout(self, ts: TrainState, hyper: Hyperparams, eps):
+        """T steps of the N environments under the epsilon-greedy policy: the transitions (T, N), the
+        per-step episode rows, and the state the rollout ends in."""
         def step(carry, _):
             env_state, obs, mask, stats, key = carry
             key, kl = jax.random.split(key)
@@ -290,6 +290,12 @@ class Trainer:
         (env_state, obs, _, stats, key), (tr, rows) = jax.lax.scan(
             step, (ts.env_state, ts.obs, self._mask(ts.env_state, hyper), ts.stats, ts.key), None,
             length=self.tc.rollout_steps)
+        return ts.replace(env_state=env_state, obs=obs, stats=stats, key=key), tr, rows
+
+    def _learn(self, ts: TrainState, tr: Transition, hyper: Hyperparams, eps):
+        """Lambda-returns of a rollout (eq 2.19, by a reverse scan) and ``num_epochs`` passes of
+        ``num_minibatches`` Adam steps on 0.5 (G - Q(s, a))^2: the new parameters and optimizer state,
+        the mean loss and mean Q(s, a)."""
         done = tr.terminated | tr.truncated
         if self.off_policy:
             boot = tr.target_q                                                        # eq 2.28
@@ -330,12 +336,17 @@ class Trainer:
 
             return jax.lax.scan(minibatch, (params, opt_state), mb)
 
-        key, kp = jax.random.split(key)
+        key, kp = jax.random.split(ts.key)
         kp = self._local_key(kp)
         (params, opt_state), (losses, qms) = jax.lax.scan(
             epoch, (ts.params, ts.opt_state), jax.random.split(kp, self.tc.num_epochs))
-        new = ts.replace(params=params, opt_state=opt_state, env_state=env_state, obs=obs, stats=stats, key=key)
-        return self._finish_update(ts, new, hyper, self._psum(rows.sum(0)), losses.mean(), qms.mean(), eps)
+        return ts.replace(params=params, opt_state=opt_state, key=key), losses.mean(), qms.mean()
+
+    def _update_forward(self, ts: TrainState, hyper: Hyperparams):
+        eps = self.epsilon(ts, hyper)
+        rolled, tr, rows = self._rollout(ts, hyper, eps)
+        new, loss, q_mean = self._learn(rolled, tr, hyper, eps)
+        return self._finish_update(ts, new, hyper, self._psum(rows.sum(0)), loss, q_mean, eps)
 
     def _update_backward(self, ts: TrainState, hyper: Hyperparams):
         eps = self.epsilon(ts, hyper)
