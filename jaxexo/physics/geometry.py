@@ -80,6 +80,12 @@ CHAIN_MAX = 8
 BY_EDGE_UNROLL = 3
 
 
+def is_jax(xp) -> bool:
+    """Whether the array module is jax.numpy (the term-by-term forms are for XLA; any other module,
+    NumPy or a namespace standing in for it, takes the broadcast ones)."""
+    return getattr(xp, "__name__", "").startswith("jax")
+
+
 def _chain_last(xp, op, reduce, x):
     k = x.shape[-1]
     if not 0 < k <= CHAIN_MAX:
@@ -194,6 +200,7 @@ def foot_clearance_by_edge(xp, heel, foot_length, vy, vz):
     same reason: XLA on a CPU, thousands of feet): the outline vertex-major, vy, vz (K, ...)
     broadcasting against the heels' (...,); each term is the same expression as in
     ``flat_foot_distance`` and ``point_in_obstacle``."""
+    vy, vz = xp.asarray(vy), xp.asarray(vz)   # indexed by the loop's counter
     y0, z = heel[..., 0], heel[..., 1]
     y1 = y0 + foot_length
 
@@ -207,13 +214,13 @@ def foot_clearance_by_edge(xp, heel, foot_length, vy, vz):
     k_last = vy.shape[0] - 1
     shape = xp.broadcast_shapes(y0.shape, vy.shape[1:])
     carry = (xp.full(shape, np.inf, dtype=y0.dtype), xp.zeros(shape, dtype=bool), xp.zeros(shape, dtype=bool))
-    if xp is np:
-        for k in range(k_last):
-            carry = edge(k, carry)
-    else:
+    if is_jax(xp):
         import jax   # only under JAX: jaxexo.physics stays importable without it
 
         carry = jax.lax.fori_loop(0, k_last, edge, carry, unroll=BY_EDGE_UNROLL)
+    else:
+        for k in range(k_last):
+            carry = edge(k, carry)
     d2, crosses, odd = carry
     d2 = xp.minimum(d2, _foot_vertex_term(xp, y0, y1, z, vy[k_last], vz[k_last]))
     dist = xp.where(crosses, 0.0, xp.sqrt(d2))
@@ -226,7 +233,7 @@ def foot_clearance(xp, heel, foot_length, outline):
     Positive: the exact distance to the outline. Zero or negative: the foot touches or is inside
     (negative of the distance to the outline when the whole foot is buried). Under JAX computed term
     by term (``foot_clearance_by_edge``), in NumPy all at once."""
-    if xp is not np:
+    if is_jax(xp):
         return foot_clearance_by_edge(xp, heel, foot_length, xp.moveaxis(outline[..., 0], -1, 0),
                                       xp.moveaxis(outline[..., 1], -1, 0))
     dist = flat_foot_distance(xp, heel, foot_length, outline)

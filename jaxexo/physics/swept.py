@@ -22,7 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from jaxexo.physics.geometry import BY_EDGE_UNROLL, _inv_edge_len2, _point_edge_dist2, any_last, foot_clearance, min_last
+from jaxexo.physics.geometry import (BY_EDGE_UNROLL, _inv_edge_len2, _point_edge_dist2, any_last, foot_clearance,
+                                     is_jax, min_last)
 
 
 def _last_axis(xp, *arrays):
@@ -101,6 +102,7 @@ def swept_distance_by_edge(xp, h0, h1, foot_length, vy, vz):
     against the heels' (...,): a vertex row is then contiguous, where column k of a (..., K, 2) array
     is a strided access (3-4x slower). Under JAX the vertices are a ``fori_loop`` (a few unrolled
     per iteration: most of the speed of a full unroll at a fraction of its compile time)."""
+    vy, vz = xp.asarray(vy), xp.asarray(vz)   # indexed by the loop's counter
     (py, pz), (ay, az, uy, uz, inv_u), inside = _parallelogram(xp, h0, h1, foot_length)
 
     def vertex(k, d2, hit):
@@ -122,13 +124,13 @@ def swept_distance_by_edge(xp, h0, h1, foot_length, vy, vz):
     k_last = vy.shape[0] - 1
     shape = xp.broadcast_shapes(py[0].shape, vy.shape[1:])
     carry = (xp.full(shape, np.inf, dtype=py[0].dtype), xp.zeros(shape, dtype=bool))
-    if xp is np:
-        for k in range(k_last):
-            carry = vertex_and_edge(k, carry)
-    else:
+    if is_jax(xp):
         import jax   # only under JAX: jaxexo.physics stays importable without it
 
         carry = jax.lax.fori_loop(0, k_last, vertex_and_edge, carry, unroll=BY_EDGE_UNROLL)
+    else:
+        for k in range(k_last):
+            carry = vertex_and_edge(k, carry)
     d2, hit = vertex(k_last, *carry)
     return xp.where(hit, 0.0, xp.sqrt(d2))
 
@@ -141,11 +143,11 @@ def swept_clearance(xp, h0, h1, foot_length, outline, c0=None, c1=None):
         c0 = foot_clearance(xp, h0, foot_length, outline)
     if c1 is None:
         c1 = foot_clearance(xp, h1, foot_length, outline)
-    if xp is np:
-        d = swept_distance(xp, h0, h1, foot_length, outline)
-    else:   # XLA: the environment checks every step's move this way
+    if is_jax(xp):   # XLA: the environment checks every step's move this way
         d = swept_distance_by_edge(xp, h0, h1, foot_length, xp.moveaxis(outline[..., 0], -1, 0),
                                    xp.moveaxis(outline[..., 1], -1, 0))
+    else:
+        d = swept_distance(xp, h0, h1, foot_length, outline)
     return xp.minimum(d, xp.minimum(c0, c1))
 
 
