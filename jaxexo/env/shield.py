@@ -36,10 +36,11 @@ from jaxexo.physics import dynamics, geometry, swept
 
 # m: the box bound must clear shield_clearance by this much before the exact check is skipped.
 BOUND_MARGIN = 1e-4
-# Open (env, move) pairs checked exactly per round, as a fraction of all pairs of the batch. Small:
-# the rounds' fixed cost is less than the padding a large buffer checks for nothing (the shielded
-# default trains 6-7 % faster at 1/64 than at 1/16, the same decisions: an A/B in one process).
-BUFFER_FRACTION = 1 / 64
+# Open (env, move) pairs checked exactly per round, as a fraction of all pairs of the batch. A round
+# has a fixed cost (gathering, scattering, the loop) that a larger buffer pays less often, and padding
+# that a smaller one checks for nothing; with the term-by-term exact check one eighth is the faster
+# (docs/benchmarks.md, the shield's mask).
+BUFFER_FRACTION = 1 / 8
 
 
 def _box(outline):
