@@ -86,6 +86,18 @@ def is_jax(xp) -> bool:
     return getattr(xp, "__name__", "").startswith("jax")
 
 
+def vertex_loop(xp, count: int, body, carry):
+    """``carry = body(k, carry)`` for k = 0 .. count-1: the term-by-term forms' loop over outline
+    vertices. Under JAX a ``fori_loop`` unrolled by BY_EDGE_UNROLL, otherwise a Python loop."""
+    if is_jax(xp):
+        import jax   # only under JAX: jaxexo.physics stays importable without it
+
+        return jax.lax.fori_loop(0, count, body, carry, unroll=BY_EDGE_UNROLL)
+    for k in range(count):
+        carry = body(k, carry)
+    return carry
+
+
 def _chain_last(xp, op, reduce, x):
     k = x.shape[-1]
     if not 0 < k <= CHAIN_MAX:
@@ -214,14 +226,7 @@ def foot_clearance_by_edge(xp, heel, foot_length, vy, vz):
     k_last = vy.shape[0] - 1
     shape = xp.broadcast_shapes(y0.shape, vy.shape[1:])
     carry = (xp.full(shape, np.inf, dtype=y0.dtype), xp.zeros(shape, dtype=bool), xp.zeros(shape, dtype=bool))
-    if is_jax(xp):
-        import jax   # only under JAX: jaxexo.physics stays importable without it
-
-        carry = jax.lax.fori_loop(0, k_last, edge, carry, unroll=BY_EDGE_UNROLL)
-    else:
-        for k in range(k_last):
-            carry = edge(k, carry)
-    d2, crosses, odd = carry
+    d2, crosses, odd = vertex_loop(xp, k_last, edge, carry)
     d2 = xp.minimum(d2, _foot_vertex_term(xp, y0, y1, z, vy[k_last], vz[k_last]))
     dist = xp.where(crosses, 0.0, xp.sqrt(d2))
     return xp.where(odd & (z >= 0.0), -dist, dist)

@@ -22,8 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from jaxexo.physics.geometry import (BY_EDGE_UNROLL, _inv_edge_len2, _point_edge_dist2, any_last, foot_clearance,
-                                     is_jax, min_last)
+from jaxexo.physics.geometry import (_inv_edge_len2, _point_edge_dist2, any_last, foot_clearance, is_jax, min_last,
+                                     vertex_loop)
 
 
 def _last_axis(xp, *arrays):
@@ -124,14 +124,7 @@ def swept_distance_by_edge(xp, h0, h1, foot_length, vy, vz):
     k_last = vy.shape[0] - 1
     shape = xp.broadcast_shapes(py[0].shape, vy.shape[1:])
     carry = (xp.full(shape, np.inf, dtype=py[0].dtype), xp.zeros(shape, dtype=bool))
-    if is_jax(xp):
-        import jax   # only under JAX: jaxexo.physics stays importable without it
-
-        carry = jax.lax.fori_loop(0, k_last, vertex_and_edge, carry, unroll=BY_EDGE_UNROLL)
-    else:
-        for k in range(k_last):
-            carry = vertex_and_edge(k, carry)
-    d2, hit = vertex(k_last, *carry)
+    d2, hit = vertex(k_last, *vertex_loop(xp, k_last, vertex_and_edge, carry))
     return xp.where(hit, 0.0, xp.sqrt(d2))
 
 
