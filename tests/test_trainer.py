@@ -295,3 +295,16 @@ def test_epsilon_greedy_value_matches_the_behaviour_policy(tiny):
         # an exploratory draw can still pick the greedy action: 1 - eps + eps / 36 of them are greedy
         np.testing.assert_allclose(greedy_share, 1 - eps + eps / trainer.env.num_actions, atol=0.015)
     assert std.max() > 0.01   # Q differs across actions: the comparison above has teeth
+
+
+def test_update_breakdown_refuses_the_backward_view_naming_the_field():
+    """bench_train.py --breakdown times the forward view's parts; a backward-view config is refused at
+    the call, naming train.trace, before anything is compiled."""
+    import dataclasses
+
+    from jaxexo.benchmarks.train_bench import update_breakdown
+
+    cfg = load_config(ROOT / "configs" / "quick.toml")
+    cfg = dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, trace="backward"))
+    with pytest.raises(ValueError, match="train.trace"):
+        update_breakdown(cfg)
