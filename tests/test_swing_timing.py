@@ -280,3 +280,38 @@ def test_cli_generate_rate_and_animation(trained_run, tmp_path):
         assert im.n_frames >= 10
     assert main(["generate", "--policy", str(trained_run / "policy.npz"), "--obstacle", "base2", "--rate", "-5",
                  "--out", str(out)]) == 2
+
+
+def test_topp_passes_row_by_row_equal_the_batched_passes_and_the_plain_recurrence():
+    """The TOPP passes run as Python floats for small batches and vectorised for large ones
+    (jaxexo.inference.time_law._min_affine_scan): both must give the same law bit for bit, and both
+    must equal the passes written out plainly from the admissible-s'' interval (eq. of the module
+    docstring: reach[i-1] = clip(reach[i] - 2 ds L_i(reach[i])), x[i+1] = clip(x[i] + 2 ds U_i(x[i])))."""
+    from jaxexo.inference import time_law as tl
+
+    rng = np.random.default_rng(11)
+    b, k = tl.SCALAR_ROWS + 6, 160
+    dq = rng.normal(size=(b, k, 4))
+    dq[:, 40:55, 3] = 0.0                        # a joint that stands still for a stretch
+    ddq = 5.0 * rng.normal(size=(b, k, 4))
+    vmax, amax, ds = np.array([3.0, 4.0, 3.0, 4.0]), np.array([15.0, 20.0, 15.0, 20.0]), 1.0 / (k - 1)
+    big, floor_big = tl.topp(dq, ddq, vmax, amax, ds)
+    small = np.concatenate([tl.topp(dq[i:i + 1], ddq[i:i + 1], vmax, amax, ds)[0] for i in range(b)])
+    np.testing.assert_array_equal(big, small)
+    # The plain recurrence, one path at a time, with the interval computed per step.
+    for i in range(0, b, 7):
+        xmax = tl.max_speed_curve(dq[i], ddq[i], vmax, amax)
+        reach = np.zeros(k)
+        for j in range(k - 1, 0, -1):
+            moving = np.abs(dq[i, j]) > 1e-12
+            lo = max(min((-amax[m] - ddq[i, j, m] * reach[j]) / dq[i, j, m], (amax[m] - ddq[i, j, m] * reach[j])
+                         / dq[i, j, m]) for m in range(4) if moving[m]) if moving.any() else -np.inf
+            reach[j - 1] = min(max(reach[j] - 2.0 * ds * lo, 0.0), xmax[j - 1])
+        x = np.zeros(k)
+        for j in range(k - 1):
+            moving = np.abs(dq[i, j]) > 1e-12
+            hi = min(max((-amax[m] - ddq[i, j, m] * x[j]) / dq[i, j, m], (amax[m] - ddq[i, j, m] * x[j])
+                         / dq[i, j, m]) for m in range(4) if moving[m]) if moving.any() else np.inf
+            x[j + 1] = min(max(x[j] + 2.0 * ds * hi, 0.0), reach[j + 1])
+        np.testing.assert_allclose(big[i], x, rtol=1e-9, atol=1e-12)
+    assert np.all(np.isfinite(floor_big)) and np.all(big >= 0)

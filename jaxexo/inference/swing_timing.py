@@ -53,6 +53,7 @@ limits apply to both legs).
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -260,7 +261,7 @@ def time_swings(trajs, config, rate: float | None = None, limits: DeviceLimits |
     limits (default: ``config.device``) and sample each at ``rate`` Hz (default:
     ``config.device.control_rate``). ``config`` also supplies the kinematics (pass the generator's
     ``config``). The TOPP passes run on all swings at once."""
-    from jaxexo.config import Config, scalar_params
+    from jaxexo.config import Config
 
     if _is_trajectory(trajs) and not isinstance(trajs, TrajectoryBatch):
         raise TypeError("trajs: expected a list of trajectories or a TrajectoryBatch, got one trajectory "
@@ -281,7 +282,7 @@ def time_swings(trajs, config, rate: float | None = None, limits: DeviceLimits |
     limits = DeviceLimits.from_config(config) if limits is None else limits
     if not isinstance(limits, DeviceLimits):
         raise ValueError(f"limits: expected a DeviceLimits, got {type(limits).__name__}")
-    sp = scalar_params(config) if sp is None else sp
+    sp = _scalars(config) if sp is None else sp
     vmax = np.asarray(limits.velocity)
     amax = np.asarray(limits.acceleration)
     heels = [np.asarray(t.heel, np.float64) for t in trajs]
@@ -313,6 +314,15 @@ def time_swings(trajs, config, rate: float | None = None, limits: DeviceLimits |
         if not todo:
             break
     return [_finish(trajs[i], evals[i], sp, limits, rate, t_opt[i], slow[i]) for i in range(len(trajs))]
+
+
+@functools.lru_cache(maxsize=8)
+def _scalars(config):
+    """scalar_params of a config, kept: a config is frozen, and the view costs about a millisecond,
+    as much as timing a swing (read only here)."""
+    from jaxexo.config import scalar_params
+
+    return scalar_params(config)
 
 
 def _topp_laws(paths, idx, caps, vmax, amax) -> list[TimeLaw]:
