@@ -396,7 +396,7 @@ def cmd_replay(args) -> int:
         if args.driven:
             for label, scale in (("driven", 1.0), ("driven_half_limits", 0.5))[: 2 if args.half_limits else 1]:
                 lim = DeviceLimits.from_config(config).scaled(scale, scale)
-                d = r[label] = driven_replay(timed, config, limits=lim, legs=legs)
+                d = r[label] = driven_replay(timed, config, limits=lim, legs=legs, controller=args.controller)
                 print(f"  {label.replace('_', ' ')}: heel error max {100 * d['heel_error_max_m']:.2f} cm, toe "
                       f"{100 * d['toe_error_max_m']:.2f} cm; smallest distance {100 * d['mujoco_min_distance_m']:.2f} "
                       f"cm; {'CONTACT' if d['contact'] else 'no contact'}; "
@@ -574,8 +574,10 @@ def build_parser() -> argparse.ArgumentParser:
             x.add_argument("--method", choices=("rl", "cfftg", "both"), default="rl",
                            help="the RL swing alone (no fallback), CFFTG's, or both")
             x.add_argument("--rate", type=float, help="control rate, Hz (default: the config's control_rate)")
-            x.add_argument("--driven", action="store_true", help="also drive the legs with position actuators "
-                                                                 "within the [device] limits")
+            x.add_argument("--driven", action="store_true", help="also drive the legs within the [device] limits")
+            x.add_argument("--controller", choices=("pd_ff", "servo"), default="pd_ff",
+                           help="with --driven: PD with inverse-dynamics feed-forward (pd_ff, default) or stiff "
+                                "position servos (servo)")
             x.add_argument("--half-limits", action="store_true", help="with --driven: also at half the limits")
             x.add_argument("--json", help="write the figures (SI units) to this JSON file")
             x.set_defaults(func=cmd_replay)

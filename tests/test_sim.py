@@ -21,7 +21,7 @@ from jaxexo.sim.pieces import convex_pieces
 
 mujoco = pytest.importorskip("mujoco")
 
-from jaxexo.sim.replay import Legs, brute_force_distance, driven_replay, kinematic_replay  # noqa: E402
+from jaxexo.sim.replay import Legs, brute_force_distance, driven_replay, feed_forward, hermite, kinematic_replay  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -183,6 +183,58 @@ def test_a_safe_swing_tracks_at_the_limits_and_keeps_clear(config):
     # At a tenth of the limits the drive cannot follow: a limit saturates.
     slow = driven_replay(timed, config, limits=timed.limits.scaled(0.1, 0.1), settle=0.0)
     assert slow["saturated"] and slow["heel_error_max_m"] > d["heel_error_max_m"]
+
+
+def test_feed_forward_torques_alone_carry_the_legs_along_the_reference(config):
+    """The feed-forward torques, applied open loop in MuJoCo's forward simulation (its own soft
+    stance and level constraints, no feedback), carry the legs along the reference for 40 ms from
+    any reference state, where gravity alone lets them drift away: an independent check of the
+    rigid inverse dynamics in feed_forward."""
+    from jaxexo.baselines import CFFTG
+    from jaxexo.inference.swing_timing import time_swing
+    from jaxexo.sim.replay import _dofs, _equalities_on
+    from jaxexo.sim.mjcf import ACTUATED
+
+    timed = time_swing(CFFTG(config).generate(Obstacle.named("base2"), pivot="between"), config, rate=100.0)
+    legs = Legs(config, timed.scene)
+    _equalities_on(legs)
+    m, d = legs.model, legs.data
+    dt = m.opt.timestep = 1e-3
+    q = hermite(timed.joint_angles, timed.joint_velocity, 0.01, np.arange(len(timed.joint_angles) * 10) * dt)
+    qpos = legs.qpos(q)
+    qvel = np.gradient(qpos, dt, axis=0, edge_order=2)
+    qacc = np.gradient(qvel, dt, axis=0, edge_order=2)
+    tau = feed_forward(legs, qpos, qvel, qacc)
+    act = _dofs(legs, ACTUATED)
+    m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_ACTUATION)     # the torques alone move the legs
+    span = 40
+    for k in range(20, len(qpos) - span - 20, 150):
+        drift = {}
+        for label, scale in (("ff", 1.0), ("none", 0.0)):
+            mujoco.mj_resetData(m, d)
+            d.qpos[:], d.qvel[:] = qpos[k], qvel[k]
+            for i in range(span):
+                d.qfrc_applied[:] = 0.0
+                d.qfrc_applied[act] = scale * tau[k + i]
+                mujoco.mj_step(m, d)
+            drift[label] = float(np.abs(d.qpos[act] - qpos[k + span][act]).max())
+        assert drift["ff"] < 0.01 and drift["ff"] < 0.1 * drift["none"], (k, drift)
+
+
+def test_feed_forward_tracks_where_a_plain_servo_lags(config):
+    """With the same setpoints, the PD with feed-forward keeps the heel within millimetres of the
+    swing; the plain position servo trails it by about 2 / omega times the joints' speed."""
+    from jaxexo.baselines import CFFTG
+    from jaxexo.inference.swing_timing import time_swing
+
+    timed = time_swing(CFFTG(config).generate(Obstacle.named("base1"), pivot="between"), config, rate=100.0)
+    ff = driven_replay(timed, config, settle=0.05)
+    servo = driven_replay(timed, config, settle=0.05, controller="servo")
+    assert ff["controller"] == "pd_ff" and servo["controller"] == "servo"
+    assert ff["heel_error_max_m"] < 0.005 < servo["heel_error_max_m"]
+    assert not ff["contact"] and ff["margin_kept"] and ff["stance_heel_slip_max_m"] < 0.005
+    with pytest.raises(SimError, match="controller"):
+        driven_replay(timed, config, controller="pid")
 
 
 def test_jaxexo_and_its_inference_never_import_mujoco():

@@ -149,7 +149,8 @@ def test_samples_lie_on_the_path():
 def test_durations_scale_with_the_limits():
     rng = np.random.default_rng(7)
     trajs = synthetic([random_path(rng) for _ in range(3)])
-    base = DeviceLimits.from_config(CFG)
+    # The velocity and acceleration law alone (jerk and headroom: test_jerk_limit_and_headroom_hold).
+    base = dataclasses.replace(DeviceLimits.from_config(CFG), jerk=None, headroom=0.0)
     # Velocity-bound (accelerations practically unlimited): half the speed, twice the time.
     vb = base.scaled(acceleration=1e4)
     t1 = np.array([s.duration for s in time_swings(trajs, CFG, rate=200, limits=vb)])
@@ -164,6 +165,30 @@ def test_durations_scale_with_the_limits():
     sw = time_swing(trajs[0], CFG, rate=100, limits=dataclasses.replace(base, min_duration=3.0))
     assert sw.duration == pytest.approx(3.0, abs=0.011)
     assert_device_ready(sw, base, 100)
+
+
+def test_jerk_limit_and_headroom_hold_on_the_exported_samples():
+    """The third finite difference of the exported angles stays within the jerk limit, and with a
+    tracking headroom h every sample keeps (1 - h) of each limit; a velocity-bound swing then takes
+    about 1 / (1 - h) as long."""
+    rng = np.random.default_rng(5)
+    trajs = synthetic([random_path(rng) for _ in range(4)])
+    base = DeviceLimits.from_config(CFG)
+    for jerk in (400.0, 1500.0):
+        lim = dataclasses.replace(base, jerk=(jerk,) * 4, headroom=0.2)
+        for sw in time_swings(trajs, CFG, rate=100, limits=lim):
+            j = np.abs(np.diff(sw.joint_angles, n=3, axis=0)).max(0) * 100.0**3
+            assert np.all(j <= 0.8 * jerk), (j, jerk)
+            assert_device_ready(sw, base.scaled(0.8, 0.8), 100)
+            assert sw.limits == lim and sw.within_limits
+    vb = dataclasses.replace(base.scaled(acceleration=1e4), jerk=None, headroom=0.0)
+    t0 = np.array([s.duration for s in time_swings(trajs, CFG, rate=200, limits=vb)])
+    t1 = np.array([s.duration for s in time_swings(trajs, CFG, rate=200, limits=dataclasses.replace(vb, headroom=0.2))])
+    assert np.all((t1 / t0 > 1.15) & (t1 / t0 < 1.35)), t1 / t0
+    for bad, match in ((dict(headroom=0.7), "limits.headroom"), (dict(headroom=-0.1), "limits.headroom"),
+                       (dict(jerk=(1.0, 2.0)), "limits.jerk"), (dict(jerk=(0.0,) * 4), "limits.jerk")):
+        with pytest.raises(ValueError, match=match):
+            dataclasses.replace(base, **bad)
 
 
 def quintic_duration(tr, limits, rate=1000.0):
@@ -194,10 +219,11 @@ def quintic_duration(tr, limits, rate=1000.0):
 
 def test_variable_speed_beats_a_fixed_time_law():
     cf = CFFTG(CFG)
-    lim = DeviceLimits.from_config(CFG)
+    # Like with like: the quintic reference knows velocity and acceleration limits only, all of them.
+    lim = dataclasses.replace(DeviceLimits.from_config(CFG), jerk=None, headroom=0.0)
     for kind in ("base2", "triangle"):
         tr = cf.generate(Obstacle.named(kind), pivot="between")
-        t_opt = time_swing(tr, CFG, rate=1000).duration
+        t_opt = time_swing(tr, CFG, rate=1000, limits=lim).duration
         t_fixed = quintic_duration(tr, lim)
         assert t_opt < t_fixed, (kind, t_opt, t_fixed)
 
@@ -233,6 +259,15 @@ def test_device_config_section_and_bad_input():
         config_from_dict(legacy_raw({"device": {"joint_velocity": [2.0, -1.0]}}))
     with pytest.raises(ConfigError, match=r"device\.joint_acceleration"):
         config_from_dict(legacy_raw({"device": {"joint_acceleration": [2.0]}}))
+    cfg = config_from_dict(legacy_raw({"device": {"joint_jerk": [300.0, 500.0], "tracking_headroom": 0.2}}))
+    lim = DeviceLimits.from_config(cfg)
+    assert lim.jerk == (300.0, 500.0, 300.0, 500.0) and lim.headroom == 0.2
+    assert lim.planned().velocity == pytest.approx(tuple(0.8 * v for v in lim.velocity))
+    for bad, match in (({"joint_jerk": [300.0, -1.0]}, r"device\.joint_jerk\[1\]"), ({"joint_jerk": [300.0]}, r"device\.joint_jerk"),
+                       ({"tracking_headroom": 0.9}, r"device\.tracking_headroom"),
+                       ({"tracking_headroom": float("nan")}, r"device\.tracking_headroom")):
+        with pytest.raises(ConfigError, match=match):
+            config_from_dict(legacy_raw({"device": bad}))
     with pytest.raises(ConfigError, match=r"device\.control_rate"):
         config_from_dict(legacy_raw({"device": {"control_rate": 0}}))
     with pytest.raises(ConfigError, match=r"device\.speed"):

@@ -137,6 +137,13 @@ class DeviceConfig:
                                                   unit="rad/s", role="setting")          # (hip, knee)
     joint_acceleration: tuple[float, float] = declare((15.0, 20.0), vector(2, positive=True, lo=0.1, hi=1000.0),
                                                       unit="rad/s^2", role="setting")      # (hip, knee)
+    # Jerk bounds how fast the drives' torque may change: at the defaults the full acceleration is
+    # reached in 10 ms, above the peaks of most timed swings at 100 Hz (RL and CFFTG: median 0.9e3
+    # rad/s^3), so it trims outliers; 10 rad/s^3 to 1e5 rad/s^3.
+    joint_jerk: tuple[float, float] = declare((1500.0, 2000.0), vector(2, positive=True, lo=10.0, hi=1e5),
+                                              unit="rad/s^3", role="setting")      # (hip, knee)
+    # Fraction of each limit the timed reference leaves to the feedback controller (tracking room).
+    tracking_headroom: float = declare(0.1, number(nonneg=True, hi=0.5), role="setting")
     # a swing never takes less (0: as fast as the limits allow); at most MAX_SWING_DURATION
     min_swing_duration: float = declare(0.0, number(nonneg=True, hi=MAX_SWING_DURATION), unit="s", role="setting")
     # default rate of timed exports (jaxexo generate --rate); at most MAX_CONTROL_RATE

@@ -62,7 +62,7 @@ import numpy as np
 from jaxexo.config import MAX_CONTROL_RATE, MIN_CONTROL_RATE
 from jaxexo.physics import kinematics
 from jaxexo.physics.dynamics import Scene
-from jaxexo.inference.time_law import TimeLaw, pchip_eval, pchip_slopes, time_law, topp
+from jaxexo.inference.time_law import BLEND_S, TimeLaw, pchip_eval, pchip_slopes, time_law, topp
 from jaxexo.inference.export import JOINT_NAMES, timed_dict, timed_table, write_timed_csv, write_timed_json
 from jaxexo.inference.trajectory import TrajectoryBatch, TrajectoryChecks, failure_reasons, measure_paths
 
@@ -72,21 +72,33 @@ CHECK_MARGIN = 1e-3        # exported samples must stay within (1 - this) of eac
 LOCAL_PASSES = 6           # local corrections of the law where exported samples exceed a limit ...
 MAX_SLOWDOWNS = 12         # ... then uniform slow-downs (the safety net)
 ARC_TABLE_PER_SAMPLE = 32  # arc-length table points per sample interval
+MAX_HEADROOM = 0.5         # a reference using less than half of each limit is a slower device, not headroom
 BYTES_PER_SAMPLE = 1024    # timing holds about 500 B per exported sample (measured); the bound counts twice that
 
 
 @dataclass(frozen=True)
 class DeviceLimits:
-    """Peak joint velocity (rad/s) and acceleration (rad/s^2) per joint of JOINT_NAMES, and the
-    shortest swing allowed (s)."""
+    """Peak joint velocity (rad/s), acceleration (rad/s^2) and jerk (rad/s^3; None: unbounded) per
+    joint of JOINT_NAMES, the shortest swing allowed (s), and the tracking headroom: the fraction of
+    each limit the timed reference leaves free for the feedback controller (a swing is timed, and its
+    exported samples checked, against the ``planned`` limits, (1 - headroom) of these)."""
 
     velocity: tuple[float, float, float, float]
     acceleration: tuple[float, float, float, float]
     min_duration: float = 0.0
+    jerk: tuple[float, float, float, float] | None = None
+    headroom: float = 0.0
 
     def __post_init__(self):
-        for name in ("velocity", "acceleration"):
+        h = self.headroom
+        if isinstance(h, bool) or not isinstance(h, (int, float)) or not (0.0 <= h <= MAX_HEADROOM):
+            raise ValueError(f"limits.headroom: must be a number in [0, {MAX_HEADROOM:g}] (a fraction of each limit), "
+                             f"got {h!r}")
+        object.__setattr__(self, "headroom", float(h))
+        for name in ("velocity", "acceleration", "jerk"):
             v = getattr(self, name)
+            if v is None and name == "jerk":
+                continue
             try:
                 arr = np.asarray(v, dtype=np.float64)
             except (TypeError, ValueError):
@@ -106,16 +118,28 @@ class DeviceLimits:
     def from_config(cls, config) -> "DeviceLimits":
         """The [device] section's (hip, knee) limits, applied to both legs."""
         dev = config.device
-        (vh, vk), (ah, ak) = dev.joint_velocity, dev.joint_acceleration
-        return cls((vh, vk, vh, vk), (ah, ak, ah, ak), dev.min_swing_duration)
+        (vh, vk), (ah, ak), (jh, jk) = dev.joint_velocity, dev.joint_acceleration, dev.joint_jerk
+        return cls((vh, vk, vh, vk), (ah, ak, ah, ak), dev.min_swing_duration, (jh, jk, jh, jk),
+                   dev.tracking_headroom)
 
-    def scaled(self, velocity: float = 1.0, acceleration: float = 1.0) -> "DeviceLimits":
+    def scaled(self, velocity: float = 1.0, acceleration: float = 1.0, jerk: float | None = None) -> "DeviceLimits":
+        """The limits times these factors (jerk: by the acceleration's factor unless given)."""
+        jerk = acceleration if jerk is None else jerk
         return DeviceLimits(tuple(velocity * v for v in self.velocity),
-                            tuple(acceleration * a for a in self.acceleration), self.min_duration)
+                            tuple(acceleration * a for a in self.acceleration), self.min_duration,
+                            None if self.jerk is None else tuple(jerk * j for j in self.jerk), self.headroom)
+
+    def planned(self) -> "DeviceLimits":
+        """What a timed reference may use: (1 - headroom) of each limit, no headroom left to take."""
+        f = 1.0 - self.headroom
+        return DeviceLimits(tuple(f * v for v in self.velocity), tuple(f * a for a in self.acceleration),
+                            self.min_duration, None if self.jerk is None else tuple(f * j for j in self.jerk), 0.0)
 
     def to_dict(self) -> dict:
         return {"joints": list(JOINT_NAMES), "joint_velocity_rad_s": list(self.velocity),
-                "joint_acceleration_rad_s2": list(self.acceleration), "min_duration_s": self.min_duration}
+                "joint_acceleration_rad_s2": list(self.acceleration),
+                "joint_jerk_rad_s3": None if self.jerk is None else list(self.jerk),
+                "tracking_headroom": self.headroom, "min_duration_s": self.min_duration}
 
 
 @dataclass(frozen=True)
@@ -145,6 +169,7 @@ class TimedSwing:
     peak_velocity: np.ndarray      # (4,) rad/s, max of |column| and |finite difference| per joint
     peak_acceleration: np.ndarray  # (4,) rad/s^2, likewise
     slowdown: float                # uniform slow-down applied after the TOPP passes and local corrections (>= 1)
+    peak_jerk: np.ndarray | None = None  # (4,) rad/s^3, the third finite difference of the samples
     notes: tuple[str, ...] = field(default=())
 
     @property
@@ -154,7 +179,7 @@ class TimedSwing:
     @property
     def reasons(self) -> tuple[str, ...]:
         extra = () if self.within_limits else (
-            "joint velocity/acceleration limits exceeded on the exported samples",)
+            "joint velocity/acceleration/jerk limits (less the tracking headroom) exceeded on the exported samples",)
         return self.checks.reasons + extra
 
     def table(self) -> np.ndarray:
@@ -240,7 +265,8 @@ def _joint_paths(sp, pivot_y: float, heel: np.ndarray):
 
 
 def _finite_differences(q: np.ndarray, dt: float):
-    return np.diff(q, axis=0) / dt, np.diff(q, n=2, axis=0) / (dt * dt)
+    # Velocity, acceleration and jerk of samples at period dt: first, second and third differences.
+    return np.diff(q, axis=0) / dt, np.diff(q, n=2, axis=0) / (dt * dt), np.diff(q, n=3, axis=0) / dt**3
 
 
 def check_rate(rate, name: str = "rate") -> float:
@@ -283,15 +309,17 @@ def time_swings(trajs, config, rate: float | None = None, limits: DeviceLimits |
     if not isinstance(limits, DeviceLimits):
         raise ValueError(f"limits: expected a DeviceLimits, got {type(limits).__name__}")
     sp = _scalars(config) if sp is None else sp
+    device, limits = limits, limits.planned()
     vmax = np.asarray(limits.velocity)
     amax = np.asarray(limits.acceleration)
+    blend = blend_window(limits)
     heels = [np.asarray(t.heel, np.float64) for t in trajs]
     for i, h in enumerate(heels):
         if h.ndim != 2 or h.shape[1] != 2 or len(h) < 2 or not np.all(np.isfinite(h)):
             raise ValueError(f"trajs[{i}].heel: expected a finite (N >= 2, 2) path, got shape {h.shape}")
     paths = [_joint_paths(sp, t.scene.pivot_y, h) for t, h in zip(trajs, heels)]
     caps = [np.full(len(p[0]), np.inf) for p in paths]
-    laws = _topp_laws(paths, list(range(len(paths))), caps, vmax, amax)
+    laws = _topp_laws(paths, list(range(len(paths))), caps, vmax, amax, blend)
     t_opt = [law.duration for law in laws]
     slow = [1.0] * len(trajs)       # uniform slow-down beyond the (locally corrected) TOPP law
     evals: list = [None] * len(trajs)
@@ -303,17 +331,26 @@ def time_swings(trajs, config, rate: float | None = None, limits: DeviceLimits |
             if e["ratio"] <= 1.0 - CHECK_MARGIN:
                 continue
             if it < LOCAL_PASSES:
-                _lower_cap(caps[i], paths[i][0], e, vmax, amax)
+                _lower_cap(caps[i], paths[i][0], e, limits)
                 redo.append(i)
             else:
                 slow[i] *= e["ratio"] / (1.0 - 2.0 * CHECK_MARGIN)
         if redo:
-            for i, law in zip(redo, _topp_laws(paths, redo, caps, vmax, amax)):
+            for i, law in zip(redo, _topp_laws(paths, redo, caps, vmax, amax, blend)):
                 laws[i] = law
         todo = [i for i in todo if evals[i]["ratio"] > 1.0 - CHECK_MARGIN]
         if not todo:
             break
-    return [_finish(trajs[i], evals[i], sp, limits, rate, t_opt[i], slow[i]) for i in range(len(trajs))]
+    return [_finish(trajs[i], evals[i], sp, device, limits, rate, t_opt[i], slow[i]) for i in range(len(trajs))]
+
+
+def blend_window(limits: DeviceLimits) -> float:
+    """The box filter's window (s) on s'(t): BLEND_S, or longer where a jerk limit asks for it. The
+    filtered s'' changes by at most its range over one window, so a joint's jerk from the time law
+    is about q' d3s/dt3 <= a / w: w = max_j a_j / j_j keeps it at the limit from rest."""
+    if limits.jerk is None:
+        return BLEND_S
+    return max(BLEND_S, max(a / j for a, j in zip(limits.acceleration, limits.jerk)))
 
 
 @functools.lru_cache(maxsize=8)
@@ -325,7 +362,7 @@ def _scalars(config):
     return scalar_params(config)
 
 
-def _topp_laws(paths, idx, caps, vmax, amax) -> list[TimeLaw]:
+def _topp_laws(paths, idx, caps, vmax, amax, blend: float) -> list[TimeLaw]:
     """Time laws of paths[idx], one batched TOPP per grid size."""
     out = {}
     sizes = np.array([len(paths[i][0]) for i in idx])
@@ -336,7 +373,7 @@ def _topp_laws(paths, idx, caps, vmax, amax) -> list[TimeLaw]:
         cap = np.stack([caps[i] for i in sub])
         x, floor = topp(dq, ddq, SAFETY * vmax, SAFETY * amax, 1.0 / (k - 1), cap)
         for j, i in enumerate(sub):
-            out[i] = time_law(paths[i][0], x[j], floor[j])
+            out[i] = time_law(paths[i][0], x[j], floor[j], blend_s=blend)
     return [out[i] for i in idx]
 
 
@@ -392,26 +429,45 @@ def _evaluate(traj, heel, path, law: TimeLaw, slow: float, sp, limits: DeviceLim
     heel_vel = dh_t * sd[:, None]
     heel_acc = ddh_t * (sd * sd)[:, None] + dh_t * sdd[:, None]
     heel_vel[0] = heel_vel[-1] = heel_acc[0] = heel_acc[-1] = 0.0
-    fv, fa = _finite_differences(np.unwrap(q, axis=0), 1.0 / rate)
+    fv, fa, fj = _finite_differences(np.unwrap(q, axis=0), 1.0 / rate)
     peak_v = np.maximum(np.abs(vel).max(axis=0), np.abs(fv).max(axis=0))
     peak_a = np.maximum(np.abs(acc).max(axis=0), np.abs(fa).max(axis=0))
+    peak_j = np.abs(fj).max(axis=0) if len(fj) else np.zeros(len(vmax))
+    # Slowing the law by k scales velocity by 1/k, acceleration by 1/k^2, jerk by 1/k^3.
     ratio = max(float(np.max(peak_v / vmax)), math.sqrt(float(np.max(peak_a / amax))))
+    if limits.jerk is not None:
+        ratio = max(ratio, float(np.max(peak_j / np.asarray(limits.jerk))) ** (1.0 / 3.0))
     return {"t": t, "s": s, "sd": sd / scale, "h": h, "vel": vel, "acc": acc, "fv": fv, "fa": fa,
-            "heel_vel": heel_vel, "heel_acc": heel_acc,
-            "peak_v": peak_v, "peak_a": peak_a, "ratio": ratio}
+            "heel_vel": heel_vel, "heel_acc": heel_acc, "fj": fj,
+            "peak_v": peak_v, "peak_a": peak_a, "peak_j": peak_j, "ratio": ratio}
 
 
-def _lower_cap(cap, s_grid, e: dict, vmax, amax) -> None:
+def _excess(x: np.ndarray, power: float) -> np.ndarray:
+    """Per sample, the factor by which the speed must fall for ratios x (samples, joints) of a
+    quantity that scales with the speed to this power on a smooth path: x^(1 / power) up to the
+    limit, x itself beyond it (at a kink it scales with the speed alone)."""
+    x = x.max(axis=1)
+    return np.maximum(x ** (1.0 / power), x)
+
+
+def _lower_cap(cap, s_grid, e: dict, limits: DeviceLimits) -> None:
     """Where exported samples exceed a limit (a bend too tight for the grid's q''), lower the speed
     bound around them by the excess; the passes are then run again for this path."""
     vel, acc, fv, fa, s = e["vel"], e["acc"], e["fv"], e["fa"], e["s"]
+    vmax, amax = np.asarray(limits.velocity), np.asarray(limits.acceleration)
     r = np.maximum(np.abs(vel) / vmax, np.sqrt(np.abs(acc) / amax)).max(axis=1)
     rv = (np.abs(fv) / vmax).max(axis=1)
-    ra = np.sqrt(np.abs(fa) / amax).max(axis=1)
+    # A kink or a C1 knot of the path gives finite differences that fall only linearly with the
+    # speed, not with its square: above the limit the excess is taken linearly (one pass suffices).
+    ra = _excess(np.abs(fa) / amax, 2.0)
     r[:-1] = np.maximum(r[:-1], rv)
     r[1:] = np.maximum(r[1:], rv)
     for k in range(3):
         r[k: len(r) - 2 + k] = np.maximum(r[k: len(r) - 2 + k], ra)
+    if limits.jerk is not None and len(e["fj"]):
+        rj = _excess(np.abs(e["fj"]) / np.asarray(limits.jerk), 3.0)
+        for k in range(4):
+            r[k: len(r) - 3 + k] = np.maximum(r[k: len(r) - 3 + k], rj)
     x_now = np.interp(s_grid, s, e["sd"] ** 2)       # the law's own s'^2 (before stretching)
     k = np.flatnonzero(r > 1.0 - CHECK_MARGIN)
     if k.size == 0:
@@ -420,8 +476,10 @@ def _lower_cap(cap, s_grid, e: dict, vmax, amax) -> None:
     # all (sample, grid point) pairs at once, then the smallest per grid point (min is exact, so this
     # is the per-sample loop's result bit for bit). The square is the scalar pow the loop took (NumPy's
     # array square can differ from it in the last bit).
-    lo = np.searchsorted(s_grid, s[np.maximum(k - 2, 0)], side="left")
-    hi = np.searchsorted(s_grid, s[np.minimum(k + 2, len(s) - 1)], side="right")
+    # Widened by one grid point each way: at high rates the samples around k can fall inside one
+    # grid cell, whose ends then bound its speed.
+    lo = np.maximum(np.searchsorted(s_grid, s[np.maximum(k - 2, 0)], side="left") - 1, 0)
+    hi = np.minimum(np.searchsorted(s_grid, s[np.minimum(k + 2, len(s) - 1)], side="right") + 1, len(s_grid))
     count = np.maximum(hi - lo, 0)
     total = int(count.sum())
     if total == 0:
@@ -431,14 +489,17 @@ def _lower_cap(cap, s_grid, e: dict, vmax, amax) -> None:
     np.minimum.at(cap, grid, x_now[grid] * np.repeat(factor, count))
 
 
-def _finish(traj, e: dict, sp, limits: DeviceLimits, rate: float, t_opt: float, slow: float) -> TimedSwing:
+def _finish(traj, e: dict, sp, device: DeviceLimits, limits: DeviceLimits, rate: float, t_opt: float,
+            slow: float) -> TimedSwing:
+    # ``limits``: the planned ones (the device's less its tracking headroom), which the samples keep.
     notes = []
     if limits.min_duration > t_opt:
         notes.append(f"the limits allow {t_opt:.3f} s; the minimum swing duration {limits.min_duration:.3f} s is used")
     vmax = np.asarray(limits.velocity)
     amax = np.asarray(limits.acceleration)
     t, s, h, vel, acc, peak_v, peak_a = (e[k] for k in ("t", "s", "h", "vel", "acc", "peak_v", "peak_a"))
-    within = bool(np.all(peak_v <= vmax) and np.all(peak_a <= amax))
+    within = bool(np.all(peak_v <= vmax) and np.all(peak_a <= amax)
+                  and (limits.jerk is None or np.all(e["peak_j"] <= np.asarray(limits.jerk))))
     sc = traj.scene
     # The safe-swing checks of the retimed samples, with the trajectory's own bound on its
     # curve's distance from the polyline through its samples.
@@ -453,11 +514,11 @@ def _finish(traj, e: dict, sp, limits: DeviceLimits, rate: float, t_opt: float, 
     toe = h.copy()
     toe[:, 0] += sp.foot_length
     return TimedSwing(
-        method=traj.method, scene=sc, rate=rate, duration=float(t[-1]), limits=limits, time=t, heel=h, toe=toe,
+        method=traj.method, scene=sc, rate=rate, duration=float(t[-1]), limits=device, time=t, heel=h, toe=toe,
         hip=kin["hip"][0], knee_swing=kin["knee_swing"][0], knee_stance=kin["knee_stance"][0],
         joint_angles=m["angles"][0], joint_velocity=vel, joint_acceleration=acc, heel_velocity=e["heel_vel"],
         heel_acceleration=e["heel_acc"], path_parameter=s, checks=checks,
-        within_limits=within, peak_velocity=peak_v, peak_acceleration=peak_a, slowdown=slow,
+        within_limits=within, peak_velocity=peak_v, peak_acceleration=peak_a, slowdown=slow, peak_jerk=e["peak_j"],
         notes=tuple(getattr(traj, "notes", ())) + tuple(notes))
 
 
@@ -477,7 +538,7 @@ def uniform_peaks(traj) -> tuple[np.ndarray, np.ndarray]:
     """Peak |joint velocity| (4,) and |acceleration| (4,) of a trajectory as generated, at its own
     uniform time stamps (finite differences), for comparison with a timed swing."""
     dt = float(traj.time[1] - traj.time[0])
-    fv, fa = _finite_differences(np.unwrap(np.asarray(traj.joint_angles), axis=0), dt)
+    fv, fa, _ = _finite_differences(np.unwrap(np.asarray(traj.joint_angles), axis=0), dt)
     return np.abs(fv).max(axis=0), np.abs(fa).max(axis=0)
 
 

@@ -198,11 +198,118 @@ def setpoints(ref: np.ndarray, dt: float, vmax, amax):
     return out, clip_a, clip_v
 
 
-def driven_replay(timed, config, limits=None, legs: Legs | None = None, settle: float = SETTLE) -> dict:
+CONTROLLERS = ("pd_ff", "servo")
+PD_BANDWIDTH_HZ = 8.0        # Hz: the PD loop's natural frequency per joint (critically damped) under feed-forward
+
+
+def _equalities_on(legs: Legs) -> None:
+    """The stance heel held on its pivot and both feet level (the driven replay's constraints)."""
+    mujoco, m = legs.mujoco, legs.model
+    m.eq_active0[:] = 0
+    m.eq_active0[legs.stance_eq] = 1
+    for name in (f"{leg}_level" for leg in LEGS):
+        m.eq_active0[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_EQUALITY, name)] = 1
+
+
+def _dofs(legs: Legs, names) -> list[int]:
+    mujoco, m = legs.mujoco, legs.model
+    return [int(m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, n)]) for n in names]
+
+
+def feed_forward(legs: Legs, qpos: np.ndarray, qvel: np.ndarray, qacc: np.ndarray) -> np.ndarray:
+    """Joint torques (steps, 4), ACTUATED order, that move the legs along (qpos, qvel, qacc) (steps,
+    nv each) with the stance heel on its pivot and the feet level: MuJoCo's rigid-body inverse
+    dynamics (mj_inverse, constraints off: M qacc + bias), less the constraint forces that make the
+    unactuated coordinates (pelvis, ankles) balance. The constraint rows (the stance heel's
+    horizontal and vertical position, each foot's level tendon) are as many as those coordinates,
+    so the split is exact; mj_inverse's own soft-constraint forces are not used (they follow the
+    reference's small inconsistencies, not the rigid constraint)."""
+    mujoco, m, d = legs.mujoco, legs.model, legs.data
+    act = _dofs(legs, ACTUATED)
+    free = [i for i in range(m.nv) if i not in act]
+    tendon = np.zeros((len(LEGS), m.nv))
+    for r, leg in enumerate(LEGS):
+        tendon[r, _dofs(legs, [f"{leg}_{j}" for j in ("hip", "knee", "ankle")])] = 1.0
+    site = legs.site[f"{STANCE_LEG}_heel"]
+    jac = np.zeros((3, m.nv))
+    tau = np.empty((len(qpos), len(act)))
+    flags = m.opt.disableflags
+    m.opt.disableflags = flags | int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT)
+    try:
+        for k in range(len(qpos)):
+            d.qpos[:], d.qvel[:], d.qacc[:] = qpos[k], qvel[k], qacc[k]
+            mujoco.mj_inverse(m, d)
+            mujoco.mj_jacSite(m, d, jac, None, site)
+            rows = np.vstack([jac[[0, 2]], tendon])            # the planar rows of the constraints
+            f = d.qfrc_inverse
+            lam = np.linalg.solve(rows[:, free].T, f[free])
+            tau[k] = (f - rows.T @ lam)[act]
+    finally:
+        m.opt.disableflags = flags
+    return tau
+
+
+def _pd_gains(legs: Legs, qpos0: np.ndarray):
+    """Per actuated joint, kp (N m / rad) and kd (N m s / rad) of a critically damped loop of
+    PD_BANDWIDTH_HZ on the joint's own inertia (the mass matrix's diagonal at the start pose)."""
+    mujoco, m, d = legs.mujoco, legs.model, legs.data
+    d.qpos[:] = qpos0
+    mujoco.mj_forward(m, d)
+    full = np.zeros((m.nv, m.nv))
+    mujoco.mj_fullM(m, d, full)
+    inertia = np.diag(full)[_dofs(legs, ACTUATED)]
+    w = 2.0 * math.pi * PD_BANDWIDTH_HZ
+    return inertia * w * w, 2.0 * inertia * w
+
+
+def _rollout(legs: Legs, qpos0: np.ndarray, control: np.ndarray, gains=None) -> np.ndarray:
+    """MuJoCo's rollout from rest at qpos0 with the actuators' commands ``control`` (steps, 4);
+    ``gains``: (kp, kd) for the PD with feed-forward (the position actuators re-gained for the
+    call, their command range off: the command carries the velocity and torque terms too).
+    Returns the sensor data after each step, the start's first (steps + 1, nsensordata)."""
+    mujoco, m, d = legs.mujoco, legs.model, legs.data
+    from mujoco import rollout
+
+    saved = (m.actuator_gainprm.copy(), m.actuator_biasprm.copy(), m.actuator_ctrllimited.copy())
+    try:
+        if gains is not None:
+            for j, a in enumerate(legs.actuators):
+                m.actuator_gainprm[a, 0] = gains[0][j]
+                m.actuator_biasprm[a, 1:3] = (-gains[0][j], -gains[1][j])
+                m.actuator_ctrllimited[a] = 0
+        mujoco.mj_resetData(m, d)
+        d.qpos[:] = qpos0
+        mujoco.mj_forward(m, d)
+        spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        state0 = np.empty(mujoco.mj_stateSize(m, spec))
+        mujoco.mj_getState(m, d, state0, spec)
+        first = d.sensordata.copy()
+        full = np.zeros((1, len(control), m.nu))
+        full[0][:, legs.actuators] = control
+        _, sensors = rollout.rollout(m, d, state0[None], full)
+    finally:
+        m.actuator_gainprm[:], m.actuator_biasprm[:], m.actuator_ctrllimited[:] = saved
+    return np.concatenate([first[None], sensors[0]])
+
+
+def driven_replay(timed, config, limits=None, legs: Legs | None = None, settle: float = SETTLE,
+                  controller: str = "pd_ff") -> dict:
     """The driven replay of a TimedSwing (module docstring) with the drives' ``limits`` (a
-    DeviceLimits; default: the config's [device]). The commands are computed first (they do not
-    depend on the simulation), then MuJoCo rolls the model out in one call (mujoco.rollout) and its
-    sensors give the sites and the foot-obstacle distances. Returns SI figures."""
+    DeviceLimits; default: the config's [device]) and a ``controller``:
+
+    - "pd_ff": what an exoskeleton's joint controller does: the inverse-dynamics torque of the
+      reference (``feed_forward``) plus a PD loop on the position and velocity error
+      (``_pd_gains``), on the setpoints' positions, velocities and accelerations.
+    - "servo": stiff position servos (SERVO_KP, critically damped) on the setpoints' positions
+      alone: with no velocity term a servo lags a moving reference by 2 / omega times its speed.
+
+    The setpoints, for both: the swing's cubic Hermite through its samples, followed by a setpoint
+    generator that moves each command towards it within the velocity and acceleration limits
+    (``setpoints``); saturated where the generator clips.
+
+    The commands are computed first (they do not depend on the simulation), then MuJoCo rolls the
+    model out in one call (mujoco.rollout) and its sensors give the sites and the foot-obstacle
+    distances. Returns SI figures."""
     from jaxexo.inference.swing_timing import DeviceLimits
 
     limits = DeviceLimits.from_config(config) if limits is None else limits
@@ -210,11 +317,11 @@ def driven_replay(timed, config, limits=None, legs: Legs | None = None, settle: 
         raise SimError(f"limits: expected a DeviceLimits, got {type(limits).__name__}")
     if isinstance(settle, bool) or not (isinstance(settle, (int, float)) and math.isfinite(settle) and settle >= 0):
         raise SimError(f"settle: must be a finite number >= 0 (s), got {settle!r}")
+    if controller not in CONTROLLERS:
+        raise SimError(f"controller: expected one of {', '.join(CONTROLLERS)}, got {controller!r}")
     t0 = time.perf_counter()
     legs = Legs(config, timed.scene) if legs is None else legs
-    mujoco, m, d = legs.mujoco, legs.model, legs.data
-    from mujoco import rollout
-
+    mujoco, m = legs.mujoco, legs.model
     rate = float(timed.rate)
     sub = max(1, math.ceil(1.0 / (rate * PHYSICS_PER_SAMPLE_MAX_DT) - 1e-9))
     dt = 1.0 / (rate * sub)
@@ -222,24 +329,27 @@ def driven_replay(timed, config, limits=None, legs: Legs | None = None, settle: 
     ref = np.asarray(timed.joint_angles, dtype=np.float64)
     n = len(ref)
     steps = (n - 1) * sub + int(round(settle / dt))
-    cmd, clip_a, clip_v = setpoints(hermite(ref, np.asarray(timed.joint_velocity, np.float64), 1.0 / rate,
-                                            np.arange(steps + 1) * dt),
-                                    dt, limits.velocity, limits.acceleration)
-    m.eq_active0[:] = 0
-    m.eq_active0[legs.stance_eq] = 1
-    for name in (f"{leg}_level" for leg in LEGS):
-        m.eq_active0[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_EQUALITY, name)] = 1
-    mujoco.mj_resetData(m, d)
-    d.qpos[:] = legs.qpos(ref[0])
-    mujoco.mj_forward(m, d)
-    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
-    state0 = np.empty(mujoco.mj_stateSize(m, spec))
-    mujoco.mj_getState(m, d, state0, spec)
-    first = d.sensordata.copy()
-    control = np.zeros((1, steps, m.nu))
-    control[0][:, legs.actuators] = cmd
-    _, sensors = rollout.rollout(m, d, state0[None], control)
-    sens = np.concatenate([first[None], sensors[0]])          # (steps + 1, nsensordata), after each step
+    # The reference at every physics step, and one step beyond for the central differences.
+    qref = hermite(ref, np.asarray(timed.joint_velocity, np.float64), 1.0 / rate, np.arange(steps + 2) * dt)
+    _equalities_on(legs)
+    qpos0 = legs.qpos(ref[0])
+    # Both controllers follow the reference through the setpoint generator: the drive is never
+    # asked beyond its limits (where it would be, the generator clips: saturation).
+    cmd, clip_a, clip_v = setpoints(qref, dt, limits.velocity, limits.acceleration)
+    torque_peak = None
+    if controller == "servo":
+        sens = _rollout(legs, qpos0, cmd[:steps])
+    else:
+        qpos = legs.qpos(np.concatenate([ref[:1], cmd]))
+        qvel = np.gradient(qpos, dt, axis=0, edge_order=2)
+        qacc = np.gradient(qvel, dt, axis=0, edge_order=2)
+        tau = feed_forward(legs, qpos[:steps], qvel[:steps], qacc[:steps])
+        kp, kd = _pd_gains(legs, qpos0)
+        act = _dofs(legs, ACTUATED)
+        # The command of the step ending at t_{k+1}: force = kp (q_ref - q) + kd (q_ref' - q') + tau.
+        sens = _rollout(legs, qpos0, cmd[:steps] + (kd / kp) * qvel[1: steps + 1][:, act] + tau / kp, (kp, kd))
+        torque_peak = np.abs(tau).max(axis=0).tolist()
+    clip_a, clip_v = clip_a[:steps], clip_v[:steps]
     col = lambda name: sens[:, m.sensor_adr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, name)]:][:, :3]  # noqa: E731
     heel = col(f"{SWING_LEG}_heel")[::sub][:n][:, [0, 2]]
     toe = col(f"{SWING_LEG}_toe")[::sub][:n][:, [0, 2]]
@@ -254,7 +364,7 @@ def driven_replay(timed, config, limits=None, legs: Legs | None = None, settle: 
     k = int(np.argmin(dist))
     margin = float(config.env.min_clearance)
     return {
-        "method": timed.method, "flagged_ok": bool(timed.ok), "margin_m": margin,
+        "method": timed.method, "flagged_ok": bool(timed.ok), "margin_m": margin, "controller": controller,
         "limits": limits.to_dict(), "physics_dt_s": dt, "settle_s": float(settle),
         "heel_error_max_m": float(heel_err.max()), "toe_error_max_m": float(toe_err.max()),
         "heel_error_p95_m": float(np.percentile(heel_err, 95)), "toe_error_p95_m": float(np.percentile(toe_err, 95)),
@@ -266,6 +376,7 @@ def driven_replay(timed, config, limits=None, legs: Legs | None = None, settle: 
         "saturated_velocity_steps": int(clip_v.sum()), "saturated_acceleration_steps": int(clip_a.sum()),
         "saturated": bool(clip_v.any() or clip_a.any()), "steps": steps,
         "peak_joint_velocity_rad_s": np.abs(qv).max(axis=0).tolist(), "stance_heel_slip_max_m": float(slip),
+        "feed_forward_torque_peak_nm": torque_peak,
         "seconds": time.perf_counter() - t0,
     }
 

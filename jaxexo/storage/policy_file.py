@@ -201,7 +201,11 @@ def policy_config(meta: dict, path):
     try:
         raw = tomllib.loads(text)
         for section in SECTIONS:
-            for name, _ in declared_fields(SECTION_CLASSES[section]):
+            for name, spec in declared_fields(SECTION_CLASSES[section]):
+                # The [device] section describes the drives a swing is timed for, not the training:
+                # a setting added after a policy was trained takes its default.
+                if section == "device" and spec.role == "setting":
+                    continue
                 if not isinstance(raw.get(section), dict) or name not in raw[section]:
                     raise ConfigError(f"{section}.{name} is not stated: not the resolved training config that "
                                       "this jaxexo's train writes (a policy trained by an older jaxexo, before "
