@@ -10,10 +10,11 @@ limits), then:
   flagged ok (the timed swing's checks) that come within env.min_clearance in MuJoCo (target 0);
   the largest difference between MuJoCo's and jaxexo's distance at the same pose, and at that pose a
   third, brute-force distance (jaxexo.sim.replay.brute_force_distance) says which is nearer;
-- driven replay of every swing flagged ok, at the default [device] limits, and of every swing
-  flagged ok when timed for half the limits, driven at half the limits (a device with half the
-  drives): heel and toe tracking error (p95 and max over swings of each swing's max), contacts with
-  the obstacle, MuJoCo's smallest distance, saturation of a limit.
+- driven replay of every swing flagged ok at the default [device] limits, by two controllers on
+  the same setpoints: PD with inverse-dynamics feed-forward (pd_ff, what an exoskeleton's joint
+  controller does) and stiff position servos (servo): heel and toe tracking error (p95 and max over
+  swings of each swing's max; also where the swing's heel is off the floor), contacts with the
+  obstacle, swings within the margin, MuJoCo's smallest distance, saturation of a limit.
 
 Writes benchmarks/results/replay_<date>_<machine>.{json,md}.
 Run: python benchmarks/bench_replay.py RUN_DIR/policy.npz [--n 1000] [--rate 100]
@@ -49,7 +50,6 @@ def replay_set(sc, rl, cfftg, config, rate: float, driven: bool) -> dict:
               step_length=[s["step_length"] for s in sc])
     obs = [s["obstacle"] for s in sc]
     default = DeviceLimits.from_config(config)
-    half = default.scaled(0.5, 0.5)
     out = {}
     legs_cache = {}
     for gname, make in (("rl", lambda: rl.generate_batch(obs, fallback=None, **kw)),
@@ -58,9 +58,7 @@ def replay_set(sc, rl, cfftg, config, rate: float, driven: bool) -> dict:
         t0 = time.perf_counter()
         timed = time_swings(batch, config, rate=rate)
         t_timing = time.perf_counter() - t0
-        # A device with half the drives: its swings timed for its own limits, then driven at them.
-        timed_half = time_swings(batch, config, rate=rate, limits=half) if driven else [None] * len(timed)
-        kin, drv, drv_half, build_s = [], [], [], []
+        kin, drv, drv_servo, build_s = [], [], [], []
         disagree = []
         for i, ts in enumerate(timed):
             if i not in legs_cache:
@@ -83,9 +81,8 @@ def replay_set(sc, rl, cfftg, config, rate: float, driven: bool) -> dict:
                 k["brute_at_mujoco_min_m"] = brute_force_distance(k["mujoco_min_heel"], config.kinematics.foot_length,
                                                                   ts.scene.outline)
             if driven and ts.ok:
-                drv.append(driven_replay(ts, config, legs=legs, limits=default))
-            if driven and timed_half[i].ok:
-                drv_half.append(driven_replay(timed_half[i], config, legs=legs, limits=half))
+                drv.append(driven_replay(ts, config, legs=legs, limits=default, controller="pd_ff"))
+                drv_servo.append(driven_replay(ts, config, legs=legs, limits=default, controller="servo"))
         ok = np.array([t.ok for t in timed])
         r = {"n": len(timed), "flagged_ok": int(ok.sum()), "timing_seconds": t_timing,
              "model_build_ms_median": 1e3 * float(np.median(build_s)) if build_s else None,
@@ -97,7 +94,7 @@ def replay_set(sc, rl, cfftg, config, rate: float, driven: bool) -> dict:
                 **w, "nearer_brute": "jaxexo" if abs(w["jaxexo"] - w["brute"]) <= abs(w["mujoco"] - w["brute"]) else "mujoco"}
             r["kinematic"]["brute_nearer_jaxexo_share"] = float(np.mean(
                 [abs(x["jaxexo"] - x["brute"]) <= abs(x["mujoco"] - x["brute"]) for x in disagree]))
-        for name, rows in (("driven", drv), ("driven_half_limits", drv_half)):
+        for name, rows in (("driven", drv), ("driven_servo", drv_servo)):
             if rows:
                 r[name] = summarize_driven(rows)
         out[gname] = r
@@ -140,11 +137,12 @@ def main():
                           f"{_mm(k['min_mujoco_distance_of_ok_m'])} | {_mm(k['min_mujoco_minus_guaranteed_of_ok_m'])} | "
                           f"{1e6 * k['max_disagreement_m']:.3f} | {w.get('nearer_brute', '-')} | "
                           f"{1e3 * k['seconds_median']:.1f} |")
-            for lim in ("driven", "driven_half_limits"):
+            for lim in ("driven", "driven_servo"):
                 if lim in r:
                     d = r[lim]
-                    rows_d.append(f"| {name} | {g} | {'default' if lim == 'driven' else 'half'} | {d['n']} | "
+                    rows_d.append(f"| {name} | {g} | {'pd_ff' if lim == 'driven' else 'servo'} | {d['n']} | "
                                   f"{_mm(d['heel_error_p95_m'])} / {_mm(d['heel_error_max_m'])} | "
+                                  f"{_mm(d['heel_error_airborne_p95_m'])} | "
                                   f"{_mm(d['toe_error_p95_m'])} / {_mm(d['toe_error_max_m'])} | {d['contacts']} | "
                                   f"{d['within_margin']} | {_mm(d['min_distance_m'])} | {d['saturated']} | "
                                   f"{1e3 * d['seconds_median']:.0f} |")
@@ -158,12 +156,13 @@ def main():
         "min (MuJoCo - jaxexo guaranteed), mm | max disagreement at the samples, um | nearer the brute force | "
         "replay ms (median) |",
         "|---|---|---:|---:|---:|---:|---:|---:|---|---:|", *rows_k, "",
-        "## Driven replay of the swings flagged ok (position actuators, setpoints within the [device] limits)", "",
-        "Default: swings timed for the [device] limits, driven at them; half: swings timed for half the limits, "
-        "driven at half (a device with half the drives).", "",
-        "| scenes | generator | limits | n | heel error p95 / max, mm | toe error p95 / max, mm | contacts | "
-        "within margin | min distance, mm | saturated | replay ms (median) |",
-        "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|", *rows_d, ""])
+        "## Driven replay of the swings flagged ok (setpoints within the [device] limits)", "",
+        "Swings timed for the [device] limits (less the tracking headroom), driven at them by two controllers on the "
+        "same setpoints: pd_ff, PD with inverse-dynamics feed-forward; servo, stiff position servos. Heel error "
+        "off the floor: at the samples where the swing's heel is more than 1 mm above the floor.", "",
+        "| scenes | generator | controller | n | heel error p95 / max, mm | heel error off the floor p95, mm | "
+        "toe error p95 / max, mm | contacts | within margin | min distance, mm | saturated | replay ms (median) |",
+        "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|", *rows_d, ""])
     paths = write_result(a.name, payload, md, Path(__file__).resolve().parent / "results")
     print(md)
     print("wrote", *paths)

@@ -51,6 +51,7 @@ SUBSTEPS = 4                 # kinematic poses per control period (the sample an
 PHYSICS_PER_SAMPLE_MAX_DT = 0.001   # s: the driven replay's physics step is at most this
 SETTLE = 0.2                 # s the driven replay holds the last setpoint after the swing
 SAME_POSE = 1e-6             # m: MuJoCo's heel this close to jaxexo's is the same pose
+GROUND_BAND = 1e-3           # m: a heel this close to the floor rests or slides on it
 CLIP_TOL = 1e-9              # rad/s: a setpoint speed changed by more than this by a limit counts as saturated
 
 
@@ -367,6 +368,8 @@ def driven_replay(timed, config, limits=None, legs: Legs | None = None, settle: 
         "method": timed.method, "flagged_ok": bool(timed.ok), "margin_m": margin, "controller": controller,
         "limits": limits.to_dict(), "physics_dt_s": dt, "settle_s": float(settle),
         "heel_error_max_m": float(heel_err.max()), "toe_error_max_m": float(toe_err.max()),
+        # Where the swing's heel is off the floor: a heel moved along the floor is held back by friction.
+        "heel_error_airborne_max_m": float(np.max(heel_err[timed.heel[:, 1] > GROUND_BAND], initial=0.0)),
         "heel_error_p95_m": float(np.percentile(heel_err, 95)), "toe_error_p95_m": float(np.percentile(toe_err, 95)),
         "final_heel_error_m": float(np.linalg.norm(col(f"{SWING_LEG}_heel")[-1, [0, 2]] - timed.heel[-1])),
         "mujoco_min_distance_m": float(dist[k]), "mujoco_min_time_s": float(k * dt),
@@ -410,7 +413,9 @@ def summarize_driven(rows: list[dict]) -> dict:
     he = np.array([d["heel_error_max_m"] for d in rows])
     te = np.array([d["toe_error_max_m"] for d in rows])
     md = np.array([d["mujoco_min_distance_m"] for d in rows])
+    ha = np.array([d["heel_error_airborne_max_m"] for d in rows])
     return {"n": len(rows), "heel_error_p95_m": float(np.percentile(he, 95)), "heel_error_max_m": float(he.max()),
+            "heel_error_airborne_p95_m": float(np.percentile(ha, 95)),
             "toe_error_p95_m": float(np.percentile(te, 95)), "toe_error_max_m": float(te.max()),
             "contacts": int(sum(d["contact"] for d in rows)),
             "within_margin": int(np.sum(md < rows[0]["margin_m"])),

@@ -1,0 +1,108 @@
+"""Device-ready swing benchmark: what a wearer's controller waits for, one swing planned and timed
+(``generate`` + ``time_swing`` at the control rate), RL alone and CFFTG on the same held-out scenes,
+alternating in one process (CPU time, so that the other jobs on a shared machine count less), and
+``time_swings`` of a batch of 1000. Where one swing's time goes: generation, the timing's path set-up
+(joint paths and arc-length map), its TOPP passes and time law, and its evaluation and checks.
+
+Writes benchmarks/results/device_ready_<date>_<machine>.{json,md}."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+TARGETS = {"rl_device_ready_ms": 5.0, "rl_over_cfftg": 1.5, "batch_1000_s": 1.0}
+
+
+def _split_timing(swing_timing):
+    """Wrap the timing's parts to accumulate their CPU time (restored by the returned undo)."""
+    acc = {"paths": 0.0, "topp": 0.0, "evaluate": 0.0, "finish": 0.0}
+    names = {"paths": "_joint_paths", "topp": "_topp_laws", "evaluate": "_evaluate", "finish": "_finish"}
+    saved = {k: getattr(swing_timing, n) for k, n in names.items()}
+
+    def wrap(key, fn):
+        def inner(*a, **k):
+            t0 = time.process_time()
+            try:
+                return fn(*a, **k)
+            finally:
+                acc[key] += time.process_time() - t0
+        return inner
+
+    for k, n in names.items():
+        setattr(swing_timing, n, wrap(k, saved[k]))
+
+    def undo():
+        for k, n in names.items():
+            setattr(swing_timing, n, saved[k])
+    return acc, undo
+
+
+def run_device_ready_benchmark(policy: str | Path, out_dir: str | Path, n: int = 300, batch: int = 1000,
+                               rate: float = 100.0) -> dict:
+    from jaxexo.baselines import CFFTG
+    from jaxexo.evaluation.machine import machine_info, write_result
+    from jaxexo.inference import TrajectoryGenerator, swing_timing
+    from jaxexo.inference.scenarios import safety_scenarios
+
+    rl = TrajectoryGenerator.load(policy)
+    cfg = rl.config
+    cf = CFFTG(cfg)
+    sc = safety_scenarios(cfg, n, unseen=True)
+    gens = {"rl": lambda s: rl.generate(s["obstacle"], pivot=s["pivot"], start_y=s["start_y"],
+                                        step_length=s["step_length"], fallback=None),
+            "cfftg": lambda s: cf.generate(s["obstacle"], pivot=s["pivot"], start_y=s["start_y"],
+                                           step_length=s["step_length"])}
+    for g in gens.values():          # warm caches (config scalars, smoothing bases)
+        swing_timing.time_swing(g(sc[0]), cfg, rate=rate)
+    total = {k: [] for k in gens}
+    gen_ms = {k: [] for k in gens}
+    parts = {}
+    for name, g in gens.items():
+        parts[name] = {"paths": 0.0, "topp": 0.0, "evaluate": 0.0, "finish": 0.0}
+    for s in sc:                     # alternating, scene by scene
+        for name, g in gens.items():
+            acc, undo = _split_timing(swing_timing)
+            try:
+                t0 = time.process_time()
+                traj = g(s)
+                t1 = time.process_time()
+                swing_timing.time_swing(traj, cfg, rate=rate)
+                t2 = time.process_time()
+            finally:
+                undo()
+            total[name].append(1e3 * (t2 - t0))
+            gen_ms[name].append(1e3 * (t1 - t0))
+            for k, v in acc.items():
+                parts[name][k] += 1e3 * v / len(sc)
+    trajs = [gens["rl"](s) for s in (sc * (batch // len(sc) + 1))[:batch]]
+    t0 = time.perf_counter()
+    swing_timing.time_swings(trajs, cfg, rate=rate)
+    batch_s = time.perf_counter() - t0
+    med = {k: float(np.median(v)) for k, v in total.items()}
+    payload = {
+        "policy": str(policy), "rate_hz": rate, "n": len(sc), "scenes": "unseen shapes (safety_scenarios unseen=True)",
+        "device_ready_ms_median": med, "device_ready_ms_p95": {k: float(np.percentile(v, 95)) for k, v in total.items()},
+        "generate_ms_median": {k: float(np.median(v)) for k, v in gen_ms.items()},
+        "timing_parts_ms_mean": parts, "rl_over_cfftg": med["rl"] / med["cfftg"],
+        "time_swings_batch": {"n": batch, "seconds": batch_s}, "targets": TARGETS, "machine": machine_info(),
+    }
+    md = "\n".join([
+        "# Device-ready swing: generate + time_swing, RL alone vs CFFTG", "",
+        f"Policy `{policy}`; {len(sc)} unseen-shape scenes, both generators alternating scene by scene in one "
+        f"process; CPU ms per swing (process time); control rate {rate:g} Hz; machine: {payload['machine']['cpu']}, "
+        f"{payload['machine']['cores']} cores; other jobs may have run.", "",
+        "| generator | device-ready median ms | p95 ms | of which generate (median) | timing parts (mean ms): "
+        "paths / TOPP+law / evaluate / finish |",
+        "|---|---:|---:|---:|---|",
+        *[f"| {k} | {med[k]:.2f} | {payload['device_ready_ms_p95'][k]:.2f} | {payload['generate_ms_median'][k]:.2f} | "
+          f"{parts[k]['paths']:.2f} / {parts[k]['topp']:.2f} / {parts[k]['evaluate']:.2f} / {parts[k]['finish']:.2f} |"
+          for k in gens], "",
+        f"RL / CFFTG device-ready median: **{payload['rl_over_cfftg']:.2f}** (target <= {TARGETS['rl_over_cfftg']}); "
+        f"RL median {med['rl']:.2f} ms (target <= {TARGETS['rl_device_ready_ms']} ms).", "",
+        f"time_swings of {batch} RL swings: {batch_s:.2f} s (target <= {TARGETS['batch_1000_s']} s).", ""])
+    write_result("device_ready", payload, md, out_dir)
+    print(md)
+    return payload
