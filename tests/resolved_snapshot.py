@@ -27,10 +27,17 @@ REDEFINED = {"configs/default.toml", "jaxexo/config/default.toml", "configs/swee
              "configs/quick.toml", "jaxexo/config/quick.toml"}
 
 
+# The drives' settings declared since ([device], role "setting"): they time a swing for a device,
+# they do not change what a config trains (a policy file that lacks them reads the defaults).
+DEVICE_ADDED = ("joint_jerk", "tracking_headroom")
+
+
 def without_added(text: str) -> str:
-    """A resolved config's text without the ADDED_SINCE lines that hold their neutral value."""
+    """A resolved config's text without the ADDED_SINCE lines that hold their neutral value and
+    without the DEVICE_ADDED lines."""
     drop = {f"{k} = {v!r}" for fields in ADDED_SINCE.values() for k, v in fields.items()}
-    return "\n".join(line for line in text.split("\n") if line not in drop)
+    return "\n".join(line for line in text.split("\n")
+                     if line not in drop and not line.startswith(tuple(f"{k} = " for k in DEVICE_ADDED)))
 
 
 def _digest(text: str) -> str:

@@ -14,7 +14,7 @@ from jaxexo.config.declarations import FieldSpec, declared_fields  # noqa: F401
 from jaxexo.config.loading import config_from_dict, load_config, packaged_config  # noqa: F401
 from jaxexo.config.obstacles import ObstacleSpec, TerrainSpec, default_obstacles, named_spec  # noqa: F401
 from jaxexo.config.sections import (  # noqa: F401
-    COLLISION_MODES, CONTROLS, ENV_SECTIONS, HYPER_FIELDS, INT32_MAX, MAX_CONTROL_RATE, MAX_SEED, MAX_SWING_DURATION,
+    COLLISION_MODES, CONTROLS, ENV_SECTIONS, HYPER_FIELDS, INT32_MAX, MAX_CONTROL_RATE, MAX_SEED, MAX_TRACKING_HEADROOM, MAX_SWING_DURATION,
     MIN_CONTROL_RATE, check_seed,
     OBS_MODES, OBS_PROFILES, SECTION_CLASSES, SECTIONS, TARGETS, TRACE_KINDS, TRACE_VIEWS, Config, DeviceConfig,
     EnvConfig, KinematicsConfig, LayoutConfig, RewardConfig, TrainConfig, num_updates, static_settings,

@@ -33,6 +33,7 @@ TARGETS = ("hard", "polyak")
 
 INT32_MAX = 2**31 - 1   # integers that reach JAX as int32 (or index a scan) stay below this
 MAX_CONTROL_RATE = 10_000.0   # Hz: a timed export's rate ([device] control_rate, jaxexo generate --rate)
+MAX_TRACKING_HEADROOM = 0.5   # a reference using less than half of each limit is a slower device, not headroom
 MAX_SWING_DURATION = 60.0     # s: one swing (about 1 s on today's exoskeletons), not a walk
 # Hz: the slowest rate of a timed export. A swing sampled more coarsely is not a control signal
 # (at 1e-9 Hz a 1 s swing became one period of 2e9 s).
@@ -127,7 +128,9 @@ class DeviceConfig:
     6 rad/s (~350 deg/s) and 50-100 rad/s^2 (Winter, Biomechanics and Motor Control of Human Movement,
     4th ed., 2009, ch. 4); their drives (brushless motor + harmonic drive, ratio of the order of 100)
     reach the order of 3-5 rad/s at the joint. We take the order's lower end: hip 3 rad/s (172 deg/s),
-    knee 4 rad/s (229 deg/s), both under 300 deg/s, and 15 / 20 rad/s^2. Set your device's own.
+    knee 4 rad/s (229 deg/s), both under 300 deg/s, and 15 / 20 rad/s^2; jerk 1500 / 2000 rad/s^3
+    (the acceleration limit reached in 10 ms). A swing is timed within (1 - tracking_headroom) of
+    each. Set your device's own.
 
     Read by the NumPy timing code only: every field is a Python-side setting, never a pytree leaf."""
 
@@ -138,12 +141,12 @@ class DeviceConfig:
     joint_acceleration: tuple[float, float] = declare((15.0, 20.0), vector(2, positive=True, lo=0.1, hi=1000.0),
                                                       unit="rad/s^2", role="setting")      # (hip, knee)
     # Jerk bounds how fast the drives' torque may change: at the defaults the full acceleration is
-    # reached in 10 ms, above the peaks of most timed swings at 100 Hz (RL and CFFTG: median 0.9e3
-    # rad/s^3), so it trims outliers; 10 rad/s^3 to 1e5 rad/s^3.
+    # reached in 10 ms (docs/device-timing.md#limits); 10 rad/s^3 to 1e5 rad/s^3.
     joint_jerk: tuple[float, float] = declare((1500.0, 2000.0), vector(2, positive=True, lo=10.0, hi=1e5),
                                               unit="rad/s^3", role="setting")      # (hip, knee)
-    # Fraction of each limit the timed reference leaves to the feedback controller (tracking room).
-    tracking_headroom: float = declare(0.1, number(nonneg=True, hi=0.5), role="setting")
+    # Fraction of each limit the timed reference leaves to the feedback controller, so that a drive
+    # correcting a tracking error is not already at its limit (docs/device-timing.md#limits).
+    tracking_headroom: float = declare(0.05, number(nonneg=True, hi=MAX_TRACKING_HEADROOM), role="setting")
     # a swing never takes less (0: as fast as the limits allow); at most MAX_SWING_DURATION
     min_swing_duration: float = declare(0.0, number(nonneg=True, hi=MAX_SWING_DURATION), unit="s", role="setting")
     # default rate of timed exports (jaxexo generate --rate); at most MAX_CONTROL_RATE

@@ -59,7 +59,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from jaxexo.config import MAX_CONTROL_RATE, MIN_CONTROL_RATE
+from jaxexo.config import MAX_CONTROL_RATE, MAX_TRACKING_HEADROOM, MIN_CONTROL_RATE
 from jaxexo.physics import kinematics
 from jaxexo.physics.dynamics import Scene
 from jaxexo.inference.time_law import BLEND_S, TimeLaw, pchip_eval, pchip_slopes, time_law, topp
@@ -72,7 +72,6 @@ CHECK_MARGIN = 1e-3        # exported samples must stay within (1 - this) of eac
 LOCAL_PASSES = 6           # local corrections of the law where exported samples exceed a limit ...
 MAX_SLOWDOWNS = 12         # ... then uniform slow-downs (the safety net)
 ARC_TABLE_PER_SAMPLE = 32  # arc-length table points per sample interval
-MAX_HEADROOM = 0.5         # a reference using less than half of each limit is a slower device, not headroom
 BYTES_PER_SAMPLE = 1024    # timing holds about 500 B per exported sample (measured); the bound counts twice that
 
 
@@ -91,8 +90,8 @@ class DeviceLimits:
 
     def __post_init__(self):
         h = self.headroom
-        if isinstance(h, bool) or not isinstance(h, (int, float)) or not (0.0 <= h <= MAX_HEADROOM):
-            raise ValueError(f"limits.headroom: must be a number in [0, {MAX_HEADROOM:g}] (a fraction of each limit), "
+        if isinstance(h, bool) or not isinstance(h, (int, float)) or not (0.0 <= h <= MAX_TRACKING_HEADROOM):
+            raise ValueError(f"limits.headroom: must be a number in [0, {MAX_TRACKING_HEADROOM:g}] (a fraction of each limit), "
                              f"got {h!r}")
         object.__setattr__(self, "headroom", float(h))
         for name in ("velocity", "acceleration", "jerk"):
