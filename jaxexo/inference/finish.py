@@ -1,4 +1,4 @@
-"""Finish a path: a generator's raw heel points smoothed (thesis 2.7), checked, and retried.
+"""Finish a path: a generator's raw heel points landed on the floor, smoothed (thesis 2.7), checked, and retried.
 
 First the raw path lands (``landed``): the policy stops in its goal box (env.goal_tolerance: up to
 2 cm above the floor), so a path that reached the goal above the floor gains a last point on the
