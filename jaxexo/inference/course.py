@@ -27,9 +27,10 @@ foot standing as its pivot (``pivot_y``), as the thesis's single swing does.
    (``generate`` with ``pivot_y``) over the obstacles between its start and goal as one
    ``Obstacle.profile``; on flat ground, over a low virtual obstacle (``FLAT_OBSTACLE``) so the
    foot lifts off. The RL generator falls back on CFFTG per step unless ``fallback=None``; the
-   step's method says which planned it. A swing that ends above the ground (the policy's goal box
-   is env.goal_tolerance high) is extended by a vertical touch-down and checked again
-   (trajectory.assemble), so that every swing ends with the foot on the floor.
+   step's method says which planned it. Every safe swing ends with the foot on the floor: CFFTG's by
+   construction, the RL swing's because its descent to the floor is part of the smoothed and checked
+   path (jaxexo.inference.finish.landed). A swing that fails (short of the goal, maybe above the
+   floor) stops the walk, as it fails a single swing.
 3. Timing (swing_timing.time_swings): every swing rest-to-rest at the [device] limits, sampled at
    the control rate. At a landing both legs are straight with the hip between the heels (the hip
    model of jaxexo.physics.kinematics), so the landing pose of one swing is the lift-off pose of
@@ -59,7 +60,6 @@ from jaxexo.storage.terrain_file import Terrain, TerrainFileError, read_terrain
 GRID = 0.01                 # m, foothold resolution
 STAND_MARGIN = NEAR_MARGIN  # m, least distance of a standing foot from an obstacle (the training's toe margin)
 FLAT_OBSTACLE = (0.10, 0.03)  # m, (width, height) of the virtual obstacle a swing on flat ground lifts over
-TOUCH_DOWN_POINTS = 6       # samples of a vertical touch-down appended to a swing that ends above the ground
 JUNCTION_TOL = 1e-6         # rad, largest joint-angle jump allowed where one swing hands over to the next
 MAX_STEPS = 1000            # swings in one walk (``steps``)
 MAX_DOUBLE_SUPPORT = 10.0   # s
@@ -551,20 +551,11 @@ def _swing_obstacle(obs, start, goal, r: FootholdRules):
 
 def _in_course(traj: Trajectory, gen, obstacle, start: float, pivot: float, goal: float) -> Trajectory:
     """A swing planned in its own frame (start at y = 0) placed on the course at ``start`` and checked
-    there again (trajectory.assemble: the same checks), its heel lowered vertically to the floor at the
-    end when the swing ends above it (TOUCH_DOWN_POINTS samples)."""
+    there again (trajectory.assemble: the same checks)."""
     shift = np.array([start, 0.0])
-    path = traj.heel + shift
-    notes = tuple(traj.notes)
-    end = path[-1]
-    if traj.ok and end[1] > 0.0:
-        drop = np.column_stack([np.full(TOUCH_DOWN_POINTS, end[0]),
-                                np.linspace(end[1], 0.0, TOUCH_DOWN_POINTS + 1)[1:]])
-        path = np.concatenate([path, drop])
-        notes += (f"touch-down: the heel lowered {end[1] * 1000:.1f} mm to the floor at the end",)
     scene = gen.scene(obstacle, pivot_y=pivot, start_y=start, step_length=goal - start)
-    batch = assemble(traj.method, gen.sp, [scene], [traj.raw + shift], path[None], [traj.smoothing],
-                     duration=float(traj.time[-1]), notes=[notes], deviation=[traj.checks.deviation])
+    batch = assemble(traj.method, gen.sp, [scene], [traj.raw + shift], (traj.heel + shift)[None], [traj.smoothing],
+                     duration=float(traj.time[-1]), notes=[tuple(traj.notes)], deviation=[traj.checks.deviation])
     return batch[0]
 
 

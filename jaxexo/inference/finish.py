@@ -1,4 +1,11 @@
-"""Finish a path: a generator's raw heel points smoothed (thesis 2.7), checked, and retried.
+"""Finish a path: a generator's raw heel points landed on the floor, smoothed (thesis 2.7), checked, and retried.
+
+First the raw path lands (``landed``): the policy stops in its goal box (env.goal_tolerance: up to
+2 cm above the floor), so a path that reached the goal above the floor gains a last point on the
+floor, where the line of its last move meets it (straight below its end when that point is outside
+the goal box, jaxexo.physics.dynamics.goal_reached). The descent is then part of everything below:
+smoothed, corrected, retried and judged with the rest of the swing, and the swing ends with the
+whole foot on the floor.
 
 The raw path is smoothed with the requested s (jaxexo.inference.smoothing) and judged as a safe swing
 (jaxexo.inference.trajectory: exact clearance of the moving foot between samples less the curve's
@@ -24,6 +31,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from jaxexo.physics import dynamics
 from jaxexo.inference import smoothing as sm, trajectory
 from jaxexo.inference.clearing import clear_rows
 from jaxexo.inference.trajectory import TrajectoryBatch, assemble
@@ -47,6 +55,24 @@ ACCEPT_HEADROOM = 5e-4
 
 CLEARED_NOTE = ("the spline of smoothing {s:g} m^2 is corrected where it came within the safety margin or "
                 "moved the heel back (jaxexo.inference.clearing)")
+
+
+def landed(sp, raw: np.ndarray, goal_y: float) -> np.ndarray:
+    """The raw path (M, 2) with its landing (module docstring): unchanged when it ends on the floor or
+    short of the goal (that swing fails its verdict however it ends); otherwise one more point on the
+    floor, on the line of the last move when that move descends and the point is in the goal box,
+    else straight below the end (in the box, as the end is)."""
+    raw = np.asarray(raw, dtype=np.float64)
+    y, z = float(raw[-1, 0]), float(raw[-1, 1])
+    if z <= 0.0 or not dynamics.goal_reached(np, sp, y, z, goal_y):
+        return raw
+    land = y
+    if len(raw) > 1:
+        dy, dz = raw[-1] - raw[-2]
+        # continuing the last move keeps the direction the policy came down in (no corner to smooth)
+        if dz < 0.0 and dy > 0.0 and dynamics.goal_reached(np, sp, y + z * dy / -dz, 0.0, goal_y):
+            land = y + z * dy / -dz
+    return np.vstack([raw, [[land, 0.0]]])
 
 
 def candidates(raw, smoothing: float) -> list[float]:
@@ -283,7 +309,9 @@ class PathFinisher:
                fast: bool = True) -> TrajectoryBatch:
         """Checked trajectories of raw paths (M_i, 2) on their scenes: smoothed with ``smoothing`` (m^2; 0:
         the raw polylines resampled), checked, and retried where a curve fails but its raw path
-        need not (module docstring)."""
+        need not (module docstring). Each raw path lands first (``landed``); the trajectories' ``raw``
+        hold the landed paths."""
+        raws = [landed(self.sp, r, sc.goal_y) for r, sc in zip(raws, scenes)]
         notes = [()] * len(raws)
         measured = None
         if smoothing > 0 and len(raws) == 1 and len(candidates(raws[0], smoothing)) > 1:

@@ -9,9 +9,9 @@ admissible one in order of Q, so ``fast`` checks moves in that order instead of 
 (jaxexo.inference.shield for one swing; ``ShieldRows.choose`` for a batch, in the reference's float32
 arithmetic); ``fast=False`` computes the whole mask every step. Both choose the same moves.
 
-The raw path is then finished (jaxexo.inference.finish: smoothed, thesis 2.7; checked as a safe swing;
-retried) and, with ``fallback="cfftg"`` (the default), a swing that still fails is replaced by CFFTG's
-plan for its scene (jaxexo.inference.fallback). ``clearance=C`` asks for a margin C instead of the
+The raw path is then finished (jaxexo.inference.finish: landed on the floor, smoothed, thesis 2.7;
+checked as a safe swing; retried) and, with ``fallback="cfftg"`` (the default), a swing that still
+fails is replaced by CFFTG's plan for its scene (jaxexo.inference.fallback). ``clearance=C`` asks for a margin C instead of the
 model's (``at_clearance``).
 """
 

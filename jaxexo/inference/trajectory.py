@@ -71,7 +71,7 @@ class Trajectory:
 
     method: str
     scene: Scene
-    raw: np.ndarray             # (M, 2) generator points (heel y, z), m
+    raw: np.ndarray             # (M, 2) generator points (heel y, z), m; RL: the policy's, then its landing
     heel: np.ndarray            # (N, 2)
     toe: np.ndarray             # (N, 2)
     hip: np.ndarray             # (N, 2)
