@@ -163,7 +163,7 @@ def mixed_step():
 # A small config trained briefly from configs/quick.toml (unshielded, so it trains in seconds): a
 # policy that reaches the goal on most scenes and fails on some, for the generator and evaluation
 # tests (one training per session). The shielded default has its own tests (tests/test_shield.py).
-TRAINED_BUDGET = 1_000_000
+TRAINED_BUDGET = 2_000_000
 
 
 def session_folder(tmp_path_factory, name: str) -> Path:

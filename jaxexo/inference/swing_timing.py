@@ -59,7 +59,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from jaxexo.config import MAX_CONTROL_RATE, MAX_TRACKING_HEADROOM, MIN_CONTROL_RATE
+from jaxexo.config import MAX_CONTROL_RATE, MAX_SWING_DURATION, MAX_TRACKING_HEADROOM, MIN_CONTROL_RATE
 from jaxexo.physics import kinematics
 from jaxexo.physics.dynamics import Scene
 from jaxexo.inference.time_law import BLEND_S, TimeLaw, pchip_eval, pchip_slopes, time_law, topp
@@ -323,6 +323,7 @@ def time_swings(trajs, config, rate: float | None = None, limits: DeviceLimits |
     slow = [1.0] * len(trajs)       # uniform slow-down beyond the (locally corrected) TOPP law
     evals: list = [None] * len(trajs)
     todo = list(range(len(trajs)))
+    stuck: set[int] = set()
     for it in range(LOCAL_PASSES + MAX_SLOWDOWNS):
         redo = []
         for i in todo:
@@ -333,11 +334,17 @@ def time_swings(trajs, config, rate: float | None = None, limits: DeviceLimits |
                 _lower_cap(caps[i], paths[i][0], e, limits)
                 redo.append(i)
             else:
-                slow[i] *= e["ratio"] / (1.0 - 2.0 * CHECK_MARGIN)
+                # Never slower than the longest swing a config may ask for: a path no slow-down helps
+                # (a jump in the joints, a heel out of reach) ends there, not within the limits.
+                longest = max(1.0, MAX_SWING_DURATION / laws[i].duration)
+                slowed = min(slow[i] * e["ratio"] / (1.0 - 2.0 * CHECK_MARGIN), longest)
+                if slowed == slow[i]:
+                    stuck.add(i)
+                slow[i] = slowed
         if redo:
             for i, law in zip(redo, _topp_laws(paths, redo, caps, vmax, amax, blend)):
                 laws[i] = law
-        todo = [i for i in todo if evals[i]["ratio"] > 1.0 - CHECK_MARGIN]
+        todo = [i for i in todo if evals[i]["ratio"] > 1.0 - CHECK_MARGIN and i not in stuck]
         if not todo:
             break
     return [_finish(trajs[i], evals[i], sp, device, limits, rate, t_opt[i], slow[i]) for i in range(len(trajs))]
