@@ -28,14 +28,16 @@ while a variable-speed law slows only where the path bends in joint space):
    path parametrisation of Bobrow 1985 / Pfeiffer-Johanni 1987, passes ordered as in TOPP-RA), with
    the limits shrunk by SAFETY. Time per grid cell assumes constant s'' in the cell.
 3. Rest with zero acceleration: the optimal law starts with a jump in s''; its speed s'(t) is
-   averaged over a sliding window of BLEND_S = 30 ms (at most a tenth of the swing; a box filter),
+   averaged over a sliding window of BLEND_S = 30 ms, or a / j where a jerk limit j asks for longer
+   (``blend_window``; at most a tenth of the swing; a box filter),
    which keeps s' and s'' bounded by the averaged values, adds the window to the duration, and
    makes s'' = 0 at both ends (s''(t) = (s'(t) - s'(t - w)) / w, zero where both speeds are the
    rest speed).
 4. Exported samples: the law is sampled at the control rate (the duration rounded up to whole
    periods, never below ``min_duration``); positions come from the path and kinematics, velocities
    and accelerations from the chain rule; then every exported sample is checked, both the
-   chain-rule columns and finite differences of the exported positions at the control rate. Where
+   chain-rule columns and finite differences of the exported positions at the control rate (the
+   third difference against the jerk limit), against (1 - tracking headroom) of each limit. Where
    samples exceed a limit (a bend tighter than the grid resolves, a reversal of the joints), the
    bound on s'^2 is lowered around them by the excess and the passes run again (LOCAL_PASSES
    times, all such swings in one batch); after that the whole law is slowed uniformly (t -> k t
