@@ -1,7 +1,7 @@
 """Walks over courses: RL alone against CFFTG on the same footholds (jaxexo.benchmarks.course_bench,
 also ``jaxexo bench``'s ``course`` part). Writes benchmarks/results/course_<date>_<machine>.{json,md}.
 
-Run: python benchmarks/bench_course.py RUN_DIR/policy.npz [--n 200] [--seed 0] [--log FILE] [--pivots]
+Run: python benchmarks/bench_course.py RUN_DIR/policy.npz [--n 200] [--seed 0] [--log FILE] [--pivots | --swings]
      (``--log`` keeps each course's row as it is done; ``--summarize FILE`` writes the results of
      an interrupted run from its log)
 """
@@ -11,7 +11,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from jaxexo.benchmarks.course_bench import markdown, run_course_benchmark, run_pivot_benchmark, summarize_log
+from jaxexo.benchmarks.course_bench import (markdown, run_course_benchmark, run_pivot_benchmark, run_swing_breakdown,
+                                            summarize_log)
 
 OUT = Path(__file__).resolve().parent / "results"
 
@@ -24,8 +25,12 @@ def main() -> None:
     p.add_argument("--log", help="JSON-lines file receiving each course's row")
     p.add_argument("--summarize", help="write the results of the courses logged in this file")
     p.add_argument("--pivots", action="store_true", help="only the pivots a course produces (RL alone, per family)")
+    p.add_argument("--swings", action="store_true", help="only where a walk's time goes, swing by swing (--n courses)")
     p.add_argument("--out", default=str(OUT))
     a = p.parse_args()
+    if a.swings:
+        print(run_swing_breakdown(a.policy, a.out, n=a.n, seed=a.seed))
+        return
     if a.pivots:
         print(run_pivot_benchmark(a.policy, a.out, seed=a.seed)["total"])
         return
