@@ -258,3 +258,20 @@ def tiny_reference(tmp_path_factory):
     out = built_once(session_folder(tmp_path_factory, "tiny_reference"), build)
     return {"run": out / "run", "cfg": cfg, "cfg_path": out / "config_in.toml",
             "stdout": (out / "stdout.txt").read_text(), "stderr": (out / "stderr.txt").read_text()}
+
+
+def random_generator(config, seed: int = 0):
+    """A TrajectoryGenerator with random weights (one hidden layer of 16) for ``config``: for tests
+    whose rollouts are replaced or whose policy need not be any good."""
+    import numpy as np
+
+    from jaxexo.inference import TrajectoryGenerator
+    from jaxexo.physics import dynamics
+    from jaxexo.storage.policy_file import QPolicy
+
+    d = dynamics.obs_dim(config.env.obs_mode, config.env.shape_points)
+    rng = np.random.default_rng(seed)
+    sizes = [d, 16, dynamics.NUM_ACTIONS]
+    pol = QPolicy(kernels=[rng.normal(size=(a, b)).astype(np.float32) for a, b in zip(sizes, sizes[1:])],
+                  biases=[np.zeros(b, np.float32) for b in sizes[1:]], norm_scales=[], norm_biases=[], metadata={})
+    return TrajectoryGenerator(pol, config)

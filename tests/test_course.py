@@ -205,15 +205,9 @@ def test_a_cfftg_walk_is_continuous_within_the_limits_and_lands_on_flat_ground(t
 
 
 def _random_rl(seed=0):
-    from jaxexo.physics import dynamics
-    from jaxexo.storage.policy_file import QPolicy
+    from conftest import random_generator
 
-    d = dynamics.obs_dim(CFG.env.obs_mode, CFG.env.shape_points)
-    rng = np.random.default_rng(seed)
-    sizes = [d, 16, dynamics.NUM_ACTIONS]
-    pol = QPolicy(kernels=[rng.normal(size=(a, b)).astype(np.float32) for a, b in zip(sizes, sizes[1:])],
-                  biases=[np.zeros(b, np.float32) for b in sizes[1:]], norm_scales=[], norm_biases=[], metadata={})
-    return TrajectoryGenerator(pol, CFG)
+    return random_generator(CFG, seed)
 
 
 def test_rl_walk_reports_fallbacks_per_step_and_stops_at_a_failed_swing_without_them():

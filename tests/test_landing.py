@@ -19,8 +19,8 @@ from jaxexo.inference import smoothing as sm
 from jaxexo.inference.finish import landed
 from jaxexo.inference.scenarios import safety_scenarios
 from jaxexo.inference.trajectory import assemble
+from conftest import random_generator
 from jaxexo.physics import dynamics
-from jaxexo.storage.policy_file import QPolicy
 
 CFG = Config()
 FLOOR_TOL = 0.002   # m: the heel at the end of a swing at most this far above the floor
@@ -29,12 +29,7 @@ N_POINTS = sm.DEFAULT_POINTS
 
 def _generator(seed=0) -> TrajectoryGenerator:
     """A generator of random weights: its network is never asked here (the rollouts are replaced)."""
-    d = dynamics.obs_dim(CFG.env.obs_mode, CFG.env.shape_points)
-    rng = np.random.default_rng(seed)
-    sizes = [d, 16, dynamics.NUM_ACTIONS]
-    pol = QPolicy(kernels=[rng.normal(size=(a, b)).astype(np.float32) for a, b in zip(sizes, sizes[1:])],
-                  biases=[np.zeros(b, np.float32) for b in sizes[1:]], norm_scales=[], norm_biases=[], metadata={})
-    return TrajectoryGenerator(pol, CFG)
+    return random_generator(CFG, seed)
 
 
 def _walked(heel: np.ndarray, goal_y: float, sp) -> np.ndarray:
