@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from conftest import random_generator
 from jaxexo.baselines import CFFTG
 from jaxexo.config import Config
 from jaxexo.inference import Terrain, TrajectoryGenerator, plan_course
@@ -19,7 +20,6 @@ from jaxexo.inference import smoothing as sm
 from jaxexo.inference.finish import landed
 from jaxexo.inference.scenarios import safety_scenarios
 from jaxexo.inference.trajectory import assemble
-from conftest import random_generator
 from jaxexo.physics import dynamics
 
 CFG = Config()
