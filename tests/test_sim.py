@@ -192,8 +192,7 @@ def test_feed_forward_torques_alone_carry_the_legs_along_the_reference(config):
     rigid inverse dynamics in feed_forward."""
     from jaxexo.baselines import CFFTG
     from jaxexo.inference.swing_timing import time_swing
-    from jaxexo.sim.replay import _dofs, _equalities_on
-    from jaxexo.sim.mjcf import ACTUATED
+    from jaxexo.sim.replay import _equalities_on
 
     timed = time_swing(CFFTG(config).generate(Obstacle.named("base2"), pivot="between"), config, rate=100.0)
     legs = Legs(config, timed.scene)
@@ -205,7 +204,7 @@ def test_feed_forward_torques_alone_carry_the_legs_along_the_reference(config):
     qvel = np.gradient(qpos, dt, axis=0, edge_order=2)
     qacc = np.gradient(qvel, dt, axis=0, edge_order=2)
     tau = feed_forward(legs, qpos, qvel, qacc)
-    act = _dofs(legs, ACTUATED)
+    act = legs.actuated_dofs
     m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_ACTUATION)     # the torques alone move the legs
     span = 40
     for k in range(20, len(qpos) - span - 20, 150):

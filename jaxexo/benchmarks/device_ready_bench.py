@@ -14,13 +14,14 @@ from pathlib import Path
 import numpy as np
 
 TARGETS = {"rl_device_ready_ms": 5.0, "rl_over_cfftg": 1.5, "batch_1000_s": 1.0}
+# The timing's parts: the swing_timing function each one's CPU time is read from.
+PARTS = {"paths": "_joint_paths", "topp": "_topp_laws", "evaluate": "_evaluate", "finish": "_finish"}
 
 
 def _split_timing(swing_timing):
     """Wrap the timing's parts to accumulate their CPU time (restored by the returned undo)."""
-    acc = {"paths": 0.0, "topp": 0.0, "evaluate": 0.0, "finish": 0.0}
-    names = {"paths": "_joint_paths", "topp": "_topp_laws", "evaluate": "_evaluate", "finish": "_finish"}
-    saved = {k: getattr(swing_timing, n) for k, n in names.items()}
+    acc = dict.fromkeys(PARTS, 0.0)
+    saved = {k: getattr(swing_timing, n) for k, n in PARTS.items()}
 
     def wrap(key, fn):
         def inner(*a, **k):
@@ -31,11 +32,11 @@ def _split_timing(swing_timing):
                 acc[key] += time.process_time() - t0
         return inner
 
-    for k, n in names.items():
+    for k, n in PARTS.items():
         setattr(swing_timing, n, wrap(k, saved[k]))
 
     def undo():
-        for k, n in names.items():
+        for k, n in PARTS.items():
             setattr(swing_timing, n, saved[k])
     return acc, undo
 
@@ -59,9 +60,7 @@ def run_device_ready_benchmark(policy: str | Path, out_dir: str | Path, n: int =
         swing_timing.time_swing(g(sc[0]), cfg, rate=rate)
     total = {k: [] for k in gens}
     gen_ms = {k: [] for k in gens}
-    parts = {}
-    for name, g in gens.items():
-        parts[name] = {"paths": 0.0, "topp": 0.0, "evaluate": 0.0, "finish": 0.0}
+    parts = {name: dict.fromkeys(PARTS, 0.0) for name in gens}
     for s in sc:                     # alternating, scene by scene
         for name, g in gens.items():
             acc, undo = _split_timing(swing_timing)

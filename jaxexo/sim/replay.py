@@ -88,6 +88,7 @@ class Legs:
                      for n in (f"{leg}_{p}" for leg in LEGS for p in ("heel", "toe"))}
         self.stance_eq = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_EQUALITY, f"{STANCE_LEG}_on_pivot")
         self.actuators = [mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_ACTUATOR, n) for n in ACTUATED]
+        self.actuated_dofs = _dofs(self, ACTUATED)      # the actuated joints' columns of qvel, ACTUATED order
 
     def qpos(self, angles) -> np.ndarray:
         """qpos (..., nq) of joint angles (..., 4) in JOINT_NAMES order (jaxexo.sim.mjcf.pose_qpos)."""
@@ -213,6 +214,7 @@ def _equalities_on(legs: Legs) -> None:
 
 
 def _dofs(legs: Legs, names) -> list[int]:
+    """The qvel columns of the named joints."""
     mujoco, m = legs.mujoco, legs.model
     return [int(m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, n)]) for n in names]
 
@@ -226,7 +228,7 @@ def feed_forward(legs: Legs, qpos: np.ndarray, qvel: np.ndarray, qacc: np.ndarra
     so the split is exact; mj_inverse's own soft-constraint forces are not used (they follow the
     reference's small inconsistencies, not the rigid constraint)."""
     mujoco, m, d = legs.mujoco, legs.model, legs.data
-    act = _dofs(legs, ACTUATED)
+    act = legs.actuated_dofs
     free = [i for i in range(m.nv) if i not in act]
     tendon = np.zeros((len(LEGS), m.nv))
     for r, leg in enumerate(LEGS):
@@ -258,7 +260,7 @@ def _pd_gains(legs: Legs, qpos0: np.ndarray):
     mujoco.mj_forward(m, d)
     full = np.zeros((m.nv, m.nv))
     mujoco.mj_fullM(m, d, full)
-    inertia = np.diag(full)[_dofs(legs, ACTUATED)]
+    inertia = np.diag(full)[legs.actuated_dofs]
     w = 2.0 * math.pi * PD_BANDWIDTH_HZ
     return inertia * w * w, 2.0 * inertia * w
 
@@ -346,9 +348,9 @@ def driven_replay(timed, config, limits=None, legs: Legs | None = None, settle: 
         qacc = np.gradient(qvel, dt, axis=0, edge_order=2)
         tau = feed_forward(legs, qpos[:steps], qvel[:steps], qacc[:steps])
         kp, kd = _pd_gains(legs, qpos0)
-        act = _dofs(legs, ACTUATED)
         # The command of the step ending at t_{k+1}: force = kp (q_ref - q) + kd (q_ref' - q') + tau.
-        sens = _rollout(legs, qpos0, cmd[:steps] + (kd / kp) * qvel[1: steps + 1][:, act] + tau / kp, (kp, kd))
+        qvel_ref = qvel[1: steps + 1][:, legs.actuated_dofs]
+        sens = _rollout(legs, qpos0, cmd[:steps] + (kd / kp) * qvel_ref + tau / kp, (kp, kd))
         torque_peak = np.abs(tau).max(axis=0).tolist()
     clip_a, clip_v = clip_a[:steps], clip_v[:steps]
     col = lambda name: sens[:, m.sensor_adr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, name)]:][:, :3]  # noqa: E731
