@@ -530,7 +530,8 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("--out", required=True, help="run directory")
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--population", type=int, help="train K agents (seeds SEED..SEED+K-1) as one program and export the "
-                                                  "best on validation (overrides [train] population; default 1)")
+                                                  "one a wearer would choose (overrides [train] population; the "
+                                                  "default model's: 2)")
     t.add_argument("--resume", action="store_true", help="continue the run in --out from its checkpoint")
     t.add_argument("--quiet", action="store_true", help="no progress bar")
     t.set_defaults(func=cmd_train)

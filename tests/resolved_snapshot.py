@@ -18,10 +18,14 @@ SNAPSHOT = ROOT / "tests" / "data" / "resolved_configs.json"
 # before them (the wearer's costs: 0 is the thesis reward). A config that states them so, or a
 # resolved text that has them so, means what it meant.
 # train.population: 1 is one agent, what every config trained before it.
-ADDED_SINCE = {"reward": {"lift_cost": 0.0, "time_cost": 0.0, "turn_cost": 0.0}, "train": {"population": 1}}
+# env.floor_clearance: 0 is no floor rule, the shield before it.
+ADDED_SINCE = {"reward": {"lift_cost": 0.0, "time_cost": 0.0, "turn_cost": 0.0}, "train": {"population": 1},
+               "env": {"floor_clearance": 0.0}}
 # Configs deliberately redefined since: the default model (a new reward and mid-goal) and
 # the sweeps built on it. Their meaning is the default's (tests/test_config_roundtrip.py).
 # quick.toml (both copies): 32 minibatches per update since 2026-12-02 (4 learned at only some seeds).
+# Since 2026-12-04 the default's swing ends on the floor (env.goal_tolerance, env.floor_clearance),
+# and every sweep built on the default with it.
 REDEFINED = {"configs/default.toml", "jaxexo/config/default.toml", "configs/sweeps/backward.toml",
              "configs/sweeps/lr_lambda.toml", "configs/sweeps/reward_weights.toml", "configs/sweeps/smoke.toml",
              "configs/quick.toml", "jaxexo/config/quick.toml"}

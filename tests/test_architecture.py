@@ -22,7 +22,8 @@ LAYERS = (
     ("jaxexo.config",),
     ("jaxexo.storage",),
     ("jaxexo.env",),
-    ("jaxexo.inference", "jaxexo.train"),
+    ("jaxexo.inference",),
+    ("jaxexo.train",),        # exports policies for the generator, and picks them as it swings (selection)
     ("jaxexo.baselines", "jaxexo.sim"),
     ("jaxexo.sweep", "jaxexo.evaluation"),
     ("jaxexo.benchmarks",),

@@ -85,6 +85,11 @@ def test_scalar_shield_picks_the_full_masks_greedy_move():
     # (down stays only where no move passes every condition: the mask's fall-backs)
     assert (~mask[1::5, 27]).mean() > 0.8 and (want[1::5] != 27).mean() > 0.8
     assert (~mask[k: 2 * k: 3, 27]).mean() > 0.8
+    # the floor rule is exercised: from the ground short of the goal box's column, the move along the
+    # floor (0 deg) is refused, and the scalar shield agreed with that mask above
+    ground = np.arange(k, 2 * k, 3)
+    short = ground[np.abs(hy[ground] - lay["goal_y"][ground]) > p.goal_tolerance[0] + 0.03]
+    assert p.floor_clearance > 0 and len(short) > 100 and (~mask[short, 0]).mean() > 0.95
     # a nan among the Q-values: argmax's own rules, left to the full mask
     scene = types.SimpleNamespace(outline=lay["outline"][0], pivot_y=lay["pivot_y"][0], goal_y=lay["goal_y"][0])
     bad = q[0].copy()

@@ -7,6 +7,7 @@ through the module's compilation cache (a population of 1 and of 2 are the same 
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -122,6 +123,9 @@ def test_a_population_too_large_for_memory_is_refused_naming_the_field():
 
 def test_the_driver_exports_the_best_member_records_every_member_and_resumes(tmp_path, monkeypatch):
     # Two members: on one device the same padded program as a member alone (compiled once for the module).
+    from jaxexo.train import selection
+
+    monkeypatch.setattr(selection, "SELECTION_SCENES", 24)     # the choice's rule, on fewer scenes
     cfg = config_from_dict(raw(population=2))
     res = driver.run_training(cfg, tmp_path / "run", seed=SEED, progress=False)
     rows = [json.loads(x) for x in (tmp_path / "run" / "metrics.jsonl").read_text().splitlines()]
@@ -129,8 +133,16 @@ def test_the_driver_exports_the_best_member_records_every_member_and_resumes(tmp
     assert [m["seed"] for m in rows[0]["members"]] == [SEED, SEED + 1]
     assert res["population"] == 2 and [m["seed"] for m in res["members"]] == [SEED, SEED + 1]
     k = res["exported_member"]
-    best = max(m["validation_success_raw"] for m in res["members"])
-    assert res["members"][k]["validation_success_raw"] == best == res["validation_success_raw"]
+    # Exported: the candidate a wearer would choose (jaxexo.train.selection), every candidate scored and
+    # written beside the policy.
+    sel = res["selection"]
+    assert [r["seed"] for r in sel] == [SEED, SEED + 1]
+    key = lambda r: (-r["safe"], math.inf if r["cost"] is None else r["cost"], -r["validation_success"], r["seed"])  # noqa: E731
+    assert min(range(2), key=lambda i: key(sel[i])) == k
+    for i, r in enumerate(sel):
+        assert r["validation_success"] == res["members"][i]["validation_success_raw"]
+        assert (tmp_path / "run" / "members" / f"seed_{SEED + i}.npz").is_file()
+    assert res["validation_success_raw"] == res["members"][k]["validation_success_raw"]
     assert res["seed"] == SEED + k and res["selected_chunk"] == res["members"][k]["selected_chunk"]
     for m in res["members"]:
         assert len(m["validation_curve"]) == UPDATES // CHUNK
@@ -163,7 +175,7 @@ def test_the_driver_exports_the_best_member_records_every_member_and_resumes(tmp
         driver.run_training(cfg, tmp_path / "cut", seed=SEED + 1, resume=True, progress=False)
     resumed = driver.run_training(cfg, tmp_path / "cut", seed=SEED, resume=True, progress=False)
     full = res
-    clock = ("train_seconds",)
+    clock = ("train_seconds", "selection_seconds")
     assert {k: v for k, v in resumed.items() if k not in clock} == {k: v for k, v in full.items() if k not in clock}
     assert (tmp_path / "cut" / "policy.npz").read_bytes() == (tmp_path / "run" / "policy.npz").read_bytes()
     assert _without_clock((tmp_path / "cut" / "metrics.jsonl").read_text()) == \

@@ -22,13 +22,16 @@ def _config(**env):
 
 
 def _states(cfg, n, seed):
-    """n terrain scenes (jaxexo.physics.scenarios, NumPy) and heel positions around their obstacles."""
+    """n terrain scenes (jaxexo.physics.scenarios, NumPy) and heel positions around their obstacles;
+    every fifth heel low (0-3 cm), every tenth in the goal box's column, where the floor rule decides."""
     from jaxexo.physics import scenarios
     p = numpy_params(cfg)
     lay = scenarios.scenario_layouts(np, p, seed, n, False)
     rng = np.random.default_rng(seed)
     hy = (lay["center_y"] + rng.uniform(-0.4, 0.15, n)).astype(np.float32)
     hz = rng.uniform(0.0, 0.45, n).astype(np.float32)
+    hz[::5] = rng.uniform(0.0, 0.03, len(hz[::5]))
+    hy[::10] = (lay["goal_y"][::10] + rng.uniform(-0.07, 0.03, len(hy[::10]))).astype(np.float32)
     return p, lay, hy, hz
 
 
@@ -40,29 +43,40 @@ def _dense_clearance(p, h0, h1, outline, n=600):
     return float(geometry.foot_clearance(np, heels, float(p.foot_length), outline[None].astype(np.float64)).min())
 
 
-def test_admissible_moves_against_dense_sampling():
-    cfg = _config()
+# Off: the shield before the floor rule (legacy_raw); on: the default's goal on the floor and its rule.
+FLOOR_RULE = {"off": {}, "on": {"floor_clearance": 0.02, "goal_tolerance": [0.04, 0.005]}}
+
+
+@pytest.mark.parametrize("floor", sorted(FLOOR_RULE))
+def test_admissible_moves_against_dense_sampling(floor):
+    cfg = _config(**FLOOR_RULE[floor])
     p, lay, hy, hz = _states(cfg, 300, 3)
     import types
     m = dynamics.admissible_moves(np, p, hy, hz, types.SimpleNamespace(**lay))
     d = p.directions.astype(np.float64)
     step = float(p.step_size)
-    blocked_near = fallback = checked = 0
+    blocked_near = fallback = checked = floor_blocked = 0
     for i in range(len(hy)):
         h0 = np.array([hy[i], hz[i]], np.float64)
         c_here = float(geometry.foot_clearance(np, h0, float(p.foot_length), lay["outline"][i].astype(np.float64)))
         if c_here <= 1e-4:
             continue     # a heel inside or on the obstacle: not a state a shielded agent reaches
         need = min(SHIELD, c_here)
-        dense, reach, before_goal = [], [], []
+        dense, reach, before_goal, off_floor = [], [], [], []
         for a in range(dynamics.NUM_ACTIONS):
             y, z = dynamics.move_heel(np, p, hy[i], hz[i], d[a, 0], d[a, 1])
             h1 = np.array([y, z], np.float64)
             dense.append(_dense_clearance(p, h0, h1, lay["outline"][i]))
             reach.append(not bool(kinematics.swing_heel_unreachable(
                 np, float(lay["pivot_y"][i]), h1, float(p.thigh), float(p.shin), p.hip_limits, p.knee_limits)))
-            before_goal.append(h1[0] <= float(lay["goal_y"][i]) + float(p.goal_tolerance[0]))
+            # the floor rule by hand: low only in the goal box's column (a band of 1e-6 m left to rounding)
+            column = abs(h1[0] - float(lay["goal_y"][i])) <= float(p.goal_tolerance[0]) - 1e-6
+            before_goal.append(h1[0] <= float(lay["goal_y"][i]) + float(p.goal_tolerance[0])
+                               and (h1[1] >= float(p.floor_clearance) + 1e-6 or column))
+            off_floor.append(h1[1] >= float(p.floor_clearance) - 1e-6
+                             or abs(h1[0] - float(lay["goal_y"][i])) <= float(p.goal_tolerance[0]) + 1e-6)
         dense, reach, before_goal = np.array(dense), np.array(reach), np.array(before_goal)
+        off_floor = np.array(off_floor)
         forward = d[:, 0] >= 0.0
         assert m[i].any(), "some move is always offered"
         assert not (m[i] & ~forward).any(), "a backward move was admitted"
@@ -75,12 +89,15 @@ def test_admissible_moves_against_dense_sampling():
         checked += 1
         admitted = m[i]
         assert (dense[admitted] >= need - 1e-5).all(), (i, dense[admitted], need)
-        assert (reach[admitted] & before_goal[admitted]).all(), i
+        assert (reach[admitted] & off_floor[admitted]).all(), i
         refused = forward & reach & before_goal & ~admitted
         assert (dense[refused] < need + step / 600 + 1e-5).all(), (i, dense[refused], need)
         blocked_near += int(refused.sum())
+        floor_blocked += int((forward & reach & ~off_floor).sum())
     assert blocked_near > 50, "the scenes must exercise the clearance condition"
     assert checked > 120, (checked, fallback)   # enough states with a move passing every condition
+    if floor == "on":
+        assert floor_blocked > 100, "the scenes must exercise the floor rule"
 
 
 def test_shield_off_admits_every_move():

@@ -53,6 +53,9 @@ def validate(cfg: Config) -> None:
     if env.shield and env.shield_clearance < env.min_clearance:
         raise ConfigError(f"env.shield_clearance: {env.shield_clearance} m is below env.min_clearance = "
                           f"{env.min_clearance} m; the shield must keep at least the margin that a safe swing needs")
+    if env.shield and env.floor_clearance >= env.step_size:
+        raise ConfigError(f"env.floor_clearance: {env.floor_clearance} m is not below env.step_size = "
+                          f"{env.step_size} m; the first move off the floor could not clear it")
     if rew.safety_distance < env.min_clearance:
         raise ConfigError(f"reward.safety_distance: {rew.safety_distance} m is below env.min_clearance = "
                           f"{env.min_clearance} m; the safety term (eq 2.35) must pay the policy to keep the "

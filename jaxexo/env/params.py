@@ -37,6 +37,7 @@ class EnvParams:
     backward_tolerance: jnp.ndarray     # float32 (): env.backward_tolerance, m
     shield: jnp.ndarray                 # bool (): env.shield
     shield_clearance: jnp.ndarray       # float32 (): env.shield_clearance, m
+    floor_clearance: jnp.ndarray        # float32 (): env.floor_clearance, m
     thigh: jnp.ndarray                  # float32 (): kinematics.thigh, m
     shin: jnp.ndarray                   # float32 (): kinematics.shin, m
     foot_length: jnp.ndarray            # float32 (): kinematics.foot_length, m

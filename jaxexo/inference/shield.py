@@ -118,6 +118,11 @@ class ScalarShield:
         f = lambda v: float(np.float32(v))  # noqa: E731
         self.pivot = f(scene.pivot_y)
         self.goal_limit = float(np.float32(scene.goal_y) + p.goal_tolerance[0])
+        # dynamics.keeps_off_floor in the reference's float32: exact here (a float32 difference is
+        # exact in float64, then rounded as float32 rounds it)
+        self.goal_y32 = f(scene.goal_y)
+        self.goal_tol32 = float(np.float32(p.goal_tolerance[0]))
+        self.floor32 = float(np.float32(p.floor_clearance))
         ol = np.asarray(scene.outline, np.float32).astype(np.float64)
         self.vy, self.vz = ol[:, 0].tolist(), ol[:, 1].tolist()
         self.box = (min(self.vy), max(self.vy), min(min(self.vz), 0.0), max(self.vz))
@@ -326,6 +331,8 @@ class ScalarShield:
             return False
         z = _f32(hz + pz)
         z = 0.0 if z < 0.0 else (self.zmax if z > self.zmax else z)
+        if z < self.floor32 and abs(_f32(y - self.goal_y32)) > self.goal_tol32:
+            return False
         moved = max(abs(y - hy), abs(z - hz))       # dynamics.moves_heel, certified like the rest
         if moved <= _MOVE_EPS + MARGIN_MOVE:
             return False if moved <= _MOVE_EPS - MARGIN_MOVE else None

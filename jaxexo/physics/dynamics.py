@@ -192,12 +192,15 @@ def admissible_moves(xp, p, heel_y, heel_z, layout, over_moves=_stacked, clear=N
     - end where both legs are inside their joint limits (eq 2.50) and within reach (eq 2.45);
     - not end beyond the goal box's far side (goal_y + goal_tolerance[0]): with no move backward the
       goal could never be reached from there (a dead end, like a collision);
+    - not end lower than ``p.floor_clearance`` above the floor outside the goal box's column
+      (``keeps_off_floor``): the heel comes down only where it lands, it never scuffs or skims along
+      the floor towards the goal;
     - move the heel (``moves_heel``: not a move the ground or the world's bounds cancel) and not undo
       ``last_action`` (..., int; -1 or None: none), the move just made: the only forward move that
       undoes another is straight down after straight up or the reverse, so with this rule the heel's y
       never falls, it rises or falls at one y in one direction only, and no point of a swing is
       visited twice: a greedy swing cannot dither between two heights until the step limit.
-    Where no move passes all five, the forward moves that keep the clearance and move the heel are
+    Where no move passes all six, the forward moves that keep the clearance and move the heel are
     offered (a foot stopped short of a wall, in front of an obstacle, goes up again rather than
     pushing into the ground); where none does, those that keep the clearance; where none does
     either, every move (so a greedy choice always exists). The training environment, the
@@ -230,7 +233,8 @@ def shield_conditions(xp, p, heel_y, heel_z, layout, actions, ends, clear, last_
                   | kinematics.leg_too_long(xp, kin["leg_swing"], kin["leg_stance"], p.thigh, p.shin,
                                             p.leg_length_tolerance))
     ok = (clear & reachable & (ends[..., 0] <= layout.goal_y[..., None] + p.goal_tolerance[0])
-          & moves_heel(xp, heel_y, heel_z, ends))
+          & moves_heel(xp, heel_y, heel_z, ends)
+          & keeps_off_floor(xp, p, ends[..., 0], ends[..., 1], layout.goal_y[..., None]))
     if last_action is not None:
         ok = ok & ~undoes(xp, actions, last_action)
     return ok
@@ -293,9 +297,20 @@ def beyond_mid_goal(xp, p, heel_y, mid_y):
     return heel_y > mid_y + p.mid_goal_half_size[0]
 
 
+def in_goal_column(xp, p, heel_y, goal_y):
+    """The heel is above or in the goal box: |y - goal| <= goal_tolerance[0]."""
+    return xp.abs(heel_y - goal_y) <= p.goal_tolerance[0]
+
+
 def goal_reached(xp, p, heel_y, heel_z, goal_y):
-    """The heel is back on the ground at the goal: |y - goal| <= tol_y and z <= tol_z."""
-    return (xp.abs(heel_y - goal_y) <= p.goal_tolerance[0]) & (heel_z <= p.goal_tolerance[1])
+    """The heel is back on the ground at the goal (eq 2.32): in the goal column, z <= goal_tolerance[1]."""
+    return in_goal_column(xp, p, heel_y, goal_y) & (heel_z <= p.goal_tolerance[1])
+
+
+def keeps_off_floor(xp, p, heel_y, heel_z, goal_y):
+    """The shield's floor rule: a heel at (y, z) is at least ``p.floor_clearance`` above the floor, or
+    in the goal column (where it lands). 0 keeps every heel (the rule off)."""
+    return (heel_z >= p.floor_clearance) | in_goal_column(xp, p, heel_y, goal_y)
 
 
 def observation(xp, p, obs_mode: str, heel_y, heel_z, time, visited_mid, layout):

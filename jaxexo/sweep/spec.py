@@ -194,6 +194,10 @@ def sweep_from_dict(raw: dict) -> Sweep:
     unknown = sorted(set(table) - set(SWEEP_KEYS))
     if unknown:
         raise ConfigError(f"sweep.{unknown[0]}: unknown field (known: {', '.join(SWEEP_KEYS)})")
+    # The sweep's seeds are its population: a config that leaves train.population to the default
+    # model's (2) trains each agent once here; only a stated population > 1 is refused below.
+    if isinstance(raw.get("train", {}), dict):
+        raw.setdefault("train", {}).setdefault("population", 1)
     base = config_from_dict(raw)
     axes = _axes(table, base)
     seeds = _seeds(table.get("seeds", 1))

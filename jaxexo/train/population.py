@@ -1,6 +1,7 @@
 """``[train] population = K``: K agents of one config (seeds seed .. seed + K - 1) trained as one
-compiled program, every member scored on the same validation scenes after each chunk, the best
-member's best chunk exported.
+compiled program, every member scored on the same validation scenes after each chunk; each member's
+best chunk is a candidate, and the candidate a wearer would choose is exported (jaxexo.train.selection:
+the most safe swings, then the timed swing and lift against CFFTG's, as the NumPy generator gives them).
 
 Why: whether a heel-only thesis learner learns depends on its seed (benchmarks/results/thesis-seeds_*);
 a practitioner trains several and keeps the best on validation. Seeds vmap, so a population costs
@@ -18,11 +19,13 @@ unpartitioned program, whose members agree with each other but not with a partit
 The run directory is the one-agent driver's (jaxexo.train.driver), with per-member content:
 - metrics.jsonl: one line per chunk: ``members``, each member's row (the one-agent row plus its
   ``seed``, ``validation_success_raw`` and ``diverged``), and ``best_member`` so far;
-- policy.npz: the exported member's best chunk;
+- policy.npz: the exported member's best chunk; members/seed_<seed>.npz: every candidate's;
 - eval.json: the exported member's test figures (as for one agent, ``seed`` its seed), ``population``,
   ``base_seed``, ``exported_member``, and ``members``: per member its ``seed``, ``validation_curve``
   (validation_success_raw after each chunk, null after it diverged), ``selected_chunk``,
   ``validation_success_raw`` at that chunk, ``diverged_chunk`` (or null) and its test figures;
+  ``selection``: each candidate's wearer score (jaxexo.train.selection.WearerScore; empty when only
+  one candidate remained) and ``selection_seconds``;
 - checkpoint.msgpack: every member's state and best parameters, and the per-member bookkeeping.
 
 Resume, the directory lock, checksums and the config checks are the one-agent driver's. A member whose
@@ -271,15 +274,19 @@ def run_population(cfg: Config, out: Path, seed: int, resume: bool, progress: bo
             bar.close()
     train_seconds = wall_before + time.perf_counter() - t_start
 
-    exported = choose(best_score, best_chunk, diverged)
-    if rows:
-        plot_population_curve(out / "training_curve.png", rows, exported)
-    if exported is None:
+    if choose(best_score, best_chunk, diverged) is None:
+        if rows:
+            plot_population_curve(out / "training_curve.png", rows, None)
         raise TrainingDiverged(
             f"every member of the population of {K} diverged (non-finite loss or parameters; {metrics_path}: the "
             f"members' \"diverged\"), and a diverged member is never exported, so no policy was. Lower train.lr "
             f"(it is {cfg.train.lr:g}) or train.max_grad_norm")
     member_params = lambda i: jax.tree.map(lambda x: np.asarray(x)[i], best_params)  # noqa: E731
+    t_select = time.perf_counter()
+    exported, selection = _choose_for_wearer(cfg, out, pop, best_score, best_chunk, diverged, member_params)
+    select_seconds = time.perf_counter() - t_select
+    if rows:
+        plot_population_curve(out / "training_curve.png", rows, exported)
     F.export_policy(out / "policy.npz", cfg, pop.trainer, member_params(exported))
     # Each member scored by the same compiled evaluation, one at a time (its figures never depend on K).
     evaluate_params = make_evaluator(cfg, pop.trainer.net, eval_episodes or cfg.train.eval_episodes)
@@ -302,9 +309,27 @@ def run_population(cfg: Config, out: Path, seed: int, resume: bool, progress: bo
     result.update({"episodes": int(episodes[exported]), "env_steps": int(updates[exported]) * steps_per_update,
                    "train_seconds": round(train_seconds, 3), "seed": pop.seeds[exported], "base_seed": seed,
                    "selected_chunk": int(best_chunk[exported]), "validation_success_raw": float(best_score[exported]),
-                   "devices": len(pop.devices), "population": K, "exported_member": exported, "members": members})
+                   "devices": len(pop.devices), "population": K, "exported_member": exported, "members": members,
+                   "selection": selection, "selection_seconds": round(select_seconds, 3)})
     atomic_write(out / "eval.json", json.dumps(result, indent=2) + "\n")
     return result
+
+
+def _choose_for_wearer(cfg: Config, out: Path, pop: Population, best_score, best_chunk, diverged,
+                       member_params) -> tuple[int, list[dict]]:
+    """The member to export and the selection's record for eval.json: every candidate (a member that
+    finished a chunk and never diverged) exported to ``members/seed_<seed>.npz`` and scored as a wearer
+    gets it (jaxexo.train.selection); one candidate is exported without a score."""
+    from jaxexo.train.selection import Candidate, choose_for_wearer, score_record, wearer_scores
+
+    ok = [i for i in range(pop.size) if diverged[i] == 0 and best_chunk[i] > 0]
+    if len(ok) == 1:
+        return ok[0], []
+    (out / "members").mkdir(exist_ok=True)
+    candidates = [Candidate(pop.seeds[i], float(best_score[i]), F.export_policy(
+        out / "members" / f"seed_{pop.seeds[i]}.npz", cfg, pop.trainer, member_params(i))) for i in ok]
+    scores = wearer_scores(cfg, candidates)
+    return ok[choose_for_wearer(scores)], [score_record(s) for s in scores]
 
 
 def _set(batch: np.ndarray, i: int, value: np.ndarray) -> np.ndarray:

@@ -1,0 +1,108 @@
+"""Which member of a population is exported: the one a wearer would choose.
+
+Training ranks a population's members (jaxexo.train.population) by greedy validation success; each
+member's best chunk is a candidate. The candidates are then exported and swung as a user gets them:
+the NumPy generator, RL alone (no CFFTG fallback), on validation scenes of the config's training
+distribution (jaxexo.inference.scenarios.training_scenarios at the validation seed, never a test or
+held-out set), each swing timed at the config's [device] limits complete to the floor, beside CFFTG on
+the same scenes. The choice:
+
+1. the most safe swings (the verdict at env.min_clearance): comfort is never bought with safety;
+2. then the least wearer's cost, ``t_median / t_median(CFFTG) + t_p95 / t_p95(CFFTG) + lift_median /
+   lift_median(CFFTG)`` over the scenes both generators swing safely: the timed swing's median, its
+   slow tail and how high the foot is lifted, each about 1 when the candidate feels like CFFTG;
+3. then the highest greedy validation success in training (500 scenes: it decides between candidates
+   that no selection scene separates, such as learners that fail every scene), then the lowest seed.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from jaxexo.config import Config
+from jaxexo.inference import TrajectoryGenerator, time_swings
+from jaxexo.inference.cfftg import CFFTG
+from jaxexo.inference.scenarios import training_scenarios
+
+# Scenes every candidate is swung on: enough that one unsafe swing in a hundred shows, few enough that
+# the choice costs seconds (about 10 ms per swing and generator with its timing).
+SELECTION_SCENES = 100
+SELECTION_SEED = 777      # the JAX validation set's seed (jaxexo.train.evaluate.VALIDATION_SEED)
+
+
+@dataclass(frozen=True)
+class WearerScore:
+    """One candidate's figures on the selection scenes (SI units)."""
+
+    seed: int
+    validation_success: float   # greedy validation success of the candidate's chunk in training
+    safe: float                 # share of the scenes swung safely, RL alone
+    both_safe: int              # scenes both the candidate and CFFTG swing safely
+    duration_median_s: float    # timed swing, complete to the floor, on those scenes
+    duration_p95_s: float
+    lift_median_m: float        # heel peak above the obstacle's top
+    cost: float                 # the wearer's cost (module docstring); inf when no scene is both safe
+
+    def key(self) -> tuple:
+        """Sort key: best first (most safe, least cost, best validation, lowest seed)."""
+        return (-self.safe, self.cost, -self.validation_success, self.seed)
+
+
+@dataclass(frozen=True)
+class _Figures:
+    ok: np.ndarray          # (n,) bool: safe swing
+    duration: np.ndarray    # (n,) s
+    lift: np.ndarray        # (n,) m
+
+
+def _swing(gen, scenes: list[dict], cfg: Config, **options) -> _Figures:
+    obstacles = [s["obstacle"] for s in scenes]
+    batch = list(gen.generate_batch(obstacles, pivot=[s["pivot"] for s in scenes],
+                                    start_y=[s["start_y"] for s in scenes],
+                                    step_length=[s["step_length"] for s in scenes], **options))
+    duration = np.array([t.duration for t in time_swings(batch, cfg)])
+    lift = np.array([t.heel[:, 1].max() - o.height for t, o in zip(batch, obstacles)])
+    return _Figures(np.array([t.ok for t in batch]), duration, lift)
+
+
+def _score(seed: int, validation: float, rl: _Figures, ref: _Figures) -> WearerScore:
+    both = rl.ok & ref.ok
+    if not both.any():
+        return WearerScore(seed, validation, float(rl.ok.mean()), 0, math.nan, math.nan, math.nan, math.inf)
+    med, p95 = float(np.median(rl.duration[both])), float(np.percentile(rl.duration[both], 95))
+    lift = float(np.median(rl.lift[both]))
+    cost = (med / float(np.median(ref.duration[both])) + p95 / float(np.percentile(ref.duration[both], 95))
+            + lift / max(float(np.median(ref.lift[both])), 1e-3))
+    return WearerScore(seed, validation, float(rl.ok.mean()), int(both.sum()), med, p95, lift, cost)
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A population member's exported best chunk."""
+
+    seed: int
+    validation_success: float
+    policy: Path
+
+
+def wearer_scores(cfg: Config, candidates: list[Candidate]) -> list[WearerScore]:
+    """Each candidate scored on SELECTION_SCENES scenes of ``cfg``'s training distribution (seed
+    SELECTION_SEED), in the order given."""
+    scenes = training_scenarios(cfg, SELECTION_SCENES, SELECTION_SEED)
+    ref = _swing(CFFTG(cfg), scenes, cfg)
+    return [_score(c.seed, c.validation_success, _swing(TrajectoryGenerator.load(c.policy), scenes, cfg,
+                                                        fallback=None), ref) for c in candidates]
+
+
+def choose_for_wearer(scores: list[WearerScore]) -> int:
+    """The index of the best score (WearerScore.key)."""
+    return min(range(len(scores)), key=lambda i: scores[i].key())
+
+
+def score_record(score: WearerScore) -> dict:
+    """A score as eval.json writes it (JSON: a cost without a value is null)."""
+    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in asdict(score).items()}
