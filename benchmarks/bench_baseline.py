@@ -4,7 +4,6 @@ Needs the bench extra: pip install -e ".[train,bench]". Writes benchmarks/result
 
 Run: python benchmarks/bench_baseline.py [--throughput-seconds 60] [--baseline-seconds 600]"""
 
-import argparse
 import sys
 from pathlib import Path
 
@@ -13,10 +12,11 @@ from jaxexo.train.devices import use_all_cpu_cores
 use_all_cpu_cores()
 
 from jaxexo.benchmarks.baseline_bench import run_baseline_benchmark  # noqa: E402
+from jaxexo.benchmarks.runner import parser  # noqa: E402
 
 if __name__ == "__main__":
     root = Path(__file__).resolve().parent.parent
-    ap = argparse.ArgumentParser(description=__doc__)
+    ap = parser(__doc__, policy=False)
     ap.add_argument("--throughput-seconds", type=float, default=60.0)
     ap.add_argument("--baseline-seconds", type=float, default=600.0)
     ap.add_argument("--out", default=str(root / "benchmarks" / "results"))

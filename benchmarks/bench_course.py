@@ -8,17 +8,17 @@ Run: python benchmarks/bench_course.py RUN_DIR/policy.npz [--n 200] [--seed 0] [
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 from jaxexo.benchmarks.course_bench import (markdown, run_course_benchmark, run_pivot_benchmark, run_swing_breakdown,
                                             summarize_log)
+from jaxexo.benchmarks.runner import parser
 
 OUT = Path(__file__).resolve().parent / "results"
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__)
+    p = parser(__doc__, policy=False)
     p.add_argument("policy", nargs="?")
     p.add_argument("--n", type=int, default=200, help="courses drawn")
     p.add_argument("--seed", type=int, default=0)

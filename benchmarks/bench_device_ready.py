@@ -3,14 +3,13 @@ swing, RL alone vs CFFTG alternating in one process, and time_swings of a batch 
 
 Run: python benchmarks/bench_device_ready.py RUN_DIR/policy.npz [--n 300] [--rate 100]"""
 
-import argparse
 from pathlib import Path
 
 from jaxexo.benchmarks.device_ready_bench import run_device_ready_benchmark
+from jaxexo.benchmarks.runner import parser
 
 if __name__ == "__main__":
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("policy", help="policy.npz")
+    p = parser(__doc__)
     p.add_argument("--n", type=int, default=300, help="unseen-shape scenes")
     p.add_argument("--batch", type=int, default=1000, help="swings timed in one time_swings call")
     p.add_argument("--rate", type=float, default=100.0, help="control rate, Hz")

@@ -4,14 +4,13 @@ jaxexo.inference. Writes benchmarks/results/generate_<date>_<machine>.json and .
 Run: python benchmarks/bench_generate.py RUN_DIR/policy.npz
 (train one first: jaxexo train --out RUN_DIR)"""
 
-import argparse
 from pathlib import Path
 
 from jaxexo.benchmarks.generate_bench import run_generate_benchmark
+from jaxexo.benchmarks.runner import parser
 
 if __name__ == "__main__":
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("policy", help="policy.npz")
+    p = parser(__doc__)
     p.add_argument("--n", type=int, default=1000)
     a = p.parse_args()
     run_generate_benchmark(a.policy, Path(__file__).resolve().parent / "results", a.n)

@@ -1,157 +1,24 @@
-"""Landing benchmark: where the RL swing ends and what a complete swing costs beside CFFTG's.
-
-On the safety scene sets (benchmarks/bench_replay.py ``scene_sets``: the thesis five shifted, shapes
-never trained on, the held-out families), RL alone (``fallback=None``) and CFFTG on the same scenes:
-
-- safe swing % (the verdict, jaxexo.physics.outcome) and goal reached %;
-- final heel height: the share of swings ending more than 2 mm above the floor, and the max and
-  median over the swings, mm (a swing on the floor ends at 0);
-- heel lift (the path's highest heel z), median, cm;
-- duration at the device limits (jaxexo.inference.swing_timing.time_swings), median and p95, s;
-  RL / CFFTG per scene, median (both safe); where RL swings end above the floor (the generator before
-  its landing), also the duration with the vertical touch-down that walks used to append to them
-  (6 samples straight down, re-checked by trajectory.assemble), median, and the time it adds to
-  the swings it is appended to, median, s;
-- the landing's approach: the heel's forward travel over its last 2 cm of descent, median, mm;
-- RL swings whose requested smoothing was retried (jaxexo.inference.finish) and those that fell back
-  to the raw polyline, %.
+"""Landing benchmark (jaxexo.benchmarks.landing_bench): where the RL swing ends and what a complete
+swing costs beside CFFTG's, on the safety scene sets (the thesis five shifted, shapes never trained
+on, the held-out families), RL alone (``fallback=None``) and CFFTG on the same scenes: safe and goal
+%, final heel height, lift, timed duration (and with a vertical touch-down appended), the landing's
+approach, RL swings retried or on the raw polyline.
 
 Writes benchmarks/results/landing[_tag]_<date>_<machine>.{json,md}.
 
 Run: python benchmarks/bench_landing.py RUN_DIR/policy.npz [--n 300] [--tag NAME] [--note TEXT]
 """
 
-from __future__ import annotations
-
-import argparse
-import time
 from pathlib import Path
 
-import numpy as np
-
-from jaxexo.baselines import CFFTG
-from jaxexo.evaluation.machine import write_result
-from jaxexo.inference import TrajectoryGenerator, time_swings
-from jaxexo.inference.scenarios import safety_scenarios
-from jaxexo.inference.trajectory import assemble
-from jaxexo.physics import scenarios
-
-OUT = Path(__file__).resolve().parent / "results"
-
-
-def scene_sets(config, n: int) -> dict:
-    fl = config.kinematics.foot_length
-    fam = scenarios.unseen_scenarios(fl, scenarios.repeats_for(n))
-    rng = np.random.default_rng(0)
-    pick = [fam[i] for i in np.sort(rng.choice(len(fam), size=min(n, len(fam)), replace=False))]
-    return {"thesis five, shifted": safety_scenarios(config, n),
-            "unseen shapes": safety_scenarios(config, n, unseen=True),
-            "held-out families": pick}
-
-
-def approach(heel: np.ndarray, drop: float = 0.02) -> float:
-    """Forward heel travel (m) while the heel comes down its last ``drop`` m to where it ends."""
-    z_end = heel[-1, 1]
-    above = np.flatnonzero(heel[:, 1] > z_end + drop)
-    start = above[-1] if above.size else 0
-    return float(heel[-1, 0] - heel[start, 0])
-
-
-def with_touch_down(batch, gen, points: int = 6) -> list:
-    """The swings with a vertical touch-down appended where they end above the floor (what
-    jaxexo.inference.course did to RL swings before the generator landed them), checked again."""
-    out = []
-    for t in batch:
-        path = t.heel
-        if t.ok and path[-1, 1] > 0.0:
-            drop = np.column_stack([np.full(points, path[-1, 0]), np.linspace(path[-1, 1], 0.0, points + 1)[1:]])
-            path = np.concatenate([path, drop])
-        out.append(assemble(t.method, gen.sp, [t.scene], [t.raw], path[None], [t.smoothing],
-                            duration=float(t.time[-1]), deviation=[t.checks.deviation])[0])
-    return out
-
-
-def run_set(gens, scenes, config) -> dict:
-    kw = dict(pivot=[s["pivot"] for s in scenes], start_y=[s["start_y"] for s in scenes],
-              step_length=[s["step_length"] for s in scenes])
-    obs = [s["obstacle"] for s in scenes]
-    out, dur = {}, {}
-    for name, gen in gens.items():
-        t0 = time.perf_counter()
-        batch = gen.generate_batch(obs, fallback=None, **kw) if name == "rl" else gen.generate_batch(obs, **kw)
-        gen_s = time.perf_counter() - t0
-        timed = time_swings(batch, config)
-        d = np.array([t.duration for t in timed])
-        end_z = batch.heel[:, -1, 1]
-        dur[name] = d
-        touch = added = None
-        if name == "rl" and (batch.heel[:, -1, 1] > 0.0).any():
-            td = np.array([t.duration for t in time_swings(with_touch_down(batch, gen), config)])
-            up = batch.ok & (batch.heel[:, -1, 1] > 0.0)
-            touch = float(np.median(td))
-            added = float(np.median(td[up] - d[up]))
-        out[name] = {
-            "n": len(batch), "safe": float(batch.ok.mean()), "reached_goal": float(batch.reached_goal.mean()),
-            "end_above_2mm": float(np.mean(end_z > 0.002)), "end_z_mm_max": 1000 * float(end_z.max()), "end_z_mm_median": 1000 * float(np.median(end_z)),
-            "lift_cm_median": 100 * float(np.median(batch.heel[..., 1].max(axis=1))),
-            "duration_s_median": float(np.median(d)), "duration_s_p95": float(np.percentile(d, 95)),
-            "duration_touch_down_s_median": touch, "touch_down_added_s_median": added,
-            "approach_mm_median": 1000 * float(np.median([approach(h) for h in batch.heel])),
-            "retried": float(np.mean([bool(n) for n in batch.notes])),
-            "raw_polyline": float(np.mean(np.isnan(batch.smoothing))),
-            "generate_s": gen_s, "ok_mask": batch.ok,
-            # per scene, for comparing two runs swing by swing
-            "per_scene": {"duration_s": d.tolist(), "end_z_m": end_z.tolist(), "ok": batch.ok.tolist()},
-        }
-    both = out["rl"]["ok_mask"] & out["cfftg"]["ok_mask"]
-    out["rl_over_cfftg_duration_median"] = float(np.median(dur["rl"][both] / dur["cfftg"][both])) if both.any() else None
-    out["both_safe"] = int(both.sum())
-    for name in gens:
-        del out[name]["ok_mask"]
-    return out
-
-
-def markdown(res: dict) -> str:
-    lines = [f"# Landing: RL alone (fallback=None) beside CFFTG ({res['tag'] or 'current'})", "",
-             f"Policy {res['policy']}; {res['n']} scenes per set. {res['note']}".rstrip(), "",
-             "| set | method | safe | goal | ends > 2 mm up | end heel z max / median (mm) | lift median (cm) | duration median / p95 (s) | with touch-down (s): median, added "
-             "| approach (mm) | retried / raw polyline | RL/CFFTG duration median |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    for name, r in res["sets"].items():
-        for g in ("rl", "cfftg"):
-            x = r[g]
-            ratio = f"{r['rl_over_cfftg_duration_median']:.3f} (n = {r['both_safe']})" if g == "rl" else ""
-            touch = "-" if x["duration_touch_down_s_median"] is None else (
-                f"{x['duration_touch_down_s_median']:.3f}, +{x['touch_down_added_s_median']:.3f}")
-            retried = f"{100 * x['retried']:.1f} / {100 * x['raw_polyline']:.1f} %" if g == "rl" else "-"
-            lines.append(f"| {name} | {g} | {100 * x['safe']:.1f} % | {100 * x['reached_goal']:.1f} % | "
-                         f"{100 * x['end_above_2mm']:.1f} % | {x['end_z_mm_max']:.1f} / {x['end_z_mm_median']:.1f} | {x['lift_cm_median']:.2f} | "
-                         f"{x['duration_s_median']:.3f} / {x['duration_s_p95']:.3f} | "
-                         f"{touch} | "
-                         f"{x['approach_mm_median']:.1f} | "
-                         f"{retried} | {ratio} |")
-    return "\n".join(lines)
-
-
-def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__)
-    p.add_argument("policy")
-    p.add_argument("--n", type=int, default=300)
-    p.add_argument("--tag", default="")
-    p.add_argument("--out", default=str(OUT))
-    p.add_argument("--note", default="", help="a line for the report (where the policy came from)")
-    a = p.parse_args()
-    rl = TrajectoryGenerator.load(a.policy)
-    config = rl.config
-    gens = {"rl": rl, "cfftg": CFFTG(config)}
-    res = {"policy": a.policy, "n": a.n, "tag": a.tag, "note": a.note, "sets": {}}
-    for name, scenes in scene_sets(config, a.n).items():
-        res["sets"][name] = run_set(gens, scenes, config)
-        print(name, res["sets"][name], flush=True)
-    md = markdown(res)
-    write_result("landing" + (f"_{a.tag}" if a.tag else ""), res, md, a.out)
-    print(md)
-
+from jaxexo.benchmarks.landing_bench import run_landing_benchmark
+from jaxexo.benchmarks.runner import parser
 
 if __name__ == "__main__":
-    main()
+    p = parser(__doc__)
+    p.add_argument("--n", type=int, default=300)
+    p.add_argument("--tag", default="")
+    p.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
+    p.add_argument("--note", default="", help="a line for the report (where the policy came from)")
+    a = p.parse_args()
+    run_landing_benchmark(a.policy, a.out, a.n, a.tag, a.note)

@@ -4,7 +4,6 @@ obstacles drawn from jaxexo.physics.terrain's training families, compared on the
 
 Run: python benchmarks/bench_observation.py [--budget 8000000] [--repeats 2] [--runs /tmp/obs-runs]"""
 
-import argparse
 import sys
 from pathlib import Path
 
@@ -13,10 +12,11 @@ from jaxexo.train.devices import use_all_cpu_cores
 use_all_cpu_cores()
 
 from jaxexo.benchmarks.observation_bench import run_observation_study  # noqa: E402
+from jaxexo.benchmarks.runner import parser  # noqa: E402
 
 if __name__ == "__main__":
     root = Path(__file__).resolve().parent.parent
-    ap = argparse.ArgumentParser(description=__doc__)
+    ap = parser(__doc__, policy=False)
     ap.add_argument("--budget", type=int, default=8_000_000, help="env steps per model")
     ap.add_argument("--repeats", type=int, default=2, help="draws per benchmark cell")
     ap.add_argument("--runs", default="/tmp/jaxexo-observation-runs", help="run directories")

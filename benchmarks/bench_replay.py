@@ -1,172 +1,24 @@
-"""MuJoCo replay benchmark: every swing of the safety sets replayed in MuJoCo (jaxexo.sim.replay).
-
-Sets: the thesis's five obstacles with shifted layouts, shapes never trained on (both
-jaxexo.inference.scenarios.safety_scenarios) and the held-out terrain families
-(jaxexo.physics.scenarios.unseen_scenarios), every pivot condition. Generators: the RL swing alone
-(fallback none) and CFFTG. Every swing is timed for the device at --rate (time_swings, [device]
-limits), then:
-
-- kinematic replay: MuJoCo's distance at every control sample and 3 poses between; counted: swings
-  flagged ok (the timed swing's checks) that come within env.min_clearance in MuJoCo (target 0);
-  the largest difference between MuJoCo's and jaxexo's distance at the same pose, and at that pose a
-  third, brute-force distance (jaxexo.sim.replay.brute_force_distance) says which is nearer;
-- driven replay of every swing flagged ok at the default [device] limits, by two controllers on
-  the same setpoints: PD with inverse-dynamics feed-forward (pd_ff, what an exoskeleton's joint
-  controller does) and stiff position servos (servo): heel and toe tracking error (p95 and max over
-  swings of each swing's max; also where the swing's heel is off the floor), contacts with the
-  obstacle, swings within the margin, MuJoCo's smallest distance, saturation of a limit.
+"""MuJoCo replay benchmark (jaxexo.benchmarks.replay_bench): every swing of the safety sets (the thesis
+five shifted, unseen shapes, the held-out families), RL alone and CFFTG, timed for the device and
+replayed in MuJoCo (jaxexo.sim.replay): kinematically (MuJoCo's distance against jaxexo's, swings
+flagged ok that come within the margin) and, for the swings flagged ok, driven at the [device] limits
+by PD with inverse-dynamics feed-forward and by stiff position servos (tracking error, contacts,
+saturation).
 
 Writes benchmarks/results/replay_<date>_<machine>.{json,md}.
 Run: python benchmarks/bench_replay.py RUN_DIR/policy.npz [--n 1000] [--rate 100]
 """
 
-from __future__ import annotations
-
-import argparse
-import time
 from pathlib import Path
 
-import numpy as np
+from jaxexo.benchmarks.replay_bench import run_replay_benchmark
+from jaxexo.benchmarks.runner import parser
 
-from jaxexo.baselines import CFFTG
-from jaxexo.evaluation.machine import machine_info, write_result
-from jaxexo.inference import TrajectoryGenerator
-from jaxexo.inference.scenarios import safety_scenarios
-from jaxexo.inference.swing_timing import DeviceLimits, time_swings
-from jaxexo.physics import geometry, scenarios
-from jaxexo.sim.replay import (Legs, brute_force_distance, driven_replay, kinematic_replay, summarize_driven,
-                               summarize_kinematic)
-
-
-def scene_sets(config, n: int) -> dict:
-    fl = config.kinematics.foot_length
-    return {"thesis five, shifted": safety_scenarios(config, n),
-            "unseen shapes": safety_scenarios(config, n, unseen=True),
-            "held-out families": scenarios.unseen_scenarios(fl, scenarios.repeats_for(n))}
-
-
-def replay_set(sc, rl, cfftg, config, rate: float, driven: bool) -> dict:
-    kw = dict(pivot=[s["pivot"] for s in sc], start_y=[s["start_y"] for s in sc],
-              step_length=[s["step_length"] for s in sc])
-    obs = [s["obstacle"] for s in sc]
-    default = DeviceLimits.from_config(config)
-    out = {}
-    legs_cache = {}
-    for gname, make in (("rl", lambda: rl.generate_batch(obs, fallback=None, **kw)),
-                        ("cfftg", lambda: cfftg.generate_batch(obs, **kw))):
-        batch = make()
-        t0 = time.perf_counter()
-        timed = time_swings(batch, config, rate=rate)
-        t_timing = time.perf_counter() - t0
-        kin, drv, drv_servo, build_s = [], [], [], []
-        disagree = []
-        for i, ts in enumerate(timed):
-            if i not in legs_cache:
-                t1 = time.perf_counter()
-                legs_cache[i] = Legs(config, ts.scene)
-                build_s.append(time.perf_counter() - t1)
-            legs = legs_cache[i]
-            k = kinematic_replay(ts, config, legs=legs)
-            kin.append(k)
-            s = k["max_disagreement_sample"]
-            if s >= 0:
-                jx = float(geometry.foot_clearance(np, np.asarray(ts.heel[s]), config.kinematics.foot_length,
-                                                   ts.scene.outline))
-                legs.set_pose(legs.qpos(ts.joint_angles[s]))
-                mj = legs.foot_distance()
-                bf = brute_force_distance(ts.heel[s], config.kinematics.foot_length, ts.scene.outline)
-                disagree.append({"jaxexo": jx, "mujoco": mj, "brute": bf})
-            if k["flagged_ok_but_within_margin"]:
-                # The third look at MuJoCo's closest pose: the brute-force distance of that heel.
-                k["brute_at_mujoco_min_m"] = brute_force_distance(k["mujoco_min_heel"], config.kinematics.foot_length,
-                                                                  ts.scene.outline)
-            if driven and ts.ok:
-                drv.append(driven_replay(ts, config, legs=legs, limits=default, controller="pd_ff"))
-                drv_servo.append(driven_replay(ts, config, legs=legs, limits=default, controller="servo"))
-        ok = np.array([t.ok for t in timed])
-        r = {"n": len(timed), "flagged_ok": int(ok.sum()), "timing_seconds": t_timing,
-             "model_build_ms_median": 1e3 * float(np.median(build_s)) if build_s else None,
-             "kinematic": {**summarize_kinematic(kin),
-                           "violations": [k for k in kin if k["flagged_ok_but_within_margin"]]}}
-        if disagree:
-            w = max(disagree, key=lambda x: abs(x["jaxexo"] - x["mujoco"]))
-            r["kinematic"]["worst_disagreement"] = {
-                **w, "nearer_brute": "jaxexo" if abs(w["jaxexo"] - w["brute"]) <= abs(w["mujoco"] - w["brute"]) else "mujoco"}
-            r["kinematic"]["brute_nearer_jaxexo_share"] = float(np.mean(
-                [abs(x["jaxexo"] - x["brute"]) <= abs(x["mujoco"] - x["brute"]) for x in disagree]))
-        for name, rows in (("driven", drv), ("driven_servo", drv_servo)):
-            if rows:
-                r[name] = summarize_driven(rows)
-        out[gname] = r
-        print(f"[{time.strftime('%H:%M:%S')}]", gname, {k: v for k, v in r.items() if k != "kinematic"}, {k: v for k, v in r["kinematic"].items()
-                                                                          if k != "violations"}, flush=True)
-    return out
-
-
-def _mm(x):
-    return "-" if x is None or x != x else f"{1000 * x:.1f}"
-
-
-def main():
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("policy", help="policy.npz")
+if __name__ == "__main__":
+    p = parser(__doc__)
     p.add_argument("--n", type=int, default=1000, help="scenes per set (the held-out families round up to whole cells)")
     p.add_argument("--rate", type=float, default=None, help="control rate, Hz (default: the config's)")
     p.add_argument("--no-driven", action="store_true", help="kinematic replay only")
     p.add_argument("--name", default="replay")
     a = p.parse_args()
-    rl = TrajectoryGenerator.load(a.policy)
-    config = rl.config
-    cfftg = CFFTG(config)
-    rate = config.device.control_rate if a.rate is None else a.rate
-    payload = {"policy": str(a.policy), "n_per_set": a.n, "rate_hz": rate, "margin_m": config.env.min_clearance,
-               "sets": {}}
-    t0 = time.perf_counter()
-    for name, sc in scene_sets(config, a.n).items():
-        print(name, len(sc), flush=True)
-        payload["sets"][name] = replay_set(sc, rl, cfftg, config, rate, not a.no_driven)
-    payload["seconds"] = time.perf_counter() - t0
-    info = machine_info()
-    payload["machine"] = info
-    rows_k, rows_d = [], []
-    for name, gens in payload["sets"].items():
-        for g, r in gens.items():
-            k = r["kinematic"]
-            w = k.get("worst_disagreement", {})
-            rows_k.append(f"| {name} | {g} | {r['n']} | {r['flagged_ok']} | {k['flagged_ok_within_margin']} | "
-                          f"{_mm(k['min_mujoco_distance_of_ok_m'])} | {_mm(k['min_mujoco_minus_guaranteed_of_ok_m'])} | "
-                          f"{1e6 * k['max_disagreement_m']:.3f} | {w.get('nearer_brute', '-')} | "
-                          f"{1e3 * k['seconds_median']:.1f} |")
-            for lim in ("driven", "driven_servo"):
-                if lim in r:
-                    d = r[lim]
-                    rows_d.append(f"| {name} | {g} | {'pd_ff' if lim == 'driven' else 'servo'} | {d['n']} | "
-                                  f"{_mm(d['heel_error_p95_m'])} / {_mm(d['heel_error_max_m'])} | "
-                                  f"{_mm(d['heel_error_airborne_p95_m'])} | "
-                                  f"{_mm(d['toe_error_p95_m'])} / {_mm(d['toe_error_max_m'])} | {d['contacts']} | "
-                                  f"{d['within_margin']} | {_mm(d['min_distance_m'])} | {d['saturated']} | "
-                                  f"{1e3 * d['seconds_median']:.0f} |")
-    md = "\n".join([
-        "# MuJoCo replay benchmark", "",
-        f"Policy `{a.policy}`; {a.n} scenes per set requested (held-out families: whole cells); control rate "
-        f"{rate:g} Hz; margin env.min_clearance = {100 * config.env.min_clearance:.1f} cm; MuJoCo "
-        f"{__import__('mujoco').__version__}; {payload['seconds']:.0f} s in all.", "",
-        "## Kinematic replay (MuJoCo's mj_geomDistance at every control sample and 3 poses between)", "",
-        "| scenes | generator | n | flagged ok | flagged ok, within margin in MuJoCo | min MuJoCo distance of ok, mm | "
-        "min (MuJoCo - jaxexo guaranteed), mm | max disagreement at the samples, um | nearer the brute force | "
-        "replay ms (median) |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---|---:|", *rows_k, "",
-        "## Driven replay of the swings flagged ok (setpoints within the [device] limits)", "",
-        "Swings timed for the [device] limits (less the tracking headroom), driven at them by two controllers on the "
-        "same setpoints: pd_ff, PD with inverse-dynamics feed-forward; servo, stiff position servos. Heel error "
-        "off the floor: at the samples where the swing's heel is more than 1 mm above the floor.", "",
-        "| scenes | generator | controller | n | heel error p95 / max, mm | heel error off the floor p95, mm | "
-        "toe error p95 / max, mm | contacts | within margin | min distance, mm | saturated | replay ms (median) |",
-        "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|", *rows_d, ""])
-    paths = write_result(a.name, payload, md, Path(__file__).resolve().parent / "results")
-    print(md)
-    print("wrote", *paths)
-
-
-if __name__ == "__main__":
-    main()
+    run_replay_benchmark(a.policy, Path(__file__).resolve().parent / "results", a.n, a.rate, not a.no_driven, a.name)

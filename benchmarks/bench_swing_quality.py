@@ -1,18 +1,6 @@
-"""Swing-quality benchmark: what a wearer feels of the RL swing beside CFFTG's, on scenes outside the
-training distribution. RL alone (``fallback=None``) and CFFTG on the same scenes:
-
-- safe swing % (jaxexo.physics.outcome's verdict at the clearance asked for) and goal reached %;
-- lift: the heel's peak height above the obstacle's highest point (median, p95), cm;
-- duration at the device: the time-optimal swing within the config's ``[device]`` joint limits
-  (jaxexo.inference.swing_timing), median, p95 and max, s;
-- smoothness as delivered: integrated squared jerk of the timed joint trajectories (sum over the four
-  joints of the third finite difference at the control rate, squared, times dt; rad^2/s^5), median
-  and p95; the share of RL swings smoothed once (no retry) and of those that fell back to the raw
-  polyline.
-
-Sets: the held-out terrain families (jaxexo.physics.scenarios.unseen_scenarios: pole, stairs, curb, bumps,
-smooth_bump; never drawn in training), and the two safety sets of benchmarks/bench_safety.py (the
-thesis five with shifted layouts, and shapes never trained on).
+"""Swing-quality benchmark (jaxexo.benchmarks.swing_quality_bench): what a wearer feels of the RL swing
+beside CFFTG's (safe %, lift, timed duration, jerk) on the held-out terrain families, the thesis five
+shifted and unseen shapes, RL alone (``fallback=None``) and CFFTG on the same scenes.
 
 ``--clearance C`` asks both generators for clearance C (m). ``--perception-error E`` (m) plans over a
 wrong obstacle estimate (its outline lowered by E and shifted by E along y, alternating sign) while
@@ -26,218 +14,18 @@ Run: python benchmarks/bench_swing_quality.py RUN_DIR/policy.npz [--n 600] [--cl
      [--perception-error E] [--tag NAME]
 """
 
-from __future__ import annotations
-
-import argparse
-import time
 from pathlib import Path
 
-import numpy as np
+from jaxexo.benchmarks.runner import parser
+from jaxexo.benchmarks.swing_quality_bench import run_swing_quality_benchmark
 
-from jaxexo.baselines import CFFTG
-from jaxexo.evaluation.machine import machine_info, write_result
-from jaxexo.inference import TrajectoryGenerator, time_swings
-from jaxexo.storage.atomic import write_figure
-from jaxexo.inference.swing_timing import joint_jerk
-from jaxexo.inference.scenarios import safety_scenarios
-from jaxexo.physics import geometry, scenarios, swept
-
-OUT = Path(__file__).resolve().parent / "results"
-
-
-def perturbed(obstacle: geometry.Obstacle, error: float, sign: float) -> geometry.Obstacle:
-    """The obstacle a perception error of ``error`` m gives the planner: its outline's heights lowered by
-    ``error`` (to 1 mm at least: an obstacle is never seen as nothing), the outline shifted by
-    ``sign * error`` along y."""
-    o = np.asarray(obstacle.outline, dtype=np.float64).copy()
-    o[:, 1] = np.where(o[:, 1] > 0.0, np.maximum(o[:, 1] - error, 0.001), 0.0)
-    o[:, 0] += sign * error
-    return geometry.Obstacle.profile(o)
-
-
-def scene_sets(cfg, n: int) -> dict[str, list[dict]]:
-    fam = scenarios.unseen_scenarios(cfg.kinematics.foot_length, repeats=scenarios.repeats_for(n))
-    rng = np.random.default_rng(0)
-    pick = lambda s: [s[i] for i in np.sort(rng.choice(len(s), size=min(n, len(s)), replace=False))]  # noqa: E731
-    return {
-        "held-out families": pick(fam),
-        "thesis five, shifted": safety_scenarios(cfg, n, seed=2024),
-        "unseen shapes": safety_scenarios(cfg, n, seed=2025, unseen=True),
-    }
-
-
-def run_set(gens: dict, scenes: list[dict], cfg, clearance, error: float, smoothing=None, arrays=None) -> dict:
-    """Both generators' figures on one scene set; ``arrays`` (a dict), when given, receives each
-    generator's per-scene (safe, lift m, duration s) for the figure."""
-    out, per = {}, {}
-    true = [s["obstacle"] for s in scenes]
-    seen = true if error == 0 else [perturbed(o, error, 1.0 if i % 2 else -1.0) for i, o in enumerate(true)]
-    kw = dict(pivot=[s["pivot"] for s in scenes], start_y=[s["start_y"] for s in scenes],
-              step_length=[s["step_length"] for s in scenes])
-    if clearance is not None:
-        kw["clearance"] = clearance
-    for name, gen in gens.items():
-        t0 = time.perf_counter()
-        extra = {"fallback": None} if name == "rl" else {}
-        if name == "rl" and smoothing is not None:
-            extra["smoothing"] = smoothing
-        batch = gen.generate_batch(seen, **kw, **extra)
-        gen_s = time.perf_counter() - t0
-        trajs = list(batch)
-        timed = time_swings(trajs, cfg)
-        dur = np.array([t.duration for t in timed])
-        jerk = np.array([joint_jerk(t) for t in timed])
-        lift = np.array([t.heel[:, 1].max() - o.height for t, o in zip(trajs, true)])
-        # clearance from the TRUE obstacle (the judge), exact per sample of the delivered curve and
-        # exact between samples (the swept foot)
-        true_c = np.array([float(swept.path_swept_clearance(
-            np, t.heel, cfg.kinematics.foot_length, np.asarray(o.outline)).min()) for t, o in zip(trajs, true)])
-        # Scenes where the clearance asked is possible at all: the flat foot at the start and at the goal
-        # keeps it from the obstacle the planner sees (and the config's margin from the true one).
-        c_ask = cfg.env.min_clearance if clearance is None else clearance
-        feet = lambda y, o: float(geometry.foot_clearance(  # noqa: E731
-            np, np.array([y, 0.0]), cfg.kinematics.foot_length, np.asarray(o.outline, float)))
-        feasible = np.array([min(feet(t.scene.start_y, o_seen), feet(t.scene.goal_y, o_seen)) >= c_ask - 1e-9 and
-                             min(feet(t.scene.start_y, o), feet(t.scene.goal_y, o)) >= cfg.env.min_clearance - 1e-9
-                             for t, o, o_seen in zip(trajs, true, seen)])
-        smooth = np.array([t.smoothing for t in trajs], dtype=np.float64)
-        asked = np.array([(t.method == "rl") for t in trajs])
-        r = {
-            "n": len(trajs),
-            "safe": float(np.mean([t.ok for t in trajs])),
-            "feasible": int(feasible.sum()),
-            "safe_of_feasible": float(np.mean([t.ok for t, f in zip(trajs, feasible) if f])) if feasible.any() else float("nan"),
-            "true_contact_of_feasible": float(np.mean((true_c <= geometry.TOUCH_EPS)[feasible])) if feasible.any() else float("nan"),
-            "reached_goal": float(np.mean([t.checks.reached_goal for t in trajs])),
-            "lift_cm_median": 100 * float(np.median(lift)),
-            "lift_cm_p95": 100 * float(np.percentile(lift, 95)),
-            "duration_s_median": float(np.median(dur)),
-            "duration_s_p95": float(np.percentile(dur, 95)),
-            "duration_s_max": float(dur.max()),
-            "jerk_median": float(np.median(jerk)),
-            "jerk_p95": float(np.percentile(jerk, 95)),
-            "true_contact": float(np.mean(true_c <= geometry.TOUCH_EPS)),
-            "true_within_1cm": float(np.mean(true_c < 0.01)),
-            "true_clearance_cm_p5": 100 * float(np.percentile(true_c, 5)),
-            "generate_s": gen_s,
-        }
-        if name == "rl":
-            asked_s = gen.smoothing if smoothing is None else smoothing
-            r["smoothed_once"] = float(np.mean(asked & (smooth == asked_s)))
-            r["corrected"] = float(np.mean([any("jaxexo.inference.clearing" in n for n in t.notes) for t in trajs]))
-            r["raw_polyline"] = float(np.mean(np.isnan(smooth)))
-        out[name] = r
-        per[name] = (np.array([t.ok for t in trajs]), lift, dur)
-    # The scenes every generator swings safely: lift and duration compared where neither fails.
-    both = np.logical_and.reduce([ok for ok, _, _ in per.values()])
-    for name, (_, lift, dur) in per.items():
-        out[name]["n_all_safe"] = int(both.sum())
-        out[name]["lift_cm_median_all_safe"] = 100 * float(np.median(lift[both])) if both.any() else float("nan")
-        out[name]["duration_s_median_all_safe"] = float(np.median(dur[both])) if both.any() else float("nan")
-    if arrays is not None:
-        arrays.update(per)
-    return out
-
-
-def figure(arrays: dict, title: str, path: Path) -> None:
-    """Per scene set: the distribution (share of swings at or below) of the lift and of the timed swing,
-    RL against CFFTG, each generator's unsafe swings marked on the lift panel."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axs = plt.subplots(2, len(arrays), figsize=(4.2 * len(arrays), 6.4), squeeze=False)
-    colours = {"rl": "tab:green", "cfftg": "tab:red"}
-    for col, (set_name, per) in enumerate(arrays.items()):
-        for name, (ok, lift, dur) in per.items():
-            label = "RL" if name == "rl" else "CFFTG"
-            for row, (values, scale) in enumerate(((lift, 100.0), (dur, 1.0))):
-                v = np.sort(values * scale)
-                axs[row, col].step(v, np.arange(1, len(v) + 1) / len(v), where="post", color=colours[name],
-                                   label=f"{label} (unsafe {100 * np.mean(~ok):.1f} %)" if row == 0 else label)
-            bad = np.sort(lift[~ok] * 100.0)
-            if bad.size:
-                axs[0, col].plot(bad, np.zeros_like(bad), "|", color=colours[name], ms=10)
-        axs[0, col].set_title(set_name)
-        axs[0, col].set_xlabel("lift: heel peak above the obstacle's top (cm)")
-        axs[0, col].set_xlim(-6.0, 12.0)     # below 0: a plan whose peak is under the top (it hits)
-        axs[1, col].set_xlabel("timed swing at the [device] limits (s)")
-        axs[1, col].set_xlim(0.3, 2.5)
-        for row in range(2):
-            axs[row, col].set_ylabel("share of swings at or below")
-            axs[row, col].grid(alpha=0.3)
-            axs[row, col].legend(fontsize=8, loc="lower right")
-    fig.suptitle(title + " (ticks on the lift axis: unsafe swings)")
-    fig.tight_layout()
-    write_figure(path, fig, dpi=90)
-    plt.close(fig)
-
-
-def markdown(res: dict, title: str) -> str:
-    lines = [f"# {title}", "",
-             "RL alone (fallback none) and CFFTG on the same scenes. Lift = heel peak above the obstacle's "
-             "highest point; duration = time-optimal swing within the default [device] limits; jerk = "
-             "integrated squared jerk of the timed joint angles (rad^2/s^5). Feasible: scenes whose flat foot at "
-             "the start and at the goal keeps the clearance asked from the obstacle the planner sees (and the "
-             "margin from the true one); no generator can do better on the others. True contact and < 1 cm: "
-             "the delivered curve against the true obstacle (exact swept clearance).", "",
-             "| set | generator | n | safe % | feasible n | safe % of feasible | goal % | lift median cm | lift p95 cm | duration median s | "
-             "p95 s | max s | jerk median | jerk p95 | smoothed once % | raw polyline % | true contact % | "
-             "true < 1 cm % |",
-             "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
-    for s, gens in res["sets"].items():
-        for g, r in gens.items():
-            once = f"{100 * r['smoothed_once']:.1f}" if "smoothed_once" in r else ""
-            raw = f"{100 * r['raw_polyline']:.1f}" if "raw_polyline" in r else ""
-            lines.append(f"| {s} | {g} | {r['n']} | {100 * r['safe']:.1f} | {r['feasible']} | "
-                         f"{100 * r['safe_of_feasible']:.1f} | {100 * r['reached_goal']:.1f} | "
-                         f"{r['lift_cm_median']:.2f} | {r['lift_cm_p95']:.2f} | {r['duration_s_median']:.3f} | "
-                         f"{r['duration_s_p95']:.3f} | {r['duration_s_max']:.2f} | {r['jerk_median']:.3g} | "
-                         f"{r['jerk_p95']:.3g} | {once} | {raw} | {100 * r['true_contact']:.1f} | "
-                         f"{100 * r['true_within_1cm']:.1f} |")
-    lines += ["", "On the scenes that every generator swings safely:", "",
-              "| set | generator | n | lift median cm | duration median s |", "|---|---|---:|---:|---:|"]
-    for s, gens in res["sets"].items():
-        for g, r in gens.items():
-            lines.append(f"| {s} | {g} | {r['n_all_safe']} | {r['lift_cm_median_all_safe']:.2f} | "
-                         f"{r['duration_s_median_all_safe']:.3f} |")
-    return "\n".join(lines)
-
-
-def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("policy")
+if __name__ == "__main__":
+    ap = parser(__doc__.split("\n\n")[0])
     ap.add_argument("--n", type=int, default=600, help="scenes per set")
     ap.add_argument("--clearance", type=float, default=None, help="m; default env.min_clearance (+ the error)")
     ap.add_argument("--perception-error", type=float, default=0.0, help="m")
     ap.add_argument("--smoothing", type=float, default=None, help="m^2, the RL spline's (default: the generator's)")
     ap.add_argument("--tag", default="")
-    ap.add_argument("--out", default=str(OUT))
+    ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
     a = ap.parse_args()
-    gen = TrajectoryGenerator.load(a.policy)
-    cfg = gen.config
-    clearance = a.clearance
-    if clearance is None and a.perception_error > 0:
-        clearance = cfg.env.min_clearance + a.perception_error
-    gens = {"rl": gen, "cfftg": CFFTG(cfg)}
-    res = {"policy": str(a.policy), "clearance": clearance, "perception_error": a.perception_error,
-           "smoothing": a.smoothing,
-           "sets": {}, "machine": machine_info()}
-    arrays = {}
-    for name, scenes in scene_sets(cfg, a.n).items():
-        arrays[name] = {}
-        res["sets"][name] = run_set(gens, scenes, cfg, clearance, a.perception_error, a.smoothing, arrays[name])
-        print(name, {g: {k: round(v, 4) for k, v in r.items()} for g, r in res["sets"][name].items()}, flush=True)
-    title = "Swing quality" + (f" at clearance {100 * clearance:.1f} cm" if clearance else "") + (
-        f", perception error {100 * a.perception_error:.1f} cm" if a.perception_error else "")
-    md = markdown(res, title)
-    print(md)
-    if a.out:
-        name = "swing_quality" + (f"_{a.tag}" if a.tag else "")
-        paths = write_result(name, res, md, a.out)
-        figure(arrays, title, paths[1].with_suffix(".png"))
-        print(*paths, paths[1].with_suffix(".png"))
-
-
-if __name__ == "__main__":
-    main()
+    run_swing_quality_benchmark(a.policy, a.out, a.n, a.clearance, a.perception_error, a.smoothing, a.tag)

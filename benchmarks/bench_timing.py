@@ -6,14 +6,13 @@ Writes benchmarks/results/timing_<date>_<machine>.json and .md.
 Run: python benchmarks/bench_timing.py RUN_DIR/policy.npz
 (train one first: jaxexo train --out RUN_DIR)"""
 
-import argparse
 from pathlib import Path
 
 from jaxexo.benchmarks.timing_bench import run_timing_benchmark
+from jaxexo.benchmarks.runner import parser
 
 if __name__ == "__main__":
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("policy", help="policy.npz")
+    p = parser(__doc__)
     p.add_argument("--n", type=int, default=1000, help="thesis-obstacle scenes")
     p.add_argument("--unseen", type=int, default=300, help="unseen-shape scenes")
     p.add_argument("--rate", type=float, default=100.0, help="control rate, Hz")

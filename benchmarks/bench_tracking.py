@@ -3,14 +3,13 @@ limit against duration, setpoint clipping and tracking error under the feed-forw
 
 Run: python benchmarks/bench_tracking.py RUN_DIR/policy.npz [--n 100] [--rate 100]"""
 
-import argparse
 from pathlib import Path
 
 from jaxexo.benchmarks.tracking_bench import run_tracking_benchmark
+from jaxexo.benchmarks.runner import parser
 
 if __name__ == "__main__":
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("policy", help="policy.npz")
+    p = parser(__doc__)
     p.add_argument("--n", type=int, default=100, help="unseen-shape scenes")
     p.add_argument("--rate", type=float, default=100.0, help="control rate, Hz")
     a = p.parse_args()

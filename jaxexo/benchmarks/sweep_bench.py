@@ -11,6 +11,10 @@ environments, T = 16, 2 minibatches):
 - the target run: configs/sweeps/benchmark.toml (64 configurations x 4 seeds x 2 M env steps,
   512 M env steps) through ``run_sweep``, wall time including compilation, against 10 minutes.
 
+- lanes: what group-size independence costs in throughput, the same agents trained by one vmapped
+  batch per device (``over_agents``) and by fixed blocks of LANES (``over_lanes``, what sweeps and
+  populations run), on this file's static settings (16 agents) and thesis (b) learns (8 agents).
+
 Throughputs are medians over repeated compiled calls after a warm-up call that compiles.
 """
 
@@ -27,7 +31,7 @@ import numpy as np
 
 from jaxexo.benchmarks.train_bench import throughput
 from jaxexo.config import Config
-from jaxexo.train.lanes import over_agents
+from jaxexo.train.lanes import LANES, over_agents, over_lanes
 from jaxexo.sweep.spec import load_sweep, sweep_from_dict
 from jaxexo.train.trainer import Hyperparams, Trainer
 
@@ -200,3 +204,38 @@ def run_learning_benchmark(out_dir, sweep_file: str | Path, progress=print) -> d
     write_result("sweep-learning", out, md, out_dir)
     progress(md)
     return out
+
+
+def run_lanes_benchmark(out_dir, sweep_file: str | Path) -> dict:
+    """Both programs on the sweep file's first member (16 agents, 10 updates a call) and on thesis (b)
+    learns (8 agents, 100 updates), every CPU core a device; written as lanes_<date>_<machine>.*"""
+    import os
+
+    from jaxexo.config import load_config, packaged_config
+    from jaxexo.evaluation.machine import write_result
+
+    devices = jax.local_devices()
+    thesis_b = load_config(Path(packaged_config("default")).parent / "thesis" / "b-learns.toml")
+    cases = [("sweep benchmark (256 envs, T 16)", load_sweep(sweep_file).members[0].config, 16, 10),
+             ("thesis (b) learns (64 envs, T 8)", thesis_b, 8, 100)]
+    load_before = os.getloadavg()
+    rows = []
+    for name, cfg, n, updates in cases:
+        for label, wrap in (("one vmap per device", over_agents), (f"blocks of {LANES}", over_lanes)):
+            r = agents_throughput(cfg, n, devices, updates, repeats=3, wrap=wrap)
+            rows.append({"case": name, "program": label, **r})
+            print(name, label, f"{r['env_steps_per_s'] / 1e6:.3f} M env-steps/s", flush=True)
+    lines = ["# Fixed vmap blocks against one batch per device", "",
+             f"{len(devices)} CPU devices; load average before {tuple(round(x, 2) for x in load_before)}, after "
+             f"{tuple(round(x, 2) for x in os.getloadavg())} (a shared machine). Training only (no evaluation); "
+             "median of 3 compiled calls.", "",
+             "| case | agents | program | M env-steps/s | median s per call | ratio to one vmap per device |",
+             "|---|---:|---|---:|---:|---:|"]
+    for i, r in enumerate(rows):
+        base = rows[i - i % 2]
+        lines.append(f"| {r['case']} | {r['agents']} | {r['program']} | {r['env_steps_per_s'] / 1e6:.3f} | "
+                     f"{r['median_s']:.2f} | {r['env_steps_per_s'] / base['env_steps_per_s']:.2f} |")
+    payload = {"rows": rows, "load_before": load_before}
+    for p in write_result("lanes", payload, "\n".join(lines), out_dir):
+        print(p)
+    return payload

@@ -4,7 +4,12 @@
   thesis network (2 -> 64 -> 32 -> 32 -> 32 -> 36) at 4096 environments, forward view and backward
   view, medians of repeated compiled chunks after a warm-up;
 - default model: wall time (compilation included) and eval.json figures of `jaxexo train` on
-  configs/default.toml.
+  configs/default.toml;
+- the shield's mask inside the trainer, the plain rule against the batched one, alternated in one
+  process (run_mask_ab_benchmark);
+- where an update's time goes, per config (update_breakdown, run_breakdown_benchmark).
+
+The steady rate through the driver is train_steady_bench (it must also run against older checkouts).
 """
 
 from __future__ import annotations
@@ -184,3 +189,73 @@ def update_breakdown(cfg: Config, repeats: int = 5, calls: int = 4) -> dict:
     return {"num_envs": n, "rollout_steps": t, "num_minibatches": n_mb, "num_epochs": epochs,
             "hidden": list(cfg.train.hidden), "shield": bool(tr.env.shield), "ms_per_update": parts,
             "env_steps_per_s_one_device": n * t / (parts["update"] / 1e3)}
+
+
+def run_mask_ab_benchmark(path, updates: int, rounds: int, out_dir: Path) -> dict:
+    """Steady env-steps/s of the shielded trainer with the plain mask (vmap(env.action_mask)) and with
+    the batched one (env.action_masks, the trainer's), compiled once each and alternated A B A B so
+    that a shared machine's load hits both alike; the medians of each."""
+    from jaxexo.config import load_config
+    from jaxexo.evaluation.machine import write_result
+
+    cfg = load_config(path)
+    hyper = Hyperparams.from_config(cfg)
+    progs = {}
+    for kind in ("plain", "batched"):
+        tr = Trainer(cfg, devices=jax.local_devices())
+        if kind == "plain":
+            tr._mask = lambda st, h, tr=tr: jax.vmap(tr.env.action_mask, in_axes=(0, None))(st, h.env)
+        ts = tr.place(jax.jit(tr.init)(jax.random.PRNGKey(0), hyper))
+        run = jax.jit(tr.run, static_argnums=2)
+        ts, _ = jax.block_until_ready(run(ts, hyper, updates))      # compiles
+        progs[kind] = [run, ts, []]
+    steps = updates * cfg.train.num_envs * cfg.train.rollout_steps
+    for _ in range(rounds):
+        for kind, prog in progs.items():
+            run, ts, times = prog
+            t0 = time.perf_counter()
+            prog[1], _ = jax.block_until_ready(run(ts, hyper, updates))
+            times.append(time.perf_counter() - t0)
+    rates = {k: steps / float(np.median(v[2])) for k, v in progs.items()}
+    out = {"config": Path(path).name, "updates_per_call": updates, "rounds": rounds, "env_steps_per_call": steps,
+           "devices": len(jax.local_devices()), "env_steps_per_s": rates,
+           "times_s": {k: v[2] for k, v in progs.items()}, "ratio": rates["batched"] / rates["plain"]}
+    md = "\n".join([
+        f"# Shielded trainer, plain mask vs batched mask ({out['config']}, {out['devices']} CPU devices)", "",
+        "| mask | steady env-steps/s (median) |", "|---|---:|",
+        *(f"| {k} | {v / 1e3:.0f}k |" for k, v in rates.items()), "",
+        f"Batched / plain: {out['ratio']:.2f}x; {rounds} alternated calls of {steps:,} env steps each. Shared "
+        "machine: other jobs ran at the same time; the alternation exposes both to the same load."])
+    write_result("train-mask-ab", out, md, out_dir)
+    print(md)
+    return out
+
+
+def run_breakdown_benchmark(paths, label: str, out_dir: Path) -> dict:
+    """Where an update's time goes (update_breakdown), per config, written as
+    train-breakdown[-label]_<date>_<machine>.{json,md}."""
+    from jaxexo.config import load_config
+    from jaxexo.evaluation.machine import write_result
+
+    rows = []
+    for path in paths:
+        r = update_breakdown(load_config(path))
+        r["config"] = Path(path).name
+        rows.append(r)
+        print(r, flush=True)
+    lines = [f"# Where a training update's time goes ({label or 'one device'})", "",
+             "One forward-view update (T steps of N environments, then the learning part) on one CPU device "
+             f"(of {len(jax.local_devices())}), each part timed alone on the update's own shapes in a jitted loop; "
+             "milliseconds per update and share of the whole update. The parts inside the rollout and the "
+             "learning part are measured alone, so they need not add up to their totals exactly.", ""]
+    for r in rows:
+        parts = r["ms_per_update"]
+        lines += [f"## {r['config']} (N = {r['num_envs']}, T = {r['rollout_steps']}, {r['num_minibatches']} "
+                  f"minibatches x {r['num_epochs']} epoch(s), hidden {r['hidden']}, shield {r['shield']})", "",
+                  "| part | ms per update | share of the update |", "|---|---:|---:|"]
+        lines += [f"| {k} | {v:.2f} | {100 * v / parts['update']:.0f} % |" for k, v in parts.items()]
+        lines += ["", f"One device: {r['env_steps_per_s_one_device'] / 1e3:.0f}k env-steps/s.", ""]
+    md = "\n".join(lines)
+    write_result("train-breakdown" + (f"-{label}" if label else ""), {"rows": rows}, md, out_dir)
+    print(md)
+    return {"rows": rows}

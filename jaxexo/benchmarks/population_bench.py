@@ -1,0 +1,148 @@
+"""Population benchmarks: what a population costs against one agent, and whether a member's
+arithmetic depends on the number of CPU devices.
+
+- cost: a population of K costs at most 1.5 + (K - 1) x 0.25 times the wall time of one agent of the
+  same config (``jaxexo train`` with population 1, data parallel over the cores). For each K,
+  ``jaxexo train``'s driver (jaxexo.train.driver.run_training, as the CLI runs it: every CPU core a
+  JAX device) trains the config into a fresh directory, in this one process, one K after the other.
+  Reported per K: the training wall time (eval.json's train_seconds: first compilation and every
+  chunk's validation included, the final test evaluation not), the steady chunk time (median over
+  the chunks after the first, which compiles), their ratios to K = 1 and the target, and the members'
+  outcomes; the machine's load average before and after (it is shared, and a loaded core is slower).
+- devices: tests/test_population.py checks group-size independence in one process (one device);
+  this trains the test's tiny config in fresh processes with 1, 2 and 4 CPU devices, seed 3 alone and
+  as the fourth member of a population of 5, each on every device the process has (the devices a
+  population of 5 uses; jaxexo.train.population.population_devices gives at least two), and compares
+  the final parameters' bytes within each process and across device counts.
+
+Run by benchmarks/bench_population.py and benchmarks/population_devices_check.py.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from jaxexo.config import load_config, packaged_config, with_population
+from jaxexo.evaluation.machine import write_result
+
+THESIS_B_LEARNS = Path(packaged_config("default")).parent / "thesis" / "b-learns.toml"
+
+
+def target(k: int) -> float:
+    return 1.5 + (k - 1) * 0.25
+
+
+def population_row(base, k: int, work: Path) -> dict:
+    """Population ``k`` of config ``base`` trained into ``work``/k<k>: its times and members' outcomes."""
+    from jaxexo.train.driver import run_training
+
+    ev = run_training(with_population(base, k), work / f"k{k}", seed=0, progress=False)
+    chunks = [json.loads(x) for x in (work / f"k{k}" / "metrics.jsonl").read_text().splitlines()]
+    walls = [c["wall_s"] for c in chunks]
+    steady = [b - a for a, b in zip(walls[:-1], walls[1:])][1:] or [walls[-1]]
+    members = ev.get("members") or [{"seed": ev["seed"], "test": {"success_raw": ev["success_raw"],
+                                                                  "reached_goal": ev["reached_goal"]}}]
+    return {"k": k, "train_seconds": ev["train_seconds"], "chunks": len(chunks),
+            "steady_chunk_s": statistics.median(steady), "devices": ev["devices"],
+            "exported_seed": ev["seed"], "validation_success_raw": ev["validation_success_raw"],
+            "test_success_raw": [m["test"]["success_raw"] if m.get("test") else None for m in members],
+            "reached_goal": [m["test"]["reached_goal"] if m.get("test") else None for m in members]}
+
+
+def run_population_benchmark(out_dir, config: str | None = None, ks=(1, 4, 8), name: str = "population") -> dict:
+    """Populations of each K in ``ks`` (default config: thesis (b) learns), printed and written as
+    <name>_<date>_<machine>.{json,md}."""
+    path = config or str(THESIS_B_LEARNS)
+    base = load_config(path)
+    rows = []
+    load_before = os.getloadavg()
+    work = Path(tempfile.mkdtemp(prefix="bench_population_"))
+    try:
+        for k in ks:
+            rows.append(population_row(base, k, work))
+            print(f"K={k}: {rows[-1]['train_seconds']:.1f} s, steady chunk {rows[-1]['steady_chunk_s']:.2f} s",
+                  flush=True)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    load_after = os.getloadavg()
+    one = rows[0]
+    for r in rows:
+        r["ratio"] = r["train_seconds"] / one["train_seconds"]
+        r["steady_ratio"] = r["steady_chunk_s"] / one["steady_chunk_s"]
+        r["target"] = target(r["k"])
+        r["meets_target"] = r["ratio"] <= r["target"]
+    lines = ["# Population cost", "",
+             f"Config `{Path(path).name}`; seeds 0..K-1; `jaxexo train`'s driver in one process, the CPU cores as JAX "
+             "devices. K = 1 is one agent (data parallel over the devices); K > 1 a population "
+             "(jaxexo.train.population: members in fixed blocks of 2 lanes per device). Wall time: eval.json's "
+             "train_seconds (compilation and per-chunk validation included). Load average (1, 5, 15 min) before "
+             f"{tuple(round(x, 2) for x in load_before)}, after {tuple(round(x, 2) for x in load_after)}.", "",
+             "| K | devices | train s | ratio to K = 1 | target | met | steady chunk s | steady ratio | exported seed | "
+             "members' test strict success |", "|---:|---:|---:|---:|---:|---|---:|---:|---:|---|"]
+    for r in rows:
+        lines.append(f"| {r['k']} | {r['devices']} | {r['train_seconds']:.1f} | {r['ratio']:.2f} | {r['target']:.2f} | "
+                     f"{'yes' if r['meets_target'] else 'no'} | {r['steady_chunk_s']:.2f} | {r['steady_ratio']:.2f} | "
+                     f"{r['exported_seed']} | "
+                     + ", ".join("-" if s is None else f"{s:.2f}" for s in r["test_success_raw"]) + " |")
+    payload = {"config": Path(path).name, "rows": rows, "load_before": load_before, "load_after": load_after}
+    for p in write_result(name, payload, "\n".join(lines), out_dir):
+        print(p)
+    return payload
+
+
+# The child process: the test's members trained on every device it has, their bytes hashed.
+CHILD = r"""
+import hashlib, json, sys
+sys.path.insert(0, sys.argv[1])
+import numpy as np
+import jax
+import test_population as T
+from jaxexo.train import population as P
+
+P.population_devices = lambda n, devices: list(devices)    # every device of the process
+five = T.train_members([0, 1, 2, T.SEED, 4])[T.SEED]
+one = T.train_members([T.SEED])[0]
+digest = lambda m: hashlib.sha256(b"".join(np.ascontiguousarray(x).tobytes() for x in T.leaves(m["params"]))
+                                  + m["metrics"].tobytes()).hexdigest()
+print("RESULT " + json.dumps({"devices": len(jax.local_devices()), "alone": digest(one), "fourth_of_five": digest(five)}))
+"""
+
+
+def member_digests(devices: int, tests_dir: Path) -> dict:
+    """The child's digests in a fresh process with ``devices`` CPU devices."""
+    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    env["XLA_FLAGS"] = f"--xla_force_host_platform_device_count={devices}"
+    out = subprocess.run([sys.executable, "-c", CHILD, str(tests_dir)], cwd=tests_dir, env=env,
+                         capture_output=True, text=True, timeout=1800)
+    if out.returncode:
+        raise RuntimeError(out.stderr[-3000:])
+    return json.loads(next(x for x in out.stdout.splitlines() if x.startswith("RESULT "))[7:])
+
+
+def run_population_devices_check(out_dir, tests_dir) -> dict:
+    """Digests on 1, 2 and 4 devices (tests_dir: the repository's tests/, for test_population), written
+    as population-devices_<date>_<machine>.{json,md}."""
+    rows = [member_digests(d, Path(tests_dir)) for d in (1, 2, 4)]
+    lines = ["# Population members across device counts", "",
+             "The tiny config of tests/test_population.py, seed 3, trained alone and as the fourth member of a "
+             "population of 5, in a fresh process with 1, 2 and 4 CPU devices (the population spread over all of "
+             "them); sha256 of the final parameters and per-update metrics.", "",
+             "| devices | alone | fourth of five | equal |", "|---:|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['devices']} | {r['alone'][:16]} | {r['fourth_of_five'][:16]} | "
+                     f"{'yes' if r['alone'] == r['fourth_of_five'] else 'no'} |")
+    same = {f"{a['devices']} vs {b['devices']}": a["alone"] == b["alone"] for a in rows for b in rows
+            if a["devices"] < b["devices"]}
+    lines += ["", "Across device counts (alone): " + ", ".join(f"{k}: {'equal' if v else 'differ'}"
+                                                         for k, v in same.items())]
+    payload = {"rows": rows, "across": same}
+    for p in write_result("population-devices", payload, "\n".join(lines), out_dir):
+        print(p)
+    return payload

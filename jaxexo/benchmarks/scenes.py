@@ -1,0 +1,36 @@
+"""The scene sets the swing benchmarks share: the thesis five with shifted layouts, shapes never
+trained on (both jaxexo.inference.scenarios.safety_scenarios) and the held-out terrain families
+(jaxexo.physics.scenarios.unseen_scenarios), and the keyword lists a batch of scenes is generated
+with."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from jaxexo.inference.scenarios import safety_scenarios
+from jaxexo.physics import scenarios
+
+THESIS_FIVE, SHAPES, FAMILIES = "thesis five, shifted", "unseen shapes", "held-out families"
+
+
+def held_out_families(config, n: int, pick: bool = True) -> list[dict]:
+    """The held-out families in whole cells of at least ``n`` scenes; with ``pick``, ``n`` of them
+    drawn at random (seed 0, kept in order)."""
+    fam = scenarios.unseen_scenarios(config.kinematics.foot_length, repeats=scenarios.repeats_for(n))
+    if not pick:
+        return fam
+    rng = np.random.default_rng(0)
+    return [fam[i] for i in np.sort(rng.choice(len(fam), size=min(n, len(fam)), replace=False))]
+
+
+def safety_sets(config, n: int, shapes_seed: int = 2024, pick: bool = True) -> dict[str, list[dict]]:
+    """The three sets by name: ``n`` scenes of the thesis five and of unseen shapes (drawn with
+    ``shapes_seed``), and the held-out families (see held_out_families)."""
+    return {THESIS_FIVE: safety_scenarios(config, n),
+            SHAPES: safety_scenarios(config, n, seed=shapes_seed, unseen=True),
+            FAMILIES: held_out_families(config, n, pick)}
+
+
+def batch_kwargs(scenes: list[dict]) -> dict[str, list]:
+    """generate_batch's per-scene keywords (pivot, start_y, step_length) of a scene list."""
+    return {k: [s[k] for s in scenes] for k in ("pivot", "start_y", "step_length")}
