@@ -64,8 +64,9 @@ def validate(cfg: Config) -> None:
         raise ConfigError(f"env.max_steps: {env.max_steps} is below reward.step_threshold = {rew.step_threshold}")
 
 
-# (env, kinematics, layout) sections that passed _check_scene: its reach and room checks cost ~40 ms
-# and depend on these alone, so the configurations of a sweep that share them are checked once.
+# (env, kinematics, layout) sections that passed _check_scene: its reach and room checks are costly
+# (docs/reliability.md) and depend on these alone, so the configurations of a sweep that share them
+# are checked once.
 _SCENES_OK: set = set()
 
 

@@ -195,8 +195,8 @@ class ExoStepEnv:
         """``step`` of a batch of N environments (keys, states and actions with a leading N), equal to
         ``jax.vmap(step)`` bit for bit at a fraction of the cost: the auto-reset draws fresh scenes only
         for the environments whose episode ended (jaxexo.env.compact), where ``step`` under vmap draws
-        one for every environment at every step (for procedural terrain, about 90 % of a step's time).
-        The trainer's step."""
+        one for every environment at every step (for procedural terrain, most of a step's time:
+        docs/training.md). The trainer's step."""
         params = self.default_params if params is None else params
         n = actions.shape[0]
         obs_st, state_st, reward, terminated, info = jax.vmap(self.step_env, in_axes=(0, 0, 0, None))(

@@ -24,12 +24,17 @@ import numpy as np
 from jaxexo.config import Config
 from jaxexo.evaluation.metrics import device_metrics, summarize, summarize_device, trajectory_metrics
 from jaxexo.evaluation.report import check_report_folder, write_report
+from jaxexo.evaluation.thesis_results import THESIS_ACCURACY, THESIS_BATCH_1000_MS, THESIS_CFFTG_MS, THESIS_T32
 from jaxexo.evaluation.timing import BATCH, scene_options
 from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 from jaxexo.inference.scenarios import sample_scenarios, training_scenarios
 
 BATCH_REPEATS = 3
 SCENARIO_SETS = ("train", "test", "all", "unseen")
+# The thesis's figures the report quotes beside jaxexo's (jaxexo.evaluation.thesis_results).
+THESIS_REFERENCE = (f"Thesis reference (Tables 3.9-3.11): final model accuracy {THESIS_ACCURACY['final']:g} %, "
+                    f"{THESIS_T32['final'][0]:g} ms per trajectory, {THESIS_BATCH_1000_MS / 1000:g} s per 1000; "
+                    f"CFFTG about {THESIS_CFFTG_MS:g} ms per trajectory.")
 
 
 def make_scenarios(cfg: Config, which: str, n: int, seed: int = 12345) -> list[dict]:
@@ -160,8 +165,7 @@ def run_eval(policy: str | Path, out: str | Path, against: str | None = "cfftg",
     info = machine_info()
     context = [f"Policy `{policy}`; scenarios `{scenarios}` ({len(sc)}, seed {seed}); both generators in one "
                f"process, alternating; {info['cpu']}, {info['cores']} cores.",
-               "Thesis reference (Tables 3.9-3.11): final model accuracy 94.7 %, 2.31 ms per trajectory, "
-               "1.764 s per 1000; CFFTG about 2 ms per trajectory."]
+               THESIS_REFERENCE]
     for entry in report.values():
         entry["scenarios"] = scenarios
         entry["policy"] = str(policy)

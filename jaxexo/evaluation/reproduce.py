@@ -36,17 +36,16 @@ import json
 from pathlib import Path
 
 from jaxexo.config import load_config, packaged_config
+from jaxexo.evaluation.thesis_results import (THESIS_ACCURACY, THESIS_BATCH_1000_MS, THESIS_CROSS, THESIS_T32,
+                                              THESIS_T311, THESIS_TRAIN_TIME)
 from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 from jaxexo.storage.atomic import atomic_write
 from jaxexo.storage.rundir import blocking_file
 
 THESIS_MODELS = ("a", "b", "c", "1", "2", "3", "final")
 # Members per learns model (jaxexo.train.population): which seed of a heel-only learner learns is
-# chance (benchmarks/results/thesis-seeds_*), so each learns config trains this many seeds as one
-# program and keeps the best on validation. Four, by measurement: at base seed 0 every learns model
-# had 2 to 4 of its 4 members meet the target (benchmarks/results/reproduce-population-seed0_*), and
-# four cost 1.5-2.0x one agent's training time against 2.5-2.9x for eight (thesis (b), population_* and
-# population-rerun_*).
+# chance, so each learns config trains this many seeds as one program and keeps the best on
+# validation; why four: docs/thesis-reproduction.md.
 REPRODUCE_POPULATION = 4
 VARIANTS = ("faithful", "learns")
 ENTRY = "reproduce_entry.json"   # a run's evaluated figures, beside its policy
@@ -55,27 +54,6 @@ ENTRY = "reproduce_entry.json"   # a run's evaluated figures, beside its policy
 LEARNS_CHANGES = ()
 # The pivot condition each single-condition model was trained on (thesis 3.2; configs/thesis/*.toml).
 TRAINED_PIVOT = {"a": "obstacle", "b": "agent", "c": "between", "1": "obstacle", "2": "agent", "3": "between"}
-
-# Published values. Table 3.2: (mean generation time ms, mean knee deg, mean hip deg), 1000 episodes.
-THESIS_T32 = {"a": (2.46, -51.031, 35.363), "b": (2.03, -52.995, 33.744), "c": (2.12, -49.407, 33.0341),
-              "1": (2.50, -50.483, 33.729), "2": (1.21, -10.544, 14.458), "3": (2.64, -49.462, 33.703),
-              "final": (2.31, -56.604, 37.532)}  # final: Table 3.9
-# Tables 3.3-3.8: the same three figures in the two pivot conditions a model was not trained on.
-THESIS_CROSS = {
-    "a": {"agent": (2.53, -47.175, 41.131), "between": (2.30, -52.136, 39.453)},       # Table 3.3
-    "b": {"obstacle": (2.28, -52.334, 29.733), "between": (2.27, -56.731, 38.730)},    # Table 3.4
-    "c": {"obstacle": (2.55, -46.396, 28.419), "agent": (2.06, -52.572, 41.442)},      # Table 3.5
-    "1": {"agent": (2.46, -51.204, 41.345), "between": (2.19, -51.066, 37.621)},       # Table 3.6
-    "2": {"obstacle": (2.49, -8.377, 11.367), "between": (1.23, -11.675, 16.849)},     # Table 3.7
-    "3": {"obstacle": (2.14, -49.266, 29.942), "agent": (2.52, -49.424, 41.001)},      # Table 3.8
-}
-# Training time on the thesis's laptop (Ryzen 7, RTX 4060), thesis 3.2 and 3.4.
-THESIS_TRAIN_TIME = {**dict.fromkeys(("a", "b", "c"), "12 ± 3 min"), **dict.fromkeys(("1", "2", "3"), "29 ± 5 min"),
-                     "final": "55 min 27 s"}
-THESIS_ACCURACY = {"final": 94.7, "a": 58.2, "b": 75.8, "c": 74.1, "1": 56.9, "2": 3.8, "3": 58.0}  # Table 3.10
-# Table 3.11: generation time per obstacle (ms), CFFTG and the final model.
-THESIS_T311 = {"base1": (2.055, 3.001), "base2": (1.974, 3.028), "base3": (2.003, 3.002),
-               "triangle": (1.982, 3.353), "half_circle": (1.958, 3.001)}
 
 
 def _fig(r: dict) -> tuple[float, float, float]:
@@ -195,7 +173,7 @@ def tables(results: dict) -> str:
                         "| obstacle | thesis CFFTG | thesis final | jaxexo CFFTG | jaxexo final (RL) | "
                         "jaxexo CFFTG success % | jaxexo RL success % |", "|---|---:|---:|---:|---:|---:|---:|", rows)
         lines += ["", f"Batch of 1000 (median): RL {final['rl']['batch_1000_ms']:.0f} ms, CFFTG "
-                  f"{final['cfftg']['batch_1000_ms']:.0f} ms (thesis final model: 1764 ms)."]
+                  f"{final['cfftg']['batch_1000_ms']:.0f} ms (thesis final model: {THESIS_BATCH_1000_MS:.0f} ms)."]
     return "\n".join(lines) + "\n"
 
 

@@ -1,14 +1,11 @@
 """BLAS threads for the batch generator: ``generate_batch`` runs its matrix products on one
 BLAS thread.
 
-Measured on the 2-core development machine (shared, so often busy): OpenBLAS's default threads
-made ``generate_batch`` of 1000 scenes about 4x slower than one thread (1000 ms against 256 ms). Its
-products are small to medium ((alive scenes, 23..128) @ (.., 128) per rollout step, (100, M) @
-(M, 2B) for the smoothing) and finish in tens to hundreds of microseconds on one core, while
-OpenBLAS's worker threads spin-wait for each other: with the cores shared, a product that one
-thread does in 0.4 ms took 5-7 ms on two (benchmarks/results/generate_*). One thread is also what an
-exoskeleton's controller wants from a library call. ``generate`` (one scene) is not affected: its
-vector-matrix products are below OpenBLAS's threading threshold.
+Its products are small to medium ((alive scenes, 23..128) @ (.., 128) per rollout step, (100, M) @
+(M, 2B) for the smoothing), and on shared cores OpenBLAS's worker threads spin-wait for each other
+far longer than one thread takes for the product (measured: docs/generation.md#speed). One thread
+is also what an exoskeleton's controller wants from a library call. ``generate`` (one scene) is not
+affected: its vector-matrix products are below OpenBLAS's threading threshold.
 
 The limit is set with threadpoolctl (a small pure-Python package, a dependency of jaxexo) for the
 duration of the call and restored afterwards; it is process-wide while it lasts, so another Python
@@ -39,8 +36,9 @@ def limited(threads: int | None):
         except ImportError:
             _missing = True
             return contextlib.nullcontext()
-        # Listing the loaded libraries takes ~1 ms, so it is redone only when modules were imported
-        # since (a library that another import loaded would otherwise keep its threads).
+        # Listing the loaded libraries has a cost of its own (docs/generation.md#speed), so it is
+        # redone only when modules were imported since (a library that another import loaded would
+        # otherwise keep its threads).
         _controller = threadpoolctl.ThreadpoolController()
         _modules = len(sys.modules)
     return _controller.limit(limits=int(threads), user_api="blas")

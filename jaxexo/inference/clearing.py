@@ -53,7 +53,7 @@ _MIN_DIAG = 1e-9      # relative: constraints with less freedom than this are le
 MAX_SHIFT = 0.10      # m: a correction moving a sample further than this is not a small one; not made
 # A correction that needs more constraints than this at once (a curve far inside the margin over most
 # of its length: seen only on paths that never reach the goal) is not a small one either; not made,
-# which also spares a dual system whose solve costs tens of milliseconds.
+# which also spares its costly dual solve (docs/generation.md#speed).
 MAX_CONSTRAINTS = 64
 
 
@@ -103,9 +103,9 @@ def _solve_same(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Solutions of a x = b for a stack (G, k, k) of symmetric positive semi-definite systems of one
     size: one stacked LU solve for those whose Cholesky factor exists with a diagonal that is not
     degenerate (there LU and lstsq agree), lstsq's minimum-norm solution one by one for the others.
-    Why: LAPACK's SVD-based lstsq costs 20-1000 us a call on these 5-60 constraint systems (far
-    more when OpenBLAS's threads compete on a busy machine), a stacked Cholesky and LU a few us a
-    system; the curve is judged by the exact verdict whatever the solve."""
+    Why: LAPACK's SVD-based lstsq costs far more per call on these small systems than a stacked
+    Cholesky and LU per system (docs/generation.md#speed); the curve is judged by the exact verdict
+    whatever the solve."""
     g = len(a)
     try:
         low = np.linalg.cholesky(a)

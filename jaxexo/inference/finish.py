@@ -39,8 +39,7 @@ from jaxexo.inference.trajectory import TrajectoryBatch, assemble
 # Per-path candidate smoothings: s = M * rho^2 for these rho (m), a root-mean-square residual of rho
 # per point. A shielded raw path keeps env.shield_clearance, 5 mm above the verdict's margin; the
 # thesis's s (an RMS residual of ~1 cm on a 30-point path) cuts its corners by more than that, much
-# smaller ones wiggle the heel back. On the default model these four rescue all but ~1 % of the
-# swings the requested s fails.
+# smaller ones wiggle the heel back (what these four rescue: docs/generation.md, smoothing).
 CANDIDATE_RESIDUALS = (0.008, 0.005, 0.004, 0.0025)
 
 # Smoothing multipliers tried last, before the raw polyline.
@@ -48,9 +47,8 @@ RETRY_FACTORS = (0.25, 1.0 / 16.0, 0.0)
 
 # m a retried curve must keep above the margin to be accepted (the verdict itself asks for none): the
 # device-ready swing (jaxexo.inference.swing_timing) resamples a C1 interpolant of the samples, which
-# can pass a little closer than their polyline (measured 0.02-0.07 mm, 4 of 1000 thesis-five swings
-# at s = 0.001, whose timed verdict then failed); with this much to spare it keeps the margin when
-# timed. The raw polyline keeps the shield's 5 mm in any case.
+# can pass a little closer than their polyline (docs/generation.md, smoothing); with this much to
+# spare it keeps the margin when timed. The raw polyline keeps the shield's 5 mm in any case.
 ACCEPT_HEADROOM = 5e-4
 
 CLEARED_NOTE = ("the spline of smoothing {s:g} m^2 is corrected where it came within the safety margin or "

@@ -46,8 +46,7 @@ while a variable-speed law slows only where the path bends in joint space):
    exported, not assumed from the discretised passes.
 
 Known cost: the path interpolant is C1, so q'' jumps at the path's samples; at higher control rates
-finite differences resolve those jumps and the corrections lengthen a swing (measured: 500 Hz swings
-2-11 % longer than 100 Hz ones on the tests' random paths, 1-2 % on CFFTG's thesis-obstacle paths).
+finite differences resolve those jumps and the corrections lengthen a swing (docs/device-timing.md).
 
 Units: m, rad, s; limits in rad/s and rad/s^2, one value per joint of JOINT_NAMES (hip and knee
 limits apply to both legs).
@@ -74,7 +73,7 @@ CHECK_MARGIN = 1e-3        # exported samples must stay within (1 - this) of eac
 LOCAL_PASSES = 6           # local corrections of the law where exported samples exceed a limit ...
 MAX_SLOWDOWNS = 12         # ... then uniform slow-downs (the safety net)
 ARC_TABLE_PER_SAMPLE = 32  # arc-length table points per sample interval
-BYTES_PER_SAMPLE = 1024    # timing holds about 500 B per exported sample (measured); the bound counts twice that
+BYTES_PER_SAMPLE = 1024    # twice what timing holds per exported sample (docs/reliability.md)
 
 
 @dataclass(frozen=True)
@@ -363,8 +362,8 @@ def blend_window(limits: DeviceLimits) -> float:
 
 @functools.lru_cache(maxsize=8)
 def _scalars(config):
-    """scalar_params of a config, kept: a config is frozen, and the view costs about a millisecond,
-    as much as timing a swing (read only here)."""
+    """scalar_params of a config, kept: a config is frozen, and the view costs as much as timing a
+    swing (docs/decisions.md; read only here)."""
     from jaxexo.config import scalar_params
 
     return scalar_params(config)

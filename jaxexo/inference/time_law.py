@@ -128,9 +128,9 @@ def _scan_floats(a, b, bound, order) -> list:
 def _min_affine_scan(a, b, bound, order):
     """x_next = clip(min_j (a_j x + b_j), 0, bound) over the grid points in ``order``, from x = 0,
     for a batch: a, b (B, K, J), bound (B, K). Returns x (B, K). A small batch runs row by row as
-    Python floats, where a grid point costs about a microsecond instead of several NumPy calls; a
-    large one runs one vectorised step per grid point. Both do the same IEEE operations (a product, a
-    sum, exact minima), so they agree bit for bit."""
+    Python floats, where a grid point's few float operations cost less than a vectorised step's
+    several NumPy calls (docs/decisions.md); a large one runs one vectorised step per grid point.
+    Both do the same IEEE operations (a product, a sum, exact minima), so they agree bit for bit."""
     bsz, k, nj = a.shape
     x = np.empty((bsz, k))
     if bsz <= SCALAR_ROWS:

@@ -52,8 +52,8 @@ SHAPES = ("rectangle", "triangle", "half_ellipse", "profile")
 # The one bound of an obstacle's size (m), for the config's [layout] and every generator's input: a
 # swing of a lower-limb exoskeleton (legs of at most 2 m, kinematics' bounds) steps over nothing
 # taller than 0.6 m or wider than 1 m. With the default legs the config's reach check refuses
-# obstacles above about 0.6 m anyway; far larger ones gave nonsense diagnostics (clearances of
-# hundreds of metres).
+# obstacles above about 0.6 m anyway, and far larger ones only give meaningless diagnostics
+# (docs/reliability.md).
 MAX_OBSTACLE_HEIGHT = 0.6
 MAX_OBSTACLE_WIDTH = 1.0
 
@@ -67,11 +67,11 @@ class GeometryError(ValueError):
 # --------------------------------------------------------------------------------------------
 
 
-# NumPy reduces over a short last axis one outer element at a time, 4-15x slower than elementwise
-# operations across it (an outline has 3-17 vertices, and one checked trajectory makes
-# dozens of such reductions). Up to CHAIN_MAX entries, min / any / parity over the last axis are
-# therefore a chain of elementwise operations: exactly the same values (min, or and xor are exact),
-# any array module (under jit the chain is unrolled over a static length).
+# NumPy reduces over a short last axis one outer element at a time, several times slower than
+# elementwise operations across it (an outline has 3-17 vertices, and one checked trajectory makes
+# dozens of such reductions; docs/decisions.md). Up to CHAIN_MAX entries, min / any / parity over
+# the last axis are therefore a chain of elementwise operations: exactly the same values (min, or
+# and xor are exact), any array module (under jit the chain is unrolled over a static length).
 CHAIN_MAX = 8
 
 
@@ -135,7 +135,7 @@ def _point_edge_dist2(xp, py, pz, ay, az, ey, ez, inv_len2):
     apz = pz - az
     # Degenerate (padding) edges have inv_len2 = 0: t = 0 gives the distance to the vertex.
     t = (apy * ey + apz * ez) * inv_len2
-    t = xp.minimum(xp.maximum(t, 0.0), 1.0)    # = clip(t, 0, 1); NumPy's clip is several times slower
+    t = xp.minimum(xp.maximum(t, 0.0), 1.0)    # = clip(t, 0, 1): NumPy's clip is slower
     dy = apy - t * ey
     dz = apz - t * ez
     return dy * dy + dz * dz
@@ -143,7 +143,7 @@ def _point_edge_dist2(xp, py, pz, ay, az, ey, ez, inv_len2):
 
 def _inv_edge_len2(xp, ey, ez):
     """1 / |e|^2 of edges e, 0 for edges shorter than 1e-12 m (counted as points: 1 / len2 of a
-    shorter one overflows to inf and t = 0 * inf is nan; hypothesis found an edge of 5e-158 m)."""
+    shorter one can overflow to inf, and t = 0 * inf is nan)."""
     len2 = ey * ey + ez * ez
     ok = len2 > 1e-24
     return xp.where(ok, 1.0 / xp.where(ok, len2, 1.0), 0.0)

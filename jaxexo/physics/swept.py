@@ -28,7 +28,7 @@ from jaxexo.physics.geometry import (_inv_edge_len2, _point_edge_dist2, any_last
 
 def _last_axis(xp, *arrays):
     """xp.stack(arrays, axis=-1) for arrays of one shape, as one concatenate (NumPy's stack is a
-    Python function costing several microseconds a call; one path's check makes dozens)."""
+    Python function with a cost per call, and one path's check makes dozens; docs/decisions.md)."""
     return xp.concatenate([a[..., None] for a in arrays], axis=-1)
 
 
@@ -97,11 +97,12 @@ def swept_distance_by_edge(xp, h0, h1, foot_length, vy, vz):
     corners and sides, the minimum and the crossing and inside flags carried along; each term is the
     same expression as there. Why: under XLA on a CPU the broadcast form materialises (..., 4, K)
     arrays that leave the cache for thousands of (environment, move) pairs; this form keeps arrays
-    of the batch's shape (the shield's mask, jaxexo.env.shield, and the environment's step run
-    several times faster). The outline comes vertex-major, ``vy``, ``vz`` (K, ...) broadcasting
-    against the heels' (...,): a vertex row is then contiguous, where column k of a (..., K, 2) array
-    is a strided access (3-4x slower). Under JAX the vertices are a ``fori_loop`` (a few unrolled
-    per iteration: most of the speed of a full unroll at a fraction of its compile time)."""
+    of the batch's shape (for the shield's mask, jaxexo.env.shield, and the environment's step:
+    docs/benchmarks.md#training). The outline comes vertex-major, ``vy``, ``vz`` (K, ...)
+    broadcasting against the heels' (...,): a vertex row is then contiguous, where column k of a
+    (..., K, 2) array is a slower strided access (docs/decisions.md). Under JAX the vertices are a
+    ``fori_loop`` (a few unrolled per iteration: most of the speed of a full unroll at a fraction of
+    its compile time)."""
     vy, vz = xp.asarray(vy), xp.asarray(vz)   # indexed by the loop's counter
     (py, pz), (ay, az, uy, uz, inv_u), inside = _parallelogram(xp, h0, h1, foot_length)
 

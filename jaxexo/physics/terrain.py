@@ -331,8 +331,9 @@ def to_obstacle(outline: np.ndarray, center_y: float) -> geometry.Obstacle:
 # --------------------------------------------------------------------------------------------
 
 # m between the toe at the start and the obstacle's near edge: above the safe-swing margin
-# (env.min_clearance, 2 cm by default) with 5 mm to spare. The swing starts from this stance pose, so at
-# exactly 2 cm a scene sat on the safety boundary and its verdict was decided by float rounding.
+# (env.min_clearance, 2 cm by default) with 5 mm to spare. The swing starts from this stance pose,
+# so at exactly the margin a scene would sit on the safety boundary, its verdict decided by float
+# rounding.
 NEAR_MARGIN = 0.025
 FAR_MARGIN = 0.06    # m between the obstacle's far edge and the goal (> the goal box's 0.04 half width)
 

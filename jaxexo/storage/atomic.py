@@ -14,8 +14,7 @@ written); ``append_line`` opens with O_NOFOLLOW and refuses a link (SymlinkRefus
 Special outputs (the one rule for every writer: exports, reports, figures, GIFs): ``-`` is standard
 output; an existing path that is not a regular file (a device such as /dev/null, a FIFO, a socket)
 or a link to a file descriptor (``/dev/stdout``, ``/proc/self/fd/1``) is written into directly, as
-GNU tools do. Write-by-rename would replace the node itself by a regular file (it once replaced a
-machine's /dev/null).
+GNU tools do. Write-by-rename would replace the node itself by a regular file (docs/reliability.md).
 """
 
 from __future__ import annotations

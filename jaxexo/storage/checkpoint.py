@@ -4,7 +4,7 @@
 followed by the payload (flax's msgpack of the training state; jaxexo.train.driver). A flipped bit, a
 truncated or empty file, a random file, or a file from an older jaxexo (no header) is refused with
 a CheckpointError naming the file, before any byte of the payload is decoded: a corrupt checkpoint
-must never resume silently (it once exported a weight of 1.6e38). NumPy-free, JAX-free.
+must never resume silently (docs/reliability.md). NumPy-free, JAX-free.
 """
 
 from __future__ import annotations

@@ -24,7 +24,8 @@ from jaxexo.config import Config, ConfigError, num_updates
 from jaxexo.physics.dynamics import NUM_ACTIONS, obs_dim as _obs_dim  # one definition each
 from jaxexo.sweep.spec import Sweep
 
-# About this many env steps per chunk (a minute or so at ~1 M env-steps/s).
+# About this many env steps per chunk (a minute or so at the sweep program's throughput,
+# docs/benchmarks.md#sweeps).
 CHUNK_ENV_STEPS = 64_000_000
 # Outline edges and reward terms make the environment step's temporaries about this many floats per
 # environment and outline vertex, plus a constant (measured from XLA's buffer assignment, rounded up).

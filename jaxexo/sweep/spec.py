@@ -361,7 +361,7 @@ def _value_key(v: Any):
 
 def _check_size(axes, samples: int) -> None:
     """Refuse a sweep of more than MAX_CONFIGURATIONS configurations, counted from its axes before
-    any is built (a grid of 1000 x 1000 values was checked for minutes without a word)."""
+    any is built (building a huge grid's configurations takes minutes: docs/reliability.md)."""
     sizes = [len(a.values) for a in axes if a.kind == "grid"]
     if any(a.kind == "random" for a in axes):
         sizes.append(samples)

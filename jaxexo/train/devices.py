@@ -33,8 +33,8 @@ def use_all_cpu_cores(count: int | None = None) -> int:
 
 
 CACHE_ENV = "JAXEXO_COMPILATION_CACHE"
-# Compiled programs are small (the default model's four: about 2 MB); the cap only stops a long
-# history of sweeps filling the disk (JAX evicts the least recently used entries beyond it).
+# Compiled programs are small (docs/training.md); the cap only stops a long history of sweeps
+# filling the disk (JAX evicts the least recently used entries beyond it).
 CACHE_MAX_BYTES = 1 << 30
 
 
@@ -57,9 +57,9 @@ def _cache_folder_problem(path: str) -> str | None:
 def use_compilation_cache() -> str | None:
     """Keep compiled programs on disk (JAX's persistent compilation cache), so that a later run with
     the same static settings (any seed, any pytree-leaf hyperparameter: learning rate, gamma, reward
-    weights...) loads its training, validation and evaluation programs instead of compiling them:
-    about 25 s of the default model's minute on the 2-core machine. A loaded program is the compiled
-    program itself, so results are bit for bit those of a run that compiled.
+    weights...) loads its training, validation and evaluation programs instead of compiling them
+    (what that saves: docs/training.md). A loaded program is the compiled program itself, so results
+    are bit for bit those of a run that compiled.
 
     The directory: ``$JAXEXO_COMPILATION_CACHE`` ("off" disables it), else JAX's own setting
     (``JAX_COMPILATION_CACHE_DIR``), else ``$XDG_CACHE_HOME/jaxexo/xla`` (``~/.cache/jaxexo/xla``).

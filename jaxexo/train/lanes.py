@@ -9,8 +9,8 @@ in a batch whose shape depends on who else is in the program: every device runs 
 a time, ``lax.map`` over fixed ``vmap(LANES)`` blocks (padded with copies of the first agent, whose
 results are dropped). An agent's arithmetic is then the same in a population of any size and in a
 sweep chunk of any size (tests/test_population.py checks it bit for bit), and on any device count from
-two up (measured on 2 and 4; a program over a single device is compiled without partitioning and
-differs in the last bits, so populations use at least two devices where there are two).
+two up (a program over a single device is compiled without partitioning and differs in the last
+bits, so populations use at least two devices where there are two; docs/training.md).
 """
 
 from __future__ import annotations
@@ -18,11 +18,9 @@ from __future__ import annotations
 import jax
 import numpy as np
 
-# Agents per vmapped block: fixed, so that an agent's arithmetic never depends on
-# how many agents share its program. Two: a chunk of thesis (b) learns on one core took 0.97 s for one
-# unbatched agent, 1.54 s for a block of two and 2.26 s for a block of four (measured while choosing,
-# on the shared machine): two buys most of the batching gain while a lone member (a population of one,
-# a sweep's last odd agent) pays for one padding lane, not three.
+# Agents per vmapped block: fixed, so that an agent's arithmetic never depends on how many agents
+# share its program. Two buys most of the batching gain while a lone member (a population of one, a
+# sweep's last odd agent) pays for one padding lane, not three (measured: docs/training.md).
 LANES = 2
 
 

@@ -12,9 +12,9 @@ from jaxexo.physics.dynamics import NUM_ACTIONS
 
 # Inputs this narrow (the thesis observation: heel y, z) enter the first layer as a sum of scaled rows
 # of its kernel instead of a matrix product: the same arithmetic, but its gradient becomes a fused
-# elementwise reduction. XLA's CPU dot for that gradient (a contraction over the whole minibatch into
-# a 2 x 64 kernel) ran about 30 times slower per multiply than the other layers' and took about 8 %
-# of a trainer update.
+# elementwise reduction, where XLA's CPU dot for that gradient (a contraction over the whole
+# minibatch into a 2 x 64 kernel) is far slower per multiply than the other layers'
+# (docs/decisions.md).
 NARROW_INPUT = 4
 
 
