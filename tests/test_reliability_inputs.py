@@ -275,6 +275,21 @@ def test_policy_config_must_be_complete_and_agree_with_the_metadata(tmp_path, ch
         TrajectoryGenerator.load(path)
 
 
+def test_a_policy_trained_before_the_floor_rule_loads_without_it(tmp_path):
+    """A file written before env.floor_clearance existed (its config lacks the line) reads 0: the
+    shield it was trained with; a file of today states it and keeps it."""
+    from jaxexo.config import Config
+    from jaxexo.config.toml_io import config_to_toml
+    from jaxexo.inference import TrajectoryGenerator
+
+    text = config_to_toml(Config())
+    assert "floor_clearance = 0.02\n" in text
+    old = make_policy(tmp_path / "old.npz", cfg=Config(), config_toml=text.replace("floor_clearance = 0.02\n", ""))
+    assert TrajectoryGenerator.load(old).config.env.floor_clearance == 0.0
+    new = make_policy(tmp_path / "new.npz", cfg=Config())
+    assert TrajectoryGenerator.load(new).config.env.floor_clearance == 0.02
+
+
 # --------------------------------------------------------------------------------------------
 # The Python API: types checked, sizes bounded, raw errors replaced by ones naming the argument
 # --------------------------------------------------------------------------------------------

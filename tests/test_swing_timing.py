@@ -88,6 +88,25 @@ def test_limits_hold_on_random_paths_and_ends_rest():
             assert sw.slowdown < (1.25 if rate == 100 else 1.6)
 
 
+def test_the_safety_net_slows_by_whole_control_periods():
+    """Samples span whole control periods, so a uniform slow-down of less than one period exports the
+    same samples again: the net must add at least a period. The recorded swing (tests/data) came out
+    of the TOPP passes 0.13 % over the hip's acceleration limit at 100 Hz, and was left flagged not
+    within the limits when the net's slow-downs stayed inside one period."""
+    rec = json.loads((ROOT / "tests" / "data" / "stuck_swing.json").read_text())
+    scene = dynamics.make_scene(Obstacle.profile(rec["obstacle_outline"]), rec["pivot_y"], rec["start_y"],
+                                rec["goal_y"] - rec["start_y"], foot_length=SP.foot_length)
+    heel = np.asarray(rec["heel"])
+    traj = assemble("rl", SP, [scene], [heel], heel[None], [float("nan")], deviation=np.array([rec["deviation"]]))[0]
+    planned = DeviceLimits.from_config(CFG).planned()
+    sw = time_swing(traj, CFG, rate=100.0)
+    v, a = fd(sw.joint_angles, 100.0)
+    assert sw.within_limits and sw.slowdown > 1.0
+    assert np.all(np.abs(v) <= planned.velocity) and np.all(np.abs(a) <= planned.acceleration)
+    assert np.all(np.abs(np.diff(a, axis=0) * 100.0) <= planned.jerk)
+    assert np.all(np.abs(sw.joint_acceleration) <= planned.acceleration)
+
+
 def test_limits_hold_on_polylines_with_corners():
     # The generator's last fallback is the raw polyline: corners in joint space, where the law must
     # nearly stop; the exported samples are held within the limits all the same.

@@ -241,7 +241,7 @@ class TrainConfig:
     fields of ``jaxexo.train.Hyperparams`` (sweeps). The budgets are leaves too, but the number of
     updates they need (num_updates) is static: it is the length of the scan."""
 
-    num_envs: int = declare(1024, number(positive=True, integer=True, hi=2**24), unit="envs", role="static")
+    num_envs: int = declare(512, number(positive=True, integer=True, hi=2**24), unit="envs", role="static")
     # T: steps per environment between updates
     rollout_steps: int = declare(16, number(positive=True, integer=True, hi=100_000), unit="steps", role="static")
     # forward view: gradient steps per epoch over the T x N batch
@@ -262,7 +262,7 @@ class TrainConfig:
     # stop after this many finished episodes (0: no limit)
     budget_episodes: int = declare(0, number(nonneg=True, integer=True, hi=INT32_MAX), unit="episodes")
     # stop after this many env steps (0: no limit)
-    budget_env_steps: int = declare(5_000_000, number(nonneg=True, integer=True, hi=2**40), unit="steps")
+    budget_env_steps: int = declare(1_500_000, number(nonneg=True, integer=True, hi=2**40), unit="steps")
     # updates per compiled chunk (progress, checkpoint); 0: auto
     chunk_updates: int = declare(0, number(nonneg=True, integer=True, hi=INT32_MAX), unit="updates", role="setting")
     # Agents of this config trained together as one compiled program (seeds seed .. seed + K - 1), the one
@@ -272,7 +272,7 @@ class TrainConfig:
     population: int = declare(2, number(positive=True, integer=True, hi=4096), unit="agents", role="setting")
     eval_episodes: int = declare(1000, number(positive=True, integer=True, hi=10_000_000), unit="episodes",
                                  role="static")
-    lr: float = declare(3e-4, number(positive=True))
+    lr: float = declare(1e-3, number(positive=True))
     # linear decay of the learning rate to lr * this at the budget's end
     lr_end_fraction: float = declare(0.1, fraction())
     gamma: float = declare(0.98, fraction())

@@ -338,7 +338,11 @@ def time_swings(trajs, config, rate: float | None = None, limits: DeviceLimits |
                 # Never slower than the longest swing a config may ask for: a path no slow-down helps
                 # (a jump in the joints, a heel out of reach) ends there, not within the limits.
                 longest = max(1.0, MAX_SWING_DURATION / laws[i].duration)
-                slowed = min(slow[i] * e["ratio"] / (1.0 - 2.0 * CHECK_MARGIN), longest)
+                # at least one control period more: the samples span whole periods, so a smaller
+                # slow-down would export the same samples again
+                base = laws[i].duration * max(1.0, limits.min_duration / laws[i].duration)
+                one_more = (e["t"][-1] + 1.0 / rate) / base
+                slowed = min(max(slow[i] * e["ratio"] / (1.0 - 2.0 * CHECK_MARGIN), one_more), longest)
                 if slowed == slow[i]:
                     stuck.add(i)
                 slow[i] = slowed

@@ -182,6 +182,12 @@ def _check_archive(data: bytes, path: Path) -> None:
         raise PolicyFileError(f"{path}: not a readable jaxexo policy (truncated or corrupt: {e})") from None
 
 
+# Fields declared after policies had been trained, with the value that means what those policies were
+# trained with: a file that lacks one reads it (env.floor_clearance: 0, the shield without the floor
+# rule).
+FORMER_MEANING = {("env", "floor_clearance"): 0.0}
+
+
 def policy_config(meta: dict, path):
     """The policy's training config from ``metadata.config_toml``: the complete resolved config that
     ``jaxexo train`` writes (every field stated, so that no default fills a gap), agreeing with every
@@ -206,6 +212,8 @@ def policy_config(meta: dict, path):
                 # a setting added after a policy was trained takes its default.
                 if section == "device" and spec.role == "setting":
                     continue
+                if (section, name) in FORMER_MEANING and isinstance(raw.get(section), dict):
+                    raw[section].setdefault(name, FORMER_MEANING[section, name])
                 if not isinstance(raw.get(section), dict) or name not in raw[section]:
                     raise ConfigError(f"{section}.{name} is not stated: not the resolved training config that "
                                       "this jaxexo's train writes (a policy trained by an older jaxexo, before "
