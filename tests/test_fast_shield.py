@@ -105,7 +105,7 @@ def test_fast_rollouts_take_the_references_actions(layer_norm):
     for x, y, u, v in zip(fb, rb, ab, rab):
         np.testing.assert_array_equal(u, v)
         np.testing.assert_array_equal(x, y)
-    assert gen.shield_stats[3] > 0          # some rows needed the full mask
+    assert gen.shield_stats.rows_to_full_mask > 0          # some rows needed the full mask
     steps = 0
     for scene in scenes[::8] + scenes[1::40]:
         pf, af = gen.rollout(scene)
@@ -114,7 +114,8 @@ def test_fast_rollouts_take_the_references_actions(layer_norm):
         np.testing.assert_array_equal(pf, pr)
         steps += len(af)
     assert steps > 3000
-    assert 0 < gen.shield_stats[1] < 0.2 * gen.shield_stats[0]     # steps left to the full mask
+    stats = gen.shield_stats
+    assert 0 < stats.steps_to_full_mask < 0.2 * stats.steps     # steps left to the full mask
 
 
 @pytest.mark.slow

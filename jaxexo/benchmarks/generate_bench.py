@@ -239,9 +239,10 @@ def run_generate_benchmark(policy: str | Path, out_dir, n: int = 1000, progress=
     for which in SETS:
         scenarios = scene_sets[which]
         gens = {"rl": WithFallback(gen, None), "cfftg": cf}
-        before = list(gen.shield_stats)
+        stats = gen.shield_stats
+        before = (stats.steps, stats.steps_to_full_mask)
         passes = [alternate(gens, scenarios) for _ in range(3)]
-        steps = [a - b for a, b in zip(gen.shield_stats, before)]
+        steps = (stats.steps - before[0], stats.steps_to_full_mask - before[1])
         single = {k: np.median([p[k][1] for p in passes], axis=0) for k in gens}
         cpu = {k: np.median([p[k][2] for p in passes], axis=0) for k in gens}
         ref = run_generators({"rl": WithFallback(gen, None), "rl_reference": _Reference()}, scenarios[: max(1, n // 4)])

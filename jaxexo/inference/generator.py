@@ -33,7 +33,7 @@ from jaxexo.inference.network import FoldedQNetwork, StepNetwork
 from jaxexo.inference.options import check_fallback, check_flag, check_options, scene_for, scenes_for
 from jaxexo.inference.policy_check import load_checked
 from jaxexo.inference.shield import ScalarShield
-from jaxexo.inference.shield_rows import ShieldRows, take_rows
+from jaxexo.inference.shield_rows import ShieldRows, ShieldStats, take_rows
 from jaxexo.inference.trajectory import DEFAULT_DURATION, Trajectory, TrajectoryBatch, TrajectoryError
 from jaxexo.storage.policy_file import QPolicy
 
@@ -72,9 +72,7 @@ class TrajectoryGenerator:
         self.smoothing = model_smoothing(config.env.shield_clearance, config.env.min_clearance, self.shield,
                                          config.env.step_size)
         self._rng = None
-        # single-swing shield steps: [decided by jaxexo.inference.shield, handed to the full mask]
-        # and batch rows: [rows, rows whose best forward move was not admissible (full mask)]
-        self.shield_stats = [0, 0, 0, 0]
+        self.shield_stats = ShieldStats()     # the fast shield's steps, and those it could not decide
 
     def exploring(self, epsilon: float, seed: int = 0) -> "TrajectoryGenerator":
         """A copy that acts epsilon-greedily (thesis 2.6 tests that way): each step a uniformly
@@ -158,8 +156,8 @@ class TrajectoryGenerator:
                     mask = rows.admissible(np.array([hy], np.float32), np.array([hz], np.float32), one,
                                            last=np.array([last]))[0]
                     a = int(dynamics.greedy_action(np, q, mask))
-                    self.shield_stats[1] += 1
-                self.shield_stats[0] += 1
+                    self.shield_stats.steps_to_full_mask += 1
+                self.shield_stats.steps += 1
             elif self.shield:
                 mask = rows.admissible(np.array([hy], np.float32), np.array([hz], np.float32), one,
                                        last=np.array([last]))[0]
