@@ -152,17 +152,17 @@ def _mixed_scenes(n, seed):
 
 
 def test_many_paths_corrected_together_equal_each_corrected_alone_and_the_reference():
-    """clear_rows (the paths' rounds together, fast clearances) against clear_rows(fast=False) (every
+    """clear_rows (the paths' rounds together, pruned clearances) against exact_clear_rows (every
     move's swept clearance exact: the same curves, bit for bit, since the shortfalls that steer the
     correction are the same numbers) and against each path corrected on its own (the same curve, bit
     for bit: the stacked products and the dual systems, solved at their own size, do the same
     arithmetic in any batch)."""
-    from jaxexo.inference.clearing import clear_rows
+    from jaxexo.inference.clearing import clear_rows, exact_clear_rows
 
     rows = _mixed_scenes(400, seed=11)
     outlines, raws = [o for o, _ in rows], [r for _, r in rows]
     fast = clear_rows(raws, outlines, FOOT, MARGIN)
-    ref = clear_rows(raws, outlines, FOOT, MARGIN, fast=False)
+    ref = exact_clear_rows(raws, outlines, FOOT, MARGIN)
     corrected = 0
     for (outline, raw), a, b in zip(rows, fast, ref):
         np.testing.assert_array_equal(a.path, b.path)

@@ -14,6 +14,7 @@ from jaxexo.config import load_config
 from jaxexo.physics import dynamics, scenarios
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.inference import smoothing as sm
+from jaxexo.inference.generator import plain_reference
 from jaxexo.inference.shield import ScalarShield
 from jaxexo.storage.policy_file import QPolicy
 from conftest import ROOT
@@ -100,32 +101,34 @@ def test_scalar_shield_picks_the_full_masks_greedy_move():
 @pytest.mark.slow
 @pytest.mark.parametrize("layer_norm", [False, True])
 def test_fast_rollouts_take_the_references_actions(layer_norm):
-    """One swing (``rollout``) and a batch (``rollout_batch``), fast against ``fast=False`` (the full
-    mask every step): the same actions and points, on the training distribution and the held-out
+    """One swing (``rollout``) and a batch (``rollout_batch``), fast against ``plain_reference`` (the
+    full mask every step): the same actions and points, on the training distribution and the held-out
     families."""
     gen = _random_generator(seed=2 if layer_norm else 4, layer_norm=layer_norm)
     sc, scenes = _scenes(gen, 1000, 1000)
     fb, ab = gen.rollout_batch(scenes)
-    rb, rab = gen.rollout_batch(scenes, fast=False)
+    plain = plain_reference(gen)
+    rb, rab = plain.rollout_batch(scenes)
     for x, y, u, v in zip(fb, rb, ab, rab):
         np.testing.assert_array_equal(u, v)
         np.testing.assert_array_equal(x, y)
-    assert gen.shield_stats[3] > 0          # some rows needed the full mask
+    assert gen.shield_stats.rows_to_full_mask > 0          # some rows needed the full mask
     steps = 0
     for scene in scenes[::8] + scenes[1::40]:
         pf, af = gen.rollout(scene)
-        pr, ar = gen.rollout(scene, fast=False)
+        pr, ar = plain.rollout(scene)
         np.testing.assert_array_equal(af, ar)
         np.testing.assert_array_equal(pf, pr)
         steps += len(af)
     assert steps > 3000
-    assert 0 < gen.shield_stats[1] < 0.2 * gen.shield_stats[0]     # steps left to the full mask
+    stats = gen.shield_stats
+    assert 0 < stats.steps_to_full_mask < 0.2 * stats.steps     # steps left to the full mask
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("clearing", [False, True])
 def test_fast_generation_with_candidate_smoothings_matches_the_reference(clearing):
-    """``generate`` and ``generate_batch`` against ``fast=False``: the same samples, checks, notes and
+    """``generate`` and ``generate_batch`` against ``plain_reference``: the same samples, checks, notes and
     smoothing; the per-path candidate smoothings occur (without the corrected spline, which comes
     first when on) or the corrected splines do, and each swing's curve is reproduced from its raw
     path: by smoothing it with its reported smoothing, or by the correction (jaxexo.inference.clearing)."""
@@ -137,7 +140,8 @@ def test_fast_generation_with_candidate_smoothings_matches_the_reference(clearin
     args = {k: [s[k] for s in sc] for k in ("obstacle", "pivot", "start_y", "step_length")}
     kw = {k: args[k] for k in ("pivot", "start_y", "step_length")}
     fast = gen.generate_batch(args["obstacle"], fallback=None, **kw)
-    ref = gen.generate_batch(args["obstacle"], fallback=None, fast=False, **kw)
+    plain = plain_reference(gen)
+    ref = plain.generate_batch(args["obstacle"], fallback=None, **kw)
     for a, b in zip(fast, ref):
         _same(a, b)
     marker = "jaxexo.inference.clearing" if clearing else "per-path candidate"
@@ -145,7 +149,7 @@ def test_fast_generation_with_candidate_smoothings_matches_the_reference(clearin
     for s in sc[::7]:
         one = {k: s[k] for k in ("pivot", "start_y", "step_length")}
         a = gen.generate(s["obstacle"], fallback=None, **one)
-        _same(a, gen.generate(s["obstacle"], fallback=None, fast=False, **one))
+        _same(a, plain.generate(s["obstacle"], fallback=None, **one))
         if any("jaxexo.inference.clearing" in n for n in a.notes):
             again = clear_smooth(a.raw, a.scene.outline, gen.sp.foot_length, gen.sp.min_clearance, len(a.heel),
                                  a.smoothing)[0]
@@ -221,17 +225,17 @@ def test_a_swing_short_of_the_goal_is_not_retried_down_to_the_raw_polyline(clear
     down = [(0.48, z) for z in np.arange(0.20, -0.001, -0.03)] + [(0.48, 0.0)]
     whole = np.array([(0.0, 0.0), (0.06, 0.0)] + up + over + down + [(0.70, 0.0)])
     short = whole[: 2 + len(up) + len(over)]                    # stops on top of the obstacle
-    for fast in (True, False):
-        t = gen.finish([scene], [short], 100, 0.05, 1.0, None, fast=fast)[0]
+    for g in (gen, plain_reference(gen)):
+        t = g.finish([scene], [short], 100, 0.05, 1.0, None)[0]
         assert not t.ok and not t.checks.reached_goal and t.smoothing == 0.05
         assert not any("brought the foot" in n for n in t.notes)
-        w = gen.finish([scene], [whole], 100, 0.05, 1.0, None, fast=fast)[0]
+        w = g.finish([scene], [whole], 100, 0.05, 1.0, None)[0]
         assert w.checks.reached_goal and w.checks.clearance_ok
         if not clearing:
             assert np.isnan(w.smoothing) or w.smoothing < 0.05
             assert any("brought the foot" in n for n in w.notes)
     _same(gen.finish([scene], [short], 100, 0.05, 1.0, None)[0],
-          gen.finish([scene], [short], 100, 0.05, 1.0, None, fast=False)[0])
+          plain_reference(gen).finish([scene], [short], 100, 0.05, 1.0, None)[0])
     # in a batch too, beside a row that is retried
     b = gen.finish([scene, scene], [short, whole], 100, 0.05, 1.0, None)
     assert b[0].smoothing == 0.05 and not b[0].checks.reached_goal

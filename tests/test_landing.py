@@ -58,8 +58,8 @@ class _Walker:
 
     def install(self, monkeypatch):
         none = np.zeros(0, np.int64)
-        monkeypatch.setattr(self.gen, "rollout", lambda scene, fast=True: (self.raws([scene])[0], none))
-        monkeypatch.setattr(self.gen, "rollout_batch", lambda scenes, fast=True: (self.raws(scenes), [none] * len(scenes)))
+        monkeypatch.setattr(self.gen, "rollout", lambda scene: (self.raws([scene])[0], none))
+        monkeypatch.setattr(self.gen, "rollout_batch", lambda scenes: (self.raws(scenes), [none] * len(scenes)))
 
 
 def _scene_sets(n=40):

@@ -1,6 +1,6 @@
 """The generator's fast paths against the plain reference implementation: the swept
 check's pruning bound against the exact swept clearance, the pruned per-path minimum against the
-full one, and ``generate`` / ``generate_batch`` (fast) against ``fast=False`` on thousands of scenes."""
+full one, and ``generate`` / ``generate_batch`` (fast) against ``plain_reference`` on thousands of scenes."""
 
 from __future__ import annotations
 
@@ -85,15 +85,17 @@ def _same(a, b):
 @pytest.mark.slow
 def test_fast_generation_matches_the_reference_on_thousands_of_scenes(trained_run):
     from jaxexo.inference import TrajectoryGenerator
+    from jaxexo.inference.generator import plain_reference
     from jaxexo.inference.scenarios import sample_scenarios
 
     gen = TrajectoryGenerator.load(trained_run / "policy.npz")
+    plain = plain_reference(gen)
     sc = sample_scenarios(gen.config, 2000, seed=7)
     args = {k: [s[k] for s in sc] for k in ("obstacle", "pivot", "start_y", "step_length")}
     fast = gen.generate_batch(args["obstacle"], pivot=args["pivot"], start_y=args["start_y"],
                               step_length=args["step_length"])
-    ref = gen.generate_batch(args["obstacle"], pivot=args["pivot"], start_y=args["start_y"],
-                             step_length=args["step_length"], fast=False)
+    ref = plain.generate_batch(args["obstacle"], pivot=args["pivot"], start_y=args["start_y"],
+                               step_length=args["step_length"])
     assert len(fast) == len(ref) == 2000
     for a, b in zip(fast, ref):
         _same(a, b)
@@ -103,7 +105,7 @@ def test_fast_generation_matches_the_reference_on_thousands_of_scenes(trained_ru
         for s in sc[:1000]:
             kw = {k: s[k] for k in ("pivot", "start_y", "step_length")}
             _same(gen.generate(s["obstacle"], fallback=fallback, **kw),
-                  gen.generate(s["obstacle"], fallback=fallback, fast=False, **kw))
+                  plain.generate(s["obstacle"], fallback=fallback, **kw))
 
 
 def test_pruned_point_clearances_keep_the_exact_minimum():

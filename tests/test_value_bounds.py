@@ -85,7 +85,7 @@ def test_the_shortest_accepted_swing_has_distinct_time_stamps():
     assert len(set(times)) == MIN_POINTS and times[-1] == pytest.approx(MIN_DURATION)
 
 
-@pytest.mark.parametrize("flag, value", [("strict", "yes"), ("fast", "no"), ("strict", 1)])
+@pytest.mark.parametrize("flag, value", [("strict", "yes"), ("strict", "no"), ("strict", 1)])
 def test_flags_are_booleans_only(generator, flag, value):
     with pytest.raises(TypeError, match=f"{flag}: expected True or False"):
         generator.generate(Obstacle.named("base1"), **{flag: value})
@@ -98,6 +98,42 @@ def test_cfftg_strict_is_a_boolean_only():
 
     with pytest.raises(TypeError, match="strict: expected True or False"):
         CFFTG(None).generate(Obstacle.named("base1"), strict="yes")
+
+
+def test_options_are_one_checked_record(generator):
+    """GenerateOptions is checked when made (the error names the field) and frozen; ``generate`` takes
+    it whole, its keywords replace fields, and a keyword that is no option (``fast``, the reference
+    switch that is no longer public) is named; CFFTG takes the fields it has."""
+    import dataclasses
+
+    from jaxexo.baselines import CFFTG
+    from jaxexo.inference import GenerateOptions, SwingOptions
+
+    with pytest.raises(ValueError, match="^n_points must be an integer"):
+        GenerateOptions(n_points=5)
+    with pytest.raises(ValueError, match="^smoothing must be >= 0"):
+        GenerateOptions(smoothing=-1.0)
+    with pytest.raises(ValueError, match="^fallback must be 'cfftg' or None"):
+        GenerateOptions(fallback="rl")
+    assert GenerateOptions(fallback="none").fallback is None          # as the command line spells it
+    o = GenerateOptions(pivot="between", fallback=None, n_points=60)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        o.n_points = 70
+    ob = Obstacle.named("base1")
+    a = generator.generate(ob, o)
+    b = generator.generate(ob, pivot="between", fallback=None, n_points=60)
+    assert a.heel.shape == (60, 2) and (a.heel == b.heel).all() and a.checks == b.checks
+    assert generator.generate(ob, o, n_points=80).heel.shape == (80, 2)     # a keyword replaces a field
+    for call in (generator.generate, generator.generate_batch):
+        arg = ob if call == generator.generate else [ob]
+        with pytest.raises(TypeError, match=r"^fast: not an option of generate(_batch)? \(options: pivot, "):
+            call(arg, fast=False)
+        with pytest.raises(TypeError, match="^options: expected GenerateOptions, got dict"):
+            call(arg, {"n_points": 60})
+    cf = CFFTG(generator.config)
+    with pytest.raises(TypeError, match=r"^fallback: not an option of CFFTG.generate \(options: "):
+        cf.generate(ob, fallback=None)
+    assert (cf.generate(ob, o).heel == cf.generate(ob, SwingOptions(pivot="between", n_points=60)).heel).all()
 
 
 # --------------------------------------------------------------------------------------------

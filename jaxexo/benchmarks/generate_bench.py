@@ -2,7 +2,7 @@
 process, on the same scenes: one swing (rollout, smoothing, every safe-swing check, kinematics, joint
 angles), RL alone (``fallback=None``), RL and CFFTG alternating per scene, on the held-out families
 (jaxexo.evaluation.unseen) and on the safety scenes (jaxexo.inference.scenarios.safety_scenarios);
-the plain reference implementation (``fast=False``) on a quarter of them, so that the speed-up
+the plain reference implementation (``plain_reference``) on a quarter of them, so that the speed-up
 shows; how RL swings were smoothed (one pass, retries, raw polyline) and how many are safe; a batch
 of 1000 held-out scenes (RL and CFFTG alternating) with the default BLAS threads and with
 single-threaded BLAS (``generate_batch`` runs its BLAS on one thread, jaxexo.inference.blas; the
@@ -219,10 +219,11 @@ def smoothing_counts(trajs) -> dict:
 
 def run_generate_benchmark(policy: str | Path, out_dir, n: int = 1000, progress=print) -> dict:
     """One swing (``generate``, RL alone: ``fallback=None``) RL and CFFTG alternating per scene on the
-    held-out families and on the safety scenes (and the plain reference, ``fast=False``, on a
+    held-out families and on the safety scenes (and the plain reference, ``plain_reference``, on a
     quarter of them); batches of 1000 with default and single-threaded BLAS; smoothing counts; the
     cold import."""
     from jaxexo.inference.cfftg import CFFTG
+    from jaxexo.inference.generator import plain_reference
     from jaxexo.evaluation.compare import WithFallback, run_generators
     from jaxexo.evaluation.machine import write_result
 
@@ -230,21 +231,19 @@ def run_generate_benchmark(policy: str | Path, out_dir, n: int = 1000, progress=
     gen = TrajectoryGenerator.load(policy)
     cf = CFFTG(gen.config)
 
-    class _Reference:      # the plain reference path, timed like the others
-        def generate(self, obstacle, **kw):
-            return gen.generate(obstacle, fast=False, fallback=None, **kw)
-
     sets = {}
     scene_sets = {which: scene_set(gen.config, which, n) for which in SETS}
     for which in SETS:
         scenarios = scene_sets[which]
         gens = {"rl": WithFallback(gen, None), "cfftg": cf}
-        before = list(gen.shield_stats)
+        stats = gen.shield_stats
+        before = (stats.steps, stats.steps_to_full_mask)
         passes = [alternate(gens, scenarios) for _ in range(3)]
-        steps = [a - b for a, b in zip(gen.shield_stats, before)]
+        steps = (stats.steps - before[0], stats.steps_to_full_mask - before[1])
         single = {k: np.median([p[k][1] for p in passes], axis=0) for k in gens}
         cpu = {k: np.median([p[k][2] for p in passes], axis=0) for k in gens}
-        ref = run_generators({"rl": WithFallback(gen, None), "rl_reference": _Reference()}, scenarios[: max(1, n // 4)])
+        plain = WithFallback(plain_reference(gen), None)
+        ref = run_generators({"rl": WithFallback(gen, None), "rl_reference": plain}, scenarios[: max(1, n // 4)])
         trajs = passes[-1]["rl"][0]
         sets[which] = {
             "n": len(scenarios),
@@ -299,7 +298,7 @@ def run_generate_benchmark(policy: str | Path, out_dir, n: int = 1000, progress=
         row("one swing, CFFTG median", lambda d: f"{d['single_ms']['cfftg']['median']:.3f} ms"),
         row("one swing, RL mean / p95",
             lambda d: f"{d['single_ms']['rl']['mean']:.3f} / {d['single_ms']['rl']['p95']:.3f} ms"),
-        row("one swing, plain reference (`fast=False`) vs fast, median (first quarter of the scenes)",
+        row("one swing, plain reference (`plain_reference`) vs fast, median (first quarter of the scenes)",
             lambda d: f"{d['reference_ms']['rl_reference']['median']:.3f} vs {d['reference_ms']['rl']['median']:.3f} ms"),
         row("RL swings smoothed in one pass (no retry)", lambda d: f"{d['smoothing']['smoothed_once']:.1%} "
             f"({miss(d['smoothing']['smoothed_once'] >= 0.99)})", ">= 99 %"),

@@ -21,7 +21,7 @@ def scene_options(s: dict) -> dict:
 
 def time_batch(gen: TrajectoryGenerator, scenarios: list[dict], repeats: int = 5, **options):
     """Seconds per ``generate_batch`` of all scenarios (one per repeat), and the last batch;
-    ``options`` go to generate_batch (e.g. ``fast=False``)."""
+    ``options`` go to generate_batch (e.g. ``fallback=None``)."""
     args = {k: [s[k] for s in scenarios] for k in ("obstacle", "pivot", "start_y", "step_length")}
     out = []
     for _ in range(repeats):

@@ -8,12 +8,16 @@ import fast), so it runs on an exoskeleton's own computer::
     traj = gen.generate(Obstacle.named("triangle"), pivot="obstacle", start_y=0.0, step_length=0.70)
     traj.heel, traj.joint_angles, traj.checks.ok
 
+The keywords are the fields of one checked record, ``GenerateOptions``, which may also be passed
+whole: ``gen.generate(obstacle, GenerateOptions(pivot="between", fallback=None))``.
+
 Units: metres, radians, seconds.
 """
 
 from jaxexo.physics.dynamics import Scene
 from jaxexo.physics.geometry import Obstacle
 from jaxexo.inference.generator import TrajectoryGenerator
+from jaxexo.inference.options import GenerateOptions, SwingOptions
 from jaxexo.inference.export import CSV_COLUMNS, JOINT_NAMES
 from jaxexo.inference.trajectory import (
     Trajectory,
@@ -38,7 +42,8 @@ def __getattr__(name):
         return getattr(importlib.import_module(f"jaxexo.inference.{_LAZY[name]}"), name)
     raise AttributeError(f"module 'jaxexo.inference' has no attribute {name!r}")
 
-__all__ = ["TrajectoryGenerator", "Trajectory", "TrajectoryBatch", "TrajectoryChecks", "TrajectoryError",
+__all__ = ["TrajectoryGenerator", "GenerateOptions", "SwingOptions",
+           "Trajectory", "TrajectoryBatch", "TrajectoryChecks", "TrajectoryError",
            "Obstacle", "Scene", "PolicyFileError", "assemble", "CSV_COLUMNS", "JOINT_NAMES",
            "DeviceLimits", "TimedSwing", "time_swing", "time_swings", "plan_course", "Course", "CourseError",
            "footholds", "Terrain", "read_terrain"]

@@ -59,10 +59,9 @@ import numpy as np
 from jaxexo.physics import dynamics, geometry
 from jaxexo.physics.dynamics import DEFAULT_START_Y, DEFAULT_STEP_LENGTH
 from jaxexo.config import Config, load_config, scalar_params
-from jaxexo.inference.options import check_flag, check_options, scene_for, scenes_for
+from jaxexo.inference.options import SwingOptions, scene_for, scenes_for
 from jaxexo.inference.policy_check import load_checked
-from jaxexo.inference.trajectory import (DEFAULT_DURATION, Trajectory, TrajectoryBatch, TrajectoryError, assemble,
-                                         measure_paths)
+from jaxexo.inference.trajectory import Trajectory, TrajectoryBatch, assemble, measure_paths
 
 DEFAULT_POINTS = 100
 C_MAX = 10.0          # |c| bound for a monotone y(s)
@@ -269,37 +268,22 @@ class CFFTG:
         return assemble(self.method, self.sp, scenes, list(via), paths, np.zeros(len(scenes)), duration, notes,
                         measured=checks)
 
-    def generate(self, obstacle: geometry.Obstacle, *, pivot: str | float | None = None, pivot_y: float | None = None,
-                 start_y: float = DEFAULT_START_Y, step_length: float = DEFAULT_STEP_LENGTH,
-                 n_points: int = DEFAULT_POINTS,
-                 duration: float = DEFAULT_DURATION, strict: bool = False,
-                 clearance: float | None = None) -> Trajectory:
-        """One checked trajectory (metres, radians, seconds); ``strict`` raises TrajectoryError instead
-        of returning one that fails a check; ``clearance`` (m) the margin to keep (``at_clearance``)."""
-        n_points, duration = _check_options(n_points, duration)
-        strict = check_flag(strict, "strict")
-        scene = self.scene(obstacle, pivot, pivot_y, start_y, step_length)
-        traj = self.at_clearance(clearance).finish([scene], n_points, duration)[0]
-        if strict and not traj.ok:
-            raise TrajectoryError(traj)
-        return traj
+    def generate(self, obstacle: geometry.Obstacle, options: SwingOptions | None = None,
+                 **overrides) -> Trajectory:
+        """One checked trajectory (metres, radians, seconds) for ``options``
+        (jaxexo.inference.options.SwingOptions; a GenerateOptions lends the fields CFFTG has), whose
+        fields the keywords replace; ``strict`` raises TrajectoryError instead of returning one that
+        fails a check; ``clearance`` (m) the margin to keep (``at_clearance``)."""
+        o = SwingOptions.given(options, overrides, "CFFTG.generate")
+        scene = self.scene(obstacle, *o.scene_args)
+        return o.checked(self.at_clearance(o.clearance).finish([scene], o.n_points, o.duration)[0])
 
-    def generate_batch(self, obstacles, *, pivot=None, pivot_y=None, start_y=DEFAULT_START_Y,
-                       step_length=DEFAULT_STEP_LENGTH,
-                       n_points: int = DEFAULT_POINTS, duration: float = DEFAULT_DURATION,
-                       strict: bool = False, clearance: float | None = None) -> TrajectoryBatch:
-        """Trajectories for many scenarios, vectorised; every option is one value or one per obstacle
-        (``clearance`` one value, as in ``generate``)."""
-        n_points, duration = _check_options(n_points, duration)
-        strict = check_flag(strict, "strict")
-        scenes = self.scenes(obstacles, pivot, pivot_y, start_y, step_length)
-        batch = self.at_clearance(clearance).finish(scenes, n_points, duration)
-        if strict and not batch.ok.all():
-            raise TrajectoryError(batch[int(np.argmin(batch.ok))])
-        return batch
-
-    def scenes(self, obstacles, pivot=None, pivot_y=None, start_y=DEFAULT_START_Y, step_length=DEFAULT_STEP_LENGTH):
-        return scenes_for(self.scene, obstacles, pivot, pivot_y, start_y, step_length)
+    def generate_batch(self, obstacles, options: SwingOptions | None = None, **overrides) -> TrajectoryBatch:
+        """Trajectories for many scenarios, vectorised, with ``generate``'s options; each scene field
+        (pivot, pivot_y, start_y, step_length) is one value or one per obstacle."""
+        o = SwingOptions.given(options, overrides, "CFFTG.generate_batch")
+        scenes = scenes_for(self.scene, obstacles, o)
+        return o.checked(self.at_clearance(o.clearance).finish(scenes, o.n_points, o.duration))
 
 
 def _scatter(full: dict, part: dict, idx: np.ndarray) -> dict:
@@ -311,8 +295,3 @@ def _scatter(full: dict, part: dict, idx: np.ndarray) -> dict:
             full[k][idx] = v
     return full
 
-
-def _check_options(n_points, duration):
-    """The RL generator's option checks (n_points, duration); CFFTG has no smoothing."""
-    n_points, _, duration = check_options(n_points, 0.0, duration)
-    return n_points, duration

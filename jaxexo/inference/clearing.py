@@ -30,7 +30,7 @@ Speed: ``clear_rows`` corrects many paths at once, each path's arithmetic its ow
 same curve, bit for bit, in any batch as alone): the splines of one point count in stacked
 products, the exact clearances of all paths in one vectorised call per round and outline size,
 computed exactly only for the moves that can be under the margin's threshold or be the path's
-closest (``fast``; ``fast=False`` computes every move, the reference), and the dual systems in
+closest (``exact_clear_rows`` computes every move: the reference), and the dual systems in
 stacked Cholesky / LU solves of one size (lstsq's minimum-norm solution where a system is not
 safely positive definite). The last round's clearances of each curve come back with it
 (``Cleared``), so the generator's verdict does not measure the curve again, and the first round's
@@ -155,7 +155,7 @@ def _dual(a: np.ndarray, need: np.ndarray, valid: np.ndarray) -> np.ndarray:
     return mu
 
 
-# m added to the threshold below which clear_rows asks for exact move clearances (fast): a move
+# m added to the threshold below which clear_rows asks for exact move clearances: a move
 # reported at or above the padded threshold has a shortfall below zero however its value rounds.
 _BELOW_PAD = 1e-7
 
@@ -163,8 +163,8 @@ _BELOW_PAD = 1e-7
 class Cleared:
     """One path's correction (``clear_rows``): the curve ``path`` (n, 2), its deviation bound, the
     rounds of correction used, and the clearances its last round measured: ``point_clearance`` (n,)
-    and ``move_clearance`` (n-1,), each path's minimum and the move attaining it exact (fast: other
-    entries may be lower bounds above the minimum and above the margin; None for a path too short
+    and ``move_clearance`` (n-1,), each path's minimum and the move attaining it exact (clear_rows:
+    other entries may be lower bounds above the minimum and above the margin; None for a path too short
     for a spline, which is resampled, not corrected)."""
 
     __slots__ = ("path", "deviation", "rounds", "point_clearance", "move_clearance", "initial", "_coef", "_ends",
@@ -192,12 +192,11 @@ class Cleared:
 
 def clear_smooth(raw: np.ndarray, outline: np.ndarray, foot_length: float, margin: float,
                  n_points: int = sm.DEFAULT_POINTS, smoothing: float = sm.DEFAULT_SMOOTHING,
-                 dense_points: int | None = None, fast: bool = True):
+                 dense_points: int | None = None):
     """The smoothed heel path (n_points, 2) of a raw agent path, corrected to keep ``margin`` (m) from
     ``outline`` and to move forward; returns (path, deviation bound m, rounds of correction used), and
-    with ``dense_points`` also the same curve sampled at that many parameters (for a denser look).
-    ``fast``: see ``clear_rows`` (the same curve either way)."""
-    got = clear_rows([raw], [outline], foot_length, margin, n_points, smoothing, fast)[0]
+    with ``dense_points`` also the same curve sampled at that many parameters (for a denser look)."""
+    got = clear_rows([raw], [outline], foot_length, margin, n_points, smoothing)[0]
     if dense_points:
         return got.path, got.deviation, got.rounds, got.dense(int(dense_points))
     return got.path, got.deviation, got.rounds
@@ -238,16 +237,27 @@ class _Group:
 
 
 def clear_rows(raws, outlines, foot_length: float, margin: float, n_points: int = sm.DEFAULT_POINTS,
-               smoothing: float = sm.DEFAULT_SMOOTHING, fast: bool = True) -> list[Cleared]:
+               smoothing: float = sm.DEFAULT_SMOOTHING) -> list[Cleared]:
     """``clear_smooth`` of many raw paths (M_i, 2) on their outlines (K_i, 2): a ``Cleared`` per path.
 
     Each path's correction is its own; the arithmetic runs on all paths at once: the splines of the
     paths with the same point count in stacked products, the exact clearances in one vectorised call
-    per outline size, the dual systems in stacked solves (``_dual``). ``fast`` computes a move's
-    swept clearance exactly only where it can be under the threshold ``margin + SLACK + deviation``
-    or be the path's closest (jaxexo.physics.swept.path_clearance_pruned: the shortfalls that steer
-    the correction are the same numbers, and every other move is certainly above the threshold);
-    ``fast=False`` computes every move exactly (the reference). Both give the same curves."""
+    per outline size, the dual systems in stacked solves (``_dual``). A move's swept clearance is
+    computed exactly only where it can be under the threshold ``margin + SLACK + deviation`` or be
+    the path's closest (jaxexo.physics.swept.path_clearance_pruned: the shortfalls that steer the
+    correction are the same numbers, and every other move is certainly above the threshold)."""
+    return _clear_rows(raws, outlines, foot_length, margin, n_points, smoothing, exact=False)
+
+
+def exact_clear_rows(raws, outlines, foot_length: float, margin: float, n_points: int = sm.DEFAULT_POINTS,
+                     smoothing: float = sm.DEFAULT_SMOOTHING) -> list[Cleared]:
+    """``clear_rows`` with every move's clearance computed exactly: the reference it is tested against
+    (the same curves)."""
+    return _clear_rows(raws, outlines, foot_length, margin, n_points, smoothing, exact=True)
+
+
+def _clear_rows(raws, outlines, foot_length, margin, n_points, smoothing, exact: bool) -> list[Cleared]:
+    """``clear_rows``, every move exact where ``exact``."""
     _check(raws, outlines, foot_length, margin, n_points, smoothing)
     outlines = [np.asarray(o, np.float64) for o in outlines]
     res: list[Cleared | None] = [None] * len(raws)
@@ -287,7 +297,7 @@ def clear_rows(raws, outlines, foot_length: float, margin: float, n_points: int 
         out = np.concatenate([g.out for g in live])                      # (A, n, 2): every live row
         dev = np.concatenate([g.dev for g in live])
         row = np.concatenate([g.rows[g.alive] for g in live])
-        c, sw = _clearances(out, dev, row, lib, foot_length, margin, fast)
+        c, sw = _clearances(out, dev, row, lib, foot_length, margin, exact)
         if r == 0:
             initial = {int(i): (out[a], float(dev[a]), c[a], sw[a]) for a, i in enumerate(row)}
         short = margin + SLACK - (sw - dev[:, None])                      # (A, n-1)
@@ -309,9 +319,9 @@ def clear_rows(raws, outlines, foot_length: float, margin: float, n_points: int 
     return res
 
 
-def _clearances(out, dev, row, lib, foot_length, margin, fast):
+def _clearances(out, dev, row, lib, foot_length, margin, exact):
     """(point clearances (A, n), move clearances (A, n-1)) of the live rows' curves, one call per
-    outline size."""
+    outline size; pruned (``clear_rows``) unless ``exact``."""
     sizes, place, stacks = lib
     a, n = out.shape[:2]
     c = np.empty((a, n))
@@ -320,12 +330,12 @@ def _clearances(out, dev, row, lib, foot_length, margin, fast):
     for k in np.unique(rs):
         sel = np.flatnonzero(rs == k)
         ol = stacks[int(k)][place[row[sel]]]
-        if fast:
-            c[sel], sw[sel] = swept.path_clearance_pruned(out[sel], foot_length, ol,
-                                                          below=margin + SLACK + dev[sel] + _BELOW_PAD)
-        else:
+        if exact:
             c[sel] = geometry.foot_clearance(np, out[sel], foot_length, ol[:, None])
             sw[sel] = swept.path_swept_clearance(np, out[sel], foot_length, ol, c[sel])
+        else:
+            c[sel], sw[sel] = swept.path_clearance_pruned(out[sel], foot_length, ol,
+                                                          below=margin + SLACK + dev[sel] + _BELOW_PAD)
     return c, sw
 
 

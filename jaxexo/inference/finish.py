@@ -21,10 +21,11 @@ A retried curve is accepted with ACCEPT_HEADROOM to spare (``trajectory.passes``
 rule). ``Trajectory.smoothing`` and ``notes`` record what was used. A swing that ends short of the
 goal is not retried: every curve ends where its raw path does.
 
-``fast`` (default) measures each path's closest move exactly and bounds the others
+The finisher measures each path's closest move exactly and bounds the others
 (``trajectory.path_clearances``), checks many curves in one call and hands the chosen curve's
-clearances to ``assemble``; ``fast=False`` is the reference (every move exact, each curve measured
-afresh). Both choose the same curves and give the same trajectories (tests/test_speed.py).
+clearances to ``assemble``; ``PathFinisher(exact=True)`` is the plain reference (every move exact,
+each curve measured afresh). Both choose the same curves and give the same trajectories
+(tests/test_speed.py).
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ import numpy as np
 
 from jaxexo.physics import dynamics
 from jaxexo.inference import smoothing as sm, trajectory
-from jaxexo.inference.clearing import clear_rows
+from jaxexo.inference.clearing import clear_rows, exact_clear_rows
 from jaxexo.inference.trajectory import TrajectoryBatch, assemble
 
 # Per-path candidate smoothings: s = M * rho^2 for these rho (m), a root-mean-square residual of rho
@@ -94,17 +95,20 @@ def _candidate_note(smoothing, used):
 
 class PathFinisher:
     """Smooth, check and retry raw paths for the constants ``sp`` (jaxexo.config.scalar_params,
-    at the swing's clearance); ``clearing``: try the corrected spline (module docstring, step 1)."""
+    at the swing's clearance); ``clearing``: try the corrected spline (module docstring, step 1);
+    ``exact``: the plain reference (module docstring), which the fast path is tested against."""
 
-    def __init__(self, sp, clearing: bool = True):
-        self.sp, self.clearing = sp, clearing
+    def __init__(self, sp, clearing: bool = True, exact: bool = False):
+        self.sp, self.clearing, self.exact = sp, clearing, exact
+        self._clearances = trajectory.exact_path_clearances if exact else trajectory.path_clearances
+        self._clear_rows = exact_clear_rows if exact else clear_rows
 
-    def margin_ok(self, scenes, paths: np.ndarray, deviation, fast: bool = True, headroom: float = ACCEPT_HEADROOM,
+    def margin_ok(self, scenes, paths: np.ndarray, deviation, headroom: float = ACCEPT_HEADROOM,
                   with_clearances: bool = False):
         """``trajectory.passes`` of curves (B, N, 2) with deviation bounds (B,); with ``with_clearances``
         also their point and move clearances (``trajectory.path_clearances``, ``measure``'s inputs)."""
         deviation = np.asarray(deviation, np.float64)
-        c, sw = trajectory.path_clearances(self.sp.foot_length, paths, scenes, fast)
+        c, sw = self._clearances(self.sp.foot_length, paths, scenes)
         ok = trajectory.passes(self.sp, trajectory.lowest_clearance(c, sw), deviation,
                                trajectory.backward_bound(paths, deviation), headroom)
         return (ok, c, sw) if with_clearances else ok
@@ -121,23 +125,23 @@ class PathFinisher:
         rest, c_rest, sw_rest = self.margin_ok([scene] * (len(paths) - 1), paths[1:], dev[1:], with_clearances=True)
         return np.concatenate([ok, rest]), np.concatenate([c, c_rest]), np.concatenate([sw, sw_rest])
 
-    def _one_pass(self, scene, raw, n_points: int, smoothing: float, fast: bool = True):
+    def _one_pass(self, scene, raw, n_points: int, smoothing: float):
         """One swing's candidates smoothed together (smoothing.smooth_candidates); the first that passes
         is used (the requested smoothing when none does: the retries then follow), except that the
         requested spline corrected comes before the other candidates when the requested one fails.
-        ``fast`` checks the requested smoothing first (through the correction's first round, which
-        measures that very spline), then the correction, and the other candidates only when both
-        fail. Returns (paths (1, N, 2), deviations (1,), smoothings, notes, measured or None)."""
+        The fast path checks the requested smoothing first (through the correction's first round,
+        which measures that very spline), then the correction, and the other candidates only when
+        both fail. Returns (paths (1, N, 2), deviations (1,), smoothings, notes, measured or None)."""
         cands = candidates(raw, smoothing)
-        if fast and self.clearing:
+        if not self.exact and self.clearing:
             got = clear_rows([raw], [scene.outline], self.sp.foot_length, self.sp.min_clearance, n_points,
-                             smoothing, fast)[0]
+                             smoothing)[0]
             if got.initial is not None:
                 p0, d0, c0, sw0 = got.initial
                 if trajectory.passes(self.sp, sw0.min(), d0, trajectory.backward_bound(p0, d0), ACCEPT_HEADROOM):
                     return (p0[None], np.array([d0]), [cands[0]], [()],
                             self._measured(scene, p0[None], c0[None], sw0[None], np.array([d0])))
-                cleared = self._judge_cleared([scene], [0], [got], smoothing, fast)
+                cleared = self._judge_cleared([scene], [0], [got], smoothing)
                 if cleared:
                     path, used, note, d, clear = cleared[0][1]
                     return path[None], np.array([d]), [used], [note], self._measured(
@@ -149,10 +153,10 @@ class PathFinisher:
                 return (paths[j: j + 1], dev[j: j + 1], [cands[j]], notes,
                         self._measured(scene, paths[j: j + 1], c[j: j + 1], sw[j: j + 1], dev[j: j + 1]))
         paths, dev = sm.smooth_candidates(raw, n_points, cands)
-        if fast:
+        if not self.exact:
             ok, c, sw = self.margin_ok([scene], paths[:1], dev[:1], with_clearances=True)
             if not ok[0]:
-                cleared = self._cleared_rows([scene], [raw], [0], n_points, smoothing, fast)
+                cleared = self._cleared_rows([scene], [raw], [0], n_points, smoothing)
                 if cleared:
                     path, used, note, d, clear = cleared[0][1]
                     measured = (None if clear is None else
@@ -160,36 +164,37 @@ class PathFinisher:
                     return path[None], np.array([d]), [used], [note], measured
                 ok, c, sw = self._other_candidates(scene, paths, dev, ok, c, sw)
         else:
-            ok = self.margin_ok([scene] * len(cands), paths, dev, fast=False)
+            ok = self.margin_ok([scene] * len(cands), paths, dev)
             if not ok[0]:
-                cleared = self._cleared_rows([scene], [raw], [0], n_points, smoothing, fast)
+                cleared = self._cleared_rows([scene], [raw], [0], n_points, smoothing)
                 if cleared:
                     path, used, note, d, _ = cleared[0][1]
                     return path[None], np.array([d]), [used], [note], None      # assemble measures it
         j = int(np.argmax(ok)) if ok.any() else 0
-        measured = self._measured(scene, paths[j: j + 1], c[j: j + 1], sw[j: j + 1], dev[j: j + 1]) if fast else None
+        measured = (None if self.exact else
+                    self._measured(scene, paths[j: j + 1], c[j: j + 1], sw[j: j + 1], dev[j: j + 1]))
         notes = [_candidate_note(smoothing, cands[j])] if j else [()]
         return paths[j: j + 1], dev[j: j + 1], [cands[j]], notes, measured
 
-    def _cleared_rows(self, scenes, raws, rows, n_points: int, smoothing: float, fast: bool):
+    def _cleared_rows(self, scenes, raws, rows, n_points: int, smoothing: float):
         """Rows whose requested smoothing failed: the requested spline corrected (jaxexo.inference.clearing,
         all rows' rounds together), as (row, (path, smoothing, notes, deviation, clearances)) for the
         rows whose corrected curve passes (``_judge_cleared``)."""
         if not self.clearing or len(rows) == 0:
             return []
         rows = [int(i) for i in rows]
-        got = clear_rows([raws[i] for i in rows], [scenes[i].outline for i in rows], self.sp.foot_length,
-                         self.sp.min_clearance, n_points, smoothing, fast)
-        return self._judge_cleared(scenes, rows, got, smoothing, fast)
+        got = self._clear_rows([raws[i] for i in rows], [scenes[i].outline for i in rows], self.sp.foot_length,
+                               self.sp.min_clearance, n_points, smoothing)
+        return self._judge_cleared(scenes, rows, got, smoothing)
 
-    def _judge_cleared(self, scenes, rows, got, smoothing: float, fast: bool):
-        """The verdict on the corrections ``got`` (clearing.Cleared) of rows ``rows``. ``fast`` judges each
-        curve on the clearances the correction's last round measured and returns them as (point,
-        move) clearances for assemble (None where the path was resampled, not corrected); the
-        reference measures each curve afresh, every move exact."""
+    def _judge_cleared(self, scenes, rows, got, smoothing: float):
+        """The verdict on the corrections ``got`` (clearing.Cleared) of rows ``rows``. The fast path
+        judges each curve on the clearances the correction's last round measured and returns them as
+        (point, move) clearances for assemble (None where the path was resampled, not corrected);
+        the reference measures each curve afresh, every move exact."""
         paths = np.stack([g.path for g in got])
         dev = np.array([g.deviation for g in got], np.float64)
-        if fast:
+        if not self.exact:
             ok = np.zeros(len(rows), bool)
             have = [k for k, g in enumerate(got) if g.move_clearance is not None and g.move_clearance.size]
             if have:
@@ -202,12 +207,12 @@ class PathFinisher:
                 ok[rest] = self.margin_ok([scenes[rows[k]] for k in rest], paths[rest], dev[rest])
             clear = [None if g.move_clearance is None else (g.point_clearance, g.move_clearance) for g in got]
         else:
-            ok = self.margin_ok([scenes[i] for i in rows], paths, dev, fast=False)
+            ok = self.margin_ok([scenes[i] for i in rows], paths, dev)
             clear = [None] * len(rows)
         note = (CLEARED_NOTE.format(s=smoothing),)
         return [(i, (paths[k], float(smoothing), note, dev[k], clear[k])) for k, i in enumerate(rows) if ok[k]]
 
-    def _candidate_rows(self, scenes, raws, rows, n_points: int, smoothing: float, fast: bool):
+    def _candidate_rows(self, scenes, raws, rows, n_points: int, smoothing: float):
         """Rows whose requested smoothing failed: the first of their other candidates that passes, as
         (row, (path, smoothing, notes, deviation)). One swing: all its candidates smoothed in one call;
         many: candidate by candidate over the rows still failing, each level in one call."""
@@ -222,7 +227,7 @@ class PathFinisher:
                 pairs = [(i, cands[i][level]) for i in wait]
             paths, dev = sm.smooth_paths([raws[i] for i, _ in pairs], n_points, np.array([c for _, c in pairs]),
                                          with_deviation=True)
-            ok = self.margin_ok([scenes[i] for i, _ in pairs], paths, dev, fast)
+            ok = self.margin_ok([scenes[i] for i, _ in pairs], paths, dev)
             for k, (i, c) in enumerate(pairs):
                 if ok[k] and i not in out:
                     out[i] = (paths[k], c, _candidate_note(smoothing, c), dev[k])
@@ -230,21 +235,21 @@ class PathFinisher:
             wait = [] if len(scenes) == 1 else [i for i in wait if i not in out and level < len(cands[i])]
         return sorted(out.items())
 
-    def _less_smoothing(self, scenes, raws, rows, n_points: int, smoothing: float, fast: bool):
+    def _less_smoothing(self, scenes, raws, rows, n_points: int, smoothing: float):
         """The last retries of rows ``rows``: when the raw path keeps the margin, less smoothing
         (RETRY_FACTORS), then the raw polyline; each factor's curves of all rows still waiting checked
         in one call. Returns (row, (path, smoothing used, notes, deviation)) in row order; a row whose
         raw path breaks the margin is left out (its smoothing is kept and the checks report it)."""
         pts = [sm.distinct(raws[i]) for i in rows]
         zero = np.zeros(len(rows))
-        if fast:
+        if not self.exact:
             # Raw paths padded with their last point (a repeated point adds a zero-length move, whose
             # swept clearance is that point's own: the polyline's minimum is unchanged).
             n = max(len(p) for p in pts)
             padded = np.stack([np.concatenate([p, np.repeat(p[-1:], n - len(p), axis=0)]) for p in pts])
             keeps = self.margin_ok([scenes[i] for i in rows], padded, zero, headroom=0.0)
         else:
-            keeps = [self.margin_ok([scenes[i]], p[None], zero[:1], fast=False, headroom=0.0)[0]
+            keeps = [self.margin_ok([scenes[i]], p[None], zero[:1], headroom=0.0)[0]
                      for i, p in zip(rows, pts)]
         wait = [j for j, ok in enumerate(keeps) if ok or len(pts[j]) == 1]   # one point: no move to check
         out = {}
@@ -255,7 +260,7 @@ class PathFinisher:
             # in the samples to ~1e-8 rad); the checks are vectorised
             one = [sm.smooth_paths([raws[rows[j]]], n_points, smoothing * f, with_deviation=True) for j in wait]
             cand, dev = np.concatenate([c for c, _ in one]), np.concatenate([d for _, d in one])
-            ok = self.margin_ok([scenes[rows[j]] for j in wait], cand, dev, fast)
+            ok = self.margin_ok([scenes[rows[j]] for j in wait], cand, dev)
             for k, j in enumerate(wait):
                 if ok[k]:
                     note = (f"smoothing {smoothing:g} m^2 brought the foot within the safety margin or moved the "
@@ -269,25 +274,25 @@ class PathFinisher:
                 "polyline is used",), dev)
         return [(int(rows[j]), out[j]) for j in sorted(out)]
 
-    def _many(self, scenes, raws, paths, dev, n_points: int, smoothing: float, fast: bool):
+    def _many(self, scenes, raws, paths, dev, n_points: int, smoothing: float):
         """Many swings smoothed with ``smoothing``: the requested curves checked at once, then the rows
         they fail retried (corrected spline, then candidates level by level). Returns (paths,
         deviations, smoothings, notes, measured or None)."""
         used = [smoothing] * len(raws)
         notes = [()] * len(raws)
-        if fast:
+        if not self.exact:
             ok, c_all, sw_all = self.margin_ok(scenes, paths, dev, with_clearances=True)
         else:
-            ok = self.margin_ok(scenes, paths, dev, fast=False)
-        cleared = self._cleared_rows(scenes, raws, np.flatnonzero(~ok), n_points, smoothing, fast)
+            ok = self.margin_ok(scenes, paths, dev)
+        cleared = self._cleared_rows(scenes, raws, np.flatnonzero(~ok), n_points, smoothing)
         done = {i for i, _ in cleared}
         redo = [(i, r[:4]) for i, r in cleared] + self._candidate_rows(
-            scenes, raws, [i for i in np.flatnonzero(~ok) if i not in done], n_points, smoothing, fast)
+            scenes, raws, [i for i in np.flatnonzero(~ok) if i not in done], n_points, smoothing)
         if redo:
             paths, dev, notes = paths.copy(), np.array(dev, np.float64), list(notes)
             for i, (path, c, note, d) in redo:
                 paths[i], dev[i], used[i], notes[i] = path, d, c, note
-        if not fast:
+        if self.exact:
             return paths, dev, used, notes, None
         # assemble measures from the clearances already computed: the requested smoothing's (each
         # path's closest move exact), the corrected curves' own; the rest afresh
@@ -303,8 +308,14 @@ class PathFinisher:
                                       np.array([sc.goal_y for sc in scenes]), sw_all, dev)
         return paths, dev, used, notes, measured
 
-    def finish(self, method: str, scenes, raws, n_points: int, smoothing: float, duration: float,
-               fast: bool = True) -> TrajectoryBatch:
+    def _measure(self, scenes, paths, deviation) -> dict:
+        """``trajectory.measure_paths`` of curves on their scenes with this finisher's clearances."""
+        paths = np.asarray(paths, dtype=np.float64)     # as assemble reads them
+        return trajectory.measure_paths(self.sp, paths, scenes, deviation,
+                                        self._clearances(self.sp.foot_length, paths, scenes))
+
+    def finish(self, method: str, scenes, raws, n_points: int, smoothing: float,
+               duration: float) -> TrajectoryBatch:
         """Checked trajectories of raw paths (M_i, 2) on their scenes: smoothed with ``smoothing`` (m^2; 0:
         the raw polylines resampled), checked, and retried where a curve fails but its raw path
         need not (module docstring). Each raw path lands first (``landed``); the trajectories' ``raw``
@@ -313,29 +324,30 @@ class PathFinisher:
         notes = [()] * len(raws)
         measured = None
         if smoothing > 0 and len(raws) == 1 and len(candidates(raws[0], smoothing)) > 1:
-            paths, dev, used, notes, measured = self._one_pass(scenes[0], raws[0], n_points, smoothing, fast)
+            paths, dev, used, notes, measured = self._one_pass(scenes[0], raws[0], n_points, smoothing)
         elif smoothing > 0:
             paths, dev = sm.smooth_paths(raws, n_points, smoothing, with_deviation=True)
             used = [smoothing] * len(raws)
             if len(raws) > 1:
-                paths, dev, used, notes, measured = self._many(scenes, raws, paths, dev, n_points, smoothing, fast)
+                paths, dev, used, notes, measured = self._many(scenes, raws, paths, dev, n_points, smoothing)
         else:
             both = [sm.linear_resample(r, n_points, with_deviation=True) for r in raws]
             paths, dev = np.stack([p for p, _ in both]), np.array([d for _, d in both])
             used = [float("nan")] * len(raws)
-        batch = assemble(method, self.sp, scenes, raws, paths, used, duration, notes, measured, deviation=dev,
-                         fast=fast)
+        batch = assemble(method, self.sp, scenes, raws, paths, used, duration, notes,
+                         measured if measured is not None else self._measure(scenes, paths, dev))
         # Not for a swing that ends short of the goal: every curve ends where its raw path does, so no
         # smoothing can make it pass (the policy's failure, not the smoothing's).
         if smoothing <= 0:
             return batch
         bad = np.flatnonzero((~batch.clearance_ok | (batch.heel_backward > self.sp.backward_tolerance))
                              & batch.reached_goal)
-        redo = self._less_smoothing(scenes, raws, bad, n_points, smoothing, fast) if bad.size else []
+        redo = self._less_smoothing(scenes, raws, bad, n_points, smoothing) if bad.size else []
         if not redo:
             return batch
         idx = [i for i, _ in redo]
-        sub = assemble(method, self.sp, [scenes[i] for i in idx], [raws[i] for i in idx],
-                       np.stack([fb[0] for _, fb in redo]), [fb[1] for _, fb in redo], duration,
-                       [fb[2] for _, fb in redo], deviation=np.array([fb[3] for _, fb in redo]), fast=fast)
+        sub_scenes, sub_paths = [scenes[i] for i in idx], np.stack([fb[0] for _, fb in redo])
+        sub = assemble(method, self.sp, sub_scenes, [raws[i] for i in idx], sub_paths, [fb[1] for _, fb in redo],
+                       duration, [fb[2] for _, fb in redo],
+                       self._measure(sub_scenes, sub_paths, np.array([fb[3] for _, fb in redo])))
         return batch.with_rows(idx, sub)

@@ -5,14 +5,15 @@ goal, mid-goal and observation functions, step limit and collision handling) wit
 Q-network's greedy action (thesis 2.6). ``generate`` runs one scene in Python floats with the
 observation folded into the network's first layer (jaxexo.inference.network); ``generate_batch``
 runs NumPy arrays over the scenes still moving. With the shield, the chosen move is the first
-admissible one in order of Q, so ``fast`` checks moves in that order instead of all 19
+admissible one in order of Q, so the rollouts check moves in that order instead of all 19
 (jaxexo.inference.shield for one swing; ``ShieldRows.choose`` for a batch, in the reference's float32
-arithmetic); ``fast=False`` computes the whole mask every step. Both choose the same moves.
+arithmetic); the plain reference (``plain_reference``, for tests) computes the whole mask every
+step. Both choose the same moves.
 
 The raw path is then finished (jaxexo.inference.finish: landed on the floor, smoothed, thesis 2.7;
 checked as a safe swing; retried) and, with ``fallback="cfftg"`` (the default), a swing that still
 fails is replaced by CFFTG's plan for its scene (jaxexo.inference.fallback). ``clearance=C`` asks for a margin C instead of the
-model's (``at_clearance``).
+model's (``at_clearance``). The options are one checked record (jaxexo.inference.options.GenerateOptions).
 """
 
 from __future__ import annotations
@@ -30,11 +31,11 @@ from jaxexo.inference import blas, smoothing as sm
 from jaxexo.inference.fallback import replace_failures
 from jaxexo.inference.finish import PathFinisher
 from jaxexo.inference.network import FoldedQNetwork, StepNetwork
-from jaxexo.inference.options import check_fallback, check_flag, check_options, scene_for, scenes_for
+from jaxexo.inference.options import GenerateOptions, scene_for, scenes_for
 from jaxexo.inference.policy_check import load_checked
 from jaxexo.inference.shield import ScalarShield
-from jaxexo.inference.shield_rows import ShieldRows, take_rows
-from jaxexo.inference.trajectory import DEFAULT_DURATION, Trajectory, TrajectoryBatch, TrajectoryError
+from jaxexo.inference.shield_rows import ShieldRows, ShieldStats, take_rows
+from jaxexo.inference.trajectory import Trajectory, TrajectoryBatch
 from jaxexo.storage.policy_file import QPolicy
 
 
@@ -44,6 +45,8 @@ class TrajectoryGenerator:
     # BLAS threads for generate_batch (jaxexo.inference.blas: default threads were 4x slower on a
     # busy 2-core machine); None leaves the process's BLAS as it is.
     batch_blas_threads: int | None = 1
+    # True only in ``plain_reference``'s copy: every move's clearance exact, the full shield mask
+    _exact = False
 
     def __init__(self, policy: QPolicy, config, source: str = "<policy>"):
         self.policy = policy
@@ -72,9 +75,7 @@ class TrajectoryGenerator:
         self.smoothing = model_smoothing(config.env.shield_clearance, config.env.min_clearance, self.shield,
                                          config.env.step_size)
         self._rng = None
-        # single-swing shield steps: [decided by jaxexo.inference.shield, handed to the full mask]
-        # and batch rows: [rows, rows whose best forward move was not admissible (full mask)]
-        self.shield_stats = [0, 0, 0, 0]
+        self.shield_stats = ShieldStats()     # the fast shield's steps, and those it could not decide
 
     def exploring(self, epsilon: float, seed: int = 0) -> "TrajectoryGenerator":
         """A copy that acts epsilon-greedily (thesis 2.6 tests that way): each step a uniformly
@@ -114,9 +115,6 @@ class TrajectoryGenerator:
         """Validate one scenario (metres). ``pivot_y``, when given, overrides the ``pivot`` condition."""
         return scene_for(self.config, obstacle, pivot, pivot_y, start_y, step_length)
 
-    def _scenes(self, obstacles, pivot, pivot_y, start_y, step_length) -> list[Scene]:
-        return scenes_for(self.scene, obstacles, pivot, pivot_y, start_y, step_length)
-
     def _basis(self, scene: Scene) -> np.ndarray:
         """(5, D): the observation as c @ basis for c = (heel_y, heel_z, time, visited, 1).
 
@@ -134,13 +132,13 @@ class TrajectoryGenerator:
         return np.vstack([self._linear, origin])
 
     # Rollouts -----------------------------------------------------------------------------------
-    def rollout(self, scene: Scene, fast: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    def rollout(self, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
         """Greedy raw path of one scene: heel points (M, 2) from the start, and the actions (M-1,).
 
-        With the shield, ``fast`` (greedy only) checks the moves one at a time in order of Q until
-        one is admissible (jaxexo.inference.shield: the same move as the full mask, which it
-        computes instead on the rare steps it cannot decide); ``fast=False`` computes the full
-        mask every step (the reference)."""
+        With the shield, a greedy rollout checks the moves one at a time in order of Q until one is
+        admissible (jaxexo.inference.shield: the same move as the full mask, which it computes
+        instead on the rare steps it cannot decide); ``plain_reference`` computes the full mask
+        every step."""
         sp, step = self.sp, self.step_net
         step.set_scene(self._basis(scene))
         mid_y, mid_z = dynamics.mid_goal(scalar, sp, scene.center_y, scene.height)
@@ -149,7 +147,7 @@ class TrajectoryGenerator:
         last = -1           # the move just made (the shield never undoes it)
         one = dynamics.stack_scenes([scene], np.float32) if self.shield else None
         rows = ShieldRows(self.np_params, self.sp, self.shield_stats) if self.shield else None
-        single = ScalarShield(self.sp, self.np_params, scene) if self.shield and fast and self.epsilon <= 0.0 else None
+        single = ScalarShield(self.sp, self.np_params, scene) if self._shield_first() else None
         while True:
             if single is not None:
                 q = step.q_values(hy, hz, t, 1.0 if visited else 0.0)
@@ -158,8 +156,8 @@ class TrajectoryGenerator:
                     mask = rows.admissible(np.array([hy], np.float32), np.array([hz], np.float32), one,
                                            last=np.array([last]))[0]
                     a = int(dynamics.greedy_action(np, q, mask))
-                    self.shield_stats[1] += 1
-                self.shield_stats[0] += 1
+                    self.shield_stats.steps_to_full_mask += 1
+                self.shield_stats.steps += 1
             elif self.shield:
                 mask = rows.admissible(np.array([hy], np.float32), np.array([hz], np.float32), one,
                                        last=np.array([last]))[0]
@@ -181,10 +179,15 @@ class TrajectoryGenerator:
         return np.asarray(pts), np.asarray(acts, dtype=np.int64)
 
 
-    def rollout_batch(self, scenes, fast: bool = True) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    def _shield_first(self) -> bool:
+        """Whether the rollouts check the shield's moves in order of Q (greedy only; not in
+        ``plain_reference``, which computes the full mask every step)."""
+        return self.shield and not self._exact and self.epsilon <= 0.0
+
+    def rollout_batch(self, scenes) -> tuple[list[np.ndarray], list[np.ndarray]]:
         """Greedy raw paths of many scenes at once (float32 NumPy, like the JAX environment). With the
-        shield, ``fast`` (greedy only) checks each row's best forward move first (``ShieldRows.choose``);
-        ``fast=False`` computes the full mask of every row every step (the reference)."""
+        shield, a greedy rollout checks each row's best forward move first (``ShieldRows.choose``);
+        ``plain_reference`` computes the full mask of every row every step."""
         p = self.np_params
         lay = dynamics.stack_scenes(scenes, np.float32)
         rows = ShieldRows(self.np_params, self.sp, self.shield_stats) if self.shield else None
@@ -204,7 +207,7 @@ class TrajectoryGenerator:
         for k in range(self.max_steps):
             sub = take_rows(lay, alive)
             obs = dynamics.observation(np, p, self.obs_mode, hy[alive], hz[alive], t[alive], visited[alive], sub)
-            if self.shield and fast and self.epsilon <= 0.0:
+            if self._shield_first():
                 a = rows.choose(hy[alive], hz[alive], sub, self.net.q(obs), last[alive])
             else:
                 mask = rows.admissible(hy[alive], hz[alive], sub, last=last[alive]) if self.shield else None
@@ -266,59 +269,54 @@ class TrajectoryGenerator:
 
     # Trajectories ---------------------------------------------------------------------------------
     def finish(self, scenes, raws, n_points: int, smoothing: float, duration: float,
-               fallback: str | None = "cfftg", fast: bool = True) -> TrajectoryBatch:
+               fallback: str | None = "cfftg") -> TrajectoryBatch:
         """Checked trajectories of raw paths on their scenes: smoothed, checked and retried
         (jaxexo.inference.finish), then, with ``fallback="cfftg"``, CFFTG's plan wherever the RL
         swing still fails (jaxexo.inference.fallback)."""
-        batch = PathFinisher(self.sp, self.clearing).finish("rl", scenes, raws, n_points, smoothing, duration, fast)
+        finisher = PathFinisher(self.sp, self.clearing, exact=self._exact)
+        batch = finisher.finish("rl", scenes, raws, n_points, smoothing, duration)
         if fallback == "cfftg":
             batch = replace_failures(batch, self._fallback_planner(), n_points, duration)
         return batch
 
-    def generate(self, obstacle: geometry.Obstacle, *, pivot: str | float | None = None, pivot_y: float | None = None,
-                 start_y: float = DEFAULT_START_Y, step_length: float = DEFAULT_STEP_LENGTH,
-                 n_points: int = sm.DEFAULT_POINTS,
-                 smoothing: float | None = None, duration: float = DEFAULT_DURATION,
-                 strict: bool = False, fallback: str | None = "cfftg", fast: bool = True,
-                 clearance: float | None = None) -> Trajectory:
-        """One smoothed, checked trajectory (metres, radians, seconds). ``strict`` raises
-        TrajectoryError instead of returning a trajectory that fails a check; ``fallback``: "cfftg"
-        (CFFTG's plan when the RL swing is not safe) or None (module docstring). ``fast=False`` runs
-        the plain reference implementation (every move's swept clearance computed exactly), which
-        gives the same actions, samples and verdicts. ``clearance`` (m): the margin the swing keeps
-        (``at_clearance``). ``smoothing`` (m^2; None: the model's, ``self.smoothing``)."""
-        n_points, smoothing, duration = check_options(n_points, self.smoothing if smoothing is None else smoothing,
-                                                      duration)
-        fallback = check_fallback(fallback)
-        strict, fast = check_flag(strict, "strict"), check_flag(fast, "fast")
-        self = self.at_clearance(clearance)
-        scene = self.scene(obstacle, pivot, pivot_y, start_y, step_length)
-        raw, _ = self.rollout(scene, fast)
-        traj = self.finish([scene], [raw], n_points, smoothing, duration, fallback, fast)[0]
-        if strict and not traj.ok:
-            raise TrajectoryError(traj)
-        return traj
+    def _prepared(self, options, overrides: dict, where: str):
+        """(this generator at the options' clearance, the options checked, the smoothing to use)."""
+        o = GenerateOptions.given(options, overrides, where)
+        return self.at_clearance(o.clearance), o, self.smoothing if o.smoothing is None else o.smoothing
 
-    def generate_batch(self, obstacles, *, pivot=None, pivot_y=None, start_y=DEFAULT_START_Y,
-                       step_length=DEFAULT_STEP_LENGTH,
-                       n_points: int = sm.DEFAULT_POINTS, smoothing: float | None = None,
-                       duration: float = DEFAULT_DURATION, strict: bool = False,
-                       fallback: str | None = "cfftg", fast: bool = True,
-                       clearance: float | None = None) -> TrajectoryBatch:
-        """Trajectories for many scenarios; every option is one value or one per obstacle (``fallback``,
-        ``fast`` and ``clearance`` one value, as in ``generate``)."""
-        n_points, smoothing, duration = check_options(n_points, self.smoothing if smoothing is None else smoothing,
-                                                      duration)
-        fallback = check_fallback(fallback)
-        strict, fast = check_flag(strict, "strict"), check_flag(fast, "fast")
-        self = self.at_clearance(clearance)
-        scenes = self._scenes(obstacles, pivot, pivot_y, start_y, step_length)
-        with blas.limited(self.batch_blas_threads):
-            raws, _ = self.rollout_batch(scenes, fast)
-            batch = self.finish(scenes, raws, n_points, smoothing, duration, fallback, fast)
-        if strict and not batch.ok.all():
-            raise TrajectoryError(batch[int(np.argmin(batch.ok))])
-        return batch
+    def generate(self, obstacle: geometry.Obstacle, options: GenerateOptions | None = None,
+                 **overrides) -> Trajectory:
+        """One smoothed, checked trajectory (metres, radians, seconds) for ``options``
+        (jaxexo.inference.options.GenerateOptions), whose fields the keywords replace:
+        ``generate(obstacle, pivot="between", fallback=None)``. ``strict`` raises TrajectoryError
+        instead of returning a trajectory that fails a check; ``fallback``: "cfftg" (CFFTG's plan
+        when the RL swing is not safe) or None (module docstring); ``clearance`` (m): the margin the
+        swing keeps (``at_clearance``); ``smoothing`` (m^2; None: the model's, ``self.smoothing``)."""
+        gen, o, smoothing = self._prepared(options, overrides, "generate")
+        scene = gen.scene(obstacle, *o.scene_args)
+        raw, _ = gen.rollout(scene)
+        return o.checked(gen.finish([scene], [raw], o.n_points, smoothing, o.duration, o.fallback)[0])
+
+    def generate_batch(self, obstacles, options: GenerateOptions | None = None, **overrides) -> TrajectoryBatch:
+        """Trajectories for many scenarios, with ``generate``'s options; each scene field (pivot,
+        pivot_y, start_y, step_length) is one value or one per obstacle. ``strict`` raises
+        TrajectoryError on the first swing that fails a check."""
+        gen, o, smoothing = self._prepared(options, overrides, "generate_batch")
+        scenes = scenes_for(gen.scene, obstacles, o)
+        with blas.limited(gen.batch_blas_threads):
+            raws, _ = gen.rollout_batch(scenes)
+            batch = gen.finish(scenes, raws, o.n_points, smoothing, o.duration, o.fallback)
+        return o.checked(batch)
+
+
+def plain_reference(gen: TrajectoryGenerator) -> TrajectoryGenerator:
+    """``gen`` running the plain reference implementation: the full shield mask every step and
+    every move's clearance exact, each curve measured afresh. It gives the same actions, samples
+    and verdicts as the fast paths; for the tests and the benchmark that compare against it, not
+    part of the generator's API."""
+    out = copy.copy(gen)
+    out._exact = True
+    return out
 
 
 # The raw path of a long swing (m): 40 moves of 3 cm (a typical one has 25-35): the budget below holds

@@ -1,19 +1,26 @@
-"""The options shared by every generator (the RL policy, CFFTG): scene defaults and checks.
+"""The options shared by every generator (the RL policy, CFFTG): one frozen record, its checks and scenes.
 
-A swing is asked for by an obstacle and where the feet are: the pivot (stance) heel, the swing
-heel's start and the step length; their defaults are jaxexo.physics.dynamics's (DEFAULT_PIVOT,
-DEFAULT_START_Y, DEFAULT_STEP_LENGTH). ``scenes_for`` turns the per-obstacle options of
-``generate_batch`` into validated scenes (jaxexo.physics.dynamics.make_scene); ``check_options``
-bounds the sizes taken from input.
+``generate(obstacle, options, **overrides)`` takes a ``SwingOptions`` (CFFTG) or ``GenerateOptions``
+(the RL generator: also its smoothing and fallback), checked once when made: an error names the
+field. A swing is asked for by an obstacle and where the feet are: the pivot (stance) heel, the
+swing heel's start and the step length; their defaults are jaxexo.physics.dynamics's (DEFAULT_PIVOT,
+DEFAULT_START_Y, DEFAULT_STEP_LENGTH), and they are checked with the obstacle when its scene is laid
+out (``scene_for``, ``scenes_for``: jaxexo.physics.dynamics.make_scene).
 """
 
 from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any, ClassVar
 
 import numpy as np
 
 from jaxexo.config import MAX_SWING_DURATION
 from jaxexo.physics import geometry
 from jaxexo.physics.dynamics import DEFAULT_PIVOT, DEFAULT_START_Y, DEFAULT_STEP_LENGTH, Scene, make_scene
+from jaxexo.inference.smoothing import DEFAULT_POINTS
+from jaxexo.inference.trajectory import DEFAULT_DURATION, TrajectoryBatch, TrajectoryError
 
 # Bounds of the sizes taken from input, checked before anything is allocated.
 MAX_POINTS = 100_000                 # samples of one path
@@ -45,9 +52,10 @@ def scene_for(config, obstacle, pivot=None, pivot_y=None, start_y=DEFAULT_START_
                       foot_length=config.kinematics.foot_length, shape_points=config.env.shape_points)
 
 
-def scenes_for(make, obstacles, pivot, pivot_y, start_y, step_length) -> list[Scene]:
-    """Scenes for many obstacles with ``make(obstacle, pivot, pivot_y, start_y, step_length)``; every
-    option is one value for all or one per obstacle (every generator's generate_batch)."""
+def scenes_for(make, obstacles, options: SwingOptions) -> list[Scene]:
+    """Scenes for many obstacles with ``make(obstacle, pivot, pivot_y, start_y, step_length)``; each
+    of ``options``' scene fields is one value for all or one per obstacle (every generator's
+    generate_batch)."""
     if isinstance(obstacles, geometry.Obstacle):
         raise TypeError("obstacles: expected a list of Obstacle objects, got one Obstacle (use generate() for "
                         "one scenario, or pass [obstacle])")
@@ -67,9 +75,8 @@ def scenes_for(make, obstacles, pivot, pivot_y, start_y, step_length) -> list[Sc
             raise ValueError(f"{name}: {len(v)} values for {n} obstacles")
         return v
 
-    return [make(o, p, py, s, sl) for o, p, py, s, sl in zip(
-        obstacles, per("pivot", pivot), per("pivot_y", pivot_y), per("start_y", start_y),
-        per("step_length", step_length))]
+    columns = [per(name, v) for name, v in zip(SwingOptions.SCENE_FIELDS, options.scene_args)]
+    return [make(o, *args) for o, *args in zip(obstacles, *columns)]
 
 
 def check_points(n_points, name: str = "n_points") -> int:
@@ -91,19 +98,20 @@ def check_duration(duration, name: str = "duration") -> float:
 
 
 def check_flag(value, name: str) -> bool:
-    """A yes/no option: True or False only (``strict="yes"`` or ``fast="no"`` would be taken as true)."""
+    """A yes/no option: True or False only (``strict="no"`` would be taken as true)."""
     if not isinstance(value, (bool, np.bool_)):
         raise TypeError(f"{name}: expected True or False, got {value!r}")
     return bool(value)
 
 
-def check_options(n_points, smoothing, duration):
-    """(n_points, smoothing m^2, duration s) checked: ValueError naming the option."""
-    n_points = check_points(n_points)
+def check_smoothing(smoothing):
+    """The spline's smoothing s (m^2, >= 0), or None (the model's); ValueError naming the option."""
+    if smoothing is None:
+        return None
     smoothing = geometry.finite("smoothing", smoothing, "m^2")
     if smoothing < 0:
         raise ValueError(f"smoothing must be >= 0 (m^2), got {smoothing}")
-    return n_points, smoothing, check_duration(duration)
+    return smoothing
 
 
 def check_fallback(fallback):
@@ -113,3 +121,80 @@ def check_fallback(fallback):
     if fallback not in FALLBACKS:
         raise ValueError(f"fallback must be 'cfftg' or None, got {fallback!r}")
     return fallback
+
+
+def _check_strict(strict) -> bool:
+    return check_flag(strict, "strict")
+
+
+@dataclass(frozen=True)
+class SwingOptions:
+    """What every generator's ``generate`` / ``generate_batch`` takes besides the obstacles (metres,
+    seconds), checked when made (``CHECKS``, in order; an error names the field). The scene's fields
+    (``SCENE_FIELDS``) are one value, or in generate_batch one per obstacle; ``pivot_y``, when given,
+    replaces the ``pivot`` condition; they are checked with the obstacle (``scene_for``).
+    ``strict`` raises TrajectoryError instead of returning a swing that fails a check (``checked``);
+    ``clearance`` (m; None: the model's env.min_clearance) is the margin the swing keeps
+    (the generators' ``at_clearance``, which checks it against the model)."""
+
+    pivot: Any = None
+    pivot_y: Any = None
+    start_y: Any = DEFAULT_START_Y
+    step_length: Any = DEFAULT_STEP_LENGTH
+    n_points: int = DEFAULT_POINTS
+    duration: float = DEFAULT_DURATION
+    strict: bool = False
+    clearance: float | None = None
+
+    SCENE_FIELDS: ClassVar[tuple[str, ...]] = ("pivot", "pivot_y", "start_y", "step_length")
+    CHECKS: ClassVar[tuple] = (("n_points", check_points), ("duration", check_duration), ("strict", _check_strict))
+
+    def __post_init__(self):
+        for name, check in self.CHECKS:
+            object.__setattr__(self, name, check(getattr(self, name)))
+
+    @property
+    def scene_args(self) -> tuple:
+        """(pivot, pivot_y, start_y, step_length): the generators' ``scene`` arguments."""
+        return tuple(getattr(self, name) for name in self.SCENE_FIELDS)
+
+    @classmethod
+    def given(cls, options, overrides: dict, where: str):
+        """``options`` (None: the defaults; a SwingOptions of another kind keeps the fields both have)
+        with ``overrides`` (``generate``'s keywords) replacing its fields, checked once. TypeError
+        naming a keyword that is not a field, or ``options`` that are not options."""
+        names = [f.name for f in dataclasses.fields(cls)]
+        unknown = [k for k in overrides if k not in names]
+        if unknown:
+            raise TypeError(f"{unknown[0]}: not an option of {where} (options: {', '.join(names)})")
+        if options is None:
+            return cls(**overrides)
+        if not isinstance(options, SwingOptions):
+            raise TypeError(f"options: expected {cls.__name__}, got {type(options).__name__}")
+        if not isinstance(options, cls):
+            shared = {f.name: getattr(options, f.name) for f in dataclasses.fields(options) if f.name in names}
+            return cls(**{**shared, **overrides})
+        return dataclasses.replace(options, **overrides) if overrides else options
+
+    def checked(self, result):
+        """A trajectory or batch as generated, or with ``strict`` TrajectoryError on its first failed swing."""
+        if self.strict and not np.all(result.ok):
+            batch = isinstance(result, TrajectoryBatch)
+            raise TrajectoryError(result[int(np.argmin(result.ok))] if batch else result)
+        return result
+
+
+@dataclass(frozen=True)
+class GenerateOptions(SwingOptions):
+    """The RL generator's options: every generator's (``SwingOptions``) and ``smoothing``, the
+    spline's s (m^2; None: the model's, TrajectoryGenerator.smoothing) and ``fallback``: "cfftg"
+    (CFFTG's plan replaces a swing that is not safe) or None. CFFTG takes these too and uses the
+    fields it has."""
+
+    smoothing: float | None = None
+    fallback: str | None = "cfftg"
+
+    # the order generate checked its keywords in: with several bad values, the same one is named
+    CHECKS: ClassVar[tuple] = (("n_points", check_points), ("smoothing", check_smoothing),
+                               ("duration", check_duration), ("fallback", check_fallback),
+                               ("strict", _check_strict))

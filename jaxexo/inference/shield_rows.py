@@ -9,6 +9,8 @@ float32 elementwise arithmetic) and the full mask only for the rows where none o
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from jaxexo.physics import dynamics, geometry, swept
@@ -19,10 +21,21 @@ def take_rows(lay, idx):
     return type(lay)(**{k: v[idx] for k, v in vars(lay).items()})
 
 
+@dataclass
+class ShieldStats:
+    """The generator's shielded steps (its ``shield_stats``): one swing's steps checked move by move
+    (jaxexo.inference.shield) and those handed to the full mask; a batch's rows ``ShieldRows.choose``
+    decided and those handed to the full mask."""
+
+    steps: int = 0
+    steps_to_full_mask: int = 0
+    rows: int = 0
+    rows_to_full_mask: int = 0
+
+
 class ShieldRows:
     """Admissible moves of many heels for parameters ``p`` (jaxexo.config.numpy_params) and ``sp``
-    (jaxexo.config.scalar_params); ``stats`` (a list of 4, the generator's shield_stats) counts the
-    rows ``choose`` decided [2] and those it handed to the full mask [3]."""
+    (jaxexo.config.scalar_params); ``stats`` (ShieldStats) counts the rows ``choose`` decides."""
 
     # forward moves checked one at a time per row before the full mask (``choose``)
     BATCH_ROUNDS = 4
@@ -105,8 +118,8 @@ class ShieldRows:
             sub = take_rows(lay, miss)
             mask = self.admissible(hy[miss], hz[miss], sub, pruned, near[miss], c_here[miss], last[miss])
             out[miss] = dynamics.greedy_action(np, q[miss], mask)
-        self.stats[2] += len(hy)
-        self.stats[3] += miss.size
+        self.stats.rows += len(hy)
+        self.stats.rows_to_full_mask += miss.size
         return out
 
     def _one_move_ok(self, hy, hz, lay, near, a, pruned: bool, last, c_here=None) -> np.ndarray:

@@ -216,19 +216,19 @@ def _outline_groups(scenes):
 
 
 def _move_clearances(foot_length: float, heel: np.ndarray, scenes, point_clearance: np.ndarray,
-                     fast: bool = True) -> np.ndarray:
+                     exact: bool) -> np.ndarray:
     """Signed clearance (B, N-1) of the foot over each move between consecutive samples
-    (jaxexo.physics.swept), grouped by outline size like ``_point_clearances``. ``fast=False``: exact for
-    every move; ``fast`` (default): exact for each path's closest move, a lower bound above that
-    minimum for the moves that cannot be the closest (``swept.path_swept_min``), which is all the
-    verdict and its reasons read."""
+    (jaxexo.physics.swept), grouped by outline size like ``_point_clearances``. ``exact``: exact for
+    every move; otherwise exact for each path's closest move, a lower bound above that minimum for
+    the moves that cannot be the closest (``swept.path_swept_min``), which is all the verdict and
+    its reasons read."""
     b, n = heel.shape[:2]
     out = np.empty((b, max(n - 1, 0)))
     for idx, outline in _outline_groups(scenes):
-        if fast:
-            out[idx] = swept.path_swept_min(heel[idx], foot_length, outline, point_clearance[idx])
-        else:
+        if exact:
             out[idx] = swept.path_swept_clearance(np, heel[idx], foot_length, outline, point_clearance[idx])
+        else:
+            out[idx] = swept.path_swept_min(heel[idx], foot_length, outline, point_clearance[idx])
     return out
 
 
@@ -323,23 +323,29 @@ def failure_reasons(m: dict, i: int, heel: np.ndarray, goal_y: float, time: np.n
     return tuple(out)
 
 
-def measure_paths(sp, paths: np.ndarray, scenes, deviation, fast: bool = True) -> dict:
-    """``measure`` of heel paths (B, N, 2) on their scenes, clearances included (``path_clearances``)."""
+def measure_paths(sp, paths: np.ndarray, scenes, deviation, clearances=None) -> dict:
+    """``measure`` of heel paths (B, N, 2) on their scenes, clearances included: ``clearances`` (point,
+    move) when known, else ``path_clearances``."""
     pivot_y = np.array([sc.pivot_y for sc in scenes])
     goal_y = np.array([sc.goal_y for sc in scenes])
-    c, sw = path_clearances(sp.foot_length, paths, scenes, fast)
+    c, sw = path_clearances(sp.foot_length, paths, scenes) if clearances is None else clearances
     return measure(sp, paths, c, pivot_y, goal_y, sw, deviation)
 
 
-def path_clearances(foot_length: float, paths: np.ndarray, scenes, fast: bool = True):
-    """The one entry point for a path's clearances: (at the samples (B, N), over the moves (B, N-1))
-    of heel paths (B, N, 2) on their scenes. ``fast``: each path's closest move and sample exact,
-    lower bounds above that minimum elsewhere (all that the verdict and its reasons read);
-    ``fast=False``, the reference: every sample and move exact."""
-    if fast and len(scenes) >= PRUNE_POINTS_FROM:
+def path_clearances(foot_length: float, paths: np.ndarray, scenes):
+    """A path's clearances, as the verdict reads them: (at the samples (B, N), over the moves (B, N-1))
+    of heel paths (B, N, 2) on their scenes, each path's closest move and sample exact, lower bounds
+    above that minimum elsewhere (all that the verdict and its reasons read)."""
+    if len(scenes) >= PRUNE_POINTS_FROM:
         return _pruned_clearances(foot_length, paths, scenes)
     c = _point_clearances(foot_length, paths, scenes)
-    return c, _move_clearances(foot_length, paths, scenes, c, fast)
+    return c, _move_clearances(foot_length, paths, scenes, c, exact=False)
+
+
+def exact_path_clearances(foot_length: float, paths: np.ndarray, scenes):
+    """``path_clearances`` with every sample and move exact: the reference it is tested against."""
+    c = _point_clearances(foot_length, paths, scenes)
+    return c, _move_clearances(foot_length, paths, scenes, c, exact=True)
 
 
 def lowest_clearance(point_clearance: np.ndarray, move_clearance: np.ndarray) -> np.ndarray:
@@ -357,7 +363,7 @@ def passes(sp, low, deviation, backward, headroom: float = 0.0) -> np.ndarray:
             & (backward <= sp.backward_tolerance))
 
 
-# From this many paths on, ``fast`` also skips the exact point clearances that cannot matter
+# From this many paths on, ``path_clearances`` also skips the exact point clearances that cannot matter
 # (swept.path_clearance_pruned): worth it where the arrays are large; for a few paths the extra
 # NumPy calls cost more than they save.
 PRUNE_POINTS_FROM = 8
@@ -383,7 +389,7 @@ def _time_stamps(n: int, duration: float) -> np.ndarray:
 
 
 def assemble(method: str, sp, scenes, raws, paths: np.ndarray, smoothing, duration: float = DEFAULT_DURATION,
-             notes=None, measured: dict | None = None, deviation=None, fast: bool = True) -> TrajectoryBatch:
+             notes=None, measured: dict | None = None, deviation=None) -> TrajectoryBatch:
     """Checked trajectories from dense heel paths (B, N, 2), one per scene; ``raws`` the generator's
     own points per scene, ``smoothing`` (B,) the smoothing each path used (nan for a raw polyline),
     ``deviation`` (B,) the bound (m) on each curve's distance from the polyline through its samples
@@ -394,7 +400,7 @@ def assemble(method: str, sp, scenes, raws, paths: np.ndarray, smoothing, durati
     if measured is None:
         if deviation is None:
             raise ValueError("deviation: the bound on the curve's distance from its samples' polyline is needed")
-        measured = measure_paths(sp, paths, scenes, deviation, fast)
+        measured = measure_paths(sp, paths, scenes, deviation)
     m = measured
     time = _time_stamps(n, float(duration)).copy()
     reasons = tuple(failure_reasons(m, i, paths[i], scenes[i].goal_y, time, sp) for i in range(b))
