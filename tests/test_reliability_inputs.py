@@ -55,7 +55,7 @@ def test_a_symlinked_lock_file_is_refused_and_its_target_untouched(tmp_path):
             pass
     assert victim.read_text() == "precious\n"
     cfg = tmp_path / "tiny.toml"
-    cfg.write_text('[train]\nbudget_env_steps = 1024\nnum_envs = 64\n')
+    cfg.write_text('[train]\nbudget_env_steps = 1024\nnum_envs = 64\npopulation = 1\n')
     r = run_cli("train", cfg, "--out", run, "--quiet")
     assert_clean_refusal(r, "--out", LOCK_NAME, "symbolic link")
     assert victim.read_text() == "precious\n"

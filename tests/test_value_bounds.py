@@ -206,7 +206,7 @@ def test_every_shipped_config_is_within_the_bounds():
 
 def test_a_seed_beyond_the_bound_is_refused_and_leaves_no_run_folder(tmp_path):
     cfg = tmp_path / "tiny.toml"
-    cfg.write_text('[train]\nbudget_env_steps = 1024\nnum_envs = 64\n')
+    cfg.write_text('[train]\nbudget_env_steps = 1024\nnum_envs = 64\npopulation = 1\n')
     out = tmp_path / "new" / "run"
     r = run_cli("train", cfg, "--out", out, "--seed", "1180591620717411303424", "--quiet", timeout=300)
     assert_clean_refusal(r, "--seed", "a seed must be in [0, 2147483647]")
