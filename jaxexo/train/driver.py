@@ -36,8 +36,8 @@ Reliability (docs/reliability.md; tests/test_reliability.py):
   whose checkpoint was deleted (checkpoint.json, or more than one metrics row, remain) is refused;
 - a chunk whose parameters, target parameters or metrics (the loss among them) are not finite
   (jaxexo.train.engine.finite, the population's and the sweep's rule too) marks the run diverged: the
-  row says so, training stops, no checkpoint is written for it, only the best finite parameters (if a chunk produced any)
-  are exported, and TrainingDiverged is raised (the CLI exits 3).
+  row says so, training stops, no checkpoint is written for it, only the best finite parameters (if a
+  chunk produced any) are exported, and TrainingDiverged is raised (the CLI exits 3).
 """
 
 from __future__ import annotations
