@@ -7,8 +7,9 @@ learning curve of CURVE_POINTS bins (sums of the per-update metrics) and the fin
 agents of a chunk are split over the CPU devices (the ``agents`` mesh axis); the program is cached
 per static settings, so every chunk of a group reuses one compilation.
 
-Agents never interact: a configuration whose parameters or loss become NaN is flagged ``diverged``
-and the others are untouched (each vmapped lane computes alone).
+Agents never interact: a configuration whose parameters, target parameters or metrics (the loss among
+them) become NaN or infinite is flagged ``diverged`` (jaxexo.train.engine.finite, a run's rule) and the
+others are untouched (each vmapped lane computes alone).
 
 Agents run in fixed blocks of ``LANES`` (jaxexo.train.lanes), so an agent's arithmetic is the same
 in a chunk of any size and in a population.
@@ -29,22 +30,17 @@ from jaxexo.sweep.plan import Chunk
 from jaxexo.sweep.results import SCALARS
 from jaxexo.sweep.spec import Sweep
 from jaxexo.physics.scenarios import HELD_OUT, TEST_KINDS
+from jaxexo.train.engine import finite
 from jaxexo.train.evaluate import make_rollouts, test_layouts
 from jaxexo.train.lanes import over_lanes, padded_agents
-from jaxexo.train.trainer import METRICS, Hyperparams, Trainer
+from jaxexo.train.trainer import METRICS, Hyperparams, Trainer, UpdateMetrics
 
 CURVE_POINTS = 50
 # Episodes to reach this training success rate (strict success, under the behaviour policy), over a
 # trailing window of about 1 % of the updates that finished at least MIN_WINDOW_EPISODES episodes.
 TARGET_SUCCESS = 0.9
 MIN_WINDOW_EPISODES = 20
-_COL = {m: i for i, m in enumerate(METRICS)}
 _PROGRAMS: dict = {}
-
-
-
-def _finite(tree) -> jnp.ndarray:
-    return jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in jax.tree.leaves(tree)]))
 
 
 def reduce_metrics(m: jnp.ndarray, min_episodes: int) -> dict:
@@ -53,29 +49,29 @@ def reduce_metrics(m: jnp.ndarray, min_episodes: int) -> dict:
     figures cover the last tenth of the active updates, widened backwards until at least
     ``min_episodes`` episodes finished in it (nan if none did)."""
     n_upd = m.shape[0]
+    col = UpdateMetrics.named(m)
     idx = jnp.arange(n_upd)
-    n_active = jnp.sum(m[:, _COL["env_steps"]] > 0)
-    ep = m[:, _COL["episodes"]]
+    n_active = jnp.sum(col.env_steps > 0)
+    ep = col.episodes
     after = jnp.cumsum(ep[::-1])[::-1] - ep          # episodes finished after each update
     last = (idx < n_active) & ((idx >= n_active - jnp.maximum(1, n_active // 10)) | (after < min_episodes))
     ep_last = jnp.sum(jnp.where(last, ep, 0.0))
-    per_episode = lambda col: jnp.where(  # noqa: E731
-        ep_last > 0, jnp.sum(jnp.where(last, m[:, _COL[col]], 0.0)) / jnp.maximum(ep_last, 1.0), jnp.nan)
-    train_success, train_return = per_episode("successes"), per_episode("return_sum")
+    per_episode = lambda x: jnp.where(  # noqa: E731
+        ep_last > 0, jnp.sum(jnp.where(last, x, 0.0)) / jnp.maximum(ep_last, 1.0), jnp.nan)
+    train_success, train_return = per_episode(col.successes), per_episode(col.return_sum)
     # Episodes to reach TARGET_SUCCESS: the first update whose trailing window (about 1 % of the
     # updates) succeeds that often; the count is of all episodes finished up to that update.
     window = max(1, n_upd // 100)
-    cum_ep = jnp.cumsum(m[:, _COL["episodes"]])
-    cum_su = jnp.cumsum(m[:, _COL["successes"]])
+    cum_ep = jnp.cumsum(col.episodes)
+    cum_su = jnp.cumsum(col.successes)
     shift = lambda x: jnp.concatenate([jnp.zeros(window), x[:-window]]) if window < n_upd else jnp.zeros_like(x)  # noqa: E731
     ep_w, su_w = cum_ep - shift(cum_ep), cum_su - shift(cum_su)
     hit = (ep_w >= MIN_WINDOW_EPISODES) & (su_w >= TARGET_SUCCESS * ep_w)
     episodes_to = jnp.where(jnp.any(hit), cum_ep[jnp.argmax(hit)], jnp.nan)
     bins = np.minimum(np.arange(n_upd) * CURVE_POINTS // n_upd, CURVE_POINTS - 1)
     curve = jax.ops.segment_sum(m, jnp.asarray(bins), num_segments=CURVE_POINTS)
-    finite = jnp.all(jnp.isfinite(m))
     return {"train_success": train_success, "train_return": train_return, "episodes_to_90": episodes_to,
-            "updates": n_active.astype(jnp.float32), "curve": curve, "metrics_finite": finite}
+            "updates": n_active.astype(jnp.float32), "curve": curve}
 
 
 def chunk_program(cfg: Config, devices):
@@ -101,7 +97,7 @@ def _build(cfg: Config, devices):
         out = rollout(ts.params, test_lay, test_params)
         suc, acc = out["success"].astype(jnp.float32), out["accurate"].astype(jnp.float32)
         red = reduce_metrics(m, cfg.train.num_envs)
-        diverged = ~(_finite(ts.params) & _finite(ts.target_params) & red.pop("metrics_finite"))
+        diverged = ~finite(jnp, ts, m)
         scalars = {
             "success": suc.mean(), "accuracy": acc.mean(),
             "held_out_success": jnp.sum(suc * held) / held.sum(), "held_out_accuracy": jnp.sum(acc * held) / held.sum(),

@@ -9,7 +9,9 @@ Run directory:
 - policy.npz         the exported greedy policy (jaxexo.storage.policy_file; NumPy-only to load)
 - training_curve.png return and success rate against episodes (thesis Fig. 3.4)
 - eval.json          greedy rollouts on the test layouts (jaxexo.train.evaluate)
-(names, checkpoint reading and checks, rows, export: jaxexo.train.run_files, shared with populations)
+(names, checkpoint reading and checks, rows, export: jaxexo.train.run_files; the chunk loop with resume,
+checkpoints, divergence, progress and export: jaxexo.train.engine, shared with populations, of which
+``OneAgent`` here is the one-agent placement)
 
 Population (``[train] population = K > 1``): K seeds of the config trained together, the best member's
 best chunk exported; jaxexo.train.population has the program and the per-member files.
@@ -32,28 +34,26 @@ Reliability (docs/reliability.md; tests/test_reliability.py):
 - the checkpoint records the config the run started with: a resume with any other config (config.toml
   edited along with it) is refused naming the first differing field; a run past its first chunk
   whose checkpoint was deleted (checkpoint.json, or more than one metrics row, remain) is refused;
-- a chunk whose loss or parameters are not finite marks the run diverged: the row says so, training
-  stops, no checkpoint is written for it, only the best finite parameters (if a chunk produced any)
-  are exported, and TrainingDiverged is raised (the CLI exits 3).
+- a chunk whose parameters, target parameters or metrics (the loss among them) are not finite
+  (jaxexo.train.engine.finite, the population's and the sweep's rule too) marks the run diverged: the
+  row says so, training stops, no checkpoint is written for it, only the best finite parameters (if a
+  chunk produced any) are exported, and TrainingDiverged is raised (the CLI exits 3).
 """
 
 from __future__ import annotations
 
-import json
-import time
+import functools
+import math
 from pathlib import Path
 
 import jax
 import numpy as np
-from flax import serialization
 
 from jaxexo.config import Config, ConfigError, check_seed
-from jaxexo.config.toml_io import config_to_toml
-from jaxexo.storage.atomic import append_line, atomic_write
-from jaxexo.storage.checkpoint import CheckpointError, pack_checkpoint
-from jaxexo.storage.rundir import TrainingDiverged, run_lock
+from jaxexo.storage.rundir import TrainingDiverged, run_lock  # noqa: F401 (read as driver.TrainingDiverged)
 from jaxexo.train import run_files
-from jaxexo.train.evaluate import evaluate, make_validator
+from jaxexo.train.engine import ChunkOut, Placement, Track, finite, run_chunks
+from jaxexo.train.evaluate import make_validator
 from jaxexo.train.trainer import Hyperparams, Trainer
 
 
@@ -69,125 +69,110 @@ def run_training(cfg: Config, out: str | Path, seed: int = 0, resume: bool = Fal
             from jaxexo.train.population import run_population
 
             return run_population(cfg, out, seed, resume, progress, eval_episodes)
-        return _run_locked(cfg, out, seed, resume, progress, eval_episodes)
+        return run_chunks(cfg, out, seed, resume, progress, eval_episodes, OneAgent)
 
 
-def _all_finite(tree) -> bool:
-    return all(bool(np.all(np.isfinite(np.asarray(x)))) for x in jax.tree.leaves(tree)
-               if np.issubdtype(np.asarray(x).dtype, np.inexact))
+class OneAgent(Placement):
+    """One agent whose environments are split over the CPU cores exposed as JAX devices (data parallel,
+    jaxexo.train.devices; the CLI sets this up). The device count changes the random streams: a run is
+    reproducible on the same count. Its records: one metrics row per chunk, eval.json of the agent."""
 
+    noun = "training state"
 
-def _run_locked(cfg: Config, out: Path, seed: int, resume: bool, progress: bool, eval_episodes) -> dict:
-    ckpt, book = out / run_files.CHECKPOINT, out / run_files.BOOKKEEPING
-    raw = run_files.prepare_dir(out, cfg, seed, resume)
-    state_book = raw["book"] if raw is not None else None
+    def __init__(self, cfg: Config, seed: int):
+        self.cfg, self.seed, self.size = cfg, seed, 1
+        self.trainer = Trainer(cfg, devices=jax.local_devices())
+        self.n_devices = len(self.trainer.devices or [0])
+        self.desc = f"train {cfg.train.trace} {cfg.train.control}"
+        self.hyper = Hyperparams.from_config(cfg)
+        self.n_chunk = run_files.chunking(cfg, self.trainer)[0]
+        self._run = jax.jit(self.trainer.run, static_argnums=2)
+        self._active = jax.jit(self.trainer.active)
 
-    t_start = time.perf_counter()
-    # Data parallel over the CPU cores exposed as JAX devices (jaxexo.train.devices; the CLI sets this up).
-    # The device count changes the random streams: a run is reproducible on the same count.
-    trainer = Trainer(cfg, devices=jax.local_devices())
-    n_dev = len(trainer.devices or [0])
-    if raw is not None and state_book["devices"] != n_dev:
-        raise ConfigError(f"--resume: the run used {state_book['devices']} device(s), this process has "
-                          f"{n_dev}; resume it on the same number of CPU devices")
-    hyper = Hyperparams.from_config(cfg)
-    ts = jax.jit(trainer.init)(jax.random.PRNGKey(seed), hyper)
-    n_chunk, total_chunks = run_files.chunking(cfg, trainer)
-    rows: list[dict] = []
-    chunks_done, wall_before = 0, 0.0
-    metrics_path = out / "metrics.jsonl"
-    best = {"params": ts.params, "score": -1.0, "chunk": 0}
-    if resume and raw is None:
-        atomic_write(metrics_path, "")   # rows of a run that never reached its first checkpoint
-    if raw is not None:
-        # A checkpoint of another network or state layout (another config's, a foreign file) must not
-        # be poured into this one: flax would accept mismatched shapes silently.
-        for name, template in (("state", serialization.to_state_dict(ts)),
-                               ("best_params", serialization.to_state_dict(ts.params))):
-            bad = run_files.tree_mismatch(template, raw[name])
-            if bad:
-                raise CheckpointError(f"{ckpt}: does not fit this config's training state ({name}{bad})")
-        ts = serialization.from_state_dict(ts, raw["state"])
-        best["params"] = serialization.from_state_dict(ts.params, raw["best_params"])
-        best.update(score=state_book["best_score"], chunk=state_book["best_chunk"])
-        chunks_done = state_book["chunks_done"]
-        wall_before = run_files.resumed_clock(ckpt, book, chunks_done, total_chunks)
-        rows = run_files.read_metrics_rows(metrics_path, chunks_done)
-        # Lines written after the checkpoint are recomputed identically: drop them (a torn last line too).
-        atomic_write(metrics_path, "".join(json.dumps(r) + "\n" for r in rows))
-    # The state laid out as the chunks return it, so that every chunk calls one compiled program
-    # (Trainer.place: else the second chunk, on a state split over the devices, compiles it again).
-    ts = trainer.place(ts)
-    run = jax.jit(trainer.run, static_argnums=2)
-    active = jax.jit(trainer.active)
-    validate = make_validator(cfg, trainer.net)
+    @functools.cached_property
+    def _validate(self):
+        # Made on first use: a refused resume draws no validation layouts.
+        return make_validator(self.cfg, self.trainer.net)
 
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
+    def check_resume(self, raw, ckpt):
+        if raw["book"]["devices"] != self.n_devices:
+            raise ConfigError(f"--resume: the run used {raw['book']['devices']} device(s), this process has "
+                              f"{self.n_devices}; resume it on the same number of CPU devices")
 
-        bar = tqdm(total=total_chunks, initial=chunks_done, unit="chunk", dynamic_ncols=True,
-                   desc=f"train {cfg.train.trace} {cfg.train.control}")
-    diverged = None
-    try:
-        while chunks_done < total_chunks and bool(active(ts, hyper)):
-            t0 = time.perf_counter()
-            ts, m = run(ts, hyper, n_chunk)
-            m = np.asarray(m)
-            chunks_done += 1
-            wall = wall_before + time.perf_counter() - t_start
-            row = run_files.chunk_row(m, ts, trainer.env_steps(ts), chunks_done, wall, time.perf_counter() - t0)
-            finite = bool(np.all(np.isfinite(m))) and _all_finite(ts.params)
-            row["diverged"] = not finite
-            row["validation_success_raw"] = validate(ts.params) if finite else None
-            rows.append(row)
-            append_line(metrics_path, json.dumps(row) + "\n")
-            if not finite:
-                # No checkpoint of a diverged state: a resume would only diverge again.
-                diverged = chunks_done
-                if bar is not None:
-                    bar.set_postfix(diverged=f"chunk {chunks_done}", loss=row["loss"])
-                break
-            if row["validation_success_raw"] >= best["score"]:
-                best.update(params=ts.params, score=row["validation_success_raw"], chunk=chunks_done)
-            bookkeeping = {"seed": seed, "chunks_done": chunks_done, "best_score": best["score"],
-                           "best_chunk": best["chunk"], "devices": n_dev}
-            # State, best parameters and bookkeeping in one atomic write, checksummed: a run stopped at
-            # any point resumes from a consistent checkpoint (wall time, which differs run to run, stays out).
-            run_files.checkpoint_write(ckpt, pack_checkpoint(serialization.msgpack_serialize({
-                "state": serialization.to_state_dict(ts),
-                "best_params": serialization.to_state_dict(best["params"]),
-                "book": bookkeeping, "config_toml": config_to_toml(cfg)})))
-            run_files.checkpoint_write(book, json.dumps({**bookkeeping, "train_seconds": wall}, indent=1).encode())
-            if bar is not None:
-                bar.update(1)
-                bar.set_postfix(episodes=row["episodes"], steps_per_s=f"{row['env_steps_per_s']:.3g}",
-                                ret=f"{row['return_mean']:.2f}", success_raw=f"{row['success_raw_rate']:.3f}",
-                                eps=f"{row['epsilon']:.3f}", val=f"{row['validation_success_raw']:.3f}")
-    finally:
-        if bar is not None:
-            bar.close()
-    train_seconds = wall_before + time.perf_counter() - t_start
+    def init(self):
+        return self.resume(jax.jit(self.trainer.init)(jax.random.PRNGKey(self.seed), self.hyper))
 
-    if rows:
-        run_files.plot_training_curve(out / "training_curve.png", [r for r in rows if not r["diverged"]] or rows)
-    if diverged is not None and best["chunk"] == 0:
-        raise TrainingDiverged(
-            f"training diverged in chunk {diverged} (non-finite loss or parameters; {metrics_path} row "
-            f"{diverged} has \"diverged\": true); no chunk finished with finite parameters, so no policy was "
-            f"exported. Lower train.lr (it is {cfg.train.lr:g}) or train.max_grad_norm")
-    run_files.export_policy(out / "policy.npz", cfg, trainer, best["params"])
-    result = evaluate(cfg, trainer.net, best["params"], eval_episodes or cfg.train.eval_episodes)
-    result.update({"episodes": int(ts.episodes), "env_steps": int(trainer.env_steps(ts)),
-                   "train_seconds": round(train_seconds, 3), "seed": seed,
-                   "selected_chunk": best["chunk"], "validation_success_raw": best["score"], "devices": n_dev})
-    if diverged is not None:
-        result["diverged_chunk"] = diverged
-    atomic_write(out / "eval.json", json.dumps(result, indent=2) + "\n")
-    if diverged is not None:
-        raise TrainingDiverged(
-            f"training diverged in chunk {diverged} (non-finite loss or parameters; {metrics_path} row "
-            f"{diverged} has \"diverged\": true); policy.npz and eval.json hold the best finite parameters, "
-            f"from chunk {best['chunk']} (validation success on raw moves {best['score']:.3f}). Lower train.lr "
-            f"(it is {cfg.train.lr:g}) or train.max_grad_norm")
-    return result
+    def saved(self, ts):
+        return ts
+
+    def resume(self, saved):
+        # The state laid out as the chunks return it, so that every chunk calls one compiled program
+        # (Trainer.place: else the second chunk, on a state split over the devices, compiles it again).
+        return self.trainer.place(saved)
+
+    def restore_track(self, raw, ckpt, params):
+        book = raw["book"]
+        return Track(params, np.array([book["best_score"]], np.float64), np.array([book["best_chunk"]], np.int64),
+                     np.zeros(1, np.int64))    # a diverged chunk is never checkpointed
+
+    def track_record(self, track):
+        return {}    # the best score and chunk are the book's
+
+    def active(self, ts):
+        return np.array([bool(self._active(ts, self.hyper))])
+
+    def chunk(self, ts):
+        ts, m = self._run(ts, self.hyper, self.n_chunk)
+        m = np.asarray(m)
+        ok = bool(finite(np, ts, m))
+        score = self._validate(ts.params) if ok else math.nan
+        return ChunkOut(ts, m[None], np.array([score]), np.array([ok]))
+
+    def counts(self, ts):
+        return [run_files.Counters(np.asarray(ts.update), np.asarray(ts.episodes), self.trainer.env_steps(ts))]
+
+    def keep_best(self, best, ts, i):
+        return ts.params
+
+    def params_of(self, best, i):
+        return best
+
+    def lead(self, track):
+        return 0
+
+    def row(self, chunk, wall, lead, agent_rows):
+        return agent_rows[0]
+
+    def label(self, i):
+        return {}
+
+    def progress(self, row, out, track, lead, stopped):
+        if stopped:
+            return dict(diverged=f"chunk {row['chunk']}", loss=row["loss"])
+        return dict(episodes=row["episodes"], steps_per_s=f"{row['env_steps_per_s']:.3g}",
+                    ret=f"{row['return_mean']:.2f}", success_raw=f"{row['success_raw_rate']:.3f}",
+                    eps=f"{row['epsilon']:.3f}", val=f"{row['validation_success_raw']:.3f}")
+
+    def select(self, out, track):
+        # A chunk that diverged after a finite one leaves that chunk's parameters to export.
+        return None if track.diverged[0] and track.chunk[0] == 0 else 0
+
+    def plot(self, path, rows, exported):
+        run_files.plot_training_curve(path, [r for r in rows if not r["diverged"]] or rows)
+
+    def identity(self, exported, seed):
+        return {"seed": seed}
+
+    def report(self, exported, track, rows, counts, figures):
+        return {"diverged_chunk": int(track.diverged[0])} if track.diverged[0] else {}
+
+    def nothing_exported(self, metrics_path, track):
+        return (f"training diverged in chunk {track.diverged[0]} (non-finite loss or parameters; {metrics_path} row "
+                f"{track.diverged[0]} has \"diverged\": true); no chunk finished with finite parameters, so no policy "
+                f"was exported. Lower train.lr (it is {self.cfg.train.lr:g}) or train.max_grad_norm")
+
+    def diverged_after(self, metrics_path, track):
+        return (f"training diverged in chunk {track.diverged[0]} (non-finite loss or parameters; {metrics_path} row "
+                f"{track.diverged[0]} has \"diverged\": true); policy.npz and eval.json hold the best finite "
+                f"parameters, from chunk {track.chunk[0]} (validation success on raw moves {track.score[0]:.3f}). "
+                f"Lower train.lr (it is {self.cfg.train.lr:g}) or train.max_grad_norm")

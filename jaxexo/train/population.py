@@ -28,35 +28,30 @@ The run directory is the one-agent driver's (jaxexo.train.driver), with per-memb
   one candidate remained) and ``selection_seconds``;
 - checkpoint.msgpack: every member's state and best parameters, and the per-member bookkeeping.
 
-Resume, the directory lock, checksums and the config checks are the one-agent driver's. A member whose
-loss or parameters become non-finite is dropped from the choice (``diverged_chunk``), not the run; if
-every member diverges, training stops and TrainingDiverged is raised as for one agent.
+The chunk loop (resume, the directory lock, checksums, the config checks, the divergence rule) is the
+one-agent driver's: jaxexo.train.engine, of which ``Members`` here is the population's placement. A
+member whose parameters, target parameters or metrics become non-finite is dropped from the choice
+(``diverged_chunk``), not the run; if every member diverges, training stops and TrainingDiverged is
+raised as for one agent.
 """
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-from flax import serialization
 
 from jaxexo.config import Config, ConfigError
-from jaxexo.config.toml_io import config_to_toml
-from jaxexo.storage.atomic import append_line, atomic_write, write_figure
-from jaxexo.storage.checkpoint import CheckpointError, pack_checkpoint
-from jaxexo.storage.rundir import TrainingDiverged
-from jaxexo.train.lanes import LANES, over_lanes, padded_agents
+from jaxexo.storage.atomic import write_figure
+from jaxexo.storage.checkpoint import CheckpointError
 from jaxexo.train import run_files as F
-from jaxexo.train.evaluate import make_evaluator, make_rollouts, validation_set
+from jaxexo.train.engine import ChunkOut, Placement, Track, finite, run_chunks
+from jaxexo.train.evaluate import make_rollouts, validation_set
+from jaxexo.train.lanes import LANES, over_lanes, padded_agents
 from jaxexo.train.trainer import Hyperparams, Trainer
-
-
-def _finite(tree) -> jnp.ndarray:
-    return jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in jax.tree.leaves(tree)]))
 
 
 def population_devices(n_members: int, devices) -> list:
@@ -92,8 +87,7 @@ class Population:
         def member(ts, hyper, layouts, vparams):
             ts, m = trainer.run(ts, hyper, n_chunk_)
             score = jnp.mean(rollout(ts.params, layouts, vparams)["success"].astype(jnp.float32))
-            finite = _finite(ts.params) & _finite(ts.target_params) & jnp.all(jnp.isfinite(m))
-            return ts, m, score, finite
+            return ts, m, score, finite(jnp, ts, m)
 
         self._init = over_lanes(trainer.init, self.devices, n_args=2)
         self._chunk = over_lanes(member, self.devices, n_args=2, shared=2)
@@ -122,13 +116,6 @@ class Population:
 
     def active(self, ts) -> np.ndarray:
         return np.asarray(self._active(ts, self.hyper))[:self.size]
-
-
-class _Counters:
-    """The two counters ``run_files.chunk_row`` reads from a state, for one member."""
-
-    def __init__(self, update, episodes):
-        self.update, self.episodes = update, episodes
 
 
 def plot_population_curve(path: Path, rows: list[dict], exported: int | None) -> None:
@@ -164,7 +151,7 @@ def plot_population_curve(path: Path, rows: list[dict], exported: int | None) ->
 def choose(best_score: np.ndarray, best_chunk: np.ndarray, diverged: np.ndarray) -> int | None:
     """The member to export: the highest best validation score among the members that never diverged
     and finished a chunk (the lowest seed on a tie); None if there is none."""
-    ok = [i for i in range(len(best_score)) if diverged[i] == 0 and best_chunk[i] > 0]
+    ok = Track(None, best_score, best_chunk, diverged).candidates()
     if not ok:
         return None
     return max(ok, key=lambda i: (best_score[i], -i))
@@ -175,158 +162,143 @@ def run_population(cfg: Config, out: Path, seed: int, resume: bool, progress: bo
     from jaxexo.config.memory import check_memory
 
     check_memory(cfg)
-    K = cfg.train.population
-    ckpt, book_path, metrics_path = out / F.CHECKPOINT, out / F.BOOKKEEPING, out / "metrics.jsonl"
-    raw = F.prepare_dir(out, cfg, seed, resume)
-    t_start = time.perf_counter()
-    pop = Population(cfg, range(seed, seed + K))
-    n_chunk, total_chunks = F.chunking(cfg, pop.trainer)
-    ts = pop.init()
-    start = pop.real(ts)
-    best_params = pop.real(ts.params)
-    best_score = np.full(K, -1.0)
-    best_chunk = np.zeros(K, np.int64)
-    diverged = np.zeros(K, np.int64)         # the chunk a member diverged in, 0: never
-    rows: list[dict] = []
-    chunks_done, wall_before = 0, 0.0
-    if resume and raw is None:
-        atomic_write(metrics_path, "")
-    if raw is not None:
+    return run_chunks(cfg, out, seed, resume, progress, eval_episodes, Members)
+
+
+class Members(Placement):
+    """The engine's placement of a population: K members vmapped in lanes (``Population``). Its records:
+    per-member rows in each metrics line, per-member bookkeeping in the checkpoint, the member a
+    wearer would choose exported, every member in eval.json."""
+
+    noun = "population state"
+
+    def __init__(self, cfg: Config, seed: int):
+        self.cfg, self.size = cfg, cfg.train.population
+        self.pop = Population(cfg, range(seed, seed + self.size))
+        self.trainer, self.n_devices, self.book = self.pop.trainer, len(self.pop.devices), {"population": self.size}
+        self.desc = f"train population of {self.size} ({self.n_devices} device(s))"
+        self.selection, self.selection_seconds = [], 0.0
+
+    def check_resume(self, raw, ckpt):
         if "members" not in raw:
-            raise CheckpointError(f"{ckpt}: a one-agent checkpoint; this config trains a population of {K}")
-        if (raw["book"]["devices"] == 1) != (len(pop.devices) == 1):
+            raise CheckpointError(f"{ckpt}: a one-agent checkpoint; this config trains a population of {self.size}")
+        if (raw["book"]["devices"] == 1) != (self.n_devices == 1):
             # One device compiles an unpartitioned program, several a partitioned one: their arithmetic
             # differs in the last bits (population_devices), so the rest of the run would not be this run's.
             need = "one CPU device" if raw["book"]["devices"] == 1 else "two or more CPU devices"
             raise ConfigError(f"--resume: the population ran on {raw['book']['devices']} device(s), this process "
-                              f"gives it {len(pop.devices)}; resume it with {need}")
-        for name, template in (("state", serialization.to_state_dict(start)),
-                               ("best_params", serialization.to_state_dict(best_params))):
-            bad = F.tree_mismatch(template, raw[name])
-            if bad:
-                raise CheckpointError(f"{ckpt}: does not fit this config's population state ({name}{bad})")
-        members = raw["members"]
-        for k in ("best_score", "best_chunk", "diverged"):
-            if not isinstance(members, dict) or np.shape(members.get(k)) != (K,):
-                raise CheckpointError(f"{ckpt}: the checkpoint's per-member bookkeeping lacks {k!r} for {K} members")
-        start = serialization.from_state_dict(start, raw["state"])
-        ts = jax.device_put(pop.pad(start))
-        best_params = serialization.from_state_dict(best_params, raw["best_params"])
+                              f"gives it {self.n_devices}; resume it with {need}")
+
+    def init(self):
+        return self.pop.init()
+
+    def saved(self, ts):
+        return self.pop.real(ts)
+
+    def resume(self, saved):
+        return jax.device_put(self.pop.pad(saved))
+
+    def restore_track(self, raw, ckpt, params):
+        members, k = raw["members"], self.size
+        for name in ("best_score", "best_chunk", "diverged"):
+            if not isinstance(members, dict) or np.shape(members.get(name)) != (k,):
+                raise CheckpointError(f"{ckpt}: the checkpoint's per-member bookkeeping lacks {name!r} for {k} members")
         # Copies: arrays restored from msgpack are read-only, these are updated in place.
-        best_score = np.array(members["best_score"], np.float64)
-        best_chunk = np.array(members["best_chunk"], np.int64)
-        diverged = np.array(members["diverged"], np.int64)
-        chunks_done = raw["book"]["chunks_done"]
-        wall_before = F.resumed_clock(ckpt, book_path, chunks_done, total_chunks)
-        rows = F.read_metrics_rows(metrics_path, chunks_done)
-        atomic_write(metrics_path, "".join(json.dumps(r) + "\n" for r in rows))
+        return Track(params, np.array(members["best_score"], np.float64), np.array(members["best_chunk"], np.int64),
+                     np.array(members["diverged"], np.int64))
 
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
+    def track_record(self, track):
+        return {"members": {"best_score": track.score, "best_chunk": track.chunk, "diverged": track.diverged}}
 
-        bar = tqdm(total=total_chunks, initial=chunks_done, unit="chunk", dynamic_ncols=True,
-                   desc=f"train population of {K} ({len(pop.devices)} device(s))")
-    steps_per_update = pop.trainer.steps_per_update
-    try:
-        while chunks_done < total_chunks and (pop.active(ts) & (diverged == 0)).any():
-            t0 = time.perf_counter()
-            ts, m, score, finite = pop.chunk(ts)
-            m, score, finite = np.asarray(m), np.asarray(score), np.asarray(finite)
-            chunks_done += 1
-            seconds = time.perf_counter() - t0
-            wall = wall_before + time.perf_counter() - t_start
-            updates, episodes = np.asarray(ts.update), np.asarray(ts.episodes)
-            members = []
-            for i in range(K):
-                ok = bool(finite[i]) and diverged[i] == 0
-                if not ok and diverged[i] == 0:
-                    diverged[i] = chunks_done
-                row = F.chunk_row(m[i], _Counters(updates[i], episodes[i]),
-                                   int(updates[i]) * steps_per_update, chunks_done, wall, seconds)
-                row.update(seed=pop.seeds[i], diverged=not ok, validation_success_raw=float(score[i]) if ok else None)
-                members.append(row)
-                if ok and score[i] >= best_score[i]:       # later chunks win ties, as for one agent
-                    best_score[i], best_chunk[i] = float(score[i]), chunks_done
-                    best_params = jax.tree.map(lambda b, p: _set(b, i, np.asarray(p)[i]), best_params, ts.params)
-            lead = choose(best_score, best_chunk, diverged)
-            row = {"chunk": chunks_done, "wall_s": wall, "best_member": lead,
-                   "env_steps_per_s": float(sum(r["env_steps_per_s"] for r in members)), "members": members}
-            rows.append(row)
-            append_line(metrics_path, json.dumps(row) + "\n")
-            if (diverged > 0).all():
-                break     # no checkpoint of a state in which every member diverged: nothing left to train
-            lead_i = lead if lead is not None else 0
-            bookkeeping = {"seed": seed, "chunks_done": chunks_done, "best_score": float(best_score[lead_i]),
-                           "best_chunk": int(best_chunk[lead_i]), "devices": len(pop.devices), "population": K}
-            F.checkpoint_write(ckpt, pack_checkpoint(serialization.msgpack_serialize({
-                "state": serialization.to_state_dict(pop.real(ts)),
-                "best_params": serialization.to_state_dict(best_params),
-                "members": {"best_score": best_score, "best_chunk": best_chunk, "diverged": diverged},
-                "book": bookkeeping, "config_toml": config_to_toml(cfg)})))
-            F.checkpoint_write(book_path, json.dumps({**bookkeeping, "train_seconds": wall}, indent=1).encode())
-            if bar is not None:
-                bar.update(1)
-                bar.set_postfix(best=f"seed {pop.seeds[lead_i]}: {best_score[lead_i]:.3f}",
-                                val=" ".join(f"{s:.2f}" for s in score[:K]), diverged=int((diverged > 0).sum()))
-    finally:
-        if bar is not None:
-            bar.close()
-    train_seconds = wall_before + time.perf_counter() - t_start
+    def active(self, ts):
+        return self.pop.active(ts)
 
-    if choose(best_score, best_chunk, diverged) is None:
-        if rows:
-            plot_population_curve(out / "training_curve.png", rows, None)
-        raise TrainingDiverged(
-            f"every member of the population of {K} diverged (non-finite loss or parameters; {metrics_path}: the "
-            f"members' \"diverged\"), and a diverged member is never exported, so no policy was. Lower train.lr "
-            f"(it is {cfg.train.lr:g}) or train.max_grad_norm")
-    member_params = lambda i: jax.tree.map(lambda x: np.asarray(x)[i], best_params)  # noqa: E731
-    t_select = time.perf_counter()
-    exported, selection = _choose_for_wearer(cfg, out, pop, best_score, best_chunk, diverged, member_params)
-    select_seconds = time.perf_counter() - t_select
-    if rows:
-        plot_population_curve(out / "training_curve.png", rows, exported)
-    F.export_policy(out / "policy.npz", cfg, pop.trainer, member_params(exported))
-    # Each member scored by the same compiled evaluation, one at a time (its figures never depend on K).
-    evaluate_params = make_evaluator(cfg, pop.trainer.net, eval_episodes or cfg.train.eval_episodes)
-    figures = [evaluate_params(member_params(i)) if best_chunk[i] > 0 else None for i in range(K)]
-    updates, episodes = np.asarray(ts.update)[:K], np.asarray(ts.episodes)[:K]
-    members = []
-    for i in range(K):
-        f = figures[i]
-        members.append({
-            "seed": pop.seeds[i],
-            "validation_curve": [r["members"][i]["validation_success_raw"] for r in rows],
-            "selected_chunk": int(best_chunk[i]),
-            "validation_success_raw": float(best_score[i]) if best_chunk[i] else None,
-            "diverged_chunk": int(diverged[i]) or None,
-            "episodes": int(episodes[i]), "env_steps": int(updates[i]) * steps_per_update,
-            "test": None if f is None else {k: f[k] for k in ("accuracy", "success_raw", "reached_goal", "held_out",
-                                                              "mean_steps", "by_obstacle")},
-        })
-    result = dict(figures[exported])
-    result.update({"episodes": int(episodes[exported]), "env_steps": int(updates[exported]) * steps_per_update,
-                   "train_seconds": round(train_seconds, 3), "seed": pop.seeds[exported], "base_seed": seed,
-                   "selected_chunk": int(best_chunk[exported]), "validation_success_raw": float(best_score[exported]),
-                   "devices": len(pop.devices), "population": K, "exported_member": exported, "members": members,
-                   "selection": selection, "selection_seconds": round(select_seconds, 3)})
-    atomic_write(out / "eval.json", json.dumps(result, indent=2) + "\n")
-    return result
+    def chunk(self, ts):
+        ts, m, score, ok = self.pop.chunk(ts)
+        k = self.size
+        return ChunkOut(ts, np.asarray(m)[:k], np.asarray(score)[:k], np.asarray(ok)[:k])
+
+    def counts(self, ts):
+        updates, episodes = np.asarray(ts.update), np.asarray(ts.episodes)
+        per = self.trainer.steps_per_update
+        return [F.Counters(updates[i], episodes[i], int(updates[i]) * per) for i in range(self.size)]
+
+    def keep_best(self, best, ts, i):
+        return jax.tree.map(lambda b, p: _set(b, i, np.asarray(p)[i]), best, ts.params)
+
+    def params_of(self, best, i):
+        return jax.tree.map(lambda x: np.asarray(x)[i], best)
+
+    def lead(self, track):
+        return choose(track.score, track.chunk, track.diverged)
+
+    def row(self, chunk, wall, lead, agent_rows):
+        return {"chunk": chunk, "wall_s": wall, "best_member": lead,
+                "env_steps_per_s": float(sum(r["env_steps_per_s"] for r in agent_rows)), "members": agent_rows}
+
+    def label(self, i):
+        return {"seed": self.pop.seeds[i]}
+
+    def progress(self, row, out, track, lead, stopped):
+        if stopped:
+            return None
+        i = lead if lead is not None else 0
+        return dict(best=f"seed {self.pop.seeds[i]}: {track.score[i]:.3f}",
+                    val=" ".join(f"{s:.2f}" for s in out.score), diverged=int((track.diverged > 0).sum()))
+
+    def select(self, out, track):
+        if choose(track.score, track.chunk, track.diverged) is None:
+            return None
+        t_select = time.perf_counter()
+        exported, self.selection = _choose_for_wearer(self.cfg, out, self.pop, track,
+                                                      lambda i: self.params_of(track.params, i))
+        self.selection_seconds = time.perf_counter() - t_select
+        return exported
+
+    def plot(self, path, rows, exported):
+        plot_population_curve(path, rows, exported)
+
+    def identity(self, exported, seed):
+        return {"seed": self.pop.seeds[exported], "base_seed": seed}
+
+    def report(self, exported, track, rows, counts, figures):
+        members = []
+        for i in range(self.size):
+            f = figures[i]
+            members.append({
+                "seed": self.pop.seeds[i],
+                "validation_curve": [r["members"][i]["validation_success_raw"] for r in rows],
+                "selected_chunk": int(track.chunk[i]),
+                "validation_success_raw": float(track.score[i]) if track.chunk[i] else None,
+                "diverged_chunk": int(track.diverged[i]) or None,
+                "episodes": int(counts[i].episodes), "env_steps": int(counts[i].env_steps),
+                "test": None if f is None else {k: f[k] for k in ("accuracy", "success_raw", "reached_goal", "held_out",
+                                                                  "mean_steps", "by_obstacle")},
+            })
+        return {"population": self.size, "exported_member": exported, "members": members,
+                "selection": self.selection, "selection_seconds": round(self.selection_seconds, 3)}
+
+    def nothing_exported(self, metrics_path, track):
+        return (f"every member of the population of {self.size} diverged (non-finite loss or parameters; "
+                f"{metrics_path}: the members' \"diverged\"), and a diverged member is never exported, so no policy "
+                f"was. Lower train.lr (it is {self.cfg.train.lr:g}) or train.max_grad_norm")
+
+    def diverged_after(self, metrics_path, track):
+        raise AssertionError("a diverged member is never exported")
 
 
-def _choose_for_wearer(cfg: Config, out: Path, pop: Population, best_score, best_chunk, diverged,
-                       member_params) -> tuple[int, list[dict]]:
+
+def _choose_for_wearer(cfg: Config, out: Path, pop: Population, track: Track, member_params) -> tuple[int, list[dict]]:
     """The member to export and the selection's record for eval.json: every candidate (a member that
     finished a chunk and never diverged) exported to ``members/seed_<seed>.npz`` and scored as a wearer
     gets it (jaxexo.train.selection); one candidate is exported without a score."""
     from jaxexo.train.selection import Candidate, choose_for_wearer, score_record, wearer_scores
 
-    ok = [i for i in range(pop.size) if diverged[i] == 0 and best_chunk[i] > 0]
+    ok = track.candidates()
     if len(ok) == 1:
         return ok[0], []
     (out / "members").mkdir(exist_ok=True)
-    candidates = [Candidate(pop.seeds[i], float(best_score[i]), F.export_policy(
+    candidates = [Candidate(pop.seeds[i], float(track.score[i]), F.export_policy(
         out / "members" / f"seed_{pop.seeds[i]}.npz", cfg, pop.trainer, member_params(i))) for i in ok]
     scores = wearer_scores(cfg, candidates)
     return ok[choose_for_wearer(scores)], [score_record(s) for s in scores]

@@ -9,6 +9,7 @@ import json
 import math
 import tomllib
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from flax import serialization
@@ -23,7 +24,7 @@ from jaxexo.storage.checkpoint import CheckpointError, unpack_checkpoint
 from jaxexo.storage.policy_file import save_policy
 from jaxexo.storage.rundir import RunDirError, contents, describe
 from jaxexo.train.network import dense_layers, norm_layers
-from jaxexo.train.trainer import METRICS, Trainer
+from jaxexo.train.trainer import METRICS, Trainer, UpdateMetrics  # noqa: F401 (METRICS read as run_files.METRICS)
 
 CHECKPOINT = "checkpoint.msgpack"
 BOOKKEEPING = "checkpoint.json"
@@ -45,23 +46,34 @@ def chunking(cfg: Config, trainer: Trainer) -> tuple[int, int]:
 checkpoint_write = atomic_write
 
 
-def chunk_row(m: np.ndarray, ts, env_steps: int, chunk: int, wall: float, seconds: float) -> dict:
-    d = dict(zip(METRICS, m.astype(np.float64).sum(0).tolist()))
-    n_upd = max(1, int((m[:, METRICS.index("env_steps")] > 0).sum()))
-    eps = max(d["episodes"], 1.0)
+class Counters(NamedTuple):
+    """An agent's totals after a chunk (host integers)."""
+
+    updates: int
+    episodes: int
+    env_steps: int
+
+
+def chunk_row(m: np.ndarray, counts: Counters, chunk: int, wall: float, seconds: float) -> dict:
+    """metrics.jsonl's row of one agent's chunk: ``m`` its (n_chunk, len(METRICS)) update metrics."""
+    # One float64 sum of the whole array, then the fields by name (a column summed alone could round
+    # differently: NumPy sums a contiguous row pairwise).
+    d = UpdateMetrics.named(m.astype(np.float64).sum(0))
+    n_upd = max(1, int((UpdateMetrics.named(m).env_steps > 0).sum()))
+    eps = max(float(d.episodes), 1.0)
     return {
         "chunk": chunk,
-        "updates": int(ts.update),
-        "env_steps": int(env_steps),
-        "episodes": int(ts.episodes),
-        "chunk_episodes": int(d["episodes"]),
-        "return_mean": d["return_sum"] / eps,
-        "success_raw_rate": d["successes"] / eps,    # behaviour policy, raw moves
-        "accuracy": d["accurate"] / eps,
-        "loss": d["loss"] / n_upd,
-        "q_mean": d["q_mean"] / n_upd,
-        "epsilon": d["epsilon"] / n_upd,
-        "env_steps_per_s": d["env_steps"] / max(seconds, 1e-9),
+        "updates": int(counts.updates),
+        "env_steps": int(counts.env_steps),
+        "episodes": int(counts.episodes),
+        "chunk_episodes": int(d.episodes),
+        "return_mean": float(d.return_sum) / eps,
+        "success_raw_rate": float(d.successes) / eps,    # behaviour policy, raw moves
+        "accuracy": float(d.accurate) / eps,
+        "loss": float(d.loss) / n_upd,
+        "q_mean": float(d.q_mean) / n_upd,
+        "epsilon": float(d.epsilon) / n_upd,
+        "env_steps_per_s": float(d.env_steps) / max(seconds, 1e-9),
         "wall_s": wall,
     }
 

@@ -33,7 +33,27 @@ from jaxexo.train import td_lambda
 from jaxexo.train.network import QNetwork
 
 
-METRICS = ("episodes", "return_sum", "successes", "accurate", "env_steps", "loss", "q_mean", "epsilon")
+class UpdateMetrics(NamedTuple):
+    """One update's metrics by name. The compiled scan returns them as the columns of a
+    (n_updates, len(METRICS)) array, in this order (``_finish_update``); ``named`` reads such an
+    array (or a sum of its rows) by name, so that no reader indexes a column by position."""
+
+    episodes: Any       # episodes finished
+    return_sum: Any     # their returns, summed
+    successes: Any      # of them, strict successes on the raw moves (behaviour policy)
+    accurate: Any       # of them, collision-free
+    env_steps: Any      # N T while the budget lasts, 0 after: the active updates are the nonzero ones
+    loss: Any
+    q_mean: Any
+    epsilon: Any
+
+    @classmethod
+    def named(cls, rows) -> "UpdateMetrics":
+        """The fields of ``rows``, a NumPy or JAX array whose last axis is METRICS."""
+        return cls(*(rows[..., i] for i in range(len(cls._fields))))
+
+
+METRICS = UpdateMetrics._fields
 
 
 def _hyper_from_config(cls, cfg: Config) -> "Hyperparams":
@@ -265,6 +285,7 @@ class Trainer:
         # Past the budget the state is frozen (vmapped seeds and sweeps reach it at different times).
         act = self.active(ts, hyper)
         new = jax.tree.map(lambda a, b: jnp.where(act, a, b), new, ts)
+        # UpdateMetrics's order: row_ep holds its first four fields (_episode_stats).
         metrics = jnp.concatenate([row_ep, jnp.stack([steps, loss, q_mean, eps])]) * act
         return new, metrics
 
@@ -424,7 +445,8 @@ class Trainer:
         return jax.device_put(ts, shardings)
 
     def run(self, ts: TrainState, hyper: Hyperparams, n_updates: int):
-        """``n_updates`` updates in one scan; returns the state and a (n_updates, len(METRICS)) array.
+        """``n_updates`` updates in one scan; returns the state and a (n_updates, len(METRICS)) array
+        (its columns by name: ``UpdateMetrics.named``).
         With several devices, pass ``place(ts)`` on the first call (one compilation, see ``place``)."""
         def scan(ts, hyper):
             return jax.lax.scan(lambda s, _: self.update(s, hyper), ts, None, length=n_updates)

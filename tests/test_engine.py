@@ -1,0 +1,51 @@
+"""The run engine's pieces that need no training: the one divergence rule, read the same on the host
+and inside a program, and the trainer's metric rows read by name.
+
+(The engine's runs are tests/test_driver.py's, tests/test_population.py's and tests/test_reliability.py's.)"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+jax = pytest.importorskip("jax")
+import jax.numpy as jnp  # noqa: E402
+
+from jaxexo.train.engine import Track, finite  # noqa: E402
+from jaxexo.train.trainer import METRICS, UpdateMetrics  # noqa: E402
+
+
+def _state(params=1.0, target=1.0):
+    tree = lambda v: {"dense": {"kernel": np.full((2, 3), v, np.float32), "bias": np.zeros(3, np.float32)}}  # noqa: E731
+    return SimpleNamespace(params=tree(params), target_params=tree(target))
+
+
+@pytest.mark.parametrize("params, target, loss, ok", [
+    (1.0, 1.0, 0.5, True),
+    (np.nan, 1.0, 0.5, False),
+    (1.0, np.inf, 0.5, False),      # the target network alone: diverged (the population's and sweep's rule)
+    (1.0, 1.0, np.nan, False),
+])
+def test_one_rule_on_the_host_and_in_a_program(params, target, loss, ok):
+    ts = _state(params, target)
+    m = np.zeros((4, len(METRICS)), np.float32)
+    m[2, METRICS.index("loss")] = loss
+    assert bool(finite(np, ts, m)) is ok
+    in_program = jax.jit(lambda p, t, m: finite(jnp, SimpleNamespace(params=p, target_params=t), m))
+    assert bool(in_program(ts.params, ts.target_params, m)) is ok
+
+
+def test_metric_rows_by_name():
+    m = np.arange(3 * len(METRICS), dtype=np.float32).reshape(3, len(METRICS))
+    named = UpdateMetrics.named(m)
+    assert named._fields == METRICS
+    for i, name in enumerate(METRICS):
+        assert np.array_equal(getattr(named, name), m[:, i])
+    assert float(UpdateMetrics.named(m.sum(0)).loss) == float(m[:, METRICS.index("loss")].sum())
+
+
+def test_candidates_finished_a_chunk_and_never_diverged():
+    track = Track(None, np.array([0.5, 0.9, 0.7, -1.0]), np.array([2, 3, 1, 0]), np.array([0, 4, 0, 0]))
+    assert track.candidates() == [0, 2]
