@@ -49,7 +49,14 @@ def test_readme_test_command_is_what_ci_runs():
     assert "pytest" in test_cmd
     ci_lines = [ln.strip() for ln in (ROOT / ".ci" / "run").read_text().splitlines()
                 if ln.strip() and not ln.lstrip().startswith("#")]
-    assert test_cmd in ci_lines, f"README test command {test_cmd!r} not in .ci/run"
+    # The README's steps run in .ci/run in its order, the style gate (ruff) between install and tests.
+    ci_steps = [step for ln in ci_lines for step in ln.split(" && ")]
+    readme_steps = test_cmd.split(" && ")
+    at = [ci_steps.index(step) for step in readme_steps if step in ci_steps]
+    assert len(at) == len(readme_steps) and at == sorted(at), \
+        f"README test command {test_cmd!r} not run step by step by .ci/run"
+    gate = [ci_steps.index(".venv/bin/ruff format --check ."), ci_steps.index(".venv/bin/ruff check .")]
+    assert at[-2] < min(gate) and max(gate) < at[-1], "ruff runs after the install, before the tests"
     # The CI runs it from the repository root on a fresh environment.
     ci = (ROOT / ".ci" / "run").read_text()
     assert "set -euo pipefail" in ci and 'cd "$(dirname "$0")/.."' in ci and "rm -rf .venv" in ci
