@@ -21,5 +21,7 @@ if __name__ == "__main__":
     ap.add_argument("--baseline-seconds", type=float, default=600.0)
     ap.add_argument("--out", default=str(root / "benchmarks" / "results"))
     a = ap.parse_args()
-    run_baseline_benchmark(a.out, str(root / "configs" / "default.toml"), a.throughput_seconds, a.baseline_seconds)
+    run_baseline_benchmark(
+        a.out, str(root / "configs" / "default.toml"), a.throughput_seconds, a.baseline_seconds
+    )
     sys.exit(0)

@@ -10,8 +10,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from jaxexo.benchmarks.course_bench import (markdown, run_course_benchmark, run_pivot_benchmark, run_swing_breakdown,
-                                            summarize_log)
+from jaxexo.benchmarks.course_bench import (
+    markdown,
+    run_course_benchmark,
+    run_pivot_benchmark,
+    run_swing_breakdown,
+    summarize_log,
+)
 from jaxexo.benchmarks.runner import parser
 
 OUT = Path(__file__).resolve().parent / "results"
@@ -24,8 +29,16 @@ def main() -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--log", help="JSON-lines file receiving each course's row")
     p.add_argument("--summarize", help="write the results of the courses logged in this file")
-    p.add_argument("--pivots", action="store_true", help="only the pivots a course produces (RL alone, per family)")
-    p.add_argument("--swings", action="store_true", help="only where a walk's time goes, swing by swing (--n courses)")
+    p.add_argument(
+        "--pivots",
+        action="store_true",
+        help="only the pivots a course produces (RL alone, per family)",
+    )
+    p.add_argument(
+        "--swings",
+        action="store_true",
+        help="only where a walk's time goes, swing by swing (--n courses)",
+    )
     p.add_argument("--out", default=str(OUT))
     a = p.parse_args()
     if a.swings:

@@ -14,4 +14,6 @@ if __name__ == "__main__":
     p.add_argument("--batch", type=int, default=1000, help="swings timed in one time_swings call")
     p.add_argument("--rate", type=float, default=100.0, help="control rate, Hz")
     a = p.parse_args()
-    run_device_ready_benchmark(a.policy, Path(__file__).resolve().parent / "results", a.n, a.batch, a.rate)
+    run_device_ready_benchmark(
+        a.policy, Path(__file__).resolve().parent / "results", a.n, a.batch, a.rate
+    )

@@ -22,4 +22,6 @@ from jaxexo.benchmarks.sweep_bench import run_lanes_benchmark  # noqa: E402
 if __name__ == "__main__":
     parser(__doc__, policy=False).parse_args()
     root = Path(__file__).resolve().parent.parent
-    run_lanes_benchmark(root / "benchmarks" / "results", root / "configs" / "sweeps" / "benchmark.toml")
+    run_lanes_benchmark(
+        root / "benchmarks" / "results", root / "configs" / "sweeps" / "benchmark.toml"
+    )

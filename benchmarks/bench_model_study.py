@@ -18,13 +18,25 @@ if __name__ == "__main__":
     ap = parser(__doc__.split("\n\n")[0], policy=False)
     ap.add_argument("sweep_dir")
     ap.add_argument("--n", type=int, default=120, help="scenes per set")
-    ap.add_argument("--time-n", type=int, default=80, help="scenes per set for the one-swing timing")
+    ap.add_argument(
+        "--time-n", type=int, default=80, help="scenes per set for the one-swing timing"
+    )
     ap.add_argument("--configs", default="", help="comma-separated config ids (default: all)")
     ap.add_argument("--tag", default="")
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
-    ap.add_argument("--from-json", help="re-render the tables and figure of an earlier run's JSON (no measuring)")
+    ap.add_argument(
+        "--from-json",
+        help="re-render the tables and figure of an earlier run's JSON (no measuring)",
+    )
     a = ap.parse_args()
     if a.from_json:
         rerender(a.from_json)
     else:
-        run_model_study(a.sweep_dir, a.out, a.n, a.time_n, {int(c) for c in a.configs.split(",") if c} or None, a.tag)
+        run_model_study(
+            a.sweep_dir,
+            a.out,
+            a.n,
+            a.time_n,
+            {int(c) for c in a.configs.split(",") if c} or None,
+            a.tag,
+        )

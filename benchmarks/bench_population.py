@@ -25,5 +25,9 @@ if __name__ == "__main__":
     p.add_argument("ks", nargs="?", default="1,4,8", help="population sizes, comma-separated")
     p.add_argument("name", nargs="?", default="population", help="the result files' name")
     a = p.parse_args()
-    run_population_benchmark(Path(__file__).resolve().parent / "results", a.config,
-                             tuple(int(x) for x in a.ks.split(",")), a.name)
+    run_population_benchmark(
+        Path(__file__).resolve().parent / "results",
+        a.config,
+        tuple(int(x) for x in a.ks.split(",")),
+        a.name,
+    )

@@ -16,9 +16,18 @@ from jaxexo.benchmarks.runner import parser
 
 if __name__ == "__main__":
     p = parser(__doc__)
-    p.add_argument("--n", type=int, default=1000, help="scenes per set (the held-out families round up to whole cells)")
-    p.add_argument("--rate", type=float, default=None, help="control rate, Hz (default: the config's)")
+    p.add_argument(
+        "--n",
+        type=int,
+        default=1000,
+        help="scenes per set (the held-out families round up to whole cells)",
+    )
+    p.add_argument(
+        "--rate", type=float, default=None, help="control rate, Hz (default: the config's)"
+    )
     p.add_argument("--no-driven", action="store_true", help="kinematic replay only")
     p.add_argument("--name", default="replay")
     a = p.parse_args()
-    run_replay_benchmark(a.policy, Path(__file__).resolve().parent / "results", a.n, a.rate, not a.no_driven, a.name)
+    run_replay_benchmark(
+        a.policy, Path(__file__).resolve().parent / "results", a.n, a.rate, not a.no_driven, a.name
+    )

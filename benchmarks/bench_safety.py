@@ -19,6 +19,8 @@ from jaxexo.benchmarks.safety_bench import run_safety_benchmark
 
 if __name__ == "__main__":
     p = parser(__doc__)
-    p.add_argument("--n", type=int, default=2000, help="scenes per set (thesis five; unseen shapes)")
+    p.add_argument(
+        "--n", type=int, default=2000, help="scenes per set (thesis five; unseen shapes)"
+    )
     a = p.parse_args()
     run_safety_benchmark(a.policy, Path(__file__).resolve().parent / "results", a.n)

@@ -21,12 +21,20 @@ from jaxexo.benchmarks.sweep_bench import run_learning_benchmark, run_sweep_benc
 if __name__ == "__main__":
     root = Path(__file__).resolve().parent.parent
     p = parser(__doc__, policy=False)
-    p.add_argument("--learning", nargs="?", const=root / "configs" / "sweeps" / "learning_benchmark.toml",
-                   metavar="SWEEP_FILE", help="only the learning sweep")
+    p.add_argument(
+        "--learning",
+        nargs="?",
+        const=root / "configs" / "sweeps" / "learning_benchmark.toml",
+        metavar="SWEEP_FILE",
+        help="only the learning sweep",
+    )
     p.add_argument("--no-target", action="store_true", help="without the 10-minute target run")
     a = p.parse_args()
     if a.learning:
         run_learning_benchmark(root / "benchmarks" / "results", a.learning)
     else:
-        run_sweep_benchmark(root / "benchmarks" / "results", root / "configs" / "sweeps" / "benchmark.toml",
-                            target=not a.no_target)
+        run_sweep_benchmark(
+            root / "benchmarks" / "results",
+            root / "configs" / "sweeps" / "benchmark.toml",
+            target=not a.no_target,
+        )

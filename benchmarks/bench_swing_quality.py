@@ -22,10 +22,19 @@ from jaxexo.benchmarks.swing_quality_bench import run_swing_quality_benchmark
 if __name__ == "__main__":
     ap = parser(__doc__.split("\n\n")[0])
     ap.add_argument("--n", type=int, default=600, help="scenes per set")
-    ap.add_argument("--clearance", type=float, default=None, help="m; default env.min_clearance (+ the error)")
+    ap.add_argument(
+        "--clearance", type=float, default=None, help="m; default env.min_clearance (+ the error)"
+    )
     ap.add_argument("--perception-error", type=float, default=0.0, help="m")
-    ap.add_argument("--smoothing", type=float, default=None, help="m^2, the RL spline's (default: the generator's)")
+    ap.add_argument(
+        "--smoothing",
+        type=float,
+        default=None,
+        help="m^2, the RL spline's (default: the generator's)",
+    )
     ap.add_argument("--tag", default="")
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
     a = ap.parse_args()
-    run_swing_quality_benchmark(a.policy, a.out, a.n, a.clearance, a.perception_error, a.smoothing, a.tag)
+    run_swing_quality_benchmark(
+        a.policy, a.out, a.n, a.clearance, a.perception_error, a.smoothing, a.tag
+    )

@@ -17,4 +17,6 @@ if __name__ == "__main__":
     p.add_argument("--unseen", type=int, default=300, help="unseen-shape scenes")
     p.add_argument("--rate", type=float, default=100.0, help="control rate, Hz")
     a = p.parse_args()
-    run_timing_benchmark(a.policy, Path(__file__).resolve().parent / "results", a.n, a.unseen, a.rate)
+    run_timing_benchmark(
+        a.policy, Path(__file__).resolve().parent / "results", a.n, a.unseen, a.rate
+    )

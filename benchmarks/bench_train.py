@@ -35,15 +35,18 @@ ROOT = Path(__file__).resolve().parent.parent
 
 def steady_module():
     """This checkout's train_steady_bench, loaded by path: the jaxexo it measures may be another's."""
-    spec = importlib.util.spec_from_file_location("train_steady_bench",
-                                                  ROOT / "jaxexo" / "benchmarks" / "train_steady_bench.py")
+    spec = importlib.util.spec_from_file_location(
+        "train_steady_bench", ROOT / "jaxexo" / "benchmarks" / "train_steady_bench.py"
+    )
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
 
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     mode = ap.add_mutually_exclusive_group()
     mode.add_argument("--steady", nargs="+", metavar="CONFIG")
     mode.add_argument("--mask-ab", metavar="CONFIG")
@@ -67,5 +70,8 @@ if __name__ == "__main__":
     else:
         from jaxexo.benchmarks.train_bench import run_train_benchmark
 
-        thesis = [str(ROOT / "configs" / "thesis" / f"{n}.toml") for n in ("a", "b", "c", "1", "2", "3", "final")]
+        thesis = [
+            str(ROOT / "configs" / "thesis" / f"{n}.toml")
+            for n in ("a", "b", "c", "1", "2", "3", "final")
+        ]
         run_train_benchmark(Path(a.out), str(ROOT / "configs" / "default.toml"), thesis)

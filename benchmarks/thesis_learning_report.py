@@ -20,4 +20,6 @@ if __name__ == "__main__":
         p.add_argument(arg)
     p.add_argument("note", nargs="?", default="")
     a = p.parse_args()
-    learning_report(a.study, a.sweep_file, a.sweep_dir, Path(__file__).resolve().parent / "results", a.note)
+    learning_report(
+        a.study, a.sweep_file, a.sweep_dir, Path(__file__).resolve().parent / "results", a.note
+    )

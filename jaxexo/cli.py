@@ -24,7 +24,9 @@ def _sizes(text: str) -> list[int]:
     try:
         sizes = [int(x) for x in text.split(",") if x.strip()]
     except ValueError:
-        raise argparse.ArgumentTypeError(f"--envs: expected comma-separated integers, got {text!r}") from None
+        raise argparse.ArgumentTypeError(
+            f"--envs: expected comma-separated integers, got {text!r}"
+        ) from None
     if not sizes or min(sizes) < 1:
         raise argparse.ArgumentTypeError(f"--envs: sizes must be >= 1, got {text!r}")
     return sizes
@@ -37,7 +39,9 @@ def cmd_bench_env(args) -> int:
     cfg, name = _load(args.config)
     from jaxexo.benchmarks.env_bench import run_env_benchmark
 
-    run_env_benchmark(cfg, Path(name).stem, args.envs, args.out, name=args.name, mixed=not args.no_mixed)
+    run_env_benchmark(
+        cfg, Path(name).stem, args.envs, args.out, name=args.name, mixed=not args.no_mixed
+    )
     return 0
 
 
@@ -46,7 +50,7 @@ def cmd_train(args) -> int:
 
     use_all_cpu_cores()
     if args.config is None and args.resume and (Path(args.out) / "config.toml").is_file():
-        args.config = Path(args.out) / "config.toml"     # the run's own resolved config
+        args.config = Path(args.out) / "config.toml"  # the run's own resolved config
     cfg, name = _load(args.config)
     if args.population is not None:
         from jaxexo.config import with_population
@@ -54,35 +58,52 @@ def cmd_train(args) -> int:
         cfg = with_population(cfg, args.population, "--population")
     from jaxexo.config import check_seed
 
-    check_seed(args.seed, "--seed", cfg.train.population)   # before JAX starts (run_training checks it too)
+    check_seed(
+        args.seed, "--seed", cfg.train.population
+    )  # before JAX starts (run_training checks it too)
     from jaxexo.config.memory import check_memory
 
-    check_memory(cfg)       # before JAX allocates: a run the machine cannot hold is refused here
+    check_memory(cfg)  # before JAX allocates: a run the machine cannot hold is refused here
     from jaxexo.train.devices import use_compilation_cache
 
     use_compilation_cache()  # a later run of these static settings loads its programs
     from jaxexo.train.driver import run_training
 
     k = cfg.train.population
-    seeds = f"seeds {args.seed}..{args.seed + k - 1}, population of {k}" if k > 1 else f"seed {args.seed}"
+    seeds = (
+        f"seeds {args.seed}..{args.seed + k - 1}, population of {k}"
+        if k > 1
+        else f"seed {args.seed}"
+    )
     print(f"jaxexo train: {name} -> {args.out} ({seeds}{', resume' if args.resume else ''})")
     res = run_training(cfg, args.out, seed=args.seed, resume=args.resume, progress=not args.quiet)
     held = res.get("held_out") or {}
-    print(f"trained {res['episodes']} episodes, {res['env_steps']:,} env steps in {res['train_seconds']:.1f} s")
-    print(f"greedy eval on {sum(v['n'] for v in res['by_obstacle'].values())} test layouts: "
-          f"success_raw {res['success_raw']:.3f}, accuracy {res['accuracy']:.3f}"
-          + (f"; held-out triangle/half-circle success_raw {held['success_raw']:.3f}" if held else ""))
+    print(
+        f"trained {res['episodes']} episodes, {res['env_steps']:,} env steps in {res['train_seconds']:.1f} s"
+    )
+    print(
+        f"greedy eval on {sum(v['n'] for v in res['by_obstacle'].values())} test layouts: "
+        f"success_raw {res['success_raw']:.3f}, accuracy {res['accuracy']:.3f}"
+        + (f"; held-out triangle/half-circle success_raw {held['success_raw']:.3f}" if held else "")
+    )
     if "members" in res:
         ok = [m for m in res["members"] if m["diverged_chunk"] is None]
-        print(f"exported member {res['exported_member']} (seed {res['seed']}, chunk {res['selected_chunk']}, "
-              f"validation {res['validation_success_raw']:.3f}); {len(ok)} of {k} members finite, test success_raw "
-              + ", ".join(f"{m['test']['success_raw']:.2f}" if m["test"] else "-" for m in res["members"]))
+        print(
+            f"exported member {res['exported_member']} (seed {res['seed']}, chunk {res['selected_chunk']}, "
+            f"validation {res['validation_success_raw']:.3f}); {len(ok)} of {k} members finite, test success_raw "
+            + ", ".join(
+                f"{m['test']['success_raw']:.2f}" if m["test"] else "-" for m in res["members"]
+            )
+        )
     print(f"wrote {args.out}/policy.npz, eval.json, metrics.jsonl, training_curve.png")
     return 0
 
 
-GENERAL_SHAPES = ("rectangle", "half_ellipse")    # --obstacle kinds of any size besides the thesis's five
-DEFAULT_SIZE = (0.20, 0.15)                       # m, width and height of a general shape
+GENERAL_SHAPES = (
+    "rectangle",
+    "half_ellipse",
+)  # --obstacle kinds of any size besides the thesis's five
+DEFAULT_SIZE = (0.20, 0.15)  # m, width and height of a general shape
 
 
 def obstacle_from_args(args):
@@ -92,33 +113,52 @@ def obstacle_from_args(args):
     from jaxexo.physics.geometry import THESIS_OBSTACLES, GeometryError, Obstacle
 
     if getattr(args, "profile", None) is not None:
-        given = [o for o, v in (("--width", args.width), ("--height", args.height), ("--center-y", args.center_y))
-                 if v is not None]
+        given = [
+            o
+            for o, v in (
+                ("--width", args.width),
+                ("--height", args.height),
+                ("--center-y", args.center_y),
+            )
+            if v is not None
+        ]
         if given:
-            raise ValueError(f"{given[0]}: not with --profile (the profile file gives the obstacle's shape and place)")
+            raise ValueError(
+                f"{given[0]}: not with --profile (the profile file gives the obstacle's shape and place)"
+            )
         from jaxexo.storage.terrain_file import read_terrain
 
         t = read_terrain(args.profile)
         return Obstacle.profile(t.points)
     if args.obstacle is None:
-        raise ValueError("--obstacle or --profile: give the obstacle (a named shape, or a profile file)")
+        raise ValueError(
+            "--obstacle or --profile: give the obstacle (a named shape, or a profile file)"
+        )
     kind = args.obstacle
     center = 0.45 if args.center_y is None else args.center_y
     try:
         if kind in THESIS_OBSTACLES and args.width is None and args.height is None:
             return Obstacle.named(kind, center_y=center)
-        shape, default_w, default_h = THESIS_OBSTACLES[kind] if kind in THESIS_OBSTACLES else (kind, *DEFAULT_SIZE)
+        shape, default_w, default_h = (
+            THESIS_OBSTACLES[kind] if kind in THESIS_OBSTACLES else (kind, *DEFAULT_SIZE)
+        )
         w = default_w if args.width is None else args.width
         h = default_h if args.height is None else args.height
         return getattr(Obstacle, shape)(w, h, center_y=center)
     except GeometryError as e:
-        option = {"width": "--width", "height": "--height", "center_y": "--center-y"}.get(str(e).split()[0], "--obstacle")
+        option = {"width": "--width", "height": "--height", "center_y": "--center-y"}.get(
+            str(e).split()[0], "--obstacle"
+        )
         raise ValueError(f"{option}: {e}") from None
 
 
 # A file name to suggest for each output of jaxexo generate (its kind's suffix).
-OUTPUT_EXAMPLES = {"--out": "trajectory.csv", "--json": "trajectory.json", "--plot": "swing.png",
-                   "--animate": "swing.gif"}
+OUTPUT_EXAMPLES = {
+    "--out": "trajectory.csv",
+    "--json": "trajectory.json",
+    "--plot": "swing.png",
+    "--animate": "swing.gif",
+}
 
 
 def _check_output_file(option: str, value) -> None:
@@ -129,7 +169,9 @@ def _check_output_file(option: str, value) -> None:
     text = str(value)
     p = Path(value)
     if text.endswith(("/", "\\")) or p.is_dir():
-        raise ValueError(f"{option}: {text} is a directory; give a file name (e.g. {p / OUTPUT_EXAMPLES[option]})")
+        raise ValueError(
+            f"{option}: {text} is a directory; give a file name (e.g. {p / OUTPUT_EXAMPLES[option]})"
+        )
     if not p.parent.is_dir():
         _check_folder_part(option, p.parent, text)
         raise ValueError(f"{option}: the folder {p.parent} does not exist (for {text})")
@@ -161,11 +203,15 @@ def _check_outputs(inputs, outputs) -> None:
     for i, (option, value) in enumerate(outs):
         for other, v in outs[:i]:
             if _same_file(value, v):
-                raise ValueError(f"{option}: {value} is also the {other} output; give each output its own path")
+                raise ValueError(
+                    f"{option}: {value} is also the {other} output; give each output its own path"
+                )
         for other, v in inputs:
             if v is not None and _same_file(value, v):
-                raise ValueError(f"{option}: {value} is the {other} input; an output never replaces an input, "
-                                 "pick another path")
+                raise ValueError(
+                    f"{option}: {value} is the {other} input; an output never replaces an input, "
+                    "pick another path"
+                )
 
 
 def _check_clearance(clearance, config) -> None:
@@ -179,14 +225,23 @@ def _check_clearance(clearance, config) -> None:
 
 
 def cmd_generate(args) -> int:
-    outputs = (("--out", args.out), ("--json", args.json), ("--plot", args.plot), ("--animate", args.animate))
+    outputs = (
+        ("--out", args.out),
+        ("--json", args.json),
+        ("--plot", args.plot),
+        ("--animate", args.animate),
+    )
     for option, value in outputs:
         _check_output_file(option, value)
     _check_outputs([("--policy", args.policy), ("--profile", args.profile)], outputs)
     if args.obstacle is not None and args.profile is not None:
-        raise ValueError("--obstacle, --profile: give one of them (a named shape, or a profile file)")
+        raise ValueError(
+            "--obstacle, --profile: give one of them (a named shape, or a profile file)"
+        )
     if args.method == "cfftg" and args.smoothing is not None:
-        raise ValueError("--smoothing: applies to --method rl only (CFFTG's polynomial path is not smoothed)")
+        raise ValueError(
+            "--smoothing: applies to --method rl only (CFFTG's polynomial path is not smoothed)"
+        )
     from jaxexo.inference.options import check_duration, check_points
     from jaxexo.inference.swing_timing import check_rate
     from jaxexo.storage.atomic import writes_to_stdout
@@ -201,8 +256,15 @@ def cmd_generate(args) -> int:
     report = sys.stderr if any(writes_to_stdout(v) for _, v in outputs) else sys.stdout
     import numpy as np
 
-    common = dict(pivot=args.pivot, pivot_y=args.pivot_y, start_y=args.start_y, step_length=args.step_length,
-                  n_points=args.points, duration=args.duration, clearance=args.clearance)
+    common = dict(
+        pivot=args.pivot,
+        pivot_y=args.pivot_y,
+        start_y=args.start_y,
+        step_length=args.step_length,
+        n_points=args.points,
+        duration=args.duration,
+        clearance=args.clearance,
+    )
     if args.method == "cfftg":
         from jaxexo.baselines import CFFTG
 
@@ -217,8 +279,12 @@ def cmd_generate(args) -> int:
 
         gen = TrajectoryGenerator.load(args.policy)
         _check_clearance(args.clearance, gen.config)
-        traj = gen.generate(obstacle, smoothing=args.smoothing,
-                            fallback=None if args.fallback == "none" else args.fallback, **common)
+        traj = gen.generate(
+            obstacle,
+            smoothing=args.smoothing,
+            fallback=None if args.fallback == "none" else args.fallback,
+            **common,
+        )
     timed = _timed_swing(args, traj, gen.config)
     (timed or traj).to_csv(args.out)
     written = [args.out]
@@ -236,19 +302,31 @@ def cmd_generate(args) -> int:
         animate_swing(timed, args.animate)
         written.append(args.animate)
     c = traj.checks
-    moves = f"{len(traj.raw) - 1} agent moves" if traj.method == "rl" else (
-        "polynomial path (CFFTG fallback: the RL swing was not safe)" if traj.method == "cfftg-fallback"
-        else "polynomial path (CFFTG)")
-    print(f"{traj.scene.obstacle.kind} {traj.scene.width * 100:.1f} x {traj.scene.height * 100:.1f} cm, pivot "
-          f"{traj.scene.pivot}: {moves}, min clearance (between samples, guaranteed) {c.min_clearance * 100:.1f} cm, "
-          f"{'ok' if c.ok else 'FAILED'}", file=report)
+    moves = (
+        f"{len(traj.raw) - 1} agent moves"
+        if traj.method == "rl"
+        else (
+            "polynomial path (CFFTG fallback: the RL swing was not safe)"
+            if traj.method == "cfftg-fallback"
+            else "polynomial path (CFFTG)"
+        )
+    )
+    print(
+        f"{traj.scene.obstacle.kind} {traj.scene.width * 100:.1f} x {traj.scene.height * 100:.1f} cm, pivot "
+        f"{traj.scene.pivot}: {moves}, min clearance (between samples, guaranteed) {c.min_clearance * 100:.1f} cm, "
+        f"{'ok' if c.ok else 'FAILED'}",
+        file=report,
+    )
     for r in c.reasons + traj.notes:
         print(f"  {r}", file=report)
     if timed is not None:
-        print(f"device timing: {timed.duration:.2f} s swing at {timed.rate:g} Hz, peak joint velocity "
-              f"{np.degrees(timed.peak_velocity.max()):.0f} deg/s, acceleration "
-              f"{np.degrees(timed.peak_acceleration.max()):.0f} deg/s^2, "
-              f"{'within' if timed.within_limits else 'OUTSIDE'} the limits", file=report)
+        print(
+            f"device timing: {timed.duration:.2f} s swing at {timed.rate:g} Hz, peak joint velocity "
+            f"{np.degrees(timed.peak_velocity.max()):.0f} deg/s, acceleration "
+            f"{np.degrees(timed.peak_acceleration.max()):.0f} deg/s^2, "
+            f"{'within' if timed.within_limits else 'OUTSIDE'} the limits",
+            file=report,
+        )
         for r in timed.reasons:
             if r not in c.reasons:
                 print(f"  {r}", file=report)
@@ -260,17 +338,28 @@ def cmd_generate(args) -> int:
 
 
 def cmd_walk(args) -> int:
-    outputs = (("--out", args.out), ("--json", args.json), ("--plot", args.plot), ("--animate", args.animate))
+    outputs = (
+        ("--out", args.out),
+        ("--json", args.json),
+        ("--plot", args.plot),
+        ("--animate", args.animate),
+    )
     for option, value in outputs:
         _check_output_file(option, value)
     _check_outputs([("--policy", args.policy), ("--terrain", args.terrain)], outputs)
     from jaxexo.config import MAX_CONTROL_RATE
 
-    if args.rate is not None and not (math.isfinite(args.rate) and 0 < args.rate <= MAX_CONTROL_RATE):
-        raise ValueError(f"--rate: control rate must be > 0 and <= {MAX_CONTROL_RATE:g} Hz, got {args.rate:g}")
+    if args.rate is not None and not (
+        math.isfinite(args.rate) and 0 < args.rate <= MAX_CONTROL_RATE
+    ):
+        raise ValueError(
+            f"--rate: control rate must be > 0 and <= {MAX_CONTROL_RATE:g} Hz, got {args.rate:g}"
+        )
     if args.method == "cfftg":
         if args.fallback != "cfftg":
-            raise ValueError("--fallback: applies to --method rl only (CFFTG plans every swing itself)")
+            raise ValueError(
+                "--fallback: applies to --method rl only (CFFTG plans every swing itself)"
+            )
         from jaxexo.baselines import CFFTG
 
         gen = CFFTG.from_policy(args.policy) if args.policy else CFFTG(_load(None)[0])
@@ -285,11 +374,19 @@ def cmd_walk(args) -> int:
     from jaxexo.storage.terrain_file import read_terrain
 
     terrain = read_terrain(args.terrain)
-    kw = dict(start_y=args.start_y, goal_y=args.goal_y, steps=args.steps, rate=args.rate, clearance=args.clearance,
-              double_support=args.double_support)
+    kw = dict(
+        start_y=args.start_y,
+        goal_y=args.goal_y,
+        steps=args.steps,
+        rate=args.rate,
+        clearance=args.clearance,
+        double_support=args.double_support,
+    )
     if args.method == "rl":
         kw["fallback"] = None if args.fallback == "none" else args.fallback
-    course = plan_course(gen, terrain, **kw)      # an infeasible course is refused here: nothing written
+    course = plan_course(
+        gen, terrain, **kw
+    )  # an infeasible course is refused here: nothing written
     course.to_csv(args.out)
     written = [args.out]
     if args.json:
@@ -306,13 +403,18 @@ def cmd_walk(args) -> int:
         animate_course(course, args.animate)
         written.append(args.animate)
     fb = sum(s.method == "cfftg-fallback" for s in course.steps)
-    print(f"{terrain.source}: {len(course.footholds)} swings from y = {course.footholds.start_y:.2f} m to "
-          f"{course.footholds.landings[-1]:.2f} m ({course.method}"
-          + (f", {fb} CFFTG fallback{'s' * (fb != 1)}" if fb else "") + f"), {course.duration:.2f} s at "
-          f"{course.rate:g} Hz, {'ok' if course.ok else 'FAILED'}")
+    print(
+        f"{terrain.source}: {len(course.footholds)} swings from y = {course.footholds.start_y:.2f} m to "
+        f"{course.footholds.landings[-1]:.2f} m ({course.method}"
+        + (f", {fb} CFFTG fallback{'s' * (fb != 1)}" if fb else "")
+        + f"), {course.duration:.2f} s at "
+        f"{course.rate:g} Hz, {'ok' if course.ok else 'FAILED'}"
+    )
     for st in course.steps:
-        print(f"  step {st.index + 1:2d} {st.leg:5s} {st.start_y:6.2f} -> {st.landing_y:6.2f} m (pivot {st.pivot_y:.2f} m)"
-              f" {st.method:14s} {st.end_s - st.start_s:5.2f} s{'' if st.ok else '  FAILED'}")
+        print(
+            f"  step {st.index + 1:2d} {st.leg:5s} {st.start_y:6.2f} -> {st.landing_y:6.2f} m (pivot {st.pivot_y:.2f} m)"
+            f" {st.method:14s} {st.end_s - st.start_s:5.2f} s{'' if st.ok else '  FAILED'}"
+        )
     for r in course.reasons:
         print(f"  {r}")
     print("wrote " + ", ".join(written))
@@ -334,8 +436,13 @@ def _scene_args(args, config):
     from jaxexo.physics.dynamics import DEFAULT_PIVOT, make_scene
 
     pivot = args.pivot_y if args.pivot_y is not None else (args.pivot or DEFAULT_PIVOT)
-    return make_scene(obstacle_from_args(args), pivot, args.start_y, args.step_length,
-                      foot_length=config.kinematics.foot_length)
+    return make_scene(
+        obstacle_from_args(args),
+        pivot,
+        args.start_y,
+        args.step_length,
+        foot_length=config.kinematics.foot_length,
+    )
 
 
 def cmd_mjcf(args) -> int:
@@ -352,7 +459,9 @@ def cmd_mjcf(args) -> int:
 
     scene = _scene_args(args, config)
     atomic_write(args.out, scene_mjcf(config, scene))
-    print(f"wrote {args.out} (open it with: python -m mujoco.viewer --mjcf={args.out}; keyframe 'start')")
+    print(
+        f"wrote {args.out} (open it with: python -m mujoco.viewer --mjcf={args.out}; keyframe 'start')"
+    )
     return 0
 
 
@@ -363,11 +472,15 @@ def cmd_replay(args) -> int:
     _check_outputs([("--policy", args.policy)], outputs)
     from jaxexo.config import MAX_CONTROL_RATE
 
-    if args.rate is not None and not (math.isfinite(args.rate) and 0 < args.rate <= MAX_CONTROL_RATE):
-        raise ValueError(f"--rate: control rate must be > 0 and <= {MAX_CONTROL_RATE:g} Hz, got {args.rate:g}")
+    if args.rate is not None and not (
+        math.isfinite(args.rate) and 0 < args.rate <= MAX_CONTROL_RATE
+    ):
+        raise ValueError(
+            f"--rate: control rate must be > 0 and <= {MAX_CONTROL_RATE:g} Hz, got {args.rate:g}"
+        )
     from jaxexo.sim.replay import require_mujoco
 
-    require_mujoco()        # a clear error before any work
+    require_mujoco()  # a clear error before any work
     from jaxexo.baselines import CFFTG
     from jaxexo.inference import TrajectoryGenerator
     from jaxexo.inference.swing_timing import DeviceLimits, time_swing
@@ -376,39 +489,66 @@ def cmd_replay(args) -> int:
     rl = TrajectoryGenerator.load(args.policy)
     config = rl.config
     scene = _scene_args(args, config)
-    common = dict(pivot=scene.pivot_y if args.pivot_y is not None else (args.pivot or None), start_y=args.start_y,
-                  step_length=args.step_length)
-    gens = {"rl": lambda: rl.generate(scene.obstacle, fallback=None, **common),
-            "cfftg": lambda: CFFTG(config).generate(scene.obstacle, **common)}
+    common = dict(
+        pivot=scene.pivot_y if args.pivot_y is not None else (args.pivot or None),
+        start_y=args.start_y,
+        step_length=args.step_length,
+    )
+    gens = {
+        "rl": lambda: rl.generate(scene.obstacle, fallback=None, **common),
+        "cfftg": lambda: CFFTG(config).generate(scene.obstacle, **common),
+    }
     methods = ("rl", "cfftg") if args.method == "both" else (args.method,)
     report, ok = {}, True
     for name in methods:
         timed = time_swing(gens[name](), config, rate=args.rate)
         legs = Legs(config, timed.scene)
-        r = {"flagged_ok": bool(timed.ok), "duration_s": timed.duration, "rate_hz": timed.rate,
-             "kinematic": kinematic_replay(timed, config, legs=legs)}
+        r = {
+            "flagged_ok": bool(timed.ok),
+            "duration_s": timed.duration,
+            "rate_hz": timed.rate,
+            "kinematic": kinematic_replay(timed, config, legs=legs),
+        }
         k = r["kinematic"]
-        print(f"{name}: {timed.duration:.2f} s swing at {timed.rate:g} Hz, jaxexo {'ok' if timed.ok else 'FAILED'} "
-              f"(guaranteed clearance {100 * timed.checks.min_clearance:.2f} cm); MuJoCo kinematic replay: smallest "
-              f"distance {100 * k['mujoco_min_distance_m']:.2f} cm over {k['poses']} poses, largest difference from "
-              f"jaxexo at the samples {1e6 * k['max_disagreement_m']:.3f} um, {1e3 * k['seconds']:.1f} ms")
+        print(
+            f"{name}: {timed.duration:.2f} s swing at {timed.rate:g} Hz, jaxexo {'ok' if timed.ok else 'FAILED'} "
+            f"(guaranteed clearance {100 * timed.checks.min_clearance:.2f} cm); MuJoCo kinematic replay: smallest "
+            f"distance {100 * k['mujoco_min_distance_m']:.2f} cm over {k['poses']} poses, largest difference from "
+            f"jaxexo at the samples {1e6 * k['max_disagreement_m']:.3f} um, {1e3 * k['seconds']:.1f} ms"
+        )
         ok &= not k["flagged_ok_but_within_margin"]
         if args.driven:
-            for label, scale in (("driven", 1.0), ("driven_half_limits", 0.5))[: 2 if args.half_limits else 1]:
+            for label, scale in (("driven", 1.0), ("driven_half_limits", 0.5))[
+                : 2 if args.half_limits else 1
+            ]:
                 lim = DeviceLimits.from_config(config).scaled(scale, scale)
-                d = r[label] = driven_replay(timed, config, limits=lim, legs=legs, controller=args.controller)
-                print(f"  {label.replace('_', ' ')}: heel error max {100 * d['heel_error_max_m']:.2f} cm, toe "
-                      f"{100 * d['toe_error_max_m']:.2f} cm; smallest distance {100 * d['mujoco_min_distance_m']:.2f} "
-                      f"cm; {'CONTACT' if d['contact'] else 'no contact'}; "
-                      f"{'a limit saturates' if d['saturated'] else 'no limit saturates'}; {1e3 * d['seconds']:.0f} ms")
+                d = r[label] = driven_replay(
+                    timed, config, limits=lim, legs=legs, controller=args.controller
+                )
+                print(
+                    f"  {label.replace('_', ' ')}: heel error max {100 * d['heel_error_max_m']:.2f} cm, toe "
+                    f"{100 * d['toe_error_max_m']:.2f} cm; smallest distance {100 * d['mujoco_min_distance_m']:.2f} "
+                    f"cm; {'CONTACT' if d['contact'] else 'no contact'}; "
+                    f"{'a limit saturates' if d['saturated'] else 'no limit saturates'}; {1e3 * d['seconds']:.0f} ms"
+                )
                 ok &= not (timed.ok and d["contact"]) or scale != 1.0
         report[name] = r
     if args.json:
         from jaxexo.inference.export import write_json
 
-        write_json({"units": {"length": "m", "angle": "rad", "time": "s"}, "scene": {
-            "obstacle": scene.obstacle.kind, "pivot_y": scene.pivot_y, "start_y": scene.start_y,
-            "goal_y": scene.goal_y}, "replays": report}, args.json)
+        write_json(
+            {
+                "units": {"length": "m", "angle": "rad", "time": "s"},
+                "scene": {
+                    "obstacle": scene.obstacle.kind,
+                    "pivot_y": scene.pivot_y,
+                    "start_y": scene.start_y,
+                    "goal_y": scene.goal_y,
+                },
+                "replays": report,
+            },
+            args.json,
+        )
         print(f"wrote {args.json}")
     return 0 if ok else 1
 
@@ -419,7 +559,7 @@ def cmd_sweep(args) -> int:
     if args.task_cpus is not None and args.task_cpus < 1:
         raise ValueError(f"--task-cpus: must be >= 1, got {args.task_cpus}")
     budget = parse_bytes(args.memory_budget) if args.memory_budget else None
-    sweep = load_sweep(args.sweep)      # validated (NumPy only) before JAX starts
+    sweep = load_sweep(args.sweep)  # validated (NumPy only) before JAX starts
     if args.backend == "local":
         from jaxexo.train.devices import use_all_cpu_cores, use_compilation_cache
 
@@ -427,22 +567,41 @@ def cmd_sweep(args) -> int:
         use_compilation_cache()
     from jaxexo.sweep.runner import run_sweep
 
-    print(f"jaxexo sweep: {args.sweep} -> {args.out}: {len(sweep.members)} configurations x {len(sweep.seeds)} "
-          f"seeds = {sweep.num_agents} agents in {len(sweep.groups)} group(s) ({args.backend} backend"
-          f"{', resume' if args.resume else ''})")
+    print(
+        f"jaxexo sweep: {args.sweep} -> {args.out}: {len(sweep.members)} configurations x {len(sweep.seeds)} "
+        f"seeds = {sweep.num_agents} agents in {len(sweep.groups)} group(s) ({args.backend} backend"
+        f"{', resume' if args.resume else ''})"
+    )
     heatmap = tuple(args.heatmap.split(",")) if args.heatmap else None
-    res = run_sweep(sweep, args.out, resume=args.resume, backend=args.backend, address=args.address,
-                    memory_budget=budget, task_cpus=args.task_cpus, progress=not args.quiet,
-                    export_best=args.export_best, export_all=args.export_all, heatmap=heatmap)
+    res = run_sweep(
+        sweep,
+        args.out,
+        resume=args.resume,
+        backend=args.backend,
+        address=args.address,
+        memory_budget=budget,
+        task_cpus=args.task_cpus,
+        progress=not args.quiet,
+        export_best=args.export_best,
+        export_all=args.export_all,
+        heatmap=heatmap,
+    )
     for i, e in enumerate(res["ranking"][:5], 1):
-        print(f"  #{i} config {e['config_id']} ({e['label']}): success {e['success_mean']:.3f} "
-              f"± {e['success_std']:.3f} over {e['seeds']} seeds, held-out {e['held_out_success']:.3f}"
-              + (f", {e['diverged']} diverged" if e["diverged"] else ""))
+        print(
+            f"  #{i} config {e['config_id']} ({e['label']}): success {e['success_mean']:.3f} "
+            f"± {e['success_std']:.3f} over {e['seeds']} seeds, held-out {e['held_out_success']:.3f}"
+            + (f", {e['diverged']} diverged" if e["diverged"] else "")
+        )
     if res["wall_s_this_run"] > 0 and res["env_steps_this_run"]:
-        print(f"{res['env_steps_this_run']:,.0f} env steps in {res['wall_s_this_run']:.1f} s "
-              f"({res['env_steps_this_run'] / res['wall_s_this_run'] / 1e6:.3f} M env-steps/s)")
-    print(f"wrote {args.out}/results.csv, summary.md, " + ", ".join(res["figures"])
-          + (", best/policy.npz, best/config.toml" if "exported" in res else ""))
+        print(
+            f"{res['env_steps_this_run']:,.0f} env steps in {res['wall_s_this_run']:.1f} s "
+            f"({res['env_steps_this_run'] / res['wall_s_this_run'] / 1e6:.3f} M env-steps/s)"
+        )
+    print(
+        f"wrote {args.out}/results.csv, summary.md, "
+        + ", ".join(res["figures"])
+        + (", best/policy.npz, best/config.toml" if "exported" in res else "")
+    )
     return 0
 
 
@@ -454,12 +613,26 @@ def cmd_eval(args) -> int:
     if args.batch < 1:
         raise ValueError(f"--batch: must be >= 1, got {args.batch}")
     check_report_folder(args.out, args.policy, force=args.force)
-    report = run_eval(args.policy, args.out, against=args.against, scenarios=args.scenarios, n=args.n,
-                      figures=not args.no_figures, batch_size=args.batch, force=args.force, replay=args.replay)
+    report = run_eval(
+        args.policy,
+        args.out,
+        against=args.against,
+        scenarios=args.scenarios,
+        n=args.n,
+        figures=not args.no_figures,
+        batch_size=args.batch,
+        force=args.force,
+        replay=args.replay,
+    )
     for name, r in report.items():
-        print(f"{name}: accuracy {r['accuracy']:.3f}, success {r['success']:.3f}, median {r['time_ms_median']:.3f} ms "
-              f"per trajectory, {r['batch_1000_ms']:.1f} ms per batch of 1000")
-    print(f"wrote {args.out}/report.md, report.json" + ("" if args.no_figures else ", trajectories.png, joint_angles.png"))
+        print(
+            f"{name}: accuracy {r['accuracy']:.3f}, success {r['success']:.3f}, median {r['time_ms_median']:.3f} ms "
+            f"per trajectory, {r['batch_1000_ms']:.1f} ms per batch of 1000"
+        )
+    print(
+        f"wrote {args.out}/report.md, report.json"
+        + ("" if args.no_figures else ", trajectories.png, joint_angles.png")
+    )
     return 0
 
 
@@ -470,13 +643,23 @@ def cmd_reproduce(args) -> int:
     models = [m.strip() for m in args.models.split(",") if m.strip()]
     if not models:
         raise ValueError(f"--models: name at least one model, got {args.models!r}")
-    run_names(models, args.variant)     # checks --models and --variant before anything trains
+    run_names(models, args.variant)  # checks --models and --variant before anything trains
     check_reproduce_options(args.out, args.n, args.results, args.population, args.seed)
-    use_all_cpu_cores()                 # after the checks (NumPy only): a refusal starts no JAX
+    use_all_cpu_cores()  # after the checks (NumPy only): a refusal starts no JAX
     use_compilation_cache()
-    run_reproduce(args.out, models, n=args.n, seed=args.seed, include_default=args.default, results_dir=args.results,
-                  variant=args.variant, population=args.population)
-    print(f"wrote {args.out}/reproduce.md, reproduce.json and the run directories under {args.out}/runs")
+    run_reproduce(
+        args.out,
+        models,
+        n=args.n,
+        seed=args.seed,
+        include_default=args.default,
+        results_dir=args.results,
+        variant=args.variant,
+        population=args.population,
+    )
+    print(
+        f"wrote {args.out}/reproduce.md, reproduce.json and the run directories under {args.out}/runs"
+    )
     return 0
 
 
@@ -484,14 +667,22 @@ def cmd_bench(args) -> int:
     from jaxexo.train.devices import use_all_cpu_cores
 
     if not (math.isfinite(args.baseline_seconds) and args.baseline_seconds > 0):
-        raise ValueError(f"--baseline-seconds: a time budget must be a finite number of seconds > 0, "
-                         f"got {args.baseline_seconds:g}")
+        raise ValueError(
+            f"--baseline-seconds: a time budget must be a finite number of seconds > 0, "
+            f"got {args.baseline_seconds:g}"
+        )
     if args.courses < 1:
         raise ValueError(f"--courses: must be >= 1, got {args.courses}")
     use_all_cpu_cores()
     from jaxexo.benchmarks.run_all import run_all
 
-    run_all(args.out, policy=args.policy, baseline_seconds=args.baseline_seconds, skip=args.skip, courses=args.courses)
+    run_all(
+        args.out,
+        policy=args.policy,
+        baseline_seconds=args.baseline_seconds,
+        skip=args.skip,
+        courses=args.courses,
+    )
     return 0
 
 
@@ -500,171 +691,394 @@ def _add_scene_args(g) -> None:
     from jaxexo.physics.dynamics import DEFAULT_PIVOT, DEFAULT_START_Y, DEFAULT_STEP_LENGTH
     from jaxexo.physics.geometry import THESIS_OBSTACLES
 
-    g.add_argument("--obstacle", choices=(*THESIS_OBSTACLES, *GENERAL_SHAPES), help="a named obstacle (or --profile)")
-    g.add_argument("--profile", help="the obstacle as a measured height profile: a CSV (y,z per line) or JSON "
-                                     "({\"points\": [[y, z], ...]}) file, m, y increasing, z >= 0")
+    g.add_argument(
+        "--obstacle",
+        choices=(*THESIS_OBSTACLES, *GENERAL_SHAPES),
+        help="a named obstacle (or --profile)",
+    )
+    g.add_argument(
+        "--profile",
+        help="the obstacle as a measured height profile: a CSV (y,z per line) or JSON "
+        '({"points": [[y, z], ...]}) file, m, y increasing, z >= 0',
+    )
     g.add_argument("--width", type=float, help="obstacle width, m")
     g.add_argument("--height", type=float, help="obstacle height, m")
-    g.add_argument("--center-y", type=float, help="obstacle centre, m ahead of the start (default 0.45)")
+    g.add_argument(
+        "--center-y", type=float, help="obstacle centre, m ahead of the start (default 0.45)"
+    )
     pv = g.add_mutually_exclusive_group()
-    pv.add_argument("--pivot", choices=("agent", "obstacle", "between"),
-                    help=f"stance-foot condition (thesis 3.1; default: {DEFAULT_PIVOT})")
+    pv.add_argument(
+        "--pivot",
+        choices=("agent", "obstacle", "between"),
+        help=f"stance-foot condition (thesis 3.1; default: {DEFAULT_PIVOT})",
+    )
     pv.add_argument("--pivot-y", type=float, help="stance heel y, m")
     g.add_argument("--start-y", type=float, default=DEFAULT_START_Y, help="swing heel start y, m")
-    g.add_argument("--step-length", type=float, default=DEFAULT_STEP_LENGTH, help="goal = start + this, m")
+    g.add_argument(
+        "--step-length", type=float, default=DEFAULT_STEP_LENGTH, help="goal = start + this, m"
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="jaxexo", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
-    b = sub.add_parser("bench-env", help="environment steps per second (random actions, full reward)")
-    b.add_argument("--config", help="TOML config (default: the packaged default, configs/default.toml)")
-    b.add_argument("--envs", type=_sizes, default=[1, 256, 4096, 16384], help="batch sizes, e.g. 1,256,4096")
-    b.add_argument("--out", default="benchmarks/results", help="folder for the JSON and Markdown results")
-    b.add_argument("--name", default="env", help="result files' name: NAME_<date>_<machine>.json and .md")
-    b.add_argument("--no-mixed", action="store_true", help="skip the all-obstacle-kinds comparison rows")
+    b = sub.add_parser(
+        "bench-env", help="environment steps per second (random actions, full reward)"
+    )
+    b.add_argument(
+        "--config", help="TOML config (default: the packaged default, configs/default.toml)"
+    )
+    b.add_argument(
+        "--envs", type=_sizes, default=[1, 256, 4096, 16384], help="batch sizes, e.g. 1,256,4096"
+    )
+    b.add_argument(
+        "--out", default="benchmarks/results", help="folder for the JSON and Markdown results"
+    )
+    b.add_argument(
+        "--name", default="env", help="result files' name: NAME_<date>_<machine>.json and .md"
+    )
+    b.add_argument(
+        "--no-mixed", action="store_true", help="skip the all-obstacle-kinds comparison rows"
+    )
     b.set_defaults(func=cmd_bench_env)
     t = sub.add_parser("train", help="train a policy (TD(lambda)); writes a run directory")
-    t.add_argument("config", nargs="?", help="TOML config (default: the packaged default, configs/default.toml; "
-                                             "with --resume, the run's own config.toml)")
+    t.add_argument(
+        "config",
+        nargs="?",
+        help="TOML config (default: the packaged default, configs/default.toml; "
+        "with --resume, the run's own config.toml)",
+    )
     t.add_argument("--out", required=True, help="run directory")
     t.add_argument("--seed", type=int, default=0)
-    t.add_argument("--population", type=int, help="train K agents (seeds SEED..SEED+K-1) as one program and export the "
-                                                  "one a wearer would choose (overrides [train] population; the "
-                                                  "default model's: 2)")
-    t.add_argument("--resume", action="store_true", help="continue the run in --out from its checkpoint")
+    t.add_argument(
+        "--population",
+        type=int,
+        help="train K agents (seeds SEED..SEED+K-1) as one program and export the "
+        "one a wearer would choose (overrides [train] population; the "
+        "default model's: 2)",
+    )
+    t.add_argument(
+        "--resume", action="store_true", help="continue the run in --out from its checkpoint"
+    )
     t.add_argument("--quiet", action="store_true", help="no progress bar")
     t.set_defaults(func=cmd_train)
-    g = sub.add_parser("generate", help="a smoothed, checked swing trajectory from policy.npz (NumPy only)")
-    g.add_argument("--policy", help="policy.npz written by jaxexo train (required for --method rl; for cfftg "
-                                    "it supplies the kinematics, default: configs/default.toml)")
-    g.add_argument("--method", choices=("rl", "cfftg"), default="rl",
-                   help="rl: the trained policy; cfftg: the polynomial baseline (jaxexo.inference.cfftg)")
+    g = sub.add_parser(
+        "generate", help="a smoothed, checked swing trajectory from policy.npz (NumPy only)"
+    )
+    g.add_argument(
+        "--policy",
+        help="policy.npz written by jaxexo train (required for --method rl; for cfftg "
+        "it supplies the kinematics, default: configs/default.toml)",
+    )
+    g.add_argument(
+        "--method",
+        choices=("rl", "cfftg"),
+        default="rl",
+        help="rl: the trained policy; cfftg: the polynomial baseline (jaxexo.inference.cfftg)",
+    )
     _add_scene_args(g)
     g.add_argument("--points", type=int, default=100, help="samples of the smoothed path")
-    g.add_argument("--fallback", choices=("cfftg", "none"), default="cfftg",
-                   help="when the RL swing is not safe, return CFFTG's plan (cfftg) or the RL swing alone (none)")
-    g.add_argument("--smoothing", type=float,
-                   help="B-spline smoothing s, m^2 (0: raw polyline; default: the model's, 0.001 for a "
-                        "shielded model, the thesis's 0.005 otherwise); rl only")
-    g.add_argument("--clearance", type=float, help="m the swing keeps from the obstacle (default: the model's "
-                                                   "env.min_clearance; at most 0.10); the verdict judges against it")
-    g.add_argument("--duration", type=float, default=1.0, help="swing duration for the time stamps, s "
-                                                                "(ignored with --rate)")
-    g.add_argument("--rate", type=float, help="device-ready output: the shortest rest-to-rest timing within the "
-                                              "config's [device] joint limits, sampled at this rate (Hz); the CSV "
-                                              "and JSON gain joint velocities and accelerations")
-    g.add_argument("--animate", help="also write a GIF of both legs stepping over the obstacle in real time at "
-                                     "the device timing (needs matplotlib and Pillow)")
-    g.add_argument("--out", required=True, help="CSV file (time, heel, toe, hip, knees, joint angles; SI units)")
+    g.add_argument(
+        "--fallback",
+        choices=("cfftg", "none"),
+        default="cfftg",
+        help="when the RL swing is not safe, return CFFTG's plan (cfftg) or the RL swing alone (none)",
+    )
+    g.add_argument(
+        "--smoothing",
+        type=float,
+        help="B-spline smoothing s, m^2 (0: raw polyline; default: the model's, 0.001 for a "
+        "shielded model, the thesis's 0.005 otherwise); rl only",
+    )
+    g.add_argument(
+        "--clearance",
+        type=float,
+        help="m the swing keeps from the obstacle (default: the model's "
+        "env.min_clearance; at most 0.10); the verdict judges against it",
+    )
+    g.add_argument(
+        "--duration",
+        type=float,
+        default=1.0,
+        help="swing duration for the time stamps, s (ignored with --rate)",
+    )
+    g.add_argument(
+        "--rate",
+        type=float,
+        help="device-ready output: the shortest rest-to-rest timing within the "
+        "config's [device] joint limits, sampled at this rate (Hz); the CSV "
+        "and JSON gain joint velocities and accelerations",
+    )
+    g.add_argument(
+        "--animate",
+        help="also write a GIF of both legs stepping over the obstacle in real time at "
+        "the device timing (needs matplotlib and Pillow)",
+    )
+    g.add_argument(
+        "--out",
+        required=True,
+        help="CSV file (time, heel, toe, hip, knees, joint angles; SI units)",
+    )
     g.add_argument("--json", help="also write JSON (scene, checks, raw points, samples)")
     g.add_argument("--plot", help="also draw the legs, the foot path and the joint angles (PNG)")
     g.set_defaults(func=cmd_generate)
-    for name, helptext in (("mjcf", "the legs and the obstacle as a MuJoCo model (MJCF), for MuJoCo's viewer"),
-                           ("replay", "a swing replayed in MuJoCo: its distance to the obstacle, and driven at the "
-                                      "[device] limits with --driven (needs the sim extra)")):
+    for name, helptext in (
+        ("mjcf", "the legs and the obstacle as a MuJoCo model (MJCF), for MuJoCo's viewer"),
+        (
+            "replay",
+            "a swing replayed in MuJoCo: its distance to the obstacle, and driven at the "
+            "[device] limits with --driven (needs the sim extra)",
+        ),
+    ):
         x = sub.add_parser(name, help=helptext)
-        x.add_argument("--policy", required=name == "replay", help="policy.npz (its config: legs, limits, margin)")
+        x.add_argument(
+            "--policy",
+            required=name == "replay",
+            help="policy.npz (its config: legs, limits, margin)",
+        )
         if name == "mjcf":
-            x.add_argument("--config", help="TOML config when no --policy (default: the packaged default)")
+            x.add_argument(
+                "--config", help="TOML config when no --policy (default: the packaged default)"
+            )
         _add_scene_args(x)
         if name == "mjcf":
             x.add_argument("--out", required=True, help="MJCF file to write (e.g. legs.xml)")
             x.set_defaults(func=cmd_mjcf)
         else:
-            x.add_argument("--method", choices=("rl", "cfftg", "both"), default="rl",
-                           help="the RL swing alone (no fallback), CFFTG's, or both")
-            x.add_argument("--rate", type=float, help="control rate, Hz (default: the config's control_rate)")
-            x.add_argument("--driven", action="store_true", help="also drive the legs within the [device] limits")
-            x.add_argument("--controller", choices=("pd_ff", "servo"), default="pd_ff",
-                           help="with --driven: PD with inverse-dynamics feed-forward (pd_ff, default) or stiff "
-                                "position servos (servo)")
-            x.add_argument("--half-limits", action="store_true", help="with --driven: also at half the limits")
+            x.add_argument(
+                "--method",
+                choices=("rl", "cfftg", "both"),
+                default="rl",
+                help="the RL swing alone (no fallback), CFFTG's, or both",
+            )
+            x.add_argument(
+                "--rate", type=float, help="control rate, Hz (default: the config's control_rate)"
+            )
+            x.add_argument(
+                "--driven",
+                action="store_true",
+                help="also drive the legs within the [device] limits",
+            )
+            x.add_argument(
+                "--controller",
+                choices=("pd_ff", "servo"),
+                default="pd_ff",
+                help="with --driven: PD with inverse-dynamics feed-forward (pd_ff, default) or stiff "
+                "position servos (servo)",
+            )
+            x.add_argument(
+                "--half-limits", action="store_true", help="with --driven: also at half the limits"
+            )
             x.add_argument("--json", help="write the figures (SI units) to this JSON file")
             x.set_defaults(func=cmd_replay)
-    w = sub.add_parser("walk", help="a walk over a measured course: footholds, every swing and both legs timed "
-                                    "for the device (NumPy only)")
-    w.add_argument("--policy", help="policy.npz written by jaxexo train (required for --method rl; for cfftg it "
-                                    "supplies the kinematics, default: configs/default.toml)")
-    w.add_argument("--terrain", required=True, help="the ground profile: a CSV (y,z per line) or JSON "
-                                                    "({\"points\": [[y, z], ...]}) file, m, y increasing, z >= 0")
-    w.add_argument("--method", choices=("rl", "cfftg"), default="rl",
-                   help="rl: the trained policy's swings; cfftg: CFFTG's swings on the same footholds")
-    w.add_argument("--fallback", choices=("cfftg", "none"), default="cfftg",
-                   help="when an RL swing is not safe, use CFFTG's (cfftg, reported per step) or stop (none)")
-    w.add_argument("--start-y", type=float, help="where both feet stand at first, m (default: the terrain's first point)")
+    w = sub.add_parser(
+        "walk",
+        help="a walk over a measured course: footholds, every swing and both legs timed "
+        "for the device (NumPy only)",
+    )
+    w.add_argument(
+        "--policy",
+        help="policy.npz written by jaxexo train (required for --method rl; for cfftg it "
+        "supplies the kinematics, default: configs/default.toml)",
+    )
+    w.add_argument(
+        "--terrain",
+        required=True,
+        help="the ground profile: a CSV (y,z per line) or JSON "
+        '({"points": [[y, z], ...]}) file, m, y increasing, z >= 0',
+    )
+    w.add_argument(
+        "--method",
+        choices=("rl", "cfftg"),
+        default="rl",
+        help="rl: the trained policy's swings; cfftg: CFFTG's swings on the same footholds",
+    )
+    w.add_argument(
+        "--fallback",
+        choices=("cfftg", "none"),
+        default="cfftg",
+        help="when an RL swing is not safe, use CFFTG's (cfftg, reported per step) or stop (none)",
+    )
+    w.add_argument(
+        "--start-y",
+        type=float,
+        help="where both feet stand at first, m (default: the terrain's first point)",
+    )
     end = w.add_mutually_exclusive_group()
-    end.add_argument("--goal-y", type=float, help="where both feet stand at the end, m (default: the furthest "
-                                                  "foothold on the terrain)")
+    end.add_argument(
+        "--goal-y",
+        type=float,
+        help="where both feet stand at the end, m (default: the furthest foothold on the terrain)",
+    )
     end.add_argument("--steps", type=int, help="walk exactly this many swings instead")
-    w.add_argument("--rate", type=float, help="control rate, Hz (default: the config's [device] control_rate)")
-    w.add_argument("--clearance", type=float, help="m every swing keeps from the terrain (default: the model's "
-                                                   "env.min_clearance)")
-    w.add_argument("--double-support", type=float, default=0.0,
-                   help="s both feet stand still at each landing (default 0: the swings meet at rest)")
-    w.add_argument("--out", required=True, help="CSV file: both legs' heels, toes, hip, knees, joint angles, "
-                                                "velocities and accelerations at the control rate (SI units)")
-    w.add_argument("--json", help="also write JSON (footholds, ok, and each step's samples, landing and method)")
+    w.add_argument(
+        "--rate", type=float, help="control rate, Hz (default: the config's [device] control_rate)"
+    )
+    w.add_argument(
+        "--clearance",
+        type=float,
+        help="m every swing keeps from the terrain (default: the model's env.min_clearance)",
+    )
+    w.add_argument(
+        "--double-support",
+        type=float,
+        default=0.0,
+        help="s both feet stand still at each landing (default 0: the swings meet at rest)",
+    )
+    w.add_argument(
+        "--out",
+        required=True,
+        help="CSV file: both legs' heels, toes, hip, knees, joint angles, "
+        "velocities and accelerations at the control rate (SI units)",
+    )
+    w.add_argument(
+        "--json",
+        help="also write JSON (footholds, ok, and each step's samples, landing and method)",
+    )
     w.add_argument("--plot", help="also draw the footholds and the swings over the terrain (PNG)")
-    w.add_argument("--animate", help="also write a GIF of the whole walk in real time (needs matplotlib and Pillow)")
+    w.add_argument(
+        "--animate",
+        help="also write a GIF of the whole walk in real time (needs matplotlib and Pillow)",
+    )
     w.set_defaults(func=cmd_walk)
-    s = sub.add_parser("sweep", help="train a grid of configurations x seeds as compiled, vmapped programs")
+    s = sub.add_parser(
+        "sweep", help="train a grid of configurations x seeds as compiled, vmapped programs"
+    )
     s.add_argument("sweep", help="sweep file (a config with a [sweep] table; see configs/sweeps/)")
-    s.add_argument("--out", required=True, help="sweep directory (results.csv, summary.md, figures)")
-    s.add_argument("--resume", action="store_true", help="run only the chunks of --out without results")
-    s.add_argument("--export-best", action="store_true", help="write best/policy.npz and best/config.toml")
-    s.add_argument("--export-all", action="store_true",
-                   help="write every agent's policy.npz and config.toml under agents/ (and agents/index.json)")
-    s.add_argument("--backend", choices=["local", "ray"], default="local",
-                   help="local: chunks over this machine's CPU cores; ray: chunks as tasks on a Ray cluster")
+    s.add_argument(
+        "--out", required=True, help="sweep directory (results.csv, summary.md, figures)"
+    )
+    s.add_argument(
+        "--resume", action="store_true", help="run only the chunks of --out without results"
+    )
+    s.add_argument(
+        "--export-best", action="store_true", help="write best/policy.npz and best/config.toml"
+    )
+    s.add_argument(
+        "--export-all",
+        action="store_true",
+        help="write every agent's policy.npz and config.toml under agents/ (and agents/index.json)",
+    )
+    s.add_argument(
+        "--backend",
+        choices=["local", "ray"],
+        default="local",
+        help="local: chunks over this machine's CPU cores; ray: chunks as tasks on a Ray cluster",
+    )
     s.add_argument("--address", help="Ray cluster address (default: start a local Ray instance)")
-    s.add_argument("--task-cpus", type=int, help="ray: CPUs (JAX devices) per chunk task (default: this machine's cores)")
-    s.add_argument("--memory-budget", help="memory for one chunk, e.g. 4GiB (default: half the available memory)")
-    s.add_argument("--heatmap", help="two axes for heatmap.png, e.g. train.lr,train.lam (default: sweep.heatmap)")
+    s.add_argument(
+        "--task-cpus",
+        type=int,
+        help="ray: CPUs (JAX devices) per chunk task (default: this machine's cores)",
+    )
+    s.add_argument(
+        "--memory-budget",
+        help="memory for one chunk, e.g. 4GiB (default: half the available memory)",
+    )
+    s.add_argument(
+        "--heatmap",
+        help="two axes for heatmap.png, e.g. train.lr,train.lam (default: sweep.heatmap)",
+    )
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=cmd_sweep)
-    e = sub.add_parser("eval", help="evaluate the RL generator (and CFFTG) side by side; writes report.md/.json "
-                                    "and figures (NumPy only)")
+    e = sub.add_parser(
+        "eval",
+        help="evaluate the RL generator (and CFFTG) side by side; writes report.md/.json "
+        "and figures (NumPy only)",
+    )
     e.add_argument("--policy", required=True, help="policy.npz written by jaxexo train")
-    e.add_argument("--against", choices=("cfftg",), help="also evaluate this baseline on the same scenarios")
-    e.add_argument("--scenarios", choices=("train", "test", "all", "unseen"), default="test",
-                   help="test: the five thesis obstacles x three pivots; train: the policy's training "
-                        "distribution; all: both; unseen: the fixed held-out obstacle families "
-                        "(jaxexo.evaluation.unseen), reported per family")
+    e.add_argument(
+        "--against", choices=("cfftg",), help="also evaluate this baseline on the same scenarios"
+    )
+    e.add_argument(
+        "--scenarios",
+        choices=("train", "test", "all", "unseen"),
+        default="test",
+        help="test: the five thesis obstacles x three pivots; train: the policy's training "
+        "distribution; all: both; unseen: the fixed held-out obstacle families "
+        "(jaxexo.evaluation.unseen), reported per family",
+    )
     e.add_argument("--n", type=int, default=1000, help="scenarios per set")
-    e.add_argument("--batch", type=int, default=1000,
-                   help="scenarios per timed generate_batch call (reported scaled to a batch of 1000)")
+    e.add_argument(
+        "--batch",
+        type=int,
+        default=1000,
+        help="scenarios per timed generate_batch call (reported scaled to a batch of 1000)",
+    )
     e.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     e.add_argument("--force", action="store_true", help="replace an earlier report in --out")
-    e.add_argument("--replay", action="store_true", help="also replay every swing in MuJoCo, kinematically and "
-                                                         "driven at the [device] limits (needs the sim extra)")
+    e.add_argument(
+        "--replay",
+        action="store_true",
+        help="also replay every swing in MuJoCo, kinematically and "
+        "driven at the [device] limits (needs the sim extra)",
+    )
     e.add_argument("--out", required=True, help="report folder")
     e.set_defaults(func=cmd_eval)
-    r = sub.add_parser("reproduce", help="train the seven thesis configs and tabulate them beside the thesis's "
-                                         "Tables 3.2-3.11")
-    r.add_argument("--out", required=True, help="folder for runs/ and reproduce.md/.json (reuses finished runs)")
+    r = sub.add_parser(
+        "reproduce",
+        help="train the seven thesis configs and tabulate them beside the thesis's Tables 3.2-3.11",
+    )
+    r.add_argument(
+        "--out",
+        required=True,
+        help="folder for runs/ and reproduce.md/.json (reuses finished runs)",
+    )
     r.add_argument("--models", default="a,b,c,1,2,3,final", help="comma-separated thesis models")
     r.add_argument("--n", type=int, default=1000, help="test scenarios per model")
     r.add_argument("--seed", type=int, default=0)
-    r.add_argument("--variant", default="both", choices=("faithful", "learns", "both"),
-                   help="faithful: configs/thesis/<m>.toml as the thesis wrote it; learns: <m>-learns.toml, with "
-                        "the named switches that make it learn; both (default): side by side")
-    r.add_argument("--default", action="store_true", help="also train and tabulate configs/default.toml")
-    r.add_argument("--population", type=int, default=None,
-                   help="members per learns model (seeds SEED..SEED+K-1, the best on validation kept; default "
-                        "4); the faithful configs always train one agent")
-    r.add_argument("--results", help="also write the tables to this folder as reproduce_<date>_<machine>.json/.md "
-                                     "(e.g. benchmarks/results)")
+    r.add_argument(
+        "--variant",
+        default="both",
+        choices=("faithful", "learns", "both"),
+        help="faithful: configs/thesis/<m>.toml as the thesis wrote it; learns: <m>-learns.toml, with "
+        "the named switches that make it learn; both (default): side by side",
+    )
+    r.add_argument(
+        "--default", action="store_true", help="also train and tabulate configs/default.toml"
+    )
+    r.add_argument(
+        "--population",
+        type=int,
+        default=None,
+        help="members per learns model (seeds SEED..SEED+K-1, the best on validation kept; default "
+        "4); the faithful configs always train one agent",
+    )
+    r.add_argument(
+        "--results",
+        help="also write the tables to this folder as reproduce_<date>_<machine>.json/.md "
+        "(e.g. benchmarks/results)",
+    )
     r.set_defaults(func=cmd_reproduce)
-    bb = sub.add_parser("bench", help="every benchmark (environment, trainer, generator, CFFTG, thesis-style "
-                                      "baseline) into benchmarks/results with a summary table")
-    bb.add_argument("--out", default="benchmarks/results", help="folder for the JSON and Markdown results")
-    bb.add_argument("--policy", help="policy.npz for the generator benchmarks (default: train configs/default.toml)")
-    bb.add_argument("--baseline-seconds", type=float, default=600.0,
-                    help="time budget of the thesis-style baseline's training run")
-    bb.add_argument("--skip", default="", help="comma-separated parts to skip: env,train,generate,compare,baseline,course")
-    bb.add_argument("--courses", type=int, default=200, help="courses drawn for the course part (walks, RL alone "
-                                                             "against CFFTG)")
+    bb = sub.add_parser(
+        "bench",
+        help="every benchmark (environment, trainer, generator, CFFTG, thesis-style "
+        "baseline) into benchmarks/results with a summary table",
+    )
+    bb.add_argument(
+        "--out", default="benchmarks/results", help="folder for the JSON and Markdown results"
+    )
+    bb.add_argument(
+        "--policy",
+        help="policy.npz for the generator benchmarks (default: train configs/default.toml)",
+    )
+    bb.add_argument(
+        "--baseline-seconds",
+        type=float,
+        default=600.0,
+        help="time budget of the thesis-style baseline's training run",
+    )
+    bb.add_argument(
+        "--skip",
+        default="",
+        help="comma-separated parts to skip: env,train,generate,compare,baseline,course",
+    )
+    bb.add_argument(
+        "--courses",
+        type=int,
+        default=200,
+        help="courses drawn for the course part (walks, RL alone against CFFTG)",
+    )
     bb.set_defaults(func=cmd_bench)
     return p
 

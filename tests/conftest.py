@@ -34,25 +34,58 @@ settings.load_profile("jaxexo")
 # Every obstacle kind the config accepts: the five thesis obstacles (Table 3.1), a rectangle range,
 # a half-ellipse range and a user profile; all three pivot conditions.
 PROFILE_POINTS = [[-0.08, 0.0], [-0.08, 0.06], [0.0, 0.12], [0.08, 0.06], [0.08, 0.0]]
-MIXED_KINDS = ("base1", "base2", "base3", "triangle", "half_circle", "rectangle", "half_ellipse", "profile")
+MIXED_KINDS = (
+    "base1",
+    "base2",
+    "base3",
+    "triangle",
+    "half_circle",
+    "rectangle",
+    "half_ellipse",
+    "profile",
+)
 # Every constant the hand-computed env tests rely on is pinned here, so that changes to the package's
 # defaults do not silently change what those tests check.
 MIXED_RAW = {
     "env": {
-        "obs_mode": "conditioned", "step_size": 0.03, "max_steps": 100, "collision": "penalty",
-        "goal_tolerance": [0.04, 0.02], "mid_goal_clearance": 0.10, "mid_goal_half_size": [0.06, 0.05],
-        "max_height_margin": 0.20, "bounds_y": [-0.30, 1.30], "max_z": 0.80, "shape_points": 9,
+        "obs_mode": "conditioned",
+        "step_size": 0.03,
+        "max_steps": 100,
+        "collision": "penalty",
+        "goal_tolerance": [0.04, 0.02],
+        "mid_goal_clearance": 0.10,
+        "mid_goal_half_size": [0.06, 0.05],
+        "max_height_margin": 0.20,
+        "bounds_y": [-0.30, 1.30],
+        "max_z": 0.80,
+        "shape_points": 9,
     },
     "kinematics": {
-        "thigh": 0.5, "shin": 0.5, "foot_length": 0.2, "hip_limits": [-0.5235987755982988, 2.007128639793479],
+        "thigh": 0.5,
+        "shin": 0.5,
+        "foot_length": 0.2,
+        "hip_limits": [-0.5235987755982988, 2.007128639793479],
         "knee_limits": [-1.7453292519943295, 0.0],
     },
     "reward": {
-        "traj_weights": [1.0] * 8, "exo_weights": [1.0] * 4, "step_threshold": 30.0, "collision_penalty": 10.0,
-        "backward_penalty": 1.0, "goal_reward": 10.0, "mid_goal_penalty": 1.0, "max_height_penalty": 1.0,
-        "safety_penalty": 2.0, "safety_distance": 0.03, "z_monotone_penalty": 0.5, "hlc_penalty": 1.0,
-        "hlc_threshold": 0.90, "leg_length_penalty": 1.0, "leg_length_tolerance": 0.0,
-        "joint_limit_penalty": 1.0, "hip_height_penalty": 1.0, "max_hip_z": 1.0,
+        "traj_weights": [1.0] * 8,
+        "exo_weights": [1.0] * 4,
+        "step_threshold": 30.0,
+        "collision_penalty": 10.0,
+        "backward_penalty": 1.0,
+        "goal_reward": 10.0,
+        "mid_goal_penalty": 1.0,
+        "max_height_penalty": 1.0,
+        "safety_penalty": 2.0,
+        "safety_distance": 0.03,
+        "z_monotone_penalty": 0.5,
+        "hlc_penalty": 1.0,
+        "hlc_threshold": 0.90,
+        "leg_length_penalty": 1.0,
+        "leg_length_tolerance": 0.0,
+        "joint_limit_penalty": 1.0,
+        "hip_height_penalty": 1.0,
+        "max_hip_z": 1.0,
     },
     "layout": {
         "obstacles": [
@@ -89,7 +122,7 @@ def legacy_raw(raw: dict | None = None) -> dict:
     if not _LEGACY:
         snap = json.loads((ROOT / "tests" / "data" / "resolved_configs.json").read_text())
         _LEGACY.update(tomllib.loads(snap["schema_defaults"]))
-        from resolved_snapshot import ADDED_SINCE   # fields declared since, at their former meaning
+        from resolved_snapshot import ADDED_SINCE  # fields declared since, at their former meaning
 
         _LEGACY.update(deep_merge(_LEGACY, ADDED_SINCE))
     return deep_merge(_LEGACY, raw or {})
@@ -202,9 +235,13 @@ def trained_run(tmp_path_factory):
     from jaxexo.train.driver import run_training
 
     cfg = load_config(ROOT / "configs" / "quick.toml")
-    cfg = dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, num_envs=512, budget_env_steps=TRAINED_BUDGET))
-    return built_once(session_folder(tmp_path_factory, "trained_run"),
-                      lambda out: run_training(cfg, out, seed=0, progress=False, eval_episodes=200))
+    cfg = dataclasses.replace(
+        cfg, train=dataclasses.replace(cfg.train, num_envs=512, budget_env_steps=TRAINED_BUDGET)
+    )
+    return built_once(
+        session_folder(tmp_path_factory, "trained_run"),
+        lambda out: run_training(cfg, out, seed=0, progress=False, eval_episodes=200),
+    )
 
 
 @contextlib.contextmanager
@@ -215,8 +252,11 @@ def jax_compilation_cache(directory):
     import jax
     from jax.experimental.compilation_cache import compilation_cache as cc
 
-    names = ("jax_compilation_cache_dir", "jax_persistent_cache_min_compile_time_secs",
-             "jax_persistent_cache_min_entry_size_bytes")
+    names = (
+        "jax_compilation_cache_dir",
+        "jax_persistent_cache_min_compile_time_secs",
+        "jax_persistent_cache_min_entry_size_bytes",
+    )
     old = {n: getattr(jax.config, n) for n in names}
     jax.config.update("jax_compilation_cache_dir", str(directory))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
@@ -248,16 +288,37 @@ def tiny_reference(tmp_path_factory):
         out.mkdir()
         (out / "config_in.toml").write_text(config_to_toml(cfg))
         env = {**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=1"}
-        r = subprocess.run([sys.executable, "-m", "jaxexo.cli", "train", str(out / "config_in.toml"), "--out",
-                            str(out / "run"), "--quiet", "--seed", str(SEED)],
-                           cwd=ROOT, env=env, capture_output=True, text=True, timeout=900)
+        r = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "jaxexo.cli",
+                "train",
+                str(out / "config_in.toml"),
+                "--out",
+                str(out / "run"),
+                "--quiet",
+                "--seed",
+                str(SEED),
+            ],
+            cwd=ROOT,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=900,
+        )
         assert r.returncode == 0, r.stderr[-3000:]
         (out / "stdout.txt").write_text(r.stdout)
         (out / "stderr.txt").write_text(r.stderr)
 
     out = built_once(session_folder(tmp_path_factory, "tiny_reference"), build)
-    return {"run": out / "run", "cfg": cfg, "cfg_path": out / "config_in.toml",
-            "stdout": (out / "stdout.txt").read_text(), "stderr": (out / "stderr.txt").read_text()}
+    return {
+        "run": out / "run",
+        "cfg": cfg,
+        "cfg_path": out / "config_in.toml",
+        "stdout": (out / "stdout.txt").read_text(),
+        "stderr": (out / "stderr.txt").read_text(),
+    }
 
 
 def random_generator(config, seed: int = 0):
@@ -272,6 +333,11 @@ def random_generator(config, seed: int = 0):
     d = dynamics.obs_dim(config.env.obs_mode, config.env.shape_points)
     rng = np.random.default_rng(seed)
     sizes = [d, 16, dynamics.NUM_ACTIONS]
-    pol = QPolicy(kernels=[rng.normal(size=(a, b)).astype(np.float32) for a, b in zip(sizes, sizes[1:])],
-                  biases=[np.zeros(b, np.float32) for b in sizes[1:]], norm_scales=[], norm_biases=[], metadata={})
+    pol = QPolicy(
+        kernels=[rng.normal(size=(a, b)).astype(np.float32) for a, b in zip(sizes, sizes[1:])],
+        biases=[np.zeros(b, np.float32) for b in sizes[1:]],
+        norm_scales=[],
+        norm_biases=[],
+        metadata={},
+    )
     return TrajectoryGenerator(pol, config)

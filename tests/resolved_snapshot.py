@@ -19,16 +19,26 @@ SNAPSHOT = ROOT / "tests" / "data" / "resolved_configs.json"
 # resolved text that has them so, means what it meant.
 # train.population: 1 is one agent, what every config trained before it.
 # env.floor_clearance: 0 is no floor rule, the shield before it.
-ADDED_SINCE = {"reward": {"lift_cost": 0.0, "time_cost": 0.0, "turn_cost": 0.0}, "train": {"population": 1},
-               "env": {"floor_clearance": 0.0}}
+ADDED_SINCE = {
+    "reward": {"lift_cost": 0.0, "time_cost": 0.0, "turn_cost": 0.0},
+    "train": {"population": 1},
+    "env": {"floor_clearance": 0.0},
+}
 # Configs deliberately redefined since: the default model (a new reward and mid-goal) and
 # the sweeps built on it. Their meaning is the default's (tests/test_config_roundtrip.py).
 # quick.toml (both copies): 32 minibatches per update since 2026-12-02 (4 learned at only some seeds).
 # Since 2026-12-04 the default's swing ends on the floor (env.goal_tolerance, env.floor_clearance),
 # and every sweep built on the default with it.
-REDEFINED = {"configs/default.toml", "jaxexo/config/default.toml", "configs/sweeps/backward.toml",
-             "configs/sweeps/lr_lambda.toml", "configs/sweeps/reward_weights.toml", "configs/sweeps/smoke.toml",
-             "configs/quick.toml", "jaxexo/config/quick.toml"}
+REDEFINED = {
+    "configs/default.toml",
+    "jaxexo/config/default.toml",
+    "configs/sweeps/backward.toml",
+    "configs/sweeps/lr_lambda.toml",
+    "configs/sweeps/reward_weights.toml",
+    "configs/sweeps/smoke.toml",
+    "configs/quick.toml",
+    "jaxexo/config/quick.toml",
+}
 
 
 # The drives' settings declared since ([device], role "setting"): they time a swing for a device,
@@ -40,8 +50,11 @@ def without_added(text: str) -> str:
     """A resolved config's text without the ADDED_SINCE lines that hold their neutral value and
     without the DEVICE_ADDED lines."""
     drop = {f"{k} = {v!r}" for fields in ADDED_SINCE.values() for k, v in fields.items()}
-    return "\n".join(line for line in text.split("\n")
-                     if line not in drop and not line.startswith(tuple(f"{k} = " for k in DEVICE_ADDED)))
+    return "\n".join(
+        line
+        for line in text.split("\n")
+        if line not in drop and not line.startswith(tuple(f"{k} = " for k in DEVICE_ADDED))
+    )
 
 
 def _digest(text: str) -> str:
@@ -57,14 +70,20 @@ def resolved() -> dict:
 
     # "schema_defaults": what Config() (and an empty config) meant on main: the tests' raw configs
     # are stated on top of it (conftest.legacy_raw), so that they keep their meaning.
-    out = {"configs": {}, "sweeps": {}, "schema_defaults": config_to_toml(Config()),
-           "empty": config_to_toml(config_from_dict({}))}
+    out = {
+        "configs": {},
+        "sweeps": {},
+        "schema_defaults": config_to_toml(Config()),
+        "empty": config_to_toml(config_from_dict({})),
+    }
     for base in (ROOT / "configs", ROOT / "jaxexo" / "config"):
         for path in sorted(base.rglob("*.toml")):
             name = str(path.relative_to(ROOT))
             if "sweeps" in path.parts:
                 sweep = load_sweep(path)
-                out["sweeps"][name] = [_digest(without_added(config_to_toml(m.config))) for m in sweep.members]
+                out["sweeps"][name] = [
+                    _digest(without_added(config_to_toml(m.config))) for m in sweep.members
+                ]
             else:
                 out["configs"][name] = without_added(config_to_toml(load_config(path)))
     return out

@@ -23,7 +23,9 @@ LAYERS = (
     ("jaxexo.storage",),
     ("jaxexo.env",),
     ("jaxexo.inference",),
-    ("jaxexo.train",),        # exports policies for the generator, and picks them as it swings (selection)
+    (
+        "jaxexo.train",
+    ),  # exports policies for the generator, and picks them as it swings (selection)
     ("jaxexo.baselines", "jaxexo.sim"),
     ("jaxexo.sweep", "jaxexo.evaluation"),
     ("jaxexo.benchmarks",),
@@ -35,7 +37,7 @@ LAYERS = (
 # matches anything, so this list can only shrink.
 KNOWN_EXCEPTIONS: set = set()
 
-SCRIPT_DIRS = ("benchmarks",)     # scripts outside the package: any import, but no private names
+SCRIPT_DIRS = ("benchmarks",)  # scripts outside the package: any import, but no private names
 
 
 def _module_name(path: Path) -> str:
@@ -56,7 +58,7 @@ def _resolve(importer: str, node: ast.ImportFrom) -> str:
         return node.module or ""
     base = importer.split(".")
     is_pkg = MODULES.get(importer, Path()).name == "__init__.py"
-    base = base[:len(base) - node.level + (1 if is_pkg else 0)]
+    base = base[: len(base) - node.level + (1 if is_pkg else 0)]
     return ".".join(base + ([node.module] if node.module else []))
 
 
@@ -77,7 +79,7 @@ def _imports(name: str, path: Path):
                 continue
             for a in node.names:
                 sub = f"{mod}.{a.name}"
-                if sub in MODULES:                      # a submodule: the import is of that module
+                if sub in MODULES:  # a submodule: the import is of that module
                     out.append((sub, [], node.lineno))
                     bound[a.asname or a.name] = sub
                 else:
@@ -139,7 +141,9 @@ def test_no_import_goes_up_or_sideways():
     for (a, b), line in sorted(_edges().items()):
         la, lb = _floor(a)[0], _floor(b)[0]
         if la < lb or (la == lb and _package(a) != _package(b)):
-            bad.append(f"{MODULES[a].relative_to(ROOT)}:{line}: {a} (floor {la}) imports {b} (floor {lb})")
+            bad.append(
+                f"{MODULES[a].relative_to(ROOT)}:{line}: {a} (floor {la}) imports {b} (floor {lb})"
+            )
     assert not bad, "imports against the layer map:\n" + "\n".join(bad)
 
 
@@ -154,7 +158,7 @@ def test_no_import_cycles():
         stack.append(node)
         for nxt in sorted(graph.get(node, ())):
             if state.get(nxt) == 1:
-                cycles.append(" -> ".join(stack[stack.index(nxt):] + [nxt]))
+                cycles.append(" -> ".join(stack[stack.index(nxt) :] + [nxt]))
             elif nxt not in state:
                 visit(nxt, stack)
         stack.pop()
@@ -174,13 +178,20 @@ def test_no_private_names_across_packages():
         for target, private, line in _imports(name, path):
             private = [x for x in private if (name, f"{target}.{x}") not in KNOWN_EXCEPTIONS]
             if private and _package(target) != _package(name):
-                bad.append(f"{path.relative_to(ROOT)}:{line}: {name} uses {target}.{', '.join(private)}")
+                bad.append(
+                    f"{path.relative_to(ROOT)}:{line}: {name} uses {target}.{', '.join(private)}"
+                )
     assert not bad, "private names used across packages:\n" + "\n".join(bad)
 
 
 def test_known_exceptions_still_exist():
     """An exception whose import is gone is removed from KNOWN_EXCEPTIONS, so the list only shrinks."""
     found = {(n, t) for n, p in MODULES.items() for t, _, _ in _imports(n, p)}
-    found |= {(n, f"{t}.{x}") for n, p in MODULES.items() for t, private, _ in _imports(n, p) for x in private}
+    found |= {
+        (n, f"{t}.{x}")
+        for n, p in MODULES.items()
+        for t, private, _ in _imports(n, p)
+        for x in private
+    }
     stale = sorted(KNOWN_EXCEPTIONS - found)
     assert not stale, f"remove these from KNOWN_EXCEPTIONS, their imports are gone: {stale}"

@@ -30,15 +30,22 @@ def test_truncated_lambda_returns_equal_jaxexos_lambda_returns():
     length = rng.integers(1, H + 1, size=B)
     valid = np.arange(H)[None, :] < length[:, None]
     terminated = np.zeros((B, H), bool)
-    ends = rng.random(B) < 0.5          # half the windows end with the goal, the rest are cut short
+    ends = rng.random(B) < 0.5  # half the windows end with the goal, the rest are cut short
     terminated[np.arange(B), length - 1] = ends
-    cont = rng.random((B, H)) < 0.7     # Watkins cuts
+    cont = rng.random((B, H)) < 0.7  # Watkins cuts
     got = truncated_lambda_returns(reward, boot, terminated, valid, cont, gamma, lam)
     for L in np.unique(length):
-        rows = np.flatnonzero(length == L)      # jaxexo's rollouts are time-major: (L, rows)
+        rows = np.flatnonzero(length == L)  # jaxexo's rollouts are time-major: (L, rows)
         col = lambda x: jnp.asarray(x[rows, :L].T, jnp.float32)  # noqa: E731
-        ref = td_lambda.lambda_returns(col(reward), col(boot), col(terminated), jnp.zeros((L, len(rows)), bool),
-                                       col(cont), gamma, lam)
+        ref = td_lambda.lambda_returns(
+            col(reward),
+            col(boot),
+            col(terminated),
+            jnp.zeros((L, len(rows)), bool),
+            col(cont),
+            gamma,
+            lam,
+        )
         np.testing.assert_allclose(got[rows], np.asarray(ref[0]), rtol=1e-5, atol=1e-5)
     # lambda = 0 is one-step Q-learning: r + gamma * (1 - term) * boot.
     one = truncated_lambda_returns(reward, boot, terminated, valid, cont, gamma, 0.0)
@@ -55,11 +62,16 @@ def test_replay_windows_stay_inside_an_episode_and_the_written_data():
     # slot 4 holds t=4: t=5..7 follow in the same episode (slots 5, 6, 7).
     assert buf.reward[slots[0]].tolist() == [4, 5, 6, 7] and valid[0].tolist() == [True] * 4
     # slot 7 holds t=7: t=8, t=9 (episode end) follow; t=10 belongs to the next episode.
-    assert buf.reward[slots[1]][:3].tolist() == [7, 8, 9] and valid[1].tolist() == [True, True, True, False]
+    assert buf.reward[slots[1]][:3].tolist() == [7, 8, 9] and valid[1].tolist() == [
+        True,
+        True,
+        True,
+        False,
+    ]
     # slot 1 holds t=9 (the end of its episode): nothing after it; slot 2 (t=10) is the newest.
     assert valid[2].tolist() == [True, False, False, False]
     slots, valid = buf.windows(np.array([2]), 4)
-    assert valid[0].tolist() == [True, False, False, False]      # nothing written after the newest slot
+    assert valid[0].tolist() == [True, False, False, False]  # nothing written after the newest slot
 
 
 # s: float32 rounding of a move's drive time near a straight knee: 2e-3 rad over the slowest drive
@@ -97,7 +109,9 @@ def test_numpy_environment_steps_like_the_jax_environment(which):
             np.testing.assert_allclose(w[1], jw[1], atol=KNEE_STRAIGHT_S)
             np.testing.assert_allclose(w[0], jw[0], atol=1e-6)
             tc = cfg.reward.time_cost
-            np.testing.assert_allclose(r - tc * w[1], float(jr) - tc * float(jw[1]), rtol=1e-5, atol=1e-5)
+            np.testing.assert_allclose(
+                r - tc * w[1], float(jr) - tc * float(jw[1]), rtol=1e-5, atol=1e-5
+            )
             np.testing.assert_allclose(info["traj_terms"], jinfo["traj_terms"], atol=1e-5)
             assert term == bool(jterm) and bool(info["collision"]) == bool(jinfo["collision"])
             steps += 1
@@ -124,7 +138,9 @@ def test_torch_learner_is_deterministic_and_exports_the_same_network():
     for pa, pb in zip(a.q.parameters(), b.q.parameters()):
         assert torch.equal(pa, pb)
     # Training moved the weights away from the target copy taken at the start.
-    assert any(not torch.equal(p, t) for p, t in zip(a.q.parameters(), _learner(cfg, 0).q.parameters()))
+    assert any(
+        not torch.equal(p, t) for p, t in zip(a.q.parameters(), _learner(cfg, 0).q.parameters())
+    )
     # The exported flax tree gives the torch network's Q-values (the validator scores this).
     obs = np.stack([a.env.reset() for _ in range(5)]).astype(np.float32)
     net = QNetwork(hidden=cfg.train.hidden, num_actions=36, layer_norm=cfg.train.layer_norm)
@@ -151,5 +167,7 @@ def test_torch_learner_targets_terminal_transitions_with_their_reward():
 
         with torch.no_grad():
             boot = lr.q_target(torch.from_numpy(buf.next_obs[trunc])).max(-1).values.numpy()
-        np.testing.assert_allclose(lr.targets(trunc), buf.reward[trunc] + lr.gamma * boot, rtol=1e-5, atol=1e-6)
+        np.testing.assert_allclose(
+            lr.targets(trunc), buf.reward[trunc] + lr.gamma * boot, rtol=1e-5, atol=1e-6
+        )
     assert len(idx) > 0

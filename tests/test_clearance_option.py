@@ -23,8 +23,10 @@ SHIELD, MARGIN = 0.025, 0.02
 
 
 def _config():
-    raw = {"env": {"shield": True, "shield_clearance": SHIELD, "min_clearance": MARGIN},
-           "layout": {"terrain": {"start_shift": [0.0, 0.12], "step_length": [0.55, 0.85]}}}
+    raw = {
+        "env": {"shield": True, "shield_clearance": SHIELD, "min_clearance": MARGIN},
+        "layout": {"terrain": {"start_shift": [0.0, 0.12], "step_length": [0.55, 0.85]}},
+    }
     return config_from_dict(legacy_raw(raw))
 
 
@@ -33,9 +35,15 @@ def _random_generator(cfg, seed=0):
     d = dynamics.obs_dim(cfg.env.obs_mode, cfg.env.shape_points)
     rng = np.random.default_rng(seed)
     sizes = [d, 32, 32, dynamics.NUM_ACTIONS]
-    pol = QPolicy(kernels=[rng.normal(size=(a, b)).astype(np.float32) * 0.3 for a, b in zip(sizes, sizes[1:])],
-                  biases=[np.zeros(b, np.float32) for b in sizes[1:]], norm_scales=[], norm_biases=[],
-                  metadata={})
+    pol = QPolicy(
+        kernels=[
+            rng.normal(size=(a, b)).astype(np.float32) * 0.3 for a, b in zip(sizes, sizes[1:])
+        ],
+        biases=[np.zeros(b, np.float32) for b in sizes[1:]],
+        norm_scales=[],
+        norm_biases=[],
+        metadata={},
+    )
     return TrajectoryGenerator(pol, cfg)
 
 
@@ -44,7 +52,9 @@ def _dense_min(heel, outline, foot, per=20):
     (geometry.foot_clearance only; no swept code)."""
     t = np.linspace(0.0, 1.0, per, endpoint=False)[None, :, None]
     pts = (heel[:-1, None] + t * (heel[1:, None] - heel[:-1, None])).reshape(-1, 2)
-    return float(geometry.foot_clearance(np, np.vstack([pts, heel[-1:]]), foot, outline[None]).min())
+    return float(
+        geometry.foot_clearance(np, np.vstack([pts, heel[-1:]]), foot, outline[None]).min()
+    )
 
 
 @pytest.mark.parametrize("clearance", [0.03, 0.04])
@@ -55,17 +65,26 @@ def test_shielded_raw_moves_keep_the_clearance_asked(clearance):
     gen = _random_generator(cfg)
     foot = cfg.kinematics.foot_length
     sc = safety_scenarios(cfg, 60, seed=5)
-    batch = gen.generate_batch([s["obstacle"] for s in sc], fallback=None, clearance=clearance,
-                               pivot=[s["pivot"] for s in sc], start_y=[s["start_y"] for s in sc],
-                               step_length=[s["step_length"] for s in sc])
+    batch = gen.generate_batch(
+        [s["obstacle"] for s in sc],
+        fallback=None,
+        clearance=clearance,
+        pivot=[s["pivot"] for s in sc],
+        start_y=[s["start_y"] for s in sc],
+        step_length=[s["step_length"] for s in sc],
+    )
     for t in batch:
         outline = np.asarray(t.scene.outline, float)
         raw = np.asarray(t.raw, float)
         c0 = float(geometry.foot_clearance(np, raw[0], foot, outline))
-        assert _dense_min(raw, outline, foot, per=200) >= min(SHIELD + clearance - MARGIN, c0) - 1e-5
+        assert (
+            _dense_min(raw, outline, foot, per=200) >= min(SHIELD + clearance - MARGIN, c0) - 1e-5
+        )
         # a swing closer than C is never ok, and says so
         if t.checks.min_clearance < clearance:
-            assert not t.ok and any("safety margin" in r or "touches" in r for r in t.checks.reasons)
+            assert not t.ok and any(
+                "safety margin" in r or "touches" in r for r in t.checks.reasons
+            )
 
 
 @pytest.mark.parametrize("clearance", [0.03, 0.045])
@@ -75,8 +94,11 @@ def test_swings_called_ok_keep_the_clearance_under_a_denser_look(trained_run, cl
     gen = TrajectoryGenerator.load(trained_run / "policy.npz")
     foot = gen.config.kinematics.foot_length
     sc = safety_scenarios(gen.config, 150, seed=9)
-    kw = dict(pivot=[s["pivot"] for s in sc], start_y=[s["start_y"] for s in sc],
-              step_length=[s["step_length"] for s in sc])
+    kw = dict(
+        pivot=[s["pivot"] for s in sc],
+        start_y=[s["start_y"] for s in sc],
+        step_length=[s["step_length"] for s in sc],
+    )
     n_ok = 0
     for g, extra in ((gen, {"fallback": None}), (CFFTG(gen.config), {})):
         batch = g.generate_batch([s["obstacle"] for s in sc], clearance=clearance, **kw, **extra)
@@ -84,10 +106,14 @@ def test_swings_called_ok_keep_the_clearance_under_a_denser_look(trained_run, cl
             if t.ok:
                 n_ok += 1
                 assert t.checks.min_clearance >= clearance - 1e-12
-                assert _dense_min(np.asarray(t.heel, float), np.asarray(t.scene.outline, float), foot) \
+                assert (
+                    _dense_min(np.asarray(t.heel, float), np.asarray(t.scene.outline, float), foot)
                     >= clearance - 1e-9
+                )
             elif t.checks.min_clearance < clearance:
-                assert any("safety margin" in r or "touches" in r for r in t.checks.reasons), t.checks.reasons
+                assert any("safety margin" in r or "touches" in r for r in t.checks.reasons), (
+                    t.checks.reasons
+                )
     assert n_ok >= 100
 
 
@@ -112,7 +138,10 @@ def test_cfftg_keeps_the_clearance_asked():
     for c in (0.03, 0.05):
         t = cf.generate(Obstacle.named("triangle", center_y=0.42), pivot="between", clearance=c)
         assert t.ok and t.checks.min_clearance >= c
-        assert _dense_min(np.asarray(t.heel, float), np.asarray(t.scene.outline, float), foot) >= c - 1e-9
+        assert (
+            _dense_min(np.asarray(t.heel, float), np.asarray(t.scene.outline, float), foot)
+            >= c - 1e-9
+        )
 
 
 @pytest.mark.parametrize("bad", [0.01, 0.2, float("nan"), "0.03", True])
@@ -129,11 +158,45 @@ def test_bad_clearance_is_refused_naming_it(bad):
 
 def test_cli_refuses_a_clearance_below_the_margin(tmp_path):
     out = tmp_path / "t.csv"
-    r = subprocess.run([sys.executable, "-m", "jaxexo.cli", "generate", "--method", "cfftg", "--obstacle", "base1",
-                        "--clearance", "0.01", "--out", str(out)], capture_output=True, text=True, cwd=ROOT)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "jaxexo.cli",
+            "generate",
+            "--method",
+            "cfftg",
+            "--obstacle",
+            "base1",
+            "--clearance",
+            "0.01",
+            "--out",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+    )
     assert r.returncode == 2 and "--clearance" in r.stderr and "Traceback" not in r.stderr
     assert not out.exists()
-    r = subprocess.run([sys.executable, "-m", "jaxexo.cli", "generate", "--method", "cfftg", "--obstacle", "base1",
-                        "--clearance", "0.04", "--out", str(out)], capture_output=True, text=True, cwd=ROOT)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "jaxexo.cli",
+            "generate",
+            "--method",
+            "cfftg",
+            "--obstacle",
+            "base1",
+            "--clearance",
+            "0.04",
+            "--out",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+    )
     assert r.returncode == 0, r.stderr
     assert out.exists()

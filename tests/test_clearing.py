@@ -28,7 +28,11 @@ def hugging_path(rng, outline, start=0.0, goal=0.75, hug=0.025, step=0.03):
         if abs(h[0] - goal) < 0.02 and h[1] < 0.01:
             break
         over = h[0] + FOOT > left - hug and h[0] < outline[:, 0].max() + hug
-        want_z = top + hug + rng.uniform(0, 0.01) if (over or h[0] + FOOT + 0.06 > left) and h[0] < goal - 0.15 else 0.0
+        want_z = (
+            top + hug + rng.uniform(0, 0.01)
+            if (over or h[0] + FOOT + 0.06 > left) and h[0] < goal - 0.15
+            else 0.0
+        )
         target = np.array([min(h[0] + 0.06, goal), want_z])
         d = target - h
         k = np.argmax(dirs @ d / max(np.linalg.norm(d), 1e-9))
@@ -52,9 +56,13 @@ def scenes(n, seed=0):
         w, h = rng.uniform(0.04, 0.22), rng.uniform(0.05, 0.25)
         c = rng.uniform(0.33, 0.42)
         kind = rng.integers(3)
-        ob = (geometry.Obstacle.rectangle(w, h, center_y=c) if kind == 0 else
-              geometry.Obstacle.triangle(w, h, center_y=c) if kind == 1 else
-              geometry.Obstacle.half_ellipse(w, h, center_y=c))
+        ob = (
+            geometry.Obstacle.rectangle(w, h, center_y=c)
+            if kind == 0
+            else geometry.Obstacle.triangle(w, h, center_y=c)
+            if kind == 1
+            else geometry.Obstacle.half_ellipse(w, h, center_y=c)
+        )
         outline = np.asarray(ob.outline, float)
         yield outline, hugging_path(rng, outline)
 
@@ -83,8 +91,19 @@ def test_corrected_curves_keep_the_margin_under_a_dense_look():
 
 def test_no_correction_where_the_plain_spline_keeps_the_margin():
     outline = np.asarray(geometry.Obstacle.rectangle(0.05, 0.05, center_y=0.4).outline, float)
-    raw = np.array([[0.0, 0.0], [0.1, 0.08], [0.2, 0.14], [0.3, 0.17], [0.4, 0.18], [0.5, 0.17], [0.6, 0.13],
-                    [0.7, 0.06], [0.75, 0.0]])
+    raw = np.array(
+        [
+            [0.0, 0.0],
+            [0.1, 0.08],
+            [0.2, 0.14],
+            [0.3, 0.17],
+            [0.4, 0.18],
+            [0.5, 0.17],
+            [0.6, 0.13],
+            [0.7, 0.06],
+            [0.75, 0.0],
+        ]
+    )
     path, dev, rounds = clear_smooth(raw, outline, FOOT, MARGIN)
     ref, ref_dev = sm.smooth_paths([raw], 100, sm.DEFAULT_SMOOTHING, with_deviation=True)
     assert rounds == 0
@@ -92,11 +111,16 @@ def test_no_correction_where_the_plain_spline_keeps_the_margin():
     assert dev == pytest.approx(ref_dev[0], abs=1e-15)
 
 
-@pytest.mark.parametrize("raw", [
-    np.array([[0.0, 0.0], [0.03, 0.0], [0.06, 0.0]]),                         # too short for a spline
-    np.array([[0.0, 0.0]] * 5),                                                # stood still
-    np.array([[0.0, 0.0], [0.25, 0.0], [0.5, 0.0], [0.75, 0.0], [1.0, 0.0]]),  # straight through
-])
+@pytest.mark.parametrize(
+    "raw",
+    [
+        np.array([[0.0, 0.0], [0.03, 0.0], [0.06, 0.0]]),  # too short for a spline
+        np.array([[0.0, 0.0]] * 5),  # stood still
+        np.array(
+            [[0.0, 0.0], [0.25, 0.0], [0.5, 0.0], [0.75, 0.0], [1.0, 0.0]]
+        ),  # straight through
+    ],
+)
 def test_degenerate_paths_stay_finite(raw):
     outline = np.asarray(geometry.Obstacle.rectangle(0.1, 0.1, center_y=0.5).outline, float)
     path, dev, _ = clear_smooth(raw, outline, FOOT, MARGIN)
@@ -134,17 +158,24 @@ def test_a_smoothed_path_is_accepted_with_headroom_above_the_margin():
 # Many paths corrected together, the pruned clearances, the stacked dual solve
 # --------------------------------------------------------------------------------------------
 
+
 def _mixed_scenes(n, seed):
     """Agent-like hugging paths and noisy arcs (some through the obstacle, some too short for a
     spline, some with repeated points) on rectangles, triangles and half-ellipses."""
     rng = np.random.default_rng(seed)
     out = []
     for i, (outline, raw) in enumerate(scenes(n, seed)):
-        if i % 4 == 3:      # a noisy arc instead: heavier corrections, backward wiggles
+        if i % 4 == 3:  # a noisy arc instead: heavier corrections, backward wiggles
             m = int(rng.integers(2, 45))
             u = np.linspace(0.0, 1.0, m)
-            raw = np.column_stack([0.75 * u + rng.normal(0, 0.01, m),
-                                   np.maximum(rng.uniform(0.05, 0.3) * np.sin(np.pi * u) + rng.normal(0, 0.01, m), 0)])
+            raw = np.column_stack(
+                [
+                    0.75 * u + rng.normal(0, 0.01, m),
+                    np.maximum(
+                        rng.uniform(0.05, 0.3) * np.sin(np.pi * u) + rng.normal(0, 0.01, m), 0
+                    ),
+                ]
+            )
             if m > 5:
                 raw[m // 2] = raw[m // 2 - 1]
         out.append((outline, raw))
@@ -174,7 +205,9 @@ def test_many_paths_corrected_together_equal_each_corrected_alone_and_the_refere
         if a.move_clearance is not None:
             # the last round's clearances are those of the returned curve: minimum and place exact
             full = swept.path_swept_clearance(np, a.path, FOOT, outline)
-            assert a.move_clearance.min() == full.min() and np.argmin(a.move_clearance) == np.argmin(full)
+            assert a.move_clearance.min() == full.min() and np.argmin(
+                a.move_clearance
+            ) == np.argmin(full)
             assert np.all(a.move_clearance <= full + 1e-12)
     assert corrected > 200
 
@@ -184,7 +217,11 @@ def test_pruned_clearances_are_exact_under_the_threshold():
     other one is reported at or above the threshold (and never above its exact value), the minimum
     and its place exact, against the full swept clearance on random paths."""
     rng = np.random.default_rng(5)
-    kinds = [geometry.Obstacle.rectangle, geometry.Obstacle.triangle, geometry.Obstacle.half_ellipse]
+    kinds = [
+        geometry.Obstacle.rectangle,
+        geometry.Obstacle.triangle,
+        geometry.Obstacle.half_ellipse,
+    ]
     pruned = 0
     for k, kind in enumerate(kinds):
         for n in (2, 9, 100):
@@ -192,10 +229,17 @@ def test_pruned_clearances_are_exact_under_the_threshold():
             for _ in range(200):
                 u = np.linspace(0.0, 1.0, n)
                 y = rng.uniform(-0.1, 0.1) + rng.uniform(0.6, 0.9) * u + rng.normal(0, 0.01, n)
-                z = np.maximum(rng.uniform(0, 0.35) * np.sin(np.pi * u) + rng.normal(0, 0.005, n), 0.0)
+                z = np.maximum(
+                    rng.uniform(0, 0.35) * np.sin(np.pi * u) + rng.normal(0, 0.005, n), 0.0
+                )
                 paths.append(np.column_stack([y, z]))
-                outlines.append(kind(rng.uniform(0.02, 0.25), rng.uniform(0.02, 0.25),
-                                     center_y=rng.uniform(0.35, 0.55)).outline)
+                outlines.append(
+                    kind(
+                        rng.uniform(0.02, 0.25),
+                        rng.uniform(0.02, 0.25),
+                        center_y=rng.uniform(0.35, 0.55),
+                    ).outline
+                )
             path, outline = np.stack(paths), np.stack(outlines)
             below = rng.uniform(0.0, 0.08, len(path))
             c, sw = swept.path_clearance_pruned(path, FOOT, outline, below=below)
@@ -219,12 +263,12 @@ def test_stacked_dual_solve_equals_lstsq():
     rng = np.random.default_rng(2)
     for rank, k in ((12, 8), (6, 10), (3, 9), (20, 20)):
         f = rng.normal(size=(50, k, rank))
-        f[::5, 1] = f[::5, 0]                     # a repeated constraint
+        f[::5, 1] = f[::5, 0]  # a repeated constraint
         a = f @ f.transpose(0, 2, 1)
         b = rng.normal(size=(50, k))
         act = rng.uniform(size=(50, k)) < 0.8
         act[:, 0] = True
-        for stack in (a, a[:1]):                  # many systems, and one (its own branch)
+        for stack in (a, a[:1]):  # many systems, and one (its own branch)
             g = len(stack)
             x = _solve_stack(stack, b[:g], act[:g])
             for i in range(g):
@@ -233,27 +277,38 @@ def test_stacked_dual_solve_equals_lstsq():
                 assert np.all(x[i, ~act[i]] == 0.0)
                 sub = stack[i][np.ix_(on, on)]
                 # the same solution where it is unique; the same least-squares fit either way
-                np.testing.assert_allclose(sub @ x[i, on], sub @ ref, rtol=0, atol=1e-6 * (1 + np.abs(b[i]).max()))
+                np.testing.assert_allclose(
+                    sub @ x[i, on], sub @ ref, rtol=0, atol=1e-6 * (1 + np.abs(b[i]).max())
+                )
                 if np.linalg.matrix_rank(sub) == len(on):
                     np.testing.assert_allclose(x[i, on], ref, rtol=1e-6, atol=1e-8)
 
 
-@pytest.mark.parametrize("args, match", [
-    (dict(raws=[np.zeros((5, 2))], outlines=[]), "1 raw paths but 0 outlines"),
-    (dict(n_points=1), "n_points"),
-    (dict(n_points=True), "n_points"),
-    (dict(margin=-0.01), "margin"),
-    (dict(smoothing=float("nan")), "smoothing"),
-    (dict(raws=[np.zeros((5, 3))]), r"raws\[0\]"),
-    (dict(raws=[np.zeros((0, 2))]), r"raws\[0\]"),
-    (dict(outlines=[np.zeros((1, 2))]), r"outlines\[0\]"),
-])
+@pytest.mark.parametrize(
+    "args, match",
+    [
+        (dict(raws=[np.zeros((5, 2))], outlines=[]), "1 raw paths but 0 outlines"),
+        (dict(n_points=1), "n_points"),
+        (dict(n_points=True), "n_points"),
+        (dict(margin=-0.01), "margin"),
+        (dict(smoothing=float("nan")), "smoothing"),
+        (dict(raws=[np.zeros((5, 3))]), r"raws\[0\]"),
+        (dict(raws=[np.zeros((0, 2))]), r"raws\[0\]"),
+        (dict(outlines=[np.zeros((1, 2))]), r"outlines\[0\]"),
+    ],
+)
 def test_bad_input_to_clear_rows_is_refused(args, match):
     from jaxexo.inference.clearing import clear_rows
 
     outline = np.asarray(geometry.Obstacle.rectangle(0.1, 0.1, center_y=0.4).outline, float)
-    kw = dict(raws=[np.array([[0.0, 0.0], [0.2, 0.1], [0.4, 0.2], [0.6, 0.1], [0.75, 0.0]])], outlines=[outline],
-              foot_length=FOOT, margin=MARGIN, n_points=100, smoothing=0.005)
+    kw = dict(
+        raws=[np.array([[0.0, 0.0], [0.2, 0.1], [0.4, 0.2], [0.6, 0.1], [0.75, 0.0]])],
+        outlines=[outline],
+        foot_length=FOOT,
+        margin=MARGIN,
+        n_points=100,
+        smoothing=0.005,
+    )
     kw.update(args)
     with pytest.raises(ValueError, match=match):
         clear_rows(**kw)
@@ -273,7 +328,7 @@ def test_the_first_round_measures_the_requested_smoothings_own_spline():
         if m < sm.DEGREE + 1:
             assert g.initial is None
             continue
-        paths, dev = sm.smooth_candidates(raw, 100, [sm.DEFAULT_SMOOTHING, m * 0.004 ** 2])
+        paths, dev = sm.smooth_candidates(raw, 100, [sm.DEFAULT_SMOOTHING, m * 0.004**2])
         p0, d0, c0, sw0 = g.initial
         np.testing.assert_array_equal(p0, paths[0])
         assert d0 == dev[0]

@@ -25,7 +25,8 @@ import jax.numpy as jnp  # noqa: E402
 from jaxexo.train import driver, run_files  # noqa: E402
 from jaxexo.train.evaluate import HELD_OUT, TEST_KINDS, make_rollout  # noqa: E402
 from jaxexo.train.trainer import METRICS, Hyperparams, Trainer, make_train  # noqa: E402
-pytestmark = pytest.mark.slow   # subprocess CLI runs
+
+pytestmark = pytest.mark.slow  # subprocess CLI runs
 
 from train_helpers import *  # noqa: F401,F403 (the shared tiny config, helpers and fixtures)
 from train_helpers import _cli_cmd
@@ -41,24 +42,40 @@ def test_cli_train_writes_the_run_directory(tiny_reference):
     (on one CPU device, so that the in-process driver tests can compare with it bit for bit)."""
     ref, out = tiny_reference, tiny_reference["run"]
     stdout, stderr = ref["stdout"], ref["stderr"]
-    for name in ("config.toml", "metrics.jsonl", "policy.npz", "training_curve.png", "eval.json",
-                 run_files.CHECKPOINT, run_files.BOOKKEEPING):
+    for name in (
+        "config.toml",
+        "metrics.jsonl",
+        "policy.npz",
+        "training_curve.png",
+        "eval.json",
+        run_files.CHECKPOINT,
+        run_files.BOOKKEEPING,
+    ):
         assert (out / name).is_file(), name
     assert load_config(out / "config.toml") == load_config(ref["cfg_path"]) == ref["cfg"]
     assert len((out / "metrics.jsonl").read_text().splitlines()) == 3
     res = json.loads((out / "eval.json").read_text())
-    assert res["env_steps"] == TINY_UPDATES * TINY_N * TINY_T and res["seed"] == SEED and res["devices"] == 1
+    assert (
+        res["env_steps"] == TINY_UPDATES * TINY_N * TINY_T
+        and res["seed"] == SEED
+        and res["devices"] == 1
+    )
     assert sum(v["n"] for v in res["by_obstacle"].values()) == TINY_TRAIN["eval_episodes"]
     assert load_policy(out / "policy.npz").num_actions == 36
     assert f"{res['env_steps']:,} env steps" in stdout and "policy.npz" in stdout
-    assert "\r" not in stderr and "it/s" not in stderr   # --quiet: no progress bar
+    assert "\r" not in stderr and "it/s" not in stderr  # --quiet: no progress bar
 
 
 def test_cli_train_bad_config_exits_2_naming_the_field(tmp_path):
     cfg_path = tmp_path / "bad.toml"
     cfg_path.write_text('[train]\ncontrol = "sarsa"\n')
-    r = subprocess.run(_cli_cmd("train", cfg_path, "--out", tmp_path / "run", "--quiet"), capture_output=True,
-                       text=True, cwd=ROOT, timeout=120)
+    r = subprocess.run(
+        _cli_cmd("train", cfg_path, "--out", tmp_path / "run", "--quiet"),
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=120,
+    )
     assert r.returncode == 2
     assert "train.control" in r.stderr and "sarsa" in r.stderr
 
@@ -73,14 +90,24 @@ def test_cli_train_loads_its_programs_from_the_compilation_cache(tiny_reference,
     from train_helpers import tiny_config
 
     cache = tmp_path / "cache"
-    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "JAX_COMPILATION_CACHE_DIR")}
-    env.update(XLA_FLAGS="--xla_force_host_platform_device_count=1", JAXEXO_COMPILATION_CACHE=str(cache))
+    env = {
+        k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "JAX_COMPILATION_CACHE_DIR")
+    }
+    env.update(
+        XLA_FLAGS="--xla_force_host_platform_device_count=1", JAXEXO_COMPILATION_CACHE=str(cache)
+    )
 
     def train(name, cfg):
         path = tmp_path / f"{name}.toml"
         path.write_text(config_to_toml(cfg))
-        r = subprocess.run(_cli_cmd("train", path, "--out", tmp_path / name, "--quiet", "--seed", SEED), cwd=root,
-                           env=env, capture_output=True, text=True, timeout=600)
+        r = subprocess.run(
+            _cli_cmd("train", path, "--out", tmp_path / name, "--quiet", "--seed", SEED),
+            cwd=root,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
         assert r.returncode == 0, r.stderr[-3000:]
         return tmp_path / name
 
@@ -89,14 +116,23 @@ def test_cli_train_loads_its_programs_from_the_compilation_cache(tiny_reference,
 
     train("other_lr", tiny_config(lr=3e-3))
     programs, read = entries("-cache"), entries("-atime")
-    assert {n.split("-")[0] for n in programs} >= {"jit_run", "jit_init", "jit_validate", "jit_rollouts"}, programs
+    assert {n.split("-")[0] for n in programs} >= {
+        "jit_run",
+        "jit_init",
+        "jit_validate",
+        "jit_rollouts",
+    }, programs
     assert any(n.startswith("jit_run-") for n in read), read
     assert tiny_reference["cfg"] == tiny_config()
     again = train("again", tiny_config())
     assert entries("-cache") == programs
     later = entries("-atime")
-    assert all(later[n] > t for n, t in read.items() if n.split("-")[0] in ("jit_run", "jit_validate")), (read, later)
-    assert (again / "policy.npz").read_bytes() == (tiny_reference["run"] / "policy.npz").read_bytes()
+    assert all(
+        later[n] > t for n, t in read.items() if n.split("-")[0] in ("jit_run", "jit_validate")
+    ), (read, later)
+    assert (again / "policy.npz").read_bytes() == (
+        tiny_reference["run"] / "policy.npz"
+    ).read_bytes()
 
 
 def test_compilation_cache_setting(monkeypatch, tmp_path):
@@ -127,7 +163,9 @@ def test_compilation_cache_setting(monkeypatch, tmp_path):
             assert use_compilation_cache() is None
         assert jax.config.jax_compilation_cache_dir is None and not any(elsewhere.iterdir())
         monkeypatch.setenv(CACHE_ENV, str(tmp_path / "xla"))
-        assert use_compilation_cache() == str(tmp_path / "xla") == jax.config.jax_compilation_cache_dir
+        assert (
+            use_compilation_cache() == str(tmp_path / "xla") == jax.config.jax_compilation_cache_dir
+        )
         assert (tmp_path / "xla").is_dir() and jax.config.jax_compilation_cache_max_size > 0
     finally:
         for n, v in old.items():

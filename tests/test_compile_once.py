@@ -91,13 +91,22 @@ def counted(tmp_path_factory):
     env["XLA_FLAGS"] = "--xla_force_host_platform_device_count=2"
     # A persistent cache: the resumed run reads the programs the first run compiled (a cache hit still
     # goes through XLA's compile entry point and is counted, so the counts are the same without it).
-    env.update(JAX_COMPILATION_CACHE_DIR=str(tmp_path_factory.mktemp("jax_cache")),
-               JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="0.5", JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES="0")
-    proc = subprocess.run([sys.executable, "-c", SCRIPT, str(ROOT / "tests")], cwd=ROOT, env=env,
-                          capture_output=True, text=True, timeout=900)
+    env.update(
+        JAX_COMPILATION_CACHE_DIR=str(tmp_path_factory.mktemp("jax_cache")),
+        JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="0.5",
+        JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES="0",
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", SCRIPT, str(ROOT / "tests")],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
     assert proc.returncode == 0, proc.stderr[-3000:]
     line = next(ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT "))
-    return json.loads(line[len("RESULT "):])
+    return json.loads(line[len("RESULT ") :])
 
 
 def test_a_run_compiles_its_training_program_once(counted):
@@ -110,7 +119,7 @@ def test_a_run_compiles_its_training_program_once(counted):
 def test_a_resumed_run_compiles_its_training_program_once(counted):
     assert counted["resume"].get("jit(run)") == 1, counted["resume"]
     assert counted["resume"].get("jit(active)") == 1, counted["resume"]
-    assert counted["resume_same"]   # and still ends bit-identical to the uninterrupted run
+    assert counted["resume_same"]  # and still ends bit-identical to the uninterrupted run
 
 
 def test_a_sweep_group_compiles_once(counted):

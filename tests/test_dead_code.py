@@ -28,7 +28,10 @@ ALLOWED: dict[str, str] = {}
 
 def _is_pytest_hook(node, in_test: bool) -> bool:
     """Test functions, test classes' methods and fixtures: pytest calls them by their names."""
-    return in_test and (node.name.startswith("test") or any("fixture" in ast.unparse(d) for d in node.decorator_list))
+    return in_test and (
+        node.name.startswith("test")
+        or any("fixture" in ast.unparse(d) for d in node.decorator_list)
+    )
 
 
 def definitions(path: Path, tree: ast.Module, in_test: bool):
@@ -44,9 +47,14 @@ def definitions(path: Path, tree: ast.Module, in_test: bool):
 
 def references(tree: ast.Module):
     """(name, line) of every place the module names something."""
-    docstrings = {id(n.body[0].value) for n in ast.walk(tree)
-                  if isinstance(n, (ast.Module, ast.ClassDef, *FUNCS)) and n.body
-                  and isinstance(n.body[0], ast.Expr) and isinstance(n.body[0].value, ast.Constant)}
+    docstrings = {
+        id(n.body[0].value)
+        for n in ast.walk(tree)
+        if isinstance(n, (ast.Module, ast.ClassDef, *FUNCS))
+        and n.body
+        and isinstance(n.body[0], ast.Expr)
+        and isinstance(n.body[0].value, ast.Constant)
+    }
     for n in ast.walk(tree):
         if isinstance(n, ast.Name):
             yield n.id, n.lineno
@@ -59,7 +67,9 @@ def references(tree: ast.Module):
                 yield w, n.lineno
 
 
-def dead_functions(checked: list[Path], users: list[Path], extra_text: str = "", tests: tuple[Path, ...] = ()):
+def dead_functions(
+    checked: list[Path], users: list[Path], extra_text: str = "", tests: tuple[Path, ...] = ()
+):
     """(path, line, qualified name) of each function defined in ``checked`` that nothing in ``checked``,
     ``users`` or ``extra_text`` names outside its own body."""
     refs: dict[str, list[tuple[Path | None, int]]] = {}
@@ -77,7 +87,9 @@ def dead_functions(checked: list[Path], users: list[Path], extra_text: str = "",
         name = qual.rpartition(".")[2]
         if name.startswith("__") and name.endswith("__"):
             continue
-        if not any(f != p or not node.lineno <= line <= node.end_lineno for f, line in refs.get(name, ())):
+        if not any(
+            f != p or not node.lineno <= line <= node.end_lineno for f, line in refs.get(name, ())
+        ):
             dead.append((p, node.lineno, qual))
     return dead
 
@@ -86,12 +98,20 @@ def test_every_function_is_reached():
     package = sorted((ROOT / "jaxexo").rglob("*.py"))
     tests = sorted((ROOT / "tests").rglob("*.py"))
     scripts = sorted((ROOT / "benchmarks").glob("*.py"))
-    dead = {f"{p.relative_to(ROOT).as_posix()}:{qual}": line
-            for p, line, qual in dead_functions(package + tests, scripts, (ROOT / "pyproject.toml").read_text(),
-                                                tuple(tests))}
+    dead = {
+        f"{p.relative_to(ROOT).as_posix()}:{qual}": line
+        for p, line, qual in dead_functions(
+            package + tests, scripts, (ROOT / "pyproject.toml").read_text(), tuple(tests)
+        )
+    }
     unexplained = [f"{k} (line {line})" for k, line in dead.items() if k not in ALLOWED]
-    assert not unexplained, "functions nothing calls (delete them, or explain them in ALLOWED):\n" + "\n".join(unexplained)
-    assert not set(ALLOWED) - set(dead), f"ALLOWED entries that are no longer dead: {sorted(set(ALLOWED) - set(dead))}"
+    assert not unexplained, (
+        "functions nothing calls (delete them, or explain them in ALLOWED):\n"
+        + "\n".join(unexplained)
+    )
+    assert not set(ALLOWED) - set(dead), (
+        f"ALLOWED entries that are no longer dead: {sorted(set(ALLOWED) - set(dead))}"
+    )
 
 
 def test_the_scan_finds_planted_dead_code(tmp_path):
@@ -132,7 +152,7 @@ def main():
     Thing().method_used()
 ''')
     test = tmp_path / "test_mod.py"
-    test.write_text('''import pytest
+    test.write_text("""import pytest
 
 
 @pytest.fixture
@@ -146,8 +166,13 @@ def helper_dead():
 
 def test_it(fix):
     pass
-''')
+""")
     dead = dead_functions([mod, test], [], extra_text='mod = "mod:main"', tests=(test,))
-    assert sorted(q for _, _, q in dead) == ["Thing.method_dead", "helper_dead", "recursive_only", "unused_in_doc"]
+    assert sorted(q for _, _, q in dead) == [
+        "Thing.method_dead",
+        "helper_dead",
+        "recursive_only",
+        "unused_in_doc",
+    ]
     # without the entry point, main is dead too
     assert "main" in {q for _, _, q in dead_functions([mod], [])}

@@ -39,10 +39,11 @@ def _prose_lines(text: str, keep_code: bool = False) -> list[tuple[int, str]]:
 
 def slug(heading: str) -> str:
     """GitHub's anchor for a heading: markup dropped, lower case, punctuation removed, spaces to '-'."""
-    text = re.sub(r"!?\[([^\]]*)\]\([^)]*\)", r"\1", heading)    # links: keep their text
+    text = re.sub(r"!?\[([^\]]*)\]\([^)]*\)", r"\1", heading)  # links: keep their text
     text = text.replace("`", "").strip().lower()
-    text = "".join(c for c in text
-                   if c in "-_ " or unicodedata.category(c)[0] in "LNM")   # letters, digits, marks
+    text = "".join(
+        c for c in text if c in "-_ " or unicodedata.category(c)[0] in "LNM"
+    )  # letters, digits, marks
     return text.replace(" ", "-")
 
 
@@ -50,7 +51,7 @@ def anchors(path: Path) -> set[str]:
     """Every heading anchor of a markdown file (repeated headings get -1, -2, ... as on GitHub)."""
     seen: dict[str, int] = {}
     out = set()
-    for _, line in _prose_lines(path.read_text(), keep_code=True):   # headings may hold code
+    for _, line in _prose_lines(path.read_text(), keep_code=True):  # headings may hold code
         m = _HEADING.match(line)
         if not m:
             continue
@@ -66,7 +67,7 @@ def broken_links(path: Path, root: Path = ROOT) -> list[str]:
     problems = []
     for n, line in _prose_lines(path.read_text()):
         for target in _LINK.findall(line):
-            if re.match(r"^[a-z][a-z0-9+.-]*:", target, flags=re.I):   # http:, https:, mailto: ...
+            if re.match(r"^[a-z][a-z0-9+.-]*:", target, flags=re.I):  # http:, https:, mailto: ...
                 continue
             file_part, _, anchor = target.partition("#")
             dest = path if not file_part else (path.parent / unquote(file_part)).resolve()
@@ -82,12 +83,16 @@ def broken_links(path: Path, root: Path = ROOT) -> list[str]:
 
 def test_readme_is_short():
     lines = (ROOT / "README.md").read_text().splitlines()
-    assert len(lines) <= README_MAX_LINES, f"README.md has {len(lines)} lines (at most {README_MAX_LINES})"
+    assert len(lines) <= README_MAX_LINES, (
+        f"README.md has {len(lines)} lines (at most {README_MAX_LINES})"
+    )
 
 
 def test_readme_reaches_a_generated_trajectory_early():
     lines = (ROOT / "README.md").read_text().splitlines()
-    first = next(i for i, ln in enumerate(lines, 1) if ".generate(" in ln or "jaxexo generate" in ln)
+    first = next(
+        i for i, ln in enumerate(lines, 1) if ".generate(" in ln or "jaxexo generate" in ln
+    )
     assert first <= 60, f"the first generated trajectory is on line {first}"
 
 
@@ -111,7 +116,8 @@ def test_a_broken_link_is_caught(tmp_path):
         "[`ok`](docs/page.md) [ok](docs/page.md#some-code-heading-here) [ok](#top) [web](https://x.org/a)\n"
         "```\n[inside a fence](nowhere.md)\n```\n"
         "[missing](docs/nope.md) [bad anchor](docs/page.md#nope) ![img](docs/gone.gif)\n"
-        "# Top\n")
+        "# Top\n"
+    )
     problems = broken_links(tmp_path / "README.md", tmp_path)
     assert [p.split(": ", 1)[1] for p in problems] == [
         "docs/nope.md (no such file)",
@@ -121,11 +127,18 @@ def test_a_broken_link_is_caught(tmp_path):
 
 
 def test_slugs_match_github():
-    assert slug("The shield: the policy chooses only among safe moves") == \
-        "the-shield-the-policy-chooses-only-among-safe-moves"
-    assert slug("`jaxexo eval`: both generators side by side") == "jaxexo-eval-both-generators-side-by-side"
-    assert slug("Device-ready swings: joint limits, timing, control rate") == \
-        "device-ready-swings-joint-limits-timing-control-rate"
+    assert (
+        slug("The shield: the policy chooses only among safe moves")
+        == "the-shield-the-policy-chooses-only-among-safe-moves"
+    )
+    assert (
+        slug("`jaxexo eval`: both generators side by side")
+        == "jaxexo-eval-both-generators-side-by-side"
+    )
+    assert (
+        slug("Device-ready swings: joint limits, timing, control rate")
+        == "device-ready-swings-joint-limits-timing-control-rate"
+    )
     assert slug("`[env]`") == "env"
 
 
@@ -153,18 +166,32 @@ _ISSUE_NUMBER = re.compile(r"\bissues?\s*#?\s*\d+", re.IGNORECASE)
 
 
 def _prose_files():
-    for folder, pattern in (("jaxexo", "**/*.py"), ("jaxexo", "**/*.toml"), ("tests", "*.py"),
-                            ("benchmarks", "*.py"), ("configs", "**/*.toml"), ("docs", "*.md")):
+    for folder, pattern in (
+        ("jaxexo", "**/*.py"),
+        ("jaxexo", "**/*.toml"),
+        ("tests", "*.py"),
+        ("benchmarks", "*.py"),
+        ("configs", "**/*.toml"),
+        ("docs", "*.md"),
+    ):
         yield from sorted((ROOT / folder).glob(pattern))
     yield ROOT / "README.md"
 
 
 def test_no_issue_numbers_in_code_or_docs():
-    found = [f"{p.relative_to(ROOT)}:{i}: {line.strip()}" for p in _prose_files()
-             for i, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1) if _ISSUE_NUMBER.search(line)]
+    found = [
+        f"{p.relative_to(ROOT)}:{i}: {line.strip()}"
+        for p in _prose_files()
+        for i, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1)
+        if _ISSUE_NUMBER.search(line)
+    ]
     assert not found, "issue numbers (say what and why instead):\n" + "\n".join(found[:20])
 
 
 def test_the_issue_number_check_catches_one():
-    assert _ISSUE_NUMBER.search("the shield (Iss" + "ue 11)") and _ISSUE_NUMBER.search("iss" + "ues 12, 19")
-    assert not _ISSUE_NUMBER.search("an issue with 3 vertices") and not _ISSUE_NUMBER.search("tissue 4")
+    assert _ISSUE_NUMBER.search("the shield (Iss" + "ue 11)") and _ISSUE_NUMBER.search(
+        "iss" + "ues 12, 19"
+    )
+    assert not _ISSUE_NUMBER.search("an issue with 3 vertices") and not _ISSUE_NUMBER.search(
+        "tissue 4"
+    )

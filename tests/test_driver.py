@@ -27,7 +27,8 @@ import jax.numpy as jnp  # noqa: E402
 from jaxexo.train import driver, run_files  # noqa: E402
 from jaxexo.train.evaluate import HELD_OUT, TEST_KINDS, make_rollout  # noqa: E402
 from jaxexo.train.trainer import METRICS, Hyperparams, Trainer, make_train  # noqa: E402
-pytestmark = pytest.mark.slow   # training runs and a background ``jaxexo train`` subprocess
+
+pytestmark = pytest.mark.slow  # training runs and a background ``jaxexo train`` subprocess
 
 from train_helpers import *  # noqa: F401,F403 (the shared tiny config, helpers and fixtures)
 from train_helpers import _compilation_cache, _npz  # noqa: F401 (module-scoped compilation cache)
@@ -36,6 +37,7 @@ from train_helpers import _compilation_cache, _npz  # noqa: F401 (module-scoped 
 # --------------------------------------------------------------------------------------------
 # The driver: resume, eval.json, policy export
 # --------------------------------------------------------------------------------------------
+
 
 class _Interrupt:
     """Patches run_files.checkpoint_write to raise KeyboardInterrupt on its ``at``-th call (calls go
@@ -88,8 +90,15 @@ def _counters(path) -> list[dict]:
 @pytest.mark.parametrize("which", ["full", "part"])
 def test_run_directory_is_complete(driver_runs, which):
     out = driver_runs[which]
-    for name in ("config.toml", "metrics.jsonl", "policy.npz", "training_curve.png", "eval.json",
-                 run_files.CHECKPOINT, run_files.BOOKKEEPING):
+    for name in (
+        "config.toml",
+        "metrics.jsonl",
+        "policy.npz",
+        "training_curve.png",
+        "eval.json",
+        run_files.CHECKPOINT,
+        run_files.BOOKKEEPING,
+    ):
         assert (out / name).is_file(), name
     assert load_config(out / "config.toml") == driver_runs["cfg"]
     rows = _counters(out / "metrics.jsonl")
@@ -107,7 +116,9 @@ def test_resume_is_bit_identical(driver_runs):
     before = driver_runs["before"]
     # The interruption happened where intended: chunk 1 saved, chunk 2's metrics line written but
     # its checkpoint not, no policy yet.
-    assert before["book"]["chunks_done"] == 1 and before["metric_lines"] == 2 and not before["policy"]
+    assert (
+        before["book"]["chunks_done"] == 1 and before["metric_lines"] == 2 and not before["policy"]
+    )
     assert (full / run_files.CHECKPOINT).read_bytes() == (part / run_files.CHECKPOINT).read_bytes()
     pf, pp = _npz(full / "policy.npz"), _npz(part / "policy.npz")
     assert sorted(pf) == sorted(pp) and len(pf) >= 7
@@ -127,16 +138,31 @@ def test_resume_after_an_interrupt_between_checkpoint_and_bookkeeping(driver_run
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(run_files, "checkpoint_write", _Interrupt(4))
         with pytest.raises(KeyboardInterrupt):
-            driver.run_training(driver_runs["cfg"], out, seed=SEED, progress=False, eval_episodes=20)
-    driver.run_training(driver_runs["cfg"], out, seed=SEED, resume=True, progress=False, eval_episodes=20)
+            driver.run_training(
+                driver_runs["cfg"], out, seed=SEED, progress=False, eval_episodes=20
+            )
+    driver.run_training(
+        driver_runs["cfg"], out, seed=SEED, resume=True, progress=False, eval_episodes=20
+    )
     assert _counters(driver_runs["full"] / "metrics.jsonl") == _counters(out / "metrics.jsonl")
-    assert (driver_runs["full"] / run_files.CHECKPOINT).read_bytes() == (out / run_files.CHECKPOINT).read_bytes()
+    assert (driver_runs["full"] / run_files.CHECKPOINT).read_bytes() == (
+        out / run_files.CHECKPOINT
+    ).read_bytes()
 
 
 def test_eval_json(driver_runs):
     res = json.loads((driver_runs["full"] / "eval.json").read_text())
-    for key in ("accuracy", "success_raw", "success", "by_obstacle", "by_pivot", "episodes", "env_steps", "train_seconds",
-                "held_out"):
+    for key in (
+        "accuracy",
+        "success_raw",
+        "success",
+        "by_obstacle",
+        "by_pivot",
+        "episodes",
+        "env_steps",
+        "train_seconds",
+        "held_out",
+    ):
         assert key in res, key
     assert set(res["by_obstacle"]) == set(TEST_KINDS) and len(TEST_KINDS) == 5
     assert set(res["by_pivot"]) == {"agent", "obstacle", "between"}
@@ -145,7 +171,7 @@ def test_eval_json(driver_runs):
     assert res["held_out"]["n"] == sum(res["by_obstacle"][k]["n"] for k in HELD_OUT)
     for fig in [res, res["held_out"], *res["by_obstacle"].values(), *res["by_pivot"].values()]:
         assert 0.0 <= fig["success_raw"] <= fig["accuracy"] <= 1.0
-    assert res["success"] == res["success_raw"]   # the old name, kept for existing readers
+    assert res["success"] == res["success_raw"]  # the old name, kept for existing readers
     assert res["env_steps"] == TINY_UPDATES * TINY_N * TINY_T
     ck = json.loads((driver_runs["full"] / "metrics.jsonl").read_text().splitlines()[-1])
     assert res["episodes"] == ck["episodes"]
@@ -161,13 +187,22 @@ def test_exported_policy_matches_the_checkpoint(driver_runs, tiny):
     template = tiny["init"](jax.random.PRNGKey(0), hyper)
     from jaxexo.storage.checkpoint import unpack_checkpoint
 
-    saved = serialization.from_bytes({"state": template, "best_params": template.params},
-                                     unpack_checkpoint((full / run_files.CHECKPOINT).read_bytes(), "ckpt"))
+    saved = serialization.from_bytes(
+        {"state": template, "best_params": template.params},
+        unpack_checkpoint((full / run_files.CHECKPOINT).read_bytes(), "ckpt"),
+    )
     assert int(saved["state"].update) == TINY_UPDATES
     pol = load_policy(full / "policy.npz")
-    assert pol.metadata["layer_norm"] is True and pol.metadata["layers"] == [trainer.env.obs_dim, 32, 32, 36]
-    assert config_from_dict(tomllib.loads(pol.metadata["config_toml"])) == cfg   # and the whole config
-    obs = template.obs   # 64 observations of fresh episodes
+    assert pol.metadata["layer_norm"] is True and pol.metadata["layers"] == [
+        trainer.env.obs_dim,
+        32,
+        32,
+        36,
+    ]
+    assert (
+        config_from_dict(tomllib.loads(pol.metadata["config_toml"])) == cfg
+    )  # and the whole config
+    obs = template.obs  # 64 observations of fresh episodes
     q = np.asarray(jax.jit(trainer.net.apply)(saved["best_params"], obs))
     np.testing.assert_allclose(pol.q_values(np.asarray(obs)), q, rtol=1e-5, atol=1e-5)
 
@@ -192,7 +227,9 @@ def test_run_training_refuses_to_overwrite_or_mix_runs(driver_runs, tmp_path):
 
     from jaxexo.storage.checkpoint import pack_checkpoint, unpack_checkpoint
 
-    raw = serialization.msgpack_restore(unpack_checkpoint((run / run_files.CHECKPOINT).read_bytes(), "ckpt"))
+    raw = serialization.msgpack_restore(
+        unpack_checkpoint((run / run_files.CHECKPOINT).read_bytes(), "ckpt")
+    )
     raw["book"]["devices"] = 2
     (run / run_files.CHECKPOINT).write_bytes(pack_checkpoint(serialization.msgpack_serialize(raw)))
     with pytest.raises(ConfigError, match="2 device"):

@@ -18,16 +18,26 @@ from jaxexo.train.trainer import METRICS, UpdateMetrics  # noqa: E402
 
 
 def _state(params=1.0, target=1.0):
-    tree = lambda v: {"dense": {"kernel": np.full((2, 3), v, np.float32), "bias": np.zeros(3, np.float32)}}  # noqa: E731
+    tree = lambda v: {
+        "dense": {"kernel": np.full((2, 3), v, np.float32), "bias": np.zeros(3, np.float32)}
+    }  # noqa: E731
     return SimpleNamespace(params=tree(params), target_params=tree(target))
 
 
-@pytest.mark.parametrize("params, target, loss, ok", [
-    (1.0, 1.0, 0.5, True),
-    (np.nan, 1.0, 0.5, False),
-    (1.0, np.inf, 0.5, False),      # the target network alone: diverged (the population's and sweep's rule)
-    (1.0, 1.0, np.nan, False),
-])
+@pytest.mark.parametrize(
+    "params, target, loss, ok",
+    [
+        (1.0, 1.0, 0.5, True),
+        (np.nan, 1.0, 0.5, False),
+        (
+            1.0,
+            np.inf,
+            0.5,
+            False,
+        ),  # the target network alone: diverged (the population's and sweep's rule)
+        (1.0, 1.0, np.nan, False),
+    ],
+)
 def test_one_rule_on_the_host_and_in_a_program(params, target, loss, ok):
     ts = _state(params, target)
     m = np.zeros((4, len(METRICS)), np.float32)
@@ -47,5 +57,7 @@ def test_metric_rows_by_name():
 
 
 def test_candidates_finished_a_chunk_and_never_diverged():
-    track = Track(None, np.array([0.5, 0.9, 0.7, -1.0]), np.array([2, 3, 1, 0]), np.array([0, 4, 0, 0]))
+    track = Track(
+        None, np.array([0.5, 0.9, 0.7, -1.0]), np.array([2, 3, 1, 0]), np.array([0, 4, 0, 0])
+    )
     assert track.candidates() == [0, 2]

@@ -19,7 +19,7 @@ from jaxexo.physics.geometry import Obstacle  # noqa: E402
 from conftest import MIXED_KINDS, MIXED_RAW, get_mixed_env, get_mixed_step, legacy_raw  # noqa: E402
 
 BATCH = 512
-ROLLOUT = 110          # > max_steps = 100: every episode that does not reach the goal is truncated
+ROLLOUT = 110  # > max_steps = 100: every episode that does not reach the goal is truncated
 RIGHT, UP, DOWN = 0, 9, 27
 
 
@@ -61,7 +61,9 @@ class EnvVariantsTest(chex.TestCase):
         chex.assert_shape(info["exo_terms"], (4,))
         chex.assert_shape(info["joint_angles"], (4,))
         chex.assert_tree_all_finite((obs2, reward, info["traj_terms"], info["exo_terms"]))
-        np.testing.assert_allclose(np.asarray(state2.heel), np.asarray(state.heel) + [0.0, 0.03], atol=1e-6)
+        np.testing.assert_allclose(
+            np.asarray(state2.heel), np.asarray(state.heel) + [0.0, 0.03], atol=1e-6
+        )
         assert int(state2.time) == 1
         # Jitted and eager agree (float32 rounding only).
         ref = get_mixed_step()(jax.random.PRNGKey(4), state, UP, params)
@@ -77,19 +79,34 @@ def _make_rollout(env, n_steps):
     @jax.jit
     def rollout(key, params):
         k_reset, k_run = jax.random.split(key)
-        obs, state = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(k_reset, BATCH), params)
+        obs, state = jax.vmap(env.reset, in_axes=(0, None))(
+            jax.random.split(k_reset, BATCH), params
+        )
 
         def body(carry, k):
             obs, state = carry
             k_act, k_step = jax.random.split(k)
             action = jax.random.randint(k_act, (BATCH,), 0, NUM_ACTIONS)
-            obs2, state2, reward, terminated, truncated, info = jax.vmap(env.step, in_axes=(0, 0, 0, None))(
-                jax.random.split(k_step, BATCH), state, action, params)
-            out = dict(obs=obs2, reward=reward, terminated=terminated, truncated=truncated,
-                       prev_time=state.time, time=state2.time, heel=state2.heel, kind=state2.layout.kind,
-                       pivot_kind=state2.layout.pivot_kind, center_y=state2.layout.center_y,
-                       traj=info["traj_terms"], exo=info["exo_terms"], final_obs=info["final_observation"],
-                       shaping=info.get("shaping", jnp.zeros_like(reward)), goal=info["goal_reached"])
+            obs2, state2, reward, terminated, truncated, info = jax.vmap(
+                env.step, in_axes=(0, 0, 0, None)
+            )(jax.random.split(k_step, BATCH), state, action, params)
+            out = dict(
+                obs=obs2,
+                reward=reward,
+                terminated=terminated,
+                truncated=truncated,
+                prev_time=state.time,
+                time=state2.time,
+                heel=state2.heel,
+                kind=state2.layout.kind,
+                pivot_kind=state2.layout.pivot_kind,
+                center_y=state2.layout.center_y,
+                traj=info["traj_terms"],
+                exo=info["exo_terms"],
+                final_obs=info["final_observation"],
+                shaping=info.get("shaping", jnp.zeros_like(reward)),
+                goal=info["goal_reached"],
+            )
             return (obs2, state2), out
 
         (_, _), traj = jax.lax.scan(body, (obs, state), jax.random.split(k_run, n_steps))
@@ -120,7 +137,9 @@ def test_batch_shapes_and_finite(mixed):
     assert np.isfinite(t["reward"]).all()
     assert np.isfinite(t["traj"]).all() and np.isfinite(t["exo"]).all()
     # The heel stays in bounds: above the ground, below the ceiling.
-    assert (t["heel"][..., 1] >= 0).all() and (t["heel"][..., 1] <= mixed["env"].config.env.max_z + 1e-6).all()
+    assert (t["heel"][..., 1] >= 0).all() and (
+        t["heel"][..., 1] <= mixed["env"].config.env.max_z + 1e-6
+    ).all()
 
 
 def test_every_kind_and_pivot_appears(mixed):
@@ -139,15 +158,24 @@ def test_sampled_layouts_respect_the_config(mixed):
     for i, spec in enumerate(specs):
         sel = lay.kind == i
         assert sel.any()
-        assert (lay.width[sel] >= spec.width[0] - 1e-6).all() and (lay.width[sel] <= spec.width[1] + 1e-6).all()
-        assert (lay.height[sel] >= spec.height[0] - 1e-6).all() and (lay.height[sel] <= spec.height[1] + 1e-6).all()
+        assert (lay.width[sel] >= spec.width[0] - 1e-6).all() and (
+            lay.width[sel] <= spec.width[1] + 1e-6
+        ).all()
+        assert (lay.height[sel] >= spec.height[0] - 1e-6).all() and (
+            lay.height[sel] <= spec.height[1] + 1e-6
+        ).all()
         # The outline is the kind's unit outline scaled and placed; its shape descriptor scales with height.
         unit = geometry.pad_outline(spec.unit_vertices(), env.max_vertices)
         j = np.flatnonzero(sel)[0]
-        np.testing.assert_allclose(lay.outline[j, :, 0], lay.center_y[j] + lay.width[j] * unit[:, 0], atol=1e-5)
+        np.testing.assert_allclose(
+            lay.outline[j, :, 0], lay.center_y[j] + lay.width[j] * unit[:, 0], atol=1e-5
+        )
         np.testing.assert_allclose(lay.outline[j, :, 1], lay.height[j] * unit[:, 1], atol=1e-5)
-        np.testing.assert_allclose(lay.shape[j], lay.height[j] * geometry.shape_descriptor(unit, env.shape_points),
-                                   atol=1e-5)
+        np.testing.assert_allclose(
+            lay.shape[j],
+            lay.height[j] * geometry.shape_descriptor(unit, env.shape_points),
+            atol=1e-5,
+        )
     step_len = lay.goal_y - lay.start_y
     assert (step_len >= 0.65 - 1e-5).all() and (step_len <= 0.75 + 1e-5).all()
     assert (lay.start_y >= -1e-7).all() and (lay.start_y <= 0.05 + 1e-6).all()
@@ -155,10 +183,16 @@ def test_sampled_layouts_respect_the_config(mixed):
     assert (np.abs(lay.center_y - center0) <= 0.03 + 1e-5).all()
     for k, name in enumerate(PIVOT_CONDITIONS):
         sel = lay.pivot_kind == k
-        expected = {"agent": lay.start_y, "obstacle": lay.center_y, "between": 0.5 * (lay.start_y + lay.center_y)}[name]
+        expected = {
+            "agent": lay.start_y,
+            "obstacle": lay.center_y,
+            "between": 0.5 * (lay.start_y + lay.center_y),
+        }[name]
         np.testing.assert_allclose(lay.pivot_y[sel], expected[sel], atol=1e-6)
     # The heel starts on the ground at the start; the toe is clear of the obstacle.
-    np.testing.assert_allclose(np.asarray(st.heel), np.stack([lay.start_y, 0 * lay.start_y], -1), atol=1e-7)
+    np.testing.assert_allclose(
+        np.asarray(st.heel), np.stack([lay.start_y, 0 * lay.start_y], -1), atol=1e-7
+    )
     assert (lay.center_y - 0.5 * lay.width > lay.start_y + cfg.kinematics.foot_length).all()
     assert (lay.center_y + 0.5 * lay.width < lay.goal_y).all()
 
@@ -182,17 +216,25 @@ def test_auto_reset_and_flags(mixed):
     # final_observation is the next observation unless the episode ended.
     np.testing.assert_array_equal(t["final_obs"][~done], t["obs"][~done])
     # A new layout after a reset (the centre is drawn anew, differs almost surely).
-    prev_center = np.concatenate([np.asarray(mixed["state0"].layout.center_y)[None], t["center_y"][:-1]])
+    prev_center = np.concatenate(
+        [np.asarray(mixed["state0"].layout.center_y)[None], t["center_y"][:-1]]
+    )
     assert (t["center_y"][done] != prev_center[done]).mean() > 0.99
     assert (t["center_y"][~done] == prev_center[~done]).all()
 
 
 def test_reward_is_weighted_sum_of_terms(mixed):
     t, p = mixed["traj"], mixed["params"]
-    expected = (t["traj"] @ np.asarray(p.traj_weights) + t["exo"] @ np.asarray(p.exo_weights) + t["shaping"])
+    expected = (
+        t["traj"] @ np.asarray(p.traj_weights) + t["exo"] @ np.asarray(p.exo_weights) + t["shaping"]
+    )
     np.testing.assert_allclose(t["reward"], expected, atol=1e-4)
     # Penalties are non-positive; only r0 and the goal term may be positive.
-    assert (t["traj"][..., 1:3] <= 0).all() and (t["traj"][..., 4:] <= 0).all() and (t["exo"] <= 0).all()
+    assert (
+        (t["traj"][..., 1:3] <= 0).all()
+        and (t["traj"][..., 4:] <= 0).all()
+        and (t["exo"] <= 0).all()
+    )
     assert (t["traj"][..., 3] >= 0).all()
 
 
@@ -203,13 +245,15 @@ def test_determinism(mixed):
         np.testing.assert_array_equal(np.asarray(traj[key]), value, err_msg=key)
     np.testing.assert_array_equal(np.asarray(obs0), np.asarray(mixed["obs0"]))
     _, state_b, traj_b = rollout(jax.random.PRNGKey(1), params)
-    assert not np.array_equal(np.asarray(state_b.layout.center_y), np.asarray(state0.layout.center_y))
+    assert not np.array_equal(
+        np.asarray(state_b.layout.center_y), np.asarray(state0.layout.center_y)
+    )
     assert not np.array_equal(np.asarray(traj_b["heel"]), mixed["traj"]["heel"])
 
 
 def test_single_reset_determinism(mixed):
     env, params = mixed["env"], mixed["params"]
-    reset = env.reset   # eager
+    reset = env.reset  # eager
     o1, s1 = reset(jax.random.PRNGKey(42), params)
     o2, s2 = reset(jax.random.PRNGKey(42), params)
     o3, s3 = reset(jax.random.PRNGKey(43), params)
@@ -231,10 +275,14 @@ def test_thesis_obs_mode():
     # Eager (op-by-op): cheaper than compiling this env's transitions once more.
     obs, state = env.reset(jax.random.PRNGKey(0), params)
     chex.assert_shape(obs, (2,))
-    np.testing.assert_allclose(np.asarray(obs), (np.asarray(state.heel) - THESIS_OBS_CENTER) / LENGTH_SCALE, atol=1e-6)
+    np.testing.assert_allclose(
+        np.asarray(obs), (np.asarray(state.heel) - THESIS_OBS_CENTER) / LENGTH_SCALE, atol=1e-6
+    )
     obs2, state2, *_ = env.step(jax.random.PRNGKey(1), state, UP, params)
     chex.assert_shape(obs2, (2,))
-    np.testing.assert_allclose(np.asarray(obs2) - np.asarray(obs), [0.0, 0.03 / LENGTH_SCALE], atol=1e-6)
+    np.testing.assert_allclose(
+        np.asarray(obs2) - np.asarray(obs), [0.0, 0.03 / LENGTH_SCALE], atol=1e-6
+    )
     assert env.observation_space(params).shape == (2,)
 
 
@@ -253,10 +301,16 @@ def test_conditioned_obs_content(mixed):
     # box, ``obs_true_profile`` false) its height at every point.
     true_profile = bool(getattr(mixed["params"], "obs_true_profile", True))
     profile = lay.shape if true_profile else np.broadcast_to(lay.height[:, None], lay.shape.shape)
-    np.testing.assert_allclose(obs[:, 12:12 + env.shape_points], profile / LENGTH_SCALE, atol=1e-5)
+    np.testing.assert_allclose(
+        obs[:, 12 : 12 + env.shape_points], profile / LENGTH_SCALE, atol=1e-5
+    )
     # Obstacle near edge, far edge and top relative to the heel (on the ground at the start).
-    np.testing.assert_allclose(obs[:, 9], (lay.center_y - 0.5 * lay.width - lay.start_y) / LENGTH_SCALE, atol=1e-5)
-    np.testing.assert_allclose(obs[:, 10], (lay.center_y + 0.5 * lay.width - lay.start_y) / LENGTH_SCALE, atol=1e-5)
+    np.testing.assert_allclose(
+        obs[:, 9], (lay.center_y - 0.5 * lay.width - lay.start_y) / LENGTH_SCALE, atol=1e-5
+    )
+    np.testing.assert_allclose(
+        obs[:, 10], (lay.center_y + 0.5 * lay.width - lay.start_y) / LENGTH_SCALE, atol=1e-5
+    )
     np.testing.assert_allclose(obs[:, 11], lay.height / LENGTH_SCALE, atol=1e-5)
     np.testing.assert_allclose(obs[:, 8], (lay.pivot_y - lay.start_y) / LENGTH_SCALE, atol=1e-5)
 
@@ -298,9 +352,18 @@ def test_collision_terminates_when_configured(mixed_env, mixed_step):
     _, st_term, _, term, trunc, info = jit_step(jax.random.PRNGKey(0), state, RIGHT, p_term)
     assert bool(term) and not bool(trunc) and not bool(info["goal_reached"])
     assert int(st_term.time) == 0
-    np.testing.assert_allclose(np.asarray(info["final_observation"]), np.asarray(env.get_obs(
-        state.replace(heel=jnp.asarray([0.33, 0.05], jnp.float32), time=jnp.asarray(1, jnp.int32)), params)),
-        atol=1e-6)
+    np.testing.assert_allclose(
+        np.asarray(info["final_observation"]),
+        np.asarray(
+            env.get_obs(
+                state.replace(
+                    heel=jnp.asarray([0.33, 0.05], jnp.float32), time=jnp.asarray(1, jnp.int32)
+                ),
+                params,
+            )
+        ),
+        atol=1e-6,
+    )
 
 
 @pytest.mark.parametrize(
@@ -309,7 +372,7 @@ def test_collision_terminates_when_configured(mixed_env, mixed_step):
         # the 100th step reaches the goal: terminated and, as in gymnax 1.0.1 (truncation from the step
         # count alone, gymnax.environments.environment.Environment.step), truncated too
         ([0.66, 0.0], True, True),
-        ([0.10, 0.0], False, True),    # the 100th step anywhere else: truncated
+        ([0.10, 0.0], False, True),  # the 100th step anywhere else: truncated
     ],
 )
 def test_last_step_flags(mixed_env, mixed_step, heel, expect_term, expect_trunc):
@@ -317,17 +380,23 @@ def test_last_step_flags(mixed_env, mixed_step, heel, expect_term, expect_trunc)
     params = env.default_params
     _, state = env.init_state(env.layout_for(Obstacle.named("base2"), pivot="between"), params)
     state = state.replace(heel=jnp.asarray(heel, jnp.float32), time=jnp.asarray(99, jnp.int32))
-    obs, new_state, reward, term, trunc, info = mixed_step(jax.random.PRNGKey(7), state, RIGHT, params)
+    obs, new_state, reward, term, trunc, info = mixed_step(
+        jax.random.PRNGKey(7), state, RIGHT, params
+    )
     assert (bool(term), bool(trunc)) == (expect_term, expect_trunc)
     assert bool(info["terminated"]) == expect_term and bool(info["truncated"]) == expect_trunc
     # Either way the episode is over: a fresh one starts (time 0, heel on the ground at its start).
     assert int(new_state.time) == 0 and not bool(new_state.visited_mid)
-    np.testing.assert_allclose(np.asarray(new_state.heel), [float(new_state.layout.start_y), 0.0], atol=1e-7)
+    np.testing.assert_allclose(
+        np.asarray(new_state.heel), [float(new_state.layout.start_y), 0.0], atol=1e-7
+    )
     from jaxexo.env.exo_step import LENGTH_SCALE, THESIS_OBS_CENTER
 
-    np.testing.assert_allclose(np.asarray(info["final_observation"])[:2],
-                               (np.asarray(heel) + [0.03, 0.0] - np.asarray(THESIS_OBS_CENTER)) / LENGTH_SCALE,
-                               atol=1e-5)
+    np.testing.assert_allclose(
+        np.asarray(info["final_observation"])[:2],
+        (np.asarray(heel) + [0.03, 0.0] - np.asarray(THESIS_OBS_CENTER)) / LENGTH_SCALE,
+        atol=1e-5,
+    )
     assert not np.allclose(np.asarray(obs), np.asarray(info["final_observation"]))
 
 
@@ -341,9 +410,9 @@ def test_layout_for_errors(mixed_env):
     with pytest.raises(ValueError, match="pivot"):
         mixed_env.layout_for(Obstacle.named("base1"), pivot="left")
     with pytest.raises(ValueError, match="obstacle"):
-        mixed_env.layout_for(Obstacle.named("base1", center_y=0.25))      # reaches back to the toe
+        mixed_env.layout_for(Obstacle.named("base1", center_y=0.25))  # reaches back to the toe
     with pytest.raises(ValueError, match="step_length"):
-        mixed_env.layout_for(Obstacle.named("base1"), step_length=0.5)    # goal before its far edge
+        mixed_env.layout_for(Obstacle.named("base1"), step_length=0.5)  # goal before its far edge
     with pytest.raises(ValueError, match="step_length"):
         mixed_env.layout_for(Obstacle.named("base1"), step_length=float("nan"))
 
@@ -361,8 +430,8 @@ def test_scripted_policy_reaches_goal(mixed_env, mixed_step, kind, pivot):
     ob = Obstacle.named(kind)
     lay = env.layout_for(ob, pivot=pivot, step_length=0.70)
     _, state = env.init_state(lay, params)
-    n_up = int(np.ceil((ob.height + 0.05) / 0.03))       # 5 cm over the top
-    n_across = 23                                         # 0.69 m: inside the goal's 4 cm
+    n_up = int(np.ceil((ob.height + 0.05) / 0.03))  # 5 cm over the top
+    n_across = 23  # 0.69 m: inside the goal's 4 cm
     actions = [UP] * n_up + [RIGHT] * n_across + [DOWN] * n_up
     key = jax.random.PRNGKey(0)
     total = 0.0
@@ -441,10 +510,18 @@ def test_gymnax_wrappers_rollout(mixed_env):
             obs, state = carry
             ka, ks = jax.random.split(k)
             action = jax.vmap(a_space.sample)(jax.random.split(ka, n_envs))
-            obs, state, reward, terminated, truncated, info = jax.vmap(env.step, in_axes=(0, 0, 0, None))(
-                jax.random.split(ks, n_envs), state, action, params)
-            return (obs, state), (obs, reward, terminated, truncated, info["returned_episode"],
-                                  info["returned_episode_lengths"], info["returned_episode_returns"])
+            obs, state, reward, terminated, truncated, info = jax.vmap(
+                env.step, in_axes=(0, 0, 0, None)
+            )(jax.random.split(ks, n_envs), state, action, params)
+            return (obs, state), (
+                obs,
+                reward,
+                terminated,
+                truncated,
+                info["returned_episode"],
+                info["returned_episode_lengths"],
+                info["returned_episode_returns"],
+            )
 
         return jax.lax.scan(body, (obs, state), jax.random.split(k1, n_steps))
 
@@ -461,9 +538,9 @@ def test_gymnax_wrappers_rollout(mixed_env):
     # The returned return of the first finished episode is the sum of its rewards.
     e = int(np.flatnonzero(done.any(axis=0))[0])
     t_end = int(np.flatnonzero(done[:, e])[0])
-    np.testing.assert_allclose(float(ret_ret[t_end, e]), float(np.asarray(r)[: t_end + 1, e].sum()), rtol=1e-4,
-                               atol=1e-3)
-
+    np.testing.assert_allclose(
+        float(ret_ret[t_end, e]), float(np.asarray(r)[: t_end + 1, e].sum()), rtol=1e-4, atol=1e-3
+    )
 
 
 @pytest.mark.parametrize("which", ["mixed", "terrain"])
@@ -477,13 +554,21 @@ def test_step_batch_equals_vmapped_step_bit_for_bit(mixed_env, which):
 
     from conftest import ROOT
 
-    env = mixed_env if which == "mixed" else ExoStepEnv(load_config(ROOT / "configs" / "default.toml"))
+    env = (
+        mixed_env
+        if which == "mixed"
+        else ExoStepEnv(load_config(ROOT / "configs" / "default.toml"))
+    )
     p = env.default_params
-    params = jax.tree.map(lambda a, b: jnp.stack([a, b]), p, p.replace(step_size=jnp.asarray(0.04, jnp.float32)))
+    params = jax.tree.map(
+        lambda a, b: jnp.stack([a, b]), p, p.replace(step_size=jnp.asarray(0.04, jnp.float32))
+    )
     n = 256
 
     def rollout(batched, pp):
-        _, state = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(jax.random.PRNGKey(5), n), pp)
+        _, state = jax.vmap(env.reset, in_axes=(0, None))(
+            jax.random.split(jax.random.PRNGKey(5), n), pp
+        )
         # Episodes at staggered ages, so that some are truncated at most steps, and 40 at one step.
         age = jax.random.randint(jax.random.PRNGKey(7), (n,), 0, 100, jnp.int32)
         state = state.replace(time=age.at[:40].set(50))
@@ -503,6 +588,8 @@ def test_step_batch_equals_vmapped_step_bit_for_bit(mixed_env, which):
     fast = jax.jit(jax.vmap(lambda pp: rollout(True, pp)))(params)
     ref = jax.jit(jax.vmap(lambda pp: rollout(False, pp)))(params)
     done = np.asarray(ref[1][3] | ref[1][4])
-    assert (done.sum(-1) > 0).mean() > 0.8 and done.sum(-1).max() > 16   # most steps end some; one takes rounds
+    assert (done.sum(-1) > 0).mean() > 0.8 and done.sum(
+        -1
+    ).max() > 16  # most steps end some; one takes rounds
     for a, b in zip(jax.tree.leaves(fast), jax.tree.leaves(ref), strict=True):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))

@@ -28,19 +28,30 @@ def _random_generator(seed=0, hidden=(32, 32), scale=0.3, layer_norm=False):
     d = dynamics.obs_dim(cfg.env.obs_mode, cfg.env.shape_points)
     rng = np.random.default_rng(seed)
     sizes = [d, *hidden, dynamics.NUM_ACTIONS]
-    pol = QPolicy(kernels=[rng.normal(size=(a, b)).astype(np.float32) * scale for a, b in zip(sizes, sizes[1:])],
-                  biases=[rng.normal(size=b).astype(np.float32) * 0.1 for b in sizes[1:]],
-                  norm_scales=[rng.normal(size=h).astype(np.float32) for h in hidden] if layer_norm else [],
-                  norm_biases=[rng.normal(size=h).astype(np.float32) * 0.1 for h in hidden] if layer_norm else [],
-                  metadata={})
+    pol = QPolicy(
+        kernels=[
+            rng.normal(size=(a, b)).astype(np.float32) * scale for a, b in zip(sizes, sizes[1:])
+        ],
+        biases=[rng.normal(size=b).astype(np.float32) * 0.1 for b in sizes[1:]],
+        norm_scales=[rng.normal(size=h).astype(np.float32) for h in hidden] if layer_norm else [],
+        norm_biases=[rng.normal(size=h).astype(np.float32) * 0.1 for h in hidden]
+        if layer_norm
+        else [],
+        metadata={},
+    )
     return TrajectoryGenerator(pol, cfg)
 
 
 def _scenes(gen, n_train, n_unseen, seed=5):
     from jaxexo.evaluation.compare import make_scenarios
 
-    sc = make_scenarios(gen.config, "train", n_train, seed) + make_scenarios(gen.config, "unseen", n_unseen)[:n_unseen]
-    return sc, [gen.scene(s["obstacle"], s["pivot"], None, s["start_y"], s["step_length"]) for s in sc]
+    sc = (
+        make_scenarios(gen.config, "train", n_train, seed)
+        + make_scenarios(gen.config, "unseen", n_unseen)[:n_unseen]
+    )
+    return sc, [
+        gen.scene(s["obstacle"], s["pivot"], None, s["start_y"], s["step_length"]) for s in sc
+    ]
 
 
 def test_scalar_shield_picks_the_full_masks_greedy_move():
@@ -60,19 +71,23 @@ def test_scalar_shield_picks_the_full_masks_greedy_move():
     side = rng.uniform(size=k) < 0.5
     left = lay["center_y"][:k] - 0.5 * lay["width"][:k] - p.foot_length - near
     hy[:k] = np.where(side, left, hy[:k]).astype(np.float32)
-    hz[:k] = np.where(side, rng.uniform(0, 1, k) * lay["height"][:k], lay["height"][:k] + near).astype(np.float32)
-    hz[k: 2 * k: 3] = 0.0          # on the ground: a move down is cancelled (dynamics.moves_heel)
+    hz[:k] = np.where(
+        side, rng.uniform(0, 1, k) * lay["height"][:k], lay["height"][:k] + near
+    ).astype(np.float32)
+    hz[k : 2 * k : 3] = 0.0  # on the ground: a move down is cancelled (dynamics.moves_heel)
     ok = (hy > lay["start_y"] - 0.05) & (hy < lay["goal_y"])
     q = rng.normal(size=(n, dynamics.NUM_ACTIONS)).astype(np.float32)
-    q[::3] = np.round(q[::3] * 2) / 2                      # ties between moves
-    q[1::5, 27] = 10.0                                     # straight down is the best move ...
+    q[::3] = np.round(q[::3] * 2) / 2  # ties between moves
+    q[1::5, 27] = 10.0  # straight down is the best move ...
     last = rng.choice(np.array([-1, 0, 9, 27, 30, 5]), size=n)
-    last[1::5] = 9                                         # ... right after straight up
+    last[1::5] = 9  # ... right after straight up
     mask = dynamics.admissible_moves(np, p, hy, hz, types.SimpleNamespace(**lay), last_action=last)
     want = dynamics.greedy_action(np, q, mask)
     decided = agree = 0
     for i in np.flatnonzero(ok):
-        scene = types.SimpleNamespace(outline=lay["outline"][i], pivot_y=lay["pivot_y"][i], goal_y=lay["goal_y"][i])
+        scene = types.SimpleNamespace(
+            outline=lay["outline"][i], pivot_y=lay["pivot_y"][i], goal_y=lay["goal_y"][i]
+        )
         a = ScalarShield(gen.sp, p, scene).choose(float(hy[i]), float(hz[i]), q[i], int(last[i]))
         if a is not None:
             decided += 1
@@ -85,14 +100,16 @@ def test_scalar_shield_picks_the_full_masks_greedy_move():
     # the rule is exercised: rows whose best move (down) undoes the last one (up) get another move
     # (down stays only where no move passes every condition: the mask's fall-backs)
     assert (~mask[1::5, 27]).mean() > 0.8 and (want[1::5] != 27).mean() > 0.8
-    assert (~mask[k: 2 * k: 3, 27]).mean() > 0.8
+    assert (~mask[k : 2 * k : 3, 27]).mean() > 0.8
     # the floor rule is exercised: from the ground short of the goal box's column, the move along the
     # floor (0 deg) is refused, and the scalar shield agreed with that mask above
     ground = np.arange(k, 2 * k, 3)
     short = ground[np.abs(hy[ground] - lay["goal_y"][ground]) > p.goal_tolerance[0] + 0.03]
     assert p.floor_clearance > 0 and len(short) > 100 and (~mask[short, 0]).mean() > 0.95
     # a nan among the Q-values: argmax's own rules, left to the full mask
-    scene = types.SimpleNamespace(outline=lay["outline"][0], pivot_y=lay["pivot_y"][0], goal_y=lay["goal_y"][0])
+    scene = types.SimpleNamespace(
+        outline=lay["outline"][0], pivot_y=lay["pivot_y"][0], goal_y=lay["goal_y"][0]
+    )
     bad = q[0].copy()
     bad[3] = np.nan
     assert ScalarShield(gen.sp, p, scene).choose(float(hy[0]), float(hz[0]), bad) is None
@@ -112,7 +129,7 @@ def test_fast_rollouts_take_the_references_actions(layer_norm):
     for x, y, u, v in zip(fb, rb, ab, rab):
         np.testing.assert_array_equal(u, v)
         np.testing.assert_array_equal(x, y)
-    assert gen.shield_stats.rows_to_full_mask > 0          # some rows needed the full mask
+    assert gen.shield_stats.rows_to_full_mask > 0  # some rows needed the full mask
     steps = 0
     for scene in scenes[::8] + scenes[1::40]:
         pf, af = gen.rollout(scene)
@@ -122,7 +139,7 @@ def test_fast_rollouts_take_the_references_actions(layer_norm):
         steps += len(af)
     assert steps > 3000
     stats = gen.shield_stats
-    assert 0 < stats.steps_to_full_mask < 0.2 * stats.steps     # steps left to the full mask
+    assert 0 < stats.steps_to_full_mask < 0.2 * stats.steps  # steps left to the full mask
 
 
 @pytest.mark.slow
@@ -151,11 +168,19 @@ def test_fast_generation_with_candidate_smoothings_matches_the_reference(clearin
         a = gen.generate(s["obstacle"], fallback=None, **one)
         _same(a, plain.generate(s["obstacle"], fallback=None, **one))
         if any("jaxexo.inference.clearing" in n for n in a.notes):
-            again = clear_smooth(a.raw, a.scene.outline, gen.sp.foot_length, gen.sp.min_clearance, len(a.heel),
-                                 a.smoothing)[0]
+            again = clear_smooth(
+                a.raw,
+                a.scene.outline,
+                gen.sp.foot_length,
+                gen.sp.min_clearance,
+                len(a.heel),
+                a.smoothing,
+            )[0]
             np.testing.assert_allclose(again, a.heel, rtol=0, atol=1e-9)
         elif not np.isnan(a.smoothing) and a.smoothing > 0:
-            np.testing.assert_allclose(sm.smooth_paths([a.raw], len(a.heel), a.smoothing)[0], a.heel, rtol=0, atol=1e-9)
+            np.testing.assert_allclose(
+                sm.smooth_paths([a.raw], len(a.heel), a.smoothing)[0], a.heel, rtol=0, atol=1e-9
+            )
 
 
 def test_candidate_smoothings_are_decreasing_and_per_path():
@@ -165,7 +190,7 @@ def test_candidate_smoothings_are_decreasing_and_per_path():
     c = candidates(raw, 0.005)
     assert c[0] == 0.005 and all(a > b for a, b in zip(c, c[1:]))
     assert c[1:] == [30 * r * r for r in CANDIDATE_RESIDUALS if 30 * r * r < 0.005]
-    assert candidates(raw[:3], 0.005) == [0.005]        # too short to smooth
+    assert candidates(raw[:3], 0.005) == [0.005]  # too short to smooth
     assert candidates(raw, 1e-6) == [1e-6]
 
 
@@ -173,9 +198,11 @@ def test_smooth_candidates_is_smooth_paths_of_the_repeated_path():
     rng = np.random.default_rng(3)
     for n in (2, 3, 4, 9, 31, 60):
         u = np.linspace(0.0, 1.0, n)
-        raw = np.column_stack([0.7 * u + rng.normal(0, 0.005, n), 0.2 * np.sin(np.pi * u) + rng.normal(0, 0.005, n)])
+        raw = np.column_stack(
+            [0.7 * u + rng.normal(0, 0.005, n), 0.2 * np.sin(np.pi * u) + rng.normal(0, 0.005, n)]
+        )
         raw[:, 1] = np.maximum(raw[:, 1], 0.0)
-        s = [0.005, n * 0.008 ** 2, n * 0.0025 ** 2, 0.0]
+        s = [0.005, n * 0.008**2, n * 0.0025**2, 0.0]
         a, da = sm.smooth_candidates(raw, 100, s)
         b, db = sm.smooth_paths([raw] * len(s), 100, np.array(s), with_deviation=True)
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
@@ -193,9 +220,9 @@ def test_a_shielded_models_smoothing_is_its_clearance_budget():
     excess = gen.config.env.shield_clearance - gen.config.env.min_clearance
     assert excess > 0
     points = 1.2 / gen.config.env.step_size
-    assert gen.smoothing == pytest.approx(points * excess ** 2, rel=1e-12)
-    assert model_smoothing(0.025, 0.02, True, 0.03) == pytest.approx(40 * 0.005 ** 2, rel=1e-12)
-    assert model_smoothing(0.025, 0.02, True, 0.06) == pytest.approx(20 * 0.005 ** 2, rel=1e-12)
+    assert gen.smoothing == pytest.approx(points * excess**2, rel=1e-12)
+    assert model_smoothing(0.025, 0.02, True, 0.03) == pytest.approx(40 * 0.005**2, rel=1e-12)
+    assert model_smoothing(0.025, 0.02, True, 0.06) == pytest.approx(20 * 0.005**2, rel=1e-12)
     assert gen.smoothing < sm.DEFAULT_SMOOTHING
     assert model_smoothing(0.025, 0.02, False) == sm.DEFAULT_SMOOTHING
     s = make_scenarios(gen.config, "train", 3, 11)
@@ -204,8 +231,10 @@ def test_a_shielded_models_smoothing_is_its_clearance_budget():
         a = gen.generate(x["obstacle"], fallback=None, **k)
         _same(a, gen.generate(x["obstacle"], fallback=None, smoothing=gen.smoothing, **k))
     obstacles, per = [x["obstacle"] for x in s], {key: [k[key] for k in kw] for key in kw[0]}
-    for a, b in zip(gen.generate_batch(obstacles, fallback=None, **per),
-                    gen.generate_batch(obstacles, fallback=None, smoothing=gen.smoothing, **per)):
+    for a, b in zip(
+        gen.generate_batch(obstacles, fallback=None, **per),
+        gen.generate_batch(obstacles, fallback=None, smoothing=gen.smoothing, **per),
+    ):
         _same(a, b)
 
 
@@ -224,7 +253,7 @@ def test_a_swing_short_of_the_goal_is_not_retried_down_to_the_raw_polyline(clear
     over = [(y, 0.23) for y in np.arange(0.15, 0.46, 0.03)]
     down = [(0.48, z) for z in np.arange(0.20, -0.001, -0.03)] + [(0.48, 0.0)]
     whole = np.array([(0.0, 0.0), (0.06, 0.0)] + up + over + down + [(0.70, 0.0)])
-    short = whole[: 2 + len(up) + len(over)]                    # stops on top of the obstacle
+    short = whole[: 2 + len(up) + len(over)]  # stops on top of the obstacle
     for g in (gen, plain_reference(gen)):
         t = g.finish([scene], [short], 100, 0.05, 1.0, None)[0]
         assert not t.ok and not t.checks.reached_goal and t.smoothing == 0.05
@@ -234,8 +263,10 @@ def test_a_swing_short_of_the_goal_is_not_retried_down_to_the_raw_polyline(clear
         if not clearing:
             assert np.isnan(w.smoothing) or w.smoothing < 0.05
             assert any("brought the foot" in n for n in w.notes)
-    _same(gen.finish([scene], [short], 100, 0.05, 1.0, None)[0],
-          plain_reference(gen).finish([scene], [short], 100, 0.05, 1.0, None)[0])
+    _same(
+        gen.finish([scene], [short], 100, 0.05, 1.0, None)[0],
+        plain_reference(gen).finish([scene], [short], 100, 0.05, 1.0, None)[0],
+    )
     # in a batch too, beside a row that is retried
     b = gen.finish([scene, scene], [short, whole], 100, 0.05, 1.0, None)
     assert b[0].smoothing == 0.05 and not b[0].checks.reached_goal
@@ -251,9 +282,23 @@ def test_time_breakdown_replays_the_rollouts_own_steps():
     gen = _random_generator()
     sc = scene_set(gen.config, "unseen", 3)
     b = time_breakdown(gen, CFFTG(gen.config), sc, repeats=1)
-    steps = [len(gen.rollout(gen.scene(s["obstacle"], s["pivot"], None, s["start_y"], s["step_length"]))[1])
-             for s in sc]
+    steps = [
+        len(
+            gen.rollout(gen.scene(s["obstacle"], s["pivot"], None, s["start_y"], s["step_length"]))[
+                1
+            ]
+        )
+        for s in sc
+    ]
     assert b["steps"] == float(np.median(steps))
-    for k in ("rollout", "network_per_step", "shield_per_step", "observation", "smoothing_correction",
-              "rl_total", "cfftg_plan", "cfftg_total"):
+    for k in (
+        "rollout",
+        "network_per_step",
+        "shield_per_step",
+        "observation",
+        "smoothing_correction",
+        "rl_total",
+        "cfftg_plan",
+        "cfftg_total",
+    ):
         assert b[k] > 0.0, k

@@ -57,20 +57,22 @@ STEP = Obstacle.profile([(0.30, 0.05), (0.40, 0.05), (0.40, 0.15), (0.50, 0.15)]
 
 
 def test_rectangle_outline_vertices():
-    np.testing.assert_allclose(RECT.outline, [[0.35, 0.0], [0.35, 0.10], [0.55, 0.10], [0.55, 0.0]], atol=1e-12)
+    np.testing.assert_allclose(
+        RECT.outline, [[0.35, 0.0], [0.35, 0.10], [0.55, 0.10], [0.55, 0.0]], atol=1e-12
+    )
     assert RECT.left == pytest.approx(0.35) and RECT.right == pytest.approx(0.55)
 
 
 @pytest.mark.parametrize(
     "heel, expected",
     [
-        ((0.40, 0.15), 0.05),   # above the top edge
-        ((0.10, 0.05), 0.05),   # toe 5 cm before the near side
-        ((0.60, 0.05), 0.05),   # heel 5 cm beyond the far side
-        ((0.58, 0.14), 0.05),   # heel diagonal to the far top corner (3-4-5)
-        ((0.12, 0.14), 0.05),   # toe diagonal to the near top corner (3-4-5)
-        ((0.00, 0.00), 0.15),   # on the ground behind: toe to the near bottom corner
-        ((0.30, 0.40), 0.30),   # high above the top, overlapping it in y
+        ((0.40, 0.15), 0.05),  # above the top edge
+        ((0.10, 0.05), 0.05),  # toe 5 cm before the near side
+        ((0.60, 0.05), 0.05),  # heel 5 cm beyond the far side
+        ((0.58, 0.14), 0.05),  # heel diagonal to the far top corner (3-4-5)
+        ((0.12, 0.14), 0.05),  # toe diagonal to the near top corner (3-4-5)
+        ((0.00, 0.00), 0.15),  # on the ground behind: toe to the near bottom corner
+        ((0.30, 0.40), 0.30),  # high above the top, overlapping it in y
     ],
 )
 def test_rectangle_clearance_outside(heel, expected):
@@ -83,10 +85,10 @@ def test_rectangle_clearance_outside(heel, expected):
 @pytest.mark.parametrize(
     "heel",
     [
-        (0.40, 0.10),   # lying on the top edge
-        (0.15, 0.10),   # toe exactly on the near top corner
-        (0.55, 0.05),   # heel on the far side
-        (0.15, 0.00),   # toe touching the near bottom corner on the ground
+        (0.40, 0.10),  # lying on the top edge
+        (0.15, 0.10),  # toe exactly on the near top corner
+        (0.55, 0.05),  # heel on the far side
+        (0.15, 0.00),  # toe touching the near bottom corner on the ground
     ],
 )
 def test_rectangle_touching_is_collision(heel):
@@ -118,7 +120,9 @@ def test_rectangle_fully_inside_gives_negative_clearance():
 
 def test_clearance_method_matches_function():
     heels = np.array([[0.40, 0.15], [0.30, 0.05], [0.40, 0.06]])
-    np.testing.assert_allclose(RECT.clearance(heels, FOOT), foot_clearance(np, heels, FOOT, RECT.outline))
+    np.testing.assert_allclose(
+        RECT.clearance(heels, FOOT), foot_clearance(np, heels, FOOT, RECT.outline)
+    )
 
 
 def test_foot_collides_threshold():
@@ -214,12 +218,12 @@ def test_profile_adds_ground_end_points():
 @pytest.mark.parametrize(
     "heel, foot, expected",
     [
-        ((0.05, 0.10), FOOT, math.hypot(0.05, 0.05)),   # toe diagonal to the low step's corner
-        ((0.12, 0.08), FOOT, 0.03),                     # toe above the low step
-        ((0.42, 0.20), FOOT, 0.05),                     # above the high part
-        ((0.31, 0.02), 0.05, -0.01),                    # buried: 1 cm from the near wall
-        ((0.25, 0.10), FOOT, 0.0),                      # crossing the interior riser at y = 0.40
-        ((0.20, 0.15), FOOT, 0.0),                      # lying on the high top's level, toe on its corner
+        ((0.05, 0.10), FOOT, math.hypot(0.05, 0.05)),  # toe diagonal to the low step's corner
+        ((0.12, 0.08), FOOT, 0.03),  # toe above the low step
+        ((0.42, 0.20), FOOT, 0.05),  # above the high part
+        ((0.31, 0.02), 0.05, -0.01),  # buried: 1 cm from the near wall
+        ((0.25, 0.10), FOOT, 0.0),  # crossing the interior riser at y = 0.40
+        ((0.20, 0.15), FOOT, 0.0),  # lying on the high top's level, toe on its corner
     ],
 )
 def test_profile_clearance(heel, foot, expected):
@@ -240,19 +244,19 @@ def test_profile_collision_flags():
     "ob, p, expected",
     [
         (RECT, (0.45, 0.05), True),
-        (RECT, (0.45, 0.00), True),     # on the ground under the obstacle
-        (RECT, (0.45, 0.11), False),    # above
-        (RECT, (0.30, 0.05), False),    # before
-        (RECT, (0.60, 0.05), False),    # after
-        (RECT, (0.00, 0.00), False),    # on the ground behind
-        (RECT, (0.45, -0.01), False),   # below the ground
+        (RECT, (0.45, 0.00), True),  # on the ground under the obstacle
+        (RECT, (0.45, 0.11), False),  # above
+        (RECT, (0.30, 0.05), False),  # before
+        (RECT, (0.60, 0.05), False),  # after
+        (RECT, (0.00, 0.00), False),  # on the ground behind
+        (RECT, (0.45, -0.01), False),  # below the ground
         (TRI, (0.45, 0.19), True),
-        (TRI, (0.38, 0.10), False),     # left of the slope (slope at y = 0.40 there)
+        (TRI, (0.38, 0.10), False),  # left of the slope (slope at y = 0.40 there)
         (TRI, (0.42, 0.10), True),
         (ELL, (0.45, 0.24), True),
-        (ELL, (0.54, 0.20), False),     # outside the curve near the far foot
+        (ELL, (0.54, 0.20), False),  # outside the curve near the far foot
         (STEP, (0.35, 0.04), True),
-        (STEP, (0.35, 0.10), False),    # above the low step, below the high one's level
+        (STEP, (0.35, 0.10), False),  # above the low step, below the high one's level
         (STEP, (0.45, 0.10), True),
         (STEP, (0.55, 0.10), False),
     ],
@@ -263,10 +267,22 @@ def test_point_in_obstacle(ob, p, expected):
 
 def test_point_in_obstacle_two_bumps():
     # A profile with a ground gap between two bumps: the gap is outside.
-    two = Obstacle.profile([(0.0, 0.0), (0.0, 0.1), (0.1, 0.1), (0.1, 0.0), (0.2, 0.0), (0.2, 0.1), (0.3, 0.1),
-                            (0.3, 0.0)])
+    two = Obstacle.profile(
+        [
+            (0.0, 0.0),
+            (0.0, 0.1),
+            (0.1, 0.1),
+            (0.1, 0.0),
+            (0.2, 0.0),
+            (0.2, 0.1),
+            (0.3, 0.1),
+            (0.3, 0.0),
+        ]
+    )
     pts = np.array([[0.05, 0.05], [0.15, 0.05], [0.25, 0.05], [0.15, 0.0]])
-    np.testing.assert_array_equal(point_in_obstacle(np, pts, two.outline), [True, False, True, False])
+    np.testing.assert_array_equal(
+        point_in_obstacle(np, pts, two.outline), [True, False, True, False]
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -278,33 +294,39 @@ def test_point_in_obstacle_two_bumps():
     "ob, y, expected",
     [
         (RECT, 0.45, 0.10),
-        (RECT, 0.35, 0.10),   # on the vertical side: the higher end counts
+        (RECT, 0.35, 0.10),  # on the vertical side: the higher end counts
         (RECT, 0.55, 0.10),
         (RECT, 0.20, 0.0),
         (RECT, 0.70, 0.0),
         (TRI, 0.45, 0.20),
         (TRI, 0.40, 0.10),
         (TRI, 0.525, 0.05),
-        (STEP, 0.30, 0.05),   # near wall: vertical edge 0 .. 0.05
+        (STEP, 0.30, 0.05),  # near wall: vertical edge 0 .. 0.05
         (STEP, 0.35, 0.05),
-        (STEP, 0.40, 0.15),   # interior riser 0.05 .. 0.15: the higher end
+        (STEP, 0.40, 0.15),  # interior riser 0.05 .. 0.15: the higher end
         (STEP, 0.45, 0.15),
         (STEP, 0.50, 0.15),
         (STEP, 0.51, 0.0),
     ],
 )
 def test_profile_height(ob, y, expected):
-    assert float(profile_height(np, np.asarray(y), ob.outline)) == pytest.approx(expected, abs=1e-12)
+    assert float(profile_height(np, np.asarray(y), ob.outline)) == pytest.approx(
+        expected, abs=1e-12
+    )
 
 
 def test_profile_height_vectorised_and_padded():
     ys = np.array([0.2, 0.35, 0.45, 0.55, 0.7])
     padded = RECT.outline_array(16)
-    np.testing.assert_allclose(profile_height(np, ys, padded), [0.0, 0.1, 0.1, 0.1, 0.0], atol=1e-12)
+    np.testing.assert_allclose(
+        profile_height(np, ys, padded), [0.0, 0.1, 0.1, 0.1, 0.0], atol=1e-12
+    )
 
 
 def test_shape_descriptor_rectangle_and_triangle():
-    np.testing.assert_allclose(shape_descriptor(geometry.unit_profile("rectangle")), np.ones(9), atol=1e-12)
+    np.testing.assert_allclose(
+        shape_descriptor(geometry.unit_profile("rectangle")), np.ones(9), atol=1e-12
+    )
     tri = shape_descriptor(geometry.unit_profile("triangle"))
     np.testing.assert_allclose(tri, [0, 0.25, 0.5, 0.75, 1.0, 0.75, 0.5, 0.25, 0], atol=1e-5)
     assert len(shape_descriptor(geometry.unit_profile("rectangle"), 5)) == 5
@@ -321,7 +343,9 @@ def test_shape_descriptor_half_ellipse_under_true_curve():
 
 def test_shape_descriptor_padding_invariant():
     unit = geometry.unit_profile("triangle")
-    np.testing.assert_allclose(shape_descriptor(unit), shape_descriptor(geometry.pad_outline(unit, 16)))
+    np.testing.assert_allclose(
+        shape_descriptor(unit), shape_descriptor(geometry.pad_outline(unit, 16))
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -362,7 +386,9 @@ def test_outline_array_padding():
     np.testing.assert_allclose(arr[3:], np.repeat(TRI.outline[-1:], 3, axis=0))
     # Padding changes neither the distance nor the inside test.
     heels = np.array([[0.40, 0.25], [0.30, 0.10], [0.44, 0.05]])
-    np.testing.assert_allclose(foot_clearance(np, heels, 0.02, arr), foot_clearance(np, heels, 0.02, TRI.outline))
+    np.testing.assert_allclose(
+        foot_clearance(np, heels, 0.02, arr), foot_clearance(np, heels, 0.02, TRI.outline)
+    )
     with pytest.raises(GeometryError, match="max_vertices"):
         TRI.outline_array(2)
 
@@ -405,14 +431,14 @@ def test_unit_profile_unknown_shape():
 @pytest.mark.parametrize(
     "points, message",
     [
-        ([(0.1, 0.1), (0.0, 0.1)], "non-decreasing"),                 # non-monotone y
-        ([(0.0, 0.1), (0.1, -0.01)], r"z >= 0"),                       # negative z
+        ([(0.1, 0.1), (0.0, 0.1)], "non-decreasing"),  # non-monotone y
+        ([(0.0, 0.1), (0.1, -0.01)], r"z >= 0"),  # negative z
         ([(0.0, float("nan")), (0.1, 0.1)], "finite"),
         ([(0.0, 0.1), (float("inf"), 0.1)], "finite"),
-        ([(0.0, 0.1)], "shape"),                                       # a single point
-        ([0.0, 0.1, 0.2], "shape"),                                    # not pairs
-        ([(0.0, 0.0), (0.1, 0.0)], "height"),                          # flat: zero height
-        ([(0.1, 0.0), (0.1, 0.1), (0.1, 0.0)], "width"),               # zero width
+        ([(0.0, 0.1)], "shape"),  # a single point
+        ([0.0, 0.1, 0.2], "shape"),  # not pairs
+        ([(0.0, 0.0), (0.1, 0.0)], "height"),  # flat: zero height
+        ([(0.1, 0.0), (0.1, 0.1), (0.1, 0.0)], "width"),  # zero width
         ([(0.01 * i, 0.1) for i in range(MAX_PROFILE_VERTICES - 1)], "at most"),  # too many points
         ("not points", ""),
     ],
@@ -449,8 +475,11 @@ def _point_segment_distance(p, a, b):
 
 def _segments_cross(p0, p1, a, b):
     """Whether segment p0-p1 intersects any segment a-b (closed segments, orientation test)."""
+
     def orient(o, q, r):
-        return (q[..., 0] - o[..., 0]) * (r[..., 1] - o[..., 1]) - (q[..., 1] - o[..., 1]) * (r[..., 0] - o[..., 0])
+        return (q[..., 0] - o[..., 0]) * (r[..., 1] - o[..., 1]) - (q[..., 1] - o[..., 1]) * (
+            r[..., 0] - o[..., 0]
+        )
 
     # Signs, not products (a product of two tiny orientations underflows to 0).
     d1 = np.sign(orient(a, b, p0))
@@ -459,7 +488,12 @@ def _segments_cross(p0, p1, a, b):
     d4 = np.sign(orient(p0, p1, b))
     general = (d1 * d2 <= 0) & (d3 * d4 <= 0) & ~((d1 == 0) & (d2 == 0))
     # Collinear: the projections on the foot's line (y, the foot is horizontal) must overlap.
-    collinear = (d1 == 0) & (d2 == 0) & (np.maximum(a[:, 0], b[:, 0]) >= p0[0]) & (np.minimum(a[:, 0], b[:, 0]) <= p1[0])
+    collinear = (
+        (d1 == 0)
+        & (d2 == 0)
+        & (np.maximum(a[:, 0], b[:, 0]) >= p0[0])
+        & (np.minimum(a[:, 0], b[:, 0]) <= p1[0])
+    )
     return bool(np.any((general | collinear) & (np.sum((b - a) ** 2, axis=-1) > 0)))
 
 
@@ -477,12 +511,15 @@ def brute_force_distance(heel, foot, outline):
 def _random_obstacle(draw):
     shape = draw(st.sampled_from(["rectangle", "triangle", "half_ellipse", "profile", "named"]))
     if shape == "named":
-        return Obstacle.named(draw(st.sampled_from(sorted(THESIS_OBSTACLES))),
-                              center_y=draw(st.floats(0.3, 0.6)))
+        return Obstacle.named(
+            draw(st.sampled_from(sorted(THESIS_OBSTACLES))), center_y=draw(st.floats(0.3, 0.6))
+        )
     if shape == "profile":
         n = draw(st.integers(2, 8))
         # Millimetre-rounded points (no sub-nanometre edges, whose 1/len^2 overflows).
-        ys = sorted(round(y, 3) for y in draw(st.lists(st.floats(0.2, 0.7), min_size=n, max_size=n)))
+        ys = sorted(
+            round(y, 3) for y in draw(st.lists(st.floats(0.2, 0.7), min_size=n, max_size=n))
+        )
         zs = [round(z, 3) for z in draw(st.lists(st.floats(0.0, 0.3), min_size=n, max_size=n))]
         assume(ys[-1] - ys[0] > 1e-3 and max(zs) > 1e-3)
         return Obstacle.profile(list(zip(ys, zs)))
@@ -516,7 +553,9 @@ def test_flat_foot_distance_matches_brute_force(scene):
     else:
         assert c == pytest.approx(exact, abs=1e-15)
     # the term-by-term form JAX uses: the same terms, the same value
-    by_edge = foot_clearance_by_edge(np, np.asarray(heel, np.float64), foot, ob.outline[:, 0], ob.outline[:, 1])
+    by_edge = foot_clearance_by_edge(
+        np, np.asarray(heel, np.float64), foot, ob.outline[:, 0], ob.outline[:, 1]
+    )
     assert float(by_edge) == c
     # Collision iff touching/inside: any foot sample strictly inside the region collides.
     s = np.linspace(0.0, 1.0, 51)[:, None]
@@ -526,8 +565,11 @@ def test_flat_foot_distance_matches_brute_force(scene):
 
 
 @given(
-    st.floats(0.02, 0.4), st.floats(0.02, 0.4), st.floats(0.3, 0.6),
-    st.floats(-0.2, 1.0), st.floats(-0.05, 0.5),
+    st.floats(0.02, 0.4),
+    st.floats(0.02, 0.4),
+    st.floats(0.3, 0.6),
+    st.floats(-0.2, 1.0),
+    st.floats(-0.05, 0.5),
 )
 def test_point_in_rectangle_and_triangle_analytic(w, h, c, y, z):
     rect = Obstacle.rectangle(w, h, center_y=c)
@@ -574,7 +616,9 @@ def test_numpy_and_jax_agree():
     oj = jnp.asarray(o, dtype=jnp.float32)
     for foot in (0.05, 0.2):
         d_np = flat_foot_distance(np, np.broadcast_to(h, (len(heels), len(outlines), 2)), foot, o)
-        d_j = flat_foot_distance(jnp, jnp.broadcast_to(hj, (len(heels), len(outlines), 2)), foot, oj)
+        d_j = flat_foot_distance(
+            jnp, jnp.broadcast_to(hj, (len(heels), len(outlines), 2)), foot, oj
+        )
         assert d_np.shape == d_j.shape == (len(heels), len(outlines))
         np.testing.assert_allclose(np.asarray(d_j), d_np, atol=1e-5)
         c_np = foot_clearance(np, np.broadcast_to(h, d_np.shape + (2,)), foot, o)
@@ -586,7 +630,11 @@ def test_numpy_and_jax_agree():
     np.testing.assert_array_equal(np.asarray(in_j), in_np)
     assert in_np.any() and (~in_np).any()
     ys = np.linspace(-0.1, 0.8, 91) + 0.00123
-    ph_np = profile_height(np, np.broadcast_to(ys[:, None], (len(ys), len(outlines))), outlines[None])
-    ph_j = profile_height(jnp, jnp.broadcast_to(jnp.asarray(ys, jnp.float32)[:, None], ph_np.shape), oj)
+    ph_np = profile_height(
+        np, np.broadcast_to(ys[:, None], (len(ys), len(outlines))), outlines[None]
+    )
+    ph_j = profile_height(
+        jnp, jnp.broadcast_to(jnp.asarray(ys, jnp.float32)[:, None], ph_np.shape), oj
+    )
     np.testing.assert_allclose(np.asarray(ph_j), ph_np, atol=1e-5)
     assert ph_np.max() == pytest.approx(0.25, abs=1e-2)

@@ -38,7 +38,9 @@ SCENE_OBSTACLES = {
     "half_circle": Obstacle.named("half_circle"),
     "rectangle": Obstacle.rectangle(0.12, 0.18, center_y=0.42),
     "half_ellipse": Obstacle.half_ellipse(0.16, 0.10, center_y=0.47),
-    "profile": Obstacle.profile([[0.37, 0.0], [0.37, 0.06], [0.45, 0.12], [0.53, 0.06], [0.53, 0.0]]),
+    "profile": Obstacle.profile(
+        [[0.37, 0.0], [0.37, 0.06], [0.45, 0.12], [0.53, 0.06], [0.53, 0.0]]
+    ),
 }
 
 
@@ -66,8 +68,11 @@ def export_random(path, cfg, seed=0, scale_signs=False):
                 r[::7] = 0.0
                 return jnp.asarray(r)
             if names[-1] == "bias" and any(str(n).startswith("norm") for n in names):
-                return jnp.asarray(np.random.default_rng(seed + 1).normal(size=x.shape).astype(np.float32))
+                return jnp.asarray(
+                    np.random.default_rng(seed + 1).normal(size=x.shape).astype(np.float32)
+                )
             return x
+
         params = jax.tree_util.tree_map_with_path(f, params)
     return run_files.export_policy(path, cfg, trainer, params)
 
@@ -76,8 +81,11 @@ def small_config(shield: bool = False, **train):
     """configs/default.toml with ``train`` overrides; unshielded unless ``shield`` (collisions and
     free moves are what most tests here exercise; the "shield" policy covers the shielded rollout)."""
     cfg = load_config(ROOT / "configs" / "default.toml")
-    return dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, shield=shield),
-                               train=dataclasses.replace(cfg.train, **train))
+    return dataclasses.replace(
+        cfg,
+        env=dataclasses.replace(cfg.env, shield=shield),
+        train=dataclasses.replace(cfg.train, **train),
+    )
 
 
 @pytest.fixture(scope="module")
@@ -100,11 +108,21 @@ def policies(tmp_path_factory):
     d = tmp_path_factory.mktemp("policies")
     thesis = load_config(ROOT / "configs" / "thesis" / "final.toml")
     return {
-        "ln_signs": export_random(d / "ln.npz", small_config(hidden=[32, 24]), seed=3, scale_signs=True),
+        "ln_signs": export_random(
+            d / "ln.npz", small_config(hidden=[32, 24]), seed=3, scale_signs=True
+        ),
         "thesis": export_random(d / "thesis.npz", thesis, seed=4),
-        "terminate": export_random(d / "term.npz", dataclasses.replace(
-            small_config(hidden=[16]), env=dataclasses.replace(small_config().env, collision="terminate")), seed=5),
-        "shield": export_random(d / "shield.npz", small_config(shield=True, hidden=[32, 32]), seed=6),
+        "terminate": export_random(
+            d / "term.npz",
+            dataclasses.replace(
+                small_config(hidden=[16]),
+                env=dataclasses.replace(small_config().env, collision="terminate"),
+            ),
+            seed=5,
+        ),
+        "shield": export_random(
+            d / "shield.npz", small_config(shield=True, hidden=[32, 32]), seed=6
+        ),
     }
 
 
@@ -112,11 +130,14 @@ def policies(tmp_path_factory):
 # Network parity
 # --------------------------------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("which", [SLOW_TRAINED, "ln_signs", "thesis"])
 def test_numpy_network_matches_flax(request, policies, which):
     policy = load_policy(_policy(request, policies, which))
     layers = policy.metadata["layers"]
-    net = QNetwork(hidden=tuple(layers[1:-1]), num_actions=layers[-1], layer_norm=policy.metadata["layer_norm"])
+    net = QNetwork(
+        hidden=tuple(layers[1:-1]), num_actions=layers[-1], layer_norm=policy.metadata["layer_norm"]
+    )
     x = np.random.default_rng(0).normal(size=(256, policy.obs_dim)).astype(np.float32)
     ref = np.asarray(net.apply(flax_params(policy), jnp.asarray(x)))
     np.testing.assert_allclose(policy.q_values(x), ref, rtol=1e-5, atol=1e-5)
@@ -124,7 +145,9 @@ def test_numpy_network_matches_flax(request, policies, which):
     np.testing.assert_allclose(folded.q(x), ref, rtol=1e-5, atol=1e-5)
     # The single-step path: observation given as affine coordinates folded into layer 0.
     step = StepNetwork(folded)
-    basis = np.vstack([np.eye(4, policy.obs_dim) * 0.3, x[0][None] - 0.3 * np.eye(4, policy.obs_dim).sum(0)])
+    basis = np.vstack(
+        [np.eye(4, policy.obs_dim) * 0.3, x[0][None] - 0.3 * np.eye(4, policy.obs_dim).sum(0)]
+    )
     step.set_scene(basis)
     for c in ([1.0, 1.0, 1.0, 1.0], [0.2, -0.1, 7.0, 0.0]):
         obs = np.asarray(c) @ basis[:4] + basis[4]
@@ -136,27 +159,43 @@ def test_numpy_network_matches_flax(request, policies, which):
 # Rollout parity with the JAX environment
 # --------------------------------------------------------------------------------------------
 
+
 def jax_paths(gen, scenes_args):
     """Greedy heel paths of the JAX environment on the same scenes (flax network, float32)."""
     cfg = gen.config
-    cfg = dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, max_vertices=geometry.MAX_PROFILE_VERTICES))
+    cfg = dataclasses.replace(
+        cfg, env=dataclasses.replace(cfg.env, max_vertices=geometry.MAX_PROFILE_VERTICES)
+    )
     env = ExoStepEnv(cfg)
     params = env.default_params
     layouts = [env.layout_for(*a) for a in scenes_args]
     stacked = jax.tree.map(lambda *x: jnp.stack(x), *layouts)
     layers = gen.policy.metadata["layers"]
-    net = QNetwork(hidden=tuple(layers[1:-1]), num_actions=layers[-1], layer_norm=gen.policy.metadata["layer_norm"])
+    net = QNetwork(
+        hidden=tuple(layers[1:-1]),
+        num_actions=layers[-1],
+        layer_norm=gen.policy.metadata["layer_norm"],
+    )
     rollout = make_rollout(env, net.apply, cfg.env.max_steps, record=True)
-    out, path = jax.jit(jax.vmap(rollout, in_axes=(None, 0, None)))(flax_params(gen.policy), stacked, params)
+    out, path = jax.jit(jax.vmap(rollout, in_axes=(None, 0, None)))(
+        flax_params(gen.policy), stacked, params
+    )
     steps = np.asarray(out["steps"])
     start = np.stack([np.asarray([l.start_y for l in layouts]), np.zeros(len(layouts))], -1)
-    return [np.vstack([start[i], np.asarray(path)[i, : steps[i]]]) for i in range(len(layouts))], out
+    return [
+        np.vstack([start[i], np.asarray(path)[i, : steps[i]]]) for i in range(len(layouts))
+    ], out
 
 
 @pytest.mark.parametrize("which", [SLOW_TRAINED, "thesis", "terminate", "shield"])
 def test_numpy_rollouts_take_the_jax_environments_actions(request, policies, which):
     gen = TrajectoryGenerator.load(_policy(request, policies, which))
-    args = [(ob, pv, sy, 0.70) for ob in SCENE_OBSTACLES.values() for pv in PIVOT_CONDITIONS for sy in (0.0, 0.04)]
+    args = [
+        (ob, pv, sy, 0.70)
+        for ob in SCENE_OBSTACLES.values()
+        for pv in PIVOT_CONDITIONS
+        for sy in (0.0, 0.04)
+    ]
     ref, out = jax_paths(gen, args)
     scenes = [gen.scene(ob, pivot=pv, start_y=sy, step_length=sl) for ob, pv, sy, sl in args]
     single = [gen.rollout(s)[0] for s in scenes]
@@ -191,12 +230,15 @@ def test_batch_equals_single_generation(trained_policy):
         b = batch[i]
         assert len(b.raw) == len(t.raw)
         np.testing.assert_allclose(b.heel, t.heel, atol=1e-4)
-        assert b.checks.ok == t.checks.ok and b.checks.reasons.__len__() == t.checks.reasons.__len__()
+        assert (
+            b.checks.ok == t.checks.ok and b.checks.reasons.__len__() == t.checks.reasons.__len__()
+        )
 
 
 # --------------------------------------------------------------------------------------------
 # Trajectories: kinematics, checks, smoothing, exports
 # --------------------------------------------------------------------------------------------
+
 
 @pytest.mark.slow
 def test_trajectory_fields_follow_the_shared_kinematics(trained_policy):
@@ -231,9 +273,11 @@ def test_trajectory_fields_follow_the_shared_kinematics(trained_policy):
 
 
 def test_a_failed_trajectory_says_why_and_strict_raises(policies):
-    gen = TrajectoryGenerator.load(policies["ln_signs"])     # an untrained network: it cannot get there
+    gen = TrajectoryGenerator.load(
+        policies["ln_signs"]
+    )  # an untrained network: it cannot get there
     ob = Obstacle.named("base1")
-    t = gen.generate(ob, fallback=None)      # the RL swing alone (the CFFTG fallback is tested apart)
+    t = gen.generate(ob, fallback=None)  # the RL swing alone (the CFFTG fallback is tested apart)
     assert not t.ok and not t.checks.reached_goal
     assert any("did not reach the goal" in r for r in t.checks.reasons)
     with pytest.raises(TrajectoryError, match="did not reach the goal") as e:
@@ -255,9 +299,14 @@ def test_smoothing_that_would_touch_the_obstacle_falls_back(trained_policy):
     down = [(0.48, z) for z in np.arange(0.20, -0.001, -0.03)] + [(0.48, 0.0)]
     raw = np.array([(0.0, 0.0), (0.06, 0.0)] + up + over + down + [(0.70, 0.0)])
     assert np.all(ob.clearance(raw, foot) > 0)
-    assert swept.path_swept_clearance(np, raw, foot, scene.outline).min() >= gen.config.env.min_clearance
+    assert (
+        swept.path_swept_clearance(np, raw, foot, scene.outline).min()
+        >= gen.config.env.min_clearance
+    )
     smooth = sm.bspline_smooth(raw, 100, 0.05)
-    assert ob.clearance(smooth, foot).min() <= geometry.TOUCH_EPS      # the premise: plain smoothing collides
+    assert (
+        ob.clearance(smooth, foot).min() <= geometry.TOUCH_EPS
+    )  # the premise: plain smoothing collides
     # First the corrected spline (jaxexo.inference.clearing, on by default): the same smoothing, moved
     # away from the obstacle where it cut the margin.
     t = gen.finish([scene], [raw], 100, 0.05, 1.0, None)[0]
@@ -270,11 +319,11 @@ def test_smoothing_that_would_touch_the_obstacle_falls_back(trained_policy):
     assert (np.isnan(t.smoothing) or t.smoothing < 0.05) and t.notes
     # In a batch, only the rows that need it fall back; the others keep the full smoothing.
     arc = np.linspace(0.0, np.pi, 25)
-    plain = np.column_stack([0.35 * (1 - np.cos(arc)), 0.45 * np.sin(arc)])    # high above it
+    plain = np.column_stack([0.35 * (1 - np.cos(arc)), 0.45 * np.sin(arc)])  # high above it
     both = gen.finish([scene, scene], [plain, raw], 100, 0.05, 1.0, None)
     assert both[0].smoothing == 0.05 and not both[0].notes and both[0].checks.collision_free
     np.testing.assert_allclose(both[1].heel, t.heel)
-    np.testing.assert_equal(both[1].smoothing, t.smoothing)      # nan (the raw polyline) equals nan
+    np.testing.assert_equal(both[1].smoothing, t.smoothing)  # nan (the raw polyline) equals nan
     assert both[1].checks == t.checks
     # A raw path that itself touches the obstacle keeps its smoothing, and the checks say so.
     bad = raw.copy()
@@ -308,7 +357,9 @@ def test_bspline_basis_matches_scipy(m):
 
     t = np.concatenate([[0.0] * 3, np.linspace(0.0, 1.0, m - 2), [1.0] * 3])
     u = np.concatenate([np.linspace(0.0, 1.0, 97), [0.0, 1.0, 0.5]])
-    np.testing.assert_allclose(sm.bspline_design(u, t, 3), BSpline.design_matrix(u, t, 3).toarray(), atol=1e-14)
+    np.testing.assert_allclose(
+        sm.bspline_design(u, t, 3), BSpline.design_matrix(u, t, 3).toarray(), atol=1e-14
+    )
     b = sm.bspline_design(np.linspace(0, 1, m), t, 3)
     a = b.T @ b + np.eye(m)
     p = np.diff(np.eye(m), n=2, axis=0)
@@ -321,14 +372,14 @@ def test_bspline_basis_matches_scipy(m):
 def test_smoothing_batches_handle_ragged_repeated_and_short_paths():
     t = np.linspace(0, np.pi, 30)
     raw = np.column_stack([0.35 * (1 - np.cos(t)), 0.25 * np.sin(t)])
-    rep = np.vstack([raw[:3], raw[2:3], raw[2:3], raw[3:]])           # a move clipped to nothing, twice
+    rep = np.vstack([raw[:3], raw[2:3], raw[2:3], raw[3:]])  # a move clipped to nothing, twice
     paths = [raw, raw[:17], rep, raw[:3], raw[:2], raw[:1]]
     out = sm.smooth_paths(paths, 50, sm.DEFAULT_SMOOTHING)
     assert out.shape == (6, 50, 2) and np.isfinite(out).all()
     for p, o in zip(paths, out):
         np.testing.assert_allclose(o, sm.bspline_smooth(p, 50), atol=1e-12)
         np.testing.assert_allclose(o[[0, -1]], p[[0, -1]])
-    np.testing.assert_allclose(out[2], out[0], atol=1e-12)            # repeats change nothing
+    np.testing.assert_allclose(out[2], out[0], atol=1e-12)  # repeats change nothing
     np.testing.assert_allclose(out[4], sm.linear_resample(raw[:2], 50))
     assert (out[..., 1] >= 0).all()
 
@@ -352,6 +403,7 @@ def test_exports_round_trip(trained_policy, tmp_path):
 # Bad input
 # --------------------------------------------------------------------------------------------
 
+
 def _rewrite_meta(src, dst, **changes):
     with np.load(src) as z:
         files = {k: z[k] for k in z.files}
@@ -370,16 +422,28 @@ def _rewrite_meta(src, dst, **changes):
 def test_load_refuses_what_it_cannot_drive(trained_policy, tmp_path):
     src = trained_policy
     cases = {
-        "config": (_rewrite_meta(src, tmp_path / "a.npz", config_toml="[env]\nstep_size = -1\n"), "config_toml"),
-        "no_config": (_rewrite_meta(src, tmp_path / "b.npz", config_toml=None), "config_toml is missing"),
+        "config": (
+            _rewrite_meta(src, tmp_path / "a.npz", config_toml="[env]\nstep_size = -1\n"),
+            "config_toml",
+        ),
+        "no_config": (
+            _rewrite_meta(src, tmp_path / "b.npz", config_toml=None),
+            "config_toml is missing",
+        ),
         "obs": (_rewrite_meta(src, tmp_path / "c.npz", obs_dim=3), "inputs"),
-        "angles": (_rewrite_meta(src, tmp_path / "d.npz", action_angles_rad=[0.0] * 36), "action_angles_rad"),
+        "angles": (
+            _rewrite_meta(src, tmp_path / "d.npz", action_angles_rad=[0.0] * 36),
+            "action_angles_rad",
+        ),
         "scale": (_rewrite_meta(src, tmp_path / "e.npz", length_scale=1.0), "length_scale"),
     }
     data = src.read_bytes()
     (tmp_path / "t.npz").write_bytes(data[: len(data) // 3])
     cases["truncated"] = (tmp_path / "t.npz", "truncated or corrupt")
-    cases["version"] = (_rewrite_meta(src, tmp_path / "v.npz", format_version=99), "format_version 99")
+    cases["version"] = (
+        _rewrite_meta(src, tmp_path / "v.npz", format_version=99),
+        "format_version 99",
+    )
     for name, (path, msg) in cases.items():
         with pytest.raises(PolicyFileError, match=msg):
             TrajectoryGenerator.load(path)
@@ -389,10 +453,15 @@ def test_load_refuses_what_it_cannot_drive(trained_policy, tmp_path):
 def test_bad_generation_arguments_name_the_field(trained_policy):
     gen = TrajectoryGenerator.load(trained_policy)
     ob = Obstacle.named("base1")
-    for kwargs, msg in [({"pivot": "left"}, "pivot must be one of"), ({"start_y": float("nan")}, "start_y"),
-                        ({"step_length": 0.3}, "step_length"), ({"n_points": 1}, "n_points"),
-                        ({"smoothing": -1.0}, "smoothing"), ({"duration": 0.0}, "duration"),
-                        ({"pivot_y": float("inf")}, "pivot_y")]:
+    for kwargs, msg in [
+        ({"pivot": "left"}, "pivot must be one of"),
+        ({"start_y": float("nan")}, "start_y"),
+        ({"step_length": 0.3}, "step_length"),
+        ({"n_points": 1}, "n_points"),
+        ({"smoothing": -1.0}, "smoothing"),
+        ({"duration": 0.0}, "duration"),
+        ({"pivot_y": float("inf")}, "pivot_y"),
+    ]:
         with pytest.raises(ValueError, match=msg):
             gen.generate(ob, **kwargs)
     with pytest.raises(ValueError, match="start_y: 2 values for 3"):
@@ -424,11 +493,15 @@ def test_inference_runs_where_jax_cannot_be_imported(trained_policy):
         "b = gen.generate_batch([Obstacle.named('base3')] * 3, start_y=[0.0, 0.02, 0.04])\n"
         "print('OK', t.heel.shape, len(b), sorted(m for m in sys.modules if m.split('.')[0] in ('jax', 'flax')))\n"
     )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120
+    )
     assert out.returncode == 0, out.stderr
     assert "OK (100, 2) 3 []" in out.stdout
     # The probe works: importing jax under the block fails.
-    out = subprocess.run([sys.executable, "-c", BLOCK_JAX + "import jax"], capture_output=True, text=True, timeout=60)
+    out = subprocess.run(
+        [sys.executable, "-c", BLOCK_JAX + "import jax"], capture_output=True, text=True, timeout=60
+    )
     assert out.returncode != 0 and "blocked for this test" in out.stderr
 
 
@@ -437,12 +510,47 @@ def test_cli_generate_writes_csv_json_and_plot(trained_policy, tmp_path):
     from jaxexo.cli import main
 
     out = tmp_path / "t.csv"
-    rc = main(["generate", "--policy", str(trained_policy), "--obstacle", "triangle", "--width", "0.16",
-               "--height", "0.12", "--center-y", "0.42", "--pivot-y", "0.3", "--out", str(out),
-               "--json", str(tmp_path / "t.json"), "--plot", str(tmp_path / "t.png")])
+    rc = main(
+        [
+            "generate",
+            "--policy",
+            str(trained_policy),
+            "--obstacle",
+            "triangle",
+            "--width",
+            "0.16",
+            "--height",
+            "0.12",
+            "--center-y",
+            "0.42",
+            "--pivot-y",
+            "0.3",
+            "--out",
+            str(out),
+            "--json",
+            str(tmp_path / "t.json"),
+            "--plot",
+            str(tmp_path / "t.png"),
+        ]
+    )
     doc = json.loads((tmp_path / "t.json").read_text())
     assert rc == (0 if doc["checks"]["ok"] else 1)
-    assert doc["scene"]["width"] == pytest.approx(0.16) and doc["scene"]["pivot_y"] == pytest.approx(0.3)
+    assert doc["scene"]["width"] == pytest.approx(0.16) and doc["scene"][
+        "pivot_y"
+    ] == pytest.approx(0.3)
     assert (tmp_path / "t.png").stat().st_size > 10_000
     assert np.loadtxt(out, delimiter=",", skiprows=1).shape == (100, 15)
-    assert main(["generate", "--policy", str(tmp_path / "none.npz"), "--obstacle", "base1", "--out", str(out)]) == 2
+    assert (
+        main(
+            [
+                "generate",
+                "--policy",
+                str(tmp_path / "none.npz"),
+                "--obstacle",
+                "base1",
+                "--out",
+                str(out),
+            ]
+        )
+        == 2
+    )

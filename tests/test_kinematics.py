@@ -36,11 +36,15 @@ def hip(pivot_y, heel, t=T, s=S):
 @pytest.mark.parametrize(
     "pivot_y, heel, expected",
     [
-        (0.45, (0.0, 0.0), (0.225, math.sqrt(1.0 - 0.225 ** 2))),
+        (0.45, (0.0, 0.0), (0.225, math.sqrt(1.0 - 0.225**2))),
         (0.60, (0.0, 0.0), (0.30, math.sqrt(0.91))),
-        (0.0, (0.0, 0.0), (0.0, 1.0)),                          # heels together: straight up
-        (0.0, (0.70, 0.0), (0.35, math.sqrt(1.0 - 0.35 ** 2))),  # swing heel ahead of the pivot
-        (0.45, (0.0, 0.30), (0.225, math.sqrt(1.0 - 0.225 ** 2))),  # a raised heel does not move the hip
+        (0.0, (0.0, 0.0), (0.0, 1.0)),  # heels together: straight up
+        (0.0, (0.70, 0.0), (0.35, math.sqrt(1.0 - 0.35**2))),  # swing heel ahead of the pivot
+        (
+            0.45,
+            (0.0, 0.30),
+            (0.225, math.sqrt(1.0 - 0.225**2)),
+        ),  # a raised heel does not move the hip
         (0.0, (2.5, 0.0), (1.25, MIN_HIP_HEIGHT_FRACTION * 1.0)),  # > 2 legs apart: clamped height
     ],
 )
@@ -50,7 +54,9 @@ def test_hip_position(pivot_y, heel, expected):
 
 def test_hip_position_other_leg_lengths():
     # t = 0.4, s = 0.45: leg 0.85; heels 0.5 apart -> dist_y 0.25.
-    np.testing.assert_allclose(hip(0.5, (0.0, 0.0), 0.4, 0.45), (0.25, math.sqrt(0.85 ** 2 - 0.25 ** 2)), atol=1e-12)
+    np.testing.assert_allclose(
+        hip(0.5, (0.0, 0.0), 0.4, 0.45), (0.25, math.sqrt(0.85**2 - 0.25**2)), atol=1e-12
+    )
 
 
 @given(st.floats(-1.0, 1.0), st.floats(-1.0, 1.0), st.floats(0.0, 0.5))
@@ -59,7 +65,7 @@ def test_stance_leg_is_straight(pivot_y, heel_y, heel_z):
     # the heels are (nearly) two legs apart, where the height is clamped.
     h = hip(pivot_y, (heel_y, heel_z))
     assert h[1] >= MIN_HIP_HEIGHT_FRACTION * (T + S) - 1e-12
-    assume((0.5 * (pivot_y - heel_y)) ** 2 <= (T + S) ** 2 * (1 - MIN_HIP_HEIGHT_FRACTION ** 2))
+    assume((0.5 * (pivot_y - heel_y)) ** 2 <= (T + S) ** 2 * (1 - MIN_HIP_HEIGHT_FRACTION**2))
     assert h[0] == pytest.approx(0.5 * (pivot_y + heel_y), abs=1e-12)
     assert math.hypot(h[0] - pivot_y, h[1]) == pytest.approx(T + S, abs=1e-9)
 
@@ -69,7 +75,7 @@ def test_hip_position_vectorised():
     h = hip_position(np, 0.35, heels, T, S)
     assert h.shape == (3, 2)
     np.testing.assert_allclose(h[:, 0], [0.175, 0.525, 0.35])
-    np.testing.assert_allclose(h[:, 1], [math.sqrt(1 - 0.175 ** 2)] * 2 + [1.0])
+    np.testing.assert_allclose(h[:, 1], [math.sqrt(1 - 0.175**2)] * 2 + [1.0])
 
 
 # --------------------------------------------------------------------------------------------
@@ -161,7 +167,7 @@ def test_leg_state_signs_and_lengths():
     # Pivot at the obstacle centre 0.45, swing heel at the start 0: both legs straight,
     # the stance foot ahead of the hip (flexion +), the swing foot behind (extension -).
     ks = leg_state(np, 0.45, np.array([0.0, 0.0]), T, S)
-    expected_hip = np.asarray([0.225, math.sqrt(1 - 0.225 ** 2)])
+    expected_hip = np.asarray([0.225, math.sqrt(1 - 0.225**2)])
     np.testing.assert_allclose(ks["hip"], expected_hip, atol=1e-12)
     a = math.asin(0.225)
     assert ks["hip_stance"] == pytest.approx(a, abs=1e-6)
@@ -175,8 +181,17 @@ def test_leg_state_signs_and_lengths():
     assert ks["knee_swing_angle"] < -10 * DEG
     assert ks["hip_swing"] > 10 * DEG
     assert ks["knee_swing"][0] > 0.225
-    assert set(ks) == {"hip", "knee_swing", "knee_stance", "leg_swing", "leg_stance", "hip_swing",
-                       "knee_swing_angle", "hip_stance", "knee_stance_angle"}
+    assert set(ks) == {
+        "hip",
+        "knee_swing",
+        "knee_stance",
+        "leg_swing",
+        "leg_stance",
+        "hip_swing",
+        "knee_swing_angle",
+        "hip_stance",
+        "knee_stance_angle",
+    }
 
 
 # --------------------------------------------------------------------------------------------
@@ -189,14 +204,14 @@ LIMITS = (-30 * DEG, 115 * DEG, -100 * DEG, 0.0)
 @pytest.mark.parametrize(
     "hip_a, knee_a, violated",
     [
-        (0.0, 0.0, False),               # straight leg, exactly at the knee's 0 limit
-        (0.0, 0.5 * ANGLE_EPS, False),   # float rounding within the tolerance
-        (0.0, 0.01, True),               # knee hyperextension
+        (0.0, 0.0, False),  # straight leg, exactly at the knee's 0 limit
+        (0.0, 0.5 * ANGLE_EPS, False),  # float rounding within the tolerance
+        (0.0, 0.01, True),  # knee hyperextension
         (-29 * DEG, -50 * DEG, False),
-        (-31 * DEG, -50 * DEG, True),    # hip extension beyond -30
+        (-31 * DEG, -50 * DEG, True),  # hip extension beyond -30
         (114 * DEG, -99 * DEG, False),
-        (116 * DEG, -50 * DEG, True),    # hip flexion beyond 115
-        (30 * DEG, -101 * DEG, True),    # knee flexion beyond 100
+        (116 * DEG, -50 * DEG, True),  # hip flexion beyond 115
+        (30 * DEG, -101 * DEG, True),  # knee flexion beyond 100
     ],
 )
 def test_joint_limit_violation(hip_a, knee_a, violated):
@@ -206,7 +221,9 @@ def test_joint_limit_violation(hip_a, knee_a, violated):
 def test_joint_limit_violation_vectorised():
     h = np.array([0.0, -1.0, 0.5, 2.1])
     q = np.array([0.0, -0.5, -1.8, -0.5])
-    np.testing.assert_array_equal(joint_limit_violation(np, h, q, *LIMITS), [False, True, True, True])
+    np.testing.assert_array_equal(
+        joint_limit_violation(np, h, q, *LIMITS), [False, True, True, True]
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -219,8 +236,20 @@ def test_atan2_all_quadrants_and_axes():
     for rad in (1e-3, 0.5, 1.0, 37.0):
         y, x = rad * np.sin(ang), rad * np.cos(ang)
         np.testing.assert_allclose(atan2(np, y, x), np.arctan2(y, x), atol=1e-6, rtol=0)
-    axes = np.array([[0.0, 1.0], [1.0, 0.0], [0.0, -1.0], [-1.0, 0.0], [0.0, 0.0], [1.0, 1.0],
-                     [1.0, -1.0], [-1.0, 1.0], [-1.0, -1.0], [2.0, -3.0]])
+    axes = np.array(
+        [
+            [0.0, 1.0],
+            [1.0, 0.0],
+            [0.0, -1.0],
+            [-1.0, 0.0],
+            [0.0, 0.0],
+            [1.0, 1.0],
+            [1.0, -1.0],
+            [-1.0, 1.0],
+            [-1.0, -1.0],
+            [2.0, -3.0],
+        ]
+    )
     y, x = axes[:, 0], axes[:, 1]
     np.testing.assert_allclose(atan2(np, y, x), np.arctan2(y, x), atol=1e-6, rtol=0)
     assert float(atan2(np, np.array(0.0), np.array(-1.0))) == pytest.approx(math.pi)
@@ -231,7 +260,9 @@ def test_atan2_all_quadrants_and_axes():
 def test_atan2_random(y, x):
     # Signed zeros are normalised (atan2(0, -0.0) is pi in IEEE, 0 here: the same degenerate point).
     y, x = y + 0.0, x + 0.0
-    assert float(atan2(np, np.asarray(y), np.asarray(x))) == pytest.approx(math.atan2(y, x), abs=1e-6)
+    assert float(atan2(np, np.asarray(y), np.asarray(x))) == pytest.approx(
+        math.atan2(y, x), abs=1e-6
+    )
 
 
 def test_atan2_jax_float32():
@@ -241,7 +272,9 @@ def test_atan2_jax_float32():
     x = rng.uniform(-2, 2, 4096).astype(np.float32)
     got = np.asarray(atan2(jnp, jnp.asarray(y), jnp.asarray(x)))
     assert got.dtype == np.float32
-    np.testing.assert_allclose(got, np.arctan2(y.astype(np.float64), x.astype(np.float64)), atol=1e-6, rtol=0)
+    np.testing.assert_allclose(
+        got, np.arctan2(y.astype(np.float64), x.astype(np.float64)), atol=1e-6, rtol=0
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -250,9 +283,12 @@ def test_atan2_jax_float32():
 
 
 @given(
-    st.floats(0.2, 0.8), st.floats(0.2, 0.8),           # thigh, shin
-    st.floats(-1.0, 1.0), st.floats(0.0, 1.5),          # hip
-    st.floats(0.0, 1.0), st.floats(-math.pi, math.pi),  # reach fraction, direction
+    st.floats(0.2, 0.8),
+    st.floats(0.2, 0.8),  # thigh, shin
+    st.floats(-1.0, 1.0),
+    st.floats(0.0, 1.5),  # hip
+    st.floats(0.0, 1.0),
+    st.floats(-math.pi, math.pi),  # reach fraction, direction
 )
 def test_ik_closure(t, s, hy, hz, frac, phi):
     lo, hi = max(abs(t - s), 1e-3) + 1e-3, t + s  # fully folded (r = |t - s|): angle +-pi
@@ -293,7 +329,9 @@ def test_knee_bends_forward_with_heel_above_hip():
     assert ks["hip"][1] < 0.80
     # Same knee flexion magnitude either way (|hip - heel| fixes it): about 105.5 degrees.
     assert abs(ks["knee_swing_angle"]) == pytest.approx(105.54 * DEG, abs=0.01)
-    assert ks["knee_swing_angle"] < 0, f"knee angle {math.degrees(ks['knee_swing_angle']):.1f} deg (hyperextension)"
+    assert ks["knee_swing_angle"] < 0, (
+        f"knee angle {math.degrees(ks['knee_swing_angle']):.1f} deg (hyperextension)"
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -316,7 +354,9 @@ def test_leg_state_numpy_vs_jax():
         for key in ("hip", "leg_swing", "leg_stance"):
             np.testing.assert_allclose(np.asarray(ks_j[key]), ks_np[key], atol=1e-5, err_msg=key)
         for key in ("knee_swing", "hip_swing", "knee_swing_angle"):
-            np.testing.assert_allclose(np.asarray(ks_j[key])[bent], ks_np[key][bent], atol=1e-4, err_msg=key)
+            np.testing.assert_allclose(
+                np.asarray(ks_j[key])[bent], ks_np[key][bent], atol=1e-4, err_msg=key
+            )
             # At a straight leg sqrt(t^2 - a^2) amplifies float32 rounding: a looser bound.
             np.testing.assert_allclose(np.asarray(ks_j[key]), ks_np[key], atol=3e-3, err_msg=key)
         # The stance leg is always straight: float32 rounding only.

@@ -49,4 +49,4 @@ def test_narrow_input_layer_is_a_matrix_product():
     g_net, g_plain = jax.grad(loss(net.apply))(params), jax.grad(loss(plain))(params)
     for a, b in zip(leaves(g_net), leaves(g_plain)):
         np.testing.assert_allclose(a, b, rtol=1e-4, atol=1e-6)
-    assert np.abs(leaves(g_net)[1]).max() > 0   # dense_0's kernel gradient is not trivially zero
+    assert np.abs(leaves(g_net)[1]).max() > 0  # dense_0's kernel gradient is not trivially zero

@@ -27,8 +27,15 @@ def _reference(reached, clearance, limit_bad, leg_bad, heel_y, margin=0.0, back_
 def _from_samples(xp, reached, clearance, limit_bad, leg_bad, heel_y, **rule):
     """The verdict on per-sample arrays (..., N), reduced the way a sampled path is: the smallest
     clearance, the largest fall behind the furthest y (jaxexo.physics.swept.backward_motion)."""
-    v = outcome.verdict(xp, reached, clearance.min(-1), ~limit_bad.any(-1), ~leg_bad.any(-1),
-                        swept.backward_motion(xp, heel_y), **rule)
+    v = outcome.verdict(
+        xp,
+        reached,
+        clearance.min(-1),
+        ~limit_bad.any(-1),
+        ~leg_bad.any(-1),
+        swept.backward_motion(xp, heel_y),
+        **rule,
+    )
     return {**v, "max_backward": swept.backward_motion(xp, heel_y)}
 
 
@@ -38,22 +45,38 @@ def _random_paths(rng, b=400, n=30):
     limit_bad = rng.uniform(size=(b, n)) < 0.002
     leg_bad = rng.uniform(size=(b, n)) < 0.002
     steps = rng.uniform(0, 0.05, (b, n))
-    back = rng.uniform(size=b) < 0.5                      # half of the paths step back once, up to 2 cm
+    back = rng.uniform(size=b) < 0.5  # half of the paths step back once, up to 2 cm
     steps[back, rng.integers(1, n, back.sum())] = -rng.uniform(0, 0.02, back.sum())
     heel_y = np.cumsum(steps, axis=1)
     reached = rng.uniform(size=b) < 0.8
     return reached, clearance, limit_bad, leg_bad, heel_y
 
 
-@pytest.mark.parametrize("rule", [{}, {"min_clearance_margin": 0.02}, {"backward_tolerance": 0.005},
-                                  {"min_clearance_margin": 0.01, "backward_tolerance": 0.0}])
+@pytest.mark.parametrize(
+    "rule",
+    [
+        {},
+        {"min_clearance_margin": 0.02},
+        {"backward_tolerance": 0.005},
+        {"min_clearance_margin": 0.01, "backward_tolerance": 0.0},
+    ],
+)
 def test_verdict_on_samples_matches_reference(rule):
     rng = np.random.default_rng(0)
     reached, c, lb, gb, hy = _random_paths(rng)
     v = _from_samples(np, reached, c, lb, gb, hy, **rule)
-    ref = [_reference(reached[i], c[i], lb[i], gb[i], hy[i],
-                      rule.get("min_clearance_margin", outcome.DEFAULT_MIN_CLEARANCE),
-                      rule.get("backward_tolerance", outcome.DEFAULT_BACKWARD_TOLERANCE)) for i in range(len(reached))]
+    ref = [
+        _reference(
+            reached[i],
+            c[i],
+            lb[i],
+            gb[i],
+            hy[i],
+            rule.get("min_clearance_margin", outcome.DEFAULT_MIN_CLEARANCE),
+            rule.get("backward_tolerance", outcome.DEFAULT_BACKWARD_TOLERANCE),
+        )
+        for i in range(len(reached))
+    ]
     np.testing.assert_array_equal(v["success"], ref)
     assert 0.05 < np.mean(ref) < 0.95, "the random paths must exercise both verdicts"
     # Accuracy (eq 3.1) ignores the margin.
@@ -65,7 +88,9 @@ def test_margin_zero_and_no_backward_check_is_the_contact_rule():
     (the rule before the safe-swing margin, kept reachable through the config)."""
     rng = np.random.default_rng(1)
     reached, c, lb, gb, hy = _random_paths(rng)
-    v = _from_samples(np, reached, c, lb, gb, hy, min_clearance_margin=0.0, backward_tolerance=np.inf)
+    v = _from_samples(
+        np, reached, c, lb, gb, hy, min_clearance_margin=0.0, backward_tolerance=np.inf
+    )
     contact_rule = reached & ~(c <= geometry.TOUCH_EPS).any(1) & ~lb.any(1) & ~gb.any(1)
     np.testing.assert_array_equal(v["success"], contact_rule)
 
@@ -75,14 +100,17 @@ def test_defaults_are_the_configs_safe_swing():
     from jaxexo.config import Config
 
     env = Config().env
-    assert (env.min_clearance, env.backward_tolerance) == (outcome.DEFAULT_MIN_CLEARANCE,
-                                                           outcome.DEFAULT_BACKWARD_TOLERANCE) == (0.02, 0.005)
+    assert (
+        (env.min_clearance, env.backward_tolerance)
+        == (outcome.DEFAULT_MIN_CLEARANCE, outcome.DEFAULT_BACKWARD_TOLERANCE)
+        == (0.02, 0.005)
+    )
     assert outcome.rule(env) == {"min_clearance_margin": 0.02, "backward_tolerance": 0.005}
 
 
 def test_margin_and_backward_tolerance_fail_the_right_check():
-    hy = np.array([[0.0, 0.1, 0.09, 0.3]])           # one 1 cm step backwards
-    c = np.array([[0.05, 0.015, 0.03, 0.05]])         # 1.5 cm closest approach
+    hy = np.array([[0.0, 0.1, 0.09, 0.3]])  # one 1 cm step backwards
+    c = np.array([[0.05, 0.015, 0.03, 0.05]])  # 1.5 cm closest approach
     no = np.zeros((1, 4), bool)
     yes = np.array([True])
     contact_rule = {"min_clearance_margin": 0.0, "backward_tolerance": np.inf}
@@ -100,7 +128,7 @@ def test_step_by_step_equals_samples_and_jax_equals_numpy():
     jnp = pytest.importorskip("jax.numpy")
     rng = np.random.default_rng(2)
     reached, c, lb, gb, hy = _random_paths(rng, b=200, n=20)
-    end = rng.integers(5, 20, size=200)                 # episode length; later steps are junk
+    end = rng.integers(5, 20, size=200)  # episode length; later steps are junk
     goal_step = np.zeros((200, 20), bool)
     goal_step[np.arange(200), end - 1] = reached
     # transition's info["backward"]: how far the heel is behind its furthest y before the step
@@ -109,13 +137,26 @@ def test_step_by_step_equals_samples_and_jax_equals_numpy():
     for xp in (np, jnp):
         acc = outcome.start(xp, (200,))
         for j in range(20):
-            info = {"goal_reached": xp.asarray(goal_step[:, j]), "clearance": xp.asarray(c[:, j], dtype=xp.float32),
-                    "joint_limit_violation": xp.asarray(lb[:, j]), "leg_length_violation": xp.asarray(gb[:, j]),
-                    "backward": xp.asarray(furthest[:, j] - hy[:, j], dtype=xp.float32)}
+            info = {
+                "goal_reached": xp.asarray(goal_step[:, j]),
+                "clearance": xp.asarray(c[:, j], dtype=xp.float32),
+                "joint_limit_violation": xp.asarray(lb[:, j]),
+                "leg_length_violation": xp.asarray(gb[:, j]),
+                "backward": xp.asarray(furthest[:, j] - hy[:, j], dtype=xp.float32),
+            }
             acc = outcome.accumulate(xp, acc, info, xp.asarray(j < end))
         v = outcome.episode_verdict(xp, acc, **rule)
-        ref = [_reference(reached[i], c[i, :end[i]].astype(np.float32), lb[i, :end[i]], gb[i, :end[i]],
-                          hy[i, :end[i]], **{"margin": 0.01, "back_tol": 0.02}) for i in range(200)]
+        ref = [
+            _reference(
+                reached[i],
+                c[i, : end[i]].astype(np.float32),
+                lb[i, : end[i]],
+                gb[i, : end[i]],
+                hy[i, : end[i]],
+                **{"margin": 0.01, "back_tol": 0.02},
+            )
+            for i in range(200)
+        ]
         np.testing.assert_array_equal(np.asarray(v["success"]), ref)
 
 
@@ -139,15 +180,21 @@ def test_trainer_counts_successes_with_the_verdict():
     for _ in range(T):
         goal = rng.uniform(size=n) < 0.15
         trunc = (steps_in_ep + 1 >= 8) & ~goal
-        info = {"goal_reached": jnp.asarray(goal), "clearance": jnp.asarray(rng.uniform(-0.002, 0.2, n), jnp.float32),
-                "collision": None, "joint_limit_violation": jnp.asarray(rng.uniform(size=n) < 0.02),
-                "leg_length_violation": jnp.asarray(rng.uniform(size=n) < 0.02), "backward": jnp.zeros(n)}
+        info = {
+            "goal_reached": jnp.asarray(goal),
+            "clearance": jnp.asarray(rng.uniform(-0.002, 0.2, n), jnp.float32),
+            "collision": None,
+            "joint_limit_violation": jnp.asarray(rng.uniform(size=n) < 0.02),
+            "leg_length_violation": jnp.asarray(rng.uniform(size=n) < 0.02),
+            "backward": jnp.zeros(n),
+        }
         info["collision"] = info["clearance"] <= geometry.TOUCH_EPS
         stats, row = step(stats, jnp.ones(n), jnp.asarray(goal), jnp.asarray(trunc), info)
         total += np.asarray(row)
         for i in range(n):
             e = ep[i]
-            e["c"].append(float(info["clearance"][i])); e["lb"].append(bool(info["joint_limit_violation"][i]))
+            e["c"].append(float(info["clearance"][i]))
+            e["lb"].append(bool(info["joint_limit_violation"][i]))
             e["gb"].append(bool(info["leg_length_violation"][i]))
             if goal[i] or trunc[i]:
                 want_done += 1

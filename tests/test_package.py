@@ -12,7 +12,9 @@ from conftest import ROOT
 
 
 def _run(code: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    return subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120
+    )
 
 
 def test_import_does_not_pull_in_jax():
@@ -47,16 +49,25 @@ def test_readme_test_command_is_what_ci_runs():
     assert len(blocks) >= 2
     test_cmd = blocks[1]
     assert "pytest" in test_cmd
-    ci_lines = [ln.strip() for ln in (ROOT / ".ci" / "run").read_text().splitlines()
-                if ln.strip() and not ln.lstrip().startswith("#")]
+    ci_lines = [
+        ln.strip()
+        for ln in (ROOT / ".ci" / "run").read_text().splitlines()
+        if ln.strip() and not ln.lstrip().startswith("#")
+    ]
     # The README's steps run in .ci/run in its order, the style gate (ruff) between install and tests.
     ci_steps = [step for ln in ci_lines for step in ln.split(" && ")]
     readme_steps = test_cmd.split(" && ")
     at = [ci_steps.index(step) for step in readme_steps if step in ci_steps]
-    assert len(at) == len(readme_steps) and at == sorted(at), \
+    assert len(at) == len(readme_steps) and at == sorted(at), (
         f"README test command {test_cmd!r} not run step by step by .ci/run"
-    gate = [ci_steps.index(".venv/bin/ruff format --check ."), ci_steps.index(".venv/bin/ruff check .")]
-    assert at[-2] < min(gate) and max(gate) < at[-1], "ruff runs after the install, before the tests"
+    )
+    gate = [
+        ci_steps.index(".venv/bin/ruff format --check ."),
+        ci_steps.index(".venv/bin/ruff check ."),
+    ]
+    assert at[-2] < min(gate) and max(gate) < at[-1], (
+        "ruff runs after the install, before the tests"
+    )
     # The CI runs it from the repository root on a fresh environment.
     ci = (ROOT / ".ci" / "run").read_text()
     assert "set -euo pipefail" in ci and 'cd "$(dirname "$0")/.."' in ci and "rm -rf .venv" in ci
@@ -69,16 +80,22 @@ def test_readme_test_command_is_what_ci_runs():
 
 
 def test_cli_help():
-    out = subprocess.run([sys.executable, "-m", "jaxexo.cli", "--help"], capture_output=True, text=True,
-                         cwd=ROOT, timeout=120)
+    out = subprocess.run(
+        [sys.executable, "-m", "jaxexo.cli", "--help"],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=120,
+    )
     assert out.returncode == 0, out.stderr
     assert "bench-env" in out.stdout
     assert out.stdout.startswith("usage: jaxexo")
 
 
 def test_cli_requires_a_command():
-    out = subprocess.run([sys.executable, "-m", "jaxexo.cli"], capture_output=True, text=True, cwd=ROOT,
-                         timeout=120)
+    out = subprocess.run(
+        [sys.executable, "-m", "jaxexo.cli"], capture_output=True, text=True, cwd=ROOT, timeout=120
+    )
     assert out.returncode == 2
     assert "required" in out.stderr
 
@@ -86,8 +103,13 @@ def test_cli_requires_a_command():
 def test_cli_bad_config_is_a_clean_error(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text("[env]\nstep_size = -1\n")
-    out = subprocess.run([sys.executable, "-m", "jaxexo.cli", "bench-env", "--config", str(bad), "--envs", "1"],
-                         capture_output=True, text=True, cwd=ROOT, timeout=120)
+    out = subprocess.run(
+        [sys.executable, "-m", "jaxexo.cli", "bench-env", "--config", str(bad), "--envs", "1"],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=120,
+    )
     assert out.returncode == 2
     assert "env.step_size" in out.stderr and "Traceback" not in out.stderr
 
@@ -104,4 +126,10 @@ def test_version():
     import jaxexo
 
     assert re.fullmatch(r"\d+\.\d+\.\d+", jaxexo.__version__)
-    assert set(jaxexo.__all__) >= {"Config", "ConfigError", "load_config", "Obstacle", "GeometryError"}
+    assert set(jaxexo.__all__) >= {
+        "Config",
+        "ConfigError",
+        "load_config",
+        "Obstacle",
+        "GeometryError",
+    }

@@ -37,11 +37,14 @@ def test_policy_round_trip(tmp_path, layer_norm):
     d = trainer.env.obs_dim
     params = random_params(trainer.net, d, seed=1)
     path = run_files.export_policy(tmp_path / "policy.npz", cfg, trainer, params)
-    with zipfile.ZipFile(path) as z:   # plain arrays, no pickled objects
+    with zipfile.ZipFile(path) as z:  # plain arrays, no pickled objects
         assert all(n.endswith(".npy") for n in z.namelist())
     pol = load_policy(path)
     assert pol.obs_dim == d and pol.num_actions == 36
-    assert pol.metadata["format_version"] == FORMAT_VERSION and pol.metadata["layer_norm"] is layer_norm
+    assert (
+        pol.metadata["format_version"] == FORMAT_VERSION
+        and pol.metadata["layer_norm"] is layer_norm
+    )
     assert len(pol.norm_scales) == (3 if layer_norm else 0)
     obs = np.random.default_rng(0).normal(size=(256, d)).astype(np.float32) * 2
     ref = np.asarray(jax.jit(trainer.net.apply)(params, jnp.asarray(obs)))
@@ -64,7 +67,9 @@ def good_policy(tmp_path_factory):
     cfg = tiny_config(hidden=[8], layer_norm=True)
     trainer = Trainer(cfg)
     params = random_params(trainer.net, trainer.env.obs_dim, seed=0)
-    path = run_files.export_policy(tmp_path_factory.mktemp("pol") / "policy.npz", cfg, trainer, params)
+    path = run_files.export_policy(
+        tmp_path_factory.mktemp("pol") / "policy.npz", cfg, trainer, params
+    )
     load_policy(path)
     return path
 
@@ -106,19 +111,41 @@ def test_policy_file_errors(good_policy, tmp_path):
     cases["empty"] = (tmp_path / "empty.npz", "truncated or corrupt")
     (tmp_path / "junk.npz").write_bytes(b"this is not a zip file at all" * 10)
     cases["junk"] = (tmp_path / "junk.npz", "not a readable policy file")
-    cases["version"] = (_rewrite(good_policy, tmp_path / "v.npz", {"format_version": FORMAT_VERSION + 1}),
-                        f"format_version {FORMAT_VERSION + 1}")
-    cases["format"] = (_rewrite(good_policy, tmp_path / "f.npz", {"format": "other"}), "format is 'other'")
+    cases["version"] = (
+        _rewrite(good_policy, tmp_path / "v.npz", {"format_version": FORMAT_VERSION + 1}),
+        f"format_version {FORMAT_VERSION + 1}",
+    )
+    cases["format"] = (
+        _rewrite(good_policy, tmp_path / "f.npz", {"format": "other"}),
+        "format is 'other'",
+    )
     k0 = _npz(good_policy)["dense_0_kernel"]
-    cases["shape"] = (_rewrite(good_policy, tmp_path / "s.npz", dense_0_kernel=k0.T), "dense_0 has shapes")
-    cases["layers"] = (_rewrite(good_policy, tmp_path / "l.npz", {"layers": [5, 8, 36], "obs_dim": 5}), "dense_0 has shapes")
-    cases["missing_array"] = (_rewrite(good_policy, tmp_path / "m.npz", dense_1_bias=None), "missing array 'dense_1_bias'")
-    cases["nan"] = (_rewrite(good_policy, tmp_path / "n.npz", dense_1_bias=np.full(36, np.nan, np.float32)),
-                    "'dense_1_bias' holds NaN")
+    cases["shape"] = (
+        _rewrite(good_policy, tmp_path / "s.npz", dense_0_kernel=k0.T),
+        "dense_0 has shapes",
+    )
+    cases["layers"] = (
+        _rewrite(good_policy, tmp_path / "l.npz", {"layers": [5, 8, 36], "obs_dim": 5}),
+        "dense_0 has shapes",
+    )
+    cases["missing_array"] = (
+        _rewrite(good_policy, tmp_path / "m.npz", dense_1_bias=None),
+        "missing array 'dense_1_bias'",
+    )
+    cases["nan"] = (
+        _rewrite(good_policy, tmp_path / "n.npz", dense_1_bias=np.full(36, np.nan, np.float32)),
+        "'dense_1_bias' holds NaN",
+    )
     cases["norm"] = (_rewrite(good_policy, tmp_path / "ln.npz", norm_0_scale=None), "norm_0")
-    cases["actions"] = (_rewrite(good_policy, tmp_path / "a.npz", {"num_actions": 35}), "num_actions 35")
+    cases["actions"] = (
+        _rewrite(good_policy, tmp_path / "a.npz", {"num_actions": 35}),
+        "num_actions 35",
+    )
     cases["no_meta"] = (_rewrite(good_policy, tmp_path / "nm.npz", metadata=None), "no 'metadata'")
-    cases["bad_json"] = (_rewrite(good_policy, tmp_path / "bj.npz", metadata=np.array("{not json")), "not valid JSON")
+    cases["bad_json"] = (
+        _rewrite(good_policy, tmp_path / "bj.npz", metadata=np.array("{not json")),
+        "not valid JSON",
+    )
     for name, (path, message) in cases.items():
         with pytest.raises(PolicyFileError, match=message):
             load_policy(path)
@@ -130,7 +157,7 @@ def test_policy_file_that_is_a_single_npy_array(tmp_path):
     path = tmp_path / "policy.npz"
     with path.open("wb") as f:
         np.save(f, np.zeros(3, np.float32))
-    with pytest.raises(PolicyFileError):      # any other exception, or none, fails the test
+    with pytest.raises(PolicyFileError):  # any other exception, or none, fails the test
         load_policy(path)
 
 

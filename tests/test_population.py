@@ -31,13 +31,24 @@ SEED = 3
 
 
 def raw(**train) -> dict:
-    return legacy_raw({
-        "env": {"obs_mode": "thesis"},
-        "layout": {"obstacles": ["base1"], "pivot": ["obstacle"]},
-        "train": {"num_envs": N, "rollout_steps": T, "num_minibatches": 2, "hidden": [16], "layer_norm": False,
-                  "budget_env_steps": N * T * UPDATES, "chunk_updates": CHUNK, "eval_episodes": 10,
-                  "lr": 3e-3, **train},
-    })
+    return legacy_raw(
+        {
+            "env": {"obs_mode": "thesis"},
+            "layout": {"obstacles": ["base1"], "pivot": ["obstacle"]},
+            "train": {
+                "num_envs": N,
+                "rollout_steps": T,
+                "num_minibatches": 2,
+                "hidden": [16],
+                "layer_norm": False,
+                "budget_env_steps": N * T * UPDATES,
+                "chunk_updates": CHUNK,
+                "eval_episodes": 10,
+                "lr": 3e-3,
+                **train,
+            },
+        }
+    )
 
 
 def train_members(seeds):
@@ -48,26 +59,36 @@ def train_members(seeds):
     metrics, scores, params = [], [], []
     for _ in range(UPDATES // CHUNK):
         ts, m, score, finite = pop.chunk(ts)
-        assert np.asarray(finite)[:pop.size].all()
-        metrics.append(np.asarray(m)[:pop.size])
-        scores.append(np.asarray(score)[:pop.size])
+        assert np.asarray(finite)[: pop.size].all()
+        metrics.append(np.asarray(m)[: pop.size])
+        scores.append(np.asarray(score)[: pop.size])
         params.append(pop.real(ts.params))
-    return [{"metrics": np.stack([m[i] for m in metrics]), "scores": np.array([s[i] for s in scores]),
-             "chunk_params": [jax.tree.map(lambda x: x[i], p) for p in params],
-             "params": jax.tree.map(lambda x: x[i], params[-1])} for i in range(pop.size)]
+    return [
+        {
+            "metrics": np.stack([m[i] for m in metrics]),
+            "scores": np.array([s[i] for s in scores]),
+            "chunk_params": [jax.tree.map(lambda x: x[i], p) for p in params],
+            "params": jax.tree.map(lambda x: x[i], params[-1]),
+        }
+        for i in range(pop.size)
+    ]
 
 
 def same(a, b) -> bool:
     la, lb = leaves(a), leaves(b)
-    return len(la) == len(lb) and all(x.dtype == y.dtype and np.array_equal(x, y) for x, y in zip(la, lb))
+    return len(la) == len(lb) and all(
+        x.dtype == y.dtype and np.array_equal(x, y) for x, y in zip(la, lb)
+    )
 
 
 def test_a_member_trains_identically_alone_in_populations_of_2_and_5_and_in_a_sweep_group_of_8():
     alone = train_members([SEED])[0]
     neighbour, pair = train_members([SEED - 1, SEED])  # pair: the second lane of the block
-    five = train_members([0, 1, 2, SEED, 4])[SEED]     # second block of three, on one device
+    five = train_members([0, 1, 2, SEED, 4])[SEED]  # second block of three, on one device
     assert alone["metrics"].shape == (UPDATES // CHUNK, CHUNK, len(run_files.METRICS))
-    assert alone["metrics"][..., run_files.METRICS.index("loss")].all()   # it trained: every update had a loss
+    assert alone["metrics"][
+        ..., run_files.METRICS.index("loss")
+    ].all()  # it trained: every update had a loss
     for other in (pair, five):
         assert same(alone["params"], other["params"])
         assert np.array_equal(alone["metrics"], other["metrics"])
@@ -91,8 +112,18 @@ def sweep_from_plan(sweep):
     return chunk
 
 
-@pytest.mark.parametrize("members, devices, used, padded", [(1, 2, 2, 4), (1, 1, 1, 2), (4, 2, 2, 4), (5, 2, 2, 8),
-                                                             (8, 8, 4, 8), (2, 8, 2, 4), (3, 1, 1, 4)])
+@pytest.mark.parametrize(
+    "members, devices, used, padded",
+    [
+        (1, 2, 2, 4),
+        (1, 1, 1, 2),
+        (4, 2, 2, 4),
+        (5, 2, 2, 8),
+        (8, 8, 4, 8),
+        (2, 8, 2, 4),
+        (3, 1, 1, 4),
+    ],
+)
 def test_population_layout_is_whole_blocks_of_lanes(members, devices, used, padded):
     assert LANES == 2
     assert len(population_devices(members, list(range(devices)))) == used
@@ -105,7 +136,9 @@ def test_the_choice_skips_diverged_members_and_prefers_the_lower_seed_on_a_tie()
     assert choose(np.array([0.4, 0.9]), np.array([0, 3]), np.array([0, 1])) is None
 
 
-@pytest.mark.parametrize("value, text", [(0, "> 0"), (-2, "> 0"), (2.5, "integer"), (10**6, "<= 4096")])
+@pytest.mark.parametrize(
+    "value, text", [(0, "> 0"), (-2, "> 0"), (2.5, "integer"), (10**6, "<= 4096")]
+)
 def test_bad_population_values_name_the_field(value, text):
     with pytest.raises(ConfigError, match=rf"train\.population: .*{text}"):
         config_from_dict(raw(population=value))
@@ -125,7 +158,7 @@ def test_the_driver_exports_the_best_member_records_every_member_and_resumes(tmp
     # Two members: on one device the same padded program as a member alone (compiled once for the module).
     from jaxexo.train import selection
 
-    monkeypatch.setattr(selection, "SELECTION_SCENES", 24)     # the choice's rule, on fewer scenes
+    monkeypatch.setattr(selection, "SELECTION_SCENES", 24)  # the choice's rule, on fewer scenes
     cfg = config_from_dict(raw(population=2))
     res = driver.run_training(cfg, tmp_path / "run", seed=SEED, progress=False)
     rows = [json.loads(x) for x in (tmp_path / "run" / "metrics.jsonl").read_text().splitlines()]
@@ -137,7 +170,12 @@ def test_the_driver_exports_the_best_member_records_every_member_and_resumes(tmp
     # written beside the policy.
     sel = res["selection"]
     assert [r["seed"] for r in sel] == [SEED, SEED + 1]
-    key = lambda r: (-r["safe"], math.inf if r["cost"] is None else r["cost"], -r["validation_success"], r["seed"])  # noqa: E731
+    key = lambda r: (
+        -r["safe"],
+        math.inf if r["cost"] is None else r["cost"],
+        -r["validation_success"],
+        r["seed"],
+    )  # noqa: E731
     assert min(range(2), key=lambda i: key(sel[i])) == k
     for i, r in enumerate(sel):
         assert r["validation_success"] == res["members"][i]["validation_success_raw"]
@@ -151,12 +189,16 @@ def test_the_driver_exports_the_best_member_records_every_member_and_resumes(tmp
     assert res["success_raw"] == res["members"][k]["test"]["success_raw"]
     # The exported policy is that member's parameters after its selected chunk, as it trains alone.
     alone = train_members([SEED + k])[0]
-    assert np.array_equal([r["members"][k]["validation_success_raw"] for r in rows], alone["scores"].astype(float))
+    assert np.array_equal(
+        [r["members"][k]["validation_success_raw"] for r in rows], alone["scores"].astype(float)
+    )
     chosen = dense_layers(alone["chunk_params"][res["selected_chunk"] - 1])
     policy = np.load(tmp_path / "run" / "policy.npz")
     assert len(chosen) == 2
     for j, (w, b) in enumerate(chosen):
-        assert np.array_equal(policy[f"dense_{j}_kernel"], w) and np.array_equal(policy[f"dense_{j}_bias"], b)
+        assert np.array_equal(policy[f"dense_{j}_kernel"], w) and np.array_equal(
+            policy[f"dense_{j}_bias"], b
+        )
     # Interrupted after its second checkpoint and resumed: the same files as the uninterrupted run.
     real, calls = run_files.checkpoint_write, []
 
@@ -176,18 +218,28 @@ def test_the_driver_exports_the_best_member_records_every_member_and_resumes(tmp
     resumed = driver.run_training(cfg, tmp_path / "cut", seed=SEED, resume=True, progress=False)
     full = res
     clock = ("train_seconds", "selection_seconds")
-    assert {k: v for k, v in resumed.items() if k not in clock} == {k: v for k, v in full.items() if k not in clock}
-    assert (tmp_path / "cut" / "policy.npz").read_bytes() == (tmp_path / "run" / "policy.npz").read_bytes()
-    assert _without_clock((tmp_path / "cut" / "metrics.jsonl").read_text()) == \
-        _without_clock((tmp_path / "run" / "metrics.jsonl").read_text())
+    assert {k: v for k, v in resumed.items() if k not in clock} == {
+        k: v for k, v in full.items() if k not in clock
+    }
+    assert (tmp_path / "cut" / "policy.npz").read_bytes() == (
+        tmp_path / "run" / "policy.npz"
+    ).read_bytes()
+    assert _without_clock((tmp_path / "cut" / "metrics.jsonl").read_text()) == _without_clock(
+        (tmp_path / "run" / "metrics.jsonl").read_text()
+    )
 
 
 def _without_clock(text: str) -> list:
     """metrics.jsonl rows without the wall-clock fields (the only ones a resumed run may change)."""
     clock = {"wall_s", "env_steps_per_s"}
     rows = [json.loads(x) for x in text.splitlines()]
-    return [{**{k: v for k, v in r.items() if k not in clock},
-             "members": [{k: v for k, v in m.items() if k not in clock} for m in r["members"]]} for r in rows]
+    return [
+        {
+            **{k: v for k, v in r.items() if k not in clock},
+            "members": [{k: v for k, v in m.items() if k not in clock} for m in r["members"]],
+        }
+        for r in rows
+    ]
 
 
 def test_a_sweep_refuses_a_population():
@@ -210,21 +262,27 @@ def test_a_diverged_member_is_dropped_from_the_choice_not_the_run(tmp_path, monk
             self.hyper = self.hyper.replace(lr=lr)
 
     monkeypatch.setattr(population, "Population", OneDiverges)
-    res = driver.run_training(config_from_dict(raw(population=2)), tmp_path / "run", seed=SEED, progress=False)
+    res = driver.run_training(
+        config_from_dict(raw(population=2)), tmp_path / "run", seed=SEED, progress=False
+    )
     rows = [json.loads(x) for x in (tmp_path / "run" / "metrics.jsonl").read_text().splitlines()]
-    assert len(rows) == UPDATES // CHUNK                      # the others trained to the end
+    assert len(rows) == UPDATES // CHUNK  # the others trained to the end
     assert [r["members"][1]["diverged"] for r in rows] == [True] * len(rows)
     assert res["members"][1]["diverged_chunk"] == 1 and res["members"][1]["selected_chunk"] == 0
     assert res["members"][1]["validation_curve"] == [None] * len(rows)
     assert res["exported_member"] == 0 and res["members"][0]["diverged_chunk"] is None
 
 
-@pytest.mark.parametrize("command", [["train", "--out", "{tmp}/run"], ["reproduce", "--out", "{tmp}/repro"]])
+@pytest.mark.parametrize(
+    "command", [["train", "--out", "{tmp}/run"], ["reproduce", "--out", "{tmp}/repro"]]
+)
 def test_the_cli_refuses_a_bad_population_before_training(tmp_path, command):
     import subprocess
     import sys
 
     args = [a.format(tmp=tmp_path) for a in command] + ["--population", "0"]
-    out = subprocess.run([sys.executable, "-m", "jaxexo.cli", *args], capture_output=True, text=True, timeout=120)
+    out = subprocess.run(
+        [sys.executable, "-m", "jaxexo.cli", *args], capture_output=True, text=True, timeout=120
+    )
     assert out.returncode == 2 and "--population: must be > 0, got 0" in out.stderr
     assert not (tmp_path / "run").exists() and not (tmp_path / "repro").exists()

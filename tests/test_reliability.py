@@ -37,12 +37,29 @@ TINY_N, TINY_T, TINY_UPDATES = 64, 8, 6
 TINY_RAW = {
     "env": {"obs_mode": "conditioned"},
     "layout": {"obstacles": ["base1"], "pivot": ["obstacle"]},
-    "reward": {"traj_weights": [0.0, 2.0, 0.5, 4.0, 0.5, 0.5, 1.0, 0.5], "exo_weights": [1.0, 1.0, 2.0, 1.0],
-               "goal_reward": 20.0, "joint_limit_penalty": 4.0, "progress_shaping": 5.0},
-    "train": {"num_envs": TINY_N, "rollout_steps": TINY_T, "num_minibatches": 2, "hidden": [32, 32],
-              "layer_norm": True, "trace": "backward", "control": "off_policy", "trace_kind": "accumulating",
-              "lr": 1e-3, "gamma": 0.98, "lam": 0.9, "budget_env_steps": TINY_N * TINY_T * TINY_UPDATES,
-              "chunk_updates": 2, "eval_episodes": 20},
+    "reward": {
+        "traj_weights": [0.0, 2.0, 0.5, 4.0, 0.5, 0.5, 1.0, 0.5],
+        "exo_weights": [1.0, 1.0, 2.0, 1.0],
+        "goal_reward": 20.0,
+        "joint_limit_penalty": 4.0,
+        "progress_shaping": 5.0,
+    },
+    "train": {
+        "num_envs": TINY_N,
+        "rollout_steps": TINY_T,
+        "num_minibatches": 2,
+        "hidden": [32, 32],
+        "layer_norm": True,
+        "trace": "backward",
+        "control": "off_policy",
+        "trace_kind": "accumulating",
+        "lr": 1e-3,
+        "gamma": 0.98,
+        "lam": 0.9,
+        "budget_env_steps": TINY_N * TINY_T * TINY_UPDATES,
+        "chunk_updates": 2,
+        "eval_episodes": 20,
+    },
 }
 SEED = 3
 
@@ -59,7 +76,7 @@ def cli(*args):
 
 def one_device_env() -> dict:
     env = dict(os.environ)
-    env["XLA_FLAGS"] = "--xla_force_host_platform_device_count=1"   # as the in-process runs here
+    env["XLA_FLAGS"] = "--xla_force_host_platform_device_count=1"  # as the in-process runs here
     return env
 
 
@@ -79,10 +96,12 @@ def snapshot(directory) -> dict:
 # killing the process with SIGXFSZ: a full disk as the process sees it. The limit and the ignored signal
 # are set in a fresh interpreter that then execs the command (both survive exec), rather than in a
 # preexec_fn, which would fork this JAX-threaded process.
-_LIMITED = ("import os, resource, signal, sys\n"
-            "signal.signal(signal.SIGXFSZ, signal.SIG_IGN)\n"
-            "n = int(sys.argv[1]); resource.setrlimit(resource.RLIMIT_FSIZE, (n, n))\n"
-            "os.execv(sys.argv[2], sys.argv[2:])\n")
+_LIMITED = (
+    "import os, resource, signal, sys\n"
+    "signal.signal(signal.SIGXFSZ, signal.SIG_IGN)\n"
+    "n = int(sys.argv[1]); resource.setrlimit(resource.RLIMIT_FSIZE, (n, n))\n"
+    "os.execv(sys.argv[2], sys.argv[2:])\n"
+)
 
 
 def limited_fsize(limit: int, cmd: list) -> list:
@@ -93,16 +112,26 @@ def limited_fsize(limit: int, cmd: list) -> list:
 # Atomic writes under a full disk (no JAX)
 # --------------------------------------------------------------------------------------------
 
+
 def test_atomic_write_on_a_full_disk_keeps_the_old_file_and_leaves_no_tmp(tmp_path):
     target = tmp_path / "data.bin"
     target.write_bytes(b"old content\n")
-    code = ("import sys; from jaxexo.storage.atomic import atomic_write\n"
-            "try:\n    atomic_write(sys.argv[1], b'x' * 100000)\n"
-            "except OSError as e:\n    print(e); sys.exit(7)\n")
-    r = subprocess.run(limited_fsize(4096, [sys.executable, "-c", code, target]), capture_output=True, text=True,
-                       cwd=ROOT, timeout=60)
+    code = (
+        "import sys; from jaxexo.storage.atomic import atomic_write\n"
+        "try:\n    atomic_write(sys.argv[1], b'x' * 100000)\n"
+        "except OSError as e:\n    print(e); sys.exit(7)\n"
+    )
+    r = subprocess.run(
+        limited_fsize(4096, [sys.executable, "-c", code, target]),
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=60,
+    )
     assert r.returncode == 7, r.stderr
-    assert "could not write" in r.stdout and str(target) in r.stdout and "File too large" in r.stdout
+    assert (
+        "could not write" in r.stdout and str(target) in r.stdout and "File too large" in r.stdout
+    )
     assert target.read_bytes() == b"old content\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["data.bin"]
 
@@ -111,20 +140,23 @@ def test_atomic_write_on_a_full_disk_keeps_the_old_file_and_leaves_no_tmp(tmp_pa
 # The checkpoint envelope (no JAX)
 # --------------------------------------------------------------------------------------------
 
+
 def test_checkpoint_envelope_refuses_corrupt_truncated_random_and_old_files(tmp_path):
     payload = bytes(range(256)) * 40
     good = pack_checkpoint(payload)
     assert unpack_checkpoint(good, "c") == payload
     rng = np.random.default_rng(0)
     flipped = bytearray(good)
-    for i in rng.choice(np.arange(100, len(good)), 64, replace=False):   # 64 flipped bytes in the payload
+    for i in rng.choice(
+        np.arange(100, len(good)), 64, replace=False
+    ):  # 64 flipped bytes in the payload
         flipped[i] ^= 0xFF
     cases = {
         "flipped": (bytes(flipped), "checksum mismatch"),
         "truncated": (good[: len(good) // 2], "checksum mismatch"),
         "empty": (b"", "not a jaxexo checkpoint"),
         "random": (rng.bytes(5000), "not a jaxexo checkpoint"),
-        "old": (payload, "not a jaxexo checkpoint"),            # an older jaxexo: bare msgpack, no header
+        "old": (payload, "not a jaxexo checkpoint"),  # an older jaxexo: bare msgpack, no header
         "version": (good.replace(b"checkpoint 1 ", b"checkpoint 9 ", 1), "version 9"),
         "header": (b"jaxexo-checkpoint 1 sha256=abc\n" + payload, "damaged checkpoint header"),
     }
@@ -139,6 +171,7 @@ def test_checkpoint_envelope_refuses_corrupt_truncated_random_and_old_files(tmp_
 # Policy files: every field required, dtypes and finiteness checked, checksum verified (no JAX)
 # --------------------------------------------------------------------------------------------
 
+
 def _layers(obs_dim=5, hidden=(8, 8), actions=36, seed=0):
     rng = np.random.default_rng(seed)
     sizes = [obs_dim, *hidden, actions]
@@ -146,9 +179,18 @@ def _layers(obs_dim=5, hidden=(8, 8), actions=36, seed=0):
     bs = [rng.normal(size=b).astype(np.float32) for b in sizes[1:]]
     ss = [rng.normal(size=h).astype(np.float32) for h in hidden]
     nb = [rng.normal(size=h).astype(np.float32) for h in hidden]
-    meta = {"obs_mode": "conditioned", "obs_dim": obs_dim, "num_actions": actions, "layers": sizes,
-            "layer_norm": True, "activation": "relu", "length_scale": 1.0, "thesis_obs_center": [0.0, 0.0],
-            "action_angles_rad": [0.1 * k for k in range(actions)], "config_toml": ""}
+    meta = {
+        "obs_mode": "conditioned",
+        "obs_dim": obs_dim,
+        "num_actions": actions,
+        "layers": sizes,
+        "layer_norm": True,
+        "activation": "relu",
+        "length_scale": 1.0,
+        "thesis_obs_center": [0.0, 0.0],
+        "action_angles_rad": [0.1 * k for k in range(actions)],
+        "config_toml": "",
+    }
     return ks, bs, ss, nb, meta
 
 
@@ -180,7 +222,9 @@ def _write(path, files: dict, meta_update=None, drop=(), fix_checksum=True):
 def test_policy_round_trip_and_checksum_in_metadata(policy):
     pol = load_policy(policy)
     ks, bs, ss, nb, _ = _layers()
-    for a, b in zip(pol.kernels + pol.biases + pol.norm_scales + pol.norm_biases, ks + bs + ss + nb):
+    for a, b in zip(
+        pol.kernels + pol.biases + pol.norm_scales + pol.norm_biases, ks + bs + ss + nb
+    ):
         np.testing.assert_array_equal(a, b)
     files = _files(policy)
     meta = json.loads(str(files.pop("metadata")))
@@ -190,7 +234,7 @@ def test_policy_round_trip_and_checksum_in_metadata(policy):
 def test_policy_tampering_is_refused(policy, tmp_path):
     files = _files(policy)
     k1 = files["dense_1_kernel"]
-    assert k1.shape[0] == k1.shape[1]   # square: a transposed kernel still fits the layer sizes
+    assert k1.shape[0] == k1.shape[1]  # square: a transposed kernel still fits the layer sizes
     flipped = files["dense_0_kernel"].copy()
     flipped.view(np.uint8)[:64] ^= 0xFF
     cases = {
@@ -208,31 +252,40 @@ def test_policy_tampering_is_refused(policy, tmp_path):
         load_policy(path)
 
 
-@pytest.mark.parametrize("case, message", [
-    ("no_layer_norm", "metadata.layer_norm is missing"),
-    ("no_activation", "metadata.activation is missing"),
-    ("no_angles", "metadata.action_angles_rad is missing"),
-    ("no_checksum", "metadata.sha256 is missing"),
-    ("activation", "metadata.activation must be one of"),
-    ("layer_norm_string", "metadata.layer_norm must be true or false"),
-    ("layers_float", "metadata.layers must be"),
-    ("obs_dim", "metadata.obs_dim is 6 but the network \\(metadata.layers\\) has 5 inputs"),
-    ("null_layers", "metadata.layers is missing"),
-    ("angles", "lists 35 angles for 36 actions"),
-    ("int8", "'dense_0_kernel' has dtype int8"),
-    ("complex", "'dense_1_bias' has dtype complex64"),
-    ("float64_overflow", "'dense_2_kernel' holds NaN or inf after the cast to float32"),
-    ("inf", "'norm_0_scale' holds NaN or inf"),
-    ("extra_norm", "unexpected arrays"),
-    ("version_1", "format_version 1"),
-])
+@pytest.mark.parametrize(
+    "case, message",
+    [
+        ("no_layer_norm", "metadata.layer_norm is missing"),
+        ("no_activation", "metadata.activation is missing"),
+        ("no_angles", "metadata.action_angles_rad is missing"),
+        ("no_checksum", "metadata.sha256 is missing"),
+        ("activation", "metadata.activation must be one of"),
+        ("layer_norm_string", "metadata.layer_norm must be true or false"),
+        ("layers_float", "metadata.layers must be"),
+        ("obs_dim", "metadata.obs_dim is 6 but the network \\(metadata.layers\\) has 5 inputs"),
+        ("null_layers", "metadata.layers is missing"),
+        ("angles", "lists 35 angles for 36 actions"),
+        ("int8", "'dense_0_kernel' has dtype int8"),
+        ("complex", "'dense_1_bias' has dtype complex64"),
+        ("float64_overflow", "'dense_2_kernel' holds NaN or inf after the cast to float32"),
+        ("inf", "'norm_0_scale' holds NaN or inf"),
+        ("extra_norm", "unexpected arrays"),
+        ("version_1", "format_version 1"),
+    ],
+)
 def test_policy_fields_and_dtypes_are_checked(policy, tmp_path, case, message):
     """Each file carries a valid checksum (recomputed): the check that refuses it is the one under test."""
     f = _files(policy)
     meta, drop = {}, ()
     if case.startswith("no_"):
-        drop = ({"no_layer_norm": "layer_norm", "no_activation": "activation", "no_angles": "action_angles_rad",
-                 "no_checksum": "sha256"}[case],)
+        drop = (
+            {
+                "no_layer_norm": "layer_norm",
+                "no_activation": "activation",
+                "no_angles": "action_angles_rad",
+                "no_checksum": "sha256",
+            }[case],
+        )
     elif case == "activation":
         meta = {"activation": "tanh"}
     elif case == "layer_norm_string":
@@ -251,13 +304,13 @@ def test_policy_fields_and_dtypes_are_checked(policy, tmp_path, case, message):
         f["dense_1_bias"] = f["dense_1_bias"].astype(np.complex64)
     elif case == "float64_overflow":
         k = f["dense_2_kernel"].astype(np.float64)
-        k[3, 4] = 1e300     # finite in float64, inf in float32
+        k[3, 4] = 1e300  # finite in float64, inf in float32
         f["dense_2_kernel"] = k
     elif case == "inf":
         f["norm_0_scale"] = f["norm_0_scale"].copy()
         f["norm_0_scale"][2] = np.inf
     elif case == "extra_norm":
-        meta = {"layer_norm": False}   # the norm arrays are then not part of the network
+        meta = {"layer_norm": False}  # the norm arrays are then not part of the network
     elif case == "version_1":
         meta = {"format_version": 1}
     path = _write(tmp_path / "p.npz", f, meta, drop, fix_checksum=case != "no_checksum")
@@ -276,22 +329,25 @@ def test_save_policy_refuses_non_finite_weights(tmp_path):
         save_policy(tmp_path / "policy.npz", ks, bs, ss, nb, meta)
     ks, *_ = _layers()
     big = [k.astype(np.float64) for k in ks]
-    big[0][0, 0] = 1.6e39   # beyond float32
+    big[0][0, 0] = 1.6e39  # beyond float32
     with pytest.raises(PolicyFileError, match="after the cast to float32"):
         save_policy(tmp_path / "policy.npz", big, bs, ss, nb, meta)
-    assert list(tmp_path.iterdir()) == []   # nothing written, no temporary file
+    assert list(tmp_path.iterdir()) == []  # nothing written, no temporary file
 
 
 # --------------------------------------------------------------------------------------------
 # Run directories: the lock and the empty-directory rule
 # --------------------------------------------------------------------------------------------
 
+
 def test_run_lock_is_exclusive_and_released(tmp_path):
     with run_lock(tmp_path / "d", "train"):
-        with pytest.raises(RunDirError, match=f"in use by another jaxexo process \\(pid {os.getpid()}"):
+        with pytest.raises(
+            RunDirError, match=f"in use by another jaxexo process \\(pid {os.getpid()}"
+        ):
             with run_lock(tmp_path / "d", "train"):
                 pass
-    with run_lock(tmp_path / "d", "train"):   # released at the end of the block
+    with run_lock(tmp_path / "d", "train"):  # released at the end of the block
         pass
     with pytest.raises(RunDirError, match="no checkpoint to resume from"):
         with run_lock(tmp_path / "absent", "train", create=False):
@@ -304,10 +360,16 @@ def test_run_lock_is_exclusive_and_released(tmp_path):
 
 
 def test_lock_of_a_killed_process_does_not_block(tmp_path):
-    code = ("import sys, time; from jaxexo.storage.rundir import run_lock\n"
-            "with run_lock(sys.argv[1], 'train'):\n    print('locked', flush=True); time.sleep(600)\n")
-    p = subprocess.Popen([sys.executable, "-c", code, str(tmp_path / "d")], stdout=subprocess.PIPE, text=True,
-                         cwd=ROOT)
+    code = (
+        "import sys, time; from jaxexo.storage.rundir import run_lock\n"
+        "with run_lock(sys.argv[1], 'train'):\n    print('locked', flush=True); time.sleep(600)\n"
+    )
+    p = subprocess.Popen(
+        [sys.executable, "-c", code, str(tmp_path / "d")],
+        stdout=subprocess.PIPE,
+        text=True,
+        cwd=ROOT,
+    )
     try:
         assert p.stdout.readline().strip() == "locked"
         with pytest.raises(RunDirError, match=f"pid {p.pid}"):
@@ -316,8 +378,8 @@ def test_lock_of_a_killed_process_does_not_block(tmp_path):
     finally:
         p.send_signal(signal.SIGKILL)
         p.wait()
-    assert (tmp_path / "d" / LOCK_NAME).exists()    # left behind...
-    with run_lock(tmp_path / "d", "train"):         # ...and no obstacle
+    assert (tmp_path / "d" / LOCK_NAME).exists()  # left behind...
+    with run_lock(tmp_path / "d", "train"):  # ...and no obstacle
         pass
 
 
@@ -327,17 +389,31 @@ def test_cli_train_and_sweep_refuse_a_locked_directory(tmp_path):
     cfg_path.write_text(config_to_toml(tiny_config()))
     run = tmp_path / "run"
     with run_lock(run, "train"):
-        r = subprocess.run(cli("train", cfg_path, "--out", run, "--quiet"), capture_output=True, text=True,
-                           cwd=ROOT, env=one_device_env(), timeout=300)
+        r = subprocess.run(
+            cli("train", cfg_path, "--out", run, "--quiet"),
+            capture_output=True,
+            text=True,
+            cwd=ROOT,
+            env=one_device_env(),
+            timeout=300,
+        )
         assert_clean_refusal(r, str(run), "in use by another jaxexo process", f"pid {os.getpid()}")
         assert snapshot(run) == {}
-        r = subprocess.run(cli("sweep", ROOT / "configs" / "sweeps" / "smoke.toml", "--out", run, "--quiet"),
-                           capture_output=True, text=True, cwd=ROOT, env=one_device_env(), timeout=300)
+        r = subprocess.run(
+            cli("sweep", ROOT / "configs" / "sweeps" / "smoke.toml", "--out", run, "--quiet"),
+            capture_output=True,
+            text=True,
+            cwd=ROOT,
+            env=one_device_env(),
+            timeout=300,
+        )
         assert_clean_refusal(r, str(run), "in use by another jaxexo process")
         assert snapshot(run) == {}
 
 
-@pytest.mark.parametrize("present", [("policy.npz",), ("eval.json", "metrics.jsonl"), ("policy.npz", "config.toml")])
+@pytest.mark.parametrize(
+    "present", [("policy.npz",), ("eval.json", "metrics.jsonl"), ("policy.npz", "config.toml")]
+)
 def test_new_run_refuses_a_directory_with_results_but_no_checkpoint(tmp_path, present):
     """A sweep's best/, a run whose checkpoint was deleted, the remains of a crashed run: never
     overwritten or appended to."""
@@ -349,8 +425,11 @@ def test_new_run_refuses_a_directory_with_results_but_no_checkpoint(tmp_path, pr
     for name in present:
         (run / name).write_bytes(b"precious " + name.encode())
     before = snapshot(run)
-    with pytest.raises(ConfigError, match="is not empty .*" + present[0].replace(".", r"\.") + ".*no checkpoint"
-                                          r"\.msgpack to resume"):
+    with pytest.raises(
+        ConfigError,
+        match="is not empty .*" + present[0].replace(".", r"\.") + ".*no checkpoint"
+        r"\.msgpack to resume",
+    ):
         run_training(tiny_config(), run, seed=SEED, progress=False)
     assert snapshot(run) == before
 
@@ -372,26 +451,35 @@ def test_sweep_refuses_a_directory_with_other_files(tmp_path):
 # generate: unclear errors made clear
 # --------------------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("option, value, message", [
-    ("--out", "{d}/", "is a directory"),
-    ("--out", "{d}", "is a directory"),
-    ("--json", "{d}/missing/t.json", "does not exist"),
-    ("--plot", "{d}", "is a directory"),
-])
+
+@pytest.mark.parametrize(
+    "option, value, message",
+    [
+        ("--out", "{d}/", "is a directory"),
+        ("--out", "{d}", "is a directory"),
+        ("--json", "{d}/missing/t.json", "does not exist"),
+        ("--plot", "{d}", "is a directory"),
+    ],
+)
 def test_cli_generate_refuses_directories_and_missing_folders(tmp_path, option, value, message):
     d = tmp_path / "outdir"
     d.mkdir()
     outputs = {"--out": tmp_path / "t.csv", option: value.format(d=d)}
-    args = ["generate", "--method", "cfftg", "--obstacle", "triangle"] + [x for kv in outputs.items() for x in kv]
+    args = ["generate", "--method", "cfftg", "--obstacle", "triangle"] + [
+        x for kv in outputs.items() for x in kv
+    ]
     r = subprocess.run(cli(*args), capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert_clean_refusal(r, option, message)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["outdir"]   # nothing written, no stray .tmp
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "outdir"
+    ]  # nothing written, no stray .tmp
     assert list(d.iterdir()) == []
 
 
 # --------------------------------------------------------------------------------------------
 # Integer counters (no float32 drift past 2^24)
 # --------------------------------------------------------------------------------------------
+
 
 @pytest.mark.slow
 def test_counters_are_exact_past_2_24_with_an_odd_rollout_size():
@@ -404,35 +492,46 @@ def test_counters_are_exact_past_2_24_with_an_odd_rollout_size():
 
     from jaxexo.train.trainer import METRICS, Hyperparams, Trainer
 
-    budget = 2 ** 24 + 1000
-    cfg = tiny_config(num_envs=12, rollout_steps=7, num_minibatches=1, hidden=[8], budget_env_steps=budget)
+    budget = 2**24 + 1000
+    cfg = tiny_config(
+        num_envs=12, rollout_steps=7, num_minibatches=1, hidden=[8], budget_env_steps=budget
+    )
     trainer = Trainer(cfg)
     hyper = Hyperparams.from_config(cfg)
     per = 12 * 7
-    last = -(-budget // per)    # updates the budget allows
+    last = -(-budget // per)  # updates the budget allows
     assert (last - 1) * per < budget <= last * per and int(hyper.budget_updates) == last
     active = jax.jit(trainer.active)
     ts = jax.jit(trainer.init)(jax.random.PRNGKey(0), hyper)
-    episodes0 = 2 ** 24 + 1
-    ts = ts.replace(update=jnp.asarray(last - 2, jnp.int32), episodes=jnp.asarray(episodes0, jnp.int32))
+    episodes0 = 2**24 + 1
+    ts = ts.replace(
+        update=jnp.asarray(last - 2, jnp.int32), episodes=jnp.asarray(episodes0, jnp.int32)
+    )
     assert bool(active(ts, hyper))
     ts, m = jax.jit(trainer.run, static_argnums=2)(ts, hyper, 3)
     m = np.asarray(m)
     col = {k: i for i, k in enumerate(METRICS)}
-    assert (m[:, col["env_steps"]] > 0).tolist() == [True, True, False]   # two updates left, then frozen
+    assert (m[:, col["env_steps"]] > 0).tolist() == [
+        True,
+        True,
+        False,
+    ]  # two updates left, then frozen
     assert int(ts.update) == last and not bool(active(ts, hyper))
     assert int(trainer.env_steps(ts)) == last * per
     assert int(ts.episodes) == episodes0 + int(m[:, col["episodes"]].sum())
     assert ts.episodes.dtype == jnp.int32 and ts.update.dtype == jnp.int32
     # Episode budgets in integers too: 2^24 + 2 and 2^24 + 3 are one episode apart (equal in float32).
-    hyper_ep = hyper.replace(budget_episodes=jnp.asarray(2 ** 24 + 3, jnp.int32), budget_updates=jnp.asarray(0, jnp.int32))
-    assert bool(active(ts.replace(episodes=jnp.asarray(2 ** 24 + 2, jnp.int32)), hyper_ep))
-    assert not bool(active(ts.replace(episodes=jnp.asarray(2 ** 24 + 3, jnp.int32)), hyper_ep))
+    hyper_ep = hyper.replace(
+        budget_episodes=jnp.asarray(2**24 + 3, jnp.int32), budget_updates=jnp.asarray(0, jnp.int32)
+    )
+    assert bool(active(ts.replace(episodes=jnp.asarray(2**24 + 2, jnp.int32)), hyper_ep))
+    assert not bool(active(ts.replace(episodes=jnp.asarray(2**24 + 3, jnp.int32)), hyper_ep))
 
 
 # --------------------------------------------------------------------------------------------
 # Training runs: divergence, foreign checkpoints, kill/resume, two writers, full disk (slow)
 # --------------------------------------------------------------------------------------------
+
 
 @pytest.fixture(scope="module")
 def cache(tmp_path_factory):
@@ -465,7 +564,9 @@ def assert_same_run(a, b):
         assert pa[k].dtype == pb[k].dtype and np.array_equal(pa[k], pb[k]), k
     assert _counters(a / "metrics.jsonl") == _counters(b / "metrics.jsonl")
     drop = lambda r: {k: v for k, v in r.items() if k != "train_seconds"}  # noqa: E731
-    assert drop(json.loads((a / "eval.json").read_text())) == drop(json.loads((b / "eval.json").read_text()))
+    assert drop(json.loads((a / "eval.json").read_text())) == drop(
+        json.loads((b / "eval.json").read_text())
+    )
 
 
 @pytest.mark.slow
@@ -500,7 +601,9 @@ def test_resume_refuses_foreign_corrupt_and_incomplete_run_directories(reference
     layers = payload["state"]["params"]["params"]
     first = sorted(layers)[0]
     k = layers[first]["kernel"]
-    layers[first]["kernel"] = np.zeros((k.shape[0] + 1,) + k.shape[1:], np.float32)   # another network's shape
+    layers[first]["kernel"] = np.zeros(
+        (k.shape[0] + 1,) + k.shape[1:], np.float32
+    )  # another network's shape
     ckpt.write_bytes(pack_checkpoint(serialization.msgpack_serialize(payload)))
     with pytest.raises(CheckpointError, match=f"{ckpt}: does not fit this config's training state"):
         run_training(cfg, run, seed=SEED, resume=True, progress=False)
@@ -519,8 +622,14 @@ def test_resume_refuses_foreign_corrupt_and_incomplete_run_directories(reference
 def test_sigkill_mid_run_then_resume_is_bit_identical(reference, tmp_path):
     cfg_path = reference["cfg_path"]
     run = tmp_path / "run"
-    p = subprocess.Popen(cli("train", cfg_path, "--out", run, "--quiet", "--seed", SEED), cwd=ROOT,
-                         env=one_device_env(), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    p = subprocess.Popen(
+        cli("train", cfg_path, "--out", run, "--quiet", "--seed", SEED),
+        cwd=ROOT,
+        env=one_device_env(),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     t0 = time.monotonic()
     while not (run / "checkpoint.msgpack").exists():
         assert p.poll() is None, p.stderr.read()[-3000:]
@@ -528,11 +637,17 @@ def test_sigkill_mid_run_then_resume_is_bit_identical(reference, tmp_path):
         time.sleep(0.01)
     p.send_signal(signal.SIGKILL)
     p.communicate()
-    assert p.returncode == -signal.SIGKILL        # killed, not finished
+    assert p.returncode == -signal.SIGKILL  # killed, not finished
     assert not (run / "eval.json").exists()
-    assert (run / LOCK_NAME).exists()             # the dead process's lock file is still there
-    r = subprocess.run(cli("train", cfg_path, "--out", run, "--quiet", "--seed", SEED, "--resume"),
-                       capture_output=True, text=True, cwd=ROOT, env=one_device_env(), timeout=900)
+    assert (run / LOCK_NAME).exists()  # the dead process's lock file is still there
+    r = subprocess.run(
+        cli("train", cfg_path, "--out", run, "--quiet", "--seed", SEED, "--resume"),
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        env=one_device_env(),
+        timeout=900,
+    )
     assert r.returncode == 0, r.stderr[-3000:]
     assert_same_run(reference["run"], run)
     assert not any(p.name.endswith(".tmp") for p in run.iterdir())
@@ -556,7 +671,11 @@ def test_run_stopped_before_its_first_checkpoint_resumes_from_scratch(reference,
             driver.run_training(cfg, run, seed=SEED, progress=False)
     # as a SIGKILL mid-write leaves it (atomic_write's temporary name for checkpoint.msgpack)
     (run / ".checkpoint.msgpack.k1ll3d.tmp").write_bytes(b"half a checkpoint")
-    assert sorted(snapshot(run)) == [".checkpoint.msgpack.k1ll3d.tmp", "config.toml", "metrics.jsonl"]
+    assert sorted(snapshot(run)) == [
+        ".checkpoint.msgpack.k1ll3d.tmp",
+        "config.toml",
+        "metrics.jsonl",
+    ]
     with pytest.raises(ConfigError, match="--resume starts it again"):
         driver.run_training(cfg, run, seed=SEED, progress=False)
     with pytest.raises(ConfigError, match="config differs"):
@@ -572,9 +691,17 @@ def test_two_training_processes_on_one_directory(reference, tmp_path):
     was faster) with a clean message; the run is exactly the uninterrupted one, no interleaved rows."""
     cfg_path = reference["cfg_path"]
     run = tmp_path / "run"
-    procs = [subprocess.Popen(cli("train", cfg_path, "--out", run, "--quiet", "--seed", SEED), cwd=ROOT,
-                              env=one_device_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-             for _ in range(2)]
+    procs = [
+        subprocess.Popen(
+            cli("train", cfg_path, "--out", run, "--quiet", "--seed", SEED),
+            cwd=ROOT,
+            env=one_device_env(),
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for _ in range(2)
+    ]
     results = [(p, *p.communicate(timeout=900)) for p in procs]
     codes = sorted(p.returncode for p, _, _ in results)
     assert codes == [0, 2], [(p.returncode, err[-1500:]) for p, _, err in results]
@@ -596,7 +723,7 @@ def test_full_disk_fails_cleanly_and_keeps_the_last_checkpoint(reference, cache,
     calls = {"n": 0}
     real = run_files.checkpoint_write
 
-    def stop_after_chunk_1(path, data):    # checkpoint, bookkeeping of chunk 1, then stop
+    def stop_after_chunk_1(path, data):  # checkpoint, bookkeeping of chunk 1, then stop
         calls["n"] += 1
         if calls["n"] == 3:
             raise KeyboardInterrupt
@@ -609,9 +736,19 @@ def test_full_disk_fails_cleanly_and_keeps_the_last_checkpoint(reference, cache,
     ckpt = run / run_files.CHECKPOINT
     saved = ckpt.read_bytes()
     assert run_files.read_checkpoint(ckpt)["book"]["chunks_done"] == 1
-    r = subprocess.run(limited_fsize(len(saved) - 1, cli("train", reference["cfg_path"], "--out", run, "--quiet",
-                                                          "--seed", SEED, "--resume")),
-                       capture_output=True, text=True, cwd=ROOT, env=one_device_env(), timeout=900)
+    r = subprocess.run(
+        limited_fsize(
+            len(saved) - 1,
+            cli(
+                "train", reference["cfg_path"], "--out", run, "--quiet", "--seed", SEED, "--resume"
+            ),
+        ),
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        env=one_device_env(),
+        timeout=900,
+    )
     assert_clean_refusal(r, f"could not write {ckpt}", "File too large", code=1)
     assert ckpt.read_bytes() == saved
     assert not any(p.name.endswith(".tmp") for p in run.iterdir())
@@ -628,8 +765,14 @@ def test_diverged_run_says_so_and_exports_nothing_non_finite(cache, tmp_path):
     cfg_path = tmp_path / "lr.toml"
     cfg_path.write_text(config_to_toml(cfg))
     run = tmp_path / "run"
-    r = subprocess.run(cli("train", cfg_path, "--out", run, "--quiet", "--seed", SEED), capture_output=True,
-                       text=True, cwd=ROOT, env=one_device_env(), timeout=900)
+    r = subprocess.run(
+        cli("train", cfg_path, "--out", run, "--quiet", "--seed", SEED),
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        env=one_device_env(),
+        timeout=900,
+    )
     assert_clean_refusal(r, "training diverged in chunk 1", "train.lr", code=3)
     rows = [json.loads(x) for x in (run / "metrics.jsonl").read_text().splitlines()]
     assert [x["diverged"] for x in rows] == [True] and rows[0]["validation_success_raw"] is None
@@ -637,7 +780,9 @@ def test_diverged_run_says_so_and_exports_nothing_non_finite(cache, tmp_path):
 
 
 @pytest.mark.slow
-def test_divergence_after_a_good_chunk_keeps_the_best_finite_parameters(cache, tmp_path, monkeypatch):
+def test_divergence_after_a_good_chunk_keeps_the_best_finite_parameters(
+    cache, tmp_path, monkeypatch
+):
     """Parameters that turn NaN in chunk 2 (injected after the real update): chunk 1's parameters, the best
     finite ones, are exported and evaluated, the checkpoint stays at chunk 1, and TrainingDiverged is raised."""
     import jax
@@ -655,7 +800,9 @@ def test_divergence_after_a_good_chunk_keeps_the_best_finite_parameters(cache, t
 
     monkeypatch.setattr(Trainer, "run", run_then_poison)
     run = tmp_path / "run"
-    with pytest.raises(driver.TrainingDiverged, match="diverged in chunk 2.*best finite parameters, from chunk 1"):
+    with pytest.raises(
+        driver.TrainingDiverged, match="diverged in chunk 2.*best finite parameters, from chunk 1"
+    ):
         driver.run_training(tiny_config(), run, seed=SEED, progress=False)
     rows = [json.loads(x) for x in (run / "metrics.jsonl").read_text().splitlines()]
     assert [x["diverged"] for x in rows] == [False, True]
@@ -668,11 +815,15 @@ def test_divergence_after_a_good_chunk_keeps_the_best_finite_parameters(cache, t
     best = run_files.read_checkpoint(run / run_files.CHECKPOINT)["best_params"]
     trainer = Trainer(tiny_config())
     obs = np.random.default_rng(0).normal(size=(64, trainer.env.obs_dim)).astype(np.float32)
-    np.testing.assert_allclose(pol.q_values(obs), np.asarray(trainer.net.apply(best, obs)), rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(
+        pol.q_values(obs), np.asarray(trainer.net.apply(best, obs)), rtol=1e-5, atol=1e-5
+    )
 
 
 @pytest.mark.slow
-def test_resume_refuses_an_edited_config_a_deleted_checkpoint_and_undecodable_metrics(reference, cache, tmp_path):
+def test_resume_refuses_an_edited_config_a_deleted_checkpoint_and_undecodable_metrics(
+    reference, cache, tmp_path
+):
     """config.toml edited together with the config passed (a changed lr would mix two
     learning rates), checkpoint.msgpack deleted from a run of several chunks (it used to restart from
     scratch silently), random bytes in metrics.jsonl (named, not "'utf-8' codec can't decode")."""
@@ -683,7 +834,9 @@ def test_resume_refuses_an_edited_config_a_deleted_checkpoint_and_undecodable_me
     shutil.copytree(reference["run"], run)
     edited = tiny_config(lr=5e-4)
     (run / "config.toml").write_text(config_to_toml(edited))
-    with pytest.raises(ConfigError, match="train.lr differs from the value the run .* started with"):
+    with pytest.raises(
+        ConfigError, match="train.lr differs from the value the run .* started with"
+    ):
         run_training(edited, run, seed=SEED, resume=True, progress=False)
     (run / "config.toml").write_bytes((reference["run"] / "config.toml").read_bytes())
 
@@ -700,7 +853,9 @@ def test_resume_refuses_an_edited_config_a_deleted_checkpoint_and_undecodable_me
         (run / name).unlink()
     with pytest.raises(ConfigError, match="metrics.jsonl records 3 finished chunks"):
         run_training(tiny_config(), run, seed=SEED, resume=True, progress=False)
-    with pytest.raises(ConfigError, match="is not empty") as info:     # a new run there: no restart hint
+    with pytest.raises(
+        ConfigError, match="is not empty"
+    ) as info:  # a new run there: no restart hint
         run_training(tiny_config(), run, seed=SEED, progress=False)
     assert "--resume starts it again" not in str(info.value)
     assert (run / "metrics.jsonl").read_bytes() == good

@@ -44,6 +44,7 @@ def assert_clean_refusal(r: subprocess.CompletedProcess, *needles: str, code: in
 # No file outside the run reached through a symbolic link
 # --------------------------------------------------------------------------------------------
 
+
 def test_a_symlinked_lock_file_is_refused_and_its_target_untouched(tmp_path):
     victim = tmp_path / "victim.txt"
     victim.write_text("precious\n")
@@ -55,7 +56,7 @@ def test_a_symlinked_lock_file_is_refused_and_its_target_untouched(tmp_path):
             pass
     assert victim.read_text() == "precious\n"
     cfg = tmp_path / "tiny.toml"
-    cfg.write_text('[train]\nbudget_env_steps = 1024\nnum_envs = 64\npopulation = 1\n')
+    cfg.write_text("[train]\nbudget_env_steps = 1024\nnum_envs = 64\npopulation = 1\n")
     r = run_cli("train", cfg, "--out", run, "--quiet")
     assert_clean_refusal(r, "--out", LOCK_NAME, "symbolic link")
     assert victim.read_text() == "precious\n"
@@ -84,6 +85,7 @@ def test_an_append_only_log_replaced_by_a_symlink_is_refused(tmp_path):
 # A policy file made without training (random weights, a real config): the generator loads it
 # --------------------------------------------------------------------------------------------
 
+
 def make_policy(path, cfg=None, seed=0, **meta_changes):
     from jaxexo.config import load_config
     from jaxexo.config.toml_io import config_to_toml
@@ -92,17 +94,37 @@ def make_policy(path, cfg=None, seed=0, **meta_changes):
 
     cfg = cfg or load_config(ROOT / "configs" / "quick.toml")
     rng = np.random.default_rng(seed)
-    sizes = [dynamics.obs_dim(cfg.env.obs_mode, cfg.env.shape_points), *cfg.train.hidden, dynamics.NUM_ACTIONS]
-    ks = [rng.normal(scale=0.1, size=(a, b)).astype(np.float32) for a, b in zip(sizes[:-1], sizes[1:])]
+    sizes = [
+        dynamics.obs_dim(cfg.env.obs_mode, cfg.env.shape_points),
+        *cfg.train.hidden,
+        dynamics.NUM_ACTIONS,
+    ]
+    ks = [
+        rng.normal(scale=0.1, size=(a, b)).astype(np.float32) for a, b in zip(sizes[:-1], sizes[1:])
+    ]
     bs = [np.zeros(b, np.float32) for b in sizes[1:]]
     hidden = list(cfg.train.hidden) if cfg.train.layer_norm else []
-    meta = {"obs_mode": cfg.env.obs_mode, "obs_dim": sizes[0], "num_actions": sizes[-1], "layers": sizes,
-            "layer_norm": cfg.train.layer_norm, "activation": "relu", "length_scale": dynamics.LENGTH_SCALE,
-            "thesis_obs_center": list(dynamics.THESIS_OBS_CENTER),
-            "action_angles_rad": dynamics.action_angles().tolist(), "config_toml": config_to_toml(cfg)}
+    meta = {
+        "obs_mode": cfg.env.obs_mode,
+        "obs_dim": sizes[0],
+        "num_actions": sizes[-1],
+        "layers": sizes,
+        "layer_norm": cfg.train.layer_norm,
+        "activation": "relu",
+        "length_scale": dynamics.LENGTH_SCALE,
+        "thesis_obs_center": list(dynamics.THESIS_OBS_CENTER),
+        "action_angles_rad": dynamics.action_angles().tolist(),
+        "config_toml": config_to_toml(cfg),
+    }
     meta.update(meta_changes)
-    return save_policy(path, ks, bs, [np.ones(h, np.float32) for h in hidden],
-                       [np.zeros(h, np.float32) for h in hidden], meta)
+    return save_policy(
+        path,
+        ks,
+        bs,
+        [np.ones(h, np.float32) for h in hidden],
+        [np.zeros(h, np.float32) for h in hidden],
+        meta,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -124,15 +146,18 @@ def generator(policy):
 GEN = ("generate", "--obstacle", "base1")
 
 
-@pytest.mark.parametrize("outputs", [
-    lambda d, p: ["--out", p],
-    lambda d, p: ["--out", d / "t.csv", "--json", p],
-    lambda d, p: ["--out", d / "t.csv", "--plot", p],
-    lambda d, p: ["--out", d / "link.csv"],         # a symbolic link to the policy
-    lambda d, p: ["--out", d / "x", "--json", d / "x"],
-    lambda d, p: ["--out", d / "t.csv", "--plot", d / "s.png", "--json", d / "s.png"],
-    lambda d, p: ["--out", d / "t.csv", "--json", d / "a.gif", "--animate", d / "a.gif"],
-])
+@pytest.mark.parametrize(
+    "outputs",
+    [
+        lambda d, p: ["--out", p],
+        lambda d, p: ["--out", d / "t.csv", "--json", p],
+        lambda d, p: ["--out", d / "t.csv", "--plot", p],
+        lambda d, p: ["--out", d / "link.csv"],  # a symbolic link to the policy
+        lambda d, p: ["--out", d / "x", "--json", d / "x"],
+        lambda d, p: ["--out", d / "t.csv", "--plot", d / "s.png", "--json", d / "s.png"],
+        lambda d, p: ["--out", d / "t.csv", "--json", d / "a.gif", "--animate", d / "a.gif"],
+    ],
+)
 def test_generate_refuses_an_output_on_an_input_or_on_another_output(tmp_path, outputs):
     policy = make_policy(tmp_path / "p.npz")
     (tmp_path / "link.csv").symlink_to(policy)
@@ -141,25 +166,34 @@ def test_generate_refuses_an_output_on_an_input_or_on_another_output(tmp_path, o
     assert_clean_refusal(r)
     assert ("input" in r.stderr) or ("also the" in r.stderr), r.stderr
     assert policy.read_bytes() == before
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["link.csv", "p.npz"]   # nothing written
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["link.csv", "p.npz"]  # nothing written
 
 
-@pytest.mark.parametrize("args, needles", [
-    (["--out", "{f}/t.csv"], ["--out", "is a file, not a folder"]),
-    (["--out", "t.csv", "--json", "{f}/sub/t.json"], ["--json", "is a file, not a folder"]),
-    (["--out", "t.csv", "--duration", "1e300"], ["--duration", "<= 60 s"]),
-    (["--out", "t.csv", "--duration", "0"], ["--duration", "> 0"]),
-    (["--out", "t.csv", "--points", "100000000"], ["--points"]),
-    (["--out", "t.csv", "--rate", "100000"], ["--rate", "10000 Hz"]),
-    (["--out", "t.csv", "--rate", "1e9"], ["--rate"]),
-    (["--out", "t.csv", "--method", "cfftg", "--smoothing", "0.1"], ["--smoothing", "rl only"]),
-])
+@pytest.mark.parametrize(
+    "args, needles",
+    [
+        (["--out", "{f}/t.csv"], ["--out", "is a file, not a folder"]),
+        (["--out", "t.csv", "--json", "{f}/sub/t.json"], ["--json", "is a file, not a folder"]),
+        (["--out", "t.csv", "--duration", "1e300"], ["--duration", "<= 60 s"]),
+        (["--out", "t.csv", "--duration", "0"], ["--duration", "> 0"]),
+        (["--out", "t.csv", "--points", "100000000"], ["--points"]),
+        (["--out", "t.csv", "--rate", "100000"], ["--rate", "10000 Hz"]),
+        (["--out", "t.csv", "--rate", "1e9"], ["--rate"]),
+        (["--out", "t.csv", "--method", "cfftg", "--smoothing", "0.1"], ["--smoothing", "rl only"]),
+    ],
+)
 def test_generate_refuses_bad_options_before_any_work(tmp_path, args, needles):
     afile = tmp_path / "afile"
     afile.write_text("not a folder\n")
-    args = [a.format(f=afile) if "{f}" in a else (tmp_path / a if a.endswith((".csv", ".json")) else a)
-            for a in args]
-    r = run_cli(*GEN, "--method", "cfftg", *args) if "--method" not in args else run_cli(*GEN, *args)
+    args = [
+        a.format(f=afile) if "{f}" in a else (tmp_path / a if a.endswith((".csv", ".json")) else a)
+        for a in args
+    ]
+    r = (
+        run_cli(*GEN, "--method", "cfftg", *args)
+        if "--method" not in args
+        else run_cli(*GEN, *args)
+    )
     assert_clean_refusal(r, *needles)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["afile"]
 
@@ -209,17 +243,20 @@ def test_eval_force_replaces_an_earlier_report(tmp_path, policy):
 def test_reproduce_validates_every_option_before_training(tmp_path):
     afile = tmp_path / "afile"
     afile.write_text("x\n")
-    for args, needles in ((["--models", "a", "--n", "0"], ["--n", ">= 1"]),
-                          (["--models", "a", "--results", afile], ["--results", "is a file, not a folder"]),
-                          (["--models", "a", "--results", afile / "sub"], ["--results", "is a file"])):
+    for args, needles in (
+        (["--models", "a", "--n", "0"], ["--n", ">= 1"]),
+        (["--models", "a", "--results", afile], ["--results", "is a file, not a folder"]),
+        (["--models", "a", "--results", afile / "sub"], ["--results", "is a file"]),
+    ):
         r = run_cli("reproduce", "--out", tmp_path / "rep", *args, timeout=120)
         assert_clean_refusal(r, *needles)
-        assert not (tmp_path / "rep").exists()      # nothing trained, nothing written
+        assert not (tmp_path / "rep").exists()  # nothing trained, nothing written
 
 
 # --------------------------------------------------------------------------------------------
 # Policy files: what is not a policy says so; the config is the policy's own
 # --------------------------------------------------------------------------------------------
+
 
 def test_a_non_policy_file_is_not_a_jaxexo_policy_and_pickle_is_never_suggested(tmp_path):
     from jaxexo.storage.policy_file import PolicyFileError, load_policy
@@ -253,19 +290,23 @@ def test_an_npz_header_claiming_a_huge_shape_is_refused_before_allocating(tmp_pa
     assert str(path) in str(info.value)
 
 
-@pytest.mark.parametrize("changes, message", [
-    ({"config_toml": ""}, "config_toml is empty"),
-    ({"config_toml": "[env]\nobs_mode = \"conditioned\"\n"}, "is not stated"),
-    ({"obs_mode": "thesis"}, "metadata.obs_mode .* contradicts .* env.obs_mode"),
-    ({"layer_norm": False}, "metadata.layer_norm .* contradicts .* train.layer_norm"),
-])
+@pytest.mark.parametrize(
+    "changes, message",
+    [
+        ({"config_toml": ""}, "config_toml is empty"),
+        ({"config_toml": '[env]\nobs_mode = "conditioned"\n'}, "is not stated"),
+        ({"obs_mode": "thesis"}, "metadata.obs_mode .* contradicts .* env.obs_mode"),
+        ({"layer_norm": False}, "metadata.layer_norm .* contradicts .* train.layer_norm"),
+    ],
+)
 def test_policy_config_must_be_complete_and_agree_with_the_metadata(tmp_path, changes, message):
     from jaxexo.inference import TrajectoryGenerator
     from jaxexo.storage.policy_file import PolicyFileError
 
     path = make_policy(tmp_path / "p.npz", **changes)
-    if changes.get("layer_norm") is False:   # the arrays of a network without LayerNorm
+    if changes.get("layer_norm") is False:  # the arrays of a network without LayerNorm
         from jaxexo.storage.policy_file import policy_checksum
+
         with np.load(path) as z:
             files = {k: z[k] for k in z.files if not k.startswith("norm_")}
         meta = json.loads(str(files.pop("metadata")))
@@ -284,7 +325,9 @@ def test_a_policy_trained_before_the_floor_rule_loads_without_it(tmp_path):
 
     text = config_to_toml(Config())
     assert "floor_clearance = 0.02\n" in text
-    old = make_policy(tmp_path / "old.npz", cfg=Config(), config_toml=text.replace("floor_clearance = 0.02\n", ""))
+    old = make_policy(
+        tmp_path / "old.npz", cfg=Config(), config_toml=text.replace("floor_clearance = 0.02\n", "")
+    )
     assert TrajectoryGenerator.load(old).config.env.floor_clearance == 0.0
     new = make_policy(tmp_path / "new.npz", cfg=Config())
     assert TrajectoryGenerator.load(new).config.env.floor_clearance == 0.02
@@ -294,15 +337,18 @@ def test_a_policy_trained_before_the_floor_rule_loads_without_it(tmp_path):
 # The Python API: types checked, sizes bounded, raw errors replaced by ones naming the argument
 # --------------------------------------------------------------------------------------------
 
+
 def test_strings_and_booleans_are_never_taken_as_numbers(generator):
     from jaxexo.inference import Obstacle
     from jaxexo.inference.swing_timing import time_swing
 
-    for call, name in ((lambda: Obstacle.rectangle("0.1", 0.1), "width"),
-                       (lambda: Obstacle.profile([[0.3, 0.0], [0.4, "0.1"], [0.5, 0.0]]), "points"),
-                       (lambda: generator.generate(Obstacle.named("base1"), start_y="0.0"), "start_y"),
-                       (lambda: generator.generate(Obstacle.named("base1"), smoothing="0.1"), "smoothing"),
-                       (lambda: generator.generate(Obstacle.named("base1"), duration="1"), "duration")):
+    for call, name in (
+        (lambda: Obstacle.rectangle("0.1", 0.1), "width"),
+        (lambda: Obstacle.profile([[0.3, 0.0], [0.4, "0.1"], [0.5, 0.0]]), "points"),
+        (lambda: generator.generate(Obstacle.named("base1"), start_y="0.0"), "start_y"),
+        (lambda: generator.generate(Obstacle.named("base1"), smoothing="0.1"), "smoothing"),
+        (lambda: generator.generate(Obstacle.named("base1"), duration="1"), "duration"),
+    ):
         with pytest.raises(ValueError, match=f"{name} must be .*string"):
             call()
     traj = generator.generate(Obstacle.named("base1"))
@@ -348,7 +394,9 @@ def test_public_api_names_the_argument_instead_of_a_raw_error(generator):
     with pytest.raises(TypeError, match="config: expected a jaxexo Config"):
         CFFTG(42)
     # the obvious intent: a config file's path, and None for the default model
-    assert CFFTG(str(ROOT / "configs" / "quick.toml")).config == load_config(ROOT / "configs" / "quick.toml")
+    assert CFFTG(str(ROOT / "configs" / "quick.toml")).config == load_config(
+        ROOT / "configs" / "quick.toml"
+    )
     assert CFFTG(None).config == load_config(ROOT / "configs" / "default.toml")
 
 
@@ -377,6 +425,7 @@ def test_every_size_from_input_is_bounded_before_allocating(generator):
 # --------------------------------------------------------------------------------------------
 # Configs: one default, every shipped config unchanged in meaning, physical bounds
 # --------------------------------------------------------------------------------------------
+
 
 def test_an_empty_config_config_and_the_packaged_default_are_one_default(tmp_path):
     from jaxexo.config import Config, load_config, packaged_config
@@ -424,21 +473,35 @@ def test_the_tests_legacy_base_is_the_former_schema_defaults():
     snap = json.loads((ROOT / "tests" / "data" / "resolved_configs.json").read_text())
     from resolved_snapshot import without_added
 
-    assert without_added(config_to_toml(config_from_dict(legacy_raw({})))) == snap["schema_defaults"]
+    assert (
+        without_added(config_to_toml(config_from_dict(legacy_raw({})))) == snap["schema_defaults"]
+    )
 
 
-@pytest.mark.parametrize("raw, message", [
-    ({"env": {"backward_tolerance": 100}}, r"env\.backward_tolerance: must be <= 10"),
-    ({"env": {"shield_clearance": 5.0}}, r"env\.shield_clearance: must be <= 0.1"),
-    ({"env": {"shield_clearance": 0.001}}, r"env\.shield_clearance: 0.001 m is below env\.min_clearance"),
-    ({"kinematics": {"thigh": 1e9}}, r"kinematics\.thigh: must be <= 1.0"),
-    ({"kinematics": {"shin": 2.0}}, r"kinematics\.shin: must be <= 1.0"),
-    ({"kinematics": {"foot_length": 3.0}}, r"kinematics\.foot_length: must be <= 0.5"),
-    ({"device": {"joint_velocity": [1e-9, 1e-9]}}, r"device\.joint_velocity\[0\]: must be >= 0.1"),
-    ({"device": {"joint_acceleration": [1e9, 20.0]}}, r"device\.joint_acceleration\[0\]: must be <= 1000"),
-    ({"device": {"min_swing_duration": 1e9}}, r"device\.min_swing_duration: must be <= 60"),
-    ({"device": {"control_rate": 1e12}}, r"device\.control_rate: must be <= 10000"),
-])
+@pytest.mark.parametrize(
+    "raw, message",
+    [
+        ({"env": {"backward_tolerance": 100}}, r"env\.backward_tolerance: must be <= 10"),
+        ({"env": {"shield_clearance": 5.0}}, r"env\.shield_clearance: must be <= 0.1"),
+        (
+            {"env": {"shield_clearance": 0.001}},
+            r"env\.shield_clearance: 0.001 m is below env\.min_clearance",
+        ),
+        ({"kinematics": {"thigh": 1e9}}, r"kinematics\.thigh: must be <= 1.0"),
+        ({"kinematics": {"shin": 2.0}}, r"kinematics\.shin: must be <= 1.0"),
+        ({"kinematics": {"foot_length": 3.0}}, r"kinematics\.foot_length: must be <= 0.5"),
+        (
+            {"device": {"joint_velocity": [1e-9, 1e-9]}},
+            r"device\.joint_velocity\[0\]: must be >= 0.1",
+        ),
+        (
+            {"device": {"joint_acceleration": [1e9, 20.0]}},
+            r"device\.joint_acceleration\[0\]: must be <= 1000",
+        ),
+        ({"device": {"min_swing_duration": 1e9}}, r"device\.min_swing_duration: must be <= 60"),
+        ({"device": {"control_rate": 1e12}}, r"device\.control_rate: must be <= 10000"),
+    ],
+)
 def test_physically_meaningless_settings_are_refused_naming_the_field(raw, message):
     with pytest.raises(ConfigError, match=message):
         config_from_dict(raw)

@@ -11,7 +11,14 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from jaxexo.physics.rewards import EXO_TERMS, TRAJECTORY_TERMS, exo_terms, normalize_weights, total_reward, trajectory_terms
+from jaxexo.physics.rewards import (
+    EXO_TERMS,
+    TRAJECTORY_TERMS,
+    exo_terms,
+    normalize_weights,
+    total_reward,
+    trajectory_terms,
+)
 
 C = SimpleNamespace(
     step_threshold=30.0,
@@ -66,8 +73,16 @@ def only(vec, index, value, names):
 
 
 def test_term_names():
-    assert TRAJECTORY_TERMS == ("steps", "collision", "backward", "goal", "mid_goal", "max_height", "safety",
-                                "z_monotone")
+    assert TRAJECTORY_TERMS == (
+        "steps",
+        "collision",
+        "backward",
+        "goal",
+        "mid_goal",
+        "max_height",
+        "safety",
+        "z_monotone",
+    )
     assert EXO_TERMS == ("hip_lowering", "leg_length", "joint_limits", "hip_height")
 
 
@@ -76,7 +91,9 @@ def test_neutral_step_has_only_the_step_term():
 
 
 # r0, eq 2.29 -------------------------------------------------------------------------------
-@pytest.mark.parametrize("steps, expected", [(1, 1 / 30), (29, 29 / 30), (30, 1.0), (31, -31 / 30), (60, -2.0)])
+@pytest.mark.parametrize(
+    "steps, expected", [(1, 1 / 30), (29, 29 / 30), (30, 1.0), (31, -31 / 30), (60, -2.0)]
+)
 def test_r0_steps(steps, expected):
     assert traj(steps=steps)[0] == pytest.approx(expected)
 
@@ -90,9 +107,9 @@ def test_r1_collision():
 
 # r2, eq 2.31 -------------------------------------------------------------------------------
 def test_r2_backward():
-    assert traj(heel=[0.07, 0.05])[2] == -1.5            # y decreased
-    assert traj(heel=[0.10, 0.08])[2] == 0.0             # y unchanged (straight up)
-    assert traj(heel=[0.13, 0.05])[2] == 0.0             # forward
+    assert traj(heel=[0.07, 0.05])[2] == -1.5  # y decreased
+    assert traj(heel=[0.10, 0.08])[2] == 0.0  # y unchanged (straight up)
+    assert traj(heel=[0.13, 0.05])[2] == 0.0  # forward
 
 
 # r3, eq 2.32 -------------------------------------------------------------------------------
@@ -111,11 +128,13 @@ def test_r4_mid_goal():
 def test_r5_max_height():
     t = traj(prev_heel=[0.30, 0.30], heel=[0.30, 0.33])  # straight up, before the mid-goal
     only(t[1:], 4, -4.0, TRAJECTORY_TERMS[1:])
-    assert traj(prev_heel=[0.30, 0.27], heel=[0.30, 0.30])[5] == 0.0   # exactly at max_z: allowed
+    assert traj(prev_heel=[0.30, 0.27], heel=[0.30, 0.30])[5] == 0.0  # exactly at max_z: allowed
 
 
 # r6, eq 2.35 -------------------------------------------------------------------------------
-@pytest.mark.parametrize("clearance, expected", [(0.029, -2.0), (0.0, -2.0), (-0.05, -2.0), (0.03, 0.0), (0.5, 0.0)])
+@pytest.mark.parametrize(
+    "clearance, expected", [(0.029, -2.0), (0.0, -2.0), (-0.05, -2.0), (0.03, 0.0), (0.5, 0.0)]
+)
 def test_r6_safety(clearance, expected):
     assert traj(clearance=clearance)[6] == expected
 
@@ -124,13 +143,13 @@ def test_r6_safety(clearance, expected):
 @pytest.mark.parametrize(
     "prev, heel, expected",
     [
-        ((0.40, 0.10), (0.43, 0.07), -0.5),   # before the mid-goal (0.40 <= 0.45) and falling
-        ((0.40, 0.10), (0.43, 0.13), 0.0),    # before and rising
-        ((0.40, 0.10), (0.43, 0.10), 0.0),    # before and level
-        ((0.45, 0.10), (0.48, 0.07), -0.5),   # exactly at the mid-goal y counts as before
-        ((0.46, 0.10), (0.49, 0.13), -0.5),   # after and rising
-        ((0.46, 0.10), (0.49, 0.07), 0.0),    # after and falling
-        ((0.46, 0.10), (0.49, 0.10), 0.0),    # after and level
+        ((0.40, 0.10), (0.43, 0.07), -0.5),  # before the mid-goal (0.40 <= 0.45) and falling
+        ((0.40, 0.10), (0.43, 0.13), 0.0),  # before and rising
+        ((0.40, 0.10), (0.43, 0.10), 0.0),  # before and level
+        ((0.45, 0.10), (0.48, 0.07), -0.5),  # exactly at the mid-goal y counts as before
+        ((0.46, 0.10), (0.49, 0.13), -0.5),  # after and rising
+        ((0.46, 0.10), (0.49, 0.07), 0.0),  # after and falling
+        ((0.46, 0.10), (0.49, 0.10), 0.0),  # after and level
     ],
 )
 def test_r7_z_monotone(prev, heel, expected):
@@ -140,11 +159,18 @@ def test_r7_z_monotone(prev, heel, expected):
 def test_trajectory_terms_vectorised():
     n = 4
     out = trajectory_terms(
-        np, C, steps=np.array([1, 10, 30, 40]), prev_heel=np.tile([0.1, 0.05], (n, 1)),
+        np,
+        C,
+        steps=np.array([1, 10, 30, 40]),
+        prev_heel=np.tile([0.1, 0.05], (n, 1)),
         heel=np.array([[0.13, 0.05], [0.07, 0.05], [0.13, 0.5], [0.13, 0.05]]),
-        collided=np.array([False, True, False, False]), clearance=np.array([0.2, 0.0, 0.2, 0.01]),
-        reached_goal=np.array([False, False, False, True]), missed_mid=np.array([True, False, False, False]),
-        mid_y=np.full(n, 0.45), max_z=np.full(n, 0.3))
+        collided=np.array([False, True, False, False]),
+        clearance=np.array([0.2, 0.0, 0.2, 0.01]),
+        reached_goal=np.array([False, False, False, True]),
+        missed_mid=np.array([True, False, False, False]),
+        mid_y=np.full(n, 0.45),
+        max_z=np.full(n, 0.3),
+    )
     assert out.shape == (n, 8)
     np.testing.assert_allclose(out[:, 0], [1 / 30, 10 / 30, 1.0, -40 / 30])
     np.testing.assert_allclose(out[:, 1], [0, -10, 0, 0])
@@ -158,8 +184,12 @@ def test_trajectory_terms_vectorised():
 
 # Exoskeleton terms -----------------------------------------------------------------------------
 
-NEUTRAL_EXO = dict(hip_z=np.asarray(0.97), leg_swing=np.asarray(0.8), leg_stance=np.asarray(1.0),
-                   limits_violated=np.asarray(False))
+NEUTRAL_EXO = dict(
+    hip_z=np.asarray(0.97),
+    leg_swing=np.asarray(0.8),
+    leg_stance=np.asarray(1.0),
+    limits_violated=np.asarray(False),
+)
 
 
 def exo(**changes):
@@ -176,7 +206,7 @@ def test_neutral_exo_is_zero():
 def test_e0_hip_lowering():
     # hip_z / (t + s) = 0.8 < 0.9: -o (t + s) / h_z = -1.25 / 0.8.
     only(exo(hip_z=0.8), 0, -1.25 / 0.8, EXO_TERMS)
-    assert exo(hip_z=0.9)[0] == 0.0     # at the threshold: not lowered
+    assert exo(hip_z=0.9)[0] == 0.0  # at the threshold: not lowered
     assert exo(hip_z=0.95)[0] == 0.0
 
 
@@ -184,9 +214,9 @@ def test_e0_hip_lowering():
 @pytest.mark.parametrize(
     "swing, stance, expected",
     [
-        (1.02, 1.0, -6.0),    # swing leg 2 cm too long (> tolerance 1 cm)
-        (0.8, 1.02, -6.0),    # stance leg too long
-        (1.005, 1.0, 0.0),    # within the tolerance
+        (1.02, 1.0, -6.0),  # swing leg 2 cm too long (> tolerance 1 cm)
+        (0.8, 1.02, -6.0),  # stance leg too long
+        (1.005, 1.0, 0.0),  # within the tolerance
         (0.5, 0.5, 0.0),
     ],
 )
@@ -214,8 +244,14 @@ def test_e1_not_fired_by_rounding_within_two_legs():
     # Hand case (float64): pivot heel at y = 0.06, swing heel on the ground at 1.172: 1.112 m apart,
     # the hip is placed so that both legs are exactly t + s = 1 long.
     ks = leg_state(np, 0.06, np.array([1.172, 0.0]), 0.5, 0.5)
-    e = exo_terms(np, c, hip_z=ks["hip"][1], leg_swing=ks["leg_swing"], leg_stance=ks["leg_stance"],
-                  limits_violated=np.asarray(False))
+    e = exo_terms(
+        np,
+        c,
+        hip_z=ks["hip"][1],
+        leg_swing=ks["leg_swing"],
+        leg_stance=ks["leg_stance"],
+        limits_violated=np.asarray(False),
+    )
     assert e[1] == 0.0, f"leg_stance = {ks['leg_stance']!r}"
     # A grid of grounded heels against pivots in the sampled range, float64 and float32.
     import jax.numpy as jnp
@@ -224,8 +260,14 @@ def test_e1_not_fired_by_rounding_within_two_legs():
     heel = np.stack([H, 0 * H], -1)
     for xp, dt in ((np, np.float64), (jnp, jnp.float32)):
         ks = leg_state(xp, xp.asarray(P, dt), xp.asarray(heel, dt), 0.5, 0.5)
-        e = exo_terms(xp, c, hip_z=ks["hip"][..., 1], leg_swing=ks["leg_swing"], leg_stance=ks["leg_stance"],
-                      limits_violated=xp.zeros(P.shape, bool))
+        e = exo_terms(
+            xp,
+            c,
+            hip_z=ks["hip"][..., 1],
+            leg_swing=ks["leg_swing"],
+            leg_stance=ks["leg_stance"],
+            limits_violated=xp.zeros(P.shape, bool),
+        )
         assert int((np.asarray(e[..., 1]) != 0).sum()) == 0, xp.__name__
 
 
@@ -247,7 +289,7 @@ def test_normalize_weights_values():
 
 
 def test_total_reward():
-    t = np.arange(1.0, 9.0)            # 1 .. 8
+    t = np.arange(1.0, 9.0)  # 1 .. 8
     e = np.array([-1.0, -2.0, -3.0, -4.0])
     expected = float(np.dot(C.traj_weights, t) + np.dot(C.exo_weights, e))
     assert total_reward(np, C, t, e) == pytest.approx(expected)
@@ -277,15 +319,29 @@ def env_tools(mixed_env, mixed_step):
     # its outline size (16) fits every named obstacle.
     env, params = mixed_env, mixed_env.default_params
 
-    def run(heel, action, *, obstacle=None, pivot="obstacle", time=0, visited=False, p=None, last=-1):
+    def run(
+        heel, action, *, obstacle=None, pivot="obstacle", time=0, visited=False, p=None, last=-1
+    ):
         lay = env.layout_for(obstacle or Obstacle.named("base1"), pivot=pivot)
         _, state = env.init_state(lay, params)
-        state = state.replace(heel=jnp.asarray(heel, jnp.float32), time=jnp.asarray(time, jnp.int32),
-                              visited_mid=jnp.asarray(visited), last_action=jnp.asarray(last, jnp.int32))
-        obs, new_state, reward, terminated, truncated, info = mixed_step(jax.random.PRNGKey(0), state, action,
-                                                                          params if p is None else p)
-        return dict(obs=obs, state=new_state, reward=float(reward), terminated=bool(terminated),
-                    traj=np.asarray(info["traj_terms"]), exo=np.asarray(info["exo_terms"]), info=info)
+        state = state.replace(
+            heel=jnp.asarray(heel, jnp.float32),
+            time=jnp.asarray(time, jnp.int32),
+            visited_mid=jnp.asarray(visited),
+            last_action=jnp.asarray(last, jnp.int32),
+        )
+        obs, new_state, reward, terminated, truncated, info = mixed_step(
+            jax.random.PRNGKey(0), state, action, params if p is None else p
+        )
+        return dict(
+            obs=obs,
+            state=new_state,
+            reward=float(reward),
+            terminated=bool(terminated),
+            traj=np.asarray(info["traj_terms"]),
+            exo=np.asarray(info["exo_terms"]),
+            info=info,
+        )
 
     return SimpleNamespace(run=run, env=env, params=params)
 
@@ -297,7 +353,10 @@ def test_env_neutral_step(env_tools):
     np.testing.assert_array_equal(out["exo"], np.zeros(4))
     assert not out["terminated"]
     p = env_tools.params
-    expected = float(np.dot(np.asarray(p.traj_weights), out["traj"]) + np.dot(np.asarray(p.exo_weights), out["exo"]))
+    expected = float(
+        np.dot(np.asarray(p.traj_weights), out["traj"])
+        + np.dot(np.asarray(p.exo_weights), out["exo"])
+    )
     # Optional shaping (not a thesis term, reported separately when the package adds it).
     expected += float(out["info"].get("shaping", 0.0))
     assert out["reward"] == pytest.approx(expected, abs=1e-6)
@@ -313,7 +372,7 @@ def test_env_collision(env_tools):
     # Toe at 0.33 + 0.20 = 0.53 at z = 0.05: the foot enters Base 1 through its near side.
     out = env_tools.run([0.30, 0.05], RIGHT)
     assert out["traj"][1] == -10.0
-    assert out["traj"][6] == -2.0          # clearance 0 < safety distance too
+    assert out["traj"][6] == -2.0  # clearance 0 < safety distance too
     assert bool(out["info"]["collision"]) and not out["terminated"]  # penalty mode: continue
     assert float(out["info"]["clearance"]) <= 0.0
 
@@ -335,11 +394,11 @@ def test_env_goal(env_tools):
 
 def test_env_mid_goal(env_tools):
     # Mid-goal box: centre (0.45, 0.20), half sizes (0.06, 0.05): far edge at y = 0.51.
-    out = env_tools.run([0.50, 0.30], RIGHT)          # heel at 0.53, never went through the box
+    out = env_tools.run([0.50, 0.30], RIGHT)  # heel at 0.53, never went through the box
     assert out["traj"][4] == -1.0
     visited = env_tools.run([0.50, 0.30], RIGHT, visited=True)
     assert visited["traj"][4] == 0.0
-    inside = env_tools.run([0.42, 0.20], RIGHT)       # into the box at (0.45, 0.20): visited
+    inside = env_tools.run([0.42, 0.20], RIGHT)  # into the box at (0.45, 0.20): visited
     assert inside["traj"][4] == 0.0 and bool(inside["state"].visited_mid)
 
 
@@ -356,12 +415,12 @@ def test_env_safety(env_tools):
     out = env_tools.run([0.10, 0.05], RIGHT)
     assert float(out["info"]["clearance"]) == pytest.approx(0.02, abs=1e-5)
     assert out["traj"][6] == -2.0 and out["traj"][1] == 0.0
-    assert env_tools.run([0.05, 0.05], RIGHT)["traj"][6] == 0.0   # 7 cm away
+    assert env_tools.run([0.05, 0.05], RIGHT)["traj"][6] == 0.0  # 7 cm away
 
 
 def test_env_z_monotone(env_tools):
-    assert env_tools.run([0.20, 0.10], DOWN)["traj"][7] == -0.5     # falling before the mid-goal
-    assert env_tools.run([0.60, 0.10], UP)["traj"][7] == -0.5       # rising after it
+    assert env_tools.run([0.20, 0.10], DOWN)["traj"][7] == -0.5  # falling before the mid-goal
+    assert env_tools.run([0.60, 0.10], UP)["traj"][7] == -0.5  # rising after it
     assert env_tools.run([0.60, 0.10], DOWN)["traj"][7] == 0.0
 
 
@@ -370,7 +429,7 @@ def test_env_hip_lowering(env_tools):
 
     # Pivot at the agent's start (y = 0), heel moved to 0.90: dist_y 0.45, h_z = sqrt(1 - 0.45^2) < 0.9.
     out = env_tools.run([0.87, 0.0], RIGHT, obstacle=Obstacle.named("base1"), pivot="agent")
-    hz = math.sqrt(1 - 0.45 ** 2)
+    hz = math.sqrt(1 - 0.45**2)
     assert out["exo"][0] == pytest.approx(-1.0 / hz, rel=1e-5)
     np.testing.assert_allclose(np.asarray(out["info"]["hip"]), [0.45, hz], atol=1e-5)
     assert env_tools.run([0.60, 0.0], RIGHT, pivot="agent")["exo"][0] == 0.0
@@ -399,9 +458,9 @@ def test_env_joint_limits(env_tools):
 def test_env_hip_height(env_tools):
     # The hip model never exceeds t + s = 1.0, so lower max_hip_z to make eq 2.51 fire.
     p = env_tools.params.replace(max_hip_z=env_tools.params.max_hip_z * 0 + 0.99)
-    out = env_tools.run([0.42, 0.0], RIGHT, p=p)          # heel at the pivot's y: hip at 1.0
+    out = env_tools.run([0.42, 0.0], RIGHT, p=p)  # heel at the pivot's y: hip at 1.0
     assert out["exo"][3] == -1.0
-    assert env_tools.run([0.42, 0.0], RIGHT)["exo"][3] == 0.0   # default max_hip_z = 1.0
+    assert env_tools.run([0.42, 0.0], RIGHT)["exo"][3] == 0.0  # default max_hip_z = 1.0
 
 
 # --------------------------------------------------------------------------------------------
@@ -414,7 +473,7 @@ def _two_link_angles(hip, heel, thigh, shin):
     hip angle from the downward vertical, positive forward; knee <= 0 in flexion."""
     d = np.asarray(heel, float) - np.asarray(hip, float)
     r = min(float(np.hypot(*d)), thigh + shin)
-    to_heel = math.atan2(d[0], -d[1])                         # from the downward vertical, forward +
+    to_heel = math.atan2(d[0], -d[1])  # from the downward vertical, forward +
     inner = math.acos(np.clip((thigh**2 + r**2 - shin**2) / (2 * thigh * r), -1, 1))
     knee = -(math.pi - math.acos(np.clip((thigh**2 + shin**2 - r**2) / (2 * thigh * shin), -1, 1)))
     return to_heel + inner, knee
@@ -426,11 +485,18 @@ def test_wearer_lift_by_hand():
     assert WEARER_TERMS == ("lift", "move_time", "turn")
     c = SimpleNamespace(shield_clearance=0.025, joint_speed=np.array([3.0, 4.0, 3.0, 4.0]))
     heel = np.array([[0.4, 0.10], [0.4, 0.125], [0.4, 0.165], [0.9, 0.0]])
-    out = wearer_terms(np, c, heel=heel, top=np.full(4, 0.10), angles_prev=np.zeros((4, 4)), angles=np.zeros((4, 4)))
+    out = wearer_terms(
+        np,
+        c,
+        heel=heel,
+        top=np.full(4, 0.10),
+        angles_prev=np.zeros((4, 4)),
+        angles=np.zeros((4, 4)),
+    )
     # below top + clearance: nothing; 4 cm above it: -0.04; no joint motion: no time
     np.testing.assert_allclose(out[:, 0], [0.0, 0.0, -0.04, 0.0], atol=1e-12)
     np.testing.assert_array_equal(out[:, 1], np.zeros(4))
-    np.testing.assert_array_equal(out[:, 2], np.zeros(4))     # no turn given: none counted
+    np.testing.assert_array_equal(out[:, 2], np.zeros(4))  # no turn given: none counted
 
 
 def test_wearer_turn_by_hand():
@@ -442,9 +508,11 @@ def test_wearer_turn_by_hand():
     dirs = dynamics.action_directions()
     a = np.array([0, 9, 27, 1, 35, 4])
     last = np.array([0, 0, 9, 0, 0, -1])
-    np.testing.assert_allclose(turn_of(np, dirs, a, last),
-                               [0.0, 1.0, 2.0, 1 - math.cos(math.radians(10)), 1 - math.cos(math.radians(10)), 0.0],
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        turn_of(np, dirs, a, last),
+        [0.0, 1.0, 2.0, 1 - math.cos(math.radians(10)), 1 - math.cos(math.radians(10)), 0.0],
+        atol=1e-12,
+    )
 
 
 def test_wearer_move_time_matches_two_link_reference(env_tools):
@@ -464,7 +532,7 @@ def test_wearer_move_time_matches_two_link_reference(env_tools):
             sw = _two_link_angles(hip, h, thigh, shin)
             st = _two_link_angles(hip, [pivot, 0.0], thigh, shin)
             q.append(np.array([sw[0], sw[1], st[0], st[1]]))
-        speed = np.array([3.0, 4.0, 3.0, 4.0])      # the config's [device] defaults (hip, knee) x 2
+        speed = np.array([3.0, 4.0, 3.0, 4.0])  # the config's [device] defaults (hip, knee) x 2
         expected = np.max(np.abs(q[1] - q[0]) / speed)
         got = -float(np.asarray(out["info"]["wearer_terms"])[1])
         assert expected > 0.003
@@ -475,9 +543,13 @@ def test_wearer_costs_enter_the_reward(env_tools):
     """lift_cost and time_cost weigh the wearer's terms in the reward (0: the thesis reward)."""
     p0 = env_tools.params
     base = env_tools.run([0.40, 0.20], UP)
-    p1 = p0.replace(lift_cost=p0.lift_cost + 10.0, time_cost=p0.time_cost + 2.0, turn_cost=p0.turn_cost + 3.0)
+    p1 = p0.replace(
+        lift_cost=p0.lift_cost + 10.0, time_cost=p0.time_cost + 2.0, turn_cost=p0.turn_cost + 3.0
+    )
     base = env_tools.run([0.40, 0.20], UP, last=RIGHT)
     out = env_tools.run([0.40, 0.20], UP, p=p1, last=RIGHT)
     w = np.asarray(out["info"]["wearer_terms"])
-    assert w[0] < 0 and w[1] < 0 and w[2] == pytest.approx(-1.0, abs=1e-6)    # a right-angle turn
-    assert out["reward"] - base["reward"] == pytest.approx(10.0 * w[0] + 2.0 * w[1] + 3.0 * w[2], rel=1e-4, abs=1e-6)
+    assert w[0] < 0 and w[1] < 0 and w[2] == pytest.approx(-1.0, abs=1e-6)  # a right-angle turn
+    assert out["reward"] - base["reward"] == pytest.approx(
+        10.0 * w[0] + 2.0 * w[1] + 3.0 * w[2], rel=1e-4, abs=1e-6
+    )

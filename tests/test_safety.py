@@ -24,6 +24,7 @@ FOOT = 0.2
 # Brute-force references (independent of jaxexo.physics.swept)
 # --------------------------------------------------------------------------------------------
 
+
 def _seg_points(a, b, n):
     t = np.linspace(0.0, 1.0, n)[:, None]
     return a + t * (b - a)
@@ -37,11 +38,15 @@ def brute_swept(h0, h1, outline, n_move=81, n_foot=81, n_edge=81):
     heels = _seg_points(h0, h1, n_move)
     s = np.linspace(0.0, FOOT, n_foot)
     pts = (heels[:, None, :] + np.stack([s, 0 * s], -1)[None]).reshape(-1, 2)
-    edge_pts = np.concatenate([_seg_points(outline[i], outline[i + 1], n_edge) for i in range(len(outline) - 1)])
+    edge_pts = np.concatenate(
+        [_seg_points(outline[i], outline[i + 1], n_edge) for i in range(len(outline) - 1)]
+    )
     d = np.sqrt(((pts[:, None, :] - edge_pts[None]) ** 2).sum(-1)).min()
     inside = geometry.point_in_obstacle(np, pts, outline).any()
     edge_len = np.max(np.linalg.norm(np.diff(outline, axis=0), axis=1))
-    res = 0.5 * (np.linalg.norm(h1 - h0) / (n_move - 1) + FOOT / (n_foot - 1) + edge_len / (n_edge - 1))
+    res = 0.5 * (
+        np.linalg.norm(h1 - h0) / (n_move - 1) + FOOT / (n_foot - 1) + edge_len / (n_edge - 1)
+    )
     return (0.0 if inside else d), res, d
 
 
@@ -56,12 +61,17 @@ def outlines(draw):
     k = draw(st.integers(2, 8))
     z = draw(st.lists(st.floats(0.0, 0.25), min_size=k, max_size=k))
     y = np.linspace(c - w / 2, c + w / 2, k)
-    return Obstacle.profile(np.column_stack([y, z]) if max(z) > 0 else [[c - w / 2, h], [c + w / 2, h]]).outline
+    return Obstacle.profile(
+        np.column_stack([y, z]) if max(z) > 0 else [[c - w / 2, h], [c + w / 2, h]]
+    ).outline
 
 
 @settings(max_examples=80)
-@given(outline=outlines(), h0=st.tuples(st.floats(-0.1, 0.8), st.floats(0.0, 0.35)),
-       move=st.tuples(st.floats(-0.15, 0.15), st.floats(-0.15, 0.15)))
+@given(
+    outline=outlines(),
+    h0=st.tuples(st.floats(-0.1, 0.8), st.floats(0.0, 0.35)),
+    move=st.tuples(st.floats(-0.15, 0.15), st.floats(-0.15, 0.15)),
+)
 def test_swept_distance_is_exact_against_dense_brute_force(outline, h0, move):
     h0 = np.array(h0)
     h1 = h0 + np.array(move)
@@ -77,7 +87,9 @@ def test_swept_distance_is_exact_against_dense_brute_force(outline, h0, move):
     assert exact <= brute + 1e-12
     assert brute - exact <= res + 1e-9
     # the term-by-term form the shield and the environment use under XLA: the same terms, the same value
-    assert float(swept.swept_distance_by_edge(np, h0, h1, FOOT, outline[:, 0], outline[:, 1])) == exact
+    assert (
+        float(swept.swept_distance_by_edge(np, h0, h1, FOOT, outline[:, 0], outline[:, 1])) == exact
+    )
 
 
 def test_swept_distance_under_jit_matches_numpy():
@@ -90,10 +102,15 @@ def test_swept_distance_under_jit_matches_numpy():
     h1 = h0 + rng.uniform(-0.1, 0.1, (500, 2))
     ref = swept.swept_clearance(np, h0, h1, FOOT, outline[None])
     f = jax.jit(lambda a, b, o: swept.swept_clearance(jnp, a, b, FOOT, o))
-    got = np.asarray(f(jnp.asarray(h0, jnp.float32), jnp.asarray(h1, jnp.float32),
-                       jnp.asarray(outline[None], jnp.float32)))
+    got = np.asarray(
+        f(
+            jnp.asarray(h0, jnp.float32),
+            jnp.asarray(h1, jnp.float32),
+            jnp.asarray(outline[None], jnp.float32),
+        )
+    )
     np.testing.assert_allclose(got, ref, atol=2e-5)
-    assert (ref <= 0).any() and (ref > 0.02).any()      # both contact and clear moves were tried
+    assert (ref <= 0).any() and (ref > 0.02).any()  # both contact and clear moves were tried
 
 
 def test_a_two_sample_line_through_the_triangle_fails():
@@ -109,10 +126,19 @@ def test_a_two_sample_line_through_the_triangle_fails():
 
 
 @settings(max_examples=60)
-@given(outline=outlines(), seed=st.integers(0, 2**31 - 1), n=st.integers(2, 12),
-       smoothing=st.sampled_from([0.0, 0.001, 0.005]))
+@given(
+    outline=outlines(),
+    seed=st.integers(0, 2**31 - 1),
+    n=st.integers(2, 12),
+    smoothing=st.sampled_from([0.0, 0.001, 0.005]),
+)
 # a 2-sample move along the ground through a rectangle's base (swept distance 7e-18 m, not 0)
-@example(outline=np.array([[0.25, 0.0], [0.25, 0.25], [0.5, 0.25], [0.5, 0.0]]), seed=90981, n=2, smoothing=0.0)
+@example(
+    outline=np.array([[0.25, 0.0], [0.25, 0.25], [0.5, 0.25], [0.5, 0.0]]),
+    seed=90981,
+    n=2,
+    smoothing=0.0,
+)
 def test_a_verdict_at_n_samples_holds_at_10n(outline, seed, n, smoothing):
     """Every path the verdict calls clear at N samples is clear at 10 N samples of the same curve (the
     per-sample exact foot distance of jaxexo.physics.geometry, not the swept one), and the guaranteed
@@ -149,9 +175,12 @@ def test_a_verdict_at_n_samples_holds_at_10n(outline, seed, n, smoothing):
 # Environment, reward and config
 # --------------------------------------------------------------------------------------------
 
+
 def _step(xp, cfg, prev, heel, max_y=None):
     p = numpy_params(cfg)
-    scene = dynamics.make_scene(Obstacle.named("base1"), "obstacle", foot_length=FOOT)   # [0.35, 0.55] x 0.10
+    scene = dynamics.make_scene(
+        Obstacle.named("base1"), "obstacle", foot_length=FOOT
+    )  # [0.35, 0.55] x 0.10
     lay = dynamics.stack_scenes([scene], np.float32)
     lay = type(lay)(**{k: v[0] for k, v in vars(lay).items()})
     if xp is not np:
@@ -159,12 +188,25 @@ def _step(xp, cfg, prev, heel, max_y=None):
 
         p = EnvParams.from_config(cfg)
         lay = type(lay)(**{k: xp.asarray(v) for k, v in vars(lay).items()})
-    out = dynamics.transition(xp, p, xp.asarray(prev, xp.float32), xp.asarray(heel, xp.float32),
-                              xp.asarray(1), xp.asarray(False), lay, max_y)
-    info = {k: np.asarray(v) for k, v in out["info"].items() if k in ("collision", "clearance", "backward",
-                                                                      "traj_terms")}
+    out = dynamics.transition(
+        xp,
+        p,
+        xp.asarray(prev, xp.float32),
+        xp.asarray(heel, xp.float32),
+        xp.asarray(1),
+        xp.asarray(False),
+        lay,
+        max_y,
+    )
+    info = {
+        k: np.asarray(v)
+        for k, v in out["info"].items()
+        if k in ("collision", "clearance", "backward", "traj_terms")
+    }
     # What the one verdict (jaxexo.physics.outcome) makes of this move: its margin and backward checks.
-    v = outcome.verdict(np, True, info["clearance"], True, True, info["backward"], **outcome.rule(cfg.env))
+    v = outcome.verdict(
+        np, True, info["clearance"], True, True, info["backward"], **outcome.rule(cfg.env)
+    )
     info["backward_violation"] = not v["backward_ok"]
     info["unsafe"] = not (v["clearance_ok"] and v["backward_ok"])
     return info
@@ -213,6 +255,7 @@ def test_the_margin_is_validated_at_config_load():
 # The generator: no false "safe", and the CFFTG fallback
 # --------------------------------------------------------------------------------------------
 
+
 def _dense_recheck(gen, t, factor=10):
     """Clearance and backward motion of trajectory t's own curve at factor x denser sampling."""
     n = len(t.heel)
@@ -221,16 +264,27 @@ def _dense_recheck(gen, t, factor=10):
         # the corrected spline (jaxexo.inference.clearing), its own coefficients at the dense parameters
         from jaxexo.inference.clearing import clear_smooth
 
-        out = clear_smooth(t.raw, t.scene.outline, gen.sp.foot_length, gen.sp.min_clearance, n, t.smoothing,
-                           dense_points=dense_n)
-        np.testing.assert_allclose(out[0], t.heel, rtol=0, atol=1e-9)   # the same curve
+        out = clear_smooth(
+            t.raw,
+            t.scene.outline,
+            gen.sp.foot_length,
+            gen.sp.min_clearance,
+            n,
+            t.smoothing,
+            dense_points=dense_n,
+        )
+        np.testing.assert_allclose(out[0], t.heel, rtol=0, atol=1e-9)  # the same curve
         fine = out[3]
         y = fine[:, 0]
     elif np.isnan(t.smoothing):
         fine = np.concatenate([sm.linear_resample(t.raw, dense_n), t.raw])
         y = sm.linear_resample(t.raw, dense_n)[:, 0]
     else:
-        fine = sm.smooth_paths([t.raw], dense_n, t.smoothing)[0] if t.smoothing > 0 else sm.linear_resample(t.raw, dense_n)
+        fine = (
+            sm.smooth_paths([t.raw], dense_n, t.smoothing)[0]
+            if t.smoothing > 0
+            else sm.linear_resample(t.raw, dense_n)
+        )
         y = fine[:, 0]
     c = geometry.foot_clearance(np, fine, gen.sp.foot_length, t.scene.outline).min()
     return c, float(np.max(np.maximum.accumulate(y) - y))
@@ -240,9 +294,13 @@ def _dense_recheck(gen, t, factor=10):
 def test_no_rl_trajectory_flagged_safe_fails_at_10x_density(trained_run, unseen):
     gen = TrajectoryGenerator.load(trained_run / "policy.npz")
     sc = safety_scenarios(gen.config, 150, unseen=unseen)
-    b = gen.generate_batch([s["obstacle"] for s in sc], pivot=[s["pivot"] for s in sc],
-                           start_y=[s["start_y"] for s in sc], step_length=[s["step_length"] for s in sc],
-                           fallback=None)
+    b = gen.generate_batch(
+        [s["obstacle"] for s in sc],
+        pivot=[s["pivot"] for s in sc],
+        start_y=[s["start_y"] for s in sc],
+        step_length=[s["step_length"] for s in sc],
+        fallback=None,
+    )
     margin, tol = gen.config.env.min_clearance, gen.config.env.backward_tolerance
     for i in np.flatnonzero(b.ok):
         c, back = _dense_recheck(gen, b[i])
@@ -268,10 +326,16 @@ def test_cfftg_fallback_replaces_an_unsafe_rl_swing(trained_run):
     rl = gen.finish([scene], [raw], 100, 0.0, 1.0, None)[0]
     assert not rl.ok and rl.checks.collision_free and not rl.checks.clearance_ok
     t = gen.finish([scene], [raw], 100, 0.0, 1.0, "cfftg")[0]
-    assert t.method == "cfftg-fallback" and t.ok and t.checks.min_clearance >= gen.config.env.min_clearance
+    assert (
+        t.method == "cfftg-fallback"
+        and t.ok
+        and t.checks.min_clearance >= gen.config.env.min_clearance
+    )
     assert any(n.startswith("RL swing failed the safe-swing check") for n in t.notes)
     # The batch falls back row by row; a safe RL row stays RL.
-    high = np.array([[0.0, 0.0], [0.05, 0.15], [0.25, 0.30], [0.45, 0.30], [0.65, 0.15], [0.70, 0.0]])
+    high = np.array(
+        [[0.0, 0.0], [0.05, 0.15], [0.25, 0.30], [0.45, 0.30], [0.65, 0.15], [0.70, 0.0]]
+    )
     b = gen.finish([scene, scene], [raw, high], 100, 0.0, 1.0, "cfftg")
     assert b[1].ok, b.reasons[1]
     assert [b[i].method for i in range(2)] == ["cfftg-fallback", "rl"] and b.ok.all()

@@ -14,7 +14,18 @@ from conftest import legacy_raw
 jax = pytest.importorskip("jax")
 jnp = pytest.importorskip("jax.numpy")
 
-FIELDS = ("outline", "shape", "center_y", "width", "height", "kind", "pivot_kind", "pivot_y", "start_y", "goal_y")
+FIELDS = (
+    "outline",
+    "shape",
+    "center_y",
+    "width",
+    "height",
+    "kind",
+    "pivot_kind",
+    "pivot_y",
+    "start_y",
+    "goal_y",
+)
 
 
 def test_threefry_matches_jax():
@@ -23,8 +34,8 @@ def test_threefry_matches_jax():
 
     rng = np.random.default_rng(0)
     for _ in range(5):
-        k = rng.integers(0, 2 ** 32, 2, dtype=np.uint32)
-        x = rng.integers(0, 2 ** 32, 2 * 64, dtype=np.uint32)
+        k = rng.integers(0, 2**32, 2, dtype=np.uint32)
+        x = rng.integers(0, 2**32, 2 * 64, dtype=np.uint32)
         ref = np.asarray(threefry_2x32(jnp.asarray(k), jnp.asarray(x)))
         a, b = scenarios.threefry2x32(np, k[0], k[1], x[:64], x[64:])
         np.testing.assert_array_equal(np.concatenate([a, b]), ref)
@@ -43,10 +54,12 @@ def test_uniforms_identical_in_numpy_and_jax():
 
 
 def test_seed_words_are_jax_key_words():
-    for seed in (0, 7, 12345, 2 ** 32 - 1):
-        np.testing.assert_array_equal(jax.random.key_data(jax.random.PRNGKey(seed)), scenarios.seed_words(seed))
+    for seed in (0, 7, 12345, 2**32 - 1):
+        np.testing.assert_array_equal(
+            jax.random.key_data(jax.random.PRNGKey(seed)), scenarios.seed_words(seed)
+        )
     with pytest.raises(ValueError, match="seed"):
-        scenarios.scenario_layouts(np, numpy_params(config_from_dict(legacy_raw())), 2 ** 32, 3)
+        scenarios.scenario_layouts(np, numpy_params(config_from_dict(legacy_raw())), 2**32, 3)
 
 
 @pytest.mark.parametrize("which", ["default", "mixed"])
@@ -63,7 +76,9 @@ def test_env_reset_draws_the_numpy_scenario_list(which, mixed_config):
     for i in (0, 1, 17, 299):
         _, st = env.reset(key(i), env.default_params)
         for f in FIELDS:
-            np.testing.assert_array_equal(np.asarray(getattr(st.layout, f)), ref[f][i], err_msg=f"{f}, scene {i}")
+            np.testing.assert_array_equal(
+                np.asarray(getattr(st.layout, f)), ref[f][i], err_msg=f"{f}, scene {i}"
+            )
     keys = jax.vmap(key)(jnp.arange(n, dtype=jnp.uint32))
     _, st = jax.jit(jax.vmap(env.reset, in_axes=(0, None)))(keys, env.default_params)
     for f in FIELDS:
@@ -85,7 +100,9 @@ def test_kind_frequencies_follow_the_mixture(mixed_config):
     freq = np.bincount(lay["kind"], minlength=len(w)) / 20000
     np.testing.assert_allclose(freq, w / w.sum(), atol=0.015)
     pw = np.array(cfg.layout.pivot, float)
-    np.testing.assert_allclose(np.bincount(lay["pivot_kind"], minlength=3) / 20000, pw / pw.sum(), atol=0.015)
+    np.testing.assert_allclose(
+        np.bincount(lay["pivot_kind"], minlength=3) / 20000, pw / pw.sum(), atol=0.015
+    )
 
 
 def test_eval_test_set_is_the_numpy_test_set():

@@ -21,15 +21,31 @@ from jaxexo.sim.pieces import convex_pieces
 
 mujoco = pytest.importorskip("mujoco")
 
-from jaxexo.sim.replay import Legs, brute_force_distance, driven_replay, feed_forward, hermite, kinematic_replay  # noqa: E402
+from jaxexo.sim.replay import (
+    Legs,
+    brute_force_distance,
+    driven_replay,
+    feed_forward,
+    hermite,
+    kinematic_replay,
+)  # noqa: E402
 
 
 @pytest.fixture(scope="module")
 def config():
     cfg = load_config(ROOT / "configs" / "default.toml")
     # Unequal lengths and limits unlike the defaults, so that a mix-up shows.
-    return dataclasses.replace(cfg, kinematics=dataclasses.replace(
-        cfg.kinematics, thigh=0.46, shin=0.53, foot_length=0.22, hip_limits=(-0.6, 1.9), knee_limits=(-1.6, 0.05)))
+    return dataclasses.replace(
+        cfg,
+        kinematics=dataclasses.replace(
+            cfg.kinematics,
+            thigh=0.46,
+            shin=0.53,
+            foot_length=0.22,
+            hip_limits=(-0.6, 1.9),
+            knee_limits=(-1.6, 0.05),
+        ),
+    )
 
 
 def _scene(config, obstacle, pivot="between"):
@@ -41,12 +57,20 @@ def test_mjcf_links_and_limits_are_the_configs(config):
     k, dev = config.kinematics, config.device
     name = lambda kind, n: mujoco.mj_name2id(m, kind, n)  # noqa: E731
     for leg in ("right", "left"):
-        assert m.body_pos[name(mujoco.mjtObj.mjOBJ_BODY, f"{leg}_shin")][2] == pytest.approx(-k.thigh, abs=1e-12)
-        assert m.body_pos[name(mujoco.mjtObj.mjOBJ_BODY, f"{leg}_foot")][2] == pytest.approx(-k.shin, abs=1e-12)
+        assert m.body_pos[name(mujoco.mjtObj.mjOBJ_BODY, f"{leg}_shin")][2] == pytest.approx(
+            -k.thigh, abs=1e-12
+        )
+        assert m.body_pos[name(mujoco.mjtObj.mjOBJ_BODY, f"{leg}_foot")][2] == pytest.approx(
+            -k.shin, abs=1e-12
+        )
         toe = m.site_pos[name(mujoco.mjtObj.mjOBJ_SITE, f"{leg}_toe")]
         assert toe[0] == pytest.approx(k.foot_length, abs=1e-12)
-        np.testing.assert_allclose(m.jnt_range[name(mujoco.mjtObj.mjOBJ_JOINT, f"{leg}_hip")], k.hip_limits, atol=1e-12)
-        np.testing.assert_allclose(m.jnt_range[name(mujoco.mjtObj.mjOBJ_JOINT, f"{leg}_knee")], k.knee_limits, atol=1e-12)
+        np.testing.assert_allclose(
+            m.jnt_range[name(mujoco.mjtObj.mjOBJ_JOINT, f"{leg}_hip")], k.hip_limits, atol=1e-12
+        )
+        np.testing.assert_allclose(
+            m.jnt_range[name(mujoco.mjtObj.mjOBJ_JOINT, f"{leg}_knee")], k.knee_limits, atol=1e-12
+        )
     (vh, vk), (ah, ak) = dev.joint_velocity, dev.joint_acceleration
     np.testing.assert_allclose(m.numeric("device_joint_velocity").data, [vh, vk, vh, vk])
     np.testing.assert_allclose(m.numeric("device_joint_acceleration").data, [ah, ak, ah, ak])
@@ -63,14 +87,18 @@ def test_keyframe_puts_the_feet_where_jaxexo_does(config):
     # 1e-7: jaxexo's angles come from the float32 scalar parameters (jaxexo.config.scalar_params),
     # which round this config's 0.46 m and 0.53 m by ~1e-8 m; the model has the float64 lengths.
     np.testing.assert_allclose(site("right_heel"), [sc.start_y, 0.0], atol=1e-7)
-    np.testing.assert_allclose(site("right_toe"), [sc.start_y + config.kinematics.foot_length, 0.0], atol=1e-7)
+    np.testing.assert_allclose(
+        site("right_toe"), [sc.start_y + config.kinematics.foot_length, 0.0], atol=1e-7
+    )
     np.testing.assert_allclose(site("left_heel"), [sc.pivot_y, 0.0], atol=1e-7)
 
 
 def _inside_piece(p, poly):
     """Inside a counter-clockwise convex polygon (or on its boundary): left of every edge."""
     a, b = poly, np.roll(poly, -1, axis=0)
-    cross = (b[:, 0] - a[:, 0]) * (p[:, None, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (p[:, None, 0] - a[:, 0])
+    cross = (b[:, 0] - a[:, 0]) * (p[:, None, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (
+        p[:, None, 0] - a[:, 0]
+    )
     return np.all(cross >= -1e-15, axis=1)
 
 
@@ -88,14 +116,19 @@ def test_convex_pieces_cover_the_outline_exactly():
             in_pieces |= _inside_piece(p, poly)
         # Points on a boundary may go either way; none of 4000 random points lands on one.
         assert np.array_equal(inside, in_pieces)
-    assert len(convex_pieces(Obstacle.named("half_circle").outline)) == 1     # a convex outline is one piece
+    assert (
+        len(convex_pieces(Obstacle.named("half_circle").outline)) == 1
+    )  # a convex outline is one piece
 
 
-@pytest.mark.parametrize("points, match", [
-    ([[0.0, 0.0], [0.0, 0.1], [0.0, 0.05], [0.1, 0.05], [0.1, 0.0]], "fold back"),
-    ([[0.0, 0.0], [0.05, 0.1], [0.1, 0.0], [0.15, 0.1], [0.2, 0.0]], "touches the ground"),
-    ([[0.0, 0.0], [0.1, 0.1], [0.05, 0.1], [0.2, 0.0]], "backwards"),
-])
+@pytest.mark.parametrize(
+    "points, match",
+    [
+        ([[0.0, 0.0], [0.0, 0.1], [0.0, 0.05], [0.1, 0.05], [0.1, 0.0]], "fold back"),
+        ([[0.0, 0.0], [0.05, 0.1], [0.1, 0.0], [0.15, 0.1], [0.2, 0.0]], "touches the ground"),
+        ([[0.0, 0.0], [0.1, 0.1], [0.05, 0.1], [0.2, 0.0]], "backwards"),
+    ],
+)
 def test_an_outline_that_is_not_a_simple_polygon_is_refused(config, points, match):
     with pytest.raises(GeometryError, match=match):
         legs_mjcf(config, np.asarray(points), 0.3)
@@ -105,7 +138,9 @@ def test_a_config_whose_legs_cannot_be_built_is_refused(config):
     bad = dataclasses.replace(config, kinematics=dataclasses.replace(config.kinematics, shin=0.0))
     with pytest.raises(SimError, match="kinematics.shin"):
         legs_mjcf(bad)
-    bad = dataclasses.replace(config, kinematics=dataclasses.replace(config.kinematics, knee_limits=(0.1, -0.5)))
+    bad = dataclasses.replace(
+        config, kinematics=dataclasses.replace(config.kinematics, knee_limits=(0.1, -0.5))
+    )
     with pytest.raises(SimError, match="kinematics.knee_limits"):
         legs_mjcf(bad)
 
@@ -124,9 +159,13 @@ def _over(scene, height: float) -> np.ndarray:
     """A heel path straight up from the start to ``height``, level to above the goal, straight down."""
     up = np.linspace(0.0, height, 12)
     level = np.linspace(scene.start_y, scene.goal_y, 40)[1:-1]
-    return np.concatenate([np.column_stack([np.full(12, scene.start_y), up]),
-                           np.column_stack([level, np.full(len(level), height)]),
-                           np.column_stack([np.full(12, scene.goal_y), up[::-1]])])
+    return np.concatenate(
+        [
+            np.column_stack([np.full(12, scene.start_y), up]),
+            np.column_stack([level, np.full(len(level), height)]),
+            np.column_stack([np.full(12, scene.goal_y), up[::-1]]),
+        ]
+    )
 
 
 def test_a_pose_at_a_known_distance_measures_it(config):
@@ -135,16 +174,22 @@ def test_a_pose_at_a_known_distance_measures_it(config):
     from jaxexo.inference.swing_timing import leg_angles
 
     sp = scalar_params(config)
-    for heel, want in (((0.25, 0.08 + 0.037), 0.037),            # above the top
-                       ((0.05, 0.02), 0.35 - 0.05 - 0.22),        # on the ground's level, toe short of the side
-                       ((0.46, 0.09), 0.01)):                     # heel past the right edge's corner: vertex distance
+    for heel, want in (
+        ((0.25, 0.08 + 0.037), 0.037),  # above the top
+        ((0.05, 0.02), 0.35 - 0.05 - 0.22),  # on the ground's level, toe short of the side
+        ((0.46, 0.09), 0.01),
+    ):  # heel past the right edge's corner: vertex distance
         heel = np.asarray(heel)
         if want == 0.01:
             want = float(np.hypot(0.46 - 0.45, 0.09 - 0.08))
         legs.set_pose(legs.qpos(leg_angles(sp, sc.pivot_y, heel[None])[0]))
-        np.testing.assert_allclose(legs.site_yz("right_heel"), heel, atol=1e-7)     # float32 scalar params
+        np.testing.assert_allclose(
+            legs.site_yz("right_heel"), heel, atol=1e-7
+        )  # float32 scalar params
         assert abs(legs.foot_distance() - want) < 1e-6
-        assert abs(brute_force_distance(heel, config.kinematics.foot_length, sc.outline) - want) < 1e-9
+        assert (
+            abs(brute_force_distance(heel, config.kinematics.foot_length, sc.outline) - want) < 1e-9
+        )
 
 
 def test_a_hand_made_swing_at_a_known_distance_measures_it(config):
@@ -160,7 +205,9 @@ def test_a_hand_made_swing_at_a_known_distance_measures_it(config):
 
 def test_a_swing_through_the_obstacle_is_a_contact(config):
     sc = _scene(config, Obstacle.rectangle(0.10, 0.08, center_y=0.40))
-    timed = _hand_made(config, sc, _over(sc, 0.04))      # half the obstacle's height: straight through it
+    timed = _hand_made(
+        config, sc, _over(sc, 0.04)
+    )  # half the obstacle's height: straight through it
     assert not timed.ok
     k = kinematic_replay(timed, config)
     assert k["mujoco_min_distance_m"] <= 0.0 and not k["margin_kept"]
@@ -194,18 +241,24 @@ def test_feed_forward_torques_alone_carry_the_legs_along_the_reference(config):
     from jaxexo.inference.swing_timing import time_swing
     from jaxexo.sim.replay import _equalities_on
 
-    timed = time_swing(CFFTG(config).generate(Obstacle.named("base2"), pivot="between"), config, rate=100.0)
+    timed = time_swing(
+        CFFTG(config).generate(Obstacle.named("base2"), pivot="between"), config, rate=100.0
+    )
     legs = Legs(config, timed.scene)
     _equalities_on(legs)
     m, d = legs.model, legs.data
     dt = m.opt.timestep = 1e-3
-    q = hermite(timed.joint_angles, timed.joint_velocity, 0.01, np.arange(len(timed.joint_angles) * 10) * dt)
+    q = hermite(
+        timed.joint_angles, timed.joint_velocity, 0.01, np.arange(len(timed.joint_angles) * 10) * dt
+    )
     qpos = legs.qpos(q)
     qvel = np.gradient(qpos, dt, axis=0, edge_order=2)
     qacc = np.gradient(qvel, dt, axis=0, edge_order=2)
     tau = feed_forward(legs, qpos, qvel, qacc)
     act = legs.actuated_dofs
-    m.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_ACTUATION)     # the torques alone move the legs
+    m.opt.disableflags |= int(
+        mujoco.mjtDisableBit.mjDSBL_ACTUATION
+    )  # the torques alone move the legs
     span = 40
     for k in range(20, len(qpos) - span - 20, 150):
         drift = {}
@@ -226,7 +279,9 @@ def test_feed_forward_tracks_where_a_plain_servo_lags(config):
     from jaxexo.baselines import CFFTG
     from jaxexo.inference.swing_timing import time_swing
 
-    timed = time_swing(CFFTG(config).generate(Obstacle.named("base1"), pivot="between"), config, rate=100.0)
+    timed = time_swing(
+        CFFTG(config).generate(Obstacle.named("base1"), pivot="between"), config, rate=100.0
+    )
     ff = driven_replay(timed, config, settle=0.05)
     servo = driven_replay(timed, config, settle=0.05, controller="servo")
     assert ff["controller"] == "pd_ff" and servo["controller"] == "servo"
@@ -237,8 +292,10 @@ def test_feed_forward_tracks_where_a_plain_servo_lags(config):
 
 
 def test_jaxexo_and_its_inference_never_import_mujoco():
-    code = ("import sys, jaxexo, jaxexo.inference, jaxexo.sim, jaxexo.sim.mjcf; "
-            "assert 'mujoco' not in sys.modules, 'mujoco imported'")
+    code = (
+        "import sys, jaxexo, jaxexo.inference, jaxexo.sim, jaxexo.sim.mjcf; "
+        "assert 'mujoco' not in sys.modules, 'mujoco imported'"
+    )
     subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT)
 
 

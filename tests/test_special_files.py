@@ -34,9 +34,11 @@ ROOT_ONLY = pytest.mark.skipif(os.geteuid() != 0, reason="making a device node n
 
 def _fifo_reader(path, out: list):
     """Read a FIFO to its end in a thread (its writer's open blocks until a reader is there)."""
+
     def run():
         with open(path, "rb") as f:
             out.append(f.read())
+
     t = threading.Thread(target=run, daemon=True)
     t.start()
     return t
@@ -45,6 +47,7 @@ def _fifo_reader(path, out: list):
 # --------------------------------------------------------------------------------------------
 # Outputs: written into, never replaced
 # --------------------------------------------------------------------------------------------
+
 
 def test_a_fifo_output_is_written_into_and_stays_a_fifo(tmp_path):
     fifo = tmp_path / "fifo.csv"
@@ -55,7 +58,7 @@ def test_a_fifo_output_is_written_into_and_stays_a_fifo(tmp_path):
     t.join(10)
     assert got == [b"a,b\n1,2\n"]
     assert stat.S_ISFIFO(os.lstat(fifo).st_mode)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["fifo.csv"]    # no temporary file left
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fifo.csv"]  # no temporary file left
 
 
 def test_generate_writes_its_csv_into_a_fifo(tmp_path):
@@ -74,13 +77,17 @@ def test_generate_writes_its_csv_into_a_fifo(tmp_path):
 @ROOT_ONLY
 def test_a_device_node_output_is_written_into_and_stays_a_device(tmp_path):
     null = tmp_path / "null"
-    os.mknod(null, 0o666 | stat.S_IFCHR, os.makedev(1, 3))    # the null device, inside tmp_path
+    os.mknod(null, 0o666 | stat.S_IFCHR, os.makedev(1, 3))  # the null device, inside tmp_path
     before = os.lstat(null)
     from jaxexo.cli import main
 
     assert main([*GEN_CFFTG, "--out", str(null), "--json", str(tmp_path / "t.json")]) in (0, 1)
     after = os.lstat(null)
-    assert stat.S_ISCHR(after.st_mode) and after.st_rdev == before.st_rdev and after.st_ino == before.st_ino
+    assert (
+        stat.S_ISCHR(after.st_mode)
+        and after.st_rdev == before.st_rdev
+        and after.st_ino == before.st_ino
+    )
     assert json.loads((tmp_path / "t.json").read_text())["method"] == "cfftg"
 
 
@@ -103,7 +110,9 @@ def test_a_link_to_a_regular_file_is_still_replaced_not_written_through(tmp_path
     link.symlink_to(victim)
     assert not direct_output(link)
     atomic_write(link, "new\n")
-    assert victim.read_text() == "precious\n" and not link.is_symlink() and link.read_text() == "new\n"
+    assert (
+        victim.read_text() == "precious\n" and not link.is_symlink() and link.read_text() == "new\n"
+    )
 
 
 @pytest.mark.parametrize("target", ["-", "/dev/stdout"])
@@ -123,7 +132,7 @@ def test_a_figure_is_written_into_a_fifo(tmp_path):
 
     from jaxexo.storage.atomic import write_figure
 
-    fifo = tmp_path / "plot.csv"      # a suffix that is no image format: PNG into a special output
+    fifo = tmp_path / "plot.csv"  # a suffix that is no image format: PNG into a special output
     os.mkfifo(fifo)
     got: list = []
     t = _fifo_reader(fifo, got)
@@ -138,9 +147,10 @@ def test_a_figure_is_written_into_a_fifo(tmp_path):
 # Inputs: regular files only, with a cap
 # --------------------------------------------------------------------------------------------
 
+
 def test_a_fifo_folder_or_link_loop_input_is_refused_naming_the_rule(tmp_path):
     fifo = tmp_path / "c.toml"
-    os.mkfifo(fifo)          # no writer: an open without O_NONBLOCK would wait forever
+    os.mkfifo(fifo)  # no writer: an open without O_NONBLOCK would wait forever
     with pytest.raises(InputFileError, match="c.toml: a FIFO .*not a regular file"):
         load_config(fifo)
     with pytest.raises(InputFileError, match="a folder, not a regular file"):
@@ -154,7 +164,7 @@ def test_a_fifo_folder_or_link_loop_input_is_refused_naming_the_rule(tmp_path):
 @ROOT_ONLY
 def test_a_zero_device_as_config_is_refused_before_reading(tmp_path):
     zero = tmp_path / "zero"
-    os.mknod(zero, 0o666 | stat.S_IFCHR, os.makedev(1, 5))    # like /dev/zero, inside tmp_path
+    os.mknod(zero, 0o666 | stat.S_IFCHR, os.makedev(1, 5))  # like /dev/zero, inside tmp_path
     with pytest.raises(InputFileError, match="a character device, not a regular file"):
         load_config(zero)
     r = run_cli("train", zero, "--out", tmp_path / "d", "--quiet", timeout=120)
@@ -165,8 +175,10 @@ def test_a_zero_device_as_config_is_refused_before_reading(tmp_path):
 def test_a_file_above_its_cap_is_refused_by_its_size(tmp_path):
     big = tmp_path / "big.toml"
     with open(big, "wb") as f:
-        f.truncate(17 * 2**20)       # sparse: no 17 MiB written
-    with pytest.raises(InputFileError, match=r"17,825,792 bytes, more than the 16,777,216 bytes a config may have"):
+        f.truncate(17 * 2**20)  # sparse: no 17 MiB written
+    with pytest.raises(
+        InputFileError, match=r"17,825,792 bytes, more than the 16,777,216 bytes a config may have"
+    ):
         load_config(big)
     with pytest.raises(InputFileError, match="more than the 100 bytes"):
         read_input(big, "thing", 100)
@@ -175,14 +187,21 @@ def test_a_file_above_its_cap_is_refused_by_its_size(tmp_path):
 @pytest.mark.parametrize("kind", ["folder", "fifo", "loop", "missing"])
 def test_a_policy_that_is_no_regular_file_is_named_for_what_it_is(tmp_path, kind):
     p = tmp_path / "policy.npz"
-    expected = {"folder": "a folder", "fifo": "a FIFO", "loop": "symbolic link loop", "missing": "no such policy"}
+    expected = {
+        "folder": "a folder",
+        "fifo": "a FIFO",
+        "loop": "symbolic link loop",
+        "missing": "no such policy",
+    }
     if kind == "folder":
         p.mkdir()
     elif kind == "fifo":
         os.mkfifo(p)
     elif kind == "loop":
         p.symlink_to(p)
-    r = run_cli("generate", "--policy", p, "--obstacle", "base1", "--out", tmp_path / "t.csv", timeout=120)
+    r = run_cli(
+        "generate", "--policy", p, "--obstacle", "base1", "--out", tmp_path / "t.csv", timeout=120
+    )
     assert_clean_refusal(r, "policy.npz", expected[kind])
 
 
@@ -206,7 +225,9 @@ def test_a_policy_archive_with_a_duplicated_member_is_refused_saying_so(tmp_path
     good = make_policy(tmp_path / "good.npz")
     bad = tmp_path / "dup.npz"
     with zipfile.ZipFile(good) as src, warnings.catch_warnings():
-        warnings.simplefilter("ignore")     # zipfile warns about the duplicate name it is asked to write
+        warnings.simplefilter(
+            "ignore"
+        )  # zipfile warns about the duplicate name it is asked to write
         with zipfile.ZipFile(bad, "w") as dst:
             for info in src.infolist():
                 dst.writestr(info, src.read(info))
@@ -221,7 +242,9 @@ def test_a_policy_archive_with_a_duplicated_member_is_refused_saying_so(tmp_path
 def test_generator_load_takes_a_path_only(arg):
     from jaxexo.inference import TrajectoryGenerator
 
-    with pytest.raises(TypeError, match=r"path: expected a file's path \(str or os.PathLike\), got"):
+    with pytest.raises(
+        TypeError, match=r"path: expected a file's path \(str or os.PathLike\), got"
+    ):
         TrajectoryGenerator.load(arg)
 
 
@@ -241,6 +264,7 @@ def test_a_metrics_log_replaced_by_a_link_is_named_on_resume(tmp_path):
 # The compilation cache folder and the CLI's warnings
 # --------------------------------------------------------------------------------------------
 
+
 def _cache_warning(monkeypatch, setting) -> str:
     from jaxexo.train import devices
 
@@ -257,23 +281,29 @@ def test_a_cache_path_through_a_link_or_below_a_file_is_refused(tmp_path, monkey
     (tmp_path / "link").symlink_to(real)
     msg = _cache_warning(monkeypatch, tmp_path / "link" / "xla")
     assert "link is a symbolic link" in msg
-    assert list(real.iterdir()) == []          # nothing written through the link
+    assert list(real.iterdir()) == []  # nothing written through the link
     (tmp_path / "afile").write_text("x\n")
     msg = _cache_warning(monkeypatch, tmp_path / "afile" / "xla")
     assert "afile is a file, not a folder" in msg and "File exists" not in msg
 
 
 def test_cli_warnings_are_one_line_without_a_source_line(tmp_path):
-    code = ("import warnings, sys; from jaxexo import cli; sys.argv = ['jaxexo'];"
-            "cli.build_parser = lambda: type('P', (), {'parse_args': lambda self, a: type('A', (), "
-            "{'func': staticmethod(lambda args: (warnings.warn('careful'), 0)[1])})()})();"
-            "sys.exit(cli.main([]))")
-    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=60)
+    code = (
+        "import warnings, sys; from jaxexo import cli; sys.argv = ['jaxexo'];"
+        "cli.build_parser = lambda: type('P', (), {'parse_args': lambda self, a: type('A', (), "
+        "{'func': staticmethod(lambda args: (warnings.warn('careful'), 0)[1])})()})();"
+        "sys.exit(cli.main([]))"
+    )
+    r = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=60
+    )
     assert r.returncode == 0, r.stderr
     assert r.stderr.strip() == "jaxexo: warning: careful"
 
 
-@pytest.mark.skipif(os.geteuid() == 0, reason="root writes through any permission; needs a non-root user")
+@pytest.mark.skipif(
+    os.geteuid() == 0, reason="root writes through any permission; needs a non-root user"
+)
 def test_a_cache_folder_that_cannot_be_written_is_a_warning_not_a_crash(tmp_path, monkeypatch):
     locked = tmp_path / "locked"
     locked.mkdir()

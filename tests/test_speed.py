@@ -14,8 +14,11 @@ from test_safety import FOOT, outlines
 
 
 @settings(max_examples=300, deadline=None)
-@given(outline=outlines(), h0=st.tuples(st.floats(-0.1, 0.8), st.floats(0.0, 0.35)),
-       move=st.tuples(st.floats(-0.15, 0.15), st.floats(-0.15, 0.15)))
+@given(
+    outline=outlines(),
+    h0=st.tuples(st.floats(-0.1, 0.8), st.floats(0.0, 0.35)),
+    move=st.tuples(st.floats(-0.15, 0.15), st.floats(-0.15, 0.15)),
+)
 def test_swept_lower_bound_never_exceeds_the_exact_clearance(outline, h0, move):
     h0 = np.array(h0)
     h1 = h0 + np.array(move)
@@ -34,24 +37,32 @@ def _random_paths(rng, n_paths, n):
         start, goal = rng.uniform(-0.1, 0.1), rng.uniform(0.6, 0.9)
         apex = rng.uniform(0.0, 0.35)
         y = start + (goal - start) * u + rng.normal(0, 0.01, n)
-        z = np.maximum(apex * np.sin(np.pi * u) ** rng.uniform(0.5, 2.0) + rng.normal(0, 0.005, n), 0.0)
+        z = np.maximum(
+            apex * np.sin(np.pi * u) ** rng.uniform(0.5, 2.0) + rng.normal(0, 0.005, n), 0.0
+        )
         yield np.column_stack([y, z])
 
 
 def test_pruned_swept_minimum_matches_the_full_swept_clearance():
     rng = np.random.default_rng(0)
-    kinds = [geometry.Obstacle.rectangle, geometry.Obstacle.triangle, geometry.Obstacle.half_ellipse]
+    kinds = [
+        geometry.Obstacle.rectangle,
+        geometry.Obstacle.triangle,
+        geometry.Obstacle.half_ellipse,
+    ]
     pruned_any = 0
     rects = []
     for i, path in enumerate(_random_paths(rng, 3000, int(rng.integers(5, 120)))):
-        ob = kinds[i % 3](rng.uniform(0.02, 0.25), rng.uniform(0.02, 0.25), center_y=rng.uniform(0.35, 0.55))
+        ob = kinds[i % 3](
+            rng.uniform(0.02, 0.25), rng.uniform(0.02, 0.25), center_y=rng.uniform(0.35, 0.55)
+        )
         c = geometry.foot_clearance(np, path, FOOT, ob.outline[None])
         full = swept.path_swept_clearance(np, path, FOOT, ob.outline, c)
         fast = swept.path_swept_min(path[None], FOOT, ob.outline[None], c[None])[0]
         assert fast.shape == full.shape
         assert fast.min() == full.min()
         assert np.argmin(fast) == np.argmin(full)
-        assert np.all(fast <= full + 1e-12)            # elsewhere a lower bound ...
+        assert np.all(fast <= full + 1e-12)  # elsewhere a lower bound ...
         assert np.all(fast[fast != full] > full.min())  # ... that stays above the minimum
         pruned_any += int(np.sum(fast != full))
         if i % 3 == 0:
@@ -73,7 +84,14 @@ def _same(a, b):
     # The verdict exactly; the clearance figures to float rounding (the fast path may smooth the
     # retried rows together, in one matrix product, where the reference smooths them one by one).
     ca, cb = a.checks, b.checks
-    for f in ("reached_goal", "collision_free", "joint_limits_ok", "leg_length_ok", "clearance_ok", "above_ground"):
+    for f in (
+        "reached_goal",
+        "collision_free",
+        "joint_limits_ok",
+        "leg_length_ok",
+        "clearance_ok",
+        "above_ground",
+    ):
         assert getattr(ca, f) == getattr(cb, f), f
     assert ca.ok == cb.ok and len(ca.reasons) == len(cb.reasons)
     for f in ("min_clearance", "heel_backward", "deviation"):
@@ -92,10 +110,18 @@ def test_fast_generation_matches_the_reference_on_thousands_of_scenes(trained_ru
     plain = plain_reference(gen)
     sc = sample_scenarios(gen.config, 2000, seed=7)
     args = {k: [s[k] for s in sc] for k in ("obstacle", "pivot", "start_y", "step_length")}
-    fast = gen.generate_batch(args["obstacle"], pivot=args["pivot"], start_y=args["start_y"],
-                              step_length=args["step_length"])
-    ref = plain.generate_batch(args["obstacle"], pivot=args["pivot"], start_y=args["start_y"],
-                               step_length=args["step_length"])
+    fast = gen.generate_batch(
+        args["obstacle"],
+        pivot=args["pivot"],
+        start_y=args["start_y"],
+        step_length=args["step_length"],
+    )
+    ref = plain.generate_batch(
+        args["obstacle"],
+        pivot=args["pivot"],
+        start_y=args["start_y"],
+        step_length=args["step_length"],
+    )
     assert len(fast) == len(ref) == 2000
     for a, b in zip(fast, ref):
         _same(a, b)
@@ -104,19 +130,27 @@ def test_fast_generation_matches_the_reference_on_thousands_of_scenes(trained_ru
     for fallback in ("cfftg", None):
         for s in sc[:1000]:
             kw = {k: s[k] for k in ("pivot", "start_y", "step_length")}
-            _same(gen.generate(s["obstacle"], fallback=fallback, **kw),
-                  plain.generate(s["obstacle"], fallback=fallback, **kw))
+            _same(
+                gen.generate(s["obstacle"], fallback=fallback, **kw),
+                plain.generate(s["obstacle"], fallback=fallback, **kw),
+            )
 
 
 def test_pruned_point_clearances_keep_the_exact_minimum():
     rng = np.random.default_rng(2)
-    kinds = [geometry.Obstacle.rectangle, geometry.Obstacle.triangle, geometry.Obstacle.half_ellipse]
+    kinds = [
+        geometry.Obstacle.rectangle,
+        geometry.Obstacle.triangle,
+        geometry.Obstacle.half_ellipse,
+    ]
     for n in (1, 2, 7, 60, 100):
         rows = []
         for i, path in enumerate(_random_paths(rng, 600, n)):
-            ob = kinds[i % 3](rng.uniform(0.02, 0.25), rng.uniform(0.02, 0.25), center_y=rng.uniform(0.35, 0.55))
+            ob = kinds[i % 3](
+                rng.uniform(0.02, 0.25), rng.uniform(0.02, 0.25), center_y=rng.uniform(0.35, 0.55)
+            )
             rows.append((path, ob.outline))
-        for k in range(3):     # one outline size per call
+        for k in range(3):  # one outline size per call
             path = np.stack([p for p, _ in rows[k::3]])
             outline = np.stack([o for _, o in rows[k::3]])
             c_full = geometry.foot_clearance(np, path, FOOT, outline[:, None])
@@ -133,7 +167,9 @@ def test_pruned_point_clearances_keep_the_exact_minimum():
             assert np.array_equal(np.argmin(sw, axis=1), np.argmin(full, axis=1))
             assert np.all(sw <= full + 1e-12)
             assert np.all((c == c_full) | ((c <= c_full + 1e-12) & (c > 0.0)))
-            assert np.all(sw[sw != full] > full.min(axis=1, keepdims=True).repeat(n - 1, 1)[sw != full])
+            assert np.all(
+                sw[sw != full] > full.min(axis=1, keepdims=True).repeat(n - 1, 1)[sw != full]
+            )
 
 
 def test_generate_batch_runs_blas_on_one_thread_and_restores_it(tmp_path, monkeypatch):
@@ -145,7 +181,9 @@ def test_generate_batch_runs_blas_on_one_thread_and_restores_it(tmp_path, monkey
 
     from jaxexo.inference import Obstacle, TrajectoryGenerator, blas
 
-    gen = TrajectoryGenerator.load(export_random(tmp_path / "p.npz", small_config(hidden=[16]), seed=1))
+    gen = TrajectoryGenerator.load(
+        export_random(tmp_path / "p.npz", small_config(hidden=[16]), seed=1)
+    )
     before = blas.blas_threads()
     assert before, "threadpoolctl (a jaxexo dependency) finds no BLAS in this process"
     seen = []
@@ -183,8 +221,12 @@ def test_chained_reductions_equal_numpys_reductions(k):
         np.testing.assert_array_equal(geometry.any_last(np, b), np.any(b, axis=-1))
         np.testing.assert_array_equal(geometry.odd_last(np, b), np.sum(b, axis=-1) % 2 == 1)
         if len(shape) >= 2:
-            np.testing.assert_array_equal(geometry.min_last(np, x, axes=2), np.min(x, axis=(-2, -1)))
-            np.testing.assert_array_equal(geometry.any_last(np, b, axes=2), np.any(b, axis=(-2, -1)))
+            np.testing.assert_array_equal(
+                geometry.min_last(np, x, axes=2), np.min(x, axis=(-2, -1))
+            )
+            np.testing.assert_array_equal(
+                geometry.any_last(np, b, axes=2), np.any(b, axis=(-2, -1))
+            )
 
 
 def test_chained_reductions_under_jax_jit():
@@ -193,8 +235,13 @@ def test_chained_reductions_under_jax_jit():
     rng = np.random.default_rng(0)
     x = rng.normal(size=(6, 4, 5)).astype(np.float32)
     b = rng.uniform(size=(6, 5)) < 0.5
-    got = jax.jit(lambda a, c: (geometry.min_last(jnp, a, axes=2), geometry.any_last(jnp, c),
-                                geometry.odd_last(jnp, c)))(x, b)
+    got = jax.jit(
+        lambda a, c: (
+            geometry.min_last(jnp, a, axes=2),
+            geometry.any_last(jnp, c),
+            geometry.odd_last(jnp, c),
+        )
+    )(x, b)
     np.testing.assert_array_equal(np.asarray(got[0]), x.min(axis=(-2, -1)))
     np.testing.assert_array_equal(np.asarray(got[1]), b.any(axis=-1))
     np.testing.assert_array_equal(np.asarray(got[2]), b.sum(axis=-1) % 2 == 1)

@@ -44,21 +44,32 @@ LRS = [1e-3, HUGE_LR, 3e-3, 1e-2]
 
 
 def tiny_raw(**sweep) -> dict:
-    return legacy_raw({
-        "env": {"obs_mode": "thesis"},
-        "layout": {"obstacles": ["base1"], "pivot": ["obstacle"]},
-        "train": {"num_envs": N, "rollout_steps": T, "num_minibatches": 2, "hidden": [16], "layer_norm": False,
-                  "budget_env_steps": N * T * UPDATES, "eval_episodes": 10},
-        "sweep": {"seeds": 2, "chunk_size": 4, "grid": {"train.lr": list(LRS)}, **sweep},
-    })
+    return legacy_raw(
+        {
+            "env": {"obs_mode": "thesis"},
+            "layout": {"obstacles": ["base1"], "pivot": ["obstacle"]},
+            "train": {
+                "num_envs": N,
+                "rollout_steps": T,
+                "num_minibatches": 2,
+                "hidden": [16],
+                "layer_norm": False,
+                "budget_env_steps": N * T * UPDATES,
+                "eval_episodes": 10,
+            },
+            "sweep": {"seeds": 2, "chunk_size": 4, "grid": {"train.lr": list(LRS)}, **sweep},
+        }
+    )
 
 
 def tiny_toml(path) -> None:
     """The tiny sweep as a file (what the CLI and Ray runs read)."""
     raw = tiny_raw()
     cfg = sweep_from_dict(raw).members[0].config
-    text = config_to_toml(cfg) + "\n[sweep]\nseeds = 2\nchunk_size = 4\n\n[sweep.grid]\n" \
+    text = (
+        config_to_toml(cfg) + "\n[sweep]\nseeds = 2\nchunk_size = 4\n\n[sweep.grid]\n"
         f'"train.lr" = [{", ".join(repr(x) for x in LRS)}]\n'
+    )
     path.write_text(text)
 
 
@@ -81,27 +92,43 @@ def test_grid_expands_in_order_with_every_seed():
     assert sw.members[4].values == {"train.lr": 3e-3, "train.lam": 0.8}
     assert sw.members[4].label == "train.lr=0.003, train.lam=0.8"
     # Everything else is the base config.
-    assert all(m.config.train.num_envs == N and m.config.env.obs_mode == "thesis" for m in sw.members)
+    assert all(
+        m.config.train.num_envs == N and m.config.env.obs_mode == "thesis" for m in sw.members
+    )
     assert len(sw.groups) == 1
     assert sw.groups[0].agents == tuple((c, s) for c in range(6) for s in (3, 7))
 
 
 def test_random_axes_are_seeded_and_respect_their_ranges():
-    random = {"train.gamma": {"low": 0.9, "high": 0.99}, "train.target_tau": {"low": 1e-3, "high": 1e-1, "log": True},
-              "train.target_period": {"low": 2, "high": 5}, "layout.pivot": {"choices": ["agent", "obstacle"]}}
+    random = {
+        "train.gamma": {"low": 0.9, "high": 0.99},
+        "train.target_tau": {"low": 1e-3, "high": 1e-1, "log": True},
+        "train.target_period": {"low": 2, "high": 5},
+        "layout.pivot": {"choices": ["agent", "obstacle"]},
+    }
     raw = tiny_raw(grid={"train.lr": [1e-3, 3e-3]}, random=random, samples=20, sample_seed=4)
     sw = sweep_from_dict(raw)
     assert len(sw.members) == 40
-    assert [m.values for m in sweep_from_dict(raw).members] == [m.values for m in sw.members]   # reproducible
+    assert [m.values for m in sweep_from_dict(raw).members] == [
+        m.values for m in sw.members
+    ]  # reproducible
     other = sweep_from_dict({**raw, "sweep": {**raw["sweep"], "sample_seed": 5}})
     assert [m.values for m in other.members] != [m.values for m in sw.members]
     vals = lambda k: np.array([m.values[k] for m in sw.members], dtype=object)  # noqa: E731
-    g, tau, period = vals("train.gamma").astype(float), vals("train.target_tau").astype(float), vals("train.target_period")
+    g, tau, period = (
+        vals("train.gamma").astype(float),
+        vals("train.target_tau").astype(float),
+        vals("train.target_period"),
+    )
     assert g.min() >= 0.9 and g.max() <= 0.99 and len(set(g)) == 40
     assert tau.min() >= 1e-3 and tau.max() <= 1e-1
     # log-uniform: about half the draws below the geometric middle 1e-2 (uniform would give ~9 %)
     assert 10 <= (tau < 1e-2).sum() <= 30
-    assert all(isinstance(p, int) for p in period) and set(period) <= {2, 3, 4, 5} and len(set(period)) >= 3
+    assert (
+        all(isinstance(p, int) for p in period)
+        and set(period) <= {2, 3, 4, 5}
+        and len(set(period)) >= 3
+    )
     assert set(vals("layout.pivot")) == {"agent", "obstacle"}
     pivots = {m.values["layout.pivot"]: m.config.layout.pivot for m in sw.members}
     assert pivots == {"agent": (1.0, 0.0, 0.0), "obstacle": (0.0, 1.0, 0.0)}
@@ -114,7 +141,7 @@ def test_vector_element_axes():
     sw = sweep_from_dict(raw)
     w = [m.config.reward.traj_weights for m in sw.members]
     assert w == [(1.0, 0.5, 1.0, 2.0, 1.0, 1.0, 1.0, 1.0), (1.0, 0.5, 1.0, 8.0, 1.0, 1.0, 1.0, 1.0)]
-    assert len(sw.groups) == 1      # reward weights are leaves: one program
+    assert len(sw.groups) == 1  # reward weights are leaves: one program
 
 
 def test_groups_follow_static_settings():
@@ -123,7 +150,9 @@ def test_groups_follow_static_settings():
     raw = tiny_raw(grid={"train.num_envs": [16, 32], "train.lr": [1e-3, 3e-3]})
     sw = sweep_from_dict(raw)
     assert [g.config_ids for g in sw.groups] == [(0, 1), (2, 3)]
-    sw = sweep_from_dict(tiny_raw(grid={"train.hidden": [[16], [8, 8]], "reward.goal_reward": [5.0, 10.0]}))
+    sw = sweep_from_dict(
+        tiny_raw(grid={"train.hidden": [[16], [8, 8]], "reward.goal_reward": [5.0, 10.0]})
+    )
     assert [g.config_ids for g in sw.groups] == [(0, 1), (2, 3)]
     steps = N * T * UPDATES
     sw = sweep_from_dict(tiny_raw(grid={"train.budget_env_steps": [steps, steps - 10, 2 * steps]}))
@@ -132,8 +161,14 @@ def test_groups_follow_static_settings():
     sw = sweep_from_dict(tiny_raw(grid={"train.trace": ["forward", "backward"]}))
     assert len(sw.groups) == 2
     # Layout distributions of the same size are leaves, a different number of obstacle kinds is not.
-    sw = sweep_from_dict(tiny_raw(grid={"layout.pivot": ["agent", "between"],
-                                        "layout.obstacles": [["base1"], ["base2"], ["base1", "base2"]]}))
+    sw = sweep_from_dict(
+        tiny_raw(
+            grid={
+                "layout.pivot": ["agent", "between"],
+                "layout.obstacles": [["base1"], ["base2"], ["base1", "base2"]],
+            }
+        )
+    )
     assert [g.config_ids for g in sw.groups] == [(0, 1, 3, 4), (2, 5)]
 
 
@@ -144,7 +179,9 @@ def test_hyper_fields_are_the_hyperparams_leaves():
     from jaxexo.train.trainer import Hyperparams
 
     # ...and budget_updates, the env-step budget in whole updates (integer budgets).
-    assert tuple(f.name for f in dataclasses.fields(Hyperparams) if f.name != "env") == HYPER_FIELDS + ("budget_updates",)
+    assert tuple(
+        f.name for f in dataclasses.fields(Hyperparams) if f.name != "env"
+    ) == HYPER_FIELDS + ("budget_updates",)
 
 
 BAD = [
@@ -155,30 +192,75 @@ BAD = [
     ({"grid": {"lr": [1e-3]}}, "sweep.grid.lr", "section.field"),
     ({"grid": {"train.lam": [0.5, 1.5]}}, "sweep.grid.train.lam", "train.lam: a fraction"),
     ({"grid": {"train.lr": [-1.0]}}, "sweep.grid.train.lr", "train.lr: must be > 0"),
-    ({"grid": {}, "random": {"train.gamma": {"low": 0.99, "high": 0.9}}, "samples": 2},
-     "sweep.random.train.gamma", "bad range"),
-    ({"grid": {}, "random": {"train.gamma": {"low": 0.9, "high": 0.9}}, "samples": 2},
-     "sweep.random.train.gamma", "bad range"),
-    ({"grid": {}, "random": {"train.lr": {"low": 0.0, "high": 1e-2, "log": True}}, "samples": 2},
-     "sweep.random.train.lr.low", "log range"),
-    ({"grid": {}, "random": {"train.lr": {"low": 1e-4}}, "samples": 2}, "sweep.random.train.lr.high", "required"),
-    ({"grid": {}, "random": {"train.lr": {"low": 1e-4, "high": 1e-3, "scale": "log"}}, "samples": 2},
-     "sweep.random.train.lr.scale", "unknown field"),
-    ({"grid": {}, "random": {"train.lr": {"low": "a", "high": 1e-3}}, "samples": 2}, "sweep.random.train.lr.low",
-     "finite number"),
-    ({"grid": {}, "random": {"train.target_period": {"low": 1.5, "high": 4}}, "samples": 2},
-     "sweep.random.train.target_period", "integer"),
-    ({"grid": {}, "random": {"train.lr": {"choices": []}}, "samples": 2}, "sweep.random.train.lr.choices", "non-empty"),
-    ({"grid": {}, "random": {"train.gamma": {"low": 0.9, "high": 0.99}}}, "sweep.samples", "required"),
+    (
+        {"grid": {}, "random": {"train.gamma": {"low": 0.99, "high": 0.9}}, "samples": 2},
+        "sweep.random.train.gamma",
+        "bad range",
+    ),
+    (
+        {"grid": {}, "random": {"train.gamma": {"low": 0.9, "high": 0.9}}, "samples": 2},
+        "sweep.random.train.gamma",
+        "bad range",
+    ),
+    (
+        {"grid": {}, "random": {"train.lr": {"low": 0.0, "high": 1e-2, "log": True}}, "samples": 2},
+        "sweep.random.train.lr.low",
+        "log range",
+    ),
+    (
+        {"grid": {}, "random": {"train.lr": {"low": 1e-4}}, "samples": 2},
+        "sweep.random.train.lr.high",
+        "required",
+    ),
+    (
+        {
+            "grid": {},
+            "random": {"train.lr": {"low": 1e-4, "high": 1e-3, "scale": "log"}},
+            "samples": 2,
+        },
+        "sweep.random.train.lr.scale",
+        "unknown field",
+    ),
+    (
+        {"grid": {}, "random": {"train.lr": {"low": "a", "high": 1e-3}}, "samples": 2},
+        "sweep.random.train.lr.low",
+        "finite number",
+    ),
+    (
+        {"grid": {}, "random": {"train.target_period": {"low": 1.5, "high": 4}}, "samples": 2},
+        "sweep.random.train.target_period",
+        "integer",
+    ),
+    (
+        {"grid": {}, "random": {"train.lr": {"choices": []}}, "samples": 2},
+        "sweep.random.train.lr.choices",
+        "non-empty",
+    ),
+    (
+        {"grid": {}, "random": {"train.gamma": {"low": 0.9, "high": 0.99}}},
+        "sweep.samples",
+        "required",
+    ),
     ({"samples": 3}, "sweep.samples", "only meaningful"),
-    ({"grid": {"train.lr": [1e-3]}, "random": {"train.lr": {"low": 1e-4, "high": 1e-3}}, "samples": 2},
-     "sweep.random.train.lr", "already a grid axis"),
+    (
+        {
+            "grid": {"train.lr": [1e-3]},
+            "random": {"train.lr": {"low": 1e-4, "high": 1e-3}},
+            "samples": 2,
+        },
+        "sweep.random.train.lr",
+        "already a grid axis",
+    ),
     ({"grid": {}}, "sweep.grid", "no axes"),
     ({"seeds": 0}, "sweep.seeds", ">= 1"),
     ({"seeds": [1, 1]}, "sweep.seeds", "repeat"),
     ({"seeds": []}, "sweep.seeds", "non-empty"),
     ({"seed": 3}, "sweep.seed", "unknown field"),
-    ({"grid": {"reward.traj_weights[8]": [1.0]}}, r"sweep.grid.reward.traj_weights\[8\]", "out of range"),
+    (
+        {"grid": {"reward.traj_weights[8]": [1.0]}},
+        r"sweep.grid.reward.traj_weights\[8\]",
+        "out of range",
+    ),
     ({"grid": {"train.lr[0]": [1.0]}}, r"sweep.grid.train.lr\[0\]", "not a vector"),
     ({"heatmap": ["train.lr", "train.lam"]}, "sweep.heatmap", "not an axis"),
     ({"memory_budget": "4 parsecs"}, "sweep.memory_budget", "unknown unit"),
@@ -198,26 +280,41 @@ def test_sweep_errors_name_the_field(sweep, field, text):
 def test_sweep_file_errors_name_the_file_and_field(tmp_path):
     p = tmp_path / "s.toml"
     p.write_text('[sweep]\nbase = "missing.toml"\n[sweep.grid]\n"train.lr" = [1e-3]\n')
-    with pytest.raises(ConfigError, match=r"s.toml: sweep.base: .*missing.toml: cannot read config"):
+    with pytest.raises(
+        ConfigError, match=r"s.toml: sweep.base: .*missing.toml: cannot read config"
+    ):
         load_sweep(p)
-    p.write_text('[train]\nlr = 1e-3\n')
+    p.write_text("[train]\nlr = 1e-3\n")
     with pytest.raises(ConfigError, match=r"s.toml: sweep: missing \[sweep\]"):
         load_sweep(p)
     p.write_text('[sweep]\nseeds = 2\n[sweep.grid]\n"train.gamma" = [0.9, 2.0]\n')
-    with pytest.raises(ConfigError, match=r"s.toml: sweep.grid.train.gamma: configuration 1 .*train.gamma"):
+    with pytest.raises(
+        ConfigError, match=r"s.toml: sweep.grid.train.gamma: configuration 1 .*train.gamma"
+    ):
         load_sweep(p)
     with pytest.raises(ConfigError, match="cannot read"):
         load_sweep(tmp_path / "nope.toml")
 
 
 def test_base_config_is_merged_under_the_sweep_file(tmp_path):
-    (tmp_path / "base.toml").write_text('[train]\nnum_envs = 64\nlr = 0.5\nhidden = [8]\n[env]\nobs_mode = "thesis"\n')
-    (tmp_path / "s.toml").write_text('[sweep]\nbase = "base.toml"\n[sweep.grid]\n"train.lam" = [0.1, 0.2]\n'
-                                     '[train]\nhidden = [4, 4]\n')
+    (tmp_path / "base.toml").write_text(
+        '[train]\nnum_envs = 64\nlr = 0.5\nhidden = [8]\n[env]\nobs_mode = "thesis"\n'
+    )
+    (tmp_path / "s.toml").write_text(
+        '[sweep]\nbase = "base.toml"\n[sweep.grid]\n"train.lam" = [0.1, 0.2]\n'
+        "[train]\nhidden = [4, 4]\n"
+    )
     sw = load_sweep(tmp_path / "s.toml")
     cfg = sw.members[1].config
-    assert (cfg.train.num_envs, cfg.train.lr, cfg.train.hidden, cfg.train.lam) == (64, 0.5, (4, 4), 0.2)
-    assert cfg.env.obs_mode == "thesis" and not hasattr(cfg, "extra")   # [sweep] never reaches the Config
+    assert (cfg.train.num_envs, cfg.train.lr, cfg.train.hidden, cfg.train.lam) == (
+        64,
+        0.5,
+        (4, 4),
+        0.2,
+    )
+    assert cfg.env.obs_mode == "thesis" and not hasattr(
+        cfg, "extra"
+    )  # [sweep] never reaches the Config
     # The self-contained form rebuilds the same sweep (what a Ray worker receives).
     again = sweep_from_dict(sw.to_dict())
     assert [m.config for m in again.members] == [m.config for m in sw.members]
@@ -226,7 +323,10 @@ def test_base_config_is_merged_under_the_sweep_file(tmp_path):
 
 def test_fingerprint_covers_results_not_report_options():
     a = sweep_from_dict(tiny_raw())
-    assert a.fingerprint() == sweep_from_dict(tiny_raw(top=2, chunk_size=2, memory_budget="1GiB")).fingerprint()
+    assert (
+        a.fingerprint()
+        == sweep_from_dict(tiny_raw(top=2, chunk_size=2, memory_budget="1GiB")).fingerprint()
+    )
     assert a.fingerprint() != sweep_from_dict(tiny_raw(seeds=3)).fingerprint()
     assert a.fingerprint() != sweep_from_dict(tiny_raw(grid={"train.lr": LRS[:3]})).fingerprint()
     raw = tiny_raw()
@@ -234,18 +334,30 @@ def test_fingerprint_covers_results_not_report_options():
     assert a.fingerprint() != sweep_from_dict(raw).fingerprint()
 
 
-@pytest.mark.parametrize("text, n", [("512MiB", 512 * 2**20), ("4 GiB", 4 * 2**30), ("2GB", 2 * 10**9),
-                                     (1000, 1000), ("1.5KiB", 1536)])
+@pytest.mark.parametrize(
+    "text, n",
+    [
+        ("512MiB", 512 * 2**20),
+        ("4 GiB", 4 * 2**30),
+        ("2GB", 2 * 10**9),
+        (1000, 1000),
+        ("1.5KiB", 1536),
+    ],
+)
 def test_parse_bytes(text, n):
     assert parse_bytes(text) == n
 
 
 def test_sweep_files_load_without_jax():
-    code = ("import sys\nfrom jaxexo.sweep.spec import load_sweep\nfrom jaxexo.sweep.plan import make_plan\n"
-            "import jaxexo.sweep.results\n"
-            "s = load_sweep('configs/sweeps/smoke.toml')\nmake_plan(s, 2, 2**30)\n"
-            "print('JAX' if any(m == 'jax' or m.startswith(('jax.', 'flax')) for m in sys.modules) else 'NOJAX')\n")
-    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    code = (
+        "import sys\nfrom jaxexo.sweep.spec import load_sweep\nfrom jaxexo.sweep.plan import make_plan\n"
+        "import jaxexo.sweep.results\n"
+        "s = load_sweep('configs/sweeps/smoke.toml')\nmake_plan(s, 2, 2**30)\n"
+        "print('JAX' if any(m == 'jax' or m.startswith(('jax.', 'flax')) for m in sys.modules) else 'NOJAX')\n"
+    )
+    r = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120
+    )
     assert r.returncode == 0, r.stderr
     assert r.stdout.strip() == "NOJAX"
 
@@ -257,7 +369,7 @@ def test_bundled_sweeps_load():
     assert len(smoke.members) == 8 and len(smoke.seeds) == 2 and len(smoke.groups) == 1
     thesis = sweeps["thesis_episodes_pivot"]
     assert {a.path for a in thesis.axes} == {"train.budget_episodes", "layout.pivot"}
-    assert len(thesis.groups) == 3      # one compiled program per episode budget
+    assert len(thesis.groups) == 3  # one compiled program per episode budget
     assert all(m.config.env.obs_mode == "thesis" for m in thesis.members)
 
 
@@ -267,17 +379,42 @@ def test_ranking_by_mean_success_then_divergence():
     sw = sweep_from_dict(tiny_raw())
 
     def row(cid, seed, success, diverged=0, ret=0.0, reach="nan"):
-        return {"config_id": str(cid), "seed": str(seed), "success": repr(success), "held_out_success": "0.0",
-                "accuracy": "1.0", "train_return": repr(ret), "episodes_to_90": reach, "diverged": str(diverged)}
+        return {
+            "config_id": str(cid),
+            "seed": str(seed),
+            "success": repr(success),
+            "held_out_success": "0.0",
+            "accuracy": "1.0",
+            "train_return": repr(ret),
+            "episodes_to_90": reach,
+            "diverged": str(diverged),
+        }
 
-    rows = [row(0, 0, 0.5), row(0, 1, 0.7, reach="1000.0"), row(1, 0, 0.0, 1, ret=9.0), row(1, 1, 0.0, 1, ret=9.0),
-            row(2, 0, 0.0, ret=-5.0), row(2, 1, 0.0, ret=-5.0), row(3, 0, 0.9), row(3, 1, 0.1, reach="3000.0")]
+    rows = [
+        row(0, 0, 0.5),
+        row(0, 1, 0.7, reach="1000.0"),
+        row(1, 0, 0.0, 1, ret=9.0),
+        row(1, 1, 0.0, 1, ret=9.0),
+        row(2, 0, 0.0, ret=-5.0),
+        row(2, 1, 0.0, ret=-5.0),
+        row(3, 0, 0.9),
+        row(3, 1, 0.1, reach="3000.0"),
+    ]
     entries = rank(sw, rows)
-    assert [e["config_id"] for e in entries] == [0, 3, 2, 1]   # 0.6 > 0.5 (wider spread); 0.0 healthy > diverged
+    assert [e["config_id"] for e in entries] == [
+        0,
+        3,
+        2,
+        1,
+    ]  # 0.6 > 0.5 (wider spread); 0.0 healthy > diverged
     e0, e3 = entries[0], entries[1]
     assert e0["success_mean"] == pytest.approx(0.6) and e0["success_std"] == pytest.approx(0.1)
     assert (e0["success_min"], e0["success_max"]) == (0.5, 0.7)
-    assert e0["episodes_to_90"] == 1000.0 and e0["reached_90"] == 1 and e3["success_std"] == pytest.approx(0.4)
+    assert (
+        e0["episodes_to_90"] == 1000.0
+        and e0["reached_90"] == 1
+        and e3["success_std"] == pytest.approx(0.4)
+    )
     assert entries[3]["diverged"] == 2 and entries[2]["reached_90"] == 0
 
 
@@ -286,13 +423,15 @@ def test_ranking_by_mean_success_then_divergence():
 # --------------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("agents, devices, cap", [(12, 2, 5), (7, 2, 100), (64, 4, 16), (1, 2, 8), (9, 1, 4),
-                                                  (256, 2, 30), (100, 2, 24)])
+@pytest.mark.parametrize(
+    "agents, devices, cap",
+    [(12, 2, 5), (7, 2, 100), (64, 4, 16), (1, 2, 8), (9, 1, 4), (256, 2, 30), (100, 2, 24)],
+)
 def test_chunk_sizes_are_multiples_of_the_devices_and_pad_least(agents, devices, cap):
     size = P.group_chunk_size(agents, 1, 1, devices, budget=cap)
     assert size % devices == 0 and size <= max(cap, devices)
     chunks = -(-agents // size)
-    assert size * (chunks - 1) < agents   # no empty chunk
+    assert size * (chunks - 1) < agents  # no empty chunk
     top = max(devices, min(cap, agents) // devices * devices)
     waste = lambda s: -(-agents // s) * s - agents  # noqa: E731
     assert all(waste(size) <= waste(s) for s in range(max(devices, top // 2), top + 1, devices))
@@ -310,8 +449,11 @@ def test_plan_covers_every_agent_once_in_order():
     for g in sw.groups:
         sizes = {c.size for c in chunks if c.group_id == g.group_id}
         assert len(sizes) == 1 and sizes.pop() % 2 == 0
-    assert all(len(c.agents) <= c.size and c.size * P.agent_bytes(sw.members[c.agents[0][0]].config) <= 4 * per
-               for c in chunks)
+    assert all(
+        len(c.agents) <= c.size
+        and c.size * P.agent_bytes(sw.members[c.agents[0][0]].config) <= 4 * per
+        for c in chunks
+    )
     with pytest.raises(ConfigError, match="memory_budget: 2 agent"):
         P.make_plan(sw, devices=2, budget=per)
     # The chunk program's own estimate grows with the batch.
@@ -339,8 +481,13 @@ def _subprocess_env(cache) -> dict:
     # RAY_AUTH_MODE: the test cluster listens on loopback only; without it Ray turns token
     # authentication on whenever ~/.ray/auth_token exists, a file other Ray runs on this machine
     # create and replace (a cluster and its client could then hold different tokens).
-    env.update(JAX_COMPILATION_CACHE_DIR=str(cache), JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="0.5",
-               JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES="0", RAY_USAGE_STATS_ENABLED="0", RAY_AUTH_MODE="disabled")
+    env.update(
+        JAX_COMPILATION_CACHE_DIR=str(cache),
+        JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="0.5",
+        JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES="0",
+        RAY_USAGE_STATS_ENABLED="0",
+        RAY_AUTH_MODE="disabled",
+    )
     return env
 
 
@@ -350,10 +497,22 @@ def cli_local(jax_cache, tmp_path_factory):
     in the background from the first test that needs it."""
     tmp = tmp_path_factory.mktemp("cli")
     tiny_toml(tmp / "tiny.toml")
-    proc = subprocess.Popen(_cli("sweep", tmp / "tiny.toml", "--out", tmp / "out", "--export-best", "--export-all",
-                                 "--quiet"),
-                            cwd=ROOT, env=_subprocess_env(jax_cache), stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        _cli(
+            "sweep",
+            tmp / "tiny.toml",
+            "--out",
+            tmp / "out",
+            "--export-best",
+            "--export-all",
+            "--quiet",
+        ),
+        cwd=ROOT,
+        env=_subprocess_env(jax_cache),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         os.setpriority(os.PRIO_PROCESS, proc.pid, 10)
     except (AttributeError, OSError):
@@ -415,9 +574,12 @@ def test_agents_match_solo_make_train_runs_and_divergence_is_contained(inproc, t
     assert len(rows) == 8
     plan = json.loads((out / R.PLAN).read_text())
     # The diverging configuration (1) shares chunk 0, one vmapped batch, with configuration 0.
-    assert [c["agents"] for c in plan["chunks"]] == [[[0, 0], [0, 1], [1, 0], [1, 1]], [[2, 0], [2, 1], [3, 0], [3, 1]]]
+    assert [c["agents"] for c in plan["chunks"]] == [
+        [[0, 0], [0, 1], [1, 0], [1, 1]],
+        [[2, 0], [2, 1], [3, 0], [3, 1]],
+    ]
     cfg0 = tiny_sweep.members[0].config
-    solo = jax.jit(make_train(cfg0))   # one program for every lr: they are leaves
+    solo = jax.jit(make_train(cfg0))  # one program for every lr: they are leaves
     init = jax.jit(Trainer(cfg0).init)
     for chunk in plan["chunks"]:
         data = R.load_chunk(out, chunk["chunk_id"])
@@ -429,17 +591,19 @@ def test_agents_match_solo_make_train_runs_and_divergence_is_contained(inproc, t
             ts, m = solo(jax.random.PRNGKey(seed), hyper)
             if LRS[cid] == HUGE_LR:
                 assert row["diverged"] == "1"
-                assert not np.all(np.isfinite(np.asarray(m)))      # the solo run diverges as well
+                assert not np.all(np.isfinite(np.asarray(m)))  # the solo run diverges as well
                 continue
             assert row["diverged"] == "0"
             assert int(row["episodes"]) == int(ts.episodes)
             got = jax.tree.leaves(unflatten(data["params"], i))
             want = jax.tree.leaves(jax.tree.map(np.asarray, ts.params))
-            start = jax.tree.leaves(jax.tree.map(np.asarray, init(jax.random.PRNGKey(seed), hyper).params))
+            start = jax.tree.leaves(
+                jax.tree.map(np.asarray, init(jax.random.PRNGKey(seed), hyper).params)
+            )
             assert len(got) == len(want) == 4
             for g, w, s0 in zip(got, want, start):
                 np.testing.assert_allclose(g, w, rtol=1e-4, atol=1e-5)
-                assert np.abs(w - s0).max() > 1e-3     # trained: the comparison has teeth
+                assert np.abs(w - s0).max() > 1e-3  # trained: the comparison has teeth
     for cid, seed in [(0, 0), (0, 1), (2, 0), (3, 1)]:
         r = rows[(cid, seed)]
         assert all(np.isfinite(float(r[k])) for k in ("success", "accuracy", "eval_return"))
@@ -519,8 +683,12 @@ def test_resume_skips_finished_chunks_and_ends_identical(inproc, tiny_sweep, tmp
     assert _without_wall(_rows(out / R.RESULTS)) == _without_wall(_rows(full / R.RESULTS))
     for c in (0, 1):
         a, b = R.load_chunk(out, c), R.load_chunk(full, c)
-        assert a["agents"] == b["agents"] and np.array_equal(a["curves"], b["curves"], equal_nan=True)
-        assert all(np.array_equal(a["params"][k], b["params"][k], equal_nan=True) for k in a["params"])
+        assert a["agents"] == b["agents"] and np.array_equal(
+            a["curves"], b["curves"], equal_nan=True
+        )
+        assert all(
+            np.array_equal(a["params"][k], b["params"][k], equal_nan=True) for k in a["params"]
+        )
     # Another sweep in the same folder is refused.
     other = sweep_from_dict(tiny_raw(seeds=3))
     with pytest.raises(ConfigError, match="sweep differs"):
@@ -528,7 +696,13 @@ def test_resume_skips_finished_chunks_and_ends_identical(inproc, tiny_sweep, tmp
     with pytest.raises(ConfigError, match="no sweep to resume"):
         runner.run_sweep(tiny_sweep, tmp_path / "empty", resume=True, progress=False, devices=dev)
     with pytest.raises(ConfigError, match="--heatmap: expected two different axes"):
-        runner.run_sweep(tiny_sweep, tmp_path / "h", heatmap=("train.lr", "train.gamma"), progress=False, devices=dev)
+        runner.run_sweep(
+            tiny_sweep,
+            tmp_path / "h",
+            heatmap=("train.lr", "train.gamma"),
+            progress=False,
+            devices=dev,
+        )
     assert not (tmp_path / "h").exists()
 
 
@@ -545,10 +719,21 @@ def test_cli_sweep_writes_results_report_and_best_policy(cli_local, tiny_sweep):
     stdout, stderr = cli_local["wait"]()
     out = cli_local["out"]
     rows = _rows(out / R.RESULTS)
-    assert [(int(r["config_id"]), int(r["seed"])) for r in rows] == [(c, s) for c in range(4) for s in (0, 1)]
+    assert [(int(r["config_id"]), int(r["seed"])) for r in rows] == [
+        (c, s) for c in range(4) for s in (0, 1)
+    ]
     cols = list(rows[0])
-    for c in ["config_id", "seed", "label", "train.lr", *(f"train.{f}" for f in HYPER_FIELDS), "reward.goal_reward",
-              "reward.traj_weights", *R.SCALARS, "wall_s"]:
+    for c in [
+        "config_id",
+        "seed",
+        "label",
+        "train.lr",
+        *(f"train.{f}" for f in HYPER_FIELDS),
+        "reward.goal_reward",
+        "reward.traj_weights",
+        *R.SCALARS,
+        "wall_s",
+    ]:
         assert c in cols, c
     assert json.loads(rows[0]["reward.traj_weights"]) == [1.0] * 8
     assert {r["diverged"] for r in rows} == {"0", "1"}
@@ -571,20 +756,27 @@ def test_cli_sweep_writes_results_report_and_best_policy(cli_local, tiny_sweep):
     # The exported parameters are the chosen agent's final ones.
     from jaxexo.sweep.program import unflatten
 
-    row = next(r for r in rows if int(r["config_id"]) == sel["config_id"] and int(r["seed"]) == sel["seed"])
+    row = next(
+        r for r in rows if int(r["config_id"]) == sel["config_id"] and int(r["seed"]) == sel["seed"]
+    )
     data = R.load_chunk(out, int(row["chunk"]))
     params = unflatten(data["params"], data["agents"].index((sel["config_id"], sel["seed"])))
     np.testing.assert_array_equal(pol.kernels[0], params["params"]["dense_0"]["kernel"])
     assert "8 agents" in stdout.replace("= 8 agents", "8 agents") and "best/policy.npz" in stdout
-    assert "\r" not in stderr   # --quiet: no progress bar
+    assert "\r" not in stderr  # --quiet: no progress bar
 
 
 @pytest.mark.slow
 def test_cli_bad_sweep_exits_2_naming_the_field(tmp_path):
     p = tmp_path / "bad.toml"
     p.write_text('[sweep]\nseeds = 2\n[sweep.grid]\n"train.lamda" = [0.5]\n')
-    r = subprocess.run(_cli("sweep", p, "--out", tmp_path / "out", "--quiet"), capture_output=True, text=True,
-                       cwd=ROOT, timeout=120)
+    r = subprocess.run(
+        _cli("sweep", p, "--out", tmp_path / "out", "--quiet"),
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=120,
+    )
     assert r.returncode == 2, r.stderr
     assert "sweep.grid.train.lamda" in r.stderr and "unknown axis" in r.stderr
     assert not (tmp_path / "out").exists()
@@ -607,8 +799,13 @@ class _RayNode:
     def __init__(self, args, env, log):
         ray_bin = os.path.join(os.path.dirname(sys.executable), "ray")
         self.log = open(log, "w")
-        self.proc = subprocess.Popen([ray_bin, "start", "--block", "--disable-usage-stats", *args], env=env,
-                                     stdout=self.log, stderr=subprocess.STDOUT, start_new_session=True)
+        self.proc = subprocess.Popen(
+            [ray_bin, "start", "--block", "--disable-usage-stats", *args],
+            env=env,
+            stdout=self.log,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+        )
 
     def signal(self, sig) -> None:
         try:
@@ -637,20 +834,35 @@ def ray_cluster(jax_cache):
     """A real Ray cluster on loopback: a head (no CPUs for tasks) and one worker node with two CPUs,
     each a ``ray start --block`` process; both are ended with the test."""
     pytest.importorskip("ray")
-    tmp = tempfile.mkdtemp(prefix="jxr", dir="/tmp")   # short: Ray's socket paths must fit 107 bytes
+    tmp = tempfile.mkdtemp(prefix="jxr", dir="/tmp")  # short: Ray's socket paths must fit 107 bytes
     env = _subprocess_env(jax_cache)
     # A private HOME: a token in the user's ~/.ray/auth_token (Ray's token authentication) must not
     # leak into this loopback cluster, whose nodes and client would then disagree about it.
     env["HOME"] = tmp
     port = _free_port()
     common = ["--node-ip-address=127.0.0.1", "--object-store-memory=100000000"]
-    head = _RayNode(["--head", f"--port={port}", "--num-cpus=0", "--include-dashboard=false", f"--temp-dir={tmp}",
-                     *common], env, os.path.join(tmp, "head.log"))
+    head = _RayNode(
+        [
+            "--head",
+            f"--port={port}",
+            "--num-cpus=0",
+            "--include-dashboard=false",
+            f"--temp-dir={tmp}",
+            *common,
+        ],
+        env,
+        os.path.join(tmp, "head.log"),
+    )
     nodes = [head]
     try:
         _wait_for_port(port, head, timeout=60)
-        nodes.append(_RayNode([f"--address=127.0.0.1:{port}", "--num-cpus=2", *common], env,
-                              os.path.join(tmp, "worker.log")))
+        nodes.append(
+            _RayNode(
+                [f"--address=127.0.0.1:{port}", "--num-cpus=2", *common],
+                env,
+                os.path.join(tmp, "worker.log"),
+            )
+        )
         yield {"address": f"127.0.0.1:{port}", "env": env}
     finally:
         _stop_nodes(nodes)
@@ -675,9 +887,26 @@ def test_ray_backend_gives_the_local_results(ray_cluster, cli_local, tmp_path):
     on the worker with two CPUs exposed as JAX devices, as the local run had: identical results."""
     cli_local["wait"]()
     out = tmp_path / "ray"
-    r = subprocess.run(_cli("sweep", cli_local["dir"] / "tiny.toml", "--out", out, "--backend", "ray",
-                            "--address", ray_cluster["address"], "--task-cpus", "2", "--quiet"),
-                       capture_output=True, text=True, cwd=ROOT, env=ray_cluster["env"], timeout=300)
+    r = subprocess.run(
+        _cli(
+            "sweep",
+            cli_local["dir"] / "tiny.toml",
+            "--out",
+            out,
+            "--backend",
+            "ray",
+            "--address",
+            ray_cluster["address"],
+            "--task-cpus",
+            "2",
+            "--quiet",
+        ),
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        env=ray_cluster["env"],
+        timeout=300,
+    )
     assert r.returncode == 0, r.stderr[-3000:]
     local = cli_local["out"]
     local_plan = json.loads((local / R.PLAN).read_text())
@@ -688,7 +917,9 @@ def test_ray_backend_gives_the_local_results(ray_cluster, cli_local, tmp_path):
     assert _without_wall(_rows(out / R.RESULTS)) == _without_wall(_rows(local / R.RESULTS))
     for c in range(len(ray_plan["chunks"])):
         a, b = R.load_chunk(out, c), R.load_chunk(local, c)
-        assert all(np.array_equal(a["params"][k], b["params"][k], equal_nan=True) for k in a["params"])
+        assert all(
+            np.array_equal(a["params"][k], b["params"][k], equal_nan=True) for k in a["params"]
+        )
 
 
 @pytest.mark.slow
@@ -707,7 +938,9 @@ def test_export_all_writes_each_agent_and_skips_the_diverged(cli_local, tiny_swe
     index = json.loads((out / "agents" / "index.json").read_text())
     diverged = {(int(r["config_id"]), int(r["seed"])) for r in rows if r["diverged"] == "1"}
     assert diverged and sum(e["exported"] for e in index) == 8 - len(diverged)
-    assert [(e["config_id"], e["seed"]) for e in index] == [(c, s) for c in range(4) for s in (0, 1)]
+    assert [(e["config_id"], e["seed"]) for e in index] == [
+        (c, s) for c in range(4) for s in (0, 1)
+    ]
     for e, r in zip(index, sorted(rows, key=lambda r: (int(r["config_id"]), int(r["seed"])))):
         key = (e["config_id"], e["seed"])
         d = agent_dir(out, *key)
@@ -716,5 +949,7 @@ def test_export_all_writes_each_agent_and_skips_the_diverged(cli_local, tiny_swe
             continue
         data = R.load_chunk(out, int(r["chunk"]))
         params = unflatten(data["params"], data["agents"].index(key))
-        np.testing.assert_array_equal(load_policy(d / "policy.npz").kernels[0], params["params"]["dense_0"]["kernel"])
+        np.testing.assert_array_equal(
+            load_policy(d / "policy.npz").kernels[0], params["params"]["dense_0"]["kernel"]
+        )
         assert load_config(d / "config.toml") == tiny_sweep.members[key[0]].config

@@ -40,7 +40,9 @@ def assert_device_ready(sw, limits: DeviceLimits, rate: float):
     v, a = fd(sw.joint_angles, rate)
     assert np.all(np.abs(v) <= vmax), (np.abs(v).max(0), vmax)
     assert np.all(np.abs(a) <= amax), (np.abs(a).max(0), amax)
-    assert np.all(np.abs(sw.joint_velocity) <= vmax) and np.all(np.abs(sw.joint_acceleration) <= amax)
+    assert np.all(np.abs(sw.joint_velocity) <= vmax) and np.all(
+        np.abs(sw.joint_acceleration) <= amax
+    )
     assert sw.within_limits
     # Rest at lift-off and touch-down: zero velocity and acceleration, and the positions barely move
     # over the first and last control period (s ~ t^3 there).
@@ -57,8 +59,12 @@ def random_path(rng, n=100, dense=None):
     """A random smooth swing (n, 2) from (0, 0) to (0.70, 0), z >= 0; with ``dense``, also the same
     curve at that many points (the reference for "on the path")."""
     k = np.arange(1, 4)[:, None]
-    cy, h, cz, p = rng.uniform(-0.03, 0.03, (3, 1)), rng.uniform(0.05, 0.30), rng.uniform(-0.01, 0.01, (3, 1)), \
-        rng.uniform(0.6, 2.0)
+    cy, h, cz, p = (
+        rng.uniform(-0.03, 0.03, (3, 1)),
+        rng.uniform(0.05, 0.30),
+        rng.uniform(-0.01, 0.01, (3, 1)),
+        rng.uniform(0.6, 2.0),
+    )
 
     def curve(tau):
         y = 0.70 * tau + (cy * np.sin(k * np.pi * tau)).sum(0)
@@ -72,8 +78,17 @@ def random_path(rng, n=100, dense=None):
 def synthetic(paths, pivot="between"):
     ob = Obstacle.rectangle(0.05, 0.05, center_y=0.45)
     scenes = [dynamics.make_scene(ob, pivot, 0.0, 0.70, foot_length=SP.foot_length) for _ in paths]
-    return list(assemble("test", SP, scenes, list(paths), np.stack(paths), [float("nan")] * len(paths),
-                         deviation=np.zeros(len(paths))))   # the paths are the polylines themselves
+    return list(
+        assemble(
+            "test",
+            SP,
+            scenes,
+            list(paths),
+            np.stack(paths),
+            [float("nan")] * len(paths),
+            deviation=np.zeros(len(paths)),
+        )
+    )  # the paths are the polylines themselves
 
 
 def test_limits_hold_on_random_paths_and_ends_rest():
@@ -94,10 +109,23 @@ def test_the_safety_net_slows_by_whole_control_periods():
     of the TOPP passes 0.13 % over the hip's acceleration limit at 100 Hz, and was left flagged not
     within the limits when the net's slow-downs stayed inside one period."""
     rec = json.loads((ROOT / "tests" / "data" / "stuck_swing.json").read_text())
-    scene = dynamics.make_scene(Obstacle.profile(rec["obstacle_outline"]), rec["pivot_y"], rec["start_y"],
-                                rec["goal_y"] - rec["start_y"], foot_length=SP.foot_length)
+    scene = dynamics.make_scene(
+        Obstacle.profile(rec["obstacle_outline"]),
+        rec["pivot_y"],
+        rec["start_y"],
+        rec["goal_y"] - rec["start_y"],
+        foot_length=SP.foot_length,
+    )
     heel = np.asarray(rec["heel"])
-    traj = assemble("rl", SP, [scene], [heel], heel[None], [float("nan")], deviation=np.array([rec["deviation"]]))[0]
+    traj = assemble(
+        "rl",
+        SP,
+        [scene],
+        [heel],
+        heel[None],
+        [float("nan")],
+        deviation=np.array([rec["deviation"]]),
+    )[0]
     planned = DeviceLimits.from_config(CFG).planned()
     sw = time_swing(traj, CFG, rate=100.0)
     v, a = fd(sw.joint_angles, 100.0)
@@ -113,8 +141,15 @@ def test_limits_hold_on_polylines_with_corners():
     rng = np.random.default_rng(11)
     paths = []
     for _ in range(4):
-        pts = np.array([[0, 0], [0.1, rng.uniform(0.1, 0.25)], [0.45, rng.uniform(0.25, 0.35)],
-                        [0.62, rng.uniform(0.05, 0.15)], [0.70, 0.0]])
+        pts = np.array(
+            [
+                [0, 0],
+                [0.1, rng.uniform(0.1, 0.25)],
+                [0.45, rng.uniform(0.25, 0.35)],
+                [0.62, rng.uniform(0.05, 0.15)],
+                [0.70, 0.0],
+            ]
+        )
         seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
         arc = np.concatenate([[0], np.cumsum(seg)])
         u = np.linspace(0, arc[-1], 100)
@@ -126,14 +161,17 @@ def test_limits_hold_on_polylines_with_corners():
 
 def test_thesis_obstacles_and_unseen_shapes_cfftg():
     cf = CFFTG(CFG)
-    obs = [Obstacle.named(k) for k in THESIS] + [Obstacle.rectangle(0.08, 0.25), Obstacle.triangle(0.22, 0.10),
-                                                 Obstacle.half_ellipse(0.18, 0.22),
-                                                 Obstacle.profile([(0.35, 0), (0.40, 0.15), (0.50, 0.08), (0.55, 0)])]
+    obs = [Obstacle.named(k) for k in THESIS] + [
+        Obstacle.rectangle(0.08, 0.25),
+        Obstacle.triangle(0.22, 0.10),
+        Obstacle.half_ellipse(0.18, 0.22),
+        Obstacle.profile([(0.35, 0), (0.40, 0.15), (0.50, 0.08), (0.55, 0)]),
+    ]
     batch = cf.generate_batch(obs, pivot=["agent", "obstacle", "between"] * 3)
     lim = DeviceLimits.from_config(CFG)
     for tr, sw in zip(batch, time_swings(batch, CFG, rate=200)):
         assert_device_ready(sw, lim, 200)
-        assert sw.checks.ok == tr.checks.ok     # the exported samples pass the path's checks too
+        assert sw.checks.ok == tr.checks.ok  # the exported samples pass the path's checks too
         assert sw.checks.min_clearance == pytest.approx(tr.checks.min_clearance, abs=2e-3)
         # The uniform 1 s timing of the same path asks for more than the device gives.
         assert uniform_peaks(tr)[0].max() > sw.peak_velocity.max()
@@ -154,7 +192,7 @@ def test_samples_lie_on_the_path():
     dist = np.linalg.norm(p - (a + t[..., None] * d), axis=-1).min(axis=1)
     # 1 mm: between its 100 samples the path is a monotone cubic (PCHIP), which flattens at extrema.
     assert dist.max() < 1e-3
-    assert np.all(np.diff(sw.path_parameter) >= 0)      # forward along the path, never back
+    assert np.all(np.diff(sw.path_parameter) >= 0)  # forward along the path, never back
     # The exported kinematics are the project's kinematics of the exported heel.
     ks = kinematics.leg_state(np, tr.scene.pivot_y, sw.heel, SP.thigh, SP.shin)
     np.testing.assert_allclose(sw.joint_angles[:, 1], ks["knee_swing_angle"], atol=1e-9)
@@ -173,12 +211,16 @@ def test_durations_scale_with_the_limits():
     # Velocity-bound (accelerations practically unlimited): half the speed, twice the time.
     vb = base.scaled(acceleration=1e4)
     t1 = np.array([s.duration for s in time_swings(trajs, CFG, rate=200, limits=vb)])
-    t2 = np.array([s.duration for s in time_swings(trajs, CFG, rate=200, limits=vb.scaled(velocity=0.5))])
+    t2 = np.array(
+        [s.duration for s in time_swings(trajs, CFG, rate=200, limits=vb.scaled(velocity=0.5))]
+    )
     assert np.all((t2 / t1 > 1.85) & (t2 / t1 < 2.15)), t2 / t1
     # Acceleration-bound: a quarter of the acceleration, twice the time.
     ab = base.scaled(velocity=1e3)
     t3 = np.array([s.duration for s in time_swings(trajs, CFG, rate=200, limits=ab)])
-    t4 = np.array([s.duration for s in time_swings(trajs, CFG, rate=200, limits=ab.scaled(acceleration=0.25))])
+    t4 = np.array(
+        [s.duration for s in time_swings(trajs, CFG, rate=200, limits=ab.scaled(acceleration=0.25))]
+    )
     assert np.all((t4 / t3 > 1.85) & (t4 / t3 < 2.15)), t4 / t3
     # A minimum duration is honoured (and the swing is still at rest at both ends).
     sw = time_swing(trajs[0], CFG, rate=100, limits=dataclasses.replace(base, min_duration=3.0))
@@ -202,10 +244,19 @@ def test_jerk_limit_and_headroom_hold_on_the_exported_samples():
             assert sw.limits == lim and sw.within_limits
     vb = dataclasses.replace(base.scaled(acceleration=1e4), jerk=None, headroom=0.0)
     t0 = np.array([s.duration for s in time_swings(trajs, CFG, rate=200, limits=vb)])
-    t1 = np.array([s.duration for s in time_swings(trajs, CFG, rate=200, limits=dataclasses.replace(vb, headroom=0.2))])
+    t1 = np.array(
+        [
+            s.duration
+            for s in time_swings(trajs, CFG, rate=200, limits=dataclasses.replace(vb, headroom=0.2))
+        ]
+    )
     assert np.all((t1 / t0 > 1.15) & (t1 / t0 < 1.35)), t1 / t0
-    for bad, match in ((dict(headroom=0.7), "limits.headroom"), (dict(headroom=-0.1), "limits.headroom"),
-                       (dict(jerk=(1.0, 2.0)), "limits.jerk"), (dict(jerk=(0.0,) * 4), "limits.jerk")):
+    for bad, match in (
+        (dict(headroom=0.7), "limits.headroom"),
+        (dict(headroom=-0.1), "limits.headroom"),
+        (dict(jerk=(1.0, 2.0)), "limits.jerk"),
+        (dict(jerk=(0.0,) * 4), "limits.jerk"),
+    ):
         with pytest.raises(ValueError, match=match):
             dataclasses.replace(base, **bad)
 
@@ -217,9 +268,16 @@ def quintic_duration(tr, limits, rate=1000.0):
     seg = np.linalg.norm(np.diff(tr.heel, axis=0), axis=1)
     arc = np.concatenate([[0.0], np.cumsum(seg)]) / seg.sum()
     dense = np.linspace(0, 1, 20001)
-    heel = np.column_stack([np.interp(dense, arc, tr.heel[:, 0]), np.interp(dense, arc, tr.heel[:, 1])])
-    q = np.stack(list(kinematics.leg_state(np, tr.scene.pivot_y, heel, SP.thigh, SP.shin)[k] for k in
-                      ("hip_swing", "knee_swing_angle", "hip_stance", "knee_stance_angle")), -1)
+    heel = np.column_stack(
+        [np.interp(dense, arc, tr.heel[:, 0]), np.interp(dense, arc, tr.heel[:, 1])]
+    )
+    q = np.stack(
+        list(
+            kinematics.leg_state(np, tr.scene.pivot_y, heel, SP.thigh, SP.shin)[k]
+            for k in ("hip_swing", "knee_swing_angle", "hip_stance", "knee_stance_angle")
+        ),
+        -1,
+    )
     vmax, amax = np.array(limits.velocity), np.array(limits.acceleration)
 
     def ok(T):
@@ -256,8 +314,9 @@ def test_exports_carry_velocities_accelerations_and_limits(tmp_path):
     assert "hip_swing_vel_rad_s" in header and "knee_stance_acc_rad_s2" in header
     data = np.loadtxt(tmp_path / "s.csv", delimiter=",", skiprows=1)
     assert data.shape == (len(sw.time), len(TIMED_CSV_COLUMNS))
-    np.testing.assert_allclose(data[:, header.index("knee_swing_vel_rad_s")], sw.joint_velocity[:, 1], rtol=1e-8,
-                               atol=1e-8)
+    np.testing.assert_allclose(
+        data[:, header.index("knee_swing_vel_rad_s")], sw.joint_velocity[:, 1], rtol=1e-8, atol=1e-8
+    )
     doc = json.loads(sw.to_json(tmp_path / "s.json"))
     assert doc["limits"]["joint_velocity_rad_s"] == list(CFG.device.joint_velocity) * 2
     assert doc["limits"]["joint_acceleration_rad_s2"] == list(CFG.device.joint_acceleration) * 2
@@ -267,10 +326,21 @@ def test_exports_carry_velocities_accelerations_and_limits(tmp_path):
 
 def test_device_config_section_and_bad_input():
     assert max(Config().device.joint_velocity) <= math.radians(300)
-    cfg = config_from_dict(legacy_raw({"device": {"joint_velocity": [2.0, 2.5], "joint_acceleration": [10, 12],
-                                       "min_swing_duration": 0.8, "control_rate": 250}}))
+    cfg = config_from_dict(
+        legacy_raw(
+            {
+                "device": {
+                    "joint_velocity": [2.0, 2.5],
+                    "joint_acceleration": [10, 12],
+                    "min_swing_duration": 0.8,
+                    "control_rate": 250,
+                }
+            }
+        )
+    )
     assert cfg.device.joint_velocity == (2.0, 2.5) and cfg.device.control_rate == 250.0
     import tomllib
+
     assert config_from_dict(tomllib.loads(config_to_toml(cfg))).device == cfg.device
     lim = DeviceLimits.from_config(cfg)
     assert lim.velocity == (2.0, 2.5, 2.0, 2.5) and lim.min_duration == 0.8
@@ -278,13 +348,18 @@ def test_device_config_section_and_bad_input():
         config_from_dict(legacy_raw({"device": {"joint_velocity": [2.0, -1.0]}}))
     with pytest.raises(ConfigError, match=r"device\.joint_acceleration"):
         config_from_dict(legacy_raw({"device": {"joint_acceleration": [2.0]}}))
-    cfg = config_from_dict(legacy_raw({"device": {"joint_jerk": [300.0, 500.0], "tracking_headroom": 0.2}}))
+    cfg = config_from_dict(
+        legacy_raw({"device": {"joint_jerk": [300.0, 500.0], "tracking_headroom": 0.2}})
+    )
     lim = DeviceLimits.from_config(cfg)
     assert lim.jerk == (300.0, 500.0, 300.0, 500.0) and lim.headroom == 0.2
     assert lim.planned().velocity == pytest.approx(tuple(0.8 * v for v in lim.velocity))
-    for bad, match in (({"joint_jerk": [300.0, -1.0]}, r"device\.joint_jerk\[1\]"), ({"joint_jerk": [300.0]}, r"device\.joint_jerk"),
-                       ({"tracking_headroom": 0.9}, r"device\.tracking_headroom"),
-                       ({"tracking_headroom": float("nan")}, r"device\.tracking_headroom")):
+    for bad, match in (
+        ({"joint_jerk": [300.0, -1.0]}, r"device\.joint_jerk\[1\]"),
+        ({"joint_jerk": [300.0]}, r"device\.joint_jerk"),
+        ({"tracking_headroom": 0.9}, r"device\.tracking_headroom"),
+        ({"tracking_headroom": float("nan")}, r"device\.tracking_headroom"),
+    ):
         with pytest.raises(ConfigError, match=match):
             config_from_dict(legacy_raw({"device": bad}))
     with pytest.raises(ConfigError, match=r"device\.control_rate"):
@@ -308,8 +383,10 @@ def test_rl_swings_on_the_thesis_obstacles(trained_run):
     from jaxexo.inference import TrajectoryGenerator
 
     gen = TrajectoryGenerator.load(trained_run / "policy.npz")
-    batch = gen.generate_batch([Obstacle.named(k) for k in THESIS] * 3,
-                               pivot=[p for p in ("agent", "obstacle", "between") for _ in THESIS])
+    batch = gen.generate_batch(
+        [Obstacle.named(k) for k in THESIS] * 3,
+        pivot=[p for p in ("agent", "obstacle", "between") for _ in THESIS],
+    )
     lim = DeviceLimits.from_config(gen.config)
     for tr, sw in zip(batch, time_swings(batch, gen.config, rate=100)):
         assert_device_ready(sw, lim, 100)
@@ -321,19 +398,50 @@ def test_cli_generate_rate_and_animation(trained_run, tmp_path):
     from jaxexo.cli import main
 
     out = tmp_path / "t.csv"
-    rc = main(["generate", "--policy", str(trained_run / "policy.npz"), "--obstacle", "base2", "--rate", "200",
-               "--out", str(out), "--json", str(tmp_path / "t.json"), "--animate", str(tmp_path / "s.gif")])
+    rc = main(
+        [
+            "generate",
+            "--policy",
+            str(trained_run / "policy.npz"),
+            "--obstacle",
+            "base2",
+            "--rate",
+            "200",
+            "--out",
+            str(out),
+            "--json",
+            str(tmp_path / "t.json"),
+            "--animate",
+            str(tmp_path / "s.gif"),
+        ]
+    )
     doc = json.loads((tmp_path / "t.json").read_text())
     assert rc == (0 if doc["checks"]["ok"] else 1)
     assert doc["rate_hz"] == 200 and doc["columns"] == list(TIMED_CSV_COLUMNS)
     data = np.loadtxt(out, delimiter=",", skiprows=1)
-    assert data.shape[1] == len(TIMED_CSV_COLUMNS) and data[-1, 0] == pytest.approx(doc["duration_s"])
+    assert data.shape[1] == len(TIMED_CSV_COLUMNS) and data[-1, 0] == pytest.approx(
+        doc["duration_s"]
+    )
     from PIL import Image
 
     with Image.open(tmp_path / "s.gif") as im:
         assert im.n_frames >= 10
-    assert main(["generate", "--policy", str(trained_run / "policy.npz"), "--obstacle", "base2", "--rate", "-5",
-                 "--out", str(out)]) == 2
+    assert (
+        main(
+            [
+                "generate",
+                "--policy",
+                str(trained_run / "policy.npz"),
+                "--obstacle",
+                "base2",
+                "--rate",
+                "-5",
+                "--out",
+                str(out),
+            ]
+        )
+        == 2
+    )
 
 
 def test_topp_passes_row_by_row_equal_the_batched_passes_and_the_plain_recurrence():
@@ -346,11 +454,17 @@ def test_topp_passes_row_by_row_equal_the_batched_passes_and_the_plain_recurrenc
     rng = np.random.default_rng(11)
     b, k = tl.SCALAR_ROWS + 6, 160
     dq = rng.normal(size=(b, k, 4))
-    dq[:, 40:55, 3] = 0.0                        # a joint that stands still for a stretch
+    dq[:, 40:55, 3] = 0.0  # a joint that stands still for a stretch
     ddq = 5.0 * rng.normal(size=(b, k, 4))
-    vmax, amax, ds = np.array([3.0, 4.0, 3.0, 4.0]), np.array([15.0, 20.0, 15.0, 20.0]), 1.0 / (k - 1)
+    vmax, amax, ds = (
+        np.array([3.0, 4.0, 3.0, 4.0]),
+        np.array([15.0, 20.0, 15.0, 20.0]),
+        1.0 / (k - 1),
+    )
     big, floor_big = tl.topp(dq, ddq, vmax, amax, ds)
-    small = np.concatenate([tl.topp(dq[i:i + 1], ddq[i:i + 1], vmax, amax, ds)[0] for i in range(b)])
+    small = np.concatenate(
+        [tl.topp(dq[i : i + 1], ddq[i : i + 1], vmax, amax, ds)[0] for i in range(b)]
+    )
     np.testing.assert_array_equal(big, small)
     # The plain recurrence, one path at a time, with the interval computed per step.
     for i in range(0, b, 7):
@@ -358,14 +472,34 @@ def test_topp_passes_row_by_row_equal_the_batched_passes_and_the_plain_recurrenc
         reach = np.zeros(k)
         for j in range(k - 1, 0, -1):
             moving = np.abs(dq[i, j]) > 1e-12
-            lo = max(min((-amax[m] - ddq[i, j, m] * reach[j]) / dq[i, j, m], (amax[m] - ddq[i, j, m] * reach[j])
-                         / dq[i, j, m]) for m in range(4) if moving[m]) if moving.any() else -np.inf
+            lo = (
+                max(
+                    min(
+                        (-amax[m] - ddq[i, j, m] * reach[j]) / dq[i, j, m],
+                        (amax[m] - ddq[i, j, m] * reach[j]) / dq[i, j, m],
+                    )
+                    for m in range(4)
+                    if moving[m]
+                )
+                if moving.any()
+                else -np.inf
+            )
             reach[j - 1] = min(max(reach[j] - 2.0 * ds * lo, 0.0), xmax[j - 1])
         x = np.zeros(k)
         for j in range(k - 1):
             moving = np.abs(dq[i, j]) > 1e-12
-            hi = min(max((-amax[m] - ddq[i, j, m] * x[j]) / dq[i, j, m], (amax[m] - ddq[i, j, m] * x[j])
-                         / dq[i, j, m]) for m in range(4) if moving[m]) if moving.any() else np.inf
+            hi = (
+                min(
+                    max(
+                        (-amax[m] - ddq[i, j, m] * x[j]) / dq[i, j, m],
+                        (amax[m] - ddq[i, j, m] * x[j]) / dq[i, j, m],
+                    )
+                    for m in range(4)
+                    if moving[m]
+                )
+                if moving.any()
+                else np.inf
+            )
             x[j + 1] = min(max(x[j] + 2.0 * ds * hi, 0.0), reach[j + 1])
         np.testing.assert_allclose(big[i], x, rtol=1e-9, atol=1e-12)
     assert np.all(np.isfinite(floor_big)) and np.all(big >= 0)

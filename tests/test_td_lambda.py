@@ -24,8 +24,17 @@ GAMMAS = (0.5, 0.9, 1.0)
 
 def _returns(rewards, boot, terminated, done, cont, gamma, lam):
     f = lambda x: jnp.asarray(x, jnp.float32)  # noqa: E731
-    return np.asarray(td_lambda.lambda_returns(f(rewards), f(boot), jnp.asarray(terminated, bool),
-                                               jnp.asarray(done, bool), jnp.asarray(cont, bool), gamma, lam))
+    return np.asarray(
+        td_lambda.lambda_returns(
+            f(rewards),
+            f(boot),
+            jnp.asarray(terminated, bool),
+            jnp.asarray(done, bool),
+            jnp.asarray(cont, bool),
+            gamma,
+            lam,
+        )
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -42,11 +51,13 @@ def _episode(seed: int, control: str, n_env=3, length=12, n_feat=5, n_act=4):
     w = rng.normal(size=(n_act, n_feat))
     b = rng.normal(size=n_act)
     phi = rng.normal(size=(length, n_env, n_feat))
-    q_all = phi @ w.T + b                                          # (L, N, A)
+    q_all = phi @ w.T + b  # (L, N, A)
     greedy_a = q_all.argmax(-1)
     # Behaviour: the greedy action 60% of the time, else any action; every episode takes at least
     # one greedy and one exploratory action in its middle so that the Watkins cut is exercised.
-    actions = np.where(rng.uniform(size=(length, n_env)) < 0.6, greedy_a, rng.integers(0, n_act, (length, n_env)))
+    actions = np.where(
+        rng.uniform(size=(length, n_env)) < 0.6, greedy_a, rng.integers(0, n_act, (length, n_env))
+    )
     actions[length // 2] = greedy_a[length // 2]
     actions[length // 2 + 1] = (greedy_a[length // 2 + 1] + 1) % n_act
     greedy = actions == greedy_a
@@ -56,27 +67,44 @@ def _episode(seed: int, control: str, n_env=3, length=12, n_feat=5, n_act=4):
     # boot[t]: the value of s_{t+1}; the last step terminates, so its boot must not matter: a large
     # random value makes any leak visible.
     if control == "on_policy":
-        boot = np.concatenate([q_sa[1:], 1e3 * rng.normal(size=(1, n_env))])        # Q(s', a'), eq 2.27
+        boot = np.concatenate([q_sa[1:], 1e3 * rng.normal(size=(1, n_env))])  # Q(s', a'), eq 2.27
         cont = np.ones((length, n_env), bool)
     else:
-        boot = np.concatenate([q_all[1:].max(-1), 1e3 * rng.normal(size=(1, n_env))])  # max_a Q(s', a), eq 2.28
+        boot = np.concatenate(
+            [q_all[1:].max(-1), 1e3 * rng.normal(size=(1, n_env))]
+        )  # max_a Q(s', a), eq 2.28
         cont = greedy
     terminated = np.zeros((length, n_env), bool)
     terminated[-1] = True
-    onehot = np.eye(n_act)[actions]                                # (L, N, A)
+    onehot = np.eye(n_act)[actions]  # (L, N, A)
     grads = {"w": onehot[..., None] * phi[:, :, None, :], "b": onehot}  # dQ/dw: phi(s) in row a
-    return dict(rewards=rewards, boot=boot, terminated=terminated, cont=cont, greedy=greedy,
-                q_sa=q_sa, grads=grads, n_env=n_env, length=length)
+    return dict(
+        rewards=rewards,
+        boot=boot,
+        terminated=terminated,
+        cont=cont,
+        greedy=greedy,
+        q_sa=q_sa,
+        grads=grads,
+        n_env=n_env,
+        length=length,
+    )
 
 
 def _forward_sum(ep, gamma, lam):
     """sum_t (G_t - Q(s_t, a_t)) grad Q(s_t, a_t) per environment (forward view, eq 2.19-2.20)."""
     g = td_lambda.lambda_returns(
-        jnp.asarray(ep["rewards"]), jnp.asarray(ep["boot"]), jnp.asarray(ep["terminated"]),
-        jnp.asarray(ep["terminated"]), jnp.asarray(ep["cont"]), gamma, lam)
+        jnp.asarray(ep["rewards"]),
+        jnp.asarray(ep["boot"]),
+        jnp.asarray(ep["terminated"]),
+        jnp.asarray(ep["terminated"]),
+        jnp.asarray(ep["cont"]),
+        gamma,
+        lam,
+    )
     g = np.asarray(g)
     assert g.dtype == np.float64
-    err = g - ep["q_sa"]                                            # (L, N)
+    err = g - ep["q_sa"]  # (L, N)
     return {k: np.einsum("tn,tn...->n...", err, v) for k, v in ep["grads"].items()}
 
 
@@ -94,8 +122,12 @@ def _backward_sum(ep, gamma, lam, control, kind="accumulating"):
         fresh = np.full(n, t == 0)
         keep = ~fresh & (ep["greedy"][t] if control == "off_policy" else True)
         traces = td_lambda.decay_traces(traces, gamma, lam, jnp.asarray(keep))
-        traces = td_lambda.add_gradient(traces, {k: jnp.asarray(v[t]) for k, v in ep["grads"].items()}, kind)
-        delta = ep["rewards"][t] + gamma * (1.0 - ep["terminated"][t]) * ep["boot"][t] - ep["q_sa"][t]
+        traces = td_lambda.add_gradient(
+            traces, {k: jnp.asarray(v[t]) for k, v in ep["grads"].items()}, kind
+        )
+        delta = (
+            ep["rewards"][t] + gamma * (1.0 - ep["terminated"][t]) * ep["boot"][t] - ep["q_sa"][t]
+        )
         for k in total:
             e = np.asarray(traces[k])
             assert e.dtype == np.float64
@@ -117,9 +149,11 @@ def test_offline_equivalence_of_forward_and_backward_views(control, gamma, lam):
             bwd, bwd_mean = _backward_sum(ep, gamma, lam, control)
             for k in fwd:
                 scale = np.abs(fwd[k]).max()
-                assert scale > 1e-3   # a real, non-trivial update
+                assert scale > 1e-3  # a real, non-trivial update
                 np.testing.assert_allclose(bwd[k], fwd[k], rtol=1e-9, atol=1e-12 * scale)
-                np.testing.assert_allclose(bwd_mean[k], fwd[k].mean(0), rtol=1e-9, atol=1e-12 * scale)
+                np.testing.assert_allclose(
+                    bwd_mean[k], fwd[k].mean(0), rtol=1e-9, atol=1e-12 * scale
+                )
 
 
 def test_offline_equivalence_is_sensitive_to_the_watkins_cut():
@@ -143,17 +177,30 @@ def test_lambda_returns_are_the_lambda_average_of_n_step_returns(gamma, lam):
     G^{(n)}_t, the n-step returns (eq 2.17) that reach the end of the episode weighing the rest."""
     rng = np.random.default_rng(7)
     L = 9
-    r, v = rng.normal(size=L), rng.normal(size=L)       # v[t]: the value of s_{t+1}
+    r, v = rng.normal(size=L), rng.normal(size=L)  # v[t]: the value of s_{t+1}
     with jax.enable_x64(True):
         term = np.zeros(L, bool)
         term[-1] = True
-        g = np.asarray(td_lambda.lambda_returns(jnp.asarray(r), jnp.asarray(v), jnp.asarray(term),
-                                                jnp.asarray(term), jnp.ones(L, bool), gamma, lam))
+        g = np.asarray(
+            td_lambda.lambda_returns(
+                jnp.asarray(r),
+                jnp.asarray(v),
+                jnp.asarray(term),
+                jnp.asarray(term),
+                jnp.ones(L, bool),
+                gamma,
+                lam,
+            )
+        )
     for t in range(L):
-        m = L - t                                            # steps left, the last one terminating
-        g_n = [sum(gamma ** k * r[t + k] for k in range(n)) + (gamma ** n * v[t + n - 1] if n < m else 0.0)
-               for n in range(1, m + 1)]
-        expect = (1 - lam) * sum(lam ** (n - 1) * g_n[n - 1] for n in range(1, m)) + lam ** (m - 1) * g_n[-1]
+        m = L - t  # steps left, the last one terminating
+        g_n = [
+            sum(gamma**k * r[t + k] for k in range(n)) + (gamma**n * v[t + n - 1] if n < m else 0.0)
+            for n in range(1, m + 1)
+        ]
+        expect = (1 - lam) * sum(lam ** (n - 1) * g_n[n - 1] for n in range(1, m)) + lam ** (
+            m - 1
+        ) * g_n[-1]
         assert g[t] == pytest.approx(expect, rel=1e-12, abs=1e-12)
 
 
@@ -179,13 +226,17 @@ def test_lambda_one_is_monte_carlo():
     # One episode terminating at its last step: the discounted sum of rewards, bootstraps ignored.
     term = [False, False, False, True]
     g = _returns(R, [123.0, -7.0, 55.0, 999.0], term, term, T, 0.5, 1.0)
-    np.testing.assert_allclose(g, [1 + 0.5 * 2 + 0.25 * 3 + 0.125 * 4, 2 + 0.5 * 3 + 0.25 * 4, 3 + 0.5 * 4, 4])
+    np.testing.assert_allclose(
+        g, [1 + 0.5 * 2 + 0.25 * 3 + 0.125 * 4, 2 + 0.5 * 3 + 0.25 * 4, 3 + 0.5 * 4, 4]
+    )
 
 
 def test_lambda_one_without_termination_bootstraps_at_the_rollout_end():
     g = _returns(R, B, F, F, T, 0.5, 1.0)
     # G_3 = r_3 + gamma * boot_3 (rollout end), then Monte Carlo back to it.
-    np.testing.assert_allclose(g, [1 + 0.5 * 2 + 0.25 * 3 + 0.125 * 24, 2 + 0.5 * 3 + 0.25 * 24, 3 + 0.5 * 24, 24])
+    np.testing.assert_allclose(
+        g, [1 + 0.5 * 2 + 0.25 * 3 + 0.125 * 24, 2 + 0.5 * 3 + 0.25 * 24, 3 + 0.5 * 24, 24]
+    )
 
 
 def test_intermediate_lambda_by_hand():
@@ -222,7 +273,7 @@ def test_truncation_bootstraps_on_boot_alone_and_cuts_the_chain():
 def test_termination_gives_no_bootstrap():
     term = [False, True, False, False]
     g = _returns(R, B, term, term, T, 0.5, 0.7)
-    assert g[1] == pytest.approx(2.0)                     # boot_1 = 20 is ignored
+    assert g[1] == pytest.approx(2.0)  # boot_1 = 20 is ignored
     assert g[0] == pytest.approx(1 + 0.5 * (0.3 * 10 + 0.7 * 2.0))
     # Termination without `done` set still refuses the bootstrap and the continuation.
     g_t = _returns(R, B, term, F, T, 0.5, 0.7)
@@ -248,14 +299,26 @@ def test_lambda_returns_per_environment_columns():
     g = _returns(r, b, term, done, cont, 0.9, 0.8)
     assert g.shape == (6, 5)
     for i in range(5):
-        np.testing.assert_allclose(g[:, i], _returns(r[:, i], b[:, i], term[:, i], done[:, i], cont[:, i], 0.9, 0.8),
-                                   rtol=1e-6)
+        np.testing.assert_allclose(
+            g[:, i],
+            _returns(r[:, i], b[:, i], term[:, i], done[:, i], cont[:, i], 0.9, 0.8),
+            rtol=1e-6,
+        )
 
 
 def test_lambda_returns_is_jittable_and_vmappable_over_gamma():
     f = jax.jit(jax.vmap(td_lambda.lambda_returns, in_axes=(None, None, None, None, None, 0, None)))
-    g = np.asarray(f(jnp.asarray(R), jnp.asarray(B), jnp.zeros(4, bool), jnp.zeros(4, bool), jnp.ones(4, bool),
-                     jnp.asarray([0.0, 0.5]), 0.0))
+    g = np.asarray(
+        f(
+            jnp.asarray(R),
+            jnp.asarray(B),
+            jnp.zeros(4, bool),
+            jnp.zeros(4, bool),
+            jnp.ones(4, bool),
+            jnp.asarray([0.0, 0.5]),
+            0.0,
+        )
+    )
     np.testing.assert_allclose(g[0], R)
     np.testing.assert_allclose(g[1], [6, 12, 18, 24])
 
@@ -270,7 +333,9 @@ def test_decay_traces_scales_and_resets_per_environment():
     out = td_lambda.decay_traces(tr, 0.9, 0.5, jnp.asarray([True, False, True]))
     np.testing.assert_allclose(out["a"], [0.45, 0.0, 0.45])
     np.testing.assert_allclose(out["b"], np.array([0.9, 0.0, 0.9])[:, None] * np.ones((3, 2)))
-    np.testing.assert_allclose(out["c"], np.array([-0.45, 0.0, -0.45])[:, None, None] * np.ones((3, 2, 4)))
+    np.testing.assert_allclose(
+        out["c"], np.array([-0.45, 0.0, -0.45])[:, None, None] * np.ones((3, 2, 4))
+    )
     assert out["c"].dtype == jnp.float32
 
 
@@ -289,19 +354,24 @@ def test_replacing_trace_reduces_to_tabular_for_one_hot_features():
     acc = e
     for s in visits:
         onehot = jax.nn.one_hot(jnp.asarray([s]), 3)
-        e = td_lambda.add_gradient(td_lambda.decay_traces(e, gamma, lam, jnp.asarray([True])), onehot, "replacing")
-        acc = td_lambda.add_gradient(td_lambda.decay_traces(acc, gamma, lam, jnp.asarray([True])), onehot,
-                                     "accumulating")
+        e = td_lambda.add_gradient(
+            td_lambda.decay_traces(e, gamma, lam, jnp.asarray([True])), onehot, "replacing"
+        )
+        acc = td_lambda.add_gradient(
+            td_lambda.decay_traces(acc, gamma, lam, jnp.asarray([True])), onehot, "accumulating"
+        )
     gl = gamma * lam
     np.testing.assert_allclose(e[0], [1.0, 0.0, gl], rtol=1e-6)
-    np.testing.assert_allclose(acc[0], [1 + gl ** 2 + gl ** 3, 0.0, gl], rtol=1e-6)
+    np.testing.assert_allclose(acc[0], [1 + gl**2 + gl**3, 0.0, gl], rtol=1e-6)
 
 
 def test_replacing_trace_signed_gradients():
     # Replace where |grad| > |e|, keep otherwise (ties keep the trace).
     e = jnp.asarray([-2.0, 0.5, 0.3, -1.0, 0.0])
     g = jnp.asarray([1.0, -1.0, 0.0, 1.0, -0.25])
-    np.testing.assert_allclose(td_lambda.add_gradient(e, g, "replacing"), [-2.0, -1.0, 0.3, -1.0, -0.25])
+    np.testing.assert_allclose(
+        td_lambda.add_gradient(e, g, "replacing"), [-2.0, -1.0, 0.3, -1.0, -0.25]
+    )
 
 
 def test_add_gradient_rejects_unknown_kind():
@@ -311,11 +381,16 @@ def test_add_gradient_rejects_unknown_kind():
 
 def test_trace_update_direction_is_the_mean_of_delta_times_trace():
     rng = np.random.default_rng(0)
-    e = {"k": rng.normal(size=(4, 2, 3)).astype(np.float32), "b": rng.normal(size=(4, 3)).astype(np.float32),
-         "s": rng.normal(size=(4,)).astype(np.float32)}
+    e = {
+        "k": rng.normal(size=(4, 2, 3)).astype(np.float32),
+        "b": rng.normal(size=(4, 3)).astype(np.float32),
+        "s": rng.normal(size=(4,)).astype(np.float32),
+    }
     d = rng.normal(size=4).astype(np.float32)
     out = td_lambda.trace_update_direction(jax.tree.map(jnp.asarray, e), jnp.asarray(d))
-    np.testing.assert_allclose(out["k"], np.einsum("n,nij->ij", d, e["k"]) / 4, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(
+        out["k"], np.einsum("n,nij->ij", d, e["k"]) / 4, rtol=1e-5, atol=1e-6
+    )
     np.testing.assert_allclose(out["b"], np.einsum("n,nj->j", d, e["b"]) / 4, rtol=1e-5, atol=1e-6)
     np.testing.assert_allclose(out["s"], (d * e["s"]).mean(), rtol=1e-5, atol=1e-6)
     assert out["k"].shape == (2, 3) and out["s"].shape == ()
@@ -333,7 +408,11 @@ def test_epsilon_greedy_value():
     q = jnp.asarray([[1.0, 2.0, 6.0], [-3.0, 0.0, 0.0]])
     np.testing.assert_allclose(td_lambda.epsilon_greedy_value(q, 0.0), [6.0, 0.0])
     np.testing.assert_allclose(td_lambda.epsilon_greedy_value(q, 1.0), [3.0, -1.0])
-    np.testing.assert_allclose(td_lambda.epsilon_greedy_value(q, 0.3), [0.7 * 6 + 0.3 * 3, 0.3 * -1.0], rtol=1e-6)
+    np.testing.assert_allclose(
+        td_lambda.epsilon_greedy_value(q, 0.3), [0.7 * 6 + 0.3 * 3, 0.3 * -1.0], rtol=1e-6
+    )
     # One epsilon per row (vmapped sweeps) and a 1-D Q row.
-    np.testing.assert_allclose(td_lambda.epsilon_greedy_value(q, jnp.asarray([0.0, 1.0])), [6.0, -1.0])
+    np.testing.assert_allclose(
+        td_lambda.epsilon_greedy_value(q, jnp.asarray([0.0, 1.0])), [6.0, -1.0]
+    )
     assert float(td_lambda.epsilon_greedy_value(jnp.asarray([0.0, 4.0]), 0.5)) == pytest.approx(3.0)

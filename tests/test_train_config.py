@@ -34,27 +34,30 @@ from train_helpers import _compilation_cache  # noqa: F401 (module-scoped compil
 # --------------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("train, field, text", [
-    ({"trace": "sideways"}, "train.trace", "forward"),
-    ({"trace_kind": "dutch"}, "train.trace_kind", "replacing"),
-    ({"control": "sarsa"}, "train.control", "on_policy"),
-    ({"target": "soft"}, "train.target", "polyak"),
-    ({"num_envs": 64, "num_minibatches": 3}, "train.num_minibatches", "64"),
-    ({"gamma": 1.5}, "train.gamma", "[0, 1]"),
-    ({"lam": -0.1}, "train.lam", ">= 0"),
-    ({"budget_env_steps": 0, "budget_episodes": 0}, "train.budget", "budget"),
-    ({"budget_env_steps": -5}, "train.budget_env_steps", ">= 0"),
-    ({"learning_rate": 1e-3}, "train.learning_rate", "unknown field"),
-    ({"eps_start": 0.1, "eps_end": 0.5}, "train.eps_end", "eps_start"),
-    ({"hidden": [64, 0]}, r"train.hidden\[1\]", "> 0"),
-    ({"hidden": [64.5]}, r"train.hidden\[0\]", "integer"),
-    ({"hidden": "64"}, "train.hidden", "list"),
-    ({"num_envs": 0}, "train.num_envs", "> 0"),
-    ({"lr": 0.0}, "train.lr", "> 0"),
-    ({"layer_norm": "yes"}, "train.layer_norm", "true or false"),
-    ({"eps_decay_fraction": 0.0}, "train.eps_decay_fraction", "> 0"),
-    ({"target_period": 2.5}, "train.target_period", "integer"),
-])
+@pytest.mark.parametrize(
+    "train, field, text",
+    [
+        ({"trace": "sideways"}, "train.trace", "forward"),
+        ({"trace_kind": "dutch"}, "train.trace_kind", "replacing"),
+        ({"control": "sarsa"}, "train.control", "on_policy"),
+        ({"target": "soft"}, "train.target", "polyak"),
+        ({"num_envs": 64, "num_minibatches": 3}, "train.num_minibatches", "64"),
+        ({"gamma": 1.5}, "train.gamma", "[0, 1]"),
+        ({"lam": -0.1}, "train.lam", ">= 0"),
+        ({"budget_env_steps": 0, "budget_episodes": 0}, "train.budget", "budget"),
+        ({"budget_env_steps": -5}, "train.budget_env_steps", ">= 0"),
+        ({"learning_rate": 1e-3}, "train.learning_rate", "unknown field"),
+        ({"eps_start": 0.1, "eps_end": 0.5}, "train.eps_end", "eps_start"),
+        ({"hidden": [64, 0]}, r"train.hidden\[1\]", "> 0"),
+        ({"hidden": [64.5]}, r"train.hidden\[0\]", "integer"),
+        ({"hidden": "64"}, "train.hidden", "list"),
+        ({"num_envs": 0}, "train.num_envs", "> 0"),
+        ({"lr": 0.0}, "train.lr", "> 0"),
+        ({"layer_norm": "yes"}, "train.layer_norm", "true or false"),
+        ({"eps_decay_fraction": 0.0}, "train.eps_decay_fraction", "> 0"),
+        ({"target_period": 2.5}, "train.target_period", "integer"),
+    ],
+)
 def test_train_config_errors_name_the_field(train, field, text):
     raw = tiny_raw()
     raw["train"].update(train)
@@ -65,8 +68,14 @@ def test_train_config_errors_name_the_field(train, field, text):
 
 
 def test_train_config_round_trips_through_toml(tmp_path):
-    cfg = tiny_config(trace="backward", trace_kind="replacing", control="on_policy", target="polyak",
-                      hidden=[7, 5], budget_episodes=100)
+    cfg = tiny_config(
+        trace="backward",
+        trace_kind="replacing",
+        control="on_policy",
+        target="polyak",
+        hidden=[7, 5],
+        budget_episodes=100,
+    )
     path = tmp_path / "c.toml"
     path.write_text(config_to_toml(cfg))
     assert load_config(path) == cfg

@@ -36,9 +36,21 @@ from train_helpers import _compilation_cache  # noqa: F401 (module-scoped compil
 
 LEARN_SEED = 0
 LEARN_TRAIN = {
-    "num_envs": 128, "rollout_steps": 8, "num_minibatches": 4, "hidden": [64, 64], "layer_norm": True,
-    "trace": "forward", "control": "off_policy", "lr": 3e-4, "lr_end_fraction": 0.1, "gamma": 0.98,
-    "lam": 0.9, "eps_start": 1.0, "eps_end": 0.02, "eps_decay_fraction": 0.5, "budget_env_steps": 600_000,
+    "num_envs": 128,
+    "rollout_steps": 8,
+    "num_minibatches": 4,
+    "hidden": [64, 64],
+    "layer_norm": True,
+    "trace": "forward",
+    "control": "off_policy",
+    "lr": 3e-4,
+    "lr_end_fraction": 0.1,
+    "gamma": 0.98,
+    "lam": 0.9,
+    "eps_start": 1.0,
+    "eps_end": 0.02,
+    "eps_decay_fraction": 0.5,
+    "budget_env_steps": 600_000,
 }
 
 
@@ -59,14 +71,24 @@ def test_trainer_learns_to_step_over_a_fixed_obstacle():
     seed 0 before this change: first tenth 0.000, last tenth 0.744."""
     from jaxexo.physics.geometry import Obstacle
 
-    cfg = config_from_dict(legacy_raw({"env": {"obs_mode": "conditioned"}, "layout": dict(FIXED_LAYOUT),
-                            "reward": dict(REWARD), "train": LEARN_TRAIN}))
+    cfg = config_from_dict(
+        legacy_raw(
+            {
+                "env": {"obs_mode": "conditioned"},
+                "layout": dict(FIXED_LAYOUT),
+                "reward": dict(REWARD),
+                "train": LEARN_TRAIN,
+            }
+        )
+    )
     trainer = Trainer(cfg)
     hyper = Hyperparams.from_config(cfg)
     assert trainer.num_updates == 586
     env = trainer.env
     # Greedy evaluation on the same fixed scene, built by hand: it is the scene training saw.
-    layout = env.layout_for(Obstacle.named("base1"), pivot="obstacle", start_y=0.0, step_length=0.70)
+    layout = env.layout_for(
+        Obstacle.named("base1"), pivot="obstacle", start_y=0.0, step_length=0.70
+    )
     obs_fixed, _ = env.init_state(layout, env.default_params)
     obs_reset, _ = env.reset(jax.random.PRNGKey(1), env.default_params)
     np.testing.assert_allclose(obs_fixed, obs_reset, atol=1e-6)
@@ -74,7 +96,9 @@ def test_trainer_learns_to_step_over_a_fixed_obstacle():
 
     ts = jax.jit(trainer.init)(jax.random.PRNGKey(LEARN_SEED), hyper)
     before = greedy(ts.params, layout, env.default_params)
-    assert not bool(before["success"]), "the untrained greedy policy already clears the scene: nothing to learn"
+    assert not bool(before["success"]), (
+        "the untrained greedy policy already clears the scene: nothing to learn"
+    )
     ts, m = jax.jit(trainer.run, static_argnums=2)(ts, hyper, trainer.num_updates)
     m = np.asarray(m)
     assert int(trainer.env_steps(ts)) == trainer.num_updates * 128 * 8
@@ -87,7 +111,9 @@ def test_trainer_learns_to_step_over_a_fixed_obstacle():
     first, last = rate(m[:tenth]), rate(m[-tenth:])
     assert m[-1, COL["epsilon"]] == pytest.approx(0.02)
     out = greedy(ts.params, layout, env.default_params)
-    assert bool(out["reached"]) and bool(out["success"]), {k: np.asarray(v).tolist() for k, v in out.items()}
+    assert bool(out["reached"]) and bool(out["success"]), {
+        k: np.asarray(v).tolist() for k, v in out.items()
+    }
     assert int(out["steps"]) < cfg.env.max_steps
     steps = int(out["steps"])
     backward = int(np.sum(np.asarray(env.default_params.directions)[:, 0] < -1e-6))
@@ -150,10 +176,10 @@ def test_state_types_are_stable_across_updates(tiny):
 
 
 COMBOS = [
-    ("backward", "off_policy", "accumulating"),   # the tiny config
+    ("backward", "off_policy", "accumulating"),  # the tiny config
     ("backward", "off_policy", "replacing"),
     ("backward", "on_policy", "accumulating"),
-    ("backward", "on_policy", "replacing"),       # through make_train, vmapped over 2 seeds
+    ("backward", "on_policy", "replacing"),  # through make_train, vmapped over 2 seeds
     ("forward", "on_policy", "accumulating"),
 ]
 COMBO_UPDATES = 2
@@ -172,31 +198,45 @@ def fast_compile(fun, *args, static_argnums=()):
 def compiled_runs(tiny):
     """A few updates of every trace view x control x trace kind, one of them through make_train
     jitted and vmapped over two seeds."""
+
     def combo_config(combo, **kw):
         trace, control, kind = combo
         return tiny_config(trace=trace, control=control, trace_kind=kind, **kw)
 
     # The initial state depends on the view only, not on the control or trace kind.
-    start = jax.random.split(jax.random.PRNGKey(0), 2)   # make_train: both keys; the others: the first
+    start = jax.random.split(
+        jax.random.PRNGKey(0), 2
+    )  # make_train: both keys; the others: the first
     hyper = tiny["hyper"]
     fwd_init = Trainer(combo_config(COMBOS[-1])).init
-    starts = {"backward": tiny["init"](start[0], hyper),
-              "forward": fast_compile(fwd_init, start[0], hyper)(start[0], hyper)}
+    starts = {
+        "backward": tiny["init"](start[0], hyper),
+        "forward": fast_compile(fwd_init, start[0], hyper)(start[0], hyper),
+    }
 
     def one(combo):
         ts0 = starts[combo[0]]
         if combo == COMBOS[0]:
             run = lambda ts, hyper: tiny["run"](ts, hyper, COMBO_UPDATES)  # noqa: E731
         else:
-            run = fast_compile(Trainer(combo_config(combo)).run, ts0, hyper, COMBO_UPDATES, static_argnums=2)
+            run = fast_compile(
+                Trainer(combo_config(combo)).run, ts0, hyper, COMBO_UPDATES, static_argnums=2
+            )
         ts, m = run(ts0, hyper)
         return combo, {"hyper": hyper, "run": run, "ts0": ts0, "ts": ts, "m": np.asarray(m)}
 
     def vmapped_make_train(combo):
         # The whole 6-update budget in one program, per seed.
-        ts, m = fast_compile(jax.vmap(make_train(combo_config(combo)), in_axes=(0, None)), start, hyper)(start, hyper)
+        ts, m = fast_compile(
+            jax.vmap(make_train(combo_config(combo)), in_axes=(0, None)), start, hyper
+        )(start, hyper)
         first = jax.tree.map(lambda x: x[0], ts)
-        return combo, {"ts0": starts["backward"], "ts": first, "m": np.asarray(m)[0], "vmapped": (ts, np.asarray(m))}
+        return combo, {
+            "ts0": starts["backward"],
+            "ts": first,
+            "m": np.asarray(m)[0],
+            "vmapped": (ts, np.asarray(m)),
+        }
 
     runs = dict(one(c) for c in COMBOS if c != COMBOS[3])
     runs.update([vmapped_make_train(COMBOS[3])])
@@ -204,7 +244,7 @@ def compiled_runs(tiny):
 
 
 @pytest.mark.parametrize("combo", COMBOS, ids=["-".join(c) for c in COMBOS])
-@pytest.mark.slow   # compiles every trace view x control x trace kind (~1 min)
+@pytest.mark.slow  # compiles every trace view x control x trace kind (~1 min)
 def test_views_and_controls_run(compiled_runs, combo):
     r = compiled_runs[combo]
     ts0, ts, m = r["ts0"], r["ts"], r["m"]
@@ -227,7 +267,7 @@ def test_views_and_controls_run(compiled_runs, combo):
         assert ts.traces == ()
 
 
-@pytest.mark.slow   # compiles every trace view x control x trace kind (~1 min)
+@pytest.mark.slow  # compiles every trace view x control x trace kind (~1 min)
 def test_controls_and_trace_kinds_are_different_algorithms(compiled_runs):
     # From the same initial state and keys: accumulating vs replacing, Watkins vs SARSA differ.
     final = {c: leaves(compiled_runs[c]["ts"].params)[0] for c in COMBOS[:3]}
@@ -236,7 +276,7 @@ def test_controls_and_trace_kinds_are_different_algorithms(compiled_runs):
 
 
 @pytest.mark.parametrize("control", ["on_policy", "off_policy"])
-@pytest.mark.slow   # compiles every trace view x control x trace kind (~1 min)
+@pytest.mark.slow  # compiles every trace view x control x trace kind (~1 min)
 def test_backward_traces_reset_at_episode_start_and_watkins_cut(compiled_runs, control):
     """Stale traces never leak into a fresh episode (bitwise: the reset multiplies them by 0), and
     under Watkins Q(lambda) an exploratory action cuts them the same way; without either, they do
@@ -259,13 +299,15 @@ def test_backward_traces_reset_at_episode_start_and_watkins_cut(compiled_runs, c
         assert not np.array_equal(leaves(cut.params)[0], leaves(ref.params)[0])
 
 
-@pytest.mark.slow   # compiles every trace view x control x trace kind (~1 min)
+@pytest.mark.slow  # compiles every trace view x control x trace kind (~1 min)
 def test_make_train_jit_vmaps_over_seeds(compiled_runs):
     ts, m = compiled_runs[COMBOS[3]]["vmapped"]
     assert m.shape == (2, TINY_UPDATES, len(METRICS))
     assert np.all(np.isfinite(m)) and all_finite(ts.params)
     np.testing.assert_array_equal(np.asarray(ts.update), [TINY_UPDATES] * 2)
-    np.testing.assert_array_equal(Trainer(tiny_config()).env_steps(ts), [TINY_UPDATES * TINY_N * TINY_T] * 2)
+    np.testing.assert_array_equal(
+        Trainer(tiny_config()).env_steps(ts), [TINY_UPDATES * TINY_N * TINY_T] * 2
+    )
     for leaf in leaves(ts.params):
         assert leaf.shape[0] == 2 and not np.array_equal(leaf[0], leaf[1])
     assert not np.array_equal(m[0], m[1])
@@ -287,14 +329,21 @@ def test_epsilon_greedy_value_matches_the_behaviour_policy(tiny):
         a, greedy = trainer._act(params, big, key, eps)
         q = trainer.net.apply(params, big)
         qa = jnp.take_along_axis(q, a[:, None], axis=-1)[:, 0].reshape(n, m)
-        return qa.mean(1), qa.std(1), greedy.reshape(n, m).mean(1), td_lambda.epsilon_greedy_value(q[::m], eps)
+        return (
+            qa.mean(1),
+            qa.std(1),
+            greedy.reshape(n, m).mean(1),
+            td_lambda.epsilon_greedy_value(q[::m], eps),
+        )
 
     for eps in (0.0, 0.3, 1.0):
         mean, std, greedy_share, expect = (np.asarray(x) for x in mc(jax.random.PRNGKey(2), eps))
         np.testing.assert_allclose(mean, expect, atol=4 * std.max() / np.sqrt(m) + 1e-6)
         # an exploratory draw can still pick the greedy action: 1 - eps + eps / 36 of them are greedy
-        np.testing.assert_allclose(greedy_share, 1 - eps + eps / trainer.env.num_actions, atol=0.015)
-    assert std.max() > 0.01   # Q differs across actions: the comparison above has teeth
+        np.testing.assert_allclose(
+            greedy_share, 1 - eps + eps / trainer.env.num_actions, atol=0.015
+        )
+    assert std.max() > 0.01  # Q differs across actions: the comparison above has teeth
 
 
 def test_update_breakdown_refuses_the_backward_view_naming_the_field():

@@ -46,11 +46,15 @@ def generator(tmp_path_factory):
 # jaxexo generate and the generator API
 # --------------------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("extra, needles", [
-    (["--duration", "1e-300"], ["--duration must be >= 0.01 s"]),
-    (["--rate", "1e-9"], ["--rate: control rate must be between 10 and 10000 Hz"]),
-    (["--points", "2"], ["--points must be an integer in [20, 100000]"]),
-])
+
+@pytest.mark.parametrize(
+    "extra, needles",
+    [
+        (["--duration", "1e-300"], ["--duration must be >= 0.01 s"]),
+        (["--rate", "1e-9"], ["--rate: control rate must be between 10 and 10000 Hz"]),
+        (["--points", "2"], ["--points must be an integer in [20, 100000]"]),
+    ],
+)
 def test_generate_refuses_values_below_a_swings_scale(tmp_path, capsys, extra, needles):
     err = cli_error(capsys, *GEN, "base1", "--out", tmp_path / "t.csv", *extra)
     for n in needles:
@@ -115,7 +119,7 @@ def test_options_are_one_checked_record(generator):
         GenerateOptions(smoothing=-1.0)
     with pytest.raises(ValueError, match="^fallback must be 'cfftg' or None"):
         GenerateOptions(fallback="rl")
-    assert GenerateOptions(fallback="none").fallback is None          # as the command line spells it
+    assert GenerateOptions(fallback="none").fallback is None  # as the command line spells it
     o = GenerateOptions(pivot="between", fallback=None, n_points=60)
     with pytest.raises(dataclasses.FrozenInstanceError):
         o.n_points = 70
@@ -123,22 +127,30 @@ def test_options_are_one_checked_record(generator):
     a = generator.generate(ob, o)
     b = generator.generate(ob, pivot="between", fallback=None, n_points=60)
     assert a.heel.shape == (60, 2) and (a.heel == b.heel).all() and a.checks == b.checks
-    assert generator.generate(ob, o, n_points=80).heel.shape == (80, 2)     # a keyword replaces a field
+    assert generator.generate(ob, o, n_points=80).heel.shape == (
+        80,
+        2,
+    )  # a keyword replaces a field
     for call in (generator.generate, generator.generate_batch):
         arg = ob if call == generator.generate else [ob]
-        with pytest.raises(TypeError, match=r"^fast: not an option of generate(_batch)? \(options: pivot, "):
+        with pytest.raises(
+            TypeError, match=r"^fast: not an option of generate(_batch)? \(options: pivot, "
+        ):
             call(arg, fast=False)
         with pytest.raises(TypeError, match="^options: expected GenerateOptions, got dict"):
             call(arg, {"n_points": 60})
     cf = CFFTG(generator.config)
     with pytest.raises(TypeError, match=r"^fallback: not an option of CFFTG.generate \(options: "):
         cf.generate(ob, fallback=None)
-    assert (cf.generate(ob, o).heel == cf.generate(ob, SwingOptions(pivot="between", n_points=60)).heel).all()
+    assert (
+        cf.generate(ob, o).heel == cf.generate(ob, SwingOptions(pivot="between", n_points=60)).heel
+    ).all()
 
 
 # --------------------------------------------------------------------------------------------
 # One obstacle-size bound: config, API and CLI
 # --------------------------------------------------------------------------------------------
+
 
 def test_one_obstacle_size_bound_for_the_config_the_api_and_the_cli(tmp_path, capsys):
     assert (MAX_OBSTACLE_WIDTH, MAX_OBSTACLE_HEIGHT) == (1.0, 0.6)
@@ -148,9 +160,13 @@ def test_one_obstacle_size_bound_for_the_config_the_api_and_the_cli(tmp_path, ca
         Obstacle.half_ellipse(1.5, 0.1)
     with pytest.raises(GeometryError, match=r"points \(height\) must be <= 0.6"):
         Obstacle.profile([(0.3, 0.0), (0.4, 0.7), (0.5, 0.0)])
-    Obstacle.rectangle(MAX_OBSTACLE_WIDTH, MAX_OBSTACLE_HEIGHT)      # the bound itself is accepted
-    with pytest.raises(ConfigError, match=r"layout.obstacles\[0\].height\[1\]: must be <= 0.6, got 5"):
-        config_from_dict({"layout": {"obstacles": [{"kind": "rectangle", "width": 0.2, "height": [0.1, 5.0]}]}})
+    Obstacle.rectangle(MAX_OBSTACLE_WIDTH, MAX_OBSTACLE_HEIGHT)  # the bound itself is accepted
+    with pytest.raises(
+        ConfigError, match=r"layout.obstacles\[0\].height\[1\]: must be <= 0.6, got 5"
+    ):
+        config_from_dict(
+            {"layout": {"obstacles": [{"kind": "rectangle", "width": 0.2, "height": [0.1, 5.0]}]}}
+        )
     err = cli_error(capsys, *GEN, "rectangle", "--height", "5", "--out", tmp_path / "t.csv")
     assert "--height: height must be <= 0.6 metres, got 5" in err
     err = cli_error(capsys, *GEN, "rectangle", "--width", "1e300", "--out", tmp_path / "t.csv")
@@ -160,9 +176,18 @@ def test_one_obstacle_size_bound_for_the_config_the_api_and_the_cli(tmp_path, ca
     assert list(tmp_path.iterdir()) == []
 
 
-@pytest.mark.parametrize("option, suggestion", [("--animate", "swing.gif"), ("--json", "trajectory.json"),
-                                                ("--plot", "swing.png"), ("--out", "trajectory.csv")])
-def test_a_folder_given_as_an_output_suggests_a_file_of_its_kind(tmp_path, capsys, option, suggestion):
+@pytest.mark.parametrize(
+    "option, suggestion",
+    [
+        ("--animate", "swing.gif"),
+        ("--json", "trajectory.json"),
+        ("--plot", "swing.png"),
+        ("--out", "trajectory.csv"),
+    ],
+)
+def test_a_folder_given_as_an_output_suggests_a_file_of_its_kind(
+    tmp_path, capsys, option, suggestion
+):
     argv = [*GEN, "base1", "--out", tmp_path / "t.csv"] if option != "--out" else [*GEN, "base1"]
     err = cli_error(capsys, *argv, option, tmp_path)
     assert f"{option}: {tmp_path} is a directory" in err and f"{tmp_path / suggestion}" in err
@@ -172,23 +197,42 @@ def test_a_folder_given_as_an_output_suggests_a_file_of_its_kind(tmp_path, capsy
 # Every physical field has its physical bound
 # --------------------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("raw, message", [
-    ({"kinematics": {"hip_limits": [-100.0, 100.0]}}, r"kinematics.hip_limits\[0\]: must be >= -3.14"),
-    ({"kinematics": {"knee_limits": [-1.0, 7.0]}}, r"kinematics.knee_limits\[1\]: must be <= 3.14"),
-    ({"env": {"step_size": 5.0}}, r"env.step_size: must be <= 0.1"),
-    ({"env": {"max_z": 100.0}}, r"env.max_z: must be <= 2"),
-    ({"env": {"min_clearance": 1.0}}, r"env.min_clearance: must be <= 0.1"),
-    ({"env": {"bounds_y": [-1e6, 1.3]}}, r"env.bounds_y\[0\]: must be >= -10"),
-    ({"env": {"goal_tolerance": [5.0, 0.02]}}, r"env.goal_tolerance\[0\]: must be <= 0.5"),
-    ({"reward": {"safety_distance": 3.0}}, r"reward.safety_distance: must be <= 0.5"),
-    ({"reward": {"max_hip_z": 50.0}}, r"reward.max_hip_z: must be <= 2"),
-    ({"reward": {"goal_reward": 1e30}}, r"reward.goal_reward: must be <= 1000000"),
-    ({"reward": {"traj_weights": [1e300] * 8}}, r"reward.traj_weights\[0\]: must be <= 1000000"),
-    ({"layout": {"step_length": [0.65, 50.0]}}, r"layout.step_length\[1\]: must be <= 2"),
-    ({"layout": {"start_shift": [0.0, 9.0]}}, r"layout.start_shift\[1\]: must be <= 1"),
-    ({"layout": {"obstacle_offset": [-5.0, 0.0]}}, r"layout.obstacle_offset\[0\]: must be >= -1"),
-    ({"layout": {"terrain": {"step_length": [0.55, 30.0]}}}, r"layout.terrain.step_length\[1\]: must be <= 2"),
-])
+
+@pytest.mark.parametrize(
+    "raw, message",
+    [
+        (
+            {"kinematics": {"hip_limits": [-100.0, 100.0]}},
+            r"kinematics.hip_limits\[0\]: must be >= -3.14",
+        ),
+        (
+            {"kinematics": {"knee_limits": [-1.0, 7.0]}},
+            r"kinematics.knee_limits\[1\]: must be <= 3.14",
+        ),
+        ({"env": {"step_size": 5.0}}, r"env.step_size: must be <= 0.1"),
+        ({"env": {"max_z": 100.0}}, r"env.max_z: must be <= 2"),
+        ({"env": {"min_clearance": 1.0}}, r"env.min_clearance: must be <= 0.1"),
+        ({"env": {"bounds_y": [-1e6, 1.3]}}, r"env.bounds_y\[0\]: must be >= -10"),
+        ({"env": {"goal_tolerance": [5.0, 0.02]}}, r"env.goal_tolerance\[0\]: must be <= 0.5"),
+        ({"reward": {"safety_distance": 3.0}}, r"reward.safety_distance: must be <= 0.5"),
+        ({"reward": {"max_hip_z": 50.0}}, r"reward.max_hip_z: must be <= 2"),
+        ({"reward": {"goal_reward": 1e30}}, r"reward.goal_reward: must be <= 1000000"),
+        (
+            {"reward": {"traj_weights": [1e300] * 8}},
+            r"reward.traj_weights\[0\]: must be <= 1000000",
+        ),
+        ({"layout": {"step_length": [0.65, 50.0]}}, r"layout.step_length\[1\]: must be <= 2"),
+        ({"layout": {"start_shift": [0.0, 9.0]}}, r"layout.start_shift\[1\]: must be <= 1"),
+        (
+            {"layout": {"obstacle_offset": [-5.0, 0.0]}},
+            r"layout.obstacle_offset\[0\]: must be >= -1",
+        ),
+        (
+            {"layout": {"terrain": {"step_length": [0.55, 30.0]}}},
+            r"layout.terrain.step_length\[1\]: must be <= 2",
+        ),
+    ],
+)
 def test_every_physical_field_has_its_physical_bound(raw, message):
     with pytest.raises(ConfigError, match=message):
         config_from_dict(raw)
@@ -204,16 +248,21 @@ def test_every_shipped_config_is_within_the_bounds():
 # Seeds, and no half-made run folder on a refusal
 # --------------------------------------------------------------------------------------------
 
+
 def test_a_seed_beyond_the_bound_is_refused_and_leaves_no_run_folder(tmp_path):
     cfg = tmp_path / "tiny.toml"
-    cfg.write_text('[train]\nbudget_env_steps = 1024\nnum_envs = 64\npopulation = 1\n')
+    cfg.write_text("[train]\nbudget_env_steps = 1024\nnum_envs = 64\npopulation = 1\n")
     out = tmp_path / "new" / "run"
-    r = run_cli("train", cfg, "--out", out, "--seed", "1180591620717411303424", "--quiet", timeout=300)
+    r = run_cli(
+        "train", cfg, "--out", out, "--seed", "1180591620717411303424", "--quiet", timeout=300
+    )
     assert_clean_refusal(r, "--seed", "a seed must be in [0, 2147483647]")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["tiny.toml"]
     from jaxexo.config import check_seed
 
-    with pytest.raises(ConfigError, match=r"--seed: a seed must be in \[0, 2147483644\] \(with 3 more seeds"):
+    with pytest.raises(
+        ConfigError, match=r"--seed: a seed must be in \[0, 2147483644\] \(with 3 more seeds"
+    ):
         check_seed(2147483645, "--seed", 4)
     with pytest.raises(ConfigError, match="expected an integer seed"):
         check_seed(True)
@@ -244,8 +293,12 @@ def test_a_refusal_inside_a_new_run_folder_removes_what_it_made(tmp_path):
 
 
 def test_reproduce_refuses_no_models_and_a_seed_beyond_the_bound(tmp_path, capsys):
-    assert "--models: name at least one model" in cli_error(capsys, "reproduce", "--out", tmp_path / "r", "--models", "")
-    err = cli_error(capsys, "reproduce", "--out", tmp_path / "r", "--models", "a", "--seed", "2147483647")
+    assert "--models: name at least one model" in cli_error(
+        capsys, "reproduce", "--out", tmp_path / "r", "--models", ""
+    )
+    err = cli_error(
+        capsys, "reproduce", "--out", tmp_path / "r", "--models", "a", "--seed", "2147483647"
+    )
     assert "--seed: a seed must be in [0, 2147483644] (with 3 more seeds" in err
     assert list(tmp_path.iterdir()) == []
 
@@ -258,14 +311,22 @@ def test_bench_refuses_a_baseline_budget_that_is_no_time(tmp_path, capsys, value
 
 
 def test_sweep_refuses_zero_task_cpus_on_any_backend(tmp_path, capsys):
-    err = cli_error(capsys, "sweep", ROOT / "configs" / "sweeps" / "smoke.toml", "--out", tmp_path / "s",
-                    "--task-cpus", "0")
+    err = cli_error(
+        capsys,
+        "sweep",
+        ROOT / "configs" / "sweeps" / "smoke.toml",
+        "--out",
+        tmp_path / "s",
+        "--task-cpus",
+        "0",
+    )
     assert "--task-cpus: must be >= 1, got 0" in err
 
 
 # --------------------------------------------------------------------------------------------
 # Sweeps: a grid's size before it is built, duplicates, and checks that do not grow with it
 # --------------------------------------------------------------------------------------------
+
 
 def _sweep(grid: dict, **sweep):
     from jaxexo.sweep.spec import sweep_from_dict
@@ -274,22 +335,35 @@ def _sweep(grid: dict, **sweep):
     from jaxexo.config.toml_io import config_to_toml
     import tomllib
 
-    return sweep_from_dict({**tomllib.loads(config_to_toml(base)), "sweep": {"grid": grid, **sweep}})
+    return sweep_from_dict(
+        {**tomllib.loads(config_to_toml(base)), "sweep": {"grid": grid, **sweep}}
+    )
 
 
 def test_a_grid_beyond_the_limit_is_refused_from_its_axes_at_once():
     from jaxexo.sweep.spec import MAX_CONFIGURATIONS
 
     t0 = time.perf_counter()
-    with pytest.raises(ConfigError, match=r"sweep.grid: 1,000,000 configurations \(1,000 x 1,000\), more than "
-                                          r"the 10,000 a sweep may have"):
-        _sweep({"train.lr": [1e-4 * (1 + i) for i in range(1000)], "train.lam": [i / 1000 for i in range(1000)]})
+    with pytest.raises(
+        ConfigError,
+        match=r"sweep.grid: 1,000,000 configurations \(1,000 x 1,000\), more than "
+        r"the 10,000 a sweep may have",
+    ):
+        _sweep(
+            {
+                "train.lr": [1e-4 * (1 + i) for i in range(1000)],
+                "train.lam": [i / 1000 for i in range(1000)],
+            }
+        )
     assert time.perf_counter() - t0 < 5.0
     assert MAX_CONFIGURATIONS == 10_000
 
 
 def test_a_value_listed_twice_is_refused_naming_the_axis():
-    with pytest.raises(ConfigError, match=r"sweep.grid.train.lr: the value 0.001 is listed twice \(values 0 and 1\)"):
+    with pytest.raises(
+        ConfigError,
+        match=r"sweep.grid.train.lr: the value 0.001 is listed twice \(values 0 and 1\)",
+    ):
         _sweep({"train.lr": [1e-3, 0.001]})
 
 
@@ -309,7 +383,7 @@ def test_a_grids_members_share_one_scene_check_and_equal_the_config_files(monkey
     assert elapsed < 20.0, elapsed
     # Independent reference: a config file with the values written in, read the ordinary way.
     base = sweep.raw
-    for m in sweep.members[:: 397]:
+    for m in sweep.members[::397]:
         raw = copy.deepcopy(base)
         raw["train"]["lr"], raw["train"]["lam"] = m.values["train.lr"], m.values["train.lam"]
         raw["reward"]["traj_weights"][3] = m.values["reward.traj_weights[3]"]
@@ -317,15 +391,20 @@ def test_a_grids_members_share_one_scene_check_and_equal_the_config_files(monkey
 
 
 def test_a_bad_value_in_a_fast_built_grid_is_still_named():
-    with pytest.raises(ConfigError, match=r"sweep.grid.train.gamma: configuration 1 \(train.gamma=2\).*train.gamma"):
+    with pytest.raises(
+        ConfigError, match=r"sweep.grid.train.gamma: configuration 1 \(train.gamma=2\).*train.gamma"
+    ):
         _sweep({"train.gamma": [0.9, 2.0]})
-    with pytest.raises(ConfigError, match=r"sweep.grid.layout.step_length: configuration 1 .*layout.step_length"):
+    with pytest.raises(
+        ConfigError, match=r"sweep.grid.layout.step_length: configuration 1 .*layout.step_length"
+    ):
         _sweep({"layout.step_length": [[0.65, 0.75], [0.65, 40.0]]})
 
 
 # --------------------------------------------------------------------------------------------
 # Resume: the field that differs, and the run's own config
 # --------------------------------------------------------------------------------------------
+
 
 def test_resume_with_another_config_names_the_field_and_both_values(tmp_path):
     import dataclasses
@@ -336,8 +415,11 @@ def test_resume_with_another_config_names_the_field_and_both_values(tmp_path):
     cfg = load_config(ROOT / "configs" / "quick.toml")
     (tmp_path / "config.toml").write_text(config_to_toml(cfg))
     other = dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, lr=cfg.train.lr * 2))
-    with pytest.raises(ConfigError, match=r"config differs from the run's config .*config.toml in train.lr "
-                                          r"\(given 0.00\d+, the run has 0.00\d+\)"):
+    with pytest.raises(
+        ConfigError,
+        match=r"config differs from the run's config .*config.toml in train.lr "
+        r"\(given 0.00\d+, the run has 0.00\d+\)",
+    ):
         prepare_dir(tmp_path, other, 0, resume=True)
 
 
@@ -353,6 +435,8 @@ def test_resume_without_a_config_path_uses_the_runs_config(tmp_path, monkeypatch
     (run / "checkpoint.msgpack").write_bytes(b"not a checkpoint")
     given = []
     monkeypatch.setattr(driver, "run_training", lambda c, *a, **k: (given.append(c), {})[1])
-    with pytest.raises(KeyError):      # the stand-in returns no results: the config it got is what counts
+    with pytest.raises(
+        KeyError
+    ):  # the stand-in returns no results: the config it got is what counts
         main(["train", "--out", str(run), "--resume", "--quiet"])
     assert given == [cfg]

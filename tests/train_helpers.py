@@ -52,22 +52,43 @@ def _compilation_cache(tmp_path_factory):
 # A fixed scene: Base 1 at the default place, pivot under the obstacle, no start shift or jitter.
 FIXED_LAYOUT = {"obstacles": ["base1"], "pivot": ["obstacle"]}
 # configs/default.toml's [reward]
-REWARD = {"traj_weights": [0.0, 2.0, 0.5, 4.0, 0.5, 0.5, 1.0, 0.5], "exo_weights": [1.0, 1.0, 2.0, 1.0],
-          "goal_reward": 20.0, "joint_limit_penalty": 4.0, "progress_shaping": 5.0}
+REWARD = {
+    "traj_weights": [0.0, 2.0, 0.5, 4.0, 0.5, 0.5, 1.0, 0.5],
+    "exo_weights": [1.0, 1.0, 2.0, 1.0],
+    "goal_reward": 20.0,
+    "joint_limit_penalty": 4.0,
+    "progress_shaping": 5.0,
+}
 # The shared tiny config: Watkins Q(lambda) in the backward view (its checkpoint then holds traces,
 # the pending action and its greediness too), 6 updates in 3 chunks of 2.
 TINY_N, TINY_T, TINY_UPDATES = 64, 8, 6
 TINY_TRAIN = {
-    "num_envs": TINY_N, "rollout_steps": TINY_T, "num_minibatches": 2, "hidden": [32, 32], "layer_norm": True,
-    "trace": "backward", "control": "off_policy", "trace_kind": "accumulating",
-    "lr": 1e-3, "gamma": 0.98, "lam": 0.9, "budget_env_steps": TINY_N * TINY_T * TINY_UPDATES,
-    "chunk_updates": 2, "eval_episodes": 20,
+    "num_envs": TINY_N,
+    "rollout_steps": TINY_T,
+    "num_minibatches": 2,
+    "hidden": [32, 32],
+    "layer_norm": True,
+    "trace": "backward",
+    "control": "off_policy",
+    "trace_kind": "accumulating",
+    "lr": 1e-3,
+    "gamma": 0.98,
+    "lam": 0.9,
+    "budget_env_steps": TINY_N * TINY_T * TINY_UPDATES,
+    "chunk_updates": 2,
+    "eval_episodes": 20,
 }
 
 
 def tiny_raw(**train) -> dict:
-    return legacy_raw({"env": {"obs_mode": "conditioned"}, "layout": dict(FIXED_LAYOUT), "reward": dict(REWARD),
-                       "train": {**TINY_TRAIN, **train}})
+    return legacy_raw(
+        {
+            "env": {"obs_mode": "conditioned"},
+            "layout": dict(FIXED_LAYOUT),
+            "reward": dict(REWARD),
+            "train": {**TINY_TRAIN, **train},
+        }
+    )
 
 
 def tiny_config(**train):
@@ -80,7 +101,9 @@ def leaves(tree) -> list[np.ndarray]:
 
 def trees_equal(a, b) -> bool:
     la, lb = leaves(a), leaves(b)
-    return len(la) == len(lb) and all(x.dtype == y.dtype and np.array_equal(x, y) for x, y in zip(la, lb))
+    return len(la) == len(lb) and all(
+        x.dtype == y.dtype and np.array_equal(x, y) for x, y in zip(la, lb)
+    )
 
 
 def all_finite(tree) -> bool:
@@ -96,9 +119,13 @@ def tiny():
     """The shared tiny config's trainer with its jitted init and run (the driver's programs too)."""
     cfg = tiny_config()
     trainer = Trainer(cfg)
-    return {"cfg": cfg, "trainer": trainer, "hyper": Hyperparams.from_config(cfg), "init": jax.jit(trainer.init),
-            "run": jax.jit(trainer.run, static_argnums=2)}
-
+    return {
+        "cfg": cfg,
+        "trainer": trainer,
+        "hyper": Hyperparams.from_config(cfg),
+        "init": jax.jit(trainer.init),
+        "run": jax.jit(trainer.run, static_argnums=2),
+    }
 
 
 def random_params(net, obs_dim: int, seed: int):
@@ -106,8 +133,10 @@ def random_params(net, obs_dim: int, seed: int):
     LayerNorm scales and biases included (not the initial ones: zero biases, unit scales)."""
     rng = np.random.default_rng(seed)
     shapes = jax.eval_shape(net.init, jax.random.PRNGKey(0), jnp.zeros((1, obs_dim)))
-    return jax.tree.map(lambda s: (rng.normal(size=s.shape) * 0.5 + (1.0 if s.ndim == 1 else 0.0)).astype(s.dtype),
-                        shapes)
+    return jax.tree.map(
+        lambda s: (rng.normal(size=s.shape) * 0.5 + (1.0 if s.ndim == 1 else 0.0)).astype(s.dtype),
+        shapes,
+    )
 
 
 SEED = 3

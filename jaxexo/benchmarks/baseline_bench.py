@@ -29,23 +29,41 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxexo.benchmarks.thesis_baseline import BaselineSettings, NumpyExoEnv, SequentialTDLambda, layout_pool
+from jaxexo.benchmarks.thesis_baseline import (
+    BaselineSettings,
+    NumpyExoEnv,
+    SequentialTDLambda,
+    layout_pool,
+)
 from jaxexo.config import Config, load_config
 from jaxexo.physics.dynamics import NUM_ACTIONS
 
 POOL = 20_000
 
 
-def make_baseline(cfg: Config, pool: dict, eps_decay_steps: int, seed: int = 0) -> SequentialTDLambda:
+def make_baseline(
+    cfg: Config, pool: dict, eps_decay_steps: int, seed: int = 0
+) -> SequentialTDLambda:
     """The sequential learner on cfg's environment, network and hyperparameters."""
     t = cfg.train
     env = NumpyExoEnv(cfg, pool, seed)
     obs_dim = len(env.reset())
     return SequentialTDLambda(
-        env, obs_dim, NUM_ACTIONS, t.hidden, t.layer_norm, lr=t.lr, gamma=t.gamma, lam=t.lam, eps_start=t.eps_start,
-        eps_end=t.eps_end, eps_decay_steps=eps_decay_steps, max_grad_norm=t.max_grad_norm,
+        env,
+        obs_dim,
+        NUM_ACTIONS,
+        t.hidden,
+        t.layer_norm,
+        lr=t.lr,
+        gamma=t.gamma,
+        lam=t.lam,
+        eps_start=t.eps_start,
+        eps_end=t.eps_end,
+        eps_decay_steps=eps_decay_steps,
+        max_grad_norm=t.max_grad_norm,
         off_policy=t.control == "off_policy",
-        settings=BaselineSettings(horizon=t.rollout_steps, seed=seed))
+        settings=BaselineSettings(horizon=t.rollout_steps, seed=seed),
+    )
 
 
 def baseline_throughput(cfg: Config, pool: dict, seconds: float, warmup_steps: int = 500) -> dict:
@@ -64,9 +82,15 @@ def baseline_throughput(cfg: Config, pool: dict, seconds: float, warmup_steps: i
         if term or trunc:
             env.reset()
     env_rate = n / (time.perf_counter() - t0)
-    return {"env_steps": steps, "seconds": res["train_seconds"], "env_steps_per_s": steps / res["train_seconds"],
-            "env_only_steps_per_s": env_rate, "batch_size": learner.s.batch_size, "horizon": learner.s.horizon,
-            "torch_threads": learner.s.torch_threads}
+    return {
+        "env_steps": steps,
+        "seconds": res["train_seconds"],
+        "env_steps_per_s": steps / res["train_seconds"],
+        "env_only_steps_per_s": env_rate,
+        "batch_size": learner.s.batch_size,
+        "horizon": learner.s.horizon,
+        "torch_threads": learner.s.torch_threads,
+    }
 
 
 def time_to_target(rows: list[dict], target: float, key: str = "validation_success") -> dict | None:
@@ -76,9 +100,15 @@ def time_to_target(rows: list[dict], target: float, key: str = "validation_succe
     return None
 
 
-def run_baseline_benchmark(out_dir, default_config: str = "configs/default.toml", throughput_seconds: float = 60.0,
-                           baseline_seconds: float = 600.0, targets=(0.5, 0.9), validate_every: int = 20_000,
-                           progress=print) -> dict:
+def run_baseline_benchmark(
+    out_dir,
+    default_config: str = "configs/default.toml",
+    throughput_seconds: float = 60.0,
+    baseline_seconds: float = 600.0,
+    targets=(0.5, 0.9),
+    validate_every: int = 20_000,
+    progress=print,
+) -> dict:
     import jax
 
     import torch
@@ -91,15 +121,23 @@ def run_baseline_benchmark(out_dir, default_config: str = "configs/default.toml"
 
     base = load_config(default_config)
     # The load average before and after: other processes on the machine make every figure slower.
-    result: dict = {"torch": torch.__version__, "targets": list(targets), "load_avg_before": os.getloadavg()}
+    result: dict = {
+        "torch": torch.__version__,
+        "targets": list(targets),
+        "load_avg_before": os.getloadavg(),
+    }
 
     # 1. Throughput, thesis network -------------------------------------------------------------
     tcfg = thesis_network_config(base, "forward")
     jx = throughput(tcfg, 10, repeats=3, devices=jax.local_devices())
-    progress(f"jaxexo trainer, thesis network, 4096 envs: {jx['env_steps_per_s'] / 1e6:.3f} M env-steps/s")
+    progress(
+        f"jaxexo trainer, thesis network, 4096 envs: {jx['env_steps_per_s'] / 1e6:.3f} M env-steps/s"
+    )
     bl = baseline_throughput(tcfg, layout_pool(tcfg, POOL), throughput_seconds)
-    progress(f"thesis-style baseline, thesis network: {bl['env_steps_per_s']:.0f} env-steps/s "
-             f"(environment alone {bl['env_only_steps_per_s']:.0f}/s)")
+    progress(
+        f"thesis-style baseline, thesis network: {bl['env_steps_per_s']:.0f} env-steps/s "
+        f"(environment alone {bl['env_only_steps_per_s']:.0f}/s)"
+    )
     ratio = jx["env_steps_per_s"] / bl["env_steps_per_s"]
     progress(f"ratio: {ratio:.0f}x (target >= 1000x)")
     result["throughput"] = {"jaxexo": jx, "baseline": bl, "ratio": ratio}
@@ -108,24 +146,44 @@ def run_baseline_benchmark(out_dir, default_config: str = "configs/default.toml"
     with tempfile.TemporaryDirectory() as d:
         res = run_training(base, d, seed=0, progress=False)
         rows = [json.loads(x) for x in (Path(d) / "metrics.jsonl").read_text().splitlines()]
-    jx_curve = [{"env_steps": r["env_steps"], "wall_s": r["wall_s"], "validation_success": r["validation_success_raw"]}
-                for r in rows]
-    progress(f"jaxexo default model: {res['train_seconds']:.1f} s, final validation "
-             f"{rows[-1]['validation_success_raw']:.3f}")
+    jx_curve = [
+        {
+            "env_steps": r["env_steps"],
+            "wall_s": r["wall_s"],
+            "validation_success": r["validation_success_raw"],
+        }
+        for r in rows
+    ]
+    progress(
+        f"jaxexo default model: {res['train_seconds']:.1f} s, final validation "
+        f"{rows[-1]['validation_success_raw']:.3f}"
+    )
 
     pool = layout_pool(base, POOL)
     rate = baseline_throughput(base, pool, min(20.0, throughput_seconds))["env_steps_per_s"]
     planned = int(rate * baseline_seconds)
-    learner = make_baseline(base, pool, eps_decay_steps=max(1, int(base.train.eps_decay_fraction * planned)))
-    net = QNetwork(hidden=base.train.hidden, num_actions=NUM_ACTIONS, layer_norm=base.train.layer_norm)
+    learner = make_baseline(
+        base, pool, eps_decay_steps=max(1, int(base.train.eps_decay_fraction * planned))
+    )
+    net = QNetwork(
+        hidden=base.train.hidden, num_actions=NUM_ACTIONS, layer_norm=base.train.layer_norm
+    )
     validate = make_validator(base, net)
     bl_curve: list[dict] = []
 
     def on_eval(lr: SequentialTDLambda, train_s: float) -> bool:
         v = validate(jax.tree.map(np.asarray, lr.export_flax_params()))
-        bl_curve.append({"env_steps": lr.env_steps, "train_s": train_s, "validation_success": v,
-                         "epsilon": lr.epsilon()})
-        progress(f"  baseline {lr.env_steps} env steps, {train_s:.0f} s: validation {v:.3f}, eps {lr.epsilon():.2f}")
+        bl_curve.append(
+            {
+                "env_steps": lr.env_steps,
+                "train_s": train_s,
+                "validation_success": v,
+                "epsilon": lr.epsilon(),
+            }
+        )
+        progress(
+            f"  baseline {lr.env_steps} env steps, {train_s:.0f} s: validation {v:.3f}, eps {lr.epsilon():.2f}"
+        )
         return v >= max(targets)
 
     bres = learner.train(seconds=baseline_seconds, callback=on_eval, callback_every=validate_every)
@@ -135,24 +193,39 @@ def run_baseline_benchmark(out_dir, default_config: str = "configs/default.toml"
     for tgt in targets:
         j = time_to_target(jx_curve, tgt)
         b = time_to_target(bl_curve, tgt)
-        entry = {"target": tgt,
-                 "jaxexo_s": j["wall_s"] if j else None, "jaxexo_env_steps": j["env_steps"] if j else None}
+        entry = {
+            "target": tgt,
+            "jaxexo_s": j["wall_s"] if j else None,
+            "jaxexo_env_steps": j["env_steps"] if j else None,
+        }
         if b is not None:
-            entry.update(baseline_s=b["train_s"], baseline_env_steps=b["env_steps"], baseline_extrapolated=False)
+            entry.update(
+                baseline_s=b["train_s"],
+                baseline_env_steps=b["env_steps"],
+                baseline_extrapolated=False,
+            )
         elif j is not None:
-            entry.update(baseline_s=j["env_steps"] / bres["env_steps_per_s"], baseline_env_steps=None,
-                         baseline_extrapolated=True)
+            entry.update(
+                baseline_s=j["env_steps"] / bres["env_steps_per_s"],
+                baseline_env_steps=None,
+                baseline_extrapolated=True,
+            )
         else:
             entry.update(baseline_s=None, baseline_env_steps=None, baseline_extrapolated=None)
         if entry["jaxexo_s"] and entry["baseline_s"]:
             entry["speedup"] = entry["baseline_s"] / entry["jaxexo_s"]
         reach[str(tgt)] = entry
     result["time_to_success"] = {
-        "config": Path(default_config).name, "jaxexo_curve": jx_curve, "baseline_curve": bl_curve,
-        "baseline_budget_s": baseline_seconds, "baseline_env_steps_per_s": bres["env_steps_per_s"],
-        "baseline_eps_decay_steps": learner.eps_decay_steps, "reach": reach,
+        "config": Path(default_config).name,
+        "jaxexo_curve": jx_curve,
+        "baseline_curve": bl_curve,
+        "baseline_budget_s": baseline_seconds,
+        "baseline_env_steps_per_s": bres["env_steps_per_s"],
+        "baseline_eps_decay_steps": learner.eps_decay_steps,
+        "reach": reach,
         "baseline_best_validation": max(r["validation_success"] for r in bl_curve),
-        "jaxexo_train_seconds": res["train_seconds"]}
+        "jaxexo_train_seconds": res["train_seconds"],
+    }
 
     result["load_avg_after"] = os.getloadavg()
     md = markdown(result)
@@ -164,18 +237,27 @@ def run_baseline_benchmark(out_dir, default_config: str = "configs/default.toml"
 def markdown(r: dict) -> str:
     t = r["throughput"]
     jx, bl = t["jaxexo"], t["baseline"]
-    lines = ["# jaxexo trainer vs thesis-style sequential trainer (PyTorch)", "",
-             "| trainer (thesis network, thesis observation) | env-steps/s |", "|---|---:|",
-             f"| jaxexo, {jx['num_envs']} envs, forward view, {jx['devices']} CPU devices | {jx['env_steps_per_s']:,.0f} |",
-             f"| thesis-style: 1 env, 1 update/step, replay batch {bl['batch_size']}, lambda-return window "
-             f"{bl['horizon']}, torch {r['torch']} ({bl['torch_threads']} thread) | {bl['env_steps_per_s']:,.0f} |",
-             f"| (its NumPy environment alone, random actions) | {bl['env_only_steps_per_s']:,.0f} |",
-             f"| **ratio** | **{t['ratio']:,.0f}x** |", ""]
+    lines = [
+        "# jaxexo trainer vs thesis-style sequential trainer (PyTorch)",
+        "",
+        "| trainer (thesis network, thesis observation) | env-steps/s |",
+        "|---|---:|",
+        f"| jaxexo, {jx['num_envs']} envs, forward view, {jx['devices']} CPU devices | {jx['env_steps_per_s']:,.0f} |",
+        f"| thesis-style: 1 env, 1 update/step, replay batch {bl['batch_size']}, lambda-return window "
+        f"{bl['horizon']}, torch {r['torch']} ({bl['torch_threads']} thread) | {bl['env_steps_per_s']:,.0f} |",
+        f"| (its NumPy environment alone, random actions) | {bl['env_only_steps_per_s']:,.0f} |",
+        f"| **ratio** | **{t['ratio']:,.0f}x** |",
+        "",
+    ]
     ts = r["time_to_success"]
-    lines += [f"Time to the same greedy validation success (strict, 500 training layouts), `{ts['config']}`; "
-              f"baseline budget {ts['baseline_budget_s']:.0f} s at {ts['baseline_env_steps_per_s']:.0f} env-steps/s, "
-              f"best validation {ts['baseline_best_validation']:.3f}:", "",
-              "| target | jaxexo s (env steps) | baseline s (env steps) | speed-up |", "|---:|---:|---:|---:|"]
+    lines += [
+        f"Time to the same greedy validation success (strict, 500 training layouts), `{ts['config']}`; "
+        f"baseline budget {ts['baseline_budget_s']:.0f} s at {ts['baseline_env_steps_per_s']:.0f} env-steps/s, "
+        f"best validation {ts['baseline_best_validation']:.3f}:",
+        "",
+        "| target | jaxexo s (env steps) | baseline s (env steps) | speed-up |",
+        "|---:|---:|---:|---:|",
+    ]
     for e in ts["reach"].values():
         js = "-" if e["jaxexo_s"] is None else f"{e['jaxexo_s']:.1f} ({e['jaxexo_env_steps']:,})"
         if e["baseline_s"] is None:
@@ -187,11 +269,15 @@ def markdown(r: dict) -> str:
         x = e.get("speedup")
         sp = "-" if not x else (f"{x:,.0f}x" if x >= 10 else f"{x:.2f}x")
         lines.append(f"| {e['target']:.2f} | {js} | {bs} | {sp} |")
-    lines += ["", f"Load average (1, 5, 15 min) before / after: {_load(r['load_avg_before'])} / "
-              f"{_load(r['load_avg_after'])} on {os.cpu_count()} CPUs.", "",
-              "Extrapolated times assume the baseline learns as much per env step as jaxexo "
-              "(it makes 32 sample-gradients per env step where jaxexo makes one, so it may need fewer steps; "
-              "its measured curve is in the JSON)."]
+    lines += [
+        "",
+        f"Load average (1, 5, 15 min) before / after: {_load(r['load_avg_before'])} / "
+        f"{_load(r['load_avg_after'])} on {os.cpu_count()} CPUs.",
+        "",
+        "Extrapolated times assume the baseline learns as much per env step as jaxexo "
+        "(it makes 32 sample-gradients per env step where jaxexo makes one, so it may need fewer steps; "
+        "its measured curve is in the JSON).",
+    ]
     return "\n".join(lines)
 
 

@@ -23,11 +23,11 @@ from pathlib import Path
 import numpy as np
 
 RANDOM = "random_profile"
-LENGTH = (3.0, 8.0)            # m
+LENGTH = (3.0, 8.0)  # m
 OBSTACLES = (2, 8)
-START_FLAT = (0.9, 1.3)        # m of floor before the first obstacle and after the last
-GAP = (0.45, 1.4)              # m of floor between obstacles
-REFERENCE_COURSES = 10         # courses whose first steps are also timed as single swings
+START_FLAT = (0.9, 1.3)  # m of floor before the first obstacle and after the last
+GAP = (0.45, 1.4)  # m of floor between obstacles
+REFERENCE_COURSES = 10  # courses whose first steps are also timed as single swings
 
 
 def random_profile(rng: np.random.Generator) -> np.ndarray:
@@ -65,7 +65,10 @@ def draw_course(rng: np.random.Generator) -> tuple[np.ndarray, list[str]]:
     shapes = [random_profile(rng) if n == RANDOM else family_profile(n, rng) for n in names]
     pre, post = rng.uniform(*START_FLAT), rng.uniform(*START_FLAT)
     gaps = rng.uniform(*GAP, k)
-    while k > OBSTACLES[0] and pre + post + sum(s[-1, 0] for s in shapes) + gaps[: k - 1].sum() > length:
+    while (
+        k > OBSTACLES[0]
+        and pre + post + sum(s[-1, 0] for s in shapes) + gaps[: k - 1].sum() > length
+    ):
         k -= 1
         shapes, names = shapes[:k], names[:k]
     pts, y = [[0.0, 0.0]], pre
@@ -91,25 +94,43 @@ def independent_checks(course, min_clearance: float) -> dict:
     landings_ok = True
     for st in course.steps:
         row = t[int(np.argmin(np.abs(t[:, 0] - st.end_s)))]
-        y, z = row[WALK_COLUMNS.index(f"{st.leg}_heel_y_m")], row[WALK_COLUMNS.index(f"{st.leg}_heel_z_m")]
-        landings_ok &= z == 0.0 and _flat(course.terrain, y - min_clearance, y + foot + min_clearance)
+        y, z = (
+            row[WALK_COLUMNS.index(f"{st.leg}_heel_y_m")],
+            row[WALK_COLUMNS.index(f"{st.leg}_heel_z_m")],
+        )
+        landings_ok &= z == 0.0 and _flat(
+            course.terrain, y - min_clearance, y + foot + min_clearance
+        )
     lowest = math.inf
     for ob in obstacles_of(course.terrain):
         for leg in ("left", "right"):
-            heel = t[:, [WALK_COLUMNS.index(f"{leg}_heel_y_m"), WALK_COLUMNS.index(f"{leg}_heel_z_m")]]
+            heel = t[
+                :, [WALK_COLUMNS.index(f"{leg}_heel_y_m"), WALK_COLUMNS.index(f"{leg}_heel_z_m")]
+            ]
             near = (heel[:, 0] + foot >= ob[0, 0] - 0.1) & (heel[:, 0] <= ob[-1, 0] + 0.1)
             if near.any():
                 lowest = min(lowest, float(geometry.foot_clearance(np, heel[near], foot, ob).min()))
     dt = 1.0 / course.rate
-    q = t[:, [WALK_COLUMNS.index(f"{j}_rad") for j in ("hip_left", "knee_left", "hip_right", "knee_right")]]
+    q = t[
+        :,
+        [
+            WALK_COLUMNS.index(f"{j}_rad")
+            for j in ("hip_left", "knee_left", "hip_right", "knee_right")
+        ],
+    ]
     v = np.abs(np.diff(q, axis=0)) / dt
     a = np.abs(np.diff(q, n=2, axis=0)) / dt**2
     lim_v, lim_a = np.asarray(course.limits.velocity), np.asarray(course.limits.acceleration)
     uniform = bool(np.allclose(np.diff(t[:, 0]), dt, atol=1e-6))
-    return {"landings_ok": bool(landings_ok), "min_sample_clearance_m": lowest,
-            "uniform_time": uniform, "max_joint_step_rad": float(np.abs(np.diff(q, axis=0)).max()),
-            "velocity_ratio": float((v / lim_v).max()), "acceleration_ratio": float((a / lim_a).max()),
-            "within_limits": bool(np.all(v <= lim_v * (1 + 1e-3)) and np.all(a <= lim_a * (1 + 1e-3)))}
+    return {
+        "landings_ok": bool(landings_ok),
+        "min_sample_clearance_m": lowest,
+        "uniform_time": uniform,
+        "max_joint_step_rad": float(np.abs(np.diff(q, axis=0)).max()),
+        "velocity_ratio": float((v / lim_v).max()),
+        "acceleration_ratio": float((a / lim_a).max()),
+        "within_limits": bool(np.all(v <= lim_v * (1 + 1e-3)) and np.all(a <= lim_a * (1 + 1e-3))),
+    }
 
 
 def _one_swing_seconds(gen, course, k: int) -> float:
@@ -120,16 +141,28 @@ def _one_swing_seconds(gen, course, k: int) -> float:
 
     st = course.steps[k]
     ob = st.trajectory.scene.obstacle
-    local = dataclasses.replace(ob, center_y=ob.center_y - st.start_y)     # planned in its own frame
+    local = dataclasses.replace(ob, center_y=ob.center_y - st.start_y)  # planned in its own frame
     t0 = time.process_time()
-    traj = gen.generate(local, pivot_y=st.pivot_y - st.start_y, start_y=0.0, step_length=st.goal_y - st.start_y,
-                        fallback=None)
+    traj = gen.generate(
+        local,
+        pivot_y=st.pivot_y - st.start_y,
+        start_y=0.0,
+        step_length=st.goal_y - st.start_y,
+        fallback=None,
+    )
     time_swing(traj, gen.config, rate=course.rate)
     return time.process_time() - t0
 
 
-def run_course_benchmark(policy, out_dir=None, n: int = 200, seed: int = 0, progress=print, name: str = "course",
-                         log=None) -> dict:
+def run_course_benchmark(
+    policy,
+    out_dir=None,
+    n: int = 200,
+    seed: int = 0,
+    progress=print,
+    name: str = "course",
+    log=None,
+) -> dict:
     """Plan ``n`` drawn courses with RL alone and with CFFTG, check them and write
     ``<name>_<date>_<machine>.json/.md`` to ``out_dir`` (when given). ``log``: a JSON-lines file that
     gets each course's row as it is done (``summarize_log`` summarises an interrupted run). Returns
@@ -151,20 +184,40 @@ def run_course_benchmark(policy, out_dir=None, n: int = 200, seed: int = 0, prog
         try:
             fh = footholds(ter, gen.config)
         except CourseError as e:
-            refused.append({"course": i, "kinds": kinds, "length_m": float(pts[-1, 0]), "message": str(e),
-                            "seconds": time.process_time() - t0})
+            refused.append(
+                {
+                    "course": i,
+                    "kinds": kinds,
+                    "length_m": float(pts[-1, 0]),
+                    "message": str(e),
+                    "seconds": time.process_time() - t0,
+                }
+            )
             _log(log, {"refused": refused[-1]})
             continue
         foothold_s = time.process_time() - t0
-        row = {"course": i, "kinds": kinds, "length_m": float(pts[-1, 0]), "obstacles": len(kinds),
-               "steps": len(fh), "footholds_s": foothold_s}
+        row = {
+            "course": i,
+            "kinds": kinds,
+            "length_m": float(pts[-1, 0]),
+            "obstacles": len(kinds),
+            "steps": len(fh),
+            "footholds_s": foothold_s,
+        }
         for label, g, kw in (("rl", gen, {"fallback": None}), ("cfftg", cfftg, {})):
             t0 = time.process_time()
             c = plan_course(g, ter, **kw)
             cpu = time.process_time() - t0
-            assert c.footholds == fh     # the same footholds for both
-            r = {"ok": c.ok, "duration_s": c.duration if c.ok else None, "plan_wall_s": c.plan_seconds,
-                 "plan_s": cpu, "plan_s_per_step": cpu / len(c.steps), "failed_step": None, "reasons": list(c.reasons)}
+            assert c.footholds == fh  # the same footholds for both
+            r = {
+                "ok": c.ok,
+                "duration_s": c.duration if c.ok else None,
+                "plan_wall_s": c.plan_seconds,
+                "plan_s": cpu,
+                "plan_s_per_step": cpu / len(c.steps),
+                "failed_step": None,
+                "reasons": list(c.reasons),
+            }
             if not c.ok:
                 bad = [s for s in c.steps if not s.ok]
                 r["failed_step"] = bad[0].index + 1 if bad else None
@@ -177,7 +230,9 @@ def run_course_benchmark(policy, out_dir=None, n: int = 200, seed: int = 0, prog
         rows.append(row)
         _log(log, {"row": row})
         if progress and (i + 1) % 10 == 0:
-            progress(f"course {i + 1}/{n}: {sum(r['rl']['ok'] for r in rows)}/{len(rows)} RL-alone walks ok")
+            progress(
+                f"course {i + 1}/{n}: {sum(r['rl']['ok'] for r in rows)}/{len(rows)} RL-alone walks ok"
+            )
     res = summarize(rows, refused, n, seed)
     if out_dir is not None:
         from jaxexo.evaluation.machine import write_result
@@ -213,7 +268,11 @@ def summarize(rows, refused, n, seed) -> dict:
     both = [r for r in rows if r["rl"]["ok"] and r["cfftg"]["ok"]]
     ratio = [r["rl"]["duration_s"] / r["cfftg"]["duration_s"] for r in both]
     per_step = [r["rl"]["plan_s_per_step"] for r in rows if r["rl"]["ok"]]
-    ref = [(r["rl"]["plan_s_per_step"], r["rl"]["one_swing_s"]) for r in rows if "one_swing_s" in r["rl"]]
+    ref = [
+        (r["rl"]["plan_s_per_step"], r["rl"]["one_swing_s"])
+        for r in rows
+        if "one_swing_s" in r["rl"]
+    ]
     checks = {}
     for label in ("rl", "cfftg"):
         ok = [r[label] for r in rows if r[label]["ok"]]
@@ -228,20 +287,38 @@ def summarize(rows, refused, n, seed) -> dict:
             "max_acceleration_ratio": max((c["acceleration_ratio"] for c in ok), default=None),
         }
     return {
-        "courses_drawn": n, "seed": seed, "planned": len(rows), "refused": len(refused),
+        "courses_drawn": n,
+        "seed": seed,
+        "planned": len(rows),
+        "refused": len(refused),
         "refusals": refused,
         "refusal_seconds_max": max((r["seconds"] for r in refused), default=None),
-        "rl_alone_success": share("rl"), "cfftg_success": share("cfftg"),
-        "rl_failed_courses": [{"course": r["course"], "step": r["rl"]["failed_step"], "reasons": r["rl"]["reasons"][:1]}
-                              for r in rows if not r["rl"]["ok"]],
+        "rl_alone_success": share("rl"),
+        "cfftg_success": share("cfftg"),
+        "rl_failed_courses": [
+            {
+                "course": r["course"],
+                "step": r["rl"]["failed_step"],
+                "reasons": r["rl"]["reasons"][:1],
+            }
+            for r in rows
+            if not r["rl"]["ok"]
+        ],
         "steps_median": float(np.median([r["steps"] for r in rows])) if rows else None,
-        "duration_s_median": {"rl": float(np.median([r["rl"]["duration_s"] for r in both])) if both else None,
-                              "cfftg": float(np.median([r["cfftg"]["duration_s"] for r in both])) if both else None},
-        "duration_ratio_rl_over_cfftg": {"median": float(np.median(ratio)) if ratio else None,
-                                         "max": float(np.max(ratio)) if ratio else None, "n": len(ratio)},
+        "duration_s_median": {
+            "rl": float(np.median([r["rl"]["duration_s"] for r in both])) if both else None,
+            "cfftg": float(np.median([r["cfftg"]["duration_s"] for r in both])) if both else None,
+        },
+        "duration_ratio_rl_over_cfftg": {
+            "median": float(np.median(ratio)) if ratio else None,
+            "max": float(np.max(ratio)) if ratio else None,
+            "n": len(ratio),
+        },
         "plan_s_per_step_median": float(np.median(per_step)) if per_step else None,
         "one_swing_s_median": float(np.median([b for _, b in ref])) if ref else None,
-        "per_step_over_one_swing_median": float(np.median([a / b for a, b in ref])) if ref else None,
+        "per_step_over_one_swing_median": float(np.median([a / b for a, b in ref]))
+        if ref
+        else None,
         "reference_courses": len(ref),
         "checks": checks,
         "courses": rows,
@@ -283,27 +360,35 @@ def markdown(res: dict) -> str:
         lines.append(
             f"| {label}: walks checked independently: landings on flat ground, within the limits (finite "
             f"differences), uniform time | {c['landings_ok']}, {c['within_limits']}, {c['uniform_time']} of "
-            f"{c['walks']} | | all |")
+            f"{c['walks']} | | all |"
+        )
         lines.append(
             f"| {label}: least foot clearance at the samples; largest joint step per sample; peak velocity and "
             f"acceleration / limit | {num(c['min_sample_clearance_m'], '{:.4f} m')}; "
             f"{num(c['max_joint_step_rad'], '{:.4f} rad')}; {num(c['max_velocity_ratio'])}, "
-            f"{num(c['max_acceleration_ratio'])} | | >= 0.02 m; -; <= 1 |")
+            f"{num(c['max_acceleration_ratio'])} | | >= 0.02 m; -; <= 1 |"
+        )
     if res["rl_failed_courses"]:
         lines += ["", "RL-alone failures (course, step, first reason):", ""]
-        lines += [f"- course {f['course']}, step {f['step']}: {'; '.join(f['reasons'])[:300]}"
-                  for f in res["rl_failed_courses"][:20]]
+        lines += [
+            f"- course {f['course']}, step {f['step']}: {'; '.join(f['reasons'])[:300]}"
+            for f in res["rl_failed_courses"][:20]
+        ]
     if res["refusals"]:
         lines += ["", "Refusals (first 10):", ""]
-        lines += [f"- course {r['course']} ({r['length_m']:.2f} m, {', '.join(r['kinds'])}): {r['message']}"
-                  for r in res["refusals"][:10]]
+        lines += [
+            f"- course {r['course']} ({r['length_m']:.2f} m, {', '.join(r['kinds'])}): {r['message']}"
+            for r in res["refusals"][:10]
+        ]
     return "\n".join(lines) + "\n"
 
 
 PIVOT_PLACES = ("agent", "before", "after", "goal")
 
 
-def run_pivot_benchmark(policy, out_dir=None, n: int = 60, seed: int = 0, name: str = "course-pivots") -> dict:
+def run_pivot_benchmark(
+    policy, out_dir=None, n: int = 60, seed: int = 0, name: str = "course-pivots"
+) -> dict:
     """Does the policy handle the pivots a course produces? RL alone on ``n`` scenes per terrain
     family (held-out and training) with the stance heel at the swing's start (``agent``, the
     training's own condition), on the floor before the obstacle (the first leg over it), after it
@@ -336,22 +421,38 @@ def run_pivot_benchmark(policy, out_dir=None, n: int = 60, seed: int = 0, name: 
                 places.append(place)
         ok = gen.generate_batch(obs, pivot_y=piv, start_y=0.0, step_length=steps, fallback=None).ok
         places = np.array(places)
-        table[fam] = {p: [int(ok[places == p].sum()), int((places == p).sum())] for p in PIVOT_PLACES}
-    total = {p: [sum(t[p][0] for t in table.values()), sum(t[p][1] for t in table.values())] for p in PIVOT_PLACES}
+        table[fam] = {
+            p: [int(ok[places == p].sum()), int((places == p).sum())] for p in PIVOT_PLACES
+        }
+    total = {
+        p: [sum(t[p][0] for t in table.values()), sum(t[p][1] for t in table.values())]
+        for p in PIVOT_PLACES
+    }
     res = {"n_per_family": n, "seed": seed, "by_family": table, "total": total}
     if out_dir is not None:
         from jaxexo.evaluation.machine import write_result
 
-        lines = ["# The pivots a course produces: RL alone, safe swings (strict verdict, 2 cm)", "",
-                 f"{n} scenes per family; the same obstacle and step with the stance heel at each place.", "",
-                 "| family | " + " | ".join(PIVOT_PLACES) + " |", "|---" * (len(PIVOT_PLACES) + 1) + "|"]
+        lines = [
+            "# The pivots a course produces: RL alone, safe swings (strict verdict, 2 cm)",
+            "",
+            f"{n} scenes per family; the same obstacle and step with the stance heel at each place.",
+            "",
+            "| family | " + " | ".join(PIVOT_PLACES) + " |",
+            "|---" * (len(PIVOT_PLACES) + 1) + "|",
+        ]
         for fam, t in list(table.items()) + [("all", total)]:
-            lines.append(f"| {fam} | " + " | ".join(f"{a}/{b}" for a, b in (t[p] for p in PIVOT_PLACES)) + " |")
+            lines.append(
+                f"| {fam} | "
+                + " | ".join(f"{a}/{b}" for a, b in (t[p] for p in PIVOT_PLACES))
+                + " |"
+            )
         write_result(name, res, "\n".join(lines) + "\n", Path(out_dir))
     return res
 
 
-def run_swing_breakdown(policy, out_dir=None, n: int = 30, seed: int = 0, name: str = "course-swings") -> dict:
+def run_swing_breakdown(
+    policy, out_dir=None, n: int = 30, seed: int = 0, name: str = "course-swings"
+) -> dict:
     """Where a walk's time goes, swing by swing: on the first ``n`` drawn courses that both generators
     walk safely (RL alone, CFFTG on the same footholds), each RL swing's timed duration over CFFTG's
     and both heels' lift, split into swings over flat floor (the virtual FLAT_OBSTACLE) and over
@@ -376,29 +477,55 @@ def run_swing_breakdown(policy, out_dir=None, n: int = 30, seed: int = 0, name: 
         walked += 1
         for sa, sb in zip(a.steps, b.steps):
             ratio[sa.flat].append(sa.timed.duration / sb.timed.duration)
-            lift[sa.flat].append((float(sa.trajectory.heel[:, 1].max()), float(sb.trajectory.heel[:, 1].max())))
+            lift[sa.flat].append(
+                (float(sa.trajectory.heel[:, 1].max()), float(sb.trajectory.heel[:, 1].max()))
+            )
             h = np.asarray(sa.trajectory.heel)
             last_up = len(h) - 1 - int(np.argmin(h[::-1, 1] <= 1e-3))
             slide.append(float(h[-1, 0] - h[last_up, 0]))
-    rows = {("flat" if f else "obstacle"): {
-        "swings": len(ratio[f]), "duration_ratio_median": float(np.median(ratio[f])),
-        "duration_ratio_mean": float(np.mean(ratio[f])),
-        "lift_median_m": {"rl": float(np.median([x[0] for x in lift[f]])),
-                          "cfftg": float(np.median([x[1] for x in lift[f]]))}} for f in (True, False)}
-    res = {"courses": n, "seed": seed, "by_kind": rows,
-           "rl_floor_travel_m": {"median": float(np.median(slide)), "p95": float(np.percentile(slide, 95))}}
+    rows = {
+        ("flat" if f else "obstacle"): {
+            "swings": len(ratio[f]),
+            "duration_ratio_median": float(np.median(ratio[f])),
+            "duration_ratio_mean": float(np.mean(ratio[f])),
+            "lift_median_m": {
+                "rl": float(np.median([x[0] for x in lift[f]])),
+                "cfftg": float(np.median([x[1] for x in lift[f]])),
+            },
+        }
+        for f in (True, False)
+    }
+    res = {
+        "courses": n,
+        "seed": seed,
+        "by_kind": rows,
+        "rl_floor_travel_m": {
+            "median": float(np.median(slide)),
+            "p95": float(np.percentile(slide, 95)),
+        },
+    }
     if out_dir is not None:
         from jaxexo.evaluation.machine import write_result
 
-        lines = ["# A walk's swings: RL alone against CFFTG on the same footholds", "",
-                 f"The first {n} drawn courses (seed {seed}) that both walk safely.", "",
-                 "| swings | n | RL / CFFTG duration, median / mean | heel lift median, RL / CFFTG cm |",
-                 "|---|---:|---:|---:|"]
+        lines = [
+            "# A walk's swings: RL alone against CFFTG on the same footholds",
+            "",
+            f"The first {n} drawn courses (seed {seed}) that both walk safely.",
+            "",
+            "| swings | n | RL / CFFTG duration, median / mean | heel lift median, RL / CFFTG cm |",
+            "|---|---:|---:|---:|",
+        ]
         for k, r in rows.items():
-            lines.append(f"| {k} | {r['swings']} | {r['duration_ratio_median']:.3f} / {r['duration_ratio_mean']:.3f} | "
-                         f"{100 * r['lift_median_m']['rl']:.1f} / {100 * r['lift_median_m']['cfftg']:.1f} |")
+            lines.append(
+                f"| {k} | {r['swings']} | {r['duration_ratio_median']:.3f} / {r['duration_ratio_mean']:.3f} | "
+                f"{100 * r['lift_median_m']['rl']:.1f} / {100 * r['lift_median_m']['cfftg']:.1f} |"
+            )
         ft = res["rl_floor_travel_m"]
-        lines += ["", f"RL heel travel along the floor at the end of a swing: median {1000 * ft['median']:.1f} mm, "
-                  f"p95 {1000 * ft['p95']:.1f} mm.", ""]
+        lines += [
+            "",
+            f"RL heel travel along the floor at the end of a swing: median {1000 * ft['median']:.1f} mm, "
+            f"p95 {1000 * ft['p95']:.1f} mm.",
+            "",
+        ]
         write_result(name, res, "\n".join(lines), Path(out_dir))
     return res

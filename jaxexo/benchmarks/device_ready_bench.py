@@ -15,7 +15,12 @@ import numpy as np
 
 TARGETS = {"rl_device_ready_ms": 5.0, "rl_over_cfftg": 1.5, "batch_1000_s": 1.0}
 # The timing's parts: the swing_timing function each one's CPU time is read from.
-PARTS = {"paths": "_joint_paths", "topp": "_topp_laws", "evaluate": "_evaluate", "finish": "_finish"}
+PARTS = {
+    "paths": "_joint_paths",
+    "topp": "_topp_laws",
+    "evaluate": "_evaluate",
+    "finish": "_finish",
+}
 
 
 def _split_timing(swing_timing):
@@ -30,6 +35,7 @@ def _split_timing(swing_timing):
                 return fn(*a, **k)
             finally:
                 acc[key] += time.process_time() - t0
+
         return inner
 
     for k, n in PARTS.items():
@@ -38,11 +44,13 @@ def _split_timing(swing_timing):
     def undo():
         for k, n in PARTS.items():
             setattr(swing_timing, n, saved[k])
+
     return acc, undo
 
 
-def run_device_ready_benchmark(policy: str | Path, out_dir: str | Path, n: int = 300, batch: int = 1000,
-                               rate: float = 100.0) -> dict:
+def run_device_ready_benchmark(
+    policy: str | Path, out_dir: str | Path, n: int = 300, batch: int = 1000, rate: float = 100.0
+) -> dict:
     from jaxexo.baselines import CFFTG
     from jaxexo.evaluation.machine import machine_info, write_result
     from jaxexo.inference import TrajectoryGenerator, swing_timing
@@ -52,16 +60,24 @@ def run_device_ready_benchmark(policy: str | Path, out_dir: str | Path, n: int =
     cfg = rl.config
     cf = CFFTG(cfg)
     sc = safety_scenarios(cfg, n, unseen=True)
-    gens = {"rl": lambda s: rl.generate(s["obstacle"], pivot=s["pivot"], start_y=s["start_y"],
-                                        step_length=s["step_length"], fallback=None),
-            "cfftg": lambda s: cf.generate(s["obstacle"], pivot=s["pivot"], start_y=s["start_y"],
-                                           step_length=s["step_length"])}
-    for g in gens.values():          # warm caches (config scalars, smoothing bases)
+    gens = {
+        "rl": lambda s: rl.generate(
+            s["obstacle"],
+            pivot=s["pivot"],
+            start_y=s["start_y"],
+            step_length=s["step_length"],
+            fallback=None,
+        ),
+        "cfftg": lambda s: cf.generate(
+            s["obstacle"], pivot=s["pivot"], start_y=s["start_y"], step_length=s["step_length"]
+        ),
+    }
+    for g in gens.values():  # warm caches (config scalars, smoothing bases)
         swing_timing.time_swing(g(sc[0]), cfg, rate=rate)
     total = {k: [] for k in gens}
     gen_ms = {k: [] for k in gens}
     parts = {name: dict.fromkeys(PARTS, 0.0) for name in gens}
-    for s in sc:                     # alternating, scene by scene
+    for s in sc:  # alternating, scene by scene
         for name, g in gens.items():
             acc, undo = _split_timing(swing_timing)
             try:
@@ -82,26 +98,43 @@ def run_device_ready_benchmark(policy: str | Path, out_dir: str | Path, n: int =
     batch_s = time.perf_counter() - t0
     med = {k: float(np.median(v)) for k, v in total.items()}
     payload = {
-        "policy": str(policy), "rate_hz": rate, "n": len(sc), "scenes": "unseen shapes (safety_scenarios unseen=True)",
-        "device_ready_ms_median": med, "device_ready_ms_p95": {k: float(np.percentile(v, 95)) for k, v in total.items()},
+        "policy": str(policy),
+        "rate_hz": rate,
+        "n": len(sc),
+        "scenes": "unseen shapes (safety_scenarios unseen=True)",
+        "device_ready_ms_median": med,
+        "device_ready_ms_p95": {k: float(np.percentile(v, 95)) for k, v in total.items()},
         "generate_ms_median": {k: float(np.median(v)) for k, v in gen_ms.items()},
-        "timing_parts_ms_mean": parts, "rl_over_cfftg": med["rl"] / med["cfftg"],
-        "time_swings_batch": {"n": batch, "seconds": batch_s}, "targets": TARGETS, "machine": machine_info(),
+        "timing_parts_ms_mean": parts,
+        "rl_over_cfftg": med["rl"] / med["cfftg"],
+        "time_swings_batch": {"n": batch, "seconds": batch_s},
+        "targets": TARGETS,
+        "machine": machine_info(),
     }
-    md = "\n".join([
-        "# Device-ready swing: generate + time_swing, RL alone vs CFFTG", "",
-        f"Policy `{policy}`; {len(sc)} unseen-shape scenes, both generators alternating scene by scene in one "
-        f"process; CPU ms per swing (process time); control rate {rate:g} Hz; machine: {payload['machine']['cpu']}, "
-        f"{payload['machine']['cores']} cores; other jobs may have run.", "",
-        "| generator | device-ready median ms | p95 ms | of which generate (median) | timing parts (mean ms): "
-        "paths / TOPP+law / evaluate / finish |",
-        "|---|---:|---:|---:|---|",
-        *[f"| {k} | {med[k]:.2f} | {payload['device_ready_ms_p95'][k]:.2f} | {payload['generate_ms_median'][k]:.2f} | "
-          f"{parts[k]['paths']:.2f} / {parts[k]['topp']:.2f} / {parts[k]['evaluate']:.2f} / {parts[k]['finish']:.2f} |"
-          for k in gens], "",
-        f"RL / CFFTG device-ready median: **{payload['rl_over_cfftg']:.2f}** (target <= {TARGETS['rl_over_cfftg']}); "
-        f"RL median {med['rl']:.2f} ms (target <= {TARGETS['rl_device_ready_ms']} ms).", "",
-        f"time_swings of {batch} RL swings: {batch_s:.2f} s (target <= {TARGETS['batch_1000_s']} s).", ""])
+    md = "\n".join(
+        [
+            "# Device-ready swing: generate + time_swing, RL alone vs CFFTG",
+            "",
+            f"Policy `{policy}`; {len(sc)} unseen-shape scenes, both generators alternating scene by scene in one "
+            f"process; CPU ms per swing (process time); control rate {rate:g} Hz; machine: {payload['machine']['cpu']}, "
+            f"{payload['machine']['cores']} cores; other jobs may have run.",
+            "",
+            "| generator | device-ready median ms | p95 ms | of which generate (median) | timing parts (mean ms): "
+            "paths / TOPP+law / evaluate / finish |",
+            "|---|---:|---:|---:|---|",
+            *[
+                f"| {k} | {med[k]:.2f} | {payload['device_ready_ms_p95'][k]:.2f} | {payload['generate_ms_median'][k]:.2f} | "
+                f"{parts[k]['paths']:.2f} / {parts[k]['topp']:.2f} / {parts[k]['evaluate']:.2f} / {parts[k]['finish']:.2f} |"
+                for k in gens
+            ],
+            "",
+            f"RL / CFFTG device-ready median: **{payload['rl_over_cfftg']:.2f}** (target <= {TARGETS['rl_over_cfftg']}); "
+            f"RL median {med['rl']:.2f} ms (target <= {TARGETS['rl_device_ready_ms']} ms).",
+            "",
+            f"time_swings of {batch} RL swings: {batch_s:.2f} s (target <= {TARGETS['batch_1000_s']} s).",
+            "",
+        ]
+    )
     write_result("device_ready", payload, md, out_dir)
     print(md)
     return payload

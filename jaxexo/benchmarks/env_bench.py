@@ -36,8 +36,9 @@ def make_rollout(env: ExoStepEnv, num_envs: int, num_steps: int, devices=None, m
         return _rollout(env, per_device, num_steps, key[0], params, mask)[None]
 
     mesh = Mesh(np.array(devices), ("envs",))
-    sharded = jax.shard_map(rollout, mesh=mesh, in_specs=(P("envs"), P()), out_specs=P("envs"),
-                            check_vma=False)
+    sharded = jax.shard_map(
+        rollout, mesh=mesh, in_specs=(P("envs"), P()), out_specs=P("envs"), check_vma=False
+    )
 
     def run(key, params):
         return sharded(jax.random.split(key, d), params).sum(axis=0)
@@ -63,9 +64,13 @@ def _rollout(env, num_envs, num_steps, key, params, mask="none"):
         key, ka, ks = jax.random.split(key, 3)
         if masks is None:
             actions = jax.random.randint(ka, (num_envs,), 0, env.num_actions)
-        else:   # uniform over the admissible moves of the current state (the trainer's exploration)
-            actions = jax.random.categorical(ka, jnp.where(masks(state, params), 0.0, -jnp.inf), axis=-1)
-        _, state, reward, term, trunc, info = env.step_batch(jax.random.split(ks, num_envs), state, actions, params)
+        else:  # uniform over the admissible moves of the current state (the trainer's exploration)
+            actions = jax.random.categorical(
+                ka, jnp.where(masks(state, params), 0.0, -jnp.inf), axis=-1
+            )
+        _, state, reward, term, trunc, info = env.step_batch(
+            jax.random.split(ks, num_envs), state, actions, params
+        )
         acc = acc + jnp.stack([reward.sum(), term.sum(), info["collision"].sum()])
         return (state, key, acc), None
 
@@ -73,8 +78,14 @@ def _rollout(env, num_envs, num_steps, key, params, mask="none"):
     return acc
 
 
-def bench_env(num_envs_list=(1, 256, 4096, 16384), steps_per_call=None, repeats=5, config=None,
-              progress=print, mask: str = "none") -> list[dict]:
+def bench_env(
+    num_envs_list=(1, 256, 4096, 16384),
+    steps_per_call=None,
+    repeats=5,
+    config=None,
+    progress=print,
+    mask: str = "none",
+) -> list[dict]:
     """Measure env-steps/s for each batch size; returns one row per size (``mask``: make_rollout's)."""
     env = ExoStepEnv(config or Config())
     params = env.default_params
@@ -102,14 +113,22 @@ def bench_env(num_envs_list=(1, 256, 4096, 16384), steps_per_call=None, repeats=
             "episodes_finished": float(out[1]),
             "mask": mask,
         }
-        progress(f"  {n:>6} envs: {row['env_steps_per_s'] / 1e6:8.3f} M env-steps/s "
-                 f"(median of {repeats}, {steps} steps/call, {ndev} device(s), compile {compile_s:.1f} s)")
+        progress(
+            f"  {n:>6} envs: {row['env_steps_per_s'] / 1e6:8.3f} M env-steps/s "
+            f"(median of {repeats}, {steps} steps/call, {ndev} device(s), compile {compile_s:.1f} s)"
+        )
         rows.append(row)
     return rows
 
 
-MIXED_KINDS = ["base1", "base2", "base3", "triangle", "half_circle",
-               {"kind": "rectangle", "width": [0.05, 0.20], "height": [0.05, 0.20]}]
+MIXED_KINDS = [
+    "base1",
+    "base2",
+    "base3",
+    "triangle",
+    "half_circle",
+    {"kind": "rectangle", "width": [0.05, 0.20], "height": [0.05, 0.20]},
+]
 
 
 def mixed_config() -> Config:
@@ -118,18 +137,41 @@ def mixed_config() -> Config:
 
     # Stated in full (the env-step settings of the recorded results): unshielded, obstacle mixture, no
     # placement jitter, thesis-like reward weights; a field left out would take the default model's value.
-    return config_from_dict({
-        "env": {"shield": False, "obs_profile": "bbox"},
-        "kinematics": {"hip_limits": [-0.5235987755982988, 2.007128639793479],
-                       "knee_limits": [-1.7453292519943295, 0.0]},
-        "reward": {"traj_weights": [1.0] * 8, "exo_weights": [1.0] * 4, "goal_reward": 10.0,
-                   "joint_limit_penalty": 1.0, "progress_shaping": 0.0},
-        "layout": {"obstacles": MIXED_KINDS, "pivot": ["agent", "obstacle", "between"], "terrain": False,
-                   "obstacle_offset": [0.0, 0.0], "start_shift": [0.0, 0.0], "step_length": [0.70, 0.70]}})
+    return config_from_dict(
+        {
+            "env": {"shield": False, "obs_profile": "bbox"},
+            "kinematics": {
+                "hip_limits": [-0.5235987755982988, 2.007128639793479],
+                "knee_limits": [-1.7453292519943295, 0.0],
+            },
+            "reward": {
+                "traj_weights": [1.0] * 8,
+                "exo_weights": [1.0] * 4,
+                "goal_reward": 10.0,
+                "joint_limit_penalty": 1.0,
+                "progress_shaping": 0.0,
+            },
+            "layout": {
+                "obstacles": MIXED_KINDS,
+                "pivot": ["agent", "obstacle", "between"],
+                "terrain": False,
+                "obstacle_offset": [0.0, 0.0],
+                "start_shift": [0.0, 0.0],
+                "step_length": [0.70, 0.70],
+            },
+        }
+    )
 
 
-def run_env_benchmark(config: Config, config_name: str, sizes, out_dir, progress=print, name: str = "env",
-                      mixed: bool = True) -> dict:
+def run_env_benchmark(
+    config: Config,
+    config_name: str,
+    sizes,
+    out_dir,
+    progress=print,
+    name: str = "env",
+    mixed: bool = True,
+) -> dict:
     """Benchmark the given config and, for comparison, the all-kinds mix; write the results. A
     shielded config is also measured with the shield's mask computed every step, as the trainer
     does: the plain rule and the trainer's batched one, back to back."""
@@ -138,20 +180,31 @@ def run_env_benchmark(config: Config, config_name: str, sizes, out_dir, progress
     results = {}
     runs = [(config_name, config, "none")]
     if config.env.shield:
-        runs += [(f"{config_name} + mask (plain)", config, "plain"), (f"{config_name} + mask (batched)", config, "batched")]
+        runs += [
+            (f"{config_name} + mask (plain)", config, "plain"),
+            (f"{config_name} + mask (batched)", config, "batched"),
+        ]
     if mixed:
         runs.append(("all obstacle kinds (K=16)", mixed_config(), "none"))
     for label, cfg, mask in runs:
         progress(f"{label}: outline size K = {cfg.outline_vertices}, obs_mode = {cfg.env.obs_mode}")
         results[label] = bench_env(sizes, config=cfg, progress=progress, mask=mask)
-    lines = ["# Environment throughput (random actions, full reward, auto-reset)", "",
-             "| layout | envs | devices | M env-steps/s |", "|---|---:|---:|---:|"]
+    lines = [
+        "# Environment throughput (random actions, full reward, auto-reset)",
+        "",
+        "| layout | envs | devices | M env-steps/s |",
+        "|---|---:|---:|---:|",
+    ]
     for label, rows in results.items():
         for r in rows:
-            lines.append(f"| {label} | {r['num_envs']} | {r['devices']} | {r['env_steps_per_s'] / 1e6:.2f} |")
+            lines.append(
+                f"| {label} | {r['num_envs']} | {r['devices']} | {r['env_steps_per_s'] / 1e6:.2f} |"
+            )
     lines.append("")
-    lines.append("Shared machine: other jobs ran at the same time, so figures are noisy; rows of one file were "
-                 "measured back to back in one process.")
+    lines.append(
+        "Shared machine: other jobs ran at the same time, so figures are noisy; rows of one file were "
+        "measured back to back in one process."
+    )
     paths = write_result(name, {"results": results}, "\n".join(lines), out_dir)
     progress("\n".join(lines))
     progress(f"wrote {paths[0]} and {paths[1]}")

@@ -47,10 +47,22 @@ def with_touch_down(batch, gen, points: int = 6) -> list:
     for t in batch:
         path = t.heel
         if t.ok and path[-1, 1] > 0.0:
-            drop = np.column_stack([np.full(points, path[-1, 0]), np.linspace(path[-1, 1], 0.0, points + 1)[1:]])
+            drop = np.column_stack(
+                [np.full(points, path[-1, 0]), np.linspace(path[-1, 1], 0.0, points + 1)[1:]]
+            )
             path = np.concatenate([path, drop])
-        out.append(assemble(t.method, gen.sp, [t.scene], [t.raw], path[None], [t.smoothing],
-                            duration=float(t.time[-1]), deviation=[t.checks.deviation])[0])
+        out.append(
+            assemble(
+                t.method,
+                gen.sp,
+                [t.scene],
+                [t.raw],
+                path[None],
+                [t.smoothing],
+                duration=float(t.time[-1]),
+                deviation=[t.checks.deviation],
+            )[0]
+        )
     return out
 
 
@@ -60,7 +72,11 @@ def run_set(gens, scenes, config) -> dict:
     out, dur = {}, {}
     for name, gen in gens.items():
         t0 = time.perf_counter()
-        batch = gen.generate_batch(obs, fallback=None, **kw) if name == "rl" else gen.generate_batch(obs, **kw)
+        batch = (
+            gen.generate_batch(obs, fallback=None, **kw)
+            if name == "rl"
+            else gen.generate_batch(obs, **kw)
+        )
         gen_s = time.perf_counter() - t0
         timed = time_swings(batch, config)
         d = np.array([t.duration for t in timed])
@@ -73,20 +89,33 @@ def run_set(gens, scenes, config) -> dict:
             touch = float(np.median(td))
             added = float(np.median(td[up] - d[up]))
         out[name] = {
-            "n": len(batch), "safe": float(batch.ok.mean()), "reached_goal": float(batch.reached_goal.mean()),
-            "end_above_2mm": float(np.mean(end_z > 0.002)), "end_z_mm_max": 1000 * float(end_z.max()), "end_z_mm_median": 1000 * float(np.median(end_z)),
+            "n": len(batch),
+            "safe": float(batch.ok.mean()),
+            "reached_goal": float(batch.reached_goal.mean()),
+            "end_above_2mm": float(np.mean(end_z > 0.002)),
+            "end_z_mm_max": 1000 * float(end_z.max()),
+            "end_z_mm_median": 1000 * float(np.median(end_z)),
             "lift_cm_median": 100 * float(np.median(batch.heel[..., 1].max(axis=1))),
-            "duration_s_median": float(np.median(d)), "duration_s_p95": float(np.percentile(d, 95)),
-            "duration_touch_down_s_median": touch, "touch_down_added_s_median": added,
+            "duration_s_median": float(np.median(d)),
+            "duration_s_p95": float(np.percentile(d, 95)),
+            "duration_touch_down_s_median": touch,
+            "touch_down_added_s_median": added,
             "approach_mm_median": 1000 * float(np.median([approach(h) for h in batch.heel])),
             "retried": float(np.mean([bool(n) for n in batch.notes])),
             "raw_polyline": float(np.mean(np.isnan(batch.smoothing))),
-            "generate_s": gen_s, "ok_mask": batch.ok,
+            "generate_s": gen_s,
+            "ok_mask": batch.ok,
             # per scene, for comparing two runs swing by swing
-            "per_scene": {"duration_s": d.tolist(), "end_z_m": end_z.tolist(), "ok": batch.ok.tolist()},
+            "per_scene": {
+                "duration_s": d.tolist(),
+                "end_z_m": end_z.tolist(),
+                "ok": batch.ok.tolist(),
+            },
         }
     both = out["rl"]["ok_mask"] & out["cfftg"]["ok_mask"]
-    out["rl_over_cfftg_duration_median"] = float(np.median(dur["rl"][both] / dur["cfftg"][both])) if both.any() else None
+    out["rl_over_cfftg_duration_median"] = (
+        float(np.median(dur["rl"][both] / dur["cfftg"][both])) if both.any() else None
+    )
     out["both_safe"] = int(both.sum())
     for name in gens:
         del out[name]["ok_mask"]
@@ -94,24 +123,41 @@ def run_set(gens, scenes, config) -> dict:
 
 
 def markdown(res: dict) -> str:
-    lines = [f"# Landing: RL alone (fallback=None) beside CFFTG ({res['tag'] or 'current'})", "",
-             f"Policy {res['policy']}; {res['n']} scenes per set. {res['note']}".rstrip(), "",
-             "| set | method | safe | goal | ends > 2 mm up | end heel z max / median (mm) | lift median (cm) | duration median / p95 (s) | with touch-down (s): median, added "
-             "| approach (mm) | retried / raw polyline | RL/CFFTG duration median |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        f"# Landing: RL alone (fallback=None) beside CFFTG ({res['tag'] or 'current'})",
+        "",
+        f"Policy {res['policy']}; {res['n']} scenes per set. {res['note']}".rstrip(),
+        "",
+        "| set | method | safe | goal | ends > 2 mm up | end heel z max / median (mm) | lift median (cm) | duration median / p95 (s) | with touch-down (s): median, added "
+        "| approach (mm) | retried / raw polyline | RL/CFFTG duration median |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
     for name, r in res["sets"].items():
         for g in ("rl", "cfftg"):
             x = r[g]
-            ratio = f"{r['rl_over_cfftg_duration_median']:.3f} (n = {r['both_safe']})" if g == "rl" else ""
-            touch = "-" if x["duration_touch_down_s_median"] is None else (
-                f"{x['duration_touch_down_s_median']:.3f}, +{x['touch_down_added_s_median']:.3f}")
-            retried = f"{100 * x['retried']:.1f} / {100 * x['raw_polyline']:.1f} %" if g == "rl" else "-"
-            lines.append(f"| {name} | {g} | {100 * x['safe']:.1f} % | {100 * x['reached_goal']:.1f} % | "
-                         f"{100 * x['end_above_2mm']:.1f} % | {x['end_z_mm_max']:.1f} / {x['end_z_mm_median']:.1f} | {x['lift_cm_median']:.2f} | "
-                         f"{x['duration_s_median']:.3f} / {x['duration_s_p95']:.3f} | "
-                         f"{touch} | "
-                         f"{x['approach_mm_median']:.1f} | "
-                         f"{retried} | {ratio} |")
+            ratio = (
+                f"{r['rl_over_cfftg_duration_median']:.3f} (n = {r['both_safe']})"
+                if g == "rl"
+                else ""
+            )
+            touch = (
+                "-"
+                if x["duration_touch_down_s_median"] is None
+                else (
+                    f"{x['duration_touch_down_s_median']:.3f}, +{x['touch_down_added_s_median']:.3f}"
+                )
+            )
+            retried = (
+                f"{100 * x['retried']:.1f} / {100 * x['raw_polyline']:.1f} %" if g == "rl" else "-"
+            )
+            lines.append(
+                f"| {name} | {g} | {100 * x['safe']:.1f} % | {100 * x['reached_goal']:.1f} % | "
+                f"{100 * x['end_above_2mm']:.1f} % | {x['end_z_mm_max']:.1f} / {x['end_z_mm_median']:.1f} | {x['lift_cm_median']:.2f} | "
+                f"{x['duration_s_median']:.3f} / {x['duration_s_p95']:.3f} | "
+                f"{touch} | "
+                f"{x['approach_mm_median']:.1f} | "
+                f"{retried} | {ratio} |"
+            )
     return "\n".join(lines)
 
 

@@ -43,8 +43,11 @@ def _both_safe(per: dict) -> dict:
     both = per["rl"][0] & per["cfftg"][0]
     out = {"n_both_safe": int(both.sum())}
     for g, (_, lift, dur) in per.items():
-        out[g] = {"lift_cm": 100 * float(np.median(lift[both])), "dur_median_s": float(np.median(dur[both])),
-                  "dur_p95_s": float(np.percentile(dur[both], 95))}
+        out[g] = {
+            "lift_cm": 100 * float(np.median(lift[both])),
+            "dur_median_s": float(np.median(dur[both])),
+            "dur_p95_s": float(np.percentile(dur[both], 95)),
+        }
     return out
 
 
@@ -55,15 +58,22 @@ def screen_agent(gen: TrajectoryGenerator, time_n: int) -> dict:
     scenes = scene_sets(gen.config, time_n)
     timing = {}
     for name in ("held-out families", "unseen shapes"):
-        runs = alternate({"rl": WithFallback(gen, None), "cfftg": cf}, scenes[name][:time_n], warmup=10)
+        runs = alternate(
+            {"rl": WithFallback(gen, None), "cfftg": cf}, scenes[name][:time_n], warmup=10
+        )
         rl, c = np.median(runs["rl"][1]) * 1e3, np.median(runs["cfftg"][1]) * 1e3
         rl_cpu, c_cpu = np.median(runs["rl"][2]) * 1e3, np.median(runs["cfftg"][2]) * 1e3
         trajs = runs["rl"][0]
-        timing[name] = {"rl_ms": float(rl), "cfftg_ms": float(c), "ratio": float(rl / c),
-                        "cpu_ratio": float(rl_cpu / c_cpu), "raw_points": float(np.mean([len(t.raw) for t in trajs])),
-                        "rl_safe": float(np.mean([t.ok for t in trajs])),
-                        "rl_goal": float(np.mean([t.checks.reached_goal for t in trajs])),
-                        "cfftg_safe": float(np.mean([t.ok for t in runs["cfftg"][0]]))}
+        timing[name] = {
+            "rl_ms": float(rl),
+            "cfftg_ms": float(c),
+            "ratio": float(rl / c),
+            "cpu_ratio": float(rl_cpu / c_cpu),
+            "raw_points": float(np.mean([len(t.raw) for t in trajs])),
+            "rl_safe": float(np.mean([t.ok for t in trajs])),
+            "rl_goal": float(np.mean([t.checks.reached_goal for t in trajs])),
+            "cfftg_safe": float(np.mean([t.ok for t in runs["cfftg"][0]])),
+        }
     return {"timing": timing, "smoothing": gen.smoothing}
 
 
@@ -76,9 +86,14 @@ def measure_agent(gen: TrajectoryGenerator, n: int) -> dict:
     for name, sc in scenes.items():
         arrays = {}
         r = run_set(gens, sc, cfg, None, 0.0, None, arrays)
-        sets[name] = {"rl_safe": r["rl"]["safe"], "cfftg_safe": r["cfftg"]["safe"],
-                      "rl_goal": r["rl"]["reached_goal"], "rl_longest_s": r["rl"]["duration_s_max"],
-                      "rl_corrected": r["rl"]["corrected"], **_both_safe(arrays)}
+        sets[name] = {
+            "rl_safe": r["rl"]["safe"],
+            "cfftg_safe": r["cfftg"]["safe"],
+            "rl_goal": r["rl"]["reached_goal"],
+            "rl_longest_s": r["rl"]["duration_s_max"],
+            "rl_corrected": r["rl"]["corrected"],
+            **_both_safe(arrays),
+        }
         longest = max(longest, r["rl"]["duration_s_max"])
         for g, (ok, lift, dur) in arrays.items():
             for k, v in enumerate((ok, lift, dur)):
@@ -102,6 +117,7 @@ def verdicts(m: dict, success: float) -> dict:
 
 def figure(rows: list[dict], path: Path, default_label: str) -> None:
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -109,11 +125,22 @@ def figure(rows: list[dict], path: Path, default_label: str) -> None:
     for r in (r for r in rows if r["screened"]):
         x = r["timing"]["held-out families"]["cpu_ratio"]
         ok = all(r["meets"].values())
-        for ax, y in zip(axs, (r["pooled"]["rl"]["dur_p95_s"] / r["pooled"]["cfftg"]["dur_p95_s"],
-                               r["pooled"]["rl"]["lift_cm"] - r["pooled"]["cfftg"]["lift_cm"])):
-            ax.scatter(x, y, s=18 + 30 * r["step_size"] / 0.03, marker="o" if r["layer_norm"] else "s",
-                       color={32: "tab:blue", 64: "tab:orange", 128: "tab:green"}.get(r["hidden"][0], "k"),
-                       edgecolors="k" if ok else "none", alpha=0.8)
+        for ax, y in zip(
+            axs,
+            (
+                r["pooled"]["rl"]["dur_p95_s"] / r["pooled"]["cfftg"]["dur_p95_s"],
+                r["pooled"]["rl"]["lift_cm"] - r["pooled"]["cfftg"]["lift_cm"],
+            ),
+        ):
+            ax.scatter(
+                x,
+                y,
+                s=18 + 30 * r["step_size"] / 0.03,
+                marker="o" if r["layer_norm"] else "s",
+                color={32: "tab:blue", 64: "tab:orange", 128: "tab:green"}.get(r["hidden"][0], "k"),
+                edgecolors="k" if ok else "none",
+                alpha=0.8,
+            )
             if default_label in r["label"]:
                 ax.scatter(x, y, s=220, facecolors="none", edgecolors="red", linewidths=1.5)
     axs[0].axhline(P95_FACTOR, color="grey", ls="--", lw=1)
@@ -125,12 +152,19 @@ def figure(rows: list[dict], path: Path, default_label: str) -> None:
         ax.set_xlabel("one swing, RL / CFFTG CPU time (medians, held-out families)")
         ax.grid(alpha=0.3)
     from matplotlib.lines import Line2D
-    handles = [Line2D([], [], marker="o", ls="", color=c, label=f"{h}-{h}") for h, c in
-               ((32, "tab:blue"), (64, "tab:orange"), (128, "tab:green"))]
-    handles += [Line2D([], [], marker="o", ls="", color="grey", label="LayerNorm"),
-                Line2D([], [], marker="s", ls="", color="grey", label="no LayerNorm"),
-                Line2D([], [], marker="o", ls="", mfc="none", mec="red", ms=12, label="today's default config"),
-                Line2D([], [], marker="o", ls="", mfc="w", mec="k", label="black edge: meets every target")]
+
+    handles = [
+        Line2D([], [], marker="o", ls="", color=c, label=f"{h}-{h}")
+        for h, c in ((32, "tab:blue"), (64, "tab:orange"), (128, "tab:green"))
+    ]
+    handles += [
+        Line2D([], [], marker="o", ls="", color="grey", label="LayerNorm"),
+        Line2D([], [], marker="s", ls="", color="grey", label="no LayerNorm"),
+        Line2D(
+            [], [], marker="o", ls="", mfc="none", mec="red", ms=12, label="today's default config"
+        ),
+        Line2D([], [], marker="o", ls="", mfc="w", mec="k", label="black edge: meets every target"),
+    ]
     axs[1].legend(handles=handles, fontsize=7, loc="upper right")
     fig.suptitle("Model study: one point per agent (marker size: step size 3 / 4.5 / 6 cm)")
     fig.tight_layout()
@@ -143,9 +177,22 @@ def config_summary(rows: list[dict]) -> list[dict]:
     over seeds of the one-swing time and ratio (held-out families)."""
     out = {}
     for r in rows:
-        e = out.setdefault(r["config_id"], {"config_id": r["config_id"], "label": r["label"], "hidden": r["hidden"],
-                                            "layer_norm": r["layer_norm"], "step_size": r["step_size"], "seeds": 0,
-                                            "screened": 0, "meets_all": 0, "ms": [], "ratio": [], "success": []})
+        e = out.setdefault(
+            r["config_id"],
+            {
+                "config_id": r["config_id"],
+                "label": r["label"],
+                "hidden": r["hidden"],
+                "layer_norm": r["layer_norm"],
+                "step_size": r["step_size"],
+                "seeds": 0,
+                "screened": 0,
+                "meets_all": 0,
+                "ms": [],
+                "ratio": [],
+                "success": [],
+            },
+        )
         e["seeds"] += 1
         e["screened"] += bool(r["screened"])
         e["meets_all"] += bool(r.get("meets")) and all(r["meets"].values())
@@ -159,35 +206,52 @@ def config_summary(rows: list[dict]) -> list[dict]:
 
 
 def markdown(rows: list[dict], meta: dict) -> str:
-    lines = ["# Model study: network x LayerNorm x step size, 3 seeds, measured agent by agent", "",
-             f"Sweep `{meta['sweep']}`. Screen: one swing timed on {meta['time_n']} held-out-family and "
-             f"{meta['time_n']} unseen-shape scenes, RL alone (`fallback=None`) and CFFTG alternating in one process, "
-             "and the RL swings' verdict on those scenes; an agent passes with validation success >= 0.99 and every "
-             f"screened RL swing safe. Agents that pass are measured on {meta['n']} scenes per set (held-out "
-             "families, thesis five shifted, unseen shapes) beside CFFTG: lift and timed swing (default [device] "
-             "limits) pooled over the three sets on the scenes both swing safely. Load average at the start: "
-             f"{meta['load']}.", "",
-             "Times: the one-swing ratio is of CPU time (`time.process_time`, RL / CFFTG medians over the same "
-             "scenes): on a loaded machine a longer call is preempted more often, which the wall clock charges to "
-             "it; the wall-clock medians are listed too.", "",
-             "## Per configuration (median over seeds)", "",
-             "| config | seeds passing the screen | seeds meeting every target | min validation success | "
-             "one swing ms, wall | ratio, CPU |", "|---|---:|---:|---:|---:|---:|"]
+    lines = [
+        "# Model study: network x LayerNorm x step size, 3 seeds, measured agent by agent",
+        "",
+        f"Sweep `{meta['sweep']}`. Screen: one swing timed on {meta['time_n']} held-out-family and "
+        f"{meta['time_n']} unseen-shape scenes, RL alone (`fallback=None`) and CFFTG alternating in one process, "
+        "and the RL swings' verdict on those scenes; an agent passes with validation success >= 0.99 and every "
+        f"screened RL swing safe. Agents that pass are measured on {meta['n']} scenes per set (held-out "
+        "families, thesis five shifted, unseen shapes) beside CFFTG: lift and timed swing (default [device] "
+        "limits) pooled over the three sets on the scenes both swing safely. Load average at the start: "
+        f"{meta['load']}.",
+        "",
+        "Times: the one-swing ratio is of CPU time (`time.process_time`, RL / CFFTG medians over the same "
+        "scenes): on a loaded machine a longer call is preempted more often, which the wall clock charges to "
+        "it; the wall-clock medians are listed too.",
+        "",
+        "## Per configuration (median over seeds)",
+        "",
+        "| config | seeds passing the screen | seeds meeting every target | min validation success | "
+        "one swing ms, wall | ratio, CPU |",
+        "|---|---:|---:|---:|---:|---:|",
+    ]
     for e in config_summary(rows):
-        lines.append(f"| {e['label']} | {e['screened']} of {e['seeds']} | {e['meets_all']} of {e['seeds']} | "
-                     f"{e['success_min']:.3f} | {e['ms']:.2f} | {e['ratio']:.2f} |")
-    lines += ["", "## Per agent", "",
-              "| config | seed | val. success | screen: RL safe % fam / shapes | RL safe % (fam / five / shapes) | "
-              "CFFTG safe % | lift cm RL / CFFTG | timed median s RL / CFFTG | p95 s RL / CFFTG | longest RL s | "
-              "one swing ms RL / CFFTG (fam, wall) | CPU ratio fam / shapes | raw pts | meets |",
-              "|---|---:|---:|---|---|---|---|---|---|---:|---|---|---:|---|"]
+        lines.append(
+            f"| {e['label']} | {e['screened']} of {e['seeds']} | {e['meets_all']} of {e['seeds']} | "
+            f"{e['success_min']:.3f} | {e['ms']:.2f} | {e['ratio']:.2f} |"
+        )
+    lines += [
+        "",
+        "## Per agent",
+        "",
+        "| config | seed | val. success | screen: RL safe % fam / shapes | RL safe % (fam / five / shapes) | "
+        "CFFTG safe % | lift cm RL / CFFTG | timed median s RL / CFFTG | p95 s RL / CFFTG | longest RL s | "
+        "one swing ms RL / CFFTG (fam, wall) | CPU ratio fam / shapes | raw pts | meets |",
+        "|---|---:|---:|---|---|---|---|---|---|---:|---|---|---:|---|",
+    ]
     for r in rows:
         t = r["timing"]
-        head = (f"| {r['label']} | {r['seed']} | {r['success']:.3f} | "
-                f"{100 * t['held-out families']['rl_safe']:.1f} / {100 * t['unseen shapes']['rl_safe']:.1f} | ")
-        tail = (f"{t['held-out families']['rl_ms']:.2f} / {t['held-out families']['cfftg_ms']:.2f} | "
-                f"{t['held-out families']['cpu_ratio']:.2f} / {t['unseen shapes']['cpu_ratio']:.2f} | "
-                f"{t['held-out families']['raw_points']:.1f} | ")
+        head = (
+            f"| {r['label']} | {r['seed']} | {r['success']:.3f} | "
+            f"{100 * t['held-out families']['rl_safe']:.1f} / {100 * t['unseen shapes']['rl_safe']:.1f} | "
+        )
+        tail = (
+            f"{t['held-out families']['rl_ms']:.2f} / {t['held-out families']['cfftg_ms']:.2f} | "
+            f"{t['held-out families']['cpu_ratio']:.2f} / {t['unseen shapes']['cpu_ratio']:.2f} | "
+            f"{t['held-out families']['raw_points']:.1f} | "
+        )
         if not r["screened"]:
             lines.append(head + "| | | | | | " + tail + "screen failed |")
             continue
@@ -198,13 +262,14 @@ def markdown(rows: list[dict], meta: dict) -> str:
         lines.append(
             head + f"{safe} | {csafe} | {p['rl']['lift_cm']:.2f} / {p['cfftg']['lift_cm']:.2f} | "
             f"{p['rl']['dur_median_s']:.3f} / {p['cfftg']['dur_median_s']:.3f} | {p['rl']['dur_p95_s']:.3f} / "
-            f"{p['cfftg']['dur_p95_s']:.3f} | {r['rl_longest_s']:.2f} | " + tail +
-            f"{'all' if not missed else 'not ' + ', '.join(missed)} |")
+            f"{p['cfftg']['dur_p95_s']:.3f} | {r['rl_longest_s']:.2f} | "
+            + tail
+            + f"{'all' if not missed else 'not ' + ', '.join(missed)} |"
+        )
     return "\n".join(lines)
 
 
-
-DEFAULT_LABEL = "today's default"     # the label of the default's configuration, marked in the figure
+DEFAULT_LABEL = "today's default"  # the label of the default's configuration, marked in the figure
 
 
 def rerender(json_path) -> str:
@@ -214,8 +279,11 @@ def rerender(json_path) -> str:
     md = markdown(res["rows"], res)
     res["configs"] = config_summary(res["rows"])
     atomic_write(json_path, json.dumps(res, indent=2) + "\n")
-    atomic_write(Path(json_path).with_suffix(".md"), md + f"\n\nMachine: {res['machine']['cpu']}, "
-                                                  f"{res['machine']['cores']} cores; {res['date']}.\n")
+    atomic_write(
+        Path(json_path).with_suffix(".md"),
+        md + f"\n\nMachine: {res['machine']['cpu']}, "
+        f"{res['machine']['cores']} cores; {res['date']}.\n",
+    )
     figure(res["rows"], Path(json_path).with_suffix(".png"), DEFAULT_LABEL)
     print(md)
     return md
@@ -226,26 +294,42 @@ def agent_row(sweep_dir: Path, entry: dict, wall_s: float, n: int, time_n: int) 
     screen passes (validation and RL alone safe on the screen's scenes)."""
     gen = TrajectoryGenerator.load(sweep_dir / entry["dir"] / "policy.npz")
     gen_cfg = gen.config
-    row = {"config_id": entry["config_id"], "seed": entry["seed"], "label": entry["label"],
-           "success": entry["success"], "held_out_success": entry["held_out_success"],
-           "hidden": list(gen_cfg.train.hidden), "layer_norm": bool(gen_cfg.train.layer_norm),
-           "step_size": float(gen_cfg.env.step_size), "sweep_wall_s": wall_s, **screen_agent(gen, time_n)}
-    row["screened"] = entry["success"] >= 0.99 and all(t["rl_safe"] == 1.0 and t["rl_goal"] == 1.0
-                                                       for t in row["timing"].values())
+    row = {
+        "config_id": entry["config_id"],
+        "seed": entry["seed"],
+        "label": entry["label"],
+        "success": entry["success"],
+        "held_out_success": entry["held_out_success"],
+        "hidden": list(gen_cfg.train.hidden),
+        "layer_norm": bool(gen_cfg.train.layer_norm),
+        "step_size": float(gen_cfg.env.step_size),
+        "sweep_wall_s": wall_s,
+        **screen_agent(gen, time_n),
+    }
+    row["screened"] = entry["success"] >= 0.99 and all(
+        t["rl_safe"] == 1.0 and t["rl_goal"] == 1.0 for t in row["timing"].values()
+    )
     if row["screened"]:
         row.update(measure_agent(gen, n))
         row["meets"] = verdicts(row, entry["success"])
     return row
 
 
-def run_model_study(sweep_dir, out_dir, n: int = 120, time_n: int = 80, configs=None, tag: str = "") -> dict:
+def run_model_study(
+    sweep_dir, out_dir, n: int = 120, time_n: int = 80, configs=None, tag: str = ""
+) -> dict:
     """Every exported agent of the sweep in ``sweep_dir`` (only the config ids in ``configs`` when
     given), printed and written as model_study[_tag]_<date>_<machine>.{json,md,png}."""
     d = Path(sweep_dir)
     index = json.loads((d / "agents" / "index.json").read_text())
     with open(d / "results.csv") as f:
         results = {(int(r["config_id"]), int(r["seed"])): r for r in csv.DictReader(f)}
-    meta = {"sweep": str(d), "n": n, "time_n": time_n, "load": [round(x, 2) for x in os.getloadavg()]}
+    meta = {
+        "sweep": str(d),
+        "n": n,
+        "time_n": time_n,
+        "load": [round(x, 2) for x in os.getloadavg()],
+    }
     rows = []
     for e in index:
         if not e["exported"] or (configs is not None and e["config_id"] not in configs):
@@ -253,8 +337,11 @@ def run_model_study(sweep_dir, out_dir, n: int = 120, time_n: int = 80, configs=
         t0 = time.perf_counter()
         row = agent_row(d, e, float(results[(e["config_id"], e["seed"])]["wall_s"]), n, time_n)
         rows.append(row)
-        print(f"{e['label']} seed {e['seed']}: screened {row['screened']} {json.dumps(row.get('meets'))} "
-              f"ratio {row['timing']['held-out families']['ratio']:.2f} ({time.perf_counter() - t0:.0f} s)", flush=True)
+        print(
+            f"{e['label']} seed {e['seed']}: screened {row['screened']} {json.dumps(row.get('meets'))} "
+            f"ratio {row['timing']['held-out families']['ratio']:.2f} ({time.perf_counter() - t0:.0f} s)",
+            flush=True,
+        )
     md = markdown(rows, meta)
     print(md)
     res = {**meta, "rows": rows, "configs": config_summary(rows), "machine": machine_info()}

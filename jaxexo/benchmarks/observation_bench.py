@@ -39,8 +39,14 @@ def training_profiles(per_family: int = 8, seed: int = STUDY_SEED) -> list[dict]
             if w > MAX_WIDTH:
                 continue
             pts = terrain.unpad(o[0])
-            out.append({"kind": "profile", "points": [[float(y), float(z)] for y, z in pts],
-                        "width": [0.85 * w, w], "height": [0.85 * h, h]})
+            out.append(
+                {
+                    "kind": "profile",
+                    "points": [[float(y), float(z)] for y, z in pts],
+                    "width": [0.85 * w, w],
+                    "height": [0.85 * h, h],
+                }
+            )
             got += 1
     return out
 
@@ -56,8 +62,14 @@ def study_config(base_toml: str | Path, obs_profile: str, budget: int, per_famil
     return config_from_dict(raw)
 
 
-def run_observation_study(out_dir: str | Path, base_toml: str | Path, runs_dir: str | Path, budget: int = 8_000_000,
-                          repeats: int = 2, seed: int = 0) -> dict:
+def run_observation_study(
+    out_dir: str | Path,
+    base_toml: str | Path,
+    runs_dir: str | Path,
+    budget: int = 8_000_000,
+    repeats: int = 2,
+    seed: int = 0,
+) -> dict:
     from jaxexo.baselines import CFFTG
     from jaxexo.evaluation.compare import run_generators
     from jaxexo.evaluation.machine import write_result
@@ -72,49 +84,88 @@ def run_observation_study(out_dir: str | Path, base_toml: str | Path, runs_dir: 
         cfg = study_config(base_toml, mode, budget)
         t0 = time.perf_counter()
         ev = run_training(cfg, runs_dir / mode, seed=seed, progress=False)
-        train_info[mode] = {"train_seconds": time.perf_counter() - t0, "eval_success": ev.get("success"),
-                            "episodes": ev.get("episodes"), "env_steps": ev.get("env_steps")}
+        train_info[mode] = {
+            "train_seconds": time.perf_counter() - t0,
+            "eval_success": ev.get("success"),
+            "episodes": ev.get("episodes"),
+            "env_steps": ev.get("env_steps"),
+        }
         models[mode] = TrajectoryGenerator.load(runs_dir / mode / "policy.npz")
     foot = models["bbox"].config.kinematics.foot_length
-    sets = {"unseen": unseen_scenarios(foot, repeats),
-            "seen": unseen_scenarios(foot, repeats, seed=SEEN_SEED, families=terrain.TRAIN_FAMILIES)}
-    gens = {"rl_bbox": models["bbox"], "rl_shape": models["shape"], "cfftg": CFFTG(models["bbox"].config)}
+    sets = {
+        "unseen": unseen_scenarios(foot, repeats),
+        "seen": unseen_scenarios(foot, repeats, seed=SEEN_SEED, families=terrain.TRAIN_FAMILIES),
+    }
+    gens = {
+        "rl_bbox": models["bbox"],
+        "rl_shape": models["shape"],
+        "cfftg": CFFTG(models["bbox"].config),
+    }
     tables, overall = {}, {}
     for name, sc in sets.items():
         runs = run_generators(gens, sc, warmup=5)
         trajs = {g: tr for g, (tr, _) in runs.items()}
         tables[name] = family_table(trajs, sc)
-        overall[name] = {g: {"n": len(tr), "success": float(np.mean([t.ok for t in tr])),
-                             "accuracy": float(np.mean([t.checks.collision_free for t in tr]))}
-                         for g, tr in trajs.items()}
-    payload = {"budget_env_steps": budget, "seed": seed, "repeats": repeats, "train": train_info,
-               "overall": overall, "by_family": tables}
+        overall[name] = {
+            g: {
+                "n": len(tr),
+                "success": float(np.mean([t.ok for t in tr])),
+                "accuracy": float(np.mean([t.checks.collision_free for t in tr])),
+            }
+            for g, tr in trajs.items()
+        }
+    payload = {
+        "budget_env_steps": budget,
+        "seed": seed,
+        "repeats": repeats,
+        "train": train_info,
+        "overall": overall,
+        "by_family": tables,
+    }
     md = markdown(payload)
     write_result("observation", payload, md, out_dir)
     return payload
 
 
 def markdown(p: dict) -> str:
-    lines = ["# Observation study: bbox vs shape profile on unseen obstacle families", "",
-             f"Two policies trained from configs/default.toml on profile obstacles drawn from the training "
-             f"families ({', '.join(terrain.TRAIN_FAMILIES)}), differing only in env.obs_profile; "
-             f"{p['budget_env_steps']:,} env steps each, seed {p['seed']}. Scored by the NumPy generator on "
-             f"the held-out benchmark (families {', '.join(terrain.HELD_OUT_FAMILIES)}) and on fresh draws of "
-             "the training families placed the same way (seen); CFFTG on the same scenes.", "",
-             "| model | train s | trainer eval success (its own test layouts) |", "|---|---:|---:|"]
+    lines = [
+        "# Observation study: bbox vs shape profile on unseen obstacle families",
+        "",
+        f"Two policies trained from configs/default.toml on profile obstacles drawn from the training "
+        f"families ({', '.join(terrain.TRAIN_FAMILIES)}), differing only in env.obs_profile; "
+        f"{p['budget_env_steps']:,} env steps each, seed {p['seed']}. Scored by the NumPy generator on "
+        f"the held-out benchmark (families {', '.join(terrain.HELD_OUT_FAMILIES)}) and on fresh draws of "
+        "the training families placed the same way (seen); CFFTG on the same scenes.",
+        "",
+        "| model | train s | trainer eval success (its own test layouts) |",
+        "|---|---:|---:|",
+    ]
     for m, t in p["train"].items():
         lines.append(f"| {m} | {t['train_seconds']:.0f} | {t['eval_success']} |")
-    lines += ["", "| set | generator | n | strict success % | accuracy % |", "|---|---|---:|---:|---:|"]
+    lines += [
+        "",
+        "| set | generator | n | strict success % | accuracy % |",
+        "|---|---|---:|---:|---:|",
+    ]
     for s, gens in p["overall"].items():
         for g, r in gens.items():
-            lines.append(f"| {s} | {g} | {r['n']} | {100 * r['success']:.1f} | {100 * r['accuracy']:.1f} |")
+            lines.append(
+                f"| {s} | {g} | {r['n']} | {100 * r['success']:.1f} | {100 * r['accuracy']:.1f} |"
+            )
     for s, table in p["by_family"].items():
-        lines += ["", f"## {s}: per family", "",
-                  "| family | generator | n | strict success % | accuracy % | clearance min cm | p5 cm | median cm | "
-                  "path length mean cm |", "|---|---|---:|---:|---:|---:|---:|---:|---:|"]
+        lines += [
+            "",
+            f"## {s}: per family",
+            "",
+            "| family | generator | n | strict success % | accuracy % | clearance min cm | p5 cm | median cm | "
+            "path length mean cm |",
+            "|---|---|---:|---:|---:|---:|---:|---:|---:|",
+        ]
         for fam, gens in table.items():
             for g, r in gens.items():
-                lines.append(f"| {fam} | {g} | {r['n']} | {100 * r['success']:.1f} | {100 * r['accuracy']:.1f} | "
-                             f"{100 * r['clearance_m_min']:.2f} | {100 * r['clearance_m_p5']:.2f} | "
-                             f"{100 * r['clearance_m_median']:.2f} | {100 * r['path_length_m_mean']:.1f} |")
+                lines.append(
+                    f"| {fam} | {g} | {r['n']} | {100 * r['success']:.1f} | {100 * r['accuracy']:.1f} | "
+                    f"{100 * r['clearance_m_min']:.2f} | {100 * r['clearance_m_p5']:.2f} | "
+                    f"{100 * r['clearance_m_median']:.2f} | {100 * r['path_length_m_mean']:.1f} |"
+                )
     return "\n".join(lines)

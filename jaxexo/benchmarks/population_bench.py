@@ -47,16 +47,28 @@ def population_row(base, k: int, work: Path) -> dict:
     chunks = [json.loads(x) for x in (work / f"k{k}" / "metrics.jsonl").read_text().splitlines()]
     walls = [c["wall_s"] for c in chunks]
     steady = [b - a for a, b in zip(walls[:-1], walls[1:])][1:] or [walls[-1]]
-    members = ev.get("members") or [{"seed": ev["seed"], "test": {"success_raw": ev["success_raw"],
-                                                                  "reached_goal": ev["reached_goal"]}}]
-    return {"k": k, "train_seconds": ev["train_seconds"], "chunks": len(chunks),
-            "steady_chunk_s": statistics.median(steady), "devices": ev["devices"],
-            "exported_seed": ev["seed"], "validation_success_raw": ev["validation_success_raw"],
-            "test_success_raw": [m["test"]["success_raw"] if m.get("test") else None for m in members],
-            "reached_goal": [m["test"]["reached_goal"] if m.get("test") else None for m in members]}
+    members = ev.get("members") or [
+        {
+            "seed": ev["seed"],
+            "test": {"success_raw": ev["success_raw"], "reached_goal": ev["reached_goal"]},
+        }
+    ]
+    return {
+        "k": k,
+        "train_seconds": ev["train_seconds"],
+        "chunks": len(chunks),
+        "steady_chunk_s": statistics.median(steady),
+        "devices": ev["devices"],
+        "exported_seed": ev["seed"],
+        "validation_success_raw": ev["validation_success_raw"],
+        "test_success_raw": [m["test"]["success_raw"] if m.get("test") else None for m in members],
+        "reached_goal": [m["test"]["reached_goal"] if m.get("test") else None for m in members],
+    }
 
 
-def run_population_benchmark(out_dir, config: str | None = None, ks=(1, 4, 8), name: str = "population") -> dict:
+def run_population_benchmark(
+    out_dir, config: str | None = None, ks=(1, 4, 8), name: str = "population"
+) -> dict:
     """Populations of each K in ``ks`` (default config: thesis (b) learns), printed and written as
     <name>_<date>_<machine>.{json,md}."""
     path = config or str(THESIS_B_LEARNS)
@@ -67,8 +79,10 @@ def run_population_benchmark(out_dir, config: str | None = None, ks=(1, 4, 8), n
     try:
         for k in ks:
             rows.append(population_row(base, k, work))
-            print(f"K={k}: {rows[-1]['train_seconds']:.1f} s, steady chunk {rows[-1]['steady_chunk_s']:.2f} s",
-                  flush=True)
+            print(
+                f"K={k}: {rows[-1]['train_seconds']:.1f} s, steady chunk {rows[-1]['steady_chunk_s']:.2f} s",
+                flush=True,
+            )
     finally:
         shutil.rmtree(work, ignore_errors=True)
     load_after = os.getloadavg()
@@ -78,20 +92,33 @@ def run_population_benchmark(out_dir, config: str | None = None, ks=(1, 4, 8), n
         r["steady_ratio"] = r["steady_chunk_s"] / one["steady_chunk_s"]
         r["target"] = target(r["k"])
         r["meets_target"] = r["ratio"] <= r["target"]
-    lines = ["# Population cost", "",
-             f"Config `{Path(path).name}`; seeds 0..K-1; `jaxexo train`'s driver in one process, the CPU cores as JAX "
-             "devices. K = 1 is one agent (data parallel over the devices); K > 1 a population "
-             "(jaxexo.train.population: members in fixed blocks of 2 lanes per device). Wall time: eval.json's "
-             "train_seconds (compilation and per-chunk validation included). Load average (1, 5, 15 min) before "
-             f"{tuple(round(x, 2) for x in load_before)}, after {tuple(round(x, 2) for x in load_after)}.", "",
-             "| K | devices | train s | ratio to K = 1 | target | met | steady chunk s | steady ratio | exported seed | "
-             "members' test strict success |", "|---:|---:|---:|---:|---:|---|---:|---:|---:|---|"]
+    lines = [
+        "# Population cost",
+        "",
+        f"Config `{Path(path).name}`; seeds 0..K-1; `jaxexo train`'s driver in one process, the CPU cores as JAX "
+        "devices. K = 1 is one agent (data parallel over the devices); K > 1 a population "
+        "(jaxexo.train.population: members in fixed blocks of 2 lanes per device). Wall time: eval.json's "
+        "train_seconds (compilation and per-chunk validation included). Load average (1, 5, 15 min) before "
+        f"{tuple(round(x, 2) for x in load_before)}, after {tuple(round(x, 2) for x in load_after)}.",
+        "",
+        "| K | devices | train s | ratio to K = 1 | target | met | steady chunk s | steady ratio | exported seed | "
+        "members' test strict success |",
+        "|---:|---:|---:|---:|---:|---|---:|---:|---:|---|",
+    ]
     for r in rows:
-        lines.append(f"| {r['k']} | {r['devices']} | {r['train_seconds']:.1f} | {r['ratio']:.2f} | {r['target']:.2f} | "
-                     f"{'yes' if r['meets_target'] else 'no'} | {r['steady_chunk_s']:.2f} | {r['steady_ratio']:.2f} | "
-                     f"{r['exported_seed']} | "
-                     + ", ".join("-" if s is None else f"{s:.2f}" for s in r["test_success_raw"]) + " |")
-    payload = {"config": Path(path).name, "rows": rows, "load_before": load_before, "load_after": load_after}
+        lines.append(
+            f"| {r['k']} | {r['devices']} | {r['train_seconds']:.1f} | {r['ratio']:.2f} | {r['target']:.2f} | "
+            f"{'yes' if r['meets_target'] else 'no'} | {r['steady_chunk_s']:.2f} | {r['steady_ratio']:.2f} | "
+            f"{r['exported_seed']} | "
+            + ", ".join("-" if s is None else f"{s:.2f}" for s in r["test_success_raw"])
+            + " |"
+        )
+    payload = {
+        "config": Path(path).name,
+        "rows": rows,
+        "load_before": load_before,
+        "load_after": load_after,
+    }
     for p in write_result(name, payload, "\n".join(lines), out_dir):
         print(p)
     return payload
@@ -119,8 +146,14 @@ def member_digests(devices: int, tests_dir: Path) -> dict:
     """The child's digests in a fresh process with ``devices`` CPU devices."""
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
     env["XLA_FLAGS"] = f"--xla_force_host_platform_device_count={devices}"
-    out = subprocess.run([sys.executable, "-c", CHILD, str(tests_dir)], cwd=tests_dir, env=env,
-                         capture_output=True, text=True, timeout=1800)
+    out = subprocess.run(
+        [sys.executable, "-c", CHILD, str(tests_dir)],
+        cwd=tests_dir,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=1800,
+    )
     if out.returncode:
         raise RuntimeError(out.stderr[-3000:])
     return json.loads(next(x for x in out.stdout.splitlines() if x.startswith("RESULT "))[7:])
@@ -130,18 +163,32 @@ def run_population_devices_check(out_dir, tests_dir) -> dict:
     """Digests on 1, 2 and 4 devices (tests_dir: the repository's tests/, for test_population), written
     as population-devices_<date>_<machine>.{json,md}."""
     rows = [member_digests(d, Path(tests_dir)) for d in (1, 2, 4)]
-    lines = ["# Population members across device counts", "",
-             "The tiny config of tests/test_population.py, seed 3, trained alone and as the fourth member of a "
-             "population of 5, in a fresh process with 1, 2 and 4 CPU devices (the population spread over all of "
-             "them); sha256 of the final parameters and per-update metrics.", "",
-             "| devices | alone | fourth of five | equal |", "|---:|---|---|---|"]
+    lines = [
+        "# Population members across device counts",
+        "",
+        "The tiny config of tests/test_population.py, seed 3, trained alone and as the fourth member of a "
+        "population of 5, in a fresh process with 1, 2 and 4 CPU devices (the population spread over all of "
+        "them); sha256 of the final parameters and per-update metrics.",
+        "",
+        "| devices | alone | fourth of five | equal |",
+        "|---:|---|---|---|",
+    ]
     for r in rows:
-        lines.append(f"| {r['devices']} | {r['alone'][:16]} | {r['fourth_of_five'][:16]} | "
-                     f"{'yes' if r['alone'] == r['fourth_of_five'] else 'no'} |")
-    same = {f"{a['devices']} vs {b['devices']}": a["alone"] == b["alone"] for a in rows for b in rows
-            if a["devices"] < b["devices"]}
-    lines += ["", "Across device counts (alone): " + ", ".join(f"{k}: {'equal' if v else 'differ'}"
-                                                         for k, v in same.items())]
+        lines.append(
+            f"| {r['devices']} | {r['alone'][:16]} | {r['fourth_of_five'][:16]} | "
+            f"{'yes' if r['alone'] == r['fourth_of_five'] else 'no'} |"
+        )
+    same = {
+        f"{a['devices']} vs {b['devices']}": a["alone"] == b["alone"]
+        for a in rows
+        for b in rows
+        if a["devices"] < b["devices"]
+    }
+    lines += [
+        "",
+        "Across device counts (alone): "
+        + ", ".join(f"{k}: {'equal' if v else 'differ'}" for k, v in same.items()),
+    ]
     payload = {"rows": rows, "across": same}
     for p in write_result("population-devices", payload, "\n".join(lines), out_dir):
         print(p)

@@ -30,8 +30,14 @@ from jaxexo.evaluation.machine import machine_info, write_result
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.inference.swing_timing import DeviceLimits, time_swings
 from jaxexo.physics import geometry
-from jaxexo.sim.replay import (Legs, brute_force_distance, driven_replay, kinematic_replay, summarize_driven,
-                               summarize_kinematic)
+from jaxexo.sim.replay import (
+    Legs,
+    brute_force_distance,
+    driven_replay,
+    kinematic_replay,
+    summarize_driven,
+    summarize_kinematic,
+)
 
 
 def replay_set(sc, rl, cfftg, config, rate: float, driven: bool) -> dict:
@@ -40,8 +46,10 @@ def replay_set(sc, rl, cfftg, config, rate: float, driven: bool) -> dict:
     default = DeviceLimits.from_config(config)
     out = {}
     legs_cache = {}
-    for gname, make in (("rl", lambda: rl.generate_batch(obs, fallback=None, **kw)),
-                        ("cfftg", lambda: cfftg.generate_batch(obs, **kw))):
+    for gname, make in (
+        ("rl", lambda: rl.generate_batch(obs, fallback=None, **kw)),
+        ("cfftg", lambda: cfftg.generate_batch(obs, **kw)),
+    ):
         batch = make()
         t0 = time.perf_counter()
         timed = time_swings(batch, config, rate=rate)
@@ -58,36 +66,65 @@ def replay_set(sc, rl, cfftg, config, rate: float, driven: bool) -> dict:
             kin.append(k)
             s = k["max_disagreement_sample"]
             if s >= 0:
-                jx = float(geometry.foot_clearance(np, np.asarray(ts.heel[s]), config.kinematics.foot_length,
-                                                   ts.scene.outline))
+                jx = float(
+                    geometry.foot_clearance(
+                        np, np.asarray(ts.heel[s]), config.kinematics.foot_length, ts.scene.outline
+                    )
+                )
                 legs.set_pose(legs.qpos(ts.joint_angles[s]))
                 mj = legs.foot_distance()
-                bf = brute_force_distance(ts.heel[s], config.kinematics.foot_length, ts.scene.outline)
+                bf = brute_force_distance(
+                    ts.heel[s], config.kinematics.foot_length, ts.scene.outline
+                )
                 disagree.append({"jaxexo": jx, "mujoco": mj, "brute": bf})
             if k["flagged_ok_but_within_margin"]:
                 # The third look at MuJoCo's closest pose: the brute-force distance of that heel.
-                k["brute_at_mujoco_min_m"] = brute_force_distance(k["mujoco_min_heel"], config.kinematics.foot_length,
-                                                                  ts.scene.outline)
+                k["brute_at_mujoco_min_m"] = brute_force_distance(
+                    k["mujoco_min_heel"], config.kinematics.foot_length, ts.scene.outline
+                )
             if driven and ts.ok:
                 drv.append(driven_replay(ts, config, legs=legs, limits=default, controller="pd_ff"))
-                drv_servo.append(driven_replay(ts, config, legs=legs, limits=default, controller="servo"))
+                drv_servo.append(
+                    driven_replay(ts, config, legs=legs, limits=default, controller="servo")
+                )
         ok = np.array([t.ok for t in timed])
-        r = {"n": len(timed), "flagged_ok": int(ok.sum()), "timing_seconds": t_timing,
-             "model_build_ms_median": 1e3 * float(np.median(build_s)) if build_s else None,
-             "kinematic": {**summarize_kinematic(kin),
-                           "violations": [k for k in kin if k["flagged_ok_but_within_margin"]]}}
+        r = {
+            "n": len(timed),
+            "flagged_ok": int(ok.sum()),
+            "timing_seconds": t_timing,
+            "model_build_ms_median": 1e3 * float(np.median(build_s)) if build_s else None,
+            "kinematic": {
+                **summarize_kinematic(kin),
+                "violations": [k for k in kin if k["flagged_ok_but_within_margin"]],
+            },
+        }
         if disagree:
             w = max(disagree, key=lambda x: abs(x["jaxexo"] - x["mujoco"]))
             r["kinematic"]["worst_disagreement"] = {
-                **w, "nearer_brute": "jaxexo" if abs(w["jaxexo"] - w["brute"]) <= abs(w["mujoco"] - w["brute"]) else "mujoco"}
-            r["kinematic"]["brute_nearer_jaxexo_share"] = float(np.mean(
-                [abs(x["jaxexo"] - x["brute"]) <= abs(x["mujoco"] - x["brute"]) for x in disagree]))
+                **w,
+                "nearer_brute": "jaxexo"
+                if abs(w["jaxexo"] - w["brute"]) <= abs(w["mujoco"] - w["brute"])
+                else "mujoco",
+            }
+            r["kinematic"]["brute_nearer_jaxexo_share"] = float(
+                np.mean(
+                    [
+                        abs(x["jaxexo"] - x["brute"]) <= abs(x["mujoco"] - x["brute"])
+                        for x in disagree
+                    ]
+                )
+            )
         for name, rows in (("driven", drv), ("driven_servo", drv_servo)):
             if rows:
                 r[name] = summarize_driven(rows)
         out[gname] = r
-        print(f"[{time.strftime('%H:%M:%S')}]", gname, {k: v for k, v in r.items() if k != "kinematic"}, {k: v for k, v in r["kinematic"].items()
-                                                                          if k != "violations"}, flush=True)
+        print(
+            f"[{time.strftime('%H:%M:%S')}]",
+            gname,
+            {k: v for k, v in r.items() if k != "kinematic"},
+            {k: v for k, v in r["kinematic"].items() if k != "violations"},
+            flush=True,
+        )
     return out
 
 
@@ -101,48 +138,75 @@ def markdown(payload: dict, policy, n: int, rate: float, margin: float) -> str:
         for g, r in gens.items():
             k = r["kinematic"]
             w = k.get("worst_disagreement", {})
-            rows_k.append(f"| {name} | {g} | {r['n']} | {r['flagged_ok']} | {k['flagged_ok_within_margin']} | "
-                          f"{_mm(k['min_mujoco_distance_of_ok_m'])} | {_mm(k['min_mujoco_minus_guaranteed_of_ok_m'])} | "
-                          f"{1e6 * k['max_disagreement_m']:.3f} | {w.get('nearer_brute', '-')} | "
-                          f"{1e3 * k['seconds_median']:.1f} |")
+            rows_k.append(
+                f"| {name} | {g} | {r['n']} | {r['flagged_ok']} | {k['flagged_ok_within_margin']} | "
+                f"{_mm(k['min_mujoco_distance_of_ok_m'])} | {_mm(k['min_mujoco_minus_guaranteed_of_ok_m'])} | "
+                f"{1e6 * k['max_disagreement_m']:.3f} | {w.get('nearer_brute', '-')} | "
+                f"{1e3 * k['seconds_median']:.1f} |"
+            )
             for lim in ("driven", "driven_servo"):
                 if lim in r:
                     d = r[lim]
-                    rows_d.append(f"| {name} | {g} | {'pd_ff' if lim == 'driven' else 'servo'} | {d['n']} | "
-                                  f"{_mm(d['heel_error_p95_m'])} / {_mm(d['heel_error_max_m'])} | "
-                                  f"{_mm(d['heel_error_airborne_p95_m'])} | "
-                                  f"{_mm(d['toe_error_p95_m'])} / {_mm(d['toe_error_max_m'])} | {d['contacts']} | "
-                                  f"{d['within_margin']} | {_mm(d['min_distance_m'])} | {d['saturated']} | "
-                                  f"{1e3 * d['seconds_median']:.0f} |")
-    return "\n".join([
-        "# MuJoCo replay benchmark", "",
-        f"Policy `{policy}`; {n} scenes per set requested (held-out families: whole cells); control rate "
-        f"{rate:g} Hz; margin env.min_clearance = {100 * margin:.1f} cm; MuJoCo "
-        f"{__import__('mujoco').__version__}; {payload['seconds']:.0f} s in all.", "",
-        "## Kinematic replay (MuJoCo's mj_geomDistance at every control sample and 3 poses between)", "",
-        "| scenes | generator | n | flagged ok | flagged ok, within margin in MuJoCo | min MuJoCo distance of ok, mm | "
-        "min (MuJoCo - jaxexo guaranteed), mm | max disagreement at the samples, um | nearer the brute force | "
-        "replay ms (median) |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---|---:|", *rows_k, "",
-        "## Driven replay of the swings flagged ok (setpoints within the [device] limits)", "",
-        "Swings timed for the [device] limits (less the tracking headroom), driven at them by two controllers on the "
-        "same setpoints: pd_ff, PD with inverse-dynamics feed-forward; servo, stiff position servos. Heel error "
-        "off the floor: at the samples where the swing's heel is more than 1 mm above the floor.", "",
-        "| scenes | generator | controller | n | heel error p95 / max, mm | heel error off the floor p95, mm | "
-        "toe error p95 / max, mm | contacts | within margin | min distance, mm | saturated | replay ms (median) |",
-        "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|", *rows_d, ""])
+                    rows_d.append(
+                        f"| {name} | {g} | {'pd_ff' if lim == 'driven' else 'servo'} | {d['n']} | "
+                        f"{_mm(d['heel_error_p95_m'])} / {_mm(d['heel_error_max_m'])} | "
+                        f"{_mm(d['heel_error_airborne_p95_m'])} | "
+                        f"{_mm(d['toe_error_p95_m'])} / {_mm(d['toe_error_max_m'])} | {d['contacts']} | "
+                        f"{d['within_margin']} | {_mm(d['min_distance_m'])} | {d['saturated']} | "
+                        f"{1e3 * d['seconds_median']:.0f} |"
+                    )
+    return "\n".join(
+        [
+            "# MuJoCo replay benchmark",
+            "",
+            f"Policy `{policy}`; {n} scenes per set requested (held-out families: whole cells); control rate "
+            f"{rate:g} Hz; margin env.min_clearance = {100 * margin:.1f} cm; MuJoCo "
+            f"{__import__('mujoco').__version__}; {payload['seconds']:.0f} s in all.",
+            "",
+            "## Kinematic replay (MuJoCo's mj_geomDistance at every control sample and 3 poses between)",
+            "",
+            "| scenes | generator | n | flagged ok | flagged ok, within margin in MuJoCo | min MuJoCo distance of ok, mm | "
+            "min (MuJoCo - jaxexo guaranteed), mm | max disagreement at the samples, um | nearer the brute force | "
+            "replay ms (median) |",
+            "|---|---|---:|---:|---:|---:|---:|---:|---|---:|",
+            *rows_k,
+            "",
+            "## Driven replay of the swings flagged ok (setpoints within the [device] limits)",
+            "",
+            "Swings timed for the [device] limits (less the tracking headroom), driven at them by two controllers on the "
+            "same setpoints: pd_ff, PD with inverse-dynamics feed-forward; servo, stiff position servos. Heel error "
+            "off the floor: at the samples where the swing's heel is more than 1 mm above the floor.",
+            "",
+            "| scenes | generator | controller | n | heel error p95 / max, mm | heel error off the floor p95, mm | "
+            "toe error p95 / max, mm | contacts | within margin | min distance, mm | saturated | replay ms (median) |",
+            "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+            *rows_d,
+            "",
+        ]
+    )
 
 
-def run_replay_benchmark(policy, out_dir, n: int = 1000, rate: float | None = None, driven: bool = True,
-                         name: str = "replay") -> dict:
+def run_replay_benchmark(
+    policy,
+    out_dir,
+    n: int = 1000,
+    rate: float | None = None,
+    driven: bool = True,
+    name: str = "replay",
+) -> dict:
     """Both generators' swings on ``n`` scenes per set replayed at ``rate`` Hz (default: the config's
     control rate), printed and written as <name>_<date>_<machine>.{json,md}."""
     rl = TrajectoryGenerator.load(policy)
     config = rl.config
     cfftg = CFFTG(config)
     rate = config.device.control_rate if rate is None else rate
-    payload = {"policy": str(policy), "n_per_set": n, "rate_hz": rate, "margin_m": config.env.min_clearance,
-               "sets": {}}
+    payload = {
+        "policy": str(policy),
+        "n_per_set": n,
+        "rate_hz": rate,
+        "margin_m": config.env.min_clearance,
+        "sets": {},
+    }
     t0 = time.perf_counter()
     for set_name, sc in safety_sets(config, n, pick=False).items():
         print(set_name, len(sc), flush=True)

@@ -25,54 +25,110 @@ def summary_rows(res: dict) -> list[tuple[str, str, str]]:
         for layout, results in res["env"].items():
             for r in results:
                 if r["num_envs"] == 4096:
-                    rows.append((f"environment ({layout}), 4096 envs, env-steps/s",
-                                 f"{r['env_steps_per_s'] / 1e6:.2f} M", ">= 5 M" if layout == "default" else ""))
+                    rows.append(
+                        (
+                            f"environment ({layout}), 4096 envs, env-steps/s",
+                            f"{r['env_steps_per_s'] / 1e6:.2f} M",
+                            ">= 5 M" if layout == "default" else "",
+                        )
+                    )
     if "train" in res:
         for r in res["train"]["throughput"]:
             if r["trace"] == "forward" and r.get("num_minibatches") == 4:
-                rows.append(("trainer, thesis network, 4096 envs, env-steps/s", f"{r['env_steps_per_s'] / 1e6:.2f} M",
-                             ">= 1 M"))
+                rows.append(
+                    (
+                        "trainer, thesis network, 4096 envs, env-steps/s",
+                        f"{r['env_steps_per_s'] / 1e6:.2f} M",
+                        ">= 1 M",
+                    )
+                )
         for name, r in res["train"]["runs"].items():
-            rows.append((f"`jaxexo train {Path(name).name}`: wall s, strict success (raw moves)",
-                         f"{r['train_seconds']:.1f} s, {r.get('success_raw', r.get('success')):.3f}",
-                         "<= 60 s, >= 0.99" if name.endswith("default.toml") else "< 30 s"))
+            rows.append(
+                (
+                    f"`jaxexo train {Path(name).name}`: wall s, strict success (raw moves)",
+                    f"{r['train_seconds']:.1f} s, {r.get('success_raw', r.get('success')):.3f}",
+                    "<= 60 s, >= 0.99" if name.endswith("default.toml") else "< 30 s",
+                )
+            )
     if "generate" in res:
         g = res["generate"]
-        rows.append(("RL generator (shielded), one swing, median (CFFTG side by side), held-out scenes",
-                     f"{g['single_ms']['rl']['median']:.3f} ms (CFFTG {g['single_ms']['cfftg']['median']:.3f} ms)",
-                     "<= 1.0 ms and <= 1.5x CFFTG (thesis ~3 ms)"))
+        rows.append(
+            (
+                "RL generator (shielded), one swing, median (CFFTG side by side), held-out scenes",
+                f"{g['single_ms']['rl']['median']:.3f} ms (CFFTG {g['single_ms']['cfftg']['median']:.3f} ms)",
+                "<= 1.0 ms and <= 1.5x CFFTG (thesis ~3 ms)",
+            )
+        )
         bt = g["batch_ms"]
-        rows.append(("RL generator, batch of 1000 (default / single-threaded BLAS)",
-                     f"{bt['default_threads']['rl'] * 1000 / g['n']:.1f} / {bt['single_thread_blas']['rl'] * 1000 / g['n']:.1f} ms",
-                     "<= CFFTG's and <= 150 ms (thesis 1764 ms)"))
-        rows.append(("`import jaxexo.inference`, cold", f"{g['import_s']['median']:.3f} s", "<= 0.3 s"))
+        rows.append(
+            (
+                "RL generator, batch of 1000 (default / single-threaded BLAS)",
+                f"{bt['default_threads']['rl'] * 1000 / g['n']:.1f} / {bt['single_thread_blas']['rl'] * 1000 / g['n']:.1f} ms",
+                "<= CFFTG's and <= 150 ms (thesis 1764 ms)",
+            )
+        )
+        rows.append(
+            ("`import jaxexo.inference`, cold", f"{g['import_s']['median']:.3f} s", "<= 0.3 s")
+        )
     if "compare" in res:
         for name, r in res["compare"].items():
-            rows.append((f"{name} on {r['n']} test scenarios: success / accuracy / median ms / batch 1000 ms",
-                         f"{r['success']:.3f} / {r['accuracy']:.3f} / {r['time_ms_median']:.3f} / {r['batch_1000_ms']:.1f}",
-                         "RL success >= CFFTG's, median <= CFFTG's" if name == "rl" else "thesis CFFTG ~2 ms"))
+            rows.append(
+                (
+                    f"{name} on {r['n']} test scenarios: success / accuracy / median ms / batch 1000 ms",
+                    f"{r['success']:.3f} / {r['accuracy']:.3f} / {r['time_ms_median']:.3f} / {r['batch_1000_ms']:.1f}",
+                    "RL success >= CFFTG's, median <= CFFTG's"
+                    if name == "rl"
+                    else "thesis CFFTG ~2 ms",
+                )
+            )
     if "baseline" in res:
         t = res["baseline"]["throughput"]
-        rows.append(("trainer vs thesis-style PyTorch trainer, env-steps/s",
-                     f"{t['jaxexo']['env_steps_per_s']:,.0f} vs {t['baseline']['env_steps_per_s']:,.0f} "
-                     f"= {t['ratio']:,.0f}x", ">= 1000x"))
+        rows.append(
+            (
+                "trainer vs thesis-style PyTorch trainer, env-steps/s",
+                f"{t['jaxexo']['env_steps_per_s']:,.0f} vs {t['baseline']['env_steps_per_s']:,.0f} "
+                f"= {t['ratio']:,.0f}x",
+                ">= 1000x",
+            )
+        )
         for e in res["baseline"]["time_to_success"]["reach"].values():
             if e.get("speedup"):
                 how = " (baseline extrapolated)" if e["baseline_extrapolated"] else ""
                 x = e["speedup"]
-                rows.append((f"time to validation success {e['target']:.2f}: jaxexo vs baseline",
-                             f"{e['jaxexo_s']:.1f} s vs {e['baseline_s']:,.0f} s = "
-                             f"{f'{x:,.0f}' if x >= 10 else f'{x:.1f}'}x{how}", ""))
+                rows.append(
+                    (
+                        f"time to validation success {e['target']:.2f}: jaxexo vs baseline",
+                        f"{e['jaxexo_s']:.1f} s vs {e['baseline_s']:,.0f} s = "
+                        f"{f'{x:,.0f}' if x >= 10 else f'{x:.1f}'}x{how}",
+                        "",
+                    )
+                )
     if "course" in res:
         c = res["course"]
-        rows.append((f"walks over {c['planned']} courses ({c['courses_drawn']} drawn, {c['refused']} refused): every "
-                     "swing safe, RL alone / CFFTG", f"{100 * c['rl_alone_success']:.1f} % / {100 * c['cfftg_success']:.1f} %",
-                     "RL >= 99 %"))
+        rows.append(
+            (
+                f"walks over {c['planned']} courses ({c['courses_drawn']} drawn, {c['refused']} refused): every "
+                "swing safe, RL alone / CFFTG",
+                f"{100 * c['rl_alone_success']:.1f} % / {100 * c['cfftg_success']:.1f} %",
+                "RL >= 99 %",
+            )
+        )
         r = c["duration_ratio_rl_over_cfftg"]["median"]
-        rows.append(("walk duration at the device limits, RL / CFFTG, median over courses",
-                     "-" if r is None else f"{r:.3f}", "<= 1"))
+        rows.append(
+            (
+                "walk duration at the device limits, RL / CFFTG, median over courses",
+                "-" if r is None else f"{r:.3f}",
+                "<= 1",
+            )
+        )
         x = c["per_step_over_one_swing_median"]
-        rows.append(("walk planning time per step / one swing's (CPU time)", "-" if x is None else f"{x:.2f}x", "<= 1.5x"))
+        rows.append(
+            (
+                "walk planning time per step / one swing's (CPU time)",
+                "-" if x is None else f"{x:.2f}x",
+                "<= 1.5x",
+            )
+        )
     return rows
 
 
@@ -89,8 +145,16 @@ def latest_result(out_dir: Path, name: str):
     return (doc["results"] if name == "env" else doc), paths[-1]
 
 
-def run_all(out_dir=None, policy=None, baseline_seconds: float = 600.0, skip: str = "", n: int = 1000,
-            batch_size: int = 1000, progress=print, courses: int = 200) -> dict:
+def run_all(
+    out_dir=None,
+    policy=None,
+    baseline_seconds: float = 600.0,
+    skip: str = "",
+    n: int = 1000,
+    batch_size: int = 1000,
+    progress=print,
+    courses: int = 200,
+) -> dict:
     """Run the parts not in ``skip`` (comma-separated), write their results and the summary to
     ``out_dir``; ``n`` scenarios for the generator parts, ``batch_size`` for the compare part's batch,
     ``courses`` drawn courses for the course part."""
@@ -110,11 +174,16 @@ def run_all(out_dir=None, policy=None, baseline_seconds: float = 600.0, skip: st
     if "env" not in skipped:
         from jaxexo.benchmarks.env_bench import run_env_benchmark
 
-        res["env"] = run_env_benchmark(load_config(default), "default", [1, 256, 4096, 16384], out_dir)
+        res["env"] = run_env_benchmark(
+            load_config(default), "default", [1, 256, 4096, 16384], out_dir
+        )
     if "train" not in skipped:
         from jaxexo.benchmarks.train_bench import run_train_benchmark
 
-        thesis = [str(ROOT / "configs" / "thesis" / f"{n}.toml") for n in ("a", "b", "c", "1", "2", "3", "final")]
+        thesis = [
+            str(ROOT / "configs" / "thesis" / f"{n}.toml")
+            for n in ("a", "b", "c", "1", "2", "3", "final")
+        ]
         res["train"] = run_train_benchmark(out_dir, str(default), thesis, progress)
     with tempfile.TemporaryDirectory() as tmp:
         if policy is None and ({"generate", "compare", "course"} - skipped):
@@ -131,10 +200,16 @@ def run_all(out_dir=None, policy=None, baseline_seconds: float = 600.0, skip: st
             from jaxexo.evaluation.compare import run_eval
             from jaxexo.evaluation.report import markdown
 
-            report = run_eval(policy, Path(tmp) / "eval", "cfftg", "test", n, figures=False, batch_size=batch_size)
+            report = run_eval(
+                policy, Path(tmp) / "eval", "cfftg", "test", n, figures=False, batch_size=batch_size
+            )
             res["compare"] = report
-            write_result("compare", json.loads(json.dumps(report)),
-                         markdown(report, f"RL generator vs CFFTG, {n} test scenarios", []), out_dir)
+            write_result(
+                "compare",
+                json.loads(json.dumps(report)),
+                markdown(report, f"RL generator vs CFFTG, {n} test scenarios", []),
+                out_dir,
+            )
     if "course" not in skipped:
         from jaxexo.benchmarks.course_bench import run_course_benchmark
 
@@ -143,12 +218,15 @@ def run_all(out_dir=None, policy=None, baseline_seconds: float = 600.0, skip: st
         try:
             import torch  # noqa: F401
         except ImportError:
-            notes.append("baseline skipped: PyTorch is not installed (pip install -e \".[train,bench]\")")
+            notes.append(
+                'baseline skipped: PyTorch is not installed (pip install -e ".[train,bench]")'
+            )
         else:
             from jaxexo.benchmarks.baseline_bench import run_baseline_benchmark
 
-            res["baseline"] = run_baseline_benchmark(out_dir, str(default), baseline_seconds=baseline_seconds,
-                                                     progress=progress)
+            res["baseline"] = run_baseline_benchmark(
+                out_dir, str(default), baseline_seconds=baseline_seconds, progress=progress
+            )
     # Parts skipped this time: their latest results in out_dir, if any, so the summary stays whole.
     for part in PARTS:
         if part not in res:
@@ -156,7 +234,12 @@ def run_all(out_dir=None, policy=None, baseline_seconds: float = 600.0, skip: st
             if found is not None:
                 res[part], path = found
                 notes.append(f"{part}: from {path.name} (not rerun)")
-    lines = ["# jaxexo benchmark summary", "", "| figure | measured | target / thesis |", "|---|---|---|"]
+    lines = [
+        "# jaxexo benchmark summary",
+        "",
+        "| figure | measured | target / thesis |",
+        "|---|---|---|",
+    ]
     lines += [f"| {a} | {b} | {c} |" for a, b, c in summary_rows(res)]
     lines += [""] + [f"- {n}" for n in notes]
     md = "\n".join(lines)

@@ -44,8 +44,15 @@ def dense_curve(t, cfftg: CFFTG, factor: int = FACTOR) -> np.ndarray:
         return np.column_stack([y, h * phi[k]])
     if any(CLEARING in note for note in t.notes):
         # the corrected spline, evaluated from the same coefficients at the dense parameters
-        return clear_smooth(t.raw, t.scene.outline, cfftg.sp.foot_length, cfftg.sp.min_clearance, len(t.heel),
-                            t.smoothing, dense_points=dense_n)[3]
+        return clear_smooth(
+            t.raw,
+            t.scene.outline,
+            cfftg.sp.foot_length,
+            cfftg.sp.min_clearance,
+            len(t.heel),
+            t.smoothing,
+            dense_points=dense_n,
+        )[3]
     if np.isnan(t.smoothing) or t.smoothing == 0:
         return np.concatenate([sm.linear_resample(t.raw, dense_n), sm.distinct(t.raw)])
     return sm.smooth_paths([t.raw], dense_n, t.smoothing)[0]
@@ -61,8 +68,11 @@ def recheck(batch, cfftg: CFFTG, margin: float, tol: float) -> dict:
         back = float(np.max(np.maximum.accumulate(y) - y))
         dense_min.append(c - t.checks.min_clearance)
         false_safe += int(c < margin or back > tol)
-    return {"false_safe": false_safe, "rechecked": int(batch.ok.sum()),
-            "dense_minus_guaranteed_m_min": float(min(dense_min)) if dense_min else None}
+    return {
+        "false_safe": false_safe,
+        "rechecked": int(batch.ok.sum()),
+        "dense_minus_guaranteed_m_min": float(min(dense_min)) if dense_min else None,
+    }
 
 
 def generator_figures(b, cfftg: CFFTG, margin: float, tol: float, seconds: float) -> dict:
@@ -70,26 +80,37 @@ def generator_figures(b, cfftg: CFFTG, margin: float, tol: float, seconds: float
     rc = recheck(b, cfftg, margin, tol)
     close = np.array([b[i].checks.min_clearance for i in range(len(b))])
     back = np.array([float(swept.backward_motion(np, b.heel[i, :, 0])) for i in range(len(b))])
-    return {"n": len(b), "safe_rate": float(b.ok.mean()), "seconds": seconds,
-            "within_1cm_rate": float((close < 0.01).mean()),
-            "median_guaranteed_clearance_m": float(np.median(close)),
-            "backward_over_5mm_rate": float((back > 0.005).mean()),
-            "fallback_rate": float(np.mean([b[i].method == "cfftg-fallback" for i in range(len(b))])),
-            **rc}
+    return {
+        "n": len(b),
+        "safe_rate": float(b.ok.mean()),
+        "seconds": seconds,
+        "within_1cm_rate": float((close < 0.01).mean()),
+        "median_guaranteed_clearance_m": float(np.median(close)),
+        "backward_over_5mm_rate": float((back > 0.005).mean()),
+        "fallback_rate": float(np.mean([b[i].method == "cfftg-fallback" for i in range(len(b))])),
+        **rc,
+    }
 
 
 def markdown(policy, margin: float, tol: float, info: dict, rows: list[str]) -> str:
-    return "\n".join([
-        "# Safe-swing benchmark", "",
-        f"Policy `{policy}`; margin env.min_clearance = {100 * margin:.1f} cm, backward tolerance "
-        f"{1000 * tol:.1f} mm; {info['cpu']}, {info['cores']} cores. A swing is safe when the exact clearance "
-        "of the moving foot (between samples, less the curve's deviation bound) keeps the margin, the goal is "
-        "reached, the heel never moves backward by more than the tolerance, and joint limits and leg length "
-        f"hold. False safe: swings flagged safe whose curve, sampled {FACTOR}x more densely (exact per-sample "
-        "foot distance), comes within the margin or moves the heel back more than the tolerance.", "",
-        "| scenes | generator | n | safe % | guaranteed clearance < 1 cm % | median guaranteed clearance cm | "
-        "heel backward > 5 mm % | CFFTG fallback % | rechecked at 10x | false safe | seconds |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|", *rows, ""])
+    return "\n".join(
+        [
+            "# Safe-swing benchmark",
+            "",
+            f"Policy `{policy}`; margin env.min_clearance = {100 * margin:.1f} cm, backward tolerance "
+            f"{1000 * tol:.1f} mm; {info['cpu']}, {info['cores']} cores. A swing is safe when the exact clearance "
+            "of the moving foot (between samples, less the curve's deviation bound) keeps the margin, the goal is "
+            "reached, the heel never moves backward by more than the tolerance, and joint limits and leg length "
+            f"hold. False safe: swings flagged safe whose curve, sampled {FACTOR}x more densely (exact per-sample "
+            "foot distance), comes within the margin or moves the heel back more than the tolerance.",
+            "",
+            "| scenes | generator | n | safe % | guaranteed clearance < 1 cm % | median guaranteed clearance cm | "
+            "heel backward > 5 mm % | CFFTG fallback % | rechecked at 10x | false safe | seconds |",
+            "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+            *rows,
+            "",
+        ]
+    )
 
 
 def run_safety_benchmark(policy, out_dir, n: int = 2000) -> dict:
@@ -97,23 +118,35 @@ def run_safety_benchmark(policy, out_dir, n: int = 2000) -> dict:
     rl = TrajectoryGenerator.load(policy)
     cfftg = CFFTG(rl.config)
     margin, tol = rl.config.env.min_clearance, rl.config.env.backward_tolerance
-    rows, payload = [], {"policy": str(policy), "margin_m": margin, "backward_tolerance_m": tol,
-                         "dense_factor": FACTOR, "sets": {}}
+    rows, payload = (
+        [],
+        {
+            "policy": str(policy),
+            "margin_m": margin,
+            "backward_tolerance_m": tol,
+            "dense_factor": FACTOR,
+            "sets": {},
+        },
+    )
     for name, unseen in ((THESIS_FIVE, False), (SHAPES, True)):
         sc = safety_scenarios(rl.config, n, unseen=unseen)
         kw = batch_kwargs(sc)
         obs = [s["obstacle"] for s in sc]
         out = {}
-        for gname, make in (("rl", lambda: rl.generate_batch(obs, fallback=None, **kw)),
-                            ("rl+cfftg", lambda: rl.generate_batch(obs, fallback="cfftg", **kw)),
-                            ("cfftg", lambda: cfftg.generate_batch(obs, **kw))):
+        for gname, make in (
+            ("rl", lambda: rl.generate_batch(obs, fallback=None, **kw)),
+            ("rl+cfftg", lambda: rl.generate_batch(obs, fallback="cfftg", **kw)),
+            ("cfftg", lambda: cfftg.generate_batch(obs, **kw)),
+        ):
             t0 = time.perf_counter()
             b = make()
             r = out[gname] = generator_figures(b, cfftg, margin, tol, time.perf_counter() - t0)
-            rows.append(f"| {name} | {gname} | {r['n']} | {100 * r['safe_rate']:.1f} | "
-                        f"{100 * r['within_1cm_rate']:.1f} | {100 * r['median_guaranteed_clearance_m']:.2f} | "
-                        f"{100 * r['backward_over_5mm_rate']:.1f} | {100 * r['fallback_rate']:.1f} | "
-                        f"{r['rechecked']} | {r['false_safe']} | {r['seconds']:.1f} |")
+            rows.append(
+                f"| {name} | {gname} | {r['n']} | {100 * r['safe_rate']:.1f} | "
+                f"{100 * r['within_1cm_rate']:.1f} | {100 * r['median_guaranteed_clearance_m']:.2f} | "
+                f"{100 * r['backward_over_5mm_rate']:.1f} | {100 * r['fallback_rate']:.1f} | "
+                f"{r['rechecked']} | {r['false_safe']} | {r['seconds']:.1f} |"
+            )
         payload["sets"][name] = out
     info = machine_info()
     payload["machine"] = info

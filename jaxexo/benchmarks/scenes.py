@@ -16,19 +16,25 @@ THESIS_FIVE, SHAPES, FAMILIES = "thesis five, shifted", "unseen shapes", "held-o
 def held_out_families(config, n: int, pick: bool = True) -> list[dict]:
     """The held-out families in whole cells of at least ``n`` scenes; with ``pick``, ``n`` of them
     drawn at random (seed 0, kept in order)."""
-    fam = scenarios.unseen_scenarios(config.kinematics.foot_length, repeats=scenarios.repeats_for(n))
+    fam = scenarios.unseen_scenarios(
+        config.kinematics.foot_length, repeats=scenarios.repeats_for(n)
+    )
     if not pick:
         return fam
     rng = np.random.default_rng(0)
     return [fam[i] for i in np.sort(rng.choice(len(fam), size=min(n, len(fam)), replace=False))]
 
 
-def safety_sets(config, n: int, shapes_seed: int = 2024, pick: bool = True) -> dict[str, list[dict]]:
+def safety_sets(
+    config, n: int, shapes_seed: int = 2024, pick: bool = True
+) -> dict[str, list[dict]]:
     """The three sets by name: ``n`` scenes of the thesis five and of unseen shapes (drawn with
     ``shapes_seed``), and the held-out families (see held_out_families)."""
-    return {THESIS_FIVE: safety_scenarios(config, n),
-            SHAPES: safety_scenarios(config, n, seed=shapes_seed, unseen=True),
-            FAMILIES: held_out_families(config, n, pick)}
+    return {
+        THESIS_FIVE: safety_scenarios(config, n),
+        SHAPES: safety_scenarios(config, n, seed=shapes_seed, unseen=True),
+        FAMILIES: held_out_families(config, n, pick),
+    }
 
 
 def batch_kwargs(scenes: list[dict]) -> dict[str, list]:

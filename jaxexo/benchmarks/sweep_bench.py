@@ -38,15 +38,21 @@ from jaxexo.train.trainer import Hyperparams, Trainer
 TARGET_S = 600.0
 
 
-def agents_throughput(cfg: Config, n_agents: int, devices, updates: int, repeats: int = 3, wrap=over_agents) -> dict:
+def agents_throughput(
+    cfg: Config, n_agents: int, devices, updates: int, repeats: int = 3, wrap=over_agents
+) -> dict:
     """Training env-steps/s of ``n_agents`` agents (learning rates spread over a decade, one seed
     each) vmapped and split over ``devices``: the sweep's training program without its evaluation.
     ``wrap``: over_agents (one vmapped batch per device) or over_lanes (fixed blocks, what sweeps and
     populations run)."""
     tr = Trainer(cfg)
     h = Hyperparams.from_config(cfg)
-    hyper = jax.tree.map(lambda x: np.broadcast_to(np.asarray(x), (n_agents,) + np.shape(x)).copy(), h)
-    hyper = hyper.replace(lr=np.asarray(cfg.train.lr * np.logspace(-0.5, 0.5, n_agents), np.float32))
+    hyper = jax.tree.map(
+        lambda x: np.broadcast_to(np.asarray(x), (n_agents,) + np.shape(x)).copy(), h
+    )
+    hyper = hyper.replace(
+        lr=np.asarray(cfg.train.lr * np.logspace(-0.5, 0.5, n_agents), np.float32)
+    )
     keys = np.stack([np.asarray(jax.random.PRNGKey(s)) for s in range(n_agents)])
     ts = wrap(tr.init, devices, 2)(keys, hyper)
     run = wrap(lambda t, hh: tr.run(t, hh, updates), devices, 2)
@@ -60,11 +66,20 @@ def agents_throughput(cfg: Config, n_agents: int, devices, updates: int, repeats
         times.append(time.perf_counter() - t0)
     steps = n_agents * updates * cfg.train.num_envs * cfg.train.rollout_steps
     med = float(np.median(times))
-    return {"agents": n_agents, "devices": len(devices), "env_steps_per_call": steps, "median_s": med,
-            "env_steps_per_s": steps / med, "compile_s": compile_s, "repeats": repeats}
+    return {
+        "agents": n_agents,
+        "devices": len(devices),
+        "env_steps_per_call": steps,
+        "median_s": med,
+        "env_steps_per_s": steps / med,
+        "compile_s": compile_s,
+        "repeats": repeats,
+    }
 
 
-def agents_per_minute(base_raw: dict, n_configs: int, budget_env_steps: int, progress=print) -> dict:
+def agents_per_minute(
+    base_raw: dict, n_configs: int, budget_env_steps: int, progress=print
+) -> dict:
     """A whole sweep of ``n_configs`` learning rates x 1 seed at ``budget_env_steps`` each."""
     from jaxexo.sweep.runner import run_sweep
 
@@ -77,16 +92,29 @@ def agents_per_minute(base_raw: dict, n_configs: int, budget_env_steps: int, pro
         t0 = time.perf_counter()
         res = run_sweep(sweep, Path(d) / "sweep", progress=False)
         wall = time.perf_counter() - t0
-    row = {"configs": n_configs, "agents": sweep.num_agents, "env_steps": res["env_steps"], "wall_s": wall,
-           "agents_per_min": sweep.num_agents / wall * 60.0, "env_steps_per_s": res["env_steps"] / wall,
-           "best_success": res["ranking"][0]["success_mean"]}
-    progress(f"  {n_configs:4d} configurations: {wall:7.1f} s, {row['agents_per_min']:7.1f} agents/min, "
-             f"{row['env_steps_per_s'] / 1e6:.3f} M env-steps/s (all included)")
+    row = {
+        "configs": n_configs,
+        "agents": sweep.num_agents,
+        "env_steps": res["env_steps"],
+        "wall_s": wall,
+        "agents_per_min": sweep.num_agents / wall * 60.0,
+        "env_steps_per_s": res["env_steps"] / wall,
+        "best_success": res["ranking"][0]["success_mean"],
+    }
+    progress(
+        f"  {n_configs:4d} configurations: {wall:7.1f} s, {row['agents_per_min']:7.1f} agents/min, "
+        f"{row['env_steps_per_s'] / 1e6:.3f} M env-steps/s (all included)"
+    )
     return row
 
 
-def run_sweep_benchmark(out_dir, sweep_file: str | Path, target: bool = True, per_minute_budget: int = 500_000,
-                        progress=print) -> dict:
+def run_sweep_benchmark(
+    out_dir,
+    sweep_file: str | Path,
+    target: bool = True,
+    per_minute_budget: int = 500_000,
+    progress=print,
+) -> dict:
     from jaxexo.evaluation.machine import write_result
     from jaxexo.sweep.runner import run_sweep
 
@@ -94,21 +122,33 @@ def run_sweep_benchmark(out_dir, sweep_file: str | Path, target: bool = True, pe
     cfg = sweep.members[0].config
     tc = cfg.train
     devices = jax.local_devices()
-    progress(f"static settings: hidden {list(tc.hidden)}, obs {cfg.env.obs_mode}, {tc.num_envs} envs/agent, "
-             f"T = {tc.rollout_steps}, {tc.num_minibatches} minibatch(es); {len(devices)} CPU device(s)")
+    progress(
+        f"static settings: hidden {list(tc.hidden)}, obs {cfg.env.obs_mode}, {tc.num_envs} envs/agent, "
+        f"T = {tc.rollout_steps}, {tc.num_minibatches} minibatch(es); {len(devices)} CPU device(s)"
+    )
     updates = 10
     sweep64 = agents_throughput(cfg, 64, devices, updates)
-    progress(f"64 agents x {tc.num_envs} envs, {len(devices)} devices: {sweep64['env_steps_per_s'] / 1e6:.3f} M env-steps/s")
+    progress(
+        f"64 agents x {tc.num_envs} envs, {len(devices)} devices: {sweep64['env_steps_per_s'] / 1e6:.3f} M env-steps/s"
+    )
     one_dev = agents_throughput(cfg, 64, devices[:1], updates)
-    progress(f"64 agents x {tc.num_envs} envs, 1 device: {one_dev['env_steps_per_s'] / 1e6:.3f} M env-steps/s")
+    progress(
+        f"64 agents x {tc.num_envs} envs, 1 device: {one_dev['env_steps_per_s'] / 1e6:.3f} M env-steps/s"
+    )
     big = dataclasses.replace(cfg, train=dataclasses.replace(tc, num_envs=64 * tc.num_envs))
     single = throughput(big, updates, repeats=3, devices=devices)
-    progress(f"one run of {big.train.num_envs} envs, {single['devices']} devices: "
-             f"{single['env_steps_per_s'] / 1e6:.3f} M env-steps/s")
+    progress(
+        f"one run of {big.train.num_envs} envs, {single['devices']} devices: "
+        f"{single['env_steps_per_s'] / 1e6:.3f} M env-steps/s"
+    )
 
-    progress(f"agents trained per minute ({per_minute_budget:,} env steps each, one seed, everything included):")
+    progress(
+        f"agents trained per minute ({per_minute_budget:,} env steps each, one seed, everything included):"
+    )
     base_raw = {k: v for k, v in sweep.to_dict().items() if k != "sweep"}
-    per_minute = [agents_per_minute(base_raw, n, per_minute_budget, progress) for n in (1, 8, 64, 256)]
+    per_minute = [
+        agents_per_minute(base_raw, n, per_minute_budget, progress) for n in (1, 8, 64, 256)
+    ]
 
     full = None
     if target:
@@ -116,41 +156,72 @@ def run_sweep_benchmark(out_dir, sweep_file: str | Path, target: bool = True, pe
             t0 = time.perf_counter()
             res = run_sweep(sweep, Path(d) / "sweep", progress=True)
             wall = time.perf_counter() - t0
-        full = {"agents": sweep.num_agents, "env_steps": res["env_steps"], "wall_s": wall,
-                "env_steps_per_s": res["env_steps"] / wall, "target_s": TARGET_S,
-                "best": {k: res["ranking"][0][k] for k in ("label", "success_mean", "success_std", "held_out_success")},
-                "diverged_agents": sum(e["diverged"] for e in res["ranking"])}
-        progress(f"target run: {sweep.num_agents} agents, {res['env_steps']:,.0f} env steps in {wall:.1f} s "
-                 f"({'within' if wall <= TARGET_S else 'over'} the {TARGET_S:.0f} s target)")
+        full = {
+            "agents": sweep.num_agents,
+            "env_steps": res["env_steps"],
+            "wall_s": wall,
+            "env_steps_per_s": res["env_steps"] / wall,
+            "target_s": TARGET_S,
+            "best": {
+                k: res["ranking"][0][k]
+                for k in ("label", "success_mean", "success_std", "held_out_success")
+            },
+            "diverged_agents": sum(e["diverged"] for e in res["ranking"]),
+        }
+        progress(
+            f"target run: {sweep.num_agents} agents, {res['env_steps']:,.0f} env steps in {wall:.1f} s "
+            f"({'within' if wall <= TARGET_S else 'over'} the {TARGET_S:.0f} s target)"
+        )
 
-    lines = ["# Sweep benchmarks", "",
-             f"Static settings (configs/sweeps/benchmark.toml): network 2-{'-'.join(map(str, tc.hidden))}-36, "
-             f"observation `{cfg.env.obs_mode}`, {tc.num_envs} environments per agent, T = {tc.rollout_steps}, "
-             f"{tc.num_minibatches} minibatch(es) per update, forward view, {tc.control}.", "",
-             "| what | M env-steps/s |", "|---|---:|",
-             f"| 64 agents × {tc.num_envs} envs (vmapped), {len(devices)} CPU devices | {sweep64['env_steps_per_s'] / 1e6:.3f} |",
-             f"| 64 agents × {tc.num_envs} envs (vmapped), 1 CPU device | {one_dev['env_steps_per_s'] / 1e6:.3f} |",
-             f"| one run of {big.train.num_envs} envs, {single['devices']} CPU devices (data parallel) | "
-             f"{single['env_steps_per_s'] / 1e6:.3f} |", "",
-             f"| configurations (1 seed, {per_minute_budget:,} env steps each) | wall s (all included) | agents per minute | "
-             "M env-steps/s |", "|---:|---:|---:|---:|"]
-    lines += [f"| {r['configs']} | {r['wall_s']:.1f} | {r['agents_per_min']:.1f} | {r['env_steps_per_s'] / 1e6:.3f} |"
-              for r in per_minute]
+    lines = [
+        "# Sweep benchmarks",
+        "",
+        f"Static settings (configs/sweeps/benchmark.toml): network 2-{'-'.join(map(str, tc.hidden))}-36, "
+        f"observation `{cfg.env.obs_mode}`, {tc.num_envs} environments per agent, T = {tc.rollout_steps}, "
+        f"{tc.num_minibatches} minibatch(es) per update, forward view, {tc.control}.",
+        "",
+        "| what | M env-steps/s |",
+        "|---|---:|",
+        f"| 64 agents × {tc.num_envs} envs (vmapped), {len(devices)} CPU devices | {sweep64['env_steps_per_s'] / 1e6:.3f} |",
+        f"| 64 agents × {tc.num_envs} envs (vmapped), 1 CPU device | {one_dev['env_steps_per_s'] / 1e6:.3f} |",
+        f"| one run of {big.train.num_envs} envs, {single['devices']} CPU devices (data parallel) | "
+        f"{single['env_steps_per_s'] / 1e6:.3f} |",
+        "",
+        f"| configurations (1 seed, {per_minute_budget:,} env steps each) | wall s (all included) | agents per minute | "
+        "M env-steps/s |",
+        "|---:|---:|---:|---:|",
+    ]
+    lines += [
+        f"| {r['configs']} | {r['wall_s']:.1f} | {r['agents_per_min']:.1f} | {r['env_steps_per_s'] / 1e6:.3f} |"
+        for r in per_minute
+    ]
     if full:
-        lines += ["", f"Target run (64 configurations × 4 seeds × {tc.num_envs} envs × {tc.budget_env_steps:,} env "
-                  f"steps): {full['env_steps']:,.0f} env steps in **{full['wall_s']:.1f} s** "
-                  f"(target ≤ {TARGET_S:.0f} s), {full['env_steps_per_s'] / 1e6:.3f} M env-steps/s including "
-                  f"compilation, evaluation and the report; best: {full['best']['label']} "
-                  f"(success {full['best']['success_mean']:.3f} ± {full['best']['success_std']:.3f})."]
+        lines += [
+            "",
+            f"Target run (64 configurations × 4 seeds × {tc.num_envs} envs × {tc.budget_env_steps:,} env "
+            f"steps): {full['env_steps']:,.0f} env steps in **{full['wall_s']:.1f} s** "
+            f"(target ≤ {TARGET_S:.0f} s), {full['env_steps_per_s'] / 1e6:.3f} M env-steps/s including "
+            f"compilation, evaluation and the report; best: {full['best']['label']} "
+            f"(success {full['best']['success_mean']:.3f} ± {full['best']['success_std']:.3f}).",
+        ]
     md = "\n".join(lines)
-    payload = {"settings": {"hidden": list(tc.hidden), "obs_mode": cfg.env.obs_mode, "num_envs": tc.num_envs,
-                            "rollout_steps": tc.rollout_steps, "num_minibatches": tc.num_minibatches},
-               "sweep_64": sweep64, "sweep_64_one_device": one_dev, "single_run": single,
-               "agents_per_minute": per_minute, "target_run": full}
+    payload = {
+        "settings": {
+            "hidden": list(tc.hidden),
+            "obs_mode": cfg.env.obs_mode,
+            "num_envs": tc.num_envs,
+            "rollout_steps": tc.rollout_steps,
+            "num_minibatches": tc.num_minibatches,
+        },
+        "sweep_64": sweep64,
+        "sweep_64_one_device": one_dev,
+        "single_run": single,
+        "agents_per_minute": per_minute,
+        "target_run": full,
+    }
     write_result("sweep", payload, md, out_dir)
     progress(md)
     return payload
-
 
 
 # Greedy success on the test layouts an agent must reach to count as having learned (the sweep's
@@ -186,21 +257,38 @@ def run_learning_benchmark(out_dir, sweep_file: str | Path, progress=print) -> d
             rows = list(csv.DictReader(f))
     success = np.array([float(r["success"]) for r in rows])
     program = sum(v for k, v in counts.items() if "agent" in k)
-    out = {"sweep_file": str(Path(sweep_file).name), "agents": sweep.num_agents, "groups": len(sweep.groups),
-           "env_steps": res["env_steps"], "wall_s": wall, "agents_per_min": sweep.num_agents / wall * 60.0,
-           "env_steps_per_s": res["env_steps"] / wall, "learned_success": LEARNED_SUCCESS,
-           "agents_learned": int(np.sum(success >= LEARNED_SUCCESS)), "success": success.tolist(),
-           "compilations_per_group": program / max(1, len(sweep.groups)), "devices": len(jax.local_devices())}
-    md = "\n".join([
-        f"# Learning sweep benchmark ({out['sweep_file']})", "",
-        "| agents | groups | env steps | wall s (all included) | agents per minute | M env-steps/s | "
-        f"agents with greedy success >= {LEARNED_SUCCESS} | compilations per group |",
-        "|---:|---:|---:|---:|---:|---:|---:|---:|",
-        f"| {out['agents']} | {out['groups']} | {out['env_steps']:,.0f} | {wall:.1f} | {out['agents_per_min']:.1f} | "
-        f"{out['env_steps_per_s'] / 1e6:.3f} | {out['agents_learned']} of {out['agents']} | "
-        f"{out['compilations_per_group']:g} |", "",
-        "Greedy success per agent (test layouts): " + ", ".join(f"{x:.3f}" for x in success) + ".", "",
-        "Shared machine: other jobs ran at the same time, so times are noisy."])
+    out = {
+        "sweep_file": str(Path(sweep_file).name),
+        "agents": sweep.num_agents,
+        "groups": len(sweep.groups),
+        "env_steps": res["env_steps"],
+        "wall_s": wall,
+        "agents_per_min": sweep.num_agents / wall * 60.0,
+        "env_steps_per_s": res["env_steps"] / wall,
+        "learned_success": LEARNED_SUCCESS,
+        "agents_learned": int(np.sum(success >= LEARNED_SUCCESS)),
+        "success": success.tolist(),
+        "compilations_per_group": program / max(1, len(sweep.groups)),
+        "devices": len(jax.local_devices()),
+    }
+    md = "\n".join(
+        [
+            f"# Learning sweep benchmark ({out['sweep_file']})",
+            "",
+            "| agents | groups | env steps | wall s (all included) | agents per minute | M env-steps/s | "
+            f"agents with greedy success >= {LEARNED_SUCCESS} | compilations per group |",
+            "|---:|---:|---:|---:|---:|---:|---:|---:|",
+            f"| {out['agents']} | {out['groups']} | {out['env_steps']:,.0f} | {wall:.1f} | {out['agents_per_min']:.1f} | "
+            f"{out['env_steps_per_s'] / 1e6:.3f} | {out['agents_learned']} of {out['agents']} | "
+            f"{out['compilations_per_group']:g} |",
+            "",
+            "Greedy success per agent (test layouts): "
+            + ", ".join(f"{x:.3f}" for x in success)
+            + ".",
+            "",
+            "Shared machine: other jobs ran at the same time, so times are noisy.",
+        ]
+    )
     write_result("sweep-learning", out, md, out_dir)
     progress(md)
     return out
@@ -216,25 +304,36 @@ def run_lanes_benchmark(out_dir, sweep_file: str | Path) -> dict:
 
     devices = jax.local_devices()
     thesis_b = load_config(Path(packaged_config("default")).parent / "thesis" / "b-learns.toml")
-    cases = [("sweep benchmark (256 envs, T 16)", load_sweep(sweep_file).members[0].config, 16, 10),
-             ("thesis (b) learns (64 envs, T 8)", thesis_b, 8, 100)]
+    cases = [
+        ("sweep benchmark (256 envs, T 16)", load_sweep(sweep_file).members[0].config, 16, 10),
+        ("thesis (b) learns (64 envs, T 8)", thesis_b, 8, 100),
+    ]
     load_before = os.getloadavg()
     rows = []
     for name, cfg, n, updates in cases:
-        for label, wrap in (("one vmap per device", over_agents), (f"blocks of {LANES}", over_lanes)):
+        for label, wrap in (
+            ("one vmap per device", over_agents),
+            (f"blocks of {LANES}", over_lanes),
+        ):
             r = agents_throughput(cfg, n, devices, updates, repeats=3, wrap=wrap)
             rows.append({"case": name, "program": label, **r})
             print(name, label, f"{r['env_steps_per_s'] / 1e6:.3f} M env-steps/s", flush=True)
-    lines = ["# Fixed vmap blocks against one batch per device", "",
-             f"{len(devices)} CPU devices; load average before {tuple(round(x, 2) for x in load_before)}, after "
-             f"{tuple(round(x, 2) for x in os.getloadavg())} (a shared machine). Training only (no evaluation); "
-             "median of 3 compiled calls.", "",
-             "| case | agents | program | M env-steps/s | median s per call | ratio to one vmap per device |",
-             "|---|---:|---|---:|---:|---:|"]
+    lines = [
+        "# Fixed vmap blocks against one batch per device",
+        "",
+        f"{len(devices)} CPU devices; load average before {tuple(round(x, 2) for x in load_before)}, after "
+        f"{tuple(round(x, 2) for x in os.getloadavg())} (a shared machine). Training only (no evaluation); "
+        "median of 3 compiled calls.",
+        "",
+        "| case | agents | program | M env-steps/s | median s per call | ratio to one vmap per device |",
+        "|---|---:|---|---:|---:|---:|",
+    ]
     for i, r in enumerate(rows):
         base = rows[i - i % 2]
-        lines.append(f"| {r['case']} | {r['agents']} | {r['program']} | {r['env_steps_per_s'] / 1e6:.3f} | "
-                     f"{r['median_s']:.2f} | {r['env_steps_per_s'] / base['env_steps_per_s']:.2f} |")
+        lines.append(
+            f"| {r['case']} | {r['agents']} | {r['program']} | {r['env_steps_per_s'] / 1e6:.3f} | "
+            f"{r['median_s']:.2f} | {r['env_steps_per_s'] / base['env_steps_per_s']:.2f} |"
+        )
     payload = {"rows": rows, "load_before": load_before}
     for p in write_result("lanes", payload, "\n".join(lines), out_dir):
         print(p)

@@ -56,14 +56,24 @@ def _feasible(trajs, true, seen, cfg, clearance) -> np.ndarray:
     """Scenes where the clearance asked is possible at all: the flat foot at the start and at the goal
     keeps it from the obstacle the planner sees (and the config's margin from the true one)."""
     c_ask = cfg.env.min_clearance if clearance is None else clearance
-    feet = lambda y, o: float(geometry.foot_clearance(  # noqa: E731
-        np, np.array([y, 0.0]), cfg.kinematics.foot_length, np.asarray(o.outline, float)))
-    return np.array([min(feet(t.scene.start_y, o_seen), feet(t.scene.goal_y, o_seen)) >= c_ask - 1e-9 and
-                     min(feet(t.scene.start_y, o), feet(t.scene.goal_y, o)) >= cfg.env.min_clearance - 1e-9
-                     for t, o, o_seen in zip(trajs, true, seen)])
+    feet = lambda y, o: float(
+        geometry.foot_clearance(  # noqa: E731
+            np, np.array([y, 0.0]), cfg.kinematics.foot_length, np.asarray(o.outline, float)
+        )
+    )
+    return np.array(
+        [
+            min(feet(t.scene.start_y, o_seen), feet(t.scene.goal_y, o_seen)) >= c_ask - 1e-9
+            and min(feet(t.scene.start_y, o), feet(t.scene.goal_y, o))
+            >= cfg.env.min_clearance - 1e-9
+            for t, o, o_seen in zip(trajs, true, seen)
+        ]
+    )
 
 
-def _figures(trajs, timed, true, feasible, cfg, gen_s: float) -> tuple[dict, np.ndarray, np.ndarray]:
+def _figures(
+    trajs, timed, true, feasible, cfg, gen_s: float
+) -> tuple[dict, np.ndarray, np.ndarray]:
     """One generator's figures on a set (true: the obstacles the judge sees), its lifts (m) and timed
     durations (s)."""
     dur = np.array([t.duration for t in timed])
@@ -71,36 +81,58 @@ def _figures(trajs, timed, true, feasible, cfg, gen_s: float) -> tuple[dict, np.
     lift = np.array([t.heel[:, 1].max() - o.height for t, o in zip(trajs, true)])
     # clearance from the TRUE obstacle (the judge), exact per sample of the delivered curve and
     # exact between samples (the swept foot)
-    true_c = np.array([float(swept.path_swept_clearance(
-        np, t.heel, cfg.kinematics.foot_length, np.asarray(o.outline)).min()) for t, o in zip(trajs, true)])
+    true_c = np.array(
+        [
+            float(
+                swept.path_swept_clearance(
+                    np, t.heel, cfg.kinematics.foot_length, np.asarray(o.outline)
+                ).min()
+            )
+            for t, o in zip(trajs, true)
+        ]
+    )
     nan = float("nan")
-    return {
-        "n": len(trajs),
-        "safe": float(np.mean([t.ok for t in trajs])),
-        "feasible": int(feasible.sum()),
-        "safe_of_feasible": float(np.mean([t.ok for t, f in zip(trajs, feasible) if f])) if feasible.any() else nan,
-        "true_contact_of_feasible": float(np.mean((true_c <= geometry.TOUCH_EPS)[feasible])) if feasible.any() else nan,
-        "reached_goal": float(np.mean([t.checks.reached_goal for t in trajs])),
-        "lift_cm_median": 100 * float(np.median(lift)),
-        "lift_cm_p95": 100 * float(np.percentile(lift, 95)),
-        "duration_s_median": float(np.median(dur)),
-        "duration_s_p95": float(np.percentile(dur, 95)),
-        "duration_s_max": float(dur.max()),
-        "jerk_median": float(np.median(jerk)),
-        "jerk_p95": float(np.percentile(jerk, 95)),
-        "true_contact": float(np.mean(true_c <= geometry.TOUCH_EPS)),
-        "true_within_1cm": float(np.mean(true_c < 0.01)),
-        "true_clearance_cm_p5": 100 * float(np.percentile(true_c, 5)),
-        "generate_s": gen_s,
-    }, lift, dur
+    return (
+        {
+            "n": len(trajs),
+            "safe": float(np.mean([t.ok for t in trajs])),
+            "feasible": int(feasible.sum()),
+            "safe_of_feasible": float(np.mean([t.ok for t, f in zip(trajs, feasible) if f]))
+            if feasible.any()
+            else nan,
+            "true_contact_of_feasible": float(np.mean((true_c <= geometry.TOUCH_EPS)[feasible]))
+            if feasible.any()
+            else nan,
+            "reached_goal": float(np.mean([t.checks.reached_goal for t in trajs])),
+            "lift_cm_median": 100 * float(np.median(lift)),
+            "lift_cm_p95": 100 * float(np.percentile(lift, 95)),
+            "duration_s_median": float(np.median(dur)),
+            "duration_s_p95": float(np.percentile(dur, 95)),
+            "duration_s_max": float(dur.max()),
+            "jerk_median": float(np.median(jerk)),
+            "jerk_p95": float(np.percentile(jerk, 95)),
+            "true_contact": float(np.mean(true_c <= geometry.TOUCH_EPS)),
+            "true_within_1cm": float(np.mean(true_c < 0.01)),
+            "true_clearance_cm_p5": 100 * float(np.percentile(true_c, 5)),
+            "generate_s": gen_s,
+        },
+        lift,
+        dur,
+    )
 
 
-def run_set(gens: dict, scenes: list[dict], cfg, clearance, error: float, smoothing=None, arrays=None) -> dict:
+def run_set(
+    gens: dict, scenes: list[dict], cfg, clearance, error: float, smoothing=None, arrays=None
+) -> dict:
     """Both generators' figures on one scene set; ``arrays`` (a dict), when given, receives each
     generator's per-scene (safe, lift m, duration s) for the figure."""
     out, per = {}, {}
     true = [s["obstacle"] for s in scenes]
-    seen = true if error == 0 else [perturbed(o, error, 1.0 if i % 2 else -1.0) for i, o in enumerate(true)]
+    seen = (
+        true
+        if error == 0
+        else [perturbed(o, error, 1.0 if i % 2 else -1.0) for i, o in enumerate(true)]
+    )
     kw = batch_kwargs(scenes)
     if clearance is not None:
         kw["clearance"] = clearance
@@ -127,9 +159,15 @@ def run_set(gens: dict, scenes: list[dict], cfg, clearance, error: float, smooth
     both = np.logical_and.reduce([ok for ok, _, _ in per.values()])
     for name, (_, lift, dur) in per.items():
         out[name]["n_all_safe"] = int(both.sum())
-        out[name]["lift_cm_median_all_safe"] = 100 * float(np.median(lift[both])) if both.any() else float("nan")
-        out[name]["duration_s_median_all_safe"] = float(np.median(dur[both])) if both.any() else float("nan")
-        out[name]["duration_s_p95_all_safe"] = float(np.percentile(dur[both], 95)) if both.any() else float("nan")
+        out[name]["lift_cm_median_all_safe"] = (
+            100 * float(np.median(lift[both])) if both.any() else float("nan")
+        )
+        out[name]["duration_s_median_all_safe"] = (
+            float(np.median(dur[both])) if both.any() else float("nan")
+        )
+        out[name]["duration_s_p95_all_safe"] = (
+            float(np.percentile(dur[both], 95)) if both.any() else float("nan")
+        )
     if arrays is not None:
         arrays.update(per)
     return out
@@ -139,6 +177,7 @@ def figure(arrays: dict, title: str, path: Path) -> None:
     """Per scene set: the distribution (share of swings at or below) of the lift and of the timed swing,
     RL against CFFTG, each generator's unsafe swings marked on the lift panel."""
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -149,14 +188,19 @@ def figure(arrays: dict, title: str, path: Path) -> None:
             label = "RL" if name == "rl" else "CFFTG"
             for row, (values, scale) in enumerate(((lift, 100.0), (dur, 1.0))):
                 v = np.sort(values * scale)
-                axs[row, col].step(v, np.arange(1, len(v) + 1) / len(v), where="post", color=colours[name],
-                                   label=f"{label} (unsafe {100 * np.mean(~ok):.1f} %)" if row == 0 else label)
+                axs[row, col].step(
+                    v,
+                    np.arange(1, len(v) + 1) / len(v),
+                    where="post",
+                    color=colours[name],
+                    label=f"{label} (unsafe {100 * np.mean(~ok):.1f} %)" if row == 0 else label,
+                )
             bad = np.sort(lift[~ok] * 100.0)
             if bad.size:
                 axs[0, col].plot(bad, np.zeros_like(bad), "|", color=colours[name], ms=10)
         axs[0, col].set_title(set_name)
         axs[0, col].set_xlabel("lift: heel peak above the obstacle's top (cm)")
-        axs[0, col].set_xlim(-6.0, 12.0)     # below 0: a plan whose peak is under the top (it hits)
+        axs[0, col].set_xlim(-6.0, 12.0)  # below 0: a plan whose peak is under the top (it hits)
         axs[1, col].set_xlabel("timed swing at the [device] limits (s)")
         axs[1, col].set_xlim(0.3, 2.5)
         for row in range(2):
@@ -170,39 +214,58 @@ def figure(arrays: dict, title: str, path: Path) -> None:
 
 
 def markdown(res: dict, title: str) -> str:
-    lines = [f"# {title}", "",
-             "RL alone (fallback none) and CFFTG on the same scenes. Lift = heel peak above the obstacle's "
-             "highest point; duration = time-optimal swing within the default [device] limits; jerk = "
-             "integrated squared jerk of the timed joint angles (rad^2/s^5). Feasible: scenes whose flat foot at "
-             "the start and at the goal keeps the clearance asked from the obstacle the planner sees (and the "
-             "margin from the true one); no generator can do better on the others. True contact and < 1 cm: "
-             "the delivered curve against the true obstacle (exact swept clearance).", "",
-             "| set | generator | n | safe % | feasible n | safe % of feasible | goal % | lift median cm | lift p95 cm | duration median s | "
-             "p95 s | max s | jerk median | jerk p95 | smoothed once % | raw polyline % | true contact % | "
-             "true < 1 cm % |",
-             "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    lines = [
+        f"# {title}",
+        "",
+        "RL alone (fallback none) and CFFTG on the same scenes. Lift = heel peak above the obstacle's "
+        "highest point; duration = time-optimal swing within the default [device] limits; jerk = "
+        "integrated squared jerk of the timed joint angles (rad^2/s^5). Feasible: scenes whose flat foot at "
+        "the start and at the goal keeps the clearance asked from the obstacle the planner sees (and the "
+        "margin from the true one); no generator can do better on the others. True contact and < 1 cm: "
+        "the delivered curve against the true obstacle (exact swept clearance).",
+        "",
+        "| set | generator | n | safe % | feasible n | safe % of feasible | goal % | lift median cm | lift p95 cm | duration median s | "
+        "p95 s | max s | jerk median | jerk p95 | smoothed once % | raw polyline % | true contact % | "
+        "true < 1 cm % |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
     for s, gens in res["sets"].items():
         for g, r in gens.items():
             once = f"{100 * r['smoothed_once']:.1f}" if "smoothed_once" in r else ""
             raw = f"{100 * r['raw_polyline']:.1f}" if "raw_polyline" in r else ""
-            lines.append(f"| {s} | {g} | {r['n']} | {100 * r['safe']:.1f} | {r['feasible']} | "
-                         f"{100 * r['safe_of_feasible']:.1f} | {100 * r['reached_goal']:.1f} | "
-                         f"{r['lift_cm_median']:.2f} | {r['lift_cm_p95']:.2f} | {r['duration_s_median']:.3f} | "
-                         f"{r['duration_s_p95']:.3f} | {r['duration_s_max']:.2f} | {r['jerk_median']:.3g} | "
-                         f"{r['jerk_p95']:.3g} | {once} | {raw} | {100 * r['true_contact']:.1f} | "
-                         f"{100 * r['true_within_1cm']:.1f} |")
-    lines += ["", "On the scenes that every generator swings safely:", "",
-              "| set | generator | n | lift median cm | duration median s | duration p95 s |",
-              "|---|---|---:|---:|---:|---:|"]
+            lines.append(
+                f"| {s} | {g} | {r['n']} | {100 * r['safe']:.1f} | {r['feasible']} | "
+                f"{100 * r['safe_of_feasible']:.1f} | {100 * r['reached_goal']:.1f} | "
+                f"{r['lift_cm_median']:.2f} | {r['lift_cm_p95']:.2f} | {r['duration_s_median']:.3f} | "
+                f"{r['duration_s_p95']:.3f} | {r['duration_s_max']:.2f} | {r['jerk_median']:.3g} | "
+                f"{r['jerk_p95']:.3g} | {once} | {raw} | {100 * r['true_contact']:.1f} | "
+                f"{100 * r['true_within_1cm']:.1f} |"
+            )
+    lines += [
+        "",
+        "On the scenes that every generator swings safely:",
+        "",
+        "| set | generator | n | lift median cm | duration median s | duration p95 s |",
+        "|---|---|---:|---:|---:|---:|",
+    ]
     for s, gens in res["sets"].items():
         for g, r in gens.items():
-            lines.append(f"| {s} | {g} | {r['n_all_safe']} | {r['lift_cm_median_all_safe']:.2f} | "
-                         f"{r['duration_s_median_all_safe']:.3f} | {r['duration_s_p95_all_safe']:.3f} |")
+            lines.append(
+                f"| {s} | {g} | {r['n_all_safe']} | {r['lift_cm_median_all_safe']:.2f} | "
+                f"{r['duration_s_median_all_safe']:.3f} | {r['duration_s_p95_all_safe']:.3f} |"
+            )
     return "\n".join(lines)
 
 
-def run_swing_quality_benchmark(policy, out_dir, n: int = 600, clearance: float | None = None,
-                                perception_error: float = 0.0, smoothing: float | None = None, tag: str = "") -> dict:
+def run_swing_quality_benchmark(
+    policy,
+    out_dir,
+    n: int = 600,
+    clearance: float | None = None,
+    perception_error: float = 0.0,
+    smoothing: float | None = None,
+    tag: str = "",
+) -> dict:
     """Both generators on the three sets, printed and (when ``out_dir``) written with the figure as
     swing_quality[_tag]_<date>_<machine>.{json,md,png}. The clearance asked defaults to the config's
     margin plus the perception error."""
@@ -211,15 +274,30 @@ def run_swing_quality_benchmark(policy, out_dir, n: int = 600, clearance: float 
     if clearance is None and perception_error > 0:
         clearance = cfg.env.min_clearance + perception_error
     gens = {"rl": gen, "cfftg": CFFTG(cfg)}
-    res = {"policy": str(policy), "clearance": clearance, "perception_error": perception_error,
-           "smoothing": smoothing, "sets": {}, "machine": machine_info()}
+    res = {
+        "policy": str(policy),
+        "clearance": clearance,
+        "perception_error": perception_error,
+        "smoothing": smoothing,
+        "sets": {},
+        "machine": machine_info(),
+    }
     arrays = {}
     for name, scenes in scene_sets(cfg, n).items():
         arrays[name] = {}
-        res["sets"][name] = run_set(gens, scenes, cfg, clearance, perception_error, smoothing, arrays[name])
-        print(name, {g: {k: round(v, 4) for k, v in r.items()} for g, r in res["sets"][name].items()}, flush=True)
-    title = "Swing quality" + (f" at clearance {100 * clearance:.1f} cm" if clearance else "") + (
-        f", perception error {100 * perception_error:.1f} cm" if perception_error else "")
+        res["sets"][name] = run_set(
+            gens, scenes, cfg, clearance, perception_error, smoothing, arrays[name]
+        )
+        print(
+            name,
+            {g: {k: round(v, 4) for k, v in r.items()} for g, r in res["sets"][name].items()},
+            flush=True,
+        )
+    title = (
+        "Swing quality"
+        + (f" at clearance {100 * clearance:.1f} cm" if clearance else "")
+        + (f", perception error {100 * perception_error:.1f} cm" if perception_error else "")
+    )
     md = markdown(res, title)
     print(md)
     if out_dir:

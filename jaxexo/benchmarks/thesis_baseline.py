@@ -94,9 +94,9 @@ class ReplayBuffer:
         k = np.arange(horizon)
         slots = (idx[:, None] + k[None, :]) % self.capacity
         newest = (self.head - 1) % self.capacity
-        ahead = (newest - idx) % self.capacity          # successors written after idx
+        ahead = (newest - idx) % self.capacity  # successors written after idx
         valid = k[None, :] <= ahead[:, None]
-        ended = np.cumsum(self.done[slots], axis=1)      # episode ended at or before step k
+        ended = np.cumsum(self.done[slots], axis=1)  # episode ended at or before step k
         valid[:, 1:] &= ended[:, :-1] == 0
         return slots, valid
 
@@ -155,8 +155,9 @@ class NumpyExoEnv:
         return types.SimpleNamespace(**{k: v[i] for k, v in self.pool.items()})
 
     def _obs(self):
-        return self.dyn.observation(np, self.p, self.obs_mode, self.heel[0], self.heel[1], self.time,
-                                    self.visited, self.lay)
+        return self.dyn.observation(
+            np, self.p, self.obs_mode, self.heel[0], self.heel[1], self.time, self.visited, self.lay
+        )
 
     def reset(self) -> np.ndarray:
         if self.next == self.n_layouts:
@@ -168,7 +169,7 @@ class NumpyExoEnv:
         self.visited = np.bool_(False)
         self.outcome = self.dyn_outcome.start(np)
         self.max_y = self.heel[0]
-        self.last = -1          # the move just made (rewards.turn_of)
+        self.last = -1  # the move just made (rewards.turn_of)
         return self._obs()
 
     def step(self, action: int):
@@ -177,8 +178,18 @@ class NumpyExoEnv:
         prev = self.heel
         self.heel = np.stack(self.dyn.move_heel(np, p, prev[0], prev[1], d[0], d[1]))
         self.time = self.time + np.int32(1)
-        out = self.dyn.transition(np, p, prev, self.heel, self.time, self.visited, self.lay, self.max_y,
-                                  action=action, last_action=self.last)
+        out = self.dyn.transition(
+            np,
+            p,
+            prev,
+            self.heel,
+            self.time,
+            self.visited,
+            self.lay,
+            self.max_y,
+            action=action,
+            last_action=self.last,
+        )
         self.last = action
         self.visited, self.max_y = out["visited_mid"], out["max_y"]
         info = out["info"]
@@ -187,7 +198,10 @@ class NumpyExoEnv:
         truncated = (not terminated) and int(self.time) >= self.max_steps
         # The one strict-success verdict (jaxexo.physics.outcome), as the JAX trainer counts it.
         info["success"] = (terminated or truncated) and bool(
-            self.dyn_outcome.episode_verdict(np, self.outcome, **self.dyn_outcome.rule(p))["success"])
+            self.dyn_outcome.episode_verdict(np, self.outcome, **self.dyn_outcome.rule(p))[
+                "success"
+            ]
+        )
         return self._obs(), float(out["reward"]), terminated, truncated, info
 
 
@@ -211,10 +225,10 @@ class BaselineSettings:
     period, warm-up) are the common DQN choices; the rest follow the jaxexo config it trains."""
 
     batch_size: int = BATCH_SIZE
-    horizon: int = 8               # lambda-return window (jaxexo's rollout_steps plays this role)
+    horizon: int = 8  # lambda-return window (jaxexo's rollout_steps plays this role)
     replay_capacity: int = 100_000
     learning_starts: int = BATCH_SIZE
-    target_period: int = 500       # env steps (= updates) between copies of Q_main into Q_target
+    target_period: int = 500  # env steps (= updates) between copies of Q_main into Q_target
     torch_threads: int = 1
     seed: int = 0
 
@@ -243,9 +257,24 @@ class SequentialTDLambda:
     reward, terminated, truncated, info)`` (``obs`` of the step is the reached observation; the
     caller resets after a finished episode)."""
 
-    def __init__(self, env, obs_dim: int, num_actions: int, hidden, layer_norm: bool, *, lr: float,
-                 gamma: float, lam: float, eps_start: float, eps_end: float, eps_decay_steps: int,
-                 max_grad_norm: float, off_policy: bool = True, settings: BaselineSettings = BaselineSettings()):
+    def __init__(
+        self,
+        env,
+        obs_dim: int,
+        num_actions: int,
+        hidden,
+        layer_norm: bool,
+        *,
+        lr: float,
+        gamma: float,
+        lam: float,
+        eps_start: float,
+        eps_end: float,
+        eps_decay_steps: int,
+        max_grad_norm: float,
+        off_policy: bool = True,
+        settings: BaselineSettings = BaselineSettings(),
+    ):
         import torch
 
         self.torch = torch
@@ -255,7 +284,11 @@ class SequentialTDLambda:
         self.s = settings
         self.num_actions = num_actions
         self.gamma, self.lam = float(gamma), float(lam)
-        self.eps_start, self.eps_end, self.eps_decay_steps = float(eps_start), float(eps_end), int(eps_decay_steps)
+        self.eps_start, self.eps_end, self.eps_decay_steps = (
+            float(eps_start),
+            float(eps_end),
+            int(eps_decay_steps),
+        )
         self.max_grad_norm = float(max_grad_norm)
         self.off_policy = off_policy
         self.q = build_torch_network(obs_dim, hidden, num_actions, layer_norm)
@@ -289,12 +322,16 @@ class SequentialTDLambda:
         slots, valid = b.windows(idx, self.s.horizon)
         B, H = slots.shape
         with torch.inference_mode():
-            q_next = self.q_target(torch.from_numpy(b.next_obs[slots.reshape(-1)])).numpy().reshape(B, H, -1)
+            q_next = (
+                self.q_target(torch.from_numpy(b.next_obs[slots.reshape(-1)]))
+                .numpy()
+                .reshape(B, H, -1)
+            )
         act = b.action[slots]
         if self.off_policy:
-            boot = q_next.max(-1)                                                  # eq 2.28
+            boot = q_next.max(-1)  # eq 2.28
             # Watkins: continue into step k only if its stored action is greedy at its state.
-            greedy_next = q_next.argmax(-1)                                        # at the state step k reached
+            greedy_next = q_next.argmax(-1)  # at the state step k reached
             cont = np.ones((B, H), bool)
             cont[:, 1:] = act[:, 1:] == greedy_next[:, :-1]
         else:
@@ -307,8 +344,9 @@ class SequentialTDLambda:
             last |= b.done[slots]
             boot = np.where(last, q_next.max(-1), boot)
             cont = np.ones((B, H), bool)
-        return truncated_lambda_returns(b.reward[slots], boot, b.terminated[slots], valid, cont,
-                                        self.gamma, self.lam)
+        return truncated_lambda_returns(
+            b.reward[slots], boot, b.terminated[slots], valid, cont, self.gamma, self.lam
+        )
 
     def update(self) -> float:
         torch, b = self.torch, self.buffer
@@ -343,8 +381,14 @@ class SequentialTDLambda:
         if self.buffer.size >= max(self.s.learning_starts, self.s.batch_size):
             self.update()
 
-    def train(self, *, seconds: float = math.inf, env_steps: int | None = None, callback=None,
-              callback_every: int = 0) -> dict:
+    def train(
+        self,
+        *,
+        seconds: float = math.inf,
+        env_steps: int | None = None,
+        callback=None,
+        callback_every: int = 0,
+    ) -> dict:
         """Step until the time or step budget is spent. ``callback(self, train_seconds)`` runs every
         ``callback_every`` env steps, off the clock; returning True stops training."""
         train_s = 0.0
@@ -363,8 +407,13 @@ class SequentialTDLambda:
             train_s += time.perf_counter() - t0
             if callback is not None and callback_every:
                 stop = bool(callback(self, train_s))
-        return {"env_steps": self.env_steps, "updates": self.updates, "episodes": self.episodes,
-                "train_seconds": train_s, "env_steps_per_s": self.env_steps / max(train_s, 1e-9)}
+        return {
+            "env_steps": self.env_steps,
+            "updates": self.updates,
+            "episodes": self.episodes,
+            "train_seconds": train_s,
+            "env_steps_per_s": self.env_steps / max(train_s, 1e-9),
+        }
 
     def export_flax_params(self) -> dict:
         """The main network's weights in flax's layout (jaxexo.train.network.QNetwork), so that
@@ -374,7 +423,13 @@ class SequentialTDLambda:
         p = {}
         for i, m in enumerate(lin):
             name = "out" if i == len(lin) - 1 else f"dense_{i}"
-            p[name] = {"kernel": m.weight.detach().numpy().T.copy(), "bias": m.bias.detach().numpy().copy()}
+            p[name] = {
+                "kernel": m.weight.detach().numpy().T.copy(),
+                "bias": m.bias.detach().numpy().copy(),
+            }
         for i, m in enumerate(norms):
-            p[f"norm_{i}"] = {"scale": m.weight.detach().numpy().copy(), "bias": m.bias.detach().numpy().copy()}
+            p[f"norm_{i}"] = {
+                "scale": m.weight.detach().numpy().copy(),
+                "bias": m.bias.detach().numpy().copy(),
+            }
         return {"params": p}

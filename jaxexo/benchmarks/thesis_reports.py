@@ -39,35 +39,66 @@ def run_envelope(out_dir) -> dict:
     center, foot = 0.45, 0.20
     kinds = ("base1", "base2", "base3", "triangle", "half_circle")
     obs = {k: g.Obstacle.named(k, center_y=center) for k in kinds}
-    ys = np.linspace(center - 0.45, center + 0.20, 651)      # 1 mm steps
-    zs = np.linspace(0.0, 0.40, 401)                          # 1 mm steps
+    ys = np.linspace(center - 0.45, center + 0.20, 651)  # 1 mm steps
+    zs = np.linspace(0.0, 0.40, 401)  # 1 mm steps
     y, z = np.meshgrid(ys, zs)
     heel = np.stack([y.ravel(), z.ravel()], -1)
-    clear = {k: g.foot_clearance(np, heel, foot, o.outline_array(len(o.unit_vertices))) for k, o in obs.items()}
+    clear = {
+        k: g.foot_clearance(np, heel, foot, o.outline_array(len(o.unit_vertices)))
+        for k, o in obs.items()
+    }
     rows = []
     for margin in (0.03, 0.06):
         for basis in (("base3",), ("base1", "base2", "base3")):
             safe = np.all([clear[k] >= margin for k in basis], axis=0)
             for test in ("triangle", "half_circle"):
                 bad = safe & g.foot_collides(np, clear[test])
-                rows.append({"min_dt_m": margin, "kept_from": "+".join(basis), "test_obstacle": test,
-                             "safe_positions": int(safe.sum()), "safe_but_colliding": int(bad.sum()),
-                             "min_clearance_m": float(clear[test][safe].min())})
-    lines = ["# Thesis learning study: envelope", "", ENVELOPE_NOTE, "",
-             f"Grid: heel y {ys[0]:.2f}-{ys[-1]:.2f} m x z 0-0.40 m, 1 mm steps ({heel.shape[0]} positions); "
-             "command: `python benchmarks/thesis_envelope.py`.", "",
-             "| min_dt cm | kept from | test obstacle | positions kept | of which collide with the test obstacle | "
-             "min clearance to it cm |", "|---:|---|---|---:|---:|---:|"]
+                rows.append(
+                    {
+                        "min_dt_m": margin,
+                        "kept_from": "+".join(basis),
+                        "test_obstacle": test,
+                        "safe_positions": int(safe.sum()),
+                        "safe_but_colliding": int(bad.sum()),
+                        "min_clearance_m": float(clear[test][safe].min()),
+                    }
+                )
+    lines = [
+        "# Thesis learning study: envelope",
+        "",
+        ENVELOPE_NOTE,
+        "",
+        f"Grid: heel y {ys[0]:.2f}-{ys[-1]:.2f} m x z 0-0.40 m, 1 mm steps ({heel.shape[0]} positions); "
+        "command: `python benchmarks/thesis_envelope.py`.",
+        "",
+        "| min_dt cm | kept from | test obstacle | positions kept | of which collide with the test obstacle | "
+        "min clearance to it cm |",
+        "|---:|---|---|---:|---:|---:|",
+    ]
     for r in rows:
-        lines.append(f"| {100 * r['min_dt_m']:.0f} | {r['kept_from']} | {r['test_obstacle']} | {r['safe_positions']} | "
-                     f"{r['safe_but_colliding']} | {100 * r['min_clearance_m']:.2f} |")
-    lines += ["", "With 6 cm from each of Base 1-3 every kept position is at least 1.1 cm clear of the half-circle "
-              "and 6 cm of the triangle; with jaxexo's default 3 cm, thousands of kept positions touch the half-circle, "
-              "so a policy that is merely safe for the training obstacles can hit it."]
+        lines.append(
+            f"| {100 * r['min_dt_m']:.0f} | {r['kept_from']} | {r['test_obstacle']} | {r['safe_positions']} | "
+            f"{r['safe_but_colliding']} | {100 * r['min_clearance_m']:.2f} |"
+        )
+    lines += [
+        "",
+        "With 6 cm from each of Base 1-3 every kept position is at least 1.1 cm clear of the half-circle "
+        "and 6 cm of the triangle; with jaxexo's default 3 cm, thousands of kept positions touch the half-circle, "
+        "so a policy that is merely safe for the training obstacles can hit it.",
+    ]
     return _write("thesis-learning-envelope", {"rows": rows}, lines, out_dir)
 
 
-COLS = ("success", "accuracy", "held_out_success", "train_success", "eval_return", "episodes", "updates", "wall_s")
+COLS = (
+    "success",
+    "accuracy",
+    "held_out_success",
+    "train_success",
+    "eval_return",
+    "episodes",
+    "updates",
+    "wall_s",
+)
 PCT = {"success", "accuracy", "held_out_success", "train_success"}
 
 
@@ -75,7 +106,11 @@ def _fmt(col: str, v: str) -> str:
     if v in ("", "nan"):
         return "-"
     x = float(v)
-    return f"{100 * x:.1f}" if col in PCT else (f"{x:.0f}" if col in ("episodes", "updates") else f"{x:.2f}")
+    return (
+        f"{100 * x:.1f}"
+        if col in PCT
+        else (f"{x:.0f}" if col in ("episodes", "updates") else f"{x:.2f}")
+    )
 
 
 def learning_report(study: str, sweep_file: str, sweep_dir: str, out_dir, note: str = "") -> dict:
@@ -84,58 +119,126 @@ def learning_report(study: str, sweep_file: str, sweep_dir: str, out_dir, note: 
     sweep = json.loads((Path(sweep_dir) / "sweep.json").read_text())
     axes = list(sweep.get("sweep", {}).get("grid", {}))
     rows = list(csv.DictReader(open(Path(sweep_dir) / "results.csv")))
-    head = "| " + " | ".join([*axes, "seed", "strict success %", "accuracy % (eq 3.1)", "held-out success %",
-                              "train success % (last 10 %)", "greedy return", "episodes", "updates", "wall s"]) + " |"
+    head = (
+        "| "
+        + " | ".join(
+            [
+                *axes,
+                "seed",
+                "strict success %",
+                "accuracy % (eq 3.1)",
+                "held-out success %",
+                "train success % (last 10 %)",
+                "greedy return",
+                "episodes",
+                "updates",
+                "wall s",
+            ]
+        )
+        + " |"
+    )
     align = "|" + "---|" * (len(axes) + 1) + "---:|" * len(COLS)
-    lines = [f"# Thesis learning study: {study}", "", note, "",
-             f"Command: `jaxexo sweep {sweep_file} --out DIR` (then `python benchmarks/thesis_learning_report.py "
-             f"{study} {sweep_file} DIR`). Scores: greedy rollouts on 1000 test layouts (the five thesis obstacles "
-             "x three pivot conditions; triangle and half-circle never trained on). Wall s: the compiled group "
-             "the agent ran in, all its agents together, on this machine (busy, shared by other jobs).", "",
-             "## Per configuration (mean over seeds)", "", head.replace("| seed ", "| seeds "), align]
+    lines = [
+        f"# Thesis learning study: {study}",
+        "",
+        note,
+        "",
+        f"Command: `jaxexo sweep {sweep_file} --out DIR` (then `python benchmarks/thesis_learning_report.py "
+        f"{study} {sweep_file} DIR`). Scores: greedy rollouts on 1000 test layouts (the five thesis obstacles "
+        "x three pivot conditions; triangle and half-circle never trained on). Wall s: the compiled group "
+        "the agent ran in, all its agents together, on this machine (busy, shared by other jobs).",
+        "",
+        "## Per configuration (mean over seeds)",
+        "",
+        head.replace("| seed ", "| seeds "),
+        align,
+    ]
     groups = defaultdict(list)
     for r in rows:
         groups[tuple(r[a] for a in axes)].append(r)
     for key, rs in groups.items():
-        means = [str(sum(float(r[c]) for r in rs) / len(rs)) if all(r[c] not in ("", "nan") for r in rs) else "nan"
-                 for c in COLS]
-        lines.append("| " + " | ".join([*key, str(len(rs)), *(_fmt(c, m) for c, m in zip(COLS, means))]) + " |")
+        means = [
+            str(sum(float(r[c]) for r in rs) / len(rs))
+            if all(r[c] not in ("", "nan") for r in rs)
+            else "nan"
+            for c in COLS
+        ]
+        lines.append(
+            "| "
+            + " | ".join([*key, str(len(rs)), *(_fmt(c, m) for c, m in zip(COLS, means))])
+            + " |"
+        )
     lines += ["", "## Every agent", "", head, align]
     for r in rows:
-        lines.append("| " + " | ".join([*(r[a] for a in axes), r["seed"], *(_fmt(c, r[c]) for c in COLS)]) + " |")
-    payload = {"study": study, "sweep_file": sweep_file, "axes": axes, "note": note,
-               "rows": [{k: r[k] for k in (*axes, "seed", *COLS)} for r in rows]}
+        lines.append(
+            "| "
+            + " | ".join([*(r[a] for a in axes), r["seed"], *(_fmt(c, r[c]) for c in COLS)])
+            + " |"
+        )
+    payload = {
+        "study": study,
+        "sweep_file": sweep_file,
+        "axes": axes,
+        "note": note,
+        "rows": [{k: r[k] for k in (*axes, "seed", *COLS)} for r in rows],
+    }
     return _write(f"thesis-learning-{study}", payload, lines, out_dir)
 
 
 def seed_check(note: str, runs: list[str], out_dir) -> dict:
     """Run directories given as MODEL=RUN_DIR:SEED, their eval.json figures one row each, written as
     thesis-seeds_<date>_<machine>.*"""
-    head = ("| config | seed | strict success % | accuracy % (eq 3.1) | reached goal % | held-out success % | "
-            "selected chunk | train s |")
-    lines = ["# Thesis learns configs over seeds (jaxexo train, the reproduce driver)", "", note, "",
-             "Command per row: `jaxexo train jaxexo/config/thesis/<config>.toml --out DIR --seed S` (seed 0: the "
-             "run of `jaxexo reproduce --variant both`). Scores: the run's eval.json, greedy JAX rollouts of the "
-             "exported (best validated) policy on the 1000 test layouts (five thesis obstacles x three pivot "
-             "conditions), raw moves, no smoothing.", "", head, "|---|---:|---:|---:|---:|---:|---:|---:|"]
+    head = (
+        "| config | seed | strict success % | accuracy % (eq 3.1) | reached goal % | held-out success % | "
+        "selected chunk | train s |"
+    )
+    lines = [
+        "# Thesis learns configs over seeds (jaxexo train, the reproduce driver)",
+        "",
+        note,
+        "",
+        "Command per row: `jaxexo train jaxexo/config/thesis/<config>.toml --out DIR --seed S` (seed 0: the "
+        "run of `jaxexo reproduce --variant both`). Scores: the run's eval.json, greedy JAX rollouts of the "
+        "exported (best validated) policy on the 1000 test layouts (five thesis obstacles x three pivot "
+        "conditions), raw moves, no smoothing.",
+        "",
+        head,
+        "|---|---:|---:|---:|---:|---:|---:|---:|",
+    ]
     rows = []
     for spec in runs:
         model, rest = spec.split("=", 1)
         run, seed = rest.rsplit(":", 1)
         ev = json.loads((Path(run) / "eval.json").read_text())
-        row = {"config": model, "seed": int(seed), "success": ev["success_raw"],
-               "accuracy": ev["accuracy"], "reached_goal": ev["reached_goal"],
-               "held_out_success": ev["held_out"]["success_raw"],
-               "selected_chunk": ev.get("selected_chunk"), "train_seconds": ev["train_seconds"]}
+        row = {
+            "config": model,
+            "seed": int(seed),
+            "success": ev["success_raw"],
+            "accuracy": ev["accuracy"],
+            "reached_goal": ev["reached_goal"],
+            "held_out_success": ev["held_out"]["success_raw"],
+            "selected_chunk": ev.get("selected_chunk"),
+            "train_seconds": ev["train_seconds"],
+        }
         rows.append(row)
-        lines.append(f"| {model} | {seed} | {100 * row['success']:.1f} | {100 * row['accuracy']:.1f} | "
-                     f"{100 * row['reached_goal']:.1f} | {100 * row['held_out_success']:.1f} | "
-                     f"{row['selected_chunk']} | {row['train_seconds']:.1f} |")
+        lines.append(
+            f"| {model} | {seed} | {100 * row['success']:.1f} | {100 * row['accuracy']:.1f} | "
+            f"{100 * row['reached_goal']:.1f} | {100 * row['held_out_success']:.1f} | "
+            f"{row['selected_chunk']} | {row['train_seconds']:.1f} |"
+        )
     return _write("thesis-seeds", {"note": note, "rows": rows}, lines, out_dir)
 
 
 # The figures the reproduce result keeps (it stays under 100 KB).
-KEEP = ("n", "accuracy", "success", "reached_goal", "time_ms_mean", "knee_swing_mean_deg", "hip_swing_mean_deg")
+KEEP = (
+    "n",
+    "accuracy",
+    "success",
+    "reached_goal",
+    "time_ms_mean",
+    "knee_swing_mean_deg",
+    "hip_swing_mean_deg",
+)
 
 
 def _slim(r: dict) -> dict:
@@ -180,8 +283,10 @@ def combine_reproduce(dirs, out_dir="benchmarks/results") -> dict:
     print("have", list(results))
     md = tables(results)
     Path("/tmp/repro/reproduce.md").write_text(md)
-    small = {n: {k: (_slim(v) if k in ("rl", "rl_eps", "cfftg") else v) for k, v in r.items()}
-             for n, r in results.items()}
+    small = {
+        n: {k: (_slim(v) if k in ("rl", "rl_eps", "cfftg") else v) for k, v in r.items()}
+        for n, r in results.items()
+    }
     payload = json.loads(json.dumps(small))
     for p in write_result("reproduce", payload, md, out_dir):
         print(p, p.stat().st_size)

@@ -23,17 +23,23 @@ def _figures(trajs, timed, rate: float) -> dict:
     vmax = np.array(timed[0].limits.velocity)
     amax = np.array(timed[0].limits.acceleration)
     fd_v = np.array([np.abs(np.diff(t.joint_angles, axis=0) * rate).max(axis=0) for t in timed])
-    fd_a = np.array([np.abs(np.diff(t.joint_angles, n=2, axis=0) * rate**2).max(axis=0) for t in timed])
+    fd_a = np.array(
+        [np.abs(np.diff(t.joint_angles, n=2, axis=0) * rate**2).max(axis=0) for t in timed]
+    )
     end_v = np.array([np.abs(np.diff(t.joint_angles, axis=0)[[0, -1]] * rate).max() for t in timed])
     uni = [uniform_peaks(t) for t in trajs]
     return {
         "n": len(timed),
         "path_ok": float(np.mean([t.ok for t in trajs])),
         "timed_ok": float(np.mean([t.ok for t in timed])),
-        "swing_s_mean": float(dur.mean()), "swing_s_median": float(np.median(dur)),
-        "swing_s_p95": float(np.percentile(dur, 95)), "swing_s_max": float(dur.max()),
+        "swing_s_mean": float(dur.mean()),
+        "swing_s_median": float(np.median(dur)),
+        "swing_s_p95": float(np.percentile(dur, 95)),
+        "swing_s_max": float(dur.max()),
         "within_limits": float(np.mean([t.within_limits for t in timed])),
-        "fd_within_limits": float(np.mean(np.all(fd_v <= vmax, axis=1) & np.all(fd_a <= amax, axis=1))),
+        "fd_within_limits": float(
+            np.mean(np.all(fd_v <= vmax, axis=1) & np.all(fd_a <= amax, axis=1))
+        ),
         "fd_peak_vel_ratio_max": float((fd_v / vmax).max()),
         "fd_peak_acc_ratio_max": float((fd_a / amax).max()),
         "peak_hip_vel_deg_s_mean": float(d(np.maximum(fd_v[:, 0], fd_v[:, 2]).mean())),
@@ -45,8 +51,9 @@ def _figures(trajs, timed, rate: float) -> dict:
     }, dur
 
 
-def run_timing_benchmark(policy: str | Path, out_dir: str | Path, n: int = 1000, n_unseen: int = 300,
-                         rate: float = 100.0) -> dict:
+def run_timing_benchmark(
+    policy: str | Path, out_dir: str | Path, n: int = 1000, n_unseen: int = 300, rate: float = 100.0
+) -> dict:
     from jaxexo.baselines import CFFTG
     from jaxexo.evaluation.compare import make_scenarios
     from jaxexo.evaluation.machine import write_result
@@ -58,22 +65,30 @@ def run_timing_benchmark(policy: str | Path, out_dir: str | Path, n: int = 1000,
     sets = {"thesis": make_scenarios(rl.config, "test", n), "unseen": shape_scenarios(n_unseen)}
     lim = DeviceLimits.from_config(rl.config)
     payload = {"policy": str(policy), "rate_hz": rate, "limits": lim.to_dict(), "sets": {}}
-    lines = ["# Device-ready swings: RL vs CFFTG, same scenes, same device limits", "",
-             f"Policy `{policy}`; every swing timed by jaxexo.inference.swing_timing (TOPP on the joint path, "
-             f"rest-to-rest) and sampled at {rate:g} Hz. Limits (hip, knee): "
-             f"{np.degrees(lim.velocity[0]):.0f}, {np.degrees(lim.velocity[1]):.0f} deg/s; "
-             f"{np.degrees(lim.acceleration[0]):.0f}, {np.degrees(lim.acceleration[1]):.0f} deg/s². "
-             "Peaks and limit checks are finite differences of the exported joint angles at the control rate.", "",
-             "| set | generator | n | path ok % | timed ok % | swing s mean | median | p95 | max | within limits % "
-             "(FD) | peak hip deg/s | peak knee deg/s | end step deg/s max | timing ms/swing | uniform 1 s: peak "
-             "deg/s / deg/s² (median) |",
-             "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
+    lines = [
+        "# Device-ready swings: RL vs CFFTG, same scenes, same device limits",
+        "",
+        f"Policy `{policy}`; every swing timed by jaxexo.inference.swing_timing (TOPP on the joint path, "
+        f"rest-to-rest) and sampled at {rate:g} Hz. Limits (hip, knee): "
+        f"{np.degrees(lim.velocity[0]):.0f}, {np.degrees(lim.velocity[1]):.0f} deg/s; "
+        f"{np.degrees(lim.acceleration[0]):.0f}, {np.degrees(lim.acceleration[1]):.0f} deg/s². "
+        "Peaks and limit checks are finite differences of the exported joint angles at the control rate.",
+        "",
+        "| set | generator | n | path ok % | timed ok % | swing s mean | median | p95 | max | within limits % "
+        "(FD) | peak hip deg/s | peak knee deg/s | end step deg/s max | timing ms/swing | uniform 1 s: peak "
+        "deg/s / deg/s² (median) |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
+    ]
     for set_name, sc in sets.items():
         args = {k: [s[k] for s in sc] for k in ("obstacle", "pivot", "start_y", "step_length")}
         res, durs = {}, {}
         for name, g in gens.items():
-            batch = g.generate_batch(args["obstacle"], pivot=args["pivot"], start_y=args["start_y"],
-                                     step_length=args["step_length"])
+            batch = g.generate_batch(
+                args["obstacle"],
+                pivot=args["pivot"],
+                start_y=args["start_y"],
+                step_length=args["step_length"],
+            )
             trajs = list(batch)
             t0 = time.perf_counter()
             timed = time_swings(trajs, g.config, rate=rate)
@@ -81,30 +96,49 @@ def run_timing_benchmark(policy: str | Path, out_dir: str | Path, n: int = 1000,
             fig, durs[name] = _figures(trajs, timed, rate)
             fig["timing_ms_per_swing"] = ms
             kinds = np.array([s["kind"] for s in sc])
-            fig["by_kind_swing_s_mean"] = {k: float(durs[name][kinds == k].mean()) for k in dict.fromkeys(kinds)}
+            fig["by_kind_swing_s_mean"] = {
+                k: float(durs[name][kinds == k].mean()) for k in dict.fromkeys(kinds)
+            }
             res[name] = fig
             f = fig
-            lines.append(f"| {set_name} | {name} | {f['n']} | {100 * f['path_ok']:.1f} | {100 * f['timed_ok']:.1f} | "
-                         f"{f['swing_s_mean']:.3f} | {f['swing_s_median']:.3f} | {f['swing_s_p95']:.3f} | "
-                         f"{f['swing_s_max']:.3f} | {100 * f['fd_within_limits']:.1f} | "
-                         f"{f['peak_hip_vel_deg_s_mean']:.0f} | "
-                         f"{f['peak_knee_vel_deg_s_mean']:.0f} | {f['end_step_vel_deg_s_max']:.2f} | {ms:.1f} | "
-                         f"{f['uniform_peak_vel_deg_s_median']:.0f} / {f['uniform_peak_acc_deg_s2_median']:.0f} |")
+            lines.append(
+                f"| {set_name} | {name} | {f['n']} | {100 * f['path_ok']:.1f} | {100 * f['timed_ok']:.1f} | "
+                f"{f['swing_s_mean']:.3f} | {f['swing_s_median']:.3f} | {f['swing_s_p95']:.3f} | "
+                f"{f['swing_s_max']:.3f} | {100 * f['fd_within_limits']:.1f} | "
+                f"{f['peak_hip_vel_deg_s_mean']:.0f} | "
+                f"{f['peak_knee_vel_deg_s_mean']:.0f} | {f['end_step_vel_deg_s_max']:.2f} | {ms:.1f} | "
+                f"{f['uniform_peak_vel_deg_s_median']:.0f} / {f['uniform_peak_acc_deg_s2_median']:.0f} |"
+            )
         ratio = durs["rl"] / durs["cfftg"]
-        res["rl_vs_cfftg"] = {"rl_not_longer_fraction": float(np.mean(durs["rl"] <= durs["cfftg"] + 1e-9)),
-                              "duration_ratio_mean": float(ratio.mean()),
-                              "duration_ratio_median": float(np.median(ratio))}
+        res["rl_vs_cfftg"] = {
+            "rl_not_longer_fraction": float(np.mean(durs["rl"] <= durs["cfftg"] + 1e-9)),
+            "duration_ratio_mean": float(ratio.mean()),
+            "duration_ratio_median": float(np.median(ratio)),
+        }
         payload["sets"][set_name] = res
-    lines += ["", "| set | RL swing ≤ CFFTG swing (% of scenes) | RL / CFFTG duration, mean | median |",
-              "|---|---:|---:|---:|"]
+    lines += [
+        "",
+        "| set | RL swing ≤ CFFTG swing (% of scenes) | RL / CFFTG duration, mean | median |",
+        "|---|---:|---:|---:|",
+    ]
     for set_name, res in payload["sets"].items():
         c = res["rl_vs_cfftg"]
-        lines.append(f"| {set_name} | {100 * c['rl_not_longer_fraction']:.1f} | {c['duration_ratio_mean']:.3f} | "
-                     f"{c['duration_ratio_median']:.3f} |")
-    lines += ["", "Swing mean by obstacle kind (s):", "", "| set | kind | RL | CFFTG |", "|---|---|---:|---:|"]
+        lines.append(
+            f"| {set_name} | {100 * c['rl_not_longer_fraction']:.1f} | {c['duration_ratio_mean']:.3f} | "
+            f"{c['duration_ratio_median']:.3f} |"
+        )
+    lines += [
+        "",
+        "Swing mean by obstacle kind (s):",
+        "",
+        "| set | kind | RL | CFFTG |",
+        "|---|---|---:|---:|",
+    ]
     for set_name, res in payload["sets"].items():
         for k, v in res["rl"]["by_kind_swing_s_mean"].items():
-            lines.append(f"| {set_name} | {k} | {v:.3f} | {res['cfftg']['by_kind_swing_s_mean'][k]:.3f} |")
+            lines.append(
+                f"| {set_name} | {k} | {v:.3f} | {res['cfftg']['by_kind_swing_s_mean'][k]:.3f} |"
+            )
     md = "\n".join(lines)
     jpath, mpath = write_result("timing", payload, md, out_dir)
     print(md)

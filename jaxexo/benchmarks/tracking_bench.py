@@ -14,10 +14,18 @@ from pathlib import Path
 
 import numpy as np
 
-SETTINGS = ((0.0, False), (0.05, False), (0.1, False), (0.1, True), (0.2, True))   # (headroom, jerk limit on)
+SETTINGS = (
+    (0.0, False),
+    (0.05, False),
+    (0.1, False),
+    (0.1, True),
+    (0.2, True),
+)  # (headroom, jerk limit on)
 
 
-def run_tracking_benchmark(policy: str | Path, out_dir: str | Path, n: int = 100, rate: float = 100.0) -> dict:
+def run_tracking_benchmark(
+    policy: str | Path, out_dir: str | Path, n: int = 100, rate: float = 100.0
+) -> dict:
     from jaxexo.baselines import CFFTG
     from jaxexo.evaluation.machine import machine_info, write_result
     from jaxexo.inference import TrajectoryGenerator
@@ -30,7 +38,10 @@ def run_tracking_benchmark(policy: str | Path, out_dir: str | Path, n: int = 100
     sc = safety_scenarios(cfg, n, unseen=True)
     kw = {k: [s[k] for s in sc] for k in ("pivot", "start_y", "step_length")}
     obs = [s["obstacle"] for s in sc]
-    batches = {"rl": rl.generate_batch(obs, fallback=None, **kw), "cfftg": CFFTG(cfg).generate_batch(obs, **kw)}
+    batches = {
+        "rl": rl.generate_batch(obs, fallback=None, **kw),
+        "cfftg": CFFTG(cfg).generate_batch(obs, **kw),
+    }
     device = DeviceLimits.from_config(cfg)
     legs = {}
     rows = []
@@ -44,33 +55,60 @@ def run_tracking_benchmark(policy: str | Path, out_dir: str | Path, n: int = 100
                 if ts.ok:
                     leg = legs.setdefault(i, Legs(cfg, ts.scene))
                     # Driven at the device's full limits: the headroom is the controller's room.
-                    drv.append(driven_replay(ts, cfg, limits=dataclasses.replace(lim, headroom=0.0), legs=leg))
+                    drv.append(
+                        driven_replay(
+                            ts, cfg, limits=dataclasses.replace(lim, headroom=0.0), legs=leg
+                        )
+                    )
             air = np.array([d["heel_error_airborne_max_m"] for d in drv])
             dist = np.array([d["mujoco_min_distance_m"] for d in drv])
-            rows.append({"headroom": headroom, "jerk": list(device.jerk) if jerk else None, "generator": g,
-                         "n": len(timed), "ok": len(drv),
-                         "duration_median_s": float(np.median([t.duration for t in timed])),
-                         "duration_p95_s": float(np.percentile([t.duration for t in timed], 95)),
-                         "saturated": int(sum(d["saturated"] for d in drv)),
-                         "heel_error_airborne_p95_m": float(np.percentile(air, 95)),
-                         "heel_error_airborne_max_m": float(air.max()),
-                         "within_margin": int(np.sum(dist < cfg.env.min_clearance)),
-                         "min_distance_m": float(dist.min())})
+            rows.append(
+                {
+                    "headroom": headroom,
+                    "jerk": list(device.jerk) if jerk else None,
+                    "generator": g,
+                    "n": len(timed),
+                    "ok": len(drv),
+                    "duration_median_s": float(np.median([t.duration for t in timed])),
+                    "duration_p95_s": float(np.percentile([t.duration for t in timed], 95)),
+                    "saturated": int(sum(d["saturated"] for d in drv)),
+                    "heel_error_airborne_p95_m": float(np.percentile(air, 95)),
+                    "heel_error_airborne_max_m": float(air.max()),
+                    "within_margin": int(np.sum(dist < cfg.env.min_clearance)),
+                    "min_distance_m": float(dist.min()),
+                }
+            )
             print(rows[-1], flush=True)
-    payload = {"policy": str(policy), "rate_hz": rate, "n": n, "rows": rows, "seconds": time.perf_counter() - t0,
-               "machine": machine_info()}
-    md = "\n".join([
-        "# Tracking room: headroom and jerk limit, driven by PD + inverse-dynamics feed-forward", "",
-        f"Policy `{policy}`; {n} unseen-shape scenes; {rate:g} Hz; swings timed with each setting, driven in "
-        "MuJoCo at the full [device] limits; figures over the swings flagged ok.", "",
-        "| headroom | jerk limit | generator | ok | duration median / p95 s | setpoints clipped | heel error off the "
-        "floor p95 / max mm | within 2 cm driven | min distance mm |",
-        "|---:|---|---|---:|---:|---:|---:|---:|---:|",
-        *[f"| {r['headroom']:.2f} | {'on' if r['jerk'] else 'off'} | {r['generator']} | {r['ok']} | "
-          f"{r['duration_median_s']:.3f} / {r['duration_p95_s']:.3f} | {r['saturated']} | "
-          f"{1e3 * r['heel_error_airborne_p95_m']:.1f} / {1e3 * r['heel_error_airborne_max_m']:.1f} | "
-          f"{r['within_margin']} | {1e3 * r['min_distance_m']:.1f} |" for r in rows], "",
-        f"Machine: {payload['machine']['cpu']}, {payload['machine']['cores']} cores; {payload['seconds']:.0f} s.", ""])
+    payload = {
+        "policy": str(policy),
+        "rate_hz": rate,
+        "n": n,
+        "rows": rows,
+        "seconds": time.perf_counter() - t0,
+        "machine": machine_info(),
+    }
+    md = "\n".join(
+        [
+            "# Tracking room: headroom and jerk limit, driven by PD + inverse-dynamics feed-forward",
+            "",
+            f"Policy `{policy}`; {n} unseen-shape scenes; {rate:g} Hz; swings timed with each setting, driven in "
+            "MuJoCo at the full [device] limits; figures over the swings flagged ok.",
+            "",
+            "| headroom | jerk limit | generator | ok | duration median / p95 s | setpoints clipped | heel error off the "
+            "floor p95 / max mm | within 2 cm driven | min distance mm |",
+            "|---:|---|---|---:|---:|---:|---:|---:|---:|",
+            *[
+                f"| {r['headroom']:.2f} | {'on' if r['jerk'] else 'off'} | {r['generator']} | {r['ok']} | "
+                f"{r['duration_median_s']:.3f} / {r['duration_p95_s']:.3f} | {r['saturated']} | "
+                f"{1e3 * r['heel_error_airborne_p95_m']:.1f} / {1e3 * r['heel_error_airborne_max_m']:.1f} | "
+                f"{r['within_margin']} | {1e3 * r['min_distance_m']:.1f} |"
+                for r in rows
+            ],
+            "",
+            f"Machine: {payload['machine']['cpu']}, {payload['machine']['cores']} cores; {payload['seconds']:.0f} s.",
+            "",
+        ]
+    )
     write_result("tracking", payload, md, out_dir)
     print(md)
     return payload

@@ -41,22 +41,41 @@ def throughput(cfg: Config, updates_per_call: int, repeats: int = 3, devices=Non
         times.append(time.perf_counter() - t0)
     steps = updates_per_call * cfg.train.num_envs * cfg.train.rollout_steps
     med = float(np.median(times))
-    return {"trace": cfg.train.trace, "control": cfg.train.control, "num_envs": cfg.train.num_envs,
-            "hidden": list(cfg.train.hidden), "rollout_steps": cfg.train.rollout_steps,
-            "env_steps_per_call": steps, "median_s": med, "env_steps_per_s": steps / med,
-            "compile_s": compile_s, "repeats": repeats, "devices": len(tr.devices or [0])}
+    return {
+        "trace": cfg.train.trace,
+        "control": cfg.train.control,
+        "num_envs": cfg.train.num_envs,
+        "hidden": list(cfg.train.hidden),
+        "rollout_steps": cfg.train.rollout_steps,
+        "env_steps_per_call": steps,
+        "median_s": med,
+        "env_steps_per_s": steps / med,
+        "compile_s": compile_s,
+        "repeats": repeats,
+        "devices": len(tr.devices or [0]),
+    }
 
 
 def thesis_network_config(base: Config, trace: str, num_envs: int = 4096) -> Config:
-    tc = dataclasses.replace(base.train, trace=trace, num_envs=num_envs, hidden=(64, 32, 32, 32),
-                             layer_norm=False, rollout_steps=16, num_minibatches=4, num_epochs=1,
-                             budget_env_steps=10**9, budget_episodes=0)
+    tc = dataclasses.replace(
+        base.train,
+        trace=trace,
+        num_envs=num_envs,
+        hidden=(64, 32, 32, 32),
+        layer_norm=False,
+        rollout_steps=16,
+        num_minibatches=4,
+        num_epochs=1,
+        budget_env_steps=10**9,
+        budget_episodes=0,
+    )
     env = dataclasses.replace(base.env, obs_mode="thesis")
     return dataclasses.replace(base, train=tc, env=env)
 
 
-def run_train_benchmark(out_dir, default_config: str = "configs/default.toml", thesis_configs=(),
-                        progress=print) -> dict:
+def run_train_benchmark(
+    out_dir, default_config: str = "configs/default.toml", thesis_configs=(), progress=print
+) -> dict:
     """Throughput (thesis network, 4096 envs, forward view with 4 and 1 minibatches, backward view)
     and time-to-result of the default model and of the thesis configs, each through the real
     `jaxexo train` driver (compilation included in the wall time)."""
@@ -71,34 +90,58 @@ def run_train_benchmark(out_dir, default_config: str = "configs/default.toml", t
     devices = jax.local_devices()
     for trace, minibatches, updates in (("forward", 4, 10), ("forward", 1, 10), ("backward", 4, 1)):
         cfg = thesis_network_config(base, trace)
-        cfg = dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, num_minibatches=minibatches))
+        cfg = dataclasses.replace(
+            cfg, train=dataclasses.replace(cfg.train, num_minibatches=minibatches)
+        )
         r = throughput(cfg, updates, repeats=3 if trace == "forward" else 2, devices=devices)
         r["num_minibatches"] = minibatches
-        progress(f"thesis network, {trace} view, {minibatches} minibatch(es), 4096 envs, {r['devices']} device(s): "
-                 f"{r['env_steps_per_s'] / 1e6:.3f} M env-steps/s")
+        progress(
+            f"thesis network, {trace} view, {minibatches} minibatch(es), 4096 envs, {r['devices']} device(s): "
+            f"{r['env_steps_per_s'] / 1e6:.3f} M env-steps/s"
+        )
         rows.append(r)
     runs = {}
     for name in [default_config, *thesis_configs]:
         with tempfile.TemporaryDirectory() as d:
             res = run_training(load_config(name), d, seed=0, progress=False)
-        runs[name] = {k: res[k] for k in ("success_raw", "accuracy", "held_out", "by_obstacle", "train_seconds",
-                                          "episodes", "env_steps")}
-        progress(f"{name}: trained in {res['train_seconds']:.1f} s, success_raw {res['success_raw']:.3f}, "
-                 f"held-out success_raw {(res['held_out'] or {}).get('success_raw')}")
+        runs[name] = {
+            k: res[k]
+            for k in (
+                "success_raw",
+                "accuracy",
+                "held_out",
+                "by_obstacle",
+                "train_seconds",
+                "episodes",
+                "env_steps",
+            )
+        }
+        progress(
+            f"{name}: trained in {res['train_seconds']:.1f} s, success_raw {res['success_raw']:.3f}, "
+            f"held-out success_raw {(res['held_out'] or {}).get('success_raw')}"
+        )
     lines = ["# Trainer benchmarks", "", "| what | figure |", "|---|---:|"]
     for r in rows:
         mb = "" if r["trace"] == "backward" else f", {r['num_minibatches']} minibatch(es)/update"
-        lines.append(f"| thesis network, {r['trace']} view{mb}, {r['num_envs']} envs, {r['devices']} CPU devices | "
-                     f"{r['env_steps_per_s'] / 1e6:.3f} M env-steps/s |")
+        lines.append(
+            f"| thesis network, {r['trace']} view{mb}, {r['num_envs']} envs, {r['devices']} CPU devices | "
+            f"{r['env_steps_per_s'] / 1e6:.3f} M env-steps/s |"
+        )
     for name, r in runs.items():
         held = (r["held_out"] or {}).get("success_raw")
-    lines += ["", "| config | train wall s (incl. compile) | episodes | env steps | accuracy (eq 3.1) | "
-              "strict success, raw moves | held-out, raw moves |", "|---|---:|---:|---:|---:|---:|---:|"]
+    lines += [
+        "",
+        "| config | train wall s (incl. compile) | episodes | env steps | accuracy (eq 3.1) | "
+        "strict success, raw moves | held-out, raw moves |",
+        "|---|---:|---:|---:|---:|---:|---:|",
+    ]
     for name, r in runs.items():
         held = (r["held_out"] or {}).get("success_raw")
-        lines.append(f"| `{Path(name).relative_to(Path(name).parents[1]) if 'thesis' in name else Path(name).name}` | "
-                     f"{r['train_seconds']:.1f} | {r['episodes']} | {r['env_steps']:,} | {r['accuracy']:.3f} | "
-                     f"{r['success_raw']:.3f} | {held:.3f} |")
+        lines.append(
+            f"| `{Path(name).relative_to(Path(name).parents[1]) if 'thesis' in name else Path(name).name}` | "
+            f"{r['train_seconds']:.1f} | {r['episodes']} | {r['env_steps']:,} | {r['accuracy']:.3f} | "
+            f"{r['success_raw']:.3f} | {held:.3f} |"
+        )
     md = "\n".join(lines)
     write_result("train", {"throughput": rows, "runs": runs}, md, out_dir)
     progress(md)
@@ -147,23 +190,35 @@ def update_breakdown(cfg: Config, repeats: int = 5, calls: int = 4) -> dict:
         def one(c, k):
             es = c
             mask = tr._mask(es, hyper)
-            a = jax.random.randint(k, (n,), 0, tr.env.num_actions) if mask is None else \
-                jax.random.categorical(k, jnp.where(mask, 0.0, -jnp.inf), axis=-1).astype(jnp.int32)
+            a = (
+                jax.random.randint(k, (n,), 0, tr.env.num_actions)
+                if mask is None
+                else jax.random.categorical(k, jnp.where(mask, 0.0, -jnp.inf), axis=-1).astype(
+                    jnp.int32
+                )
+            )
             _, es, r, *_ = tr._env_step(k, es, a, hyper)
             return es, r.sum()
+
         _, r = jax.lax.scan(one, s.env_state, jax.random.split(jax.random.fold_in(s.key, i), t))
         return r.sum()
 
-    def acting(i, s):   # each pass on its own input (identical passes would be computed once)
-        return sum(tr.net.apply(s.params, s.obs + 1e-6 * (i + j)).sum()
-                   + tr.net.apply(s.target_params, s.obs - 1e-6 * (i + j)).sum() for j in range(t))
+    def acting(i, s):  # each pass on its own input (identical passes would be computed once)
+        return sum(
+            tr.net.apply(s.params, s.obs + 1e-6 * (i + j)).sum()
+            + tr.net.apply(s.target_params, s.obs - 1e-6 * (i + j)).sum()
+            for j in range(t)
+        )
 
     def grads(i, s, tr_):
         obs = tr_.obs.reshape((n_mb * epochs, -1) + tr_.obs.shape[2:])[:, :mb] + 1e-9 * i
 
         def loss(p, o):
             return 0.5 * jnp.mean(tr.net.apply(p, o) ** 2)
-        return sum(total(jax.grad(loss)(s.params, obs[j % obs.shape[0]])) for j in range(n_mb * epochs))
+
+        return sum(
+            total(jax.grad(loss)(s.params, obs[j % obs.shape[0]])) for j in range(n_mb * epochs)
+        )
 
     def optimizer(i, s):
         g = jax.tree.map(lambda p: p * (1.0 + 1e-9 * i), s.params)
@@ -174,21 +229,50 @@ def update_breakdown(cfg: Config, repeats: int = 5, calls: int = 4) -> dict:
         return total(p)
 
     parts = {
-        "update": timed(lambda i, s: total(tr.update(s.replace(update=s.update * 0 + i), hyper)[1]), ts),
-        "rollout": timed(lambda i, s: total(tr._rollout(s.replace(key=jax.random.fold_in(s.key, i)), hyper, eps)[1]), ts),
-        "learn": timed(lambda i, s, tr_: total(tr._learn(s.replace(key=jax.random.fold_in(s.key, i)), tr_, hyper,
-                                                         eps)[1:]), ts, trans),
+        "update": timed(
+            lambda i, s: total(tr.update(s.replace(update=s.update * 0 + i), hyper)[1]), ts
+        ),
+        "rollout": timed(
+            lambda i, s: total(
+                tr._rollout(s.replace(key=jax.random.fold_in(s.key, i)), hyper, eps)[1]
+            ),
+            ts,
+        ),
+        "learn": timed(
+            lambda i, s, tr_: total(
+                tr._learn(s.replace(key=jax.random.fold_in(s.key, i)), tr_, hyper, eps)[1:]
+            ),
+            ts,
+            trans,
+        ),
         "environment steps" + (" with the mask" if tr.env.shield else ""): timed(env_steps, ts),
         "network: acting and target passes": timed(acting, ts),
         "network: forward and backward passes": timed(grads, ts, trans),
         "optimizer: clipping and Adam": timed(optimizer, ts),
-        "lambda-returns": timed(lambda i, s, tr_: td_lambda.lambda_returns(
-            tr_.reward + 1e-9 * i, tr_.target_q, tr_.terminated, tr_.terminated | tr_.truncated, tr_.greedy,
-            hyper.gamma, hyper.lam).sum(), ts, trans),
+        "lambda-returns": timed(
+            lambda i, s, tr_: td_lambda.lambda_returns(
+                tr_.reward + 1e-9 * i,
+                tr_.target_q,
+                tr_.terminated,
+                tr_.terminated | tr_.truncated,
+                tr_.greedy,
+                hyper.gamma,
+                hyper.lam,
+            ).sum(),
+            ts,
+            trans,
+        ),
     }
-    return {"num_envs": n, "rollout_steps": t, "num_minibatches": n_mb, "num_epochs": epochs,
-            "hidden": list(cfg.train.hidden), "shield": bool(tr.env.shield), "ms_per_update": parts,
-            "env_steps_per_s_one_device": n * t / (parts["update"] / 1e3)}
+    return {
+        "num_envs": n,
+        "rollout_steps": t,
+        "num_minibatches": n_mb,
+        "num_epochs": epochs,
+        "hidden": list(cfg.train.hidden),
+        "shield": bool(tr.env.shield),
+        "ms_per_update": parts,
+        "env_steps_per_s_one_device": n * t / (parts["update"] / 1e3),
+    }
 
 
 def run_mask_ab_benchmark(path, updates: int, rounds: int, out_dir: Path) -> dict:
@@ -204,10 +288,12 @@ def run_mask_ab_benchmark(path, updates: int, rounds: int, out_dir: Path) -> dic
     for kind in ("plain", "batched"):
         tr = Trainer(cfg, devices=jax.local_devices())
         if kind == "plain":
-            tr._mask = lambda st, h, tr=tr: jax.vmap(tr.env.action_mask, in_axes=(0, None))(st, h.env)
+            tr._mask = lambda st, h, tr=tr: jax.vmap(tr.env.action_mask, in_axes=(0, None))(
+                st, h.env
+            )
         ts = tr.place(jax.jit(tr.init)(jax.random.PRNGKey(0), hyper))
         run = jax.jit(tr.run, static_argnums=2)
-        ts, _ = jax.block_until_ready(run(ts, hyper, updates))      # compiles
+        ts, _ = jax.block_until_ready(run(ts, hyper, updates))  # compiles
         progs[kind] = [run, ts, []]
     steps = updates * cfg.train.num_envs * cfg.train.rollout_steps
     for _ in range(rounds):
@@ -217,15 +303,28 @@ def run_mask_ab_benchmark(path, updates: int, rounds: int, out_dir: Path) -> dic
             prog[1], _ = jax.block_until_ready(run(ts, hyper, updates))
             times.append(time.perf_counter() - t0)
     rates = {k: steps / float(np.median(v[2])) for k, v in progs.items()}
-    out = {"config": Path(path).name, "updates_per_call": updates, "rounds": rounds, "env_steps_per_call": steps,
-           "devices": len(jax.local_devices()), "env_steps_per_s": rates,
-           "times_s": {k: v[2] for k, v in progs.items()}, "ratio": rates["batched"] / rates["plain"]}
-    md = "\n".join([
-        f"# Shielded trainer, plain mask vs batched mask ({out['config']}, {out['devices']} CPU devices)", "",
-        "| mask | steady env-steps/s (median) |", "|---|---:|",
-        *(f"| {k} | {v / 1e3:.0f}k |" for k, v in rates.items()), "",
-        f"Batched / plain: {out['ratio']:.2f}x; {rounds} alternated calls of {steps:,} env steps each. Shared "
-        "machine: other jobs ran at the same time; the alternation exposes both to the same load."])
+    out = {
+        "config": Path(path).name,
+        "updates_per_call": updates,
+        "rounds": rounds,
+        "env_steps_per_call": steps,
+        "devices": len(jax.local_devices()),
+        "env_steps_per_s": rates,
+        "times_s": {k: v[2] for k, v in progs.items()},
+        "ratio": rates["batched"] / rates["plain"],
+    }
+    md = "\n".join(
+        [
+            f"# Shielded trainer, plain mask vs batched mask ({out['config']}, {out['devices']} CPU devices)",
+            "",
+            "| mask | steady env-steps/s (median) |",
+            "|---|---:|",
+            *(f"| {k} | {v / 1e3:.0f}k |" for k, v in rates.items()),
+            "",
+            f"Batched / plain: {out['ratio']:.2f}x; {rounds} alternated calls of {steps:,} env steps each. Shared "
+            "machine: other jobs ran at the same time; the alternation exposes both to the same load.",
+        ]
+    )
     write_result("train-mask-ab", out, md, out_dir)
     print(md)
     return out
@@ -243,17 +342,27 @@ def run_breakdown_benchmark(paths, label: str, out_dir: Path) -> dict:
         r["config"] = Path(path).name
         rows.append(r)
         print(r, flush=True)
-    lines = [f"# Where a training update's time goes ({label or 'one device'})", "",
-             "One forward-view update (T steps of N environments, then the learning part) on one CPU device "
-             f"(of {len(jax.local_devices())}), each part timed alone on the update's own shapes in a jitted loop; "
-             "milliseconds per update and share of the whole update. The parts inside the rollout and the "
-             "learning part are measured alone, so they need not add up to their totals exactly.", ""]
+    lines = [
+        f"# Where a training update's time goes ({label or 'one device'})",
+        "",
+        "One forward-view update (T steps of N environments, then the learning part) on one CPU device "
+        f"(of {len(jax.local_devices())}), each part timed alone on the update's own shapes in a jitted loop; "
+        "milliseconds per update and share of the whole update. The parts inside the rollout and the "
+        "learning part are measured alone, so they need not add up to their totals exactly.",
+        "",
+    ]
     for r in rows:
         parts = r["ms_per_update"]
-        lines += [f"## {r['config']} (N = {r['num_envs']}, T = {r['rollout_steps']}, {r['num_minibatches']} "
-                  f"minibatches x {r['num_epochs']} epoch(s), hidden {r['hidden']}, shield {r['shield']})", "",
-                  "| part | ms per update | share of the update |", "|---|---:|---:|"]
-        lines += [f"| {k} | {v:.2f} | {100 * v / parts['update']:.0f} % |" for k, v in parts.items()]
+        lines += [
+            f"## {r['config']} (N = {r['num_envs']}, T = {r['rollout_steps']}, {r['num_minibatches']} "
+            f"minibatches x {r['num_epochs']} epoch(s), hidden {r['hidden']}, shield {r['shield']})",
+            "",
+            "| part | ms per update | share of the update |",
+            "|---|---:|---:|",
+        ]
+        lines += [
+            f"| {k} | {v:.2f} | {100 * v / parts['update']:.0f} % |" for k, v in parts.items()
+        ]
         lines += ["", f"One device: {r['env_steps_per_s_one_device'] / 1e3:.0f}k env-steps/s.", ""]
     md = "\n".join(lines)
     write_result("train-breakdown" + (f"-{label}" if label else ""), {"rows": rows}, md, out_dir)

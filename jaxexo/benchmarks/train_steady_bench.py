@@ -31,7 +31,9 @@ from jaxexo.evaluation.machine import write_result
 from jaxexo.train.driver import run_training
 
 
-def matmul_roofline(rows: int = 1024, width: int = 128, length: int = 200, repeats: int = 5) -> float:
+def matmul_roofline(
+    rows: int = 1024, width: int = 128, length: int = 200, repeats: int = 5
+) -> float:
     """The machine's float32 matmul rate (FLOP/s): (rows, width) x (width, width) products in a jitted
     loop on every host device at once (one block of rows each), median of ``repeats`` timed calls.
     A 128-wide MLP layer is this product, so it bounds what the trainer's network work can reach."""
@@ -40,7 +42,11 @@ def matmul_roofline(rows: int = 1024, width: int = 128, length: int = 200, repea
     def loop(x, w):
         return jax.lax.scan(lambda c, _: ((c @ w) * 0.01, None), x, None, length=length)[0]
 
-    f = jax.jit(jax.shard_map(loop, mesh=Mesh(np.array(devs), ("d",)), in_specs=(P("d"), P()), out_specs=P("d")))
+    f = jax.jit(
+        jax.shard_map(
+            loop, mesh=Mesh(np.array(devs), ("d",)), in_specs=(P("d"), P()), out_specs=P("d")
+        )
+    )
     x, w = jnp.ones((rows * len(devs), width)), jnp.full((width, width), 0.01)
     f(x, w).block_until_ready()
     times = []
@@ -68,8 +74,14 @@ def _commit() -> str:
     """The short commit of the checkout the imported jaxexo comes from ("?" where git cannot tell)."""
     src = Path(importlib.util.find_spec("jaxexo").origin).resolve().parent.parent
     try:
-        return subprocess.run(["git", "-C", str(src), "rev-parse", "--short", "HEAD"], capture_output=True,
-                              text=True).stdout.strip() or "?"
+        return (
+            subprocess.run(
+                ["git", "-C", str(src), "rev-parse", "--short", "HEAD"],
+                capture_output=True,
+                text=True,
+            ).stdout.strip()
+            or "?"
+        )
     except OSError:
         return "?"
 
@@ -88,47 +100,72 @@ def run_train_steady(paths, budget: int, label: str, out_dir: Path) -> dict:
     rows = []
     for path in paths:
         cfg = load_config(path)
-        cfg = dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, budget_env_steps=budget))
+        cfg = dataclasses.replace(
+            cfg, train=dataclasses.replace(cfg.train, budget_env_steps=budget)
+        )
         counts.clear()
         with tempfile.TemporaryDirectory() as d:
             res = run_training(cfg, Path(d) / "run", seed=0, progress=False)
-            chunks = [json.loads(x) for x in (Path(d) / "run" / "metrics.jsonl").read_text().splitlines()]
+            chunks = [
+                json.loads(x) for x in (Path(d) / "run" / "metrics.jsonl").read_text().splitlines()
+            ]
         rates = [c["env_steps_per_s"] for c in chunks]
-        row = {"config": Path(path).name, "budget_env_steps": budget, "devices": len(jax.local_devices()),
-               "chunks": len(chunks), "chunk_env_steps_per_s": rates,
-               "steady_env_steps_per_s": float(np.median(rates[2:])) if len(rates) > 2 else None,
-               "compilations_run": counts.get("jit(run)", 0), "train_seconds": res["train_seconds"],
-               "validation_success_raw": res["validation_success_raw"], "success_raw": res["success_raw"],
-               "network_flops_per_env_step": network_flops_per_step(cfg)}
+        row = {
+            "config": Path(path).name,
+            "budget_env_steps": budget,
+            "devices": len(jax.local_devices()),
+            "chunks": len(chunks),
+            "chunk_env_steps_per_s": rates,
+            "steady_env_steps_per_s": float(np.median(rates[2:])) if len(rates) > 2 else None,
+            "compilations_run": counts.get("jit(run)", 0),
+            "train_seconds": res["train_seconds"],
+            "validation_success_raw": res["validation_success_raw"],
+            "success_raw": res["success_raw"],
+            "network_flops_per_env_step": network_flops_per_step(cfg),
+        }
         rows.append(row)
         print(json.dumps(row), flush=True)
     roof = matmul_roofline()
     for r in rows:
-        r["network_flop_per_s"] = (r["steady_env_steps_per_s"] or 0.0) * r["network_flops_per_env_step"]
+        r["network_flop_per_s"] = (r["steady_env_steps_per_s"] or 0.0) * r[
+            "network_flops_per_env_step"
+        ]
         r["fraction_of_roofline"] = r["network_flop_per_s"] / roof
     md = steady_markdown(rows, label, commit, roof)
     name = "train-steady" + (f"-{label}" if label else "")
-    write_result(name, {"rows": rows, "commit": commit, "label": label, "matmul_roofline_flop_per_s": roof}, md,
-                 out_dir)
+    write_result(
+        name,
+        {"rows": rows, "commit": commit, "label": label, "matmul_roofline_flop_per_s": roof},
+        md,
+        out_dir,
+    )
     print(md)
     return {"rows": rows}
 
 
 def steady_markdown(rows: list[dict], label: str, commit: str, roof: float) -> str:
-    lines = [f"# Trainer steady rate through `jaxexo train` ({label}, jaxexo at {commit})", "",
-             "| config | env steps | chunks | compilations of the chunk program | chunk 1 (incl. compile) | chunk 2 | "
-             "steady (median of chunks 3+) | network GFLOP/s at the steady rate | of the matmul roofline | train s |",
-             "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    lines = [
+        f"# Trainer steady rate through `jaxexo train` ({label}, jaxexo at {commit})",
+        "",
+        "| config | env steps | chunks | compilations of the chunk program | chunk 1 (incl. compile) | chunk 2 | "
+        "steady (median of chunks 3+) | network GFLOP/s at the steady rate | of the matmul roofline | train s |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
     for r in rows:
         c = r["chunk_env_steps_per_s"]
-        lines.append(f"| {r['config']} | {r['budget_env_steps']:,} | {r['chunks']} | {r['compilations_run']} | "
-                     f"{c[0] / 1e3:.0f}k | {c[1] / 1e3 if len(c) > 1 else float('nan'):.0f}k | "
-                     f"{(r['steady_env_steps_per_s'] or float('nan')) / 1e3:.0f}k | {r['network_flop_per_s'] / 1e9:.0f} | "
-                     f"{100 * r['fraction_of_roofline']:.0f} % | {r['train_seconds']:.1f} |")
-    lines += ["", "Env-steps/s per chunk as metrics.jsonl reports them. Network GFLOP/s: the steady rate times the "
-              "matmul FLOPs of the acting, bootstrap and update passes per env step (LayerNorm, biases and the "
-              "environment not counted). Matmul roofline: (1024, 128) x (128, 128) float32 products in a jitted loop "
-              f"on every host device, measured in the same process after the runs: {roof / 1e9:.0f} GFLOP/s. "
-              "Shared machine: other jobs may run at the same time, so rates are noisy; compare rows measured back "
-              "to back."]
+        lines.append(
+            f"| {r['config']} | {r['budget_env_steps']:,} | {r['chunks']} | {r['compilations_run']} | "
+            f"{c[0] / 1e3:.0f}k | {c[1] / 1e3 if len(c) > 1 else float('nan'):.0f}k | "
+            f"{(r['steady_env_steps_per_s'] or float('nan')) / 1e3:.0f}k | {r['network_flop_per_s'] / 1e9:.0f} | "
+            f"{100 * r['fraction_of_roofline']:.0f} % | {r['train_seconds']:.1f} |"
+        )
+    lines += [
+        "",
+        "Env-steps/s per chunk as metrics.jsonl reports them. Network GFLOP/s: the steady rate times the "
+        "matmul FLOPs of the acting, bootstrap and update passes per env step (LayerNorm, biases and the "
+        "environment not counted). Matmul roofline: (1024, 128) x (128, 128) float32 products in a jitted loop "
+        f"on every host device, measured in the same process after the runs: {roof / 1e9:.0f} GFLOP/s. "
+        "Shared machine: other jobs may run at the same time, so rates are noisy; compare rows measured back "
+        "to back.",
+    ]
     return "\n".join(lines)

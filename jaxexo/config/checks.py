@@ -15,8 +15,9 @@ class ConfigError(ValueError):
     """A config value that is invalid or impossible; the message starts with the field's path."""
 
 
-
-def _number(path: str, v: Any, *, positive=False, nonneg=False, integer=False, lo=None, hi=None) -> float:
+def _number(
+    path: str, v: Any, *, positive=False, nonneg=False, integer=False, lo=None, hi=None
+) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         raise ConfigError(f"{path}: expected a number, got {v!r}")
     if integer and not (isinstance(v, int) or float(v).is_integer()):
@@ -37,16 +38,22 @@ def _number(path: str, v: Any, *, positive=False, nonneg=False, integer=False, l
 def number(*, positive=False, nonneg=False, integer=False, lo=None, hi=None) -> Callable:
     if integer and hi is None:
         raise TypeError("an integer field needs an upper bound (hi)")
-    return lambda path, v: _number(path, v, positive=positive, nonneg=nonneg, integer=integer, lo=lo, hi=hi)
+    return lambda path, v: _number(
+        path, v, positive=positive, nonneg=nonneg, integer=integer, lo=lo, hi=hi
+    )
 
 
 def fraction(positive: bool = False) -> Callable:
     """A number in [0, 1] ((0, 1] if ``positive``)."""
+
     def check(path, v):
         x = _number(path, v, positive=positive, nonneg=True)
         if x > 1:
-            raise ConfigError(f"{path}: a fraction, must be in {'(0' if positive else '[0'}, 1], got {x}")
+            raise ConfigError(
+                f"{path}: a fraction, must be in {'(0' if positive else '[0'}, 1], got {x}"
+            )
         return x
+
     return check
 
 
@@ -71,6 +78,7 @@ def vector(n: int | None = None, *, max_len: int | None = None, **kw) -> Callabl
         if max_len is not None and len(out) > max_len:
             raise ConfigError(f"{path}: at most {max_len} numbers, got {len(out)}")
         return out
+
     return check
 
 
@@ -112,11 +120,17 @@ def pivot_weights(path: str, v: Any) -> tuple[float, float, float]:
         for x in v:
             _choice(path, x, PIVOT_CONDITIONS)
         return tuple(1.0 if c in v else 0.0 for c in PIVOT_CONDITIONS)
-    if isinstance(v, (list, tuple)) and len(v) == len(PIVOT_CONDITIONS) and not any(isinstance(x, str) for x in v):
+    if (
+        isinstance(v, (list, tuple))
+        and len(v) == len(PIVOT_CONDITIONS)
+        and not any(isinstance(x, str) for x in v)
+    ):
         return _vector(path, v, len(PIVOT_CONDITIONS), nonneg=True)
     if isinstance(v, dict):
         for x in v:
             _choice(f"{path}.{x}", x, PIVOT_CONDITIONS)
         return tuple(_number(f"{path}.{c}", v.get(c, 0.0), nonneg=True) for c in PIVOT_CONDITIONS)
-    raise ConfigError(f"{path}: expected a list of names from {list(PIVOT_CONDITIONS)}, three weights "
-                      "in that order, or a table of weights")
+    raise ConfigError(
+        f"{path}: expected a list of names from {list(PIVOT_CONDITIONS)}, three weights "
+        "in that order, or a table of weights"
+    )

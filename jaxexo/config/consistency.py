@@ -22,20 +22,30 @@ from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 def validate(cfg: Config) -> None:
     env, kin, rew, lay, tr = cfg.env, cfg.kinematics, cfg.reward, cfg.layout, cfg.train
     if tr.budget_episodes == 0 and tr.budget_env_steps == 0:
-        raise ConfigError("train.budget_episodes: set a budget (budget_episodes and/or budget_env_steps > 0)")
+        raise ConfigError(
+            "train.budget_episodes: set a budget (budget_episodes and/or budget_env_steps > 0)"
+        )
     if tr.num_envs % tr.num_minibatches:
-        raise ConfigError(f"train.num_minibatches: {tr.num_minibatches} does not divide train.num_envs = "
-                          f"{tr.num_envs} (minibatches are blocks of environments)")
+        raise ConfigError(
+            f"train.num_minibatches: {tr.num_minibatches} does not divide train.num_envs = "
+            f"{tr.num_envs} (minibatches are blocks of environments)"
+        )
     if num_updates(cfg) > INT32_MAX:
         which = "budget_env_steps" if tr.budget_env_steps else "budget_episodes"
-        raise ConfigError(f"train.{which}: needs {num_updates(cfg)} updates of train.num_envs x "
-                          f"train.rollout_steps env steps, more than a scan can count ({INT32_MAX})")
+        raise ConfigError(
+            f"train.{which}: needs {num_updates(cfg)} updates of train.num_envs x "
+            f"train.rollout_steps env steps, more than a scan can count ({INT32_MAX})"
+        )
     if tr.eps_end > tr.eps_start:
         raise ConfigError("train.eps_end: must not exceed train.eps_start")
     if sum(rew.traj_weights) <= 0:
-        raise ConfigError("reward.traj_weights: at least one weight must be > 0 (eq 2.38 divides by the sum)")
+        raise ConfigError(
+            "reward.traj_weights: at least one weight must be > 0 (eq 2.38 divides by the sum)"
+        )
     if sum(rew.exo_weights) <= 0:
-        raise ConfigError("reward.exo_weights: at least one weight must be > 0 (eq 2.52 divides by the sum)")
+        raise ConfigError(
+            "reward.exo_weights: at least one weight must be > 0 (eq 2.52 divides by the sum)"
+        )
     if sum(lay.pivot) <= 0:
         raise ConfigError("layout.pivot: at least one pivot condition needs a weight > 0")
     if sum(o.weight for o in lay.obstacles) <= 0:
@@ -51,17 +61,25 @@ def validate(cfg: Config) -> None:
             _SCENES_OK.clear()
         _SCENES_OK.add(key)
     if env.shield and env.shield_clearance < env.min_clearance:
-        raise ConfigError(f"env.shield_clearance: {env.shield_clearance} m is below env.min_clearance = "
-                          f"{env.min_clearance} m; the shield must keep at least the margin that a safe swing needs")
+        raise ConfigError(
+            f"env.shield_clearance: {env.shield_clearance} m is below env.min_clearance = "
+            f"{env.min_clearance} m; the shield must keep at least the margin that a safe swing needs"
+        )
     if env.shield and env.floor_clearance >= env.step_size:
-        raise ConfigError(f"env.floor_clearance: {env.floor_clearance} m is not below env.step_size = "
-                          f"{env.step_size} m; the first move off the floor could not clear it")
+        raise ConfigError(
+            f"env.floor_clearance: {env.floor_clearance} m is not below env.step_size = "
+            f"{env.step_size} m; the first move off the floor could not clear it"
+        )
     if rew.safety_distance < env.min_clearance:
-        raise ConfigError(f"reward.safety_distance: {rew.safety_distance} m is below env.min_clearance = "
-                          f"{env.min_clearance} m; the safety term (eq 2.35) must pay the policy to keep the "
-                          "margin that a safe swing needs, not only to avoid contact")
+        raise ConfigError(
+            f"reward.safety_distance: {rew.safety_distance} m is below env.min_clearance = "
+            f"{env.min_clearance} m; the safety term (eq 2.35) must pay the policy to keep the "
+            "margin that a safe swing needs, not only to avoid contact"
+        )
     if env.max_steps < rew.step_threshold:
-        raise ConfigError(f"env.max_steps: {env.max_steps} is below reward.step_threshold = {rew.step_threshold}")
+        raise ConfigError(
+            f"env.max_steps: {env.max_steps} is below reward.step_threshold = {rew.step_threshold}"
+        )
 
 
 # (env, kinematics, layout) sections that passed _check_scene: its reach and room checks are costly
@@ -76,8 +94,10 @@ def _check_scene(cfg: Config) -> None:
     env, kin, lay = cfg.env, cfg.kinematics, cfg.layout
     need = max(len(o.unit_vertices()) for o in lay.obstacles)
     if env.max_vertices and env.max_vertices < need:
-        raise ConfigError(f"env.max_vertices: {env.max_vertices} is fewer than the {need} outline vertices "
-                          "of an obstacle in layout.obstacles (0 picks the size automatically)")
+        raise ConfigError(
+            f"env.max_vertices: {env.max_vertices} is fewer than the {need} outline vertices "
+            "of an obstacle in layout.obstacles (0 picks the size automatically)"
+        )
     if lay.terrain is not None:
         _check_terrain(cfg)
     j = lay.size_jitter
@@ -94,29 +114,39 @@ def _check_scene(cfg: Config) -> None:
                 # The obstacle itself is large enough: the jitter shrinks it below a step.
                 raise ConfigError(
                     f"layout.size_jitter: {j} shrinks {p}.{field_} to {smallest:.3f} m, not larger than "
-                    f"env.step_size = {env.step_size} m: a step could jump through the obstacle")
+                    f"env.step_size = {env.step_size} m: a step could jump through the obstacle"
+                )
             raise ConfigError(
                 f"env.step_size: {env.step_size} m is not smaller than {p}.{field_} "
-                f"(smallest {smallest:.3f} m): a step could jump through the obstacle")
+                f"(smallest {smallest:.3f} m): a step could jump through the obstacle"
+            )
         _check_room(cfg, p, w_max)
         top = h_max
         mid_z = top + env.mid_goal_clearance
         if mid_z + env.mid_goal_half_size[1] >= env.max_z:
-            raise ConfigError(f"{p}.height: up to {h_max:.3f} m puts the mid-goal above env.max_z = {env.max_z} m")
+            raise ConfigError(
+                f"{p}.height: up to {h_max:.3f} m puts the mid-goal above env.max_z = {env.max_z} m"
+            )
         if top + env.mid_goal_clearance - env.mid_goal_half_size[1] <= top:
-            raise ConfigError("env.mid_goal_half_size: the mid-goal box must lie above the obstacle "
-                              "(mid_goal_clearance must exceed its half height)")
+            raise ConfigError(
+                "env.mid_goal_half_size: the mid-goal box must lie above the obstacle "
+                "(mid_goal_clearance must exceed its half height)"
+            )
         _check_clearable(cfg, p, h_max, w_max)
     if env.step_size > 2.0 * env.goal_tolerance[0]:
         # a heel moving along the ground must be able to land inside the goal window (eq 2.32)
-        raise ConfigError(f"env.step_size: {env.step_size} m is longer than the goal window "
-                          f"(2 x env.goal_tolerance[0] = {2.0 * env.goal_tolerance[0]:.3f} m): a step could "
-                          "jump over the goal")
+        raise ConfigError(
+            f"env.step_size: {env.step_size} m is longer than the goal window "
+            f"(2 x env.goal_tolerance[0] = {2.0 * env.goal_tolerance[0]:.3f} m): a step could "
+            "jump over the goal"
+        )
     if env.bounds_y[0] > 0.0:
         raise ConfigError("env.bounds_y: the lower bound must be at or behind the start (y = 0)")
     goal_far = lay.start_shift[1] + lay.step_length[1] + env.goal_tolerance[0]
     if env.bounds_y[1] <= goal_far:
-        raise ConfigError(f"env.bounds_y: the upper bound must lie beyond the goal region ({goal_far:.3f} m)")
+        raise ConfigError(
+            f"env.bounds_y: the upper bound must lie beyond the goal region ({goal_far:.3f} m)"
+        )
 
 
 def _check_terrain(cfg: Config) -> None:
@@ -125,21 +155,35 @@ def _check_terrain(cfg: Config) -> None:
     family clearable at every placement extreme and pivot (TerrainSpec.check)."""
     env, kin, t = cfg.env, cfg.kinematics, cfg.layout.terrain
     if env.max_vertices and env.max_vertices < terrain.K_MAX:
-        raise ConfigError(f"env.max_vertices: {env.max_vertices} is fewer than the {terrain.K_MAX} outline vertices "
-                          "of layout.terrain's families (0 picks the size automatically)")
+        raise ConfigError(
+            f"env.max_vertices: {env.max_vertices} is fewer than the {terrain.K_MAX} outline vertices "
+            "of layout.terrain's families (0 picks the size automatically)"
+        )
     if not env.shield and env.step_size >= t.min_size:
-        raise ConfigError(f"env.step_size: {env.step_size} m is not smaller than the smallest width or height "
-                          f"of layout.terrain.families ({t.min_size:.3f} m): a step could jump through the obstacle")
+        raise ConfigError(
+            f"env.step_size: {env.step_size} m is not smaller than the smallest width or height "
+            f"of layout.terrain.families ({t.min_size:.3f} m): a step could jump through the obstacle"
+        )
     if t.max_height + env.mid_goal_clearance + env.mid_goal_half_size[1] >= env.max_z:
-        raise ConfigError(f"layout.terrain.families: obstacles up to {t.max_height:.3f} m put the mid-goal above "
-                          f"env.max_z = {env.max_z} m")
+        raise ConfigError(
+            f"layout.terrain.families: obstacles up to {t.max_height:.3f} m put the mid-goal above "
+            f"env.max_z = {env.max_z} m"
+        )
     goal_far = t.start_shift[1] + t.step_length[1] + env.goal_tolerance[0]
     if env.bounds_y[1] <= goal_far:
-        raise ConfigError(f"env.bounds_y: the upper bound must lie beyond layout.terrain's goal region ({goal_far:.3f} m)")
+        raise ConfigError(
+            f"env.bounds_y: the upper bound must lie beyond layout.terrain's goal region ({goal_far:.3f} m)"
+        )
     try:
-        t.check(foot_length=kin.foot_length, thigh=kin.thigh, shin=kin.shin, hip_limits=kin.hip_limits,
-                knee_limits=kin.knee_limits, heel_lift=env.mid_goal_clearance - env.mid_goal_half_size[1],
-                goal_tolerance=env.goal_tolerance[0])
+        t.check(
+            foot_length=kin.foot_length,
+            thigh=kin.thigh,
+            shin=kin.shin,
+            hip_limits=kin.hip_limits,
+            knee_limits=kin.knee_limits,
+            heel_lift=env.mid_goal_clearance - env.mid_goal_half_size[1],
+            goal_tolerance=env.goal_tolerance[0],
+        )
     except terrain.TerrainError as e:
         raise ConfigError(str(e)) from None
 
@@ -153,10 +197,10 @@ def _check_room(cfg: Config, p: str, w_max: float) -> None:
     o_lo, o_hi = lay.obstacle_offset
     fl, tol = kin.foot_length, env.goal_tolerance[0]
 
-    def near_ok(L, shift, off):   # the obstacle's near edge lies ahead of the toe at the start
+    def near_ok(L, shift, off):  # the obstacle's near edge lies ahead of the toe at the start
         return lay.default_center(fl, L) + off - 0.5 * w_max > shift + fl
 
-    def far_ok(L, shift, off):    # the goal lies beyond the obstacle's far edge
+    def far_ok(L, shift, off):  # the goal lies beyond the obstacle's far edge
         return lay.default_center(fl, L) + off + 0.5 * w_max < shift + L - tol
 
     for L in lay.step_length:
@@ -164,26 +208,31 @@ def _check_room(cfg: Config, p: str, w_max: float) -> None:
             raise ConfigError(
                 f"layout.step_length: {L} m is too short for {p} (up to {w_max:.3f} m wide): centred in the gap, "
                 f"it reaches back to the toe at the start ({fl:.3f} m); the step must be longer than the foot "
-                "length plus the obstacle's width; use a longer step or a narrower obstacle")
+                "length plus the obstacle's width; use a longer step or a narrower obstacle"
+            )
         if not far_ok(L, 0.0, 0.0):
             raise ConfigError(
                 f"layout.step_length: the goal at {L:.3f} m is not beyond {p} (its far edge reaches "
-                f"{lay.default_center(fl, L) + 0.5 * w_max:.3f} m); the goal must lie ahead of the obstacle")
+                f"{lay.default_center(fl, L) + 0.5 * w_max:.3f} m); the goal must lie ahead of the obstacle"
+            )
         if not near_ok(L, 0.0, o_lo) or not far_ok(L, 0.0, o_hi):
             side = o_lo if not near_ok(L, 0.0, o_lo) else o_hi
             raise ConfigError(
                 f"layout.obstacle_offset: {side} m moves {p} (up to {w_max:.3f} m wide, step length {L} m) "
-                "onto the foot at the start or past the goal; reduce the offset or the width")
+                "onto the foot at the start or past the goal; reduce the offset or the width"
+            )
         if not near_ok(L, s_hi, o_lo):
             raise ConfigError(
                 f"layout.start_shift: with {p} up to {w_max:.3f} m wide, step length {L} m and "
                 f"offset {o_lo} m, the obstacle reaches back to the toe at the "
-                f"start (y = {s_hi + fl:.3f} m); reduce start_shift, obstacle_offset or the width")
+                f"start (y = {s_hi + fl:.3f} m); reduce start_shift, obstacle_offset or the width"
+            )
         if not far_ok(L, s_lo, o_hi):
             goal = s_lo + L
             raise ConfigError(
                 f"layout.step_length: the goal at {goal:.3f} m is not beyond {p} (its far edge "
-                f"reaches {lay.default_center(fl, L) + o_hi + 0.5 * w_max:.3f} m); the goal must lie ahead of the obstacle")
+                f"reaches {lay.default_center(fl, L) + o_hi + 0.5 * w_max:.3f} m); the goal must lie ahead of the obstacle"
+            )
 
 
 def _check_clearable(cfg: Config, path: str, h_max: float, w_max: float) -> None:
@@ -195,14 +244,19 @@ def _check_clearable(cfg: Config, path: str, h_max: float, w_max: float) -> None
     heel_z = h_max + env.mid_goal_clearance - env.mid_goal_half_size[1]
     for start, L, off in itertools.product(lay.start_shift, lay.step_length, lay.obstacle_offset):
         center = lay.default_center(kin.foot_length, L) + off
-        pivots = {name: float(kinematics.pivot_position(np, i, start, center)) for i, name in enumerate(PIVOT_CONDITIONS)}
+        pivots = {
+            name: float(kinematics.pivot_position(np, i, start, center))
+            for i, name in enumerate(PIVOT_CONDITIONS)
+        }
         heel = np.array([center, heel_z])
         for name, weight in zip(PIVOT_CONDITIONS, lay.pivot):
             if weight <= 0:
                 continue
-            if kinematics.swing_heel_unreachable(np, pivots[name], heel, kin.thigh, kin.shin, kin.hip_limits,
-                                                 kin.knee_limits):
+            if kinematics.swing_heel_unreachable(
+                np, pivots[name], heel, kin.thigh, kin.shin, kin.hip_limits, kin.knee_limits
+            ):
                 raise ConfigError(
                     f"{path}.height: an obstacle {h_max:.3f} m high cannot be cleared with pivot {name!r} "
                     f"(start {start:.3f} m, step length {L:.3f} m): the heel over it at {heel_z:.3f} m is "
-                    "out of the leg's reach or joint limits")
+                    "out of the leg's reach or joint limits"
+                )

@@ -39,11 +39,11 @@ class FieldSpec:
     check: Callable[[str, Any], Any]
     unit: str = ""
     role: str = "leaf"
-    param: str | None = None        # EnvParams name when it differs from the field name
+    param: str | None = None  # EnvParams name when it differs from the field name
     # value -> {EnvParams name: NumPy value}; ``cfg`` is passed for values that need other fields.
     to_param: Callable[[Any, Any], dict] | None = None
-    dtype: str = "float32"          # of the pytree leaf
-    write: Callable[[Any], Any] | None = None   # value -> TOML-writable value (default: as is)
+    dtype: str = "float32"  # of the pytree leaf
+    write: Callable[[Any], Any] | None = None  # value -> TOML-writable value (default: as is)
 
     @property
     def leaf(self) -> bool:
@@ -65,7 +65,9 @@ def declare(default=dataclasses.MISSING, check=None, *, default_factory=dataclas
         raise TypeError("declare: every field needs a check")
     if kw.get("role", "leaf") not in ROLES:
         raise TypeError(f"declare: role must be one of {ROLES}")
-    return field(default=default, default_factory=default_factory, metadata={"spec": FieldSpec(check, **kw)})
+    return field(
+        default=default, default_factory=default_factory, metadata={"spec": FieldSpec(check, **kw)}
+    )
 
 
 def spec_of(f: dataclasses.Field) -> FieldSpec:

@@ -23,9 +23,9 @@ from jaxexo.config.checks import ConfigError
 MiB = 2**20
 # Caps, in bytes. A config or sweep file is a few kB (the largest shipped one is under 4 kB);
 # a policy of the default network is about 100 kB; a run's metrics log grows by ~0.5 kB a chunk.
-MAX_TEXT_BYTES = 16 * MiB          # TOML: configs, sweep files, a run's config.toml
-MAX_POLICY_BYTES = 1024 * MiB      # policy.npz
-MAX_LOG_BYTES = 1024 * MiB         # metrics.jsonl, checkpoint.json
+MAX_TEXT_BYTES = 16 * MiB  # TOML: configs, sweep files, a run's config.toml
+MAX_POLICY_BYTES = 1024 * MiB  # policy.npz
+MAX_LOG_BYTES = 1024 * MiB  # metrics.jsonl, checkpoint.json
 MAX_CHECKPOINT_BYTES = 64 * 1024 * MiB
 
 
@@ -56,8 +56,10 @@ def check_path_type(path, what: str) -> Path:
     """``path`` as a Path when it is a str or os.PathLike; TypeError naming ``what`` otherwise (bytes,
     an open file, None: a file is named by its path)."""
     if isinstance(path, (bytes, bytearray)) or not isinstance(path, (str, os.PathLike)):
-        raise TypeError(f"{what}: expected a file's path (str or os.PathLike), got {type(path).__name__} (an open "
-                        "file or the file's bytes are not read: name the file)")
+        raise TypeError(
+            f"{what}: expected a file's path (str or os.PathLike), got {type(path).__name__} (an open "
+            "file or the file's bytes are not read: name the file)"
+        )
     return Path(path)
 
 
@@ -76,20 +78,30 @@ def read_input(path, what: str, cap: int, follow_links: bool = True) -> bytes:
             raise InputFileError(path, f"cannot read {what}: no such {what}") from None
         if e.errno == errno.ELOOP:
             if not follow_links and path.is_symlink():
-                raise InputFileError(path, f"is a symbolic link; jaxexo reads no {what} through a link it did "
-                                     "not make: remove the link") from None
-            raise InputFileError(path, f"a symbolic link loop (too many levels of links); not a {what}") from None
+                raise InputFileError(
+                    path,
+                    f"is a symbolic link; jaxexo reads no {what} through a link it did "
+                    "not make: remove the link",
+                ) from None
+            raise InputFileError(
+                path, f"a symbolic link loop (too many levels of links); not a {what}"
+            ) from None
         raise InputFileError(path, f"cannot read {what} ({e.strerror})") from None
     try:
         st = os.fstat(fd)
         if not stat.S_ISREG(st.st_mode):
-            raise InputFileError(path, f"{_kind(st.st_mode)}, not a regular file; jaxexo reads a {what} only from "
-                                 "a regular file")
+            raise InputFileError(
+                path,
+                f"{_kind(st.st_mode)}, not a regular file; jaxexo reads a {what} only from "
+                "a regular file",
+            )
         if st.st_size > cap:
-            raise InputFileError(path, f"{st.st_size:,} bytes, more than the {cap:,} bytes a {what} may have")
+            raise InputFileError(
+                path, f"{st.st_size:,} bytes, more than the {cap:,} bytes a {what} may have"
+            )
         os.set_blocking(fd, True)
         chunks, total = [], 0
-        while True:     # a file that grows while it is read is still held to the cap
+        while True:  # a file that grows while it is read is still held to the cap
             b = os.read(fd, min(cap + 1 - total, 1 << 24))
             if not b:
                 break
@@ -111,6 +123,9 @@ def read_text_input(path, what: str, cap: int = MAX_TEXT_BYTES, follow_links: bo
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as e:
-        raise InputFileError(path, f"not UTF-8 text (byte {e.start}: {data[e.start:e.start + 1]!r}); "
-                             f"a {what} is UTF-8 text") from None
+        raise InputFileError(
+            path,
+            f"not UTF-8 text (byte {e.start}: {data[e.start : e.start + 1]!r}); "
+            f"a {what} is UTF-8 text",
+        ) from None
     return text[1:] if text.startswith("\ufeff") else text

@@ -19,10 +19,11 @@ from jaxexo.config.obstacles import default_obstacles
 from jaxexo.config.sections import SECTION_CLASSES, SECTIONS, Config
 
 # Sections that other commands read; a train config refuses them, saying where they belong.
-OTHER_COMMANDS = {"sweep": "it is read by jaxexo sweep (a sweep file, see configs/sweeps/*.toml)",
-                  "eval": "no command reads it: jaxexo eval takes its settings as options (--n, --scenarios, "
-                          "--against), and training's greedy evaluation size is train.eval_episodes"}
-
+OTHER_COMMANDS = {
+    "sweep": "it is read by jaxexo sweep (a sweep file, see configs/sweeps/*.toml)",
+    "eval": "no command reads it: jaxexo eval takes its settings as options (--n, --scenarios, "
+    "--against), and training's greedy evaluation size is train.eval_episodes",
+}
 
 
 def _section(cls, path: str, raw: Any) -> Any:
@@ -41,8 +42,10 @@ def config_from_dict(raw: dict) -> Config:
         raise ConfigError(f"config: expected a table, got {raw!r}")
     for name in raw:
         if name in OTHER_COMMANDS:
-            raise ConfigError(f"{name}: a [{name}] section does not belong in a train config; "
-                              f"{OTHER_COMMANDS[name]}")
+            raise ConfigError(
+                f"{name}: a [{name}] section does not belong in a train config; "
+                f"{OTHER_COMMANDS[name]}"
+            )
     unknown = sorted(set(raw) - set(SECTIONS))
     if unknown:
         raise ConfigError(f"{unknown[0]}: unknown section (known: {', '.join(sorted(SECTIONS))})")

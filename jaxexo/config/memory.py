@@ -19,9 +19,9 @@ from jaxexo.config.sections import Config
 from jaxexo.physics import dynamics
 from jaxexo.physics.dynamics import NUM_ACTIONS
 
-FLOAT = 4                  # bytes: float32 / int32
-ENV_SCALARS = 24           # per-environment scalars of the env state and episode statistics (heel, time,
-                           # scene numbers, flags, return): a generous count
+FLOAT = 4  # bytes: float32 / int32
+ENV_SCALARS = 24  # per-environment scalars of the env state and episode statistics (heel, time,
+# scene numbers, flags, return): a generous count
 
 
 def observation_size(cfg: Config) -> int:
@@ -96,18 +96,29 @@ def check_memory(cfg: Config, available: int | None = None) -> int:
     need = one * k
     have = machine_memory_bytes() if available is None else available
     if have is not None and k > 1 and one <= have < need:
-        raise ConfigError(f"train.population: {k} members need at least {need / 2**30:.2f} GiB ({one / 2**30:.3f} "
-                          f"GiB each) but this machine has {have / 2**30:.2f} GiB of memory; at most "
-                          f"{have // one} members fit")
+        raise ConfigError(
+            f"train.population: {k} members need at least {need / 2**30:.2f} GiB ({one / 2**30:.3f} "
+            f"GiB each) but this machine has {have / 2**30:.2f} GiB of memory; at most "
+            f"{have // one} members fit"
+        )
     need = one
     if have is not None and need > have:
         parts = memory_breakdown(cfg)
         top = max(parts, key=parts.get)
-        field = {"traces": "train.num_envs", "rollout_buffer": "train.num_envs", "activations": "train.num_envs",
-                 "env_state": "train.num_envs", "eval_envs": "train.eval_episodes",
-                 "network": "train.hidden"}[top]
-        detail = ", ".join(f"{k} {v / 2**30:.2f}" for k, v in sorted(parts.items(), key=lambda kv: -kv[1]))
-        raise ConfigError(f"{field}: the run needs at least {need / 2**30:.2f} GiB ({detail} GiB) but this machine "
-                          f"has {have / 2**30:.2f} GiB of memory; reduce {field}"
-                          + (" or train.rollout_steps" if top == "rollout_buffer" else ""))
+        field = {
+            "traces": "train.num_envs",
+            "rollout_buffer": "train.num_envs",
+            "activations": "train.num_envs",
+            "env_state": "train.num_envs",
+            "eval_envs": "train.eval_episodes",
+            "network": "train.hidden",
+        }[top]
+        detail = ", ".join(
+            f"{k} {v / 2**30:.2f}" for k, v in sorted(parts.items(), key=lambda kv: -kv[1])
+        )
+        raise ConfigError(
+            f"{field}: the run needs at least {need / 2**30:.2f} GiB ({detail} GiB) but this machine "
+            f"has {have / 2**30:.2f} GiB of memory; reduce {field}"
+            + (" or train.rollout_steps" if top == "rollout_buffer" else "")
+        )
     return one * k

@@ -14,8 +14,16 @@ import numpy as np
 from jaxexo.config.checks import ConfigError, _number, _range, _vector, pivot_weights
 from jaxexo.physics import geometry
 from jaxexo.physics.geometry import THESIS_OBSTACLES
-from jaxexo.physics.terrain import (FAMILIES, FAMILY_NAMES, FAR_MARGIN, NEAR_MARGIN, TRAIN_FAMILIES, TerrainError,
-                                    min_step_length, unclearable)
+from jaxexo.physics.terrain import (
+    FAMILIES,
+    FAMILY_NAMES,
+    FAR_MARGIN,
+    NEAR_MARGIN,
+    TRAIN_FAMILIES,
+    TerrainError,
+    min_step_length,
+    unclearable,
+)
 
 
 def cdf(weights) -> np.ndarray:
@@ -58,7 +66,12 @@ class ObstacleSpec:
         """The TOML table that ``parse_obstacle`` reads back to this spec."""
         if self.is_thesis:
             return {"kind": self.kind, "weight": self.weight}
-        d = {"kind": self.kind, "weight": self.weight, "width": list(self.width), "height": list(self.height)}
+        d = {
+            "kind": self.kind,
+            "weight": self.weight,
+            "width": list(self.width),
+            "height": list(self.height),
+        }
         if self.kind == "profile":
             d["points"] = [list(p) for p in self.points]
         return d
@@ -70,8 +83,10 @@ def named_spec(kind: str, weight: float = 1.0) -> ObstacleSpec:
 
 
 # Width and height ranges: the one obstacle-size bound (jaxexo.physics.geometry), as for the generators.
-SIZE = {"width": dict(positive=True, hi=geometry.MAX_OBSTACLE_WIDTH),
-        "height": dict(positive=True, hi=geometry.MAX_OBSTACLE_HEIGHT)}
+SIZE = {
+    "width": dict(positive=True, hi=geometry.MAX_OBSTACLE_WIDTH),
+    "height": dict(positive=True, hi=geometry.MAX_OBSTACLE_HEIGHT),
+}
 # Placement ranges of the terrain (m): a start shift within a metre, a step of at most 2 m.
 MAX_SHIFT = 1.0
 MAX_STEP_LENGTH = 2.0
@@ -94,22 +109,28 @@ def parse_obstacle(path: str, raw: Any) -> ObstacleSpec:
     shapes = geometry.SHAPES
     if kind in THESIS_OBSTACLES and kind not in shapes:
         k = next(k for k in ("width", "height", "points") if k in raw)
-        raise ConfigError(f"{path}.{k}: {kind} has the fixed size of thesis Table 3.1; "
-                          f"use kind = \"{THESIS_OBSTACLES[kind][0]}\" for other sizes")
+        raise ConfigError(
+            f"{path}.{k}: {kind} has the fixed size of thesis Table 3.1; "
+            f'use kind = "{THESIS_OBSTACLES[kind][0]}" for other sizes'
+        )
     if kind not in shapes:
-        raise ConfigError(f"{path}.kind: must be a thesis obstacle {sorted(THESIS_OBSTACLES)} "
-                          f"or a shape {list(shapes)}, got {kind!r}")
+        raise ConfigError(
+            f"{path}.kind: must be a thesis obstacle {sorted(THESIS_OBSTACLES)} "
+            f"or a shape {list(shapes)}, got {kind!r}"
+        )
     if kind != "profile":
         if "points" in raw:
-            raise ConfigError(f"{path}.points: only kind = \"profile\" takes points")
+            raise ConfigError(f'{path}.points: only kind = "profile" takes points')
         for k in ("width", "height"):
             if k not in raw:
-                raise ConfigError(f"{path}.{k}: required for kind = \"{kind}\" (a range [lo, hi] in m)")
+                raise ConfigError(
+                    f'{path}.{k}: required for kind = "{kind}" (a range [lo, hi] in m)'
+                )
         width = _range(f"{path}.width", raw["width"], **SIZE["width"])
         height = _range(f"{path}.height", raw["height"], **SIZE["height"])
         return ObstacleSpec(kind, width, height, weight, kind)
     if "points" not in raw:
-        raise ConfigError(f"{path}.points: required for kind = \"profile\"")
+        raise ConfigError(f'{path}.points: required for kind = "profile"')
     pts = raw["points"]
     if not isinstance(pts, (list, tuple)) or not all(isinstance(p, (list, tuple)) for p in pts):
         raise ConfigError(f"{path}.points: expected a list of [y, z] pairs in m, got {pts!r}")
@@ -126,17 +147,27 @@ def parse_obstacle(path: str, raw: Any) -> ObstacleSpec:
 def parse_obstacles(path: str, v: Any) -> tuple[ObstacleSpec, ...]:
     if not isinstance(v, (list, tuple)) or not v:
         raise ConfigError(f"{path}: expected a non-empty list of obstacles")
-    return tuple(o if isinstance(o, ObstacleSpec) else parse_obstacle(f"{path}[{i}]", o) for i, o in enumerate(v))
+    return tuple(
+        o if isinstance(o, ObstacleSpec) else parse_obstacle(f"{path}[{i}]", o)
+        for i, o in enumerate(v)
+    )
 
 
 def obstacle_params(obstacles: tuple[ObstacleSpec, ...], cfg) -> dict[str, np.ndarray]:
     """The layout's obstacle mixture as EnvParams leaves: padded unit outlines (B, K, 2), shape
     descriptors (B, P), the kinds' cumulative probabilities and their size ranges (m)."""
-    outlines = np.stack([geometry.pad_outline(o.unit_vertices(), cfg.outline_vertices) for o in obstacles])
+    outlines = np.stack(
+        [geometry.pad_outline(o.unit_vertices(), cfg.outline_vertices) for o in obstacles]
+    )
     shapes = np.stack([geometry.shape_descriptor(u, cfg.env.shape_points) for u in outlines])
     f = lambda x: np.asarray(x, dtype=np.float32)  # noqa: E731
-    return {"kind_outlines": f(outlines), "kind_shape": f(shapes), "kind_cdf": cdf([o.weight for o in obstacles]),
-            "kind_width": f([o.width for o in obstacles]), "kind_height": f([o.height for o in obstacles])}
+    return {
+        "kind_outlines": f(outlines),
+        "kind_shape": f(shapes),
+        "kind_cdf": cdf([o.weight for o in obstacles]),
+        "kind_width": f([o.width for o in obstacles]),
+        "kind_height": f([o.height for o in obstacles]),
+    }
 
 
 def default_obstacles() -> tuple[ObstacleSpec, ...]:
@@ -186,21 +217,32 @@ class TerrainSpec:
             raise TerrainError(f"{p}.families: name at least one of {TRAIN_FAMILIES}")
         for f in fams:
             if f not in FAMILIES:
-                raise TerrainError(f"{p}.families: unknown family {f!r} (known: {', '.join(FAMILY_NAMES)})")
+                raise TerrainError(
+                    f"{p}.families: unknown family {f!r} (known: {', '.join(FAMILY_NAMES)})"
+                )
             if FAMILIES[f].held_out and not self.allow_held_out:
-                raise TerrainError(f"{p}.families: {f!r} is held out for the unseen benchmark "
-                                   f"(training families: {', '.join(TRAIN_FAMILIES)})")
+                raise TerrainError(
+                    f"{p}.families: {f!r} is held out for the unseen benchmark "
+                    f"(training families: {', '.join(TRAIN_FAMILIES)})"
+                )
         if len(set(fams)) != len(fams):
             raise TerrainError(f"{p}.families: a family is listed twice")
         weights = tuple(self.weights) if self.weights else (1.0,) * len(fams)
         if len(weights) != len(fams):
             raise TerrainError(f"{p}.weights: {len(weights)} weights for {len(fams)} families")
-        if any(not (isinstance(w, (int, float)) and math.isfinite(w) and w >= 0) for w in weights) or sum(weights) <= 0:
-            raise TerrainError(f"{p}.weights: need finite weights >= 0 with a positive sum, got {list(weights)}")
+        if (
+            any(not (isinstance(w, (int, float)) and math.isfinite(w) and w >= 0) for w in weights)
+            or sum(weights) <= 0
+        ):
+            raise TerrainError(
+                f"{p}.weights: need finite weights >= 0 with a positive sum, got {list(weights)}"
+            )
         piv = tuple(float(x) for x in self.pivot)
         if len(piv) != 3 or any(not math.isfinite(x) or x < 0 for x in piv) or sum(piv) <= 0:
-            raise TerrainError(f"{p}.pivot: three weights >= 0 (agent, obstacle, between) with a positive sum, "
-                               f"got {list(self.pivot)}")
+            raise TerrainError(
+                f"{p}.pivot: three weights >= 0 (agent, obstacle, between) with a positive sum, "
+                f"got {list(self.pivot)}"
+            )
         for name in ("near_margin", "far_margin"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
@@ -208,8 +250,12 @@ class TerrainSpec:
         object.__setattr__(self, "families", fams)
         object.__setattr__(self, "weights", tuple(float(w) for w in weights))
         object.__setattr__(self, "pivot", piv)
-        object.__setattr__(self, "start_shift", _terrain_range(f"{p}.start_shift", self.start_shift))
-        object.__setattr__(self, "step_length", _terrain_range(f"{p}.step_length", self.step_length, 1e-9))
+        object.__setattr__(
+            self, "start_shift", _terrain_range(f"{p}.start_shift", self.start_shift)
+        )
+        object.__setattr__(
+            self, "step_length", _terrain_range(f"{p}.step_length", self.step_length, 1e-9)
+        )
 
     @property
     def ids(self) -> np.ndarray:
@@ -234,27 +280,48 @@ class TerrainSpec:
         """The smallest width or height any family draws (compare with the env's step size)."""
         return min(min(FAMILIES[f].width[0], FAMILIES[f].height[0]) for f in self.families)
 
-    def check(self, *, foot_length: float, thigh: float, shin: float, hip_limits, knee_limits,
-              heel_lift: float, goal_tolerance: float) -> None:
+    def check(
+        self,
+        *,
+        foot_length: float,
+        thigh: float,
+        shin: float,
+        hip_limits,
+        knee_limits,
+        heel_lift: float,
+        goal_tolerance: float,
+    ) -> None:
         """Refuse a spec the scene cannot hold or the leg cannot clear (raises TerrainError naming
         the field). ``heel_lift``: env.mid_goal_clearance - env.mid_goal_half_size[1];
         ``goal_tolerance``: env.goal_tolerance[0]."""
         p = self.path
         if self.far_margin <= goal_tolerance:
-            raise TerrainError(f"{p}.far_margin: {self.far_margin} m must exceed the goal tolerance "
-                               f"{goal_tolerance} m, or the goal box reaches the obstacle")
+            raise TerrainError(
+                f"{p}.far_margin: {self.far_margin} m must exceed the goal tolerance "
+                f"{goal_tolerance} m, or the goal box reaches the obstacle"
+            )
         need = min_step_length(self.max_width, foot_length, self.near_margin, self.far_margin)
         if self.step_length[1] < need:
-            raise TerrainError(f"{p}.step_length: the longest step {self.step_length[1]} m cannot hold the "
-                               f"widest obstacle ({self.max_width} m): it needs {need:.3f} m")
-        bad = unclearable(self, foot_length=foot_length, thigh=thigh, shin=shin, hip_limits=hip_limits,
-                          knee_limits=knee_limits, heel_lift=heel_lift)
+            raise TerrainError(
+                f"{p}.step_length: the longest step {self.step_length[1]} m cannot hold the "
+                f"widest obstacle ({self.max_width} m): it needs {need:.3f} m"
+            )
+        bad = unclearable(
+            self,
+            foot_length=foot_length,
+            thigh=thigh,
+            shin=shin,
+            hip_limits=hip_limits,
+            knee_limits=knee_limits,
+            heel_lift=heel_lift,
+        )
         if bad:
             fam, piv, start, L, c = bad[0]
             raise TerrainError(
                 f"{p}.families: {fam!r} up to {FAMILIES[fam].height[1]:.3f} m high cannot be cleared with pivot "
                 f"{piv!r} (start {start:.3f} m, step length {L:.3f} m, centre {c:.3f} m): the heel "
-                f"{heel_lift:.3f} m over its top is out of the leg's reach or joint limits")
+                f"{heel_lift:.3f} m over its top is out of the leg's reach or joint limits"
+            )
 
 
 # [layout] terrain of the default model (configs/default.toml); the other TerrainSpec fields keep
@@ -262,7 +329,15 @@ class TerrainSpec:
 DEFAULT_TERRAIN = {"start_shift": [0.0, 0.12], "step_length": [0.55, 0.85]}
 
 
-TERRAIN_KEYS = ("families", "weights", "start_shift", "step_length", "pivot", "near_margin", "far_margin")
+TERRAIN_KEYS = (
+    "families",
+    "weights",
+    "start_shift",
+    "step_length",
+    "pivot",
+    "near_margin",
+    "far_margin",
+)
 
 
 def parse_terrain(path: str, v: Any) -> "TerrainSpec | None":
@@ -277,7 +352,9 @@ def parse_terrain(path: str, v: Any) -> "TerrainSpec | None":
     if v is True:
         v = {}
     if not isinstance(v, dict):
-        raise ConfigError(f"{path}: expected false or a table of {', '.join(TERRAIN_KEYS)}, got {v!r}")
+        raise ConfigError(
+            f"{path}: expected false or a table of {', '.join(TERRAIN_KEYS)}, got {v!r}"
+        )
     unknown = sorted(set(v) - set(TERRAIN_KEYS))
     if unknown:
         raise ConfigError(f"{path}.{unknown[0]}: unknown field (known: {', '.join(TERRAIN_KEYS)})")
@@ -308,9 +385,15 @@ def parse_terrain(path: str, v: Any) -> "TerrainSpec | None":
 def write_terrain(spec) -> Any:
     if spec is None:
         return False
-    return {"families": list(spec.families), "weights": list(spec.weights), "start_shift": list(spec.start_shift),
-            "step_length": list(spec.step_length), "pivot": list(spec.pivot), "near_margin": spec.near_margin,
-            "far_margin": spec.far_margin}
+    return {
+        "families": list(spec.families),
+        "weights": list(spec.weights),
+        "start_shift": list(spec.start_shift),
+        "step_length": list(spec.step_length),
+        "pivot": list(spec.pivot),
+        "near_margin": spec.near_margin,
+        "far_margin": spec.far_margin,
+    }
 
 
 def terrain_params(spec, cfg) -> dict[str, np.ndarray]:
@@ -318,9 +401,19 @@ def terrain_params(spec, cfg) -> dict[str, np.ndarray]:
     jaxexo.physics.scenarios reads as a static (shape) switch back to the obstacle mixture."""
     f = lambda x: np.asarray(x, dtype=np.float32)  # noqa: E731
     if spec is None:
-        return {"terrain_ids": np.zeros((0,), np.int32), "terrain_cdf": f(np.zeros((0,))),
-                "terrain_start_shift": f([0.0, 0.0]), "terrain_step_length": f([0.0, 0.0]),
-                "terrain_pivot_cdf": cdf([1.0, 1.0, 1.0]), "terrain_margins": f([0.0, 0.0])}
-    return {"terrain_ids": spec.ids.astype(np.int32), "terrain_cdf": f(spec.cdf),
-            "terrain_start_shift": f(spec.start_shift), "terrain_step_length": f(spec.step_length),
-            "terrain_pivot_cdf": cdf(spec.pivot), "terrain_margins": f([spec.near_margin, spec.far_margin])}
+        return {
+            "terrain_ids": np.zeros((0,), np.int32),
+            "terrain_cdf": f(np.zeros((0,))),
+            "terrain_start_shift": f([0.0, 0.0]),
+            "terrain_step_length": f([0.0, 0.0]),
+            "terrain_pivot_cdf": cdf([1.0, 1.0, 1.0]),
+            "terrain_margins": f([0.0, 0.0]),
+        }
+    return {
+        "terrain_ids": spec.ids.astype(np.int32),
+        "terrain_cdf": f(spec.cdf),
+        "terrain_start_shift": f(spec.start_shift),
+        "terrain_step_length": f(spec.step_length),
+        "terrain_pivot_cdf": cdf(spec.pivot),
+        "terrain_margins": f([spec.near_margin, spec.far_margin]),
+    }

@@ -16,7 +16,7 @@ def _value(v) -> str:
     if isinstance(v, int):
         return str(int(v))
     if isinstance(v, float):
-        v = float(v)   # np.float64 is a float whose repr is "np.float64(...)"
+        v = float(v)  # np.float64 is a float whose repr is "np.float64(...)"
         if math.isinf(v):
             return "inf" if v > 0 else "-inf"
         if math.isnan(v):
@@ -37,7 +37,9 @@ def config_to_toml(cfg: Config) -> str:
         assert SECTION_CLASSES[section] is type(getattr(cfg, section))
         lines += ["", f"[{section}]"]
         for name, v in to_toml_values(getattr(cfg, section)):
-            if isinstance(v, list) and v and isinstance(v[0], dict):   # the obstacle list, one per line
+            if (
+                isinstance(v, list) and v and isinstance(v[0], dict)
+            ):  # the obstacle list, one per line
                 lines += [f"{name} = ["] + [f"  {_value(x)}," for x in v] + ["]"]
             else:
                 lines.append(f"{name} = {_value(v)}")

@@ -56,8 +56,9 @@ def scalar_params(cfg: Config) -> types.SimpleNamespace:
 def test_config(cfg: Config) -> Config:
     """The training config with the layout's obstacle mixture replaced by the five thesis obstacles
     and all three pivot conditions (same jitter, start shifts and step lengths)."""
-    lay = dataclasses.replace(cfg.layout, obstacles=tuple(named_spec(k) for k in TEST_KINDS),
-                              pivot=(1.0, 1.0, 1.0))
+    lay = dataclasses.replace(
+        cfg.layout, obstacles=tuple(named_spec(k) for k in TEST_KINDS), pivot=(1.0, 1.0, 1.0)
+    )
     lay = dataclasses.replace(lay, terrain=None)
     env = dataclasses.replace(cfg.env, max_vertices=0)
     return dataclasses.replace(cfg, layout=lay, env=env)

@@ -21,6 +21,7 @@ from jaxexo.config import Config
 from jaxexo.physics.dynamics import LENGTH_SCALE, NUM_ACTIONS, THESIS_OBS_CENTER  # noqa: F401 (re-exported)
 from jaxexo.env import compact, shield, spaces
 from jaxexo.env.params import EnvParams
+
 # Every observation lies within +-OBS_BOUND (world bounds of a few metres over LENGTH_SCALE).
 OBS_BOUND = 10.0
 # Fresh scenes drawn per round of step_batch's auto-reset, as a fraction of the batch (episodes last
@@ -48,11 +49,11 @@ class Layout:
 
 @struct.dataclass
 class EnvState:
-    heel: jnp.ndarray          # (2,) swing heel (y, z), m
-    time: jnp.ndarray          # steps taken this episode (gymnax name)
-    visited_mid: jnp.ndarray   # bool: the heel has passed through the mid-goal box
-    max_y: jnp.ndarray         # the heel's largest y this episode (backward motion)
-    last_action: jnp.ndarray   # the move just made (-1 at the start): the shield never undoes it
+    heel: jnp.ndarray  # (2,) swing heel (y, z), m
+    time: jnp.ndarray  # steps taken this episode (gymnax name)
+    visited_mid: jnp.ndarray  # bool: the heel has passed through the mid-goal box
+    max_y: jnp.ndarray  # the heel's largest y this episode (backward motion)
+    last_action: jnp.ndarray  # the move just made (-1 at the start): the shield never undoes it
     layout: Layout
 
 
@@ -110,32 +111,60 @@ class ExoStepEnv:
     def layout_from_uniforms(self, u, params: EnvParams, kind=None, pivot_kind=None) -> Layout:
         """The scene of uniform numbers u (..., scenarios.n_uniforms(params))
         (jaxexo.physics.scenarios.layout_from_uniforms; procedural terrain when the config has it)."""
-        t = self.config.layout.terrain   # static: evaluate only the outlines of its families
-        return Layout(**scenarios.layout_from_uniforms(jnp, params, u, kind, pivot_kind,
-                                                       None if t is None else t.families))
+        t = self.config.layout.terrain  # static: evaluate only the outlines of its families
+        return Layout(
+            **scenarios.layout_from_uniforms(
+                jnp, params, u, kind, pivot_kind, None if t is None else t.families
+            )
+        )
 
     def init_state(self, layout: Layout, params: EnvParams) -> tuple[jnp.ndarray, EnvState]:
         """Start an episode on a given layout: the heel on the ground at the start."""
         heel = jnp.stack([layout.start_y, jnp.zeros_like(layout.start_y)])
-        state = EnvState(heel=heel, time=jnp.asarray(0, jnp.int32), visited_mid=jnp.asarray(False),
-                         max_y=heel[0], last_action=jnp.asarray(-1, jnp.int32), layout=layout)
+        state = EnvState(
+            heel=heel,
+            time=jnp.asarray(0, jnp.int32),
+            visited_mid=jnp.asarray(False),
+            max_y=heel[0],
+            last_action=jnp.asarray(-1, jnp.int32),
+            layout=layout,
+        )
         return self.get_obs(state, params), state
 
-    def layout_for(self, obstacle: geometry.Obstacle, pivot: str | float = "obstacle", start_y: float = 0.0,
-                   step_length: float = 0.70, kind: int = -1) -> Layout:
+    def layout_for(
+        self,
+        obstacle: geometry.Obstacle,
+        pivot: str | float = "obstacle",
+        start_y: float = 0.0,
+        step_length: float = 0.70,
+        kind: int = -1,
+    ) -> Layout:
         """A fixed layout from an Obstacle, for evaluation on chosen scenes (validated by
         jaxexo.physics.dynamics.make_scene, as the NumPy generator's scenes are).
 
         ``pivot`` is one of PIVOT_CONDITIONS or a pivot heel y in metres; ``kind`` tags the layout
         for per-kind statistics."""
-        sc = dynamics.make_scene(obstacle, pivot, start_y, step_length,
-                                 foot_length=self.config.kinematics.foot_length,
-                                 max_vertices=self.max_vertices, shape_points=self.shape_points)
+        sc = dynamics.make_scene(
+            obstacle,
+            pivot,
+            start_y,
+            step_length,
+            foot_length=self.config.kinematics.foot_length,
+            max_vertices=self.max_vertices,
+            shape_points=self.shape_points,
+        )
         f = lambda x: jnp.asarray(x, dtype=jnp.float32)  # noqa: E731
         return Layout(
-            outline=f(sc.outline), shape=f(sc.shape), center_y=f(sc.center_y), width=f(sc.width),
-            height=f(sc.height), kind=jnp.asarray(kind, jnp.int32), pivot_kind=jnp.asarray(sc.pivot_kind, jnp.int32),
-            pivot_y=f(sc.pivot_y), start_y=f(sc.start_y), goal_y=f(sc.goal_y),
+            outline=f(sc.outline),
+            shape=f(sc.shape),
+            center_y=f(sc.center_y),
+            width=f(sc.width),
+            height=f(sc.height),
+            kind=jnp.asarray(kind, jnp.int32),
+            pivot_kind=jnp.asarray(sc.pivot_kind, jnp.int32),
+            pivot_y=f(sc.pivot_y),
+            start_y=f(sc.start_y),
+            goal_y=f(sc.goal_y),
         )
 
     # gymnax transitions ----------------------------------------------------------------------
@@ -157,11 +186,27 @@ class ExoStepEnv:
         heel = jnp.stack(dynamics.move_heel(jnp, params, prev[0], prev[1], d[0], d[1]))
         time = state.time + 1
 
-        out = dynamics.transition(jnp, params, prev, heel, time, state.visited_mid, lay, state.max_y,
-                                  action=action, last_action=state.last_action)
+        out = dynamics.transition(
+            jnp,
+            params,
+            prev,
+            heel,
+            time,
+            state.visited_mid,
+            lay,
+            state.max_y,
+            action=action,
+            last_action=state.last_action,
+        )
         visited, reward, terminated = out["visited_mid"], out["reward"], out["terminated"]
-        new_state = EnvState(heel=heel, time=time, visited_mid=visited, max_y=out["max_y"],
-                             last_action=jnp.asarray(action, jnp.int32), layout=lay)
+        new_state = EnvState(
+            heel=heel,
+            time=time,
+            visited_mid=visited,
+            max_y=out["max_y"],
+            last_action=jnp.asarray(action, jnp.int32),
+            layout=lay,
+        )
         info = out["info"]
         return self.get_obs(new_state, params), new_state, reward, terminated, info
 
@@ -173,7 +218,12 @@ class ExoStepEnv:
     def _step_info(info, terminated, truncated, obs_st):
         """The info ``step`` and ``step_batch`` return: the transition's, the two flags, and the
         finished episode's last observation (for bootstrapping through truncation)."""
-        return {**info, "terminated": terminated, "truncated": truncated, "final_observation": obs_st}
+        return {
+            **info,
+            "terminated": terminated,
+            "truncated": truncated,
+            "final_observation": obs_st,
+        }
 
     def step(self, key, state: EnvState, action, params: EnvParams | None = None):
         """One transition with auto-reset (gymnax 1.0): a finished episode is replaced by a fresh one;
@@ -189,7 +239,14 @@ class ExoStepEnv:
         obs_re, state_re = self.reset_env(key, params)
         state = jax.tree.map(lambda r, s: jax.lax.select(done, r, s), state_re, state_st)
         obs = jax.lax.select(done, obs_re, obs_st)
-        return obs, state, reward, terminated, truncated, self._step_info(info, terminated, truncated, obs_st)
+        return (
+            obs,
+            state,
+            reward,
+            terminated,
+            truncated,
+            self._step_info(info, terminated, truncated, obs_st),
+        )
 
     def step_batch(self, keys, states: EnvState, actions, params: EnvParams | None = None):
         """``step`` of a batch of N environments (keys, states and actions with a leading N), equal to
@@ -199,17 +256,26 @@ class ExoStepEnv:
         docs/training.md). The trainer's step."""
         params = self.default_params if params is None else params
         n = actions.shape[0]
-        obs_st, state_st, reward, terminated, info = jax.vmap(self.step_env, in_axes=(0, 0, 0, None))(
-            keys, states, actions, params)
+        obs_st, state_st, reward, terminated, info = jax.vmap(
+            self.step_env, in_axes=(0, 0, 0, None)
+        )(keys, states, actions, params)
         truncated = self.is_truncated(state_st, params)
         done = terminated | truncated
 
         def fresh(idx):
             return jax.vmap(self.reset_env, in_axes=(0, None))(keys[idx], params)
 
-        obs, state = compact.compacted(done, fresh, (obs_st, state_st),
-                                       compact.buffer_size(n, RESET_BUFFER_FRACTION))
-        return obs, state, reward, terminated, truncated, self._step_info(info, terminated, truncated, obs_st)
+        obs, state = compact.compacted(
+            done, fresh, (obs_st, state_st), compact.buffer_size(n, RESET_BUFFER_FRACTION)
+        )
+        return (
+            obs,
+            state,
+            reward,
+            terminated,
+            truncated,
+            self._step_info(info, terminated, truncated, obs_st),
+        )
 
     def action_mask(self, state: EnvState, params: EnvParams | None = None):
         """(NUM_ACTIONS,) bool: the moves the agent may choose in ``state``
@@ -217,9 +283,15 @@ class ExoStepEnv:
         params = self.default_params if params is None else params
         if not self.shield:
             return jnp.ones(NUM_ACTIONS, bool)
-        return dynamics.admissible_moves(jnp, params, state.heel[0], state.heel[1], state.layout,
-                                         over_moves=lambda f, xs: jax.lax.map(lambda x: f(*x), xs),
-                                         last_action=state.last_action)
+        return dynamics.admissible_moves(
+            jnp,
+            params,
+            state.heel[0],
+            state.heel[1],
+            state.layout,
+            over_moves=lambda f, xs: jax.lax.map(lambda x: f(*x), xs),
+            last_action=state.last_action,
+        )
 
     def action_masks(self, states: EnvState, params: EnvParams | None = None):
         """(N, NUM_ACTIONS) bool: ``action_mask`` of a batch of N states (leading axis), the same
@@ -229,10 +301,23 @@ class ExoStepEnv:
         n = states.heel.shape[0]
         if not self.shield:
             return jnp.ones((n, NUM_ACTIONS), bool)
-        return shield.admissible_moves_batch(params, states.heel[:, 0], states.heel[:, 1], states.layout,
-                                             last_action=states.last_action)
+        return shield.admissible_moves_batch(
+            params,
+            states.heel[:, 0],
+            states.heel[:, 1],
+            states.layout,
+            last_action=states.last_action,
+        )
 
     # Observations ---------------------------------------------------------------------------
     def get_obs(self, state: EnvState, params: EnvParams):
-        return dynamics.observation(jnp, params, self.obs_mode, state.heel[0], state.heel[1], state.time,
-                                    state.visited_mid, state.layout)
+        return dynamics.observation(
+            jnp,
+            params,
+            self.obs_mode,
+            state.heel[0],
+            state.heel[1],
+            state.time,
+            state.visited_mid,
+            state.layout,
+        )

@@ -78,8 +78,13 @@ def _nearest_outline_point(heel_y, heel_z, foot_length, outline):
         cy.append(ay + t * ey)
         cz.append(az + t * ez)
     cy, cz = jnp.concatenate(cy, axis=-1), jnp.concatenate(cz, axis=-1)
-    j = jnp.argmin(_point_foot_distance2(cy, cz, heel_y[:, None], heel_z[:, None], foot_length), axis=-1)
-    return (jnp.take_along_axis(cy, j[:, None], axis=-1)[:, 0], jnp.take_along_axis(cz, j[:, None], axis=-1)[:, 0])
+    j = jnp.argmin(
+        _point_foot_distance2(cy, cz, heel_y[:, None], heel_z[:, None], foot_length), axis=-1
+    )
+    return (
+        jnp.take_along_axis(cy, j[:, None], axis=-1)[:, 0],
+        jnp.take_along_axis(cz, j[:, None], axis=-1)[:, 0],
+    )
 
 
 def bounds(p, heel_y, heel_z, ends, outline, c_here):
@@ -93,17 +98,27 @@ def bounds(p, heel_y, heel_z, ends, outline, c_here):
     foot's distance to any outline point: the vertices, and the point nearest the foot at the start."""
     y0, y1, z0, z1 = (b[:, None] for b in _box(outline))
     b1 = _foot_box_distance(ends[..., 0], ends[..., 1], p.foot_length, y0, y1, z0, z1)
-    step = p.step_size * (1.0 + 1e-6)     # 1e-6: a unit direction rounded to float32
+    step = p.step_size * (1.0 + 1e-6)  # 1e-6: a unit direction rounded to float32
     ch = c_here[:, None]
     lower = jnp.maximum(ch - step, 0.5 * (ch + b1 - step))
     sure_pass = lower >= p.shield_clearance + BOUND_MARGIN
     ny, nz = _nearest_outline_point(heel_y, heel_z, p.foot_length, outline)
     # Squared distances compared first (one square root per move), vertex by vertex: an (N, F, K)
     # array of them would leave the cache (as in swept.swept_distance_by_edge).
-    upper2 = _point_foot_distance2(ny[:, None], nz[:, None], ends[..., 0], ends[..., 1], p.foot_length)
+    upper2 = _point_foot_distance2(
+        ny[:, None], nz[:, None], ends[..., 0], ends[..., 1], p.foot_length
+    )
     for k in range(outline.shape[-2]):
-        upper2 = jnp.minimum(upper2, _point_foot_distance2(outline[:, None, k, 0], outline[:, None, k, 1], ends[..., 0],
-                                                           ends[..., 1], p.foot_length))
+        upper2 = jnp.minimum(
+            upper2,
+            _point_foot_distance2(
+                outline[:, None, k, 0],
+                outline[:, None, k, 1],
+                ends[..., 0],
+                ends[..., 1],
+                p.foot_length,
+            ),
+        )
     upper = jnp.sqrt(upper2)
     need = jnp.minimum(p.shield_clearance, ch) - dynamics.SHIELD_SLACK
     # From inside the obstacle (c_here <= 0) every move passes: never a sure failure there.
@@ -125,7 +140,7 @@ def keep_clearance(p, heel_y, heel_z, ends, outline, buffer: int | None = None):
     n, f = ends.shape[:2]
     total = n * f
     heel = jnp.stack([heel_y, heel_z], axis=-1)
-    c_here = geometry.foot_clearance(jnp, heel, p.foot_length, outline)   # as moves_keep_clearance
+    c_here = geometry.foot_clearance(jnp, heel, p.foot_length, outline)  # as moves_keep_clearance
     sure_pass, sure_fail = bounds(p, heel_y, heel_z, ends, outline, c_here)
     flat_ends = ends.reshape(total, 2)
 
@@ -134,10 +149,16 @@ def keep_clearance(p, heel_y, heel_z, ends, outline, buffer: int | None = None):
 
     def exact(pair):
         env = pair // f
-        return _exact_pairs(p, heel[env], flat_ends[pair], table_y[:, env], table_z[:, env], c_here[env])
+        return _exact_pairs(
+            p, heel[env], flat_ends[pair], table_y[:, env], table_z[:, env], c_here[env]
+        )
 
-    clear = compact.compacted(~(sure_pass | sure_fail).reshape(total), exact, sure_pass.reshape(total),
-                              buffer or compact.buffer_size(total, BUFFER_FRACTION))
+    clear = compact.compacted(
+        ~(sure_pass | sure_fail).reshape(total),
+        exact,
+        sure_pass.reshape(total),
+        buffer or compact.buffer_size(total, BUFFER_FRACTION),
+    )
     return clear.reshape(n, f)
 
 
@@ -147,4 +168,6 @@ def admissible_moves_batch(p, heel_y, heel_z, layout, buffer: int | None = None,
     ``keep_clearance``."""
     ends = dynamics.forward_ends(jnp, p, heel_y, heel_z)
     clear = keep_clearance(p, heel_y, heel_z, ends, layout.outline, buffer)
-    return dynamics.admissible_moves(jnp, p, heel_y, heel_z, layout, clear=clear, last_action=last_action)
+    return dynamics.admissible_moves(
+        jnp, p, heel_y, heel_z, layout, clear=clear, last_action=last_action
+    )

@@ -22,9 +22,19 @@ from pathlib import Path
 import numpy as np
 
 from jaxexo.config import Config
-from jaxexo.evaluation.metrics import device_metrics, summarize, summarize_device, trajectory_metrics
+from jaxexo.evaluation.metrics import (
+    device_metrics,
+    summarize,
+    summarize_device,
+    trajectory_metrics,
+)
 from jaxexo.evaluation.report import check_report_folder, write_report
-from jaxexo.evaluation.thesis_results import THESIS_ACCURACY, THESIS_BATCH_1000_MS, THESIS_CFFTG_MS, THESIS_T32
+from jaxexo.evaluation.thesis_results import (
+    THESIS_ACCURACY,
+    THESIS_BATCH_1000_MS,
+    THESIS_CFFTG_MS,
+    THESIS_T32,
+)
 from jaxexo.evaluation.timing import BATCH, scene_options
 from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 from jaxexo.inference.scenarios import sample_scenarios, training_scenarios
@@ -32,9 +42,11 @@ from jaxexo.inference.scenarios import sample_scenarios, training_scenarios
 BATCH_REPEATS = 3
 SCENARIO_SETS = ("train", "test", "all", "unseen")
 # The thesis's figures the report quotes beside jaxexo's (jaxexo.evaluation.thesis_results).
-THESIS_REFERENCE = (f"Thesis reference (Tables 3.9-3.11): final model accuracy {THESIS_ACCURACY['final']:g} %, "
-                    f"{THESIS_T32['final'][0]:g} ms per trajectory, {THESIS_BATCH_1000_MS / 1000:g} s per 1000; "
-                    f"CFFTG about {THESIS_CFFTG_MS:g} ms per trajectory.")
+THESIS_REFERENCE = (
+    f"Thesis reference (Tables 3.9-3.11): final model accuracy {THESIS_ACCURACY['final']:g} %, "
+    f"{THESIS_T32['final'][0]:g} ms per trajectory, {THESIS_BATCH_1000_MS / 1000:g} s per 1000; "
+    f"CFFTG about {THESIS_CFFTG_MS:g} ms per trajectory."
+)
 
 
 def make_scenarios(cfg: Config, which: str, n: int, seed: int = 12345) -> list[dict]:
@@ -72,7 +84,9 @@ class WithFallback:
         return self.gen.generate_batch(*a, fallback=self.fallback, **kw)
 
 
-def batch_time(gen, scenarios: list[dict], size: int = BATCH, repeats: int = BATCH_REPEATS) -> float:
+def batch_time(
+    gen, scenarios: list[dict], size: int = BATCH, repeats: int = BATCH_REPEATS
+) -> float:
     """Median wall time (ms) of ``generate_batch`` on ``size`` scenarios (cycled if fewer), timed by
     the generator benchmark's own function, scaled to a batch of 1000 (exact when size = 1000)."""
     from jaxexo.evaluation.timing import time_batch
@@ -101,8 +115,12 @@ def run_generators(generators: dict, scenarios: list[dict], warmup: int = 20):
     return {n: (trajs[n], times[n]) for n in names}
 
 
-def evaluate_generators(generators: dict, scenarios: list[dict], batch_size: int = BATCH,
-                        batch_repeats: int = BATCH_REPEATS) -> tuple[dict, dict]:
+def evaluate_generators(
+    generators: dict,
+    scenarios: list[dict],
+    batch_size: int = BATCH,
+    batch_repeats: int = BATCH_REPEATS,
+) -> tuple[dict, dict]:
     """The report's figures per generator, and the trajectories (for figures)."""
     runs = run_generators(generators, scenarios)
     kinds = np.array([s["kind"] for s in scenarios])
@@ -111,8 +129,12 @@ def evaluate_generators(generators: dict, scenarios: list[dict], batch_size: int
     groups = {
         "by_kind": {k: kinds == k for k in dict.fromkeys(kinds)},
         "by_pivot": {p: pivots == p for p in PIVOT_CONDITIONS if (pivots == p).any()},
-        "by_kind_pivot": {f"{k}/{p}": (kinds == k) & (pivots == p) for k in dict.fromkeys(kinds)
-                          for p in PIVOT_CONDITIONS if ((kinds == k) & (pivots == p)).any()},
+        "by_kind_pivot": {
+            f"{k}/{p}": (kinds == k) & (pivots == p)
+            for k in dict.fromkeys(kinds)
+            for p in PIVOT_CONDITIONS
+            if ((kinds == k) & (pivots == p)).any()
+        },
     }
     for name, (tr, times) in runs.items():
         gen = generators[name]
@@ -120,7 +142,9 @@ def evaluate_generators(generators: dict, scenarios: list[dict], batch_size: int
         dm = device_metrics(tr, gen.config)
         entry = summarize(m, times, np.ones(len(tr), bool))
         entry["device"] = summarize_device(dm, np.ones(len(tr), bool))
-        entry["batch_1000_ms"] = batch_time(gen, scenarios, batch_size, batch_repeats) if batch_size else None
+        entry["batch_1000_ms"] = (
+            batch_time(gen, scenarios, batch_size, batch_repeats) if batch_size else None
+        )
         entry["batch_size"] = batch_size
         for key, masks in groups.items():
             entry[key] = {}
@@ -129,17 +153,36 @@ def evaluate_generators(generators: dict, scenarios: list[dict], batch_size: int
                 entry[key][g]["device"] = summarize_device(dm, mask)
                 # The group's own scenarios in one generate_batch call, scaled to 1000.
                 sub = [scenarios[i] for i in np.flatnonzero(mask)]
-                entry[key][g]["batch_1000_ms"] = batch_time(gen, sub, len(sub), 1) if batch_size else None
-        entry["failures"] = [{"scenario": i, "kind": str(kinds[i]), "pivot": str(pivots[i]),
-                              "reasons": list(t.checks.reasons)} for i, t in enumerate(tr) if not t.ok][:20]
+                entry[key][g]["batch_1000_ms"] = (
+                    batch_time(gen, sub, len(sub), 1) if batch_size else None
+                )
+        entry["failures"] = [
+            {
+                "scenario": i,
+                "kind": str(kinds[i]),
+                "pivot": str(pivots[i]),
+                "reasons": list(t.checks.reasons),
+            }
+            for i, t in enumerate(tr)
+            if not t.ok
+        ][:20]
         report[name] = entry
         trajs[name] = tr
     return report, trajs
 
 
-def run_eval(policy: str | Path, out: str | Path, against: str | None = "cfftg", scenarios: str = "test",
-             n: int = 1000, seed: int = 12345, figures: bool = True, batch_size: int = BATCH,
-             force: bool = False, replay: bool = False) -> dict:
+def run_eval(
+    policy: str | Path,
+    out: str | Path,
+    against: str | None = "cfftg",
+    scenarios: str = "test",
+    n: int = 1000,
+    seed: int = 12345,
+    figures: bool = True,
+    batch_size: int = BATCH,
+    force: bool = False,
+    replay: bool = False,
+) -> dict:
     """``jaxexo eval``: the policy (and CFFTG) on the chosen scenarios; writes the report.
     ``batch_size``: scenarios per timed ``generate_batch`` call (the figure is scaled to 1000);
     ``force``: replace an earlier report in ``out`` (else refused, as is a report over its policy);
@@ -148,7 +191,7 @@ def run_eval(policy: str | Path, out: str | Path, against: str | None = "cfftg",
     if replay:
         from jaxexo.sim.replay import require_mujoco
 
-        require_mujoco()       # refused before any work
+        require_mujoco()  # refused before any work
     from jaxexo.baselines import CFFTG
     from jaxexo.evaluation.machine import machine_info
     from jaxexo.inference import TrajectoryGenerator
@@ -163,9 +206,11 @@ def run_eval(policy: str | Path, out: str | Path, against: str | None = "cfftg",
     sc = make_scenarios(rl.config, scenarios, n, seed)
     report, trajs = evaluate_generators(gens, sc, batch_size)
     info = machine_info()
-    context = [f"Policy `{policy}`; scenarios `{scenarios}` ({len(sc)}, seed {seed}); both generators in one "
-               f"process, alternating; {info['cpu']}, {info['cores']} cores.",
-               THESIS_REFERENCE]
+    context = [
+        f"Policy `{policy}`; scenarios `{scenarios}` ({len(sc)}, seed {seed}); both generators in one "
+        f"process, alternating; {info['cpu']}, {info['cores']} cores.",
+        THESIS_REFERENCE,
+    ]
     for entry in report.values():
         entry["scenarios"] = scenarios
         entry["policy"] = str(policy)
@@ -184,11 +229,21 @@ def run_eval(policy: str | Path, out: str | Path, against: str | None = "cfftg",
 
         for name, entry in report.items():
             entry["mujoco"] = replay_trajectories(trajs[name], gens[name].config)
-        sections = [*sections, *([""] if sections else []), *mujoco_lines(report, rl.config.device.control_rate)]
-    return write_report(out, report, trajs, sc, "jaxexo eval: RL generator" + (" vs CFFTG" if against else ""),
-                        context, figures, sections)
-
-
+        sections = [
+            *sections,
+            *([""] if sections else []),
+            *mujoco_lines(report, rl.config.device.control_rate),
+        ]
+    return write_report(
+        out,
+        report,
+        trajs,
+        sc,
+        "jaxexo eval: RL generator" + (" vs CFFTG" if against else ""),
+        context,
+        figures,
+        sections,
+    )
 
 
 def mujoco_lines(report: dict, rate: float) -> list[str]:
@@ -197,15 +252,24 @@ def mujoco_lines(report: dict, rate: float) -> list[str]:
     rows = []
     for name, entry in report.items():
         k, d = entry["mujoco"]["kinematic"], entry["mujoco"].get("driven", {"n": 0})
-        drv = (f"{mm(d['heel_error_p95_m'])} / {mm(d['heel_error_max_m'])} | {mm(d['toe_error_p95_m'])} / "
-               f"{mm(d['toe_error_max_m'])} | {d['contacts']} | {mm(d['min_distance_m'])} | {d['saturated']}"
-               if d["n"] else "- | - | - | - | -")
-        rows.append(f"| {name} | {k['n']} | {k['flagged_ok']} | {k['flagged_ok_within_margin']} | "
-                    f"{mm(k['min_mujoco_distance_of_ok_m'])} | {1e6 * (k['max_disagreement_m'] or 0.0):.3f} | {drv} |")
-    return [f"Replayed in MuJoCo (jaxexo.sim.replay): every swing timed for the [device] limits at {rate:g} Hz; "
-            "kinematic: MuJoCo's own distance at every sample and 3 poses between; driven (swings flagged ok): "
-            "position actuators, setpoints within the limits.", "",
-            "| generator | n | flagged ok | ok, within margin in MuJoCo | min MuJoCo distance of ok, mm | "
-            "max disagreement, um | heel error p95 / max, mm | toe error p95 / max, mm | contacts | "
-            "min distance driven, mm | saturated |",
-            "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|", *rows]
+        drv = (
+            f"{mm(d['heel_error_p95_m'])} / {mm(d['heel_error_max_m'])} | {mm(d['toe_error_p95_m'])} / "
+            f"{mm(d['toe_error_max_m'])} | {d['contacts']} | {mm(d['min_distance_m'])} | {d['saturated']}"
+            if d["n"]
+            else "- | - | - | - | -"
+        )
+        rows.append(
+            f"| {name} | {k['n']} | {k['flagged_ok']} | {k['flagged_ok_within_margin']} | "
+            f"{mm(k['min_mujoco_distance_of_ok_m'])} | {1e6 * (k['max_disagreement_m'] or 0.0):.3f} | {drv} |"
+        )
+    return [
+        f"Replayed in MuJoCo (jaxexo.sim.replay): every swing timed for the [device] limits at {rate:g} Hz; "
+        "kinematic: MuJoCo's own distance at every sample and 3 poses between; driven (swings flagged ok): "
+        "position actuators, setpoints within the limits.",
+        "",
+        "| generator | n | flagged ok | ok, within margin in MuJoCo | min MuJoCo distance of ok, mm | "
+        "max disagreement, um | heel error p95 / max, mm | toe error p95 / max, mm | contacts | "
+        "min distance driven, mm | saturated |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        *rows,
+    ]

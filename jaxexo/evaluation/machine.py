@@ -28,8 +28,13 @@ def machine_info() -> dict:
     except OSError:
         pass
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    info = {"cpu": cpu, "cores": cores, "memory_gib": mem_gib, "python": platform.python_version(),
-            "platform": platform.platform()}
+    info = {
+        "cpu": cpu,
+        "cores": cores,
+        "memory_gib": mem_gib,
+        "python": platform.python_version(),
+        "platform": platform.platform(),
+    }
     try:
         import jax
 
@@ -55,6 +60,9 @@ def write_result(name: str, payload: dict, markdown: str, out_dir: str | Path) -
     stem = f"{name}_{date}_{machine_tag(info)}"
     jpath, mpath = out / f"{stem}.json", out / f"{stem}.md"
     atomic_write(jpath, json.dumps(payload, indent=2) + "\n")
-    atomic_write(mpath, markdown + f"\n\nMachine: {info['cpu']}, {info['cores']} cores, "
-                 f"{info.get('memory_gib')} GiB, JAX {info.get('jax', '-')}; {date}.\n")
+    atomic_write(
+        mpath,
+        markdown + f"\n\nMachine: {info['cpu']}, {info['cores']} cores, "
+        f"{info.get('memory_gib')} GiB, JAX {info.get('jax', '-')}; {date}.\n",
+    )
     return jpath, mpath

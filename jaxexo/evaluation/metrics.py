@@ -59,8 +59,14 @@ def device_metrics(trajs, config) -> dict[str, np.ndarray]:
     trajs = list(trajs)
     n = len(trajs)
     moves = [i for i, t in enumerate(trajs) if np.any(np.asarray(t.heel) != np.asarray(t.heel)[0])]
-    out = {"swing_s": np.zeros(n), "peak_hip_vel": np.zeros(n), "peak_knee_vel": np.zeros(n),
-           "within_limits": np.ones(n, bool), "uniform_peak_vel": np.zeros(n), "joint_jerk": np.zeros(n)}
+    out = {
+        "swing_s": np.zeros(n),
+        "peak_hip_vel": np.zeros(n),
+        "peak_knee_vel": np.zeros(n),
+        "within_limits": np.ones(n, bool),
+        "uniform_peak_vel": np.zeros(n),
+        "joint_jerk": np.zeros(n),
+    }
     if moves:
         timed = time_swings([trajs[i] for i in moves], config)
         out["swing_s"][moves] = [t.duration for t in timed]

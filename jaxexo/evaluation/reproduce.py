@@ -36,8 +36,14 @@ import json
 from pathlib import Path
 
 from jaxexo.config import load_config, packaged_config
-from jaxexo.evaluation.thesis_results import (THESIS_ACCURACY, THESIS_BATCH_1000_MS, THESIS_CROSS, THESIS_T32,
-                                              THESIS_T311, THESIS_TRAIN_TIME)
+from jaxexo.evaluation.thesis_results import (
+    THESIS_ACCURACY,
+    THESIS_BATCH_1000_MS,
+    THESIS_CROSS,
+    THESIS_T32,
+    THESIS_T311,
+    THESIS_TRAIN_TIME,
+)
 from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 from jaxexo.storage.atomic import atomic_write
 from jaxexo.storage.rundir import blocking_file
@@ -48,12 +54,19 @@ THESIS_MODELS = ("a", "b", "c", "1", "2", "3", "final")
 # validation; why four: docs/thesis-reproduction.md.
 REPRODUCE_POPULATION = 4
 VARIANTS = ("faithful", "learns")
-ENTRY = "reproduce_entry.json"   # a run's evaluated figures, beside its policy
+ENTRY = "reproduce_entry.json"  # a run's evaluated figures, beside its policy
 # The changes from the thesis's text in the ``learns`` variant, each a named config switch (the
 # faithful setting first); the evidence is benchmarks/results/thesis-learning_*.md.
 LEARNS_CHANGES = ()
 # The pivot condition each single-condition model was trained on (thesis 3.2; configs/thesis/*.toml).
-TRAINED_PIVOT = {"a": "obstacle", "b": "agent", "c": "between", "1": "obstacle", "2": "agent", "3": "between"}
+TRAINED_PIVOT = {
+    "a": "obstacle",
+    "b": "agent",
+    "c": "between",
+    "1": "obstacle",
+    "2": "agent",
+    "3": "between",
+}
 
 
 def _fig(r: dict) -> tuple[float, float, float]:
@@ -85,12 +98,18 @@ def device_table(results: dict) -> list[str]:
         for gen in ("rl", "cfftg"):
             d = r.get(gen, {}).get("device")
             if d:
-                rows.append(f"| {name} ({gen}) | {d['swing_s_mean']:.3f} | {d['swing_s_max']:.3f} | "
-                            f"{d['peak_hip_vel_deg_s_mean']:.0f} | {d['peak_knee_vel_deg_s_mean']:.0f} | "
-                            f"{_pct(d['device_within_limits'])} | {d['uniform_peak_joint_vel_deg_s_median']:.0f} |")
-    return _table("Device timing (not in the thesis): shortest rest-to-rest swing within the [device] joint limits",
-                  "| model (generator) | swing s mean | swing s max | peak hip vel deg/s | peak knee vel deg/s | "
-                  "within limits % | uniform 1 s peak deg/s (median) |", "|---|---:|---:|---:|---:|---:|---:|", rows)
+                rows.append(
+                    f"| {name} ({gen}) | {d['swing_s_mean']:.3f} | {d['swing_s_max']:.3f} | "
+                    f"{d['peak_hip_vel_deg_s_mean']:.0f} | {d['peak_knee_vel_deg_s_mean']:.0f} | "
+                    f"{_pct(d['device_within_limits'])} | {d['uniform_peak_joint_vel_deg_s_median']:.0f} |"
+                )
+    return _table(
+        "Device timing (not in the thesis): shortest rest-to-rest swing within the [device] joint limits",
+        "| model (generator) | swing s mean | swing s max | peak hip vel deg/s | peak knee vel deg/s | "
+        "within limits % | uniform 1 s peak deg/s (median) |",
+        "|---|---:|---:|---:|---:|---:|---:|",
+        rows,
+    )
 
 
 def model_of(name: str) -> str:
@@ -111,53 +130,87 @@ def tables(results: dict) -> str:
     ("a", "a-learns", "default") to its figures: ``rl`` greedy, ``rl_eps`` epsilon-greedy (thesis 2.6)."""
     eps = sorted({r["test_epsilon"] for r in results.values() if "test_epsilon" in r})
     eps_txt = ", ".join(f"{e:g}" for e in eps) or "-"
-    lines = ["# Thesis experiments reproduced with jaxexo", "",
-             "Each triple: mean generation time (ms) / mean swing knee angle (deg) / mean swing hip angle (deg). "
-             "Thesis values from Tables 3.2-3.11; jaxexo's from the NumPy generator on the same scenario set "
-             "for every model. Variant *faithful*: the thesis's text as written (configs/thesis/<m>.toml); "
-             "*learns*: with the switches listed below (configs/thesis/<m>-learns.toml). *greedy*: the policy's "
-             "best action at every step (what a device runs); *ε-greedy*: the thesis's test protocol (§2.6), a "
-             f"random action with probability ε = {eps_txt} (the configs' final training ε; the thesis does not "
-             "state its test ε)."]
+    lines = [
+        "# Thesis experiments reproduced with jaxexo",
+        "",
+        "Each triple: mean generation time (ms) / mean swing knee angle (deg) / mean swing hip angle (deg). "
+        "Thesis values from Tables 3.2-3.11; jaxexo's from the NumPy generator on the same scenario set "
+        "for every model. Variant *faithful*: the thesis's text as written (configs/thesis/<m>.toml); "
+        "*learns*: with the switches listed below (configs/thesis/<m>-learns.toml). *greedy*: the policy's "
+        "best action at every step (what a device runs); *ε-greedy*: the thesis's test protocol (§2.6), a "
+        f"random action with probability ε = {eps_txt} (the configs' final training ε; the thesis does not "
+        "state its test ε).",
+    ]
     changes = [f"- `{key}`: {text}" for key, text in LEARNS_CHANGES]
     if changes and any(variant_of(n) == "learns" for n in results):
-        lines += ["", "Switches of the *learns* variant (thesis setting -> learns setting):", "", *changes]
-    lines += _table("Table 3.10: accuracy (eq 3.1) on the test scenarios, greedy and ε-greedy",
-                    "| model | variant | thesis accuracy % | greedy accuracy % | greedy strict success % | "
-                    "greedy reached goal % | ε-greedy accuracy % | ε-greedy strict success % | "
-                    "ε-greedy reached goal % |", "|---|---|---:|---:|---:|---:|---:|---:|---:|",
-                    [f"| {model_of(name)} | {variant_of(name)} | "
-                     f"{_cell(THESIS_ACCURACY.get(model_of(name)), lambda x: f'{x:.1f}')} | "
-                     f"{_pct(r['rl']['accuracy'])} | {_pct(r['rl']['success'])} | {_pct(r['rl']['reached_goal'])} | "
-                     + (f"{_pct(r['rl_eps']['accuracy'])} | {_pct(r['rl_eps']['success'])} | "
-                        f"{_pct(r['rl_eps']['reached_goal'])} |" if "rl_eps" in r else "- | - | - |")
-                     for name, r in results.items()])
+        lines += [
+            "",
+            "Switches of the *learns* variant (thesis setting -> learns setting):",
+            "",
+            *changes,
+        ]
+    lines += _table(
+        "Table 3.10: accuracy (eq 3.1) on the test scenarios, greedy and ε-greedy",
+        "| model | variant | thesis accuracy % | greedy accuracy % | greedy strict success % | "
+        "greedy reached goal % | ε-greedy accuracy % | ε-greedy strict success % | "
+        "ε-greedy reached goal % |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|",
+        [
+            f"| {model_of(name)} | {variant_of(name)} | "
+            f"{_cell(THESIS_ACCURACY.get(model_of(name)), lambda x: f'{x:.1f}')} | "
+            f"{_pct(r['rl']['accuracy'])} | {_pct(r['rl']['success'])} | {_pct(r['rl']['reached_goal'])} | "
+            + (
+                f"{_pct(r['rl_eps']['accuracy'])} | {_pct(r['rl_eps']['success'])} | "
+                f"{_pct(r['rl_eps']['reached_goal'])} |"
+                if "rl_eps" in r
+                else "- | - | - |"
+            )
+            for name, r in results.items()
+        ],
+    )
     lines += population_table(results)
-    lines += _table("Training time per model (thesis: laptop GPU, Ryzen 7 + RTX 4060; jaxexo: this machine's CPU)",
-                    "| model | variant | thesis | jaxexo | jaxexo s | episodes | env steps |",
-                    "|---|---|---|---|---:|---:|---:|",
-                    [f"| {model_of(name)} | {variant_of(name)} | {THESIS_TRAIN_TIME.get(model_of(name), '-')} | "
-                     f"{_minutes(r['train_seconds'])} | {r['train_seconds']:.1f} | {r['episodes']} | "
-                     f"{r.get('env_steps', '-')} |" for name, r in results.items()])
-    lines += _table("Table 3.2 / 3.9: every pivot condition together",
-                    "| model | variant | thesis | jaxexo greedy | jaxexo ε-greedy |", "|---|---|---|---|---|",
-                    [f"| {model_of(name)} | {variant_of(name)} | {_cell(THESIS_T32.get(model_of(name)))} | "
-                     f"{_triple(_fig(r['rl']))} | {_triple(_fig(r['rl_eps'])) if 'rl_eps' in r else '-'} |"
-                     for name, r in results.items()])
+    lines += _table(
+        "Training time per model (thesis: laptop GPU, Ryzen 7 + RTX 4060; jaxexo: this machine's CPU)",
+        "| model | variant | thesis | jaxexo | jaxexo s | episodes | env steps |",
+        "|---|---|---|---|---:|---:|---:|",
+        [
+            f"| {model_of(name)} | {variant_of(name)} | {THESIS_TRAIN_TIME.get(model_of(name), '-')} | "
+            f"{_minutes(r['train_seconds'])} | {r['train_seconds']:.1f} | {r['episodes']} | "
+            f"{r.get('env_steps', '-')} |"
+            for name, r in results.items()
+        ],
+    )
+    lines += _table(
+        "Table 3.2 / 3.9: every pivot condition together",
+        "| model | variant | thesis | jaxexo greedy | jaxexo ε-greedy |",
+        "|---|---|---|---|---|",
+        [
+            f"| {model_of(name)} | {variant_of(name)} | {_cell(THESIS_T32.get(model_of(name)))} | "
+            f"{_triple(_fig(r['rl']))} | {_triple(_fig(r['rl_eps'])) if 'rl_eps' in r else '-'} |"
+            for name, r in results.items()
+        ],
+    )
     cross = []
     for name, r in results.items():
         model = model_of(name)
         trained = TRAINED_PIVOT.get(model)
-        for p, rp in ((p, r["rl"]["by_pivot"][p]) for p in PIVOT_CONDITIONS if p in r["rl"]["by_pivot"]):
+        for p, rp in (
+            (p, r["rl"]["by_pivot"][p]) for p in PIVOT_CONDITIONS if p in r["rl"]["by_pivot"]
+        ):
             re_ = r.get("rl_eps", {}).get("by_pivot", {}).get(p)
-            cross.append(f"| {model} ({trained or 'all'}) | {variant_of(name)} | {p}{' (trained)' if trained == p else ''} | "
-                         f"{_cell(THESIS_CROSS.get(model, {}).get(p))} | {_triple(_fig(rp))} | "
-                         f"{_pct(rp['accuracy'])} | {_pct(rp['success'])} | "
-                         f"{_triple(_fig(re_)) if re_ else '-'} | {_pct(re_['success']) if re_ else '-'} |")
-    lines += _table("Tables 3.3-3.8: per pivot condition",
-                    "| model (trained on) | variant | pivot | thesis | jaxexo greedy | greedy accuracy % | "
-                    "greedy success % | jaxexo ε-greedy | ε-greedy success % |",
-                    "|---|---|---|---|---|---:|---:|---|---:|", cross)
+            cross.append(
+                f"| {model} ({trained or 'all'}) | {variant_of(name)} | {p}{' (trained)' if trained == p else ''} | "
+                f"{_cell(THESIS_CROSS.get(model, {}).get(p))} | {_triple(_fig(rp))} | "
+                f"{_pct(rp['accuracy'])} | {_pct(rp['success'])} | "
+                f"{_triple(_fig(re_)) if re_ else '-'} | {_pct(re_['success']) if re_ else '-'} |"
+            )
+    lines += _table(
+        "Tables 3.3-3.8: per pivot condition",
+        "| model (trained on) | variant | pivot | thesis | jaxexo greedy | greedy accuracy % | "
+        "greedy success % | jaxexo ε-greedy | ε-greedy success % |",
+        "|---|---|---|---|---|---:|---:|---|---:|",
+        cross,
+    )
     lines += device_table(results)
     for name in ("final", "final-learns"):
         final = results.get(name)
@@ -167,13 +220,22 @@ def tables(results: dict) -> str:
         for k, rk in final["rl"]["by_kind"].items():
             ck = final["cfftg"]["by_kind"][k]
             ref = THESIS_T311.get(k, (float("nan"),) * 2)
-            rows.append(f"| {k} | {ref[0]:.3f} | {ref[1]:.3f} | {ck['time_ms_mean']:.3f} | {rk['time_ms_mean']:.3f} | "
-                        f"{_pct(ck['success'])} | {_pct(rk['success'])} |")
-        lines += _table(f"Table 3.11: generation time per obstacle (ms, mean), {name} model vs CFFTG",
-                        "| obstacle | thesis CFFTG | thesis final | jaxexo CFFTG | jaxexo final (RL) | "
-                        "jaxexo CFFTG success % | jaxexo RL success % |", "|---|---:|---:|---:|---:|---:|---:|", rows)
-        lines += ["", f"Batch of 1000 (median): RL {final['rl']['batch_1000_ms']:.0f} ms, CFFTG "
-                  f"{final['cfftg']['batch_1000_ms']:.0f} ms (thesis final model: {THESIS_BATCH_1000_MS:.0f} ms)."]
+            rows.append(
+                f"| {k} | {ref[0]:.3f} | {ref[1]:.3f} | {ck['time_ms_mean']:.3f} | {rk['time_ms_mean']:.3f} | "
+                f"{_pct(ck['success'])} | {_pct(rk['success'])} |"
+            )
+        lines += _table(
+            f"Table 3.11: generation time per obstacle (ms, mean), {name} model vs CFFTG",
+            "| obstacle | thesis CFFTG | thesis final | jaxexo CFFTG | jaxexo final (RL) | "
+            "jaxexo CFFTG success % | jaxexo RL success % |",
+            "|---|---:|---:|---:|---:|---:|---:|",
+            rows,
+        )
+        lines += [
+            "",
+            f"Batch of 1000 (median): RL {final['rl']['batch_1000_ms']:.0f} ms, CFFTG "
+            f"{final['cfftg']['batch_1000_ms']:.0f} ms (thesis final model: {THESIS_BATCH_1000_MS:.0f} ms).",
+        ]
     return "\n".join(lines) + "\n"
 
 
@@ -191,13 +253,25 @@ def population_summary(ev: dict, model: str) -> dict:
     members = []
     for m in ev["members"]:
         t = m["test"]
-        members.append({"seed": m["seed"], "validation_success_raw": m["validation_success_raw"],
-                        "diverged_chunk": m["diverged_chunk"],
-                        "success_raw": t and t["success_raw"], "reached_goal": t and t["reached_goal"],
-                        "meets_target": bool(t) and bool(meets_target(model, t["success_raw"], t["reached_goal"]))})
-    return {"size": len(members), "exported_member": ev["exported_member"], "exported_seed": ev["seed"],
-            "base_seed": ev.get("base_seed"), "members": members,
-            "members_meeting_target": sum(m["meets_target"] for m in members)}
+        members.append(
+            {
+                "seed": m["seed"],
+                "validation_success_raw": m["validation_success_raw"],
+                "diverged_chunk": m["diverged_chunk"],
+                "success_raw": t and t["success_raw"],
+                "reached_goal": t and t["reached_goal"],
+                "meets_target": bool(t)
+                and bool(meets_target(model, t["success_raw"], t["reached_goal"])),
+            }
+        )
+    return {
+        "size": len(members),
+        "exported_member": ev["exported_member"],
+        "exported_seed": ev["seed"],
+        "base_seed": ev.get("base_seed"),
+        "members": members,
+        "members_meeting_target": sum(m["meets_target"] for m in members),
+    }
 
 
 def population_table(results: dict) -> list[str]:
@@ -211,18 +285,32 @@ def population_table(results: dict) -> list[str]:
         model = model_of(name)
         exported = p["members"][p["exported_member"]]
         verdict = meets_target(model, r["rl"]["success"], r["rl"]["reached_goal"])
-        rows.append(f"| {model} | {p['size']} | {p['exported_seed']} | {exported['validation_success_raw']:.3f} | "
-                    f"{_pct(r['rl']['success'])} / {_pct(r['rl']['reached_goal'])} | "
-                    f"{'yes' if verdict else ('no' if verdict is not None else '-')} | "
-                    f"{p['members_meeting_target']} of {p['size']} | "
-                    + ", ".join(f"{m['seed']}: {_pct(m['success_raw'])}/{_pct(m['reached_goal'])}" if m["success_raw"]
-                                is not None else f"{m['seed']}: diverged" for m in p["members"]) + " |")
-    return _table("Populations (learns): the member exported (best on validation, training layouts) and the "
-                  "members meeting the target (reached goal >= 95 %, strict success >= the thesis's accuracy)",
-                  "| model | members | exported seed | its validation success | exported: strict success / reached "
-                  "goal % (NumPy generator) | exported meets target | members meeting target (raw greedy moves) | "
-                  "per member seed: strict success / reached goal % (raw greedy moves) |",
-                  "|---|---:|---:|---:|---|---|---|---|", rows) if rows else []
+        rows.append(
+            f"| {model} | {p['size']} | {p['exported_seed']} | {exported['validation_success_raw']:.3f} | "
+            f"{_pct(r['rl']['success'])} / {_pct(r['rl']['reached_goal'])} | "
+            f"{'yes' if verdict else ('no' if verdict is not None else '-')} | "
+            f"{p['members_meeting_target']} of {p['size']} | "
+            + ", ".join(
+                f"{m['seed']}: {_pct(m['success_raw'])}/{_pct(m['reached_goal'])}"
+                if m["success_raw"] is not None
+                else f"{m['seed']}: diverged"
+                for m in p["members"]
+            )
+            + " |"
+        )
+    return (
+        _table(
+            "Populations (learns): the member exported (best on validation, training layouts) and the "
+            "members meeting the target (reached goal >= 95 %, strict success >= the thesis's accuracy)",
+            "| model | members | exported seed | its validation success | exported: strict success / reached "
+            "goal % (NumPy generator) | exported meets target | members meeting target (raw greedy moves) | "
+            "per member seed: strict success / reached goal % (raw greedy moves) |",
+            "|---|---:|---:|---:|---|---|---|---|",
+            rows,
+        )
+        if rows
+        else []
+    )
 
 
 def run_names(models=THESIS_MODELS, variant: str = "both") -> list[str]:
@@ -261,13 +349,26 @@ def compact(report: dict) -> dict:
     out = {k: v for k, v in report.items() if k != "by_kind_pivot"}
     out["failures"] = report.get("failures", [])[:5]
     for group in ("by_kind", "by_pivot"):
-        out[group] = {g: {k: v for k, v in r.items() if k != "device"} for g, r in report.get(group, {}).items()}
+        out[group] = {
+            g: {k: v for k, v in r.items() if k != "device"}
+            for g, r in report.get(group, {}).items()
+        }
     return out
 
 
-def run_reproduce(out: str | Path, models=THESIS_MODELS, n: int = 1000, seed: int = 0, include_default: bool = False,
-                  root: Path | None = None, batch_size: int = 1000, results_dir: str | Path | None = None,
-                  variant: str = "faithful", progress=print, population: int | None = None) -> dict:
+def run_reproduce(
+    out: str | Path,
+    models=THESIS_MODELS,
+    n: int = 1000,
+    seed: int = 0,
+    include_default: bool = False,
+    root: Path | None = None,
+    batch_size: int = 1000,
+    results_dir: str | Path | None = None,
+    variant: str = "faithful",
+    progress=print,
+    population: int | None = None,
+) -> dict:
     """Train (or reuse) each model, evaluate it greedily and epsilon-greedily, write
     OUT/reproduce.{md,json}; returns the results. ``variant``: "faithful", "learns" or "both";
     ``batch_size``: scenarios of the timed batch for the models compared with CFFTG; ``results_dir``:
@@ -300,8 +401,10 @@ def run_reproduce(out: str | Path, models=THESIS_MODELS, n: int = 1000, seed: in
             # A finished run is reused only if it trained this very config: a config edited since
             # would otherwise be tabulated with the old one's numbers.
             if (run / "config.toml").exists() and load_config(run / "config.toml") != cfg:
-                raise ValueError(f"{run}: trained with a different config than {cfg_path} (edited since?); "
-                                 f"remove that run or choose another --out")
+                raise ValueError(
+                    f"{run}: trained with a different config than {cfg_path} (edited since?); "
+                    f"remove that run or choose another --out"
+                )
             ev = json.loads((run / "eval.json").read_text())
             progress(f"{name}: reusing {run}")
         else:
@@ -311,34 +414,57 @@ def run_reproduce(out: str | Path, models=THESIS_MODELS, n: int = 1000, seed: in
             ev = run_training(cfg, run, seed=seed, resume=started, progress=False)
         # A run's evaluation is kept beside it (ENTRY), so that rerunning reproduce to tabulate more models
         # does not re-evaluate the finished ones; it is reused only for the same n, seed and batch size.
-        key = {"n": n, "seed": seed, "batch_size": batch_size if model_of(name) in ("final", "default") else 0}
+        key = {
+            "n": n,
+            "seed": seed,
+            "batch_size": batch_size if model_of(name) in ("final", "default") else 0,
+        }
         entry = run / ENTRY
-        if entry.exists() and (cached := json.loads(entry.read_text())).get("key") == key and \
-                cached.get("train_seconds") == ev["train_seconds"]:
+        if (
+            entry.exists()
+            and (cached := json.loads(entry.read_text())).get("key") == key
+            and cached.get("train_seconds") == ev["train_seconds"]
+        ):
             results[name] = cached["result"]
             progress(f"{name}: reusing its evaluation {entry}")
             continue
         gen = TrajectoryGenerator.load(run / "policy.npz")
-        gens = {"rl": WithFallback(gen, None)}     # the thesis tables score the RL swing alone
+        gens = {"rl": WithFallback(gen, None)}  # the thesis tables score the RL swing alone
         if model_of(name) in ("final", "default"):
             gens["cfftg"] = CFFTG(gen.config)
         scenarios = make_scenarios(gen.config, "test", n)
-        report, _ = evaluate_generators(gens, scenarios, batch_size=batch_size if len(gens) > 1 else 0)
+        report, _ = evaluate_generators(
+            gens, scenarios, batch_size=batch_size if len(gens) > 1 else 0
+        )
         # The thesis's test protocol (2.6): epsilon-greedy, with the run's final training epsilon.
         eps = float(gen.config.train.eps_end)
-        eps_report, _ = evaluate_generators({"rl": WithFallback(gen.exploring(eps, seed=seed), None)}, scenarios,
-                                           batch_size=0)
-        results[name] = {**{k: compact(v) for k, v in report.items()}, "rl_eps": compact(eps_report["rl"]),
-                         "test_epsilon": eps, "model": model_of(name), "variant": variant_of(name),
-                         "train_seconds": ev["train_seconds"], "episodes": ev["episodes"],
-                         "env_steps": ev.get("env_steps"), "eval_json": {k: ev[k] for k in ("accuracy", "success")}}
+        eps_report, _ = evaluate_generators(
+            {"rl": WithFallback(gen.exploring(eps, seed=seed), None)}, scenarios, batch_size=0
+        )
+        results[name] = {
+            **{k: compact(v) for k, v in report.items()},
+            "rl_eps": compact(eps_report["rl"]),
+            "test_epsilon": eps,
+            "model": model_of(name),
+            "variant": variant_of(name),
+            "train_seconds": ev["train_seconds"],
+            "episodes": ev["episodes"],
+            "env_steps": ev.get("env_steps"),
+            "eval_json": {k: ev[k] for k in ("accuracy", "success")},
+        }
         if "members" in ev:
             results[name]["population"] = population_summary(ev, model_of(name))
-        atomic_write(entry, json.dumps({"key": key, "train_seconds": ev["train_seconds"], "result": results[name]}) + "\n")
+        atomic_write(
+            entry,
+            json.dumps({"key": key, "train_seconds": ev["train_seconds"], "result": results[name]})
+            + "\n",
+        )
         r, re_ = report["rl"], eps_report["rl"]
-        progress(f"{name}: greedy accuracy {r['accuracy']:.3f}, success {r['success']:.3f}, reached goal "
-                 f"{r['reached_goal']:.3f}; eps-greedy ({eps:g}) success {re_['success']:.3f}; "
-                 f"{r['time_ms_mean']:.2f} ms per trajectory")
+        progress(
+            f"{name}: greedy accuracy {r['accuracy']:.3f}, success {r['success']:.3f}, reached goal "
+            f"{r['reached_goal']:.3f}; eps-greedy ({eps:g}) success {re_['success']:.3f}; "
+            f"{r['time_ms_mean']:.2f} ms per trajectory"
+        )
     out.mkdir(parents=True, exist_ok=True)
     atomic_write(out / "reproduce.json", json.dumps(results, indent=1) + "\n")
     atomic_write(out / "reproduce.md", tables(results))

@@ -11,7 +11,7 @@ import numpy as np
 if TYPE_CHECKING:
     from jaxexo.inference import TrajectoryGenerator
 
-BATCH = 1000    # scenarios per timed generate_batch (thesis Table 3.11 times 1000)
+BATCH = 1000  # scenarios per timed generate_batch (thesis Table 3.11 times 1000)
 
 
 def scene_options(s: dict) -> dict:
@@ -26,7 +26,12 @@ def time_batch(gen: TrajectoryGenerator, scenarios: list[dict], repeats: int = 5
     out = []
     for _ in range(repeats):
         t0 = time.perf_counter()
-        batch = gen.generate_batch(args["obstacle"], pivot=args["pivot"], start_y=args["start_y"],
-                                   step_length=args["step_length"], **options)
+        batch = gen.generate_batch(
+            args["obstacle"],
+            pivot=args["pivot"],
+            start_y=args["start_y"],
+            step_length=args["step_length"],
+            **options,
+        )
         out.append(time.perf_counter() - t0)
     return out, batch

@@ -42,13 +42,18 @@ def family_table(trajs: dict, scenarios: list[dict]) -> dict:
 def markdown_lines(table: dict) -> list[str]:
     """The per-family table as Markdown lines (clearance and path length in cm, labelled; the path
     length's median is in the report's JSON)."""
-    lines = ["## Unseen families (held out from training by construction)", "",
-             "| family (generator) | n | safe swing (strict success) % | accuracy % | clearance min cm | "
-             "p5 cm | median cm | path length mean cm |",
-             "|---|---:|---:|---:|---:|---:|---:|---:|"]
+    lines = [
+        "## Unseen families (held out from training by construction)",
+        "",
+        "| family (generator) | n | safe swing (strict success) % | accuracy % | clearance min cm | "
+        "p5 cm | median cm | path length mean cm |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|",
+    ]
     for fam, gens in table.items():
         for name, r in gens.items():
-            lines.append(f"| {fam} ({name}) | {r['n']} | {100 * r['success']:.1f} | {100 * r['accuracy']:.1f} | "
-                         f"{100 * r['clearance_m_min']:.2f} | {100 * r['clearance_m_p5']:.2f} | "
-                         f"{100 * r['clearance_m_median']:.2f} | {100 * r['path_length_m_mean']:.1f} |")
+            lines.append(
+                f"| {fam} ({name}) | {r['n']} | {100 * r['success']:.1f} | {100 * r['accuracy']:.1f} | "
+                f"{100 * r['clearance_m_min']:.2f} | {100 * r['clearance_m_p5']:.2f} | "
+                f"{100 * r['clearance_m_median']:.2f} | {100 * r['path_length_m_mean']:.1f} |"
+            )
     return lines

@@ -28,9 +28,18 @@ from jaxexo.inference.trajectory import (
 )
 from jaxexo.storage.policy_file import PolicyFileError
 
-_LAZY = {"DeviceLimits": "swing_timing", "TimedSwing": "swing_timing", "time_swing": "swing_timing",
-         "time_swings": "swing_timing", "plan_course": "course", "Course": "course", "CourseError": "course",
-         "footholds": "course", "Terrain": "course", "read_terrain": "course"}
+_LAZY = {
+    "DeviceLimits": "swing_timing",
+    "TimedSwing": "swing_timing",
+    "time_swing": "swing_timing",
+    "time_swings": "swing_timing",
+    "plan_course": "course",
+    "Course": "course",
+    "CourseError": "course",
+    "footholds": "course",
+    "Terrain": "course",
+    "read_terrain": "course",
+}
 
 
 def __getattr__(name):
@@ -42,8 +51,29 @@ def __getattr__(name):
         return getattr(importlib.import_module(f"jaxexo.inference.{_LAZY[name]}"), name)
     raise AttributeError(f"module 'jaxexo.inference' has no attribute {name!r}")
 
-__all__ = ["TrajectoryGenerator", "GenerateOptions", "SwingOptions",
-           "Trajectory", "TrajectoryBatch", "TrajectoryChecks", "TrajectoryError",
-           "Obstacle", "Scene", "PolicyFileError", "assemble", "CSV_COLUMNS", "JOINT_NAMES",
-           "DeviceLimits", "TimedSwing", "time_swing", "time_swings", "plan_course", "Course", "CourseError",
-           "footholds", "Terrain", "read_terrain"]
+
+__all__ = [
+    "TrajectoryGenerator",
+    "GenerateOptions",
+    "SwingOptions",
+    "Trajectory",
+    "TrajectoryBatch",
+    "TrajectoryChecks",
+    "TrajectoryError",
+    "Obstacle",
+    "Scene",
+    "PolicyFileError",
+    "assemble",
+    "CSV_COLUMNS",
+    "JOINT_NAMES",
+    "DeviceLimits",
+    "TimedSwing",
+    "time_swing",
+    "time_swings",
+    "plan_course",
+    "Course",
+    "CourseError",
+    "footholds",
+    "Terrain",
+    "read_terrain",
+]

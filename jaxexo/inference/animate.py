@@ -15,7 +15,9 @@ from jaxexo.storage.atomic import atomic_write
 CM = 100.0
 
 
-def animate_swing(swing, path: str | Path, fps: float = 25.0, hold_s: float = 0.4, dpi: int = 64) -> Path:
+def animate_swing(
+    swing, path: str | Path, fps: float = 25.0, hold_s: float = 0.4, dpi: int = 64
+) -> Path:
     """Write a GIF of ``swing`` (a TimedSwing) to ``path``: one frame every 1/fps s of swing time
     (the GIF plays in real time), the last pose held ``hold_s``. Returns the path."""
     if not np.isfinite(fps) or fps <= 0:
@@ -33,9 +35,9 @@ def animate_swing(swing, path: str | Path, fps: float = 25.0, hold_s: float = 0.
     ax.axhline(0.0, color="k", lw=0.8)
     heel = swing.heel * CM
     ax.plot(heel[:, 0], heel[:, 1], color="tab:red", lw=0.6, alpha=0.35)
-    trace, = ax.plot([], [], color="tab:red", lw=1.4)
-    swing_leg, = ax.plot([], [], "-o", color="tab:blue", ms=3, lw=2.5)
-    stance_leg, = ax.plot([], [], "-o", color="0.35", ms=3, lw=2.5)
+    (trace,) = ax.plot([], [], color="tab:red", lw=1.4)
+    (swing_leg,) = ax.plot([], [], "-o", color="tab:blue", ms=3, lw=2.5)
+    (stance_leg,) = ax.plot([], [], "-o", color="0.35", ms=3, lw=2.5)
     label = ax.text(0.02, 0.95, "", transform=ax.transAxes, fontsize=8, va="top")
     ys = np.concatenate([swing.hip[:, 0], swing.toe[:, 0], [sc.pivot_y + 0.2]]) * CM
     ax.set_xlim(ys.min() - 10, ys.max() + 10)
@@ -43,7 +45,10 @@ def animate_swing(swing, path: str | Path, fps: float = 25.0, hold_s: float = 0.
     ax.set_aspect("equal")
     ax.set_xlabel("y, forward (cm)")
     ax.set_ylabel("z, up (cm)")
-    ax.set_title(f"{swing.method}: {sc.obstacle.kind}, pivot {sc.pivot}, {swing.duration:.2f} s swing", fontsize=9)
+    ax.set_title(
+        f"{swing.method}: {sc.obstacle.kind}, pivot {sc.pivot}, {swing.duration:.2f} s swing",
+        fontsize=9,
+    )
     vel = np.degrees(swing.joint_velocity)
     lim = np.degrees(swing.limits.velocity)
     for col, name, c in ((0, "hip", "tab:green"), (1, "knee", "tab:blue")):
@@ -63,7 +68,9 @@ def animate_swing(swing, path: str | Path, fps: float = 25.0, hold_s: float = 0.
         h, toe = heel[j], swing.toe[j] * CM
         swing_leg.set_data([hip[0], ks[0], h[0], toe[0]], [hip[1], ks[1], h[1], toe[1]])
         p = sc.pivot_y * CM
-        stance_leg.set_data([hip[0], kt[0], p, p + swing.toe[0, 0] * CM - heel[0, 0]], [hip[1], kt[1], 0.0, 0.0])
+        stance_leg.set_data(
+            [hip[0], kt[0], p, p + swing.toe[0, 0] * CM - heel[0, 0]], [hip[1], kt[1], 0.0, 0.0]
+        )
         trace.set_data(heel[: j + 1, 0], heel[: j + 1, 1])
         cursor.set_xdata([swing.time[j], swing.time[j]])
         label.set_text(f"t = {swing.time[j]:.2f} s")
@@ -72,7 +79,9 @@ def animate_swing(swing, path: str | Path, fps: float = 25.0, hold_s: float = 0.
     return _save(fig, draw, len(idx), path, fps, dpi)
 
 
-def animate_course(course, path: str | Path, fps: float = 20.0, hold_s: float = 0.5, dpi: int = 60) -> Path:
+def animate_course(
+    course, path: str | Path, fps: float = 20.0, hold_s: float = 0.5, dpi: int = 60
+) -> Path:
     """Write a GIF of a whole walk (jaxexo.inference.course.Course) to ``path`` in real time: both
     legs over the terrain at the walk's timing, the left leg blue, the right orange, the heels'
     paths traced behind. Returns the path."""
@@ -102,8 +111,11 @@ def animate_course(course, path: str | Path, fps: float = 20.0, hold_s: float = 
     ax.set_ylim(-3, max(s[:, 12].max() + 5, 30))
     ax.set_aspect("equal")
     ax.set_xlabel("y, along the course (cm)")
-    ax.set_title(f"{course.method}: {len(course.steps)} swings in {course.duration:.1f} s at the device limits "
-                 "(real time)", fontsize=9)
+    ax.set_title(
+        f"{course.method}: {len(course.steps)} swings in {course.duration:.1f} s at the device limits "
+        "(real time)",
+        fontsize=9,
+    )
     fig.tight_layout()
 
     def draw(k):
@@ -111,8 +123,10 @@ def animate_course(course, path: str | Path, fps: float = 20.0, hold_s: float = 
         hip = s[j, 11:13]
         out = []
         for base, knee, line in legs:
-            line.set_data([hip[0], s[j, knee], s[j, base], s[j, base + 2]],
-                          [hip[1], s[j, knee + 1], s[j, base + 1], s[j, base + 3]])
+            line.set_data(
+                [hip[0], s[j, knee], s[j, base], s[j, base + 2]],
+                [hip[1], s[j, knee + 1], s[j, base + 1], s[j, base + 3]],
+            )
             out.append(line)
         for base, line in traces:
             line.set_data(s[: j + 1, base], s[: j + 1, base + 1])

@@ -20,9 +20,11 @@ from __future__ import annotations
 import contextlib
 import sys
 
-_controller = None     # threadpoolctl.ThreadpoolController: the BLAS libraries loaded when it was built
-_modules = -1          # len(sys.modules) then: a BLAS loaded later (SciPy's, JAX's) comes with new modules
-_missing = False       # threadpoolctl is not installed
+_controller = (
+    None  # threadpoolctl.ThreadpoolController: the BLAS libraries loaded when it was built
+)
+_modules = -1  # len(sys.modules) then: a BLAS loaded later (SciPy's, JAX's) comes with new modules
+_missing = False  # threadpoolctl is not installed
 
 
 def limited(threads: int | None):
@@ -50,4 +52,8 @@ def blas_threads() -> list[int]:
         import threadpoolctl
     except ImportError:
         return []
-    return [int(i["num_threads"]) for i in threadpoolctl.threadpool_info() if i.get("user_api") == "blas"]
+    return [
+        int(i["num_threads"])
+        for i in threadpoolctl.threadpool_info()
+        if i.get("user_api") == "blas"
+    ]

@@ -64,8 +64,8 @@ from jaxexo.inference.policy_check import load_checked
 from jaxexo.inference.trajectory import Trajectory, TrajectoryBatch, assemble, measure_paths
 
 DEFAULT_POINTS = 100
-C_MAX = 10.0          # |c| bound for a monotone y(s)
-APEX_FRAC_RANGE = (0.5 - C_MAX / 64.0, 0.5 + C_MAX / 64.0)   # apex y as a fraction of the step
+C_MAX = 10.0  # |c| bound for a monotone y(s)
+APEX_FRAC_RANGE = (0.5 - C_MAX / 64.0, 0.5 + C_MAX / 64.0)  # apex y as a fraction of the step
 
 
 # Shapes of the height profile: z = h * phi_k(s), phi_k = g(s) (1 + k (1 - 2s)^2) normalised to a
@@ -98,9 +98,13 @@ def _curvature(n_points: int):
     P = np.polynomial.Polynomial
     s = P([0.0, 1.0])
     g = s**3 * (1 - s) ** 3
-    polys = [s**3 * (10 - 15 * s + 6 * s**2), g] + [64.0 * g * (1 + k * (1 - 2 * s) ** 2) for k in FLATNESS]
+    polys = [s**3 * (10 - 15 * s + 6 * s**2), g] + [
+        64.0 * g * (1 + k * (1 - 2 * s) ** 2) for k in FLATNESS
+    ]
     grid = np.linspace(0.0, 1.0, 2001)
-    bounds = np.array([np.abs(p.deriv(2)(grid)).max() + 0.5 / 2000 * np.abs(p.deriv(3).coef).sum() for p in polys])
+    bounds = np.array(
+        [np.abs(p.deriv(2)(grid)).max() + 0.5 / 2000 * np.abs(p.deriv(3).coef).sum() for p in polys]
+    )
     return bounds, (1.0 / (n_points - 1)) ** 2 / 8.0
 
 
@@ -118,16 +122,20 @@ def profile_max(lo: np.ndarray, hi: np.ndarray, outline: np.ndarray) -> np.ndarr
 
     The profile is piecewise linear, so its maximum over an interval is at an end of the interval
     or at an outline vertex inside it (jaxexo.physics.geometry.profile_height gives the ends)."""
-    ol = outline[:, None]                                   # (B, 1, K, 2)
+    ol = outline[:, None]  # (B, 1, K, 2)
     vy, vz = ol[..., 0], ol[..., 1]
     inside = (vy >= lo[..., None]) & (vy <= hi[..., None])
     top = np.max(np.where(inside, vz, 0.0), axis=-1)
     n = lo.shape[-1]
-    ends = geometry.profile_height(np, np.concatenate([lo, hi], axis=-1), ol)    # both ends in one pass
+    ends = geometry.profile_height(
+        np, np.concatenate([lo, hi], axis=-1), ol
+    )  # both ends in one pass
     return np.maximum(top, np.maximum(ends[..., :n], ends[..., n:]))
 
 
-def plan_paths(start_y, goal_y, outline, apex_frac, margin, foot_length: float, n_points: int = DEFAULT_POINTS):
+def plan_paths(
+    start_y, goal_y, outline, apex_frac, margin, foot_length: float, n_points: int = DEFAULT_POINTS
+):
     """Heel paths (B, N, 2) and apex heights (B,) of the polynomial plan (see the module docstring).
 
     ``apex_frac`` (B,): the apex's y as a fraction of the step (clipped to the monotone range);
@@ -140,13 +148,15 @@ def plan_paths(start_y, goal_y, outline, apex_frac, margin, foot_length: float, 
     y = start_y[:, None] + d * (mj + c[:, None] * g)
     m = margin[:, None]
     need = profile_max(y - m, y + foot_length + m, outline)
-    req = np.where(need > 0.0, need + m, 0.0)[:, None, :]   # (B, 1, N)
+    req = np.where(need > 0.0, need + m, 0.0)[:, None, :]  # (B, 1, N)
     with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.where(req > 0.0, req / phi, 0.0)          # inf where the foot must already be up at s = 0 or 1
-    h_k = ratio.max(axis=-1)                                 # (B, len(FLATNESS))
+        ratio = np.where(
+            req > 0.0, req / phi, 0.0
+        )  # inf where the foot must already be up at s = 0 or 1
+    h_k = ratio.max(axis=-1)  # (B, len(FLATNESS))
     best = np.argmin(h_k, axis=1)
     h = np.maximum(h_k[np.arange(len(best)), best], margin)
-    h = np.where(np.isfinite(h), h, 0.0)                    # infeasible: flat path, the checks report it
+    h = np.where(np.isfinite(h), h, 0.0)  # infeasible: flat path, the checks report it
     return np.stack([y, h[:, None] * phi[best]], axis=-1), h
 
 
@@ -156,22 +166,37 @@ class CFFTG:
 
     method = "cfftg"
 
-    def __init__(self, config: Config | None = None, *, margin: float | None = None, margin_step: float = 0.01,
-                 apex_step: float = 0.02, max_plans: int = 10):
+    def __init__(
+        self,
+        config: Config | None = None,
+        *,
+        margin: float | None = None,
+        margin_step: float = 0.01,
+        apex_step: float = 0.02,
+        max_plans: int = 10,
+    ):
         if isinstance(config, (str, os.PathLike)):
-            config = load_config(config)     # a config file's path: the obvious intent
+            config = load_config(config)  # a config file's path: the obvious intent
         elif config is None:
-            config = Config()                # the default model's settings (configs/default.toml)
+            config = Config()  # the default model's settings (configs/default.toml)
         elif not isinstance(config, Config):
-            raise TypeError(f"config: expected a jaxexo Config or a config file's path, got {type(config).__name__}")
+            raise TypeError(
+                f"config: expected a jaxexo Config or a config file's path, got {type(config).__name__}"
+            )
         self.config = config
         self.sp = scalar_params(self.config)
-        self.margin = geometry.finite("margin", self.config.reward.safety_distance if margin is None else margin)
+        self.margin = geometry.finite(
+            "margin", self.config.reward.safety_distance if margin is None else margin
+        )
         if self.margin < 0:
             raise ValueError(f"margin must be >= 0 metres, got {self.margin}")
         self.margin_step = geometry.finite_positive("margin_step", margin_step)
         self.apex_step = geometry.finite_positive("apex_step", apex_step)
-        if isinstance(max_plans, bool) or not isinstance(max_plans, (int, np.integer)) or max_plans < 1:
+        if (
+            isinstance(max_plans, bool)
+            or not isinstance(max_plans, (int, np.integer))
+            or max_plans < 1
+        ):
             raise ValueError(f"max_plans must be an integer >= 1, got {max_plans!r}")
         self.max_plans = int(max_plans)
 
@@ -182,8 +207,14 @@ class CFFTG:
         return cls(load_checked(path)[1], **kwargs)
 
     # Scenes ---------------------------------------------------------------------------------------
-    def scene(self, obstacle: geometry.Obstacle, pivot: str | float | None = None, pivot_y: float | None = None,
-              start_y: float = DEFAULT_START_Y, step_length: float = DEFAULT_STEP_LENGTH) -> dynamics.Scene:
+    def scene(
+        self,
+        obstacle: geometry.Obstacle,
+        pivot: str | float | None = None,
+        pivot_y: float | None = None,
+        start_y: float = DEFAULT_START_Y,
+        step_length: float = DEFAULT_STEP_LENGTH,
+    ) -> dynamics.Scene:
         """Validate one scenario (metres), as the RL generator does."""
         return scene_for(self.config, obstacle, pivot, pivot_y, start_y, step_length)
 
@@ -202,7 +233,7 @@ class CFFTG:
         frac0 = (0.5 * (left - foot + right) - arr.start_y) / step
         toward_pivot = np.where(arr.pivot_y > arr.start_y + frac0 * step, 1.0, -1.0)
         margin = np.full(b, self.margin)
-        moves = np.zeros(b, np.int64)                        # apex moves so far
+        moves = np.zeros(b, np.int64)  # apex moves so far
         frac = frac0.copy()
         plans = np.zeros(b, np.int64)
         paths = np.zeros((b, n_points, 2))
@@ -215,14 +246,17 @@ class CFFTG:
             for k in np.unique(sizes[todo]):
                 g = todo[sizes[todo] == k]
                 outline = np.stack([scenes[i].outline for i in g])
-                paths[g], apex_h[g] = plan_paths(arr.start_y[g], arr.goal_y[g], outline, frac[g], margin[g], foot,
-                                                 n_points)
+                paths[g], apex_h[g] = plan_paths(
+                    arr.start_y[g], arr.goal_y[g], outline, frac[g], margin[g], foot, n_points
+                )
             p = paths[todo]
             plans[todo] += 1
-            dev = plan_deviation(arr.start_y[todo], arr.goal_y[todo], frac[todo], apex_h[todo], n_points)
+            dev = plan_deviation(
+                arr.start_y[todo], arr.goal_y[todo], frac[todo], apex_h[todo], n_points
+            )
             m = measure_paths(self.sp, p, [scenes[i] for i in todo], dev)
             checks = m if checks is None else _scatter(checks, m, todo)
-            ok = m["ok"]   # the one strict-success verdict (jaxexo.physics.outcome)
+            ok = m["ok"]  # the one strict-success verdict (jaxexo.physics.outcome)
             bad_kin = ~(m["joint_limits_ok"] & m["leg_length_ok"])
             fail = todo[~ok]
             # Joint limits or leg length: move the apex (alternately towards and away from the pivot).
@@ -241,7 +275,14 @@ class CFFTG:
         gave_up[todo] = True
         frac_used = np.clip(frac, *APEX_FRAC_RANGE)
         apex = np.stack([arr.start_y + frac_used * step, apex_h], axis=-1)
-        via = np.stack([np.stack([arr.start_y, np.zeros(b)], -1), apex, np.stack([arr.goal_y, np.zeros(b)], -1)], 1)
+        via = np.stack(
+            [
+                np.stack([arr.start_y, np.zeros(b)], -1),
+                apex,
+                np.stack([arr.goal_y, np.zeros(b)], -1),
+            ],
+            1,
+        )
         return paths, via, plans, gave_up, checks
 
     def at_clearance(self, clearance: float | None) -> "CFFTG":
@@ -264,12 +305,24 @@ class CFFTG:
         notes = []
         for i in range(len(scenes)):
             note = f"cfftg: {plans[i]} plan(s); apex y={via[i, 1, 0]:.3f} m, z={via[i, 1, 1]:.3f} m"
-            notes.append((note + f"; gave up after {self.max_plans} plans",) if gave_up[i] else (note,))
-        return assemble(self.method, self.sp, scenes, list(via), paths, np.zeros(len(scenes)), duration, notes,
-                        measured=checks)
+            notes.append(
+                (note + f"; gave up after {self.max_plans} plans",) if gave_up[i] else (note,)
+            )
+        return assemble(
+            self.method,
+            self.sp,
+            scenes,
+            list(via),
+            paths,
+            np.zeros(len(scenes)),
+            duration,
+            notes,
+            measured=checks,
+        )
 
-    def generate(self, obstacle: geometry.Obstacle, options: SwingOptions | None = None,
-                 **overrides) -> Trajectory:
+    def generate(
+        self, obstacle: geometry.Obstacle, options: SwingOptions | None = None, **overrides
+    ) -> Trajectory:
         """One checked trajectory (metres, radians, seconds) for ``options``
         (jaxexo.inference.options.SwingOptions; a GenerateOptions lends the fields CFFTG has), whose
         fields the keywords replace; ``strict`` raises TrajectoryError instead of returning one that
@@ -278,7 +331,9 @@ class CFFTG:
         scene = self.scene(obstacle, *o.scene_args)
         return o.checked(self.at_clearance(o.clearance).finish([scene], o.n_points, o.duration)[0])
 
-    def generate_batch(self, obstacles, options: SwingOptions | None = None, **overrides) -> TrajectoryBatch:
+    def generate_batch(
+        self, obstacles, options: SwingOptions | None = None, **overrides
+    ) -> TrajectoryBatch:
         """Trajectories for many scenarios, vectorised, with ``generate``'s options; each scene field
         (pivot, pivot_y, start_y, step_length) is one value or one per obstacle."""
         o = SwingOptions.given(options, overrides, "CFFTG.generate_batch")
@@ -294,4 +349,3 @@ def _scatter(full: dict, part: dict, idx: np.ndarray) -> dict:
         else:
             full[k][idx] = v
     return full
-

@@ -45,12 +45,12 @@ from jaxexo.inference import smoothing as sm
 from jaxexo.physics import geometry, swept
 
 ROUNDS = 4
-SLACK = 1e-3          # m asked above the margin, so that the next round's curve does not land on it
-_GROW = 1.2           # each round asks this multiple of the shortfall (rounding of the normals)
+SLACK = 1e-3  # m asked above the margin, so that the next round's curve does not land on it
+_GROW = 1.2  # each round asks this multiple of the shortfall (rounding of the normals)
 _ACTIVE_SET_STEPS = 8
-_NORMAL_EPS = 1e-4    # m, central-difference step of the clearance gradient
-_MIN_DIAG = 1e-9      # relative: constraints with less freedom than this are left to the retries
-MAX_SHIFT = 0.10      # m: a correction moving a sample further than this is not a small one; not made
+_NORMAL_EPS = 1e-4  # m, central-difference step of the clearance gradient
+_MIN_DIAG = 1e-9  # relative: constraints with less freedom than this are left to the retries
+MAX_SHIFT = 0.10  # m: a correction moving a sample further than this is not a small one; not made
 # A correction that needs more constraints than this at once (a curve far inside the margin over most
 # of its length: seen only on paths that never reach the goal) is not a small one either; not made,
 # which also spares its costly dual solve (docs/generation.md#speed).
@@ -61,9 +61,11 @@ def _outward(path_points, foot_length, outline):
     """Unit outward normals (k, 2) of the foot's distance to the outline at heel points (k, 2);
     ``outline`` (K, 2), or (k, K, 2): one per point."""
     e = _NORMAL_EPS
-    probe = path_points[None, :, :] + np.array([[e, 0.0], [-e, 0.0], [0.0, e], [0.0, -e]])[:, None, :]
+    probe = (
+        path_points[None, :, :] + np.array([[e, 0.0], [-e, 0.0], [0.0, e], [0.0, -e]])[:, None, :]
+    )
     ol = outline[None] if outline.ndim == 3 else outline[None, None]
-    c = geometry.foot_clearance(np, probe, foot_length, ol)                 # (4, k)
+    c = geometry.foot_clearance(np, probe, foot_length, ol)  # (4, k)
     g = np.stack([c[0] - c[1], c[2] - c[3]], axis=-1)
     norm = np.linalg.norm(g, axis=-1, keepdims=True)
     return np.where(norm > 0.0, g / np.maximum(norm, 1e-300), [0.0, 1.0])
@@ -82,12 +84,12 @@ def _solve_stack(a: np.ndarray, b: np.ndarray, act: np.ndarray) -> np.ndarray:
     ill-conditioned enough to amplify a last-bit difference)."""
     g, k = act.shape
     x = np.zeros((g, k))
-    if g == 1:      # one swing: the same system, fewer NumPy calls
+    if g == 1:  # one swing: the same system, fewer NumPy calls
         on = np.flatnonzero(act[0])
         if on.size:
             x[0, on] = _solve_same(a[0][np.ix_(on, on)][None], b[0, on][None])[0]
         return x
-    order = np.argsort(~act, axis=1, kind="stable")      # each row's active constraints first, in order
+    order = np.argsort(~act, axis=1, kind="stable")  # each row's active constraints first, in order
     count = act.sum(axis=1)
     for kk in np.unique(count):
         if kk == 0:
@@ -110,12 +112,12 @@ def _solve_same(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     try:
         low = np.linalg.cholesky(a)
         pd = np.ones(g, bool)
-    except np.linalg.LinAlgError:     # some are not positive definite: find which, one by one
+    except np.linalg.LinAlgError:  # some are not positive definite: find which, one by one
         low = np.zeros_like(a)
         pd = np.zeros(g, bool)
         for i in range(g):
             try:
-                low[i] = np.linalg.cholesky(a[i: i + 1])[0]
+                low[i] = np.linalg.cholesky(a[i : i + 1])[0]
                 pd[i] = True
             except np.linalg.LinAlgError:
                 pass
@@ -167,11 +169,30 @@ class Cleared:
     other entries may be lower bounds above the minimum and above the margin; None for a path too short
     for a spline, which is resampled, not corrected)."""
 
-    __slots__ = ("path", "deviation", "rounds", "point_clearance", "move_clearance", "initial", "_coef", "_ends",
-                 "_m")
+    __slots__ = (
+        "path",
+        "deviation",
+        "rounds",
+        "point_clearance",
+        "move_clearance",
+        "initial",
+        "_coef",
+        "_ends",
+        "_m",
+    )
 
-    def __init__(self, path, deviation, rounds, point_clearance=None, move_clearance=None, coef=None, ends=None, m=0,
-                 initial=None):
+    def __init__(
+        self,
+        path,
+        deviation,
+        rounds,
+        point_clearance=None,
+        move_clearance=None,
+        coef=None,
+        ends=None,
+        m=0,
+        initial=None,
+    ):
         self.path, self.deviation, self.rounds = path, deviation, rounds
         self.point_clearance, self.move_clearance = point_clearance, move_clearance
         self._coef, self._ends, self._m = coef, ends, m
@@ -190,9 +211,15 @@ class Cleared:
         return out
 
 
-def clear_smooth(raw: np.ndarray, outline: np.ndarray, foot_length: float, margin: float,
-                 n_points: int = sm.DEFAULT_POINTS, smoothing: float = sm.DEFAULT_SMOOTHING,
-                 dense_points: int | None = None):
+def clear_smooth(
+    raw: np.ndarray,
+    outline: np.ndarray,
+    foot_length: float,
+    margin: float,
+    n_points: int = sm.DEFAULT_POINTS,
+    smoothing: float = sm.DEFAULT_SMOOTHING,
+    dense_points: int | None = None,
+):
     """The smoothed heel path (n_points, 2) of a raw agent path, corrected to keep ``margin`` (m) from
     ``outline`` and to move forward; returns (path, deviation bound m, rounds of correction used), and
     with ``dense_points`` also the same curve sampled at that many parameters (for a denser look)."""
@@ -212,9 +239,13 @@ def _check(raws, outlines, foot_length, margin, n_points, smoothing):
             raise ValueError(f"{name} must be finite and >= 0, got {v!r}")
     for i, (raw, outline) in enumerate(zip(raws, outlines)):
         if np.ndim(raw) != 2 or np.shape(raw)[1] != 2 or len(raw) == 0:
-            raise ValueError(f"raws[{i}]: expected heel points (M, 2) with M >= 1, got shape {np.shape(raw)}")
+            raise ValueError(
+                f"raws[{i}]: expected heel points (M, 2) with M >= 1, got shape {np.shape(raw)}"
+            )
         if np.ndim(outline) != 2 or np.shape(outline)[1] != 2 or len(outline) < 2:
-            raise ValueError(f"outlines[{i}]: expected an outline (K, 2) with K >= 2, got shape {np.shape(outline)}")
+            raise ValueError(
+                f"outlines[{i}]: expected an outline (K, 2) with K >= 2, got shape {np.shape(outline)}"
+            )
 
 
 class _Group:
@@ -224,20 +255,34 @@ class _Group:
     def __init__(self, m, rows, pts, n_points, smoothing):
         self.m, self.rows = m, np.asarray(rows)
         zm, dm, self.em, self.qm = sm.spline_operators(m, n_points)
-        z = np.matmul(zm, pts)                                            # (G, M, 2)
-        lam = sm.solve_lambda(np.broadcast_to(dm, (len(rows), m)), np.sum(z * z, axis=-1),
-                               np.full(len(rows), float(smoothing)))
+        z = np.matmul(zm, pts)  # (G, M, 2)
+        lam = sm.solve_lambda(
+            np.broadcast_to(dm, (len(rows), m)),
+            np.sum(z * z, axis=-1),
+            np.full(len(rows), float(smoothing)),
+        )
         with np.errstate(invalid="ignore"):
-            self.shrink = np.where(np.isinf(lam)[:, None], (dm == 0.0).astype(float)[None],
-                                   1.0 / (1.0 + lam[:, None] * dm))
+            self.shrink = np.where(
+                np.isinf(lam)[:, None],
+                (dm == 0.0).astype(float)[None],
+                1.0 / (1.0 + lam[:, None] * dm),
+            )
         self.zc = z * self.shrink[..., None]
         self.first, self.last = pts[:, 0], pts[:, -1]
         self.alive = np.arange(len(rows))
-        self.out = self.dev = None      # the live rows' curves (G, n, 2) and deviation bounds, per round
+        self.out = self.dev = (
+            None  # the live rows' curves (G, n, 2) and deviation bounds, per round
+        )
 
 
-def clear_rows(raws, outlines, foot_length: float, margin: float, n_points: int = sm.DEFAULT_POINTS,
-               smoothing: float = sm.DEFAULT_SMOOTHING) -> list[Cleared]:
+def clear_rows(
+    raws,
+    outlines,
+    foot_length: float,
+    margin: float,
+    n_points: int = sm.DEFAULT_POINTS,
+    smoothing: float = sm.DEFAULT_SMOOTHING,
+) -> list[Cleared]:
     """``clear_smooth`` of many raw paths (M_i, 2) on their outlines (K_i, 2): a ``Cleared`` per path.
 
     Each path's correction is its own; the arithmetic runs on all paths at once: the splines of the
@@ -249,14 +294,22 @@ def clear_rows(raws, outlines, foot_length: float, margin: float, n_points: int 
     return _clear_rows(raws, outlines, foot_length, margin, n_points, smoothing, exact=False)
 
 
-def exact_clear_rows(raws, outlines, foot_length: float, margin: float, n_points: int = sm.DEFAULT_POINTS,
-                     smoothing: float = sm.DEFAULT_SMOOTHING) -> list[Cleared]:
+def exact_clear_rows(
+    raws,
+    outlines,
+    foot_length: float,
+    margin: float,
+    n_points: int = sm.DEFAULT_POINTS,
+    smoothing: float = sm.DEFAULT_SMOOTHING,
+) -> list[Cleared]:
     """``clear_rows`` with every move's clearance computed exactly: the reference it is tested against
     (the same curves)."""
     return _clear_rows(raws, outlines, foot_length, margin, n_points, smoothing, exact=True)
 
 
-def _clear_rows(raws, outlines, foot_length, margin, n_points, smoothing, exact: bool) -> list[Cleared]:
+def _clear_rows(
+    raws, outlines, foot_length, margin, n_points, smoothing, exact: bool
+) -> list[Cleared]:
     """``clear_rows``, every move exact where ``exact``."""
     _check(raws, outlines, foot_length, margin, n_points, smoothing)
     outlines = [np.asarray(o, np.float64) for o in outlines]
@@ -271,7 +324,10 @@ def _clear_rows(raws, outlines, foot_length, margin, n_points, smoothing, exact:
             res[i] = Cleared(path, dev, 0, ends=pts)
         else:
             by_m.setdefault(len(pts), []).append(i)
-    groups = [_Group(m, rows, np.stack([pts_all[i] for i in rows]), n_points, smoothing) for m, rows in by_m.items()]
+    groups = [
+        _Group(m, rows, np.stack([pts_all[i] for i in rows]), n_points, smoothing)
+        for m, rows in by_m.items()
+    ]
     h2_8 = (1.0 / (n_points - 1)) ** 2 / 8.0
     sizes = np.array([len(o) for o in outlines])
     # every outline of one size stacked once (k -> (rows of that size, K, 2)), and each row's place in it
@@ -288,33 +344,38 @@ def _clear_rows(raws, outlines, foot_length, margin, n_points, smoothing, exact:
             break
         for g in live:
             zc = g.zc[g.alive]
-            out = np.matmul(g.em, zc)                                     # (G, n, 2)
-            curv = np.max(np.abs(np.matmul(g.qm, zc)), axis=1)            # (G, 2): max |c''| per axis
+            out = np.matmul(g.em, zc)  # (G, n, 2)
+            curv = np.max(np.abs(np.matmul(g.qm, zc)), axis=1)  # (G, 2): max |c''| per axis
             g.dev = h2_8 * np.sqrt(np.sum(curv * curv, axis=-1))
             np.maximum(out[..., 1], 0.0, out=out[..., 1])
             out[:, 0], out[:, -1] = g.first[g.alive], g.last[g.alive]
             g.out = out
-        out = np.concatenate([g.out for g in live])                      # (A, n, 2): every live row
+        out = np.concatenate([g.out for g in live])  # (A, n, 2): every live row
         dev = np.concatenate([g.dev for g in live])
         row = np.concatenate([g.rows[g.alive] for g in live])
         c, sw = _clearances(out, dev, row, lib, foot_length, margin, exact)
         if r == 0:
             initial = {int(i): (out[a], float(dev[a]), c[a], sw[a]) for a, i in enumerate(row)}
-        short = margin + SLACK - (sw - dev[:, None])                      # (A, n-1)
-        fall = out[:, :-1, 0] - out[:, 1:, 0]                             # (A, n-1)
+        short = margin + SLACK - (sw - dev[:, None])  # (A, n-1)
+        fall = out[:, :-1, 0] - out[:, 1:, 0]  # (A, n-1)
         going = ~(((short.max(axis=1) <= 0.0) & (fall.max(axis=1) <= 0.0)) | (r == ROUNDS))
         normal = _normals(out, short, going, row, lib, foot_length) if going.any() else None
         off = 0
         for g in live:
             span = slice(off, off + len(g.alive))
             off += len(g.alive)
-            moved = (_correct(g, short[span], fall[span], going[span], normal[span], n_points) if normal is not None
-                     else np.zeros(len(g.alive), bool))
+            moved = (
+                _correct(g, short[span], fall[span], going[span], normal[span], n_points)
+                if normal is not None
+                else np.zeros(len(g.alive), bool)
+            )
             for j, k in enumerate(g.alive):
                 if not moved[j]:
                     a = span.start + j
                     i = int(g.rows[k])
-                    res[i] = Cleared(out[a], float(dev[a]), r, c[a], sw[a], g.zc[k], pts_all[i], g.m, initial[i])
+                    res[i] = Cleared(
+                        out[a], float(dev[a]), r, c[a], sw[a], g.zc[k], pts_all[i], g.m, initial[i]
+                    )
             g.alive = g.alive[moved]
     return res
 
@@ -334,8 +395,9 @@ def _clearances(out, dev, row, lib, foot_length, margin, exact):
             c[sel] = geometry.foot_clearance(np, out[sel], foot_length, ol[:, None])
             sw[sel] = swept.path_swept_clearance(np, out[sel], foot_length, ol, c[sel])
         else:
-            c[sel], sw[sel] = swept.path_clearance_pruned(out[sel], foot_length, ol,
-                                                          below=margin + SLACK + dev[sel] + _BELOW_PAD)
+            c[sel], sw[sel] = swept.path_clearance_pruned(
+                out[sel], foot_length, ol, below=margin + SLACK + dev[sel] + _BELOW_PAD
+            )
     return c, sw
 
 
@@ -346,7 +408,7 @@ def _clear_samples(short, going, n_points):
     s = np.zeros((len(short), n_points), bool)
     s[:, :-1] |= bad
     s[:, 1:] |= bad
-    s[:, 0] = s[:, -1] = False          # the pinned ends do not move
+    s[:, 0] = s[:, -1] = False  # the pinned ends do not move
     return s
 
 
@@ -373,7 +435,7 @@ def _correct(g, short, fall, going, normal, n_points) -> np.ndarray:
     moved = going.copy()
     samp = _clear_samples(short, going, n_points)
     back = (fall > 0.0) & going[:, None]
-    back[:, n_points - 2:] = False                  # the last sample is pinned
+    back[:, n_points - 2 :] = False  # the last sample is pinned
     k_clear = samp.sum(axis=1)
     k = k_clear + back.sum(axis=1)
     moved &= (k > 0) & (k <= MAX_CONSTRAINTS)

@@ -57,22 +57,44 @@ from jaxexo.inference.export import JOINT_NAMES, timed_dict, write_csv, write_js
 from jaxexo.inference.trajectory import Trajectory, assemble
 from jaxexo.storage.terrain_file import Terrain, TerrainFileError, read_terrain
 
-GRID = 0.01                 # m, foothold resolution
-STAND_MARGIN = NEAR_MARGIN  # m, least distance of a standing foot from an obstacle (the training's toe margin)
-FLAT_OBSTACLE = (0.10, 0.03)  # m, (width, height) of the virtual obstacle a swing on flat ground lifts over
-JUNCTION_TOL = 1e-6         # rad, largest joint-angle jump allowed where one swing hands over to the next
-MAX_STEPS = 1000            # swings in one walk (``steps``)
-MAX_DOUBLE_SUPPORT = 10.0   # s
+GRID = 0.01  # m, foothold resolution
+STAND_MARGIN = (
+    NEAR_MARGIN  # m, least distance of a standing foot from an obstacle (the training's toe margin)
+)
+FLAT_OBSTACLE = (
+    0.10,
+    0.03,
+)  # m, (width, height) of the virtual obstacle a swing on flat ground lifts over
+JUNCTION_TOL = 1e-6  # rad, largest joint-angle jump allowed where one swing hands over to the next
+MAX_STEPS = 1000  # swings in one walk (``steps``)
+MAX_DOUBLE_SUPPORT = 10.0  # s
 
 LEGS = ("left", "right")
 WALK_JOINTS = ("hip_left", "knee_left", "hip_right", "knee_right")
 WALK_COLUMNS = (
-    "time_s", "step", "swing_leg",
-    "left_heel_y_m", "left_heel_z_m", "left_toe_y_m", "left_toe_z_m",
-    "right_heel_y_m", "right_heel_z_m", "right_toe_y_m", "right_toe_z_m",
-    "hip_y_m", "hip_z_m", "left_knee_y_m", "left_knee_z_m", "right_knee_y_m", "right_knee_z_m",
-) + tuple(f"{j}_rad" for j in WALK_JOINTS) + tuple(f"{j}_vel_rad_s" for j in WALK_JOINTS) + tuple(
-    f"{j}_acc_rad_s2" for j in WALK_JOINTS)
+    (
+        "time_s",
+        "step",
+        "swing_leg",
+        "left_heel_y_m",
+        "left_heel_z_m",
+        "left_toe_y_m",
+        "left_toe_z_m",
+        "right_heel_y_m",
+        "right_heel_z_m",
+        "right_toe_y_m",
+        "right_toe_z_m",
+        "hip_y_m",
+        "hip_z_m",
+        "left_knee_y_m",
+        "left_knee_z_m",
+        "right_knee_y_m",
+        "right_knee_z_m",
+    )
+    + tuple(f"{j}_rad" for j in WALK_JOINTS)
+    + tuple(f"{j}_vel_rad_s" for j in WALK_JOINTS)
+    + tuple(f"{j}_acc_rad_s2" for j in WALK_JOINTS)
+)
 
 
 class CourseError(ValueError):
@@ -96,11 +118,13 @@ def obstacles_of(terrain: Terrain) -> list[np.ndarray]:
     starts = np.flatnonzero(up & ~prev)
     ends = np.flatnonzero(up & ~nxt)
     pts = terrain.points
-    return [pts[max(i - 1, 0): min(j + 2, len(z))] for i, j in zip(starts, ends)]
+    return [pts[max(i - 1, 0) : min(j + 2, len(z))] for i, j in zip(starts, ends)]
 
 
 def _describe(ob: np.ndarray) -> str:
-    return f"the obstacle at y = {ob[0, 0]:.2f}-{ob[-1, 0]:.2f} m ({ob[:, 1].max() * 100:.0f} cm high)"
+    return (
+        f"the obstacle at y = {ob[0, 0]:.2f}-{ob[-1, 0]:.2f} m ({ob[:, 1].max() * 100:.0f} cm high)"
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -113,11 +137,11 @@ class FootholdRules:
     """The numbers footholds are chosen by (metres), from a config and a clearance."""
 
     foot: float
-    stand: float        # flat ground a standing foot keeps on either side
-    tolerance: float    # how far a swing may land from its goal (env.goal_tolerance[0])
-    lo: float           # swing length range
+    stand: float  # flat ground a standing foot keeps on either side
+    tolerance: float  # how far a swing may land from its goal (env.goal_tolerance[0])
+    lo: float  # swing length range
     hi: float
-    lift: float         # heel height above an obstacle's vertices that must be within reach
+    lift: float  # heel height above an obstacle's vertices that must be within reach
     thigh: float
     shin: float
     hip_limits: tuple
@@ -128,11 +152,18 @@ class FootholdRules:
         env, kin, lay = config.env, config.kinematics, config.layout
         c = env.min_clearance if clearance is None else float(clearance)
         steps = lay.terrain.step_length if lay.terrain is not None else lay.step_length
-        return cls(foot=float(kin.foot_length), stand=max(STAND_MARGIN, c + 0.005),
-                   tolerance=float(env.goal_tolerance[0]), lo=float(steps[0]), hi=float(steps[1]),
-                   lift=max(c, env.mid_goal_clearance - env.mid_goal_half_size[1]),
-                   thigh=float(kin.thigh), shin=float(kin.shin), hip_limits=tuple(kin.hip_limits),
-                   knee_limits=tuple(kin.knee_limits))
+        return cls(
+            foot=float(kin.foot_length),
+            stand=max(STAND_MARGIN, c + 0.005),
+            tolerance=float(env.goal_tolerance[0]),
+            lo=float(steps[0]),
+            hi=float(steps[1]),
+            lift=max(c, env.mid_goal_clearance - env.mid_goal_half_size[1]),
+            thigh=float(kin.thigh),
+            shin=float(kin.shin),
+            hip_limits=tuple(kin.hip_limits),
+            knee_limits=tuple(kin.knee_limits),
+        )
 
     @property
     def nominal(self) -> float:
@@ -170,8 +201,15 @@ def _check_number(name: str, v, lo=None, integer=False):
     return v
 
 
-def footholds(terrain: Terrain, config, *, start_y: float | None = None, goal_y: float | None = None,
-              steps: int | None = None, clearance: float | None = None) -> Footholds:
+def footholds(
+    terrain: Terrain,
+    config,
+    *,
+    start_y: float | None = None,
+    goal_y: float | None = None,
+    steps: int | None = None,
+    clearance: float | None = None,
+) -> Footholds:
     """Choose the footholds of a walk over ``terrain`` (module docstring, 1.): from ``start_y``
     (default: the terrain's first point) to ``goal_y`` (default: the furthest foothold the terrain
     allows), or, with ``steps``, the walk of exactly that many swings. CourseError naming the
@@ -186,32 +224,46 @@ def footholds(terrain: Terrain, config, *, start_y: float | None = None, goal_y:
     y0, y_end = float(terrain.y[0]), float(terrain.y[-1])
     start = y0 if start_y is None else _check_number("start_y", start_y)
     if not y0 <= start <= y_end - r.foot:
-        raise CourseError(f"start_y: {start:.3f} m is not on the course (the foot must stand between "
-                          f"{y0:.3f} and {y_end - r.foot:.3f} m)")
+        raise CourseError(
+            f"start_y: {start:.3f} m is not on the course (the foot must stand between "
+            f"{y0:.3f} and {y_end - r.foot:.3f} m)"
+        )
     lefts = np.array([o[0, 0] for o in obs])
     rights = np.array([o[-1, 0] for o in obs])
-    blocked = _overlapping(lefts, rights, np.array([start - r.stand]), np.array([start + r.foot + r.stand]))[0]
+    blocked = _overlapping(
+        lefts, rights, np.array([start - r.stand]), np.array([start + r.foot + r.stand])
+    )[0]
     if blocked >= 0:
-        raise CourseError(f"start_y: the feet at y = {start:.3f} m do not stand on flat ground {r.stand * 100:.1f} cm "
-                          f"clear of {_describe(obs[blocked])}")
+        raise CourseError(
+            f"start_y: the feet at y = {start:.3f} m do not stand on flat ground {r.stand * 100:.1f} cm "
+            f"clear of {_describe(obs[blocked])}"
+        )
     n = int(math.floor((y_end - r.foot - r.tolerance - start) / GRID + 1e-9)) + 1
     if n < 2:
-        raise CourseError(f"terrain: the course ends at y = {y_end:.3f} m, too close to the start for a step")
+        raise CourseError(
+            f"terrain: the course ends at y = {y_end:.3f} m, too close to the start for a step"
+        )
     ys = start + GRID * np.arange(n)
-    over = _overlapping(lefts, rights, ys - r.tolerance - r.stand, ys + r.foot + r.tolerance + r.stand)
+    over = _overlapping(
+        lefts, rights, ys - r.tolerance - r.stand, ys + r.foot + r.tolerance + r.stand
+    )
     valid = over < 0
-    valid[0] = True   # the start (checked above, without the landing tolerance)
+    valid[0] = True  # the start (checked above, without the landing tolerance)
     if goal_y is not None:
         goal_y = _check_number("goal_y", goal_y)
         g = int(round((goal_y - start) / GRID))
         if g <= 0:
             raise CourseError(f"goal_y: {goal_y:.3f} m must lie ahead of the start ({start:.3f} m)")
         if g >= n:
-            raise CourseError(f"goal_y: {goal_y:.3f} m is beyond the last place a foot can land on the course "
-                              f"({ys[-1]:.3f} m: the terrain ends at {y_end:.3f} m)")
+            raise CourseError(
+                f"goal_y: {goal_y:.3f} m is beyond the last place a foot can land on the course "
+                f"({ys[-1]:.3f} m: the terrain ends at {y_end:.3f} m)"
+            )
         if not valid[g]:
-            raise CourseError(f"goal_y: a foot at y = {ys[g]:.3f} m does not stand on flat ground clear of "
-                              f"{_describe(obs[over[g]])}")
+            raise CourseError(
+                f"goal_y: a foot at y = {ys[g]:.3f} m does not stand on flat ground clear of "
+                f"{_describe(obs[over[g]])}"
+            )
     planner = _Planner(r, ys, valid, obs, lefts, rights)
     if steps is not None:
         path = planner.fixed_steps(steps)
@@ -225,12 +277,18 @@ def footholds(terrain: Terrain, config, *, start_y: float | None = None, goal_y:
         # The default goal: the furthest place both feet can stand together, past every obstacle.
         path = planner.to_goal(None)
         if not path:
-            raise CourseError(planner.why_not(f"terrain: no walk from y = {start:.2f} m ends with both feet together "
-                                              f"(steps of {r.lo:.2f}-{r.hi:.2f} m)"))
+            raise CourseError(
+                planner.why_not(
+                    f"terrain: no walk from y = {start:.2f} m ends with both feet together "
+                    f"(steps of {r.lo:.2f}-{r.hi:.2f} m)"
+                )
+            )
         end = ys[path[-1]]
         left_out = np.flatnonzero(rights > end)
         if left_out.size:
-            raise CourseError(planner.why_not(f"no walk gets past {_describe(obs[int(left_out[0])])}"))
+            raise CourseError(
+                planner.why_not(f"no walk gets past {_describe(obs[int(left_out[0])])}")
+            )
     return Footholds(float(start), tuple(float(ys[k]) for k in path))
 
 
@@ -238,8 +296,8 @@ def _overlapping(lefts, rights, lo, hi) -> np.ndarray:
     """For each window (lo, hi) (m): the index of an obstacle reaching into it, or -1."""
     if lefts.size == 0:
         return np.full(len(lo), -1)
-    i = np.searchsorted(lefts, hi, side="left")     # obstacles starting before the window's end ...
-    j = np.searchsorted(rights, lo, side="right")   # ... less those ending at or before its start
+    i = np.searchsorted(lefts, hi, side="left")  # obstacles starting before the window's end ...
+    j = np.searchsorted(rights, lo, side="right")  # ... less those ending at or before its start
     return np.where(i > j, j, -1)
 
 
@@ -254,14 +312,18 @@ class _Planner:
         self.hi = int(math.floor(r.hi / GRID + 1e-9))
         self.sigma = 0.5 * (self.hi - self.lo) if self.hi > self.lo else 1.0
         # Swing (a, c) covers obstacle j when a < left_j and right_j < c: grid bounds per obstacle.
-        self.a_below = np.ceil((lefts - ys[0]) / GRID - 1e-9).astype(np.int64)    # a index < this
+        self.a_below = np.ceil((lefts - ys[0]) / GRID - 1e-9).astype(np.int64)  # a index < this
         self.c_above = np.floor((rights - ys[0]) / GRID + 1e-9).astype(np.int64)  # c index > this
         sizes = np.array([len(o) for o in obs], np.int64)
         self.too_many = sizes > geometry.MAX_PROFILE_VERTICES - 2
         self.vert_cum = np.concatenate([[0], np.cumsum(sizes)])
         idx = np.arange(self.n)
-        self.first_after = np.searchsorted(self.a_below, idx, side="right")   # obstacles with a_below > a
-        self.last_before = np.searchsorted(self.c_above, idx, side="left")    # obstacles with c_above < c
+        self.first_after = np.searchsorted(
+            self.a_below, idx, side="right"
+        )  # obstacles with a_below > a
+        self.last_before = np.searchsorted(
+            self.c_above, idx, side="left"
+        )  # obstacles with c_above < c
         self.lefts, self.rights = lefts, rights
         self._clear = {}
 
@@ -279,8 +341,9 @@ class _Planner:
         top = ob[ob[:, 1] > 0.0]
         heels = np.concatenate([top, top - [r.foot, 0.0]]) + [0.0, r.lift]
         hb = np.broadcast_to(heels, (len(piv),) + heels.shape)
-        bad = kinematics.swing_heel_unreachable(np, piv[:, None], hb, r.thigh, r.shin, r.hip_limits,
-                                                r.knee_limits).any(axis=1)
+        bad = kinematics.swing_heel_unreachable(
+            np, piv[:, None], hb, r.thigh, r.shin, r.hip_limits, r.knee_limits
+        ).any(axis=1)
         ok = ~bad
         if tol:
             win = np.lib.stride_tricks.sliding_window_view(ok, 2 * tol + 1)
@@ -307,7 +370,10 @@ class _Planner:
             return np.full(e.shape[1], np.inf), np.zeros(e.shape[1], np.int64)
         aa = np.clip(a, 0, self.n - 1)
         j0, j1 = self.first_after[aa], self.last_before[cc]
-        ok &= self.vert_cum[np.maximum(j1, j0)] - self.vert_cum[j0] <= geometry.MAX_PROFILE_VERTICES - 2
+        ok &= (
+            self.vert_cum[np.maximum(j1, j0)] - self.vert_cum[j0]
+            <= geometry.MAX_PROFILE_VERTICES - 2
+        )
         lo_j = int(self.first_after[max(b - H, 0)])
         hi_j = int(self.last_before[min(b + H, self.n - 1)])
         for j in range(lo_j, hi_j):
@@ -411,26 +477,40 @@ class _Planner:
             ob = self.obs[j]
             need = (ob[-1, 0] - ob[0, 0]) + r.foot + 2.0 * (r.tolerance + r.stand)
             if self.too_many[j]:
-                return (f"{what}: {_describe(ob)} has {len(ob)} profile points, more than a swing's obstacle "
-                        f"may have ({geometry.MAX_PROFILE_VERTICES - 2}); the walk stops at y = {y:.2f} m")
+                return (
+                    f"{what}: {_describe(ob)} has {len(ob)} profile points, more than a swing's obstacle "
+                    f"may have ({geometry.MAX_PROFILE_VERTICES - 2}); the walk stops at y = {y:.2f} m"
+                )
             if need > r.hi + 1e-9:
-                return (f"{what}: no step can cross {_describe(ob)}: it needs a swing of at least {need:.2f} m "
-                        f"(foot and clearances included), longer than the longest step ({r.hi:.2f} m); the walk "
-                        f"stops at y = {y:.2f} m")
+                return (
+                    f"{what}: no step can cross {_describe(ob)}: it needs a swing of at least {need:.2f} m "
+                    f"(foot and clearances included), longer than the longest step ({r.hi:.2f} m); the walk "
+                    f"stops at y = {y:.2f} m"
+                )
             k0, clear = self.clears(j)
             if not clear.any():
-                return (f"{what}: no swing can clear {_describe(ob)}: the heel {r.lift * 100:.1f} cm above it is out "
-                        f"of the leg's reach or joint limits for every stance position; the walk stops at "
-                        f"y = {y:.2f} m")
-        ahead = np.flatnonzero(self.valid[self.reach + 1:])
+                return (
+                    f"{what}: no swing can clear {_describe(ob)}: the heel {r.lift * 100:.1f} cm above it is out "
+                    f"of the leg's reach or joint limits for every stance position; the walk stops at "
+                    f"y = {y:.2f} m"
+                )
+        ahead = np.flatnonzero(self.valid[self.reach + 1 :])
         if not ahead.size or ahead[0] + 1 > self.hi:
-            gap_to = f"the next is at y = {self.ys[self.reach + 1 + ahead[0]]:.2f} m" if ahead.size else "there is none"
-            return (f"{what}: no flat foothold within a step of y = {y:.2f} m ({gap_to}; the longest step is "
-                    f"{r.hi:.2f} m)")
+            gap_to = (
+                f"the next is at y = {self.ys[self.reach + 1 + ahead[0]]:.2f} m"
+                if ahead.size
+                else "there is none"
+            )
+            return (
+                f"{what}: no flat foothold within a step of y = {y:.2f} m ({gap_to}; the longest step is "
+                f"{r.hi:.2f} m)"
+            )
         ob = _describe(self.obs[int(nxt[0])]) if nxt.size else ""
         where = f" across {ob}" if ob and ob not in what else ""
-        return (f"{what}: the walk gets no further than y = {y:.2f} m: no footholds with swings of "
-                f"{r.lo:.2f}-{r.hi:.2f} m lead on from there{where}")
+        return (
+            f"{what}: the walk gets no further than y = {y:.2f} m: no footholds with swings of "
+            f"{r.lo:.2f}-{r.hi:.2f} m lead on from there{where}"
+        )
 
 
 # --------------------------------------------------------------------------------------------
@@ -447,11 +527,11 @@ class CourseStep:
     leg: str
     start_y: float
     pivot_y: float
-    goal_y: float           # the planned foothold
-    landing_y: float        # where the heel came down
-    flat: bool              # no obstacle under the swing (planned over FLAT_OBSTACLE)
+    goal_y: float  # the planned foothold
+    landing_y: float  # where the heel came down
+    flat: bool  # no obstacle under the swing (planned over FLAT_OBSTACLE)
     trajectory: Trajectory
-    timed: object           # TimedSwing; None for a failed swing (not timed)
+    timed: object  # TimedSwing; None for a failed swing (not timed)
     start_s: float
     end_s: float
 
@@ -466,7 +546,9 @@ class CourseStep:
     @property
     def reasons(self) -> tuple[str, ...]:
         out = tuple(self.trajectory.checks.reasons)
-        return out + tuple(r for r in (self.timed.reasons if self.timed is not None else ()) if r not in out)
+        return out + tuple(
+            r for r in (self.timed.reasons if self.timed is not None else ()) if r not in out
+        )
 
 
 @dataclass(frozen=True)
@@ -482,8 +564,8 @@ class Course:
     limits: object
     double_support: float
     method: str
-    samples: np.ndarray             # (T, len(WALK_COLUMNS))
-    junction_jump: float            # rad, largest joint-angle jump at a hand-over
+    samples: np.ndarray  # (T, len(WALK_COLUMNS))
+    junction_jump: float  # rad, largest joint-angle jump at a hand-over
     reasons: tuple[str, ...]
     plan_seconds: float = 0.0
     notes: tuple[str, ...] = field(default=())
@@ -511,22 +593,50 @@ class Course:
         for s in self.steps:
             d = timed_dict(s.timed) if s.timed is not None else s.trajectory.to_dict()
             samples = np.asarray(d["samples"])
-            samples[:, 0] += s.start_s          # walk time
+            samples[:, 0] += s.start_s  # walk time
             d["samples"] = samples.tolist()
-            d.update({"index": s.index, "leg": s.leg, "method": s.method, "start_y": s.start_y, "pivot_y": s.pivot_y,
-                      "planned_landing_y": s.goal_y, "landing": {"heel_y": s.landing_y, "heel_z": 0.0},
-                      "flat": s.flat, "start_s": s.start_s, "end_s": s.end_s, "ok": s.ok, "reasons": list(s.reasons)})
+            d.update(
+                {
+                    "index": s.index,
+                    "leg": s.leg,
+                    "method": s.method,
+                    "start_y": s.start_y,
+                    "pivot_y": s.pivot_y,
+                    "planned_landing_y": s.goal_y,
+                    "landing": {"heel_y": s.landing_y, "heel_z": 0.0},
+                    "flat": s.flat,
+                    "start_s": s.start_s,
+                    "end_s": s.end_s,
+                    "ok": s.ok,
+                    "reasons": list(s.reasons),
+                }
+            )
             steps.append(d)
         return {
-            "units": {"length": "m", "angle": "rad", "time": "s", "joint velocity": "rad/s",
-                      "joint acceleration": "rad/s^2", "rate": "Hz"},
-            "ok": self.ok, "reasons": list(self.reasons), "method": self.method,
+            "units": {
+                "length": "m",
+                "angle": "rad",
+                "time": "s",
+                "joint velocity": "rad/s",
+                "joint acceleration": "rad/s^2",
+                "rate": "Hz",
+            },
+            "ok": self.ok,
+            "reasons": list(self.reasons),
+            "method": self.method,
             "terrain": {"source": self.terrain.source, "points": self.terrain.points.tolist()},
-            "start_y": self.footholds.start_y, "footholds": list(self.footholds.landings),
-            "rate_hz": self.rate, "duration_s": self.duration, "limits": self.limits.to_dict(),
-            "double_support_s": self.double_support, "junction_jump_rad": self.junction_jump,
-            "plan_seconds": self.plan_seconds, "notes": list(self.notes),
-            "columns": list(WALK_COLUMNS), "samples": self.samples.tolist(), "steps": steps,
+            "start_y": self.footholds.start_y,
+            "footholds": list(self.footholds.landings),
+            "rate_hz": self.rate,
+            "duration_s": self.duration,
+            "limits": self.limits.to_dict(),
+            "double_support_s": self.double_support,
+            "junction_jump_rad": self.junction_jump,
+            "plan_seconds": self.plan_seconds,
+            "notes": list(self.notes),
+            "columns": list(WALK_COLUMNS),
+            "samples": self.samples.tolist(),
+            "steps": steps,
         }
 
     def to_json(self, path: str | Path | None = None) -> str:
@@ -549,13 +659,24 @@ def _swing_obstacle(obs, start, goal, r: FootholdRules):
     return geometry.Obstacle.profile(np.concatenate(inside)), False
 
 
-def _in_course(traj: Trajectory, gen, obstacle, start: float, pivot: float, goal: float) -> Trajectory:
+def _in_course(
+    traj: Trajectory, gen, obstacle, start: float, pivot: float, goal: float
+) -> Trajectory:
     """A swing planned in its own frame (start at y = 0) placed on the course at ``start`` and checked
     there again (trajectory.assemble: the same checks)."""
     shift = np.array([start, 0.0])
     scene = gen.scene(obstacle, pivot_y=pivot, start_y=start, step_length=goal - start)
-    batch = assemble(traj.method, gen.sp, [scene], [traj.raw + shift], (traj.heel + shift)[None], [traj.smoothing],
-                     duration=float(traj.time[-1]), notes=[tuple(traj.notes)], deviation=[traj.checks.deviation])
+    batch = assemble(
+        traj.method,
+        gen.sp,
+        [scene],
+        [traj.raw + shift],
+        (traj.heel + shift)[None],
+        [traj.smoothing],
+        duration=float(traj.time[-1]),
+        notes=[tuple(traj.notes)],
+        deviation=[traj.checks.deviation],
+    )
     return batch[0]
 
 
@@ -571,9 +692,19 @@ def _as_terrain(terrain) -> Terrain:
     return Terrain.from_points(terrain)
 
 
-def plan_course(generator, terrain, *, start_y: float | None = None, goal_y: float | None = None,
-                steps: int | None = None, fallback: str | None = "cfftg", rate: float | None = None,
-                limits=None, clearance: float | None = None, double_support: float = 0.0) -> Course:
+def plan_course(
+    generator,
+    terrain,
+    *,
+    start_y: float | None = None,
+    goal_y: float | None = None,
+    steps: int | None = None,
+    fallback: str | None = "cfftg",
+    rate: float | None = None,
+    limits=None,
+    clearance: float | None = None,
+    double_support: float = 0.0,
+) -> Course:
     """Plan a walk over ``terrain`` (a Terrain, a terrain file's path or (y, z) points) with
     ``generator`` (a TrajectoryGenerator, or a CFFTG for its swings on the same footholds): the
     footholds (``footholds``), each swing (``fallback``: "cfftg" or None, the RL generator only),
@@ -588,7 +719,9 @@ def plan_course(generator, terrain, *, start_y: float | None = None, goal_y: flo
 
     t0 = _time.perf_counter()
     if not isinstance(generator, (TrajectoryGenerator, CFFTG)):
-        raise CourseError(f"generator: expected a TrajectoryGenerator or CFFTG, got {type(generator).__name__}")
+        raise CourseError(
+            f"generator: expected a TrajectoryGenerator or CFFTG, got {type(generator).__name__}"
+        )
     config = generator.config
     rl = isinstance(generator, TrajectoryGenerator)
     fallback = check_fallback(fallback)
@@ -598,10 +731,12 @@ def plan_course(generator, terrain, *, start_y: float | None = None, goal_y: flo
         raise CourseError(f"double_support: at most {MAX_DOUBLE_SUPPORT:g} s, got {ds:g}")
     limits = DeviceLimits.from_config(config) if limits is None else limits
     gen = generator.at_clearance(clearance)
-    plan = footholds(terrain, config, start_y=start_y, goal_y=goal_y, steps=steps, clearance=clearance)
+    plan = footholds(
+        terrain, config, start_y=start_y, goal_y=goal_y, steps=steps, clearance=clearance
+    )
     r = FootholdRules.of(config, clearance)
     obs = obstacles_of(terrain)
-    feet = [plan.start_y, plan.start_y]         # heel y of the left and right foot
+    feet = [plan.start_y, plan.start_y]  # heel y of the left and right foot
     trajs, meta, stopped = [], [], None
     for k in range(len(plan)):
         leg = k % 2
@@ -632,15 +767,35 @@ def plan_course(generator, terrain, *, start_y: float | None = None, goal_y: flo
         st = CourseStep(k, leg, start, pivot, goal, land, flat, traj, t, *span)
         steps_out.append(st)
         if not st.ok:
-            reasons.append(f"step {k + 1} ({leg} foot, y = {start:.2f} -> {land:.2f} m, {st.method}): "
-                           + "; ".join(st.reasons))
+            reasons.append(
+                f"step {k + 1} ({leg} foot, y = {start:.2f} -> {land:.2f} m, {st.method}): "
+                + "; ".join(st.reasons)
+            )
     if stopped is not None and stopped + 1 < len(plan):
-        reasons.append(f"steps {stopped + 2}-{len(plan)} not planned: the walk cannot go on from a failed swing")
+        reasons.append(
+            f"steps {stopped + 2}-{len(plan)} not planned: the walk cannot go on from a failed swing"
+        )
     if jump > JUNCTION_TOL:
-        reasons.append(f"the joint angles jump by {jump:.2e} rad where one swing hands over to the next")
-    notes = tuple(f"step {s.index + 1}: {s.method}" for s in steps_out if s.method == "cfftg-fallback")
-    return Course(terrain, plan, tuple(steps_out), float(rate), limits, ds, "rl" if rl else "cfftg", samples,
-                  jump, tuple(reasons), _time.perf_counter() - t0, notes)
+        reasons.append(
+            f"the joint angles jump by {jump:.2e} rad where one swing hands over to the next"
+        )
+    notes = tuple(
+        f"step {s.index + 1}: {s.method}" for s in steps_out if s.method == "cfftg-fallback"
+    )
+    return Course(
+        terrain,
+        plan,
+        tuple(steps_out),
+        float(rate),
+        limits,
+        ds,
+        "rl" if rl else "cfftg",
+        samples,
+        jump,
+        tuple(reasons),
+        _time.perf_counter() - t0,
+        notes,
+    )
 
 
 def _walk_table(timed, meta, double_support: float, rate: float):
@@ -663,7 +818,7 @@ def _walk_table(timed, meta, double_support: float, rate: float):
         feet = [None, None]
         feet[side], feet[1 - side] = t.heel, stance
         for i, h in enumerate(feet):
-            block[:, 3 + 4 * i: 5 + 4 * i] = h
+            block[:, 3 + 4 * i : 5 + 4 * i] = h
             block[:, 5 + 4 * i] = h[:, 0] + (t.toe[0, 0] - t.heel[0, 0])
             block[:, 6 + 4 * i] = h[:, 1]
         block[:, 11:13] = t.hip
@@ -672,8 +827,8 @@ def _walk_table(timed, meta, double_support: float, rate: float):
         block[:, 13:15], block[:, 15:17] = knees
         for base, arr in ((17, t.joint_angles), (21, t.joint_velocity), (25, t.joint_acceleration)):
             sw, st = arr[:, 0:2], arr[:, 2:4]
-            block[:, base + 2 * side: base + 2 * side + 2] = sw
-            block[:, base + 2 * (1 - side): base + 2 * (1 - side) + 2] = st
+            block[:, base + 2 * side : base + 2 * side + 2] = sw
+            block[:, base + 2 * (1 - side) : base + 2 * (1 - side) + 2] = st
         if last is not None:
             jump = max(jump, float(np.abs(block[0, 17:21] - last[17:21]).max()))
             block = block[1:]
@@ -693,5 +848,17 @@ def _walk_table(timed, meta, double_support: float, rate: float):
     return np.concatenate(rows), spans, jump
 
 
-__all__ = ["Course", "CourseError", "CourseStep", "Footholds", "FootholdRules", "Terrain", "WALK_COLUMNS",
-           "footholds", "obstacles_of", "plan_course", "flat_obstacle", "read_terrain"]
+__all__ = [
+    "Course",
+    "CourseError",
+    "CourseStep",
+    "Footholds",
+    "FootholdRules",
+    "Terrain",
+    "WALK_COLUMNS",
+    "footholds",
+    "obstacles_of",
+    "plan_course",
+    "flat_obstacle",
+    "read_terrain",
+]

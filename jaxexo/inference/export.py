@@ -16,29 +16,66 @@ from jaxexo.storage.atomic import atomic_write
 JOINT_NAMES = ("hip_swing", "knee_swing", "hip_stance", "knee_stance")
 
 CSV_COLUMNS = (
-    "time_s", "heel_y_m", "heel_z_m", "toe_y_m", "toe_z_m", "hip_y_m", "hip_z_m",
-    "knee_swing_y_m", "knee_swing_z_m", "knee_stance_y_m", "knee_stance_z_m",
-    "hip_swing_rad", "knee_swing_rad", "hip_stance_rad", "knee_stance_rad",
+    "time_s",
+    "heel_y_m",
+    "heel_z_m",
+    "toe_y_m",
+    "toe_z_m",
+    "hip_y_m",
+    "hip_z_m",
+    "knee_swing_y_m",
+    "knee_swing_z_m",
+    "knee_stance_y_m",
+    "knee_stance_z_m",
+    "hip_swing_rad",
+    "knee_swing_rad",
+    "hip_stance_rad",
+    "knee_stance_rad",
 )
 
 
 def scene_dict(sc) -> dict:
     """A scene (jaxexo.physics.dynamics.Scene) as JSON values."""
-    return {"obstacle": sc.obstacle.kind, "shape": sc.obstacle.shape, "center_y": sc.center_y,
-            "width": sc.width, "height": sc.height, "outline": sc.obstacle.outline.tolist(),
-            "pivot": sc.pivot, "pivot_y": sc.pivot_y, "start_y": sc.start_y, "goal_y": sc.goal_y}
+    return {
+        "obstacle": sc.obstacle.kind,
+        "shape": sc.obstacle.shape,
+        "center_y": sc.center_y,
+        "width": sc.width,
+        "height": sc.height,
+        "outline": sc.obstacle.outline.tolist(),
+        "pivot": sc.pivot,
+        "pivot_y": sc.pivot_y,
+        "start_y": sc.start_y,
+        "goal_y": sc.goal_y,
+    }
 
 
-TIMED_CSV_COLUMNS = CSV_COLUMNS + tuple(f"{j}_vel_rad_s" for j in JOINT_NAMES) + tuple(
-    f"{j}_acc_rad_s2" for j in JOINT_NAMES) + ("heel_vel_y_m_s", "heel_vel_z_m_s", "heel_acc_y_m_s2", "heel_acc_z_m_s2")
+TIMED_CSV_COLUMNS = (
+    CSV_COLUMNS
+    + tuple(f"{j}_vel_rad_s" for j in JOINT_NAMES)
+    + tuple(f"{j}_acc_rad_s2" for j in JOINT_NAMES)
+    + ("heel_vel_y_m_s", "heel_vel_z_m_s", "heel_acc_y_m_s2", "heel_acc_z_m_s2")
+)
 
 
 def timed_table(swing) -> np.ndarray:
     """(n, len(TIMED_CSV_COLUMNS)) array of a TimedSwing: the path columns, then joint velocities
     and accelerations and the heel's velocity and acceleration, one row per control period."""
-    return np.column_stack([swing.time, swing.heel, swing.toe, swing.hip, swing.knee_swing, swing.knee_stance,
-                            swing.joint_angles, swing.joint_velocity, swing.joint_acceleration,
-                            swing.heel_velocity, swing.heel_acceleration])
+    return np.column_stack(
+        [
+            swing.time,
+            swing.heel,
+            swing.toe,
+            swing.hip,
+            swing.knee_swing,
+            swing.knee_stance,
+            swing.joint_angles,
+            swing.joint_velocity,
+            swing.joint_acceleration,
+            swing.heel_velocity,
+            swing.heel_acceleration,
+        ]
+    )
 
 
 def write_timed_csv(swing, path: str | Path | None = None) -> str:
@@ -62,8 +99,16 @@ def write_csv(columns, table: np.ndarray, fmt: str, path: str | Path | None = No
 def timed_dict(swing) -> dict:
     c = swing.checks
     return {
-        "units": {"length": "m", "angle": "rad", "time": "s", "joint velocity": "rad/s",
-                  "joint acceleration": "rad/s^2", "heel velocity": "m/s", "heel acceleration": "m/s^2", "rate": "Hz"},
+        "units": {
+            "length": "m",
+            "angle": "rad",
+            "time": "s",
+            "joint velocity": "rad/s",
+            "joint acceleration": "rad/s^2",
+            "heel velocity": "m/s",
+            "heel acceleration": "m/s^2",
+            "rate": "Hz",
+        },
         "method": swing.method,
         "scene": scene_dict(swing.scene),
         "rate_hz": swing.rate,
@@ -71,10 +116,16 @@ def timed_dict(swing) -> dict:
         "limits": swing.limits.to_dict(),
         "peak_joint_velocity_rad_s": [float(x) for x in swing.peak_velocity],
         "peak_joint_acceleration_rad_s2": [float(x) for x in swing.peak_acceleration],
-        "checks": {"ok": swing.ok, "within_limits": swing.within_limits, "reached_goal": c.reached_goal,
-                   "collision_free": c.collision_free, "min_clearance": c.min_clearance,
-                   "joint_limits_ok": c.joint_limits_ok, "leg_length_ok": c.leg_length_ok,
-                   "reasons": list(swing.reasons)},
+        "checks": {
+            "ok": swing.ok,
+            "within_limits": swing.within_limits,
+            "reached_goal": c.reached_goal,
+            "collision_free": c.collision_free,
+            "min_clearance": c.min_clearance,
+            "joint_limits_ok": c.joint_limits_ok,
+            "leg_length_ok": c.leg_length_ok,
+            "reasons": list(swing.reasons),
+        },
         "notes": list(swing.notes),
         "columns": list(TIMED_CSV_COLUMNS),
         "samples": timed_table(swing).tolist(),

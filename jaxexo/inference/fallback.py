@@ -27,7 +27,9 @@ def rows(batch: TrajectoryBatch, idx) -> TrajectoryBatch:
     return dataclasses.replace(batch, **changes)
 
 
-def replace_failures(batch: TrajectoryBatch, planner, n_points: int, duration: float) -> TrajectoryBatch:
+def replace_failures(
+    batch: TrajectoryBatch, planner, n_points: int, duration: float
+) -> TrajectoryBatch:
     """``batch`` with each failing row replaced by ``planner``'s swing for its scene where that passes."""
     bad = np.flatnonzero(~batch.ok)
     if not bad.size:
@@ -37,11 +39,16 @@ def replace_failures(batch: TrajectoryBatch, planner, n_points: int, duration: f
     notes = list(batch.notes)
     for j, i in enumerate(bad):
         rl_fail = "RL swing failed the safe-swing check: " + "; ".join(batch.reasons[i])
-        notes[i] = notes[i] + ((rl_fail + "; CFFTG's plan is returned",) if j in take else
-                               (rl_fail, "CFFTG fallback failed too: " + "; ".join(plan.reasons[j])))
+        notes[i] = notes[i] + (
+            (rl_fail + "; CFFTG's plan is returned",)
+            if j in take
+            else (rl_fail, "CFFTG fallback failed too: " + "; ".join(plan.reasons[j]))
+        )
     batch = dataclasses.replace(batch, notes=tuple(notes))
     if not take:
         return batch
     sub = rows(dataclasses.replace(plan, method="cfftg-fallback", row_methods=()), take)
-    sub = dataclasses.replace(sub, notes=tuple(notes[bad[j]] + sub.notes[n] for n, j in enumerate(take)))
+    sub = dataclasses.replace(
+        sub, notes=tuple(notes[bad[j]] + sub.notes[n] for n, j in enumerate(take))
+    )
     return batch.with_rows([bad[j] for j in take], sub)

@@ -52,8 +52,10 @@ RETRY_FACTORS = (0.25, 1.0 / 16.0, 0.0)
 # spare it keeps the margin when timed. The raw polyline keeps the shield's 5 mm in any case.
 ACCEPT_HEADROOM = 5e-4
 
-CLEARED_NOTE = ("the spline of smoothing {s:g} m^2 is corrected where it came within the safety margin or "
-                "moved the heel back (jaxexo.inference.clearing)")
+CLEARED_NOTE = (
+    "the spline of smoothing {s:g} m^2 is corrected where it came within the safety margin or "
+    "moved the heel back (jaxexo.inference.clearing)"
+)
 
 
 def landed(sp, raw: np.ndarray, goal_y: float) -> np.ndarray:
@@ -89,8 +91,10 @@ def candidates(raw, smoothing: float) -> list[float]:
 
 
 def _candidate_note(smoothing, used):
-    return (f"smoothing {smoothing:g} m^2 would bring the foot within the safety margin or move the heel "
-            f"back; the per-path candidate {used:g} m^2 is used",)
+    return (
+        f"smoothing {smoothing:g} m^2 would bring the foot within the safety margin or move the heel "
+        f"back; the per-path candidate {used:g} m^2 is used",
+    )
 
 
 class PathFinisher:
@@ -103,27 +107,46 @@ class PathFinisher:
         self._clearances = trajectory.exact_path_clearances if exact else trajectory.path_clearances
         self._clear_rows = exact_clear_rows if exact else clear_rows
 
-    def margin_ok(self, scenes, paths: np.ndarray, deviation, headroom: float = ACCEPT_HEADROOM,
-                  with_clearances: bool = False):
+    def margin_ok(
+        self,
+        scenes,
+        paths: np.ndarray,
+        deviation,
+        headroom: float = ACCEPT_HEADROOM,
+        with_clearances: bool = False,
+    ):
         """``trajectory.passes`` of curves (B, N, 2) with deviation bounds (B,); with ``with_clearances``
         also their point and move clearances (``trajectory.path_clearances``, ``measure``'s inputs)."""
         deviation = np.asarray(deviation, np.float64)
         c, sw = self._clearances(self.sp.foot_length, paths, scenes)
-        ok = trajectory.passes(self.sp, trajectory.lowest_clearance(c, sw), deviation,
-                               trajectory.backward_bound(paths, deviation), headroom)
+        ok = trajectory.passes(
+            self.sp,
+            trajectory.lowest_clearance(c, sw),
+            deviation,
+            trajectory.backward_bound(paths, deviation),
+            headroom,
+        )
         return (ok, c, sw) if with_clearances else ok
 
     def _measured(self, scene, path, c, sw, dev):
         """trajectory.measure of one scene's path (1, N, 2) from its clearances, for assemble."""
-        return trajectory.measure(self.sp, path, c, np.array([scene.pivot_y]), np.array([scene.goal_y]), sw, dev)
+        return trajectory.measure(
+            self.sp, path, c, np.array([scene.pivot_y]), np.array([scene.goal_y]), sw, dev
+        )
 
     def _other_candidates(self, scene, paths, dev, ok, c, sw):
         """The requested smoothing's check (ok, point and move clearances, each (1, ...)) followed by
         those of the other candidates ``paths[1:]`` (checked together)."""
         if len(paths) == 1:
             return ok, c, sw
-        rest, c_rest, sw_rest = self.margin_ok([scene] * (len(paths) - 1), paths[1:], dev[1:], with_clearances=True)
-        return np.concatenate([ok, rest]), np.concatenate([c, c_rest]), np.concatenate([sw, sw_rest])
+        rest, c_rest, sw_rest = self.margin_ok(
+            [scene] * (len(paths) - 1), paths[1:], dev[1:], with_clearances=True
+        )
+        return (
+            np.concatenate([ok, rest]),
+            np.concatenate([c, c_rest]),
+            np.concatenate([sw, sw_rest]),
+        )
 
     def _one_pass(self, scene, raw, n_points: int, smoothing: float):
         """One swing's candidates smoothed together (smoothing.smooth_candidates); the first that passes
@@ -134,24 +157,53 @@ class PathFinisher:
         both fail. Returns (paths (1, N, 2), deviations (1,), smoothings, notes, measured or None)."""
         cands = candidates(raw, smoothing)
         if not self.exact and self.clearing:
-            got = clear_rows([raw], [scene.outline], self.sp.foot_length, self.sp.min_clearance, n_points,
-                             smoothing)[0]
+            got = clear_rows(
+                [raw],
+                [scene.outline],
+                self.sp.foot_length,
+                self.sp.min_clearance,
+                n_points,
+                smoothing,
+            )[0]
             if got.initial is not None:
                 p0, d0, c0, sw0 = got.initial
-                if trajectory.passes(self.sp, sw0.min(), d0, trajectory.backward_bound(p0, d0), ACCEPT_HEADROOM):
-                    return (p0[None], np.array([d0]), [cands[0]], [()],
-                            self._measured(scene, p0[None], c0[None], sw0[None], np.array([d0])))
+                if trajectory.passes(
+                    self.sp, sw0.min(), d0, trajectory.backward_bound(p0, d0), ACCEPT_HEADROOM
+                ):
+                    return (
+                        p0[None],
+                        np.array([d0]),
+                        [cands[0]],
+                        [()],
+                        self._measured(scene, p0[None], c0[None], sw0[None], np.array([d0])),
+                    )
                 cleared = self._judge_cleared([scene], [0], [got], smoothing)
                 if cleared:
                     path, used, note, d, clear = cleared[0][1]
-                    return path[None], np.array([d]), [used], [note], self._measured(
-                        scene, path[None], clear[0][None], clear[1][None], np.array([d]))
+                    return (
+                        path[None],
+                        np.array([d]),
+                        [used],
+                        [note],
+                        self._measured(
+                            scene, path[None], clear[0][None], clear[1][None], np.array([d])
+                        ),
+                    )
                 paths, dev = sm.smooth_candidates(raw, n_points, cands)
-                ok, c, sw = self._other_candidates(scene, paths, dev, np.zeros(1, bool), c0[None], sw0[None])
+                ok, c, sw = self._other_candidates(
+                    scene, paths, dev, np.zeros(1, bool), c0[None], sw0[None]
+                )
                 j = int(np.argmax(ok)) if ok.any() else 0
                 notes = [_candidate_note(smoothing, cands[j])] if j else [()]
-                return (paths[j: j + 1], dev[j: j + 1], [cands[j]], notes,
-                        self._measured(scene, paths[j: j + 1], c[j: j + 1], sw[j: j + 1], dev[j: j + 1]))
+                return (
+                    paths[j : j + 1],
+                    dev[j : j + 1],
+                    [cands[j]],
+                    notes,
+                    self._measured(
+                        scene, paths[j : j + 1], c[j : j + 1], sw[j : j + 1], dev[j : j + 1]
+                    ),
+                )
         paths, dev = sm.smooth_candidates(raw, n_points, cands)
         if not self.exact:
             ok, c, sw = self.margin_ok([scene], paths[:1], dev[:1], with_clearances=True)
@@ -159,8 +211,13 @@ class PathFinisher:
                 cleared = self._cleared_rows([scene], [raw], [0], n_points, smoothing)
                 if cleared:
                     path, used, note, d, clear = cleared[0][1]
-                    measured = (None if clear is None else
-                                self._measured(scene, path[None], clear[0][None], clear[1][None], np.array([d])))
+                    measured = (
+                        None
+                        if clear is None
+                        else self._measured(
+                            scene, path[None], clear[0][None], clear[1][None], np.array([d])
+                        )
+                    )
                     return path[None], np.array([d]), [used], [note], measured
                 ok, c, sw = self._other_candidates(scene, paths, dev, ok, c, sw)
         else:
@@ -169,12 +226,17 @@ class PathFinisher:
                 cleared = self._cleared_rows([scene], [raw], [0], n_points, smoothing)
                 if cleared:
                     path, used, note, d, _ = cleared[0][1]
-                    return path[None], np.array([d]), [used], [note], None      # assemble measures it
+                    return path[None], np.array([d]), [used], [note], None  # assemble measures it
         j = int(np.argmax(ok)) if ok.any() else 0
-        measured = (None if self.exact else
-                    self._measured(scene, paths[j: j + 1], c[j: j + 1], sw[j: j + 1], dev[j: j + 1]))
+        measured = (
+            None
+            if self.exact
+            else self._measured(
+                scene, paths[j : j + 1], c[j : j + 1], sw[j : j + 1], dev[j : j + 1]
+            )
+        )
         notes = [_candidate_note(smoothing, cands[j])] if j else [()]
-        return paths[j: j + 1], dev[j: j + 1], [cands[j]], notes, measured
+        return paths[j : j + 1], dev[j : j + 1], [cands[j]], notes, measured
 
     def _cleared_rows(self, scenes, raws, rows, n_points: int, smoothing: float):
         """Rows whose requested smoothing failed: the requested spline corrected (jaxexo.inference.clearing,
@@ -183,8 +245,14 @@ class PathFinisher:
         if not self.clearing or len(rows) == 0:
             return []
         rows = [int(i) for i in rows]
-        got = self._clear_rows([raws[i] for i in rows], [scenes[i].outline for i in rows], self.sp.foot_length,
-                               self.sp.min_clearance, n_points, smoothing)
+        got = self._clear_rows(
+            [raws[i] for i in rows],
+            [scenes[i].outline for i in rows],
+            self.sp.foot_length,
+            self.sp.min_clearance,
+            n_points,
+            smoothing,
+        )
         return self._judge_cleared(scenes, rows, got, smoothing)
 
     def _judge_cleared(self, scenes, rows, got, smoothing: float):
@@ -196,21 +264,37 @@ class PathFinisher:
         dev = np.array([g.deviation for g in got], np.float64)
         if not self.exact:
             ok = np.zeros(len(rows), bool)
-            have = [k for k, g in enumerate(got) if g.move_clearance is not None and g.move_clearance.size]
+            have = [
+                k
+                for k, g in enumerate(got)
+                if g.move_clearance is not None and g.move_clearance.size
+            ]
             if have:
                 low = np.array([got[k].move_clearance.min() for k in have])
-                ok[have] = trajectory.passes(self.sp, low, dev[have], trajectory.backward_bound(paths[have], dev[have]),
-                                             ACCEPT_HEADROOM)
+                ok[have] = trajectory.passes(
+                    self.sp,
+                    low,
+                    dev[have],
+                    trajectory.backward_bound(paths[have], dev[have]),
+                    ACCEPT_HEADROOM,
+                )
             known = set(have)
             rest = [k for k in range(len(rows)) if k not in known]
             if rest:
                 ok[rest] = self.margin_ok([scenes[rows[k]] for k in rest], paths[rest], dev[rest])
-            clear = [None if g.move_clearance is None else (g.point_clearance, g.move_clearance) for g in got]
+            clear = [
+                None if g.move_clearance is None else (g.point_clearance, g.move_clearance)
+                for g in got
+            ]
         else:
             ok = self.margin_ok([scenes[i] for i in rows], paths, dev)
             clear = [None] * len(rows)
         note = (CLEARED_NOTE.format(s=smoothing),)
-        return [(i, (paths[k], float(smoothing), note, dev[k], clear[k])) for k, i in enumerate(rows) if ok[k]]
+        return [
+            (i, (paths[k], float(smoothing), note, dev[k], clear[k]))
+            for k, i in enumerate(rows)
+            if ok[k]
+        ]
 
     def _candidate_rows(self, scenes, raws, rows, n_points: int, smoothing: float):
         """Rows whose requested smoothing failed: the first of their other candidates that passes, as
@@ -225,14 +309,22 @@ class PathFinisher:
                 pairs = [(i, c) for i in wait for c in cands[i]]
             else:
                 pairs = [(i, cands[i][level]) for i in wait]
-            paths, dev = sm.smooth_paths([raws[i] for i, _ in pairs], n_points, np.array([c for _, c in pairs]),
-                                         with_deviation=True)
+            paths, dev = sm.smooth_paths(
+                [raws[i] for i, _ in pairs],
+                n_points,
+                np.array([c for _, c in pairs]),
+                with_deviation=True,
+            )
             ok = self.margin_ok([scenes[i] for i, _ in pairs], paths, dev)
             for k, (i, c) in enumerate(pairs):
                 if ok[k] and i not in out:
                     out[i] = (paths[k], c, _candidate_note(smoothing, c), dev[k])
             level += 1
-            wait = [] if len(scenes) == 1 else [i for i in wait if i not in out and level < len(cands[i])]
+            wait = (
+                []
+                if len(scenes) == 1
+                else [i for i in wait if i not in out and level < len(cands[i])]
+            )
         return sorted(out.items())
 
     def _less_smoothing(self, scenes, raws, rows, n_points: int, smoothing: float):
@@ -246,32 +338,49 @@ class PathFinisher:
             # Raw paths padded with their last point (a repeated point adds a zero-length move, whose
             # swept clearance is that point's own: the polyline's minimum is unchanged).
             n = max(len(p) for p in pts)
-            padded = np.stack([np.concatenate([p, np.repeat(p[-1:], n - len(p), axis=0)]) for p in pts])
+            padded = np.stack(
+                [np.concatenate([p, np.repeat(p[-1:], n - len(p), axis=0)]) for p in pts]
+            )
             keeps = self.margin_ok([scenes[i] for i in rows], padded, zero, headroom=0.0)
         else:
-            keeps = [self.margin_ok([scenes[i]], p[None], zero[:1], headroom=0.0)[0]
-                     for i, p in zip(rows, pts)]
-        wait = [j for j, ok in enumerate(keeps) if ok or len(pts[j]) == 1]   # one point: no move to check
+            keeps = [
+                self.margin_ok([scenes[i]], p[None], zero[:1], headroom=0.0)[0]
+                for i, p in zip(rows, pts)
+            ]
+        wait = [
+            j for j, ok in enumerate(keeps) if ok or len(pts[j]) == 1
+        ]  # one point: no move to check
         out = {}
         for f in RETRY_FACTORS:
             if not wait:
                 break
             # each row smoothed on its own (a straight leg's joint angles amplify a last-bit difference
             # in the samples to ~1e-8 rad); the checks are vectorised
-            one = [sm.smooth_paths([raws[rows[j]]], n_points, smoothing * f, with_deviation=True) for j in wait]
+            one = [
+                sm.smooth_paths([raws[rows[j]]], n_points, smoothing * f, with_deviation=True)
+                for j in wait
+            ]
             cand, dev = np.concatenate([c for c, _ in one]), np.concatenate([d for _, d in one])
             ok = self.margin_ok([scenes[rows[j]] for j in wait], cand, dev)
             for k, j in enumerate(wait):
                 if ok[k]:
-                    note = (f"smoothing {smoothing:g} m^2 brought the foot within the safety margin or moved the "
-                            f"heel back; {smoothing * f:g} m^2 used",)
+                    note = (
+                        f"smoothing {smoothing:g} m^2 brought the foot within the safety margin or moved the "
+                        f"heel back; {smoothing * f:g} m^2 used",
+                    )
                     out[j] = (cand[k], smoothing * f, note, dev[k])
             wait = [j for k, j in enumerate(wait) if not ok[k]]
         for j in wait:
             path, dev = sm.linear_resample(raws[rows[j]], n_points, with_deviation=True)
-            out[j] = (path, float("nan"), (
-                "every smoothing brought the foot within the safety margin or moved the heel back; the raw "
-                "polyline is used",), dev)
+            out[j] = (
+                path,
+                float("nan"),
+                (
+                    "every smoothing brought the foot within the safety margin or moved the heel back; the raw "
+                    "polyline is used",
+                ),
+                dev,
+            )
         return [(int(rows[j]), out[j]) for j in sorted(out)]
 
     def _many(self, scenes, raws, paths, dev, n_points: int, smoothing: float):
@@ -287,7 +396,8 @@ class PathFinisher:
         cleared = self._cleared_rows(scenes, raws, np.flatnonzero(~ok), n_points, smoothing)
         done = {i for i, _ in cleared}
         redo = [(i, r[:4]) for i, r in cleared] + self._candidate_rows(
-            scenes, raws, [i for i in np.flatnonzero(~ok) if i not in done], n_points, smoothing)
+            scenes, raws, [i for i in np.flatnonzero(~ok) if i not in done], n_points, smoothing
+        )
         if redo:
             paths, dev, notes = paths.copy(), np.array(dev, np.float64), list(notes)
             for i, (path, c, note, d) in redo:
@@ -302,20 +412,30 @@ class PathFinisher:
                 c_all[i], sw_all[i] = r[4]
         fresh = sorted({i for i, _ in redo} - known)
         if fresh:
-            _, c_all[fresh], sw_all[fresh] = self.margin_ok([scenes[i] for i in fresh], paths[fresh], dev[fresh],
-                                                            with_clearances=True)
-        measured = trajectory.measure(self.sp, paths, c_all, np.array([sc.pivot_y for sc in scenes]),
-                                      np.array([sc.goal_y for sc in scenes]), sw_all, dev)
+            _, c_all[fresh], sw_all[fresh] = self.margin_ok(
+                [scenes[i] for i in fresh], paths[fresh], dev[fresh], with_clearances=True
+            )
+        measured = trajectory.measure(
+            self.sp,
+            paths,
+            c_all,
+            np.array([sc.pivot_y for sc in scenes]),
+            np.array([sc.goal_y for sc in scenes]),
+            sw_all,
+            dev,
+        )
         return paths, dev, used, notes, measured
 
     def _measure(self, scenes, paths, deviation) -> dict:
         """``trajectory.measure_paths`` of curves on their scenes with this finisher's clearances."""
-        paths = np.asarray(paths, dtype=np.float64)     # as assemble reads them
-        return trajectory.measure_paths(self.sp, paths, scenes, deviation,
-                                        self._clearances(self.sp.foot_length, paths, scenes))
+        paths = np.asarray(paths, dtype=np.float64)  # as assemble reads them
+        return trajectory.measure_paths(
+            self.sp, paths, scenes, deviation, self._clearances(self.sp.foot_length, paths, scenes)
+        )
 
-    def finish(self, method: str, scenes, raws, n_points: int, smoothing: float,
-               duration: float) -> TrajectoryBatch:
+    def finish(
+        self, method: str, scenes, raws, n_points: int, smoothing: float, duration: float
+    ) -> TrajectoryBatch:
         """Checked trajectories of raw paths (M_i, 2) on their scenes: smoothed with ``smoothing`` (m^2; 0:
         the raw polylines resampled), checked, and retried where a curve fails but its raw path
         need not (module docstring). Each raw path lands first (``landed``); the trajectories' ``raw``
@@ -324,30 +444,53 @@ class PathFinisher:
         notes = [()] * len(raws)
         measured = None
         if smoothing > 0 and len(raws) == 1 and len(candidates(raws[0], smoothing)) > 1:
-            paths, dev, used, notes, measured = self._one_pass(scenes[0], raws[0], n_points, smoothing)
+            paths, dev, used, notes, measured = self._one_pass(
+                scenes[0], raws[0], n_points, smoothing
+            )
         elif smoothing > 0:
             paths, dev = sm.smooth_paths(raws, n_points, smoothing, with_deviation=True)
             used = [smoothing] * len(raws)
             if len(raws) > 1:
-                paths, dev, used, notes, measured = self._many(scenes, raws, paths, dev, n_points, smoothing)
+                paths, dev, used, notes, measured = self._many(
+                    scenes, raws, paths, dev, n_points, smoothing
+                )
         else:
             both = [sm.linear_resample(r, n_points, with_deviation=True) for r in raws]
             paths, dev = np.stack([p for p, _ in both]), np.array([d for _, d in both])
             used = [float("nan")] * len(raws)
-        batch = assemble(method, self.sp, scenes, raws, paths, used, duration, notes,
-                         measured if measured is not None else self._measure(scenes, paths, dev))
+        batch = assemble(
+            method,
+            self.sp,
+            scenes,
+            raws,
+            paths,
+            used,
+            duration,
+            notes,
+            measured if measured is not None else self._measure(scenes, paths, dev),
+        )
         # Not for a swing that ends short of the goal: every curve ends where its raw path does, so no
         # smoothing can make it pass (the policy's failure, not the smoothing's).
         if smoothing <= 0:
             return batch
-        bad = np.flatnonzero((~batch.clearance_ok | (batch.heel_backward > self.sp.backward_tolerance))
-                             & batch.reached_goal)
+        bad = np.flatnonzero(
+            (~batch.clearance_ok | (batch.heel_backward > self.sp.backward_tolerance))
+            & batch.reached_goal
+        )
         redo = self._less_smoothing(scenes, raws, bad, n_points, smoothing) if bad.size else []
         if not redo:
             return batch
         idx = [i for i, _ in redo]
         sub_scenes, sub_paths = [scenes[i] for i in idx], np.stack([fb[0] for _, fb in redo])
-        sub = assemble(method, self.sp, sub_scenes, [raws[i] for i in idx], sub_paths, [fb[1] for _, fb in redo],
-                       duration, [fb[2] for _, fb in redo],
-                       self._measure(sub_scenes, sub_paths, np.array([fb[3] for _, fb in redo])))
+        sub = assemble(
+            method,
+            self.sp,
+            sub_scenes,
+            [raws[i] for i in idx],
+            sub_paths,
+            [fb[1] for _, fb in redo],
+            duration,
+            [fb[2] for _, fb in redo],
+            self._measure(sub_scenes, sub_paths, np.array([fb[3] for _, fb in redo])),
+        )
         return batch.with_rows(idx, sub)

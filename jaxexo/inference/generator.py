@@ -61,21 +61,24 @@ class TrajectoryGenerator:
         self.net = FoldedQNetwork(policy)
         self.step_net = StepNetwork(self.net)
         self._linear = None
-        self._cfftg = None      # built on the first fallback (its constants cost ~ms to derive)
-        self.clearance = None   # m, or None: env.min_clearance (at_clearance)
+        self._cfftg = None  # built on the first fallback (its constants cost ~ms to derive)
+        self.clearance = None  # m, or None: env.min_clearance (at_clearance)
         # the requested spline corrected where it cuts the margin (jaxexo.inference.clearing) before
         # any smaller smoothing is tried; False: the candidates and retries alone
         self.clearing = True
         # terminated()'s one parameter as a Python bool: a NumPy bool would make every step's test
         # a NumPy scalar operation.
-        self._term_p = types.SimpleNamespace(terminate_on_collision=bool(self.np_params.terminate_on_collision))
-        self.epsilon = 0.0      # 0: greedy (the default; a device's generator must not explore)
+        self._term_p = types.SimpleNamespace(
+            terminate_on_collision=bool(self.np_params.terminate_on_collision)
+        )
+        self.epsilon = 0.0  # 0: greedy (the default; a device's generator must not explore)
         self.shield = bool(config.env.shield)
         # The spline's smoothing when a call does not give one (m^2, thesis 2.7's s).
-        self.smoothing = model_smoothing(config.env.shield_clearance, config.env.min_clearance, self.shield,
-                                         config.env.step_size)
+        self.smoothing = model_smoothing(
+            config.env.shield_clearance, config.env.min_clearance, self.shield, config.env.step_size
+        )
         self._rng = None
-        self.shield_stats = ShieldStats()     # the fast shield's steps, and those it could not decide
+        self.shield_stats = ShieldStats()  # the fast shield's steps, and those it could not decide
 
     def exploring(self, epsilon: float, seed: int = 0) -> "TrajectoryGenerator":
         """A copy that acts epsilon-greedily (thesis 2.6 tests that way): each step a uniformly
@@ -96,7 +99,7 @@ class TrajectoryGenerator:
         g = np.asarray(greedy)
         if mask is None:
             rand = self._rng.integers(len(self.directions), size=g.shape)
-        else:   # the k-th admissible move, k uniform
+        else:  # the k-th admissible move, k uniform
             m = np.asarray(mask).reshape(g.shape + (-1,))
             k = np.floor(self._rng.uniform(size=g.shape) * m.sum(-1)).astype(np.int64)
             rand = np.argmax(np.cumsum(m, axis=-1) > k[..., None], axis=-1)
@@ -110,8 +113,14 @@ class TrajectoryGenerator:
         return cls(policy, config, str(path))
 
     # Scenes -------------------------------------------------------------------------------------
-    def scene(self, obstacle: geometry.Obstacle, pivot: str | float | None = None, pivot_y: float | None = None,
-              start_y: float = DEFAULT_START_Y, step_length: float = DEFAULT_STEP_LENGTH) -> Scene:
+    def scene(
+        self,
+        obstacle: geometry.Obstacle,
+        pivot: str | float | None = None,
+        pivot_y: float | None = None,
+        start_y: float = DEFAULT_START_Y,
+        step_length: float = DEFAULT_STEP_LENGTH,
+    ) -> Scene:
         """Validate one scenario (metres). ``pivot_y``, when given, overrides the ``pivot`` condition."""
         return scene_for(self.config, obstacle, pivot, pivot_y, start_y, step_length)
 
@@ -122,13 +131,29 @@ class TrajectoryGenerator:
         1/LENGTH_SCALE, 1/max_steps, ...), so the linear rows are found once, from unit vectors,
         and only the origin row is computed per scene."""
         if self._linear is None:
-            e = np.eye(5)    # rows: unit heel_y, heel_z, time, visited, then the origin
-            obs = dynamics.observation(np, self.np_params, self.obs_mode, e[:, 0], e[:, 1], e[:, 2], e[:, 3],
-                                       dynamics.stack_scenes([scene] * 5, np.float64))
+            e = np.eye(5)  # rows: unit heel_y, heel_z, time, visited, then the origin
+            obs = dynamics.observation(
+                np,
+                self.np_params,
+                self.obs_mode,
+                e[:, 0],
+                e[:, 1],
+                e[:, 2],
+                e[:, 3],
+                dynamics.stack_scenes([scene] * 5, np.float64),
+            )
             self._linear = obs[:4] - obs[4]
         z = np.zeros(1)
-        origin = dynamics.observation(np, self.np_params, self.obs_mode, z, z, z, z,
-                                      dynamics.stack_scenes([scene], np.float64))
+        origin = dynamics.observation(
+            np,
+            self.np_params,
+            self.obs_mode,
+            z,
+            z,
+            z,
+            z,
+            dynamics.stack_scenes([scene], np.float64),
+        )
         return np.vstack([self._linear, origin])
 
     # Rollouts -----------------------------------------------------------------------------------
@@ -144,7 +169,7 @@ class TrajectoryGenerator:
         mid_y, mid_z = dynamics.mid_goal(scalar, sp, scene.center_y, scene.height)
         hy, hz, t, visited = float(scene.start_y), 0.0, 0, False
         pts, acts = [(hy, hz)], []
-        last = -1           # the move just made (the shield never undoes it)
+        last = -1  # the move just made (the shield never undoes it)
         one = dynamics.stack_scenes([scene], np.float32) if self.shield else None
         rows = ShieldRows(self.np_params, self.sp, self.shield_stats) if self.shield else None
         single = ScalarShield(self.sp, self.np_params, scene) if self._shield_first() else None
@@ -153,14 +178,22 @@ class TrajectoryGenerator:
                 q = step.q_values(hy, hz, t, 1.0 if visited else 0.0)
                 a = single.choose(hy, hz, q, last)
                 if a is None:
-                    mask = rows.admissible(np.array([hy], np.float32), np.array([hz], np.float32), one,
-                                           last=np.array([last]))[0]
+                    mask = rows.admissible(
+                        np.array([hy], np.float32),
+                        np.array([hz], np.float32),
+                        one,
+                        last=np.array([last]),
+                    )[0]
                     a = int(dynamics.greedy_action(np, q, mask))
                     self.shield_stats.steps_to_full_mask += 1
                 self.shield_stats.steps += 1
             elif self.shield:
-                mask = rows.admissible(np.array([hy], np.float32), np.array([hz], np.float32), one,
-                                       last=np.array([last]))[0]
+                mask = rows.admissible(
+                    np.array([hy], np.float32),
+                    np.array([hz], np.float32),
+                    one,
+                    last=np.array([last]),
+                )[0]
                 a = self._explore(step.greedy(hy, hz, t, 1.0 if visited else 0.0, mask), mask)
             else:
                 a = self._explore(step.greedy(hy, hz, t, 1.0 if visited else 0.0))
@@ -173,11 +206,14 @@ class TrajectoryGenerator:
             # The environment's termination (dynamics.terminated, .truncated); the clearance is
             # only computed where a collision ends the episode.
             collided = self.terminate_on_collision and self._touches(scene, np.array([[hy, hz]]))
-            if (dynamics.terminated(scalar, self._term_p, dynamics.goal_reached(scalar, sp, hy, hz, scene.goal_y),
-                                    collided) or dynamics.truncated(t, self.max_steps)):
+            if dynamics.terminated(
+                scalar,
+                self._term_p,
+                dynamics.goal_reached(scalar, sp, hy, hz, scene.goal_y),
+                collided,
+            ) or dynamics.truncated(t, self.max_steps):
                 break
         return np.asarray(pts), np.asarray(acts, dtype=np.int64)
-
 
     def _shield_first(self) -> bool:
         """Whether the rollouts check the shield's moves in order of Q (greedy only; not in
@@ -200,17 +236,23 @@ class TrajectoryGenerator:
         mid_y, mid_z = dynamics.mid_goal(np, p, lay.center_y, lay.height)
         path = np.empty((self.max_steps + 1, b, 2), np.float32)
         acts = np.zeros((self.max_steps, b), np.int64)
-        last = np.full(b, -1, np.int64)     # the move just made (the shield never undoes it)
+        last = np.full(b, -1, np.int64)  # the move just made (the shield never undoes it)
         path[0, :, 0], path[0, :, 1] = hy, hz
         length = np.ones(b, np.int64)
         alive = np.arange(b)
         for k in range(self.max_steps):
             sub = take_rows(lay, alive)
-            obs = dynamics.observation(np, p, self.obs_mode, hy[alive], hz[alive], t[alive], visited[alive], sub)
+            obs = dynamics.observation(
+                np, p, self.obs_mode, hy[alive], hz[alive], t[alive], visited[alive], sub
+            )
             if self._shield_first():
                 a = rows.choose(hy[alive], hz[alive], sub, self.net.q(obs), last[alive])
             else:
-                mask = rows.admissible(hy[alive], hz[alive], sub, last=last[alive]) if self.shield else None
+                mask = (
+                    rows.admissible(hy[alive], hz[alive], sub, last=last[alive])
+                    if self.shield
+                    else None
+                )
                 a = self._explore(dynamics.greedy_action(np, self.net.q(obs), mask), mask)
             ny, nz = dynamics.move_heel(np, p, hy[alive], hz[alive], dirs[a, 0], dirs[a, 1])
             hy[alive], hz[alive] = ny, nz
@@ -221,11 +263,12 @@ class TrajectoryGenerator:
             last[alive] = a
             length[alive] += 1
             collided = False
-            if self.terminate_on_collision:   # the clearance only where a collision ends the episode
+            if self.terminate_on_collision:  # the clearance only where a collision ends the episode
                 c = geometry.foot_clearance(np, np.stack([ny, nz], -1), p.foot_length, sub.outline)
                 collided = geometry.foot_collides(np, c)
-            done = (dynamics.terminated(np, p, dynamics.goal_reached(np, p, ny, nz, sub.goal_y), collided)
-                    | dynamics.truncated(t[alive], self.max_steps))
+            done = dynamics.terminated(
+                np, p, dynamics.goal_reached(np, p, ny, nz, sub.goal_y), collided
+            ) | dynamics.truncated(t[alive], self.max_steps)
             alive = alive[~done]
             if alive.size == 0:
                 break
@@ -236,7 +279,7 @@ class TrajectoryGenerator:
         """CFFTG for this generator's config and clearance, built on the first fallback (its constants
         cost ~ms to derive)."""
         if self._cfftg is None:
-            from jaxexo.inference.cfftg import CFFTG    # built only when a swing falls back
+            from jaxexo.inference.cfftg import CFFTG  # built only when a swing falls back
 
             self._cfftg = CFFTG(self.config).at_clearance(self.clearance)
         return self._cfftg
@@ -245,8 +288,11 @@ class TrajectoryGenerator:
         # Cheap exclusion first: a path that never comes below the obstacle's top within its extent
         # cannot touch it (the foot is horizontal).
         y, z = path[:, 0], path[:, 1]
-        near = (z <= scene.height + 1e-6) & (y <= scene.center_y + 0.5 * scene.width + 1e-6) & (
-            y + self.sp.foot_length >= scene.center_y - 0.5 * scene.width - 1e-6)
+        near = (
+            (z <= scene.height + 1e-6)
+            & (y <= scene.center_y + 0.5 * scene.width + 1e-6)
+            & (y + self.sp.foot_length >= scene.center_y - 0.5 * scene.width - 1e-6)
+        )
         if not near.any():
             return False
         c = geometry.foot_clearance(np, path[near], self.sp.foot_length, scene.outline)
@@ -268,8 +314,15 @@ class TrajectoryGenerator:
         return out
 
     # Trajectories ---------------------------------------------------------------------------------
-    def finish(self, scenes, raws, n_points: int, smoothing: float, duration: float,
-               fallback: str | None = "cfftg") -> TrajectoryBatch:
+    def finish(
+        self,
+        scenes,
+        raws,
+        n_points: int,
+        smoothing: float,
+        duration: float,
+        fallback: str | None = "cfftg",
+    ) -> TrajectoryBatch:
         """Checked trajectories of raw paths on their scenes: smoothed, checked and retried
         (jaxexo.inference.finish), then, with ``fallback="cfftg"``, CFFTG's plan wherever the RL
         swing still fails (jaxexo.inference.fallback)."""
@@ -282,10 +335,15 @@ class TrajectoryGenerator:
     def _prepared(self, options, overrides: dict, where: str):
         """(this generator at the options' clearance, the options checked, the smoothing to use)."""
         o = GenerateOptions.given(options, overrides, where)
-        return self.at_clearance(o.clearance), o, self.smoothing if o.smoothing is None else o.smoothing
+        return (
+            self.at_clearance(o.clearance),
+            o,
+            self.smoothing if o.smoothing is None else o.smoothing,
+        )
 
-    def generate(self, obstacle: geometry.Obstacle, options: GenerateOptions | None = None,
-                 **overrides) -> Trajectory:
+    def generate(
+        self, obstacle: geometry.Obstacle, options: GenerateOptions | None = None, **overrides
+    ) -> Trajectory:
         """One smoothed, checked trajectory (metres, radians, seconds) for ``options``
         (jaxexo.inference.options.GenerateOptions), whose fields the keywords replace:
         ``generate(obstacle, pivot="between", fallback=None)``. ``strict`` raises TrajectoryError
@@ -295,9 +353,13 @@ class TrajectoryGenerator:
         gen, o, smoothing = self._prepared(options, overrides, "generate")
         scene = gen.scene(obstacle, *o.scene_args)
         raw, _ = gen.rollout(scene)
-        return o.checked(gen.finish([scene], [raw], o.n_points, smoothing, o.duration, o.fallback)[0])
+        return o.checked(
+            gen.finish([scene], [raw], o.n_points, smoothing, o.duration, o.fallback)[0]
+        )
 
-    def generate_batch(self, obstacles, options: GenerateOptions | None = None, **overrides) -> TrajectoryBatch:
+    def generate_batch(
+        self, obstacles, options: GenerateOptions | None = None, **overrides
+    ) -> TrajectoryBatch:
         """Trajectories for many scenarios, with ``generate``'s options; each scene field (pivot,
         pivot_y, start_y, step_length) is one value or one per obstacle. ``strict`` raises
         TrajectoryError on the first swing that fails a check."""
@@ -324,7 +386,9 @@ def plain_reference(gen: TrajectoryGenerator) -> TrajectoryGenerator:
 LONG_SWING_PATH = 1.2
 
 
-def model_smoothing(shield_clearance: float, min_clearance: float, shield: bool, step_size: float = 0.03) -> float:
+def model_smoothing(
+    shield_clearance: float, min_clearance: float, shield: bool, step_size: float = 0.03
+) -> float:
     """The spline's default smoothing s (m^2, the sum of squared residuals at the agent's points,
     thesis 2.7) for a model: the thesis's 0.005 m^2 without the shield; with it, the s whose RMS
     residual over a long swing (LONG_SWING_PATH / step_size points: 40 at 3 cm) equals the shield's

@@ -30,8 +30,8 @@ class FoldedQNetwork:
         self.layer_norm = bool(policy.norm_scales)
         self.eps = LAYER_NORM_EPS
         weights, shifts = [], []
-        carry_rows = None     # per-unit factor |s| to apply to the next layer's rows
-        carry_bias = None     # constant contribution of s = 0 units to the next layer's bias
+        carry_rows = None  # per-unit factor |s| to apply to the next layer's rows
+        carry_bias = None  # constant contribution of s = 0 units to the next layer's bias
         for i in range(n):
             w = policy.kernels[i].astype(np.float64)
             b = policy.biases[i].astype(np.float64)
@@ -41,7 +41,7 @@ class FoldedQNetwork:
             wa = np.vstack([w, b[None, :]])
             shift = None
             if self.layer_norm and i < n - 1:
-                wa = wa - wa.mean(axis=1, keepdims=True)          # centring folded in
+                wa = wa - wa.mean(axis=1, keepdims=True)  # centring folded in
                 s = policy.norm_scales[i].astype(np.float64)
                 beta = policy.norm_biases[i].astype(np.float64)
                 sign = np.where(s < 0.0, -1.0, 1.0)
@@ -52,8 +52,8 @@ class FoldedQNetwork:
                 carry_bias = np.where(mag > 0.0, 0.0, np.maximum(beta, 0.0))
             weights.append(wa.astype(np.float32))
             shifts.append(None if shift is None else shift.astype(np.float32))
-        self.weights = weights            # (in + 1, out) each
-        self.shifts = shifts              # LayerNorm shift b/|s| per hidden layer (None without LN)
+        self.weights = weights  # (in + 1, out) each
+        self.shifts = shifts  # LayerNorm shift b/|s| per hidden layer (None without LN)
         self.hidden = [w.shape[1] for w in weights[:-1]]
         self.obs_dim = weights[0].shape[0] - 1
         self.num_actions = weights[-1].shape[1]
@@ -96,7 +96,7 @@ class StepNetwork:
         self.m0 = None
         self.c = np.ones(5, np.float32)
         self.pre = [np.empty(h, np.float32) for h in net.hidden]
-        self.bufs = [np.ones(h + 1, np.float32) for h in net.hidden]   # trailing 1 for the bias row
+        self.bufs = [np.ones(h + 1, np.float32) for h in net.hidden]  # trailing 1 for the bias row
         self.outs = [b[:-1] for b in self.bufs]
         self.q = np.empty(net.num_actions, np.float32)
         # Per hidden layer: (weights, pre-activation buffer, output view, LayerNorm shift, 1/H).
@@ -105,12 +105,22 @@ class StepNetwork:
     def set_scene(self, basis: np.ndarray) -> None:
         self.m0 = self.net.first_layer_for(basis)
         net = self.net
-        self._layers = [((self.m0 if i == 0 else net.weights[i]), self.pre[i], self.outs[i], net.shifts[i],
-                         1.0 / len(self.pre[i])) for i in range(len(self.pre))]
+        self._layers = [
+            (
+                (self.m0 if i == 0 else net.weights[i]),
+                self.pre[i],
+                self.outs[i],
+                net.shifts[i],
+                1.0 / len(self.pre[i]),
+            )
+            for i in range(len(self.pre))
+        ]
 
     def greedy(self, heel_y: float, heel_z: float, time: float, visited: float, mask=None) -> int:
         q = self.q_values(heel_y, heel_z, time, visited)
-        if mask is not None:   # the shield's admissible moves (jaxexo.physics.dynamics.greedy_action)
+        if (
+            mask is not None
+        ):  # the shield's admissible moves (jaxexo.physics.dynamics.greedy_action)
             return int(dynamics.greedy_action(np, q, mask))
         return int(q.argmax())
 

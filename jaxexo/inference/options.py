@@ -18,13 +18,19 @@ import numpy as np
 
 from jaxexo.config import MAX_SWING_DURATION
 from jaxexo.physics import geometry
-from jaxexo.physics.dynamics import DEFAULT_PIVOT, DEFAULT_START_Y, DEFAULT_STEP_LENGTH, Scene, make_scene
+from jaxexo.physics.dynamics import (
+    DEFAULT_PIVOT,
+    DEFAULT_START_Y,
+    DEFAULT_STEP_LENGTH,
+    Scene,
+    make_scene,
+)
 from jaxexo.inference.smoothing import DEFAULT_POINTS
 from jaxexo.inference.trajectory import DEFAULT_DURATION, TrajectoryBatch, TrajectoryError
 
 # Bounds of the sizes taken from input, checked before anything is allocated.
-MAX_POINTS = 100_000                 # samples of one path
-MAX_DURATION = MAX_SWING_DURATION    # s: a swing, not a walk (jaxexo.config)
+MAX_POINTS = 100_000  # samples of one path
+MAX_DURATION = MAX_SWING_DURATION  # s: a swing, not a walk (jaxexo.config)
 # Fewer samples cannot follow a swing over an obstacle: with 2-10 the checks judged the path between
 # them with clearances and backward moves of metres.
 MIN_POINTS = 20
@@ -39,17 +45,31 @@ def pivot_of(pivot, pivot_y):
     if pivot_y is None:
         return DEFAULT_PIVOT if pivot is None else pivot
     if pivot is not None:
-        raise ValueError(f"pivot, pivot_y: give one of them (a condition or a y in metres), got pivot={pivot!r} "
-                         f"and pivot_y={pivot_y!r}")
+        raise ValueError(
+            f"pivot, pivot_y: give one of them (a condition or a y in metres), got pivot={pivot!r} "
+            f"and pivot_y={pivot_y!r}"
+        )
     return pivot_y
 
 
-def scene_for(config, obstacle, pivot=None, pivot_y=None, start_y=DEFAULT_START_Y,
-              step_length=DEFAULT_STEP_LENGTH) -> Scene:
+def scene_for(
+    config,
+    obstacle,
+    pivot=None,
+    pivot_y=None,
+    start_y=DEFAULT_START_Y,
+    step_length=DEFAULT_STEP_LENGTH,
+) -> Scene:
     """One validated scene (metres) for a generator of ``config`` (its foot length and shape
     descriptor); ``pivot_y``, when given, replaces the ``pivot`` condition."""
-    return make_scene(obstacle, pivot_of(pivot, pivot_y), start_y, step_length,
-                      foot_length=config.kinematics.foot_length, shape_points=config.env.shape_points)
+    return make_scene(
+        obstacle,
+        pivot_of(pivot, pivot_y),
+        start_y,
+        step_length,
+        foot_length=config.kinematics.foot_length,
+        shape_points=config.env.shape_points,
+    )
 
 
 def scenes_for(make, obstacles, options: SwingOptions) -> list[Scene]:
@@ -57,12 +77,16 @@ def scenes_for(make, obstacles, options: SwingOptions) -> list[Scene]:
     of ``options``' scene fields is one value for all or one per obstacle (every generator's
     generate_batch)."""
     if isinstance(obstacles, geometry.Obstacle):
-        raise TypeError("obstacles: expected a list of Obstacle objects, got one Obstacle (use generate() for "
-                        "one scenario, or pass [obstacle])")
+        raise TypeError(
+            "obstacles: expected a list of Obstacle objects, got one Obstacle (use generate() for "
+            "one scenario, or pass [obstacle])"
+        )
     try:
         obstacles = list(obstacles)
     except TypeError:
-        raise TypeError(f"obstacles: expected a list of Obstacle objects, got {type(obstacles).__name__}") from None
+        raise TypeError(
+            f"obstacles: expected a list of Obstacle objects, got {type(obstacles).__name__}"
+        ) from None
     n = len(obstacles)
     if n == 0:
         raise ValueError("obstacles: need at least one scenario")
@@ -81,9 +105,14 @@ def scenes_for(make, obstacles, options: SwingOptions) -> list[Scene]:
 
 def check_points(n_points, name: str = "n_points") -> int:
     """Samples of a path: an integer in [MIN_POINTS, MAX_POINTS]; ValueError naming ``name``."""
-    if isinstance(n_points, bool) or not isinstance(n_points, (int, np.integer)) or not (
-            MIN_POINTS <= n_points <= MAX_POINTS):
-        raise ValueError(f"{name} must be an integer in [{MIN_POINTS}, {MAX_POINTS}], got {n_points!r}")
+    if (
+        isinstance(n_points, bool)
+        or not isinstance(n_points, (int, np.integer))
+        or not (MIN_POINTS <= n_points <= MAX_POINTS)
+    ):
+        raise ValueError(
+            f"{name} must be an integer in [{MIN_POINTS}, {MAX_POINTS}], got {n_points!r}"
+        )
     return int(n_points)
 
 
@@ -93,7 +122,9 @@ def check_duration(duration, name: str = "duration") -> float:
     if duration > MAX_DURATION:
         raise ValueError(f"{name} must be <= {MAX_DURATION:g} s (one swing), got {duration:g}")
     if duration < MIN_DURATION:
-        raise ValueError(f"{name} must be >= {MIN_DURATION:g} s (no drive swings a leg faster), got {duration:g}")
+        raise ValueError(
+            f"{name} must be >= {MIN_DURATION:g} s (no drive swings a leg faster), got {duration:g}"
+        )
     return duration
 
 
@@ -115,7 +146,7 @@ def check_smoothing(smoothing):
 
 
 def check_fallback(fallback):
-    """"cfftg" or None ("none" from a command line)."""
+    """ "cfftg" or None ("none" from a command line)."""
     if fallback == "none":
         return None
     if fallback not in FALLBACKS:
@@ -147,7 +178,11 @@ class SwingOptions:
     clearance: float | None = None
 
     SCENE_FIELDS: ClassVar[tuple[str, ...]] = ("pivot", "pivot_y", "start_y", "step_length")
-    CHECKS: ClassVar[tuple] = (("n_points", check_points), ("duration", check_duration), ("strict", _check_strict))
+    CHECKS: ClassVar[tuple] = (
+        ("n_points", check_points),
+        ("duration", check_duration),
+        ("strict", _check_strict),
+    )
 
     def __post_init__(self):
         for name, check in self.CHECKS:
@@ -172,7 +207,11 @@ class SwingOptions:
         if not isinstance(options, SwingOptions):
             raise TypeError(f"options: expected {cls.__name__}, got {type(options).__name__}")
         if not isinstance(options, cls):
-            shared = {f.name: getattr(options, f.name) for f in dataclasses.fields(options) if f.name in names}
+            shared = {
+                f.name: getattr(options, f.name)
+                for f in dataclasses.fields(options)
+                if f.name in names
+            }
             return cls(**{**shared, **overrides})
         return dataclasses.replace(options, **overrides) if overrides else options
 
@@ -195,6 +234,10 @@ class GenerateOptions(SwingOptions):
     fallback: str | None = "cfftg"
 
     # the order generate checked its keywords in: with several bad values, the same one is named
-    CHECKS: ClassVar[tuple] = (("n_points", check_points), ("smoothing", check_smoothing),
-                               ("duration", check_duration), ("fallback", check_fallback),
-                               ("strict", _check_strict))
+    CHECKS: ClassVar[tuple] = (
+        ("n_points", check_points),
+        ("smoothing", check_smoothing),
+        ("duration", check_duration),
+        ("fallback", check_fallback),
+        ("strict", _check_strict),
+    )

@@ -14,7 +14,9 @@ from jaxexo.storage.atomic import write_figure
 CM = 100.0
 
 
-def plot_trajectory(traj: Trajectory, path: str | Path | None = None, n_poses: int = 6, title: str | None = None):
+def plot_trajectory(
+    traj: Trajectory, path: str | Path | None = None, n_poses: int = 6, title: str | None = None
+):
     """Draw one trajectory; saves to ``path`` when given and returns the figure."""
     import matplotlib
 
@@ -22,7 +24,9 @@ def plot_trajectory(traj: Trajectory, path: str | Path | None = None, n_poses: i
         matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, (ax, ax_h, ax_k) = plt.subplots(1, 3, figsize=(15, 4.8), gridspec_kw={"width_ratios": [1.6, 1, 1]})
+    fig, (ax, ax_h, ax_k) = plt.subplots(
+        1, 3, figsize=(15, 4.8), gridspec_kw={"width_ratios": [1.6, 1, 1]}
+    )
     sc = traj.scene
     o = sc.obstacle.outline * CM
     ax.fill(o[:, 0], o[:, 1], color="0.55", alpha=0.8, label=f"obstacle ({sc.obstacle.kind})")
@@ -31,26 +35,59 @@ def plot_trajectory(traj: Trajectory, path: str | Path | None = None, n_poses: i
         a = 0.25 + 0.75 * j / (len(traj.heel) - 1)
         hip, ks, kt = traj.hip[j] * CM, traj.knee_swing[j] * CM, traj.knee_stance[j] * CM
         heel, toe = traj.heel[j] * CM, traj.toe[j] * CM
-        ax.plot([hip[0], ks[0], heel[0]], [hip[1], ks[1], heel[1]], "-o", color="tab:blue", alpha=a, ms=3)
-        ax.plot([hip[0], kt[0], sc.pivot_y * CM], [hip[1], kt[1], 0.0], "-o", color="tab:gray", alpha=a, ms=3)
+        ax.plot(
+            [hip[0], ks[0], heel[0]],
+            [hip[1], ks[1], heel[1]],
+            "-o",
+            color="tab:blue",
+            alpha=a,
+            ms=3,
+        )
+        ax.plot(
+            [hip[0], kt[0], sc.pivot_y * CM],
+            [hip[1], kt[1], 0.0],
+            "-o",
+            color="tab:gray",
+            alpha=a,
+            ms=3,
+        )
         ax.plot([heel[0], toe[0]], [heel[1], toe[1]], "-", color="tab:blue", alpha=a, lw=2.5)
     raw = traj.raw * CM
     rl = traj.method == "rl"
     if rl:
         d = np.diff(raw, axis=0)
-        ax.quiver(raw[:-1, 0], raw[:-1, 1], d[:, 0], d[:, 1], angles="xy", scale_units="xy", scale=1.0,
-                  color="tab:orange", width=0.003, label="agent moves")
+        ax.quiver(
+            raw[:-1, 0],
+            raw[:-1, 1],
+            d[:, 0],
+            d[:, 1],
+            angles="xy",
+            scale_units="xy",
+            scale=1.0,
+            color="tab:orange",
+            width=0.003,
+            label="agent moves",
+        )
     else:
-        ax.plot(raw[:, 0], raw[:, 1], "o", color="tab:orange", ms=4, label=f"{traj.method} plan points")
-    ax.plot(traj.heel[:, 0] * CM, traj.heel[:, 1] * CM, color="tab:red", lw=1.5,
-            label="heel (smoothed)" if rl else "heel")
+        ax.plot(
+            raw[:, 0], raw[:, 1], "o", color="tab:orange", ms=4, label=f"{traj.method} plan points"
+        )
+    ax.plot(
+        traj.heel[:, 0] * CM,
+        traj.heel[:, 1] * CM,
+        color="tab:red",
+        lw=1.5,
+        label="heel (smoothed)" if rl else "heel",
+    )
     ax.plot(traj.toe[:, 0] * CM, traj.toe[:, 1] * CM, color="tab:red", lw=0.8, ls="--", label="toe")
     ax.plot([sc.goal_y * CM], [0.0], "g*", ms=12, label="goal")
     ax.set_aspect("equal")
     ax.set_xlabel("y, forward (cm)")
     ax.set_ylabel("z, up (cm)")
     status = "ok" if traj.ok else "FAILED: " + "; ".join(traj.checks.reasons)
-    ax.set_title(title or f"{traj.method}: {sc.obstacle.kind}, pivot {sc.pivot} ({status})", fontsize=9)
+    ax.set_title(
+        title or f"{traj.method}: {sc.obstacle.kind}, pivot {sc.pivot} ({status})", fontsize=9
+    )
     ax.legend(fontsize=7, loc="upper left")
     ang = np.degrees(traj.joint_angles)
     for axis, col, name in ((ax_h, 0, "hip"), (ax_k, 1, "knee")):
@@ -80,11 +117,16 @@ def plot_course(course, path: str | Path | None = None):
 
     ter = course.terrain
     length = float(ter.y[-1] - ter.y[0])
-    fig, (ax, axq) = plt.subplots(2, 1, figsize=(min(4.0 + 2.2 * length, 22.0), 6.4),
-                                  gridspec_kw={"height_ratios": [1.2, 1]})
+    fig, (ax, axq) = plt.subplots(
+        2, 1, figsize=(min(4.0 + 2.2 * length, 22.0), 6.4), gridspec_kw={"height_ratios": [1.2, 1]}
+    )
     ax.fill_between(ter.y * CM, 0.0, ter.z * CM, color="0.55", lw=0, label="terrain")
     ax.axhline(0.0, color="k", lw=0.8)
-    foot = course.steps[0].trajectory.toe[0, 0] - course.steps[0].trajectory.heel[0, 0] if course.steps else 0.2
+    foot = (
+        course.steps[0].trajectory.toe[0, 0] - course.steps[0].trajectory.heel[0, 0]
+        if course.steps
+        else 0.2
+    )
     ax.plot([course.footholds.start_y * CM] * 2, [0.0, 0.0], "ks", ms=6, label="start (both feet)")
     for st in course.steps:
         c = LEG_COLORS[st.leg]
@@ -92,8 +134,15 @@ def plot_course(course, path: str | Path | None = None):
         ax.plot(h[:, 0], h[:, 1], color=c, lw=1.2, ls="-" if st.method == "rl" else "--")
         y = st.landing_y * CM
         ax.plot([y, y + foot * CM], [0.0, 0.0], color=c, lw=4, solid_capstyle="butt")
-        ax.annotate(str(st.index + 1), (y, 0.0), xytext=(0, -11), textcoords="offset points", fontsize=7,
-                    ha="left", color=c)
+        ax.annotate(
+            str(st.index + 1),
+            (y, 0.0),
+            xytext=(0, -11),
+            textcoords="offset points",
+            fontsize=7,
+            ha="left",
+            color=c,
+        )
     for leg, c in LEG_COLORS.items():
         ax.plot([], [], color=c, lw=3, label=f"{leg} foot: heel path, foothold")
     ax.set_aspect("equal")
@@ -101,14 +150,21 @@ def plot_course(course, path: str | Path | None = None):
     ax.set_xlabel("y, along the course (cm)")
     ax.set_ylabel("z (cm)")
     fb = sum(s.method == "cfftg-fallback" for s in course.steps)
-    ax.set_title(f"{course.method}: {len(course.steps)} swings, {course.duration:.1f} s at the device limits"
-                 + (f", {fb} CFFTG fallbacks (dashed)" if fb else "") + f" ({'ok' if course.ok else 'FAILED'})",
-                 fontsize=9)
+    ax.set_title(
+        f"{course.method}: {len(course.steps)} swings, {course.duration:.1f} s at the device limits"
+        + (f", {fb} CFFTG fallbacks (dashed)" if fb else "")
+        + f" ({'ok' if course.ok else 'FAILED'})",
+        fontsize=9,
+    )
     ax.legend(fontsize=7, loc="upper right", ncol=3)
     t = course.samples[:, 0]
     ang = np.degrees(course.samples[:, 17:21])
-    for col, name, c, ls in ((0, "left hip", "tab:blue", "-"), (1, "left knee", "tab:blue", ":"),
-                             (2, "right hip", "tab:orange", "-"), (3, "right knee", "tab:orange", ":")):
+    for col, name, c, ls in (
+        (0, "left hip", "tab:blue", "-"),
+        (1, "left knee", "tab:blue", ":"),
+        (2, "right hip", "tab:orange", "-"),
+        (3, "right knee", "tab:orange", ":"),
+    ):
         axq.plot(t, ang[:, col], color=c, ls=ls, label=name)
     for st in course.steps:
         axq.axvline(st.start_s, color="0.8", lw=0.6)

@@ -17,21 +17,34 @@ def load_checked(path: str | Path) -> tuple[QPolicy, object]:
     disagrees (observation size, action angles, observation scale)."""
     policy = load_policy(path)
     meta = policy.metadata
-    config = policy_config(meta, path)      # complete, and agreeing with the metadata
+    config = policy_config(meta, path)  # complete, and agreeing with the metadata
     obs_dim = dynamics.obs_dim(config.env.obs_mode, config.env.shape_points)
     if policy.obs_dim != obs_dim or meta.get("obs_dim") != obs_dim:
-        raise PolicyFileError(f"{path}: the network takes {policy.obs_dim} inputs (metadata.obs_dim "
-                              f"{meta.get('obs_dim')!r}) but its config's {config.env.obs_mode!r} observation "
-                              f"has {obs_dim}")
+        raise PolicyFileError(
+            f"{path}: the network takes {policy.obs_dim} inputs (metadata.obs_dim "
+            f"{meta.get('obs_dim')!r}) but its config's {config.env.obs_mode!r} observation "
+            f"has {obs_dim}"
+        )
     angles = meta.get("action_angles_rad")
     expected = dynamics.action_angles()
-    if (not isinstance(angles, list) or len(angles) != len(expected)
-            or not np.allclose(np.mod(np.asarray(angles, float) - expected + np.pi, 2 * np.pi) - np.pi, 0, atol=1e-9)):
-        raise PolicyFileError(f"{path}: metadata.action_angles_rad does not match the "
-                              f"{dynamics.NUM_ACTIONS} moves of jaxexo.physics.dynamics.action_angles")
-    for key, value in (("length_scale", dynamics.LENGTH_SCALE),
-                       ("thesis_obs_center", list(dynamics.THESIS_OBS_CENTER))):
+    if (
+        not isinstance(angles, list)
+        or len(angles) != len(expected)
+        or not np.allclose(
+            np.mod(np.asarray(angles, float) - expected + np.pi, 2 * np.pi) - np.pi, 0, atol=1e-9
+        )
+    ):
+        raise PolicyFileError(
+            f"{path}: metadata.action_angles_rad does not match the "
+            f"{dynamics.NUM_ACTIONS} moves of jaxexo.physics.dynamics.action_angles"
+        )
+    for key, value in (
+        ("length_scale", dynamics.LENGTH_SCALE),
+        ("thesis_obs_center", list(dynamics.THESIS_OBS_CENTER)),
+    ):
         if meta.get(key) != value:
-            raise PolicyFileError(f"{path}: metadata.{key} is {meta.get(key)!r}; this jaxexo builds "
-                                  f"observations with {value!r}")
+            raise PolicyFileError(
+                f"{path}: metadata.{key} is {meta.get(key)!r}; this jaxexo builds "
+                f"observations with {value!r}"
+            )
     return policy, config

@@ -30,20 +30,28 @@ def training_scenarios(config: Config, n: int, seed: int = 54321) -> list[dict]:
     positive weight in turn, sizes drawn from its ranges) and the pivot conditions it trains on (in
     turn), the rest drawn as the environment's reset draws it."""
     t = config.layout.terrain
-    if t is not None:   # procedural terrain: its families (indices into t.families) and pivots
+    if t is not None:  # procedural terrain: its families (indices into t.families) and pivots
         kinds = [i for i, w in enumerate(t.weights) if w > 0]
         pivots = [i for i, w in enumerate(t.pivot) if w > 0]
     else:
         kinds = [i for i, o in enumerate(config.layout.obstacles) if o.weight > 0]
         pivots = [i for i, w in enumerate(config.layout.pivot) if w > 0]
-    return _kwargs(config, scenarios.scenario_layouts(np, numpy_params(config), seed, n, cycle=True,
-                                                         kinds=kinds, pivots=pivots))
+    return _kwargs(
+        config,
+        scenarios.scenario_layouts(
+            np, numpy_params(config), seed, n, cycle=True, kinds=kinds, pivots=pivots
+        ),
+    )
 
 
 def safety_scenarios(config: Config, n: int, seed: int = 2024, unseen: bool = False) -> list[dict]:
     """jaxexo.physics.scenarios.safety_scenes for the config's foot length and step lengths."""
-    return scenarios.safety_scenes(config.kinematics.foot_length, config.layout.step_length, n, seed, unseen)
+    return scenarios.safety_scenes(
+        config.kinematics.foot_length, config.layout.step_length, n, seed, unseen
+    )
 
 
 def _kwargs(cfg: Config, lay: dict) -> list[dict]:
-    return scenarios.scene_kwargs(lay, None if cfg.layout.terrain is not None else cfg.layout.obstacles)
+    return scenarios.scene_kwargs(
+        lay, None if cfg.layout.terrain is not None else cfg.layout.obstacles
+    )

@@ -49,7 +49,7 @@ ANGLE_MARGIN = 1e-5
 # error in the knee's offset h where h is near 0 (a straight leg).
 _G_ERR = 4e-6
 _SQRT_G_ERR = math.sqrt(_G_ERR)
-_H_SMALL = _G_ERR / (2.0 * _SQRT_G_ERR)     # below this h, sqrt(|dg|) is the smaller bound
+_H_SMALL = _G_ERR / (2.0 * _SQRT_G_ERR)  # below this h, sqrt(|dg|) is the smaller bound
 _TWO_PI = 2.0 * math.pi
 # Orientation products closer to 0 than this (m^2) are treated as undecidable (float32 sign noise).
 _ORIENT_TOL = 1e-9
@@ -131,12 +131,25 @@ class ScalarShield:
             cy, cz = self.vy[i], self.vz[i]
             ey, ez = self.vy[i + 1] - cy, self.vz[i + 1] - cz
             len2 = ey * ey + ez * ez
-            if len2 > 1e-24:   # padding (repeated vertices): their distances are the vertices'
-                edges.append((cy, cz, ey, ez, 1.0 / len2,
-                              min(cy, cy + ey), max(cy, cy + ey), min(cz, cz + ez), max(cz, cz + ez)))
+            if len2 > 1e-24:  # padding (repeated vertices): their distances are the vertices'
+                edges.append(
+                    (
+                        cy,
+                        cz,
+                        ey,
+                        ez,
+                        1.0 / len2,
+                        min(cy, cy + ey),
+                        max(cy, cy + ey),
+                        min(cz, cz + ez),
+                        max(cz, cz + ez),
+                    )
+                )
         self.edges = edges
-        self.pairs = [(self.vy[i], self.vz[i], self.vy[i + 1], self.vz[i + 1]) for i in range(len(ol) - 1)]
-        self.unsure = 0     # steps handed to the reference (diagnostics)
+        self.pairs = [
+            (self.vy[i], self.vz[i], self.vy[i + 1], self.vz[i + 1]) for i in range(len(ol) - 1)
+        ]
+        self.unsure = 0  # steps handed to the reference (diagnostics)
 
     # Geometry (float64 on float32 inputs) -------------------------------------------------------
     def _box_distance(self, y0, y1, z0, z1):
@@ -203,28 +216,35 @@ class ScalarShield:
         iu = 1.0 / len2 if len2 > 1e-24 else 0.0
         i_f = 1.0 / (f * f)
         # P's sides a -> a + u with 1 / |u|^2: the foot at both ends, the heel's and the toe's chords
-        sides = ((y0, z0, f, 0.0, i_f), (y1, z1, f, 0.0, i_f), (y0, z0, dy, dz, iu), (y0 + f, z0, dy, dz, iu))
+        sides = (
+            (y0, z0, f, 0.0, i_f),
+            (y1, z1, f, 0.0, i_f),
+            (y0, z0, dy, dz, iu),
+            (y0 + f, z0, dy, dz, iu),
+        )
         verts = set()
         for cy, cz, ey, ez, inv, *_ in near:
             verts.add((cy, cz))
             verts.add((cy + ey, cz + ez))
-            best = _nearest2(corners, cy, cz, ey, ez, inv, best)     # P's corners against the edge
-            for ay, az, uy, uz, _ in sides:     # proper crossings of P's sides and the edge
+            best = _nearest2(corners, cy, cz, ey, ez, inv, best)  # P's corners against the edge
+            for ay, az, uy, uz, _ in sides:  # proper crossings of P's sides and the edge
                 o1 = uy * (cz - az) - uz * (cy - ay)
                 o2 = uy * (cz + ez - az) - uz * (cy + ey - ay)
                 o3 = ey * (az - cz) - ez * (ay - cy)
                 o4 = ey * (az + uz - cz) - ez * (ay + uy - cy)
-                if (abs(o1) < _ORIENT_TOL or abs(o2) < _ORIENT_TOL) and (abs(o3) < _ORIENT_TOL or abs(o4) < _ORIENT_TOL):
-                    return 0        # collinear within rounding: float32 might decide either way
+                if (abs(o1) < _ORIENT_TOL or abs(o2) < _ORIENT_TOL) and (
+                    abs(o3) < _ORIENT_TOL or abs(o4) < _ORIENT_TOL
+                ):
+                    return 0  # collinear within rounding: float32 might decide either way
                 if o1 * o2 < 0.0 and o3 * o4 < 0.0:
                     return -1 if lo > 0.0 else 0
             if best < lo2:
                 return -1
         for vy, vz in verts:
             vertex = ((vy, vz),)
-            for ay, az, uy, uz, iv in sides:    # the outline's vertices against P's sides
+            for ay, az, uy, uz, iv in sides:  # the outline's vertices against P's sides
                 best = _nearest2(vertex, ay, az, uy, uz, iv, best)
-            if dz != 0.0:                       # ... and strictly inside P
+            if dz != 0.0:  # ... and strictly inside P
                 t = (vz - z0) / dz
                 if 0.0 <= t <= 1.0:
                     s = (vy - y0 - t * dy) / f
@@ -255,7 +275,7 @@ class ScalarShield:
         knee = (math.atan2(fy - ky, kz - fz) - thigh + math.pi) % _TWO_PI - math.pi
         # float32 error in h: |dg| / (2 h) where h is well away from 0, else sqrt(|dg|)
         dh = _G_ERR / (2.0 * h) if h > _H_SMALL else _SQRT_G_ERR
-        e_thigh = (dh + 1e-5) / t + ANGLE_MARGIN          # the knee's position error (m) over the thigh
+        e_thigh = (dh + 1e-5) / t + ANGLE_MARGIN  # the knee's position error (m) over the thigh
         return r, thigh, knee, e_thigh, e_thigh + (dh + 1e-5) / s + ANGLE_MARGIN, g < 1e-3
 
     def reachable(self, y, z):
@@ -300,12 +320,12 @@ class ScalarShield:
         would apply."""
         ql = q.tolist()
         total = sum(ql)
-        if total - total != 0.0:         # a nan or an infinity: argmax's own rules
+        if total - total != 0.0:  # a nan or an infinity: argmax's own rules
             return self._miss()
         hy, hz = _f32(hy), _f32(hz)
         # Far from the obstacle's box no move of one step comes within the shield's clearance.
         far = self._box_distance(hy, hy + self.fl, hz, hz) - self.step >= self.shield_c + MARGIN
-        state = [None]      # the clearance threshold, computed once when needed
+        state = [None]  # the clearance threshold, computed once when needed
         # the move that would undo the last one (dynamics.undoes) is never admissible
         undo = (last + dynamics.NUM_ACTIONS // 2) % dynamics.NUM_ACTIONS if last >= 0 else -1
         # The best forward move first (max returns the first of equal values, as argmax); only on a
@@ -320,7 +340,7 @@ class ScalarShield:
             v = self._admissible(a, hy, hz, far, state)
             if v is not False:
                 return a if v else self._miss()
-        return self._miss()     # no forward move passes everything: the reference's fallbacks
+        return self._miss()  # no forward move passes everything: the reference's fallbacks
 
     def _admissible(self, a, hy, hz, far, state):
         """True / False / None (too close to call) for forward move a from the float32 heel (hy, hz)."""
@@ -333,7 +353,7 @@ class ScalarShield:
         z = 0.0 if z < 0.0 else (self.zmax if z > self.zmax else z)
         if z < self.floor32 and abs(_f32(y - self.goal_y32)) > self.goal_tol32:
             return False
-        moved = max(abs(y - hy), abs(z - hz))       # dynamics.moves_heel, certified like the rest
+        moved = max(abs(y - hy), abs(z - hz))  # dynamics.moves_heel, certified like the rest
         if moved <= _MOVE_EPS + MARGIN_MOVE:
             return False if moved <= _MOVE_EPS - MARGIN_MOVE else None
         k = self.reachable(y, z)
@@ -345,7 +365,7 @@ class ScalarShield:
         if need is None:
             c_here = self.foot_distance(hy, hz)
             if c_here < MARGIN:
-                return None      # touching or inside: the sign may be rounding
+                return None  # touching or inside: the sign may be rounding
             if self.inside(hy, hz):
                 c_here = -c_here
             need = state[0] = min(self.shield_c, c_here) - self.slack

@@ -50,7 +50,9 @@ class ShieldRows:
         box (elsewhere no move can fail the clearance condition)."""
         p = self.p
         half = 0.5 * lay.width
-        dy = np.maximum(np.maximum(lay.center_y - half - (hy + p.foot_length), hy - (lay.center_y + half)), 0.0)
+        dy = np.maximum(
+            np.maximum(lay.center_y - half - (hy + p.foot_length), hy - (lay.center_y + half)), 0.0
+        )
         dz = np.maximum(hz - lay.height, 0.0)
         return np.hypot(dy, dz) < self.sp.shield_clearance + self.sp.step_size + 1e-4
 
@@ -67,10 +69,14 @@ class ShieldRows:
             return dynamics.moves_keep_clearance_pruned(p, here, c_here, ends, outline)
         # the unpruned branch of moves_keep_clearance, written out (the same elementwise arithmetic)
         moves = np.moveaxis(ends, -2, 0)
-        d_move = np.moveaxis(swept.swept_distance(np, here + 0.0 * moves, moves, p.foot_length, outline), 0, -1)
+        d_move = np.moveaxis(
+            swept.swept_distance(np, here + 0.0 * moves, moves, p.foot_length, outline), 0, -1
+        )
         return d_move >= np.minimum(p.shield_clearance, c_here)[..., None] - dynamics.SHIELD_SLACK
 
-    def admissible(self, hy, hz, lay, pruned: bool | None = None, near=None, c_here=None, last=None) -> np.ndarray:
+    def admissible(
+        self, hy, hz, lay, pruned: bool | None = None, near=None, c_here=None, last=None
+    ) -> np.ndarray:
         """(B, A) the shield's admissible moves (jaxexo.physics.dynamics.admissible_moves) of many heels,
         float32 rows of stacked scenes like the training environment; the exact clearance is computed
         only for the ``_near`` rows (elsewhere no move can fail it, so the mask is the same).
@@ -83,10 +89,18 @@ class ShieldRows:
         if near.any():
             ends = dynamics.forward_ends(np, p, hy[near], hz[near])
             if pruned is None:
-                clear[near] = dynamics.moves_keep_clearance(np, p, hy[near], hz[near], ends, lay.outline[near])
+                clear[near] = dynamics.moves_keep_clearance(
+                    np, p, hy[near], hz[near], ends, lay.outline[near]
+                )
             else:
-                clear[near] = self._clear(hy[near], hz[near], ends, lay.outline[near], pruned,
-                                          None if c_here is None else c_here[near])
+                clear[near] = self._clear(
+                    hy[near],
+                    hz[near],
+                    ends,
+                    lay.outline[near],
+                    pruned,
+                    None if c_here is None else c_here[near],
+                )
         return dynamics.admissible_moves(np, p, hy, hz, lay, clear=clear, last_action=last)
 
     def choose(self, hy, hz, lay, q, last) -> np.ndarray:
@@ -95,28 +109,39 @@ class ShieldRows:
         elementwise arithmetic); the full mask only for the rows where that move is not admissible."""
         fwd = self._fwd_idx
         # forward moves by decreasing Q, ties by index (as argmax over the mask picks the first)
-        order = fwd[np.argsort(-q[:, fwd], axis=1, kind="stable")[:, :self.BATCH_ROUNDS]]
+        order = fwd[np.argsort(-q[:, fwd], axis=1, kind="stable")[:, : self.BATCH_ROUNDS]]
         near = self._near(hy, hz, lay)
         # the branch the whole step's moves_keep_clearance call takes (by its array's size)
         pruned = int(near.sum()) * self._n_forward * 2 > dynamics.PRUNE_FROM
         # the near heels' foot clearances once per step (every round and the full mask read them)
         c_here = np.zeros(len(hy), np.float32)
         if near.any():
-            c_here[near] = geometry.foot_clearance(np, np.stack([hy[near], hz[near]], axis=-1),
-                                                   self.p.foot_length, lay.outline[near])
+            c_here[near] = geometry.foot_clearance(
+                np, np.stack([hy[near], hz[near]], axis=-1), self.p.foot_length, lay.outline[near]
+            )
         out = order[:, 0].copy()
         miss = np.arange(len(hy))
-        for r in range(self.BATCH_ROUNDS):     # the r-th best move of the rows still undecided
+        for r in range(self.BATCH_ROUNDS):  # the r-th best move of the rows still undecided
             a = order[miss, r]
-            ok = self._one_move_ok(hy[miss], hz[miss], take_rows(lay, miss), near[miss], a, pruned, last[miss],
-                                   c_here[miss])
+            ok = self._one_move_ok(
+                hy[miss],
+                hz[miss],
+                take_rows(lay, miss),
+                near[miss],
+                a,
+                pruned,
+                last[miss],
+                c_here[miss],
+            )
             out[miss[ok]] = a[ok]
             miss = miss[~ok]
             if not miss.size:
                 break
         if miss.size:
             sub = take_rows(lay, miss)
-            mask = self.admissible(hy[miss], hz[miss], sub, pruned, near[miss], c_here[miss], last[miss])
+            mask = self.admissible(
+                hy[miss], hz[miss], sub, pruned, near[miss], c_here[miss], last[miss]
+            )
             out[miss] = dynamics.greedy_action(np, q[miss], mask)
         self.stats.rows += len(hy)
         self.stats.rows_to_full_mask += miss.size
@@ -129,9 +154,15 @@ class ShieldRows:
         p = self.p
         d = p.directions[a]
         y, z = dynamics.move_heel(np, p, hy, hz, d[:, 0], d[:, 1])
-        new = np.stack([y, z], axis=-1)[:, None, :]      # (B, 1, 2)
+        new = np.stack([y, z], axis=-1)[:, None, :]  # (B, 1, 2)
         clear = np.ones((len(hy), 1), bool)
         if near.any():
-            clear[near] = self._clear(hy[near], hz[near], new[near], lay.outline[near], pruned,
-                                      None if c_here is None else c_here[near])
+            clear[near] = self._clear(
+                hy[near],
+                hz[near],
+                new[near],
+                lay.outline[near],
+                pruned,
+                None if c_here is None else c_here[near],
+            )
         return dynamics.shield_conditions(np, p, hy, hz, lay, a[:, None], new, clear, last)[:, 0]

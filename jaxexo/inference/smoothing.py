@@ -39,11 +39,11 @@ from functools import lru_cache
 
 import numpy as np
 
-DEFAULT_SMOOTHING = 0.005      # m^2: the thesis's s = 0.5 in decimetres
+DEFAULT_SMOOTHING = 0.005  # m^2: the thesis's s = 0.5 in decimetres
 DEFAULT_POINTS = 100
 DEGREE = 3
 END_WEIGHT = 1000.0
-LOG_LAMBDA = (-12.0, 12.0)     # search range of log10(lambda)
+LOG_LAMBDA = (-12.0, 12.0)  # search range of log10(lambda)
 GRID_POINTS = 13
 NEWTON_STEPS = 4
 
@@ -107,16 +107,18 @@ def bspline_design(u: np.ndarray, knots: np.ndarray, k: int) -> np.ndarray:
     u = np.asarray(u, dtype=np.float64)
     t = np.asarray(knots, dtype=np.float64)
     n_int = len(t) - 1
-    last = np.max(np.flatnonzero(t[1:] > t[:-1]))          # the last non-empty interval
+    last = np.max(np.flatnonzero(t[1:] > t[:-1]))  # the last non-empty interval
     b = ((u[:, None] >= t[None, :-1]) & (u[:, None] < t[None, 1:])).astype(np.float64)
     b[u >= t[last + 1], :] = 0.0
     b[u >= t[last + 1], last] = 1.0
     for d in range(1, k + 1):
         left_den = t[d:n_int] - t[: n_int - d]
-        right_den = t[d + 1: n_int + 1] - t[1: n_int - d + 1]
+        right_den = t[d + 1 : n_int + 1] - t[1 : n_int - d + 1]
         with np.errstate(divide="ignore", invalid="ignore"):
             left = np.where(left_den > 0, (u[:, None] - t[None, : n_int - d]) / left_den, 0.0)
-            right = np.where(right_den > 0, (t[None, d + 1: n_int + 1] - u[:, None]) / right_den, 0.0)
+            right = np.where(
+                right_den > 0, (t[None, d + 1 : n_int + 1] - u[:, None]) / right_den, 0.0
+            )
         b = left * b[:, :-1] + right * b[:, 1:]
     return b
 
@@ -137,28 +139,28 @@ def spline_operators(m: int, n_points: int):
     interior = np.linspace(0.0, 1.0, m - k + 1)
     t = np.concatenate([[0.0] * k, interior, [1.0] * k])
     u = np.linspace(0.0, 1.0, m)
-    b = bspline_design(u, t, k)                                      # (M, M)
+    b = bspline_design(u, t, k)  # (M, M)
     w = np.ones(m)
-    w[0] = w[-1] = END_WEIGHT ** 2
+    w[0] = w[-1] = END_WEIGHT**2
     a = b.T @ (w[:, None] * b)
     diff = np.diff(np.eye(m), n=2, axis=0)
     p = diff.T @ diff
-    d, v = _generalized_eigh(p, a)                                   # v' a v = I, v' p v = diag(d)
+    d, v = _generalized_eigh(p, a)  # v' a v = I, v' p v = diag(d)
     d = np.maximum(d, 0.0)
     z = v.T @ (b.T * w[None, :])
     e = bspline_design(np.linspace(0.0, 1.0, n_points), t, k) @ v
     # Coefficients of c'' (a degree-1 B-spline) from c's: differentiate twice (de Boor),
     # P'_j = 3 (P_j+1 - P_j) / (t_j+4 - t_j+1), P''_j = 2 (P'_j+1 - P'_j) / (t_j+4 - t_j+2).
-    d1 = 3.0 * np.diff(np.eye(m), axis=0) / (t[4: m + 3] - t[1: m])[:, None]
-    d2 = 2.0 * np.diff(d1, axis=0) / (t[4: m + 2] - t[2: m])[:, None]
+    d1 = 3.0 * np.diff(np.eye(m), axis=0) / (t[4 : m + 3] - t[1:m])[:, None]
+    d2 = 2.0 * np.diff(d1, axis=0) / (t[4 : m + 2] - t[2:m])[:, None]
     q = d2 @ v
     for x in (z, d, e, q):
         x.setflags(write=False)
     return z, d, e, q
 
 
-_GRID = np.linspace(*LOG_LAMBDA, GRID_POINTS)     # log10(lambda) of the bracketing grid
-_GRID_LAMBDA = 10.0 ** _GRID
+_GRID = np.linspace(*LOG_LAMBDA, GRID_POINTS)  # log10(lambda) of the bracketing grid
+_GRID_LAMBDA = 10.0**_GRID
 _TWO_LN10 = 2.0 * np.log(10.0)
 for _a in (_GRID, _GRID_LAMBDA):
     _a.setflags(write=False)
@@ -171,16 +173,23 @@ def solve_lambda(d: np.ndarray, zz: np.ndarray, s: np.ndarray) -> np.ndarray:
     grid = _GRID
     ld = _GRID_LAMBDA[None, :, None] * d[:, None, :]
     q = ld / (1.0 + ld)
-    r = np.einsum("bgm,bm->bg", q * q, zz)                                # (B, G), increasing in g
-    k = np.clip((r <= s[:, None]).sum(axis=1), 1, GRID_POINTS - 1)       # r[k-1] <= s < r[k]
+    r = np.einsum("bgm,bm->bg", q * q, zz)  # (B, G), increasing in g
+    k = np.clip((r <= s[:, None]).sum(axis=1), 1, GRID_POINTS - 1)  # r[k-1] <= s < r[k]
     rows = np.arange(len(d))
     lo, hi = grid[k - 1], grid[k]
-    log_lo, log_hi = np.log(np.maximum(r[rows, k - 1], 1e-300)), np.log(np.maximum(r[rows, k], 1e-300))
+    log_lo, log_hi = (
+        np.log(np.maximum(r[rows, k - 1], 1e-300)),
+        np.log(np.maximum(r[rows, k], 1e-300)),
+    )
     # Start from the interpolation in log(r), then Newton on x = log10(lambda):
     # dr/dx = ln(10) * lambda * dr/dlambda = ln(10) * sum_j 2 q_j^2 (1 - q_j) zz_j.
     # (np.minimum/np.maximum rather than np.clip: the same values, without np.clip's Python wrapper)
-    x = lo + (hi - lo) * np.minimum(np.maximum(
-        (np.log(np.maximum(s, 1e-300)) - log_lo) / np.maximum(log_hi - log_lo, 1e-12), 0), 1)
+    x = lo + (hi - lo) * np.minimum(
+        np.maximum(
+            (np.log(np.maximum(s, 1e-300)) - log_lo) / np.maximum(log_hi - log_lo, 1e-12), 0
+        ),
+        1,
+    )
     for _ in range(NEWTON_STEPS):
         ld = 10.0 ** x[:, None] * d
         q = ld / (1.0 + ld)
@@ -188,7 +197,7 @@ def solve_lambda(d: np.ndarray, zz: np.ndarray, s: np.ndarray) -> np.ndarray:
         rx = q2zz.sum(axis=1)
         drx = _TWO_LN10 * np.einsum("bm,bm->b", q2zz, 1.0 - q)
         x = np.minimum(np.maximum(x - (rx - s) / np.maximum(drx, 1e-300), lo), hi)
-    lam = np.where(r[:, -1] <= s, np.inf, 10.0 ** x)
+    lam = np.where(r[:, -1] <= s, np.inf, 10.0**x)
     return np.where(r[:, 0] > s, 10.0 ** LOG_LAMBDA[0], lam)
 
 
@@ -199,8 +208,12 @@ def _apply(mat: np.ndarray, x: np.ndarray) -> np.ndarray:
     return y.reshape(len(mat), g, 2).transpose(1, 0, 2)
 
 
-def smooth_paths(raws, n_points: int = DEFAULT_POINTS, smoothing: float | np.ndarray = DEFAULT_SMOOTHING,
-                 with_deviation: bool = False):
+def smooth_paths(
+    raws,
+    n_points: int = DEFAULT_POINTS,
+    smoothing: float | np.ndarray = DEFAULT_SMOOTHING,
+    with_deviation: bool = False,
+):
     """Smoothed heel paths (B, n_points, 2) for a list of raw agent paths (M_i, 2), metres;
     ``smoothing`` one value or one per path (m^2). ``with_deviation``: also (B,) bounds (m) on the
     curve's distance from the polyline through its samples (module docstring)."""
@@ -211,8 +224,13 @@ def smooth_paths(raws, n_points: int = DEFAULT_POINTS, smoothing: float | np.nda
     return smooth_padded(pts, lengths, n_points, smoothing, with_deviation)
 
 
-def smooth_padded(pts: np.ndarray, lengths: np.ndarray, n_points: int = DEFAULT_POINTS,
-                  smoothing: float | np.ndarray = DEFAULT_SMOOTHING, with_deviation: bool = False):
+def smooth_padded(
+    pts: np.ndarray,
+    lengths: np.ndarray,
+    n_points: int = DEFAULT_POINTS,
+    smoothing: float | np.ndarray = DEFAULT_SMOOTHING,
+    with_deviation: bool = False,
+):
     """``smooth_paths`` for paths given as one padded array (B, T, 2) and their lengths (B,)."""
     b, t = pts.shape[:2]
     s_all = np.broadcast_to(np.asarray(smoothing, np.float64), (b,))
@@ -239,14 +257,17 @@ def smooth_padded(pts: np.ndarray, lengths: np.ndarray, n_points: int = DEFAULT_
         smooth = np.concatenate(idxs)
         lam = solve_lambda(d[smooth], np.sum(z[smooth] ** 2, axis=-1), s_all[smooth])
         with np.errstate(invalid="ignore"):
-            shrink = np.where(np.isinf(lam)[:, None], (d[smooth] == 0.0).astype(float),
-                              1.0 / (1.0 + lam[:, None] * d[smooth]))
+            shrink = np.where(
+                np.isinf(lam)[:, None],
+                (d[smooth] == 0.0).astype(float),
+                1.0 / (1.0 + lam[:, None] * d[smooth]),
+            )
         z[smooth] *= shrink[..., None]
-        h2_8 = (1.0 / (n_points - 1)) ** 2 / 8.0      # samples at u = i / (n - 1): L^2 / 8
+        h2_8 = (1.0 / (n_points - 1)) ** 2 / 8.0  # samples at u = i / (n - 1): L^2 / 8
         for m, idx in zip(ms, idxs):
             _, _, em, qm = spline_operators(int(m), n_points)
             out[idx] = _apply(em, z[idx, :m])
-            curv = np.max(np.abs(_apply(qm, z[idx, :m])), axis=1)      # (G, 2): max |c''| per axis
+            curv = np.max(np.abs(_apply(qm, z[idx, :m])), axis=1)  # (G, 2): max |c''| per axis
             dev[idx] = h2_8 * np.sqrt(np.sum(curv * curv, axis=-1))
     np.maximum(out[..., 1], 0.0, out=out[..., 1])
     out[:, 0] = pts[:, 0]
@@ -254,7 +275,9 @@ def smooth_padded(pts: np.ndarray, lengths: np.ndarray, n_points: int = DEFAULT_
     return (out, dev) if with_deviation else out
 
 
-def bspline_smooth(raw: np.ndarray, n_points: int = DEFAULT_POINTS, smoothing: float = DEFAULT_SMOOTHING) -> np.ndarray:
+def bspline_smooth(
+    raw: np.ndarray, n_points: int = DEFAULT_POINTS, smoothing: float = DEFAULT_SMOOTHING
+) -> np.ndarray:
     """One smoothed heel path (n_points, 2): ``smooth_paths`` for a single raw path."""
     return smooth_paths([raw], n_points, smoothing)[0]
 
@@ -272,14 +295,16 @@ def smooth_candidates(raw: np.ndarray, n_points: int, smoothings) -> tuple[np.nd
         out, dev = linear_resample(pts, n_points, with_deviation=True)
         return np.repeat(out[None], k, axis=0), np.full(k, dev, dtype=np.float64)
     zm, dm, em, qm = spline_operators(m, n_points)
-    z = zm @ pts                                                         # (M, 2)
+    z = zm @ pts  # (M, 2)
     zz = np.sum(z * z, axis=-1)
     lam = solve_lambda(np.broadcast_to(dm, (k, m)), np.broadcast_to(zz, (k, m)), s)
     with np.errstate(invalid="ignore"):
-        shrink = np.where(np.isinf(lam)[:, None], (dm == 0.0).astype(float)[None], 1.0 / (1.0 + lam[:, None] * dm))
-    zk = z[None] * shrink[..., None]                                     # (K, M, 2)
-    out = np.matmul(em, zk)                                              # (K, n, 2)
-    curv = np.max(np.abs(np.matmul(qm, zk)), axis=1)                     # (K, 2)
+        shrink = np.where(
+            np.isinf(lam)[:, None], (dm == 0.0).astype(float)[None], 1.0 / (1.0 + lam[:, None] * dm)
+        )
+    zk = z[None] * shrink[..., None]  # (K, M, 2)
+    out = np.matmul(em, zk)  # (K, n, 2)
+    curv = np.max(np.abs(np.matmul(qm, zk)), axis=1)  # (K, 2)
     dev = (1.0 / (n_points - 1)) ** 2 / 8.0 * np.sqrt(np.sum(curv * curv, axis=-1))
     np.maximum(out[..., 1], 0.0, out=out[..., 1])
     out[:, 0] = pts[0]

@@ -60,20 +60,36 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from jaxexo.config import MAX_CONTROL_RATE, MAX_SWING_DURATION, MAX_TRACKING_HEADROOM, MIN_CONTROL_RATE
+from jaxexo.config import (
+    MAX_CONTROL_RATE,
+    MAX_SWING_DURATION,
+    MAX_TRACKING_HEADROOM,
+    MIN_CONTROL_RATE,
+)
 from jaxexo.physics import kinematics
 from jaxexo.physics.dynamics import Scene
 from jaxexo.inference.time_law import BLEND_S, TimeLaw, pchip_eval, pchip_slopes, time_law, topp
-from jaxexo.inference.export import JOINT_NAMES, timed_dict, timed_table, write_timed_csv, write_timed_json
-from jaxexo.inference.trajectory import TrajectoryBatch, TrajectoryChecks, failure_reasons, measure_paths
+from jaxexo.inference.export import (
+    JOINT_NAMES,
+    timed_dict,
+    timed_table,
+    write_timed_csv,
+    write_timed_json,
+)
+from jaxexo.inference.trajectory import (
+    TrajectoryBatch,
+    TrajectoryChecks,
+    failure_reasons,
+    measure_paths,
+)
 
-FINE_PER_SAMPLE = 8        # fine s-grid points per interval of the path's samples
-SAFETY = 0.95              # the TOPP passes use this fraction of each limit
-CHECK_MARGIN = 1e-3        # exported samples must stay within (1 - this) of each limit
-LOCAL_PASSES = 6           # local corrections of the law where exported samples exceed a limit ...
-MAX_SLOWDOWNS = 12         # ... then uniform slow-downs (the safety net)
+FINE_PER_SAMPLE = 8  # fine s-grid points per interval of the path's samples
+SAFETY = 0.95  # the TOPP passes use this fraction of each limit
+CHECK_MARGIN = 1e-3  # exported samples must stay within (1 - this) of each limit
+LOCAL_PASSES = 6  # local corrections of the law where exported samples exceed a limit ...
+MAX_SLOWDOWNS = 12  # ... then uniform slow-downs (the safety net)
 ARC_TABLE_PER_SAMPLE = 32  # arc-length table points per sample interval
-BYTES_PER_SAMPLE = 1024    # twice what timing holds per exported sample (docs/reliability.md)
+BYTES_PER_SAMPLE = 1024  # twice what timing holds per exported sample (docs/reliability.md)
 
 
 @dataclass(frozen=True)
@@ -91,9 +107,15 @@ class DeviceLimits:
 
     def __post_init__(self):
         h = self.headroom
-        if isinstance(h, bool) or not isinstance(h, (int, float)) or not (0.0 <= h <= MAX_TRACKING_HEADROOM):
-            raise ValueError(f"limits.headroom: must be a number in [0, {MAX_TRACKING_HEADROOM:g}] (a fraction of each limit), "
-                             f"got {h!r}")
+        if (
+            isinstance(h, bool)
+            or not isinstance(h, (int, float))
+            or not (0.0 <= h <= MAX_TRACKING_HEADROOM)
+        ):
+            raise ValueError(
+                f"limits.headroom: must be a number in [0, {MAX_TRACKING_HEADROOM:g}] (a fraction of each limit), "
+                f"got {h!r}"
+            )
         object.__setattr__(self, "headroom", float(h))
         for name in ("velocity", "acceleration", "jerk"):
             v = getattr(self, name)
@@ -102,10 +124,14 @@ class DeviceLimits:
             try:
                 arr = np.asarray(v, dtype=np.float64)
             except (TypeError, ValueError):
-                raise ValueError(f"limits.{name}: expected {len(JOINT_NAMES)} numbers, got {v!r}") from None
+                raise ValueError(
+                    f"limits.{name}: expected {len(JOINT_NAMES)} numbers, got {v!r}"
+                ) from None
             if arr.shape != (len(JOINT_NAMES),):
-                raise ValueError(f"limits.{name}: expected {len(JOINT_NAMES)} numbers ({', '.join(JOINT_NAMES)}), "
-                                 f"got {v!r}")
+                raise ValueError(
+                    f"limits.{name}: expected {len(JOINT_NAMES)} numbers ({', '.join(JOINT_NAMES)}), "
+                    f"got {v!r}"
+                )
             if not np.all(np.isfinite(arr)) or np.any(arr <= 0):
                 raise ValueError(f"limits.{name}: every limit must be finite and > 0, got {v!r}")
             object.__setattr__(self, name, tuple(float(x) for x in arr))
@@ -119,27 +145,47 @@ class DeviceLimits:
         """The [device] section's (hip, knee) limits, applied to both legs."""
         dev = config.device
         (vh, vk), (ah, ak), (jh, jk) = dev.joint_velocity, dev.joint_acceleration, dev.joint_jerk
-        return cls((vh, vk, vh, vk), (ah, ak, ah, ak), dev.min_swing_duration, (jh, jk, jh, jk),
-                   dev.tracking_headroom)
+        return cls(
+            (vh, vk, vh, vk),
+            (ah, ak, ah, ak),
+            dev.min_swing_duration,
+            (jh, jk, jh, jk),
+            dev.tracking_headroom,
+        )
 
-    def scaled(self, velocity: float = 1.0, acceleration: float = 1.0, jerk: float | None = None) -> "DeviceLimits":
+    def scaled(
+        self, velocity: float = 1.0, acceleration: float = 1.0, jerk: float | None = None
+    ) -> "DeviceLimits":
         """The limits times these factors (jerk: by the acceleration's factor unless given)."""
         jerk = acceleration if jerk is None else jerk
-        return DeviceLimits(tuple(velocity * v for v in self.velocity),
-                            tuple(acceleration * a for a in self.acceleration), self.min_duration,
-                            None if self.jerk is None else tuple(jerk * j for j in self.jerk), self.headroom)
+        return DeviceLimits(
+            tuple(velocity * v for v in self.velocity),
+            tuple(acceleration * a for a in self.acceleration),
+            self.min_duration,
+            None if self.jerk is None else tuple(jerk * j for j in self.jerk),
+            self.headroom,
+        )
 
     def planned(self) -> "DeviceLimits":
         """What a timed reference may use: (1 - headroom) of each limit, no headroom left to take."""
         f = 1.0 - self.headroom
-        return DeviceLimits(tuple(f * v for v in self.velocity), tuple(f * a for a in self.acceleration),
-                            self.min_duration, None if self.jerk is None else tuple(f * j for j in self.jerk), 0.0)
+        return DeviceLimits(
+            tuple(f * v for v in self.velocity),
+            tuple(f * a for a in self.acceleration),
+            self.min_duration,
+            None if self.jerk is None else tuple(f * j for j in self.jerk),
+            0.0,
+        )
 
     def to_dict(self) -> dict:
-        return {"joints": list(JOINT_NAMES), "joint_velocity_rad_s": list(self.velocity),
-                "joint_acceleration_rad_s2": list(self.acceleration),
-                "joint_jerk_rad_s3": None if self.jerk is None else list(self.jerk),
-                "tracking_headroom": self.headroom, "min_duration_s": self.min_duration}
+        return {
+            "joints": list(JOINT_NAMES),
+            "joint_velocity_rad_s": list(self.velocity),
+            "joint_acceleration_rad_s2": list(self.acceleration),
+            "joint_jerk_rad_s3": None if self.jerk is None else list(self.jerk),
+            "tracking_headroom": self.headroom,
+            "min_duration_s": self.min_duration,
+        }
 
 
 @dataclass(frozen=True)
@@ -149,26 +195,28 @@ class TimedSwing:
 
     method: str
     scene: Scene
-    rate: float                    # Hz
-    duration: float                # s
+    rate: float  # Hz
+    duration: float  # s
     limits: DeviceLimits
-    time: np.ndarray               # (n,) s
-    heel: np.ndarray               # (n, 2) m
+    time: np.ndarray  # (n,) s
+    heel: np.ndarray  # (n, 2) m
     toe: np.ndarray
     hip: np.ndarray
     knee_swing: np.ndarray
     knee_stance: np.ndarray
-    joint_angles: np.ndarray       # (n, 4) rad, JOINT_NAMES
-    joint_velocity: np.ndarray     # (n, 4) rad/s (chain rule: q'(s) s')
-    joint_acceleration: np.ndarray # (n, 4) rad/s^2 (q''(s) s'^2 + q'(s) s'')
-    heel_velocity: np.ndarray      # (n, 2) m/s, the same chain rule on the heel path
+    joint_angles: np.ndarray  # (n, 4) rad, JOINT_NAMES
+    joint_velocity: np.ndarray  # (n, 4) rad/s (chain rule: q'(s) s')
+    joint_acceleration: np.ndarray  # (n, 4) rad/s^2 (q''(s) s'^2 + q'(s) s'')
+    heel_velocity: np.ndarray  # (n, 2) m/s, the same chain rule on the heel path
     heel_acceleration: np.ndarray  # (n, 2) m/s^2
-    path_parameter: np.ndarray     # (n,) s(t) in [0, 1]
-    checks: TrajectoryChecks       # path checks (goal, clearance, joint range, leg length) on these samples
-    within_limits: bool            # chain-rule columns and finite differences within the limits
-    peak_velocity: np.ndarray      # (4,) rad/s, max of |column| and |finite difference| per joint
+    path_parameter: np.ndarray  # (n,) s(t) in [0, 1]
+    checks: (
+        TrajectoryChecks  # path checks (goal, clearance, joint range, leg length) on these samples
+    )
+    within_limits: bool  # chain-rule columns and finite differences within the limits
+    peak_velocity: np.ndarray  # (4,) rad/s, max of |column| and |finite difference| per joint
     peak_acceleration: np.ndarray  # (4,) rad/s^2, likewise
-    slowdown: float                # uniform slow-down applied after the TOPP passes and local corrections (>= 1)
+    slowdown: float  # uniform slow-down applied after the TOPP passes and local corrections (>= 1)
     peak_jerk: np.ndarray | None = None  # (4,) rad/s^3, the third finite difference of the samples
     notes: tuple[str, ...] = field(default=())
 
@@ -178,8 +226,13 @@ class TimedSwing:
 
     @property
     def reasons(self) -> tuple[str, ...]:
-        extra = () if self.within_limits else (
-            "joint velocity/acceleration/jerk limits (less the tracking headroom) exceeded on the exported samples",)
+        extra = (
+            ()
+            if self.within_limits
+            else (
+                "joint velocity/acceleration/jerk limits (less the tracking headroom) exceeded on the exported samples",
+            )
+        )
         return self.checks.reasons + extra
 
     def table(self) -> np.ndarray:
@@ -266,23 +319,32 @@ def _joint_paths(sp, pivot_y: float, heel: np.ndarray):
 
 def _finite_differences(q: np.ndarray, dt: float):
     # Velocity, acceleration and jerk of samples at period dt: first, second and third differences.
-    return np.diff(q, axis=0) / dt, np.diff(q, n=2, axis=0) / (dt * dt), np.diff(q, n=3, axis=0) / dt**3
+    return (
+        np.diff(q, axis=0) / dt,
+        np.diff(q, n=2, axis=0) / (dt * dt),
+        np.diff(q, n=3, axis=0) / dt**3,
+    )
 
 
 def check_rate(rate, name: str = "rate") -> float:
     """A control rate (Hz) in [MIN_CONTROL_RATE, MAX_CONTROL_RATE], the bounds of [device]
     control_rate; TypeError or ValueError naming ``name``."""
-    if isinstance(rate, (bool, np.bool_)) or not isinstance(rate, (int, float, np.integer, np.floating)):
+    if isinstance(rate, (bool, np.bool_)) or not isinstance(
+        rate, (int, float, np.integer, np.floating)
+    ):
         raise TypeError(f"{name}: expected a number in Hz, got {rate!r}")
     rate = float(rate)
     if not (math.isfinite(rate) and MIN_CONTROL_RATE <= rate <= MAX_CONTROL_RATE):
-        raise ValueError(f"{name}: control rate must be between {MIN_CONTROL_RATE:g} and {MAX_CONTROL_RATE:g} Hz, "
-                         f"got {rate:g}")
+        raise ValueError(
+            f"{name}: control rate must be between {MIN_CONTROL_RATE:g} and {MAX_CONTROL_RATE:g} Hz, "
+            f"got {rate:g}"
+        )
     return rate
 
 
-def time_swings(trajs, config, rate: float | None = None, limits: DeviceLimits | None = None,
-                sp=None) -> list[TimedSwing]:
+def time_swings(
+    trajs, config, rate: float | None = None, limits: DeviceLimits | None = None, sp=None
+) -> list[TimedSwing]:
     """Time every swing of ``trajs`` (Trajectory objects or a TrajectoryBatch) with the device
     limits (default: ``config.device``) and sample each at ``rate`` Hz (default:
     ``config.device.control_rate``). ``config`` also supplies the kinematics (pass the generator's
@@ -290,20 +352,28 @@ def time_swings(trajs, config, rate: float | None = None, limits: DeviceLimits |
     from jaxexo.config import Config
 
     if _is_trajectory(trajs) and not isinstance(trajs, TrajectoryBatch):
-        raise TypeError("trajs: expected a list of trajectories or a TrajectoryBatch, got one trajectory "
-                        "(time_swing times one)")
+        raise TypeError(
+            "trajs: expected a list of trajectories or a TrajectoryBatch, got one trajectory "
+            "(time_swing times one)"
+        )
     try:
         trajs = list(trajs)
     except TypeError:
-        raise TypeError(f"trajs: expected a list of trajectories or a TrajectoryBatch, got "
-                        f"{type(trajs).__name__}") from None
+        raise TypeError(
+            f"trajs: expected a list of trajectories or a TrajectoryBatch, got "
+            f"{type(trajs).__name__}"
+        ) from None
     if not trajs:
         raise ValueError("trajs: need at least one trajectory")
     for i, t in enumerate(trajs):
         if not _is_trajectory(t):
-            raise TypeError(f"trajs[{i}]: expected a Trajectory (from generate), got {type(t).__name__}")
+            raise TypeError(
+                f"trajs[{i}]: expected a Trajectory (from generate), got {type(t).__name__}"
+            )
     if not isinstance(config, Config):
-        raise TypeError(f"config: expected a jaxexo Config (the generator's .config), got {type(config).__name__}")
+        raise TypeError(
+            f"config: expected a jaxexo Config (the generator's .config), got {type(config).__name__}"
+        )
     rate = check_rate(config.device.control_rate if rate is None else rate)
     limits = DeviceLimits.from_config(config) if limits is None else limits
     if not isinstance(limits, DeviceLimits):
@@ -316,19 +386,23 @@ def time_swings(trajs, config, rate: float | None = None, limits: DeviceLimits |
     heels = [np.asarray(t.heel, np.float64) for t in trajs]
     for i, h in enumerate(heels):
         if h.ndim != 2 or h.shape[1] != 2 or len(h) < 2 or not np.all(np.isfinite(h)):
-            raise ValueError(f"trajs[{i}].heel: expected a finite (N >= 2, 2) path, got shape {h.shape}")
+            raise ValueError(
+                f"trajs[{i}].heel: expected a finite (N >= 2, 2) path, got shape {h.shape}"
+            )
     paths = [_joint_paths(sp, t.scene.pivot_y, h) for t, h in zip(trajs, heels)]
     caps = [np.full(len(p[0]), np.inf) for p in paths]
     laws = _topp_laws(paths, list(range(len(paths))), caps, vmax, amax, blend)
     t_opt = [law.duration for law in laws]
-    slow = [1.0] * len(trajs)       # uniform slow-down beyond the (locally corrected) TOPP law
+    slow = [1.0] * len(trajs)  # uniform slow-down beyond the (locally corrected) TOPP law
     evals: list = [None] * len(trajs)
     todo = list(range(len(trajs)))
     stuck: set[int] = set()
     for it in range(LOCAL_PASSES + MAX_SLOWDOWNS):
         redo = []
         for i in todo:
-            e = evals[i] = _evaluate(trajs[i], heels[i], paths[i], laws[i], slow[i], sp, limits, rate)
+            e = evals[i] = _evaluate(
+                trajs[i], heels[i], paths[i], laws[i], slow[i], sp, limits, rate
+            )
             if e["ratio"] <= 1.0 - CHECK_MARGIN:
                 continue
             if it < LOCAL_PASSES:
@@ -342,7 +416,9 @@ def time_swings(trajs, config, rate: float | None = None, limits: DeviceLimits |
                 # slow-down would export the same samples again
                 base = laws[i].duration * max(1.0, limits.min_duration / laws[i].duration)
                 one_more = (e["t"][-1] + 1.0 / rate) / base
-                slowed = min(max(slow[i] * e["ratio"] / (1.0 - 2.0 * CHECK_MARGIN), one_more), longest)
+                slowed = min(
+                    max(slow[i] * e["ratio"] / (1.0 - 2.0 * CHECK_MARGIN), one_more), longest
+                )
                 if slowed == slow[i]:
                     stuck.add(i)
                 slow[i] = slowed
@@ -352,7 +428,10 @@ def time_swings(trajs, config, rate: float | None = None, limits: DeviceLimits |
         todo = [i for i in todo if evals[i]["ratio"] > 1.0 - CHECK_MARGIN and i not in stuck]
         if not todo:
             break
-    return [_finish(trajs[i], evals[i], sp, device, limits, rate, t_opt[i], slow[i]) for i in range(len(trajs))]
+    return [
+        _finish(trajs[i], evals[i], sp, device, limits, rate, t_opt[i], slow[i])
+        for i in range(len(trajs))
+    ]
 
 
 def blend_window(limits: DeviceLimits) -> float:
@@ -400,15 +479,21 @@ def _is_trajectory(t) -> bool:
     return hasattr(t, "heel") and hasattr(t, "scene")
 
 
-def time_swing(traj, config, rate: float | None = None, limits: DeviceLimits | None = None) -> TimedSwing:
+def time_swing(
+    traj, config, rate: float | None = None, limits: DeviceLimits | None = None
+) -> TimedSwing:
     """One swing: ``time_swings([traj], ...)[0]``."""
     if not _is_trajectory(traj) or isinstance(traj, TrajectoryBatch):
-        raise TypeError(f"traj: expected one Trajectory (from generate), got {type(traj).__name__}"
-                        + (" (time_swings times a batch)" if isinstance(traj, TrajectoryBatch) else ""))
+        raise TypeError(
+            f"traj: expected one Trajectory (from generate), got {type(traj).__name__}"
+            + (" (time_swings times a batch)" if isinstance(traj, TrajectoryBatch) else "")
+        )
     return time_swings([traj], config, rate, limits)[0]
 
 
-def _evaluate(traj, heel, path, law: TimeLaw, slow: float, sp, limits: DeviceLimits, rate: float) -> dict:
+def _evaluate(
+    traj, heel, path, law: TimeLaw, slow: float, sp, limits: DeviceLimits, rate: float
+) -> dict:
     """The exported samples of a law (stretched to the minimum duration and whole control periods,
     and by ``slow``), and how far they are from the limits: ``ratio`` the largest of |v| / v_max and
     sqrt(|a| / a_max) over the chain-rule columns and the finite differences."""
@@ -418,12 +503,14 @@ def _evaluate(traj, heel, path, law: TimeLaw, slow: float, sp, limits: DeviceLim
     scale = max(1.0, limits.min_duration / law.duration) * slow
     cur = law.slowed(scale)
     n = cur.duration * rate
-    if not n < max_samples():     # bounded before anything is allocated (an inf or NaN is refused too)
-        raise ValueError(f"rate: a {cur.duration:.4g} s swing at {rate:g} Hz needs {n:.4g} samples, more than "
-                         f"half this machine's memory holds ({max_samples()}); lower the rate or check the device "
-                         "limits (joint_velocity, joint_acceleration, min_swing_duration)")
+    if not n < max_samples():  # bounded before anything is allocated (an inf or NaN is refused too)
+        raise ValueError(
+            f"rate: a {cur.duration:.4g} s swing at {rate:g} Hz needs {n:.4g} samples, more than "
+            f"half this machine's memory holds ({max_samples()}); lower the rate or check the device "
+            "limits (joint_velocity, joint_acceleration, min_swing_duration)"
+        )
     periods = max(2, math.ceil(n - 1e-9))
-    cur = cur.slowed(periods / (cur.duration * rate))      # whole control periods: never faster
+    cur = cur.slowed(periods / (cur.duration * rate))  # whole control periods: never faster
     t = np.arange(periods + 1) / rate
     s, sd, sdd = cur.at(t)
     s[0], s[-1] = 0.0, 1.0
@@ -434,7 +521,7 @@ def _evaluate(traj, heel, path, law: TimeLaw, slow: float, sp, limits: DeviceLim
     ddq_t = np.stack([np.interp(s, s_grid, ddq[:, j]) for j in range(ddq.shape[1])], axis=-1)
     vel = dq_t * sd[:, None]
     acc = ddq_t * (sd * sd)[:, None] + dq_t * sdd[:, None]
-    vel[0] = vel[-1] = acc[0] = acc[-1] = 0.0        # s' = s'' = 0 exactly at the ends
+    vel[0] = vel[-1] = acc[0] = acc[-1] = 0.0  # s' = s'' = 0 exactly at the ends
     dh_t = np.stack([np.interp(s, s_grid, dh[:, j]) for j in range(2)], axis=-1)
     ddh_t = np.stack([np.interp(s, s_grid, ddh[:, j]) for j in range(2)], axis=-1)
     heel_vel = dh_t * sd[:, None]
@@ -448,9 +535,23 @@ def _evaluate(traj, heel, path, law: TimeLaw, slow: float, sp, limits: DeviceLim
     ratio = max(float(np.max(peak_v / vmax)), math.sqrt(float(np.max(peak_a / amax))))
     if limits.jerk is not None:
         ratio = max(ratio, float(np.max(peak_j / np.asarray(limits.jerk))) ** (1.0 / 3.0))
-    return {"t": t, "s": s, "sd": sd / scale, "h": h, "vel": vel, "acc": acc, "fv": fv, "fa": fa,
-            "heel_vel": heel_vel, "heel_acc": heel_acc, "fj": fj,
-            "peak_v": peak_v, "peak_a": peak_a, "peak_j": peak_j, "ratio": ratio}
+    return {
+        "t": t,
+        "s": s,
+        "sd": sd / scale,
+        "h": h,
+        "vel": vel,
+        "acc": acc,
+        "fv": fv,
+        "fa": fa,
+        "heel_vel": heel_vel,
+        "heel_acc": heel_acc,
+        "fj": fj,
+        "peak_v": peak_v,
+        "peak_a": peak_a,
+        "peak_j": peak_j,
+        "ratio": ratio,
+    }
 
 
 def _excess(x: np.ndarray, power: float) -> np.ndarray:
@@ -474,12 +575,12 @@ def _lower_cap(cap, s_grid, e: dict, limits: DeviceLimits) -> None:
     r[:-1] = np.maximum(r[:-1], rv)
     r[1:] = np.maximum(r[1:], rv)
     for k in range(3):
-        r[k: len(r) - 2 + k] = np.maximum(r[k: len(r) - 2 + k], ra)
+        r[k : len(r) - 2 + k] = np.maximum(r[k : len(r) - 2 + k], ra)
     if limits.jerk is not None and len(e["fj"]):
         rj = _excess(np.abs(e["fj"]) / np.asarray(limits.jerk), 3.0)
         for k in range(4):
-            r[k: len(r) - 3 + k] = np.maximum(r[k: len(r) - 3 + k], rj)
-    x_now = np.interp(s_grid, s, e["sd"] ** 2)       # the law's own s'^2 (before stretching)
+            r[k : len(r) - 3 + k] = np.maximum(r[k : len(r) - 3 + k], rj)
+    x_now = np.interp(s_grid, s, e["sd"] ** 2)  # the law's own s'^2 (before stretching)
     k = np.flatnonzero(r > 1.0 - CHECK_MARGIN)
     if k.size == 0:
         return
@@ -490,47 +591,92 @@ def _lower_cap(cap, s_grid, e: dict, limits: DeviceLimits) -> None:
     # Widened by one grid point each way: at high rates the samples around k can fall inside one
     # grid cell, whose ends then bound its speed.
     lo = np.maximum(np.searchsorted(s_grid, s[np.maximum(k - 2, 0)], side="left") - 1, 0)
-    hi = np.minimum(np.searchsorted(s_grid, s[np.minimum(k + 2, len(s) - 1)], side="right") + 1, len(s_grid))
+    hi = np.minimum(
+        np.searchsorted(s_grid, s[np.minimum(k + 2, len(s) - 1)], side="right") + 1, len(s_grid)
+    )
     count = np.maximum(hi - lo, 0)
     total = int(count.sum())
     if total == 0:
         return
     grid = np.repeat(lo - (np.cumsum(count) - count), count) + np.arange(total)
-    factor = np.fromiter((math.pow(q, 2.0) for q in ((1.0 - 4.0 * CHECK_MARGIN) / r[k]).tolist()), float, k.size)
+    factor = np.fromiter(
+        (math.pow(q, 2.0) for q in ((1.0 - 4.0 * CHECK_MARGIN) / r[k]).tolist()), float, k.size
+    )
     np.minimum.at(cap, grid, x_now[grid] * np.repeat(factor, count))
 
 
-def _finish(traj, e: dict, sp, device: DeviceLimits, limits: DeviceLimits, rate: float, t_opt: float,
-            slow: float) -> TimedSwing:
+def _finish(
+    traj,
+    e: dict,
+    sp,
+    device: DeviceLimits,
+    limits: DeviceLimits,
+    rate: float,
+    t_opt: float,
+    slow: float,
+) -> TimedSwing:
     # ``limits``: the planned ones (the device's less its tracking headroom), which the samples keep.
     notes = []
     if limits.min_duration > t_opt:
-        notes.append(f"the limits allow {t_opt:.3f} s; the minimum swing duration {limits.min_duration:.3f} s is used")
+        notes.append(
+            f"the limits allow {t_opt:.3f} s; the minimum swing duration {limits.min_duration:.3f} s is used"
+        )
     vmax = np.asarray(limits.velocity)
     amax = np.asarray(limits.acceleration)
-    t, s, h, vel, acc, peak_v, peak_a = (e[k] for k in ("t", "s", "h", "vel", "acc", "peak_v", "peak_a"))
-    within = bool(np.all(peak_v <= vmax) and np.all(peak_a <= amax)
-                  and (limits.jerk is None or np.all(e["peak_j"] <= np.asarray(limits.jerk))))
+    t, s, h, vel, acc, peak_v, peak_a = (
+        e[k] for k in ("t", "s", "h", "vel", "acc", "peak_v", "peak_a")
+    )
+    within = bool(
+        np.all(peak_v <= vmax)
+        and np.all(peak_a <= amax)
+        and (limits.jerk is None or np.all(e["peak_j"] <= np.asarray(limits.jerk)))
+    )
     sc = traj.scene
     # The safe-swing checks of the retimed samples, with the trajectory's own bound on its
     # curve's distance from the polyline through its samples.
     m = measure_paths(sp, h[None], [sc], traj.checks.deviation)
     reasons = failure_reasons(m, 0, h, sc.goal_y, t, sp)
-    checks = TrajectoryChecks(bool(m["reached_goal"][0]), bool(m["collision_free"][0]),
-                              float(m["min_clearance"][0]), bool(m["joint_limits_ok"][0]),
-                              bool(m["leg_length_ok"][0]), reasons, bool(m["clearance_ok"][0]),
-                              bool(m["above_ground"][0]), float(m["heel_backward"][0]),
-                              float(m["deviation"][0]))
+    checks = TrajectoryChecks(
+        bool(m["reached_goal"][0]),
+        bool(m["collision_free"][0]),
+        float(m["min_clearance"][0]),
+        bool(m["joint_limits_ok"][0]),
+        bool(m["leg_length_ok"][0]),
+        reasons,
+        bool(m["clearance_ok"][0]),
+        bool(m["above_ground"][0]),
+        float(m["heel_backward"][0]),
+        float(m["deviation"][0]),
+    )
     kin = m["kin"]
     toe = h.copy()
     toe[:, 0] += sp.foot_length
     return TimedSwing(
-        method=traj.method, scene=sc, rate=rate, duration=float(t[-1]), limits=device, time=t, heel=h, toe=toe,
-        hip=kin["hip"][0], knee_swing=kin["knee_swing"][0], knee_stance=kin["knee_stance"][0],
-        joint_angles=m["angles"][0], joint_velocity=vel, joint_acceleration=acc, heel_velocity=e["heel_vel"],
-        heel_acceleration=e["heel_acc"], path_parameter=s, checks=checks,
-        within_limits=within, peak_velocity=peak_v, peak_acceleration=peak_a, slowdown=slow, peak_jerk=e["peak_j"],
-        notes=tuple(getattr(traj, "notes", ())) + tuple(notes))
+        method=traj.method,
+        scene=sc,
+        rate=rate,
+        duration=float(t[-1]),
+        limits=device,
+        time=t,
+        heel=h,
+        toe=toe,
+        hip=kin["hip"][0],
+        knee_swing=kin["knee_swing"][0],
+        knee_stance=kin["knee_stance"][0],
+        joint_angles=m["angles"][0],
+        joint_velocity=vel,
+        joint_acceleration=acc,
+        heel_velocity=e["heel_vel"],
+        heel_acceleration=e["heel_acc"],
+        path_parameter=s,
+        checks=checks,
+        within_limits=within,
+        peak_velocity=peak_v,
+        peak_acceleration=peak_a,
+        slowdown=slow,
+        peak_jerk=e["peak_j"],
+        notes=tuple(getattr(traj, "notes", ())) + tuple(notes),
+    )
 
 
 def joint_jerk(swing: TimedSwing) -> float:
@@ -553,4 +699,12 @@ def uniform_peaks(traj) -> tuple[np.ndarray, np.ndarray]:
     return np.abs(fv).max(axis=0), np.abs(fa).max(axis=0)
 
 
-__all__ = ["DeviceLimits", "TimedSwing", "time_swing", "time_swings", "joint_jerk", "leg_angles", "uniform_peaks"]
+__all__ = [
+    "DeviceLimits",
+    "TimedSwing",
+    "time_swing",
+    "time_swings",
+    "joint_jerk",
+    "leg_angles",
+    "uniform_peaks",
+]

@@ -16,11 +16,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-TIME_NODES = 2000          # nodes of the time-law table over the optimal duration
-BLEND_S = 0.03             # s, box-filter window (s'' ramps from rest over 30 ms) ...
-BLEND_FRACTION = 0.1       # ... at most this fraction of the optimal duration
-SCALAR_ROWS = 24           # batches up to this size scan row by row as Python floats (faster there)
-X_CAP = 1e6                # 1/s^2: cap on s'^2 where no joint moves (s' <= 1000 /s)
+TIME_NODES = 2000  # nodes of the time-law table over the optimal duration
+BLEND_S = 0.03  # s, box-filter window (s'' ramps from rest over 30 ms) ...
+BLEND_FRACTION = 0.1  # ... at most this fraction of the optimal duration
+SCALAR_ROWS = 24  # batches up to this size scan row by row as Python floats (faster there)
+X_CAP = 1e6  # 1/s^2: cap on s'^2 where no joint moves (s' <= 1000 /s)
 
 
 # --------------------------------------------------------------------------------------------
@@ -56,8 +56,12 @@ def pchip_eval(y: np.ndarray, m: np.ndarray, u: np.ndarray) -> np.ndarray:
     i = np.minimum(np.floor(u).astype(np.int64), n - 2)
     t = (u - i)[:, None]
     t2, t3 = t * t, t * t * t
-    return ((2 * t3 - 3 * t2 + 1) * y[i] + (t3 - 2 * t2 + t) * m[i]
-            + (-2 * t3 + 3 * t2) * y[i + 1] + (t3 - t2) * m[i + 1])
+    return (
+        (2 * t3 - 3 * t2 + 1) * y[i]
+        + (t3 - 2 * t2 + t) * m[i]
+        + (-2 * t3 + 3 * t2) * y[i + 1]
+        + (t3 - t2) * m[i + 1]
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -76,7 +80,9 @@ def _accel_bounds(dq, ddq, amax, x):
     return (np.where(moving, lo, -np.inf).max(axis=-1), np.where(moving, hi, np.inf).min(axis=-1))
 
 
-def max_speed_curve(dq: np.ndarray, ddq: np.ndarray, vmax: np.ndarray, amax: np.ndarray) -> np.ndarray:
+def max_speed_curve(
+    dq: np.ndarray, ddq: np.ndarray, vmax: np.ndarray, amax: np.ndarray
+) -> np.ndarray:
     """Largest admissible x = s'^2 at each grid point (..., K) from joint derivatives (..., K, J):
     the velocity limits, and the acceleration limits' condition that some s'' satisfies every joint
     (L_j(x) <= U_k(x) for every pair, each linear in x)."""
@@ -85,13 +91,17 @@ def max_speed_curve(dq: np.ndarray, ddq: np.ndarray, vmax: np.ndarray, amax: np.
     with np.errstate(divide="ignore"):
         x_vel = np.where(moving, (vmax / np.where(moving, adq, 1.0)) ** 2, np.inf).min(axis=-1)
         # Joints that do not move: |q'' x| <= a.
-        still = np.where(~moving & (np.abs(ddq) > 0), amax / np.abs(np.where(moving, 1.0, ddq)), np.inf).min(axis=-1)
+        still = np.where(
+            ~moving & (np.abs(ddq) > 0), amax / np.abs(np.where(moving, 1.0, ddq)), np.inf
+        ).min(axis=-1)
         # L_j(x) = -a_j/|q'_j| - (q''_j/q'_j) x, U_k(x) = a_k/|q'_k| - (q''_k/q'_k) x.
         r = np.where(moving, amax / np.where(moving, adq, 1.0), np.inf)
         c = np.where(moving, ddq / np.where(moving, dq, 1.0), 0.0)
-        slope = c[..., None, :] - c[..., :, None]          # (..., j, k): (c_k - c_j) x <= r_j + r_k
+        slope = c[..., None, :] - c[..., :, None]  # (..., j, k): (c_k - c_j) x <= r_j + r_k
         room = r[..., :, None] + r[..., None, :]
-        x_acc = np.where(slope > 0, room / np.where(slope > 0, slope, 1.0), np.inf).min(axis=(-1, -2))
+        x_acc = np.where(slope > 0, room / np.where(slope > 0, slope, 1.0), np.inf).min(
+            axis=(-1, -2)
+        )
     return np.minimum(np.minimum(x_vel, still), np.minimum(x_acc, X_CAP))
 
 
@@ -144,8 +154,9 @@ def _min_affine_scan(a, b, bound, order):
     return x
 
 
-def topp(dq: np.ndarray, ddq: np.ndarray, vmax, amax, ds: float, cap: np.ndarray | None = None
-         ) -> tuple[np.ndarray, np.ndarray]:
+def topp(
+    dq: np.ndarray, ddq: np.ndarray, vmax, amax, ds: float, cap: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """The time-optimal rest-to-rest law on a uniform s grid (spacing ds) for joint derivatives
     dq, ddq (B, K, J): s'^2 (B, K), and per cell the least speed (B, K-1) of a cell crossed from
     rest to rest. A backward pass from rest at the end at the smallest admissible s'' bounds the
@@ -204,8 +215,13 @@ class TimeLaw:
         return (np.clip(s, 0.0, 1.0), np.interp(u, grid, self.sdot), np.interp(u, grid, self.sddot))
 
 
-def time_law(s_grid: np.ndarray, x: np.ndarray, v_floor: np.ndarray | None = None,
-             blend_s: float | None = None, nodes: int = TIME_NODES) -> TimeLaw:
+def time_law(
+    s_grid: np.ndarray,
+    x: np.ndarray,
+    v_floor: np.ndarray | None = None,
+    blend_s: float | None = None,
+    nodes: int = TIME_NODES,
+) -> TimeLaw:
     """The rest-to-rest law from s'^2 = x on s_grid: cell times from constant s'' per cell
     (2 ds / (v0 + v1), the mean speed at least ``v_floor`` per cell), s' at uniform time nodes,
     then averaged over a window w (zero s'' at both ends)."""

@@ -33,8 +33,7 @@ from jaxexo.physics import dynamics, geometry, kinematics, outcome, swept
 from jaxexo.physics.dynamics import Scene
 from jaxexo.inference.export import CSV_COLUMNS, scene_dict, write_csv, write_json
 
-DEFAULT_DURATION = 1.0   # s, swing duration for the time stamps
-
+DEFAULT_DURATION = 1.0  # s, swing duration for the time stamps
 
 
 class TrajectoryError(RuntimeError):
@@ -50,15 +49,15 @@ class TrajectoryChecks:
     """The safe-swing checks of the final (smoothed) path (module docstring)."""
 
     reached_goal: bool
-    collision_free: bool        # the foot's motion never touches the obstacle
-    min_clearance: float        # m, guaranteed clearance of the moving foot (negative: inside)
+    collision_free: bool  # the foot's motion never touches the obstacle
+    min_clearance: float  # m, guaranteed clearance of the moving foot (negative: inside)
     joint_limits_ok: bool
     leg_length_ok: bool
-    reasons: tuple[str, ...]    # empty when ok
-    clearance_ok: bool = True   # min_clearance >= env.min_clearance
+    reasons: tuple[str, ...]  # empty when ok
+    clearance_ok: bool = True  # min_clearance >= env.min_clearance
     above_ground: bool = True
     heel_backward: float = 0.0  # m, largest backward heel motion (deviation bound included)
-    deviation: float = 0.0      # m, bound on the curve's distance from the polyline through the samples
+    deviation: float = 0.0  # m, bound on the curve's distance from the polyline through the samples
 
     @property
     def ok(self) -> bool:
@@ -71,16 +70,16 @@ class Trajectory:
 
     method: str
     scene: Scene
-    raw: np.ndarray             # (M, 2) generator points (heel y, z), m; RL: the policy's, then its landing
-    heel: np.ndarray            # (N, 2)
-    toe: np.ndarray             # (N, 2)
-    hip: np.ndarray             # (N, 2)
-    knee_swing: np.ndarray      # (N, 2)
-    knee_stance: np.ndarray     # (N, 2)
-    joint_angles: np.ndarray    # (N, 4) rad, columns JOINT_NAMES
-    time: np.ndarray            # (N,) s
+    raw: np.ndarray  # (M, 2) generator points (heel y, z), m; RL: the policy's, then its landing
+    heel: np.ndarray  # (N, 2)
+    toe: np.ndarray  # (N, 2)
+    hip: np.ndarray  # (N, 2)
+    knee_swing: np.ndarray  # (N, 2)
+    knee_stance: np.ndarray  # (N, 2)
+    joint_angles: np.ndarray  # (N, 4) rad, columns JOINT_NAMES
+    time: np.ndarray  # (N,) s
     checks: TrajectoryChecks
-    smoothing: float            # m^2 actually used; nan: the raw polyline (smoothing fell back)
+    smoothing: float  # m^2 actually used; nan: the raw polyline (smoothing fell back)
     notes: tuple[str, ...] = field(default=())
 
     @property
@@ -90,8 +89,17 @@ class Trajectory:
     # Exports -----------------------------------------------------------------------------------
     def table(self) -> np.ndarray:
         """(N, len(CSV_COLUMNS)) array in CSV_COLUMNS order."""
-        return np.column_stack([self.time, self.heel, self.toe, self.hip, self.knee_swing, self.knee_stance,
-                                self.joint_angles])
+        return np.column_stack(
+            [
+                self.time,
+                self.heel,
+                self.toe,
+                self.hip,
+                self.knee_swing,
+                self.knee_stance,
+                self.joint_angles,
+            ]
+        )
 
     def to_csv(self, path: str | Path | None = None) -> str:
         return write_csv(CSV_COLUMNS, self.table(), "{:.6f}", path)
@@ -102,11 +110,19 @@ class Trajectory:
             "units": {"length": "m", "angle": "rad", "time": "s"},
             "method": self.method,
             "scene": scene_dict(self.scene),
-            "checks": {"ok": c.ok, "reached_goal": c.reached_goal, "collision_free": c.collision_free,
-                       "min_clearance": c.min_clearance, "clearance_ok": c.clearance_ok,
-                       "above_ground": c.above_ground, "heel_backward": c.heel_backward,
-                       "deviation": c.deviation, "joint_limits_ok": c.joint_limits_ok,
-                       "leg_length_ok": c.leg_length_ok, "reasons": list(c.reasons)},
+            "checks": {
+                "ok": c.ok,
+                "reached_goal": c.reached_goal,
+                "collision_free": c.collision_free,
+                "min_clearance": c.min_clearance,
+                "clearance_ok": c.clearance_ok,
+                "above_ground": c.above_ground,
+                "heel_backward": c.heel_backward,
+                "deviation": c.deviation,
+                "joint_limits_ok": c.joint_limits_ok,
+                "leg_length_ok": c.leg_length_ok,
+                "reasons": list(c.reasons),
+            },
             "smoothing": None if math.isnan(self.smoothing) else self.smoothing,
             "notes": list(self.notes),
             "raw": self.raw.tolist(),
@@ -144,7 +160,7 @@ class TrajectoryBatch:
     above_ground: np.ndarray
     heel_backward: np.ndarray
     deviation: np.ndarray
-    row_methods: tuple[str, ...] = ()   # per-row method when rows differ (e.g. "cfftg-fallback")
+    row_methods: tuple[str, ...] = ()  # per-row method when rows differ (e.g. "cfftg-fallback")
 
     def __len__(self) -> int:
         return len(self.scenes)
@@ -154,14 +170,33 @@ class TrajectoryBatch:
         return np.array([not r for r in self.reasons], dtype=bool)
 
     def __getitem__(self, i: int) -> Trajectory:
-        checks = TrajectoryChecks(bool(self.reached_goal[i]), bool(self.collision_free[i]),
-                                  float(self.min_clearance[i]), bool(self.joint_limits_ok[i]),
-                                  bool(self.leg_length_ok[i]), self.reasons[i], bool(self.clearance_ok[i]),
-                                  bool(self.above_ground[i]), float(self.heel_backward[i]),
-                                  float(self.deviation[i]))
-        return Trajectory(self.row_methods[i] if self.row_methods else self.method, self.scenes[i], self.raw[i], self.heel[i], self.toe[i], self.hip[i],
-                          self.knee_swing[i], self.knee_stance[i], self.joint_angles[i], self.time,
-                          checks, float(self.smoothing[i]), self.notes[i])
+        checks = TrajectoryChecks(
+            bool(self.reached_goal[i]),
+            bool(self.collision_free[i]),
+            float(self.min_clearance[i]),
+            bool(self.joint_limits_ok[i]),
+            bool(self.leg_length_ok[i]),
+            self.reasons[i],
+            bool(self.clearance_ok[i]),
+            bool(self.above_ground[i]),
+            float(self.heel_backward[i]),
+            float(self.deviation[i]),
+        )
+        return Trajectory(
+            self.row_methods[i] if self.row_methods else self.method,
+            self.scenes[i],
+            self.raw[i],
+            self.heel[i],
+            self.toe[i],
+            self.hip[i],
+            self.knee_swing[i],
+            self.knee_stance[i],
+            self.joint_angles[i],
+            self.time,
+            checks,
+            float(self.smoothing[i]),
+            self.notes[i],
+        )
 
     def __iter__(self):
         return (self[i] for i in range(len(self)))
@@ -211,12 +246,15 @@ def _outline_groups(scenes):
     if len(set(sizes)) == 1:
         return [(slice(None), np.stack([sc.outline for sc in scenes]))]
     sizes = np.array(sizes)
-    return [(idx, np.stack([scenes[i].outline for i in idx]))
-            for idx in (np.flatnonzero(sizes == k) for k in np.unique(sizes))]
+    return [
+        (idx, np.stack([scenes[i].outline for i in idx]))
+        for idx in (np.flatnonzero(sizes == k) for k in np.unique(sizes))
+    ]
 
 
-def _move_clearances(foot_length: float, heel: np.ndarray, scenes, point_clearance: np.ndarray,
-                     exact: bool) -> np.ndarray:
+def _move_clearances(
+    foot_length: float, heel: np.ndarray, scenes, point_clearance: np.ndarray, exact: bool
+) -> np.ndarray:
     """Signed clearance (B, N-1) of the foot over each move between consecutive samples
     (jaxexo.physics.swept), grouped by outline size like ``_point_clearances``. ``exact``: exact for
     every move; otherwise exact for each path's closest move, a lower bound above that minimum for
@@ -226,7 +264,9 @@ def _move_clearances(foot_length: float, heel: np.ndarray, scenes, point_clearan
     out = np.empty((b, max(n - 1, 0)))
     for idx, outline in _outline_groups(scenes):
         if exact:
-            out[idx] = swept.path_swept_clearance(np, heel[idx], foot_length, outline, point_clearance[idx])
+            out[idx] = swept.path_swept_clearance(
+                np, heel[idx], foot_length, outline, point_clearance[idx]
+            )
         else:
             out[idx] = swept.path_swept_min(heel[idx], foot_length, outline, point_clearance[idx])
     return out
@@ -238,8 +278,15 @@ def backward_bound(heel: np.ndarray, deviation) -> np.ndarray:
     return swept.backward_motion(np, heel[..., 0]) + 2.0 * np.asarray(deviation)
 
 
-def measure(sp, heel: np.ndarray, clearance: np.ndarray, pivot_y: np.ndarray, goal_y: np.ndarray,
-            swept_clearance: np.ndarray, deviation) -> dict:
+def measure(
+    sp,
+    heel: np.ndarray,
+    clearance: np.ndarray,
+    pivot_y: np.ndarray,
+    goal_y: np.ndarray,
+    swept_clearance: np.ndarray,
+    deviation,
+) -> dict:
     """Kinematics and safe-swing checks of heel paths (B, N, 2), vectorised, from their clearances at
     the samples (B, N), over the moves between them (B, N-1, ``path_clearances``) and the bound
     ``deviation`` (B,) of the curve from the polyline through the samples (m).
@@ -253,22 +300,39 @@ def measure(sp, heel: np.ndarray, clearance: np.ndarray, pivot_y: np.ndarray, go
     backward = backward_bound(heel, dev)
     # kinematics.leg_state's equations, with both legs stacked on a leading axis (fewer NumPy calls).
     hip = kinematics.hip_position(np, pivot_y[:, None], heel, sp.thigh, sp.shin)
-    feet = np.zeros((2,) + heel.shape)     # the swing heel, then the pivot heel on the ground
+    feet = np.zeros((2,) + heel.shape)  # the swing heel, then the pivot heel on the ground
     feet[0] = heel
     feet[1, ..., 0] = pivot_y[:, None]
     knees, legs = kinematics.knee_position(np, hip[None], feet, sp.thigh, sp.shin)
     hips, qs = kinematics.joint_angles(np, hip[None], knees, feet)
-    angles = np.empty(heel.shape[:-1] + (4,))   # JOINT_NAMES order (filled in place: cheaper than stack)
+    angles = np.empty(
+        heel.shape[:-1] + (4,)
+    )  # JOINT_NAMES order (filled in place: cheaper than stack)
     angles[..., 0], angles[..., 1], angles[..., 2], angles[..., 3] = hips[0], qs[0], hips[1], qs[1]
-    kin = {"hip": hip, "knee_swing": knees[0], "knee_stance": knees[1], "leg_swing": legs[0], "leg_stance": legs[1]}
+    kin = {
+        "hip": hip,
+        "knee_swing": knees[0],
+        "knee_stance": knees[1],
+        "leg_swing": legs[0],
+        "leg_stance": legs[1],
+    }
     limit_bad = kinematics.legs_outside_limits(np, angles, sp.hip_limits, sp.knee_limits)
-    leg_bad = kinematics.leg_too_long(np, kin["leg_swing"], kin["leg_stance"], sp.thigh, sp.shin,
-                                      sp.leg_length_tolerance)
+    leg_bad = kinematics.leg_too_long(
+        np, kin["leg_swing"], kin["leg_stance"], sp.thigh, sp.shin, sp.leg_length_tolerance
+    )
     reached = dynamics.goal_reached(np, sp, heel[:, -1, 0], heel[:, -1, 1], goal_y)
     above_ground = heel[..., 1].min(axis=-1) >= 0.0
     # The one safe-swing verdict (jaxexo.physics.outcome), on what is guaranteed between the samples.
-    v = outcome.verdict(np, reached, guaranteed, ~np.any(limit_bad, axis=-1), ~np.any(leg_bad, axis=-1), backward,
-                        above_ground, **outcome.rule(sp))
+    v = outcome.verdict(
+        np,
+        reached,
+        guaranteed,
+        ~np.any(limit_bad, axis=-1),
+        ~np.any(leg_bad, axis=-1),
+        backward,
+        above_ground,
+        **outcome.rule(sp),
+    )
     return {
         "clearance": clearance,
         "kin": kin,
@@ -291,32 +355,44 @@ def measure(sp, heel: np.ndarray, clearance: np.ndarray, pivot_y: np.ndarray, go
     }
 
 
-def failure_reasons(m: dict, i: int, heel: np.ndarray, goal_y: float, time: np.ndarray, sp) -> tuple[str, ...]:
+def failure_reasons(
+    m: dict, i: int, heel: np.ndarray, goal_y: float, time: np.ndarray, sp
+) -> tuple[str, ...]:
     """The failed checks of path i (jaxexo.physics.outcome.CHECKS, in order), each with where it failed."""
     out = []
     for check in outcome.failed_checks(m["verdict"], i):
         if check == "reached_goal":
             y, z = heel[-1]
-            out.append(f"did not reach the goal: ends at y={y:.3f} m, z={z:.3f} m, goal y={goal_y:.3f} m")
+            out.append(
+                f"did not reach the goal: ends at y={y:.3f} m, z={z:.3f} m, goal y={goal_y:.3f} m"
+            )
         elif check == "clearance_ok":
             sw = m["swept_clearance"][i]
             j = int(np.argmin(sw)) if sw.size else 0
             when = f"between t={time[j]:.3f} s and t={time[min(j + 1, len(time) - 1)]:.3f} s"
             if not m["collision_free"][i]:
-                out.append(f"the foot touches the obstacle (min clearance {m['min_clearance'][i]:.4f} m {when})")
+                out.append(
+                    f"the foot touches the obstacle (min clearance {m['min_clearance'][i]:.4f} m {when})"
+                )
             else:
-                out.append(f"the foot passes within {m['min_clearance'][i]:.4f} m of the obstacle {when}, closer "
-                           f"than the safety margin env.min_clearance = {sp.min_clearance:.4f} m")
+                out.append(
+                    f"the foot passes within {m['min_clearance'][i]:.4f} m of the obstacle {when}, closer "
+                    f"than the safety margin env.min_clearance = {sp.min_clearance:.4f} m"
+                )
         elif check == "above_ground":
             out.append(f"the heel goes below the ground (z={heel[:, 1].min():.4f} m)")
         elif check == "backward_ok":
-            out.append(f"the heel moves backward by {m['heel_backward'][i]:.4f} m, more than env.backward_tolerance "
-                       f"= {sp.backward_tolerance:.4f} m")
+            out.append(
+                f"the heel moves backward by {m['heel_backward'][i]:.4f} m, more than env.backward_tolerance "
+                f"= {sp.backward_tolerance:.4f} m"
+            )
         elif check == "joint_limits_ok":
             j = int(np.argmax(m["limit_bad"][i]))
             a = np.degrees(m["angles"][i, j])
-            out.append(f"joint limits exceeded at t={time[j]:.3f} s (hip/knee swing {a[0]:.1f}/{a[1]:.1f} deg, "
-                       f"stance {a[2]:.1f}/{a[3]:.1f} deg)")
+            out.append(
+                f"joint limits exceeded at t={time[j]:.3f} s (hip/knee swing {a[0]:.1f}/{a[1]:.1f} deg, "
+                f"stance {a[2]:.1f}/{a[3]:.1f} deg)"
+            )
         else:
             j = int(np.argmax(m["leg_bad"][i]))
             out.append(f"a leg would have to stretch beyond thigh + shin at t={time[j]:.3f} s")
@@ -359,8 +435,11 @@ def passes(sp, low, deviation, backward, headroom: float = 0.0) -> np.ndarray:
     curve's bound and ``backward`` its backward motion, the margin env.min_clearance kept with
     ``headroom`` (m) to spare. The generators' retries accept a curve by this rule."""
     g = low - deviation
-    return (~geometry.foot_collides(np, g) & ~geometry.foot_collides(np, g - sp.min_clearance - headroom)
-            & (backward <= sp.backward_tolerance))
+    return (
+        ~geometry.foot_collides(np, g)
+        & ~geometry.foot_collides(np, g - sp.min_clearance - headroom)
+        & (backward <= sp.backward_tolerance)
+    )
 
 
 # From this many paths on, ``path_clearances`` also skips the exact point clearances that cannot matter
@@ -388,8 +467,18 @@ def _time_stamps(n: int, duration: float) -> np.ndarray:
     return t
 
 
-def assemble(method: str, sp, scenes, raws, paths: np.ndarray, smoothing, duration: float = DEFAULT_DURATION,
-             notes=None, measured: dict | None = None, deviation=None) -> TrajectoryBatch:
+def assemble(
+    method: str,
+    sp,
+    scenes,
+    raws,
+    paths: np.ndarray,
+    smoothing,
+    duration: float = DEFAULT_DURATION,
+    notes=None,
+    measured: dict | None = None,
+    deviation=None,
+) -> TrajectoryBatch:
     """Checked trajectories from dense heel paths (B, N, 2), one per scene; ``raws`` the generator's
     own points per scene, ``smoothing`` (B,) the smoothing each path used (nan for a raw polyline),
     ``deviation`` (B,) the bound (m) on each curve's distance from the polyline through its samples
@@ -399,7 +488,9 @@ def assemble(method: str, sp, scenes, raws, paths: np.ndarray, smoothing, durati
     b, n = paths.shape[:2]
     if measured is None:
         if deviation is None:
-            raise ValueError("deviation: the bound on the curve's distance from its samples' polyline is needed")
+            raise ValueError(
+                "deviation: the bound on the curve's distance from its samples' polyline is needed"
+            )
         measured = measure_paths(sp, paths, scenes, deviation)
     m = measured
     time = _time_stamps(n, float(duration)).copy()
@@ -408,12 +499,26 @@ def assemble(method: str, sp, scenes, raws, paths: np.ndarray, smoothing, durati
     toe = paths.copy()
     toe[..., 0] += sp.foot_length
     return TrajectoryBatch(
-        method=method, scenes=tuple(scenes), raw=tuple(np.asarray(r, np.float64) for r in raws), heel=paths,
-        toe=toe, hip=kin["hip"], knee_swing=kin["knee_swing"], knee_stance=kin["knee_stance"],
-        joint_angles=m["angles"], time=time, reached_goal=m["reached_goal"], collision_free=m["collision_free"],
-        min_clearance=m["min_clearance"], joint_limits_ok=m["joint_limits_ok"], leg_length_ok=m["leg_length_ok"],
-        reasons=reasons, smoothing=np.asarray(smoothing, np.float64).reshape(b),
+        method=method,
+        scenes=tuple(scenes),
+        raw=tuple(np.asarray(r, np.float64) for r in raws),
+        heel=paths,
+        toe=toe,
+        hip=kin["hip"],
+        knee_swing=kin["knee_swing"],
+        knee_stance=kin["knee_stance"],
+        joint_angles=m["angles"],
+        time=time,
+        reached_goal=m["reached_goal"],
+        collision_free=m["collision_free"],
+        min_clearance=m["min_clearance"],
+        joint_limits_ok=m["joint_limits_ok"],
+        leg_length_ok=m["leg_length_ok"],
+        reasons=reasons,
+        smoothing=np.asarray(smoothing, np.float64).reshape(b),
         notes=tuple(notes) if notes is not None else ((),) * b,
-        clearance_ok=m["clearance_ok"], above_ground=m["above_ground"], heel_backward=m["heel_backward"],
+        clearance_ok=m["clearance_ok"],
+        above_ground=m["above_ground"],
+        heel_backward=m["heel_backward"],
         deviation=m["deviation"],
     )

@@ -26,7 +26,7 @@ import numpy as np
 from jaxexo.physics import geometry, kinematics, rewards, swept
 from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 
-NUM_ACTIONS = 36          # thesis 2.1: 36 moves, 10 degrees apart
+NUM_ACTIONS = 36  # thesis 2.1: 36 moves, 10 degrees apart
 # Observation entries besides the obstacle profile (``observation``, conditioned mode): heel (2),
 # scene relative to the heel (10), progress and mid-goal flag (2).
 OBS_SCENE_ENTRIES = 14
@@ -38,7 +38,10 @@ THESIS_OBS_CENTER = (0.35, 0.10)
 # A scalar "array module" for the generator's per-step loop on Python floats: the few functions the
 # transition rules below use, with numpy's meaning.
 scalar = types.SimpleNamespace(
-    minimum=min, maximum=max, abs=abs, sqrt=math.sqrt,
+    minimum=min,
+    maximum=max,
+    abs=abs,
+    sqrt=math.sqrt,
     clip=lambda x, lo, hi: min(max(x, lo), hi),
     where=lambda c, a, b: a if c else b,
 )
@@ -75,12 +78,16 @@ def check_clearance(clearance, min_clearance: float) -> float | None:
     a number in [min_clearance, MAX_CLEARANCE]. Raises ValueError naming ``clearance``."""
     if clearance is None:
         return None
-    if isinstance(clearance, bool) or not isinstance(clearance, (int, float, np.integer, np.floating)):
+    if isinstance(clearance, bool) or not isinstance(
+        clearance, (int, float, np.integer, np.floating)
+    ):
         raise TypeError(f"clearance: expected a number of metres, got {type(clearance).__name__}")
     c = float(clearance)
     if not math.isfinite(c) or c < float(min_clearance) - 1e-12 or c > MAX_CLEARANCE:
-        raise ValueError(f"clearance must be between env.min_clearance = {float(min_clearance):g} m and "
-                         f"{MAX_CLEARANCE:g} m, got {clearance!r}")
+        raise ValueError(
+            f"clearance must be between env.min_clearance = {float(min_clearance):g} m and "
+            f"{MAX_CLEARANCE:g} m, got {clearance!r}"
+        )
     return c
 
 
@@ -92,10 +99,18 @@ def with_clearance(p, clearance: float | None):
     if clearance is None:
         return p
     extra = clearance - float(p.min_clearance)
-    cast = (lambda v: np.asarray(v, dtype=np.asarray(p.min_clearance).dtype)) if isinstance(
-        p.min_clearance, np.ndarray) else float
-    return types.SimpleNamespace(**{**vars(p), "min_clearance": cast(clearance),
-                                    "shield_clearance": cast(float(p.shield_clearance) + extra)})
+    cast = (
+        (lambda v: np.asarray(v, dtype=np.asarray(p.min_clearance).dtype))
+        if isinstance(p.min_clearance, np.ndarray)
+        else float
+    )
+    return types.SimpleNamespace(
+        **{
+            **vars(p),
+            "min_clearance": cast(clearance),
+            "shield_clearance": cast(float(p.shield_clearance) + extra),
+        }
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -115,7 +130,9 @@ def move_heel(xp, p, heel_y, heel_z, dir_y, dir_z):
 # list, so the shield's mask is assembled with a static concatenation (no scatter, same for every xp).
 _FORWARD = np.flatnonzero(action_directions()[:, 0] >= 0.0)
 _FORWARD_HEAD = int(np.sum(_FORWARD < NUM_ACTIONS // 2))
-assert np.array_equal(_FORWARD, np.r_[0:_FORWARD_HEAD, NUM_ACTIONS - (len(_FORWARD) - _FORWARD_HEAD):NUM_ACTIONS])
+assert np.array_equal(
+    _FORWARD, np.r_[0:_FORWARD_HEAD, NUM_ACTIONS - (len(_FORWARD) - _FORWARD_HEAD) : NUM_ACTIONS]
+)
 # m: a move "keeps" the clearance it starts with up to this rounding (vertical moves beside a wall).
 SHIELD_SLACK = 1e-6
 # Entries of ``ends`` from which NumPy's pruning pays (a batch of rows); for one heel's 19 moves the
@@ -155,10 +172,15 @@ def moves_keep_clearance(xp, p, heel_y, heel_z, ends, outline, over_moves=_stack
     c_here = geometry.foot_clearance(xp, here, p.foot_length, outline)
     if xp is np and ends.size > PRUNE_FROM:
         return moves_keep_clearance_pruned(p, here, c_here, ends, outline)
-    moves = xp.moveaxis(ends, -2, 0)                                 # the moves' axis first: (F, ..., 2)
-    d_move = xp.moveaxis(over_moves(
-        lambda end: swept.swept_distance(xp, here + 0.0 * end, end, p.foot_length, outline),
-        (moves,)), 0, -1)                                            # (..., F)
+    moves = xp.moveaxis(ends, -2, 0)  # the moves' axis first: (F, ..., 2)
+    d_move = xp.moveaxis(
+        over_moves(
+            lambda end: swept.swept_distance(xp, here + 0.0 * end, end, p.foot_length, outline),
+            (moves,),
+        ),
+        0,
+        -1,
+    )  # (..., F)
     return d_move >= xp.minimum(p.shield_clearance, c_here)[..., None] - SHIELD_SLACK
 
 
@@ -167,10 +189,14 @@ def moves_keep_clearance_pruned(p, here, c_here, ends, outline):
     only where the ends' clearances leave it open: a move whose end is closer than needed fails (the
     swept region contains the foot at the end), and one whose ends satisfy the 1-Lipschitz bound
     (c_here + c_end - |move|) / 2 >= need passes (jaxexo.physics.swept.swept_lower_bound)."""
-    c_end = geometry.foot_clearance(np, ends, p.foot_length, outline[..., None, :, :])     # (..., F)
-    need = np.broadcast_to(np.minimum(p.shield_clearance, c_here)[..., None] - SHIELD_SLACK, c_end.shape)
+    c_end = geometry.foot_clearance(np, ends, p.foot_length, outline[..., None, :, :])  # (..., F)
+    need = np.broadcast_to(
+        np.minimum(p.shield_clearance, c_here)[..., None] - SHIELD_SLACK, c_end.shape
+    )
     length = np.sqrt(((ends - here[..., None, :]) ** 2).sum(-1))
-    ok = (c_here[..., None] > 0.0) & (swept.swept_lower_bound(np, c_here[..., None], c_end, length) >= need)
+    ok = (c_here[..., None] > 0.0) & (
+        swept.swept_lower_bound(np, c_here[..., None], c_end, length) >= need
+    )
     todo = ~ok & (c_end >= need) & (c_here[..., None] > 0.0)
     if todo.any():
         idx = np.nonzero(todo)
@@ -182,7 +208,9 @@ def moves_keep_clearance_pruned(p, here, c_here, ends, outline):
     return ok | (c_here[..., None] <= 0.0)
 
 
-def admissible_moves(xp, p, heel_y, heel_z, layout, over_moves=_stacked, clear=None, last_action=None):
+def admissible_moves(
+    xp, p, heel_y, heel_z, layout, over_moves=_stacked, clear=None, last_action=None
+):
     """(..., NUM_ACTIONS) bool: the moves the agent may choose from heel (y, z) (the shield).
 
     Without the shield (``p.shield`` False, the thesis) every move. With it, a move must
@@ -212,7 +240,7 @@ def admissible_moves(xp, p, heel_y, heel_z, layout, over_moves=_stacked, clear=N
     when given, is the clearance condition already known: the NumPy generator passes True for the rows
     whose foot is at least shield_clearance + step_size from the obstacle's bounding box, where no
     move of one step can come closer than shield_clearance (the distance is 1-Lipschitz)."""
-    new = forward_ends(xp, p, heel_y, heel_z)                        # (..., F, 2)
+    new = forward_ends(xp, p, heel_y, heel_z)  # (..., F, 2)
     if clear is None:
         clear = moves_keep_clearance(xp, p, heel_y, heel_z, new, layout.outline, over_moves)
     ok = shield_conditions(xp, p, heel_y, heel_z, layout, _FORWARD, new, clear, last_action)
@@ -229,12 +257,19 @@ def shield_conditions(xp, p, heel_y, heel_z, layout, actions, ends, clear, last_
     that pass all of ``admissible_moves``' conditions, the clearance one given as ``clear`` (..., F)."""
     kin = kinematics.leg_state(xp, layout.pivot_y[..., None], ends, p.thigh, p.shin)
     angles = kinematics.both_legs_angles(xp, kin)
-    reachable = ~(kinematics.legs_outside_limits(xp, angles, p.hip_limits, p.knee_limits)
-                  | kinematics.leg_too_long(xp, kin["leg_swing"], kin["leg_stance"], p.thigh, p.shin,
-                                            p.leg_length_tolerance))
-    ok = (clear & reachable & (ends[..., 0] <= layout.goal_y[..., None] + p.goal_tolerance[0])
-          & moves_heel(xp, heel_y, heel_z, ends)
-          & keeps_off_floor(xp, p, ends[..., 0], ends[..., 1], layout.goal_y[..., None]))
+    reachable = ~(
+        kinematics.legs_outside_limits(xp, angles, p.hip_limits, p.knee_limits)
+        | kinematics.leg_too_long(
+            xp, kin["leg_swing"], kin["leg_stance"], p.thigh, p.shin, p.leg_length_tolerance
+        )
+    )
+    ok = (
+        clear
+        & reachable
+        & (ends[..., 0] <= layout.goal_y[..., None] + p.goal_tolerance[0])
+        & moves_heel(xp, heel_y, heel_z, ends)
+        & keeps_off_floor(xp, p, ends[..., 0], ends[..., 1], layout.goal_y[..., None])
+    )
     if last_action is not None:
         ok = ok & ~undoes(xp, actions, last_action)
     return ok
@@ -250,8 +285,9 @@ MOVE_EPS = 1e-6
 def moves_heel(xp, heel_y, heel_z, ends):
     """(..., F) bool: the forward moves whose end ``ends`` (..., F, 2) is not the heel itself (a move
     into the ground, or past the world's bounds, that ``move_heel``'s clipping cancels)."""
-    return ((xp.abs(ends[..., 0] - heel_y[..., None]) > MOVE_EPS)
-            | (xp.abs(ends[..., 1] - heel_z[..., None]) > MOVE_EPS))
+    return (xp.abs(ends[..., 0] - heel_y[..., None]) > MOVE_EPS) | (
+        xp.abs(ends[..., 1] - heel_z[..., None]) > MOVE_EPS
+    )
 
 
 def undoes(xp, actions, last_action):
@@ -269,7 +305,7 @@ def greedy_action(xp, q, mask=None):
     return xp.argmax(xp.where(mask, q, -xp.inf), axis=-1)
 
 
-pivot_position = kinematics.pivot_position   # the three pivot conditions -> pivot y (one definition)
+pivot_position = kinematics.pivot_position  # the three pivot conditions -> pivot y (one definition)
 
 
 def terminated(xp, p, reached, collided):
@@ -289,7 +325,9 @@ def mid_goal(xp, p, center_y, height):
 
 
 def in_mid_goal(xp, p, heel_y, heel_z, mid_y, mid_z):
-    return (xp.abs(heel_y - mid_y) <= p.mid_goal_half_size[0]) & (xp.abs(heel_z - mid_z) <= p.mid_goal_half_size[1])
+    return (xp.abs(heel_y - mid_y) <= p.mid_goal_half_size[0]) & (
+        xp.abs(heel_z - mid_z) <= p.mid_goal_half_size[1]
+    )
 
 
 def beyond_mid_goal(xp, p, heel_y, mid_y):
@@ -320,32 +358,43 @@ def observation(xp, p, obs_mode: str, heel_y, heel_z, time, visited_mid, layout)
     to the heel (start, goal, mid-goal, pivot, obstacle extents and top, the obstacle's profile or
     its bounding box, episode progress and whether the mid-goal was visited). Every entry is affine
     in (heel_y, heel_z, time, visited_mid) for a fixed scene; the generator relies on that."""
-    base = [(heel_y - THESIS_OBS_CENTER[0]) / LENGTH_SCALE, (heel_z - THESIS_OBS_CENTER[1]) / LENGTH_SCALE]
+    base = [
+        (heel_y - THESIS_OBS_CENTER[0]) / LENGTH_SCALE,
+        (heel_z - THESIS_OBS_CENTER[1]) / LENGTH_SCALE,
+    ]
     if obs_mode == "thesis":
         return xp.stack(base, axis=-1)
     lay = layout
     mid_y, mid_z = mid_goal(xp, p, lay.center_y, lay.height)
     rel = [
-        heel_y - lay.start_y, heel_z,                        # heel relative to its start
-        lay.goal_y - heel_y, -heel_z,                        # goal relative to the heel
-        mid_y - heel_y, mid_z - heel_z,                      # mid-goal relative to the heel
-        lay.pivot_y - heel_y,                                # pivot heel relative to the heel
-        lay.center_y - 0.5 * lay.width - heel_y,             # obstacle near edge
-        lay.center_y + 0.5 * lay.width - heel_y,             # obstacle far edge
-        lay.height - heel_z,                                 # obstacle top
+        heel_y - lay.start_y,
+        heel_z,  # heel relative to its start
+        lay.goal_y - heel_y,
+        -heel_z,  # goal relative to the heel
+        mid_y - heel_y,
+        mid_z - heel_z,  # mid-goal relative to the heel
+        lay.pivot_y - heel_y,  # pivot heel relative to the heel
+        lay.center_y - 0.5 * lay.width - heel_y,  # obstacle near edge
+        lay.center_y + 0.5 * lay.width - heel_y,  # obstacle far edge
+        lay.height - heel_z,  # obstacle top
     ]
     dtype = heel_y.dtype
     progress = (time / p.max_steps_in_episode).astype(dtype)
     # "bbox": the profile shown as the bounding box's constant height.
     profile = xp.where(p.obs_true_profile, lay.shape, lay.height[..., None]) / LENGTH_SCALE
-    return xp.concatenate([
-        xp.stack(base + [r / LENGTH_SCALE for r in rel], axis=-1),
-        profile,
-        xp.stack([progress, visited_mid.astype(dtype)], axis=-1),
-    ], axis=-1)
+    return xp.concatenate(
+        [
+            xp.stack(base + [r / LENGTH_SCALE for r in rel], axis=-1),
+            profile,
+            xp.stack([progress, visited_mid.astype(dtype)], axis=-1),
+        ],
+        axis=-1,
+    )
 
 
-def transition(xp, p, prev, heel, time, visited_mid, layout, max_y=None, action=None, last_action=None) -> dict:
+def transition(
+    xp, p, prev, heel, time, visited_mid, layout, max_y=None, action=None, last_action=None
+) -> dict:
     """Everything a step from heel ``prev`` to ``heel`` (..., 2) decides (thesis 2.1-2.5), for the
     JAX environment and the NumPy environment alike: collision, mid-goal, goal, kinematics, the 8 + 4
     reward terms (eq 2.29-2.52), the wearer's costs (rewards.wearer_terms), optional shaping, the
@@ -373,24 +422,50 @@ def transition(xp, p, prev, heel, time, visited_mid, layout, max_y=None, action=
 
     kin = kinematics.leg_state(xp, lay.pivot_y, heel, p.thigh, p.shin)
     angles = kinematics.both_legs_angles(xp, kin)
-    angles_prev = kinematics.both_legs_angles(xp, kinematics.leg_state(xp, lay.pivot_y, prev, p.thigh, p.shin))
+    angles_prev = kinematics.both_legs_angles(
+        xp, kinematics.leg_state(xp, lay.pivot_y, prev, p.thigh, p.shin)
+    )
     limits_violated = kinematics.legs_outside_limits(xp, angles, p.hip_limits, p.knee_limits)
 
     traj = rewards.trajectory_terms(
-        xp, p, steps=time, prev_heel=prev, heel=heel, collided=collided, clearance=clearance,
-        reached_goal=reached, missed_mid=missed_mid, mid_y=mid_y, max_z=lay.height + p.max_height_margin)
+        xp,
+        p,
+        steps=time,
+        prev_heel=prev,
+        heel=heel,
+        collided=collided,
+        clearance=clearance,
+        reached_goal=reached,
+        missed_mid=missed_mid,
+        mid_y=mid_y,
+        max_z=lay.height + p.max_height_margin,
+    )
     exo = rewards.exo_terms(
-        xp, p, hip_z=kin["hip"][..., 1], leg_swing=kin["leg_swing"], leg_stance=kin["leg_stance"],
-        limits_violated=limits_violated)
-    turn = None if action is None or last_action is None else rewards.turn_of(xp, p.directions, action, last_action)
-    wearer = rewards.wearer_terms(xp, p, heel=heel, top=lay.height, angles_prev=angles_prev, angles=angles,
-                                  turn=turn)
+        xp,
+        p,
+        hip_z=kin["hip"][..., 1],
+        leg_swing=kin["leg_swing"],
+        leg_stance=kin["leg_stance"],
+        limits_violated=limits_violated,
+    )
+    turn = (
+        None
+        if action is None or last_action is None
+        else rewards.turn_of(xp, p.directions, action, last_action)
+    )
+    wearer = rewards.wearer_terms(
+        xp, p, heel=heel, top=lay.height, angles_prev=angles_prev, angles=angles, turn=turn
+    )
     done = terminated(xp, p, reached, collided)
     mid = xp.stack([mid_y, mid_z], axis=-1)
     goal = xp.stack([lay.goal_y, 0.0 * lay.goal_y], axis=-1)
     shaping = rewards.shaping_reward(
-        xp, p, rewards.progress_potential(xp, prev, mid, goal, visited_mid),
-        rewards.progress_potential(xp, heel, mid, goal, visited), done)
+        xp,
+        p,
+        rewards.progress_potential(xp, prev, mid, goal, visited_mid),
+        rewards.progress_potential(xp, heel, mid, goal, visited),
+        done,
+    )
     reward = rewards.total_reward(xp, p, traj, exo, wearer) + shaping
     info = {
         "traj_terms": traj,
@@ -408,8 +483,13 @@ def transition(xp, p, prev, heel, time, visited_mid, layout, max_y=None, action=
         # m the heel is behind its furthest y so far (eq 2.31's condition; the safe-swing rule's measure)
         "backward": run_max - heel[..., 0],
     }
-    return {"visited_mid": visited, "reward": reward, "terminated": done, "info": info,
-            "max_y": xp.maximum(run_max, heel[..., 0])}
+    return {
+        "visited_mid": visited,
+        "reward": reward,
+        "terminated": done,
+        "info": info,
+        "max_y": xp.maximum(run_max, heel[..., 0]),
+    }
 
 
 # --------------------------------------------------------------------------------------------
@@ -424,19 +504,21 @@ class Scene:
     Layout, so the same observation and transition code reads either."""
 
     obstacle: geometry.Obstacle
-    outline: np.ndarray        # (K, 2) world-frame outline, padded to K vertices
-    shape: np.ndarray          # (P,) heights at equally spaced fractions of the width
+    outline: np.ndarray  # (K, 2) world-frame outline, padded to K vertices
+    shape: np.ndarray  # (P,) heights at equally spaced fractions of the width
     center_y: float
     width: float
     height: float
-    pivot_kind: int            # index into PIVOT_CONDITIONS, -1 for a pivot given as a y
+    pivot_kind: int  # index into PIVOT_CONDITIONS, -1 for a pivot given as a y
     pivot_y: float
     start_y: float
     goal_y: float
 
     @property
     def pivot(self) -> str:
-        return PIVOT_CONDITIONS[self.pivot_kind] if self.pivot_kind >= 0 else f"y={self.pivot_y:.3f} m"
+        return (
+            PIVOT_CONDITIONS[self.pivot_kind] if self.pivot_kind >= 0 else f"y={self.pivot_y:.3f} m"
+        )
 
 
 # A scene's defaults (m): the pivot heel beside the obstacle, the swing heel at the origin, the
@@ -446,9 +528,16 @@ DEFAULT_START_Y = 0.0
 DEFAULT_STEP_LENGTH = 0.70
 
 
-def make_scene(obstacle: geometry.Obstacle, pivot: str | float = DEFAULT_PIVOT, start_y: float = DEFAULT_START_Y,
-               step_length: float = DEFAULT_STEP_LENGTH, *, foot_length: float, max_vertices: int | None = None,
-               shape_points: int = geometry.DEFAULT_SHAPE_POINTS) -> Scene:
+def make_scene(
+    obstacle: geometry.Obstacle,
+    pivot: str | float = DEFAULT_PIVOT,
+    start_y: float = DEFAULT_START_Y,
+    step_length: float = DEFAULT_STEP_LENGTH,
+    *,
+    foot_length: float,
+    max_vertices: int | None = None,
+    shape_points: int = geometry.DEFAULT_SHAPE_POINTS,
+) -> Scene:
     """Validate and lay out one scene. ``pivot`` is one of PIVOT_CONDITIONS (thesis 3.1) or the pivot
     heel's y in metres. ``max_vertices`` pads the outline to a fixed K (the JAX environment's); None
     keeps the obstacle's own vertex count. Raises ValueError naming the bad argument."""
@@ -458,26 +547,43 @@ def make_scene(obstacle: geometry.Obstacle, pivot: str | float = DEFAULT_PIVOT, 
     step_length = geometry.finite_positive("step_length", step_length)
     if isinstance(pivot, str):
         if pivot not in PIVOT_CONDITIONS:
-            raise ValueError(f"pivot must be one of {PIVOT_CONDITIONS} or a y in metres, got {pivot!r}")
+            raise ValueError(
+                f"pivot must be one of {PIVOT_CONDITIONS} or a y in metres, got {pivot!r}"
+            )
         pk = PIVOT_CONDITIONS.index(pivot)
         py = pivot_position(scalar, pk, start_y, obstacle.center_y)
     else:
         pk, py = -1, geometry.finite("pivot_y", pivot)
     if obstacle.left <= start_y + foot_length:
-        raise ValueError(f"obstacle: its near edge ({obstacle.left:.4g} m) must lie ahead of the toe at "
-                         f"the start ({start_y + foot_length:.4g} m)")
+        raise ValueError(
+            f"obstacle: its near edge ({obstacle.left:.4g} m) must lie ahead of the toe at "
+            f"the start ({start_y + foot_length:.4g} m)"
+        )
     if obstacle.right >= start_y + step_length:
-        raise ValueError(f"step_length: the goal ({start_y + step_length:.4g} m) must lie beyond the "
-                         f"obstacle's far edge ({obstacle.right:.4g} m)")
+        raise ValueError(
+            f"step_length: the goal ({start_y + step_length:.4g} m) must lie beyond the "
+            f"obstacle's far edge ({obstacle.right:.4g} m)"
+        )
     n_vertices = len(obstacle.unit_vertices)
     max_vertices = n_vertices if max_vertices is None else max_vertices
     if n_vertices > max_vertices:
-        raise ValueError(f"obstacle: its outline has {n_vertices} vertices, more than this model's "
-                         f"{max_vertices} (env.max_vertices)")
+        raise ValueError(
+            f"obstacle: its outline has {n_vertices} vertices, more than this model's "
+            f"{max_vertices} (env.max_vertices)"
+        )
     shape = obstacle.height * geometry.cached_shape_descriptor(obstacle.unit_vertices, shape_points)
-    return Scene(obstacle=obstacle, outline=obstacle.outline_array(max_vertices), shape=shape,
-                 center_y=obstacle.center_y, width=obstacle.width, height=obstacle.height, pivot_kind=pk,
-                 pivot_y=float(py), start_y=start_y, goal_y=start_y + step_length)
+    return Scene(
+        obstacle=obstacle,
+        outline=obstacle.outline_array(max_vertices),
+        shape=shape,
+        center_y=obstacle.center_y,
+        width=obstacle.width,
+        height=obstacle.height,
+        pivot_kind=pk,
+        pivot_y=float(py),
+        start_y=start_y,
+        goal_y=start_y + step_length,
+    )
 
 
 def stack_scenes(scenes, dtype=np.float32) -> types.SimpleNamespace:
@@ -488,7 +594,11 @@ def stack_scenes(scenes, dtype=np.float32) -> types.SimpleNamespace:
     return types.SimpleNamespace(
         outline=np.stack([geometry.pad_outline(s.outline, k) for s in scenes]).astype(dtype),
         shape=np.stack([s.shape for s in scenes]).astype(dtype),
-        center_y=f("center_y"), width=f("width"), height=f("height"), pivot_y=f("pivot_y"),
-        start_y=f("start_y"), goal_y=f("goal_y"),
+        center_y=f("center_y"),
+        width=f("width"),
+        height=f("height"),
+        pivot_y=f("pivot_y"),
+        start_y=f("start_y"),
+        goal_y=f("goal_y"),
         pivot_kind=np.asarray([s.pivot_kind for s in scenes], dtype=np.int32),
     )

@@ -90,7 +90,7 @@ def vertex_loop(xp, count: int, body, carry):
     """``carry = body(k, carry)`` for k = 0 .. count-1: the term-by-term forms' loop over outline
     vertices. Under JAX a ``fori_loop`` unrolled by BY_EDGE_UNROLL, otherwise a Python loop."""
     if is_jax(xp):
-        import jax   # only under JAX: jaxexo.physics stays importable without it
+        import jax  # only under JAX: jaxexo.physics stays importable without it
 
         return jax.lax.fori_loop(0, count, body, carry, unroll=BY_EDGE_UNROLL)
     for k in range(count):
@@ -135,7 +135,7 @@ def _point_edge_dist2(xp, py, pz, ay, az, ey, ez, inv_len2):
     apz = pz - az
     # Degenerate (padding) edges have inv_len2 = 0: t = 0 gives the distance to the vertex.
     t = (apy * ey + apz * ez) * inv_len2
-    t = xp.minimum(xp.maximum(t, 0.0), 1.0)    # = clip(t, 0, 1): NumPy's clip is slower
+    t = xp.minimum(xp.maximum(t, 0.0), 1.0)  # = clip(t, 0, 1): NumPy's clip is slower
     dy = apy - t * ey
     dz = apz - t * ez
     return dy * dy + dz * dz
@@ -158,7 +158,7 @@ def _foot_edge_terms(xp, y0, y1, z, ay, az, by, bz):
     d_toe = _point_edge_dist2(xp, y1, z, ay, az, ey, ez, inv_len2)
     sa = az - z
     sb = bz - z
-    straddle = (sa * sb < 0.0)
+    straddle = sa * sb < 0.0
     frac = sa / xp.where(straddle, sa - sb, 1.0)
     y_cross = ay + frac * ey
     return d_heel, d_toe, straddle & (y_cross >= y0) & (y_cross <= y1)
@@ -190,7 +190,9 @@ def flat_foot_distance(xp, heel, foot_length, outline):
     y1 = y0 + foot_length
     vy = outline[..., 0]
     vz = outline[..., 1]
-    d_heel, d_toe, crosses = _foot_edge_terms(xp, y0, y1, z, vy[..., :-1], vz[..., :-1], vy[..., 1:], vz[..., 1:])
+    d_heel, d_toe, crosses = _foot_edge_terms(
+        xp, y0, y1, z, vy[..., :-1], vz[..., :-1], vy[..., 1:], vz[..., 1:]
+    )
     d_vert = _foot_vertex_term(xp, y0, y1, z, vy, vz)
     d2 = xp.minimum(xp.minimum(min_last(xp, d_heel), min_last(xp, d_toe)), min_last(xp, d_vert))
     return xp.where(any_last(xp, crosses), 0.0, xp.sqrt(d2))
@@ -203,7 +205,9 @@ def point_in_obstacle(xp, p, outline):
     ground is horizontal and never crosses a horizontal ray, so it can be left out."""
     a = outline[..., :-1, :]
     b = outline[..., 1:, :]
-    hits = _ray_hits(xp, p[..., None, 0], p[..., None, 1], a[..., 0], a[..., 1], b[..., 0], b[..., 1])
+    hits = _ray_hits(
+        xp, p[..., None, 0], p[..., None, 1], a[..., 0], a[..., 1], b[..., 0], b[..., 1]
+    )
     return odd_last(xp, hits) & (p[..., 1] >= 0.0)
 
 
@@ -212,7 +216,7 @@ def foot_clearance_by_edge(xp, heel, foot_length, vy, vz):
     same reason: XLA on a CPU, thousands of feet): the outline vertex-major, vy, vz (K, ...)
     broadcasting against the heels' (...,); each term is the same expression as in
     ``flat_foot_distance`` and ``point_in_obstacle``."""
-    vy, vz = xp.asarray(vy), xp.asarray(vz)   # indexed by the loop's counter
+    vy, vz = xp.asarray(vy), xp.asarray(vz)  # indexed by the loop's counter
     y0, z = heel[..., 0], heel[..., 1]
     y1 = y0 + foot_length
 
@@ -225,7 +229,11 @@ def foot_clearance_by_edge(xp, heel, foot_length, vy, vz):
 
     k_last = vy.shape[0] - 1
     shape = xp.broadcast_shapes(y0.shape, vy.shape[1:])
-    carry = (xp.full(shape, np.inf, dtype=y0.dtype), xp.zeros(shape, dtype=bool), xp.zeros(shape, dtype=bool))
+    carry = (
+        xp.full(shape, np.inf, dtype=y0.dtype),
+        xp.zeros(shape, dtype=bool),
+        xp.zeros(shape, dtype=bool),
+    )
     d2, crosses, odd = vertex_loop(xp, k_last, edge, carry)
     d2 = xp.minimum(d2, _foot_vertex_term(xp, y0, y1, z, vy[k_last], vz[k_last]))
     dist = xp.where(crosses, 0.0, xp.sqrt(d2))
@@ -239,8 +247,13 @@ def foot_clearance(xp, heel, foot_length, outline):
     (negative of the distance to the outline when the whole foot is buried). Under JAX computed term
     by term (``foot_clearance_by_edge``), in NumPy all at once."""
     if is_jax(xp):
-        return foot_clearance_by_edge(xp, heel, foot_length, xp.moveaxis(outline[..., 0], -1, 0),
-                                      xp.moveaxis(outline[..., 1], -1, 0))
+        return foot_clearance_by_edge(
+            xp,
+            heel,
+            foot_length,
+            xp.moveaxis(outline[..., 0], -1, 0),
+            xp.moveaxis(outline[..., 1], -1, 0),
+        )
     dist = flat_foot_distance(xp, heel, foot_length, outline)
     inside = point_in_obstacle(xp, heel, outline)
     return xp.where(inside, -dist, dist)
@@ -267,7 +280,9 @@ def profile_height(xp, y, outline):
     dy = b[..., 0] - a[..., 0]
     within = (ye >= a[..., 0]) & (ye <= b[..., 0])
     frac = xp.clip((ye - a[..., 0]) / xp.where(dy == 0.0, 1.0, dy), 0.0, 1.0)
-    z = xp.where(dy == 0.0, xp.maximum(a[..., 1], b[..., 1]), a[..., 1] + frac * (b[..., 1] - a[..., 1]))
+    z = xp.where(
+        dy == 0.0, xp.maximum(a[..., 1], b[..., 1]), a[..., 1] + frac * (b[..., 1] - a[..., 1])
+    )
     return xp.max(xp.where(within, z, 0.0), axis=-1)
 
 
@@ -305,7 +320,9 @@ def finite_positive(name: str, value, unit: str = "metres", hi: float | None = N
 
 def obstacle_size(name: str, value) -> float:
     """An obstacle's width or height (m) within the one size bound (MAX_OBSTACLE_WIDTH, _HEIGHT)."""
-    return finite_positive(name, value, hi=MAX_OBSTACLE_HEIGHT if "height" in name else MAX_OBSTACLE_WIDTH)
+    return finite_positive(
+        name, value, hi=MAX_OBSTACLE_HEIGHT if "height" in name else MAX_OBSTACLE_WIDTH
+    )
 
 
 def unit_profile(shape: str) -> np.ndarray:
@@ -321,24 +338,30 @@ def unit_profile(shape: str) -> np.ndarray:
         pts = np.column_stack([0.5 * np.cos(ang), np.sin(ang)])
         pts[0], pts[-1] = (-0.5, 0.0), (0.5, 0.0)
     else:
-        raise GeometryError(f"shape must be one of {SHAPES[:-1]} (profiles take points), got {shape!r}")
+        raise GeometryError(
+            f"shape must be one of {SHAPES[:-1]} (profiles take points), got {shape!r}"
+        )
     return np.asarray(pts, dtype=np.float64)
 
 
 def pad_outline(pts: np.ndarray, max_vertices: int) -> np.ndarray:
     """The fixed-size (K, 2) representation: vertices padded by repeating the last one."""
     if len(pts) > max_vertices:
-        raise GeometryError(f"obstacle has {len(pts)} outline vertices, more than max_vertices={max_vertices}")
+        raise GeometryError(
+            f"obstacle has {len(pts)} outline vertices, more than max_vertices={max_vertices}"
+        )
     out = np.empty((max_vertices, 2), dtype=np.float64)
     out[: len(pts)] = pts
-    out[len(pts):] = pts[-1]
+    out[len(pts) :] = pts[-1]
     return out
 
 
 _DESCRIPTOR_CACHE: dict = {}
 
 
-def cached_shape_descriptor(unit_vertices: np.ndarray, n_points: int = DEFAULT_SHAPE_POINTS) -> np.ndarray:
+def cached_shape_descriptor(
+    unit_vertices: np.ndarray, n_points: int = DEFAULT_SHAPE_POINTS
+) -> np.ndarray:
     """shape_descriptor, remembered per unit outline (the built-in shapes recur in every scene)."""
     key = (unit_vertices.tobytes(), unit_vertices.shape, n_points)
     out = _DESCRIPTOR_CACHE.get(key)
@@ -422,7 +445,11 @@ class Obstacle:
 
         Missing ground end points are added (the profile drops vertically to the ground)."""
         if isinstance(points, (list, tuple)) and any(
-                isinstance(x, (bool, np.bool_)) for p in points if isinstance(p, (list, tuple)) for x in p):
+            isinstance(x, (bool, np.bool_))
+            for p in points
+            if isinstance(p, (list, tuple))
+            for x in p
+        ):
             raise GeometryError("points must be (y, z) numbers in metres, got a boolean")
         try:
             pts = np.asarray(points, dtype=np.float64)
@@ -431,12 +458,15 @@ class Obstacle:
         if np.asarray(points).dtype == np.bool_:
             raise GeometryError("points must be (y, z) numbers in metres, got booleans")
         if np.asarray(points).dtype.kind in "USO" and any(
-                isinstance(x, (str, bytes)) for x in np.asarray(points, dtype=object).ravel()):
+            isinstance(x, (str, bytes)) for x in np.asarray(points, dtype=object).ravel()
+        ):
             raise GeometryError("points must be (y, z) numbers in metres, got strings")
         if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 2:
             raise GeometryError(f"points must have shape (n >= 2, 2), got {pts.shape}")
         if len(pts) > MAX_PROFILE_VERTICES - 2:
-            raise GeometryError(f"points: at most {MAX_PROFILE_VERTICES - 2} points, got {len(pts)}")
+            raise GeometryError(
+                f"points: at most {MAX_PROFILE_VERTICES - 2} points, got {len(pts)}"
+            )
         if not np.all(np.isfinite(pts)):
             raise GeometryError("points must be finite (no NaN or inf)")
         if np.any(np.diff(pts[:, 0]) < 0):

@@ -48,11 +48,13 @@ def atan2(xp, y, x):
     ay = xp.abs(y)
     hi = xp.maximum(ax, ay)
     lo = xp.minimum(ax, ay)
-    a = lo / xp.where(hi > 0.0, hi, 1.0)          # in [0, 1]
+    a = lo / xp.where(hi > 0.0, hi, 1.0)  # in [0, 1]
     big = a > _TAN_PI_8
-    t = xp.where(big, (a - 1.0) / (a + 1.0), a)   # in [-tan(pi/8), tan(pi/8)]
+    t = xp.where(big, (a - 1.0) / (a + 1.0), a)  # in [-tan(pi/8), tan(pi/8)]
     z = t * t
-    r = (((8.05374449538e-2 * z - 1.38776856032e-1) * z + 1.99777106478e-1) * z - 3.33329491539e-1) * z * t + t
+    r = (
+        ((8.05374449538e-2 * z - 1.38776856032e-1) * z + 1.99777106478e-1) * z - 3.33329491539e-1
+    ) * z * t + t
     r = xp.where(big, r + math.pi / 4.0, r)
     r = xp.where(ay > ax, math.pi / 2.0 - r, r)
     r = xp.where(x < 0.0, math.pi - r, r)
@@ -71,18 +73,22 @@ def hip_position(xp, pivot_y, heel, thigh, shin):
 def knee_position(xp, hip, foot, thigh, shin):
     """Forward-bending knee (..., 2) for a hip and a heel (eq 2.4-2.11), and |hip - heel| (eq 2.4, 2.44)."""
     d = foot - hip
-    r = xp.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1])   # not xp.sum over 2: slow in NumPy
+    r = xp.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1])  # not xp.sum over 2: slow in NumPy
     r_safe = xp.maximum(r, 1e-12)
     u = d / r_safe[..., None]
     # Distance along hip->heel to the chord through both circle intersections (law of cosines,
     # eq 2.5); clamped to the reachable range like eq 2.6.
-    a = xp.minimum(xp.maximum((thigh * thigh - shin * shin + r * r) / (2.0 * r_safe), -thigh), thigh)   # clip
+    a = xp.minimum(
+        xp.maximum((thigh * thigh - shin * shin + r * r) / (2.0 * r_safe), -thigh), thigh
+    )  # clip
     h = xp.sqrt(xp.maximum(thigh * thigh - a * a, 0.0))
     # Eq 2.11 as a pair: of the two solutions, the knee on the +90 degree side of the hip->heel
     # direction is the one that flexes (knee angle <= 0). With the heel below the hip it is the
     # solution with the larger y, as eq 2.11 says; with the heel raised above the hip the larger-y
     # solution would be a hyperextended knee.
-    perp = xp.concatenate([-u[..., 1:2], u[..., 0:1]], axis=-1)   # concatenate: cheaper than stack in NumPy
+    perp = xp.concatenate(
+        [-u[..., 1:2], u[..., 0:1]], axis=-1
+    )  # concatenate: cheaper than stack in NumPy
     knee = hip + a[..., None] * u + h[..., None] * perp
     return knee, r
 
@@ -133,7 +139,9 @@ PIVOT_CONDITIONS = ("agent", "obstacle", "between")
 def pivot_position(xp, pivot_kind, start_y, center_y):
     """The three thesis pivot conditions (3.1), indexed like PIVOT_CONDITIONS: the pivot
     heel aligned with the swing heel's start, with the obstacle centre, or half-way between (m)."""
-    return xp.where(pivot_kind == 0, start_y, xp.where(pivot_kind == 1, center_y, 0.5 * (start_y + center_y)))
+    return xp.where(
+        pivot_kind == 0, start_y, xp.where(pivot_kind == 1, center_y, 0.5 * (start_y + center_y))
+    )
 
 
 def swing_heel_unreachable(xp, pivot_y, heel, thigh, shin, hip_limits, knee_limits):
@@ -142,7 +150,8 @@ def swing_heel_unreachable(xp, pivot_y, heel, thigh, shin, hip_limits, knee_limi
     The feasibility rule of the config's obstacles and of the terrain families."""
     ks = leg_state(xp, pivot_y, heel, thigh, shin)
     return (ks["leg_swing"] > thigh + shin + 1e-9) | joint_limit_violation(
-        xp, ks["hip_swing"], ks["knee_swing_angle"], *hip_limits, *knee_limits)
+        xp, ks["hip_swing"], ks["knee_swing_angle"], *hip_limits, *knee_limits
+    )
 
 
 def joint_limit_violation(xp, hip_angle, knee_angle, hip_min, hip_max, knee_min, knee_max):
@@ -158,15 +167,23 @@ def joint_limit_violation(xp, hip_angle, knee_angle, hip_min, hip_max, knee_min,
 def both_legs_angles(xp, state):
     """(..., 4) [hip_swing, knee_swing, hip_stance, knee_stance] (rad) of a ``leg_state``: the layout
     ``legs_outside_limits`` and the environment's info["joint_angles"] use."""
-    return xp.stack([state["hip_swing"], state["knee_swing_angle"], state["hip_stance"], state["knee_stance_angle"]],
-                    axis=-1)
+    return xp.stack(
+        [
+            state["hip_swing"],
+            state["knee_swing_angle"],
+            state["hip_stance"],
+            state["knee_stance_angle"],
+        ],
+        axis=-1,
+    )
 
 
 def legs_outside_limits(xp, angles, hip_limits, knee_limits):
     """Eq 2.50's condition for both legs: ``angles`` (..., 4) as [hip_swing, knee_swing, hip_stance,
     knee_stance] (rad); True where either leg has an angle outside its limits."""
     lim = lambda h, q: joint_limit_violation(  # noqa: E731
-        xp, h, q, hip_limits[0], hip_limits[1], knee_limits[0], knee_limits[1])
+        xp, h, q, hip_limits[0], hip_limits[1], knee_limits[0], knee_limits[1]
+    )
     return lim(angles[..., 0], angles[..., 1]) | lim(angles[..., 2], angles[..., 3])
 
 

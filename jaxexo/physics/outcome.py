@@ -33,7 +33,14 @@ DEFAULT_MIN_CLEARANCE = 0.02
 DEFAULT_BACKWARD_TOLERANCE = 0.005
 
 # The checks, in the order their reasons are reported.
-CHECKS = ("reached_goal", "clearance_ok", "above_ground", "backward_ok", "joint_limits_ok", "leg_length_ok")
+CHECKS = (
+    "reached_goal",
+    "clearance_ok",
+    "above_ground",
+    "backward_ok",
+    "joint_limits_ok",
+    "leg_length_ok",
+)
 
 
 def rule(p) -> dict:
@@ -42,8 +49,18 @@ def rule(p) -> dict:
     return {"min_clearance_margin": p.min_clearance, "backward_tolerance": p.backward_tolerance}
 
 
-def verdict(xp, reached_goal, min_clearance, joint_limits_ok, leg_length_ok, max_backward, above_ground=True, *,
-            min_clearance_margin=DEFAULT_MIN_CLEARANCE, backward_tolerance=DEFAULT_BACKWARD_TOLERANCE) -> dict:
+def verdict(
+    xp,
+    reached_goal,
+    min_clearance,
+    joint_limits_ok,
+    leg_length_ok,
+    max_backward,
+    above_ground=True,
+    *,
+    min_clearance_margin=DEFAULT_MIN_CLEARANCE,
+    backward_tolerance=DEFAULT_BACKWARD_TOLERANCE,
+) -> dict:
     """The verdict on whole swings from their aggregates (any shape, broadcast together).
 
     ``min_clearance`` (m) the smallest clearance of the foot's motion from the obstacle (for a sampled
@@ -52,20 +69,36 @@ def verdict(xp, reached_goal, min_clearance, joint_limits_ok, leg_length_ok, max
     CHECKS, ``collision_free`` (eq 3.1: never touched, whatever the margin) and ``success`` (all
     CHECKS hold; a margin >= 0 implies collision_free)."""
     collision_free = ~geometry.foot_collides(xp, min_clearance)
-    clearance_ok = collision_free & ~geometry.foot_collides(xp, min_clearance - min_clearance_margin)
+    clearance_ok = collision_free & ~geometry.foot_collides(
+        xp, min_clearance - min_clearance_margin
+    )
     backward_ok = max_backward <= backward_tolerance
     above_ground = xp.ones_like(collision_free) & above_ground
-    success = reached_goal & clearance_ok & above_ground & backward_ok & joint_limits_ok & leg_length_ok
-    return {"success": success, "collision_free": collision_free, "reached_goal": reached_goal,
-            "clearance_ok": clearance_ok, "above_ground": above_ground, "backward_ok": backward_ok,
-            "joint_limits_ok": joint_limits_ok, "leg_length_ok": leg_length_ok}
+    success = (
+        reached_goal & clearance_ok & above_ground & backward_ok & joint_limits_ok & leg_length_ok
+    )
+    return {
+        "success": success,
+        "collision_free": collision_free,
+        "reached_goal": reached_goal,
+        "clearance_ok": clearance_ok,
+        "above_ground": above_ground,
+        "backward_ok": backward_ok,
+        "joint_limits_ok": joint_limits_ok,
+        "leg_length_ok": leg_length_ok,
+    }
 
 
 def start(xp, shape=(), dtype="float32") -> dict:
     """An episode's running aggregates before its first step (``shape``: the batch of episodes)."""
     no = xp.zeros(shape, dtype=bool)
-    return {"reached_goal": no, "limits": no, "leg": no,
-            "min_clearance": xp.full(shape, xp.inf, dtype=dtype), "max_backward": xp.zeros(shape, dtype=dtype)}
+    return {
+        "reached_goal": no,
+        "limits": no,
+        "leg": no,
+        "min_clearance": xp.full(shape, xp.inf, dtype=dtype),
+        "max_backward": xp.zeros(shape, dtype=dtype),
+    }
 
 
 def accumulate(xp, acc: dict, info: dict, alive=True) -> dict:
@@ -75,16 +108,27 @@ def accumulate(xp, acc: dict, info: dict, alive=True) -> dict:
         "reached_goal": acc["reached_goal"] | (alive & info["goal_reached"]),
         "limits": acc["limits"] | (alive & info["joint_limit_violation"]),
         "leg": acc["leg"] | (alive & info["leg_length_violation"]),
-        "min_clearance": xp.where(alive, xp.minimum(acc["min_clearance"], info["clearance"]), acc["min_clearance"]),
+        "min_clearance": xp.where(
+            alive, xp.minimum(acc["min_clearance"], info["clearance"]), acc["min_clearance"]
+        ),
         # info["backward"]: how far the heel is behind its furthest y so far (transition's running max)
-        "max_backward": xp.where(alive, xp.maximum(acc["max_backward"], info["backward"]), acc["max_backward"]),
+        "max_backward": xp.where(
+            alive, xp.maximum(acc["max_backward"], info["backward"]), acc["max_backward"]
+        ),
     }
 
 
 def episode_verdict(xp, acc: dict, **rule) -> dict:
     """The verdict on episodes from their running aggregates (``accumulate``)."""
-    return verdict(xp, acc["reached_goal"], acc["min_clearance"], ~acc["limits"], ~acc["leg"],
-                   acc["max_backward"], **rule)
+    return verdict(
+        xp,
+        acc["reached_goal"],
+        acc["min_clearance"],
+        ~acc["limits"],
+        ~acc["leg"],
+        acc["max_backward"],
+        **rule,
+    )
 
 
 def failed_checks(v: dict, i=None) -> tuple[str, ...]:

@@ -24,20 +24,20 @@ import numpy as np
 from jaxexo.physics.kinematics import LENGTH_EPS, leg_too_long  # noqa: F401 (LENGTH_EPS re-exported)
 
 TRAJECTORY_TERMS = (
-    "steps",          # r0, eq 2.29
-    "collision",      # r1, eq 2.30
-    "backward",       # r2, eq 2.31
-    "goal",           # r3, eq 2.32
-    "mid_goal",       # r4, eq 2.33
-    "max_height",     # r5, eq 2.34
-    "safety",         # r6, eq 2.35
-    "z_monotone",     # r7, eq 2.36-2.37
+    "steps",  # r0, eq 2.29
+    "collision",  # r1, eq 2.30
+    "backward",  # r2, eq 2.31
+    "goal",  # r3, eq 2.32
+    "mid_goal",  # r4, eq 2.33
+    "max_height",  # r5, eq 2.34
+    "safety",  # r6, eq 2.35
+    "z_monotone",  # r7, eq 2.36-2.37
 )
 EXO_TERMS = (
-    "hip_lowering",   # e0, eq 2.43 (HLC)
-    "leg_length",     # e1, eq 2.45
-    "joint_limits",   # e2, eq 2.50
-    "hip_height",     # e3, eq 2.51
+    "hip_lowering",  # e0, eq 2.43 (HLC)
+    "leg_length",  # e1, eq 2.45
+    "joint_limits",  # e2, eq 2.50
+    "hip_height",  # e3, eq 2.51
 )
 
 
@@ -47,23 +47,26 @@ def normalize_weights(weights) -> np.ndarray:
     return 0.5 * w / w.sum()
 
 
-def trajectory_terms(xp, c, *, steps, prev_heel, heel, collided, clearance, reached_goal, missed_mid,
-                     mid_y, max_z):
+def trajectory_terms(
+    xp, c, *, steps, prev_heel, heel, collided, clearance, reached_goal, missed_mid, mid_y, max_z
+):
     """The eight trajectory terms (..., 8). ``c`` holds the constants (attributes, see EnvParams)."""
     n = c.step_threshold
     s = steps.astype(heel.dtype)
     zero = xp.zeros_like(heel[..., 0])
-    r0 = xp.where(s <= n, s / n, -s / n)                                          # eq 2.29
-    r1 = xp.where(collided, -c.collision_penalty, zero)                            # eq 2.30
-    r2 = xp.where(heel[..., 0] < prev_heel[..., 0], -c.backward_penalty, zero)     # eq 2.31
-    r3 = xp.where(reached_goal, c.goal_reward, zero)                               # eq 2.32
-    r4 = xp.where(missed_mid, -c.mid_goal_penalty, zero)                           # eq 2.33
-    r5 = xp.where(heel[..., 1] > max_z, -c.max_height_penalty, zero)              # eq 2.34
-    r6 = xp.where(clearance < c.safety_distance, -c.safety_penalty, zero)          # eq 2.35
+    r0 = xp.where(s <= n, s / n, -s / n)  # eq 2.29
+    r1 = xp.where(collided, -c.collision_penalty, zero)  # eq 2.30
+    r2 = xp.where(heel[..., 0] < prev_heel[..., 0], -c.backward_penalty, zero)  # eq 2.31
+    r3 = xp.where(reached_goal, c.goal_reward, zero)  # eq 2.32
+    r4 = xp.where(missed_mid, -c.mid_goal_penalty, zero)  # eq 2.33
+    r5 = xp.where(heel[..., 1] > max_z, -c.max_height_penalty, zero)  # eq 2.34
+    r6 = xp.where(clearance < c.safety_distance, -c.safety_penalty, zero)  # eq 2.35
     rising = heel[..., 1] >= prev_heel[..., 1]
     falling = heel[..., 1] <= prev_heel[..., 1]
     before_mid = prev_heel[..., 0] <= mid_y
-    r7 = xp.where(xp.where(before_mid, rising, falling), zero, -c.z_monotone_penalty)  # eq 2.36-2.37
+    r7 = xp.where(
+        xp.where(before_mid, rising, falling), zero, -c.z_monotone_penalty
+    )  # eq 2.36-2.37
     return xp.stack([r0, r1, r2, r3, r4, r5, r6, r7], axis=-1)
 
 
@@ -71,11 +74,11 @@ def exo_terms(xp, c, *, hip_z, leg_swing, leg_stance, limits_violated):
     """The four exoskeleton terms (..., 4) (eq 2.43, 2.45, 2.50, 2.51)."""
     leg = c.thigh + c.shin
     zero = xp.zeros_like(hip_z)
-    e0 = xp.where(hip_z / leg < c.hlc_threshold, -c.hlc_penalty * leg / hip_z, zero)           # eq 2.43
+    e0 = xp.where(hip_z / leg < c.hlc_threshold, -c.hlc_penalty * leg / hip_z, zero)  # eq 2.43
     too_long = leg_too_long(xp, leg_swing, leg_stance, c.thigh, c.shin, c.leg_length_tolerance)
-    e1 = xp.where(too_long, -c.leg_length_penalty, zero)                                        # eq 2.45
-    e2 = xp.where(limits_violated, -c.joint_limit_penalty, zero)                                # eq 2.50
-    e3 = xp.where(hip_z > c.max_hip_z, -c.hip_height_penalty, zero)                            # eq 2.51
+    e1 = xp.where(too_long, -c.leg_length_penalty, zero)  # eq 2.45
+    e2 = xp.where(limits_violated, -c.joint_limit_penalty, zero)  # eq 2.50
+    e3 = xp.where(hip_z > c.max_hip_z, -c.hip_height_penalty, zero)  # eq 2.51
     return xp.stack([e0, e1, e2, e3], axis=-1)
 
 
@@ -84,9 +87,9 @@ def exo_terms(xp, c, *, hip_z, leg_swing, leg_stance, limits_violated):
 # greedy move can no longer come within the clearance, so the reward is free to pay for how the swing
 # feels: how high the foot is lifted and how long the device takes for each move.
 WEARER_TERMS = (
-    "lift",           # m of heel height above the obstacle's top plus the shield's clearance
-    "move_time",      # s the joint drives need for the move at their velocity limits
-    "turn",           # 1 - cos of the angle between this move and the last (0: straight on; 2: reversed)
+    "lift",  # m of heel height above the obstacle's top plus the shield's clearance
+    "move_time",  # s the joint drives need for the move at their velocity limits
+    "turn",  # 1 - cos of the angle between this move and the last (0: straight on; 2: reversed)
 )
 
 
@@ -118,8 +121,10 @@ def progress_potential(xp, heel, mid, goal, visited_mid):
     the mid-goal until it is visited, then straight to the goal (m). Shaping with
     F = gamma * Phi(s') - Phi(s) (Phi = 0 at termination) leaves the optimal policy unchanged
     (Ng, Harada & Russell 1999) and gives the sparse goal reward a direction."""
+
     def norm(v):
         return xp.sqrt(xp.sum(v * v, axis=-1))
+
     via_mid = norm(mid - heel) + norm(goal - mid)
     return -xp.where(visited_mid, norm(goal - heel), via_mid)
 
@@ -142,5 +147,10 @@ def total_reward(xp, c, traj, exo, wearer=None):
     unit of 1 - cos) (0, 0, 0: the thesis)."""
     r = xp.sum(traj * c.traj_weights, axis=-1) + xp.sum(exo * c.exo_weights, axis=-1)
     if wearer is not None:
-        r = r + c.lift_cost * wearer[..., 0] + c.time_cost * wearer[..., 1] + c.turn_cost * wearer[..., 2]
+        r = (
+            r
+            + c.lift_cost * wearer[..., 0]
+            + c.time_cost * wearer[..., 1]
+            + c.turn_cost * wearer[..., 2]
+        )
     return r

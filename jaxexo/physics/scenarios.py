@@ -62,7 +62,7 @@ def threefry2x32(xp, k0, k1, x0, x1):
     ks = (u32(k0), u32(k1), u32(k0) ^ u32(k1) ^ u32(_PARITY))
     x0, x1 = u32(x0) + ks[0], u32(x1) + ks[1]
     for block in range(5):
-        for r in _ROTATIONS[4 * (block % 2):4 * (block % 2) + 4]:
+        for r in _ROTATIONS[4 * (block % 2) : 4 * (block % 2) + 4]:
             x0 = x0 + x1
             x1 = _rotl(x1, r) ^ x0
         x0 = x0 + ks[(block + 1) % 3]
@@ -78,13 +78,13 @@ def uniforms(xp, k0, k1, n: int = N_UNIFORMS):
     k1 = xp.asarray(k1, dtype=xp.uint32)[..., None]
     count = xp.arange(n, dtype=xp.uint32)
     bits, _ = threefry2x32(xp, k0, k1, count, xp.zeros_like(count))
-    return (bits >> 8).astype(xp.float32) * xp.float32(2.0 ** -24)
+    return (bits >> 8).astype(xp.float32) * xp.float32(2.0**-24)
 
 
 def seed_words(seed: int) -> tuple[int, int]:
     """The two key words of an integer seed (as jax.random.PRNGKey(seed) holds them)."""
     seed = int(seed)
-    if not 0 <= seed < 2 ** 64:
+    if not 0 <= seed < 2**64:
         raise ValueError(f"seed must be in [0, 2**64), got {seed}")
     return seed >> 32, seed & 0xFFFFFFFF
 
@@ -125,15 +125,30 @@ def terrain_layout_from_uniforms(xp, p, u, kind=None, pivot_kind=None, families=
     D = terrain.D_MAX
     kind, pivot_kind = _kind_and_pivot(xp, u, kind, pivot_kind, p.terrain_cdf, p.terrain_pivot_cdf)
     fid = p.terrain_ids[kind]
-    local, width, height = terrain.family_outline(xp, fid, u[..., 2:2 + D], families)
+    local, width, height = terrain.family_outline(xp, fid, u[..., 2 : 2 + D], families)
     start_y, step_length, center = terrain.place(
-        xp, u[..., 2 + D:2 + D + 3], width, p.terrain_start_shift, p.terrain_step_length, p.foot_length,
-        p.terrain_margins[..., 0], p.terrain_margins[..., 1])
+        xp,
+        u[..., 2 + D : 2 + D + 3],
+        width,
+        p.terrain_start_shift,
+        p.terrain_step_length,
+        p.foot_length,
+        p.terrain_margins[..., 0],
+        p.terrain_margins[..., 1],
+    )
     outline = xp.stack([local[..., 0] + center[..., None], local[..., 1]], axis=-1)
-    return dict(outline=outline, shape=terrain.shape(xp, local, width, p.kind_shape.shape[-1]), center_y=center,
-                width=width, height=height, kind=xp.asarray(fid, dtype=xp.int32), pivot_kind=pivot_kind,
-                pivot_y=pivot_position(xp, pivot_kind, start_y, center), start_y=start_y,
-                goal_y=start_y + step_length)
+    return dict(
+        outline=outline,
+        shape=terrain.shape(xp, local, width, p.kind_shape.shape[-1]),
+        center_y=center,
+        width=width,
+        height=height,
+        kind=xp.asarray(fid, dtype=xp.int32),
+        pivot_kind=pivot_kind,
+        pivot_y=pivot_position(xp, pivot_kind, start_y, center),
+        start_y=start_y,
+        goal_y=start_y + step_length,
+    )
 
 
 def layout_from_uniforms(xp, p, u, kind=None, pivot_kind=None, families=None) -> dict:
@@ -149,24 +164,38 @@ def layout_from_uniforms(xp, p, u, kind=None, pivot_kind=None, families=None) ->
     height = lerp(u[..., 5], p.kind_height[kind]) * (1.0 + (2.0 * u[..., 3] - 1.0) * p.size_jitter)
     step_length = lerp(u[..., 6], p.step_length)
     start_y = lerp(u[..., 7], p.start_shift)
-    center = geometry.default_center(p.foot_length, step_length) + lerp(u[..., 8], p.obstacle_offset)
+    center = geometry.default_center(p.foot_length, step_length) + lerp(
+        u[..., 8], p.obstacle_offset
+    )
     unit = p.kind_outlines[kind]
-    outline = xp.stack([center[..., None] + width[..., None] * unit[..., 0],
-                        height[..., None] * unit[..., 1]], axis=-1)
-    return dict(outline=outline, shape=height[..., None] * p.kind_shape[kind], center_y=center, width=width,
-                height=height, kind=kind, pivot_kind=pivot_kind,
-                pivot_y=pivot_position(xp, pivot_kind, start_y, center), start_y=start_y,
-                goal_y=start_y + step_length)
+    outline = xp.stack(
+        [center[..., None] + width[..., None] * unit[..., 0], height[..., None] * unit[..., 1]],
+        axis=-1,
+    )
+    return dict(
+        outline=outline,
+        shape=height[..., None] * p.kind_shape[kind],
+        center_y=center,
+        width=width,
+        height=height,
+        kind=kind,
+        pivot_kind=pivot_kind,
+        pivot_y=pivot_position(xp, pivot_kind, start_y, center),
+        start_y=start_y,
+        goal_y=start_y + step_length,
+    )
 
 
-def scenario_layouts(xp, p, seed: int, n: int, cycle: bool = False, kinds=None, pivots=None) -> dict:
+def scenario_layouts(
+    xp, p, seed: int, n: int, cycle: bool = False, kinds=None, pivots=None
+) -> dict:
     """Scene i (i < n) of the set ``seed``: the scene reset draws from the key words (seed, i).
     ``cycle``: kinds and pivot conditions in turn instead of drawn (test sets): kind
     kinds[i % len(kinds)], pivot pivots[(i // len(kinds)) % len(pivots)], by default every kind of
     ``p`` and every pivot condition."""
     if n < 1:
         raise ValueError(f"n must be >= 1, got {n}")
-    if not 0 <= int(seed) < 2 ** 32:
+    if not 0 <= int(seed) < 2**32:
         raise ValueError(f"seed must be in [0, 2**32), got {seed}")
     i = xp.arange(n, dtype=xp.uint32)
     u = uniforms(xp, xp.full((n,), int(seed), dtype=xp.uint32), i, n_uniforms(p))
@@ -176,8 +205,9 @@ def scenario_layouts(xp, p, seed: int, n: int, cycle: bool = False, kinds=None, 
     kinds = xp.asarray(range(n_kinds) if kinds is None else kinds, dtype=xp.int32)
     pivots = xp.asarray(range(len(PIVOT_CONDITIONS)) if pivots is None else pivots, dtype=xp.int32)
     idx = xp.arange(n, dtype=xp.int32)
-    return layout_from_uniforms(xp, p, u, kind=kinds[idx % len(kinds)],
-                                pivot_kind=pivots[(idx // len(kinds)) % len(pivots)])
+    return layout_from_uniforms(
+        xp, p, u, kind=kinds[idx % len(kinds)], pivot_kind=pivots[(idx // len(kinds)) % len(pivots)]
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -194,19 +224,32 @@ def scene_kwargs(lay: dict, obstacles=None) -> list[dict]:
     for i in range(len(lay["start_y"])):
         w, h, center = (float(lay[k][i]) for k in ("width", "height", "center_y"))
         start_y = float(lay["start_y"][i])
-        if obstacles is None:   # kind is the family id; the outline is world-frame
+        if obstacles is None:  # kind is the family id; the outline is world-frame
             local = np.asarray(lay["outline"][i], dtype=np.float64) - np.array([center, 0.0])
-            out.append({"kind": terrain.FAMILY_NAMES[int(lay["kind"][i])], "obstacle": terrain.to_obstacle(local, center),
-                        "pivot": PIVOT_CONDITIONS[int(lay["pivot_kind"][i])], "start_y": start_y,
-                        "step_length": float(lay["goal_y"][i]) - start_y})
+            out.append(
+                {
+                    "kind": terrain.FAMILY_NAMES[int(lay["kind"][i])],
+                    "obstacle": terrain.to_obstacle(local, center),
+                    "pivot": PIVOT_CONDITIONS[int(lay["pivot_kind"][i])],
+                    "start_y": start_y,
+                    "step_length": float(lay["goal_y"][i]) - start_y,
+                }
+            )
             continue
         spec = obstacles[int(lay["kind"][i])]
         if spec.shape == "profile":
             ob = Obstacle("profile", "profile", center, w, h, spec.unit_vertices())
         else:
             ob = getattr(Obstacle, spec.shape)(w, h, center_y=center)
-        out.append({"kind": spec.kind, "obstacle": ob, "pivot": PIVOT_CONDITIONS[int(lay["pivot_kind"][i])],
-                    "start_y": start_y, "step_length": float(lay["goal_y"][i]) - start_y})
+        out.append(
+            {
+                "kind": spec.kind,
+                "obstacle": ob,
+                "pivot": PIVOT_CONDITIONS[int(lay["pivot_kind"][i])],
+                "start_y": start_y,
+                "step_length": float(lay["goal_y"][i]) - start_y,
+            }
+        )
     return out
 
 
@@ -220,7 +263,7 @@ def _unseen_obstacle(rng, shape: str, center: float) -> Obstacle:
     if shape == "pole":
         return Obstacle.rectangle(rng.uniform(0.01, 0.04), rng.uniform(0.05, 0.20), center_y=center)
     w, h = rng.uniform(0.08, 0.25), rng.uniform(0.05, 0.20)
-    if shape == "wedge":        # a ramp rising (or falling) to a vertical face
+    if shape == "wedge":  # a ramp rising (or falling) to a vertical face
         z = [0.0, h] if rng.uniform() < 0.5 else [h, 0.0]
         return Obstacle.profile([[center - w / 2, z[0]], [center + w / 2, z[1]]])
     k = int(rng.integers(2, 4))  # "bumps": k humps of random heights with dips between them
@@ -231,7 +274,9 @@ def _unseen_obstacle(rng, shape: str, center: float) -> Obstacle:
     return Obstacle.profile(np.column_stack([y, z]))
 
 
-def safety_scenes(foot_length: float, step_length, n: int, seed: int = 2024, unseen: bool = False) -> list[dict]:
+def safety_scenes(
+    foot_length: float, step_length, n: int, seed: int = 2024, unseen: bool = False
+) -> list[dict]:
     """n shifted layouts for the safe-swing checks (``foot_length`` m, ``step_length`` a range [lo, hi] m): the start anywhere in 0-10 cm, the obstacle anywhere
     in the gap between the toe at the start and the goal (terrain.NEAR_MARGIN = 2.5 cm from the toe,
     terrain.FAR_MARGIN = 6 cm from the goal: procedural terrain's placement margins), every pivot condition in
@@ -252,12 +297,22 @@ def safety_scenes(foot_length: float, step_length, n: int, seed: int = 2024, uns
         lo = start + foot + terrain.NEAR_MARGIN + probe.width / 2
         hi = start + step - terrain.FAR_MARGIN - probe.width / 2
         center = rng.uniform(lo, max(lo, hi))
-        ob = Obstacle.profile(probe.outline + [center, 0.0]) if probe.shape == "profile" else (
-            getattr(Obstacle, probe.shape)(probe.width, probe.height, center_y=center))
+        ob = (
+            Obstacle.profile(probe.outline + [center, 0.0])
+            if probe.shape == "profile"
+            else (getattr(Obstacle, probe.shape)(probe.width, probe.height, center_y=center))
+        )
         if not unseen:
             ob = Obstacle.named(kind, center_y=center)
-        out.append({"kind": kind, "obstacle": ob, "pivot": PIVOT_CONDITIONS[(i // len(kinds)) % 3],
-                    "start_y": float(start), "step_length": float(step)})
+        out.append(
+            {
+                "kind": kind,
+                "obstacle": ob,
+                "pivot": PIVOT_CONDITIONS[(i // len(kinds)) % 3],
+                "start_y": float(start),
+                "step_length": float(step),
+            }
+        )
     return out
 
 
@@ -266,9 +321,9 @@ def safety_scenes(foot_length: float, step_length, n: int, seed: int = 2024, uns
 # --------------------------------------------------------------------------------------------
 
 UNSEEN_SEED = 20_261_122
-UNSEEN_START_SHIFT = (0.0, 0.12)      # m, the agent starts up to 12 cm closer to the obstacle
-UNSEEN_STEP_LENGTH = (0.55, 0.85)     # m
-UNSEEN_LEVELS = (0.0, 0.5, 1.0)    # fractions of the start and step-length ranges
+UNSEEN_START_SHIFT = (0.0, 0.12)  # m, the agent starts up to 12 cm closer to the obstacle
+UNSEEN_STEP_LENGTH = (0.55, 0.85)  # m
+UNSEEN_LEVELS = (0.0, 0.5, 1.0)  # fractions of the start and step-length ranges
 CELLS_PER_FAMILY = len(PIVOT_CONDITIONS) * len(UNSEEN_LEVELS) * len(UNSEEN_LEVELS)
 
 
@@ -279,8 +334,12 @@ def repeats_for(n: int, families=terrain.HELD_OUT_FAMILIES) -> int:
     return max(1, math.ceil(n / (len(families) * CELLS_PER_FAMILY)))
 
 
-def unseen_scenarios(foot_length: float, repeats: int = 2, seed: int = UNSEEN_SEED,
-                     families=terrain.HELD_OUT_FAMILIES) -> list[dict]:
+def unseen_scenarios(
+    foot_length: float,
+    repeats: int = 2,
+    seed: int = UNSEEN_SEED,
+    families=terrain.HELD_OUT_FAMILIES,
+) -> list[dict]:
     """The held-out scene set: families x pivots x starts x step lengths x ``repeats`` draws (shape
     and position). The families are terrain.HELD_OUT_FAMILIES (excluded from training by
     construction), the starts 0, 6 and 12 cm closer to the obstacle, the step lengths the shortest
@@ -292,7 +351,7 @@ def unseen_scenarios(foot_length: float, repeats: int = 2, seed: int = UNSEEN_SE
     if repeats < 1:
         raise ValueError(f"repeats must be >= 1, got {repeats}")
     for f in families:
-        terrain.family_id(f)   # names the bad family
+        terrain.family_id(f)  # names the bad family
     out = []
     for fi, fam in enumerate(families):
         # One Generator per family: adding a family never changes another family's scenes.
@@ -306,10 +365,19 @@ def unseen_scenarios(foot_length: float, repeats: int = 2, seed: int = UNSEEN_SE
                 for b in UNSEEN_LEVELS:
                     for _ in range(repeats):
                         u = np.array([a, b, u_place[i, 2]], dtype=np.float64)
-                        start, L, c = terrain.place(np, u, width[i], UNSEEN_START_SHIFT, UNSEEN_STEP_LENGTH, foot_length)
-                        out.append({"kind": fam, "obstacle": terrain.to_obstacle(outline[i], float(c)),
-                                    "pivot": pivot, "start_y": float(start), "step_length": float(L),
-                                    "family_u": u_shape[i].tolist()})
+                        start, L, c = terrain.place(
+                            np, u, width[i], UNSEEN_START_SHIFT, UNSEEN_STEP_LENGTH, foot_length
+                        )
+                        out.append(
+                            {
+                                "kind": fam,
+                                "obstacle": terrain.to_obstacle(outline[i], float(c)),
+                                "pivot": pivot,
+                                "start_y": float(start),
+                                "step_length": float(L),
+                                "family_u": u_shape[i].tolist(),
+                            }
+                        )
                         i += 1
     return out
 
@@ -328,14 +396,41 @@ def shape_scenarios(n: int, seed: int = 2024) -> list[dict]:
             ob, kind = Obstacle.half_ellipse(w, h, center_y=c), "half_ellipse"
         else:
             a, b = sorted(rng.uniform(-0.4, 0.4, 2) * w)
-            ob = Obstacle.profile([(c - w / 2, 0.0), (c + a, h), (c + b, rng.uniform(0.5, 1.0) * h), (c + w / 2, 0.0)])
+            ob = Obstacle.profile(
+                [(c - w / 2, 0.0), (c + a, h), (c + b, rng.uniform(0.5, 1.0) * h), (c + w / 2, 0.0)]
+            )
             kind = "profile"
-        out.append({"obstacle": ob, "kind": kind, "pivot": PIVOT_CONDITIONS[(i // 3) % 3],
-                    "start_y": 0.0, "step_length": 0.70})
+        out.append(
+            {
+                "obstacle": ob,
+                "kind": kind,
+                "pivot": PIVOT_CONDITIONS[(i // 3) % 3],
+                "start_y": 0.0,
+                "step_length": 0.70,
+            }
+        )
     return out
 
 
-__all__ = ["TEST_KINDS", "HELD_OUT", "N_UNIFORMS", "N_TERRAIN_UNIFORMS", "threefry2x32", "uniforms", "seed_words",
-           "uses_terrain", "n_uniforms", "layout_from_uniforms", "terrain_layout_from_uniforms", "scenario_layouts",
-           "scene_kwargs", "safety_scenes", "UNSEEN_SHAPES", "UNSEEN_SEED", "CELLS_PER_FAMILY", "repeats_for",
-           "unseen_scenarios", "shape_scenarios"]
+__all__ = [
+    "TEST_KINDS",
+    "HELD_OUT",
+    "N_UNIFORMS",
+    "N_TERRAIN_UNIFORMS",
+    "threefry2x32",
+    "uniforms",
+    "seed_words",
+    "uses_terrain",
+    "n_uniforms",
+    "layout_from_uniforms",
+    "terrain_layout_from_uniforms",
+    "scenario_layouts",
+    "scene_kwargs",
+    "safety_scenes",
+    "UNSEEN_SHAPES",
+    "UNSEEN_SEED",
+    "CELLS_PER_FAMILY",
+    "repeats_for",
+    "unseen_scenarios",
+    "shape_scenarios",
+]

@@ -22,8 +22,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from jaxexo.physics.geometry import (_inv_edge_len2, _point_edge_dist2, any_last, foot_clearance, is_jax, min_last,
-                                     vertex_loop)
+from jaxexo.physics.geometry import (
+    _inv_edge_len2,
+    _point_edge_dist2,
+    any_last,
+    foot_clearance,
+    is_jax,
+    min_last,
+    vertex_loop,
+)
 
 
 def _last_axis(xp, *arrays):
@@ -80,14 +87,28 @@ def swept_distance(xp, h0, h1, foot_length, outline):
     ey, ez = vy[..., None, 1:] - cy, vz[..., None, 1:] - cz
     inv_e = _inv_edge_len2(xp, ey, ez)
     (py, pz), (ay, az, uy, uz, inv_u), (y0, z0, dy, safe_dz, f_safe, has_area) = _parallelogram(
-        xp, h0, h1, foot_length)
+        xp, h0, h1, foot_length
+    )
     # Corners and sides (..., 4, 1) against the outline's edges (..., 1, K-1) and vertices (..., 1, K).
-    py, pz, ay, az, uy, uz, inv_u = (_last_axis(xp, *x)[..., :, None] for x in (py, pz, ay, az, uy, uz, inv_u))
+    py, pz, ay, az, uy, uz, inv_u = (
+        _last_axis(xp, *x)[..., :, None] for x in (py, pz, ay, az, uy, uz, inv_u)
+    )
     d_corner = _point_edge_dist2(xp, py, pz, cy, cz, ey, ez, inv_e)
     d_vertex = _point_edge_dist2(xp, vy[..., None, :], vz[..., None, :], ay, az, uy, uz, inv_u)
     crossing = any_last(xp, _crosses(ay, az, uy, uz, cy, cz, ey, ez), axes=2)
-    inside = any_last(xp, _vertex_inside(vy, vz, y0[..., None], z0[..., None], dy[..., None], safe_dz[..., None],
-                                         f_safe[..., None], has_area[..., None]))
+    inside = any_last(
+        xp,
+        _vertex_inside(
+            vy,
+            vz,
+            y0[..., None],
+            z0[..., None],
+            dy[..., None],
+            safe_dz[..., None],
+            f_safe[..., None],
+            has_area[..., None],
+        ),
+    )
     d2 = xp.minimum(min_last(xp, d_corner, axes=2), min_last(xp, d_vertex, axes=2))
     return xp.where(crossing | inside, 0.0, xp.sqrt(d2))
 
@@ -103,7 +124,7 @@ def swept_distance_by_edge(xp, h0, h1, foot_length, vy, vz):
     (..., K, 2) array is a slower strided access (docs/decisions.md). Under JAX the vertices are a
     ``fori_loop`` (a few unrolled per iteration: most of the speed of a full unroll at a fraction of
     its compile time)."""
-    vy, vz = xp.asarray(vy), xp.asarray(vz)   # indexed by the loop's counter
+    vy, vz = xp.asarray(vy), xp.asarray(vz)  # indexed by the loop's counter
     (py, pz), (ay, az, uy, uz, inv_u), inside = _parallelogram(xp, h0, h1, foot_length)
 
     def vertex(k, d2, hit):
@@ -137,9 +158,15 @@ def swept_clearance(xp, h0, h1, foot_length, outline, c0=None, c1=None):
         c0 = foot_clearance(xp, h0, foot_length, outline)
     if c1 is None:
         c1 = foot_clearance(xp, h1, foot_length, outline)
-    if is_jax(xp):   # XLA: the environment checks every step's move this way
-        d = swept_distance_by_edge(xp, h0, h1, foot_length, xp.moveaxis(outline[..., 0], -1, 0),
-                                   xp.moveaxis(outline[..., 1], -1, 0))
+    if is_jax(xp):  # XLA: the environment checks every step's move this way
+        d = swept_distance_by_edge(
+            xp,
+            h0,
+            h1,
+            foot_length,
+            xp.moveaxis(outline[..., 0], -1, 0),
+            xp.moveaxis(outline[..., 1], -1, 0),
+        )
     else:
         d = swept_distance(xp, h0, h1, foot_length, outline)
     return xp.minimum(d, xp.minimum(c0, c1))
@@ -179,7 +206,9 @@ def path_swept_min(path, foot_length, outline, point_clearance, slack=1e-9):
     out[inside] = ends[inside]
     r, j = np.nonzero(~inside & (lb <= upper + slack))
     if r.size:
-        out[r, j] = np.minimum(swept_distance(np, path[r, j], path[r, j + 1], foot_length, outline[r]), ends[r, j])
+        out[r, j] = np.minimum(
+            swept_distance(np, path[r, j], path[r, j + 1], foot_length, outline[r]), ends[r, j]
+        )
     return out
 
 
@@ -239,24 +268,36 @@ def path_clearance_pruned(path, foot_length, outline, slack=1e-9, below=None):
         cand |= lb < np.asarray(below, np.float64).reshape(b, 1)
     r, j = np.nonzero(~inside & cand)
     if r.size:
-        for k in (j, j + 1):             # exact clearances at the candidates' ends
+        for k in (j, j + 1):  # exact clearances at the candidates' ends
             miss = ~exact[r, k]
             if miss.any():
                 rm, km = r[miss], k[miss]
                 c[rm, km] = foot_clearance(np, path[rm, km], foot_length, outline[rm])
                 exact[rm, km] = True
         e = np.minimum(c[r, j], c[r, j + 1])
-        out[r, j] = np.minimum(swept_distance(np, path[r, j], path[r, j + 1], foot_length, outline[r]), e)
+        out[r, j] = np.minimum(
+            swept_distance(np, path[r, j], path[r, j + 1], foot_length, outline[r]), e
+        )
     return c, out
 
 
 def path_swept_clearance(xp, path, foot_length, outline, point_clearance=None):
     """Per-move signed clearance (..., N-1) along heel paths (..., N, 2) taken as polylines;
     ``outline`` (..., K, 2) broadcasts against the path's leading axes (add an axis for the moves)."""
-    c = foot_clearance(xp, path, foot_length, outline[..., None, :, :]) if point_clearance is None \
+    c = (
+        foot_clearance(xp, path, foot_length, outline[..., None, :, :])
+        if point_clearance is None
         else point_clearance
-    return swept_clearance(xp, path[..., :-1, :], path[..., 1:, :], foot_length, outline[..., None, :, :],
-                           c[..., :-1], c[..., 1:])
+    )
+    return swept_clearance(
+        xp,
+        path[..., :-1, :],
+        path[..., 1:, :],
+        foot_length,
+        outline[..., None, :, :],
+        c[..., :-1],
+        c[..., 1:],
+    )
 
 
 def backward_motion(xp, y):

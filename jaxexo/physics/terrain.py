@@ -82,7 +82,16 @@ def _trapezoid(xp, u, W, H):
     w, h = _lerp(*W, u[..., 0]), _lerp(*H, u[..., 1])
     t = _lerp(0.15, 0.85, u[..., 2])
     s = (u[..., 3] - 0.5) * (1.0 - t)
-    return [_v(-0.5 * w, 0.0 * h), _v((s - 0.5 * t) * w, h), _v((s + 0.5 * t) * w, h), _v(0.5 * w, 0.0 * h)], w, h
+    return (
+        [
+            _v(-0.5 * w, 0.0 * h),
+            _v((s - 0.5 * t) * w, h),
+            _v((s + 0.5 * t) * w, h),
+            _v(0.5 * w, 0.0 * h),
+        ],
+        w,
+        h,
+    )
 
 
 def _wedge(xp, u, W, H):
@@ -117,7 +126,17 @@ def _bump(xp, u, W, H):
     q = _lerp(0.5, 0.9, u[..., 3])
     a, b = -0.5 * w, 0.5 * w
     yp = a + p * w
-    return [_v(a, 0.0 * h), _v(0.5 * (a + yp), q * h), _v(yp, h), _v(0.5 * (yp + b), q * h), _v(b, 0.0 * h)], w, h
+    return (
+        [
+            _v(a, 0.0 * h),
+            _v(0.5 * (a + yp), q * h),
+            _v(yp, h),
+            _v(0.5 * (yp + b), q * h),
+            _v(b, 0.0 * h),
+        ],
+        w,
+        h,
+    )
 
 
 _POLY_INNER = 6
@@ -145,7 +164,11 @@ def _polyline(xp, u, W, H):
         suf[i] = xp.maximum(suf[i + 1], z[i])
     top = pre[-1]
     zs = [xp.minimum(pre[i], suf[i]) / top * h for i in range(n)]
-    return [_v(-0.5 * w, 0.0 * h)] + [_v(y, zz) for y, zz in zip(ys, zs)] + [_v(0.5 * w, 0.0 * h)], w, h
+    return (
+        [_v(-0.5 * w, 0.0 * h)] + [_v(y, zz) for y, zz in zip(ys, zs)] + [_v(0.5 * w, 0.0 * h)],
+        w,
+        h,
+    )
 
 
 def _pole(xp, u, W, H):
@@ -164,7 +187,16 @@ def _stairs(xp, u, W, H):
     a, b = -0.5 * w, 0.5 * w
     t1, t2 = a + w / 3.0, a + 2.0 * w / 3.0
     z0 = 0.0 * h
-    verts = [_v(a, z0), _v(a, l1), _v(t1, l1), _v(t1, l2), _v(t2, l2), _v(t2, h), _v(b, h), _v(b, z0)]
+    verts = [
+        _v(a, z0),
+        _v(a, l1),
+        _v(t1, l1),
+        _v(t1, l2),
+        _v(t2, l2),
+        _v(t2, h),
+        _v(b, h),
+        _v(b, z0),
+    ]
     return _mirror(xp, u[..., 4] >= 0.5, verts), w, h
 
 
@@ -236,20 +268,21 @@ class Family:
 
 _TABLE = (
     # name,        D, K,  width (m),     height (m),    held out, builder
-    ("rectangle",   2, 4,  (0.08, 0.30), (0.06, 0.30), False, _rectangle),
-    ("trapezoid",   4, 4,  (0.08, 0.36), (0.06, 0.28), False, _trapezoid),
-    ("wedge",       3, 3,  (0.08, 0.36), (0.06, 0.28), False, _wedge),
-    ("step",        5, 6,  (0.10, 0.36), (0.06, 0.28), False, _step),
-    ("bump",        4, 5,  (0.08, 0.36), (0.06, 0.28), False, _bump),
-    ("polyline",   15, 8,  (0.08, 0.36), (0.06, 0.28), False, _polyline),
-    ("pole",        3, 5,  (0.02, 0.05), (0.10, 0.30), True, _pole),
-    ("stairs",      5, 8,  (0.18, 0.40), (0.08, 0.28), True, _stairs),
-    ("curb",        3, 4,  (0.25, 0.40), (0.02, 0.05), True, _curb),
-    ("bumps",       7, 7,  (0.16, 0.40), (0.06, 0.28), True, _bumps),
+    ("rectangle", 2, 4, (0.08, 0.30), (0.06, 0.30), False, _rectangle),
+    ("trapezoid", 4, 4, (0.08, 0.36), (0.06, 0.28), False, _trapezoid),
+    ("wedge", 3, 3, (0.08, 0.36), (0.06, 0.28), False, _wedge),
+    ("step", 5, 6, (0.10, 0.36), (0.06, 0.28), False, _step),
+    ("bump", 4, 5, (0.08, 0.36), (0.06, 0.28), False, _bump),
+    ("polyline", 15, 8, (0.08, 0.36), (0.06, 0.28), False, _polyline),
+    ("pole", 3, 5, (0.02, 0.05), (0.10, 0.30), True, _pole),
+    ("stairs", 5, 8, (0.18, 0.40), (0.08, 0.28), True, _stairs),
+    ("curb", 3, 4, (0.25, 0.40), (0.02, 0.05), True, _curb),
+    ("bumps", 7, 7, (0.16, 0.40), (0.06, 0.28), True, _bumps),
     ("smooth_bump", 3, 15, (0.10, 0.40), (0.06, 0.28), True, _smooth_bump),
 )
 FAMILIES: dict[str, Family] = {
-    name: Family(name, i, d, k, w, h, held, fn) for i, (name, d, k, w, h, held, fn) in enumerate(_TABLE)
+    name: Family(name, i, d, k, w, h, held, fn)
+    for i, (name, d, k, w, h, held, fn) in enumerate(_TABLE)
 }
 FAMILY_NAMES = tuple(FAMILIES)
 TRAIN_FAMILIES = tuple(n for n, f in FAMILIES.items() if not f.held_out)
@@ -290,7 +323,7 @@ def family_outline(xp, fid, u, names=None):
     for their ids; an id outside them gives the first)."""
     fid = xp.asarray(fid)
     out = w_out = h_out = None
-    for fam in (FAMILIES.values() if names is None else [FAMILIES[n] for n in names]):
+    for fam in FAMILIES.values() if names is None else [FAMILIES[n] for n in names]:
         o, w, h = one_family_outline(xp, fam.name, u)
         if out is None:
             out, w_out, h_out = o, w, h
@@ -335,16 +368,28 @@ def to_obstacle(outline: np.ndarray, center_y: float) -> geometry.Obstacle:
 # so at exactly the margin a scene would sit on the safety boundary, its verdict decided by float
 # rounding.
 NEAR_MARGIN = 0.025
-FAR_MARGIN = 0.06    # m between the obstacle's far edge and the goal (> the goal box's 0.04 half width)
+FAR_MARGIN = (
+    0.06  # m between the obstacle's far edge and the goal (> the goal box's 0.04 half width)
+)
 
 
-def min_step_length(width, foot_length: float, near_margin: float = NEAR_MARGIN, far_margin: float = FAR_MARGIN):
+def min_step_length(
+    width, foot_length: float, near_margin: float = NEAR_MARGIN, far_margin: float = FAR_MARGIN
+):
     """The shortest step that fits an obstacle this wide between the toe at the start and the goal."""
     return foot_length + near_margin + width + far_margin
 
 
-def place(xp, u, width, start_shift, step_length, foot_length: float, near_margin: float = NEAR_MARGIN,
-          far_margin: float = FAR_MARGIN):
+def place(
+    xp,
+    u,
+    width,
+    start_shift,
+    step_length,
+    foot_length: float,
+    near_margin: float = NEAR_MARGIN,
+    far_margin: float = FAR_MARGIN,
+):
     """(start_y, step_length, center_y), metres, from uniforms u (..., 3): the start shift drawn from
     its range, the step length from [max(lo, min_step_length(width)), hi] (a wide obstacle only gets
     steps it fits in), and the centre anywhere between the toe at the start + near_margin and the
@@ -357,8 +402,9 @@ def place(xp, u, width, start_shift, step_length, foot_length: float, near_margi
     return start, L, c_lo + (c_hi - c_lo) * u[..., 2]
 
 
-def unclearable(spec, *, foot_length, thigh, shin, hip_limits, knee_limits, heel_lift,
-                grid: int = 3) -> list[tuple]:
+def unclearable(
+    spec, *, foot_length, thigh, shin, hip_limits, knee_limits, heel_lift, grid: int = 3
+) -> list[tuple]:
     """NumPy: the (family, pivot, start, step length, centre) placements, on a grid x grid x grid
     of each family's placement range at its widest and narrowest, where the heel over the centre at
     the family's tallest top + heel_lift is out of reach or joint limits (kinematics.swing_heel_unreachable,
@@ -369,14 +415,29 @@ def unclearable(spec, *, foot_length, thigh, shin, hip_limits, knee_limits, heel
     for name in spec.families:
         fam = FAMILIES[name]
         for width in fam.width:
-            start, L, c = place(np, uu, np.full(len(uu), width), spec.start_shift, spec.step_length, foot_length,
-                                spec.near_margin, spec.far_margin)
+            start, L, c = place(
+                np,
+                uu,
+                np.full(len(uu), width),
+                spec.start_shift,
+                spec.step_length,
+                foot_length,
+                spec.near_margin,
+                spec.far_margin,
+            )
             heel = np.stack([c, np.full_like(c, fam.height[1] + heel_lift)], -1)
             for k, piv in enumerate(kinematics.PIVOT_CONDITIONS):
                 if spec.pivot[k] <= 0:
                     continue
-                bad = kinematics.swing_heel_unreachable(np, kinematics.pivot_position(np, k, start, c), heel,
-                                                        thigh, shin, hip_limits, knee_limits)
+                bad = kinematics.swing_heel_unreachable(
+                    np,
+                    kinematics.pivot_position(np, k, start, c),
+                    heel,
+                    thigh,
+                    shin,
+                    hip_limits,
+                    knee_limits,
+                )
                 for i in np.flatnonzero(bad):
                     out.append((name, piv, float(start[i]), float(L[i]), float(c[i])))
     return out

@@ -36,17 +36,28 @@ from jaxexo.sim.pieces import convex_pieces
 SWING_LEG, STANCE_LEG = "right", "left"
 LEGS = (SWING_LEG, STANCE_LEG)
 # qpos layout of the model (every joint one coordinate).
-QPOS_NAMES = ("pelvis_y", "pelvis_z", "right_hip", "right_knee", "right_ankle", "left_hip", "left_knee", "left_ankle")
+QPOS_NAMES = (
+    "pelvis_y",
+    "pelvis_z",
+    "right_hip",
+    "right_knee",
+    "right_ankle",
+    "left_hip",
+    "left_knee",
+    "left_ankle",
+)
 # The actuated joints, in jaxexo's JOINT_NAMES order (hip_swing, knee_swing, hip_stance, knee_stance).
 ACTUATED = (f"{SWING_LEG}_hip", f"{SWING_LEG}_knee", f"{STANCE_LEG}_hip", f"{STANCE_LEG}_knee")
-FOOT_RADIUS = 0.001        # m
-BODY_MASS = 70.0           # kg
+FOOT_RADIUS = 0.001  # m
+BODY_MASS = 70.0  # kg
 MASS_FRACTIONS = {"pelvis": 0.678, "thigh": 0.100, "shin": 0.0465, "foot": 0.0145}
-OBSTACLE_DEPTH = 0.30      # m, the prisms' extent across the sagittal plane (either side)
-SERVO_KP = 1.0e5           # N m / rad, position actuators' stiffness (critically damped): a stiff drive
-TIMESTEP = 0.001           # s, the default physics step
-DISTMAX = 1.0              # m: distance sensors report this beyond it (never near a margin)
-EQ_SOLREF = "0.002 1"      # the equalities' time constant (s) and damping: stiff (at least 2 physics steps)
+OBSTACLE_DEPTH = 0.30  # m, the prisms' extent across the sagittal plane (either side)
+SERVO_KP = 1.0e5  # N m / rad, position actuators' stiffness (critically damped): a stiff drive
+TIMESTEP = 0.001  # s, the default physics step
+DISTMAX = 1.0  # m: distance sensors report this beyond it (never near a margin)
+EQ_SOLREF = (
+    "0.002 1"  # the equalities' time constant (s) and damping: stiff (at least 2 physics steps)
+)
 
 
 class SimError(ValueError):
@@ -54,7 +65,12 @@ class SimError(ValueError):
 
 
 def _positive(name: str, v) -> float:
-    if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not math.isfinite(v) or v <= 0:
+    if (
+        isinstance(v, bool)
+        or not isinstance(v, (int, float, np.integer, np.floating))
+        or not math.isfinite(v)
+        or v <= 0
+    ):
         raise SimError(f"{name}: must be a finite number > 0, got {v!r}")
     return float(v)
 
@@ -66,8 +82,14 @@ def check_config(config) -> dict:
     out = {n: _positive(f"kinematics.{n}", getattr(k, n)) for n in ("thigh", "shin", "foot_length")}
     for n in ("hip_limits", "knee_limits"):
         lim = tuple(getattr(k, n))
-        if len(lim) != 2 or not all(isinstance(x, (int, float)) and math.isfinite(x) for x in lim) or not lim[0] < lim[1]:
-            raise SimError(f"kinematics.{n}: a joint range needs finite (low, high) with low < high (rad), got {lim!r}")
+        if (
+            len(lim) != 2
+            or not all(isinstance(x, (int, float)) and math.isfinite(x) for x in lim)
+            or not lim[0] < lim[1]
+        ):
+            raise SimError(
+                f"kinematics.{n}: a joint range needs finite (low, high) with low < high (rad), got {lim!r}"
+            )
         out[n] = (float(lim[0]), float(lim[1]))
     for n in ("joint_velocity", "joint_acceleration"):
         v = tuple(getattr(dev, n))
@@ -93,8 +115,16 @@ def pose_qpos(angles, pivot_y: float, thigh: float, shin: float) -> np.ndarray:
     a = np.asarray(angles, dtype=np.float64)
     _, stance_heel = forward_leg(np.zeros(2), a[..., 2], a[..., 3], thigh, shin)
     hip = np.array([pivot_y, 0.0]) - stance_heel
-    cols = (hip[..., 0], hip[..., 1], a[..., 0], a[..., 1], -(a[..., 0] + a[..., 1]), a[..., 2], a[..., 3],
-            -(a[..., 2] + a[..., 3]))
+    cols = (
+        hip[..., 0],
+        hip[..., 1],
+        a[..., 0],
+        a[..., 1],
+        -(a[..., 0] + a[..., 1]),
+        a[..., 2],
+        a[..., 3],
+        -(a[..., 2] + a[..., 3]),
+    )
     return np.stack(cols, axis=-1)
 
 
@@ -124,13 +154,15 @@ def _leg(name: str, c: dict) -> list[str]:
         f'mass="{_f(m["foot"])}" contype="1" conaffinity="0" rgba="0.2 0.4 0.8 1"/>',
         f'            <site name="{name}_heel" pos="0 0 0"/>',
         f'            <site name="{name}_toe" pos="{_v(L, 0, 0)}"/>',
-        '          </body>',
-        '        </body>',
-        '      </body>',
+        "          </body>",
+        "        </body>",
+        "      </body>",
     ]
 
 
-def legs_mjcf(config, outline=None, pivot_y: float = 0.0, start_qpos=None, timestep: float = TIMESTEP) -> str:
+def legs_mjcf(
+    config, outline=None, pivot_y: float = 0.0, start_qpos=None, timestep: float = TIMESTEP
+) -> str:
     """MJCF text of the legs of ``config`` (a jaxexo Config), with the ground obstacle ``outline``
     ((K, 2) (y, z) vertices, metres, padded or not; None: no obstacle), the stance heel's place
     ``pivot_y`` and, when given, a keyframe ``start`` at ``start_qpos`` (QPOS_NAMES order). Every
@@ -146,32 +178,38 @@ def legs_mjcf(config, outline=None, pivot_y: float = 0.0, start_qpos=None, times
         # Vertices about the piece's centre, the centre as the geom's position: MuJoCo keeps mesh
         # vertices in single precision, so they stay small (rounding ~1e-9 m) and the offset double.
         centre = 0.5 * (p.min(axis=0) + p.max(axis=0))
-        verts = [(y - centre[0], sgn * OBSTACLE_DEPTH, z - centre[1]) for sgn in (-1.0, 1.0) for y, z in p]
+        verts = [
+            (y - centre[0], sgn * OBSTACLE_DEPTH, z - centre[1])
+            for sgn in (-1.0, 1.0)
+            for y, z in p
+        ]
         assets.append(f'    <mesh name="obstacle_{i}" vertex="{" ".join(_v(*v) for v in verts)}"/>')
-        obstacle_geoms.append(f'    <geom name="obstacle_{i}" type="mesh" mesh="obstacle_{i}" '
-                              f'pos="{_v(centre[0], 0, centre[1])}" contype="0" conaffinity="1" rgba="0.8 0.3 0.2 1"/>')
+        obstacle_geoms.append(
+            f'    <geom name="obstacle_{i}" type="mesh" mesh="obstacle_{i}" '
+            f'pos="{_v(centre[0], 0, centre[1])}" contype="0" conaffinity="1" rgba="0.8 0.3 0.2 1"/>'
+        )
     vel, acc = c["joint_velocity"], c["joint_acceleration"]
     lines = [
         '<mujoco model="jaxexo-legs">',
-        '  <!-- written by jaxexo (jaxexo.sim.mjcf); units m, rad, s, kg -->',
+        "  <!-- written by jaxexo (jaxexo.sim.mjcf); units m, rad, s, kg -->",
         '  <compiler angle="radian" autolimits="true"/>',
         f'  <option timestep="{_f(timestep)}" integrator="implicitfast" ccd_tolerance="1e-12" ccd_iterations="200"/>',
-        '  <default>',
+        "  <default>",
         '    <geom contype="0" conaffinity="0" rgba="0.7 0.7 0.7 1"/>',
         f'    <position kp="{_f(SERVO_KP)}" dampratio="1"/>',
-        '  </default>',
-        '  <custom>',
+        "  </default>",
+        "  <custom>",
         f'    <numeric name="thigh" data="{_f(c["thigh"])}"/>',
         f'    <numeric name="shin" data="{_f(c["shin"])}"/>',
         f'    <numeric name="foot_length" data="{_f(c["foot_length"])}"/>',
         f'    <numeric name="device_joint_velocity" data="{_v(vel[0], vel[1], vel[0], vel[1])}"/>',
         f'    <numeric name="device_joint_acceleration" data="{_v(acc[0], acc[1], acc[0], acc[1])}"/>',
         f'    <numeric name="obstacle_pieces" data="{len(pieces)}"/>',
-        '  </custom>',
-        '  <asset>',
+        "  </custom>",
+        "  <asset>",
         *assets,
-        '  </asset>',
-        '  <worldbody>',
+        "  </asset>",
+        "  <worldbody>",
         f'    <geom name="ground" type="plane" pos="{_v(0, 0, -FOOT_RADIUS)}" size="0 0 0.05" contype="0" '
         'conaffinity="1" rgba="0.9 0.9 0.9 1"/>',
         *obstacle_geoms,
@@ -183,36 +221,53 @@ def legs_mjcf(config, outline=None, pivot_y: float = 0.0, start_qpos=None, times
         f'      <geom name="pelvis" type="sphere" size="0.06" mass="{_f(BODY_MASS * MASS_FRACTIONS["pelvis"])}"/>',
         *_leg("right", c),
         *_leg("left", c),
-        '    </body>',
-        '  </worldbody>',
-        '  <tendon>',
-        *[f'    <fixed name="{leg}_level"><joint joint="{leg}_hip" coef="1"/><joint joint="{leg}_knee" coef="1"/>'
-          f'<joint joint="{leg}_ankle" coef="1"/></fixed>' for leg in LEGS],
-        '  </tendon>',
-        '  <equality>',
-        *[f'    <tendon name="{leg}_level" tendon1="{leg}_level" solref="{EQ_SOLREF}"/>' for leg in LEGS],
-        *[f'    <connect name="{leg}_on_pivot" site1="{leg}_heel" site2="pivot" active="false" solref="{EQ_SOLREF}"/>'
-          for leg in LEGS],
-        '  </equality>',
-        '  <sensor>',
-        *[f'    <framepos name="{leg}_{part}" objtype="site" objname="{leg}_{part}"/>'
-          for leg in LEGS for part in ("heel", "toe")],
+        "    </body>",
+        "  </worldbody>",
+        "  <tendon>",
+        *[
+            f'    <fixed name="{leg}_level"><joint joint="{leg}_hip" coef="1"/><joint joint="{leg}_knee" coef="1"/>'
+            f'<joint joint="{leg}_ankle" coef="1"/></fixed>'
+            for leg in LEGS
+        ],
+        "  </tendon>",
+        "  <equality>",
+        *[
+            f'    <tendon name="{leg}_level" tendon1="{leg}_level" solref="{EQ_SOLREF}"/>'
+            for leg in LEGS
+        ],
+        *[
+            f'    <connect name="{leg}_on_pivot" site1="{leg}_heel" site2="pivot" active="false" solref="{EQ_SOLREF}"/>'
+            for leg in LEGS
+        ],
+        "  </equality>",
+        "  <sensor>",
+        *[
+            f'    <framepos name="{leg}_{part}" objtype="site" objname="{leg}_{part}"/>'
+            for leg in LEGS
+            for part in ("heel", "toe")
+        ],
         *[f'    <jointvel name="{j}" joint="{j}"/>' for j in ACTUATED],
-        *[f'    <distance name="foot_obstacle_{i}" geom1="{SWING_LEG}_foot" geom2="obstacle_{i}" cutoff="{_f(DISTMAX)}"/>'
-          for i in range(len(pieces))],
-        '  </sensor>',
-        '  <actuator>',
-        *[f'    <position name="{j}" joint="{j}" ctrlrange="{_v(*c["hip_limits" if j.endswith("hip") else "knee_limits"])}"/>'
-          for j in ACTUATED],
-        '  </actuator>',
+        *[
+            f'    <distance name="foot_obstacle_{i}" geom1="{SWING_LEG}_foot" geom2="obstacle_{i}" cutoff="{_f(DISTMAX)}"/>'
+            for i in range(len(pieces))
+        ],
+        "  </sensor>",
+        "  <actuator>",
+        *[
+            f'    <position name="{j}" joint="{j}" ctrlrange="{_v(*c["hip_limits" if j.endswith("hip") else "knee_limits"])}"/>'
+            for j in ACTUATED
+        ],
+        "  </actuator>",
     ]
     if start_qpos is not None:
         q = np.asarray(start_qpos, dtype=np.float64)
         if q.shape != (len(QPOS_NAMES),) or not np.all(np.isfinite(q)):
-            raise SimError(f"start_qpos: expected {len(QPOS_NAMES)} finite numbers ({', '.join(QPOS_NAMES)}), "
-                           f"got shape {q.shape}")
-        lines += ['  <keyframe>', f'    <key name="start" qpos="{_v(*q)}"/>', '  </keyframe>']
-    lines.append('</mujoco>')
+            raise SimError(
+                f"start_qpos: expected {len(QPOS_NAMES)} finite numbers ({', '.join(QPOS_NAMES)}), "
+                f"got shape {q.shape}"
+            )
+        lines += ["  <keyframe>", f'    <key name="start" qpos="{_v(*q)}"/>', "  </keyframe>"]
+    lines.append("</mujoco>")
     return "\n".join(lines) + "\n"
 
 

@@ -30,7 +30,9 @@ def unpadded(outline) -> np.ndarray:
     is a zero-length edge that changes no distance)."""
     o = np.asarray(outline, dtype=np.float64)
     if o.ndim != 2 or o.shape[1] != 2 or len(o) < 3:
-        raise GeometryError(f"outline: expected (K >= 3, 2) (y, z) vertices in metres, got shape {o.shape}")
+        raise GeometryError(
+            f"outline: expected (K >= 3, 2) (y, z) vertices in metres, got shape {o.shape}"
+        )
     if not np.all(np.isfinite(o)):
         raise GeometryError("outline: vertices must be finite (no NaN or inf)")
     keep = np.ones(len(o), dtype=bool)
@@ -51,19 +53,25 @@ def check_simple(outline) -> np.ndarray:
         raise GeometryError(f"outline: vertex {i} is below the ground (z = {o[i, 1]:.6g} m)")
     if np.any(np.diff(o[:, 0]) < 0.0):
         i = int(np.argmax(np.diff(o[:, 0]) < 0.0))
-        raise GeometryError(f"outline: y goes backwards between vertices {i} and {i + 1}; not a height profile")
+        raise GeometryError(
+            f"outline: y goes backwards between vertices {i} and {i + 1}; not a height profile"
+        )
     if np.any(o[1:-1, 1] == 0.0):
         i = 1 + int(np.argmax(o[1:-1, 1] == 0.0))
-        raise GeometryError(f"outline: interior vertex {i} touches the ground, so the closed outline "
-                            "touches itself (two obstacles); give each its own outline")
+        raise GeometryError(
+            f"outline: interior vertex {i} touches the ground, so the closed outline "
+            "touches itself (two obstacles); give each its own outline"
+        )
     # Consecutive vertical edges that fold back (up then down at one y) overlap each other.
     d = np.diff(o, axis=0)
     vert = d[:, 0] == 0.0
     fold = vert[:-1] & vert[1:] & (d[:-1, 1] * d[1:, 1] < 0.0)
     if np.any(fold):
         i = 1 + int(np.argmax(fold))
-        raise GeometryError(f"outline: the vertical edges at vertex {i} (y = {o[i, 0]:.6g} m) fold back on "
-                            "themselves; not a simple polygon")
+        raise GeometryError(
+            f"outline: the vertical edges at vertex {i} (y = {o[i, 0]:.6g} m) fold back on "
+            "themselves; not a simple polygon"
+        )
     if o[-1, 0] - o[0, 0] <= 0.0:
         raise GeometryError("outline: zero width; not a polygon")
     return o
@@ -103,15 +111,15 @@ def convex_pieces(outline) -> list[np.ndarray]:
     """The region under a ground obstacle's outline (K, 2) (padded or not) as a list of convex
     counter-clockwise polygons (n, 2), left to right, checked by ``check_cover``."""
     o = check_simple(outline)
-    chains = []          # index ranges [a, b] of the outline whose region is one piece
+    chains = []  # index ranges [a, b] of the outline whose region is one piece
     for k in range(len(o) - 1):
         if o[k + 1, 0] == o[k, 0]:
-            continue       # a vertical edge: a side of its neighbours, never merged across (a reflex corner)
-        if chains and chains[-1][1] == k and _convex_ccw(region_polygon(o[chains[-1][0]: k + 2])):
+            continue  # a vertical edge: a side of its neighbours, never merged across (a reflex corner)
+        if chains and chains[-1][1] == k and _convex_ccw(region_polygon(o[chains[-1][0] : k + 2])):
             chains[-1][1] = k + 1
         else:
             chains.append([k, k + 1])
-    pieces = [region_polygon(o[a: b + 1]) for a, b in chains]
+    pieces = [region_polygon(o[a : b + 1]) for a, b in chains]
     check_cover(o, pieces, chains)
     return pieces
 
@@ -127,16 +135,24 @@ def check_cover(o: np.ndarray, pieces, chains) -> None:
     for (a, b), p in zip(chains, pieces):
         area = _area(p)
         if not area > 0.0 or not _convex_ccw(p):
-            raise RuntimeError(f"convex_pieces: the piece over vertices {a}..{b} is not a convex polygon")
+            raise RuntimeError(
+                f"convex_pieces: the piece over vertices {a}..{b} is not a convex polygon"
+            )
         if o[a, 0] != y_prev:
-            raise RuntimeError(f"convex_pieces: a gap or overlap before the piece over vertices {a}..{b}")
-        want = {tuple(v) for v in o[a: b + 1]} | {(o[a, 0], 0.0), (o[b, 0], 0.0)}
+            raise RuntimeError(
+                f"convex_pieces: a gap or overlap before the piece over vertices {a}..{b}"
+            )
+        want = {tuple(v) for v in o[a : b + 1]} | {(o[a, 0], 0.0), (o[b, 0], 0.0)}
         if {tuple(v) for v in p} != want or len(p) != len(want):
-            raise RuntimeError(f"convex_pieces: the piece over vertices {a}..{b} does not follow the outline")
+            raise RuntimeError(
+                f"convex_pieces: the piece over vertices {a}..{b} does not follow the outline"
+            )
         y_prev = o[b, 0]
         total += area
     if y_prev != o[-1, 0]:
         raise RuntimeError("convex_pieces: the pieces end before the outline does")
     closed = _area(region_polygon(o))
     if abs(total - closed) > 1e-9 * scale * scale:
-        raise RuntimeError(f"convex_pieces: the pieces' area {total:.12g} m^2 is not the outline's {closed:.12g} m^2")
+        raise RuntimeError(
+            f"convex_pieces: the pieces' area {total:.12g} m^2 is not the outline's {closed:.12g} m^2"
+        )

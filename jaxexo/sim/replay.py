@@ -44,15 +44,25 @@ import time
 import numpy as np
 
 from jaxexo.physics import geometry
-from jaxexo.sim.mjcf import (ACTUATED, DISTMAX, FOOT_RADIUS, LEGS, QPOS_NAMES, STANCE_LEG, SWING_LEG, SimError, legs_mjcf,
-                             pose_qpos)
+from jaxexo.sim.mjcf import (
+    ACTUATED,
+    DISTMAX,
+    FOOT_RADIUS,
+    LEGS,
+    QPOS_NAMES,
+    STANCE_LEG,
+    SWING_LEG,
+    SimError,
+    legs_mjcf,
+    pose_qpos,
+)
 
-SUBSTEPS = 4                 # kinematic poses per control period (the sample and 3 between)
-PHYSICS_PER_SAMPLE_MAX_DT = 0.001   # s: the driven replay's physics step is at most this
-SETTLE = 0.2                 # s the driven replay holds the last setpoint after the swing
-SAME_POSE = 1e-6             # m: MuJoCo's heel this close to jaxexo's is the same pose
-GROUND_BAND = 1e-3           # m: a heel this close to the floor rests or slides on it
-CLIP_TOL = 1e-9              # rad/s: a setpoint speed changed by more than this by a limit counts as saturated
+SUBSTEPS = 4  # kinematic poses per control period (the sample and 3 between)
+PHYSICS_PER_SAMPLE_MAX_DT = 0.001  # s: the driven replay's physics step is at most this
+SETTLE = 0.2  # s the driven replay holds the last setpoint after the swing
+SAME_POSE = 1e-6  # m: MuJoCo's heel this close to jaxexo's is the same pose
+GROUND_BAND = 1e-3  # m: a heel this close to the floor rests or slides on it
+CLIP_TOL = 1e-9  # rad/s: a setpoint speed changed by more than this by a limit counts as saturated
 
 
 def require_mujoco():
@@ -60,8 +70,10 @@ def require_mujoco():
     try:
         import mujoco
     except ImportError:
-        raise SimError('MuJoCo is not installed; install the sim extra: pip install -e ".[sim]" '
-                       '(or pip install "mujoco>=4.0")') from None
+        raise SimError(
+            'MuJoCo is not installed; install the sim extra: pip install -e ".[sim]" '
+            '(or pip install "mujoco>=4.0")'
+        ) from None
     return mujoco
 
 
@@ -73,22 +85,38 @@ class Legs:
         self.config = config
         self.scene = scene
         k = config.kinematics
-        self.thigh, self.shin, self.foot_length = float(k.thigh), float(k.shin), float(k.foot_length)
+        self.thigh, self.shin, self.foot_length = (
+            float(k.thigh),
+            float(k.shin),
+            float(k.foot_length),
+        )
         self.xml = legs_mjcf(config, scene.outline, scene.pivot_y)
         self.model = mujoco.MjModel.from_xml_string(self.xml)
         self.data = mujoco.MjData(self.model)
         gid = lambda n: mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_GEOM, n)  # noqa: E731
         self.foot = gid(f"{SWING_LEG}_foot")
-        self.pieces = [gid(f"obstacle_{i}") for i in range(int(self.model.numeric("obstacle_pieces").data[0]))]
-        adr = [int(self.model.jnt_qposadr[mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_JOINT, n)])
-               for n in QPOS_NAMES]
-        if adr != list(range(len(QPOS_NAMES))):     # pose_qpos writes the columns in this order
+        self.pieces = [
+            gid(f"obstacle_{i}") for i in range(int(self.model.numeric("obstacle_pieces").data[0]))
+        ]
+        adr = [
+            int(self.model.jnt_qposadr[mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_JOINT, n)])
+            for n in QPOS_NAMES
+        ]
+        if adr != list(range(len(QPOS_NAMES))):  # pose_qpos writes the columns in this order
             raise RuntimeError(f"the model's qpos layout {adr} is not QPOS_NAMES")
-        self.site = {n: mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_SITE, n)
-                     for n in (f"{leg}_{p}" for leg in LEGS for p in ("heel", "toe"))}
-        self.stance_eq = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_EQUALITY, f"{STANCE_LEG}_on_pivot")
-        self.actuators = [mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_ACTUATOR, n) for n in ACTUATED]
-        self.actuated_dofs = _dofs(self, ACTUATED)      # the actuated joints' columns of qvel, ACTUATED order
+        self.site = {
+            n: mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_SITE, n)
+            for n in (f"{leg}_{p}" for leg in LEGS for p in ("heel", "toe"))
+        }
+        self.stance_eq = mujoco.mj_name2id(
+            self.model, mujoco.mjtObj.mjOBJ_EQUALITY, f"{STANCE_LEG}_on_pivot"
+        )
+        self.actuators = [
+            mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_ACTUATOR, n) for n in ACTUATED
+        ]
+        self.actuated_dofs = _dofs(
+            self, ACTUATED
+        )  # the actuated joints' columns of qvel, ACTUATED order
 
     def qpos(self, angles) -> np.ndarray:
         """qpos (..., nq) of joint angles (..., 4) in JOINT_NAMES order (jaxexo.sim.mjcf.pose_qpos)."""
@@ -99,7 +127,11 @@ class Legs:
         at the data's current pose (negative: penetration); ``distmax`` when farther (or no obstacle)."""
         d = distmax
         for g in self.pieces:
-            d = min(d, self.mujoco.mj_geomDistance(self.model, self.data, self.foot, g, distmax, None) + FOOT_RADIUS)
+            d = min(
+                d,
+                self.mujoco.mj_geomDistance(self.model, self.data, self.foot, g, distmax, None)
+                + FOOT_RADIUS,
+            )
         return d
 
     def set_pose(self, qpos) -> None:
@@ -146,16 +178,21 @@ def kinematic_replay(timed, config, substeps: int = SUBSTEPS, legs: Legs | None 
     margin = float(config.env.min_clearance)
     k = int(np.argmin(dist))
     return {
-        "method": timed.method, "flagged_ok": bool(timed.ok), "margin_m": margin,
+        "method": timed.method,
+        "flagged_ok": bool(timed.ok),
+        "margin_m": margin,
         "jaxexo_guaranteed_clearance_m": float(timed.checks.min_clearance),
-        "mujoco_min_distance_m": float(dist[k]), "mujoco_min_time_s": float(k / substeps / timed.rate),
+        "mujoco_min_distance_m": float(dist[k]),
+        "mujoco_min_time_s": float(k / substeps / timed.rate),
         "mujoco_min_heel": heel[k].tolist(),
         "margin_kept": bool(dist[k] >= margin),
         "flagged_ok_but_within_margin": bool(timed.ok and dist[k] < margin),
         "max_disagreement_m": float(diff[worst]) if worst >= 0 else 0.0,
         "max_disagreement_sample": worst,
-        "max_heel_offset_m": float(offset.max()), "samples_compared": int(both.sum()),
-        "poses": int(len(q)), "substeps": substeps,
+        "max_heel_offset_m": float(offset.max()),
+        "samples_compared": int(both.sum()),
+        "poses": int(len(q)),
+        "substeps": substeps,
         "seconds": time.perf_counter() - t0,
     }
 
@@ -166,7 +203,12 @@ def hermite(ref: np.ndarray, ref_v: np.ndarray, period: float, t: np.ndarray) ->
     x = np.clip(np.asarray(t) / period, 0.0, len(ref) - 1)
     k = np.minimum(x.astype(int), len(ref) - 2)
     u = (x - k)[:, None]
-    h00, h10, h01, h11 = 2 * u**3 - 3 * u**2 + 1, u**3 - 2 * u**2 + u, -2 * u**3 + 3 * u**2, u**3 - u**2
+    h00, h10, h01, h11 = (
+        2 * u**3 - 3 * u**2 + 1,
+        u**3 - 2 * u**2 + u,
+        -2 * u**3 + 3 * u**2,
+        u**3 - u**2,
+    )
     return h00 * ref[k] + h10 * period * ref_v[k] + h01 * ref[k + 1] + h11 * period * ref_v[k + 1]
 
 
@@ -187,7 +229,9 @@ def setpoints(ref: np.ndarray, dt: float, vmax, amax):
         r, r_next = rows[i], rows[i + 1]
         for j in range(len(cmd)):
             e = r[j] - cmd[j]
-            want = (r_next[j] - r[j]) / dt + math.copysign(min(abs(e) / dt, math.sqrt(2.0 * amax[j] * abs(e))), e)
+            want = (r_next[j] - r[j]) / dt + math.copysign(
+                min(abs(e) / dt, math.sqrt(2.0 * amax[j] * abs(e))), e
+            )
             v = min(max(want, vel[j] - amax[j] * dt), vel[j] + amax[j] * dt)
             if abs(v - want) > CLIP_TOL:
                 clip_a[i] = True
@@ -201,7 +245,9 @@ def setpoints(ref: np.ndarray, dt: float, vmax, amax):
 
 
 CONTROLLERS = ("pd_ff", "servo")
-PD_BANDWIDTH_HZ = 8.0        # Hz: the PD loop's natural frequency per joint (critically damped) under feed-forward
+PD_BANDWIDTH_HZ = (
+    8.0  # Hz: the PD loop's natural frequency per joint (critically damped) under feed-forward
+)
 
 
 def _equalities_on(legs: Legs) -> None:
@@ -243,7 +289,7 @@ def feed_forward(legs: Legs, qpos: np.ndarray, qvel: np.ndarray, qacc: np.ndarra
             d.qpos[:], d.qvel[:], d.qacc[:] = qpos[k], qvel[k], qacc[k]
             mujoco.mj_inverse(m, d)
             mujoco.mj_jacSite(m, d, jac, None, site)
-            rows = np.vstack([jac[[0, 2]], tendon])            # the planar rows of the constraints
+            rows = np.vstack([jac[[0, 2]], tendon])  # the planar rows of the constraints
             f = d.qfrc_inverse
             lam = np.linalg.solve(rows[:, free].T, f[free])
             tau[k] = (f - rows.T @ lam)[act]
@@ -295,8 +341,14 @@ def _rollout(legs: Legs, qpos0: np.ndarray, control: np.ndarray, gains=None) -> 
     return np.concatenate([first[None], sensors[0]])
 
 
-def driven_replay(timed, config, limits=None, legs: Legs | None = None, settle: float = SETTLE,
-                  controller: str = "pd_ff") -> dict:
+def driven_replay(
+    timed,
+    config,
+    limits=None,
+    legs: Legs | None = None,
+    settle: float = SETTLE,
+    controller: str = "pd_ff",
+) -> dict:
     """The driven replay of a TimedSwing (module docstring) with the drives' ``limits`` (a
     DeviceLimits; default: the config's [device]) and a ``controller``:
 
@@ -318,7 +370,9 @@ def driven_replay(timed, config, limits=None, legs: Legs | None = None, settle: 
     limits = DeviceLimits.from_config(config) if limits is None else limits
     if not isinstance(limits, DeviceLimits):
         raise SimError(f"limits: expected a DeviceLimits, got {type(limits).__name__}")
-    if isinstance(settle, bool) or not (isinstance(settle, (int, float)) and math.isfinite(settle) and settle >= 0):
+    if isinstance(settle, bool) or not (
+        isinstance(settle, (int, float)) and math.isfinite(settle) and settle >= 0
+    ):
         raise SimError(f"settle: must be a finite number >= 0 (s), got {settle!r}")
     if controller not in CONTROLLERS:
         raise SimError(f"controller: expected one of {', '.join(CONTROLLERS)}, got {controller!r}")
@@ -333,7 +387,9 @@ def driven_replay(timed, config, limits=None, legs: Legs | None = None, settle: 
     n = len(ref)
     steps = (n - 1) * sub + int(round(settle / dt))
     # The reference at every physics step, and one step beyond for the central differences.
-    qref = hermite(ref, np.asarray(timed.joint_velocity, np.float64), 1.0 / rate, np.arange(steps + 2) * dt)
+    qref = hermite(
+        ref, np.asarray(timed.joint_velocity, np.float64), 1.0 / rate, np.arange(steps + 2) * dt
+    )
     _equalities_on(legs)
     qpos0 = legs.qpos(ref[0])
     # Both controllers follow the reference through the setpoint generator: the drive is never
@@ -349,11 +405,13 @@ def driven_replay(timed, config, limits=None, legs: Legs | None = None, settle: 
         tau = feed_forward(legs, qpos[:steps], qvel[:steps], qacc[:steps])
         kp, kd = _pd_gains(legs, qpos0)
         # The command of the step ending at t_{k+1}: force = kp (q_ref - q) + kd (q_ref' - q') + tau.
-        qvel_ref = qvel[1: steps + 1][:, legs.actuated_dofs]
+        qvel_ref = qvel[1 : steps + 1][:, legs.actuated_dofs]
         sens = _rollout(legs, qpos0, cmd[:steps] + (kd / kp) * qvel_ref + tau / kp, (kp, kd))
         torque_peak = np.abs(tau).max(axis=0).tolist()
     clip_a, clip_v = clip_a[:steps], clip_v[:steps]
-    col = lambda name: sens[:, m.sensor_adr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, name)]:][:, :3]  # noqa: E731
+    col = lambda name: sens[
+        :, m.sensor_adr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, name)] :
+    ][:, :3]  # noqa: E731
     heel = col(f"{SWING_LEG}_heel")[::sub][:n][:, [0, 2]]
     toe = col(f"{SWING_LEG}_toe")[::sub][:n][:, [0, 2]]
     heel_err = np.linalg.norm(heel - timed.heel, axis=1)
@@ -367,20 +425,36 @@ def driven_replay(timed, config, limits=None, legs: Legs | None = None, settle: 
     k = int(np.argmin(dist))
     margin = float(config.env.min_clearance)
     return {
-        "method": timed.method, "flagged_ok": bool(timed.ok), "margin_m": margin, "controller": controller,
-        "limits": limits.to_dict(), "physics_dt_s": dt, "settle_s": float(settle),
-        "heel_error_max_m": float(heel_err.max()), "toe_error_max_m": float(toe_err.max()),
+        "method": timed.method,
+        "flagged_ok": bool(timed.ok),
+        "margin_m": margin,
+        "controller": controller,
+        "limits": limits.to_dict(),
+        "physics_dt_s": dt,
+        "settle_s": float(settle),
+        "heel_error_max_m": float(heel_err.max()),
+        "toe_error_max_m": float(toe_err.max()),
         # Where the swing's heel is off the floor: a heel moved along the floor is held back by friction.
-        "heel_error_airborne_max_m": float(np.max(heel_err[timed.heel[:, 1] > GROUND_BAND], initial=0.0)),
-        "heel_error_p95_m": float(np.percentile(heel_err, 95)), "toe_error_p95_m": float(np.percentile(toe_err, 95)),
-        "final_heel_error_m": float(np.linalg.norm(col(f"{SWING_LEG}_heel")[-1, [0, 2]] - timed.heel[-1])),
-        "mujoco_min_distance_m": float(dist[k]), "mujoco_min_time_s": float(k * dt),
+        "heel_error_airborne_max_m": float(
+            np.max(heel_err[timed.heel[:, 1] > GROUND_BAND], initial=0.0)
+        ),
+        "heel_error_p95_m": float(np.percentile(heel_err, 95)),
+        "toe_error_p95_m": float(np.percentile(toe_err, 95)),
+        "final_heel_error_m": float(
+            np.linalg.norm(col(f"{SWING_LEG}_heel")[-1, [0, 2]] - timed.heel[-1])
+        ),
+        "mujoco_min_distance_m": float(dist[k]),
+        "mujoco_min_time_s": float(k * dt),
         "margin_kept": bool(dist[k] >= margin),
         # The foot's capsule touches a piece where the segment comes within its radius: MuJoCo makes a contact.
-        "contact_steps": int(np.sum(dist <= FOOT_RADIUS)), "contact": bool(dist[k] <= FOOT_RADIUS),
-        "saturated_velocity_steps": int(clip_v.sum()), "saturated_acceleration_steps": int(clip_a.sum()),
-        "saturated": bool(clip_v.any() or clip_a.any()), "steps": steps,
-        "peak_joint_velocity_rad_s": np.abs(qv).max(axis=0).tolist(), "stance_heel_slip_max_m": float(slip),
+        "contact_steps": int(np.sum(dist <= FOOT_RADIUS)),
+        "contact": bool(dist[k] <= FOOT_RADIUS),
+        "saturated_velocity_steps": int(clip_v.sum()),
+        "saturated_acceleration_steps": int(clip_a.sum()),
+        "saturated": bool(clip_v.any() or clip_a.any()),
+        "steps": steps,
+        "peak_joint_velocity_rad_s": np.abs(qv).max(axis=0).tolist(),
+        "stance_heel_slip_max_m": float(slip),
         "feed_forward_torque_peak_nm": torque_peak,
         "seconds": time.perf_counter() - t0,
     }
@@ -393,11 +467,14 @@ def summarize_kinematic(rows: list[dict]) -> dict:
     between the two geometries at the samples, and the replay's median cost."""
     ok = [r for r in rows if r["flagged_ok"]]
     return {
-        "n": len(rows), "flagged_ok": len(ok),
+        "n": len(rows),
+        "flagged_ok": len(ok),
         "flagged_ok_within_margin": int(sum(r["flagged_ok_but_within_margin"] for r in rows)),
         "min_mujoco_distance_of_ok_m": min((r["mujoco_min_distance_m"] for r in ok), default=None),
         "min_mujoco_minus_guaranteed_of_ok_m": min(
-            (r["mujoco_min_distance_m"] - r["jaxexo_guaranteed_clearance_m"] for r in ok), default=None),
+            (r["mujoco_min_distance_m"] - r["jaxexo_guaranteed_clearance_m"] for r in ok),
+            default=None,
+        ),
         "max_disagreement_m": max((r["max_disagreement_m"] for r in rows), default=None),
         # Over the swings flagged ok: a failed swing may ask for a heel out of the leg's reach.
         "max_heel_offset_of_ok_m": max((r["max_heel_offset_m"] for r in ok), default=None),
@@ -416,15 +493,21 @@ def summarize_driven(rows: list[dict]) -> dict:
     te = np.array([d["toe_error_max_m"] for d in rows])
     md = np.array([d["mujoco_min_distance_m"] for d in rows])
     ha = np.array([d["heel_error_airborne_max_m"] for d in rows])
-    return {"n": len(rows), "heel_error_p95_m": float(np.percentile(he, 95)), "heel_error_max_m": float(he.max()),
-            "heel_error_airborne_p95_m": float(np.percentile(ha, 95)),
-            "toe_error_p95_m": float(np.percentile(te, 95)), "toe_error_max_m": float(te.max()),
-            "contacts": int(sum(d["contact"] for d in rows)),
-            "within_margin": int(np.sum(md < rows[0]["margin_m"])),
-            "min_distance_m": float(md.min()), "median_min_distance_m": float(np.median(md)),
-            "saturated": int(sum(d["saturated"] for d in rows)),
-            "stance_heel_slip_max_m": float(max(d["stance_heel_slip_max_m"] for d in rows)),
-            "seconds_median": float(np.median([d["seconds"] for d in rows]))}
+    return {
+        "n": len(rows),
+        "heel_error_p95_m": float(np.percentile(he, 95)),
+        "heel_error_max_m": float(he.max()),
+        "heel_error_airborne_p95_m": float(np.percentile(ha, 95)),
+        "toe_error_p95_m": float(np.percentile(te, 95)),
+        "toe_error_max_m": float(te.max()),
+        "contacts": int(sum(d["contact"] for d in rows)),
+        "within_margin": int(np.sum(md < rows[0]["margin_m"])),
+        "min_distance_m": float(md.min()),
+        "median_min_distance_m": float(np.median(md)),
+        "saturated": int(sum(d["saturated"] for d in rows)),
+        "stance_heel_slip_max_m": float(max(d["stance_heel_slip_max_m"] for d in rows)),
+        "seconds_median": float(np.median([d["seconds"] for d in rows])),
+    }
 
 
 def replay_trajectories(trajs, config, rate: float | None = None, driven: bool = True) -> dict:
@@ -456,7 +539,7 @@ def brute_force_distance(heel, foot_length: float, outline, iterations: int = 20
     len2 = np.maximum((e * e).sum(axis=1), 1e-300)
     heel = np.asarray(heel, dtype=np.float64)
 
-    def dist(u):            # u (E,): the foot point at heel + u (L, 0) to each edge
+    def dist(u):  # u (E,): the foot point at heel + u (L, 0) to each edge
         p = heel[None, :] + np.stack([u * foot_length, np.zeros_like(u)], axis=1)
         t = np.clip(((p - a) * e).sum(axis=1) / len2, 0.0, 1.0)
         r = p - (a + t[:, None] * e)

@@ -26,7 +26,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-STDOUT = "-"   # an output named "-" is standard output
+STDOUT = "-"  # an output named "-" is standard output
 
 
 def _temp_prefix(path: Path) -> str:
@@ -65,7 +65,7 @@ def direct_output(path: str | Path) -> bool:
     if str(path) == STDOUT:
         return True
     try:
-        mode = os.stat(path).st_mode       # follows links: a link to a FIFO is a FIFO
+        mode = os.stat(path).st_mode  # follows links: a link to a FIFO is a FIFO
     except OSError:
         return False
     return (not stat.S_ISREG(mode) and not stat.S_ISDIR(mode)) or _fd_link(Path(path))
@@ -93,8 +93,10 @@ def _write_direct(path: str | Path, payload: bytes) -> None:
         return
     path = Path(path)
     try:
-        regular = stat.S_ISREG(os.stat(path).st_mode)     # a descriptor link to a regular file
-        fd = os.open(path, os.O_WRONLY | (os.O_TRUNC if regular else 0) | getattr(os, "O_CLOEXEC", 0))
+        regular = stat.S_ISREG(os.stat(path).st_mode)  # a descriptor link to a regular file
+        fd = os.open(
+            path, os.O_WRONLY | (os.O_TRUNC if regular else 0) | getattr(os, "O_CLOEXEC", 0)
+        )
     except OSError as e:
         raise _named(e, path, "write") from None
     try:
@@ -150,8 +152,10 @@ def append_line(path: str | Path, text: str) -> None:
         fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW, 0o644)
     except OSError as e:
         if path.is_symlink():
-            raise SymlinkRefused(f"{path} is a symbolic link; jaxexo writes no file through a link it did not "
-                                 "make: remove the link") from None
+            raise SymlinkRefused(
+                f"{path} is a symbolic link; jaxexo writes no file through a link it did not "
+                "make: remove the link"
+            ) from None
         raise _named(e, path, "append to") from None
     try:
         with os.fdopen(fd, "a", encoding="utf-8") as f:
@@ -167,7 +171,9 @@ def write_figure(path: str | Path, fig, dpi: int = 110) -> Path:
     format its name's suffix gives (PNG for no suffix, ``-`` and special outputs of another suffix)."""
     suffix = Path(str(path)).suffix.lstrip(".").lower()
     supported = fig.canvas.get_supported_filetypes()
-    fmt = suffix if suffix in supported else ("png" if not suffix or direct_output(path) else suffix)
+    fmt = (
+        suffix if suffix in supported else ("png" if not suffix or direct_output(path) else suffix)
+    )
     buf = io.BytesIO()
     fig.savefig(buf, format=fmt, dpi=dpi)
     return atomic_write(path, buf.getvalue())

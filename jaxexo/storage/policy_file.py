@@ -30,7 +30,7 @@ from jaxexo.config.input_files import MAX_POLICY_BYTES, InputFileError, check_pa
 from jaxexo.storage.atomic import atomic_write
 
 FORMAT = "jaxexo-policy"
-FORMAT_VERSION = 2    # 2: sha256 checksum in the metadata, every network field required
+FORMAT_VERSION = 2  # 2: sha256 checksum in the metadata, every network field required
 ACTIVATIONS = ("relu",)
 LAYER_NORM_EPS = 1e-6  # flax.linen.LayerNorm's default epsilon
 
@@ -66,7 +66,9 @@ class QPolicy:
             if self.norm_scales:
                 mu = x.mean(axis=-1, keepdims=True)
                 var = ((x - mu) ** 2).mean(axis=-1, keepdims=True)
-                x = (x - mu) / np.sqrt(var + LAYER_NORM_EPS) * self.norm_scales[i] + self.norm_biases[i]
+                x = (x - mu) / np.sqrt(var + LAYER_NORM_EPS) * self.norm_scales[
+                    i
+                ] + self.norm_biases[i]
             x = np.maximum(x, 0.0)
         return x @ self.kernels[-1] + self.biases[-1]
 
@@ -78,7 +80,9 @@ def policy_checksum(arrays: dict, metadata: dict) -> str:
     """SHA-256 over the metadata (canonical JSON, without its ``sha256`` field) and every array's name,
     dtype, shape and bytes, in name order."""
     h = hashlib.sha256()
-    h.update(json.dumps({k: v for k, v in metadata.items() if k != "sha256"}, sort_keys=True).encode())
+    h.update(
+        json.dumps({k: v for k, v in metadata.items() if k != "sha256"}, sort_keys=True).encode()
+    )
     for name in sorted(arrays):
         a = np.ascontiguousarray(arrays[name])
         h.update(f"\n{name} {a.dtype.str} {a.shape}\n".encode())
@@ -90,16 +94,26 @@ def _as_float32(name: str, a, path) -> np.ndarray:
     """``a`` as float32 if it is a real floating-point array that stays finite in float32."""
     a = np.asarray(a)
     if not np.issubdtype(a.dtype, np.floating):
-        raise PolicyFileError(f"{path}: array {name!r} has dtype {a.dtype}; weights must be real floating point")
+        raise PolicyFileError(
+            f"{path}: array {name!r} has dtype {a.dtype}; weights must be real floating point"
+        )
     with np.errstate(over="ignore", invalid="ignore"):
         f = a.astype(np.float32)
     if not np.all(np.isfinite(f)):
-        raise PolicyFileError(f"{path}: array {name!r} holds NaN or inf" + (
-            "" if not np.all(np.isfinite(a)) else " after the cast to float32 (values beyond float32's range)"))
+        raise PolicyFileError(
+            f"{path}: array {name!r} holds NaN or inf"
+            + (
+                ""
+                if not np.all(np.isfinite(a))
+                else " after the cast to float32 (values beyond float32's range)"
+            )
+        )
     return f
 
 
-def save_policy(path: str | Path, kernels, biases, norm_scales, norm_biases, metadata: dict) -> Path:
+def save_policy(
+    path: str | Path, kernels, biases, norm_scales, norm_biases, metadata: dict
+) -> Path:
     """Write policy.npz atomically (a partial file never replaces a good one). Refuses arrays that are
     not finite in float32: a diverged training must not export a policy."""
     path = Path(path)
@@ -131,13 +145,21 @@ REQUIRED = {
     "obs_mode": (lambda x: isinstance(x, str), "a string"),
     "obs_dim": (lambda x: _is_int(x) and x > 0, "a positive integer"),
     "num_actions": (lambda x: _is_int(x) and x > 0, "a positive integer"),
-    "layers": (lambda x: isinstance(x, list) and len(x) >= 2 and all(_is_int(v) and v > 0 for v in x),
-               "a list of at least two positive integers (the layer sizes)"),
+    "layers": (
+        lambda x: isinstance(x, list) and len(x) >= 2 and all(_is_int(v) and v > 0 for v in x),
+        "a list of at least two positive integers (the layer sizes)",
+    ),
     "layer_norm": (lambda x: isinstance(x, bool), "true or false"),
     "activation": (lambda x: x in ACTIVATIONS, f"one of {list(ACTIVATIONS)}"),
-    "action_angles_rad": (lambda x: isinstance(x, list) and all(_is_num(v) for v in x), "a list of angles (rad)"),
+    "action_angles_rad": (
+        lambda x: isinstance(x, list) and all(_is_num(v) for v in x),
+        "a list of angles (rad)",
+    ),
     "length_scale": (lambda x: _is_num(x) and x > 0, "a positive number (m)"),
-    "thesis_obs_center": (lambda x: isinstance(x, list) and all(_is_num(v) for v in x), "a list of numbers"),
+    "thesis_obs_center": (
+        lambda x: isinstance(x, list) and all(_is_num(v) for v in x),
+        "a list of numbers",
+    ),
     "config_toml": (lambda x: isinstance(x, str), "the training config as TOML text"),
     "sha256": (lambda x: isinstance(x, str) and len(x) == 64, "a 64-digit hex checksum"),
 }
@@ -153,15 +175,19 @@ def _check_archive(data: bytes, path: Path) -> None:
     them), and no member's header claims more data than the member holds (a crafted shape of 10^12
     would be allocated before the read fails)."""
     if not zipfile.is_zipfile(io.BytesIO(data)):
-        raise PolicyFileError(f"{path}: not a jaxexo policy: not a readable policy file (truncated or corrupt, "
-                              "or not the zip archive of arrays that policy.npz is)")
+        raise PolicyFileError(
+            f"{path}: not a jaxexo policy: not a readable policy file (truncated or corrupt, "
+            "or not the zip archive of arrays that policy.npz is)"
+        )
     try:
         with zipfile.ZipFile(io.BytesIO(data)) as zf:
             names = [info.filename for info in zf.infolist()]
             twice = sorted({n for n in names if names.count(n) > 1})
             if twice:
-                raise PolicyFileError(f"{path}: the archive holds the member {twice[0]!r} more than once; not a "
-                                      "policy that jaxexo wrote (it writes each array once)")
+                raise PolicyFileError(
+                    f"{path}: the archive holds the member {twice[0]!r} more than once; not a "
+                    "policy that jaxexo wrote (it writes each array once)"
+                )
             for info in zf.infolist():
                 with zf.open(info) as f:
                     version = np.lib.format.read_magic(f)
@@ -174,12 +200,16 @@ def _check_archive(data: bytes, path: Path) -> None:
                     count *= int(n)
                 nbytes = count * dtype.itemsize
                 if nbytes > min(info.file_size, MAX_ARRAY_BYTES):
-                    raise PolicyFileError(f"{path}: array {info.filename!r} claims shape {tuple(shape)} "
-                                          f"({nbytes} bytes) but holds {info.file_size} bytes; not a valid policy")
+                    raise PolicyFileError(
+                        f"{path}: array {info.filename!r} claims shape {tuple(shape)} "
+                        f"({nbytes} bytes) but holds {info.file_size} bytes; not a valid policy"
+                    )
     except (zipfile.BadZipFile, OSError, EOFError, ValueError, RuntimeError) as e:
         if isinstance(e, PolicyFileError):
             raise
-        raise PolicyFileError(f"{path}: not a readable jaxexo policy (truncated or corrupt: {e})") from None
+        raise PolicyFileError(
+            f"{path}: not a readable jaxexo policy (truncated or corrupt: {e})"
+        ) from None
 
 
 # Fields declared after policies had been trained, with the value that means what those policies were
@@ -200,10 +230,14 @@ def policy_config(meta: dict, path):
 
     text = meta.get("config_toml")
     if not isinstance(text, str):
-        raise PolicyFileError(f"{path}: metadata.config_toml is missing; cannot rebuild the environment")
+        raise PolicyFileError(
+            f"{path}: metadata.config_toml is missing; cannot rebuild the environment"
+        )
     if not text.strip():
-        raise PolicyFileError(f"{path}: metadata.config_toml is empty; the policy's training config is needed "
-                              "to rebuild its environment")
+        raise PolicyFileError(
+            f"{path}: metadata.config_toml is empty; the policy's training config is needed "
+            "to rebuild its environment"
+        )
     try:
         raw = tomllib.loads(text)
         for section in SECTIONS:
@@ -215,21 +249,29 @@ def policy_config(meta: dict, path):
                 if (section, name) in FORMER_MEANING and isinstance(raw.get(section), dict):
                     raw[section].setdefault(name, FORMER_MEANING[section, name])
                 if not isinstance(raw.get(section), dict) or name not in raw[section]:
-                    raise ConfigError(f"{section}.{name} is not stated: not the resolved training config that "
-                                      "this jaxexo's train writes (a policy trained by an older jaxexo, before "
-                                      "the field existed, must be retrained)")
+                    raise ConfigError(
+                        f"{section}.{name} is not stated: not the resolved training config that "
+                        "this jaxexo's train writes (a policy trained by an older jaxexo, before "
+                        "the field existed, must be retrained)"
+                    )
         config = config_from_dict(raw)
     except (tomllib.TOMLDecodeError, ConfigError) as e:
-        raise PolicyFileError(f"{path}: metadata.config_toml is not a valid jaxexo config ({e})") from None
-    for key, field_, value in (("obs_mode", "env.obs_mode", config.env.obs_mode),
-                               ("layer_norm", "train.layer_norm", config.train.layer_norm),
-                               ("layers", "train.hidden", list(config.train.hidden))):
+        raise PolicyFileError(
+            f"{path}: metadata.config_toml is not a valid jaxexo config ({e})"
+        ) from None
+    for key, field_, value in (
+        ("obs_mode", "env.obs_mode", config.env.obs_mode),
+        ("layer_norm", "train.layer_norm", config.train.layer_norm),
+        ("layers", "train.hidden", list(config.train.hidden)),
+    ):
         have = meta.get(key)
         if key == "layers" and isinstance(have, list):
             have = have[1:-1]
         if have != value:
-            raise PolicyFileError(f"{path}: metadata.{key} ({meta.get(key)!r}) contradicts its config_toml's "
-                                  f"{field_} = {value!r}")
+            raise PolicyFileError(
+                f"{path}: metadata.{key} ({meta.get(key)!r}) contradicts its config_toml's "
+                f"{field_} = {value!r}"
+            )
     return config
 
 
@@ -248,7 +290,9 @@ def load_policy(path: str | Path) -> QPolicy:
         with z:
             files = {k: z[k] for k in z.files}
     except (zipfile.BadZipFile, OSError, EOFError, ValueError) as e:
-        raise PolicyFileError(f"{path}: not a readable policy file (truncated or corrupt: {e})") from None
+        raise PolicyFileError(
+            f"{path}: not a readable policy file (truncated or corrupt: {e})"
+        ) from None
     if "metadata" not in files:
         raise PolicyFileError(f"{path}: no 'metadata' entry; not a jaxexo policy file")
     try:
@@ -260,23 +304,31 @@ def load_policy(path: str | Path) -> QPolicy:
     if meta.get("format") != FORMAT:
         raise PolicyFileError(f"{path}: format is {meta.get('format')!r}, expected {FORMAT!r}")
     if meta.get("format_version") == 1:
-        raise PolicyFileError(f"{path}: format_version 1 (written by an older jaxexo, without a checksum) is no "
-                              f"longer read: its weights cannot be verified. Train the policy again with this jaxexo")
+        raise PolicyFileError(
+            f"{path}: format_version 1 (written by an older jaxexo, without a checksum) is no "
+            f"longer read: its weights cannot be verified. Train the policy again with this jaxexo"
+        )
     if meta.get("format_version") != FORMAT_VERSION:
-        raise PolicyFileError(f"{path}: format_version {meta.get('format_version')!r} is not supported "
-                              f"(this jaxexo reads version {FORMAT_VERSION})")
+        raise PolicyFileError(
+            f"{path}: format_version {meta.get('format_version')!r} is not supported "
+            f"(this jaxexo reads version {FORMAT_VERSION})"
+        )
     for key, (ok, what) in REQUIRED.items():
         if meta.get(key) is None:
             raise PolicyFileError(f"{path}: metadata.{key} is missing (it must be {what})")
         if not ok(meta[key]):
             raise PolicyFileError(f"{path}: metadata.{key} must be {what}, got {meta[key]!r:.80}")
     if policy_checksum(files, meta) != meta["sha256"]:
-        raise PolicyFileError(f"{path}: checksum mismatch: the arrays or the metadata were changed or corrupted "
-                              "after export (metadata.sha256 does not match the content)")
+        raise PolicyFileError(
+            f"{path}: checksum mismatch: the arrays or the metadata were changed or corrupted "
+            "after export (metadata.sha256 does not match the content)"
+        )
     layers = meta["layers"]
     if layers[0] != meta["obs_dim"]:
-        raise PolicyFileError(f"{path}: metadata.obs_dim is {meta['obs_dim']} but the network (metadata.layers) "
-                              f"has {layers[0]} inputs")
+        raise PolicyFileError(
+            f"{path}: metadata.obs_dim is {meta['obs_dim']} but the network (metadata.layers) "
+            f"has {layers[0]} inputs"
+        )
     n_norm = len(layers) - 2 if meta["layer_norm"] else 0
     expected = {f"dense_{i}_{p}" for i in range(len(layers) - 1) for p in ("kernel", "bias")}
     expected |= {f"norm_{i}_{p}" for i in range(n_norm) for p in ("scale", "bias")}
@@ -285,27 +337,37 @@ def load_policy(path: str | Path) -> QPolicy:
             raise PolicyFileError(f"{path}: missing array {name!r}")
     extra = sorted(set(files) - expected)
     if extra:
-        raise PolicyFileError(f"{path}: unexpected arrays {extra} for metadata.layers {layers} and "
-                              f"metadata.layer_norm {meta['layer_norm']}")
+        raise PolicyFileError(
+            f"{path}: unexpected arrays {extra} for metadata.layers {layers} and "
+            f"metadata.layer_norm {meta['layer_norm']}"
+        )
     kernels, biases, scales, nbiases = [], [], [], []
     for i in range(len(layers) - 1):
         w, b = files[f"dense_{i}_kernel"], files[f"dense_{i}_bias"]
         if w.shape != (layers[i], layers[i + 1]) or b.shape != (layers[i + 1],):
-            raise PolicyFileError(f"{path}: dense_{i} has shapes {w.shape}, {b.shape}; metadata.layers "
-                                  f"says ({layers[i]}, {layers[i + 1]})")
+            raise PolicyFileError(
+                f"{path}: dense_{i} has shapes {w.shape}, {b.shape}; metadata.layers "
+                f"says ({layers[i]}, {layers[i + 1]})"
+            )
         kernels.append(_as_float32(f"dense_{i}_kernel", w, path))
         biases.append(_as_float32(f"dense_{i}_bias", b, path))
         if i < n_norm:
             s, nb = files[f"norm_{i}_scale"], files[f"norm_{i}_bias"]
             if s.shape != (layers[i + 1],) or nb.shape != (layers[i + 1],):
-                raise PolicyFileError(f"{path}: misshaped norm_{i} arrays {s.shape}, {nb.shape}; expected "
-                                      f"({layers[i + 1]},)")
+                raise PolicyFileError(
+                    f"{path}: misshaped norm_{i} arrays {s.shape}, {nb.shape}; expected "
+                    f"({layers[i + 1]},)"
+                )
             scales.append(_as_float32(f"norm_{i}_scale", s, path))
             nbiases.append(_as_float32(f"norm_{i}_bias", nb, path))
     if meta["num_actions"] != layers[-1]:
-        raise PolicyFileError(f"{path}: metadata.num_actions {meta['num_actions']!r} does not match "
-                              f"the output layer ({layers[-1]})")
+        raise PolicyFileError(
+            f"{path}: metadata.num_actions {meta['num_actions']!r} does not match "
+            f"the output layer ({layers[-1]})"
+        )
     if len(meta["action_angles_rad"]) != meta["num_actions"]:
-        raise PolicyFileError(f"{path}: metadata.action_angles_rad lists {len(meta['action_angles_rad'])} "
-                              f"angles for {meta['num_actions']} actions")
+        raise PolicyFileError(
+            f"{path}: metadata.action_angles_rad lists {len(meta['action_angles_rad'])} "
+            f"angles for {meta['num_actions']} actions"
+        )
     return QPolicy(tuple(kernels), tuple(biases), tuple(scales), tuple(nbiases), meta)

@@ -30,7 +30,6 @@ class TrainingDiverged(RuntimeError):
     """The loss or the parameters became NaN or infinite (the message says where, and what was kept)."""
 
 
-
 def blocking_file(folder: str | Path) -> Path | None:
     """The nearest existing ancestor of ``folder`` (itself included) when it is a file, not a folder:
     nothing can be written below it (``afile/t.csv``). None when the path can be created."""
@@ -38,6 +37,7 @@ def blocking_file(folder: str | Path) -> Path | None:
     while not q.exists() and q != q.parent:
         q = q.parent
     return q if q.exists() and not q.is_dir() else None
+
 
 def contents(directory: Path) -> list[str]:
     """Names in ``directory`` other than the lock file, sorted (empty if it does not exist)."""
@@ -117,9 +117,13 @@ def _locked(directory: Path, what: str, create: bool):
         fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o644)
     except OSError as e:
         if lock.is_symlink():
-            raise RunDirError(f"--out: {lock} is a symbolic link; jaxexo writes no file through a link it did "
-                              "not make: remove the link") from None
-        raise RunDirError(f"--out: cannot use {directory} as a run directory ({e.strerror})") from None
+            raise RunDirError(
+                f"--out: {lock} is a symbolic link; jaxexo writes no file through a link it did "
+                "not make: remove the link"
+            ) from None
+        raise RunDirError(
+            f"--out: cannot use {directory} as a run directory ({e.strerror})"
+        ) from None
     if not stat.S_ISREG(os.fstat(fd).st_mode):
         os.close(fd)
         raise RunDirError(f"--out: {lock} is not a regular file; remove it")
@@ -128,11 +132,13 @@ def _locked(directory: Path, what: str, create: bool):
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             holder = os.pread(fd, 200, 0).decode(errors="replace").strip() or "unknown"
-            raise RunDirError(f"--out: {directory} is in use by another jaxexo process ({holder}); wait for "
-                              "it to finish (or stop it) and pass --resume, or pick another directory") from None
+            raise RunDirError(
+                f"--out: {directory} is in use by another jaxexo process ({holder}); wait for "
+                "it to finish (or stop it) and pass --resume, or pick another directory"
+            ) from None
         # Who holds it, for the message above (informational: the flock is the lock).
         os.ftruncate(fd, 0)
         os.pwrite(fd, f"pid {os.getpid()}, jaxexo {what}\n".encode(), 0)
         yield directory
     finally:
-        os.close(fd)   # releases the flock
+        os.close(fd)  # releases the flock

@@ -26,10 +26,10 @@ import numpy as np
 from jaxexo.config.input_files import InputFileError, read_input
 
 MIN_POINTS = 2
-MAX_POINTS = 100_000          # a 100 m course measured every millimetre
-MAX_LENGTH = 100.0            # m, first to last y
-MAX_HEIGHT = 2.0              # m above the floor (twice the default leg: no swing clears it)
-MAX_FILE_BYTES = 16 * 2**20   # 16 MiB: far above MAX_POINTS lines of text
+MAX_POINTS = 100_000  # a 100 m course measured every millimetre
+MAX_LENGTH = 100.0  # m, first to last y
+MAX_HEIGHT = 2.0  # m above the floor (twice the default leg: no swing clears it)
+MAX_FILE_BYTES = 16 * 2**20  # 16 MiB: far above MAX_POINTS lines of text
 
 
 class TerrainFileError(ValueError):
@@ -55,9 +55,13 @@ class Terrain:
         try:
             pts = np.asarray(points, dtype=np.float64)
         except (TypeError, ValueError):
-            raise TerrainFileError(f"{source}: points must be (y, z) pairs of numbers in metres") from None
+            raise TerrainFileError(
+                f"{source}: points must be (y, z) pairs of numbers in metres"
+            ) from None
         if pts.ndim != 2 or pts.shape[1:] != (2,):
-            raise TerrainFileError(f"{source}: points must have shape (n, 2) of (y, z) in metres, got {pts.shape}")
+            raise TerrainFileError(
+                f"{source}: points must have shape (n, 2) of (y, z) in metres, got {pts.shape}"
+            )
         return _checked(pts, [f"point {i}" for i in range(len(pts))], source)
 
 
@@ -65,7 +69,7 @@ def read_terrain(path: str | Path) -> Terrain:
     """The terrain in ``path`` (module docstring), checked; TerrainFileError naming the line otherwise."""
     p = Path(path)
     name = str(path)
-    try:    # the one read of an input file: a regular file, at most MAX_FILE_BYTES
+    try:  # the one read of an input file: a regular file, at most MAX_FILE_BYTES
         raw = read_input(p, "terrain file", MAX_FILE_BYTES)
     except InputFileError as e:
         raise TerrainFileError(f"{name}: {e.reason}") from None
@@ -92,21 +96,27 @@ def _parse_csv(text: str, name: str):
         if not s or s.startswith("#"):
             continue
         if not seen_data and not rows and _HEADER.match(s):
-            seen_data = True        # the one header line
+            seen_data = True  # the one header line
             continue
         seen_data = True
         if len(rows) >= MAX_POINTS:
-            raise TerrainFileError(f"{name}, line {k}: more than {MAX_POINTS} points (a terrain file may have "
-                                   f"at most {MAX_POINTS})")
+            raise TerrainFileError(
+                f"{name}, line {k}: more than {MAX_POINTS} points (a terrain file may have "
+                f"at most {MAX_POINTS})"
+            )
         parts = [x.strip() for x in s.split(",")]
         if len(parts) != 2:
-            raise TerrainFileError(f"{name}, line {k}: expected two numbers 'y,z' (metres), got {s!r}")
+            raise TerrainFileError(
+                f"{name}, line {k}: expected two numbers 'y,z' (metres), got {s!r}"
+            )
         vals = []
         for label, x in zip(("y", "z"), parts):
             try:
                 vals.append(float(x))
             except ValueError:
-                raise TerrainFileError(f"{name}, line {k}: {label} is not a number: {x!r}") from None
+                raise TerrainFileError(
+                    f"{name}, line {k}: {label} is not a number: {x!r}"
+                ) from None
         rows.append(vals)
         where.append(f"line {k}")
     return np.asarray(rows, dtype=np.float64).reshape(-1, 2), where
@@ -114,24 +124,37 @@ def _parse_csv(text: str, name: str):
 
 def _parse_json(text: str, name: str):
     try:
-        doc = json.loads(text, parse_constant=lambda c: float(c))   # NaN/Infinity: refused below by line
+        doc = json.loads(
+            text, parse_constant=lambda c: float(c)
+        )  # NaN/Infinity: refused below by line
     except json.JSONDecodeError as e:
         raise TerrainFileError(f"{name}, line {e.lineno}: not valid JSON ({e.msg})") from None
     pts = doc.get("points") if isinstance(doc, dict) else doc
     if not isinstance(pts, list):
-        raise TerrainFileError(f"{name}: expected {{\"points\": [[y, z], ...]}} or a list of [y, z] pairs")
+        raise TerrainFileError(
+            f'{name}: expected {{"points": [[y, z], ...]}} or a list of [y, z] pairs'
+        )
     if len(pts) > MAX_POINTS:
-        raise TerrainFileError(f"{name}: {len(pts)} points, more than a terrain file may have ({MAX_POINTS})")
+        raise TerrainFileError(
+            f"{name}: {len(pts)} points, more than a terrain file may have ({MAX_POINTS})"
+        )
     # The line of each inner [y, z] pair, in order (json keeps no positions).
     lines = [text.count("\n", 0, m.start()) + 1 for m in re.finditer(r"\[[^\[\]]*\]", text)]
-    where = [f"line {lines[i]} (points[{i}])" if len(lines) == len(pts) else f"points[{i}]"
-             for i in range(len(pts))]
+    where = [
+        f"line {lines[i]} (points[{i}])" if len(lines) == len(pts) else f"points[{i}]"
+        for i in range(len(pts))
+    ]
     rows = []
     for i, p in enumerate(pts):
-        if (not isinstance(p, list) or len(p) != 2
-                or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in p)):
-            raise TerrainFileError(f"{name}, {where[i]}: expected a pair [y, z] of numbers (metres), got "
-                                   f"{json.dumps(p)[:60]}")
+        if (
+            not isinstance(p, list)
+            or len(p) != 2
+            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in p)
+        ):
+            raise TerrainFileError(
+                f"{name}, {where[i]}: expected a pair [y, z] of numbers (metres), got "
+                f"{json.dumps(p)[:60]}"
+            )
         rows.append([float(p[0]), float(p[1])])
     return np.asarray(rows, dtype=np.float64).reshape(-1, 2), where
 
@@ -139,34 +162,46 @@ def _parse_json(text: str, name: str):
 def _checked(pts: np.ndarray, where: list[str], name: str) -> Terrain:
     n = len(pts)
     if n < MIN_POINTS:
-        raise TerrainFileError(f"{name}: {n} point{'s' * (n != 1)}, a profile needs at least {MIN_POINTS}")
+        raise TerrainFileError(
+            f"{name}: {n} point{'s' * (n != 1)}, a profile needs at least {MIN_POINTS}"
+        )
     if n > MAX_POINTS:
         raise TerrainFileError(f"{name}: {n} points, more than a terrain may have ({MAX_POINTS})")
     for i in range(n):
         for j, label in ((0, "y"), (1, "z")):
             if not math.isfinite(pts[i, j]):
-                raise TerrainFileError(f"{name}, {where[i]}: {label} must be a finite number, got {pts[i, j]}")
+                raise TerrainFileError(
+                    f"{name}, {where[i]}: {label} must be a finite number, got {pts[i, j]}"
+                )
     neg = np.flatnonzero(pts[:, 1] < 0.0)
     if neg.size:
         i = int(neg[0])
-        raise TerrainFileError(f"{name}, {where[i]}: z = {pts[i, 1]:g} m is below the floor (heights are above "
-                               "the floor, z >= 0)")
+        raise TerrainFileError(
+            f"{name}, {where[i]}: z = {pts[i, 1]:g} m is below the floor (heights are above "
+            "the floor, z >= 0)"
+        )
     high = np.flatnonzero(pts[:, 1] > MAX_HEIGHT)
     if high.size:
         i = int(high[0])
-        raise TerrainFileError(f"{name}, {where[i]}: z = {pts[i, 1]:g} m, higher than a terrain may be "
-                               f"({MAX_HEIGHT:g} m)")
+        raise TerrainFileError(
+            f"{name}, {where[i]}: z = {pts[i, 1]:g} m, higher than a terrain may be "
+            f"({MAX_HEIGHT:g} m)"
+        )
     back = np.flatnonzero(np.diff(pts[:, 0]) < 0.0)
     if back.size:
         i = int(back[0]) + 1
-        raise TerrainFileError(f"{name}, {where[i]}: y = {pts[i, 0]:g} m is behind the point before it "
-                               f"(y = {pts[i - 1, 0]:g} m); y must increase along the course")
+        raise TerrainFileError(
+            f"{name}, {where[i]}: y = {pts[i, 0]:g} m is behind the point before it "
+            f"(y = {pts[i - 1, 0]:g} m); y must increase along the course"
+        )
     length = pts[-1, 0] - pts[0, 0]
     if length <= 0.0:
         raise TerrainFileError(f"{name}: the profile has no length (every y is {pts[0, 0]:g} m)")
     if length > MAX_LENGTH:
-        raise TerrainFileError(f"{name}, {where[-1]}: the profile is {length:g} m long, more than a terrain may "
-                               f"be ({MAX_LENGTH:g} m)")
+        raise TerrainFileError(
+            f"{name}, {where[-1]}: the profile is {length:g} m long, more than a terrain may "
+            f"be ({MAX_LENGTH:g} m)"
+        )
     return Terrain(pts[:, 0].copy(), pts[:, 1].copy(), name)
 
 

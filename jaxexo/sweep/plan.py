@@ -45,7 +45,9 @@ def default_memory_budget() -> int:
 
 
 def local_cpu_count() -> int:
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    return (
+        len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    )
 
 
 def param_count(cfg: Config) -> int:
@@ -63,14 +65,17 @@ def agent_bytes(cfg: Config) -> int:
     t, e = cfg.train, cfg.env
     obs_dim = _obs_dim(e.obs_mode, e.shape_points)
     n_env, T = t.num_envs, t.rollout_steps
-    k = max(cfg.outline_vertices, 16)   # the evaluation's outlines (the half-circle's 16 vertices)
+    k = max(cfg.outline_vertices, 16)  # the evaluation's outlines (the half-circle's 16 vertices)
     p = param_count(cfg)
     width = sum(t.hidden) + NUM_ACTIONS
     env_state = 2 * k + e.shape_points + 16 + obs_dim
     step = k * _STEP_FLOATS_PER_VERTEX + _STEP_FLOATS
     state = 4 * p + n_env * env_state + (n_env * p if t.trace == "backward" else 0)
     if t.trace == "forward":
-        work = T * n_env * (2 * obs_dim + 8 + NUM_ACTIONS) + 3 * (T * n_env // t.num_minibatches) * width
+        work = (
+            T * n_env * (2 * obs_dim + 8 + NUM_ACTIONS)
+            + 3 * (T * n_env // t.num_minibatches) * width
+        )
     else:
         work = 3 * n_env * p + 2 * n_env * width
     work += n_env * (step + width)
@@ -83,8 +88,8 @@ def agent_bytes(cfg: Config) -> int:
 class Chunk:
     chunk_id: int
     group_id: int
-    size: int                                  # agents in the compiled batch (padded)
-    agents: tuple[tuple[int, int], ...]        # (config_id, seed), the real ones
+    size: int  # agents in the compiled batch (padded)
+    agents: tuple[tuple[int, int], ...]  # (config_id, seed), the real ones
 
     def to_json(self) -> dict:
         d = asdict(self)
@@ -93,11 +98,22 @@ class Chunk:
 
     @classmethod
     def from_json(cls, d: dict) -> "Chunk":
-        return cls(int(d["chunk_id"]), int(d["group_id"]), int(d["size"]), tuple((int(c), int(s)) for c, s in d["agents"]))
+        return cls(
+            int(d["chunk_id"]),
+            int(d["group_id"]),
+            int(d["size"]),
+            tuple((int(c), int(s)) for c, s in d["agents"]),
+        )
 
 
-def group_chunk_size(n_agents: int, per_agent_bytes: int, per_agent_steps: int, devices: int, budget: int,
-                     fixed: int | None = None) -> int:
+def group_chunk_size(
+    n_agents: int,
+    per_agent_bytes: int,
+    per_agent_steps: int,
+    devices: int,
+    budget: int,
+    fixed: int | None = None,
+) -> int:
     """Agents per chunk for a group: at most the memory cap and about the progress cap, a multiple of
     ``devices``; among the sizes from half that cap up to it, the one that pads the last chunk least
     (padding is computed and thrown away), the largest of those."""
@@ -108,8 +124,10 @@ def group_chunk_size(n_agents: int, per_agent_bytes: int, per_agent_steps: int, 
     c = max(devices, (min(c, n_agents) // devices) * devices)
     if fixed is None and c * per_agent_bytes > budget:
         need = devices * per_agent_bytes
-        raise ConfigError(f"memory_budget: {devices} agent(s) (one per CPU device) need about {need / 2**20:.0f} MiB, "
-                          f"more than the budget of {budget / 2**20:.0f} MiB; raise --memory-budget")
+        raise ConfigError(
+            f"memory_budget: {devices} agent(s) (one per CPU device) need about {need / 2**20:.0f} MiB, "
+            f"more than the budget of {budget / 2**20:.0f} MiB; raise --memory-budget"
+        )
     sizes = range(c, max(devices, c // 2) - 1, -devices)
     return min(sizes, key=lambda s: (math.ceil(n_agents / s) * s - n_agents, -s))
 
@@ -120,7 +138,9 @@ def make_plan(sweep: Sweep, devices: int, budget: int) -> list[Chunk]:
     for g in sweep.groups:
         cfg = sweep.members[g.config_ids[0]].config
         steps = num_updates(cfg) * cfg.train.num_envs * cfg.train.rollout_steps
-        size = group_chunk_size(len(g.agents), agent_bytes(cfg), steps, devices, budget, sweep.chunk_size)
+        size = group_chunk_size(
+            len(g.agents), agent_bytes(cfg), steps, devices, budget, sweep.chunk_size
+        )
         for i in range(0, len(g.agents), size):
-            chunks.append(Chunk(len(chunks), g.group_id, size, g.agents[i:i + size]))
+            chunks.append(Chunk(len(chunks), g.group_id, size, g.agents[i : i + size]))
     return chunks

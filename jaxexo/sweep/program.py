@@ -53,25 +53,35 @@ def reduce_metrics(m: jnp.ndarray, min_episodes: int) -> dict:
     idx = jnp.arange(n_upd)
     n_active = jnp.sum(col.env_steps > 0)
     ep = col.episodes
-    after = jnp.cumsum(ep[::-1])[::-1] - ep          # episodes finished after each update
-    last = (idx < n_active) & ((idx >= n_active - jnp.maximum(1, n_active // 10)) | (after < min_episodes))
+    after = jnp.cumsum(ep[::-1])[::-1] - ep  # episodes finished after each update
+    last = (idx < n_active) & (
+        (idx >= n_active - jnp.maximum(1, n_active // 10)) | (after < min_episodes)
+    )
     ep_last = jnp.sum(jnp.where(last, ep, 0.0))
     per_episode = lambda x: jnp.where(  # noqa: E731
-        ep_last > 0, jnp.sum(jnp.where(last, x, 0.0)) / jnp.maximum(ep_last, 1.0), jnp.nan)
+        ep_last > 0, jnp.sum(jnp.where(last, x, 0.0)) / jnp.maximum(ep_last, 1.0), jnp.nan
+    )
     train_success, train_return = per_episode(col.successes), per_episode(col.return_sum)
     # Episodes to reach TARGET_SUCCESS: the first update whose trailing window (about 1 % of the
     # updates) succeeds that often; the count is of all episodes finished up to that update.
     window = max(1, n_upd // 100)
     cum_ep = jnp.cumsum(col.episodes)
     cum_su = jnp.cumsum(col.successes)
-    shift = lambda x: jnp.concatenate([jnp.zeros(window), x[:-window]]) if window < n_upd else jnp.zeros_like(x)  # noqa: E731
+    shift = lambda x: (
+        jnp.concatenate([jnp.zeros(window), x[:-window]]) if window < n_upd else jnp.zeros_like(x)
+    )  # noqa: E731
     ep_w, su_w = cum_ep - shift(cum_ep), cum_su - shift(cum_su)
     hit = (ep_w >= MIN_WINDOW_EPISODES) & (su_w >= TARGET_SUCCESS * ep_w)
     episodes_to = jnp.where(jnp.any(hit), cum_ep[jnp.argmax(hit)], jnp.nan)
     bins = np.minimum(np.arange(n_upd) * CURVE_POINTS // n_upd, CURVE_POINTS - 1)
     curve = jax.ops.segment_sum(m, jnp.asarray(bins), num_segments=CURVE_POINTS)
-    return {"train_success": train_success, "train_return": train_return, "episodes_to_90": episodes_to,
-            "updates": n_active.astype(jnp.float32), "curve": curve}
+    return {
+        "train_success": train_success,
+        "train_return": train_return,
+        "episodes_to_90": episodes_to,
+        "updates": n_active.astype(jnp.float32),
+        "curve": curve,
+    }
 
 
 def chunk_program(cfg: Config, devices):
@@ -99,11 +109,15 @@ def _build(cfg: Config, devices):
         red = reduce_metrics(m, cfg.train.num_envs)
         diverged = ~finite(jnp, ts, m)
         scalars = {
-            "success": suc.mean(), "accuracy": acc.mean(),
-            "held_out_success": jnp.sum(suc * held) / held.sum(), "held_out_accuracy": jnp.sum(acc * held) / held.sum(),
-            "eval_return": out["return"].mean(), "episodes": ts.episodes,
-            "env_steps": ts.update,   # updates done: run_chunk scales it to env steps in integers
-            "diverged": diverged, **{k: v for k, v in red.items() if k != "curve"},
+            "success": suc.mean(),
+            "accuracy": acc.mean(),
+            "held_out_success": jnp.sum(suc * held) / held.sum(),
+            "held_out_accuracy": jnp.sum(acc * held) / held.sum(),
+            "eval_return": out["return"].mean(),
+            "episodes": ts.episodes,
+            "env_steps": ts.update,  # updates done: run_chunk scales it to env steps in integers
+            "diverged": diverged,
+            **{k: v for k, v in red.items() if k != "curve"},
         }
         return {"scalars": scalars, "curve": red["curve"], "params": ts.params}
 
@@ -122,8 +136,13 @@ def chunk_inputs(sweep: Sweep, chunk: Chunk, size: int | None = None):
     hyper = {c: Hyperparams.from_config(cfg) for c, cfg in cfgs.items()}
     # The test layouts drawn in NumPy (jaxexo.train.evaluate.test_layouts): eval.json's and
     # ``jaxexo eval``'s scenes.
-    test = {c: (ExoStepEnv(test_config(cfg)).default_params, test_layouts(test_config(cfg), cfg.train.eval_episodes))
-            for c, cfg in cfgs.items()}
+    test = {
+        c: (
+            ExoStepEnv(test_config(cfg)).default_params,
+            test_layouts(test_config(cfg), cfg.train.eval_episodes),
+        )
+        for c, cfg in cfgs.items()
+    }
     keys = np.stack([np.asarray(jax.random.PRNGKey(s)) for _, s in agents])
     return keys, _stack([hyper[c] for c, _ in agents]), _stack([test[c] for c, _ in agents])
 
@@ -134,7 +153,9 @@ def run_chunk(sweep: Sweep, chunk: Chunk, devices=None) -> dict:
     leading agent axis), ``wall_s`` (the call, compilation included when it happened here)."""
     devices = list(devices if devices is not None else jax.local_devices())
     if chunk.size % len(devices):
-        raise ValueError(f"chunk {chunk.chunk_id}: {chunk.size} agents do not split over {len(devices)} devices")
+        raise ValueError(
+            f"chunk {chunk.chunk_id}: {chunk.size} agents do not split over {len(devices)} devices"
+        )
     cfg = sweep.members[chunk.agents[0][0]].config
     t0 = time.perf_counter()
     program = chunk_program(cfg, devices)
@@ -149,8 +170,12 @@ def run_chunk(sweep: Sweep, chunk: Chunk, devices=None) -> dict:
     return {
         "chunk_id": chunk.chunk_id,
         "agents": [list(a) for a in chunk.agents],
-        "scalars": {k: (out["scalars"][k].astype(np.int64) * per if k == "env_steps" else out["scalars"][k])
-                    .astype(np.float64) for k in SCALARS},
+        "scalars": {
+            k: (
+                out["scalars"][k].astype(np.int64) * per if k == "env_steps" else out["scalars"][k]
+            ).astype(np.float64)
+            for k in SCALARS
+        },
         "curves": out["curve"],
         "metrics": list(METRICS),
         "params": _flatten(flat),

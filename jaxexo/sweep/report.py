@@ -29,6 +29,8 @@ from jaxexo.storage.atomic import atomic_write, write_figure
 def _save(fig, path) -> None:
     """A figure as PNG, written atomically (a link in its place is replaced, never written through)."""
     write_figure(path, fig, dpi=110)
+
+
 from jaxexo.sweep import results as R
 from jaxexo.sweep.spec import Sweep, format_value
 
@@ -47,32 +49,73 @@ def rank(sweep: Sweep, rows: list[dict]) -> list[dict]:
         col = lambda k: np.array([float(r[k]) for r in rs])  # noqa: E731
         suc, reach = col("success"), col("episodes_to_90")
         reached = reach[np.isfinite(reach)]
-        entries.append({
-            "config_id": cid, "label": sweep.members[cid].label, "values": sweep.members[cid].values,
-            "seeds": len(rs), "success_mean": float(suc.mean()), "success_std": float(suc.std()),
-            "success_min": float(suc.min()), "success_max": float(suc.max()),
-            "held_out_success": float(col("held_out_success").mean()), "accuracy": float(col("accuracy").mean()),
-            "train_return": float(col("train_return").mean()),
-            "episodes_to_90": float(reached.mean()) if reached.size else math.nan, "reached_90": int(reached.size),
-            "diverged": int(col("diverged").sum()),
-        })
-    entries.sort(key=lambda e: (-_nan_key(e["success_mean"]), e["diverged"], -_nan_key(e["held_out_success"]),
-                                -_nan_key(e["train_return"]), e["config_id"]))
+        entries.append(
+            {
+                "config_id": cid,
+                "label": sweep.members[cid].label,
+                "values": sweep.members[cid].values,
+                "seeds": len(rs),
+                "success_mean": float(suc.mean()),
+                "success_std": float(suc.std()),
+                "success_min": float(suc.min()),
+                "success_max": float(suc.max()),
+                "held_out_success": float(col("held_out_success").mean()),
+                "accuracy": float(col("accuracy").mean()),
+                "train_return": float(col("train_return").mean()),
+                "episodes_to_90": float(reached.mean()) if reached.size else math.nan,
+                "reached_90": int(reached.size),
+                "diverged": int(col("diverged").sum()),
+            }
+        )
+    entries.sort(
+        key=lambda e: (
+            -_nan_key(e["success_mean"]),
+            e["diverged"],
+            -_nan_key(e["held_out_success"]),
+            -_nan_key(e["train_return"]),
+            e["config_id"],
+        )
+    )
     return entries
 
 
 def _table(sweep: Sweep, entries: list[dict]) -> list[str]:
     axes = [a.path for a in sweep.axes]
-    head = ["rank", "config", *[f"`{a}`" for a in axes], "success (mean ± std, min–max)", "held-out success",
-            "accuracy", "train return", "episodes to 90 %", "diverged"]
+    head = [
+        "rank",
+        "config",
+        *[f"`{a}`" for a in axes],
+        "success (mean ± std, min–max)",
+        "held-out success",
+        "accuracy",
+        "train return",
+        "episodes to 90 %",
+        "diverged",
+    ]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * 2 + "---|" * len(axes) + "---:|" * 6]
     for i, e in enumerate(entries, 1):
-        reach = "never" if not e["reached_90"] else f"{e['episodes_to_90']:,.0f} ({e['reached_90']}/{e['seeds']})"
-        lines.append("| " + " | ".join([
-            str(i), str(e["config_id"]), *[format_value(e["values"][a]) for a in axes],
-            f"{e['success_mean']:.3f} ± {e['success_std']:.3f} ({e['success_min']:.3f}–{e['success_max']:.3f})",
-            f"{e['held_out_success']:.3f}", f"{e['accuracy']:.3f}", f"{e['train_return']:.2f}", reach,
-            f"{e['diverged']}/{e['seeds']}"]) + " |")
+        reach = (
+            "never"
+            if not e["reached_90"]
+            else f"{e['episodes_to_90']:,.0f} ({e['reached_90']}/{e['seeds']})"
+        )
+        lines.append(
+            "| "
+            + " | ".join(
+                [
+                    str(i),
+                    str(e["config_id"]),
+                    *[format_value(e["values"][a]) for a in axes],
+                    f"{e['success_mean']:.3f} ± {e['success_std']:.3f} ({e['success_min']:.3f}–{e['success_max']:.3f})",
+                    f"{e['held_out_success']:.3f}",
+                    f"{e['accuracy']:.3f}",
+                    f"{e['train_return']:.2f}",
+                    reach,
+                    f"{e['diverged']}/{e['seeds']}",
+                ]
+            )
+            + " |"
+        )
     return lines
 
 
@@ -91,32 +134,55 @@ def write_report(sweep: Sweep, out: Path, rows: list[dict], heatmap=None) -> dic
         figures.append(("heatmap.png", f"success over `{axes[0]}` × `{axes[1]}`"))
     if entries:
         plot_curves(out / "curves.png", sweep, out, rows, entries[: sweep.top])
-        figures.append(("curves.png", f"learning curves of the top {min(sweep.top, len(entries))} configurations"))
+        figures.append(
+            (
+                "curves.png",
+                f"learning curves of the top {min(sweep.top, len(entries))} configurations",
+            )
+        )
     seeds = ", ".join(map(str, sweep.seeds))
     lines = [
-        "# Sweep summary", "",
+        "# Sweep summary",
+        "",
         f"{len(sweep.members)} configurations × {len(sweep.seeds)} seeds ({seeds}) = {sweep.num_agents} agents "
         f"in {len(sweep.groups)} group(s) of equal static settings; {len(rows)} agents finished, "
         f"in {len(chunk_wall)} chunks.",
         f"{steps:,.0f} env steps; chunk wall time {wall:.1f} s in all (compilation included)"
         + (f", {steps / wall / 1e6:.3f} M env-steps/s." if wall > 0 else "."),
-        "Axes: " + ", ".join(f"`{a.path}` ({a.kind}{', ' + str(len(a.values)) + ' values' if a.kind == 'grid' else ''})"
-                             for a in sweep.axes) + ".",
+        "Axes: "
+        + ", ".join(
+            f"`{a.path}` ({a.kind}{', ' + str(len(a.values)) + ' values' if a.kind == 'grid' else ''})"
+            for a in sweep.axes
+        )
+        + ".",
         "",
         "Ranked by mean greedy strict success on the agent's raw moves (eval.json's `success_raw`, not "
         "smoothed) on the test layouts (five thesis obstacles × three pivot conditions) over seeds; held-out: triangle and half-circle only. Train return: mean episode return "
         "over the last tenth of training. Episodes to 90 %: episodes finished when the training success rate "
-        "first reached 90 % (mean over the seeds that reached it).", "",
-        *_table(sweep, entries), "",
+        "first reached 90 % (mean over the seeds that reached it).",
+        "",
+        *_table(sweep, entries),
+        "",
     ]
     bad = [e for e in entries if e["diverged"]]
     if bad:
-        lines += ["Diverged (NaN or infinite parameters or loss): "
-                  + "; ".join(f"config {e['config_id']} ({e['label']}): {e['diverged']}/{e['seeds']} seeds" for e in bad), ""]
+        lines += [
+            "Diverged (NaN or infinite parameters or loss): "
+            + "; ".join(
+                f"config {e['config_id']} ({e['label']}): {e['diverged']}/{e['seeds']} seeds"
+                for e in bad
+            ),
+            "",
+        ]
     lines += [f"![{text}]({name})" for name, text in figures]
     R.atomic_write(out / "summary.md", "\n".join(lines) + "\n")
-    return {"ranking": entries, "agents": len(rows), "env_steps": steps, "chunk_wall_s": wall,
-            "figures": [f for f, _ in figures]}
+    return {
+        "ranking": entries,
+        "agents": len(rows),
+        "env_steps": steps,
+        "chunk_wall_s": wall,
+        "figures": [f for f, _ in figures],
+    }
 
 
 def _axis_levels(values: list):
@@ -137,7 +203,9 @@ def _pyplot():
     return plt
 
 
-def plot_heatmap(path: Path, sweep: Sweep, entries: list[dict], axes: tuple[str, str], rows: list[dict]) -> None:
+def plot_heatmap(
+    path: Path, sweep: Sweep, entries: list[dict], axes: tuple[str, str], rows: list[dict]
+) -> None:
     """Mean success over two axes; with ``seed`` as the second axis, each seed's own success (the
     report's choice for a one-axis sweep)."""
     plt = _pyplot()
@@ -145,10 +213,15 @@ def plot_heatmap(path: Path, sweep: Sweep, entries: list[dict], axes: tuple[str,
     kinds["seed"] = "grid"
     for a in axes:
         if a not in kinds:
-            raise ConfigError(f"heatmap: {a!r} is not an axis of this sweep (axes: {', '.join(kinds)})")
+            raise ConfigError(
+                f"heatmap: {a!r} is not an axis of this sweep (axes: {', '.join(kinds)})"
+            )
     xa, ya = axes
     if ya == "seed":
-        points = [(sweep.members[int(r["config_id"])].values[xa], int(r["seed"]), float(r["success"])) for r in rows]
+        points = [
+            (sweep.members[int(r["config_id"])].values[xa], int(r["seed"]), float(r["success"]))
+            for r in rows
+        ]
     else:
         points = [(e["values"][xa], e["values"][ya], e["success_mean"]) for e in entries]
     fig, ax = plt.subplots(figsize=(7, 5.5))
@@ -167,8 +240,15 @@ def plot_heatmap(path: Path, sweep: Sweep, entries: list[dict], axes: tuple[str,
         for i in range(len(ys)):
             for j in range(len(xs)):
                 if cnt[i, j]:
-                    ax.text(j, i, f"{grid[i, j]:.2f}", ha="center", va="center",
-                            color="white" if grid[i, j] < 0.6 else "black", fontsize=9)
+                    ax.text(
+                        j,
+                        i,
+                        f"{grid[i, j]:.2f}",
+                        ha="center",
+                        va="center",
+                        color="white" if grid[i, j] < 0.6 else "black",
+                        fontsize=9,
+                    )
     else:
         coords = []
         for k, axis in ((0, xa), (1, ya)):
@@ -178,12 +258,18 @@ def plot_heatmap(path: Path, sweep: Sweep, entries: list[dict], axes: tuple[str,
                 lo, hi = min(coords[-1]), max(coords[-1])
                 if kinds[axis] == "random" and lo > 0 and hi / lo > 20:
                     (ax.set_xscale if k == 0 else ax.set_yscale)("log")
-            else:   # categorical: one position per level, labelled
+            else:  # categorical: one position per level, labelled
                 levels = _axis_levels(vals)
                 coords.append([float(levels.index(format_value(v))) for v in vals])
                 (ax.set_xticks if k == 0 else ax.set_yticks)(range(len(levels)), levels)
-        im = ax.scatter(coords[0], coords[1], c=[p[2] for p in points], cmap="viridis", vmin=0.0, vmax=1.0, s=60)
-    fig.colorbar(im, ax=ax, label="greedy success" + (" (mean over seeds and other axes)" if ya != "seed" else ""))
+        im = ax.scatter(
+            coords[0], coords[1], c=[p[2] for p in points], cmap="viridis", vmin=0.0, vmax=1.0, s=60
+        )
+    fig.colorbar(
+        im,
+        ax=ax,
+        label="greedy success" + (" (mean over seeds and other axes)" if ya != "seed" else ""),
+    )
     ax.set_xlabel(xa)
     ax.set_ylabel(ya)
     ax.set_title("Sweep: success on the test layouts")
@@ -207,14 +293,18 @@ def plot_curves(path: Path, sweep: Sweep, out: Path, rows: list[dict], entries: 
     if names is not None:
         col = {m: i for i, m in enumerate(names)}
         for rank_i, e in enumerate(entries, 1):
-            c = np.stack(curves[e["config_id"]])          # (seeds, bins, metrics): sums per bin
+            c = np.stack(curves[e["config_id"]])  # (seeds, bins, metrics): sums per bin
             ep = c[..., col["episodes"]]
             x = np.cumsum(ep, axis=1).mean(0)
             ok = (ep > 0).any(0)
             n = np.maximum((ep > 0).sum(0), 1)
             # Mean over the seeds that finished episodes in the bin.
-            rate = (np.where(ep > 0, c[..., col["successes"]] / np.maximum(ep, 1), 0.0).sum(0) / n)[ok]
-            ret = (np.where(ep > 0, c[..., col["return_sum"]] / np.maximum(ep, 1), 0.0).sum(0) / n)[ok]
+            rate = (np.where(ep > 0, c[..., col["successes"]] / np.maximum(ep, 1), 0.0).sum(0) / n)[
+                ok
+            ]
+            ret = (np.where(ep > 0, c[..., col["return_sum"]] / np.maximum(ep, 1), 0.0).sum(0) / n)[
+                ok
+            ]
             label = f"#{rank_i} config {e['config_id']}: {e['label']}"
             a1.plot(x[ok], rate, label=label)
             a2.plot(x[ok], ret, label=label)
@@ -261,9 +351,14 @@ def export_best(sweep: Sweep, out: Path, rows: list[dict]) -> dict:
     cid, seed = int(best_row["config_id"]), int(best_row["seed"])
     best = Path(out) / "best"
     _export_agent(sweep, R.load_chunk(out, int(best_row["chunk"])), best_row, best)
-    selection = {"config_id": cid, "seed": seed, "label": sweep.members[cid].label,
-                 "success": float(best_row["success"]), "held_out_success": float(best_row["held_out_success"]),
-                 "mean_success_over_seeds": e["success_mean"]}
+    selection = {
+        "config_id": cid,
+        "seed": seed,
+        "label": sweep.members[cid].label,
+        "success": float(best_row["success"]),
+        "held_out_success": float(best_row["held_out_success"]),
+        "mean_success_over_seeds": e["success_mean"],
+    }
     atomic_write(best / "selection.json", json.dumps(selection, indent=1) + "\n")
     return selection
 
@@ -296,9 +391,17 @@ def export_all(sweep: Sweep, out: Path, rows: list[dict]) -> dict:
             if cid not in trainers:
                 trainers[cid] = Trainer(sweep.members[cid].config)
             _export_agent(sweep, chunk, r, dest, trainers[cid])
-        index.append({"config_id": cid, "seed": seed, "label": sweep.members[cid].label,
-                      "dir": str(dest.relative_to(out)), "exported": not diverged,
-                      "success": float(r["success"]), "held_out_success": float(r["held_out_success"])})
+        index.append(
+            {
+                "config_id": cid,
+                "seed": seed,
+                "label": sweep.members[cid].label,
+                "dir": str(dest.relative_to(out)),
+                "exported": not diverged,
+                "success": float(r["success"]),
+                "held_out_success": float(r["held_out_success"]),
+            }
+        )
     index.sort(key=lambda e: (e["config_id"], e["seed"]))
     atomic_write(Path(out) / AGENTS / "index.json", json.dumps(index, indent=1) + "\n")
     return {"agents": len(index), "exported": sum(e["exported"] for e in index)}

@@ -38,16 +38,32 @@ IDENTITY = ("config_id", "seed", "group", "chunk", "label")
 # eval_return: their mean return; train_success/train_return: the last tenth of training (behaviour
 # policy); episodes_to_90: episodes finished when training success first reached 90 % (nan: never);
 # diverged: 1 if the parameters or the loss became NaN or infinite.
-SCALARS = ("success", "accuracy", "held_out_success", "held_out_accuracy", "eval_return", "train_success",
-           "train_return", "episodes_to_90", "episodes", "env_steps", "updates", "diverged")
+SCALARS = (
+    "success",
+    "accuracy",
+    "held_out_success",
+    "held_out_accuracy",
+    "eval_return",
+    "train_success",
+    "train_return",
+    "episodes_to_90",
+    "episodes",
+    "env_steps",
+    "updates",
+    "diverged",
+)
 INTEGER = ("episodes", "env_steps", "updates", "diverged")
 
 
 def hyper_columns(sweep: Sweep) -> list[str]:
     """The axes, then every hyperparameter (train.* vmappable ones, every reward.* field)."""
     cols = [a.path for a in sweep.axes]
-    cols += [c for c in [f"train.{f}" for f in HYPER_FIELDS] + [f"reward.{f.name}" for f in fields(RewardConfig)]
-             if c not in cols]
+    cols += [
+        c
+        for c in [f"train.{f}" for f in HYPER_FIELDS]
+        + [f"reward.{f.name}" for f in fields(RewardConfig)]
+        if c not in cols
+    ]
     return cols
 
 
@@ -78,8 +94,13 @@ def chunk_rows(sweep: Sweep, result: dict, group_of: dict) -> list[dict]:
     hcols = hyper_columns(sweep)
     for i, (cid, seed) in enumerate(result["agents"]):
         m = sweep.members[cid]
-        row = {"config_id": str(cid), "seed": str(seed), "group": str(group_of[cid]), "chunk": str(result["chunk_id"]),
-               "label": m.label}
+        row = {
+            "config_id": str(cid),
+            "seed": str(seed),
+            "group": str(group_of[cid]),
+            "chunk": str(result["chunk_id"]),
+            "label": m.label,
+        }
         row.update((c, _text(_config_value(m.config, c))) for c in hcols)
         for k in SCALARS:
             x = float(result["scalars"][k][i])
@@ -129,14 +150,21 @@ def save_chunk(out: Path, result: dict) -> None:
     path = chunk_path(out, result["chunk_id"])
     path.parent.mkdir(parents=True, exist_ok=True)
     buf = io.BytesIO()
-    np.savez(buf, agents=np.asarray(result["agents"], np.int64), curves=result["curves"],
-             metrics=np.asarray(result["metrics"], dtype=str),
-             **{f"params/{k}": v for k, v in result["params"].items()})
+    np.savez(
+        buf,
+        agents=np.asarray(result["agents"], np.int64),
+        curves=result["curves"],
+        metrics=np.asarray(result["metrics"], dtype=str),
+        **{f"params/{k}": v for k, v in result["params"].items()},
+    )
     atomic_write(path, buf.getvalue())
 
 
 def load_chunk(out: Path, chunk_id: int) -> dict:
     with np.load(chunk_path(out, chunk_id), allow_pickle=False) as z:
-        return {"agents": [tuple(a) for a in z["agents"].tolist()], "curves": z["curves"],
-                "metrics": [str(m) for m in z["metrics"]],
-                "params": {k[len("params/"):]: z[k] for k in z.files if k.startswith("params/")}}
+        return {
+            "agents": [tuple(a) for a in z["agents"].tolist()],
+            "curves": z["curves"],
+            "metrics": [str(m) for m in z["metrics"]],
+            "params": {k[len("params/") :]: z[k] for k in z.files if k.startswith("params/")},
+        }

@@ -28,7 +28,9 @@ from jaxexo.sweep.spec import Sweep, sweep_from_dict
 BACKENDS = ("local", "ray")
 
 
-def _prepare(sweep: Sweep, out: Path, resume: bool, devices: int, budget: int) -> tuple[dict, list[dict]]:
+def _prepare(
+    sweep: Sweep, out: Path, resume: bool, devices: int, budget: int
+) -> tuple[dict, list[dict]]:
     """The plan (new, or the stored one on resume) and the rows of the chunks already finished."""
     plan_path, results = out / R.PLAN, out / R.RESULTS
     if resume:
@@ -36,27 +38,41 @@ def _prepare(sweep: Sweep, out: Path, resume: bool, devices: int, budget: int) -
             raise ConfigError(f"--resume: {out} holds no sweep to resume (no {R.PLAN})")
         plan = json.loads(plan_path.read_text())
         if plan["fingerprint"] != sweep.fingerprint():
-            raise ConfigError(f"--resume: the sweep differs from the one in {out} (axes, seeds or base config "
-                              "changed); resume with the same sweep file or pick a new --out")
+            raise ConfigError(
+                f"--resume: the sweep differs from the one in {out} (axes, seeds or base config "
+                "changed); resume with the same sweep file or pick a new --out"
+            )
         chunks = {c["chunk_id"]: Chunk.from_json(c) for c in plan["chunks"]}
         rows = R.read_rows(results)
         by_chunk: dict = {}
         for r in rows:
             by_chunk.setdefault(int(r["chunk"]), []).append(r)
-        done = {c for c, rs in by_chunk.items()
-                if c in chunks and len(rs) == len(chunks[c].agents) and R.chunk_path(out, c).exists()}
+        done = {
+            c
+            for c, rs in by_chunk.items()
+            if c in chunks and len(rs) == len(chunks[c].agents) and R.chunk_path(out, c).exists()
+        }
         rows = [r for r in rows if int(r["chunk"]) in done]
-        R.write_rows(results, R.columns(sweep), rows)   # drops rows of unfinished chunks, torn lines
+        R.write_rows(results, R.columns(sweep), rows)  # drops rows of unfinished chunks, torn lines
         return plan, rows
     if plan_path.exists():
-        raise ConfigError(f"--out: {out} already holds a sweep; pass --resume to continue it or pick a new folder")
+        raise ConfigError(
+            f"--out: {out} already holds a sweep; pass --resume to continue it or pick a new folder"
+        )
     present = contents(out)
     if present:
-        raise RunDirError(f"--out: {out} is not empty ({describe(present)}) and holds no sweep ({R.PLAN}); a new "
-                          "sweep needs an empty or absent directory: pick another --out, or move those files away")
+        raise RunDirError(
+            f"--out: {out} is not empty ({describe(present)}) and holds no sweep ({R.PLAN}); a new "
+            "sweep needs an empty or absent directory: pick another --out, or move those files away"
+        )
     chunks = make_plan(sweep, devices, budget)
-    plan = {"fingerprint": sweep.fingerprint(), "devices": devices, "memory_budget": budget,
-            "agents": sweep.num_agents, "chunks": [c.to_json() for c in chunks]}
+    plan = {
+        "fingerprint": sweep.fingerprint(),
+        "devices": devices,
+        "memory_budget": budget,
+        "agents": sweep.num_agents,
+        "chunks": [c.to_json() for c in chunks],
+    }
     out.mkdir(parents=True, exist_ok=True)
     R.atomic_write(out / R.SWEEP_FILE, json.dumps(sweep.to_dict(), indent=1) + "\n")
     R.write_rows(results, R.columns(sweep), [])
@@ -64,10 +80,21 @@ def _prepare(sweep: Sweep, out: Path, resume: bool, devices: int, budget: int) -
     return plan, []
 
 
-def run_sweep(sweep: Sweep, out: str | Path, *, resume: bool = False, backend: str = "local",
-              address: str | None = None, memory_budget: int | None = None, task_cpus: int | None = None,
-              progress: bool = True, export_best: bool = False, export_all: bool = False, heatmap=None,
-              devices=None) -> dict:
+def run_sweep(
+    sweep: Sweep,
+    out: str | Path,
+    *,
+    resume: bool = False,
+    backend: str = "local",
+    address: str | None = None,
+    memory_budget: int | None = None,
+    task_cpus: int | None = None,
+    progress: bool = True,
+    export_best: bool = False,
+    export_all: bool = False,
+    heatmap=None,
+    devices=None,
+) -> dict:
     """Run (or finish) the sweep into ``out``; write the report; return the report's figures.
 
     ``devices``: local backend only, the JAX devices to split chunks over (default: all local ones).
@@ -79,8 +106,10 @@ def run_sweep(sweep: Sweep, out: str | Path, *, resume: bool = False, backend: s
     if heatmap is not None:
         axes = [a.path for a in sweep.axes] + ["seed"]
         if len(heatmap) != 2 or any(h not in axes for h in heatmap) or heatmap[0] == heatmap[1]:
-            raise ConfigError(f"--heatmap: expected two different axes of the sweep ({', '.join(axes)}), "
-                              f"got {','.join(heatmap)}")
+            raise ConfigError(
+                f"--heatmap: expected two different axes of the sweep ({', '.join(axes)}), "
+                f"got {','.join(heatmap)}"
+            )
     budget = memory_budget or sweep.memory_budget or default_memory_budget()
     if backend == "local":
         import jax
@@ -97,8 +126,10 @@ def run_sweep(sweep: Sweep, out: str | Path, *, resume: bool = False, backend: s
         done = {int(r["chunk"]) for r in rows}
         pending = [c for c in chunks if c.chunk_id not in done]
         if backend == "local" and plan["devices"] != n_dev:
-            raise ConfigError(f"--resume: the sweep was planned for {plan['devices']} device(s), this process has "
-                              f"{n_dev}; resume it on the same number of CPU devices")
+            raise ConfigError(
+                f"--resume: the sweep was planned for {plan['devices']} device(s), this process has "
+                f"{n_dev}; resume it on the same number of CPU devices"
+            )
         group_of = {cid: g.group_id for g in sweep.groups for cid in g.config_ids}
         cols = R.columns(sweep)
 
@@ -106,10 +137,17 @@ def run_sweep(sweep: Sweep, out: str | Path, *, resume: bool = False, backend: s
         if progress:
             from tqdm.auto import tqdm
 
-            bar = tqdm(total=sweep.num_agents, initial=len(rows), unit="agent", dynamic_ncols=True,
-                       desc=f"sweep ({len(chunks)} chunks, {backend})")
+            bar = tqdm(
+                total=sweep.num_agents,
+                initial=len(rows),
+                unit="agent",
+                dynamic_ncols=True,
+                desc=f"sweep ({len(chunks)} chunks, {backend})",
+            )
         t_start, steps_run = time.perf_counter(), 0.0
-        best = max((float(r["success"]) for r in rows if r["diverged"] == "0"), default=float("-inf"))
+        best = max(
+            (float(r["success"]) for r in rows if r["diverged"] == "0"), default=float("-inf")
+        )
         diverged = sum(int(r["diverged"]) for r in rows)
 
         def finished(result: dict) -> None:
@@ -123,8 +161,11 @@ def run_sweep(sweep: Sweep, out: str | Path, *, resume: bool = False, backend: s
             diverged += sum(int(r["diverged"]) for r in new)
             if bar is not None:
                 bar.update(len(new))
-                bar.set_postfix(steps_per_s=f"{steps_run / (time.perf_counter() - t_start):.3g}",
-                                best_success=f"{best:.3f}", diverged=diverged)
+                bar.set_postfix(
+                    steps_per_s=f"{steps_run / (time.perf_counter() - t_start):.3g}",
+                    best_success=f"{best:.3f}",
+                    diverged=diverged,
+                )
 
         if pending:
             if backend == "local":
@@ -169,8 +210,10 @@ def ray_chunk_task(sweep_dict: dict, chunk: dict, devices: int) -> dict:
 
     local = jax.local_devices()
     if len(local) < devices:
-        raise RuntimeError(f"this Ray worker has {len(local)} JAX device(s), the sweep was planned for {devices}; "
-                           "start workers without XLA_FLAGS forcing another host device count")
+        raise RuntimeError(
+            f"this Ray worker has {len(local)} JAX device(s), the sweep was planned for {devices}; "
+            "start workers without XLA_FLAGS forcing another host device count"
+        )
     key = json.dumps(sweep_dict, sort_keys=True, default=repr)
     if key not in _WORKER_SWEEPS:
         _WORKER_SWEEPS.clear()
@@ -178,17 +221,25 @@ def ray_chunk_task(sweep_dict: dict, chunk: dict, devices: int) -> dict:
     return run_chunk(_WORKER_SWEEPS[key], Chunk.from_json(chunk), local[:devices])
 
 
-def _run_ray(sweep: Sweep, pending: list[Chunk], devices: int, address: str | None, finished) -> None:
+def _run_ray(
+    sweep: Sweep, pending: list[Chunk], devices: int, address: str | None, finished
+) -> None:
     try:
         import ray
     except ImportError:
-        raise ConfigError("--backend ray: Ray is not installed (pip install 'jaxexo[distributed]')") from None
+        raise ConfigError(
+            "--backend ray: Ray is not installed (pip install 'jaxexo[distributed]')"
+        ) from None
     started = not ray.is_initialized()
     if started:
         if address:
             ray.init(address=address, logging_level="WARNING")
         else:
-            ray.init(num_cpus=max(devices, local_cpu_count()), include_dashboard=False, logging_level="WARNING")
+            ray.init(
+                num_cpus=max(devices, local_cpu_count()),
+                include_dashboard=False,
+                logging_level="WARNING",
+            )
     try:
         task = ray.remote(num_cpus=devices, max_retries=0)(ray_chunk_task)
         spec = ray.put(sweep.to_dict())

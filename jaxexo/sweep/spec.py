@@ -47,12 +47,30 @@ from typing import Any
 
 import numpy as np
 
-from jaxexo.config import Config, ConfigError, check_seed, config_from_dict, declared_fields, static_settings, validate
+from jaxexo.config import (
+    Config,
+    ConfigError,
+    check_seed,
+    config_from_dict,
+    declared_fields,
+    static_settings,
+    validate,
+)
 from jaxexo.config.input_files import InputFileError, read_text_input
 
 SECTIONS = ("env", "kinematics", "reward", "layout", "train")
-SWEEP_KEYS = ("base", "seeds", "samples", "sample_seed", "grid", "random", "heatmap", "top", "chunk_size",
-              "memory_budget")
+SWEEP_KEYS = (
+    "base",
+    "seeds",
+    "samples",
+    "sample_seed",
+    "grid",
+    "random",
+    "heatmap",
+    "top",
+    "chunk_size",
+    "memory_budget",
+)
 RANDOM_KEYS = ("low", "high", "log", "choices")
 # Configurations of one sweep (grid points x samples), counted from the axes before any is built.
 MAX_CONFIGURATIONS = 10_000
@@ -61,16 +79,16 @@ _AXIS = re.compile(r"([a-z_]+)\.([a-z_0-9]+)(?:\[(\d+)\])?")
 
 @dataclass(frozen=True)
 class Axis:
-    path: str                  # "train.lr", "reward.traj_weights[3]"
+    path: str  # "train.lr", "reward.traj_weights[3]"
     section: str
     field: str
     index: int | None
-    kind: str                  # "grid" or "random"
-    values: tuple = ()         # grid: the values; random: the choices (if any)
-    low: float | None = None   # random range
+    kind: str  # "grid" or "random"
+    values: tuple = ()  # grid: the values; random: the choices (if any)
+    low: float | None = None  # random range
     high: float | None = None
     log: bool = False
-    integer: bool = False      # random range over an integer field: integers in [low, high]
+    integer: bool = False  # random range over an integer field: integers in [low, high]
 
     @property
     def where(self) -> str:
@@ -102,8 +120,8 @@ class Group:
 
 @dataclass(frozen=True)
 class Sweep:
-    raw: dict                  # the merged base config table (without [sweep])
-    table: dict                # the [sweep] table as written (base resolved)
+    raw: dict  # the merged base config table (without [sweep])
+    table: dict  # the [sweep] table as written (base resolved)
     axes: tuple[Axis, ...]
     seeds: tuple[int, ...]
     members: tuple[Member, ...]
@@ -119,14 +137,21 @@ class Sweep:
 
     def fingerprint(self) -> str:
         """Hash of everything that decides the results (not the report options or the chunking)."""
-        keep = {k: v for k, v in self.table.items() if k in ("seeds", "samples", "sample_seed", "grid", "random")}
+        keep = {
+            k: v
+            for k, v in self.table.items()
+            if k in ("seeds", "samples", "sample_seed", "grid", "random")
+        }
         text = json.dumps({"raw": self.raw, "sweep": keep}, sort_keys=True, default=repr)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
     def to_dict(self) -> dict:
         """The self-contained sweep (base merged in), which ``sweep_from_dict`` rebuilds exactly: what
         a Ray worker receives."""
-        return {**copy.deepcopy(self.raw), "sweep": {k: v for k, v in self.table.items() if k != "base"}}
+        return {
+            **copy.deepcopy(self.raw),
+            "sweep": {k: v for k, v in self.table.items() if k != "base"},
+        }
 
 
 def format_value(v: Any) -> str:
@@ -157,7 +182,11 @@ def deep_merge(base: dict, over: dict) -> dict:
     """``over`` on top of ``base``: tables merge key by key, any other value replaces."""
     out = copy.deepcopy(base)
     for k, v in over.items():
-        out[k] = deep_merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else copy.deepcopy(v)
+        out[k] = (
+            deep_merge(out[k], v)
+            if isinstance(v, dict) and isinstance(out.get(k), dict)
+            else copy.deepcopy(v)
+        )
     return out
 
 
@@ -208,16 +237,24 @@ def sweep_from_dict(raw: dict) -> Sweep:
     if any(m.config.train.population != 1 for m in members):
         # A sweep's agents are its configurations x [sweep] seeds; each trains once, its final parameters
         # kept. A population inside a sweep cell would be a second, silent seed axis.
-        raise ConfigError("train.population: a sweep trains its seeds itself (sweep.seeds); population must be 1 "
-                          "in a sweep (use `jaxexo train --population K` for a population of one config)")
+        raise ConfigError(
+            "train.population: a sweep trains its seeds itself (sweep.seeds); population must be 1 "
+            "in a sweep (use `jaxexo train --population K` for a population of one config)"
+        )
     paths = [a.path for a in axes]
     heatmap = tuple(table.get("heatmap", paths[:2]))
     if "heatmap" in table:
-        if not isinstance(table["heatmap"], list) or len(heatmap) != 2 or not all(isinstance(h, str) for h in heatmap):
+        if (
+            not isinstance(table["heatmap"], list)
+            or len(heatmap) != 2
+            or not all(isinstance(h, str) for h in heatmap)
+        ):
             raise ConfigError(f"sweep.heatmap: expected two axis names, got {table['heatmap']!r}")
         for h in heatmap:
             if h not in paths:
-                raise ConfigError(f"sweep.heatmap: {h!r} is not an axis of this sweep (axes: {', '.join(paths)})")
+                raise ConfigError(
+                    f"sweep.heatmap: {h!r} is not an axis of this sweep (axes: {', '.join(paths)})"
+                )
         if heatmap[0] == heatmap[1]:
             raise ConfigError("sweep.heatmap: needs two different axes")
     top = _int("sweep.top", table.get("top", 5), minimum=1)
@@ -225,9 +262,18 @@ def sweep_from_dict(raw: dict) -> Sweep:
     chunk = None if chunk is None else _int("sweep.chunk_size", chunk, minimum=1)
     budget = table.get("memory_budget")
     budget = None if budget is None else parse_bytes(budget, "sweep.memory_budget")
-    return Sweep(raw=raw, table=table, axes=axes, seeds=seeds, members=members,
-                 groups=group_members(members, seeds), heatmap=heatmap, top=top, chunk_size=chunk,
-                 memory_budget=budget)
+    return Sweep(
+        raw=raw,
+        table=table,
+        axes=axes,
+        seeds=seeds,
+        members=members,
+        groups=group_members(members, seeds),
+        heatmap=heatmap,
+        top=top,
+        chunk_size=chunk,
+        memory_budget=budget,
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -250,7 +296,10 @@ def _seeds(v: Any) -> tuple[int, ...]:
         return tuple(range(n))
     if not isinstance(v, list) or not v:
         raise ConfigError(f"sweep.seeds: expected a count or a non-empty list of seeds, got {v!r}")
-    seeds = tuple(check_seed(_int(f"sweep.seeds[{i}]", s, minimum=0), f"sweep.seeds[{i}]") for i, s in enumerate(v))
+    seeds = tuple(
+        check_seed(_int(f"sweep.seeds[{i}]", s, minimum=0), f"sweep.seeds[{i}]")
+        for i, s in enumerate(v)
+    )
     if len(set(seeds)) != len(seeds):
         raise ConfigError(f"sweep.seeds: seeds repeat: {list(seeds)}")
     return seeds
@@ -260,15 +309,27 @@ def _samples(table: dict, axes) -> int:
     random_axes = any(a.kind == "random" for a in axes)
     if "samples" not in table:
         if random_axes:
-            raise ConfigError("sweep.samples: required with [sweep.random] (random draws per grid point)")
+            raise ConfigError(
+                "sweep.samples: required with [sweep.random] (random draws per grid point)"
+            )
         return 1
     if not random_axes:
         raise ConfigError("sweep.samples: only meaningful with [sweep.random] axes")
     return _int("sweep.samples", table["samples"], minimum=1)
 
 
-_BYTES = {"": 1, "b": 1, "kb": 10**3, "mb": 10**6, "gb": 10**9, "tb": 10**12,
-          "kib": 2**10, "mib": 2**20, "gib": 2**30, "tib": 2**40}
+_BYTES = {
+    "": 1,
+    "b": 1,
+    "kb": 10**3,
+    "mb": 10**6,
+    "gb": 10**9,
+    "tb": 10**12,
+    "kib": 2**10,
+    "mib": 2**20,
+    "gib": 2**30,
+    "tib": 2**40,
+}
 
 
 def parse_bytes(v: Any, where: str = "--memory-budget") -> int:
@@ -278,9 +339,11 @@ def parse_bytes(v: Any, where: str = "--memory-budget") -> int:
     elif isinstance(v, str) and (m := re.fullmatch(r"\s*([0-9]*\.?[0-9]+)\s*([a-zA-Z]*)\s*", v)):
         n, unit = float(m.group(1)), m.group(2).lower()
     else:
-        raise ConfigError(f"{where}: expected a size such as \"4GiB\" or \"512MiB\", got {v!r}")
+        raise ConfigError(f'{where}: expected a size such as "4GiB" or "512MiB", got {v!r}')
     if unit not in _BYTES:
-        raise ConfigError(f"{where}: unknown unit {unit!r} (use B, KiB, MiB, GiB, TiB, KB, MB, GB, TB)")
+        raise ConfigError(
+            f"{where}: unknown unit {unit!r} (use B, KiB, MiB, GiB, TiB, KB, MB, GB, TB)"
+        )
     if not math.isfinite(n) or n <= 0:
         raise ConfigError(f"{where}: must be > 0, got {v!r}")
     return int(n * _BYTES[unit])
@@ -290,21 +353,31 @@ def _parse_axis(key: Any, kind: str, spec: Any, base: Config) -> Axis:
     where = f"sweep.{kind}.{key}"
     m = _AXIS.fullmatch(key) if isinstance(key, str) else None
     if not m:
-        raise ConfigError(f"{where}: an axis is named section.field or section.field[i], e.g. \"train.lr\"")
+        raise ConfigError(
+            f'{where}: an axis is named section.field or section.field[i], e.g. "train.lr"'
+        )
     section, name, index = m.group(1), m.group(2), m.group(3)
     if section not in SECTIONS:
-        raise ConfigError(f"{where}: unknown axis: no config section {section!r} (sections: {', '.join(SECTIONS)})")
+        raise ConfigError(
+            f"{where}: unknown axis: no config section {section!r} (sections: {', '.join(SECTIONS)})"
+        )
     obj = getattr(base, section)
     names = [f.name for f in fields(obj)]
     if name not in names:
-        raise ConfigError(f"{where}: unknown axis: [{section}] has no field {name!r} (known: {', '.join(names)})")
+        raise ConfigError(
+            f"{where}: unknown axis: [{section}] has no field {name!r} (known: {', '.join(names)})"
+        )
     current = getattr(obj, name)
     if index is not None:
         index = int(index)
         if not isinstance(current, tuple) or not all(isinstance(x, (int, float)) for x in current):
-            raise ConfigError(f"{where}: {section}.{name} is not a vector of numbers; sweep it whole")
+            raise ConfigError(
+                f"{where}: {section}.{name} is not a vector of numbers; sweep it whole"
+            )
         if index >= len(current):
-            raise ConfigError(f"{where}: index {index} is out of range ({section}.{name} has {len(current)} elements)")
+            raise ConfigError(
+                f"{where}: index {index} is out of range ({section}.{name} has {len(current)} elements)"
+            )
         current = current[index]
     if kind == "grid":
         if not isinstance(spec, list):
@@ -315,13 +388,17 @@ def _parse_axis(key: Any, kind: str, spec: Any, base: Config) -> Axis:
         for i, v in enumerate(spec):
             k = _value_key(v)
             if k in seen:
-                raise ConfigError(f"{where}: the value {format_value(v)} is listed twice (values {seen[k]} and {i}); "
-                                  "each configuration is trained once, list each value once")
+                raise ConfigError(
+                    f"{where}: the value {format_value(v)} is listed twice (values {seen[k]} and {i}); "
+                    "each configuration is trained once, list each value once"
+                )
             seen[k] = i
         return Axis(key, section, name, index, kind, values=tuple(spec))
     if not isinstance(spec, dict):
-        raise ConfigError(f"{where}: expected a table {{ low = ..., high = ..., log = false }} or {{ choices = [...] }}, "
-                          f"got {spec!r}")
+        raise ConfigError(
+            f"{where}: expected a table {{ low = ..., high = ..., log = false }} or {{ choices = [...] }}, "
+            f"got {spec!r}"
+        )
     unknown = sorted(set(spec) - set(RANDOM_KEYS))
     if unknown:
         raise ConfigError(f"{where}.{unknown[0]}: unknown field (known: {', '.join(RANDOM_KEYS)})")
@@ -329,7 +406,9 @@ def _parse_axis(key: Any, kind: str, spec: Any, base: Config) -> Axis:
         if set(spec) != {"choices"}:
             raise ConfigError(f"{where}: give either choices or a range (low, high), not both")
         if not isinstance(spec["choices"], list) or not spec["choices"]:
-            raise ConfigError(f"{where}.choices: expected a non-empty list, got {spec['choices']!r}")
+            raise ConfigError(
+                f"{where}.choices: expected a non-empty list, got {spec['choices']!r}"
+            )
         return Axis(key, section, name, index, kind, values=tuple(spec["choices"]))
     for k in ("low", "high"):
         if k not in spec:
@@ -348,8 +427,12 @@ def _parse_axis(key: Any, kind: str, spec: Any, base: Config) -> Axis:
         raise ConfigError(f"{where}: {section}.{name} is not a number; use choices = [...]")
     integer = isinstance(current, int)
     if integer and not (float(low).is_integer() and float(high).is_integer()):
-        raise ConfigError(f"{where}: {section}.{name} is an integer field; low and high must be integers")
-    return Axis(key, section, name, index, kind, low=float(low), high=float(high), log=log, integer=integer)
+        raise ConfigError(
+            f"{where}: {section}.{name} is an integer field; low and high must be integers"
+        )
+    return Axis(
+        key, section, name, index, kind, low=float(low), high=float(high), log=log, integer=integer
+    )
 
 
 def _value_key(v: Any):
@@ -368,8 +451,10 @@ def _check_size(axes, samples: int) -> None:
     n = math.prod(sizes)
     if n > MAX_CONFIGURATIONS:
         shape = " x ".join(f"{k:,}" for k in sizes)
-        raise ConfigError(f"sweep.grid: {n:,} configurations ({shape}), more than the {MAX_CONFIGURATIONS:,} a "
-                          "sweep may have; split it into several sweeps")
+        raise ConfigError(
+            f"sweep.grid: {n:,} configurations ({shape}), more than the {MAX_CONFIGURATIONS:,} a "
+            "sweep may have; split it into several sweeps"
+        )
 
 
 def _axes(table: dict, base: Config) -> tuple[Axis, ...]:
@@ -382,11 +467,16 @@ def _axes(table: dict, base: Config) -> tuple[Axis, ...]:
     paths = [a.path for a in axes]
     for p in paths:
         if paths.count(p) > 1:
-            raise ConfigError(f"sweep.random.{p}: already a grid axis (an axis is either grid or random)")
+            raise ConfigError(
+                f"sweep.random.{p}: already a grid axis (an axis is either grid or random)"
+            )
     fields_swept = [(a.section, a.field) for a in axes]
     for a in axes:
-        if a.index is not None and fields_swept.count((a.section, a.field)) > 1 and any(
-                b.index is None and (b.section, b.field) == (a.section, a.field) for b in axes):
+        if (
+            a.index is not None
+            and fields_swept.count((a.section, a.field)) > 1
+            and any(b.index is None and (b.section, b.field) == (a.section, a.field) for b in axes)
+        ):
             raise ConfigError(f"{a.where}: {a.section}.{a.field} is also swept whole")
     if not axes:
         raise ConfigError("sweep.grid: no axes (add [sweep.grid] or [sweep.random] entries)")
@@ -436,7 +526,9 @@ class _Builder:
                         v[a.index] = values[a.path]
                 key = (section, name, _value_key(v))
                 if key not in self.parsed:
-                    self.parsed[key] = self.checks[section][name].check(f"{section}.{name}", copy.deepcopy(v))
+                    self.parsed[key] = self.checks[section][name].check(
+                        f"{section}.{name}", copy.deepcopy(v)
+                    )
                 changes[name] = self.parsed[key]
             sections[section] = dataclasses.replace(obj, **changes)
         cfg = dataclasses.replace(self.base, **sections)
@@ -454,13 +546,17 @@ def _expand(raw: dict, base: Config, axes, samples: int, sample_seed: int) -> tu
         for _ in range(samples if rand else 1):
             values = dict(zip((a.path for a in grid), combo))
             values.update((a.path, _draw(a, rng)) for a in rand)
-            values = {a.path: values[a.path] for a in axes}   # in the order written
+            values = {a.path: values[a.path] for a in axes}  # in the order written
             try:
                 cfg = build(values)
             except ConfigError as e:
-                first = next((a for a in axes if str(e).startswith(f"{a.section}.{a.field}")), axes[0])
-                raise ConfigError(f"{first.where}: configuration {len(members)} "
-                                  f"({', '.join(f'{k}={format_value(v)}' for k, v in values.items())}): {e}") from None
+                first = next(
+                    (a for a in axes if str(e).startswith(f"{a.section}.{a.field}")), axes[0]
+                )
+                raise ConfigError(
+                    f"{first.where}: configuration {len(members)} "
+                    f"({', '.join(f'{k}={format_value(v)}' for k, v in values.items())}): {e}"
+                ) from None
             members.append(Member(len(members), values, cfg))
     return tuple(members)
 
@@ -471,5 +567,7 @@ def group_members(members, seeds) -> tuple[Group, ...]:
     by_sig: dict = {}
     for m in members:
         by_sig.setdefault(static_settings(m.config), []).append(m.config_id)
-    return tuple(Group(g, tuple(ids), tuple((c, s) for c in ids for s in seeds))
-                 for g, ids in enumerate(by_sig.values()))
+    return tuple(
+        Group(g, tuple(ids), tuple((c, s) for c in ids for s in seeds))
+        for g, ids in enumerate(by_sig.values())
+    )

@@ -20,13 +20,18 @@ def use_all_cpu_cores(count: int | None = None) -> int:
     """Ask XLA for one host device per CPU core (or ``count``). Returns the count asked for.
 
     Has no effect if JAX was already imported (a warning says so) or if XLA_FLAGS already sets it."""
-    n = count or (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
+    n = count or (
+        len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    )
     flags = os.environ.get("XLA_FLAGS", "")
     if _FLAG in flags:
         return n
     if "jax" in sys.modules:
-        warnings.warn("jaxexo.train.devices.use_all_cpu_cores() called after JAX was imported; using the "
-                      "devices JAX already has", stacklevel=2)
+        warnings.warn(
+            "jaxexo.train.devices.use_all_cpu_cores() called after JAX was imported; using the "
+            "devices JAX already has",
+            stacklevel=2,
+        )
         return n
     os.environ["XLA_FLAGS"] = f"{flags} {_FLAG}={n}".strip()
     return n
@@ -81,8 +86,11 @@ def use_compilation_cache() -> str | None:
         except OSError as e:
             problem = f"cannot use {path} as the compilation cache ({e.strerror})"
     if problem is not None:
-        warnings.warn(f"{CACHE_ENV}: {problem}; compiling every program (point {CACHE_ENV} at a real folder, or "
-                      "set it to off)", stacklevel=2)
+        warnings.warn(
+            f"{CACHE_ENV}: {problem}; compiling every program (point {CACHE_ENV} at a real folder, or "
+            "set it to off)",
+            stacklevel=2,
+        )
         return None
     jax.config.update("jax_compilation_cache_dir", path)
     if jax.config.jax_compilation_cache_max_size < 0:

@@ -57,12 +57,20 @@ from jaxexo.train.evaluate import make_validator
 from jaxexo.train.trainer import Hyperparams, Trainer
 
 
-def run_training(cfg: Config, out: str | Path, seed: int = 0, resume: bool = False, progress: bool = True,
-                 eval_episodes: int | None = None) -> dict:
+def run_training(
+    cfg: Config,
+    out: str | Path,
+    seed: int = 0,
+    resume: bool = False,
+    progress: bool = True,
+    eval_episodes: int | None = None,
+) -> dict:
     """Train, write the run directory, and return eval.json's content. Holds the directory's lock
     throughout; raises TrainingDiverged (after writing what can be trusted) if the run diverged."""
     out = Path(out)
-    check_seed(seed, "--seed", cfg.train.population)   # before anything is made (PRNGKey overflows past it)
+    check_seed(
+        seed, "--seed", cfg.train.population
+    )  # before anything is made (PRNGKey overflows past it)
     with run_lock(out, "train", create=not resume, scratch=("config.toml",)):
         if cfg.train.population > 1:
             # K agents as one compiled program, the best on validation exported (jaxexo.train.population).
@@ -96,8 +104,10 @@ class OneAgent(Placement):
 
     def check_resume(self, raw, ckpt):
         if raw["book"]["devices"] != self.n_devices:
-            raise ConfigError(f"--resume: the run used {raw['book']['devices']} device(s), this process has "
-                              f"{self.n_devices}; resume it on the same number of CPU devices")
+            raise ConfigError(
+                f"--resume: the run used {raw['book']['devices']} device(s), this process has "
+                f"{self.n_devices}; resume it on the same number of CPU devices"
+            )
 
     def init(self):
         return self.resume(jax.jit(self.trainer.init)(jax.random.PRNGKey(self.seed), self.hyper))
@@ -112,11 +122,15 @@ class OneAgent(Placement):
 
     def restore_track(self, raw, ckpt, params):
         book = raw["book"]
-        return Track(params, np.array([book["best_score"]], np.float64), np.array([book["best_chunk"]], np.int64),
-                     np.zeros(1, np.int64))    # a diverged chunk is never checkpointed
+        return Track(
+            params,
+            np.array([book["best_score"]], np.float64),
+            np.array([book["best_chunk"]], np.int64),
+            np.zeros(1, np.int64),
+        )  # a diverged chunk is never checkpointed
 
     def track_record(self, track):
-        return {}    # the best score and chunk are the book's
+        return {}  # the best score and chunk are the book's
 
     def active(self, ts):
         return np.array([bool(self._active(ts, self.hyper))])
@@ -129,7 +143,11 @@ class OneAgent(Placement):
         return ChunkOut(ts, m[None], np.array([score]), np.array([ok]))
 
     def counts(self, ts):
-        return [run_files.Counters(np.asarray(ts.update), np.asarray(ts.episodes), self.trainer.env_steps(ts))]
+        return [
+            run_files.Counters(
+                np.asarray(ts.update), np.asarray(ts.episodes), self.trainer.env_steps(ts)
+            )
+        ]
 
     def keep_best(self, best, ts, i):
         return ts.params
@@ -149,9 +167,14 @@ class OneAgent(Placement):
     def progress(self, row, out, track, lead, stopped):
         if stopped:
             return dict(diverged=f"chunk {row['chunk']}", loss=row["loss"])
-        return dict(episodes=row["episodes"], steps_per_s=f"{row['env_steps_per_s']:.3g}",
-                    ret=f"{row['return_mean']:.2f}", success_raw=f"{row['success_raw_rate']:.3f}",
-                    eps=f"{row['epsilon']:.3f}", val=f"{row['validation_success_raw']:.3f}")
+        return dict(
+            episodes=row["episodes"],
+            steps_per_s=f"{row['env_steps_per_s']:.3g}",
+            ret=f"{row['return_mean']:.2f}",
+            success_raw=f"{row['success_raw_rate']:.3f}",
+            eps=f"{row['epsilon']:.3f}",
+            val=f"{row['validation_success_raw']:.3f}",
+        )
 
     def select(self, out, track):
         # A chunk that diverged after a finite one leaves that chunk's parameters to export.
@@ -167,12 +190,16 @@ class OneAgent(Placement):
         return {"diverged_chunk": int(track.diverged[0])} if track.diverged[0] else {}
 
     def nothing_exported(self, metrics_path, track):
-        return (f"training diverged in chunk {track.diverged[0]} (non-finite loss or parameters; {metrics_path} row "
-                f"{track.diverged[0]} has \"diverged\": true); no chunk finished with finite parameters, so no policy "
-                f"was exported. Lower train.lr (it is {self.cfg.train.lr:g}) or train.max_grad_norm")
+        return (
+            f"training diverged in chunk {track.diverged[0]} (non-finite loss or parameters; {metrics_path} row "
+            f'{track.diverged[0]} has "diverged": true); no chunk finished with finite parameters, so no policy '
+            f"was exported. Lower train.lr (it is {self.cfg.train.lr:g}) or train.max_grad_norm"
+        )
 
     def diverged_after(self, metrics_path, track):
-        return (f"training diverged in chunk {track.diverged[0]} (non-finite loss or parameters; {metrics_path} row "
-                f"{track.diverged[0]} has \"diverged\": true); policy.npz and eval.json hold the best finite "
-                f"parameters, from chunk {track.chunk[0]} (validation success on raw moves {track.score[0]:.3f}). "
-                f"Lower train.lr (it is {self.cfg.train.lr:g}) or train.max_grad_norm")
+        return (
+            f"training diverged in chunk {track.diverged[0]} (non-finite loss or parameters; {metrics_path} row "
+            f'{track.diverged[0]} has "diverged": true); policy.npz and eval.json hold the best finite '
+            f"parameters, from chunk {track.chunk[0]} (validation success on raw moves {track.score[0]:.3f}). "
+            f"Lower train.lr (it is {self.cfg.train.lr:g}) or train.max_grad_norm"
+        )

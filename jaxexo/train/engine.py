@@ -42,10 +42,10 @@ class Track:
     """Each agent's best chunk so far and the chunk it diverged in: what the export is chosen from and
     what the checkpoint keeps."""
 
-    params: Any            # the best chunks' parameters, in the placement's layout
-    score: np.ndarray      # (K,) float64: their greedy validation success; -1 before any chunk
-    chunk: np.ndarray      # (K,) int64: which chunk (0: none yet)
-    diverged: np.ndarray   # (K,) int64: the chunk the agent diverged in (0: never)
+    params: Any  # the best chunks' parameters, in the placement's layout
+    score: np.ndarray  # (K,) float64: their greedy validation success; -1 before any chunk
+    chunk: np.ndarray  # (K,) int64: which chunk (0: none yet)
+    diverged: np.ndarray  # (K,) int64: the chunk the agent diverged in (0: never)
 
     @classmethod
     def start(cls, params, k: int) -> "Track":
@@ -60,10 +60,10 @@ class Track:
 class ChunkOut:
     """One chunk of every agent, on the host."""
 
-    state: Any             # the placement's state after it
-    metrics: np.ndarray    # (K, n_chunk, len(METRICS)): UpdateMetrics.named reads it
-    score: np.ndarray      # (K,) greedy validation success (meaningless where not finite)
-    finite: np.ndarray     # (K,) bool: the divergence rule (``finite``)
+    state: Any  # the placement's state after it
+    metrics: np.ndarray  # (K, n_chunk, len(METRICS)): UpdateMetrics.named reads it
+    score: np.ndarray  # (K,) greedy validation success (meaningless where not finite)
+    finite: np.ndarray  # (K,) bool: the divergence rule (``finite``)
 
 
 class Placement(abc.ABC):
@@ -138,7 +138,9 @@ class Placement(abc.ABC):
         """What names agent ``i`` in its row."""
 
     @abc.abstractmethod
-    def progress(self, row: dict, out: ChunkOut, track: Track, lead: int | None, stopped: bool) -> dict | None:
+    def progress(
+        self, row: dict, out: ChunkOut, track: Track, lead: int | None, stopped: bool
+    ) -> dict | None:
         """The progress bar's postfix after a chunk (``stopped``: every agent diverged); None: none."""
 
     # The end -------------------------------------------------------------------------------------
@@ -155,7 +157,9 @@ class Placement(abc.ABC):
         """eval.json's fields naming the exported agent."""
 
     @abc.abstractmethod
-    def report(self, exported: int, track: Track, rows: list[dict], counts: list, figures: list) -> dict:
+    def report(
+        self, exported: int, track: Track, rows: list[dict], counts: list, figures: list
+    ) -> dict:
         """eval.json's fields after the exported agent's (``figures``: each agent's test figures)."""
 
     @abc.abstractmethod
@@ -167,8 +171,9 @@ class Placement(abc.ABC):
         """TrainingDiverged's message when the exported agent diverged after its best chunk."""
 
 
-def run_chunks(cfg: Config, out: Path, seed: int, resume: bool, progress: bool, eval_episodes,
-               placement) -> dict:
+def run_chunks(
+    cfg: Config, out: Path, seed: int, resume: bool, progress: bool, eval_episodes, placement
+) -> dict:
     """Train ``placement(cfg, seed)``'s agents in chunks into the (locked) run directory ``out``, export
     and evaluate; return eval.json's content. Raises TrainingDiverged after writing what can be trusted."""
     raw = F.prepare_dir(out, cfg, seed, resume)
@@ -183,7 +188,11 @@ class _Run:
 
     def __init__(self, cfg: Config, out: Path, seed: int, t_start: float, place: Placement):
         self.cfg, self.out, self.seed, self.t_start, self.place = cfg, out, seed, t_start, place
-        self.ckpt, self.book_path, self.metrics_path = out / F.CHECKPOINT, out / F.BOOKKEEPING, out / "metrics.jsonl"
+        self.ckpt, self.book_path, self.metrics_path = (
+            out / F.CHECKPOINT,
+            out / F.BOOKKEEPING,
+            out / "metrics.jsonl",
+        )
         self.rows: list[dict] = []
         self.chunks_done, self.wall_before, self.train_seconds = 0, 0.0, 0.0
 
@@ -196,19 +205,26 @@ class _Run:
         saved = place.saved(ts)
         self.track = Track.start(saved.params, place.size)
         if resume and raw is None:
-            atomic_write(self.metrics_path, "")   # rows of a run that never reached its first checkpoint
+            atomic_write(
+                self.metrics_path, ""
+            )  # rows of a run that never reached its first checkpoint
         self.ts = ts if raw is None else self._restore(raw, saved)
 
     def _restore(self, raw: dict, fresh):
         # A checkpoint of another network or state layout (another config's, a foreign file) must not
         # be poured into this one: flax would accept mismatched shapes silently.
-        for name, template in (("state", serialization.to_state_dict(fresh)),
-                               ("best_params", serialization.to_state_dict(fresh.params))):
+        for name, template in (
+            ("state", serialization.to_state_dict(fresh)),
+            ("best_params", serialization.to_state_dict(fresh.params)),
+        ):
             bad = F.tree_mismatch(template, raw[name])
             if bad:
-                raise CheckpointError(f"{self.ckpt}: does not fit this config's {self.place.noun} ({name}{bad})")
-        self.track = self.place.restore_track(raw, self.ckpt,
-                                              serialization.from_state_dict(fresh.params, raw["best_params"]))
+                raise CheckpointError(
+                    f"{self.ckpt}: does not fit this config's {self.place.noun} ({name}{bad})"
+                )
+        self.track = self.place.restore_track(
+            raw, self.ckpt, serialization.from_state_dict(fresh.params, raw["best_params"])
+        )
         ts = self.place.resume(serialization.from_state_dict(fresh, raw["state"]))
         self.chunks_done = raw["book"]["chunks_done"]
         self.wall_before = F.resumed_clock(self.ckpt, self.book_path, self.chunks_done, self.total)
@@ -222,10 +238,18 @@ class _Run:
         if progress:
             from tqdm.auto import tqdm
 
-            bar = tqdm(total=self.total, initial=self.chunks_done, unit="chunk", dynamic_ncols=True,
-                       desc=self.place.desc)
+            bar = tqdm(
+                total=self.total,
+                initial=self.chunks_done,
+                unit="chunk",
+                dynamic_ncols=True,
+                desc=self.place.desc,
+            )
         try:
-            while self.chunks_done < self.total and (self.place.active(self.ts) & (self.track.diverged == 0)).any():
+            while (
+                self.chunks_done < self.total
+                and (self.place.active(self.ts) & (self.track.diverged == 0)).any()
+            ):
                 if not self._chunk(bar):
                     break
         finally:
@@ -246,9 +270,15 @@ class _Run:
             ok = bool(out.finite[i]) and track.diverged[i] == 0
             if not ok and track.diverged[i] == 0:
                 track.diverged[i] = n
-            agent_rows.append({**F.chunk_row(out.metrics[i], counts[i], n, wall, seconds), **place.label(i),
-                         "diverged": not ok, "validation_success_raw": float(out.score[i]) if ok else None})
-            if ok and out.score[i] >= track.score[i]:       # later chunks win ties
+            agent_rows.append(
+                {
+                    **F.chunk_row(out.metrics[i], counts[i], n, wall, seconds),
+                    **place.label(i),
+                    "diverged": not ok,
+                    "validation_success_raw": float(out.score[i]) if ok else None,
+                }
+            )
+            if ok and out.score[i] >= track.score[i]:  # later chunks win ties
                 track.score[i], track.chunk[i] = float(out.score[i]), n
                 track.params = place.keep_best(track.params, out.state, i)
         lead = place.lead(track)
@@ -272,14 +302,31 @@ class _Run:
         point resumes from a consistent checkpoint (wall time, which differs run to run, stays out)."""
         place, track = self.place, self.track
         i = lead if lead is not None else 0
-        book = {"seed": self.seed, "chunks_done": self.chunks_done, "best_score": float(track.score[i]),
-                "best_chunk": int(track.chunk[i]), "devices": place.n_devices, **place.book}
-        F.checkpoint_write(self.ckpt, pack_checkpoint(serialization.msgpack_serialize({
-            "state": serialization.to_state_dict(place.saved(self.ts)),
-            "best_params": serialization.to_state_dict(track.params),
-            **place.track_record(track),
-            "book": book, "config_toml": config_to_toml(self.cfg)})))
-        F.checkpoint_write(self.book_path, json.dumps({**book, "train_seconds": wall}, indent=1).encode())
+        book = {
+            "seed": self.seed,
+            "chunks_done": self.chunks_done,
+            "best_score": float(track.score[i]),
+            "best_chunk": int(track.chunk[i]),
+            "devices": place.n_devices,
+            **place.book,
+        }
+        F.checkpoint_write(
+            self.ckpt,
+            pack_checkpoint(
+                serialization.msgpack_serialize(
+                    {
+                        "state": serialization.to_state_dict(place.saved(self.ts)),
+                        "best_params": serialization.to_state_dict(track.params),
+                        **place.track_record(track),
+                        "book": book,
+                        "config_toml": config_to_toml(self.cfg),
+                    }
+                )
+            ),
+        )
+        F.checkpoint_write(
+            self.book_path, json.dumps({**book, "train_seconds": wall}, indent=1).encode()
+        )
 
     def finish(self, eval_episodes) -> dict:
         """Choose, plot, export, evaluate, write eval.json; TrainingDiverged where the run diverged."""
@@ -289,18 +336,31 @@ class _Run:
             place.plot(self.out / "training_curve.png", self.rows, exported)
         if exported is None:
             raise TrainingDiverged(place.nothing_exported(self.metrics_path, track))
-        F.export_policy(self.out / "policy.npz", cfg, place.trainer, place.params_of(track.params, exported))
+        F.export_policy(
+            self.out / "policy.npz", cfg, place.trainer, place.params_of(track.params, exported)
+        )
         # Every agent scored by the same compiled evaluation, one at a time (its figures never depend on K).
         evaluate = make_evaluator(cfg, place.trainer.net, eval_episodes or cfg.train.eval_episodes)
-        figures = [evaluate(place.params_of(track.params, i)) if i == exported or track.chunk[i] > 0 else None
-                   for i in range(place.size)]
+        figures = [
+            evaluate(place.params_of(track.params, i))
+            if i == exported or track.chunk[i] > 0
+            else None
+            for i in range(place.size)
+        ]
         counts = place.counts(self.ts)
         result = dict(figures[exported])
-        result.update({"episodes": int(counts[exported].episodes), "env_steps": int(counts[exported].env_steps),
-                       "train_seconds": round(self.train_seconds, 3), **place.identity(exported, self.seed),
-                       "selected_chunk": int(track.chunk[exported]),
-                       "validation_success_raw": float(track.score[exported]), "devices": place.n_devices,
-                       **place.report(exported, track, self.rows, counts, figures)})
+        result.update(
+            {
+                "episodes": int(counts[exported].episodes),
+                "env_steps": int(counts[exported].env_steps),
+                "train_seconds": round(self.train_seconds, 3),
+                **place.identity(exported, self.seed),
+                "selected_chunk": int(track.chunk[exported]),
+                "validation_success_raw": float(track.score[exported]),
+                "devices": place.n_devices,
+                **place.report(exported, track, self.rows, counts, figures),
+            }
+        )
         atomic_write(self.out / "eval.json", json.dumps(result, indent=2) + "\n")
         if track.diverged[exported]:
             raise TrainingDiverged(place.diverged_after(self.metrics_path, track))

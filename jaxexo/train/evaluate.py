@@ -52,7 +52,7 @@ def make_rollouts(env: ExoStepEnv, q_apply, max_steps: int, record: bool = False
         obs, state = jax.vmap(env.init_state, in_axes=(0, None))(layouts, params)
         n = obs.shape[0]
 
-        def rows(alive, x):   # alive (N,) against a leaf with leading axis N
+        def rows(alive, x):  # alive (N,) against a leaf with leading axis N
             return alive.reshape(alive.shape + (1,) * (x.ndim - 1))
 
         def step(carry, _):
@@ -61,25 +61,40 @@ def make_rollouts(env: ExoStepEnv, q_apply, max_steps: int, record: bool = False
             mask = env.action_masks(state, params) if env.shield else None
             a = dynamics.greedy_action(jnp, q_apply(q_params, obs), mask)
             obs2, state2, r, term, info = jax.vmap(env.step_env, in_axes=(None, 0, 0, None))(
-                jax.random.PRNGKey(0), state, a, params)
+                jax.random.PRNGKey(0), state, a, params
+            )
             truncated = jax.vmap(env.is_truncated, in_axes=(0, None))(state2, params)
             out = {
                 "outcome": outcome.accumulate(jnp, out["outcome"], info, alive),
                 "steps": out["steps"] + alive,
                 "return": out["return"] + jnp.where(alive, r, 0.0),
             }
-            state = jax.tree.map(lambda new, old: jnp.where(rows(alive, new), new, old), state2, state)
+            state = jax.tree.map(
+                lambda new, old: jnp.where(rows(alive, new), new, old), state2, state
+            )
             obs = jnp.where(alive[:, None], obs2, obs)
             alive = alive & ~term & ~truncated
             return (state, obs, alive, out), (state.heel if record else None)
 
-        out0 = {"outcome": outcome.start(jnp, (n,)), "steps": jnp.zeros(n, jnp.int32),
-                "return": jnp.zeros(n, jnp.float32)}
-        (_, _, _, out), path = jax.lax.scan(step, (state, obs, jnp.ones(n, bool), out0), None, length=max_steps)
+        out0 = {
+            "outcome": outcome.start(jnp, (n,)),
+            "steps": jnp.zeros(n, jnp.int32),
+            "return": jnp.zeros(n, jnp.float32),
+        }
+        (_, _, _, out), path = jax.lax.scan(
+            step, (state, obs, jnp.ones(n, bool), out0), None, length=max_steps
+        )
         acc = out.pop("outcome")
         v = outcome.episode_verdict(jnp, acc, **outcome.rule(params))
-        out.update(reached=acc["reached_goal"], collided=~v["collision_free"], limits=acc["limits"], leg=acc["leg"],
-                   min_clearance=acc["min_clearance"], accurate=v["collision_free"], success=v["success"])
+        out.update(
+            reached=acc["reached_goal"],
+            collided=~v["collision_free"],
+            limits=acc["limits"],
+            leg=acc["leg"],
+            min_clearance=acc["min_clearance"],
+            accurate=v["collision_free"],
+            success=v["success"],
+        )
         return (out, jnp.swapaxes(path, 0, 1)) if record else out
 
     return rollouts
@@ -103,7 +118,11 @@ def summarize(out: dict, kinds: np.ndarray, pivots: np.ndarray, kind_names=TEST_
     suc = np.asarray(out["success"], bool)
 
     def fig(mask):
-        return {"accuracy": float(acc[mask].mean()), "success_raw": float(suc[mask].mean()), "n": int(mask.sum())}
+        return {
+            "accuracy": float(acc[mask].mean()),
+            "success_raw": float(suc[mask].mean()),
+            "n": int(mask.sum()),
+        }
 
     held = np.isin(np.asarray(kind_names)[kinds], HELD_OUT)
     return {
@@ -111,10 +130,12 @@ def summarize(out: dict, kinds: np.ndarray, pivots: np.ndarray, kind_names=TEST_
         # On the agent's raw greedy moves in the environment (no smoothing); ``jaxexo eval`` reports
         # ``success`` of the final smoothed trajectories on the same scenes.
         "success_raw": float(suc.mean()),
-        "success": float(suc.mean()),   # old name of success_raw, kept for existing readers
+        "success": float(suc.mean()),  # old name of success_raw, kept for existing readers
         "held_out": fig(held) if held.any() else None,
         "by_obstacle": {k: fig(kinds == i) for i, k in enumerate(kind_names) if (kinds == i).any()},
-        "by_pivot": {p: fig(pivots == i) for i, p in enumerate(PIVOT_CONDITIONS) if (pivots == i).any()},
+        "by_pivot": {
+            p: fig(pivots == i) for i, p in enumerate(PIVOT_CONDITIONS) if (pivots == i).any()
+        },
         "mean_steps": float(np.mean(out["steps"])),
         "reached_goal": float(np.mean(out["reached"])),
     }

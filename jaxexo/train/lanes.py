@@ -31,8 +31,15 @@ def over_agents(fn, devices, n_args: int):
     from jax.sharding import Mesh, PartitionSpec as P
 
     spec = P("agents")
-    return jax.jit(jax.shard_map(jax.vmap(fn), mesh=Mesh(np.array(list(devices)), ("agents",)),
-                                 in_specs=(spec,) * n_args, out_specs=spec, check_vma=False))
+    return jax.jit(
+        jax.shard_map(
+            jax.vmap(fn),
+            mesh=Mesh(np.array(list(devices)), ("agents",)),
+            in_specs=(spec,) * n_args,
+            out_specs=spec,
+            check_vma=False,
+        )
+    )
 
 
 def padded_agents(n_agents: int, n_devices: int, lanes: int = LANES) -> int:
@@ -55,7 +62,9 @@ def over_lanes(fn, devices, n_args: int, shared: int = 0, lanes: int = LANES):
         batched, common = args[:n_args], args[n_args:]
         n = jax.tree.leaves(batched)[0].shape[0]
         if n % lanes:
-            raise ValueError(f"over_lanes: {n} agents per device is not a multiple of {lanes} lanes")
+            raise ValueError(
+                f"over_lanes: {n} agents per device is not a multiple of {lanes} lanes"
+            )
         blocks = jax.tree.map(lambda x: x.reshape((n // lanes, lanes) + x.shape[1:]), batched)
         block = jax.vmap(lambda *b: fn(*b, *common))
         out = jax.lax.map(lambda b: block(*b), blocks)
@@ -64,5 +73,12 @@ def over_lanes(fn, devices, n_args: int, shared: int = 0, lanes: int = LANES):
     # Compilation events name the program by this function: keep the agent function's name in it.
     local.__name__ = f"{getattr(fn, '__name__', 'fn')}_in_lanes"
     spec = P("agents")
-    return jax.jit(jax.shard_map(local, mesh=Mesh(np.array(list(devices)), ("agents",)),
-                                 in_specs=(spec,) * n_args + (P(),) * shared, out_specs=spec, check_vma=False))
+    return jax.jit(
+        jax.shard_map(
+            local,
+            mesh=Mesh(np.array(list(devices)), ("agents",)),
+            in_specs=(spec,) * n_args + (P(),) * shared,
+            out_specs=spec,
+            check_vma=False,
+        )
+    )

@@ -18,14 +18,21 @@ from jaxexo.physics.dynamics import NUM_ACTIONS
 NARROW_INPUT = 4
 
 
-def _narrow_dot_general(x, kernel, dimension_numbers, precision=None, preferred_element_type=None, **kw):
+def _narrow_dot_general(
+    x, kernel, dimension_numbers, precision=None, preferred_element_type=None, **kw
+):
     """flax Dense's product ``x @ kernel`` (contracting x's last axis with the kernel's first)."""
     if kernel.shape[0] > NARROW_INPUT:
-        return jax.lax.dot_general(x, kernel, dimension_numbers, precision=precision,
-                                   preferred_element_type=preferred_element_type)
+        return jax.lax.dot_general(
+            x,
+            kernel,
+            dimension_numbers,
+            precision=precision,
+            preferred_element_type=preferred_element_type,
+        )
     out = x[..., 0:1] * kernel[0]
     for i in range(1, kernel.shape[0]):
-        out = out + x[..., i:i + 1] * kernel[i]
+        out = out + x[..., i : i + 1] * kernel[i]
     return out
 
 
@@ -37,7 +44,11 @@ class QNetwork(nn.Module):
     @nn.compact
     def __call__(self, x):
         for i, h in enumerate(self.hidden):
-            x = nn.Dense(h, name=f"dense_{i}", dot_general=_narrow_dot_general if i == 0 else jax.lax.dot_general)(x)
+            x = nn.Dense(
+                h,
+                name=f"dense_{i}",
+                dot_general=_narrow_dot_general if i == 0 else jax.lax.dot_general,
+            )(x)
             if self.layer_norm:
                 x = nn.LayerNorm(name=f"norm_{i}")(x)
             x = nn.relu(x)
@@ -47,7 +58,9 @@ class QNetwork(nn.Module):
 def dense_layers(params) -> list[tuple[jnp.ndarray, jnp.ndarray]]:
     """(kernel, bias) of each Dense layer in order; LayerNorm (scale, bias) come from norm_layers."""
     p = params["params"]
-    names = sorted([k for k in p if k.startswith("dense_")], key=lambda k: int(k.split("_")[1])) + ["out"]
+    names = sorted([k for k in p if k.startswith("dense_")], key=lambda k: int(k.split("_")[1])) + [
+        "out"
+    ]
     return [(p[n]["kernel"], p[n]["bias"]) for n in names]
 
 

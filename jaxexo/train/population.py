@@ -61,7 +61,7 @@ def population_devices(n_members: int, devices) -> list:
     on 2 and 4 devices, not on 1 and 2), so a population never drops to one device because it is
     small: its members then train as they do in a larger population or a sweep on the same machine."""
     devices = list(devices)
-    return devices[:min(len(devices), max(2, -(-n_members // LANES)))]
+    return devices[: min(len(devices), max(2, -(-n_members // LANES)))]
 
 
 class Population:
@@ -74,8 +74,10 @@ class Population:
         self.cfg, self.seeds = cfg, [int(s) for s in seeds]
         if not self.seeds:
             raise ConfigError("train.population: a population needs at least one member")
-        self.trainer = Trainer(cfg)     # one device per member: no data parallelism inside a member
-        self.devices = population_devices(len(self.seeds), devices if devices is not None else jax.local_devices())
+        self.trainer = Trainer(cfg)  # one device per member: no data parallelism inside a member
+        self.devices = population_devices(
+            len(self.seeds), devices if devices is not None else jax.local_devices()
+        )
         self.padded = padded_agents(len(self.seeds), len(self.devices))
         self.n_chunk = n_chunk if n_chunk is not None else F.chunking(cfg, self.trainer)[0]
         hyper = Hyperparams.from_config(cfg)
@@ -100,10 +102,12 @@ class Population:
     def pad(self, tree):
         """Members -> the padded batch (copies of the first member after the real ones)."""
         extra = self.padded - self.size
-        return jax.tree.map(lambda x: np.concatenate([np.asarray(x)] + [np.asarray(x)[:1]] * extra), tree)
+        return jax.tree.map(
+            lambda x: np.concatenate([np.asarray(x)] + [np.asarray(x)[:1]] * extra), tree
+        )
 
     def real(self, tree):
-        return jax.tree.map(lambda x: np.asarray(x)[:self.size], tree)
+        return jax.tree.map(lambda x: np.asarray(x)[: self.size], tree)
 
     def init(self):
         keys = np.stack([np.asarray(jax.random.PRNGKey(s)) for s in self.seeds])
@@ -115,7 +119,7 @@ class Population:
         return self._chunk(ts, self.hyper, self.val_layouts, self.val_params)
 
     def active(self, ts) -> np.ndarray:
-        return np.asarray(self._active(ts, self.hyper))[:self.size]
+        return np.asarray(self._active(ts, self.hyper))[: self.size]
 
 
 def plot_population_curve(path: Path, rows: list[dict], exported: int | None) -> None:
@@ -133,8 +137,15 @@ def plot_population_curve(path: Path, rows: list[dict], exported: int | None) ->
         bold = dict(lw=2.2, zorder=3) if i == exported else dict(lw=0.9, alpha=0.6)
         label = f"seed {mem[0]['seed']}" + (" (exported)" if i == exported else "")
         a1.plot(ep, [m["success_raw_rate"] for m in mem], label=label, **bold)
-        a2.plot(ep, [np.nan if m["validation_success_raw"] is None else m["validation_success_raw"] for m in mem],
-                label=label, **bold)
+        a2.plot(
+            ep,
+            [
+                np.nan if m["validation_success_raw"] is None else m["validation_success_raw"]
+                for m in mem
+            ],
+            label=label,
+            **bold,
+        )
     a1.set_ylabel("training strict success\n(behaviour policy)")
     a1.set_title(f"Population of {len(rows[0]['members'])}: training and validation per member")
     a2.set_ylabel("validation strict success\n(greedy, training layouts)")
@@ -157,7 +168,9 @@ def choose(best_score: np.ndarray, best_chunk: np.ndarray, diverged: np.ndarray)
     return max(ok, key=lambda i: (best_score[i], -i))
 
 
-def run_population(cfg: Config, out: Path, seed: int, resume: bool, progress: bool, eval_episodes) -> dict:
+def run_population(
+    cfg: Config, out: Path, seed: int, resume: bool, progress: bool, eval_episodes
+) -> dict:
     """The population driver, called by ``driver.run_training`` (which holds the directory's lock)."""
     from jaxexo.config.memory import check_memory
 
@@ -175,19 +188,27 @@ class Members(Placement):
     def __init__(self, cfg: Config, seed: int):
         self.cfg, self.size = cfg, cfg.train.population
         self.pop = Population(cfg, range(seed, seed + self.size))
-        self.trainer, self.n_devices, self.book = self.pop.trainer, len(self.pop.devices), {"population": self.size}
+        self.trainer, self.n_devices, self.book = (
+            self.pop.trainer,
+            len(self.pop.devices),
+            {"population": self.size},
+        )
         self.desc = f"train population of {self.size} ({self.n_devices} device(s))"
         self.selection, self.selection_seconds = [], 0.0
 
     def check_resume(self, raw, ckpt):
         if "members" not in raw:
-            raise CheckpointError(f"{ckpt}: a one-agent checkpoint; this config trains a population of {self.size}")
+            raise CheckpointError(
+                f"{ckpt}: a one-agent checkpoint; this config trains a population of {self.size}"
+            )
         if (raw["book"]["devices"] == 1) != (self.n_devices == 1):
             # One device compiles an unpartitioned program, several a partitioned one: their arithmetic
             # differs in the last bits (population_devices), so the rest of the run would not be this run's.
             need = "one CPU device" if raw["book"]["devices"] == 1 else "two or more CPU devices"
-            raise ConfigError(f"--resume: the population ran on {raw['book']['devices']} device(s), this process "
-                              f"gives it {self.n_devices}; resume it with {need}")
+            raise ConfigError(
+                f"--resume: the population ran on {raw['book']['devices']} device(s), this process "
+                f"gives it {self.n_devices}; resume it with {need}"
+            )
 
     def init(self):
         return self.pop.init()
@@ -202,13 +223,25 @@ class Members(Placement):
         members, k = raw["members"], self.size
         for name in ("best_score", "best_chunk", "diverged"):
             if not isinstance(members, dict) or np.shape(members.get(name)) != (k,):
-                raise CheckpointError(f"{ckpt}: the checkpoint's per-member bookkeeping lacks {name!r} for {k} members")
+                raise CheckpointError(
+                    f"{ckpt}: the checkpoint's per-member bookkeeping lacks {name!r} for {k} members"
+                )
         # Copies: arrays restored from msgpack are read-only, these are updated in place.
-        return Track(params, np.array(members["best_score"], np.float64), np.array(members["best_chunk"], np.int64),
-                     np.array(members["diverged"], np.int64))
+        return Track(
+            params,
+            np.array(members["best_score"], np.float64),
+            np.array(members["best_chunk"], np.int64),
+            np.array(members["diverged"], np.int64),
+        )
 
     def track_record(self, track):
-        return {"members": {"best_score": track.score, "best_chunk": track.chunk, "diverged": track.diverged}}
+        return {
+            "members": {
+                "best_score": track.score,
+                "best_chunk": track.chunk,
+                "diverged": track.diverged,
+            }
+        }
 
     def active(self, ts):
         return self.pop.active(ts)
@@ -221,7 +254,9 @@ class Members(Placement):
     def counts(self, ts):
         updates, episodes = np.asarray(ts.update), np.asarray(ts.episodes)
         per = self.trainer.steps_per_update
-        return [F.Counters(updates[i], episodes[i], int(updates[i]) * per) for i in range(self.size)]
+        return [
+            F.Counters(updates[i], episodes[i], int(updates[i]) * per) for i in range(self.size)
+        ]
 
     def keep_best(self, best, ts, i):
         return jax.tree.map(lambda b, p: _set(b, i, np.asarray(p)[i]), best, ts.params)
@@ -233,8 +268,13 @@ class Members(Placement):
         return choose(track.score, track.chunk, track.diverged)
 
     def row(self, chunk, wall, lead, agent_rows):
-        return {"chunk": chunk, "wall_s": wall, "best_member": lead,
-                "env_steps_per_s": float(sum(r["env_steps_per_s"] for r in agent_rows)), "members": agent_rows}
+        return {
+            "chunk": chunk,
+            "wall_s": wall,
+            "best_member": lead,
+            "env_steps_per_s": float(sum(r["env_steps_per_s"] for r in agent_rows)),
+            "members": agent_rows,
+        }
 
     def label(self, i):
         return {"seed": self.pop.seeds[i]}
@@ -243,15 +283,19 @@ class Members(Placement):
         if stopped:
             return None
         i = lead if lead is not None else 0
-        return dict(best=f"seed {self.pop.seeds[i]}: {track.score[i]:.3f}",
-                    val=" ".join(f"{s:.2f}" for s in out.score), diverged=int((track.diverged > 0).sum()))
+        return dict(
+            best=f"seed {self.pop.seeds[i]}: {track.score[i]:.3f}",
+            val=" ".join(f"{s:.2f}" for s in out.score),
+            diverged=int((track.diverged > 0).sum()),
+        )
 
     def select(self, out, track):
         if choose(track.score, track.chunk, track.diverged) is None:
             return None
         t_select = time.perf_counter()
-        exported, self.selection = _choose_for_wearer(self.cfg, out, self.pop, track,
-                                                      lambda i: self.params_of(track.params, i))
+        exported, self.selection = _choose_for_wearer(
+            self.cfg, out, self.pop, track, lambda i: self.params_of(track.params, i)
+        )
         self.selection_seconds = time.perf_counter() - t_select
         return exported
 
@@ -265,30 +309,52 @@ class Members(Placement):
         members = []
         for i in range(self.size):
             f = figures[i]
-            members.append({
-                "seed": self.pop.seeds[i],
-                "validation_curve": [r["members"][i]["validation_success_raw"] for r in rows],
-                "selected_chunk": int(track.chunk[i]),
-                "validation_success_raw": float(track.score[i]) if track.chunk[i] else None,
-                "diverged_chunk": int(track.diverged[i]) or None,
-                "episodes": int(counts[i].episodes), "env_steps": int(counts[i].env_steps),
-                "test": None if f is None else {k: f[k] for k in ("accuracy", "success_raw", "reached_goal", "held_out",
-                                                                  "mean_steps", "by_obstacle")},
-            })
-        return {"population": self.size, "exported_member": exported, "members": members,
-                "selection": self.selection, "selection_seconds": round(self.selection_seconds, 3)}
+            members.append(
+                {
+                    "seed": self.pop.seeds[i],
+                    "validation_curve": [r["members"][i]["validation_success_raw"] for r in rows],
+                    "selected_chunk": int(track.chunk[i]),
+                    "validation_success_raw": float(track.score[i]) if track.chunk[i] else None,
+                    "diverged_chunk": int(track.diverged[i]) or None,
+                    "episodes": int(counts[i].episodes),
+                    "env_steps": int(counts[i].env_steps),
+                    "test": None
+                    if f is None
+                    else {
+                        k: f[k]
+                        for k in (
+                            "accuracy",
+                            "success_raw",
+                            "reached_goal",
+                            "held_out",
+                            "mean_steps",
+                            "by_obstacle",
+                        )
+                    },
+                }
+            )
+        return {
+            "population": self.size,
+            "exported_member": exported,
+            "members": members,
+            "selection": self.selection,
+            "selection_seconds": round(self.selection_seconds, 3),
+        }
 
     def nothing_exported(self, metrics_path, track):
-        return (f"every member of the population of {self.size} diverged (non-finite loss or parameters; "
-                f"{metrics_path}: the members' \"diverged\"), and a diverged member is never exported, so no policy "
-                f"was. Lower train.lr (it is {self.cfg.train.lr:g}) or train.max_grad_norm")
+        return (
+            f"every member of the population of {self.size} diverged (non-finite loss or parameters; "
+            f'{metrics_path}: the members\' "diverged"), and a diverged member is never exported, so no policy '
+            f"was. Lower train.lr (it is {self.cfg.train.lr:g}) or train.max_grad_norm"
+        )
 
     def diverged_after(self, metrics_path, track):
         raise AssertionError("a diverged member is never exported")
 
 
-
-def _choose_for_wearer(cfg: Config, out: Path, pop: Population, track: Track, member_params) -> tuple[int, list[dict]]:
+def _choose_for_wearer(
+    cfg: Config, out: Path, pop: Population, track: Track, member_params
+) -> tuple[int, list[dict]]:
     """The member to export and the selection's record for eval.json: every candidate (a member that
     finished a chunk and never diverged) exported to ``members/seed_<seed>.npz`` and scored as a wearer
     gets it (jaxexo.train.selection); one candidate is exported without a score."""
@@ -298,8 +364,16 @@ def _choose_for_wearer(cfg: Config, out: Path, pop: Population, track: Track, me
     if len(ok) == 1:
         return ok[0], []
     (out / "members").mkdir(exist_ok=True)
-    candidates = [Candidate(pop.seeds[i], float(track.score[i]), F.export_policy(
-        out / "members" / f"seed_{pop.seeds[i]}.npz", cfg, pop.trainer, member_params(i))) for i in ok]
+    candidates = [
+        Candidate(
+            pop.seeds[i],
+            float(track.score[i]),
+            F.export_policy(
+                out / "members" / f"seed_{pop.seeds[i]}.npz", cfg, pop.trainer, member_params(i)
+            ),
+        )
+        for i in ok
+    ]
     scores = wearer_scores(cfg, candidates)
     return ok[choose_for_wearer(scores)], [score_record(s) for s in scores]
 

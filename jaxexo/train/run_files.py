@@ -15,7 +15,12 @@ import numpy as np
 from flax import serialization
 
 from jaxexo.config import Config, ConfigError, config_from_dict, load_config
-from jaxexo.config.input_files import MAX_CHECKPOINT_BYTES, MAX_LOG_BYTES, InputFileError, read_input
+from jaxexo.config.input_files import (
+    MAX_CHECKPOINT_BYTES,
+    MAX_LOG_BYTES,
+    InputFileError,
+    read_input,
+)
 from jaxexo.config.toml_io import config_to_toml
 from jaxexo.env.exo_step import LENGTH_SCALE, THESIS_OBS_CENTER
 from jaxexo.physics import dynamics
@@ -68,7 +73,7 @@ def chunk_row(m: np.ndarray, counts: Counters, chunk: int, wall: float, seconds:
         "episodes": int(counts.episodes),
         "chunk_episodes": int(d.episodes),
         "return_mean": float(d.return_sum) / eps,
-        "success_raw_rate": float(d.successes) / eps,    # behaviour policy, raw moves
+        "success_raw_rate": float(d.successes) / eps,  # behaviour policy, raw moves
         "accuracy": float(d.accurate) / eps,
         "loss": float(d.loss) / n_upd,
         "q_mean": float(d.q_mean) / n_upd,
@@ -94,8 +99,14 @@ def export_policy(path: Path, cfg: Config, trainer: Trainer, params) -> Path:
         "activation": "relu",
         "config_toml": config_to_toml(cfg),
     }
-    return save_policy(path, [w for w, _ in dense], [b for _, b in dense],
-                       [s for s, _ in norms], [b for _, b in norms], meta)
+    return save_policy(
+        path,
+        [w for w, _ in dense],
+        [b for _, b in dense],
+        [s for s, _ in norms],
+        [b for _, b in norms],
+        meta,
+    )
 
 
 def plot_training_curve(path: Path, rows: list[dict]) -> None:
@@ -110,7 +121,12 @@ def plot_training_curve(path: Path, rows: list[dict]) -> None:
     a1.set_ylabel("mean episode return")
     a1.set_title("Training (thesis Fig. 3.4): return and success per chunk")
     a1.grid(alpha=0.3)
-    a2.plot(ep, [r["success_raw_rate"] for r in rows], label="strict success, raw moves", color="tab:green")
+    a2.plot(
+        ep,
+        [r["success_raw_rate"] for r in rows],
+        label="strict success, raw moves",
+        color="tab:green",
+    )
     a2.plot(ep, [r["accuracy"] for r in rows], label="accuracy (eq 3.1)", color="tab:orange")
     a2.set_ylim(-0.02, 1.02)
     a2.set_xlabel("episodes")
@@ -128,7 +144,10 @@ def tree_mismatch(template, loaded, where: str = "") -> str | None:
         if not isinstance(loaded, dict):
             return f"{where or '/'}: expected a table, found {type(loaded).__name__}"
         if set(template) != set(loaded):
-            missing, extra = sorted(set(template) - set(loaded)), sorted(set(loaded) - set(template))
+            missing, extra = (
+                sorted(set(template) - set(loaded)),
+                sorted(set(loaded) - set(template)),
+            )
             return f"{where or '/'}: keys differ (missing {missing[:4]}, unexpected {extra[:4]})"
         for k in template:
             bad = tree_mismatch(template[k], loaded[k], f"{where}/{k}")
@@ -144,7 +163,13 @@ def tree_mismatch(template, loaded, where: str = "") -> str | None:
     return None
 
 
-BOOK_FIELDS = {"seed": int, "chunks_done": int, "best_score": float, "best_chunk": int, "devices": int}
+BOOK_FIELDS = {
+    "seed": int,
+    "chunks_done": int,
+    "best_score": float,
+    "best_chunk": int,
+    "devices": int,
+}
 
 
 def read_metrics_rows(metrics_path: Path, chunks_done: int) -> list[dict]:
@@ -160,11 +185,15 @@ def read_metrics_rows(metrics_path: Path, chunks_done: int) -> list[dict]:
     try:
         return [json.loads(x) for x in data.decode("utf-8").splitlines()[:chunks_done]]
     except UnicodeDecodeError as e:
-        raise ConfigError(f"--resume: {metrics_path} is damaged (not UTF-8 text at byte {e.start}); it cannot "
-                          "be rebuilt, start a new run") from None
+        raise ConfigError(
+            f"--resume: {metrics_path} is damaged (not UTF-8 text at byte {e.start}); it cannot "
+            "be rebuilt, start a new run"
+        ) from None
     except ValueError:
-        raise ConfigError(f"--resume: {metrics_path} is damaged within the checkpoint's {chunks_done} "
-                          "chunk(s); it cannot be rebuilt, start a new run") from None
+        raise ConfigError(
+            f"--resume: {metrics_path} is damaged within the checkpoint's {chunks_done} "
+            "chunk(s); it cannot be rebuilt, start a new run"
+        ) from None
 
 
 def read_checkpoint(path: Path) -> dict:
@@ -177,10 +206,14 @@ def read_checkpoint(path: Path) -> dict:
     payload = unpack_checkpoint(data, path)
     try:
         raw = serialization.msgpack_restore(payload)
-    except Exception as e:   # msgpack raises several unrelated types on a bad payload
-        raise CheckpointError(f"{path}: the checkpoint's content cannot be decoded ({type(e).__name__}: {e})") from None
+    except Exception as e:  # msgpack raises several unrelated types on a bad payload
+        raise CheckpointError(
+            f"{path}: the checkpoint's content cannot be decoded ({type(e).__name__}: {e})"
+        ) from None
     if not isinstance(raw, dict) or not {"state", "best_params", "book"} <= set(raw):
-        raise CheckpointError(f"{path}: not a training checkpoint (expected state, best_params and book)")
+        raise CheckpointError(
+            f"{path}: not a training checkpoint (expected state, best_params and book)"
+        )
     book = raw["book"]
     if not isinstance(book, dict):
         raise CheckpointError(f"{path}: the checkpoint's bookkeeping is damaged")
@@ -189,7 +222,9 @@ def read_checkpoint(path: Path) -> dict:
         v = book.get(k, 1 if k == "devices" else None)
         v = v.item() if hasattr(v, "item") else v
         if not isinstance(v, (int, float)) or isinstance(v, bool):
-            raise CheckpointError(f"{path}: the checkpoint's bookkeeping lacks {k!r} (or it is not a number)")
+            raise CheckpointError(
+                f"{path}: the checkpoint's bookkeeping lacks {k!r} (or it is not a number)"
+            )
         out[k] = typ(v)
     raw["book"] = out
     return raw
@@ -200,7 +235,9 @@ def resumed_clock(ckpt: Path, book: Path, chunks_done: int, total_chunks: int) -
     run's chunks. The time comes from the readable copy ``book`` when it matches the checkpoint (it is
     informational: a missing or stale copy only restarts the clock)."""
     if not 0 <= chunks_done <= total_chunks:
-        raise CheckpointError(f"{ckpt}: chunks_done {chunks_done} is outside this run's 0..{total_chunks}")
+        raise CheckpointError(
+            f"{ckpt}: chunks_done {chunks_done} is outside this run's 0..{total_chunks}"
+        )
     try:
         readable = json.loads(book.read_text())
         return readable["train_seconds"] if readable.get("chunks_done") == chunks_done else 0.0
@@ -211,7 +248,15 @@ def resumed_clock(ckpt: Path, book: Path, chunks_done: int, total_chunks: int) -
 # What a run writes before its first checkpoint: a run stopped then (killed, a full disk) is resumed
 # from the beginning.
 BEFORE_FIRST_CHECKPOINT = {"config.toml", "metrics.jsonl", BOOKKEEPING}
-WRITTEN = ("config.toml", "metrics.jsonl", CHECKPOINT, BOOKKEEPING, "policy.npz", "training_curve.png", "eval.json")
+WRITTEN = (
+    "config.toml",
+    "metrics.jsonl",
+    CHECKPOINT,
+    BOOKKEEPING,
+    "policy.npz",
+    "training_curve.png",
+    "eval.json",
+)
 
 
 def prepare_dir(out: Path, cfg: Config, seed: int, resume: bool):
@@ -229,16 +274,22 @@ def prepare_dir(out: Path, cfg: Config, seed: int, resume: bool):
         if not ckpt.exists():
             done = _chunks_recorded(out)
             if done:
-                raise ConfigError(f"--resume: {out} has no {CHECKPOINT} but {done}; its checkpoint was deleted, "
-                                  "so the run cannot be continued: start a new run in another directory")
+                raise ConfigError(
+                    f"--resume: {out} has no {CHECKPOINT} but {done}; its checkpoint was deleted, "
+                    "so the run cannot be continued: start a new run in another directory"
+                )
             if "config.toml" in present and set(present) <= BEFORE_FIRST_CHECKPOINT:
                 _check_same_config(load_config(cfg_path), cfg, cfg_path)
-                return None    # stopped before its first checkpoint: nothing to keep, start again
-            raise ConfigError(f"--resume: {out} has no checkpoint to resume from (no {CHECKPOINT}"
-                              + (f"; it holds {describe(present)})" if present else "; it is empty)"))
+                return None  # stopped before its first checkpoint: nothing to keep, start again
+            raise ConfigError(
+                f"--resume: {out} has no checkpoint to resume from (no {CHECKPOINT}"
+                + (f"; it holds {describe(present)})" if present else "; it is empty)")
+            )
         if not cfg_path.exists():
-            raise ConfigError(f"--resume: {out} has {CHECKPOINT} but no config.toml (the run's resolved config, "
-                              f"which resume checks the config against); put it back, or start a new run elsewhere")
+            raise ConfigError(
+                f"--resume: {out} has {CHECKPOINT} but no config.toml (the run's resolved config, "
+                f"which resume checks the config against); put it back, or start a new run elsewhere"
+            )
         _check_same_config(load_config(cfg_path), cfg, cfg_path)
         raw = read_checkpoint(ckpt)
         started = raw.get("config_toml")
@@ -253,22 +304,32 @@ def prepare_dir(out: Path, cfg: Config, seed: int, resume: bool):
                 raise CheckpointError(f"{ckpt}: its config cannot be read ({e})") from None
             if first != cfg:
                 name, given, run = _first_difference(first, cfg)
-                raise ConfigError(f"--resume: {name} differs from the value the run in {out} started with (given "
-                                  f"{given}, the run started with {run}; its checkpoint records the config); the "
-                                  "training state depends on it: resume with the run's config, or start a new run")
+                raise ConfigError(
+                    f"--resume: {name} differs from the value the run in {out} started with (given "
+                    f"{given}, the run started with {run}; its checkpoint records the config); the "
+                    "training state depends on it: resume with the run's config, or start a new run"
+                )
         if raw["book"]["seed"] != seed:
             raise ConfigError(f"--resume: the run used --seed {raw['book']['seed']}, not {seed}")
         return raw
     if ckpt.exists():
-        raise ConfigError(f"--out: {out} already holds a run; pass --resume to continue it or pick a new folder")
+        raise ConfigError(
+            f"--out: {out} already holds a run; pass --resume to continue it or pick a new folder"
+        )
     if present:
         stale = {tmp.name for name in WRITTEN for tmp in stale_temps(out / name)}
-        hint = (" (a run stopped before its first checkpoint: --resume starts it again)"
-                if "config.toml" in present and set(present) - stale <= BEFORE_FIRST_CHECKPOINT
-                and not _chunks_recorded(out) else "")
-        raise RunDirError(f"--out: {out} is not empty ({describe(present)}) and has no {CHECKPOINT} to resume "
-                          f"from{hint}; a new run needs an empty or absent directory, so that nothing there is "
-                          "overwritten: pick another --out, or move those files away")
+        hint = (
+            " (a run stopped before its first checkpoint: --resume starts it again)"
+            if "config.toml" in present
+            and set(present) - stale <= BEFORE_FIRST_CHECKPOINT
+            and not _chunks_recorded(out)
+            else ""
+        )
+        raise RunDirError(
+            f"--out: {out} is not empty ({describe(present)}) and has no {CHECKPOINT} to resume "
+            f"from{hint}; a new run needs an empty or absent directory, so that nothing there is "
+            "overwritten: pick another --out, or move those files away"
+        )
     atomic_write(cfg_path, config_to_toml(cfg))
     return None
 
@@ -307,5 +368,7 @@ def _check_same_config(saved: Config, cfg: Config, cfg_path: Path) -> None:
     """A resume's config must be the run's config.toml; ConfigError naming the first differing field."""
     if saved != cfg:
         name, given, run = _first_difference(saved, cfg)
-        raise ConfigError(f"--resume: the config differs from the run's config {cfg_path} in {name} (given {given}, "
-                          f"the run has {run}); resume with that config (--resume without a config path uses it)")
+        raise ConfigError(
+            f"--resume: the config differs from the run's config {cfg_path} in {name} (given {given}, "
+            f"the run has {run}); resume with that config (--resume without a config path uses it)"
+        )

@@ -31,7 +31,7 @@ from jaxexo.inference.scenarios import training_scenarios
 # Scenes every candidate is swung on: enough that one unsafe swing in a hundred shows, few enough that
 # the choice costs seconds (about 10 ms per swing and generator with its timing).
 SELECTION_SCENES = 100
-SELECTION_SEED = 777      # the JAX validation set's seed (jaxexo.train.evaluate.VALIDATION_SEED)
+SELECTION_SEED = 777  # the JAX validation set's seed (jaxexo.train.evaluate.VALIDATION_SEED)
 
 
 @dataclass(frozen=True)
@@ -39,13 +39,13 @@ class WearerScore:
     """One candidate's figures on the selection scenes (SI units)."""
 
     seed: int
-    validation_success: float   # greedy validation success of the candidate's chunk in training
-    safe: float                 # share of the scenes swung safely, RL alone
-    both_safe: int              # scenes both the candidate and CFFTG swing safely
-    duration_median_s: float    # timed swing, complete to the floor, on those scenes
+    validation_success: float  # greedy validation success of the candidate's chunk in training
+    safe: float  # share of the scenes swung safely, RL alone
+    both_safe: int  # scenes both the candidate and CFFTG swing safely
+    duration_median_s: float  # timed swing, complete to the floor, on those scenes
     duration_p95_s: float
-    lift_median_m: float        # heel peak above the obstacle's top
-    cost: float                 # the wearer's cost (module docstring); inf when no scene is both safe
+    lift_median_m: float  # heel peak above the obstacle's top
+    cost: float  # the wearer's cost (module docstring); inf when no scene is both safe
 
     def key(self) -> tuple:
         """Sort key: best first (most safe, least cost, best validation, lowest seed)."""
@@ -54,16 +54,22 @@ class WearerScore:
 
 @dataclass(frozen=True)
 class _Figures:
-    ok: np.ndarray          # (n,) bool: safe swing
-    duration: np.ndarray    # (n,) s
-    lift: np.ndarray        # (n,) m
+    ok: np.ndarray  # (n,) bool: safe swing
+    duration: np.ndarray  # (n,) s
+    lift: np.ndarray  # (n,) m
 
 
 def _swing(gen, scenes: list[dict], cfg: Config, **options) -> _Figures:
     obstacles = [s["obstacle"] for s in scenes]
-    batch = list(gen.generate_batch(obstacles, pivot=[s["pivot"] for s in scenes],
-                                    start_y=[s["start_y"] for s in scenes],
-                                    step_length=[s["step_length"] for s in scenes], **options))
+    batch = list(
+        gen.generate_batch(
+            obstacles,
+            pivot=[s["pivot"] for s in scenes],
+            start_y=[s["start_y"] for s in scenes],
+            step_length=[s["step_length"] for s in scenes],
+            **options,
+        )
+    )
     duration = np.array([t.duration for t in time_swings(batch, cfg)])
     lift = np.array([t.heel[:, 1].max() - o.height for t, o in zip(batch, obstacles)])
     return _Figures(np.array([t.ok for t in batch]), duration, lift)
@@ -72,11 +78,16 @@ def _swing(gen, scenes: list[dict], cfg: Config, **options) -> _Figures:
 def _score(seed: int, validation: float, rl: _Figures, ref: _Figures) -> WearerScore:
     both = rl.ok & ref.ok
     if not both.any():
-        return WearerScore(seed, validation, float(rl.ok.mean()), 0, math.nan, math.nan, math.nan, math.inf)
+        return WearerScore(
+            seed, validation, float(rl.ok.mean()), 0, math.nan, math.nan, math.nan, math.inf
+        )
     med, p95 = float(np.median(rl.duration[both])), float(np.percentile(rl.duration[both], 95))
     lift = float(np.median(rl.lift[both]))
-    cost = (med / float(np.median(ref.duration[both])) + p95 / float(np.percentile(ref.duration[both], 95))
-            + lift / max(float(np.median(ref.lift[both])), 1e-3))
+    cost = (
+        med / float(np.median(ref.duration[both]))
+        + p95 / float(np.percentile(ref.duration[both], 95))
+        + lift / max(float(np.median(ref.lift[both])), 1e-3)
+    )
     return WearerScore(seed, validation, float(rl.ok.mean()), int(both.sum()), med, p95, lift, cost)
 
 
@@ -94,8 +105,15 @@ def wearer_scores(cfg: Config, candidates: list[Candidate]) -> list[WearerScore]
     SELECTION_SEED), in the order given."""
     scenes = training_scenarios(cfg, SELECTION_SCENES, SELECTION_SEED)
     ref = _swing(CFFTG(cfg), scenes, cfg)
-    return [_score(c.seed, c.validation_success, _swing(TrajectoryGenerator.load(c.policy), scenes, cfg,
-                                                        fallback=None), ref) for c in candidates]
+    return [
+        _score(
+            c.seed,
+            c.validation_success,
+            _swing(TrajectoryGenerator.load(c.policy), scenes, cfg, fallback=None),
+            ref,
+        )
+        for c in candidates
+    ]
 
 
 def choose_for_wearer(scores: list[WearerScore]) -> int:
@@ -105,4 +123,7 @@ def choose_for_wearer(scores: list[WearerScore]) -> int:
 
 def score_record(score: WearerScore) -> dict:
     """A score as eval.json writes it (JSON: a cost without a value is null)."""
-    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in asdict(score).items()}
+    return {
+        k: (None if isinstance(v, float) and not math.isfinite(v) else v)
+        for k, v in asdict(score).items()
+    }

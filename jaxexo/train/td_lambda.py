@@ -32,7 +32,7 @@ def lambda_returns(rewards, boot, terminated, done, cont, gamma, lam):
     G_t = r_t + gamma * (1 - terminated_t) * [(1 - l_t) * boot_t + l_t * G_{t+1}]
     with l_t = lam * cont_{t+1} * (1 - done_t), and at the rollout's last step G = r + gamma * boot."""
     not_term = 1.0 - terminated.astype(rewards.dtype)
-    chain = (1.0 - done.astype(rewards.dtype))
+    chain = 1.0 - done.astype(rewards.dtype)
     # l_t uses cont of the *next* step; the last step has no next step in the rollout.
     cont_next = jnp.concatenate([cont[1:], jnp.zeros_like(cont[:1])], axis=0).astype(rewards.dtype)
     lt = lam * cont_next * chain
@@ -42,16 +42,20 @@ def lambda_returns(rewards, boot, terminated, done, cont, gamma, lam):
         g = r + gamma * nt * ((1.0 - l) * b + l * g_next)
         return g, g
 
-    _, g = jax.lax.scan(body, jnp.zeros_like(rewards[-1]), (rewards, boot, not_term, lt), reverse=True)
+    _, g = jax.lax.scan(
+        body, jnp.zeros_like(rewards[-1]), (rewards, boot, not_term, lt), reverse=True
+    )
     return g
 
 
 def decay_traces(traces, gamma, lam, keep):
     """e <- gamma * lam * e, zeroed where ``keep`` is 0 (episode start; Watkins cut). Per environment:
     ``keep`` has shape (N,), every leaf of ``traces`` (N, ...)."""
+
     def f(e):
         k = keep.reshape(keep.shape + (1,) * (e.ndim - 1)).astype(e.dtype)
         return gamma * lam * k * e
+
     return jax.tree.map(f, traces)
 
 
@@ -70,9 +74,11 @@ def add_gradient(traces, grads, kind: str):
 
 def trace_update_direction(traces, td_errors):
     """Eq 2.26 summed over environments: mean_i delta_i * e_i (the ascent direction)."""
+
     def f(e):
         d = td_errors.reshape(td_errors.shape + (1,) * (e.ndim - 1)).astype(e.dtype)
         return jnp.mean(d * e, axis=0)
+
     return jax.tree.map(f, traces)
 
 
@@ -90,5 +96,7 @@ def restrict(q, mask):
     if mask is None:
         return q
     m = mask.astype(q.dtype)
-    mean = jnp.sum(q * m, axis=-1, keepdims=True) / jnp.maximum(jnp.sum(m, axis=-1, keepdims=True), 1.0)
+    mean = jnp.sum(q * m, axis=-1, keepdims=True) / jnp.maximum(
+        jnp.sum(m, axis=-1, keepdims=True), 1.0
+    )
     return jnp.where(mask, q, mean)
