@@ -8,8 +8,8 @@ Run: python benchmarks/bench_timing.py RUN_DIR/policy.npz
 
 from pathlib import Path
 
-from jaxexo.benchmarks.timing_bench import run_timing_benchmark
 from jaxexo.benchmarks.runner import parser
+from jaxexo.benchmarks.timing_bench import run_timing_benchmark
 
 if __name__ == "__main__":
     p = parser(__doc__)

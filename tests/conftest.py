@@ -280,6 +280,7 @@ def tiny_reference(tmp_path_factory):
     import sys
 
     from jaxexo.config.toml_io import config_to_toml
+
     from train_helpers import SEED, tiny_config
 
     cfg = tiny_config()

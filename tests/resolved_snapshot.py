@@ -62,11 +62,9 @@ def _digest(text: str) -> str:
 
 
 def resolved() -> dict:
-    from jaxexo.config import load_config
+    from jaxexo.config import Config, config_from_dict, load_config
     from jaxexo.config.toml_io import config_to_toml
     from jaxexo.sweep.spec import load_sweep
-
-    from jaxexo.config import Config, config_from_dict
 
     # "schema_defaults": what Config() (and an empty config) meant on main: the tests' raw configs
     # are stated on top of it (conftest.legacy_raw), so that they keep their meaning.

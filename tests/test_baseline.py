@@ -9,9 +9,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from conftest import ROOT, get_mixed_config
 from jaxexo.benchmarks.thesis_baseline import ReplayBuffer, truncated_lambda_returns
 from jaxexo.config import load_config
+
+from conftest import ROOT, get_mixed_config
 
 jax = pytest.importorskip("jax")
 import jax.numpy as jnp  # noqa: E402

@@ -9,14 +9,15 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import ROOT
-from jaxexo.physics import geometry
 from jaxexo.baselines import CFFTG
-from jaxexo.inference.cfftg import APEX_FRAC_RANGE, FLATNESS, plan_basis, plan_paths
 from jaxexo.config import load_config
-from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 from jaxexo.inference import Obstacle, TrajectoryError
+from jaxexo.inference.cfftg import APEX_FRAC_RANGE, FLATNESS, plan_basis, plan_paths
 from jaxexo.inference.scenarios import sample_scenarios, training_scenarios
+from jaxexo.physics import geometry
+from jaxexo.physics.kinematics import PIVOT_CONDITIONS
+
+from conftest import ROOT
 
 
 @pytest.fixture(scope="module")

@@ -11,13 +11,14 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import ROOT, legacy_raw
 from jaxexo.baselines import CFFTG
 from jaxexo.config import config_from_dict
 from jaxexo.inference import Obstacle, TrajectoryGenerator
 from jaxexo.inference.scenarios import safety_scenarios
 from jaxexo.physics import dynamics, geometry
 from jaxexo.storage.policy_file import QPolicy
+
+from conftest import ROOT, legacy_raw
 
 SHIELD, MARGIN = 0.025, 0.02
 

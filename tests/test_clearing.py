@@ -140,10 +140,10 @@ def test_a_smoothed_path_is_accepted_with_headroom_above_the_margin():
     device-ready retiming, which resamples an interpolant of the samples, keeps the margin too): a path
     whose guaranteed clearance is between the margin and margin + headroom is sent on to the spline's
     correction, one above is accepted, one below is not."""
-    from test_fast_shield import _random_generator
-
     from jaxexo.inference.finish import ACCEPT_HEADROOM
     from jaxexo.inference.trajectory import passes
+
+    from test_fast_shield import _random_generator
 
     gen = _random_generator()
     m, h = gen.sp.min_clearance, ACCEPT_HEADROOM

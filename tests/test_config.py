@@ -662,8 +662,8 @@ def test_memory_estimate_sizes_match_the_real_network_and_env(raw):
 def test_cmd_sweep_returns_an_exit_status(monkeypatch, tmp_path):
     import argparse
 
-    from jaxexo import cli
     import jaxexo.sweep.runner as runner
+    from jaxexo import cli
 
     monkeypatch.setattr(
         runner,

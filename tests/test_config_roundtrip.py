@@ -28,8 +28,8 @@ from jaxexo.config import (
     load_config,
 )
 from jaxexo.config.toml_io import config_to_toml
-from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 from jaxexo.physics.geometry import THESIS_OBSTACLES
+from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 
 from conftest import ROOT, legacy_raw
 

@@ -15,7 +15,7 @@ import pytest
 from jaxexo.baselines import CFFTG
 from jaxexo.cli import main
 from jaxexo.config import Config
-from jaxexo.inference import Terrain, TrajectoryGenerator, footholds, plan_course, read_terrain
+from jaxexo.inference import Terrain, footholds, plan_course, read_terrain
 from jaxexo.inference.course import WALK_COLUMNS, CourseError, FootholdRules
 from jaxexo.storage import terrain_file
 from jaxexo.storage.terrain_file import TerrainFileError
@@ -402,10 +402,10 @@ def test_cli_generate_takes_a_profile_file(tmp_path, capsys):
 
 
 def test_course_benchmark_figures_follow_from_its_rows(tmp_path, monkeypatch):
-    from test_reliability_inputs import make_policy
-
     from jaxexo.benchmarks import course_bench
     from jaxexo.benchmarks.run_all import summary_rows
+
+    from test_reliability_inputs import make_policy
 
     # One short course with one obstacle: a few swings (the part's own sizes are for `jaxexo bench`).
     monkeypatch.setattr(course_bench, "LENGTH", (2.0, 2.0))

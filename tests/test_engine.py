@@ -18,9 +18,9 @@ from jaxexo.train.trainer import METRICS, UpdateMetrics  # noqa: E402
 
 
 def _state(params=1.0, target=1.0):
-    tree = lambda v: {
+    tree = lambda v: {  # noqa: E731
         "dense": {"kernel": np.full((2, 3), v, np.float32), "bias": np.zeros(3, np.float32)}
-    }  # noqa: E731
+    }
     return SimpleNamespace(params=tree(params), target_params=tree(target))
 
 

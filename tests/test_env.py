@@ -10,11 +10,11 @@ import pytest
 jax = pytest.importorskip("jax")
 jnp = pytest.importorskip("jax.numpy")
 
-from jaxexo.physics import geometry  # noqa: E402
 from jaxexo.config import config_from_dict  # noqa: E402
-from jaxexo.physics.kinematics import PIVOT_CONDITIONS  # noqa: E402
 from jaxexo.env import NUM_ACTIONS, ExoStepEnv  # noqa: E402
+from jaxexo.physics import geometry  # noqa: E402
 from jaxexo.physics.geometry import Obstacle  # noqa: E402
+from jaxexo.physics.kinematics import PIVOT_CONDITIONS  # noqa: E402
 
 from conftest import MIXED_KINDS, MIXED_RAW, get_mixed_env, get_mixed_step, legacy_raw  # noqa: E402
 

@@ -11,12 +11,13 @@ import numpy as np
 import pytest
 
 from jaxexo.config import load_config
-from jaxexo.physics import dynamics, scenarios
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.inference import smoothing as sm
 from jaxexo.inference.generator import plain_reference
 from jaxexo.inference.shield import ScalarShield
+from jaxexo.physics import dynamics, scenarios
 from jaxexo.storage.policy_file import QPolicy
+
 from conftest import ROOT
 from test_speed import _same
 

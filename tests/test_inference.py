@@ -12,20 +12,21 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import ROOT
-from jaxexo.physics import dynamics, geometry, kinematics, swept
 from jaxexo.config import load_config
-from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 from jaxexo.inference import Obstacle, TrajectoryError, TrajectoryGenerator
 from jaxexo.inference import smoothing as sm
 from jaxexo.inference.network import FoldedQNetwork, StepNetwork
+from jaxexo.physics import geometry, kinematics, swept
+from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 from jaxexo.storage.policy_file import PolicyFileError, load_policy
+
+from conftest import ROOT
 
 jax = pytest.importorskip("jax")
 import jax.numpy as jnp  # noqa: E402
 
 from jaxexo.env import ExoStepEnv  # noqa: E402
-from jaxexo.train import driver, run_files  # noqa: E402
+from jaxexo.train import run_files  # noqa: E402
 from jaxexo.train.evaluate import make_rollout  # noqa: E402
 from jaxexo.train.network import QNetwork  # noqa: E402
 from jaxexo.train.trainer import Trainer  # noqa: E402

@@ -14,7 +14,6 @@ import dataclasses
 import numpy as np
 import pytest
 
-from conftest import random_generator
 from jaxexo.baselines import CFFTG
 from jaxexo.config import Config
 from jaxexo.inference import Terrain, TrajectoryGenerator, plan_course
@@ -23,6 +22,8 @@ from jaxexo.inference.finish import landed
 from jaxexo.inference.scenarios import safety_scenarios
 from jaxexo.inference.trajectory import assemble
 from jaxexo.physics import dynamics
+
+from conftest import random_generator
 
 # The default model with the thesis's goal box (2 cm): its rollouts stop up to 2 cm above the floor,
 # which exercises the landing more than the default's 5 mm.

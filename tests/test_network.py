@@ -2,29 +2,12 @@
 
 from __future__ import annotations
 
-import json
-import os
-import shutil
-import subprocess
-import sys
-import tomllib
-import zipfile
-
 import numpy as np
 import pytest
-
-from jaxexo.config import ConfigError, config_from_dict, load_config
-from jaxexo.config.toml_io import config_to_toml
-from jaxexo.storage.policy_file import FORMAT_VERSION, PolicyFileError, load_policy
-
-from conftest import ROOT, jax_compilation_cache
 
 jax = pytest.importorskip("jax")
 import jax.numpy as jnp  # noqa: E402
 
-from jaxexo.train import driver  # noqa: E402
-from jaxexo.train.evaluate import HELD_OUT, TEST_KINDS, make_rollout  # noqa: E402
-from jaxexo.train.trainer import METRICS, Hyperparams, Trainer, make_train  # noqa: E402
 from train_helpers import *  # noqa: F401,F403 (the shared tiny config, helpers and fixtures)
 from train_helpers import _compilation_cache  # noqa: F401 (module-scoped compilation cache)
 

@@ -20,9 +20,9 @@ from train_helpers import _compilation_cache, leaves  # noqa: F401 (the module's
 jax = pytest.importorskip("jax")
 
 from jaxexo.sweep.program import run_chunk, unflatten  # noqa: E402
-from jaxexo.train.lanes import LANES, padded_agents  # noqa: E402
 from jaxexo.sweep.spec import sweep_from_dict  # noqa: E402
 from jaxexo.train import driver, run_files  # noqa: E402
+from jaxexo.train.lanes import LANES, padded_agents  # noqa: E402
 from jaxexo.train.network import dense_layers  # noqa: E402
 from jaxexo.train.population import Population, choose, population_devices  # noqa: E402
 
@@ -170,12 +170,12 @@ def test_the_driver_exports_the_best_member_records_every_member_and_resumes(tmp
     # written beside the policy.
     sel = res["selection"]
     assert [r["seed"] for r in sel] == [SEED, SEED + 1]
-    key = lambda r: (
+    key = lambda r: (  # noqa: E731
         -r["safe"],
         math.inf if r["cost"] is None else r["cost"],
         -r["validation_success"],
         r["seed"],
-    )  # noqa: E731
+    )
     assert min(range(2), key=lambda i: key(sel[i])) == k
     for i, r in enumerate(sel):
         assert r["validation_success"] == res["members"][i]["validation_success_raw"]

@@ -11,7 +11,6 @@ pattern) with a persistent compilation cache for the in-process runs.
 
 from __future__ import annotations
 
-import io
 import json
 import os
 import shutil
@@ -25,7 +24,6 @@ import pytest
 
 from jaxexo.config import ConfigError, config_from_dict
 from jaxexo.config.toml_io import config_to_toml
-from jaxexo.storage.atomic import atomic_write
 from jaxexo.storage.checkpoint import CheckpointError, pack_checkpoint, unpack_checkpoint
 from jaxexo.storage.policy_file import PolicyFileError, load_policy, policy_checksum
 from jaxexo.storage.rundir import LOCK_NAME, RunDirError, run_lock

@@ -9,7 +9,6 @@ the exit code and stderr are what is checked. docs/reliability.md lists these ca
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 

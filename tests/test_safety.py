@@ -9,13 +9,14 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from conftest import ROOT, legacy_raw
-from jaxexo.config import ConfigError, config_from_dict, load_config, numpy_params, scalar_params
+from jaxexo.config import ConfigError, config_from_dict, numpy_params, scalar_params
 from jaxexo.inference import Obstacle, TrajectoryGenerator
 from jaxexo.inference import smoothing as sm
 from jaxexo.inference.scenarios import safety_scenarios
 from jaxexo.inference.trajectory import assemble
 from jaxexo.physics import dynamics, geometry, outcome, swept
+
+from conftest import legacy_raw
 
 FOOT = 0.2
 

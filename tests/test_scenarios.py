@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from jaxexo.config import config_from_dict, numpy_params, views
-from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 from jaxexo.physics import scenarios
+from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 
 from conftest import legacy_raw
 

@@ -10,6 +10,7 @@ import pytest
 
 from jaxexo.config import config_from_dict, load_config, numpy_params
 from jaxexo.physics import dynamics, geometry, kinematics, terrain  # noqa: F401
+
 from conftest import ROOT, legacy_raw
 
 SHIELD = 0.025
@@ -168,6 +169,7 @@ def test_vertical_move_up_is_admissible_from_any_safe_pose():
 def test_jax_mask_equals_numpy_and_exploration_stays_inside():
     import jax
     import jax.numpy as jnp
+
     from jaxexo.env import ExoStepEnv
     from jaxexo.train.trainer import Hyperparams, Trainer
 
@@ -298,6 +300,7 @@ def test_batched_jax_mask_decides_exactly_like_the_plain_one():
     a step takes many rounds."""
     import jax
     import jax.numpy as jnp
+
     from jaxexo.env import ExoStepEnv, shield
     from jaxexo.physics.scenarios import unseen_scenarios
 
@@ -367,6 +370,7 @@ def test_shield_never_undoes_the_last_move_nor_stands_still():
     environment the state carries the last move, and a fresh episode has none."""
     import jax
     import jax.numpy as jnp
+
     from jaxexo.env import ExoStepEnv
 
     cfg = _config()
@@ -439,6 +443,7 @@ def test_greedy_rollouts_with_the_batched_mask_equal_the_plain_mask_bit_for_bit(
     the default model's validation scenes; one layout's rollout (``make_rollout``) is its row."""
     import jax
     import jax.numpy as jnp
+
     from jaxexo.env import ExoStepEnv
     from jaxexo.train.evaluate import make_rollout, make_rollouts, validation_set
     from jaxexo.train.network import QNetwork

@@ -11,13 +11,14 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import ROOT
 from jaxexo.config import load_config, scalar_params
 from jaxexo.physics import geometry, scenarios
 from jaxexo.physics.dynamics import make_scene
 from jaxexo.physics.geometry import GeometryError, Obstacle
 from jaxexo.sim.mjcf import SimError, legs_mjcf, scene_mjcf
 from jaxexo.sim.pieces import convex_pieces
+
+from conftest import ROOT
 
 mujoco = pytest.importorskip("mujoco")
 

@@ -10,6 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from jaxexo.physics import geometry, swept
+
 from test_safety import FOOT, outlines
 
 
@@ -177,9 +178,9 @@ def test_generate_batch_runs_blas_on_one_thread_and_restores_it(tmp_path, monkey
     process's setting back afterwards, and ``batch_blas_threads = None`` leaves BLAS alone; the
     trajectories are the same either way."""
     pytest.importorskip("jax")
-    from test_inference import export_random, small_config
-
     from jaxexo.inference import Obstacle, TrajectoryGenerator, blas
+
+    from test_inference import export_random, small_config
 
     gen = TrajectoryGenerator.load(
         export_random(tmp_path / "p.npz", small_config(hidden=[16]), seed=1)

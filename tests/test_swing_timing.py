@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 
 from jaxexo.baselines import CFFTG
-from jaxexo.config import ConfigError, Config, config_from_dict, load_config, scalar_params
+from jaxexo.config import Config, ConfigError, config_from_dict, load_config, scalar_params
 from jaxexo.config.toml_io import config_to_toml
 from jaxexo.inference import Obstacle
-from jaxexo.inference.swing_timing import DeviceLimits, time_swing, time_swings, uniform_peaks
 from jaxexo.inference.export import TIMED_CSV_COLUMNS
+from jaxexo.inference.swing_timing import DeviceLimits, time_swing, time_swings, uniform_peaks
 from jaxexo.inference.trajectory import assemble
 from jaxexo.physics import dynamics, kinematics
 

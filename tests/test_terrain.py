@@ -11,6 +11,7 @@ import json
 import numpy as np
 import pytest
 
+from jaxexo.config import TerrainSpec
 from jaxexo.physics import geometry, kinematics, terrain
 from jaxexo.physics.terrain import (
     FAMILIES,
@@ -21,7 +22,6 @@ from jaxexo.physics.terrain import (
     TerrainError,
     family_outline,
 )
-from jaxexo.config import TerrainSpec
 
 FOOT = 0.20
 HIP = (-0.5236, 2.0071)
@@ -385,8 +385,8 @@ def unseen_eval(trained_run, tmp_path_factory):
 
 @pytest.mark.slow
 def test_eval_unseen_reports_per_family_end_to_end(unseen_eval):
-    from jaxexo.physics.scenarios import CELLS_PER_FAMILY, unseen_scenarios
     from jaxexo.inference import TrajectoryGenerator
+    from jaxexo.physics.scenarios import CELLS_PER_FAMILY, unseen_scenarios
 
     report = json.loads((unseen_eval / "report.json").read_text())
     assert set(report) == {

@@ -5,8 +5,6 @@ from the key (pure JAX, jit and vmap), and the NumPy tools draw the very same sc
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 

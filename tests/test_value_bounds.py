@@ -332,8 +332,9 @@ def _sweep(grid: dict, **sweep):
     from jaxexo.sweep.spec import sweep_from_dict
 
     base = load_config(ROOT / "configs" / "quick.toml")
-    from jaxexo.config.toml_io import config_to_toml
     import tomllib
+
+    from jaxexo.config.toml_io import config_to_toml
 
     return sweep_from_dict(
         {**tomllib.loads(config_to_toml(base)), "sweep": {"grid": grid, **sweep}}

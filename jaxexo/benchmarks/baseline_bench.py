@@ -110,11 +110,10 @@ def run_baseline_benchmark(
     progress=print,
 ) -> dict:
     import jax
-
     import torch
 
-    from jaxexo.evaluation.machine import write_result
     from jaxexo.benchmarks.train_bench import thesis_network_config, throughput
+    from jaxexo.evaluation.machine import write_result
     from jaxexo.train.driver import run_training
     from jaxexo.train.evaluate import make_validator
     from jaxexo.train.network import QNetwork

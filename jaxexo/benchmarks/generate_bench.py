@@ -21,8 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxexo.inference import TrajectoryGenerator
 from jaxexo.evaluation.timing import time_batch
+from jaxexo.inference import TrajectoryGenerator
 from jaxexo.inference.blas import blas_threads
 
 THESIS_MS = {"rl_single": 3.0, "cfftg_single": 2.0, "rl_batch_1000": 1764.0}  # Table 3.11, §3.4
@@ -287,10 +287,10 @@ def run_generate_benchmark(policy: str | Path, out_dir, n: int = 1000, progress=
     held-out families and on the safety scenes (and the plain reference, ``plain_reference``, on a
     quarter of them); batches of 1000 with default and single-threaded BLAS; smoothing counts; the
     cold import."""
-    from jaxexo.inference.cfftg import CFFTG
-    from jaxexo.inference.generator import plain_reference
     from jaxexo.evaluation.compare import WithFallback, run_generators
     from jaxexo.evaluation.machine import write_result
+    from jaxexo.inference.cfftg import CFFTG
+    from jaxexo.inference.generator import plain_reference
 
     load = [round(x, 2) for x in os.getloadavg()]
     gen = TrajectoryGenerator.load(policy)

@@ -74,8 +74,8 @@ def run_observation_study(
     from jaxexo.evaluation.compare import run_generators
     from jaxexo.evaluation.machine import write_result
     from jaxexo.evaluation.unseen import family_table
-    from jaxexo.physics.scenarios import unseen_scenarios
     from jaxexo.inference import TrajectoryGenerator
+    from jaxexo.physics.scenarios import unseen_scenarios
     from jaxexo.train.driver import run_training
 
     runs_dir = Path(runs_dir)

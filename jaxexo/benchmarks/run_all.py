@@ -160,8 +160,8 @@ def run_all(
     ``courses`` drawn courses for the course part."""
     import json
 
-    from jaxexo.evaluation.machine import write_result
     from jaxexo.config import load_config
+    from jaxexo.evaluation.machine import write_result
 
     out_dir = Path(out_dir or ROOT / "benchmarks" / "results")
     skipped = {s.strip() for s in skip.split(",") if s.strip()}

@@ -31,8 +31,8 @@ import numpy as np
 
 from jaxexo.benchmarks.train_bench import throughput
 from jaxexo.config import Config
-from jaxexo.train.lanes import LANES, over_agents, over_lanes
 from jaxexo.sweep.spec import load_sweep, sweep_from_dict
+from jaxexo.train.lanes import LANES, over_agents, over_lanes
 from jaxexo.train.trainer import Hyperparams, Trainer
 
 TARGET_S = 600.0

@@ -56,8 +56,8 @@ def _feasible(trajs, true, seen, cfg, clearance) -> np.ndarray:
     """Scenes where the clearance asked is possible at all: the flat foot at the start and at the goal
     keeps it from the obstacle the planner sees (and the config's margin from the true one)."""
     c_ask = cfg.env.min_clearance if clearance is None else clearance
-    feet = lambda y, o: float(
-        geometry.foot_clearance(  # noqa: E731
+    feet = lambda y, o: float(  # noqa: E731
+        geometry.foot_clearance(
             np, np.array([y, 0.0]), cfg.kinematics.foot_length, np.asarray(o.outline, float)
         )
     )

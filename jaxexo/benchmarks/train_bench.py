@@ -81,8 +81,8 @@ def run_train_benchmark(
     `jaxexo train` driver (compilation included in the wall time)."""
     import tempfile
 
-    from jaxexo.evaluation.machine import write_result
     from jaxexo.config import load_config
+    from jaxexo.evaluation.machine import write_result
     from jaxexo.train.driver import run_training
 
     base = load_config(default_config)

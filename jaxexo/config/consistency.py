@@ -91,7 +91,7 @@ _SCENES_OK: set = set()
 def _check_scene(cfg: Config) -> None:
     """The obstacles and terrain against the step, the room between the feet, the ceiling and the
     leg's reach (env, kinematics and layout only)."""
-    env, kin, lay = cfg.env, cfg.kinematics, cfg.layout
+    env, lay = cfg.env, cfg.layout
     need = max(len(o.unit_vertices()) for o in lay.obstacles)
     if env.max_vertices and env.max_vertices < need:
         raise ConfigError(

@@ -16,11 +16,11 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from jaxexo.physics import dynamics, geometry, scenarios
 from jaxexo.config import Config
-from jaxexo.physics.dynamics import LENGTH_SCALE, NUM_ACTIONS, THESIS_OBS_CENTER  # noqa: F401 (re-exported)
 from jaxexo.env import compact, shield, spaces
 from jaxexo.env.params import EnvParams
+from jaxexo.physics import dynamics, geometry, scenarios
+from jaxexo.physics.dynamics import LENGTH_SCALE, NUM_ACTIONS, THESIS_OBS_CENTER  # noqa: F401 (re-exported)
 
 # Every observation lies within +-OBS_BOUND (world bounds of a few metres over LENGTH_SCALE).
 OBS_BOUND = 10.0

@@ -36,8 +36,8 @@ from jaxexo.evaluation.thesis_results import (
     THESIS_T32,
 )
 from jaxexo.evaluation.timing import BATCH, scene_options
-from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 from jaxexo.inference.scenarios import sample_scenarios, training_scenarios
+from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 
 BATCH_REPEATS = 3
 SCENARIO_SETS = ("train", "test", "all", "unseen")

@@ -14,11 +14,9 @@ whole: ``gen.generate(obstacle, GenerateOptions(pivot="between", fallback=None))
 Units: metres, radians, seconds.
 """
 
-from jaxexo.physics.dynamics import Scene
-from jaxexo.physics.geometry import Obstacle
+from jaxexo.inference.export import CSV_COLUMNS, JOINT_NAMES
 from jaxexo.inference.generator import TrajectoryGenerator
 from jaxexo.inference.options import GenerateOptions, SwingOptions
-from jaxexo.inference.export import CSV_COLUMNS, JOINT_NAMES
 from jaxexo.inference.trajectory import (
     Trajectory,
     TrajectoryBatch,
@@ -26,6 +24,8 @@ from jaxexo.inference.trajectory import (
     TrajectoryError,
     assemble,
 )
+from jaxexo.physics.dynamics import Scene
+from jaxexo.physics.geometry import Obstacle
 from jaxexo.storage.policy_file import PolicyFileError
 
 _LAZY = {

@@ -56,12 +56,12 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxexo.physics import dynamics, geometry
-from jaxexo.physics.dynamics import DEFAULT_START_Y, DEFAULT_STEP_LENGTH
 from jaxexo.config import Config, load_config, scalar_params
 from jaxexo.inference.options import SwingOptions, scene_for, scenes_for
 from jaxexo.inference.policy_check import load_checked
 from jaxexo.inference.trajectory import Trajectory, TrajectoryBatch, assemble, measure_paths
+from jaxexo.physics import dynamics, geometry
+from jaxexo.physics.dynamics import DEFAULT_START_Y, DEFAULT_STEP_LENGTH
 
 DEFAULT_POINTS = 100
 C_MAX = 10.0  # |c| bound for a monotone y(s)

@@ -51,11 +51,11 @@ from pathlib import Path
 
 import numpy as np
 
+from jaxexo.inference.export import timed_dict, write_csv, write_json
+from jaxexo.inference.trajectory import Trajectory, assemble
 from jaxexo.physics import geometry, kinematics
 from jaxexo.physics.terrain import NEAR_MARGIN
-from jaxexo.inference.export import JOINT_NAMES, timed_dict, write_csv, write_json
-from jaxexo.inference.trajectory import Trajectory, assemble
-from jaxexo.storage.terrain_file import Terrain, TerrainFileError, read_terrain
+from jaxexo.storage.terrain_file import Terrain, read_terrain
 
 GRID = 0.01  # m, foothold resolution
 STAND_MARGIN = (

@@ -32,10 +32,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from jaxexo.physics import dynamics
-from jaxexo.inference import smoothing as sm, trajectory
+from jaxexo.inference import smoothing as sm
+from jaxexo.inference import trajectory
 from jaxexo.inference.clearing import clear_rows, exact_clear_rows
 from jaxexo.inference.trajectory import TrajectoryBatch, assemble
+from jaxexo.physics import dynamics
 
 # Per-path candidate smoothings: s = M * rho^2 for these rho (m), a root-mean-square residual of rho
 # per point. A shielded raw path keeps env.shield_clearance, 5 mm above the verdict's margin; the

@@ -24,10 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxexo.physics import dynamics, geometry
 from jaxexo.config import numpy_params, scalar_params
-from jaxexo.physics.dynamics import DEFAULT_START_Y, DEFAULT_STEP_LENGTH, Scene, scalar
-from jaxexo.inference import blas, smoothing as sm
+from jaxexo.inference import blas
+from jaxexo.inference import smoothing as sm
 from jaxexo.inference.fallback import replace_failures
 from jaxexo.inference.finish import PathFinisher
 from jaxexo.inference.network import FoldedQNetwork, StepNetwork
@@ -36,6 +35,8 @@ from jaxexo.inference.policy_check import load_checked
 from jaxexo.inference.shield import ScalarShield
 from jaxexo.inference.shield_rows import ShieldRows, ShieldStats, take_rows
 from jaxexo.inference.trajectory import Trajectory, TrajectoryBatch
+from jaxexo.physics import dynamics, geometry
+from jaxexo.physics.dynamics import DEFAULT_START_Y, DEFAULT_STEP_LENGTH, Scene, scalar
 from jaxexo.storage.policy_file import QPolicy
 
 

@@ -66,9 +66,6 @@ from jaxexo.config import (
     MAX_TRACKING_HEADROOM,
     MIN_CONTROL_RATE,
 )
-from jaxexo.physics import kinematics
-from jaxexo.physics.dynamics import Scene
-from jaxexo.inference.time_law import BLEND_S, TimeLaw, pchip_eval, pchip_slopes, time_law, topp
 from jaxexo.inference.export import (
     JOINT_NAMES,
     timed_dict,
@@ -76,12 +73,15 @@ from jaxexo.inference.export import (
     write_timed_csv,
     write_timed_json,
 )
+from jaxexo.inference.time_law import BLEND_S, TimeLaw, pchip_eval, pchip_slopes, time_law, topp
 from jaxexo.inference.trajectory import (
     TrajectoryBatch,
     TrajectoryChecks,
     failure_reasons,
     measure_paths,
 )
+from jaxexo.physics import kinematics
+from jaxexo.physics.dynamics import Scene
 
 FINE_PER_SAMPLE = 8  # fine s-grid points per interval of the path's samples
 SAFETY = 0.95  # the TOPP passes use this fraction of each limit

@@ -33,8 +33,8 @@ import math
 import numpy as np
 
 from jaxexo.physics import geometry, terrain
-from jaxexo.physics.geometry import Obstacle
 from jaxexo.physics.dynamics import pivot_position
+from jaxexo.physics.geometry import Obstacle
 from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 
 # The five thesis obstacles (Table 3.1; Base 1-3 seen in training, triangle and half-circle held out).

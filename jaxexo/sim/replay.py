@@ -409,9 +409,11 @@ def driven_replay(
         sens = _rollout(legs, qpos0, cmd[:steps] + (kd / kp) * qvel_ref + tau / kp, (kp, kd))
         torque_peak = np.abs(tau).max(axis=0).tolist()
     clip_a, clip_v = clip_a[:steps], clip_v[:steps]
-    col = lambda name: sens[
-        :, m.sensor_adr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, name)] :
-    ][:, :3]  # noqa: E731
+    col = (  # noqa: E731
+        lambda name: sens[
+            :, m.sensor_adr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, name)] :
+        ][:, :3]
+    )
     heel = col(f"{SWING_LEG}_heel")[::sub][:n][:, [0, 2]]
     toe = col(f"{SWING_LEG}_toe")[::sub][:n][:, [0, 2]]
     heel_err = np.linalg.norm(heel - timed.heel, axis=1)

@@ -225,8 +225,13 @@ def policy_config(meta: dict, path):
     naming the field otherwise."""
     import tomllib
 
-    from jaxexo.config import ConfigError, config_from_dict
-    from jaxexo.config import SECTION_CLASSES, SECTIONS, declared_fields
+    from jaxexo.config import (
+        SECTION_CLASSES,
+        SECTIONS,
+        ConfigError,
+        config_from_dict,
+        declared_fields,
+    )
 
     text = meta.get("config_toml")
     if not isinstance(text, str):

@@ -26,10 +26,10 @@ from flax import serialization
 
 from jaxexo.config import Config, static_settings, test_config
 from jaxexo.env import ExoStepEnv
+from jaxexo.physics.scenarios import HELD_OUT, TEST_KINDS
 from jaxexo.sweep.plan import Chunk
 from jaxexo.sweep.results import SCALARS
 from jaxexo.sweep.spec import Sweep
-from jaxexo.physics.scenarios import HELD_OUT, TEST_KINDS
 from jaxexo.train.engine import finite
 from jaxexo.train.evaluate import make_rollouts, test_layouts
 from jaxexo.train.lanes import over_lanes, padded_agents
@@ -67,9 +67,13 @@ def reduce_metrics(m: jnp.ndarray, min_episodes: int) -> dict:
     window = max(1, n_upd // 100)
     cum_ep = jnp.cumsum(col.episodes)
     cum_su = jnp.cumsum(col.successes)
-    shift = lambda x: (
-        jnp.concatenate([jnp.zeros(window), x[:-window]]) if window < n_upd else jnp.zeros_like(x)
-    )  # noqa: E731
+    shift = (  # noqa: E731
+        lambda x: (
+            jnp.concatenate([jnp.zeros(window), x[:-window]])
+            if window < n_upd
+            else jnp.zeros_like(x)
+        )
+    )
     ep_w, su_w = cum_ep - shift(cum_ep), cum_su - shift(cum_su)
     hit = (ep_w >= MIN_WINDOW_EPISODES) & (su_w >= TARGET_SUCCESS * ep_w)
     episodes_to = jnp.where(jnp.any(hit), cum_ep[jnp.argmax(hit)], jnp.nan)

@@ -31,8 +31,8 @@ def _save(fig, path) -> None:
     write_figure(path, fig, dpi=110)
 
 
-from jaxexo.sweep import results as R
-from jaxexo.sweep.spec import Sweep, format_value
+from jaxexo.sweep import results as R  # noqa: E402
+from jaxexo.sweep.spec import Sweep, format_value  # noqa: E402
 
 
 def _nan_key(x: float) -> float:

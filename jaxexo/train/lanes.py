@@ -28,7 +28,8 @@ def over_agents(fn, devices, n_args: int):
     """``jit(shard_map(vmap(fn)))``: every argument and output has a leading agent axis, split evenly
     over ``devices`` (each device runs its share of the agents as one vmapped batch). An agent's
     arithmetic depends on that batch's size: throughput benchmarks only; training uses ``over_lanes``."""
-    from jax.sharding import Mesh, PartitionSpec as P
+    from jax.sharding import Mesh
+    from jax.sharding import PartitionSpec as P
 
     spec = P("agents")
     return jax.jit(
@@ -56,7 +57,8 @@ def over_lanes(fn, devices, n_args: int, shared: int = 0, lanes: int = LANES):
     module doc). The first ``n_args`` arguments have a leading agent axis of a multiple of
     len(devices) x lanes (``padded_agents``); the ``shared`` arguments after them are the same for
     every agent (replicated, not batched)."""
-    from jax.sharding import Mesh, PartitionSpec as P
+    from jax.sharding import Mesh
+    from jax.sharding import PartitionSpec as P
 
     def local(*args):
         batched, common = args[:n_args], args[n_args:]

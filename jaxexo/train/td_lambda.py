@@ -38,7 +38,7 @@ def lambda_returns(rewards, boot, terminated, done, cont, gamma, lam):
     lt = lam * cont_next * chain
 
     def body(g_next, x):
-        r, b, nt, l = x
+        r, b, nt, l = x  # noqa: E741 (l_t, as in the thesis)
         g = r + gamma * nt * ((1.0 - l) * b + l * g_next)
         return g, g
 

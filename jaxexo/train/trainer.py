@@ -509,7 +509,8 @@ class Trainer:
         """The device mesh and the TrainState of PartitionSpecs the data-parallel program uses: the
         per-environment fields split over the ``envs`` axis, the rest (parameters, optimizer, key,
         counters) replicated."""
-        from jax.sharding import Mesh, PartitionSpec as P
+        from jax.sharding import Mesh
+        from jax.sharding import PartitionSpec as P
 
         mesh = Mesh(np.array(self.devices), (self.axis,))
         per_env = {"env_state", "obs", "stats", "traces", "action", "greedy", "fresh"}
