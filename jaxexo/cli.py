@@ -254,8 +254,6 @@ def cmd_generate(args) -> int:
     obstacle = obstacle_from_args(args)
     # An output on standard output (-, /dev/stdout) keeps it for the data: messages go to stderr.
     report = sys.stderr if any(writes_to_stdout(v) for _, v in outputs) else sys.stdout
-    import numpy as np
-
     common = dict(
         pivot=args.pivot,
         pivot_y=args.pivot_y,
@@ -301,6 +299,15 @@ def cmd_generate(args) -> int:
 
         animate_swing(timed, args.animate)
         written.append(args.animate)
+    ok = _report_swing(traj, timed, report)
+    print("wrote " + ", ".join(written), file=report)
+    return 0 if ok else 1
+
+
+def _report_swing(traj, timed, report) -> bool:
+    """``jaxexo generate``'s summary of a swing (and its device timing) on ``report``; whether it is ok."""
+    import numpy as np
+
     c = traj.checks
     moves = (
         f"{len(traj.raw) - 1} agent moves"
@@ -333,8 +340,7 @@ def cmd_generate(args) -> int:
         ok = c.ok and timed.ok
     else:
         ok = c.ok
-    print("wrote " + ", ".join(written), file=report)
-    return 0 if ok else 1
+    return ok
 
 
 def cmd_walk(args) -> int:
@@ -722,6 +728,20 @@ def _add_scene_args(g) -> None:
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="jaxexo", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
+    _add_bench_env(sub)
+    _add_train(sub)
+    _add_generate(sub)
+    _add_mjcf_and_replay(sub)
+    _add_walk(sub)
+    _add_sweep(sub)
+    _add_eval(sub)
+    _add_reproduce(sub)
+    _add_bench(sub)
+    return p
+
+
+def _add_bench_env(sub) -> None:
+    """The `jaxexo bench-env` subcommand and its options."""
     b = sub.add_parser(
         "bench-env", help="environment steps per second (random actions, full reward)"
     )
@@ -741,6 +761,10 @@ def build_parser() -> argparse.ArgumentParser:
         "--no-mixed", action="store_true", help="skip the all-obstacle-kinds comparison rows"
     )
     b.set_defaults(func=cmd_bench_env)
+
+
+def _add_train(sub) -> None:
+    """The `jaxexo train` subcommand and its options."""
     t = sub.add_parser("train", help="train a policy (TD(lambda)); writes a run directory")
     t.add_argument(
         "config",
@@ -762,6 +786,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     t.add_argument("--quiet", action="store_true", help="no progress bar")
     t.set_defaults(func=cmd_train)
+
+
+def _add_generate(sub) -> None:
+    """The `jaxexo generate` subcommand and its options."""
     g = sub.add_parser(
         "generate", help="a smoothed, checked swing trajectory from policy.npz (NumPy only)"
     )
@@ -822,6 +850,10 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--json", help="also write JSON (scene, checks, raw points, samples)")
     g.add_argument("--plot", help="also draw the legs, the foot path and the joint angles (PNG)")
     g.set_defaults(func=cmd_generate)
+
+
+def _add_mjcf_and_replay(sub) -> None:
+    """The `jaxexo mjcf` and `jaxexo replay` subcommand and its options."""
     for name, helptext in (
         ("mjcf", "the legs and the obstacle as a MuJoCo model (MJCF), for MuJoCo's viewer"),
         (
@@ -871,6 +903,10 @@ def build_parser() -> argparse.ArgumentParser:
             )
             x.add_argument("--json", help="write the figures (SI units) to this JSON file")
             x.set_defaults(func=cmd_replay)
+
+
+def _add_walk(sub) -> None:
+    """The `jaxexo walk` subcommand and its options."""
     w = sub.add_parser(
         "walk",
         help="a walk over a measured course: footholds, every swing and both legs timed "
@@ -941,6 +977,10 @@ def build_parser() -> argparse.ArgumentParser:
         help="also write a GIF of the whole walk in real time (needs matplotlib and Pillow)",
     )
     w.set_defaults(func=cmd_walk)
+
+
+def _add_sweep(sub) -> None:
+    """The `jaxexo sweep` subcommand and its options."""
     s = sub.add_parser(
         "sweep", help="train a grid of configurations x seeds as compiled, vmapped programs"
     )
@@ -981,6 +1021,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=cmd_sweep)
+
+
+def _add_eval(sub) -> None:
+    """The `jaxexo eval` subcommand and its options."""
     e = sub.add_parser(
         "eval",
         help="evaluate the RL generator (and CFFTG) side by side; writes report.md/.json "
@@ -1015,6 +1059,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     e.add_argument("--out", required=True, help="report folder")
     e.set_defaults(func=cmd_eval)
+
+
+def _add_reproduce(sub) -> None:
+    """The `jaxexo reproduce` subcommand and its options."""
     r = sub.add_parser(
         "reproduce",
         help="train the seven thesis configs and tabulate them beside the thesis's Tables 3.2-3.11",
@@ -1050,6 +1098,10 @@ def build_parser() -> argparse.ArgumentParser:
         "(e.g. benchmarks/results)",
     )
     r.set_defaults(func=cmd_reproduce)
+
+
+def _add_bench(sub) -> None:
+    """The `jaxexo bench` subcommand and its options."""
     bb = sub.add_parser(
         "bench",
         help="every benchmark (environment, trainer, generator, CFFTG, thesis-style "
@@ -1080,7 +1132,6 @@ def build_parser() -> argparse.ArgumentParser:
         help="courses drawn for the course part (walks, RL alone against CFFTG)",
     )
     bb.set_defaults(func=cmd_bench)
-    return p
 
 
 def _warning_line(message, category, filename, lineno, file=None, line=None) -> None:
