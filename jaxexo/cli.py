@@ -216,7 +216,7 @@ def _check_outputs(inputs, outputs) -> None:
 
 def _check_clearance(clearance, config) -> None:
     """--clearance against the model's env.min_clearance, before any work (names the option)."""
-    from jaxexo.physics.dynamics import check_clearance
+    from jaxexo.physics.scene import check_clearance
 
     try:
         check_clearance(clearance, config.env.min_clearance)
@@ -439,7 +439,7 @@ def _timed_swing(args, traj, config):
 
 def _scene_args(args, config):
     """The scene of --obstacle/--width/--height/--center-y, --pivot/--pivot-y, --start-y, --step-length."""
-    from jaxexo.physics.dynamics import DEFAULT_PIVOT, make_scene
+    from jaxexo.physics.scene import DEFAULT_PIVOT, make_scene
 
     pivot = args.pivot_y if args.pivot_y is not None else (args.pivot or DEFAULT_PIVOT)
     return make_scene(
@@ -694,8 +694,8 @@ def cmd_bench(args) -> int:
 
 def _add_scene_args(g) -> None:
     """The scene's options (obstacle, pivot, start, step length) of generate, mjcf and replay."""
-    from jaxexo.physics.dynamics import DEFAULT_PIVOT, DEFAULT_START_Y, DEFAULT_STEP_LENGTH
     from jaxexo.physics.geometry import THESIS_OBSTACLES
+    from jaxexo.physics.scene import DEFAULT_PIVOT, DEFAULT_START_Y, DEFAULT_STEP_LENGTH
 
     g.add_argument(
         "--obstacle",

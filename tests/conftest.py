@@ -328,12 +328,12 @@ def random_generator(config, seed: int = 0):
     import numpy as np
 
     from jaxexo.inference import TrajectoryGenerator
-    from jaxexo.physics import dynamics
+    from jaxexo.physics import actions
     from jaxexo.storage.policy_file import QPolicy
 
-    d = dynamics.obs_dim(config.env.obs_mode, config.env.shape_points)
+    d = actions.obs_dim(config.env.obs_mode, config.env.shape_points)
     rng = np.random.default_rng(seed)
-    sizes = [d, 16, dynamics.NUM_ACTIONS]
+    sizes = [d, 16, actions.NUM_ACTIONS]
     pol = QPolicy(
         kernels=[rng.normal(size=(a, b)).astype(np.float32) for a, b in zip(sizes, sizes[1:])],
         biases=[np.zeros(b, np.float32) for b in sizes[1:]],

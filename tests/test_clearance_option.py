@@ -1,7 +1,7 @@
 """The clearance a caller asks of a swing (``generate(..., clearance=C)``, ``jaxexo generate --clearance``):
 the RL generator's shield keeps C plus its smoothing budget on every raw move, the verdict judges
 against C (checked here by an independent dense look at the delivered curve), CFFTG plans for C, and
-a clearance below the model's env.min_clearance or above dynamics.MAX_CLEARANCE is refused by name."""
+a clearance below the model's env.min_clearance or above MAX_CLEARANCE is refused by name."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from jaxexo.baselines import CFFTG
 from jaxexo.config import config_from_dict
 from jaxexo.inference import Obstacle, TrajectoryGenerator
 from jaxexo.inference.scenarios import safety_scenarios
-from jaxexo.physics import dynamics, geometry
+from jaxexo.physics import actions, geometry
 from jaxexo.storage.policy_file import QPolicy
 
 from conftest import ROOT, legacy_raw
@@ -33,9 +33,9 @@ def _config():
 
 def _random_generator(cfg, seed=0):
     """A shielded generator with random weights: the shield and the verdict alone must keep C."""
-    d = dynamics.obs_dim(cfg.env.obs_mode, cfg.env.shape_points)
+    d = actions.obs_dim(cfg.env.obs_mode, cfg.env.shape_points)
     rng = np.random.default_rng(seed)
-    sizes = [d, 32, 32, dynamics.NUM_ACTIONS]
+    sizes = [d, 32, 32, actions.NUM_ACTIONS]
     pol = QPolicy(
         kernels=[
             rng.normal(size=(a, b)).astype(np.float32) * 0.3 for a, b in zip(sizes, sizes[1:])

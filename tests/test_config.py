@@ -648,7 +648,7 @@ def test_memory_estimate_sizes_match_the_real_network_and_env(raw):
     jax = pytest.importorskip("jax")
     from jaxexo.config.memory import NUM_ACTIONS, network_size, observation_size
     from jaxexo.env import ExoStepEnv
-    from jaxexo.physics.dynamics import NUM_ACTIONS as ENV_ACTIONS
+    from jaxexo.physics.actions import NUM_ACTIONS as ENV_ACTIONS
     from jaxexo.train.network import QNetwork
 
     cfg = config_from_dict(legacy_raw(raw))

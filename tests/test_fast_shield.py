@@ -15,7 +15,7 @@ from jaxexo.inference import TrajectoryGenerator
 from jaxexo.inference import smoothing as sm
 from jaxexo.inference.generator import plain_reference
 from jaxexo.inference.shield import ScalarShield
-from jaxexo.physics import dynamics, scenarios
+from jaxexo.physics import actions, dynamics, scenarios
 from jaxexo.storage.policy_file import QPolicy
 
 from conftest import ROOT
@@ -26,9 +26,9 @@ def _random_generator(seed=0, hidden=(32, 32), scale=0.3, layer_norm=False):
     """A generator on configs/default.toml (shielded) with random weights."""
     cfg = load_config(ROOT / "configs" / "default.toml")
     assert cfg.env.shield
-    d = dynamics.obs_dim(cfg.env.obs_mode, cfg.env.shape_points)
+    d = actions.obs_dim(cfg.env.obs_mode, cfg.env.shape_points)
     rng = np.random.default_rng(seed)
-    sizes = [d, *hidden, dynamics.NUM_ACTIONS]
+    sizes = [d, *hidden, actions.NUM_ACTIONS]
     pol = QPolicy(
         kernels=[
             rng.normal(size=(a, b)).astype(np.float32) * scale for a, b in zip(sizes, sizes[1:])
@@ -75,15 +75,15 @@ def test_scalar_shield_picks_the_full_masks_greedy_move():
     hz[:k] = np.where(
         side, rng.uniform(0, 1, k) * lay["height"][:k], lay["height"][:k] + near
     ).astype(np.float32)
-    hz[k : 2 * k : 3] = 0.0  # on the ground: a move down is cancelled (dynamics.moves_heel)
+    hz[k : 2 * k : 3] = 0.0  # on the ground: a move down is cancelled (transition.moves_heel)
     ok = (hy > lay["start_y"] - 0.05) & (hy < lay["goal_y"])
-    q = rng.normal(size=(n, dynamics.NUM_ACTIONS)).astype(np.float32)
+    q = rng.normal(size=(n, actions.NUM_ACTIONS)).astype(np.float32)
     q[::3] = np.round(q[::3] * 2) / 2  # ties between moves
     q[1::5, 27] = 10.0  # straight down is the best move ...
     last = rng.choice(np.array([-1, 0, 9, 27, 30, 5]), size=n)
     last[1::5] = 9  # ... right after straight up
     mask = dynamics.admissible_moves(np, p, hy, hz, types.SimpleNamespace(**lay), last_action=last)
-    want = dynamics.greedy_action(np, q, mask)
+    want = actions.greedy_action(np, q, mask)
     decided = agree = 0
     for i in np.flatnonzero(ok):
         scene = types.SimpleNamespace(

@@ -21,7 +21,7 @@ from jaxexo.inference import smoothing as sm
 from jaxexo.inference.finish import landed
 from jaxexo.inference.scenarios import safety_scenarios
 from jaxexo.inference.trajectory import assemble
-from jaxexo.physics import dynamics
+from jaxexo.physics import transition
 
 from conftest import random_generator
 
@@ -41,13 +41,13 @@ def _generator(seed=0) -> TrajectoryGenerator:
 
 def _walked(heel: np.ndarray, goal_y: float, sp) -> np.ndarray:
     """A heel path (N, 2) walked in moves of step_size along it, stopped at the first point in the goal
-    box (dynamics.goal_reached), as a policy's rollout stops."""
+    box (transition.goal_reached), as a policy's rollout stops."""
     s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(heel, axis=0), axis=1))])
     u = np.arange(0.0, s[-1], sp.step_size)
     pts = np.vstack(
         [np.column_stack([np.interp(u, s, heel[:, 0]), np.interp(u, s, heel[:, 1])]), heel[-1:]]
     )
-    inside = dynamics.goal_reached(np, sp, pts[:, 0], pts[:, 1], goal_y)
+    inside = transition.goal_reached(np, sp, pts[:, 0], pts[:, 1], goal_y)
     return pts[: int(np.argmax(inside)) + 1]
 
 
@@ -107,7 +107,7 @@ def test_the_landing_rule():
             landed(sp, np.array([[0.0, 0.0], prev, [0.68, 0.003]]), goal)[-1], [0.68, 0.0]
         )
     for out in (landed(sp, diag, goal), landed(sp, far, goal)):
-        assert dynamics.goal_reached(np, sp, out[-1, 0], out[-1, 1], goal)
+        assert transition.goal_reached(np, sp, out[-1, 0], out[-1, 1], goal)
 
 
 @pytest.mark.parametrize("name", ["thesis five", "unseen shapes"])
@@ -135,7 +135,7 @@ def test_generated_swings_end_on_the_floor_in_the_goal_and_keep_the_verdict(name
     np.testing.assert_allclose(
         batch.toe[:, -1, 0] - batch.heel[:, -1, 0], CFG.kinematics.foot_length
     )
-    assert dynamics.goal_reached(
+    assert transition.goal_reached(
         np, gen.sp, batch.heel[:, -1, 0], batch.heel[:, -1, 1], np.array([s.goal_y for s in scenes])
     ).all()
     assert batch.ok[cfftg_ok].all(), [

@@ -88,15 +88,15 @@ def test_an_append_only_log_replaced_by_a_symlink_is_refused(tmp_path):
 def make_policy(path, cfg=None, seed=0, **meta_changes):
     from jaxexo.config import load_config
     from jaxexo.config.toml_io import config_to_toml
-    from jaxexo.physics import dynamics
+    from jaxexo.physics import actions
     from jaxexo.storage.policy_file import save_policy
 
     cfg = cfg or load_config(ROOT / "configs" / "quick.toml")
     rng = np.random.default_rng(seed)
     sizes = [
-        dynamics.obs_dim(cfg.env.obs_mode, cfg.env.shape_points),
+        actions.obs_dim(cfg.env.obs_mode, cfg.env.shape_points),
         *cfg.train.hidden,
-        dynamics.NUM_ACTIONS,
+        actions.NUM_ACTIONS,
     ]
     ks = [
         rng.normal(scale=0.1, size=(a, b)).astype(np.float32) for a, b in zip(sizes[:-1], sizes[1:])
@@ -110,9 +110,9 @@ def make_policy(path, cfg=None, seed=0, **meta_changes):
         "layers": sizes,
         "layer_norm": cfg.train.layer_norm,
         "activation": "relu",
-        "length_scale": dynamics.LENGTH_SCALE,
-        "thesis_obs_center": list(dynamics.THESIS_OBS_CENTER),
-        "action_angles_rad": dynamics.action_angles().tolist(),
+        "length_scale": actions.LENGTH_SCALE,
+        "thesis_obs_center": list(actions.THESIS_OBS_CENTER),
+        "action_angles_rad": actions.action_angles().tolist(),
         "config_toml": config_to_toml(cfg),
     }
     meta.update(meta_changes)

@@ -502,10 +502,10 @@ def test_wearer_lift_by_hand():
 def test_wearer_turn_by_hand():
     """A move's turn is 1 - cos of its angle to the last move: 0 straight on, 1 at a right angle, 2
     reversed, 1 - cos(10 deg) for the neighbouring direction; none at the first move."""
-    from jaxexo.physics import dynamics
+    from jaxexo.physics import actions
     from jaxexo.physics.rewards import turn_of
 
-    dirs = dynamics.action_directions()
+    dirs = actions.action_directions()
     a = np.array([0, 9, 27, 1, 35, 4])
     last = np.array([0, 0, 9, 0, 0, -1])
     np.testing.assert_allclose(

@@ -14,7 +14,8 @@ from jaxexo.inference import Obstacle, TrajectoryGenerator
 from jaxexo.inference import smoothing as sm
 from jaxexo.inference.scenarios import safety_scenarios
 from jaxexo.inference.trajectory import assemble
-from jaxexo.physics import dynamics, geometry, outcome, swept
+from jaxexo.physics import geometry, outcome, swept, transition
+from jaxexo.physics.scene import make_scene, stack_scenes
 
 from conftest import legacy_raw
 
@@ -117,7 +118,7 @@ def test_swept_distance_under_jit_matches_numpy():
 def test_a_two_sample_line_through_the_triangle_fails():
     cfg = config_from_dict(legacy_raw())
     sp = scalar_params(cfg)
-    scene = dynamics.make_scene(Obstacle.named("triangle"), "between", foot_length=FOOT)
+    scene = make_scene(Obstacle.named("triangle"), "between", foot_length=FOOT)
     line = np.array([[[0.0, 0.0], [0.70, 0.0]]])
     # Both samples are 15 cm clear of the triangle; the move between them goes through it.
     assert geometry.foot_clearance(np, line[0], FOOT, scene.outline).min() > 0.1
@@ -179,17 +180,15 @@ def test_a_verdict_at_n_samples_holds_at_10n(outline, seed, n, smoothing):
 
 def _step(xp, cfg, prev, heel, max_y=None):
     p = numpy_params(cfg)
-    scene = dynamics.make_scene(
-        Obstacle.named("base1"), "obstacle", foot_length=FOOT
-    )  # [0.35, 0.55] x 0.10
-    lay = dynamics.stack_scenes([scene], np.float32)
+    scene = make_scene(Obstacle.named("base1"), "obstacle", foot_length=FOOT)  # [0.35, 0.55] x 0.10
+    lay = stack_scenes([scene], np.float32)
     lay = type(lay)(**{k: v[0] for k, v in vars(lay).items()})
     if xp is not np:
         from jaxexo.env.params import EnvParams
 
         p = EnvParams.from_config(cfg)
         lay = type(lay)(**{k: xp.asarray(v) for k, v in vars(lay).items()})
-    out = dynamics.transition(
+    out = transition.transition(
         xp,
         p,
         xp.asarray(prev, xp.float32),

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from jaxexo.config import config_from_dict, load_config, numpy_params
-from jaxexo.physics import dynamics, geometry, kinematics, terrain  # noqa: F401
+from jaxexo.physics import actions, dynamics, geometry, kinematics, terrain, transition  # noqa: F401
+from jaxexo.physics.scene import stack_scenes
 
 from conftest import ROOT, legacy_raw
 
@@ -76,8 +77,8 @@ def test_admissible_moves_against_dense_sampling(floor):
             continue  # a heel inside or on the obstacle: not a state a shielded agent reaches
         need = min(SHIELD, c_here)
         dense, reach, before_goal, off_floor = [], [], [], []
-        for a in range(dynamics.NUM_ACTIONS):
-            y, z = dynamics.move_heel(np, p, hy[i], hz[i], d[a, 0], d[a, 1])
+        for a in range(actions.NUM_ACTIONS):
+            y, z = transition.move_heel(np, p, hy[i], hz[i], d[a, 0], d[a, 1])
             h1 = np.array([y, z], np.float64)
             dense.append(_dense_clearance(p, h0, h1, lay["outline"][i]))
             reach.append(
@@ -144,7 +145,7 @@ def test_vertical_move_up_is_admissible_from_any_safe_pose():
     import types
 
     m = dynamics.admissible_moves(np, p, hy, hz, types.SimpleNamespace(**lay))
-    up = int(np.argmin(np.abs(dynamics.action_angles() - np.pi / 2)))
+    up = int(np.argmin(np.abs(actions.action_angles() - np.pi / 2)))
     c = geometry.foot_clearance(
         np,
         np.stack([hy, hz], -1).astype(np.float64),
@@ -222,9 +223,9 @@ def test_shielded_generator_never_falls_back_and_keeps_clearance(tmp_path):
     from jaxexo.storage.policy_file import QPolicy
 
     cfg = _config()
-    d = dynamics.obs_dim(cfg.env.obs_mode, cfg.env.shape_points)
+    d = actions.obs_dim(cfg.env.obs_mode, cfg.env.shape_points)
     rng = np.random.default_rng(0)
-    sizes = [d, 32, 32, dynamics.NUM_ACTIONS]
+    sizes = [d, 32, 32, actions.NUM_ACTIONS]
     pol = QPolicy(
         kernels=[
             rng.normal(size=(a, b)).astype(np.float32) * 0.3 for a, b in zip(sizes, sizes[1:])
@@ -378,7 +379,7 @@ def test_shield_never_undoes_the_last_move_nor_stands_still():
     p = env.default_params
     up, down = 9, 27
     assert np.allclose(
-        dynamics.action_directions()[[up, down]], [[0.0, 1.0], [0.0, -1.0]], atol=1e-12
+        actions.action_directions()[[up, down]], [[0.0, 1.0], [0.0, -1.0]], atol=1e-12
     )
     obs, st = env.reset(jax.random.PRNGKey(3), p)
     assert int(st.last_action) == -1
@@ -417,7 +418,7 @@ def test_shielded_swings_visit_no_point_twice():
     paths, acts = gen.rollout_batch(scenes)
     fallbacks = steps = 0
     for scene, path, act in zip(scenes, paths, acts):
-        lay = dynamics.stack_scenes([scene], np.float32)
+        lay = stack_scenes([scene], np.float32)
         pts = path.astype(np.float32)
         for k in range(1, len(act)):
             steps += 1

@@ -13,8 +13,8 @@ import pytest
 
 from jaxexo.config import load_config, scalar_params
 from jaxexo.physics import geometry, scenarios
-from jaxexo.physics.dynamics import make_scene
 from jaxexo.physics.geometry import GeometryError, Obstacle
+from jaxexo.physics.scene import make_scene
 from jaxexo.sim.mjcf import SimError, legs_mjcf, scene_mjcf
 from jaxexo.sim.pieces import convex_pieces
 

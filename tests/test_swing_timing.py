@@ -20,7 +20,8 @@ from jaxexo.inference import Obstacle
 from jaxexo.inference.export import TIMED_CSV_COLUMNS
 from jaxexo.inference.swing_timing import DeviceLimits, time_swing, time_swings, uniform_peaks
 from jaxexo.inference.trajectory import assemble
-from jaxexo.physics import dynamics, kinematics
+from jaxexo.physics import kinematics
+from jaxexo.physics.scene import make_scene
 
 from conftest import ROOT, legacy_raw
 
@@ -77,7 +78,7 @@ def random_path(rng, n=100, dense=None):
 
 def synthetic(paths, pivot="between"):
     ob = Obstacle.rectangle(0.05, 0.05, center_y=0.45)
-    scenes = [dynamics.make_scene(ob, pivot, 0.0, 0.70, foot_length=SP.foot_length) for _ in paths]
+    scenes = [make_scene(ob, pivot, 0.0, 0.70, foot_length=SP.foot_length) for _ in paths]
     return list(
         assemble(
             "test",
@@ -109,7 +110,7 @@ def test_the_safety_net_slows_by_whole_control_periods():
     of the TOPP passes 0.13 % over the hip's acceleration limit at 100 Hz, and was left flagged not
     within the limits when the net's slow-downs stayed inside one period."""
     rec = json.loads((ROOT / "tests" / "data" / "stuck_swing.json").read_text())
-    scene = dynamics.make_scene(
+    scene = make_scene(
         Obstacle.profile(rec["obstacle_outline"]),
         rec["pivot_y"],
         rec["start_y"],

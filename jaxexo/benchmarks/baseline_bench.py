@@ -36,7 +36,7 @@ from jaxexo.benchmarks.thesis_baseline import (
     layout_pool,
 )
 from jaxexo.config import Config, load_config
-from jaxexo.physics.dynamics import NUM_ACTIONS
+from jaxexo.physics.actions import NUM_ACTIONS
 
 POOL = 20_000
 

@@ -158,8 +158,8 @@ def time_breakdown(gen, cf, scenarios: list[dict], repeats: int = 3) -> dict:
 
     from jaxexo.inference.clearing import clear_rows
     from jaxexo.inference.shield import ScalarShield
-    from jaxexo.physics import dynamics
-    from jaxexo.physics.dynamics import scalar
+    from jaxexo.physics import transition
+    from jaxexo.physics.transition import scalar
 
     def best(fn):
         out = float("inf")
@@ -190,14 +190,14 @@ def time_breakdown(gen, cf, scenarios: list[dict], repeats: int = 3) -> dict:
         scene = gen.scene(s["obstacle"], s["pivot"], None, s["start_y"], s["step_length"])
         raw, acts = gen.rollout(scene)
         k = len(acts)
-        mid_y, mid_z = dynamics.mid_goal(scalar, sp, scene.center_y, scene.height)
+        mid_y, mid_z = transition.mid_goal(scalar, sp, scene.center_y, scene.height)
         visited, states = False, []
         for j in range(k):
             hy, hz = float(raw[j, 0]), float(raw[j, 1])
             states.append(
                 (hy, hz, float(j), 1.0 if visited else 0.0, int(acts[j - 1]) if j else -1)
             )
-            visited = visited or dynamics.in_mid_goal(
+            visited = visited or transition.in_mid_goal(
                 scalar, sp, float(raw[j + 1, 0]), float(raw[j + 1, 1]), mid_y, mid_z
             )
         basis = gen._basis(scene)

@@ -128,7 +128,7 @@ def truncated_lambda_returns(reward, boot, terminated, valid, cont, gamma: float
 
 class NumpyExoEnv:
     """ExoStepEnv's rules stepped one environment at a time in NumPy (float32, like the JAX env):
-    the same move, transition, reward and observation functions (``jaxexo.physics.dynamics``).
+    the same move, transition, reward and observation functions (``jaxexo.physics.transition``, ``jaxexo.physics.actions``).
 
     Layouts come from a pool drawn once by the one scenario generator (``layout_pool``), in
     a fresh random order on every pass, so both trainers see the same layout distribution and no
@@ -137,9 +137,9 @@ class NumpyExoEnv:
 
     def __init__(self, cfg, pool: dict, seed: int = 0):
         from jaxexo.config import numpy_params
-        from jaxexo.physics import dynamics, outcome
+        from jaxexo.physics import actions, outcome, transition
 
-        self.dyn, self.dyn_outcome = dynamics, outcome
+        self.actions, self.transition, self.dyn_outcome = actions, transition, outcome
         self.p = numpy_params(cfg)
         self.obs_mode = cfg.env.obs_mode
         self.max_steps = int(cfg.env.max_steps)
@@ -155,7 +155,7 @@ class NumpyExoEnv:
         return types.SimpleNamespace(**{k: v[i] for k, v in self.pool.items()})
 
     def _obs(self):
-        return self.dyn.observation(
+        return self.actions.observation(
             np, self.p, self.obs_mode, self.heel[0], self.heel[1], self.time, self.visited, self.lay
         )
 
@@ -176,9 +176,9 @@ class NumpyExoEnv:
         p = self.p
         d = p.directions[action]
         prev = self.heel
-        self.heel = np.stack(self.dyn.move_heel(np, p, prev[0], prev[1], d[0], d[1]))
+        self.heel = np.stack(self.transition.move_heel(np, p, prev[0], prev[1], d[0], d[1]))
         self.time = self.time + np.int32(1)
-        out = self.dyn.transition(
+        out = self.transition.transition(
             np,
             p,
             prev,

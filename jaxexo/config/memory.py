@@ -16,8 +16,8 @@ import os
 
 from jaxexo.config.checks import ConfigError
 from jaxexo.config.sections import Config
-from jaxexo.physics import dynamics
-from jaxexo.physics.dynamics import NUM_ACTIONS
+from jaxexo.physics import actions
+from jaxexo.physics.actions import NUM_ACTIONS
 
 FLOAT = 4  # bytes: float32 / int32
 ENV_SCALARS = 24  # per-environment scalars of the env state and episode statistics (heel, time,
@@ -25,8 +25,8 @@ ENV_SCALARS = 24  # per-environment scalars of the env state and episode statist
 
 
 def observation_size(cfg: Config) -> int:
-    """The network's input size D (jaxexo.physics.dynamics.obs_dim, the one definition)."""
-    return dynamics.obs_dim(cfg.env.obs_mode, cfg.env.shape_points)
+    """The network's input size D (jaxexo.physics.actions.obs_dim, the one definition)."""
+    return actions.obs_dim(cfg.env.obs_mode, cfg.env.shape_points)
 
 
 def network_size(cfg: Config, obs_dim: int | None = None) -> int:

@@ -40,7 +40,8 @@ from jaxexo.config.obstacles import (
     terrain_params,
     write_terrain,
 )
-from jaxexo.physics import dynamics, geometry, outcome, rewards, terrain
+from jaxexo.physics import geometry, outcome, rewards, terrain
+from jaxexo.physics.scene import MAX_CLEARANCE
 
 OBS_MODES = ("thesis", "conditioned")
 OBS_PROFILES = ("bbox", "shape")
@@ -137,9 +138,9 @@ class EnvConfig:
     # The safe-swing definition (jaxexo.physics.swept): the foot's motion between samples
     # never comes closer than min_clearance to the obstacle, and the heel never moves backward by
     # more than backward_tolerance. The environment's success flag and the generators' ``ok`` use both.
-    # At most dynamics.MAX_CLEARANCE (10 cm), the most a generator may be asked to keep.
+    # At most MAX_CLEARANCE (10 cm), the most a generator may be asked to keep.
     min_clearance: float = declare(
-        outcome.DEFAULT_MIN_CLEARANCE, number(nonneg=True, hi=dynamics.MAX_CLEARANCE), unit="m"
+        outcome.DEFAULT_MIN_CLEARANCE, number(nonneg=True, hi=MAX_CLEARANCE), unit="m"
     )
     # At most 10 m: any value beyond env.bounds_y's span turns the check off, and the thesis configs
     # write 10 m for that.

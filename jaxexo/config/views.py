@@ -1,7 +1,7 @@
 """A Config seen as the environment's parameters, and the configs derived from it.
 
 ``param_values`` turns the leaf fields of the environment sections into the arrays the transition
-rules read (jaxexo.physics.dynamics, thesis 2.1-2.5); ``numpy_params`` and ``scalar_params`` are the
+rules read (jaxexo.physics.transition, thesis 2.1-2.5); ``numpy_params`` and ``scalar_params`` are the
 NumPy and plain-float views of the same values, ``EnvParams`` (jaxexo.env.params) the JAX one.
 ``test_config`` is the training config evaluated on the five thesis obstacles (Table 3.1).
 NumPy-only: the physics below is given the values, it never reads a Config.
@@ -17,7 +17,7 @@ import numpy as np
 from jaxexo.config.declarations import declared_fields
 from jaxexo.config.obstacles import named_spec
 from jaxexo.config.sections import ENV_SECTIONS, SECTION_CLASSES, Config
-from jaxexo.physics.dynamics import action_directions
+from jaxexo.physics.actions import action_directions
 from jaxexo.physics.scenarios import TEST_KINDS
 
 
@@ -42,7 +42,7 @@ def numpy_params(cfg: Config) -> types.SimpleNamespace:
 
 
 def scalar_params(cfg: Config) -> types.SimpleNamespace:
-    """The transition constants as Python floats (for ``xp=dynamics.scalar``); vectors become tuples.
+    """The transition constants as Python floats (for ``xp=transition.scalar``); vectors become tuples.
 
     Values are rounded through float32 first, so that the scalar loop starts from exactly the
     constants the float32 JAX environment uses."""

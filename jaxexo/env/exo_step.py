@@ -19,8 +19,9 @@ from flax import struct
 from jaxexo.config import Config
 from jaxexo.env import compact, shield, spaces
 from jaxexo.env.params import EnvParams
-from jaxexo.physics import dynamics, geometry, scenarios
-from jaxexo.physics.dynamics import LENGTH_SCALE, NUM_ACTIONS, THESIS_OBS_CENTER  # noqa: F401 (re-exported)
+from jaxexo.physics import actions, dynamics, geometry, scenarios, transition
+from jaxexo.physics.actions import LENGTH_SCALE, NUM_ACTIONS, THESIS_OBS_CENTER  # noqa: F401 (re-exported)
+from jaxexo.physics.scene import make_scene
 
 # Every observation lies within +-OBS_BOUND (world bounds of a few metres over LENGTH_SCALE).
 OBS_BOUND = 10.0
@@ -90,7 +91,7 @@ class ExoStepEnv:
 
     @property
     def obs_dim(self) -> int:
-        return dynamics.obs_dim(self.obs_mode, self.shape_points)
+        return actions.obs_dim(self.obs_mode, self.shape_points)
 
     def action_space(self, params: EnvParams | None = None):
         return spaces.discrete(NUM_ACTIONS)
@@ -140,11 +141,11 @@ class ExoStepEnv:
         kind: int = -1,
     ) -> Layout:
         """A fixed layout from an Obstacle, for evaluation on chosen scenes (validated by
-        jaxexo.physics.dynamics.make_scene, as the NumPy generator's scenes are).
+        jaxexo.physics.scene.make_scene, as the NumPy generator's scenes are).
 
         ``pivot`` is one of PIVOT_CONDITIONS or a pivot heel y in metres; ``kind`` tags the layout
         for per-kind statistics."""
-        sc = dynamics.make_scene(
+        sc = make_scene(
             obstacle,
             pivot,
             start_y,
@@ -177,16 +178,16 @@ class ExoStepEnv:
 
     def mid_goal(self, layout: Layout, params: EnvParams):
         """Centre of the mid-goal box (thesis 2.2): above the obstacle centre, at a safe height."""
-        return jnp.stack(dynamics.mid_goal(jnp, params, layout.center_y, layout.height))
+        return jnp.stack(transition.mid_goal(jnp, params, layout.center_y, layout.height))
 
     def step_env(self, key, state: EnvState, action, params: EnvParams):
         lay = state.layout
         prev = state.heel
         d = params.directions[action]
-        heel = jnp.stack(dynamics.move_heel(jnp, params, prev[0], prev[1], d[0], d[1]))
+        heel = jnp.stack(transition.move_heel(jnp, params, prev[0], prev[1], d[0], d[1]))
         time = state.time + 1
 
-        out = dynamics.transition(
+        out = transition.transition(
             jnp,
             params,
             prev,
@@ -212,7 +213,7 @@ class ExoStepEnv:
 
     def is_truncated(self, state: EnvState, params: EnvParams):
         """The step limit (elementwise: a batch of states gives a batch of flags)."""
-        return dynamics.truncated(state.time, params.max_steps_in_episode)
+        return transition.truncated(state.time, params.max_steps_in_episode)
 
     @staticmethod
     def _step_info(info, terminated, truncated, obs_st):
@@ -311,7 +312,7 @@ class ExoStepEnv:
 
     # Observations ---------------------------------------------------------------------------
     def get_obs(self, state: EnvState, params: EnvParams):
-        return dynamics.observation(
+        return actions.observation(
             jnp,
             params,
             self.obs_mode,

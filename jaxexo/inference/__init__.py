@@ -24,8 +24,8 @@ from jaxexo.inference.trajectory import (
     TrajectoryError,
     assemble,
 )
-from jaxexo.physics.dynamics import Scene
 from jaxexo.physics.geometry import Obstacle
+from jaxexo.physics.scene import Scene
 from jaxexo.storage.policy_file import PolicyFileError
 
 _LAZY = {

@@ -60,8 +60,15 @@ from jaxexo.config import Config, load_config, scalar_params
 from jaxexo.inference.options import SwingOptions, scene_for, scenes_for
 from jaxexo.inference.policy_check import load_checked
 from jaxexo.inference.trajectory import Trajectory, TrajectoryBatch, assemble, measure_paths
-from jaxexo.physics import dynamics, geometry
-from jaxexo.physics.dynamics import DEFAULT_START_Y, DEFAULT_STEP_LENGTH
+from jaxexo.physics import geometry
+from jaxexo.physics.scene import (
+    DEFAULT_START_Y,
+    DEFAULT_STEP_LENGTH,
+    Scene,
+    check_clearance,
+    stack_scenes,
+    with_clearance,
+)
 
 DEFAULT_POINTS = 100
 C_MAX = 10.0  # |c| bound for a monotone y(s)
@@ -214,7 +221,7 @@ class CFFTG:
         pivot_y: float | None = None,
         start_y: float = DEFAULT_START_Y,
         step_length: float = DEFAULT_STEP_LENGTH,
-    ) -> dynamics.Scene:
+    ) -> Scene:
         """Validate one scenario (metres), as the RL generator does."""
         return scene_for(self.config, obstacle, pivot, pivot_y, start_y, step_length)
 
@@ -223,7 +230,7 @@ class CFFTG:
         """Plan, check and re-plan every scene. Returns the final paths (B, N, 2), the via points
         (B, 3, 2), the number of plans each scene needed (B,), whether it gave up (B,) and the checks
         of the final paths (``jaxexo.inference.trajectory.measure``'s dict)."""
-        arr = dynamics.stack_scenes(scenes, np.float64)
+        arr = stack_scenes(scenes, np.float64)
         b = len(scenes)
         foot = float(self.sp.foot_length)
         # Initial apex: over the middle of the heel positions at which the foot overlaps the obstacle.
@@ -289,11 +296,11 @@ class CFFTG:
         """This generator for swings that must keep ``clearance`` (m; None: env.min_clearance): the
         verdict judges against it, and the plan's margin keeps the same excess above it as the
         config's (reward.safety_distance over env.min_clearance)."""
-        c = dynamics.check_clearance(clearance, self.config.env.min_clearance)
+        c = check_clearance(clearance, self.config.env.min_clearance)
         if c is None:
             return self
         out = copy.copy(self)
-        out.sp = dynamics.with_clearance(self.sp, c)
+        out.sp = with_clearance(self.sp, c)
         out.margin = self.margin + (c - self.config.env.min_clearance)
         return out
 

@@ -35,7 +35,7 @@ CSV_COLUMNS = (
 
 
 def scene_dict(sc) -> dict:
-    """A scene (jaxexo.physics.dynamics.Scene) as JSON values."""
+    """A scene (jaxexo.physics.scene.Scene) as JSON values."""
     return {
         "obstacle": sc.obstacle.kind,
         "shape": sc.obstacle.shape,

@@ -3,7 +3,7 @@
 First the raw path lands (``landed``): the policy stops in its goal box (env.goal_tolerance: up to
 5 mm above the floor on the default model, 2 cm on the thesis configs), so a path that reached the
 goal above the floor gains a last point on the floor, where the line of its last move meets it (straight below its end when that point is outside
-the goal box, jaxexo.physics.dynamics.goal_reached). The descent is then part of everything below:
+the goal box, jaxexo.physics.transition.goal_reached). The descent is then part of everything below:
 smoothed, corrected, retried and judged with the rest of the swing, and the swing ends with the
 whole foot on the floor.
 
@@ -36,7 +36,7 @@ from jaxexo.inference import smoothing as sm
 from jaxexo.inference import trajectory
 from jaxexo.inference.clearing import clear_rows, exact_clear_rows
 from jaxexo.inference.trajectory import TrajectoryBatch, assemble
-from jaxexo.physics import dynamics
+from jaxexo.physics import transition
 
 # Per-path candidate smoothings: s = M * rho^2 for these rho (m), a root-mean-square residual of rho
 # per point. A shielded raw path keeps env.shield_clearance, 5 mm above the verdict's margin; the
@@ -66,13 +66,13 @@ def landed(sp, raw: np.ndarray, goal_y: float) -> np.ndarray:
     else straight below the end (in the box, as the end is)."""
     raw = np.asarray(raw, dtype=np.float64)
     y, z = float(raw[-1, 0]), float(raw[-1, 1])
-    if z <= 0.0 or not dynamics.goal_reached(np, sp, y, z, goal_y):
+    if z <= 0.0 or not transition.goal_reached(np, sp, y, z, goal_y):
         return raw
     land = y
     if len(raw) > 1:
         dy, dz = raw[-1] - raw[-2]
         # continuing the last move keeps the direction the policy came down in (no corner to smooth)
-        if dz < 0.0 and dy > 0.0 and dynamics.goal_reached(np, sp, y + z * dy / -dz, 0.0, goal_y):
+        if dz < 0.0 and dy > 0.0 and transition.goal_reached(np, sp, y + z * dy / -dz, 0.0, goal_y):
             land = y + z * dy / -dz
     return np.vstack([raw, [[land, 0.0]]])
 

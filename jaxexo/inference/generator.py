@@ -1,6 +1,6 @@
 """TrajectoryGenerator: an exported policy (policy.npz) driven greedily in NumPy, finished and checked.
 
-The rollout follows the training environment's rules exactly (jaxexo.physics.dynamics: the same move,
+The rollout follows the training environment's rules exactly (jaxexo.physics.transition and .actions: the same move,
 goal, mid-goal and observation functions, step limit and collision handling) with the exported
 Q-network's greedy action (thesis 2.6). ``generate`` runs one scene in Python floats with the
 observation folded into the network's first layer (jaxexo.inference.network); ``generate_batch``
@@ -35,8 +35,16 @@ from jaxexo.inference.policy_check import load_checked
 from jaxexo.inference.shield import ScalarShield
 from jaxexo.inference.shield_rows import ShieldRows, ShieldStats, take_rows
 from jaxexo.inference.trajectory import Trajectory, TrajectoryBatch
-from jaxexo.physics import dynamics, geometry
-from jaxexo.physics.dynamics import DEFAULT_START_Y, DEFAULT_STEP_LENGTH, Scene, scalar
+from jaxexo.physics import actions, geometry, transition
+from jaxexo.physics.scene import (
+    DEFAULT_START_Y,
+    DEFAULT_STEP_LENGTH,
+    Scene,
+    check_clearance,
+    stack_scenes,
+    with_clearance,
+)
+from jaxexo.physics.transition import scalar
 from jaxexo.storage.policy_file import QPolicy
 
 
@@ -133,7 +141,7 @@ class TrajectoryGenerator:
         and only the origin row is computed per scene."""
         if self._linear is None:
             e = np.eye(5)  # rows: unit heel_y, heel_z, time, visited, then the origin
-            obs = dynamics.observation(
+            obs = actions.observation(
                 np,
                 self.np_params,
                 self.obs_mode,
@@ -141,11 +149,11 @@ class TrajectoryGenerator:
                 e[:, 1],
                 e[:, 2],
                 e[:, 3],
-                dynamics.stack_scenes([scene] * 5, np.float64),
+                stack_scenes([scene] * 5, np.float64),
             )
             self._linear = obs[:4] - obs[4]
         z = np.zeros(1)
-        origin = dynamics.observation(
+        origin = actions.observation(
             np,
             self.np_params,
             self.obs_mode,
@@ -153,7 +161,7 @@ class TrajectoryGenerator:
             z,
             z,
             z,
-            dynamics.stack_scenes([scene], np.float64),
+            stack_scenes([scene], np.float64),
         )
         return np.vstack([self._linear, origin])
 
@@ -167,11 +175,11 @@ class TrajectoryGenerator:
         every step."""
         sp, step = self.sp, self.step_net
         step.set_scene(self._basis(scene))
-        mid_y, mid_z = dynamics.mid_goal(scalar, sp, scene.center_y, scene.height)
+        mid_y, mid_z = transition.mid_goal(scalar, sp, scene.center_y, scene.height)
         hy, hz, t, visited = float(scene.start_y), 0.0, 0, False
         pts, acts = [(hy, hz)], []
         last = -1  # the move just made (the shield never undoes it)
-        one = dynamics.stack_scenes([scene], np.float32) if self.shield else None
+        one = stack_scenes([scene], np.float32) if self.shield else None
         rows = ShieldRows(self.np_params, self.sp, self.shield_stats) if self.shield else None
         single = ScalarShield(self.sp, self.np_params, scene) if self._shield_first() else None
         while True:
@@ -185,7 +193,7 @@ class TrajectoryGenerator:
                         one,
                         last=np.array([last]),
                     )[0]
-                    a = int(dynamics.greedy_action(np, q, mask))
+                    a = int(actions.greedy_action(np, q, mask))
                     self.shield_stats.steps_to_full_mask += 1
                 self.shield_stats.steps += 1
             elif self.shield:
@@ -198,21 +206,21 @@ class TrajectoryGenerator:
                 a = self._explore(step.greedy(hy, hz, t, 1.0 if visited else 0.0, mask), mask)
             else:
                 a = self._explore(step.greedy(hy, hz, t, 1.0 if visited else 0.0))
-            hy, hz = dynamics.move_heel(scalar, sp, hy, hz, *self.directions[a])
+            hy, hz = transition.move_heel(scalar, sp, hy, hz, *self.directions[a])
             t += 1
-            visited = visited or dynamics.in_mid_goal(scalar, sp, hy, hz, mid_y, mid_z)
+            visited = visited or transition.in_mid_goal(scalar, sp, hy, hz, mid_y, mid_z)
             pts.append((hy, hz))
             acts.append(a)
             last = int(a)
-            # The environment's termination (dynamics.terminated, .truncated); the clearance is
+            # The environment's termination (transition.terminated, .truncated); the clearance is
             # only computed where a collision ends the episode.
             collided = self.terminate_on_collision and self._touches(scene, np.array([[hy, hz]]))
-            if dynamics.terminated(
+            if transition.terminated(
                 scalar,
                 self._term_p,
-                dynamics.goal_reached(scalar, sp, hy, hz, scene.goal_y),
+                transition.goal_reached(scalar, sp, hy, hz, scene.goal_y),
                 collided,
-            ) or dynamics.truncated(t, self.max_steps):
+            ) or transition.truncated(t, self.max_steps):
                 break
         return np.asarray(pts), np.asarray(acts, dtype=np.int64)
 
@@ -226,7 +234,7 @@ class TrajectoryGenerator:
         shield, a greedy rollout checks each row's best forward move first (``ShieldRows.choose``);
         ``plain_reference`` computes the full mask of every row every step."""
         p = self.np_params
-        lay = dynamics.stack_scenes(scenes, np.float32)
+        lay = stack_scenes(scenes, np.float32)
         rows = ShieldRows(self.np_params, self.sp, self.shield_stats) if self.shield else None
         b = len(scenes)
         dirs = p.directions
@@ -234,7 +242,7 @@ class TrajectoryGenerator:
         hz = np.zeros(b, np.float32)
         t = np.zeros(b, np.int32)
         visited = np.zeros(b, bool)
-        mid_y, mid_z = dynamics.mid_goal(np, p, lay.center_y, lay.height)
+        mid_y, mid_z = transition.mid_goal(np, p, lay.center_y, lay.height)
         path = np.empty((self.max_steps + 1, b, 2), np.float32)
         acts = np.zeros((self.max_steps, b), np.int64)
         last = np.full(b, -1, np.int64)  # the move just made (the shield never undoes it)
@@ -243,7 +251,7 @@ class TrajectoryGenerator:
         alive = np.arange(b)
         for k in range(self.max_steps):
             sub = take_rows(lay, alive)
-            obs = dynamics.observation(
+            obs = actions.observation(
                 np, p, self.obs_mode, hy[alive], hz[alive], t[alive], visited[alive], sub
             )
             if self._shield_first():
@@ -254,11 +262,11 @@ class TrajectoryGenerator:
                     if self.shield
                     else None
                 )
-                a = self._explore(dynamics.greedy_action(np, self.net.q(obs), mask), mask)
-            ny, nz = dynamics.move_heel(np, p, hy[alive], hz[alive], dirs[a, 0], dirs[a, 1])
+                a = self._explore(actions.greedy_action(np, self.net.q(obs), mask), mask)
+            ny, nz = transition.move_heel(np, p, hy[alive], hz[alive], dirs[a, 0], dirs[a, 1])
             hy[alive], hz[alive] = ny, nz
             t[alive] += 1
-            visited[alive] |= dynamics.in_mid_goal(np, p, ny, nz, mid_y[alive], mid_z[alive])
+            visited[alive] |= transition.in_mid_goal(np, p, ny, nz, mid_y[alive], mid_z[alive])
             path[k + 1, alive, 0], path[k + 1, alive, 1] = ny, nz
             acts[k, alive] = a
             last[alive] = a
@@ -267,9 +275,9 @@ class TrajectoryGenerator:
             if self.terminate_on_collision:  # the clearance only where a collision ends the episode
                 c = geometry.foot_clearance(np, np.stack([ny, nz], -1), p.foot_length, sub.outline)
                 collided = geometry.foot_collides(np, c)
-            done = dynamics.terminated(
-                np, p, dynamics.goal_reached(np, p, ny, nz, sub.goal_y), collided
-            ) | dynamics.truncated(t[alive], self.max_steps)
+            done = transition.terminated(
+                np, p, transition.goal_reached(np, p, ny, nz, sub.goal_y), collided
+            ) | transition.truncated(t[alive], self.max_steps)
             alive = alive[~done]
             if alive.size == 0:
                 break
@@ -301,15 +309,15 @@ class TrajectoryGenerator:
 
     def at_clearance(self, clearance: float | None) -> "TrajectoryGenerator":
         """This generator for swings that must keep ``clearance`` (m; None: the model's env.min_clearance;
-        refused below it or above dynamics.MAX_CLEARANCE): the verdict judges against it, the shield
+        refused below it or above MAX_CLEARANCE): the verdict judges against it, the shield
         keeps the same excess above it as in training (env.shield_clearance - env.min_clearance), and
         the CFFTG fallback plans for it too. The policy's input is unchanged."""
-        c = dynamics.check_clearance(clearance, self.config.env.min_clearance)
+        c = check_clearance(clearance, self.config.env.min_clearance)
         if c is None:
             return self
         out = copy.copy(self)
-        out.sp = dynamics.with_clearance(self.sp, c)
-        out.np_params = dynamics.with_clearance(self.np_params, c)
+        out.sp = with_clearance(self.sp, c)
+        out.np_params = with_clearance(self.np_params, c)
         out._cfftg = None
         out.clearance = c
         return out

@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from jaxexo.physics import dynamics
+from jaxexo.physics import actions
 from jaxexo.storage.policy_file import LAYER_NORM_EPS, QPolicy
 
 
@@ -88,7 +88,7 @@ class StepNetwork:
     """Greedy action for one observation given as affine coordinates, with preallocated buffers.
 
     The generator's observation is affine in c = (heel_y, heel_z, time, visited, 1) for a fixed scene
-    (jaxexo.physics.dynamics.observation), so ``set_scene(basis)`` folds that map into layer 0 and each step
+    (jaxexo.physics.actions.observation), so ``set_scene(basis)`` folds that map into layer 0 and each step
     costs one small matmul per layer and a handful of in-place operations."""
 
     def __init__(self, net: FoldedQNetwork):
@@ -118,10 +118,8 @@ class StepNetwork:
 
     def greedy(self, heel_y: float, heel_z: float, time: float, visited: float, mask=None) -> int:
         q = self.q_values(heel_y, heel_z, time, visited)
-        if (
-            mask is not None
-        ):  # the shield's admissible moves (jaxexo.physics.dynamics.greedy_action)
-            return int(dynamics.greedy_action(np, q, mask))
+        if mask is not None:  # the shield's admissible moves (jaxexo.physics.actions.greedy_action)
+            return int(actions.greedy_action(np, q, mask))
         return int(q.argmax())
 
     def q_values(self, heel_y: float, heel_z: float, time: float, visited: float) -> np.ndarray:

@@ -3,9 +3,9 @@
 ``generate(obstacle, options, **overrides)`` takes a ``SwingOptions`` (CFFTG) or ``GenerateOptions``
 (the RL generator: also its smoothing and fallback), checked once when made: an error names the
 field. A swing is asked for by an obstacle and where the feet are: the pivot (stance) heel, the
-swing heel's start and the step length; their defaults are jaxexo.physics.dynamics's (DEFAULT_PIVOT,
+swing heel's start and the step length; their defaults are jaxexo.physics.scene's (DEFAULT_PIVOT,
 DEFAULT_START_Y, DEFAULT_STEP_LENGTH), and they are checked with the obstacle when its scene is laid
-out (``scene_for``, ``scenes_for``: jaxexo.physics.dynamics.make_scene).
+out (``scene_for``, ``scenes_for``: jaxexo.physics.scene.make_scene).
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from jaxexo.config import MAX_SWING_DURATION
 from jaxexo.inference.smoothing import DEFAULT_POINTS
 from jaxexo.inference.trajectory import DEFAULT_DURATION, TrajectoryBatch, TrajectoryError
 from jaxexo.physics import geometry
-from jaxexo.physics.dynamics import (
+from jaxexo.physics.scene import (
     DEFAULT_PIVOT,
     DEFAULT_START_Y,
     DEFAULT_STEP_LENGTH,

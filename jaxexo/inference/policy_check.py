@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxexo.physics import dynamics
+from jaxexo.physics import actions
 from jaxexo.storage.policy_file import PolicyFileError, QPolicy, load_policy, policy_config
 
 
@@ -18,7 +18,7 @@ def load_checked(path: str | Path) -> tuple[QPolicy, object]:
     policy = load_policy(path)
     meta = policy.metadata
     config = policy_config(meta, path)  # complete, and agreeing with the metadata
-    obs_dim = dynamics.obs_dim(config.env.obs_mode, config.env.shape_points)
+    obs_dim = actions.obs_dim(config.env.obs_mode, config.env.shape_points)
     if policy.obs_dim != obs_dim or meta.get("obs_dim") != obs_dim:
         raise PolicyFileError(
             f"{path}: the network takes {policy.obs_dim} inputs (metadata.obs_dim "
@@ -26,7 +26,7 @@ def load_checked(path: str | Path) -> tuple[QPolicy, object]:
             f"has {obs_dim}"
         )
     angles = meta.get("action_angles_rad")
-    expected = dynamics.action_angles()
+    expected = actions.action_angles()
     if (
         not isinstance(angles, list)
         or len(angles) != len(expected)
@@ -36,11 +36,11 @@ def load_checked(path: str | Path) -> tuple[QPolicy, object]:
     ):
         raise PolicyFileError(
             f"{path}: metadata.action_angles_rad does not match the "
-            f"{dynamics.NUM_ACTIONS} moves of jaxexo.physics.dynamics.action_angles"
+            f"{actions.NUM_ACTIONS} moves of jaxexo.physics.actions.action_angles"
         )
     for key, value in (
-        ("length_scale", dynamics.LENGTH_SCALE),
-        ("thesis_obs_center", list(dynamics.THESIS_OBS_CENTER)),
+        ("length_scale", actions.LENGTH_SCALE),
+        ("thesis_obs_center", list(actions.THESIS_OBS_CENTER)),
     ):
         if meta.get(key) != value:
             raise PolicyFileError(

@@ -35,7 +35,7 @@ import struct
 
 import numpy as np
 
-from jaxexo.physics import dynamics, kinematics
+from jaxexo.physics import actions, dynamics, kinematics, transition
 
 # m: a float64 length decides a float32 comparison only when it is at least this far from the
 # threshold. float32 rounding of the clearance geometry on coordinates of order 1 m is a few 1e-7 m.
@@ -55,9 +55,9 @@ _TWO_PI = 2.0 * math.pi
 _ORIENT_TOL = 1e-9
 
 
-# dynamics.moves_heel's threshold, and the band around it left to the reference (float32 rounding of
+# transition.moves_heel's threshold, and the band around it left to the reference (float32 rounding of
 # a difference of coordinates below 1 m is under 1e-7 m).
-_MOVE_EPS = dynamics.MOVE_EPS
+_MOVE_EPS = transition.MOVE_EPS
 MARGIN_MOVE = 1e-7
 
 _F32 = struct.Struct("f")
@@ -109,16 +109,16 @@ class ScalarShield:
         # every forward move: (action, float32 step * direction per axis)
         fwd = np.flatnonzero(dynamics.forward_moves())
         prod = (p.step_size * p.directions).astype(np.float32)
-        self.forward = np.zeros(dynamics.NUM_ACTIONS, bool)
+        self.forward = np.zeros(actions.NUM_ACTIONS, bool)
         self.forward[fwd] = True
         self.fwd_list = self.forward.tolist()
         self.fwd_idx = fwd.tolist()
-        self.prod = [(float(prod[a, 0]), float(prod[a, 1])) for a in range(dynamics.NUM_ACTIONS)]
+        self.prod = [(float(prod[a, 0]), float(prod[a, 1])) for a in range(actions.NUM_ACTIONS)]
         # the scene as float32 values
         f = lambda v: float(np.float32(v))  # noqa: E731
         self.pivot = f(scene.pivot_y)
         self.goal_limit = float(np.float32(scene.goal_y) + p.goal_tolerance[0])
-        # dynamics.keeps_off_floor in the reference's float32: exact here (a float32 difference is
+        # transition.keeps_off_floor in the reference's float32: exact here (a float32 difference is
         # exact in float64, then rounded as float32 rounds it)
         self.goal_y32 = f(scene.goal_y)
         self.goal_tol32 = float(np.float32(p.goal_tolerance[0]))
@@ -326,8 +326,8 @@ class ScalarShield:
         # Far from the obstacle's box no move of one step comes within the shield's clearance.
         far = self._box_distance(hy, hy + self.fl, hz, hz) - self.step >= self.shield_c + MARGIN
         state = [None]  # the clearance threshold, computed once when needed
-        # the move that would undo the last one (dynamics.undoes) is never admissible
-        undo = (last + dynamics.NUM_ACTIONS // 2) % dynamics.NUM_ACTIONS if last >= 0 else -1
+        # the move that would undo the last one (actions.undoes) is never admissible
+        undo = (last + actions.NUM_ACTIONS // 2) % actions.NUM_ACTIONS if last >= 0 else -1
         # The best forward move first (max returns the first of equal values, as argmax); only on a
         # miss the rest in order of Q (a stable sort: ties by index).
         best = max(self.fwd_idx, key=ql.__getitem__)
@@ -353,7 +353,7 @@ class ScalarShield:
         z = 0.0 if z < 0.0 else (self.zmax if z > self.zmax else z)
         if z < self.floor32 and abs(_f32(y - self.goal_y32)) > self.goal_tol32:
             return False
-        moved = max(abs(y - hy), abs(z - hz))  # dynamics.moves_heel, certified like the rest
+        moved = max(abs(y - hy), abs(z - hz))  # transition.moves_heel, certified like the rest
         if moved <= _MOVE_EPS + MARGIN_MOVE:
             return False if moved <= _MOVE_EPS - MARGIN_MOVE else None
         k = self.reachable(y, z)

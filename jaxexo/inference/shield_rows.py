@@ -13,11 +13,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from jaxexo.physics import dynamics, geometry, swept
+from jaxexo.physics import actions, dynamics, geometry, swept, transition
 
 
 def take_rows(lay, idx):
-    """Rows ``idx`` of stacked scenes (dynamics.stack_scenes)."""
+    """Rows ``idx`` of stacked scenes (stack_scenes)."""
     return type(lay)(**{k: v[idx] for k, v in vars(lay).items()})
 
 
@@ -142,7 +142,7 @@ class ShieldRows:
             mask = self.admissible(
                 hy[miss], hz[miss], sub, pruned, near[miss], c_here[miss], last[miss]
             )
-            out[miss] = dynamics.greedy_action(np, q[miss], mask)
+            out[miss] = actions.greedy_action(np, q[miss], mask)
         self.stats.rows += len(hy)
         self.stats.rows_to_full_mask += miss.size
         return out
@@ -153,7 +153,7 @@ class ShieldRows:
         in the same float32 elementwise arithmetic."""
         p = self.p
         d = p.directions[a]
-        y, z = dynamics.move_heel(np, p, hy, hz, d[:, 0], d[:, 1])
+        y, z = transition.move_heel(np, p, hy, hz, d[:, 0], d[:, 1])
         new = np.stack([y, z], axis=-1)[:, None, :]  # (B, 1, 2)
         clear = np.ones((len(hy), 1), bool)
         if near.any():

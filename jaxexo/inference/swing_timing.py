@@ -81,7 +81,7 @@ from jaxexo.inference.trajectory import (
     measure_paths,
 )
 from jaxexo.physics import kinematics
-from jaxexo.physics.dynamics import Scene
+from jaxexo.physics.scene import Scene
 
 FINE_PER_SAMPLE = 8  # fine s-grid points per interval of the path's samples
 SAFETY = 0.95  # the TOPP passes use this fraction of each limit

@@ -4,7 +4,7 @@ Every generator (the RL policy, CFFTG) produces a dense heel path per scene and 
 ``assemble``, so all trajectories are measured by one definition: the same kinematics
 (jaxexo.physics.kinematics: hip eq 2.42, knees eq 2.4-2.11, angles eq 2.49), the same foot-obstacle
 clearance (jaxexo.physics.geometry, the heel-toe segment against the outline) and the same goal, joint-limit
-and leg-length rules as the training environment (jaxexo.physics.dynamics, eq 2.45, 2.50). Units: metres,
+and leg-length rules as the training environment (jaxexo.physics.transition, eq 2.45, 2.50). Units: metres,
 radians, seconds.
 
 A safe swing (``TrajectoryChecks.ok``; jaxexo.physics.outcome): the goal is reached; nothing is below the ground; the
@@ -30,8 +30,8 @@ from pathlib import Path
 import numpy as np
 
 from jaxexo.inference.export import CSV_COLUMNS, scene_dict, write_csv, write_json
-from jaxexo.physics import dynamics, geometry, kinematics, outcome, swept
-from jaxexo.physics.dynamics import Scene
+from jaxexo.physics import geometry, kinematics, outcome, swept, transition
+from jaxexo.physics.scene import Scene
 
 DEFAULT_DURATION = 1.0  # s, swing duration for the time stamps
 
@@ -320,7 +320,7 @@ def measure(
     leg_bad = kinematics.leg_too_long(
         np, kin["leg_swing"], kin["leg_stance"], sp.thigh, sp.shin, sp.leg_length_tolerance
     )
-    reached = dynamics.goal_reached(np, sp, heel[:, -1, 0], heel[:, -1, 1], goal_y)
+    reached = transition.goal_reached(np, sp, heel[:, -1, 0], heel[:, -1, 1], goal_y)
     above_ground = heel[..., 1].min(axis=-1) >= 0.0
     # The one safe-swing verdict (jaxexo.physics.outcome), on what is guaranteed between the samples.
     v = outcome.verdict(

@@ -102,7 +102,7 @@ def start(xp, shape=(), dtype="float32") -> dict:
 
 
 def accumulate(xp, acc: dict, info: dict, alive=True) -> dict:
-    """Fold one environment step's ``info`` (jaxexo.physics.dynamics.transition's) into ``acc``;
+    """Fold one environment step's ``info`` (jaxexo.physics.transition.transition's) into ``acc``;
     steps where ``alive`` is False (after the episode ended) leave it unchanged."""
     return {
         "reached_goal": acc["reached_goal"] | (alive & info["goal_reached"]),

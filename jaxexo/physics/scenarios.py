@@ -33,9 +33,8 @@ import math
 import numpy as np
 
 from jaxexo.physics import geometry, terrain
-from jaxexo.physics.dynamics import pivot_position
 from jaxexo.physics.geometry import Obstacle
-from jaxexo.physics.kinematics import PIVOT_CONDITIONS
+from jaxexo.physics.kinematics import PIVOT_CONDITIONS, pivot_position
 
 # The five thesis obstacles (Table 3.1; Base 1-3 seen in training, triangle and half-circle held out).
 TEST_KINDS = ("base1", "base2", "base3", "triangle", "half_circle")

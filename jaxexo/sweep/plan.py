@@ -21,8 +21,8 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from jaxexo.config import Config, ConfigError, num_updates
-from jaxexo.physics.dynamics import NUM_ACTIONS  # one definition each
-from jaxexo.physics.dynamics import obs_dim as _obs_dim
+from jaxexo.physics.actions import NUM_ACTIONS  # one definition each
+from jaxexo.physics.actions import obs_dim as _obs_dim
 from jaxexo.sweep.spec import Sweep
 
 # About this many env steps per chunk (a minute or so at the sweep program's throughput,

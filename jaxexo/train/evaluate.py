@@ -20,7 +20,7 @@ import numpy as np
 from jaxexo.config import Config, numpy_params, test_config
 from jaxexo.env import ExoStepEnv
 from jaxexo.env.exo_step import Layout
-from jaxexo.physics import dynamics, outcome, scenarios
+from jaxexo.physics import actions, outcome, scenarios
 from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 from jaxexo.physics.scenarios import HELD_OUT, TEST_KINDS  # noqa: F401 (one definition, re-exported)
 
@@ -59,7 +59,7 @@ def make_rollouts(env: ExoStepEnv, q_apply, max_steps: int, record: bool = False
             state, obs, alive, out = carry
             # greedy over the admissible moves (all of them without the shield)
             mask = env.action_masks(state, params) if env.shield else None
-            a = dynamics.greedy_action(jnp, q_apply(q_params, obs), mask)
+            a = actions.greedy_action(jnp, q_apply(q_params, obs), mask)
             obs2, state2, r, term, info = jax.vmap(env.step_env, in_axes=(None, 0, 0, None))(
                 jax.random.PRNGKey(0), state, a, params
             )

@@ -8,7 +8,7 @@ import flax.linen as nn
 import jax
 import jax.numpy as jnp
 
-from jaxexo.physics.dynamics import NUM_ACTIONS
+from jaxexo.physics.actions import NUM_ACTIONS
 
 # Inputs this narrow (the thesis observation: heel y, z) enter the first layer as a sum of scaled rows
 # of its kernel instead of a matrix product: the same arithmetic, but its gradient becomes a fused

@@ -23,7 +23,7 @@ from jaxexo.config.input_files import (
 )
 from jaxexo.config.toml_io import config_to_toml
 from jaxexo.env.exo_step import LENGTH_SCALE, THESIS_OBS_CENTER
-from jaxexo.physics import dynamics
+from jaxexo.physics import actions
 from jaxexo.storage.atomic import atomic_write, stale_temps, write_figure
 from jaxexo.storage.checkpoint import CheckpointError, unpack_checkpoint
 from jaxexo.storage.policy_file import save_policy
@@ -93,7 +93,7 @@ def export_policy(path: Path, cfg: Config, trainer: Trainer, params) -> Path:
         "length_scale": LENGTH_SCALE,
         "thesis_obs_center": list(THESIS_OBS_CENTER),
         "num_actions": env.num_actions,
-        "action_angles_rad": dynamics.action_angles(env.num_actions).tolist(),
+        "action_angles_rad": actions.action_angles(env.num_actions).tolist(),
         "layers": [env.obs_dim, *cfg.train.hidden, env.num_actions],
         "layer_norm": cfg.train.layer_norm,
         "activation": "relu",

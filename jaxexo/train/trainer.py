@@ -28,7 +28,7 @@ from flax import struct
 
 from jaxexo.config import HYPER_FIELDS, Config, TrainConfig, declared_fields, num_updates
 from jaxexo.env import EnvParams, ExoStepEnv
-from jaxexo.physics import dynamics, outcome
+from jaxexo.physics import actions, dynamics, outcome
 from jaxexo.train import td_lambda
 from jaxexo.train.network import QNetwork
 
@@ -266,7 +266,7 @@ class Trainer:
         """Epsilon-greedy (thesis 2.4.2) over the admissible moves ``mask`` (None: all): returns the
         actions and whether each is the greedy one."""
         q = self.net.apply(params, obs)
-        greedy = dynamics.greedy_action(jnp, q, mask)
+        greedy = actions.greedy_action(jnp, q, mask)
         ku, kr = jax.random.split(key)
         explore = jax.random.uniform(ku, greedy.shape) < eps
         if mask is None:
