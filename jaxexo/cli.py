@@ -242,9 +242,9 @@ def cmd_generate(args) -> int:
         raise ValueError(
             "--smoothing: applies to --method rl only (CFFTG's polynomial path is not smoothed)"
         )
-    from jaxexo.inference.options import check_duration, check_points
-    from jaxexo.inference.swing_timing import check_rate
     from jaxexo.storage.atomic import writes_to_stdout
+    from jaxexo.swing.options import check_duration, check_points
+    from jaxexo.swing.timing import check_rate
 
     # The generators' own checks, before any policy is read (the message names the option).
     if args.rate is not None:
@@ -290,12 +290,12 @@ def cmd_generate(args) -> int:
         (timed or traj).to_json(args.json)
         written.append(args.json)
     if args.plot:
-        from jaxexo.inference.plot import plot_trajectory
+        from jaxexo.plots.plot import plot_trajectory
 
         plot_trajectory(traj, args.plot)
         written.append(args.plot)
     if args.animate:
-        from jaxexo.inference.animate import animate_swing
+        from jaxexo.plots.animate import animate_swing
 
         animate_swing(timed, args.animate)
         written.append(args.animate)
@@ -376,7 +376,7 @@ def cmd_walk(args) -> int:
 
         gen = TrajectoryGenerator.load(args.policy)
     _check_clearance(args.clearance, gen.config)
-    from jaxexo.inference.course import plan_course
+    from jaxexo.course import plan_course
     from jaxexo.storage.terrain_file import read_terrain
 
     terrain = read_terrain(args.terrain)
@@ -399,12 +399,12 @@ def cmd_walk(args) -> int:
         course.to_json(args.json)
         written.append(args.json)
     if args.plot:
-        from jaxexo.inference.plot import plot_course
+        from jaxexo.plots.plot import plot_course
 
         plot_course(course, args.plot)
         written.append(args.plot)
     if args.animate and len(course.samples):
-        from jaxexo.inference.animate import animate_course
+        from jaxexo.plots.animate import animate_course
 
         animate_course(course, args.animate)
         written.append(args.animate)
@@ -432,7 +432,7 @@ def _timed_swing(args, traj, config):
     config's control_rate) when --rate or --animate is asked for; else None (uniform time stamps)."""
     if args.rate is None and not args.animate:
         return None
-    from jaxexo.inference.swing_timing import time_swing
+    from jaxexo.swing.timing import time_swing
 
     return time_swing(traj, config, rate=args.rate)
 
@@ -455,7 +455,7 @@ def cmd_mjcf(args) -> int:
     _check_output_file("--out", args.out)
     _check_outputs([("--policy", args.policy)], [("--out", args.out)])
     if args.policy:
-        from jaxexo.inference.policy_check import load_checked
+        from jaxexo.storage.policy_check import load_checked
 
         config = load_checked(args.policy)[1]
     else:
@@ -489,8 +489,8 @@ def cmd_replay(args) -> int:
     require_mujoco()  # a clear error before any work
     from jaxexo.baselines import CFFTG
     from jaxexo.inference import TrajectoryGenerator
-    from jaxexo.inference.swing_timing import DeviceLimits, time_swing
     from jaxexo.sim.replay import Legs, driven_replay, kinematic_replay
+    from jaxexo.swing.timing import DeviceLimits, time_swing
 
     rl = TrajectoryGenerator.load(args.policy)
     config = rl.config
@@ -540,7 +540,7 @@ def cmd_replay(args) -> int:
                 ok &= not (timed.ok and d["contact"]) or scale != 1.0
         report[name] = r
     if args.json:
-        from jaxexo.inference.export import write_json
+        from jaxexo.swing.export import write_json
 
         write_json(
             {
@@ -802,7 +802,7 @@ def _add_generate(sub) -> None:
         "--method",
         choices=("rl", "cfftg"),
         default="rl",
-        help="rl: the trained policy; cfftg: the polynomial baseline (jaxexo.inference.cfftg)",
+        help="rl: the trained policy; cfftg: the polynomial baseline (jaxexo.baselines.cfftg)",
     )
     _add_scene_args(g)
     g.add_argument("--points", type=int, default=100, help="samples of the smoothed path")

@@ -33,9 +33,9 @@ def test_failure_keeps_the_old_file_and_removes_the_temp(tmp_path, monkeypatch, 
 
 def test_every_writer_uses_it():
     """The four writers that used to carry their own copy call this one."""
-    from jaxexo.inference import export
     from jaxexo.storage import policy_file
     from jaxexo.sweep import results
+    from jaxexo.swing import export
     from jaxexo.train import run_files
 
     assert results.atomic_write is atomic.atomic_write

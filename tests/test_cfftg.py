@@ -1,4 +1,4 @@
-"""CFFTG (jaxexo.inference.cfftg): valid on every training and test obstacle, the polynomial's end
+"""CFFTG (jaxexo.baselines.cfftg): valid on every training and test obstacle, the polynomial's end
 conditions, re-planning, reported failure, batch = single, NumPy-only import, the CLI switch."""
 
 from __future__ import annotations
@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from jaxexo.baselines import CFFTG
+from jaxexo.baselines.cfftg import APEX_FRAC_RANGE, FLATNESS, plan_basis, plan_paths
 from jaxexo.config import load_config
 from jaxexo.inference import Obstacle, TrajectoryError
-from jaxexo.inference.cfftg import APEX_FRAC_RANGE, FLATNESS, plan_basis, plan_paths
 from jaxexo.inference.scenarios import sample_scenarios, training_scenarios
 from jaxexo.physics import geometry
 from jaxexo.physics.kinematics import PIVOT_CONDITIONS

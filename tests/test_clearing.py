@@ -1,4 +1,4 @@
-"""jaxexo.inference.clearing: the thesis spline corrected to keep the margin and to move forward,
+"""jaxexo.swing.clearing: the thesis spline corrected to keep the margin and to move forward,
 checked against an independent dense look (point clearances of the foot at 40 positions per sample
 interval, jaxexo.physics.geometry only) and against the plain spline where no correction is needed."""
 
@@ -7,9 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from jaxexo.inference import smoothing as sm
-from jaxexo.inference.clearing import clear_smooth
 from jaxexo.physics import geometry, swept
+from jaxexo.swing import smoothing as sm
+from jaxexo.swing.clearing import clear_smooth
 
 FOOT = 0.20
 MARGIN = 0.02
@@ -140,8 +140,8 @@ def test_a_smoothed_path_is_accepted_with_headroom_above_the_margin():
     device-ready retiming, which resamples an interpolant of the samples, keeps the margin too): a path
     whose guaranteed clearance is between the margin and margin + headroom is sent on to the spline's
     correction, one above is accepted, one below is not."""
-    from jaxexo.inference.finish import ACCEPT_HEADROOM
-    from jaxexo.inference.trajectory import passes
+    from jaxexo.swing.finish import ACCEPT_HEADROOM
+    from jaxexo.swing.trajectory import passes
 
     from test_fast_shield import _random_generator
 
@@ -188,7 +188,7 @@ def test_many_paths_corrected_together_equal_each_corrected_alone_and_the_refere
     correction are the same numbers) and against each path corrected on its own (the same curve, bit
     for bit: the stacked products and the dual systems, solved at their own size, do the same
     arithmetic in any batch)."""
-    from jaxexo.inference.clearing import clear_rows, exact_clear_rows
+    from jaxexo.swing.clearing import clear_rows, exact_clear_rows
 
     rows = _mixed_scenes(400, seed=11)
     outlines, raws = [o for o, _ in rows], [r for _, r in rows]
@@ -258,7 +258,7 @@ def test_stacked_dual_solve_equals_lstsq():
     """The dual's stacked solve (LU where the system is safely positive definite, lstsq's minimum-norm
     solution elsewhere) against np.linalg.lstsq on each active subsystem: well-conditioned, rank
     deficient (more constraints than freedoms) and repeated constraints, with inactive ones."""
-    from jaxexo.inference.clearing import _solve_stack
+    from jaxexo.swing.clearing import _solve_stack
 
     rng = np.random.default_rng(2)
     for rank, k in ((12, 8), (6, 10), (3, 9), (20, 20)):
@@ -298,7 +298,7 @@ def test_stacked_dual_solve_equals_lstsq():
     ],
 )
 def test_bad_input_to_clear_rows_is_refused(args, match):
-    from jaxexo.inference.clearing import clear_rows
+    from jaxexo.swing.clearing import clear_rows
 
     outline = np.asarray(geometry.Obstacle.rectangle(0.1, 0.1, center_y=0.4).outline, float)
     kw = dict(
@@ -318,7 +318,7 @@ def test_the_first_round_measures_the_requested_smoothings_own_spline():
     """Cleared.initial (the generator's one swing takes the requested smoothing from it when it passes)
     is smoothing.smooth_candidates' curve of that smoothing, bit for bit, with its deviation bound,
     and its clearances' minimum and place are the full swept clearance's."""
-    from jaxexo.inference.clearing import clear_rows
+    from jaxexo.swing.clearing import clear_rows
 
     rows = _mixed_scenes(300, seed=21)
     got = clear_rows([r for _, r in rows], [o for o, _ in rows], FOOT, MARGIN)

@@ -169,7 +169,7 @@ def test_eval_figures_match_the_generators_own_outputs(trained_run):
         )
         assert report[name]["batch_1000_ms"] is None
         # Device timing: the swings of the same paths timed for the [device] limits.
-        from jaxexo.inference.swing_timing import time_swings
+        from jaxexo.swing.timing import time_swings
 
         dev = report[name]["device"]
         timed = time_swings(trajs[name], rl.config)
@@ -356,7 +356,7 @@ def test_device_metrics_time_the_moving_swings_and_count_a_still_one_as_zero(tra
 
     from jaxexo.evaluation.metrics import device_metrics
     from jaxexo.inference import TrajectoryGenerator
-    from jaxexo.inference.swing_timing import time_swings
+    from jaxexo.swing.timing import time_swings
 
     rl = TrajectoryGenerator.load(trained_run / "policy.npz")
     sc = make_scenarios(rl.config, "test", 2)

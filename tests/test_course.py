@@ -1,4 +1,4 @@
-"""A walk over a course (jaxexo.inference.course, jaxexo.storage.terrain_file, ``jaxexo walk``,
+"""A walk over a course (jaxexo.course, jaxexo.storage.terrain_file, ``jaxexo walk``,
 ``jaxexo generate --profile``): every bad terrain file and option refused by name (the line, the
 position along the course); footholds on flat ground, checked here against the terrain itself;
 the walk's exported samples continuous and within the device limits by finite differences of the
@@ -15,8 +15,8 @@ import pytest
 from jaxexo.baselines import CFFTG
 from jaxexo.cli import main
 from jaxexo.config import Config
+from jaxexo.course import WALK_COLUMNS, CourseError, FootholdRules
 from jaxexo.inference import Terrain, footholds, plan_course, read_terrain
-from jaxexo.inference.course import WALK_COLUMNS, CourseError, FootholdRules
 from jaxexo.storage import terrain_file
 from jaxexo.storage.terrain_file import TerrainFileError
 
@@ -434,7 +434,7 @@ def test_drawn_courses_have_their_obstacles_on_the_floor():
     for _ in range(20):
         pts, kinds = draw_course(rng)
         ter = Terrain.from_points(pts)  # a valid terrain: y non-decreasing, z >= 0, finite
-        from jaxexo.inference.course import obstacles_of
+        from jaxexo.course import obstacles_of
 
         obs = obstacles_of(ter)
         assert len(obs) <= len(kinds) and 3.0 <= ter.y[-1] <= 8.0 + 1e-9 or ter.y[-1] > 8.0
@@ -446,8 +446,8 @@ def test_plot_and_animation_of_a_walk(tmp_path):
     pytest.importorskip("matplotlib")
     from PIL import Image
 
-    from jaxexo.inference.animate import animate_course
-    from jaxexo.inference.plot import plot_course
+    from jaxexo.plots.animate import animate_course
+    from jaxexo.plots.plot import plot_course
 
     course = plan_course(CFFTG(CFG), Terrain.from_points(BLOCK), rate=50)
     plot_course(course, tmp_path / "w.png")

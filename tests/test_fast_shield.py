@@ -12,11 +12,11 @@ import pytest
 
 from jaxexo.config import load_config
 from jaxexo.inference import TrajectoryGenerator
-from jaxexo.inference import smoothing as sm
 from jaxexo.inference.generator import plain_reference
 from jaxexo.inference.shield import ScalarShield
 from jaxexo.physics import actions, dynamics, scenarios
 from jaxexo.storage.policy_file import QPolicy
+from jaxexo.swing import smoothing as sm
 
 from conftest import ROOT
 from test_speed import _same
@@ -149,8 +149,8 @@ def test_fast_generation_with_candidate_smoothings_matches_the_reference(clearin
     """``generate`` and ``generate_batch`` against ``plain_reference``: the same samples, checks, notes and
     smoothing; the per-path candidate smoothings occur (without the corrected spline, which comes
     first when on) or the corrected splines do, and each swing's curve is reproduced from its raw
-    path: by smoothing it with its reported smoothing, or by the correction (jaxexo.inference.clearing)."""
-    from jaxexo.inference.clearing import clear_smooth
+    path: by smoothing it with its reported smoothing, or by the correction (jaxexo.swing.clearing)."""
+    from jaxexo.swing.clearing import clear_smooth
 
     gen = _random_generator(seed=6)
     gen.clearing = clearing
@@ -162,13 +162,13 @@ def test_fast_generation_with_candidate_smoothings_matches_the_reference(clearin
     ref = plain.generate_batch(args["obstacle"], fallback=None, **kw)
     for a, b in zip(fast, ref):
         _same(a, b)
-    marker = "jaxexo.inference.clearing" if clearing else "per-path candidate"
+    marker = "jaxexo.swing.clearing" if clearing else "per-path candidate"
     assert any(any(marker in n for n in t.notes) for t in fast)
     for s in sc[::7]:
         one = {k: s[k] for k in ("pivot", "start_y", "step_length")}
         a = gen.generate(s["obstacle"], fallback=None, **one)
         _same(a, plain.generate(s["obstacle"], fallback=None, **one))
-        if any("jaxexo.inference.clearing" in n for n in a.notes):
+        if any("jaxexo.swing.clearing" in n for n in a.notes):
             again = clear_smooth(
                 a.raw,
                 a.scene.outline,
@@ -185,7 +185,7 @@ def test_fast_generation_with_candidate_smoothings_matches_the_reference(clearin
 
 
 def test_candidate_smoothings_are_decreasing_and_per_path():
-    from jaxexo.inference.finish import CANDIDATE_RESIDUALS, candidates
+    from jaxexo.swing.finish import CANDIDATE_RESIDUALS, candidates
 
     raw = np.column_stack([np.linspace(0, 0.7, 30), np.sin(np.linspace(0, np.pi, 30)) * 0.2])
     c = candidates(raw, 0.005)

@@ -14,11 +14,11 @@ import pytest
 
 from jaxexo.config import load_config
 from jaxexo.inference import Obstacle, TrajectoryError, TrajectoryGenerator
-from jaxexo.inference import smoothing as sm
 from jaxexo.inference.network import FoldedQNetwork, StepNetwork
 from jaxexo.physics import geometry, kinematics, swept
 from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 from jaxexo.storage.policy_file import PolicyFileError, load_policy
+from jaxexo.swing import smoothing as sm
 
 from conftest import ROOT
 
@@ -308,10 +308,10 @@ def test_smoothing_that_would_touch_the_obstacle_falls_back(trained_policy):
     assert (
         ob.clearance(smooth, foot).min() <= geometry.TOUCH_EPS
     )  # the premise: plain smoothing collides
-    # First the corrected spline (jaxexo.inference.clearing, on by default): the same smoothing, moved
+    # First the corrected spline (jaxexo.swing.clearing, on by default): the same smoothing, moved
     # away from the obstacle where it cut the margin.
     t = gen.finish([scene], [raw], 100, 0.05, 1.0, None)[0]
-    assert t.smoothing == 0.05 and any("jaxexo.inference.clearing" in n for n in t.notes)
+    assert t.smoothing == 0.05 and any("jaxexo.swing.clearing" in n for n in t.notes)
     assert t.checks.clearance_ok and t.checks.min_clearance >= gen.config.env.min_clearance
     # The retries below it (less smoothing, down to the raw polyline), with the correction off.
     gen.clearing = False

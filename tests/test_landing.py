@@ -1,4 +1,4 @@
-"""Every swing ends with the whole foot on the floor (jaxexo.inference.finish.landed): the policy stops in
+"""Every swing ends with the whole foot on the floor (jaxexo.swing.finish.landed): the policy stops in
 its goal box, up to env.goal_tolerance[1] above the floor, and the raw path's descent to the floor is
 then smoothed, corrected and judged with the rest of the swing; a walk appends nothing to it.
 
@@ -17,11 +17,11 @@ import pytest
 from jaxexo.baselines import CFFTG
 from jaxexo.config import Config
 from jaxexo.inference import Terrain, TrajectoryGenerator, plan_course
-from jaxexo.inference import smoothing as sm
-from jaxexo.inference.finish import landed
 from jaxexo.inference.scenarios import safety_scenarios
-from jaxexo.inference.trajectory import assemble
 from jaxexo.physics import transition
+from jaxexo.swing import smoothing as sm
+from jaxexo.swing.finish import landed
+from jaxexo.swing.trajectory import assemble
 
 from conftest import random_generator
 

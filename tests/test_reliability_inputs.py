@@ -339,7 +339,7 @@ def test_a_policy_trained_before_the_floor_rule_loads_without_it(tmp_path):
 
 def test_strings_and_booleans_are_never_taken_as_numbers(generator):
     from jaxexo.inference import Obstacle
-    from jaxexo.inference.swing_timing import time_swing
+    from jaxexo.swing.timing import time_swing
 
     for call, name in (
         (lambda: Obstacle.rectangle("0.1", 0.1), "width"),
@@ -374,7 +374,7 @@ def test_public_api_names_the_argument_instead_of_a_raw_error(generator):
     from jaxexo.baselines import CFFTG
     from jaxexo.config import load_config
     from jaxexo.inference import Obstacle
-    from jaxexo.inference.swing_timing import time_swing, time_swings
+    from jaxexo.swing.timing import time_swing, time_swings
 
     ob = Obstacle.named("base1")
     traj = generator.generate(ob)
@@ -401,7 +401,7 @@ def test_public_api_names_the_argument_instead_of_a_raw_error(generator):
 
 def test_every_size_from_input_is_bounded_before_allocating(generator):
     from jaxexo.inference import Obstacle
-    from jaxexo.inference.swing_timing import DeviceLimits, time_swing
+    from jaxexo.swing.timing import DeviceLimits, time_swing
 
     ob = Obstacle.named("base1")
     with pytest.raises(ValueError, match="n_points must be an integer in"):

@@ -11,11 +11,11 @@ from hypothesis import strategies as st
 
 from jaxexo.config import ConfigError, config_from_dict, numpy_params, scalar_params
 from jaxexo.inference import Obstacle, TrajectoryGenerator
-from jaxexo.inference import smoothing as sm
 from jaxexo.inference.scenarios import safety_scenarios
-from jaxexo.inference.trajectory import assemble
 from jaxexo.physics import geometry, outcome, swept, transition
 from jaxexo.physics.scene import make_scene, stack_scenes
+from jaxexo.swing import smoothing as sm
+from jaxexo.swing.trajectory import assemble
 
 from conftest import legacy_raw
 
@@ -260,9 +260,9 @@ def _dense_recheck(gen, t, factor=10):
     """Clearance and backward motion of trajectory t's own curve at factor x denser sampling."""
     n = len(t.heel)
     dense_n = factor * (n - 1) + 1
-    if any("jaxexo.inference.clearing" in note for note in t.notes):
-        # the corrected spline (jaxexo.inference.clearing), its own coefficients at the dense parameters
-        from jaxexo.inference.clearing import clear_smooth
+    if any("jaxexo.swing.clearing" in note for note in t.notes):
+        # the corrected spline (jaxexo.swing.clearing), its own coefficients at the dense parameters
+        from jaxexo.swing.clearing import clear_smooth
 
         out = clear_smooth(
             t.raw,

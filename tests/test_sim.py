@@ -149,7 +149,7 @@ def test_a_config_whose_legs_cannot_be_built_is_refused(config):
 def _hand_made(config, scene, heel: np.ndarray, rate: float = 100.0):
     """A TimedSwing of a hand-made heel path (N, 2), timed for the device."""
     from jaxexo.inference import assemble
-    from jaxexo.inference.swing_timing import time_swing
+    from jaxexo.swing.timing import time_swing
 
     sp = scalar_params(config)
     batch = assemble("hand", sp, [scene], [heel], heel[None], smoothing=[0.0], deviation=[0.0])
@@ -172,7 +172,7 @@ def _over(scene, height: float) -> np.ndarray:
 def test_a_pose_at_a_known_distance_measures_it(config):
     sc = _scene(config, Obstacle.rectangle(0.10, 0.08, center_y=0.40))
     legs = Legs(config, sc)
-    from jaxexo.inference.swing_timing import leg_angles
+    from jaxexo.swing.timing import leg_angles
 
     sp = scalar_params(config)
     for heel, want in (
@@ -218,7 +218,7 @@ def test_a_swing_through_the_obstacle_is_a_contact(config):
 
 def test_a_safe_swing_tracks_at_the_limits_and_keeps_clear(config):
     from jaxexo.baselines import CFFTG
-    from jaxexo.inference.swing_timing import time_swing
+    from jaxexo.swing.timing import time_swing
 
     traj = CFFTG(config).generate(Obstacle.named("base1"), pivot="between")
     timed = time_swing(traj, config, rate=100.0)
@@ -239,8 +239,8 @@ def test_feed_forward_torques_alone_carry_the_legs_along_the_reference(config):
     any reference state, where gravity alone lets them drift away: an independent check of the
     rigid inverse dynamics in feed_forward."""
     from jaxexo.baselines import CFFTG
-    from jaxexo.inference.swing_timing import time_swing
     from jaxexo.sim.replay import _equalities_on
+    from jaxexo.swing.timing import time_swing
 
     timed = time_swing(
         CFFTG(config).generate(Obstacle.named("base2"), pivot="between"), config, rate=100.0
@@ -278,7 +278,7 @@ def test_feed_forward_tracks_where_a_plain_servo_lags(config):
     """With the same setpoints, the PD with feed-forward keeps the heel within millimetres of the
     swing; the plain position servo trails it by about 2 / omega times the joints' speed."""
     from jaxexo.baselines import CFFTG
-    from jaxexo.inference.swing_timing import time_swing
+    from jaxexo.swing.timing import time_swing
 
     timed = time_swing(
         CFFTG(config).generate(Obstacle.named("base1"), pivot="between"), config, rate=100.0
@@ -312,8 +312,8 @@ def test_cli_mjcf_writes_a_model_mujoco_loads(tmp_path, config):
 def test_eval_replay_figures_count_the_swings(config):
     from jaxexo.baselines import CFFTG
     from jaxexo.evaluation.compare import mujoco_lines
-    from jaxexo.inference.swing_timing import time_swings
     from jaxexo.sim.replay import replay_trajectories
+    from jaxexo.swing.timing import time_swings
 
     gen = CFFTG(config)
     trajs = [gen.generate(Obstacle.named(k), pivot="obstacle") for k in ("base1", "triangle")]

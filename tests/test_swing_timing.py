@@ -1,4 +1,4 @@
-"""Device-ready swings (jaxexo.inference.swing_timing): joint velocity and acceleration limits held on
+"""Device-ready swings (jaxexo.swing.timing): joint velocity and acceleration limits held on
 the exported samples (checked here by finite differences of the exported positions, independently
 of the module's own columns), rest at both ends, samples on the path, durations that scale with the
 limits, a shorter swing than a fixed-shape (quintic) time law found by brute force, config and
@@ -17,11 +17,11 @@ from jaxexo.baselines import CFFTG
 from jaxexo.config import Config, ConfigError, config_from_dict, load_config, scalar_params
 from jaxexo.config.toml_io import config_to_toml
 from jaxexo.inference import Obstacle
-from jaxexo.inference.export import TIMED_CSV_COLUMNS
-from jaxexo.inference.swing_timing import DeviceLimits, time_swing, time_swings, uniform_peaks
-from jaxexo.inference.trajectory import assemble
 from jaxexo.physics import kinematics
 from jaxexo.physics.scene import make_scene
+from jaxexo.swing.export import TIMED_CSV_COLUMNS
+from jaxexo.swing.timing import DeviceLimits, time_swing, time_swings, uniform_peaks
+from jaxexo.swing.trajectory import assemble
 
 from conftest import ROOT, legacy_raw
 
@@ -447,10 +447,10 @@ def test_cli_generate_rate_and_animation(trained_run, tmp_path):
 
 def test_topp_passes_row_by_row_equal_the_batched_passes_and_the_plain_recurrence():
     """The TOPP passes run as Python floats for small batches and vectorised for large ones
-    (jaxexo.inference.time_law._min_affine_scan): both must give the same law bit for bit, and both
+    (jaxexo.swing.time_law._min_affine_scan): both must give the same law bit for bit, and both
     must equal the passes written out plainly from the admissible-s'' interval (eq. of the module
     docstring: reach[i-1] = clip(reach[i] - 2 ds L_i(reach[i])), x[i+1] = clip(x[i] + 2 ds U_i(x[i])))."""
-    from jaxexo.inference import time_law as tl
+    from jaxexo.swing import time_law as tl
 
     rng = np.random.default_rng(11)
     b, k = tl.SCALAR_ROWS + 6, 160

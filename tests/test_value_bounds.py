@@ -64,7 +64,7 @@ def test_generate_refuses_values_below_a_swings_scale(tmp_path, capsys, extra, n
 
 def test_the_api_refuses_the_same_values(generator):
     from jaxexo.baselines import CFFTG
-    from jaxexo.inference.swing_timing import time_swing
+    from jaxexo.swing.timing import time_swing
 
     ob = Obstacle.named("base1")
     with pytest.raises(ValueError, match="duration must be >= 0.01 s"):
@@ -82,7 +82,7 @@ def test_the_api_refuses_the_same_values(generator):
 
 def test_the_shortest_accepted_swing_has_distinct_time_stamps():
     from jaxexo.baselines import CFFTG
-    from jaxexo.inference.options import MIN_DURATION, MIN_POINTS
+    from jaxexo.swing.options import MIN_DURATION, MIN_POINTS
 
     traj = CFFTG(None).generate(Obstacle.named("base1"), n_points=MIN_POINTS, duration=MIN_DURATION)
     times = [float(row.split(",")[0]) for row in traj.to_csv().splitlines()[1:]]

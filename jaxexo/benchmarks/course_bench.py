@@ -1,4 +1,4 @@
-"""Walks over courses (``jaxexo bench``'s ``course`` part; jaxexo.inference.course): RL alone against
+"""Walks over courses (``jaxexo bench``'s ``course`` part; jaxexo.course): RL alone against
 CFFTG on the same footholds, on courses 3-8 m long with 2-8 obstacles drawn from the held-out
 terrain families (jaxexo.physics.terrain) and from random profiles.
 
@@ -86,7 +86,7 @@ def _flat(ter, y0: float, y1: float) -> bool:
 
 def independent_checks(course, min_clearance: float) -> dict:
     """Checks of a walk from its exported table and the terrain alone (module docstring)."""
-    from jaxexo.inference.course import WALK_COLUMNS, obstacles_of
+    from jaxexo.course import WALK_COLUMNS, obstacles_of
     from jaxexo.physics import geometry
 
     t = course.samples
@@ -168,8 +168,8 @@ def run_course_benchmark(
     gets each course's row as it is done (``summarize_log`` summarises an interrupted run). Returns
     the figures."""
     from jaxexo.baselines import CFFTG
+    from jaxexo.course import CourseError, footholds, plan_course
     from jaxexo.inference import Terrain, TrajectoryGenerator
-    from jaxexo.inference.course import CourseError, footholds, plan_course
 
     if isinstance(n, bool) or not isinstance(n, int) or n < 1:
         raise ValueError(f"n: the number of courses must be an integer >= 1, got {n!r}")
@@ -394,8 +394,8 @@ def run_pivot_benchmark(
     training's own condition), on the floor before the obstacle (the first leg over it), after it
     (the second leg: the stance foot ahead of the obstacle, never drawn in training) and at the goal
     (the swing that brings the feet together). Writes ``<name>_<date>_<machine>.json/.md``."""
+    from jaxexo.course import FootholdRules
     from jaxexo.inference import TrajectoryGenerator
-    from jaxexo.inference.course import FootholdRules
     from jaxexo.physics import terrain
 
     gen = TrajectoryGenerator.load(policy)
@@ -457,9 +457,9 @@ def run_swing_breakdown(
     walk safely (RL alone, CFFTG on the same footholds), each RL swing's timed duration over CFFTG's
     and both heels' lift, split into swings over flat floor (the virtual FLAT_OBSTACLE) and over
     obstacles, and the RL heel's travel along the floor at the end of its swings (within 1 mm of it)."""
+    from jaxexo.baselines.cfftg import CFFTG
+    from jaxexo.course import CourseError, plan_course
     from jaxexo.inference import TrajectoryGenerator
-    from jaxexo.inference.cfftg import CFFTG
-    from jaxexo.inference.course import CourseError, plan_course
 
     rl = TrajectoryGenerator.load(policy)
     cf = CFFTG(rl.config)

@@ -53,8 +53,9 @@ def run_device_ready_benchmark(
 ) -> dict:
     from jaxexo.baselines import CFFTG
     from jaxexo.evaluation.machine import machine_info, write_result
-    from jaxexo.inference import TrajectoryGenerator, swing_timing
+    from jaxexo.inference import TrajectoryGenerator
     from jaxexo.inference.scenarios import safety_scenarios
+    from jaxexo.swing import timing as swing_timing
 
     rl = TrajectoryGenerator.load(policy)
     cfg = rl.config

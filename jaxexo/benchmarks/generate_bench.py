@@ -69,7 +69,7 @@ def _batch_ms(policy, n: int, repeats: int = 5) -> dict:
     i.e. on the process's own BLAS threads instead of generate_batch's one (jaxexo.inference.blas)."""
     import copy
 
-    from jaxexo.inference.cfftg import CFFTG
+    from jaxexo.baselines.cfftg import CFFTG
 
     gen = TrajectoryGenerator.load(policy)
     free = copy.copy(gen)
@@ -156,10 +156,10 @@ def time_breakdown(gen, cf, scenarios: list[dict], repeats: int = 3) -> dict:
     rest (``assemble``: kinematics and joint angles)."""
     import time
 
-    from jaxexo.inference.clearing import clear_rows
     from jaxexo.inference.shield import ScalarShield
     from jaxexo.physics import transition
     from jaxexo.physics.transition import scalar
+    from jaxexo.swing.clearing import clear_rows
 
     def best(fn):
         out = float("inf")
@@ -287,9 +287,9 @@ def run_generate_benchmark(policy: str | Path, out_dir, n: int = 1000, progress=
     held-out families and on the safety scenes (and the plain reference, ``plain_reference``, on a
     quarter of them); batches of 1000 with default and single-threaded BLAS; smoothing counts; the
     cold import."""
+    from jaxexo.baselines.cfftg import CFFTG
     from jaxexo.evaluation.compare import WithFallback, run_generators
     from jaxexo.evaluation.machine import write_result
-    from jaxexo.inference.cfftg import CFFTG
     from jaxexo.inference.generator import plain_reference
 
     load = [round(x, 2) for x in os.getloadavg()]

@@ -7,13 +7,13 @@ on, the held-out families), RL alone (``fallback=None``) and CFFTG on the same s
 - final heel height: the share of swings ending more than 2 mm above the floor, and the max and
   median over the swings, mm (a swing on the floor ends at 0);
 - heel lift (the path's highest heel z), median, cm;
-- duration at the device limits (jaxexo.inference.swing_timing.time_swings), median and p95, s;
+- duration at the device limits (jaxexo.swing.timing.time_swings), median and p95, s;
   RL / CFFTG per scene, median (both safe); where RL swings end above the floor (the generator before
   its landing), also the duration with the vertical touch-down that walks used to append to them
   (6 samples straight down, re-checked by trajectory.assemble), median, and the time it adds to
   the swings it is appended to, median, s;
 - the landing's approach: the heel's forward travel over its last 2 cm of descent, median, mm;
-- RL swings whose requested smoothing was retried (jaxexo.inference.finish) and those that fell back
+- RL swings whose requested smoothing was retried (jaxexo.swing.finish) and those that fell back
   to the raw polyline, %.
 
 Run by benchmarks/bench_landing.py; writes landing[_tag]_<date>_<machine>.{json,md}.
@@ -29,7 +29,7 @@ from jaxexo.baselines import CFFTG
 from jaxexo.benchmarks.scenes import batch_kwargs, safety_sets
 from jaxexo.evaluation.machine import write_result
 from jaxexo.inference import TrajectoryGenerator, time_swings
-from jaxexo.inference.trajectory import assemble
+from jaxexo.swing.trajectory import assemble
 
 
 def approach(heel: np.ndarray, drop: float = 0.02) -> float:
@@ -42,7 +42,7 @@ def approach(heel: np.ndarray, drop: float = 0.02) -> float:
 
 def with_touch_down(batch, gen, points: int = 6) -> list:
     """The swings with a vertical touch-down appended where they end above the floor (what
-    jaxexo.inference.course did to RL swings before the generator landed them), checked again."""
+    jaxexo.course did to RL swings before the generator landed them), checked again."""
     out = []
     for t in batch:
         path = t.heel

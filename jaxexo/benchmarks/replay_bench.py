@@ -28,7 +28,6 @@ from jaxexo.baselines import CFFTG
 from jaxexo.benchmarks.scenes import batch_kwargs, safety_sets
 from jaxexo.evaluation.machine import machine_info, write_result
 from jaxexo.inference import TrajectoryGenerator
-from jaxexo.inference.swing_timing import DeviceLimits, time_swings
 from jaxexo.physics import geometry
 from jaxexo.sim.replay import (
     Legs,
@@ -38,6 +37,7 @@ from jaxexo.sim.replay import (
     summarize_driven,
     summarize_kinematic,
 )
+from jaxexo.swing.timing import DeviceLimits, time_swings
 
 
 def replay_set(sc, rl, cfftg, config, rate: float, driven: bool) -> dict:

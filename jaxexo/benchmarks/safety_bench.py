@@ -15,15 +15,15 @@ import time
 import numpy as np
 
 from jaxexo.baselines import CFFTG
+from jaxexo.baselines.cfftg import plan_basis
 from jaxexo.benchmarks.scenes import SHAPES, THESIS_FIVE, batch_kwargs
 from jaxexo.benchmarks.swing_quality_bench import CLEARING
 from jaxexo.evaluation.machine import machine_info, write_result
 from jaxexo.inference import TrajectoryGenerator
-from jaxexo.inference import smoothing as sm
-from jaxexo.inference.cfftg import plan_basis
-from jaxexo.inference.clearing import clear_smooth
 from jaxexo.inference.scenarios import safety_scenarios
 from jaxexo.physics import geometry, swept
+from jaxexo.swing import smoothing as sm
+from jaxexo.swing.clearing import clear_smooth
 
 FACTOR = 10
 

@@ -4,7 +4,7 @@ training distribution. RL alone (``fallback=None``) and CFFTG on the same scenes
 - safe swing % (jaxexo.physics.outcome's verdict at the clearance asked for) and goal reached %;
 - lift: the heel's peak height above the obstacle's highest point (median, p95), cm;
 - duration at the device: the time-optimal swing within the config's ``[device]`` joint limits
-  (jaxexo.inference.swing_timing), median, p95 and max, s;
+  (jaxexo.swing.timing), median, p95 and max, s;
 - smoothness as delivered: integrated squared jerk of the timed joint trajectories (sum over the four
   joints of the third finite difference at the control rate, squared, times dt; rad^2/s^5), median
   and p95; the share of RL swings smoothed once (no retry) and of those that fell back to the raw
@@ -28,12 +28,12 @@ from jaxexo.baselines import CFFTG
 from jaxexo.benchmarks.scenes import FAMILIES, SHAPES, THESIS_FIVE, batch_kwargs, safety_sets
 from jaxexo.evaluation.machine import machine_info, write_result
 from jaxexo.inference import TrajectoryGenerator, time_swings
-from jaxexo.inference.swing_timing import joint_jerk
 from jaxexo.physics import geometry, swept
 from jaxexo.storage.atomic import write_figure
+from jaxexo.swing.timing import joint_jerk
 
 # RL swings whose smoothing a clearing pass corrected carry this module in their notes.
-CLEARING = "jaxexo.inference.clearing"
+CLEARING = "jaxexo.swing.clearing"
 
 
 def perturbed(obstacle: geometry.Obstacle, error: float, sign: float) -> geometry.Obstacle:

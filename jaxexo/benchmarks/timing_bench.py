@@ -1,5 +1,5 @@
 """Device-timing benchmark: the RL generator and CFFTG on the same scenes, every swing timed for the
-exoskeleton (jaxexo.inference.swing_timing, the policy config's [device] limits) and sampled at a
+exoskeleton (jaxexo.swing.timing, the policy config's [device] limits) and sampled at a
 control rate. Reports swing durations side by side, peak joint velocities and accelerations of the
 exported samples (finite differences at the control rate), rest at both ends, the path checks on the
 exported samples, and the uniform 1 s timing's peaks for contrast. Writes
@@ -16,7 +16,7 @@ from jaxexo.physics.scenarios import shape_scenarios
 
 
 def _figures(trajs, timed, rate: float) -> dict:
-    from jaxexo.inference.swing_timing import uniform_peaks
+    from jaxexo.swing.timing import uniform_peaks
 
     d = np.degrees
     dur = np.array([t.duration for t in timed])
@@ -58,7 +58,7 @@ def run_timing_benchmark(
     from jaxexo.evaluation.compare import make_scenarios
     from jaxexo.evaluation.machine import write_result
     from jaxexo.inference import TrajectoryGenerator
-    from jaxexo.inference.swing_timing import DeviceLimits, time_swings
+    from jaxexo.swing.timing import DeviceLimits, time_swings
 
     rl = TrajectoryGenerator.load(policy)
     gens = {"rl": rl, "cfftg": CFFTG(rl.config)}
@@ -68,7 +68,7 @@ def run_timing_benchmark(
     lines = [
         "# Device-ready swings: RL vs CFFTG, same scenes, same device limits",
         "",
-        f"Policy `{policy}`; every swing timed by jaxexo.inference.swing_timing (TOPP on the joint path, "
+        f"Policy `{policy}`; every swing timed by jaxexo.swing.timing (TOPP on the joint path, "
         f"rest-to-rest) and sampled at {rate:g} Hz. Limits (hip, knee): "
         f"{np.degrees(lim.velocity[0]):.0f}, {np.degrees(lim.velocity[1]):.0f} deg/s; "
         f"{np.degrees(lim.acceleration[0]):.0f}, {np.degrees(lim.acceleration[1]):.0f} deg/s². "

@@ -30,8 +30,8 @@ def run_tracking_benchmark(
     from jaxexo.evaluation.machine import machine_info, write_result
     from jaxexo.inference import TrajectoryGenerator
     from jaxexo.inference.scenarios import safety_scenarios
-    from jaxexo.inference.swing_timing import DeviceLimits, time_swings
     from jaxexo.sim.replay import Legs, driven_replay
+    from jaxexo.swing.timing import DeviceLimits, time_swings
 
     rl = TrajectoryGenerator.load(policy)
     cfg = rl.config

@@ -182,7 +182,7 @@ class KinematicsConfig:
 
 @dataclass(frozen=True)
 class DeviceConfig:
-    """[device]: the exoskeleton's joint drives, for timing swings (jaxexo.inference.swing_timing).
+    """[device]: the exoskeleton's joint drives, for timing swings (jaxexo.swing.timing).
 
     Limits are per joint kind (hip, knee) and apply to both legs, in rad/s and rad/s^2. The defaults
     are conservative, order-of-magnitude figures, not one device's data sheet: lower-limb

@@ -1,6 +1,6 @@
 """The figures of ``jaxexo eval`` per trajectory and per group: the thesis's metrics (3.3: accuracy
 eq 3.1, hip and knee angles of Tables 3.2-3.9), the safe-swing verdict, clearance, lift, path length,
-heel jerk, and the swing timed for the exoskeleton (jaxexo.inference.swing_timing)."""
+heel jerk, and the swing timed for the exoskeleton (jaxexo.swing.timing)."""
 
 from __future__ import annotations
 
@@ -46,7 +46,7 @@ def trajectory_metrics(trajs) -> dict[str, np.ndarray]:
 
 
 def device_metrics(trajs, config) -> dict[str, np.ndarray]:
-    """Per-trajectory device timing (jaxexo.inference.swing_timing, the config's [device] limits):
+    """Per-trajectory device timing (jaxexo.swing.timing, the config's [device] limits):
     the shortest rest-to-rest swing duration (s), the timed swing's peak hip and knee velocity over
     both legs (rad/s), whether its exported samples stay within the limits, and the peak joint
     velocity of the path at its own uniform time stamps (rad/s), for contrast.
@@ -54,7 +54,7 @@ def device_metrics(trajs, config) -> dict[str, np.ndarray]:
     A generator that stood still (the heel never leaves its start: a policy that learned not to move,
     e.g. the faithful thesis configs) has nothing to time: its swing counts as 0 s at zero velocity,
     within the limits; its success and goal figures already say it failed."""
-    from jaxexo.inference.swing_timing import joint_jerk, time_swings, uniform_peaks
+    from jaxexo.swing.timing import joint_jerk, time_swings, uniform_peaks
 
     trajs = list(trajs)
     n = len(trajs)

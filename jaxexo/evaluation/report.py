@@ -94,7 +94,7 @@ SECTIONS = (
             ("within limits %", lambda r: f"{100 * r['device']['device_within_limits']:.1f}"),
         ),
         ("by_kind", "by_pivot"),
-        "The shortest rest-to-rest swing within the [device] joint limits (jaxexo.inference.swing_timing). "
+        "The shortest rest-to-rest swing within the [device] joint limits (jaxexo.swing.timing). "
         "Joint jerk: integrated squared third derivative of the four timed joint angles.",
     ),
     (

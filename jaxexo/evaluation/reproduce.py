@@ -91,7 +91,7 @@ def _pct(x: float) -> str:
 
 
 def device_table(results: dict) -> list[str]:
-    """Not in the thesis: each model's swings timed for the exoskeleton (jaxexo.inference.swing_timing,
+    """Not in the thesis: each model's swings timed for the exoskeleton (jaxexo.swing.timing,
     the config's [device] joint limits), beside CFFTG's where it was run."""
     rows = []
     for name, r in results.items():

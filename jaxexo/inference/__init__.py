@@ -14,41 +14,42 @@ whole: ``gen.generate(obstacle, GenerateOptions(pivot="between", fallback=None))
 Units: metres, radians, seconds.
 """
 
-from jaxexo.inference.export import CSV_COLUMNS, JOINT_NAMES
 from jaxexo.inference.generator import TrajectoryGenerator
-from jaxexo.inference.options import GenerateOptions, SwingOptions
-from jaxexo.inference.trajectory import (
+from jaxexo.physics.geometry import Obstacle
+from jaxexo.physics.scene import Scene
+from jaxexo.storage.policy_file import PolicyFileError
+from jaxexo.swing.export import CSV_COLUMNS, JOINT_NAMES
+from jaxexo.swing.options import GenerateOptions, SwingOptions
+from jaxexo.swing.trajectory import (
     Trajectory,
     TrajectoryBatch,
     TrajectoryChecks,
     TrajectoryError,
     assemble,
 )
-from jaxexo.physics.geometry import Obstacle
-from jaxexo.physics.scene import Scene
-from jaxexo.storage.policy_file import PolicyFileError
 
 _LAZY = {
-    "DeviceLimits": "swing_timing",
-    "TimedSwing": "swing_timing",
-    "time_swing": "swing_timing",
-    "time_swings": "swing_timing",
-    "plan_course": "course",
-    "Course": "course",
-    "CourseError": "course",
-    "footholds": "course",
-    "Terrain": "course",
-    "read_terrain": "course",
+    "DeviceLimits": "jaxexo.swing.timing",
+    "TimedSwing": "jaxexo.swing.timing",
+    "time_swing": "jaxexo.swing.timing",
+    "time_swings": "jaxexo.swing.timing",
+    "plan_course": "jaxexo.course",
+    "Course": "jaxexo.course",
+    "CourseError": "jaxexo.course",
+    "footholds": "jaxexo.course",
+    "Terrain": "jaxexo.course",
+    "read_terrain": "jaxexo.course",
 }
 
 
 def __getattr__(name):
-    # Device timing and walks are imported on first use: they are not needed to generate, and
-    # loading them would add to every process's import time (its budget is 0.3 s).
+    # Device timing (jaxexo.swing.timing) and walks (jaxexo.course) are imported on first use: they
+    # are not needed to generate, and loading them would add to every process's import time (its
+    # budget is 0.3 s).
     if name in _LAZY:
         import importlib
 
-        return getattr(importlib.import_module(f"jaxexo.inference.{_LAZY[name]}"), name)
+        return getattr(importlib.import_module(_LAZY[name]), name)
     raise AttributeError(f"module 'jaxexo.inference' has no attribute {name!r}")
 
 

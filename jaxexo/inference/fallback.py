@@ -1,7 +1,7 @@
 """The fallback composition: the RL generator's swings, with a planner's swing wherever the RL one
-fails the safe-swing check (jaxexo.inference.trajectory).
+fails the safe-swing check (jaxexo.swing.trajectory).
 
-The planner (CFFTG, jaxexo.inference.cfftg, for ``fallback="cfftg"``) is anything with
+The planner (CFFTG, jaxexo.baselines.cfftg, for ``fallback="cfftg"``) is anything with
 ``finish(scenes, n_points, duration) -> TrajectoryBatch``. A row is replaced only when the planner's
 swing passes; the method then reads "cfftg-fallback" and the notes keep the RL failure. When the
 planner fails too, the RL swing is kept, not ok, with both failures in its notes.
@@ -13,7 +13,7 @@ import dataclasses
 
 import numpy as np
 
-from jaxexo.inference.trajectory import TrajectoryBatch
+from jaxexo.swing.trajectory import TrajectoryBatch
 
 
 def rows(batch: TrajectoryBatch, idx) -> TrajectoryBatch:

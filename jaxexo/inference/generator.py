@@ -10,10 +10,10 @@ admissible one in order of Q, so the rollouts check moves in that order instead 
 arithmetic); the plain reference (``plain_reference``, for tests) computes the whole mask every
 step. Both choose the same moves.
 
-The raw path is then finished (jaxexo.inference.finish: landed on the floor, smoothed, thesis 2.7;
+The raw path is then finished (jaxexo.swing.finish: landed on the floor, smoothed, thesis 2.7;
 checked as a safe swing; retried) and, with ``fallback="cfftg"`` (the default), a swing that still
 fails is replaced by CFFTG's plan for its scene (jaxexo.inference.fallback). ``clearance=C`` asks for a margin C instead of the
-model's (``at_clearance``). The options are one checked record (jaxexo.inference.options.GenerateOptions).
+model's (``at_clearance``). The options are one checked record (jaxexo.swing.options.GenerateOptions).
 """
 
 from __future__ import annotations
@@ -26,15 +26,10 @@ import numpy as np
 
 from jaxexo.config import numpy_params, scalar_params
 from jaxexo.inference import blas
-from jaxexo.inference import smoothing as sm
 from jaxexo.inference.fallback import replace_failures
-from jaxexo.inference.finish import PathFinisher
 from jaxexo.inference.network import FoldedQNetwork, StepNetwork
-from jaxexo.inference.options import GenerateOptions, scene_for, scenes_for
-from jaxexo.inference.policy_check import load_checked
 from jaxexo.inference.shield import ScalarShield
 from jaxexo.inference.shield_rows import ShieldRows, ShieldStats, take_rows
-from jaxexo.inference.trajectory import Trajectory, TrajectoryBatch
 from jaxexo.physics import actions, geometry, transition
 from jaxexo.physics.scene import (
     DEFAULT_START_Y,
@@ -45,7 +40,12 @@ from jaxexo.physics.scene import (
     with_clearance,
 )
 from jaxexo.physics.transition import scalar
+from jaxexo.storage.policy_check import load_checked
 from jaxexo.storage.policy_file import QPolicy
+from jaxexo.swing import smoothing as sm
+from jaxexo.swing.finish import PathFinisher
+from jaxexo.swing.options import GenerateOptions, scene_for, scenes_for
+from jaxexo.swing.trajectory import Trajectory, TrajectoryBatch
 
 
 class TrajectoryGenerator:
@@ -72,7 +72,7 @@ class TrajectoryGenerator:
         self._linear = None
         self._cfftg = None  # built on the first fallback (its constants cost ~ms to derive)
         self.clearance = None  # m, or None: env.min_clearance (at_clearance)
-        # the requested spline corrected where it cuts the margin (jaxexo.inference.clearing) before
+        # the requested spline corrected where it cuts the margin (jaxexo.swing.clearing) before
         # any smaller smoothing is tried; False: the candidates and retries alone
         self.clearing = True
         # terminated()'s one parameter as a Python bool: a NumPy bool would make every step's test
@@ -288,7 +288,7 @@ class TrajectoryGenerator:
         """CFFTG for this generator's config and clearance, built on the first fallback (its constants
         cost ~ms to derive)."""
         if self._cfftg is None:
-            from jaxexo.inference.cfftg import CFFTG  # built only when a swing falls back
+            from jaxexo.baselines.cfftg import CFFTG  # built only when a swing falls back
 
             self._cfftg = CFFTG(self.config).at_clearance(self.clearance)
         return self._cfftg
@@ -333,7 +333,7 @@ class TrajectoryGenerator:
         fallback: str | None = "cfftg",
     ) -> TrajectoryBatch:
         """Checked trajectories of raw paths on their scenes: smoothed, checked and retried
-        (jaxexo.inference.finish), then, with ``fallback="cfftg"``, CFFTG's plan wherever the RL
+        (jaxexo.swing.finish), then, with ``fallback="cfftg"``, CFFTG's plan wherever the RL
         swing still fails (jaxexo.inference.fallback)."""
         finisher = PathFinisher(self.sp, self.clearing, exact=self._exact)
         batch = finisher.finish("rl", scenes, raws, n_points, smoothing, duration)
@@ -354,7 +354,7 @@ class TrajectoryGenerator:
         self, obstacle: geometry.Obstacle, options: GenerateOptions | None = None, **overrides
     ) -> Trajectory:
         """One smoothed, checked trajectory (metres, radians, seconds) for ``options``
-        (jaxexo.inference.options.GenerateOptions), whose fields the keywords replace:
+        (jaxexo.swing.options.GenerateOptions), whose fields the keywords replace:
         ``generate(obstacle, pivot="between", fallback=None)``. ``strict`` raises TrajectoryError
         instead of returning a trajectory that fails a check; ``fallback``: "cfftg" (CFFTG's plan
         when the RL swing is not safe) or None (module docstring); ``clearance`` (m): the margin the
@@ -405,7 +405,7 @@ def model_smoothing(
     by default). The shielded raw path keeps that excess everywhere, so a spline that strays no further
     than it from the agent's points rarely cuts into the margin; the thesis's s (an RMS of 1.1-1.4 cm
     over 25-40 points) cuts corners by more than the excess, and its correction
-    (jaxexo.inference.clearing) then lifts the whole swing (about 1 cm higher on the held-out families,
+    (jaxexo.swing.clearing) then lifts the whole swing (about 1 cm higher on the held-out families,
     measured). Longer steps give fewer points for the same swing, hence a smaller s."""
     if not shield:
         return sm.DEFAULT_SMOOTHING

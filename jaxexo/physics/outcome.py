@@ -3,7 +3,7 @@
 Every success figure in jaxexo comes from ``verdict``: the training curve (jaxexo.train.trainer),
 greedy evaluation and validation (jaxexo.train.evaluate, eval.json, sweeps), the thesis-style
 baseline's NumPy environment, CFFTG's planning loop and the checked trajectories
-(jaxexo.inference.trajectory, ``jaxexo eval``). Written against the array module ``xp`` (numpy,
+(jaxexo.swing.trajectory, ``jaxexo eval``). Written against the array module ``xp`` (numpy,
 jax.numpy) like the rest of jaxexo.physics, so the JAX environment's episode flags and the NumPy
 trajectory samples are judged by the same code.
 
@@ -18,7 +18,7 @@ never touched, whatever the margin.
 The two rule parameters are the config's ``env.min_clearance`` and ``env.backward_tolerance``
 (``rule(p)`` reads them from environment parameters); their defaults are declared here once.
 
-Two ways in: ``verdict`` judges finished paths from their aggregates (jaxexo.inference.trajectory
+Two ways in: ``verdict`` judges finished paths from their aggregates (jaxexo.swing.trajectory
 reduces its samples, with the clearance guaranteed between them); ``start`` / ``accumulate`` /
 ``episode_verdict`` fold per-step flags of an environment episode as it runs.
 """

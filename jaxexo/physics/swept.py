@@ -244,7 +244,7 @@ def path_clearance_pruned(path, foot_length, outline, slack=1e-9, below=None):
     ``below`` (B,), optional: moves whose lower bound is under their path's ``below`` are computed
     exactly too, so every move whose clearance is under ``below`` is exact and every other one is
     reported at or above ``below`` (what a caller acting on each move closer than a threshold
-    needs: jaxexo.inference.clearing asks for the moves closer than its margin)."""
+    needs: jaxexo.swing.clearing asks for the moves closer than its margin)."""
     b, n = path.shape[:2]
     c = box_lower_bound(path, foot_length, outline)
     if n < 2:

@@ -275,7 +275,7 @@ def scene_mjcf(config, scene) -> str:
     """The MJCF of a config's legs on a scene (jaxexo.physics.scene.Scene): its obstacle, the
     stance heel on its pivot and a keyframe ``start`` with the swing heel at its start."""
     from jaxexo.config import scalar_params
-    from jaxexo.inference.swing_timing import leg_angles
+    from jaxexo.swing.timing import leg_angles
 
     check_config(config)
     sp = scalar_params(config)

@@ -365,7 +365,7 @@ def driven_replay(
     The commands are computed first (they do not depend on the simulation), then MuJoCo rolls the
     model out in one call (mujoco.rollout) and its sensors give the sites and the foot-obstacle
     distances. Returns SI figures."""
-    from jaxexo.inference.swing_timing import DeviceLimits
+    from jaxexo.swing.timing import DeviceLimits
 
     limits = DeviceLimits.from_config(config) if limits is None else limits
     if not isinstance(limits, DeviceLimits):
@@ -516,7 +516,7 @@ def replay_trajectories(trajs, config, rate: float | None = None, driven: bool =
     """Trajectories (one generator's) timed for the device at ``rate`` and replayed in MuJoCo:
     ``summarize_kinematic`` of all of them and ``summarize_driven`` of those flagged ok, at the
     config's [device] limits (``jaxexo eval --replay``)."""
-    from jaxexo.inference.swing_timing import time_swings
+    from jaxexo.swing.timing import time_swings
 
     require_mujoco()
     kin, drv = [], []

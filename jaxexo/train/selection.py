@@ -23,9 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
+from jaxexo.baselines.cfftg import CFFTG
 from jaxexo.config import Config
 from jaxexo.inference import TrajectoryGenerator, time_swings
-from jaxexo.inference.cfftg import CFFTG
 from jaxexo.inference.scenarios import training_scenarios
 
 # Scenes every candidate is swung on: enough that one unsafe swing in a hundred shows, few enough that

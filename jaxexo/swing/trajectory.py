@@ -29,9 +29,9 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxexo.inference.export import CSV_COLUMNS, scene_dict, write_csv, write_json
 from jaxexo.physics import geometry, kinematics, outcome, swept, transition
 from jaxexo.physics.scene import Scene
+from jaxexo.swing.export import CSV_COLUMNS, scene_dict, write_csv, write_json
 
 DEFAULT_DURATION = 1.0  # s, swing duration for the time stamps
 

@@ -1,4 +1,4 @@
-"""Smoothing that keeps the margin: the thesis's B-spline (thesis 2.7, jaxexo.inference.smoothing),
+"""Smoothing that keeps the margin: the thesis's B-spline (thesis 2.7, jaxexo.swing.smoothing),
 corrected as little as possible where it comes closer to the obstacle than the margin or moves the
 heel backward.
 
@@ -14,7 +14,7 @@ A correction da that moves the sampled curve E a by at least ``need_k`` along di
 samples of constraint k, at the least cost da' H da, is da = H^-1 sum_k mu_k F_k with F_k = E' w_k
 and mu >= 0 the solution of the dual  min 1/2 mu' A mu - need' mu, A_kl = F_k' H^-1 F_l  (an active-set
 solve: a few constraints per round). In the Demmler-Reinsch basis of
-jaxexo.inference.smoothing, H^-1 is diag(1 / (1 + lambda d)), so A costs a few small products.
+jaxexo.swing.smoothing, H^-1 is diag(1 / (1 + lambda d)), so A costs a few small products.
 Constraints, each round, at the samples that fail:
 - clearance: the foot at a sample moves along the outward normal of the foot-obstacle distance (its
   gradient, by central differences) by the shortfall of the exact swept clearance of the moves next
@@ -22,8 +22,8 @@ Constraints, each round, at the samples that fail:
 - forward motion: where the heel's y falls, the next sample's y is raised to the previous one's.
 After ``ROUNDS`` rounds, or as soon as nothing fails, or when a correction would move a sample more
 than ``MAX_SHIFT`` (or needs more than ``MAX_CONSTRAINTS`` constraints at once), the curve is
-returned with its deviation bound (the same bound as the plain spline's: jaxexo.inference.smoothing).
-The result is only a candidate: the generator's verdict (jaxexo.inference.trajectory) judges it
+returned with its deviation bound (the same bound as the plain spline's: jaxexo.swing.smoothing).
+The result is only a candidate: the generator's verdict (jaxexo.swing.trajectory) judges it
 exactly like any other curve, and a curve that still fails goes through the usual retries.
 
 Speed: ``clear_rows`` corrects many paths at once, each path's arithmetic its own (the
@@ -41,8 +41,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from jaxexo.inference import smoothing as sm
 from jaxexo.physics import geometry, swept
+from jaxexo.swing import smoothing as sm
 
 ROUNDS = 4
 SLACK = 1e-3  # m asked above the margin, so that the next round's curve does not land on it

@@ -21,7 +21,7 @@ while a variable-speed law slows only where the path bends in joint space):
    the joints are the project's kinematics (jaxexo.physics.kinematics,
    thesis eq 2.4-2.11, 2.42, 2.49) of the interpolated heel on a fine s grid (FINE_PER_SAMPLE
    points per sample interval), differentiated there by central differences (q', q'').
-2. TOPP (jaxexo.inference.time_law): on that grid, with x = s'^2, the velocity limits cap x by (v_j / |q'_j|)^2 and the
+2. TOPP (jaxexo.swing.time_law): on that grid, with x = s'^2, the velocity limits cap x by (v_j / |q'_j|)^2 and the
    acceleration limits make the admissible s'' an interval [L(x), U(x)]; a backward pass from rest
    at the end decelerating at L bounds the speeds from which the end can still be reached, and a
    forward pass from rest accelerates at U under that bound (the numerical-integration time-optimal
@@ -66,22 +66,22 @@ from jaxexo.config import (
     MAX_TRACKING_HEADROOM,
     MIN_CONTROL_RATE,
 )
-from jaxexo.inference.export import (
+from jaxexo.physics import kinematics
+from jaxexo.physics.scene import Scene
+from jaxexo.swing.export import (
     JOINT_NAMES,
     timed_dict,
     timed_table,
     write_timed_csv,
     write_timed_json,
 )
-from jaxexo.inference.time_law import BLEND_S, TimeLaw, pchip_eval, pchip_slopes, time_law, topp
-from jaxexo.inference.trajectory import (
+from jaxexo.swing.time_law import BLEND_S, TimeLaw, pchip_eval, pchip_slopes, time_law, topp
+from jaxexo.swing.trajectory import (
     TrajectoryBatch,
     TrajectoryChecks,
     failure_reasons,
     measure_paths,
 )
-from jaxexo.physics import kinematics
-from jaxexo.physics.scene import Scene
 
 FINE_PER_SAMPLE = 8  # fine s-grid points per interval of the path's samples
 SAFETY = 0.95  # the TOPP passes use this fraction of each limit

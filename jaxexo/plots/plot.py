@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxexo.inference.trajectory import Trajectory
 from jaxexo.storage.atomic import write_figure
+from jaxexo.swing.trajectory import Trajectory
 
 CM = 100.0
 
@@ -106,7 +106,7 @@ LEG_COLORS = {"left": "tab:blue", "right": "tab:orange"}
 
 
 def plot_course(course, path: str | Path | None = None):
-    """Draw a walk (jaxexo.inference.course.Course): the terrain, each swing's heel path and the
+    """Draw a walk (jaxexo.course.Course): the terrain, each swing's heel path and the
     footholds, coloured by leg; below, both legs' joint angles over the walk. Saves to ``path``
     when given and returns the figure."""
     import matplotlib

@@ -1,5 +1,5 @@
 """Animation of a timed swing (needs matplotlib and Pillow, imported here only): both legs step over
-the obstacle in real time at the computed timing (jaxexo.inference.swing_timing), the heel's path
+the obstacle in real time at the computed timing (jaxexo.swing.timing), the heel's path
 traced behind, with the swing knee's velocity against its limit beside it. Lengths in centimetres,
 angles in degrees, velocities in deg/s (labelled)."""
 
@@ -82,7 +82,7 @@ def animate_swing(
 def animate_course(
     course, path: str | Path, fps: float = 20.0, hold_s: float = 0.5, dpi: int = 60
 ) -> Path:
-    """Write a GIF of a whole walk (jaxexo.inference.course.Course) to ``path`` in real time: both
+    """Write a GIF of a whole walk (jaxexo.course.Course) to ``path`` in real time: both
     legs over the terrain at the walk's timing, the left leg blue, the right orange, the heels'
     paths traced behind. Returns the path."""
     if not np.isfinite(fps) or fps <= 0:

@@ -17,8 +17,6 @@ from typing import Any, ClassVar
 import numpy as np
 
 from jaxexo.config import MAX_SWING_DURATION
-from jaxexo.inference.smoothing import DEFAULT_POINTS
-from jaxexo.inference.trajectory import DEFAULT_DURATION, TrajectoryBatch, TrajectoryError
 from jaxexo.physics import geometry
 from jaxexo.physics.scene import (
     DEFAULT_PIVOT,
@@ -27,6 +25,8 @@ from jaxexo.physics.scene import (
     Scene,
     make_scene,
 )
+from jaxexo.swing.smoothing import DEFAULT_POINTS
+from jaxexo.swing.trajectory import DEFAULT_DURATION, TrajectoryBatch, TrajectoryError
 
 # Bounds of the sizes taken from input, checked before anything is allocated.
 MAX_POINTS = 100_000  # samples of one path

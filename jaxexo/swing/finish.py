@@ -7,13 +7,13 @@ the goal box, jaxexo.physics.transition.goal_reached). The descent is then part 
 smoothed, corrected, retried and judged with the rest of the swing, and the swing ends with the
 whole foot on the floor.
 
-The raw path is smoothed with the requested s (jaxexo.inference.smoothing) and judged as a safe swing
-(jaxexo.inference.trajectory: exact clearance of the moving foot between samples less the curve's
+The raw path is smoothed with the requested s (jaxexo.swing.smoothing) and judged as a safe swing
+(jaxexo.swing.trajectory: exact clearance of the moving foot between samples less the curve's
 deviation bound, margin env.min_clearance). Smoothing cuts corners (clearance) and overshoots
 (backward heel motion), so a curve that fails where its raw path passes is retried, in order:
 
 1. the requested spline corrected as little as possible to keep the margin and move forward
-   (jaxexo.inference.clearing; off with ``clearing=False``);
+   (jaxexo.swing.clearing; off with ``clearing=False``);
 2. the per-path candidate smoothings s = M rho^2 (CANDIDATE_RESIDUALS, M raw points), smoothest first;
 3. less smoothing (RETRY_FACTORS of s), then the raw polyline.
 
@@ -32,11 +32,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from jaxexo.inference import smoothing as sm
-from jaxexo.inference import trajectory
-from jaxexo.inference.clearing import clear_rows, exact_clear_rows
-from jaxexo.inference.trajectory import TrajectoryBatch, assemble
 from jaxexo.physics import transition
+from jaxexo.swing import smoothing as sm
+from jaxexo.swing import trajectory
+from jaxexo.swing.clearing import clear_rows, exact_clear_rows
+from jaxexo.swing.trajectory import TrajectoryBatch, assemble
 
 # Per-path candidate smoothings: s = M * rho^2 for these rho (m), a root-mean-square residual of rho
 # per point. A shielded raw path keeps env.shield_clearance, 5 mm above the verdict's margin; the
@@ -48,14 +48,14 @@ CANDIDATE_RESIDUALS = (0.008, 0.005, 0.004, 0.0025)
 RETRY_FACTORS = (0.25, 1.0 / 16.0, 0.0)
 
 # m a retried curve must keep above the margin to be accepted (the verdict itself asks for none): the
-# device-ready swing (jaxexo.inference.swing_timing) resamples a C1 interpolant of the samples, which
+# device-ready swing (jaxexo.swing.timing) resamples a C1 interpolant of the samples, which
 # can pass a little closer than their polyline (docs/generation.md, smoothing); with this much to
 # spare it keeps the margin when timed. The raw polyline keeps the shield's 5 mm in any case.
 ACCEPT_HEADROOM = 5e-4
 
 CLEARED_NOTE = (
     "the spline of smoothing {s:g} m^2 is corrected where it came within the safety margin or "
-    "moved the heel back (jaxexo.inference.clearing)"
+    "moved the heel back (jaxexo.swing.clearing)"
 )
 
 
@@ -240,7 +240,7 @@ class PathFinisher:
         return paths[j : j + 1], dev[j : j + 1], [cands[j]], notes, measured
 
     def _cleared_rows(self, scenes, raws, rows, n_points: int, smoothing: float):
-        """Rows whose requested smoothing failed: the requested spline corrected (jaxexo.inference.clearing,
+        """Rows whose requested smoothing failed: the requested spline corrected (jaxexo.swing.clearing,
         all rows' rounds together), as (row, (path, smoothing, notes, deviation, clearances)) for the
         rows whose corrected curve passes (``_judge_cleared``)."""
         if not self.clearing or len(rows) == 0:

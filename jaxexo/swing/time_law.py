@@ -6,7 +6,7 @@ limits make the admissible s'' an interval [L(x), U(x)]; a backward pass from re
 decelerating at L bounds the speeds from which the end can still be reached, and a forward pass from
 rest accelerates at U under that bound (Bobrow 1985 / Pfeiffer-Johanni 1987, passes ordered as in
 TOPP-RA). ``time_law`` turns x into s(t) at uniform times and averages s' over a short window, so
-that s'' is zero at both ends (jaxexo.inference.swing_timing uses both). Also the monotone cubic
+that s'' is zero at both ends (jaxexo.swing.timing uses both). Also the monotone cubic
 (PCHIP) both modules interpolate with.
 """
 

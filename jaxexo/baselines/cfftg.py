@@ -30,7 +30,7 @@ Decisions, each made here:
   excursion. The initial margin is the reward's safety distance (eq 2.35, ``min_dt``), so
   both generators aim for the same clearance.
 - Check. Every plan goes through the same safe-swing check as the RL generator's trajectories
-  (jaxexo.inference.trajectory: exact clearance of the moving foot between samples less the
+  (jaxexo.swing.trajectory: exact clearance of the moving foot between samples less the
   polynomial's chord-deviation bound ``plan_deviation``, margin env.min_clearance; heel backward
   motion; joint limits and leg length of both legs; goal reached).
 - Re-plan. A plan that fails is re-planned, per scene:
@@ -57,9 +57,6 @@ from pathlib import Path
 import numpy as np
 
 from jaxexo.config import Config, load_config, scalar_params
-from jaxexo.inference.options import SwingOptions, scene_for, scenes_for
-from jaxexo.inference.policy_check import load_checked
-from jaxexo.inference.trajectory import Trajectory, TrajectoryBatch, assemble, measure_paths
 from jaxexo.physics import geometry
 from jaxexo.physics.scene import (
     DEFAULT_START_Y,
@@ -69,6 +66,9 @@ from jaxexo.physics.scene import (
     stack_scenes,
     with_clearance,
 )
+from jaxexo.storage.policy_check import load_checked
+from jaxexo.swing.options import SwingOptions, scene_for, scenes_for
+from jaxexo.swing.trajectory import Trajectory, TrajectoryBatch, assemble, measure_paths
 
 DEFAULT_POINTS = 100
 C_MAX = 10.0  # |c| bound for a monotone y(s)
@@ -229,7 +229,7 @@ class CFFTG:
     def plan(self, scenes, n_points: int = DEFAULT_POINTS):
         """Plan, check and re-plan every scene. Returns the final paths (B, N, 2), the via points
         (B, 3, 2), the number of plans each scene needed (B,), whether it gave up (B,) and the checks
-        of the final paths (``jaxexo.inference.trajectory.measure``'s dict)."""
+        of the final paths (``jaxexo.swing.trajectory.measure``'s dict)."""
         arr = stack_scenes(scenes, np.float64)
         b = len(scenes)
         foot = float(self.sp.foot_length)
@@ -331,7 +331,7 @@ class CFFTG:
         self, obstacle: geometry.Obstacle, options: SwingOptions | None = None, **overrides
     ) -> Trajectory:
         """One checked trajectory (metres, radians, seconds) for ``options``
-        (jaxexo.inference.options.SwingOptions; a GenerateOptions lends the fields CFFTG has), whose
+        (jaxexo.swing.options.SwingOptions; a GenerateOptions lends the fields CFFTG has), whose
         fields the keywords replace; ``strict`` raises TrajectoryError instead of returning one that
         fails a check; ``clearance`` (m) the margin to keep (``at_clearance``)."""
         o = SwingOptions.given(options, overrides, "CFFTG.generate")

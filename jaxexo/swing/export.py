@@ -1,6 +1,6 @@
 """Exports of swings: the CSV columns and JSON documents of a checked trajectory
-(jaxexo.inference.trajectory.Trajectory) and of a device-ready timed swing
-(jaxexo.inference.swing_timing.TimedSwing). Units: metres, radians, seconds."""
+(jaxexo.swing.trajectory.Trajectory) and of a device-ready timed swing
+(jaxexo.swing.timing.TimedSwing). Units: metres, radians, seconds."""
 
 from __future__ import annotations
 
@@ -96,19 +96,24 @@ def write_csv(columns, table: np.ndarray, fmt: str, path: str | Path | None = No
     return text
 
 
+def units(**extra: str) -> dict:
+    """The units of a timed record's JSON: lengths, angles, times and joint rates, then ``extra``,
+    then the sampling rate."""
+    return {
+        "length": "m",
+        "angle": "rad",
+        "time": "s",
+        "joint velocity": "rad/s",
+        "joint acceleration": "rad/s^2",
+        **extra,
+        "rate": "Hz",
+    }
+
+
 def timed_dict(swing) -> dict:
     c = swing.checks
     return {
-        "units": {
-            "length": "m",
-            "angle": "rad",
-            "time": "s",
-            "joint velocity": "rad/s",
-            "joint acceleration": "rad/s^2",
-            "heel velocity": "m/s",
-            "heel acceleration": "m/s^2",
-            "rate": "Hz",
-        },
+        "units": units(**{"heel velocity": "m/s", "heel acceleration": "m/s^2"}),
         "method": swing.method,
         "scene": scene_dict(swing.scene),
         "rate_hz": swing.rate,
