@@ -23,11 +23,15 @@ LAYERS = (
     ("jaxexo.storage",),  # also the policy file read and checked for the generators (policy_check)
     # (the shield's one package goes here, between the physics it applies and its users)
     ("jaxexo.env",),
-    ("jaxexo.swing",),  # what every generator does with its path: smooth, clear, check, time, export
+    (
+        "jaxexo.swing",
+    ),  # what every generator does with its path: smooth, clear, check, time, export
     ("jaxexo.baselines",),  # CFFTG, also the RL generator's fallback planner
     ("jaxexo.inference",),  # the RL generator and the public face of generation
     ("jaxexo.course", "jaxexo.plots"),  # walks over a course; figures and animations
-    ("jaxexo.train",),  # exports policies for the generator, and picks them as it swings (selection)
+    (
+        "jaxexo.train",
+    ),  # exports policies for the generator, and picks them as it swings (selection)
     ("jaxexo.sim",),
     ("jaxexo.sweep", "jaxexo.evaluation"),
     ("jaxexo.benchmarks",),

@@ -162,13 +162,14 @@ def test_fast_generation_with_candidate_smoothings_matches_the_reference(clearin
     ref = plain.generate_batch(args["obstacle"], fallback=None, **kw)
     for a, b in zip(fast, ref):
         _same(a, b)
-    marker = "jaxexo.swing.clearing" if clearing else "per-path candidate"
+    cleared = "jaxexo.swing.clearing"  # the note of a swing the correction moved
+    marker = cleared if clearing else "per-path candidate"
     assert any(any(marker in n for n in t.notes) for t in fast)
     for s in sc[::7]:
         one = {k: s[k] for k in ("pivot", "start_y", "step_length")}
         a = gen.generate(s["obstacle"], fallback=None, **one)
         _same(a, plain.generate(s["obstacle"], fallback=None, **one))
-        if any("jaxexo.swing.clearing" in n for n in a.notes):
+        if any(cleared in n for n in a.notes):
             again = clear_smooth(
                 a.raw,
                 a.scene.outline,

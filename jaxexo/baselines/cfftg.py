@@ -59,15 +59,12 @@ import numpy as np
 from jaxexo.config import Config, load_config, scalar_params
 from jaxexo.physics import geometry
 from jaxexo.physics.scene import (
-    DEFAULT_START_Y,
-    DEFAULT_STEP_LENGTH,
-    Scene,
     check_clearance,
     stack_scenes,
     with_clearance,
 )
 from jaxexo.storage.policy_check import load_checked
-from jaxexo.swing.options import SwingOptions, scene_for, scenes_for
+from jaxexo.swing.options import SceneMaker, SwingOptions, scenes_for
 from jaxexo.swing.trajectory import Trajectory, TrajectoryBatch, assemble, measure_paths
 
 DEFAULT_POINTS = 100
@@ -167,7 +164,7 @@ def plan_paths(
     return np.stack([y, h[:, None] * phi[best]], axis=-1), h
 
 
-class CFFTG:
+class CFFTG(SceneMaker):
     """The polynomial generator. ``config`` supplies the kinematics (thigh, shin, foot, joint limits),
     the goal tolerance and the safety distance; pass the RL policy's config to compare like with like."""
 
@@ -212,18 +209,6 @@ class CFFTG:
         """A CFFTG with the kinematics of an exported policy's config (read and checked as the RL
         generator reads it; NumPy only)."""
         return cls(load_checked(path)[1], **kwargs)
-
-    # Scenes ---------------------------------------------------------------------------------------
-    def scene(
-        self,
-        obstacle: geometry.Obstacle,
-        pivot: str | float | None = None,
-        pivot_y: float | None = None,
-        start_y: float = DEFAULT_START_Y,
-        step_length: float = DEFAULT_STEP_LENGTH,
-    ) -> Scene:
-        """Validate one scenario (metres), as the RL generator does."""
-        return scene_for(self.config, obstacle, pivot, pivot_y, start_y, step_length)
 
     # Planning ---------------------------------------------------------------------------------------
     def plan(self, scenes, n_points: int = DEFAULT_POINTS):

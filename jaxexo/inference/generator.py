@@ -32,8 +32,6 @@ from jaxexo.inference.shield import ScalarShield
 from jaxexo.inference.shield_rows import ShieldRows, ShieldStats, take_rows
 from jaxexo.physics import actions, geometry, transition
 from jaxexo.physics.scene import (
-    DEFAULT_START_Y,
-    DEFAULT_STEP_LENGTH,
     Scene,
     check_clearance,
     stack_scenes,
@@ -44,11 +42,19 @@ from jaxexo.storage.policy_check import load_checked
 from jaxexo.storage.policy_file import QPolicy
 from jaxexo.swing import smoothing as sm
 from jaxexo.swing.finish import PathFinisher
-from jaxexo.swing.options import GenerateOptions, scene_for, scenes_for
+from jaxexo.swing.options import GenerateOptions, SceneMaker, scenes_for
 from jaxexo.swing.trajectory import Trajectory, TrajectoryBatch
 
 
-class TrajectoryGenerator:
+def _one_mask(rows: ShieldRows, one, hy: float, hz: float, last: int) -> np.ndarray:
+    """(NUM_ACTIONS,) the shield's full mask of one heel (y, z) after move ``last``, in float32 like
+    the batch rollout's (``ShieldRows.admissible`` of one row; ``one``: the scene stacked)."""
+    return rows.admissible(
+        np.array([hy], np.float32), np.array([hz], np.float32), one, last=np.array([last])
+    )[0]
+
+
+class TrajectoryGenerator(SceneMaker):
     """Greedy trajectories from an exported Q-network. Build with ``TrajectoryGenerator.load(path)``."""
 
     # BLAS threads for generate_batch (jaxexo.inference.blas: default threads were 4x slower on a
@@ -121,18 +127,7 @@ class TrajectoryGenerator:
         policy, config = load_checked(path)
         return cls(policy, config, str(path))
 
-    # Scenes -------------------------------------------------------------------------------------
-    def scene(
-        self,
-        obstacle: geometry.Obstacle,
-        pivot: str | float | None = None,
-        pivot_y: float | None = None,
-        start_y: float = DEFAULT_START_Y,
-        step_length: float = DEFAULT_STEP_LENGTH,
-    ) -> Scene:
-        """Validate one scenario (metres). ``pivot_y``, when given, overrides the ``pivot`` condition."""
-        return scene_for(self.config, obstacle, pivot, pivot_y, start_y, step_length)
-
+    # Scenes (``scene``: SceneMaker's) -----------------------------------------------------------
     def _basis(self, scene: Scene) -> np.ndarray:
         """(5, D): the observation as c @ basis for c = (heel_y, heel_z, time, visited, 1).
 
@@ -187,22 +182,12 @@ class TrajectoryGenerator:
                 q = step.q_values(hy, hz, t, 1.0 if visited else 0.0)
                 a = single.choose(hy, hz, q, last)
                 if a is None:
-                    mask = rows.admissible(
-                        np.array([hy], np.float32),
-                        np.array([hz], np.float32),
-                        one,
-                        last=np.array([last]),
-                    )[0]
+                    mask = _one_mask(rows, one, hy, hz, last)
                     a = int(actions.greedy_action(np, q, mask))
                     self.shield_stats.steps_to_full_mask += 1
                 self.shield_stats.steps += 1
             elif self.shield:
-                mask = rows.admissible(
-                    np.array([hy], np.float32),
-                    np.array([hz], np.float32),
-                    one,
-                    last=np.array([last]),
-                )[0]
+                mask = _one_mask(rows, one, hy, hz, last)
                 a = self._explore(step.greedy(hy, hz, t, 1.0 if visited else 0.0, mask), mask)
             else:
                 a = self._explore(step.greedy(hy, hz, t, 1.0 if visited else 0.0))

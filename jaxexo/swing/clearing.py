@@ -282,6 +282,8 @@ def clear_rows(
     margin: float,
     n_points: int = sm.DEFAULT_POINTS,
     smoothing: float = sm.DEFAULT_SMOOTHING,
+    *,
+    exact: bool = False,
 ) -> list[Cleared]:
     """``clear_smooth`` of many raw paths (M_i, 2) on their outlines (K_i, 2): a ``Cleared`` per path.
 
@@ -290,21 +292,15 @@ def clear_rows(
     per outline size, the dual systems in stacked solves (``_dual``). A move's swept clearance is
     computed exactly only where it can be under the threshold ``margin + SLACK + deviation`` or be
     the path's closest (jaxexo.physics.swept.path_clearance_pruned: the shortfalls that steer the
-    correction are the same numbers, and every other move is certainly above the threshold)."""
-    return _clear_rows(raws, outlines, foot_length, margin, n_points, smoothing, exact=False)
+    correction are the same numbers, and every other move is certainly above the threshold).
+    ``exact``: every move's clearance computed exactly (``exact_clear_rows``)."""
+    return _clear_rows(raws, outlines, foot_length, margin, n_points, smoothing, exact=exact)
 
 
-def exact_clear_rows(
-    raws,
-    outlines,
-    foot_length: float,
-    margin: float,
-    n_points: int = sm.DEFAULT_POINTS,
-    smoothing: float = sm.DEFAULT_SMOOTHING,
-) -> list[Cleared]:
-    """``clear_rows`` with every move's clearance computed exactly: the reference it is tested against
-    (the same curves)."""
-    return _clear_rows(raws, outlines, foot_length, margin, n_points, smoothing, exact=True)
+def exact_clear_rows(*args, **kwargs) -> list[Cleared]:
+    """``clear_rows`` (the same arguments) with every move's clearance computed exactly: the
+    reference it is tested against (the same curves)."""
+    return clear_rows(*args, exact=True, **kwargs)
 
 
 def _clear_rows(

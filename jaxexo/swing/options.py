@@ -5,7 +5,7 @@
 field. A swing is asked for by an obstacle and where the feet are: the pivot (stance) heel, the
 swing heel's start and the step length; their defaults are jaxexo.physics.scene's (DEFAULT_PIVOT,
 DEFAULT_START_Y, DEFAULT_STEP_LENGTH), and they are checked with the obstacle when its scene is laid
-out (``scene_for``, ``scenes_for``: jaxexo.physics.scene.make_scene).
+out (``SceneMaker.scene``, ``scenes_for``: jaxexo.physics.scene.make_scene).
 """
 
 from __future__ import annotations
@@ -52,24 +52,27 @@ def pivot_of(pivot, pivot_y):
     return pivot_y
 
 
-def scene_for(
-    config,
-    obstacle,
-    pivot=None,
-    pivot_y=None,
-    start_y=DEFAULT_START_Y,
-    step_length=DEFAULT_STEP_LENGTH,
-) -> Scene:
-    """One validated scene (metres) for a generator of ``config`` (its foot length and shape
-    descriptor); ``pivot_y``, when given, replaces the ``pivot`` condition."""
-    return make_scene(
-        obstacle,
-        pivot_of(pivot, pivot_y),
-        start_y,
-        step_length,
-        foot_length=config.kinematics.foot_length,
-        shape_points=config.env.shape_points,
-    )
+class SceneMaker:
+    """The ``scene`` of every generator (TrajectoryGenerator, CFFTG): a scenario validated and laid out
+    for the generator's ``config`` (its foot length and shape descriptor)."""
+
+    def scene(
+        self,
+        obstacle: geometry.Obstacle,
+        pivot: str | float | None = None,
+        pivot_y: float | None = None,
+        start_y: float = DEFAULT_START_Y,
+        step_length: float = DEFAULT_STEP_LENGTH,
+    ) -> Scene:
+        """Validate one scenario (metres). ``pivot_y``, when given, overrides the ``pivot`` condition."""
+        return make_scene(
+            obstacle,
+            pivot_of(pivot, pivot_y),
+            start_y,
+            step_length,
+            foot_length=self.config.kinematics.foot_length,
+            shape_points=self.config.env.shape_points,
+        )
 
 
 def scenes_for(make, obstacles, options: SwingOptions) -> list[Scene]:
@@ -163,7 +166,7 @@ class SwingOptions:
     """What every generator's ``generate`` / ``generate_batch`` takes besides the obstacles (metres,
     seconds), checked when made (``CHECKS``, in order; an error names the field). The scene's fields
     (``SCENE_FIELDS``) are one value, or in generate_batch one per obstacle; ``pivot_y``, when given,
-    replaces the ``pivot`` condition; they are checked with the obstacle (``scene_for``).
+    replaces the ``pivot`` condition; they are checked with the obstacle (``SceneMaker.scene``).
     ``strict`` raises TrajectoryError instead of returning a swing that fails a check (``checked``);
     ``clearance`` (m; None: the model's env.min_clearance) is the margin the swing keeps
     (the generators' ``at_clearance``, which checks it against the model)."""

@@ -117,6 +117,7 @@ class DeviceLimits:
                 f"got {h!r}"
             )
         object.__setattr__(self, "headroom", float(h))
+        n = len(JOINT_NAMES)
         for name in ("velocity", "acceleration", "jerk"):
             v = getattr(self, name)
             if v is None and name == "jerk":
@@ -124,13 +125,10 @@ class DeviceLimits:
             try:
                 arr = np.asarray(v, dtype=np.float64)
             except (TypeError, ValueError):
+                raise ValueError(f"limits.{name}: expected {n} numbers, got {v!r}") from None
+            if arr.shape != (n,):
                 raise ValueError(
-                    f"limits.{name}: expected {len(JOINT_NAMES)} numbers, got {v!r}"
-                ) from None
-            if arr.shape != (len(JOINT_NAMES),):
-                raise ValueError(
-                    f"limits.{name}: expected {len(JOINT_NAMES)} numbers ({', '.join(JOINT_NAMES)}), "
-                    f"got {v!r}"
+                    f"limits.{name}: expected {n} numbers ({', '.join(JOINT_NAMES)}), got {v!r}"
                 )
             if not np.all(np.isfinite(arr)) or np.any(arr <= 0):
                 raise ValueError(f"limits.{name}: every limit must be finite and > 0, got {v!r}")
