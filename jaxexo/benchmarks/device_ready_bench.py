@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 TARGETS = {"rl_device_ready_ms": 5.0, "rl_over_cfftg": 1.5, "batch_1000_s": 1.0}
-# The timing's parts: the swing_timing function each one's CPU time is read from.
+# The timing's parts: the jaxexo.swing.timing function each one's CPU time is read from.
 PARTS = {
     "paths": "_joint_paths",
     "topp": "_topp_laws",

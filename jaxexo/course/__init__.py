@@ -31,7 +31,7 @@ foot standing as its pivot (``pivot_y``), as the thesis's single swing does.
    construction, the RL swing's because its descent to the floor is part of the smoothed and checked
    path (jaxexo.swing.finish.landed). A swing that fails (short of the goal, maybe above the
    floor) stops the walk, as it fails a single swing.
-3. Timing (swing_timing.time_swings): every swing rest-to-rest at the [device] limits, sampled at
+3. Timing (jaxexo.swing.timing.time_swings): every swing rest-to-rest at the [device] limits, sampled at
    the control rate. At a landing both legs are straight with the hip between the heels (the hip
    model of jaxexo.physics.kinematics), so the landing pose of one swing is the lift-off pose of
    the next with the legs' roles swapped, and both are at rest: q, q-dot and q-double-dot are

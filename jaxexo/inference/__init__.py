@@ -12,6 +12,11 @@ The keywords are the fields of one checked record, ``GenerateOptions``, which ma
 whole: ``gen.generate(obstacle, GenerateOptions(pivot="between", fallback=None))``.
 
 Units: metres, radians, seconds.
+
+This package holds the RL generator (``generator``, ``network``, ``fallback``, ``blas``, the shield's
+forms, ``scenarios``) and is the public face of generation: the swing's records come from
+jaxexo.swing, and device timing (jaxexo.swing.timing) and walks (jaxexo.course) are offered here too,
+loaded on first use.
 """
 
 from jaxexo.inference.generator import TrajectoryGenerator
