@@ -19,6 +19,7 @@ from conftest import ROOT
 # face (jaxexo/__init__.py), at the top like the command line.
 LAYERS = (
     ("jaxexo.physics",),
+    ("jaxexo.shield",),  # the shield's rule and its forms: under the environment that masks with it
     ("jaxexo.config",),
     ("jaxexo.storage",),
     ("jaxexo.env",),
