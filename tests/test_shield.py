@@ -8,9 +8,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from jaxexo.config import config_from_dict, load_config, numpy_params
+from jaxexo.config import config_from_dict, load_config, numpy_params, scalar_params
 from jaxexo.physics import dynamics, geometry, kinematics, terrain  # noqa: F401
-from jaxexo.shield import rule
+from jaxexo.shield import make_shield, rule
 
 from conftest import ROOT, legacy_raw
 
@@ -63,6 +63,9 @@ def test_admissible_moves_against_dense_sampling(floor):
     import types
 
     m = rule.admissible_moves(np, p, hy, hz, types.SimpleNamespace(**lay))
+    for kind in ("rows", "scalar"):  # the NumPy forms (all three: tests/test_shield_forms.py)
+        form = make_shield(kind, p, scalar_params(cfg))
+        np.testing.assert_array_equal(form.admissible(hy, hz, types.SimpleNamespace(**lay)), m)
     d = p.directions.astype(np.float64)
     step = float(p.step_size)
     blocked_near = fallback = checked = floor_blocked = 0
@@ -292,7 +295,7 @@ def test_batched_jax_mask_decides_exactly_like_the_plain_one():
 
     from jaxexo.env import ExoStepEnv
     from jaxexo.physics.scenarios import unseen_scenarios
-    from jaxexo.shield import batched, make_shield
+    from jaxexo.shield import batched
 
     cfg = load_config(ROOT / "configs" / "default.toml")
     env = ExoStepEnv(cfg)
