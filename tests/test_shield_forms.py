@@ -14,23 +14,19 @@ import numpy as np
 import pytest
 
 from jaxexo.config import load_config, numpy_params, scalar_params
-from jaxexo.physics import dynamics, scenarios
+from jaxexo.physics import dynamics
 from jaxexo.shield import KINDS, ShieldStats, make_shield, rule
 
 from conftest import ROOT
+from test_shield import _states
 
 
 def _batch(cfg, n, seed):
-    """n random terrain scenes (float32 rows) and heels around their obstacles: some low, some in the
-    goal box's column, some a shield's clearance from the obstacle's side or top; random last moves
-    (straight up before a best move straight down too) and random Q-values with ties."""
-    p = numpy_params(cfg)
-    lay = scenarios.scenario_layouts(np, p, seed, n, False)
-    rng = np.random.default_rng(seed)
-    hy = (lay["center_y"] + rng.uniform(-0.45, 0.2, n)).astype(np.float32)
-    hz = rng.uniform(0.0, 0.45, n).astype(np.float32)
-    hz[::5] = rng.uniform(0.0, 0.03, len(hz[::5]))
-    hy[::10] = (lay["goal_y"][::10] + rng.uniform(-0.07, 0.03, len(hy[::10]))).astype(np.float32)
+    """n random terrain scenes and heels around their obstacles (test_shield's states: some low,
+    some in the goal box's column), some a shield's clearance from the obstacle's side or top;
+    random last moves (straight up before a best move straight down too), Q-values with ties."""
+    p, lay, hy, hz = _states(cfg, n, seed)
+    rng = np.random.default_rng(seed + 1)
     k = n // 4
     near = rng.uniform(0.02, 0.03, k)
     side = rng.uniform(size=k) < 0.5
