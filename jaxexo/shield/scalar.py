@@ -15,7 +15,7 @@ order and checks one move at a time in plain Python floats:
   *certified*: each comparison is decided only when the float64 value lies further from its
   threshold than a bound on float32's rounding error (``MARGIN`` for lengths, a per-leg bound for the
   angles that grows where the knee's square root is ill-conditioned); a comparison that is too close
-  to call makes ``choose`` return None, and the caller computes the reference mask (float32 NumPy)
+  to call makes ``certain`` return None, and ``choose`` computes the reference mask (float32 NumPy)
   for that step. The result is therefore always the reference's move.
 
 Cheap exact shortcuts keep the geometry rare: far from the obstacle's bounding box no move can come
@@ -334,7 +334,7 @@ class SwingShield:
 
     def reachable(self, y, z):
         """1 / 0 / -1: the end (y, z) certainly within the joint limits and reach / too close to call /
-        certainly not (dynamics.admissible_moves' kinematic conditions)."""
+        certainly not (rule.admissible_moves' kinematic conditions)."""
         leg = self.leg
         p = self.pivot
         dist = 0.5 * (p - y)
