@@ -19,9 +19,9 @@ from conftest import ROOT
 # face (jaxexo/__init__.py), at the top like the command line.
 LAYERS = (
     ("jaxexo.physics",),
+    ("jaxexo.shield",),  # the shield's rule and its forms: under the environment that masks with it
     ("jaxexo.config",),
     ("jaxexo.storage",),  # also the policy file read and checked for the generators (policy_check)
-    # (the shield's one package goes here, between the physics it applies and its users)
     ("jaxexo.env",),
     (
         "jaxexo.swing",

@@ -545,7 +545,7 @@ def test_gymnax_wrappers_rollout(mixed_env):
 
 @pytest.mark.parametrize("which", ["mixed", "terrain"])
 def test_step_batch_equals_vmapped_step_bit_for_bit(mixed_env, which):
-    """``step_batch`` (fresh scenes drawn only where an episode ended, jaxexo.env.compact) against
+    """``step_batch`` (fresh scenes drawn only where an episode ended, jaxexo.shield.compact) against
     ``jax.vmap(step)`` (a scene drawn for every environment at every step): every output and every
     state leaf equal bit for bit over 110 random steps (episodes of staggered ages: some end at
     most steps, and at one step more than one round of the buffer's 16), on the mixed

@@ -1,5 +1,6 @@
 """The generator's fast paths against their plain references: the shield's move checked one at a time
-(jaxexo.inference.shield for one swing, ``_batch_choice`` for a batch) against the full mask, and the
+(jaxexo.shield's scalar form for one swing, its rows form's ``choose`` for a batch) against the full
+mask, and the
 generator's one-pass candidate smoothings, on thousands of scenes of the training distribution and
 of the held-out families. Policies: random weights (no training), shielded default config."""
 
@@ -13,8 +14,9 @@ import pytest
 from jaxexo.config import load_config
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.inference.generator import plain_reference
-from jaxexo.inference.shield import ScalarShield
-from jaxexo.physics import actions, dynamics, scenarios
+from jaxexo.physics import actions, scenarios
+from jaxexo.shield import rule
+from jaxexo.shield.scalar import SwingShield
 from jaxexo.storage.policy_file import QPolicy
 from jaxexo.swing import smoothing as sm
 
@@ -57,8 +59,8 @@ def _scenes(gen, n_train, n_unseen, seed=5):
 
 def test_scalar_shield_picks_the_full_masks_greedy_move():
     """At random heels around terrain obstacles (close to the shield's clearance too) and random
-    Q-values (ties included), ``ScalarShield.choose`` returns the greedy move of the full float32
-    mask, or None (then the generator computes that mask)."""
+    Q-values (ties included), ``SwingShield.certain`` returns the greedy move of the full float32
+    mask, or None (then ``SwingShield.choose`` computes that mask)."""
     gen = _random_generator()
     p = gen.np_params
     n = 4000
@@ -82,14 +84,14 @@ def test_scalar_shield_picks_the_full_masks_greedy_move():
     q[1::5, 27] = 10.0  # straight down is the best move ...
     last = rng.choice(np.array([-1, 0, 9, 27, 30, 5]), size=n)
     last[1::5] = 9  # ... right after straight up
-    mask = dynamics.admissible_moves(np, p, hy, hz, types.SimpleNamespace(**lay), last_action=last)
+    mask = rule.admissible_moves(np, p, hy, hz, types.SimpleNamespace(**lay), last_action=last)
     want = actions.greedy_action(np, q, mask)
     decided = agree = 0
     for i in np.flatnonzero(ok):
         scene = types.SimpleNamespace(
             outline=lay["outline"][i], pivot_y=lay["pivot_y"][i], goal_y=lay["goal_y"][i]
         )
-        a = ScalarShield(gen.sp, p, scene).choose(float(hy[i]), float(hz[i]), q[i], int(last[i]))
+        a = SwingShield(gen.sp, p, scene).certain(float(hy[i]), float(hz[i]), q[i], int(last[i]))
         if a is not None:
             decided += 1
             agree += a == want[i]
@@ -113,7 +115,7 @@ def test_scalar_shield_picks_the_full_masks_greedy_move():
     )
     bad = q[0].copy()
     bad[3] = np.nan
-    assert ScalarShield(gen.sp, p, scene).choose(float(hy[0]), float(hz[0]), bad) is None
+    assert SwingShield(gen.sp, p, scene).certain(float(hy[0]), float(hz[0]), bad) is None
 
 
 @pytest.mark.slow

@@ -1,4 +1,4 @@
-"""The shield: the admissible moves of jaxexo.physics.dynamics.admissible_moves checked
+"""The shield: the admissible moves of jaxexo.shield.rule.admissible_moves checked
 against a dense brute-force look at each move (independent of jaxexo.physics.swept), the same mask in
 JAX and NumPy, exploration and greedy choice inside the mask in the trainer and the generator, and
 shielded raw paths that never fall back and keep the clearance."""
@@ -8,9 +8,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from jaxexo.config import config_from_dict, load_config, numpy_params
-from jaxexo.physics import actions, dynamics, geometry, kinematics, terrain, transition  # noqa: F401
+from jaxexo.config import config_from_dict, load_config, numpy_params, scalar_params
+from jaxexo.physics import actions, geometry, kinematics, terrain, transition  # noqa: F401
 from jaxexo.physics.scene import stack_scenes
+from jaxexo.shield import make_shield, rule
 
 from conftest import ROOT, legacy_raw
 
@@ -62,7 +63,10 @@ def test_admissible_moves_against_dense_sampling(floor):
     p, lay, hy, hz = _states(cfg, 300, 3)
     import types
 
-    m = dynamics.admissible_moves(np, p, hy, hz, types.SimpleNamespace(**lay))
+    m = rule.admissible_moves(np, p, hy, hz, types.SimpleNamespace(**lay))
+    for kind in ("rows", "scalar"):  # the NumPy forms (all three: tests/test_shield_forms.py)
+        form = make_shield(kind, p, scalar_params(cfg))
+        np.testing.assert_array_equal(form.admissible(hy, hz, types.SimpleNamespace(**lay)), m)
     d = p.directions.astype(np.float64)
     step = float(p.step_size)
     blocked_near = fallback = checked = floor_blocked = 0
@@ -134,7 +138,7 @@ def test_shield_off_admits_every_move():
     p, lay, hy, hz = _states(cfg, 20, 1)
     import types
 
-    assert dynamics.admissible_moves(np, p, hy, hz, types.SimpleNamespace(**lay)).all()
+    assert rule.admissible_moves(np, p, hy, hz, types.SimpleNamespace(**lay)).all()
 
 
 def test_vertical_move_up_is_admissible_from_any_safe_pose():
@@ -144,7 +148,7 @@ def test_vertical_move_up_is_admissible_from_any_safe_pose():
     p, lay, hy, hz = _states(cfg, 400, 5)
     import types
 
-    m = dynamics.admissible_moves(np, p, hy, hz, types.SimpleNamespace(**lay))
+    m = rule.admissible_moves(np, p, hy, hz, types.SimpleNamespace(**lay))
     up = int(np.argmin(np.abs(actions.action_angles() - np.pi / 2)))
     c = geometry.foot_clearance(
         np,
@@ -199,7 +203,7 @@ def test_jax_mask_equals_numpy_and_exploration_stays_inside():
         pivot_y=np.asarray(st.layout.pivot_y),
         goal_y=np.asarray(st.layout.goal_y),
     )
-    m_np = dynamics.admissible_moves(np, numpy_params(cfg), heel[:, 0], heel[:, 1], lay)
+    m_np = rule.admissible_moves(np, numpy_params(cfg), heel[:, 0], heel[:, 1], lay)
     assert (
         m_jax == m_np
     ).mean() > 0.999  # float32 fused arithmetic may flip a move on the boundary
@@ -218,24 +222,12 @@ def test_jax_mask_equals_numpy_and_exploration_stays_inside():
 def test_shielded_generator_never_falls_back_and_keeps_clearance(tmp_path):
     """A shielded policy (here random weights: the shield alone must guarantee this) never moves the
     heel backward and keeps the shield's clearance over every raw move, by the dense look."""
-    from jaxexo.inference import TrajectoryGenerator
     from jaxexo.inference.scenarios import safety_scenarios
-    from jaxexo.storage.policy_file import QPolicy
+
+    from test_clearance_option import _random_generator
 
     cfg = _config()
-    d = actions.obs_dim(cfg.env.obs_mode, cfg.env.shape_points)
-    rng = np.random.default_rng(0)
-    sizes = [d, 32, 32, actions.NUM_ACTIONS]
-    pol = QPolicy(
-        kernels=[
-            rng.normal(size=(a, b)).astype(np.float32) * 0.3 for a, b in zip(sizes, sizes[1:])
-        ],
-        biases=[np.zeros(b, np.float32) for b in sizes[1:]],
-        norm_scales=[],
-        norm_biases=[],
-        metadata={},
-    )
-    gen = TrajectoryGenerator(pol, cfg)
+    gen = _random_generator(cfg)
     sc = safety_scenarios(cfg, 60, seed=11)
     n_checked = 0
     for s in sc:
@@ -263,15 +255,15 @@ def test_pruned_numpy_clearance_rule_decides_like_the_exact_one():
 
     cfg = _config()
     p, lay, hy, hz = _states(cfg, 3000, 9)
-    ends = dynamics.forward_ends(np, p, hy, hz)
-    pruned = dynamics.moves_keep_clearance(np, p, hy, hz, ends, lay["outline"])
+    ends = rule.forward_ends(np, p, hy, hz)
+    pruned = rule.moves_keep_clearance(np, p, hy, hz, ends, lay["outline"])
     generic = types.SimpleNamespace(**{k: getattr(np, k) for k in dir(np) if not k.startswith("_")})
-    exact = dynamics.moves_keep_clearance(generic, p, hy, hz, ends, lay["outline"])
+    exact = rule.moves_keep_clearance(generic, p, hy, hz, ends, lay["outline"])
     np.testing.assert_array_equal(pruned, exact)
     assert 0.05 < (~exact).mean() < 0.95  # both outcomes exercised
     # one heel at a time (the generator's single rollout) takes the unpruned path: the same decisions
     for i in range(0, 3000, 150):
-        one = dynamics.moves_keep_clearance(np, p, hy[i], hz[i], ends[i], lay["outline"][i])
+        one = rule.moves_keep_clearance(np, p, hy[i], hz[i], ends[i], lay["outline"][i])
         np.testing.assert_array_equal(one, exact[i])
 
 
@@ -293,7 +285,7 @@ def test_bad_shield_settings_are_refused_naming_the_field(env, field):
 
 @pytest.mark.slow
 def test_batched_jax_mask_decides_exactly_like_the_plain_one():
-    """The trainer's batched mask (jaxexo.env.shield: bounds decide most moves, the exact swept check
+    """The trainer's batched mask (jaxexo.shield.batched: bounds decide most moves, the exact swept check
     the rest, gathered into a buffer) equals ``action_mask`` (the plain rule, every move checked) bit
     for bit, on thousands of states: heels around the obstacles of the training distribution
     (configs/default.toml's terrain), the states a shielded random policy visits there, and heels
@@ -302,8 +294,9 @@ def test_batched_jax_mask_decides_exactly_like_the_plain_one():
     import jax
     import jax.numpy as jnp
 
-    from jaxexo.env import ExoStepEnv, shield
+    from jaxexo.env import ExoStepEnv
     from jaxexo.physics.scenarios import unseen_scenarios
+    from jaxexo.shield import batched
 
     cfg = load_config(ROOT / "configs" / "default.toml")
     env = ExoStepEnv(cfg)
@@ -311,8 +304,8 @@ def test_batched_jax_mask_decides_exactly_like_the_plain_one():
     plain = jax.jit(jax.vmap(env.action_mask, in_axes=(0, None)))
     fast = jax.jit(env.action_masks)
     small = jax.jit(
-        lambda st: shield.admissible_moves_batch(
-            p, st.heel[:, 0], st.heel[:, 1], st.layout, buffer=64, last_action=st.last_action
+        lambda st: make_shield("jax", p, buffer=64).admissible(
+            st.heel[:, 0], st.heel[:, 1], st.layout, last_action=st.last_action
         )
     )
     rng = np.random.default_rng(24)
@@ -355,9 +348,9 @@ def test_batched_jax_mask_decides_exactly_like_the_plain_one():
         np.testing.assert_array_equal(np.asarray(fast(b, p)), ref)
         np.testing.assert_array_equal(np.asarray(small(b)), ref)
         heel, out = b.heel, b.layout.outline
-        ends = dynamics.forward_ends(jnp, p, heel[:, 0], heel[:, 1])
+        ends = rule.forward_ends(jnp, p, heel[:, 0], heel[:, 1])
         c = geometry.foot_clearance(jnp, heel, p.foot_length, out)
-        sp, sf = shield.bounds(p, heel[:, 0], heel[:, 1], ends, out, c)
+        sp, sf = batched.bounds(p, heel[:, 0], heel[:, 1], ends, out, c)
         pairs += sp.size
         decided += int(np.sum(np.asarray(sp | sf)))
     assert sum(len(b.heel) for b in batches) > 20000
@@ -423,10 +416,10 @@ def test_shielded_swings_visit_no_point_twice():
         for k in range(1, len(act)):
             steps += 1
             hy, hz = pts[k, :1], pts[k, 1:2]
-            ends = dynamics.forward_ends(np, p, hy, hz)
-            clear = dynamics.moves_keep_clearance(np, p, hy, hz, ends, lay.outline)
-            tier = dynamics.shield_conditions(
-                np, p, hy, hz, lay, dynamics._FORWARD, ends, clear, act[k - 1 : k]
+            ends = rule.forward_ends(np, p, hy, hz)
+            clear = rule.moves_keep_clearance(np, p, hy, hz, ends, lay.outline)
+            tier = rule.shield_conditions(
+                np, p, hy, hz, lay, rule.FORWARD, ends, clear, act[k - 1 : k]
             )
             if not tier.any():
                 fallbacks += 1

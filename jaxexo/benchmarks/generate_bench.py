@@ -149,16 +149,16 @@ def alternate(generators: dict, scenarios: list[dict], warmup: int = 20):
 def time_breakdown(gen, cf, scenarios: list[dict], repeats: int = 3) -> dict:
     """Where one swing's time goes, per generator (medians over the scenes of the best of ``repeats``
     timings each, microseconds). RL (``fallback=None``): the rollout per swing and its steps; per step
-    the network (``StepNetwork.q_values``) and the shield's choice (``ScalarShield.choose``), replayed on
+    the network (``StepNetwork.q_values``) and the shield's choice (``SwingShield.certain``, jaxexo.shield.scalar), replayed on
     the rollout's own states; per swing the observation's scene part (folded into the first layer), the
     smoothing and correction (``clear_rows``) and the rest of the finishing (verdict, retries,
     kinematics and joint angles). CFFTG: the plan with its checks and re-plans (``plan``) and the
     rest (``assemble``: kinematics and joint angles)."""
     import time
 
-    from jaxexo.inference.shield import ScalarShield
     from jaxexo.physics import transition
     from jaxexo.physics.transition import scalar
+    from jaxexo.shield import make_shield
     from jaxexo.swing.clearing import clear_rows
 
     def best(fn):
@@ -208,9 +208,9 @@ def time_breakdown(gen, cf, scenarios: list[dict], repeats: int = 3) -> dict:
         rows["observation"].append(best(lambda: step.set_scene(gen._basis(scene))))
         rows["network_per_step"].append(best(lambda: [step.q_values(*st[:4]) for st in states]) / k)
         if gen.shield:
-            sh = ScalarShield(sp, gen.np_params, scene)
+            sh = make_shield("scalar", gen.np_params, sp).swing(scene)
             rows["shield_per_step"].append(
-                best(lambda: [sh.choose(st[0], st[1], q, st[4]) for st, q in zip(states, qs)]) / k
+                best(lambda: [sh.certain(st[0], st[1], q, st[4]) for st, q in zip(states, qs)]) / k
             )
         fin = best(lambda: gen.finish([scene], [raw], n_pts, smooth, 1.0, None))
         cl = best(

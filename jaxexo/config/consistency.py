@@ -4,7 +4,7 @@ clear, a budget no scan can count) is refused here, naming the field to change.
 
 A shielded config (env.shield) may take steps longer than its smallest obstacle: the shield admits a
 move only where the exact swept clearance of the whole move keeps env.shield_clearance
-(jaxexo.physics.dynamics.admissible_moves), so no move can pass through an obstacle however thin.
+(jaxexo.shield.rule.admissible_moves), so no move can pass through an obstacle however thin.
 """
 
 from __future__ import annotations

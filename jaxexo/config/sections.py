@@ -148,7 +148,7 @@ class EnvConfig:
         outcome.DEFAULT_BACKWARD_TOLERANCE, number(nonneg=True, hi=10.0), unit="m"
     )
     # The shield (not in the thesis): the agent chooses only among admissible moves
-    # (jaxexo.physics.dynamics.admissible_moves): no backward component, the exact clearance of the
+    # (jaxexo.shield.rule.admissible_moves): no backward component, the exact clearance of the
     # whole move at least shield_clearance, joint limits and reach respected at its end. The same
     # mask in training, evaluation and the NumPy generator; off reproduces the thesis's free choice.
     shield: bool = declare(True, boolean, role="static+leaf", dtype="bool")

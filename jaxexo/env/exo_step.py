@@ -17,11 +17,12 @@ import jax.numpy as jnp
 from flax import struct
 
 from jaxexo.config import Config
-from jaxexo.env import compact, shield, spaces
+from jaxexo.env import spaces
 from jaxexo.env.params import EnvParams
-from jaxexo.physics import actions, dynamics, geometry, scenarios, transition
+from jaxexo.physics import actions, geometry, scenarios, transition
 from jaxexo.physics.actions import LENGTH_SCALE, NUM_ACTIONS, THESIS_OBS_CENTER  # noqa: F401 (re-exported)
 from jaxexo.physics.scene import make_scene
+from jaxexo.shield import compact, make_shield, rule
 
 # Every observation lies within +-OBS_BOUND (world bounds of a few metres over LENGTH_SCALE).
 OBS_BOUND = 10.0
@@ -216,15 +217,17 @@ class ExoStepEnv:
         return transition.truncated(state.time, params.max_steps_in_episode)
 
     @staticmethod
-    def _step_info(info, terminated, truncated, obs_st):
-        """The info ``step`` and ``step_batch`` return: the transition's, the two flags, and the
-        finished episode's last observation (for bootstrapping through truncation)."""
-        return {
+    def _step_outputs(obs, state, reward, terminated, truncated, info, obs_st):
+        """What ``step`` and ``step_batch`` return: (obs, state, reward, terminated, truncated, info)
+        with the info the transition's, the two flags, and the finished episode's last observation
+        (for bootstrapping through truncation)."""
+        info = {
             **info,
             "terminated": terminated,
             "truncated": truncated,
             "final_observation": obs_st,
         }
+        return obs, state, reward, terminated, truncated, info
 
     def step(self, key, state: EnvState, action, params: EnvParams | None = None):
         """One transition with auto-reset (gymnax 1.0): a finished episode is replaced by a fresh one;
@@ -240,19 +243,12 @@ class ExoStepEnv:
         obs_re, state_re = self.reset_env(key, params)
         state = jax.tree.map(lambda r, s: jax.lax.select(done, r, s), state_re, state_st)
         obs = jax.lax.select(done, obs_re, obs_st)
-        return (
-            obs,
-            state,
-            reward,
-            terminated,
-            truncated,
-            self._step_info(info, terminated, truncated, obs_st),
-        )
+        return self._step_outputs(obs, state, reward, terminated, truncated, info, obs_st)
 
     def step_batch(self, keys, states: EnvState, actions, params: EnvParams | None = None):
         """``step`` of a batch of N environments (keys, states and actions with a leading N), equal to
         ``jax.vmap(step)`` bit for bit at a fraction of the cost: the auto-reset draws fresh scenes only
-        for the environments whose episode ended (jaxexo.env.compact), where ``step`` under vmap draws
+        for the environments whose episode ended (jaxexo.shield.compact), where ``step`` under vmap draws
         one for every environment at every step (for procedural terrain, most of a step's time:
         docs/training.md). The trainer's step."""
         params = self.default_params if params is None else params
@@ -269,22 +265,15 @@ class ExoStepEnv:
         obs, state = compact.compacted(
             done, fresh, (obs_st, state_st), compact.buffer_size(n, RESET_BUFFER_FRACTION)
         )
-        return (
-            obs,
-            state,
-            reward,
-            terminated,
-            truncated,
-            self._step_info(info, terminated, truncated, obs_st),
-        )
+        return self._step_outputs(obs, state, reward, terminated, truncated, info, obs_st)
 
     def action_mask(self, state: EnvState, params: EnvParams | None = None):
         """(NUM_ACTIONS,) bool: the moves the agent may choose in ``state``
-        (jaxexo.physics.dynamics.admissible_moves); every move without the shield."""
+        (jaxexo.shield.rule.admissible_moves); every move without the shield."""
         params = self.default_params if params is None else params
         if not self.shield:
             return jnp.ones(NUM_ACTIONS, bool)
-        return dynamics.admissible_moves(
+        return rule.admissible_moves(
             jnp,
             params,
             state.heel[0],
@@ -297,13 +286,12 @@ class ExoStepEnv:
     def action_masks(self, states: EnvState, params: EnvParams | None = None):
         """(N, NUM_ACTIONS) bool: ``action_mask`` of a batch of N states (leading axis), the same
         decisions at a fraction of the cost: the exact swept check only for the moves a cheap bound
-        leaves open (jaxexo.env.shield). The trainer's mask, every step."""
+        leaves open (jaxexo.shield's JAX form). The trainer's mask, every step."""
         params = self.default_params if params is None else params
         n = states.heel.shape[0]
         if not self.shield:
             return jnp.ones((n, NUM_ACTIONS), bool)
-        return shield.admissible_moves_batch(
-            params,
+        return make_shield("jax", params).admissible(
             states.heel[:, 0],
             states.heel[:, 1],
             states.layout,

@@ -6,7 +6,7 @@ Q-network's greedy action (thesis 2.6). ``generate`` runs one scene in Python fl
 observation folded into the network's first layer (jaxexo.inference.network); ``generate_batch``
 runs NumPy arrays over the scenes still moving. With the shield, the chosen move is the first
 admissible one in order of Q, so the rollouts check moves in that order instead of all 19
-(jaxexo.inference.shield for one swing; ``ShieldRows.choose`` for a batch, in the reference's float32
+(jaxexo.shield's scalar form for one swing; its rows form's ``choose`` for a batch, in the reference's float32
 arithmetic); the plain reference (``plain_reference``, for tests) computes the whole mask every
 step. Both choose the same moves.
 
@@ -28,30 +28,17 @@ from jaxexo.config import numpy_params, scalar_params
 from jaxexo.inference import blas
 from jaxexo.inference.fallback import replace_failures
 from jaxexo.inference.network import FoldedQNetwork, StepNetwork
-from jaxexo.inference.shield import ScalarShield
-from jaxexo.inference.shield_rows import ShieldRows, ShieldStats, take_rows
 from jaxexo.physics import actions, geometry, transition
-from jaxexo.physics.scene import (
-    Scene,
-    check_clearance,
-    stack_scenes,
-    with_clearance,
-)
+from jaxexo.physics.scene import Scene, check_clearance, stack_scenes, with_clearance
 from jaxexo.physics.transition import scalar
+from jaxexo.shield import ShieldStats, make_shield
+from jaxexo.shield.rows import take_rows
 from jaxexo.storage.policy_check import load_checked
 from jaxexo.storage.policy_file import QPolicy
 from jaxexo.swing import smoothing as sm
 from jaxexo.swing.finish import PathFinisher
 from jaxexo.swing.options import GenerateOptions, SceneMaker, scenes_for
 from jaxexo.swing.trajectory import Trajectory, TrajectoryBatch
-
-
-def _one_mask(rows: ShieldRows, one, hy: float, hz: float, last: int) -> np.ndarray:
-    """(NUM_ACTIONS,) the shield's full mask of one heel (y, z) after move ``last``, in float32 like
-    the batch rollout's (``ShieldRows.admissible`` of one row; ``one``: the scene stacked)."""
-    return rows.admissible(
-        np.array([hy], np.float32), np.array([hz], np.float32), one, last=np.array([last])
-    )[0]
 
 
 class TrajectoryGenerator(SceneMaker):
@@ -165,7 +152,7 @@ class TrajectoryGenerator(SceneMaker):
         """Greedy raw path of one scene: heel points (M, 2) from the start, and the actions (M-1,).
 
         With the shield, a greedy rollout checks the moves one at a time in order of Q until one is
-        admissible (jaxexo.inference.shield: the same move as the full mask, which it computes
+        admissible (jaxexo.shield.scalar: the same move as the full mask, which it computes
         instead on the rare steps it cannot decide); ``plain_reference`` computes the full mask
         every step."""
         sp, step = self.sp, self.step_net
@@ -175,19 +162,18 @@ class TrajectoryGenerator(SceneMaker):
         pts, acts = [(hy, hz)], []
         last = -1  # the move just made (the shield never undoes it)
         one = stack_scenes([scene], np.float32) if self.shield else None
-        rows = ShieldRows(self.np_params, self.sp, self.shield_stats) if self.shield else None
-        single = ScalarShield(self.sp, self.np_params, scene) if self._shield_first() else None
+        rows = self._shield("rows") if self.shield else None
+        single = self._shield("scalar").swing(scene, one) if self._shield_first() else None
         while True:
             if single is not None:
-                q = step.q_values(hy, hz, t, 1.0 if visited else 0.0)
-                a = single.choose(hy, hz, q, last)
-                if a is None:
-                    mask = _one_mask(rows, one, hy, hz, last)
-                    a = int(actions.greedy_action(np, q, mask))
-                    self.shield_stats.steps_to_full_mask += 1
-                self.shield_stats.steps += 1
+                a = single.choose(hy, hz, step.q_values(hy, hz, t, 1.0 if visited else 0.0), last)
             elif self.shield:
-                mask = _one_mask(rows, one, hy, hz, last)
+                mask = rows.admissible(
+                    np.array([hy], np.float32),
+                    np.array([hz], np.float32),
+                    one,
+                    last_action=np.array([last]),
+                )[0]
                 a = self._explore(step.greedy(hy, hz, t, 1.0 if visited else 0.0, mask), mask)
             else:
                 a = self._explore(step.greedy(hy, hz, t, 1.0 if visited else 0.0))
@@ -209,6 +195,10 @@ class TrajectoryGenerator(SceneMaker):
                 break
         return np.asarray(pts), np.asarray(acts, dtype=np.int64)
 
+    def _shield(self, kind: str):
+        """The shield's form ``kind`` (jaxexo.shield.make_shield), counting in ``shield_stats``."""
+        return make_shield(kind, self.np_params, self.sp, self.shield_stats)
+
     def _shield_first(self) -> bool:
         """Whether the rollouts check the shield's moves in order of Q (greedy only; not in
         ``plain_reference``, which computes the full mask every step)."""
@@ -216,11 +206,11 @@ class TrajectoryGenerator(SceneMaker):
 
     def rollout_batch(self, scenes) -> tuple[list[np.ndarray], list[np.ndarray]]:
         """Greedy raw paths of many scenes at once (float32 NumPy, like the JAX environment). With the
-        shield, a greedy rollout checks each row's best forward move first (``ShieldRows.choose``);
+        shield, a greedy rollout checks each row's best forward move first (the rows form's ``choose``);
         ``plain_reference`` computes the full mask of every row every step."""
         p = self.np_params
         lay = stack_scenes(scenes, np.float32)
-        rows = ShieldRows(self.np_params, self.sp, self.shield_stats) if self.shield else None
+        rows = self._shield("rows") if self.shield else None
         b = len(scenes)
         dirs = p.directions
         hy = lay.start_y.copy()
@@ -243,7 +233,7 @@ class TrajectoryGenerator(SceneMaker):
                 a = rows.choose(hy[alive], hz[alive], sub, self.net.q(obs), last[alive])
             else:
                 mask = (
-                    rows.admissible(hy[alive], hz[alive], sub, last=last[alive])
+                    rows.admissible(hy[alive], hz[alive], sub, last_action=last[alive])
                     if self.shield
                     else None
                 )

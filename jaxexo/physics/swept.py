@@ -118,7 +118,7 @@ def swept_distance_by_edge(xp, h0, h1, foot_length, vy, vz):
     corners and sides, the minimum and the crossing and inside flags carried along; each term is the
     same expression as there. Why: under XLA on a CPU the broadcast form materialises (..., 4, K)
     arrays that leave the cache for thousands of (environment, move) pairs; this form keeps arrays
-    of the batch's shape (for the shield's mask, jaxexo.env.shield, and the environment's step:
+    of the batch's shape (for the shield's mask, jaxexo.shield.batched, and the environment's step:
     docs/benchmarks.md#training). The outline comes vertex-major, ``vy``, ``vz`` (K, ...)
     broadcasting against the heels' (...,): a vertex row is then contiguous, where column k of a
     (..., K, 2) array is a slower strided access (docs/decisions.md). Under JAX the vertices are a

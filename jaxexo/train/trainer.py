@@ -28,7 +28,8 @@ from flax import struct
 
 from jaxexo.config import HYPER_FIELDS, Config, TrainConfig, declared_fields, num_updates
 from jaxexo.env import EnvParams, ExoStepEnv
-from jaxexo.physics import actions, dynamics, outcome
+from jaxexo.physics import actions, outcome
+from jaxexo.shield import rule
 from jaxexo.train import td_lambda
 from jaxexo.train.network import QNetwork
 
@@ -260,7 +261,7 @@ class Trainer:
         so that each step computes one mask, not two (terminated steps do not bootstrap at all)."""
         if mask_next is None:
             return None
-        return jnp.where(done[:, None], jnp.asarray(dynamics.forward_moves()), mask_next)
+        return jnp.where(done[:, None], jnp.asarray(rule.forward_moves()), mask_next)
 
     def _act(self, params, obs, key, eps, mask=None):
         """Epsilon-greedy (thesis 2.4.2) over the admissible moves ``mask`` (None: all): returns the

@@ -1,11 +1,12 @@
-"""The shield's greedy choice for one heel, checking only the move that will be taken.
+"""The shield's greedy choice for one heel, checking only the move that will be taken: the form
+``make_shield("scalar", ...)`` (jaxexo.shield).
 
 The shielded greedy action is ``argmax(where(mask, q, -inf))`` with ``mask`` the admissible moves of
-jaxexo.physics.dynamics.admissible_moves, evaluated in float32 on the heel rounded to float32 (the
-generator's reference, ``ShieldRows.admissible``, jaxexo.inference.shield_rows). Checking all 19 forward moves every
-step costs ~200 us in NumPy calls; the chosen move, however, is simply the first move, in order of
-decreasing Q (ties by index, as argmax), that is admissible. ``ScalarShield.choose`` walks that order
-and checks one move at a time in plain Python floats:
+jaxexo.shield.rule.admissible_moves, evaluated in float32 on the heel rounded to float32 (the
+generator's reference, ``ShieldRows.admissible``, jaxexo.shield.rows). Checking all 19 forward moves
+every step costs ~200 us in NumPy calls; the chosen move, however, is simply the first move, in order
+of decreasing Q (ties by index, as argmax), that is admissible. ``SwingShield.certain`` walks that
+order and checks one move at a time in plain Python floats:
 
 - the goal-box condition exactly (the move's end is rounded to float32 exactly like the reference's
   float32 arithmetic: a sum of two float32 values is exact in float64, so one rounding gives the
@@ -14,7 +15,7 @@ and checks one move at a time in plain Python floats:
   *certified*: each comparison is decided only when the float64 value lies further from its
   threshold than a bound on float32's rounding error (``MARGIN`` for lengths, a per-leg bound for the
   angles that grows where the knee's square root is ill-conditioned); a comparison that is too close
-  to call makes ``choose`` return None, and the caller computes the reference mask (float32 NumPy)
+  to call makes ``certain`` return None, and ``choose`` computes the reference mask (float32 NumPy)
   for that step. The result is therefore always the reference's move.
 
 Cheap exact shortcuts keep the geometry rare: far from the obstacle's bounding box no move can come
@@ -24,8 +25,12 @@ clearance is already below the threshold fails, and one whose ends' clearances c
 bound (jaxexo.physics.swept.swept_lower_bound) passes.
 
 Where no forward move passes all four conditions the reference falls back (the forward moves that
-keep the clearance, then every move): ``choose`` returns None there too, so those steps take the
-reference path. Exploration (epsilon > 0) always takes it.
+keep the clearance, then every move): ``certain`` returns None there too, so those steps take the
+reference path (``SwingShield.choose``). Exploration (epsilon > 0) always takes it.
+
+``ScalarShield`` is the form behind the shield's one interface (``admissible`` and ``choose`` on
+rows of stacked scenes, one heel at a time); ``ScalarShield.swing(scene)`` is one swing's
+``SwingShield``, the generator's per-step choice.
 """
 
 from __future__ import annotations
@@ -35,7 +40,10 @@ import struct
 
 import numpy as np
 
-from jaxexo.physics import actions, dynamics, kinematics, transition
+from jaxexo.physics import actions, kinematics, transition
+from jaxexo.physics.scene import stack_scenes
+from jaxexo.shield import rule
+from jaxexo.shield.rows import ShieldRows, ShieldStats, take_rows
 
 # m: a float64 length decides a float32 comparison only when it is at least this far from the
 # threshold. float32 rounding of the clearance geometry on coordinates of order 1 m is a few 1e-7 m.
@@ -85,17 +93,64 @@ def _nearest2(points, cy, cz, ey, ez, inv, best):
 
 
 class ScalarShield:
-    """Per-scene constants (Python floats, the float32 values the reference uses) and ``choose``."""
+    """The scalar form: one heel at a time, each row's scene as a ``SwingShield``, for parameters
+    ``p`` (jaxexo.config.numpy_params) and ``sp`` (jaxexo.config.scalar_params); ``stats``
+    (ShieldStats; None: a fresh one) counts the steps ``choose`` decides and those it hands to the
+    full mask (the rows form, ``reference``)."""
 
-    def __init__(self, sp, np_params, scene):
+    kind = "scalar"
+
+    def __init__(self, p, sp, stats=None):
+        self.p, self.sp = p, sp
+        self.stats = ShieldStats() if stats is None else stats
+        self.reference = ShieldRows(p, sp, self.stats)
+
+    def swing(self, scene, layout=None) -> "SwingShield":
+        """One swing's choice in ``scene`` (a Scene, or any object with its outline, pivot_y and
+        goal_y); ``layout``: the scene stacked as one float32 row (None: stacked here)."""
+        return SwingShield(self.sp, self.p, scene, self, layout)
+
+    def _rows(self, layout, last_action):
+        n = len(layout.goal_y)
+        last = np.full(n, -1, np.int64) if last_action is None else np.asarray(last_action)
+        for i in range(n):
+            row = take_rows(layout, i)
+            yield i, self.swing(row, take_rows(layout, [i])), int(last[i])
+
+    def admissible(self, hy, hz, layout, last_action=None) -> np.ndarray:
+        """(B, A): the rows form's mask, each row decided move by move in Python floats
+        (``SwingShield.mask``), the rows' full mask where a move is too close to call."""
+        if not bool(self.p.shield):
+            return np.ones((len(hy), actions.NUM_ACTIONS), bool)
+        out = np.zeros((len(hy), actions.NUM_ACTIONS), bool)
+        for i, one, last in self._rows(layout, last_action):
+            out[i] = one.mask(float(hy[i]), float(hz[i]), last)
+        return out
+
+    def choose(self, hy, hz, layout, q, last_action=None) -> np.ndarray:
+        """(B,) the shielded greedy actions, one heel at a time (``SwingShield.choose``)."""
+        if not bool(self.p.shield):
+            return actions.greedy_action(np, q)
+        out = np.zeros(len(hy), np.int64)
+        for i, one, last in self._rows(layout, last_action):
+            out[i] = one.choose(float(hy[i]), float(hz[i]), q[i], last)
+        return out
+
+
+class SwingShield:
+    """Per-scene constants (Python floats, the float32 values the reference uses), ``certain`` (the
+    greedy move where every comparison it needs is certain) and ``choose`` (else the full mask's)."""
+
+    def __init__(self, sp, np_params, scene, form: ScalarShield | None = None, layout=None):
         p = np_params
+        self.form = ScalarShield(p, sp) if form is None else form
+        self.scene, self._layout = scene, layout
         self.sp = sp
         self.fl = sp.foot_length
         self.step = sp.step_size
         self.b0, self.b1 = sp.bounds_y
         self.zmax = sp.max_z_world
         self.shield_c = sp.shield_clearance
-        self.slack = dynamics.SHIELD_SLACK
         self.t, self.s = sp.thigh, sp.shin
         self.leg = _f32(np.float32(sp.thigh) + np.float32(sp.shin))
         self.hip_lim = sp.hip_limits
@@ -107,7 +162,7 @@ class ScalarShield:
         self.knee_hi = self.knee_lim[1] + kinematics.ANGLE_EPS
         self.min_hz2 = (kinematics.MIN_HIP_HEIGHT_FRACTION * self.leg) ** 2
         # every forward move: (action, float32 step * direction per axis)
-        fwd = np.flatnonzero(dynamics.forward_moves())
+        fwd = rule.FORWARD
         prod = (p.step_size * p.directions).astype(np.float32)
         self.forward = np.zeros(actions.NUM_ACTIONS, bool)
         self.forward[fwd] = True
@@ -280,7 +335,7 @@ class ScalarShield:
 
     def reachable(self, y, z):
         """1 / 0 / -1: the end (y, z) certainly within the joint limits and reach / too close to call /
-        certainly not (dynamics.admissible_moves' kinematic conditions)."""
+        certainly not (rule.admissible_moves' kinematic conditions)."""
         leg = self.leg
         p = self.pivot
         dist = 0.5 * (p - y)
@@ -313,7 +368,45 @@ class ScalarShield:
         return 0 if unsure else 1
 
     # The choice ---------------------------------------------------------------------------------
-    def choose(self, hy: float, hz: float, q: np.ndarray, last: int = -1):
+    def _reference(self, hy: float, hz: float, last: int) -> np.ndarray:
+        """(A,) the full mask of the float32 heel (the rows form, ``ScalarShield.reference``), on the
+        scene stacked as one float32 row (stacked here on first use when not given)."""
+        if self._layout is None:
+            self._layout = stack_scenes([self.scene], np.float32)
+        return self.form.reference.admissible(
+            np.array([hy], np.float32),
+            np.array([hz], np.float32),
+            self._layout,
+            last_action=np.array([last]),
+        )[0]
+
+    def choose(self, hy: float, hz: float, q: np.ndarray, last: int = -1) -> int:
+        """The shielded greedy action: ``certain``'s, else the full mask's (counted in the form's
+        ``stats``: every step, and those handed to the full mask)."""
+        a = self.certain(hy, hz, q, last)
+        stats = self.form.stats
+        if a is None:
+            a = int(actions.greedy_action(np, q, self._reference(hy, hz, last)))
+            stats.steps_to_full_mask += 1
+        stats.steps += 1
+        return a
+
+    def mask(self, hy: float, hz: float, last: int = -1) -> np.ndarray:
+        """(A,) the admissible moves: every forward move decided by ``_admissible`` where all are
+        certain and one passes (then the reference's fallbacks do not apply), else the full mask."""
+        hy, hz = _f32(hy), _f32(hz)
+        far = self._box_distance(hy, hy + self.fl, hz, hz) - self.step >= self.shield_c + MARGIN
+        state = [None]
+        undo = (last + actions.NUM_ACTIONS // 2) % actions.NUM_ACTIONS if last >= 0 else -1
+        out = np.zeros(actions.NUM_ACTIONS, bool)
+        for a in self.fwd_idx:
+            v = a != undo and self._admissible(a, hy, hz, far, state)
+            if v is None:
+                return self._reference(hy, hz, last)
+            out[a] = v
+        return out if out.any() else self._reference(hy, hz, last)
+
+    def certain(self, hy: float, hz: float, q: np.ndarray, last: int = -1):
         """The reference's shielded greedy action for heel (hy, hz) (Python floats; rounded to float32
         here as the reference does), Q-values ``q`` (NUM_ACTIONS,) and the move just made ``last`` (-1:
         none), or None when some needed comparison is too close to call or the reference's fallbacks
@@ -368,7 +461,7 @@ class ScalarShield:
                 return None  # touching or inside: the sign may be rounding
             if self.inside(hy, hz):
                 c_here = -c_here
-            need = state[0] = min(self.shield_c, c_here) - self.slack
+            need = state[0] = rule.clearance_need(transition.scalar, self.sp, c_here)
             state.append(c_here)
         # 1-Lipschitz: the foot moved by at most a step stays at least c_here - step from the outline
         if state[1] - self.step >= need + MARGIN:

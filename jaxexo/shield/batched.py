@@ -1,10 +1,10 @@
-"""The shield's mask for a batch of environments, JAX only: the decisions of
-``jaxexo.physics.dynamics.admissible_moves``, with the exact swept clearance computed only for the
-moves that a cheap bound leaves open.
+"""The shield's mask for a batch of environments, JAX only: the form ``make_shield("jax", ...)``
+(jaxexo.shield), the decisions of ``jaxexo.shield.rule.admissible_moves``, with the exact swept
+clearance computed only for the moves that a cheap bound leaves open.
 
 Why: the trainer asks for the mask of every environment at every step, and the exact swept check
 (jaxexo.physics.swept) of the 19 forward moves costs several environment steps. Under ``vmap``/``jit``
-a ``jnp.where`` computes both of its branches, so skipping work needs compaction (jaxexo.env.compact):
+a ``jnp.where`` computes both of its branches, so skipping work needs compaction (jaxexo.shield.compact):
 the open (env, move) pairs are gathered into a buffer of static size, checked exactly there, and
 scattered back; a loop takes as many rounds of the buffer as there are open pairs (one round in most
 steps, more when a batch has unusually many pairs near its obstacles), so no state is ever decided by
@@ -21,18 +21,20 @@ distance (about 1e-6 m at these scales) is far below BOUND_MARGIN. tests/test_sh
 states across the training distribution and the held-out terrain families, that the masks are equal.
 
 The moves left open are decided by the same comparison as the plain rule
-(``dynamics.moves_keep_clearance``'s, on ``geometry.foot_clearance`` and the exact swept distance, here
-in its term-by-term form ``swept.swept_distance_by_edge``, the same terms evaluated edge by edge so
-that the arrays stay in cache), and the rest of the shield (kinematic limits, goal, fall-backs) is
-``dynamics.admissible_moves`` itself, given the clearance condition through its ``clear`` argument.
+(``rule.moves_keep_clearance``'s ``rule.clearance_need``, on ``geometry.foot_clearance`` and the exact
+swept distance, here in its term-by-term form ``swept.swept_distance_by_edge``, the same terms
+evaluated edge by edge so that the arrays stay in cache), and the rest of the shield (kinematic
+limits, goal, fall-backs) is ``rule.admissible_moves`` itself, given the clearance condition through
+its ``clear`` argument.
 """
 
 from __future__ import annotations
 
 import jax.numpy as jnp
 
-from jaxexo.env import compact
-from jaxexo.physics import dynamics, geometry, swept
+from jaxexo.physics import actions, geometry, swept
+from jaxexo.shield import compact, rule
+from jaxexo.shield.rows import ShieldStats
 
 # m: the box bound must clear shield_clearance by this much before the exact check is skipped.
 BOUND_MARGIN = 1e-4
@@ -89,7 +91,7 @@ def _nearest_outline_point(heel_y, heel_z, foot_length, outline):
 
 def bounds(p, heel_y, heel_z, ends, outline, c_here):
     """(sure_pass, sure_fail), (N, F) bool each: the moves whose clearance condition the bounds decide
-    (sure_pass only where ``dynamics.moves_keep_clearance`` is True, sure_fail only where it is False).
+    (sure_pass only where ``rule.moves_keep_clearance`` is True, sure_fail only where it is False).
 
     Lower bound on the swept distance (the distance to the outline is 1-Lipschitz in the heel's
     position; the box distance b1 at the end is at most the end's clearance):
@@ -120,7 +122,7 @@ def bounds(p, heel_y, heel_z, ends, outline, c_here):
             ),
         )
     upper = jnp.sqrt(upper2)
-    need = jnp.minimum(p.shield_clearance, ch) - dynamics.SHIELD_SLACK
+    need = rule.clearance_need(jnp, p, ch)
     # From inside the obstacle (c_here <= 0) every move passes: never a sure failure there.
     sure_fail = (ch > 0.0) & (upper < need - BOUND_MARGIN)
     return sure_pass, sure_fail
@@ -131,12 +133,12 @@ def _exact_pairs(p, heel, ends, vy, vz, c_here):
     vertex-major, vy, vz (K, M), c_here (M,) (the foot's clearance at the heel,
     geometry.foot_clearance)."""
     d_move = swept.swept_distance_by_edge(jnp, heel + 0.0 * ends, ends, p.foot_length, vy, vz)
-    return d_move >= jnp.minimum(p.shield_clearance, c_here) - dynamics.SHIELD_SLACK
+    return d_move >= rule.clearance_need(jnp, p, c_here)
 
 
 def keep_clearance(p, heel_y, heel_z, ends, outline, buffer: int | None = None):
-    """(N, F) bool, equal to ``dynamics.moves_keep_clearance`` for a batch: the bounds where they are
-    conclusive, the exact rule on the open pairs in rounds of ``buffer`` pairs (jaxexo.env.compact)."""
+    """(N, F) bool, equal to ``rule.moves_keep_clearance`` for a batch: the bounds where they are
+    conclusive, the exact rule on the open pairs in rounds of ``buffer`` pairs (jaxexo.shield.compact)."""
     n, f = ends.shape[:2]
     total = n * f
     heel = jnp.stack([heel_y, heel_z], axis=-1)
@@ -162,12 +164,32 @@ def keep_clearance(p, heel_y, heel_z, ends, outline, buffer: int | None = None):
     return clear.reshape(n, f)
 
 
-def admissible_moves_batch(p, heel_y, heel_z, layout, buffer: int | None = None, last_action=None):
-    """(N, NUM_ACTIONS) bool: ``dynamics.admissible_moves`` of N environments (heel_y, heel_z (N,),
-    layout fields with a leading N, ``last_action`` (N,) or None), the clearance condition computed by
-    ``keep_clearance``."""
-    ends = dynamics.forward_ends(jnp, p, heel_y, heel_z)
-    clear = keep_clearance(p, heel_y, heel_z, ends, layout.outline, buffer)
-    return dynamics.admissible_moves(
-        jnp, p, heel_y, heel_z, layout, clear=clear, last_action=last_action
-    )
+class BatchedShield:
+    """The JAX form: the admissible moves of N environments for parameters ``p`` (EnvParams, or any
+    object with their fields), the clearance condition computed by ``keep_clearance`` in rounds of
+    ``buffer`` open pairs (None: ``BUFFER_FRACTION`` of them). ``stats`` (ShieldStats) counts the rows
+    ``choose`` decides, every one by its full mask (static counts: under ``jit``, once per trace)."""
+
+    kind = "jax"
+
+    def __init__(self, p, sp=None, stats=None, buffer: int | None = None):
+        self.p, self.buffer = p, buffer
+        self.stats = ShieldStats() if stats is None else stats
+
+    def admissible(self, heel_y, heel_z, layout, last_action=None):
+        """(N, NUM_ACTIONS) bool: ``rule.admissible_moves`` of N environments (heel_y, heel_z (N,),
+        layout fields with a leading N, ``last_action`` (N,) or None)."""
+        p = self.p
+        ends = rule.forward_ends(jnp, p, heel_y, heel_z)
+        clear = keep_clearance(p, heel_y, heel_z, ends, layout.outline, self.buffer)
+        return rule.admissible_moves(
+            jnp, p, heel_y, heel_z, layout, clear=clear, last_action=last_action
+        )
+
+    def choose(self, heel_y, heel_z, layout, q, last_action=None):
+        """(N,) the shielded greedy actions for Q-values ``q`` (N, NUM_ACTIONS)."""
+        mask = self.admissible(heel_y, heel_z, layout, last_action)
+        n = int(q.shape[0])
+        self.stats.rows += n
+        self.stats.rows_to_full_mask += n
+        return actions.greedy_action(jnp, q, mask)

@@ -1,6 +1,7 @@
-"""The shield's admissible moves for many heels at once, in the training environment's float32.
+"""The shield's admissible moves for many heels at once, in the training environment's float32: the
+form ``make_shield("rows", ...)`` (jaxexo.shield).
 
-The generator's batch rollout and its reference: ``admissible`` is jaxexo.physics.dynamics.admissible_moves
+The generator's batch rollout and its reference: ``admissible`` is jaxexo.shield.rule.admissible_moves
 on rows of stacked scenes, with the exact swept clearance (jaxexo.physics.swept) computed only for the
 heels near the obstacle (elsewhere no move can fail it). ``choose`` is the shielded greedy action,
 checking first only each row's best forward moves (one move per row instead of 19, in the same
@@ -13,7 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from jaxexo.physics import actions, dynamics, geometry, swept, transition
+from jaxexo.physics import actions, geometry, transition
+from jaxexo.shield import rule
 
 
 def take_rows(lay, idx):
@@ -23,9 +25,10 @@ def take_rows(lay, idx):
 
 @dataclass
 class ShieldStats:
-    """The generator's shielded steps (its ``shield_stats``): one swing's steps checked move by move
-    (jaxexo.inference.shield) and those handed to the full mask; a batch's rows ``ShieldRows.choose``
-    decided and those handed to the full mask."""
+    """The shielded choices of a form's ``choose`` (the generator's ``shield_stats``): one swing's
+    steps checked move by move (jaxexo.shield.scalar) and those handed to the full mask; a batch's
+    rows (``ShieldRows.choose``, and the JAX form's, which computes every row's mask) and those handed
+    to the full mask."""
 
     steps: int = 0
     steps_to_full_mask: int = 0
@@ -35,14 +38,17 @@ class ShieldStats:
 
 class ShieldRows:
     """Admissible moves of many heels for parameters ``p`` (jaxexo.config.numpy_params) and ``sp``
-    (jaxexo.config.scalar_params); ``stats`` (ShieldStats) counts the rows ``choose`` decides."""
+    (jaxexo.config.scalar_params); ``stats`` (ShieldStats; None: a fresh one) counts the rows
+    ``choose`` decides."""
 
+    kind = "rows"
     # forward moves checked one at a time per row before the full mask (``choose``)
     BATCH_ROUNDS = 4
 
-    def __init__(self, p, sp, stats):
-        self.p, self.sp, self.stats = p, sp, stats
-        self._fwd_idx = np.flatnonzero(dynamics.forward_moves())
+    def __init__(self, p, sp, stats=None):
+        self.p, self.sp = p, sp
+        self.stats = ShieldStats() if stats is None else stats
+        self._fwd_idx = rule.FORWARD
         self._n_forward = len(self._fwd_idx)
 
     def _near(self, hy, hz, lay) -> np.ndarray:
@@ -57,62 +63,52 @@ class ShieldRows:
         return np.hypot(dy, dz) < self.sp.shield_clearance + self.sp.step_size + 1e-4
 
     def _clear(self, hy, hz, ends, outline, pruned: bool, c_here=None) -> np.ndarray:
-        """dynamics.moves_keep_clearance for heels (B,) and move ends (B, F, 2), with its NumPy branch
+        """rule.moves_keep_clearance for heels (B,) and move ends (B, F, 2), with its NumPy branch
         (pruned or not: the same decisions) given rather than chosen by the array's size,
         so that a subset of the moves or rows is decided exactly as in the whole step's call.
         ``c_here``: the heels' foot clearances when known (elementwise, so the same numbers)."""
-        p = self.p
-        here = np.stack([hy, hz], axis=-1)
-        if c_here is None:
-            c_here = geometry.foot_clearance(np, here, p.foot_length, outline)
-        if pruned:
-            return dynamics.moves_keep_clearance_pruned(p, here, c_here, ends, outline)
-        # the unpruned branch of moves_keep_clearance, written out (the same elementwise arithmetic)
-        moves = np.moveaxis(ends, -2, 0)
-        d_move = np.moveaxis(
-            swept.swept_distance(np, here + 0.0 * moves, moves, p.foot_length, outline), 0, -1
+        return rule.moves_keep_clearance(
+            np, self.p, hy, hz, ends, outline, pruned=pruned, c_here=c_here
         )
-        return d_move >= np.minimum(p.shield_clearance, c_here)[..., None] - dynamics.SHIELD_SLACK
 
     def admissible(
-        self, hy, hz, lay, pruned: bool | None = None, near=None, c_here=None, last=None
+        self, hy, hz, lay, last_action=None, *, pruned: bool | None = None, near=None, c_here=None
     ) -> np.ndarray:
-        """(B, A) the shield's admissible moves (jaxexo.physics.dynamics.admissible_moves) of many heels,
+        """(B, A) the shield's admissible moves (jaxexo.shield.rule.admissible_moves) of many heels,
         float32 rows of stacked scenes like the training environment; the exact clearance is computed
         only for the ``_near`` rows (elsewhere no move can fail it, so the mask is the same).
-        ``pruned``: the clearance's NumPy branch (None: by size, as moves_keep_clearance chooses);
-        ``c_here`` (B,): the heels' foot clearances where ``near`` (with ``pruned`` given); ``last``
-        (B,): the moves just made (-1: none)."""
+        ``last_action`` (B,): the moves just made (-1: none; None: no undo condition); ``pruned``: the
+        clearance's NumPy branch (None: by size, as moves_keep_clearance chooses); ``c_here`` (B,):
+        the heels' foot clearances where ``near``."""
         p = self.p
         near = self._near(hy, hz, lay) if near is None else near
         clear = np.ones((len(hy), self._n_forward), bool)
         if near.any():
-            ends = dynamics.forward_ends(np, p, hy[near], hz[near])
-            if pruned is None:
-                clear[near] = dynamics.moves_keep_clearance(
-                    np, p, hy[near], hz[near], ends, lay.outline[near]
-                )
-            else:
-                clear[near] = self._clear(
-                    hy[near],
-                    hz[near],
-                    ends,
-                    lay.outline[near],
-                    pruned,
-                    None if c_here is None else c_here[near],
-                )
-        return dynamics.admissible_moves(np, p, hy, hz, lay, clear=clear, last_action=last)
+            ends = rule.forward_ends(np, p, hy[near], hz[near])
+            clear[near] = self._clear(
+                hy[near],
+                hz[near],
+                ends,
+                lay.outline[near],
+                pruned,
+                None if c_here is None else c_here[near],
+            )
+        return rule.admissible_moves(np, p, hy, hz, lay, clear=clear, last_action=last_action)
 
-    def choose(self, hy, hz, lay, q, last) -> np.ndarray:
-        """The shielded greedy actions (B,) of ``admissible`` + greedy_action, checking first only
-        each row's best forward move (one move per row instead of 19, in the same float32
-        elementwise arithmetic); the full mask only for the rows where that move is not admissible."""
+    def choose(self, hy, hz, lay, q, last_action) -> np.ndarray:
+        """The shielded greedy actions (B,) of ``admissible`` + greedy_action for Q-values ``q``
+        (B, A), checking first only each row's best forward move (one move per row instead of 19, in
+        the same float32 elementwise arithmetic); the full mask only for the rows where that move is
+        not admissible."""
+        if not bool(self.p.shield):
+            return actions.greedy_action(np, q)
+        last = last_action
         fwd = self._fwd_idx
         # forward moves by decreasing Q, ties by index (as argmax over the mask picks the first)
         order = fwd[np.argsort(-q[:, fwd], axis=1, kind="stable")[:, : self.BATCH_ROUNDS]]
         near = self._near(hy, hz, lay)
         # the branch the whole step's moves_keep_clearance call takes (by its array's size)
-        pruned = int(near.sum()) * self._n_forward * 2 > dynamics.PRUNE_FROM
+        pruned = int(near.sum()) * self._n_forward * 2 > rule.PRUNE_FROM
         # the near heels' foot clearances once per step (every round and the full mask read them)
         c_here = np.zeros(len(hy), np.float32)
         if near.any():
@@ -140,7 +136,13 @@ class ShieldRows:
         if miss.size:
             sub = take_rows(lay, miss)
             mask = self.admissible(
-                hy[miss], hz[miss], sub, pruned, near[miss], c_here[miss], last[miss]
+                hy[miss],
+                hz[miss],
+                sub,
+                last[miss],
+                pruned=pruned,
+                near=near[miss],
+                c_here=c_here[miss],
             )
             out[miss] = actions.greedy_action(np, q[miss], mask)
         self.stats.rows += len(hy)
@@ -165,4 +167,4 @@ class ShieldRows:
                 pruned,
                 None if c_here is None else c_here[near],
             )
-        return dynamics.shield_conditions(np, p, hy, hz, lay, a[:, None], new, clear, last)[:, 0]
+        return rule.shield_conditions(np, p, hy, hz, lay, a[:, None], new, clear, last)[:, 0]

@@ -1,6 +1,11 @@
-"""The shield's rule (thesis 2.1 with the safety shield): which moves the agent may choose from a heel,
-written once for every array module (``xp``: numpy, jax.numpy). The transition rules it builds on are
-jaxexo.physics.transition's, the moves jaxexo.physics.actions'.
+"""The shield's rule, written once for every array module: the moves the agent may choose from a heel.
+
+Each function takes the array module ``xp`` first (``numpy`` or ``jax.numpy``) like the transition
+rules of jaxexo.physics.transition, whose move, floor and undo conditions it reads. The forms of the
+shield (jaxexo.shield: the JAX batch of the trainer, the NumPy rows of the generator's batches, the
+scalar choice of one swing) decide exactly as ``admissible_moves``, and call its pieces
+(``forward_ends``, ``clearance_need``, ``moves_keep_clearance``, ``shield_conditions``) where they
+must stay separate for speed.
 """
 
 from __future__ import annotations
@@ -13,22 +18,22 @@ from jaxexo.physics.transition import keeps_off_floor, move_heel, moves_heel
 
 # The moves with no backward component (0-90 and 270-350 deg): a contiguous head and tail of the action
 # list, so the shield's mask is assembled with a static concatenation (no scatter, same for every xp).
-_FORWARD = np.flatnonzero(action_directions()[:, 0] >= 0.0)
-_FORWARD_HEAD = int(np.sum(_FORWARD < NUM_ACTIONS // 2))
+FORWARD = np.flatnonzero(action_directions()[:, 0] >= 0.0)
+_FORWARD_HEAD = int(np.sum(FORWARD < NUM_ACTIONS // 2))
 assert np.array_equal(
-    _FORWARD, np.r_[0:_FORWARD_HEAD, NUM_ACTIONS - (len(_FORWARD) - _FORWARD_HEAD) : NUM_ACTIONS]
+    FORWARD, np.r_[0:_FORWARD_HEAD, NUM_ACTIONS - (len(FORWARD) - _FORWARD_HEAD) : NUM_ACTIONS]
 )
 # m: a move "keeps" the clearance it starts with up to this rounding (vertical moves beside a wall).
 SHIELD_SLACK = 1e-6
 # Entries of ``ends`` from which NumPy's pruning pays (a batch of rows); for one heel's 19 moves the
 # unpruned call is cheaper: NumPy's cost there is its number of calls, not the arithmetic.
-PRUNE_FROM = 2 * len(_FORWARD) * 16
+PRUNE_FROM = 2 * len(FORWARD) * 16
 
 
 def forward_moves() -> np.ndarray:
     """(NUM_ACTIONS,) bool: the moves with no backward component, the shield's first condition."""
     out = np.zeros(NUM_ACTIONS, bool)
-    out[_FORWARD] = True
+    out[FORWARD] = True
     return out
 
 
@@ -39,12 +44,20 @@ def _stacked(f, xs):
 
 def forward_ends(xp, p, heel_y, heel_z):
     """(..., F, 2): where each forward move (the shield's candidates) takes the heel."""
-    dirs = p.directions[_FORWARD]
+    dirs = p.directions[FORWARD]
     y, z = move_heel(xp, p, heel_y[..., None], heel_z[..., None], dirs[:, 0], dirs[:, 1])
     return xp.stack([y, z], axis=-1)
 
 
-def moves_keep_clearance(xp, p, heel_y, heel_z, ends, outline, over_moves=_stacked):
+def clearance_need(xp, p, c_here):
+    """The swept distance a move from a foot at clearance ``c_here`` (...,) must keep: the shield's
+    clearance, or the clearance where the foot starts if it is closer, less ``SHIELD_SLACK``."""
+    return xp.minimum(p.shield_clearance, c_here) - SHIELD_SLACK
+
+
+def moves_keep_clearance(
+    xp, p, heel_y, heel_z, ends, outline, over_moves=_stacked, pruned=None, c_here=None
+):
     """(..., F) bool: the shield's clearance condition for the moves from heel (y, z) to ``ends``
     (..., F, 2): the exact swept distance at least min(shield_clearance, the clearance where the foot
     starts), against ``outline`` (..., K, 2).
@@ -52,10 +65,17 @@ def moves_keep_clearance(xp, p, heel_y, heel_z, ends, outline, over_moves=_stack
     The swept distance alone decides: it is zero for a move into the obstacle and at most the
     clearance at either end, so ">= need" (need <= the start's clearance) is swept_clearance's
     ">= need" whenever the foot starts outside; from inside (never reached under the shield) every
-    move passes."""
+    move passes.
+
+    NumPy's branch (``pruned``: None chooses by the size of ``ends``, from ``PRUNE_FROM``) may be
+    given, so that a subset of the moves or rows is decided exactly as in a whole step's call (the
+    same decisions either way); ``c_here`` (...,): the heels' foot clearances when already known."""
     here = xp.stack([heel_y, heel_z], axis=-1)
-    c_here = geometry.foot_clearance(xp, here, p.foot_length, outline)
-    if xp is np and ends.size > PRUNE_FROM:
+    if c_here is None:
+        c_here = geometry.foot_clearance(xp, here, p.foot_length, outline)
+    if pruned is None:
+        pruned = xp is np and ends.size > PRUNE_FROM
+    if pruned:
         return moves_keep_clearance_pruned(p, here, c_here, ends, outline)
     moves = xp.moveaxis(ends, -2, 0)  # the moves' axis first: (F, ..., 2)
     d_move = xp.moveaxis(
@@ -66,7 +86,7 @@ def moves_keep_clearance(xp, p, heel_y, heel_z, ends, outline, over_moves=_stack
         0,
         -1,
     )  # (..., F)
-    return d_move >= xp.minimum(p.shield_clearance, c_here)[..., None] - SHIELD_SLACK
+    return d_move >= clearance_need(xp, p, c_here)[..., None]
 
 
 def moves_keep_clearance_pruned(p, here, c_here, ends, outline):
@@ -75,9 +95,7 @@ def moves_keep_clearance_pruned(p, here, c_here, ends, outline):
     swept region contains the foot at the end), and one whose ends satisfy the 1-Lipschitz bound
     (c_here + c_end - |move|) / 2 >= need passes (jaxexo.physics.swept.swept_lower_bound)."""
     c_end = geometry.foot_clearance(np, ends, p.foot_length, outline[..., None, :, :])  # (..., F)
-    need = np.broadcast_to(
-        np.minimum(p.shield_clearance, c_here)[..., None] - SHIELD_SLACK, c_end.shape
-    )
+    need = np.broadcast_to(clearance_need(np, p, c_here)[..., None], c_end.shape)
     length = np.sqrt(((ends - here[..., None, :]) ** 2).sum(-1))
     ok = (c_here[..., None] > 0.0) & (
         swept.swept_lower_bound(np, c_here[..., None], c_end, length) >= need
@@ -128,11 +146,11 @@ def admissible_moves(
     new = forward_ends(xp, p, heel_y, heel_z)  # (..., F, 2)
     if clear is None:
         clear = moves_keep_clearance(xp, p, heel_y, heel_z, new, layout.outline, over_moves)
-    ok = shield_conditions(xp, p, heel_y, heel_z, layout, _FORWARD, new, clear, last_action)
+    ok = shield_conditions(xp, p, heel_y, heel_z, layout, FORWARD, new, clear, last_action)
     for fallback in (clear & moves_heel(xp, heel_y, heel_z, new), clear, True):
         ok = xp.where(xp.any(ok, axis=-1, keepdims=True), ok, fallback)
     shape = ok.shape[:-1]
-    back = xp.zeros(shape + (NUM_ACTIONS - len(_FORWARD),), dtype=bool)
+    back = xp.zeros(shape + (NUM_ACTIONS - len(FORWARD),), dtype=bool)
     mask = xp.concatenate([ok[..., :_FORWARD_HEAD], back, ok[..., _FORWARD_HEAD:]], axis=-1)
     return xp.where(p.shield, mask, True)
 
