@@ -128,6 +128,58 @@ def legacy_raw(raw: dict | None = None) -> dict:
     return deep_merge(_LEGACY, raw or {})
 
 
+# A fixed scene: Base 1 at the default place, pivot under the obstacle, no start shift or jitter.
+FIXED_LAYOUT = {"obstacles": ["base1"], "pivot": ["obstacle"]}
+# configs/default.toml's [reward]
+REWARD = {
+    "traj_weights": [0.0, 2.0, 0.5, 4.0, 0.5, 0.5, 1.0, 0.5],
+    "exo_weights": [1.0, 1.0, 2.0, 1.0],
+    "goal_reward": 20.0,
+    "joint_limit_penalty": 4.0,
+    "progress_shaping": 5.0,
+}
+# The shared tiny training config (of tests/train_helpers.py's modules, test_reliability and
+# tiny_reference below): Watkins Q(lambda) in the backward view (its checkpoint then holds traces,
+# the pending action and its greediness too), 6 updates in 3 chunks of 2.
+TINY_N, TINY_T, TINY_UPDATES = 64, 8, 6
+TINY_TRAIN = {
+    "num_envs": TINY_N,
+    "rollout_steps": TINY_T,
+    "num_minibatches": 2,
+    "hidden": [32, 32],
+    "layer_norm": True,
+    "trace": "backward",
+    "control": "off_policy",
+    "trace_kind": "accumulating",
+    "lr": 1e-3,
+    "gamma": 0.98,
+    "lam": 0.9,
+    "budget_env_steps": TINY_N * TINY_T * TINY_UPDATES,
+    "chunk_updates": 2,
+    "eval_episodes": 20,
+}
+
+
+def tiny_raw(**train) -> dict:
+    return legacy_raw(
+        {
+            "env": {"obs_mode": "conditioned"},
+            "layout": dict(FIXED_LAYOUT),
+            "reward": dict(REWARD),
+            "train": {**TINY_TRAIN, **train},
+        }
+    )
+
+
+def tiny_config(**train):
+    from jaxexo.config import config_from_dict
+
+    return config_from_dict(tiny_raw(**train))
+
+
+SEED = 3  # the tiny runs' seed
+
+
 @pytest.fixture
 def mixed_raw():
     """A fresh (mutable) copy of the raw mixed config table."""
@@ -280,8 +332,6 @@ def tiny_reference(tmp_path_factory):
     import sys
 
     from jaxexo.config.toml_io import config_to_toml
-
-    from train_helpers import SEED, tiny_config
 
     cfg = tiny_config()
 

@@ -22,50 +22,13 @@ import time
 import numpy as np
 import pytest
 
-from jaxexo.config import ConfigError, config_from_dict
+from jaxexo.config import ConfigError
 from jaxexo.config.toml_io import config_to_toml
 from jaxexo.storage.checkpoint import CheckpointError, pack_checkpoint, unpack_checkpoint
 from jaxexo.storage.policy_file import PolicyFileError, load_policy, policy_checksum
 from jaxexo.storage.rundir import LOCK_NAME, RunDirError, run_lock
 
-from conftest import ROOT, jax_compilation_cache, legacy_raw
-
-# The tiny config of tests/train_helpers.py: backward-view Watkins Q(lambda), 6 updates in 3 chunks of 2.
-TINY_N, TINY_T, TINY_UPDATES = 64, 8, 6
-TINY_RAW = {
-    "env": {"obs_mode": "conditioned"},
-    "layout": {"obstacles": ["base1"], "pivot": ["obstacle"]},
-    "reward": {
-        "traj_weights": [0.0, 2.0, 0.5, 4.0, 0.5, 0.5, 1.0, 0.5],
-        "exo_weights": [1.0, 1.0, 2.0, 1.0],
-        "goal_reward": 20.0,
-        "joint_limit_penalty": 4.0,
-        "progress_shaping": 5.0,
-    },
-    "train": {
-        "num_envs": TINY_N,
-        "rollout_steps": TINY_T,
-        "num_minibatches": 2,
-        "hidden": [32, 32],
-        "layer_norm": True,
-        "trace": "backward",
-        "control": "off_policy",
-        "trace_kind": "accumulating",
-        "lr": 1e-3,
-        "gamma": 0.98,
-        "lam": 0.9,
-        "budget_env_steps": TINY_N * TINY_T * TINY_UPDATES,
-        "chunk_updates": 2,
-        "eval_episodes": 20,
-    },
-}
-SEED = 3
-
-
-def tiny_config(**train):
-    raw = json.loads(json.dumps(TINY_RAW))
-    raw["train"].update(train)
-    return config_from_dict(legacy_raw(raw))
+from conftest import ROOT, SEED, jax_compilation_cache, tiny_config
 
 
 def cli(*args):
