@@ -10,6 +10,8 @@ from __future__ import annotations
 import contextlib
 import copy
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -30,6 +32,28 @@ settings.register_profile(
     derandomize=False,
 )
 settings.load_profile("jaxexo")
+
+
+def cli_cmd(*args) -> list[str]:
+    """The command line ``python -m jaxexo.cli ARGS`` (each argument as text)."""
+    return [sys.executable, "-m", "jaxexo.cli", *map(str, args)]
+
+
+def run_command(argv, timeout: float = 300, **kw) -> subprocess.CompletedProcess:
+    """``argv`` run from the repository root, its output captured as text (``kw``: more of
+    subprocess.run's arguments, e.g. env)."""
+    return subprocess.run(argv, capture_output=True, text=True, cwd=ROOT, timeout=timeout, **kw)
+
+
+def run_cli(*args, timeout: float = 300, **kw) -> subprocess.CompletedProcess:
+    """``jaxexo ARGS`` in a subprocess from the repository root (run_command)."""
+    return run_command(cli_cmd(*args), timeout=timeout, **kw)
+
+
+def run_python(code: str, timeout: float = 300) -> subprocess.CompletedProcess:
+    """``python -c CODE`` in a subprocess from the repository root (run_command)."""
+    return run_command([sys.executable, "-c", code], timeout=timeout)
+
 
 # Every obstacle kind the config accepts: the five thesis obstacles (Table 3.1), a rectangle range,
 # a half-ellipse range and a user profile; all three pivot conditions.

@@ -106,10 +106,6 @@ def random_params(net, obs_dim: int, seed: int):
     )
 
 
-def _cli_cmd(*args):
-    return [sys.executable, "-m", "jaxexo.cli", *map(str, args)]
-
-
 def _npz(path) -> dict:
     with np.load(path, allow_pickle=False) as z:
         return {k: z[k] for k in z.files}
