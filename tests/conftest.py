@@ -203,6 +203,32 @@ def tiny_config(**train):
 
 SEED = 3  # the tiny runs' seed
 
+# The small forward-view config of the population and sweep tests: the thesis observation, Base 1,
+# 16 environments, 6 updates of 4 steps, one hidden layer of 16.
+FORWARD_N, FORWARD_T, FORWARD_UPDATES = 16, 4, 6
+
+
+def forward_raw(train: dict | None = None, **tables) -> dict:
+    """The small forward-view config (legacy_raw), ``train`` over its [train] table and ``tables``
+    (e.g. sweep) beside it."""
+    return legacy_raw(
+        {
+            "env": {"obs_mode": "thesis"},
+            "layout": dict(FIXED_LAYOUT),
+            "train": {
+                "num_envs": FORWARD_N,
+                "rollout_steps": FORWARD_T,
+                "num_minibatches": 2,
+                "hidden": [16],
+                "layer_norm": False,
+                "budget_env_steps": FORWARD_N * FORWARD_T * FORWARD_UPDATES,
+                "eval_episodes": 10,
+                **(train or {}),
+            },
+            **tables,
+        }
+    )
+
 
 @pytest.fixture
 def mixed_raw():

@@ -32,33 +32,30 @@ from jaxexo.sweep import plan as P
 from jaxexo.sweep import results as R
 from jaxexo.sweep.spec import load_sweep, parse_bytes, sweep_from_dict
 
-from conftest import ROOT, cli_cmd, jax_compilation_cache, legacy_raw, run_cli, run_python
+from conftest import (
+    FORWARD_N,
+    FORWARD_T,
+    FORWARD_UPDATES,
+    ROOT,
+    cli_cmd,
+    forward_raw,
+    jax_compilation_cache,
+    run_cli,
+    run_python,
+)
 
 # --------------------------------------------------------------------------------------------
 # The tiny sweep: 4 learning rates (one of them absurd: it diverges) x 2 seeds, 6 updates each.
 # --------------------------------------------------------------------------------------------
 
-N, T, UPDATES = 16, 4, 6
+N, T, UPDATES = FORWARD_N, FORWARD_T, FORWARD_UPDATES
 HUGE_LR = 1e30
 LRS = [1e-3, HUGE_LR, 3e-3, 1e-2]
 
 
 def tiny_raw(**sweep) -> dict:
-    return legacy_raw(
-        {
-            "env": {"obs_mode": "thesis"},
-            "layout": {"obstacles": ["base1"], "pivot": ["obstacle"]},
-            "train": {
-                "num_envs": N,
-                "rollout_steps": T,
-                "num_minibatches": 2,
-                "hidden": [16],
-                "layer_norm": False,
-                "budget_env_steps": N * T * UPDATES,
-                "eval_episodes": 10,
-            },
-            "sweep": {"seeds": 2, "chunk_size": 4, "grid": {"train.lr": list(LRS)}, **sweep},
-        }
+    return forward_raw(
+        sweep={"seeds": 2, "chunk_size": 4, "grid": {"train.lr": list(LRS)}, **sweep}
     )
 
 
