@@ -17,6 +17,8 @@ from pathlib import Path
 import pytest
 from hypothesis import HealthCheck, settings
 
+from jaxexo.config import EQUAL_WEIGHTS, THESIS_JOINT_LIMITS
+
 ROOT = Path(__file__).resolve().parent.parent
 
 # The CLI keeps compiled programs in ~/.cache/jaxexo/xla (jaxexo.train.devices.use_compilation_cache);
@@ -88,12 +90,10 @@ MIXED_RAW = {
         "thigh": 0.5,
         "shin": 0.5,
         "foot_length": 0.2,
-        "hip_limits": [-0.5235987755982988, 2.007128639793479],
-        "knee_limits": [-1.7453292519943295, 0.0],
+        **THESIS_JOINT_LIMITS,
     },
     "reward": {
-        "traj_weights": [1.0] * 8,
-        "exo_weights": [1.0] * 4,
+        **EQUAL_WEIGHTS,
         "step_threshold": 30.0,
         "collision_penalty": 10.0,
         "backward_penalty": 1.0,
