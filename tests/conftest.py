@@ -346,6 +346,17 @@ def trained_run(tmp_path_factory):
     )
 
 
+def eval_against_cfftg(run: Path, out: Path, *args) -> int:
+    """``jaxexo eval`` (in this process) of ``run``'s policy against CFFTG into ``out``, with ``args``
+    (the scenarios and their numbers); its exit status."""
+    from jaxexo.cli import main
+
+    policy = str(run / "policy.npz")
+    return main(
+        ["eval", "--policy", policy, "--against", "cfftg", *map(str, args), "--out", str(out)]
+    )
+
+
 @contextlib.contextmanager
 def jax_compilation_cache(directory):
     """A persistent JAX compilation cache in ``directory`` while the block runs (the previous settings

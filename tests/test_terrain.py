@@ -23,6 +23,8 @@ from jaxexo.physics.terrain import (
     family_outline,
 )
 
+from conftest import eval_against_cfftg
+
 FOOT = 0.20
 HIP = (-0.5236, 2.0071)
 KNEE = (-1.7453, 0.0)
@@ -318,30 +320,9 @@ def test_unseen_set_is_fixed_held_out_and_accepted_by_the_generators():
 @pytest.fixture(scope="module")
 def unseen_eval(trained_run, tmp_path_factory):
     pytest.importorskip("jax")
-    from jaxexo.cli import main
-
     out = tmp_path_factory.mktemp("unseen")
-    assert (
-        main(
-            [
-                "eval",
-                "--policy",
-                str(trained_run / "policy.npz"),
-                "--against",
-                "cfftg",
-                "--scenarios",
-                "unseen",
-                "--n",
-                "30",
-                "--batch",
-                "50",
-                "--no-figures",
-                "--out",
-                str(out),
-            ]
-        )
-        == 0
-    )
+    args = ("--scenarios", "unseen", "--n", 30, "--batch", 50, "--no-figures")
+    assert eval_against_cfftg(trained_run, out, *args) == 0
     return out
 
 
