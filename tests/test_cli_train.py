@@ -15,7 +15,6 @@ from conftest import run_cli
 
 jax = pytest.importorskip("jax")
 
-from jaxexo.train import run_files  # noqa: E402
 
 pytestmark = pytest.mark.slow  # subprocess CLI runs
 
@@ -31,16 +30,7 @@ def test_cli_train_writes_the_run_directory(tiny_reference):
     (on one CPU device, so that the in-process driver tests can compare with it bit for bit)."""
     ref, out = tiny_reference, tiny_reference["run"]
     stdout, stderr = ref["stdout"], ref["stderr"]
-    for name in (
-        "config.toml",
-        "metrics.jsonl",
-        "policy.npz",
-        "training_curve.png",
-        "eval.json",
-        run_files.CHECKPOINT,
-        run_files.BOOKKEEPING,
-    ):
-        assert (out / name).is_file(), name
+    assert_run_files(out)
     assert load_config(out / "config.toml") == load_config(ref["cfg_path"]) == ref["cfg"]
     assert len((out / "metrics.jsonl").read_text().splitlines()) == 3
     res = json.loads((out / "eval.json").read_text())

@@ -47,7 +47,7 @@ from conftest import (  # noqa: F401 (the shared tiny config, for the star impor
 jax = pytest.importorskip("jax")
 import jax.numpy as jnp  # noqa: E402
 
-from jaxexo.train import driver  # noqa: E402
+from jaxexo.train import driver, run_files  # noqa: E402
 from jaxexo.train.evaluate import HELD_OUT, TEST_KINDS, make_rollout  # noqa: E402
 from jaxexo.train.trainer import METRICS, Hyperparams, Trainer, make_train  # noqa: E402
 
@@ -60,6 +60,20 @@ def _compilation_cache(tmp_path_factory):
     chunk and evaluation programs, run again by the resume and CLI tests) are compiled once."""
     with jax_compilation_cache(tmp_path_factory.mktemp("jax_cache")) as cache:
         yield cache
+
+
+def assert_run_files(out) -> None:
+    """A finished run directory ``out`` holds every file of a run."""
+    for name in (
+        "config.toml",
+        "metrics.jsonl",
+        "policy.npz",
+        "training_curve.png",
+        "eval.json",
+        run_files.CHECKPOINT,
+        run_files.BOOKKEEPING,
+    ):
+        assert (out / name).is_file(), name
 
 
 def leaves(tree) -> list[np.ndarray]:
