@@ -8,15 +8,9 @@ Run: python benchmarks/bench_timing.py RUN_DIR/policy.npz
 
 from pathlib import Path
 
-from jaxexo.benchmarks.runner import parser
-from jaxexo.benchmarks.timing_bench import run_timing_benchmark
+from jaxexo.benchmarks.runner import run_script
+from jaxexo.benchmarks.timing_bench import OPTIONS, run_timing_benchmark
 
 if __name__ == "__main__":
-    p = parser(__doc__)
-    p.add_argument("--n", type=int, default=1000, help="thesis-obstacle scenes")
-    p.add_argument("--unseen", type=int, default=300, help="unseen-shape scenes")
-    p.add_argument("--rate", type=float, default=100.0, help="control rate, Hz")
-    a = p.parse_args()
-    run_timing_benchmark(
-        a.policy, Path(__file__).resolve().parent / "results", a.n, a.unseen, a.rate
-    )
+    results = Path(__file__).resolve().parent / "results"
+    run_script(__doc__, run_timing_benchmark, OPTIONS, results)

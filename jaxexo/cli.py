@@ -225,15 +225,7 @@ def _check_clearance(clearance, config) -> None:
 
 
 def cmd_generate(args) -> int:
-    outputs = (
-        ("--out", args.out),
-        ("--json", args.json),
-        ("--plot", args.plot),
-        ("--animate", args.animate),
-    )
-    for option, value in outputs:
-        _check_output_file(option, value)
-    _check_outputs([("--policy", args.policy), ("--profile", args.profile)], outputs)
+    outputs = _checked_outputs(args, [("--policy", args.policy), ("--profile", args.profile)])
     if args.obstacle is not None and args.profile is not None:
         raise ValueError(
             "--obstacle, --profile: give one of them (a named shape, or a profile file)"
@@ -254,29 +246,21 @@ def cmd_generate(args) -> int:
     obstacle = obstacle_from_args(args)
     # An output on standard output (-, /dev/stdout) keeps it for the data: messages go to stderr.
     report = sys.stderr if any(writes_to_stdout(v) for _, v in outputs) else sys.stdout
-    common = dict(
-        pivot=args.pivot,
-        pivot_y=args.pivot_y,
-        start_y=args.start_y,
-        step_length=args.step_length,
-        n_points=args.points,
-        duration=args.duration,
-        clearance=args.clearance,
+    common = _options(
+        args,
+        "pivot",
+        "pivot_y",
+        "start_y",
+        "step_length",
+        "duration",
+        "clearance",
+        n_points="points",
     )
+    gen = _generator(args)
+    _check_clearance(args.clearance, gen.config)
     if args.method == "cfftg":
-        from jaxexo.baselines import CFFTG
-
-        # The kinematics (and joint limits) of the policy's config when one is given.
-        gen = CFFTG.from_policy(args.policy) if args.policy else CFFTG(_load(None)[0])
-        _check_clearance(args.clearance, gen.config)
         traj = gen.generate(obstacle, **common)
     else:
-        if not args.policy:
-            raise ValueError("--policy: required with --method rl (the trained policy.npz)")
-        from jaxexo.inference import TrajectoryGenerator
-
-        gen = TrajectoryGenerator.load(args.policy)
-        _check_clearance(args.clearance, gen.config)
         traj = gen.generate(
             obstacle,
             smoothing=args.smoothing,
@@ -284,24 +268,68 @@ def cmd_generate(args) -> int:
             **common,
         )
     timed = _timed_swing(args, traj, gen.config)
-    (timed or traj).to_csv(args.out)
-    written = [args.out]
-    if args.json:
-        (timed or traj).to_json(args.json)
-        written.append(args.json)
-    if args.plot:
-        from jaxexo.plots.plot import plot_trajectory
+    from jaxexo.plots.animate import animate_swing
+    from jaxexo.plots.plot import plot_trajectory
 
-        plot_trajectory(traj, args.plot)
-        written.append(args.plot)
-    if args.animate:
-        from jaxexo.plots.animate import animate_swing
-
-        animate_swing(timed, args.animate)
-        written.append(args.animate)
+    written = _write_outputs(
+        args,
+        timed or traj,
+        lambda path: plot_trajectory(traj, path),
+        lambda path: animate_swing(timed, path),
+    )
     ok = _report_swing(traj, timed, report)
     print("wrote " + ", ".join(written), file=report)
     return 0 if ok else 1
+
+
+def _options(args, *names, **renamed) -> dict:
+    """Keyword arguments from the parsed options: ``name=args.name`` for each of ``names`` and
+    ``key=args.<option>`` for each ``key=option`` of ``renamed``."""
+    return {
+        **{n: getattr(args, n) for n in names},
+        **{k: getattr(args, v) for k, v in renamed.items()},
+    }
+
+
+def _checked_outputs(args, inputs):
+    """generate's and walk's output files (--out, --json, --plot, --animate) as (option, path),
+    each checked, and none the same file as an input or another output."""
+    outputs = (
+        ("--out", args.out),
+        ("--json", args.json),
+        ("--plot", args.plot),
+        ("--animate", args.animate),
+    )
+    for option, value in outputs:
+        _check_output_file(option, value)
+    _check_outputs(inputs, outputs)
+    return outputs
+
+
+def _generator(args):
+    """The generator --method names: CFFTG (with the kinematics and joint limits of --policy's
+    config when one is given) or the trained policy."""
+    if args.method == "cfftg":
+        from jaxexo.baselines import CFFTG
+
+        return CFFTG.from_policy(args.policy) if args.policy else CFFTG(_load(None)[0])
+    if not args.policy:
+        raise ValueError("--policy: required with --method rl (the trained policy.npz)")
+    from jaxexo.inference import TrajectoryGenerator
+
+    return TrajectoryGenerator.load(args.policy)
+
+
+def _write_outputs(args, data, draw, animate) -> list[str]:
+    """``data`` (a swing or a course) as --out's CSV and --json's JSON, --plot drawn by
+    ``draw(path)`` and --animate by ``animate(path)`` (None: no GIF); the files written, in order."""
+    data.to_csv(args.out)
+    written = [args.out]
+    for path, write in ((args.json, data.to_json), (args.plot, draw), (args.animate, animate)):
+        if path and write is not None:
+            write(path)
+            written.append(path)
+    return written
 
 
 def _report_swing(traj, timed, report) -> bool:
@@ -344,15 +372,7 @@ def _report_swing(traj, timed, report) -> bool:
 
 
 def cmd_walk(args) -> int:
-    outputs = (
-        ("--out", args.out),
-        ("--json", args.json),
-        ("--plot", args.plot),
-        ("--animate", args.animate),
-    )
-    for option, value in outputs:
-        _check_output_file(option, value)
-    _check_outputs([("--policy", args.policy), ("--terrain", args.terrain)], outputs)
+    _checked_outputs(args, [("--policy", args.policy), ("--terrain", args.terrain)])
     from jaxexo.config import MAX_CONTROL_RATE
 
     if args.rate is not None and not (
@@ -361,53 +381,29 @@ def cmd_walk(args) -> int:
         raise ValueError(
             f"--rate: control rate must be > 0 and <= {MAX_CONTROL_RATE:g} Hz, got {args.rate:g}"
         )
-    if args.method == "cfftg":
-        if args.fallback != "cfftg":
-            raise ValueError(
-                "--fallback: applies to --method rl only (CFFTG plans every swing itself)"
-            )
-        from jaxexo.baselines import CFFTG
-
-        gen = CFFTG.from_policy(args.policy) if args.policy else CFFTG(_load(None)[0])
-    else:
-        if not args.policy:
-            raise ValueError("--policy: required with --method rl (the trained policy.npz)")
-        from jaxexo.inference import TrajectoryGenerator
-
-        gen = TrajectoryGenerator.load(args.policy)
+    if args.method == "cfftg" and args.fallback != "cfftg":
+        raise ValueError("--fallback: applies to --method rl only (CFFTG plans every swing itself)")
+    gen = _generator(args)
     _check_clearance(args.clearance, gen.config)
     from jaxexo.course import plan_course
     from jaxexo.storage.terrain_file import read_terrain
 
     terrain = read_terrain(args.terrain)
-    kw = dict(
-        start_y=args.start_y,
-        goal_y=args.goal_y,
-        steps=args.steps,
-        rate=args.rate,
-        clearance=args.clearance,
-        double_support=args.double_support,
-    )
+    kw = _options(args, "start_y", "goal_y", "steps", "rate", "clearance", "double_support")
     if args.method == "rl":
         kw["fallback"] = None if args.fallback == "none" else args.fallback
     course = plan_course(
         gen, terrain, **kw
     )  # an infeasible course is refused here: nothing written
-    course.to_csv(args.out)
-    written = [args.out]
-    if args.json:
-        course.to_json(args.json)
-        written.append(args.json)
-    if args.plot:
-        from jaxexo.plots.plot import plot_course
+    from jaxexo.plots.animate import animate_course
+    from jaxexo.plots.plot import plot_course
 
-        plot_course(course, args.plot)
-        written.append(args.plot)
-    if args.animate and len(course.samples):
-        from jaxexo.plots.animate import animate_course
-
-        animate_course(course, args.animate)
-        written.append(args.animate)
+    written = _write_outputs(
+        args,
+        course,
+        lambda path: plot_course(course, path),
+        (lambda path: animate_course(course, path)) if len(course.samples) else None,
+    )
     fb = sum(s.method == "cfftg-fallback" for s in course.steps)
     print(
         f"{terrain.source}: {len(course.footholds)} swings from y = {course.footholds.start_y:.2f} m to "
@@ -725,35 +721,96 @@ def _add_scene_args(g) -> None:
     )
 
 
+def _add_policy(p) -> None:
+    """generate's and walk's --policy: the model, or for cfftg only its kinematics."""
+    p.add_argument(
+        "--policy",
+        help="policy.npz written by jaxexo train (required for --method rl; for cfftg it "
+        "supplies the kinematics, default: configs/default.toml)",
+    )
+
+
+def _add_method(p, helptext: str) -> None:
+    """generate's and walk's --method: the RL generator or CFFTG."""
+    p.add_argument("--method", choices=("rl", "cfftg"), default="rl", help=helptext)
+
+
+def _add_fallback(p, helptext: str) -> None:
+    """generate's and walk's --fallback: what stands in for an RL swing that is not safe."""
+    p.add_argument("--fallback", choices=("cfftg", "none"), default="cfftg", help=helptext)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="jaxexo", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
-    _add_bench_env(sub)
-    _add_train(sub)
-    _add_generate(sub)
-    _add_mjcf_and_replay(sub)
-    _add_walk(sub)
-    _add_sweep(sub)
-    _add_eval(sub)
-    _add_reproduce(sub)
-    _add_bench(sub)
+    for name, helptext, add_options in (
+        ("bench-env", "environment steps per second (random actions, full reward)", _add_bench_env),
+        ("train", "train a policy (TD(lambda)); writes a run directory", _add_train),
+        (
+            "generate",
+            "a smoothed, checked swing trajectory from policy.npz (NumPy only)",
+            _add_generate,
+        ),
+        (
+            "mjcf",
+            "the legs and the obstacle as a MuJoCo model (MJCF), for MuJoCo's viewer",
+            _add_mjcf,
+        ),
+        (
+            "replay",
+            "a swing replayed in MuJoCo: its distance to the obstacle, and driven at the "
+            "[device] limits with --driven (needs the sim extra)",
+            _add_replay,
+        ),
+        (
+            "walk",
+            "a walk over a measured course: footholds, every swing and both legs timed "
+            "for the device (NumPy only)",
+            _add_walk,
+        ),
+        (
+            "sweep",
+            "train a grid of configurations x seeds as compiled, vmapped programs",
+            _add_sweep,
+        ),
+        (
+            "eval",
+            "evaluate the RL generator (and CFFTG) side by side; writes report.md/.json "
+            "and figures (NumPy only)",
+            _add_eval,
+        ),
+        (
+            "reproduce",
+            "train the seven thesis configs and tabulate them beside the thesis's Tables 3.2-3.11",
+            _add_reproduce,
+        ),
+        (
+            "bench",
+            "every benchmark (environment, trainer, generator, CFFTG, thesis-style "
+            "baseline) into benchmarks/results with a summary table",
+            _add_bench,
+        ),
+    ):
+        add_options(sub.add_parser(name, help=helptext))
     return p
 
 
-def _add_bench_env(sub) -> None:
-    """The `jaxexo bench-env` subcommand and its options."""
-    b = sub.add_parser(
-        "bench-env", help="environment steps per second (random actions, full reward)"
+def _add_results_out(p) -> None:
+    """bench-env's and bench's --out: where benchmark results go."""
+    p.add_argument(
+        "--out", default="benchmarks/results", help="folder for the JSON and Markdown results"
     )
+
+
+def _add_bench_env(b) -> None:
+    """The `jaxexo bench-env` options."""
     b.add_argument(
         "--config", help="TOML config (default: the packaged default, configs/default.toml)"
     )
     b.add_argument(
         "--envs", type=_sizes, default=[1, 256, 4096, 16384], help="batch sizes, e.g. 1,256,4096"
     )
-    b.add_argument(
-        "--out", default="benchmarks/results", help="folder for the JSON and Markdown results"
-    )
+    _add_results_out(b)
     b.add_argument(
         "--name", default="env", help="result files' name: NAME_<date>_<machine>.json and .md"
     )
@@ -763,9 +820,8 @@ def _add_bench_env(sub) -> None:
     b.set_defaults(func=cmd_bench_env)
 
 
-def _add_train(sub) -> None:
-    """The `jaxexo train` subcommand and its options."""
-    t = sub.add_parser("train", help="train a policy (TD(lambda)); writes a run directory")
+def _add_train(t) -> None:
+    """The `jaxexo train` options."""
     t.add_argument(
         "config",
         nargs="?",
@@ -788,29 +844,16 @@ def _add_train(sub) -> None:
     t.set_defaults(func=cmd_train)
 
 
-def _add_generate(sub) -> None:
-    """The `jaxexo generate` subcommand and its options."""
-    g = sub.add_parser(
-        "generate", help="a smoothed, checked swing trajectory from policy.npz (NumPy only)"
-    )
-    g.add_argument(
-        "--policy",
-        help="policy.npz written by jaxexo train (required for --method rl; for cfftg "
-        "it supplies the kinematics, default: configs/default.toml)",
-    )
-    g.add_argument(
-        "--method",
-        choices=("rl", "cfftg"),
-        default="rl",
-        help="rl: the trained policy; cfftg: the polynomial baseline (jaxexo.baselines.cfftg)",
+def _add_generate(g) -> None:
+    """The `jaxexo generate` options."""
+    _add_policy(g)
+    _add_method(
+        g, "rl: the trained policy; cfftg: the polynomial baseline (jaxexo.baselines.cfftg)"
     )
     _add_scene_args(g)
     g.add_argument("--points", type=int, default=100, help="samples of the smoothed path")
-    g.add_argument(
-        "--fallback",
-        choices=("cfftg", "none"),
-        default="cfftg",
-        help="when the RL swing is not safe, return CFFTG's plan (cfftg) or the RL swing alone (none)",
+    _add_fallback(
+        g, "when the RL swing is not safe, return CFFTG's plan (cfftg) or the RL swing alone (none)"
     )
     g.add_argument(
         "--smoothing",
@@ -852,88 +895,66 @@ def _add_generate(sub) -> None:
     g.set_defaults(func=cmd_generate)
 
 
-def _add_mjcf_and_replay(sub) -> None:
-    """The `jaxexo mjcf` and `jaxexo replay` subcommand and its options."""
-    for name, helptext in (
-        ("mjcf", "the legs and the obstacle as a MuJoCo model (MJCF), for MuJoCo's viewer"),
-        (
-            "replay",
-            "a swing replayed in MuJoCo: its distance to the obstacle, and driven at the "
-            "[device] limits with --driven (needs the sim extra)",
-        ),
-    ):
-        x = sub.add_parser(name, help=helptext)
-        x.add_argument(
-            "--policy",
-            required=name == "replay",
-            help="policy.npz (its config: legs, limits, margin)",
-        )
-        if name == "mjcf":
-            x.add_argument(
-                "--config", help="TOML config when no --policy (default: the packaged default)"
-            )
-        _add_scene_args(x)
-        if name == "mjcf":
-            x.add_argument("--out", required=True, help="MJCF file to write (e.g. legs.xml)")
-            x.set_defaults(func=cmd_mjcf)
-        else:
-            x.add_argument(
-                "--method",
-                choices=("rl", "cfftg", "both"),
-                default="rl",
-                help="the RL swing alone (no fallback), CFFTG's, or both",
-            )
-            x.add_argument(
-                "--rate", type=float, help="control rate, Hz (default: the config's control_rate)"
-            )
-            x.add_argument(
-                "--driven",
-                action="store_true",
-                help="also drive the legs within the [device] limits",
-            )
-            x.add_argument(
-                "--controller",
-                choices=("pd_ff", "servo"),
-                default="pd_ff",
-                help="with --driven: PD with inverse-dynamics feed-forward (pd_ff, default) or stiff "
-                "position servos (servo)",
-            )
-            x.add_argument(
-                "--half-limits", action="store_true", help="with --driven: also at half the limits"
-            )
-            x.add_argument("--json", help="write the figures (SI units) to this JSON file")
-            x.set_defaults(func=cmd_replay)
+def _add_sim_policy(x, required: bool) -> None:
+    """mjcf's and replay's --policy: the model whose config gives the legs."""
+    x.add_argument(
+        "--policy", required=required, help="policy.npz (its config: legs, limits, margin)"
+    )
 
 
-def _add_walk(sub) -> None:
-    """The `jaxexo walk` subcommand and its options."""
-    w = sub.add_parser(
-        "walk",
-        help="a walk over a measured course: footholds, every swing and both legs timed "
-        "for the device (NumPy only)",
+def _add_mjcf(x) -> None:
+    """The `jaxexo mjcf` options."""
+    _add_sim_policy(x, required=False)
+    x.add_argument("--config", help="TOML config when no --policy (default: the packaged default)")
+    _add_scene_args(x)
+    x.add_argument("--out", required=True, help="MJCF file to write (e.g. legs.xml)")
+    x.set_defaults(func=cmd_mjcf)
+
+
+def _add_replay(x) -> None:
+    """The `jaxexo replay` options."""
+    _add_sim_policy(x, required=True)
+    _add_scene_args(x)
+    x.add_argument(
+        "--method",
+        choices=("rl", "cfftg", "both"),
+        default="rl",
+        help="the RL swing alone (no fallback), CFFTG's, or both",
     )
-    w.add_argument(
-        "--policy",
-        help="policy.npz written by jaxexo train (required for --method rl; for cfftg it "
-        "supplies the kinematics, default: configs/default.toml)",
+    x.add_argument(
+        "--rate", type=float, help="control rate, Hz (default: the config's control_rate)"
     )
+    x.add_argument(
+        "--driven",
+        action="store_true",
+        help="also drive the legs within the [device] limits",
+    )
+    x.add_argument(
+        "--controller",
+        choices=("pd_ff", "servo"),
+        default="pd_ff",
+        help="with --driven: PD with inverse-dynamics feed-forward (pd_ff, default) or stiff "
+        "position servos (servo)",
+    )
+    x.add_argument(
+        "--half-limits", action="store_true", help="with --driven: also at half the limits"
+    )
+    x.add_argument("--json", help="write the figures (SI units) to this JSON file")
+    x.set_defaults(func=cmd_replay)
+
+
+def _add_walk(w) -> None:
+    """The `jaxexo walk` options."""
+    _add_policy(w)
     w.add_argument(
         "--terrain",
         required=True,
         help="the ground profile: a CSV (y,z per line) or JSON "
         '({"points": [[y, z], ...]}) file, m, y increasing, z >= 0',
     )
-    w.add_argument(
-        "--method",
-        choices=("rl", "cfftg"),
-        default="rl",
-        help="rl: the trained policy's swings; cfftg: CFFTG's swings on the same footholds",
-    )
-    w.add_argument(
-        "--fallback",
-        choices=("cfftg", "none"),
-        default="cfftg",
-        help="when an RL swing is not safe, use CFFTG's (cfftg, reported per step) or stop (none)",
+    _add_method(w, "rl: the trained policy's swings; cfftg: CFFTG's swings on the same footholds")
+    _add_fallback(
+        w, "when an RL swing is not safe, use CFFTG's (cfftg, reported per step) or stop (none)"
     )
     w.add_argument(
         "--start-y",
@@ -979,11 +1000,8 @@ def _add_walk(sub) -> None:
     w.set_defaults(func=cmd_walk)
 
 
-def _add_sweep(sub) -> None:
-    """The `jaxexo sweep` subcommand and its options."""
-    s = sub.add_parser(
-        "sweep", help="train a grid of configurations x seeds as compiled, vmapped programs"
-    )
+def _add_sweep(s) -> None:
+    """The `jaxexo sweep` options."""
     s.add_argument("sweep", help="sweep file (a config with a [sweep] table; see configs/sweeps/)")
     s.add_argument(
         "--out", required=True, help="sweep directory (results.csv, summary.md, figures)"
@@ -1023,13 +1041,8 @@ def _add_sweep(sub) -> None:
     s.set_defaults(func=cmd_sweep)
 
 
-def _add_eval(sub) -> None:
-    """The `jaxexo eval` subcommand and its options."""
-    e = sub.add_parser(
-        "eval",
-        help="evaluate the RL generator (and CFFTG) side by side; writes report.md/.json "
-        "and figures (NumPy only)",
-    )
+def _add_eval(e) -> None:
+    """The `jaxexo eval` options."""
     e.add_argument("--policy", required=True, help="policy.npz written by jaxexo train")
     e.add_argument(
         "--against", choices=("cfftg",), help="also evaluate this baseline on the same scenarios"
@@ -1061,12 +1074,8 @@ def _add_eval(sub) -> None:
     e.set_defaults(func=cmd_eval)
 
 
-def _add_reproduce(sub) -> None:
-    """The `jaxexo reproduce` subcommand and its options."""
-    r = sub.add_parser(
-        "reproduce",
-        help="train the seven thesis configs and tabulate them beside the thesis's Tables 3.2-3.11",
-    )
+def _add_reproduce(r) -> None:
+    """The `jaxexo reproduce` options."""
     r.add_argument(
         "--out",
         required=True,
@@ -1088,7 +1097,6 @@ def _add_reproduce(sub) -> None:
     r.add_argument(
         "--population",
         type=int,
-        default=None,
         help="members per learns model (seeds SEED..SEED+K-1, the best on validation kept; default "
         "4); the faithful configs always train one agent",
     )
@@ -1100,16 +1108,9 @@ def _add_reproduce(sub) -> None:
     r.set_defaults(func=cmd_reproduce)
 
 
-def _add_bench(sub) -> None:
-    """The `jaxexo bench` subcommand and its options."""
-    bb = sub.add_parser(
-        "bench",
-        help="every benchmark (environment, trainer, generator, CFFTG, thesis-style "
-        "baseline) into benchmarks/results with a summary table",
-    )
-    bb.add_argument(
-        "--out", default="benchmarks/results", help="folder for the JSON and Markdown results"
-    )
+def _add_bench(bb) -> None:
+    """The `jaxexo bench` options."""
+    _add_results_out(bb)
     bb.add_argument(
         "--policy",
         help="policy.npz for the generator benchmarks (default: train configs/default.toml)",

@@ -10,10 +10,14 @@ from __future__ import annotations
 import contextlib
 import copy
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, settings
+
+from jaxexo.config import EQUAL_WEIGHTS, THESIS_JOINT_LIMITS
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -30,6 +34,28 @@ settings.register_profile(
     derandomize=False,
 )
 settings.load_profile("jaxexo")
+
+
+def cli_cmd(*args) -> list[str]:
+    """The command line ``python -m jaxexo.cli ARGS`` (each argument as text)."""
+    return [sys.executable, "-m", "jaxexo.cli", *map(str, args)]
+
+
+def run_command(argv, timeout: float = 300, **kw) -> subprocess.CompletedProcess:
+    """``argv`` run from the repository root, its output captured as text (``kw``: more of
+    subprocess.run's arguments, e.g. env)."""
+    return subprocess.run(argv, capture_output=True, text=True, cwd=ROOT, timeout=timeout, **kw)
+
+
+def run_cli(*args, timeout: float = 300, **kw) -> subprocess.CompletedProcess:
+    """``jaxexo ARGS`` in a subprocess from the repository root (run_command)."""
+    return run_command(cli_cmd(*args), timeout=timeout, **kw)
+
+
+def run_python(code: str, timeout: float = 300) -> subprocess.CompletedProcess:
+    """``python -c CODE`` in a subprocess from the repository root (run_command)."""
+    return run_command([sys.executable, "-c", code], timeout=timeout)
+
 
 # Every obstacle kind the config accepts: the five thesis obstacles (Table 3.1), a rectangle range,
 # a half-ellipse range and a user profile; all three pivot conditions.
@@ -64,12 +90,10 @@ MIXED_RAW = {
         "thigh": 0.5,
         "shin": 0.5,
         "foot_length": 0.2,
-        "hip_limits": [-0.5235987755982988, 2.007128639793479],
-        "knee_limits": [-1.7453292519943295, 0.0],
+        **THESIS_JOINT_LIMITS,
     },
     "reward": {
-        "traj_weights": [1.0] * 8,
-        "exo_weights": [1.0] * 4,
+        **EQUAL_WEIGHTS,
         "step_threshold": 30.0,
         "collision_penalty": 10.0,
         "backward_penalty": 1.0,
@@ -126,6 +150,84 @@ def legacy_raw(raw: dict | None = None) -> dict:
 
         _LEGACY.update(deep_merge(_LEGACY, ADDED_SINCE))
     return deep_merge(_LEGACY, raw or {})
+
+
+# A fixed scene: Base 1 at the default place, pivot under the obstacle, no start shift or jitter.
+FIXED_LAYOUT = {"obstacles": ["base1"], "pivot": ["obstacle"]}
+# configs/default.toml's [reward]
+REWARD = {
+    "traj_weights": [0.0, 2.0, 0.5, 4.0, 0.5, 0.5, 1.0, 0.5],
+    "exo_weights": [1.0, 1.0, 2.0, 1.0],
+    "goal_reward": 20.0,
+    "joint_limit_penalty": 4.0,
+    "progress_shaping": 5.0,
+}
+# The shared tiny training config (of tests/train_helpers.py's modules, test_reliability and
+# tiny_reference below): Watkins Q(lambda) in the backward view (its checkpoint then holds traces,
+# the pending action and its greediness too), 6 updates in 3 chunks of 2.
+TINY_N, TINY_T, TINY_UPDATES = 64, 8, 6
+TINY_TRAIN = {
+    "num_envs": TINY_N,
+    "rollout_steps": TINY_T,
+    "num_minibatches": 2,
+    "hidden": [32, 32],
+    "layer_norm": True,
+    "trace": "backward",
+    "control": "off_policy",
+    "trace_kind": "accumulating",
+    "lr": 1e-3,
+    "gamma": 0.98,
+    "lam": 0.9,
+    "budget_env_steps": TINY_N * TINY_T * TINY_UPDATES,
+    "chunk_updates": 2,
+    "eval_episodes": 20,
+}
+
+
+def tiny_raw(**train) -> dict:
+    return legacy_raw(
+        {
+            "env": {"obs_mode": "conditioned"},
+            "layout": dict(FIXED_LAYOUT),
+            "reward": dict(REWARD),
+            "train": {**TINY_TRAIN, **train},
+        }
+    )
+
+
+def tiny_config(**train):
+    from jaxexo.config import config_from_dict
+
+    return config_from_dict(tiny_raw(**train))
+
+
+SEED = 3  # the tiny runs' seed
+
+# The small forward-view config of the population and sweep tests: the thesis observation, Base 1,
+# 16 environments, 6 updates of 4 steps, one hidden layer of 16.
+FORWARD_N, FORWARD_T, FORWARD_UPDATES = 16, 4, 6
+
+
+def forward_raw(train: dict | None = None, **tables) -> dict:
+    """The small forward-view config (legacy_raw), ``train`` over its [train] table and ``tables``
+    (e.g. sweep) beside it."""
+    return legacy_raw(
+        {
+            "env": {"obs_mode": "thesis"},
+            "layout": dict(FIXED_LAYOUT),
+            "train": {
+                "num_envs": FORWARD_N,
+                "rollout_steps": FORWARD_T,
+                "num_minibatches": 2,
+                "hidden": [16],
+                "layer_norm": False,
+                "budget_env_steps": FORWARD_N * FORWARD_T * FORWARD_UPDATES,
+                "eval_episodes": 10,
+                **(train or {}),
+            },
+            **tables,
+        }
+    )
 
 
 @pytest.fixture
@@ -244,6 +346,17 @@ def trained_run(tmp_path_factory):
     )
 
 
+def eval_against_cfftg(run: Path, out: Path, *args) -> int:
+    """``jaxexo eval`` (in this process) of ``run``'s policy against CFFTG into ``out``, with ``args``
+    (the scenarios and their numbers); its exit status."""
+    from jaxexo.cli import main
+
+    policy = str(run / "policy.npz")
+    return main(
+        ["eval", "--policy", policy, "--against", "cfftg", *map(str, args), "--out", str(out)]
+    )
+
+
 @contextlib.contextmanager
 def jax_compilation_cache(directory):
     """A persistent JAX compilation cache in ``directory`` while the block runs (the previous settings
@@ -280,8 +393,6 @@ def tiny_reference(tmp_path_factory):
     import sys
 
     from jaxexo.config.toml_io import config_to_toml
-
-    from train_helpers import SEED, tiny_config
 
     cfg = tiny_config()
 

@@ -220,44 +220,18 @@ def test_cfftg_needs_no_jax():
 def test_cli_generate_method_cfftg(tmp_path):
     from jaxexo.cli import main
 
+    def generate(*args):
+        return main(["generate", "--method", "cfftg", *map(str, args)])
+
     out = tmp_path / "c.csv"
-    assert (
-        main(
-            [
-                "generate",
-                "--method",
-                "cfftg",
-                "--obstacle",
-                "triangle",
-                "--pivot",
-                "agent",
-                "--out",
-                str(out),
-                "--json",
-                str(tmp_path / "c.json"),
-            ]
-        )
-        == 0
-    )
+    scene = ("--obstacle", "triangle", "--pivot", "agent")
+    assert generate(*scene, "--out", out, "--json", tmp_path / "c.json") == 0
     rows = np.loadtxt(out, delimiter=",", skiprows=1)
     assert rows.shape == (100, 15)
     assert rows[0, 1] == 0.0 and abs(rows[-1, 1] - 0.70) < 1e-6
     # An impossible obstacle: written, reported, exit status 1.
     assert (
-        main(
-            [
-                "generate",
-                "--method",
-                "cfftg",
-                "--obstacle",
-                "rectangle",
-                "--height",
-                "0.5",
-                "--out",
-                str(tmp_path / "bad.csv"),
-            ]
-        )
-        == 1
+        generate("--obstacle", "rectangle", "--height", "0.5", "--out", tmp_path / "bad.csv") == 1
     )
     # The RL method still needs its policy.
     assert main(["generate", "--obstacle", "triangle", "--out", str(tmp_path / "x.csv")]) == 2

@@ -5,9 +5,6 @@ a clearance below the model's env.min_clearance or above MAX_CLEARANCE is refuse
 
 from __future__ import annotations
 
-import subprocess
-import sys
-
 import numpy as np
 import pytest
 
@@ -18,7 +15,7 @@ from jaxexo.inference.scenarios import safety_scenarios
 from jaxexo.physics import actions, geometry
 from jaxexo.storage.policy_file import QPolicy
 
-from conftest import ROOT, legacy_raw
+from conftest import legacy_raw, run_cli
 
 SHIELD, MARGIN = 0.025, 0.02
 
@@ -159,45 +156,13 @@ def test_bad_clearance_is_refused_naming_it(bad):
 
 def test_cli_refuses_a_clearance_below_the_margin(tmp_path):
     out = tmp_path / "t.csv"
-    r = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "jaxexo.cli",
-            "generate",
-            "--method",
-            "cfftg",
-            "--obstacle",
-            "base1",
-            "--clearance",
-            "0.01",
-            "--out",
-            str(out),
-        ],
-        capture_output=True,
-        text=True,
-        cwd=ROOT,
+    r = run_cli(
+        "generate", "--method", "cfftg", "--obstacle", "base1", "--clearance", "0.01", "--out", out
     )
     assert r.returncode == 2 and "--clearance" in r.stderr and "Traceback" not in r.stderr
     assert not out.exists()
-    r = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "jaxexo.cli",
-            "generate",
-            "--method",
-            "cfftg",
-            "--obstacle",
-            "base1",
-            "--clearance",
-            "0.04",
-            "--out",
-            str(out),
-        ],
-        capture_output=True,
-        text=True,
-        cwd=ROOT,
+    r = run_cli(
+        "generate", "--method", "cfftg", "--obstacle", "base1", "--clearance", "0.04", "--out", out
     )
     assert r.returncode == 0, r.stderr
     assert out.exists()

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
 
 import pytest
 
@@ -12,16 +11,14 @@ from jaxexo.config import load_config
 from jaxexo.config.toml_io import config_to_toml
 from jaxexo.storage.policy_file import load_policy
 
-from conftest import ROOT
+from conftest import run_cli
 
 jax = pytest.importorskip("jax")
 
-from jaxexo.train import run_files  # noqa: E402
 
 pytestmark = pytest.mark.slow  # subprocess CLI runs
 
 from train_helpers import *  # noqa: F401,F403 (the shared tiny config, helpers and fixtures)
-from train_helpers import _cli_cmd
 
 # --------------------------------------------------------------------------------------------
 # CLI
@@ -33,16 +30,7 @@ def test_cli_train_writes_the_run_directory(tiny_reference):
     (on one CPU device, so that the in-process driver tests can compare with it bit for bit)."""
     ref, out = tiny_reference, tiny_reference["run"]
     stdout, stderr = ref["stdout"], ref["stderr"]
-    for name in (
-        "config.toml",
-        "metrics.jsonl",
-        "policy.npz",
-        "training_curve.png",
-        "eval.json",
-        run_files.CHECKPOINT,
-        run_files.BOOKKEEPING,
-    ):
-        assert (out / name).is_file(), name
+    assert_run_files(out)
     assert load_config(out / "config.toml") == load_config(ref["cfg_path"]) == ref["cfg"]
     assert len((out / "metrics.jsonl").read_text().splitlines()) == 3
     res = json.loads((out / "eval.json").read_text())
@@ -60,13 +48,7 @@ def test_cli_train_writes_the_run_directory(tiny_reference):
 def test_cli_train_bad_config_exits_2_naming_the_field(tmp_path):
     cfg_path = tmp_path / "bad.toml"
     cfg_path.write_text('[train]\ncontrol = "sarsa"\n')
-    r = subprocess.run(
-        _cli_cmd("train", cfg_path, "--out", tmp_path / "run", "--quiet"),
-        capture_output=True,
-        text=True,
-        cwd=ROOT,
-        timeout=120,
-    )
+    r = run_cli("train", cfg_path, "--out", tmp_path / "run", "--quiet", timeout=120)
     assert r.returncode == 2
     assert "train.control" in r.stderr and "sarsa" in r.stderr
 
@@ -77,7 +59,6 @@ def test_cli_train_loads_its_programs_from_the_compilation_cache(tiny_reference,
     cache writes only what it compiles), reads every one (their access times move), and exports the
     same bytes as the session's reference run of its config, which compiled its own programs (cache
     "off": test_compilation_cache_setting)."""
-    from conftest import ROOT as root
     from train_helpers import tiny_config
 
     cache = tmp_path / "cache"
@@ -91,13 +72,8 @@ def test_cli_train_loads_its_programs_from_the_compilation_cache(tiny_reference,
     def train(name, cfg):
         path = tmp_path / f"{name}.toml"
         path.write_text(config_to_toml(cfg))
-        r = subprocess.run(
-            _cli_cmd("train", path, "--out", tmp_path / name, "--quiet", "--seed", SEED),
-            cwd=root,
-            env=env,
-            capture_output=True,
-            text=True,
-            timeout=600,
+        r = run_cli(
+            "train", path, "--out", tmp_path / name, "--quiet", "--seed", SEED, env=env, timeout=600
         )
         assert r.returncode == 0, r.stderr[-3000:]
         return tmp_path / name

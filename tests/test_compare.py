@@ -13,6 +13,8 @@ from jaxexo.evaluation.compare import evaluate_generators, make_scenarios
 from jaxexo.evaluation.metrics import path_length, squared_jerk
 from jaxexo.evaluation.report import markdown
 
+from conftest import eval_against_cfftg
+
 pytest.importorskip("jax")
 
 
@@ -30,28 +32,9 @@ def test_path_length_and_jerk_are_exact_on_known_paths():
 
 @pytest.fixture(scope="module")
 def eval_out(trained_run, tmp_path_factory):
-    from jaxexo.cli import main
-
     out = tmp_path_factory.mktemp("eval")
     assert (
-        main(
-            [
-                "eval",
-                "--policy",
-                str(trained_run / "policy.npz"),
-                "--against",
-                "cfftg",
-                "--scenarios",
-                "all",
-                "--n",
-                "30",
-                "--batch",
-                "100",
-                "--out",
-                str(out),
-            ]
-        )
-        == 0
+        eval_against_cfftg(trained_run, out, "--scenarios", "all", "--n", 30, "--batch", 100) == 0
     )
     return out
 

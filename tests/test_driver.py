@@ -80,16 +80,7 @@ def _counters(path) -> list[dict]:
 @pytest.mark.parametrize("which", ["full", "part"])
 def test_run_directory_is_complete(driver_runs, which):
     out = driver_runs[which]
-    for name in (
-        "config.toml",
-        "metrics.jsonl",
-        "policy.npz",
-        "training_curve.png",
-        "eval.json",
-        run_files.CHECKPOINT,
-        run_files.BOOKKEEPING,
-    ):
-        assert (out / name).is_file(), name
+    assert_run_files(out)
     assert load_config(out / "config.toml") == driver_runs["cfg"]
     rows = _counters(out / "metrics.jsonl")
     assert [r["chunk"] for r in rows] == [1, 2, 3]

@@ -14,7 +14,7 @@ import pytest
 
 from jaxexo.config import ConfigError, config_from_dict
 
-from conftest import legacy_raw
+from conftest import FORWARD_UPDATES, forward_raw
 from train_helpers import _compilation_cache, leaves  # noqa: F401 (the module's compilation cache)
 
 jax = pytest.importorskip("jax")
@@ -26,29 +26,12 @@ from jaxexo.train.lanes import LANES, padded_agents  # noqa: E402
 from jaxexo.train.network import dense_layers  # noqa: E402
 from jaxexo.train.population import Population, choose, population_devices  # noqa: E402
 
-N, T, UPDATES, CHUNK = 16, 4, 6, 2
+UPDATES, CHUNK = FORWARD_UPDATES, 2
 SEED = 3
 
 
 def raw(**train) -> dict:
-    return legacy_raw(
-        {
-            "env": {"obs_mode": "thesis"},
-            "layout": {"obstacles": ["base1"], "pivot": ["obstacle"]},
-            "train": {
-                "num_envs": N,
-                "rollout_steps": T,
-                "num_minibatches": 2,
-                "hidden": [16],
-                "layer_norm": False,
-                "budget_env_steps": N * T * UPDATES,
-                "chunk_updates": CHUNK,
-                "eval_episodes": 10,
-                "lr": 3e-3,
-                **train,
-            },
-        }
-    )
+    return forward_raw({"chunk_updates": CHUNK, "lr": 3e-3, **train})
 
 
 def train_members(seeds):

@@ -22,54 +22,26 @@ import time
 import numpy as np
 import pytest
 
-from jaxexo.config import ConfigError, config_from_dict
+from jaxexo.config import ConfigError
 from jaxexo.config.toml_io import config_to_toml
 from jaxexo.storage.checkpoint import CheckpointError, pack_checkpoint, unpack_checkpoint
 from jaxexo.storage.policy_file import PolicyFileError, load_policy, policy_checksum
 from jaxexo.storage.rundir import LOCK_NAME, RunDirError, run_lock
 
-from conftest import ROOT, jax_compilation_cache, legacy_raw
-
-# The tiny config of tests/train_helpers.py: backward-view Watkins Q(lambda), 6 updates in 3 chunks of 2.
-TINY_N, TINY_T, TINY_UPDATES = 64, 8, 6
-TINY_RAW = {
-    "env": {"obs_mode": "conditioned"},
-    "layout": {"obstacles": ["base1"], "pivot": ["obstacle"]},
-    "reward": {
-        "traj_weights": [0.0, 2.0, 0.5, 4.0, 0.5, 0.5, 1.0, 0.5],
-        "exo_weights": [1.0, 1.0, 2.0, 1.0],
-        "goal_reward": 20.0,
-        "joint_limit_penalty": 4.0,
-        "progress_shaping": 5.0,
-    },
-    "train": {
-        "num_envs": TINY_N,
-        "rollout_steps": TINY_T,
-        "num_minibatches": 2,
-        "hidden": [32, 32],
-        "layer_norm": True,
-        "trace": "backward",
-        "control": "off_policy",
-        "trace_kind": "accumulating",
-        "lr": 1e-3,
-        "gamma": 0.98,
-        "lam": 0.9,
-        "budget_env_steps": TINY_N * TINY_T * TINY_UPDATES,
-        "chunk_updates": 2,
-        "eval_episodes": 20,
-    },
-}
-SEED = 3
+from conftest import ROOT, SEED, cli_cmd, jax_compilation_cache, run_cli, tiny_config
 
 
-def tiny_config(**train):
-    raw = json.loads(json.dumps(TINY_RAW))
-    raw["train"].update(train)
-    return config_from_dict(legacy_raw(raw))
-
-
-def cli(*args):
-    return [sys.executable, "-m", "jaxexo.cli", *map(str, args)]
+def start_training(cfg_path, run, stdout) -> subprocess.Popen:
+    """``jaxexo train`` of ``cfg_path`` into ``run`` (seed SEED, one CPU device) as a background
+    process, its standard error piped (text) and its standard output to ``stdout``."""
+    return subprocess.Popen(
+        cli_cmd("train", cfg_path, "--out", run, "--quiet", "--seed", SEED),
+        cwd=ROOT,
+        env=one_device_env(),
+        stdout=stdout,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
 
 
 def one_device_env() -> dict:
@@ -387,23 +359,16 @@ def test_cli_train_and_sweep_refuse_a_locked_directory(tmp_path):
     cfg_path.write_text(config_to_toml(tiny_config()))
     run = tmp_path / "run"
     with run_lock(run, "train"):
-        r = subprocess.run(
-            cli("train", cfg_path, "--out", run, "--quiet"),
-            capture_output=True,
-            text=True,
-            cwd=ROOT,
-            env=one_device_env(),
-            timeout=300,
-        )
+        r = run_cli("train", cfg_path, "--out", run, "--quiet", env=one_device_env())
         assert_clean_refusal(r, str(run), "in use by another jaxexo process", f"pid {os.getpid()}")
         assert snapshot(run) == {}
-        r = subprocess.run(
-            cli("sweep", ROOT / "configs" / "sweeps" / "smoke.toml", "--out", run, "--quiet"),
-            capture_output=True,
-            text=True,
-            cwd=ROOT,
+        r = run_cli(
+            "sweep",
+            ROOT / "configs" / "sweeps" / "smoke.toml",
+            "--out",
+            run,
+            "--quiet",
             env=one_device_env(),
-            timeout=300,
         )
         assert_clean_refusal(r, str(run), "in use by another jaxexo process")
         assert snapshot(run) == {}
@@ -466,7 +431,7 @@ def test_cli_generate_refuses_directories_and_missing_folders(tmp_path, option, 
     args = ["generate", "--method", "cfftg", "--obstacle", "triangle"] + [
         x for kv in outputs.items() for x in kv
     ]
-    r = subprocess.run(cli(*args), capture_output=True, text=True, cwd=ROOT, timeout=120)
+    r = run_cli(*args, timeout=120)
     assert_clean_refusal(r, option, message)
     assert sorted(p.name for p in tmp_path.iterdir()) == [
         "outdir"
@@ -620,14 +585,7 @@ def test_resume_refuses_foreign_corrupt_and_incomplete_run_directories(reference
 def test_sigkill_mid_run_then_resume_is_bit_identical(reference, tmp_path):
     cfg_path = reference["cfg_path"]
     run = tmp_path / "run"
-    p = subprocess.Popen(
-        cli("train", cfg_path, "--out", run, "--quiet", "--seed", SEED),
-        cwd=ROOT,
-        env=one_device_env(),
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
+    p = start_training(cfg_path, run, stdout=subprocess.DEVNULL)
     t0 = time.monotonic()
     while not (run / "checkpoint.msgpack").exists():
         assert p.poll() is None, p.stderr.read()[-3000:]
@@ -638,11 +596,15 @@ def test_sigkill_mid_run_then_resume_is_bit_identical(reference, tmp_path):
     assert p.returncode == -signal.SIGKILL  # killed, not finished
     assert not (run / "eval.json").exists()
     assert (run / LOCK_NAME).exists()  # the dead process's lock file is still there
-    r = subprocess.run(
-        cli("train", cfg_path, "--out", run, "--quiet", "--seed", SEED, "--resume"),
-        capture_output=True,
-        text=True,
-        cwd=ROOT,
+    r = run_cli(
+        "train",
+        cfg_path,
+        "--out",
+        run,
+        "--quiet",
+        "--seed",
+        SEED,
+        "--resume",
         env=one_device_env(),
         timeout=900,
     )
@@ -689,17 +651,7 @@ def test_two_training_processes_on_one_directory(reference, tmp_path):
     was faster) with a clean message; the run is exactly the uninterrupted one, no interleaved rows."""
     cfg_path = reference["cfg_path"]
     run = tmp_path / "run"
-    procs = [
-        subprocess.Popen(
-            cli("train", cfg_path, "--out", run, "--quiet", "--seed", SEED),
-            cwd=ROOT,
-            env=one_device_env(),
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-        )
-        for _ in range(2)
-    ]
+    procs = [start_training(cfg_path, run, stdout=subprocess.PIPE) for _ in range(2)]
     results = [(p, *p.communicate(timeout=900)) for p in procs]
     codes = sorted(p.returncode for p, _, _ in results)
     assert codes == [0, 2], [(p.returncode, err[-1500:]) for p, _, err in results]
@@ -737,7 +689,7 @@ def test_full_disk_fails_cleanly_and_keeps_the_last_checkpoint(reference, cache,
     r = subprocess.run(
         limited_fsize(
             len(saved) - 1,
-            cli(
+            cli_cmd(
                 "train", reference["cfg_path"], "--out", run, "--quiet", "--seed", SEED, "--resume"
             ),
         ),
@@ -764,7 +716,7 @@ def test_diverged_run_says_so_and_exports_nothing_non_finite(cache, tmp_path):
     cfg_path.write_text(config_to_toml(cfg))
     run = tmp_path / "run"
     r = subprocess.run(
-        cli("train", cfg_path, "--out", run, "--quiet", "--seed", SEED),
+        cli_cmd("train", cfg_path, "--out", run, "--quiet", "--seed", SEED),
         capture_output=True,
         text=True,
         cwd=ROOT,

@@ -19,15 +19,7 @@ from jaxexo.config import ConfigError, config_from_dict
 from jaxexo.storage.atomic import SymlinkRefused, append_line
 from jaxexo.storage.rundir import LOCK_NAME, RunDirError, run_lock
 
-from conftest import ROOT
-
-
-def cli(*args):
-    return [sys.executable, "-m", "jaxexo.cli", *map(str, args)]
-
-
-def run_cli(*args, timeout=300):
-    return subprocess.run(cli(*args), capture_output=True, text=True, cwd=ROOT, timeout=timeout)
+from conftest import ROOT, run_cli
 
 
 def assert_clean_refusal(r: subprocess.CompletedProcess, *needles: str, code: int = 2):

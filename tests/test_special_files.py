@@ -13,8 +13,6 @@ import io
 import json
 import os
 import stat
-import subprocess
-import sys
 import threading
 import warnings
 import zipfile
@@ -25,7 +23,7 @@ from jaxexo.config import ConfigError, load_config
 from jaxexo.config.input_files import InputFileError, read_input
 from jaxexo.storage.atomic import atomic_write, direct_output
 
-from conftest import ROOT
+from conftest import ROOT, run_python
 from test_reliability_inputs import assert_clean_refusal, make_policy, run_cli
 
 GEN_CFFTG = ("generate", "--method", "cfftg", "--obstacle", "base1")
@@ -294,9 +292,7 @@ def test_cli_warnings_are_one_line_without_a_source_line(tmp_path):
         "{'func': staticmethod(lambda args: (warnings.warn('careful'), 0)[1])})()})();"
         "sys.exit(cli.main([]))"
     )
-    r = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=60
-    )
+    r = run_python(code, timeout=60)
     assert r.returncode == 0, r.stderr
     assert r.stderr.strip() == "jaxexo: warning: careful"
 

@@ -32,33 +32,30 @@ from jaxexo.sweep import plan as P
 from jaxexo.sweep import results as R
 from jaxexo.sweep.spec import load_sweep, parse_bytes, sweep_from_dict
 
-from conftest import ROOT, jax_compilation_cache, legacy_raw
+from conftest import (
+    FORWARD_N,
+    FORWARD_T,
+    FORWARD_UPDATES,
+    ROOT,
+    cli_cmd,
+    forward_raw,
+    jax_compilation_cache,
+    run_cli,
+    run_python,
+)
 
 # --------------------------------------------------------------------------------------------
 # The tiny sweep: 4 learning rates (one of them absurd: it diverges) x 2 seeds, 6 updates each.
 # --------------------------------------------------------------------------------------------
 
-N, T, UPDATES = 16, 4, 6
+N, T, UPDATES = FORWARD_N, FORWARD_T, FORWARD_UPDATES
 HUGE_LR = 1e30
 LRS = [1e-3, HUGE_LR, 3e-3, 1e-2]
 
 
 def tiny_raw(**sweep) -> dict:
-    return legacy_raw(
-        {
-            "env": {"obs_mode": "thesis"},
-            "layout": {"obstacles": ["base1"], "pivot": ["obstacle"]},
-            "train": {
-                "num_envs": N,
-                "rollout_steps": T,
-                "num_minibatches": 2,
-                "hidden": [16],
-                "layer_norm": False,
-                "budget_env_steps": N * T * UPDATES,
-                "eval_episodes": 10,
-            },
-            "sweep": {"seeds": 2, "chunk_size": 4, "grid": {"train.lr": list(LRS)}, **sweep},
-        }
+    return forward_raw(
+        sweep={"seeds": 2, "chunk_size": 4, "grid": {"train.lr": list(LRS)}, **sweep}
     )
 
 
@@ -71,10 +68,6 @@ def tiny_toml(path) -> None:
         f'"train.lr" = [{", ".join(repr(x) for x in LRS)}]\n'
     )
     path.write_text(text)
-
-
-def _cli(*args):
-    return [sys.executable, "-m", "jaxexo.cli", *map(str, args)]
 
 
 # --------------------------------------------------------------------------------------------
@@ -355,9 +348,7 @@ def test_sweep_files_load_without_jax():
         "s = load_sweep('configs/sweeps/smoke.toml')\nmake_plan(s, 2, 2**30)\n"
         "print('JAX' if any(m == 'jax' or m.startswith(('jax.', 'flax')) for m in sys.modules) else 'NOJAX')\n"
     )
-    r = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120
-    )
+    r = run_python(code, timeout=120)
     assert r.returncode == 0, r.stderr
     assert r.stdout.strip() == "NOJAX"
 
@@ -498,7 +489,7 @@ def cli_local(jax_cache, tmp_path_factory):
     tmp = tmp_path_factory.mktemp("cli")
     tiny_toml(tmp / "tiny.toml")
     proc = subprocess.Popen(
-        _cli(
+        cli_cmd(
             "sweep",
             tmp / "tiny.toml",
             "--out",
@@ -770,13 +761,7 @@ def test_cli_sweep_writes_results_report_and_best_policy(cli_local, tiny_sweep):
 def test_cli_bad_sweep_exits_2_naming_the_field(tmp_path):
     p = tmp_path / "bad.toml"
     p.write_text('[sweep]\nseeds = 2\n[sweep.grid]\n"train.lamda" = [0.5]\n')
-    r = subprocess.run(
-        _cli("sweep", p, "--out", tmp_path / "out", "--quiet"),
-        capture_output=True,
-        text=True,
-        cwd=ROOT,
-        timeout=120,
-    )
+    r = run_cli("sweep", p, "--out", tmp_path / "out", "--quiet", timeout=120)
     assert r.returncode == 2, r.stderr
     assert "sweep.grid.train.lamda" in r.stderr and "unknown axis" in r.stderr
     assert not (tmp_path / "out").exists()
@@ -888,7 +873,7 @@ def test_ray_backend_gives_the_local_results(ray_cluster, cli_local, tmp_path):
     cli_local["wait"]()
     out = tmp_path / "ray"
     r = subprocess.run(
-        _cli(
+        cli_cmd(
             "sweep",
             cli_local["dir"] / "tiny.toml",
             "--out",

@@ -399,23 +399,13 @@ def test_cli_generate_rate_and_animation(trained_run, tmp_path):
     from jaxexo.cli import main
 
     out = tmp_path / "t.csv"
-    rc = main(
-        [
-            "generate",
-            "--policy",
-            str(trained_run / "policy.npz"),
-            "--obstacle",
-            "base2",
-            "--rate",
-            "200",
-            "--out",
-            str(out),
-            "--json",
-            str(tmp_path / "t.json"),
-            "--animate",
-            str(tmp_path / "s.gif"),
-        ]
-    )
+
+    def generate(rate, *more):
+        """``jaxexo generate`` of the trained policy on Base 2 at ``rate`` Hz into t.csv (+ ``more``)."""
+        args = ["--policy", trained_run / "policy.npz", "--obstacle", "base2", "--rate", rate]
+        return main(["generate", *map(str, args), "--out", str(out), *map(str, more)])
+
+    rc = generate(200, "--json", tmp_path / "t.json", "--animate", tmp_path / "s.gif")
     doc = json.loads((tmp_path / "t.json").read_text())
     assert rc == (0 if doc["checks"]["ok"] else 1)
     assert doc["rate_hz"] == 200 and doc["columns"] == list(TIMED_CSV_COLUMNS)
@@ -427,22 +417,7 @@ def test_cli_generate_rate_and_animation(trained_run, tmp_path):
 
     with Image.open(tmp_path / "s.gif") as im:
         assert im.n_frames >= 10
-    assert (
-        main(
-            [
-                "generate",
-                "--policy",
-                str(trained_run / "policy.npz"),
-                "--obstacle",
-                "base2",
-                "--rate",
-                "-5",
-                "--out",
-                str(out),
-            ]
-        )
-        == 2
-    )
+    assert generate(-5) == 2
 
 
 def test_topp_passes_row_by_row_equal_the_batched_passes_and_the_plain_recurrence():
@@ -467,40 +442,33 @@ def test_topp_passes_row_by_row_equal_the_batched_passes_and_the_plain_recurrenc
         [tl.topp(dq[i : i + 1], ddq[i : i + 1], vmax, amax, ds)[0] for i in range(b)]
     )
     np.testing.assert_array_equal(big, small)
+
     # The plain recurrence, one path at a time, with the interval computed per step.
+    def interval(i, j, speed):
+        """The admissible s'' interval (lo, hi) of path i at step j at s'^2 = speed (every joint's
+        acceleration within its limit; the whole line when no joint moves)."""
+        moving = np.abs(dq[i, j]) > 1e-12
+        if not moving.any():
+            return -np.inf, np.inf
+        ends = [
+            (
+                (-amax[m] - ddq[i, j, m] * speed) / dq[i, j, m],
+                (amax[m] - ddq[i, j, m] * speed) / dq[i, j, m],
+            )
+            for m in range(4)
+            if moving[m]
+        ]
+        return max(min(e) for e in ends), min(max(e) for e in ends)
+
     for i in range(0, b, 7):
         xmax = tl.max_speed_curve(dq[i], ddq[i], vmax, amax)
         reach = np.zeros(k)
         for j in range(k - 1, 0, -1):
-            moving = np.abs(dq[i, j]) > 1e-12
-            lo = (
-                max(
-                    min(
-                        (-amax[m] - ddq[i, j, m] * reach[j]) / dq[i, j, m],
-                        (amax[m] - ddq[i, j, m] * reach[j]) / dq[i, j, m],
-                    )
-                    for m in range(4)
-                    if moving[m]
-                )
-                if moving.any()
-                else -np.inf
-            )
+            lo = interval(i, j, reach[j])[0]
             reach[j - 1] = min(max(reach[j] - 2.0 * ds * lo, 0.0), xmax[j - 1])
         x = np.zeros(k)
         for j in range(k - 1):
-            moving = np.abs(dq[i, j]) > 1e-12
-            hi = (
-                min(
-                    max(
-                        (-amax[m] - ddq[i, j, m] * x[j]) / dq[i, j, m],
-                        (amax[m] - ddq[i, j, m] * x[j]) / dq[i, j, m],
-                    )
-                    for m in range(4)
-                    if moving[m]
-                )
-                if moving.any()
-                else np.inf
-            )
+            hi = interval(i, j, x[j])[1]
             x[j + 1] = min(max(x[j] + 2.0 * ds * hi, 0.0), reach[j + 1])
         np.testing.assert_allclose(big[i], x, rtol=1e-9, atol=1e-12)
     assert np.all(np.isfinite(floor_big)) and np.all(big >= 0)

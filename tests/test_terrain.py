@@ -23,10 +23,15 @@ from jaxexo.physics.terrain import (
     family_outline,
 )
 
+from conftest import eval_against_cfftg
+
 FOOT = 0.20
 HIP = (-0.5236, 2.0071)
 KNEE = (-1.7453, 0.0)
 N = 400
+# The default leg as terrain.unclearable takes it; TerrainSpec.check also takes the goal tolerance.
+LEG = dict(foot_length=FOOT, thigh=0.5, shin=0.5, hip_limits=HIP, knee_limits=KNEE, heel_lift=0.04)
+CHECK = dict(LEG, goal_tolerance=0.04)
 
 
 def draws(n=N, seed=0):
@@ -222,27 +227,8 @@ def test_every_family_is_clearable_by_the_default_leg_dense_independent_sweep():
     """Dense random placements (not the grid of terrain.unclearable) and the heel anywhere over the
     obstacle's top at its tallest + 4 cm (default mid-goal box bottom), for every pivot."""
     spec = TerrainSpec(families=FAMILY_NAMES, allow_held_out=True)
-    assert (
-        terrain.unclearable(
-            spec,
-            foot_length=FOOT,
-            thigh=0.5,
-            shin=0.5,
-            hip_limits=HIP,
-            knee_limits=KNEE,
-            heel_lift=0.04,
-        )
-        == []
-    )
-    spec.check(
-        foot_length=FOOT,
-        thigh=0.5,
-        shin=0.5,
-        hip_limits=HIP,
-        knee_limits=KNEE,
-        heel_lift=0.04,
-        goal_tolerance=0.04,
-    )
+    assert terrain.unclearable(spec, **LEG) == []
+    spec.check(**CHECK)
     rng = np.random.default_rng(2)
     for name, fam in FAMILIES.items():
         n = 4000
@@ -264,13 +250,7 @@ def test_every_family_is_clearable_by_the_default_leg_dense_independent_sweep():
     # ... and an impossible one is refused with the field named: a leg too short for 30 cm poles.
     with pytest.raises(TerrainError, match=r"layout.terrain.families: 'pole'"):
         TerrainSpec(families=("pole",), allow_held_out=True).check(
-            foot_length=FOOT,
-            thigh=0.25,
-            shin=0.25,
-            hip_limits=HIP,
-            knee_limits=KNEE,
-            heel_lift=0.04,
-            goal_tolerance=0.04,
+            **{**CHECK, "thigh": 0.25, "shin": 0.25}
         )
 
 
@@ -291,25 +271,9 @@ def test_spec_validation_names_the_field():
     with pytest.raises(TerrainError, match=r"pivot"):
         TerrainSpec(pivot=(0, 0, 0))
     with pytest.raises(TerrainError, match=r"step_length: the longest step 0.5 m cannot hold"):
-        TerrainSpec(step_length=(0.4, 0.5)).check(
-            foot_length=FOOT,
-            thigh=0.5,
-            shin=0.5,
-            hip_limits=HIP,
-            knee_limits=KNEE,
-            heel_lift=0.04,
-            goal_tolerance=0.04,
-        )
+        TerrainSpec(step_length=(0.4, 0.5)).check(**CHECK)
     with pytest.raises(TerrainError, match=r"far_margin"):
-        TerrainSpec(far_margin=0.03).check(
-            foot_length=FOOT,
-            thigh=0.5,
-            shin=0.5,
-            hip_limits=HIP,
-            knee_limits=KNEE,
-            heel_lift=0.04,
-            goal_tolerance=0.04,
-        )
+        TerrainSpec(far_margin=0.03).check(**CHECK)
     with pytest.raises(TerrainError, match=r"family must be one of"):
         terrain.family_id("nope")
 
@@ -356,30 +320,9 @@ def test_unseen_set_is_fixed_held_out_and_accepted_by_the_generators():
 @pytest.fixture(scope="module")
 def unseen_eval(trained_run, tmp_path_factory):
     pytest.importorskip("jax")
-    from jaxexo.cli import main
-
     out = tmp_path_factory.mktemp("unseen")
-    assert (
-        main(
-            [
-                "eval",
-                "--policy",
-                str(trained_run / "policy.npz"),
-                "--against",
-                "cfftg",
-                "--scenarios",
-                "unseen",
-                "--n",
-                "30",
-                "--batch",
-                "50",
-                "--no-figures",
-                "--out",
-                str(out),
-            ]
-        )
-        == 0
-    )
+    args = ("--scenarios", "unseen", "--n", 30, "--batch", 50, "--no-figures")
+    assert eval_against_cfftg(trained_run, out, *args) == 0
     return out
 
 

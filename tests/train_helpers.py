@@ -1,6 +1,6 @@
 """Shared pieces of the training tests (test_trainer, test_driver, test_policy_file, test_network,
-test_train_config, test_cli_train): the tiny config, tree helpers and the module-scoped compilation
-cache (the uninterrupted ``jaxexo train`` reference run of the tiny config is conftest's
+test_train_config, test_cli_train): the tiny config (defined in conftest, jax-free, and shared with
+test_reliability), tree helpers and the module-scoped compilation cache (the uninterrupted ``jaxexo train`` reference run of the tiny config is conftest's
 ``tiny_reference``).
 
 JAX compile time dominates these tests (a trainer update takes 5-6 s to compile on two CPU cores,
@@ -29,12 +29,25 @@ from jaxexo.config import ConfigError, config_from_dict, load_config
 from jaxexo.config.toml_io import config_to_toml
 from jaxexo.storage.policy_file import FORMAT_VERSION, PolicyFileError, load_policy
 
-from conftest import ROOT, jax_compilation_cache, legacy_raw
+from conftest import (  # noqa: F401 (the shared tiny config, for the star imports)
+    FIXED_LAYOUT,
+    REWARD,
+    ROOT,
+    SEED,
+    TINY_N,
+    TINY_T,
+    TINY_TRAIN,
+    TINY_UPDATES,
+    jax_compilation_cache,
+    legacy_raw,
+    tiny_config,
+    tiny_raw,
+)
 
 jax = pytest.importorskip("jax")
 import jax.numpy as jnp  # noqa: E402
 
-from jaxexo.train import driver  # noqa: E402
+from jaxexo.train import driver, run_files  # noqa: E402
 from jaxexo.train.evaluate import HELD_OUT, TEST_KINDS, make_rollout  # noqa: E402
 from jaxexo.train.trainer import METRICS, Hyperparams, Trainer, make_train  # noqa: E402
 
@@ -49,50 +62,18 @@ def _compilation_cache(tmp_path_factory):
         yield cache
 
 
-# A fixed scene: Base 1 at the default place, pivot under the obstacle, no start shift or jitter.
-FIXED_LAYOUT = {"obstacles": ["base1"], "pivot": ["obstacle"]}
-# configs/default.toml's [reward]
-REWARD = {
-    "traj_weights": [0.0, 2.0, 0.5, 4.0, 0.5, 0.5, 1.0, 0.5],
-    "exo_weights": [1.0, 1.0, 2.0, 1.0],
-    "goal_reward": 20.0,
-    "joint_limit_penalty": 4.0,
-    "progress_shaping": 5.0,
-}
-# The shared tiny config: Watkins Q(lambda) in the backward view (its checkpoint then holds traces,
-# the pending action and its greediness too), 6 updates in 3 chunks of 2.
-TINY_N, TINY_T, TINY_UPDATES = 64, 8, 6
-TINY_TRAIN = {
-    "num_envs": TINY_N,
-    "rollout_steps": TINY_T,
-    "num_minibatches": 2,
-    "hidden": [32, 32],
-    "layer_norm": True,
-    "trace": "backward",
-    "control": "off_policy",
-    "trace_kind": "accumulating",
-    "lr": 1e-3,
-    "gamma": 0.98,
-    "lam": 0.9,
-    "budget_env_steps": TINY_N * TINY_T * TINY_UPDATES,
-    "chunk_updates": 2,
-    "eval_episodes": 20,
-}
-
-
-def tiny_raw(**train) -> dict:
-    return legacy_raw(
-        {
-            "env": {"obs_mode": "conditioned"},
-            "layout": dict(FIXED_LAYOUT),
-            "reward": dict(REWARD),
-            "train": {**TINY_TRAIN, **train},
-        }
-    )
-
-
-def tiny_config(**train):
-    return config_from_dict(tiny_raw(**train))
+def assert_run_files(out) -> None:
+    """A finished run directory ``out`` holds every file of a run."""
+    for name in (
+        "config.toml",
+        "metrics.jsonl",
+        "policy.npz",
+        "training_curve.png",
+        "eval.json",
+        run_files.CHECKPOINT,
+        run_files.BOOKKEEPING,
+    ):
+        assert (out / name).is_file(), name
 
 
 def leaves(tree) -> list[np.ndarray]:
@@ -137,13 +118,6 @@ def random_params(net, obs_dim: int, seed: int):
         lambda s: (rng.normal(size=s.shape) * 0.5 + (1.0 if s.ndim == 1 else 0.0)).astype(s.dtype),
         shapes,
     )
-
-
-SEED = 3
-
-
-def _cli_cmd(*args):
-    return [sys.executable, "-m", "jaxexo.cli", *map(str, args)]
 
 
 def _npz(path) -> dict:

@@ -14,6 +14,12 @@ from pathlib import Path
 import numpy as np
 
 TARGETS = {"rl_device_ready_ms": 5.0, "rl_over_cfftg": 1.5, "batch_1000_s": 1.0}
+# benchmarks/bench_device_ready.py's options (jaxexo.benchmarks.runner.run_script).
+OPTIONS = (
+    ("--n", "n", "unseen-shape scenes"),
+    ("--batch", "batch", "swings timed in one time_swings call"),
+    ("--rate", "rate", "control rate, Hz"),
+)
 # The timing's parts: the jaxexo.swing.timing function each one's CPU time is read from.
 PARTS = {
     "paths": "_joint_paths",

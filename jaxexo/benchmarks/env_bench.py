@@ -16,8 +16,9 @@ import numpy as np
 from jax.sharding import Mesh
 from jax.sharding import PartitionSpec as P
 
-from jaxexo.config import Config
+from jaxexo.config import EQUAL_WEIGHTS, THESIS_JOINT_LIMITS, Config
 from jaxexo.env import ExoStepEnv
+from jaxexo.physics.geometry import THESIS_OBSTACLES
 
 
 def make_rollout(env: ExoStepEnv, num_envs: int, num_steps: int, devices=None, mask: str = "none"):
@@ -122,12 +123,9 @@ def bench_env(
     return rows
 
 
+# The thesis's five obstacles (Table 3.1) and a rectangle range.
 MIXED_KINDS = [
-    "base1",
-    "base2",
-    "base3",
-    "triangle",
-    "half_circle",
+    *THESIS_OBSTACLES,
     {"kind": "rectangle", "width": [0.05, 0.20], "height": [0.05, 0.20]},
 ]
 
@@ -141,13 +139,9 @@ def mixed_config() -> Config:
     return config_from_dict(
         {
             "env": {"shield": False, "obs_profile": "bbox"},
-            "kinematics": {
-                "hip_limits": [-0.5235987755982988, 2.007128639793479],
-                "knee_limits": [-1.7453292519943295, 0.0],
-            },
+            "kinematics": dict(THESIS_JOINT_LIMITS),
             "reward": {
-                "traj_weights": [1.0] * 8,
-                "exo_weights": [1.0] * 4,
+                **EQUAL_WEIGHTS,
                 "goal_reward": 10.0,
                 "joint_limit_penalty": 1.0,
                 "progress_shaping": 0.0,

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from jaxexo.benchmarks.scenes import set_table
 from jaxexo.config import config_from_dict
 from jaxexo.physics import terrain
 
@@ -142,16 +143,12 @@ def markdown(p: dict) -> str:
     ]
     for m, t in p["train"].items():
         lines.append(f"| {m} | {t['train_seconds']:.0f} | {t['eval_success']} |")
-    lines += [
-        "",
-        "| set | generator | n | strict success % | accuracy % |",
-        "|---|---|---:|---:|---:|",
-    ]
-    for s, gens in p["overall"].items():
-        for g, r in gens.items():
-            lines.append(
-                f"| {s} | {g} | {r['n']} | {100 * r['success']:.1f} | {100 * r['accuracy']:.1f} |"
-            )
+    lines.append("")
+    lines += set_table(
+        ("n", "strict success %", "accuracy %"),
+        p["overall"],
+        lambda r: f"{r['n']} | {100 * r['success']:.1f} | {100 * r['accuracy']:.1f}",
+    )
     for s, table in p["by_family"].items():
         lines += [
             "",

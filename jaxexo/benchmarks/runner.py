@@ -1,9 +1,11 @@
 """What the benchmarks/*.py runners share: their command line's parser, which shows the script's
-docstring as written and takes the policy to measure."""
+docstring as written and takes the policy to measure, and (run_script) the whole runner of a
+benchmark whose options are its function's parameters."""
 
 from __future__ import annotations
 
 import argparse
+import inspect
 
 
 def parser(doc: str, policy: bool = True) -> argparse.ArgumentParser:
@@ -15,3 +17,19 @@ def parser(doc: str, policy: bool = True) -> argparse.ArgumentParser:
     if policy:
         p.add_argument("policy", help="policy.npz")
     return p
+
+
+def run_script(doc: str, benchmark, options, out_dir, argv=None):
+    """A runner script: its parser (``doc``, the policy) with ``options``, (flag, parameter, help)
+    triples, each an option of the type and default of ``benchmark``'s parameter of that name; then
+    ``benchmark(policy, out_dir, **options)``, whose result it returns."""
+    p = parser(doc)
+    params = inspect.signature(benchmark).parameters
+    for flag, name, helptext in options:
+        default = params[name].default
+        metavar = flag.lstrip("-").replace("-", "_").upper()  # as argparse names the flag's own
+        p.add_argument(
+            flag, dest=name, metavar=metavar, type=type(default), default=default, help=helptext
+        )
+    a = vars(p.parse_args(argv))
+    return benchmark(a.pop("policy"), out_dir, **a)

@@ -1,7 +1,7 @@
 """The scene sets the swing benchmarks share: the thesis five with shifted layouts, shapes never
 trained on (both jaxexo.inference.scenarios.safety_scenarios) and the held-out terrain families
-(jaxexo.physics.scenarios.unseen_scenarios), and the keyword lists a batch of scenes is generated
-with."""
+(jaxexo.physics.scenarios.unseen_scenarios), the keyword lists a batch of scenes is generated
+with, and the Markdown table of figures per scene set and generator."""
 
 from __future__ import annotations
 
@@ -40,3 +40,14 @@ def safety_sets(
 def batch_kwargs(scenes: list[dict]) -> dict[str, list]:
     """generate_batch's per-scene keywords (pivot, start_y, step_length) of a scene list."""
     return {k: [s[k] for s in scenes] for k in ("pivot", "start_y", "step_length")}
+
+
+def set_table(columns, sets: dict, cells) -> list[str]:
+    """A Markdown table of a row per scene set and generator of ``sets`` ({set: {generator: figures}}):
+    the columns set, generator and ``columns`` (right-aligned), ``cells(figures)`` the row's cells after
+    the first two, as text ("a | b")."""
+    lines = [f"| set | generator | {' | '.join(columns)} |", "|---|---|" + "---:|" * len(columns)]
+    for s, gens in sets.items():
+        for g, r in gens.items():
+            lines.append(f"| {s} | {g} | {cells(r)} |")
+    return lines

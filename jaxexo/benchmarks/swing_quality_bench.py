@@ -25,7 +25,14 @@ from pathlib import Path
 import numpy as np
 
 from jaxexo.baselines import CFFTG
-from jaxexo.benchmarks.scenes import FAMILIES, SHAPES, THESIS_FIVE, batch_kwargs, safety_sets
+from jaxexo.benchmarks.scenes import (
+    FAMILIES,
+    SHAPES,
+    THESIS_FIVE,
+    batch_kwargs,
+    safety_sets,
+    set_table,
+)
 from jaxexo.evaluation.machine import machine_info, write_result
 from jaxexo.inference import TrajectoryGenerator, time_swings
 from jaxexo.physics import geometry, swept
@@ -224,36 +231,35 @@ def markdown(res: dict, title: str) -> str:
         "margin from the true one); no generator can do better on the others. True contact and < 1 cm: "
         "the delivered curve against the true obstacle (exact swept clearance).",
         "",
-        "| set | generator | n | safe % | feasible n | safe % of feasible | goal % | lift median cm | lift p95 cm | duration median s | "
-        "p95 s | max s | jerk median | jerk p95 | smoothed once % | raw polyline % | true contact % | "
-        "true < 1 cm % |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
-    for s, gens in res["sets"].items():
-        for g, r in gens.items():
-            once = f"{100 * r['smoothed_once']:.1f}" if "smoothed_once" in r else ""
-            raw = f"{100 * r['raw_polyline']:.1f}" if "raw_polyline" in r else ""
-            lines.append(
-                f"| {s} | {g} | {r['n']} | {100 * r['safe']:.1f} | {r['feasible']} | "
-                f"{100 * r['safe_of_feasible']:.1f} | {100 * r['reached_goal']:.1f} | "
-                f"{r['lift_cm_median']:.2f} | {r['lift_cm_p95']:.2f} | {r['duration_s_median']:.3f} | "
-                f"{r['duration_s_p95']:.3f} | {r['duration_s_max']:.2f} | {r['jerk_median']:.3g} | "
-                f"{r['jerk_p95']:.3g} | {once} | {raw} | {100 * r['true_contact']:.1f} | "
-                f"{100 * r['true_within_1cm']:.1f} |"
-            )
-    lines += [
-        "",
-        "On the scenes that every generator swings safely:",
-        "",
-        "| set | generator | n | lift median cm | duration median s | duration p95 s |",
-        "|---|---|---:|---:|---:|---:|",
-    ]
-    for s, gens in res["sets"].items():
-        for g, r in gens.items():
-            lines.append(
-                f"| {s} | {g} | {r['n_all_safe']} | {r['lift_cm_median_all_safe']:.2f} | "
-                f"{r['duration_s_median_all_safe']:.3f} | {r['duration_s_p95_all_safe']:.3f} |"
-            )
+
+    def cells(r):
+        once = f"{100 * r['smoothed_once']:.1f}" if "smoothed_once" in r else ""
+        raw = f"{100 * r['raw_polyline']:.1f}" if "raw_polyline" in r else ""
+        return (
+            f"{r['n']} | {100 * r['safe']:.1f} | {r['feasible']} | "
+            f"{100 * r['safe_of_feasible']:.1f} | {100 * r['reached_goal']:.1f} | "
+            f"{r['lift_cm_median']:.2f} | {r['lift_cm_p95']:.2f} | {r['duration_s_median']:.3f} | "
+            f"{r['duration_s_p95']:.3f} | {r['duration_s_max']:.2f} | {r['jerk_median']:.3g} | "
+            f"{r['jerk_p95']:.3g} | {once} | {raw} | {100 * r['true_contact']:.1f} | "
+            f"{100 * r['true_within_1cm']:.1f}"
+        )
+
+    columns = (
+        "n, safe %, feasible n, safe % of feasible, goal %, lift median cm, lift p95 cm, "
+        "duration median s, p95 s, max s, jerk median, jerk p95, smoothed once %, raw polyline %, "
+        "true contact %, true < 1 cm %"
+    )
+    lines += set_table(columns.split(", "), res["sets"], cells)
+    lines += ["", "On the scenes that every generator swings safely:", ""]
+    lines += set_table(
+        ("n", "lift median cm", "duration median s", "duration p95 s"),
+        res["sets"],
+        lambda r: (
+            f"{r['n_all_safe']} | {r['lift_cm_median_all_safe']:.2f} | "
+            f"{r['duration_s_median_all_safe']:.3f} | {r['duration_s_p95_all_safe']:.3f}"
+        ),
+    )
     return "\n".join(lines)
 
 

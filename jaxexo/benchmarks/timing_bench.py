@@ -14,6 +14,13 @@ import numpy as np
 
 from jaxexo.physics.scenarios import shape_scenarios
 
+# benchmarks/bench_timing.py's options (jaxexo.benchmarks.runner.run_script).
+OPTIONS = (
+    ("--n", "n", "thesis-obstacle scenes"),
+    ("--unseen", "n_unseen", "unseen-shape scenes"),
+    ("--rate", "rate", "control rate, Hz"),
+)
+
 
 def _figures(trajs, timed, rate: float) -> dict:
     from jaxexo.swing.timing import uniform_peaks

@@ -180,6 +180,14 @@ class KinematicsConfig:
     )  # -100 .. 0 deg
 
 
+# The thesis's joint limits to the last bit (the declared defaults above are rounded to 0.1 mrad) as a
+# [kinematics] table states them: what the thesis configs hold, for configs stated in full.
+THESIS_JOINT_LIMITS = {
+    "hip_limits": [math.radians(-30), math.radians(115)],
+    "knee_limits": [math.radians(-100), 0.0],
+}
+
+
 @dataclass(frozen=True)
 class DeviceConfig:
     """[device]: the exoskeleton's joint drives, for timing swings (jaxexo.swing.timing).
@@ -231,6 +239,10 @@ class DeviceConfig:
 def _penalty(default):
     """A penalty or reward magnitude of eq 2.29-2.52 (>= 0, at most MAX_REWARD_SCALE)."""
     return declare(default, number(nonneg=True, hi=MAX_REWARD_SCALE))
+
+
+# Every term of eq 2.38 and of eq 2.52 weighted alike, as a [reward] table states it.
+EQUAL_WEIGHTS = {"traj_weights": [1.0] * 8, "exo_weights": [1.0] * 4}
 
 
 @dataclass(frozen=True)

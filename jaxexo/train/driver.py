@@ -52,7 +52,7 @@ import numpy as np
 from jaxexo.config import Config, ConfigError, check_seed
 from jaxexo.storage.rundir import TrainingDiverged, run_lock  # noqa: F401 (read as driver.TrainingDiverged)
 from jaxexo.train import run_files
-from jaxexo.train.engine import ChunkOut, Placement, Track, finite, run_chunks
+from jaxexo.train.engine import ChunkOut, Placement, Track, divergence_remedy, finite, run_chunks
 from jaxexo.train.evaluate import make_validator
 from jaxexo.train.trainer import Hyperparams, Trainer
 
@@ -189,17 +189,24 @@ class OneAgent(Placement):
     def report(self, exported, track, rows, counts, figures):
         return {"diverged_chunk": int(track.diverged[0])} if track.diverged[0] else {}
 
-    def nothing_exported(self, metrics_path, track):
+    def _diverged(self, metrics_path, track, what: str) -> str:
+        """TrainingDiverged's message: where the run diverged, ``what`` was kept, and the remedy."""
         return (
             f"training diverged in chunk {track.diverged[0]} (non-finite loss or parameters; {metrics_path} row "
-            f'{track.diverged[0]} has "diverged": true); no chunk finished with finite parameters, so no policy '
-            f"was exported. Lower train.lr (it is {self.cfg.train.lr:g}) or train.max_grad_norm"
+            f'{track.diverged[0]} has "diverged": true); {what}. {divergence_remedy(self.cfg)}'
+        )
+
+    def nothing_exported(self, metrics_path, track):
+        return self._diverged(
+            metrics_path,
+            track,
+            "no chunk finished with finite parameters, so no policy was exported",
         )
 
     def diverged_after(self, metrics_path, track):
-        return (
-            f"training diverged in chunk {track.diverged[0]} (non-finite loss or parameters; {metrics_path} row "
-            f'{track.diverged[0]} has "diverged": true); policy.npz and eval.json hold the best finite '
-            f"parameters, from chunk {track.chunk[0]} (validation success on raw moves {track.score[0]:.3f}). "
-            f"Lower train.lr (it is {self.cfg.train.lr:g}) or train.max_grad_norm"
+        return self._diverged(
+            metrics_path,
+            track,
+            f"policy.npz and eval.json hold the best finite parameters, from chunk {track.chunk[0]} "
+            f"(validation success on raw moves {track.score[0]:.3f})",
         )

@@ -171,6 +171,11 @@ class Placement(abc.ABC):
         """TrainingDiverged's message when the exported agent diverged after its best chunk."""
 
 
+def divergence_remedy(cfg: Config) -> str:
+    """The last sentence of every TrainingDiverged message: what to change."""
+    return f"Lower train.lr (it is {cfg.train.lr:g}) or train.max_grad_norm"
+
+
 def run_chunks(
     cfg: Config, out: Path, seed: int, resume: bool, progress: bool, eval_episodes, placement
 ) -> dict:

@@ -48,7 +48,7 @@ from jaxexo.config import Config, ConfigError
 from jaxexo.storage.atomic import write_figure
 from jaxexo.storage.checkpoint import CheckpointError
 from jaxexo.train import run_files as F
-from jaxexo.train.engine import ChunkOut, Placement, Track, finite, run_chunks
+from jaxexo.train.engine import ChunkOut, Placement, Track, divergence_remedy, finite, run_chunks
 from jaxexo.train.evaluate import make_rollouts, validation_set
 from jaxexo.train.lanes import LANES, over_lanes, padded_agents
 from jaxexo.train.trainer import Hyperparams, Trainer
@@ -345,7 +345,7 @@ class Members(Placement):
         return (
             f"every member of the population of {self.size} diverged (non-finite loss or parameters; "
             f'{metrics_path}: the members\' "diverged"), and a diverged member is never exported, so no policy '
-            f"was. Lower train.lr (it is {self.cfg.train.lr:g}) or train.max_grad_norm"
+            f"was. {divergence_remedy(self.cfg)}"
         )
 
     def diverged_after(self, metrics_path, track):
