@@ -316,6 +316,49 @@ def test_bench_summary_from_the_compare_part(trained_run, tmp_path):
     assert "| rl on 20 test scenarios" in again and "compare: from compare_" in again
 
 
+def test_bench_keeps_the_policy_it_trained_until_the_course_part_has_run(tmp_path, monkeypatch):
+    """Without --policy, ``jaxexo bench`` trains one into a temporary directory; the course part, the
+    last to swing it, runs while that directory still exists (it once ran after the directory was
+    removed). Training is stood in for by a policy file written where it would be."""
+    from pathlib import Path
+
+    from jaxexo.benchmarks import course_bench
+    from jaxexo.benchmarks.run_all import run_all
+    from jaxexo.train import driver
+
+    from test_reliability_inputs import make_policy
+
+    def train(cfg, out, **_):
+        Path(out).mkdir(parents=True)
+        make_policy(Path(out) / "policy.npz")
+
+    seen = []
+
+    def course(policy, out_dir, n, progress=None):
+        seen.append(Path(policy).is_file())
+        return {
+            "planned": n,
+            "courses_drawn": n,
+            "refused": 0,
+            "rl_alone_success": 1.0,
+            "cfftg_success": 1.0,
+            "duration_ratio_rl_over_cfftg": {"median": None},
+            "per_step_over_one_swing_median": None,
+        }
+
+    monkeypatch.setattr(driver, "run_training", train)
+    monkeypatch.setattr(course_bench, "run_course_benchmark", course)
+    res = run_all(
+        tmp_path,
+        skip="env,train,generate,compare,baseline",
+        courses=1,
+        progress=lambda *_: None,
+    )
+    assert seen == [True]
+    assert res["course"]["planned"] == 1
+    assert "walks over 1 courses" in next(tmp_path.glob("summary_*.md")).read_text()
+
+
 @pytest.mark.slow
 def test_cli_generate_cfftg_with_a_policys_kinematics(trained_run, tmp_path):
     from jaxexo.baselines import CFFTG
