@@ -125,25 +125,46 @@ def _ms(x) -> dict:
     }
 
 
+def _placement(s: dict) -> dict:
+    """A scenario's placement, as ``generate``'s keywords: the pivot, the start and the step length."""
+    return {k: s[k] for k in ("pivot", "start_y", "step_length")}
+
+
 def alternate(generators: dict, scenarios: list[dict], warmup: int = 20):
     """jaxexo.evaluation.compare.run_generators with the CPU time of each call too (time.process_time:
     on a shared machine a long call is preempted more often than a short one, which the wall clock
     charges to it). Returns {name: (trajectories, wall seconds, CPU seconds)}."""
     import time
 
-    kw = lambda s: {k: s[k] for k in ("pivot", "start_y", "step_length")}  # noqa: E731
     names = list(generators)
     for s in scenarios[:warmup]:
         for g in generators.values():
-            g.generate(s["obstacle"], **kw(s))
+            g.generate(s["obstacle"], **_placement(s))
     out = {n: ([], np.empty(len(scenarios)), np.empty(len(scenarios))) for n in names}
     for i, s in enumerate(scenarios):
         for n in names if i % 2 == 0 else names[::-1]:
             c0, t0 = time.process_time(), time.perf_counter()
-            tr = generators[n].generate(s["obstacle"], **kw(s))
+            tr = generators[n].generate(s["obstacle"], **_placement(s))
             out[n][1][i], out[n][2][i] = time.perf_counter() - t0, time.process_time() - c0
             out[n][0].append(tr)
     return out
+
+
+def rollout_states(sp, scene, raw, acts) -> list[tuple]:
+    """The network's and the shield's inputs at each step of a rollout (``raw`` heel path, ``acts``
+    its moves): heel y, z, the step, whether the mid goal was visited, the previous move (-1 first)."""
+    from jaxexo.physics import dynamics
+    from jaxexo.physics.dynamics import scalar
+
+    mid_y, mid_z = dynamics.mid_goal(scalar, sp, scene.center_y, scene.height)
+    visited, states = False, []
+    for j in range(len(acts)):
+        hy, hz = float(raw[j, 0]), float(raw[j, 1])
+        states.append((hy, hz, float(j), 1.0 if visited else 0.0, int(acts[j - 1]) if j else -1))
+        visited = visited or dynamics.in_mid_goal(
+            scalar, sp, float(raw[j + 1, 0]), float(raw[j + 1, 1]), mid_y, mid_z
+        )
+    return states
 
 
 def time_breakdown(gen, cf, scenarios: list[dict], repeats: int = 3) -> dict:
@@ -158,8 +179,6 @@ def time_breakdown(gen, cf, scenarios: list[dict], repeats: int = 3) -> dict:
 
     from jaxexo.inference.clearing import clear_rows
     from jaxexo.inference.shield import ScalarShield
-    from jaxexo.physics import dynamics
-    from jaxexo.physics.dynamics import scalar
 
     def best(fn):
         out = float("inf")
@@ -190,16 +209,7 @@ def time_breakdown(gen, cf, scenarios: list[dict], repeats: int = 3) -> dict:
         scene = gen.scene(s["obstacle"], s["pivot"], None, s["start_y"], s["step_length"])
         raw, acts = gen.rollout(scene)
         k = len(acts)
-        mid_y, mid_z = dynamics.mid_goal(scalar, sp, scene.center_y, scene.height)
-        visited, states = False, []
-        for j in range(k):
-            hy, hz = float(raw[j, 0]), float(raw[j, 1])
-            states.append(
-                (hy, hz, float(j), 1.0 if visited else 0.0, int(acts[j - 1]) if j else -1)
-            )
-            visited = visited or dynamics.in_mid_goal(
-                scalar, sp, float(raw[j + 1, 0]), float(raw[j + 1, 1]), mid_y, mid_z
-            )
+        states = rollout_states(sp, scene, raw, acts)
         basis = gen._basis(scene)
         step.set_scene(basis)
         qs = [step.q_values(*st[:4]).copy() for st in states]
@@ -220,31 +230,13 @@ def time_breakdown(gen, cf, scenarios: list[dict], repeats: int = 3) -> dict:
         )
         rows["smoothing_correction"].append(cl)
         rows["verdict_angles"].append(max(fin - cl, 0.0))
-        rows["rl_total"].append(
-            best(
-                lambda: gen.generate(
-                    s["obstacle"],
-                    pivot=s["pivot"],
-                    start_y=s["start_y"],
-                    step_length=s["step_length"],
-                    fallback=None,
-                )
-            )
-        )
+        at = _placement(s)
+        rows["rl_total"].append(best(lambda: gen.generate(s["obstacle"], **at, fallback=None)))
         plan = best(lambda: cf.plan([scene]))
         tot = best(lambda: cf.finish([scene], n_pts, 1.0))
         rows["cfftg_plan"].append(plan)
         rows["cfftg_assemble"].append(max(tot - plan, 0.0))
-        rows["cfftg_total"].append(
-            best(
-                lambda: cf.generate(
-                    s["obstacle"],
-                    pivot=s["pivot"],
-                    start_y=s["start_y"],
-                    step_length=s["step_length"],
-                )
-            )
-        )
+        rows["cfftg_total"].append(best(lambda: cf.generate(s["obstacle"], **at)))
     return {k: float(np.median(v)) for k, v in rows.items() if v}
 
 
@@ -282,73 +274,50 @@ def smoothing_counts(trajs) -> dict:
     }
 
 
-def run_generate_benchmark(policy: str | Path, out_dir, n: int = 1000, progress=print) -> dict:
-    """One swing (``generate``, RL alone: ``fallback=None``) RL and CFFTG alternating per scene on the
-    held-out families and on the safety scenes (and the plain reference, ``plain_reference``, on a
-    quarter of them); batches of 1000 with default and single-threaded BLAS; smoothing counts; the
-    cold import."""
+def set_figures(gen, cf, scenarios: list[dict], n: int) -> dict:
+    """One scene set's figures: one swing, RL alone (``fallback=None``) and CFFTG alternating per
+    scene, medians of 3 passes (wall and CPU time); the plain reference (``plain_reference``) against
+    the fast generator on the first quarter of the n scenes; smoothing counts, safe swings and the
+    shield's steps left to the full mask."""
     from jaxexo.evaluation.compare import WithFallback, run_generators
-    from jaxexo.evaluation.machine import write_result
-    from jaxexo.inference.cfftg import CFFTG
     from jaxexo.inference.generator import plain_reference
 
-    load = [round(x, 2) for x in os.getloadavg()]
-    gen = TrajectoryGenerator.load(policy)
-    cf = CFFTG(gen.config)
-
-    sets = {}
-    scene_sets = {which: scene_set(gen.config, which, n) for which in SETS}
-    for which in SETS:
-        scenarios = scene_sets[which]
-        gens = {"rl": WithFallback(gen, None), "cfftg": cf}
-        stats = gen.shield_stats
-        before = (stats.steps, stats.steps_to_full_mask)
-        passes = [alternate(gens, scenarios) for _ in range(3)]
-        steps = (stats.steps - before[0], stats.steps_to_full_mask - before[1])
-        single = {k: np.median([p[k][1] for p in passes], axis=0) for k in gens}
-        cpu = {k: np.median([p[k][2] for p in passes], axis=0) for k in gens}
-        plain = WithFallback(plain_reference(gen), None)
-        ref = run_generators(
-            {"rl": WithFallback(gen, None), "rl_reference": plain}, scenarios[: max(1, n // 4)]
-        )
-        trajs = passes[-1]["rl"][0]
-        sets[which] = {
-            "n": len(scenarios),
-            "single_ms": {k: _ms(v) for k, v in single.items()},
-            "ratio_rl_over_cfftg": float(np.median(single["rl"]) / np.median(single["cfftg"])),
-            "single_cpu_ms": {k: _ms(v) for k, v in cpu.items()},
-            "cpu_ratio_rl_over_cfftg": float(np.median(cpu["rl"]) / np.median(cpu["cfftg"])),
-            "reference_ms": {
-                "rl": _ms(ref["rl"][1]),
-                "rl_reference": _ms(ref["rl_reference"][1]),
-                "n": len(ref["rl"][1]),
-            },
-            "rl_over_cfftg_scenes": float(np.mean(single["rl"] > single["cfftg"])),
-            "smoothing": smoothing_counts(trajs),
-            "cfftg_safe": float(np.mean([t.ok for t in passes[-1]["cfftg"][0]])),
-            "shield_steps_full_mask": steps[1] / max(steps[0], 1),
-        }
-    breakdown = time_breakdown(gen, cf, scene_sets["unseen"][: max(1, n // 5)])
-    batch = _batch_ms(policy, n)
-    batch_1t = batch_single_thread(policy, n)
-    imports = time_import()
-    u = sets["unseen"]
-    res = {
-        "policy": str(policy),
-        "n": n,
-        "sets": sets,
-        # the held-out set's figures under the keys the summary (run_all) reads
-        "single_ms": u["single_ms"],
-        "batch_ms": {"default_threads": batch, "single_thread_blas": batch_1t},
-        "import_s": {"median": statistics.median(imports), "runs": imports},
-        "breakdown_us": breakdown,
-        "blas_threads_default": blas_threads(),
-        "load_average": load,
-        "targets": TARGETS,
-        "thesis_ms": THESIS_MS,
+    gens = {"rl": WithFallback(gen, None), "cfftg": cf}
+    stats = gen.shield_stats
+    before = (stats.steps, stats.steps_to_full_mask)
+    passes = [alternate(gens, scenarios) for _ in range(3)]
+    steps = (stats.steps - before[0], stats.steps_to_full_mask - before[1])
+    single = {k: np.median([p[k][1] for p in passes], axis=0) for k in gens}
+    cpu = {k: np.median([p[k][2] for p in passes], axis=0) for k in gens}
+    plain = WithFallback(plain_reference(gen), None)
+    ref = run_generators(
+        {"rl": WithFallback(gen, None), "rl_reference": plain}, scenarios[: max(1, n // 4)]
+    )
+    trajs = passes[-1]["rl"][0]
+    return {
+        "n": len(scenarios),
+        "single_ms": {k: _ms(v) for k, v in single.items()},
+        "ratio_rl_over_cfftg": float(np.median(single["rl"]) / np.median(single["cfftg"])),
+        "single_cpu_ms": {k: _ms(v) for k, v in cpu.items()},
+        "cpu_ratio_rl_over_cfftg": float(np.median(cpu["rl"]) / np.median(cpu["cfftg"])),
+        "reference_ms": {
+            "rl": _ms(ref["rl"][1]),
+            "rl_reference": _ms(ref["rl_reference"][1]),
+            "n": len(ref["rl"][1]),
+        },
+        "rl_over_cfftg_scenes": float(np.mean(single["rl"] > single["cfftg"])),
+        "smoothing": smoothing_counts(trajs),
+        "cfftg_safe": float(np.mean([t.ok for t in passes[-1]["cfftg"][0]])),
+        "shield_steps_full_mask": steps[1] / max(steps[0], 1),
     }
-    b = lambda d, k: d[k] * 1000 / n  # noqa: E731  (scaled to 1000 scenes; exact for n = 1000)
-    miss = lambda ok: "met" if ok else "**missed**"  # noqa: E731
+
+
+def _miss(ok) -> str:
+    return "met" if ok else "**missed**"
+
+
+def _swing_table(sets: dict) -> list[str]:
+    """The one-swing table: a column per scene set."""
 
     def row(label, cell, target=""):
         """A table row: the label, ``cell`` of each scene set's figures, the target."""
@@ -358,20 +327,13 @@ def run_generate_benchmark(policy: str | Path, out_dir, n: int = 1000, progress=
             + (f" | {target} |" if target else " | |")
         )
 
-    lines = [
-        "# Generator benchmark (NumPy only): the shielded RL generator against CFFTG, side by side",
-        "",
-        f"Policy `{policy}`; RL alone (`fallback=None`). One swing: `generate` (rollout, smoothing, every "
-        "safe-swing check, joint angles), RL and CFFTG alternating per scene, median of 3 passes per scene. "
-        f"Batch: `generate_batch` of {n} held-out scenes, RL and CFFTG alternating, median of 5. "
-        f"Load average at the start: {res['load_average']}.",
-        "",
+    return [
         "| figure | unseen (held-out families) | safety scenes | target |",
         "|---|---:|---:|---|",
         row(
             "one swing, RL / CFFTG median ratio",
             lambda d: (
-                f"**{d['ratio_rl_over_cfftg']:.2f}** ({miss(d['ratio_rl_over_cfftg'] <= 1.5)})"
+                f"**{d['ratio_rl_over_cfftg']:.2f}** ({_miss(d['ratio_rl_over_cfftg'] <= 1.5)})"
             ),
             "<= 1.5",
         ),
@@ -379,7 +341,7 @@ def run_generate_benchmark(policy: str | Path, out_dir, n: int = 1000, progress=
             "one swing, RL median",
             lambda d: (
                 f"{d['single_ms']['rl']['median']:.3f} ms "
-                f"({miss(d['single_ms']['rl']['median'] <= 1.0)})"
+                f"({_miss(d['single_ms']['rl']['median'] <= 1.0)})"
             ),
             "<= 1.0 ms",
         ),
@@ -405,7 +367,7 @@ def run_generate_benchmark(policy: str | Path, out_dir, n: int = 1000, progress=
             "RL swings smoothed in one pass (no retry)",
             lambda d: (
                 f"{d['smoothing']['smoothed_once']:.1%} "
-                f"({miss(d['smoothing']['smoothed_once'] >= 0.99)})"
+                f"({_miss(d['smoothing']['smoothed_once'] >= 0.99)})"
             ),
             ">= 99 %",
         ),
@@ -419,7 +381,7 @@ def run_generate_benchmark(policy: str | Path, out_dir, n: int = 1000, progress=
             "RL swings on the raw polyline (every smoothing failed)",
             lambda d: (
                 f"{d['smoothing']['raw_polyline']:.1%} "
-                f"({miss(d['smoothing']['raw_polyline'] == 0)})"
+                f"({_miss(d['smoothing']['raw_polyline'] == 0)})"
             ),
             "0",
         ),
@@ -432,23 +394,82 @@ def run_generate_benchmark(policy: str | Path, out_dir, n: int = 1000, progress=
             "shield steps left to the full mask (one swing)",
             lambda d: f"{d['shield_steps_full_mask']:.2%}",
         ),
-        "",
+    ]
+
+
+def _batch_table(res: dict) -> list[str]:
+    """The batch table: default and single-threaded BLAS, scaled to 1000 scenes (exact for n = 1000)."""
+    batch, batch_1t = res["batch_ms"]["default_threads"], res["batch_ms"]["single_thread_blas"]
+    b = lambda d, k: d[k] * 1000 / res["n"]  # noqa: E731
+    return [
         "| batch of 1000 held-out scenes | RL | CFFTG | RL / CFFTG | target |",
         "|---|---:|---:|---:|---|",
         f"| default BLAS threads (this process) | {b(batch, 'rl'):.1f} ms | {b(batch, 'cfftg'):.1f} ms | "
-        f"**{batch['rl'] / batch['cfftg']:.2f}** | <= 1 and <= 150 ms: {miss(batch['rl'] <= batch['cfftg'] and b(batch, 'rl') <= 150)} |",
+        f"**{batch['rl'] / batch['cfftg']:.2f}** | <= 1 and <= 150 ms: {_miss(batch['rl'] <= batch['cfftg'] and b(batch, 'rl') <= 150)} |",
         f"| single-threaded BLAS (a fresh process) | {b(batch_1t, 'rl'):.1f} ms | {b(batch_1t, 'cfftg'):.1f} ms | "
-        f"**{batch_1t['rl'] / batch_1t['cfftg']:.2f}** | {miss(batch_1t['rl'] <= batch_1t['cfftg'] and b(batch_1t, 'rl') <= 150)} |",
+        f"**{batch_1t['rl'] / batch_1t['cfftg']:.2f}** | {_miss(batch_1t['rl'] <= batch_1t['cfftg'] and b(batch_1t, 'rl') <= 150)} |",
         f"| RL on the process's BLAS threads (`batch_blas_threads = None`): default / single-threaded | "
         f"{b(batch, 'rl_process_blas'):.1f} / {b(batch_1t, 'rl_process_blas'):.1f} ms | | | |",
+    ]
+
+
+def report_lines(res: dict) -> list[str]:
+    """The benchmark's Markdown, from its figures (``run_generate_benchmark``'s result)."""
+    n = res["n"]
+    return [
+        "# Generator benchmark (NumPy only): the shielded RL generator against CFFTG, side by side",
+        "",
+        f"Policy `{res['policy']}`; RL alone (`fallback=None`). One swing: `generate` (rollout, smoothing, every "
+        "safe-swing check, joint angles), RL and CFFTG alternating per scene, median of 3 passes per scene. "
+        f"Batch: `generate_batch` of {n} held-out scenes, RL and CFFTG alternating, median of 5. "
+        f"Load average at the start: {res['load_average']}.",
+        "",
+        *_swing_table(res["sets"]),
+        "",
+        *_batch_table(res),
         "",
         f"`import jaxexo.inference`, cold process: {res['import_s']['median']:.3f} s (<= 0.3 s: "
-        f"{miss(res['import_s']['median'] <= 0.3)}).",
+        f"{_miss(res['import_s']['median'] <= 0.3)}).",
         "",
         f"Where the time goes, {max(1, n // 5)} held-out scenes, each part timed alone (best of 3):",
         "",
-        *breakdown_lines(breakdown),
+        *breakdown_lines(res["breakdown_us"]),
     ]
+
+
+def run_generate_benchmark(policy: str | Path, out_dir, n: int = 1000, progress=print) -> dict:
+    """One swing (``generate``, RL alone: ``fallback=None``) RL and CFFTG alternating per scene on the
+    held-out families and on the safety scenes (and the plain reference, ``plain_reference``, on a
+    quarter of them); batches of 1000 with default and single-threaded BLAS; smoothing counts; the
+    cold import."""
+    from jaxexo.evaluation.machine import write_result
+    from jaxexo.inference.cfftg import CFFTG
+
+    load = [round(x, 2) for x in os.getloadavg()]
+    gen = TrajectoryGenerator.load(policy)
+    cf = CFFTG(gen.config)
+
+    scene_sets = {which: scene_set(gen.config, which, n) for which in SETS}
+    sets = {which: set_figures(gen, cf, scene_sets[which], n) for which in SETS}
+    breakdown = time_breakdown(gen, cf, scene_sets["unseen"][: max(1, n // 5)])
+    batch = _batch_ms(policy, n)
+    batch_1t = batch_single_thread(policy, n)
+    imports = time_import()
+    res = {
+        "policy": str(policy),
+        "n": n,
+        "sets": sets,
+        # the held-out set's figures under the keys the summary (run_all) reads
+        "single_ms": sets["unseen"]["single_ms"],
+        "batch_ms": {"default_threads": batch, "single_thread_blas": batch_1t},
+        "import_s": {"median": statistics.median(imports), "runs": imports},
+        "breakdown_us": breakdown,
+        "blas_threads_default": blas_threads(),
+        "load_average": load,
+        "targets": TARGETS,
+        "thesis_ms": THESIS_MS,
+    }
+    lines = report_lines(res)
     jpath, _ = write_result("generate", res, "\n".join(lines), out_dir)
     progress("\n".join(lines))
     progress(f"wrote {jpath}")
