@@ -108,25 +108,10 @@ def agents_per_minute(
     return row
 
 
-def run_sweep_benchmark(
-    out_dir,
-    sweep_file: str | Path,
-    target: bool = True,
-    per_minute_budget: int = 500_000,
-    progress=print,
-) -> dict:
-    from jaxexo.evaluation.machine import write_result
-    from jaxexo.sweep.runner import run_sweep
-
-    sweep = load_sweep(sweep_file)
-    cfg = sweep.members[0].config
+def vmap_throughputs(cfg: Config, devices, progress=print, updates: int = 10) -> dict:
+    """Training env-steps/s of 64 agents vmapped over ``devices`` and over one device, and of one
+    run of 64 times the environments, data parallel over ``devices``: the payload's three entries."""
     tc = cfg.train
-    devices = jax.local_devices()
-    progress(
-        f"static settings: hidden {list(tc.hidden)}, obs {cfg.env.obs_mode}, {tc.num_envs} envs/agent, "
-        f"T = {tc.rollout_steps}, {tc.num_minibatches} minibatch(es); {len(devices)} CPU device(s)"
-    )
-    updates = 10
     sweep64 = agents_throughput(cfg, 64, devices, updates)
     progress(
         f"64 agents x {tc.num_envs} envs, {len(devices)} devices: {sweep64['env_steps_per_s'] / 1e6:.3f} M env-steps/s"
@@ -141,38 +126,42 @@ def run_sweep_benchmark(
         f"one run of {big.train.num_envs} envs, {single['devices']} devices: "
         f"{single['env_steps_per_s'] / 1e6:.3f} M env-steps/s"
     )
+    return {"sweep_64": sweep64, "sweep_64_one_device": one_dev, "single_run": single}
 
+
+def target_run(sweep, progress=print) -> dict:
+    """The whole sweep through ``run_sweep`` (compilation, evaluation and the report included),
+    its wall time against TARGET_S."""
+    from jaxexo.sweep.runner import run_sweep
+
+    with tempfile.TemporaryDirectory() as d:
+        t0 = time.perf_counter()
+        res = run_sweep(sweep, Path(d) / "sweep", progress=True)
+        wall = time.perf_counter() - t0
+    full = {
+        "agents": sweep.num_agents,
+        "env_steps": res["env_steps"],
+        "wall_s": wall,
+        "env_steps_per_s": res["env_steps"] / wall,
+        "target_s": TARGET_S,
+        "best": {
+            k: res["ranking"][0][k]
+            for k in ("label", "success_mean", "success_std", "held_out_success")
+        },
+        "diverged_agents": sum(e["diverged"] for e in res["ranking"]),
+    }
     progress(
-        f"agents trained per minute ({per_minute_budget:,} env steps each, one seed, everything included):"
+        f"target run: {sweep.num_agents} agents, {res['env_steps']:,.0f} env steps in {wall:.1f} s "
+        f"({'within' if wall <= TARGET_S else 'over'} the {TARGET_S:.0f} s target)"
     )
-    base_raw = {k: v for k, v in sweep.to_dict().items() if k != "sweep"}
-    per_minute = [
-        agents_per_minute(base_raw, n, per_minute_budget, progress) for n in (1, 8, 64, 256)
-    ]
+    return full
 
-    full = None
-    if target:
-        with tempfile.TemporaryDirectory() as d:
-            t0 = time.perf_counter()
-            res = run_sweep(sweep, Path(d) / "sweep", progress=True)
-            wall = time.perf_counter() - t0
-        full = {
-            "agents": sweep.num_agents,
-            "env_steps": res["env_steps"],
-            "wall_s": wall,
-            "env_steps_per_s": res["env_steps"] / wall,
-            "target_s": TARGET_S,
-            "best": {
-                k: res["ranking"][0][k]
-                for k in ("label", "success_mean", "success_std", "held_out_success")
-            },
-            "diverged_agents": sum(e["diverged"] for e in res["ranking"]),
-        }
-        progress(
-            f"target run: {sweep.num_agents} agents, {res['env_steps']:,.0f} env steps in {wall:.1f} s "
-            f"({'within' if wall <= TARGET_S else 'over'} the {TARGET_S:.0f} s target)"
-        )
 
+def sweep_markdown(cfg: Config, payload: dict, per_minute_budget: int) -> str:
+    """The sweep benchmarks' Markdown, from their figures (``run_sweep_benchmark``'s payload)."""
+    tc = cfg.train
+    sweep64, one_dev = payload["sweep_64"], payload["sweep_64_one_device"]
+    single, full = payload["single_run"], payload["target_run"]
     lines = [
         "# Sweep benchmarks",
         "",
@@ -182,9 +171,9 @@ def run_sweep_benchmark(
         "",
         "| what | M env-steps/s |",
         "|---|---:|",
-        f"| 64 agents × {tc.num_envs} envs (vmapped), {len(devices)} CPU devices | {sweep64['env_steps_per_s'] / 1e6:.3f} |",
+        f"| 64 agents × {tc.num_envs} envs (vmapped), {sweep64['devices']} CPU devices | {sweep64['env_steps_per_s'] / 1e6:.3f} |",
         f"| 64 agents × {tc.num_envs} envs (vmapped), 1 CPU device | {one_dev['env_steps_per_s'] / 1e6:.3f} |",
-        f"| one run of {big.train.num_envs} envs, {single['devices']} CPU devices (data parallel) | "
+        f"| one run of {64 * tc.num_envs} envs, {single['devices']} CPU devices (data parallel) | "
         f"{single['env_steps_per_s'] / 1e6:.3f} |",
         "",
         f"| configurations (1 seed, {per_minute_budget:,} env steps each) | wall s (all included) | agents per minute | "
@@ -193,7 +182,7 @@ def run_sweep_benchmark(
     ]
     lines += [
         f"| {r['configs']} | {r['wall_s']:.1f} | {r['agents_per_min']:.1f} | {r['env_steps_per_s'] / 1e6:.3f} |"
-        for r in per_minute
+        for r in payload["agents_per_minute"]
     ]
     if full:
         lines += [
@@ -204,7 +193,35 @@ def run_sweep_benchmark(
             f"compilation, evaluation and the report; best: {full['best']['label']} "
             f"(success {full['best']['success_mean']:.3f} ± {full['best']['success_std']:.3f}).",
         ]
-    md = "\n".join(lines)
+    return "\n".join(lines)
+
+
+def run_sweep_benchmark(
+    out_dir,
+    sweep_file: str | Path,
+    target: bool = True,
+    per_minute_budget: int = 500_000,
+    progress=print,
+) -> dict:
+    from jaxexo.evaluation.machine import write_result
+
+    sweep = load_sweep(sweep_file)
+    cfg = sweep.members[0].config
+    tc = cfg.train
+    devices = jax.local_devices()
+    progress(
+        f"static settings: hidden {list(tc.hidden)}, obs {cfg.env.obs_mode}, {tc.num_envs} envs/agent, "
+        f"T = {tc.rollout_steps}, {tc.num_minibatches} minibatch(es); {len(devices)} CPU device(s)"
+    )
+    vmapped = vmap_throughputs(cfg, devices, progress)
+    progress(
+        f"agents trained per minute ({per_minute_budget:,} env steps each, one seed, everything included):"
+    )
+    base_raw = {k: v for k, v in sweep.to_dict().items() if k != "sweep"}
+    per_minute = [
+        agents_per_minute(base_raw, n, per_minute_budget, progress) for n in (1, 8, 64, 256)
+    ]
+    full = target_run(sweep, progress) if target else None
     payload = {
         "settings": {
             "hidden": list(tc.hidden),
@@ -213,12 +230,11 @@ def run_sweep_benchmark(
             "rollout_steps": tc.rollout_steps,
             "num_minibatches": tc.num_minibatches,
         },
-        "sweep_64": sweep64,
-        "sweep_64_one_device": one_dev,
-        "single_run": single,
+        **vmapped,
         "agents_per_minute": per_minute,
         "target_run": full,
     }
+    md = sweep_markdown(cfg, payload, per_minute_budget)
     write_result("sweep", payload, md, out_dir)
     progress(md)
     return payload
