@@ -148,43 +148,63 @@ def run_train_benchmark(
     return {"throughput": rows, "runs": runs}
 
 
-def update_breakdown(cfg: Config, repeats: int = 5, calls: int = 4) -> dict:
-    """Where one forward-view update's time goes, on one device at the config's batch: the whole
-    update; its rollout (T steps of acting, environment, mask, target pass) and its learning part
-    (lambda-returns, minibatch gradients, clipping and Adam) as the trainer runs them
-    (``Trainer._rollout``, ``Trainer._learn``); and inside those, timed alone on the same shapes, the
-    environment's steps (with the shield's mask where the config has it), the network's acting and
-    target passes, its forward-and-backward passes over the minibatches, and the optimizer's steps.
-    Medians of ``repeats`` jitted loops of ``calls`` iterations each, in milliseconds per update."""
-    import jax.numpy as jnp
-    import optax
+@dataclasses.dataclass(frozen=True)
+class UpdateParts:
+    """What update_breakdown times the parts of an update on: a trainer on one device, its
+    hyperparameters, its first state, one rollout's transitions from it (``trans``), the acting
+    epsilon and the optimizer."""
 
-    from jaxexo.train import td_lambda
+    tr: Trainer
+    hyper: Hyperparams
+    ts: object
+    trans: object
+    eps: object
+    tx: object
 
-    if cfg.train.trace != "forward":
-        raise ValueError("update_breakdown: the forward view only (train.trace = 'forward')")
-    tr = Trainer(cfg)
-    hyper = Hyperparams.from_config(cfg)
-    ts = jax.jit(tr.init)(jax.random.PRNGKey(0), hyper)
-    eps = jnp.float32(0.1)
-    t, n = cfg.train.rollout_steps, cfg.train.num_envs
-    n_mb, epochs = cfg.train.num_minibatches, cfg.train.num_epochs
-    _, trans, _ = jax.jit(lambda s: tr._rollout(s, hyper, eps))(ts)
-    tx = tr.optimizer(hyper)
-    mb = n * t // n_mb
+    @classmethod
+    def of(cls, cfg: Config) -> UpdateParts:
+        import jax.numpy as jnp
 
-    def timed(fn, *args):
-        loop = jax.jit(lambda *a: jax.lax.fori_loop(0, calls, lambda i, acc: acc + fn(i, *a), 0.0))
+        tr = Trainer(cfg)
+        hyper = Hyperparams.from_config(cfg)
+        ts = jax.jit(tr.init)(jax.random.PRNGKey(0), hyper)
+        eps = jnp.float32(0.1)
+        _, trans, _ = jax.jit(lambda s: tr._rollout(s, hyper, eps))(ts)
+        return cls(tr, hyper, ts, trans, eps, tr.optimizer(hyper))
+
+    @property
+    def steps(self) -> int:
+        """Minibatch steps per update."""
+        c = self.tr.cfg.train
+        return c.num_minibatches * c.num_epochs
+
+
+def _timed_ms(fn, *args, repeats: int, calls: int) -> float:
+    """Milliseconds per call of ``fn(i, *args)``: the median of ``repeats`` jitted loops of ``calls``
+    iterations (after one that compiles)."""
+    loop = jax.jit(lambda *a: jax.lax.fori_loop(0, calls, lambda i, acc: acc + fn(i, *a), 0.0))
+    jax.block_until_ready(loop(*args))
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
         jax.block_until_ready(loop(*args))
-        times = []
-        for _ in range(repeats):
-            t0 = time.perf_counter()
-            jax.block_until_ready(loop(*args))
-            times.append(time.perf_counter() - t0)
-        return 1e3 * float(np.median(times)) / calls
+        times.append(time.perf_counter() - t0)
+    return 1e3 * float(np.median(times)) / calls
 
-    def total(tree):
-        return sum(jnp.sum(x).astype(jnp.float32) for x in jax.tree.leaves(tree))
+
+def _total(tree):
+    import jax.numpy as jnp
+
+    return sum(jnp.sum(x).astype(jnp.float32) for x in jax.tree.leaves(tree))
+
+
+def _env_steps(u: UpdateParts):
+    """The rollout's T environment steps alone, on random moves (within the shield's mask where the
+    config has it)."""
+    import jax.numpy as jnp
+
+    tr, hyper = u.tr, u.hyper
+    t, n = tr.cfg.train.rollout_steps, tr.cfg.train.num_envs
 
     def env_steps(i, s):
         def one(c, k):
@@ -203,71 +223,123 @@ def update_breakdown(cfg: Config, repeats: int = 5, calls: int = 4) -> dict:
         _, r = jax.lax.scan(one, s.env_state, jax.random.split(jax.random.fold_in(s.key, i), t))
         return r.sum()
 
+    return env_steps
+
+
+def _acting(u: UpdateParts):
+    """The rollout's T acting and target passes of the network."""
+    net, t = u.tr.net, u.tr.cfg.train.rollout_steps
+
     def acting(i, s):  # each pass on its own input (identical passes would be computed once)
         return sum(
-            tr.net.apply(s.params, s.obs + 1e-6 * (i + j)).sum()
-            + tr.net.apply(s.target_params, s.obs - 1e-6 * (i + j)).sum()
+            net.apply(s.params, s.obs + 1e-6 * (i + j)).sum()
+            + net.apply(s.target_params, s.obs - 1e-6 * (i + j)).sum()
             for j in range(t)
         )
 
+    return acting
+
+
+def _grads(u: UpdateParts):
+    """The network's forward and backward passes over the update's minibatches."""
+    import jax.numpy as jnp
+
+    net, steps = u.tr.net, u.steps
+    mb = u.tr.cfg.train.num_envs * u.tr.cfg.train.rollout_steps // u.tr.cfg.train.num_minibatches
+
     def grads(i, s, tr_):
-        obs = tr_.obs.reshape((n_mb * epochs, -1) + tr_.obs.shape[2:])[:, :mb] + 1e-9 * i
+        obs = tr_.obs.reshape((steps, -1) + tr_.obs.shape[2:])[:, :mb] + 1e-9 * i
 
         def loss(p, o):
-            return 0.5 * jnp.mean(tr.net.apply(p, o) ** 2)
+            return 0.5 * jnp.mean(net.apply(p, o) ** 2)
 
-        return sum(
-            total(jax.grad(loss)(s.params, obs[j % obs.shape[0]])) for j in range(n_mb * epochs)
-        )
+        return sum(_total(jax.grad(loss)(s.params, obs[j % obs.shape[0]])) for j in range(steps))
+
+    return grads
+
+
+def _optimizer(u: UpdateParts):
+    """The optimizer's steps of an update (clipping and Adam)."""
+    import optax
+
+    tx, steps = u.tx, u.steps
 
     def optimizer(i, s):
         g = jax.tree.map(lambda p: p * (1.0 + 1e-9 * i), s.params)
         p, o = s.params, s.opt_state
-        for _ in range(n_mb * epochs):
-            u, o = tx.update(g, o, p)
-            p = optax.apply_updates(p, u)
-        return total(p)
+        for _ in range(steps):
+            u_, o = tx.update(g, o, p)
+            p = optax.apply_updates(p, u_)
+        return _total(p)
+
+    return optimizer
+
+
+def _lambda_returns(u: UpdateParts):
+    """The lambda-returns of one rollout's transitions."""
+    from jaxexo.train import td_lambda
+
+    hyper = u.hyper
+
+    def returns(i, s, tr_):
+        return td_lambda.lambda_returns(
+            tr_.reward + 1e-9 * i,
+            tr_.target_q,
+            tr_.terminated,
+            tr_.terminated | tr_.truncated,
+            tr_.greedy,
+            hyper.gamma,
+            hyper.lam,
+        ).sum()
+
+    return returns
+
+
+def update_breakdown(cfg: Config, repeats: int = 5, calls: int = 4) -> dict:
+    """Where one forward-view update's time goes, on one device at the config's batch: the whole
+    update; its rollout (T steps of acting, environment, mask, target pass) and its learning part
+    (lambda-returns, minibatch gradients, clipping and Adam) as the trainer runs them
+    (``Trainer._rollout``, ``Trainer._learn``); and inside those, timed alone on the same shapes, the
+    environment's steps (with the shield's mask where the config has it), the network's acting and
+    target passes, its forward-and-backward passes over the minibatches, and the optimizer's steps.
+    Medians of ``repeats`` jitted loops of ``calls`` iterations each, in milliseconds per update."""
+    if cfg.train.trace != "forward":
+        raise ValueError("update_breakdown: the forward view only (train.trace = 'forward')")
+    u = UpdateParts.of(cfg)
+    tr, hyper, ts, trans, eps = u.tr, u.hyper, u.ts, u.trans, u.eps
+    t, n = cfg.train.rollout_steps, cfg.train.num_envs
+
+    def timed(fn, *args):
+        return _timed_ms(fn, *args, repeats=repeats, calls=calls)
 
     parts = {
         "update": timed(
-            lambda i, s: total(tr.update(s.replace(update=s.update * 0 + i), hyper)[1]), ts
+            lambda i, s: _total(tr.update(s.replace(update=s.update * 0 + i), hyper)[1]), ts
         ),
         "rollout": timed(
-            lambda i, s: total(
+            lambda i, s: _total(
                 tr._rollout(s.replace(key=jax.random.fold_in(s.key, i)), hyper, eps)[1]
             ),
             ts,
         ),
         "learn": timed(
-            lambda i, s, tr_: total(
+            lambda i, s, tr_: _total(
                 tr._learn(s.replace(key=jax.random.fold_in(s.key, i)), tr_, hyper, eps)[1:]
             ),
             ts,
             trans,
         ),
-        "environment steps" + (" with the mask" if tr.env.shield else ""): timed(env_steps, ts),
-        "network: acting and target passes": timed(acting, ts),
-        "network: forward and backward passes": timed(grads, ts, trans),
-        "optimizer: clipping and Adam": timed(optimizer, ts),
-        "lambda-returns": timed(
-            lambda i, s, tr_: td_lambda.lambda_returns(
-                tr_.reward + 1e-9 * i,
-                tr_.target_q,
-                tr_.terminated,
-                tr_.terminated | tr_.truncated,
-                tr_.greedy,
-                hyper.gamma,
-                hyper.lam,
-            ).sum(),
-            ts,
-            trans,
-        ),
+        "environment steps" + (" with the mask" if tr.env.shield else ""): timed(_env_steps(u), ts),
+        "network: acting and target passes": timed(_acting(u), ts),
+        "network: forward and backward passes": timed(_grads(u), ts, trans),
+        "optimizer: clipping and Adam": timed(_optimizer(u), ts),
+        "lambda-returns": timed(_lambda_returns(u), ts, trans),
     }
     return {
         "num_envs": n,
         "rollout_steps": t,
-        "num_minibatches": n_mb,
-        "num_epochs": epochs,
+        "num_minibatches": cfg.train.num_minibatches,
+        "num_epochs": cfg.train.num_epochs,
         "hidden": list(cfg.train.hidden),
         "shield": bool(tr.env.shield),
         "ms_per_update": parts,
