@@ -21,10 +21,12 @@ success rate. Needs the ``bench`` extra (PyTorch).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -100,6 +102,135 @@ def time_to_target(rows: list[dict], target: float, key: str = "validation_succe
     return None
 
 
+@dataclasses.dataclass(frozen=True)
+class Budgets:
+    """The benchmark's settings: seconds of the baseline's throughput run and of its training, the
+    validation success targets, env steps between the baseline's validations, where progress goes."""
+
+    throughput_seconds: float
+    baseline_seconds: float
+    targets: tuple
+    validate_every: int
+    progress: Callable
+
+
+def throughput_figures(base: Config, b: Budgets) -> dict:
+    """Env-steps/s of jaxexo's trainer and of the baseline on the thesis network, and their ratio."""
+    import jax
+
+    from jaxexo.benchmarks.train_bench import thesis_network_config, throughput
+
+    tcfg = thesis_network_config(base, "forward")
+    jx = throughput(tcfg, 10, repeats=3, devices=jax.local_devices())
+    b.progress(
+        f"jaxexo trainer, thesis network, 4096 envs: {jx['env_steps_per_s'] / 1e6:.3f} M env-steps/s"
+    )
+    bl = baseline_throughput(tcfg, layout_pool(tcfg, POOL), b.throughput_seconds)
+    b.progress(
+        f"thesis-style baseline, thesis network: {bl['env_steps_per_s']:.0f} env-steps/s "
+        f"(environment alone {bl['env_only_steps_per_s']:.0f}/s)"
+    )
+    ratio = jx["env_steps_per_s"] / bl["env_steps_per_s"]
+    b.progress(f"ratio: {ratio:.0f}x (target >= 1000x)")
+    return {"jaxexo": jx, "baseline": bl, "ratio": ratio}
+
+
+def jaxexo_curve(base: Config, b: Budgets) -> tuple[list[dict], float]:
+    """jaxexo's validation curve training the default model through the driver (wall time with
+    compilation), and its training seconds."""
+    from jaxexo.train.driver import run_training
+
+    with tempfile.TemporaryDirectory() as d:
+        res = run_training(base, d, seed=0, progress=False)
+        rows = [json.loads(x) for x in (Path(d) / "metrics.jsonl").read_text().splitlines()]
+    curve = [
+        {
+            "env_steps": r["env_steps"],
+            "wall_s": r["wall_s"],
+            "validation_success": r["validation_success_raw"],
+        }
+        for r in rows
+    ]
+    b.progress(
+        f"jaxexo default model: {res['train_seconds']:.1f} s, final validation "
+        f"{rows[-1]['validation_success_raw']:.3f}"
+    )
+    return curve, res["train_seconds"]
+
+
+def baseline_curve(base: Config, b: Budgets) -> tuple[SequentialTDLambda, dict, list[dict]]:
+    """The baseline trained on the default model for its time budget, validated every
+    ``validate_every`` env steps (off the clock) until it reaches the highest target, and at its
+    end: the learner, its training figures and its validation curve."""
+    import jax
+
+    from jaxexo.train.evaluate import make_validator
+    from jaxexo.train.network import QNetwork
+
+    pool = layout_pool(base, POOL)
+    rate = baseline_throughput(base, pool, min(20.0, b.throughput_seconds))["env_steps_per_s"]
+    planned = int(rate * b.baseline_seconds)
+    learner = make_baseline(
+        base, pool, eps_decay_steps=max(1, int(base.train.eps_decay_fraction * planned))
+    )
+    net = QNetwork(
+        hidden=base.train.hidden, num_actions=NUM_ACTIONS, layer_norm=base.train.layer_norm
+    )
+    validate = make_validator(base, net)
+    curve: list[dict] = []
+
+    def on_eval(lr: SequentialTDLambda, train_s: float) -> bool:
+        v = validate(jax.tree.map(np.asarray, lr.export_flax_params()))
+        curve.append(
+            {
+                "env_steps": lr.env_steps,
+                "train_s": train_s,
+                "validation_success": v,
+                "epsilon": lr.epsilon(),
+            }
+        )
+        b.progress(
+            f"  baseline {lr.env_steps} env steps, {train_s:.0f} s: validation {v:.3f}, eps {lr.epsilon():.2f}"
+        )
+        return v >= max(b.targets)
+
+    bres = learner.train(
+        seconds=b.baseline_seconds, callback=on_eval, callback_every=b.validate_every
+    )
+    if not curve or curve[-1]["env_steps"] != learner.env_steps:
+        on_eval(learner, bres["train_seconds"])
+    return learner, bres, curve
+
+
+def reach(jx_curve: list[dict], bl_curve: list[dict], target: float, bl_rate: float) -> dict:
+    """The wall seconds (and env steps) each trainer needed to reach ``target``, the baseline's
+    extrapolated at its rate ``bl_rate`` where it did not reach it (module docstring), the speed-up."""
+    j = time_to_target(jx_curve, target)
+    b = time_to_target(bl_curve, target)
+    entry = {
+        "target": target,
+        "jaxexo_s": j["wall_s"] if j else None,
+        "jaxexo_env_steps": j["env_steps"] if j else None,
+    }
+    if b is not None:
+        entry.update(
+            baseline_s=b["train_s"],
+            baseline_env_steps=b["env_steps"],
+            baseline_extrapolated=False,
+        )
+    elif j is not None:
+        entry.update(
+            baseline_s=j["env_steps"] / bl_rate,
+            baseline_env_steps=None,
+            baseline_extrapolated=True,
+        )
+    else:
+        entry.update(baseline_s=None, baseline_env_steps=None, baseline_extrapolated=None)
+    if entry["jaxexo_s"] and entry["baseline_s"]:
+        entry["speedup"] = entry["baseline_s"] / entry["jaxexo_s"]
+    return entry
+
+
 def run_baseline_benchmark(
     out_dir,
     default_config: str = "configs/default.toml",
@@ -109,15 +240,12 @@ def run_baseline_benchmark(
     validate_every: int = 20_000,
     progress=print,
 ) -> dict:
-    import jax
+    import jax  # noqa: F401
     import torch
 
-    from jaxexo.benchmarks.train_bench import thesis_network_config, throughput
     from jaxexo.evaluation.machine import write_result
-    from jaxexo.train.driver import run_training
-    from jaxexo.train.evaluate import make_validator
-    from jaxexo.train.network import QNetwork
 
+    b = Budgets(throughput_seconds, baseline_seconds, targets, validate_every, progress)
     base = load_config(default_config)
     # The load average before and after: other processes on the machine make every figure slower.
     result: dict = {
@@ -125,95 +253,11 @@ def run_baseline_benchmark(
         "targets": list(targets),
         "load_avg_before": os.getloadavg(),
     }
-
-    # 1. Throughput, thesis network -------------------------------------------------------------
-    tcfg = thesis_network_config(base, "forward")
-    jx = throughput(tcfg, 10, repeats=3, devices=jax.local_devices())
-    progress(
-        f"jaxexo trainer, thesis network, 4096 envs: {jx['env_steps_per_s'] / 1e6:.3f} M env-steps/s"
-    )
-    bl = baseline_throughput(tcfg, layout_pool(tcfg, POOL), throughput_seconds)
-    progress(
-        f"thesis-style baseline, thesis network: {bl['env_steps_per_s']:.0f} env-steps/s "
-        f"(environment alone {bl['env_only_steps_per_s']:.0f}/s)"
-    )
-    ratio = jx["env_steps_per_s"] / bl["env_steps_per_s"]
-    progress(f"ratio: {ratio:.0f}x (target >= 1000x)")
-    result["throughput"] = {"jaxexo": jx, "baseline": bl, "ratio": ratio}
-
-    # 2. Time to the same success rate, default model ------------------------------------------
-    with tempfile.TemporaryDirectory() as d:
-        res = run_training(base, d, seed=0, progress=False)
-        rows = [json.loads(x) for x in (Path(d) / "metrics.jsonl").read_text().splitlines()]
-    jx_curve = [
-        {
-            "env_steps": r["env_steps"],
-            "wall_s": r["wall_s"],
-            "validation_success": r["validation_success_raw"],
-        }
-        for r in rows
-    ]
-    progress(
-        f"jaxexo default model: {res['train_seconds']:.1f} s, final validation "
-        f"{rows[-1]['validation_success_raw']:.3f}"
-    )
-
-    pool = layout_pool(base, POOL)
-    rate = baseline_throughput(base, pool, min(20.0, throughput_seconds))["env_steps_per_s"]
-    planned = int(rate * baseline_seconds)
-    learner = make_baseline(
-        base, pool, eps_decay_steps=max(1, int(base.train.eps_decay_fraction * planned))
-    )
-    net = QNetwork(
-        hidden=base.train.hidden, num_actions=NUM_ACTIONS, layer_norm=base.train.layer_norm
-    )
-    validate = make_validator(base, net)
-    bl_curve: list[dict] = []
-
-    def on_eval(lr: SequentialTDLambda, train_s: float) -> bool:
-        v = validate(jax.tree.map(np.asarray, lr.export_flax_params()))
-        bl_curve.append(
-            {
-                "env_steps": lr.env_steps,
-                "train_s": train_s,
-                "validation_success": v,
-                "epsilon": lr.epsilon(),
-            }
-        )
-        progress(
-            f"  baseline {lr.env_steps} env steps, {train_s:.0f} s: validation {v:.3f}, eps {lr.epsilon():.2f}"
-        )
-        return v >= max(targets)
-
-    bres = learner.train(seconds=baseline_seconds, callback=on_eval, callback_every=validate_every)
-    if not bl_curve or bl_curve[-1]["env_steps"] != learner.env_steps:
-        on_eval(learner, bres["train_seconds"])
-    reach = {}
-    for tgt in targets:
-        j = time_to_target(jx_curve, tgt)
-        b = time_to_target(bl_curve, tgt)
-        entry = {
-            "target": tgt,
-            "jaxexo_s": j["wall_s"] if j else None,
-            "jaxexo_env_steps": j["env_steps"] if j else None,
-        }
-        if b is not None:
-            entry.update(
-                baseline_s=b["train_s"],
-                baseline_env_steps=b["env_steps"],
-                baseline_extrapolated=False,
-            )
-        elif j is not None:
-            entry.update(
-                baseline_s=j["env_steps"] / bres["env_steps_per_s"],
-                baseline_env_steps=None,
-                baseline_extrapolated=True,
-            )
-        else:
-            entry.update(baseline_s=None, baseline_env_steps=None, baseline_extrapolated=None)
-        if entry["jaxexo_s"] and entry["baseline_s"]:
-            entry["speedup"] = entry["baseline_s"] / entry["jaxexo_s"]
-        reach[str(tgt)] = entry
+    # 1. Throughput, thesis network
+    result["throughput"] = throughput_figures(base, b)
+    # 2. Time to the same success rate, default model
+    jx_curve, jx_seconds = jaxexo_curve(base, b)
+    learner, bres, bl_curve = baseline_curve(base, b)
     result["time_to_success"] = {
         "config": Path(default_config).name,
         "jaxexo_curve": jx_curve,
@@ -221,11 +265,12 @@ def run_baseline_benchmark(
         "baseline_budget_s": baseline_seconds,
         "baseline_env_steps_per_s": bres["env_steps_per_s"],
         "baseline_eps_decay_steps": learner.eps_decay_steps,
-        "reach": reach,
+        "reach": {
+            str(tgt): reach(jx_curve, bl_curve, tgt, bres["env_steps_per_s"]) for tgt in targets
+        },
         "baseline_best_validation": max(r["validation_success"] for r in bl_curve),
-        "jaxexo_train_seconds": res["train_seconds"],
+        "jaxexo_train_seconds": jx_seconds,
     }
-
     result["load_avg_after"] = os.getloadavg()
     md = markdown(result)
     write_result("baseline", result, md, out_dir)
