@@ -32,7 +32,9 @@ OUT/reproduce.json hold the tables.
 
 from __future__ import annotations
 
+import dataclasses
 import json
+from collections.abc import Callable
 from pathlib import Path
 
 from jaxexo.config import load_config, packaged_config
@@ -125,9 +127,8 @@ def _minutes(seconds: float) -> str:
     return f"{seconds / 60:.1f} min" if seconds >= 60 else f"{seconds:.0f} s"
 
 
-def tables(results: dict) -> str:
-    """The reproduction's Markdown: every table beside the thesis's values. ``results`` maps a run name
-    ("a", "a-learns", "default") to its figures: ``rl`` greedy, ``rl_eps`` epsilon-greedy (thesis 2.6)."""
+def _intro(results: dict) -> list[str]:
+    """The title, what the triples and variants mean (with the test epsilons), the learns switches."""
     eps = sorted({r["test_epsilon"] for r in results.values() if "test_epsilon" in r})
     eps_txt = ", ".join(f"{e:g}" for e in eps) or "-"
     lines = [
@@ -149,47 +150,76 @@ def tables(results: dict) -> str:
             "",
             *changes,
         ]
-    lines += _table(
+    return lines
+
+
+def _run_rows(results: dict, cells) -> list[str]:
+    """A table row per run: its model and variant, then ``cells(model, figures)``."""
+    return [
+        f"| {model_of(name)} | {variant_of(name)} | " + cells(model_of(name), r)
+        for name, r in results.items()
+    ]
+
+
+def _accuracy_cells(model: str, r: dict) -> str:
+    greedy = (
+        f"{_cell(THESIS_ACCURACY.get(model), lambda x: f'{x:.1f}')} | "
+        f"{_pct(r['rl']['accuracy'])} | {_pct(r['rl']['success'])} | {_pct(r['rl']['reached_goal'])} | "
+    )
+    if "rl_eps" not in r:
+        return greedy + "- | - | - |"
+    e = r["rl_eps"]
+    return greedy + f"{_pct(e['accuracy'])} | {_pct(e['success'])} | {_pct(e['reached_goal'])} |"
+
+
+def _training_cells(model: str, r: dict) -> str:
+    return (
+        f"{THESIS_TRAIN_TIME.get(model, '-')} | {_minutes(r['train_seconds'])} | "
+        f"{r['train_seconds']:.1f} | {r['episodes']} | {r.get('env_steps', '-')} |"
+    )
+
+
+def _overall_cells(model: str, r: dict) -> str:
+    return (
+        f"{_cell(THESIS_T32.get(model))} | {_triple(_fig(r['rl']))} | "
+        f"{_triple(_fig(r['rl_eps'])) if 'rl_eps' in r else '-'} |"
+    )
+
+
+# The tables with a row per run: title, header, alignment, and the row's cells after the model and
+# variant.
+RUN_TABLES = {
+    "accuracy": (
         "Table 3.10: accuracy (eq 3.1) on the test scenarios, greedy and ε-greedy",
         "| model | variant | thesis accuracy % | greedy accuracy % | greedy strict success % | "
         "greedy reached goal % | ε-greedy accuracy % | ε-greedy strict success % | "
         "ε-greedy reached goal % |",
         "|---|---|---:|---:|---:|---:|---:|---:|---:|",
-        [
-            f"| {model_of(name)} | {variant_of(name)} | "
-            f"{_cell(THESIS_ACCURACY.get(model_of(name)), lambda x: f'{x:.1f}')} | "
-            f"{_pct(r['rl']['accuracy'])} | {_pct(r['rl']['success'])} | {_pct(r['rl']['reached_goal'])} | "
-            + (
-                f"{_pct(r['rl_eps']['accuracy'])} | {_pct(r['rl_eps']['success'])} | "
-                f"{_pct(r['rl_eps']['reached_goal'])} |"
-                if "rl_eps" in r
-                else "- | - | - |"
-            )
-            for name, r in results.items()
-        ],
-    )
-    lines += population_table(results)
-    lines += _table(
+        _accuracy_cells,
+    ),
+    "training time": (
         "Training time per model (thesis: laptop GPU, Ryzen 7 + RTX 4060; jaxexo: this machine's CPU)",
         "| model | variant | thesis | jaxexo | jaxexo s | episodes | env steps |",
         "|---|---|---|---|---:|---:|---:|",
-        [
-            f"| {model_of(name)} | {variant_of(name)} | {THESIS_TRAIN_TIME.get(model_of(name), '-')} | "
-            f"{_minutes(r['train_seconds'])} | {r['train_seconds']:.1f} | {r['episodes']} | "
-            f"{r.get('env_steps', '-')} |"
-            for name, r in results.items()
-        ],
-    )
-    lines += _table(
+        _training_cells,
+    ),
+    "overall": (
         "Table 3.2 / 3.9: every pivot condition together",
         "| model | variant | thesis | jaxexo greedy | jaxexo ε-greedy |",
         "|---|---|---|---|---|",
-        [
-            f"| {model_of(name)} | {variant_of(name)} | {_cell(THESIS_T32.get(model_of(name)))} | "
-            f"{_triple(_fig(r['rl']))} | {_triple(_fig(r['rl_eps'])) if 'rl_eps' in r else '-'} |"
-            for name, r in results.items()
-        ],
-    )
+        _overall_cells,
+    ),
+}
+
+
+def run_table(which: str, results: dict) -> list[str]:
+    """One of RUN_TABLES: Table 3.10 (accuracy), the training times, Table 3.2 / 3.9 (overall)."""
+    title, header, align, cells = RUN_TABLES[which]
+    return _table(title, header, align, _run_rows(results, cells))
+
+
+def pivot_table(results: dict) -> list[str]:
+    """Tables 3.3-3.8: per model and pivot condition, the one it was trained on marked."""
     cross = []
     for name, r in results.items():
         model = model_of(name)
@@ -204,14 +234,18 @@ def tables(results: dict) -> str:
                 f"{_pct(rp['accuracy'])} | {_pct(rp['success'])} | "
                 f"{_triple(_fig(re_)) if re_ else '-'} | {_pct(re_['success']) if re_ else '-'} |"
             )
-    lines += _table(
+    return _table(
         "Tables 3.3-3.8: per pivot condition",
         "| model (trained on) | variant | pivot | thesis | jaxexo greedy | greedy accuracy % | "
         "greedy success % | jaxexo ε-greedy | ε-greedy success % |",
         "|---|---|---|---|---|---:|---:|---|---:|",
         cross,
     )
-    lines += device_table(results)
+
+
+def cfftg_tables(results: dict) -> list[str]:
+    """Table 3.11 and the batch of 1000, for each final model compared with CFFTG."""
+    lines = []
     for name in ("final", "final-learns"):
         final = results.get(name)
         if not (final and "cfftg" in final):
@@ -236,6 +270,22 @@ def tables(results: dict) -> str:
             f"Batch of 1000 (median): RL {final['rl']['batch_1000_ms']:.0f} ms, CFFTG "
             f"{final['cfftg']['batch_1000_ms']:.0f} ms (thesis final model: {THESIS_BATCH_1000_MS:.0f} ms).",
         ]
+    return lines
+
+
+def tables(results: dict) -> str:
+    """The reproduction's Markdown: every table beside the thesis's values. ``results`` maps a run name
+    ("a", "a-learns", "default") to its figures: ``rl`` greedy, ``rl_eps`` epsilon-greedy (thesis 2.6)."""
+    lines = [
+        *_intro(results),
+        *run_table("accuracy", results),
+        *population_table(results),
+        *run_table("training time", results),
+        *run_table("overall", results),
+        *pivot_table(results),
+        *device_table(results),
+        *cfftg_tables(results),
+    ]
     return "\n".join(lines) + "\n"
 
 
@@ -356,6 +406,139 @@ def compact(report: dict) -> dict:
     return out
 
 
+@dataclasses.dataclass(frozen=True)
+class Protocol:
+    """How every model of one reproduction is trained and evaluated: ``n`` test scenarios, the
+    training and exploring seed, the timed batch's size, the learns models' population size and
+    where progress goes."""
+
+    n: int
+    seed: int
+    batch_size: int
+    population: int
+    progress: Callable
+
+    def compared(self, name: str) -> bool:
+        """Whether the run is evaluated beside CFFTG (with a timed batch)."""
+        return model_of(name) in ("final", "default")
+
+    def key(self, name: str) -> dict:
+        """What a run's kept evaluation (ENTRY) must have been made with to be reused."""
+        return {
+            "n": self.n,
+            "seed": self.seed,
+            "batch_size": self.batch_size if self.compared(name) else 0,
+        }
+
+
+def config_paths(root, models, variant: str, include_default: bool) -> dict[str, Path]:
+    """Each run's config, in table order. The thesis and default configs ship inside the package
+    (jaxexo/config/); ``root``: a tree with its own configs/thesis/*.toml and configs/default.toml
+    instead."""
+    base = root / "configs" if root else Path(packaged_config("default")).parent
+    paths = {name: base / "thesis" / f"{name}.toml" for name in run_names(models, variant)}
+    if include_default:
+        paths["default"] = base / "default.toml"
+    return paths
+
+
+def train_or_reuse(name: str, cfg_path: Path, run: Path, p: Protocol) -> dict:
+    """The run's eval.json figures: those of a finished run of this very config, or a new training
+    (continued where a stopped one left off)."""
+    from jaxexo.config import with_population
+    from jaxexo.storage.rundir import contents
+    from jaxexo.train.driver import run_training
+
+    cfg = load_config(cfg_path)
+    if variant_of(name) == "learns":
+        # A population, the best member on validation exported; the faithful configs (documented not to
+        # learn) and the default model train one agent.
+        cfg = with_population(cfg, p.population, "--population")
+    if (run / "policy.npz").exists() and (run / "eval.json").exists():
+        # A finished run is reused only if it trained this very config: a config edited since
+        # would otherwise be tabulated with the old one's numbers.
+        if (run / "config.toml").exists() and load_config(run / "config.toml") != cfg:
+            raise ValueError(
+                f"{run}: trained with a different config than {cfg_path} (edited since?); "
+                f"remove that run or choose another --out"
+            )
+        ev = json.loads((run / "eval.json").read_text())
+        p.progress(f"{name}: reusing {run}")
+        return ev
+    p.progress(f"{name}: training {cfg_path}")
+    # A run stopped part way (killed, full disk) is continued, not refused.
+    started = run.is_dir() and bool(contents(run))
+    return run_training(cfg, run, seed=p.seed, resume=started, progress=False)
+
+
+def kept_evaluation(entry: Path, key: dict, ev: dict) -> dict | None:
+    """A run's kept figures (ENTRY), if they were made with ``key`` for this very training."""
+    if (
+        entry.exists()
+        and (cached := json.loads(entry.read_text())).get("key") == key
+        and cached.get("train_seconds") == ev["train_seconds"]
+    ):
+        return cached["result"]
+    return None
+
+
+def evaluate_run(name: str, run: Path, ev: dict, p: Protocol) -> dict:
+    """A run's figures: its policy greedy (beside CFFTG for the compared models) and
+    epsilon-greedy on the n test scenarios, its training figures and its population."""
+    from jaxexo.baselines import CFFTG
+    from jaxexo.evaluation.compare import WithFallback, evaluate_generators, make_scenarios
+    from jaxexo.inference import TrajectoryGenerator
+
+    gen = TrajectoryGenerator.load(run / "policy.npz")
+    gens = {"rl": WithFallback(gen, None)}  # the thesis tables score the RL swing alone
+    if p.compared(name):
+        gens["cfftg"] = CFFTG(gen.config)
+    scenarios = make_scenarios(gen.config, "test", p.n)
+    report, _ = evaluate_generators(
+        gens, scenarios, batch_size=p.batch_size if len(gens) > 1 else 0
+    )
+    # The thesis's test protocol (2.6): epsilon-greedy, with the run's final training epsilon.
+    eps = float(gen.config.train.eps_end)
+    eps_report, _ = evaluate_generators(
+        {"rl": WithFallback(gen.exploring(eps, seed=p.seed), None)}, scenarios, batch_size=0
+    )
+    result = {
+        **{k: compact(v) for k, v in report.items()},
+        "rl_eps": compact(eps_report["rl"]),
+        "test_epsilon": eps,
+        "model": model_of(name),
+        "variant": variant_of(name),
+        "train_seconds": ev["train_seconds"],
+        "episodes": ev["episodes"],
+        "env_steps": ev.get("env_steps"),
+        "eval_json": {k: ev[k] for k in ("accuracy", "success")},
+    }
+    if "members" in ev:
+        result["population"] = population_summary(ev, model_of(name))
+    return result
+
+
+def _evaluated(name: str, result: dict) -> str:
+    """The progress line of a run just evaluated."""
+    r, re_ = result["rl"], result["rl_eps"]
+    return (
+        f"{name}: greedy accuracy {r['accuracy']:.3f}, success {r['success']:.3f}, reached goal "
+        f"{r['reached_goal']:.3f}; eps-greedy ({result['test_epsilon']:g}) success {re_['success']:.3f}; "
+        f"{r['time_ms_mean']:.2f} ms per trajectory"
+    )
+
+
+def write_tables(out: Path, results: dict, results_dir) -> None:
+    """OUT/reproduce.{json,md}, and the tables as a benchmark result in ``results_dir`` if given."""
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write(out / "reproduce.json", json.dumps(results, indent=1) + "\n")
+    atomic_write(out / "reproduce.md", tables(results))
+    if results_dir is not None:
+        from jaxexo.evaluation.machine import write_result
+
+        write_result("reproduce", json.loads(json.dumps(results)), tables(results), results_dir)
+
+
 def run_reproduce(
     out: str | Path,
     models=THESIS_MODELS,
@@ -375,101 +558,26 @@ def run_reproduce(
     also write the tables as a benchmark result (reproduce_<date>_<machine>.{json,md})."""
     check_reproduce_options(out, n, results_dir, population)
     population = REPRODUCE_POPULATION if population is None else population
-    from jaxexo.baselines import CFFTG
-    from jaxexo.config import with_population
-    from jaxexo.evaluation.compare import WithFallback, evaluate_generators, make_scenarios
-    from jaxexo.inference import TrajectoryGenerator
-    from jaxexo.storage.rundir import contents
-    from jaxexo.train.driver import run_training
-
-    # The thesis and default configs ship inside the package (jaxexo/config/); ``root``: a tree with
-    # its own configs/thesis/*.toml and configs/default.toml instead.
-    base = root / "configs" if root else Path(packaged_config("default")).parent
+    p = Protocol(n, seed, batch_size, population, progress)
     out = Path(out)
-    paths = {name: base / "thesis" / f"{name}.toml" for name in run_names(models, variant)}
-    if include_default:
-        paths["default"] = base / "default.toml"
     results: dict = {}
-    for name, cfg_path in paths.items():
+    for name, cfg_path in config_paths(root, models, variant, include_default).items():
         run = out / "runs" / name
-        cfg = load_config(cfg_path)
-        if variant_of(name) == "learns":
-            # A population, the best member on validation exported; the faithful configs (documented not to
-            # learn) and the default model train one agent.
-            cfg = with_population(cfg, population, "--population")
-        if (run / "policy.npz").exists() and (run / "eval.json").exists():
-            # A finished run is reused only if it trained this very config: a config edited since
-            # would otherwise be tabulated with the old one's numbers.
-            if (run / "config.toml").exists() and load_config(run / "config.toml") != cfg:
-                raise ValueError(
-                    f"{run}: trained with a different config than {cfg_path} (edited since?); "
-                    f"remove that run or choose another --out"
-                )
-            ev = json.loads((run / "eval.json").read_text())
-            progress(f"{name}: reusing {run}")
-        else:
-            progress(f"{name}: training {cfg_path}")
-            # A run stopped part way (killed, full disk) is continued, not refused.
-            started = run.is_dir() and bool(contents(run))
-            ev = run_training(cfg, run, seed=seed, resume=started, progress=False)
+        ev = train_or_reuse(name, cfg_path, run, p)
         # A run's evaluation is kept beside it (ENTRY), so that rerunning reproduce to tabulate more models
         # does not re-evaluate the finished ones; it is reused only for the same n, seed and batch size.
-        key = {
-            "n": n,
-            "seed": seed,
-            "batch_size": batch_size if model_of(name) in ("final", "default") else 0,
-        }
-        entry = run / ENTRY
-        if (
-            entry.exists()
-            and (cached := json.loads(entry.read_text())).get("key") == key
-            and cached.get("train_seconds") == ev["train_seconds"]
-        ):
-            results[name] = cached["result"]
+        key, entry = p.key(name), run / ENTRY
+        kept = kept_evaluation(entry, key, ev)
+        if kept is not None:
+            results[name] = kept
             progress(f"{name}: reusing its evaluation {entry}")
             continue
-        gen = TrajectoryGenerator.load(run / "policy.npz")
-        gens = {"rl": WithFallback(gen, None)}  # the thesis tables score the RL swing alone
-        if model_of(name) in ("final", "default"):
-            gens["cfftg"] = CFFTG(gen.config)
-        scenarios = make_scenarios(gen.config, "test", n)
-        report, _ = evaluate_generators(
-            gens, scenarios, batch_size=batch_size if len(gens) > 1 else 0
-        )
-        # The thesis's test protocol (2.6): epsilon-greedy, with the run's final training epsilon.
-        eps = float(gen.config.train.eps_end)
-        eps_report, _ = evaluate_generators(
-            {"rl": WithFallback(gen.exploring(eps, seed=seed), None)}, scenarios, batch_size=0
-        )
-        results[name] = {
-            **{k: compact(v) for k, v in report.items()},
-            "rl_eps": compact(eps_report["rl"]),
-            "test_epsilon": eps,
-            "model": model_of(name),
-            "variant": variant_of(name),
-            "train_seconds": ev["train_seconds"],
-            "episodes": ev["episodes"],
-            "env_steps": ev.get("env_steps"),
-            "eval_json": {k: ev[k] for k in ("accuracy", "success")},
-        }
-        if "members" in ev:
-            results[name]["population"] = population_summary(ev, model_of(name))
+        results[name] = evaluate_run(name, run, ev, p)
         atomic_write(
             entry,
             json.dumps({"key": key, "train_seconds": ev["train_seconds"], "result": results[name]})
             + "\n",
         )
-        r, re_ = report["rl"], eps_report["rl"]
-        progress(
-            f"{name}: greedy accuracy {r['accuracy']:.3f}, success {r['success']:.3f}, reached goal "
-            f"{r['reached_goal']:.3f}; eps-greedy ({eps:g}) success {re_['success']:.3f}; "
-            f"{r['time_ms_mean']:.2f} ms per trajectory"
-        )
-    out.mkdir(parents=True, exist_ok=True)
-    atomic_write(out / "reproduce.json", json.dumps(results, indent=1) + "\n")
-    atomic_write(out / "reproduce.md", tables(results))
-    if results_dir is not None:
-        from jaxexo.evaluation.machine import write_result
-
-        write_result("reproduce", json.loads(json.dumps(results)), tables(results), results_dir)
+        progress(_evaluated(name, results[name]))
+    write_tables(out, results, results_dir)
     return results
