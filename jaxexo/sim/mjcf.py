@@ -160,20 +160,9 @@ def _leg(name: str, c: dict) -> list[str]:
     ]
 
 
-def legs_mjcf(
-    config, outline=None, pivot_y: float = 0.0, start_qpos=None, timestep: float = TIMESTEP
-) -> str:
-    """MJCF text of the legs of ``config`` (a jaxexo Config), with the ground obstacle ``outline``
-    ((K, 2) (y, z) vertices, metres, padded or not; None: no obstacle), the stance heel's place
-    ``pivot_y`` and, when given, a keyframe ``start`` at ``start_qpos`` (QPOS_NAMES order). Every
-    input is checked first (SimError, or GeometryError for the outline)."""
-    c = check_config(config)
-    pivot_y = float(pivot_y)
-    if not math.isfinite(pivot_y):
-        raise SimError(f"pivot_y: must be finite (m), got {pivot_y!r}")
-    _positive("timestep", timestep)
-    pieces = [] if outline is None else convex_pieces(outline)
-    assets, obstacle_geoms = [], []
+def _obstacle(pieces) -> tuple[list[str], list[str]]:
+    """The obstacle's convex pieces as mesh assets and as the geoms placing them."""
+    assets, geoms = [], []
     for i, p in enumerate(pieces):
         # Vertices about the piece's centre, the centre as the geom's position: MuJoCo keeps mesh
         # vertices in single precision, so they stay small (rounding ~1e-9 m) and the offset double.
@@ -184,12 +173,31 @@ def legs_mjcf(
             for y, z in p
         ]
         assets.append(f'    <mesh name="obstacle_{i}" vertex="{" ".join(_v(*v) for v in verts)}"/>')
-        obstacle_geoms.append(
+        geoms.append(
             f'    <geom name="obstacle_{i}" type="mesh" mesh="obstacle_{i}" '
             f'pos="{_v(centre[0], 0, centre[1])}" contype="0" conaffinity="1" rgba="0.8 0.3 0.2 1"/>'
         )
+    return assets, geoms
+
+
+def _start_qpos(start_qpos) -> np.ndarray | None:
+    """The keyframe's qpos, checked (SimError), or None."""
+    if start_qpos is None:
+        return None
+    q = np.asarray(start_qpos, dtype=np.float64)
+    if q.shape != (len(QPOS_NAMES),) or not np.all(np.isfinite(q)):
+        raise SimError(
+            f"start_qpos: expected {len(QPOS_NAMES)} finite numbers ({', '.join(QPOS_NAMES)}), "
+            f"got shape {q.shape}"
+        )
+    return q
+
+
+def _head(c: dict, timestep: float, pieces: int, assets: list[str]) -> list[str]:
+    """The model's settings: compiler, options, defaults, the custom numbers jaxexo reads back
+    (segment lengths, device limits, obstacle pieces) and the assets."""
     vel, acc = c["joint_velocity"], c["joint_acceleration"]
-    lines = [
+    return [
         '<mujoco model="jaxexo-legs">',
         "  <!-- written by jaxexo (jaxexo.sim.mjcf); units m, rad, s, kg -->",
         '  <compiler angle="radian" autolimits="true"/>',
@@ -204,11 +212,17 @@ def legs_mjcf(
         f'    <numeric name="foot_length" data="{_f(c["foot_length"])}"/>',
         f'    <numeric name="device_joint_velocity" data="{_v(vel[0], vel[1], vel[0], vel[1])}"/>',
         f'    <numeric name="device_joint_acceleration" data="{_v(acc[0], acc[1], acc[0], acc[1])}"/>',
-        f'    <numeric name="obstacle_pieces" data="{len(pieces)}"/>',
+        f'    <numeric name="obstacle_pieces" data="{pieces}"/>',
         "  </custom>",
         "  <asset>",
         *assets,
         "  </asset>",
+    ]
+
+
+def _world(c: dict, obstacle_geoms: list[str], pivot_y: float) -> list[str]:
+    """The ground, the obstacle, the pivot and the pelvis with both legs."""
+    return [
         "  <worldbody>",
         f'    <geom name="ground" type="plane" pos="{_v(0, 0, -FOOT_RADIUS)}" size="0 0 0.05" contype="0" '
         'conaffinity="1" rgba="0.9 0.9 0.9 1"/>',
@@ -223,6 +237,13 @@ def legs_mjcf(
         *_leg("left", c),
         "    </body>",
         "  </worldbody>",
+    ]
+
+
+def _constraints() -> list[str]:
+    """Each foot kept level (the tendon of its leg's joints held at its length) and each heel's connection
+    to the pivot (off until a replay turns the stance leg's on)."""
+    return [
         "  <tendon>",
         *[
             f'    <fixed name="{leg}_level"><joint joint="{leg}_hip" coef="1"/><joint joint="{leg}_knee" coef="1"/>'
@@ -240,6 +261,13 @@ def legs_mjcf(
             for leg in LEGS
         ],
         "  </equality>",
+    ]
+
+
+def _sensors_and_actuators(c: dict, pieces: int) -> list[str]:
+    """Heel and toe positions, the actuated joints' velocities and the swing foot's distance to each
+    obstacle piece; a position actuator per actuated joint, within its limits."""
+    return [
         "  <sensor>",
         *[
             f'    <framepos name="{leg}_{part}" objtype="site" objname="{leg}_{part}"/>'
@@ -249,7 +277,7 @@ def legs_mjcf(
         *[f'    <jointvel name="{j}" joint="{j}"/>' for j in ACTUATED],
         *[
             f'    <distance name="foot_obstacle_{i}" geom1="{SWING_LEG}_foot" geom2="obstacle_{i}" cutoff="{_f(DISTMAX)}"/>'
-            for i in range(len(pieces))
+            for i in range(pieces)
         ],
         "  </sensor>",
         "  <actuator>",
@@ -259,13 +287,30 @@ def legs_mjcf(
         ],
         "  </actuator>",
     ]
-    if start_qpos is not None:
-        q = np.asarray(start_qpos, dtype=np.float64)
-        if q.shape != (len(QPOS_NAMES),) or not np.all(np.isfinite(q)):
-            raise SimError(
-                f"start_qpos: expected {len(QPOS_NAMES)} finite numbers ({', '.join(QPOS_NAMES)}), "
-                f"got shape {q.shape}"
-            )
+
+
+def legs_mjcf(
+    config, outline=None, pivot_y: float = 0.0, start_qpos=None, timestep: float = TIMESTEP
+) -> str:
+    """MJCF text of the legs of ``config`` (a jaxexo Config), with the ground obstacle ``outline``
+    ((K, 2) (y, z) vertices, metres, padded or not; None: no obstacle), the stance heel's place
+    ``pivot_y`` and, when given, a keyframe ``start`` at ``start_qpos`` (QPOS_NAMES order). Every
+    input is checked first (SimError, or GeometryError for the outline)."""
+    c = check_config(config)
+    pivot_y = float(pivot_y)
+    if not math.isfinite(pivot_y):
+        raise SimError(f"pivot_y: must be finite (m), got {pivot_y!r}")
+    _positive("timestep", timestep)
+    pieces = [] if outline is None else convex_pieces(outline)
+    q = _start_qpos(start_qpos)
+    assets, obstacle_geoms = _obstacle(pieces)
+    lines = [
+        *_head(c, timestep, len(pieces), assets),
+        *_world(c, obstacle_geoms, pivot_y),
+        *_constraints(),
+        *_sensors_and_actuators(c, len(pieces)),
+    ]
+    if q is not None:
         lines += ["  <keyframe>", f'    <key name="start" qpos="{_v(*q)}"/>', "  </keyframe>"]
     lines.append("</mujoco>")
     return "\n".join(lines) + "\n"
