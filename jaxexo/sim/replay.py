@@ -38,6 +38,7 @@ Units: m, rad, s.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 
@@ -341,6 +342,125 @@ def _rollout(legs: Legs, qpos0: np.ndarray, control: np.ndarray, gains=None) -> 
     return np.concatenate([first[None], sensors[0]])
 
 
+def _check_driven(config, limits, settle, controller):
+    """The driven replay's limits (default: the config's [device]), its other inputs checked
+    (SimError)."""
+    from jaxexo.inference.swing_timing import DeviceLimits
+
+    limits = DeviceLimits.from_config(config) if limits is None else limits
+    if not isinstance(limits, DeviceLimits):
+        raise SimError(f"limits: expected a DeviceLimits, got {type(limits).__name__}")
+    if isinstance(settle, bool) or not (
+        isinstance(settle, (int, float)) and math.isfinite(settle) and settle >= 0
+    ):
+        raise SimError(f"settle: must be a finite number >= 0 (s), got {settle!r}")
+    if controller not in CONTROLLERS:
+        raise SimError(f"controller: expected one of {', '.join(CONTROLLERS)}, got {controller!r}")
+    return limits
+
+
+@dataclasses.dataclass(frozen=True)
+class DrivenRun:
+    """A driven replay's simulation: MuJoCo's sensor data after each physics step (the start's
+    first), the physics step ``dt``, ``sub`` physics steps per control sample, the ``steps``
+    simulated, where the setpoint generator clipped the acceleration and the velocity (per step),
+    and the feed-forward torque's peak per actuated joint (pd_ff; None for the servo)."""
+
+    sens: np.ndarray
+    dt: float
+    sub: int
+    steps: int
+    clip_a: np.ndarray
+    clip_v: np.ndarray
+    torque_peak: list | None
+
+    def sensor(self, legs: Legs, name: str) -> np.ndarray:
+        """The first three columns of sensor ``name`` at every physics step."""
+        mujoco, m = legs.mujoco, legs.model
+        return self.sens[:, m.sensor_adr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, name)] :][
+            :, :3
+        ]
+
+
+def _simulate(timed, legs: Legs, limits, settle: float, controller: str) -> DrivenRun:
+    """The commands of a driven replay (they do not depend on the simulation), then MuJoCo's
+    rollout of the model under them (``driven_replay``)."""
+    m = legs.model
+    rate = float(timed.rate)
+    sub = max(1, math.ceil(1.0 / (rate * PHYSICS_PER_SAMPLE_MAX_DT) - 1e-9))
+    dt = 1.0 / (rate * sub)
+    m.opt.timestep = dt
+    ref = np.asarray(timed.joint_angles, dtype=np.float64)
+    steps = (len(ref) - 1) * sub + int(round(settle / dt))
+    # The reference at every physics step, and one step beyond for the central differences.
+    qref = hermite(
+        ref, np.asarray(timed.joint_velocity, np.float64), 1.0 / rate, np.arange(steps + 2) * dt
+    )
+    _equalities_on(legs)
+    qpos0 = legs.qpos(ref[0])
+    # Both controllers follow the reference through the setpoint generator: the drive is never
+    # asked beyond its limits (where it would be, the generator clips: saturation).
+    cmd, clip_a, clip_v = setpoints(qref, dt, limits.velocity, limits.acceleration)
+    torque_peak = None
+    if controller == "servo":
+        sens = _rollout(legs, qpos0, cmd[:steps])
+    else:
+        qpos = legs.qpos(np.concatenate([ref[:1], cmd]))
+        qvel = np.gradient(qpos, dt, axis=0, edge_order=2)
+        qacc = np.gradient(qvel, dt, axis=0, edge_order=2)
+        tau = feed_forward(legs, qpos[:steps], qvel[:steps], qacc[:steps])
+        kp, kd = _pd_gains(legs, qpos0)
+        # The command of the step ending at t_{k+1}: force = kp (q_ref - q) + kd (q_ref' - q') + tau.
+        qvel_ref = qvel[1 : steps + 1][:, legs.actuated_dofs]
+        sens = _rollout(legs, qpos0, cmd[:steps] + (kd / kp) * qvel_ref + tau / kp, (kp, kd))
+        torque_peak = np.abs(tau).max(axis=0).tolist()
+    return DrivenRun(sens, dt, sub, steps, clip_a[:steps], clip_v[:steps], torque_peak)
+
+
+def _driven_figures(timed, config, legs: Legs, run: DrivenRun) -> dict:
+    """Tracking, clearance, contact, saturation and slip figures of a driven replay's simulation."""
+    col = lambda name: run.sensor(legs, name)  # noqa: E731
+    n = len(timed.joint_angles)
+    heel = col(f"{SWING_LEG}_heel")[:: run.sub][:n][:, [0, 2]]
+    toe = col(f"{SWING_LEG}_toe")[:: run.sub][:n][:, [0, 2]]
+    heel_err = np.linalg.norm(heel - timed.heel, axis=1)
+    toe_err = np.linalg.norm(toe - timed.toe, axis=1)
+    pivot = np.array([timed.scene.pivot_y, 0.0])
+    slip = np.linalg.norm(col(f"{STANCE_LEG}_heel")[:, [0, 2]] - pivot, axis=1).max()
+    dist = np.full(len(run.sens), DISTMAX)
+    for i in range(len(legs.pieces)):
+        dist = np.minimum(dist, col(f"foot_obstacle_{i}")[:, 0] + FOOT_RADIUS)
+    qv = np.stack([col(j)[:, 0] for j in ACTUATED], axis=1)
+    k = int(np.argmin(dist))
+    margin = float(config.env.min_clearance)
+    return {
+        "heel_error_max_m": float(heel_err.max()),
+        "toe_error_max_m": float(toe_err.max()),
+        # Where the swing's heel is off the floor: a heel moved along the floor is held back by friction.
+        "heel_error_airborne_max_m": float(
+            np.max(heel_err[timed.heel[:, 1] > GROUND_BAND], initial=0.0)
+        ),
+        "heel_error_p95_m": float(np.percentile(heel_err, 95)),
+        "toe_error_p95_m": float(np.percentile(toe_err, 95)),
+        "final_heel_error_m": float(
+            np.linalg.norm(col(f"{SWING_LEG}_heel")[-1, [0, 2]] - timed.heel[-1])
+        ),
+        "mujoco_min_distance_m": float(dist[k]),
+        "mujoco_min_time_s": float(k * run.dt),
+        "margin_kept": bool(dist[k] >= margin),
+        # The foot's capsule touches a piece where the segment comes within its radius: MuJoCo makes a contact.
+        "contact_steps": int(np.sum(dist <= FOOT_RADIUS)),
+        "contact": bool(dist[k] <= FOOT_RADIUS),
+        "saturated_velocity_steps": int(run.clip_v.sum()),
+        "saturated_acceleration_steps": int(run.clip_a.sum()),
+        "saturated": bool(run.clip_v.any() or run.clip_a.any()),
+        "steps": run.steps,
+        "peak_joint_velocity_rad_s": np.abs(qv).max(axis=0).tolist(),
+        "stance_heel_slip_max_m": float(slip),
+        "feed_forward_torque_peak_nm": run.torque_peak,
+    }
+
+
 def driven_replay(
     timed,
     config,
@@ -365,99 +485,19 @@ def driven_replay(
     The commands are computed first (they do not depend on the simulation), then MuJoCo rolls the
     model out in one call (mujoco.rollout) and its sensors give the sites and the foot-obstacle
     distances. Returns SI figures."""
-    from jaxexo.inference.swing_timing import DeviceLimits
-
-    limits = DeviceLimits.from_config(config) if limits is None else limits
-    if not isinstance(limits, DeviceLimits):
-        raise SimError(f"limits: expected a DeviceLimits, got {type(limits).__name__}")
-    if isinstance(settle, bool) or not (
-        isinstance(settle, (int, float)) and math.isfinite(settle) and settle >= 0
-    ):
-        raise SimError(f"settle: must be a finite number >= 0 (s), got {settle!r}")
-    if controller not in CONTROLLERS:
-        raise SimError(f"controller: expected one of {', '.join(CONTROLLERS)}, got {controller!r}")
+    limits = _check_driven(config, limits, settle, controller)
     t0 = time.perf_counter()
     legs = Legs(config, timed.scene) if legs is None else legs
-    mujoco, m = legs.mujoco, legs.model
-    rate = float(timed.rate)
-    sub = max(1, math.ceil(1.0 / (rate * PHYSICS_PER_SAMPLE_MAX_DT) - 1e-9))
-    dt = 1.0 / (rate * sub)
-    m.opt.timestep = dt
-    ref = np.asarray(timed.joint_angles, dtype=np.float64)
-    n = len(ref)
-    steps = (n - 1) * sub + int(round(settle / dt))
-    # The reference at every physics step, and one step beyond for the central differences.
-    qref = hermite(
-        ref, np.asarray(timed.joint_velocity, np.float64), 1.0 / rate, np.arange(steps + 2) * dt
-    )
-    _equalities_on(legs)
-    qpos0 = legs.qpos(ref[0])
-    # Both controllers follow the reference through the setpoint generator: the drive is never
-    # asked beyond its limits (where it would be, the generator clips: saturation).
-    cmd, clip_a, clip_v = setpoints(qref, dt, limits.velocity, limits.acceleration)
-    torque_peak = None
-    if controller == "servo":
-        sens = _rollout(legs, qpos0, cmd[:steps])
-    else:
-        qpos = legs.qpos(np.concatenate([ref[:1], cmd]))
-        qvel = np.gradient(qpos, dt, axis=0, edge_order=2)
-        qacc = np.gradient(qvel, dt, axis=0, edge_order=2)
-        tau = feed_forward(legs, qpos[:steps], qvel[:steps], qacc[:steps])
-        kp, kd = _pd_gains(legs, qpos0)
-        # The command of the step ending at t_{k+1}: force = kp (q_ref - q) + kd (q_ref' - q') + tau.
-        qvel_ref = qvel[1 : steps + 1][:, legs.actuated_dofs]
-        sens = _rollout(legs, qpos0, cmd[:steps] + (kd / kp) * qvel_ref + tau / kp, (kp, kd))
-        torque_peak = np.abs(tau).max(axis=0).tolist()
-    clip_a, clip_v = clip_a[:steps], clip_v[:steps]
-    col = (  # noqa: E731
-        lambda name: sens[
-            :, m.sensor_adr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, name)] :
-        ][:, :3]
-    )
-    heel = col(f"{SWING_LEG}_heel")[::sub][:n][:, [0, 2]]
-    toe = col(f"{SWING_LEG}_toe")[::sub][:n][:, [0, 2]]
-    heel_err = np.linalg.norm(heel - timed.heel, axis=1)
-    toe_err = np.linalg.norm(toe - timed.toe, axis=1)
-    pivot = np.array([timed.scene.pivot_y, 0.0])
-    slip = np.linalg.norm(col(f"{STANCE_LEG}_heel")[:, [0, 2]] - pivot, axis=1).max()
-    dist = np.full(len(sens), DISTMAX)
-    for i in range(len(legs.pieces)):
-        dist = np.minimum(dist, col(f"foot_obstacle_{i}")[:, 0] + FOOT_RADIUS)
-    qv = np.stack([col(j)[:, 0] for j in ACTUATED], axis=1)
-    k = int(np.argmin(dist))
-    margin = float(config.env.min_clearance)
+    run = _simulate(timed, legs, limits, settle, controller)
     return {
         "method": timed.method,
         "flagged_ok": bool(timed.ok),
-        "margin_m": margin,
+        "margin_m": float(config.env.min_clearance),
         "controller": controller,
         "limits": limits.to_dict(),
-        "physics_dt_s": dt,
+        "physics_dt_s": run.dt,
         "settle_s": float(settle),
-        "heel_error_max_m": float(heel_err.max()),
-        "toe_error_max_m": float(toe_err.max()),
-        # Where the swing's heel is off the floor: a heel moved along the floor is held back by friction.
-        "heel_error_airborne_max_m": float(
-            np.max(heel_err[timed.heel[:, 1] > GROUND_BAND], initial=0.0)
-        ),
-        "heel_error_p95_m": float(np.percentile(heel_err, 95)),
-        "toe_error_p95_m": float(np.percentile(toe_err, 95)),
-        "final_heel_error_m": float(
-            np.linalg.norm(col(f"{SWING_LEG}_heel")[-1, [0, 2]] - timed.heel[-1])
-        ),
-        "mujoco_min_distance_m": float(dist[k]),
-        "mujoco_min_time_s": float(k * dt),
-        "margin_kept": bool(dist[k] >= margin),
-        # The foot's capsule touches a piece where the segment comes within its radius: MuJoCo makes a contact.
-        "contact_steps": int(np.sum(dist <= FOOT_RADIUS)),
-        "contact": bool(dist[k] <= FOOT_RADIUS),
-        "saturated_velocity_steps": int(clip_v.sum()),
-        "saturated_acceleration_steps": int(clip_a.sum()),
-        "saturated": bool(clip_v.any() or clip_a.any()),
-        "steps": steps,
-        "peak_joint_velocity_rad_s": np.abs(qv).max(axis=0).tolist(),
-        "stance_heel_slip_max_m": float(slip),
-        "feed_forward_torque_peak_nm": torque_peak,
+        **_driven_figures(timed, config, legs, run),
         "seconds": time.perf_counter() - t0,
     }
 
