@@ -80,6 +80,80 @@ def _prepare(
     return plan, []
 
 
+def _check_heatmap(sweep: Sweep, heatmap) -> None:
+    if heatmap is not None:
+        axes = [a.path for a in sweep.axes] + ["seed"]
+        if len(heatmap) != 2 or any(h not in axes for h in heatmap) or heatmap[0] == heatmap[1]:
+            raise ConfigError(
+                f"--heatmap: expected two different axes of the sweep ({', '.join(axes)}), "
+                f"got {','.join(heatmap)}"
+            )
+
+
+class Tally:
+    """A sweep run's rows so far (the finished chunks' ones first) and its progress bar: each chunk's
+    result, as it finishes, saved, its rows appended to results.csv and counted (env steps run, best
+    success, diverged agents)."""
+
+    def __init__(self, sweep: Sweep, out: Path, rows: list[dict], n_chunks: int, backend, progress):
+        self.sweep, self.out, self.rows = sweep, out, rows
+        self.group_of = {cid: g.group_id for g in sweep.groups for cid in g.config_ids}
+        self.cols = R.columns(sweep)
+        self.bar = None
+        if progress:
+            from tqdm.auto import tqdm
+
+            self.bar = tqdm(
+                total=sweep.num_agents,
+                initial=len(rows),
+                unit="agent",
+                dynamic_ncols=True,
+                desc=f"sweep ({n_chunks} chunks, {backend})",
+            )
+        self.t_start, self.steps_run = time.perf_counter(), 0.0
+        self.best = max(
+            (float(r["success"]) for r in rows if r["diverged"] == "0"), default=float("-inf")
+        )
+        self.diverged = sum(int(r["diverged"]) for r in rows)
+
+    def finished(self, result: dict) -> None:
+        R.save_chunk(self.out, result)
+        new = R.chunk_rows(self.sweep, result, self.group_of)
+        R.append_rows(self.out / R.RESULTS, self.cols, new)
+        self.rows.extend(new)
+        self.steps_run += float(result["scalars"]["env_steps"].sum())
+        self.best = max([self.best] + [float(r["success"]) for r in new if r["diverged"] == "0"])
+        self.diverged += sum(int(r["diverged"]) for r in new)
+        if self.bar is not None:
+            self.bar.update(len(new))
+            self.bar.set_postfix(
+                steps_per_s=f"{self.steps_run / (time.perf_counter() - self.t_start):.3g}",
+                best_success=f"{self.best:.3f}",
+                diverged=self.diverged,
+            )
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+def _report(tally: Tally, heatmap, export_best: bool, export_all: bool) -> dict:
+    """results.csv in config and seed order, the report, the exports; the report's figures."""
+    from jaxexo.sweep import report
+
+    sweep, out, rows = tally.sweep, tally.out, tally.rows
+    rows.sort(key=lambda r: (int(r["config_id"]), int(r["seed"])))
+    R.write_rows(out / R.RESULTS, tally.cols, rows)
+    summary = report.write_report(sweep, out, rows, heatmap=heatmap)
+    summary["wall_s_this_run"] = time.perf_counter() - tally.t_start
+    summary["env_steps_this_run"] = tally.steps_run
+    if export_best:
+        summary["exported"] = report.export_best(sweep, out, rows)
+    if export_all:
+        summary["exported_all"] = report.export_all(sweep, out, rows)
+    return summary
+
+
 def run_sweep(
     sweep: Sweep,
     out: str | Path,
@@ -103,13 +177,7 @@ def run_sweep(
     if backend not in BACKENDS:
         raise ConfigError(f"--backend: must be one of {list(BACKENDS)}, got {backend!r}")
     out = Path(out)
-    if heatmap is not None:
-        axes = [a.path for a in sweep.axes] + ["seed"]
-        if len(heatmap) != 2 or any(h not in axes for h in heatmap) or heatmap[0] == heatmap[1]:
-            raise ConfigError(
-                f"--heatmap: expected two different axes of the sweep ({', '.join(axes)}), "
-                f"got {','.join(heatmap)}"
-            )
+    _check_heatmap(sweep, heatmap)
     budget = memory_budget or sweep.memory_budget or default_memory_budget()
     if backend == "local":
         import jax
@@ -130,66 +198,17 @@ def run_sweep(
                 f"--resume: the sweep was planned for {plan['devices']} device(s), this process has "
                 f"{n_dev}; resume it on the same number of CPU devices"
             )
-        group_of = {cid: g.group_id for g in sweep.groups for cid in g.config_ids}
-        cols = R.columns(sweep)
-
-        bar = None
-        if progress:
-            from tqdm.auto import tqdm
-
-            bar = tqdm(
-                total=sweep.num_agents,
-                initial=len(rows),
-                unit="agent",
-                dynamic_ncols=True,
-                desc=f"sweep ({len(chunks)} chunks, {backend})",
-            )
-        t_start, steps_run = time.perf_counter(), 0.0
-        best = max(
-            (float(r["success"]) for r in rows if r["diverged"] == "0"), default=float("-inf")
-        )
-        diverged = sum(int(r["diverged"]) for r in rows)
-
-        def finished(result: dict) -> None:
-            nonlocal steps_run, best, diverged
-            R.save_chunk(out, result)
-            new = R.chunk_rows(sweep, result, group_of)
-            R.append_rows(out / R.RESULTS, cols, new)
-            rows.extend(new)
-            steps_run += float(result["scalars"]["env_steps"].sum())
-            best = max([best] + [float(r["success"]) for r in new if r["diverged"] == "0"])
-            diverged += sum(int(r["diverged"]) for r in new)
-            if bar is not None:
-                bar.update(len(new))
-                bar.set_postfix(
-                    steps_per_s=f"{steps_run / (time.perf_counter() - t_start):.3g}",
-                    best_success=f"{best:.3f}",
-                    diverged=diverged,
-                )
-
+        tally = Tally(sweep, out, rows, len(chunks), backend, progress)
         if pending:
             if backend == "local":
                 from jaxexo.sweep.program import run_chunk
 
                 for c in pending:
-                    finished(run_chunk(sweep, c, devices))
+                    tally.finished(run_chunk(sweep, c, devices))
             else:
-                _run_ray(sweep, pending, plan["devices"], address, finished)
-        if bar is not None:
-            bar.close()
-        rows.sort(key=lambda r: (int(r["config_id"]), int(r["seed"])))
-        R.write_rows(out / R.RESULTS, cols, rows)
-
-        from jaxexo.sweep import report
-
-        summary = report.write_report(sweep, out, rows, heatmap=heatmap)
-        summary["wall_s_this_run"] = time.perf_counter() - t_start
-        summary["env_steps_this_run"] = steps_run
-        if export_best:
-            summary["exported"] = report.export_best(sweep, out, rows)
-        if export_all:
-            summary["exported_all"] = report.export_all(sweep, out, rows)
-        return summary
+                _run_ray(sweep, pending, plan["devices"], address, tally.finished)
+        tally.close()
+        return _report(tally, heatmap, export_best, export_all)
 
 
 # --------------------------------------------------------------------------------------------
