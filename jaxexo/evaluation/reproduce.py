@@ -153,55 +153,69 @@ def _intro(results: dict) -> list[str]:
     return lines
 
 
-def accuracy_table(results: dict) -> list[str]:
-    """Table 3.10: accuracy, strict success and goal reaching, greedy and epsilon-greedy."""
-    return _table(
+def _run_rows(results: dict, cells) -> list[str]:
+    """A table row per run: its model and variant, then ``cells(model, figures)``."""
+    return [
+        f"| {model_of(name)} | {variant_of(name)} | " + cells(model_of(name), r)
+        for name, r in results.items()
+    ]
+
+
+def _accuracy_cells(model: str, r: dict) -> str:
+    greedy = (
+        f"{_cell(THESIS_ACCURACY.get(model), lambda x: f'{x:.1f}')} | "
+        f"{_pct(r['rl']['accuracy'])} | {_pct(r['rl']['success'])} | {_pct(r['rl']['reached_goal'])} | "
+    )
+    if "rl_eps" not in r:
+        return greedy + "- | - | - |"
+    e = r["rl_eps"]
+    return greedy + f"{_pct(e['accuracy'])} | {_pct(e['success'])} | {_pct(e['reached_goal'])} |"
+
+
+def _training_cells(model: str, r: dict) -> str:
+    return (
+        f"{THESIS_TRAIN_TIME.get(model, '-')} | {_minutes(r['train_seconds'])} | "
+        f"{r['train_seconds']:.1f} | {r['episodes']} | {r.get('env_steps', '-')} |"
+    )
+
+
+def _overall_cells(model: str, r: dict) -> str:
+    return (
+        f"{_cell(THESIS_T32.get(model))} | {_triple(_fig(r['rl']))} | "
+        f"{_triple(_fig(r['rl_eps'])) if 'rl_eps' in r else '-'} |"
+    )
+
+
+# The tables with a row per run: title, header, alignment, and the row's cells after the model and
+# variant.
+RUN_TABLES = {
+    "accuracy": (
         "Table 3.10: accuracy (eq 3.1) on the test scenarios, greedy and ε-greedy",
         "| model | variant | thesis accuracy % | greedy accuracy % | greedy strict success % | "
         "greedy reached goal % | ε-greedy accuracy % | ε-greedy strict success % | "
         "ε-greedy reached goal % |",
         "|---|---|---:|---:|---:|---:|---:|---:|---:|",
-        [
-            f"| {model_of(name)} | {variant_of(name)} | "
-            f"{_cell(THESIS_ACCURACY.get(model_of(name)), lambda x: f'{x:.1f}')} | "
-            f"{_pct(r['rl']['accuracy'])} | {_pct(r['rl']['success'])} | {_pct(r['rl']['reached_goal'])} | "
-            + (
-                f"{_pct(r['rl_eps']['accuracy'])} | {_pct(r['rl_eps']['success'])} | "
-                f"{_pct(r['rl_eps']['reached_goal'])} |"
-                if "rl_eps" in r
-                else "- | - | - |"
-            )
-            for name, r in results.items()
-        ],
-    )
-
-
-def training_time_table(results: dict) -> list[str]:
-    return _table(
+        _accuracy_cells,
+    ),
+    "training time": (
         "Training time per model (thesis: laptop GPU, Ryzen 7 + RTX 4060; jaxexo: this machine's CPU)",
         "| model | variant | thesis | jaxexo | jaxexo s | episodes | env steps |",
         "|---|---|---|---|---:|---:|---:|",
-        [
-            f"| {model_of(name)} | {variant_of(name)} | {THESIS_TRAIN_TIME.get(model_of(name), '-')} | "
-            f"{_minutes(r['train_seconds'])} | {r['train_seconds']:.1f} | {r['episodes']} | "
-            f"{r.get('env_steps', '-')} |"
-            for name, r in results.items()
-        ],
-    )
-
-
-def overall_table(results: dict) -> list[str]:
-    """Table 3.2 / 3.9: every pivot condition together."""
-    return _table(
+        _training_cells,
+    ),
+    "overall": (
         "Table 3.2 / 3.9: every pivot condition together",
         "| model | variant | thesis | jaxexo greedy | jaxexo ε-greedy |",
         "|---|---|---|---|---|",
-        [
-            f"| {model_of(name)} | {variant_of(name)} | {_cell(THESIS_T32.get(model_of(name)))} | "
-            f"{_triple(_fig(r['rl']))} | {_triple(_fig(r['rl_eps'])) if 'rl_eps' in r else '-'} |"
-            for name, r in results.items()
-        ],
-    )
+        _overall_cells,
+    ),
+}
+
+
+def run_table(which: str, results: dict) -> list[str]:
+    """One of RUN_TABLES: Table 3.10 (accuracy), the training times, Table 3.2 / 3.9 (overall)."""
+    title, header, align, cells = RUN_TABLES[which]
+    return _table(title, header, align, _run_rows(results, cells))
 
 
 def pivot_table(results: dict) -> list[str]:
@@ -264,10 +278,10 @@ def tables(results: dict) -> str:
     ("a", "a-learns", "default") to its figures: ``rl`` greedy, ``rl_eps`` epsilon-greedy (thesis 2.6)."""
     lines = [
         *_intro(results),
-        *accuracy_table(results),
+        *run_table("accuracy", results),
         *population_table(results),
-        *training_time_table(results),
-        *overall_table(results),
+        *run_table("training time", results),
+        *run_table("overall", results),
         *pivot_table(results),
         *device_table(results),
         *cfftg_tables(results),
