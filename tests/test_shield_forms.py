@@ -43,6 +43,7 @@ def _batch(cfg, n, seed):
 
 
 def test_every_form_gives_the_rules_mask_moves_and_statistics():
+    import jax
     import jax.numpy as jnp
 
     from jaxexo.env import ExoStepEnv
@@ -76,6 +77,12 @@ def test_every_form_gives_the_rules_mask_moves_and_statistics():
     # every form counts its choices in one record: the JAX form every row by its full mask, the rows
     # form the rows its best moves did not decide, the scalar form the steps it could not certify
     assert stats["jax"] == ShieldStats(rows=n, rows_to_full_mask=n)
+    # under jit a trace runs once for any number of calls: the JAX form counts nothing there
+    traced = make_shield("jax", env_p, sp)
+    choose = jax.jit(lambda qk, lk: traced.choose(*args["jax"][1], qk, lk))
+    for _ in range(2):
+        np.testing.assert_array_equal(np.asarray(choose(*args["jax"][2:])), greedy)
+    assert traced.stats == ShieldStats()
     assert stats["rows"].rows == n and 0 < stats["rows"].rows_to_full_mask < n / 2
     assert stats["rows"].steps == stats["rows"].steps_to_full_mask == 0
     assert stats["scalar"].steps == n and 0 < stats["scalar"].steps_to_full_mask < n / 2

@@ -30,6 +30,7 @@ its ``clear`` argument.
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 
 from jaxexo.physics import actions, geometry, swept
@@ -168,7 +169,8 @@ class BatchedShield:
     """The JAX form: the admissible moves of N environments for parameters ``p`` (EnvParams, or any
     object with their fields), the clearance condition computed by ``keep_clearance`` in rounds of
     ``buffer`` open pairs (None: ``BUFFER_FRACTION`` of them). ``stats`` (ShieldStats) counts the rows
-    ``choose`` decides, every one by its full mask (static counts: under ``jit``, once per trace)."""
+    ``choose`` decides on concrete arrays, every one by its full mask; under ``jit`` nothing is
+    counted (a trace runs once for any number of calls, so a count there would be wrong)."""
 
     kind = "jax"
 
@@ -189,7 +191,8 @@ class BatchedShield:
     def choose(self, heel_y, heel_z, layout, q, last_action=None):
         """(N,) the shielded greedy actions for Q-values ``q`` (N, NUM_ACTIONS)."""
         mask = self.admissible(heel_y, heel_z, layout, last_action)
-        n = int(q.shape[0])
-        self.stats.rows += n
-        self.stats.rows_to_full_mask += n
+        if not isinstance(q, jax.core.Tracer):
+            n = int(q.shape[0])
+            self.stats.rows += n
+            self.stats.rows_to_full_mask += n
         return actions.greedy_action(jnp, q, mask)
