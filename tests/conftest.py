@@ -7,7 +7,6 @@ that ``import jaxexo`` stays free of JAX.
 
 from __future__ import annotations
 
-import contextlib
 import copy
 import os
 import subprocess
@@ -22,9 +21,46 @@ from jaxexo.config import EQUAL_WEIGHTS, THESIS_JOINT_LIMITS
 ROOT = Path(__file__).resolve().parent.parent
 
 # The CLI keeps compiled programs in ~/.cache/jaxexo/xla (jaxexo.train.devices.use_compilation_cache);
-# the CLI runs of the tests (subprocesses inherit this) write nothing there. Tests that want a cache
-# set their own (jax_compilation_cache below, or the variable itself).
+# the CLI runs of the tests (subprocesses inherit this) write nothing there. Tests of that cache set
+# the variable themselves.
 os.environ["JAXEXO_COMPILATION_CACHE"] = "off"
+
+# JAX compile time dominates the suite, and many tests compile the same programs (the tiny config's
+# training, validation and evaluation programs, in process and in CLI subprocesses). One persistent
+# compilation cache serves the whole session: made by the controlling process, inherited through the
+# environment by the xdist workers and every subprocess, removed when the session ends. A program
+# read back is the compiled program itself, so results are bit for bit those of a fresh compile. The
+# size bound turns on JAX's file lock, so that two processes never read an entry half written.
+SESSION_CACHE_ENV = {
+    "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0.5",
+    "JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES": "0",
+    "JAX_COMPILATION_CACHE_MAX_SIZE": str(4 * 2**30),
+}
+_OWN_SESSION_CACHE: list[str] = []
+
+
+def pytest_configure(config):
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        return  # the controller's cache, inherited
+    import tempfile
+
+    folder = tempfile.mkdtemp(prefix="jaxexo-tests-xla-")
+    _OWN_SESSION_CACHE.append(folder)
+    os.environ.update(SESSION_CACHE_ENV, JAX_COMPILATION_CACHE_DIR=folder)
+
+
+def pytest_unconfigure(config):
+    import shutil
+
+    for folder in _OWN_SESSION_CACHE:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def without_compilation_cache(env: dict) -> dict:
+    """``env`` without the session's compilation cache: for a subprocess that may die or fail while
+    writing files (its half-written entries would stay in the shared cache)."""
+    return {k: v for k, v in env.items() if k != "JAX_COMPILATION_CACHE_DIR"}
+
 
 settings.register_profile(
     "jaxexo",
@@ -355,32 +391,6 @@ def eval_against_cfftg(run: Path, out: Path, *args) -> int:
     return main(
         ["eval", "--policy", policy, "--against", "cfftg", *map(str, args), "--out", str(out)]
     )
-
-
-@contextlib.contextmanager
-def jax_compilation_cache(directory):
-    """A persistent JAX compilation cache in ``directory`` while the block runs (the previous settings
-    after): identical programs compiled again, in this process or in subprocesses given the same
-    directory, are read back instead."""
-    import jax
-    from jax.experimental.compilation_cache import compilation_cache as cc
-
-    names = (
-        "jax_compilation_cache_dir",
-        "jax_persistent_cache_min_compile_time_secs",
-        "jax_persistent_cache_min_entry_size_bytes",
-    )
-    old = {n: getattr(jax.config, n) for n in names}
-    jax.config.update("jax_compilation_cache_dir", str(directory))
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
-    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
-    cc.reset_cache()
-    try:
-        yield directory
-    finally:
-        for n, v in old.items():
-            jax.config.update(n, v)
-        cc.reset_cache()
 
 
 @pytest.fixture(scope="session")

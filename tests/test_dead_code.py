@@ -27,9 +27,10 @@ ALLOWED: dict[str, str] = {}
 
 
 def _is_pytest_hook(node, in_test: bool) -> bool:
-    """Test functions, test classes' methods and fixtures: pytest calls them by their names."""
+    """Test functions, test classes' methods, fixtures and conftest hooks (``pytest_configure``...):
+    pytest calls them by their names."""
     return in_test and (
-        node.name.startswith("test")
+        node.name.startswith(("test", "pytest_"))
         or any("fixture" in ast.unparse(d) for d in node.decorator_list)
     )
 

@@ -22,7 +22,7 @@ from jaxexo.train.evaluate import HELD_OUT, TEST_KINDS  # noqa: E402
 pytestmark = pytest.mark.slow  # training runs and a background ``jaxexo train`` subprocess
 
 from train_helpers import *  # noqa: F401,F403 (the shared tiny config, helpers and fixtures)
-from train_helpers import _compilation_cache, _npz  # noqa: F401 (module-scoped compilation cache)
+from train_helpers import _npz
 
 # --------------------------------------------------------------------------------------------
 # The driver: resume, eval.json, policy export

@@ -9,7 +9,6 @@ jax = pytest.importorskip("jax")
 import jax.numpy as jnp  # noqa: E402
 
 from train_helpers import *  # noqa: F401,F403 (the shared tiny config, helpers and fixtures)
-from train_helpers import _compilation_cache  # noqa: F401 (module-scoped compilation cache)
 
 
 def test_narrow_input_layer_is_a_matrix_product():

@@ -18,7 +18,7 @@ from jaxexo.train import run_files  # noqa: E402
 from jaxexo.train.trainer import Trainer  # noqa: E402
 
 from train_helpers import *  # noqa: F401,F403 (the shared tiny config, helpers and fixtures)
-from train_helpers import _compilation_cache, _npz  # noqa: F401 (module-scoped compilation cache)
+from train_helpers import _npz
 
 
 @pytest.mark.parametrize("layer_norm", [False, True])

@@ -15,7 +15,7 @@ import pytest
 from jaxexo.config import ConfigError, config_from_dict
 
 from conftest import FORWARD_UPDATES, forward_raw
-from train_helpers import _compilation_cache, leaves  # noqa: F401 (the module's compilation cache)
+from train_helpers import leaves
 
 jax = pytest.importorskip("jax")
 

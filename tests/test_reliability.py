@@ -6,7 +6,7 @@ write raises). Every refusal must exit non-zero, name the file or field, print n
 what was already written intact. docs/reliability.md lists these cases.
 
 The tests that train in subprocesses are marked slow and share one tiny config (tests/train_helpers.py's
-pattern) with a persistent compilation cache for the in-process runs.
+pattern) and the session's compilation cache (conftest).
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from jaxexo.storage.checkpoint import CheckpointError, pack_checkpoint, unpack_c
 from jaxexo.storage.policy_file import PolicyFileError, load_policy, policy_checksum
 from jaxexo.storage.rundir import LOCK_NAME, RunDirError, run_lock
 
-from conftest import ROOT, SEED, cli_cmd, jax_compilation_cache, run_cli, tiny_config
+from conftest import ROOT, SEED, cli_cmd, run_cli, tiny_config, without_compilation_cache
 
 
 def start_training(cfg_path, run, stdout) -> subprocess.Popen:
@@ -497,13 +497,6 @@ def test_counters_are_exact_past_2_24_with_an_odd_rollout_size():
 
 
 @pytest.fixture(scope="module")
-def cache(tmp_path_factory):
-    pytest.importorskip("jax")
-    with jax_compilation_cache(tmp_path_factory.mktemp("jax_cache")) as c:
-        yield c
-
-
-@pytest.fixture(scope="module")
 def reference(tiny_reference):
     """The uninterrupted tiny run by the CLI on one device (what every interrupted run must equal):
     the session's (conftest.tiny_reference), whose config is this module's tiny config."""
@@ -533,7 +526,7 @@ def assert_same_run(a, b):
 
 
 @pytest.mark.slow
-def test_resume_refuses_foreign_corrupt_and_incomplete_run_directories(reference, cache, tmp_path):
+def test_resume_refuses_foreign_corrupt_and_incomplete_run_directories(reference, tmp_path):
     from flax import serialization
 
     from jaxexo.train.driver import run_training
@@ -614,7 +607,7 @@ def test_sigkill_mid_run_then_resume_is_bit_identical(reference, tmp_path):
 
 
 @pytest.mark.slow
-def test_run_stopped_before_its_first_checkpoint_resumes_from_scratch(reference, cache, tmp_path):
+def test_run_stopped_before_its_first_checkpoint_resumes_from_scratch(reference, tmp_path):
     """Killed (here: interrupted) after chunk 1's metrics row but before its checkpoint: a new run there is
     refused (it is not empty) with a hint, --resume starts again and ends as the uninterrupted run."""
     from jaxexo.train import driver, run_files
@@ -662,7 +655,7 @@ def test_two_training_processes_on_one_directory(reference, tmp_path):
 
 
 @pytest.mark.slow
-def test_full_disk_fails_cleanly_and_keeps_the_last_checkpoint(reference, cache, tmp_path):
+def test_full_disk_fails_cleanly_and_keeps_the_last_checkpoint(reference, tmp_path):
     """Chunk 1 checkpointed; the resumed process may not write files as large as a checkpoint: it fails
     on chunk 2's checkpoint with a message naming the file (exit 1, no traceback), the chunk-1 checkpoint
     is intact, no temporary file is left, and a later resume ends bit-identical to the uninterrupted run."""
@@ -696,7 +689,7 @@ def test_full_disk_fails_cleanly_and_keeps_the_last_checkpoint(reference, cache,
         capture_output=True,
         text=True,
         cwd=ROOT,
-        env=one_device_env(),
+        env=without_compilation_cache(one_device_env()),
         timeout=900,
     )
     assert_clean_refusal(r, f"could not write {ckpt}", "File too large", code=1)
@@ -708,7 +701,7 @@ def test_full_disk_fails_cleanly_and_keeps_the_last_checkpoint(reference, cache,
 
 
 @pytest.mark.slow
-def test_diverged_run_says_so_and_exports_nothing_non_finite(cache, tmp_path):
+def test_diverged_run_says_so_and_exports_nothing_non_finite(tmp_path):
     """train.lr = 1e9 (the issue's case): a non-zero exit with a message, a ``diverged`` row, no policy
     (no chunk had finite parameters) and no checkpoint of the diverged state."""
     cfg = tiny_config(lr=1e9)
@@ -730,9 +723,7 @@ def test_diverged_run_says_so_and_exports_nothing_non_finite(cache, tmp_path):
 
 
 @pytest.mark.slow
-def test_divergence_after_a_good_chunk_keeps_the_best_finite_parameters(
-    cache, tmp_path, monkeypatch
-):
+def test_divergence_after_a_good_chunk_keeps_the_best_finite_parameters(tmp_path, monkeypatch):
     """Parameters that turn NaN in chunk 2 (injected after the real update): chunk 1's parameters, the best
     finite ones, are exported and evaluated, the checkpoint stays at chunk 1, and TrainingDiverged is raised."""
     import jax
@@ -772,7 +763,7 @@ def test_divergence_after_a_good_chunk_keeps_the_best_finite_parameters(
 
 @pytest.mark.slow
 def test_resume_refuses_an_edited_config_a_deleted_checkpoint_and_undecodable_metrics(
-    reference, cache, tmp_path
+    reference, tmp_path
 ):
     """config.toml edited together with the config passed (a changed lr would mix two
     learning rates), checkpoint.msgpack deleted from a run of several chunks (it used to restart from

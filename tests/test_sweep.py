@@ -39,7 +39,6 @@ from conftest import (
     ROOT,
     cli_cmd,
     forward_raw,
-    jax_compilation_cache,
     run_cli,
     run_python,
 )
@@ -459,23 +458,12 @@ def test_plan_covers_every_agent_once_in_order():
 jax = pytest.importorskip("jax")
 
 
-@pytest.fixture(scope="module")
-def jax_cache(tmp_path_factory):
-    """A persistent compilation cache for this module (and its subprocesses, through the
-    environment): the Ray worker reuses the program the CLI run compiled."""
-    with jax_compilation_cache(tmp_path_factory.mktemp("jax_cache")) as cache:
-        yield cache
-
-
-def _subprocess_env(cache) -> dict:
+def _subprocess_env() -> dict:
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
     # RAY_AUTH_MODE: the test cluster listens on loopback only; without it Ray turns token
     # authentication on whenever ~/.ray/auth_token exists, a file other Ray runs on this machine
     # create and replace (a cluster and its client could then hold different tokens).
     env.update(
-        JAX_COMPILATION_CACHE_DIR=str(cache),
-        JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="0.5",
-        JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES="0",
         RAY_USAGE_STATS_ENABLED="0",
         RAY_AUTH_MODE="disabled",
     )
@@ -483,7 +471,7 @@ def _subprocess_env(cache) -> dict:
 
 
 @pytest.fixture(scope="module")
-def cli_local(jax_cache, tmp_path_factory):
+def cli_local(tmp_path_factory):
     """``jaxexo sweep tiny.toml --out DIR --export-best --export-all --quiet`` (every CPU core as a device), niced,
     in the background from the first test that needs it."""
     tmp = tmp_path_factory.mktemp("cli")
@@ -499,7 +487,7 @@ def cli_local(jax_cache, tmp_path_factory):
             "--quiet",
         ),
         cwd=ROOT,
-        env=_subprocess_env(jax_cache),
+        env=_subprocess_env(),
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -815,12 +803,12 @@ def _stop_nodes(nodes, grace: float = 5.0) -> None:
 
 
 @pytest.fixture
-def ray_cluster(jax_cache):
+def ray_cluster():
     """A real Ray cluster on loopback: a head (no CPUs for tasks) and one worker node with two CPUs,
     each a ``ray start --block`` process; both are ended with the test."""
     pytest.importorskip("ray")
     tmp = tempfile.mkdtemp(prefix="jxr", dir="/tmp")  # short: Ray's socket paths must fit 107 bytes
-    env = _subprocess_env(jax_cache)
+    env = _subprocess_env()
     # A private HOME: a token in the user's ~/.ray/auth_token (Ray's token authentication) must not
     # leak into this loopback cluster, whose nodes and client would then disagree about it.
     env["HOME"] = tmp

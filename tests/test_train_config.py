@@ -12,7 +12,6 @@ from conftest import legacy_raw
 jax = pytest.importorskip("jax")
 
 from train_helpers import *  # noqa: F401,F403 (the shared tiny config, helpers and fixtures)
-from train_helpers import _compilation_cache  # noqa: F401 (module-scoped compilation cache)
 
 # --------------------------------------------------------------------------------------------
 # Config errors and the driver's refusals

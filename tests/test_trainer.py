@@ -17,7 +17,6 @@ from jaxexo.train.evaluate import make_rollout  # noqa: E402
 from jaxexo.train.trainer import METRICS, Hyperparams, Trainer, make_train  # noqa: E402
 
 from train_helpers import *  # noqa: F401,F403 (the shared tiny config, helpers and fixtures)
-from train_helpers import _compilation_cache  # noqa: F401 (module-scoped compilation cache)
 
 # --------------------------------------------------------------------------------------------
 # Learning

@@ -1,13 +1,13 @@
 """Shared pieces of the training tests (test_trainer, test_driver, test_policy_file, test_network,
 test_train_config, test_cli_train): the tiny config (defined in conftest, jax-free, and shared with
-test_reliability), tree helpers and the module-scoped compilation cache (the uninterrupted ``jaxexo train`` reference run of the tiny config is conftest's
-``tiny_reference``).
+test_reliability) and tree helpers (the uninterrupted ``jaxexo train`` reference run of the tiny
+config is conftest's ``tiny_reference``).
 
 JAX compile time dominates these tests (a trainer update takes 5-6 s to compile on two CPU cores,
 most of it the environment step), so:
 - the runs are tiny and share one config (``tiny``) wherever they can;
-- a persistent compilation cache in a temporary folder (per module, ``_compilation_cache``, imported
-  by each module that compiles) lets runs reuse programs that other tests compiled;
+- the session's persistent compilation cache (conftest) lets runs reuse programs that other tests,
+  other workers and CLI subprocesses compiled;
 - the uninterrupted reference run (conftest's ``tiny_reference``) is made once per session, whichever
   xdist worker asks first, and shared by the driver, reliability and CLI tests.
 """
@@ -38,7 +38,6 @@ from conftest import (  # noqa: F401 (the shared tiny config, for the star impor
     TINY_T,
     TINY_TRAIN,
     TINY_UPDATES,
-    jax_compilation_cache,
     legacy_raw,
     tiny_config,
     tiny_raw,
@@ -52,14 +51,6 @@ from jaxexo.train.evaluate import HELD_OUT, TEST_KINDS, make_rollout  # noqa: E4
 from jaxexo.train.trainer import METRICS, Hyperparams, Trainer, make_train  # noqa: E402
 
 COL = {m: i for i, m in enumerate(METRICS)}
-
-
-@pytest.fixture(scope="module", autouse=True)
-def _compilation_cache(tmp_path_factory):
-    """A persistent compilation cache for this module only: identical programs (the driver's init,
-    chunk and evaluation programs, run again by the resume and CLI tests) are compiled once."""
-    with jax_compilation_cache(tmp_path_factory.mktemp("jax_cache")) as cache:
-        yield cache
 
 
 def assert_run_files(out) -> None:
