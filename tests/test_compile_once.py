@@ -86,16 +86,12 @@ SCRIPT = textwrap.dedent(r"""
 
 
 @pytest.fixture(scope="module")
-def counted(tmp_path_factory):
+def counted():
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
     env["XLA_FLAGS"] = "--xla_force_host_platform_device_count=2"
-    # A persistent cache: the resumed run reads the programs the first run compiled (a cache hit still
-    # goes through XLA's compile entry point and is counted, so the counts are the same without it).
-    env.update(
-        JAX_COMPILATION_CACHE_DIR=str(tmp_path_factory.mktemp("jax_cache")),
-        JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="0.5",
-        JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES="0",
-    )
+    # The session's compilation cache comes with the environment (conftest): the resumed run reads the
+    # programs the first run compiled (a cache hit still goes through XLA's compile entry point and is
+    # counted, so the counts are the same without it).
     proc = subprocess.run(
         [sys.executable, "-c", SCRIPT, str(ROOT / "tests")],
         cwd=ROOT,
