@@ -1,67 +1,19 @@
-"""The time law of a device-ready swing: the time-optimal rest-to-rest parametrisation s(t) of a
-joint path under velocity and acceleration limits (TOPP), blended to rest at both ends.
+"""The time-optimal passes of a device-ready swing: the rest-to-rest parametrisation s(t) of a
+joint path under velocity and acceleration limits (TOPP), on a uniform s grid.
 
 With x = s'^2 on a uniform s grid, the velocity limits cap x by (v_j / |q'_j|)^2 and the acceleration
 limits make the admissible s'' an interval [L(x), U(x)]; a backward pass from rest at the end
 decelerating at L bounds the speeds from which the end can still be reached, and a forward pass from
 rest accelerates at U under that bound (Bobrow 1985 / Pfeiffer-Johanni 1987, passes ordered as in
-TOPP-RA). ``time_law`` turns x into s(t) at uniform times and averages s' over a short window, so
-that s'' is zero at both ends (jaxexo.swing.timing uses both). Also the monotone cubic
-(PCHIP) both modules interpolate with.
+TOPP-RA). jaxexo.swing.curve turns x into the smoothed time law s(t).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
-TIME_NODES = 2000  # nodes of the time-law table over the optimal duration
-BLEND_S = 0.03  # s, box-filter window (s'' ramps from rest over 30 ms) ...
-BLEND_FRACTION = 0.1  # ... at most this fraction of the optimal duration
 SCALAR_ROWS = 24  # batches up to this size scan row by row as Python floats (faster there)
 X_CAP = 1e6  # 1/s^2: cap on s'^2 where no joint moves (s' <= 1000 /s)
-
-
-# --------------------------------------------------------------------------------------------
-# Monotone cubic interpolation (PCHIP)
-# --------------------------------------------------------------------------------------------
-
-
-def pchip_slopes(y: np.ndarray) -> np.ndarray:
-    """Fritsch-Carlson slopes (per unit sample index) of samples y (N, D): the harmonic mean of the
-    neighbouring differences where they share a sign, zero at local extrema, so the interpolant
-    never overshoots the samples; shape-preserving three-point ends."""
-    d = np.diff(y, axis=0)
-    if len(d) == 1:
-        return np.repeat(d, 2, axis=0)
-    d0, d1 = d[:-1], d[1:]
-    same = d0 * d1 > 0
-    m = np.zeros_like(y)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        m[1:-1] = np.where(same, 2.0 * d0 * d1 / np.where(same, d0 + d1, 1.0), 0.0)
-    for end, a, b in ((0, d[0], d[1]), (-1, d[-1], d[-2])):
-        e = 0.5 * (3.0 * a - b)
-        e = np.where(np.sign(e) != np.sign(a), 0.0, e)
-        e = np.where((np.sign(a) != np.sign(b)) & (np.abs(e) > 3.0 * np.abs(a)), 3.0 * a, e)
-        m[end] = e
-    return m
-
-
-def pchip_eval(y: np.ndarray, m: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """Cubic Hermite interpolant of samples y (N, D) with slopes m at sample coordinates u (K,)
-    in [0, N-1]: (K, D)."""
-    n = y.shape[0]
-    u = np.clip(np.asarray(u, np.float64), 0.0, n - 1)
-    i = np.minimum(np.floor(u).astype(np.int64), n - 2)
-    t = (u - i)[:, None]
-    t2, t3 = t * t, t * t * t
-    return (
-        (2 * t3 - 3 * t2 + 1) * y[i]
-        + (t3 - 2 * t2 + t) * m[i]
-        + (-2 * t3 + 3 * t2) * y[i + 1]
-        + (t3 - t2) * m[i + 1]
-    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -184,75 +136,3 @@ def topp(
         root = np.sqrt(cap)
         floor = np.minimum(floor, 0.5 * (root[:, :-1] + root[:, 1:]))
     return x, floor
-
-
-# --------------------------------------------------------------------------------------------
-# Time law
-# --------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class TimeLaw:
-    """s(t) as a table at uniform times (step dt): s, s', s'' at every node; ``at`` interpolates
-    (cubic Hermite in s with the node speeds, linear in s' and s''). ``slowed(k)`` is s(t / k)."""
-
-    dt: float
-    s: np.ndarray
-    sdot: np.ndarray
-    sddot: np.ndarray
-
-    @property
-    def duration(self) -> float:
-        return self.dt * (len(self.s) - 1)
-
-    def slowed(self, k: float) -> "TimeLaw":
-        return TimeLaw(self.dt * k, self.s, self.sdot / k, self.sddot / (k * k))
-
-    def at(self, t: np.ndarray):
-        u = np.clip(np.asarray(t, np.float64) / self.dt, 0.0, len(self.s) - 1)
-        s = pchip_eval(self.s[:, None], self.sdot[:, None] * self.dt, u)[:, 0]
-        grid = np.arange(len(self.s))
-        return (np.clip(s, 0.0, 1.0), np.interp(u, grid, self.sdot), np.interp(u, grid, self.sddot))
-
-
-def time_law(
-    s_grid: np.ndarray,
-    x: np.ndarray,
-    v_floor: np.ndarray | None = None,
-    blend_s: float | None = None,
-    nodes: int = TIME_NODES,
-) -> TimeLaw:
-    """The rest-to-rest law from s'^2 = x on s_grid: cell times from constant s'' per cell
-    (2 ds / (v0 + v1), the mean speed at least ``v_floor`` per cell), s' at uniform time nodes,
-    then averaged over a window w (zero s'' at both ends)."""
-    blend_s = BLEND_S if blend_s is None else blend_s
-    v = np.sqrt(np.maximum(x, 0.0))
-    mean = 0.5 * (v[:-1] + v[1:])
-    if v_floor is not None:
-        mean = np.maximum(mean, v_floor)
-    dt_cells = np.diff(s_grid) / np.maximum(mean, 1e-12)
-    t_grid = np.concatenate([[0.0], np.cumsum(dt_cells)])
-    t0 = float(t_grid[-1])
-    dt = t0 / nodes
-    # A short window: averaging over longer stretches would carry speed into the places (cusps,
-    # sharp bends) where the optimal law must nearly stop.
-    m = max(1, int(round(min(blend_s / dt, BLEND_FRACTION * nodes))))
-    w = m * dt
-    tn = np.arange(nodes + 1) * dt
-    vn = np.interp(tn, t_grid, v)
-    vn[0] = vn[-1] = 0.0
-    # Box filter of the piecewise-linear speed: sdot(t) = (V(t) - V(t - w)) / w, V its integral.
-    big_v = np.concatenate([[0.0], np.cumsum(0.5 * (vn[1:] + vn[:-1]) * dt)])
-    total = nodes + m
-    idx = np.arange(total + 1)
-    V = big_v[np.clip(idx, 0, nodes)]
-    Vlag = np.where(idx - m >= 0, big_v[np.clip(idx - m, 0, nodes)], 0.0)
-    sdot = (V - Vlag) / w
-    vpad = np.concatenate([vn, np.zeros(m)])
-    vlag = np.where(idx - m >= 0, vpad[np.clip(idx - m, 0, total)], 0.0)
-    sddot = (vpad[idx] - vlag) / w
-    s = np.concatenate([[0.0], np.cumsum(0.5 * (sdot[1:] + sdot[:-1]) * dt)])
-    # Trapezoid error makes s end a hair off 1: rescale s and its derivatives together.
-    scale = 1.0 / s[-1]
-    sdot[0] = sdot[-1] = sddot[0] = sddot[-1] = 0.0
-    return TimeLaw(dt, s * scale, sdot * scale, sddot * scale)

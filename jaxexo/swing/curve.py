@@ -1,0 +1,430 @@
+"""The timed swing as a curve (NumPy only): the joint path q(s), a C2 cubic spline in the joint-space
+arc length s in [0, 1], and the time law s(t), a C2 piecewise cubic with bounded s'''; the joints
+q(s(t)) then have continuous acceleration and bounded jerk, and the heel, toe, hip and knees follow
+from the joints by forward kinematics from the pivot foot (docs/device-timing.md).
+
+Why the joints and not the heel: both legs are straight at lift-off and touch-down (the hip model,
+eq 2.42), so any smooth heel curve makes the joints move like a square root there and no heel
+parametrisation has bounded joint acceleration at the ends; along the joint path itself the ends
+are regular.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+# Leg terms of the swing heel relative to the pivot heel: heel = pivot + sum_i SIGN_i L_i e(phi_i),
+# phi = (hip_swing, hip_swing + knee_swing, hip_stance, hip_stance + knee_stance), L = (thigh,
+# shin, thigh, shin), e(phi) = (sin phi, -cos phi): the thigh and shank directions of eq 2.49.
+_SIGN = np.array([1.0, 1.0, -1.0, -1.0])
+
+
+# --------------------------------------------------------------------------------------------
+# The joint path q(s)
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class JointPath:
+    """q(s) for the four joints: on [knots[i], knots[i+1]], q = c0 + c1 d + c2 d^2 + c3 d^3 with
+    d = s - knots[i]; knots (P + 1,) from 0 to 1, coef (P, 4, J) (c0..c3 per joint)."""
+
+    knots: np.ndarray
+    coef: np.ndarray
+
+    def derivatives(self, s: np.ndarray, order: int = 3) -> list[np.ndarray]:
+        """q and its s-derivatives up to ``order`` at s (n,): a list of (n, J) arrays."""
+        s = np.asarray(s, np.float64)
+        i = np.clip(np.searchsorted(self.knots, s, side="right") - 1, 0, len(self.coef) - 1)
+        d = (s - self.knots[i])[:, None]
+        c = self.coef[i]  # (n, 4, J)
+        c0, c1, c2, c3 = c[:, 0], c[:, 1], c[:, 2], c[:, 3]
+        out = [((c3 * d + c2) * d + c1) * d + c0]
+        if order >= 1:
+            out.append((3.0 * c3 * d + 2.0 * c2) * d + c1)
+        if order >= 2:
+            out.append(6.0 * c3 * d + 2.0 * c2)
+        if order >= 3:
+            out.append(6.0 * c3)
+        return out
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per piece, max |q'| and max |q''| over the piece (P, J): q'' is linear on a piece (its
+        ends), q' quadratic (its ends and its vertex)."""
+        h = np.diff(self.knots)[:, None]
+        c1, c2, c3 = self.coef[:, 1], self.coef[:, 2], self.coef[:, 3]
+        d1_end = c1 + (2.0 * c2 + 3.0 * c3 * h) * h
+        with np.errstate(divide="ignore", invalid="ignore"):
+            dv = np.where(c3 != 0.0, -c2 / (3.0 * c3), 0.0)
+        dv = np.clip(dv, 0.0, h)
+        d1_mid = c1 + (2.0 * c2 + 3.0 * c3 * dv) * dv
+        d1 = np.maximum(np.maximum(np.abs(c1), np.abs(d1_end)), np.abs(d1_mid))
+        d2 = np.maximum(np.abs(2.0 * c2), np.abs(2.0 * c2 + 6.0 * c3 * h))
+        return d1, d2
+
+
+def chord_knots(q: np.ndarray) -> np.ndarray:
+    """Joint-space chord-length fractions (N,) of joint samples (N, J), from 0 to 1 (the samples
+    must move: see ``distinct_samples``)."""
+    length = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(q, axis=0), axis=1))])
+    return length / length[-1]
+
+
+def distinct_samples(q: np.ndarray, short: float = 0.25) -> np.ndarray:
+    """Indices of the samples (N, J) the spline goes through: a sample closer to the next kept one
+    than ``short`` of the median step is dropped (a cubic through a chord much shorter than its
+    neighbours swings wide of it), the first and the last sample always kept. Raises ValueError when
+    the joints do not move at all."""
+    step = np.linalg.norm(np.diff(q, axis=0), axis=1)
+    if not float(step.sum()) > 0.0:
+        raise ValueError("trajectory: the joints do not move along this path; nothing to time")
+    tiny = short * float(np.median(step[step > 0]))
+    keep = np.ones(len(q), bool)
+    keep[1:-1] = step[1:] >= tiny  # a sample nearly on the next one goes
+    if len(q) > 2 and step[-1] < tiny:  # the landing stays; the sample it nearly repeats goes
+        keep[-2] = False
+    return np.flatnonzero(keep)
+
+
+def cubic_paths(knots: np.ndarray, q: np.ndarray) -> list[JointPath]:
+    """C2 cubic splines through joint samples q (B, N, J) at knots (B, N), not-a-knot ends (the
+    third derivative continuous across the second and the second-last knots), so that a path with
+    a cubic shape is reproduced. The slopes solve one tridiagonal system per path."""
+    b, n, nj = q.shape
+    h = np.diff(knots, axis=1)  # (B, N-1)
+    delta = np.diff(q, axis=1) / h[..., None]  # (B, N-1, J)
+    if n < 4:  # a line or a parabola through the samples: one piece per interval, exact
+        m = _low_order_slopes(knots, q, delta)
+    else:
+        lower, diag, upper = np.zeros((b, n)), np.zeros((b, n)), np.zeros((b, n))
+        rhs = np.zeros((b, n, nj))
+        lower[:, 1:-1], diag[:, 1:-1] = h[:, 1:], 2.0 * (h[:, :-1] + h[:, 1:])
+        upper[:, 1:-1] = h[:, :-1]
+        rhs[:, 1:-1] = 3.0 * (h[:, 1:, None] * delta[:, :-1] + h[:, :-1, None] * delta[:, 1:])
+        # Not-a-knot: (m0 + m1 - 2 D0) / h0^2 = (m1 + m2 - 2 D1) / h1^2, with m2 eliminated by the
+        # next row; its mirror at the end with m[n-3] eliminated. Both rows become two-term.
+        w0, w1 = 1.0 / h[:, 0] ** 2, 1.0 / h[:, 1] ** 2
+        f = w1 / h[:, 0]
+        diag[:, 0] = w0 + f * h[:, 1]
+        upper[:, 0] = w0 - w1 + f * 2.0 * (h[:, 0] + h[:, 1])
+        rhs[:, 0] = 2.0 * (w0[:, None] * delta[:, 0] - w1[:, None] * delta[:, 1])
+        rhs[:, 0] += f[:, None] * rhs[:, 1]
+        wa, wb = 1.0 / h[:, -2] ** 2, 1.0 / h[:, -1] ** 2
+        g = wa / h[:, -1]
+        lower[:, -1] = wa - wb - g * 2.0 * (h[:, -2] + h[:, -1])
+        diag[:, -1] = -wb - g * h[:, -2]
+        rhs[:, -1] = 2.0 * (wa[:, None] * delta[:, -2] - wb[:, None] * delta[:, -1])
+        rhs[:, -1] -= g[:, None] * rhs[:, -2]
+        m = tridiagonal_solve(lower, diag, upper, rhs)
+    hh = h[..., None]
+    c2 = (3.0 * delta - 2.0 * m[:, :-1] - m[:, 1:]) / hh
+    c3 = (m[:, :-1] + m[:, 1:] - 2.0 * delta) / (hh * hh)
+    coef = np.stack([q[:, :-1], m[:, :-1], c2, c3], axis=2)  # (B, N-1, 4, J)
+    return [JointPath(knots[i].copy(), coef[i]) for i in range(b)]
+
+
+def tridiagonal_solve(lower, diag, upper, rhs) -> np.ndarray:
+    """x with lower[i] x[i-1] + diag[i] x[i] + upper[i] x[i+1] = rhs[i] (Thomas algorithm), for
+    systems (B, N) with right-hand sides (B, N, J). A few systems run as Python floats (a row costs
+    less than a NumPy call), many as one vectorised sweep."""
+    b, n, nj = rhs.shape
+    if b <= 4:
+        return np.stack([_thomas_floats(lower[i], diag[i], upper[i], rhs[i]) for i in range(b)])
+    cp = np.empty((b, n))
+    dp = np.empty((b, n, nj))
+    cp[:, 0] = upper[:, 0] / diag[:, 0]
+    dp[:, 0] = rhs[:, 0] / diag[:, 0, None]
+    for i in range(1, n):
+        den = diag[:, i] - lower[:, i] * cp[:, i - 1]
+        cp[:, i] = upper[:, i] / den
+        dp[:, i] = (rhs[:, i] - lower[:, i, None] * dp[:, i - 1]) / den[:, None]
+    x = np.empty((b, n, nj))
+    x[:, -1] = dp[:, -1]
+    for i in range(n - 2, -1, -1):
+        x[:, i] = dp[:, i] - cp[:, i, None] * x[:, i + 1]
+    return x
+
+
+def _thomas_floats(lower, diag, upper, rhs) -> np.ndarray:
+    lo, di, up = lower.tolist(), diag.tolist(), upper.tolist()
+    d = rhs.tolist()
+    n, nj = rhs.shape
+    cp = [up[0] / di[0]] + [0.0] * (n - 1)
+    dp = [[v / di[0] for v in d[0]]] + [None] * (n - 1)
+    for i in range(1, n):
+        li = lo[i]
+        den = di[i] - li * cp[i - 1]
+        cp[i] = up[i] / den
+        prev = dp[i - 1]
+        dp[i] = [(d[i][j] - li * prev[j]) / den for j in range(nj)]
+    x = [None] * n
+    x[-1] = dp[-1]
+    for i in range(n - 2, -1, -1):
+        c, nxt = cp[i], x[i + 1]
+        x[i] = [dp[i][j] - c * nxt[j] for j in range(nj)]
+    return np.array(x)
+
+
+def _low_order_slopes(knots, q, delta):
+    """Slopes (B, N, J) for N = 2 (the line) or N = 3 (the parabola through the three samples)."""
+    if q.shape[1] == 2:
+        return np.repeat(delta, 2, axis=1)
+    x = knots[..., None]
+    c = (delta[:, 1] - delta[:, 0]) / (x[:, 2] - x[:, 0])  # the parabola's second coefficient
+    m0 = delta[:, 0] - c * (x[:, 1] - x[:, 0])
+    return np.stack([m0, m0 + 2.0 * c * (x[:, 1] - x[:, 0]), m0 + 2.0 * c * (x[:, 2] - x[:, 0])], 1)
+
+
+# --------------------------------------------------------------------------------------------
+# Forward kinematics with derivatives
+# --------------------------------------------------------------------------------------------
+
+
+def _phases(q):
+    """The absolute segment angles phi (..., 4) of joint values (..., 4), or of their derivatives."""
+    return np.stack([q[..., 0], q[..., 0] + q[..., 1], q[..., 2], q[..., 2] + q[..., 3]], axis=-1)
+
+
+def heel_derivatives(lengths, pivot_y: float, qs: list[np.ndarray]) -> list[np.ndarray]:
+    """The swing heel (n, 2) and its derivatives (same order as ``qs``, up to the third) for joint
+    values and derivatives qs = [q, q', q'', q'''] (each (n, 4)): forward kinematics from the pivot
+    heel on the ground, heel = pivot + sum_i sign_i L_i e(phi_i), differentiated term by term
+    (e' = phi' e_perp, e_perp' = -phi' e)."""
+    thigh, shin = lengths
+    ln = _SIGN * np.array([thigh, shin, thigh, shin])
+    phi = _phases(qs[0])
+    e = np.stack([np.sin(phi), -np.cos(phi)], axis=-1)  # (n, 4, 2)
+    ep = np.stack([np.cos(phi), np.sin(phi)], axis=-1)
+    out = [np.einsum("i,nik->nk", ln, e)]
+    out[0][:, 0] += pivot_y
+    if len(qs) > 1:
+        p1 = _phases(qs[1])[..., None]
+        out.append(np.einsum("i,nik->nk", ln, p1 * ep))
+    if len(qs) > 2:
+        p2 = _phases(qs[2])[..., None]
+        out.append(np.einsum("i,nik->nk", ln, p2 * ep - p1 * p1 * e))
+    if len(qs) > 3:
+        p3 = _phases(qs[3])[..., None]
+        out.append(np.einsum("i,nik->nk", ln, (p3 - p1**3) * ep - 3.0 * p1 * p2 * e))
+    return out
+
+
+def leg_points(lengths, pivot_y: float, q: np.ndarray) -> dict[str, np.ndarray]:
+    """Hip, knees and swing heel (n, 2) each of joint angles (n, 4): the stance leg from the pivot
+    heel up to the hip, the swing leg down from it."""
+    thigh, shin = lengths
+    phi = _phases(q)
+    e = np.stack([np.sin(phi), -np.cos(phi)], axis=-1)
+    pivot = np.array([pivot_y, 0.0])
+    hip = pivot - thigh * e[:, 2] - shin * e[:, 3]
+    knee_swing = hip + thigh * e[:, 0]
+    return {
+        "hip": hip,
+        "knee_swing": knee_swing,
+        "knee_stance": hip + thigh * e[:, 2],
+        "heel": knee_swing + shin * e[:, 1],
+    }
+
+
+def heel_second_derivative_bounds(lengths, path: JointPath) -> np.ndarray:
+    """Per piece of the path (P,), an upper bound on |d2 heel / ds2| (m): per leg term
+    L (|phi''| + phi'^2), with the joints' per-piece bounds (sums of bounds bound the summed
+    angles)."""
+    d1, d2 = path.bounds()
+    a1, a2 = _phases(d1), _phases(d2)
+    ln = np.abs(np.array([lengths[0], lengths[1], lengths[0], lengths[1]]))
+    return np.sum(ln * (a2 + a1 * a1), axis=-1)
+
+
+def check_grid(lengths, path: JointPath, tol: float) -> np.ndarray:
+    """Path parameters (n,) from 0 to 1, every knot among them, spaced so that the heel curve
+    strays at most ``tol`` (m) from the polyline through them: on a piece with |h''| <= B, a chord
+    over Delta s deviates by at most Delta s^2 B / 8."""
+    h = np.diff(path.knots)
+    bound = heel_second_derivative_bounds(lengths, path)
+    n = np.maximum(1, np.ceil(h * np.sqrt(bound / (8.0 * tol)))).astype(np.int64)
+    start = np.repeat(path.knots[:-1], n)
+    step = np.repeat(h / n, n)
+    j = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)
+    return np.concatenate([start + j * step, [1.0]])
+
+
+# --------------------------------------------------------------------------------------------
+# The time law s(t)
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class TimeLaw:
+    """s(t): a piecewise-linear speed v(t) through (nodes, speed), rest at both ends, whose integral
+    over [0, nodes[-1]] is 1, averaged over a sliding window w (a box filter):
+    s'(t) = (S(t) - S(t - w)) / w with S = integral of v. Then s is a C2 piecewise cubic on
+    [0, nodes[-1] + w] with breakpoints at the nodes and the nodes + w, s'' = (v(t) - v(t - w)) / w
+    and s''' = (v'(t) - v'(t - w)) / w bounded (Biagiotti & Melchiorri's FIR view of smoothing a
+    time-optimal law). All values are exact closed forms of the nodes."""
+
+    nodes: np.ndarray  # (M + 1,) s, from 0
+    speed: np.ndarray  # (M + 1,) 1/s, 0 at both ends
+    window: float  # s
+
+    def __post_init__(self):
+        dt = np.diff(self.nodes)
+        acc = np.diff(self.speed) / np.where(dt > 0, dt, 1.0)
+        area = 0.5 * (self.speed[:-1] + self.speed[1:]) * dt
+        big_s = np.concatenate([[0.0], np.cumsum(area)])
+        # P = integral of S: per segment S_i dt + v_i dt^2 / 2 + a_i dt^3 / 6.
+        inc = big_s[:-1] * dt + self.speed[:-1] * dt * dt / 2.0 + acc * dt**3 / 6.0
+        big_p = np.concatenate([[0.0], np.cumsum(inc)])
+        object.__setattr__(self, "_acc", acc)
+        object.__setattr__(self, "_S", big_s)
+        object.__setattr__(self, "_P", big_p)
+
+    @property
+    def duration(self) -> float:
+        return float(self.nodes[-1] + self.window)
+
+    def slowed(self, k: float) -> "TimeLaw":
+        """s(t / k): velocities / k, accelerations / k^2, jerks / k^3."""
+        return TimeLaw(self.nodes * k, self.speed / k, self.window * k)
+
+    def _primitives(self, tau: np.ndarray):
+        """P, S, v, v' (right-continuous) at times tau (n,), 0 before the start, at rest after."""
+        t_end = self.nodes[-1]
+        i = np.clip(np.searchsorted(self.nodes, tau, side="right") - 1, 0, len(self.nodes) - 2)
+        d = tau - self.nodes[i]
+        a = self._acc[i]
+        v = self.speed[i] + a * d
+        big_s = self._S[i] + (self.speed[i] + 0.5 * a * d) * d
+        big_p = self._P[i] + (self._S[i] + (0.5 * self.speed[i] + a * d / 6.0) * d) * d
+        before, after = tau < 0.0, tau >= t_end
+        total = self._S[-1]
+        big_p = np.where(before, 0.0, np.where(after, self._P[-1] + total * (tau - t_end), big_p))
+        big_s = np.where(before, 0.0, np.where(after, total, big_s))
+        v = np.where(before | after, 0.0, v)
+        a = np.where(before | after, 0.0, a)
+        return big_p, big_s, v, a
+
+    def at(self, t) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """s and its first three time derivatives at times t (n,), clamped to [0, duration]."""
+        t = np.clip(np.asarray(t, np.float64), 0.0, self.duration)
+        n = len(t)
+        p, big_s, v, a = self._primitives(np.concatenate([t, t - self.window]))
+        k = 1.0 / (self.window * self._S[-1])
+        s = np.clip((p[:n] - p[n:]) * k, 0.0, 1.0)
+        out = [s, (big_s[:n] - big_s[n:]) * k, (v[:n] - v[n:]) * k, (a[:n] - a[n:]) * k]
+        # At touch-down exactly at rest (t - w rounds to a hair before the last node).
+        end = t >= self.duration
+        for x, val in zip(out, (1.0, 0.0, 0.0, 0.0)):
+            x[end] = val
+        return tuple(out)
+
+    def breakpoints(self) -> np.ndarray:
+        """Where s''' may jump: the nodes and the nodes + w, sorted, within [0, duration]."""
+        b = np.unique(np.concatenate([self.nodes, self.nodes + self.window]))
+        return b[b <= self.duration]
+
+    def pieces(self) -> tuple[np.ndarray, np.ndarray]:
+        """The piecewise-cubic form: breakpoints (P + 1,) and coefficients (P, 4), s(t) =
+        c0 + c1 d + c2 d^2 + c3 d^3 with d = t - breakpoints[i] on piece i."""
+        b = self.breakpoints()
+        s, s1, s2, s3 = self.at(b[:-1])
+        # s''' is right-continuous at a breakpoint: the piece's own value.
+        return b, np.stack([s, s1, s2 / 2.0, s3 / 6.0], axis=1)
+
+
+def law_from_speeds(
+    s_grid: np.ndarray, x: np.ndarray, floor: np.ndarray, window: float, fraction: float = 1.0
+) -> TimeLaw:
+    """The time law of speeds s'^2 = x (K,) on s_grid (K,), constant s'' per cell (the TOPP passes'
+    law), each cell's mean speed at least ``floor`` (K - 1,): a cell where the floor binds is crossed
+    at a peak in its middle (two linear pieces) so that it still covers its length. Then averaged
+    over ``window`` (s), at most ``fraction`` of the passes' duration."""
+    v = np.sqrt(np.maximum(x, 0.0))
+    ds = np.diff(s_grid)
+    mean = np.maximum(0.5 * (v[:-1] + v[1:]), np.maximum(floor, 1e-12))
+    dt = ds / mean
+    lin = 0.5 * (v[:-1] + v[1:])
+    t = np.concatenate([[0.0], np.cumsum(dt)])
+    bind = np.flatnonzero(mean > lin * (1.0 + 1e-12))
+    # A cell where the floor binds gets a middle node at the speed that makes its area ds.
+    nodes = np.insert(t, bind + 1, t[bind] + 0.5 * dt[bind])
+    speed = np.insert(v, bind + 1, 2.0 * mean[bind] - lin[bind])
+    speed[0] = speed[-1] = 0.0
+    return TimeLaw(nodes, speed, float(min(window, fraction * t[-1])) if t[-1] > 0 else window)
+
+
+# --------------------------------------------------------------------------------------------
+# The curve
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class CurveState:
+    """The swing at times (n,): joints (n, 4) rad and their time derivatives (rad/s, rad/s^2,
+    rad/s^3), the swing heel (n, 2) m with its velocity, acceleration and jerk (the toe moves with
+    it: the foot stays level), and the path parameter s (n,)."""
+
+    time: np.ndarray
+    path_parameter: np.ndarray
+    joint_angles: np.ndarray
+    joint_velocity: np.ndarray
+    joint_acceleration: np.ndarray
+    joint_jerk: np.ndarray
+    heel: np.ndarray
+    heel_velocity: np.ndarray
+    heel_acceleration: np.ndarray
+    heel_jerk: np.ndarray
+    toe: np.ndarray
+
+
+@dataclass(frozen=True)
+class SwingCurve:
+    """A timed swing as a curve: joints q(s(t)) for t in [0, duration], at rest at both ends."""
+
+    path: JointPath
+    law: TimeLaw
+    pivot_y: float  # m
+    lengths: tuple[float, float]  # thigh, shin (m)
+    foot_length: float  # m
+
+    @property
+    def duration(self) -> float:
+        return self.law.duration
+
+    def joints(self, t) -> tuple[np.ndarray, list[np.ndarray]]:
+        """s (n,) and [q, q-dot, q-ddot, q-dddot] (n, 4) each at times t: the chain rule on q(s(t))."""
+        s, s1, s2, s3 = self.law.at(t)
+        q, d1, d2, d3 = self.path.derivatives(s, 3)
+        s1, s2, s3 = s1[:, None], s2[:, None], s3[:, None]
+        vel = d1 * s1
+        acc = d2 * s1 * s1 + d1 * s2
+        jerk = d3 * s1**3 + 3.0 * d2 * s1 * s2 + d1 * s3
+        return s, [q, vel, acc, jerk]
+
+    def at(self, t) -> CurveState:
+        """Every joint and the heel/toe, with their derivatives, at times t (s; clamped to the
+        swing: before it starts and after it lands the legs rest)."""
+        t = np.atleast_1d(np.asarray(t, np.float64))
+        if t.ndim != 1 or not np.all(np.isfinite(t)):
+            raise ValueError(f"t: expected finite times in s (a number or a 1-D array), got {t!r}")
+        s, qs = self.joints(t)
+        h = heel_derivatives(self.lengths, self.pivot_y, qs)
+        toe = h[0].copy()
+        toe[:, 0] += self.foot_length
+        return CurveState(t, s, *qs, *h, toe)
+
+    def piecewise(self) -> dict:
+        """The piecewise-polynomial form for a controller that evaluates the curve itself:
+        s(t) and q_j(s), cubic pieces each (module docstring), JSON values."""
+        tb, tc = self.law.pieces()
+        return {
+            "evaluate": "q_j(t) = Q_j(S(t)); on piece i, S = sum_k c_k (t - t_i)^k and "
+            "Q_j = sum_k c_k (s - s_i)^k, k = 0..3",
+            "time_law": {"breakpoints_s": tb.tolist(), "coefficients": tc.tolist()},
+            "joint_path": {
+                "breakpoints": self.path.knots.tolist(),
+                "coefficients": self.path.coef.transpose(2, 0, 1).tolist(),
+            },
+        }
