@@ -33,11 +33,11 @@ from jaxexo.swing.curve import (
     JointPath,
     SwingCurve,
     TimeLaw,
+    check_grid,
     chord_knots,
     cubic_paths,
     distinct_samples,
     heel_derivatives,
-    check_grid,
     law_from_speeds,
     leg_points,
 )
