@@ -241,6 +241,8 @@ def cmd_generate(args) -> int:
     # The generators' own checks, before any policy is read (the message names the option).
     if args.rate is not None:
         check_rate(args.rate, "--rate")
+    if args.ros and args.rate is None:
+        raise ValueError("--ros: a ROS 2 JointTrajectory is a timed swing; give --rate too")
     check_points(args.points, "--points")
     check_duration(args.duration, "--duration")
     obstacle = obstacle_from_args(args)
@@ -277,6 +279,9 @@ def cmd_generate(args) -> int:
         lambda path: plot_trajectory(traj, path),
         lambda path: animate_swing(timed, path),
     )
+    if args.ros:
+        timed.to_joint_trajectory(args.ros)
+        written.append(args.ros)
     ok = _report_swing(traj, timed, report)
     print("wrote " + ", ".join(written), file=report)
     return 0 if ok else 1
@@ -299,6 +304,7 @@ def _checked_outputs(args, inputs):
         ("--json", args.json),
         ("--plot", args.plot),
         ("--animate", args.animate),
+        ("--ros", getattr(args, "ros", None)),
     )
     for option, value in outputs:
         _check_output_file(option, value)
@@ -891,6 +897,11 @@ def _add_generate(g) -> None:
         help="CSV file (time, heel, toe, hip, knees, joint angles; SI units)",
     )
     g.add_argument("--json", help="also write JSON (scene, checks, raw points, samples)")
+    g.add_argument(
+        "--ros",
+        help="also write the timed swing as ROS 2 trajectory_msgs/JointTrajectory JSON "
+        "(positions, velocities, accelerations; needs --rate)",
+    )
     g.add_argument("--plot", help="also draw the legs, the foot path and the joint angles (PNG)")
     g.set_defaults(func=cmd_generate)
 

@@ -134,7 +134,35 @@ def timed_dict(swing) -> dict:
         "notes": list(swing.notes),
         "columns": list(TIMED_CSV_COLUMNS),
         "samples": timed_table(swing).tolist(),
+        # The curve itself, for a controller that evaluates it at its own rate.
+        "piecewise": swing.curve.piecewise() if swing.curve is not None else None,
     }
+
+
+def joint_trajectory_dict(swing) -> dict:
+    """A timed swing in the layout of ROS 2 ``trajectory_msgs/msg/JointTrajectory``: joint_names,
+    and per sample positions (rad), velocities (rad/s), accelerations (rad/s^2) and
+    time_from_start (sec, nanosec), which a ``joint_trajectory_controller`` interpolates with
+    quintic splines."""
+    points = []
+    for t, q, v, a in zip(
+        swing.time, swing.joint_angles, swing.joint_velocity, swing.joint_acceleration
+    ):
+        ns = int(round(float(t) * 1e9))
+        points.append(
+            {
+                "positions": [float(x) for x in q],
+                "velocities": [float(x) for x in v],
+                "accelerations": [float(x) for x in a],
+                "effort": [],
+                "time_from_start": {"sec": ns // 1_000_000_000, "nanosec": ns % 1_000_000_000},
+            }
+        )
+    return {"header": {"frame_id": ""}, "joint_names": list(JOINT_NAMES), "points": points}
+
+
+def write_joint_trajectory(swing, path: str | Path | None = None) -> str:
+    return write_json(joint_trajectory_dict(swing), path)
 
 
 def write_timed_json(swing, path: str | Path | None = None) -> str:

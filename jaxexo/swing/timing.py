@@ -45,6 +45,7 @@ from jaxexo.swing.export import (
     JOINT_NAMES,
     timed_dict,
     timed_table,
+    write_joint_trajectory,
     write_timed_csv,
     write_timed_json,
 )
@@ -139,6 +140,10 @@ class TimedSwing:
 
     def to_json(self, path=None) -> str:
         return write_timed_json(self, path)
+
+    def to_joint_trajectory(self, path=None) -> str:
+        """JSON in the layout of ROS 2 trajectory_msgs/JointTrajectory (jaxexo.swing.export)."""
+        return write_joint_trajectory(self, path)
 
 
 def leg_angles(sp, pivot_y: float, heel: np.ndarray) -> np.ndarray:

@@ -1,0 +1,172 @@
+"""The timed swing as a curve (jaxexo.swing.curve, jaxexo.swing.timing): continuous joint
+acceleration and bounded jerk on thousands of swings of both generators, the limits held on the
+curve at 20 kHz and by finite differences of the samples at 100 Hz to 1 kHz, the chain rule
+against finite differences of the curve's own positions, and the exports (piecewise form evaluated
+independently, ROS 2 JointTrajectory layout)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from jaxexo.baselines import CFFTG
+from jaxexo.benchmarks.scenes import batch_kwargs, safety_sets
+from jaxexo.inference import TrajectoryGenerator
+from jaxexo.swing.curve import JointPath, chord_knots, cubic_paths, distinct_samples
+from jaxexo.swing.limits import DeviceLimits
+from jaxexo.swing.timing import time_swings
+
+from conftest import ROOT
+
+POLICY = ROOT / "tests" / "data" / "reference" / "policy.npz"
+
+
+@pytest.fixture(scope="module")
+def swings():
+    """RL alone and CFFTG on the three benchmark sets (thesis five shifted, unseen shapes, held-out
+    families), 400 scenes each: the safe swings of each generator."""
+    rl = TrajectoryGenerator.load(POLICY)
+    cf = CFFTG(rl.config)
+    out = {"rl": [], "cfftg": []}
+    for scenes in safety_sets(rl.config, 400).values():
+        obs = [s["obstacle"] for s in scenes]
+        kw = batch_kwargs(scenes)
+        out["rl"] += [t for t in rl.generate_batch(obs, fallback=None, **kw) if t.ok]
+        out["cfftg"] += [t for t in cf.generate_batch(obs, **kw) if t.ok]
+    return rl.config, out
+
+
+def _paths(trajs) -> list[JointPath]:
+    paths = []
+    for t in trajs:
+        q = np.unwrap(t.joint_angles, axis=0)
+        q = q[distinct_samples(q)]
+        paths += cubic_paths(chord_knots(q)[None], q[None])
+    return paths
+
+
+@pytest.mark.parametrize("method", ["rl", "cfftg"])
+def test_joint_paths_are_c2_with_bounded_third_derivative(swings, method):
+    """On every safe swing (over a thousand per generator): q and q' and q'' agree across every
+    knot (evaluated just left and right of it, so a jump in q'' would show), and q''' is a finite
+    constant per piece."""
+    _, trajs = swings
+    paths = _paths(trajs[method])
+    assert len(paths) > 1000
+    worst = [0.0, 0.0, 0.0]
+    for p in paths:
+        k = p.knots[1:-1]
+        eps = 1e-9
+        left, right = p.derivatives(k - eps, 3), p.derivatives(k + eps, 3)
+        scale = [np.abs(d).max() for d in p.derivatives(np.linspace(0, 1, 2001), 2)]
+        for o in range(3):
+            # a continuous derivative changes by at most (next derivative) * 2 eps across a knot
+            jump = np.abs(left[o] - right[o]).max() / scale[o]
+            worst[o] = max(worst[o], jump)
+        assert np.all(np.isfinite(p.coef[:, 3]))
+    assert max(worst) < 1e-5, worst
+
+
+def _check_on_curve(sw, planned: DeviceLimits, rate_hz: float = 20_000.0):
+    t = np.append(np.arange(0.0, sw.duration, 1.0 / rate_hz), sw.duration)
+    st = sw.at(t)
+    for value, limit in (
+        (st.joint_velocity, planned.velocity),
+        (st.joint_acceleration, planned.acceleration),
+        (st.joint_jerk, planned.jerk),
+    ):
+        assert np.all(np.abs(value) <= np.asarray(limit)), (np.abs(value).max(0), limit)
+    # Independent of the chain rule: finite differences of the curve's own positions at 20 kHz are
+    # averages of its derivatives, so they are within the limits too.
+    q = st.joint_angles
+    dt = 1.0 / rate_hz
+    for n, limit in ((1, planned.velocity), (2, planned.acceleration), (3, planned.jerk)):
+        fd = np.diff(q, n=n, axis=0) / dt**n
+        assert np.all(np.abs(fd) <= np.asarray(limit) * (1 + 1e-6)), n
+    # At rest at both ends.
+    for end in (0, -1):
+        assert np.all(st.joint_velocity[end] == 0) and np.all(st.joint_acceleration[end] == 0)
+
+
+@pytest.mark.parametrize("method", ["rl", "cfftg"])
+def test_limits_hold_on_the_curve_and_at_every_rate(swings, method):
+    """150 swings per generator: the curve within the planned limits at 20 kHz (values and finite
+    differences), the samples at 100, 500 and 1000 Hz within them by finite differences, the same
+    curve at every rate (its duration changes by less than one period), and the safe verdicts
+    kept."""
+    config, trajs = swings
+    rng = np.random.default_rng(0)
+    pick = [trajs[method][i] for i in rng.choice(len(trajs[method]), 150, replace=False)]
+    planned = DeviceLimits.from_config(config).planned()
+    by_rate = {r: time_swings(pick, config, rate=r) for r in (100.0, 500.0, 1000.0)}
+    for sw in by_rate[1000.0]:
+        assert sw.ok, sw.reasons
+        _check_on_curve(sw, planned)
+    for rate, timed in by_rate.items():
+        for sw in timed:
+            assert sw.within_limits
+            q = sw.joint_angles
+            for n, limit in ((1, planned.velocity), (2, planned.acceleration), (3, planned.jerk)):
+                fd = np.diff(q, n=n, axis=0) * rate**n
+                assert np.all(np.abs(fd) <= np.asarray(limit) * (1 + 1e-6)), (rate, n)
+    d100 = np.array([s.duration for s in by_rate[100.0]])
+    d1k = np.array([s.duration for s in by_rate[1000.0]])
+    assert np.all(d1k <= d100 + 1e-9) and np.all(d100 - d1k < 0.01 + 1e-9)
+
+
+def test_chain_rule_against_finite_differences(swings):
+    config, trajs = swings
+    (sw,) = time_swings([trajs["rl"][3]], config, rate=100.0)
+    h = 1e-5
+    t = np.linspace(0.05, sw.duration - 0.05, 50)
+    st, lo, hi = sw.at(t), sw.at(t - h), sw.at(t + h)
+    np.testing.assert_allclose(
+        st.joint_velocity, (hi.joint_angles - lo.joint_angles) / (2 * h), atol=1e-4
+    )
+    np.testing.assert_allclose(
+        st.joint_acceleration, (hi.joint_velocity - lo.joint_velocity) / (2 * h), atol=1e-2
+    )
+    np.testing.assert_allclose(st.heel_velocity, (hi.heel - lo.heel) / (2 * h), atol=1e-5)
+    np.testing.assert_allclose(
+        st.heel_acceleration, (hi.heel_velocity - lo.heel_velocity) / (2 * h), atol=1e-3
+    )
+    np.testing.assert_allclose(st.toe - st.heel, [[config.kinematics.foot_length, 0.0]] * 50)
+
+
+def test_exports_piecewise_form_and_joint_trajectory(swings, tmp_path):
+    """The JSON's piecewise form, evaluated here with plain Horner steps, gives the curve's joint
+    angles; the ROS 2 layout has one point per sample with positions, velocities, accelerations
+    and time_from_start; sample(rate) is the same curve at another rate."""
+    config, trajs = swings
+    (sw,) = time_swings([trajs["cfftg"][0]], config, rate=100.0)
+    doc = json.loads(sw.to_json(tmp_path / "swing.json"))
+    pw = doc["piecewise"]
+    tb = np.array(pw["time_law"]["breakpoints_s"])
+    tc = np.array(pw["time_law"]["coefficients"])
+    sb = np.array(pw["joint_path"]["breakpoints"])
+    qc = np.array(pw["joint_path"]["coefficients"])  # (J, P, 4)
+    t = np.linspace(0.0, sw.duration, 333)
+    i = np.clip(np.searchsorted(tb, t, side="right") - 1, 0, len(tc) - 1)
+    d = t - tb[i]
+    s = tc[i, 0] + d * (tc[i, 1] + d * (tc[i, 2] + d * tc[i, 3]))
+    k = np.clip(np.searchsorted(sb, s, side="right") - 1, 0, qc.shape[1] - 1)
+    e = s - sb[k]
+    q = np.stack([c[k, 0] + e * (c[k, 1] + e * (c[k, 2] + e * c[k, 3])) for c in qc], axis=1)
+    np.testing.assert_allclose(q, sw.at(t).joint_angles, atol=1e-9)
+    ros = json.loads(sw.to_joint_trajectory(tmp_path / "swing_ros.json"))
+    assert ros["joint_names"] == ["hip_swing", "knee_swing", "hip_stance", "knee_stance"]
+    assert len(ros["points"]) == len(sw.time)
+    p5 = ros["points"][5]
+    assert p5["time_from_start"] == {"sec": 0, "nanosec": 50_000_000}
+    np.testing.assert_allclose(p5["accelerations"], sw.joint_acceleration[5])
+    fast = sw.sample(1000.0)
+    assert (
+        fast.rate == 1000.0 and fast.duration == sw.duration and len(fast.time) > 9 * len(sw.time)
+    )
+    np.testing.assert_allclose(fast.joint_angles[::10], sw.joint_angles[: len(fast.time[::10])])
+    with pytest.raises(ValueError, match="rate: control rate must be between"):
+        sw.sample(5.0)
+    with pytest.raises(ValueError, match="t: expected finite times"):
+        sw.at([0.1, float("nan")])
