@@ -99,9 +99,9 @@ def test_limits_hold_on_random_paths_and_ends_rest():
     for rate in (100.0, 500.0):
         for sw in time_swings(trajs, CFG, rate=rate):
             assert_device_ready(sw, lim, rate)
-            # At 100 Hz the TOPP passes, not the safety net, set the timing; at 500 Hz finite
-            # differences resolve the C1 path interpolant's jumps in q'' and the net slows more.
-            assert sw.slowdown < (1.25 if rate == 100 else 1.6)
+            # The passes and their local corrections, not the uniform slow-down, set the timing,
+            # at every rate alike (the limits are held on the curve, not on the samples).
+            assert sw.slowdown < 1.1
 
 
 def test_the_safety_net_slows_by_whole_control_periods():
