@@ -70,8 +70,8 @@ REFERENCE_POLICY = Path(__file__).resolve().parent / "data" / "reference" / "pol
 DOWN = 27  # the move straight down (270 degrees): at the start, on the ground, it does not move
 
 
-def _policy_that_pushes_into_the_ground(path: Path) -> Path:
-    """The reference policy with its output layer replaced by one that always prefers the move
+def policy_that_pushes_into_the_ground(path: Path, src: Path = REFERENCE_POLICY) -> Path:
+    """The policy ``src`` (default: the reference policy) with its output layer replaced by one that always prefers the move
     straight down, unshielded (the shield would offer it other moves): its heel never leaves the
     start, so its joints never move and the timing has nothing to time (a member of a population
     can learn this)."""
@@ -94,7 +94,7 @@ def test_a_member_that_cannot_be_timed_scores_unsafe_and_the_others_are_chosen(t
     """A population member whose swings cannot be timed (its joints never move) ended the
     run while the member was chosen (a ValueError from the timing). It now scores as unsafe on those
     scenes, the other members' scores are what they are without it, and one member is chosen."""
-    stuck = _policy_that_pushes_into_the_ground(tmp_path / "stuck.npz")
+    stuck = policy_that_pushes_into_the_ground(tmp_path / "stuck.npz")
     cfg = TrajectoryGenerator.load(REFERENCE_POLICY).config
     good = selection.Candidate(1, 0.5, REFERENCE_POLICY)
     scores = selection.wearer_scores(cfg, [selection.Candidate(2, 0.9, stuck), good])
@@ -107,7 +107,7 @@ def test_a_member_that_cannot_be_timed_scores_unsafe_and_the_others_are_chosen(t
 def test_a_swing_that_cannot_be_timed_costs_its_own_scene_only(tmp_path):
     """Among swings timed together, one the timing refuses gets no duration and is unsafe; the
     others keep the durations they have when timed without it."""
-    stuck = TrajectoryGenerator.load(_policy_that_pushes_into_the_ground(tmp_path / "stuck.npz"))
+    stuck = TrajectoryGenerator.load(policy_that_pushes_into_the_ground(tmp_path / "stuck.npz"))
     gen = TrajectoryGenerator.load(REFERENCE_POLICY)
     scenes = training_scenarios(gen.config, 4, 5)
     kw = {k: [s[k] for s in scenes] for k in ("pivot", "start_y", "step_length")}
