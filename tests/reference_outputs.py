@@ -10,10 +10,15 @@ a refactor that must not change them, so a difference is a change of behaviour.
 
 ``python tests/reference_outputs.py --write`` rewrites the stored copy: only for a deliberate change
 of behaviour, never to make the test pass.
+
+``outputs(sensitivity=d)`` also fills ``d`` with how each timed swing responds to rounding
+(``timing_sensitivity``): not stored, measured on the machine that runs the test, so that the
+comparison's tolerance on a timed swing follows the timing code as it is (whatever its time law).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 from pathlib import Path
 
@@ -40,6 +45,15 @@ FLAGS = (
 )
 NUMBERS = ("min_clearance", "heel_backward", "deviation", "smoothing")
 TIMED_PER_SET = 40  # swings of each set timed, per generator
+# How a timed swing's rounding is probed: its heel path's interior points (float64) moved by k ulps
+# of its largest coordinate, up or down at random per coordinate, for each k (_probe). Another CPU's BLAS changes the heel by a few ulps of float64: the
+# smoothing's and the landing's matrix products (dgemm, rows of 10 to 100 terms) are summed in
+# another order and fused differently, an error bounded by n eps sum|a_i b_i| and typically a few
+# eps; the same happens here when a swing is generated in a batch of another size (another blocking).
+# 1, 4 and 16 ulps span that; the timing's response to them is not proportional to their size (its
+# time law makes discrete choices), so the test takes the largest of the three.
+PROBE_ULPS = (1, 4, 16)
+PROBE_SEED = 0
 
 
 def scene_sets(config) -> dict[str, tuple[list[dict], GenerateOptions]]:
@@ -54,8 +68,40 @@ def scene_sets(config) -> dict[str, tuple[list[dict], GenerateOptions]]:
     }
 
 
-def outputs(policy: Path = POLICY) -> dict[str, np.ndarray]:
-    """Every stored array, keyed "<generator>/<set>/<field>"."""
+def _probe(traj, ulps: int, rng):
+    """``traj`` with its heel's interior points moved by ``ulps`` ulps of the path's largest
+    coordinate (a dot product's rounding scales with its terms, not its result), each coordinate
+    up or down at random; the ends, pinned by the generator, stay."""
+    heel = np.array(traj.heel, np.float64)
+    step = ulps * np.finfo(np.float64).eps * np.abs(heel).max()
+    heel[1:-1] += step * rng.choice([-1.0, 1.0], heel[1:-1].shape)
+    return dataclasses.replace(traj, heel=heel)
+
+
+def timing_sensitivity(trajs: list, timed: list, config) -> dict[str, np.ndarray]:
+    """How the timed swings ``timed`` (time_swings of ``trajs``) respond to rounding: each swing's
+    heel perturbed by PROBE_ULPS ulps of float64 and timed again. Per swing: ``timed_tie`` whether
+    any probe changed its sample count or its within-limits verdict (a discrete outcome at a tie),
+    else the largest change of its duration (s) and of its joint angles (rad) over the probes."""
+    from jaxexo.inference import time_swings
+
+    rng = np.random.default_rng(PROBE_SEED)
+    n = len(timed)
+    tie, duration, angles = np.zeros(n, bool), np.zeros(n), np.zeros(n)
+    for k in PROBE_ULPS:
+        probed = [_probe(t, k, rng) for t in trajs]
+        for i, (a, b) in enumerate(zip(timed, time_swings(probed, config))):
+            if len(a.time) != len(b.time) or a.ok != b.ok:
+                tie[i] = True
+                continue
+            duration[i] = max(duration[i], abs(a.duration - b.duration))
+            angles[i] = max(angles[i], float(np.abs(a.joint_angles - b.joint_angles).max()))
+    return {"timed_tie": tie, "timed_duration_probe": duration, "timed_angles_probe": angles}
+
+
+def outputs(policy: Path = POLICY, sensitivity: dict | None = None) -> dict[str, np.ndarray]:
+    """Every stored array, keyed "<generator>/<set>/<field>"; ``sensitivity`` (a dict) is filled
+    with each set's timing_sensitivity, keyed the same way."""
     rl = TrajectoryGenerator.load(policy)
     generators = {"rl": rl, "cfftg": CFFTG.from_policy(policy)}
     out = {}
@@ -76,7 +122,11 @@ def outputs(policy: Path = POLICY) -> dict[str, np.ndarray]:
                 out[f"{key}/{name}"] = np.asarray(getattr(batch, name), bool)
             for name in NUMBERS:
                 out[f"{key}/{name}"] = np.asarray(getattr(batch, name), np.float64)
-            timed = time_swings([batch[i] for i in range(TIMED_PER_SET)], gen.config)
+            swings = [batch[i] for i in range(TIMED_PER_SET)]
+            timed = time_swings(swings, gen.config)
+            if sensitivity is not None:
+                for name, value in timing_sensitivity(swings, timed, gen.config).items():
+                    sensitivity[f"{key}/{name}"] = value
             out[f"{key}/timed_ok"] = np.array([t.ok for t in timed])
             out[f"{key}/timed_duration"] = np.array([t.duration for t in timed])
             out[f"{key}/timed_samples"] = np.array([len(t.time) for t in timed])

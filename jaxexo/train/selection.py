@@ -25,7 +25,7 @@ import numpy as np
 
 from jaxexo.baselines.cfftg import CFFTG
 from jaxexo.config import Config
-from jaxexo.inference import TrajectoryGenerator, time_swings
+from jaxexo.inference import TrajectoryGenerator, time_swing, time_swings
 from jaxexo.inference.scenarios import training_scenarios
 
 # Scenes every candidate is swung on: enough that one unsafe swing in a hundred shows, few enough that
@@ -70,9 +70,28 @@ def _swing(gen, scenes: list[dict], cfg: Config, **options) -> _Figures:
             **options,
         )
     )
-    duration = np.array([t.duration for t in time_swings(batch, cfg)])
+    duration = _durations(batch, cfg)
     lift = np.array([t.heel[:, 1].max() - o.height for t, o in zip(batch, obstacles)])
-    return _Figures(np.array([t.ok for t in batch]), duration, lift)
+    # A swing that cannot be timed is not one a wearer can be given: unsafe on its scene.
+    return _Figures(np.array([t.ok for t in batch]) & np.isfinite(duration), duration, lift)
+
+
+def _durations(batch: list, cfg: Config) -> np.ndarray:
+    """Each swing's timed duration (s), NaN where the timing refuses the swing (a ValueError: a
+    member that pushes into the ground never moves its joints, so there is nothing to time). The
+    swings are timed together (one batched TOPP), and one by one only when that fails, so that one
+    such swing costs its own scene, not the member's other scenes or the run."""
+    try:
+        return np.array([t.duration for t in time_swings(batch, cfg)])
+    except ValueError:
+        pass
+    out = np.full(len(batch), math.nan)
+    for i, traj in enumerate(batch):
+        try:
+            out[i] = time_swing(traj, cfg).duration
+        except ValueError:
+            continue
+    return out
 
 
 def _score(seed: int, validation: float, rl: _Figures, ref: _Figures) -> WearerScore:
