@@ -608,12 +608,9 @@ def cmd_sweep(args) -> int:
 
 
 def cmd_eval(args) -> int:
-    from jaxexo.evaluation.compare import check_report_folder, run_eval
+    from jaxexo.evaluation.compare import check_eval_counts, check_report_folder, run_eval
 
-    if args.n < 1:
-        raise ValueError(f"--n: must be >= 1, got {args.n}")
-    if args.batch < 1:
-        raise ValueError(f"--batch: must be >= 1, got {args.batch}")
+    check_eval_counts(args.n, args.batch)
     check_report_folder(args.out, args.policy, force=args.force)
     report = run_eval(
         args.policy,
