@@ -167,7 +167,13 @@ def _check_output_file(option: str, value) -> None:
     if value is None:
         return
     text = str(value)
+    if not text:
+        raise ValueError(
+            f"{option}: the option is empty; give a file name (e.g. {OUTPUT_EXAMPLES[option]})"
+        )
     p = Path(value)
+    if option == "--animate":
+        _check_animation_name(text)
     if text.endswith(("/", "\\")) or p.is_dir():
         raise ValueError(
             f"{option}: {text} is a directory; give a file name (e.g. {p / OUTPUT_EXAMPLES[option]})"
@@ -175,6 +181,18 @@ def _check_output_file(option: str, value) -> None:
     if not p.parent.is_dir():
         _check_folder_part(option, p.parent, text)
         raise ValueError(f"{option}: the folder {p.parent} does not exist (for {text})")
+
+
+def _check_animation_name(text: str) -> None:
+    """--animate writes a GIF (Pillow's writer): its file is named .gif, or is a special output
+    (``-``, a device, a FIFO) that takes the bytes as they are."""
+    from jaxexo.storage.atomic import direct_output
+
+    if Path(text).suffix.lower() != ".gif" and not direct_output(text):
+        raise ValueError(
+            f"--animate: {text} would hold GIF data (the animation is written as a GIF); "
+            f"name it .gif (e.g. {Path(text).with_suffix('.gif').name if Path(text).name else 'swing.gif'})"
+        )
 
 
 def _check_folder_part(option: str, folder: Path, text: str) -> None:
@@ -234,6 +252,7 @@ def cmd_generate(args) -> int:
         raise ValueError(
             "--smoothing: applies to --method rl only (CFFTG's polynomial path is not smoothed)"
         )
+    fallback = _fallback(args)
     from jaxexo.storage.atomic import writes_to_stdout
     from jaxexo.swing.options import check_duration, check_points
     from jaxexo.swing.timing import check_rate
@@ -266,7 +285,7 @@ def cmd_generate(args) -> int:
         traj = gen.generate(
             obstacle,
             smoothing=args.smoothing,
-            fallback=None if args.fallback == "none" else args.fallback,
+            fallback=fallback,
             **common,
         )
     timed = _timed_swing(args, traj, gen.config)
@@ -387,8 +406,7 @@ def cmd_walk(args) -> int:
         raise ValueError(
             f"--rate: control rate must be > 0 and <= {MAX_CONTROL_RATE:g} Hz, got {args.rate:g}"
         )
-    if args.method == "cfftg" and args.fallback != "cfftg":
-        raise ValueError("--fallback: applies to --method rl only (CFFTG plans every swing itself)")
+    fallback = _fallback(args)
     gen = _generator(args)
     _check_clearance(args.clearance, gen.config)
     from jaxexo.course import plan_course
@@ -397,7 +415,7 @@ def cmd_walk(args) -> int:
     terrain = read_terrain(args.terrain)
     kw = _options(args, "start_y", "goal_y", "steps", "rate", "clearance", "double_support")
     if args.method == "rl":
-        kw["fallback"] = None if args.fallback == "none" else args.fallback
+        kw["fallback"] = fallback
     course = plan_course(
         gen, terrain, **kw
     )  # an infeasible course is refused here: nothing written
@@ -453,9 +471,33 @@ def _scene_args(args, config):
     )
 
 
+def _check_start_pose(scene, config) -> None:
+    """The keyframe's pose must exist: the swing heel's start within the swing leg's reach (thigh +
+    shin) and joint limits from a stance heel at the pivot; else refused naming the option."""
+    import numpy as np
+
+    from jaxexo.physics.kinematics import swing_heel_unreachable
+
+    k = config.kinematics
+    heel = np.array([scene.start_y, 0.0])
+    if swing_heel_unreachable(
+        np, scene.pivot_y, heel, k.thigh, k.shin, k.hip_limits, k.knee_limits
+    ):
+        option = "--pivot-y" if scene.pivot_kind < 0 else "--start-y"
+        raise ValueError(
+            f"{option}: with the stance heel at {scene.pivot_y:g} m, the swing heel's start "
+            f"({scene.start_y:g} m) is out of the leg's reach (thigh + shin = "
+            f"{k.thigh + k.shin:g} m) or joint limits; no pose has both feet there"
+        )
+
+
 def cmd_mjcf(args) -> int:
     _check_output_file("--out", args.out)
-    _check_outputs([("--policy", args.policy)], [("--out", args.out)])
+    _check_outputs([("--policy", args.policy), ("--config", args.config)], [("--out", args.out)])
+    if args.policy and args.config:
+        raise ValueError(
+            "--policy, --config: give one of them (a policy's legs are its own config's)"
+        )
     if args.policy:
         from jaxexo.storage.policy_check import load_checked
 
@@ -466,6 +508,7 @@ def cmd_mjcf(args) -> int:
     from jaxexo.storage.atomic import atomic_write
 
     scene = _scene_args(args, config)
+    _check_start_pose(scene, config)
     atomic_write(args.out, scene_mjcf(config, scene))
     print(
         f"wrote {args.out} (open it with: python -m mujoco.viewer --mjcf={args.out}; keyframe 'start')"
@@ -562,11 +605,11 @@ def cmd_replay(args) -> int:
 
 
 def cmd_sweep(args) -> int:
-    from jaxexo.sweep.spec import load_sweep, parse_bytes
+    from jaxexo.sweep.spec import load_sweep, memory_budget
 
     if args.task_cpus is not None and args.task_cpus < 1:
         raise ValueError(f"--task-cpus: must be >= 1, got {args.task_cpus}")
-    budget = parse_bytes(args.memory_budget) if args.memory_budget else None
+    budget = None if args.memory_budget is None else memory_budget(args.memory_budget)
     sweep = load_sweep(args.sweep)  # validated (NumPy only) before JAX starts
     if args.backend == "local":
         from jaxexo.train.devices import use_all_cpu_cores, use_compilation_cache
@@ -614,12 +657,9 @@ def cmd_sweep(args) -> int:
 
 
 def cmd_eval(args) -> int:
-    from jaxexo.evaluation.compare import check_report_folder, run_eval
+    from jaxexo.evaluation.compare import check_eval_counts, check_report_folder, run_eval
 
-    if args.n < 1:
-        raise ValueError(f"--n: must be >= 1, got {args.n}")
-    if args.batch < 1:
-        raise ValueError(f"--batch: must be >= 1, got {args.batch}")
+    check_eval_counts(args.n, args.batch)
     check_report_folder(args.out, args.policy, force=args.force)
     report = run_eval(
         args.policy,
@@ -742,8 +782,20 @@ def _add_method(p, helptext: str) -> None:
 
 
 def _add_fallback(p, helptext: str) -> None:
-    """generate's and walk's --fallback: what stands in for an RL swing that is not safe."""
-    p.add_argument("--fallback", choices=("cfftg", "none"), default="cfftg", help=helptext)
+    """generate's and walk's --fallback: what stands in for an RL swing that is not safe (not given:
+    None, read by ``_fallback``)."""
+    p.add_argument("--fallback", choices=("cfftg", "none"), help=helptext + " (default: cfftg)")
+
+
+def _fallback(args) -> str | None:
+    """--fallback's one rule for generate and walk: --method rl only (given with --method cfftg it is
+    refused, whatever its value); not given, "cfftg"; "none" is None."""
+    if args.method == "cfftg" and args.fallback is not None:
+        raise ValueError(
+            f"--fallback: applies to --method rl only (CFFTG plans every swing itself), got "
+            f"--fallback {args.fallback} with --method cfftg"
+        )
+    return None if args.fallback == "none" else "cfftg"
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -717,7 +717,12 @@ def test_diverged_run_says_so_and_exports_nothing_non_finite(tmp_path):
         timeout=900,
     )
     assert_clean_refusal(r, "training diverged in chunk 1", "train.lr", code=3)
-    rows = [json.loads(x) for x in (run / "metrics.jsonl").read_text().splitlines()]
+
+    def strict(constant):  # NaN, Infinity: not JSON
+        raise AssertionError(f"metrics.jsonl holds {constant}, which is not JSON")
+
+    lines = (run / "metrics.jsonl").read_text().splitlines()
+    rows = [json.loads(x, parse_constant=strict) for x in lines]
     assert [x["diverged"] for x in rows] == [True] and rows[0]["validation_success_raw"] is None
     assert not (run / "policy.npz").exists() and not (run / "checkpoint.msgpack").exists()
 

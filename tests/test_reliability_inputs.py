@@ -235,7 +235,7 @@ def test_reproduce_validates_every_option_before_training(tmp_path):
     afile = tmp_path / "afile"
     afile.write_text("x\n")
     for args, needles in (
-        (["--models", "a", "--n", "0"], ["--n", ">= 1"]),
+        (["--models", "a", "--n", "0"], ["--n", "from 1 to"]),
         (["--models", "a", "--results", afile], ["--results", "is a file, not a folder"]),
         (["--models", "a", "--results", afile / "sub"], ["--results", "is a file"]),
     ):

@@ -40,6 +40,10 @@ from jaxexo.inference.scenarios import sample_scenarios, training_scenarios
 from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 
 BATCH_REPEATS = 3
+# Bounds checked before any work (each single call's trajectory is kept for the metrics, so the
+# memory grows with --n; --batch sizes one generate_batch call's arrays).
+MAX_SCENARIOS = 100_000  # per set: 200,000 swings for `all`, a few GB at most
+MAX_BATCH = 100_000
 SCENARIO_SETS = ("train", "test", "all", "unseen")
 # The thesis's figures the report quotes beside jaxexo's (jaxexo.evaluation.thesis_results).
 THESIS_REFERENCE = (
@@ -169,6 +173,20 @@ def evaluate_generators(
         report[name] = entry
         trajs[name] = tr
     return report, trajs
+
+
+def check_eval_counts(n, batch, n_option: str = "--n", batch_option: str = "--batch") -> None:
+    """``jaxexo eval``'s counts, bounded before any work; ValueError naming the option and bound."""
+    for option, value, what, bound in (
+        (n_option, n, "scenarios per set", MAX_SCENARIOS),
+        (batch_option, batch, "scenarios per generate_batch call", MAX_BATCH),
+    ):
+        if value is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= bound:
+            raise ValueError(
+                f"{option}: {what} must be an integer from 1 to {bound:,}, got {value!r}"
+            )
 
 
 def run_eval(

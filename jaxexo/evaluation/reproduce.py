@@ -379,9 +379,13 @@ def check_reproduce_options(out, n, results_dir=None, population=None, seed: int
     any work: --n, --population, --seed (with the population's seeds after it), and --out and
     --results naming folders (not files)."""
     from jaxexo.config import Config, check_seed, with_population
+    from jaxexo.evaluation.compare import MAX_SCENARIOS
 
-    if isinstance(n, bool) or not isinstance(n, int) or n < 1:
-        raise ValueError(f"--n: test scenarios per model must be an integer >= 1, got {n!r}")
+    if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= MAX_SCENARIOS:
+        raise ValueError(
+            f"--n: test scenarios per model must be an integer from 1 to {MAX_SCENARIOS:,}, "
+            f"got {n!r}"
+        )
     if population is not None:
         with_population(Config(), population, "--population")
     check_seed(seed, "--seed", REPRODUCE_POPULATION if population is None else population)

@@ -8,6 +8,9 @@ replaces the target. On any failure (a full disk, a file-size limit, KeyboardInt
 file is removed and the target is left as it was; an OSError raised names the target file. Only a
 SIGKILL can leave a temporary file behind: ``stale_temps`` finds those for a run's resume to remove.
 
+Modes: a new file is created 0666 & ~umask, as Unix tools create files (a lab's shared umask 002
+gives colleagues their read and write); a file replaced keeps its own mode.
+
 Symbolic links: ``atomic_write`` replaces a link at the target's name (the file it points to is never
 written); ``append_line`` opens with O_NOFOLLOW and refuses a link (SymlinkRefused, a ValueError).
 
@@ -106,6 +109,32 @@ def _write_direct(path: str | Path, payload: bytes) -> None:
         raise _named(e, path, "write") from None
 
 
+def _umask() -> int:
+    """The process's umask, read without changing it where Linux shows it (/proc/self/status)."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _output_mode(path: Path) -> int:
+    """The mode a written file gets: an existing regular file's own, else 0666 & ~umask (what Unix
+    tools create; mkstemp's temporary file is 0600 until set)."""
+    try:
+        st = os.lstat(path)
+        if stat.S_ISREG(st.st_mode):
+            return stat.S_IMODE(st.st_mode)
+    except OSError:
+        pass
+    return 0o666 & ~_umask()
+
+
 def atomic_write(path: str | Path, data: bytes | str) -> Path:
     """Write ``data`` (str: UTF-8) to ``path`` atomically, creating its directory; returns the path.
     A special output (``-``, a device, a FIFO, a descriptor link) is written into directly."""
@@ -118,6 +147,7 @@ def atomic_write(path: str | Path, data: bytes | str) -> Path:
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=_temp_prefix(path), suffix=TEMP_SUFFIX)
     try:
         with os.fdopen(fd, "wb") as f:
+            os.fchmod(f.fileno(), _output_mode(path))
             f.write(payload)
             f.flush()
             os.fsync(f.fileno())
@@ -149,7 +179,7 @@ def append_line(path: str | Path, text: str) -> None:
     path = Path(path)
     try:
         # O_NOFOLLOW: a log replaced by a symbolic link is never appended to through it.
-        fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW, 0o644)
+        fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW, 0o666)
     except OSError as e:
         if path.is_symlink():
             raise SymlinkRefused(

@@ -4,8 +4,13 @@
 Two formats, chosen by the suffix (``.json``; anything else is read as CSV):
 
 - CSV: one ``y,z`` pair per line; blank lines and lines starting with ``#`` are skipped, and the
-  first other line may be a header (``y_m,z_m``).
-- JSON: ``{"points": [[y, z], ...]}`` or the bare list ``[[y, z], ...]``.
+  first other line may be a header (``y_m,z_m``). A value is a CSV number (``-1.5``, ``.25``,
+  ``2e-3``; ``nan``/``inf`` are refused as not finite): Python's own literals such as ``1_0`` are
+  not numbers here.
+- JSON: ``{"points": [[y, z], ...]}`` or the bare list ``[[y, z], ...]``, nested at most
+  MAX_JSON_DEPTH deep.
+
+Either may start with a UTF-8 byte-order mark (as configs may); it is not part of the first value.
 
 The profile is the ground's height above the floor along the course: y non-decreasing (points
 sharing a y make a vertical riser), z >= 0 (the floor is z = 0; flat ground is exactly 0), every
@@ -18,6 +23,7 @@ from __future__ import annotations
 import json
 import math
 import re
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -30,6 +36,10 @@ MAX_POINTS = 100_000  # a 100 m course measured every millimetre
 MAX_LENGTH = 100.0  # m, first to last y
 MAX_HEIGHT = 2.0  # m above the floor (twice the default leg: no swing clears it)
 MAX_FILE_BYTES = 16 * 2**20  # 16 MiB: far above MAX_POINTS lines of text
+MAX_JSON_DEPTH = 3  # {"points": [[y, z]]}: an object, the list, a pair
+# A CSV number: digits with an optional point and exponent; nan/inf (any case) reach the finite check.
+_CSV_NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
+_NON_FINITE = re.compile(r"[+-]?(?:nan|inf|infinity)", re.IGNORECASE)
 
 
 class TerrainFileError(ValueError):
@@ -78,6 +88,7 @@ def read_terrain(path: str | Path) -> Terrain:
     except UnicodeDecodeError as e:
         line = raw[: e.start].count(b"\n") + 1
         raise TerrainFileError(f"{name}, line {line}: not UTF-8 text") from None
+    text = text.removeprefix("\ufeff")  # a byte-order mark, as configs accept
     if p.suffix.lower() == ".json":
         pts, where = _parse_json(text, name)
     else:
@@ -109,26 +120,48 @@ def _parse_csv(text: str, name: str):
             raise TerrainFileError(
                 f"{name}, line {k}: expected two numbers 'y,z' (metres), got {s!r}"
             )
-        vals = []
-        for label, x in zip(("y", "z"), parts):
-            try:
-                vals.append(float(x))
-            except ValueError:
-                raise TerrainFileError(
-                    f"{name}, line {k}: {label} is not a number: {x!r}"
-                ) from None
-        rows.append(vals)
+        rows.append([_csv_number(x, label, f"{name}, line {k}") for label, x in zip("yz", parts)])
         where.append(f"line {k}")
     return np.asarray(rows, dtype=np.float64).reshape(-1, 2), where
 
 
+def _csv_number(x: str, label: str, where: str) -> float:
+    if _CSV_NUMBER.fullmatch(x) or _NON_FINITE.fullmatch(x):
+        return float(x)
+    raise TerrainFileError(f"{where}: {label} is not a number: {x!r}")
+
+
+def _json_depth(text: str) -> int:
+    """The deepest nesting of arrays and objects in ``text`` (brackets inside strings not counted)."""
+    depth = deepest = 0
+    # Strings (with their escapes) removed first, so that no bracket inside one counts.
+    brackets = re.sub(r"[^\[\]{}]+", "", re.sub(r'"(?:[^"\\]|\\.)*"', '""', text))
+    for c in brackets:
+        if c in "[{":
+            depth += 1
+            deepest = max(deepest, depth)
+        elif c in "]}":
+            depth -= 1
+    return deepest
+
+
 def _parse_json(text: str, name: str):
+    if _json_depth(text) > MAX_JSON_DEPTH:
+        raise TerrainFileError(
+            f"{name}: JSON nested deeper than a terrain file is ({MAX_JSON_DEPTH} levels: "
+            '{"points": [[y, z], ...]})'
+        )
     try:
         doc = json.loads(
             text, parse_constant=lambda c: float(c)
         )  # NaN/Infinity: refused below by line
     except json.JSONDecodeError as e:
         raise TerrainFileError(f"{name}, line {e.lineno}: not valid JSON ({e.msg})") from None
+    except (ValueError, RecursionError):  # a number of more digits than Python converts
+        raise TerrainFileError(
+            f"{name}: a number has more than {sys.get_int_max_str_digits()} digits; terrain "
+            f"values are metres (at most {MAX_LENGTH:g} m long, {MAX_HEIGHT:g} m high)"
+        ) from None
     pts = doc.get("points") if isinstance(doc, dict) else doc
     if not isinstance(pts, list):
         raise TerrainFileError(
@@ -155,7 +188,13 @@ def _parse_json(text: str, name: str):
                 f"{name}, {where[i]}: expected a pair [y, z] of numbers (metres), got "
                 f"{json.dumps(p)[:60]}"
             )
-        rows.append([float(p[0]), float(p[1])])
+        try:
+            rows.append([float(p[0]), float(p[1])])
+        except OverflowError:
+            raise TerrainFileError(
+                f"{name}, {where[i]}: a number too large for metres (a terrain is at most "
+                f"{MAX_LENGTH:g} m long, {MAX_HEIGHT:g} m high)"
+            ) from None
     return np.asarray(rows, dtype=np.float64).reshape(-1, 2), where
 
 

@@ -190,6 +190,28 @@ def deep_merge(base: dict, over: dict) -> dict:
     return out
 
 
+def _base_config(path: Path, base: str) -> dict:
+    """The table of the config ``sweep.base`` names (relative to the sweep file ``path``): a model's
+    config, never this sweep file itself nor another sweep file (whose [sweep] table would be dropped
+    and whose own base not followed, training some other model without a word)."""
+    target = (path.parent / base).resolve()
+    try:
+        same = target.exists() and target.samefile(path)
+    except OSError:
+        same = False
+    if same:
+        raise ConfigError(
+            f"sweep.base: {base!r} is this sweep file itself; name the config file the sweep varies"
+        )
+    base_raw = _read_toml(target, "sweep.base")
+    if "sweep" in base_raw:
+        raise ConfigError(
+            f"sweep.base: {target} is a sweep file (it has a [sweep] table); a sweep's base is one "
+            "model's config file"
+        )
+    return base_raw
+
+
 def load_sweep(path: str | Path) -> Sweep:
     """Read, validate and expand a sweep file; errors name the file and the field."""
     path = Path(path)
@@ -205,9 +227,7 @@ def load_sweep(path: str | Path) -> Sweep:
             base = table["base"]
             if not isinstance(base, str):
                 raise ConfigError(f"sweep.base: expected a path to a config file, got {base!r}")
-            base_raw = _read_toml((path.parent / base).resolve(), "sweep.base")
-            base_raw.pop("sweep", None)
-            raw = deep_merge(base_raw, raw)
+            raw = deep_merge(_base_config(path, base), raw)
         return sweep_from_dict({**raw, "sweep": table})
     except ConfigError as e:
         raise ConfigError(f"{path}: {e}") from None
@@ -261,7 +281,7 @@ def sweep_from_dict(raw: dict) -> Sweep:
     chunk = table.get("chunk_size")
     chunk = None if chunk is None else _int("sweep.chunk_size", chunk, minimum=1)
     budget = table.get("memory_budget")
-    budget = None if budget is None else parse_bytes(budget, "sweep.memory_budget")
+    budget = None if budget is None else memory_budget(budget, "sweep.memory_budget")
     return Sweep(
         raw=raw,
         table=table,
@@ -330,6 +350,23 @@ _BYTES = {
     "gib": 2**30,
     "tib": 2**40,
 }
+
+
+# A chunk holds at least one agent per CPU device, and one agent of the smallest config takes tens
+# of MiB (jaxexo.sweep.plan.agent_bytes): a smaller budget can only be a mistyped unit.
+MIN_MEMORY_BUDGET = 64 * 2**20
+
+
+def memory_budget(v: Any, where: str = "--memory-budget") -> int:
+    """A sweep's memory budget (``parse_bytes``) of at least MIN_MEMORY_BUDGET; ConfigError naming
+    ``where`` and the bound."""
+    n = parse_bytes(v, where)
+    if n < MIN_MEMORY_BUDGET:
+        raise ConfigError(
+            f"{where}: must be at least {MIN_MEMORY_BUDGET // 2**20} MiB (one agent per CPU device "
+            f"takes tens of MiB), got {v!r}"
+        )
+    return n
 
 
 def parse_bytes(v: Any, where: str = "--memory-budget") -> int:

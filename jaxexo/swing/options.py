@@ -11,6 +11,7 @@ out (``SceneMaker.scene``, ``scenes_for``: jaxexo.physics.scene.make_scene).
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -18,10 +19,12 @@ import numpy as np
 
 from jaxexo.config import MAX_SWING_DURATION
 from jaxexo.physics import geometry
+from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 from jaxexo.physics.scene import (
     DEFAULT_PIVOT,
     DEFAULT_START_Y,
     DEFAULT_STEP_LENGTH,
+    MAX_CLEARANCE,
     Scene,
     make_scene,
 )
@@ -161,6 +164,59 @@ def _check_strict(strict) -> bool:
     return check_flag(strict, "strict")
 
 
+def _check_pivot(name: str, v) -> None:
+    if isinstance(v, str):
+        if v not in PIVOT_CONDITIONS:
+            raise ValueError(
+                f"{name} must be one of {PIVOT_CONDITIONS} or a y in metres, got {v!r}"
+            )
+    elif v is not None:
+        geometry.finite(name, v)
+
+
+def _check_pivot_y(name: str, v) -> None:
+    if v is not None:
+        geometry.finite(name, v)
+
+
+SCENE_CHECKS = (
+    ("pivot", _check_pivot),
+    ("pivot_y", _check_pivot_y),
+    ("start_y", geometry.finite),
+    ("step_length", geometry.finite_positive),
+)
+
+
+def check_scene_fields(options) -> None:
+    """The scene's fields, each one value or one per obstacle (a list, tuple or array), checked when
+    the record is made: a pivot condition's name or a y, finite metres, a positive step length. The
+    obstacle's own checks (where it lies from the start and the goal) wait for it (make_scene)."""
+    for name, check in SCENE_CHECKS:
+        v = getattr(options, name)
+        if isinstance(v, (list, tuple, np.ndarray)):
+            for i, x in enumerate(np.asarray(v, dtype=object).ravel()):
+                check(f"{name}[{i}]", x)
+        else:
+            check(name, v)
+
+
+def check_clearance_field(clearance):
+    """None (the model's env.min_clearance) or a finite number of metres in [0, MAX_CLEARANCE]; the
+    model's own lower bound is checked against its config when the swing is made (at_clearance)."""
+    if clearance is None:
+        return None
+    if isinstance(clearance, (bool, np.bool_)) or not isinstance(
+        clearance, (int, float, np.integer, np.floating)
+    ):
+        raise TypeError(f"clearance: expected a number of metres, got {type(clearance).__name__}")
+    c = float(clearance)
+    if not (math.isfinite(c) and 0.0 <= c <= MAX_CLEARANCE):
+        raise ValueError(
+            f"clearance must be a finite number of metres in [0, {MAX_CLEARANCE:g}], got {clearance!r}"
+        )
+    return clearance
+
+
 @dataclass(frozen=True)
 class SwingOptions:
     """What every generator's ``generate`` / ``generate_batch`` takes besides the obstacles (metres,
@@ -185,11 +241,13 @@ class SwingOptions:
         ("n_points", check_points),
         ("duration", check_duration),
         ("strict", _check_strict),
+        ("clearance", check_clearance_field),
     )
 
     def __post_init__(self):
         for name, check in self.CHECKS:
             object.__setattr__(self, name, check(getattr(self, name)))
+        check_scene_fields(self)
 
     @property
     def scene_args(self) -> tuple:
@@ -243,4 +301,5 @@ class GenerateOptions(SwingOptions):
         ("duration", check_duration),
         ("fallback", check_fallback),
         ("strict", _check_strict),
+        ("clearance", check_clearance_field),
     )

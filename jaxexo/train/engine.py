@@ -235,7 +235,7 @@ class _Run:
         self.wall_before = F.resumed_clock(self.ckpt, self.book_path, self.chunks_done, self.total)
         self.rows = F.read_metrics_rows(self.metrics_path, self.chunks_done)
         # Lines written after the checkpoint are recomputed identically: drop them (a torn last line too).
-        atomic_write(self.metrics_path, "".join(json.dumps(r) + "\n" for r in self.rows))
+        atomic_write(self.metrics_path, "".join(F.metrics_line(r) for r in self.rows))
         return ts
 
     def train(self, progress: bool) -> None:
@@ -289,7 +289,7 @@ class _Run:
         lead = place.lead(track)
         row = place.row(n, wall, lead, agent_rows)
         self.rows.append(row)
-        append_line(self.metrics_path, json.dumps(row) + "\n")
+        append_line(self.metrics_path, F.metrics_line(row))
         stopped = bool((track.diverged > 0).all())
         if not stopped:
             # No checkpoint of a state in which every agent diverged: a resume would only diverge again.
@@ -366,7 +366,10 @@ class _Run:
                 **place.report(exported, track, self.rows, counts, figures),
             }
         )
-        atomic_write(self.out / "eval.json", json.dumps(result, indent=2) + "\n")
+        atomic_write(
+            self.out / "eval.json",
+            json.dumps(F.json_safe(result), indent=2, allow_nan=False) + "\n",
+        )
         if track.diverged[exported]:
             raise TrainingDiverged(place.diverged_after(self.metrics_path, track))
         return result

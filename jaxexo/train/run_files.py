@@ -172,6 +172,43 @@ BOOK_FIELDS = {
 }
 
 
+# chunk_row's float fields: a diverged chunk's may be NaN or inf, written as null (JSON has no NaN)
+# and read back as NaN.
+FLOAT_FIELDS = frozenset(
+    (
+        "return_mean",
+        "success_raw_rate",
+        "accuracy",
+        "loss",
+        "q_mean",
+        "epsilon",
+        "env_steps_per_s",
+        "wall_s",
+    )
+)
+
+
+def json_safe(x):
+    """``x`` with every non-finite float replaced by None, so that json.dumps writes valid JSON
+    (null) instead of the bare NaN/Infinity that no strict JSON reader accepts."""
+    if isinstance(x, float):
+        return x if math.isfinite(x) else None
+    if isinstance(x, dict):
+        return {k: json_safe(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [json_safe(v) for v in x]
+    return x
+
+
+def metrics_line(row: dict) -> str:
+    """metrics.jsonl's line for ``row``: strict JSON, a non-finite number written as null."""
+    return json.dumps(json_safe(row), allow_nan=False) + "\n"
+
+
+def _nan_for_null(d: dict) -> dict:
+    return {k: (math.nan if v is None and k in FLOAT_FIELDS else v) for k, v in d.items()}
+
+
 def read_metrics_rows(metrics_path: Path, chunks_done: int) -> list[dict]:
     """The rows of a run's metrics.jsonl up to its checkpoint's ``chunks_done`` (later lines, a torn
     last line among them, are recomputed by the resumed run). ConfigError naming the file when it is
@@ -183,7 +220,10 @@ def read_metrics_rows(metrics_path: Path, chunks_done: int) -> list[dict]:
     except InputFileError as e:
         raise ConfigError(f"--resume: {e}; it cannot be rebuilt, start a new run") from None
     try:
-        return [json.loads(x) for x in data.decode("utf-8").splitlines()[:chunks_done]]
+        return [
+            json.loads(x, object_hook=_nan_for_null)
+            for x in data.decode("utf-8").splitlines()[:chunks_done]
+        ]
     except UnicodeDecodeError as e:
         raise ConfigError(
             f"--resume: {metrics_path} is damaged (not UTF-8 text at byte {e.start}); it cannot "
