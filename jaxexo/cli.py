@@ -574,7 +574,13 @@ def cmd_replay(args) -> int:
             ]:
                 lim = DeviceLimits.from_config(config).scaled(scale, scale)
                 d = r[label] = driven_replay(
-                    timed, config, limits=lim, legs=legs, controller=args.controller
+                    timed,
+                    config,
+                    limits=lim,
+                    legs=legs,
+                    controller=args.controller,
+                    reference=args.reference,
+                    reference_rate=args.reference_rate,
                 )
                 print(
                     f"  {label.replace('_', ' ')}: heel error max {100 * d['heel_error_max_m']:.2f} cm, toe "
@@ -998,6 +1004,19 @@ def _add_replay(x) -> None:
         default="pd_ff",
         help="with --driven: PD with inverse-dynamics feed-forward (pd_ff, default) or stiff "
         "position servos (servo)",
+    )
+    x.add_argument(
+        "--reference",
+        choices=("curve", "quintic", "cubic", "linear"),
+        default="curve",
+        help="with --driven: what the setpoints follow: the timed curve at every physics step "
+        "(default), or its samples at --reference-rate interpolated as a drive does (quintic or "
+        "cubic Hermite; linear for comparison only)",
+    )
+    x.add_argument(
+        "--reference-rate",
+        type=float,
+        help="with --driven and a sampled --reference: the samples' rate, Hz (default: --rate)",
     )
     x.add_argument(
         "--half-limits", action="store_true", help="with --driven: also at half the limits"

@@ -28,7 +28,9 @@ from jaxexo.sim.replay import (
     driven_replay,
     feed_forward,
     hermite,
+    interpolate,
     kinematic_replay,
+    reference_states,
 )  # noqa: E402
 
 
@@ -323,3 +325,106 @@ def test_eval_replay_figures_count_the_swings(config):
     assert r["kinematic"]["flagged_ok_within_margin"] == 0 and r["driven"]["contacts"] == 0
     lines = mujoco_lines({"cfftg": {"mujoco": r}}, 100.0)
     assert lines[-1].startswith(f"| cfftg | 2 | {ok} | 0 |")
+
+
+def test_quintic_hermite_reproduces_a_quintic_and_meets_the_samples():
+    """From a quintic's positions, velocities and accelerations at the samples, the quintic Hermite
+    is that quintic everywhere (each joint its own), and meets every sample's three values."""
+    rng = np.random.default_rng(5)
+    coef = rng.normal(size=(6, 4))  # q_j(t) = sum_k coef[k, j] t^k
+    powers = lambda t, d: np.stack(  # noqa: E731
+        [
+            np.where(k >= d, np.prod(np.arange(k - d + 1, k + 1)) * t ** max(k - d, 0), 0.0)
+            for k in range(6)
+        ],
+        axis=1,
+    )
+    exact = lambda t, d: powers(t, d) @ coef  # noqa: E731
+    period = 0.013
+    knots = np.arange(9) * period
+    samples = (exact(knots, 0), exact(knots, 1), exact(knots, 2))
+    t = np.linspace(0.0, knots[-1], 997)
+    for d, got in enumerate(interpolate("quintic", samples, period, t)):
+        np.testing.assert_allclose(got, exact(t, d), rtol=1e-9, atol=1e-9)
+    for d, got in enumerate(interpolate("quintic", samples, period, knots)):
+        np.testing.assert_allclose(got, samples[d], rtol=1e-12, atol=1e-12)
+    # The cubic Hermite meets the positions and velocities, not the accelerations; linear only
+    # the positions.
+    cubic = interpolate("cubic", samples, period, knots[:-1])
+    np.testing.assert_allclose(cubic[0], samples[0][:-1], atol=1e-12)
+    np.testing.assert_allclose(cubic[1], samples[1][:-1], atol=1e-12)
+    np.testing.assert_allclose(
+        interpolate("linear", samples, period, knots)[0], samples[0], atol=1e-12
+    )
+    np.testing.assert_array_equal(
+        hermite(samples[0], samples[1], period, t), interpolate("cubic", samples, period, t)[0]
+    )
+
+
+def _cfftg_swing(config, name="base1", rate=100.0):
+    from jaxexo.baselines import CFFTG
+    from jaxexo.swing.timing import time_swing
+
+    return time_swing(CFFTG(config).generate(Obstacle.named(name), pivot="between"), config, rate)
+
+
+def test_the_curve_reference_is_the_curve_at_every_physics_step(config):
+    """reference="curve": the setpoints follow timed.at at every physics step, position, velocity
+    and acceleration; a sampled reference meets the samples at theirs."""
+    from jaxexo.sim.replay import _simulate
+
+    timed = _cfftg_swing(config, "base2")
+    legs = Legs(config, timed.scene)
+    run = _simulate(timed, legs, timed.limits, 0.02, "pd_ff", "curve", None)
+    t = np.arange(run.steps + 2) * run.dt
+    assert run.dt <= 1e-3 and len(run.reference) == len(t)
+    st = timed.at(t)
+    np.testing.assert_array_equal(run.reference, st.joint_angles)
+    got = reference_states(timed, t, "curve")
+    for a, b in zip(got, (st.joint_angles, st.joint_velocity, st.joint_acceleration)):
+        np.testing.assert_array_equal(a, b)
+    # Between the samples the curve is not the straight line: the references differ there.
+    lin = reference_states(timed, t, "linear", 100.0)[0]
+    assert np.abs(lin - st.joint_angles).max() > 1e-4
+    sw = timed.sample(500.0)
+    for kind in ("quintic", "cubic", "linear"):
+        q = reference_states(timed, sw.time[:-1], kind, 500.0)[0]
+        np.testing.assert_allclose(q, sw.joint_angles[:-1], atol=1e-12)
+
+
+@pytest.mark.parametrize("name", ["base1", "triangle"])
+def test_a_driven_replay_of_the_curve_tracks_without_clipping(config, name):
+    """pd_ff on the curve: the heel within 2.5 mm of the swing at every sample (the figure is
+    about 1.6 mm, mostly the soft stance constraint's give), no setpoint clipped, clear of the
+    obstacle; the quintic of 500 Hz samples and the cubic of 1 kHz samples track as well."""
+    timed = _cfftg_swing(config, name)
+    assert timed.ok
+    legs = Legs(config, timed.scene)
+    d = driven_replay(timed, config, legs=legs, settle=0.05)
+    assert d["reference"] == "curve" and d["reference_rate_hz"] is None
+    assert d["heel_error_max_m"] < 0.0025 and d["heel_error_p95_m"] < 0.0025
+    assert not d["saturated"] and d["saturated_acceleration_steps"] == 0
+    assert not d["contact"] and d["margin_kept"] and d["stance_heel_slip_max_m"] < 0.005
+    for kind, rate in (("quintic", 500.0), ("cubic", 1000.0)):
+        s = driven_replay(
+            timed, config, legs=legs, settle=0.05, reference=kind, reference_rate=rate
+        )
+        assert s["reference"] == kind and s["reference_rate_hz"] == rate
+        assert not s["saturated"] and not s["contact"]
+        assert abs(s["heel_error_max_m"] - d["heel_error_max_m"]) < 2e-4
+
+
+def test_a_bad_reference_is_refused_naming_the_argument(config):
+    timed = _cfftg_swing(config)
+    for kwargs, match in (
+        ({"reference": "spline"}, "reference: expected one of curve, quintic, cubic, linear"),
+        ({"reference": "curve", "reference_rate": 500.0}, "reference_rate: only for the sampled"),
+        ({"reference": "quintic", "reference_rate": 1e6}, "reference_rate: control rate"),
+        ({"reference": "cubic", "reference_rate": "fast"}, "reference_rate: expected a number"),
+    ):
+        with pytest.raises(SimError, match=match):
+            driven_replay(timed, config, **kwargs)
+    with pytest.raises(SimError, match="reference: 'curve' needs"):
+        driven_replay(dataclasses.replace(timed, curve=None), config)
+    with pytest.raises(TypeError):
+        driven_replay(timed, config, None, None, 0.0, "pd_ff", "curve")  # keyword-only

@@ -15,7 +15,9 @@ pose; and MuJoCo's smallest distance over all poses, which a swing that jaxexo f
 at env.min_clearance or more.
 
 Driven replay (``driven_replay``): the physics runs at ``physics_per_sample`` steps per control
-period; the swing's joint angles, interpolated between the samples, are the reference of a setpoint
+period; the swing's joint angles (by default the timed curve itself at every physics step; or its
+samples at a rate, interpolated between them as a drive or a ROS 2 joint_trajectory_controller does:
+quintic or cubic Hermite, or linear for comparison) are the reference of a setpoint
 generator that moves each actuator's command towards it no faster than the device's joint velocity
 and with no more than its acceleration (``DeviceLimits``: the [device] section, or scaled); the
 position actuators (kp SERVO_KP, critically damped) pull the joints to the command against the
@@ -198,19 +200,95 @@ def kinematic_replay(timed, config, substeps: int = SUBSTEPS, legs: Legs | None 
     }
 
 
+def _interval(t, period: float, n: int):
+    """The interval k (len(t),) of each time t among n samples ``period`` apart, the position u in
+    it ([0, 1], clamped: before the first sample and after the last the reference holds), and
+    whether t lies inside the samples (the derivatives are 0 where it does not)."""
+    x = np.asarray(t, np.float64) / period
+    inside = (x >= 0.0) & (x <= n - 1)
+    x = np.clip(x, 0.0, n - 1)
+    k = np.minimum(x.astype(int), n - 2)
+    return k, (x - k)[:, None], inside[:, None]
+
+
+def _polynomial(coef: np.ndarray, k, u, inside, period: float):
+    """Position, velocity and acceleration (len(u), 4) of the piecewise polynomials ``coef``
+    (n - 1, degree + 1, 4) in u = (t - t_k) / period on interval k."""
+    c = coef[k]  # (m, degree + 1, 4)
+    deg = c.shape[1] - 1
+    q, d1, d2 = c[:, deg], np.zeros_like(c[:, 0]), np.zeros_like(c[:, 0])
+    for i in range(deg - 1, -1, -1):  # Horner, with the first two derivatives alongside
+        d2 = d2 * u + 2.0 * d1
+        d1 = d1 * u + q
+        q = q * u + c[:, i]
+    return q, np.where(inside, d1 / period, 0.0), np.where(inside, d2 / period**2, 0.0)
+
+
+def linear_coefficients(p: np.ndarray) -> np.ndarray:
+    """(n - 1, 2, 4): the straight lines between the samples p (n, 4)."""
+    return np.stack([p[:-1], np.diff(p, axis=0)], axis=1)
+
+
+def cubic_coefficients(p: np.ndarray, v: np.ndarray, period: float) -> np.ndarray:
+    """(n - 1, 4, 4): the cubic Hermite in u through the samples p (n, 4) with velocities v."""
+    p0, p1, m0, m1 = p[:-1], p[1:], period * v[:-1], period * v[1:]
+    return np.stack([p0, m0, 3.0 * (p1 - p0) - 2.0 * m0 - m1, 2.0 * (p0 - p1) + m0 + m1], axis=1)
+
+
+def quintic_coefficients(p: np.ndarray, v: np.ndarray, a: np.ndarray, period: float) -> np.ndarray:
+    """(n - 1, 6, 4): the quintic Hermite in u through the samples p (n, 4) with velocities v and
+    accelerations a (what a ROS 2 joint_trajectory_controller makes of positions, velocities and
+    accelerations): c0..c2 from the start of each interval, c3..c5 so that the position, velocity
+    and acceleration at its end are the next sample's."""
+    c0, c1, c2 = p[:-1], period * v[:-1], 0.5 * period**2 * a[:-1]
+    rp = p[1:] - (c0 + c1 + c2)  # what c3 + c4 + c5 must add to the position at u = 1
+    rv = period * v[1:] - (c1 + 2.0 * c2)  # ... 3 c3 + 4 c4 + 5 c5 to the velocity
+    ra = period**2 * a[1:] - 2.0 * c2  # ... 6 c3 + 12 c4 + 20 c5 to the acceleration
+    c3 = 10.0 * rp - 4.0 * rv + 0.5 * ra
+    c4 = -15.0 * rp + 7.0 * rv - ra
+    c5 = 6.0 * rp - 3.0 * rv + 0.5 * ra
+    return np.stack([c0, c1, c2, c3, c4, c5], axis=1)
+
+
+def interpolate(kind: str, samples, period: float, t) -> tuple[np.ndarray, ...]:
+    """Position, velocity and acceleration (len(t), 4 each) at times t (s) of samples ``period``
+    apart from t = 0, interpolated as a drive does: "linear" (positions), "cubic" (the cubic
+    Hermite of positions and velocities) or "quintic" (the quintic Hermite of positions,
+    velocities and accelerations); ``samples``: (positions, velocities, accelerations), (n, 4)
+    each (those the kind does not use may be None). Held at the first and last sample outside."""
+    p, v, a = (None if x is None else np.asarray(x, np.float64) for x in samples)
+    if kind == "linear":
+        coef = linear_coefficients(p)
+    elif kind == "cubic":
+        coef = cubic_coefficients(p, v, period)
+    elif kind == "quintic":
+        coef = quintic_coefficients(p, v, a, period)
+    else:
+        raise SimError(f"kind: expected linear, cubic or quintic, got {kind!r}")
+    return _polynomial(coef, *_interval(t, period, len(p)), period)
+
+
 def hermite(ref: np.ndarray, ref_v: np.ndarray, period: float, t: np.ndarray) -> np.ndarray:
     """Joint angles (len(t), 4) at times t: the cubic Hermite through the control samples ``ref``
     (n, 4) with their velocities ``ref_v`` (the swing's chain-rule columns), held after the last."""
-    x = np.clip(np.asarray(t) / period, 0.0, len(ref) - 1)
-    k = np.minimum(x.astype(int), len(ref) - 2)
-    u = (x - k)[:, None]
-    h00, h10, h01, h11 = (
-        2 * u**3 - 3 * u**2 + 1,
-        u**3 - 2 * u**2 + u,
-        -2 * u**3 + 3 * u**2,
-        u**3 - u**2,
-    )
-    return h00 * ref[k] + h10 * period * ref_v[k] + h01 * ref[k + 1] + h11 * period * ref_v[k + 1]
+    return interpolate("cubic", (ref, ref_v, None), period, t)[0]
+
+
+REFERENCES = ("curve", "quintic", "cubic", "linear")
+
+
+def reference_states(timed, t, reference: str = "curve", rate: float | None = None):
+    """The driven replay's reference at times t (s): joint angles, velocities and accelerations
+    (len(t), 4 each). "curve": the timed swing's curve itself (``timed.at(t)``); "quintic",
+    "cubic", "linear": its samples at ``rate`` Hz (``timed.sample(rate)``; None: the swing's own
+    rate) interpolated as a drive or a ROS 2 joint_trajectory_controller does (``interpolate``)."""
+    t = np.asarray(t, np.float64)
+    if reference == "curve":
+        st = timed.at(t)
+        return st.joint_angles, st.joint_velocity, st.joint_acceleration
+    sw = timed if rate is None or float(rate) == float(timed.rate) else timed.sample(rate)
+    cols = (sw.joint_angles, sw.joint_velocity, sw.joint_acceleration)
+    return interpolate(reference, cols, 1.0 / float(sw.rate), t)
 
 
 def setpoints(ref: np.ndarray, dt: float, vmax, amax):
@@ -359,12 +437,37 @@ def _check_driven(config, limits, settle, controller):
     return limits
 
 
+def check_reference(timed, reference, reference_rate) -> float | None:
+    """The driven replay's ``reference`` and ``reference_rate`` checked (SimError naming the
+    argument); returns the rate in Hz of a sampled reference (None: the curve)."""
+    from jaxexo.swing.timing import check_rate
+
+    if not isinstance(reference, str) or reference not in REFERENCES:
+        raise SimError(f"reference: expected one of {', '.join(REFERENCES)}, got {reference!r}")
+    if reference == "curve":
+        if reference_rate is not None:
+            raise SimError(
+                "reference_rate: only for the sampled references (quintic, cubic, linear); "
+                f"reference='curve' follows the curve at every physics step, got {reference_rate!r}"
+            )
+        if getattr(timed, "curve", None) is None:
+            raise SimError("reference: 'curve' needs a TimedSwing that carries its curve")
+        return None
+    if reference_rate is None:
+        return float(timed.rate)
+    try:
+        return check_rate(reference_rate, "reference_rate")
+    except (TypeError, ValueError) as e:
+        raise SimError(str(e)) from None
+
+
 @dataclasses.dataclass(frozen=True)
 class DrivenRun:
     """A driven replay's simulation: MuJoCo's sensor data after each physics step (the start's
     first), the physics step ``dt``, ``sub`` physics steps per control sample, the ``steps``
     simulated, where the setpoint generator clipped the acceleration and the velocity (per step),
-    and the feed-forward torque's peak per actuated joint (pd_ff; None for the servo)."""
+    the feed-forward torque's peak per actuated joint (pd_ff; None for the servo), and the
+    reference's joint angles at every physics step (``reference_states``)."""
 
     sens: np.ndarray
     dt: float
@@ -373,6 +476,7 @@ class DrivenRun:
     clip_a: np.ndarray
     clip_v: np.ndarray
     torque_peak: list | None
+    reference: np.ndarray | None = None  # (steps + 2, 4) rad: the reference's joint angles
 
     def sensor(self, legs: Legs, name: str) -> np.ndarray:
         """The first three columns of sensor ``name`` at every physics step."""
@@ -382,7 +486,19 @@ class DrivenRun:
         ]
 
 
-def _simulate(timed, legs: Legs, limits, settle: float, controller: str) -> DrivenRun:
+def qpos_derivatives(legs: Legs, q, qd, qdd, h: float = 1e-4):
+    """The model's qpos, qvel and qacc (steps, nq each) of joint angles q (steps, 4) moving at qd
+    with acceleration qdd: pose_qpos along its second-order Taylor step q +- h qd + h^2/2 qdd
+    (central differences in the direction of motion: the pelvis and ankles follow the joints)."""
+    p0 = legs.qpos(q)
+    pp = legs.qpos(q + h * qd + 0.5 * h * h * qdd)
+    pm = legs.qpos(q - h * qd + 0.5 * h * h * qdd)
+    return p0, (pp - pm) / (2.0 * h), (pp - 2.0 * p0 + pm) / (h * h)
+
+
+def _simulate(
+    timed, legs: Legs, limits, settle: float, controller: str, reference="curve", ref_rate=None
+) -> DrivenRun:
     """The commands of a driven replay (they do not depend on the simulation), then MuJoCo's
     rollout of the model under them (``driven_replay``)."""
     m = legs.model
@@ -390,31 +506,36 @@ def _simulate(timed, legs: Legs, limits, settle: float, controller: str) -> Driv
     sub = max(1, math.ceil(1.0 / (rate * PHYSICS_PER_SAMPLE_MAX_DT) - 1e-9))
     dt = 1.0 / (rate * sub)
     m.opt.timestep = dt
-    ref = np.asarray(timed.joint_angles, dtype=np.float64)
-    steps = (len(ref) - 1) * sub + int(round(settle / dt))
-    # The reference at every physics step, and one step beyond for the central differences.
-    qref = hermite(
-        ref, np.asarray(timed.joint_velocity, np.float64), 1.0 / rate, np.arange(steps + 2) * dt
-    )
+    n = len(timed.joint_angles)
+    steps = (n - 1) * sub + int(round(settle / dt))
+    # The reference at every physics step, and one step beyond for the velocity at each step's end.
+    q, qd, qdd = reference_states(timed, np.arange(steps + 2) * dt, reference, ref_rate)
+    if reference == "linear":  # its velocity jumps at the samples: the derivatives of its steps
+        qd = np.gradient(q, dt, axis=0, edge_order=2)
+        qdd = np.gradient(qd, dt, axis=0, edge_order=2)
     _equalities_on(legs)
-    qpos0 = legs.qpos(ref[0])
+    qpos0 = legs.qpos(q[0])
     # Both controllers follow the reference through the setpoint generator: the drive is never
     # asked beyond its limits (where it would be, the generator clips: saturation).
-    cmd, clip_a, clip_v = setpoints(qref, dt, limits.velocity, limits.acceleration)
+    cmd, clip_a, clip_v = setpoints(q, dt, limits.velocity, limits.acceleration)
     torque_peak = None
     if controller == "servo":
         sens = _rollout(legs, qpos0, cmd[:steps])
     else:
-        qpos = legs.qpos(np.concatenate([ref[:1], cmd]))
-        qvel = np.gradient(qpos, dt, axis=0, edge_order=2)
-        qacc = np.gradient(qvel, dt, axis=0, edge_order=2)
+        # The commanded motion: the reference's own velocity and acceleration, plus those of the
+        # generator's departure from it (zero unless a limit clipped).
+        dev = np.concatenate([q[:1], cmd]) - q
+        dv = np.gradient(dev, dt, axis=0, edge_order=2)
+        qpos, qvel, qacc = qpos_derivatives(
+            legs, q + dev, qd + dv, qdd + np.gradient(dv, dt, axis=0, edge_order=2)
+        )
         tau = feed_forward(legs, qpos[:steps], qvel[:steps], qacc[:steps])
         kp, kd = _pd_gains(legs, qpos0)
         # The command of the step ending at t_{k+1}: force = kp (q_ref - q) + kd (q_ref' - q') + tau.
         qvel_ref = qvel[1 : steps + 1][:, legs.actuated_dofs]
         sens = _rollout(legs, qpos0, cmd[:steps] + (kd / kp) * qvel_ref + tau / kp, (kp, kd))
         torque_peak = np.abs(tau).max(axis=0).tolist()
-    return DrivenRun(sens, dt, sub, steps, clip_a[:steps], clip_v[:steps], torque_peak)
+    return DrivenRun(sens, dt, sub, steps, clip_a[:steps], clip_v[:steps], torque_peak, q)
 
 
 def _driven_figures(timed, config, legs: Legs, run: DrivenRun) -> dict:
@@ -468,6 +589,9 @@ def driven_replay(
     legs: Legs | None = None,
     settle: float = SETTLE,
     controller: str = "pd_ff",
+    *,
+    reference: str = "curve",
+    reference_rate: float | None = None,
 ) -> dict:
     """The driven replay of a TimedSwing (module docstring) with the drives' ``limits`` (a
     DeviceLimits; default: the config's [device]) and a ``controller``:
@@ -478,22 +602,34 @@ def driven_replay(
     - "servo": stiff position servos (SERVO_KP, critically damped) on the setpoints' positions
       alone: with no velocity term a servo lags a moving reference by 2 / omega times its speed.
 
-    The setpoints, for both: the swing's cubic Hermite through its samples, followed by a setpoint
-    generator that moves each command towards it within the velocity and acceleration limits
-    (``setpoints``); saturated where the generator clips.
+    The ``reference`` the setpoints follow, for both (``reference_states``):
+
+    - "curve" (default): the timed swing's curve, its position, velocity and acceleration at every
+      physics step (``timed.at``).
+    - "quintic", "cubic", "linear": the swing sampled at ``reference_rate`` Hz (default: its own
+      rate; ``timed.sample``) and interpolated between the samples as a drive or a ROS 2
+      joint_trajectory_controller does: the quintic Hermite of positions, velocities and
+      accelerations, the cubic Hermite of positions and velocities, or straight lines between the
+      positions (for comparison only: its velocity jumps at every sample).
+
+    A setpoint generator then moves each command towards the reference within the velocity and
+    acceleration limits (``setpoints``); saturated where it clips.
 
     The commands are computed first (they do not depend on the simulation), then MuJoCo rolls the
     model out in one call (mujoco.rollout) and its sensors give the sites and the foot-obstacle
     distances. Returns SI figures."""
     limits = _check_driven(config, limits, settle, controller)
+    ref_rate = check_reference(timed, reference, reference_rate)
     t0 = time.perf_counter()
     legs = Legs(config, timed.scene) if legs is None else legs
-    run = _simulate(timed, legs, limits, settle, controller)
+    run = _simulate(timed, legs, limits, settle, controller, reference, ref_rate)
     return {
         "method": timed.method,
         "flagged_ok": bool(timed.ok),
         "margin_m": float(config.env.min_clearance),
         "controller": controller,
+        "reference": reference,
+        "reference_rate_hz": ref_rate,
         "limits": limits.to_dict(),
         "physics_dt_s": run.dt,
         "settle_s": float(settle),
