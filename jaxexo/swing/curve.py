@@ -36,19 +36,7 @@ class JointPath:
 
     def derivatives(self, s: np.ndarray, order: int = 3) -> list[np.ndarray]:
         """q and its s-derivatives up to ``order`` at s (n,): a list of (n, J) arrays."""
-        s = np.asarray(s, np.float64)
-        i = np.clip(np.searchsorted(self.knots, s, side="right") - 1, 0, len(self.coef) - 1)
-        d = (s - self.knots[i])[:, None]
-        c = self.coef[i]  # (n, 4, J)
-        c0, c1, c2, c3 = c[:, 0], c[:, 1], c[:, 2], c[:, 3]
-        out = [((c3 * d + c2) * d + c1) * d + c0]
-        if order >= 1:
-            out.append((3.0 * c3 * d + 2.0 * c2) * d + c1)
-        if order >= 2:
-            out.append(6.0 * c3 * d + 2.0 * c2)
-        if order >= 3:
-            out.append(6.0 * c3)
-        return out
+        return paths_at([self], [np.asarray(s, np.float64)], order)[0]
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Per piece, max |q'| and max |q''| over the piece (P, J): q'' is linear on a piece (its
@@ -198,7 +186,7 @@ def heel_derivatives(lengths, pivot_y: float, qs: list[np.ndarray]) -> list[np.n
     e = np.stack([np.sin(phi), -np.cos(phi)], axis=-1)  # (n, 4, 2)
     ep = np.stack([np.cos(phi), np.sin(phi)], axis=-1)
     out = [np.einsum("i,nik->nk", ln, e)]
-    out[0][:, 0] += pivot_y
+    out[0][:, 0] += pivot_y  # a number, or one per row
     if len(qs) > 1:
         p1 = _phases(qs[1])[..., None]
         out.append(np.einsum("i,nik->nk", ln, p1 * ep))
@@ -217,8 +205,8 @@ def leg_points(lengths, pivot_y: float, q: np.ndarray) -> dict[str, np.ndarray]:
     thigh, shin = lengths
     phi = _phases(q)
     e = np.stack([np.sin(phi), -np.cos(phi)], axis=-1)
-    pivot = np.array([pivot_y, 0.0])
-    hip = pivot - thigh * e[:, 2] - shin * e[:, 3]
+    hip = -thigh * e[:, 2] - shin * e[:, 3]
+    hip[:, 0] += pivot_y  # a number, or one per row
     knee_swing = hip + thigh * e[:, 0]
     return {
         "hip": hip,
@@ -289,36 +277,9 @@ class TimeLaw:
         """s(t / k): velocities / k, accelerations / k^2, jerks / k^3."""
         return TimeLaw(self.nodes * k, self.speed / k, self.window * k)
 
-    def _primitives(self, tau: np.ndarray):
-        """P, S, v, v' (right-continuous) at times tau (n,), 0 before the start, at rest after."""
-        t_end = self.nodes[-1]
-        i = np.clip(np.searchsorted(self.nodes, tau, side="right") - 1, 0, len(self.nodes) - 2)
-        d = tau - self.nodes[i]
-        a = self._acc[i]
-        v = self.speed[i] + a * d
-        big_s = self._S[i] + (self.speed[i] + 0.5 * a * d) * d
-        big_p = self._P[i] + (self._S[i] + (0.5 * self.speed[i] + a * d / 6.0) * d) * d
-        before, after = tau < 0.0, tau >= t_end
-        total = self._S[-1]
-        big_p = np.where(before, 0.0, np.where(after, self._P[-1] + total * (tau - t_end), big_p))
-        big_s = np.where(before, 0.0, np.where(after, total, big_s))
-        v = np.where(before | after, 0.0, v)
-        a = np.where(before | after, 0.0, a)
-        return big_p, big_s, v, a
-
     def at(self, t) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """s and its first three time derivatives at times t (n,), clamped to [0, duration]."""
-        t = np.clip(np.asarray(t, np.float64), 0.0, self.duration)
-        n = len(t)
-        p, big_s, v, a = self._primitives(np.concatenate([t, t - self.window]))
-        k = 1.0 / (self.window * self._S[-1])
-        s = np.clip((p[:n] - p[n:]) * k, 0.0, 1.0)
-        out = [s, (big_s[:n] - big_s[n:]) * k, (v[:n] - v[n:]) * k, (a[:n] - a[n:]) * k]
-        # At touch-down exactly at rest (t - w rounds to a hair before the last node).
-        end = t >= self.duration
-        for x, val in zip(out, (1.0, 0.0, 0.0, 0.0)):
-            x[end] = val
-        return tuple(out)
+        return laws_at([self], [np.asarray(t, np.float64)])[0]
 
     def breakpoints(self) -> np.ndarray:
         """Where s''' may jump: the nodes and the nodes + w, sorted, within [0, duration]."""
@@ -353,6 +314,108 @@ def law_from_speeds(
     speed = np.insert(v, bind + 1, 2.0 * mean[bind] - lin[bind])
     speed[0] = speed[-1] = 0.0
     return TimeLaw(nodes, speed, float(min(window, fraction * t[-1])) if t[-1] > 0 else window)
+
+
+# --------------------------------------------------------------------------------------------
+# Many curves at once: each law and path is stored as itself; an evaluation of many stacks them
+# with offsets, so that one searchsorted finds every query's piece (a row of the stacked arrays
+# never mixes two swings, and the arithmetic inside a piece is the single curve's own).
+# --------------------------------------------------------------------------------------------
+
+
+def _segments(lengths, counts) -> tuple[np.ndarray, np.ndarray]:
+    """Per query, the start of its item's rows and its item's index (both (sum counts,))."""
+    starts = np.concatenate([[0], np.cumsum(lengths)[:-1]])
+    item = np.repeat(np.arange(len(counts)), counts)
+    return starts[item], item
+
+
+def laws_at(laws, times) -> list[tuple]:
+    """s, s', s'', s''' of each law at its times: a list of 4-tuples of (n_b,) arrays."""
+    counts = np.array([len(t) for t in times])
+    lens = np.array([len(law.nodes) for law in laws])
+    w = np.array([law.window for law in laws])
+    end = np.array([law.nodes[-1] for law in laws])
+    dur = end + w
+    off = np.concatenate([[0.0], np.cumsum(end + 1.0)[:-1]])
+    nodes = np.concatenate([law.nodes for law in laws])
+    speed = np.concatenate([law.speed for law in laws])
+    acc = np.concatenate([np.append(law._acc, 0.0) for law in laws])
+    big_s = np.concatenate([law._S for law in laws])
+    big_p = np.concatenate([law._P for law in laws])
+    start, item = _segments(lens, counts)
+    t = np.clip(np.concatenate(times), 0.0, dur[item]) if len(times) else np.zeros(0)
+    total = big_s[start + lens[item] - 1]
+    p_end = big_p[start + lens[item] - 1]
+    out = []
+    for tau in (t, t - w[item]):
+        local = np.clip(tau, 0.0, end[item])
+        i = np.searchsorted(nodes + np.repeat(off, lens), local + off[item], side="right") - 1
+        i = np.clip(i, start, start + lens[item] - 2)
+        d = local - nodes[i]
+        a = acc[i]
+        v = speed[i] + a * d
+        s_ = big_s[i] + (speed[i] + 0.5 * a * d) * d
+        p = big_p[i] + (big_s[i] + (0.5 * speed[i] + a * d / 6.0) * d) * d
+        before, after = tau < 0.0, tau >= end[item]
+        rest = before | after
+        out.append(
+            (
+                np.where(before, 0.0, np.where(after, p_end + total * (tau - end[item]), p)),
+                np.where(before, 0.0, np.where(after, total, s_)),
+                np.where(rest, 0.0, v),
+                np.where(rest, 0.0, a),
+            )
+        )
+    k = 1.0 / (w[item] * total)
+    (p1, s1, v1, a1), (p0, s0, v0, a0) = out
+    res = [np.clip((p1 - p0) * k, 0.0, 1.0), (s1 - s0) * k, (v1 - v0) * k, (a1 - a0) * k]
+    # At touch-down exactly at rest (t - w rounds to a hair before the last node).
+    landed = t >= dur[item]
+    for x, val in zip(res, (1.0, 0.0, 0.0, 0.0)):
+        x[landed] = val
+    cut = np.cumsum(counts)[:-1]
+    return list(zip(*(np.split(x, cut) for x in res)))
+
+
+def paths_at(paths, params, order: int = 3) -> list[list[np.ndarray]]:
+    """q and its s-derivatives up to ``order`` of each path at its parameters: a list of lists of
+    (n_b, J) arrays."""
+    counts = np.array([len(s) for s in params])
+    pieces = np.array([len(p.coef) for p in paths])
+    knots = np.concatenate([p.knots[:-1] + 2.0 * b for b, p in enumerate(paths)])
+    coef = np.concatenate([p.coef for p in paths])
+    start, item = _segments(pieces, counts)
+    s = np.clip(np.concatenate(params), 0.0, 1.0) if len(params) else np.zeros(0)
+    i = np.searchsorted(knots, s + 2.0 * item, side="right") - 1
+    i = np.clip(i, start, start + pieces[item] - 1)
+    d = (s - (knots[i] - 2.0 * item))[:, None]
+    c = coef[i]
+    c0, c1, c2, c3 = c[:, 0], c[:, 1], c[:, 2], c[:, 3]
+    res = [((c3 * d + c2) * d + c1) * d + c0]
+    if order >= 1:
+        res.append((3.0 * c3 * d + 2.0 * c2) * d + c1)
+    if order >= 2:
+        res.append(6.0 * c3 * d + 2.0 * c2)
+    if order >= 3:
+        res.append(6.0 * c3)
+    cut = np.cumsum(counts)[:-1]
+    return [list(x) for x in zip(*(np.split(r, cut) for r in res))]
+
+
+def joints_at(paths, laws, times) -> list[tuple]:
+    """For each (path, law) at its times: s (n_b,) and [q, q-dot, q-ddot, q-dddot] (n_b, J) each,
+    the chain rule on q(s(t))."""
+    lv = laws_at(laws, times)
+    counts = [len(t) for t in times]
+    s, s1, s2, s3 = (np.concatenate(x) if x else np.zeros(0) for x in zip(*lv))
+    flat = paths_at(paths, [x[0] for x in lv], 3)
+    d0, d1, d2, d3 = (np.concatenate(x) for x in zip(*flat))
+    s1, s2, s3 = s1[:, None], s2[:, None], s3[:, None]
+    derivs = [d0, d1 * s1, d2 * s1 * s1 + d1 * s2, d3 * s1**3 + 3.0 * d2 * s1 * s2 + d1 * s3]
+    cut = np.cumsum(counts)[:-1]
+    split = [np.split(x, cut) for x in derivs]
+    return [(x[0], [split[o][b] for o in range(4)]) for b, x in enumerate(lv)]
 
 
 # --------------------------------------------------------------------------------------------
@@ -395,13 +458,7 @@ class SwingCurve:
 
     def joints(self, t) -> tuple[np.ndarray, list[np.ndarray]]:
         """s (n,) and [q, q-dot, q-ddot, q-dddot] (n, 4) each at times t: the chain rule on q(s(t))."""
-        s, s1, s2, s3 = self.law.at(t)
-        q, d1, d2, d3 = self.path.derivatives(s, 3)
-        s1, s2, s3 = s1[:, None], s2[:, None], s3[:, None]
-        vel = d1 * s1
-        acc = d2 * s1 * s1 + d1 * s2
-        jerk = d3 * s1**3 + 3.0 * d2 * s1 * s2 + d1 * s3
-        return s, [q, vel, acc, jerk]
+        return joints_at([self.path], [self.law], [np.asarray(t, np.float64)])[0]
 
     def at(self, t) -> CurveState:
         """Every joint and the heel/toe, with their derivatives, at times t (s; clamped to the
@@ -409,11 +466,7 @@ class SwingCurve:
         t = np.atleast_1d(np.asarray(t, np.float64))
         if t.ndim != 1 or not np.all(np.isfinite(t)):
             raise ValueError(f"t: expected finite times in s (a number or a 1-D array), got {t!r}")
-        s, qs = self.joints(t)
-        h = heel_derivatives(self.lengths, self.pivot_y, qs)
-        toe = h[0].copy()
-        toe[:, 0] += self.foot_length
-        return CurveState(t, s, *qs, *h, toe)
+        return curves_at([self], [t])[0]
 
     def piecewise(self) -> dict:
         """The piecewise-polynomial form for a controller that evaluates the curve itself:
@@ -428,3 +481,18 @@ class SwingCurve:
                 "coefficients": self.path.coef.transpose(2, 0, 1).tolist(),
             },
         }
+
+
+def curves_at(curves, times) -> list[CurveState]:
+    """``SwingCurve.at`` of each curve at its times, in one evaluation (the curves share their
+    leg lengths and foot)."""
+    res = joints_at([c.path for c in curves], [c.law for c in curves], times)
+    counts = [len(t) for t in times]
+    pivot = np.repeat([c.pivot_y for c in curves], counts)
+    qs = [np.concatenate([r[1][o] for r in res]) for o in range(4)]
+    h = heel_derivatives(curves[0].lengths, pivot, qs)
+    toe = h[0].copy()
+    toe[:, 0] += curves[0].foot_length
+    cut = np.cumsum(counts)[:-1]
+    cols = [np.split(x, cut) for x in (*qs, *h, toe)]
+    return [CurveState(t, r[0], *(c[b] for c in cols)) for b, (t, r) in enumerate(zip(times, res))]

@@ -98,6 +98,17 @@ def speed_ratio(constraints, derivs) -> np.ndarray:
     return r
 
 
+def peak_ratio(constraints, peaks) -> float:
+    """``speed_ratio``'s largest value from the peaks max |q-dot|, max |q-ddot|, max |q-dddot| (J,)
+    each (the ratio is monotone in each value, so the peak of the ratio is the ratio of the
+    peaks)."""
+    r = 0.0
+    for c in constraints:
+        x = float((peaks[int(c.power) - 1] / c.limit).max())
+        r = max(r, x ** (1.0 / c.power))
+    return r
+
+
 def _positive_vector(name: str, v) -> tuple[float, ...]:
     n = len(JOINT_NAMES)
     try:

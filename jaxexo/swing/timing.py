@@ -36,9 +36,12 @@ from jaxexo.swing.curve import (
     check_grid,
     chord_knots,
     cubic_paths,
+    curves_at,
     distinct_samples,
     heel_derivatives,
+    joints_at,
     law_from_speeds,
+    laws_at,
     leg_points,
 )
 from jaxexo.swing.export import (
@@ -49,7 +52,7 @@ from jaxexo.swing.export import (
     write_timed_csv,
     write_timed_json,
 )
-from jaxexo.swing.limits import DeviceLimits, GridView, speed_ratio
+from jaxexo.swing.limits import DeviceLimits, GridView, peak_ratio, speed_ratio
 from jaxexo.swing.time_law import topp
 from jaxexo.swing.trajectory import (
     TrajectoryBatch,
@@ -127,7 +130,7 @@ class TimedSwing:
         """The same curve sampled at ``rate`` Hz (MIN_CONTROL_RATE to MAX_CONTROL_RATE): one row per
         period from 0 until the first period at or after touch-down (the legs rest from there)."""
         rate = check_rate(rate)
-        return replace(self, rate=rate, **_samples(self.curve, rate))
+        return replace(self, rate=rate, **_samples([self.curve], rate)[0])
 
     def table(self) -> np.ndarray:
         return timed_table(self)
@@ -222,11 +225,13 @@ class _Plan:
 
 @dataclass(frozen=True)
 class _Check:
-    """A law's curve at its check times t (n,): s (n,) and |q-dot|, |q-ddot|, |q-dddot| (n, J)."""
+    """A law's curve at its check times t (n,): s (n,), [q, q-dot, q-ddot, q-dddot] (n, J), and
+    the peaks of |q-dot|, |q-ddot|, |q-dddot| over the times (J,) each."""
 
     t: np.ndarray
     s: np.ndarray
     derivs: tuple
+    peaks: tuple
 
 
 def time_swing(
@@ -299,17 +304,23 @@ def time_swings(
     for _ in range(LOCAL_PASSES):
         redo = []
         for i, p in enumerate(plans):
-            ratio = speed_ratio(check, p.check.derivs)
-            if ratio.max() > 1.0:
+            if peak_ratio(check, p.check.peaks) > 1.0:
+                ratio = speed_ratio(check, p.check.derivs)
                 plans[i] = replace(p, cap=_lowered_cap(p, ratio, p.check.s, p.check.t))
                 redo.append(i)
         if not redo:
             break
         plans = _run_passes(plans, redo, passes, window)
     checks = _path_checks(trajs, plans, sp)
+    finals = [_final_law(p, planned, rate, t) for p, t in zip(plans, t_opt)]
+    curves = [
+        SwingCurve(p.path, f.law, float(t.scene.pivot_y), (sp.thigh, sp.shin), sp.foot_length)
+        for t, p, f in zip(trajs, plans, finals)
+    ]
+    samples = _samples(curves, rate)
     return [
-        _finish(trajs[i], p, checks[i], sp, device, planned, rate, t_opt[i])
-        for i, p in enumerate(plans)
+        _timed(trajs[i], plans[i], checks[i], finals[i], curves[i], samples[i], sp, device, rate)
+        for i in range(len(plans))
     ]
 
 
@@ -365,29 +376,38 @@ def _run_passes(plans, idx, constraints, window: float) -> list[_Plan]:
         x, floor = topp(a, b, np.inf, bound, 1.0 / (k - 1), cap)
         for j, i in enumerate(sub):
             law = law_from_speeds(view.s, x[j], floor[j], window, BLEND_FRACTION)
-            plans[i] = replace(plans[i], x=x[j], law=law, check=_curve_check(plans[i].path, law))
-    return plans
+            plans[i] = replace(plans[i], x=x[j], law=law)
+    return _with_checks(plans, idx)
 
 
-def _check_times(path: JointPath, law: TimeLaw) -> np.ndarray:
-    """Where the curve is checked: every CHECK_DT, and both sides of every breakpoint of the law
+def _check_times(paths, laws) -> list[np.ndarray]:
+    """Where each curve is checked: every CHECK_DT, and both sides of every breakpoint of the law
     and of every knot of the path (where the jerk may jump), so that between check times the
     velocity, acceleration and jerk are smooth and their maxima are caught to second order."""
-    d = law.duration
-    n = max(2, int(math.ceil(d / CHECK_DT)) + 1)
-    grid = np.linspace(0.0, d, n)
-    s_grid = law.at(grid)[0]
-    knots = np.interp(path.knots[1:-1], s_grid, grid)
-    b = np.concatenate([law.breakpoints(), knots])
-    eps = 1e-9 * max(d, 1e-9)
-    t = np.concatenate([grid, b - eps, b + eps])
-    return np.sort(np.clip(t, 0.0, d))
+    grids = [
+        np.linspace(0.0, law.duration, max(2, int(math.ceil(law.duration / CHECK_DT)) + 1))
+        for law in laws
+    ]
+    out = []
+    for path, law, grid, lv in zip(paths, laws, grids, laws_at(laws, grids)):
+        d = law.duration
+        knots = np.interp(path.knots[1:-1], lv[0], grid)
+        b = np.concatenate([law.breakpoints(), knots])
+        eps = 1e-9 * max(d, 1e-9)
+        out.append(np.sort(np.clip(np.concatenate([grid, b - eps, b + eps]), 0.0, d)))
+    return out
 
 
-def _curve_check(path: JointPath, law: TimeLaw) -> _Check:
-    t = _check_times(path, law)
-    s, derivs = SwingCurve(path, law, 0.0, (1.0, 1.0), 0.0).joints(t)
-    return _Check(t, s, tuple(derivs))
+def _with_checks(plans, idx) -> list[_Plan]:
+    """plans[idx] with their curves evaluated at their check times (all in one evaluation)."""
+    plans = list(plans)
+    idx = list(idx)
+    paths, laws = [plans[i].path for i in idx], [plans[i].law for i in idx]
+    times = _check_times(paths, laws)
+    for i, t, (s, derivs) in zip(idx, times, joints_at(paths, laws, times)):
+        peaks = tuple(np.abs(d).max(axis=0) for d in derivs[1:])
+        plans[i] = replace(plans[i], check=_Check(t, s, tuple(derivs), peaks))
+    return plans
 
 
 def _lowered_cap(p: _Plan, ratio, s, t) -> np.ndarray:
@@ -432,14 +452,23 @@ def _path_checks(trajs, plans, sp) -> list:
     return [(m, i, padded[i], pad[i], outside[i]) for i in range(len(trajs))]
 
 
-def _finish(traj, p: _Plan, chk, sp, device, planned, rate, t_opt) -> TimedSwing:
-    """The swing's final law (uniform slow-down, minimum duration, whole control periods), its
-    checks and its samples at ``rate``."""
-    ratio = speed_ratio(planned.constraints(1.0 - CHECK_MARGIN), p.check.derivs)
-    s_chk, t_chk = p.check.s, p.check.t
+@dataclass(frozen=True)
+class _Final:
+    """A swing's final law: the passes' law slowed by ``scale`` (the uniform slow-down ``slow``,
+    the minimum duration, whole control periods), and the curve's peaks under it."""
+
+    law: TimeLaw
+    scale: float
+    slow: float
+    peaks: tuple  # |q-dot|, |q-ddot|, |q-dddot| maxima (J,) each
+    within: bool
+    notes: tuple
+
+
+def _final_law(p: _Plan, planned: DeviceLimits, rate: float, t_opt: float) -> _Final:
     law = p.law
     notes = []
-    slow = max(1.0, float(ratio.max()))
+    slow = max(1.0, peak_ratio(planned.constraints(1.0 - CHECK_MARGIN), p.check.peaks))
     longest = max(1.0, MAX_SWING_DURATION / law.duration)
     if slow > longest:
         notes.append(f"slowed to the longest swing ({MAX_SWING_DURATION:g} s); still over a limit")
@@ -458,27 +487,27 @@ def _finish(traj, p: _Plan, chk, sp, device, planned, rate, t_opt) -> TimedSwing
             f"than half this machine's memory holds ({max_samples()}); lower the rate or check the "
             "device limits (joint_velocity, joint_acceleration, joint_jerk, min_swing_duration)"
         )
-    periods = max(2, math.ceil(n - 1e-9))
-    scale *= periods / n  # whole control periods: never faster
-    law = law.slowed(scale)
-    curve = SwingCurve(
-        p.path, law, float(traj.scene.pivot_y), (sp.thigh, sp.shin), float(sp.foot_length)
-    )
+    scale *= max(2, math.ceil(n - 1e-9)) / n  # whole control periods: never faster
     # The check's values at the same curve points, slowed exactly (1/k, 1/k^2, 1/k^3).
-    derivs = p.check.derivs
-    peaks = [np.abs(derivs[o]).max(axis=0) / scale**o for o in (1, 2, 3)]
+    peaks = tuple(pk / scale**o for o, pk in zip((1, 2, 3), p.check.peaks))
     within = bool(
         np.all(peaks[0] <= planned.velocity)
         and np.all(peaks[1] <= planned.acceleration)
         and (planned.jerk is None or np.all(peaks[2] <= planned.jerk))
     )
+    return _Final(law.slowed(scale), scale, slow, peaks, within, tuple(notes))
+
+
+def _curve_verdict(traj, p: _Plan, chk, scale: float, sp) -> TrajectoryChecks:
+    """The path checks of the curve (``_path_checks``), with their times on the final law."""
     m, j, heel, s_grid, outside = chk
+    s_chk, t_chk = p.check.s, p.check.t
     t_grid = np.interp(s_grid, s_chk, t_chk) * scale
     reasons = failure_reasons(m, j, heel, traj.scene.goal_y, t_grid, sp)
     if outside is not None and m["joint_limits_ok"][j]:
         t_out = float(np.interp(outside, s_chk, t_chk) * scale)
         reasons += (f"the joints leave their range at t={t_out:.3f} s",)
-    checks = TrajectoryChecks(
+    return TrajectoryChecks(
         bool(m["reached_goal"][j]),
         bool(m["collision_free"][j]),
         float(m["min_clearance"][j]),
@@ -490,52 +519,62 @@ def _finish(traj, p: _Plan, chk, sp, device, planned, rate, t_opt) -> TimedSwing
         float(m["heel_backward"][j]),
         float(m["deviation"][j]),
     )
+
+
+def _timed(traj, p, chk, f: _Final, curve, samples, sp, device, rate) -> TimedSwing:
     return TimedSwing(
         method=traj.method,
         scene=traj.scene,
         rate=rate,
         limits=device,
-        checks=checks,
-        within_limits=within,
-        peak_velocity=peaks[0],
-        peak_acceleration=peaks[1],
-        slowdown=slow,
-        peak_jerk=peaks[2],
-        notes=tuple(getattr(traj, "notes", ())) + tuple(notes),
+        checks=_curve_verdict(traj, p, chk, f.scale, sp),
+        within_limits=f.within,
+        peak_velocity=f.peaks[0],
+        peak_acceleration=f.peaks[1],
+        slowdown=f.slow,
+        peak_jerk=f.peaks[2],
+        notes=tuple(getattr(traj, "notes", ())) + f.notes,
         curve=curve,
-        **_samples(curve, rate),
+        **samples,
     )
 
 
-def _samples(curve: SwingCurve, rate: float) -> dict:
-    """The TimedSwing's sample columns of a curve at ``rate``: t = k / rate from 0 to the first
-    period at or after touch-down."""
-    periods = max(2, math.ceil(curve.duration * rate - 1e-9))
-    if not periods < max_samples():
-        raise ValueError(
-            f"rate: a {curve.duration:.4g} s swing at {rate:g} Hz needs {periods} samples, more "
-            f"than half this machine's memory holds ({max_samples()}); lower the rate"
-        )
-    t = np.arange(periods + 1) / rate
+def _samples(curves, rate: float) -> list[dict]:
+    """Each curve's TimedSwing sample columns at ``rate``: t = k / rate from 0 to the first period
+    at or after touch-down (all curves in one evaluation)."""
+    times = []
+    for c in curves:
+        periods = max(2, math.ceil(c.duration * rate - 1e-9))
+        if not periods < max_samples():
+            raise ValueError(
+                f"rate: a {c.duration:.4g} s swing at {rate:g} Hz needs {periods} samples, more "
+                f"than half this machine's memory holds ({max_samples()}); lower the rate"
+            )
+        times.append(np.arange(periods + 1) / rate)
     # the last sample is at or after touch-down: the legs at rest in the landing pose
-    st = replace(curve.at(np.concatenate([t[:-1], [curve.duration]])), time=t)
-    pts = leg_points(curve.lengths, curve.pivot_y, st.joint_angles)
-    return {
-        "duration": curve.duration,
-        "time": t,
-        "heel": st.heel,
-        "toe": st.toe,
-        "hip": pts["hip"],
-        "knee_swing": pts["knee_swing"],
-        "knee_stance": pts["knee_stance"],
-        "joint_angles": st.joint_angles,
-        "joint_velocity": st.joint_velocity,
-        "joint_acceleration": st.joint_acceleration,
-        "heel_velocity": st.heel_velocity,
-        "heel_acceleration": st.heel_acceleration,
-        "path_parameter": st.path_parameter,
-        "joint_jerk": st.joint_jerk,
-    }
+    at = [np.concatenate([t[:-1], [c.duration]]) for t, c in zip(times, curves)]
+    out = []
+    for c, t, st in zip(curves, times, curves_at(curves, at)):
+        pts = leg_points(c.lengths, c.pivot_y, st.joint_angles)
+        out.append(
+            {
+                "duration": c.duration,
+                "time": t,
+                "heel": st.heel,
+                "toe": st.toe,
+                "hip": pts["hip"],
+                "knee_swing": pts["knee_swing"],
+                "knee_stance": pts["knee_stance"],
+                "joint_angles": st.joint_angles,
+                "joint_velocity": st.joint_velocity,
+                "joint_acceleration": st.joint_acceleration,
+                "heel_velocity": st.heel_velocity,
+                "heel_acceleration": st.heel_acceleration,
+                "path_parameter": st.path_parameter,
+                "joint_jerk": st.joint_jerk,
+            }
+        )
+    return out
 
 
 # --------------------------------------------------------------------------------------------
