@@ -324,3 +324,79 @@ def test_a_memory_budget_below_one_agent_is_refused_naming_the_bound(tmp_path, b
     sweep.write_text(SWEEP_AXES.replace("[sweep]\n", f'[sweep]\nmemory_budget = "{budget}"\n'))
     with pytest.raises(ConfigError, match="sweep.memory_budget: must be at least 64 MiB"):
         load_sweep(sweep)
+
+
+# --------------------------------------------------------------------------------------------
+# Ctrl-C during jaxexo train: one line saying how to resume, exit 130
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.slow
+def test_ctrl_c_during_train_says_how_to_resume(tmp_path):
+    import shlex
+    import signal
+    import subprocess
+    import time
+
+    from jaxexo.config.toml_io import config_to_toml
+
+    from conftest import SEED, cli_cmd, tiny_config, without_compilation_cache
+
+    cfg_path = tmp_path / "tiny.toml"
+    cfg_path.write_text(config_to_toml(tiny_config()))
+    run = tmp_path / "run"
+    p = subprocess.Popen(
+        cli_cmd("train", cfg_path, "--out", run, "--quiet", "--seed", SEED),
+        cwd=ROOT,
+        env=without_compilation_cache(dict(os.environ)),  # may die mid-write of an entry
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    t0 = time.monotonic()
+    while not (run / "config.toml").exists():
+        assert p.poll() is None, p.stderr.read()[-3000:]
+        assert time.monotonic() - t0 < 300
+        time.sleep(0.01)
+    p.send_signal(signal.SIGINT)
+    _, err = p.communicate(timeout=300)
+    assert p.returncode == 130, err[-3000:]
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err[-3000:]
+    assert "interrupted" in err
+    command = err.strip().split("continue it with: ", 1)[1]
+    assert shlex.split(command) == [
+        "jaxexo", "train", str(cfg_path), "--out", str(run), "--seed", str(SEED), "--resume",
+    ]  # fmt: skip
+
+
+# --------------------------------------------------------------------------------------------
+# Messages name the option or argument: walk's numbers, an empty or NUL path
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "option, value, message",
+    [
+        ("--start-y", "nan", "--start-y: must be a finite number, got nan"),
+        ("--goal-y", "nan", "--goal-y: must be a finite number, got nan"),
+        ("--steps", "0", "--steps: must be a finite number >= 1, got 0"),
+    ],
+)
+def test_walk_names_its_options_and_bounds(tmp_path, option, value, message):
+    terrain = tmp_path / "t.csv"
+    terrain.write_text("0,0\n3,0\n")
+    r = run_cli("walk", "--method", "cfftg", "--terrain", terrain, "--out", tmp_path / "w.csv",
+                option, value)  # fmt: skip
+    assert_clean_refusal(r, message)
+    assert "None" not in r.stderr
+
+
+@pytest.mark.parametrize("path, message", [("", "the path is empty"), ("a\0b", "NUL byte")])
+def test_an_empty_or_nul_path_names_the_argument(path, message):
+    from jaxexo.config import ConfigError, load_config
+    from jaxexo.inference import TrajectoryGenerator
+
+    with pytest.raises(ConfigError, match=f"^path: .*{message}"):
+        TrajectoryGenerator.load(path)
+    with pytest.raises(ConfigError, match=f"^config: .*{message}"):
+        load_config(path)
