@@ -132,6 +132,23 @@ GENERAL_SHAPES = (
 DEFAULT_SIZE = (0.20, 0.15)  # m, width and height of a general shape
 
 
+def _profile_obstacle(path):
+    """--profile's obstacle: the file read by the terrain rules, then held to the one outline rule
+    of every command (jaxexo.sim.pieces.check_simple, as replay and the MJCF scene hold it: a closed
+    outline of one obstacle); an error names the option and the file."""
+    from jaxexo.physics.geometry import GeometryError, Obstacle
+    from jaxexo.sim.pieces import check_simple
+    from jaxexo.storage.terrain_file import read_terrain
+
+    t = read_terrain(path)
+    try:
+        obstacle = Obstacle.profile(t.points)
+        check_simple(obstacle.outline_array(len(obstacle.unit_vertices)))
+    except GeometryError as e:
+        raise ValueError(f"--profile: {path}: {e}") from None
+    return obstacle
+
+
 def obstacle_from_args(args):
     """An Obstacle from --obstacle/--width/--height/--center-y (metres); thesis shapes keep their
     Table 3.1 size unless --width/--height are given. Sizes within the one obstacle-size bound
@@ -152,10 +169,7 @@ def obstacle_from_args(args):
             raise ValueError(
                 f"{given[0]}: not with --profile (the profile file gives the obstacle's shape and place)"
             )
-        from jaxexo.storage.terrain_file import read_terrain
-
-        t = read_terrain(args.profile)
-        return Obstacle.profile(t.points)
+        return _profile_obstacle(args.profile)
     if args.obstacle is None:
         raise ValueError(
             "--obstacle or --profile: give the obstacle (a named shape, or a profile file)"

@@ -213,7 +213,8 @@ def test_generate_options_still_take_per_obstacle_columns_and_a_pivot_y():
 # Outputs: --animate is a GIF, an empty option says so
 # --------------------------------------------------------------------------------------------
 
-GEN = ("generate", "--obstacle", "base1", "--method", "cfftg")
+GEN = ("generate", "--method", "cfftg")
+GEN_BASE1 = (*GEN, "--obstacle", "base1")
 
 
 @pytest.mark.parametrize(
@@ -229,7 +230,7 @@ GEN = ("generate", "--obstacle", "base1", "--method", "cfftg")
 )
 def test_generate_refuses_outputs_and_options_it_cannot_honour(tmp_path, args, needles):
     args = [str(tmp_path / a) if a and a != "none" and "." in a or a == "x" else a for a in args]
-    r = run_cli(*GEN, *args)
+    r = run_cli(*GEN_BASE1, *args)
     assert_clean_refusal(r, *needles)
     assert list(tmp_path.iterdir()) == []
 
@@ -400,3 +401,17 @@ def test_an_empty_or_nul_path_names_the_argument(path, message):
         TrajectoryGenerator.load(path)
     with pytest.raises(ConfigError, match=f"^config: .*{message}"):
         load_config(path)
+
+
+def test_cfftgs_backward_figure_at_few_points_is_worded_as_a_bound(tmp_path):
+    r = run_cli(*GEN_BASE1, "--points", "20", "--out", tmp_path / "t.csv")
+    assert "may move backward by up to" in r.stdout and "a bound" in r.stdout, r.stdout
+    assert "the heel moves backward by" not in r.stdout
+
+
+def test_a_profile_of_two_obstacles_is_refused_by_generate_naming_the_file(tmp_path):
+    profile = tmp_path / "two.csv"
+    profile.write_text("0.3,0\n0.35,0.05\n0.4,0\n0.45,0.05\n0.5,0\n")
+    r = run_cli(*GEN, "--profile", profile, "--out", tmp_path / "t.csv")
+    assert_clean_refusal(r, "--profile", str(profile), "interior vertex 2 touches the ground")
+    assert not (tmp_path / "t.csv").exists()
