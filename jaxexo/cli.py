@@ -45,10 +45,26 @@ def cmd_bench_env(args) -> int:
     return 0
 
 
+def _resume_command(args) -> str:
+    """The command line that continues an interrupted ``jaxexo train`` (its options, and --resume)."""
+    import shlex
+
+    argv = ["jaxexo", "train"]
+    if args.config_given is not None:
+        argv.append(str(args.config_given))
+    argv += ["--out", str(args.out)]
+    if args.seed != 0:
+        argv += ["--seed", str(args.seed)]
+    if args.population is not None:
+        argv += ["--population", str(args.population)]
+    return shlex.join([*argv, "--resume"])
+
+
 def cmd_train(args) -> int:
     from jaxexo.train.devices import use_all_cpu_cores
 
     use_all_cpu_cores()
+    args.config_given = args.config  # as typed: the resume command repeats it
     if args.config is None and args.resume and (Path(args.out) / "config.toml").is_file():
         args.config = Path(args.out) / "config.toml"  # the run's own resolved config
     cfg, name = _load(args.config)
@@ -76,7 +92,17 @@ def cmd_train(args) -> int:
         else f"seed {args.seed}"
     )
     print(f"jaxexo train: {name} -> {args.out} ({seeds}{', resume' if args.resume else ''})")
-    res = run_training(cfg, args.out, seed=args.seed, resume=args.resume, progress=not args.quiet)
+    try:
+        res = run_training(
+            cfg, args.out, seed=args.seed, resume=args.resume, progress=not args.quiet
+        )
+    except KeyboardInterrupt:
+        print(
+            f"jaxexo: interrupted; {args.out} keeps the chunks trained up to its last checkpoint; "
+            f"continue it with: {_resume_command(args)}",
+            file=sys.stderr,
+        )
+        return 130
     held = res.get("held_out") or {}
     print(
         f"trained {res['episodes']} episodes, {res['env_steps']:,} env steps in {res['train_seconds']:.1f} s"
@@ -106,6 +132,23 @@ GENERAL_SHAPES = (
 DEFAULT_SIZE = (0.20, 0.15)  # m, width and height of a general shape
 
 
+def _profile_obstacle(path):
+    """--profile's obstacle: the file read by the terrain rules, then held to the one outline rule
+    of every command (jaxexo.sim.pieces.check_simple, as replay and the MJCF scene hold it: a closed
+    outline of one obstacle); an error names the option and the file."""
+    from jaxexo.physics.geometry import GeometryError, Obstacle
+    from jaxexo.sim.pieces import check_simple
+    from jaxexo.storage.terrain_file import read_terrain
+
+    t = read_terrain(path)
+    try:
+        obstacle = Obstacle.profile(t.points)
+        check_simple(obstacle.outline_array(len(obstacle.unit_vertices)))
+    except GeometryError as e:
+        raise ValueError(f"--profile: {path}: {e}") from None
+    return obstacle
+
+
 def obstacle_from_args(args):
     """An Obstacle from --obstacle/--width/--height/--center-y (metres); thesis shapes keep their
     Table 3.1 size unless --width/--height are given. Sizes within the one obstacle-size bound
@@ -126,10 +169,7 @@ def obstacle_from_args(args):
             raise ValueError(
                 f"{given[0]}: not with --profile (the profile file gives the obstacle's shape and place)"
             )
-        from jaxexo.storage.terrain_file import read_terrain
-
-        t = read_terrain(args.profile)
-        return Obstacle.profile(t.points)
+        return _profile_obstacle(args.profile)
     if args.obstacle is None:
         raise ValueError(
             "--obstacle or --profile: give the obstacle (a named shape, or a profile file)"
@@ -172,12 +212,12 @@ def _check_output_file(option: str, value) -> None:
             f"{option}: the option is empty; give a file name (e.g. {OUTPUT_EXAMPLES[option]})"
         )
     p = Path(value)
-    if option == "--animate":
-        _check_animation_name(text)
     if text.endswith(("/", "\\")) or p.is_dir():
         raise ValueError(
             f"{option}: {text} is a directory; give a file name (e.g. {p / OUTPUT_EXAMPLES[option]})"
         )
+    if option == "--animate":
+        _check_animation_name(text)
     if not p.parent.is_dir():
         _check_folder_part(option, p.parent, text)
         raise ValueError(f"{option}: the folder {p.parent} does not exist (for {text})")
@@ -191,7 +231,7 @@ def _check_animation_name(text: str) -> None:
     if Path(text).suffix.lower() != ".gif" and not direct_output(text):
         raise ValueError(
             f"--animate: {text} would hold GIF data (the animation is written as a GIF); "
-            f"name it .gif (e.g. {Path(text).with_suffix('.gif').name if Path(text).name else 'swing.gif'})"
+            f"name it .gif (e.g. {Path(text).with_suffix('.gif')})"
         )
 
 
@@ -407,6 +447,13 @@ def cmd_walk(args) -> int:
             f"--rate: control rate must be > 0 and <= {MAX_CONTROL_RATE:g} Hz, got {args.rate:g}"
         )
     fallback = _fallback(args)
+    from jaxexo.course.ground import check_number
+
+    # The course's own checks, before any policy or terrain is read, naming the options as typed.
+    check_number("--start-y", args.start_y)
+    check_number("--goal-y", args.goal_y)
+    check_number("--steps", args.steps, 1, integer=True)
+    check_number("--double-support", args.double_support, 0.0)
     gen = _generator(args)
     _check_clearance(args.clearance, gen.config)
     from jaxexo.course import plan_course

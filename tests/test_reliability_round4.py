@@ -213,7 +213,8 @@ def test_generate_options_still_take_per_obstacle_columns_and_a_pivot_y():
 # Outputs: --animate is a GIF, an empty option says so
 # --------------------------------------------------------------------------------------------
 
-GEN = ("generate", "--obstacle", "base1", "--method", "cfftg")
+GEN = ("generate", "--method", "cfftg")
+GEN_BASE1 = (*GEN, "--obstacle", "base1")
 
 
 @pytest.mark.parametrize(
@@ -229,7 +230,7 @@ GEN = ("generate", "--obstacle", "base1", "--method", "cfftg")
 )
 def test_generate_refuses_outputs_and_options_it_cannot_honour(tmp_path, args, needles):
     args = [str(tmp_path / a) if a and a != "none" and "." in a or a == "x" else a for a in args]
-    r = run_cli(*GEN, *args)
+    r = run_cli(*GEN_BASE1, *args)
     assert_clean_refusal(r, *needles)
     assert list(tmp_path.iterdir()) == []
 
@@ -324,3 +325,93 @@ def test_a_memory_budget_below_one_agent_is_refused_naming_the_bound(tmp_path, b
     sweep.write_text(SWEEP_AXES.replace("[sweep]\n", f'[sweep]\nmemory_budget = "{budget}"\n'))
     with pytest.raises(ConfigError, match="sweep.memory_budget: must be at least 64 MiB"):
         load_sweep(sweep)
+
+
+# --------------------------------------------------------------------------------------------
+# Ctrl-C during jaxexo train: one line saying how to resume, exit 130
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.slow
+def test_ctrl_c_during_train_says_how_to_resume(tmp_path):
+    import shlex
+    import signal
+    import subprocess
+    import time
+
+    from jaxexo.config.toml_io import config_to_toml
+
+    from conftest import SEED, cli_cmd, tiny_config, without_compilation_cache
+
+    cfg_path = tmp_path / "tiny.toml"
+    cfg_path.write_text(config_to_toml(tiny_config()))
+    run = tmp_path / "run"
+    p = subprocess.Popen(
+        cli_cmd("train", cfg_path, "--out", run, "--quiet", "--seed", SEED),
+        cwd=ROOT,
+        env=without_compilation_cache(dict(os.environ)),  # may die mid-write of an entry
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    t0 = time.monotonic()
+    while not (run / "config.toml").exists():
+        assert p.poll() is None, p.stderr.read()[-3000:]
+        assert time.monotonic() - t0 < 300
+        time.sleep(0.01)
+    p.send_signal(signal.SIGINT)
+    _, err = p.communicate(timeout=300)
+    assert p.returncode == 130, err[-3000:]
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err[-3000:]
+    assert "interrupted" in err
+    command = err.strip().split("continue it with: ", 1)[1]
+    assert shlex.split(command) == [
+        "jaxexo", "train", str(cfg_path), "--out", str(run), "--seed", str(SEED), "--resume",
+    ]  # fmt: skip
+
+
+# --------------------------------------------------------------------------------------------
+# Messages name the option or argument: walk's numbers, an empty or NUL path
+# --------------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "option, value, message",
+    [
+        ("--start-y", "nan", "--start-y: must be a finite number, got nan"),
+        ("--goal-y", "nan", "--goal-y: must be a finite number, got nan"),
+        ("--steps", "0", "--steps: must be a finite number >= 1, got 0"),
+    ],
+)
+def test_walk_names_its_options_and_bounds(tmp_path, option, value, message):
+    terrain = tmp_path / "t.csv"
+    terrain.write_text("0,0\n3,0\n")
+    r = run_cli("walk", "--method", "cfftg", "--terrain", terrain, "--out", tmp_path / "w.csv",
+                option, value)  # fmt: skip
+    assert_clean_refusal(r, message)
+    assert "None" not in r.stderr
+
+
+@pytest.mark.parametrize("path, message", [("", "the path is empty"), ("a\0b", "NUL byte")])
+def test_an_empty_or_nul_path_names_the_argument(path, message):
+    from jaxexo.config import ConfigError, load_config
+    from jaxexo.inference import TrajectoryGenerator
+
+    with pytest.raises(ConfigError, match=f"^path: .*{message}"):
+        TrajectoryGenerator.load(path)
+    with pytest.raises(ConfigError, match=f"^config: .*{message}"):
+        load_config(path)
+
+
+def test_cfftgs_backward_figure_at_few_points_is_worded_as_a_bound(tmp_path):
+    r = run_cli(*GEN_BASE1, "--points", "20", "--out", tmp_path / "t.csv")
+    assert "may move backward by up to" in r.stdout and "a bound" in r.stdout, r.stdout
+    assert "the heel moves backward by" not in r.stdout
+
+
+def test_a_profile_of_two_obstacles_is_refused_by_generate_naming_the_file(tmp_path):
+    profile = tmp_path / "two.csv"
+    profile.write_text("0.3,0\n0.35,0.05\n0.4,0\n0.45,0.05\n0.5,0\n")
+    r = run_cli(*GEN, "--profile", profile, "--out", tmp_path / "t.csv")
+    assert_clean_refusal(r, "--profile", str(profile), "interior vertex 2 touches the ground")
+    assert not (tmp_path / "t.csv").exists()

@@ -54,12 +54,20 @@ def _kind(mode: int) -> str:
 
 def check_path_type(path, what: str) -> Path:
     """``path`` as a Path when it is a str or os.PathLike; TypeError naming ``what`` otherwise (bytes,
-    an open file, None: a file is named by its path)."""
+    an open file, None: a file is named by its path). An empty path (Path("") is the current folder)
+    or one with a NUL byte (no file system takes it) is a ConfigError naming ``what``."""
     if isinstance(path, (bytes, bytearray)) or not isinstance(path, (str, os.PathLike)):
         raise TypeError(
             f"{what}: expected a file's path (str or os.PathLike), got {type(path).__name__} (an open "
             "file or the file's bytes are not read: name the file)"
         )
+    text = os.fspath(path)
+    if isinstance(text, bytes):
+        raise TypeError(f"{what}: expected a file's path as text, got bytes {text!r}")
+    if not text:
+        raise ConfigError(f"{what}: the path is empty; name a file")
+    if "\0" in text:
+        raise ConfigError(f"{what}: {text!r} contains a NUL byte, which no file's name can hold")
     return Path(path)
 
 

@@ -98,11 +98,14 @@ def check_number(name: str, v, lo=None, integer=False):
         return None
     if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.integer, np.floating)):
         raise CourseError(f"{name}: expected a number, got {v!r}")
+    bound = "" if lo is None else f" >= {lo:g}"
+    if not math.isfinite(float(v)):
+        raise CourseError(f"{name}: must be a finite number{bound}, got {float(v)!r}")
     if integer and int(v) != v:
         raise CourseError(f"{name}: expected a whole number, got {v!r}")
     v = int(v) if integer else float(v)
-    if not math.isfinite(v) or (lo is not None and v < lo):
-        raise CourseError(f"{name}: must be a finite number >= {lo}, got {v!r}")
+    if lo is not None and v < lo:
+        raise CourseError(f"{name}: must be a finite number{bound}, got {v!r}")
     return v
 
 

@@ -272,6 +272,17 @@ def _move_clearances(
     return out
 
 
+def _backward_reason(bound: float, heel: np.ndarray, tolerance: float) -> str:
+    """The failed backward check in words: ``bound`` is a bound over the curve between the samples
+    (backward_bound), not a measurement; the samples' own backward motion is said beside it."""
+    sampled = float(swept.backward_motion(np, heel[:, 0]))
+    return (
+        f"the heel may move backward by up to {bound:.4f} m (a bound over the curve between samples: "
+        f"the samples themselves move back {sampled:.4f} m), more than env.backward_tolerance = "
+        f"{tolerance:.4f} m; more samples (n_points, --points) tighten the bound"
+    )
+
+
 def backward_bound(heel: np.ndarray, deviation) -> np.ndarray:
     """How far the heel moves backward (m) on the curve through paths (..., N, 2): the samples' y
     drawdown (jaxexo.physics.swept.backward_motion) plus twice the curve's deviation bound (...,)."""
@@ -382,10 +393,7 @@ def failure_reasons(
         elif check == "above_ground":
             out.append(f"the heel goes below the ground (z={heel[:, 1].min():.4f} m)")
         elif check == "backward_ok":
-            out.append(
-                f"the heel moves backward by {m['heel_backward'][i]:.4f} m, more than env.backward_tolerance "
-                f"= {sp.backward_tolerance:.4f} m"
-            )
+            out.append(_backward_reason(m["heel_backward"][i], heel, sp.backward_tolerance))
         elif check == "joint_limits_ok":
             j = int(np.argmax(m["limit_bad"][i]))
             a = np.degrees(m["angles"][i, j])
