@@ -203,7 +203,7 @@ def test_a_fixed_number_of_steps():
 
 def _check_walk_samples(table: np.ndarray, rate: float, limits) -> None:
     """Independent of the planner: uniform time at the control rate, joint angles continuous, and
-    finite differences of the exported angles within the velocity and acceleration limits."""
+    finite differences of the exported angles within the velocity, acceleration and jerk limits."""
     t = table[:, 0]
     dt = 1.0 / rate
     np.testing.assert_allclose(np.diff(t), dt, atol=1e-6)
@@ -218,6 +218,10 @@ def _check_walk_samples(table: np.ndarray, rate: float, limits) -> None:
     a = np.diff(q, n=2, axis=0) / dt**2
     assert np.all(np.abs(v) <= np.asarray(limits.velocity) * (1 + 1e-3))
     assert np.all(np.abs(a) <= np.asarray(limits.acceleration) * (1 + 1e-3))
+    # Jerk too, across the hand-overs: each swing is a curve at rest with zero acceleration at both
+    # ends, so the walk is as continuous at a hand-over as inside a swing.
+    j = np.diff(q, n=3, axis=0) / dt**3
+    assert np.all(np.abs(j) <= np.asarray(limits.jerk) * (1 + 1e-3))
     # Both legs at rest at the start and at the end.
     np.testing.assert_allclose(table[0, WALK_COLUMNS.index("hip_left_vel_rad_s") :], 0.0, atol=1e-9)
     np.testing.assert_allclose(

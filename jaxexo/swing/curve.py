@@ -62,13 +62,15 @@ def chord_knots(q: np.ndarray) -> np.ndarray:
 
 def distinct_samples(q: np.ndarray, short: float = 0.25) -> np.ndarray:
     """Indices of the samples (N, J) the spline goes through: a sample closer to the next kept one
-    than ``short`` of the median step is dropped (a cubic through a chord much shorter than its
-    neighbours swings wide of it), the first and the last sample always kept. Raises ValueError when
+    than ``short`` of the median step, or than 1e-4 of the whole path, is dropped (a cubic through
+    a chord much shorter than its neighbours swings wide of it), the first and the last sample always kept. Raises ValueError when
     the joints do not move at all."""
     step = np.linalg.norm(np.diff(q, axis=0), axis=1)
     if not float(step.sum()) > 0.0:
         raise ValueError("trajectory: the joints do not move along this path; nothing to time")
-    tiny = short * float(np.median(step[step > 0]))
+    # Relative to the path's length too: a path that mostly stands still has a median step of
+    # rounding noise, and knots that close would make the spline's derivatives explode.
+    tiny = max(short * float(np.median(step[step > 0])), 1e-4 * float(step.sum()))
     keep = np.ones(len(q), bool)
     keep[1:-1] = step[1:] >= tiny  # a sample nearly on the next one goes
     if len(q) > 2 and step[-1] < tiny:  # the landing stays; the sample it nearly repeats goes
@@ -331,49 +333,57 @@ def _segments(lengths, counts) -> tuple[np.ndarray, np.ndarray]:
 
 
 def laws_at(laws, times) -> list[tuple]:
-    """s, s', s'', s''' of each law at its times: a list of 4-tuples of (n_b,) arrays."""
+    """s, s', s'', s''' of each law at its times: a list of 4-tuples of (n_b,) arrays.
+
+    s(t) = (P(t) - P(t - w)) / w with P the integral of S = integral of v (TimeLaw). At t the
+    law is either inside the passes' nodes or past them at rest (S = total, P grows linearly);
+    at t - w it is inside them or before the start (all zero)."""
     counts = np.array([len(t) for t in times])
     lens = np.array([len(law.nodes) for law in laws])
     w = np.array([law.window for law in laws])
     end = np.array([law.nodes[-1] for law in laws])
-    dur = end + w
     off = np.concatenate([[0.0], np.cumsum(end + 1.0)[:-1]])
-    nodes = np.concatenate([law.nodes for law in laws])
-    speed = np.concatenate([law.speed for law in laws])
-    acc = np.concatenate([np.append(law._acc, 0.0) for law in laws])
-    big_s = np.concatenate([law._S for law in laws])
-    big_p = np.concatenate([law._P for law in laws])
+    one = len(laws) == 1
+    cat = (lambda xs: xs[0]) if one else np.concatenate
+    nodes = cat([law.nodes for law in laws])
+    speed = cat([law.speed for law in laws])
+    acc = cat([np.append(law._acc, 0.0) for law in laws])
+    big_s, big_p = cat([law._S for law in laws]), cat([law._P for law in laws])
     start, item = _segments(lens, counts)
-    t = np.clip(np.concatenate(times), 0.0, dur[item]) if len(times) else np.zeros(0)
-    total = big_s[start + lens[item] - 1]
-    p_end = big_p[start + lens[item] - 1]
-    out = []
-    for tau in (t, t - w[item]):
-        local = np.clip(tau, 0.0, end[item])
-        i = np.searchsorted(nodes + np.repeat(off, lens), local + off[item], side="right") - 1
-        i = np.clip(i, start, start + lens[item] - 2)
+    t = np.clip(cat(list(times)), 0.0, (end + w)[item])
+    last = start + lens[item] - 1
+    total, end_i, w_i = big_s[last], end[item], w[item]
+    keys = nodes if one else nodes + np.repeat(off, lens)
+
+    def piece(local):
+        i = np.searchsorted(keys, local if one else local + off[item], side="right") - 1
+        i = np.minimum(i, last - 1)
         d = local - nodes[i]
         a = acc[i]
-        v = speed[i] + a * d
-        s_ = big_s[i] + (speed[i] + 0.5 * a * d) * d
-        p = big_p[i] + (big_s[i] + (0.5 * speed[i] + a * d / 6.0) * d) * d
-        before, after = tau < 0.0, tau >= end[item]
-        rest = before | after
-        out.append(
-            (
-                np.where(before, 0.0, np.where(after, p_end + total * (tau - end[item]), p)),
-                np.where(before, 0.0, np.where(after, total, s_)),
-                np.where(rest, 0.0, v),
-                np.where(rest, 0.0, a),
-            )
+        v0 = speed[i]
+        return (
+            big_p[i] + (big_s[i] + (0.5 * v0 + a * d / 6.0) * d) * d,
+            big_s[i] + (v0 + 0.5 * a * d) * d,
+            v0 + a * d,
+            a,
         )
-    k = 1.0 / (w[item] * total)
-    (p1, s1, v1, a1), (p0, s0, v0, a0) = out
+
+    past = t >= end_i  # at rest after the passes' last node
+    p1, s1, v1, a1 = piece(np.minimum(t, end_i))
+    p1 = p1 + total * np.maximum(t - end_i, 0.0)
+    v1[past] = 0.0
+    a1 = np.where(past, 0.0, a1)
+    lag = t - w_i
+    p0, s0, v0, a0 = piece(np.maximum(lag, 0.0))  # all zero at the start, but the piece's v'
+    a0 = np.where(lag < 0.0, 0.0, a0)
+    k = 1.0 / (w_i * total)
     res = [np.clip((p1 - p0) * k, 0.0, 1.0), (s1 - s0) * k, (v1 - v0) * k, (a1 - a0) * k]
     # At touch-down exactly at rest (t - w rounds to a hair before the last node).
-    landed = t >= dur[item]
+    landed = t >= end_i + w_i
     for x, val in zip(res, (1.0, 0.0, 0.0, 0.0)):
         x[landed] = val
+    if one:
+        return [tuple(res)]
     cut = np.cumsum(counts)[:-1]
     return list(zip(*(np.split(x, cut) for x in res)))
 
@@ -382,14 +392,22 @@ def paths_at(paths, params, order: int = 3) -> list[list[np.ndarray]]:
     """q and its s-derivatives up to ``order`` of each path at its parameters: a list of lists of
     (n_b, J) arrays."""
     counts = np.array([len(s) for s in params])
-    pieces = np.array([len(p.coef) for p in paths])
-    knots = np.concatenate([p.knots[:-1] + 2.0 * b for b, p in enumerate(paths)])
-    coef = np.concatenate([p.coef for p in paths])
-    start, item = _segments(pieces, counts)
-    s = np.clip(np.concatenate(params), 0.0, 1.0) if len(params) else np.zeros(0)
-    i = np.searchsorted(knots, s + 2.0 * item, side="right") - 1
-    i = np.clip(i, start, start + pieces[item] - 1)
-    d = (s - (knots[i] - 2.0 * item))[:, None]
+    one = len(paths) == 1
+    if one:
+        knots, coef = paths[0].knots[:-1], paths[0].coef
+        s = np.asarray(params[0], np.float64)
+        i = np.maximum(np.searchsorted(knots, s, side="right") - 1, 0)
+        i = np.minimum(i, len(coef) - 1)
+        d = (s - knots[i])[:, None]
+    else:
+        pieces = np.array([len(p.coef) for p in paths])
+        knots = np.concatenate([p.knots[:-1] + 2.0 * b for b, p in enumerate(paths)])
+        coef = np.concatenate([p.coef for p in paths])
+        start, item = _segments(pieces, counts)
+        s = np.clip(np.concatenate(params), 0.0, 1.0)
+        i = np.searchsorted(knots, s + 2.0 * item, side="right") - 1
+        i = np.clip(i, start, start + pieces[item] - 1)
+        d = (s - (knots[i] - 2.0 * item))[:, None]
     c = coef[i]
     c0, c1, c2, c3 = c[:, 0], c[:, 1], c[:, 2], c[:, 3]
     res = [((c3 * d + c2) * d + c1) * d + c0]
@@ -399,6 +417,8 @@ def paths_at(paths, params, order: int = 3) -> list[list[np.ndarray]]:
         res.append(6.0 * c3 * d + 2.0 * c2)
     if order >= 3:
         res.append(6.0 * c3)
+    if one:
+        return [res]
     cut = np.cumsum(counts)[:-1]
     return [list(x) for x in zip(*(np.split(r, cut) for r in res))]
 
@@ -407,13 +427,16 @@ def joints_at(paths, laws, times) -> list[tuple]:
     """For each (path, law) at its times: s (n_b,) and [q, q-dot, q-ddot, q-dddot] (n_b, J) each,
     the chain rule on q(s(t))."""
     lv = laws_at(laws, times)
-    counts = [len(t) for t in times]
-    s, s1, s2, s3 = (np.concatenate(x) if x else np.zeros(0) for x in zip(*lv))
     flat = paths_at(paths, [x[0] for x in lv], 3)
-    d0, d1, d2, d3 = (np.concatenate(x) for x in zip(*flat))
-    s1, s2, s3 = s1[:, None], s2[:, None], s3[:, None]
-    derivs = [d0, d1 * s1, d2 * s1 * s1 + d1 * s2, d3 * s1**3 + 3.0 * d2 * s1 * s2 + d1 * s3]
-    cut = np.cumsum(counts)[:-1]
+    one = len(paths) == 1
+    cat = (lambda xs: xs[0]) if one else np.concatenate
+    _, s1, s2, s3 = (cat(list(x))[:, None] for x in zip(*lv))
+    d0, d1, d2, d3 = (cat(list(x)) for x in zip(*flat))
+    s1s1 = s1 * s1
+    derivs = [d0, d1 * s1, d2 * s1s1 + d1 * s2, (d3 * s1s1 + 3.0 * d2 * s2) * s1 + d1 * s3]
+    if one:
+        return [(lv[0][0], derivs)]
+    cut = np.cumsum([len(t) for t in times])[:-1]
     split = [np.split(x, cut) for x in derivs]
     return [(x[0], [split[o][b] for o in range(4)]) for b, x in enumerate(lv)]
 

@@ -64,8 +64,11 @@ from jaxexo.swing.trajectory import (
 GRID_PER_KNOT = 2  # TOPP grid points per interval of the joint path's knots
 SAFETY = 0.95  # the TOPP passes use this fraction of each limit
 CHECK_MARGIN = 5e-3  # the curve must stay within (1 - this) of each limit at the check times
-CHECK_DT = 1e-3  # s: spacing of the check times (with every breakpoint of the time law)
+CHECK_DT = 1e-3  # s: spacing of the check times (with every breakpoint of the time law) ...
+CHECK_PER_NODE = 16  # ... at most this many per node of the law
 LOCAL_PASSES = 2  # local corrections of the passes' caps, then one uniform slow-down
+LOCAL_FROM = 1.02  # ... for a curve over a limit by more than this factor (less: the slow-down)
+LOCAL_SLOWEST = 10.0  # a local correction slows a stretch by at most this factor
 BLEND_S = 0.03  # s: the time law's smoothing window, or longer where the jerk limit asks ...
 BLEND_FRACTION = 0.1  # ... at most this fraction of the time-optimal duration
 CURVE_TOL = 5e-5  # m: the checked polyline's largest distance from the heel curve
@@ -304,7 +307,7 @@ def time_swings(
     for _ in range(LOCAL_PASSES):
         redo = []
         for i, p in enumerate(plans):
-            if peak_ratio(check, p.check.peaks) > 1.0:
+            if peak_ratio(check, p.check.peaks) > LOCAL_FROM:
                 ratio = speed_ratio(check, p.check.derivs)
                 plans[i] = replace(p, cap=_lowered_cap(p, ratio, p.check.s, p.check.t))
                 redo.append(i)
@@ -384,8 +387,16 @@ def _check_times(paths, laws) -> list[np.ndarray]:
     """Where each curve is checked: every CHECK_DT, and both sides of every breakpoint of the law
     and of every knot of the path (where the jerk may jump), so that between check times the
     velocity, acceleration and jerk are smooth and their maxima are caught to second order."""
+    # At most CHECK_PER_NODE points per node of the law: a very slow law (limits near zero, a
+    # path that nearly stops) is checked as finely relative to its own pieces, in bounded memory.
     grids = [
-        np.linspace(0.0, law.duration, max(2, int(math.ceil(law.duration / CHECK_DT)) + 1))
+        np.linspace(
+            0.0,
+            law.duration,
+            max(
+                2, min(int(math.ceil(law.duration / CHECK_DT)), CHECK_PER_NODE * len(law.nodes)) + 1
+            ),
+        )
         for law in laws
     ]
     out = []
@@ -422,8 +433,13 @@ def _lowered_cap(p: _Plan, ratio, s, t) -> np.ndarray:
     lo, hi = np.maximum(lo, 0), np.minimum(hi, len(grid))
     count = np.maximum(hi - lo, 0)
     idx = np.repeat(lo - (np.cumsum(count) - count), count) + np.arange(int(count.sum()))
-    factor = np.repeat((1.0 / ratio[bad]) ** 2, count)
-    np.minimum.at(cap, idx, p.x[idx] * factor)
+    # At most LOCAL_SLOWEST slower per pass: a point far over a limit (a degenerate path) is left
+    # to the uniform slow-down, which is bounded, rather than crawled through at no speed.
+    factor = np.repeat((1.0 / np.minimum(ratio[bad], LOCAL_SLOWEST)) ** 2, count)
+    # Where the passes already stop (s'^2 = 0: the rest ends, a cusp) a lower cap changes nothing
+    # but the floor of the cells around it, which would then be crossed at no speed.
+    moving = p.x[idx] > 0.0
+    np.minimum.at(cap, idx[moving], p.x[idx[moving]] * factor[moving])
     return cap
 
 
@@ -556,6 +572,8 @@ def _samples(curves, rate: float) -> list[dict]:
     out = []
     for c, t, st in zip(curves, times, curves_at(curves, at)):
         pts = leg_points(c.lengths, c.pivot_y, st.joint_angles)
+        for h in (st.heel, st.toe):  # the forward kinematics' rounding at the floor
+            h[:, 1] = np.where(np.abs(h[:, 1]) < GROUND_ROUNDING, 0.0, h[:, 1])
         out.append(
             {
                 "duration": c.duration,
