@@ -170,3 +170,18 @@ def test_exports_piecewise_form_and_joint_trajectory(swings, tmp_path):
         sw.sample(5.0)
     with pytest.raises(ValueError, match="t: expected finite times"):
         sw.at([0.1, float("nan")])
+
+
+def test_a_batch_times_each_swing_as_it_is_timed_alone(swings):
+    """time_swings of a batch (both generators mixed) gives every swing bit for bit what
+    time_swing gives it alone: the stacked evaluation only finds pieces, the arithmetic is each
+    curve's own."""
+    config, trajs = swings
+    batch = trajs["rl"][:7] + trajs["cfftg"][:7]
+    together = time_swings(batch, config, rate=250.0)
+    for t, sw in zip(batch, together):
+        (alone,) = time_swings([t], config, rate=250.0)
+        assert alone.duration == sw.duration
+        np.testing.assert_array_equal(alone.joint_angles, sw.joint_angles)
+        np.testing.assert_array_equal(alone.joint_jerk, sw.joint_jerk)
+        np.testing.assert_array_equal(alone.peak_jerk, sw.peak_jerk)

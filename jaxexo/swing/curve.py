@@ -401,13 +401,14 @@ def paths_at(paths, params, order: int = 3) -> list[list[np.ndarray]]:
         d = (s - knots[i])[:, None]
     else:
         pieces = np.array([len(p.coef) for p in paths])
-        knots = np.concatenate([p.knots[:-1] + 2.0 * b for b, p in enumerate(paths)])
+        knots = np.concatenate([p.knots[:-1] for p in paths])
+        keys = knots + np.repeat(2.0 * np.arange(len(paths)), pieces)  # for the search only
         coef = np.concatenate([p.coef for p in paths])
         start, item = _segments(pieces, counts)
-        s = np.clip(np.concatenate(params), 0.0, 1.0)
-        i = np.searchsorted(knots, s + 2.0 * item, side="right") - 1
+        s = np.concatenate(params)
+        i = np.searchsorted(keys, np.clip(s, 0.0, 1.0) + 2.0 * item, side="right") - 1
         i = np.clip(i, start, start + pieces[item] - 1)
-        d = (s - (knots[i] - 2.0 * item))[:, None]
+        d = (s - knots[i])[:, None]  # as one path computes it: batch = single, bit for bit
     c = coef[i]
     c0, c1, c2, c3 = c[:, 0], c[:, 1], c[:, 2], c[:, 3]
     res = [((c3 * d + c2) * d + c1) * d + c0]
