@@ -185,3 +185,24 @@ def test_a_batch_times_each_swing_as_it_is_timed_alone(swings):
         np.testing.assert_array_equal(alone.joint_angles, sw.joint_angles)
         np.testing.assert_array_equal(alone.joint_jerk, sw.joint_jerk)
         np.testing.assert_array_equal(alone.peak_jerk, sw.peak_jerk)
+
+
+def test_cli_writes_the_ros_layout_and_refuses_it_untimed(tmp_path):
+    from conftest import run_cli
+
+    ros = tmp_path / "swing_ros.json"
+    base = ("generate", "--policy", str(POLICY), "--method", "cfftg", "--obstacle", "base1")
+    r = run_cli(*base, "--out", str(tmp_path / "a.csv"), "--ros", str(ros))
+    assert r.returncode == 2 and "--ros" in r.stderr and "Traceback" not in r.stderr
+    assert not ros.exists() and not (tmp_path / "a.csv").exists()
+    r = run_cli(*base, "--rate", "500", "--out", str(tmp_path / "b.csv"), "--ros", str(ros))
+    assert r.returncode == 0, r.stderr
+    doc = json.loads(ros.read_text())
+    t = [
+        p["time_from_start"]["sec"] + 1e-9 * p["time_from_start"]["nanosec"] for p in doc["points"]
+    ]
+    np.testing.assert_allclose(np.diff(t), 1 / 500, atol=1e-9)
+    assert (
+        doc["points"][0]["velocities"] == [0.0] * 4
+        and doc["points"][-1]["accelerations"] == [0.0] * 4
+    )
