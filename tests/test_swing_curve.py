@@ -13,10 +13,11 @@ import pytest
 
 from jaxexo.baselines import CFFTG
 from jaxexo.benchmarks.scenes import batch_kwargs, safety_sets
+from jaxexo.config import scalar_params
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.swing.curve import JointPath, chord_knots, cubic_paths, distinct_samples
 from jaxexo.swing.limits import DeviceLimits
-from jaxexo.swing.timing import time_swings
+from jaxexo.swing.timing import _joint_samples, time_swings
 
 from conftest import ROOT
 
@@ -38,10 +39,13 @@ def swings():
     return rl.config, out
 
 
-def _paths(trajs) -> list[JointPath]:
+def _paths(trajs, config) -> list[JointPath]:
+    """The joint paths the timing builds: the trajectory's joints, refined where a leg straightens
+    (timing._joint_samples), less the samples that nearly repeat."""
+    sp = scalar_params(config)
     paths = []
     for t in trajs:
-        q = np.unwrap(t.joint_angles, axis=0)
+        q = _joint_samples(sp, t)
         q = q[distinct_samples(q)]
         paths += cubic_paths(chord_knots(q)[None], q[None])
     return paths
@@ -52,8 +56,8 @@ def test_joint_paths_are_c2_with_bounded_third_derivative(swings, method):
     """On every safe swing (over a thousand per generator): q and q' and q'' agree across every
     knot (evaluated just left and right of it, so a jump in q'' would show), and q''' is a finite
     constant per piece."""
-    _, trajs = swings
-    paths = _paths(trajs[method])
+    config, trajs = swings
+    paths = _paths(trajs[method], config)
     assert len(paths) > 1000
     worst = [0.0, 0.0, 0.0]
     for p in paths:

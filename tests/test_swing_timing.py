@@ -191,8 +191,9 @@ def test_samples_lie_on_the_path():
     p = sw.heel[:, None, :]
     t = np.clip(np.sum((p - a) * d, -1) / np.maximum(np.sum(d * d, -1), 1e-18), 0.0, 1.0)
     dist = np.linalg.norm(p - (a + t[..., None] * d), axis=-1).min(axis=1)
-    # Between its 100 samples the joints follow a cubic spline: 0.2 mm of the dense curve.
-    assert dist.max() < 2e-4, dist.max()
+    # Between its 100 samples the joints follow a cubic spline, and where a leg straightens the
+    # heel's monotone cubic through the samples (which flattens at extrema): 1 mm of the dense curve.
+    assert dist.max() < 1e-3, dist.max()
     assert np.all(np.diff(sw.path_parameter) >= 0)  # forward along the path, never back
     # The exported points are the forward kinematics of the exported joints: segment lengths, the
     # pivot heel under the stance leg, and the swing leg's angles (independent: atan2 of the points).

@@ -167,6 +167,42 @@ def _low_order_slopes(knots, q, delta):
     return np.stack([m0, m0 + 2.0 * c * (x[:, 1] - x[:, 0]), m0 + 2.0 * c * (x[:, 2] - x[:, 0])], 1)
 
 
+def pchip_slopes(y: np.ndarray) -> np.ndarray:
+    """Fritsch-Carlson slopes (per unit sample index) of samples y (N, D): the harmonic mean of the
+    neighbouring differences where they share a sign, zero at local extrema, so the interpolant
+    never overshoots the samples; shape-preserving three-point ends."""
+    d = np.diff(y, axis=0)
+    if len(d) == 1:
+        return np.repeat(d, 2, axis=0)
+    d0, d1 = d[:-1], d[1:]
+    same = d0 * d1 > 0
+    m = np.zeros_like(y)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        m[1:-1] = np.where(same, 2.0 * d0 * d1 / np.where(same, d0 + d1, 1.0), 0.0)
+    for end, a, b in ((0, d[0], d[1]), (-1, d[-1], d[-2])):
+        e = 0.5 * (3.0 * a - b)
+        e = np.where(np.sign(e) != np.sign(a), 0.0, e)
+        e = np.where((np.sign(a) != np.sign(b)) & (np.abs(e) > 3.0 * np.abs(a)), 3.0 * a, e)
+        m[end] = e
+    return m
+
+
+def pchip_eval(y: np.ndarray, m: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Cubic Hermite interpolant of samples y (N, D) with slopes m at sample coordinates u (K,)
+    in [0, N-1]: (K, D)."""
+    n = y.shape[0]
+    u = np.clip(np.asarray(u, np.float64), 0.0, n - 1)
+    i = np.minimum(np.floor(u).astype(np.int64), n - 2)
+    t = (u - i)[:, None]
+    t2, t3 = t * t, t * t * t
+    return (
+        (2 * t3 - 3 * t2 + 1) * y[i]
+        + (t3 - 2 * t2 + t) * m[i]
+        + (-2 * t3 + 3 * t2) * y[i + 1]
+        + (t3 - t2) * m[i + 1]
+    )
+
+
 # --------------------------------------------------------------------------------------------
 # Forward kinematics with derivatives
 # --------------------------------------------------------------------------------------------

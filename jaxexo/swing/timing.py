@@ -43,6 +43,8 @@ from jaxexo.swing.curve import (
     law_from_speeds,
     laws_at,
     leg_points,
+    pchip_eval,
+    pchip_slopes,
 )
 from jaxexo.swing.export import (
     JOINT_NAMES,
@@ -62,6 +64,7 @@ from jaxexo.swing.trajectory import (
 )
 
 GRID_PER_KNOT = 2  # TOPP grid points per interval of the joint path's knots
+REFINE = 2.0  # a sample interval with a joint step over this many median steps is subdivided
 SAFETY = 0.95  # the TOPP passes use this fraction of each limit
 CHECK_MARGIN = 5e-3  # the curve must stay within (1 - this) of each limit at the check times
 CHECK_DT = 1e-3  # s: spacing of the check times (with every breakpoint of the time law) ...
@@ -301,7 +304,7 @@ def time_swings(
     window = blend_window(planned)
     passes = planned.constraints(SAFETY)
     check = planned.constraints(1.0 - CHECK_MARGIN)
-    plans = _joint_paths(trajs)
+    plans = _joint_paths(trajs, sp)
     plans = _run_passes(plans, range(len(plans)), passes, window)
     t_opt = [p.law.duration for p in plans]
     for _ in range(LOCAL_PASSES):
@@ -327,11 +330,38 @@ def time_swings(
     ]
 
 
-def _joint_paths(trajs) -> list[_Plan]:
+def _joint_samples(sp, traj) -> np.ndarray:
+    """The joints (M, 4) the spline goes through: the trajectory's, with every sample interval whose
+    joint step is over REFINE times the median subdivided along the heel's monotone cubic through
+    the samples, the joints there by the kinematics. Near a leg
+    straightening on the floor a small heel step is a large joint step (a square root); without
+    the points in between, a cubic through that chord swings wide of it."""
+    q = np.unwrap(np.asarray(traj.joint_angles, np.float64), axis=0)
+    step = np.linalg.norm(np.diff(q, axis=0), axis=1)
+    moving = step[step > 0]
+    long = np.flatnonzero(step > REFINE * np.median(moving)) if moving.size else []
+    if not len(long):
+        return q
+    heel = np.asarray(traj.heel, np.float64)
+    parts = np.ones(len(step), np.int64)
+    parts[long] = np.ceil(step[long] / np.median(moving)).astype(np.int64)
+    i = np.repeat(np.arange(len(step)), parts)
+    x = (np.arange(len(i)) - np.repeat(np.cumsum(parts) - parts, parts)) / parts[i]
+    # Along the heel's monotone cubic through the samples (C1, never beyond the samples), graded
+    # towards both ends of the interval (a smoothstep), where a straightening leg moves fastest.
+    pts = pchip_eval(heel, pchip_slopes(heel), np.append(i + x * x * (3.0 - 2.0 * x), len(step)))
+    fine = np.unwrap(leg_angles(sp, traj.scene.pivot_y, pts), axis=0)
+    fine += q[0] - fine[0]  # the same branch of each angle as the trajectory's (whole turns)
+    # The trajectory's own joints at its samples (the same kinematics; kept exactly).
+    fine[np.concatenate([np.cumsum(parts) - parts, [len(pts) - 1]])] = q
+    return fine
+
+
+def _joint_paths(trajs, sp) -> list[_Plan]:
     """The joint paths of the swings (splines batched by sample count) and their passes' grids."""
     qs, knots = [], []
     for t in trajs:
-        q = np.unwrap(np.asarray(t.joint_angles, np.float64), axis=0)
+        q = _joint_samples(sp, t)
         q = q[distinct_samples(q)]
         qs.append(q)
         knots.append(chord_knots(q))
