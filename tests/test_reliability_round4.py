@@ -341,10 +341,12 @@ def test_ctrl_c_during_train_says_how_to_resume(tmp_path):
 
     from jaxexo.config.toml_io import config_to_toml
 
-    from conftest import SEED, cli_cmd, tiny_config, without_compilation_cache
+    from conftest import SEED, TINY_N, TINY_T, cli_cmd, tiny_config, without_compilation_cache
 
     cfg_path = tmp_path / "tiny.toml"
-    cfg_path.write_text(config_to_toml(tiny_config()))
+    # A budget the run cannot finish before the signal comes, however fast the machine: the tiny
+    # default's few updates could end between the config's write and the Ctrl-C.
+    cfg_path.write_text(config_to_toml(tiny_config(budget_env_steps=TINY_N * TINY_T * 20_000)))
     run = tmp_path / "run"
     p = subprocess.Popen(
         cli_cmd("train", cfg_path, "--out", run, "--quiet", "--seed", SEED),
