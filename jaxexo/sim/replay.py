@@ -3,8 +3,8 @@ driven (position actuators within the device's velocity and acceleration limits,
 held on the ground). Needs the ``sim`` extra (``pip install -e ".[sim]"``: mujoco >= 4.0).
 
 Kinematic replay (``kinematic_replay``): the model's joints are set to the swing's joint angles at
-every control sample and at ``substeps`` poses between two samples, the angles interpolated
-linearly (what a drive fed setpoints at the control rate follows to first order); the pelvis is
+every control sample and at ``substeps`` poses between two samples, the angles there the timed
+curve's (``TimedSwing.at``; linear between the samples for a swing without a curve); the pelvis is
 placed where the stance leg's angles put it with the stance heel on its pivot, so at a sample the
 feet are exactly jaxexo's (the hip of eq 2.42 keeps the stance leg straight on the pivot). At every
 pose, MuJoCo's ``mj_geomDistance`` between the swing foot (a capsule around the heel-toe segment;
@@ -163,7 +163,14 @@ def kinematic_replay(timed, config, substeps: int = SUBSTEPS, legs: Legs | None 
     t0 = time.perf_counter()
     legs = Legs(config, timed.scene) if legs is None else legs
     angles = np.asarray(timed.joint_angles, dtype=np.float64)
-    q = legs.qpos(fine_angles(angles, substeps))
+    if getattr(timed, "curve", None) is not None:
+        # Between the samples the drives follow the curve, not a straight line in joint space.
+        t = np.arange((len(angles) - 1) * substeps + 1) / (substeps * timed.rate)
+        fine = timed.at(np.minimum(t, timed.duration)).joint_angles
+        fine[::substeps] = angles
+    else:
+        fine = fine_angles(angles, substeps)
+    q = legs.qpos(fine)
     dist = np.empty(len(q))
     heel = np.empty((len(q), 2))
     for i, qi in enumerate(q):
