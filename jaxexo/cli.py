@@ -102,7 +102,11 @@ def cmd_train(args) -> int:
             f"continue it with: {_resume_command(args)}",
             file=sys.stderr,
         )
-        return 130
+        # Out at once: an interpreter shutdown with XLA's threads mid-computation can crash
+        # (seen: SIGSEGV after this message); every file is already written atomically.
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(130)
     held = res.get("held_out") or {}
     print(
         f"trained {res['episodes']} episodes, {res['env_steps']:,} env steps in {res['train_seconds']:.1f} s"
