@@ -355,6 +355,9 @@ def test_ctrl_c_during_train_says_how_to_resume(tmp_path):
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
         text=True,
+        # As from a terminal: a pytest-xdist worker ignores SIGINT, and a child inherits that, so
+        # Python would never raise KeyboardInterrupt there (the run then trains to its end).
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     t0 = time.monotonic()
     # Training under way (its first checkpoint written), not starting up: the signal then always
