@@ -208,6 +208,12 @@ def max_samples() -> int:
     return max(100_000, (machine_memory_bytes() or 8 * 2**30) // 2 // BYTES_PER_SAMPLE)
 
 
+def _on_floor(points: np.ndarray) -> None:
+    """Heights (points[:, 1]) within GROUND_ROUNDING of the floor set to it, in place: the forward
+    kinematics' rounding, not a motion."""
+    points[:, 1] = np.where(np.abs(points[:, 1]) < GROUND_ROUNDING, 0.0, points[:, 1])
+
+
 def _is_trajectory(t) -> bool:
     return hasattr(t, "heel") and hasattr(t, "scene")
 
@@ -488,7 +494,7 @@ def _path_checks(trajs, plans, sp) -> list:
         bad = kinematics.legs_outside_limits(np, q[0], sp.hip_limits, sp.knee_limits)
         outside.append(float(s[np.argmax(bad)]) if bad.any() else None)
         h = heel_derivatives(lengths, t.scene.pivot_y, q)[0]
-        h[:, 1] = np.where(np.abs(h[:, 1]) < GROUND_ROUNDING, 0.0, h[:, 1])
+        _on_floor(h)
         heels.append(h)
         grids.append(s)
     n = max(len(h) for h in heels)
@@ -603,7 +609,7 @@ def _samples(curves, rate: float) -> list[dict]:
     for c, t, st in zip(curves, times, curves_at(curves, at)):
         pts = leg_points(c.lengths, c.pivot_y, st.joint_angles)
         for h in (st.heel, st.toe):  # the forward kinematics' rounding at the floor
-            h[:, 1] = np.where(np.abs(h[:, 1]) < GROUND_ROUNDING, 0.0, h[:, 1])
+            _on_floor(h)
         out.append(
             {
                 "duration": c.duration,
