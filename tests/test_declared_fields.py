@@ -47,12 +47,21 @@ def env_params_lines() -> list[str]:
     cfg = Config()
     values = param_values(cfg)
     origin = {"directions": "the move directions (thesis 2.1)"}
+    specs = {
+        f"{section}.{name}": spec
+        for section, cls in SECTION_CLASSES.items()
+        for name, spec in declared_fields(cls)
+    }
+
+    def label(field: str) -> str:
+        return field + (f", {specs[field].unit}" if specs[field].unit else "")
+
     for section in ENV_SECTIONS:
         for name, spec in declared_fields(SECTION_CLASSES[section]):
             if spec.leaf:
-                unit = f", {spec.unit}" if spec.unit else ""
+                others = dict(spec.params_from)
                 for p in spec.params(name, getattr(getattr(cfg, section), name), cfg):
-                    origin[p] = f"{section}.{name}{unit}"
+                    origin[p] = label(others.get(p, f"{section}.{name}"))
     return [_line(k, f"{v.dtype} {_shape(v)}: {origin[k]}") for k, v in values.items()]
 
 

@@ -44,6 +44,8 @@ class FieldSpec:
     to_param: Callable[[Any, Any], dict] | None = None
     dtype: str = "float32"  # of the pytree leaf
     write: Callable[[Any], Any] | None = None  # value -> TOML-writable value (default: as is)
+    # (EnvParams name, "section.field") for a parameter that ``to_param`` takes from another field
+    params_from: tuple[tuple[str, str], ...] = ()
 
     @property
     def leaf(self) -> bool:

@@ -299,6 +299,7 @@ class RewardConfig:
             "time_cost": np.asarray(v, dtype=np.float32),
             "joint_speed": np.asarray(tuple(cfg.device.joint_velocity) * 2, dtype=np.float32),
         },
+        params_from=(("joint_speed", "device.joint_velocity"),),
     )
     # per unit of a move's change of direction, 1 - cos of its angle to the last move (a path without
     # corners: quicker at the device, and smoothed without cutting towards the obstacle; 0 = thesis)

@@ -67,7 +67,7 @@ class EnvParams:
     shaping_discount: jnp.ndarray       # float32 (): reward.shaping_discount
     lift_cost: jnp.ndarray              # float32 (): reward.lift_cost, 1/m
     time_cost: jnp.ndarray              # float32 (): reward.time_cost, 1/s
-    joint_speed: jnp.ndarray            # float32 (4,): reward.time_cost, 1/s
+    joint_speed: jnp.ndarray            # float32 (4,): device.joint_velocity, rad/s
     turn_cost: jnp.ndarray              # float32 (): reward.turn_cost
     kind_outlines: jnp.ndarray          # float32 (5, 16, 2): layout.obstacles
     kind_shape: jnp.ndarray             # float32 (5, 9): layout.obstacles
