@@ -1,26 +1,7 @@
-"""Obstacle geometry in the sagittal plane, shared by the JAX environment and the NumPy generator.
-
-Frame: y forward, z up, metres. The origin is the swing heel's default start on the ground.
-
-Every obstacle is a *ground obstacle*: the region between the ground (z = 0) and a height-profile
-polyline. Its one fixed-size array representation is the outline, a ``(K, 2)`` array of (y, z)
-vertices with y non-decreasing, the first and last vertex on the ground, padded by repeating the
-last vertex. Degenerate (zero-length) padding edges change neither distances nor inside tests, so
-rectangles (4 vertices), triangles (3), half-ellipses (K, sampled) and user profiles share one
-vmapped batch.
-
-The array functions below take the array module ``xp`` (``numpy`` or ``jax.numpy``) as an argument
-and use only the API both share: this file is the single definition of the geometry for the trainer
-and the NumPy generator (tests run both and compare).
-
-Decisions (thesis-notes "Decisions left to you"):
-- The foot is the heel-to-toe segment, kept parallel to the ground (flat foot, passive ankle): the
-  toe is ``heel + (foot_length, 0)``.
-- The foot-obstacle distance is the exact minimum distance between the heel-toe segment and the
-  obstacle outline (Algorithm 4 approximates it by sampling points of the obstacle). For the
-  half-ellipse the outline is a polygon of ``K`` vertices inscribed in the ellipse (with K = 16 it
-  lies within 1.5 mm of the true curve, inside it).
-- Touching counts as collision: a segment at distance 0 from the outline is in the obstacle.
+"""Obstacle geometry in the sagittal plane (outlines, the exact foot-obstacle distance), written once
+for the array module ``xp`` (numpy or jax.numpy) and shared by the JAX environment and the NumPy
+generator. Frame, outline convention and the modelling decisions (flat foot, exact distance,
+touching is collision): docs/training.md#modelling-decisions.
 """
 
 from __future__ import annotations
@@ -49,11 +30,8 @@ THESIS_OBSTACLES = {
     "half_circle": ("half_ellipse", 0.20, 0.25),
 }
 SHAPES = ("rectangle", "triangle", "half_ellipse", "profile")
-# The one bound of an obstacle's size (m), for the config's [layout] and every generator's input: a
-# swing of a lower-limb exoskeleton (legs of at most 2 m, kinematics' bounds) steps over nothing
-# taller than 0.6 m or wider than 1 m. With the default legs the config's reach check refuses
-# obstacles above about 0.6 m anyway, and far larger ones only give meaningless diagnostics
-# (docs/reliability.md).
+# The one bound of an obstacle's size (m), for the config and every generator's input: no swing of
+# legs of at most 2 m steps over more (docs/reliability.md).
 MAX_OBSTACLE_HEIGHT = 0.6
 MAX_OBSTACLE_WIDTH = 1.0
 
@@ -67,11 +45,8 @@ class GeometryError(ValueError):
 # --------------------------------------------------------------------------------------------
 
 
-# NumPy reduces over a short last axis one outer element at a time, several times slower than
-# elementwise operations across it (an outline has 3-17 vertices, and one checked trajectory makes
-# dozens of such reductions; docs/decisions.md). Up to CHAIN_MAX entries, min / any / parity over
-# the last axis are therefore a chain of elementwise operations: exactly the same values (min, or
-# and xor are exact), any array module (under jit the chain is unrolled over a static length).
+# Up to CHAIN_MAX entries, min / any / parity over the last axis are a chain of elementwise
+# operations, exact and several times faster in NumPy than a reduction (docs/decisions.md).
 CHAIN_MAX = 8
 
 

@@ -1,26 +1,7 @@
-"""Exoskeleton kinematics in the sagittal plane, shared by the JAX environment and the NumPy generator.
-
-Functions take the array module ``xp`` (``numpy`` or ``jax.numpy``); positions are (..., 2) arrays
-of (y, z) in metres, angles are radians.
-
-Decisions (thesis-notes "Typos and contradictions", "Decisions left to you"):
-- Hip model (one for every term): eq 2.42 read as ``dist_y = (p_y - f_y) / 2``. The hip sits above
-  the midpoint of the two heels, at the height of a straight stance leg:
-  ``h = ((p_y + f_y) / 2, sqrt((t + s)^2 - dist_y^2))``, with the pivot heel on the ground. The
-  initial hip of eq 2.3 is the same formula at the start. With this model the stance leg is always
-  exactly one leg length long, so the leg-length term (eq 2.45) fires only when the heels are more
-  than two leg lengths apart, where the hip height is clamped to ``MIN_HIP_HEIGHT_FRACTION`` of the
-  leg and both legs are then too short.
-- Knee IK (eq 2.4-2.11): the knee is the intersection of the circle of radius t about the hip and
-  the circle of radius s about the heel, computed algebraically (no arccos). Of the two solutions we
-  keep the flexing one as a pair, not y and z independently as eq 2.11 prints: the one on the +90
-  degree side of the hip->heel direction, which is the larger-y (forward) knee of eq 2.11 whenever
-  the heel is below the hip. An unreachable foot (|hip-heel| > t + s) gets the straight leg pointing at it, as the
-  clamp of eq 2.6 does.
-- Joint angles (eq 2.46-2.49, written with atan2 so that they hold beyond +-90 degrees): the hip
-  angle is the thigh's angle from the downward vertical, positive when the knee is ahead of the hip
-  (flexion); the knee angle is the shank's angle minus the thigh's, 0 for a straight leg and negative
-  in flexion. This matches the thesis's tables (knee about -50 deg, hip about +35 deg).
+"""Exoskeleton kinematics in the sagittal plane (hip eq 2.42, knee IK eq 2.4-2.11, joint angles eq
+2.46-2.49), written once for the array module ``xp`` and shared by the JAX environment and the NumPy
+generator. Positions are (..., 2) arrays of (y, z) in metres, angles radians. The hip model, the
+knee's branch and the angle signs: docs/training.md#modelling-decisions.
 """
 
 from __future__ import annotations

@@ -1,26 +1,10 @@
 """The one verdict on a swing: did it succeed, and if not, which checks failed.
 
-Every success figure in jaxexo comes from ``verdict``: the training curve (jaxexo.train.trainer),
-greedy evaluation and validation (jaxexo.train.evaluate, eval.json, sweeps), the thesis-style
-baseline's NumPy environment, CFFTG's planning loop and the checked trajectories
-(jaxexo.swing.trajectory, ``jaxexo eval``). Written against the array module ``xp`` (numpy,
-jax.numpy) like the rest of jaxexo.physics, so the JAX environment's episode flags and the NumPy
-trajectory samples are judged by the same code.
-
-A safe swing (thesis 3.3, eq 3.1 extended): the heel reached the goal (eq 2.32's goal),
-the flat foot's motion kept at least ``min_clearance`` from the obstacle outline (eq 2.30 with the
-foot's length, measured over the region the foot sweeps between samples or steps, jaxexo.physics.swept),
-the heel stayed above the ground, it never fell back more than ``backward_tolerance`` behind the
-furthest y it had reached (eq 2.31's condition), both legs stayed inside their joint limits (eq 2.50)
-and no leg had to stretch beyond thigh + shin (eq 2.45). Accuracy (eq 3.1) is ``collision_free``:
-never touched, whatever the margin.
-
-The two rule parameters are the config's ``env.min_clearance`` and ``env.backward_tolerance``
-(``rule(p)`` reads them from environment parameters); their defaults are declared here once.
-
-Two ways in: ``verdict`` judges finished paths from their aggregates (jaxexo.swing.trajectory
-reduces its samples, with the clearance guaranteed between them); ``start`` / ``accumulate`` /
-``episode_verdict`` fold per-step flags of an environment episode as it runs.
+Every success figure in jaxexo comes from here (training curve, evaluation, baselines, checked
+trajectories), written for the array module ``xp``. ``verdict`` judges finished paths from their
+aggregates; ``start`` / ``accumulate`` / ``episode_verdict`` fold an episode's per-step flags. The
+rule's two parameters (``env.min_clearance``, ``env.backward_tolerance``) have their defaults here.
+What a safe swing is: docs/safety.md#a-safe-swing-the-trajectory-checks.
 """
 
 from __future__ import annotations

@@ -1,20 +1,7 @@
-"""The thesis's reward function (eq 2.1-2.2, 2.29-2.52), array-module generic (numpy or jax.numpy).
-
-``r = alpha . T + beta . E`` (eq 2.1) with eight trajectory terms T (eq 2.29-2.37) and four
-exoskeleton terms E (eq 2.43-2.51). The weight vectors are normalised so that each sums to 0.5
-(eq 2.2 with eq 2.38 and 2.52: ``alpha <- 0.5 * alpha / sum(alpha)``).
-
-Decisions (thesis-notes):
-- Terms are per step. r0 (eq 2.29) is s/n while s <= n and -s/n after, as printed; the positive goal
-  and step terms make r > 0 possible, contradicting eq 2.1's r <= 0 (a known typo).
-- r3: the goal is reached when the heel is in the goal region; the thesis also accepts the toe, but
-  with a flat foot that would land the heel a foot length short of the step.
-- r4 (eq 2.33 "foot in goal" read as "foot in mid-goal"): the penalty is paid on every step taken
-  beyond the mid-goal box's far edge while the heel has not yet passed through the box.
-- r7 (eq 2.36-2.37): the comparison of z before and after the move; "before the midpoint" means the
-  heel's y before the move is at most the mid-goal's y.
-- E: the hip model is ``kinematics.hip_position``; every term uses it. Leg length (eq 2.45) and joint
-  limits (eq 2.50) are checked on both legs.
+"""The thesis's reward function (eq 2.1-2.2, 2.29-2.52) and the default model's additions (shaping,
+the wearer's costs), written for the array module ``xp`` (numpy or jax.numpy). How the terms are
+read where the thesis is ambiguous: docs/training.md#modelling-decisions; the fields:
+docs/configuration.md#reward.
 """
 
 from __future__ import annotations
@@ -82,10 +69,8 @@ def exo_terms(xp, c, *, hip_z, leg_swing, leg_stance, limits_violated):
     return xp.stack([e0, e1, e2, e3], axis=-1)
 
 
-# Costs a wearer feels (not in the thesis; added to eq 2.1's reward like the shaping term). The thesis
-# reward was designed for an agent that could walk into the obstacle; under the shield a
-# greedy move can no longer come within the clearance, so the reward is free to pay for how the swing
-# feels: how high the foot is lifted and how long the device takes for each move.
+# Costs a wearer feels (not in the thesis; added to eq 2.1's reward like the shaping term): under the
+# shield no greedy move comes within the clearance, so the reward may pay for how the swing feels.
 WEARER_TERMS = (
     "lift",  # m of heel height above the obstacle's top plus the shield's clearance
     "move_time",  # s the joint drives need for the move at their velocity limits

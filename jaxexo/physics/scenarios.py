@@ -1,29 +1,10 @@
-"""The one scenario generator: how a scene (obstacle kind and size, position, pivot condition, start,
-step length) is drawn, for the JAX environment's reset and every NumPy tool alike.
+"""The one scenario generator: how a scene (obstacle, position, pivot condition, start, step length)
+is drawn, for the JAX environment's reset and every NumPy tool alike.
 
-A scene is drawn from ``N_UNIFORMS`` uniform numbers by ``layout_from_uniforms`` (array-module generic,
-like the rest of jaxexo.physics). The uniform numbers come from a counter-based generator,
-``uniforms(xp, k0, k1, n)``: the Threefry-2x32 block cipher (Salmon et al. 2011, 20 rounds; the
-cipher JAX's own PRNG uses) keyed by two 32-bit words and applied to the counters 0..n-1, in uint32
-arithmetic that NumPy and JAX compute bit for bit alike. So
-
-- ``ExoStepEnv.reset(key)`` draws its scene from the key's two words (jax.random.key_data);
-- scene ``i`` of a scenario set with ``seed`` is the scene of the key words (seed, i): the same
-  obstacle kind and pivot condition as the JAX environment's reset for that key, and the same sizes
-  and positions (bit for bit eagerly; under jax.jit XLA may fuse ``a + b * c`` into one multiply-add
-  and move a value by an ulp, about 1e-8 m);
-- the sets every success figure is measured on (eval.json, validation, sweeps, ``jaxexo eval``, the
-  thesis-style baseline's pool) are drawn here with NumPy and fed to JAX as arrays, so they are one
-  set, bit for bit.
-
-Test sets (``cycle=True``) fix the kind and pivot condition of scene i (kind i % kinds, pivot
-(i // kinds) % 3, so every pair is equally represented) and draw the rest; the config of such a set
-is ``jaxexo.config.test_config``: the five thesis obstacles (Table 3.1), all three pivot conditions.
-
-Every scene set the tools use is drawn here too, as keyword arguments of ``generate`` (NumPy only):
-the layouts above (``scene_kwargs``), the shifted layouts of the safe-swing checks
-(``safety_scenes``), the held-out benchmark's families (``unseen_scenarios``) and the shapes of
-the device-timing benchmark (``shape_scenarios``).
+``layout_from_uniforms`` turns ``N_UNIFORMS`` numbers of ``uniforms`` (Threefry-2x32, bit for bit
+alike in NumPy and JAX) into a layout; ``generate`` draws the scene sets the tools use (the
+training and test layouts, the safe-swing checks' shifted layouts, the held-out families, the
+timing shapes). Why and how: docs/training.md#the-environment.
 """
 
 from __future__ import annotations

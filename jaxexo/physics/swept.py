@@ -1,21 +1,7 @@
-"""Exact clearance of the flat foot while it moves between two samples (a safe swing is safe
-under any finer look), written once for any array module ``xp`` (numpy, jax.numpy).
-
-Between two consecutive heel positions h0 and h1 the flat foot (the horizontal heel-toe segment of
-length foot_length, jaxexo.physics.geometry) translates along the chord h0 -> h1, so it sweeps the
-parallelogram P = {h0 + s (foot_length, 0) + t (h1 - h0) : s, t in [0, 1]} (degenerate, a segment,
-when the move is horizontal). Its distance to the obstacle outline (a polyline) is exact and
-sampling-free:
-
-- zero when an outline edge crosses one of P's four sides, or an outline vertex lies inside P;
-- otherwise the distance between two convex sets that do not meet, which is attained between a
-  side of P and an outline edge, and for two segments that do not cross at an endpoint of one of
-  them: P's four corners (heel and toe at h0 and h1) against the outline edges, and the outline
-  vertices against P's four sides.
-
-``swept_clearance`` signs it like ``geometry.foot_clearance``: negative when the foot is inside the
-obstacle at either end of the move. Every function broadcasts: h0, h1 (..., 2), outline (..., K, 2)
-(padded outlines: degenerate padding edges change nothing, as in geometry).
+"""Exact clearance of the flat foot while it moves between two samples, so that a safe swing is safe
+under any finer look; written for the array module ``xp`` (numpy, jax.numpy). Every function
+broadcasts: h0, h1 (..., 2), outline (..., K, 2). ``swept_clearance`` is signed like
+``geometry.foot_clearance``. The method: docs/safety.md#a-safe-swing-the-trajectory-checks.
 """
 
 from __future__ import annotations

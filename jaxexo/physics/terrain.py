@@ -1,39 +1,10 @@
-"""Procedural obstacle families: uniform numbers -> ground-obstacle outlines, for reset and for tools.
+"""Procedural obstacle families: uniform numbers -> ground-obstacle outlines, for reset and the tools.
 
-Every family is a function ``outline(xp, u) -> list of (y, z) vertices`` of a vector of uniform
-numbers ``u`` in [0, 1)^D (``u[..., i]``, so a batch (..., D) works too), written once against the
-array module ``xp`` (numpy or jax.numpy): the JAX environment draws ``u`` with jax.random inside
-``reset`` and the NumPy tools draw it with a numpy Generator, and the same ``u`` give the same
-outline in both. Outlines follow jaxexo.physics.geometry's convention: (y, z) vertices in the
-obstacle's own frame (y relative to its centre, so y spans exactly [-width/2, width/2]; z >= 0 with
-the top at exactly ``height``), y non-decreasing, first and last vertex on the ground, padded to
-``K_MAX`` vertices by repeating the last one. ``family_outline(xp, family_id, u)`` evaluates every
-family and selects by id with ``xp.where`` (no Python branch on a traced value), so it jits and vmaps
-over families.
-
-The train / held-out split is made by construction, so that a held-out family cannot be drawn in
-training and is a different *shape*, not another size of a training one:
-
-- training (TRAIN_FAMILIES): rectangle, trapezoid, wedge (wedges and ramps: a triangle whose apex
-  may sit over either end), step (a two-level block, rising or falling), bump (one polygonal hump)
-  and polyline (a random unimodal polyline). All of them are at least 8 cm wide and 6 cm high, and
-  none has an interior dip (each profile rises to its top and falls, never rising again) nor more
-  than one level change at a vertical riser inside it.
-- held out (HELD_OUT_FAMILIES): pole (2-5 cm wide, 10-30 cm high: thinner than any training
-  obstacle), stairs (three risers: more levels than any training step), curb (25-40 cm wide,
-  2-5 cm high: lower than any training obstacle), bumps (two or three humps with valleys between
-  them: the one family with interior local minima), smooth_bump (a raised-cosine dome sampled
-  at 15 vertices: a smooth curve, where training outlines have at most 8 straight edges).
-
-Sizes (metres) are within what the default leg clears: ``clearable`` checks the heel held
-``heel_lift`` above the tallest top of a spec's families (the mid-goal box's bottom), at the extremes
-of the placement, reachable within the leg's length and joint limits for every pivot condition
-(jaxexo.physics.kinematics; the same test as jaxexo.config.consistency's ``_check_clearable``).
-
-``place`` puts an obstacle of a drawn width into a drawn scene "anywhere the gap allows": start
-shift, step length (at least long enough for the width) and centre between the toe at the start
-and the goal. ``TerrainError`` names the bad field of a terrain description (the config's
-``TerrainSpec``, jaxexo.config.obstacles).
+Each family is ``outline(xp, u)`` of uniform numbers ``u`` in [0, 1)^D, written once for NumPy and
+jax.numpy; outlines follow jaxexo.physics.geometry's convention, padded to ``K_MAX`` vertices.
+``family_outline`` selects by id with ``xp.where``, so it jits and vmaps over families; ``place``
+puts a drawn obstacle anywhere the gap allows. The families, the train / held-out split and the
+clearability check: docs/configuration.md#procedural-terrain.
 """
 
 from __future__ import annotations
@@ -363,10 +334,8 @@ def to_obstacle(outline: np.ndarray, center_y: float) -> geometry.Obstacle:
 # Placement
 # --------------------------------------------------------------------------------------------
 
-# m between the toe at the start and the obstacle's near edge: above the safe-swing margin
-# (env.min_clearance, 2 cm by default) with 5 mm to spare. The swing starts from this stance pose,
-# so at exactly the margin a scene would sit on the safety boundary, its verdict decided by float
-# rounding.
+# m between the toe at the start and the obstacle's near edge: the safe-swing margin (2 cm) with 5 mm
+# to spare, so that no scene's verdict is decided by float rounding at its start.
 NEAR_MARGIN = 0.025
 FAR_MARGIN = (
     0.06  # m between the obstacle's far edge and the goal (> the goal box's 0.04 half width)
