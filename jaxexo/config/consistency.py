@@ -1,10 +1,7 @@
 """Cross-field validation: a config whose fields are each valid but cannot work together (an obstacle
 a step could jump through, one that does not fit between the toe and the goal, one the leg cannot
-clear, a budget no scan can count) is refused here, naming the field to change.
-
-A shielded config (env.shield) may take steps longer than its smallest obstacle: the shield admits a
-move only where the exact swept clearance of the whole move keeps env.shield_clearance
-(jaxexo.shield.rule.admissible_moves), so no move can pass through an obstacle however thin.
+clear, a budget no scan can count) is refused here, naming the field to change. A shielded config
+may step further than its thinnest obstacle: the shield checks each move's whole sweep.
 """
 
 from __future__ import annotations

@@ -1,20 +1,7 @@
-"""The declaration of a config field: ``declare(default, check, unit=..., role=...)``.
-
-Each field is declared once, as a dataclass field whose metadata holds its ``FieldSpec``: its type
-(the dataclass annotation), its check (which parses and validates the raw TOML value), its unit, and
-its role in the compiled program:
-
-- ``"leaf"``: a pytree leaf, vmappable (sweeps): an ``EnvParams`` field (env, kinematics, reward,
-  layout) or a ``Hyperparams`` field (train); ``param``/``to_param`` say how it becomes one;
-- ``"static"``: fixes the compiled program's shapes or structure (``static_settings``);
-- ``"static+leaf"``: both (``env.max_steps``: the step limit is a leaf, but the scan length over
-  episodes depends on it);
-- ``"setting"``: read by the Python driver only (``train.chunk_updates``) or resolved into a
-  derived static setting (``env.max_vertices`` -> ``Config.outline_vertices``).
-
-Parsing and its messages (``config_from_dict``), the TOML writer (``jaxexo.config.toml_io``),
-``HYPER_FIELDS``, ``EnvParams`` (``jaxexo.config.views.param_values``), ``Hyperparams`` and
-``static_settings`` all iterate these declarations.
+"""The declaration of a config field: ``declare(default, check, unit=..., role=...)``, its
+``FieldSpec`` kept in the dataclass field's metadata. Parsing, the TOML writer, ``EnvParams``,
+``Hyperparams`` and the static settings all iterate these declarations. The roles (leaf, static,
+setting): docs/configuration.md#static-settings-vmappable-leaves-and-driver-settings.
 """
 
 from __future__ import annotations

@@ -1,14 +1,7 @@
 """The one read of an input file (a config, a sweep file, a policy, a checkpoint, a run's own files):
-regular files only, up to a size cap, in one ``open``.
-
-A FIFO, a device (``/dev/zero``), a folder or a symbolic link loop is refused before a byte is read,
-naming the file and the rule (read as a config, ``/dev/zero`` fills memory until the kernel kills
-the process: docs/reliability.md); a regular file above the cap is refused by its size. The file is
-opened with O_NONBLOCK, so that opening a FIFO never waits for a writer, and judged by ``fstat`` of
-the open descriptor: what is checked is what is read. Files a run writes itself are read with
-``follow_links=False``: a link in their place is refused, never read through.
-
-It lives on the config floor (jaxexo.config reads configs; jaxexo.storage builds on it). NumPy-free.
+regular files only, up to a size cap, judged by ``fstat`` of the descriptor it reads, opened with
+O_NONBLOCK so that a FIFO never waits; ``follow_links=False`` refuses a link in place of a run's own
+file. The rules: docs/reliability.md. NumPy-free.
 """
 
 from __future__ import annotations

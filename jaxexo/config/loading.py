@@ -1,7 +1,6 @@
-"""Reading a config: a TOML file or a parsed table becomes a validated ``Config``; each section's
-fields are parsed by their declared checks, unknown fields and sections are refused by name, and the
-whole is cross-checked (jaxexo.config.consistency). A sweep file's [sweep] table is read by ``jaxexo
-sweep`` (jaxexo.sweep.spec), which removes it before the rest reaches ``config_from_dict``.
+"""Reading a config: a TOML file or a parsed table becomes a validated ``Config``, each field parsed
+by its declared check, unknown fields and sections refused by name, the whole cross-checked
+(jaxexo.config.consistency). A sweep file's [sweep] table is removed by jaxexo.sweep.spec first.
 """
 
 from __future__ import annotations

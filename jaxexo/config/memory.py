@@ -1,13 +1,6 @@
-"""How much memory a training run needs, estimated from its config before JAX allocates anything,
-so that ``jaxexo train`` refuses a run the machine cannot hold with a message naming the field to
-change (instead of an out-of-memory traceback minutes later). NumPy-only.
-
-The estimate is rough but honest: it sums the arrays a run keeps alive at once, in float32 (4 bytes):
-the network (parameters, target copy, Adam's two moments, a gradient: 5 P), the per-environment
-state and observations, the T x N rollout buffer of the forward view with its lambda-returns and the
-activations of one minibatch's gradient, or, for the backward view, one eligibility trace and one
-gradient per environment (2 N P), and the greedy evaluation's environments. XLA's temporaries and
-the Python process itself come on top, so the true peak is higher; a run refused here would not fit.
+"""How much memory a training run needs, estimated from its config before JAX allocates anything, so
+that ``jaxexo train`` refuses a run the machine cannot hold naming the field to change. What the
+estimate counts: docs/training.md#jaxexo-train-and-what-a-run-writes. NumPy-only.
 """
 
 from __future__ import annotations

@@ -1,9 +1,6 @@
-"""The config's sections as frozen dataclasses, each field declared once (jaxexo.config.declarations):
-[env], [kinematics], [reward] (the thesis reward, eq 2.29-2.52, and the wearer's costs), [layout],
-[train] (the TD(lambda) agent, thesis 2.3-2.4) and [device], and the whole ``Config`` with the values
-derived from it (the scan length, the static settings that fix a compiled program).
-
-Units: metres, radians, steps. Everything here is NumPy-only (``import jaxexo`` must not import JAX).
+"""The config's sections as frozen dataclasses, each field declared once (jaxexo.config.declarations),
+and the whole ``Config`` with the values derived from it. The fields: docs/configuration.md.
+Units: metres, radians, steps. NumPy-only (``import jaxexo`` must not import JAX).
 """
 
 from __future__ import annotations

@@ -1,10 +1,6 @@
-"""A Config seen as the environment's parameters, and the configs derived from it.
-
-``param_values`` turns the leaf fields of the environment sections into the arrays the transition
-rules read (jaxexo.physics.transition, thesis 2.1-2.5); ``numpy_params`` and ``scalar_params`` are the
-NumPy and plain-float views of the same values, ``EnvParams`` (jaxexo.env.params) the JAX one.
-``test_config`` is the training config evaluated on the five thesis obstacles (Table 3.1).
-NumPy-only: the physics below is given the values, it never reads a Config.
+"""A Config seen as the environment's parameters (``param_values``, and its NumPy, plain-float and,
+in jaxexo.env.params, JAX views), and ``test_config``, the config evaluated on the five thesis
+obstacles (Table 3.1). NumPy-only: the physics is given these values, it never reads a Config.
 """
 
 from __future__ import annotations

@@ -1,13 +1,7 @@
-"""ExoStepEnv: the swing heel of a lower-limb exoskeleton stepping over a low obstacle (thesis ch. 2).
-
-Pure JAX, gymnax 1.0 contract: ``reset(key, params) -> (obs, state)`` and
-``step(key, state, action, params) -> (obs, state, reward, terminated, truncated, info)`` with
-auto-reset; ``step_env``/``reset_env`` are the un-reset transitions. State, layout and params are
-frozen flax.struct pytrees, so everything jits and vmaps over thousands of episodes, and params vmap
-over configurations.
-
-Geometry, kinematics and reward terms come from jaxexo.physics.geometry, jaxexo.physics.kinematics and
-jaxexo.physics.rewards (array-module generic, shared with the NumPy generator).
+"""ExoStepEnv: the swing heel of a lower-limb exoskeleton stepping over a low obstacle (thesis ch. 2),
+in pure JAX with the gymnax 1.0 contract (auto-reset ``step``; ``step_env``/``reset_env`` without).
+State, layout and params are flax.struct pytrees, so it jits and vmaps over episodes and configs;
+the rules come from jaxexo.physics. How it behaves: docs/training.md#the-environment.
 """
 
 from __future__ import annotations

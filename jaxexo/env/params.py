@@ -1,11 +1,6 @@
-"""Environment parameters as a flax.struct pytree, built from a validated Config.
-
-Every field here is a pytree leaf (vmappable: reward weights and constants, kinematic constants, the
-layout distribution). The fields are the names that ``jaxexo.config.param_values`` derives from the
-config declarations (jaxexo.config.sections: each leaf field of [env], [kinematics], [reward],
-[layout], plus the action directions), written out by tests/test_declared_fields.py, which fails
-when they differ. Shapes (the number of outline vertices, shape-descriptor points, obstacle kinds,
-the observation mode) are fixed by the arrays themselves or by the ExoStepEnv instance.
+"""Environment parameters as a flax.struct pytree (every field a vmappable leaf), built from a
+validated Config. The fields are ``jaxexo.config.param_values``' names, written out from the config
+declarations by tests/test_declared_fields.py, which fails when they differ.
 """
 
 from __future__ import annotations

@@ -1,8 +1,6 @@
-"""Observation and action spaces with the gymnax 1.0 interface.
-
-If gymnax is installed its own space classes are returned, so that gymnax wrappers (which check
-``isinstance(space, gymnax.environments.spaces.Box)``) accept this environment unchanged; otherwise
-these minimal equivalents are used (jaxexo does not depend on gymnax)."""
+"""Observation and action spaces with the gymnax 1.0 interface: gymnax's own classes when it is
+installed (its wrappers check ``isinstance``), minimal equivalents otherwise.
+"""
 
 from __future__ import annotations
 

@@ -1,22 +1,12 @@
-"""NumPy-only swing trajectory generation: an exported policy (policy.npz) in, a checked trajectory out.
-
-Needs NumPy only (``pip install jaxexo`` without extras; SciPy is not even imported, which keeps the
-import fast), so it runs on an exoskeleton's own computer::
+"""NumPy-only swing trajectory generation: an exported policy (policy.npz) in, a checked trajectory out::
 
     from jaxexo.inference import Obstacle, TrajectoryGenerator
     gen = TrajectoryGenerator.load("run/policy.npz")
     traj = gen.generate(Obstacle.named("triangle"), pivot="obstacle", start_y=0.0, step_length=0.70)
     traj.heel, traj.joint_angles, traj.checks.ok
 
-The keywords are the fields of one checked record, ``GenerateOptions``, which may also be passed
-whole: ``gen.generate(obstacle, GenerateOptions(pivot="between", fallback=None))``.
-
-Units: metres, radians, seconds.
-
-This package holds the RL generator (``generator``, ``network``, ``fallback``, ``blas``, the shield's
-forms, ``scenarios``) and is the public face of generation: the swing's records come from
-jaxexo.swing, and device timing (jaxexo.swing.timing) and walks (jaxexo.course) are offered here too,
-loaded on first use.
+The public face of generation: the swing's records (jaxexo.swing), and, loaded on first use,
+device timing and walks. Units: metres, radians, seconds. See docs/generation.md.
 """
 
 from jaxexo.inference.generator import TrajectoryGenerator

@@ -1,18 +1,6 @@
-"""BLAS threads for the batch generator: ``generate_batch`` runs its matrix products on one
-BLAS thread.
-
-Its products are small to medium ((alive scenes, 23..128) @ (.., 128) per rollout step, (100, M) @
-(M, 2B) for the smoothing), and on shared cores OpenBLAS's worker threads spin-wait for each other
-far longer than one thread takes for the product (measured: docs/generation.md#speed). One thread
-is also what an exoskeleton's controller wants from a library call. ``generate`` (one scene) is not
-affected: its vector-matrix products are below OpenBLAS's threading threshold.
-
-The limit is set with threadpoolctl (a small pure-Python package, a dependency of jaxexo) for the
-duration of the call and restored afterwards; it is process-wide while it lasts, so another Python
-thread's BLAS work at the same moment runs on one thread too. Without threadpoolctl the BLAS is
-left as it is (then ``OMP_NUM_THREADS=1`` or ``OPENBLAS_NUM_THREADS=1`` in the environment, read
-at NumPy's import, does the same for the whole process). threadpoolctl is imported on the first
-batch, not at ``import jaxexo.inference`` (the import time budget).
+"""BLAS threads for the batch generator: ``generate_batch`` runs its matrix products on one BLAS
+thread (threadpoolctl, imported on the first batch), restored afterwards; without threadpoolctl the
+BLAS is left as it is. Why: docs/generation.md#speed.
 """
 
 from __future__ import annotations

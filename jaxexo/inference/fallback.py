@@ -1,10 +1,6 @@
-"""The fallback composition: the RL generator's swings, with a planner's swing wherever the RL one
-fails the safe-swing check (jaxexo.swing.trajectory).
-
-The planner (CFFTG, jaxexo.baselines.cfftg, for ``fallback="cfftg"``) is anything with
-``finish(scenes, n_points, duration) -> TrajectoryBatch``. A row is replaced only when the planner's
-swing passes; the method then reads "cfftg-fallback" and the notes keep the RL failure. When the
-planner fails too, the RL swing is kept, not ok, with both failures in its notes.
+"""The fallback composition: the RL generator's swings, with a planner's swing (CFFTG, or anything
+with ``finish(scenes, n_points, duration) -> TrajectoryBatch``) wherever the RL one fails the
+safe-swing check and the planner's passes; its notes keep both failures.
 """
 
 from __future__ import annotations

@@ -1,15 +1,5 @@
-"""The exported Q-network rearranged for fast NumPy inference (same outputs as policy.QPolicy).
-
-A greedy trajectory is ~30 sequential network evaluations on one observation, where NumPy's cost is
-the number of calls, not the arithmetic. So the layers are folded once, at load time, into fewer
-operations with the same result (up to float32 rounding):
-
-- biases become an extra weight row (inputs carry a trailing 1): one matmul per layer;
-- LayerNorm's centring is linear, so it moves into the preceding weights (W <- W (I - 11'/H));
-- LayerNorm's scale s and bias b before the ReLU: s*n + b = |s| * (sign(s)*n + b/|s|), and
-  |s| * relu(.) moves into the next layer's rows while sign(s) moves into this layer's columns;
-  a unit with s = 0 outputs the constant relu(b), which moves into the next layer's bias.
-Each hidden layer is then matmul, one dot product for the variance, scale-and-shift and ReLU.
+"""The exported Q-network folded for fast NumPy inference (the outputs of policy.QPolicy up to
+float32 rounding). The folding: docs/generation.md#speed.
 """
 
 from __future__ import annotations

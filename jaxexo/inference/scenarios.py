@@ -1,13 +1,6 @@
-"""Scenario sets for evaluating and timing generators in NumPy (no JAX): the scenes of
-jaxexo.physics.scenarios, the one scenario generator, as ``TrajectoryGenerator.generate`` arguments.
-
-``sample_scenarios(cfg, n, seed)`` is the test set: the five thesis obstacles (Table 3.1; Base 1-3
-seen in training, triangle and half-circle held out) crossed with the three pivot conditions, cycling
-evenly, jittered like the config's training layouts (size jitter, obstacle offset, start shift, step
-length). It is the very set the training run's eval.json and a sweep's ``success_raw`` are scored on
-(jaxexo.train.evaluate.test_layouts, same seed): the same scene parameters, bit for bit in float32.
-``training_scenarios`` draws the config's own distribution: the scenes ``ExoStepEnv.reset`` draws
-for the key words (seed, i), like the training run's validation set (seed 777).
+"""Scenario sets for evaluating and timing generators in NumPy: the scenes of
+jaxexo.physics.scenarios as ``TrajectoryGenerator.generate`` arguments. ``sample_scenarios`` is the
+test set eval.json and sweeps score on (bit for bit), ``training_scenarios`` the config's own draw.
 """
 
 from __future__ import annotations

@@ -1,7 +1,6 @@
-"""Animation of a timed swing (needs matplotlib and Pillow, imported here only): both legs step over
-the obstacle in real time at the computed timing (jaxexo.swing.timing), the heel's path
-traced behind, with the swing knee's velocity against its limit beside it. Lengths in centimetres,
-angles in degrees, velocities in deg/s (labelled)."""
+"""Animation of a timed swing (matplotlib and Pillow, imported here only): both legs in real time
+at the computed timing, the heel's path traced, the swing knee's velocity against its limit.
+"""
 
 from __future__ import annotations
 

@@ -1,23 +1,7 @@
-"""The one atomic file write: every file jaxexo writes that a reader may load (checkpoints, the policy,
-sweep results, trajectory exports) goes through ``atomic_write``, so that an interrupted write never
-leaves half a file in place of a good one; append-only logs go through ``append_line``.
-
-The data goes to a temporary file in the target's own directory (``os.replace`` is atomic only within
-one file system; ``tempfile.mkstemp`` gives every writer its own name), is flushed and fsync'ed, then
-replaces the target. On any failure (a full disk, a file-size limit, KeyboardInterrupt) the temporary
-file is removed and the target is left as it was; an OSError raised names the target file. Only a
-SIGKILL can leave a temporary file behind: ``stale_temps`` finds those for a run's resume to remove.
-
-Modes: a new file is created 0666 & ~umask, as Unix tools create files (a lab's shared umask 002
-gives colleagues their read and write); a file replaced keeps its own mode.
-
-Symbolic links: ``atomic_write`` replaces a link at the target's name (the file it points to is never
-written); ``append_line`` opens with O_NOFOLLOW and refuses a link (SymlinkRefused, a ValueError).
-
-Special outputs (the one rule for every writer: exports, reports, figures, GIFs): ``-`` is standard
-output; an existing path that is not a regular file (a device such as /dev/null, a FIFO, a socket)
-or a link to a file descriptor (``/dev/stdout``, ``/proc/self/fd/1``) is written into directly, as
-GNU tools do. Write-by-rename would replace the node itself by a regular file (docs/reliability.md).
+"""The one atomic file write: every file a reader may load goes through ``atomic_write`` (a temporary
+file in the target's directory, fsync'ed, then ``os.replace``), so an interrupted write never leaves
+half a file; append-only logs go through ``append_line``; ``stale_temps`` finds what a SIGKILL left.
+Modes, symbolic links and special outputs (``-``, devices, FIFOs): docs/reliability.md.
 """
 
 from __future__ import annotations

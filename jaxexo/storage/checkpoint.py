@@ -1,10 +1,6 @@
-"""The checkpoint file's envelope: a header with a SHA-256 of the payload, verified on every load.
-
-``checkpoint.msgpack`` = one header line ``jaxexo-checkpoint <version> sha256=<64 hex digits>\\n``
-followed by the payload (flax's msgpack of the training state; jaxexo.train.driver). A flipped bit, a
-truncated or empty file, a random file, or a file from an older jaxexo (no header) is refused with
-a CheckpointError naming the file, before any byte of the payload is decoded: a corrupt checkpoint
-must never resume silently (docs/reliability.md). NumPy-free, JAX-free.
+"""The checkpoint file's envelope: a header line ``jaxexo-checkpoint <version> sha256=<hex>`` before
+the payload (flax's msgpack of the training state), verified before any byte is decoded; a bad file
+is a CheckpointError naming it (docs/reliability.md). NumPy-free, JAX-free.
 """
 
 from __future__ import annotations

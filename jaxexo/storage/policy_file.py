@@ -1,17 +1,8 @@
-"""The exported policy file (policy.npz): writing is done by the trainer, reading needs NumPy only.
+"""The exported policy file (policy.npz): written by the trainer, read with NumPy only.
 
-A policy file is a plain ``.npz`` (no pickle: loading never executes code) holding the Q-network's
-arrays ``dense_{i}_kernel``, ``dense_{i}_bias`` (and ``norm_{i}_scale``, ``norm_{i}_bias`` with
-LayerNorm), and ``metadata``: a JSON document with everything inference needs to rebuild the
-observation and the actions: format version, observation mode and normalisation, action set, step
-size, kinematic constants, layer sizes, and ``sha256``: a checksum of every array (name, dtype, shape,
-bytes) and of the rest of the metadata, verified on load.
-
-Loading trusts nothing: every metadata field the network needs is required and type-checked, the
-array set must be exactly the one the layers describe, arrays must be real floating point, and they
-must be finite after the cast to float32. Format version 1 (no checksum) is refused rather than
-accepted with a warning: its arrays cannot be verified, and a policy drives an exoskeleton (a warning
-on a robot's computer is easily never read). Training again writes version 2.
+A plain ``.npz`` (no pickle) of the Q-network's arrays and a JSON ``metadata`` with everything
+inference needs, checksummed (``sha256``) and verified on load; loading type-checks every field and
+refuses format version 1 (docs/reliability.md, docs/training.md).
 """
 
 from __future__ import annotations

@@ -1,13 +1,6 @@
-"""Run directories (``jaxexo train``, ``jaxexo sweep``): one writer at a time, and no mixing of runs.
-
-- ``run_lock``: an exclusive ``fcntl.flock`` on ``DIR/.jaxexo.lock`` held for the whole run. A second
-  process on the same directory is refused at once (it would interleave metrics and overwrite
-  checkpoints); a symbolic link at the lock's name is refused, never followed; the operating system releases the lock when its holder exits or is killed, so a lock
-  file left behind by a killed run never blocks its ``--resume``.
-- ``TrainingDiverged``: the run's outcome when its loss or parameters became non-finite (raised by
-  jaxexo.train.driver; defined here, without JAX, so that the CLI can catch it).
-- ``contents``: what a directory holds besides the lock file, for the "a new run needs an empty
-  directory" rule.
+"""Run directories (``jaxexo train``, ``jaxexo sweep``): one writer at a time (``run_lock``, an
+exclusive flock the OS releases when its holder dies), no mixing of runs (``contents``), and
+``TrainingDiverged``, defined here without JAX so that the CLI can catch it (docs/reliability.md).
 """
 
 from __future__ import annotations

@@ -1,21 +1,7 @@
 """Terrain files: a measured ground profile as (y, z) points in metres, for a course (``jaxexo walk
---terrain``) or for one swing's obstacle (``jaxexo generate --profile``).
-
-Two formats, chosen by the suffix (``.json``; anything else is read as CSV):
-
-- CSV: one ``y,z`` pair per line; blank lines and lines starting with ``#`` are skipped, and the
-  first other line may be a header (``y_m,z_m``). A value is a CSV number (``-1.5``, ``.25``,
-  ``2e-3``; ``nan``/``inf`` are refused as not finite): Python's own literals such as ``1_0`` are
-  not numbers here.
-- JSON: ``{"points": [[y, z], ...]}`` or the bare list ``[[y, z], ...]``, nested at most
-  MAX_JSON_DEPTH deep.
-
-Either may start with a UTF-8 byte-order mark (as configs may); it is not part of the first value.
-
-The profile is the ground's height above the floor along the course: y non-decreasing (points
-sharing a y make a vertical riser), z >= 0 (the floor is z = 0; flat ground is exactly 0), every
-number finite. Every rule is checked here and a bad file is refused with a ``TerrainFileError``
-that names the file and the line of the offending point, before any planning.
+--terrain``) or one swing's obstacle (``jaxexo generate --profile``); CSV or JSON by suffix. Every
+rule is checked here and a bad file is a ``TerrainFileError`` naming the file and line. The format:
+docs/walking.md#the-terrain-file.
 """
 
 from __future__ import annotations
