@@ -79,9 +79,8 @@ def validate(cfg: Config) -> None:
         )
 
 
-# (env, kinematics, layout) sections that passed _check_scene: its reach and room checks are costly
-# (docs/reliability.md) and depend on these alone, so the configurations of a sweep that share them
-# are checked once.
+# (env, kinematics, layout) sections that passed _check_scene: its costly reach and room checks
+# depend on these alone, so a sweep's configurations that share them are checked once.
 _SCENES_OK: set = set()
 
 

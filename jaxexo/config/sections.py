@@ -1,6 +1,7 @@
-"""The config's sections as frozen dataclasses, each field declared once (jaxexo.config.declarations),
-and the whole ``Config`` with the values derived from it. The fields: docs/configuration.md.
-Units: metres, radians, steps. NumPy-only (``import jaxexo`` must not import JAX).
+"""The config's sections as frozen dataclasses, each field declared once
+(jaxexo.config.declarations), and the whole ``Config`` with the values derived from it. The
+fields: docs/configuration.md. Units: metres, radians, steps. NumPy-only (``import jaxexo`` must not
+import JAX).
 """
 
 from __future__ import annotations
@@ -56,8 +57,7 @@ MAX_TRACKING_HEADROOM = (
     0.5  # a reference using less than half of each limit is a slower device, not headroom
 )
 MAX_SWING_DURATION = 60.0  # s: one swing (about 1 s on today's exoskeletons), not a walk
-# Hz: the slowest rate of a timed export. A swing sampled more coarsely is not a control signal
-# (at 1e-9 Hz a 1 s swing became one period of 2e9 s).
+# Hz: the slowest rate of a timed export; a swing sampled more coarsely is not a control signal.
 MIN_CONTROL_RATE = 10.0
 # Every physical field has a physical bound (docs/reliability.md). Lengths: two segments of at most
 # 1 m make a leg of at most MAX_LEG; heights, ceilings and hip heights stay within it.
@@ -132,32 +132,24 @@ class EnvConfig:
     )  # the heel is kept inside
     # ceiling for the heel; the ground is z = 0
     max_z: float = declare(0.80, number(positive=True, hi=MAX_LEG), unit="m", param="max_z_world")
-    # The safe-swing definition (jaxexo.physics.swept): the foot's motion between samples
-    # never comes closer than min_clearance to the obstacle, and the heel never moves backward by
-    # more than backward_tolerance. The environment's success flag and the generators' ``ok`` use both.
-    # At most MAX_CLEARANCE (10 cm), the most a generator may be asked to keep.
+    # The safe-swing rule's two parameters (docs/safety.md#a-safe-swing-the-trajectory-checks);
+    # at most MAX_CLEARANCE, the most a generator may be asked to keep.
     min_clearance: float = declare(
         outcome.DEFAULT_MIN_CLEARANCE, number(nonneg=True, hi=MAX_CLEARANCE), unit="m"
     )
-    # At most 10 m: any value beyond env.bounds_y's span turns the check off, and the thesis configs
-    # write 10 m for that.
+    # At most 10 m: beyond env.bounds_y's span the check is off (the thesis configs write 10 m).
     backward_tolerance: float = declare(
         outcome.DEFAULT_BACKWARD_TOLERANCE, number(nonneg=True, hi=10.0), unit="m"
     )
-    # The shield (not in the thesis): the agent chooses only among admissible moves
-    # (jaxexo.shield.rule.admissible_moves): no backward component, the exact clearance of the
-    # whole move at least shield_clearance, joint limits and reach respected at its end. The same
-    # mask in training, evaluation and the NumPy generator; off reproduces the thesis's free choice.
+    # The shield (not in the thesis; off is the thesis's free choice): the agent chooses only among
+    # admissible moves (docs/safety.md#the-shield-the-policy-chooses-only-among-safe-moves).
     shield: bool = declare(True, boolean, role="static+leaf", dtype="bool")
     # m: the clearance a shielded move keeps; above min_clearance so that the smoothed curve, which
-    # cuts corners, still keeps min_clearance without falling back to the raw polyline. With the shield
-    # on it must be at least min_clearance (validate); at most 10 cm, above that no step over an
-    # obstacle remains admissible.
+    # cuts corners, still keeps it (validated); above 10 cm no step over an obstacle is admissible.
     shield_clearance: float = declare(0.025, number(nonneg=True, hi=0.10), unit="m")
     # m: with the shield, a move may end lower than this above the floor only inside the goal box's
-    # column (|y - goal_y| <= goal_tolerance[0]): the heel neither scuffs nor skims along the floor
-    # before the goal; 0 turns the rule off (configs written before it). Below env.step_size
-    # (validate), so that the first move off the floor can clear it.
+    # column, so the heel never skims the floor before the goal (0: off); below env.step_size
+    # (validated), so that the first move off the floor can clear it.
     floor_clearance: float = declare(0.02, number(nonneg=True, hi=0.10), unit="m")
 
 
@@ -189,18 +181,10 @@ THESIS_JOINT_LIMITS = {
 class DeviceConfig:
     """[device]: the exoskeleton's joint drives, for timing swings (jaxexo.swing.timing).
 
-    Limits are per joint kind (hip, knee) and apply to both legs, in rad/s and rad/s^2. The defaults
-    are conservative, order-of-magnitude figures, not one device's data sheet: lower-limb
-    exoskeletons for paraplegic gait (ReWalk, Ekso, Indego, TWIICE) walk at about 0.2-0.5 m/s with
-    swings near one second, far slower than able-bodied gait, whose swing knee peaks at the order of
-    6 rad/s (~350 deg/s) and 50-100 rad/s^2 (Winter, Biomechanics and Motor Control of Human Movement,
-    4th ed., 2009, ch. 4); their drives (brushless motor + harmonic drive, ratio of the order of 100)
-    reach the order of 3-5 rad/s at the joint. We take the order's lower end: hip 3 rad/s (172 deg/s),
-    knee 4 rad/s (229 deg/s), both under 300 deg/s, and 15 / 20 rad/s^2; jerk 1500 / 2000 rad/s^3
-    (the acceleration limit reached in 10 ms). A swing is timed within (1 - tracking_headroom) of
-    each. Set your device's own.
-
-    Read by the NumPy timing code only: every field is a Python-side setting, never a pytree leaf."""
+    Limits are per joint kind (hip, knee) and apply to both legs; a swing is timed within
+    (1 - tracking_headroom) of each. The defaults are conservative order-of-magnitude figures
+    (sources: docs/device-timing.md#limits). Read by the NumPy timing code only: every field is a
+    Python-side setting, never a pytree leaf."""
 
     # Bounds: a drive slower than 0.1 rad/s (6 deg/s) or 0.1 rad/s^2 cannot swing a leg within a
     # minute; 50 rad/s and 1000 rad/s^2 are beyond any joint drive.
@@ -283,10 +267,8 @@ class RewardConfig:
     # jaxexo.physics.rewards.shaping_reward for the choice of its discount.
     progress_shaping: float = declare(5.0, number(nonneg=True, hi=1e3), unit="1/m")
     shaping_discount: float = declare(1.0, fraction(positive=True))
-    # The wearer's costs (not in the thesis, jaxexo.physics.rewards.wearer_terms; 0 = thesis reward):
-    # per metre of heel height above the obstacle's top plus env.shield_clearance, per step (a low
-    # swing), and per second the joint drives need for each move at [device] joint_velocity (a quick,
-    # straight swing). The velocities enter the environment as ``joint_speed`` (hip, knee, hip, knee).
+    # The wearer's costs (not in the thesis; 0 = thesis reward; docs/configuration.md#reward); the
+    # [device] joint velocities enter the environment as ``joint_speed`` (hip, knee, hip, knee).
     lift_cost: float = declare(10.0, number(nonneg=True, hi=1e3), unit="1/m")
     time_cost: float = declare(
         2.0,
@@ -383,10 +365,8 @@ class TrainConfig:
     chunk_updates: int = declare(
         0, number(nonneg=True, integer=True, hi=INT32_MAX), unit="updates", role="setting"
     )
-    # Agents of this config trained together as one compiled program (seeds seed .. seed + K - 1), the one
-    # a wearer would choose exported (jaxexo.train.population, jaxexo.train.selection); 1: one agent,
-    # the data-parallel driver. The default model trains two: its figures hold at every seed. Bounded
-    # here only loosely: the memory estimate (jaxexo.config.memory.check_memory) is the real limit.
+    # Agents trained together as one program, seeds seed .. seed + K - 1, the best exported (1: one
+    # agent; docs/training.md); bounded loosely here, the memory estimate is the real limit.
     population: int = declare(
         2, number(positive=True, integer=True, hi=4096), unit="agents", role="setting"
     )

@@ -1,7 +1,8 @@
-"""ExoStepEnv: the swing heel of a lower-limb exoskeleton stepping over a low obstacle (thesis ch. 2),
-in pure JAX with the gymnax 1.0 contract (auto-reset ``step``; ``step_env``/``reset_env`` without).
-State, layout and params are flax.struct pytrees, so it jits and vmaps over episodes and configs;
-the rules come from jaxexo.physics. How it behaves: docs/training.md#the-environment.
+"""ExoStepEnv: the swing heel of a lower-limb exoskeleton stepping over a low obstacle (thesis
+ch. 2), in pure JAX with the gymnax 1.0 contract (auto-reset ``step``; ``step_env`` and
+``reset_env`` without). State, layout and params are flax.struct pytrees, so it jits and vmaps over
+episodes and configs; the rules come from jaxexo.physics. How it behaves:
+docs/training.md#the-environment.
 """
 
 from __future__ import annotations

@@ -1,4 +1,5 @@
-"""NumPy-only swing trajectory generation: an exported policy (policy.npz) in, a checked trajectory out::
+"""NumPy-only swing trajectory generation: an exported policy (policy.npz) in, a checked
+trajectory out::
 
     from jaxexo.inference import Obstacle, TrajectoryGenerator
     gen = TrajectoryGenerator.load("run/policy.npz")
@@ -38,9 +39,8 @@ _LAZY = {
 
 
 def __getattr__(name):
-    # Device timing (jaxexo.swing.timing) and walks (jaxexo.course) are imported on first use: they
-    # are not needed to generate, and loading them would add to every process's import time (its
-    # budget is 0.3 s).
+    # Device timing and walks are imported on first use: generating needs neither, and the import
+    # time budget is 0.3 s.
     if name in _LAZY:
         import importlib
 

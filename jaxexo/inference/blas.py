@@ -26,9 +26,8 @@ def limited(threads: int | None):
         except ImportError:
             _missing = True
             return contextlib.nullcontext()
-        # Listing the loaded libraries has a cost of its own (docs/generation.md#speed), so it is
-        # redone only when modules were imported since (a library that another import loaded would
-        # otherwise keep its threads).
+        # Listing the loaded libraries costs about 1 ms (docs/generation.md#speed): redone only
+        # after new imports, which may have loaded another BLAS.
         _controller = threadpoolctl.ThreadpoolController()
         _modules = len(sys.modules)
     return _controller.limit(limits=int(threads), user_api="blas")

@@ -1,7 +1,7 @@
-"""Obstacle geometry in the sagittal plane (outlines, the exact foot-obstacle distance), written once
-for the array module ``xp`` (numpy or jax.numpy) and shared by the JAX environment and the NumPy
-generator. Frame, outline convention and the modelling decisions (flat foot, exact distance,
-touching is collision): docs/training.md#modelling-decisions.
+"""Obstacle geometry in the sagittal plane (outlines, the exact foot-obstacle distance), written
+once for the array module ``xp`` (numpy or jax.numpy) and shared by the JAX environment and the
+NumPy generator. Frame, outline convention and the modelling decisions (flat foot, exact
+distance, touching is collision): docs/training.md#modelling-decisions.
 """
 
 from __future__ import annotations

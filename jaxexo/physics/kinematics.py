@@ -63,10 +63,8 @@ def knee_position(xp, hip, foot, thigh, shin):
         xp.maximum((thigh * thigh - shin * shin + r * r) / (2.0 * r_safe), -thigh), thigh
     )  # clip
     h = xp.sqrt(xp.maximum(thigh * thigh - a * a, 0.0))
-    # Eq 2.11 as a pair: of the two solutions, the knee on the +90 degree side of the hip->heel
-    # direction is the one that flexes (knee angle <= 0). With the heel below the hip it is the
-    # solution with the larger y, as eq 2.11 says; with the heel raised above the hip the larger-y
-    # solution would be a hyperextended knee.
+    # Eq 2.11 as a pair: the knee on the +90 degree side of hip->heel flexes (knee angle <= 0); the
+    # larger-y knee only while the heel is below the hip (docs/training.md#modelling-decisions).
     perp = xp.concatenate(
         [-u[..., 1:2], u[..., 0:1]], axis=-1
     )  # concatenate: cheaper than stack in NumPy

@@ -69,8 +69,8 @@ def exo_terms(xp, c, *, hip_z, leg_swing, leg_stance, limits_violated):
     return xp.stack([e0, e1, e2, e3], axis=-1)
 
 
-# Costs a wearer feels (not in the thesis; added to eq 2.1's reward like the shaping term): under the
-# shield no greedy move comes within the clearance, so the reward may pay for how the swing feels.
+# Costs a wearer feels (not in the thesis; added to eq 2.1's reward like the shaping term): under
+# the shield no greedy move comes within the clearance, so the reward may pay for how it feels.
 WEARER_TERMS = (
     "lift",  # m of heel height above the obstacle's top plus the shield's clearance
     "move_time",  # s the joint drives need for the move at their velocity limits

@@ -16,9 +16,8 @@ from jaxexo.physics import geometry, kinematics
 from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 from jaxexo.physics.transition import scalar
 
-# m: the largest clearance a caller may ask of a swing (``generate(..., clearance=C)``). The obstacles
-# jaxexo trains on reach 0.28 m, and a heel lifted 10 cm above such a top is near the hip and knee
-# limits of the default leg; beyond that the clearance is a different task (stepping onto it).
+# m: the largest clearance a caller may ask of a swing: 10 cm above the 0.28 m obstacles jaxexo
+# trains on is near the default leg's joint limits; more is another task (stepping onto it).
 MAX_CLEARANCE = 0.10
 
 

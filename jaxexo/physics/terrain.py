@@ -1,4 +1,4 @@
-"""Procedural obstacle families: uniform numbers -> ground-obstacle outlines, for reset and the tools.
+"""Procedural obstacle families: uniform numbers -> ground-obstacle outlines, for reset and tools.
 
 Each family is ``outline(xp, u)`` of uniform numbers ``u`` in [0, 1)^D, written once for NumPy and
 jax.numpy; outlines follow jaxexo.physics.geometry's convention, padded to ``K_MAX`` vertices.
@@ -334,8 +334,8 @@ def to_obstacle(outline: np.ndarray, center_y: float) -> geometry.Obstacle:
 # Placement
 # --------------------------------------------------------------------------------------------
 
-# m between the toe at the start and the obstacle's near edge: the safe-swing margin (2 cm) with 5 mm
-# to spare, so that no scene's verdict is decided by float rounding at its start.
+# m between the toe at the start and the obstacle's near edge: the safe-swing margin (2 cm) with
+# 5 mm to spare, so that no scene's verdict is decided by float rounding at its start.
 NEAR_MARGIN = 0.025
 FAR_MARGIN = (
     0.06  # m between the obstacle's far edge and the goal (> the goal box's 0.04 half width)

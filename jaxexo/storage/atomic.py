@@ -1,7 +1,8 @@
-"""The one atomic file write: every file a reader may load goes through ``atomic_write`` (a temporary
-file in the target's directory, fsync'ed, then ``os.replace``), so an interrupted write never leaves
-half a file; append-only logs go through ``append_line``; ``stale_temps`` finds what a SIGKILL left.
-Modes, symbolic links and special outputs (``-``, devices, FIFOs): docs/reliability.md.
+"""The one atomic file write: every file a reader may load goes through ``atomic_write`` (a
+temporary file in the target's directory, fsync'ed, then ``os.replace``), so an interrupted write
+never leaves half a file; append-only logs go through ``append_line``; ``stale_temps`` finds what
+a SIGKILL left. Modes, symbolic links and special outputs (``-``, devices, FIFOs):
+docs/reliability.md.
 """
 
 from __future__ import annotations
