@@ -172,7 +172,7 @@ def test_half_ellipse_outline_is_inscribed_polygon():
     # Every vertex on the ellipse ((y - c) / a)^2 + (z / b)^2 = 1.
     r = ((o[:, 0] - 0.45) / 0.10) ** 2 + (o[:, 1] / 0.25) ** 2
     np.testing.assert_allclose(r, 1.0, atol=1e-12)
-    # Within 1.5 mm of the true curve and inside it (docstring): edge midpoints.
+    # Within 1.5 mm of the true curve and inside it (docs/training.md): edge midpoints.
     t = np.linspace(0.0, np.pi, 20001)
     curve = np.column_stack([0.45 + 0.10 * np.cos(t), 0.25 * np.sin(t)])
     mids = 0.5 * (o[1:] + o[:-1])

@@ -16,12 +16,14 @@ import numpy as np
 # The declaration of a field
 # --------------------------------------------------------------------------------------------
 
+# leaf: a vmappable pytree leaf (EnvParams, Hyperparams); static: fixes the compiled program;
+# static+leaf: both (env.max_steps); setting: read by the Python driver, or resolved into a static.
 ROLES = ("leaf", "static", "static+leaf", "setting")
 
 
 @dataclass(frozen=True)
 class FieldSpec:
-    """How one config field is parsed, what unit it has and what it becomes (see module doc)."""
+    """How one config field is parsed, what unit it has and what it becomes (roles: ``ROLES``)."""
 
     check: Callable[[str, Any], Any]
     unit: str = ""

@@ -33,7 +33,7 @@ def network_size(cfg: Config, obs_dim: int | None = None) -> int:
 
 
 def memory_breakdown(cfg: Config) -> dict[str, int]:
-    """Bytes by part (see the module doc); ``estimate_memory_bytes`` is their sum."""
+    """Bytes by part (docs/training.md); ``estimate_memory_bytes`` is their sum."""
     t = cfg.train
     n, T = t.num_envs, t.rollout_steps
     d = observation_size(cfg)

@@ -62,7 +62,8 @@ class Terrain:
 
 
 def read_terrain(path: str | Path) -> Terrain:
-    """The terrain in ``path`` (module docstring), checked; TerrainFileError naming the line otherwise."""
+    """The terrain in ``path`` (format: docs/walking.md#the-terrain-file), checked; a
+    TerrainFileError naming the line otherwise."""
     p = Path(path)
     name = str(path)
     try:  # the one read of an input file: a regular file, at most MAX_FILE_BYTES
