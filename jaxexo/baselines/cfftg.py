@@ -65,7 +65,13 @@ from jaxexo.physics.scene import (
 )
 from jaxexo.storage.policy_check import load_checked
 from jaxexo.swing.options import SceneMaker, SwingOptions, scenes_for
-from jaxexo.swing.trajectory import Trajectory, TrajectoryBatch, assemble, measure_paths
+from jaxexo.swing.trajectory import (
+    Measured,
+    Trajectory,
+    TrajectoryBatch,
+    assemble,
+    measure_paths,
+)
 
 DEFAULT_POINTS = 100
 C_MAX = 10.0  # |c| bound for a monotone y(s)
@@ -248,8 +254,8 @@ class CFFTG(SceneMaker):
             )
             m = measure_paths(self.sp, p, [scenes[i] for i in todo], dev)
             checks = m if checks is None else _scatter(checks, m, todo)
-            ok = m["ok"]  # the one strict-success verdict (jaxexo.physics.outcome)
-            bad_kin = ~(m["joint_limits_ok"] & m["leg_length_ok"])
+            ok = m.ok  # the one strict-success verdict (jaxexo.physics.outcome)
+            bad_kin = ~(m.joint_limits_ok & m.leg_length_ok)
             fail = todo[~ok]
             # Joint limits or leg length: move the apex (alternately towards and away from the pivot).
             mv = fail[bad_kin[~ok]]
@@ -333,11 +339,8 @@ class CFFTG(SceneMaker):
         return o.checked(self.at_clearance(o.clearance).finish(scenes, o.n_points, o.duration))
 
 
-def _scatter(full: dict, part: dict, idx: np.ndarray) -> dict:
-    """Write the checks of re-planned scenes ``idx`` into the batch's checks (nested dicts of arrays)."""
-    for k, v in part.items():
-        if isinstance(v, dict):
-            _scatter(full[k], v, idx)
-        else:
-            full[k][idx] = v
+def _scatter(full: Measured, part: Measured, idx: np.ndarray) -> Measured:
+    """Write the checks of re-planned scenes ``idx`` into the batch's checks (in place)."""
+    for k, v in vars(part).items():
+        getattr(full, k)[idx] = v
     return full
