@@ -52,6 +52,7 @@ from __future__ import annotations
 import copy
 import functools
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -170,6 +171,19 @@ def plan_paths(
     return np.stack([y, h[:, None] * phi[best]], axis=-1), h
 
 
+@dataclass(frozen=True)
+class Plans:
+    """``CFFTG.plan`` of B scenes: the final paths (B, N, 2), the via points (B, 3, 2) (start, apex,
+    goal), the plans each scene needed (B,), whether it gave up (B,) and the final paths' checks
+    (jaxexo.swing.trajectory.Measured)."""
+
+    paths: np.ndarray
+    via: np.ndarray
+    plans: np.ndarray
+    gave_up: np.ndarray
+    checks: Measured
+
+
 class CFFTG(SceneMaker):
     """The polynomial generator. ``config`` supplies the kinematics (thigh, shin, foot, joint limits),
     the goal tolerance and the safety distance; pass the RL policy's config to compare like with like."""
@@ -217,10 +231,8 @@ class CFFTG(SceneMaker):
         return cls(load_checked(path)[1], **kwargs)
 
     # Planning ---------------------------------------------------------------------------------------
-    def plan(self, scenes, n_points: int = DEFAULT_POINTS):
-        """Plan, check and re-plan every scene. Returns the final paths (B, N, 2), the via points
-        (B, 3, 2), the number of plans each scene needed (B,), whether it gave up (B,) and the checks
-        of the final paths (``jaxexo.swing.trajectory.measure``'s dict)."""
+    def plan(self, scenes, n_points: int = DEFAULT_POINTS) -> Plans:
+        """Plan, check and re-plan every scene (B of them)."""
         arr = stack_scenes(scenes, np.float64)
         b = len(scenes)
         foot = float(self.sp.foot_length)
@@ -281,7 +293,7 @@ class CFFTG(SceneMaker):
             ],
             1,
         )
-        return paths, via, plans, gave_up, checks
+        return Plans(paths=paths, via=via, plans=plans, gave_up=gave_up, checks=checks)
 
     def at_clearance(self, clearance: float | None) -> "CFFTG":
         """This generator for swings that must keep ``clearance`` (m; None: env.min_clearance): the
@@ -299,23 +311,24 @@ class CFFTG(SceneMaker):
     def finish(self, scenes, n_points: int, duration: float) -> TrajectoryBatch:
         """Checked trajectories of validated scenes: planned, checked and re-planned (``plan``), with a
         note per scene of the plans it took and where the apex is."""
-        paths, via, plans, gave_up, checks = self.plan(scenes, n_points)
+        p = self.plan(scenes, n_points)
         notes = []
         for i in range(len(scenes)):
-            note = f"cfftg: {plans[i]} plan(s); apex y={via[i, 1, 0]:.3f} m, z={via[i, 1, 1]:.3f} m"
+            y, z = p.via[i, 1]
+            note = f"cfftg: {p.plans[i]} plan(s); apex y={y:.3f} m, z={z:.3f} m"
             notes.append(
-                (note + f"; gave up after {self.max_plans} plans",) if gave_up[i] else (note,)
+                (note + f"; gave up after {self.max_plans} plans",) if p.gave_up[i] else (note,)
             )
         return assemble(
             self.method,
             self.sp,
             scenes,
-            list(via),
-            paths,
+            list(p.via),
+            p.paths,
             np.zeros(len(scenes)),
             duration,
             notes,
-            measured=checks,
+            measured=p.checks,
         )
 
     def generate(

@@ -38,7 +38,6 @@ from jaxexo.swing.curve import (
     distinct_samples,
     heel_derivatives,
     law_from_speeds,
-    leg_points,
     pchip_eval,
     pchip_slopes,
 )
@@ -501,7 +500,6 @@ def _samples(curves, rate: float) -> list[_Samples]:
     at = [np.concatenate([t[:-1], [c.duration]]) for t, c in zip(times, curves)]
     out = []
     for c, t, st in zip(curves, times, curves_at(curves, at)):
-        pts = leg_points(c.lengths, c.pivot_y, st.joint_angles)
         for h in (st.heel, st.toe):  # the forward kinematics' rounding at the floor
             _on_floor(h)
         out.append(
@@ -510,9 +508,9 @@ def _samples(curves, rate: float) -> list[_Samples]:
                 time=t,
                 heel=st.heel,
                 toe=st.toe,
-                hip=pts["hip"],
-                knee_swing=pts["knee_swing"],
-                knee_stance=pts["knee_stance"],
+                hip=st.hip,
+                knee_swing=st.knee_swing,
+                knee_stance=st.knee_stance,
                 joint_angles=st.joint_angles,
                 joint_velocity=st.joint_velocity,
                 joint_acceleration=st.joint_acceleration,
