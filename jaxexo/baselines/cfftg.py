@@ -1,50 +1,6 @@
-"""CFFTG: a polynomial Collision-Free Foot Trajectory Generator, the baseline of thesis 3.1-3.4.
-
-The generator the thesis compares against (its ref. [11]) is not public; the thesis says only that
-it is polynomial, always finds a trajectory given enough time, and takes about 2 ms (Table 3.11).
-This is the standard form of such a generator, in NumPy only (importable without JAX), returning
-the same checked ``Trajectory`` as the RL generator (``jaxexo.inference.assemble``: the same
-kinematics, clearance, goal, joint-limit and leg-length checks), so every metric applies to both.
-
-Decisions, each made here:
-
-- Path. The heel moves in the sagittal plane along two polynomials of normalised time s in [0, 1]
-  (t = s * duration):
-      z(s) = h * 64 s^3 (1 - s)^3 (1 + k (1 - 2s)^2)      apex h at s = 1/2,
-      y(s) = y0 + D (10 s^3 - 15 s^4 + 6 s^5 + c s^3 (1 - s)^3),   D = goal - start.
-  Both have zero velocity and zero acceleration at lift-off and touch-down (triple roots at s = 0
-  and 1), so the foot leaves and lands gently. ``k`` in FLATNESS = {0, 1, 2, 3} widens the top of
-  the height profile (k = 3 is the flattest with a single apex); each plan uses the k that needs
-  the lowest apex, so a wide obstacle gets a flat-topped path instead of a tall bell.
-  y is the minimum-jerk (quintic) profile plus a term that moves the
-  apex along y without touching those end conditions: y(1/2) = y0 + D (1/2 + c/64). ``c`` is kept
-  in [-10, 10], where y is monotone (dy/ds = D s^2 (1-s)^2 (30 + 3c (1 - 2s)) >= 0): the foot never
-  steps backwards. The path passes through the start (on the ground), the apex and the goal (on
-  the ground).
-- Apex position. Initially over the middle of the span of heel positions at which the flat foot
-  (heel to toe, ``foot_length``) overlaps the obstacle: y_apex = (left - foot_length + right) / 2.
-- Apex height. z is linear in h, so the lowest apex that keeps the foot ``margin`` above the
-  obstacle is computed exactly on the samples: at every sample the foot segment, widened by the
-  margin on both sides, must be above the highest point of the obstacle under it plus the margin;
-  h = max over samples of required height / z's shape. The lowest apex means the least joint
-  excursion. The initial margin is the reward's safety distance (eq 2.35, ``min_dt``), so
-  both generators aim for the same clearance.
-- Check. Every plan goes through the same safe-swing check as the RL generator's trajectories
-  (jaxexo.swing.trajectory: exact clearance of the moving foot between samples less the
-  polynomial's chord-deviation bound ``plan_deviation``, margin env.min_clearance; heel backward
-  motion; joint limits and leg length of both legs; goal reached).
-- Re-plan. A plan that fails is re-planned, per scene:
-  the foot comes within the margin -> raise the apex (margin += ``margin_step``);
-  joint limits or leg length exceeded -> move the apex along y, alternately towards and away from
-  the pivot heel (the hip sits above the midpoint of the heels, so an apex nearer the pivot keeps
-  the swing leg nearer under the hip), by ``apex_step`` metres, 1, 1, 2, 2, 3... steps out.
-  After ``max_plans`` plans without success the last plan is returned with ``ok`` False, its
-  failed checks in ``checks.reasons`` and a note that the planner gave up: a reported failure,
-  never a silent one.
-- Batch. ``generate_batch`` plans every scene at once with NumPy arrays (B, N); each round re-plans
-  only the scenes still failing. ``generate`` is the same code on a batch of one.
-- ``raw`` of the returned Trajectory holds the three via points (start, apex, goal); there is no
-  smoothing (``smoothing`` = 0: the polynomial is the path).
+"""CFFTG: a polynomial Collision-Free Foot Trajectory Generator, the baseline of thesis 3.1-3.4 (its
+ref. [11] is not public), in NumPy only, returning the same checked ``Trajectory`` as the RL
+generator. Its path, apex and re-planning: docs/generation.md (CFFTG, the polynomial baseline).
 """
 
 from __future__ import annotations
@@ -147,7 +103,7 @@ def profile_max(lo: np.ndarray, hi: np.ndarray, outline: np.ndarray) -> np.ndarr
 def plan_paths(
     start_y, goal_y, outline, apex_frac, margin, foot_length: float, n_points: int = DEFAULT_POINTS
 ):
-    """Heel paths (B, N, 2) and apex heights (B,) of the polynomial plan (see the module docstring).
+    """Heel paths (B, N, 2) and apex heights (B,) of the polynomial plan (docs/generation.md, CFFTG).
 
     ``apex_frac`` (B,): the apex's y as a fraction of the step (clipped to the monotone range);
     ``margin`` (B,): clearance asked of the foot, metres. Of the height shapes FLATNESS, each scene

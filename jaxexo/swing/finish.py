@@ -1,31 +1,8 @@
-"""Finish a path: a generator's raw heel points landed on the floor, smoothed (thesis 2.7), checked, and retried.
-
-First the raw path lands (``landed``): the policy stops in its goal box (env.goal_tolerance: up to
-5 mm above the floor on the default model, 2 cm on the thesis configs), so a path that reached the
-goal above the floor gains a last point on the floor, where the line of its last move meets it (straight below its end when that point is outside
-the goal box, jaxexo.physics.transition.goal_reached). The descent is then part of everything below:
-smoothed, corrected, retried and judged with the rest of the swing, and the swing ends with the
-whole foot on the floor.
-
-The raw path is smoothed with the requested s (jaxexo.swing.smoothing) and judged as a safe swing
-(jaxexo.swing.trajectory: exact clearance of the moving foot between samples less the curve's
-deviation bound, margin env.min_clearance). Smoothing cuts corners (clearance) and overshoots
-(backward heel motion), so a curve that fails where its raw path passes is retried, in order:
-
-1. the requested spline corrected as little as possible to keep the margin and move forward
-   (jaxexo.swing.clearing; off with ``clearing=False``);
-2. the per-path candidate smoothings s = M rho^2 (CANDIDATE_RESIDUALS, M raw points), smoothest first;
-3. less smoothing (RETRY_FACTORS of s), then the raw polyline.
-
-A retried curve is accepted with ACCEPT_HEADROOM to spare (``trajectory.passes``, the verdict's
-rule). ``Trajectory.smoothing`` and ``notes`` record what was used. A swing that ends short of the
-goal is not retried: every curve ends where its raw path does.
-
-The finisher measures each path's closest move exactly and bounds the others
-(``trajectory.path_clearances``), checks many curves in one call and hands the chosen curve's
-clearances to ``assemble``; ``PathFinisher(exact=True)`` is the plain reference (every move exact,
-each curve measured afresh). Both choose the same curves and give the same trajectories
-(tests/test_speed.py).
+"""Finish a path: a generator's raw heel points landed on the floor (``landed``), smoothed (thesis
+2.7), checked, and retried in order (the corrected spline, the per-path candidate smoothings, less
+smoothing, the raw polyline) until a curve keeps the margin. ``PathFinisher(exact=True)`` is the
+plain reference that the fast path is tested against. Method: docs/generation.md (the landing;
+smoothing and correction).
 """
 
 from __future__ import annotations
@@ -87,7 +64,7 @@ class _Chosen:
 
 
 def landed(sp, raw: np.ndarray, goal_y: float) -> np.ndarray:
-    """The raw path (M, 2) with its landing (module docstring): unchanged when it ends on the floor or
+    """The raw path (M, 2) with its landing (docs/generation.md, the landing): unchanged when it ends on the floor or
     short of the goal (that swing fails its verdict however it ends); otherwise one more point on the
     floor, on the line of the last move when that move descends and the point is in the goal box,
     else straight below the end (in the box, as the end is)."""
@@ -127,8 +104,8 @@ def _candidate_note(smoothing, used):
 
 class PathFinisher:
     """Smooth, check and retry raw paths for the constants ``sp`` (jaxexo.config.scalar_params,
-    at the swing's clearance); ``clearing``: try the corrected spline (module docstring, step 1);
-    ``exact``: the plain reference (module docstring), which the fast path is tested against."""
+    at the swing's clearance); ``clearing``: try the corrected spline first;
+    ``exact``: the plain reference (every move exact, each curve measured afresh), which the fast path is tested against."""
 
     def __init__(self, sp, clearing: bool = True, exact: bool = False):
         self.sp, self.clearing, self.exact = sp, clearing, exact
@@ -457,7 +434,7 @@ class PathFinisher:
     ) -> TrajectoryBatch:
         """Checked trajectories of raw paths (M_i, 2) on their scenes: smoothed with ``smoothing`` (m^2; 0:
         the raw polylines resampled), checked, and retried where a curve fails but its raw path
-        need not (module docstring). Each raw path lands first (``landed``); the trajectories' ``raw``
+        need not (docs/generation.md). Each raw path lands first (``landed``); the trajectories' ``raw``
         hold the landed paths."""
         raws = [landed(self.sp, r, sc.goal_y) for r, sc in zip(raws, scenes)]
         if smoothing > 0 and len(raws) == 1 and len(candidates(raws[0], smoothing)) > 1:

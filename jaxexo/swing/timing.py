@@ -1,20 +1,8 @@
 """Device-ready swings: a swing path timed rest to rest within the drives' limits, as a curve
 (jaxexo.swing.curve) with continuous joint acceleration and bounded jerk, and its samples at a
-controller's rate (NumPy only). Method and measurements: docs/device-timing.md.
-
-1. Path: the joints at the trajectory's samples, a C2 cubic spline in their joint-space chord length
-   (``curve.cubic_paths``); the heel follows by forward kinematics.
-2. Passes: the time-optimal law under the constraints' velocity caps and acceleration rows on a
-   uniform s grid (jaxexo.swing.time_law.topp, at SAFETY of the planned limits), then its speed
-   averaged over a window that the jerk limit sets (``curve.law_from_speeds``).
-3. Check on the curve: velocity, acceleration and jerk at CHECK_DT and at every breakpoint of the
-   law; where they exceed a limit the passes' caps are lowered there and the passes run again
-   (LOCAL_PASSES), and the rest is one uniform slow-down t -> k t, exact (1/k, 1/k^2, 1/k^3).
-4. Samples at the rate: the curve stretched to whole control periods (slower, so still within).
-   Samples at any other rate are ``TimedSwing.sample(rate)``; their finite differences are averages
-   of the curve's derivatives and so hold the limits too.
-
-Units: m, rad, s; limits in rad/s, rad/s^2, rad/s^3, one value per joint of JOINT_NAMES.
+controller's rate (NumPy only): the joint path, the time-optimal passes (jaxexo.swing.time_law),
+the check on the curve (jaxexo.swing.curve_check), the path checks and the samples. Method and
+measurements: docs/device-timing.md. Units: m, rad, s; limits per joint of JOINT_NAMES.
 """
 
 from __future__ import annotations

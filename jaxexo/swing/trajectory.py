@@ -1,8 +1,7 @@
 """A checked swing trajectory: the heel path with the exoskeleton's kinematics and its pass/fail
 checks. Every generator hands its dense heel path to ``assemble``, so all swings are measured by one
-definition (the training environment's kinematics, clearance, goal and limit rules). What a safe
-swing is and how the clearance between samples is guaranteed: docs/generation.md (the safe-swing
-verdict). Units: metres, radians, seconds.
+definition (the training environment's kinematics, clearance, goal and limit rules; the clearance
+guaranteed between the samples). The verdict: docs/safety.md (a safe swing). Units: m, rad, s.
 """
 
 from __future__ import annotations
@@ -32,7 +31,8 @@ class TrajectoryError(RuntimeError):
 
 @dataclass(frozen=True)
 class TrajectoryChecks:
-    """The safe-swing checks of the final (smoothed) path (module docstring)."""
+    """The safe-swing checks of the final (smoothed) path (docs/safety.md): one swing's, or with a
+    leading axis B where a record holds many."""
 
     reached_goal: bool
     collision_free: bool  # the foot's motion never touches the obstacle
