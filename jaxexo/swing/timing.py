@@ -124,7 +124,7 @@ class TimedSwing:
         """The same curve sampled at ``rate`` Hz (MIN_CONTROL_RATE to MAX_CONTROL_RATE): one row per
         period from 0 until the first period at or after touch-down (the legs rest from there)."""
         rate = check_rate(rate)
-        return replace(self, rate=rate, **vars(_samples([self.curve], rate)[0]))
+        return replace(self, rate=rate, **_samples([self.curve], rate)[0].columns())
 
     def table(self) -> np.ndarray:
         return timed_table(self)
@@ -448,28 +448,42 @@ def _timed(traj, checks, f: FinalLaw, curve, samples, device, rate) -> TimedSwin
         peak_jerk=f.peaks[2],
         notes=tuple(getattr(traj, "notes", ())) + f.notes,
         curve=curve,
-        **vars(samples),
+        **samples.columns(),
     )
+
+
+# The columns of a TimedSwing's samples that the curve's state at the sample times gives.
+_STATE_COLUMNS = (
+    "heel",
+    "toe",
+    "hip",
+    "knee_swing",
+    "knee_stance",
+    "joint_angles",
+    "joint_velocity",
+    "joint_acceleration",
+    "heel_velocity",
+    "heel_acceleration",
+    "path_parameter",
+    "joint_jerk",
+)
 
 
 @dataclass(frozen=True)
 class _Samples:
-    """One curve's TimedSwing sample columns (TimedSwing's fields of the same names)."""
+    """One curve's samples: its duration (s), the sample times (n,) and the curve's state there
+    (the last sample at touch-down)."""
 
     duration: float
     time: np.ndarray
-    heel: np.ndarray
-    toe: np.ndarray
-    hip: np.ndarray
-    knee_swing: np.ndarray
-    knee_stance: np.ndarray
-    joint_angles: np.ndarray
-    joint_velocity: np.ndarray
-    joint_acceleration: np.ndarray
-    heel_velocity: np.ndarray
-    heel_acceleration: np.ndarray
-    path_parameter: np.ndarray
-    joint_jerk: np.ndarray
+    state: CurveState
+
+    def columns(self) -> dict:
+        """TimedSwing's sample fields, by name."""
+        st = self.state
+        return {"duration": self.duration, "time": self.time} | {
+            k: getattr(st, k) for k in _STATE_COLUMNS
+        }
 
 
 def _samples(curves, rate: float) -> list[_Samples]:
@@ -490,24 +504,7 @@ def _samples(curves, rate: float) -> list[_Samples]:
     for c, t, st in zip(curves, times, curves_at(curves, at)):
         for h in (st.heel, st.toe):  # the forward kinematics' rounding at the floor
             _on_floor(h)
-        out.append(
-            _Samples(
-                duration=c.duration,
-                time=t,
-                heel=st.heel,
-                toe=st.toe,
-                hip=st.hip,
-                knee_swing=st.knee_swing,
-                knee_stance=st.knee_stance,
-                joint_angles=st.joint_angles,
-                joint_velocity=st.joint_velocity,
-                joint_acceleration=st.joint_acceleration,
-                heel_velocity=st.heel_velocity,
-                heel_acceleration=st.heel_acceleration,
-                path_parameter=st.path_parameter,
-                joint_jerk=st.joint_jerk,
-            )
-        )
+        out.append(_Samples(c.duration, t, st))
     return out
 
 
