@@ -132,9 +132,9 @@ def test_a_first_plan_that_touches_is_replanned_higher(cfg):
     t = g0.generate(Obstacle.named("base1"), pivot="obstacle")
     assert t.ok
     assert t.notes[0].startswith("cfftg: 2 plan(s)")
-    paths, via, plans, gave_up, checks = g0.plan([g0.scene(Obstacle.named("base1"))])
-    assert plans[0] == 2 and not gave_up[0]
-    assert checks["min_clearance"][0] >= cfg.env.min_clearance
+    p = g0.plan([g0.scene(Obstacle.named("base1"))])
+    assert p.plans[0] == 2 and not p.gave_up[0]
+    assert p.checks.min_clearance[0] >= cfg.env.min_clearance
 
 
 def test_impossible_obstacle_is_a_reported_failure(gen):
@@ -144,8 +144,9 @@ def test_impossible_obstacle_is_a_reported_failure(gen):
     assert any("joint limits" in r for r in t.checks.reasons)
     assert f"gave up after {gen.max_plans} plans" in t.notes[0]
     # Joint-limit failures move the apex along y on every re-plan.
-    _, via, plans, gave_up, _ = gen.plan([gen.scene(too_high)])
-    assert plans[0] == gen.max_plans and gave_up[0]
+    p = gen.plan([gen.scene(too_high)])
+    via = p.via
+    assert p.plans[0] == gen.max_plans and p.gave_up[0]
     assert not np.isclose(
         via[0, 1, 0], too_high.center_y - 0.5 * 0.2
     )  # apex moved from its first place

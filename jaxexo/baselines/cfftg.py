@@ -1,50 +1,6 @@
-"""CFFTG: a polynomial Collision-Free Foot Trajectory Generator, the baseline of thesis 3.1-3.4.
-
-The generator the thesis compares against (its ref. [11]) is not public; the thesis says only that
-it is polynomial, always finds a trajectory given enough time, and takes about 2 ms (Table 3.11).
-This is the standard form of such a generator, in NumPy only (importable without JAX), returning
-the same checked ``Trajectory`` as the RL generator (``jaxexo.inference.assemble``: the same
-kinematics, clearance, goal, joint-limit and leg-length checks), so every metric applies to both.
-
-Decisions, each made here:
-
-- Path. The heel moves in the sagittal plane along two polynomials of normalised time s in [0, 1]
-  (t = s * duration):
-      z(s) = h * 64 s^3 (1 - s)^3 (1 + k (1 - 2s)^2)      apex h at s = 1/2,
-      y(s) = y0 + D (10 s^3 - 15 s^4 + 6 s^5 + c s^3 (1 - s)^3),   D = goal - start.
-  Both have zero velocity and zero acceleration at lift-off and touch-down (triple roots at s = 0
-  and 1), so the foot leaves and lands gently. ``k`` in FLATNESS = {0, 1, 2, 3} widens the top of
-  the height profile (k = 3 is the flattest with a single apex); each plan uses the k that needs
-  the lowest apex, so a wide obstacle gets a flat-topped path instead of a tall bell.
-  y is the minimum-jerk (quintic) profile plus a term that moves the
-  apex along y without touching those end conditions: y(1/2) = y0 + D (1/2 + c/64). ``c`` is kept
-  in [-10, 10], where y is monotone (dy/ds = D s^2 (1-s)^2 (30 + 3c (1 - 2s)) >= 0): the foot never
-  steps backwards. The path passes through the start (on the ground), the apex and the goal (on
-  the ground).
-- Apex position. Initially over the middle of the span of heel positions at which the flat foot
-  (heel to toe, ``foot_length``) overlaps the obstacle: y_apex = (left - foot_length + right) / 2.
-- Apex height. z is linear in h, so the lowest apex that keeps the foot ``margin`` above the
-  obstacle is computed exactly on the samples: at every sample the foot segment, widened by the
-  margin on both sides, must be above the highest point of the obstacle under it plus the margin;
-  h = max over samples of required height / z's shape. The lowest apex means the least joint
-  excursion. The initial margin is the reward's safety distance (eq 2.35, ``min_dt``), so
-  both generators aim for the same clearance.
-- Check. Every plan goes through the same safe-swing check as the RL generator's trajectories
-  (jaxexo.swing.trajectory: exact clearance of the moving foot between samples less the
-  polynomial's chord-deviation bound ``plan_deviation``, margin env.min_clearance; heel backward
-  motion; joint limits and leg length of both legs; goal reached).
-- Re-plan. A plan that fails is re-planned, per scene:
-  the foot comes within the margin -> raise the apex (margin += ``margin_step``);
-  joint limits or leg length exceeded -> move the apex along y, alternately towards and away from
-  the pivot heel (the hip sits above the midpoint of the heels, so an apex nearer the pivot keeps
-  the swing leg nearer under the hip), by ``apex_step`` metres, 1, 1, 2, 2, 3... steps out.
-  After ``max_plans`` plans without success the last plan is returned with ``ok`` False, its
-  failed checks in ``checks.reasons`` and a note that the planner gave up: a reported failure,
-  never a silent one.
-- Batch. ``generate_batch`` plans every scene at once with NumPy arrays (B, N); each round re-plans
-  only the scenes still failing. ``generate`` is the same code on a batch of one.
-- ``raw`` of the returned Trajectory holds the three via points (start, apex, goal); there is no
-  smoothing (``smoothing`` = 0: the polynomial is the path).
+"""CFFTG: a polynomial Collision-Free Foot Trajectory Generator, the baseline of thesis 3.1-3.4 (its
+ref. [11] is not public), in NumPy only, returning the same checked ``Trajectory`` as the RL
+generator. Its path, apex and re-planning: docs/generation.md (CFFTG, the polynomial baseline).
 """
 
 from __future__ import annotations
@@ -52,6 +8,7 @@ from __future__ import annotations
 import copy
 import functools
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -65,7 +22,13 @@ from jaxexo.physics.scene import (
 )
 from jaxexo.storage.policy_check import load_checked
 from jaxexo.swing.options import SceneMaker, SwingOptions, scenes_for
-from jaxexo.swing.trajectory import Trajectory, TrajectoryBatch, assemble, measure_paths
+from jaxexo.swing.trajectory import (
+    Measured,
+    Trajectory,
+    TrajectoryBatch,
+    assemble,
+    measure_paths,
+)
 
 DEFAULT_POINTS = 100
 C_MAX = 10.0  # |c| bound for a monotone y(s)
@@ -140,7 +103,7 @@ def profile_max(lo: np.ndarray, hi: np.ndarray, outline: np.ndarray) -> np.ndarr
 def plan_paths(
     start_y, goal_y, outline, apex_frac, margin, foot_length: float, n_points: int = DEFAULT_POINTS
 ):
-    """Heel paths (B, N, 2) and apex heights (B,) of the polynomial plan (see the module docstring).
+    """Heel paths (B, N, 2) and apex heights (B,) of the polynomial plan (docs/generation.md, CFFTG).
 
     ``apex_frac`` (B,): the apex's y as a fraction of the step (clipped to the monotone range);
     ``margin`` (B,): clearance asked of the foot, metres. Of the height shapes FLATNESS, each scene
@@ -162,6 +125,19 @@ def plan_paths(
     h = np.maximum(h_k[np.arange(len(best)), best], margin)
     h = np.where(np.isfinite(h), h, 0.0)  # infeasible: flat path, the checks report it
     return np.stack([y, h[:, None] * phi[best]], axis=-1), h
+
+
+@dataclass(frozen=True)
+class Plans:
+    """``CFFTG.plan`` of B scenes: the final paths (B, N, 2), the via points (B, 3, 2) (start, apex,
+    goal), the plans each scene needed (B,), whether it gave up (B,) and the final paths' checks
+    (jaxexo.swing.trajectory.Measured)."""
+
+    paths: np.ndarray
+    via: np.ndarray
+    plans: np.ndarray
+    gave_up: np.ndarray
+    checks: Measured
 
 
 class CFFTG(SceneMaker):
@@ -211,10 +187,8 @@ class CFFTG(SceneMaker):
         return cls(load_checked(path)[1], **kwargs)
 
     # Planning ---------------------------------------------------------------------------------------
-    def plan(self, scenes, n_points: int = DEFAULT_POINTS):
-        """Plan, check and re-plan every scene. Returns the final paths (B, N, 2), the via points
-        (B, 3, 2), the number of plans each scene needed (B,), whether it gave up (B,) and the checks
-        of the final paths (``jaxexo.swing.trajectory.measure``'s dict)."""
+    def plan(self, scenes, n_points: int = DEFAULT_POINTS) -> Plans:
+        """Plan, check and re-plan every scene (B of them)."""
         arr = stack_scenes(scenes, np.float64)
         b = len(scenes)
         foot = float(self.sp.foot_length)
@@ -248,8 +222,8 @@ class CFFTG(SceneMaker):
             )
             m = measure_paths(self.sp, p, [scenes[i] for i in todo], dev)
             checks = m if checks is None else _scatter(checks, m, todo)
-            ok = m["ok"]  # the one strict-success verdict (jaxexo.physics.outcome)
-            bad_kin = ~(m["joint_limits_ok"] & m["leg_length_ok"])
+            ok = m.ok  # the one strict-success verdict (jaxexo.physics.outcome)
+            bad_kin = ~(m.joint_limits_ok & m.leg_length_ok)
             fail = todo[~ok]
             # Joint limits or leg length: move the apex (alternately towards and away from the pivot).
             mv = fail[bad_kin[~ok]]
@@ -275,7 +249,7 @@ class CFFTG(SceneMaker):
             ],
             1,
         )
-        return paths, via, plans, gave_up, checks
+        return Plans(paths=paths, via=via, plans=plans, gave_up=gave_up, checks=checks)
 
     def at_clearance(self, clearance: float | None) -> "CFFTG":
         """This generator for swings that must keep ``clearance`` (m; None: env.min_clearance): the
@@ -293,23 +267,24 @@ class CFFTG(SceneMaker):
     def finish(self, scenes, n_points: int, duration: float) -> TrajectoryBatch:
         """Checked trajectories of validated scenes: planned, checked and re-planned (``plan``), with a
         note per scene of the plans it took and where the apex is."""
-        paths, via, plans, gave_up, checks = self.plan(scenes, n_points)
+        p = self.plan(scenes, n_points)
         notes = []
         for i in range(len(scenes)):
-            note = f"cfftg: {plans[i]} plan(s); apex y={via[i, 1, 0]:.3f} m, z={via[i, 1, 1]:.3f} m"
+            y, z = p.via[i, 1]
+            note = f"cfftg: {p.plans[i]} plan(s); apex y={y:.3f} m, z={z:.3f} m"
             notes.append(
-                (note + f"; gave up after {self.max_plans} plans",) if gave_up[i] else (note,)
+                (note + f"; gave up after {self.max_plans} plans",) if p.gave_up[i] else (note,)
             )
         return assemble(
             self.method,
             self.sp,
             scenes,
-            list(via),
-            paths,
+            list(p.via),
+            p.paths,
             np.zeros(len(scenes)),
             duration,
             notes,
-            measured=checks,
+            measured=p.checks,
         )
 
     def generate(
@@ -333,11 +308,8 @@ class CFFTG(SceneMaker):
         return o.checked(self.at_clearance(o.clearance).finish(scenes, o.n_points, o.duration))
 
 
-def _scatter(full: dict, part: dict, idx: np.ndarray) -> dict:
-    """Write the checks of re-planned scenes ``idx`` into the batch's checks (nested dicts of arrays)."""
-    for k, v in part.items():
-        if isinstance(v, dict):
-            _scatter(full[k], v, idx)
-        else:
-            full[k][idx] = v
+def _scatter(full: Measured, part: Measured, idx: np.ndarray) -> Measured:
+    """Write the checks of re-planned scenes ``idx`` into the batch's checks (in place)."""
+    for k, v in vars(part).items():
+        getattr(full, k)[idx] = v
     return full

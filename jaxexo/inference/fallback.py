@@ -12,17 +12,6 @@ import numpy as np
 from jaxexo.swing.trajectory import TrajectoryBatch
 
 
-def rows(batch: TrajectoryBatch, idx) -> TrajectoryBatch:
-    """The sub-batch of rows ``idx`` (in order)."""
-    changes = {}
-    for f in dataclasses.fields(batch):
-        v = getattr(batch, f.name)
-        if f.name in ("method", "time") or (f.name == "row_methods" and not v):
-            continue
-        changes[f.name] = tuple(v[i] for i in idx) if isinstance(v, tuple) else v[idx]
-    return dataclasses.replace(batch, **changes)
-
-
 def replace_failures(
     batch: TrajectoryBatch, planner, n_points: int, duration: float
 ) -> TrajectoryBatch:
@@ -43,7 +32,7 @@ def replace_failures(
     batch = dataclasses.replace(batch, notes=tuple(notes))
     if not take:
         return batch
-    sub = rows(dataclasses.replace(plan, method="cfftg-fallback", row_methods=()), take)
+    sub = dataclasses.replace(plan, method="cfftg-fallback", row_methods=()).take(take)
     sub = dataclasses.replace(
         sub, notes=tuple(notes[bad[j]] + sub.notes[n] for n, j in enumerate(take))
     )

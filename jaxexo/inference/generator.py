@@ -1,19 +1,9 @@
 """TrajectoryGenerator: an exported policy (policy.npz) driven greedily in NumPy, finished and checked.
 
-The rollout follows the training environment's rules exactly (jaxexo.physics.transition and .actions: the same move,
-goal, mid-goal and observation functions, step limit and collision handling) with the exported
-Q-network's greedy action (thesis 2.6). ``generate`` runs one scene in Python floats with the
-observation folded into the network's first layer (jaxexo.inference.network); ``generate_batch``
-runs NumPy arrays over the scenes still moving. With the shield, the chosen move is the first
-admissible one in order of Q, so the rollouts check moves in that order instead of all 19
-(jaxexo.shield's scalar form for one swing; its rows form's ``choose`` for a batch, in the reference's float32
-arithmetic); the plain reference (``plain_reference``, for tests) computes the whole mask every
-step. Both choose the same moves.
-
-The raw path is then finished (jaxexo.swing.finish: landed on the floor, smoothed, thesis 2.7;
-checked as a safe swing; retried) and, with ``fallback="cfftg"`` (the default), a swing that still
-fails is replaced by CFFTG's plan for its scene (jaxexo.inference.fallback). ``clearance=C`` asks for a margin C instead of the
-model's (``at_clearance``). The options are one checked record (jaxexo.swing.options.GenerateOptions).
+The rollout follows the training environment's rules (jaxexo.physics) with the exported Q-network's
+greedy action, shielded (jaxexo.shield's scalar form for one swing, its rows form for a batch); the
+raw path is finished (jaxexo.swing.finish) and, with ``fallback="cfftg"``, a failing swing is
+replaced by CFFTG's (jaxexo.inference.fallback). Method: docs/generation.md.
 """
 
 from __future__ import annotations
@@ -332,7 +322,7 @@ class TrajectoryGenerator(SceneMaker):
         (jaxexo.swing.options.GenerateOptions), whose fields the keywords replace:
         ``generate(obstacle, pivot="between", fallback=None)``. ``strict`` raises TrajectoryError
         instead of returning a trajectory that fails a check; ``fallback``: "cfftg" (CFFTG's plan
-        when the RL swing is not safe) or None (module docstring); ``clearance`` (m): the margin the
+        when the RL swing is not safe) or None (docs/generation.md, clearance and fallback); ``clearance`` (m): the margin the
         swing keeps (``at_clearance``); ``smoothing`` (m^2; None: the model's, ``self.smoothing``)."""
         gen, o, smoothing = self._prepared(options, overrides, "generate")
         scene = gen.scene(obstacle, *o.scene_args)

@@ -18,9 +18,15 @@ from jaxexo.physics import actions, geometry, transition
 from jaxexo.shield import rule
 
 
-def take_rows(lay, idx):
-    """Rows ``idx`` of stacked scenes (stack_scenes)."""
-    return type(lay)(**{k: v[idx] for k, v in vars(lay).items()})
+def take_rows(rec, idx, shared=()):
+    """Rows ``idx`` of a record whose fields have a leading axis (stacked scenes, a trajectory
+    batch): arrays indexed, tuples row by row; the fields named in ``shared`` are every row's."""
+    return type(rec)(
+        **{
+            k: v if k in shared else tuple(v[i] for i in idx) if isinstance(v, tuple) else v[idx]
+            for k, v in vars(rec).items()
+        }
+    )
 
 
 @dataclass

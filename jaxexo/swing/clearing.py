@@ -1,40 +1,7 @@
-"""Smoothing that keeps the margin: the thesis's B-spline (thesis 2.7, jaxexo.swing.smoothing),
-corrected as little as possible where it comes closer to the obstacle than the margin or moves the
-heel backward.
-
-The penalised spline of ``smoothing`` cuts the raw path's corners: with the thesis's s = 0.005 m^2
-over ~30 agent points the curve strays about a centimetre from them, and over an obstacle the corners
-it cuts are the ones the raw path bends around. Retrying with less smoothing (down to the raw
-polyline) keeps the margin but delivers a jagged curve that the joint drives must slow down for.
-Here the spline keeps its smoothness and is moved away from the obstacle only where it must be.
-
-For a fixed penalty weight lambda the spline's coefficients a minimise
-||W^1/2 (B a - P)||^2 + lambda ||D a||^2 = a' H a - 2 a' B' W P + const (P the agent's points).
-A correction da that moves the sampled curve E a by at least ``need_k`` along direction w_k at the
-samples of constraint k, at the least cost da' H da, is da = H^-1 sum_k mu_k F_k with F_k = E' w_k
-and mu >= 0 the solution of the dual  min 1/2 mu' A mu - need' mu, A_kl = F_k' H^-1 F_l  (an active-set
-solve: a few constraints per round). In the Demmler-Reinsch basis of
-jaxexo.swing.smoothing, H^-1 is diag(1 / (1 + lambda d)), so A costs a few small products.
-Constraints, each round, at the samples that fail:
-- clearance: the foot at a sample moves along the outward normal of the foot-obstacle distance (its
-  gradient, by central differences) by the shortfall of the exact swept clearance of the moves next
-  to it (jaxexo.physics.swept, less the curve's deviation bound), plus ``SLACK``;
-- forward motion: where the heel's y falls, the next sample's y is raised to the previous one's.
-After ``ROUNDS`` rounds, or as soon as nothing fails, or when a correction would move a sample more
-than ``MAX_SHIFT`` (or needs more than ``MAX_CONSTRAINTS`` constraints at once), the curve is
-returned with its deviation bound (the same bound as the plain spline's: jaxexo.swing.smoothing).
-The result is only a candidate: the generator's verdict (jaxexo.swing.trajectory) judges it
-exactly like any other curve, and a curve that still fails goes through the usual retries.
-
-Speed: ``clear_rows`` corrects many paths at once, each path's arithmetic its own (the
-same curve, bit for bit, in any batch as alone): the splines of one point count in stacked
-products, the exact clearances of all paths in one vectorised call per round and outline size,
-computed exactly only for the moves that can be under the margin's threshold or be the path's
-closest (``exact_clear_rows`` computes every move: the reference), and the dual systems in
-stacked Cholesky / LU solves of one size (lstsq's minimum-norm solution where a system is not
-safely positive definite). The last round's clearances of each curve come back with it
-(``Cleared``), so the generator's verdict does not measure the curve again, and the first round's
-(the plain spline of the requested smoothing) decide whether the plain spline already passes.
+"""Smoothing that keeps the margin: the thesis's B-spline (jaxexo.swing.smoothing) corrected as little
+as possible where it comes closer to the obstacle than the margin or moves the heel backward, many
+paths at once (``clear_rows``; ``exact_clear_rows``, every move exact, is its reference). Method:
+docs/generation.md (the fit and the correction).
 """
 
 from __future__ import annotations

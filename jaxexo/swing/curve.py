@@ -213,16 +213,22 @@ def _phases(q):
     return np.stack([q[..., 0], q[..., 0] + q[..., 1], q[..., 2], q[..., 2] + q[..., 3]], axis=-1)
 
 
-def heel_derivatives(lengths, pivot_y: float, qs: list[np.ndarray]) -> list[np.ndarray]:
+def segments(q: np.ndarray) -> np.ndarray:
+    """The unit vectors (n, 4, 2) along the legs' segments (from hip to knee, knee to heel) of joint
+    angles (n, 4): (sin phi, -cos phi) of their absolute angles."""
+    phi = _phases(q)
+    return np.stack([np.sin(phi), -np.cos(phi)], axis=-1)
+
+
+def heel_derivatives(lengths, pivot_y: float, qs: list[np.ndarray], e=None) -> list[np.ndarray]:
     """The swing heel (n, 2) and its derivatives (same order as ``qs``, up to the third) for joint
     values and derivatives qs = [q, q', q'', q'''] (each (n, 4)): forward kinematics from the pivot
     heel on the ground, heel = pivot + sum_i sign_i L_i e(phi_i), differentiated term by term
-    (e' = phi' e_perp, e_perp' = -phi' e)."""
+    (e' = phi' e_perp, e_perp' = -phi' e); ``e``: ``segments(qs[0])`` when known."""
     thigh, shin = lengths
     ln = _SIGN * np.array([thigh, shin, thigh, shin])
-    phi = _phases(qs[0])
-    e = np.stack([np.sin(phi), -np.cos(phi)], axis=-1)  # (n, 4, 2)
-    ep = np.stack([np.cos(phi), np.sin(phi)], axis=-1)
+    e = segments(qs[0]) if e is None else e  # (n, 4, 2)
+    ep = np.stack([-e[..., 1], e[..., 0]], axis=-1)  # (cos phi, sin phi), exactly
     out = [np.einsum("i,nik->nk", ln, e)]
     out[0][:, 0] += pivot_y  # a number, or one per row
     if len(qs) > 1:
@@ -237,21 +243,13 @@ def heel_derivatives(lengths, pivot_y: float, qs: list[np.ndarray]) -> list[np.n
     return out
 
 
-def leg_points(lengths, pivot_y: float, q: np.ndarray) -> dict[str, np.ndarray]:
-    """Hip, knees and swing heel (n, 2) each of joint angles (n, 4): the stance leg from the pivot
-    heel up to the hip, the swing leg down from it."""
+def leg_points(lengths, pivot_y: float, e: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Hip, swing knee and stance knee (n, 2) each of the legs' ``segments`` e (n, 4, 2): the
+    stance leg from the pivot heel up to the hip, the swing leg down from it."""
     thigh, shin = lengths
-    phi = _phases(q)
-    e = np.stack([np.sin(phi), -np.cos(phi)], axis=-1)
     hip = -thigh * e[:, 2] - shin * e[:, 3]
     hip[:, 0] += pivot_y  # a number, or one per row
-    knee_swing = hip + thigh * e[:, 0]
-    return {
-        "hip": hip,
-        "knee_swing": knee_swing,
-        "knee_stance": hip + thigh * e[:, 2],
-        "heel": knee_swing + shin * e[:, 1],
-    }
+    return hip, hip + thigh * e[:, 0], hip + thigh * e[:, 2]
 
 
 def heel_second_derivative_bounds(lengths, path: JointPath) -> np.ndarray:
@@ -487,7 +485,7 @@ def joints_at(paths, laws, times) -> list[tuple]:
 class CurveState:
     """The swing at times (n,): joints (n, 4) rad and their time derivatives (rad/s, rad/s^2,
     rad/s^3), the swing heel (n, 2) m with its velocity, acceleration and jerk (the toe moves with
-    it: the foot stays level), and the path parameter s (n,)."""
+    it: the foot stays level), the hip and both knees (n, 2) m, and the path parameter s (n,)."""
 
     time: np.ndarray
     path_parameter: np.ndarray
@@ -500,6 +498,9 @@ class CurveState:
     heel_acceleration: np.ndarray
     heel_jerk: np.ndarray
     toe: np.ndarray
+    hip: np.ndarray
+    knee_swing: np.ndarray
+    knee_stance: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -550,9 +551,11 @@ def curves_at(curves, times) -> list[CurveState]:
     counts = [len(t) for t in times]
     pivot = np.repeat([c.pivot_y for c in curves], counts)
     qs = [np.concatenate([r[1][o] for r in res]) for o in range(4)]
-    h = heel_derivatives(curves[0].lengths, pivot, qs)
+    e = segments(qs[0])  # one forward kinematics for the heel and the leg points
+    h = heel_derivatives(curves[0].lengths, pivot, qs, e)
     toe = h[0].copy()
     toe[:, 0] += curves[0].foot_length
     cut = np.cumsum(counts)[:-1]
-    cols = [np.split(x, cut) for x in (*qs, *h, toe)]
+    legs = leg_points(curves[0].lengths, pivot, e)
+    cols = [np.split(x, cut) for x in (*qs, *h, toe, *legs)]
     return [CurveState(t, r[0], *(c[b] for c in cols)) for b, (t, r) in enumerate(zip(times, res))]

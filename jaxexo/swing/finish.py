@@ -1,34 +1,13 @@
-"""Finish a path: a generator's raw heel points landed on the floor, smoothed (thesis 2.7), checked, and retried.
-
-First the raw path lands (``landed``): the policy stops in its goal box (env.goal_tolerance: up to
-5 mm above the floor on the default model, 2 cm on the thesis configs), so a path that reached the
-goal above the floor gains a last point on the floor, where the line of its last move meets it (straight below its end when that point is outside
-the goal box, jaxexo.physics.transition.goal_reached). The descent is then part of everything below:
-smoothed, corrected, retried and judged with the rest of the swing, and the swing ends with the
-whole foot on the floor.
-
-The raw path is smoothed with the requested s (jaxexo.swing.smoothing) and judged as a safe swing
-(jaxexo.swing.trajectory: exact clearance of the moving foot between samples less the curve's
-deviation bound, margin env.min_clearance). Smoothing cuts corners (clearance) and overshoots
-(backward heel motion), so a curve that fails where its raw path passes is retried, in order:
-
-1. the requested spline corrected as little as possible to keep the margin and move forward
-   (jaxexo.swing.clearing; off with ``clearing=False``);
-2. the per-path candidate smoothings s = M rho^2 (CANDIDATE_RESIDUALS, M raw points), smoothest first;
-3. less smoothing (RETRY_FACTORS of s), then the raw polyline.
-
-A retried curve is accepted with ACCEPT_HEADROOM to spare (``trajectory.passes``, the verdict's
-rule). ``Trajectory.smoothing`` and ``notes`` record what was used. A swing that ends short of the
-goal is not retried: every curve ends where its raw path does.
-
-The finisher measures each path's closest move exactly and bounds the others
-(``trajectory.path_clearances``), checks many curves in one call and hands the chosen curve's
-clearances to ``assemble``; ``PathFinisher(exact=True)`` is the plain reference (every move exact,
-each curve measured afresh). Both choose the same curves and give the same trajectories
-(tests/test_speed.py).
+"""Finish a path: a generator's raw heel points landed on the floor (``landed``), smoothed (thesis
+2.7), checked, and retried in order (the corrected spline, the per-path candidate smoothings, less
+smoothing, the raw polyline) until a curve keeps the margin. ``PathFinisher(exact=True)`` is the
+plain reference that the fast path is tested against. Method: docs/generation.md (the landing;
+smoothing and correction).
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -59,8 +38,33 @@ CLEARED_NOTE = (
 )
 
 
+@dataclass(frozen=True)
+class _Retry:
+    """One row's retried curve: its path (N, 2), the smoothing used (m^2; nan: the raw polyline),
+    notes, deviation bound (m) and, where its correction measured them, its (point, move)
+    clearances."""
+
+    path: np.ndarray
+    smoothing: float
+    notes: tuple
+    deviation: float
+    clearances: tuple | None = None
+
+
+@dataclass(frozen=True)
+class _Chosen:
+    """The curves chosen for B rows: paths (B, N, 2), deviation bounds (B,), smoothings and notes
+    per row, and ``measure``'s record of them when already known (None: assemble measures)."""
+
+    paths: np.ndarray
+    deviation: np.ndarray
+    smoothing: list
+    notes: list
+    measured: trajectory.Measured | None
+
+
 def landed(sp, raw: np.ndarray, goal_y: float) -> np.ndarray:
-    """The raw path (M, 2) with its landing (module docstring): unchanged when it ends on the floor or
+    """The raw path (M, 2) with its landing (docs/generation.md, the landing): unchanged when it ends on the floor or
     short of the goal (that swing fails its verdict however it ends); otherwise one more point on the
     floor, on the line of the last move when that move descends and the point is in the goal box,
     else straight below the end (in the box, as the end is)."""
@@ -100,8 +104,8 @@ def _candidate_note(smoothing, used):
 
 class PathFinisher:
     """Smooth, check and retry raw paths for the constants ``sp`` (jaxexo.config.scalar_params,
-    at the swing's clearance); ``clearing``: try the corrected spline (module docstring, step 1);
-    ``exact``: the plain reference (module docstring), which the fast path is tested against."""
+    at the swing's clearance); ``clearing``: try the corrected spline first;
+    ``exact``: the plain reference (every move exact, each curve measured afresh), which the fast path is tested against."""
 
     def __init__(self, sp, clearing: bool = True, exact: bool = False):
         self.sp, self.clearing, self.exact = sp, clearing, exact
@@ -155,7 +159,7 @@ class PathFinisher:
         requested spline corrected comes before the other candidates when the requested one fails.
         The fast path checks the requested smoothing first (through the correction's first round,
         which measures that very spline), then the correction, and the other candidates only when
-        both fail. Returns (paths (1, N, 2), deviations (1,), smoothings, notes, measured or None)."""
+        both fail. Returns the chosen curve (_Chosen, one row)."""
         cands = candidates(raw, smoothing)
         if not self.exact and self.clearing:
             got = clear_rows(
@@ -171,7 +175,7 @@ class PathFinisher:
                 if trajectory.passes(
                     self.sp, sw0.min(), d0, trajectory.backward_bound(p0, d0), ACCEPT_HEADROOM
                 ):
-                    return (
+                    return _Chosen(
                         p0[None],
                         np.array([d0]),
                         [cands[0]],
@@ -180,23 +184,14 @@ class PathFinisher:
                     )
                 cleared = self._judge_cleared([scene], [0], [got], smoothing)
                 if cleared:
-                    path, used, note, d, clear = cleared[0][1]
-                    return (
-                        path[None],
-                        np.array([d]),
-                        [used],
-                        [note],
-                        self._measured(
-                            scene, path[None], clear[0][None], clear[1][None], np.array([d])
-                        ),
-                    )
+                    return self._one_retry(scene, cleared[0][1])
                 paths, dev = sm.smooth_candidates(raw, n_points, cands)
                 ok, c, sw = self._other_candidates(
                     scene, paths, dev, np.zeros(1, bool), c0[None], sw0[None]
                 )
                 j = int(np.argmax(ok)) if ok.any() else 0
                 notes = [_candidate_note(smoothing, cands[j])] if j else [()]
-                return (
+                return _Chosen(
                     paths[j : j + 1],
                     dev[j : j + 1],
                     [cands[j]],
@@ -211,23 +206,14 @@ class PathFinisher:
             if not ok[0]:
                 cleared = self._cleared_rows([scene], [raw], [0], n_points, smoothing)
                 if cleared:
-                    path, used, note, d, clear = cleared[0][1]
-                    measured = (
-                        None
-                        if clear is None
-                        else self._measured(
-                            scene, path[None], clear[0][None], clear[1][None], np.array([d])
-                        )
-                    )
-                    return path[None], np.array([d]), [used], [note], measured
+                    return self._one_retry(scene, cleared[0][1])
                 ok, c, sw = self._other_candidates(scene, paths, dev, ok, c, sw)
         else:
             ok = self.margin_ok([scene] * len(cands), paths, dev)
             if not ok[0]:
                 cleared = self._cleared_rows([scene], [raw], [0], n_points, smoothing)
-                if cleared:
-                    path, used, note, d, _ = cleared[0][1]
-                    return path[None], np.array([d]), [used], [note], None  # assemble measures it
+                if cleared:  # assemble measures it
+                    return self._one_retry(scene, cleared[0][1], measure=False)
         j = int(np.argmax(ok)) if ok.any() else 0
         measured = (
             None
@@ -237,11 +223,21 @@ class PathFinisher:
             )
         )
         notes = [_candidate_note(smoothing, cands[j])] if j else [()]
-        return paths[j : j + 1], dev[j : j + 1], [cands[j]], notes, measured
+        return _Chosen(paths[j : j + 1], dev[j : j + 1], [cands[j]], notes, measured)
+
+    def _one_retry(self, scene, r: _Retry, measure: bool = True) -> _Chosen:
+        """One swing's retried curve ``r`` as chosen, measured from its clearances when known."""
+        measured = None
+        if measure and r.clearances is not None:
+            c, sw = r.clearances
+            measured = self._measured(
+                scene, r.path[None], c[None], sw[None], np.array([r.deviation])
+            )
+        return _Chosen(r.path[None], np.array([r.deviation]), [r.smoothing], [r.notes], measured)
 
     def _cleared_rows(self, scenes, raws, rows, n_points: int, smoothing: float):
         """Rows whose requested smoothing failed: the requested spline corrected (jaxexo.swing.clearing,
-        all rows' rounds together), as (row, (path, smoothing, notes, deviation, clearances)) for the
+        all rows' rounds together), as (row, _Retry) for the
         rows whose corrected curve passes (``_judge_cleared``)."""
         if not self.clearing or len(rows) == 0:
             return []
@@ -292,14 +288,14 @@ class PathFinisher:
             clear = [None] * len(rows)
         note = (CLEARED_NOTE.format(s=smoothing),)
         return [
-            (i, (paths[k], float(smoothing), note, dev[k], clear[k]))
+            (i, _Retry(paths[k], float(smoothing), note, dev[k], clear[k]))
             for k, i in enumerate(rows)
             if ok[k]
         ]
 
     def _candidate_rows(self, scenes, raws, rows, n_points: int, smoothing: float):
         """Rows whose requested smoothing failed: the first of their other candidates that passes, as
-        (row, (path, smoothing, notes, deviation)). One swing: all its candidates smoothed in one call;
+        (row, _Retry). One swing: all its candidates smoothed in one call;
         many: candidate by candidate over the rows still failing, each level in one call."""
         cands = {int(i): candidates(raws[i], smoothing)[1:] for i in rows}
         out = {}
@@ -319,7 +315,7 @@ class PathFinisher:
             ok = self.margin_ok([scenes[i] for i, _ in pairs], paths, dev)
             for k, (i, c) in enumerate(pairs):
                 if ok[k] and i not in out:
-                    out[i] = (paths[k], c, _candidate_note(smoothing, c), dev[k])
+                    out[i] = _Retry(paths[k], c, _candidate_note(smoothing, c), dev[k])
             level += 1
             wait = (
                 []
@@ -331,7 +327,7 @@ class PathFinisher:
     def _less_smoothing(self, scenes, raws, rows, n_points: int, smoothing: float):
         """The last retries of rows ``rows``: when the raw path keeps the margin, less smoothing
         (RETRY_FACTORS), then the raw polyline; each factor's curves of all rows still waiting checked
-        in one call. Returns (row, (path, smoothing used, notes, deviation)) in row order; a row whose
+        in one call. Returns (row, _Retry) in row order; a row whose
         raw path breaks the margin is left out (its smoothing is kept and the checks report it)."""
         pts = [sm.distinct(raws[i]) for i in rows]
         zero = np.zeros(len(rows))
@@ -369,11 +365,11 @@ class PathFinisher:
                         f"smoothing {smoothing:g} m^2 brought the foot within the safety margin or moved the "
                         f"heel back; {smoothing * f:g} m^2 used",
                     )
-                    out[j] = (cand[k], smoothing * f, note, dev[k])
+                    out[j] = _Retry(cand[k], smoothing * f, note, dev[k])
             wait = [j for k, j in enumerate(wait) if not ok[k]]
         for j in wait:
             path, dev = sm.linear_resample(raws[rows[j]], n_points, with_deviation=True)
-            out[j] = (
+            out[j] = _Retry(
                 path,
                 float("nan"),
                 (
@@ -386,8 +382,7 @@ class PathFinisher:
 
     def _many(self, scenes, raws, paths, dev, n_points: int, smoothing: float):
         """Many swings smoothed with ``smoothing``: the requested curves checked at once, then the rows
-        they fail retried (corrected spline, then candidates level by level). Returns (paths,
-        deviations, smoothings, notes, measured or None)."""
+        they fail retried (corrected spline, then candidates level by level): the chosen curves."""
         used = [smoothing] * len(raws)
         notes = [()] * len(raws)
         if not self.exact:
@@ -396,21 +391,21 @@ class PathFinisher:
             ok = self.margin_ok(scenes, paths, dev)
         cleared = self._cleared_rows(scenes, raws, np.flatnonzero(~ok), n_points, smoothing)
         done = {i for i, _ in cleared}
-        redo = [(i, r[:4]) for i, r in cleared] + self._candidate_rows(
+        redo = list(cleared) + self._candidate_rows(
             scenes, raws, [i for i in np.flatnonzero(~ok) if i not in done], n_points, smoothing
         )
         if redo:
             paths, dev, notes = paths.copy(), np.array(dev, np.float64), list(notes)
-            for i, (path, c, note, d) in redo:
-                paths[i], dev[i], used[i], notes[i] = path, d, c, note
+            for i, r in redo:
+                paths[i], dev[i], used[i], notes[i] = r.path, r.deviation, r.smoothing, r.notes
         if self.exact:
-            return paths, dev, used, notes, None
+            return _Chosen(paths, dev, used, notes, None)
         # assemble measures from the clearances already computed: the requested smoothing's (each
         # path's closest move exact), the corrected curves' own; the rest afresh
-        known = {i for i, r in cleared if r[4] is not None}
+        known = {i for i, r in cleared if r.clearances is not None}
         for i, r in cleared:
-            if r[4] is not None:
-                c_all[i], sw_all[i] = r[4]
+            if r.clearances is not None:
+                c_all[i], sw_all[i] = r.clearances
         fresh = sorted({i for i, _ in redo} - known)
         if fresh:
             _, c_all[fresh], sw_all[fresh] = self.margin_ok(
@@ -425,9 +420,9 @@ class PathFinisher:
             sw_all,
             dev,
         )
-        return paths, dev, used, notes, measured
+        return _Chosen(paths, dev, used, notes, measured)
 
-    def _measure(self, scenes, paths, deviation) -> dict:
+    def _measure(self, scenes, paths, deviation) -> trajectory.Measured:
         """``trajectory.measure_paths`` of curves on their scenes with this finisher's clearances."""
         paths = np.asarray(paths, dtype=np.float64)  # as assemble reads them
         return trajectory.measure_paths(
@@ -439,36 +434,32 @@ class PathFinisher:
     ) -> TrajectoryBatch:
         """Checked trajectories of raw paths (M_i, 2) on their scenes: smoothed with ``smoothing`` (m^2; 0:
         the raw polylines resampled), checked, and retried where a curve fails but its raw path
-        need not (module docstring). Each raw path lands first (``landed``); the trajectories' ``raw``
+        need not (docs/generation.md). Each raw path lands first (``landed``); the trajectories' ``raw``
         hold the landed paths."""
         raws = [landed(self.sp, r, sc.goal_y) for r, sc in zip(raws, scenes)]
-        notes = [()] * len(raws)
-        measured = None
         if smoothing > 0 and len(raws) == 1 and len(candidates(raws[0], smoothing)) > 1:
-            paths, dev, used, notes, measured = self._one_pass(
-                scenes[0], raws[0], n_points, smoothing
-            )
+            got = self._one_pass(scenes[0], raws[0], n_points, smoothing)
         elif smoothing > 0:
             paths, dev = sm.smooth_paths(raws, n_points, smoothing, with_deviation=True)
-            used = [smoothing] * len(raws)
+            got = _Chosen(paths, dev, [smoothing] * len(raws), [()] * len(raws), None)
             if len(raws) > 1:
-                paths, dev, used, notes, measured = self._many(
-                    scenes, raws, paths, dev, n_points, smoothing
-                )
+                got = self._many(scenes, raws, paths, dev, n_points, smoothing)
         else:
             both = [sm.linear_resample(r, n_points, with_deviation=True) for r in raws]
             paths, dev = np.stack([p for p, _ in both]), np.array([d for _, d in both])
-            used = [float("nan")] * len(raws)
+            got = _Chosen(paths, dev, [float("nan")] * len(raws), [()] * len(raws), None)
         batch = assemble(
             method,
             self.sp,
             scenes,
             raws,
-            paths,
-            used,
+            got.paths,
+            got.smoothing,
             duration,
-            notes,
-            measured if measured is not None else self._measure(scenes, paths, dev),
+            got.notes,
+            got.measured
+            if got.measured is not None
+            else self._measure(scenes, got.paths, got.deviation),
         )
         # Not for a swing that ends short of the goal: every curve ends where its raw path does, so no
         # smoothing can make it pass (the policy's failure, not the smoothing's).
@@ -482,16 +473,16 @@ class PathFinisher:
         if not redo:
             return batch
         idx = [i for i, _ in redo]
-        sub_scenes, sub_paths = [scenes[i] for i in idx], np.stack([fb[0] for _, fb in redo])
+        sub_scenes, sub_paths = [scenes[i] for i in idx], np.stack([r.path for _, r in redo])
         sub = assemble(
             method,
             self.sp,
             sub_scenes,
             [raws[i] for i in idx],
             sub_paths,
-            [fb[1] for _, fb in redo],
+            [r.smoothing for _, r in redo],
             duration,
-            [fb[2] for _, fb in redo],
-            self._measure(sub_scenes, sub_paths, np.array([fb[3] for _, fb in redo])),
+            [r.notes for _, r in redo],
+            self._measure(sub_scenes, sub_paths, np.array([r.deviation for _, r in redo])),
         )
         return batch.with_rows(idx, sub)

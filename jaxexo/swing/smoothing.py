@@ -1,36 +1,7 @@
-"""B-spline smoothing of generated heel paths (thesis 2.7, Algorithm 5), in metres, vectorised.
-
-The thesis fits ``splprep(points, k=3, s=0.5)`` and samples 100 equally spaced parameter values:
-a parametric cubic B-spline, as smooth as possible while the sum of squared residuals at the
-agent's points stays within s. Its coordinates were decimetres, so its s = 0.5 dm^2 is
-``DEFAULT_SMOOTHING = 0.005`` m^2 here. This module keeps that meaning of s and makes the fit a
-few matrix products, so that a batch of paths is smoothed at once:
-
-- Parameter: u_i = i / (M - 1) over the M agent points. Every agent move has the same length
-  (step_size), so this is splprep's chord-length parameter, except after a move clipped at the
-  ground; repeated points are dropped first.
-- Spline: cubic, clamped, M uniformly spaced basis functions (one per point, so s = 0 interpolates),
-  fitted by penalised least squares with the P-spline roughness penalty (squared second differences
-  of the coefficients). The penalty weight lambda is solved per path so that the residual sum
-  equals s; splprep reaches s by adapting its knots instead, so the curves differ slightly, the
-  constraint is the same. When even a straight-line fit stays within s, it is used.
-- Ends: the swing must leave and land where the agent did, so the first and last points weigh
-  END_WEIGHT in the fit and are then set exactly. The heel cannot go below the ground: spline
-  overshoot near lift-off and touch-down is clipped to z = 0 (a foot resting on the floor).
-- Paths of fewer than four distinct points are resampled as polylines.
-
-- Between samples: the checks measure the polyline through the returned samples exactly
-  (jaxexo.physics.swept) and subtract a bound on how far the curve strays from that polyline:
-  for a C2 curve c(u) the chord over a parameter step L deviates by at most L^2 max|c''| / 8, and
-  the second derivative of the cubic B-spline is a linear B-spline whose coefficients bound it
-  (convex hull), so ``smooth_padded(..., with_deviation=True)`` returns that bound per path. For a
-  polyline resampled at arc lengths the bound is exact: the largest distance of a skipped corner
-  from the chord that cuts it. Not covered: the clipping of z at the ground and the pinned ends,
-  which move the curve towards its own end points (away from any obstacle ahead of the toe).
-
-Per M, the generalised eigenbasis of (penalty, B'WB) is computed once (Demmler-Reinsch): in it the
-residual is sum_j (lambda d_j / (1 + lambda d_j))^2 |z_j|^2, so solving for lambda is a scalar
-root search per path, vectorised over the batch.
+"""B-spline smoothing of generated heel paths (thesis 2.7, Algorithm 5), in metres, vectorised: the
+thesis's splprep fit as a penalised B-spline solved in closed form, with the bound on the curve's
+distance from the polyline through its samples. Method: docs/generation.md (the fit and the
+correction).
 """
 
 from __future__ import annotations
@@ -216,7 +187,7 @@ def smooth_paths(
 ):
     """Smoothed heel paths (B, n_points, 2) for a list of raw agent paths (M_i, 2), metres;
     ``smoothing`` one value or one per path (m^2). ``with_deviation``: also (B,) bounds (m) on the
-    curve's distance from the polyline through its samples (module docstring)."""
+    curve's distance from the polyline through its samples (docs/safety.md)."""
     lengths = np.array([len(r) for r in raws])
     pts = np.zeros((len(raws), lengths.max(), 2))
     for i, r in enumerate(raws):

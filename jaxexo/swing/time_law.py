@@ -1,11 +1,6 @@
-"""The time-optimal passes of a device-ready swing: the rest-to-rest parametrisation s(t) of a
-joint path under velocity and acceleration limits (TOPP), on a uniform s grid.
-
-With x = s'^2 on a uniform s grid, the velocity limits cap x by (v_j / |q'_j|)^2 and the acceleration
-limits make the admissible s'' an interval [L(x), U(x)]; a backward pass from rest at the end
-decelerating at L bounds the speeds from which the end can still be reached, and a forward pass from
-rest accelerates at U under that bound (Bobrow 1985 / Pfeiffer-Johanni 1987, passes ordered as in
-TOPP-RA). jaxexo.swing.curve turns x into the smoothed time law s(t).
+"""The time-optimal passes (TOPP) of a device-ready swing: the rest-to-rest speeds s'^2 of a joint
+path on a uniform s grid under velocity and acceleration limits, which jaxexo.swing.curve turns into
+the smoothed time law s(t). The method: docs/device-timing.md (how the timing is computed).
 """
 
 from __future__ import annotations
@@ -111,10 +106,7 @@ def topp(
 ) -> tuple[np.ndarray, np.ndarray]:
     """The time-optimal rest-to-rest law on a uniform s grid (spacing ds) for joint derivatives
     dq, ddq (B, K, J): s'^2 (B, K), and per cell the least speed (B, K-1) of a cell crossed from
-    rest to rest. A backward pass from rest at the end at the smallest admissible s'' bounds the
-    speeds from which the end can still be reached; the forward pass from rest at the start
-    accelerates at the largest admissible s'' under that bound (as TOPP-RA orders the passes).
-    ``cap`` (B, K): further upper bounds on s'^2."""
+    rest to rest (the passes: module docstring). ``cap`` (B, K): further upper bounds on s'^2."""
     vmax = np.asarray(vmax, np.float64)
     amax = np.asarray(amax, np.float64)
     xmax = max_speed_curve(dq, ddq, vmax, amax)

@@ -1,20 +1,8 @@
 """Device-ready swings: a swing path timed rest to rest within the drives' limits, as a curve
 (jaxexo.swing.curve) with continuous joint acceleration and bounded jerk, and its samples at a
-controller's rate (NumPy only). Method and measurements: docs/device-timing.md.
-
-1. Path: the joints at the trajectory's samples, a C2 cubic spline in their joint-space chord length
-   (``curve.cubic_paths``); the heel follows by forward kinematics.
-2. Passes: the time-optimal law under the constraints' velocity caps and acceleration rows on a
-   uniform s grid (jaxexo.swing.time_law.topp, at SAFETY of the planned limits), then its speed
-   averaged over a window that the jerk limit sets (``curve.law_from_speeds``).
-3. Check on the curve: velocity, acceleration and jerk at CHECK_DT and at every breakpoint of the
-   law; where they exceed a limit the passes' caps are lowered there and the passes run again
-   (LOCAL_PASSES), and the rest is one uniform slow-down t -> k t, exact (1/k, 1/k^2, 1/k^3).
-4. Samples at the rate: the curve stretched to whole control periods (slower, so still within).
-   Samples at any other rate are ``TimedSwing.sample(rate)``; their finite differences are averages
-   of the curve's derivatives and so hold the limits too.
-
-Units: m, rad, s; limits in rad/s, rad/s^2, rad/s^3, one value per joint of JOINT_NAMES.
+controller's rate (NumPy only): the joint path, the time-optimal passes (jaxexo.swing.time_law),
+the check on the curve (jaxexo.swing.curve_check), the path checks and the samples. Method and
+measurements: docs/device-timing.md. Units: m, rad, s; limits per joint of JOINT_NAMES.
 """
 
 from __future__ import annotations
@@ -25,26 +13,30 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from jaxexo.config import MAX_CONTROL_RATE, MAX_SWING_DURATION, MIN_CONTROL_RATE
+from jaxexo.config import MAX_CONTROL_RATE, MIN_CONTROL_RATE
 from jaxexo.physics import kinematics
 from jaxexo.physics.scene import Scene
 from jaxexo.swing.curve import (
     CurveState,
-    JointPath,
     SwingCurve,
-    TimeLaw,
     check_grid,
     chord_knots,
     cubic_paths,
     curves_at,
     distinct_samples,
     heel_derivatives,
-    joints_at,
     law_from_speeds,
-    laws_at,
-    leg_points,
     pchip_eval,
     pchip_slopes,
+)
+from jaxexo.swing.curve_check import (
+    CHECK_MARGIN,
+    FinalLaw,
+    Plan,
+    final_law,
+    lowered_cap,
+    max_samples,
+    with_checks,
 )
 from jaxexo.swing.export import (
     JOINT_NAMES,
@@ -57,6 +49,7 @@ from jaxexo.swing.export import (
 from jaxexo.swing.limits import DeviceLimits, GridView, peak_ratio, speed_ratio
 from jaxexo.swing.time_law import topp
 from jaxexo.swing.trajectory import (
+    Measured,
     TrajectoryBatch,
     TrajectoryChecks,
     failure_reasons,
@@ -66,17 +59,12 @@ from jaxexo.swing.trajectory import (
 GRID_PER_KNOT = 2  # TOPP grid points per interval of the joint path's knots
 REFINE = 2.0  # a sample interval with a joint step over this many median steps is subdivided
 SAFETY = 0.95  # the TOPP passes use this fraction of each limit
-CHECK_MARGIN = 5e-3  # the curve must stay within (1 - this) of each limit at the check times
-CHECK_DT = 1e-3  # s: spacing of the check times (with every breakpoint of the time law) ...
-CHECK_PER_NODE = 16  # ... at most this many per node of the law
 LOCAL_PASSES = 2  # local corrections of the passes' caps, then one uniform slow-down
 LOCAL_FROM = 1.02  # ... for a curve over a limit by more than this factor (less: the slow-down)
-LOCAL_SLOWEST = 10.0  # a local correction slows a stretch by at most this factor
 BLEND_S = 0.03  # s: the time law's smoothing window, or longer where the jerk limit asks ...
 BLEND_FRACTION = 0.1  # ... at most this fraction of the time-optimal duration
 CURVE_TOL = 5e-5  # m: the checked polyline's largest distance from the heel curve
 GROUND_ROUNDING = 1e-12  # m: the forward kinematics' rounding at the floor (a picometre)
-BYTES_PER_SAMPLE = 1024  # twice what timing holds per exported sample (docs/reliability.md)
 
 
 @dataclass(frozen=True)
@@ -136,7 +124,7 @@ class TimedSwing:
         """The same curve sampled at ``rate`` Hz (MIN_CONTROL_RATE to MAX_CONTROL_RATE): one row per
         period from 0 until the first period at or after touch-down (the legs rest from there)."""
         rate = check_rate(rate)
-        return replace(self, rate=rate, **_samples([self.curve], rate)[0])
+        return replace(self, rate=rate, **_samples([self.curve], rate)[0].columns())
 
     def table(self) -> np.ndarray:
         return timed_table(self)
@@ -200,14 +188,6 @@ def _scalars(config):
     return scalar_params(config)
 
 
-def max_samples() -> int:
-    """The most samples one timed swing may have: half the machine's memory (8 GiB if unknown) at
-    BYTES_PER_SAMPLE, and at least 100,000 (10 s at 10 kHz)."""
-    from jaxexo.config.memory import machine_memory_bytes
-
-    return max(100_000, (machine_memory_bytes() or 8 * 2**30) // 2 // BYTES_PER_SAMPLE)
-
-
 def _on_floor(points: np.ndarray) -> None:
     """Heights (points[:, 1]) within GROUND_ROUNDING of the floor set to it, in place: the forward
     kinematics' rounding, not a motion."""
@@ -221,29 +201,6 @@ def _is_trajectory(t) -> bool:
 # --------------------------------------------------------------------------------------------
 # Timing
 # --------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class _Plan:
-    """One swing's timing state: its joint path, the passes' grid and caps, the law."""
-
-    path: JointPath
-    view: GridView  # B = 1
-    cap: np.ndarray  # (K,) caps on s'^2 from the local corrections
-    x: np.ndarray  # (K,) the passes' s'^2
-    law: TimeLaw | None
-    check: "_Check | None" = None
-
-
-@dataclass(frozen=True)
-class _Check:
-    """A law's curve at its check times t (n,): s (n,), [q, q-dot, q-ddot, q-dddot] (n, J), and
-    the peaks of |q-dot|, |q-ddot|, |q-dddot| over the times (J,) each."""
-
-    t: np.ndarray
-    s: np.ndarray
-    derivs: tuple
-    peaks: tuple
 
 
 def time_swing(
@@ -318,20 +275,28 @@ def time_swings(
         for i, p in enumerate(plans):
             if peak_ratio(check, p.check.peaks) > LOCAL_FROM:
                 ratio = speed_ratio(check, p.check.derivs)
-                plans[i] = replace(p, cap=_lowered_cap(p, ratio, p.check.s, p.check.t))
+                plans[i] = replace(p, cap=lowered_cap(p, ratio, p.check.s, p.check.t))
                 redo.append(i)
         if not redo:
             break
         plans = _run_passes(plans, redo, passes, window)
     checks = _path_checks(trajs, plans, sp)
-    finals = [_final_law(p, planned, rate, t) for p, t in zip(plans, t_opt)]
+    finals = [final_law(p, planned, rate, t) for p, t in zip(plans, t_opt)]
     curves = [
         SwingCurve(p.path, f.law, float(t.scene.pivot_y), (sp.thigh, sp.shin), sp.foot_length)
         for t, p, f in zip(trajs, plans, finals)
     ]
     samples = _samples(curves, rate)
     return [
-        _timed(trajs[i], plans[i], checks[i], finals[i], curves[i], samples[i], sp, device, rate)
+        _timed(
+            trajs[i],
+            _curve_verdict(trajs[i], plans[i], checks, i, finals[i].scale, sp),
+            finals[i],
+            curves[i],
+            samples[i],
+            device,
+            rate,
+        )
         for i in range(len(plans))
     ]
 
@@ -363,7 +328,7 @@ def _joint_samples(sp, traj) -> np.ndarray:
     return fine
 
 
-def _joint_paths(trajs, sp) -> list[_Plan]:
+def _joint_paths(trajs, sp) -> list[Plan]:
     """The joint paths of the swings (splines batched by sample count) and their passes' grids."""
     qs, knots = [], []
     for t in trajs:
@@ -385,11 +350,11 @@ def _joint_paths(trajs, sp) -> list[_Plan]:
         s = np.linspace(0.0, 1.0, k)
         _, dq, ddq = p.derivatives(s, 2)
         view = GridView(s, dq[None], ddq[None])
-        plans.append(_Plan(p, view, np.full(k, np.inf), np.zeros(k), None))
+        plans.append(Plan(p, view, np.full(k, np.inf), np.zeros(k), None))
     return plans
 
 
-def _run_passes(plans, idx, constraints, window: float) -> list[_Plan]:
+def _run_passes(plans, idx, constraints, window: float) -> list[Plan]:
     """The passes for plans[idx], batched per grid size; returns the plans with new laws."""
     plans = list(plans)
     idx = list(idx)
@@ -416,70 +381,22 @@ def _run_passes(plans, idx, constraints, window: float) -> list[_Plan]:
         for j, i in enumerate(sub):
             law = law_from_speeds(view.s, x[j], floor[j], window, BLEND_FRACTION)
             plans[i] = replace(plans[i], x=x[j], law=law)
-    return _with_checks(plans, idx)
+    return with_checks(plans, idx)
 
 
-def _check_times(paths, laws) -> list[np.ndarray]:
-    """Where each curve is checked: every CHECK_DT, and both sides of every breakpoint of the law
-    and of every knot of the path (where the jerk may jump), so that between check times the
-    velocity, acceleration and jerk are smooth and their maxima are caught to second order."""
-    # At most CHECK_PER_NODE points per node of the law: a very slow law (limits near zero, a
-    # path that nearly stops) is checked as finely relative to its own pieces, in bounded memory.
-    grids = [
-        np.linspace(
-            0.0,
-            law.duration,
-            max(
-                2, min(int(math.ceil(law.duration / CHECK_DT)), CHECK_PER_NODE * len(law.nodes)) + 1
-            ),
-        )
-        for law in laws
-    ]
-    out = []
-    for path, law, grid, lv in zip(paths, laws, grids, laws_at(laws, grids)):
-        d = law.duration
-        knots = np.interp(path.knots[1:-1], lv[0], grid)
-        b = np.concatenate([law.breakpoints(), knots])
-        eps = 1e-9 * max(d, 1e-9)
-        out.append(np.sort(np.clip(np.concatenate([grid, b - eps, b + eps]), 0.0, d)))
-    return out
+@dataclass(frozen=True)
+class _PathChecks:
+    """``_path_checks`` of B curves: ``measure``'s record of their heel polylines (B, N, 2), padded
+    to a common length N, at path parameters s (B, N), and where each curve's joints first leave
+    their range (s; None: never)."""
+
+    measured: Measured
+    heel: np.ndarray
+    s: np.ndarray
+    outside: list
 
 
-def _with_checks(plans, idx) -> list[_Plan]:
-    """plans[idx] with their curves evaluated at their check times (all in one evaluation)."""
-    plans = list(plans)
-    idx = list(idx)
-    paths, laws = [plans[i].path for i in idx], [plans[i].law for i in idx]
-    times = _check_times(paths, laws)
-    for i, t, (s, derivs) in zip(idx, times, joints_at(paths, laws, times)):
-        peaks = tuple(np.abs(d).max(axis=0) for d in derivs[1:])
-        plans[i] = replace(plans[i], check=_Check(t, s, tuple(derivs), peaks))
-    return plans
-
-
-def _lowered_cap(p: _Plan, ratio, s, t) -> np.ndarray:
-    """Where the curve exceeds a limit, the passes' cap on s'^2 lowered by the excess over the
-    stretch of s the law's window averages there (one window either side)."""
-    cap = p.cap.copy()
-    bad = np.flatnonzero(ratio > 1.0)
-    w = p.law.window
-    grid = p.view.s
-    lo = np.searchsorted(grid, np.interp(t[bad] - w, t, s), side="left") - 1
-    hi = np.searchsorted(grid, np.interp(t[bad] + w, t, s), side="right") + 1
-    lo, hi = np.maximum(lo, 0), np.minimum(hi, len(grid))
-    count = np.maximum(hi - lo, 0)
-    idx = np.repeat(lo - (np.cumsum(count) - count), count) + np.arange(int(count.sum()))
-    # At most LOCAL_SLOWEST slower per pass: a point far over a limit (a degenerate path) is left
-    # to the uniform slow-down, which is bounded, rather than crawled through at no speed.
-    factor = np.repeat((1.0 / np.minimum(ratio[bad], LOCAL_SLOWEST)) ** 2, count)
-    # Where the passes already stop (s'^2 = 0: the rest ends, a cusp) a lower cap changes nothing
-    # but the floor of the cells around it, which would then be crossed at no speed.
-    moving = p.x[idx] > 0.0
-    np.minimum.at(cap, idx[moving], p.x[idx[moving]] * factor[moving])
-    return cap
-
-
-def _path_checks(trajs, plans, sp) -> list:
+def _path_checks(trajs, plans, sp) -> _PathChecks:
     """The safe-swing checks of each curve, batched: the heel at ``curve.check_grid`` (every knot,
     and spaced so that the curve strays at most CURVE_TOL from the polyline through them), measured
     as that polyline less CURVE_TOL. Paths are padded with their last point to a common length (a
@@ -500,86 +417,30 @@ def _path_checks(trajs, plans, sp) -> list:
     n = max(len(h) for h in heels)
     padded = np.stack([np.concatenate([h, np.repeat(h[-1:], n - len(h), axis=0)]) for h in heels])
     m = measure_paths(sp, padded, [t.scene for t in trajs], np.full(len(trajs), CURVE_TOL))
-    pad = [np.concatenate([g, np.ones(n - len(g))]) for g in grids]
-    return [(m, i, padded[i], pad[i], outside[i]) for i in range(len(trajs))]
+    pad = np.stack([np.concatenate([g, np.ones(n - len(g))]) for g in grids])
+    return _PathChecks(m, padded, pad, outside)
 
 
-@dataclass(frozen=True)
-class _Final:
-    """A swing's final law: the passes' law slowed by ``scale`` (the uniform slow-down ``slow``,
-    the minimum duration, whole control periods), and the curve's peaks under it."""
-
-    law: TimeLaw
-    scale: float
-    slow: float
-    peaks: tuple  # |q-dot|, |q-ddot|, |q-dddot| maxima (J,) each
-    within: bool
-    notes: tuple
-
-
-def _final_law(p: _Plan, planned: DeviceLimits, rate: float, t_opt: float) -> _Final:
-    law = p.law
-    notes = []
-    slow = max(1.0, peak_ratio(planned.constraints(1.0 - CHECK_MARGIN), p.check.peaks))
-    longest = max(1.0, MAX_SWING_DURATION / law.duration)
-    if slow > longest:
-        notes.append(f"slowed to the longest swing ({MAX_SWING_DURATION:g} s); still over a limit")
-        slow = longest
-    scale = slow
-    if planned.min_duration > law.duration * scale:
-        notes.append(
-            f"the limits allow {t_opt:.3f} s; the minimum swing duration "
-            f"{planned.min_duration:.3f} s is used"
-        )
-        scale = planned.min_duration / law.duration
-    n = law.duration * scale * rate
-    if not n < max_samples():  # bounded before anything is allocated
-        raise ValueError(
-            f"rate: a {law.duration * scale:.4g} s swing at {rate:g} Hz needs {n:.4g} samples, more "
-            f"than half this machine's memory holds ({max_samples()}); lower the rate or check the "
-            "device limits (joint_velocity, joint_acceleration, joint_jerk, min_swing_duration)"
-        )
-    scale *= max(2, math.ceil(n - 1e-9)) / n  # whole control periods: never faster
-    # The check's values at the same curve points, slowed exactly (1/k, 1/k^2, 1/k^3).
-    peaks = tuple(pk / scale**o for o, pk in zip((1, 2, 3), p.check.peaks))
-    within = bool(
-        np.all(peaks[0] <= planned.velocity)
-        and np.all(peaks[1] <= planned.acceleration)
-        and (planned.jerk is None or np.all(peaks[2] <= planned.jerk))
-    )
-    return _Final(law.slowed(scale), scale, slow, peaks, within, tuple(notes))
-
-
-def _curve_verdict(traj, p: _Plan, chk, scale: float, sp) -> TrajectoryChecks:
-    """The path checks of the curve (``_path_checks``), with their times on the final law."""
-    m, j, heel, s_grid, outside = chk
+def _curve_verdict(traj, p: Plan, chk: _PathChecks, j: int, scale: float, sp) -> TrajectoryChecks:
+    """Curve j's path checks (``_path_checks``), with their times on the final law."""
+    m, outside = chk.measured, chk.outside[j]
     s_chk, t_chk = p.check.s, p.check.t
-    t_grid = np.interp(s_grid, s_chk, t_chk) * scale
-    reasons = failure_reasons(m, j, heel, traj.scene.goal_y, t_grid, sp)
-    if outside is not None and m["joint_limits_ok"][j]:
+    t_grid = np.interp(chk.s[j], s_chk, t_chk) * scale
+    reasons = failure_reasons(m, j, chk.heel[j], traj.scene.goal_y, t_grid, sp)
+    if outside is not None and m.joint_limits_ok[j]:
         t_out = float(np.interp(outside, s_chk, t_chk) * scale)
         reasons += (f"the joints leave their range at t={t_out:.3f} s",)
-    return TrajectoryChecks(
-        bool(m["reached_goal"][j]),
-        bool(m["collision_free"][j]),
-        float(m["min_clearance"][j]),
-        bool(m["joint_limits_ok"][j]) and outside is None,
-        bool(m["leg_length_ok"][j]),
-        reasons,
-        bool(m["clearance_ok"][j]),
-        bool(m["above_ground"][j]),
-        float(m["heel_backward"][j]),
-        float(m["deviation"][j]),
-    )
+    checks = TrajectoryChecks.row(m, j, reasons)
+    return replace(checks, joint_limits_ok=checks.joint_limits_ok and outside is None)
 
 
-def _timed(traj, p, chk, f: _Final, curve, samples, sp, device, rate) -> TimedSwing:
+def _timed(traj, checks, f: FinalLaw, curve, samples, device, rate) -> TimedSwing:
     return TimedSwing(
         method=traj.method,
         scene=traj.scene,
         rate=rate,
         limits=device,
-        checks=_curve_verdict(traj, p, chk, f.scale, sp),
+        checks=checks,
         within_limits=f.within,
         peak_velocity=f.peaks[0],
         peak_acceleration=f.peaks[1],
@@ -587,13 +448,47 @@ def _timed(traj, p, chk, f: _Final, curve, samples, sp, device, rate) -> TimedSw
         peak_jerk=f.peaks[2],
         notes=tuple(getattr(traj, "notes", ())) + f.notes,
         curve=curve,
-        **samples,
+        **samples.columns(),
     )
 
 
-def _samples(curves, rate: float) -> list[dict]:
-    """Each curve's TimedSwing sample columns at ``rate``: t = k / rate from 0 to the first period
-    at or after touch-down (all curves in one evaluation)."""
+# The columns of a TimedSwing's samples that the curve's state at the sample times gives.
+_STATE_COLUMNS = (
+    "heel",
+    "toe",
+    "hip",
+    "knee_swing",
+    "knee_stance",
+    "joint_angles",
+    "joint_velocity",
+    "joint_acceleration",
+    "heel_velocity",
+    "heel_acceleration",
+    "path_parameter",
+    "joint_jerk",
+)
+
+
+@dataclass(frozen=True)
+class _Samples:
+    """One curve's samples: its duration (s), the sample times (n,) and the curve's state there
+    (the last sample at touch-down)."""
+
+    duration: float
+    time: np.ndarray
+    state: CurveState
+
+    def columns(self) -> dict:
+        """TimedSwing's sample fields, by name."""
+        st = self.state
+        return {"duration": self.duration, "time": self.time} | {
+            k: getattr(st, k) for k in _STATE_COLUMNS
+        }
+
+
+def _samples(curves, rate: float) -> list[_Samples]:
+    """Each curve's samples at ``rate``: t = k / rate from 0 to the first period at or after
+    touch-down (all curves in one evaluation)."""
     times = []
     for c in curves:
         periods = max(2, math.ceil(c.duration * rate - 1e-9))
@@ -607,27 +502,9 @@ def _samples(curves, rate: float) -> list[dict]:
     at = [np.concatenate([t[:-1], [c.duration]]) for t, c in zip(times, curves)]
     out = []
     for c, t, st in zip(curves, times, curves_at(curves, at)):
-        pts = leg_points(c.lengths, c.pivot_y, st.joint_angles)
         for h in (st.heel, st.toe):  # the forward kinematics' rounding at the floor
             _on_floor(h)
-        out.append(
-            {
-                "duration": c.duration,
-                "time": t,
-                "heel": st.heel,
-                "toe": st.toe,
-                "hip": pts["hip"],
-                "knee_swing": pts["knee_swing"],
-                "knee_stance": pts["knee_stance"],
-                "joint_angles": st.joint_angles,
-                "joint_velocity": st.joint_velocity,
-                "joint_acceleration": st.joint_acceleration,
-                "heel_velocity": st.heel_velocity,
-                "heel_acceleration": st.heel_acceleration,
-                "path_parameter": st.path_parameter,
-                "joint_jerk": st.joint_jerk,
-            }
-        )
+        out.append(_Samples(c.duration, t, st))
     return out
 
 

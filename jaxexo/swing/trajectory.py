@@ -1,36 +1,21 @@
-"""A checked swing trajectory: the heel path with the exoskeleton's kinematics and its pass/fail checks.
-
-Every generator (the RL policy, CFFTG) produces a dense heel path per scene and hands it to
-``assemble``, so all trajectories are measured by one definition: the same kinematics
-(jaxexo.physics.kinematics: hip eq 2.42, knees eq 2.4-2.11, angles eq 2.49), the same foot-obstacle
-clearance (jaxexo.physics.geometry, the heel-toe segment against the outline) and the same goal, joint-limit
-and leg-length rules as the training environment (jaxexo.physics.transition, eq 2.45, 2.50). Units: metres,
-radians, seconds.
-
-A safe swing (``TrajectoryChecks.ok``; jaxexo.physics.outcome): the goal is reached; nothing is below the ground; the
-heel never moves backward by more than ``env.backward_tolerance``; joint limits and leg length are
-respected; and the foot's motion never comes closer than ``env.min_clearance`` to the obstacle. The
-clearance is not taken at the samples: between two samples the flat foot sweeps a parallelogram whose
-distance to the outline is exact (jaxexo.physics.swept), and the bound on how far the generator's
-curve strays from the polyline through its samples (``deviation``: the spline's chord bound
-L^2 max|c''| / 8, a resampled polyline's cut corners, CFFTG's polynomial's bound) is subtracted, so
-``min_clearance`` is a clearance that no denser sampling of the same curve can undercut. The heel's
-backward motion is measured the same way (polyline drawdown plus twice the deviation). Joint limits
-and leg length are checked at the samples (the kinematics are not linear between them).
+"""A checked swing trajectory: the heel path with the exoskeleton's kinematics and its pass/fail
+checks. Every generator hands its dense heel path to ``assemble``, so all swings are measured by one
+definition (the training environment's kinematics, clearance, goal and limit rules; the clearance
+guaranteed between the samples). The verdict: docs/safety.md (a safe swing). Units: m, rad, s.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from jaxexo.physics import geometry, kinematics, outcome, swept, transition
 from jaxexo.physics.scene import Scene
+from jaxexo.shield.rows import take_rows
 from jaxexo.swing.export import CSV_COLUMNS, scene_dict, write_csv, write_json
 
 DEFAULT_DURATION = 1.0  # s, swing duration for the time stamps
@@ -46,7 +31,8 @@ class TrajectoryError(RuntimeError):
 
 @dataclass(frozen=True)
 class TrajectoryChecks:
-    """The safe-swing checks of the final (smoothed) path (module docstring)."""
+    """The safe-swing checks of the final (smoothed) path (docs/safety.md): one swing's, or with a
+    leading axis B where a record holds many."""
 
     reached_goal: bool
     collision_free: bool  # the foot's motion never touches the obstacle
@@ -62,6 +48,48 @@ class TrajectoryChecks:
     @property
     def ok(self) -> bool:
         return not self.reasons
+
+    @classmethod
+    def row(cls, src, i: int, reasons: tuple[str, ...]) -> "TrajectoryChecks":
+        """Swing ``i``'s checks from a record whose check fields have a leading axis (``Measured``,
+        ``TrajectoryBatch``), with its failure ``reasons``."""
+        return cls(
+            reached_goal=bool(src.reached_goal[i]),
+            collision_free=bool(src.collision_free[i]),
+            min_clearance=float(src.min_clearance[i]),
+            joint_limits_ok=bool(src.joint_limits_ok[i]),
+            leg_length_ok=bool(src.leg_length_ok[i]),
+            reasons=reasons,
+            clearance_ok=bool(src.clearance_ok[i]),
+            above_ground=bool(src.above_ground[i]),
+            heel_backward=float(src.heel_backward[i]),
+            deviation=float(src.deviation[i]),
+        )
+
+
+@dataclass(frozen=True)
+class Measured:
+    """``measure``'s kinematics and checks of B heel paths of N samples: each field has the leading
+    axis B. The check fields are those of TrajectoryChecks and jaxexo.physics.outcome.CHECKS."""
+
+    swept_clearance: np.ndarray  # (B, N-1) m, over the moves between samples
+    hip: np.ndarray  # (B, N, 2)
+    knee_swing: np.ndarray  # (B, N, 2)
+    knee_stance: np.ndarray  # (B, N, 2)
+    angles: np.ndarray  # (B, N, 4) rad, JOINT_NAMES
+    limit_bad: np.ndarray  # (B, N) joints outside their limits
+    leg_bad: np.ndarray  # (B, N) a leg longer than thigh + shin
+    ok: np.ndarray  # (B,) every check holds (the verdict's success)
+    reached_goal: np.ndarray
+    collision_free: np.ndarray
+    min_clearance: np.ndarray  # (B,) m, guaranteed between the samples
+    clearance_ok: np.ndarray
+    above_ground: np.ndarray
+    heel_backward: np.ndarray  # (B,) m, deviation bound included
+    backward_ok: np.ndarray
+    joint_limits_ok: np.ndarray
+    leg_length_ok: np.ndarray
+    deviation: np.ndarray  # (B,) m
 
 
 @dataclass(frozen=True)
@@ -136,7 +164,8 @@ class Trajectory:
 
 @dataclass(frozen=True)
 class TrajectoryBatch:
-    """Many trajectories as stacked arrays (B, N, ...); ``batch[i]`` is the i-th Trajectory."""
+    """Many trajectories: each field but ``method`` and ``time`` (every row's) has a leading axis B,
+    arrays stacked (B, N, ...); ``batch[i]`` is the i-th Trajectory."""
 
     method: str
     scenes: tuple[Scene, ...]
@@ -170,62 +199,45 @@ class TrajectoryBatch:
         return np.array([not r for r in self.reasons], dtype=bool)
 
     def __getitem__(self, i: int) -> Trajectory:
-        checks = TrajectoryChecks(
-            bool(self.reached_goal[i]),
-            bool(self.collision_free[i]),
-            float(self.min_clearance[i]),
-            bool(self.joint_limits_ok[i]),
-            bool(self.leg_length_ok[i]),
-            self.reasons[i],
-            bool(self.clearance_ok[i]),
-            bool(self.above_ground[i]),
-            float(self.heel_backward[i]),
-            float(self.deviation[i]),
-        )
         return Trajectory(
-            self.row_methods[i] if self.row_methods else self.method,
-            self.scenes[i],
-            self.raw[i],
-            self.heel[i],
-            self.toe[i],
-            self.hip[i],
-            self.knee_swing[i],
-            self.knee_stance[i],
-            self.joint_angles[i],
-            self.time,
-            checks,
-            float(self.smoothing[i]),
-            self.notes[i],
+            method=self.row_methods[i] if self.row_methods else self.method,
+            scene=self.scenes[i],
+            raw=self.raw[i],
+            heel=self.heel[i],
+            toe=self.toe[i],
+            hip=self.hip[i],
+            knee_swing=self.knee_swing[i],
+            knee_stance=self.knee_stance[i],
+            joint_angles=self.joint_angles[i],
+            time=self.time,
+            checks=TrajectoryChecks.row(self, i, self.reasons[i]),
+            smoothing=float(self.smoothing[i]),
+            notes=self.notes[i],
         )
 
     def __iter__(self):
         return (self[i] for i in range(len(self)))
 
+    def take(self, idx) -> "TrajectoryBatch":
+        """The sub-batch of rows ``idx`` (in order)."""
+        return take_rows(
+            self, idx, ("method", "time") + (() if self.row_methods else ("row_methods",))
+        )
+
     def with_rows(self, idx, other: "TrajectoryBatch") -> "TrajectoryBatch":
         """This batch with rows ``idx`` replaced by ``other``'s rows (in order)."""
-        idx = [int(i) for i in idx]
-        changes = {}
-        for f in dataclasses.fields(self):
-            v = getattr(self, f.name)
-            if f.name in ("method", "time"):
-                continue
-            if f.name == "row_methods":
-                mine = list(v) if v else [self.method] * len(self)
-                theirs = other.row_methods or (other.method,) * len(idx)
-                for j, i in enumerate(idx):
-                    mine[i] = theirs[j]
-                changes[f.name] = tuple(mine)
-                continue
-            if isinstance(v, tuple):
-                v = list(v)
-                for j, i in enumerate(idx):
-                    v[i] = getattr(other, f.name)[j]
-                changes[f.name] = tuple(v)
-            else:
-                v = v.copy()
-                v[idx] = getattr(other, f.name)
-                changes[f.name] = v
-        return dataclasses.replace(self, **changes)
+        a, b = self._per_row(), other._per_row()
+        order = np.arange(len(a))
+        order[np.asarray(idx, np.int64)] = len(a) + np.arange(len(b))
+        joined = {
+            k: v + getattr(b, k) if isinstance(v, tuple) else np.concatenate([v, getattr(b, k)])
+            for k, v in vars(a).items()
+            if k not in ("method", "time")
+        }
+        return take_rows(replace(a, **joined), order, ("method", "time"))
+
+    def _per_row(self) -> "TrajectoryBatch":
+        return replace(self, row_methods=self.row_methods or (self.method,) * len(self))
 
 
 def _point_clearances(foot_length: float, heel: np.ndarray, scenes) -> np.ndarray:
@@ -297,7 +309,7 @@ def measure(
     goal_y: np.ndarray,
     swept_clearance: np.ndarray,
     deviation,
-) -> dict:
+) -> Measured:
     """Kinematics and safe-swing checks of heel paths (B, N, 2), vectorised, from their clearances at
     the samples (B, N), over the moves between them (B, N-1, ``path_clearances``) and the bound
     ``deviation`` (B,) of the curve from the polyline through the samples (m).
@@ -320,16 +332,9 @@ def measure(
         heel.shape[:-1] + (4,)
     )  # JOINT_NAMES order (filled in place: cheaper than stack)
     angles[..., 0], angles[..., 1], angles[..., 2], angles[..., 3] = hips[0], qs[0], hips[1], qs[1]
-    kin = {
-        "hip": hip,
-        "knee_swing": knees[0],
-        "knee_stance": knees[1],
-        "leg_swing": legs[0],
-        "leg_stance": legs[1],
-    }
     limit_bad = kinematics.legs_outside_limits(np, angles, sp.hip_limits, sp.knee_limits)
     leg_bad = kinematics.leg_too_long(
-        np, kin["leg_swing"], kin["leg_stance"], sp.thigh, sp.shin, sp.leg_length_tolerance
+        np, legs[0], legs[1], sp.thigh, sp.shin, sp.leg_length_tolerance
     )
     reached = transition.goal_reached(np, sp, heel[:, -1, 0], heel[:, -1, 1], goal_y)
     above_ground = heel[..., 1].min(axis=-1) >= 0.0
@@ -344,70 +349,70 @@ def measure(
         above_ground,
         **outcome.rule(sp),
     )
-    return {
-        "clearance": clearance,
-        "kin": kin,
-        "angles": angles,
-        "limit_bad": limit_bad,
-        "leg_bad": leg_bad,
-        "verdict": v,
-        "ok": v["success"],
-        "swept_clearance": swept_clearance,
-        "collision_free": v["collision_free"],
-        "min_clearance": guaranteed,
-        "clearance_ok": v["clearance_ok"],
-        "above_ground": v["above_ground"],
-        "heel_backward": backward,
-        "backward_ok": v["backward_ok"],
-        "deviation": dev,
-        "joint_limits_ok": v["joint_limits_ok"],
-        "leg_length_ok": v["leg_length_ok"],
-        "reached_goal": reached,
-    }
+    return Measured(
+        swept_clearance=swept_clearance,
+        hip=hip,
+        knee_swing=knees[0],
+        knee_stance=knees[1],
+        angles=angles,
+        limit_bad=limit_bad,
+        leg_bad=leg_bad,
+        ok=v["success"],
+        reached_goal=reached,
+        collision_free=v["collision_free"],
+        min_clearance=guaranteed,
+        clearance_ok=v["clearance_ok"],
+        above_ground=v["above_ground"],
+        heel_backward=backward,
+        backward_ok=v["backward_ok"],
+        joint_limits_ok=v["joint_limits_ok"],
+        leg_length_ok=v["leg_length_ok"],
+        deviation=dev,
+    )
 
 
 def failure_reasons(
-    m: dict, i: int, heel: np.ndarray, goal_y: float, time: np.ndarray, sp
+    m: Measured, i: int, heel: np.ndarray, goal_y: float, time: np.ndarray, sp
 ) -> tuple[str, ...]:
     """The failed checks of path i (jaxexo.physics.outcome.CHECKS, in order), each with where it failed."""
     out = []
-    for check in outcome.failed_checks(m["verdict"], i):
+    for check in outcome.failed_checks(vars(m), i):
         if check == "reached_goal":
             y, z = heel[-1]
             out.append(
                 f"did not reach the goal: ends at y={y:.3f} m, z={z:.3f} m, goal y={goal_y:.3f} m"
             )
         elif check == "clearance_ok":
-            sw = m["swept_clearance"][i]
+            sw = m.swept_clearance[i]
             j = int(np.argmin(sw)) if sw.size else 0
             when = f"between t={time[j]:.3f} s and t={time[min(j + 1, len(time) - 1)]:.3f} s"
-            if not m["collision_free"][i]:
+            if not m.collision_free[i]:
                 out.append(
-                    f"the foot touches the obstacle (min clearance {m['min_clearance'][i]:.4f} m {when})"
+                    f"the foot touches the obstacle (min clearance {m.min_clearance[i]:.4f} m {when})"
                 )
             else:
                 out.append(
-                    f"the foot passes within {m['min_clearance'][i]:.4f} m of the obstacle {when}, closer "
+                    f"the foot passes within {m.min_clearance[i]:.4f} m of the obstacle {when}, closer "
                     f"than the safety margin env.min_clearance = {sp.min_clearance:.4f} m"
                 )
         elif check == "above_ground":
             out.append(f"the heel goes below the ground (z={heel[:, 1].min():.4f} m)")
         elif check == "backward_ok":
-            out.append(_backward_reason(m["heel_backward"][i], heel, sp.backward_tolerance))
+            out.append(_backward_reason(m.heel_backward[i], heel, sp.backward_tolerance))
         elif check == "joint_limits_ok":
-            j = int(np.argmax(m["limit_bad"][i]))
-            a = np.degrees(m["angles"][i, j])
+            j = int(np.argmax(m.limit_bad[i]))
+            a = np.degrees(m.angles[i, j])
             out.append(
                 f"joint limits exceeded at t={time[j]:.3f} s (hip/knee swing {a[0]:.1f}/{a[1]:.1f} deg, "
                 f"stance {a[2]:.1f}/{a[3]:.1f} deg)"
             )
         else:
-            j = int(np.argmax(m["leg_bad"][i]))
+            j = int(np.argmax(m.leg_bad[i]))
             out.append(f"a leg would have to stretch beyond thigh + shin at t={time[j]:.3f} s")
     return tuple(out)
 
 
-def measure_paths(sp, paths: np.ndarray, scenes, deviation, clearances=None) -> dict:
+def measure_paths(sp, paths: np.ndarray, scenes, deviation, clearances=None) -> Measured:
     """``measure`` of heel paths (B, N, 2) on their scenes, clearances included: ``clearances`` (point,
     move) when known, else ``path_clearances``."""
     pivot_y = np.array([sc.pivot_y for sc in scenes])
@@ -484,7 +489,7 @@ def assemble(
     smoothing,
     duration: float = DEFAULT_DURATION,
     notes=None,
-    measured: dict | None = None,
+    measured: Measured | None = None,
     deviation=None,
 ) -> TrajectoryBatch:
     """Checked trajectories from dense heel paths (B, N, 2), one per scene; ``raws`` the generator's
@@ -503,7 +508,6 @@ def assemble(
     m = measured
     time = _time_stamps(n, float(duration)).copy()
     reasons = tuple(failure_reasons(m, i, paths[i], scenes[i].goal_y, time, sp) for i in range(b))
-    kin = m["kin"]
     toe = paths.copy()
     toe[..., 0] += sp.foot_length
     return TrajectoryBatch(
@@ -512,21 +516,21 @@ def assemble(
         raw=tuple(np.asarray(r, np.float64) for r in raws),
         heel=paths,
         toe=toe,
-        hip=kin["hip"],
-        knee_swing=kin["knee_swing"],
-        knee_stance=kin["knee_stance"],
-        joint_angles=m["angles"],
+        hip=m.hip,
+        knee_swing=m.knee_swing,
+        knee_stance=m.knee_stance,
+        joint_angles=m.angles,
         time=time,
-        reached_goal=m["reached_goal"],
-        collision_free=m["collision_free"],
-        min_clearance=m["min_clearance"],
-        joint_limits_ok=m["joint_limits_ok"],
-        leg_length_ok=m["leg_length_ok"],
+        reached_goal=m.reached_goal,
+        collision_free=m.collision_free,
+        min_clearance=m.min_clearance,
+        joint_limits_ok=m.joint_limits_ok,
+        leg_length_ok=m.leg_length_ok,
         reasons=reasons,
         smoothing=np.asarray(smoothing, np.float64).reshape(b),
         notes=tuple(notes) if notes is not None else ((),) * b,
-        clearance_ok=m["clearance_ok"],
-        above_ground=m["above_ground"],
-        heel_backward=m["heel_backward"],
-        deviation=m["deviation"],
+        clearance_ok=m.clearance_ok,
+        above_ground=m.above_ground,
+        heel_backward=m.heel_backward,
+        deviation=m.deviation,
     )

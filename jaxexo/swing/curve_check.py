@@ -1,0 +1,159 @@
+"""The check on a timed swing's curve: a time law's curve at its check times (``with_checks``),
+the passes' caps lowered where it exceeds a limit (``lowered_cap``), and the final law, slowed
+uniformly to the limits, the minimum duration and whole control periods (``final_law``). Used by
+jaxexo.swing.timing; the method: docs/device-timing.md.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from jaxexo.config import MAX_SWING_DURATION
+from jaxexo.swing.curve import JointPath, TimeLaw, joints_at, laws_at
+from jaxexo.swing.limits import DeviceLimits, GridView, peak_ratio
+
+CHECK_MARGIN = 5e-3  # the curve must stay within (1 - this) of each limit at the check times
+CHECK_DT = 1e-3  # s: spacing of the check times (with every breakpoint of the time law) ...
+CHECK_PER_NODE = 16  # ... at most this many per node of the law
+LOCAL_SLOWEST = 10.0  # a local correction slows a stretch by at most this factor
+BYTES_PER_SAMPLE = 1024  # twice what timing holds per exported sample (docs/reliability.md)
+
+
+def max_samples() -> int:
+    """The most samples one timed swing may have: half the machine's memory (8 GiB if unknown) at
+    BYTES_PER_SAMPLE, and at least 100,000 (10 s at 10 kHz)."""
+    from jaxexo.config.memory import machine_memory_bytes
+
+    return max(100_000, (machine_memory_bytes() or 8 * 2**30) // 2 // BYTES_PER_SAMPLE)
+
+
+@dataclass(frozen=True)
+class Plan:
+    """One swing's timing state: its joint path, the passes' grid and caps, the law."""
+
+    path: JointPath
+    view: GridView  # B = 1
+    cap: np.ndarray  # (K,) caps on s'^2 from the local corrections
+    x: np.ndarray  # (K,) the passes' s'^2
+    law: TimeLaw | None
+    check: "CurveCheck | None" = None
+
+
+@dataclass(frozen=True)
+class CurveCheck:
+    """A law's curve at its check times t (n,): s (n,), [q, q-dot, q-ddot, q-dddot] (n, J), and
+    the peaks of |q-dot|, |q-ddot|, |q-dddot| over the times (J,) each."""
+
+    t: np.ndarray
+    s: np.ndarray
+    derivs: tuple
+    peaks: tuple
+
+
+def check_times(paths, laws) -> list[np.ndarray]:
+    """Where each curve is checked: every CHECK_DT, and both sides of every breakpoint of the law
+    and of every knot of the path (where the jerk may jump), so that between check times the
+    velocity, acceleration and jerk are smooth and their maxima are caught to second order."""
+    # At most CHECK_PER_NODE points per node of the law: a very slow law (limits near zero, a
+    # path that nearly stops) is checked as finely relative to its own pieces, in bounded memory.
+    grids = [
+        np.linspace(
+            0.0,
+            law.duration,
+            max(
+                2, min(int(math.ceil(law.duration / CHECK_DT)), CHECK_PER_NODE * len(law.nodes)) + 1
+            ),
+        )
+        for law in laws
+    ]
+    out = []
+    for path, law, grid, lv in zip(paths, laws, grids, laws_at(laws, grids)):
+        d = law.duration
+        knots = np.interp(path.knots[1:-1], lv[0], grid)
+        b = np.concatenate([law.breakpoints(), knots])
+        eps = 1e-9 * max(d, 1e-9)
+        out.append(np.sort(np.clip(np.concatenate([grid, b - eps, b + eps]), 0.0, d)))
+    return out
+
+
+def with_checks(plans, idx) -> list[Plan]:
+    """plans[idx] with their curves evaluated at their check times (all in one evaluation)."""
+    plans = list(plans)
+    idx = list(idx)
+    paths, laws = [plans[i].path for i in idx], [plans[i].law for i in idx]
+    times = check_times(paths, laws)
+    for i, t, (s, derivs) in zip(idx, times, joints_at(paths, laws, times)):
+        peaks = tuple(np.abs(d).max(axis=0) for d in derivs[1:])
+        plans[i] = replace(plans[i], check=CurveCheck(t, s, tuple(derivs), peaks))
+    return plans
+
+
+def lowered_cap(p: Plan, ratio, s, t) -> np.ndarray:
+    """Where the curve exceeds a limit, the passes' cap on s'^2 lowered by the excess over the
+    stretch of s the law's window averages there (one window either side)."""
+    cap = p.cap.copy()
+    bad = np.flatnonzero(ratio > 1.0)
+    w = p.law.window
+    grid = p.view.s
+    lo = np.searchsorted(grid, np.interp(t[bad] - w, t, s), side="left") - 1
+    hi = np.searchsorted(grid, np.interp(t[bad] + w, t, s), side="right") + 1
+    lo, hi = np.maximum(lo, 0), np.minimum(hi, len(grid))
+    count = np.maximum(hi - lo, 0)
+    idx = np.repeat(lo - (np.cumsum(count) - count), count) + np.arange(int(count.sum()))
+    # At most LOCAL_SLOWEST slower per pass: a point far over a limit (a degenerate path) is left
+    # to the uniform slow-down, which is bounded, rather than crawled through at no speed.
+    factor = np.repeat((1.0 / np.minimum(ratio[bad], LOCAL_SLOWEST)) ** 2, count)
+    # Where the passes already stop (s'^2 = 0: the rest ends, a cusp) a lower cap changes nothing
+    # but the floor of the cells around it, which would then be crossed at no speed.
+    moving = p.x[idx] > 0.0
+    np.minimum.at(cap, idx[moving], p.x[idx[moving]] * factor[moving])
+    return cap
+
+
+@dataclass(frozen=True)
+class FinalLaw:
+    """A swing's final law: the passes' law slowed by ``scale`` (the uniform slow-down ``slow``,
+    the minimum duration, whole control periods), and the curve's peaks under it."""
+
+    law: TimeLaw
+    scale: float
+    slow: float
+    peaks: tuple  # |q-dot|, |q-ddot|, |q-dddot| maxima (J,) each
+    within: bool
+    notes: tuple
+
+
+def final_law(p: Plan, planned: DeviceLimits, rate: float, t_opt: float) -> FinalLaw:
+    law = p.law
+    notes = []
+    slow = max(1.0, peak_ratio(planned.constraints(1.0 - CHECK_MARGIN), p.check.peaks))
+    longest = max(1.0, MAX_SWING_DURATION / law.duration)
+    if slow > longest:
+        notes.append(f"slowed to the longest swing ({MAX_SWING_DURATION:g} s); still over a limit")
+        slow = longest
+    scale = slow
+    if planned.min_duration > law.duration * scale:
+        notes.append(
+            f"the limits allow {t_opt:.3f} s; the minimum swing duration "
+            f"{planned.min_duration:.3f} s is used"
+        )
+        scale = planned.min_duration / law.duration
+    n = law.duration * scale * rate
+    if not n < max_samples():  # bounded before anything is allocated
+        raise ValueError(
+            f"rate: a {law.duration * scale:.4g} s swing at {rate:g} Hz needs {n:.4g} samples, more "
+            f"than half this machine's memory holds ({max_samples()}); lower the rate or check the "
+            "device limits (joint_velocity, joint_acceleration, joint_jerk, min_swing_duration)"
+        )
+    scale *= max(2, math.ceil(n - 1e-9)) / n  # whole control periods: never faster
+    # The check's values at the same curve points, slowed exactly (1/k, 1/k^2, 1/k^3).
+    peaks = tuple(pk / scale**o for o, pk in zip((1, 2, 3), p.check.peaks))
+    within = bool(
+        np.all(peaks[0] <= planned.velocity)
+        and np.all(peaks[1] <= planned.acceleration)
+        and (planned.jerk is None or np.all(peaks[2] <= planned.jerk))
+    )
+    return FinalLaw(law.slowed(scale), scale, slow, peaks, within, tuple(notes))
