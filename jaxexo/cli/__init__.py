@@ -20,23 +20,6 @@ from jaxexo.cli.sweep import cmd_sweep
 from jaxexo.cli.train import cmd_train
 from jaxexo.cli.walk import cmd_walk
 
-__all__ = [
-    "DEFAULT_CONFIG",
-    "build_parser",
-    "cmd_bench",
-    "cmd_bench_env",
-    "cmd_eval",
-    "cmd_generate",
-    "cmd_mjcf",
-    "cmd_replay",
-    "cmd_reproduce",
-    "cmd_sweep",
-    "cmd_train",
-    "cmd_walk",
-    "main",
-    "obstacle_from_args",
-]
-
 DESCRIPTION = (
     "The ``jaxexo`` command line. Subcommands import JAX lazily, after the CPU-device setup."
 )

@@ -4,7 +4,7 @@ Method: docs/safety.md, "Replayed in a physics engine"."""
 
 from __future__ import annotations
 
-from jaxexo.cli.common import check_paths, check_rate
+from jaxexo.cli.common import check_paths, check_rate, option_values
 from jaxexo.cli.scene import add_scene_args, add_sim_policy, scene_from_args
 
 
@@ -31,19 +31,12 @@ def cmd_replay(args) -> int:
         "rl": lambda: rl.generate(scene.obstacle, fallback=None, **common),
         "cfftg": lambda: CFFTG(config).generate(scene.obstacle, **common),
     }
+    options = option_values(
+        args, "rate", "driven", "half_limits", "controller", "reference", "reference_rate"
+    )
     replays = []
     for name in ("rl", "cfftg") if args.method == "both" else (args.method,):
-        r = replay_swing(
-            name,
-            gens[name](),
-            config,
-            rate=args.rate,
-            driven=args.driven,
-            half_limits=args.half_limits,
-            controller=args.controller,
-            reference=args.reference,
-            reference_rate=args.reference_rate,
-        )
+        r = replay_swing(name, gens[name](), config, **options)
         print("\n".join(r.lines()))
         replays.append(r)
     if args.json:

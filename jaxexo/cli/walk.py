@@ -3,24 +3,13 @@ device, written as CSV/JSON, plotted and animated. Method: docs/walking.md."""
 
 from __future__ import annotations
 
-from jaxexo.cli.common import (
-    add_fallback,
-    add_method,
-    add_policy,
-    check_clearance,
-    check_rate,
-    fallback,
-    generator,
-    option_values,
-    swing_outputs,
-    write_outputs,
-)
+from jaxexo.cli import common
 
 
 def cmd_walk(args) -> int:
-    swing_outputs(args, [("--policy", args.policy), ("--terrain", args.terrain)])
-    check_rate(args.rate, "--rate")
-    fallback_method = fallback(args)
+    common.swing_outputs(args, [("--policy", args.policy), ("--terrain", args.terrain)])
+    common.check_rate(args.rate, "--rate")
+    fallback_method = common.fallback(args)
     from jaxexo.course.ground import check_number
 
     # The course's own checks, before any policy or terrain is read, naming the options as typed.
@@ -28,13 +17,15 @@ def cmd_walk(args) -> int:
     check_number("--goal-y", args.goal_y)
     check_number("--steps", args.steps, 1, integer=True)
     check_number("--double-support", args.double_support, 0.0)
-    gen = generator(args)
-    check_clearance(args.clearance, gen.config)
+    gen = common.generator(args)
+    common.check_clearance(args.clearance, gen.config)
     from jaxexo.course import plan_course
     from jaxexo.storage.terrain_file import read_terrain
 
     terrain = read_terrain(args.terrain)
-    kw = option_values(args, "start_y", "goal_y", "steps", "rate", "clearance", "double_support")
+    kw = common.option_values(
+        args, "start_y", "goal_y", "steps", "rate", "clearance", "double_support"
+    )
     if args.method == "rl":
         kw["fallback"] = fallback_method
     course = plan_course(
@@ -43,7 +34,7 @@ def cmd_walk(args) -> int:
     from jaxexo.plots.animate import animate_course
     from jaxexo.plots.plot import plot_course
 
-    written = write_outputs(
+    written = common.write_outputs(
         args,
         course,
         lambda path: plot_course(course, path),
@@ -75,15 +66,17 @@ def _report_course(course, source) -> None:
 
 def add_options(w) -> None:
     """The `jaxexo walk` options."""
-    add_policy(w)
+    common.add_policy(w)
     w.add_argument(
         "--terrain",
         required=True,
         help="the ground profile: a CSV (y,z per line) or JSON "
         '({"points": [[y, z], ...]}) file, m, y increasing, z >= 0',
     )
-    add_method(w, "rl: the trained policy's swings; cfftg: CFFTG's swings on the same footholds")
-    add_fallback(
+    common.add_method(
+        w, "rl: the trained policy's swings; cfftg: CFFTG's swings on the same footholds"
+    )
+    common.add_fallback(
         w, "when an RL swing is not safe, use CFFTG's (cfftg, reported per step) or stop (none)"
     )
     w.add_argument(

@@ -406,31 +406,15 @@ def driven_replay(
     reference: str = "curve",
     reference_rate: float | None = None,
 ) -> dict:
-    """The driven replay of a TimedSwing (module docstring) with the drives' ``limits`` (a
-    DeviceLimits; default: the config's [device]) and a ``controller``:
-
-    - "pd_ff": what an exoskeleton's joint controller does: the inverse-dynamics torque of the
-      reference (``feed_forward``) plus a PD loop on the position and velocity error
-      (``_pd_gains``), on the setpoints' positions, velocities and accelerations.
-    - "servo": stiff position servos (SERVO_KP, critically damped) on the setpoints' positions
-      alone: with no velocity term a servo lags a moving reference by 2 / omega times its speed.
-
-    The ``reference`` the setpoints follow, for both (``reference_states``):
-
-    - "curve" (default): the timed swing's curve, its position, velocity and acceleration at every
-      physics step (``timed.at``).
-    - "quintic", "cubic", "linear": the swing sampled at ``reference_rate`` Hz (default: its own
-      rate; ``timed.sample``) and interpolated between the samples as a drive or a ROS 2
-      joint_trajectory_controller does: the quintic Hermite of positions, velocities and
-      accelerations, the cubic Hermite of positions and velocities, or straight lines between the
-      positions (for comparison only: its velocity jumps at every sample).
-
-    A setpoint generator then moves each command towards the reference within the velocity and
-    acceleration limits (``setpoints``); saturated where it clips.
-
-    The commands are computed first (they do not depend on the simulation), then MuJoCo rolls the
-    model out in one call (mujoco.rollout) and its sensors give the sites and the foot-obstacle
-    distances. Returns SI figures."""
+    """The driven replay of a TimedSwing (docs/safety.md): a setpoint generator (``setpoints``)
+    moves each command towards the ``reference`` (``reference_states``: "curve", the timed curve at
+    every physics step; "quintic", "cubic" or "linear", its samples at ``reference_rate`` Hz, default
+    its own rate, interpolated as a drive does) within the drives' ``limits`` (a DeviceLimits;
+    default: the config's [device]), and the ``controller`` drives the legs after it: "pd_ff",
+    inverse-dynamics feed-forward (``feed_forward``) plus a PD loop (``_pd_gains``); "servo", stiff
+    position servos on the positions alone (they lag a moving reference by 2 / omega times its
+    speed). The commands are computed first (they do not depend on the simulation), then MuJoCo
+    rolls the model out in one call. Returns SI figures."""
     limits = _check_driven(config, limits, settle, controller)
     ref_rate = check_reference(timed, reference, reference_rate)
     t0 = time.perf_counter()

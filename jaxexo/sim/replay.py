@@ -11,32 +11,13 @@ import time
 import numpy as np
 
 from jaxexo.physics import geometry
-from jaxexo.sim.driven import (
-    driven_replay,
-    feed_forward,
-    hermite,
-    interpolate,
-    reference_states,
-)
+from jaxexo.sim.driven import driven_replay
+from jaxexo.sim.driven import feed_forward as feed_forward  # the replay's face re-exports
+from jaxexo.sim.driven import hermite as hermite
+from jaxexo.sim.driven import interpolate as interpolate
+from jaxexo.sim.driven import reference_states as reference_states
 from jaxexo.sim.legs import Legs, require_mujoco
 from jaxexo.sim.mjcf import DISTMAX, SWING_LEG, SimError
-
-# The replay's public face: the driven replay and the MuJoCo model are reached from here too.
-__all__ = [
-    "Legs",
-    "brute_force_distance",
-    "driven_replay",
-    "feed_forward",
-    "fine_angles",
-    "hermite",
-    "interpolate",
-    "kinematic_replay",
-    "reference_states",
-    "replay_trajectories",
-    "require_mujoco",
-    "summarize_driven",
-    "summarize_kinematic",
-]
 
 SUBSTEPS = 4  # kinematic poses per control period (the sample and 3 between)
 SAME_POSE = 1e-6  # m: MuJoCo's heel this close to jaxexo's is the same pose

@@ -62,38 +62,22 @@ class SwingReplay:
 
 
 def replay_swing(
-    name: str,
-    traj,
-    config,
-    *,
-    rate: float | None = None,
-    driven: bool = False,
-    half_limits: bool = False,
-    controller: str = "pd_ff",
-    reference: str = "curve",
-    reference_rate: float | None = None,
+    name: str, traj, config, *, rate=None, driven=False, half_limits=False, **drive
 ) -> SwingReplay:
-    """A generator's swing ``traj`` timed for the device at ``rate`` (default: the config's
+    """A generator's swing ``traj`` timed for the device at ``rate`` Hz (default: the config's
     control_rate) and replayed: kinematically, and with ``driven`` at the [device] limits (also at
-    HALF_LIMITS of them with ``half_limits``) by ``controller`` following ``reference``
-    (``driven_replay``)."""
+    HALF_LIMITS of them with ``half_limits``); ``drive``: ``driven_replay``'s controller, reference
+    and reference_rate."""
     from jaxexo.swing.timing import DeviceLimits, time_swing
 
     timed = time_swing(traj, config, rate=rate)
     legs = Legs(config, timed.scene)
     kinematic = kinematic_replay(timed, config, legs=legs)
     scales = (("driven", 1.0), ("driven_half_limits", HALF_LIMITS))[: 2 if half_limits else 1]
+    limits = DeviceLimits.from_config(config)
     figures = {
-        label: driven_replay(
-            timed,
-            config,
-            limits=DeviceLimits.from_config(config).scaled(scale, scale),
-            legs=legs,
-            controller=controller,
-            reference=reference,
-            reference_rate=reference_rate,
-        )
-        for label, scale in (scales if driven else ())
+        label: driven_replay(timed, config, limits=limits.scaled(s, s), legs=legs, **drive)
+        for label, s in (scales if driven else ())
     }
     return SwingReplay(name, timed, kinematic, figures)
 
