@@ -314,9 +314,10 @@ def test_sweep_member_configs_roundtrip(path):
 
 def test_cli_default_is_the_packaged_file():
     from jaxexo import cli
+    from jaxexo.cli.common import load
 
     assert cli.DEFAULT_CONFIG.resolve() == (PACKAGE / "default.toml").resolve()
-    cfg, name = cli._load(None)
+    cfg, name = load(None)
     assert cfg == load_config(ROOT / "configs" / "default.toml") and name == str(cli.DEFAULT_CONFIG)
     # One default: the packaged default is Config(), and a missing file is refused
     # (tests/test_config.py), never read as an empty one.

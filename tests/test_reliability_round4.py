@@ -236,10 +236,10 @@ def test_generate_refuses_outputs_and_options_it_cannot_honour(tmp_path, args, n
 
 
 def test_an_animation_named_gif_is_accepted_in_any_case(tmp_path):
-    from jaxexo.cli import _check_output_file
+    from jaxexo.cli.common import check_output_file
 
-    _check_output_file("--animate", tmp_path / "walk.GIF")
-    _check_output_file("--animate", "-")  # standard output takes the bytes as they are
+    check_output_file("--animate", tmp_path / "walk.GIF")
+    check_output_file("--animate", "-")  # standard output takes the bytes as they are
 
 
 def test_walk_and_generate_share_one_fallback_rule(tmp_path):

@@ -245,7 +245,7 @@ def test_feed_forward_torques_alone_carry_the_legs_along_the_reference(config):
     any reference state, where gravity alone lets them drift away: an independent check of the
     rigid inverse dynamics in feed_forward."""
     from jaxexo.baselines import CFFTG
-    from jaxexo.sim.replay import _equalities_on
+    from jaxexo.sim.driven import _equalities_on
     from jaxexo.swing.timing import time_swing
 
     timed = time_swing(
@@ -375,7 +375,7 @@ def _cfftg_swing(config, name="base1", rate=100.0):
 def test_the_curve_reference_is_the_curve_at_every_physics_step(config):
     """reference="curve": the setpoints follow timed.at at every physics step, position, velocity
     and acceleration; a sampled reference meets the samples at theirs."""
-    from jaxexo.sim.replay import _simulate
+    from jaxexo.sim.driven import _simulate
 
     timed = _cfftg_swing(config, "base2")
     legs = Legs(config, timed.scene)

@@ -62,6 +62,30 @@ def test_generate_refuses_values_below_a_swings_scale(tmp_path, capsys, extra, n
     assert list(tmp_path.iterdir()) == []
 
 
+RATE_REFUSAL = "--rate: control rate must be between 10 and 10000 Hz, got 5"
+
+
+def test_walk_refuses_a_rate_below_the_bound_naming_the_option(tmp_path, capsys):
+    """The one rate check (the timing's), at the boundary: before the terrain is read."""
+    terrain = tmp_path / "none.csv"  # never read: the refusal comes first
+    err = cli_error(
+        capsys, "walk", "--method", "cfftg", "--terrain", terrain, "--out", tmp_path / "w.csv",
+        "--rate", "5",
+    )  # fmt: skip
+    assert RATE_REFUSAL in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("option", ["--rate", "--reference-rate"])
+def test_replay_refuses_a_rate_below_the_bound_naming_the_option(tmp_path, capsys, option):
+    """replay's rates by the same check, before MuJoCo or the policy is needed."""
+    err = cli_error(
+        capsys, "replay", "--policy", tmp_path / "none.npz", "--obstacle", "base1", option, "5"
+    )
+    assert RATE_REFUSAL.replace("--rate", option) in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_the_api_refuses_the_same_values(generator):
     from jaxexo.baselines import CFFTG
     from jaxexo.swing.timing import time_swing

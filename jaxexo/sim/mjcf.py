@@ -14,7 +14,7 @@ sagittal plane is y = 0, hinge axes along -y so that a positive angle flexes lik
 - position actuators on the four hip and knee joints, their command ranges the joint limits; the
   [device] joint velocity and acceleration limits are written as custom numerics
   (``device_joint_velocity``, ``device_joint_acceleration``, rad/s and rad/s^2 per joint of
-  ``ACTUATED``), which the driven replay's setpoint generator obeys (jaxexo.sim.replay);
+  ``ACTUATED``), which the driven replay's setpoint generator obeys (jaxexo.sim.driven);
 - the ground, a plane ``FOOT_RADIUS`` below z = 0 (a foot on the ground touches it), and the
   obstacle as convex mesh prisms (jaxexo.sim.pieces), which only the feet collide with;
 - a site ``pivot`` on the ground where the stance heel stands, and an equality that holds the stance

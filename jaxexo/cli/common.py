@@ -1,0 +1,207 @@
+"""What the subcommands share: the default config, the output-path checks, the options checked by
+the library's own checkers under the name the user typed (``--rate``), and generate's and walk's
+generator, fallback and output files. NumPy only; JAX is imported by the subcommands that train."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+# Shipped inside the package (package data), so the default model is the same however jaxexo is
+# installed; the repository's configs/default.toml is a byte-equal copy.
+DEFAULT_CONFIG = Path(__file__).resolve().parent.parent / "config" / "default.toml"
+
+# A file name to suggest for each output file (its kind's suffix).
+OUTPUT_EXAMPLES = {
+    "--out": "trajectory.csv",
+    "--json": "trajectory.json",
+    "--plot": "swing.png",
+    "--animate": "swing.gif",
+}
+
+
+def load(path):
+    """The config at ``path`` (None: the packaged default) and the path as text."""
+    from jaxexo.config import load_config
+
+    path = DEFAULT_CONFIG if path is None else path
+    return load_config(path), str(path)
+
+
+def check_output_file(option: str, value) -> None:
+    """An output path must name a file in an existing folder: refused before any work (and before any
+    temporary file is made next to it)."""
+    if value is None:
+        return
+    text = str(value)
+    if not text:
+        raise ValueError(
+            f"{option}: the option is empty; give a file name (e.g. {OUTPUT_EXAMPLES[option]})"
+        )
+    p = Path(value)
+    if text.endswith(("/", "\\")) or p.is_dir():
+        raise ValueError(
+            f"{option}: {text} is a directory; give a file name (e.g. {p / OUTPUT_EXAMPLES[option]})"
+        )
+    if option == "--animate":
+        _check_animation_name(text)
+    if not p.parent.is_dir():
+        _check_folder_part(option, p.parent, text)
+        raise ValueError(f"{option}: the folder {p.parent} does not exist (for {text})")
+
+
+def _check_animation_name(text: str) -> None:
+    """--animate writes a GIF (Pillow's writer): its file is named .gif, or is a special output
+    (``-``, a device, a FIFO) that takes the bytes as they are."""
+    from jaxexo.storage.atomic import direct_output
+
+    if Path(text).suffix.lower() != ".gif" and not direct_output(text):
+        raise ValueError(
+            f"--animate: {text} would hold GIF data (the animation is written as a GIF); "
+            f"name it .gif (e.g. {Path(text).with_suffix('.gif')})"
+        )
+
+
+def _check_folder_part(option: str, folder: Path, text: str) -> None:
+    """Refuse a path whose nearest existing ancestor is a file (``afile/t.csv``), saying so."""
+    from jaxexo.storage.rundir import blocking_file
+
+    q = blocking_file(folder)
+    if q is not None:
+        raise ValueError(f"{option}: {q} is a file, not a folder (for {text})")
+
+
+def _same_file(a, b) -> bool:
+    """Whether two paths name one file: the same path after symbolic links, or the same inode."""
+    if os.path.realpath(a) == os.path.realpath(b):
+        return True
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def check_paths(inputs, outputs) -> None:
+    """Each output a file in an existing folder (``check_output_file``), none replacing an input,
+    no two sharing a path: refused before any work. ``inputs``, ``outputs``: (option, path or
+    None) pairs."""
+    for option, value in outputs:
+        check_output_file(option, value)
+    outs = [(o, v) for o, v in outputs if v is not None]
+    for i, (option, value) in enumerate(outs):
+        for other, v in outs[:i]:
+            if _same_file(value, v):
+                raise ValueError(
+                    f"{option}: {value} is also the {other} output; give each output its own path"
+                )
+        for other, v in inputs:
+            if v is not None and _same_file(value, v):
+                raise ValueError(
+                    f"{option}: {value} is the {other} input; an output never replaces an input, "
+                    "pick another path"
+                )
+
+
+def check_rate(rate, option: str = "--rate") -> None:
+    """A control-rate option (Hz; None: not given) by the timing's own check (check_rate, the
+    [device] control_rate bounds), the message naming the option as typed."""
+    if rate is not None:
+        from jaxexo.swing.timing import check_rate as check
+
+        check(rate, option)
+
+
+def check_count(value, option: str, lo: int = 1) -> None:
+    """A whole-number option (a count; None: not given) at least ``lo``, refused naming it."""
+    if value is not None and value < lo:
+        raise ValueError(f"{option}: must be >= {lo}, got {value}")
+
+
+def check_clearance(clearance, config) -> None:
+    """--clearance against the model's env.min_clearance, before any work (names the option)."""
+    from jaxexo.physics.scene import check_clearance as check
+
+    try:
+        check(clearance, config.env.min_clearance)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"--{e}") from None
+
+
+def option_values(args, *names, **renamed) -> dict:
+    """Keyword arguments from the parsed options: ``name=args.name`` for each of ``names`` and
+    ``key=args.<option>`` for each ``key=option`` of ``renamed``."""
+    return {
+        **{n: getattr(args, n) for n in names},
+        **{k: getattr(args, v) for k, v in renamed.items()},
+    }
+
+
+def swing_outputs(args, inputs):
+    """generate's and walk's output files (--out, --json, --plot, --animate, --ros) as (option,
+    path), checked against each other and the ``inputs`` (``check_paths``)."""
+    outputs = (
+        ("--out", args.out),
+        ("--json", args.json),
+        ("--plot", args.plot),
+        ("--animate", args.animate),
+        ("--ros", getattr(args, "ros", None)),
+    )
+    check_paths(inputs, outputs)
+    return outputs
+
+
+def generator(args):
+    """The generator --method names: CFFTG (with the kinematics and joint limits of --policy's
+    config when one is given) or the trained policy."""
+    if args.method == "cfftg":
+        from jaxexo.baselines import CFFTG
+
+        return CFFTG.from_policy(args.policy) if args.policy else CFFTG(load(None)[0])
+    if not args.policy:
+        raise ValueError("--policy: required with --method rl (the trained policy.npz)")
+    from jaxexo.inference import TrajectoryGenerator
+
+    return TrajectoryGenerator.load(args.policy)
+
+
+def write_outputs(args, data, draw, animate) -> list[str]:
+    """``data`` (a swing or a course) as --out's CSV and --json's JSON, --plot drawn by
+    ``draw(path)`` and --animate by ``animate(path)`` (None: no GIF); the files written, in order."""
+    data.to_csv(args.out)
+    written = [args.out]
+    for path, write in ((args.json, data.to_json), (args.plot, draw), (args.animate, animate)):
+        if path and write is not None:
+            write(path)
+            written.append(path)
+    return written
+
+
+def add_policy(p) -> None:
+    """generate's and walk's --policy: the model, or for cfftg only its kinematics."""
+    p.add_argument(
+        "--policy",
+        help="policy.npz written by jaxexo train (required for --method rl; for cfftg it "
+        "supplies the kinematics, default: configs/default.toml)",
+    )
+
+
+def add_method(p, helptext: str) -> None:
+    """generate's and walk's --method: the RL generator or CFFTG."""
+    p.add_argument("--method", choices=("rl", "cfftg"), default="rl", help=helptext)
+
+
+def add_fallback(p, helptext: str) -> None:
+    """generate's and walk's --fallback: what stands in for an RL swing that is not safe (not given:
+    None, read by ``fallback``)."""
+    p.add_argument("--fallback", choices=("cfftg", "none"), help=helptext + " (default: cfftg)")
+
+
+def fallback(args) -> str | None:
+    """--fallback's one rule for generate and walk: --method rl only (given with --method cfftg it is
+    refused, whatever its value); not given, "cfftg"; "none" is None."""
+    if args.method == "cfftg" and args.fallback is not None:
+        raise ValueError(
+            f"--fallback: applies to --method rl only (CFFTG plans every swing itself), got "
+            f"--fallback {args.fallback} with --method cfftg"
+        )
+    return None if args.fallback == "none" else "cfftg"

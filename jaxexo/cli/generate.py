@@ -1,0 +1,178 @@
+"""``jaxexo generate``: one checked swing from the trained policy or CFFTG, optionally timed for the
+device, written as CSV/JSON/ROS 2, plotted and animated. Method: docs/generation.md."""
+
+from __future__ import annotations
+
+import sys
+
+from jaxexo.cli.common import (
+    add_fallback,
+    add_method,
+    add_policy,
+    check_clearance,
+    check_rate,
+    fallback,
+    generator,
+    option_values,
+    swing_outputs,
+    write_outputs,
+)
+from jaxexo.cli.scene import add_scene_args, obstacle_from_args
+
+
+def cmd_generate(args) -> int:
+    outputs = swing_outputs(args, [("--policy", args.policy), ("--profile", args.profile)])
+    if args.obstacle is not None and args.profile is not None:
+        raise ValueError(
+            "--obstacle, --profile: give one of them (a named shape, or a profile file)"
+        )
+    if args.method == "cfftg" and args.smoothing is not None:
+        raise ValueError(
+            "--smoothing: applies to --method rl only (CFFTG's polynomial path is not smoothed)"
+        )
+    fallback_method = fallback(args)
+    from jaxexo.storage.atomic import writes_to_stdout
+    from jaxexo.swing.options import check_duration, check_points
+
+    # The generators' own checks, before any policy is read (the message names the option).
+    check_rate(args.rate, "--rate")
+    if args.ros and args.rate is None:
+        raise ValueError("--ros: a ROS 2 JointTrajectory is a timed swing; give --rate too")
+    check_points(args.points, "--points")
+    check_duration(args.duration, "--duration")
+    obstacle = obstacle_from_args(args)
+    # An output on standard output (-, /dev/stdout) keeps it for the data: messages go to stderr.
+    report = sys.stderr if any(writes_to_stdout(v) for _, v in outputs) else sys.stdout
+    common = option_values(
+        args,
+        "pivot",
+        "pivot_y",
+        "start_y",
+        "step_length",
+        "duration",
+        "clearance",
+        n_points="points",
+    )
+    gen = generator(args)
+    check_clearance(args.clearance, gen.config)
+    if args.method == "cfftg":
+        traj = gen.generate(obstacle, **common)
+    else:
+        traj = gen.generate(obstacle, smoothing=args.smoothing, fallback=fallback_method, **common)
+    timed = _timed_swing(args, traj, gen.config)
+    from jaxexo.plots.animate import animate_swing
+    from jaxexo.plots.plot import plot_trajectory
+
+    written = write_outputs(
+        args,
+        timed or traj,
+        lambda path: plot_trajectory(traj, path),
+        lambda path: animate_swing(timed, path),
+    )
+    if args.ros:
+        timed.to_joint_trajectory(args.ros)
+        written.append(args.ros)
+    ok = _report_swing(traj, timed, report)
+    print("wrote " + ", ".join(written), file=report)
+    return 0 if ok else 1
+
+
+def _timed_swing(args, traj, config):
+    """The swing timed for the device ([device] limits of the config) at --rate (default: the
+    config's control_rate) when --rate or --animate is asked for; else None (uniform time stamps)."""
+    if args.rate is None and not args.animate:
+        return None
+    from jaxexo.swing.timing import time_swing
+
+    return time_swing(traj, config, rate=args.rate)
+
+
+def _report_swing(traj, timed, report) -> bool:
+    """The summary of a swing (and its device timing) on ``report``; whether it is ok."""
+    import numpy as np
+
+    c = traj.checks
+    moves = (
+        f"{len(traj.raw) - 1} agent moves"
+        if traj.method == "rl"
+        else (
+            "polynomial path (CFFTG fallback: the RL swing was not safe)"
+            if traj.method == "cfftg-fallback"
+            else "polynomial path (CFFTG)"
+        )
+    )
+    print(
+        f"{traj.scene.obstacle.kind} {traj.scene.width * 100:.1f} x {traj.scene.height * 100:.1f} cm, pivot "
+        f"{traj.scene.pivot}: {moves}, min clearance (between samples, guaranteed) {c.min_clearance * 100:.1f} cm, "
+        f"{'ok' if c.ok else 'FAILED'}",
+        file=report,
+    )
+    for r in c.reasons + traj.notes:
+        print(f"  {r}", file=report)
+    if timed is None:
+        return c.ok
+    print(
+        f"device timing: {timed.duration:.2f} s swing at {timed.rate:g} Hz, peak joint velocity "
+        f"{np.degrees(timed.peak_velocity.max()):.0f} deg/s, acceleration "
+        f"{np.degrees(timed.peak_acceleration.max()):.0f} deg/s^2, "
+        f"{'within' if timed.within_limits else 'OUTSIDE'} the limits",
+        file=report,
+    )
+    for r in timed.reasons:
+        if r not in c.reasons:
+            print(f"  {r}", file=report)
+    return c.ok and timed.ok
+
+
+def add_options(g) -> None:
+    """The `jaxexo generate` options."""
+    add_policy(g)
+    add_method(g, "rl: the trained policy; cfftg: the polynomial baseline (jaxexo.baselines.cfftg)")
+    add_scene_args(g)
+    g.add_argument("--points", type=int, default=100, help="samples of the smoothed path")
+    add_fallback(
+        g, "when the RL swing is not safe, return CFFTG's plan (cfftg) or the RL swing alone (none)"
+    )
+    g.add_argument(
+        "--smoothing",
+        type=float,
+        help="B-spline smoothing s, m^2 (0: raw polyline; default: the model's, 0.001 for a "
+        "shielded model, the thesis's 0.005 otherwise); rl only",
+    )
+    g.add_argument(
+        "--clearance",
+        type=float,
+        help="m the swing keeps from the obstacle (default: the model's "
+        "env.min_clearance; at most 0.10); the verdict judges against it",
+    )
+    g.add_argument(
+        "--duration",
+        type=float,
+        default=1.0,
+        help="swing duration for the time stamps, s (ignored with --rate)",
+    )
+    g.add_argument(
+        "--rate",
+        type=float,
+        help="device-ready output: the shortest rest-to-rest timing within the "
+        "config's [device] joint limits, sampled at this rate (Hz); the CSV "
+        "and JSON gain joint velocities and accelerations",
+    )
+    g.add_argument(
+        "--animate",
+        help="also write a GIF of both legs stepping over the obstacle in real time at "
+        "the device timing (needs matplotlib and Pillow)",
+    )
+    g.add_argument(
+        "--out",
+        required=True,
+        help="CSV file (time, heel, toe, hip, knees, joint angles; SI units)",
+    )
+    g.add_argument("--json", help="also write JSON (scene, checks, raw points, samples)")
+    g.add_argument(
+        "--ros",
+        help="also write the timed swing as ROS 2 trajectory_msgs/JointTrajectory JSON "
+        "(positions, velocities, accelerations; needs --rate)",
+    )
+    g.add_argument("--plot", help="also draw the legs, the foot path and the joint angles (PNG)")
+    g.set_defaults(func=cmd_generate)

@@ -1,0 +1,123 @@
+"""``jaxexo walk``: a walk over a measured course, its footholds and every swing timed for the
+device, written as CSV/JSON, plotted and animated. Method: docs/walking.md."""
+
+from __future__ import annotations
+
+from jaxexo.cli import common
+
+
+def cmd_walk(args) -> int:
+    common.swing_outputs(args, [("--policy", args.policy), ("--terrain", args.terrain)])
+    common.check_rate(args.rate, "--rate")
+    fallback_method = common.fallback(args)
+    from jaxexo.course.ground import check_number
+
+    # The course's own checks, before any policy or terrain is read, naming the options as typed.
+    check_number("--start-y", args.start_y)
+    check_number("--goal-y", args.goal_y)
+    check_number("--steps", args.steps, 1, integer=True)
+    check_number("--double-support", args.double_support, 0.0)
+    gen = common.generator(args)
+    common.check_clearance(args.clearance, gen.config)
+    from jaxexo.course import plan_course
+    from jaxexo.storage.terrain_file import read_terrain
+
+    terrain = read_terrain(args.terrain)
+    kw = common.option_values(
+        args, "start_y", "goal_y", "steps", "rate", "clearance", "double_support"
+    )
+    if args.method == "rl":
+        kw["fallback"] = fallback_method
+    course = plan_course(
+        gen, terrain, **kw
+    )  # an infeasible course is refused here: nothing written
+    from jaxexo.plots.animate import animate_course
+    from jaxexo.plots.plot import plot_course
+
+    written = common.write_outputs(
+        args,
+        course,
+        lambda path: plot_course(course, path),
+        (lambda path: animate_course(course, path)) if len(course.samples) else None,
+    )
+    _report_course(course, terrain.source)
+    print("wrote " + ", ".join(written))
+    return 0 if course.ok else 1
+
+
+def _report_course(course, source) -> None:
+    """The walk's summary: its swings, their methods and times, and what failed."""
+    fb = sum(s.method == "cfftg-fallback" for s in course.steps)
+    print(
+        f"{source}: {len(course.footholds)} swings from y = {course.footholds.start_y:.2f} m to "
+        f"{course.footholds.landings[-1]:.2f} m ({course.method}"
+        + (f", {fb} CFFTG fallback{'s' * (fb != 1)}" if fb else "")
+        + f"), {course.duration:.2f} s at "
+        f"{course.rate:g} Hz, {'ok' if course.ok else 'FAILED'}"
+    )
+    for st in course.steps:
+        print(
+            f"  step {st.index + 1:2d} {st.leg:5s} {st.start_y:6.2f} -> {st.landing_y:6.2f} m (pivot {st.pivot_y:.2f} m)"
+            f" {st.method:14s} {st.end_s - st.start_s:5.2f} s{'' if st.ok else '  FAILED'}"
+        )
+    for r in course.reasons:
+        print(f"  {r}")
+
+
+def add_options(w) -> None:
+    """The `jaxexo walk` options."""
+    common.add_policy(w)
+    w.add_argument(
+        "--terrain",
+        required=True,
+        help="the ground profile: a CSV (y,z per line) or JSON "
+        '({"points": [[y, z], ...]}) file, m, y increasing, z >= 0',
+    )
+    common.add_method(
+        w, "rl: the trained policy's swings; cfftg: CFFTG's swings on the same footholds"
+    )
+    common.add_fallback(
+        w, "when an RL swing is not safe, use CFFTG's (cfftg, reported per step) or stop (none)"
+    )
+    w.add_argument(
+        "--start-y",
+        type=float,
+        help="where both feet stand at first, m (default: the terrain's first point)",
+    )
+    end = w.add_mutually_exclusive_group()
+    end.add_argument(
+        "--goal-y",
+        type=float,
+        help="where both feet stand at the end, m (default: the furthest foothold on the terrain)",
+    )
+    end.add_argument("--steps", type=int, help="walk exactly this many swings instead")
+    w.add_argument(
+        "--rate", type=float, help="control rate, Hz (default: the config's [device] control_rate)"
+    )
+    w.add_argument(
+        "--clearance",
+        type=float,
+        help="m every swing keeps from the terrain (default: the model's env.min_clearance)",
+    )
+    w.add_argument(
+        "--double-support",
+        type=float,
+        default=0.0,
+        help="s both feet stand still at each landing (default 0: the swings meet at rest)",
+    )
+    w.add_argument(
+        "--out",
+        required=True,
+        help="CSV file: both legs' heels, toes, hip, knees, joint angles, "
+        "velocities and accelerations at the control rate (SI units)",
+    )
+    w.add_argument(
+        "--json",
+        help="also write JSON (footholds, ok, and each step's samples, landing and method)",
+    )
+    w.add_argument("--plot", help="also draw the footholds and the swings over the terrain (PNG)")
+    w.add_argument(
+        "--animate",
+        help="also write a GIF of the whole walk in real time (needs matplotlib and Pillow)",
+    )
+    w.set_defaults(func=cmd_walk)
