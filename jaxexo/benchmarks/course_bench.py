@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from jaxexo.summary import Summary
+
 RANDOM = "random_profile"
 LENGTH = (3.0, 8.0)  # m
 OBSTACLES = (2, 8)
@@ -225,7 +227,7 @@ def run_course_benchmark(
                 r.update(independent_checks(c, gen.config.env.min_clearance))
             if label == "rl" and len(rows) < REFERENCE_COURSES and c.ok:
                 one = [_one_swing_seconds(gen, c, k) for k in range(min(3, len(c.steps)))]
-                r["one_swing_s"] = float(np.median(one))
+                r["one_swing_s"] = Summary.of(one).median
             row[label] = r
         rows.append(row)
         _log(log, {"row": row})
@@ -259,6 +261,11 @@ def summarize_log(path, seed: int = 0) -> dict:
         e = json.loads(line)
         (rows if "row" in e else refused).append(e.get("row", e.get("refused")))
     return summarize(rows, refused, len(rows) + len(refused), seed)
+
+
+def _median(xs: list) -> float | None:
+    """The median of ``xs``, None (JSON's null) when there is none."""
+    return Summary.of(xs).median if xs else None
 
 
 def summarize(rows, refused, n, seed) -> dict:
@@ -304,21 +311,19 @@ def summarize(rows, refused, n, seed) -> dict:
             for r in rows
             if not r["rl"]["ok"]
         ],
-        "steps_median": float(np.median([r["steps"] for r in rows])) if rows else None,
+        "steps_median": _median([r["steps"] for r in rows]),
         "duration_s_median": {
-            "rl": float(np.median([r["rl"]["duration_s"] for r in both])) if both else None,
-            "cfftg": float(np.median([r["cfftg"]["duration_s"] for r in both])) if both else None,
+            "rl": _median([r["rl"]["duration_s"] for r in both]),
+            "cfftg": _median([r["cfftg"]["duration_s"] for r in both]),
         },
         "duration_ratio_rl_over_cfftg": {
-            "median": float(np.median(ratio)) if ratio else None,
-            "max": float(np.max(ratio)) if ratio else None,
+            "median": _median(ratio),
+            "max": Summary.of(ratio).max if ratio else None,
             "n": len(ratio),
         },
-        "plan_s_per_step_median": float(np.median(per_step)) if per_step else None,
-        "one_swing_s_median": float(np.median([b for _, b in ref])) if ref else None,
-        "per_step_over_one_swing_median": float(np.median([a / b for a, b in ref]))
-        if ref
-        else None,
+        "plan_s_per_step_median": _median(per_step),
+        "one_swing_s_median": _median([b for _, b in ref]),
+        "per_step_over_one_swing_median": _median([a / b for a, b in ref]),
         "reference_courses": len(ref),
         "checks": checks,
         "courses": rows,
@@ -486,11 +491,11 @@ def run_swing_breakdown(
     rows = {
         ("flat" if f else "obstacle"): {
             "swings": len(ratio[f]),
-            "duration_ratio_median": float(np.median(ratio[f])),
-            "duration_ratio_mean": float(np.mean(ratio[f])),
+            "duration_ratio_median": Summary.of(ratio[f]).median,
+            "duration_ratio_mean": Summary.of(ratio[f]).mean,
             "lift_median_m": {
-                "rl": float(np.median([x[0] for x in lift[f]])),
-                "cfftg": float(np.median([x[1] for x in lift[f]])),
+                "rl": Summary.of([x[0] for x in lift[f]]).median,
+                "cfftg": Summary.of([x[1] for x in lift[f]]).median,
             },
         }
         for f in (True, False)
@@ -500,8 +505,8 @@ def run_swing_breakdown(
         "seed": seed,
         "by_kind": rows,
         "rl_floor_travel_m": {
-            "median": float(np.median(slide)),
-            "p95": float(np.percentile(slide, 95)),
+            "median": Summary.of(slide).median,
+            "p95": Summary.of(slide).p95,
         },
     }
     if out_dir is not None:

@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from jaxexo.summary import Summary
+
 TARGETS = {"rl_device_ready_ms": 4.0, "rl_over_cfftg": 1.5, "batch_1000_s": 1.0}
 # benchmarks/bench_device_ready.py's options (jaxexo.benchmarks.runner.run_script).
 OPTIONS = (
@@ -71,11 +73,8 @@ def rate_table(rl, cf, n: int) -> list[dict]:
             row = {"set": name, "generator": g, "n": len(safe)}
             for r in (100, 1000):
                 timed = time_swings(safe, rl.config, rate=float(r))
-                d = np.array([t.duration for t in timed])
-                row[f"median_{r}"], row[f"p95_{r}"] = (
-                    float(np.median(d)),
-                    float(np.percentile(d, 95)),
-                )
+                d = Summary.of([t.duration for t in timed])
+                row[f"median_{r}"], row[f"p95_{r}"] = d.median, d.p95
                 if r == 1000:
                     row["within"] = float(np.mean([t.within_limits for t in timed]))
                     row["safe"] = float(np.mean([t.ok for t in timed]))
@@ -103,13 +102,13 @@ def _per_swing(gens, sc, cfg, rate: float, swing_timing) -> dict:
             gen_ms[name].append(1e3 * (t1 - t0))
             for k, v in acc.items():
                 parts[name][k] += 1e3 * v / len(sc)
-    med = {k: float(np.median(v)) for k, v in total.items()}
+    ready = {k: Summary.of(v) for k, v in total.items()}
     return {
-        "device_ready_ms_median": med,
-        "device_ready_ms_p95": {k: float(np.percentile(v, 95)) for k, v in total.items()},
-        "generate_ms_median": {k: float(np.median(v)) for k, v in gen_ms.items()},
+        "device_ready_ms_median": {k: v.median for k, v in ready.items()},
+        "device_ready_ms_p95": {k: v.p95 for k, v in ready.items()},
+        "generate_ms_median": {k: Summary.of(v).median for k, v in gen_ms.items()},
         "timing_parts_ms_mean": parts,
-        "rl_over_cfftg": med["rl"] / med["cfftg"],
+        "rl_over_cfftg": ready["rl"].over(ready["cfftg"]).median,
     }
 
 

@@ -19,6 +19,7 @@ from jax.sharding import PartitionSpec as P
 from jaxexo.config import EQUAL_WEIGHTS, THESIS_JOINT_LIMITS, Config
 from jaxexo.env import ExoStepEnv
 from jaxexo.physics.geometry import THESIS_OBSTACLES
+from jaxexo.summary import Summary
 
 
 def make_rollout(env: ExoStepEnv, num_envs: int, num_steps: int, devices=None, mask: str = "none"):
@@ -104,7 +105,7 @@ def bench_env(
             t0 = time.perf_counter()
             out = jax.block_until_ready(fn(jax.random.PRNGKey(r + 1), params))
             times.append(time.perf_counter() - t0)
-        med = float(np.median(times))
+        med = Summary.of(times).median
         row = {
             "num_envs": n,
             "steps_per_call": steps,

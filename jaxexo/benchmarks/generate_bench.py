@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import json
 import os
-import statistics
 import subprocess
 import sys
 from pathlib import Path
@@ -24,6 +23,7 @@ import numpy as np
 from jaxexo.evaluation.timing import time_batch
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.inference.blas import blas_threads
+from jaxexo.summary import Summary
 
 THESIS_MS = {"rl_single": 3.0, "cfftg_single": 2.0, "rl_batch_1000": 1764.0}  # Table 3.11, §3.4
 # Targets: one swing <= 1 ms and <= 1.5x CFFTG's; a batch of 1000 no slower than CFFTG's and <= 150 ms;
@@ -87,7 +87,7 @@ def _batch_ms(policy, n: int, repeats: int = 5) -> dict:
     for r in range(repeats):  # alternating, one batch each
         for name, g, kw in runs if r % 2 == 0 else runs[::-1]:
             times[name].append(time_batch(g, sc, 1, **kw)[0][0])
-    return {name: statistics.median(t) * 1e3 for name, t in times.items()}
+    return {name: Summary.of(t).median * 1e3 for name, t in times.items()}
 
 
 def scene_set(config, which: str, n: int) -> list[dict]:
@@ -117,12 +117,8 @@ def batch_single_thread(policy, n: int) -> dict:
 
 
 def _ms(x) -> dict:
-    x = np.asarray(x) * 1e3
-    return {
-        "median": float(np.median(x)),
-        "mean": float(x.mean()),
-        "p95": float(np.percentile(x, 95)),
-    }
+    ms = Summary.of(np.asarray(x) * 1e3)
+    return {"median": ms.median, "mean": ms.mean, "p95": ms.p95}
 
 
 def _placement(s: dict) -> dict:
@@ -237,7 +233,7 @@ def time_breakdown(gen, cf, scenarios: list[dict], repeats: int = 3) -> dict:
         rows["cfftg_plan"].append(plan)
         rows["cfftg_assemble"].append(max(tot - plan, 0.0))
         rows["cfftg_total"].append(best(lambda: cf.generate(s["obstacle"], **at)))
-    return {k: float(np.median(v)) for k, v in rows.items() if v}
+    return {k: Summary.of(v).median for k, v in rows.items() if v}
 
 
 def breakdown_lines(b: dict) -> list[str]:
@@ -297,9 +293,9 @@ def set_figures(gen, cf, scenarios: list[dict], n: int) -> dict:
     return {
         "n": len(scenarios),
         "single_ms": {k: _ms(v) for k, v in single.items()},
-        "ratio_rl_over_cfftg": float(np.median(single["rl"]) / np.median(single["cfftg"])),
+        "ratio_rl_over_cfftg": Summary.of(single["rl"]).over(Summary.of(single["cfftg"])).median,
         "single_cpu_ms": {k: _ms(v) for k, v in cpu.items()},
-        "cpu_ratio_rl_over_cfftg": float(np.median(cpu["rl"]) / np.median(cpu["cfftg"])),
+        "cpu_ratio_rl_over_cfftg": Summary.of(cpu["rl"]).over(Summary.of(cpu["cfftg"])).median,
         "reference_ms": {
             "rl": _ms(ref["rl"][1]),
             "rl_reference": _ms(ref["rl_reference"][1]),
@@ -462,7 +458,7 @@ def run_generate_benchmark(policy: str | Path, out_dir, n: int = 1000, progress=
         # the held-out set's figures under the keys the summary (run_all) reads
         "single_ms": sets["unseen"]["single_ms"],
         "batch_ms": {"default_threads": batch, "single_thread_blas": batch_1t},
-        "import_s": {"median": statistics.median(imports), "runs": imports},
+        "import_s": {"median": Summary.of(imports).median, "runs": imports},
         "breakdown_us": breakdown,
         "blas_threads_default": blas_threads(),
         "load_average": load,

@@ -29,6 +29,7 @@ from jaxexo.baselines import CFFTG
 from jaxexo.benchmarks.scenes import batch_kwargs, safety_sets
 from jaxexo.evaluation.machine import write_result
 from jaxexo.inference import TrajectoryGenerator, time_swings
+from jaxexo.summary import Summary
 from jaxexo.swing.trajectory import assemble
 
 
@@ -81,26 +82,27 @@ def run_set(gens, scenes, config) -> dict:
         timed = time_swings(batch, config)
         d = np.array([t.duration for t in timed])
         end_z = batch.heel[:, -1, 1]
+        end, span = Summary.of(end_z), Summary.of(d)
         dur[name] = d
         touch = added = None
         if name == "rl" and (batch.heel[:, -1, 1] > 0.0).any():
             td = np.array([t.duration for t in time_swings(with_touch_down(batch, gen), config)])
             up = batch.ok & (batch.heel[:, -1, 1] > 0.0)
-            touch = float(np.median(td))
-            added = float(np.median(td[up] - d[up]))
+            touch = Summary.of(td).median
+            added = Summary.of(td[up] - d[up]).median
         out[name] = {
             "n": len(batch),
             "safe": float(batch.ok.mean()),
             "reached_goal": float(batch.reached_goal.mean()),
             "end_above_2mm": float(np.mean(end_z > 0.002)),
-            "end_z_mm_max": 1000 * float(end_z.max()),
-            "end_z_mm_median": 1000 * float(np.median(end_z)),
-            "lift_cm_median": 100 * float(np.median(batch.heel[..., 1].max(axis=1))),
-            "duration_s_median": float(np.median(d)),
-            "duration_s_p95": float(np.percentile(d, 95)),
+            "end_z_mm_max": 1000 * end.max,
+            "end_z_mm_median": 1000 * end.median,
+            "lift_cm_median": 100 * Summary.of(batch.heel[..., 1].max(axis=1)).median,
+            "duration_s_median": span.median,
+            "duration_s_p95": span.p95,
             "duration_touch_down_s_median": touch,
             "touch_down_added_s_median": added,
-            "approach_mm_median": 1000 * float(np.median([approach(h) for h in batch.heel])),
+            "approach_mm_median": 1000 * Summary.of([approach(h) for h in batch.heel]).median,
             "retried": float(np.mean([bool(n) for n in batch.notes])),
             "raw_polyline": float(np.mean(np.isnan(batch.smoothing))),
             "generate_s": gen_s,
@@ -114,7 +116,7 @@ def run_set(gens, scenes, config) -> dict:
         }
     both = out["rl"]["ok_mask"] & out["cfftg"]["ok_mask"]
     out["rl_over_cfftg_duration_median"] = (
-        float(np.median(dur["rl"][both] / dur["cfftg"][both])) if both.any() else None
+        Summary.of(dur["rl"][both] / dur["cfftg"][both]).median if both.any() else None
     )
     out["both_safe"] = int(both.sum())
     for name in gens:

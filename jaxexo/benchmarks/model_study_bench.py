@@ -32,6 +32,7 @@ from jaxexo.evaluation.compare import WithFallback
 from jaxexo.evaluation.machine import machine_info, write_result
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.storage.atomic import atomic_write, write_figure
+from jaxexo.summary import Summary
 
 # The wearer's targets against CFFTG on the scenes both swing safely (lift and timed median <= CFFTG's,
 # timed p95 <= 1.1x), the longest RL swing on all scenes, RL alone's safe share on every set.
@@ -43,10 +44,11 @@ def _both_safe(per: dict) -> dict:
     both = per["rl"][0] & per["cfftg"][0]
     out = {"n_both_safe": int(both.sum())}
     for g, (_, lift, dur) in per.items():
+        span = Summary.of(dur[both])
         out[g] = {
-            "lift_cm": 100 * float(np.median(lift[both])),
-            "dur_median_s": float(np.median(dur[both])),
-            "dur_p95_s": float(np.percentile(dur[both], 95)),
+            "lift_cm": 100 * Summary.of(lift[both]).median,
+            "dur_median_s": span.median,
+            "dur_p95_s": span.p95,
         }
     return out
 
@@ -61,14 +63,14 @@ def screen_agent(gen: TrajectoryGenerator, time_n: int) -> dict:
         runs = alternate(
             {"rl": WithFallback(gen, None), "cfftg": cf}, scenes[name][:time_n], warmup=10
         )
-        rl, c = np.median(runs["rl"][1]) * 1e3, np.median(runs["cfftg"][1]) * 1e3
-        rl_cpu, c_cpu = np.median(runs["rl"][2]) * 1e3, np.median(runs["cfftg"][2]) * 1e3
+        wall = {g: Summary.of(runs[g][1]) for g in ("rl", "cfftg")}
+        cpu = {g: Summary.of(runs[g][2]) for g in ("rl", "cfftg")}
         trajs = runs["rl"][0]
         timing[name] = {
-            "rl_ms": float(rl),
-            "cfftg_ms": float(c),
-            "ratio": float(rl / c),
-            "cpu_ratio": float(rl_cpu / c_cpu),
+            "rl_ms": wall["rl"].median * 1e3,
+            "cfftg_ms": wall["cfftg"].median * 1e3,
+            "ratio": wall["rl"].over(wall["cfftg"]).median,
+            "cpu_ratio": cpu["rl"].over(cpu["cfftg"]).median,
             "raw_points": float(np.mean([len(t.raw) for t in trajs])),
             "rl_safe": float(np.mean([t.ok for t in trajs])),
             "rl_goal": float(np.mean([t.checks.reached_goal for t in trajs])),
@@ -200,7 +202,7 @@ def config_summary(rows: list[dict]) -> list[dict]:
         e["ratio"].append(r["timing"]["held-out families"]["cpu_ratio"])
         e["success"].append(r["success"])
     for e in out.values():
-        e["ms"], e["ratio"] = float(np.median(e["ms"])), float(np.median(e["ratio"]))
+        e["ms"], e["ratio"] = Summary.of(e["ms"]).median, Summary.of(e["ratio"]).median
         e["success_min"] = float(min(e.pop("success")))
     return sorted(out.values(), key=lambda e: e["ratio"])
 

@@ -23,7 +23,6 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import statistics
 import subprocess
 import sys
 import tempfile
@@ -31,6 +30,7 @@ from pathlib import Path
 
 from jaxexo.config import load_config, packaged_config, with_population
 from jaxexo.evaluation.machine import write_result
+from jaxexo.summary import Summary
 
 THESIS_B_LEARNS = Path(packaged_config("default")).parent / "thesis" / "b-learns.toml"
 
@@ -57,7 +57,7 @@ def population_row(base, k: int, work: Path) -> dict:
         "k": k,
         "train_seconds": ev["train_seconds"],
         "chunks": len(chunks),
-        "steady_chunk_s": statistics.median(steady),
+        "steady_chunk_s": Summary.of(steady).median,
         "devices": ev["devices"],
         "exported_seed": ev["seed"],
         "validation_success_raw": ev["validation_success_raw"],

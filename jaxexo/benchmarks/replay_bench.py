@@ -37,6 +37,7 @@ from jaxexo.sim.replay import (
     summarize_driven,
     summarize_kinematic,
 )
+from jaxexo.summary import Summary
 from jaxexo.swing.timing import DeviceLimits, time_swings
 
 
@@ -92,7 +93,7 @@ def replay_set(sc, rl, cfftg, config, rate: float, driven: bool) -> dict:
             "n": len(timed),
             "flagged_ok": int(ok.sum()),
             "timing_seconds": t_timing,
-            "model_build_ms_median": 1e3 * float(np.median(build_s)) if build_s else None,
+            "model_build_ms_median": 1e3 * Summary.of(build_s).median if build_s else None,
             "kinematic": {
                 **summarize_kinematic(kin),
                 "violations": [k for k in kin if k["flagged_ok_but_within_margin"]],

@@ -22,6 +22,7 @@ from jaxexo.evaluation.machine import machine_info, write_result
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.inference.scenarios import safety_scenarios
 from jaxexo.physics import geometry, swept
+from jaxexo.summary import Summary
 from jaxexo.swing import smoothing as sm
 from jaxexo.swing.clearing import clear_smooth
 
@@ -85,7 +86,7 @@ def generator_figures(b, cfftg: CFFTG, margin: float, tol: float, seconds: float
         "safe_rate": float(b.ok.mean()),
         "seconds": seconds,
         "within_1cm_rate": float((close < 0.01).mean()),
-        "median_guaranteed_clearance_m": float(np.median(close)),
+        "median_guaranteed_clearance_m": Summary.of(close).median,
         "backward_over_5mm_rate": float((back > 0.005).mean()),
         "fallback_rate": float(np.mean([b[i].method == "cfftg-fallback" for i in range(len(b))])),
         **rc,

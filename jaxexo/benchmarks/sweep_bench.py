@@ -31,6 +31,7 @@ import numpy as np
 
 from jaxexo.benchmarks.train_bench import throughput
 from jaxexo.config import Config
+from jaxexo.summary import Summary
 from jaxexo.sweep.spec import load_sweep, sweep_from_dict
 from jaxexo.train.lanes import LANES, over_agents, over_lanes
 from jaxexo.train.trainer import Hyperparams, Trainer
@@ -65,7 +66,7 @@ def agents_throughput(
         ts, _ = jax.block_until_ready(run(ts, hyper))
         times.append(time.perf_counter() - t0)
     steps = n_agents * updates * cfg.train.num_envs * cfg.train.rollout_steps
-    med = float(np.median(times))
+    med = Summary.of(times).median
     return {
         "agents": n_agents,
         "devices": len(devices),

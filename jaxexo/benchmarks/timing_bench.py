@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxexo.physics.scenarios import shape_scenarios
+from jaxexo.summary import Summary
 
 # benchmarks/bench_timing.py's options (jaxexo.benchmarks.runner.run_script).
 OPTIONS = (
@@ -27,6 +28,7 @@ def _figures(trajs, timed, rate: float) -> dict:
 
     d = np.degrees
     dur = np.array([t.duration for t in timed])
+    swing = Summary.of(dur)
     vmax = np.array(timed[0].limits.velocity)
     amax = np.array(timed[0].limits.acceleration)
     fd_v = np.array([np.abs(np.diff(t.joint_angles, axis=0) * rate).max(axis=0) for t in timed])
@@ -39,10 +41,10 @@ def _figures(trajs, timed, rate: float) -> dict:
         "n": len(timed),
         "path_ok": float(np.mean([t.ok for t in trajs])),
         "timed_ok": float(np.mean([t.ok for t in timed])),
-        "swing_s_mean": float(dur.mean()),
-        "swing_s_median": float(np.median(dur)),
-        "swing_s_p95": float(np.percentile(dur, 95)),
-        "swing_s_max": float(dur.max()),
+        "swing_s_mean": swing.mean,
+        "swing_s_median": swing.median,
+        "swing_s_p95": swing.p95,
+        "swing_s_max": swing.max,
         "within_limits": float(np.mean([t.within_limits for t in timed])),
         "fd_within_limits": float(
             np.mean(np.all(fd_v <= vmax, axis=1) & np.all(fd_a <= amax, axis=1))
@@ -53,8 +55,8 @@ def _figures(trajs, timed, rate: float) -> dict:
         "peak_knee_vel_deg_s_mean": float(d(np.maximum(fd_v[:, 1], fd_v[:, 3]).mean())),
         "end_step_vel_deg_s_max": float(d(end_v.max())),
         "slowdown_mean": float(np.mean([t.slowdown for t in timed])),
-        "uniform_peak_vel_deg_s_median": float(d(np.median([u[0].max() for u in uni]))),
-        "uniform_peak_acc_deg_s2_median": float(d(np.median([u[1].max() for u in uni]))),
+        "uniform_peak_vel_deg_s_median": float(d(Summary.of([u[0].max() for u in uni]).median)),
+        "uniform_peak_acc_deg_s2_median": float(d(Summary.of([u[1].max() for u in uni]).median)),
     }, dur
 
 
@@ -116,11 +118,11 @@ def run_timing_benchmark(
                 f"{f['peak_knee_vel_deg_s_mean']:.0f} | {f['end_step_vel_deg_s_max']:.2f} | {ms:.1f} | "
                 f"{f['uniform_peak_vel_deg_s_median']:.0f} / {f['uniform_peak_acc_deg_s2_median']:.0f} |"
             )
-        ratio = durs["rl"] / durs["cfftg"]
+        ratio = Summary.of(durs["rl"] / durs["cfftg"])
         res["rl_vs_cfftg"] = {
             "rl_not_longer_fraction": float(np.mean(durs["rl"] <= durs["cfftg"] + 1e-9)),
-            "duration_ratio_mean": float(ratio.mean()),
-            "duration_ratio_median": float(np.median(ratio)),
+            "duration_ratio_mean": ratio.mean,
+            "duration_ratio_median": ratio.median,
         }
         payload["sets"][set_name] = res
     lines += [

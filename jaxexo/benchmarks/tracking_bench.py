@@ -14,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from jaxexo.summary import Summary
+
 SETTINGS = (
     (0.0, False),
     (0.05, False),
@@ -60,7 +62,8 @@ def run_tracking_benchmark(
                             ts, cfg, limits=dataclasses.replace(lim, headroom=0.0), legs=leg
                         )
                     )
-            air = np.array([d["heel_error_airborne_max_m"] for d in drv])
+            air = Summary.of([d["heel_error_airborne_max_m"] for d in drv])
+            span = Summary.of([t.duration for t in timed])
             dist = np.array([d["mujoco_min_distance_m"] for d in drv])
             rows.append(
                 {
@@ -69,11 +72,11 @@ def run_tracking_benchmark(
                     "generator": g,
                     "n": len(timed),
                     "ok": len(drv),
-                    "duration_median_s": float(np.median([t.duration for t in timed])),
-                    "duration_p95_s": float(np.percentile([t.duration for t in timed], 95)),
+                    "duration_median_s": span.median,
+                    "duration_p95_s": span.p95,
                     "saturated": int(sum(d["saturated"] for d in drv)),
-                    "heel_error_airborne_p95_m": float(np.percentile(air, 95)),
-                    "heel_error_airborne_max_m": float(air.max()),
+                    "heel_error_airborne_p95_m": air.p95,
+                    "heel_error_airborne_max_m": air.max,
                     "within_margin": int(np.sum(dist < cfg.env.min_clearance)),
                     "min_distance_m": float(dist.min()),
                 }

@@ -19,9 +19,9 @@ import time
 from pathlib import Path
 
 import jax
-import numpy as np
 
 from jaxexo.config import Config
+from jaxexo.summary import Summary
 from jaxexo.train.trainer import Hyperparams, Trainer
 
 
@@ -40,7 +40,7 @@ def throughput(cfg: Config, updates_per_call: int, repeats: int = 3, devices=Non
         ts, _ = jax.block_until_ready(run(ts, hyper, updates_per_call))
         times.append(time.perf_counter() - t0)
     steps = updates_per_call * cfg.train.num_envs * cfg.train.rollout_steps
-    med = float(np.median(times))
+    med = Summary.of(times).median
     return {
         "trace": cfg.train.trace,
         "control": cfg.train.control,
@@ -189,7 +189,7 @@ def _timed_ms(fn, *args, repeats: int, calls: int) -> float:
         t0 = time.perf_counter()
         jax.block_until_ready(loop(*args))
         times.append(time.perf_counter() - t0)
-    return 1e3 * float(np.median(times)) / calls
+    return 1e3 * Summary.of(times).median / calls
 
 
 def _total(tree):
@@ -374,7 +374,7 @@ def run_mask_ab_benchmark(path, updates: int, rounds: int, out_dir: Path) -> dic
             t0 = time.perf_counter()
             prog[1], _ = jax.block_until_ready(run(ts, hyper, updates))
             times.append(time.perf_counter() - t0)
-    rates = {k: steps / float(np.median(v[2])) for k, v in progs.items()}
+    rates = {k: steps / Summary.of(v[2]).median for k, v in progs.items()}
     out = {
         "config": Path(path).name,
         "updates_per_call": updates,

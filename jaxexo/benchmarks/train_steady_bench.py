@@ -29,6 +29,7 @@ from jax.sharding import PartitionSpec as P
 from jaxexo.config import load_config
 from jaxexo.env import ExoStepEnv
 from jaxexo.evaluation.machine import write_result
+from jaxexo.summary import Summary
 from jaxexo.train.driver import run_training
 
 
@@ -55,7 +56,7 @@ def matmul_roofline(
         t0 = time.perf_counter()
         f(x, w).block_until_ready()
         times.append(time.perf_counter() - t0)
-    return 2.0 * rows * len(devs) * width * width * length / float(np.median(times))
+    return 2.0 * rows * len(devs) * width * width * length / Summary.of(times).median
 
 
 def network_flops_per_step(cfg) -> float:
@@ -117,7 +118,7 @@ def run_train_steady(paths, budget: int, label: str, out_dir: Path) -> dict:
             "devices": len(jax.local_devices()),
             "chunks": len(chunks),
             "chunk_env_steps_per_s": rates,
-            "steady_env_steps_per_s": float(np.median(rates[2:])) if len(rates) > 2 else None,
+            "steady_env_steps_per_s": Summary.of(rates[2:]).median if len(rates) > 2 else None,
             "compilations_run": counts.get("jit(run)", 0),
             "train_seconds": res["train_seconds"],
             "validation_success_raw": res["validation_success_raw"],

@@ -38,6 +38,7 @@ from jaxexo.evaluation.thesis_results import (
 from jaxexo.evaluation.timing import BATCH, scene_options
 from jaxexo.inference.scenarios import sample_scenarios, training_scenarios
 from jaxexo.physics.kinematics import PIVOT_CONDITIONS
+from jaxexo.summary import Summary
 
 BATCH_REPEATS = 3
 # Bounds checked before any work (each single call's trajectory is kept for the metrics, so the
@@ -95,8 +96,8 @@ def batch_time(
     the generator benchmark's own function, scaled to a batch of 1000 (exact when size = 1000)."""
     from jaxexo.evaluation.timing import time_batch
 
-    t = np.median(time_batch(gen, [scenarios[i % len(scenarios)] for i in range(size)], repeats)[0])
-    return float(t) * 1e3 * BATCH / size
+    t = time_batch(gen, [scenarios[i % len(scenarios)] for i in range(size)], repeats)[0]
+    return Summary.of(t).median * 1e3 * BATCH / size
 
 
 def run_generators(generators: dict, scenarios: list[dict], warmup: int = 20):

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from jaxexo.evaluation.metrics import path_length
+from jaxexo.summary import Summary
 
 
 def family_table(trajs: dict, scenarios: list[dict]) -> dict:
@@ -24,17 +25,17 @@ def family_table(trajs: dict, scenarios: list[dict]) -> dict:
         table[fam] = {}
         for name, tr in trajs.items():
             sel = [t for t, m in zip(tr, mask) if m]
-            clr = np.array([t.checks.min_clearance for t in sel], dtype=np.float64)
-            pl = np.array([path_length(t.heel) for t in sel])
+            clr = Summary.of(np.array([t.checks.min_clearance for t in sel], dtype=np.float64))
+            pl = Summary.of(np.array([path_length(t.heel) for t in sel]))
             table[fam][name] = {
                 "n": len(sel),
                 "success": float(np.mean([t.ok for t in sel])),
                 "accuracy": float(np.mean([t.checks.collision_free for t in sel])),
-                "clearance_m_min": float(np.min(clr)),
-                "clearance_m_p5": float(np.percentile(clr, 5)),
-                "clearance_m_median": float(np.median(clr)),
-                "path_length_m_mean": float(pl.mean()),
-                "path_length_m_median": float(np.median(pl)),
+                "clearance_m_min": clr.min,
+                "clearance_m_p5": clr.p5,
+                "clearance_m_median": clr.median,
+                "path_length_m_mean": pl.mean,
+                "path_length_m_median": pl.median,
             }
     return table
 
