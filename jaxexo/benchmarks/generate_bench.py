@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxexo.evaluation.timing import time_batch
+from jaxexo.evaluation.timing import scene_options, time_batch
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.inference.blas import blas_threads
 from jaxexo.summary import Summary
@@ -121,31 +121,6 @@ def _ms(x) -> dict:
     return {"median": ms.median, "mean": ms.mean, "p95": ms.p95}
 
 
-def _placement(s: dict) -> dict:
-    """A scenario's placement, as ``generate``'s keywords: the pivot, the start and the step length."""
-    return {k: s[k] for k in ("pivot", "start_y", "step_length")}
-
-
-def alternate(generators: dict, scenarios: list[dict], warmup: int = 20):
-    """jaxexo.evaluation.compare.run_generators with the CPU time of each call too (time.process_time:
-    on a shared machine a long call is preempted more often than a short one, which the wall clock
-    charges to it). Returns {name: (trajectories, wall seconds, CPU seconds)}."""
-    import time
-
-    names = list(generators)
-    for s in scenarios[:warmup]:
-        for g in generators.values():
-            g.generate(s["obstacle"], **_placement(s))
-    out = {n: ([], np.empty(len(scenarios)), np.empty(len(scenarios))) for n in names}
-    for i, s in enumerate(scenarios):
-        for n in names if i % 2 == 0 else names[::-1]:
-            c0, t0 = time.process_time(), time.perf_counter()
-            tr = generators[n].generate(s["obstacle"], **_placement(s))
-            out[n][1][i], out[n][2][i] = time.perf_counter() - t0, time.process_time() - c0
-            out[n][0].append(tr)
-    return out
-
-
 def rollout_states(sp, scene, raw, acts) -> list[tuple]:
     """The network's and the shield's inputs at each step of a rollout (``raw`` heel path, ``acts``
     its moves): heel y, z, the step, whether the mid goal was visited, the previous move (-1 first)."""
@@ -226,7 +201,7 @@ def time_breakdown(gen, cf, scenarios: list[dict], repeats: int = 3) -> dict:
         )
         rows["smoothing_correction"].append(cl)
         rows["verdict_angles"].append(max(fin - cl, 0.0))
-        at = _placement(s)
+        at = scene_options(s)
         rows["rl_total"].append(best(lambda: gen.generate(s["obstacle"], **at, fallback=None)))
         plan = best(lambda: cf.plan([scene]))
         tot = best(lambda: cf.finish([scene], n_pts, 1.0))
@@ -281,15 +256,15 @@ def set_figures(gen, cf, scenarios: list[dict], n: int) -> dict:
     gens = {"rl": WithFallback(gen, None), "cfftg": cf}
     stats = gen.shield_stats
     before = (stats.steps, stats.steps_to_full_mask)
-    passes = [alternate(gens, scenarios) for _ in range(3)]
+    passes = [run_generators(gens, scenarios) for _ in range(3)]
     steps = (stats.steps - before[0], stats.steps_to_full_mask - before[1])
-    single = {k: np.median([p[k][1] for p in passes], axis=0) for k in gens}
-    cpu = {k: np.median([p[k][2] for p in passes], axis=0) for k in gens}
+    single = {k: np.median([p[k].wall_s for p in passes], axis=0) for k in gens}
+    cpu = {k: np.median([p[k].cpu_s for p in passes], axis=0) for k in gens}
     plain = WithFallback(plain_reference(gen), None)
     ref = run_generators(
         {"rl": WithFallback(gen, None), "rl_reference": plain}, scenarios[: max(1, n // 4)]
     )
-    trajs = passes[-1]["rl"][0]
+    trajs = passes[-1]["rl"].trajectories
     return {
         "n": len(scenarios),
         "single_ms": {k: _ms(v) for k, v in single.items()},
@@ -297,13 +272,13 @@ def set_figures(gen, cf, scenarios: list[dict], n: int) -> dict:
         "single_cpu_ms": {k: _ms(v) for k, v in cpu.items()},
         "cpu_ratio_rl_over_cfftg": Summary.of(cpu["rl"]).over(Summary.of(cpu["cfftg"])).median,
         "reference_ms": {
-            "rl": _ms(ref["rl"][1]),
-            "rl_reference": _ms(ref["rl_reference"][1]),
-            "n": len(ref["rl"][1]),
+            "rl": _ms(ref["rl"].wall_s),
+            "rl_reference": _ms(ref["rl_reference"].wall_s),
+            "n": len(ref["rl"].wall_s),
         },
         "rl_over_cfftg_scenes": float(np.mean(single["rl"] > single["cfftg"])),
         "smoothing": smoothing_counts(trajs),
-        "cfftg_safe": float(np.mean([t.ok for t in passes[-1]["cfftg"][0]])),
+        "cfftg_safe": float(np.mean([t.ok for t in passes[-1]["cfftg"].trajectories])),
         "shield_steps_full_mask": steps[1] / max(steps[0], 1),
     }
 

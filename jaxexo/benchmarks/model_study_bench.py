@@ -26,9 +26,8 @@ from pathlib import Path
 import numpy as np
 
 from jaxexo.baselines import CFFTG
-from jaxexo.benchmarks.generate_bench import alternate
 from jaxexo.benchmarks.swing_quality_bench import run_set, scene_sets
-from jaxexo.evaluation.compare import WithFallback
+from jaxexo.evaluation.compare import WithFallback, run_generators
 from jaxexo.evaluation.machine import machine_info, write_result
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.storage.atomic import atomic_write, write_figure
@@ -60,12 +59,12 @@ def screen_agent(gen: TrajectoryGenerator, time_n: int) -> dict:
     scenes = scene_sets(gen.config, time_n)
     timing = {}
     for name in ("held-out families", "unseen shapes"):
-        runs = alternate(
+        runs = run_generators(
             {"rl": WithFallback(gen, None), "cfftg": cf}, scenes[name][:time_n], warmup=10
         )
-        wall = {g: Summary.of(runs[g][1]) for g in ("rl", "cfftg")}
-        cpu = {g: Summary.of(runs[g][2]) for g in ("rl", "cfftg")}
-        trajs = runs["rl"][0]
+        wall = {g: Summary.of(runs[g].wall_s) for g in ("rl", "cfftg")}
+        cpu = {g: Summary.of(runs[g].cpu_s) for g in ("rl", "cfftg")}
+        trajs = runs["rl"].trajectories
         timing[name] = {
             "rl_ms": wall["rl"].median * 1e3,
             "cfftg_ms": wall["cfftg"].median * 1e3,
@@ -74,7 +73,7 @@ def screen_agent(gen: TrajectoryGenerator, time_n: int) -> dict:
             "raw_points": float(np.mean([len(t.raw) for t in trajs])),
             "rl_safe": float(np.mean([t.ok for t in trajs])),
             "rl_goal": float(np.mean([t.checks.reached_goal for t in trajs])),
-            "cfftg_safe": float(np.mean([t.ok for t in runs["cfftg"][0]])),
+            "cfftg_safe": float(np.mean([t.ok for t in runs["cfftg"].trajectories])),
         }
     return {"timing": timing, "smoothing": gen.smoothing}
 

@@ -17,6 +17,7 @@ The metrics are computed on the single calls' trajectories.
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -100,24 +101,33 @@ def batch_time(
     return Summary.of(t).median * 1e3 * BATCH / size
 
 
-def run_generators(generators: dict, scenarios: list[dict], warmup: int = 20):
-    """Generate every scenario with every generator, alternating their order per scenario.
-    Returns {name: (trajectories, per-call seconds)}."""
+@dataclass(frozen=True)
+class GeneratorRun:
+    """One generator's pass over N scenarios: its trajectories and each call's wall and CPU seconds
+    [N] (CPU time too: on a shared machine a long call is preempted more often than a short one,
+    which the wall clock charges to it)."""
+
+    trajectories: list
+    wall_s: np.ndarray
+    cpu_s: np.ndarray
+
+
+def run_generators(
+    generators: dict, scenarios: list[dict], warmup: int = 20
+) -> dict[str, GeneratorRun]:
+    """Generate every scenario with every generator, alternating their order per scenario."""
     names = list(generators)
     for s in scenarios[:warmup]:
         for g in generators.values():
             g.generate(s["obstacle"], **scene_options(s))
-    trajs = {n: [] for n in names}
-    times = {n: np.empty(len(scenarios)) for n in names}
+    out = {n: GeneratorRun([], np.empty(len(scenarios)), np.empty(len(scenarios))) for n in names}
     for i, s in enumerate(scenarios):
-        order = names if i % 2 == 0 else names[::-1]
-        for n in order:
-            g = generators[n]
-            t0 = time.perf_counter()
-            tr = g.generate(s["obstacle"], **scene_options(s))
-            times[n][i] = time.perf_counter() - t0
-            trajs[n].append(tr)
-    return {n: (trajs[n], times[n]) for n in names}
+        for n in names if i % 2 == 0 else names[::-1]:
+            c0, t0 = time.process_time(), time.perf_counter()
+            tr = generators[n].generate(s["obstacle"], **scene_options(s))
+            out[n].wall_s[i], out[n].cpu_s[i] = time.perf_counter() - t0, time.process_time() - c0
+            out[n].trajectories.append(tr)
+    return out
 
 
 def evaluate_generators(
@@ -141,8 +151,8 @@ def evaluate_generators(
             if ((kinds == k) & (pivots == p)).any()
         },
     }
-    for name, (tr, times) in runs.items():
-        gen = generators[name]
+    for name, run in runs.items():
+        gen, tr, times = generators[name], run.trajectories, run.wall_s
         m = trajectory_metrics(tr)
         dm = device_metrics(tr, gen.config)
         entry = summarize(m, times, np.ones(len(tr), bool))

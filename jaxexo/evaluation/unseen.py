@@ -13,6 +13,7 @@ import numpy as np
 
 from jaxexo.evaluation.metrics import path_length
 from jaxexo.summary import Summary
+from jaxexo.summary import table as md_table
 
 
 def family_table(trajs: dict, scenarios: list[dict]) -> dict:
@@ -40,21 +41,35 @@ def family_table(trajs: dict, scenarios: list[dict]) -> dict:
     return table
 
 
+def family_cells(r: dict) -> tuple[str, ...]:
+    """One family's row of figures (``family_table``'s entry) after its labels: n, success %, accuracy
+    %, clearance min, p5 and median cm, path length mean cm."""
+    return (
+        str(r["n"]),
+        *(f"{100 * r[k]:.1f}" for k in ("success", "accuracy")),
+        *(f"{100 * r[k]:.2f}" for k in ("clearance_m_min", "clearance_m_p5", "clearance_m_median")),
+        f"{100 * r['path_length_m_mean']:.1f}",
+    )
+
+
 def markdown_lines(table: dict) -> list[str]:
     """The per-family table as Markdown lines (clearance and path length in cm, labelled; the path
     length's median is in the report's JSON)."""
-    lines = [
+    header = (
+        "family (generator)",
+        "n",
+        "safe swing (strict success) %",
+        "accuracy %",
+        "clearance min cm",
+        "p5 cm",
+        "median cm",
+        "path length mean cm",
+    )
+    rows = [
+        (f"{fam} ({g})", *family_cells(r)) for fam, gens in table.items() for g, r in gens.items()
+    ]
+    return [
         "## Unseen families (held out from training by construction)",
         "",
-        "| family (generator) | n | safe swing (strict success) % | accuracy % | clearance min cm | "
-        "p5 cm | median cm | path length mean cm |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|",
+        *md_table(header, rows),
     ]
-    for fam, gens in table.items():
-        for name, r in gens.items():
-            lines.append(
-                f"| {fam} ({name}) | {r['n']} | {100 * r['success']:.1f} | {100 * r['accuracy']:.1f} | "
-                f"{100 * r['clearance_m_min']:.2f} | {100 * r['clearance_m_p5']:.2f} | "
-                f"{100 * r['clearance_m_median']:.2f} | {100 * r['path_length_m_mean']:.1f} |"
-            )
-    return lines
