@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxexo.summary import Summary
+from jaxexo.summary import Summary, table
 
 TARGETS = {"rl_device_ready_ms": 4.0, "rl_over_cfftg": 1.5, "batch_1000_s": 1.0}
 # benchmarks/bench_device_ready.py's options (jaxexo.benchmarks.runner.run_script).
@@ -158,7 +158,7 @@ def run_device_ready_benchmark(
 
 
 def _markdown(payload: dict, policy) -> str:
-    m = payload["machine"]
+    m, by_rate, gens = payload["machine"], payload["by_rate_hz"], ("rl", "cfftg")
     lines = [
         "# Device-ready swing: generate + time_swing, RL alone vs CFFTG",
         "",
@@ -167,19 +167,11 @@ def _markdown(payload: dict, policy) -> str:
         f"{m['cores']} cores; other jobs may have run. The time law is the passes with their check "
         "on the curve.",
         "",
-        "| rate Hz | generator | device-ready median ms | p95 ms | of which generate (median) | "
-        "timing parts (mean ms): paths / time law (passes + curve check) / path checks / samples |",
-        "|---:|---|---:|---:|---:|---|",
-    ]
-    for r, f in payload["by_rate_hz"].items():
-        for k in ("rl", "cfftg"):
-            p = f["timing_parts_ms_mean"][k]
-            lines.append(
-                f"| {r} | {k} | {f['device_ready_ms_median'][k]:.2f} | "
-                f"{f['device_ready_ms_p95'][k]:.2f} | {f['generate_ms_median'][k]:.2f} | "
-                f"{p['paths']:.2f} / {p['passes']:.2f} / {p['checks']:.2f} / {p['samples']:.2f} |"
-            )
-    lines += [""] + [
+        *table(
+            RATE_HEADER, [_rate_cells(r, f, k) for r, f in by_rate.items() for k in gens], "rlrrrl"
+        ),
+        "",
+    ] + [
         f"{r} Hz: RL / CFFTG device-ready median **{f['rl_over_cfftg']:.2f}** (target <= "
         f"{TARGETS['rl_over_cfftg']}); RL median {f['device_ready_ms_median']['rl']:.2f} ms "
         f"(target <= {TARGETS['rl_device_ready_ms']} ms)."
@@ -196,15 +188,35 @@ def _markdown(payload: dict, policy) -> str:
         "median and p95 (s), the 1 kHz / 100 Hz ratio of each, and the shares within the limits on "
         "the curve and safe.",
         "",
-        "| set | generator | n | median 100 Hz | p95 100 Hz | median 1 kHz | p95 1 kHz | "
-        "ratio median | ratio p95 | within | safe |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        *table(DURATION_HEADER, map(_duration_cells, payload["durations_by_rate"]), "ll" + "r" * 9),
     ]
-    for r in payload["durations_by_rate"]:
-        lines.append(
-            f"| {r['set']} | {r['generator']} | {r['n']} | {r['median_100']:.3f} | "
-            f"{r['p95_100']:.3f} | {r['median_1000']:.3f} | {r['p95_1000']:.3f} | "
-            f"{r['median_1000'] / r['median_100']:.4f} | {r['p95_1000'] / r['p95_100']:.4f} | "
-            f"{r['within']:.3f} | {r['safe']:.3f} |"
-        )
     return "\n".join(lines + [""])
+
+
+RATE_HEADER = (
+    *("rate Hz", "generator", "device-ready median ms", "p95 ms", "of which generate (median)"),
+    "timing parts (mean ms): paths / time law (passes + curve check) / path checks / samples",
+)
+DURATION_HEADER = (
+    *("set", "generator", "n", "median 100 Hz", "p95 100 Hz", "median 1 kHz", "p95 1 kHz"),
+    *("ratio median", "ratio p95", "within", "safe"),
+)
+
+
+def _rate_cells(r: str, f: dict, k: str) -> tuple[str, ...]:
+    """Rate ``r``'s row of generator ``k``: device-ready median and p95, generate, the parts (ms)."""
+    p = f["timing_parts_ms_mean"][k]
+    ms = (f["device_ready_ms_median"][k], f["device_ready_ms_p95"][k], f["generate_ms_median"][k])
+    return (r, k, *(f"{x:.2f}" for x in ms), " / ".join(f"{p[x]:.2f}" for x in PARTS))
+
+
+def _duration_cells(r: dict) -> tuple[str, ...]:
+    """One set's and generator's timed durations at 100 Hz and 1 kHz, their ratios and shares."""
+    d = (r["median_100"], r["p95_100"], r["median_1000"], r["p95_1000"])
+    ratios = (r["median_1000"] / r["median_100"], r["p95_1000"] / r["p95_100"])
+    return (
+        *(r["set"], r["generator"], str(r["n"])),
+        *(f"{x:.3f}" for x in d),
+        *(f"{x:.4f}" for x in ratios),
+        *(f"{r[k]:.3f}" for k in ("within", "safe")),
+    )
