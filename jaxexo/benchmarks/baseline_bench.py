@@ -1,23 +1,6 @@
-"""jaxexo's trainer against the thesis's way of training (jaxexo.benchmarks.thesis_baseline), in one
-process: env-steps/s of each and their ratio, and the wall time each needs to reach the same greedy
-success rate. Needs the ``bench`` extra (PyTorch).
-
-- Throughput: the thesis network (2-64-32-32-32-36) on the thesis observation and the default
-  layouts. jaxexo: whole training updates at 4096 environments split over the CPU cores
-  (jaxexo.benchmarks.train_bench.throughput, the same figure as the trainer benchmark). Baseline:
-  env steps plus one replay update each, timed over ``throughput_seconds`` after a warm-up.
-- Time to success: the default model (configs/default.toml: conditioned observation, 128-128
-  LayerNorm network, the same reward and hyperparameters) trained by both. Both are scored by the
-  same validator (jaxexo.train.evaluate.make_validator: greedy strict success on 500 layouts of the
-  training distribution). jaxexo's time is the driver's wall time (compilation included) at the
-  first chunk whose validation reaches the target; the baseline's is its training time (its
-  validations are off the clock) at the first validation that reaches it. If the baseline does not
-  reach it within ``baseline_seconds``, the time is extrapolated as (env steps jaxexo needed) /
-  (baseline env-steps/s), i.e. assuming the baseline learns as much per env step as jaxexo, and the
-  report says so. The baseline's epsilon decays over ``eps_decay_fraction`` of the steps it can take
-  in its time budget (estimated from its measured rate), not of jaxexo's budget, which would leave
-  it exploring almost uniformly throughout: the choice most favourable to the baseline.
-"""
+"""jaxexo's trainer against the thesis-style trainer (thesis_baseline) in one process: env-steps/s of
+each and the wall time each needs to reach the same greedy success. Needs the ``bench`` extra.
+Method: docs/benchmarks.md#what-each-benchmark-measures."""
 
 from __future__ import annotations
 

@@ -1,18 +1,5 @@
-"""Walks over courses (``jaxexo bench``'s ``course`` part; jaxexo.course): RL alone against
-CFFTG on the same footholds, on courses 3-8 m long with 2-8 obstacles drawn from the held-out
-terrain families (jaxexo.physics.terrain) and from random profiles.
-
-Per course: the footholds are planned once (a course no walk crosses is refused, and counted, with
-its message and the time to the refusal); then the walk with the RL generator alone
-(``fallback=None``) and with CFFTG's swings on the same footholds, both timed at the [device]
-limits. Checked here, independently of the planner, on the exported walk table: every landing on
-flat ground (the terrain's own points, interpolated) at least env.min_clearance from an obstacle;
-both feet's clearance from the terrain at every sample; the joint angles continuous and within the
-velocity and acceleration limits by finite differences of the samples. The planning time per step
-(footholds and timing included) is compared with one swing's (``generate`` + ``time_swing``, the
-course's first steps planned alone), both in CPU time (process time: on a shared machine wall time
-measures the neighbours).
-"""
+"""Walks over drawn courses (``jaxexo bench``'s ``course`` part): RL alone against CFFTG on the same
+footholds, checked independently of the planner. Method: docs/benchmarks.md#what-each-benchmark-measures."""
 
 from __future__ import annotations
 

@@ -1,10 +1,5 @@
-"""Device-ready swing benchmark: what a wearer's controller waits for, one swing planned and timed
-(``generate`` + ``time_swing`` at the control rate), RL alone and CFFTG on the same held-out scenes,
-alternating in one process (CPU time, so that the other jobs on a shared machine count less), and
-``time_swings`` of a batch of 1000. Where one swing's time goes: generation, the timing's path set-up
-(joint paths and arc-length map), its TOPP passes and time law, and its evaluation and checks.
-
-Writes benchmarks/results/device_ready_<date>_<machine>.{json,md}."""
+"""Device-ready swing benchmark: ``generate`` + ``time_swing`` of one swing, RL alone and CFFTG
+alternating in CPU time, by part, and ``time_swings`` of a batch. Method: docs/benchmarks.md#what-each-benchmark-measures."""
 
 from __future__ import annotations
 

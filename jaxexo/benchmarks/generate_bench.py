@@ -1,14 +1,5 @@
-"""Generator benchmark: the shielded RL generator against CFFTG, side by side in one
-process, on the same scenes: one swing (rollout, smoothing, every safe-swing check, kinematics, joint
-angles), RL alone (``fallback=None``), RL and CFFTG alternating per scene, on the held-out families
-(jaxexo.evaluation.unseen) and on the safety scenes (jaxexo.inference.scenarios.safety_scenarios);
-the plain reference implementation (``plain_reference``) on a quarter of them, so that the speed-up
-shows; how RL swings were smoothed (one pass, retries, raw polyline) and how many are safe; a batch
-of 1000 held-out scenes (RL and CFFTG alternating) with the default BLAS threads and with
-single-threaded BLAS (``generate_batch`` runs its BLAS on one thread, jaxexo.inference.blas; the
-batch on the process's own threads, ``batch_blas_threads = None``, is timed too); and the cold
-import of jaxexo.inference. All in NumPy (no JAX in the timed code); figures are medians, ratios
-first."""
+"""Generator benchmark: the shielded RL generator against CFFTG side by side in one process (one
+swing, batches of 1000, the cold import, where the time goes). Method: docs/benchmarks.md#what-each-benchmark-measures."""
 
 from __future__ import annotations
 

@@ -1,23 +1,5 @@
-"""Landing benchmark: where the RL swing ends and what a complete swing costs beside CFFTG's.
-
-On the safety scene sets (jaxexo.benchmarks.scenes: the thesis five shifted, shapes never trained
-on, the held-out families), RL alone (``fallback=None``) and CFFTG on the same scenes:
-
-- safe swing % (the verdict, jaxexo.physics.outcome) and goal reached %;
-- final heel height: the share of swings ending more than 2 mm above the floor, and the max and
-  median over the swings, mm (a swing on the floor ends at 0);
-- heel lift (the path's highest heel z), median, cm;
-- duration at the device limits (jaxexo.swing.timing.time_swings), median and p95, s;
-  RL / CFFTG per scene, median (both safe); where RL swings end above the floor (the generator before
-  its landing), also the duration with the vertical touch-down that walks used to append to them
-  (6 samples straight down, re-checked by trajectory.assemble), median, and the time it adds to
-  the swings it is appended to, median, s;
-- the landing's approach: the heel's forward travel over its last 2 cm of descent, median, mm;
-- RL swings whose requested smoothing was retried (jaxexo.swing.finish) and those that fell back
-  to the raw polyline, %.
-
-Run by benchmarks/bench_landing.py; writes landing[_tag]_<date>_<machine>.{json,md}.
-"""
+"""Landing benchmark: where the RL swing ends and what a complete swing costs beside CFFTG's, on the
+safety sets. Run by benchmarks/bench_landing.py; method: docs/benchmarks.md#what-each-benchmark-measures."""
 
 from __future__ import annotations
 

@@ -1,19 +1,5 @@
-"""The model study's measurements: every agent of a finished model-study sweep (exported with
-``jaxexo sweep configs/sweeps/model_study.toml --out DIR --export-all``) measured with the project's
-benchmarks, RL alone (``fallback=None``) beside CFFTG on the same scenes:
-
-- safe swings (the strict verdict at the model's margin) on the held-out terrain families, the thesis
-  five shifted and unseen shapes (the swing-quality benchmark's sets, ``n`` scenes each);
-- the wearer's figures on the scenes both generators swing safely: heel lift median, timed swing
-  (the config's [device] limits) median and p95; CFFTG's safety shortfall beside them; the longest
-  timed RL swing on all scenes;
-- one swing (``generate``): RL and CFFTG alternating per scene in this process, ``time_n`` scenes of
-  the held-out families and of the unseen shapes, median ms and the RL / CFFTG ratio;
-- the sweep's own figures: greedy validation success (results.csv ``success``) and held-out success.
-
-Run by benchmarks/bench_model_study.py; writes model_study[_tag]_<date>_<machine>.{json,md,png}, the
-figure plotting each agent's generation time against its timed-swing p95 and its lift.
-"""
+"""The model study's measurements: every agent of a model-study sweep exported with ``--export-all``,
+RL alone beside CFFTG. Run by benchmarks/bench_model_study.py; method: docs/benchmarks.md#what-each-benchmark-measures."""
 
 from __future__ import annotations
 

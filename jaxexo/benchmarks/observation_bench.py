@@ -1,15 +1,5 @@
-"""Observation study: does seeing the obstacle's height profile (env.obs_profile = "shape")
-beat seeing its bounding box ("bbox") on shapes the policy never trained on?
-
-Two models are trained from configs/default.toml with one difference, env.obs_profile, on the same
-seed and budget. Their layout lists ``profile`` obstacles drawn from the *training* families of
-jaxexo.physics.terrain (fixed seed, a few per family, each scaled over 85-100 % of its drawn size).
-The layout keeps the default's placement model (start shift 0-5 cm, step length 0.65-0.80 m, offset
-+-3 cm), which is why the drawn widths are limited to 26 cm: the env's procedural placement comes
-with the config wiring. Both are scored with the NumPy generator on the fixed held-out benchmark
-(jaxexo.evaluation.unseen) and on fresh draws of the training families placed the same way
-(``seen``), with CFFTG on the same scenes for reference.
-"""
+"""Observation study: does seeing the obstacle's height profile (env.obs_profile = "shape") beat its
+bounding box ("bbox") on shapes never trained on? Method: docs/benchmarks.md#what-each-benchmark-measures."""
 
 from __future__ import annotations
 

@@ -1,22 +1,6 @@
-"""Population benchmarks: what a population costs against one agent, and whether a member's
-arithmetic depends on the number of CPU devices.
-
-- cost: a population of K costs at most 1.5 + (K - 1) x 0.25 times the wall time of one agent of the
-  same config (``jaxexo train`` with population 1, data parallel over the cores). For each K,
-  ``jaxexo train``'s driver (jaxexo.train.driver.run_training, as the CLI runs it: every CPU core a
-  JAX device) trains the config into a fresh directory, in this one process, one K after the other.
-  Reported per K: the training wall time (eval.json's train_seconds: first compilation and every
-  chunk's validation included, the final test evaluation not), the steady chunk time (median over
-  the chunks after the first, which compiles), their ratios to K = 1 and the target, and the members'
-  outcomes; the machine's load average before and after (it is shared, and a loaded core is slower).
-- devices: tests/test_population.py checks group-size independence in one process (one device);
-  this trains the test's tiny config in fresh processes with 1, 2 and 4 CPU devices, seed 3 alone and
-  as the fourth member of a population of 5, each on every device the process has (the devices a
-  population of 5 uses; jaxexo.train.population.population_devices gives at least two), and compares
-  the final parameters' bytes within each process and across device counts.
-
-Run by benchmarks/bench_population.py and benchmarks/population_devices_check.py.
-"""
+"""Population benchmarks: what a population costs against one agent, and whether a member's arithmetic
+depends on the number of CPU devices. Run by benchmarks/bench_population.py and
+benchmarks/population_devices_check.py; method: docs/benchmarks.md#what-each-benchmark-measures."""
 
 from __future__ import annotations
 

@@ -1,22 +1,5 @@
-"""MuJoCo replay benchmark: every swing of the safety sets replayed in MuJoCo (jaxexo.sim.replay).
-
-Sets: the thesis's five obstacles with shifted layouts, shapes never trained on and the held-out
-terrain families (all their cells), every pivot condition (jaxexo.benchmarks.scenes). Generators:
-the RL swing alone (fallback none) and CFFTG. Every swing is timed for the device at the control
-rate (time_swings, [device] limits), then:
-
-- kinematic replay: MuJoCo's distance at every control sample and 3 poses between; counted: swings
-  flagged ok (the timed swing's checks) that come within env.min_clearance in MuJoCo (target 0);
-  the largest difference between MuJoCo's and jaxexo's distance at the same pose, and at that pose a
-  third, brute-force distance (jaxexo.sim.replay.brute_force_distance) says which is nearer;
-- driven replay of every swing flagged ok at the default [device] limits, by two controllers on
-  the same setpoints: PD with inverse-dynamics feed-forward (pd_ff, what an exoskeleton's joint
-  controller does) and stiff position servos (servo): heel and toe tracking error (p95 and max over
-  swings of each swing's max; also where the swing's heel is off the floor), contacts with the
-  obstacle, swings within the margin, MuJoCo's smallest distance, saturation of a limit.
-
-Run by benchmarks/bench_replay.py; writes <name>_<date>_<machine>.{json,md} (name: replay).
-"""
+"""MuJoCo replay benchmark: every swing of the safety sets replayed kinematically and driven
+(jaxexo.sim.replay). Run by benchmarks/bench_replay.py; method: docs/benchmarks.md#what-each-benchmark-measures."""
 
 from __future__ import annotations
 

@@ -1,13 +1,6 @@
-"""``jaxexo bench``: every benchmark in one run, each writing its own result files, then a summary.
-
-Parts (``skip`` any of them): ``env`` (jaxexo.benchmarks.env_bench), ``train`` (train_bench: trainer
-throughput and the default and thesis configs' training runs), ``generate`` (generate_bench: the
-NumPy generator), ``compare`` (jaxexo.evaluation.compare: RL generator against CFFTG on the same 1000 test
-scenarios, timed in one process), ``baseline`` (baseline_bench: jaxexo's trainer against the
-thesis-style PyTorch trainer; skipped with a note when torch is not installed), ``course``
-(course_bench: walks over drawn courses, RL alone against CFFTG on the same footholds). The summary table
-(summary_<date>_<machine>.md, shown in the README) is built from the figures the parts return.
-"""
+"""``jaxexo bench``: every benchmark in one run (parts env, train, generate, compare, baseline, course;
+``skip`` any), each writing its own result files, then the summary table (summary_<date>_<machine>.md,
+shown in the README) built from the figures the parts return. The parts: docs/benchmarks.md."""
 
 from __future__ import annotations
 

@@ -1,12 +1,5 @@
-"""Safe-swing benchmark: how often each generator returns a safe swing (exact clearance of
-the moving foot >= env.min_clearance, goal, no backward heel, joint limits, leg length), and the
-number of swings flagged safe that a 10x denser look at the same curve contradicts (must be 0).
-
-Scenes: the thesis's five obstacles with shifted layouts and shapes never trained on, every pivot
-condition (jaxexo.inference.scenarios.safety_scenarios). Generators: the RL swing alone (fallback
-none), the default combination (CFFTG when the RL swing is not safe), CFFTG alone. Run by
-benchmarks/bench_safety.py; writes safety_<date>_<machine>.{json,md}.
-"""
+"""Safe-swing benchmark: how often each generator returns a safe swing, and how many swings flagged safe
+a 10x denser look at the same curve contradicts (must be 0). Method: docs/benchmarks.md#what-each-benchmark-measures."""
 
 from __future__ import annotations
 

@@ -1,21 +1,6 @@
-"""Swing-quality benchmark: what a wearer feels of the RL swing beside CFFTG's, on scenes outside the
-training distribution. RL alone (``fallback=None``) and CFFTG on the same scenes:
-
-- safe swing % (jaxexo.physics.outcome's verdict at the clearance asked for) and goal reached %;
-- lift: the heel's peak height above the obstacle's highest point (median, p95), cm;
-- duration at the device: the time-optimal swing within the config's ``[device]`` joint limits
-  (jaxexo.swing.timing), median, p95 and max, s;
-- smoothness as delivered: integrated squared jerk of the timed joint trajectories (sum over the four
-  joints of the third finite difference at the control rate, squared, times dt; rad^2/s^5), median
-  and p95; the share of RL swings smoothed once (no retry) and of those that fell back to the raw
-  polyline.
-
-Sets: the held-out terrain families, and the two safety sets of the safe-swing benchmark (the thesis
-five with shifted layouts, and shapes never trained on; jaxexo.benchmarks.scenes). A perception
-error plans over a wrong obstacle estimate while the judge sees the true obstacle. Run by
-benchmarks/bench_swing_quality.py; the model study (model_study_bench) measures each agent with
-``run_set``.
-"""
+"""Swing-quality benchmark: what a wearer feels of the RL swing beside CFFTG's (safety, lift, timed
+duration, jerk) on scenes outside the training distribution. Run by
+benchmarks/bench_swing_quality.py; the model study measures each agent with ``run_set``. Method: docs/benchmarks.md#what-each-benchmark-measures."""
 
 from __future__ import annotations
 

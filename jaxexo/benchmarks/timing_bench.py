@@ -1,9 +1,5 @@
-"""Device-timing benchmark: the RL generator and CFFTG on the same scenes, every swing timed for the
-exoskeleton (jaxexo.swing.timing, the policy config's [device] limits) and sampled at a
-control rate. Reports swing durations side by side, peak joint velocities and accelerations of the
-exported samples (finite differences at the control rate), rest at both ends, the path checks on the
-exported samples, and the uniform 1 s timing's peaks for contrast. Writes
-timing_<date>_<machine>.{json,md} via jaxexo.evaluation.machine."""
+"""Device-timing benchmark: RL and CFFTG swings on the same scenes timed for the [device] limits and
+sampled at a control rate. Writes timing_<date>_<machine>.{json,md}; method: docs/benchmarks.md#what-each-benchmark-measures."""
 
 from __future__ import annotations
 

@@ -1,16 +1,6 @@
-"""Trainer throughput and time-to-result benchmarks (issue targets for the TD(lambda) trainer).
-
-- throughput: env-steps/s of whole training updates (rollout + lambda-returns + Adam steps) for the
-  thesis network (2 -> 64 -> 32 -> 32 -> 32 -> 36) at 4096 environments, forward view and backward
-  view, medians of repeated compiled chunks after a warm-up;
-- default model: wall time (compilation included) and eval.json figures of `jaxexo train` on
-  configs/default.toml;
-- the shield's mask inside the trainer, the plain rule against the batched one, alternated in one
-  process (run_mask_ab_benchmark);
-- where an update's time goes, per config (update_breakdown, run_breakdown_benchmark).
-
-The steady rate through the driver is train_steady_bench (it must also run against older checkouts).
-"""
+"""Trainer benchmarks: throughput of whole updates, the default model's training run, the shield's mask
+A/B and where an update's time goes; the steady rate through the driver is train_steady_bench.
+Method: docs/benchmarks.md#what-each-benchmark-measures."""
 
 from __future__ import annotations
 

@@ -1,12 +1,6 @@
-"""Trainer steady rate of given configs through the real driver (``jaxexo train``'s run_training):
-compilations of the chunk program, the rate of each chunk (chunk 1 includes compilation), the steady
-rate (median of chunks 3 on), and the network's FLOP/s at that rate against the machine's matmul
-roofline.
-
-benchmarks/bench_train.py --steady loads this file by its path and it imports only jaxexo's public
-driver, so that it can measure an older checkout too (run from outside the repository with
-PYTHONPATH pointing at that checkout); writes train-steady[-label]_<date>_<machine>.{json,md}.
-"""
+"""Trainer steady rate of given configs through the real driver. benchmarks/bench_train.py --steady
+loads this file by its path and it imports only jaxexo's public driver, so that it can measure an
+older checkout too. Method: docs/benchmarks.md#what-each-benchmark-measures."""
 
 from __future__ import annotations
 

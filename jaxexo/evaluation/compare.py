@@ -1,18 +1,7 @@
 """Side-by-side evaluation of trajectory generators (the RL policy and CFFTG) on the same scenarios,
 ``jaxexo eval``: the scenario sets, the timed runs and the report (figures in
-jaxexo.evaluation.metrics, files in jaxexo.evaluation.report).
-
-Scenarios (jaxexo.inference.scenarios): ``test`` are the five thesis obstacles of Table 3.1 cycled over
-the three pivot conditions, jittered like the policy config's training layouts, from a fixed seed
-(the trainer's eval.json set); ``train`` are drawn from the policy's training distribution;
-``unseen`` is the held-out benchmark of jaxexo.evaluation.unseen.
-
-Timing (thesis 3.3, Table 3.11): each generator's ``generate`` once per scenario, the generators
-alternating which goes first, in one process, ``time.perf_counter`` around the call (validation,
-generation, smoothing and every check included); ``generate_batch`` on 1000 scenarios timed alike
-(median of BATCH_REPEATS), and each kind's and pivot's own scenarios in one call, scaled to 1000.
-The metrics are computed on the single calls' trajectories.
-"""
+jaxexo.evaluation.metrics, files in jaxexo.evaluation.report). Scenario sets and timing:
+docs/generation.md#jaxexo-eval-both-generators-side-by-side."""
 
 from __future__ import annotations
 

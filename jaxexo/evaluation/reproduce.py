@@ -1,34 +1,6 @@
-"""``jaxexo reproduce``: the thesis's experiments, rerun and tabulated beside its published values.
-
-Trains the seven thesis configs (thesis 3.2) in one or both variants, shipped with the package
-(jaxexo/config/thesis/; configs/thesis/ holds byte-equal copies):
-
-- ``faithful``: ``<m>.toml``, the thesis's text as written (heel (y, z) observation, the
-  2-64-32-32-32-36 network, equal reward weights with the r0 step term, 10,000-50,000 episodes);
-- ``learns``: ``<m>-learns.toml``, the same with the few named switches that make it learn
-  (``LEARNS_CHANGES``; each has an ablation row in benchmarks/results/thesis-learning_*.md),
-
-then for each model generates the n test scenarios of ``jaxexo.evaluation.compare`` (the five obstacles of
-Table 3.1 over the three pivot conditions, the model's own starts) with the NumPy generator, greedily (a
-device's generator) and epsilon-greedily as the thesis tested (§2.6; it does not state its epsilon: we
-use the config's final training epsilon, ``train.eps_end``, 0.05), and writes:
-
-- Table 3.2 / 3.9: per model, mean generation time and mean swing knee and hip angles;
-- Tables 3.3-3.8: per model and pivot condition (the thesis gives the two it was not trained on);
-- Table 3.10: accuracy (eq 3.1) per model, with jaxexo's strict success and goal reaching beside it;
-- training time per model beside the thesis's (a laptop GPU; jaxexo's on this machine);
-- Table 3.11: generation time per obstacle, final model against CFFTG, timed in one process;
-- the same tables for jaxexo's default model when ``--default`` is given (configs/default.toml).
-
-Each learns config trains as a population (REPRODUCE_POPULATION members, seeds seed..seed+K-1; the best
-on validation exported: jaxexo.train.population) and the tables add, per model, the exported member and
-how many members meet the target (``population_table``); the faithful configs train one agent.
-
-Run directories go under OUT/runs/<name> (name: ``a`` or ``a-learns``); an existing policy.npz there is
-reused, and so is its evaluation (runs/<name>/reproduce_entry.json, for the same n, seed and batch
-size), so an interrupted reproduction continues where it stopped. OUT/reproduce.md and
-OUT/reproduce.json hold the tables.
-"""
+"""``jaxexo reproduce``: the thesis's experiments (the seven thesis configs, faithful and learns,
+``LEARNS_CHANGES``), rerun and tabulated beside its published values; runs and their evaluations
+under OUT/runs/ are reused. What it writes and why: docs/thesis-reproduction.md."""
 
 from __future__ import annotations
 

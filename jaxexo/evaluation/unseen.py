@@ -1,11 +1,7 @@
-"""The public held-out benchmark's report: fixed scenes of obstacle families that no training draws
-(jaxexo.physics.scenarios.unseen_scenarios), run by both generators (``jaxexo eval --scenarios unseen``).
-
-The report per family and generator: strict success rate (goal reached, never touching the
-obstacle, joint limits and leg length; "safe swing"), accuracy (eq 3.1), the trajectory's minimum
-clearance over the family's scenes (min, 5th percentile, median, m) and the heel path length (m).
-The seed is fixed so that numbers are comparable between models; do not tune a model to it.
-"""
+"""The public held-out benchmark's report: fixed scenes of obstacle families no training draws, run
+by both generators (``jaxexo eval --scenarios unseen``), per family and generator. The seed is fixed
+so that numbers compare between models; do not tune a model to it. Method:
+docs/generation.md#jaxexo-eval-both-generators-side-by-side."""
 
 from __future__ import annotations
 
