@@ -52,10 +52,13 @@ class Summary:
 
 def table(header: Sequence[str], rows: Iterable[Sequence], align: str | None = None) -> list[str]:
     """A Markdown table's lines: the header, the alignment row and one line per row of cells (each cell
-    as ``str`` gives it). ``align``: a letter per column, ``l`` (``---``) or ``r`` (``---:``); by
-    default the first column ``l``, the others ``r``."""
+    as ``str`` gives it, an empty one as ``| |``). ``align``: a letter per column, ``l`` (``---``) or
+    ``r`` (``---:``); by default the first column ``l``, the others ``r``."""
     align = align or "l" + "r" * (len(header) - 1)
     assert len(align) == len(header), (align, header)
     rule = "".join("---|" if a == "l" else "---:|" for a in align)
-    lines = ["| " + " | ".join(header) + " |", "|" + rule]
-    return lines + ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
+
+    def line(cells) -> str:
+        return "|" + "".join(f" {c} |" if str(c) else " |" for c in cells)
+
+    return [line(header), "|" + rule, *map(line, rows)]

@@ -14,7 +14,7 @@ import numpy as np
 from jaxexo.evaluation.timing import scene_options, time_batch
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.inference.blas import blas_threads
-from jaxexo.summary import Summary
+from jaxexo.summary import Summary, table
 
 THESIS_MS = {"rl_single": 3.0, "cfftg_single": 2.0, "rl_batch_1000": 1764.0}  # Table 3.11, §3.4
 # Targets: one swing <= 1 ms and <= 1.5x CFFTG's; a batch of 1000 no slower than CFFTG's and <= 150 ms;
@@ -205,20 +205,32 @@ def time_breakdown(gen, cf, scenarios: list[dict], repeats: int = 3) -> dict:
 def breakdown_lines(b: dict) -> list[str]:
     """The breakdown's table (microseconds, medians; the parts are medians of their own, so they need
     not add up to the total exactly)."""
-    rl_steps = b["steps"]
     shield = b.get("shield_per_step", float("nan"))
-    return [
-        "| where one swing's time goes (median us) | RL | CFFTG |",
-        "|---|---:|---:|",
-        f"| total (`generate`) | {b['rl_total']:.0f} | {b['cfftg_total']:.0f} |",
-        f"| rollout: {rl_steps:.0f} steps per swing | {b['rollout']:.0f} | |",
-        f"| ... per step: network | {b['network_per_step']:.1f} | |",
-        f"| ... per step: shield's choice | {shield:.1f} | |",
-        f"| ... per swing: the observation's scene part (first layer) | {b['observation']:.0f} | |",
-        f"| plan with its checks and re-plans (CFFTG) | | {b['cfftg_plan']:.0f} |",
-        f"| finishing: smoothing and correction (`clear_rows`) | {b['smoothing_correction']:.0f} | |",
-        f"| finishing: verdict, retries, kinematics, joint angles | {b['verdict_angles']:.0f} | {b['cfftg_assemble']:.0f} |",
+    rows = [
+        ("total (`generate`)", f"{b['rl_total']:.0f}", f"{b['cfftg_total']:.0f}"),
+        (f"rollout: {b['steps']:.0f} steps per swing", f"{b['rollout']:.0f}", ""),
+        ("... per step: network", f"{b['network_per_step']:.1f}", ""),
+        ("... per step: shield's choice", f"{shield:.1f}", ""),
+        (
+            "... per swing: the observation's scene part (first layer)",
+            f"{b['observation']:.0f}",
+            "",
+        ),
+        ("plan with its checks and re-plans (CFFTG)", "", f"{b['cfftg_plan']:.0f}"),
+        (
+            "finishing: smoothing and correction (`clear_rows`)",
+            f"{b['smoothing_correction']:.0f}",
+            "",
+        ),
     ]
+    rows.append(
+        (
+            "finishing: verdict, retries, kinematics, joint angles",
+            f"{b['verdict_angles']:.0f}",
+            f"{b['cfftg_assemble']:.0f}",
+        )
+    )
+    return table(("where one swing's time goes (median us)", "RL", "CFFTG"), rows)
 
 
 def smoothing_counts(trajs) -> dict:
@@ -283,15 +295,9 @@ def _swing_table(sets: dict) -> list[str]:
 
     def row(label, cell, target=""):
         """A table row: the label, ``cell`` of each scene set's figures, the target."""
-        return (
-            f"| {label} | "
-            + " | ".join(cell(sets[w]) for w in SETS)
-            + (f" | {target} |" if target else " | |")
-        )
+        return (label, *(cell(sets[w]) for w in SETS), target)
 
-    return [
-        "| figure | unseen (held-out families) | safety scenes | target |",
-        "|---|---:|---:|---|",
+    rows = [
         row(
             "one swing, RL / CFFTG median ratio",
             lambda d: (
@@ -357,22 +363,37 @@ def _swing_table(sets: dict) -> list[str]:
             lambda d: f"{d['shield_steps_full_mask']:.2%}",
         ),
     ]
+    header = ("figure", "unseen (held-out families)", "safety scenes", "target")
+    return table(header, rows, "lrrl")
 
 
 def _batch_table(res: dict) -> list[str]:
     """The batch table: default and single-threaded BLAS, scaled to 1000 scenes (exact for n = 1000)."""
     batch, batch_1t = res["batch_ms"]["default_threads"], res["batch_ms"]["single_thread_blas"]
     b = lambda d, k: d[k] * 1000 / res["n"]  # noqa: E731
-    return [
-        "| batch of 1000 held-out scenes | RL | CFFTG | RL / CFFTG | target |",
-        "|---|---:|---:|---:|---|",
-        f"| default BLAS threads (this process) | {b(batch, 'rl'):.1f} ms | {b(batch, 'cfftg'):.1f} ms | "
-        f"**{batch['rl'] / batch['cfftg']:.2f}** | <= 1 and <= 150 ms: {_miss(batch['rl'] <= batch['cfftg'] and b(batch, 'rl') <= 150)} |",
-        f"| single-threaded BLAS (a fresh process) | {b(batch_1t, 'rl'):.1f} ms | {b(batch_1t, 'cfftg'):.1f} ms | "
-        f"**{batch_1t['rl'] / batch_1t['cfftg']:.2f}** | {_miss(batch_1t['rl'] <= batch_1t['cfftg'] and b(batch_1t, 'rl') <= 150)} |",
-        f"| RL on the process's BLAS threads (`batch_blas_threads = None`): default / single-threaded | "
-        f"{b(batch, 'rl_process_blas'):.1f} / {b(batch_1t, 'rl_process_blas'):.1f} ms | | | |",
+    ok = lambda d: _miss(d["rl"] <= d["cfftg"] and b(d, "rl") <= 150)  # noqa: E731
+    rows = [
+        (
+            "default BLAS threads (this process)",
+            *(f"{b(batch, k):.1f} ms" for k in ("rl", "cfftg")),
+            f"**{batch['rl'] / batch['cfftg']:.2f}**",
+            f"<= 1 and <= 150 ms: {ok(batch)}",
+        ),
+        (
+            "single-threaded BLAS (a fresh process)",
+            *(f"{b(batch_1t, k):.1f} ms" for k in ("rl", "cfftg")),
+            f"**{batch_1t['rl'] / batch_1t['cfftg']:.2f}**",
+            ok(batch_1t),
+        ),
+        (
+            "RL on the process's BLAS threads (`batch_blas_threads = None`): default / single-threaded",
+            f"{b(batch, 'rl_process_blas'):.1f} / {b(batch_1t, 'rl_process_blas'):.1f} ms",
+            *("", "", ""),
+        ),
     ]
+    return table(
+        ("batch of 1000 held-out scenes", "RL", "CFFTG", "RL / CFFTG", "target"), rows, "lrrrl"
+    )
 
 
 def report_lines(res: dict) -> list[str]:

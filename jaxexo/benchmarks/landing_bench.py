@@ -11,7 +11,7 @@ from jaxexo.baselines import CFFTG
 from jaxexo.benchmarks.scenes import batch_kwargs, safety_sets
 from jaxexo.evaluation.machine import write_result
 from jaxexo.inference import TrajectoryGenerator, time_swings
-from jaxexo.summary import Summary
+from jaxexo.summary import Summary, table
 from jaxexo.swing.trajectory import assemble
 
 
@@ -106,42 +106,38 @@ def run_set(gens, scenes, config) -> dict:
     return out
 
 
+HEADER = (
+    *("set", "method", "safe", "goal", "ends > 2 mm up", "end heel z max / median (mm)"),
+    *("lift median (cm)", "duration median / p95 (s)", "with touch-down (s): median, added"),
+    *("approach (mm)", "retried / raw polyline", "RL/CFFTG duration median"),
+)
+
+
+def _cells(r: dict, g: str) -> tuple[str, ...]:
+    """Generator ``g``'s row on a set (``r``: the set's figures) after the set and method."""
+    x, rl = r[g], g == "rl"
+    touch = x["duration_touch_down_s_median"]
+    return (
+        *(f"{100 * x[k]:.1f} %" for k in ("safe", "reached_goal", "end_above_2mm")),
+        f"{x['end_z_mm_max']:.1f} / {x['end_z_mm_median']:.1f}",
+        f"{x['lift_cm_median']:.2f}",
+        f"{x['duration_s_median']:.3f} / {x['duration_s_p95']:.3f}",
+        "-" if touch is None else f"{touch:.3f}, +{x['touch_down_added_s_median']:.3f}",
+        f"{x['approach_mm_median']:.1f}",
+        f"{100 * x['retried']:.1f} / {100 * x['raw_polyline']:.1f} %" if rl else "-",
+        f"{r['rl_over_cfftg_duration_median']:.3f} (n = {r['both_safe']})" if rl else "",
+    )
+
+
 def markdown(res: dict) -> str:
     lines = [
         f"# Landing: RL alone (fallback=None) beside CFFTG ({res['tag'] or 'current'})",
         "",
         f"Policy {res['policy']}; {res['n']} scenes per set. {res['note']}".rstrip(),
         "",
-        "| set | method | safe | goal | ends > 2 mm up | end heel z max / median (mm) | lift median (cm) | duration median / p95 (s) | with touch-down (s): median, added "
-        "| approach (mm) | retried / raw polyline | RL/CFFTG duration median |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for name, r in res["sets"].items():
-        for g in ("rl", "cfftg"):
-            x = r[g]
-            ratio = (
-                f"{r['rl_over_cfftg_duration_median']:.3f} (n = {r['both_safe']})"
-                if g == "rl"
-                else ""
-            )
-            touch = (
-                "-"
-                if x["duration_touch_down_s_median"] is None
-                else (
-                    f"{x['duration_touch_down_s_median']:.3f}, +{x['touch_down_added_s_median']:.3f}"
-                )
-            )
-            retried = (
-                f"{100 * x['retried']:.1f} / {100 * x['raw_polyline']:.1f} %" if g == "rl" else "-"
-            )
-            lines.append(
-                f"| {name} | {g} | {100 * x['safe']:.1f} % | {100 * x['reached_goal']:.1f} % | "
-                f"{100 * x['end_above_2mm']:.1f} % | {x['end_z_mm_max']:.1f} / {x['end_z_mm_median']:.1f} | {x['lift_cm_median']:.2f} | "
-                f"{x['duration_s_median']:.3f} / {x['duration_s_p95']:.3f} | "
-                f"{touch} | "
-                f"{x['approach_mm_median']:.1f} | "
-                f"{retried} | {ratio} |"
-            )
+    rows = [(name, g, *_cells(r, g)) for name, r in res["sets"].items() for g in ("rl", "cfftg")]
+    lines += table(HEADER, rows, "l" * 12)
     return "\n".join(lines)
 
 

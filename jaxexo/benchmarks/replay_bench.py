@@ -20,7 +20,7 @@ from jaxexo.sim.replay import (
     summarize_driven,
     summarize_kinematic,
 )
-from jaxexo.summary import Summary
+from jaxexo.summary import Summary, table
 from jaxexo.swing.timing import DeviceLimits, time_swings
 
 
@@ -123,22 +123,25 @@ def markdown(payload: dict, policy, n: int, rate: float, margin: float) -> str:
             k = r["kinematic"]
             w = k.get("worst_disagreement", {})
             rows_k.append(
-                f"| {name} | {g} | {r['n']} | {r['flagged_ok']} | {k['flagged_ok_within_margin']} | "
-                f"{_mm(k['min_mujoco_distance_of_ok_m'])} | {_mm(k['min_mujoco_minus_guaranteed_of_ok_m'])} | "
-                f"{1e6 * k['max_disagreement_m']:.3f} | {w.get('nearer_brute', '-')} | "
-                f"{1e3 * k['seconds_median']:.1f} |"
+                (
+                    *(
+                        name,
+                        g,
+                        str(r["n"]),
+                        str(r["flagged_ok"]),
+                        str(k["flagged_ok_within_margin"]),
+                    ),
+                    _mm(k["min_mujoco_distance_of_ok_m"]),
+                    _mm(k["min_mujoco_minus_guaranteed_of_ok_m"]),
+                    f"{1e6 * k['max_disagreement_m']:.3f}",
+                    w.get("nearer_brute", "-"),
+                    f"{1e3 * k['seconds_median']:.1f}",
+                )
             )
             for lim in ("driven", "driven_servo"):
                 if lim in r:
                     d = r[lim]
-                    rows_d.append(
-                        f"| {name} | {g} | {'pd_ff' if lim == 'driven' else 'servo'} | {d['n']} | "
-                        f"{_mm(d['heel_error_p95_m'])} / {_mm(d['heel_error_max_m'])} | "
-                        f"{_mm(d['heel_error_airborne_p95_m'])} | "
-                        f"{_mm(d['toe_error_p95_m'])} / {_mm(d['toe_error_max_m'])} | {d['contacts']} | "
-                        f"{d['within_margin']} | {_mm(d['min_distance_m'])} | {d['saturated']} | "
-                        f"{1e3 * d['seconds_median']:.0f} |"
-                    )
+                    rows_d.append((name, g, "pd_ff" if lim == "driven" else "servo", *_driven(d)))
     return "\n".join(
         [
             "# MuJoCo replay benchmark",
@@ -149,11 +152,7 @@ def markdown(payload: dict, policy, n: int, rate: float, margin: float) -> str:
             "",
             "## Kinematic replay (MuJoCo's mj_geomDistance at every control sample and 3 poses between)",
             "",
-            "| scenes | generator | n | flagged ok | flagged ok, within margin in MuJoCo | min MuJoCo distance of ok, mm | "
-            "min (MuJoCo - jaxexo guaranteed), mm | max disagreement at the samples, um | nearer the brute force | "
-            "replay ms (median) |",
-            "|---|---|---:|---:|---:|---:|---:|---:|---|---:|",
-            *rows_k,
+            *table(KINEMATIC, rows_k, "ll" + "r" * 6 + "lr"),
             "",
             "## Driven replay of the swings flagged ok (setpoints within the [device] limits)",
             "",
@@ -161,12 +160,35 @@ def markdown(payload: dict, policy, n: int, rate: float, margin: float) -> str:
             "same setpoints: pd_ff, PD with inverse-dynamics feed-forward; servo, stiff position servos. Heel error "
             "off the floor: at the samples where the swing's heel is more than 1 mm above the floor.",
             "",
-            "| scenes | generator | controller | n | heel error p95 / max, mm | heel error off the floor p95, mm | "
-            "toe error p95 / max, mm | contacts | within margin | min distance, mm | saturated | replay ms (median) |",
-            "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
-            *rows_d,
+            *table(DRIVEN, rows_d, "lll" + "r" * 9),
             "",
         ]
+    )
+
+
+KINEMATIC = (
+    *("scenes", "generator", "n", "flagged ok", "flagged ok, within margin in MuJoCo"),
+    *("min MuJoCo distance of ok, mm", "min (MuJoCo - jaxexo guaranteed), mm"),
+    *("max disagreement at the samples, um", "nearer the brute force", "replay ms (median)"),
+)
+DRIVEN = (
+    *("scenes", "generator", "controller", "n", "heel error p95 / max, mm"),
+    *("heel error off the floor p95, mm", "toe error p95 / max, mm", "contacts", "within margin"),
+    *("min distance, mm", "saturated", "replay ms (median)"),
+)
+
+
+def _driven(d: dict) -> tuple[str, ...]:
+    """A driven replay's figures, the table's cells after the set, generator and controller."""
+    return (
+        str(d["n"]),
+        f"{_mm(d['heel_error_p95_m'])} / {_mm(d['heel_error_max_m'])}",
+        _mm(d["heel_error_airborne_p95_m"]),
+        f"{_mm(d['toe_error_p95_m'])} / {_mm(d['toe_error_max_m'])}",
+        *(str(d[k]) for k in ("contacts", "within_margin")),
+        _mm(d["min_distance_m"]),
+        str(d["saturated"]),
+        f"{1e3 * d['seconds_median']:.0f}",
     )
 
 

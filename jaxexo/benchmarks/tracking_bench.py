@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxexo.summary import Summary
+from jaxexo.summary import Summary, table
 
 SETTINGS = (
     (0.0, False),
@@ -23,6 +23,24 @@ SETTINGS = (
     (0.1, True),
     (0.2, True),
 )  # (headroom, jerk limit on)
+
+
+HEADER = (
+    *("headroom", "jerk limit", "generator", "ok", "duration median / p95 s", "setpoints clipped"),
+    *("heel error off the floor p95 / max mm", "within 2 cm driven", "min distance mm"),
+)
+
+
+def _cells(r: dict) -> tuple[str, ...]:
+    """One setting's and generator's row."""
+    air = (1e3 * r["heel_error_airborne_p95_m"], 1e3 * r["heel_error_airborne_max_m"])
+    return (
+        *(f"{r['headroom']:.2f}", "on" if r["jerk"] else "off", r["generator"], str(r["ok"])),
+        f"{r['duration_median_s']:.3f} / {r['duration_p95_s']:.3f}",
+        str(r["saturated"]),
+        f"{air[0]:.1f} / {air[1]:.1f}",
+        *(str(r["within_margin"]), f"{1e3 * r['min_distance_m']:.1f}"),
+    )
 
 
 def run_tracking_benchmark(
@@ -97,16 +115,7 @@ def run_tracking_benchmark(
             f"Policy `{policy}`; {n} unseen-shape scenes; {rate:g} Hz; swings timed with each setting, driven in "
             "MuJoCo at the full [device] limits; figures over the swings flagged ok.",
             "",
-            "| headroom | jerk limit | generator | ok | duration median / p95 s | setpoints clipped | heel error off the "
-            "floor p95 / max mm | within 2 cm driven | min distance mm |",
-            "|---:|---|---|---:|---:|---:|---:|---:|---:|",
-            *[
-                f"| {r['headroom']:.2f} | {'on' if r['jerk'] else 'off'} | {r['generator']} | {r['ok']} | "
-                f"{r['duration_median_s']:.3f} / {r['duration_p95_s']:.3f} | {r['saturated']} | "
-                f"{1e3 * r['heel_error_airborne_p95_m']:.1f} / {1e3 * r['heel_error_airborne_max_m']:.1f} | "
-                f"{r['within_margin']} | {1e3 * r['min_distance_m']:.1f} |"
-                for r in rows
-            ],
+            *table(HEADER, map(_cells, rows), "rll" + "r" * 6),
             "",
             f"Machine: {payload['machine']['cpu']}, {payload['machine']['cores']} cores; {payload['seconds']:.0f} s.",
             "",
