@@ -22,6 +22,7 @@ from jaxexo.benchmarks.thesis_baseline import (
 )
 from jaxexo.config import Config, load_config
 from jaxexo.physics.actions import NUM_ACTIONS
+from jaxexo.summary import table
 
 POOL = 20_000
 
@@ -267,13 +268,26 @@ def markdown(r: dict) -> str:
     lines = [
         "# jaxexo trainer vs thesis-style sequential trainer (PyTorch)",
         "",
-        "| trainer (thesis network, thesis observation) | env-steps/s |",
-        "|---|---:|",
-        f"| jaxexo, {jx['num_envs']} envs, forward view, {jx['devices']} CPU devices | {jx['env_steps_per_s']:,.0f} |",
-        f"| thesis-style: 1 env, 1 update/step, replay batch {bl['batch_size']}, lambda-return window "
-        f"{bl['horizon']}, torch {r['torch']} ({bl['torch_threads']} thread) | {bl['env_steps_per_s']:,.0f} |",
-        f"| (its NumPy environment alone, random actions) | {bl['env_only_steps_per_s']:,.0f} |",
-        f"| **ratio** | **{t['ratio']:,.0f}x** |",
+        *table(
+            ("trainer (thesis network, thesis observation)", "env-steps/s"),
+            [
+                (
+                    f"jaxexo, {jx['num_envs']} envs, forward view, {jx['devices']} CPU devices",
+                    f"{jx['env_steps_per_s']:,.0f}",
+                ),
+                (
+                    f"thesis-style: 1 env, 1 update/step, replay batch {bl['batch_size']}, "
+                    f"lambda-return window {bl['horizon']}, torch {r['torch']} "
+                    f"({bl['torch_threads']} thread)",
+                    f"{bl['env_steps_per_s']:,.0f}",
+                ),
+                (
+                    "(its NumPy environment alone, random actions)",
+                    f"{bl['env_only_steps_per_s']:,.0f}",
+                ),
+                ("**ratio**", f"**{t['ratio']:,.0f}x**"),
+            ],
+        ),
         "",
     ]
     ts = r["time_to_success"]
@@ -282,9 +296,8 @@ def markdown(r: dict) -> str:
         f"baseline budget {ts['baseline_budget_s']:.0f} s at {ts['baseline_env_steps_per_s']:.0f} env-steps/s, "
         f"best validation {ts['baseline_best_validation']:.3f}:",
         "",
-        "| target | jaxexo s (env steps) | baseline s (env steps) | speed-up |",
-        "|---:|---:|---:|---:|",
     ]
+    rows = []
     for e in ts["reach"].values():
         js = "-" if e["jaxexo_s"] is None else f"{e['jaxexo_s']:.1f} ({e['jaxexo_env_steps']:,})"
         if e["baseline_s"] is None:
@@ -295,7 +308,9 @@ def markdown(r: dict) -> str:
             bs = f"{e['baseline_s']:.1f} ({e['baseline_env_steps']:,})"
         x = e.get("speedup")
         sp = "-" if not x else (f"{x:,.0f}x" if x >= 10 else f"{x:.2f}x")
-        lines.append(f"| {e['target']:.2f} | {js} | {bs} | {sp} |")
+        rows.append((f"{e['target']:.2f}", js, bs, sp))
+    header = ("target", "jaxexo s (env steps)", "baseline s (env steps)", "speed-up")
+    lines += table(header, rows, "rrrr")
     lines += [
         "",
         f"Load average (1, 5, 15 min) before / after: {_load(r['load_avg_before'])} / "

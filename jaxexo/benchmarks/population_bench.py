@@ -14,9 +14,36 @@ from pathlib import Path
 
 from jaxexo.config import load_config, packaged_config, with_population
 from jaxexo.evaluation.machine import write_result
-from jaxexo.summary import Summary
+from jaxexo.summary import Summary, table
 
 THESIS_B_LEARNS = Path(packaged_config("default")).parent / "thesis" / "b-learns.toml"
+
+
+COST_HEADER = (
+    *(
+        "K",
+        "devices",
+        "train s",
+        "ratio to K = 1",
+        "target",
+        "met",
+        "steady chunk s",
+        "steady ratio",
+    ),
+    *("exported seed", "members' test strict success"),
+)
+
+
+def _cost_cells(r: dict) -> tuple:
+    """One population size's row of the cost table."""
+    return (
+        *(r["k"], r["devices"], f"{r['train_seconds']:.1f}"),
+        *(f"{r[k]:.2f}" for k in ("ratio", "target")),
+        "yes" if r["meets_target"] else "no",
+        *(f"{r[k]:.2f}" for k in ("steady_chunk_s", "steady_ratio")),
+        r["exported_seed"],
+        ", ".join("-" if s is None else f"{s:.2f}" for s in r["test_success_raw"]),
+    )
 
 
 def target(k: int) -> float:
@@ -85,18 +112,8 @@ def run_population_benchmark(
         "train_seconds (compilation and per-chunk validation included). Load average (1, 5, 15 min) before "
         f"{tuple(round(x, 2) for x in load_before)}, after {tuple(round(x, 2) for x in load_after)}.",
         "",
-        "| K | devices | train s | ratio to K = 1 | target | met | steady chunk s | steady ratio | exported seed | "
-        "members' test strict success |",
-        "|---:|---:|---:|---:|---:|---|---:|---:|---:|---|",
+        *table(COST_HEADER, map(_cost_cells, rows), "rrrrrlrrrl"),
     ]
-    for r in rows:
-        lines.append(
-            f"| {r['k']} | {r['devices']} | {r['train_seconds']:.1f} | {r['ratio']:.2f} | {r['target']:.2f} | "
-            f"{'yes' if r['meets_target'] else 'no'} | {r['steady_chunk_s']:.2f} | {r['steady_ratio']:.2f} | "
-            f"{r['exported_seed']} | "
-            + ", ".join("-" if s is None else f"{s:.2f}" for s in r["test_success_raw"])
-            + " |"
-        )
     payload = {
         "config": Path(path).name,
         "rows": rows,
@@ -154,14 +171,16 @@ def run_population_devices_check(out_dir, tests_dir) -> dict:
         "population of 5, in a fresh process with 1, 2 and 4 CPU devices (the population spread over all of "
         "them); sha256 of the final parameters and per-update metrics.",
         "",
-        "| devices | alone | fourth of five | equal |",
-        "|---:|---|---|---|",
+        *table(
+            ("devices", "alone", "fourth of five", "equal"),
+            [
+                (r["devices"], r["alone"][:16], r["fourth_of_five"][:16])
+                + ("yes" if r["alone"] == r["fourth_of_five"] else "no",)
+                for r in rows
+            ],
+            "rlll",
+        ),
     ]
-    for r in rows:
-        lines.append(
-            f"| {r['devices']} | {r['alone'][:16]} | {r['fourth_of_five'][:16]} | "
-            f"{'yes' if r['alone'] == r['fourth_of_five'] else 'no'} |"
-        )
     same = {
         f"{a['devices']} vs {b['devices']}": a["alone"] == b["alone"]
         for a in rows

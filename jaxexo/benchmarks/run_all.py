@@ -263,14 +263,13 @@ def _baseline_part(b: BenchRun, notes: list[str]) -> dict | None:
 def write_summary(res: dict, notes: list[str], out_dir: Path, progress) -> None:
     """The summary table of the parts' figures and the notes, written to out_dir and shown."""
     from jaxexo.evaluation.machine import write_result
+    from jaxexo.summary import table
 
     lines = [
         "# jaxexo benchmark summary",
         "",
-        "| figure | measured | target / thesis |",
-        "|---|---|---|",
+        *table(("figure", "measured", "target / thesis"), summary_rows(res), "lll"),
     ]
-    lines += [f"| {a} | {b} | {c} |" for a, b, c in summary_rows(res)]
     lines += [""] + [f"- {n}" for n in notes]
     md = "\n".join(lines)
     write_result("summary", {"rows": summary_rows(res), "notes": notes}, md, out_dir)

@@ -11,7 +11,7 @@ from pathlib import Path
 import jax
 
 from jaxexo.config import Config
-from jaxexo.summary import Summary
+from jaxexo.summary import Summary, table
 from jaxexo.train.trainer import Hyperparams, Trainer
 
 
@@ -379,9 +379,10 @@ def run_mask_ab_benchmark(path, updates: int, rounds: int, out_dir: Path) -> dic
         [
             f"# Shielded trainer, plain mask vs batched mask ({out['config']}, {out['devices']} CPU devices)",
             "",
-            "| mask | steady env-steps/s (median) |",
-            "|---|---:|",
-            *(f"| {k} | {v / 1e3:.0f}k |" for k, v in rates.items()),
+            *table(
+                ("mask", "steady env-steps/s (median)"),
+                [(k, f"{v / 1e3:.0f}k") for k, v in rates.items()],
+            ),
             "",
             f"Batched / plain: {out['ratio']:.2f}x; {rounds} alternated calls of {steps:,} env steps each. Shared "
             "machine: other jobs ran at the same time; the alternation exposes both to the same load.",
@@ -419,11 +420,10 @@ def run_breakdown_benchmark(paths, label: str, out_dir: Path) -> dict:
             f"## {r['config']} (N = {r['num_envs']}, T = {r['rollout_steps']}, {r['num_minibatches']} "
             f"minibatches x {r['num_epochs']} epoch(s), hidden {r['hidden']}, shield {r['shield']})",
             "",
-            "| part | ms per update | share of the update |",
-            "|---|---:|---:|",
-        ]
-        lines += [
-            f"| {k} | {v:.2f} | {100 * v / parts['update']:.0f} % |" for k, v in parts.items()
+            *table(
+                ("part", "ms per update", "share of the update"),
+                [(k, f"{v:.2f}", f"{100 * v / parts['update']:.0f} %") for k, v in parts.items()],
+            ),
         ]
         lines += ["", f"One device: {r['env_steps_per_s_one_device'] / 1e3:.0f}k env-steps/s.", ""]
     md = "\n".join(lines)
