@@ -335,69 +335,32 @@ def markdown(res: dict) -> str:
         f"(slowest refusal {num(res['refusal_seconds_max'])} s CPU). Median {num(res['steps_median'], '{:.0f}')} swings "
         "per course.",
         "",
-    ]
-    rows = [
-        (
-            "courses with every swing safe (strict verdict, 2 cm)",
-            pct(res["rl_alone_success"]),
-            pct(res["cfftg_success"]),
-            "RL >= 99 %",
-        ),
-        (
-            f"walk duration at the device limits, median (both ok, n = {rr['n']})",
-            num(d["rl"], "{:.2f} s"),
-            num(d["cfftg"], "{:.2f} s"),
-            "RL <= CFFTG",
-        ),
-        (
-            "RL / CFFTG duration per course: median, max",
-            f"{num(rr['median'])}, {num(rr['max'])}",
-            "",
-            "<= 1",
-        ),
-        (
-            "planning CPU time per step (footholds and timing included), median",
-            f"{num(res['plan_s_per_step_median'])} s",
-            "",
-            "",
-        ),
-        (
-            "one swing alone (generate + time_swing), CPU, median of "
-            f"{res['reference_courses']} courses' first steps",
-            f"{num(res['one_swing_s_median'])} s",
-            "",
-            "",
-        ),
-        (
-            "per step / one swing, median",
-            num(res["per_step_over_one_swing_median"], "{:.2f}x"),
-            "",
-            "<= 1.5x",
-        ),
+        "| figure | RL alone | CFFTG | target |",
+        "|---|---|---|---|",
+        f"| courses with every swing safe (strict verdict, 2 cm) | {pct(res['rl_alone_success'])} | "
+        f"{pct(res['cfftg_success'])} | RL >= 99 % |",
+        f"| walk duration at the device limits, median (both ok, n = {rr['n']}) | {num(d['rl'], '{:.2f} s')} | "
+        f"{num(d['cfftg'], '{:.2f} s')} | RL <= CFFTG |",
+        f"| RL / CFFTG duration per course: median, max | {num(rr['median'])}, {num(rr['max'])} | | <= 1 |",
+        f"| planning CPU time per step (footholds and timing included), median | {num(res['plan_s_per_step_median'])} s "
+        f"| | |",
+        f"| one swing alone (generate + time_swing), CPU, median of {res['reference_courses']} courses' first steps | "
+        f"{num(res['one_swing_s_median'])} s | | |",
+        f"| per step / one swing, median | {num(res['per_step_over_one_swing_median'], '{:.2f}x')} | | <= 1.5x |",
     ]
     for label in ("rl", "cfftg"):
         c = res["checks"][label]
-        rows.append(
-            (
-                f"{label}: walks checked independently: landings on flat ground, within the limits "
-                "(finite differences), uniform time",
-                f"{c['landings_ok']}, {c['within_limits']}, {c['uniform_time']} of {c['walks']}",
-                "",
-                "all",
-            )
+        lines.append(
+            f"| {label}: walks checked independently: landings on flat ground, within the limits (finite "
+            f"differences), uniform time | {c['landings_ok']}, {c['within_limits']}, {c['uniform_time']} of "
+            f"{c['walks']} | | all |"
         )
-        rows.append(
-            (
-                f"{label}: least foot clearance at the samples; largest joint step per sample; peak "
-                "velocity and acceleration / limit",
-                f"{num(c['min_sample_clearance_m'], '{:.4f} m')}; "
-                f"{num(c['max_joint_step_rad'], '{:.4f} rad')}; {num(c['max_velocity_ratio'])}, "
-                f"{num(c['max_acceleration_ratio'])}",
-                "",
-                ">= 0.02 m; -; <= 1",
-            )
+        lines.append(
+            f"| {label}: least foot clearance at the samples; largest joint step per sample; peak velocity and "
+            f"acceleration / limit | {num(c['min_sample_clearance_m'], '{:.4f} m')}; "
+            f"{num(c['max_joint_step_rad'], '{:.4f} rad')}; {num(c['max_velocity_ratio'])}, "
+            f"{num(c['max_acceleration_ratio'])} | | >= 0.02 m; -; <= 1 |"
         )
-    lines += md_table(("figure", "RL alone", "CFFTG", "target"), rows, "llll")
     if res["rl_failed_courses"]:
         lines += ["", "RL-alone failures (course, step, first reason):", ""]
         lines += [
