@@ -17,7 +17,7 @@ from jaxexo.evaluation.compare import WithFallback, run_generators
 from jaxexo.evaluation.machine import machine_info, write_result
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.storage.atomic import atomic_write, write_figure
-from jaxexo.summary import Summary
+from jaxexo.summary import Summary, table
 
 # The wearer's targets against CFFTG on the scenes both swing safely (lift and timed median <= CFFTG's,
 # timed p95 <= 1.1x), the longest RL swing on all scenes, RL alone's safe share on every set.
@@ -210,28 +210,28 @@ def markdown(rows: list[dict], meta: dict) -> str:
         "",
         "## Per configuration (median over seeds)",
         "",
-        "| config | seeds passing the screen | seeds meeting every target | min validation success | "
-        "one swing ms, wall | ratio, CPU |",
-        "|---|---:|---:|---:|---:|---:|",
-    ]
-    for e in config_summary(rows):
-        lines.append(
-            f"| {e['label']} | {e['screened']} of {e['seeds']} | {e['meets_all']} of {e['seeds']} | "
-            f"{e['success_min']:.3f} | {e['ms']:.2f} | {e['ratio']:.2f} |"
-        )
-    lines += [
+        *table(
+            ("config", "seeds passing the screen", "seeds meeting every target")
+            + ("min validation success", "one swing ms, wall", "ratio, CPU"),
+            [
+                (
+                    e["label"],
+                    f"{e['screened']} of {e['seeds']}",
+                    f"{e['meets_all']} of {e['seeds']}",
+                )
+                + (f"{e['success_min']:.3f}", f"{e['ms']:.2f}", f"{e['ratio']:.2f}")
+                for e in config_summary(rows)
+            ],
+        ),
         "",
         "## Per agent",
         "",
-        "| config | seed | val. success | screen: RL safe % fam / shapes | RL safe % (fam / five / shapes) | "
-        "CFFTG safe % | lift cm RL / CFFTG | timed median s RL / CFFTG | p95 s RL / CFFTG | longest RL s | "
-        "one swing ms RL / CFFTG (fam, wall) | CPU ratio fam / shapes | raw pts | meets |",
-        "|---|---:|---:|---|---|---|---|---|---|---:|---|---|---:|---|",
     ]
+    agents = []  # each agent's cells as text ("a | b")
     for r in rows:
         t = r["timing"]
         head = (
-            f"| {r['label']} | {r['seed']} | {r['success']:.3f} | "
+            f"{r['label']} | {r['seed']} | {r['success']:.3f} | "
             f"{100 * t['held-out families']['rl_safe']:.1f} / {100 * t['unseen shapes']['rl_safe']:.1f} | "
         )
         tail = (
@@ -240,20 +240,28 @@ def markdown(rows: list[dict], meta: dict) -> str:
             f"{t['held-out families']['raw_points']:.1f} | "
         )
         if not r["screened"]:
-            lines.append(head + "| | | | | | " + tail + "screen failed |")
+            agents.append(head + "| | | | | | " + tail + "screen failed")
             continue
         s, p = r["sets"], r["pooled"]
         safe = " / ".join(f"{100 * v['rl_safe']:.1f}" for v in s.values())
         csafe = " / ".join(f"{100 * v['cfftg_safe']:.1f}" for v in s.values())
         missed = [k for k, v in r["meets"].items() if not v]
-        lines.append(
+        agents.append(
             head + f"{safe} | {csafe} | {p['rl']['lift_cm']:.2f} / {p['cfftg']['lift_cm']:.2f} | "
             f"{p['rl']['dur_median_s']:.3f} / {p['cfftg']['dur_median_s']:.3f} | {p['rl']['dur_p95_s']:.3f} / "
             f"{p['cfftg']['dur_p95_s']:.3f} | {r['rl_longest_s']:.2f} | "
             + tail
-            + f"{'all' if not missed else 'not ' + ', '.join(missed)} |"
+            + f"{'all' if not missed else 'not ' + ', '.join(missed)}"
         )
-    return "\n".join(lines)
+    return "\n".join(lines + table(AGENT_HEADER, [(a,) for a in agents], "lrrllllllrllrl"))
+
+
+AGENT_HEADER = (
+    *("config", "seed", "val. success", "screen: RL safe % fam / shapes"),
+    *("RL safe % (fam / five / shapes)", "CFFTG safe %", "lift cm RL / CFFTG"),
+    *("timed median s RL / CFFTG", "p95 s RL / CFFTG", "longest RL s"),
+    *("one swing ms RL / CFFTG (fam, wall)", "CPU ratio fam / shapes", "raw pts", "meets"),
+)
 
 
 DEFAULT_LABEL = "today's default"  # the label of the default's configuration, marked in the figure
