@@ -28,7 +28,7 @@ LAYERS = (
     ),  # what every generator does with its path: smooth, clear, check, time, export
     ("jaxexo.baselines",),  # CFFTG, also the RL generator's fallback planner
     ("jaxexo.inference",),  # the RL generator and the public face of generation
-    ("jaxexo.course", "jaxexo.plots"),  # walks over a course; figures and animations
+    ("jaxexo.course", "jaxexo.plots", "jaxexo.summary"),  # walks, figures, summaries
     (
         "jaxexo.train",
     ),  # exports policies for the generator, and picks them as it swings (selection)

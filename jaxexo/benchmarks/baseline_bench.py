@@ -1,23 +1,6 @@
-"""jaxexo's trainer against the thesis's way of training (jaxexo.benchmarks.thesis_baseline), in one
-process: env-steps/s of each and their ratio, and the wall time each needs to reach the same greedy
-success rate. Needs the ``bench`` extra (PyTorch).
-
-- Throughput: the thesis network (2-64-32-32-32-36) on the thesis observation and the default
-  layouts. jaxexo: whole training updates at 4096 environments split over the CPU cores
-  (jaxexo.benchmarks.train_bench.throughput, the same figure as the trainer benchmark). Baseline:
-  env steps plus one replay update each, timed over ``throughput_seconds`` after a warm-up.
-- Time to success: the default model (configs/default.toml: conditioned observation, 128-128
-  LayerNorm network, the same reward and hyperparameters) trained by both. Both are scored by the
-  same validator (jaxexo.train.evaluate.make_validator: greedy strict success on 500 layouts of the
-  training distribution). jaxexo's time is the driver's wall time (compilation included) at the
-  first chunk whose validation reaches the target; the baseline's is its training time (its
-  validations are off the clock) at the first validation that reaches it. If the baseline does not
-  reach it within ``baseline_seconds``, the time is extrapolated as (env steps jaxexo needed) /
-  (baseline env-steps/s), i.e. assuming the baseline learns as much per env step as jaxexo, and the
-  report says so. The baseline's epsilon decays over ``eps_decay_fraction`` of the steps it can take
-  in its time budget (estimated from its measured rate), not of jaxexo's budget, which would leave
-  it exploring almost uniformly throughout: the choice most favourable to the baseline.
-"""
+"""jaxexo's trainer against the thesis-style trainer (thesis_baseline) in one process: env-steps/s of
+each and the wall time each needs to reach the same greedy success. Needs the ``bench`` extra.
+Method: docs/benchmarks.md#what-each-benchmark-measures."""
 
 from __future__ import annotations
 
@@ -39,6 +22,7 @@ from jaxexo.benchmarks.thesis_baseline import (
 )
 from jaxexo.config import Config, load_config
 from jaxexo.physics.actions import NUM_ACTIONS
+from jaxexo.summary import table
 
 POOL = 20_000
 
@@ -284,13 +268,26 @@ def markdown(r: dict) -> str:
     lines = [
         "# jaxexo trainer vs thesis-style sequential trainer (PyTorch)",
         "",
-        "| trainer (thesis network, thesis observation) | env-steps/s |",
-        "|---|---:|",
-        f"| jaxexo, {jx['num_envs']} envs, forward view, {jx['devices']} CPU devices | {jx['env_steps_per_s']:,.0f} |",
-        f"| thesis-style: 1 env, 1 update/step, replay batch {bl['batch_size']}, lambda-return window "
-        f"{bl['horizon']}, torch {r['torch']} ({bl['torch_threads']} thread) | {bl['env_steps_per_s']:,.0f} |",
-        f"| (its NumPy environment alone, random actions) | {bl['env_only_steps_per_s']:,.0f} |",
-        f"| **ratio** | **{t['ratio']:,.0f}x** |",
+        *table(
+            ("trainer (thesis network, thesis observation)", "env-steps/s"),
+            [
+                (
+                    f"jaxexo, {jx['num_envs']} envs, forward view, {jx['devices']} CPU devices",
+                    f"{jx['env_steps_per_s']:,.0f}",
+                ),
+                (
+                    f"thesis-style: 1 env, 1 update/step, replay batch {bl['batch_size']}, "
+                    f"lambda-return window {bl['horizon']}, torch {r['torch']} "
+                    f"({bl['torch_threads']} thread)",
+                    f"{bl['env_steps_per_s']:,.0f}",
+                ),
+                (
+                    "(its NumPy environment alone, random actions)",
+                    f"{bl['env_only_steps_per_s']:,.0f}",
+                ),
+                ("**ratio**", f"**{t['ratio']:,.0f}x**"),
+            ],
+        ),
         "",
     ]
     ts = r["time_to_success"]
@@ -299,9 +296,8 @@ def markdown(r: dict) -> str:
         f"baseline budget {ts['baseline_budget_s']:.0f} s at {ts['baseline_env_steps_per_s']:.0f} env-steps/s, "
         f"best validation {ts['baseline_best_validation']:.3f}:",
         "",
-        "| target | jaxexo s (env steps) | baseline s (env steps) | speed-up |",
-        "|---:|---:|---:|---:|",
     ]
+    rows = []
     for e in ts["reach"].values():
         js = "-" if e["jaxexo_s"] is None else f"{e['jaxexo_s']:.1f} ({e['jaxexo_env_steps']:,})"
         if e["baseline_s"] is None:
@@ -312,7 +308,9 @@ def markdown(r: dict) -> str:
             bs = f"{e['baseline_s']:.1f} ({e['baseline_env_steps']:,})"
         x = e.get("speedup")
         sp = "-" if not x else (f"{x:,.0f}x" if x >= 10 else f"{x:.2f}x")
-        lines.append(f"| {e['target']:.2f} | {js} | {bs} | {sp} |")
+        rows.append((f"{e['target']:.2f}", js, bs, sp))
+    header = ("target", "jaxexo s (env steps)", "baseline s (env steps)", "speed-up")
+    lines += table(header, rows, "rrrr")
     lines += [
         "",
         f"Load average (1, 5, 15 min) before / after: {_load(r['load_avg_before'])} / "

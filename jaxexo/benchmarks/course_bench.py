@@ -1,18 +1,5 @@
-"""Walks over courses (``jaxexo bench``'s ``course`` part; jaxexo.course): RL alone against
-CFFTG on the same footholds, on courses 3-8 m long with 2-8 obstacles drawn from the held-out
-terrain families (jaxexo.physics.terrain) and from random profiles.
-
-Per course: the footholds are planned once (a course no walk crosses is refused, and counted, with
-its message and the time to the refusal); then the walk with the RL generator alone
-(``fallback=None``) and with CFFTG's swings on the same footholds, both timed at the [device]
-limits. Checked here, independently of the planner, on the exported walk table: every landing on
-flat ground (the terrain's own points, interpolated) at least env.min_clearance from an obstacle;
-both feet's clearance from the terrain at every sample; the joint angles continuous and within the
-velocity and acceleration limits by finite differences of the samples. The planning time per step
-(footholds and timing included) is compared with one swing's (``generate`` + ``time_swing``, the
-course's first steps planned alone), both in CPU time (process time: on a shared machine wall time
-measures the neighbours).
-"""
+"""Walks over drawn courses (``jaxexo bench``'s ``course`` part): RL alone against CFFTG on the same
+footholds, checked independently of the planner. Method: docs/benchmarks.md#what-each-benchmark-measures."""
 
 from __future__ import annotations
 
@@ -21,6 +8,9 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+from jaxexo.summary import Summary
+from jaxexo.summary import table as md_table
 
 RANDOM = "random_profile"
 LENGTH = (3.0, 8.0)  # m
@@ -225,7 +215,7 @@ def run_course_benchmark(
                 r.update(independent_checks(c, gen.config.env.min_clearance))
             if label == "rl" and len(rows) < REFERENCE_COURSES and c.ok:
                 one = [_one_swing_seconds(gen, c, k) for k in range(min(3, len(c.steps)))]
-                r["one_swing_s"] = float(np.median(one))
+                r["one_swing_s"] = Summary.of(one).median
             row[label] = r
         rows.append(row)
         _log(log, {"row": row})
@@ -259,6 +249,11 @@ def summarize_log(path, seed: int = 0) -> dict:
         e = json.loads(line)
         (rows if "row" in e else refused).append(e.get("row", e.get("refused")))
     return summarize(rows, refused, len(rows) + len(refused), seed)
+
+
+def _median(xs: list) -> float | None:
+    """The median of ``xs``, None (JSON's null) when there is none."""
+    return Summary.of(xs).median if xs else None
 
 
 def summarize(rows, refused, n, seed) -> dict:
@@ -304,21 +299,19 @@ def summarize(rows, refused, n, seed) -> dict:
             for r in rows
             if not r["rl"]["ok"]
         ],
-        "steps_median": float(np.median([r["steps"] for r in rows])) if rows else None,
+        "steps_median": _median([r["steps"] for r in rows]),
         "duration_s_median": {
-            "rl": float(np.median([r["rl"]["duration_s"] for r in both])) if both else None,
-            "cfftg": float(np.median([r["cfftg"]["duration_s"] for r in both])) if both else None,
+            "rl": _median([r["rl"]["duration_s"] for r in both]),
+            "cfftg": _median([r["cfftg"]["duration_s"] for r in both]),
         },
         "duration_ratio_rl_over_cfftg": {
-            "median": float(np.median(ratio)) if ratio else None,
-            "max": float(np.max(ratio)) if ratio else None,
+            "median": _median(ratio),
+            "max": Summary.of(ratio).max if ratio else None,
             "n": len(ratio),
         },
-        "plan_s_per_step_median": float(np.median(per_step)) if per_step else None,
-        "one_swing_s_median": float(np.median([b for _, b in ref])) if ref else None,
-        "per_step_over_one_swing_median": float(np.median([a / b for a, b in ref]))
-        if ref
-        else None,
+        "plan_s_per_step_median": _median(per_step),
+        "one_swing_s_median": _median([b for _, b in ref]),
+        "per_step_over_one_swing_median": _median([a / b for a, b in ref]),
         "reference_courses": len(ref),
         "checks": checks,
         "courses": rows,
@@ -437,15 +430,15 @@ def run_pivot_benchmark(
             "",
             f"{n} scenes per family; the same obstacle and step with the stance heel at each place.",
             "",
-            "| family | " + " | ".join(PIVOT_PLACES) + " |",
-            "|---" * (len(PIVOT_PLACES) + 1) + "|",
+            *md_table(
+                ("family", *PIVOT_PLACES),
+                [
+                    (fam, *(f"{a}/{b}" for a, b in (t[p] for p in PIVOT_PLACES)))
+                    for fam, t in [*table.items(), ("all", total)]
+                ],
+                "l" * (len(PIVOT_PLACES) + 1),
+            ),
         ]
-        for fam, t in list(table.items()) + [("all", total)]:
-            lines.append(
-                f"| {fam} | "
-                + " | ".join(f"{a}/{b}" for a, b in (t[p] for p in PIVOT_PLACES))
-                + " |"
-            )
         write_result(name, res, "\n".join(lines) + "\n", Path(out_dir))
     return res
 
@@ -486,11 +479,11 @@ def run_swing_breakdown(
     rows = {
         ("flat" if f else "obstacle"): {
             "swings": len(ratio[f]),
-            "duration_ratio_median": float(np.median(ratio[f])),
-            "duration_ratio_mean": float(np.mean(ratio[f])),
+            "duration_ratio_median": Summary.of(ratio[f]).median,
+            "duration_ratio_mean": Summary.of(ratio[f]).mean,
             "lift_median_m": {
-                "rl": float(np.median([x[0] for x in lift[f]])),
-                "cfftg": float(np.median([x[1] for x in lift[f]])),
+                "rl": Summary.of([x[0] for x in lift[f]]).median,
+                "cfftg": Summary.of([x[1] for x in lift[f]]).median,
             },
         }
         for f in (True, False)
@@ -500,8 +493,8 @@ def run_swing_breakdown(
         "seed": seed,
         "by_kind": rows,
         "rl_floor_travel_m": {
-            "median": float(np.median(slide)),
-            "p95": float(np.percentile(slide, 95)),
+            "median": Summary.of(slide).median,
+            "p95": Summary.of(slide).p95,
         },
     }
     if out_dir is not None:
@@ -512,14 +505,24 @@ def run_swing_breakdown(
             "",
             f"The first {n} drawn courses (seed {seed}) that both walk safely.",
             "",
-            "| swings | n | RL / CFFTG duration, median / mean | heel lift median, RL / CFFTG cm |",
-            "|---|---:|---:|---:|",
+            *md_table(
+                (
+                    "swings",
+                    "n",
+                    "RL / CFFTG duration, median / mean",
+                    "heel lift median, RL / CFFTG cm",
+                ),
+                [
+                    (
+                        k,
+                        str(r["swings"]),
+                        f"{r['duration_ratio_median']:.3f} / {r['duration_ratio_mean']:.3f}",
+                        f"{100 * r['lift_median_m']['rl']:.1f} / {100 * r['lift_median_m']['cfftg']:.1f}",
+                    )
+                    for k, r in rows.items()
+                ],
+            ),
         ]
-        for k, r in rows.items():
-            lines.append(
-                f"| {k} | {r['swings']} | {r['duration_ratio_median']:.3f} / {r['duration_ratio_mean']:.3f} | "
-                f"{100 * r['lift_median_m']['rl']:.1f} / {100 * r['lift_median_m']['cfftg']:.1f} |"
-            )
         ft = res["rl_floor_travel_m"]
         lines += [
             "",

@@ -1,10 +1,5 @@
-"""Device-ready swing benchmark: what a wearer's controller waits for, one swing planned and timed
-(``generate`` + ``time_swing`` at the control rate), RL alone and CFFTG on the same held-out scenes,
-alternating in one process (CPU time, so that the other jobs on a shared machine count less), and
-``time_swings`` of a batch of 1000. Where one swing's time goes: generation, the timing's path set-up
-(joint paths and arc-length map), its TOPP passes and time law, and its evaluation and checks.
-
-Writes benchmarks/results/device_ready_<date>_<machine>.{json,md}."""
+"""Device-ready swing benchmark: ``generate`` + ``time_swing`` of one swing, RL alone and CFFTG
+alternating in CPU time, by part, and ``time_swings`` of a batch. Method: docs/benchmarks.md#what-each-benchmark-measures."""
 
 from __future__ import annotations
 
@@ -12,6 +7,8 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+from jaxexo.summary import Summary, table
 
 TARGETS = {"rl_device_ready_ms": 4.0, "rl_over_cfftg": 1.5, "batch_1000_s": 1.0}
 # benchmarks/bench_device_ready.py's options (jaxexo.benchmarks.runner.run_script).
@@ -71,11 +68,8 @@ def rate_table(rl, cf, n: int) -> list[dict]:
             row = {"set": name, "generator": g, "n": len(safe)}
             for r in (100, 1000):
                 timed = time_swings(safe, rl.config, rate=float(r))
-                d = np.array([t.duration for t in timed])
-                row[f"median_{r}"], row[f"p95_{r}"] = (
-                    float(np.median(d)),
-                    float(np.percentile(d, 95)),
-                )
+                d = Summary.of([t.duration for t in timed])
+                row[f"median_{r}"], row[f"p95_{r}"] = d.median, d.p95
                 if r == 1000:
                     row["within"] = float(np.mean([t.within_limits for t in timed]))
                     row["safe"] = float(np.mean([t.ok for t in timed]))
@@ -103,13 +97,13 @@ def _per_swing(gens, sc, cfg, rate: float, swing_timing) -> dict:
             gen_ms[name].append(1e3 * (t1 - t0))
             for k, v in acc.items():
                 parts[name][k] += 1e3 * v / len(sc)
-    med = {k: float(np.median(v)) for k, v in total.items()}
+    ready = {k: Summary.of(v) for k, v in total.items()}
     return {
-        "device_ready_ms_median": med,
-        "device_ready_ms_p95": {k: float(np.percentile(v, 95)) for k, v in total.items()},
-        "generate_ms_median": {k: float(np.median(v)) for k, v in gen_ms.items()},
+        "device_ready_ms_median": {k: v.median for k, v in ready.items()},
+        "device_ready_ms_p95": {k: v.p95 for k, v in ready.items()},
+        "generate_ms_median": {k: Summary.of(v).median for k, v in gen_ms.items()},
         "timing_parts_ms_mean": parts,
-        "rl_over_cfftg": med["rl"] / med["cfftg"],
+        "rl_over_cfftg": ready["rl"].over(ready["cfftg"]).median,
     }
 
 
@@ -159,7 +153,7 @@ def run_device_ready_benchmark(
 
 
 def _markdown(payload: dict, policy) -> str:
-    m = payload["machine"]
+    m, by_rate, gens = payload["machine"], payload["by_rate_hz"], ("rl", "cfftg")
     lines = [
         "# Device-ready swing: generate + time_swing, RL alone vs CFFTG",
         "",
@@ -168,19 +162,11 @@ def _markdown(payload: dict, policy) -> str:
         f"{m['cores']} cores; other jobs may have run. The time law is the passes with their check "
         "on the curve.",
         "",
-        "| rate Hz | generator | device-ready median ms | p95 ms | of which generate (median) | "
-        "timing parts (mean ms): paths / time law (passes + curve check) / path checks / samples |",
-        "|---:|---|---:|---:|---:|---|",
-    ]
-    for r, f in payload["by_rate_hz"].items():
-        for k in ("rl", "cfftg"):
-            p = f["timing_parts_ms_mean"][k]
-            lines.append(
-                f"| {r} | {k} | {f['device_ready_ms_median'][k]:.2f} | "
-                f"{f['device_ready_ms_p95'][k]:.2f} | {f['generate_ms_median'][k]:.2f} | "
-                f"{p['paths']:.2f} / {p['passes']:.2f} / {p['checks']:.2f} / {p['samples']:.2f} |"
-            )
-    lines += [""] + [
+        *table(
+            RATE_HEADER, [_rate_cells(r, f, k) for r, f in by_rate.items() for k in gens], "rlrrrl"
+        ),
+        "",
+    ] + [
         f"{r} Hz: RL / CFFTG device-ready median **{f['rl_over_cfftg']:.2f}** (target <= "
         f"{TARGETS['rl_over_cfftg']}); RL median {f['device_ready_ms_median']['rl']:.2f} ms "
         f"(target <= {TARGETS['rl_device_ready_ms']} ms)."
@@ -197,15 +183,35 @@ def _markdown(payload: dict, policy) -> str:
         "median and p95 (s), the 1 kHz / 100 Hz ratio of each, and the shares within the limits on "
         "the curve and safe.",
         "",
-        "| set | generator | n | median 100 Hz | p95 100 Hz | median 1 kHz | p95 1 kHz | "
-        "ratio median | ratio p95 | within | safe |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        *table(DURATION_HEADER, map(_duration_cells, payload["durations_by_rate"]), "ll" + "r" * 9),
     ]
-    for r in payload["durations_by_rate"]:
-        lines.append(
-            f"| {r['set']} | {r['generator']} | {r['n']} | {r['median_100']:.3f} | "
-            f"{r['p95_100']:.3f} | {r['median_1000']:.3f} | {r['p95_1000']:.3f} | "
-            f"{r['median_1000'] / r['median_100']:.4f} | {r['p95_1000'] / r['p95_100']:.4f} | "
-            f"{r['within']:.3f} | {r['safe']:.3f} |"
-        )
     return "\n".join(lines + [""])
+
+
+RATE_HEADER = (
+    *("rate Hz", "generator", "device-ready median ms", "p95 ms", "of which generate (median)"),
+    "timing parts (mean ms): paths / time law (passes + curve check) / path checks / samples",
+)
+DURATION_HEADER = (
+    *("set", "generator", "n", "median 100 Hz", "p95 100 Hz", "median 1 kHz", "p95 1 kHz"),
+    *("ratio median", "ratio p95", "within", "safe"),
+)
+
+
+def _rate_cells(r: str, f: dict, k: str) -> tuple[str, ...]:
+    """Rate ``r``'s row of generator ``k``: device-ready median and p95, generate, the parts (ms)."""
+    p = f["timing_parts_ms_mean"][k]
+    ms = (f["device_ready_ms_median"][k], f["device_ready_ms_p95"][k], f["generate_ms_median"][k])
+    return (r, k, *(f"{x:.2f}" for x in ms), " / ".join(f"{p[x]:.2f}" for x in PARTS))
+
+
+def _duration_cells(r: dict) -> tuple[str, ...]:
+    """One set's and generator's timed durations at 100 Hz and 1 kHz, their ratios and shares."""
+    d = (r["median_100"], r["p95_100"], r["median_1000"], r["p95_1000"])
+    ratios = (r["median_1000"] / r["median_100"], r["p95_1000"] / r["p95_100"])
+    return (
+        *(r["set"], r["generator"], str(r["n"])),
+        *(f"{x:.3f}" for x in d),
+        *(f"{x:.4f}" for x in ratios),
+        *(f"{r[k]:.3f}" for k in ("within", "safe")),
+    )

@@ -19,6 +19,7 @@ from jax.sharding import PartitionSpec as P
 from jaxexo.config import EQUAL_WEIGHTS, THESIS_JOINT_LIMITS, Config
 from jaxexo.env import ExoStepEnv
 from jaxexo.physics.geometry import THESIS_OBSTACLES
+from jaxexo.summary import Summary, table
 
 
 def make_rollout(env: ExoStepEnv, num_envs: int, num_steps: int, devices=None, mask: str = "none"):
@@ -104,7 +105,7 @@ def bench_env(
             t0 = time.perf_counter()
             out = jax.block_until_ready(fn(jax.random.PRNGKey(r + 1), params))
             times.append(time.perf_counter() - t0)
-        med = float(np.median(times))
+        med = Summary.of(times).median
         row = {
             "num_envs": n,
             "steps_per_call": steps,
@@ -187,14 +188,15 @@ def run_env_benchmark(
     lines = [
         "# Environment throughput (random actions, full reward, auto-reset)",
         "",
-        "| layout | envs | devices | M env-steps/s |",
-        "|---|---:|---:|---:|",
+        *table(
+            ("layout", "envs", "devices", "M env-steps/s"),
+            [
+                (label, r["num_envs"], r["devices"], f"{r['env_steps_per_s'] / 1e6:.2f}")
+                for label, rows in results.items()
+                for r in rows
+            ],
+        ),
     ]
-    for label, rows in results.items():
-        for r in rows:
-            lines.append(
-                f"| {label} | {r['num_envs']} | {r['devices']} | {r['env_steps_per_s'] / 1e6:.2f} |"
-            )
     lines.append("")
     lines.append(
         "Shared machine: other jobs ran at the same time, so figures are noisy; rows of one file were "

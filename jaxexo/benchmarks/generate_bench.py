@@ -1,29 +1,20 @@
-"""Generator benchmark: the shielded RL generator against CFFTG, side by side in one
-process, on the same scenes: one swing (rollout, smoothing, every safe-swing check, kinematics, joint
-angles), RL alone (``fallback=None``), RL and CFFTG alternating per scene, on the held-out families
-(jaxexo.evaluation.unseen) and on the safety scenes (jaxexo.inference.scenarios.safety_scenarios);
-the plain reference implementation (``plain_reference``) on a quarter of them, so that the speed-up
-shows; how RL swings were smoothed (one pass, retries, raw polyline) and how many are safe; a batch
-of 1000 held-out scenes (RL and CFFTG alternating) with the default BLAS threads and with
-single-threaded BLAS (``generate_batch`` runs its BLAS on one thread, jaxexo.inference.blas; the
-batch on the process's own threads, ``batch_blas_threads = None``, is timed too); and the cold
-import of jaxexo.inference. All in NumPy (no JAX in the timed code); figures are medians, ratios
-first."""
+"""Generator benchmark: the shielded RL generator against CFFTG side by side in one process (one
+swing, batches of 1000, the cold import, where the time goes). Method: docs/benchmarks.md#what-each-benchmark-measures."""
 
 from __future__ import annotations
 
 import json
 import os
-import statistics
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 
-from jaxexo.evaluation.timing import time_batch
+from jaxexo.evaluation.timing import scene_options, time_batch
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.inference.blas import blas_threads
+from jaxexo.summary import Summary, table
 
 THESIS_MS = {"rl_single": 3.0, "cfftg_single": 2.0, "rl_batch_1000": 1764.0}  # Table 3.11, §3.4
 # Targets: one swing <= 1 ms and <= 1.5x CFFTG's; a batch of 1000 no slower than CFFTG's and <= 150 ms;
@@ -87,7 +78,7 @@ def _batch_ms(policy, n: int, repeats: int = 5) -> dict:
     for r in range(repeats):  # alternating, one batch each
         for name, g, kw in runs if r % 2 == 0 else runs[::-1]:
             times[name].append(time_batch(g, sc, 1, **kw)[0][0])
-    return {name: statistics.median(t) * 1e3 for name, t in times.items()}
+    return {name: Summary.of(t).median * 1e3 for name, t in times.items()}
 
 
 def scene_set(config, which: str, n: int) -> list[dict]:
@@ -117,37 +108,8 @@ def batch_single_thread(policy, n: int) -> dict:
 
 
 def _ms(x) -> dict:
-    x = np.asarray(x) * 1e3
-    return {
-        "median": float(np.median(x)),
-        "mean": float(x.mean()),
-        "p95": float(np.percentile(x, 95)),
-    }
-
-
-def _placement(s: dict) -> dict:
-    """A scenario's placement, as ``generate``'s keywords: the pivot, the start and the step length."""
-    return {k: s[k] for k in ("pivot", "start_y", "step_length")}
-
-
-def alternate(generators: dict, scenarios: list[dict], warmup: int = 20):
-    """jaxexo.evaluation.compare.run_generators with the CPU time of each call too (time.process_time:
-    on a shared machine a long call is preempted more often than a short one, which the wall clock
-    charges to it). Returns {name: (trajectories, wall seconds, CPU seconds)}."""
-    import time
-
-    names = list(generators)
-    for s in scenarios[:warmup]:
-        for g in generators.values():
-            g.generate(s["obstacle"], **_placement(s))
-    out = {n: ([], np.empty(len(scenarios)), np.empty(len(scenarios))) for n in names}
-    for i, s in enumerate(scenarios):
-        for n in names if i % 2 == 0 else names[::-1]:
-            c0, t0 = time.process_time(), time.perf_counter()
-            tr = generators[n].generate(s["obstacle"], **_placement(s))
-            out[n][1][i], out[n][2][i] = time.perf_counter() - t0, time.process_time() - c0
-            out[n][0].append(tr)
-    return out
+    ms = Summary.of(np.asarray(x) * 1e3)
+    return {"median": ms.median, "mean": ms.mean, "p95": ms.p95}
 
 
 def rollout_states(sp, scene, raw, acts) -> list[tuple]:
@@ -230,33 +192,45 @@ def time_breakdown(gen, cf, scenarios: list[dict], repeats: int = 3) -> dict:
         )
         rows["smoothing_correction"].append(cl)
         rows["verdict_angles"].append(max(fin - cl, 0.0))
-        at = _placement(s)
+        at = scene_options(s)
         rows["rl_total"].append(best(lambda: gen.generate(s["obstacle"], **at, fallback=None)))
         plan = best(lambda: cf.plan([scene]))
         tot = best(lambda: cf.finish([scene], n_pts, 1.0))
         rows["cfftg_plan"].append(plan)
         rows["cfftg_assemble"].append(max(tot - plan, 0.0))
         rows["cfftg_total"].append(best(lambda: cf.generate(s["obstacle"], **at)))
-    return {k: float(np.median(v)) for k, v in rows.items() if v}
+    return {k: Summary.of(v).median for k, v in rows.items() if v}
 
 
 def breakdown_lines(b: dict) -> list[str]:
     """The breakdown's table (microseconds, medians; the parts are medians of their own, so they need
     not add up to the total exactly)."""
-    rl_steps = b["steps"]
     shield = b.get("shield_per_step", float("nan"))
-    return [
-        "| where one swing's time goes (median us) | RL | CFFTG |",
-        "|---|---:|---:|",
-        f"| total (`generate`) | {b['rl_total']:.0f} | {b['cfftg_total']:.0f} |",
-        f"| rollout: {rl_steps:.0f} steps per swing | {b['rollout']:.0f} | |",
-        f"| ... per step: network | {b['network_per_step']:.1f} | |",
-        f"| ... per step: shield's choice | {shield:.1f} | |",
-        f"| ... per swing: the observation's scene part (first layer) | {b['observation']:.0f} | |",
-        f"| plan with its checks and re-plans (CFFTG) | | {b['cfftg_plan']:.0f} |",
-        f"| finishing: smoothing and correction (`clear_rows`) | {b['smoothing_correction']:.0f} | |",
-        f"| finishing: verdict, retries, kinematics, joint angles | {b['verdict_angles']:.0f} | {b['cfftg_assemble']:.0f} |",
+    rows = [
+        ("total (`generate`)", f"{b['rl_total']:.0f}", f"{b['cfftg_total']:.0f}"),
+        (f"rollout: {b['steps']:.0f} steps per swing", f"{b['rollout']:.0f}", ""),
+        ("... per step: network", f"{b['network_per_step']:.1f}", ""),
+        ("... per step: shield's choice", f"{shield:.1f}", ""),
+        (
+            "... per swing: the observation's scene part (first layer)",
+            f"{b['observation']:.0f}",
+            "",
+        ),
+        ("plan with its checks and re-plans (CFFTG)", "", f"{b['cfftg_plan']:.0f}"),
+        (
+            "finishing: smoothing and correction (`clear_rows`)",
+            f"{b['smoothing_correction']:.0f}",
+            "",
+        ),
     ]
+    rows.append(
+        (
+            "finishing: verdict, retries, kinematics, joint angles",
+            f"{b['verdict_angles']:.0f}",
+            f"{b['cfftg_assemble']:.0f}",
+        )
+    )
+    return table(("where one swing's time goes (median us)", "RL", "CFFTG"), rows)
 
 
 def smoothing_counts(trajs) -> dict:
@@ -285,29 +259,29 @@ def set_figures(gen, cf, scenarios: list[dict], n: int) -> dict:
     gens = {"rl": WithFallback(gen, None), "cfftg": cf}
     stats = gen.shield_stats
     before = (stats.steps, stats.steps_to_full_mask)
-    passes = [alternate(gens, scenarios) for _ in range(3)]
+    passes = [run_generators(gens, scenarios) for _ in range(3)]
     steps = (stats.steps - before[0], stats.steps_to_full_mask - before[1])
-    single = {k: np.median([p[k][1] for p in passes], axis=0) for k in gens}
-    cpu = {k: np.median([p[k][2] for p in passes], axis=0) for k in gens}
+    single = {k: np.median([p[k].wall_s for p in passes], axis=0) for k in gens}
+    cpu = {k: np.median([p[k].cpu_s for p in passes], axis=0) for k in gens}
     plain = WithFallback(plain_reference(gen), None)
     ref = run_generators(
         {"rl": WithFallback(gen, None), "rl_reference": plain}, scenarios[: max(1, n // 4)]
     )
-    trajs = passes[-1]["rl"][0]
+    trajs = passes[-1]["rl"].trajectories
     return {
         "n": len(scenarios),
         "single_ms": {k: _ms(v) for k, v in single.items()},
-        "ratio_rl_over_cfftg": float(np.median(single["rl"]) / np.median(single["cfftg"])),
+        "ratio_rl_over_cfftg": Summary.of(single["rl"]).over(Summary.of(single["cfftg"])).median,
         "single_cpu_ms": {k: _ms(v) for k, v in cpu.items()},
-        "cpu_ratio_rl_over_cfftg": float(np.median(cpu["rl"]) / np.median(cpu["cfftg"])),
+        "cpu_ratio_rl_over_cfftg": Summary.of(cpu["rl"]).over(Summary.of(cpu["cfftg"])).median,
         "reference_ms": {
-            "rl": _ms(ref["rl"][1]),
-            "rl_reference": _ms(ref["rl_reference"][1]),
-            "n": len(ref["rl"][1]),
+            "rl": _ms(ref["rl"].wall_s),
+            "rl_reference": _ms(ref["rl_reference"].wall_s),
+            "n": len(ref["rl"].wall_s),
         },
         "rl_over_cfftg_scenes": float(np.mean(single["rl"] > single["cfftg"])),
         "smoothing": smoothing_counts(trajs),
-        "cfftg_safe": float(np.mean([t.ok for t in passes[-1]["cfftg"][0]])),
+        "cfftg_safe": float(np.mean([t.ok for t in passes[-1]["cfftg"].trajectories])),
         "shield_steps_full_mask": steps[1] / max(steps[0], 1),
     }
 
@@ -321,15 +295,9 @@ def _swing_table(sets: dict) -> list[str]:
 
     def row(label, cell, target=""):
         """A table row: the label, ``cell`` of each scene set's figures, the target."""
-        return (
-            f"| {label} | "
-            + " | ".join(cell(sets[w]) for w in SETS)
-            + (f" | {target} |" if target else " | |")
-        )
+        return (label, *(cell(sets[w]) for w in SETS), target)
 
-    return [
-        "| figure | unseen (held-out families) | safety scenes | target |",
-        "|---|---:|---:|---|",
+    rows = [
         row(
             "one swing, RL / CFFTG median ratio",
             lambda d: (
@@ -395,22 +363,37 @@ def _swing_table(sets: dict) -> list[str]:
             lambda d: f"{d['shield_steps_full_mask']:.2%}",
         ),
     ]
+    header = ("figure", "unseen (held-out families)", "safety scenes", "target")
+    return table(header, rows, "lrrl")
 
 
 def _batch_table(res: dict) -> list[str]:
     """The batch table: default and single-threaded BLAS, scaled to 1000 scenes (exact for n = 1000)."""
     batch, batch_1t = res["batch_ms"]["default_threads"], res["batch_ms"]["single_thread_blas"]
     b = lambda d, k: d[k] * 1000 / res["n"]  # noqa: E731
-    return [
-        "| batch of 1000 held-out scenes | RL | CFFTG | RL / CFFTG | target |",
-        "|---|---:|---:|---:|---|",
-        f"| default BLAS threads (this process) | {b(batch, 'rl'):.1f} ms | {b(batch, 'cfftg'):.1f} ms | "
-        f"**{batch['rl'] / batch['cfftg']:.2f}** | <= 1 and <= 150 ms: {_miss(batch['rl'] <= batch['cfftg'] and b(batch, 'rl') <= 150)} |",
-        f"| single-threaded BLAS (a fresh process) | {b(batch_1t, 'rl'):.1f} ms | {b(batch_1t, 'cfftg'):.1f} ms | "
-        f"**{batch_1t['rl'] / batch_1t['cfftg']:.2f}** | {_miss(batch_1t['rl'] <= batch_1t['cfftg'] and b(batch_1t, 'rl') <= 150)} |",
-        f"| RL on the process's BLAS threads (`batch_blas_threads = None`): default / single-threaded | "
-        f"{b(batch, 'rl_process_blas'):.1f} / {b(batch_1t, 'rl_process_blas'):.1f} ms | | | |",
+    ok = lambda d: _miss(d["rl"] <= d["cfftg"] and b(d, "rl") <= 150)  # noqa: E731
+    rows = [
+        (
+            "default BLAS threads (this process)",
+            *(f"{b(batch, k):.1f} ms" for k in ("rl", "cfftg")),
+            f"**{batch['rl'] / batch['cfftg']:.2f}**",
+            f"<= 1 and <= 150 ms: {ok(batch)}",
+        ),
+        (
+            "single-threaded BLAS (a fresh process)",
+            *(f"{b(batch_1t, k):.1f} ms" for k in ("rl", "cfftg")),
+            f"**{batch_1t['rl'] / batch_1t['cfftg']:.2f}**",
+            ok(batch_1t),
+        ),
+        (
+            "RL on the process's BLAS threads (`batch_blas_threads = None`): default / single-threaded",
+            f"{b(batch, 'rl_process_blas'):.1f} / {b(batch_1t, 'rl_process_blas'):.1f} ms",
+            *("", "", ""),
+        ),
     ]
+    return table(
+        ("batch of 1000 held-out scenes", "RL", "CFFTG", "RL / CFFTG", "target"), rows, "lrrrl"
+    )
 
 
 def report_lines(res: dict) -> list[str]:
@@ -462,7 +445,7 @@ def run_generate_benchmark(policy: str | Path, out_dir, n: int = 1000, progress=
         # the held-out set's figures under the keys the summary (run_all) reads
         "single_ms": sets["unseen"]["single_ms"],
         "batch_ms": {"default_threads": batch, "single_thread_blas": batch_1t},
-        "import_s": {"median": statistics.median(imports), "runs": imports},
+        "import_s": {"median": Summary.of(imports).median, "runs": imports},
         "breakdown_us": breakdown,
         "blas_threads_default": blas_threads(),
         "load_average": load,

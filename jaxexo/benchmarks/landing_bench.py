@@ -1,23 +1,5 @@
-"""Landing benchmark: where the RL swing ends and what a complete swing costs beside CFFTG's.
-
-On the safety scene sets (jaxexo.benchmarks.scenes: the thesis five shifted, shapes never trained
-on, the held-out families), RL alone (``fallback=None``) and CFFTG on the same scenes:
-
-- safe swing % (the verdict, jaxexo.physics.outcome) and goal reached %;
-- final heel height: the share of swings ending more than 2 mm above the floor, and the max and
-  median over the swings, mm (a swing on the floor ends at 0);
-- heel lift (the path's highest heel z), median, cm;
-- duration at the device limits (jaxexo.swing.timing.time_swings), median and p95, s;
-  RL / CFFTG per scene, median (both safe); where RL swings end above the floor (the generator before
-  its landing), also the duration with the vertical touch-down that walks used to append to them
-  (6 samples straight down, re-checked by trajectory.assemble), median, and the time it adds to
-  the swings it is appended to, median, s;
-- the landing's approach: the heel's forward travel over its last 2 cm of descent, median, mm;
-- RL swings whose requested smoothing was retried (jaxexo.swing.finish) and those that fell back
-  to the raw polyline, %.
-
-Run by benchmarks/bench_landing.py; writes landing[_tag]_<date>_<machine>.{json,md}.
-"""
+"""Landing benchmark: where the RL swing ends and what a complete swing costs beside CFFTG's, on the
+safety sets. Run by benchmarks/bench_landing.py; method: docs/benchmarks.md#what-each-benchmark-measures."""
 
 from __future__ import annotations
 
@@ -29,6 +11,7 @@ from jaxexo.baselines import CFFTG
 from jaxexo.benchmarks.scenes import batch_kwargs, safety_sets
 from jaxexo.evaluation.machine import write_result
 from jaxexo.inference import TrajectoryGenerator, time_swings
+from jaxexo.summary import Summary, table
 from jaxexo.swing.trajectory import assemble
 
 
@@ -81,26 +64,27 @@ def run_set(gens, scenes, config) -> dict:
         timed = time_swings(batch, config)
         d = np.array([t.duration for t in timed])
         end_z = batch.heel[:, -1, 1]
+        end, span = Summary.of(end_z), Summary.of(d)
         dur[name] = d
         touch = added = None
         if name == "rl" and (batch.heel[:, -1, 1] > 0.0).any():
             td = np.array([t.duration for t in time_swings(with_touch_down(batch, gen), config)])
             up = batch.ok & (batch.heel[:, -1, 1] > 0.0)
-            touch = float(np.median(td))
-            added = float(np.median(td[up] - d[up]))
+            touch = Summary.of(td).median
+            added = Summary.of(td[up] - d[up]).median
         out[name] = {
             "n": len(batch),
             "safe": float(batch.ok.mean()),
             "reached_goal": float(batch.reached_goal.mean()),
             "end_above_2mm": float(np.mean(end_z > 0.002)),
-            "end_z_mm_max": 1000 * float(end_z.max()),
-            "end_z_mm_median": 1000 * float(np.median(end_z)),
-            "lift_cm_median": 100 * float(np.median(batch.heel[..., 1].max(axis=1))),
-            "duration_s_median": float(np.median(d)),
-            "duration_s_p95": float(np.percentile(d, 95)),
+            "end_z_mm_max": 1000 * end.max,
+            "end_z_mm_median": 1000 * end.median,
+            "lift_cm_median": 100 * Summary.of(batch.heel[..., 1].max(axis=1)).median,
+            "duration_s_median": span.median,
+            "duration_s_p95": span.p95,
             "duration_touch_down_s_median": touch,
             "touch_down_added_s_median": added,
-            "approach_mm_median": 1000 * float(np.median([approach(h) for h in batch.heel])),
+            "approach_mm_median": 1000 * Summary.of([approach(h) for h in batch.heel]).median,
             "retried": float(np.mean([bool(n) for n in batch.notes])),
             "raw_polyline": float(np.mean(np.isnan(batch.smoothing))),
             "generate_s": gen_s,
@@ -114,12 +98,35 @@ def run_set(gens, scenes, config) -> dict:
         }
     both = out["rl"]["ok_mask"] & out["cfftg"]["ok_mask"]
     out["rl_over_cfftg_duration_median"] = (
-        float(np.median(dur["rl"][both] / dur["cfftg"][both])) if both.any() else None
+        Summary.of(dur["rl"][both] / dur["cfftg"][both]).median if both.any() else None
     )
     out["both_safe"] = int(both.sum())
     for name in gens:
         del out[name]["ok_mask"]
     return out
+
+
+HEADER = (
+    *("set", "method", "safe", "goal", "ends > 2 mm up", "end heel z max / median (mm)"),
+    *("lift median (cm)", "duration median / p95 (s)", "with touch-down (s): median, added"),
+    *("approach (mm)", "retried / raw polyline", "RL/CFFTG duration median"),
+)
+
+
+def _cells(r: dict, g: str) -> tuple[str, ...]:
+    """Generator ``g``'s row on a set (``r``: the set's figures) after the set and method."""
+    x, rl = r[g], g == "rl"
+    touch = x["duration_touch_down_s_median"]
+    return (
+        *(f"{100 * x[k]:.1f} %" for k in ("safe", "reached_goal", "end_above_2mm")),
+        f"{x['end_z_mm_max']:.1f} / {x['end_z_mm_median']:.1f}",
+        f"{x['lift_cm_median']:.2f}",
+        f"{x['duration_s_median']:.3f} / {x['duration_s_p95']:.3f}",
+        "-" if touch is None else f"{touch:.3f}, +{x['touch_down_added_s_median']:.3f}",
+        f"{x['approach_mm_median']:.1f}",
+        f"{100 * x['retried']:.1f} / {100 * x['raw_polyline']:.1f} %" if rl else "-",
+        f"{r['rl_over_cfftg_duration_median']:.3f} (n = {r['both_safe']})" if rl else "",
+    )
 
 
 def markdown(res: dict) -> str:
@@ -128,36 +135,9 @@ def markdown(res: dict) -> str:
         "",
         f"Policy {res['policy']}; {res['n']} scenes per set. {res['note']}".rstrip(),
         "",
-        "| set | method | safe | goal | ends > 2 mm up | end heel z max / median (mm) | lift median (cm) | duration median / p95 (s) | with touch-down (s): median, added "
-        "| approach (mm) | retried / raw polyline | RL/CFFTG duration median |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for name, r in res["sets"].items():
-        for g in ("rl", "cfftg"):
-            x = r[g]
-            ratio = (
-                f"{r['rl_over_cfftg_duration_median']:.3f} (n = {r['both_safe']})"
-                if g == "rl"
-                else ""
-            )
-            touch = (
-                "-"
-                if x["duration_touch_down_s_median"] is None
-                else (
-                    f"{x['duration_touch_down_s_median']:.3f}, +{x['touch_down_added_s_median']:.3f}"
-                )
-            )
-            retried = (
-                f"{100 * x['retried']:.1f} / {100 * x['raw_polyline']:.1f} %" if g == "rl" else "-"
-            )
-            lines.append(
-                f"| {name} | {g} | {100 * x['safe']:.1f} % | {100 * x['reached_goal']:.1f} % | "
-                f"{100 * x['end_above_2mm']:.1f} % | {x['end_z_mm_max']:.1f} / {x['end_z_mm_median']:.1f} | {x['lift_cm_median']:.2f} | "
-                f"{x['duration_s_median']:.3f} / {x['duration_s_p95']:.3f} | "
-                f"{touch} | "
-                f"{x['approach_mm_median']:.1f} | "
-                f"{retried} | {ratio} |"
-            )
+    rows = [(name, g, *_cells(r, g)) for name, r in res["sets"].items() for g in ("rl", "cfftg")]
+    lines += table(HEADER, rows, "l" * 12)
     return "\n".join(lines)
 
 

@@ -1,19 +1,5 @@
-"""The model study's measurements: every agent of a finished model-study sweep (exported with
-``jaxexo sweep configs/sweeps/model_study.toml --out DIR --export-all``) measured with the project's
-benchmarks, RL alone (``fallback=None``) beside CFFTG on the same scenes:
-
-- safe swings (the strict verdict at the model's margin) on the held-out terrain families, the thesis
-  five shifted and unseen shapes (the swing-quality benchmark's sets, ``n`` scenes each);
-- the wearer's figures on the scenes both generators swing safely: heel lift median, timed swing
-  (the config's [device] limits) median and p95; CFFTG's safety shortfall beside them; the longest
-  timed RL swing on all scenes;
-- one swing (``generate``): RL and CFFTG alternating per scene in this process, ``time_n`` scenes of
-  the held-out families and of the unseen shapes, median ms and the RL / CFFTG ratio;
-- the sweep's own figures: greedy validation success (results.csv ``success``) and held-out success.
-
-Run by benchmarks/bench_model_study.py; writes model_study[_tag]_<date>_<machine>.{json,md,png}, the
-figure plotting each agent's generation time against its timed-swing p95 and its lift.
-"""
+"""The model study's measurements: every agent of a model-study sweep exported with ``--export-all``,
+RL alone beside CFFTG. Run by benchmarks/bench_model_study.py; method: docs/benchmarks.md#what-each-benchmark-measures."""
 
 from __future__ import annotations
 
@@ -26,12 +12,12 @@ from pathlib import Path
 import numpy as np
 
 from jaxexo.baselines import CFFTG
-from jaxexo.benchmarks.generate_bench import alternate
 from jaxexo.benchmarks.swing_quality_bench import run_set, scene_sets
-from jaxexo.evaluation.compare import WithFallback
+from jaxexo.evaluation.compare import WithFallback, run_generators
 from jaxexo.evaluation.machine import machine_info, write_result
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.storage.atomic import atomic_write, write_figure
+from jaxexo.summary import Summary, table
 
 # The wearer's targets against CFFTG on the scenes both swing safely (lift and timed median <= CFFTG's,
 # timed p95 <= 1.1x), the longest RL swing on all scenes, RL alone's safe share on every set.
@@ -43,10 +29,11 @@ def _both_safe(per: dict) -> dict:
     both = per["rl"][0] & per["cfftg"][0]
     out = {"n_both_safe": int(both.sum())}
     for g, (_, lift, dur) in per.items():
+        span = Summary.of(dur[both])
         out[g] = {
-            "lift_cm": 100 * float(np.median(lift[both])),
-            "dur_median_s": float(np.median(dur[both])),
-            "dur_p95_s": float(np.percentile(dur[both], 95)),
+            "lift_cm": 100 * Summary.of(lift[both]).median,
+            "dur_median_s": span.median,
+            "dur_p95_s": span.p95,
         }
     return out
 
@@ -58,21 +45,21 @@ def screen_agent(gen: TrajectoryGenerator, time_n: int) -> dict:
     scenes = scene_sets(gen.config, time_n)
     timing = {}
     for name in ("held-out families", "unseen shapes"):
-        runs = alternate(
+        runs = run_generators(
             {"rl": WithFallback(gen, None), "cfftg": cf}, scenes[name][:time_n], warmup=10
         )
-        rl, c = np.median(runs["rl"][1]) * 1e3, np.median(runs["cfftg"][1]) * 1e3
-        rl_cpu, c_cpu = np.median(runs["rl"][2]) * 1e3, np.median(runs["cfftg"][2]) * 1e3
-        trajs = runs["rl"][0]
+        wall = {g: Summary.of(runs[g].wall_s) for g in ("rl", "cfftg")}
+        cpu = {g: Summary.of(runs[g].cpu_s) for g in ("rl", "cfftg")}
+        trajs = runs["rl"].trajectories
         timing[name] = {
-            "rl_ms": float(rl),
-            "cfftg_ms": float(c),
-            "ratio": float(rl / c),
-            "cpu_ratio": float(rl_cpu / c_cpu),
+            "rl_ms": wall["rl"].median * 1e3,
+            "cfftg_ms": wall["cfftg"].median * 1e3,
+            "ratio": wall["rl"].over(wall["cfftg"]).median,
+            "cpu_ratio": cpu["rl"].over(cpu["cfftg"]).median,
             "raw_points": float(np.mean([len(t.raw) for t in trajs])),
             "rl_safe": float(np.mean([t.ok for t in trajs])),
             "rl_goal": float(np.mean([t.checks.reached_goal for t in trajs])),
-            "cfftg_safe": float(np.mean([t.ok for t in runs["cfftg"][0]])),
+            "cfftg_safe": float(np.mean([t.ok for t in runs["cfftg"].trajectories])),
         }
     return {"timing": timing, "smoothing": gen.smoothing}
 
@@ -200,7 +187,7 @@ def config_summary(rows: list[dict]) -> list[dict]:
         e["ratio"].append(r["timing"]["held-out families"]["cpu_ratio"])
         e["success"].append(r["success"])
     for e in out.values():
-        e["ms"], e["ratio"] = float(np.median(e["ms"])), float(np.median(e["ratio"]))
+        e["ms"], e["ratio"] = Summary.of(e["ms"]).median, Summary.of(e["ratio"]).median
         e["success_min"] = float(min(e.pop("success")))
     return sorted(out.values(), key=lambda e: e["ratio"])
 
@@ -223,28 +210,28 @@ def markdown(rows: list[dict], meta: dict) -> str:
         "",
         "## Per configuration (median over seeds)",
         "",
-        "| config | seeds passing the screen | seeds meeting every target | min validation success | "
-        "one swing ms, wall | ratio, CPU |",
-        "|---|---:|---:|---:|---:|---:|",
-    ]
-    for e in config_summary(rows):
-        lines.append(
-            f"| {e['label']} | {e['screened']} of {e['seeds']} | {e['meets_all']} of {e['seeds']} | "
-            f"{e['success_min']:.3f} | {e['ms']:.2f} | {e['ratio']:.2f} |"
-        )
-    lines += [
+        *table(
+            ("config", "seeds passing the screen", "seeds meeting every target")
+            + ("min validation success", "one swing ms, wall", "ratio, CPU"),
+            [
+                (
+                    e["label"],
+                    f"{e['screened']} of {e['seeds']}",
+                    f"{e['meets_all']} of {e['seeds']}",
+                )
+                + (f"{e['success_min']:.3f}", f"{e['ms']:.2f}", f"{e['ratio']:.2f}")
+                for e in config_summary(rows)
+            ],
+        ),
         "",
         "## Per agent",
         "",
-        "| config | seed | val. success | screen: RL safe % fam / shapes | RL safe % (fam / five / shapes) | "
-        "CFFTG safe % | lift cm RL / CFFTG | timed median s RL / CFFTG | p95 s RL / CFFTG | longest RL s | "
-        "one swing ms RL / CFFTG (fam, wall) | CPU ratio fam / shapes | raw pts | meets |",
-        "|---|---:|---:|---|---|---|---|---|---|---:|---|---|---:|---|",
     ]
+    agents = []  # each agent's cells as text ("a | b")
     for r in rows:
         t = r["timing"]
         head = (
-            f"| {r['label']} | {r['seed']} | {r['success']:.3f} | "
+            f"{r['label']} | {r['seed']} | {r['success']:.3f} | "
             f"{100 * t['held-out families']['rl_safe']:.1f} / {100 * t['unseen shapes']['rl_safe']:.1f} | "
         )
         tail = (
@@ -253,20 +240,28 @@ def markdown(rows: list[dict], meta: dict) -> str:
             f"{t['held-out families']['raw_points']:.1f} | "
         )
         if not r["screened"]:
-            lines.append(head + "| | | | | | " + tail + "screen failed |")
+            agents.append(head + "| | | | | | " + tail + "screen failed")
             continue
         s, p = r["sets"], r["pooled"]
         safe = " / ".join(f"{100 * v['rl_safe']:.1f}" for v in s.values())
         csafe = " / ".join(f"{100 * v['cfftg_safe']:.1f}" for v in s.values())
         missed = [k for k, v in r["meets"].items() if not v]
-        lines.append(
+        agents.append(
             head + f"{safe} | {csafe} | {p['rl']['lift_cm']:.2f} / {p['cfftg']['lift_cm']:.2f} | "
             f"{p['rl']['dur_median_s']:.3f} / {p['cfftg']['dur_median_s']:.3f} | {p['rl']['dur_p95_s']:.3f} / "
             f"{p['cfftg']['dur_p95_s']:.3f} | {r['rl_longest_s']:.2f} | "
             + tail
-            + f"{'all' if not missed else 'not ' + ', '.join(missed)} |"
+            + f"{'all' if not missed else 'not ' + ', '.join(missed)}"
         )
-    return "\n".join(lines)
+    return "\n".join(lines + table(AGENT_HEADER, [(a,) for a in agents], "lrrllllllrllrl"))
+
+
+AGENT_HEADER = (
+    *("config", "seed", "val. success", "screen: RL safe % fam / shapes"),
+    *("RL safe % (fam / five / shapes)", "CFFTG safe %", "lift cm RL / CFFTG"),
+    *("timed median s RL / CFFTG", "p95 s RL / CFFTG", "longest RL s"),
+    *("one swing ms RL / CFFTG (fam, wall)", "CPU ratio fam / shapes", "raw pts", "meets"),
+)
 
 
 DEFAULT_LABEL = "today's default"  # the label of the default's configuration, marked in the figure

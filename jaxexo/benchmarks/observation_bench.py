@@ -1,15 +1,5 @@
-"""Observation study: does seeing the obstacle's height profile (env.obs_profile = "shape")
-beat seeing its bounding box ("bbox") on shapes the policy never trained on?
-
-Two models are trained from configs/default.toml with one difference, env.obs_profile, on the same
-seed and budget. Their layout lists ``profile`` obstacles drawn from the *training* families of
-jaxexo.physics.terrain (fixed seed, a few per family, each scaled over 85-100 % of its drawn size).
-The layout keeps the default's placement model (start shift 0-5 cm, step length 0.65-0.80 m, offset
-+-3 cm), which is why the drawn widths are limited to 26 cm: the env's procedural placement comes
-with the config wiring. Both are scored with the NumPy generator on the fixed held-out benchmark
-(jaxexo.evaluation.unseen) and on fresh draws of the training families placed the same way
-(``seen``), with CFFTG on the same scenes for reference.
-"""
+"""Observation study: does seeing the obstacle's height profile (env.obs_profile = "shape") beat its
+bounding box ("bbox") on shapes never trained on? Method: docs/benchmarks.md#what-each-benchmark-measures."""
 
 from __future__ import annotations
 
@@ -20,7 +10,9 @@ import numpy as np
 
 from jaxexo.benchmarks.scenes import set_table
 from jaxexo.config import config_from_dict
+from jaxexo.evaluation.unseen import family_cells
 from jaxexo.physics import terrain
+from jaxexo.summary import table
 
 STUDY_SEED = 7
 SEEN_SEED = 31_337
@@ -105,7 +97,7 @@ def run_observation_study(
     tables, overall = {}, {}
     for name, sc in sets.items():
         runs = run_generators(gens, sc, warmup=5)
-        trajs = {g: tr for g, (tr, _) in runs.items()}
+        trajs = {g: r.trajectories for g, r in runs.items()}
         tables[name] = family_table(trajs, sc)
         overall[name] = {
             g: {
@@ -138,31 +130,20 @@ def markdown(p: dict) -> str:
         f"the held-out benchmark (families {', '.join(terrain.HELD_OUT_FAMILIES)}) and on fresh draws of "
         "the training families placed the same way (seen); CFFTG on the same scenes.",
         "",
-        "| model | train s | trainer eval success (its own test layouts) |",
-        "|---|---:|---:|",
+        *table(
+            ("model", "train s", "trainer eval success (its own test layouts)"),
+            [(m, f"{t['train_seconds']:.0f}", t["eval_success"]) for m, t in p["train"].items()],
+        ),
+        "",
     ]
-    for m, t in p["train"].items():
-        lines.append(f"| {m} | {t['train_seconds']:.0f} | {t['eval_success']} |")
-    lines.append("")
     lines += set_table(
         ("n", "strict success %", "accuracy %"),
         p["overall"],
         lambda r: f"{r['n']} | {100 * r['success']:.1f} | {100 * r['accuracy']:.1f}",
     )
-    for s, table in p["by_family"].items():
-        lines += [
-            "",
-            f"## {s}: per family",
-            "",
-            "| family | generator | n | strict success % | accuracy % | clearance min cm | p5 cm | median cm | "
-            "path length mean cm |",
-            "|---|---|---:|---:|---:|---:|---:|---:|---:|",
-        ]
-        for fam, gens in table.items():
-            for g, r in gens.items():
-                lines.append(
-                    f"| {fam} | {g} | {r['n']} | {100 * r['success']:.1f} | {100 * r['accuracy']:.1f} | "
-                    f"{100 * r['clearance_m_min']:.2f} | {100 * r['clearance_m_p5']:.2f} | "
-                    f"{100 * r['clearance_m_median']:.2f} | {100 * r['path_length_m_mean']:.1f} |"
-                )
+    header = ("family", "generator", "n", "strict success %", "accuracy %", "clearance min cm")
+    header += ("p5 cm", "median cm", "path length mean cm")
+    for s, fams in p["by_family"].items():
+        rows = [(fam, g, *family_cells(r)) for fam, gens in fams.items() for g, r in gens.items()]
+        lines += ["", f"## {s}: per family", "", *table(header, rows, "ll" + "r" * 7)]
     return "\n".join(lines)

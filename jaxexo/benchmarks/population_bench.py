@@ -1,29 +1,12 @@
-"""Population benchmarks: what a population costs against one agent, and whether a member's
-arithmetic depends on the number of CPU devices.
-
-- cost: a population of K costs at most 1.5 + (K - 1) x 0.25 times the wall time of one agent of the
-  same config (``jaxexo train`` with population 1, data parallel over the cores). For each K,
-  ``jaxexo train``'s driver (jaxexo.train.driver.run_training, as the CLI runs it: every CPU core a
-  JAX device) trains the config into a fresh directory, in this one process, one K after the other.
-  Reported per K: the training wall time (eval.json's train_seconds: first compilation and every
-  chunk's validation included, the final test evaluation not), the steady chunk time (median over
-  the chunks after the first, which compiles), their ratios to K = 1 and the target, and the members'
-  outcomes; the machine's load average before and after (it is shared, and a loaded core is slower).
-- devices: tests/test_population.py checks group-size independence in one process (one device);
-  this trains the test's tiny config in fresh processes with 1, 2 and 4 CPU devices, seed 3 alone and
-  as the fourth member of a population of 5, each on every device the process has (the devices a
-  population of 5 uses; jaxexo.train.population.population_devices gives at least two), and compares
-  the final parameters' bytes within each process and across device counts.
-
-Run by benchmarks/bench_population.py and benchmarks/population_devices_check.py.
-"""
+"""Population benchmarks: what a population costs against one agent, and whether a member's arithmetic
+depends on the number of CPU devices. Run by benchmarks/bench_population.py and
+benchmarks/population_devices_check.py; method: docs/benchmarks.md#what-each-benchmark-measures."""
 
 from __future__ import annotations
 
 import json
 import os
 import shutil
-import statistics
 import subprocess
 import sys
 import tempfile
@@ -31,8 +14,36 @@ from pathlib import Path
 
 from jaxexo.config import load_config, packaged_config, with_population
 from jaxexo.evaluation.machine import write_result
+from jaxexo.summary import Summary, table
 
 THESIS_B_LEARNS = Path(packaged_config("default")).parent / "thesis" / "b-learns.toml"
+
+
+COST_HEADER = (
+    *(
+        "K",
+        "devices",
+        "train s",
+        "ratio to K = 1",
+        "target",
+        "met",
+        "steady chunk s",
+        "steady ratio",
+    ),
+    *("exported seed", "members' test strict success"),
+)
+
+
+def _cost_cells(r: dict) -> tuple:
+    """One population size's row of the cost table."""
+    return (
+        *(r["k"], r["devices"], f"{r['train_seconds']:.1f}"),
+        *(f"{r[k]:.2f}" for k in ("ratio", "target")),
+        "yes" if r["meets_target"] else "no",
+        *(f"{r[k]:.2f}" for k in ("steady_chunk_s", "steady_ratio")),
+        r["exported_seed"],
+        ", ".join("-" if s is None else f"{s:.2f}" for s in r["test_success_raw"]),
+    )
 
 
 def target(k: int) -> float:
@@ -57,7 +68,7 @@ def population_row(base, k: int, work: Path) -> dict:
         "k": k,
         "train_seconds": ev["train_seconds"],
         "chunks": len(chunks),
-        "steady_chunk_s": statistics.median(steady),
+        "steady_chunk_s": Summary.of(steady).median,
         "devices": ev["devices"],
         "exported_seed": ev["seed"],
         "validation_success_raw": ev["validation_success_raw"],
@@ -101,18 +112,8 @@ def run_population_benchmark(
         "train_seconds (compilation and per-chunk validation included). Load average (1, 5, 15 min) before "
         f"{tuple(round(x, 2) for x in load_before)}, after {tuple(round(x, 2) for x in load_after)}.",
         "",
-        "| K | devices | train s | ratio to K = 1 | target | met | steady chunk s | steady ratio | exported seed | "
-        "members' test strict success |",
-        "|---:|---:|---:|---:|---:|---|---:|---:|---:|---|",
+        *table(COST_HEADER, map(_cost_cells, rows), "rrrrrlrrrl"),
     ]
-    for r in rows:
-        lines.append(
-            f"| {r['k']} | {r['devices']} | {r['train_seconds']:.1f} | {r['ratio']:.2f} | {r['target']:.2f} | "
-            f"{'yes' if r['meets_target'] else 'no'} | {r['steady_chunk_s']:.2f} | {r['steady_ratio']:.2f} | "
-            f"{r['exported_seed']} | "
-            + ", ".join("-" if s is None else f"{s:.2f}" for s in r["test_success_raw"])
-            + " |"
-        )
     payload = {
         "config": Path(path).name,
         "rows": rows,
@@ -170,14 +171,16 @@ def run_population_devices_check(out_dir, tests_dir) -> dict:
         "population of 5, in a fresh process with 1, 2 and 4 CPU devices (the population spread over all of "
         "them); sha256 of the final parameters and per-update metrics.",
         "",
-        "| devices | alone | fourth of five | equal |",
-        "|---:|---|---|---|",
+        *table(
+            ("devices", "alone", "fourth of five", "equal"),
+            [
+                (r["devices"], r["alone"][:16], r["fourth_of_five"][:16])
+                + ("yes" if r["alone"] == r["fourth_of_five"] else "no",)
+                for r in rows
+            ],
+            "rlll",
+        ),
     ]
-    for r in rows:
-        lines.append(
-            f"| {r['devices']} | {r['alone'][:16]} | {r['fourth_of_five'][:16]} | "
-            f"{'yes' if r['alone'] == r['fourth_of_five'] else 'no'} |"
-        )
     same = {
         f"{a['devices']} vs {b['devices']}": a["alone"] == b["alone"]
         for a in rows

@@ -1,22 +1,5 @@
-"""MuJoCo replay benchmark: every swing of the safety sets replayed in MuJoCo (jaxexo.sim.replay).
-
-Sets: the thesis's five obstacles with shifted layouts, shapes never trained on and the held-out
-terrain families (all their cells), every pivot condition (jaxexo.benchmarks.scenes). Generators:
-the RL swing alone (fallback none) and CFFTG. Every swing is timed for the device at the control
-rate (time_swings, [device] limits), then:
-
-- kinematic replay: MuJoCo's distance at every control sample and 3 poses between; counted: swings
-  flagged ok (the timed swing's checks) that come within env.min_clearance in MuJoCo (target 0);
-  the largest difference between MuJoCo's and jaxexo's distance at the same pose, and at that pose a
-  third, brute-force distance (jaxexo.sim.replay.brute_force_distance) says which is nearer;
-- driven replay of every swing flagged ok at the default [device] limits, by two controllers on
-  the same setpoints: PD with inverse-dynamics feed-forward (pd_ff, what an exoskeleton's joint
-  controller does) and stiff position servos (servo): heel and toe tracking error (p95 and max over
-  swings of each swing's max; also where the swing's heel is off the floor), contacts with the
-  obstacle, swings within the margin, MuJoCo's smallest distance, saturation of a limit.
-
-Run by benchmarks/bench_replay.py; writes <name>_<date>_<machine>.{json,md} (name: replay).
-"""
+"""MuJoCo replay benchmark: every swing of the safety sets replayed kinematically and driven
+(jaxexo.sim.replay). Run by benchmarks/bench_replay.py; method: docs/benchmarks.md#what-each-benchmark-measures."""
 
 from __future__ import annotations
 
@@ -37,6 +20,7 @@ from jaxexo.sim.replay import (
     summarize_driven,
     summarize_kinematic,
 )
+from jaxexo.summary import Summary, table
 from jaxexo.swing.timing import DeviceLimits, time_swings
 
 
@@ -92,7 +76,7 @@ def replay_set(sc, rl, cfftg, config, rate: float, driven: bool) -> dict:
             "n": len(timed),
             "flagged_ok": int(ok.sum()),
             "timing_seconds": t_timing,
-            "model_build_ms_median": 1e3 * float(np.median(build_s)) if build_s else None,
+            "model_build_ms_median": 1e3 * Summary.of(build_s).median if build_s else None,
             "kinematic": {
                 **summarize_kinematic(kin),
                 "violations": [k for k in kin if k["flagged_ok_but_within_margin"]],
@@ -139,22 +123,25 @@ def markdown(payload: dict, policy, n: int, rate: float, margin: float) -> str:
             k = r["kinematic"]
             w = k.get("worst_disagreement", {})
             rows_k.append(
-                f"| {name} | {g} | {r['n']} | {r['flagged_ok']} | {k['flagged_ok_within_margin']} | "
-                f"{_mm(k['min_mujoco_distance_of_ok_m'])} | {_mm(k['min_mujoco_minus_guaranteed_of_ok_m'])} | "
-                f"{1e6 * k['max_disagreement_m']:.3f} | {w.get('nearer_brute', '-')} | "
-                f"{1e3 * k['seconds_median']:.1f} |"
+                (
+                    *(
+                        name,
+                        g,
+                        str(r["n"]),
+                        str(r["flagged_ok"]),
+                        str(k["flagged_ok_within_margin"]),
+                    ),
+                    _mm(k["min_mujoco_distance_of_ok_m"]),
+                    _mm(k["min_mujoco_minus_guaranteed_of_ok_m"]),
+                    f"{1e6 * k['max_disagreement_m']:.3f}",
+                    w.get("nearer_brute", "-"),
+                    f"{1e3 * k['seconds_median']:.1f}",
+                )
             )
             for lim in ("driven", "driven_servo"):
                 if lim in r:
                     d = r[lim]
-                    rows_d.append(
-                        f"| {name} | {g} | {'pd_ff' if lim == 'driven' else 'servo'} | {d['n']} | "
-                        f"{_mm(d['heel_error_p95_m'])} / {_mm(d['heel_error_max_m'])} | "
-                        f"{_mm(d['heel_error_airborne_p95_m'])} | "
-                        f"{_mm(d['toe_error_p95_m'])} / {_mm(d['toe_error_max_m'])} | {d['contacts']} | "
-                        f"{d['within_margin']} | {_mm(d['min_distance_m'])} | {d['saturated']} | "
-                        f"{1e3 * d['seconds_median']:.0f} |"
-                    )
+                    rows_d.append((name, g, "pd_ff" if lim == "driven" else "servo", *_driven(d)))
     return "\n".join(
         [
             "# MuJoCo replay benchmark",
@@ -165,11 +152,7 @@ def markdown(payload: dict, policy, n: int, rate: float, margin: float) -> str:
             "",
             "## Kinematic replay (MuJoCo's mj_geomDistance at every control sample and 3 poses between)",
             "",
-            "| scenes | generator | n | flagged ok | flagged ok, within margin in MuJoCo | min MuJoCo distance of ok, mm | "
-            "min (MuJoCo - jaxexo guaranteed), mm | max disagreement at the samples, um | nearer the brute force | "
-            "replay ms (median) |",
-            "|---|---|---:|---:|---:|---:|---:|---:|---|---:|",
-            *rows_k,
+            *table(KINEMATIC, rows_k, "ll" + "r" * 6 + "lr"),
             "",
             "## Driven replay of the swings flagged ok (setpoints within the [device] limits)",
             "",
@@ -177,12 +160,35 @@ def markdown(payload: dict, policy, n: int, rate: float, margin: float) -> str:
             "same setpoints: pd_ff, PD with inverse-dynamics feed-forward; servo, stiff position servos. Heel error "
             "off the floor: at the samples where the swing's heel is more than 1 mm above the floor.",
             "",
-            "| scenes | generator | controller | n | heel error p95 / max, mm | heel error off the floor p95, mm | "
-            "toe error p95 / max, mm | contacts | within margin | min distance, mm | saturated | replay ms (median) |",
-            "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
-            *rows_d,
+            *table(DRIVEN, rows_d, "lll" + "r" * 9),
             "",
         ]
+    )
+
+
+KINEMATIC = (
+    *("scenes", "generator", "n", "flagged ok", "flagged ok, within margin in MuJoCo"),
+    *("min MuJoCo distance of ok, mm", "min (MuJoCo - jaxexo guaranteed), mm"),
+    *("max disagreement at the samples, um", "nearer the brute force", "replay ms (median)"),
+)
+DRIVEN = (
+    *("scenes", "generator", "controller", "n", "heel error p95 / max, mm"),
+    *("heel error off the floor p95, mm", "toe error p95 / max, mm", "contacts", "within margin"),
+    *("min distance, mm", "saturated", "replay ms (median)"),
+)
+
+
+def _driven(d: dict) -> tuple[str, ...]:
+    """A driven replay's figures, the table's cells after the set, generator and controller."""
+    return (
+        str(d["n"]),
+        f"{_mm(d['heel_error_p95_m'])} / {_mm(d['heel_error_max_m'])}",
+        _mm(d["heel_error_airborne_p95_m"]),
+        f"{_mm(d['toe_error_p95_m'])} / {_mm(d['toe_error_max_m'])}",
+        *(str(d[k]) for k in ("contacts", "within_margin")),
+        _mm(d["min_distance_m"]),
+        str(d["saturated"]),
+        f"{1e3 * d['seconds_median']:.0f}",
     )
 
 

@@ -1,13 +1,6 @@
-"""``jaxexo bench``: every benchmark in one run, each writing its own result files, then a summary.
-
-Parts (``skip`` any of them): ``env`` (jaxexo.benchmarks.env_bench), ``train`` (train_bench: trainer
-throughput and the default and thesis configs' training runs), ``generate`` (generate_bench: the
-NumPy generator), ``compare`` (jaxexo.evaluation.compare: RL generator against CFFTG on the same 1000 test
-scenarios, timed in one process), ``baseline`` (baseline_bench: jaxexo's trainer against the
-thesis-style PyTorch trainer; skipped with a note when torch is not installed), ``course``
-(course_bench: walks over drawn courses, RL alone against CFFTG on the same footholds). The summary table
-(summary_<date>_<machine>.md, shown in the README) is built from the figures the parts return.
-"""
+"""``jaxexo bench``: every benchmark in one run (parts env, train, generate, compare, baseline, course;
+``skip`` any), each writing its own result files, then the summary table (summary_<date>_<machine>.md,
+shown in the README) built from the figures the parts return. The parts: docs/benchmarks.md."""
 
 from __future__ import annotations
 
@@ -270,14 +263,13 @@ def _baseline_part(b: BenchRun, notes: list[str]) -> dict | None:
 def write_summary(res: dict, notes: list[str], out_dir: Path, progress) -> None:
     """The summary table of the parts' figures and the notes, written to out_dir and shown."""
     from jaxexo.evaluation.machine import write_result
+    from jaxexo.summary import table
 
     lines = [
         "# jaxexo benchmark summary",
         "",
-        "| figure | measured | target / thesis |",
-        "|---|---|---|",
+        *table(("figure", "measured", "target / thesis"), summary_rows(res), "lll"),
     ]
-    lines += [f"| {a} | {b} | {c} |" for a, b, c in summary_rows(res)]
     lines += [""] + [f"- {n}" for n in notes]
     md = "\n".join(lines)
     write_result("summary", {"rows": summary_rows(res), "notes": notes}, md, out_dir)

@@ -1,12 +1,5 @@
-"""Safe-swing benchmark: how often each generator returns a safe swing (exact clearance of
-the moving foot >= env.min_clearance, goal, no backward heel, joint limits, leg length), and the
-number of swings flagged safe that a 10x denser look at the same curve contradicts (must be 0).
-
-Scenes: the thesis's five obstacles with shifted layouts and shapes never trained on, every pivot
-condition (jaxexo.inference.scenarios.safety_scenarios). Generators: the RL swing alone (fallback
-none), the default combination (CFFTG when the RL swing is not safe), CFFTG alone. Run by
-benchmarks/bench_safety.py; writes safety_<date>_<machine>.{json,md}.
-"""
+"""Safe-swing benchmark: how often each generator returns a safe swing, and how many swings flagged safe
+a 10x denser look at the same curve contradicts (must be 0). Method: docs/benchmarks.md#what-each-benchmark-measures."""
 
 from __future__ import annotations
 
@@ -22,6 +15,7 @@ from jaxexo.evaluation.machine import machine_info, write_result
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.inference.scenarios import safety_scenarios
 from jaxexo.physics import geometry, swept
+from jaxexo.summary import Summary, table
 from jaxexo.swing import smoothing as sm
 from jaxexo.swing.clearing import clear_smooth
 
@@ -85,14 +79,33 @@ def generator_figures(b, cfftg: CFFTG, margin: float, tol: float, seconds: float
         "safe_rate": float(b.ok.mean()),
         "seconds": seconds,
         "within_1cm_rate": float((close < 0.01).mean()),
-        "median_guaranteed_clearance_m": float(np.median(close)),
+        "median_guaranteed_clearance_m": Summary.of(close).median,
         "backward_over_5mm_rate": float((back > 0.005).mean()),
         "fallback_rate": float(np.mean([b[i].method == "cfftg-fallback" for i in range(len(b))])),
         **rc,
     }
 
 
-def markdown(policy, margin: float, tol: float, info: dict, rows: list[str]) -> str:
+HEADER = (
+    *("scenes", "generator", "n", "safe %", "guaranteed clearance < 1 cm %"),
+    *("median guaranteed clearance cm", "heel backward > 5 mm %", "CFFTG fallback %"),
+    *("rechecked at 10x", "false safe", "seconds"),
+)
+
+
+def _cells(r: dict) -> tuple[str, ...]:
+    """One generator's figures on a set, as the table's cells after the set and generator."""
+    rates = ("safe_rate", "within_1cm_rate", "median_guaranteed_clearance_m")
+    return (
+        str(r["n"]),
+        *(f"{100 * r[k]:.{2 if k.startswith('median') else 1}f}" for k in rates),
+        *(f"{100 * r[k]:.1f}" for k in ("backward_over_5mm_rate", "fallback_rate")),
+        *(str(r[k]) for k in ("rechecked", "false_safe")),
+        f"{r['seconds']:.1f}",
+    )
+
+
+def markdown(policy, margin: float, tol: float, info: dict, rows: list[tuple]) -> str:
     return "\n".join(
         [
             "# Safe-swing benchmark",
@@ -104,10 +117,7 @@ def markdown(policy, margin: float, tol: float, info: dict, rows: list[str]) -> 
             f"hold. False safe: swings flagged safe whose curve, sampled {FACTOR}x more densely (exact per-sample "
             "foot distance), comes within the margin or moves the heel back more than the tolerance.",
             "",
-            "| scenes | generator | n | safe % | guaranteed clearance < 1 cm % | median guaranteed clearance cm | "
-            "heel backward > 5 mm % | CFFTG fallback % | rechecked at 10x | false safe | seconds |",
-            "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
-            *rows,
+            *table(HEADER, rows, "ll" + "r" * 9),
             "",
         ]
     )
@@ -141,12 +151,7 @@ def run_safety_benchmark(policy, out_dir, n: int = 2000) -> dict:
             t0 = time.perf_counter()
             b = make()
             r = out[gname] = generator_figures(b, cfftg, margin, tol, time.perf_counter() - t0)
-            rows.append(
-                f"| {name} | {gname} | {r['n']} | {100 * r['safe_rate']:.1f} | "
-                f"{100 * r['within_1cm_rate']:.1f} | {100 * r['median_guaranteed_clearance_m']:.2f} | "
-                f"{100 * r['backward_over_5mm_rate']:.1f} | {100 * r['fallback_rate']:.1f} | "
-                f"{r['rechecked']} | {r['false_safe']} | {r['seconds']:.1f} |"
-            )
+            rows.append((name, gname, *_cells(r)))
         payload["sets"][name] = out
     info = machine_info()
     payload["machine"] = info

@@ -9,6 +9,7 @@ import numpy as np
 
 from jaxexo.inference.scenarios import safety_scenarios
 from jaxexo.physics import scenarios
+from jaxexo.summary import table
 
 THESIS_FIVE, SHAPES, FAMILIES = "thesis five, shifted", "unseen shapes", "held-out families"
 
@@ -46,8 +47,5 @@ def set_table(columns, sets: dict, cells) -> list[str]:
     """A Markdown table of a row per scene set and generator of ``sets`` ({set: {generator: figures}}):
     the columns set, generator and ``columns`` (right-aligned), ``cells(figures)`` the row's cells after
     the first two, as text ("a | b")."""
-    lines = [f"| set | generator | {' | '.join(columns)} |", "|---|---|" + "---:|" * len(columns)]
-    for s, gens in sets.items():
-        for g, r in gens.items():
-            lines.append(f"| {s} | {g} | {cells(r)} |")
-    return lines
+    rows = [(s, g, cells(r)) for s, gens in sets.items() for g, r in gens.items()]
+    return table(("set", "generator", *columns), rows, "ll" + "r" * len(columns))

@@ -1,22 +1,5 @@
-"""Sweep benchmarks (issue targets for ``jaxexo sweep``), on the static settings of
-configs/sweeps/benchmark.toml (the thesis network 2-64-32-32-32-36, heel (y, z) observation, 256
-environments, T = 16, 2 minibatches):
-
-- vmapping costs nothing: training env-steps/s of 64 agents (configurations) x 256 environments,
-  vmapped and split over the CPU devices, against one large single run of 64 x 256 = 16384
-  environments (data parallel over the same devices, as ``jaxexo train`` runs);
-- devices: the same 64-agent program on one CPU device and on all of them;
-- agents trained per minute for 1, 8, 64 and 256 configurations (one seed each, a smaller budget per
-  agent), each a whole ``run_sweep`` (planning, compilation, training, evaluation, results, report);
-- the target run: configs/sweeps/benchmark.toml (64 configurations x 4 seeds x 2 M env steps,
-  512 M env steps) through ``run_sweep``, wall time including compilation, against 10 minutes.
-
-- lanes: what group-size independence costs in throughput, the same agents trained by one vmapped
-  batch per device (``over_agents``) and by fixed blocks of LANES (``over_lanes``, what sweeps and
-  populations run), on this file's static settings (16 agents) and thesis (b) learns (8 agents).
-
-Throughputs are medians over repeated compiled calls after a warm-up call that compiles.
-"""
+"""Sweep benchmarks: vmapped agents against one large run, devices, agents per minute, the 10-minute
+target run and the lanes. Run by benchmarks/bench_sweep.py; method: docs/benchmarks.md#what-each-benchmark-measures."""
 
 from __future__ import annotations
 
@@ -31,6 +14,7 @@ import numpy as np
 
 from jaxexo.benchmarks.train_bench import throughput
 from jaxexo.config import Config
+from jaxexo.summary import Summary
 from jaxexo.sweep.spec import load_sweep, sweep_from_dict
 from jaxexo.train.lanes import LANES, over_agents, over_lanes
 from jaxexo.train.trainer import Hyperparams, Trainer
@@ -65,7 +49,7 @@ def agents_throughput(
         ts, _ = jax.block_until_ready(run(ts, hyper))
         times.append(time.perf_counter() - t0)
     steps = n_agents * updates * cfg.train.num_envs * cfg.train.rollout_steps
-    med = float(np.median(times))
+    med = Summary.of(times).median
     return {
         "agents": n_agents,
         "devices": len(devices),

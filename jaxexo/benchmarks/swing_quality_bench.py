@@ -1,21 +1,6 @@
-"""Swing-quality benchmark: what a wearer feels of the RL swing beside CFFTG's, on scenes outside the
-training distribution. RL alone (``fallback=None``) and CFFTG on the same scenes:
-
-- safe swing % (jaxexo.physics.outcome's verdict at the clearance asked for) and goal reached %;
-- lift: the heel's peak height above the obstacle's highest point (median, p95), cm;
-- duration at the device: the time-optimal swing within the config's ``[device]`` joint limits
-  (jaxexo.swing.timing), median, p95 and max, s;
-- smoothness as delivered: integrated squared jerk of the timed joint trajectories (sum over the four
-  joints of the third finite difference at the control rate, squared, times dt; rad^2/s^5), median
-  and p95; the share of RL swings smoothed once (no retry) and of those that fell back to the raw
-  polyline.
-
-Sets: the held-out terrain families, and the two safety sets of the safe-swing benchmark (the thesis
-five with shifted layouts, and shapes never trained on; jaxexo.benchmarks.scenes). A perception
-error plans over a wrong obstacle estimate while the judge sees the true obstacle. Run by
-benchmarks/bench_swing_quality.py; the model study (model_study_bench) measures each agent with
-``run_set``.
-"""
+"""Swing-quality benchmark: what a wearer feels of the RL swing beside CFFTG's (safety, lift, timed
+duration, jerk) on scenes outside the training distribution. Run by
+benchmarks/bench_swing_quality.py; the model study measures each agent with ``run_set``. Method: docs/benchmarks.md#what-each-benchmark-measures."""
 
 from __future__ import annotations
 
@@ -37,6 +22,7 @@ from jaxexo.evaluation.machine import machine_info, write_result
 from jaxexo.inference import TrajectoryGenerator, time_swings
 from jaxexo.physics import geometry, swept
 from jaxexo.storage.atomic import write_figure
+from jaxexo.summary import Summary
 from jaxexo.swing.timing import joint_jerk
 
 # RL swings whose smoothing a clearing pass corrected carry this module in their notes.
@@ -99,6 +85,12 @@ def _figures(
         ]
     )
     nan = float("nan")
+    lifts, durs, jerks, clear = (
+        Summary.of(lift),
+        Summary.of(dur),
+        Summary.of(jerk),
+        Summary.of(true_c),
+    )
     return (
         {
             "n": len(trajs),
@@ -111,16 +103,16 @@ def _figures(
             if feasible.any()
             else nan,
             "reached_goal": float(np.mean([t.checks.reached_goal for t in trajs])),
-            "lift_cm_median": 100 * float(np.median(lift)),
-            "lift_cm_p95": 100 * float(np.percentile(lift, 95)),
-            "duration_s_median": float(np.median(dur)),
-            "duration_s_p95": float(np.percentile(dur, 95)),
-            "duration_s_max": float(dur.max()),
-            "jerk_median": float(np.median(jerk)),
-            "jerk_p95": float(np.percentile(jerk, 95)),
+            "lift_cm_median": 100 * lifts.median,
+            "lift_cm_p95": 100 * lifts.p95,
+            "duration_s_median": durs.median,
+            "duration_s_p95": durs.p95,
+            "duration_s_max": durs.max,
+            "jerk_median": jerks.median,
+            "jerk_p95": jerks.p95,
             "true_contact": float(np.mean(true_c <= geometry.TOUCH_EPS)),
             "true_within_1cm": float(np.mean(true_c < 0.01)),
-            "true_clearance_cm_p5": 100 * float(np.percentile(true_c, 5)),
+            "true_clearance_cm_p5": 100 * clear.p5,
             "generate_s": gen_s,
         },
         lift,
@@ -165,16 +157,11 @@ def run_set(
     # The scenes every generator swings safely: lift and duration compared where neither fails.
     both = np.logical_and.reduce([ok for ok, _, _ in per.values()])
     for name, (_, lift, dur) in per.items():
+        lifts, durs = Summary.of(lift[both]), Summary.of(dur[both])  # NaN where none is safe
         out[name]["n_all_safe"] = int(both.sum())
-        out[name]["lift_cm_median_all_safe"] = (
-            100 * float(np.median(lift[both])) if both.any() else float("nan")
-        )
-        out[name]["duration_s_median_all_safe"] = (
-            float(np.median(dur[both])) if both.any() else float("nan")
-        )
-        out[name]["duration_s_p95_all_safe"] = (
-            float(np.percentile(dur[both], 95)) if both.any() else float("nan")
-        )
+        out[name]["lift_cm_median_all_safe"] = 100 * lifts.median
+        out[name]["duration_s_median_all_safe"] = durs.median
+        out[name]["duration_s_p95_all_safe"] = durs.p95
     if arrays is not None:
         arrays.update(per)
     return out

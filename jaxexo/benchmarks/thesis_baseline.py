@@ -1,40 +1,6 @@
-"""The thesis's way of training, as a baseline for jaxexo's trainer: one environment stepped in a
-Python loop, one PyTorch update per environment step from a replay batch of 32 (thesis 2.4).
-
-Benchmarks only: it needs the ``bench`` extra (``pip install torch==2.13.0``) and nothing in jaxexo
-proper imports it. The replay buffer and the lambda-return recursion are NumPy (tested without
-torch); the network, the optimizer and the loop are PyTorch.
-
-What the thesis's code did (thesis 2.4.1-2.4.4, and the notebook it grew from, thesis ref. [9]) and
-what is kept:
-- Two networks, Q_main and Q_target, the target copied from the main one periodically (2.4.1);
-  epsilon-greedy behaviour (2.4.2); a step limit per episode (2.4.3); every transition stored in a
-  buffer from which a batch is sampled at random, one update of Q_main per environment step with
-  Adam (2.4.3-2.4.4); targets from Q_target, off-policy ``max_a Q(s', a)`` (eq 2.28) or on-policy
-  ``Q(s', a')`` (eq 2.27).
-- The network of Fig. 2.2 (or the config's layers, so that both trainers fit the same model),
-  PyTorch's default initialisation.
-
-What is done correctly instead of copying the known faults (thesis-notes "Known faults"):
-- The notebook's "trace" multiplied both the prediction and the target inside the MSE loss, which
-  is not TD(lambda). Here every sampled transition's target is its *truncated lambda-return*
-  (eq 2.19, Sutton & Barto 12.3): the lambda-weighted mix of its n-step returns along the stored
-  episode, up to ``horizon`` steps ahead, bootstrapped on Q_target, then 0.5 (G - Q(s, a))^2 is
-  minimised. This is the forward view that jaxexo's trainer uses too (the same recursion as
-  ``jaxexo.train.td_lambda.lambda_returns``; a test checks the two agree), and it is how
-  lambda-returns combine with experience replay (Daley & Amato 2019), which the thesis leaves open
-  (eq 2.21-2.26).
-- Off-policy (Watkins): the chain is cut where the stored next action is not the current greedy
-  one (argmax of Q_target at that state): with replay the data are stale, so the cut is taken with
-  respect to the current greedy policy, not the policy that acted.
-- Truncation (step limit) bootstraps on the last observation; reaching the goal does not.
-- Directions are the environment's k * 10 degree moves (the notebook used radians of k).
-
-Nothing is made slow on purpose: tensors are built once per step from preallocated NumPy arrays,
-action selection runs under ``torch.inference_mode``, the target network evaluates the whole
-(batch x horizon) window in one forward pass, and PyTorch runs on one thread unless told otherwise
-(the fastest setting for a network this small on this machine's 2 cores; see ``torch_threads``).
-"""
+"""The thesis's way of training (one environment in a Python loop, one PyTorch update per step from a
+replay batch of 32, truncated lambda-returns done right), the baseline jaxexo's trainer is measured
+against. Needs the ``bench`` extra; nothing in jaxexo proper imports it. Method: docs/benchmarks.md#what-each-benchmark-measures."""
 
 from __future__ import annotations
 

@@ -1,9 +1,5 @@
-"""Device-timing benchmark: the RL generator and CFFTG on the same scenes, every swing timed for the
-exoskeleton (jaxexo.swing.timing, the policy config's [device] limits) and sampled at a
-control rate. Reports swing durations side by side, peak joint velocities and accelerations of the
-exported samples (finite differences at the control rate), rest at both ends, the path checks on the
-exported samples, and the uniform 1 s timing's peaks for contrast. Writes
-timing_<date>_<machine>.{json,md} via jaxexo.evaluation.machine."""
+"""Device-timing benchmark: RL and CFFTG swings on the same scenes timed for the [device] limits and
+sampled at a control rate. Writes timing_<date>_<machine>.{json,md}; method: docs/benchmarks.md#what-each-benchmark-measures."""
 
 from __future__ import annotations
 
@@ -13,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxexo.physics.scenarios import shape_scenarios
+from jaxexo.summary import Summary, table
 
 # benchmarks/bench_timing.py's options (jaxexo.benchmarks.runner.run_script).
 OPTIONS = (
@@ -27,6 +24,7 @@ def _figures(trajs, timed, rate: float) -> dict:
 
     d = np.degrees
     dur = np.array([t.duration for t in timed])
+    swing = Summary.of(dur)
     vmax = np.array(timed[0].limits.velocity)
     amax = np.array(timed[0].limits.acceleration)
     fd_v = np.array([np.abs(np.diff(t.joint_angles, axis=0) * rate).max(axis=0) for t in timed])
@@ -39,10 +37,10 @@ def _figures(trajs, timed, rate: float) -> dict:
         "n": len(timed),
         "path_ok": float(np.mean([t.ok for t in trajs])),
         "timed_ok": float(np.mean([t.ok for t in timed])),
-        "swing_s_mean": float(dur.mean()),
-        "swing_s_median": float(np.median(dur)),
-        "swing_s_p95": float(np.percentile(dur, 95)),
-        "swing_s_max": float(dur.max()),
+        "swing_s_mean": swing.mean,
+        "swing_s_median": swing.median,
+        "swing_s_p95": swing.p95,
+        "swing_s_max": swing.max,
         "within_limits": float(np.mean([t.within_limits for t in timed])),
         "fd_within_limits": float(
             np.mean(np.all(fd_v <= vmax, axis=1) & np.all(fd_a <= amax, axis=1))
@@ -53,9 +51,38 @@ def _figures(trajs, timed, rate: float) -> dict:
         "peak_knee_vel_deg_s_mean": float(d(np.maximum(fd_v[:, 1], fd_v[:, 3]).mean())),
         "end_step_vel_deg_s_max": float(d(end_v.max())),
         "slowdown_mean": float(np.mean([t.slowdown for t in timed])),
-        "uniform_peak_vel_deg_s_median": float(d(np.median([u[0].max() for u in uni]))),
-        "uniform_peak_acc_deg_s2_median": float(d(np.median([u[1].max() for u in uni]))),
+        "uniform_peak_vel_deg_s_median": float(d(Summary.of([u[0].max() for u in uni]).median)),
+        "uniform_peak_acc_deg_s2_median": float(d(Summary.of([u[1].max() for u in uni]).median)),
     }, dur
+
+
+HEADER = (
+    *("set", "generator", "n", "path ok %", "timed ok %", "swing s mean", "median", "p95", "max"),
+    *("within limits % (FD)", "peak hip deg/s", "peak knee deg/s", "end step deg/s max"),
+    *("timing ms/swing", "uniform 1 s: peak deg/s / deg/s² (median)"),
+)
+
+
+def _cells(f: dict) -> tuple[str, ...]:
+    """One generator's row of the main table after the set and generator."""
+    return (
+        str(f["n"]),
+        *(f"{100 * f[k]:.1f}" for k in ("path_ok", "timed_ok")),
+        *(f"{f['swing_s_' + k]:.3f}" for k in ("mean", "median", "p95", "max")),
+        f"{100 * f['fd_within_limits']:.1f}",
+        *(f"{f[k]:.0f}" for k in ("peak_hip_vel_deg_s_mean", "peak_knee_vel_deg_s_mean")),
+        f"{f['end_step_vel_deg_s_max']:.2f}",
+        f"{f['timing_ms_per_swing']:.1f}",
+        f"{f['uniform_peak_vel_deg_s_median']:.0f} / {f['uniform_peak_acc_deg_s2_median']:.0f}",
+    )
+
+
+def _ratio_cells(c: dict) -> tuple[str, ...]:
+    return (
+        f"{100 * c['rl_not_longer_fraction']:.1f}",
+        f"{c['duration_ratio_mean']:.3f}",
+        f"{c['duration_ratio_median']:.3f}",
+    )
 
 
 def run_timing_benchmark(
@@ -81,11 +108,8 @@ def run_timing_benchmark(
         f"{np.degrees(lim.acceleration[0]):.0f}, {np.degrees(lim.acceleration[1]):.0f} deg/s². "
         "Peaks and limit checks are finite differences of the exported joint angles at the control rate.",
         "",
-        "| set | generator | n | path ok % | timed ok % | swing s mean | median | p95 | max | within limits % "
-        "(FD) | peak hip deg/s | peak knee deg/s | end step deg/s max | timing ms/swing | uniform 1 s: peak "
-        "deg/s / deg/s² (median) |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
     ]
+    rows = []
     for set_name, sc in sets.items():
         args = {k: [s[k] for s in sc] for k in ("obstacle", "pivot", "start_y", "step_length")}
         res, durs = {}, {}
@@ -107,45 +131,30 @@ def run_timing_benchmark(
                 k: float(durs[name][kinds == k].mean()) for k in dict.fromkeys(kinds)
             }
             res[name] = fig
-            f = fig
-            lines.append(
-                f"| {set_name} | {name} | {f['n']} | {100 * f['path_ok']:.1f} | {100 * f['timed_ok']:.1f} | "
-                f"{f['swing_s_mean']:.3f} | {f['swing_s_median']:.3f} | {f['swing_s_p95']:.3f} | "
-                f"{f['swing_s_max']:.3f} | {100 * f['fd_within_limits']:.1f} | "
-                f"{f['peak_hip_vel_deg_s_mean']:.0f} | "
-                f"{f['peak_knee_vel_deg_s_mean']:.0f} | {f['end_step_vel_deg_s_max']:.2f} | {ms:.1f} | "
-                f"{f['uniform_peak_vel_deg_s_median']:.0f} / {f['uniform_peak_acc_deg_s2_median']:.0f} |"
-            )
-        ratio = durs["rl"] / durs["cfftg"]
+            rows.append((set_name, name, *_cells(fig)))
+        ratio = Summary.of(durs["rl"] / durs["cfftg"])
         res["rl_vs_cfftg"] = {
             "rl_not_longer_fraction": float(np.mean(durs["rl"] <= durs["cfftg"] + 1e-9)),
-            "duration_ratio_mean": float(ratio.mean()),
-            "duration_ratio_median": float(np.median(ratio)),
+            "duration_ratio_mean": ratio.mean,
+            "duration_ratio_median": ratio.median,
         }
         payload["sets"][set_name] = res
-    lines += [
-        "",
-        "| set | RL swing ≤ CFFTG swing (% of scenes) | RL / CFFTG duration, mean | median |",
-        "|---|---:|---:|---:|",
-    ]
-    for set_name, res in payload["sets"].items():
-        c = res["rl_vs_cfftg"]
-        lines.append(
-            f"| {set_name} | {100 * c['rl_not_longer_fraction']:.1f} | {c['duration_ratio_mean']:.3f} | "
-            f"{c['duration_ratio_median']:.3f} |"
-        )
-    lines += [
-        "",
-        "Swing mean by obstacle kind (s):",
-        "",
-        "| set | kind | RL | CFFTG |",
-        "|---|---|---:|---:|",
-    ]
-    for set_name, res in payload["sets"].items():
-        for k, v in res["rl"]["by_kind_swing_s_mean"].items():
-            lines.append(
-                f"| {set_name} | {k} | {v:.3f} | {res['cfftg']['by_kind_swing_s_mean'][k]:.3f} |"
-            )
+    sets = payload["sets"]
+    lines += [*table(HEADER, rows, "ll" + "r" * 12 + "l"), ""]
+    lines += table(
+        ("set", "RL swing ≤ CFFTG swing (% of scenes)", "RL / CFFTG duration, mean", "median"),
+        [(s, *_ratio_cells(res["rl_vs_cfftg"])) for s, res in sets.items()],
+    )
+    lines += ["", "Swing mean by obstacle kind (s):", ""]
+    lines += table(
+        ("set", "kind", "RL", "CFFTG"),
+        [
+            (s, k, f"{v:.3f}", f"{res['cfftg']['by_kind_swing_s_mean'][k]:.3f}")
+            for s, res in sets.items()
+            for k, v in res["rl"]["by_kind_swing_s_mean"].items()
+        ],
+        "llrr",
+    )
     md = "\n".join(lines)
     jpath, mpath = write_result("timing", payload, md, out_dir)
     print(md)

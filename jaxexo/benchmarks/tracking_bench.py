@@ -14,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from jaxexo.summary import Summary, table
+
 SETTINGS = (
     (0.0, False),
     (0.05, False),
@@ -21,6 +23,24 @@ SETTINGS = (
     (0.1, True),
     (0.2, True),
 )  # (headroom, jerk limit on)
+
+
+HEADER = (
+    *("headroom", "jerk limit", "generator", "ok", "duration median / p95 s", "setpoints clipped"),
+    *("heel error off the floor p95 / max mm", "within 2 cm driven", "min distance mm"),
+)
+
+
+def _cells(r: dict) -> tuple[str, ...]:
+    """One setting's and generator's row."""
+    air = (1e3 * r["heel_error_airborne_p95_m"], 1e3 * r["heel_error_airborne_max_m"])
+    return (
+        *(f"{r['headroom']:.2f}", "on" if r["jerk"] else "off", r["generator"], str(r["ok"])),
+        f"{r['duration_median_s']:.3f} / {r['duration_p95_s']:.3f}",
+        str(r["saturated"]),
+        f"{air[0]:.1f} / {air[1]:.1f}",
+        *(str(r["within_margin"]), f"{1e3 * r['min_distance_m']:.1f}"),
+    )
 
 
 def run_tracking_benchmark(
@@ -60,7 +80,8 @@ def run_tracking_benchmark(
                             ts, cfg, limits=dataclasses.replace(lim, headroom=0.0), legs=leg
                         )
                     )
-            air = np.array([d["heel_error_airborne_max_m"] for d in drv])
+            air = Summary.of([d["heel_error_airborne_max_m"] for d in drv])
+            span = Summary.of([t.duration for t in timed])
             dist = np.array([d["mujoco_min_distance_m"] for d in drv])
             rows.append(
                 {
@@ -69,11 +90,11 @@ def run_tracking_benchmark(
                     "generator": g,
                     "n": len(timed),
                     "ok": len(drv),
-                    "duration_median_s": float(np.median([t.duration for t in timed])),
-                    "duration_p95_s": float(np.percentile([t.duration for t in timed], 95)),
+                    "duration_median_s": span.median,
+                    "duration_p95_s": span.p95,
                     "saturated": int(sum(d["saturated"] for d in drv)),
-                    "heel_error_airborne_p95_m": float(np.percentile(air, 95)),
-                    "heel_error_airborne_max_m": float(air.max()),
+                    "heel_error_airborne_p95_m": air.p95,
+                    "heel_error_airborne_max_m": air.max,
                     "within_margin": int(np.sum(dist < cfg.env.min_clearance)),
                     "min_distance_m": float(dist.min()),
                 }
@@ -94,16 +115,7 @@ def run_tracking_benchmark(
             f"Policy `{policy}`; {n} unseen-shape scenes; {rate:g} Hz; swings timed with each setting, driven in "
             "MuJoCo at the full [device] limits; figures over the swings flagged ok.",
             "",
-            "| headroom | jerk limit | generator | ok | duration median / p95 s | setpoints clipped | heel error off the "
-            "floor p95 / max mm | within 2 cm driven | min distance mm |",
-            "|---:|---|---|---:|---:|---:|---:|---:|---:|",
-            *[
-                f"| {r['headroom']:.2f} | {'on' if r['jerk'] else 'off'} | {r['generator']} | {r['ok']} | "
-                f"{r['duration_median_s']:.3f} / {r['duration_p95_s']:.3f} | {r['saturated']} | "
-                f"{1e3 * r['heel_error_airborne_p95_m']:.1f} / {1e3 * r['heel_error_airborne_max_m']:.1f} | "
-                f"{r['within_margin']} | {1e3 * r['min_distance_m']:.1f} |"
-                for r in rows
-            ],
+            *table(HEADER, map(_cells, rows), "rll" + "r" * 6),
             "",
             f"Machine: {payload['machine']['cpu']}, {payload['machine']['cores']} cores; {payload['seconds']:.0f} s.",
             "",

@@ -1,16 +1,6 @@
-"""Trainer throughput and time-to-result benchmarks (issue targets for the TD(lambda) trainer).
-
-- throughput: env-steps/s of whole training updates (rollout + lambda-returns + Adam steps) for the
-  thesis network (2 -> 64 -> 32 -> 32 -> 32 -> 36) at 4096 environments, forward view and backward
-  view, medians of repeated compiled chunks after a warm-up;
-- default model: wall time (compilation included) and eval.json figures of `jaxexo train` on
-  configs/default.toml;
-- the shield's mask inside the trainer, the plain rule against the batched one, alternated in one
-  process (run_mask_ab_benchmark);
-- where an update's time goes, per config (update_breakdown, run_breakdown_benchmark).
-
-The steady rate through the driver is train_steady_bench (it must also run against older checkouts).
-"""
+"""Trainer benchmarks: throughput of whole updates, the default model's training run, the shield's mask
+A/B and where an update's time goes; the steady rate through the driver is train_steady_bench.
+Method: docs/benchmarks.md#what-each-benchmark-measures."""
 
 from __future__ import annotations
 
@@ -19,9 +9,9 @@ import time
 from pathlib import Path
 
 import jax
-import numpy as np
 
 from jaxexo.config import Config
+from jaxexo.summary import Summary, table
 from jaxexo.train.trainer import Hyperparams, Trainer
 
 
@@ -40,7 +30,7 @@ def throughput(cfg: Config, updates_per_call: int, repeats: int = 3, devices=Non
         ts, _ = jax.block_until_ready(run(ts, hyper, updates_per_call))
         times.append(time.perf_counter() - t0)
     steps = updates_per_call * cfg.train.num_envs * cfg.train.rollout_steps
-    med = float(np.median(times))
+    med = Summary.of(times).median
     return {
         "trace": cfg.train.trace,
         "control": cfg.train.control,
@@ -189,7 +179,7 @@ def _timed_ms(fn, *args, repeats: int, calls: int) -> float:
         t0 = time.perf_counter()
         jax.block_until_ready(loop(*args))
         times.append(time.perf_counter() - t0)
-    return 1e3 * float(np.median(times)) / calls
+    return 1e3 * Summary.of(times).median / calls
 
 
 def _total(tree):
@@ -374,7 +364,7 @@ def run_mask_ab_benchmark(path, updates: int, rounds: int, out_dir: Path) -> dic
             t0 = time.perf_counter()
             prog[1], _ = jax.block_until_ready(run(ts, hyper, updates))
             times.append(time.perf_counter() - t0)
-    rates = {k: steps / float(np.median(v[2])) for k, v in progs.items()}
+    rates = {k: steps / Summary.of(v[2]).median for k, v in progs.items()}
     out = {
         "config": Path(path).name,
         "updates_per_call": updates,
@@ -389,9 +379,10 @@ def run_mask_ab_benchmark(path, updates: int, rounds: int, out_dir: Path) -> dic
         [
             f"# Shielded trainer, plain mask vs batched mask ({out['config']}, {out['devices']} CPU devices)",
             "",
-            "| mask | steady env-steps/s (median) |",
-            "|---|---:|",
-            *(f"| {k} | {v / 1e3:.0f}k |" for k, v in rates.items()),
+            *table(
+                ("mask", "steady env-steps/s (median)"),
+                [(k, f"{v / 1e3:.0f}k") for k, v in rates.items()],
+            ),
             "",
             f"Batched / plain: {out['ratio']:.2f}x; {rounds} alternated calls of {steps:,} env steps each. Shared "
             "machine: other jobs ran at the same time; the alternation exposes both to the same load.",
@@ -429,11 +420,10 @@ def run_breakdown_benchmark(paths, label: str, out_dir: Path) -> dict:
             f"## {r['config']} (N = {r['num_envs']}, T = {r['rollout_steps']}, {r['num_minibatches']} "
             f"minibatches x {r['num_epochs']} epoch(s), hidden {r['hidden']}, shield {r['shield']})",
             "",
-            "| part | ms per update | share of the update |",
-            "|---|---:|---:|",
-        ]
-        lines += [
-            f"| {k} | {v:.2f} | {100 * v / parts['update']:.0f} % |" for k, v in parts.items()
+            *table(
+                ("part", "ms per update", "share of the update"),
+                [(k, f"{v:.2f}", f"{100 * v / parts['update']:.0f} %") for k, v in parts.items()],
+            ),
         ]
         lines += ["", f"One device: {r['env_steps_per_s_one_device'] / 1e3:.0f}k env-steps/s.", ""]
     md = "\n".join(lines)

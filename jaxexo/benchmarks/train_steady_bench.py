@@ -1,12 +1,6 @@
-"""Trainer steady rate of given configs through the real driver (``jaxexo train``'s run_training):
-compilations of the chunk program, the rate of each chunk (chunk 1 includes compilation), the steady
-rate (median of chunks 3 on), and the network's FLOP/s at that rate against the machine's matmul
-roofline.
-
-benchmarks/bench_train.py --steady loads this file by its path and it imports only jaxexo's public
-driver, so that it can measure an older checkout too (run from outside the repository with
-PYTHONPATH pointing at that checkout); writes train-steady[-label]_<date>_<machine>.{json,md}.
-"""
+"""Trainer steady rate of given configs through the real driver. benchmarks/bench_train.py --steady
+loads this file by its path and it imports only jaxexo's public driver, so that it can measure an
+older checkout too. Method: docs/benchmarks.md#what-each-benchmark-measures."""
 
 from __future__ import annotations
 
@@ -29,6 +23,7 @@ from jax.sharding import PartitionSpec as P
 from jaxexo.config import load_config
 from jaxexo.env import ExoStepEnv
 from jaxexo.evaluation.machine import write_result
+from jaxexo.summary import Summary
 from jaxexo.train.driver import run_training
 
 
@@ -55,7 +50,7 @@ def matmul_roofline(
         t0 = time.perf_counter()
         f(x, w).block_until_ready()
         times.append(time.perf_counter() - t0)
-    return 2.0 * rows * len(devs) * width * width * length / float(np.median(times))
+    return 2.0 * rows * len(devs) * width * width * length / Summary.of(times).median
 
 
 def network_flops_per_step(cfg) -> float:
@@ -117,7 +112,7 @@ def run_train_steady(paths, budget: int, label: str, out_dir: Path) -> dict:
             "devices": len(jax.local_devices()),
             "chunks": len(chunks),
             "chunk_env_steps_per_s": rates,
-            "steady_env_steps_per_s": float(np.median(rates[2:])) if len(rates) > 2 else None,
+            "steady_env_steps_per_s": Summary.of(rates[2:]).median if len(rates) > 2 else None,
             "compilations_run": counts.get("jit(run)", 0),
             "train_seconds": res["train_seconds"],
             "validation_success_raw": res["validation_success_raw"],

@@ -1,22 +1,12 @@
 """Side-by-side evaluation of trajectory generators (the RL policy and CFFTG) on the same scenarios,
 ``jaxexo eval``: the scenario sets, the timed runs and the report (figures in
-jaxexo.evaluation.metrics, files in jaxexo.evaluation.report).
-
-Scenarios (jaxexo.inference.scenarios): ``test`` are the five thesis obstacles of Table 3.1 cycled over
-the three pivot conditions, jittered like the policy config's training layouts, from a fixed seed
-(the trainer's eval.json set); ``train`` are drawn from the policy's training distribution;
-``unseen`` is the held-out benchmark of jaxexo.evaluation.unseen.
-
-Timing (thesis 3.3, Table 3.11): each generator's ``generate`` once per scenario, the generators
-alternating which goes first, in one process, ``time.perf_counter`` around the call (validation,
-generation, smoothing and every check included); ``generate_batch`` on 1000 scenarios timed alike
-(median of BATCH_REPEATS), and each kind's and pivot's own scenarios in one call, scaled to 1000.
-The metrics are computed on the single calls' trajectories.
-"""
+jaxexo.evaluation.metrics, files in jaxexo.evaluation.report). Scenario sets and timing:
+docs/generation.md#jaxexo-eval-both-generators-side-by-side."""
 
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -38,6 +28,7 @@ from jaxexo.evaluation.thesis_results import (
 from jaxexo.evaluation.timing import BATCH, scene_options
 from jaxexo.inference.scenarios import sample_scenarios, training_scenarios
 from jaxexo.physics.kinematics import PIVOT_CONDITIONS
+from jaxexo.summary import Summary, table
 
 BATCH_REPEATS = 3
 # Bounds checked before any work (each single call's trajectory is kept for the metrics, so the
@@ -95,28 +86,37 @@ def batch_time(
     the generator benchmark's own function, scaled to a batch of 1000 (exact when size = 1000)."""
     from jaxexo.evaluation.timing import time_batch
 
-    t = np.median(time_batch(gen, [scenarios[i % len(scenarios)] for i in range(size)], repeats)[0])
-    return float(t) * 1e3 * BATCH / size
+    t = time_batch(gen, [scenarios[i % len(scenarios)] for i in range(size)], repeats)[0]
+    return Summary.of(t).median * 1e3 * BATCH / size
 
 
-def run_generators(generators: dict, scenarios: list[dict], warmup: int = 20):
-    """Generate every scenario with every generator, alternating their order per scenario.
-    Returns {name: (trajectories, per-call seconds)}."""
+@dataclass(frozen=True)
+class GeneratorRun:
+    """One generator's pass over N scenarios: its trajectories and each call's wall and CPU seconds
+    [N] (CPU time too: on a shared machine a long call is preempted more often than a short one,
+    which the wall clock charges to it)."""
+
+    trajectories: list
+    wall_s: np.ndarray
+    cpu_s: np.ndarray
+
+
+def run_generators(
+    generators: dict, scenarios: list[dict], warmup: int = 20
+) -> dict[str, GeneratorRun]:
+    """Generate every scenario with every generator, alternating their order per scenario."""
     names = list(generators)
     for s in scenarios[:warmup]:
         for g in generators.values():
             g.generate(s["obstacle"], **scene_options(s))
-    trajs = {n: [] for n in names}
-    times = {n: np.empty(len(scenarios)) for n in names}
+    out = {n: GeneratorRun([], np.empty(len(scenarios)), np.empty(len(scenarios))) for n in names}
     for i, s in enumerate(scenarios):
-        order = names if i % 2 == 0 else names[::-1]
-        for n in order:
-            g = generators[n]
-            t0 = time.perf_counter()
-            tr = g.generate(s["obstacle"], **scene_options(s))
-            times[n][i] = time.perf_counter() - t0
-            trajs[n].append(tr)
-    return {n: (trajs[n], times[n]) for n in names}
+        for n in names if i % 2 == 0 else names[::-1]:
+            c0, t0 = time.process_time(), time.perf_counter()
+            tr = generators[n].generate(s["obstacle"], **scene_options(s))
+            out[n].wall_s[i], out[n].cpu_s[i] = time.perf_counter() - t0, time.process_time() - c0
+            out[n].trajectories.append(tr)
+    return out
 
 
 def evaluate_generators(
@@ -140,8 +140,8 @@ def evaluate_generators(
             if ((kinds == k) & (pivots == p)).any()
         },
     }
-    for name, (tr, times) in runs.items():
-        gen = generators[name]
+    for name, run in runs.items():
+        gen, tr, times = generators[name], run.trajectories, run.wall_s
         m = trajectory_metrics(tr)
         dm = device_metrics(tr, gen.config)
         entry = summarize(m, times, np.ones(len(tr), bool))
@@ -277,17 +277,30 @@ def mujoco_lines(report: dict, rate: float) -> list[str]:
             else "- | - | - | - | -"
         )
         rows.append(
-            f"| {name} | {k['n']} | {k['flagged_ok']} | {k['flagged_ok_within_margin']} | "
-            f"{mm(k['min_mujoco_distance_of_ok_m'])} | {1e6 * (k['max_disagreement_m'] or 0.0):.3f} | {drv} |"
+            (name, k["n"], k["flagged_ok"], k["flagged_ok_within_margin"])
+            + (
+                mm(k["min_mujoco_distance_of_ok_m"]),
+                f"{1e6 * (k['max_disagreement_m'] or 0.0):.3f}",
+                drv,
+            )
         )
     return [
         f"Replayed in MuJoCo (jaxexo.sim.replay): every swing timed for the [device] limits at {rate:g} Hz; "
         "kinematic: MuJoCo's own distance at every sample and 3 poses between; driven (swings flagged ok): "
         "position actuators, setpoints within the limits.",
         "",
-        "| generator | n | flagged ok | ok, within margin in MuJoCo | min MuJoCo distance of ok, mm | "
-        "max disagreement, um | heel error p95 / max, mm | toe error p95 / max, mm | contacts | "
-        "min distance driven, mm | saturated |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
-        *rows,
+        *table(MUJOCO_HEADER, rows),
     ]
+
+
+MUJOCO_HEADER = (
+    *(
+        "generator",
+        "n",
+        "flagged ok",
+        "ok, within margin in MuJoCo",
+        "min MuJoCo distance of ok, mm",
+    ),
+    *("max disagreement, um", "heel error p95 / max, mm", "toe error p95 / max, mm", "contacts"),
+    *("min distance driven, mm", "saturated"),
+)

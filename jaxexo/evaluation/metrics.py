@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from jaxexo.physics import outcome, swept
+from jaxexo.summary import Summary
 
 # Backward heel motion (m, at the samples) counted in the report: the default env.backward_tolerance.
 BACKWARD_REPORT = outcome.DEFAULT_BACKWARD_TOLERANCE
@@ -81,42 +82,46 @@ def device_metrics(trajs, config) -> dict[str, np.ndarray]:
 def summarize_device(m: dict[str, np.ndarray], mask: np.ndarray) -> dict:
     """Device-timing figures of one group (seconds; velocities in deg/s)."""
     d = np.degrees
+    swing, jerk = Summary.of(m["swing_s"][mask]), Summary.of(m["joint_jerk"][mask])
     return {
-        "swing_s_mean": float(m["swing_s"][mask].mean()),
-        "swing_s_median": float(np.median(m["swing_s"][mask])),
-        "swing_s_p95": float(np.percentile(m["swing_s"][mask], 95)),
-        "swing_s_max": float(m["swing_s"][mask].max()),
-        "joint_jerk_median": float(np.median(m["joint_jerk"][mask])),
-        "joint_jerk_p95": float(np.percentile(m["joint_jerk"][mask], 95)),
+        "swing_s_mean": swing.mean,
+        "swing_s_median": swing.median,
+        "swing_s_p95": swing.p95,
+        "swing_s_max": swing.max,
+        "joint_jerk_median": jerk.median,
+        "joint_jerk_p95": jerk.p95,
         "peak_hip_vel_deg_s_mean": float(d(m["peak_hip_vel"][mask].mean())),
         "peak_knee_vel_deg_s_mean": float(d(m["peak_knee_vel"][mask].mean())),
         "device_within_limits": float(m["within_limits"][mask].mean()),
-        "uniform_peak_joint_vel_deg_s_median": float(d(np.median(m["uniform_peak_vel"][mask]))),
+        "uniform_peak_joint_vel_deg_s_median": float(
+            d(Summary.of(m["uniform_peak_vel"][mask]).median)
+        ),
     }
 
 
 def summarize(m: dict[str, np.ndarray], times_s: np.ndarray, mask: np.ndarray) -> dict:
     """Figures of one group of trajectories (angles in degrees, lengths in metres, times in ms)."""
-    t = times_s[mask] * 1e3
+    t = Summary.of(times_s[mask] * 1e3)
+    clear, lift = Summary.of(m["min_clearance"][mask]), Summary.of(m["peak_above"][mask])
     d = np.degrees
     return {
         "n": int(mask.sum()),
         "accuracy": float(m["accurate"][mask].mean()),
         "success": float(m["success"][mask].mean()),
         "reached_goal": float(m["reached_goal"][mask].mean()),
-        "time_ms_mean": float(t.mean()),
-        "time_ms_median": float(np.median(t)),
-        "time_ms_p95": float(np.percentile(t, 95)),
+        "time_ms_mean": t.mean,
+        "time_ms_median": t.median,
+        "time_ms_p95": t.p95,
         "hip_swing_mean_deg": float(d(m["hip_mean"][mask].mean())),
         "knee_swing_mean_deg": float(d(m["knee_mean"][mask].mean())),
         "hip_swing_max_deg": float(d(m["hip_max"][mask].mean())),
         "knee_swing_min_deg": float(d(m["knee_min"][mask].mean())),
-        "min_clearance_m_mean": float(m["min_clearance"][mask].mean()),
-        "min_clearance_m_median": float(np.median(m["min_clearance"][mask])),
-        "min_clearance_m_worst": float(m["min_clearance"][mask].min()),
+        "min_clearance_m_mean": clear.mean,
+        "min_clearance_m_median": clear.median,
+        "min_clearance_m_worst": clear.min,
         "clearance_ok": float(m["clearance_ok"][mask].mean()),
-        "peak_above_obstacle_m_median": float(np.median(m["peak_above"][mask])),
-        "peak_above_obstacle_m_p95": float(np.percentile(m["peak_above"][mask], 95)),
+        "peak_above_obstacle_m_median": lift.median,
+        "peak_above_obstacle_m_p95": lift.p95,
         "heel_backward_rate": float((m["backward"][mask] > BACKWARD_REPORT).mean()),
         "fallback_rate": float(m["fallback"][mask].mean()),
         "path_length_m_mean": float(m["path_length"][mask].mean()),

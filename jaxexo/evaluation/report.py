@@ -15,6 +15,7 @@ from jaxexo.evaluation.metrics import BACKWARD_REPORT
 from jaxexo.evaluation.timing import BATCH
 from jaxexo.storage.atomic import atomic_write, write_figure
 from jaxexo.storage.rundir import blocking_file
+from jaxexo.summary import table
 
 
 # Each table of report.md answers one question and fits a screen (at most 8 columns); report.json holds
@@ -135,11 +136,8 @@ GROUP_LABEL = {"by_kind": "{g}", "by_pivot": "pivot {g}", "by_kind_pivot": "{g}"
 
 
 def _table(first: str, columns, rows: list[tuple[str, dict]]) -> list[str]:
-    return [
-        f"| {first} | " + " | ".join(h for h, _ in columns) + " |",
-        "|---|" + "---:|" * len(columns),
-        *(f"| {label} | " + " | ".join(cell(r) for _, cell in columns) + " |" for label, r in rows),
-    ]
+    cells = [(label, *(cell(r) for _, cell in columns)) for label, r in rows]
+    return table((first, *(h for h, _ in columns)), cells)
 
 
 def _section_rows(report: dict, groups) -> list[tuple[str, dict]]:

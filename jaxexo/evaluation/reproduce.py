@@ -1,34 +1,6 @@
-"""``jaxexo reproduce``: the thesis's experiments, rerun and tabulated beside its published values.
-
-Trains the seven thesis configs (thesis 3.2) in one or both variants, shipped with the package
-(jaxexo/config/thesis/; configs/thesis/ holds byte-equal copies):
-
-- ``faithful``: ``<m>.toml``, the thesis's text as written (heel (y, z) observation, the
-  2-64-32-32-32-36 network, equal reward weights with the r0 step term, 10,000-50,000 episodes);
-- ``learns``: ``<m>-learns.toml``, the same with the few named switches that make it learn
-  (``LEARNS_CHANGES``; each has an ablation row in benchmarks/results/thesis-learning_*.md),
-
-then for each model generates the n test scenarios of ``jaxexo.evaluation.compare`` (the five obstacles of
-Table 3.1 over the three pivot conditions, the model's own starts) with the NumPy generator, greedily (a
-device's generator) and epsilon-greedily as the thesis tested (§2.6; it does not state its epsilon: we
-use the config's final training epsilon, ``train.eps_end``, 0.05), and writes:
-
-- Table 3.2 / 3.9: per model, mean generation time and mean swing knee and hip angles;
-- Tables 3.3-3.8: per model and pivot condition (the thesis gives the two it was not trained on);
-- Table 3.10: accuracy (eq 3.1) per model, with jaxexo's strict success and goal reaching beside it;
-- training time per model beside the thesis's (a laptop GPU; jaxexo's on this machine);
-- Table 3.11: generation time per obstacle, final model against CFFTG, timed in one process;
-- the same tables for jaxexo's default model when ``--default`` is given (configs/default.toml).
-
-Each learns config trains as a population (REPRODUCE_POPULATION members, seeds seed..seed+K-1; the best
-on validation exported: jaxexo.train.population) and the tables add, per model, the exported member and
-how many members meet the target (``population_table``); the faithful configs train one agent.
-
-Run directories go under OUT/runs/<name> (name: ``a`` or ``a-learns``); an existing policy.npz there is
-reused, and so is its evaluation (runs/<name>/reproduce_entry.json, for the same n, seed and batch
-size), so an interrupted reproduction continues where it stopped. OUT/reproduce.md and
-OUT/reproduce.json hold the tables.
-"""
+"""``jaxexo reproduce``: the thesis's experiments (the seven thesis configs, faithful and learns,
+``LEARNS_CHANGES``), rerun and tabulated beside its published values; runs and their evaluations
+under OUT/runs/ are reused. What it writes and why: docs/thesis-reproduction.md."""
 
 from __future__ import annotations
 
@@ -49,6 +21,7 @@ from jaxexo.evaluation.thesis_results import (
 from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 from jaxexo.storage.atomic import atomic_write
 from jaxexo.storage.rundir import blocking_file
+from jaxexo.summary import table
 
 THESIS_MODELS = ("a", "b", "c", "1", "2", "3", "final")
 # Members per learns model (jaxexo.train.population): which seed of a heel-only learner learns is
@@ -84,8 +57,9 @@ def _cell(ref, fmt=_triple) -> str:
     return "-" if ref is None else fmt(ref)
 
 
-def _table(title: str, header: str, align: str, rows: list[str]) -> list[str]:
-    return ["", f"## {title}", "", header, align, *rows]
+def _table(title: str, header, align: str, rows: list[str]) -> list[str]:
+    """A titled table; ``rows``: each row's cells as text ("a | b")."""
+    return ["", f"## {title}", "", *table(header, [(r,) for r in rows], align)]
 
 
 def _pct(x: float) -> str:
@@ -101,15 +75,15 @@ def device_table(results: dict) -> list[str]:
             d = r.get(gen, {}).get("device")
             if d:
                 rows.append(
-                    f"| {name} ({gen}) | {d['swing_s_mean']:.3f} | {d['swing_s_max']:.3f} | "
+                    f"{name} ({gen}) | {d['swing_s_mean']:.3f} | {d['swing_s_max']:.3f} | "
                     f"{d['peak_hip_vel_deg_s_mean']:.0f} | {d['peak_knee_vel_deg_s_mean']:.0f} | "
-                    f"{_pct(d['device_within_limits'])} | {d['uniform_peak_joint_vel_deg_s_median']:.0f} |"
+                    f"{_pct(d['device_within_limits'])} | {d['uniform_peak_joint_vel_deg_s_median']:.0f}"
                 )
     return _table(
         "Device timing (not in the thesis): shortest rest-to-rest swing within the [device] joint limits",
-        "| model (generator) | swing s mean | swing s max | peak hip vel deg/s | peak knee vel deg/s | "
-        "within limits % | uniform 1 s peak deg/s (median) |",
-        "|---|---:|---:|---:|---:|---:|---:|",
+        ("model (generator)", "swing s mean", "swing s max", "peak hip vel deg/s")
+        + ("peak knee vel deg/s", "within limits %", "uniform 1 s peak deg/s (median)"),
+        "l" + "r" * 6,
         rows,
     )
 
@@ -156,7 +130,7 @@ def _intro(results: dict) -> list[str]:
 def _run_rows(results: dict, cells) -> list[str]:
     """A table row per run: its model and variant, then ``cells(model, figures)``."""
     return [
-        f"| {model_of(name)} | {variant_of(name)} | " + cells(model_of(name), r)
+        f"{model_of(name)} | {variant_of(name)} | " + cells(model_of(name), r)
         for name, r in results.items()
     ]
 
@@ -167,22 +141,22 @@ def _accuracy_cells(model: str, r: dict) -> str:
         f"{_pct(r['rl']['accuracy'])} | {_pct(r['rl']['success'])} | {_pct(r['rl']['reached_goal'])} | "
     )
     if "rl_eps" not in r:
-        return greedy + "- | - | - |"
+        return greedy + "- | - | -"
     e = r["rl_eps"]
-    return greedy + f"{_pct(e['accuracy'])} | {_pct(e['success'])} | {_pct(e['reached_goal'])} |"
+    return greedy + f"{_pct(e['accuracy'])} | {_pct(e['success'])} | {_pct(e['reached_goal'])}"
 
 
 def _training_cells(model: str, r: dict) -> str:
     return (
         f"{THESIS_TRAIN_TIME.get(model, '-')} | {_minutes(r['train_seconds'])} | "
-        f"{r['train_seconds']:.1f} | {r['episodes']} | {r.get('env_steps', '-')} |"
+        f"{r['train_seconds']:.1f} | {r['episodes']} | {r.get('env_steps', '-')}"
     )
 
 
 def _overall_cells(model: str, r: dict) -> str:
     return (
         f"{_cell(THESIS_T32.get(model))} | {_triple(_fig(r['rl']))} | "
-        f"{_triple(_fig(r['rl_eps'])) if 'rl_eps' in r else '-'} |"
+        f"{_triple(_fig(r['rl_eps'])) if 'rl_eps' in r else '-'}"
     )
 
 
@@ -191,22 +165,22 @@ def _overall_cells(model: str, r: dict) -> str:
 RUN_TABLES = {
     "accuracy": (
         "Table 3.10: accuracy (eq 3.1) on the test scenarios, greedy and ε-greedy",
-        "| model | variant | thesis accuracy % | greedy accuracy % | greedy strict success % | "
-        "greedy reached goal % | ε-greedy accuracy % | ε-greedy strict success % | "
-        "ε-greedy reached goal % |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|",
+        ("model", "variant", "thesis accuracy %", "greedy accuracy %", "greedy strict success %")
+        + ("greedy reached goal %", "ε-greedy accuracy %", "ε-greedy strict success %")
+        + ("ε-greedy reached goal %",),
+        "ll" + "r" * 7,
         _accuracy_cells,
     ),
     "training time": (
         "Training time per model (thesis: laptop GPU, Ryzen 7 + RTX 4060; jaxexo: this machine's CPU)",
-        "| model | variant | thesis | jaxexo | jaxexo s | episodes | env steps |",
-        "|---|---|---|---|---:|---:|---:|",
+        ("model", "variant", "thesis", "jaxexo", "jaxexo s", "episodes", "env steps"),
+        "llllrrr",
         _training_cells,
     ),
     "overall": (
         "Table 3.2 / 3.9: every pivot condition together",
-        "| model | variant | thesis | jaxexo greedy | jaxexo ε-greedy |",
-        "|---|---|---|---|---|",
+        ("model", "variant", "thesis", "jaxexo greedy", "jaxexo ε-greedy"),
+        "lllll",
         _overall_cells,
     ),
 }
@@ -229,16 +203,16 @@ def pivot_table(results: dict) -> list[str]:
         ):
             re_ = r.get("rl_eps", {}).get("by_pivot", {}).get(p)
             cross.append(
-                f"| {model} ({trained or 'all'}) | {variant_of(name)} | {p}{' (trained)' if trained == p else ''} | "
+                f"{model} ({trained or 'all'}) | {variant_of(name)} | {p}{' (trained)' if trained == p else ''} | "
                 f"{_cell(THESIS_CROSS.get(model, {}).get(p))} | {_triple(_fig(rp))} | "
                 f"{_pct(rp['accuracy'])} | {_pct(rp['success'])} | "
-                f"{_triple(_fig(re_)) if re_ else '-'} | {_pct(re_['success']) if re_ else '-'} |"
+                f"{_triple(_fig(re_)) if re_ else '-'} | {_pct(re_['success']) if re_ else '-'}"
             )
     return _table(
         "Tables 3.3-3.8: per pivot condition",
-        "| model (trained on) | variant | pivot | thesis | jaxexo greedy | greedy accuracy % | "
-        "greedy success % | jaxexo ε-greedy | ε-greedy success % |",
-        "|---|---|---|---|---|---:|---:|---|---:|",
+        ("model (trained on)", "variant", "pivot", "thesis", "jaxexo greedy", "greedy accuracy %")
+        + ("greedy success %", "jaxexo ε-greedy", "ε-greedy success %"),
+        "lllllrrlr",
         cross,
     )
 
@@ -255,14 +229,14 @@ def cfftg_tables(results: dict) -> list[str]:
             ck = final["cfftg"]["by_kind"][k]
             ref = THESIS_T311.get(k, (float("nan"),) * 2)
             rows.append(
-                f"| {k} | {ref[0]:.3f} | {ref[1]:.3f} | {ck['time_ms_mean']:.3f} | {rk['time_ms_mean']:.3f} | "
-                f"{_pct(ck['success'])} | {_pct(rk['success'])} |"
+                f"{k} | {ref[0]:.3f} | {ref[1]:.3f} | {ck['time_ms_mean']:.3f} | {rk['time_ms_mean']:.3f} | "
+                f"{_pct(ck['success'])} | {_pct(rk['success'])}"
             )
         lines += _table(
             f"Table 3.11: generation time per obstacle (ms, mean), {name} model vs CFFTG",
-            "| obstacle | thesis CFFTG | thesis final | jaxexo CFFTG | jaxexo final (RL) | "
-            "jaxexo CFFTG success % | jaxexo RL success % |",
-            "|---|---:|---:|---:|---:|---:|---:|",
+            ("obstacle", "thesis CFFTG", "thesis final", "jaxexo CFFTG", "jaxexo final (RL)")
+            + ("jaxexo CFFTG success %", "jaxexo RL success %"),
+            "l" + "r" * 6,
             rows,
         )
         lines += [
@@ -336,7 +310,7 @@ def population_table(results: dict) -> list[str]:
         exported = p["members"][p["exported_member"]]
         verdict = meets_target(model, r["rl"]["success"], r["rl"]["reached_goal"])
         rows.append(
-            f"| {model} | {p['size']} | {p['exported_seed']} | {exported['validation_success_raw']:.3f} | "
+            f"{model} | {p['size']} | {p['exported_seed']} | {exported['validation_success_raw']:.3f} | "
             f"{_pct(r['rl']['success'])} / {_pct(r['rl']['reached_goal'])} | "
             f"{'yes' if verdict else ('no' if verdict is not None else '-')} | "
             f"{p['members_meeting_target']} of {p['size']} | "
@@ -346,16 +320,19 @@ def population_table(results: dict) -> list[str]:
                 else f"{m['seed']}: diverged"
                 for m in p["members"]
             )
-            + " |"
         )
     return (
         _table(
             "Populations (learns): the member exported (best on validation, training layouts) and the "
             "members meeting the target (reached goal >= 95 %, strict success >= the thesis's accuracy)",
-            "| model | members | exported seed | its validation success | exported: strict success / reached "
-            "goal % (NumPy generator) | exported meets target | members meeting target (raw greedy moves) | "
-            "per member seed: strict success / reached goal % (raw greedy moves) |",
-            "|---|---:|---:|---:|---|---|---|---|",
+            ("model", "members", "exported seed", "its validation success")
+            + (
+                "exported: strict success / reached goal % (NumPy generator)",
+                "exported meets target",
+            )
+            + ("members meeting target (raw greedy moves)",)
+            + ("per member seed: strict success / reached goal % (raw greedy moves)",),
+            "lrrrllll",
             rows,
         )
         if rows
