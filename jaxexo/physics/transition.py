@@ -27,17 +27,19 @@ scalar = types.SimpleNamespace(
     maximum=max,
     abs=abs,
     sqrt=math.sqrt,
-    clip=lambda x, lo, hi: min(max(x, lo), hi),
+    clip=lambda x, lo, hi: lo if x < lo else (hi if x > hi else x),  # min/max: three times slower
     where=lambda c, a, b: a if c else b,
 )
 
 
 def move_heel(xp, p, heel_y, heel_z, dir_y, dir_z):
-    """One action: the heel moves step_size along its direction, kept inside the world (above the
-    ground, below max_z, within bounds_y)."""
-    y = xp.clip(heel_y + p.step_size * dir_y, p.bounds_y[0], p.bounds_y[1])
-    z = xp.clip(heel_z + p.step_size * dir_z, 0.0, p.max_z_world)
-    return y, z
+    """One action: the heel moves step_size along its direction, kept inside the world."""
+    return keep_in_world(xp, p, heel_y + p.step_size * dir_y, heel_z + p.step_size * dir_z)
+
+
+def keep_in_world(xp, p, y, z):
+    """The point (y, z) clipped into the world: above the ground, below max_z, within bounds_y."""
+    return xp.clip(y, p.bounds_y[0], p.bounds_y[1]), xp.clip(z, 0.0, p.max_z_world)
 
 
 # m: a move shorter than this along both axes does not move the heel. Only a vertical move at the
@@ -50,9 +52,12 @@ MOVE_EPS = 1e-6
 def moves_heel(xp, heel_y, heel_z, ends):
     """(..., F) bool: the forward moves whose end ``ends`` (..., F, 2) is not the heel itself (a move
     into the ground, or past the world's bounds, that ``move_heel``'s clipping cancels)."""
-    return (xp.abs(ends[..., 0] - heel_y[..., None]) > MOVE_EPS) | (
-        xp.abs(ends[..., 1] - heel_z[..., None]) > MOVE_EPS
-    )
+    return heel_moved(xp, heel_y[..., None], heel_z[..., None], ends[..., 0], ends[..., 1])
+
+
+def heel_moved(xp, heel_y, heel_z, end_y, end_z):
+    """``moves_heel`` for ends given by their y and z (broadcast with the heel's)."""
+    return (xp.abs(end_y - heel_y) > MOVE_EPS) | (xp.abs(end_z - heel_z) > MOVE_EPS)
 
 
 def terminated(xp, p, reached, collided):
