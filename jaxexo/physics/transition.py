@@ -1,16 +1,9 @@
-"""The environment's transition rules (thesis 2.1-2.5), written once for every array module.
-
-The JAX environment (jaxexo.env), the NumPy trajectory generator (jaxexo.inference) and the NumPy
-environment used by the thesis-style baseline all step the heel, test the mid-goal and the goal,
-and judge a step with these functions. Each takes the array module ``xp`` first: ``numpy``,
-``jax.numpy``, or ``jaxexo.physics.transition.scalar`` (plain Python floats, for the generator's fast
-single-trajectory loop). Heel coordinates are passed as separate y and z components so that the
-same code serves a scalar, a batch (B,) and a traced JAX value.
-
-``p`` is any object with the parameter attributes of ``jaxexo.config.param_values`` (``EnvParams``
-in JAX, a ``SimpleNamespace`` of NumPy arrays or Python floats elsewhere); ``layout`` any object with the
-``Scene``/``Layout`` fields (outline, shape, center_y, width, height, pivot_y, start_y, goal_y;
-jaxexo.physics.scene).
+"""The environment's transition rules (thesis 2.1-2.5), written once for every array module ``xp``:
+``numpy``, ``jax.numpy`` or ``scalar`` below (plain Python floats, the generator's one-swing loop
+and the shield's scalar form). The JAX environment, the NumPy generator and the thesis-style NumPy
+environment step, test and judge the heel with these functions; heel coordinates come as separate y
+and z so that one code serves a scalar, a batch and a traced value. ``p``: the parameter views of
+jaxexo.config (``param_values``); ``layout``: the Scene/Layout fields. Design: docs/architecture.md.
 """
 
 from __future__ import annotations

@@ -1,11 +1,10 @@
 """The shield's rule, written once for every array module: the moves the agent may choose from a heel.
 
-Each function takes the array module ``xp`` first (``numpy`` or ``jax.numpy``) like the transition
-rules of jaxexo.physics.transition, whose move, floor and undo conditions it reads. The forms of the
-shield (jaxexo.shield: the JAX batch of the trainer, the NumPy rows of the generator's batches, the
-scalar choice of one swing) decide exactly as ``admissible_moves``, and call its pieces
-(``forward_ends``, ``clearance_need``, ``moves_keep_clearance``, ``shield_conditions``) where they
-must stay separate for speed.
+Each function takes the array module ``xp`` first, like jaxexo.physics.transition, whose move,
+floor and undo conditions it reads. The shield's three forms (jaxexo.shield) decide exactly as
+``admissible_moves`` and call its pieces (``forward_ends``, ``end_conditions``, ``clearance_need``,
+``moves_keep_clearance``, ``shield_conditions``) where they must stay separate for speed; the
+conditions themselves: docs/safety.md#the-shield-the-policy-chooses-only-among-safe-moves.
 """
 
 from __future__ import annotations

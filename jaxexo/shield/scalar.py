@@ -1,10 +1,11 @@
 """The shield's scalar form, ``make_shield("scalar", ...)`` (jaxexo.shield): one heel at a time in
 Python floats, checking only the move that will be taken; the NumPy generator's per-step choice.
 
-It decides as the rows form's mask (jaxexo.shield.rows) bit for bit: the rule's own conditions
-(``rule.end_conditions``, ``transition.move_heel``, kinematics' limits) on float32 scalars, the
-clearance and reach geometry in float64 certified against float32's rounding, and the full mask on
-the steps too close to call. Method: docs/generation.md#speed.
+It decides as the rows form's float32 mask (jaxexo.shield.rows): the rule's own pieces
+(``rule.end_conditions``, ``transition.keep_in_world``, kinematics' limits, ``rule.clearance_need``)
+called with the plain-float array module on the float32 heel, each comparison exact or certified
+against float32's rounding, and the full mask on the steps too close to call.
+Method: docs/generation.md#speed.
 """
 
 from __future__ import annotations
@@ -43,9 +44,9 @@ END_MARGIN = 1e-6
 
 
 def goal_tolerance_moved(sp, by: float) -> types.SimpleNamespace:
-    """``sp`` with its goal box's half width (goal_tolerance[0]) widened by ``by`` (m; negative: narrowed):
-    the rule's end conditions on float64 values, moved by END_MARGIN either way, bound its float32
-    decision (the other thresholds they read are compared exactly)."""
+    """``sp`` with the goal box's half width (goal_tolerance[0]) widened by ``by`` (m; negative:
+    narrowed): the rule's end conditions on float64 values, with it moved by END_MARGIN either way,
+    bound their float32 decision (the other comparisons they make are exact on float32 values)."""
     tol = sp.goal_tolerance
     return types.SimpleNamespace(**{**vars(sp), "goal_tolerance": (tol[0] + by, *tol[1:])})
 
@@ -60,8 +61,8 @@ def _f32(x: float) -> float:
 
 
 class _Heel:
-    """One step's heel: float32 scalars for the rule, Python floats for the geometry; whether it is
-    far from the obstacle's box; its clearance and the swept distance a move must keep (on first need)."""
+    """One step's heel rounded to float32 (y, z), whether it is far from the obstacle's box, and its
+    clearance and the swept distance a move must keep (computed on first need)."""
 
     __slots__ = ("y", "z", "far", "c_here", "need")
 
@@ -130,17 +131,15 @@ class ScalarShield:
 
 
 class SwingShield:
-    """Per-scene constants (Python floats, the float32 values the reference uses; float32 scalars for
-    the rule), ``certain`` (the greedy move where every comparison it needs is certain) and
-    ``choose`` (else the full mask's)."""
+    """Per-scene constants (Python floats, the float32 values the reference uses), ``certain`` (the
+    greedy move where every comparison it needs is certain) and ``choose`` (else the full mask's)."""
 
     def __init__(self, sp, np_params, scene, form: ScalarShield | None = None, layout=None):
         self.form = ScalarShield(np_params, sp) if form is None else form
         self.scene, self._layout, self.sp = scene, layout, sp
         self.goal = float(np.float32(scene.goal_y))
         # transition.move_heel's step (step_size * direction) in float32, as the rows form's
-        p = np_params
-        self.offsets = (np.float32(p.step_size) * np.asarray(p.directions, np.float32)).tolist()
+        self.offsets = (np_params.step_size * np_params.directions).astype(np.float32).tolist()
         self.fwd_idx = rule.FORWARD.tolist()
         self.fl, self.step, self.shield_c = sp.foot_length, sp.step_size, sp.shield_clearance
         self.t, self.s = sp.thigh, sp.shin
