@@ -42,14 +42,16 @@ def obs_dim(obs_mode: str, shape_points: int) -> int:
     return 2 if obs_mode == "thesis" else OBS_SCENE_ENTRIES + shape_points
 
 
-# m: the largest clearance a caller may ask of a swing (``generate(..., clearance=C)``). The obstacles
+def opposite(action):
+    """The move in the opposite direction of ``action`` (an int or int array), NUM_ACTIONS / 2 away."""
+    return (action + NUM_ACTIONS // 2) % NUM_ACTIONS
 
 
 def undoes(xp, actions, last_action):
     """(..., F) bool: which of ``actions`` ((F,) or (..., F)) undo ``last_action`` (...,; -1: no move
-    yet): the move in the opposite direction, NUM_ACTIONS / 2 away."""
+    yet): its ``opposite``."""
     last = xp.asarray(last_action)[..., None]
-    return (last >= 0) & (xp.asarray(actions) == (last + NUM_ACTIONS // 2) % NUM_ACTIONS)
+    return (last >= 0) & (xp.asarray(actions) == opposite(last))
 
 
 def greedy_action(xp, q, mask=None):

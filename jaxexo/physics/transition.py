@@ -1,16 +1,9 @@
-"""The environment's transition rules (thesis 2.1-2.5), written once for every array module.
-
-The JAX environment (jaxexo.env), the NumPy trajectory generator (jaxexo.inference) and the NumPy
-environment used by the thesis-style baseline all step the heel, test the mid-goal and the goal,
-and judge a step with these functions. Each takes the array module ``xp`` first: ``numpy``,
-``jax.numpy``, or ``jaxexo.physics.transition.scalar`` (plain Python floats, for the generator's fast
-single-trajectory loop). Heel coordinates are passed as separate y and z components so that the
-same code serves a scalar, a batch (B,) and a traced JAX value.
-
-``p`` is any object with the parameter attributes of ``jaxexo.config.param_values`` (``EnvParams``
-in JAX, a ``SimpleNamespace`` of NumPy arrays or Python floats elsewhere); ``layout`` any object with the
-``Scene``/``Layout`` fields (outline, shape, center_y, width, height, pivot_y, start_y, goal_y;
-jaxexo.physics.scene).
+"""The environment's transition rules (thesis 2.1-2.5), written once for every array module ``xp``:
+``numpy``, ``jax.numpy`` or ``scalar`` below (plain Python floats, the generator's one-swing loop
+and the shield's scalar form). The JAX environment, the NumPy generator and the thesis-style NumPy
+environment step, test and judge the heel with these functions; heel coordinates come as separate y
+and z so that one code serves a scalar, a batch and a traced value. ``p``: the parameter views of
+jaxexo.config (``param_values``); ``layout``: the Scene/Layout fields. Design: docs/architecture.md.
 """
 
 from __future__ import annotations
@@ -27,17 +20,19 @@ scalar = types.SimpleNamespace(
     maximum=max,
     abs=abs,
     sqrt=math.sqrt,
-    clip=lambda x, lo, hi: min(max(x, lo), hi),
+    clip=lambda x, lo, hi: lo if x < lo else (hi if x > hi else x),  # min/max: three times slower
     where=lambda c, a, b: a if c else b,
 )
 
 
 def move_heel(xp, p, heel_y, heel_z, dir_y, dir_z):
-    """One action: the heel moves step_size along its direction, kept inside the world (above the
-    ground, below max_z, within bounds_y)."""
-    y = xp.clip(heel_y + p.step_size * dir_y, p.bounds_y[0], p.bounds_y[1])
-    z = xp.clip(heel_z + p.step_size * dir_z, 0.0, p.max_z_world)
-    return y, z
+    """One action: the heel moves step_size along its direction, kept inside the world."""
+    return keep_in_world(xp, p, heel_y + p.step_size * dir_y, heel_z + p.step_size * dir_z)
+
+
+def keep_in_world(xp, p, y, z):
+    """The point (y, z) clipped into the world: above the ground, below max_z, within bounds_y."""
+    return xp.clip(y, p.bounds_y[0], p.bounds_y[1]), xp.clip(z, 0.0, p.max_z_world)
 
 
 # m: a move shorter than this along both axes does not move the heel. Only a vertical move at the
@@ -50,9 +45,12 @@ MOVE_EPS = 1e-6
 def moves_heel(xp, heel_y, heel_z, ends):
     """(..., F) bool: the forward moves whose end ``ends`` (..., F, 2) is not the heel itself (a move
     into the ground, or past the world's bounds, that ``move_heel``'s clipping cancels)."""
-    return (xp.abs(ends[..., 0] - heel_y[..., None]) > MOVE_EPS) | (
-        xp.abs(ends[..., 1] - heel_z[..., None]) > MOVE_EPS
-    )
+    return heel_moved(xp, heel_y[..., None], heel_z[..., None], ends[..., 0], ends[..., 1])
+
+
+def heel_moved(xp, heel_y, heel_z, end_y, end_z):
+    """``moves_heel`` for ends given by their y and z (broadcast with the heel's)."""
+    return (xp.abs(end_y - heel_y) > MOVE_EPS) | (xp.abs(end_z - heel_z) > MOVE_EPS)
 
 
 def terminated(xp, p, reached, collided):

@@ -1,11 +1,10 @@
 """The shield's rule, written once for every array module: the moves the agent may choose from a heel.
 
-Each function takes the array module ``xp`` first (``numpy`` or ``jax.numpy``) like the transition
-rules of jaxexo.physics.transition, whose move, floor and undo conditions it reads. The forms of the
-shield (jaxexo.shield: the JAX batch of the trainer, the NumPy rows of the generator's batches, the
-scalar choice of one swing) decide exactly as ``admissible_moves``, and call its pieces
-(``forward_ends``, ``clearance_need``, ``moves_keep_clearance``, ``shield_conditions``) where they
-must stay separate for speed.
+Each function takes the array module ``xp`` first, like jaxexo.physics.transition, whose move,
+floor and undo conditions it reads. The shield's three forms (jaxexo.shield) decide exactly as
+``admissible_moves`` and call its pieces (``forward_ends``, ``end_conditions``, ``clearance_need``,
+``moves_keep_clearance``, ``shield_conditions``) where they must stay separate for speed; the
+conditions themselves: docs/safety.md#the-shield-the-policy-chooses-only-among-safe-moves.
 """
 
 from __future__ import annotations
@@ -14,7 +13,7 @@ import numpy as np
 
 from jaxexo.physics import geometry, kinematics, swept
 from jaxexo.physics.actions import NUM_ACTIONS, action_directions, undoes
-from jaxexo.physics.transition import keeps_off_floor, move_heel, moves_heel
+from jaxexo.physics.transition import heel_moved, keeps_off_floor, move_heel, moves_heel
 
 # The moves with no backward component (0-90 and 270-350 deg): a contiguous head and tail of the action
 # list, so the shield's mask is assembled with a static concatenation (no scatter, same for every xp).
@@ -166,13 +165,27 @@ def shield_conditions(xp, p, heel_y, heel_z, layout, actions, ends, clear, last_
             xp, kin["leg_swing"], kin["leg_stance"], p.thigh, p.shin, p.leg_length_tolerance
         )
     )
-    ok = (
-        clear
-        & reachable
-        & (ends[..., 0] <= layout.goal_y[..., None] + p.goal_tolerance[0])
-        & moves_heel(xp, heel_y, heel_z, ends)
-        & keeps_off_floor(xp, p, ends[..., 0], ends[..., 1], layout.goal_y[..., None])
+    ends_ok = end_conditions(
+        xp,
+        p,
+        heel_y[..., None],
+        heel_z[..., None],
+        ends[..., 0],
+        ends[..., 1],
+        layout.goal_y[..., None],
     )
+    ok = clear & reachable & ends_ok
     if last_action is not None:
         ok = ok & ~undoes(xp, actions, last_action)
     return ok
+
+
+def end_conditions(xp, p, heel_y, heel_z, end_y, end_z, goal_y):
+    """``admissible_moves``' conditions on where a move from heel (y, z) ends (all broadcast): not
+    beyond the goal box's far side, off the floor outside the goal column, and the heel moved. The
+    scalar form calls it on one move's float32 scalars."""
+    return (
+        (end_y <= goal_y + p.goal_tolerance[0])
+        & heel_moved(xp, heel_y, heel_z, end_y, end_z)
+        & keeps_off_floor(xp, p, end_y, end_z, goal_y)
+    )

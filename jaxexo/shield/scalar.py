@@ -1,47 +1,24 @@
-"""The shield's greedy choice for one heel, checking only the move that will be taken: the form
-``make_shield("scalar", ...)`` (jaxexo.shield).
+"""The shield's scalar form, ``make_shield("scalar", ...)`` (jaxexo.shield): one heel at a time in
+Python floats, checking only the move that will be taken; the NumPy generator's per-step choice.
 
-The shielded greedy action is ``argmax(where(mask, q, -inf))`` with ``mask`` the admissible moves of
-jaxexo.shield.rule.admissible_moves, evaluated in float32 on the heel rounded to float32 (the
-generator's reference, ``ShieldRows.admissible``, jaxexo.shield.rows). Checking all 19 forward moves
-every step costs ~200 us in NumPy calls; the chosen move, however, is simply the first move, in order
-of decreasing Q (ties by index, as argmax), that is admissible. ``SwingShield.certain`` walks that
-order and checks one move at a time in plain Python floats:
-
-- the goal-box condition exactly (the move's end is rounded to float32 exactly like the reference's
-  float32 arithmetic: a sum of two float32 values is exact in float64, so one rounding gives the
-  float32 sum);
-- the clearance and the joint limits / reach from float64 arithmetic on the same float32 inputs,
-  *certified*: each comparison is decided only when the float64 value lies further from its
-  threshold than a bound on float32's rounding error (``MARGIN`` for lengths, a per-leg bound for the
-  angles that grows where the knee's square root is ill-conditioned); a comparison that is too close
-  to call makes ``certain`` return None, and ``choose`` computes the reference mask (float32 NumPy)
-  for that step. The result is therefore always the reference's move.
-
-Cheap exact shortcuts keep the geometry rare: far from the obstacle's bounding box no move can come
-within the shield's clearance (the distance is 1-Lipschitz); outline edges whose bounding box is
-further than the threshold from the swept region's bounding box are skipped; a move whose end
-clearance is already below the threshold fails, and one whose ends' clearances certify the swept
-bound (jaxexo.physics.swept.swept_lower_bound) passes.
-
-Where no forward move passes all four conditions the reference falls back (the forward moves that
-keep the clearance, then every move): ``certain`` returns None there too, so those steps take the
-reference path (``SwingShield.choose``). Exploration (epsilon > 0) always takes it.
-
-``ScalarShield`` is the form behind the shield's one interface (``admissible`` and ``choose`` on
-rows of stacked scenes, one heel at a time); ``ScalarShield.swing(scene)`` is one swing's
-``SwingShield``, the generator's per-step choice.
+It decides as the rows form's float32 mask (jaxexo.shield.rows): the rule's own pieces
+(``rule.end_conditions``, ``transition.keep_in_world``, kinematics' limits, ``rule.clearance_need``)
+called with the plain-float array module on the float32 heel, each comparison exact or certified
+against float32's rounding, and the full mask on the steps too close to call.
+Method: docs/generation.md#speed.
 """
 
 from __future__ import annotations
 
 import math
 import struct
+import types
 
 import numpy as np
 
 from jaxexo.physics import actions, kinematics, transition
 from jaxexo.physics.scene import stack_scenes
+from jaxexo.physics.transition import scalar
 from jaxexo.shield import rule
 from jaxexo.shield.rows import ShieldRows, ShieldStats, take_rows
 
@@ -61,12 +38,18 @@ _H_SMALL = _G_ERR / (2.0 * _SQRT_G_ERR)  # below this h, sqrt(|dg|) is the small
 _TWO_PI = 2.0 * math.pi
 # Orientation products closer to 0 than this (m^2) are treated as undecidable (float32 sign noise).
 _ORIENT_TOL = 1e-9
+# m: the same for a heel's distance to the goal box's sides (float32 rounding of a difference of
+# coordinates below 2 m is at most 1.2e-7 m).
+END_MARGIN = 1e-6
 
 
-# transition.moves_heel's threshold, and the band around it left to the reference (float32 rounding of
-# a difference of coordinates below 1 m is under 1e-7 m).
-_MOVE_EPS = transition.MOVE_EPS
-MARGIN_MOVE = 1e-7
+def goal_tolerance_moved(sp, by: float) -> types.SimpleNamespace:
+    """``sp`` with the goal box's half width (goal_tolerance[0]) widened by ``by`` (m; negative:
+    narrowed): the rule's end conditions on float64 values, with it moved by END_MARGIN either way,
+    bound their float32 decision (the other comparisons they make are exact on float32 values)."""
+    tol = sp.goal_tolerance
+    return types.SimpleNamespace(**{**vars(sp), "goal_tolerance": (tol[0] + by, *tol[1:])})
+
 
 _F32 = struct.Struct("f")
 _pack, _unpack = _F32.pack, _F32.unpack
@@ -75,6 +58,13 @@ _pack, _unpack = _F32.pack, _F32.unpack
 def _f32(x: float) -> float:
     """x rounded to float32 (to nearest, as NumPy's float32 arithmetic rounds each result)."""
     return _unpack(_pack(x))[0]
+
+
+class _Heel:
+    """One step's heel rounded to float32 (y, z), whether it is far from the obstacle's box, and its
+    clearance and the swept distance a move must keep (computed on first need)."""
+
+    __slots__ = ("y", "z", "far", "c_here", "need")
 
 
 def _nearest2(points, cy, cz, ey, ez, inv, best):
@@ -102,6 +92,9 @@ class ScalarShield:
 
     def __init__(self, p, sp, stats=None):
         self.p, self.sp = p, sp
+        # the rule's end conditions certainly true / certainly false (``goal_tolerance_moved``)
+        self.ends_in = goal_tolerance_moved(sp, -END_MARGIN)
+        self.ends_out = goal_tolerance_moved(sp, END_MARGIN)
         self.stats = ShieldStats() if stats is None else stats
         self.reference = ShieldRows(p, sp, self.stats)
 
@@ -142,42 +135,20 @@ class SwingShield:
     greedy move where every comparison it needs is certain) and ``choose`` (else the full mask's)."""
 
     def __init__(self, sp, np_params, scene, form: ScalarShield | None = None, layout=None):
-        p = np_params
-        self.form = ScalarShield(p, sp) if form is None else form
-        self.scene, self._layout = scene, layout
-        self.sp = sp
-        self.fl = sp.foot_length
-        self.step = sp.step_size
-        self.b0, self.b1 = sp.bounds_y
-        self.zmax = sp.max_z_world
-        self.shield_c = sp.shield_clearance
+        self.form = ScalarShield(np_params, sp) if form is None else form
+        self.scene, self._layout, self.sp = scene, layout, sp
+        self.goal = float(np.float32(scene.goal_y))
+        # transition.move_heel's step (step_size * direction) in float32, as the rows form's
+        self.offsets = (np_params.step_size * np_params.directions).astype(np.float32).tolist()
+        self.fwd_idx = rule.FORWARD.tolist()
+        self.fl, self.step, self.shield_c = sp.foot_length, sp.step_size, sp.shield_clearance
         self.t, self.s = sp.thigh, sp.shin
-        self.leg = _f32(np.float32(sp.thigh) + np.float32(sp.shin))
-        self.hip_lim = sp.hip_limits
-        self.knee_lim = sp.knee_limits
-        self.leg_tol = sp.leg_length_tolerance + kinematics.LENGTH_EPS
-        self.hip_lo = self.hip_lim[0] - kinematics.ANGLE_EPS
-        self.hip_hi = self.hip_lim[1] + kinematics.ANGLE_EPS
-        self.knee_lo = self.knee_lim[0] - kinematics.ANGLE_EPS
-        self.knee_hi = self.knee_lim[1] + kinematics.ANGLE_EPS
+        self.leg = float(np.float32(sp.thigh) + np.float32(sp.shin))  # hip_position's, in float32
         self.min_hz2 = (kinematics.MIN_HIP_HEIGHT_FRACTION * self.leg) ** 2
-        # every forward move: (action, float32 step * direction per axis)
-        fwd = rule.FORWARD
-        prod = (p.step_size * p.directions).astype(np.float32)
-        self.forward = np.zeros(actions.NUM_ACTIONS, bool)
-        self.forward[fwd] = True
-        self.fwd_list = self.forward.tolist()
-        self.fwd_idx = fwd.tolist()
-        self.prod = [(float(prod[a, 0]), float(prod[a, 1])) for a in range(actions.NUM_ACTIONS)]
-        # the scene as float32 values
-        f = lambda v: float(np.float32(v))  # noqa: E731
-        self.pivot = f(scene.pivot_y)
-        self.goal_limit = float(np.float32(scene.goal_y) + p.goal_tolerance[0])
-        # transition.keeps_off_floor in the reference's float32: exact here (a float32 difference is
-        # exact in float64, then rounded as float32 rounds it)
-        self.goal_y32 = f(scene.goal_y)
-        self.goal_tol32 = float(np.float32(p.goal_tolerance[0]))
-        self.floor32 = float(np.float32(p.floor_clearance))
+        # a near-straight knee (angle <= 1e-5 rad up to rounding) cannot exceed this upper limit
+        self.knee_hi_free = sp.knee_limits[1] + kinematics.ANGLE_EPS >= 1e-5
+        self.limits = (*sp.hip_limits, *sp.knee_limits)
+        self.pivot = float(np.float32(scene.pivot_y))
         ol = np.asarray(scene.outline, np.float32).astype(np.float64)
         self.vy, self.vz = ol[:, 0].tolist(), ol[:, 1].tolist()
         self.box = (min(self.vy), max(self.vy), min(min(self.vz), 0.0), max(self.vz))
@@ -187,19 +158,8 @@ class SwingShield:
             ey, ez = self.vy[i + 1] - cy, self.vz[i + 1] - cz
             len2 = ey * ey + ez * ez
             if len2 > 1e-24:  # padding (repeated vertices): their distances are the vertices'
-                edges.append(
-                    (
-                        cy,
-                        cz,
-                        ey,
-                        ez,
-                        1.0 / len2,
-                        min(cy, cy + ey),
-                        max(cy, cy + ey),
-                        min(cz, cz + ez),
-                        max(cz, cz + ez),
-                    )
-                )
+                ys, zs = sorted((cy, cy + ey)), sorted((cz, cz + ez))
+                edges.append((cy, cz, ey, ez, 1.0 / len2, *ys, *zs))
         self.edges = edges
         self.pairs = [
             (self.vy[i], self.vz[i], self.vy[i + 1], self.vz[i + 1]) for i in range(len(ol) - 1)
@@ -335,50 +295,59 @@ class SwingShield:
 
     def reachable(self, y, z):
         """1 / 0 / -1: the end (y, z) certainly within the joint limits and reach / too close to call /
-        certainly not (rule.admissible_moves' kinematic conditions)."""
-        leg = self.leg
-        p = self.pivot
+        certainly not (rule.shield_conditions' kinematic conditions: kinematics' limits, each
+        compared with its float64 value's error bound to either side)."""
+        leg, p = self.leg, self.pivot
         dist = 0.5 * (p - y)
         hz2 = leg * leg - dist * dist
         hz = math.sqrt(hz2 if hz2 > self.min_hz2 else self.min_hz2)
         hy = 0.5 * (p + y)
         unsure = False
-        worst_r = 0.0
-        lo_h, hi_h, lo_k, hi_k = self.hip_lo, self.hip_hi, self.knee_lo, self.knee_hi
-        for fy, fz in ((y, z), (p, 0.0)):
-            r, hip, knee, e_hip, e_knee, straight = self._leg(hy, hz, fy, fz)
-            if r > worst_r:
-                worst_r = r
-            if hip > hi_h + e_hip or hip < lo_h - e_hip or knee < lo_k - e_knee:
-                return -1
-            if hip > hi_h - e_hip or hip < lo_h + e_hip or knee < lo_k + e_knee:
-                unsure = True
+        h0, h1, k0, k1 = self.limits
+        swing, stance = self._leg(hy, hz, y, z), self._leg(hy, hz, p, 0.0)
+        for _, hip, knee, e_h, e_k, straight in (swing, stance):
             # The knee is built on its flexing side (knee angle <= 0 up to rounding of a few 1e-7
             # rad), so a near-straight leg never exceeds an upper limit >= 1e-5 rad.
-            if not (straight and hi_k >= 1e-5 and knee <= 1e-5):
-                if knee > hi_k + e_knee:
+            k = math.inf if straight and self.knee_hi_free and knee <= 1e-5 else k1
+            if kinematics.joint_limit_violation(
+                scalar, hip, knee, h0 + e_h, h1 - e_h, k0 + e_k, k - e_k
+            ):  # not certainly within: certainly outside, or too close to call
+                if kinematics.joint_limit_violation(
+                    scalar, hip, knee, h0 - e_h, h1 + e_h, k0 - e_k, k + e_k
+                ):
                     return -1
-                if knee > hi_k - e_knee:
-                    unsure = True
-        over = worst_r - leg
-        if over > self.leg_tol + LENGTH_MARGIN:
-            return -1
-        if over > self.leg_tol - LENGTH_MARGIN:
-            unsure = True
+                unsure = True
+        tol, t, s = self.sp.leg_length_tolerance, self.t, self.s
+        if kinematics.leg_too_long(scalar, swing[0], stance[0], t, s, tol - LENGTH_MARGIN):
+            return (
+                -1
+                if kinematics.leg_too_long(scalar, swing[0], stance[0], t, s, tol + LENGTH_MARGIN)
+                else 0
+            )
         return 0 if unsure else 1
 
     # The choice ---------------------------------------------------------------------------------
-    def _reference(self, hy: float, hz: float, last: int) -> np.ndarray:
+    def _reference(self, heel: _Heel, last: int) -> np.ndarray:
         """(A,) the full mask of the float32 heel (the rows form, ``ScalarShield.reference``), on the
         scene stacked as one float32 row (stacked here on first use when not given)."""
         if self._layout is None:
             self._layout = stack_scenes([self.scene], np.float32)
         return self.form.reference.admissible(
-            np.array([hy], np.float32),
-            np.array([hz], np.float32),
+            np.array([heel.y], np.float32),
+            np.array([heel.z], np.float32),
             self._layout,
             last_action=np.array([last]),
         )[0]
+
+    def _heel(self, hy: float, hz: float) -> _Heel:
+        """The heel (hy, hz) rounded to float32, as the reference rounds it."""
+        h = _Heel()
+        h.y, h.z, h.need = _f32(hy), _f32(hz), None
+        # Far from the obstacle's box no move of one step comes within the shield's clearance.
+        h.far = (
+            self._box_distance(h.y, h.y + self.fl, h.z, h.z) - self.step >= self.shield_c + MARGIN
+        )
+        return h
 
     def choose(self, hy: float, hz: float, q: np.ndarray, last: int = -1) -> int:
         """The shielded greedy action: ``certain``'s, else the full mask's (counted in the form's
@@ -386,7 +355,8 @@ class SwingShield:
         a = self.certain(hy, hz, q, last)
         stats = self.form.stats
         if a is None:
-            a = int(actions.greedy_action(np, q, self._reference(hy, hz, last)))
+            mask = self._reference(self._heel(hy, hz), last)
+            a = int(actions.greedy_action(np, q, mask))
             stats.steps_to_full_mask += 1
         stats.steps += 1
         return a
@@ -394,17 +364,15 @@ class SwingShield:
     def mask(self, hy: float, hz: float, last: int = -1) -> np.ndarray:
         """(A,) the admissible moves: every forward move decided by ``_admissible`` where all are
         certain and one passes (then the reference's fallbacks do not apply), else the full mask."""
-        hy, hz = _f32(hy), _f32(hz)
-        far = self._box_distance(hy, hy + self.fl, hz, hz) - self.step >= self.shield_c + MARGIN
-        state = [None]
-        undo = (last + actions.NUM_ACTIONS // 2) % actions.NUM_ACTIONS if last >= 0 else -1
+        heel = self._heel(hy, hz)
+        undo = actions.opposite(last) if last >= 0 else -1
         out = np.zeros(actions.NUM_ACTIONS, bool)
         for a in self.fwd_idx:
-            v = a != undo and self._admissible(a, hy, hz, far, state)
+            v = a != undo and self._admissible(a, heel)
             if v is None:
-                return self._reference(hy, hz, last)
+                return self._reference(heel, last)
             out[a] = v
-        return out if out.any() else self._reference(hy, hz, last)
+        return out if out.any() else self._reference(heel, last)
 
     def certain(self, hy: float, hz: float, q: np.ndarray, last: int = -1):
         """The reference's shielded greedy action for heel (hy, hz) (Python floats; rounded to float32
@@ -415,58 +383,47 @@ class SwingShield:
         total = sum(ql)
         if total - total != 0.0:  # a nan or an infinity: argmax's own rules
             return self._miss()
-        hy, hz = _f32(hy), _f32(hz)
-        # Far from the obstacle's box no move of one step comes within the shield's clearance.
-        far = self._box_distance(hy, hy + self.fl, hz, hz) - self.step >= self.shield_c + MARGIN
-        state = [None]  # the clearance threshold, computed once when needed
-        # the move that would undo the last one (actions.undoes) is never admissible
-        undo = (last + actions.NUM_ACTIONS // 2) % actions.NUM_ACTIONS if last >= 0 else -1
+        heel = self._heel(hy, hz)
+        undo = actions.opposite(last) if last >= 0 else -1  # never admissible (actions.undoes)
         # The best forward move first (max returns the first of equal values, as argmax); only on a
         # miss the rest in order of Q (a stable sort: ties by index).
         best = max(self.fwd_idx, key=ql.__getitem__)
-        v = best != undo and self._admissible(best, hy, hz, far, state)
+        v = best != undo and self._admissible(best, heel)
         if v is not False:
             return best if v else self._miss()
         for a in sorted(self.fwd_idx, key=ql.__getitem__, reverse=True):
             if a == best or a == undo:
                 continue
-            v = self._admissible(a, hy, hz, far, state)
+            v = self._admissible(a, heel)
             if v is not False:
                 return a if v else self._miss()
         return self._miss()  # no forward move passes everything: the reference's fallbacks
 
-    def _admissible(self, a, hy, hz, far, state):
-        """True / False / None (too close to call) for forward move a from the float32 heel (hy, hz)."""
-        py, pz = self.prod[a]
-        y = _f32(hy + py)
-        y = self.b0 if y < self.b0 else (self.b1 if y > self.b1 else y)
-        if y > self.goal_limit:
+    def _admissible(self, a: int, heel: _Heel):
+        """True / False / None (too close to call) for forward move a from ``heel``."""
+        # the float32 heel plus a float32 offset is exact in float64, then rounded as float32 rounds it
+        py, pz = self.offsets[a]
+        y, z = transition.keep_in_world(scalar, self.sp, _f32(heel.y + py), _f32(heel.z + pz))
+        if not rule.end_conditions(scalar, self.form.ends_in, heel.y, heel.z, y, z, self.goal):
+            if rule.end_conditions(scalar, self.form.ends_out, heel.y, heel.z, y, z, self.goal):
+                return None
             return False
-        z = _f32(hz + pz)
-        z = 0.0 if z < 0.0 else (self.zmax if z > self.zmax else z)
-        if z < self.floor32 and abs(_f32(y - self.goal_y32)) > self.goal_tol32:
-            return False
-        moved = max(abs(y - hy), abs(z - hz))  # transition.moves_heel, certified like the rest
-        if moved <= _MOVE_EPS + MARGIN_MOVE:
-            return False if moved <= _MOVE_EPS - MARGIN_MOVE else None
         k = self.reachable(y, z)
         if k <= 0:
             return None if k == 0 else False
-        if far:
+        if heel.far:
             return True
-        need = state[0]
-        if need is None:
-            c_here = self.foot_distance(hy, hz)
+        if heel.need is None:
+            c_here = self.foot_distance(heel.y, heel.z)
             if c_here < MARGIN:
                 return None  # touching or inside: the sign may be rounding
-            if self.inside(hy, hz):
-                c_here = -c_here
-            need = state[0] = rule.clearance_need(transition.scalar, self.sp, c_here)
-            state.append(c_here)
+            heel.c_here = -c_here if self.inside(heel.y, heel.z) else c_here
+            heel.need = rule.clearance_need(scalar, self.sp, heel.c_here)
         # 1-Lipschitz: the foot moved by at most a step stays at least c_here - step from the outline
-        if state[1] - self.step >= need + MARGIN:
+        if heel.c_here - self.step >= heel.need + MARGIN:
             return True
-        v = self.swept_vs(hy, hz, y - hy, z - hz, need - MARGIN, need + MARGIN)
+        need = heel.need
+        v = self.swept_vs(heel.y, heel.z, y - heel.y, z - heel.z, need - MARGIN, need + MARGIN)
         return None if v == 0 else v > 0
 
     def _miss(self):
