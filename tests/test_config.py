@@ -380,8 +380,8 @@ def _mid_goal_box_reachable(pivot_y, center, height):
     zs = np.linspace(height + 0.05, height + 0.15, 51)
     Y, Z = np.meshgrid(ys, zs, indexing="ij")
     ks = kinematics.leg_state(np, pivot_y, np.stack([Y, Z], -1), 0.5, 0.5)
-    ok = (ks["leg_swing"] <= 1.0 + 1e-9) & ~kinematics.joint_limit_violation(
-        np, ks["hip_swing"], ks["knee_swing_angle"], *lim
+    ok = (ks.leg_swing <= 1.0 + 1e-9) & ~kinematics.joint_limit_violation(
+        np, ks.hip_swing, ks.knee_swing_angle, *lim
     )
     return bool(ok.any())
 

@@ -254,10 +254,10 @@ def test_trajectory_fields_follow_the_shared_kinematics(trained_policy):
     sp = gen.sp
     np.testing.assert_allclose(t.toe - t.heel, np.tile([sp.foot_length, 0.0], (n, 1)), atol=1e-12)
     kin = kinematics.leg_state(np, t.scene.pivot_y, t.heel, sp.thigh, sp.shin)
-    np.testing.assert_allclose(t.hip, kin["hip"], atol=1e-9)
-    np.testing.assert_allclose(t.knee_swing, kin["knee_swing"], atol=1e-9)
-    np.testing.assert_allclose(t.joint_angles[:, 1], kin["knee_swing_angle"], atol=1e-6)
-    np.testing.assert_allclose(t.joint_angles[:, 2], kin["hip_stance"], atol=1e-6)
+    np.testing.assert_allclose(t.hip, kin.hip, atol=1e-9)
+    np.testing.assert_allclose(t.knee_swing, kin.knee_swing, atol=1e-9)
+    np.testing.assert_allclose(t.joint_angles[:, 1], kin.knee_swing_angle, atol=1e-6)
+    np.testing.assert_allclose(t.joint_angles[:, 2], kin.hip_stance, atol=1e-6)
     # Thigh and shin keep their lengths wherever the leg can reach.
     np.testing.assert_allclose(np.linalg.norm(t.knee_swing - t.hip, axis=1), sp.thigh, atol=1e-6)
     # The clearance is the exact swept clearance over the moves between samples less the

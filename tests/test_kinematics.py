@@ -168,20 +168,20 @@ def test_leg_state_signs_and_lengths():
     # the stance foot ahead of the hip (flexion +), the swing foot behind (extension -).
     ks = leg_state(np, 0.45, np.array([0.0, 0.0]), T, S)
     expected_hip = np.asarray([0.225, math.sqrt(1 - 0.225**2)])
-    np.testing.assert_allclose(ks["hip"], expected_hip, atol=1e-12)
+    np.testing.assert_allclose(ks.hip, expected_hip, atol=1e-12)
     a = math.asin(0.225)
-    assert ks["hip_stance"] == pytest.approx(a, abs=1e-6)
-    assert ks["hip_swing"] == pytest.approx(-a, abs=1e-6)
-    assert abs(ks["knee_stance_angle"]) < ANGLE_EPS
-    assert abs(ks["knee_swing_angle"]) < ANGLE_EPS
-    assert ks["leg_swing"] == pytest.approx(1.0) and ks["leg_stance"] == pytest.approx(1.0)
-    np.testing.assert_allclose(ks["knee_stance"], 0.5 * (expected_hip + [0.45, 0.0]), atol=1e-6)
+    assert ks.hip_stance == pytest.approx(a, abs=1e-6)
+    assert ks.hip_swing == pytest.approx(-a, abs=1e-6)
+    assert abs(ks.knee_stance_angle) < ANGLE_EPS
+    assert abs(ks.knee_swing_angle) < ANGLE_EPS
+    assert ks.leg_swing == pytest.approx(1.0) and ks.leg_stance == pytest.approx(1.0)
+    np.testing.assert_allclose(ks.knee_stance, 0.5 * (expected_hip + [0.45, 0.0]), atol=1e-6)
     # Raise the swing heel under the hip: the swing knee flexes (negative), forward of the hip.
     ks = leg_state(np, 0.45, np.array([0.225, 0.4]), T, S)
-    assert ks["knee_swing_angle"] < -10 * DEG
-    assert ks["hip_swing"] > 10 * DEG
-    assert ks["knee_swing"][0] > 0.225
-    assert set(ks) == {
+    assert ks.knee_swing_angle < -10 * DEG
+    assert ks.hip_swing > 10 * DEG
+    assert ks.knee_swing[0] > 0.225
+    assert set(ks._fields) == {
         "hip",
         "knee_swing",
         "knee_stance",
@@ -313,23 +313,23 @@ def test_ik_closure(t, s, hy, hz, frac, phi):
 def test_leg_state_closure(pivot_y, heel_y, heel_z):
     ks = leg_state(np, pivot_y, np.array([heel_y, heel_z]), T, S)
     heel = np.array([heel_y, heel_z])
-    assert ks["leg_swing"] == pytest.approx(np.linalg.norm(ks["hip"] - heel))
-    assume(ks["leg_swing"] <= T + S)
-    assert np.linalg.norm(ks["knee_swing"] - ks["hip"]) == pytest.approx(T, abs=1e-6)
-    assert np.linalg.norm(ks["knee_swing"] - heel) == pytest.approx(S, abs=1e-6)
+    assert ks.leg_swing == pytest.approx(np.linalg.norm(ks.hip - heel))
+    assume(ks.leg_swing <= T + S)
+    assert np.linalg.norm(ks.knee_swing - ks.hip) == pytest.approx(T, abs=1e-6)
+    assert np.linalg.norm(ks.knee_swing - heel) == pytest.approx(S, abs=1e-6)
     # Knee flexion is never positive (the knee bends, never hyperextends) within rounding.
-    assert ks["knee_swing_angle"] <= ANGLE_EPS
-    assert ks["knee_stance_angle"] <= ANGLE_EPS
+    assert ks.knee_swing_angle <= ANGLE_EPS
+    assert ks.knee_stance_angle <= ANGLE_EPS
 
 
 def test_knee_bends_forward_with_heel_above_hip():
     # Reachable in the env (bounds_y up to 1.3 m, max_z 0.8 m): pivot at the start (0), heel 1.21 m
     # ahead at the ceiling. The hip is at (0.605, 0.796), just below the heel.
     ks = leg_state(np, 0.0, np.array([1.21, 0.80]), T, S)
-    assert ks["hip"][1] < 0.80
+    assert ks.hip[1] < 0.80
     # Same knee flexion magnitude either way (|hip - heel| fixes it): about 105.5 degrees.
-    assert abs(ks["knee_swing_angle"]) == pytest.approx(105.54 * DEG, abs=0.01)
-    assert ks["knee_swing_angle"] < 0, (
+    assert abs(ks.knee_swing_angle) == pytest.approx(105.54 * DEG, abs=0.01)
+    assert ks.knee_swing_angle < 0, (
         f"knee angle {math.degrees(ks['knee_swing_angle']):.1f} deg (hyperextension)"
     )
 
@@ -347,18 +347,27 @@ def test_leg_state_numpy_vs_jax():
     for pivot_y in (0.0, 0.225, 0.45):
         ks_np = leg_state(np, pivot_y, heels, T, S)
         ks_j = leg_state(jnp, jnp.float32(pivot_y), jnp.asarray(heels, jnp.float32), T, S)
-        assert set(ks_np) == set(ks_j)
+        assert type(ks_np) is type(ks_j)
         # Away from a straight swing leg the float32 IK is accurate to ~1e-6.
-        bent = ks_np["leg_swing"] < 0.95
+        bent = ks_np.leg_swing < 0.95
         assert bent.sum() > 50
         for key in ("hip", "leg_swing", "leg_stance"):
-            np.testing.assert_allclose(np.asarray(ks_j[key]), ks_np[key], atol=1e-5, err_msg=key)
+            np.testing.assert_allclose(
+                np.asarray(getattr(ks_j, key)), getattr(ks_np, key), atol=1e-5, err_msg=key
+            )
         for key in ("knee_swing", "hip_swing", "knee_swing_angle"):
             np.testing.assert_allclose(
-                np.asarray(ks_j[key])[bent], ks_np[key][bent], atol=1e-4, err_msg=key
+                np.asarray(getattr(ks_j, key))[bent],
+                getattr(ks_np, key)[bent],
+                atol=1e-4,
+                err_msg=key,
             )
             # At a straight leg sqrt(t^2 - a^2) amplifies float32 rounding: a looser bound.
-            np.testing.assert_allclose(np.asarray(ks_j[key]), ks_np[key], atol=3e-3, err_msg=key)
+            np.testing.assert_allclose(
+                np.asarray(getattr(ks_j, key)), getattr(ks_np, key), atol=3e-3, err_msg=key
+            )
         # The stance leg is always straight: float32 rounding only.
         for key in ("knee_stance", "hip_stance", "knee_stance_angle"):
-            np.testing.assert_allclose(np.asarray(ks_j[key]), ks_np[key], atol=3e-3, err_msg=key)
+            np.testing.assert_allclose(
+                np.asarray(getattr(ks_j, key)), getattr(ks_np, key), atol=3e-3, err_msg=key
+            )

@@ -36,7 +36,7 @@ def _from_samples(xp, reached, clearance, limit_bad, leg_bad, heel_y, **rule):
         swept.backward_motion(xp, heel_y),
         **rule,
     )
-    return {**v, "max_backward": swept.backward_motion(xp, heel_y)}
+    return SimpleNamespace(**v._asdict(), max_backward=swept.backward_motion(xp, heel_y))
 
 
 def _random_paths(rng, b=400, n=30):
@@ -77,10 +77,10 @@ def test_verdict_on_samples_matches_reference(rule):
         )
         for i in range(len(reached))
     ]
-    np.testing.assert_array_equal(v["success"], ref)
+    np.testing.assert_array_equal(v.success, ref)
     assert 0.05 < np.mean(ref) < 0.95, "the random paths must exercise both verdicts"
     # Accuracy (eq 3.1) ignores the margin.
-    np.testing.assert_array_equal(v["collision_free"], (c > geometry.TOUCH_EPS).all(axis=1))
+    np.testing.assert_array_equal(v.collision_free, (c > geometry.TOUCH_EPS).all(axis=1))
 
 
 def test_margin_zero_and_no_backward_check_is_the_contact_rule():
@@ -92,7 +92,7 @@ def test_margin_zero_and_no_backward_check_is_the_contact_rule():
         np, reached, c, lb, gb, hy, min_clearance_margin=0.0, backward_tolerance=np.inf
     )
     contact_rule = reached & ~(c <= geometry.TOUCH_EPS).any(1) & ~lb.any(1) & ~gb.any(1)
-    np.testing.assert_array_equal(v["success"], contact_rule)
+    np.testing.assert_array_equal(v.success, contact_rule)
 
 
 def test_defaults_are_the_configs_safe_swing():
@@ -114,12 +114,12 @@ def test_margin_and_backward_tolerance_fail_the_right_check():
     no = np.zeros((1, 4), bool)
     yes = np.array([True])
     contact_rule = {"min_clearance_margin": 0.0, "backward_tolerance": np.inf}
-    assert _from_samples(np, yes, c, no, no, hy, **contact_rule)["success"][0]
+    assert _from_samples(np, yes, c, no, no, hy, **contact_rule).success[0]
     v = _from_samples(np, yes, c, no, no, hy, min_clearance_margin=0.02, backward_tolerance=np.inf)
-    assert outcome.failed_checks(v, 0) == ("clearance_ok",) and v["collision_free"][0]
+    assert outcome.failed_checks(v, 0) == ("clearance_ok",) and v.collision_free[0]
     v = _from_samples(np, yes, c, no, no, hy, min_clearance_margin=0.0, backward_tolerance=0.005)
     assert outcome.failed_checks(v, 0) == ("backward_ok",)
-    np.testing.assert_allclose(v["max_backward"], [0.01])
+    np.testing.assert_allclose(v.max_backward, [0.01])
 
 
 def test_step_by_step_equals_samples_and_jax_equals_numpy():
@@ -157,7 +157,7 @@ def test_step_by_step_equals_samples_and_jax_equals_numpy():
             )
             for i in range(200)
         ]
-        np.testing.assert_array_equal(np.asarray(v["success"]), ref)
+        np.testing.assert_array_equal(np.asarray(v.success), ref)
 
 
 def test_trainer_counts_successes_with_the_verdict():

@@ -247,9 +247,9 @@ def test_e1_not_fired_by_rounding_within_two_legs():
     e = exo_terms(
         np,
         c,
-        hip_z=ks["hip"][1],
-        leg_swing=ks["leg_swing"],
-        leg_stance=ks["leg_stance"],
+        hip_z=ks.hip[1],
+        leg_swing=ks.leg_swing,
+        leg_stance=ks.leg_stance,
         limits_violated=np.asarray(False),
     )
     assert e[1] == 0.0, f"leg_stance = {ks['leg_stance']!r}"
@@ -263,9 +263,9 @@ def test_e1_not_fired_by_rounding_within_two_legs():
         e = exo_terms(
             xp,
             c,
-            hip_z=ks["hip"][..., 1],
-            leg_swing=ks["leg_swing"],
-            leg_stance=ks["leg_stance"],
+            hip_z=ks.hip[..., 1],
+            leg_swing=ks.leg_swing,
+            leg_stance=ks.leg_stance,
             limits_violated=xp.zeros(P.shape, bool),
         )
         assert int((np.asarray(e[..., 1]) != 0).sum()) == 0, xp.__name__

@@ -207,8 +207,8 @@ def _step(xp, cfg, prev, heel, max_y=None):
     v = outcome.verdict(
         np, True, info["clearance"], True, True, info["backward"], **outcome.rule(cfg.env)
     )
-    info["backward_violation"] = not v["backward_ok"]
-    info["unsafe"] = not (v["clearance_ok"] and v["backward_ok"])
+    info["backward_violation"] = not v.backward_ok
+    info["unsafe"] = not (v.clearance_ok and v.backward_ok)
     return info
 
 

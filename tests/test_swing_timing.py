@@ -284,7 +284,7 @@ def quintic_duration(tr, limits, rate=1000.0):
     )
     q = np.stack(
         list(
-            kinematics.leg_state(np, tr.scene.pivot_y, heel, SP.thigh, SP.shin)[k]
+            getattr(kinematics.leg_state(np, tr.scene.pivot_y, heel, SP.thigh, SP.shin), k)
             for k in ("hip_swing", "knee_swing_angle", "hip_stance", "knee_stance_angle")
         ),
         -1,

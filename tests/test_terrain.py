@@ -241,11 +241,9 @@ def test_every_family_is_clearable_by_the_default_leg_dense_independent_sweep():
         )
         for k in range(3):
             ks = kinematics.leg_state(np, kinematics.pivot_position(np, k, s, c), heel, 0.5, 0.5)
-            assert np.all(ks["leg_swing"] <= 1.0 + 1e-9), (name, k)
+            assert np.all(ks.leg_swing <= 1.0 + 1e-9), (name, k)
             assert not np.any(
-                kinematics.joint_limit_violation(
-                    np, ks["hip_swing"], ks["knee_swing_angle"], *HIP, *KNEE
-                )
+                kinematics.joint_limit_violation(np, ks.hip_swing, ks.knee_swing_angle, *HIP, *KNEE)
             ), (name, k)
     # ... and an impossible one is refused with the field named: a leg too short for 30 cm poles.
     with pytest.raises(TerrainError, match=r"layout.terrain.families: 'pole'"):

@@ -164,9 +164,7 @@ class NumpyExoEnv:
         truncated = (not terminated) and int(self.time) >= self.max_steps
         # The one strict-success verdict (jaxexo.physics.outcome), as the JAX trainer counts it.
         info["success"] = (terminated or truncated) and bool(
-            self.dyn_outcome.episode_verdict(np, self.outcome, **self.dyn_outcome.rule(p))[
-                "success"
-            ]
+            self.dyn_outcome.episode_verdict(np, self.outcome, **self.dyn_outcome.rule(p)).success
         )
         return self._obs(), float(out["reward"]), terminated, truncated, info
 

@@ -7,6 +7,7 @@ knee's branch and the angle signs: docs/training.md#modelling-decisions.
 from __future__ import annotations
 
 import math
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -81,29 +82,40 @@ def joint_angles(xp, hip, knee, foot):
     return thigh_angle, knee_angle
 
 
-def leg_state(xp, pivot_y, heel, thigh, shin):
-    """Full kinematic state for a swing heel and a pivot heel on the ground.
+class LegState(NamedTuple):
+    """Both legs' kinematic state for a swing heel and a pivot heel on the ground (a NamedTuple, so
+    a pytree for JAX without importing it; any leading shape ``...``)."""
 
-    Returns a dict of arrays: hip (..., 2), knee_swing, knee_stance (..., 2), leg_swing and
-    leg_stance (|hip - heel|, eq 2.44), and the angles hip_swing, knee_swing_angle, hip_stance,
-    knee_stance_angle (radians)."""
+    hip: Any  # (..., 2) m, eq 2.42
+    knee_swing: Any  # (..., 2) m
+    knee_stance: Any  # (..., 2) m
+    leg_swing: Any  # (...,) m, |hip - heel| (eq 2.44)
+    leg_stance: Any  # (...,) m
+    hip_swing: Any  # (...,) rad
+    knee_swing_angle: Any  # (...,) rad
+    hip_stance: Any  # (...,) rad
+    knee_stance_angle: Any  # (...,) rad
+
+
+def leg_state(xp, pivot_y, heel, thigh, shin) -> LegState:
+    """The full kinematic state of both legs, the swing heel at ``heel`` (..., 2)."""
     hip = hip_position(xp, pivot_y, heel, thigh, shin)
     pivot = xp.stack([pivot_y + 0.0 * heel[..., 0], 0.0 * heel[..., 1]], axis=-1)
     k_sw, m_sw = knee_position(xp, hip, heel, thigh, shin)
     k_st, m_st = knee_position(xp, hip, pivot, thigh, shin)
     h_sw, q_sw = joint_angles(xp, hip, k_sw, heel)
     h_st, q_st = joint_angles(xp, hip, k_st, pivot)
-    return {
-        "hip": hip,
-        "knee_swing": k_sw,
-        "knee_stance": k_st,
-        "leg_swing": m_sw,
-        "leg_stance": m_st,
-        "hip_swing": h_sw,
-        "knee_swing_angle": q_sw,
-        "hip_stance": h_st,
-        "knee_stance_angle": q_st,
-    }
+    return LegState(
+        hip=hip,
+        knee_swing=k_sw,
+        knee_stance=k_st,
+        leg_swing=m_sw,
+        leg_stance=m_st,
+        hip_swing=h_sw,
+        knee_swing_angle=q_sw,
+        hip_stance=h_st,
+        knee_stance_angle=q_st,
+    )
 
 
 # Tolerance on joint limits: a straight leg is exactly at the knee's 0 limit, and float32 rounding
@@ -128,8 +140,8 @@ def swing_heel_unreachable(xp, pivot_y, heel, thigh, shin, hip_limits, knee_limi
     ``pivot_y``: out of reach (longer than thigh + shin, eq 2.45) or outside its joint limits (eq 2.50).
     The feasibility rule of the config's obstacles and of the terrain families."""
     ks = leg_state(xp, pivot_y, heel, thigh, shin)
-    return (ks["leg_swing"] > thigh + shin + 1e-9) | joint_limit_violation(
-        xp, ks["hip_swing"], ks["knee_swing_angle"], *hip_limits, *knee_limits
+    return (ks.leg_swing > thigh + shin + 1e-9) | joint_limit_violation(
+        xp, ks.hip_swing, ks.knee_swing_angle, *hip_limits, *knee_limits
     )
 
 
@@ -148,10 +160,10 @@ def both_legs_angles(xp, state):
     ``legs_outside_limits`` and the environment's info["joint_angles"] use."""
     return xp.stack(
         [
-            state["hip_swing"],
-            state["knee_swing_angle"],
-            state["hip_stance"],
-            state["knee_stance_angle"],
+            state.hip_swing,
+            state.knee_swing_angle,
+            state.hip_stance,
+            state.knee_stance_angle,
         ],
         axis=-1,
     )

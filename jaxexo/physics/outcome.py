@@ -9,6 +9,8 @@ What a safe swing is: docs/safety.md#a-safe-swing-the-trajectory-checks.
 
 from __future__ import annotations
 
+from typing import Any, NamedTuple
+
 from jaxexo.physics import geometry
 
 # m: the clearance a safe swing keeps from the obstacle outline (config env.min_clearance).
@@ -25,6 +27,21 @@ CHECKS = (
     "joint_limits_ok",
     "leg_length_ok",
 )
+
+
+class Verdict(NamedTuple):
+    """The verdict on swings, every flag a bool array of the swings' shape (a NamedTuple, so a pytree
+    for JAX without importing it). ``collision_free``: eq 3.1, never touched whatever the margin;
+    ``success``: every check of CHECKS holds."""
+
+    success: Any
+    collision_free: Any
+    reached_goal: Any
+    clearance_ok: Any
+    above_ground: Any
+    backward_ok: Any
+    joint_limits_ok: Any
+    leg_length_ok: Any
 
 
 def rule(p) -> dict:
@@ -44,7 +61,7 @@ def verdict(
     *,
     min_clearance_margin=DEFAULT_MIN_CLEARANCE,
     backward_tolerance=DEFAULT_BACKWARD_TOLERANCE,
-) -> dict:
+) -> Verdict:
     """The verdict on whole swings from their aggregates (any shape, broadcast together).
 
     ``min_clearance`` (m) the smallest clearance of the foot's motion from the obstacle (for a sampled
@@ -61,16 +78,16 @@ def verdict(
     success = (
         reached_goal & clearance_ok & above_ground & backward_ok & joint_limits_ok & leg_length_ok
     )
-    return {
-        "success": success,
-        "collision_free": collision_free,
-        "reached_goal": reached_goal,
-        "clearance_ok": clearance_ok,
-        "above_ground": above_ground,
-        "backward_ok": backward_ok,
-        "joint_limits_ok": joint_limits_ok,
-        "leg_length_ok": leg_length_ok,
-    }
+    return Verdict(
+        success=success,
+        collision_free=collision_free,
+        reached_goal=reached_goal,
+        clearance_ok=clearance_ok,
+        above_ground=above_ground,
+        backward_ok=backward_ok,
+        joint_limits_ok=joint_limits_ok,
+        leg_length_ok=leg_length_ok,
+    )
 
 
 def start(xp, shape=(), dtype="float32") -> dict:
@@ -102,7 +119,7 @@ def accumulate(xp, acc: dict, info: dict, alive=True) -> dict:
     }
 
 
-def episode_verdict(xp, acc: dict, **rule) -> dict:
+def episode_verdict(xp, acc: dict, **rule) -> Verdict:
     """The verdict on episodes from their running aggregates (``accumulate``)."""
     return verdict(
         xp,
@@ -115,7 +132,8 @@ def episode_verdict(xp, acc: dict, **rule) -> dict:
     )
 
 
-def failed_checks(v: dict, i=None) -> tuple[str, ...]:
-    """Names (CHECKS) of the checks a verdict failed, for swing ``i`` of a batch (NumPy values)."""
+def failed_checks(v, i=None) -> tuple[str, ...]:
+    """Names (CHECKS) of the checks failed by ``v`` (a Verdict, or any record with the CHECKS as
+    fields), for swing ``i`` of a batch (NumPy values)."""
     pick = (lambda x: x) if i is None else (lambda x: x[i])
-    return tuple(c for c in CHECKS if not bool(pick(v[c])))
+    return tuple(c for c in CHECKS if not bool(pick(getattr(v, c))))

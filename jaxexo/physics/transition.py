@@ -147,9 +147,9 @@ def transition(
     exo = rewards.exo_terms(
         xp,
         p,
-        hip_z=kin["hip"][..., 1],
-        leg_swing=kin["leg_swing"],
-        leg_stance=kin["leg_stance"],
+        hip_z=kin.hip[..., 1],
+        leg_swing=kin.leg_swing,
+        leg_stance=kin.leg_stance,
         limits_violated=limits_violated,
     )
     turn = (
@@ -183,7 +183,7 @@ def transition(
         "leg_length_violation": exo[..., 1] < 0,
         "joint_angles": angles,
         "heel": heel,
-        "hip": kin["hip"],
+        "hip": kin.hip,
         # m the heel is behind its furthest y so far (eq 2.31's condition; the safe-swing rule's measure)
         "backward": run_max - heel[..., 0],
     }

@@ -162,7 +162,7 @@ def shield_conditions(xp, p, heel_y, heel_z, layout, actions, ends, clear, last_
     reachable = ~(
         kinematics.legs_outside_limits(xp, angles, p.hip_limits, p.knee_limits)
         | kinematics.leg_too_long(
-            xp, kin["leg_swing"], kin["leg_stance"], p.thigh, p.shin, p.leg_length_tolerance
+            xp, kin.leg_swing, kin.leg_stance, p.thigh, p.shin, p.leg_length_tolerance
         )
     )
     ends_ok = end_conditions(

@@ -357,16 +357,16 @@ def measure(
         angles=angles,
         limit_bad=limit_bad,
         leg_bad=leg_bad,
-        ok=v["success"],
+        ok=v.success,
         reached_goal=reached,
-        collision_free=v["collision_free"],
+        collision_free=v.collision_free,
         min_clearance=guaranteed,
-        clearance_ok=v["clearance_ok"],
-        above_ground=v["above_ground"],
+        clearance_ok=v.clearance_ok,
+        above_ground=v.above_ground,
         heel_backward=backward,
-        backward_ok=v["backward_ok"],
-        joint_limits_ok=v["joint_limits_ok"],
-        leg_length_ok=v["leg_length_ok"],
+        backward_ok=v.backward_ok,
+        joint_limits_ok=v.joint_limits_ok,
+        leg_length_ok=v.leg_length_ok,
         deviation=dev,
     )
 
@@ -376,7 +376,7 @@ def failure_reasons(
 ) -> tuple[str, ...]:
     """The failed checks of path i (jaxexo.physics.outcome.CHECKS, in order), each with where it failed."""
     out = []
-    for check in outcome.failed_checks(vars(m), i):
+    for check in outcome.failed_checks(m, i):
         if check == "reached_goal":
             y, z = heel[-1]
             out.append(

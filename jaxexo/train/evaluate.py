@@ -88,12 +88,12 @@ def make_rollouts(env: ExoStepEnv, q_apply, max_steps: int, record: bool = False
         v = outcome.episode_verdict(jnp, acc, **outcome.rule(params))
         out.update(
             reached=acc["reached_goal"],
-            collided=~v["collision_free"],
+            collided=~v.collision_free,
             limits=acc["limits"],
             leg=acc["leg"],
             min_clearance=acc["min_clearance"],
-            accurate=v["collision_free"],
-            success=v["success"],
+            accurate=v.collision_free,
+            success=v.success,
         )
         return (out, jnp.swapaxes(path, 0, 1)) if record else out
 

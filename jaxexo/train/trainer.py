@@ -295,8 +295,8 @@ class Trainer:
             [
                 done.sum(),
                 jnp.where(done, ret, 0.0).sum(),
-                (done & v["success"]).sum(),
-                (done & v["collision_free"]).sum(),
+                (done & v.success).sum(),
+                (done & v.collision_free).sum(),
             ]
         )
         fresh = outcome.start(jnp, ret.shape)
