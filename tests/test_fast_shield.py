@@ -66,30 +66,30 @@ def test_scalar_shield_picks_the_full_masks_greedy_move():
     n = 4000
     lay = scenarios.scenario_layouts(np, p, 3, n, False)
     rng = np.random.default_rng(1)
-    hy = (lay["center_y"] + rng.uniform(-0.45, 0.2, n)).astype(np.float32)
+    hy = (lay.center_y + rng.uniform(-0.45, 0.2, n)).astype(np.float32)
     hz = rng.uniform(0.0, 0.45, n).astype(np.float32)
     # a quarter of the heels on the shield's boundary: the foot 2.5 cm (+-1 mm) left of or above the obstacle
     k = n // 4
     near = rng.uniform(0.024, 0.026, k)
     side = rng.uniform(size=k) < 0.5
-    left = lay["center_y"][:k] - 0.5 * lay["width"][:k] - p.foot_length - near
+    left = lay.center_y[:k] - 0.5 * lay.width[:k] - p.foot_length - near
     hy[:k] = np.where(side, left, hy[:k]).astype(np.float32)
-    hz[:k] = np.where(
-        side, rng.uniform(0, 1, k) * lay["height"][:k], lay["height"][:k] + near
-    ).astype(np.float32)
+    hz[:k] = np.where(side, rng.uniform(0, 1, k) * lay.height[:k], lay.height[:k] + near).astype(
+        np.float32
+    )
     hz[k : 2 * k : 3] = 0.0  # on the ground: a move down is cancelled (transition.moves_heel)
-    ok = (hy > lay["start_y"] - 0.05) & (hy < lay["goal_y"])
+    ok = (hy > lay.start_y - 0.05) & (hy < lay.goal_y)
     q = rng.normal(size=(n, actions.NUM_ACTIONS)).astype(np.float32)
     q[::3] = np.round(q[::3] * 2) / 2  # ties between moves
     q[1::5, 27] = 10.0  # straight down is the best move ...
     last = rng.choice(np.array([-1, 0, 9, 27, 30, 5]), size=n)
     last[1::5] = 9  # ... right after straight up
-    mask = rule.admissible_moves(np, p, hy, hz, types.SimpleNamespace(**lay), last_action=last)
+    mask = rule.admissible_moves(np, p, hy, hz, lay, last_action=last)
     want = actions.greedy_action(np, q, mask)
     decided = agree = 0
     for i in np.flatnonzero(ok):
         scene = types.SimpleNamespace(
-            outline=lay["outline"][i], pivot_y=lay["pivot_y"][i], goal_y=lay["goal_y"][i]
+            outline=lay.outline[i], pivot_y=lay.pivot_y[i], goal_y=lay.goal_y[i]
         )
         a = SwingShield(gen.sp, p, scene).certain(float(hy[i]), float(hz[i]), q[i], int(last[i]))
         if a is not None:
@@ -107,11 +107,11 @@ def test_scalar_shield_picks_the_full_masks_greedy_move():
     # the floor rule is exercised: from the ground short of the goal box's column, the move along the
     # floor (0 deg) is refused, and the scalar shield agreed with that mask above
     ground = np.arange(k, 2 * k, 3)
-    short = ground[np.abs(hy[ground] - lay["goal_y"][ground]) > p.goal_tolerance[0] + 0.03]
+    short = ground[np.abs(hy[ground] - lay.goal_y[ground]) > p.goal_tolerance[0] + 0.03]
     assert p.floor_clearance > 0 and len(short) > 100 and (~mask[short, 0]).mean() > 0.95
     # a nan among the Q-values: argmax's own rules, left to the full mask
     scene = types.SimpleNamespace(
-        outline=lay["outline"][0], pivot_y=lay["pivot_y"][0], goal_y=lay["goal_y"][0]
+        outline=lay.outline[0], pivot_y=lay.pivot_y[0], goal_y=lay.goal_y[0]
     )
     bad = q[0].copy()
     bad[3] = np.nan

@@ -77,19 +77,19 @@ def test_env_reset_draws_the_numpy_scenario_list(which, mixed_config):
         _, st = env.reset(key(i), env.default_params)
         for f in FIELDS:
             np.testing.assert_array_equal(
-                np.asarray(getattr(st.layout, f)), ref[f][i], err_msg=f"{f}, scene {i}"
+                np.asarray(getattr(st.layout, f)), getattr(ref, f)[i], err_msg=f"{f}, scene {i}"
             )
     keys = jax.vmap(key)(jnp.arange(n, dtype=jnp.uint32))
     _, st = jax.jit(jax.vmap(env.reset, in_axes=(0, None)))(keys, env.default_params)
     for f in FIELDS:
         got = np.asarray(getattr(st.layout, f))
         if f in ("kind", "pivot_kind"):
-            np.testing.assert_array_equal(got, ref[f], err_msg=f)
+            np.testing.assert_array_equal(got, getattr(ref, f), err_msg=f)
         else:
-            np.testing.assert_allclose(got, ref[f], rtol=2.5e-7, atol=0, err_msg=f)
+            np.testing.assert_allclose(got, getattr(ref, f), rtol=2.5e-7, atol=0, err_msg=f)
     # Every obstacle kind and pivot condition of the mixture is drawn.
-    assert set(ref["kind"]) == set(range(len(cfg.layout.obstacles)))
-    assert set(ref["pivot_kind"]) == {i for i, w in enumerate(cfg.layout.pivot) if w > 0}
+    assert set(ref.kind) == set(range(len(cfg.layout.obstacles)))
+    assert set(ref.pivot_kind) == {i for i, w in enumerate(cfg.layout.pivot) if w > 0}
 
 
 def test_kind_frequencies_follow_the_mixture(mixed_config):
@@ -97,11 +97,11 @@ def test_kind_frequencies_follow_the_mixture(mixed_config):
     cfg = mixed_config
     lay = scenarios.scenario_layouts(np, numpy_params(cfg), 5, 20000)
     w = np.array([o.weight for o in cfg.layout.obstacles], float)
-    freq = np.bincount(lay["kind"], minlength=len(w)) / 20000
+    freq = np.bincount(lay.kind, minlength=len(w)) / 20000
     np.testing.assert_allclose(freq, w / w.sum(), atol=0.015)
     pw = np.array(cfg.layout.pivot, float)
     np.testing.assert_allclose(
-        np.bincount(lay["pivot_kind"], minlength=3) / 20000, pw / pw.sum(), atol=0.015
+        np.bincount(lay.pivot_kind, minlength=3) / 20000, pw / pw.sum(), atol=0.015
     )
 
 
@@ -128,5 +128,5 @@ def test_eval_test_set_is_the_numpy_test_set():
     # And the JAX side drawing the same set itself agrees (kinds, pivots exactly; sizes to 2 ulp).
     tenv_params = numpy_params(views.test_config(cfg))
     jl = scenarios.scenario_layouts(jnp, tenv_params, seed, n, cycle=True)
-    np.testing.assert_array_equal(np.asarray(jl["kind"]), lay.kind)
-    np.testing.assert_allclose(np.asarray(jl["width"]), lay.width, rtol=2.5e-7)
+    np.testing.assert_array_equal(np.asarray(jl.kind), lay.kind)
+    np.testing.assert_allclose(np.asarray(jl.width), lay.width, rtol=2.5e-7)

@@ -34,10 +34,10 @@ def _states(cfg, n, seed):
     p = numpy_params(cfg)
     lay = scenarios.scenario_layouts(np, p, seed, n, False)
     rng = np.random.default_rng(seed)
-    hy = (lay["center_y"] + rng.uniform(-0.4, 0.15, n)).astype(np.float32)
+    hy = (lay.center_y + rng.uniform(-0.4, 0.15, n)).astype(np.float32)
     hz = rng.uniform(0.0, 0.45, n).astype(np.float32)
     hz[::5] = rng.uniform(0.0, 0.03, len(hz[::5]))
-    hy[::10] = (lay["goal_y"][::10] + rng.uniform(-0.07, 0.03, len(hy[::10]))).astype(np.float32)
+    hy[::10] = (lay.goal_y[::10] + rng.uniform(-0.07, 0.03, len(hy[::10]))).astype(np.float32)
     return p, lay, hy, hz
 
 
@@ -61,21 +61,18 @@ FLOOR_RULE = {"off": {}, "on": {"floor_clearance": 0.02, "goal_tolerance": [0.04
 def test_admissible_moves_against_dense_sampling(floor):
     cfg = _config(**FLOOR_RULE[floor])
     p, lay, hy, hz = _states(cfg, 300, 3)
-    import types
 
-    m = rule.admissible_moves(np, p, hy, hz, types.SimpleNamespace(**lay))
+    m = rule.admissible_moves(np, p, hy, hz, lay)
     for kind in ("rows", "scalar"):  # the NumPy forms (all three: tests/test_shield_forms.py)
         form = make_shield(kind, p, scalar_params(cfg))
-        np.testing.assert_array_equal(form.admissible(hy, hz, types.SimpleNamespace(**lay)), m)
+        np.testing.assert_array_equal(form.admissible(hy, hz, lay), m)
     d = p.directions.astype(np.float64)
     step = float(p.step_size)
     blocked_near = fallback = checked = floor_blocked = 0
     for i in range(len(hy)):
         h0 = np.array([hy[i], hz[i]], np.float64)
         c_here = float(
-            geometry.foot_clearance(
-                np, h0, float(p.foot_length), lay["outline"][i].astype(np.float64)
-            )
+            geometry.foot_clearance(np, h0, float(p.foot_length), lay.outline[i].astype(np.float64))
         )
         if c_here <= 1e-4:
             continue  # a heel inside or on the obstacle: not a state a shielded agent reaches
@@ -84,12 +81,12 @@ def test_admissible_moves_against_dense_sampling(floor):
         for a in range(actions.NUM_ACTIONS):
             y, z = transition.move_heel(np, p, hy[i], hz[i], d[a, 0], d[a, 1])
             h1 = np.array([y, z], np.float64)
-            dense.append(_dense_clearance(p, h0, h1, lay["outline"][i]))
+            dense.append(_dense_clearance(p, h0, h1, lay.outline[i]))
             reach.append(
                 not bool(
                     kinematics.swing_heel_unreachable(
                         np,
-                        float(lay["pivot_y"][i]),
+                        float(lay.pivot_y[i]),
                         h1,
                         float(p.thigh),
                         float(p.shin),
@@ -99,14 +96,14 @@ def test_admissible_moves_against_dense_sampling(floor):
                 )
             )
             # the floor rule by hand: low only in the goal box's column (a band of 1e-6 m left to rounding)
-            column = abs(h1[0] - float(lay["goal_y"][i])) <= float(p.goal_tolerance[0]) - 1e-6
+            column = abs(h1[0] - float(lay.goal_y[i])) <= float(p.goal_tolerance[0]) - 1e-6
             before_goal.append(
-                h1[0] <= float(lay["goal_y"][i]) + float(p.goal_tolerance[0])
+                h1[0] <= float(lay.goal_y[i]) + float(p.goal_tolerance[0])
                 and (h1[1] >= float(p.floor_clearance) + 1e-6 or column)
             )
             off_floor.append(
                 h1[1] >= float(p.floor_clearance) - 1e-6
-                or abs(h1[0] - float(lay["goal_y"][i])) <= float(p.goal_tolerance[0]) + 1e-6
+                or abs(h1[0] - float(lay.goal_y[i])) <= float(p.goal_tolerance[0]) + 1e-6
             )
         dense, reach, before_goal = np.array(dense), np.array(reach), np.array(before_goal)
         off_floor = np.array(off_floor)
@@ -136,9 +133,8 @@ def test_admissible_moves_against_dense_sampling(floor):
 def test_shield_off_admits_every_move():
     cfg = config_from_dict(legacy_raw({"env": {"shield": False}}))
     p, lay, hy, hz = _states(cfg, 20, 1)
-    import types
 
-    assert rule.admissible_moves(np, p, hy, hz, types.SimpleNamespace(**lay)).all()
+    assert rule.admissible_moves(np, p, hy, hz, lay).all()
 
 
 def test_vertical_move_up_is_admissible_from_any_safe_pose():
@@ -146,19 +142,18 @@ def test_vertical_move_up_is_admissible_from_any_safe_pose():
     never cornered below the ceiling."""
     cfg = _config()
     p, lay, hy, hz = _states(cfg, 400, 5)
-    import types
 
-    m = rule.admissible_moves(np, p, hy, hz, types.SimpleNamespace(**lay))
+    m = rule.admissible_moves(np, p, hy, hz, lay)
     up = int(np.argmin(np.abs(actions.action_angles() - np.pi / 2)))
     c = geometry.foot_clearance(
         np,
         np.stack([hy, hz], -1).astype(np.float64),
         float(p.foot_length),
-        lay["outline"].astype(np.float64),
+        lay.outline.astype(np.float64),
     )
     kin_ok = ~kinematics.swing_heel_unreachable(
         np,
-        lay["pivot_y"],
+        lay.pivot_y,
         np.stack([hy, hz + float(p.step_size)], -1),
         float(p.thigh),
         float(p.shin),
@@ -256,14 +251,14 @@ def test_pruned_numpy_clearance_rule_decides_like_the_exact_one():
     cfg = _config()
     p, lay, hy, hz = _states(cfg, 3000, 9)
     ends = rule.forward_ends(np, p, hy, hz)
-    pruned = rule.moves_keep_clearance(np, p, hy, hz, ends, lay["outline"])
+    pruned = rule.moves_keep_clearance(np, p, hy, hz, ends, lay.outline)
     generic = types.SimpleNamespace(**{k: getattr(np, k) for k in dir(np) if not k.startswith("_")})
-    exact = rule.moves_keep_clearance(generic, p, hy, hz, ends, lay["outline"])
+    exact = rule.moves_keep_clearance(generic, p, hy, hz, ends, lay.outline)
     np.testing.assert_array_equal(pruned, exact)
     assert 0.05 < (~exact).mean() < 0.95  # both outcomes exercised
     # one heel at a time (the generator's single rollout) takes the unpruned path: the same decisions
     for i in range(0, 3000, 150):
-        one = rule.moves_keep_clearance(np, p, hy[i], hz[i], ends[i], lay["outline"][i])
+        one = rule.moves_keep_clearance(np, p, hy[i], hz[i], ends[i], lay.outline[i])
         np.testing.assert_array_equal(one, exact[i])
 
 

@@ -30,16 +30,16 @@ def _batch(cfg, n, seed):
     k = n // 4
     near = rng.uniform(0.02, 0.03, k)
     side = rng.uniform(size=k) < 0.5
-    left = lay["center_y"][1:k:2] - 0.5 * lay["width"][1:k:2] - p.foot_length - near[1::2]
+    left = lay.center_y[1:k:2] - 0.5 * lay.width[1:k:2] - p.foot_length - near[1::2]
     hy[1:k:2] = np.where(side[1::2], left, hy[1:k:2]).astype(np.float32)
-    top = lay["height"][1:k:2] + near[1::2]
+    top = lay.height[1:k:2] + near[1::2]
     hz[1:k:2] = np.where(side[1::2], hz[1:k:2], top).astype(np.float32)
     q = rng.normal(size=(n, actions.NUM_ACTIONS)).astype(np.float32)
     q[::3] = np.round(q[::3] * 2) / 2
     q[1::5, 27] = 10.0
     last = rng.choice(np.array([-1, 0, 9, 27, 30, 5]), size=n)
     last[1::5] = 9
-    return p, types.SimpleNamespace(**lay), hy, hz, q, last
+    return p, lay, hy, hz, q, last
 
 
 def test_every_form_gives_the_rules_mask_moves_and_statistics():

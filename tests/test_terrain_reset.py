@@ -118,10 +118,10 @@ def test_reset_draws_the_numpy_tools_scenes(terrain_kw):
     n = 64
     _, lj = _jax_scenes(cfg, 11, n)
     ln = scenarios.scenario_layouts(np, numpy_params(cfg), 11, n)
-    np.testing.assert_array_equal(np.asarray(lj.kind), ln["kind"])
-    np.testing.assert_array_equal(np.asarray(lj.pivot_kind), ln["pivot_kind"])
+    np.testing.assert_array_equal(np.asarray(lj.kind), ln.kind)
+    np.testing.assert_array_equal(np.asarray(lj.pivot_kind), ln.pivot_kind)
     for k in ("outline", "shape", "center_y", "width", "height", "start_y", "goal_y", "pivot_y"):
-        np.testing.assert_allclose(np.asarray(getattr(lj, k)), ln[k], atol=1e-6, err_msg=k)
+        np.testing.assert_allclose(np.asarray(getattr(lj, k)), getattr(ln, k), atol=1e-6, err_msg=k)
     # the NumPy tools' scenarios are these scenes, as Obstacles of the same outline
     from jaxexo.inference.scenarios import training_scenarios
 
@@ -131,12 +131,10 @@ def test_reset_draws_the_numpy_tools_scenes(terrain_kw):
         np, numpy_params(cfg), 11, 12, cycle=True, kinds=list(range(len(t.families))), pivots=pivots
     )
     for i, s in enumerate(sc):
-        assert s["kind"] == terrain.FAMILY_NAMES[int(lc["kind"][i])]
-        assert s["obstacle"].width == pytest.approx(float(lc["width"][i]), abs=1e-6)
-        assert s["obstacle"].height == pytest.approx(float(lc["height"][i]), abs=1e-6)
-        assert s["step_length"] == pytest.approx(
-            float(lc["goal_y"][i] - lc["start_y"][i]), abs=1e-6
-        )
+        assert s["kind"] == terrain.FAMILY_NAMES[int(lc.kind[i])]
+        assert s["obstacle"].width == pytest.approx(float(lc.width[i]), abs=1e-6)
+        assert s["obstacle"].height == pytest.approx(float(lc.height[i]), abs=1e-6)
+        assert s["step_length"] == pytest.approx(float(lc.goal_y[i] - lc.start_y[i]), abs=1e-6)
     assert {s["kind"] for s in sc} == set(t.families)
     assert {terrain.FAMILY_NAMES[k] for k in np.asarray(lj.kind)} == set(t.families)
 
@@ -186,8 +184,8 @@ def test_observed_shape_matches_a_dense_reference():
     ln = scenarios.scenario_layouts(np, numpy_params(cfg), 3, 60)
     frac = geometry.descriptor_fractions(cfg.env.shape_points)
     for i in range(60):
-        o = terrain.unpad(ln["outline"][i]).astype(np.float64)
-        y = ln["center_y"][i] + ln["width"][i] * frac
+        o = terrain.unpad(ln.outline[i]).astype(np.float64)
+        y = ln.center_y[i] + ln.width[i] * frac
         # np.interp of the polyline (at a vertical riser the higher end, as the descriptor's rule)
         ref = np.array(
             [
@@ -203,7 +201,7 @@ def test_observed_shape_matches_a_dense_reference():
             ]
         )
         # float32 positions (~1e-7 m) on a steep face move a height by a few micrometres
-        np.testing.assert_allclose(ln["shape"][i], ref, atol=1e-4)
+        np.testing.assert_allclose(ln.shape[i], ref, atol=1e-4)
 
 
 @pytest.mark.slow

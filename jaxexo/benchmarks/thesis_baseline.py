@@ -101,7 +101,7 @@ class NumpyExoEnv:
     sampling rule is written twice. ``reset() -> obs``; ``step(a) -> (obs, reward, terminated,
     truncated, info)`` with ``info["success"]`` the strict success of a finished episode."""
 
-    def __init__(self, cfg, pool: dict, seed: int = 0):
+    def __init__(self, cfg, pool, seed: int = 0):
         from jaxexo.config import numpy_params
         from jaxexo.physics import actions, outcome, transition
 
@@ -109,16 +109,14 @@ class NumpyExoEnv:
         self.p = numpy_params(cfg)
         self.obs_mode = cfg.env.obs_mode
         self.max_steps = int(cfg.env.max_steps)
-        self.pool = {k: np.asarray(v) for k, v in pool.items()}
-        self.n_layouts = len(self.pool["start_y"])
+        self.pool = type(pool)(*(np.asarray(v) for v in pool))  # scenarios.Layouts, leading axis
+        self.n_layouts = len(self.pool.start_y)
         self.rng = np.random.default_rng(seed)
         self.order = self.rng.permutation(self.n_layouts)
         self.next = 0
 
     def _layout(self, i: int):
-        import types
-
-        return types.SimpleNamespace(**{k: v[i] for k, v in self.pool.items()})
+        return type(self.pool)(*(v[i] for v in self.pool))
 
     def _obs(self):
         return self.actions.observation(
@@ -169,7 +167,7 @@ class NumpyExoEnv:
         return self._obs(), float(out["reward"]), terminated, truncated, info
 
 
-def layout_pool(cfg, n: int, seed: int = 0) -> dict:
+def layout_pool(cfg, n: int, seed: int = 0):
     """n layouts of the config's distribution (jaxexo.physics.scenarios, the scenes the JAX
     environment's reset draws for the key words (seed, i)), as NumPy arrays."""
     from jaxexo.config import numpy_params

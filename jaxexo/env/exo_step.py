@@ -112,7 +112,7 @@ class ExoStepEnv:
         return Layout(
             **scenarios.layout_from_uniforms(
                 jnp, params, u, kind, pivot_kind, None if t is None else t.families
-            )
+            )._asdict()
         )
 
     def init_state(self, layout: Layout, params: EnvParams) -> tuple[jnp.ndarray, EnvState]:

@@ -44,7 +44,7 @@ def safety_scenarios(config: Config, n: int, seed: int = 2024, unseen: bool = Fa
     )
 
 
-def _kwargs(cfg: Config, lay: dict) -> list[dict]:
+def _kwargs(cfg: Config, lay) -> list[dict]:
     return scenarios.scene_kwargs(
         lay, None if cfg.layout.terrain is not None else cfg.layout.obstacles
     )

@@ -10,6 +10,7 @@ timing shapes). Why and how: docs/training.md#the-environment.
 from __future__ import annotations
 
 import math
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -95,7 +96,23 @@ def _kind_and_pivot(xp, u, kind, pivot_kind, kind_cdf, pivot_cdf):
     return xp.asarray(kind, dtype=xp.int32), xp.asarray(pivot_kind, dtype=xp.int32)
 
 
-def terrain_layout_from_uniforms(xp, p, u, kind=None, pivot_kind=None, families=None) -> dict:
+class Layouts(NamedTuple):
+    """Scenes' layouts as arrays with any leading shape ``...`` (env.Layout's fields; a NamedTuple,
+    so a pytree for JAX without importing it). m, except the indices ``kind`` and ``pivot_kind``."""
+
+    outline: Any  # (..., K, 2) world frame
+    shape: Any  # (..., S) heights at equally spaced fractions of the width
+    center_y: Any
+    width: Any
+    height: Any
+    kind: Any  # the config's obstacle index, or the terrain family id
+    pivot_kind: Any  # index into PIVOT_CONDITIONS
+    pivot_y: Any
+    start_y: Any
+    goal_y: Any
+
+
+def terrain_layout_from_uniforms(xp, p, u, kind=None, pivot_kind=None, families=None) -> Layouts:
     """A procedural-terrain scene from uniform numbers u (..., N_TERRAIN_UNIFORMS): the family (by
     ``terrain_cdf`` over ``terrain_ids``; ``kind`` fixes the index into terrain_ids), its outline
     (terrain.family_outline), the pivot condition, and the placement (terrain.place: start shift,
@@ -117,7 +134,7 @@ def terrain_layout_from_uniforms(xp, p, u, kind=None, pivot_kind=None, families=
         p.terrain_margins[..., 1],
     )
     outline = xp.stack([local[..., 0] + center[..., None], local[..., 1]], axis=-1)
-    return dict(
+    return Layouts(
         outline=outline,
         shape=terrain.shape(xp, local, width, p.kind_shape.shape[-1]),
         center_y=center,
@@ -131,9 +148,9 @@ def terrain_layout_from_uniforms(xp, p, u, kind=None, pivot_kind=None, families=
     )
 
 
-def layout_from_uniforms(xp, p, u, kind=None, pivot_kind=None, families=None) -> dict:
+def layout_from_uniforms(xp, p, u, kind=None, pivot_kind=None, families=None) -> Layouts:
     """A scene from uniform numbers u (..., N_UNIFORMS) and the layout distribution in ``p``
-    (jaxexo.config.param_values' fields): the Layout fields as a dict of arrays (...). ``kind``/``pivot_kind``
+    (jaxexo.config.param_values' fields): the scenes as ``Layouts`` (...). ``kind``/``pivot_kind``
     (...) fix the obstacle kind / pivot condition instead of drawing them from u[0] / u[1]. With
     procedural terrain (``uses_terrain(p)``) the scene is terrain_layout_from_uniforms'."""
     if uses_terrain(p):
@@ -152,7 +169,7 @@ def layout_from_uniforms(xp, p, u, kind=None, pivot_kind=None, families=None) ->
         [center[..., None] + width[..., None] * unit[..., 0], height[..., None] * unit[..., 1]],
         axis=-1,
     )
-    return dict(
+    return Layouts(
         outline=outline,
         shape=height[..., None] * p.kind_shape[kind],
         center_y=center,
@@ -168,7 +185,7 @@ def layout_from_uniforms(xp, p, u, kind=None, pivot_kind=None, families=None) ->
 
 def scenario_layouts(
     xp, p, seed: int, n: int, cycle: bool = False, kinds=None, pivots=None
-) -> dict:
+) -> Layouts:
     """Scene i (i < n) of the set ``seed``: the scene reset draws from the key words (seed, i).
     ``cycle``: kinds and pivot conditions in turn instead of drawn (test sets): kind
     kinds[i % len(kinds)], pivot pivots[(i // len(kinds)) % len(pivots)], by default every kind of
@@ -195,28 +212,28 @@ def scenario_layouts(
 # --------------------------------------------------------------------------------------------
 
 
-def scene_kwargs(lay: dict, obstacles=None) -> list[dict]:
-    """Layouts ``lay`` (``scenario_layouts``' dict of arrays) as keyword arguments of ``generate`` plus
+def scene_kwargs(lay: Layouts, obstacles=None) -> list[dict]:
+    """Layouts ``lay`` (``scenario_layouts``' arrays) as keyword arguments of ``generate`` plus
     ``kind``: ``obstacles`` are the layout's obstacle mixture (objects with ``kind``, ``shape`` and
     ``unit_vertices()``, indexed by the layouts' ``kind``), None for procedural terrain (``kind`` is
     the family id and the outline is in the world frame)."""
     out = []
-    for i in range(len(lay["start_y"])):
-        w, h, center = (float(lay[k][i]) for k in ("width", "height", "center_y"))
-        start_y = float(lay["start_y"][i])
+    for i in range(len(lay.start_y)):
+        w, h, center = (float(getattr(lay, k)[i]) for k in ("width", "height", "center_y"))
+        start_y = float(lay.start_y[i])
         if obstacles is None:  # kind is the family id; the outline is world-frame
-            local = np.asarray(lay["outline"][i], dtype=np.float64) - np.array([center, 0.0])
+            local = np.asarray(lay.outline[i], dtype=np.float64) - np.array([center, 0.0])
             out.append(
                 {
-                    "kind": terrain.FAMILY_NAMES[int(lay["kind"][i])],
+                    "kind": terrain.FAMILY_NAMES[int(lay.kind[i])],
                     "obstacle": terrain.to_obstacle(local, center),
-                    "pivot": PIVOT_CONDITIONS[int(lay["pivot_kind"][i])],
+                    "pivot": PIVOT_CONDITIONS[int(lay.pivot_kind[i])],
                     "start_y": start_y,
-                    "step_length": float(lay["goal_y"][i]) - start_y,
+                    "step_length": float(lay.goal_y[i]) - start_y,
                 }
             )
             continue
-        spec = obstacles[int(lay["kind"][i])]
+        spec = obstacles[int(lay.kind[i])]
         if spec.shape == "profile":
             ob = Obstacle("profile", "profile", center, w, h, spec.unit_vertices())
         else:
@@ -225,9 +242,9 @@ def scene_kwargs(lay: dict, obstacles=None) -> list[dict]:
             {
                 "kind": spec.kind,
                 "obstacle": ob,
-                "pivot": PIVOT_CONDITIONS[int(lay["pivot_kind"][i])],
+                "pivot": PIVOT_CONDITIONS[int(lay.pivot_kind[i])],
                 "start_y": start_y,
-                "step_length": float(lay["goal_y"][i]) - start_y,
+                "step_length": float(lay.goal_y[i]) - start_y,
             }
         )
     return out
@@ -402,6 +419,7 @@ __all__ = [
     "seed_words",
     "uses_terrain",
     "n_uniforms",
+    "Layouts",
     "layout_from_uniforms",
     "terrain_layout_from_uniforms",
     "scenario_layouts",

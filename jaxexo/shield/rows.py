@@ -24,7 +24,7 @@ def take_rows(rec, idx, shared=()):
     return type(rec)(
         **{
             k: v if k in shared else tuple(v[i] for i in idx) if isinstance(v, tuple) else v[idx]
-            for k, v in vars(rec).items()
+            for k, v in (rec._asdict() if hasattr(rec, "_asdict") else vars(rec)).items()
         }
     )
 

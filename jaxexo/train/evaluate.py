@@ -30,7 +30,7 @@ def layout_set(cfg: Config, n: int, seed: int, cycle: bool = False) -> Layout:
     arrays in a Layout. Drawn in NumPy and fed to JAX, so that they are bit for bit the scenes
     jaxexo.inference.scenarios gives NumPy tools (under jit, XLA fuses multiply-adds, which would
     move a size by an ulp); ``cycle``: kinds and pivot conditions in turn (a test set)."""
-    return Layout(**scenarios.scenario_layouts(np, numpy_params(cfg), seed, n, cycle))
+    return Layout(**scenarios.scenario_layouts(np, numpy_params(cfg), seed, n, cycle)._asdict())
 
 
 def test_layouts(tcfg: Config, n: int, seed: int = 12345) -> Layout:
