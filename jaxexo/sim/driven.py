@@ -405,14 +405,9 @@ class DrivenReplay:
 
     def to_dict(self) -> dict:
         """The JSON entry: the fields in order, the limits as their dict, the figures spread flat."""
-        out = {}
-        for f in dataclasses.fields(self):
-            v = getattr(self, f.name)
-            if f.name == "figures":
-                out.update(dataclasses.asdict(v))
-            else:
-                out[f.name] = v.to_dict() if f.name == "limits" else v
-        return out
+        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)[:-2]}
+        out["limits"] = self.limits.to_dict()
+        return {**out, **dataclasses.asdict(self.figures), "seconds": self.seconds}
 
 
 def _driven_figures(timed, config, legs: Legs, run: DrivenRun) -> DrivenFigures:
