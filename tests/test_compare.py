@@ -402,9 +402,9 @@ def test_device_metrics_time_the_moving_swings_and_count_a_still_one_as_zero(tra
         time_swings([still], rl.config)
     m = device_metrics([moving[0], still, moving[1]], rl.config)
     alone = time_swings(moving, rl.config)
-    np.testing.assert_allclose(m["swing_s"], [alone[0].duration, 0.0, alone[1].duration])
-    assert m["swing_s"][0] > 0 and m["peak_hip_vel"][1] == 0 and m["uniform_peak_vel"][1] == 0
-    assert m["within_limits"].tolist() == [alone[0].within_limits, True, alone[1].within_limits]
+    np.testing.assert_allclose(m.swing_s, [alone[0].duration, 0.0, alone[1].duration])
+    assert m.swing_s[0] > 0 and m.peak_hip_vel[1] == 0 and m.uniform_peak_vel[1] == 0
+    assert m.within_limits.tolist() == [alone[0].within_limits, True, alone[1].within_limits]
 
 
 def test_reproduce_refuses_a_finished_run_of_another_config(trained_run, tmp_path):

@@ -201,9 +201,9 @@ def test_a_hand_made_swing_at_a_known_distance_measures_it(config):
     timed = _hand_made(config, sc, heel)
     r = kinematic_replay(timed, config, substeps=1)
     # The level stretch passes over the whole top: the smallest distance is the 4.5 cm gap.
-    assert abs(r["mujoco_min_distance_m"] - 0.045) < 1e-6
-    assert r["max_disagreement_m"] < 1e-6
-    assert r["max_heel_offset_m"] < 1e-7
+    assert abs(r.mujoco_min_distance_m - 0.045) < 1e-6
+    assert r.max_disagreement_m < 1e-6
+    assert r.max_heel_offset_m < 1e-7
 
 
 def test_a_swing_through_the_obstacle_is_a_contact(config):
@@ -213,9 +213,9 @@ def test_a_swing_through_the_obstacle_is_a_contact(config):
     )  # half the obstacle's height: straight through it
     assert not timed.ok
     k = kinematic_replay(timed, config)
-    assert k["mujoco_min_distance_m"] <= 0.0 and not k["margin_kept"]
+    assert k.mujoco_min_distance_m <= 0.0 and not k.margin_kept
     d = driven_replay(timed, config, settle=0.0)
-    assert d["contact"] and d["contact_steps"] > 0
+    assert d.figures.contact and d.figures.contact_steps > 0
 
 
 def test_a_safe_swing_tracks_at_the_limits_and_keeps_clear(config):
@@ -226,17 +226,17 @@ def test_a_safe_swing_tracks_at_the_limits_and_keeps_clear(config):
     timed = time_swing(traj, config, rate=100.0)
     assert timed.ok
     k = kinematic_replay(timed, config)
-    assert k["margin_kept"] and k["max_disagreement_m"] < 1e-6
+    assert k.margin_kept and k.max_disagreement_m < 1e-6
     # Between the samples the legs are posed on the curve: MuJoCo's own distance never falls below
     # jaxexo's guaranteed clearance (with linear joint interpolation between 100 Hz samples it did,
     # by 0.1 mm on some of 6,000 swings).
-    assert k["mujoco_min_distance_m"] >= timed.checks.min_clearance - 1e-6
+    assert k.mujoco_min_distance_m >= timed.checks.min_clearance - 1e-6
     d = driven_replay(timed, config, settle=0.05)
-    assert not d["contact"]
-    assert d["heel_error_max_m"] < 0.10 and d["stance_heel_slip_max_m"] < 0.005
+    assert not d.figures.contact
+    assert d.figures.heel_error_max_m < 0.10 and d.figures.stance_heel_slip_max_m < 0.005
     # At a tenth of the limits the drive cannot follow: a limit saturates.
     slow = driven_replay(timed, config, limits=timed.limits.scaled(0.1, 0.1), settle=0.0)
-    assert slow["saturated"] and slow["heel_error_max_m"] > d["heel_error_max_m"]
+    assert slow.figures.saturated and slow.figures.heel_error_max_m > d.figures.heel_error_max_m
 
 
 def test_feed_forward_torques_alone_carry_the_legs_along_the_reference(config):
@@ -291,9 +291,13 @@ def test_feed_forward_tracks_where_a_plain_servo_lags(config):
     )
     ff = driven_replay(timed, config, settle=0.05)
     servo = driven_replay(timed, config, settle=0.05, controller="servo")
-    assert ff["controller"] == "pd_ff" and servo["controller"] == "servo"
-    assert ff["heel_error_max_m"] < 0.005 < servo["heel_error_max_m"]
-    assert not ff["contact"] and ff["margin_kept"] and ff["stance_heel_slip_max_m"] < 0.005
+    assert ff.controller == "pd_ff" and servo.controller == "servo"
+    assert ff.figures.heel_error_max_m < 0.005 < servo.figures.heel_error_max_m
+    assert (
+        not ff.figures.contact
+        and ff.figures.margin_kept
+        and ff.figures.stance_heel_slip_max_m < 0.005
+    )
     with pytest.raises(SimError, match="controller"):
         driven_replay(timed, config, controller="pid")
 
@@ -405,17 +409,19 @@ def test_a_driven_replay_of_the_curve_tracks_without_clipping(config, name):
     assert timed.ok
     legs = Legs(config, timed.scene)
     d = driven_replay(timed, config, legs=legs, settle=0.05)
-    assert d["reference"] == "curve" and d["reference_rate_hz"] is None
-    assert d["heel_error_max_m"] < 0.0025 and d["heel_error_p95_m"] < 0.0025
-    assert not d["saturated"] and d["saturated_acceleration_steps"] == 0
-    assert not d["contact"] and d["margin_kept"] and d["stance_heel_slip_max_m"] < 0.005
+    assert d.reference == "curve" and d.reference_rate_hz is None
+    assert d.figures.heel_error_max_m < 0.0025 and d.figures.heel_error_p95_m < 0.0025
+    assert not d.figures.saturated and d.figures.saturated_acceleration_steps == 0
+    assert (
+        not d.figures.contact and d.figures.margin_kept and d.figures.stance_heel_slip_max_m < 0.005
+    )
     for kind, rate in (("quintic", 500.0), ("cubic", 1000.0)):
         s = driven_replay(
             timed, config, legs=legs, settle=0.05, reference=kind, reference_rate=rate
         )
-        assert s["reference"] == kind and s["reference_rate_hz"] == rate
-        assert not s["saturated"] and not s["contact"]
-        assert abs(s["heel_error_max_m"] - d["heel_error_max_m"]) < 2e-4
+        assert s.reference == kind and s.reference_rate_hz == rate
+        assert not s.figures.saturated and not s.figures.contact
+        assert abs(s.figures.heel_error_max_m - d.figures.heel_error_max_m) < 2e-4
 
 
 def test_a_bad_reference_is_refused_naming_the_argument(config):

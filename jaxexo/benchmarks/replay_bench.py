@@ -39,7 +39,7 @@ def replay_set(sc, rl, cfftg, config, rate: float, driven: bool) -> dict:
         timed = time_swings(batch, config, rate=rate)
         t_timing = time.perf_counter() - t0
         kin, drv, drv_servo, build_s = [], [], [], []
-        disagree = []
+        disagree, violations = [], []
         for i, ts in enumerate(timed):
             if i not in legs_cache:
                 t1 = time.perf_counter()
@@ -48,7 +48,7 @@ def replay_set(sc, rl, cfftg, config, rate: float, driven: bool) -> dict:
             legs = legs_cache[i]
             k = kinematic_replay(ts, config, legs=legs)
             kin.append(k)
-            s = k["max_disagreement_sample"]
+            s = k.max_disagreement_sample
             if s >= 0:
                 jx = float(
                     geometry.foot_clearance(
@@ -61,11 +61,12 @@ def replay_set(sc, rl, cfftg, config, rate: float, driven: bool) -> dict:
                     ts.heel[s], config.kinematics.foot_length, ts.scene.outline
                 )
                 disagree.append({"jaxexo": jx, "mujoco": mj, "brute": bf})
-            if k["flagged_ok_but_within_margin"]:
+            if k.flagged_ok_but_within_margin:
                 # The third look at MuJoCo's closest pose: the brute-force distance of that heel.
-                k["brute_at_mujoco_min_m"] = brute_force_distance(
-                    k["mujoco_min_heel"], config.kinematics.foot_length, ts.scene.outline
+                brute = brute_force_distance(
+                    k.mujoco_min_heel, config.kinematics.foot_length, ts.scene.outline
                 )
+                violations.append({**k.to_dict(), "brute_at_mujoco_min_m": brute})
             if driven and ts.ok:
                 drv.append(driven_replay(ts, config, legs=legs, limits=default, controller="pd_ff"))
                 drv_servo.append(
@@ -78,8 +79,8 @@ def replay_set(sc, rl, cfftg, config, rate: float, driven: bool) -> dict:
             "timing_seconds": t_timing,
             "model_build_ms_median": 1e3 * Summary.of(build_s).median if build_s else None,
             "kinematic": {
-                **summarize_kinematic(kin),
-                "violations": [k for k in kin if k["flagged_ok_but_within_margin"]],
+                **summarize_kinematic(kin).to_dict(),
+                "violations": violations,
             },
         }
         if disagree:
@@ -100,7 +101,7 @@ def replay_set(sc, rl, cfftg, config, rate: float, driven: bool) -> dict:
             )
         for name, rows in (("driven", drv), ("driven_servo", drv_servo)):
             if rows:
-                r[name] = summarize_driven(rows)
+                r[name] = summarize_driven(rows).to_dict()
         out[gname] = r
         print(
             f"[{time.strftime('%H:%M:%S')}]",

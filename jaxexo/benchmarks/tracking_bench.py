@@ -80,9 +80,10 @@ def run_tracking_benchmark(
                             ts, cfg, limits=dataclasses.replace(lim, headroom=0.0), legs=leg
                         )
                     )
-            air = Summary.of([d["heel_error_airborne_max_m"] for d in drv])
+            fig = [d.figures for d in drv]
+            air = Summary.of([f.heel_error_airborne_max_m for f in fig])
             span = Summary.of([t.duration for t in timed])
-            dist = np.array([d["mujoco_min_distance_m"] for d in drv])
+            dist = np.array([f.mujoco_min_distance_m for f in fig])
             rows.append(
                 {
                     "headroom": headroom,
@@ -92,7 +93,7 @@ def run_tracking_benchmark(
                     "ok": len(drv),
                     "duration_median_s": span.median,
                     "duration_p95_s": span.p95,
-                    "saturated": int(sum(d["saturated"] for d in drv)),
+                    "saturated": int(sum(f.saturated for f in fig)),
                     "heel_error_airborne_p95_m": air.p95,
                     "heel_error_airborne_max_m": air.max,
                     "within_margin": int(np.sum(dist < cfg.env.min_clearance)),

@@ -8,11 +8,16 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from jaxexo.sim.legs import Legs
 from jaxexo.sim.mjcf import ACTUATED, DISTMAX, FOOT_RADIUS, LEGS, STANCE_LEG, SWING_LEG, SimError
+from jaxexo.summary import Summary
+
+if TYPE_CHECKING:
+    from jaxexo.swing.limits import DeviceLimits
 
 PHYSICS_PER_SAMPLE_MAX_DT = 0.001  # s: the driven replay's physics step is at most this
 SETTLE = 0.2  # s the driven replay holds the last setpoint after the swing
@@ -351,14 +356,68 @@ def _simulate(
     return DrivenRun(sens, dt, sub, steps, clip_a[:steps], clip_v[:steps], torque_peak, q)
 
 
-def _driven_figures(timed, config, legs: Legs, run: DrivenRun) -> dict:
+@dataclasses.dataclass(frozen=True)
+class DrivenFigures:
+    """What MuJoCo measured of a driven replay (``_driven_figures``), SI units: the swing heel's and
+    toe's tracking error at the samples (largest; the heel's off the floor, at p95 and after the
+    settle too), MuJoCo's smallest foot-obstacle distance and when, whether it kept the margin and
+    touched (steps in contact), the setpoint generator's clipped steps, the steps simulated, the
+    largest joint speed [4], the stance heel's largest slip and the feed-forward torque's peak [4]
+    (None for the servo)."""
+
+    heel_error_max_m: float
+    toe_error_max_m: float
+    heel_error_airborne_max_m: float
+    heel_error_p95_m: float
+    toe_error_p95_m: float
+    final_heel_error_m: float
+    mujoco_min_distance_m: float
+    mujoco_min_time_s: float
+    margin_kept: bool
+    contact_steps: int
+    contact: bool
+    saturated_velocity_steps: int
+    saturated_acceleration_steps: int
+    saturated: bool
+    steps: int
+    peak_joint_velocity_rad_s: list
+    stance_heel_slip_max_m: float
+    feed_forward_torque_peak_nm: list | None
+
+
+@dataclasses.dataclass(frozen=True)
+class DrivenReplay:
+    """A driven replay (``driven_replay``): the swing's method and jaxexo's verdict, the margin (m),
+    the controller, the reference and its rate (Hz; None for the curve), the drives' limits, the
+    physics step and the settle (s), MuJoCo's figures and the replay's wall time (s)."""
+
+    method: str
+    flagged_ok: bool
+    margin_m: float
+    controller: str
+    reference: str
+    reference_rate_hz: float | None
+    limits: DeviceLimits
+    physics_dt_s: float
+    settle_s: float
+    figures: DrivenFigures
+    seconds: float
+
+    def to_dict(self) -> dict:
+        """The JSON entry: the fields in order, the limits as their dict, the figures spread flat."""
+        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)[:-2]}
+        out["limits"] = self.limits.to_dict()
+        return {**out, **dataclasses.asdict(self.figures), "seconds": self.seconds}
+
+
+def _driven_figures(timed, config, legs: Legs, run: DrivenRun) -> DrivenFigures:
     """Tracking, clearance, contact, saturation and slip figures of a driven replay's simulation."""
     col = lambda name: run.sensor(legs, name)  # noqa: E731
     n = len(timed.joint_angles)
     heel = col(f"{SWING_LEG}_heel")[:: run.sub][:n][:, [0, 2]]
     toe = col(f"{SWING_LEG}_toe")[:: run.sub][:n][:, [0, 2]]
-    heel_err = np.linalg.norm(heel - timed.heel, axis=1)
-    toe_err = np.linalg.norm(toe - timed.toe, axis=1)
+    heel_e = np.linalg.norm(heel - timed.heel, axis=1)
+    heel_err, toe_err = Summary.of(heel_e), Summary.of(np.linalg.norm(toe - timed.toe, axis=1))
     pivot = np.array([timed.scene.pivot_y, 0.0])
     slip = np.linalg.norm(col(f"{STANCE_LEG}_heel")[:, [0, 2]] - pivot, axis=1).max()
     dist = np.full(len(run.sens), DISTMAX)
@@ -366,33 +425,32 @@ def _driven_figures(timed, config, legs: Legs, run: DrivenRun) -> dict:
         dist = np.minimum(dist, col(f"foot_obstacle_{i}")[:, 0] + FOOT_RADIUS)
     qv = np.stack([col(j)[:, 0] for j in ACTUATED], axis=1)
     k = int(np.argmin(dist))
-    margin = float(config.env.min_clearance)
-    return {
-        "heel_error_max_m": float(heel_err.max()),
-        "toe_error_max_m": float(toe_err.max()),
+    return DrivenFigures(
+        heel_error_max_m=heel_err.max,
+        toe_error_max_m=toe_err.max,
         # Where the swing's heel is off the floor: a heel moved along the floor is held back by friction.
-        "heel_error_airborne_max_m": float(
-            np.max(heel_err[timed.heel[:, 1] > GROUND_BAND], initial=0.0)
+        heel_error_airborne_max_m=float(
+            np.max(heel_e[timed.heel[:, 1] > GROUND_BAND], initial=0.0)
         ),
-        "heel_error_p95_m": float(np.percentile(heel_err, 95)),
-        "toe_error_p95_m": float(np.percentile(toe_err, 95)),
-        "final_heel_error_m": float(
+        heel_error_p95_m=heel_err.p95,
+        toe_error_p95_m=toe_err.p95,
+        final_heel_error_m=float(
             np.linalg.norm(col(f"{SWING_LEG}_heel")[-1, [0, 2]] - timed.heel[-1])
         ),
-        "mujoco_min_distance_m": float(dist[k]),
-        "mujoco_min_time_s": float(k * run.dt),
-        "margin_kept": bool(dist[k] >= margin),
+        mujoco_min_distance_m=float(dist[k]),
+        mujoco_min_time_s=float(k * run.dt),
+        margin_kept=bool(dist[k] >= float(config.env.min_clearance)),
         # The foot's capsule touches a piece where the segment comes within its radius: MuJoCo makes a contact.
-        "contact_steps": int(np.sum(dist <= FOOT_RADIUS)),
-        "contact": bool(dist[k] <= FOOT_RADIUS),
-        "saturated_velocity_steps": int(run.clip_v.sum()),
-        "saturated_acceleration_steps": int(run.clip_a.sum()),
-        "saturated": bool(run.clip_v.any() or run.clip_a.any()),
-        "steps": run.steps,
-        "peak_joint_velocity_rad_s": np.abs(qv).max(axis=0).tolist(),
-        "stance_heel_slip_max_m": float(slip),
-        "feed_forward_torque_peak_nm": run.torque_peak,
-    }
+        contact_steps=int(np.sum(dist <= FOOT_RADIUS)),
+        contact=bool(dist[k] <= FOOT_RADIUS),
+        saturated_velocity_steps=int(run.clip_v.sum()),
+        saturated_acceleration_steps=int(run.clip_a.sum()),
+        saturated=bool(run.clip_v.any() or run.clip_a.any()),
+        steps=run.steps,
+        peak_joint_velocity_rad_s=np.abs(qv).max(axis=0).tolist(),
+        stance_heel_slip_max_m=float(slip),
+        feed_forward_torque_peak_nm=run.torque_peak,
+    )
 
 
 def driven_replay(
@@ -405,7 +463,7 @@ def driven_replay(
     *,
     reference: str = "curve",
     reference_rate: float | None = None,
-) -> dict:
+) -> DrivenReplay:
     """The driven replay of a TimedSwing (docs/safety.md): a setpoint generator (``setpoints``)
     moves each command towards the ``reference`` (``reference_states``: "curve", the timed curve at
     every physics step; "quintic", "cubic" or "linear", its samples at ``reference_rate`` Hz, default
@@ -414,22 +472,23 @@ def driven_replay(
     inverse-dynamics feed-forward (``feed_forward``) plus a PD loop (``_pd_gains``); "servo", stiff
     position servos on the positions alone (they lag a moving reference by 2 / omega times its
     speed). The commands are computed first (they do not depend on the simulation), then MuJoCo
-    rolls the model out in one call. Returns SI figures."""
+    rolls the model out in one call. SI units."""
     limits = _check_driven(config, limits, settle, controller)
     ref_rate = check_reference(timed, reference, reference_rate)
     t0 = time.perf_counter()
     legs = Legs(config, timed.scene) if legs is None else legs
     run = _simulate(timed, legs, limits, settle, controller, reference, ref_rate)
-    return {
-        "method": timed.method,
-        "flagged_ok": bool(timed.ok),
-        "margin_m": float(config.env.min_clearance),
-        "controller": controller,
-        "reference": reference,
-        "reference_rate_hz": ref_rate,
-        "limits": limits.to_dict(),
-        "physics_dt_s": run.dt,
-        "settle_s": float(settle),
-        **_driven_figures(timed, config, legs, run),
-        "seconds": time.perf_counter() - t0,
-    }
+    figures = _driven_figures(timed, config, legs, run)
+    return DrivenReplay(
+        method=timed.method,
+        flagged_ok=bool(timed.ok),
+        margin_m=float(config.env.min_clearance),
+        controller=controller,
+        reference=reference,
+        reference_rate_hz=ref_rate,
+        limits=limits,
+        physics_dt_s=run.dt,
+        settle_s=float(settle),
+        figures=figures,
+        seconds=time.perf_counter() - t0,
+    )

@@ -7,17 +7,19 @@ Method and figures: docs/safety.md, "Replayed in a physics engine". Units: m, ra
 from __future__ import annotations
 
 import time
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
 from jaxexo.physics import geometry
-from jaxexo.sim.driven import driven_replay
+from jaxexo.sim.driven import DrivenReplay, driven_replay
 from jaxexo.sim.driven import feed_forward as feed_forward  # the replay's face re-exports
 from jaxexo.sim.driven import hermite as hermite
 from jaxexo.sim.driven import interpolate as interpolate
 from jaxexo.sim.driven import reference_states as reference_states
 from jaxexo.sim.legs import Legs, require_mujoco
 from jaxexo.sim.mjcf import DISTMAX, SWING_LEG, SimError
+from jaxexo.summary import Summary
 
 SUBSTEPS = 4  # kinematic poses per control period (the sample and 3 between)
 SAME_POSE = 1e-6  # m: MuJoCo's heel this close to jaxexo's is the same pose
@@ -31,13 +33,43 @@ def fine_angles(angles: np.ndarray, substeps: int) -> np.ndarray:
     return np.concatenate([mid.reshape((n - 1) * substeps, angles.shape[1]), angles[-1:]])
 
 
-def kinematic_replay(timed, config, substeps: int = SUBSTEPS, legs: Legs | None = None) -> dict:
+@dataclass(frozen=True)
+class KinematicReplay:
+    """A kinematic replay (``kinematic_replay``), SI units: the swing's method, jaxexo's verdict
+    (``flagged_ok``), the margin and jaxexo's guaranteed clearance; MuJoCo's smallest distance, when
+    and the heel [2] there, whether it kept the margin (and so a swing flagged ok that did not);
+    the two geometries' largest disagreement at the samples (and which sample, -1 for none) and the
+    largest heel offset; the samples compared, the poses, the substeps and the wall time (s)."""
+
+    method: str
+    flagged_ok: bool
+    margin_m: float
+    jaxexo_guaranteed_clearance_m: float
+    mujoco_min_distance_m: float
+    mujoco_min_time_s: float
+    mujoco_min_heel: list
+    margin_kept: bool
+    flagged_ok_but_within_margin: bool
+    max_disagreement_m: float
+    max_disagreement_sample: int
+    max_heel_offset_m: float
+    samples_compared: int
+    poses: int
+    substeps: int
+    seconds: float
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def kinematic_replay(
+    timed, config, substeps: int = SUBSTEPS, legs: Legs | None = None
+) -> KinematicReplay:
     """The kinematic replay of a TimedSwing: the joints set to its angles at every control sample
     and ``substeps`` poses between (the timed curve's there; linear for a swing without a curve), the
     pelvis where the stance leg puts it on its pivot, and MuJoCo's distance from the swing foot to
     each obstacle piece at every pose; compared with jaxexo's (geometry.foot_clearance) at the
-    samples, where both measure the same pose. ``legs``: a Legs of the same scene to
-    reuse. Returns SI figures; ``flagged_ok`` is jaxexo's verdict, ``margin_kept`` MuJoCo's."""
+    samples, where both measure the same pose. ``legs``: a Legs of the same scene to reuse."""
     if not isinstance(substeps, int) or isinstance(substeps, bool) or substeps < 1:
         raise SimError(f"substeps: must be an integer >= 1, got {substeps!r}")
     t0 = time.perf_counter()
@@ -67,80 +99,123 @@ def kinematic_replay(timed, config, substeps: int = SUBSTEPS, legs: Legs | None 
     worst = int(np.argmax(np.where(both, diff, -1.0))) if both.any() else -1
     margin = float(config.env.min_clearance)
     k = int(np.argmin(dist))
-    return {
-        "method": timed.method,
-        "flagged_ok": bool(timed.ok),
-        "margin_m": margin,
-        "jaxexo_guaranteed_clearance_m": float(timed.checks.min_clearance),
-        "mujoco_min_distance_m": float(dist[k]),
-        "mujoco_min_time_s": float(k / substeps / timed.rate),
-        "mujoco_min_heel": heel[k].tolist(),
-        "margin_kept": bool(dist[k] >= margin),
-        "flagged_ok_but_within_margin": bool(timed.ok and dist[k] < margin),
-        "max_disagreement_m": float(diff[worst]) if worst >= 0 else 0.0,
-        "max_disagreement_sample": worst,
-        "max_heel_offset_m": float(offset.max()),
-        "samples_compared": int(both.sum()),
-        "poses": int(len(q)),
-        "substeps": substeps,
-        "seconds": time.perf_counter() - t0,
-    }
+    return KinematicReplay(
+        method=timed.method,
+        flagged_ok=bool(timed.ok),
+        margin_m=margin,
+        jaxexo_guaranteed_clearance_m=float(timed.checks.min_clearance),
+        mujoco_min_distance_m=float(dist[k]),
+        mujoco_min_time_s=float(k / substeps / timed.rate),
+        mujoco_min_heel=heel[k].tolist(),
+        margin_kept=bool(dist[k] >= margin),
+        flagged_ok_but_within_margin=bool(timed.ok and dist[k] < margin),
+        max_disagreement_m=float(diff[worst]) if worst >= 0 else 0.0,
+        max_disagreement_sample=worst,
+        max_heel_offset_m=float(offset.max()),
+        samples_compared=int(both.sum()),
+        poses=int(len(q)),
+        substeps=substeps,
+        seconds=time.perf_counter() - t0,
+    )
 
 
-def summarize_kinematic(rows: list[dict]) -> dict:
-    """Figures of many kinematic replays (``kinematic_replay``'s dicts): the swings jaxexo flags ok
-    that come within the margin in MuJoCo (the target is 0), MuJoCo's smallest distance among the ok
-    swings and its smallest excess over jaxexo's guaranteed clearance, the largest disagreement
-    between the two geometries at the samples, and the replay's median cost."""
-    ok = [r for r in rows if r["flagged_ok"]]
-    return {
-        "n": len(rows),
-        "flagged_ok": len(ok),
-        "flagged_ok_within_margin": int(sum(r["flagged_ok_but_within_margin"] for r in rows)),
-        "min_mujoco_distance_of_ok_m": min((r["mujoco_min_distance_m"] for r in ok), default=None),
-        "min_mujoco_minus_guaranteed_of_ok_m": min(
-            (r["mujoco_min_distance_m"] - r["jaxexo_guaranteed_clearance_m"] for r in ok),
-            default=None,
+@dataclass(frozen=True)
+class KinematicSummary:
+    """Many kinematic replays (``summarize_kinematic``), SI units: how many, how many jaxexo flags ok
+    and of those how many come within the margin in MuJoCo (the target is 0); MuJoCo's smallest
+    distance among the ok swings and its smallest excess over jaxexo's guaranteed clearance; the
+    largest disagreement between the two geometries at the samples and the largest heel offset of an
+    ok swing; the replay's median wall time (s) and poses. None where no swing gives a figure."""
+
+    n: int
+    flagged_ok: int
+    flagged_ok_within_margin: int
+    min_mujoco_distance_of_ok_m: float | None
+    min_mujoco_minus_guaranteed_of_ok_m: float | None
+    max_disagreement_m: float | None
+    max_heel_offset_of_ok_m: float | None
+    seconds_median: float | None
+    poses_median: float | None
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def summarize_kinematic(rows: list[KinematicReplay]) -> KinematicSummary:
+    """The figures of many kinematic replays (a KinematicSummary)."""
+    ok = [r for r in rows if r.flagged_ok]
+    return KinematicSummary(
+        n=len(rows),
+        flagged_ok=len(ok),
+        flagged_ok_within_margin=int(sum(r.flagged_ok_but_within_margin for r in rows)),
+        min_mujoco_distance_of_ok_m=min((r.mujoco_min_distance_m for r in ok), default=None),
+        min_mujoco_minus_guaranteed_of_ok_m=min(
+            (r.mujoco_min_distance_m - r.jaxexo_guaranteed_clearance_m for r in ok), default=None
         ),
-        "max_disagreement_m": max((r["max_disagreement_m"] for r in rows), default=None),
+        max_disagreement_m=max((r.max_disagreement_m for r in rows), default=None),
         # Over the swings flagged ok: a failed swing may ask for a heel out of the leg's reach.
-        "max_heel_offset_of_ok_m": max((r["max_heel_offset_m"] for r in ok), default=None),
-        "seconds_median": float(np.median([r["seconds"] for r in rows])) if rows else None,
-        "poses_median": float(np.median([r["poses"] for r in rows])) if rows else None,
-    }
+        max_heel_offset_of_ok_m=max((r.max_heel_offset_m for r in ok), default=None),
+        seconds_median=Summary.of([r.seconds for r in rows]).median if rows else None,
+        poses_median=Summary.of([r.poses for r in rows]).median if rows else None,
+    )
 
 
-def summarize_driven(rows: list[dict]) -> dict:
-    """Figures of many driven replays (``driven_replay``'s dicts): heel and toe tracking error (p95
-    and max over the swings of each swing's largest), contacts, swings within the margin, MuJoCo's
-    smallest distance, saturated swings, the stance heel's largest slip and the median cost."""
+@dataclass(frozen=True)
+class DrivenSummary:
+    """Many driven replays (``summarize_driven``), SI units: how many; the heel's and toe's tracking
+    error (p95 and max over the swings of each swing's largest; the heel's off the floor at p95);
+    the swings in contact and within the margin; MuJoCo's smallest distance (least and median);
+    the saturated swings, the stance heel's largest slip and the replay's median wall time (s).
+    Only ``n`` (0) for no replays."""
+
+    n: int
+    heel_error_p95_m: float | None = None
+    heel_error_max_m: float | None = None
+    heel_error_airborne_p95_m: float | None = None
+    toe_error_p95_m: float | None = None
+    toe_error_max_m: float | None = None
+    contacts: int | None = None
+    within_margin: int | None = None
+    min_distance_m: float | None = None
+    median_min_distance_m: float | None = None
+    saturated: int | None = None
+    stance_heel_slip_max_m: float | None = None
+    seconds_median: float | None = None
+
+    def to_dict(self) -> dict:
+        """The JSON entry: ``{"n": 0}`` alone for no replays."""
+        return asdict(self) if self.n else {"n": 0}
+
+
+def summarize_driven(rows: list[DrivenReplay]) -> DrivenSummary:
+    """The figures of many driven replays (a DrivenSummary)."""
     if not rows:
-        return {"n": 0}
-    he = np.array([d["heel_error_max_m"] for d in rows])
-    te = np.array([d["toe_error_max_m"] for d in rows])
-    md = np.array([d["mujoco_min_distance_m"] for d in rows])
-    ha = np.array([d["heel_error_airborne_max_m"] for d in rows])
-    return {
-        "n": len(rows),
-        "heel_error_p95_m": float(np.percentile(he, 95)),
-        "heel_error_max_m": float(he.max()),
-        "heel_error_airborne_p95_m": float(np.percentile(ha, 95)),
-        "toe_error_p95_m": float(np.percentile(te, 95)),
-        "toe_error_max_m": float(te.max()),
-        "contacts": int(sum(d["contact"] for d in rows)),
-        "within_margin": int(np.sum(md < rows[0]["margin_m"])),
-        "min_distance_m": float(md.min()),
-        "median_min_distance_m": float(np.median(md)),
-        "saturated": int(sum(d["saturated"] for d in rows)),
-        "stance_heel_slip_max_m": float(max(d["stance_heel_slip_max_m"] for d in rows)),
-        "seconds_median": float(np.median([d["seconds"] for d in rows])),
-    }
+        return DrivenSummary(n=0)
+    fig = [d.figures for d in rows]
+    he = Summary.of([f.heel_error_max_m for f in fig])
+    te = Summary.of([f.toe_error_max_m for f in fig])
+    md = np.array([f.mujoco_min_distance_m for f in fig])
+    return DrivenSummary(
+        n=len(rows),
+        heel_error_p95_m=he.p95,
+        heel_error_max_m=he.max,
+        heel_error_airborne_p95_m=Summary.of([f.heel_error_airborne_max_m for f in fig]).p95,
+        toe_error_p95_m=te.p95,
+        toe_error_max_m=te.max,
+        contacts=int(sum(f.contact for f in fig)),
+        within_margin=int(np.sum(md < rows[0].margin_m)),
+        min_distance_m=float(md.min()),
+        median_min_distance_m=Summary.of(md).median,
+        saturated=int(sum(f.saturated for f in fig)),
+        stance_heel_slip_max_m=float(max(f.stance_heel_slip_max_m for f in fig)),
+        seconds_median=Summary.of([d.seconds for d in rows]).median,
+    )
 
 
 def replay_trajectories(trajs, config, rate: float | None = None, driven: bool = True) -> dict:
     """Trajectories (one generator's) timed for the device at ``rate`` and replayed in MuJoCo:
     ``summarize_kinematic`` of all of them and ``summarize_driven`` of those flagged ok, at the
-    config's [device] limits (``jaxexo eval --replay``)."""
+    config's [device] limits (``jaxexo eval --replay``), as the report's JSON entry."""
     from jaxexo.swing.timing import time_swings
 
     require_mujoco()
@@ -150,9 +225,9 @@ def replay_trajectories(trajs, config, rate: float | None = None, driven: bool =
         kin.append(kinematic_replay(ts, config, legs=legs))
         if driven and ts.ok:
             drv.append(driven_replay(ts, config, legs=legs))
-    out = {"kinematic": summarize_kinematic(kin)}
+    out = {"kinematic": summarize_kinematic(kin).to_dict()}
     if driven:
-        out["driven"] = summarize_driven(drv)
+        out["driven"] = summarize_driven(drv).to_dict()
     return out
 
 

@@ -6,7 +6,8 @@ from __future__ import annotations
 
 import dataclasses
 
-from jaxexo.sim.replay import Legs, driven_replay, kinematic_replay
+from jaxexo.sim.driven import DrivenReplay
+from jaxexo.sim.replay import KinematicReplay, Legs, driven_replay, kinematic_replay
 
 HALF_LIMITS = 0.5  # the --half-limits replay's share of the [device] velocity and acceleration
 
@@ -14,21 +15,20 @@ HALF_LIMITS = 0.5  # the --half-limits replay's share of the [device] velocity a
 @dataclasses.dataclass(frozen=True)
 class SwingReplay:
     """One generator's swing replayed: the generator's ``name`` (rl, cfftg), its TimedSwing, the
-    kinematic replay's figures (``kinematic_replay``) and the driven replays' by label ("driven",
-    "driven_half_limits"; ``driven_replay``), SI units."""
+    kinematic replay and the driven replays by label ("driven", "driven_half_limits"), SI units."""
 
     name: str
     timed: object
-    kinematic: dict
-    driven: dict
+    kinematic: KinematicReplay
+    driven: dict[str, DrivenReplay]
 
     @property
     def ok(self) -> bool:
         """MuJoCo agrees with jaxexo's verdict: a swing flagged ok keeps the margin in the kinematic
         replay and, driven at the full limits, touches nothing."""
         full = self.driven.get("driven")
-        return not self.kinematic["flagged_ok_but_within_margin"] and not (
-            full is not None and self.timed.ok and full["contact"]
+        return not self.kinematic.flagged_ok_but_within_margin and not (
+            full is not None and self.timed.ok and full.figures.contact
         )
 
     def lines(self) -> list[str]:
@@ -37,15 +37,16 @@ class SwingReplay:
         out = [
             f"{self.name}: {t.duration:.2f} s swing at {t.rate:g} Hz, jaxexo {'ok' if t.ok else 'FAILED'} "
             f"(guaranteed clearance {100 * t.checks.min_clearance:.2f} cm); MuJoCo kinematic replay: smallest "
-            f"distance {100 * k['mujoco_min_distance_m']:.2f} cm over {k['poses']} poses, largest difference from "
-            f"jaxexo at the samples {1e6 * k['max_disagreement_m']:.3f} um, {1e3 * k['seconds']:.1f} ms"
+            f"distance {100 * k.mujoco_min_distance_m:.2f} cm over {k.poses} poses, largest difference from "
+            f"jaxexo at the samples {1e6 * k.max_disagreement_m:.3f} um, {1e3 * k.seconds:.1f} ms"
         ]
         for label, d in self.driven.items():
+            f = d.figures
             out.append(
-                f"  {label.replace('_', ' ')}: heel error max {100 * d['heel_error_max_m']:.2f} cm, toe "
-                f"{100 * d['toe_error_max_m']:.2f} cm; smallest distance {100 * d['mujoco_min_distance_m']:.2f} "
-                f"cm; {'CONTACT' if d['contact'] else 'no contact'}; "
-                f"{'a limit saturates' if d['saturated'] else 'no limit saturates'}; {1e3 * d['seconds']:.0f} ms"
+                f"  {label.replace('_', ' ')}: heel error max {100 * f.heel_error_max_m:.2f} cm, toe "
+                f"{100 * f.toe_error_max_m:.2f} cm; smallest distance {100 * f.mujoco_min_distance_m:.2f} "
+                f"cm; {'CONTACT' if f.contact else 'no contact'}; "
+                f"{'a limit saturates' if f.saturated else 'no limit saturates'}; {1e3 * d.seconds:.0f} ms"
             )
         return out
 
@@ -56,8 +57,8 @@ class SwingReplay:
             "flagged_ok": bool(t.ok),
             "duration_s": t.duration,
             "rate_hz": t.rate,
-            "kinematic": self.kinematic,
-            **self.driven,
+            "kinematic": self.kinematic.to_dict(),
+            **{label: d.to_dict() for label, d in self.driven.items()},
         }
 
 
