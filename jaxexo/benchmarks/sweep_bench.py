@@ -14,12 +14,17 @@ import numpy as np
 
 from jaxexo.benchmarks.train_bench import throughput
 from jaxexo.config import Config
-from jaxexo.summary import Summary
+from jaxexo.summary import Summary, table
 from jaxexo.sweep.spec import load_sweep, sweep_from_dict
 from jaxexo.train.lanes import LANES, over_agents, over_lanes
 from jaxexo.train.trainer import Hyperparams, Trainer
 
 TARGET_S = 600.0
+
+
+def _m(r) -> str:
+    """A row's env-steps/s in millions, as the tables show it."""
+    return f"{r['env_steps_per_s'] / 1e6:.3f}"
 
 
 def agents_throughput(
@@ -87,7 +92,7 @@ def agents_per_minute(
     }
     progress(
         f"  {n_configs:4d} configurations: {wall:7.1f} s, {row['agents_per_min']:7.1f} agents/min, "
-        f"{row['env_steps_per_s'] / 1e6:.3f} M env-steps/s (all included)"
+        f"{_m(row)} M env-steps/s (all included)"
     )
     return row
 
@@ -97,18 +102,14 @@ def vmap_throughputs(cfg: Config, devices, progress=print, updates: int = 10) ->
     run of 64 times the environments, data parallel over ``devices``: the payload's three entries."""
     tc = cfg.train
     sweep64 = agents_throughput(cfg, 64, devices, updates)
-    progress(
-        f"64 agents x {tc.num_envs} envs, {len(devices)} devices: {sweep64['env_steps_per_s'] / 1e6:.3f} M env-steps/s"
-    )
+    progress(f"64 agents x {tc.num_envs} envs, {len(devices)} devices: {_m(sweep64)} M env-steps/s")
     one_dev = agents_throughput(cfg, 64, devices[:1], updates)
-    progress(
-        f"64 agents x {tc.num_envs} envs, 1 device: {one_dev['env_steps_per_s'] / 1e6:.3f} M env-steps/s"
-    )
+    progress(f"64 agents x {tc.num_envs} envs, 1 device: {_m(one_dev)} M env-steps/s")
     big = dataclasses.replace(cfg, train=dataclasses.replace(tc, num_envs=64 * tc.num_envs))
     single = throughput(big, updates, repeats=3, devices=devices)
     progress(
         f"one run of {big.train.num_envs} envs, {single['devices']} devices: "
-        f"{single['env_steps_per_s'] / 1e6:.3f} M env-steps/s"
+        f"{_m(single)} M env-steps/s"
     )
     return {"sweep_64": sweep64, "sweep_64_one_device": one_dev, "single_run": single}
 
@@ -146,6 +147,8 @@ def sweep_markdown(cfg: Config, payload: dict, per_minute_budget: int) -> str:
     tc = cfg.train
     sweep64, one_dev = payload["sweep_64"], payload["sweep_64_one_device"]
     single, full = payload["single_run"], payload["target_run"]
+    n, per_min = tc.num_envs, payload["agents_per_minute"]
+    vm = f"64 agents × {n} envs (vmapped)"
     lines = [
         "# Sweep benchmarks",
         "",
@@ -153,27 +156,34 @@ def sweep_markdown(cfg: Config, payload: dict, per_minute_budget: int) -> str:
         f"observation `{cfg.env.obs_mode}`, {tc.num_envs} environments per agent, T = {tc.rollout_steps}, "
         f"{tc.num_minibatches} minibatch(es) per update, forward view, {tc.control}.",
         "",
-        "| what | M env-steps/s |",
-        "|---|---:|",
-        f"| 64 agents × {tc.num_envs} envs (vmapped), {sweep64['devices']} CPU devices | {sweep64['env_steps_per_s'] / 1e6:.3f} |",
-        f"| 64 agents × {tc.num_envs} envs (vmapped), 1 CPU device | {one_dev['env_steps_per_s'] / 1e6:.3f} |",
-        f"| one run of {64 * tc.num_envs} envs, {single['devices']} CPU devices (data parallel) | "
-        f"{single['env_steps_per_s'] / 1e6:.3f} |",
+        *table(
+            ("what", "M env-steps/s"),
+            [
+                (f"{vm}, {sweep64['devices']} CPU devices", _m(sweep64)),
+                (f"{vm}, 1 CPU device", _m(one_dev)),
+                (
+                    f"one run of {64 * n} envs, {single['devices']} CPU devices (data parallel)",
+                    _m(single),
+                ),
+            ],
+        ),
         "",
-        f"| configurations (1 seed, {per_minute_budget:,} env steps each) | wall s (all included) | agents per minute | "
-        "M env-steps/s |",
-        "|---:|---:|---:|---:|",
-    ]
-    lines += [
-        f"| {r['configs']} | {r['wall_s']:.1f} | {r['agents_per_min']:.1f} | {r['env_steps_per_s'] / 1e6:.3f} |"
-        for r in payload["agents_per_minute"]
+        *table(
+            f"configurations (1 seed, {per_minute_budget:,} env steps each)|wall s (all included)|"
+            "agents per minute|M env-steps/s".split("|"),
+            [
+                (r["configs"], f"{r['wall_s']:.1f}", f"{r['agents_per_min']:.1f}", _m(r))
+                for r in per_min
+            ],
+            "rrrr",
+        ),
     ]
     if full:
         lines += [
             "",
             f"Target run (64 configurations × 4 seeds × {tc.num_envs} envs × {tc.budget_env_steps:,} env "
             f"steps): {full['env_steps']:,.0f} env steps in **{full['wall_s']:.1f} s** "
-            f"(target ≤ {TARGET_S:.0f} s), {full['env_steps_per_s'] / 1e6:.3f} M env-steps/s including "
+            f"(target ≤ {TARGET_S:.0f} s), {_m(full)} M env-steps/s including "
             f"compilation, evaluation and the report; best: {full['best']['label']} "
             f"(success {full['best']['success_mean']:.3f} ± {full['best']['success_std']:.3f}).",
         ]
@@ -271,16 +281,20 @@ def run_learning_benchmark(out_dir, sweep_file: str | Path, progress=print) -> d
         "compilations_per_group": program / max(1, len(sweep.groups)),
         "devices": len(jax.local_devices()),
     }
+    head = "agents|groups|env steps|wall s (all included)|agents per minute|M env-steps/s|"
+    head += f"agents with greedy success >= {LEARNED_SUCCESS}|compilations per group"
+    cells = [out["agents"], out["groups"], f"{out['env_steps']:,.0f}", f"{wall:.1f}"]
+    cells += [
+        f"{out['agents_per_min']:.1f}",
+        _m(out),
+        f"{out['agents_learned']} of {out['agents']}",
+    ]
+    cells.append(f"{out['compilations_per_group']:g}")
     md = "\n".join(
         [
             f"# Learning sweep benchmark ({out['sweep_file']})",
             "",
-            "| agents | groups | env steps | wall s (all included) | agents per minute | M env-steps/s | "
-            f"agents with greedy success >= {LEARNED_SUCCESS} | compilations per group |",
-            "|---:|---:|---:|---:|---:|---:|---:|---:|",
-            f"| {out['agents']} | {out['groups']} | {out['env_steps']:,.0f} | {wall:.1f} | {out['agents_per_min']:.1f} | "
-            f"{out['env_steps_per_s'] / 1e6:.3f} | {out['agents_learned']} of {out['agents']} | "
-            f"{out['compilations_per_group']:g} |",
+            *table(head.split("|"), [cells], "r" * 8),
             "",
             "Greedy success per agent (test layouts): "
             + ", ".join(f"{x:.3f}" for x in success)
@@ -317,7 +331,9 @@ def run_lanes_benchmark(out_dir, sweep_file: str | Path) -> dict:
         ):
             r = agents_throughput(cfg, n, devices, updates, repeats=3, wrap=wrap)
             rows.append({"case": name, "program": label, **r})
-            print(name, label, f"{r['env_steps_per_s'] / 1e6:.3f} M env-steps/s", flush=True)
+            print(name, label, f"{_m(r)} M env-steps/s", flush=True)
+    head = "case|agents|program|M env-steps/s|median s per call|ratio to one vmap per device"
+    ratios = [r["env_steps_per_s"] / rows[i - i % 2]["env_steps_per_s"] for i, r in enumerate(rows)]
     lines = [
         "# Fixed vmap blocks against one batch per device",
         "",
@@ -325,15 +341,15 @@ def run_lanes_benchmark(out_dir, sweep_file: str | Path) -> dict:
         f"{tuple(round(x, 2) for x in os.getloadavg())} (a shared machine). Training only (no evaluation); "
         "median of 3 compiled calls.",
         "",
-        "| case | agents | program | M env-steps/s | median s per call | ratio to one vmap per device |",
-        "|---|---:|---|---:|---:|---:|",
+        *table(
+            head.split("|"),
+            [
+                (r["case"], r["agents"], r["program"], _m(r), f"{r['median_s']:.2f}", f"{q:.2f}")
+                for r, q in zip(rows, ratios)
+            ],
+            "lrlrrr",
+        ),
     ]
-    for i, r in enumerate(rows):
-        base = rows[i - i % 2]
-        lines.append(
-            f"| {r['case']} | {r['agents']} | {r['program']} | {r['env_steps_per_s'] / 1e6:.3f} | "
-            f"{r['median_s']:.2f} | {r['env_steps_per_s'] / base['env_steps_per_s']:.2f} |"
-        )
     payload = {"rows": rows, "load_before": load_before}
     for p in write_result("lanes", payload, "\n".join(lines), out_dir):
         print(p)

@@ -110,28 +110,28 @@ def run_train_benchmark(
             f"{name}: trained in {res['train_seconds']:.1f} s, success_raw {res['success_raw']:.3f}, "
             f"held-out success_raw {(res['held_out'] or {}).get('success_raw')}"
         )
-    lines = ["# Trainer benchmarks", "", "| what | figure |", "|---|---:|"]
-    for r in rows:
-        mb = "" if r["trace"] == "backward" else f", {r['num_minibatches']} minibatch(es)/update"
-        lines.append(
-            f"| thesis network, {r['trace']} view{mb}, {r['num_envs']} envs, {r['devices']} CPU devices | "
-            f"{r['env_steps_per_s'] / 1e6:.3f} M env-steps/s |"
+    tput = [
+        (
+            f"thesis network, {r['trace']} view"
+            + ("" if r["trace"] == "backward" else f", {r['num_minibatches']} minibatch(es)/update")
+            + f", {r['num_envs']} envs, {r['devices']} CPU devices",
+            f"{r['env_steps_per_s'] / 1e6:.3f} M env-steps/s",
         )
-    for name, r in runs.items():
-        held = (r["held_out"] or {}).get("success_raw")
-    lines += [
-        "",
-        "| config | train wall s (incl. compile) | episodes | env steps | accuracy (eq 3.1) | "
-        "strict success, raw moves | held-out, raw moves |",
-        "|---|---:|---:|---:|---:|---:|---:|",
+        for r in rows
     ]
-    for name, r in runs.items():
-        held = (r["held_out"] or {}).get("success_raw")
-        lines.append(
-            f"| `{Path(name).relative_to(Path(name).parents[1]) if 'thesis' in name else Path(name).name}` | "
-            f"{r['train_seconds']:.1f} | {r['episodes']} | {r['env_steps']:,} | {r['accuracy']:.3f} | "
-            f"{r['success_raw']:.3f} | {held:.3f} |"
+    head = "config|train wall s (incl. compile)|episodes|env steps|accuracy (eq 3.1)|"
+    head += "strict success, raw moves|held-out, raw moves"
+    cells = [
+        (
+            f"`{Path(name).relative_to(Path(name).parents[1]) if 'thesis' in name else Path(name).name}`",
+            *(f"{r['train_seconds']:.1f}", r["episodes"], f"{r['env_steps']:,}"),
+            *(f"{r[k]:.3f}" for k in ("accuracy", "success_raw")),
+            f"{(r['held_out'] or {}).get('success_raw'):.3f}",
         )
+        for name, r in runs.items()
+    ]
+    lines = ["# Trainer benchmarks", "", *table(("what", "figure"), tput), ""]
+    lines += table(head.split("|"), cells)
     md = "\n".join(lines)
     write_result("train", {"throughput": rows, "runs": runs}, md, out_dir)
     progress(md)
