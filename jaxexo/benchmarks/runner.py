@@ -1,10 +1,12 @@
 """What the benchmarks/*.py runners share: their command line's parser, which shows the script's
 docstring as written and takes the policy to measure, and (run_script) the whole runner of a
-benchmark whose options are its function's parameters."""
+benchmark whose options are its function's parameters; and ``Record``, the base of the frozen
+records the benchmark modules pass each other."""
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import inspect
 
 
@@ -33,3 +35,11 @@ def run_script(doc: str, benchmark, options, out_dir, argv=None):
         )
     a = vars(p.parse_args(argv))
     return benchmark(a.pop("policy"), out_dir, **a)
+
+
+@dataclasses.dataclass(frozen=True)
+class Record:
+    """A frozen record passed between benchmark modules; ``to_dict``: its JSON, field by field."""
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)

@@ -12,6 +12,7 @@ from pathlib import Path
 import jax
 import numpy as np
 
+from jaxexo.benchmarks.runner import Record
 from jaxexo.benchmarks.train_bench import throughput
 from jaxexo.config import Config
 from jaxexo.summary import Summary, table
@@ -27,9 +28,22 @@ def _m(r) -> str:
     return f"{r['env_steps_per_s'] / 1e6:.3f}"
 
 
+@dataclasses.dataclass(frozen=True)
+class AgentsThroughput(Record):
+    """Training env-steps/s of a batch of agents (the median call's figures)."""
+
+    agents: int
+    devices: int
+    env_steps_per_call: int
+    median_s: float
+    env_steps_per_s: float
+    compile_s: float
+    repeats: int
+
+
 def agents_throughput(
     cfg: Config, n_agents: int, devices, updates: int, repeats: int = 3, wrap=over_agents
-) -> dict:
+) -> AgentsThroughput:
     """Training env-steps/s of ``n_agents`` agents (learning rates spread over a decade, one seed
     each) vmapped and split over ``devices``: the sweep's training program without its evaluation.
     ``wrap``: over_agents (one vmapped batch per device) or over_lanes (fixed blocks, what sweeps and
@@ -55,15 +69,15 @@ def agents_throughput(
         times.append(time.perf_counter() - t0)
     steps = n_agents * updates * cfg.train.num_envs * cfg.train.rollout_steps
     med = Summary.of(times).median
-    return {
-        "agents": n_agents,
-        "devices": len(devices),
-        "env_steps_per_call": steps,
-        "median_s": med,
-        "env_steps_per_s": steps / med,
-        "compile_s": compile_s,
-        "repeats": repeats,
-    }
+    return AgentsThroughput(
+        agents=n_agents,
+        devices=len(devices),
+        env_steps_per_call=steps,
+        median_s=med,
+        env_steps_per_s=steps / med,
+        compile_s=compile_s,
+        repeats=repeats,
+    )
 
 
 def agents_per_minute(
@@ -101,12 +115,12 @@ def vmap_throughputs(cfg: Config, devices, progress=print, updates: int = 10) ->
     """Training env-steps/s of 64 agents vmapped over ``devices`` and over one device, and of one
     run of 64 times the environments, data parallel over ``devices``: the payload's three entries."""
     tc = cfg.train
-    sweep64 = agents_throughput(cfg, 64, devices, updates)
+    sweep64 = agents_throughput(cfg, 64, devices, updates).to_dict()
     progress(f"64 agents x {tc.num_envs} envs, {len(devices)} devices: {_m(sweep64)} M env-steps/s")
-    one_dev = agents_throughput(cfg, 64, devices[:1], updates)
+    one_dev = agents_throughput(cfg, 64, devices[:1], updates).to_dict()
     progress(f"64 agents x {tc.num_envs} envs, 1 device: {_m(one_dev)} M env-steps/s")
     big = dataclasses.replace(cfg, train=dataclasses.replace(tc, num_envs=64 * tc.num_envs))
-    single = throughput(big, updates, repeats=3, devices=devices)
+    single = throughput(big, updates, repeats=3, devices=devices).to_dict()
     progress(
         f"one run of {big.train.num_envs} envs, {single['devices']} devices: "
         f"{_m(single)} M env-steps/s"
@@ -329,7 +343,7 @@ def run_lanes_benchmark(out_dir, sweep_file: str | Path) -> dict:
             ("one vmap per device", over_agents),
             (f"blocks of {LANES}", over_lanes),
         ):
-            r = agents_throughput(cfg, n, devices, updates, repeats=3, wrap=wrap)
+            r = agents_throughput(cfg, n, devices, updates, repeats=3, wrap=wrap).to_dict()
             rows.append({"case": name, "program": label, **r})
             print(name, label, f"{_m(r)} M env-steps/s", flush=True)
     head = "case|agents|program|M env-steps/s|median s per call|ratio to one vmap per device"

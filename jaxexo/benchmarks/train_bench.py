@@ -10,12 +10,30 @@ from pathlib import Path
 
 import jax
 
+from jaxexo.benchmarks.runner import Record
 from jaxexo.config import Config
 from jaxexo.summary import Summary, table
 from jaxexo.train.trainer import Hyperparams, Trainer
 
 
-def throughput(cfg: Config, updates_per_call: int, repeats: int = 3, devices=None) -> dict:
+@dataclasses.dataclass(frozen=True)
+class Throughput(Record):
+    """Whole training updates' env-steps/s of one config (its settings, the median call's figures)."""
+
+    trace: str
+    control: str
+    num_envs: int
+    hidden: list
+    rollout_steps: int
+    env_steps_per_call: int
+    median_s: float
+    env_steps_per_s: float
+    compile_s: float
+    repeats: int
+    devices: int
+
+
+def throughput(cfg: Config, updates_per_call: int, repeats: int = 3, devices=None) -> Throughput:
     tr = Trainer(cfg, devices=devices)
     hyper = Hyperparams.from_config(cfg)
     # laid out as the chunks return it: one compilation (Trainer.place)
@@ -31,19 +49,20 @@ def throughput(cfg: Config, updates_per_call: int, repeats: int = 3, devices=Non
         times.append(time.perf_counter() - t0)
     steps = updates_per_call * cfg.train.num_envs * cfg.train.rollout_steps
     med = Summary.of(times).median
-    return {
-        "trace": cfg.train.trace,
-        "control": cfg.train.control,
-        "num_envs": cfg.train.num_envs,
-        "hidden": list(cfg.train.hidden),
-        "rollout_steps": cfg.train.rollout_steps,
-        "env_steps_per_call": steps,
-        "median_s": med,
-        "env_steps_per_s": steps / med,
-        "compile_s": compile_s,
-        "repeats": repeats,
-        "devices": len(tr.devices or [0]),
-    }
+    t = cfg.train
+    return Throughput(
+        trace=t.trace,
+        control=t.control,
+        num_envs=t.num_envs,
+        hidden=list(t.hidden),
+        rollout_steps=t.rollout_steps,
+        env_steps_per_call=steps,
+        median_s=med,
+        env_steps_per_s=steps / med,
+        compile_s=compile_s,
+        repeats=repeats,
+        devices=len(tr.devices or [0]),
+    )
 
 
 def thesis_network_config(base: Config, trace: str, num_envs: int = 4096) -> Config:
@@ -84,7 +103,7 @@ def run_train_benchmark(
             cfg, train=dataclasses.replace(cfg.train, num_minibatches=minibatches)
         )
         r = throughput(cfg, updates, repeats=3 if trace == "forward" else 2, devices=devices)
-        r["num_minibatches"] = minibatches
+        r = {**r.to_dict(), "num_minibatches": minibatches}
         progress(
             f"thesis network, {trace} view, {minibatches} minibatch(es), 4096 envs, {r['devices']} device(s): "
             f"{r['env_steps_per_s'] / 1e6:.3f} M env-steps/s"
@@ -285,7 +304,21 @@ def _lambda_returns(u: UpdateParts):
     return returns
 
 
-def update_breakdown(cfg: Config, repeats: int = 5, calls: int = 4) -> dict:
+@dataclasses.dataclass(frozen=True)
+class UpdateBreakdown(Record):
+    """Where one update's time goes: the config's batch, and milliseconds per update by part."""
+
+    num_envs: int
+    rollout_steps: int
+    num_minibatches: int
+    num_epochs: int
+    hidden: list
+    shield: bool
+    ms_per_update: dict
+    env_steps_per_s_one_device: float
+
+
+def update_breakdown(cfg: Config, repeats: int = 5, calls: int = 4) -> UpdateBreakdown:
     """Where one forward-view update's time goes, on one device at the config's batch: the whole
     update; its rollout (T steps of acting, environment, mask, target pass) and its learning part
     (lambda-returns, minibatch gradients, clipping and Adam) as the trainer runs them
@@ -325,16 +358,16 @@ def update_breakdown(cfg: Config, repeats: int = 5, calls: int = 4) -> dict:
         "optimizer: clipping and Adam": timed(_optimizer(u), ts),
         "lambda-returns": timed(_lambda_returns(u), ts, trans),
     }
-    return {
-        "num_envs": n,
-        "rollout_steps": t,
-        "num_minibatches": cfg.train.num_minibatches,
-        "num_epochs": cfg.train.num_epochs,
-        "hidden": list(cfg.train.hidden),
-        "shield": bool(tr.env.shield),
-        "ms_per_update": parts,
-        "env_steps_per_s_one_device": n * t / (parts["update"] / 1e3),
-    }
+    return UpdateBreakdown(
+        num_envs=n,
+        rollout_steps=t,
+        num_minibatches=cfg.train.num_minibatches,
+        num_epochs=cfg.train.num_epochs,
+        hidden=list(cfg.train.hidden),
+        shield=bool(tr.env.shield),
+        ms_per_update=parts,
+        env_steps_per_s_one_device=n * t / (parts["update"] / 1e3),
+    )
 
 
 def run_mask_ab_benchmark(path, updates: int, rounds: int, out_dir: Path) -> dict:
@@ -401,8 +434,7 @@ def run_breakdown_benchmark(paths, label: str, out_dir: Path) -> dict:
 
     rows = []
     for path in paths:
-        r = update_breakdown(load_config(path))
-        r["config"] = Path(path).name
+        r = {**update_breakdown(load_config(path)).to_dict(), "config": Path(path).name}
         rows.append(r)
         print(r, flush=True)
     lines = [
