@@ -1,13 +1,14 @@
 """What the benchmarks/*.py runners share: their command line's parser, which shows the script's
 docstring as written and takes the policy to measure, and (run_script) the whole runner of a
-benchmark whose options are its function's parameters; and ``Record``, the base of the frozen
-records the benchmark modules pass each other."""
+benchmark whose options are its function's parameters; ``Record``, the base of the frozen records
+the benchmark modules pass each other; and ``timed_calls``, the compile-then-repeat timing loop."""
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
 import inspect
+import time
 
 
 def parser(doc: str, policy: bool = True) -> argparse.ArgumentParser:
@@ -43,3 +44,16 @@ class Record:
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
+
+
+def timed_calls(step, state, repeats: int) -> tuple[float, list[float]]:
+    """Seconds of ``state = step(state)`` (ready) once, compilation included, then ``repeats`` times
+    more: (the first call's, [the others']). ``step`` returns what the next call takes."""
+    import jax
+
+    times = []
+    for _ in range(repeats + 1):
+        t0 = time.perf_counter()
+        state = jax.block_until_ready(step(state))
+        times.append(time.perf_counter() - t0)
+    return times[0], times[1:]

@@ -12,7 +12,7 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from jaxexo.benchmarks.runner import Record
+from jaxexo.benchmarks.runner import Record, timed_calls
 from jaxexo.benchmarks.train_bench import throughput
 from jaxexo.config import Config
 from jaxexo.summary import Summary, table
@@ -59,14 +59,7 @@ def agents_throughput(
     keys = np.stack([np.asarray(jax.random.PRNGKey(s)) for s in range(n_agents)])
     ts = wrap(tr.init, devices, 2)(keys, hyper)
     run = wrap(lambda t, hh: tr.run(t, hh, updates), devices, 2)
-    t0 = time.perf_counter()
-    ts, _ = jax.block_until_ready(run(ts, hyper))
-    compile_s = time.perf_counter() - t0
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        ts, _ = jax.block_until_ready(run(ts, hyper))
-        times.append(time.perf_counter() - t0)
+    compile_s, times = timed_calls(lambda s: run(s, hyper)[0], ts, repeats)
     steps = n_agents * updates * cfg.train.num_envs * cfg.train.rollout_steps
     med = Summary.of(times).median
     return AgentsThroughput(

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import jax
 
-from jaxexo.benchmarks.runner import Record
+from jaxexo.benchmarks.runner import Record, timed_calls
 from jaxexo.config import Config
 from jaxexo.summary import Summary, table
 from jaxexo.train.trainer import Hyperparams, Trainer
@@ -39,14 +39,7 @@ def throughput(cfg: Config, updates_per_call: int, repeats: int = 3, devices=Non
     # laid out as the chunks return it: one compilation (Trainer.place)
     ts = tr.place(jax.jit(tr.init)(jax.random.PRNGKey(0), hyper))
     run = jax.jit(tr.run, static_argnums=2)
-    t0 = time.perf_counter()
-    ts, _ = jax.block_until_ready(run(ts, hyper, updates_per_call))
-    compile_s = time.perf_counter() - t0
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        ts, _ = jax.block_until_ready(run(ts, hyper, updates_per_call))
-        times.append(time.perf_counter() - t0)
+    compile_s, times = timed_calls(lambda s: run(s, hyper, updates_per_call)[0], ts, repeats)
     steps = updates_per_call * cfg.train.num_envs * cfg.train.rollout_steps
     med = Summary.of(times).median
     t = cfg.train
@@ -192,12 +185,7 @@ def _timed_ms(fn, *args, repeats: int, calls: int) -> float:
     """Milliseconds per call of ``fn(i, *args)``: the median of ``repeats`` jitted loops of ``calls``
     iterations (after one that compiles)."""
     loop = jax.jit(lambda *a: jax.lax.fori_loop(0, calls, lambda i, acc: acc + fn(i, *a), 0.0))
-    jax.block_until_ready(loop(*args))
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        jax.block_until_ready(loop(*args))
-        times.append(time.perf_counter() - t0)
+    _, times = timed_calls(lambda _: loop(*args), None, repeats)
     return 1e3 * Summary.of(times).median / calls
 
 
