@@ -73,21 +73,31 @@ def agents_throughput(
     )
 
 
+def _timed_sweep(sweep, progress: bool = False) -> tuple[dict, float, list[dict]]:
+    """``run_sweep`` of ``sweep`` in a temporary folder: its result, its wall seconds (everything
+    included) and the rows of its results.csv."""
+    import csv
+
+    from jaxexo.sweep.runner import run_sweep
+
+    with tempfile.TemporaryDirectory() as d:
+        t0 = time.perf_counter()
+        res = run_sweep(sweep, Path(d) / "sweep", progress=progress)
+        wall = time.perf_counter() - t0
+        with open(Path(d) / "sweep" / "results.csv") as f:
+            return res, wall, list(csv.DictReader(f))
+
+
 def agents_per_minute(
     base_raw: dict, n_configs: int, budget_env_steps: int, progress=print
 ) -> dict:
     """A whole sweep of ``n_configs`` learning rates x 1 seed at ``budget_env_steps`` each."""
-    from jaxexo.sweep.runner import run_sweep
-
     raw = copy.deepcopy(base_raw)
     raw["train"]["budget_env_steps"] = budget_env_steps
     lrs = [float(x) for x in np.logspace(-4, -2, n_configs)]
     raw["sweep"] = {"seeds": 1, "grid": {"train.lr": lrs}}
     sweep = sweep_from_dict(raw)
-    with tempfile.TemporaryDirectory() as d:
-        t0 = time.perf_counter()
-        res = run_sweep(sweep, Path(d) / "sweep", progress=False)
-        wall = time.perf_counter() - t0
+    res, wall, _ = _timed_sweep(sweep)
     row = {
         "configs": n_configs,
         "agents": sweep.num_agents,
@@ -124,12 +134,7 @@ def vmap_throughputs(cfg: Config, devices, progress=print, updates: int = 10) ->
 def target_run(sweep, progress=print) -> dict:
     """The whole sweep through ``run_sweep`` (compilation, evaluation and the report included),
     its wall time against TARGET_S."""
-    from jaxexo.sweep.runner import run_sweep
-
-    with tempfile.TemporaryDirectory() as d:
-        t0 = time.perf_counter()
-        res = run_sweep(sweep, Path(d) / "sweep", progress=True)
-        wall = time.perf_counter() - t0
+    res, wall, _ = _timed_sweep(sweep, progress=True)
     full = {
         "agents": sweep.num_agents,
         "env_steps": res["env_steps"],
@@ -251,12 +256,10 @@ def run_learning_benchmark(out_dir, sweep_file: str | Path, progress=print) -> d
     (compilation, training, evaluation and the report included), agents per minute, env-steps/s, the
     agents that met LEARNED_SUCCESS, and the compilations of each group's chunk program (one each)."""
     import collections
-    import csv
 
     from jax import monitoring
 
     from jaxexo.evaluation.machine import write_result
-    from jaxexo.sweep.runner import run_sweep
 
     counts = collections.Counter()
 
@@ -266,12 +269,7 @@ def run_learning_benchmark(out_dir, sweep_file: str | Path, progress=print) -> d
 
     monitoring.register_event_duration_secs_listener(listen)
     sweep = load_sweep(sweep_file)
-    with tempfile.TemporaryDirectory() as d:
-        t0 = time.perf_counter()
-        res = run_sweep(sweep, Path(d) / "sweep", progress=False)
-        wall = time.perf_counter() - t0
-        with open(Path(d) / "sweep" / "results.csv") as f:
-            rows = list(csv.DictReader(f))
+    res, wall, rows = _timed_sweep(sweep)
     success = np.array([float(r["success"]) for r in rows])
     program = sum(v for k, v in counts.items() if "agent" in k)
     out = {
