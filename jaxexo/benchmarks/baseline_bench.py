@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from jaxexo.benchmarks.runner import Record
 from jaxexo.benchmarks.thesis_baseline import (
     BaselineSettings,
     NumpyExoEnv,
@@ -52,7 +53,22 @@ def make_baseline(
     )
 
 
-def baseline_throughput(cfg: Config, pool: dict, seconds: float, warmup_steps: int = 500) -> dict:
+@dataclasses.dataclass(frozen=True)
+class BaselineThroughput(Record):
+    """The thesis-style baseline's env-steps/s (and its environment's alone) and its settings."""
+
+    env_steps: int
+    seconds: float
+    env_steps_per_s: float
+    env_only_steps_per_s: float
+    batch_size: int
+    horizon: int
+    torch_threads: int
+
+
+def baseline_throughput(
+    cfg: Config, pool: dict, seconds: float, warmup_steps: int = 500
+) -> BaselineThroughput:
     learner = make_baseline(cfg, pool, eps_decay_steps=10**9)
     learner.train(env_steps=warmup_steps)
     res = learner.train(seconds=seconds, env_steps=10**12)
@@ -68,15 +84,15 @@ def baseline_throughput(cfg: Config, pool: dict, seconds: float, warmup_steps: i
         if term or trunc:
             env.reset()
     env_rate = n / (time.perf_counter() - t0)
-    return {
-        "env_steps": steps,
-        "seconds": res["train_seconds"],
-        "env_steps_per_s": steps / res["train_seconds"],
-        "env_only_steps_per_s": env_rate,
-        "batch_size": learner.s.batch_size,
-        "horizon": learner.s.horizon,
-        "torch_threads": learner.s.torch_threads,
-    }
+    return BaselineThroughput(
+        env_steps=steps,
+        seconds=res["train_seconds"],
+        env_steps_per_s=steps / res["train_seconds"],
+        env_only_steps_per_s=env_rate,
+        batch_size=learner.s.batch_size,
+        horizon=learner.s.horizon,
+        torch_threads=learner.s.torch_threads,
+    )
 
 
 def time_to_target(rows: list[dict], target: float, key: str = "validation_success") -> dict | None:
@@ -105,11 +121,11 @@ def throughput_figures(base: Config, b: Budgets) -> dict:
     from jaxexo.benchmarks.train_bench import thesis_network_config, throughput
 
     tcfg = thesis_network_config(base, "forward")
-    jx = throughput(tcfg, 10, repeats=3, devices=jax.local_devices())
+    jx = throughput(tcfg, 10, repeats=3, devices=jax.local_devices()).to_dict()
     b.progress(
         f"jaxexo trainer, thesis network, 4096 envs: {jx['env_steps_per_s'] / 1e6:.3f} M env-steps/s"
     )
-    bl = baseline_throughput(tcfg, layout_pool(tcfg, POOL), b.throughput_seconds)
+    bl = baseline_throughput(tcfg, layout_pool(tcfg, POOL), b.throughput_seconds).to_dict()
     b.progress(
         f"thesis-style baseline, thesis network: {bl['env_steps_per_s']:.0f} env-steps/s "
         f"(environment alone {bl['env_only_steps_per_s']:.0f}/s)"
@@ -152,7 +168,7 @@ def baseline_curve(base: Config, b: Budgets) -> tuple[SequentialTDLambda, dict, 
     from jaxexo.train.network import QNetwork
 
     pool = layout_pool(base, POOL)
-    rate = baseline_throughput(base, pool, min(20.0, b.throughput_seconds))["env_steps_per_s"]
+    rate = baseline_throughput(base, pool, min(20.0, b.throughput_seconds)).env_steps_per_s
     planned = int(rate * b.baseline_seconds)
     learner = make_baseline(
         base, pool, eps_decay_steps=max(1, int(base.train.eps_decay_fraction * planned))

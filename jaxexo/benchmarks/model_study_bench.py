@@ -74,14 +74,14 @@ def measure_agent(gen: TrajectoryGenerator, n: int) -> dict:
         arrays = {}
         r = run_set(gens, sc, cfg, None, 0.0, None, arrays)
         sets[name] = {
-            "rl_safe": r["rl"]["safe"],
-            "cfftg_safe": r["cfftg"]["safe"],
-            "rl_goal": r["rl"]["reached_goal"],
-            "rl_longest_s": r["rl"]["duration_s_max"],
-            "rl_corrected": r["rl"]["corrected"],
+            "rl_safe": r["rl"].safe,
+            "cfftg_safe": r["cfftg"].safe,
+            "rl_goal": r["rl"].reached_goal,
+            "rl_longest_s": r["rl"].duration_s_max,
+            "rl_corrected": r["rl"].corrected,
             **_both_safe(arrays),
         }
-        longest = max(longest, r["rl"]["duration_s_max"])
+        longest = max(longest, r["rl"].duration_s_max)
         for g, (ok, lift, dur) in arrays.items():
             for k, v in enumerate((ok, lift, dur)):
                 pooled[g][k].append(v)

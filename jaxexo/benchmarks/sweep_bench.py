@@ -12,9 +12,10 @@ from pathlib import Path
 import jax
 import numpy as np
 
+from jaxexo.benchmarks.runner import Record, timed_calls
 from jaxexo.benchmarks.train_bench import throughput
 from jaxexo.config import Config
-from jaxexo.summary import Summary
+from jaxexo.summary import Summary, table
 from jaxexo.sweep.spec import load_sweep, sweep_from_dict
 from jaxexo.train.lanes import LANES, over_agents, over_lanes
 from jaxexo.train.trainer import Hyperparams, Trainer
@@ -22,9 +23,27 @@ from jaxexo.train.trainer import Hyperparams, Trainer
 TARGET_S = 600.0
 
 
+def _m(r) -> str:
+    """A row's env-steps/s in millions, as the tables show it."""
+    return f"{r['env_steps_per_s'] / 1e6:.3f}"
+
+
+@dataclasses.dataclass(frozen=True)
+class AgentsThroughput(Record):
+    """Training env-steps/s of a batch of agents (the median call's figures)."""
+
+    agents: int
+    devices: int
+    env_steps_per_call: int
+    median_s: float
+    env_steps_per_s: float
+    compile_s: float
+    repeats: int
+
+
 def agents_throughput(
     cfg: Config, n_agents: int, devices, updates: int, repeats: int = 3, wrap=over_agents
-) -> dict:
+) -> AgentsThroughput:
     """Training env-steps/s of ``n_agents`` agents (learning rates spread over a decade, one seed
     each) vmapped and split over ``devices``: the sweep's training program without its evaluation.
     ``wrap``: over_agents (one vmapped batch per device) or over_lanes (fixed blocks, what sweeps and
@@ -40,42 +59,45 @@ def agents_throughput(
     keys = np.stack([np.asarray(jax.random.PRNGKey(s)) for s in range(n_agents)])
     ts = wrap(tr.init, devices, 2)(keys, hyper)
     run = wrap(lambda t, hh: tr.run(t, hh, updates), devices, 2)
-    t0 = time.perf_counter()
-    ts, _ = jax.block_until_ready(run(ts, hyper))
-    compile_s = time.perf_counter() - t0
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        ts, _ = jax.block_until_ready(run(ts, hyper))
-        times.append(time.perf_counter() - t0)
+    compile_s, times = timed_calls(lambda s: run(s, hyper)[0], ts, repeats)
     steps = n_agents * updates * cfg.train.num_envs * cfg.train.rollout_steps
     med = Summary.of(times).median
-    return {
-        "agents": n_agents,
-        "devices": len(devices),
-        "env_steps_per_call": steps,
-        "median_s": med,
-        "env_steps_per_s": steps / med,
-        "compile_s": compile_s,
-        "repeats": repeats,
-    }
+    return AgentsThroughput(
+        agents=n_agents,
+        devices=len(devices),
+        env_steps_per_call=steps,
+        median_s=med,
+        env_steps_per_s=steps / med,
+        compile_s=compile_s,
+        repeats=repeats,
+    )
+
+
+def _timed_sweep(sweep, progress: bool = False) -> tuple[dict, float, list[dict]]:
+    """``run_sweep`` of ``sweep`` in a temporary folder: its result, its wall seconds (everything
+    included) and the rows of its results.csv."""
+    import csv
+
+    from jaxexo.sweep.runner import run_sweep
+
+    with tempfile.TemporaryDirectory() as d:
+        t0 = time.perf_counter()
+        res = run_sweep(sweep, Path(d) / "sweep", progress=progress)
+        wall = time.perf_counter() - t0
+        with open(Path(d) / "sweep" / "results.csv") as f:
+            return res, wall, list(csv.DictReader(f))
 
 
 def agents_per_minute(
     base_raw: dict, n_configs: int, budget_env_steps: int, progress=print
 ) -> dict:
     """A whole sweep of ``n_configs`` learning rates x 1 seed at ``budget_env_steps`` each."""
-    from jaxexo.sweep.runner import run_sweep
-
     raw = copy.deepcopy(base_raw)
     raw["train"]["budget_env_steps"] = budget_env_steps
     lrs = [float(x) for x in np.logspace(-4, -2, n_configs)]
     raw["sweep"] = {"seeds": 1, "grid": {"train.lr": lrs}}
     sweep = sweep_from_dict(raw)
-    with tempfile.TemporaryDirectory() as d:
-        t0 = time.perf_counter()
-        res = run_sweep(sweep, Path(d) / "sweep", progress=False)
-        wall = time.perf_counter() - t0
+    res, wall, _ = _timed_sweep(sweep)
     row = {
         "configs": n_configs,
         "agents": sweep.num_agents,
@@ -87,7 +109,7 @@ def agents_per_minute(
     }
     progress(
         f"  {n_configs:4d} configurations: {wall:7.1f} s, {row['agents_per_min']:7.1f} agents/min, "
-        f"{row['env_steps_per_s'] / 1e6:.3f} M env-steps/s (all included)"
+        f"{_m(row)} M env-steps/s (all included)"
     )
     return row
 
@@ -96,19 +118,15 @@ def vmap_throughputs(cfg: Config, devices, progress=print, updates: int = 10) ->
     """Training env-steps/s of 64 agents vmapped over ``devices`` and over one device, and of one
     run of 64 times the environments, data parallel over ``devices``: the payload's three entries."""
     tc = cfg.train
-    sweep64 = agents_throughput(cfg, 64, devices, updates)
-    progress(
-        f"64 agents x {tc.num_envs} envs, {len(devices)} devices: {sweep64['env_steps_per_s'] / 1e6:.3f} M env-steps/s"
-    )
-    one_dev = agents_throughput(cfg, 64, devices[:1], updates)
-    progress(
-        f"64 agents x {tc.num_envs} envs, 1 device: {one_dev['env_steps_per_s'] / 1e6:.3f} M env-steps/s"
-    )
+    sweep64 = agents_throughput(cfg, 64, devices, updates).to_dict()
+    progress(f"64 agents x {tc.num_envs} envs, {len(devices)} devices: {_m(sweep64)} M env-steps/s")
+    one_dev = agents_throughput(cfg, 64, devices[:1], updates).to_dict()
+    progress(f"64 agents x {tc.num_envs} envs, 1 device: {_m(one_dev)} M env-steps/s")
     big = dataclasses.replace(cfg, train=dataclasses.replace(tc, num_envs=64 * tc.num_envs))
-    single = throughput(big, updates, repeats=3, devices=devices)
+    single = throughput(big, updates, repeats=3, devices=devices).to_dict()
     progress(
         f"one run of {big.train.num_envs} envs, {single['devices']} devices: "
-        f"{single['env_steps_per_s'] / 1e6:.3f} M env-steps/s"
+        f"{_m(single)} M env-steps/s"
     )
     return {"sweep_64": sweep64, "sweep_64_one_device": one_dev, "single_run": single}
 
@@ -116,12 +134,7 @@ def vmap_throughputs(cfg: Config, devices, progress=print, updates: int = 10) ->
 def target_run(sweep, progress=print) -> dict:
     """The whole sweep through ``run_sweep`` (compilation, evaluation and the report included),
     its wall time against TARGET_S."""
-    from jaxexo.sweep.runner import run_sweep
-
-    with tempfile.TemporaryDirectory() as d:
-        t0 = time.perf_counter()
-        res = run_sweep(sweep, Path(d) / "sweep", progress=True)
-        wall = time.perf_counter() - t0
+    res, wall, _ = _timed_sweep(sweep, progress=True)
     full = {
         "agents": sweep.num_agents,
         "env_steps": res["env_steps"],
@@ -146,6 +159,8 @@ def sweep_markdown(cfg: Config, payload: dict, per_minute_budget: int) -> str:
     tc = cfg.train
     sweep64, one_dev = payload["sweep_64"], payload["sweep_64_one_device"]
     single, full = payload["single_run"], payload["target_run"]
+    n, per_min = tc.num_envs, payload["agents_per_minute"]
+    vm = f"64 agents × {n} envs (vmapped)"
     lines = [
         "# Sweep benchmarks",
         "",
@@ -153,27 +168,34 @@ def sweep_markdown(cfg: Config, payload: dict, per_minute_budget: int) -> str:
         f"observation `{cfg.env.obs_mode}`, {tc.num_envs} environments per agent, T = {tc.rollout_steps}, "
         f"{tc.num_minibatches} minibatch(es) per update, forward view, {tc.control}.",
         "",
-        "| what | M env-steps/s |",
-        "|---|---:|",
-        f"| 64 agents × {tc.num_envs} envs (vmapped), {sweep64['devices']} CPU devices | {sweep64['env_steps_per_s'] / 1e6:.3f} |",
-        f"| 64 agents × {tc.num_envs} envs (vmapped), 1 CPU device | {one_dev['env_steps_per_s'] / 1e6:.3f} |",
-        f"| one run of {64 * tc.num_envs} envs, {single['devices']} CPU devices (data parallel) | "
-        f"{single['env_steps_per_s'] / 1e6:.3f} |",
+        *table(
+            ("what", "M env-steps/s"),
+            [
+                (f"{vm}, {sweep64['devices']} CPU devices", _m(sweep64)),
+                (f"{vm}, 1 CPU device", _m(one_dev)),
+                (
+                    f"one run of {64 * n} envs, {single['devices']} CPU devices (data parallel)",
+                    _m(single),
+                ),
+            ],
+        ),
         "",
-        f"| configurations (1 seed, {per_minute_budget:,} env steps each) | wall s (all included) | agents per minute | "
-        "M env-steps/s |",
-        "|---:|---:|---:|---:|",
-    ]
-    lines += [
-        f"| {r['configs']} | {r['wall_s']:.1f} | {r['agents_per_min']:.1f} | {r['env_steps_per_s'] / 1e6:.3f} |"
-        for r in payload["agents_per_minute"]
+        *table(
+            f"configurations (1 seed, {per_minute_budget:,} env steps each)|wall s (all included)|"
+            "agents per minute|M env-steps/s".split("|"),
+            [
+                (r["configs"], f"{r['wall_s']:.1f}", f"{r['agents_per_min']:.1f}", _m(r))
+                for r in per_min
+            ],
+            "rrrr",
+        ),
     ]
     if full:
         lines += [
             "",
             f"Target run (64 configurations × 4 seeds × {tc.num_envs} envs × {tc.budget_env_steps:,} env "
             f"steps): {full['env_steps']:,.0f} env steps in **{full['wall_s']:.1f} s** "
-            f"(target ≤ {TARGET_S:.0f} s), {full['env_steps_per_s'] / 1e6:.3f} M env-steps/s including "
+            f"(target ≤ {TARGET_S:.0f} s), {_m(full)} M env-steps/s including "
             f"compilation, evaluation and the report; best: {full['best']['label']} "
             f"(success {full['best']['success_mean']:.3f} ± {full['best']['success_std']:.3f}).",
         ]
@@ -234,12 +256,10 @@ def run_learning_benchmark(out_dir, sweep_file: str | Path, progress=print) -> d
     (compilation, training, evaluation and the report included), agents per minute, env-steps/s, the
     agents that met LEARNED_SUCCESS, and the compilations of each group's chunk program (one each)."""
     import collections
-    import csv
 
     from jax import monitoring
 
     from jaxexo.evaluation.machine import write_result
-    from jaxexo.sweep.runner import run_sweep
 
     counts = collections.Counter()
 
@@ -249,12 +269,7 @@ def run_learning_benchmark(out_dir, sweep_file: str | Path, progress=print) -> d
 
     monitoring.register_event_duration_secs_listener(listen)
     sweep = load_sweep(sweep_file)
-    with tempfile.TemporaryDirectory() as d:
-        t0 = time.perf_counter()
-        res = run_sweep(sweep, Path(d) / "sweep", progress=False)
-        wall = time.perf_counter() - t0
-        with open(Path(d) / "sweep" / "results.csv") as f:
-            rows = list(csv.DictReader(f))
+    res, wall, rows = _timed_sweep(sweep)
     success = np.array([float(r["success"]) for r in rows])
     program = sum(v for k, v in counts.items() if "agent" in k)
     out = {
@@ -271,16 +286,20 @@ def run_learning_benchmark(out_dir, sweep_file: str | Path, progress=print) -> d
         "compilations_per_group": program / max(1, len(sweep.groups)),
         "devices": len(jax.local_devices()),
     }
+    head = "agents|groups|env steps|wall s (all included)|agents per minute|M env-steps/s|"
+    head += f"agents with greedy success >= {LEARNED_SUCCESS}|compilations per group"
+    cells = [out["agents"], out["groups"], f"{out['env_steps']:,.0f}", f"{wall:.1f}"]
+    cells += [
+        f"{out['agents_per_min']:.1f}",
+        _m(out),
+        f"{out['agents_learned']} of {out['agents']}",
+    ]
+    cells.append(f"{out['compilations_per_group']:g}")
     md = "\n".join(
         [
             f"# Learning sweep benchmark ({out['sweep_file']})",
             "",
-            "| agents | groups | env steps | wall s (all included) | agents per minute | M env-steps/s | "
-            f"agents with greedy success >= {LEARNED_SUCCESS} | compilations per group |",
-            "|---:|---:|---:|---:|---:|---:|---:|---:|",
-            f"| {out['agents']} | {out['groups']} | {out['env_steps']:,.0f} | {wall:.1f} | {out['agents_per_min']:.1f} | "
-            f"{out['env_steps_per_s'] / 1e6:.3f} | {out['agents_learned']} of {out['agents']} | "
-            f"{out['compilations_per_group']:g} |",
+            *table(head.split("|"), [cells], "r" * 8),
             "",
             "Greedy success per agent (test layouts): "
             + ", ".join(f"{x:.3f}" for x in success)
@@ -315,9 +334,11 @@ def run_lanes_benchmark(out_dir, sweep_file: str | Path) -> dict:
             ("one vmap per device", over_agents),
             (f"blocks of {LANES}", over_lanes),
         ):
-            r = agents_throughput(cfg, n, devices, updates, repeats=3, wrap=wrap)
+            r = agents_throughput(cfg, n, devices, updates, repeats=3, wrap=wrap).to_dict()
             rows.append({"case": name, "program": label, **r})
-            print(name, label, f"{r['env_steps_per_s'] / 1e6:.3f} M env-steps/s", flush=True)
+            print(name, label, f"{_m(r)} M env-steps/s", flush=True)
+    head = "case|agents|program|M env-steps/s|median s per call|ratio to one vmap per device"
+    ratios = [r["env_steps_per_s"] / rows[i - i % 2]["env_steps_per_s"] for i, r in enumerate(rows)]
     lines = [
         "# Fixed vmap blocks against one batch per device",
         "",
@@ -325,15 +346,15 @@ def run_lanes_benchmark(out_dir, sweep_file: str | Path) -> dict:
         f"{tuple(round(x, 2) for x in os.getloadavg())} (a shared machine). Training only (no evaluation); "
         "median of 3 compiled calls.",
         "",
-        "| case | agents | program | M env-steps/s | median s per call | ratio to one vmap per device |",
-        "|---|---:|---|---:|---:|---:|",
+        *table(
+            head.split("|"),
+            [
+                (r["case"], r["agents"], r["program"], _m(r), f"{r['median_s']:.2f}", f"{q:.2f}")
+                for r, q in zip(rows, ratios)
+            ],
+            "lrlrrr",
+        ),
     ]
-    for i, r in enumerate(rows):
-        base = rows[i - i % 2]
-        lines.append(
-            f"| {r['case']} | {r['agents']} | {r['program']} | {r['env_steps_per_s'] / 1e6:.3f} | "
-            f"{r['median_s']:.2f} | {r['env_steps_per_s'] / base['env_steps_per_s']:.2f} |"
-        )
     payload = {"rows": rows, "load_before": load_before}
     for p in write_result("lanes", payload, "\n".join(lines), out_dir):
         print(p)

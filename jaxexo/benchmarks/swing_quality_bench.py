@@ -4,12 +4,14 @@ benchmarks/bench_swing_quality.py; the model study measures each agent with ``ru
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 
 import numpy as np
 
 from jaxexo.baselines import CFFTG
+from jaxexo.benchmarks.runner import Record
 from jaxexo.benchmarks.scenes import (
     FAMILIES,
     SHAPES,
@@ -64,9 +66,43 @@ def _feasible(trajs, true, seen, cfg, clearance) -> np.ndarray:
     )
 
 
+@dataclasses.dataclass(frozen=True)
+class SetFigures(Record):
+    """One generator's figures on one scene set (shares, cm, s); the RL generator's smoothing
+    figures and, once both generators ran, those on the scenes both swing safely (else None)."""
+
+    n: int
+    safe: float
+    feasible: int
+    safe_of_feasible: float
+    true_contact_of_feasible: float
+    reached_goal: float
+    lift_cm_median: float
+    lift_cm_p95: float
+    duration_s_median: float
+    duration_s_p95: float
+    duration_s_max: float
+    jerk_median: float
+    jerk_p95: float
+    true_contact: float
+    true_within_1cm: float
+    true_clearance_cm_p5: float
+    generate_s: float
+    smoothed_once: float | None = None
+    corrected: float | None = None
+    raw_polyline: float | None = None
+    n_all_safe: int | None = None
+    lift_cm_median_all_safe: float | None = None
+    duration_s_median_all_safe: float | None = None
+    duration_s_p95_all_safe: float | None = None
+
+    def to_dict(self) -> dict:
+        return {k: v for k, v in super().to_dict().items() if v is not None}
+
+
 def _figures(
     trajs, timed, true, feasible, cfg, gen_s: float
-) -> tuple[dict, np.ndarray, np.ndarray]:
+) -> tuple[SetFigures, np.ndarray, np.ndarray]:
     """One generator's figures on a set (true: the obstacles the judge sees), its lifts (m) and timed
     durations (s)."""
     dur = np.array([t.duration for t in timed])
@@ -92,29 +128,29 @@ def _figures(
         Summary.of(true_c),
     )
     return (
-        {
-            "n": len(trajs),
-            "safe": float(np.mean([t.ok for t in trajs])),
-            "feasible": int(feasible.sum()),
-            "safe_of_feasible": float(np.mean([t.ok for t, f in zip(trajs, feasible) if f]))
+        SetFigures(
+            n=len(trajs),
+            safe=float(np.mean([t.ok for t in trajs])),
+            feasible=int(feasible.sum()),
+            safe_of_feasible=float(np.mean([t.ok for t, f in zip(trajs, feasible) if f]))
             if feasible.any()
             else nan,
-            "true_contact_of_feasible": float(np.mean((true_c <= geometry.TOUCH_EPS)[feasible]))
+            true_contact_of_feasible=float(np.mean((true_c <= geometry.TOUCH_EPS)[feasible]))
             if feasible.any()
             else nan,
-            "reached_goal": float(np.mean([t.checks.reached_goal for t in trajs])),
-            "lift_cm_median": 100 * lifts.median,
-            "lift_cm_p95": 100 * lifts.p95,
-            "duration_s_median": durs.median,
-            "duration_s_p95": durs.p95,
-            "duration_s_max": durs.max,
-            "jerk_median": jerks.median,
-            "jerk_p95": jerks.p95,
-            "true_contact": float(np.mean(true_c <= geometry.TOUCH_EPS)),
-            "true_within_1cm": float(np.mean(true_c < 0.01)),
-            "true_clearance_cm_p5": 100 * clear.p5,
-            "generate_s": gen_s,
-        },
+            reached_goal=float(np.mean([t.checks.reached_goal for t in trajs])),
+            lift_cm_median=100 * lifts.median,
+            lift_cm_p95=100 * lifts.p95,
+            duration_s_median=durs.median,
+            duration_s_p95=durs.p95,
+            duration_s_max=durs.max,
+            jerk_median=jerks.median,
+            jerk_p95=jerks.p95,
+            true_contact=float(np.mean(true_c <= geometry.TOUCH_EPS)),
+            true_within_1cm=float(np.mean(true_c < 0.01)),
+            true_clearance_cm_p5=100 * clear.p5,
+            generate_s=gen_s,
+        ),
         lift,
         dur,
     )
@@ -122,9 +158,9 @@ def _figures(
 
 def run_set(
     gens: dict, scenes: list[dict], cfg, clearance, error: float, smoothing=None, arrays=None
-) -> dict:
-    """Both generators' figures on one scene set; ``arrays`` (a dict), when given, receives each
-    generator's per-scene (safe, lift m, duration s) for the figure."""
+) -> dict[str, SetFigures]:
+    """Both generators' figures on one scene set, by generator name; ``arrays`` (a dict), when given,
+    receives each generator's per-scene (safe, lift m, duration s) for the figure."""
     out, per = {}, {}
     true = [s["obstacle"] for s in scenes]
     seen = (
@@ -149,19 +185,25 @@ def run_set(
             smooth = np.array([t.smoothing for t in trajs], dtype=np.float64)
             asked = np.array([(t.method == "rl") for t in trajs])
             asked_s = gen.smoothing if smoothing is None else smoothing
-            r["smoothed_once"] = float(np.mean(asked & (smooth == asked_s)))
-            r["corrected"] = float(np.mean([any(CLEARING in n for n in t.notes) for t in trajs]))
-            r["raw_polyline"] = float(np.mean(np.isnan(smooth)))
+            r = dataclasses.replace(
+                r,
+                smoothed_once=float(np.mean(asked & (smooth == asked_s))),
+                corrected=float(np.mean([any(CLEARING in n for n in t.notes) for t in trajs])),
+                raw_polyline=float(np.mean(np.isnan(smooth))),
+            )
         out[name] = r
         per[name] = (np.array([t.ok for t in trajs]), lift, dur)
     # The scenes every generator swings safely: lift and duration compared where neither fails.
     both = np.logical_and.reduce([ok for ok, _, _ in per.values()])
     for name, (_, lift, dur) in per.items():
         lifts, durs = Summary.of(lift[both]), Summary.of(dur[both])  # NaN where none is safe
-        out[name]["n_all_safe"] = int(both.sum())
-        out[name]["lift_cm_median_all_safe"] = 100 * lifts.median
-        out[name]["duration_s_median_all_safe"] = durs.median
-        out[name]["duration_s_p95_all_safe"] = durs.p95
+        out[name] = dataclasses.replace(
+            out[name],
+            n_all_safe=int(both.sum()),
+            lift_cm_median_all_safe=100 * lifts.median,
+            duration_s_median_all_safe=durs.median,
+            duration_s_p95_all_safe=durs.p95,
+        )
     if arrays is not None:
         arrays.update(per)
     return out
@@ -278,9 +320,8 @@ def run_swing_quality_benchmark(
     arrays = {}
     for name, scenes in scene_sets(cfg, n).items():
         arrays[name] = {}
-        res["sets"][name] = run_set(
-            gens, scenes, cfg, clearance, perception_error, smoothing, arrays[name]
-        )
+        figures = run_set(gens, scenes, cfg, clearance, perception_error, smoothing, arrays[name])
+        res["sets"][name] = {g: f.to_dict() for g, f in figures.items()}
         print(
             name,
             {g: {k: round(v, 4) for k, v in r.items()} for g, r in res["sets"][name].items()},

@@ -16,6 +16,7 @@ import numpy as np
 from jaxexo.evaluation.machine import write_result
 from jaxexo.evaluation.reproduce import compact, run_names, tables
 from jaxexo.physics import geometry as g
+from jaxexo.summary import table
 
 
 def _write(name: str, payload: dict, lines: list[str], out_dir) -> dict:
@@ -63,6 +64,7 @@ def run_envelope(out_dir) -> dict:
                         "min_clearance_m": float(clear[test][safe].min()),
                     }
                 )
+    keys = ("kept_from", "test_obstacle", "safe_positions", "safe_but_colliding")
     lines = [
         "# Thesis learning study: envelope",
         "",
@@ -71,15 +73,20 @@ def run_envelope(out_dir) -> dict:
         f"Grid: heel y {ys[0]:.2f}-{ys[-1]:.2f} m x z 0-0.40 m, 1 mm steps ({heel.shape[0]} positions); "
         "command: `python benchmarks/thesis_envelope.py`.",
         "",
-        "| min_dt cm | kept from | test obstacle | positions kept | of which collide with the test obstacle | "
-        "min clearance to it cm |",
-        "|---:|---|---|---:|---:|---:|",
+        *table(
+            "min_dt cm|kept from|test obstacle|positions kept|of which collide with the test obstacle|"
+            "min clearance to it cm".split("|"),
+            [
+                (
+                    f"{100 * r['min_dt_m']:.0f}",
+                    *(r[k] for k in keys),
+                    f"{100 * r['min_clearance_m']:.2f}",
+                )
+                for r in rows
+            ],
+            "rllrrr",
+        ),
     ]
-    for r in rows:
-        lines.append(
-            f"| {100 * r['min_dt_m']:.0f} | {r['kept_from']} | {r['test_obstacle']} | {r['safe_positions']} | "
-            f"{r['safe_but_colliding']} | {100 * r['min_clearance_m']:.2f} |"
-        )
     lines += [
         "",
         "With 6 cm from each of Base 1-3 every kept position is at least 1.1 cm clear of the half-circle "
@@ -119,25 +126,9 @@ def learning_report(study: str, sweep_file: str, sweep_dir: str, out_dir, note: 
     sweep = json.loads((Path(sweep_dir) / "sweep.json").read_text())
     axes = list(sweep.get("sweep", {}).get("grid", {}))
     rows = list(csv.DictReader(open(Path(sweep_dir) / "results.csv")))
-    head = (
-        "| "
-        + " | ".join(
-            [
-                *axes,
-                "seed",
-                "strict success %",
-                "accuracy % (eq 3.1)",
-                "held-out success %",
-                "train success % (last 10 %)",
-                "greedy return",
-                "episodes",
-                "updates",
-                "wall s",
-            ]
-        )
-        + " |"
-    )
-    align = "|" + "---|" * (len(axes) + 1) + "---:|" * len(COLS)
+    head = [*axes, "seed", "strict success %", "accuracy % (eq 3.1)", "held-out success %"]
+    head += ["train success % (last 10 %)", "greedy return", "episodes", "updates", "wall s"]
+    align = "l" * (len(axes) + 1) + "r" * len(COLS)
     lines = [
         f"# Thesis learning study: {study}",
         "",
@@ -150,31 +141,30 @@ def learning_report(study: str, sweep_file: str, sweep_dir: str, out_dir, note: 
         "",
         "## Per configuration (mean over seeds)",
         "",
-        head.replace("| seed ", "| seeds "),
-        align,
     ]
     groups = defaultdict(list)
     for r in rows:
         groups[tuple(r[a] for a in axes)].append(r)
-    for key, rs in groups.items():
-        means = [
+    means = {
+        key: [
             str(sum(float(r[c]) for r in rs) / len(rs))
             if all(r[c] not in ("", "nan") for r in rs)
             else "nan"
             for c in COLS
         ]
-        lines.append(
-            "| "
-            + " | ".join([*key, str(len(rs)), *(_fmt(c, m) for c, m in zip(COLS, means))])
-            + " |"
-        )
-    lines += ["", "## Every agent", "", head, align]
-    for r in rows:
-        lines.append(
-            "| "
-            + " | ".join([*(r[a] for a in axes), r["seed"], *(_fmt(c, r[c]) for c in COLS)])
-            + " |"
-        )
+        for key, rs in groups.items()
+    }
+    per_config = [
+        (*key, len(groups[key]), *(_fmt(c, m) for c, m in zip(COLS, ms)))
+        for key, ms in means.items()
+    ]
+    lines += table([*axes, "seeds", *head[len(axes) + 1 :]], per_config, align)
+    lines += ["", "## Every agent", ""]
+    lines += table(
+        head,
+        [(*(r[a] for a in axes), r["seed"], *(_fmt(c, r[c]) for c in COLS)) for r in rows],
+        align,
+    )
     payload = {
         "study": study,
         "sweep_file": sweep_file,
@@ -188,10 +178,6 @@ def learning_report(study: str, sweep_file: str, sweep_dir: str, out_dir, note: 
 def seed_check(note: str, runs: list[str], out_dir) -> dict:
     """Run directories given as MODEL=RUN_DIR:SEED, their eval.json figures one row each, written as
     thesis-seeds_<date>_<machine>.*"""
-    head = (
-        "| config | seed | strict success % | accuracy % (eq 3.1) | reached goal % | held-out success % | "
-        "selected chunk | train s |"
-    )
     lines = [
         "# Thesis learns configs over seeds (jaxexo train, the reproduce driver)",
         "",
@@ -202,10 +188,8 @@ def seed_check(note: str, runs: list[str], out_dir) -> dict:
         "exported (best validated) policy on the 1000 test layouts (five thesis obstacles x three pivot "
         "conditions), raw moves, no smoothing.",
         "",
-        head,
-        "|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
-    rows = []
+    rows, cells = [], []
     for spec in runs:
         model, rest = spec.split("=", 1)
         run, seed = rest.rsplit(":", 1)
@@ -221,11 +205,13 @@ def seed_check(note: str, runs: list[str], out_dir) -> dict:
             "train_seconds": ev["train_seconds"],
         }
         rows.append(row)
-        lines.append(
-            f"| {model} | {seed} | {100 * row['success']:.1f} | {100 * row['accuracy']:.1f} | "
-            f"{100 * row['reached_goal']:.1f} | {100 * row['held_out_success']:.1f} | "
-            f"{row['selected_chunk']} | {row['train_seconds']:.1f} |"
+        pct = (
+            f"{100 * row[k]:.1f}"
+            for k in ("success", "accuracy", "reached_goal", "held_out_success")
         )
+        cells.append((model, seed, *pct, row["selected_chunk"], f"{row['train_seconds']:.1f}"))
+    head = "config|seed|strict success %|accuracy % (eq 3.1)|reached goal %|held-out success %"
+    lines += table(head.split("|") + ["selected chunk", "train s"], cells)
     return _write("thesis-seeds", {"note": note, "rows": rows}, lines, out_dir)
 
 

@@ -10,40 +10,52 @@ from pathlib import Path
 
 import jax
 
+from jaxexo.benchmarks.runner import Record, timed_calls
 from jaxexo.config import Config
 from jaxexo.summary import Summary, table
 from jaxexo.train.trainer import Hyperparams, Trainer
 
 
-def throughput(cfg: Config, updates_per_call: int, repeats: int = 3, devices=None) -> dict:
+@dataclasses.dataclass(frozen=True)
+class Throughput(Record):
+    """Whole training updates' env-steps/s of one config (its settings, the median call's figures)."""
+
+    trace: str
+    control: str
+    num_envs: int
+    hidden: list
+    rollout_steps: int
+    env_steps_per_call: int
+    median_s: float
+    env_steps_per_s: float
+    compile_s: float
+    repeats: int
+    devices: int
+
+
+def throughput(cfg: Config, updates_per_call: int, repeats: int = 3, devices=None) -> Throughput:
     tr = Trainer(cfg, devices=devices)
     hyper = Hyperparams.from_config(cfg)
     # laid out as the chunks return it: one compilation (Trainer.place)
     ts = tr.place(jax.jit(tr.init)(jax.random.PRNGKey(0), hyper))
     run = jax.jit(tr.run, static_argnums=2)
-    t0 = time.perf_counter()
-    ts, _ = jax.block_until_ready(run(ts, hyper, updates_per_call))
-    compile_s = time.perf_counter() - t0
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        ts, _ = jax.block_until_ready(run(ts, hyper, updates_per_call))
-        times.append(time.perf_counter() - t0)
+    compile_s, times = timed_calls(lambda s: run(s, hyper, updates_per_call)[0], ts, repeats)
     steps = updates_per_call * cfg.train.num_envs * cfg.train.rollout_steps
     med = Summary.of(times).median
-    return {
-        "trace": cfg.train.trace,
-        "control": cfg.train.control,
-        "num_envs": cfg.train.num_envs,
-        "hidden": list(cfg.train.hidden),
-        "rollout_steps": cfg.train.rollout_steps,
-        "env_steps_per_call": steps,
-        "median_s": med,
-        "env_steps_per_s": steps / med,
-        "compile_s": compile_s,
-        "repeats": repeats,
-        "devices": len(tr.devices or [0]),
-    }
+    t = cfg.train
+    return Throughput(
+        trace=t.trace,
+        control=t.control,
+        num_envs=t.num_envs,
+        hidden=list(t.hidden),
+        rollout_steps=t.rollout_steps,
+        env_steps_per_call=steps,
+        median_s=med,
+        env_steps_per_s=steps / med,
+        compile_s=compile_s,
+        repeats=repeats,
+        devices=len(tr.devices or [0]),
+    )
 
 
 def thesis_network_config(base: Config, trace: str, num_envs: int = 4096) -> Config:
@@ -84,7 +96,7 @@ def run_train_benchmark(
             cfg, train=dataclasses.replace(cfg.train, num_minibatches=minibatches)
         )
         r = throughput(cfg, updates, repeats=3 if trace == "forward" else 2, devices=devices)
-        r["num_minibatches"] = minibatches
+        r = {**r.to_dict(), "num_minibatches": minibatches}
         progress(
             f"thesis network, {trace} view, {minibatches} minibatch(es), 4096 envs, {r['devices']} device(s): "
             f"{r['env_steps_per_s'] / 1e6:.3f} M env-steps/s"
@@ -110,28 +122,28 @@ def run_train_benchmark(
             f"{name}: trained in {res['train_seconds']:.1f} s, success_raw {res['success_raw']:.3f}, "
             f"held-out success_raw {(res['held_out'] or {}).get('success_raw')}"
         )
-    lines = ["# Trainer benchmarks", "", "| what | figure |", "|---|---:|"]
-    for r in rows:
-        mb = "" if r["trace"] == "backward" else f", {r['num_minibatches']} minibatch(es)/update"
-        lines.append(
-            f"| thesis network, {r['trace']} view{mb}, {r['num_envs']} envs, {r['devices']} CPU devices | "
-            f"{r['env_steps_per_s'] / 1e6:.3f} M env-steps/s |"
+    tput = [
+        (
+            f"thesis network, {r['trace']} view"
+            + ("" if r["trace"] == "backward" else f", {r['num_minibatches']} minibatch(es)/update")
+            + f", {r['num_envs']} envs, {r['devices']} CPU devices",
+            f"{r['env_steps_per_s'] / 1e6:.3f} M env-steps/s",
         )
-    for name, r in runs.items():
-        held = (r["held_out"] or {}).get("success_raw")
-    lines += [
-        "",
-        "| config | train wall s (incl. compile) | episodes | env steps | accuracy (eq 3.1) | "
-        "strict success, raw moves | held-out, raw moves |",
-        "|---|---:|---:|---:|---:|---:|---:|",
+        for r in rows
     ]
-    for name, r in runs.items():
-        held = (r["held_out"] or {}).get("success_raw")
-        lines.append(
-            f"| `{Path(name).relative_to(Path(name).parents[1]) if 'thesis' in name else Path(name).name}` | "
-            f"{r['train_seconds']:.1f} | {r['episodes']} | {r['env_steps']:,} | {r['accuracy']:.3f} | "
-            f"{r['success_raw']:.3f} | {held:.3f} |"
+    head = "config|train wall s (incl. compile)|episodes|env steps|accuracy (eq 3.1)|"
+    head += "strict success, raw moves|held-out, raw moves"
+    cells = [
+        (
+            f"`{Path(name).relative_to(Path(name).parents[1]) if 'thesis' in name else Path(name).name}`",
+            *(f"{r['train_seconds']:.1f}", r["episodes"], f"{r['env_steps']:,}"),
+            *(f"{r[k]:.3f}" for k in ("accuracy", "success_raw")),
+            f"{(r['held_out'] or {}).get('success_raw'):.3f}",
         )
+        for name, r in runs.items()
+    ]
+    lines = ["# Trainer benchmarks", "", *table(("what", "figure"), tput), ""]
+    lines += table(head.split("|"), cells)
     md = "\n".join(lines)
     write_result("train", {"throughput": rows, "runs": runs}, md, out_dir)
     progress(md)
@@ -173,12 +185,7 @@ def _timed_ms(fn, *args, repeats: int, calls: int) -> float:
     """Milliseconds per call of ``fn(i, *args)``: the median of ``repeats`` jitted loops of ``calls``
     iterations (after one that compiles)."""
     loop = jax.jit(lambda *a: jax.lax.fori_loop(0, calls, lambda i, acc: acc + fn(i, *a), 0.0))
-    jax.block_until_ready(loop(*args))
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        jax.block_until_ready(loop(*args))
-        times.append(time.perf_counter() - t0)
+    _, times = timed_calls(lambda _: loop(*args), None, repeats)
     return 1e3 * Summary.of(times).median / calls
 
 
@@ -285,7 +292,21 @@ def _lambda_returns(u: UpdateParts):
     return returns
 
 
-def update_breakdown(cfg: Config, repeats: int = 5, calls: int = 4) -> dict:
+@dataclasses.dataclass(frozen=True)
+class UpdateBreakdown(Record):
+    """Where one update's time goes: the config's batch, and milliseconds per update by part."""
+
+    num_envs: int
+    rollout_steps: int
+    num_minibatches: int
+    num_epochs: int
+    hidden: list
+    shield: bool
+    ms_per_update: dict
+    env_steps_per_s_one_device: float
+
+
+def update_breakdown(cfg: Config, repeats: int = 5, calls: int = 4) -> UpdateBreakdown:
     """Where one forward-view update's time goes, on one device at the config's batch: the whole
     update; its rollout (T steps of acting, environment, mask, target pass) and its learning part
     (lambda-returns, minibatch gradients, clipping and Adam) as the trainer runs them
@@ -325,16 +346,16 @@ def update_breakdown(cfg: Config, repeats: int = 5, calls: int = 4) -> dict:
         "optimizer: clipping and Adam": timed(_optimizer(u), ts),
         "lambda-returns": timed(_lambda_returns(u), ts, trans),
     }
-    return {
-        "num_envs": n,
-        "rollout_steps": t,
-        "num_minibatches": cfg.train.num_minibatches,
-        "num_epochs": cfg.train.num_epochs,
-        "hidden": list(cfg.train.hidden),
-        "shield": bool(tr.env.shield),
-        "ms_per_update": parts,
-        "env_steps_per_s_one_device": n * t / (parts["update"] / 1e3),
-    }
+    return UpdateBreakdown(
+        num_envs=n,
+        rollout_steps=t,
+        num_minibatches=cfg.train.num_minibatches,
+        num_epochs=cfg.train.num_epochs,
+        hidden=list(cfg.train.hidden),
+        shield=bool(tr.env.shield),
+        ms_per_update=parts,
+        env_steps_per_s_one_device=n * t / (parts["update"] / 1e3),
+    )
 
 
 def run_mask_ab_benchmark(path, updates: int, rounds: int, out_dir: Path) -> dict:
@@ -401,8 +422,7 @@ def run_breakdown_benchmark(paths, label: str, out_dir: Path) -> dict:
 
     rows = []
     for path in paths:
-        r = update_breakdown(load_config(path))
-        r["config"] = Path(path).name
+        r = {**update_breakdown(load_config(path)).to_dict(), "config": Path(path).name}
         rows.append(r)
         print(r, flush=True)
     lines = [

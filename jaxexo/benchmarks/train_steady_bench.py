@@ -23,7 +23,7 @@ from jax.sharding import PartitionSpec as P
 from jaxexo.config import load_config
 from jaxexo.env import ExoStepEnv
 from jaxexo.evaluation.machine import write_result
-from jaxexo.summary import Summary
+from jaxexo.summary import Summary, table
 from jaxexo.train.driver import run_training
 
 
@@ -139,23 +139,26 @@ def run_train_steady(paths, budget: int, label: str, out_dir: Path) -> dict:
     return {"rows": rows}
 
 
+def _steady_cells(r: dict) -> tuple:
+    c, nan = r["chunk_env_steps_per_s"], float("nan")
+    return (
+        *(r["config"], f"{r['budget_env_steps']:,}", r["chunks"], r["compilations_run"]),
+        *(f"{c[0] / 1e3:.0f}k", f"{c[1] / 1e3 if len(c) > 1 else nan:.0f}k"),
+        f"{(r['steady_env_steps_per_s'] or nan) / 1e3:.0f}k",
+        f"{r['network_flop_per_s'] / 1e9:.0f}",
+        f"{100 * r['fraction_of_roofline']:.0f} %",
+        f"{r['train_seconds']:.1f}",
+    )
+
+
 def steady_markdown(rows: list[dict], label: str, commit: str, roof: float) -> str:
+    head = "config|env steps|chunks|compilations of the chunk program|chunk 1 (incl. compile)|"
+    head += "chunk 2|steady (median of chunks 3+)|network GFLOP/s at the steady rate|of the matmul roofline|"
+    head += "train s"
     lines = [
         f"# Trainer steady rate through `jaxexo train` ({label}, jaxexo at {commit})",
         "",
-        "| config | env steps | chunks | compilations of the chunk program | chunk 1 (incl. compile) | chunk 2 | "
-        "steady (median of chunks 3+) | network GFLOP/s at the steady rate | of the matmul roofline | train s |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
-    ]
-    for r in rows:
-        c = r["chunk_env_steps_per_s"]
-        lines.append(
-            f"| {r['config']} | {r['budget_env_steps']:,} | {r['chunks']} | {r['compilations_run']} | "
-            f"{c[0] / 1e3:.0f}k | {c[1] / 1e3 if len(c) > 1 else float('nan'):.0f}k | "
-            f"{(r['steady_env_steps_per_s'] or float('nan')) / 1e3:.0f}k | {r['network_flop_per_s'] / 1e9:.0f} | "
-            f"{100 * r['fraction_of_roofline']:.0f} % | {r['train_seconds']:.1f} |"
-        )
-    lines += [
+        *table(head.split("|"), map(_steady_cells, rows)),
         "",
         "Env-steps/s per chunk as metrics.jsonl reports them. Network GFLOP/s: the steady rate times the "
         "matmul FLOPs of the acting, bootstrap and update passes per env step (LayerNorm, biases and the "
