@@ -8,7 +8,7 @@ agents of a chunk are split over the CPU devices (the ``agents`` mesh axis); the
 per static settings, so every chunk of a group reuses one compilation.
 
 Agents never interact: a configuration whose parameters, target parameters or metrics (the loss among
-them) become NaN or infinite is flagged ``diverged`` (jaxexo.train.engine.finite, a run's rule) and the
+them) become NaN or infinite is flagged ``diverged`` (jaxexo.train.lanes.finite, a run's rule) and the
 others are untouched (each vmapped lane computes alone).
 
 Agents run in fixed blocks of ``LANES`` (jaxexo.train.lanes), so an agent's arithmetic is the same
@@ -30,9 +30,8 @@ from jaxexo.physics.scenarios import HELD_OUT, TEST_KINDS
 from jaxexo.sweep.plan import Chunk
 from jaxexo.sweep.results import SCALARS
 from jaxexo.sweep.spec import Sweep
-from jaxexo.train.engine import finite
 from jaxexo.train.evaluate import make_rollouts, test_layouts
-from jaxexo.train.lanes import over_lanes, padded_agents
+from jaxexo.train.lanes import agent_program, over_lanes, padded_agents
 from jaxexo.train.trainer import METRICS, Hyperparams, Trainer, UpdateMetrics
 
 CURVE_POINTS = 50
@@ -43,13 +42,13 @@ MIN_WINDOW_EPISODES = 20
 _PROGRAMS: dict = {}
 
 
-def reduce_metrics(m: jnp.ndarray, min_episodes: int) -> dict:
-    """Per-update metrics (U, len(METRICS)) -> the agent's training figures and its learning curve.
+def reduce_metrics(m: UpdateMetrics, min_episodes: int) -> dict:
+    """Per-update metrics [U] -> the agent's training figures and its learning curve (UpdateMetrics
+    [CURVE_POINTS], each bin a sum).
     The active updates (before the budget ran out) are a prefix of the scan. The final training
     figures cover the last tenth of the active updates, widened backwards until at least
     ``min_episodes`` episodes finished in it (nan if none did)."""
-    n_upd = m.shape[0]
-    col = UpdateMetrics.named(m)
+    n_upd, col = m.episodes.shape[0], m
     idx = jnp.arange(n_upd)
     n_active = jnp.sum(col.env_steps > 0)
     ep = col.episodes
@@ -78,7 +77,9 @@ def reduce_metrics(m: jnp.ndarray, min_episodes: int) -> dict:
     hit = (ep_w >= MIN_WINDOW_EPISODES) & (su_w >= TARGET_SUCCESS * ep_w)
     episodes_to = jnp.where(jnp.any(hit), cum_ep[jnp.argmax(hit)], jnp.nan)
     bins = np.minimum(np.arange(n_upd) * CURVE_POINTS // n_upd, CURVE_POINTS - 1)
-    curve = jax.ops.segment_sum(m, jnp.asarray(bins), num_segments=CURVE_POINTS)
+    curve = jax.tree.map(
+        lambda x: jax.ops.segment_sum(x, jnp.asarray(bins), num_segments=CURVE_POINTS), m
+    )
     return {
         "train_success": train_success,
         "train_return": train_return,
@@ -100,18 +101,18 @@ def _build(cfg: Config, devices):
     trainer = Trainer(cfg)
     tcfg = test_config(cfg)
     tenv = ExoStepEnv(tcfg)
-    rollout = make_rollouts(tenv, trainer.net.apply, tcfg.env.max_steps)
+    run = agent_program(
+        trainer, make_rollouts(tenv, trainer.net.apply, tcfg.env.max_steps), trainer.num_updates
+    )
     n_eval = cfg.train.eval_episodes
     kinds = np.arange(n_eval) % len(TEST_KINDS)
     held = jnp.asarray(np.isin(np.asarray(TEST_KINDS)[kinds], HELD_OUT), jnp.float32)
 
     def agent(key, hyper, test):
         test_params, test_lay = test
-        ts, m = trainer.run(trainer.init(key, hyper), hyper, trainer.num_updates)
-        out = rollout(ts.params, test_lay, test_params)
+        ts, m, out, ok = run(trainer.init(key, hyper), hyper, test_lay, test_params)
         suc, acc = out["success"].astype(jnp.float32), out["accurate"].astype(jnp.float32)
         red = reduce_metrics(m, cfg.train.num_envs)
-        diverged = ~finite(jnp, ts, m)
         scalars = {
             "success": suc.mean(),
             "accuracy": acc.mean(),
@@ -120,7 +121,7 @@ def _build(cfg: Config, devices):
             "eval_return": out["return"].mean(),
             "episodes": ts.episodes,
             "env_steps": ts.update,  # updates done: run_chunk scales it to env steps in integers
-            "diverged": diverged,
+            "diverged": ~ok,
             **{k: v for k, v in red.items() if k != "curve"},
         }
         return {"scalars": scalars, "curve": red["curve"], "params": ts.params}
@@ -180,7 +181,8 @@ def run_chunk(sweep: Sweep, chunk: Chunk, devices=None) -> dict:
             ).astype(np.float64)
             for k in SCALARS
         },
-        "curves": out["curve"],
+        # The chunk file's curves [n, CURVE_POINTS, len(METRICS)], columns in METRICS order.
+        "curves": np.stack([getattr(out["curve"], k) for k in METRICS], axis=-1),
         "metrics": list(METRICS),
         "params": _flatten(flat),
         "wall_s": wall,

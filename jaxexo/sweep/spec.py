@@ -59,18 +59,9 @@ from jaxexo.config import (
 from jaxexo.config.input_files import InputFileError, read_text_input
 
 SECTIONS = ("env", "kinematics", "reward", "layout", "train")
-SWEEP_KEYS = (
-    "base",
-    "seeds",
-    "samples",
-    "sample_seed",
-    "grid",
-    "random",
-    "heatmap",
-    "top",
-    "chunk_size",
-    "memory_budget",
-)
+# The [sweep] fields that decide the results (Sweep.fingerprint), and all of them.
+RESULT_KEYS = ("seeds", "samples", "sample_seed", "grid", "random")
+SWEEP_KEYS = ("base", *RESULT_KEYS, "heatmap", "top", "chunk_size", "memory_budget")
 RANDOM_KEYS = ("low", "high", "log", "choices")
 # Configurations of one sweep (grid points x samples), counted from the axes before any is built.
 MAX_CONFIGURATIONS = 10_000
@@ -137,11 +128,7 @@ class Sweep:
 
     def fingerprint(self) -> str:
         """Hash of everything that decides the results (not the report options or the chunking)."""
-        keep = {
-            k: v
-            for k, v in self.table.items()
-            if k in ("seeds", "samples", "sample_seed", "grid", "random")
-        }
+        keep = {k: v for k, v in self.table.items() if k in RESULT_KEYS}
         text = json.dumps({"raw": self.raw, "sweep": keep}, sort_keys=True, default=repr)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -338,17 +325,9 @@ def _samples(table: dict, axes) -> int:
     return _int("sweep.samples", table["samples"], minimum=1)
 
 
-_BYTES = {
-    "": 1,
-    "b": 1,
-    "kb": 10**3,
-    "mb": 10**6,
-    "gb": 10**9,
-    "tb": 10**12,
-    "kib": 2**10,
-    "mib": 2**20,
-    "gib": 2**30,
-    "tib": 2**40,
+# Units, lower case: b; kb .. tb (powers of 1000); kib .. tib (powers of 1024).
+_BYTES = {"": 1, "b": 1} | {
+    p + unit: base**k for k, p in enumerate("kmgt", 1) for unit, base in (("b", 1000), ("ib", 1024))
 }
 
 

@@ -1,4 +1,5 @@
-"""Running many agents as one compiled program, each with the arithmetic it has alone (JAX).
+"""One agent's program (train, greedy rollouts, the divergence rule) and many agents run as one
+compiled program, each with the arithmetic it has alone (JAX).
 
 Sweeps (jaxexo.sweep.program) and populations (jaxexo.train.population) vmap many agents. XLA on
 CPU compiles a vmapped batch differently for different batch sizes (a dot over a batch of one is a
@@ -16,12 +17,34 @@ bits, so populations use at least two devices where there are two; docs/training
 from __future__ import annotations
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 # Agents per vmapped block: fixed, so that an agent's arithmetic never depends on how many agents
 # share its program. Two buys most of the batching gain while a lone member (a population of one, a
 # sweep's last odd agent) pays for one padding lane, not three (measured: docs/training.md).
 LANES = 2
+
+
+def finite(xp, ts, metrics):
+    """The one divergence rule: a chunk diverged unless its parameters, target parameters and metrics
+    (the loss among them) are all finite. ``xp``: numpy on the host, jax.numpy inside a compiled
+    program (a population's or a sweep's, per agent)."""
+    leaves = jax.tree.leaves((ts.params, ts.target_params, metrics))
+    return xp.all(xp.stack([xp.all(xp.isfinite(x)) for x in leaves]))
+
+
+def agent_program(trainer, rollouts, n_updates: int):
+    """The one agent program of populations and sweeps: ``agent(ts, hyper, layouts, env_params)`` runs
+    ``n_updates`` updates of ``trainer`` from ``ts``, then the greedy ``rollouts``
+    (jaxexo.train.evaluate.make_rollouts) of the new parameters on ``layouts`` [N]; returns the state,
+    the UpdateMetrics [n_updates], the rollouts' per-episode outcomes [N] and ``finite``."""
+
+    def agent(ts, hyper, layouts, env_params):
+        ts, m = trainer.run(ts, hyper, n_updates)
+        return ts, m, rollouts(ts.params, layouts, env_params), finite(jnp, ts, m)
+
+    return agent
 
 
 def over_agents(fn, devices, n_args: int):

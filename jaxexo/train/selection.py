@@ -18,9 +18,11 @@ the same scenes. The choice:
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+import jax
 import numpy as np
 
 from jaxexo.baselines.cfftg import CFFTG
@@ -146,3 +148,42 @@ def score_record(score: WearerScore) -> dict:
         k: (None if isinstance(v, float) and not math.isfinite(v) else v)
         for k, v in asdict(score).items()
     }
+
+
+@dataclass(frozen=True)
+class Selection:
+    """A population's choice: the member exported, eval.json's ``selection`` and its time."""
+
+    exported: int
+    scores: list[dict]  # score_record of each candidate (empty: one candidate, exported unscored)
+    seconds: float
+
+
+def choose_member(cfg: Config, out: Path, trainer, track, seeds: list[int]) -> Selection:
+    """The member to export of a population with candidates (jaxexo.train.records.Track): every
+    candidate (a member that finished a chunk and never diverged) exported to
+    ``members/seed_<seed>.npz`` and scored as a wearer gets it; one candidate is exported unscored."""
+    from jaxexo.train.run_files import export_policy
+
+    t0 = time.perf_counter()
+    ok = track.candidates()
+    if len(ok) == 1:
+        return Selection(ok[0], [], time.perf_counter() - t0)
+    (out / "members").mkdir(exist_ok=True)
+    candidates = [
+        Candidate(
+            seeds[i],
+            float(track.score[i]),
+            export_policy(
+                out / "members" / f"seed_{seeds[i]}.npz",
+                cfg,
+                trainer,
+                jax.tree.map(lambda x: x[i], track.params),
+            ),
+        )
+        for i in ok
+    ]
+    scores = wearer_scores(cfg, candidates)
+    return Selection(
+        ok[choose_for_wearer(scores)], [score_record(s) for s in scores], time.perf_counter() - t0
+    )
