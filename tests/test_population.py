@@ -84,8 +84,8 @@ def test_a_member_trains_identically_alone_in_populations_of_2_and_5_and_in_a_sw
     r["sweep"] = {"seeds": 8, "chunk_size": 8, "grid": {"train.lr": [3e-3]}}
     sweep = sweep_from_dict(r)
     out = run_chunk(sweep, sweep_from_plan(sweep))
-    i = [s for _, s in out["agents"]].index(SEED)
-    assert same(unflatten(out["params"], i), alone["params"])
+    i = [s for _, s in out.agents].index(SEED)
+    assert same(unflatten(out.params, i), alone["params"])
 
 
 def sweep_from_plan(sweep):

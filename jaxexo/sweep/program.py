@@ -1,18 +1,9 @@
-"""A sweep group's compiled program and the run of one chunk (JAX).
-
-``chunk_program(cfg, devices)`` is ``jit(shard_map(vmap(agent)))``: ``agent(key, hyper, test_params)``
-is ``make_train``'s whole training scan followed by greedy evaluation on the fixed test layouts
-(jaxexo.train.evaluate), with everything reduced inside the program: per agent a few scalars, a
-learning curve of CURVE_POINTS bins (sums of the per-update metrics) and the final parameters. The
-agents of a chunk are split over the CPU devices (the ``agents`` mesh axis); the program is cached
-per static settings, so every chunk of a group reuses one compilation.
-
-Agents never interact: a configuration whose parameters, target parameters or metrics (the loss among
-them) become NaN or infinite is flagged ``diverged`` (jaxexo.train.lanes.finite, a run's rule) and the
-others are untouched (each vmapped lane computes alone).
-
-Agents run in fixed blocks of ``LANES`` (jaxexo.train.lanes), so an agent's arithmetic is the same
-in a chunk of any size and in a population.
+"""A sweep group's compiled program and the run of one chunk (JAX). ``chunk_program(cfg, devices)``
+runs every agent's program (jaxexo.train.lanes.agent_program: the whole training scan, greedy
+evaluation on the fixed test layouts, the divergence rule) in lanes over the CPU devices, reduced
+inside the program to a few scalars, a learning curve and the final parameters; it is cached per
+static settings, so every chunk of a group reuses one compilation. A diverged agent is flagged, the
+others untouched (docs/training.md, Hyperparameter sweeps).
 """
 
 from __future__ import annotations
@@ -28,7 +19,7 @@ from jaxexo.config import Config, static_settings, test_config
 from jaxexo.env import ExoStepEnv
 from jaxexo.physics.scenarios import HELD_OUT, TEST_KINDS
 from jaxexo.sweep.plan import Chunk
-from jaxexo.sweep.results import SCALARS
+from jaxexo.sweep.results import SCALARS, ChunkResult
 from jaxexo.sweep.spec import Sweep
 from jaxexo.train.evaluate import make_rollouts, test_layouts
 from jaxexo.train.lanes import agent_program, over_lanes, padded_agents
@@ -152,10 +143,8 @@ def chunk_inputs(sweep: Sweep, chunk: Chunk, size: int | None = None):
     return keys, _stack([hyper[c] for c, _ in agents]), _stack([test[c] for c, _ in agents])
 
 
-def run_chunk(sweep: Sweep, chunk: Chunk, devices=None) -> dict:
-    """Train and evaluate one chunk. Returns NumPy arrays for the real agents: ``scalars`` (name ->
-    (n,)), ``curves`` (n, CURVE_POINTS, len(METRICS)), ``params`` (flattened state dict, leaves with a
-    leading agent axis), ``wall_s`` (the call, compilation included when it happened here)."""
+def run_chunk(sweep: Sweep, chunk: Chunk, devices=None) -> ChunkResult:
+    """Train and evaluate one chunk: its real agents' results."""
     devices = list(devices if devices is not None else jax.local_devices())
     if chunk.size % len(devices):
         raise ValueError(
@@ -172,21 +161,21 @@ def run_chunk(sweep: Sweep, chunk: Chunk, devices=None) -> dict:
     per = cfg.train.num_envs * cfg.train.rollout_steps
     out = jax.tree.map(lambda x: np.asarray(x)[:n], out)
     flat = serialization.to_state_dict(out["params"])
-    return {
-        "chunk_id": chunk.chunk_id,
-        "agents": [list(a) for a in chunk.agents],
-        "scalars": {
+    return ChunkResult(
+        chunk_id=chunk.chunk_id,
+        agents=[list(a) for a in chunk.agents],
+        scalars={
             k: (
                 out["scalars"][k].astype(np.int64) * per if k == "env_steps" else out["scalars"][k]
             ).astype(np.float64)
             for k in SCALARS
         },
-        # The chunk file's curves [n, CURVE_POINTS, len(METRICS)], columns in METRICS order.
-        "curves": np.stack([getattr(out["curve"], k) for k in METRICS], axis=-1),
-        "metrics": list(METRICS),
-        "params": _flatten(flat),
-        "wall_s": wall,
-    }
+        # The chunk file's curves: columns in METRICS order.
+        curves=np.stack([getattr(out["curve"], k) for k in METRICS], axis=-1),
+        metrics=list(METRICS),
+        params=_flatten(flat),
+        wall_s=wall,
+    )
 
 
 def _flatten(d: dict, prefix: str = "") -> dict:

@@ -1,43 +1,7 @@
-"""``jaxexo train``: drive the compiled trainer in chunks, with progress, metrics, checkpoints and resume.
-
-Run directory:
-- config.toml        the resolved config
-- checkpoint.msgpack the TrainState after the last finished chunk, the best parameters so far and the
-                     bookkeeping (chunks done, wall time, best score), in one atomic write
-- checkpoint.json    a readable copy of that bookkeeping (informational; resume reads the msgpack)
-- metrics.jsonl      one line per chunk: counters and rates reduced inside the compiled scan
-- policy.npz         the exported greedy policy (jaxexo.storage.policy_file; NumPy-only to load)
-- training_curve.png return and success rate against episodes (thesis Fig. 3.4)
-- eval.json          greedy rollouts on the test layouts (jaxexo.train.evaluate)
-(names, checkpoint reading and checks, rows, export: jaxexo.train.run_files; the chunk loop with resume,
-checkpoints, divergence, progress and export: jaxexo.train.engine, shared with populations, of which
-``OneAgent`` here is the one-agent placement)
-
-Population (``[train] population = K > 1``): K seeds of the config trained together, the best member's
-best chunk exported; jaxexo.train.population has the program and the per-member files.
-
-Model selection: after every chunk the greedy policy is scored (strict success) on validation
-layouts drawn from the training distribution; the best parameters are exported (later chunks win
-ties). The held-out test obstacles are never used for this choice.
-
-Resume: the same chunk program runs from the restored state, so a resumed run ends bit-identical to
-an uninterrupted one (tests/test_driver.py checks it). metrics.jsonl is cut back to the checkpoint's
-chunks first (rows written after it are recomputed identically).
-
-Reliability (docs/reliability.md; tests/test_reliability.py):
-- the run holds an exclusive lock on the directory (jaxexo.storage.rundir) from start to end: a second
-  ``jaxexo train``/``sweep`` there is refused; a killed run's lock vanishes with it;
-- a new run needs an empty or absent directory (a finished policy.npz, a sweep's best/, the remains of a
-  crashed run are never overwritten or appended to);
-- the checkpoint carries a sha256 (jaxexo.storage.checkpoint) and its trees must match this config's
-  network and state in structure, shape and dtype, or resume is refused naming the file;
-- the checkpoint records the config the run started with: a resume with any other config (config.toml
-  edited along with it) is refused naming the first differing field; a run past its first chunk
-  whose checkpoint was deleted (checkpoint.json, or more than one metrics row, remain) is refused;
-- a chunk whose parameters, target parameters or metrics (the loss among them) are not finite
-  (jaxexo.train.lanes.finite, the population's and the sweep's rule too) marks the run diverged: the
-  row says so, training stops, no checkpoint is written for it, only the best finite parameters (if a
-  chunk produced any) are exported, and TrainingDiverged is raised (the CLI exits 3).
+"""``jaxexo train``: ``run_training`` takes the run directory's lock and hands one agent (``OneAgent``,
+its environments split over the CPU devices) or a population (jaxexo.train.population) to the chunk
+loop (jaxexo.train.engine). The run directory, model selection and resume: docs/training.md; what a
+run refuses and how it recovers: docs/reliability.md.
 """
 
 from __future__ import annotations

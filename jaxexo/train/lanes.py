@@ -1,17 +1,7 @@
 """One agent's program (train, greedy rollouts, the divergence rule) and many agents run as one
-compiled program, each with the arithmetic it has alone (JAX).
-
-Sweeps (jaxexo.sweep.program) and populations (jaxexo.train.population) vmap many agents. XLA on
-CPU compiles a vmapped batch differently for different batch sizes (a dot over a batch of one is a
-library matrix product, over two or more a fused multiply-add loop; fusion boundaries, and so where a multiply and an add become one rounded FMA,
-move with the size), so the same agent ends a few ulps apart, and after a thousand updates at a
-different outcome, in batches of 1, 2, 5 or 8. No XLA flag removes it. So no agent is ever computed
-in a batch whose shape depends on who else is in the program: every device runs its agents LANES at
-a time, ``lax.map`` over fixed ``vmap(LANES)`` blocks (padded with copies of the first agent, whose
-results are dropped). An agent's arithmetic is then the same in a population of any size and in a
-sweep chunk of any size (tests/test_population.py checks it bit for bit), and on any device count from
-two up (a program over a single device is compiled without partitioning and differs in the last
-bits, so populations use at least two devices where there are two; docs/training.md).
+compiled program (JAX), every device running its agents in fixed blocks of LANES so that an agent's
+arithmetic never depends on who else is in the program (why: docs/training.md, Group-size
+independence; tests/test_population.py checks it bit for bit).
 """
 
 from __future__ import annotations

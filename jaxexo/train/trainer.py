@@ -1,18 +1,9 @@
-"""The TD(lambda) trainer as one compiled program (thesis 2.3-2.4, 3.1-3.2).
+"""The TD(lambda) trainer as one compiled program (thesis 2.3-2.4, 3.1-3.2; the method:
+docs/training.md).
 
-``make_train(config)`` returns a pure ``train(key, hyper)``: one ``lax.scan`` over updates with the
-environment vmapped inside; jit it, vmap it over seeds or over ``Hyperparams`` (every leaf of which
-may differ: learning rate, gamma, lambda, epsilon schedule, target rate, reward weights...). Static
-settings (num_envs, rollout length, layer sizes, trace view, control) come from ``TrainConfig`` and
-fix the program's shapes.
-
-One *update* = a rollout of T steps in each of N environments, then:
-- forward view: lambda-returns by a reverse scan (jaxexo.train.td_lambda), then ``num_epochs`` passes
-  of ``num_minibatches`` Adam steps on 0.5 (G - Q(s, a))^2 (as PQN does, with a target network);
-- backward view: per-environment eligibility traces over the parameters, one Adam step per env step
-  along mean_i delta_i e_i (eq 2.26).
-The target network is copied every ``target_period`` updates ("hard") or moved by ``target_tau``
-("polyak"). Metrics are reduced inside the scan: one row of scalars per update.
+``make_train(config)`` returns a pure ``train(key, hyper)``: one ``lax.scan`` over updates whose carry
+is the TrainState and whose output is UpdateMetrics [n_updates], the environments vmapped inside; jit
+it, vmap it over seeds or over ``Hyperparams``. Static settings (TrainConfig) fix its shapes.
 """
 
 from __future__ import annotations
@@ -360,12 +351,12 @@ class Trainer:
         in, the transitions [T, N] and the per-step EpisodeCounts [T]."""
 
         def step(carry, _):
-            env_state, obs, mask, stats, key = carry
-            key, kl = jax.random.split(key)
+            c, mask = carry  # the state and its admissible moves
+            key, kl = jax.random.split(c.key)
             ka, ke = jax.random.split(self._local_key(kl))
-            a, greedy = self._act(ts.params, obs, ka, eps, mask)
-            obs2, env_state, r, term, trunc, info = self._env_step(ke, env_state, a, hyper)
-            stats, counts = self._episode_stats(stats, r, term, trunc, info, hyper.env)
+            a, g = self._act(ts.params, c.obs, ka, eps, mask)
+            obs2, env_state, r, term, trunc, info = self._env_step(ke, c.env_state, a, hyper)
+            stats, counts = self._episode_stats(c.stats, r, term, trunc, info, hyper.env)
             mask2 = self._mask(env_state, hyper)
             # The bootstrap's target-network pass runs here, on this step's N observations, rather than
             # on all T x N after the rollout: the same arithmetic on a working set that stays in cache.
@@ -373,25 +364,23 @@ class Trainer:
                 self.net.apply(ts.target_params, info["final_observation"]),
                 self._final_mask(mask2, term | trunc),
             )  # (N, A)
-            target_q = jnp.max(q_final, axis=-1) if self.off_policy else q_final
+            tq = jnp.max(q_final, axis=-1) if self.off_policy else q_final
             tr = Transition(
-                obs=obs,
+                obs=c.obs,
                 action=a,
                 reward=r,
                 terminated=term,
                 truncated=trunc,
-                target_q=target_q,
-                greedy=greedy,
+                target_q=tq,
+                greedy=g,
             )
-            return (env_state, obs2, mask2, stats, key), (tr, counts)
+            c = c.replace(env_state=env_state, obs=obs2, stats=stats, key=key)
+            return (c, mask2), (tr, counts)
 
-        (env_state, obs, _, stats, key), (tr, counts) = jax.lax.scan(
-            step,
-            (ts.env_state, ts.obs, self._mask(ts.env_state, hyper), ts.stats, ts.key),
-            None,
-            length=self.tc.rollout_steps,
+        (new, _), (tr, counts) = jax.lax.scan(
+            step, (ts, self._mask(ts.env_state, hyper)), None, length=self.tc.rollout_steps
         )
-        return ts.replace(env_state=env_state, obs=obs, stats=stats, key=key), tr, counts
+        return new, tr, counts
 
     def _learn(self, ts: TrainState, tr: Transition, hyper: Hyperparams, eps):
         """Lambda-returns of a rollout (eq 2.19, by a reverse scan) and ``num_epochs`` passes of
