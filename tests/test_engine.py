@@ -61,7 +61,7 @@ def test_metric_rows_by_name():
         "q_mean",
         "epsilon",
     )
-    row = chunk_row(m, Counters(np.int32(3), np.int32(9), np.int64(30)), 1, 2.0, 1.0)
+    row = chunk_row(m, Counters(np.int32(3), np.int32(9), 10), 1, 2.0, 1.0)
     assert row["chunk_episodes"] == 3 and row["loss"] == float(m.loss.sum()) / 3
     assert row["updates"] == 3 and row["episodes"] == 9 and row["env_steps"] == 30
 

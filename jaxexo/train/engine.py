@@ -78,6 +78,8 @@ class _Run:
         self.cfg, self.out, self.seed, self.t_start, self.place = cfg, out, seed, t_start, place
         self.agents = Agents(cfg, seed, place.size)
         self.hyper = Hyperparams.from_config(cfg)
+        # The budget check before each chunk: one compiled program (tests/test_compile_once.py).
+        self._active = jax.jit(place.trainer.active)
         self.ckpt, self.book_path, self.metrics_path = (
             out / F.CHECKPOINT,
             out / F.BOOKKEEPING,
@@ -97,11 +99,13 @@ class _Run:
         return jax.tree.map(lambda x: x[0], tree) if self.agents.one else tree
 
     def _counts(self, ts) -> F.Counters:
-        """Every agent's counters [K] (int64 env steps, exactly)."""
-        s = self.place.saved(ts)
-        update = np.asarray(s.update).reshape(self.place.size)
-        steps = update.astype(np.int64) * self.place.trainer.steps_per_update
-        return F.Counters(update, np.asarray(s.episodes).reshape(self.place.size), steps)
+        """Every agent's counters [K]."""
+        s, k = self.place.saved(ts), self.place.size
+        return F.Counters(
+            np.asarray(s.update).reshape(k),
+            np.asarray(s.episodes).reshape(k),
+            self.place.trainer.steps_per_update,
+        )
 
     def start(self, raw: dict | None, resume: bool) -> None:
         place = self.place
@@ -193,7 +197,7 @@ class _Run:
 
     def _going(self) -> bool:
         """Whether an agent has budget left and has not diverged."""
-        active = np.asarray(self.place.trainer.active(self._counts(self.ts), self.hyper))
+        active = np.asarray(self._active(self._counts(self.ts), self.hyper))
         return bool((active & (self.track.diverged == 0)).any())
 
     def _chunk(self, bar) -> bool:

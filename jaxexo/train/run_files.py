@@ -53,11 +53,17 @@ checkpoint_write = atomic_write
 
 @struct.dataclass
 class Counters:
-    """The agents' totals after a chunk (host integers [K], or one agent's scalars)."""
+    """The agents' totals after a chunk (host integers [K], or one agent's scalars), named as
+    TrainState's counters (Trainer.active reads them)."""
 
-    update: np.ndarray  # updates done (named as TrainState's: Trainer.active reads it)
+    update: np.ndarray  # updates done
     episodes: np.ndarray
-    env_steps: np.ndarray  # int64
+    steps_per_update: int = struct.field(pytree_node=False)
+
+    @property
+    def env_steps(self) -> np.ndarray:
+        """Env steps done, exactly (int64)."""
+        return np.asarray(self.update).astype(np.int64) * self.steps_per_update
 
 
 def chunk_row(m: UpdateMetrics, counts: Counters, chunk: int, wall: float, seconds: float) -> dict:
