@@ -13,7 +13,9 @@ import pytest
 jax = pytest.importorskip("jax")
 import jax.numpy as jnp  # noqa: E402
 
-from jaxexo.train.engine import Track, finite  # noqa: E402
+from jaxexo.train.lanes import finite  # noqa: E402
+from jaxexo.train.records import Track  # noqa: E402
+from jaxexo.train.run_files import Counters, chunk_row  # noqa: E402
 from jaxexo.train.trainer import METRICS, UpdateMetrics  # noqa: E402
 
 
@@ -48,12 +50,20 @@ def test_one_rule_on_the_host_and_in_a_program(params, target, loss, ok):
 
 
 def test_metric_rows_by_name():
-    m = np.arange(3 * len(METRICS), dtype=np.float32).reshape(3, len(METRICS))
-    named = UpdateMetrics.named(m)
-    assert named._fields == METRICS
-    for i, name in enumerate(METRICS):
-        assert np.array_equal(getattr(named, name), m[:, i])
-    assert float(UpdateMetrics.named(m.sum(0)).loss) == float(m[:, METRICS.index("loss")].sum())
+    m = UpdateMetrics(**{k: np.arange(3, dtype=np.float32) + i for i, k in enumerate(METRICS)})
+    assert METRICS == (
+        "episodes",
+        "return_sum",
+        "successes",
+        "accurate",
+        "env_steps",
+        "loss",
+        "q_mean",
+        "epsilon",
+    )
+    row = chunk_row(m, Counters(np.int32(3), np.int32(9), 10), 1, 2.0, 1.0)
+    assert row["chunk_episodes"] == 3 and row["loss"] == float(m.loss.sum()) / 3
+    assert row["updates"] == 3 and row["episodes"] == 9 and row["env_steps"] == 30
 
 
 def test_candidates_finished_a_chunk_and_never_diverged():

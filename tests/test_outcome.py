@@ -190,7 +190,12 @@ def test_trainer_counts_successes_with_the_verdict():
         }
         info["collision"] = info["clearance"] <= geometry.TOUCH_EPS
         stats, row = step(stats, jnp.ones(n), jnp.asarray(goal), jnp.asarray(trunc), info)
-        total += np.asarray(row)
+        total += [
+            float(row.episodes),
+            float(row.return_sum),
+            float(row.successes),
+            float(row.accurate),
+        ]
         for i in range(n):
             e = ep[i]
             e["c"].append(float(info["clearance"][i]))
@@ -205,6 +210,6 @@ def test_trainer_counts_successes_with_the_verdict():
                 steps_in_ep[i] = 0
             else:
                 steps_in_ep[i] += 1
-    # Rows: [episodes finished, return sum, successes, accurate]; counts are exact in float32.
+    # Totals: [episodes finished, return sum, successes, accurate]; counts are exact in float32.
     assert (total[0], total[2], total[3]) == (want_done, want_succ, want_acc)
     assert 0 < want_succ < want_acc < want_done

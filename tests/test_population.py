@@ -15,7 +15,7 @@ import pytest
 from jaxexo.config import ConfigError, config_from_dict
 
 from conftest import FORWARD_UPDATES, forward_raw
-from train_helpers import leaves
+from train_helpers import leaves, metric_array
 
 jax = pytest.importorskip("jax")
 
@@ -24,7 +24,8 @@ from jaxexo.sweep.spec import sweep_from_dict  # noqa: E402
 from jaxexo.train import driver, run_files  # noqa: E402
 from jaxexo.train.lanes import LANES, padded_agents  # noqa: E402
 from jaxexo.train.network import dense_layers  # noqa: E402
-from jaxexo.train.population import Population, choose, population_devices  # noqa: E402
+from jaxexo.train.population import Population, population_devices  # noqa: E402
+from jaxexo.train.records import Track  # noqa: E402
 
 UPDATES, CHUNK = FORWARD_UPDATES, 2
 SEED = 3
@@ -43,7 +44,7 @@ def train_members(seeds):
     for _ in range(UPDATES // CHUNK):
         ts, m, score, finite = pop.chunk(ts)
         assert np.asarray(finite)[: pop.size].all()
-        metrics.append(np.asarray(m)[: pop.size])
+        metrics.append(metric_array(m)[: pop.size])
         scores.append(np.asarray(score)[: pop.size])
         params.append(pop.real(ts.params))
     return [
@@ -83,8 +84,8 @@ def test_a_member_trains_identically_alone_in_populations_of_2_and_5_and_in_a_sw
     r["sweep"] = {"seeds": 8, "chunk_size": 8, "grid": {"train.lr": [3e-3]}}
     sweep = sweep_from_dict(r)
     out = run_chunk(sweep, sweep_from_plan(sweep))
-    i = [s for _, s in out["agents"]].index(SEED)
-    assert same(unflatten(out["params"], i), alone["params"])
+    i = [s for _, s in out.agents].index(SEED)
+    assert same(unflatten(out.params, i), alone["params"])
 
 
 def sweep_from_plan(sweep):
@@ -114,9 +115,13 @@ def test_population_layout_is_whole_blocks_of_lanes(members, devices, used, padd
 
 
 def test_the_choice_skips_diverged_members_and_prefers_the_lower_seed_on_a_tie():
-    assert choose(np.array([0.4, 0.8, 0.8]), np.array([2, 3, 1]), np.array([0, 0, 0])) == 1
-    assert choose(np.array([0.4, 0.9, 0.8]), np.array([2, 3, 1]), np.array([0, 2, 0])) == 2
-    assert choose(np.array([0.4, 0.9]), np.array([0, 3]), np.array([0, 1])) is None
+    assert (
+        Track(None, np.array([0.4, 0.8, 0.8]), np.array([2, 3, 1]), np.array([0, 0, 0])).lead() == 1
+    )
+    assert (
+        Track(None, np.array([0.4, 0.9, 0.8]), np.array([2, 3, 1]), np.array([0, 2, 0])).lead() == 2
+    )
+    assert Track(None, np.array([0.4, 0.9]), np.array([0, 3]), np.array([0, 1])).lead() is None
 
 
 @pytest.mark.parametrize(

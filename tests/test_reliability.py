@@ -472,7 +472,7 @@ def test_counters_are_exact_past_2_24_with_an_odd_rollout_size():
     )
     assert bool(active(ts, hyper))
     ts, m = jax.jit(trainer.run, static_argnums=2)(ts, hyper, 3)
-    m = np.asarray(m)
+    m = np.stack([np.asarray(getattr(m, k)) for k in METRICS], axis=-1)
     col = {k: i for i, k in enumerate(METRICS)}
     assert (m[:, col["env_steps"]] > 0).tolist() == [
         True,

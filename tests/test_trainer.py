@@ -88,7 +88,7 @@ def test_trainer_learns_to_step_over_a_fixed_obstacle():
         "the untrained greedy policy already clears the scene: nothing to learn"
     )
     ts, m = jax.jit(trainer.run, static_argnums=2)(ts, hyper, trainer.num_updates)
-    m = np.asarray(m)
+    m = metric_array(m)
     assert int(trainer.env_steps(ts)) == trainer.num_updates * 128 * 8
     tenth = len(m) // 10
 
@@ -123,9 +123,9 @@ def test_same_seed_is_bitwise_deterministic_and_seeds_differ(tiny):
     c, mc = run(init(jax.random.PRNGKey(6), hyper), hyper, 2)
     assert trees_equal(a.params, b.params) and trees_equal(a.opt_state, b.opt_state)
     assert trees_equal(a, b)
-    np.testing.assert_array_equal(np.asarray(ma), np.asarray(mb))
+    np.testing.assert_array_equal(metric_array(ma), metric_array(mb))
     assert not np.array_equal(leaves(a.params)[0], leaves(c.params)[0])
-    assert not np.array_equal(np.asarray(ma), np.asarray(mc))
+    assert not np.array_equal(metric_array(ma), metric_array(mc))
     # The updates really changed the parameters from their initial values.
     a0 = init(jax.random.PRNGKey(5), hyper)
     assert all(not np.array_equal(x, y) for x, y in zip(leaves(a.params), leaves(a0.params)))
@@ -139,11 +139,11 @@ def test_budget_freezes_the_state(tiny):
     for _ in range(TINY_UPDATES // 2):
         assert bool(jax.jit(tiny["trainer"].active)(ts, hyper))
         ts, m = run(ts, hyper, 2)
-        assert np.all(np.asarray(m)[:, COL["env_steps"]] == TINY_N * TINY_T)
+        assert np.all(metric_array(m)[:, COL["env_steps"]] == TINY_N * TINY_T)
     assert int(ts.update) == TINY_UPDATES and not bool(jax.jit(tiny["trainer"].active)(ts, hyper))
     ts2, m2 = run(ts, hyper, 2)
     assert trees_equal(ts, ts2)
-    assert np.all(np.asarray(m2) == 0)
+    assert np.all(metric_array(m2) == 0)
 
 
 def test_epsilon_schedule(tiny):
@@ -151,7 +151,7 @@ def test_epsilon_schedule(tiny):
     init, run, hyper = tiny["init"], tiny["run"], tiny["hyper"]
     ts, m = run(init(jax.random.PRNGKey(1), hyper), hyper, 2)
     _, m2 = run(ts, hyper, 2)
-    eps = np.concatenate([np.asarray(m)[:, COL["epsilon"]], np.asarray(m2)[:, COL["epsilon"]]])
+    eps = np.concatenate([metric_array(m)[:, COL["epsilon"]], metric_array(m2)[:, COL["epsilon"]]])
     expect = [0.02 + 0.98 * max(0.0, 1 - (k / TINY_UPDATES) / 0.5) for k in range(4)]
     np.testing.assert_allclose(eps, expect, rtol=1e-5)
 
@@ -211,7 +211,7 @@ def compiled_runs(tiny):
                 Trainer(combo_config(combo)).run, ts0, hyper, COMBO_UPDATES, static_argnums=2
             )
         ts, m = run(ts0, hyper)
-        return combo, {"hyper": hyper, "run": run, "ts0": ts0, "ts": ts, "m": np.asarray(m)}
+        return combo, {"hyper": hyper, "run": run, "ts0": ts0, "ts": ts, "m": metric_array(m)}
 
     def vmapped_make_train(combo):
         # The whole 6-update budget in one program, per seed.
@@ -222,8 +222,8 @@ def compiled_runs(tiny):
         return combo, {
             "ts0": starts["backward"],
             "ts": first,
-            "m": np.asarray(m)[0],
-            "vmapped": (ts, np.asarray(m)),
+            "m": metric_array(m)[0],
+            "vmapped": (ts, metric_array(m)),
         }
 
     runs = dict(one(c) for c in COMBOS if c != COMBOS[3])

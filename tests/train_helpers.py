@@ -53,6 +53,11 @@ from jaxexo.train.trainer import METRICS, Hyperparams, Trainer, make_train  # no
 COL = {m: i for i, m in enumerate(METRICS)}
 
 
+def metric_array(m) -> np.ndarray:
+    """UpdateMetrics [..., U] as one host array [..., U, len(METRICS)], its columns in METRICS order."""
+    return np.stack([np.asarray(getattr(m, k)) for k in METRICS], axis=-1)
+
+
 def assert_run_files(out) -> None:
     """A finished run directory ``out`` holds every file of a run."""
     for name in (

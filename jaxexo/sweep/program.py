@@ -1,18 +1,9 @@
-"""A sweep group's compiled program and the run of one chunk (JAX).
-
-``chunk_program(cfg, devices)`` is ``jit(shard_map(vmap(agent)))``: ``agent(key, hyper, test_params)``
-is ``make_train``'s whole training scan followed by greedy evaluation on the fixed test layouts
-(jaxexo.train.evaluate), with everything reduced inside the program: per agent a few scalars, a
-learning curve of CURVE_POINTS bins (sums of the per-update metrics) and the final parameters. The
-agents of a chunk are split over the CPU devices (the ``agents`` mesh axis); the program is cached
-per static settings, so every chunk of a group reuses one compilation.
-
-Agents never interact: a configuration whose parameters, target parameters or metrics (the loss among
-them) become NaN or infinite is flagged ``diverged`` (jaxexo.train.engine.finite, a run's rule) and the
-others are untouched (each vmapped lane computes alone).
-
-Agents run in fixed blocks of ``LANES`` (jaxexo.train.lanes), so an agent's arithmetic is the same
-in a chunk of any size and in a population.
+"""A sweep group's compiled program and the run of one chunk (JAX). ``chunk_program(cfg, devices)``
+runs every agent's program (jaxexo.train.lanes.agent_program: the whole training scan, greedy
+evaluation on the fixed test layouts, the divergence rule) in lanes over the CPU devices, reduced
+inside the program to a few scalars, a learning curve and the final parameters; it is cached per
+static settings, so every chunk of a group reuses one compilation. A diverged agent is flagged, the
+others untouched (docs/training.md, Hyperparameter sweeps).
 """
 
 from __future__ import annotations
@@ -28,11 +19,10 @@ from jaxexo.config import Config, static_settings, test_config
 from jaxexo.env import ExoStepEnv
 from jaxexo.physics.scenarios import HELD_OUT, TEST_KINDS
 from jaxexo.sweep.plan import Chunk
-from jaxexo.sweep.results import SCALARS
+from jaxexo.sweep.results import SCALARS, ChunkResult
 from jaxexo.sweep.spec import Sweep
-from jaxexo.train.engine import finite
 from jaxexo.train.evaluate import make_rollouts, test_layouts
-from jaxexo.train.lanes import over_lanes, padded_agents
+from jaxexo.train.lanes import agent_program, over_lanes, padded_agents
 from jaxexo.train.trainer import METRICS, Hyperparams, Trainer, UpdateMetrics
 
 CURVE_POINTS = 50
@@ -43,13 +33,13 @@ MIN_WINDOW_EPISODES = 20
 _PROGRAMS: dict = {}
 
 
-def reduce_metrics(m: jnp.ndarray, min_episodes: int) -> dict:
-    """Per-update metrics (U, len(METRICS)) -> the agent's training figures and its learning curve.
+def reduce_metrics(m: UpdateMetrics, min_episodes: int) -> dict:
+    """Per-update metrics [U] -> the agent's training figures and its learning curve (UpdateMetrics
+    [CURVE_POINTS], each bin a sum).
     The active updates (before the budget ran out) are a prefix of the scan. The final training
     figures cover the last tenth of the active updates, widened backwards until at least
     ``min_episodes`` episodes finished in it (nan if none did)."""
-    n_upd = m.shape[0]
-    col = UpdateMetrics.named(m)
+    n_upd, col = m.episodes.shape[0], m
     idx = jnp.arange(n_upd)
     n_active = jnp.sum(col.env_steps > 0)
     ep = col.episodes
@@ -78,7 +68,9 @@ def reduce_metrics(m: jnp.ndarray, min_episodes: int) -> dict:
     hit = (ep_w >= MIN_WINDOW_EPISODES) & (su_w >= TARGET_SUCCESS * ep_w)
     episodes_to = jnp.where(jnp.any(hit), cum_ep[jnp.argmax(hit)], jnp.nan)
     bins = np.minimum(np.arange(n_upd) * CURVE_POINTS // n_upd, CURVE_POINTS - 1)
-    curve = jax.ops.segment_sum(m, jnp.asarray(bins), num_segments=CURVE_POINTS)
+    curve = jax.tree.map(
+        lambda x: jax.ops.segment_sum(x, jnp.asarray(bins), num_segments=CURVE_POINTS), m
+    )
     return {
         "train_success": train_success,
         "train_return": train_return,
@@ -100,18 +92,18 @@ def _build(cfg: Config, devices):
     trainer = Trainer(cfg)
     tcfg = test_config(cfg)
     tenv = ExoStepEnv(tcfg)
-    rollout = make_rollouts(tenv, trainer.net.apply, tcfg.env.max_steps)
+    run = agent_program(
+        trainer, make_rollouts(tenv, trainer.net.apply, tcfg.env.max_steps), trainer.num_updates
+    )
     n_eval = cfg.train.eval_episodes
     kinds = np.arange(n_eval) % len(TEST_KINDS)
     held = jnp.asarray(np.isin(np.asarray(TEST_KINDS)[kinds], HELD_OUT), jnp.float32)
 
     def agent(key, hyper, test):
         test_params, test_lay = test
-        ts, m = trainer.run(trainer.init(key, hyper), hyper, trainer.num_updates)
-        out = rollout(ts.params, test_lay, test_params)
+        ts, m, out, ok = run(trainer.init(key, hyper), hyper, test_lay, test_params)
         suc, acc = out["success"].astype(jnp.float32), out["accurate"].astype(jnp.float32)
         red = reduce_metrics(m, cfg.train.num_envs)
-        diverged = ~finite(jnp, ts, m)
         scalars = {
             "success": suc.mean(),
             "accuracy": acc.mean(),
@@ -120,7 +112,7 @@ def _build(cfg: Config, devices):
             "eval_return": out["return"].mean(),
             "episodes": ts.episodes,
             "env_steps": ts.update,  # updates done: run_chunk scales it to env steps in integers
-            "diverged": diverged,
+            "diverged": ~ok,
             **{k: v for k, v in red.items() if k != "curve"},
         }
         return {"scalars": scalars, "curve": red["curve"], "params": ts.params}
@@ -151,10 +143,8 @@ def chunk_inputs(sweep: Sweep, chunk: Chunk, size: int | None = None):
     return keys, _stack([hyper[c] for c, _ in agents]), _stack([test[c] for c, _ in agents])
 
 
-def run_chunk(sweep: Sweep, chunk: Chunk, devices=None) -> dict:
-    """Train and evaluate one chunk. Returns NumPy arrays for the real agents: ``scalars`` (name ->
-    (n,)), ``curves`` (n, CURVE_POINTS, len(METRICS)), ``params`` (flattened state dict, leaves with a
-    leading agent axis), ``wall_s`` (the call, compilation included when it happened here)."""
+def run_chunk(sweep: Sweep, chunk: Chunk, devices=None) -> ChunkResult:
+    """Train and evaluate one chunk: its real agents' results."""
     devices = list(devices if devices is not None else jax.local_devices())
     if chunk.size % len(devices):
         raise ValueError(
@@ -171,20 +161,21 @@ def run_chunk(sweep: Sweep, chunk: Chunk, devices=None) -> dict:
     per = cfg.train.num_envs * cfg.train.rollout_steps
     out = jax.tree.map(lambda x: np.asarray(x)[:n], out)
     flat = serialization.to_state_dict(out["params"])
-    return {
-        "chunk_id": chunk.chunk_id,
-        "agents": [list(a) for a in chunk.agents],
-        "scalars": {
+    return ChunkResult(
+        chunk_id=chunk.chunk_id,
+        agents=[list(a) for a in chunk.agents],
+        scalars={
             k: (
                 out["scalars"][k].astype(np.int64) * per if k == "env_steps" else out["scalars"][k]
             ).astype(np.float64)
             for k in SCALARS
         },
-        "curves": out["curve"],
-        "metrics": list(METRICS),
-        "params": _flatten(flat),
-        "wall_s": wall,
-    }
+        # The chunk file's curves: columns in METRICS order.
+        curves=np.stack([getattr(out["curve"], k) for k in METRICS], axis=-1),
+        metrics=list(METRICS),
+        params=_flatten(flat),
+        wall_s=wall,
+    )
 
 
 def _flatten(d: dict, prefix: str = "") -> dict:

@@ -18,7 +18,7 @@ from __future__ import annotations
 import csv
 import io
 import json
-from dataclasses import fields
+from dataclasses import dataclass, fields
 from pathlib import Path
 
 import numpy as np
@@ -88,24 +88,37 @@ def _text(v) -> str:
     return str(v)
 
 
-def chunk_rows(sweep: Sweep, result: dict, group_of: dict) -> list[dict]:
+@dataclass(frozen=True)
+class ChunkResult:
+    """One finished chunk (jaxexo.sweep.program.run_chunk), NumPy arrays of its n real agents."""
+
+    chunk_id: int
+    agents: list  # [config_id, seed] of each agent
+    scalars: dict  # SCALARS name -> [n] float64
+    curves: np.ndarray  # [n, CURVE_POINTS, len(metrics)]: per-update metrics summed in bins
+    metrics: list  # the curves' columns (jaxexo.train.trainer.METRICS)
+    params: dict  # flattened state dict, leaves [n, ...]
+    wall_s: float  # the call, compilation included when it happened there
+
+
+def chunk_rows(sweep: Sweep, result: ChunkResult, group_of: dict) -> list[dict]:
     """results.csv rows (strings) of one finished chunk (``jaxexo.sweep.program.run_chunk``'s result)."""
     rows = []
     hcols = hyper_columns(sweep)
-    for i, (cid, seed) in enumerate(result["agents"]):
+    for i, (cid, seed) in enumerate(result.agents):
         m = sweep.members[cid]
         row = {
             "config_id": str(cid),
             "seed": str(seed),
             "group": str(group_of[cid]),
-            "chunk": str(result["chunk_id"]),
+            "chunk": str(result.chunk_id),
             "label": m.label,
         }
         row.update((c, _text(_config_value(m.config, c))) for c in hcols)
         for k in SCALARS:
-            x = float(result["scalars"][k][i])
+            x = float(result.scalars[k][i])
             row[k] = str(int(x)) if k in INTEGER else repr(x)
-        row["wall_s"] = f"{result['wall_s']:.3f}"
+        row["wall_s"] = f"{result.wall_s:.3f}"
         rows.append(row)
     return rows
 
@@ -145,17 +158,17 @@ def chunk_path(out: Path, chunk_id: int) -> Path:
     return out / CHUNKS / f"chunk_{chunk_id:04d}.npz"
 
 
-def save_chunk(out: Path, result: dict) -> None:
+def save_chunk(out: Path, result: ChunkResult) -> None:
     """The chunk's learning curves and final parameters (before its rows: a row implies its file)."""
-    path = chunk_path(out, result["chunk_id"])
+    path = chunk_path(out, result.chunk_id)
     path.parent.mkdir(parents=True, exist_ok=True)
     buf = io.BytesIO()
     np.savez(
         buf,
-        agents=np.asarray(result["agents"], np.int64),
-        curves=result["curves"],
-        metrics=np.asarray(result["metrics"], dtype=str),
-        **{f"params/{k}": v for k, v in result["params"].items()},
+        agents=np.asarray(result.agents, np.int64),
+        curves=result.curves,
+        metrics=np.asarray(result.metrics, dtype=str),
+        **{f"params/{k}": v for k, v in result.params.items()},
     )
     atomic_write(path, buf.getvalue())
 

@@ -116,12 +116,12 @@ class Tally:
         )
         self.diverged = sum(int(r["diverged"]) for r in rows)
 
-    def finished(self, result: dict) -> None:
+    def finished(self, result: R.ChunkResult) -> None:
         R.save_chunk(self.out, result)
         new = R.chunk_rows(self.sweep, result, self.group_of)
         R.append_rows(self.out / R.RESULTS, self.cols, new)
         self.rows.extend(new)
-        self.steps_run += float(result["scalars"]["env_steps"].sum())
+        self.steps_run += float(result.scalars["env_steps"].sum())
         self.best = max([self.best] + [float(r["success"]) for r in new if r["diverged"] == "0"])
         self.diverged += sum(int(r["diverged"]) for r in new)
         if self.bar is not None:
@@ -218,7 +218,7 @@ def run_sweep(
 _WORKER_SWEEPS: dict = {}
 
 
-def ray_chunk_task(sweep_dict: dict, chunk: dict, devices: int) -> dict:
+def ray_chunk_task(sweep_dict: dict, chunk: dict, devices: int) -> R.ChunkResult:
     """A Ray task: one chunk on a worker exposing ``devices`` CPU devices to JAX."""
     from jaxexo.train.devices import use_all_cpu_cores
 

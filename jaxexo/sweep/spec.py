@@ -1,34 +1,8 @@
-"""Sweep files: a base config plus axes over hyperparameters and seeds (NumPy only).
-
-A sweep file is a config file (sections [env], [kinematics], [reward], [layout], [train], optionally
-on top of another config named by ``sweep.base``) with a [sweep] table::
-
-    [sweep]
-    base = "../default.toml"      # optional, relative to this file; the sections here override it
-    seeds = 4                     # seeds 0..3, or a list such as [0, 7, 9]
-    samples = 8                   # random draws per grid point (with [sweep.random] only)
-    sample_seed = 0               # the draws are reproducible
-    heatmap = ["train.lr", "train.lam"]   # report: the two axes of the heatmap (default: the first two)
-    top = 5                       # report: learning curves of the best configurations
-    chunk_size = 16               # agents per compiled chunk (default: from the memory budget)
-    memory_budget = "4GiB"        # default: half the machine's available memory
-
-    [sweep.grid]                  # every combination of these values
-    "train.lr" = [1e-4, 3e-4, 1e-3]
-    "reward.traj_weights[3]" = [2.0, 4.0]   # one element of a vector field
-
-    [sweep.random]                # per grid point, ``samples`` draws of these
-    "train.gamma" = { low = 0.95, high = 0.995 }
-    "train.target_tau" = { low = 0.005, high = 0.1, log = true }
-    "layout.pivot" = { choices = ["agent", "obstacle"] }
-
-An axis names any config field as ``section.field`` (a vector element as ``section.field[i]``); its
-values go through the same validation as a config file, so a bad value is refused at load time with
-the axis and the field named. Fields that change the compiled program's shapes or structure (see
-``jaxexo.config.static_settings``: num_envs, layer sizes, trace view, the number of updates the
-budget needs...) may be swept too: configurations are grouped by static settings, and each group is
-one compiled program. Every configuration runs with every seed; an *agent* is one (configuration,
-seed) pair.
+"""Sweep files (NumPy only): a config with a [sweep] table of seeds and grid and random axes over any
+config field (``section.field`` or ``section.field[i]``), read, validated (a bad value refused at load
+time naming the axis and the field), expanded into configurations and grouped by static settings
+(jaxexo.config.static_settings: each group is one compiled program). An *agent* is one
+(configuration, seed) pair. The file's format: docs/training.md (Hyperparameter sweeps).
 """
 
 from __future__ import annotations
@@ -59,18 +33,9 @@ from jaxexo.config import (
 from jaxexo.config.input_files import InputFileError, read_text_input
 
 SECTIONS = ("env", "kinematics", "reward", "layout", "train")
-SWEEP_KEYS = (
-    "base",
-    "seeds",
-    "samples",
-    "sample_seed",
-    "grid",
-    "random",
-    "heatmap",
-    "top",
-    "chunk_size",
-    "memory_budget",
-)
+# The [sweep] fields that decide the results (Sweep.fingerprint), and all of them.
+RESULT_KEYS = ("seeds", "samples", "sample_seed", "grid", "random")
+SWEEP_KEYS = ("base", *RESULT_KEYS, "heatmap", "top", "chunk_size", "memory_budget")
 RANDOM_KEYS = ("low", "high", "log", "choices")
 # Configurations of one sweep (grid points x samples), counted from the axes before any is built.
 MAX_CONFIGURATIONS = 10_000
@@ -137,11 +102,7 @@ class Sweep:
 
     def fingerprint(self) -> str:
         """Hash of everything that decides the results (not the report options or the chunking)."""
-        keep = {
-            k: v
-            for k, v in self.table.items()
-            if k in ("seeds", "samples", "sample_seed", "grid", "random")
-        }
+        keep = {k: v for k, v in self.table.items() if k in RESULT_KEYS}
         text = json.dumps({"raw": self.raw, "sweep": keep}, sort_keys=True, default=repr)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
@@ -338,17 +299,9 @@ def _samples(table: dict, axes) -> int:
     return _int("sweep.samples", table["samples"], minimum=1)
 
 
-_BYTES = {
-    "": 1,
-    "b": 1,
-    "kb": 10**3,
-    "mb": 10**6,
-    "gb": 10**9,
-    "tb": 10**12,
-    "kib": 2**10,
-    "mib": 2**20,
-    "gib": 2**30,
-    "tib": 2**40,
+# Units, lower case: b; kb .. tb (powers of 1000); kib .. tib (powers of 1024).
+_BYTES = {"": 1, "b": 1} | {
+    p + unit: base**k for k, p in enumerate("kmgt", 1) for unit, base in (("b", 1000), ("ib", 1024))
 }
 
 

@@ -1,43 +1,7 @@
-"""``jaxexo train``: drive the compiled trainer in chunks, with progress, metrics, checkpoints and resume.
-
-Run directory:
-- config.toml        the resolved config
-- checkpoint.msgpack the TrainState after the last finished chunk, the best parameters so far and the
-                     bookkeeping (chunks done, wall time, best score), in one atomic write
-- checkpoint.json    a readable copy of that bookkeeping (informational; resume reads the msgpack)
-- metrics.jsonl      one line per chunk: counters and rates reduced inside the compiled scan
-- policy.npz         the exported greedy policy (jaxexo.storage.policy_file; NumPy-only to load)
-- training_curve.png return and success rate against episodes (thesis Fig. 3.4)
-- eval.json          greedy rollouts on the test layouts (jaxexo.train.evaluate)
-(names, checkpoint reading and checks, rows, export: jaxexo.train.run_files; the chunk loop with resume,
-checkpoints, divergence, progress and export: jaxexo.train.engine, shared with populations, of which
-``OneAgent`` here is the one-agent placement)
-
-Population (``[train] population = K > 1``): K seeds of the config trained together, the best member's
-best chunk exported; jaxexo.train.population has the program and the per-member files.
-
-Model selection: after every chunk the greedy policy is scored (strict success) on validation
-layouts drawn from the training distribution; the best parameters are exported (later chunks win
-ties). The held-out test obstacles are never used for this choice.
-
-Resume: the same chunk program runs from the restored state, so a resumed run ends bit-identical to
-an uninterrupted one (tests/test_driver.py checks it). metrics.jsonl is cut back to the checkpoint's
-chunks first (rows written after it are recomputed identically).
-
-Reliability (docs/reliability.md; tests/test_reliability.py):
-- the run holds an exclusive lock on the directory (jaxexo.storage.rundir) from start to end: a second
-  ``jaxexo train``/``sweep`` there is refused; a killed run's lock vanishes with it;
-- a new run needs an empty or absent directory (a finished policy.npz, a sweep's best/, the remains of a
-  crashed run are never overwritten or appended to);
-- the checkpoint carries a sha256 (jaxexo.storage.checkpoint) and its trees must match this config's
-  network and state in structure, shape and dtype, or resume is refused naming the file;
-- the checkpoint records the config the run started with: a resume with any other config (config.toml
-  edited along with it) is refused naming the first differing field; a run past its first chunk
-  whose checkpoint was deleted (checkpoint.json, or more than one metrics row, remain) is refused;
-- a chunk whose parameters, target parameters or metrics (the loss among them) are not finite
-  (jaxexo.train.engine.finite, the population's and the sweep's rule too) marks the run diverged: the
-  row says so, training stops, no checkpoint is written for it, only the best finite parameters (if a
-  chunk produced any) are exported, and TrainingDiverged is raised (the CLI exits 3).
+"""``jaxexo train``: ``run_training`` takes the run directory's lock and hands one agent (``OneAgent``,
+its environments split over the CPU devices) or a population (jaxexo.train.population) to the chunk
+loop (jaxexo.train.engine). The run directory, model selection and resume: docs/training.md; what a
+run refuses and how it recovers: docs/reliability.md.
 """
 
 from __future__ import annotations
@@ -52,8 +16,10 @@ import numpy as np
 from jaxexo.config import Config, ConfigError, check_seed
 from jaxexo.storage.rundir import TrainingDiverged, run_lock  # noqa: F401 (read as driver.TrainingDiverged)
 from jaxexo.train import run_files
-from jaxexo.train.engine import ChunkOut, Placement, Track, divergence_remedy, finite, run_chunks
+from jaxexo.train.engine import Placement, run_chunks
 from jaxexo.train.evaluate import make_validator
+from jaxexo.train.lanes import finite
+from jaxexo.train.records import ChunkOut
 from jaxexo.train.trainer import Hyperparams, Trainer
 
 
@@ -83,19 +49,15 @@ def run_training(
 class OneAgent(Placement):
     """One agent whose environments are split over the CPU cores exposed as JAX devices (data parallel,
     jaxexo.train.devices; the CLI sets this up). The device count changes the random streams: a run is
-    reproducible on the same count. Its records: one metrics row per chunk, eval.json of the agent."""
-
-    noun = "training state"
+    reproducible on the same count."""
 
     def __init__(self, cfg: Config, seed: int):
         self.cfg, self.seed, self.size = cfg, seed, 1
         self.trainer = Trainer(cfg, devices=jax.local_devices())
         self.n_devices = len(self.trainer.devices or [0])
-        self.desc = f"train {cfg.train.trace} {cfg.train.control}"
         self.hyper = Hyperparams.from_config(cfg)
         self.n_chunk = run_files.chunking(cfg, self.trainer)[0]
         self._run = jax.jit(self.trainer.run, static_argnums=2)
-        self._active = jax.jit(self.trainer.active)
 
     @functools.cached_property
     def _validate(self):
@@ -120,93 +82,9 @@ class OneAgent(Placement):
         # (Trainer.place: else the second chunk, on a state split over the devices, compiles it again).
         return self.trainer.place(saved)
 
-    def restore_track(self, raw, ckpt, params):
-        book = raw["book"]
-        return Track(
-            params,
-            np.array([book["best_score"]], np.float64),
-            np.array([book["best_chunk"]], np.int64),
-            np.zeros(1, np.int64),
-        )  # a diverged chunk is never checkpointed
-
-    def track_record(self, track):
-        return {}  # the best score and chunk are the book's
-
-    def active(self, ts):
-        return np.array([bool(self._active(ts, self.hyper))])
-
     def chunk(self, ts):
         ts, m = self._run(ts, self.hyper, self.n_chunk)
-        m = np.asarray(m)
+        m = jax.tree.map(np.asarray, m)
         ok = bool(finite(np, ts, m))
         score = self._validate(ts.params) if ok else math.nan
-        return ChunkOut(ts, m[None], np.array([score]), np.array([ok]))
-
-    def counts(self, ts):
-        return [
-            run_files.Counters(
-                np.asarray(ts.update), np.asarray(ts.episodes), self.trainer.env_steps(ts)
-            )
-        ]
-
-    def keep_best(self, best, ts, i):
-        return ts.params
-
-    def params_of(self, best, i):
-        return best
-
-    def lead(self, track):
-        return 0
-
-    def row(self, chunk, wall, lead, agent_rows):
-        return agent_rows[0]
-
-    def label(self, i):
-        return {}
-
-    def progress(self, row, out, track, lead, stopped):
-        if stopped:
-            return dict(diverged=f"chunk {row['chunk']}", loss=row["loss"])
-        return dict(
-            episodes=row["episodes"],
-            steps_per_s=f"{row['env_steps_per_s']:.3g}",
-            ret=f"{row['return_mean']:.2f}",
-            success_raw=f"{row['success_raw_rate']:.3f}",
-            eps=f"{row['epsilon']:.3f}",
-            val=f"{row['validation_success_raw']:.3f}",
-        )
-
-    def select(self, out, track):
-        # A chunk that diverged after a finite one leaves that chunk's parameters to export.
-        return None if track.diverged[0] and track.chunk[0] == 0 else 0
-
-    def plot(self, path, rows, exported):
-        run_files.plot_training_curve(path, [r for r in rows if not r["diverged"]] or rows)
-
-    def identity(self, exported, seed):
-        return {"seed": seed}
-
-    def report(self, exported, track, rows, counts, figures):
-        return {"diverged_chunk": int(track.diverged[0])} if track.diverged[0] else {}
-
-    def _diverged(self, metrics_path, track, what: str) -> str:
-        """TrainingDiverged's message: where the run diverged, ``what`` was kept, and the remedy."""
-        return (
-            f"training diverged in chunk {track.diverged[0]} (non-finite loss or parameters; {metrics_path} row "
-            f'{track.diverged[0]} has "diverged": true); {what}. {divergence_remedy(self.cfg)}'
-        )
-
-    def nothing_exported(self, metrics_path, track):
-        return self._diverged(
-            metrics_path,
-            track,
-            "no chunk finished with finite parameters, so no policy was exported",
-        )
-
-    def diverged_after(self, metrics_path, track):
-        return self._diverged(
-            metrics_path,
-            track,
-            f"policy.npz and eval.json hold the best finite parameters, from chunk {track.chunk[0]} "
-            f"(validation success on raw moves {track.score[0]:.3f})",
-        )
+        return ChunkOut(ts, jax.tree.map(lambda x: x[None], m), np.array([score]), np.array([ok]))

@@ -1,27 +1,40 @@
-"""Running many agents as one compiled program, each with the arithmetic it has alone (JAX).
-
-Sweeps (jaxexo.sweep.program) and populations (jaxexo.train.population) vmap many agents. XLA on
-CPU compiles a vmapped batch differently for different batch sizes (a dot over a batch of one is a
-library matrix product, over two or more a fused multiply-add loop; fusion boundaries, and so where a multiply and an add become one rounded FMA,
-move with the size), so the same agent ends a few ulps apart, and after a thousand updates at a
-different outcome, in batches of 1, 2, 5 or 8. No XLA flag removes it. So no agent is ever computed
-in a batch whose shape depends on who else is in the program: every device runs its agents LANES at
-a time, ``lax.map`` over fixed ``vmap(LANES)`` blocks (padded with copies of the first agent, whose
-results are dropped). An agent's arithmetic is then the same in a population of any size and in a
-sweep chunk of any size (tests/test_population.py checks it bit for bit), and on any device count from
-two up (a program over a single device is compiled without partitioning and differs in the last
-bits, so populations use at least two devices where there are two; docs/training.md).
+"""One agent's program (train, greedy rollouts, the divergence rule) and many agents run as one
+compiled program (JAX), every device running its agents in fixed blocks of LANES so that an agent's
+arithmetic never depends on who else is in the program (why: docs/training.md, Group-size
+independence; tests/test_population.py checks it bit for bit).
 """
 
 from __future__ import annotations
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 # Agents per vmapped block: fixed, so that an agent's arithmetic never depends on how many agents
 # share its program. Two buys most of the batching gain while a lone member (a population of one, a
 # sweep's last odd agent) pays for one padding lane, not three (measured: docs/training.md).
 LANES = 2
+
+
+def finite(xp, ts, metrics):
+    """The one divergence rule: a chunk diverged unless its parameters, target parameters and metrics
+    (the loss among them) are all finite. ``xp``: numpy on the host, jax.numpy inside a compiled
+    program (a population's or a sweep's, per agent)."""
+    leaves = jax.tree.leaves((ts.params, ts.target_params, metrics))
+    return xp.all(xp.stack([xp.all(xp.isfinite(x)) for x in leaves]))
+
+
+def agent_program(trainer, rollouts, n_updates: int):
+    """The one agent program of populations and sweeps: ``agent(ts, hyper, layouts, env_params)`` runs
+    ``n_updates`` updates of ``trainer`` from ``ts``, then the greedy ``rollouts``
+    (jaxexo.train.evaluate.make_rollouts) of the new parameters on ``layouts`` [N]; returns the state,
+    the UpdateMetrics [n_updates], the rollouts' per-episode outcomes [N] and ``finite``."""
+
+    def agent(ts, hyper, layouts, env_params):
+        ts, m = trainer.run(ts, hyper, n_updates)
+        return ts, m, rollouts(ts.params, layouts, env_params), finite(jnp, ts, m)
+
+    return agent
 
 
 def over_agents(fn, devices, n_args: int):

@@ -1,7 +1,7 @@
 """The run directory's files, for one agent (jaxexo.train.driver) and a population
 (jaxexo.train.population): their names, the chunking of a budget, a chunk's metrics row, the
-checkpoint (read, checked against the state it must fill, written), the exported policy, the
-training curve, and the checks a new or resumed run makes of its directory."""
+checkpoint (read, checked against the state it must fill, written), the exported policy, and the
+checks a new or resumed run makes of its directory (formats: docs/training.md)."""
 
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ import json
 import math
 import tomllib
 from pathlib import Path
-from typing import NamedTuple
 
+import jax
 import numpy as np
-from flax import serialization
+from flax import serialization, struct
 
 from jaxexo.config import Config, ConfigError, config_from_dict, load_config
 from jaxexo.config.input_files import (
@@ -24,7 +24,7 @@ from jaxexo.config.input_files import (
 from jaxexo.config.toml_io import config_to_toml
 from jaxexo.env.exo_step import LENGTH_SCALE, THESIS_OBS_CENTER
 from jaxexo.physics import actions
-from jaxexo.storage.atomic import atomic_write, stale_temps, write_figure
+from jaxexo.storage.atomic import atomic_write, stale_temps
 from jaxexo.storage.checkpoint import CheckpointError, unpack_checkpoint
 from jaxexo.storage.policy_file import save_policy
 from jaxexo.storage.rundir import RunDirError, contents, describe
@@ -51,24 +51,31 @@ def chunking(cfg: Config, trainer: Trainer) -> tuple[int, int]:
 checkpoint_write = atomic_write
 
 
-class Counters(NamedTuple):
-    """An agent's totals after a chunk (host integers)."""
+@struct.dataclass
+class Counters:
+    """The agents' totals after a chunk (host integers [K], or one agent's scalars), named as
+    TrainState's counters (Trainer.active reads them)."""
 
-    updates: int
-    episodes: int
-    env_steps: int
+    update: np.ndarray  # updates done
+    episodes: np.ndarray
+    steps_per_update: int = struct.field(pytree_node=False)
+
+    @property
+    def env_steps(self) -> np.ndarray:
+        """Env steps done, exactly (int64)."""
+        return np.asarray(self.update).astype(np.int64) * self.steps_per_update
 
 
-def chunk_row(m: np.ndarray, counts: Counters, chunk: int, wall: float, seconds: float) -> dict:
-    """metrics.jsonl's row of one agent's chunk: ``m`` its (n_chunk, len(METRICS)) update metrics."""
-    # One float64 sum of the whole array, then the fields by name (a column summed alone could round
-    # differently: NumPy sums a contiguous row pairwise).
-    d = UpdateMetrics.named(m.astype(np.float64).sum(0))
-    n_upd = max(1, int((UpdateMetrics.named(m).env_steps > 0).sum()))
+def chunk_row(m: UpdateMetrics, counts: Counters, chunk: int, wall: float, seconds: float) -> dict:
+    """metrics.jsonl's row of one agent's chunk: ``m`` its UpdateMetrics [n_chunk]."""
+    # Summed in float64 in update order (cumsum: np.sum of a lone column is pairwise and rounds
+    # differently from the rows' order the rows have always been summed in).
+    d = jax.tree.map(lambda x: np.cumsum(np.asarray(x, np.float64))[-1], m)
+    n_upd = max(1, int((np.asarray(m.env_steps) > 0).sum()))
     eps = max(float(d.episodes), 1.0)
     return {
         "chunk": chunk,
-        "updates": int(counts.updates),
+        "updates": int(counts.update),
         "env_steps": int(counts.env_steps),
         "episodes": int(counts.episodes),
         "chunk_episodes": int(d.episodes),
@@ -107,35 +114,6 @@ def export_policy(path: Path, cfg: Config, trainer: Trainer, params) -> Path:
         [b for _, b in norms],
         meta,
     )
-
-
-def plot_training_curve(path: Path, rows: list[dict]) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    ep = [r["episodes"] for r in rows]
-    fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
-    a1.plot(ep, [r["return_mean"] for r in rows], color="tab:blue")
-    a1.set_ylabel("mean episode return")
-    a1.set_title("Training (thesis Fig. 3.4): return and success per chunk")
-    a1.grid(alpha=0.3)
-    a2.plot(
-        ep,
-        [r["success_raw_rate"] for r in rows],
-        label="strict success, raw moves",
-        color="tab:green",
-    )
-    a2.plot(ep, [r["accuracy"] for r in rows], label="accuracy (eq 3.1)", color="tab:orange")
-    a2.set_ylim(-0.02, 1.02)
-    a2.set_xlabel("episodes")
-    a2.set_ylabel("share of finished episodes")
-    a2.legend(loc="lower right")
-    a2.grid(alpha=0.3)
-    fig.tight_layout()
-    write_figure(path, fig, dpi=110)
-    plt.close(fig)
 
 
 def tree_mismatch(template, loaded, where: str = "") -> str | None:

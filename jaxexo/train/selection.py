@@ -1,26 +1,18 @@
-"""Which member of a population is exported: the one a wearer would choose.
-
-Training ranks a population's members (jaxexo.train.population) by greedy validation success; each
-member's best chunk is a candidate. The candidates are then exported and swung as a user gets them:
-the NumPy generator, RL alone (no CFFTG fallback), on validation scenes of the config's training
-distribution (jaxexo.inference.scenarios.training_scenarios at the validation seed, never a test or
-held-out set), each swing timed at the config's [device] limits complete to the floor, beside CFFTG on
-the same scenes. The choice:
-
-1. the most safe swings (the verdict at env.min_clearance): comfort is never bought with safety;
-2. then the least wearer's cost, ``t_median / t_median(CFFTG) + t_p95 / t_p95(CFFTG) + lift_median /
-   lift_median(CFFTG)`` over the scenes both generators swing safely: the timed swing's median, its
-   slow tail and how high the foot is lifted, each about 1 when the candidate feels like CFFTG;
-3. then the highest greedy validation success in training (500 scenes: it decides between candidates
-   that no selection scene separates, such as learners that fail every scene), then the lowest seed.
+"""Which member of a population is exported: the one a wearer would choose. Every candidate (a
+member's best chunk) is swung by the NumPy generator, RL alone, on validation scenes of the training
+distribution, each swing timed, beside CFFTG on the same scenes: the most safe swings win, then the
+least wearer's cost (WearerScore.cost), then validation success, then the lowest seed (the method:
+docs/training.md, Populations).
 """
 
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+import jax
 import numpy as np
 
 from jaxexo.baselines.cfftg import CFFTG
@@ -45,7 +37,7 @@ class WearerScore:
     duration_median_s: float  # timed swing, complete to the floor, on those scenes
     duration_p95_s: float
     lift_median_m: float  # heel peak above the obstacle's top
-    cost: float  # the wearer's cost (module docstring); inf when no scene is both safe
+    cost: float  # the wearer's cost (docs/training.md); inf when no scene is both safe
 
     def key(self) -> tuple:
         """Sort key: best first (most safe, least cost, best validation, lowest seed)."""
@@ -146,3 +138,42 @@ def score_record(score: WearerScore) -> dict:
         k: (None if isinstance(v, float) and not math.isfinite(v) else v)
         for k, v in asdict(score).items()
     }
+
+
+@dataclass(frozen=True)
+class Selection:
+    """A population's choice: the member exported, eval.json's ``selection`` and its time."""
+
+    exported: int
+    scores: list[dict]  # score_record of each candidate (empty: one candidate, exported unscored)
+    seconds: float
+
+
+def choose_member(cfg: Config, out: Path, trainer, track, seeds: list[int]) -> Selection:
+    """The member to export of a population with candidates (jaxexo.train.records.Track): every
+    candidate (a member that finished a chunk and never diverged) exported to
+    ``members/seed_<seed>.npz`` and scored as a wearer gets it; one candidate is exported unscored."""
+    from jaxexo.train.run_files import export_policy
+
+    t0 = time.perf_counter()
+    ok = track.candidates()
+    if len(ok) == 1:
+        return Selection(ok[0], [], time.perf_counter() - t0)
+    (out / "members").mkdir(exist_ok=True)
+    candidates = [
+        Candidate(
+            seeds[i],
+            float(track.score[i]),
+            export_policy(
+                out / "members" / f"seed_{seeds[i]}.npz",
+                cfg,
+                trainer,
+                jax.tree.map(lambda x: x[i], track.params),
+            ),
+        )
+        for i in ok
+    ]
+    scores = wearer_scores(cfg, candidates)
+    return Selection(
+        ok[choose_for_wearer(scores)], [score_record(s) for s in scores], time.perf_counter() - t0
+    )

@@ -1,24 +1,15 @@
-"""The TD(lambda) trainer as one compiled program (thesis 2.3-2.4, 3.1-3.2).
+"""The TD(lambda) trainer as one compiled program (thesis 2.3-2.4, 3.1-3.2; the method:
+docs/training.md).
 
-``make_train(config)`` returns a pure ``train(key, hyper)``: one ``lax.scan`` over updates with the
-environment vmapped inside; jit it, vmap it over seeds or over ``Hyperparams`` (every leaf of which
-may differ: learning rate, gamma, lambda, epsilon schedule, target rate, reward weights...). Static
-settings (num_envs, rollout length, layer sizes, trace view, control) come from ``TrainConfig`` and
-fix the program's shapes.
-
-One *update* = a rollout of T steps in each of N environments, then:
-- forward view: lambda-returns by a reverse scan (jaxexo.train.td_lambda), then ``num_epochs`` passes
-  of ``num_minibatches`` Adam steps on 0.5 (G - Q(s, a))^2 (as PQN does, with a target network);
-- backward view: per-environment eligibility traces over the parameters, one Adam step per env step
-  along mean_i delta_i e_i (eq 2.26).
-The target network is copied every ``target_period`` updates ("hard") or moved by ``target_tau``
-("polyak"). Metrics are reduced inside the scan: one row of scalars per update.
+``make_train(config)`` returns a pure ``train(key, hyper)``: one ``lax.scan`` over updates whose carry
+is the TrainState and whose output is UpdateMetrics [n_updates], the environments vmapped inside; jit
+it, vmap it over seeds or over ``Hyperparams``. Static settings (TrainConfig) fix its shapes.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, NamedTuple
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -34,27 +25,34 @@ from jaxexo.train import td_lambda
 from jaxexo.train.network import QNetwork
 
 
-class UpdateMetrics(NamedTuple):
-    """One update's metrics by name. The compiled scan returns them as the columns of a
-    (n_updates, len(METRICS)) array, in this order (``_finish_update``); ``named`` reads such an
-    array (or a sum of its rows) by name, so that no reader indexes a column by position."""
+@struct.dataclass
+class EpisodeCounts:
+    """The episodes that finished in one step (or a sum of steps): float32 scalars, leading axes kept."""
 
-    episodes: Any  # episodes finished
-    return_sum: Any  # their returns, summed
-    successes: Any  # of them, strict successes on the raw moves (behaviour policy)
-    accurate: Any  # of them, collision-free
-    env_steps: Any  # N T while the budget lasts, 0 after: the active updates are the nonzero ones
-    loss: Any
-    q_mean: Any
-    epsilon: Any
-
-    @classmethod
-    def named(cls, rows) -> "UpdateMetrics":
-        """The fields of ``rows``, a NumPy or JAX array whose last axis is METRICS."""
-        return cls(*(rows[..., i] for i in range(len(cls._fields))))
+    episodes: jnp.ndarray  # episodes finished
+    return_sum: jnp.ndarray  # their returns, summed
+    successes: jnp.ndarray  # of them, strict successes on the raw moves (behaviour policy)
+    accurate: jnp.ndarray  # of them, collision-free
 
 
-METRICS = UpdateMetrics._fields
+@struct.dataclass
+class UpdateMetrics:
+    """One update's metrics (float32 scalars): the compiled scan returns them with a leading update
+    axis, and drivers add an agent axis in front of it."""
+
+    episodes: jnp.ndarray  # episodes finished
+    return_sum: jnp.ndarray  # their returns, summed
+    successes: jnp.ndarray  # of them, strict successes on the raw moves (behaviour policy)
+    accurate: jnp.ndarray  # of them, collision-free
+    env_steps: (
+        jnp.ndarray
+    )  # N T while the budget lasts, 0 after: the active updates are the nonzero ones
+    loss: jnp.ndarray
+    q_mean: jnp.ndarray
+    epsilon: jnp.ndarray
+
+
+METRICS = tuple(f.name for f in dataclasses.fields(UpdateMetrics))
 
 
 def _hyper_from_config(cls, cfg: Config) -> "Hyperparams":
@@ -125,7 +123,10 @@ class TrainState:
     episodes: jnp.ndarray  # int32: episodes finished
 
 
-class Transition(NamedTuple):
+@struct.dataclass
+class Transition:
+    """One step of the N environments (a rollout: leading axis T)."""
+
     obs: jnp.ndarray
     action: jnp.ndarray
     reward: jnp.ndarray
@@ -133,7 +134,7 @@ class Transition(NamedTuple):
     truncated: jnp.ndarray
     target_q: (
         jnp.ndarray
-    )  # target network at the step's final observation: max_a (off-policy) or all of Q
+    )  # target network at the final observation: max_a (off-policy), or all of Q
     greedy: jnp.ndarray
 
 
@@ -291,20 +292,22 @@ class Trainer:
         # definition), on the agent's raw moves under the behaviour policy.
         v = outcome.episode_verdict(jnp, acc, **outcome.rule(env_params))
         done = terminated | truncated
-        row = jnp.stack(
-            [
-                done.sum(),
-                jnp.where(done, ret, 0.0).sum(),
-                (done & v.success).sum(),
-                (done & v.collision_free).sum(),
-            ]
+        counts = EpisodeCounts(
+            episodes=done.sum().astype(jnp.float32),
+            return_sum=jnp.where(done, ret, 0.0).sum().astype(jnp.float32),
+            successes=(done & v.success).sum().astype(jnp.float32),
+            accurate=(done & v.collision_free).sum().astype(jnp.float32),
         )
         fresh = outcome.start(jnp, ret.shape)
         new = EpisodeStats(
             ret=jnp.where(done, 0.0, ret),
             outcome=jax.tree.map(lambda f, a: jnp.where(done, f, a), fresh, acc),
         )
-        return new, row.astype(jnp.float32)
+        return new, counts
+
+    def _step_sum(self, counts: EpisodeCounts) -> EpisodeCounts:
+        """A rollout's per-step counts [T] summed over its steps and over the devices."""
+        return self._psum(jax.tree.map(lambda x: x.sum(0), counts))
 
     def _bootstrap(self, q_final, next_action, done, eps):
         """Value of the state a step reached (its final observation), per the control mode."""
@@ -313,37 +316,47 @@ class Trainer:
         q_next = jnp.take_along_axis(q_final, next_action[..., None], axis=-1)[..., 0]
         return jnp.where(done, td_lambda.epsilon_greedy_value(q_final, eps), q_next)  # eq 2.27
 
-    def _finish_update(self, ts: TrainState, new: TrainState, hyper, row_ep, loss, q_mean, eps):
+    def _finish_update(
+        self, ts: TrainState, new: TrainState, hyper, counts: EpisodeCounts, loss, q_mean, eps
+    ):
+        """``new`` with its target network moved and its counters advanced, and the update's
+        metrics; past the budget ``ts`` itself and zero metrics (the state frozen)."""
         upd = new.update + 1
         if self.tc.target == "hard":
             copy = (upd % hyper.target_period) == 0
             target = jax.tree.map(lambda p, t: jnp.where(copy, p, t), new.params, new.target_params)
         else:
             target = optax.incremental_update(new.params, new.target_params, hyper.target_tau)
-        steps = float(self.tc.num_envs * self.tc.rollout_steps)
-        # row_ep[0] counts this update's finished episodes (<= N): exact in float32, added as an integer.
+        # counts.episodes counts this update's finished episodes (<= N): exact in float32.
         new = new.replace(
-            target_params=target, update=upd, episodes=new.episodes + row_ep[0].astype(jnp.int32)
+            target_params=target,
+            update=upd,
+            episodes=new.episodes + counts.episodes.astype(jnp.int32),
         )
         # Past the budget the state is frozen (vmapped seeds and sweeps reach it at different times).
         act = self.active(ts, hyper)
         new = jax.tree.map(lambda a, b: jnp.where(act, a, b), new, ts)
-        # UpdateMetrics's order: row_ep holds its first four fields (_episode_stats).
-        metrics = jnp.concatenate([row_ep, jnp.stack([steps, loss, q_mean, eps])]) * act
-        return new, metrics
+        metrics = UpdateMetrics(
+            **dataclasses.asdict(counts),
+            env_steps=jnp.float32(self.steps_per_update),
+            loss=loss,
+            q_mean=q_mean,
+            epsilon=eps,
+        )
+        return new, jax.tree.map(lambda x: x * act, metrics)
 
     # --------------------------------------------------------------------------------------
     def _rollout(self, ts: TrainState, hyper: Hyperparams, eps):
-        """T steps of the N environments under the epsilon-greedy policy: the transitions (T, N), the
-        per-step episode rows, and the state the rollout ends in."""
+        """T steps of the N environments under the epsilon-greedy policy: the state the rollout ends
+        in, the transitions [T, N] and the per-step EpisodeCounts [T]."""
 
         def step(carry, _):
-            env_state, obs, mask, stats, key = carry
-            key, kl = jax.random.split(key)
+            c, mask = carry  # the state and its admissible moves
+            key, kl = jax.random.split(c.key)
             ka, ke = jax.random.split(self._local_key(kl))
-            a, greedy = self._act(ts.params, obs, ka, eps, mask)
-            obs2, env_state, r, term, trunc, info = self._env_step(ke, env_state, a, hyper)
-            stats, row = self._episode_stats(stats, r, term, trunc, info, hyper.env)
+            a, g = self._act(ts.params, c.obs, ka, eps, mask)
+            obs2, env_state, r, term, trunc, info = self._env_step(ke, c.env_state, a, hyper)
+            stats, counts = self._episode_stats(c.stats, r, term, trunc, info, hyper.env)
             mask2 = self._mask(env_state, hyper)
             # The bootstrap's target-network pass runs here, on this step's N observations, rather than
             # on all T x N after the rollout: the same arithmetic on a working set that stays in cache.
@@ -351,19 +364,23 @@ class Trainer:
                 self.net.apply(ts.target_params, info["final_observation"]),
                 self._final_mask(mask2, term | trunc),
             )  # (N, A)
-            target_q = jnp.max(q_final, axis=-1) if self.off_policy else q_final
-            return (env_state, obs2, mask2, stats, key), (
-                Transition(obs, a, r, term, trunc, target_q, greedy),
-                row,
+            tq = jnp.max(q_final, axis=-1) if self.off_policy else q_final
+            tr = Transition(
+                obs=c.obs,
+                action=a,
+                reward=r,
+                terminated=term,
+                truncated=trunc,
+                target_q=tq,
+                greedy=g,
             )
+            c = c.replace(env_state=env_state, obs=obs2, stats=stats, key=key)
+            return (c, mask2), (tr, counts)
 
-        (env_state, obs, _, stats, key), (tr, rows) = jax.lax.scan(
-            step,
-            (ts.env_state, ts.obs, self._mask(ts.env_state, hyper), ts.stats, ts.key),
-            None,
-            length=self.tc.rollout_steps,
+        (new, _), (tr, counts) = jax.lax.scan(
+            step, (ts, self._mask(ts.env_state, hyper)), None, length=self.tc.rollout_steps
         )
-        return ts.replace(env_state=env_state, obs=obs, stats=stats, key=key), tr, rows
+        return new, tr, counts
 
     def _learn(self, ts: TrainState, tr: Transition, hyper: Hyperparams, eps):
         """Lambda-returns of a rollout (eq 2.19, by a reverse scan) and ``num_epochs`` passes of
@@ -426,9 +443,9 @@ class Trainer:
 
     def _update_forward(self, ts: TrainState, hyper: Hyperparams):
         eps = self.epsilon(ts, hyper)
-        rolled, tr, rows = self._rollout(ts, hyper, eps)
+        rolled, tr, counts = self._rollout(ts, hyper, eps)
         new, loss, q_mean = self._learn(rolled, tr, hyper, eps)
-        return self._finish_update(ts, new, hyper, self._psum(rows.sum(0)), loss, q_mean, eps)
+        return self._finish_update(ts, new, hyper, self._step_sum(counts), loss, q_mean, eps)
 
     def _update_backward(self, ts: TrainState, hyper: Hyperparams):
         eps = self.epsilon(ts, hyper)
@@ -439,23 +456,22 @@ class Trainer:
 
         grad_q = jax.vmap(jax.value_and_grad(q_sa), in_axes=(None, 0, 0))
 
-        def step(carry, _):
-            params, opt_state, traces, env_state, obs, a, greedy, fresh, stats, key = carry
-            key, kl = jax.random.split(key)
+        def step(c: TrainState, _):
+            key, kl = jax.random.split(c.key)
             ka, ke = jax.random.split(self._local_key(kl))
-            qsa, grads = grad_q(params, obs, a)
+            qsa, grads = grad_q(c.params, c.obs, c.action)
             # Eq 2.22: decay by gamma * lambda, reset at episode start, cut after exploration (Watkins).
-            keep = ~fresh & (greedy if self.off_policy else True)
+            keep = ~c.fresh & (c.greedy if self.off_policy else True)
             traces = td_lambda.add_gradient(
-                td_lambda.decay_traces(traces, hyper.gamma, hyper.lam, keep),
+                td_lambda.decay_traces(c.traces, hyper.gamma, hyper.lam, keep),
                 grads,
                 self.tc.trace_kind,
             )
-            obs2, env_state, r, term, trunc, info = self._env_step(ke, env_state, a, hyper)
-            stats, row = self._episode_stats(stats, r, term, trunc, info, hyper.env)
+            obs2, env_state, r, term, trunc, info = self._env_step(ke, c.env_state, c.action, hyper)
+            stats, counts = self._episode_stats(c.stats, r, term, trunc, info, hyper.env)
             done = term | trunc
             mask2 = self._mask(env_state, hyper)
-            a2, greedy2 = self._act(params, obs2, ka, eps, mask2)
+            a2, greedy2 = self._act(c.params, obs2, ka, eps, mask2)
             q_final = td_lambda.restrict(
                 self.net.apply(ts.target_params, info["final_observation"]),
                 self._final_mask(mask2, done),
@@ -464,41 +480,27 @@ class Trainer:
             delta = r + hyper.gamma * (1.0 - term) * boot - qsa  # eq 2.26
             direction = self._pmean(td_lambda.trace_update_direction(traces, delta))
             # Adam minimises: feed it the negative ascent direction of eq 2.26.
-            updates, opt_state = tx.update(jax.tree.map(jnp.negative, direction), opt_state, params)
-            params = optax.apply_updates(params, updates)
-            carry = (params, opt_state, traces, env_state, obs2, a2, greedy2, done, stats, key)
-            return carry, (row, self._pmean(0.5 * jnp.mean(delta**2)), self._pmean(jnp.mean(qsa)))
+            updates, opt_state = tx.update(
+                jax.tree.map(jnp.negative, direction), c.opt_state, c.params
+            )
+            c = c.replace(
+                params=optax.apply_updates(c.params, updates),
+                opt_state=opt_state,
+                traces=traces,
+                env_state=env_state,
+                obs=obs2,
+                action=a2,
+                greedy=greedy2,
+                fresh=done,
+                stats=stats,
+                key=key,
+            )
+            return c, (counts, self._pmean(0.5 * jnp.mean(delta**2)), self._pmean(jnp.mean(qsa)))
 
-        init = (
-            ts.params,
-            ts.opt_state,
-            ts.traces,
-            ts.env_state,
-            ts.obs,
-            ts.action,
-            ts.greedy,
-            ts.fresh,
-            ts.stats,
-            ts.key,
-        )
-        (
-            (params, opt_state, traces, env_state, obs, a, greedy, fresh, stats, key),
-            (rows, losses, qms),
-        ) = jax.lax.scan(step, init, None, length=self.tc.rollout_steps)
-        new = ts.replace(
-            params=params,
-            opt_state=opt_state,
-            traces=traces,
-            env_state=env_state,
-            obs=obs,
-            action=a,
-            greedy=greedy,
-            fresh=fresh,
-            stats=stats,
-            key=key,
-        )
+        # The carry is the state itself: its counters and target network stay as they are in the scan.
+        new, (counts, losses, qms) = jax.lax.scan(step, ts, None, length=self.tc.rollout_steps)
         return self._finish_update(
-            ts, new, hyper, self._psum(rows.sum(0)), losses.mean(), qms.mean(), eps
+            ts, new, hyper, self._step_sum(counts), losses.mean(), qms.mean(), eps
         )
 
     def update(self, ts: TrainState, hyper: Hyperparams):
@@ -543,8 +545,7 @@ class Trainer:
         return jax.device_put(ts, shardings)
 
     def run(self, ts: TrainState, hyper: Hyperparams, n_updates: int):
-        """``n_updates`` updates in one scan; returns the state and a (n_updates, len(METRICS)) array
-        (its columns by name: ``UpdateMetrics.named``).
+        """``n_updates`` updates in one scan; returns the state and the UpdateMetrics [n_updates].
         With several devices, pass ``place(ts)`` on the first call (one compilation, see ``place``)."""
 
         def scan(ts, hyper):
