@@ -181,7 +181,7 @@ def jax_paths(gen, scenes_args):
     out, path = jax.jit(jax.vmap(rollout, in_axes=(None, 0, None)))(
         flax_params(gen.policy), stacked, params
     )
-    steps = np.asarray(out["steps"])
+    steps = np.asarray(out.steps)
     start = np.stack([np.asarray([l.start_y for l in layouts]), np.zeros(len(layouts))], -1)
     return [
         np.vstack([start[i], np.asarray(path)[i, : steps[i]]]) for i in range(len(layouts))
@@ -209,14 +209,14 @@ def test_numpy_rollouts_take_the_jax_environments_actions(request, policies, whi
         # The rules that end an episode were exercised: some scenes reach the goal, by the same step.
         # (The session's policy is small: 2 M steps of quick.toml; 1 M reached the goal in none of these 48
         # on an Intel Xeon, 2 M succeed in a third of the test layouts there.)
-        reached = np.asarray(out["reached"])
+        reached = np.asarray(out.reached)
         assert reached.sum() >= len(args) // 6
         lengths = np.array([len(a) - 1 for a in single])
-        np.testing.assert_array_equal(lengths, np.asarray(out["steps"]))
+        np.testing.assert_array_equal(lengths, np.asarray(out.steps))
     if which == "terminate":
         # Collisions end episodes early here, at the same step in both.
-        steps = np.asarray(out["steps"])
-        assert np.any(np.asarray(out["collided"]) & (steps < gen.max_steps))
+        steps = np.asarray(out.steps)
+        assert np.any(np.asarray(out.collided) & (steps < gen.max_steps))
 
 
 @pytest.mark.slow

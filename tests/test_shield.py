@@ -455,7 +455,7 @@ def test_greedy_rollouts_with_the_batched_mask_equal_the_plain_mask_bit_for_bit(
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
     assert fast[1].shape == (96, cfg.env.max_steps, 2)
     # random weights: some episodes end early, some run to the limit, so both paths are exercised
-    steps = np.asarray(fast[0]["steps"])
+    steps = np.asarray(fast[0].steps)
     assert steps.min() < cfg.env.max_steps and (steps == cfg.env.max_steps).any(), np.unique(steps)
     one = jax.jit(make_rollout(env, net.apply, cfg.env.max_steps, record=True))(
         q, jax.tree.map(lambda x: x[5], layouts), params

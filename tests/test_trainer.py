@@ -84,7 +84,7 @@ def test_trainer_learns_to_step_over_a_fixed_obstacle():
 
     ts = jax.jit(trainer.init)(jax.random.PRNGKey(LEARN_SEED), hyper)
     before = greedy(ts.params, layout, env.default_params)
-    assert not bool(before["success"]), (
+    assert not bool(before.success), (
         "the untrained greedy policy already clears the scene: nothing to learn"
     )
     ts, m = jax.jit(trainer.run, static_argnums=2)(ts, hyper, trainer.num_updates)
@@ -99,11 +99,11 @@ def test_trainer_learns_to_step_over_a_fixed_obstacle():
     first, last = rate(m[:tenth]), rate(m[-tenth:])
     assert m[-1, COL["epsilon"]] == pytest.approx(0.02)
     out = greedy(ts.params, layout, env.default_params)
-    assert bool(out["reached"]) and bool(out["success"]), {
-        k: np.asarray(v).tolist() for k, v in out.items()
+    assert bool(out.reached) and bool(out.success), {
+        k: np.asarray(v).tolist() for k, v in vars(out).items()
     }
-    assert int(out["steps"]) < cfg.env.max_steps
-    steps = int(out["steps"])
+    assert int(out.steps) < cfg.env.max_steps
+    steps = int(out.steps)
     backward = int(np.sum(np.asarray(env.default_params.directions)[:, 0] < -1e-6))
     assert backward == 17
     cap = (1.0 - 0.02 * backward / 36) ** steps

@@ -102,14 +102,14 @@ def _build(cfg: Config, devices):
     def agent(key, hyper, test):
         test_params, test_lay = test
         ts, m, out, ok = run(trainer.init(key, hyper), hyper, test_lay, test_params)
-        suc, acc = out["success"].astype(jnp.float32), out["accurate"].astype(jnp.float32)
+        suc, acc = out.success.astype(jnp.float32), out.accurate.astype(jnp.float32)
         red = reduce_metrics(m, cfg.train.num_envs)
         scalars = {
             "success": suc.mean(),
             "accuracy": acc.mean(),
             "held_out_success": jnp.sum(suc * held) / held.sum(),
             "held_out_accuracy": jnp.sum(acc * held) / held.sum(),
-            "eval_return": out["return"].mean(),
+            "eval_return": out.episode_return.mean(),
             "episodes": ts.episodes,
             "env_steps": ts.update,  # updates done: run_chunk scales it to env steps in integers
             "diverged": ~ok,

@@ -16,6 +16,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 import numpy as np
+from flax import struct
 
 from jaxexo.config import Config, numpy_params, test_config
 from jaxexo.env import ExoStepEnv
@@ -38,6 +39,21 @@ def test_layouts(tcfg: Config, n: int, seed: int = 12345) -> Layout:
     evenly (every kind x pivot pair equally often), the rest drawn from the distribution; the scenes
     of jaxexo.inference.scenarios.sample_scenarios(cfg, n, seed)."""
     return layout_set(tcfg, n, seed, cycle=True)
+
+
+@struct.dataclass
+class Rollouts:
+    """Greedy episodes' outcomes, each field [N] (one episode: no axis)."""
+
+    steps: jnp.ndarray  # steps taken
+    episode_return: jnp.ndarray  # the undiscounted return
+    reached: jnp.ndarray  # the goal was reached
+    collided: jnp.ndarray  # the foot touched the obstacle
+    limits: jnp.ndarray  # a joint limit was violated
+    leg: jnp.ndarray  # a leg was too long
+    min_clearance: jnp.ndarray  # m, the smallest clearance of the foot's motion
+    accurate: jnp.ndarray  # eq 3.1: never touched
+    success: jnp.ndarray  # the strict verdict (jaxexo.physics.outcome)
 
 
 def make_rollouts(env: ExoStepEnv, q_apply, max_steps: int, record: bool = False):
@@ -84,9 +100,11 @@ def make_rollouts(env: ExoStepEnv, q_apply, max_steps: int, record: bool = False
         (_, _, _, out), path = jax.lax.scan(
             step, (state, obs, jnp.ones(n, bool), out0), None, length=max_steps
         )
-        acc = out.pop("outcome")
+        acc = out["outcome"]
         v = outcome.episode_verdict(jnp, acc, **outcome.rule(params))
-        out.update(
+        out = Rollouts(
+            steps=out["steps"],
+            episode_return=out["return"],
             reached=acc["reached_goal"],
             collided=~v.collision_free,
             limits=acc["limits"],
@@ -112,10 +130,10 @@ def make_rollout(env: ExoStepEnv, q_apply, max_steps: int, record: bool = False)
     return rollout
 
 
-def summarize(out: dict, kinds: np.ndarray, pivots: np.ndarray, kind_names=TEST_KINDS) -> dict:
+def summarize(out: Rollouts, kinds: np.ndarray, pivots: np.ndarray, kind_names=TEST_KINDS) -> dict:
     """eval.json's figures: overall, by obstacle kind and by pivot condition."""
-    acc = np.asarray(out["accurate"], bool)
-    suc = np.asarray(out["success"], bool)
+    acc = np.asarray(out.accurate, bool)
+    suc = np.asarray(out.success, bool)
 
     def fig(mask):
         return {
@@ -136,8 +154,8 @@ def summarize(out: dict, kinds: np.ndarray, pivots: np.ndarray, kind_names=TEST_
         "by_pivot": {
             p: fig(pivots == i) for i, p in enumerate(PIVOT_CONDITIONS) if (pivots == i).any()
         },
-        "mean_steps": float(np.mean(out["steps"])),
-        "reached_goal": float(np.mean(out["reached"])),
+        "mean_steps": float(np.mean(out.steps)),
+        "reached_goal": float(np.mean(out.reached)),
     }
 
 
@@ -181,6 +199,6 @@ def make_validator(cfg: Config, net, n: int = VALIDATION_EPISODES, seed: int = V
 
     @jax.jit
     def validate(q_params):
-        return jnp.mean(rollout(q_params, layouts, params)["success"])
+        return jnp.mean(rollout(q_params, layouts, params).success)
 
     return lambda q_params: float(validate(q_params))

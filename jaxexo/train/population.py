@@ -57,7 +57,7 @@ class Population:
 
         def member(ts, hyper, layouts, vparams):
             ts, m, out, ok = run(ts, hyper, layouts, vparams)
-            return ts, m, jnp.mean(out["success"].astype(jnp.float32)), ok
+            return ts, m, jnp.mean(out.success.astype(jnp.float32)), ok
 
         self._init = over_lanes(self.trainer.init, self.devices, n_args=2)
         self._chunk = over_lanes(member, self.devices, n_args=2, shared=2)
