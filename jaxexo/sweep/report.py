@@ -24,6 +24,7 @@ import numpy as np
 from jaxexo.config import ConfigError
 from jaxexo.config.toml_io import config_to_toml
 from jaxexo.storage.atomic import atomic_write, write_figure
+from jaxexo.summary import table
 
 
 def _save(fig, path) -> None:
@@ -92,31 +93,27 @@ def _table(sweep: Sweep, entries: list[dict]) -> list[str]:
         "episodes to 90 %",
         "diverged",
     ]
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * 2 + "---|" * len(axes) + "---:|" * 6]
+    rows = []
     for i, e in enumerate(entries, 1):
         reach = (
             "never"
             if not e["reached_90"]
             else f"{e['episodes_to_90']:,.0f} ({e['reached_90']}/{e['seeds']})"
         )
-        lines.append(
-            "| "
-            + " | ".join(
-                [
-                    str(i),
-                    str(e["config_id"]),
-                    *[format_value(e["values"][a]) for a in axes],
-                    f"{e['success_mean']:.3f} ± {e['success_std']:.3f} ({e['success_min']:.3f}–{e['success_max']:.3f})",
-                    f"{e['held_out_success']:.3f}",
-                    f"{e['accuracy']:.3f}",
-                    f"{e['train_return']:.2f}",
-                    reach,
-                    f"{e['diverged']}/{e['seeds']}",
-                ]
-            )
-            + " |"
+        rows.append(
+            [
+                str(i),
+                str(e["config_id"]),
+                *[format_value(e["values"][a]) for a in axes],
+                f"{e['success_mean']:.3f} ± {e['success_std']:.3f} ({e['success_min']:.3f}–{e['success_max']:.3f})",
+                f"{e['held_out_success']:.3f}",
+                f"{e['accuracy']:.3f}",
+                f"{e['train_return']:.2f}",
+                reach,
+                f"{e['diverged']}/{e['seeds']}",
+            ]
         )
-    return lines
+    return table(head, rows, align="ll" + "l" * len(axes) + "r" * 6)
 
 
 def write_report(sweep: Sweep, out: Path, rows: list[dict], heatmap=None) -> dict:

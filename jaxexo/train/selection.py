@@ -19,6 +19,7 @@ from jaxexo.baselines.cfftg import CFFTG
 from jaxexo.config import Config
 from jaxexo.inference import TrajectoryGenerator, time_swing, time_swings
 from jaxexo.inference.scenarios import training_scenarios
+from jaxexo.summary import Summary
 
 # Scenes every candidate is swung on: enough that one unsafe swing in a hundred shows, few enough that
 # the choice costs seconds (about 10 ms per swing and generator with its timing).
@@ -92,14 +93,16 @@ def _score(seed: int, validation: float, rl: _Figures, ref: _Figures) -> WearerS
         return WearerScore(
             seed, validation, float(rl.ok.mean()), 0, math.nan, math.nan, math.nan, math.inf
         )
-    med, p95 = float(np.median(rl.duration[both])), float(np.percentile(rl.duration[both], 95))
-    lift = float(np.median(rl.lift[both]))
+    d, d_ref = Summary.of(rl.duration[both]), Summary.of(ref.duration[both])
+    lift = Summary.of(rl.lift[both]).median
     cost = (
-        med / float(np.median(ref.duration[both]))
-        + p95 / float(np.percentile(ref.duration[both], 95))
-        + lift / max(float(np.median(ref.lift[both])), 1e-3)
+        d.median / d_ref.median
+        + d.p95 / d_ref.p95
+        + lift / max(Summary.of(ref.lift[both]).median, 1e-3)
     )
-    return WearerScore(seed, validation, float(rl.ok.mean()), int(both.sum()), med, p95, lift, cost)
+    return WearerScore(
+        seed, validation, float(rl.ok.mean()), int(both.sum()), d.median, d.p95, lift, cost
+    )
 
 
 @dataclass(frozen=True)
