@@ -358,16 +358,11 @@ def measure(
         limit_bad=limit_bad,
         leg_bad=leg_bad,
         ok=v.success,
-        reached_goal=reached,
         collision_free=v.collision_free,
         min_clearance=guaranteed,
-        clearance_ok=v.clearance_ok,
-        above_ground=v.above_ground,
         heel_backward=backward,
-        backward_ok=v.backward_ok,
-        joint_limits_ok=v.joint_limits_ok,
-        leg_length_ok=v.leg_length_ok,
         deviation=dev,
+        **{c: getattr(v, c) for c in outcome.CHECKS},
     )
 
 
