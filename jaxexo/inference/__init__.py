@@ -1,13 +1,7 @@
-"""NumPy-only swing trajectory generation: an exported policy (policy.npz) in, a checked
-trajectory out::
-
-    from jaxexo.inference import Obstacle, TrajectoryGenerator
-    gen = TrajectoryGenerator.load("run/policy.npz")
-    traj = gen.generate(Obstacle.named("triangle"), pivot="obstacle", start_y=0.0, step_length=0.70)
-    traj.heel, traj.joint_angles, traj.checks.ok
-
-The public face of generation: the swing's records (jaxexo.swing), and, loaded on first use,
-device timing and walks. Units: metres, radians, seconds. See docs/generation.md.
+"""NumPy-only swing trajectory generation: an exported policy in, a checked trajectory out, e.g.
+``TrajectoryGenerator.load("run/policy.npz").generate(Obstacle.named("triangle"), pivot="obstacle")``.
+The public face of generation: the swing's records and, loaded on first use, device timing and
+walks. Units: metres, radians, seconds. See docs/generation.md.
 """
 
 from jaxexo.inference.generator import TrajectoryGenerator

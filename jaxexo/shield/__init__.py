@@ -1,20 +1,8 @@
-"""The shield: the moves the agent may choose from a heel, its rule once and its three forms.
-
-``rule`` states the rule once for every array module (``admissible_moves`` and its pieces). Three
-forms compute it where it is needed, with the same decisions bit for bit, behind one interface
-chosen at construction, ``make_shield(kind, p, sp, stats)``:
-
-- ``"jax"`` (``batched.BatchedShield``): the trainer's mask of N environments in JAX, the exact
-  swept clearance only for the moves a cheap bound leaves open (``compact``);
-- ``"rows"`` (``rows.ShieldRows``): many heels in NumPy float32, the generator's batches;
-- ``"scalar"`` (``scalar.ScalarShield``): one heel at a time in Python floats, checking only the
-  move that will be taken, the generator's single swing (``.swing(scene)``).
-
-Each has ``admissible(heel_y, heel_z, layout, last_action=None)``, (B, NUM_ACTIONS) bool for heels
-(B,) in stacked scenes (``layout``: the Layout fields with a leading B), ``choose(heel_y, heel_z,
-layout, q, last_action)``, the greedy move among them for Q-values (B, NUM_ACTIONS), and ``stats``, the
-``ShieldStats`` record of its choices. ``import jaxexo.shield`` imports NumPy only; the JAX form is
-imported when it is chosen.
+"""The shield: the moves the agent may choose from a heel. ``rule`` states it once for every array
+module; ``make_shield(kind, p, sp, stats)`` picks one of its three forms with the same decisions:
+``"jax"`` (``batched``, the trainer's mask), ``"rows"`` (``rows``, the generator's NumPy batches) and
+``"scalar"`` (``scalar``, one heel, only the move taken), each with ``admissible``, ``choose`` and
+``stats``. NumPy only until the JAX form is chosen. See docs/safety.md and docs/architecture.md.
 """
 
 from __future__ import annotations

@@ -1,31 +1,7 @@
-"""The shield's mask for a batch of environments, JAX only: the form ``make_shield("jax", ...)``
-(jaxexo.shield), the decisions of ``jaxexo.shield.rule.admissible_moves``, with the exact swept
-clearance computed only for the moves that a cheap bound leaves open.
-
-Why: the trainer asks for the mask of every environment at every step, and the exact swept check
-(jaxexo.physics.swept) of the 19 forward moves costs several environment steps. Under ``vmap``/``jit``
-a ``jnp.where`` computes both of its branches, so skipping work needs compaction (jaxexo.shield.compact):
-the open (env, move) pairs are gathered into a buffer of static size, checked exactly there, and
-scattered back; a loop takes as many rounds of the buffer as there are open pairs (one round in most
-steps, more when a batch has unusually many pairs near its obstacles), so no state is ever decided by
-the bound alone unless the bound is conclusive.
-
-The bound (per move, sufficient for "keeps the clearance"): the outline and the region under it lie
-in the box B = [min y, max y] x [min(0, min z), max z] of its vertices, so the foot's distance to B is
-a lower bound on its distance to the obstacle, and it is 1-Lipschitz in the heel's position. Along a
-move of length |d| <= step_size from ends with box distances b0, b1 every foot is at least
-(b0 + b1 - |d|) / 2 from B (jaxexo.physics.swept.swept_lower_bound's argument). Where that is at
-least shield_clearance + BOUND_MARGIN the exact rule passes the move too: it asks for the swept
-distance to be >= min(shield_clearance, c_here) - SHIELD_SLACK, and float32 rounding of the exact
-distance (about 1e-6 m at these scales) is far below BOUND_MARGIN. tests/test_shield.py checks, on
-states across the training distribution and the held-out terrain families, that the masks are equal.
-
-The moves left open are decided by the same comparison as the plain rule
-(``rule.moves_keep_clearance``'s ``rule.clearance_need``, on ``geometry.foot_clearance`` and the exact
-swept distance, here in its term-by-term form ``swept.swept_distance_by_edge``, the same terms
-evaluated edge by edge so that the arrays stay in cache), and the rest of the shield (kinematic
-limits, goal, fall-backs) is ``rule.admissible_moves`` itself, given the clearance condition through
-its ``clear`` argument.
+"""The shield's mask for a batch of environments in JAX, ``make_shield("jax", ...)``: the decisions of
+``jaxexo.shield.rule.admissible_moves`` bit for bit, with the exact swept clearance computed (by
+compaction, jaxexo.shield.compact) only for the moves that a cheap box bound leaves open. The bound
+and why it is conclusive: docs/safety.md, "The shield".
 """
 
 from __future__ import annotations

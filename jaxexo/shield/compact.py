@@ -1,15 +1,6 @@
-"""Compute an expensive per-item function only where a batch needs it, under jit and vmap.
-
-Under ``vmap``/``jit`` a ``jnp.where(pick, fn(x), default)`` evaluates ``fn`` on every item. When
-few items need it (the environments whose episode just ended need a fresh scene; the (env, move)
-pairs a cheap bound leaves open need the exact swept check), the picked items are gathered into a
-buffer of static size, ``fn`` runs on the buffer, and the results are scattered back; a loop takes
-as many rounds of the buffer as there are picked items, so every picked item is always computed,
-however many there are (one round in most steps).
-
-The result equals ``jnp.where(pick, fn(all items), default)`` exactly as long as ``fn`` computes
-each item from that item's inputs alone (elementwise in the batch), which is what both callers do:
-tests/test_env.py (auto-reset) and tests/test_shield.py (the mask) compare against the plain form.
+"""Compute an expensive per-item function only where a batch needs it, under jit and vmap: the picked
+items in rounds of a fixed buffer, equal to ``jnp.where(pick, fn(all items), default)``. Used by the
+shield's JAX mask and the environment's auto-reset; the method: docs/safety.md, "The shield".
 """
 
 from __future__ import annotations

@@ -1,28 +1,9 @@
 """The legs as a MuJoCo model (MJCF text), written from a jaxexo config; no MuJoCo needed to write it.
 
-The model is the thesis's planar exoskeleton in MuJoCo's frame (x forward = jaxexo's y, z up; the
-sagittal plane is y = 0, hinge axes along -y so that a positive angle flexes like jaxexo's):
-
-- a pelvis on two slide joints (``pelvis_y``, ``pelvis_z``: the hip point of eq 2.42, no rotation);
-- two legs, ``right`` and ``left`` (the one-swing replay swings ``SWING_LEG``), each a thigh and a
-  shin of the config's lengths on ``*_hip`` and ``*_knee`` hinges limited to the config's joint
-  limits (jaxexo.physics.kinematics's convention: hip flexion +, knee flexion -), and a flat foot of
-  ``foot_length`` on a passive ``*_ankle`` hinge kept level (a fixed tendon hip + knee + ankle held
-  at 0 by an equality: the foot's angle to the ground is the sum of the three);
-- the foot's collision shape: a capsule of radius ``FOOT_RADIUS`` around the heel-toe segment
-  (distances to the segment are the capsule's plus the radius), sites ``*_heel`` and ``*_toe``;
-- position actuators on the four hip and knee joints, their command ranges the joint limits; the
-  [device] joint velocity and acceleration limits are written as custom numerics
-  (``device_joint_velocity``, ``device_joint_acceleration``, rad/s and rad/s^2 per joint of
-  ``ACTUATED``), which the driven replay's setpoint generator obeys (jaxexo.sim.driven);
-- the ground, a plane ``FOOT_RADIUS`` below z = 0 (a foot on the ground touches it), and the
-  obstacle as convex mesh prisms (jaxexo.sim.pieces), which only the feet collide with;
-- a site ``pivot`` on the ground where the stance heel stands, and an equality that holds the stance
-  heel there (off in the model; the driven replay turns it on for the stance leg).
-
-Link masses are fractions of a 70 kg body (Winter, Biomechanics and Motor Control of Human
-Movement, 4th ed., table 4.1: thigh 0.100, leg 0.0465, foot 0.0145, head-arms-trunk 0.678); the
-config has no masses and the replay's figures depend on them only through the drives' tracking.
+The thesis's planar exoskeleton in MuJoCo's frame (x forward = jaxexo's y, z up, hinge axes along -y
+so that a positive angle flexes like jaxexo's): a pelvis on two slides, two legs with hip, knee and a
+level-held ankle, the feet's capsules, the obstacle's convex prisms. The model: docs/safety.md,
+"Replayed in a physics engine (MuJoCo)".
 """
 
 from __future__ import annotations

@@ -1,18 +1,7 @@
-"""An obstacle outline as a union of convex pieces, for a physics engine's collision geometry.
-
-MuJoCo collides convex shapes (a mesh geom is its convex hull), so a non-convex ground obstacle
-(jaxexo.physics.geometry: the region between the ground and a height-profile polyline) is given to it
-as several convex polygons. A height profile splits exactly at its vertices: the region under one
-edge is a trapezoid standing on the ground (two vertical sides, the edge on top), always convex.
-Neighbouring trapezoids are merged while their union stays convex, so a triangle or a half-ellipse
-is one piece and a row of bumps is a few.
-
-``convex_pieces`` checks its own result before anything is built from it (``check_cover``): the
-pieces' y-ranges tile the outline's, each piece is convex, its top chain is exactly the outline's
-vertices over its range, and the pieces' areas add up to the outline's (shoelace). An outline that
-is not a simple polygon once closed along the ground (vertical edges that fold back on themselves,
-an interior vertex on the ground, a vertex below it, y going backwards) is refused with a
-GeometryError naming the outline, before any engine is called. Units: metres, (y, z) pairs.
+"""An obstacle outline as a union of convex pieces (the trapezoids under its edges, merged while
+convex), for a physics engine's collision geometry; ``check_cover`` checks that they tile the outline,
+and an outline that is not a simple polygon is refused with a GeometryError naming it. Units: metres,
+(y, z) pairs. See docs/safety.md, "Replayed in a physics engine (MuJoCo)".
 """
 
 from __future__ import annotations

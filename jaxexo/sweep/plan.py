@@ -1,15 +1,5 @@
-"""How a sweep is cut into chunks: the memory one agent needs, the budget, and the chunk sizes (NumPy only).
-
-A *chunk* is a batch of agents (configuration, seed) of one group, trained by one call of the group's
-compiled program, vmapped over the agents and split over the CPU devices. Every chunk of a group has
-the same size (the last is padded with copies of its first agent, whose results are dropped), so
-each group compiles once. A chunk is the unit of progress, of results.csv and of ``--resume``.
-
-Chunk size: as many agents as fit the memory budget (``agent_bytes``, a deliberately generous
-estimate of the compiled program's buffers; tests/test_sweep.py checks it against XLA's own figures),
-about CHUNK_ENV_STEPS env steps per chunk (so that the progress bar and the results file move every
-minute or so), a multiple of the device count, padding the last chunk as little as possible. The plan is written to DIR/plan.json and reused
-by ``--resume``.
+"""How a sweep is cut into chunks (NumPy only): the memory one agent needs, the budget, and the chunk
+sizes, one per group so that each group compiles once. See docs/training.md, "Hyperparameter sweeps".
 """
 
 from __future__ import annotations

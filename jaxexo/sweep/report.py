@@ -1,16 +1,6 @@
-"""A finished sweep's report: DIR/summary.md, DIR/heatmap.png, DIR/curves.png, ``--export-best``, ``--export-all``.
-
-- summary.md ranks the configurations by mean greedy success over seeds (ties: fewer diverged seeds,
-  held-out success, then training return), with the spread over seeds (standard deviation, min-max), and lists the diverged;
-- heatmap.png: mean success over two axes (sweep.heatmap, default the first two), averaged over seeds
-  and over every other axis (a one-axis sweep: that axis x seed); an axis drawn at random is shown as
-  a scatter instead of a grid;
-- curves.png: training success rate and return against episodes of the ``top`` best configurations
-  (mean over seeds of the learning curves reduced inside the compiled program);
-- ``--export-best``: DIR/best/policy.npz (final parameters of the best configuration's best seed),
-  DIR/best/config.toml (its resolved config) and DIR/best/selection.json;
-- ``--export-all``: every agent's policy.npz and config.toml under DIR/agents/ (``agent_dir``), and
-  DIR/agents/index.json, so that each agent can be measured with the benchmarks.
+"""A finished sweep's report: DIR/summary.md (configurations ranked by mean greedy success over seeds),
+DIR/heatmap.png, DIR/curves.png, and the policies of ``--export-best`` and ``--export-all``. The
+files: docs/training.md, "Hyperparameter sweeps".
 """
 
 from __future__ import annotations

@@ -1,16 +1,6 @@
-"""A sweep directory's files (NumPy only): results.csv rows, the per-chunk files, the plan.
-
-DIR/
-- plan.json             the sweep's fingerprint, the device count and the chunks (``--resume`` reuses it)
-- sweep.json            the self-contained sweep (base config merged in): what was run
-- results.csv           one row per agent (configuration, seed): identity, the axes, every
-                        hyperparameter (train.* and reward.*), the results (SCALARS) and wall_s
-- chunks/chunk_NNNN.npz per finished chunk: its agents, learning curves (CURVE_POINTS bins of the
-                        trainer's per-update METRICS, summed) and final parameters
-
-Rows are appended (one write, flushed and synced) as each chunk finishes, in the order chunks finish;
-when the sweep is complete the file is rewritten sorted by configuration and seed. On resume, rows of
-chunks that are incomplete or lack their chunk file are dropped and those chunks run again.
+"""A sweep directory's files (NumPy only): plan.json, sweep.json, results.csv (one row per agent,
+appended as chunks finish, sorted when complete) and chunks/chunk_NNNN.npz (each chunk's agents,
+learning curves and final parameters). The files: docs/training.md, "Hyperparameter sweeps".
 """
 
 from __future__ import annotations

@@ -1,16 +1,6 @@
 """``jaxexo sweep``: run a sweep's chunks on the local CPU devices or as Ray tasks, with one progress bar,
-results streamed to DIR/results.csv, ``--resume``, then the report (jaxexo.sweep.report).
-
-Backends:
-- ``local``: the chunks one after the other, each split over every local CPU device (the CLI exposes
-  each core as a JAX device, jaxexo.train.devices);
-- ``ray``: each chunk is a Ray task asking for ``task_cpus`` CPUs on an existing cluster
-  (``--address``; none: a local Ray instance), whose worker exposes that many JAX devices. With the
-  same device count a chunk is the same compiled program on the same inputs as locally, so the
-  results are the same. Workers need jaxexo with its ``train`` extra installed.
-
-Which chunks exist is decided once (jaxexo.sweep.plan) and written to DIR/plan.json; ``--resume``
-checks the sweep is the same (its fingerprint) and runs only the chunks without results.
+results streamed to DIR/results.csv and ``--resume``, then the report (jaxexo.sweep.report). The
+backends and resume: docs/training.md, "Hyperparameter sweeps".
 """
 
 from __future__ import annotations

@@ -1,12 +1,6 @@
-"""The timed swing as a curve (NumPy only): the joint path q(s), a C2 cubic spline in the joint-space
-arc length s in [0, 1], and the time law s(t), a C2 piecewise cubic with bounded s'''; the joints
-q(s(t)) then have continuous acceleration and bounded jerk, and the heel, toe, hip and knees follow
-from the joints by forward kinematics from the pivot foot (docs/device-timing.md).
-
-Why the joints and not the heel: both legs are straight at lift-off and touch-down (the hip model,
-eq 2.42), so any smooth heel curve makes the joints move like a square root there and no heel
-parametrisation has bounded joint acceleration at the ends; along the joint path itself the ends
-are regular.
+"""The timed swing as a curve (NumPy only): the joint path q(s), a C2 cubic spline in arc length,
+the time law s(t), a C2 piecewise cubic with bounded s''', and the heel, toe, hip and knees by forward
+kinematics from the pivot foot. Why the joints: docs/device-timing.md, "How the timing is computed".
 """
 
 from __future__ import annotations

@@ -1,14 +1,6 @@
-"""Greedy evaluation of a Q-network on fixed test layouts (thesis 2.6, 3.3; eq 3.1).
-
-The test set mixes the five thesis obstacles (Table 3.1: Base 1-3 seen in training, triangle and
-half-circle held out) with the three pivot conditions, jittered like the training layouts, from a
-fixed seed so that every model is scored on the same scenes; jaxexo.physics.scenarios draws them, so
-``jaxexo eval`` (NumPy) scores exactly these scenes too. Rollouts are greedy and deterministic
-(thesis-notes: a generator for a device must not explore), with no auto-reset: an episode ends at
-the goal, at a collision when collisions terminate, or at the step limit.
-
-Per episode: ``accurate`` (eq 3.1: the foot never entered the obstacle), ``success`` (strict:
-jaxexo.physics.outcome's verdict on the agent's raw moves; eval.json reports it as ``success_raw``).
+"""Greedy evaluation of a Q-network on fixed test layouts (thesis 2.6, 3.3; eq 3.1): the scenes of
+``jaxexo eval --scenarios test``, per episode ``accurate`` and the strict ``success``. What it reports:
+docs/training.md, "``jaxexo train`` and what a run writes" (eval.json).
 """
 
 from __future__ import annotations

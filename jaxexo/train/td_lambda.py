@@ -1,23 +1,7 @@
-"""TD(lambda) in its two views (thesis 2.3.4-2.3.5, eq 2.19-2.26), as pure functions.
-
-Forward view: lambda-returns (eq 2.19) from a reverse scan over a rollout. Backward view:
-eligibility traces over the Q-network's parameters (eq 2.22, 2.24-2.26). With a fixed Q over one
-episode the summed updates of the two views are equal (offline equivalence, Sutton & Barto 12.4);
-tests/test_td_lambda.py checks it to float precision.
-
-Control (thesis 2.3.1-2.3.2, 2.4.4):
-- on-policy SARSA(lambda): bootstrap on Q(s', a') with the action actually taken next (eq 2.27);
-- off-policy Watkins Q(lambda): bootstrap on max_a Q(s', a) (eq 2.28); the lambda-chain (forward)
-  and the traces (backward) are cut after an exploratory, non-greedy action.
-
-Conventions for one transition t of a rollout (arrays over time first):
-- ``boot[t]``: the value of the state reached by the step, the *final* observation before any
-  auto-reset: max_a Q or Q(s', a') or, where a' is not known (rollout end, truncation), the
-  epsilon-greedy expectation.
-- ``terminated[t]``: the goal ended the episode: no bootstrap. ``done[t]``: terminated or
-  truncated: the lambda-chain stops (a truncated episode bootstraps on ``boot[t]`` alone).
-- ``cont[t]``: 1 where the chain may continue into t+1 (on-policy: 1; Watkins: the action at t+1
-  was greedy).
+"""TD(lambda) in its two views (thesis 2.3.4-2.3.5, eq 2.19-2.26), as pure functions: lambda-returns
+by a reverse scan (forward view) and eligibility traces over the Q-network's parameters (backward
+view), for SARSA(lambda) and Watkins Q(lambda). Arrays are over time first; ``boot``, ``terminated``,
+``done`` and ``cont`` per transition as in docs/training.md, "The trainer".
 """
 
 from __future__ import annotations
