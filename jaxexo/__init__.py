@@ -1,6 +1,6 @@
-"""jaxexo: swing-foot trajectories for lower-limb exoskeletons over low obstacles, learned by TD(lambda).
+"""jaxexo: swing-foot trajectories for lower-limb exoskeletons over low obstacles, by TD(lambda).
 
-Importing ``jaxexo`` needs only NumPy and SciPy. The JAX parts (``jaxexo.env``, the trainer) are
+Importing ``jaxexo`` needs only NumPy. The JAX parts (``jaxexo.env``, the trainer) are
 imported on demand and need the ``train`` extra."""
 
 __version__ = "0.1.0"
