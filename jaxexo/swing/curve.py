@@ -14,6 +14,18 @@ import numpy as np
 # shin, thigh, shin), e(phi) = (sin phi, -cos phi): the thigh and shank directions of eq 2.49.
 _SIGN = np.array([1.0, 1.0, -1.0, -1.0])
 
+# How a controller evaluates SwingCurve.piecewise() (the JSON's "piecewise"), word for word in the
+# export; tests/test_piecewise_export.py is an evaluator written from this text alone.
+EVALUATE = (
+    "q_j(t) = Q_j(S(t)) for t in [0, duration] (clamp t to it: the legs rest outside). "
+    "S: the time law piece i is the last one with breakpoints_s[i] <= t (the last piece also holds "
+    "at t = duration), S(t) = sum_k c[i][k] (t - breakpoints_s[i])^k, k = 0..3, S from 0 to 1. "
+    "Q_j: joint_path.coefficients[j] (j in joint order: hip_swing, knee_swing, hip_stance, "
+    "knee_stance), piece m the last one with breakpoints[m] <= S, "
+    "Q_j(S) = sum_k c[j][m][k] (S - breakpoints[m])^k. Both are C2. Rates by the chain rule: "
+    "q' = Q' S', q'' = Q'' S'^2 + Q' S'', q''' = Q''' S'^3 + 3 Q'' S' S'' + Q' S''' (rad, s)"
+)
+
 
 # --------------------------------------------------------------------------------------------
 # The joint path q(s)
@@ -320,8 +332,11 @@ class TimeLaw:
         """The piecewise-cubic form: breakpoints (P + 1,) and coefficients (P, 4), s(t) =
         c0 + c1 d + c2 d^2 + c3 d^3 with d = t - breakpoints[i] on piece i."""
         b = self.breakpoints()
-        s, s1, s2, s3 = self.at(b[:-1])
-        # s''' is right-continuous at a breakpoint: the piece's own value.
+        s, s1, s2, _ = self.at(b[:-1])  # continuous (C2): the piece's own values at its start
+        # s''' jumps at a breakpoint, so it is read inside the piece, never at its start: a start
+        # of the form node + w can round just below the node, where the left neighbour's jerk
+        # holds (that once put 1.5 % of the exported pieces on the wrong jerk).
+        s3 = self.at(0.5 * (b[:-1] + b[1:]))[3]
         return b, np.stack([s, s1, s2 / 2.0, s3 / 6.0], axis=1)
 
 
@@ -528,8 +543,7 @@ class SwingCurve:
         s(t) and q_j(s), cubic pieces each (module docstring), JSON values."""
         tb, tc = self.law.pieces()
         return {
-            "evaluate": "q_j(t) = Q_j(S(t)); on piece i, S = sum_k c_k (t - t_i)^k and "
-            "Q_j = sum_k c_k (s - s_i)^k, k = 0..3",
+            "evaluate": EVALUATE,
             "time_law": {"breakpoints_s": tb.tolist(), "coefficients": tc.tolist()},
             "joint_path": {
                 "breakpoints": self.path.knots.tolist(),
