@@ -17,6 +17,7 @@ OUTPUT_EXAMPLES = {
     "--json": "trajectory.json",
     "--plot": "swing.png",
     "--animate": "swing.gif",
+    "--ros": "trajectory_ros.json",
 }
 
 
@@ -28,26 +29,38 @@ def load(path):
     return load_config(path), str(path)
 
 
-def check_output_file(option: str, value) -> None:
-    """An output path must name a file in an existing folder: refused before any work (and before any
-    temporary file is made next to it)."""
+def check_output_file(option: str, value, example: str | None = None) -> None:
+    """An output path must name a file in an existing folder that can be written: refused before
+    any work (and before any temporary file is made next to it). ``example``: a file name to
+    suggest (default: OUTPUT_EXAMPLES')."""
     if value is None:
         return
     text = str(value)
+    example = example or OUTPUT_EXAMPLES[option]
     if not text:
-        raise ValueError(
-            f"{option}: the option is empty; give a file name (e.g. {OUTPUT_EXAMPLES[option]})"
-        )
+        raise ValueError(f"{option}: the option is empty; give a file name (e.g. {example})")
     p = Path(value)
     if text.endswith(("/", "\\")) or p.is_dir():
-        raise ValueError(
-            f"{option}: {text} is a directory; give a file name (e.g. {p / OUTPUT_EXAMPLES[option]})"
-        )
+        raise ValueError(f"{option}: {text} is a directory; give a file name (e.g. {p / example})")
     if option == "--animate":
         _check_animation_name(text)
     if not p.parent.is_dir():
         _check_folder_part(option, p.parent, text)
         raise ValueError(f"{option}: the folder {p.parent} does not exist (for {text})")
+    _check_writable(option, p.parent, text)
+
+
+def _check_writable(option: str, folder: Path, text: str) -> None:
+    """The folder of an output written by replacement (atomic_write's temporary file is made there)
+    must take a new file; else refused before any work, not after the other outputs are written."""
+    from jaxexo.storage.atomic import direct_output
+
+    if direct_output(text):
+        return
+    if not os.access(
+        folder, os.W_OK | os.X_OK, effective_ids=os.access in os.supports_effective_ids
+    ):
+        raise ValueError(f"{option}: the folder {folder} cannot be written (for {text})")
 
 
 def _check_animation_name(text: str) -> None:
@@ -81,18 +94,43 @@ def _same_file(a, b) -> bool:
         return False
 
 
-def check_paths(inputs, outputs) -> None:
-    """Each output a file in an existing folder (``check_output_file``), none replacing an input,
-    no two sharing a path: refused before any work. ``inputs``, ``outputs``: (option, path or
-    None) pairs."""
+def _output_id(path) -> tuple[int, int] | None:
+    """(st_dev, st_ino) of the file an output lands in: standard output's for ``-``, the existing
+    file's (after links: /dev/stdout is the file fd 1 is) otherwise; None where there is none yet."""
+    from jaxexo.storage.atomic import STDOUT
+
+    try:
+        st = os.fstat(1) if str(path) == STDOUT else os.stat(path)
+    except OSError:
+        return None
+    return st.st_dev, st.st_ino
+
+
+def _same_output(a, b) -> bool:
+    """Whether two outputs land in one file: the same name (``-`` is standard output, not a file
+    named ``-``), the same path after links, or the same file (``-`` and /dev/stdout redirected)."""
+    a_id = _output_id(a)
+    if a_id is not None and a_id == _output_id(b):
+        return True
+    if "-" in (str(a), str(b)):
+        return str(a) == str(b)
+    return _same_file(a, b)
+
+
+def check_paths(inputs, outputs, examples=None) -> None:
+    """Each output a file in an existing, writable folder (``check_output_file``, suggesting the
+    file names of ``examples`` (option: name) where given), none replacing an input, no two landing
+    in one file: refused before any work. ``inputs``, ``outputs``: (option, path or None) pairs."""
     for option, value in outputs:
-        check_output_file(option, value)
+        check_output_file(option, value, (examples or {}).get(option))
     outs = [(o, v) for o, v in outputs if v is not None]
     for i, (option, value) in enumerate(outs):
         for other, v in outs[:i]:
-            if _same_file(value, v):
+            if _same_output(value, v):
+                also = "" if str(v) == str(value) else f" ({other} {v})"
                 raise ValueError(
-                    f"{option}: {value} is also the {other} output; give each output its own path"
+                    f"{option}: {value} is also the {other} output{also}; give each output its "
+                    "own path"
                 )
         for other, v in inputs:
             if v is not None and _same_file(value, v):

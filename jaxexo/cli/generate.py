@@ -38,6 +38,7 @@ def cmd_generate(args) -> int:
     check_rate(args.rate, "--rate")
     if args.ros and args.rate is None:
         raise ValueError("--ros: a ROS 2 JointTrajectory is a timed swing; give --rate too")
+    joint_names = _joint_names(args)
     check_points(args.points, "--points")
     check_duration(args.duration, "--duration")
     obstacle = obstacle_from_args(args)
@@ -70,11 +71,23 @@ def cmd_generate(args) -> int:
         lambda path: animate_swing(timed, path),
     )
     if args.ros:
-        timed.to_joint_trajectory(args.ros)
+        timed.to_joint_trajectory(args.ros, joint_names=joint_names)
         written.append(args.ros)
     ok = _report_swing(traj, timed, report)
     print("wrote " + ", ".join(written), file=report)
     return 0 if ok else 1
+
+
+def _joint_names(args):
+    """--joint-names (comma-separated, for --ros) checked before any work; None: not given."""
+    if args.joint_names is None:
+        return None
+    if not args.ros:
+        raise ValueError("--joint-names: names the joints of the --ros output; give --ros too")
+    from jaxexo.swing.export import check_joint_names
+
+    names = [n.strip() for n in args.joint_names.split(",")]
+    return check_joint_names(names, "--joint-names", repr(args.joint_names))
 
 
 def _timed_swing(args, traj, config):
@@ -173,6 +186,12 @@ def add_options(g) -> None:
         "--ros",
         help="also write the timed swing as ROS 2 trajectory_msgs/JointTrajectory JSON "
         "(positions, velocities, accelerations; needs --rate)",
+    )
+    g.add_argument(
+        "--joint-names",
+        help="the --ros output's joint names, as the robot's controller names them: four, "
+        "comma-separated, for hip_swing,knee_swing,hip_stance,knee_stance in that order "
+        "(default: those names)",
     )
     g.add_argument("--plot", help="also draw the legs, the foot path and the joint angles (PNG)")
     g.set_defaults(func=cmd_generate)

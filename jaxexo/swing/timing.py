@@ -138,9 +138,10 @@ class TimedSwing:
     def to_json(self, path=None) -> str:
         return write_timed_json(self, path)
 
-    def to_joint_trajectory(self, path=None) -> str:
-        """JSON in the layout of ROS 2 trajectory_msgs/JointTrajectory (jaxexo.swing.export)."""
-        return write_joint_trajectory(self, path)
+    def to_joint_trajectory(self, path=None, *, joint_names=None) -> str:
+        """JSON in the layout of ROS 2 trajectory_msgs/JointTrajectory (jaxexo.swing.export), the
+        joints named ``joint_names`` (four distinct ROS names; default JOINT_NAMES)."""
+        return write_joint_trajectory(self, path, joint_names)
 
 
 def leg_angles(sp, pivot_y: float, heel: np.ndarray) -> np.ndarray:
