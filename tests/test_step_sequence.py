@@ -61,7 +61,9 @@ def _scenes(gen, seed: int):
         + training_scenarios(mixture, q, seed + 100)
         + sample_scenarios(cfg, q, seed + 200)
     )
-    scenes = [gen.scene(s["obstacle"], s["pivot"], None, s["start_y"], s["step_length"]) for s in sc]
+    scenes = [
+        gen.scene(s["obstacle"], s["pivot"], None, s["start_y"], s["step_length"]) for s in sc
+    ]
     st = stack_scenes(scenes, np.float32)
     lay = scenarios.Layouts(**vars(st), kind=np.zeros(len(scenes), np.int32))
     return scenes, lay

@@ -154,6 +154,13 @@ class TrajectoryGenerator(SceneMaker):
         one = stack_scenes([scene], np.float32) if self.shield else None
         rows = self._shield("rows") if self.shield else None
         single = self._shield("scalar").swing(scene, one) if self._shield_first() else None
+        # the outline's extent (y from, y to, top), where a collision ends the episode
+        ol = scene.outline
+        box = (
+            (ol[:, 0].min(), ol[:, 0].max(), ol[:, 1].max())
+            if self.terminate_on_collision
+            else None
+        )
         while True:
             if single is not None:
                 a = single.choose(hy, hz, step.q_values(hy, hz, t, 1.0 if visited else 0.0), last)
@@ -176,9 +183,7 @@ class TrajectoryGenerator(SceneMaker):
             last = int(a)
             # The environment's termination (transition.terminated, .truncated); the move's clearance
             # is only computed where a collision ends the episode.
-            collided = self.terminate_on_collision and bool(
-                move_collides(sp, np.array([prev]), np.array([[hy, hz]]), scene.outline[None])[0]
-            )
+            collided = box is not None and self._move_touches(box, scene.outline, prev, (hy, hz))
             if transition.terminated(
                 scalar,
                 self._term_p,
@@ -260,6 +265,20 @@ class TrajectoryGenerator(SceneMaker):
 
             self._cfftg = CFFTG(self.config).at_clearance(self.clearance)
         return self._cfftg
+
+    def _move_touches(self, box: tuple, outline: np.ndarray, prev: tuple, heel: tuple) -> bool:
+        """``move_collides`` of one move on Python floats, the outline's extent ``box`` (y from, y to,
+        top) given. Cheap exclusion first: a move whose feet stay above the outline's top or beside
+        its extent cannot touch it (the foot is horizontal)."""
+        eps = geometry.TOUCH_EPS + BOUND_SLACK
+        (y0, z0), (y1, z1) = prev, heel
+        if (
+            min(z0, z1) > box[2] + eps
+            or min(y0, y1) > box[1] + eps
+            or max(y0, y1) + self.sp.foot_length < box[0] - eps
+        ):
+            return False
+        return bool(move_collides(self.sp, np.array([prev]), np.array([heel]), outline[None])[0])
 
     def at_clearance(self, clearance: float | None) -> "TrajectoryGenerator":
         """This generator for swings that must keep ``clearance`` (m; None: the model's env.min_clearance;
