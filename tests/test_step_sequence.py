@@ -1,4 +1,4 @@
-"""One step rule (issue 57): the JAX environment (ExoStepEnv.step_env, as the trainer and the JAX
+"""One step rule: the JAX environment (ExoStepEnv.step_env, as the trainer and the JAX
 evaluation's ``make_rollouts`` step it) and the NumPy rollouts (``TrajectoryGenerator.rollout`` and
 ``rollout_batch``) end every episode at the same step with the same outcome, on thousands of
 unshielded episodes whose collisions terminate, where the rule that ends an episode decides the most.
