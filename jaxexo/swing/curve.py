@@ -378,7 +378,8 @@ def laws_at(laws, times) -> list[tuple]:
     acc = cat([np.append(law._acc, 0.0) for law in laws])
     big_s, big_p = cat([law._S for law in laws]), cat([law._P for law in laws])
     start, item = _segments(lens, counts)
-    t = np.clip(cat(list(times)), 0.0, (end + w)[item])
+    t_in = cat(list(times))
+    t = np.clip(t_in, 0.0, (end + w)[item])
     last = start + lens[item] - 1
     total, end_i, w_i = big_s[last], end[item], w[item]
     keys = nodes if one else nodes + np.repeat(off, lens)
@@ -406,10 +407,15 @@ def laws_at(laws, times) -> list[tuple]:
     a0 = np.where(lag < 0.0, 0.0, a0)
     k = 1.0 / (w_i * total)
     res = [np.clip((p1 - p0) * k, 0.0, 1.0), (s1 - s0) * k, (v1 - v0) * k, (a1 - a0) * k]
-    # At touch-down exactly at rest (t - w rounds to a hair before the last node).
+    # At touch-down exactly at rest (t - w rounds to a hair before the last node); before lift-off
+    # too (clamped to t = 0, the jerk there is the first piece's, not the rest's).
     landed = t >= end_i + w_i
     for x, val in zip(res, (1.0, 0.0, 0.0, 0.0)):
         x[landed] = val
+    early = t_in < 0.0
+    if early.any():
+        for x in res:
+            x[early] = 0.0
     if one:
         return [tuple(res)]
     cut = np.cumsum(counts)[:-1]
@@ -475,6 +481,48 @@ def joints_at(paths, laws, times) -> list[tuple]:
 # --------------------------------------------------------------------------------------------
 
 
+BYTES_PER_TIME = 1024  # what ``SwingCurve.at`` holds per time at its peak (measured: 704 B)
+
+
+def _shown(v) -> str:
+    """A value as given, cut short (an array of millions of times is not a message)."""
+    r = repr(v)
+    return r if len(r) <= 80 else r[:77] + "..."
+
+
+def check_times(t, name: str = "t") -> np.ndarray:
+    """Times (s) as a 1-D float64 array: a real number, or a 1-D sequence or array of real numbers,
+    all finite. TypeError naming ``name`` and the value as given for a string, a bool, None or a
+    complex number (NumPy would read "0.4" as 0.4 and True as 1 s); ValueError for NaN, infinities,
+    a 2-D array, or more times than half the memory this process may use holds at BYTES_PER_TIME
+    (refused before anything is allocated)."""
+    what = f"{name}: expected times in s (a real number or a 1-D array of them)"
+    if t is None or isinstance(t, (str, bytes, bool, np.bool_, complex, np.complexfloating)):
+        raise TypeError(f"{what}, got {_shown(t)}")
+    try:
+        arr = np.asarray(t)
+    except (TypeError, ValueError):  # a ragged or mixed sequence
+        raise TypeError(f"{what}, got {_shown(t)}") from None
+    if arr.dtype.kind not in "iuf":  # bools, complex, strings, objects (None among numbers)
+        raise TypeError(f"{what}, got {_shown(t)}")
+    if arr.ndim > 1:
+        raise ValueError(f"{what}, got an array of shape {arr.shape}")
+    from jaxexo.config.memory import process_memory_bytes
+
+    room = process_memory_bytes()
+    most = (8 * 2**30 if room is None else room) // 2 // BYTES_PER_TIME
+    if arr.size > most:
+        raise ValueError(
+            f"{name}: {arr.size} times need about {arr.size * BYTES_PER_TIME / 2**30:.3g} GiB, more "
+            f"than half the memory this process may use holds ({most} times); evaluate them in "
+            "chunks"
+        )
+    arr = np.atleast_1d(arr.astype(np.float64))
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name}: expected finite times in s, got {_shown(t)}")
+    return arr
+
+
 @dataclass(frozen=True)
 class CurveState:
     """The swing at times (n,): joints (n, 4) rad and their time derivatives (rad/s, rad/s^2,
@@ -516,12 +564,10 @@ class SwingCurve:
         return joints_at([self.path], [self.law], [np.asarray(t, np.float64)])[0]
 
     def at(self, t) -> CurveState:
-        """Every joint and the heel/toe, with their derivatives, at times t (s; clamped to the
-        swing: before it starts and after it lands the legs rest)."""
-        t = np.atleast_1d(np.asarray(t, np.float64))
-        if t.ndim != 1 or not np.all(np.isfinite(t)):
-            raise ValueError(f"t: expected finite times in s (a number or a 1-D array), got {t!r}")
-        return curves_at([self], [t])[0]
+        """Every joint and the heel/toe, with their derivatives, at times t (s: a real number or a
+        1-D array of them, ``check_times``). Before the swing starts and after it lands the legs
+        rest: the end poses, every derivative zero."""
+        return curves_at([self], [check_times(t)])[0]
 
     def piecewise(self) -> dict:
         """The piecewise-polynomial form for a controller that evaluates the curve itself:

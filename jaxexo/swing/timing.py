@@ -495,7 +495,7 @@ def _samples(curves, rate: float) -> list[_Samples]:
         if not periods < max_samples():
             raise ValueError(
                 f"rate: a {c.duration:.4g} s swing at {rate:g} Hz needs {periods} samples, more "
-                f"than half this machine's memory holds ({max_samples()}); lower the rate"
+                f"than half the memory this process may use holds ({max_samples()}); lower the rate"
             )
         times.append(np.arange(periods + 1) / rate)
     # the last sample is at or after touch-down: the legs at rest in the landing pose
