@@ -72,6 +72,25 @@ def distinct_samples(q: np.ndarray, short: float = 0.25) -> np.ndarray:
     return np.flatnonzero(keep)
 
 
+# The trajectory samples a joint path is made from at most: a denser path is timed as if generated
+# with this many points. The heel comes as float32 samples (rounding up to 6e-8 m), and a cubic
+# through samples h apart amplifies that rounding in its third derivative by 1/h^3: at 5,000 path
+# samples the jerk the timing saw was the rounding's and the swing was slowed for it (2.9 s where
+# 100 samples took 1.1 s), and past 10,000 every step was below ``distinct_samples``' 1e-4 of the
+# path (all dropped but the ends: a straight joint line through the obstacle). With 500, CFFTG's
+# and the RL generator's swings at 5,000 and 20,000 points take the time the 100-point ones take
+# and pass the checks where their paths do (1,000: up to 1.3x longer).
+MAX_PATH_SAMPLES = 500
+
+
+def thinned(n: int, most: int = MAX_PATH_SAMPLES) -> np.ndarray:
+    """Indices of ``n`` samples of a path at most ``most`` + 1 of them, evenly spread over the
+    samples (the path as if generated with that many points), the first and the last kept."""
+    if n - 1 <= most:
+        return np.arange(n)
+    return np.unique(np.round(np.linspace(0.0, n - 1, most + 1)).astype(np.int64))
+
+
 def cubic_paths(knots: np.ndarray, q: np.ndarray) -> list[JointPath]:
     """C2 cubic splines through joint samples q (B, N, J) at knots (B, N), not-a-knot ends (the
     third derivative continuous across the second and the second-last knots), so that a path with

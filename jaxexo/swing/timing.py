@@ -28,6 +28,7 @@ from jaxexo.swing.curve import (
     law_from_speeds,
     pchip_eval,
     pchip_slopes,
+    thinned,
 )
 from jaxexo.swing.curve_check import (
     CHECK_MARGIN,
@@ -308,12 +309,15 @@ def _joint_samples(sp, traj) -> np.ndarray:
     straightening on the floor a small heel step is a large joint step (a square root); without
     the points in between, a cubic through that chord swings wide of it."""
     q = np.unwrap(np.asarray(traj.joint_angles, np.float64), axis=0)
+    heel = np.asarray(traj.heel, np.float64)
+    # A dense path (n_points in the thousands) is thinned first (curve.MAX_PATH_SAMPLES).
+    keep = thinned(len(q))
+    q, heel = q[keep], heel[keep]
     step = np.linalg.norm(np.diff(q, axis=0), axis=1)
     moving = step[step > 0]
     long = np.flatnonzero(step > REFINE * np.median(moving)) if moving.size else []
     if not len(long):
         return q
-    heel = np.asarray(traj.heel, np.float64)
     parts = np.ones(len(step), np.int64)
     parts[long] = np.ceil(step[long] / np.median(moving)).astype(np.int64)
     i = np.repeat(np.arange(len(step)), parts)
