@@ -1,4 +1,4 @@
-"""The swing API's checks and size bounds (issue 57): times checked when given and the legs at
+"""The swing API's checks and size bounds: times checked when given and the legs at
 rest outside the swing (``SwingCurve.at``), ``DeviceLimits`` and ``GenerateOptions`` checked when
 made, sizes bounded by the memory this process may use (``ulimit -v`` included) before any work
 (``time_swing``, ``swing.at``, ``jaxexo walk``), and dense paths timed as the path they are (the
