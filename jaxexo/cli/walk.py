@@ -23,6 +23,7 @@ def cmd_walk(args) -> int:
     from jaxexo.storage.terrain_file import read_terrain
 
     terrain = read_terrain(args.terrain)
+    _check_size(args, gen.config, terrain)
     kw = common.option_values(
         args, "start_y", "goal_y", "steps", "rate", "clearance", "double_support"
     )
@@ -31,6 +32,7 @@ def cmd_walk(args) -> int:
     course = plan_course(
         gen, terrain, **kw
     )  # an infeasible course is refused here: nothing written
+    _check_size(args, gen.config, terrain, course)
     from jaxexo.plots.animate import animate_course
     from jaxexo.plots.plot import plot_course
 
@@ -43,6 +45,55 @@ def cmd_walk(args) -> int:
     _report_course(course, terrain.source)
     print("wrote " + ", ".join(written))
     return 0 if course.ok else 1
+
+
+def _check_size(args, config, terrain, course=None) -> None:
+    """The walk's samples and outputs (the CSV, and --json's lists and text) refused where they
+    would not fit in half the memory this process may use, naming --rate and the course: before
+    any work by an estimate (jaxexo.course.ground.walk_size, a lower bound), and once the course
+    is planned by its rows, before anything is written."""
+    from jaxexo.course.ground import (
+        JSON_ROW_BYTES,
+        ROW_BYTES,
+        FootholdRules,
+        WalkSize,
+        check_walk_size,
+        walk_size,
+    )
+    from jaxexo.course.record import WALK_COLUMNS
+    from jaxexo.swing.timing import DeviceLimits
+
+    names = {
+        "rate": "--rate",
+        "course": "--goal-y, --steps",
+        "outputs": " with the --json document" if args.json else " with the CSV",
+    }
+    if course is None:
+        size = walk_size(
+            terrain,
+            config,
+            FootholdRules.of(config, args.clearance),
+            limits=DeviceLimits.from_config(config),
+            rate=args.rate,
+            start_y=args.start_y,
+            goal_y=args.goal_y,
+            steps=args.steps,
+            dwell=args.double_support,
+        )
+    else:
+        landings = course.footholds.landings
+        size = WalkSize(
+            course.footholds.start_y,
+            landings[-1] if landings else course.footholds.start_y,
+            len(course.steps),
+            course.duration,
+            len(course.samples),
+            course.rate,
+        )
+    row = JSON_ROW_BYTES if args.json else ROW_BYTES
+    check_walk_size(
+        size, columns=len(WALK_COLUMNS), row_bytes=row, names=names, known=course is not None
+    )
 
 
 def _report_course(course, source) -> None:

@@ -115,3 +115,85 @@ def check_memory(cfg: Config, available: int | None = None) -> int:
             + (" or train.rollout_steps" if top == "rollout_buffer" else "")
         )
     return one * k
+
+
+def _meminfo(key: str) -> int | None:
+    """A /proc/meminfo entry in bytes (None where there is none)."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith(key + ":"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def _process_sizes() -> dict[str, int]:
+    """This process's virtual size and data segment (VmSize, VmData) in bytes, where known."""
+    out = {}
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                key, _, rest = line.partition(":")
+                if key in ("VmSize", "VmData"):
+                    out[key] = int(rest.split()[0]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return out
+
+
+def _cgroup_room() -> int | None:
+    """What this process's cgroup (v2 memory.max, v1 memory.limit_in_bytes) leaves above its usage;
+    None without a limit. Two small reads: cheap."""
+    try:
+        with open("/proc/self/cgroup") as f:
+            lines = f.read().splitlines()
+    except OSError:
+        return None
+    for line in lines:
+        _, controllers, path = line.split(":", 2)
+        if controllers == "":  # v2: one hierarchy
+            folder, limit, usage = "/sys/fs/cgroup", "memory.max", "memory.current"
+        elif "memory" in controllers.split(","):
+            folder, limit, usage = (
+                "/sys/fs/cgroup/memory",
+                "memory.limit_in_bytes",
+                "memory.usage_in_bytes",
+            )
+        else:
+            continue
+        folder = os.path.join(folder, path.lstrip("/"))
+        try:
+            with open(os.path.join(folder, limit)) as f:
+                cap = f.read().strip()
+            with open(os.path.join(folder, usage)) as f:
+                used = int(f.read().strip())
+        except (OSError, ValueError):
+            continue
+        # "max" (v2) or a huge number (v1): no limit.
+        if cap.isdigit() and int(cap) < 2**60:
+            return max(0, int(cap) - used)
+    return None
+
+
+def process_memory_bytes() -> int | None:
+    """The memory this process may still take (bytes): the least of the machine's available memory
+    (MemAvailable; its total where that is unknown), what RLIMIT_AS and RLIMIT_DATA (``ulimit -v``,
+    ``ulimit -d``) leave above the process's present size, and what its cgroup's limit leaves; None
+    if none is known. A size guard counts this, not the machine: under a process limit the machine's
+    memory is not the process's."""
+    room = [_meminfo("MemAvailable") or machine_memory_bytes()]
+    try:
+        import resource
+    except ImportError:  # not on this platform: the machine's figure alone
+        resource = None
+    if resource is not None:
+        sizes = _process_sizes()
+        for limit, used in ((resource.RLIMIT_AS, "VmSize"), (resource.RLIMIT_DATA, "VmData")):
+            soft = resource.getrlimit(limit)[0]
+            if soft != resource.RLIM_INFINITY and soft >= 0:
+                room.append(max(0, soft - sizes.get(used, 0)))
+    room.append(_cgroup_room())
+    known = [r for r in room if r is not None]
+    return min(known) if known else None

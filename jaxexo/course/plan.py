@@ -11,14 +11,17 @@ import numpy as np
 
 from jaxexo.course.ground import (
     MAX_DOUBLE_SUPPORT,
+    ROW_BYTES,
     CourseError,
     FootholdRules,
     check_number,
+    check_walk_size,
     flat_obstacle,
     obstacles_of,
+    walk_size,
 )
 from jaxexo.course.placement import footholds
-from jaxexo.course.record import JUNCTION_TOL, LEGS, Course, CourseStep, walk_table
+from jaxexo.course.record import JUNCTION_TOL, LEGS, WALK_COLUMNS, Course, CourseStep, walk_table
 from jaxexo.physics import geometry
 from jaxexo.storage.terrain_file import Terrain, read_terrain
 from jaxexo.swing.trajectory import Trajectory, assemble
@@ -103,10 +106,11 @@ def plan_course(
         raise CourseError(f"double_support: at most {MAX_DOUBLE_SUPPORT:g} s, got {ds:g}")
     limits = DeviceLimits.from_config(config) if limits is None else limits
     gen = generator.at_clearance(clearance)
+    r = FootholdRules.of(config, clearance)
+    _check_size(terrain, config, r, limits, rate, start_y, goal_y, steps, ds)
     plan = footholds(
         terrain, config, start_y=start_y, goal_y=goal_y, steps=steps, clearance=clearance
     )
-    r = FootholdRules.of(config, clearance)
     trajs, meta, stopped = _swings(gen, rl, fallback, plan, obstacles_of(terrain), r)
     # A failed swing is not timed (its path may not be one a drive can follow).
     good = [t for t in trajs if t.ok]
@@ -135,6 +139,31 @@ def plan_course(
         _time.perf_counter() - t0,
         notes,
     )
+
+
+# What the API's size refusal names (the command line names its options: jaxexo.cli.walk).
+SIZE_NAMES = {"rate": "rate", "course": "goal_y, steps", "outputs": ""}
+
+
+def _check_size(terrain, config, r, limits, rate, start_y, goal_y, steps, dwell) -> None:
+    """The walk's size (``walk_size``) refused before any work where its samples would not fit
+    (``check_walk_size``); the numbers it reads checked first, as the planning checks them."""
+    from jaxexo.swing.timing import DeviceLimits, check_rate
+
+    if not isinstance(limits, DeviceLimits):
+        raise CourseError(f"limits: expected a DeviceLimits, got {type(limits).__name__}")
+    size = walk_size(
+        terrain,
+        config,
+        r,
+        limits=limits,
+        rate=None if rate is None else check_rate(rate),
+        start_y=check_number("start_y", start_y),
+        goal_y=check_number("goal_y", goal_y),
+        steps=check_number("steps", steps, 1, integer=True),
+        dwell=dwell,
+    )
+    check_walk_size(size, columns=len(WALK_COLUMNS), row_bytes=ROW_BYTES, names=SIZE_NAMES)
 
 
 def _swings(gen, rl: bool, fallback, plan, obs, r: FootholdRules):

@@ -28,6 +28,7 @@ from jaxexo.swing.curve import (
     law_from_speeds,
     pchip_eval,
     pchip_slopes,
+    thinned,
 )
 from jaxexo.swing.curve_check import (
     CHECK_MARGIN,
@@ -309,12 +310,15 @@ def _joint_samples(sp, traj) -> np.ndarray:
     straightening on the floor a small heel step is a large joint step (a square root); without
     the points in between, a cubic through that chord swings wide of it."""
     q = np.unwrap(np.asarray(traj.joint_angles, np.float64), axis=0)
+    heel = np.asarray(traj.heel, np.float64)
+    # A dense path (n_points in the thousands) is thinned first (curve.MAX_PATH_SAMPLES).
+    keep = thinned(len(q))
+    q, heel = q[keep], heel[keep]
     step = np.linalg.norm(np.diff(q, axis=0), axis=1)
     moving = step[step > 0]
     long = np.flatnonzero(step > REFINE * np.median(moving)) if moving.size else []
     if not len(long):
         return q
-    heel = np.asarray(traj.heel, np.float64)
     parts = np.ones(len(step), np.int64)
     parts[long] = np.ceil(step[long] / np.median(moving)).astype(np.int64)
     i = np.repeat(np.arange(len(step)), parts)
@@ -496,7 +500,7 @@ def _samples(curves, rate: float) -> list[_Samples]:
         if not periods < max_samples():
             raise ValueError(
                 f"rate: a {c.duration:.4g} s swing at {rate:g} Hz needs {periods} samples, more "
-                f"than half this machine's memory holds ({max_samples()}); lower the rate"
+                f"than half the memory this process may use holds ({max_samples()}); lower the rate"
             )
         times.append(np.arange(periods + 1) / rate)
     # the last sample is at or after touch-down: the legs at rest in the landing pose
