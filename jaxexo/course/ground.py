@@ -105,7 +105,7 @@ def check_number(name: str, v, lo=None, integer=False):
         raise CourseError(f"{name}: expected a whole number, got {v!r}")
     v = int(v) if integer else float(v)
     if lo is not None and v < lo:
-        raise CourseError(f"{name}: must be a finite number{bound}, got {v!r}")
+        raise CourseError(f"{name}: must be a finite number{bound}, got {geometry.as_given(v)}")
     return v
 
 

@@ -100,7 +100,9 @@ def plan_course(
     terrain = _as_terrain(terrain)
     ds = check_number("double_support", double_support, 0.0)
     if ds > MAX_DOUBLE_SUPPORT:
-        raise CourseError(f"double_support: at most {MAX_DOUBLE_SUPPORT:g} s, got {ds:g}")
+        raise CourseError(
+            f"double_support: at most {MAX_DOUBLE_SUPPORT:g} s, got {geometry.as_given(ds)}"
+        )
     limits = DeviceLimits.from_config(config) if limits is None else limits
     gen = generator.at_clearance(clearance)
     plan = footholds(
