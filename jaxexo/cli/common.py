@@ -23,7 +23,7 @@ OUTPUT_EXAMPLES = {
 
 
 # The library's names (a field, a keyword) of what a subcommand has an option for: a refusal that
-# starts with one (``step_length must be > 0``) is shown with the option as typed (``as_typed``).
+# names one (``step_length must be > 0``) is shown with the option as typed instead (``as_typed``).
 FIELD_OPTIONS = {
     "start_y": "--start-y",
     "goal_y": "--goal-y",
@@ -42,7 +42,7 @@ FIELD_OPTIONS = {
 _LEADING_FIELD = re.compile(r"([a-z][a-z0-9_]*)(?=[: ])")
 # A field with an underscore anywhere in a message (``... the start (start_y 1 m ...)``), not a
 # config key's part (``layout.step_length``).
-_INNER_FIELD = re.compile(r"(?<![\w.\-\[])([a-z]+_[a-z0-9_]+)(?![\w.\-])")
+_INNER_FIELD = re.compile(r"(?<![\w.\-])([a-z]+_[a-z0-9_]+)(?![\w.\-])")
 _WHOLE = re.compile(r"[+-]?[0-9]+")
 
 

@@ -162,8 +162,7 @@ def _lines_at(text: str, positions) -> np.ndarray:
 
 def _value_lines(text: str) -> list[tuple[int, int]]:
     """For each innermost [..] of ``text`` in order (the [y, z] pairs), the lines of its first and
-    second values (of the bracket where it has fewer): a pretty-printed file writes each on its own
-    line."""
+    second values (of its "[" for one it lacks): a pretty-printed file writes each on its own line."""
     starts = []
     for m in re.finditer(r"\[[^\[\]]*\]", text):
         values = [
@@ -171,8 +170,7 @@ def _value_lines(text: str) -> list[tuple[int, int]]:
             for k, part in _parts(m.group()[1:-1])
             if part.strip()
         ]
-        values = (values + [m.start()] * 2)[:2] if values else [m.start()] * 2
-        starts.extend(values)
+        starts.extend((values + [m.start()] * 2)[:2])
     lines = _lines_at(text, starts).tolist()
     return list(zip(lines[0::2], lines[1::2]))
 
