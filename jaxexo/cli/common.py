@@ -4,7 +4,9 @@ generator, fallback and output files. NumPy only; JAX is imported by the subcomm
 
 from __future__ import annotations
 
+import argparse
 import os
+import re
 from pathlib import Path
 
 # Shipped inside the package (package data), so the default model is the same however jaxexo is
@@ -19,6 +21,68 @@ OUTPUT_EXAMPLES = {
     "--animate": "swing.gif",
     "--ros": "trajectory_ros.json",
 }
+
+
+# The library's names (a field, a keyword) of what a subcommand has an option for: a refusal that
+# names one (``step_length must be > 0``) is shown with the option as typed instead (``as_typed``).
+FIELD_OPTIONS = {
+    "start_y": "--start-y",
+    "goal_y": "--goal-y",
+    "step_length": "--step-length",
+    "pivot_y": "--pivot-y",
+    "pivot": "--pivot",
+    "smoothing": "--smoothing",
+    "double_support": "--double-support",
+    "steps": "--steps",
+    "n_points": "--points",
+    "duration": "--duration",
+    "rate": "--rate",
+    "clearance": "--clearance",
+    "fallback": "--fallback",
+}
+_LEADING_FIELD = re.compile(r"([a-z][a-z0-9_]*)(?=[: ])")
+# A field with an underscore anywhere in a message (``... the start (start_y 1 m ...)``), not a
+# config key's part (``layout.step_length``).
+_INNER_FIELD = re.compile(r"(?<![\w.\-])([a-z]+_[a-z0-9_]+)(?![\w.\-])")
+_WHOLE = re.compile(r"[+-]?[0-9]+")
+
+
+def as_typed(message: str, args) -> str:
+    """A refusal as the command line words it: each field of FIELD_OPTIONS whose option ``args``'
+    subcommand has, at the message's start (``step_length must be``, ``start_y: ...``) or written with
+    an underscore anywhere, is named by that option (``--step-length``); the rest stays as it is."""
+
+    def option(field):
+        o = FIELD_OPTIONS.get(field)
+        return o if o is not None and hasattr(args, o[2:].replace("-", "_")) else None
+
+    m = _LEADING_FIELD.match(message)
+    if m is not None and option(m.group(1)) is not None:
+        message = option(m.group(1)) + message[m.end() :]
+    return _INNER_FIELD.sub(lambda f: option(f.group(1)) or f.group(1), message)
+
+
+def real(text: str) -> float:
+    """argparse type of every real-valued option: a number in the one syntax jaxexo reads numbers in
+    (jaxexo.storage.terrain_file.read_number: no ``0_05``, which float() reads as 5)."""
+    from jaxexo.storage.terrain_file import read_number
+
+    v = read_number(text.strip())
+    if v is None:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a number (digits with an optional '.' and exponent; no '_')"
+        )
+    return v
+
+
+def whole(text: str) -> int:
+    """argparse type of every whole-number option: digits with an optional sign (no ``1_0``, which
+    int() reads as 10)."""
+    if not _WHOLE.fullmatch(text.strip()):
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a whole number (digits with an optional sign; no '_')"
+        )
+    return int(text)
 
 
 def load(path):

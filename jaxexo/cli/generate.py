@@ -14,7 +14,9 @@ from jaxexo.cli.common import (
     fallback,
     generator,
     option_values,
+    real,
     swing_outputs,
+    whole,
     write_outputs,
 )
 from jaxexo.cli.scene import add_scene_args, obstacle_from_args
@@ -142,31 +144,31 @@ def add_options(g) -> None:
     add_policy(g)
     add_method(g, "rl: the trained policy; cfftg: the polynomial baseline (jaxexo.baselines.cfftg)")
     add_scene_args(g)
-    g.add_argument("--points", type=int, default=100, help="samples of the smoothed path")
+    g.add_argument("--points", type=whole, default=100, help="samples of the smoothed path")
     add_fallback(
         g, "when the RL swing is not safe, return CFFTG's plan (cfftg) or the RL swing alone (none)"
     )
     g.add_argument(
         "--smoothing",
-        type=float,
+        type=real,
         help="B-spline smoothing s, m^2 (0: raw polyline; default: the model's, 0.001 for a "
         "shielded model, the thesis's 0.005 otherwise); rl only",
     )
     g.add_argument(
         "--clearance",
-        type=float,
+        type=real,
         help="m the swing keeps from the obstacle (default: the model's "
         "env.min_clearance; at most 0.10); the verdict judges against it",
     )
     g.add_argument(
         "--duration",
-        type=float,
+        type=real,
         default=1.0,
         help="swing duration for the time stamps, s (ignored with --rate)",
     )
     g.add_argument(
         "--rate",
-        type=float,
+        type=real,
         help="device-ready output: the shortest rest-to-rest timing within the "
         "config's [device] joint limits, sampled at this rate (Hz); the CSV "
         "and JSON gain joint velocities and accelerations",

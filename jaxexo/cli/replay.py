@@ -4,7 +4,7 @@ Method: docs/safety.md, "Replayed in a physics engine"."""
 
 from __future__ import annotations
 
-from jaxexo.cli.common import check_paths, check_rate, option_values
+from jaxexo.cli.common import check_paths, check_rate, option_values, real
 from jaxexo.cli.scene import add_scene_args, add_sim_policy, scene_from_args
 
 
@@ -58,7 +58,7 @@ def add_options(x) -> None:
         help="the RL swing alone (no fallback), CFFTG's, or both",
     )
     x.add_argument(
-        "--rate", type=float, help="control rate, Hz (default: the config's control_rate)"
+        "--rate", type=real, help="control rate, Hz (default: the config's control_rate)"
     )
     x.add_argument(
         "--driven",
@@ -82,7 +82,7 @@ def add_options(x) -> None:
     )
     x.add_argument(
         "--reference-rate",
-        type=float,
+        type=real,
         help="with --driven and a sampled --reference: the samples' rate, Hz (default: --rate)",
     )
     x.add_argument(

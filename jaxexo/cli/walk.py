@@ -132,27 +132,29 @@ def add_options(w) -> None:
     )
     w.add_argument(
         "--start-y",
-        type=float,
+        type=common.real,
         help="where both feet stand at first, m (default: the terrain's first point)",
     )
     end = w.add_mutually_exclusive_group()
     end.add_argument(
         "--goal-y",
-        type=float,
+        type=common.real,
         help="where both feet stand at the end, m (default: the furthest foothold on the terrain)",
     )
-    end.add_argument("--steps", type=int, help="walk exactly this many swings instead")
+    end.add_argument("--steps", type=common.whole, help="walk exactly this many swings instead")
     w.add_argument(
-        "--rate", type=float, help="control rate, Hz (default: the config's [device] control_rate)"
+        "--rate",
+        type=common.real,
+        help="control rate, Hz (default: the config's [device] control_rate)",
     )
     w.add_argument(
         "--clearance",
-        type=float,
+        type=common.real,
         help="m every swing keeps from the terrain (default: the model's env.min_clearance)",
     )
     w.add_argument(
         "--double-support",
-        type=float,
+        type=common.real,
         default=0.0,
         help="s both feet stand still at each landing (default 0: the swings meet at rest)",
     )

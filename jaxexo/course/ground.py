@@ -50,8 +50,17 @@ def obstacles_of(terrain: Terrain) -> list[np.ndarray]:
 
 
 def describe(ob: np.ndarray) -> str:
+    return f"the obstacle at y = {ob[0, 0]:.2f}-{ob[-1, 0]:.2f} m ({_height(ob[:, 1].max())})"
+
+
+def _height(h: float) -> str:
+    """An obstacle's height in words: cm, or mm below 1 cm, where a floor measured with noise is
+    refused (the terrain file's rule: the floor is z = 0 exactly, anything above it an obstacle)."""
+    if h >= 0.01:
+        return f"{h * 100:.0f} cm high"
     return (
-        f"the obstacle at y = {ob[0, 0]:.2f}-{ob[-1, 0]:.2f} m ({ob[:, 1].max() * 100:.0f} cm high)"
+        f"{h * 1000:.2g} mm high; the floor is z = 0 exactly and any point above it is an "
+        "obstacle: write a measured floor as 0"
     )
 
 
@@ -105,7 +114,7 @@ def check_number(name: str, v, lo=None, integer=False):
         raise CourseError(f"{name}: expected a whole number, got {v!r}")
     v = int(v) if integer else float(v)
     if lo is not None and v < lo:
-        raise CourseError(f"{name}: must be a finite number{bound}, got {v!r}")
+        raise CourseError(f"{name}: must be a finite number{bound}, got {geometry.as_given(v)}")
     return v
 
 

@@ -126,10 +126,13 @@ def check_duration(duration, name: str = "duration") -> float:
     """A swing's duration in [MIN_DURATION, MAX_DURATION] s; ValueError naming ``name``."""
     duration = geometry.finite_positive(name, duration, "s")
     if duration > MAX_DURATION:
-        raise ValueError(f"{name} must be <= {MAX_DURATION:g} s (one swing), got {duration:g}")
+        raise ValueError(
+            f"{name} must be <= {MAX_DURATION:g} s (one swing), got {geometry.as_given(duration)}"
+        )
     if duration < MIN_DURATION:
         raise ValueError(
-            f"{name} must be >= {MIN_DURATION:g} s (no drive swings a leg faster), got {duration:g}"
+            f"{name} must be >= {MIN_DURATION:g} s (no drive swings a leg faster), got "
+            f"{geometry.as_given(duration)}"
         )
     return duration
 
@@ -147,7 +150,7 @@ def check_smoothing(smoothing):
         return None
     smoothing = geometry.finite("smoothing", smoothing, "m^2")
     if smoothing < 0:
-        raise ValueError(f"smoothing must be >= 0 (m^2), got {smoothing}")
+        raise ValueError(f"smoothing must be >= 0 (m^2), got {geometry.as_given(smoothing)}")
     return smoothing
 
 

@@ -15,6 +15,7 @@ import numpy as np
 
 from jaxexo.config import MAX_CONTROL_RATE, MIN_CONTROL_RATE
 from jaxexo.physics import kinematics
+from jaxexo.physics.geometry import as_given
 from jaxexo.physics.scene import Scene
 from jaxexo.swing.curve import (
     CurveState,
@@ -168,7 +169,7 @@ def check_rate(rate, name: str = "rate") -> float:
     if not (math.isfinite(rate) and MIN_CONTROL_RATE <= rate <= MAX_CONTROL_RATE):
         raise ValueError(
             f"{name}: control rate must be between {MIN_CONTROL_RATE:g} and {MAX_CONTROL_RATE:g} Hz, "
-            f"got {rate:g}"
+            f"got {as_given(rate)}"
         )
     return rate
 
