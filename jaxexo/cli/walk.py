@@ -10,13 +10,13 @@ def cmd_walk(args) -> int:
     common.swing_outputs(args, [("--policy", args.policy), ("--terrain", args.terrain)])
     common.check_rate(args.rate, "--rate")
     fallback_method = common.fallback(args)
-    from jaxexo.course.ground import check_number
+    from jaxexo.course.ground import check_double_support, check_number
 
     # The course's own checks, before any policy or terrain is read, naming the options as typed.
     check_number("--start-y", args.start_y)
     check_number("--goal-y", args.goal_y)
     check_number("--steps", args.steps, 1, integer=True)
-    check_number("--double-support", args.double_support, 0.0)
+    check_double_support("--double-support", args.double_support)
     gen = common.generator(args)
     common.check_clearance(args.clearance, gen.config)
     from jaxexo.course import plan_course

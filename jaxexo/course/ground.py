@@ -118,6 +118,14 @@ def check_number(name: str, v, lo=None, integer=False):
     return v
 
 
+def check_double_support(name: str, v) -> float:
+    """The double support (s) between two swings: 0 to MAX_DOUBLE_SUPPORT."""
+    ds = check_number(name, v, 0.0)
+    if ds > MAX_DOUBLE_SUPPORT:
+        raise CourseError(f"{name}: at most {MAX_DOUBLE_SUPPORT:g} s, got {geometry.as_given(ds)}")
+    return ds
+
+
 def flat_obstacle(start: float, goal: float, foot: float, stand: float) -> geometry.Obstacle:
     """The virtual obstacle of a swing over flat ground: FLAT_OBSTACLE, centred in the room between
     the toe at the start and the goal (narrowed to fit)."""

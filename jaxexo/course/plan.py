@@ -10,10 +10,10 @@ from pathlib import Path
 import numpy as np
 
 from jaxexo.course.ground import (
-    MAX_DOUBLE_SUPPORT,
     ROW_BYTES,
     CourseError,
     FootholdRules,
+    check_double_support,
     check_number,
     check_walk_size,
     describe,
@@ -121,11 +121,7 @@ def plan_course(
     rl = isinstance(generator, TrajectoryGenerator)
     fallback = check_fallback(fallback)
     terrain = _as_terrain(terrain)
-    ds = check_number("double_support", double_support, 0.0)
-    if ds > MAX_DOUBLE_SUPPORT:
-        raise CourseError(
-            f"double_support: at most {MAX_DOUBLE_SUPPORT:g} s, got {geometry.as_given(ds)}"
-        )
+    ds = check_double_support("double_support", double_support)
     limits = DeviceLimits.from_config(config) if limits is None else limits
     gen = generator.at_clearance(clearance)
     r = FootholdRules.of(config, clearance)
