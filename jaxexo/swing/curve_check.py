@@ -131,7 +131,16 @@ def final_law(p: Plan, planned: DeviceLimits, rate: float, t_opt: float) -> Fina
     notes = []
     slow = max(1.0, peak_ratio(planned.constraints(1.0 - CHECK_MARGIN), p.check.peaks))
     longest = max(1.0, MAX_SWING_DURATION / law.duration)
-    if slow > longest:
+    if law.duration > MAX_SWING_DURATION:
+        # A path the limits cannot cross within the longest swing (a wandering policy's, with a
+        # stop at every turn): sampled as the longest swing, faster than the limits allow, so
+        # that its cost stays bounded; the peaks below say by how much (not within the limits).
+        notes.append(
+            f"the limits need {law.duration:.4g} s, longer than the longest swing "
+            f"({MAX_SWING_DURATION:g} s): sampled at {MAX_SWING_DURATION:g} s, over a limit"
+        )
+        slow = MAX_SWING_DURATION / law.duration
+    elif slow > longest:
         notes.append(f"slowed to the longest swing ({MAX_SWING_DURATION:g} s); still over a limit")
         slow = longest
     scale = slow
