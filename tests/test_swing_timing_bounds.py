@@ -1,4 +1,4 @@
-"""Bounded timing (issue 58): a swing of a model that learned nothing costs a bounded amount to time.
+"""Bounded timing: a swing of a model that learned nothing costs a bounded amount to time.
 The recorded swings (tests/data/wandering_swings.json) are thesis config 3's test swings as
 ``jaxexo reproduce`` evaluates them: a policy that wanders, whose time-optimal law at the device
 limits takes 99 s and 182 s (117 s and 189 s slowed to them on 46d0ad3). Timing them is bounded in sizes (samples, joint samples) and memory,
