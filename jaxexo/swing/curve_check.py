@@ -135,7 +135,17 @@ def final_law(p: Plan, planned: DeviceLimits, rate: float, t_opt: float) -> Fina
     notes = []
     slow = max(1.0, peak_ratio(planned.constraints(1.0 - CHECK_MARGIN), p.check.peaks))
     longest = max(1.0, MAX_SWING_DURATION / law.duration)
-    if slow > longest:
+    cut_short = law.duration > MAX_SWING_DURATION
+    if cut_short:
+        # A path the limits cannot cross within the longest swing (a wandering policy's, with a
+        # stop at every turn): sampled as the longest swing, faster than the limits allow, so
+        # that its cost stays bounded; the peaks below say by how much (not within the limits).
+        notes.append(
+            f"the limits need {law.duration:.4g} s, longer than the longest swing "
+            f"({MAX_SWING_DURATION:g} s): sampled at {MAX_SWING_DURATION:g} s, over a limit"
+        )
+        slow = MAX_SWING_DURATION / law.duration
+    elif slow > longest:
         notes.append(f"slowed to the longest swing ({MAX_SWING_DURATION:g} s); still over a limit")
         slow = longest
     scale = slow
@@ -145,15 +155,6 @@ def final_law(p: Plan, planned: DeviceLimits, rate: float, t_opt: float) -> Fina
             f"{planned.min_duration:.3f} s is used"
         )
         scale = planned.min_duration / law.duration
-    # A swing is at most MAX_SWING_DURATION ([device] bounds): one the limits make longer (limits
-    # far below a drive's, from DeviceLimits.scaled) is never within them. (Rounding: a swing
-    # slowed or stretched to exactly the longest is not over it.)
-    too_long = law.duration * scale > MAX_SWING_DURATION * (1.0 + 1e-9)
-    if too_long:
-        notes.append(
-            f"the limits allow no swing shorter than {law.duration * scale:.4g} s; a swing takes at "
-            f"most {MAX_SWING_DURATION:g} s"
-        )
     n = law.duration * scale * rate
     if not n < max_samples():  # bounded before anything is allocated
         raise ValueError(
@@ -165,7 +166,9 @@ def final_law(p: Plan, planned: DeviceLimits, rate: float, t_opt: float) -> Fina
     scale *= max(2, math.ceil(n - 1e-9)) / n  # whole control periods: never faster
     # The check's values at the same curve points, slowed exactly (1/k, 1/k^2, 1/k^3).
     peaks = tuple(pk / scale**o for o, pk in zip((1, 2, 3), p.check.peaks))
-    within = not too_long and bool(
+    # A law cut short is never within the limits, whatever its sampled peaks say: the limits need
+    # longer than the longest swing.
+    within = not cut_short and bool(
         np.all(peaks[0] <= planned.velocity)
         and np.all(peaks[1] <= planned.acceleration)
         and (planned.jerk is None or np.all(peaks[2] <= planned.jerk))

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from jaxexo.config import MAX_CONTROL_RATE, MIN_CONTROL_RATE
+from jaxexo.config import MAX_CONTROL_RATE, MAX_SWING_DURATION, MIN_CONTROL_RATE
 from jaxexo.physics import kinematics
 from jaxexo.physics.geometry import as_given
 from jaxexo.physics.scene import Scene
@@ -59,7 +59,12 @@ from jaxexo.swing.trajectory import (
 )
 
 GRID_PER_KNOT = 2  # TOPP grid points per interval of the joint path's knots
-REFINE = 2.0  # a sample interval with a joint step over this many median steps is subdivided
+REFINE = 2.0  # a sample interval with a joint step over this many median steps is subdivided ...
+# ... into parts of at least 1/REFINE_BUDGET of the whole joint path: at most REFINE_BUDGET + N
+# joint samples (the most a swing of tests/reference_outputs.py has: 1,279, a CFFTG swing)
+REFINE_BUDGET = 4096
+CHUNK = 64  # at most this many swings timed in one batch ...
+CHUNK_SAMPLES = 16384  # ... and this many joint samples (time_swings' temporaries follow them)
 SAFETY = 0.95  # the TOPP passes use this fraction of each limit
 LOCAL_PASSES = 2  # local corrections of the passes' caps, then one uniform slow-down
 LOCAL_FROM = 1.02  # ... for a curve over a limit by more than this factor (less: the slow-down)
@@ -96,7 +101,9 @@ class TimedSwing:
     within_limits: bool  # velocity, acceleration and jerk within the planned limits on the curve
     peak_velocity: np.ndarray  # (4,) rad/s, on the curve
     peak_acceleration: np.ndarray  # (4,) rad/s^2
-    slowdown: float  # uniform slow-down applied after the passes and local corrections (>= 1)
+    # Uniform slow-down applied after the passes and local corrections (>= 1; < 1: a path the
+    # limits cannot cross within MAX_SWING_DURATION, sped up to it, notes and within_limits say so).
+    slowdown: float
     peak_jerk: np.ndarray | None = None  # (4,) rad/s^3, on the curve
     notes: tuple[str, ...] = field(default=())
     curve: SwingCurve | None = None
@@ -266,17 +273,45 @@ def time_swings(
     ``config``). Paths, passes and checks run batched."""
     trajs, rate, device = _checked_inputs(trajs, config, rate, limits)
     sp = _scalars(config) if sp is None else sp
+    # In chunks: a batch's temporaries grow with its swings' joint samples (the passes' grid, the
+    # law and the check follow them), bounded per swing (_joint_samples), so per chunk too. A
+    # batch times each swing as it is timed alone, so the chunks change no result.
+    qs = [_joint_samples(sp, t) for t in trajs]
+    return [
+        sw
+        for c in _chunks([len(q) for q in qs])
+        for sw in _time_chunk([trajs[i] for i in c], sp, rate, device, [qs[i] for i in c])
+    ]
+
+
+def _chunks(sizes) -> list[range]:
+    """Consecutive ranges of at most CHUNK swings and CHUNK_SAMPLES joint samples (or one swing)."""
+    out, start, total = [], 0, 0
+    for i, n in enumerate(sizes):
+        if i > start and (i - start >= CHUNK or total + n > CHUNK_SAMPLES):
+            out.append(range(start, i))
+            start, total = i, 0
+        total += n
+    return out + [range(start, len(sizes))]
+
+
+def _time_chunk(trajs, sp, rate: float, device: DeviceLimits, qs) -> list[TimedSwing]:
+    """``time_swings`` of a few swings, checked, in one batch."""
     planned = device.planned()
     window = blend_window(planned)
     passes = planned.constraints(SAFETY)
     check = planned.constraints(1.0 - CHECK_MARGIN)
-    plans = _joint_paths(trajs, sp)
+    plans = _joint_paths(trajs, sp, qs)
     plans = _run_passes(plans, range(len(plans)), passes, window)
     t_opt = [p.law.duration for p in plans]
     for _ in range(LOCAL_PASSES):
         redo = []
         for i, p in enumerate(plans):
-            if peak_ratio(check, p.check.peaks) > LOCAL_FROM:
+            # A law over the longest swing is not slowed further (final_law samples it faster).
+            if (
+                p.law.duration <= MAX_SWING_DURATION
+                and peak_ratio(check, p.check.peaks) > LOCAL_FROM
+            ):
                 ratio = speed_ratio(check, p.check.derivs)
                 plans[i] = replace(p, cap=lowered_cap(p, ratio, p.check.s, p.check.t))
                 redo.append(i)
@@ -321,7 +356,11 @@ def _joint_samples(sp, traj) -> np.ndarray:
     if not len(long):
         return q
     parts = np.ones(len(step), np.int64)
-    parts[long] = np.ceil(step[long] / np.median(moving)).astype(np.int64)
+    # Parts no shorter than 1/REFINE_BUDGET of the path: a path that mostly stands still (a median
+    # step of rounding noise) would otherwise ask for billions; so at most REFINE_BUDGET + N
+    # samples (far more than a normal swing needs: REFINE_BUDGET).
+    unit = max(float(np.median(moving)), float(step.sum()) / REFINE_BUDGET)
+    parts[long] = np.ceil(step[long] / unit).astype(np.int64)
     i = np.repeat(np.arange(len(step)), parts)
     x = (np.arange(len(i)) - np.repeat(np.cumsum(parts) - parts, parts)) / parts[i]
     # Along the heel's monotone cubic through the samples (C1, never beyond the samples), graded
@@ -334,11 +373,12 @@ def _joint_samples(sp, traj) -> np.ndarray:
     return fine
 
 
-def _joint_paths(trajs, sp) -> list[Plan]:
-    """The joint paths of the swings (splines batched by sample count) and their passes' grids."""
+def _joint_paths(trajs, sp, samples=None) -> list[Plan]:
+    """The joint paths of the swings (splines batched by sample count) and their passes' grids;
+    ``samples``: each swing's ``_joint_samples`` when known."""
     qs, knots = [], []
-    for t in trajs:
-        q = _joint_samples(sp, t)
+    for j, t in enumerate(trajs):
+        q = _joint_samples(sp, t) if samples is None else samples[j]
         q = q[distinct_samples(q)]
         qs.append(q)
         knots.append(chord_knots(q))
