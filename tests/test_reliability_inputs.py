@@ -405,9 +405,14 @@ def test_every_size_from_input_is_bounded_before_allocating(generator):
     traj = generator.generate(ob)
     with pytest.raises(ValueError, match="rate: control rate must be"):
         time_swing(traj, generator.config, rate=1e9)
+    # Limits that would need a swing of days: sampled as the longest swing (60 s, at most 60 s x
+    # rate + 1 rows), never within the limits, and saying so (it was refused for its size before a
+    # law longer than the longest swing was cut to it).
     tiny = DeviceLimits((1e-6,) * 4, (1e-6,) * 4)
-    with pytest.raises(ValueError, match="samples, more than"):
-        time_swing(traj, generator.config, limits=tiny)
+    sw = time_swing(traj, generator.config, limits=tiny)
+    assert sw.duration <= 60.0 + 1e-9 and len(sw.time) <= 60 * sw.rate + 1
+    assert not sw.within_limits and not sw.ok
+    assert any("longer than the longest swing" in n for n in sw.notes), sw.notes
     # A minimum duration over a swing's 60 s is refused when the limits are made (the [device]
     # section's bound), before any timing.
     with pytest.raises(ValueError, match=r"limits\.min_duration: .*\[0, 60\]"):
