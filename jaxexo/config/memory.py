@@ -78,6 +78,56 @@ def machine_memory_bytes() -> int | None:
     return None
 
 
+def process_memory_bytes() -> tuple[int | None, str]:
+    """The memory this process can use: this machine's, or less where the process's address-space or
+    data limit (``ulimit -v``, ``-d``) or its control group's memory limit says so. (bytes, what sets
+    them); (None, "") if nothing is known."""
+    known = [(machine_memory_bytes(), "this machine's memory")]
+    try:
+        import resource
+    except ImportError:  # not a Unix: the machine's memory only
+        resource = None
+    for name, ulimit in (("RLIMIT_AS", "ulimit -v"), ("RLIMIT_DATA", "ulimit -d")):
+        if resource is not None and hasattr(resource, name):
+            soft = resource.getrlimit(getattr(resource, name))[0]
+            if soft != resource.RLIM_INFINITY:
+                known.append((soft, f"the process's limit, {ulimit}"))
+    known.append((_cgroup_memory_limit(), "the control group's memory limit"))
+    known = [(n, what) for n, what in known if n is not None]
+    return min(known) if known else (None, "")
+
+
+def _cgroup_memory_limit() -> int | None:
+    """The smallest memory limit of this process's control group and its ancestors (cgroup v2
+    ``memory.max``, v1 ``memory.limit_in_bytes``; "max" and v1's huge "unlimited" are no limit)."""
+    try:
+        with open("/proc/self/cgroup") as f:
+            lines = f.read().splitlines()
+    except OSError:
+        return None
+    files = []
+    for line in lines:
+        _, controllers, path = line.split(":", 2)
+        if controllers == "":
+            folder, name = "/sys/fs/cgroup", "memory.max"
+        elif "memory" in controllers.split(","):
+            folder, name = "/sys/fs/cgroup/memory", "memory.limit_in_bytes"
+        else:
+            continue
+        parts = [x for x in path.split("/") if x]
+        files += [os.path.join(folder, *parts[:i], name) for i in range(len(parts), -1, -1)]
+    limits = []
+    for file in files:
+        try:
+            with open(file) as f:
+                text = f.read().strip()
+        except OSError:
+            continue
+        if text.isdigit() and int(text) < 2**60:
+            limits.append(int(text))
+    return min(limits, default=None)
+
+
 def check_memory(cfg: Config, available: int | None = None) -> int:
     """Refuse (ConfigError) a config whose estimate exceeds ``available`` bytes (default: this
     machine's memory); returns the estimate. The error names the field behind the largest part, or
