@@ -54,9 +54,10 @@ def _rate_option(text: str | None, option: str) -> float | None:
 def cmd_replay(args) -> int:
     check_paths([("--policy", args.policy)], [("--json", args.json)])
     check_rate(args.rate, "--rate")
-    check_rate(_rate_option(args.reference_rate, "--reference-rate"), "--reference-rate")
-    _check_drive_options(args)
-    args.reference_rate = _rate_option(args.reference_rate, "--reference-rate")
+    reference_rate = _rate_option(args.reference_rate, "--reference-rate")
+    check_rate(reference_rate, "--reference-rate")
+    _check_drive_options(args)  # with the options as typed
+    args.reference_rate = reference_rate
     from jaxexo.sim.replay import require_mujoco
 
     require_mujoco()  # a clear error before any work

@@ -107,6 +107,8 @@ def _cgroup_memory_limit() -> int | None:
         return None
     files = []
     for line in lines:
+        if line.count(":") < 2:
+            continue
         _, controllers, path = line.split(":", 2)
         if controllers == "":
             folder, name = "/sys/fs/cgroup", "memory.max"
