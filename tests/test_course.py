@@ -234,7 +234,7 @@ def test_a_cfftg_walk_is_continuous_within_the_limits_and_lands_on_flat_ground(t
     course = plan_course(CFFTG(CFG), ter, rate=50)
     assert course.ok, course.reasons
     _check_walk_samples(course.samples, 50.0, course.limits)
-    # The CSV holds the same samples (written at 9 significant digits).
+    # The CSV holds the same samples (written at full precision).
     text = course.to_csv(tmp_path / "w.csv")
     rows = list(csv.reader(text.splitlines()))
     assert tuple(rows[0]) == WALK_COLUMNS

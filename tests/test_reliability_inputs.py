@@ -408,9 +408,10 @@ def test_every_size_from_input_is_bounded_before_allocating(generator):
     tiny = DeviceLimits((1e-6,) * 4, (1e-6,) * 4)
     with pytest.raises(ValueError, match="samples, more than"):
         time_swing(traj, generator.config, limits=tiny)
-    slow = DeviceLimits((3.0, 4.0, 3.0, 4.0), (15.0, 20.0, 15.0, 20.0), min_duration=1e6)
-    with pytest.raises(ValueError, match="samples, more than"):
-        time_swing(traj, generator.config, limits=slow)
+    # A minimum duration over a swing's 60 s is refused when the limits are made (the [device]
+    # section's bound), before any timing.
+    with pytest.raises(ValueError, match=r"limits\.min_duration: .*\[0, 60\]"):
+        DeviceLimits((3.0, 4.0, 3.0, 4.0), (15.0, 20.0, 15.0, 20.0), min_duration=1e6)
 
 
 # --------------------------------------------------------------------------------------------

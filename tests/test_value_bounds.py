@@ -196,7 +196,7 @@ def test_one_obstacle_size_bound_for_the_config_the_api_and_the_cli(tmp_path, ca
     err = cli_error(capsys, *GEN, "rectangle", "--width", "1e300", "--out", tmp_path / "t.csv")
     assert "--width: width must be <= 1 metres, got 1e+300" in err and "0000000000" not in err
     err = cli_error(capsys, *GEN, "base1", "--center-y", "1e300", "--out", tmp_path / "t.csv")
-    assert "step_length" in err and "1e+300 m" in err and "0000000000" not in err
+    assert "--step-length" in err and "1e+300 m" in err and "0000000000" not in err
     assert list(tmp_path.iterdir()) == []
 
 

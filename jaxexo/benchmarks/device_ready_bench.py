@@ -17,19 +17,21 @@ OPTIONS = (
     ("--batch", "batch", "swings timed in one time_swings call"),
     ("--rate", "rate", "control rate, Hz"),
 )
-# The timing's parts: the jaxexo.swing.timing function each one's CPU time is read from.
+# The timing's parts: the jaxexo.swing.timing functions each one's CPU time is read from (the
+# joint samples are made before the chunks, the splines in each).
 PARTS = {
-    "paths": "_joint_paths",
-    "passes": "_run_passes",
-    "checks": "_path_checks",
-    "samples": "_samples",
+    "paths": ("_joint_samples", "_joint_paths"),
+    "passes": ("_run_passes",),
+    "checks": ("_path_checks",),
+    "samples": ("_samples",),
 }
+_FUNCTIONS = {n: k for k, names in PARTS.items() for n in names}
 
 
 def _split_timing(swing_timing):
     """Wrap the timing's parts to accumulate their CPU time (restored by the returned undo)."""
     acc = dict.fromkeys(PARTS, 0.0)
-    saved = {k: getattr(swing_timing, n) for k, n in PARTS.items()}
+    saved = {n: getattr(swing_timing, n) for n in _FUNCTIONS}
 
     def wrap(key, fn):
         def inner(*a, **k):
@@ -41,12 +43,12 @@ def _split_timing(swing_timing):
 
         return inner
 
-    for k, n in PARTS.items():
-        setattr(swing_timing, n, wrap(k, saved[k]))
+    for n, k in _FUNCTIONS.items():
+        setattr(swing_timing, n, wrap(k, saved[n]))
 
     def undo():
-        for k, n in PARTS.items():
-            setattr(swing_timing, n, saved[k])
+        for n in _FUNCTIONS:
+            setattr(swing_timing, n, saved[n])
 
     return acc, undo
 

@@ -9,7 +9,7 @@ import sys
 
 from jaxexo.cli import bench, evaluate, generate, mjcf, replay, reproduce, sweep, train, walk
 from jaxexo.cli.bench import cmd_bench, cmd_bench_env
-from jaxexo.cli.common import DEFAULT_CONFIG
+from jaxexo.cli.common import DEFAULT_CONFIG, as_typed
 from jaxexo.cli.evaluate import cmd_eval
 from jaxexo.cli.generate import cmd_generate
 from jaxexo.cli.mjcf import cmd_mjcf
@@ -105,8 +105,9 @@ def main(argv=None) -> int:
     try:
         return args.func(args)
     except (ConfigError, GeometryError, PolicyFileError, ValueError) as e:
-        # Bad input (config, files, options, a checkpoint or run directory that cannot be used).
-        print(f"jaxexo: error: {e}", file=sys.stderr)
+        # Bad input (config, files, options, a checkpoint or run directory that cannot be used),
+        # named by the option the user typed where the library names its field.
+        print(f"jaxexo: error: {as_typed(str(e), args)}", file=sys.stderr)
         return 2
     except TrainingDiverged as e:
         print(f"jaxexo: error: {e}", file=sys.stderr)

@@ -7,13 +7,13 @@ import argparse
 import math
 from pathlib import Path
 
-from jaxexo.cli.common import check_count, load
+from jaxexo.cli.common import check_count, load, real, whole
 
 
 def _sizes(text: str) -> list[int]:
     try:
-        sizes = [int(x) for x in text.split(",") if x.strip()]
-    except ValueError:
+        sizes = [whole(x) for x in text.split(",") if x.strip()]
+    except argparse.ArgumentTypeError:
         raise argparse.ArgumentTypeError(
             f"--envs: expected comma-separated integers, got {text!r}"
         ) from None
@@ -36,12 +36,13 @@ def cmd_bench_env(args) -> int:
 
 
 def cmd_bench(args) -> int:
+    from jaxexo.physics.geometry import as_given
     from jaxexo.train.devices import use_all_cpu_cores
 
     if not (math.isfinite(args.baseline_seconds) and args.baseline_seconds > 0):
         raise ValueError(
             f"--baseline-seconds: a time budget must be a finite number of seconds > 0, "
-            f"got {args.baseline_seconds:g}"
+            f"got {as_given(args.baseline_seconds)}"
         )
     check_count(args.courses, "--courses")
     use_all_cpu_cores()
@@ -91,7 +92,7 @@ def add_options(bb) -> None:
     )
     bb.add_argument(
         "--baseline-seconds",
-        type=float,
+        type=real,
         default=600.0,
         help="time budget of the thesis-style baseline's training run",
     )
@@ -102,7 +103,7 @@ def add_options(bb) -> None:
     )
     bb.add_argument(
         "--courses",
-        type=int,
+        type=whole,
         default=200,
         help="courses drawn for the course part (walks, RL alone against CFFTG)",
     )

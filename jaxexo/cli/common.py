@@ -4,7 +4,9 @@ generator, fallback and output files. NumPy only; JAX is imported by the subcomm
 
 from __future__ import annotations
 
+import argparse
 import os
+import re
 from pathlib import Path
 
 # Shipped inside the package (package data), so the default model is the same however jaxexo is
@@ -17,7 +19,70 @@ OUTPUT_EXAMPLES = {
     "--json": "trajectory.json",
     "--plot": "swing.png",
     "--animate": "swing.gif",
+    "--ros": "trajectory_ros.json",
 }
+
+
+# The library's names (a field, a keyword) of what a subcommand has an option for: a refusal that
+# names one (``step_length must be > 0``) is shown with the option as typed instead (``as_typed``).
+FIELD_OPTIONS = {
+    "start_y": "--start-y",
+    "goal_y": "--goal-y",
+    "step_length": "--step-length",
+    "pivot_y": "--pivot-y",
+    "pivot": "--pivot",
+    "smoothing": "--smoothing",
+    "double_support": "--double-support",
+    "steps": "--steps",
+    "n_points": "--points",
+    "duration": "--duration",
+    "rate": "--rate",
+    "clearance": "--clearance",
+    "fallback": "--fallback",
+}
+_LEADING_FIELD = re.compile(r"([a-z][a-z0-9_]*)(?=[: ])")
+# A field with an underscore anywhere in a message (``... the start (start_y 1 m ...)``), not a
+# config key's part (``layout.step_length``).
+_INNER_FIELD = re.compile(r"(?<![\w.\-])([a-z]+_[a-z0-9_]+)(?![\w.\-])")
+_WHOLE = re.compile(r"[+-]?[0-9]+")
+
+
+def as_typed(message: str, args) -> str:
+    """A refusal as the command line words it: each field of FIELD_OPTIONS whose option ``args``'
+    subcommand has, at the message's start (``step_length must be``, ``start_y: ...``) or written with
+    an underscore anywhere, is named by that option (``--step-length``); the rest stays as it is."""
+
+    def option(field):
+        o = FIELD_OPTIONS.get(field)
+        return o if o is not None and hasattr(args, o[2:].replace("-", "_")) else None
+
+    m = _LEADING_FIELD.match(message)
+    if m is not None and option(m.group(1)) is not None:
+        message = option(m.group(1)) + message[m.end() :]
+    return _INNER_FIELD.sub(lambda f: option(f.group(1)) or f.group(1), message)
+
+
+def real(text: str) -> float:
+    """argparse type of every real-valued option: a number in the one syntax jaxexo reads numbers in
+    (jaxexo.storage.terrain_file.read_number: no ``0_05``, which float() reads as 5)."""
+    from jaxexo.storage.terrain_file import read_number
+
+    v = read_number(text.strip())
+    if v is None:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a number (digits with an optional '.' and exponent; no '_')"
+        )
+    return v
+
+
+def whole(text: str) -> int:
+    """argparse type of every whole-number option: digits with an optional sign (no ``1_0``, which
+    int() reads as 10)."""
+    if not _WHOLE.fullmatch(text.strip()):
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a whole number (digits with an optional sign; no '_')"
+        )
+    return int(text)
 
 
 def load(path):
@@ -28,26 +93,38 @@ def load(path):
     return load_config(path), str(path)
 
 
-def check_output_file(option: str, value) -> None:
-    """An output path must name a file in an existing folder: refused before any work (and before any
-    temporary file is made next to it)."""
+def check_output_file(option: str, value, example: str | None = None) -> None:
+    """An output path must name a file in an existing folder that can be written: refused before
+    any work (and before any temporary file is made next to it). ``example``: a file name to
+    suggest (default: OUTPUT_EXAMPLES')."""
     if value is None:
         return
     text = str(value)
+    example = example or OUTPUT_EXAMPLES[option]
     if not text:
-        raise ValueError(
-            f"{option}: the option is empty; give a file name (e.g. {OUTPUT_EXAMPLES[option]})"
-        )
+        raise ValueError(f"{option}: the option is empty; give a file name (e.g. {example})")
     p = Path(value)
     if text.endswith(("/", "\\")) or p.is_dir():
-        raise ValueError(
-            f"{option}: {text} is a directory; give a file name (e.g. {p / OUTPUT_EXAMPLES[option]})"
-        )
+        raise ValueError(f"{option}: {text} is a directory; give a file name (e.g. {p / example})")
     if option == "--animate":
         _check_animation_name(text)
     if not p.parent.is_dir():
         _check_folder_part(option, p.parent, text)
         raise ValueError(f"{option}: the folder {p.parent} does not exist (for {text})")
+    _check_writable(option, p.parent, text)
+
+
+def _check_writable(option: str, folder: Path, text: str) -> None:
+    """The folder of an output written by replacement (atomic_write's temporary file is made there)
+    must take a new file; else refused before any work, not after the other outputs are written."""
+    from jaxexo.storage.atomic import direct_output
+
+    if direct_output(text):
+        return
+    if not os.access(
+        folder, os.W_OK | os.X_OK, effective_ids=os.access in os.supports_effective_ids
+    ):
+        raise ValueError(f"{option}: the folder {folder} cannot be written (for {text})")
 
 
 def _check_animation_name(text: str) -> None:
@@ -81,18 +158,43 @@ def _same_file(a, b) -> bool:
         return False
 
 
-def check_paths(inputs, outputs) -> None:
-    """Each output a file in an existing folder (``check_output_file``), none replacing an input,
-    no two sharing a path: refused before any work. ``inputs``, ``outputs``: (option, path or
-    None) pairs."""
+def _output_id(path) -> tuple[int, int] | None:
+    """(st_dev, st_ino) of the file an output lands in: standard output's for ``-``, the existing
+    file's (after links: /dev/stdout is the file fd 1 is) otherwise; None where there is none yet."""
+    from jaxexo.storage.atomic import STDOUT
+
+    try:
+        st = os.fstat(1) if str(path) == STDOUT else os.stat(path)
+    except OSError:
+        return None
+    return st.st_dev, st.st_ino
+
+
+def _same_output(a, b) -> bool:
+    """Whether two outputs land in one file: the same name (``-`` is standard output, not a file
+    named ``-``), the same path after links, or the same file (``-`` and /dev/stdout redirected)."""
+    a_id = _output_id(a)
+    if a_id is not None and a_id == _output_id(b):
+        return True
+    if "-" in (str(a), str(b)):
+        return str(a) == str(b)
+    return _same_file(a, b)
+
+
+def check_paths(inputs, outputs, examples=None) -> None:
+    """Each output a file in an existing, writable folder (``check_output_file``, suggesting the
+    file names of ``examples`` (option: name) where given), none replacing an input, no two landing
+    in one file: refused before any work. ``inputs``, ``outputs``: (option, path or None) pairs."""
     for option, value in outputs:
-        check_output_file(option, value)
+        check_output_file(option, value, (examples or {}).get(option))
     outs = [(o, v) for o, v in outputs if v is not None]
     for i, (option, value) in enumerate(outs):
         for other, v in outs[:i]:
-            if _same_file(value, v):
+            if _same_output(value, v):
+                also = "" if str(v) == str(value) else f" ({other} {v})"
                 raise ValueError(
-                    f"{option}: {value} is also the {other} output; give each output its own path"
+                    f"{option}: {value} is also the {other} output{also}; give each output its "
+                    "own path"
                 )
         for other, v in inputs:
             if v is not None and _same_file(value, v):

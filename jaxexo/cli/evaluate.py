@@ -3,6 +3,8 @@ the training distribution or the unseen families; report.md/.json and figures. d
 
 from __future__ import annotations
 
+from jaxexo.cli.common import whole
+
 
 def cmd_eval(args) -> int:
     from jaxexo.evaluation.compare import check_eval_counts, check_report_folder, run_eval
@@ -46,10 +48,10 @@ def add_options(e) -> None:
         "distribution; all: both; unseen: the fixed held-out obstacle families "
         "(jaxexo.evaluation.unseen), reported per family",
     )
-    e.add_argument("--n", type=int, default=1000, help="scenarios per set")
+    e.add_argument("--n", type=whole, default=1000, help="scenarios per set")
     e.add_argument(
         "--batch",
-        type=int,
+        type=whole,
         default=1000,
         help="scenarios per timed generate_batch call (reported scaled to a batch of 1000)",
     )

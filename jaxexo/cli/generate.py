@@ -14,7 +14,9 @@ from jaxexo.cli.common import (
     fallback,
     generator,
     option_values,
+    real,
     swing_outputs,
+    whole,
     write_outputs,
 )
 from jaxexo.cli.scene import add_scene_args, obstacle_from_args
@@ -38,6 +40,7 @@ def cmd_generate(args) -> int:
     check_rate(args.rate, "--rate")
     if args.ros and args.rate is None:
         raise ValueError("--ros: a ROS 2 JointTrajectory is a timed swing; give --rate too")
+    joint_names = _joint_names(args)
     check_points(args.points, "--points")
     check_duration(args.duration, "--duration")
     obstacle = obstacle_from_args(args)
@@ -70,11 +73,23 @@ def cmd_generate(args) -> int:
         lambda path: animate_swing(timed, path),
     )
     if args.ros:
-        timed.to_joint_trajectory(args.ros)
+        timed.to_joint_trajectory(args.ros, joint_names=joint_names)
         written.append(args.ros)
     ok = _report_swing(traj, timed, report)
     print("wrote " + ", ".join(written), file=report)
     return 0 if ok else 1
+
+
+def _joint_names(args):
+    """--joint-names (comma-separated, for --ros) checked before any work; None: not given."""
+    if args.joint_names is None:
+        return None
+    if not args.ros:
+        raise ValueError("--joint-names: names the joints of the --ros output; give --ros too")
+    from jaxexo.swing.export import check_joint_names
+
+    names = [n.strip() for n in args.joint_names.split(",")]
+    return check_joint_names(names, "--joint-names", repr(args.joint_names))
 
 
 def _timed_swing(args, traj, config):
@@ -129,31 +144,31 @@ def add_options(g) -> None:
     add_policy(g)
     add_method(g, "rl: the trained policy; cfftg: the polynomial baseline (jaxexo.baselines.cfftg)")
     add_scene_args(g)
-    g.add_argument("--points", type=int, default=100, help="samples of the smoothed path")
+    g.add_argument("--points", type=whole, default=100, help="samples of the smoothed path")
     add_fallback(
         g, "when the RL swing is not safe, return CFFTG's plan (cfftg) or the RL swing alone (none)"
     )
     g.add_argument(
         "--smoothing",
-        type=float,
+        type=real,
         help="B-spline smoothing s, m^2 (0: raw polyline; default: the model's, 0.001 for a "
         "shielded model, the thesis's 0.005 otherwise); rl only",
     )
     g.add_argument(
         "--clearance",
-        type=float,
+        type=real,
         help="m the swing keeps from the obstacle (default: the model's "
         "env.min_clearance; at most 0.10); the verdict judges against it",
     )
     g.add_argument(
         "--duration",
-        type=float,
+        type=real,
         default=1.0,
         help="swing duration for the time stamps, s (ignored with --rate)",
     )
     g.add_argument(
         "--rate",
-        type=float,
+        type=real,
         help="device-ready output: the shortest rest-to-rest timing within the "
         "config's [device] joint limits, sampled at this rate (Hz); the CSV "
         "and JSON gain joint velocities and accelerations",
@@ -173,6 +188,12 @@ def add_options(g) -> None:
         "--ros",
         help="also write the timed swing as ROS 2 trajectory_msgs/JointTrajectory JSON "
         "(positions, velocities, accelerations; needs --rate)",
+    )
+    g.add_argument(
+        "--joint-names",
+        help="the --ros output's joint names, as the robot's controller names them: four, "
+        "comma-separated, for hip_swing,knee_swing,hip_stance,knee_stance in that order "
+        "(default: those names)",
     )
     g.add_argument("--plot", help="also draw the legs, the foot path and the joint angles (PNG)")
     g.set_defaults(func=cmd_generate)

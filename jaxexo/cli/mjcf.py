@@ -28,7 +28,11 @@ def _check_start_pose(scene, config) -> None:
 
 
 def cmd_mjcf(args) -> int:
-    check_paths([("--policy", args.policy), ("--config", args.config)], [("--out", args.out)])
+    check_paths(
+        [("--policy", args.policy), ("--config", args.config)],
+        [("--out", args.out)],
+        {"--out": "legs.xml"},
+    )
     if args.policy and args.config:
         raise ValueError(
             "--policy, --config: give one of them (a policy's legs are its own config's)"

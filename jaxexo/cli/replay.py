@@ -4,7 +4,9 @@ Method: docs/safety.md, "Replayed in a physics engine"."""
 
 from __future__ import annotations
 
-from jaxexo.cli.common import check_paths, check_rate, option_values
+from argparse import ArgumentTypeError
+
+from jaxexo.cli.common import check_paths, check_rate, option_values, real
 from jaxexo.cli.scene import add_scene_args, add_sim_policy, scene_from_args
 
 
@@ -46,9 +48,9 @@ def _rate_option(text: str | None, option: str) -> float | None:
     if text is None:
         return None
     try:
-        return float(text)
-    except ValueError:
-        raise ValueError(f"{option}: expected a rate in Hz, got {text!r}") from None
+        return real(text)  # the one number syntax of every numeric option (no '_')
+    except ArgumentTypeError as e:
+        raise ValueError(f"{option}: expected a rate in Hz: {e}") from None
 
 
 def cmd_replay(args) -> int:
@@ -104,7 +106,7 @@ def add_options(x) -> None:
         help="the RL swing alone (no fallback), CFFTG's, or both",
     )
     x.add_argument(
-        "--rate", type=float, help="control rate, Hz (default: the config's control_rate)"
+        "--rate", type=real, help="control rate, Hz (default: the config's control_rate)"
     )
     x.add_argument(
         "--driven",

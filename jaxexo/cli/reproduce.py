@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+from jaxexo.cli.common import whole
+
 
 def cmd_reproduce(args) -> int:
     from jaxexo.evaluation.reproduce import check_reproduce_options, run_names, run_reproduce
@@ -39,8 +41,8 @@ def add_options(r) -> None:
         help="folder for runs/ and reproduce.md/.json (reuses finished runs)",
     )
     r.add_argument("--models", default="a,b,c,1,2,3,final", help="comma-separated thesis models")
-    r.add_argument("--n", type=int, default=1000, help="test scenarios per model")
-    r.add_argument("--seed", type=int, default=0)
+    r.add_argument("--n", type=whole, default=1000, help="test scenarios per model")
+    r.add_argument("--seed", type=whole, default=0)
     r.add_argument(
         "--variant",
         default="both",
@@ -53,7 +55,7 @@ def add_options(r) -> None:
     )
     r.add_argument(
         "--population",
-        type=int,
+        type=whole,
         help="members per learns model (seeds SEED..SEED+K-1, the best on validation kept; default "
         "4); the faithful configs always train one agent",
     )

@@ -3,6 +3,8 @@ pivot; the start and step length), read into a checked scene with errors naming 
 
 from __future__ import annotations
 
+from jaxexo.cli.common import real
+
 GENERAL_SHAPES = (
     "rectangle",
     "half_ellipse",
@@ -99,10 +101,10 @@ def add_scene_args(g) -> None:
         help="the obstacle as a measured height profile: a CSV (y,z per line) or JSON "
         '({"points": [[y, z], ...]}) file, m, y increasing, z >= 0',
     )
-    g.add_argument("--width", type=float, help="obstacle width, m")
-    g.add_argument("--height", type=float, help="obstacle height, m")
+    g.add_argument("--width", type=real, help="obstacle width, m")
+    g.add_argument("--height", type=real, help="obstacle height, m")
     g.add_argument(
-        "--center-y", type=float, help="obstacle centre, m ahead of the start (default 0.45)"
+        "--center-y", type=real, help="obstacle centre, m ahead of the start (default 0.45)"
     )
     pv = g.add_mutually_exclusive_group()
     pv.add_argument(
@@ -110,10 +112,10 @@ def add_scene_args(g) -> None:
         choices=("agent", "obstacle", "between"),
         help=f"stance-foot condition (thesis 3.1; default: {DEFAULT_PIVOT})",
     )
-    pv.add_argument("--pivot-y", type=float, help="stance heel y, m")
-    g.add_argument("--start-y", type=float, default=DEFAULT_START_Y, help="swing heel start y, m")
+    pv.add_argument("--pivot-y", type=real, help="stance heel y, m")
+    g.add_argument("--start-y", type=real, default=DEFAULT_START_Y, help="swing heel start y, m")
     g.add_argument(
-        "--step-length", type=float, default=DEFAULT_STEP_LENGTH, help="goal = start + this, m"
+        "--step-length", type=real, default=DEFAULT_STEP_LENGTH, help="goal = start + this, m"
     )
 
 

@@ -3,7 +3,7 @@ machine's cores or a Ray cluster, ranked and exported. Method: docs/training.md.
 
 from __future__ import annotations
 
-from jaxexo.cli.common import check_count
+from jaxexo.cli.common import check_count, whole
 
 
 def cmd_sweep(args) -> int:
@@ -93,7 +93,7 @@ def add_options(s) -> None:
     s.add_argument("--address", help="Ray cluster address (default: start a local Ray instance)")
     s.add_argument(
         "--task-cpus",
-        type=int,
+        type=whole,
         help="ray: CPUs (JAX devices) per chunk task (default: this machine's cores)",
     )
     s.add_argument(

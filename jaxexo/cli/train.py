@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from jaxexo.cli.common import load
+from jaxexo.cli.common import load, whole
 
 
 def _resume_command(args) -> str:
@@ -114,10 +114,10 @@ def add_options(t) -> None:
         "with --resume, the run's own config.toml)",
     )
     t.add_argument("--out", required=True, help="run directory")
-    t.add_argument("--seed", type=int, default=0)
+    t.add_argument("--seed", type=whole, default=0)
     t.add_argument(
         "--population",
-        type=int,
+        type=whole,
         help="train K agents (seeds SEED..SEED+K-1) as one program and export the "
         "one a wearer would choose (overrides [train] population; the "
         "default model's: 2)",

@@ -10,19 +10,20 @@ def cmd_walk(args) -> int:
     common.swing_outputs(args, [("--policy", args.policy), ("--terrain", args.terrain)])
     common.check_rate(args.rate, "--rate")
     fallback_method = common.fallback(args)
-    from jaxexo.course.ground import check_number
+    from jaxexo.course.ground import check_double_support, check_number
 
     # The course's own checks, before any policy or terrain is read, naming the options as typed.
     check_number("--start-y", args.start_y)
     check_number("--goal-y", args.goal_y)
     check_number("--steps", args.steps, 1, integer=True)
-    check_number("--double-support", args.double_support, 0.0)
+    check_double_support("--double-support", args.double_support)
     gen = common.generator(args)
     common.check_clearance(args.clearance, gen.config)
     from jaxexo.course import plan_course
     from jaxexo.storage.terrain_file import read_terrain
 
     terrain = read_terrain(args.terrain)
+    _check_size(args, gen.config, terrain)
     kw = common.option_values(
         args, "start_y", "goal_y", "steps", "rate", "clearance", "double_support"
     )
@@ -31,6 +32,7 @@ def cmd_walk(args) -> int:
     course = plan_course(
         gen, terrain, **kw
     )  # an infeasible course is refused here: nothing written
+    _check_size(args, gen.config, terrain, course)
     from jaxexo.plots.animate import animate_course
     from jaxexo.plots.plot import plot_course
 
@@ -43,6 +45,55 @@ def cmd_walk(args) -> int:
     _report_course(course, terrain.source)
     print("wrote " + ", ".join(written))
     return 0 if course.ok else 1
+
+
+def _check_size(args, config, terrain, course=None) -> None:
+    """The walk's samples and outputs (the CSV, and --json's lists and text) refused where they
+    would not fit in half the memory this process may use, naming --rate and the course: before
+    any work by an estimate (jaxexo.course.ground.walk_size, a lower bound), and once the course
+    is planned by its rows, before anything is written."""
+    from jaxexo.course.ground import (
+        JSON_ROW_BYTES,
+        ROW_BYTES,
+        FootholdRules,
+        WalkSize,
+        check_walk_size,
+        walk_size,
+    )
+    from jaxexo.course.record import WALK_COLUMNS
+    from jaxexo.swing.timing import DeviceLimits
+
+    names = {
+        "rate": "--rate",
+        "course": "--goal-y, --steps",
+        "outputs": " with the --json document" if args.json else " with the CSV",
+    }
+    if course is None:
+        size = walk_size(
+            terrain,
+            config,
+            FootholdRules.of(config, args.clearance),
+            limits=DeviceLimits.from_config(config),
+            rate=args.rate,
+            start_y=args.start_y,
+            goal_y=args.goal_y,
+            steps=args.steps,
+            dwell=args.double_support,
+        )
+    else:
+        landings = course.footholds.landings
+        size = WalkSize(
+            course.footholds.start_y,
+            landings[-1] if landings else course.footholds.start_y,
+            len(course.steps),
+            course.duration,
+            len(course.samples),
+            course.rate,
+        )
+    row = JSON_ROW_BYTES if args.json else ROW_BYTES
+    check_walk_size(
+        size, columns=len(WALK_COLUMNS), row_bytes=row, names=names, known=course is not None
+    )
 
 
 def _report_course(course, source) -> None:
@@ -81,27 +132,29 @@ def add_options(w) -> None:
     )
     w.add_argument(
         "--start-y",
-        type=float,
+        type=common.real,
         help="where both feet stand at first, m (default: the terrain's first point)",
     )
     end = w.add_mutually_exclusive_group()
     end.add_argument(
         "--goal-y",
-        type=float,
+        type=common.real,
         help="where both feet stand at the end, m (default: the furthest foothold on the terrain)",
     )
-    end.add_argument("--steps", type=int, help="walk exactly this many swings instead")
+    end.add_argument("--steps", type=common.whole, help="walk exactly this many swings instead")
     w.add_argument(
-        "--rate", type=float, help="control rate, Hz (default: the config's [device] control_rate)"
+        "--rate",
+        type=common.real,
+        help="control rate, Hz (default: the config's [device] control_rate)",
     )
     w.add_argument(
         "--clearance",
-        type=float,
+        type=common.real,
         help="m every swing keeps from the terrain (default: the model's env.min_clearance)",
     )
     w.add_argument(
         "--double-support",
-        type=float,
+        type=common.real,
         default=0.0,
         help="s both feet stand still at each landing (default 0: the swings meet at rest)",
     )

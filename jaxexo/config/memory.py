@@ -78,8 +78,9 @@ def machine_memory_bytes() -> int | None:
     return None
 
 
-def process_memory_bytes() -> tuple[int | None, str]:
-    """The memory this process can use: this machine's, or less where the process's address-space or
+def process_memory_limit() -> tuple[int | None, str]:
+    """The memory this process can use at most (a ceiling, not what is free now: see
+    ``process_memory_bytes``): this machine's, or less where the process's address-space or
     data limit (``ulimit -v``, ``-d``) or its control group's memory limit says so. (bytes, what sets
     them); (None, "") if nothing is known."""
     known = [(machine_memory_bytes(), "this machine's memory")]
@@ -92,42 +93,54 @@ def process_memory_bytes() -> tuple[int | None, str]:
             soft = resource.getrlimit(getattr(resource, name))[0]
             if soft != resource.RLIM_INFINITY:
                 known.append((soft, f"the process's limit, {ulimit}"))
-    known.append((_cgroup_memory_limit(), "the control group's memory limit"))
+    known.append((_cgroup_memory()[0], "the control group's memory limit"))
     known = [(n, what) for n, what in known if n is not None]
     return min(known) if known else (None, "")
 
 
-def _cgroup_memory_limit() -> int | None:
+def _cgroup_memory() -> tuple[int | None, int]:
     """The smallest memory limit of this process's control group and its ancestors (cgroup v2
-    ``memory.max``, v1 ``memory.limit_in_bytes``; "max" and v1's huge "unlimited" are no limit)."""
+    ``memory.max``, v1 ``memory.limit_in_bytes``; "max" and v1's huge "unlimited" are no limit) and
+    that group's usage (bytes; 0 where unknown); (None, 0) without a limit."""
     try:
         with open("/proc/self/cgroup") as f:
             lines = f.read().splitlines()
     except OSError:
-        return None
-    files = []
+        return None, 0
+    folders = []
     for line in lines:
         if line.count(":") < 2:
             continue
         _, controllers, path = line.split(":", 2)
-        if controllers == "":
-            folder, name = "/sys/fs/cgroup", "memory.max"
+        if controllers == "":  # v2: one hierarchy
+            base, names = "/sys/fs/cgroup", ("memory.max", "memory.current")
         elif "memory" in controllers.split(","):
-            folder, name = "/sys/fs/cgroup/memory", "memory.limit_in_bytes"
+            base, names = (
+                "/sys/fs/cgroup/memory",
+                ("memory.limit_in_bytes", "memory.usage_in_bytes"),
+            )
         else:
             continue
         parts = [x for x in path.split("/") if x]
-        files += [os.path.join(folder, *parts[:i], name) for i in range(len(parts), -1, -1)]
-    limits = []
-    for file in files:
+        folders += [(os.path.join(base, *parts[:i]), names) for i in range(len(parts), -1, -1)]
+    best = (None, 0)
+    for folder, (limit, usage) in folders:
         try:
-            with open(file) as f:
-                text = f.read().strip()
+            with open(os.path.join(folder, limit)) as f:
+                cap = f.read().strip()
         except OSError:
             continue
-        if text.isdigit() and int(text) < 2**60:
-            limits.append(int(text))
-    return min(limits, default=None)
+        if not (cap.isdigit() and int(cap) < 2**60) or (
+            best[0] is not None and int(cap) >= best[0]
+        ):
+            continue
+        try:
+            with open(os.path.join(folder, usage)) as f:
+                used = int(f.read().strip())
+        except (OSError, ValueError):
+            used = 0
+        best = (int(cap), used)
+    return best
 
 
 def check_memory(cfg: Config, available: int | None = None) -> int:
@@ -167,3 +180,52 @@ def check_memory(cfg: Config, available: int | None = None) -> int:
             + (" or train.rollout_steps" if top == "rollout_buffer" else "")
         )
     return one * k
+
+
+def _meminfo(key: str) -> int | None:
+    """A /proc/meminfo entry in bytes (None where there is none)."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith(key + ":"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def _process_sizes() -> dict[str, int]:
+    """This process's virtual size and data segment (VmSize, VmData) in bytes, where known."""
+    out = {}
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                key, _, rest = line.partition(":")
+                if key in ("VmSize", "VmData"):
+                    out[key] = int(rest.split()[0]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return out
+
+
+def process_memory_bytes() -> int | None:
+    """The memory this process may still take (bytes): the least of the machine's available memory
+    (MemAvailable; its total where that is unknown), what RLIMIT_AS and RLIMIT_DATA (``ulimit -v``,
+    ``ulimit -d``) leave above the process's present size, and what its cgroup's limit leaves; None
+    if none is known. A size guard counts this, not the machine: under a process limit the machine's
+    memory is not the process's."""
+    room = [_meminfo("MemAvailable") or machine_memory_bytes()]
+    try:
+        import resource
+    except ImportError:  # not on this platform: the machine's figure alone
+        resource = None
+    if resource is not None:
+        sizes = _process_sizes()
+        for limit, used in ((resource.RLIMIT_AS, "VmSize"), (resource.RLIMIT_DATA, "VmData")):
+            soft = resource.getrlimit(limit)[0]
+            if soft != resource.RLIM_INFINITY and soft >= 0:
+                room.append(max(0, soft - sizes.get(used, 0)))
+    cap, used = _cgroup_memory()
+    room.append(None if cap is None else max(0, cap - used))
+    known = [r for r in room if r is not None]
+    return min(known) if known else None

@@ -18,6 +18,7 @@ from jaxexo.course.ground import (
     obstacles_of,
 )
 from jaxexo.course.search import Planner
+from jaxexo.physics import geometry
 from jaxexo.storage.terrain_file import Terrain
 
 
@@ -37,6 +38,13 @@ class Footholds:
 
     def __len__(self) -> int:
         return len(self.landings)
+
+
+def _given(y: float) -> str:
+    """A position the caller gave, to the millimetre as the course's are, or exactly where that
+    would round it (4.7004 m is not 4.700 m, the end it is refused against)."""
+    text = f"{y:.3f}"
+    return text if float(text) == y else geometry.as_given(y)
 
 
 def footholds(
@@ -63,7 +71,7 @@ def footholds(
     start = y0 if start_y is None else check_number("start_y", start_y)
     if not y0 <= start <= y_end - r.foot:
         raise CourseError(
-            f"start_y: {start:.3f} m is not on the course (the foot must stand between "
+            f"start_y: {_given(start)} m is not on the course (the foot must stand between "
             f"{y0:.3f} and {y_end - r.foot:.3f} m)"
         )
     lefts = np.array([o[0, 0] for o in obs])
@@ -91,10 +99,12 @@ def footholds(
         goal_y = check_number("goal_y", goal_y)
         g = int(round((goal_y - start) / GRID))
         if g <= 0:
-            raise CourseError(f"goal_y: {goal_y:.3f} m must lie ahead of the start ({start:.3f} m)")
+            raise CourseError(
+                f"goal_y: {_given(goal_y)} m must lie ahead of the start ({start:.3f} m)"
+            )
         if g >= n:
             raise CourseError(
-                f"goal_y: {goal_y:.3f} m is beyond the last place a foot can land on the course "
+                f"goal_y: {_given(goal_y)} m is beyond the last place a foot can land on the course "
                 f"({ys[-1]:.3f} m: the terrain ends at {y_end:.3f} m)"
             )
         if not valid[g]:

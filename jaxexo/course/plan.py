@@ -10,25 +10,48 @@ from pathlib import Path
 import numpy as np
 
 from jaxexo.course.ground import (
-    MAX_DOUBLE_SUPPORT,
+    ROW_BYTES,
     CourseError,
     FootholdRules,
+    check_double_support,
     check_number,
+    check_walk_size,
+    describe,
     flat_obstacle,
     obstacles_of,
+    walk_size,
 )
 from jaxexo.course.placement import footholds
-from jaxexo.course.record import JUNCTION_TOL, LEGS, Course, CourseStep, walk_table
+from jaxexo.course.record import JUNCTION_TOL, LEGS, WALK_COLUMNS, Course, CourseStep, walk_table
 from jaxexo.physics import geometry
 from jaxexo.storage.terrain_file import Terrain, read_terrain
 from jaxexo.swing.trajectory import Trajectory, assemble
 
 
-def _swing_obstacle(obs, start, goal, r: FootholdRules):
+def _swing_obstacle(obs, start, goal, r: FootholdRules, terrain: Terrain):
     inside = [o for o in obs if o[0, 0] > start and o[-1, 0] < goal]
     if not inside:
         return flat_obstacle(start, goal, r.foot, r.stand), True
-    return geometry.Obstacle.profile(np.concatenate(inside)), False
+    try:
+        return geometry.Obstacle.profile(np.concatenate(inside)), False
+    except geometry.GeometryError as e:
+        raise CourseError(_not_an_obstacle(terrain, inside, e)) from None
+
+
+def _not_an_obstacle(terrain: Terrain, inside, e) -> str:
+    """Why the terrain's obstacles between a swing's start and goal make no swing's obstacle, named
+    by the file and the lines (points) of their profile above the floor."""
+    pts = terrain.points
+    first, last = inside[0][inside[0][:, 1] > 0][0], inside[-1][inside[-1][:, 1] > 0][-1]
+    i = int(np.flatnonzero((pts == first).all(axis=1) & (terrain.z > 0))[0])
+    j = int(np.flatnonzero((pts == last).all(axis=1) & (terrain.z > 0))[-1])
+    span = terrain.place(i) + (f" to {terrain.where[j]}" if j != i and terrain.where else "")
+    if last[0] == first[0]:
+        return (
+            f"{span}: {describe(inside[0])} rises and falls at one y = {first[0]:g} m (a vertical "
+            "spike of no width); a swing's obstacle needs a width: give its top two y values"
+        )
+    return f"{span}: {', '.join(map(describe, inside))} make no swing's obstacle: {e}"
 
 
 def _in_course(
@@ -98,16 +121,15 @@ def plan_course(
     rl = isinstance(generator, TrajectoryGenerator)
     fallback = check_fallback(fallback)
     terrain = _as_terrain(terrain)
-    ds = check_number("double_support", double_support, 0.0)
-    if ds > MAX_DOUBLE_SUPPORT:
-        raise CourseError(f"double_support: at most {MAX_DOUBLE_SUPPORT:g} s, got {ds:g}")
+    ds = check_double_support("double_support", double_support)
     limits = DeviceLimits.from_config(config) if limits is None else limits
     gen = generator.at_clearance(clearance)
+    r = FootholdRules.of(config, clearance)
+    _check_size(terrain, config, r, limits, rate, start_y, goal_y, steps, ds)
     plan = footholds(
         terrain, config, start_y=start_y, goal_y=goal_y, steps=steps, clearance=clearance
     )
-    r = FootholdRules.of(config, clearance)
-    trajs, meta, stopped = _swings(gen, rl, fallback, plan, obstacles_of(terrain), r)
+    trajs, meta, stopped = _swings(gen, rl, fallback, plan, terrain, r)
     # A failed swing is not timed (its path may not be one a drive can follow).
     good = [t for t in trajs if t.ok]
     timed = time_swings(good, config, rate=rate, limits=limits, sp=gen.sp) if good else []
@@ -137,15 +159,41 @@ def plan_course(
     )
 
 
-def _swings(gen, rl: bool, fallback, plan, obs, r: FootholdRules):
+# What the API's size refusal names (the command line names its options: jaxexo.cli.walk).
+SIZE_NAMES = {"rate": "rate", "course": "goal_y, steps", "outputs": ""}
+
+
+def _check_size(terrain, config, r, limits, rate, start_y, goal_y, steps, dwell) -> None:
+    """The walk's size (``walk_size``) refused before any work where its samples would not fit
+    (``check_walk_size``); the numbers it reads checked first, as the planning checks them."""
+    from jaxexo.swing.timing import DeviceLimits, check_rate
+
+    if not isinstance(limits, DeviceLimits):
+        raise CourseError(f"limits: expected a DeviceLimits, got {type(limits).__name__}")
+    size = walk_size(
+        terrain,
+        config,
+        r,
+        limits=limits,
+        rate=None if rate is None else check_rate(rate),
+        start_y=check_number("start_y", start_y),
+        goal_y=check_number("goal_y", goal_y),
+        steps=check_number("steps", steps, 1, integer=True),
+        dwell=dwell,
+    )
+    check_walk_size(size, columns=len(WALK_COLUMNS), row_bytes=ROW_BYTES, names=SIZE_NAMES)
+
+
+def _swings(gen, rl: bool, fallback, plan, terrain: Terrain, r: FootholdRules):
     """Each swing of the walk in order, until one fails: (trajectories, each swing's (index, leg,
     start, pivot, goal, landing, flat), the index of the failed swing or None)."""
     feet = [plan.start_y, plan.start_y]  # heel y of the left and right foot
+    obs = obstacles_of(terrain)
     trajs, meta, stopped = [], [], None
     for k in range(len(plan)):
         leg = k % 2
         start, pivot, goal = feet[leg], feet[1 - leg], plan.landings[k]
-        ob, flat = _swing_obstacle(obs, start, goal, r)
+        ob, flat = _swing_obstacle(obs, start, goal, r, terrain)
         # The policy observes absolute positions (it is trained with starts 0-12 cm): each swing is
         # planned in its own frame, starting at y = 0, and placed on the course after.
         kw = dict(pivot_y=pivot - start, start_y=0.0, step_length=goal - start)

@@ -111,7 +111,7 @@ class Course:
         return self.samples
 
     def to_csv(self, path: str | Path | None = None) -> str:
-        return write_csv(WALK_COLUMNS, self.samples, "{:.9g}", path)
+        return write_csv(WALK_COLUMNS, self.samples, path)
 
     def to_dict(self) -> dict:
         steps = []

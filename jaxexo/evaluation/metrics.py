@@ -92,14 +92,17 @@ def device_metrics(trajs, config) -> DeviceMetrics:
     A generator that stood still (the heel never leaves its start: a policy that learned not to move,
     e.g. the faithful thesis configs) has nothing to time: its swing counts as 0 s at zero velocity,
     within the limits; its success and goal figures already say it failed."""
-    from jaxexo.swing.timing import joint_jerk, time_swings, uniform_peaks
+    from jaxexo.swing.timing import CHUNK, joint_jerk, time_swings, uniform_peaks
 
     trajs = list(trajs)
     n = len(trajs)
-    moves = [i for i, t in enumerate(trajs) if np.any(np.asarray(t.heel) != np.asarray(t.heel)[0])]
+    moving = [i for i, t in enumerate(trajs) if np.any(np.asarray(t.heel) != np.asarray(t.heel)[0])]
     zeros = {f.name: np.zeros(n) for f in fields(DeviceMetrics)}
     out = DeviceMetrics(**zeros | {"within_limits": np.ones(n, bool)})
-    if moves:  # the moving swings' rows filled in place, before the record leaves
+    # The moving swings' rows filled in place, before the record leaves, a chunk at a time: only
+    # a chunk's timed swings (their samples) are held at once.
+    for c in range(0, len(moving), CHUNK):
+        moves = moving[c : c + CHUNK]
         timed = time_swings([trajs[i] for i in moves], config)
         out.swing_s[moves] = [t.duration for t in timed]
         out.peak_hip_vel[moves] = [max(t.peak_velocity[0], t.peak_velocity[2]) for t in timed]

@@ -18,7 +18,7 @@ from jaxexo.config import numpy_params, scalar_params
 from jaxexo.inference import blas
 from jaxexo.inference.fallback import replace_failures
 from jaxexo.inference.network import FoldedQNetwork, StepNetwork
-from jaxexo.physics import actions, geometry, transition
+from jaxexo.physics import actions, geometry, swept, transition
 from jaxexo.physics.scene import Scene, check_clearance, stack_scenes, with_clearance
 from jaxexo.physics.transition import scalar
 from jaxexo.shield import ShieldStats, make_shield
@@ -155,6 +155,13 @@ class TrajectoryGenerator(SceneMaker):
         one = stack_scenes([scene], np.float32) if self.shield else None
         rows = self._shield("rows") if self.shield else None
         single = self._shield("scalar").swing(scene, one) if self._shield_first() else None
+        # the outline's extent (y from, y to, top), where a collision ends the episode
+        ol = scene.outline
+        box = (
+            (ol[:, 0].min(), ol[:, 0].max(), ol[:, 1].max())
+            if self.terminate_on_collision
+            else None
+        )
         while True:
             if single is not None:
                 a = single.choose(hy, hz, step.q_values(hy, hz, t, 1.0 if visited else 0.0), last)
@@ -168,15 +175,16 @@ class TrajectoryGenerator(SceneMaker):
                 a = self._explore(step.greedy(hy, hz, t, 1.0 if visited else 0.0, mask), mask)
             else:
                 a = self._explore(step.greedy(hy, hz, t, 1.0 if visited else 0.0))
+            prev = (hy, hz)
             hy, hz = transition.move_heel(scalar, sp, hy, hz, *self.directions[a])
             t += 1
             visited = visited or transition.in_mid_goal(scalar, sp, hy, hz, mid_y, mid_z)
             pts.append((hy, hz))
             acts.append(a)
             last = int(a)
-            # The environment's termination (transition.terminated, .truncated); the clearance is
-            # only computed where a collision ends the episode.
-            collided = self.terminate_on_collision and self._touches(scene, np.array([[hy, hz]]))
+            # The environment's termination (transition.terminated, .truncated); the move's clearance
+            # is only computed where a collision ends the episode.
+            collided = box is not None and self._move_touches(box, scene.outline, prev, (hy, hz))
             if transition.terminated(
                 scalar,
                 self._term_p,
@@ -229,6 +237,7 @@ class TrajectoryGenerator(SceneMaker):
                     else None
                 )
                 a = self._explore(actions.greedy_action(np, self.net.q(obs), mask), mask)
+            prev = np.stack([hy[alive], hz[alive]], -1)
             ny, nz = transition.move_heel(np, p, hy[alive], hz[alive], dirs[a, 0], dirs[a, 1])
             hy[alive], hz[alive] = ny, nz
             t[alive] += 1
@@ -239,8 +248,7 @@ class TrajectoryGenerator(SceneMaker):
             length[alive] += 1
             collided = False
             if self.terminate_on_collision:  # the clearance only where a collision ends the episode
-                c = geometry.foot_clearance(np, np.stack([ny, nz], -1), p.foot_length, sub.outline)
-                collided = geometry.foot_collides(np, c)
+                collided = move_collides(p, prev, np.stack([ny, nz], -1), sub.outline)
             done = transition.terminated(
                 np, p, transition.goal_reached(np, p, ny, nz, sub.goal_y), collided
             ) | transition.truncated(t[alive], self.max_steps)
@@ -259,19 +267,19 @@ class TrajectoryGenerator(SceneMaker):
             self._cfftg = CFFTG(self.config).at_clearance(self.clearance)
         return self._cfftg
 
-    def _touches(self, scene: Scene, path: np.ndarray) -> bool:
-        # Cheap exclusion first: a path that never comes below the obstacle's top within its extent
-        # cannot touch it (the foot is horizontal).
-        y, z = path[:, 0], path[:, 1]
-        near = (
-            (z <= scene.height + 1e-6)
-            & (y <= scene.center_y + 0.5 * scene.width + 1e-6)
-            & (y + self.sp.foot_length >= scene.center_y - 0.5 * scene.width - 1e-6)
-        )
-        if not near.any():
+    def _move_touches(self, box: tuple, outline: np.ndarray, prev: tuple, heel: tuple) -> bool:
+        """``move_collides`` of one move on Python floats, the outline's extent ``box`` (y from, y to,
+        top) given. Cheap exclusion first: a move whose feet stay above the outline's top or beside
+        its extent cannot touch it (the foot is horizontal)."""
+        eps = geometry.TOUCH_EPS + BOUND_SLACK
+        (y0, z0), (y1, z1) = prev, heel
+        if (
+            min(z0, z1) > box[2] + eps
+            or min(y0, y1) > box[1] + eps
+            or max(y0, y1) + self.sp.foot_length < box[0] - eps
+        ):
             return False
-        c = geometry.foot_clearance(np, path[near], self.sp.foot_length, scene.outline)
-        return bool(np.any(geometry.foot_collides(np, c)))
+        return bool(move_collides(self.sp, np.array([prev]), np.array([heel]), outline[None])[0])
 
     def at_clearance(self, clearance: float | None) -> "TrajectoryGenerator":
         """This generator for swings that must keep ``clearance`` (m; None: the model's env.min_clearance;
@@ -344,6 +352,32 @@ class TrajectoryGenerator(SceneMaker):
             raws, _ = gen.rollout_batch(scenes)
             batch = gen.finish(scenes, raws, o.n_points, smoothing, o.duration, o.fallback)
         return o.checked(batch)
+
+
+# m: how far under the touch tolerance ``move_collides``' cheap bound may fall by rounding (float32
+# heels a metre from the origin round by ~1e-7 m; the margin only sends a few more moves to the
+# exact test, never changes a decision).
+BOUND_SLACK = 1e-4
+
+
+def move_collides(p, prev, heel, outline) -> np.ndarray:
+    """(B,) bool: the environment's collision test (jaxexo.physics.transition.move_clearance, the
+    swept clearance of the whole move) of the moves from heels ``prev`` to ``heel`` (B, 2) on
+    outlines (B, K, 2), with ``p``'s foot length. The exact test runs only where a bound leaves the
+    answer open: the distance of each end's foot to the outline's bounding box bounds its clearance
+    from below (jaxexo.physics.swept.box_lower_bound), hence the move's
+    (swept.swept_lower_bound), and a move whose bound clears the touch tolerance cannot collide."""
+    ends = np.stack([prev, heel], axis=1)  # (B, 2 ends, 2)
+    lb = swept.box_lower_bound(ends, p.foot_length, outline)
+    d = heel - prev
+    length = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1])
+    bound = swept.swept_lower_bound(np, lb[:, 0], lb[:, 1], length)
+    near = (np.minimum(lb[:, 0], lb[:, 1]) <= 0.0) | (bound <= geometry.TOUCH_EPS + BOUND_SLACK)
+    out = np.zeros(len(prev), bool)
+    if near.any():
+        c = transition.move_clearance(np, p, prev[near], heel[near], outline[near])
+        out[near] = geometry.foot_collides(np, c)
+    return out
 
 
 def plain_reference(gen: TrajectoryGenerator) -> TrajectoryGenerator:

@@ -266,6 +266,24 @@ def profile_height(xp, y, outline):
 # --------------------------------------------------------------------------------------------
 
 
+def as_given(value) -> str:
+    """A number as a message echoes it: exactly the value given, never rounded (10000.0001 is not
+    10000): its short form (``:g``) where that reads back as the same number, else its shortest
+    exact one (repr, an integral float without ".0"); anything but a number as repr."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(
+        value, (int, float, np.integer, np.floating)
+    ):
+        return repr(value)
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    v = float(value)
+    short = f"{v:g}"
+    if not math.isfinite(v) or float(short) == v:
+        return short
+    text = repr(v)
+    return text[:-2] if text.endswith(".0") else text
+
+
 def finite(name: str, value, unit: str = "metres") -> float:
     """``value`` as a finite float; GeometryError naming ``name`` otherwise (bools and strings refused)."""
     # A bool is an int to Python (True == 1): Obstacle.rectangle(True, 0.1) would be 1 m wide.
@@ -287,9 +305,9 @@ def finite_positive(name: str, value, unit: str = "metres", hi: float | None = N
     """``finite`` and > 0 (and <= ``hi`` when given)."""
     v = finite(name, value, unit)
     if v <= 0.0:
-        raise GeometryError(f"{name} must be > 0 {unit}, got {v:.6g}")
+        raise GeometryError(f"{name} must be > 0 {unit}, got {as_given(v)}")
     if hi is not None and v > hi:
-        raise GeometryError(f"{name} must be <= {hi:g} {unit}, got {v:.6g}")
+        raise GeometryError(f"{name} must be <= {hi:g} {unit}, got {as_given(v)}")
     return v
 
 

@@ -121,7 +121,8 @@ def make_scene(
     if obstacle.left <= start_y + foot_length:
         raise ValueError(
             f"obstacle: its near edge ({obstacle.left:.4g} m) must lie ahead of the toe at "
-            f"the start ({start_y + foot_length:.4g} m)"
+            f"the start ({start_y + foot_length:.4g} m: start_y {geometry.as_given(start_y)} m "
+            f"and the foot's {foot_length:g} m)"
         )
     if obstacle.right >= start_y + step_length:
         raise ValueError(

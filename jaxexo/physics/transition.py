@@ -53,6 +53,15 @@ def heel_moved(xp, heel_y, heel_z, end_y, end_z):
     return (xp.abs(end_y - heel_y) > MOVE_EPS) | (xp.abs(end_z - heel_z) > MOVE_EPS)
 
 
+def move_clearance(xp, p, prev, heel, outline):
+    """Signed clearance (m) of the whole move from heel ``prev`` to ``heel`` (..., 2) against
+    ``outline`` (..., K, 2): the region the flat foot sweeps (jaxexo.physics.swept), so that a move
+    cannot jump through a corner of the obstacle. The one collision test of every step sequence: the
+    JAX environment's ``transition`` and the NumPy rollouts (jaxexo.inference) end a colliding
+    episode on it (``geometry.foot_collides``) at the same step."""
+    return swept.swept_clearance(xp, prev, heel, p.foot_length, outline)
+
+
 def terminated(xp, p, reached, collided):
     """An episode ends at the goal, or at a collision when collisions terminate (thesis 2.2)."""
     return reached | (collided & p.terminate_on_collision)
@@ -116,7 +125,7 @@ def transition(
     environment's per-step diagnostics (reward terms, clearance, collision, goal, limit and leg-length
     flags, backward, joint angles, heel, hip) and ``max_y`` the running maximum to pass to the next step."""
     lay = layout
-    clearance = swept.swept_clearance(xp, prev, heel, p.foot_length, lay.outline)
+    clearance = move_clearance(xp, p, prev, heel, lay.outline)
     collided = geometry.foot_collides(xp, clearance)
     run_max = xp.maximum(prev[..., 0] if max_y is None else max_y, prev[..., 0])
     mid_y, mid_z = mid_goal(xp, p, lay.center_y, lay.height)

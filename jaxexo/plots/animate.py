@@ -151,6 +151,13 @@ def _save(fig, draw, frames: int, path, fps: float, dpi: int):
     # Pillow writes to a file name: a private one, then the one output rule (jaxexo.storage.atomic).
     with tempfile.TemporaryDirectory(prefix="jaxexo-gif-") as tmp:
         gif = Path(tmp) / "animation.gif"
-        anim.save(str(gif), writer=PillowWriter(fps=fps), dpi=dpi)
-        plt.close(fig)
+        try:
+            anim.save(str(gif), writer=PillowWriter(fps=fps), dpi=dpi)
+        except OSError as e:
+            # A failed write of the private file (EFBIG past ``ulimit -f``, ENOSPC) is one of the
+            # output: name it, as atomic_write names its own (the private file goes with tmp).
+            text = f"could not write {path}: {e.strerror or e}"
+            raise (OSError(e.errno, text) if e.errno else OSError(text)) from None
+        finally:
+            plt.close(fig)
         return atomic_write(path, gif.read_bytes())

@@ -7,6 +7,7 @@ docs/reliability.md.
 
 from __future__ import annotations
 
+import errno
 import io
 import os
 import stat
@@ -128,8 +129,14 @@ def atomic_write(path: str | Path, data: bytes | str) -> Path:
         _write_direct(path, payload)
         return Path(path)
     path = Path(path)
+    if path.is_dir():
+        # A folder, or a link to one: never replaced by a file (the CLI refuses it up front).
+        raise IsADirectoryError(errno.EISDIR, f"could not write {path}: it is a directory")
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=_temp_prefix(path), suffix=TEMP_SUFFIX)
+    try:
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=_temp_prefix(path), suffix=TEMP_SUFFIX)
+    except OSError as e:
+        raise _as_target(e, path) from None
     try:
         with os.fdopen(fd, "wb") as f:
             os.fchmod(f.fileno(), _output_mode(path))
@@ -143,9 +150,17 @@ def atomic_write(path: str | Path, data: bytes | str) -> Path:
         except FileNotFoundError:
             pass
         if isinstance(e, OSError):
-            raise _named(e, path, "write") from None
+            raise _as_target(e, path) from None
         raise
     return path
+
+
+def _as_target(e: OSError, path: Path) -> OSError:
+    """An error of atomic_write named by the file asked for: the temporary file is an internal
+    name (``os.replace`` onto a folder said "Is a directory: '.adir.x1y2.tmp' -> 'adir'")."""
+    if e.filename is not None and not Path(e.filename).name.startswith(_temp_prefix(path)):
+        return e
+    return OSError(e.errno, f"could not write {path}: {e.strerror}")
 
 
 def stale_temps(path: str | Path) -> list[Path]:

@@ -23,7 +23,8 @@ MAX_LENGTH = 100.0  # m, first to last y
 MAX_HEIGHT = 2.0  # m above the floor (twice the default leg: no swing clears it)
 MAX_FILE_BYTES = 16 * 2**20  # 16 MiB: far above MAX_POINTS lines of text
 MAX_JSON_DEPTH = 3  # {"points": [[y, z]]}: an object, the list, a pair
-# A CSV number: digits with an optional point and exponent; nan/inf (any case) reach the finite check.
+# A number (read_number): digits with an optional point and exponent; nan/inf (any case) reach the
+# finite check.
 _CSV_NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 _NON_FINITE = re.compile(r"[+-]?(?:nan|inf|infinity)", re.IGNORECASE)
 
@@ -39,10 +40,17 @@ class Terrain:
     y: np.ndarray
     z: np.ndarray
     source: str = "<terrain>"
+    # Where each point is written (``line 3``; ``point 2`` for points given as numbers), for
+    # messages about a point found wanting after the file's own checks.
+    where: tuple[str, ...] = ()
 
     @property
     def points(self) -> np.ndarray:
         return np.column_stack([self.y, self.z])
+
+    def place(self, i: int) -> str:
+        """Where point ``i`` is written: ``<file>, line 3`` (``point 2`` where no line is known)."""
+        return f"{self.source}, {self.where[i] if i < len(self.where) else f'point {i}'}"
 
     @classmethod
     def from_points(cls, points, source: str = "<terrain>") -> "Terrain":
@@ -112,10 +120,20 @@ def _parse_csv(text: str, name: str):
     return np.asarray(rows, dtype=np.float64).reshape(-1, 2), where
 
 
+def read_number(text: str) -> float | None:
+    """The number ``text`` writes in the one syntax jaxexo reads numbers in (a terrain CSV's values,
+    the command line's numeric options): digits with an optional point and exponent, or nan/inf;
+    None for anything else (``1_0``, which Python's float() reads as 10)."""
+    if _CSV_NUMBER.fullmatch(text) or _NON_FINITE.fullmatch(text):
+        return float(text)
+    return None
+
+
 def _csv_number(x: str, label: str, where: str) -> float:
-    if _CSV_NUMBER.fullmatch(x) or _NON_FINITE.fullmatch(x):
-        return float(x)
-    raise TerrainFileError(f"{where}: {label} is not a number: {x!r}")
+    v = read_number(x)
+    if v is None:
+        raise TerrainFileError(f"{where}: {label} is not a number: {x!r}")
+    return v
 
 
 def _json_depth(text: str) -> int:
@@ -132,23 +150,86 @@ def _json_depth(text: str) -> int:
     return deepest
 
 
+# A line break as an editor counts them (JSON's own positions count "\n" alone).
+_LINE_BREAK = re.compile(r"\r\n|\r|\n")
+
+
+def _lines_at(text: str, positions) -> np.ndarray:
+    """The line (from 1) of each offset in ``positions``: one pass over ``text``, however many."""
+    ends = np.fromiter((m.end() for m in _LINE_BREAK.finditer(text)), dtype=np.int64)
+    return np.searchsorted(ends, np.asarray(positions, dtype=np.int64), side="right") + 1
+
+
+def _value_lines(text: str) -> list[tuple[int, int]]:
+    """For each innermost [..] of ``text`` in order (the [y, z] pairs), the lines of its first and
+    second values (of its "[" for one it lacks): a pretty-printed file writes each on its own line."""
+    starts = []
+    for m in re.finditer(r"\[[^\[\]]*\]", text):
+        values = [
+            m.start() + 1 + k + len(part) - len(part.lstrip())
+            for k, part in _parts(m.group()[1:-1])
+            if part.strip()
+        ]
+        starts.extend((values + [m.start()] * 2)[:2])
+    lines = _lines_at(text, starts).tolist()
+    return list(zip(lines[0::2], lines[1::2]))
+
+
+def _parts(inner: str):
+    """(offset, text) of each comma-separated part of a pair's inside."""
+    k = 0
+    for part in inner.split(","):
+        yield k, part
+        k += len(part) + 1
+
+
+def _object_of(twice: list):
+    """json's object_pairs_hook: the object as a dict, each key it has twice noted in ``twice``."""
+
+    def hook(pairs):
+        seen = set()
+        for k, _ in pairs:
+            if k in seen:
+                twice.append(k)
+            seen.add(k)
+        return dict(pairs)
+
+    return hook
+
+
+def _duplicate_key(text: str, name: str, key: str) -> TerrainFileError:
+    """The refusal of a key written twice in one object, at the line of its second writing."""
+    found = [m.start() for m in re.finditer(rf'(?<!\\)"{re.escape(key)}"\s*:', text)]
+    at = f", line {_lines_at(text, found[1:2])[0]}" if len(found) > 1 else ""
+    return TerrainFileError(
+        f"{name}{at}: the key {json.dumps(key)} is written twice (JSON would keep the last one "
+        "silently); write it once"
+    )
+
+
 def _parse_json(text: str, name: str):
     if _json_depth(text) > MAX_JSON_DEPTH:
         raise TerrainFileError(
             f"{name}: JSON nested deeper than a terrain file is ({MAX_JSON_DEPTH} levels: "
             '{"points": [[y, z], ...]})'
         )
+    twice = []  # keys written twice in one object (json.loads would keep the last silently)
     try:
         doc = json.loads(
-            text, parse_constant=lambda c: float(c)
-        )  # NaN/Infinity: refused below by line
+            text,
+            parse_constant=lambda c: float(c),  # NaN/Infinity: refused below by line
+            object_pairs_hook=_object_of(twice),
+        )
     except json.JSONDecodeError as e:
-        raise TerrainFileError(f"{name}, line {e.lineno}: not valid JSON ({e.msg})") from None
+        line = _lines_at(text, [e.pos])[0]
+        raise TerrainFileError(f"{name}, line {line}: not valid JSON ({e.msg})") from None
     except (ValueError, RecursionError):  # a number of more digits than Python converts
         raise TerrainFileError(
             f"{name}: a number has more than {sys.get_int_max_str_digits()} digits; terrain "
             f"values are metres (at most {MAX_LENGTH:g} m long, {MAX_HEIGHT:g} m high)"
         ) from None
+    if twice:
+        raise _duplicate_key(text, name, twice[0])
     pts = doc.get("points") if isinstance(doc, dict) else doc
     if not isinstance(pts, list):
         raise TerrainFileError(
@@ -158,34 +239,45 @@ def _parse_json(text: str, name: str):
         raise TerrainFileError(
             f"{name}: {len(pts)} points, more than a terrain file may have ({MAX_POINTS})"
         )
-    # The line of each inner [y, z] pair, in order (json keeps no positions).
-    lines = [text.count("\n", 0, m.start()) + 1 for m in re.finditer(r"\[[^\[\]]*\]", text)]
-    where = [
-        f"line {lines[i]} (points[{i}])" if len(lines) == len(pts) else f"points[{i}]"
-        for i in range(len(pts))
-    ]
+    # The lines of each inner [y, z] pair's values, in order (json keeps no positions).
+    lines = _value_lines(text)
+    known = len(lines) == len(pts)
+    where, z_where = (
+        [f"line {lines[i][j]} (points[{i}])" if known else f"points[{i}]" for i in range(len(pts))]
+        for j in (0, 1)
+    )
     rows = []
     for i, p in enumerate(pts):
-        if (
-            not isinstance(p, list)
-            or len(p) != 2
-            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in p)
-        ):
+        pair = isinstance(p, list) and len(p) == 2
+        # The value at fault, where the pair has two: its line is the one to name.
+        j = 1 if pair and _is_number(p[0]) else 0
+        if not pair or not all(map(_is_number, p)):
             raise TerrainFileError(
-                f"{name}, {where[i]}: expected a pair [y, z] of numbers (metres), got "
-                f"{json.dumps(p)[:60]}"
+                f"{name}, {(where, z_where)[j][i]}: expected a pair [y, z] of numbers (metres), "
+                f"got {json.dumps(p)[:60]}"
             )
-        try:
-            rows.append([float(p[0]), float(p[1])])
-        except OverflowError:
-            raise TerrainFileError(
-                f"{name}, {where[i]}: a number too large for metres (a terrain is at most "
-                f"{MAX_LENGTH:g} m long, {MAX_HEIGHT:g} m high)"
-            ) from None
-    return np.asarray(rows, dtype=np.float64).reshape(-1, 2), where
+        rows.append([_metres(x, f"{name}, {(where, z_where)[j][i]}") for j, x in enumerate(p)])
+    return np.asarray(rows, dtype=np.float64).reshape(-1, 2), (where, z_where)
 
 
-def _checked(pts: np.ndarray, where: list[str], name: str) -> Terrain:
+def _metres(x, where: str) -> float:
+    try:
+        return float(x)
+    except OverflowError:  # an integer of more than float's range
+        raise TerrainFileError(
+            f"{where}: a number too large for metres (a terrain is at most {MAX_LENGTH:g} m long, "
+            f"{MAX_HEIGHT:g} m high)"
+        ) from None
+
+
+def _is_number(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool)
+
+
+def _checked(pts: np.ndarray, where, name: str) -> Terrain:
+    """The points held to the file rules; ``where`` names each point (a list), or its y and its z
+    apart (a pair of lists: a pretty-printed JSON writes them on lines of their own)."""
+    where, z_where = where if isinstance(where, tuple) else (where, where)
     n = len(pts)
     if n < MIN_POINTS:
         raise TerrainFileError(
@@ -197,20 +289,21 @@ def _checked(pts: np.ndarray, where: list[str], name: str) -> Terrain:
         for j, label in ((0, "y"), (1, "z")):
             if not math.isfinite(pts[i, j]):
                 raise TerrainFileError(
-                    f"{name}, {where[i]}: {label} must be a finite number, got {pts[i, j]}"
+                    f"{name}, {(where, z_where)[j][i]}: {label} must be a finite number, got "
+                    f"{pts[i, j]}"
                 )
     neg = np.flatnonzero(pts[:, 1] < 0.0)
     if neg.size:
         i = int(neg[0])
         raise TerrainFileError(
-            f"{name}, {where[i]}: z = {pts[i, 1]:g} m is below the floor (heights are above "
+            f"{name}, {z_where[i]}: z = {pts[i, 1]:g} m is below the floor (heights are above "
             "the floor, z >= 0)"
         )
     high = np.flatnonzero(pts[:, 1] > MAX_HEIGHT)
     if high.size:
         i = int(high[0])
         raise TerrainFileError(
-            f"{name}, {where[i]}: z = {pts[i, 1]:g} m, higher than a terrain may be "
+            f"{name}, {z_where[i]}: z = {pts[i, 1]:g} m, higher than a terrain may be "
             f"({MAX_HEIGHT:g} m)"
         )
     back = np.flatnonzero(np.diff(pts[:, 0]) < 0.0)
@@ -228,7 +321,7 @@ def _checked(pts: np.ndarray, where: list[str], name: str) -> Terrain:
             f"{name}, {where[-1]}: the profile is {length:g} m long, more than a terrain may "
             f"be ({MAX_LENGTH:g} m)"
         )
-    return Terrain(pts[:, 0].copy(), pts[:, 1].copy(), name)
+    return Terrain(pts[:, 0].copy(), pts[:, 1].copy(), name, tuple(where))
 
 
 __all__ = ["Terrain", "TerrainFileError", "read_terrain", "MAX_POINTS", "MAX_LENGTH", "MIN_POINTS"]

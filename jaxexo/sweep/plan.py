@@ -37,10 +37,10 @@ def default_memory_budget() -> int:
 
 def check_memory_budget(budget: int, typed, where: str) -> None:
     """A memory budget (bytes) no larger than this process can use (jaxexo.config.memory's
-    ``process_memory_bytes``): ConfigError naming ``where`` and the value as ``typed``."""
-    from jaxexo.config.memory import process_memory_bytes
+    ``process_memory_limit``): ConfigError naming ``where`` and the value as ``typed``."""
+    from jaxexo.config.memory import process_memory_limit
 
-    have, what = process_memory_bytes()
+    have, what = process_memory_limit()
     if have is not None and budget > have:
         raise ConfigError(
             f"{where}: {typed} is more memory than this process can use ({have / 2**30:.1f} GiB, "

@@ -14,6 +14,18 @@ import numpy as np
 # shin, thigh, shin), e(phi) = (sin phi, -cos phi): the thigh and shank directions of eq 2.49.
 _SIGN = np.array([1.0, 1.0, -1.0, -1.0])
 
+# How a controller evaluates SwingCurve.piecewise() (the JSON's "piecewise"), word for word in the
+# export; tests/test_piecewise_export.py is an evaluator written from this text alone.
+EVALUATE = (
+    "q_j(t) = Q_j(S(t)) for t in [0, duration] (clamp t to it: the legs rest outside). "
+    "S: the time law piece i is the last one with breakpoints_s[i] <= t (the last piece also holds "
+    "at t = duration), S(t) = sum_k c[i][k] (t - breakpoints_s[i])^k, k = 0..3, S from 0 to 1. "
+    "Q_j: joint_path.coefficients[j] (j in joint order: hip_swing, knee_swing, hip_stance, "
+    "knee_stance), piece m the last one with breakpoints[m] <= S, "
+    "Q_j(S) = sum_k c[j][m][k] (S - breakpoints[m])^k. Both are C2. Rates by the chain rule: "
+    "q' = Q' S', q'' = Q'' S'^2 + Q' S'', q''' = Q''' S'^3 + 3 Q'' S' S'' + Q' S''' (rad, s)"
+)
+
 
 # --------------------------------------------------------------------------------------------
 # The joint path q(s)
@@ -70,6 +82,25 @@ def distinct_samples(q: np.ndarray, short: float = 0.25) -> np.ndarray:
     if len(q) > 2 and step[-1] < tiny:  # the landing stays; the sample it nearly repeats goes
         keep[-2] = False
     return np.flatnonzero(keep)
+
+
+# The trajectory samples a joint path is made from at most: a denser path is timed as if generated
+# with this many points. The heel comes as float32 samples (rounding up to 6e-8 m), and a cubic
+# through samples h apart amplifies that rounding in its third derivative by 1/h^3: at 5,000 path
+# samples the jerk the timing saw was the rounding's and the swing was slowed for it (2.9 s where
+# 100 samples took 1.1 s), and past 10,000 every step was below ``distinct_samples``' 1e-4 of the
+# path (all dropped but the ends: a straight joint line through the obstacle). With 500, CFFTG's
+# and the RL generator's swings at 5,000 and 20,000 points take the time the 100-point ones take
+# and pass the checks where their paths do (1,000: up to 1.3x longer).
+MAX_PATH_SAMPLES = 500
+
+
+def thinned(n: int, most: int = MAX_PATH_SAMPLES) -> np.ndarray:
+    """Indices of ``n`` samples of a path at most ``most`` + 1 of them, evenly spread over the
+    samples (the path as if generated with that many points), the first and the last kept."""
+    if n - 1 <= most:
+        return np.arange(n)
+    return np.unique(np.round(np.linspace(0.0, n - 1, most + 1)).astype(np.int64))
 
 
 def cubic_paths(knots: np.ndarray, q: np.ndarray) -> list[JointPath]:
@@ -320,8 +351,11 @@ class TimeLaw:
         """The piecewise-cubic form: breakpoints (P + 1,) and coefficients (P, 4), s(t) =
         c0 + c1 d + c2 d^2 + c3 d^3 with d = t - breakpoints[i] on piece i."""
         b = self.breakpoints()
-        s, s1, s2, s3 = self.at(b[:-1])
-        # s''' is right-continuous at a breakpoint: the piece's own value.
+        s, s1, s2, _ = self.at(b[:-1])  # continuous (C2): the piece's own values at its start
+        # s''' jumps at a breakpoint, so it is read inside the piece, never at its start: a start
+        # of the form node + w can round just below the node, where the left neighbour's jerk
+        # holds (that once put 1.5 % of the exported pieces on the wrong jerk).
+        s3 = self.at(0.5 * (b[:-1] + b[1:]))[3]
         return b, np.stack([s, s1, s2 / 2.0, s3 / 6.0], axis=1)
 
 
@@ -378,7 +412,8 @@ def laws_at(laws, times) -> list[tuple]:
     acc = cat([np.append(law._acc, 0.0) for law in laws])
     big_s, big_p = cat([law._S for law in laws]), cat([law._P for law in laws])
     start, item = _segments(lens, counts)
-    t = np.clip(cat(list(times)), 0.0, (end + w)[item])
+    t_in = cat(list(times))
+    t = np.clip(t_in, 0.0, (end + w)[item])
     last = start + lens[item] - 1
     total, end_i, w_i = big_s[last], end[item], w[item]
     keys = nodes if one else nodes + np.repeat(off, lens)
@@ -406,10 +441,15 @@ def laws_at(laws, times) -> list[tuple]:
     a0 = np.where(lag < 0.0, 0.0, a0)
     k = 1.0 / (w_i * total)
     res = [np.clip((p1 - p0) * k, 0.0, 1.0), (s1 - s0) * k, (v1 - v0) * k, (a1 - a0) * k]
-    # At touch-down exactly at rest (t - w rounds to a hair before the last node).
+    # At touch-down exactly at rest (t - w rounds to a hair before the last node); before lift-off
+    # too (clamped to t = 0, the jerk there is the first piece's, not the rest's).
     landed = t >= end_i + w_i
     for x, val in zip(res, (1.0, 0.0, 0.0, 0.0)):
         x[landed] = val
+    early = t_in < 0.0
+    if early.any():
+        for x in res:
+            x[early] = 0.0
     if one:
         return [tuple(res)]
     cut = np.cumsum(counts)[:-1]
@@ -475,6 +515,48 @@ def joints_at(paths, laws, times) -> list[tuple]:
 # --------------------------------------------------------------------------------------------
 
 
+BYTES_PER_TIME = 1024  # what ``SwingCurve.at`` holds per time at its peak (measured: 704 B)
+
+
+def _shown(v) -> str:
+    """A value as given, cut short (an array of millions of times is not a message)."""
+    r = repr(v)
+    return r if len(r) <= 80 else r[:77] + "..."
+
+
+def check_times(t, name: str = "t") -> np.ndarray:
+    """Times (s) as a 1-D float64 array: a real number, or a 1-D sequence or array of real numbers,
+    all finite. TypeError naming ``name`` and the value as given for a string, a bool, None or a
+    complex number (NumPy would read "0.4" as 0.4 and True as 1 s); ValueError for NaN, infinities,
+    a 2-D array, or more times than half the memory this process may use holds at BYTES_PER_TIME
+    (refused before anything is allocated)."""
+    what = f"{name}: expected times in s (a real number or a 1-D array of them)"
+    if t is None or isinstance(t, (str, bytes, bool, np.bool_, complex, np.complexfloating)):
+        raise TypeError(f"{what}, got {_shown(t)}")
+    try:
+        arr = np.asarray(t)
+    except (TypeError, ValueError):  # a ragged or mixed sequence
+        raise TypeError(f"{what}, got {_shown(t)}") from None
+    if arr.dtype.kind not in "iuf":  # bools, complex, strings, objects (None among numbers)
+        raise TypeError(f"{what}, got {_shown(t)}")
+    if arr.ndim > 1:
+        raise ValueError(f"{what}, got an array of shape {arr.shape}")
+    from jaxexo.config.memory import process_memory_bytes
+
+    room = process_memory_bytes()
+    most = (8 * 2**30 if room is None else room) // 2 // BYTES_PER_TIME
+    if arr.size > most:
+        raise ValueError(
+            f"{name}: {arr.size} times need about {arr.size * BYTES_PER_TIME / 2**30:.3g} GiB, more "
+            f"than half the memory this process may use holds ({most} times); evaluate them in "
+            "chunks"
+        )
+    arr = np.atleast_1d(arr.astype(np.float64))
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name}: expected finite times in s, got {_shown(t)}")
+    return arr
+
+
 @dataclass(frozen=True)
 class CurveState:
     """The swing at times (n,): joints (n, 4) rad and their time derivatives (rad/s, rad/s^2,
@@ -516,20 +598,17 @@ class SwingCurve:
         return joints_at([self.path], [self.law], [np.asarray(t, np.float64)])[0]
 
     def at(self, t) -> CurveState:
-        """Every joint and the heel/toe, with their derivatives, at times t (s; clamped to the
-        swing: before it starts and after it lands the legs rest)."""
-        t = np.atleast_1d(np.asarray(t, np.float64))
-        if t.ndim != 1 or not np.all(np.isfinite(t)):
-            raise ValueError(f"t: expected finite times in s (a number or a 1-D array), got {t!r}")
-        return curves_at([self], [t])[0]
+        """Every joint and the heel/toe, with their derivatives, at times t (s: a real number or a
+        1-D array of them, ``check_times``). Before the swing starts and after it lands the legs
+        rest: the end poses, every derivative zero."""
+        return curves_at([self], [check_times(t)])[0]
 
     def piecewise(self) -> dict:
         """The piecewise-polynomial form for a controller that evaluates the curve itself:
         s(t) and q_j(s), cubic pieces each (module docstring), JSON values."""
         tb, tc = self.law.pieces()
         return {
-            "evaluate": "q_j(t) = Q_j(S(t)); on piece i, S = sum_k c_k (t - t_i)^k and "
-            "Q_j = sum_k c_k (s - s_i)^k, k = 0..3",
+            "evaluate": EVALUATE,
             "time_law": {"breakpoints_s": tb.tolist(), "coefficients": tc.tolist()},
             "joint_path": {
                 "breakpoints": self.path.knots.tolist(),

@@ -23,11 +23,15 @@ BYTES_PER_SAMPLE = 1024  # twice what timing holds per exported sample (docs/rel
 
 
 def max_samples() -> int:
-    """The most samples one timed swing may have: half the machine's memory (8 GiB if unknown) at
-    BYTES_PER_SAMPLE, and at least 100,000 (10 s at 10 kHz)."""
-    from jaxexo.config.memory import machine_memory_bytes
+    """The most samples one timed swing may have: half the memory this process may still use
+    (jaxexo.config.memory.process_memory_bytes: the machine's available memory, ``ulimit -v`` and
+    the cgroup's limit; 8 GiB if unknown) at BYTES_PER_SAMPLE, and at least 100,000 (10 s at 10 kHz)
+    where that many fit."""
+    from jaxexo.config.memory import process_memory_bytes
 
-    return max(100_000, (machine_memory_bytes() or 8 * 2**30) // 2 // BYTES_PER_SAMPLE)
+    room = process_memory_bytes()
+    room = 8 * 2**30 if room is None else room
+    return max(min(100_000, room // BYTES_PER_SAMPLE), room // 2 // BYTES_PER_SAMPLE)
 
 
 @dataclass(frozen=True)
@@ -131,7 +135,17 @@ def final_law(p: Plan, planned: DeviceLimits, rate: float, t_opt: float) -> Fina
     notes = []
     slow = max(1.0, peak_ratio(planned.constraints(1.0 - CHECK_MARGIN), p.check.peaks))
     longest = max(1.0, MAX_SWING_DURATION / law.duration)
-    if slow > longest:
+    cut_short = law.duration > MAX_SWING_DURATION
+    if cut_short:
+        # A path the limits cannot cross within the longest swing (a wandering policy's, with a
+        # stop at every turn): sampled as the longest swing, faster than the limits allow, so
+        # that its cost stays bounded; the peaks below say by how much (not within the limits).
+        notes.append(
+            f"the limits need {law.duration:.4g} s, longer than the longest swing "
+            f"({MAX_SWING_DURATION:g} s): sampled at {MAX_SWING_DURATION:g} s, over a limit"
+        )
+        slow = MAX_SWING_DURATION / law.duration
+    elif slow > longest:
         notes.append(f"slowed to the longest swing ({MAX_SWING_DURATION:g} s); still over a limit")
         slow = longest
     scale = slow
@@ -145,13 +159,16 @@ def final_law(p: Plan, planned: DeviceLimits, rate: float, t_opt: float) -> Fina
     if not n < max_samples():  # bounded before anything is allocated
         raise ValueError(
             f"rate: a {law.duration * scale:.4g} s swing at {rate:g} Hz needs {n:.4g} samples, more "
-            f"than half this machine's memory holds ({max_samples()}); lower the rate or check the "
-            "device limits (joint_velocity, joint_acceleration, joint_jerk, min_swing_duration)"
+            f"than half the memory this process may use holds ({max_samples()}); lower the rate or "
+            "check the device limits (joint_velocity, joint_acceleration, joint_jerk, "
+            "min_swing_duration)"
         )
     scale *= max(2, math.ceil(n - 1e-9)) / n  # whole control periods: never faster
     # The check's values at the same curve points, slowed exactly (1/k, 1/k^2, 1/k^3).
     peaks = tuple(pk / scale**o for o, pk in zip((1, 2, 3), p.check.peaks))
-    within = bool(
+    # A law cut short is never within the limits, whatever its sampled peaks say: the limits need
+    # longer than the longest swing.
+    within = not cut_short and bool(
         np.all(peaks[0] <= planned.velocity)
         and np.all(peaks[1] <= planned.acceleration)
         and (planned.jerk is None or np.all(peaks[2] <= planned.jerk))

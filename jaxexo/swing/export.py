@@ -7,6 +7,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +15,10 @@ import numpy as np
 from jaxexo.storage.atomic import atomic_write
 
 JOINT_NAMES = ("hip_swing", "knee_swing", "hip_stance", "knee_stance")
+
+# A ROS name (the ROS 2 naming rules, which a controller's joint parameters follow): tokens of
+# letters, digits and underscores, none starting with a digit, separated by single slashes.
+ROS_NAME = re.compile(r"/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*")
 
 CSV_COLUMNS = (
     "time_s",
@@ -79,17 +84,25 @@ def timed_table(swing) -> np.ndarray:
 
 
 def write_timed_csv(swing, path: str | Path | None = None) -> str:
-    return write_csv(TIMED_CSV_COLUMNS, timed_table(swing), "{:.9g}", path)
+    return write_csv(TIMED_CSV_COLUMNS, timed_table(swing), path)
 
 
-def write_csv(columns, table: np.ndarray, fmt: str, path: str | Path | None = None) -> str:
-    """CSV text of a (N, len(columns)) table, each number formatted by ``fmt``; written atomically to
-    ``path`` when given."""
+def csv_number(x) -> str:
+    """A float64 as the shortest text that reads back to the same bits (Python's repr), a whole
+    number without its ".0": finite differences of the read values at 10 kHz then hold the limits
+    as the curve does (9 digits broke the jerk limit 15-fold)."""
+    text = repr(float(x))
+    return text[:-2] if text.endswith(".0") else text
+
+
+def write_csv(columns, table: np.ndarray, path: str | Path | None = None) -> str:
+    """CSV text of a (N, len(columns)) table, each number at full precision (``csv_number``);
+    written atomically to ``path`` when given."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(columns)
     for row in table:
-        w.writerow([fmt.format(x) for x in row])
+        w.writerow([csv_number(x) for x in row])
     text = buf.getvalue()
     if path is not None:
         atomic_write(path, text)
@@ -139,11 +152,36 @@ def timed_dict(swing) -> dict:
     }
 
 
-def joint_trajectory_dict(swing) -> dict:
-    """A timed swing in the layout of ROS 2 ``trajectory_msgs/msg/JointTrajectory``: joint_names,
-    and per sample positions (rad), velocities (rad/s), accelerations (rad/s^2) and
+def check_joint_names(names, option: str = "joint_names", given=None) -> tuple[str, ...]:
+    """The ROS 2 joint names for JOINT_NAMES' four joints, in that order: None gives JOINT_NAMES;
+    else four distinct ROS names (``ROS_NAME``), refused naming ``option`` and the value as
+    ``given`` (default: its repr)."""
+    if names is None:
+        return JOINT_NAMES
+    shown = repr(names) if given is None else given
+    want = f"four distinct joint names, for {', '.join(JOINT_NAMES)} in that order"
+    if isinstance(names, (str, bytes)) or not isinstance(names, (list, tuple)):
+        raise ValueError(f"{option}: expected a list of {want}, got {shown}")
+    if len(names) != len(JOINT_NAMES):
+        raise ValueError(f"{option}: expected {want}, got {len(names)}: {shown}")
+    for i, n in enumerate(names):
+        if not isinstance(n, str) or not ROS_NAME.fullmatch(n):
+            raise ValueError(
+                f"{option}: name {i + 1} ({n!r}) is not a ROS name (letters, digits and _, not "
+                f"starting with a digit; / between parts), got {shown}"
+            )
+        if n in names[:i]:
+            raise ValueError(f"{option}: {n!r} is given twice; expected {want}, got {shown}")
+    return tuple(names)
+
+
+def joint_trajectory_dict(swing, joint_names=None) -> dict:
+    """A timed swing in the layout of ROS 2 ``trajectory_msgs/msg/JointTrajectory``: the header
+    (stamp 0: start on receipt; no frame), joint_names (``check_joint_names``; default
+    JOINT_NAMES), and per sample positions (rad), velocities (rad/s), accelerations (rad/s^2) and
     time_from_start (sec, nanosec), which a ``joint_trajectory_controller`` interpolates with
     quintic splines."""
+    names = check_joint_names(joint_names)
     points = []
     for t, q, v, a in zip(
         swing.time, swing.joint_angles, swing.joint_velocity, swing.joint_acceleration
@@ -158,11 +196,13 @@ def joint_trajectory_dict(swing) -> dict:
                 "time_from_start": {"sec": ns // 1_000_000_000, "nanosec": ns % 1_000_000_000},
             }
         )
-    return {"header": {"frame_id": ""}, "joint_names": list(JOINT_NAMES), "points": points}
+    # std_msgs/Header is stamp then frame_id; a zero stamp is "start now" to a controller.
+    header = {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": ""}
+    return {"header": header, "joint_names": list(names), "points": points}
 
 
-def write_joint_trajectory(swing, path: str | Path | None = None) -> str:
-    return write_json(joint_trajectory_dict(swing), path)
+def write_joint_trajectory(swing, path: str | Path | None = None, joint_names=None) -> str:
+    return write_json(joint_trajectory_dict(swing, joint_names), path)
 
 
 def write_timed_json(swing, path: str | Path | None = None) -> str:

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from jaxexo.config import MAX_TRACKING_HEADROOM
+from jaxexo.config import MAX_SWING_DURATION, MAX_TRACKING_HEADROOM
 from jaxexo.swing.export import JOINT_NAMES
 
 
@@ -154,8 +154,16 @@ class DeviceLimits:
             if not (v is None and name == "jerk"):
                 object.__setattr__(self, name, _positive_vector(name, v))
         d = self.min_duration
-        if isinstance(d, bool) or not isinstance(d, (int, float)) or not math.isfinite(d) or d < 0:
-            raise ValueError(f"limits.min_duration: must be a finite number >= 0 (s), got {d!r}")
+        # The [device] section's bound (min_swing_duration): a swing, not a walk.
+        if (
+            isinstance(d, (bool, np.bool_))
+            or not isinstance(d, (int, float, np.integer, np.floating))
+            or not (math.isfinite(d) and 0.0 <= d <= MAX_SWING_DURATION)
+        ):
+            raise ValueError(
+                f"limits.min_duration: must be a number of seconds in [0, {MAX_SWING_DURATION:g}] "
+                f"(a swing), got {d!r}"
+            )
         object.__setattr__(self, "min_duration", float(d))
 
     @classmethod

@@ -126,10 +126,13 @@ def check_duration(duration, name: str = "duration") -> float:
     """A swing's duration in [MIN_DURATION, MAX_DURATION] s; ValueError naming ``name``."""
     duration = geometry.finite_positive(name, duration, "s")
     if duration > MAX_DURATION:
-        raise ValueError(f"{name} must be <= {MAX_DURATION:g} s (one swing), got {duration:g}")
+        raise ValueError(
+            f"{name} must be <= {MAX_DURATION:g} s (one swing), got {geometry.as_given(duration)}"
+        )
     if duration < MIN_DURATION:
         raise ValueError(
-            f"{name} must be >= {MIN_DURATION:g} s (no drive swings a leg faster), got {duration:g}"
+            f"{name} must be >= {MIN_DURATION:g} s (no drive swings a leg faster), got "
+            f"{geometry.as_given(duration)}"
         )
     return duration
 
@@ -147,7 +150,7 @@ def check_smoothing(smoothing):
         return None
     smoothing = geometry.finite("smoothing", smoothing, "m^2")
     if smoothing < 0:
-        raise ValueError(f"smoothing must be >= 0 (m^2), got {smoothing}")
+        raise ValueError(f"smoothing must be >= 0 (m^2), got {geometry.as_given(smoothing)}")
     return smoothing
 
 
@@ -200,6 +203,30 @@ def check_scene_fields(options) -> None:
             check(name, v)
 
 
+def _column(v) -> list | None:
+    """A per-obstacle column's values, or None for one value for all."""
+    if isinstance(v, (list, tuple, np.ndarray)):
+        return list(np.asarray(v, dtype=object).ravel())
+    return None
+
+
+def check_pivot_pair(pivot, pivot_y) -> None:
+    """``pivot`` (a condition) and ``pivot_y`` (m) are two ways to place the pivot heel: refused
+    where both are given, for one obstacle or at the same obstacle of two columns (ValueError naming
+    both, with their index in a column)."""
+    cp, cy = _column(pivot), _column(pivot_y)
+    n = max(len(c) for c in (cp, cy, [None]) if c is not None)
+    for i in range(n):
+        p = pivot if cp is None else (cp[i] if i < len(cp) else None)
+        y = pivot_y if cy is None else (cy[i] if i < len(cy) else None)
+        if p is not None and y is not None:
+            at = "" if cp is None and cy is None else f"[{i}]"
+            raise ValueError(
+                f"pivot{at if cp is not None else ''}, pivot_y{at if cy is not None else ''}: give "
+                f"one of them (a condition or a y in metres), got pivot={p!r} and pivot_y={y!r}"
+            )
+
+
 def check_clearance_field(clearance):
     """None (the model's env.min_clearance) or a finite number of metres in [0, MAX_CLEARANCE]; the
     model's own lower bound is checked against its config when the swing is made (at_clearance)."""
@@ -248,6 +275,7 @@ class SwingOptions:
         for name, check in self.CHECKS:
             object.__setattr__(self, name, check(getattr(self, name)))
         check_scene_fields(self)
+        check_pivot_pair(self.pivot, self.pivot_y)
 
     @property
     def scene_args(self) -> tuple:

@@ -13,8 +13,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from jaxexo.config import MAX_CONTROL_RATE, MIN_CONTROL_RATE
+from jaxexo.config import MAX_CONTROL_RATE, MAX_SWING_DURATION, MIN_CONTROL_RATE
 from jaxexo.physics import kinematics
+from jaxexo.physics.geometry import as_given
 from jaxexo.physics.scene import Scene
 from jaxexo.swing.curve import (
     CurveState,
@@ -28,6 +29,7 @@ from jaxexo.swing.curve import (
     law_from_speeds,
     pchip_eval,
     pchip_slopes,
+    thinned,
 )
 from jaxexo.swing.curve_check import (
     CHECK_MARGIN,
@@ -57,7 +59,12 @@ from jaxexo.swing.trajectory import (
 )
 
 GRID_PER_KNOT = 2  # TOPP grid points per interval of the joint path's knots
-REFINE = 2.0  # a sample interval with a joint step over this many median steps is subdivided
+REFINE = 2.0  # a sample interval with a joint step over this many median steps is subdivided ...
+# ... into parts of at least 1/REFINE_BUDGET of the whole joint path: at most REFINE_BUDGET + N
+# joint samples (the most a swing of tests/reference_outputs.py has: 1,279, a CFFTG swing)
+REFINE_BUDGET = 4096
+CHUNK = 64  # at most this many swings timed in one batch ...
+CHUNK_SAMPLES = 16384  # ... and this many joint samples (time_swings' temporaries follow them)
 SAFETY = 0.95  # the TOPP passes use this fraction of each limit
 LOCAL_PASSES = 2  # local corrections of the passes' caps, then one uniform slow-down
 LOCAL_FROM = 1.02  # ... for a curve over a limit by more than this factor (less: the slow-down)
@@ -94,7 +101,9 @@ class TimedSwing:
     within_limits: bool  # velocity, acceleration and jerk within the planned limits on the curve
     peak_velocity: np.ndarray  # (4,) rad/s, on the curve
     peak_acceleration: np.ndarray  # (4,) rad/s^2
-    slowdown: float  # uniform slow-down applied after the passes and local corrections (>= 1)
+    # Uniform slow-down applied after the passes and local corrections (>= 1; < 1: a path the
+    # limits cannot cross within MAX_SWING_DURATION, sped up to it, notes and within_limits say so).
+    slowdown: float
     peak_jerk: np.ndarray | None = None  # (4,) rad/s^3, on the curve
     notes: tuple[str, ...] = field(default=())
     curve: SwingCurve | None = None
@@ -138,9 +147,10 @@ class TimedSwing:
     def to_json(self, path=None) -> str:
         return write_timed_json(self, path)
 
-    def to_joint_trajectory(self, path=None) -> str:
-        """JSON in the layout of ROS 2 trajectory_msgs/JointTrajectory (jaxexo.swing.export)."""
-        return write_joint_trajectory(self, path)
+    def to_joint_trajectory(self, path=None, *, joint_names=None) -> str:
+        """JSON in the layout of ROS 2 trajectory_msgs/JointTrajectory (jaxexo.swing.export), the
+        joints named ``joint_names`` (four distinct ROS names; default JOINT_NAMES)."""
+        return write_joint_trajectory(self, path, joint_names)
 
 
 def leg_angles(sp, pivot_y: float, heel: np.ndarray) -> np.ndarray:
@@ -166,7 +176,7 @@ def check_rate(rate, name: str = "rate") -> float:
     if not (math.isfinite(rate) and MIN_CONTROL_RATE <= rate <= MAX_CONTROL_RATE):
         raise ValueError(
             f"{name}: control rate must be between {MIN_CONTROL_RATE:g} and {MAX_CONTROL_RATE:g} Hz, "
-            f"got {rate:g}"
+            f"got {as_given(rate)}"
         )
     return rate
 
@@ -289,17 +299,45 @@ def time_swings(
     ``config``). Paths, passes and checks run batched."""
     trajs, rate, device = _checked_inputs(trajs, config, rate, limits)
     sp = _scalars(config) if sp is None else sp
+    # In chunks: a batch's temporaries grow with its swings' joint samples (the passes' grid, the
+    # law and the check follow them), bounded per swing (_joint_samples), so per chunk too. A
+    # batch times each swing as it is timed alone, so the chunks change no result.
+    qs = [_joint_samples(sp, t) for t in trajs]
+    return [
+        sw
+        for c in _chunks([len(q) for q in qs])
+        for sw in _time_chunk([trajs[i] for i in c], sp, rate, device, [qs[i] for i in c])
+    ]
+
+
+def _chunks(sizes) -> list[range]:
+    """Consecutive ranges of at most CHUNK swings and CHUNK_SAMPLES joint samples (or one swing)."""
+    out, start, total = [], 0, 0
+    for i, n in enumerate(sizes):
+        if i > start and (i - start >= CHUNK or total + n > CHUNK_SAMPLES):
+            out.append(range(start, i))
+            start, total = i, 0
+        total += n
+    return out + [range(start, len(sizes))]
+
+
+def _time_chunk(trajs, sp, rate: float, device: DeviceLimits, qs) -> list[TimedSwing]:
+    """``time_swings`` of a few swings, checked, in one batch."""
     planned = device.planned()
     window = blend_window(planned)
     passes = planned.constraints(SAFETY)
     check = planned.constraints(1.0 - CHECK_MARGIN)
-    plans = _joint_paths(trajs, sp)
+    plans = _joint_paths(trajs, sp, qs)
     plans = _run_passes(plans, range(len(plans)), passes, window)
     t_opt = [p.law.duration for p in plans]
     for _ in range(LOCAL_PASSES):
         redo = []
         for i, p in enumerate(plans):
-            if peak_ratio(check, p.check.peaks) > LOCAL_FROM:
+            # A law over the longest swing is not slowed further (final_law samples it faster).
+            if (
+                p.law.duration <= MAX_SWING_DURATION
+                and peak_ratio(check, p.check.peaks) > LOCAL_FROM
+            ):
                 ratio = speed_ratio(check, p.check.derivs)
                 plans[i] = replace(p, cap=lowered_cap(p, ratio, p.check.s, p.check.t))
                 redo.append(i)
@@ -334,14 +372,21 @@ def _joint_samples(sp, traj) -> np.ndarray:
     straightening on the floor a small heel step is a large joint step (a square root); without
     the points in between, a cubic through that chord swings wide of it."""
     q = np.unwrap(np.asarray(traj.joint_angles, np.float64), axis=0)
+    heel = np.asarray(traj.heel, np.float64)
+    # A dense path (n_points in the thousands) is thinned first (curve.MAX_PATH_SAMPLES).
+    keep = thinned(len(q))
+    q, heel = q[keep], heel[keep]
     step = np.linalg.norm(np.diff(q, axis=0), axis=1)
     moving = step[step > 0]
     long = np.flatnonzero(step > REFINE * np.median(moving)) if moving.size else []
     if not len(long):
         return q
-    heel = np.asarray(traj.heel, np.float64)
     parts = np.ones(len(step), np.int64)
-    parts[long] = np.ceil(step[long] / np.median(moving)).astype(np.int64)
+    # Parts no shorter than 1/REFINE_BUDGET of the path: a path that mostly stands still (a median
+    # step of rounding noise) would otherwise ask for billions; so at most REFINE_BUDGET + N
+    # samples (far more than a normal swing needs: REFINE_BUDGET).
+    unit = max(float(np.median(moving)), float(step.sum()) / REFINE_BUDGET)
+    parts[long] = np.ceil(step[long] / unit).astype(np.int64)
     i = np.repeat(np.arange(len(step)), parts)
     x = (np.arange(len(i)) - np.repeat(np.cumsum(parts) - parts, parts)) / parts[i]
     # Along the heel's monotone cubic through the samples (C1, never beyond the samples), graded
@@ -354,11 +399,12 @@ def _joint_samples(sp, traj) -> np.ndarray:
     return fine
 
 
-def _joint_paths(trajs, sp) -> list[Plan]:
-    """The joint paths of the swings (splines batched by sample count) and their passes' grids."""
+def _joint_paths(trajs, sp, samples=None) -> list[Plan]:
+    """The joint paths of the swings (splines batched by sample count) and their passes' grids;
+    ``samples``: each swing's ``_joint_samples`` when known."""
     qs, knots = [], []
-    for t in trajs:
-        q = _joint_samples(sp, t)
+    for j, t in enumerate(trajs):
+        q = _joint_samples(sp, t) if samples is None else samples[j]
         q = q[distinct_samples(q)]
         qs.append(q)
         knots.append(chord_knots(q))
@@ -521,7 +567,7 @@ def _samples(curves, rate: float) -> list[_Samples]:
         if not periods < max_samples():
             raise ValueError(
                 f"rate: a {c.duration:.4g} s swing at {rate:g} Hz needs {periods} samples, more "
-                f"than half this machine's memory holds ({max_samples()}); lower the rate"
+                f"than half the memory this process may use holds ({max_samples()}); lower the rate"
             )
         times.append(np.arange(periods + 1) / rate)
     # the last sample is at or after touch-down: the legs at rest in the landing pose

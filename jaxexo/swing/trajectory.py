@@ -130,7 +130,7 @@ class Trajectory:
         )
 
     def to_csv(self, path: str | Path | None = None) -> str:
-        return write_csv(CSV_COLUMNS, self.table(), "{:.6f}", path)
+        return write_csv(CSV_COLUMNS, self.table(), path)
 
     def to_dict(self) -> dict:
         c = self.checks
