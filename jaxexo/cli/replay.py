@@ -4,14 +4,62 @@ Method: docs/safety.md, "Replayed in a physics engine"."""
 
 from __future__ import annotations
 
+from argparse import ArgumentTypeError
+
 from jaxexo.cli.common import check_paths, check_rate, option_values, real
 from jaxexo.cli.scene import add_scene_args, add_sim_policy, scene_from_args
+
+
+def _check_drive_options(args) -> None:
+    """The driven replay's options only with --driven, and --reference-rate only with a sampled
+    --reference: refused as typed, before any work (they used to be ignored)."""
+    if not args.driven:
+        given = [
+            option
+            for option, value in (
+                ("--reference", args.reference),
+                ("--reference-rate", args.reference_rate),
+                ("--half-limits", args.half_limits or None),
+                ("--controller", args.controller),
+            )
+            if value is not None
+        ]
+        if given:
+            raise ValueError(
+                f"{given[0]}: needs --driven (it sets how the driven replay drives the legs; "
+                f"without --driven the swing is only replayed kinematically); add --driven, or "
+                f"leave out {', '.join(given)}"
+            )
+    if args.reference_rate is not None and args.reference in (None, "curve"):
+        reference = (
+            "--reference was not given (its default, curve,"
+            if args.reference is None
+            else "--reference is curve (it"
+        )
+        raise ValueError(
+            f"--reference-rate: only for a sampled --reference (quintic, cubic or linear), but "
+            f"{reference} follows the curve at every physics step); got --reference-rate "
+            f"{args.reference_rate}: add --reference quintic, or leave --reference-rate out"
+        )
+
+
+def _rate_option(text: str | None, option: str) -> float | None:
+    """A rate option kept as typed (for messages) and read as a number here."""
+    if text is None:
+        return None
+    try:
+        return real(text)  # the one number syntax of every numeric option (no '_')
+    except ArgumentTypeError as e:
+        raise ValueError(f"{option}: expected a rate in Hz: {e}") from None
 
 
 def cmd_replay(args) -> int:
     check_paths([("--policy", args.policy)], [("--json", args.json)])
     check_rate(args.rate, "--rate")
-    check_rate(args.reference_rate, "--reference-rate")
+    reference_rate = _rate_option(args.reference_rate, "--reference-rate")
+    check_rate(reference_rate, "--reference-rate")
+    _check_drive_options(args)  # with the options as typed
+    args.reference_rate = reference_rate
     from jaxexo.sim.replay import require_mujoco
 
     require_mujoco()  # a clear error before any work
@@ -31,9 +79,9 @@ def cmd_replay(args) -> int:
         "rl": lambda: rl.generate(scene.obstacle, fallback=None, **common),
         "cfftg": lambda: CFFTG(config).generate(scene.obstacle, **common),
     }
-    options = option_values(
-        args, "rate", "driven", "half_limits", "controller", "reference", "reference_rate"
-    )
+    options = option_values(args, "rate", "driven", "half_limits", "reference_rate")
+    if args.driven:
+        options.update(controller=args.controller or "pd_ff", reference=args.reference or "curve")
     replays = []
     for name in ("rl", "cfftg") if args.method == "both" else (args.method,):
         r = replay_swing(name, gens[name](), config, **options)
@@ -68,21 +116,18 @@ def add_options(x) -> None:
     x.add_argument(
         "--controller",
         choices=("pd_ff", "servo"),
-        default="pd_ff",
         help="with --driven: PD with inverse-dynamics feed-forward (pd_ff, default) or stiff "
         "position servos (servo)",
     )
     x.add_argument(
         "--reference",
         choices=("curve", "quintic", "cubic", "linear"),
-        default="curve",
         help="with --driven: what the setpoints follow: the timed curve at every physics step "
         "(default), or its samples at --reference-rate interpolated as a drive does (quintic or "
         "cubic Hermite; linear for comparison only)",
     )
     x.add_argument(
         "--reference-rate",
-        type=real,
         help="with --driven and a sampled --reference: the samples' rate, Hz (default: --rate)",
     )
     x.add_argument(

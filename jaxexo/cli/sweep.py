@@ -7,11 +7,21 @@ from jaxexo.cli.common import check_count, whole
 
 
 def cmd_sweep(args) -> int:
+    from jaxexo.sweep.plan import check_memory_budget
     from jaxexo.sweep.spec import load_sweep, memory_budget
 
     check_count(args.task_cpus, "--task-cpus")
     budget = None if args.memory_budget is None else memory_budget(args.memory_budget)
+    if budget is not None and args.backend == "local":
+        # This machine runs the chunks (a Ray task's budget is its node's memory).
+        check_memory_budget(budget, args.memory_budget, "--memory-budget")
     sweep = load_sweep(args.sweep)  # validated (NumPy only) before JAX starts
+    if budget is None and sweep.memory_budget is not None and args.backend == "local":
+        check_memory_budget(
+            sweep.memory_budget,
+            f"{sweep.memory_budget / 2**30:.4g} GiB",
+            f"{args.sweep}: sweep.memory_budget",
+        )
     if args.backend == "local":
         from jaxexo.train.devices import use_all_cpu_cores, use_compilation_cache
 

@@ -3,8 +3,6 @@ after an interruption. Training: docs/training.md."""
 
 from __future__ import annotations
 
-import os
-import sys
 from pathlib import Path
 
 from jaxexo.cli.common import load, whole
@@ -26,10 +24,32 @@ def _resume_command(args) -> str:
 
 
 def cmd_train(args) -> int:
+    from jaxexo.cli.interrupt import honoured
+    from jaxexo.storage.rundir import contents
+
+    args.config_given = args.config  # as typed: the resume command repeats it
+    try:  # the run directory as it was: only a run this command wrote into can be resumed
+        fresh = not contents(Path(args.out))
+    except OSError:
+        fresh = False  # unreadable: refused by the run's lock, below
+    with honoured(lambda: _interrupted(args, fresh)):
+        return _train(args)
+
+
+def _interrupted(args, fresh: bool) -> str:
+    """What a Ctrl-C says: how to continue the run, or that nothing was trained yet."""
+    if args.resume or (fresh and (Path(args.out) / "config.toml").is_file()):
+        return (
+            f"jaxexo: interrupted; {args.out} keeps the chunks trained up to its last checkpoint; "
+            f"continue it with: {_resume_command(args)}"
+        )
+    return "jaxexo: interrupted before training started; nothing was trained: run the command again"
+
+
+def _train(args) -> int:
     from jaxexo.train.devices import use_all_cpu_cores
 
     use_all_cpu_cores()
-    args.config_given = args.config  # as typed: the resume command repeats it
     if args.config is None and args.resume and (Path(args.out) / "config.toml").is_file():
         args.config = Path(args.out) / "config.toml"  # the run's own resolved config
     cfg, name = load(args.config)
@@ -57,21 +77,7 @@ def cmd_train(args) -> int:
         else f"seed {args.seed}"
     )
     print(f"jaxexo train: {name} -> {args.out} ({seeds}{', resume' if args.resume else ''})")
-    try:
-        res = run_training(
-            cfg, args.out, seed=args.seed, resume=args.resume, progress=not args.quiet
-        )
-    except KeyboardInterrupt:
-        print(
-            f"jaxexo: interrupted; {args.out} keeps the chunks trained up to its last checkpoint; "
-            f"continue it with: {_resume_command(args)}",
-            file=sys.stderr,
-        )
-        # Out at once: an interpreter shutdown with XLA's threads mid-computation can crash
-        # (seen: SIGSEGV after this message); every file is already written atomically.
-        sys.stdout.flush()
-        sys.stderr.flush()
-        os._exit(130)
+    res = run_training(cfg, args.out, seed=args.seed, resume=args.resume, progress=not args.quiet)
     _print_result(res, k, args.out)
     return 0
 

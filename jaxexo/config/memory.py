@@ -78,6 +78,71 @@ def machine_memory_bytes() -> int | None:
     return None
 
 
+def process_memory_limit() -> tuple[int | None, str]:
+    """The memory this process can use at most (a ceiling, not what is free now: see
+    ``process_memory_bytes``): this machine's, or less where the process's address-space or
+    data limit (``ulimit -v``, ``-d``) or its control group's memory limit says so. (bytes, what sets
+    them); (None, "") if nothing is known."""
+    known = [(machine_memory_bytes(), "this machine's memory")]
+    try:
+        import resource
+    except ImportError:  # not a Unix: the machine's memory only
+        resource = None
+    for name, ulimit in (("RLIMIT_AS", "ulimit -v"), ("RLIMIT_DATA", "ulimit -d")):
+        if resource is not None and hasattr(resource, name):
+            soft = resource.getrlimit(getattr(resource, name))[0]
+            if soft != resource.RLIM_INFINITY:
+                known.append((soft, f"the process's limit, {ulimit}"))
+    known.append((_cgroup_memory()[0], "the control group's memory limit"))
+    known = [(n, what) for n, what in known if n is not None]
+    return min(known) if known else (None, "")
+
+
+def _cgroup_memory() -> tuple[int | None, int]:
+    """The smallest memory limit of this process's control group and its ancestors (cgroup v2
+    ``memory.max``, v1 ``memory.limit_in_bytes``; "max" and v1's huge "unlimited" are no limit) and
+    that group's usage (bytes; 0 where unknown); (None, 0) without a limit."""
+    try:
+        with open("/proc/self/cgroup") as f:
+            lines = f.read().splitlines()
+    except OSError:
+        return None, 0
+    folders = []
+    for line in lines:
+        if line.count(":") < 2:
+            continue
+        _, controllers, path = line.split(":", 2)
+        if controllers == "":  # v2: one hierarchy
+            base, names = "/sys/fs/cgroup", ("memory.max", "memory.current")
+        elif "memory" in controllers.split(","):
+            base, names = (
+                "/sys/fs/cgroup/memory",
+                ("memory.limit_in_bytes", "memory.usage_in_bytes"),
+            )
+        else:
+            continue
+        parts = [x for x in path.split("/") if x]
+        folders += [(os.path.join(base, *parts[:i]), names) for i in range(len(parts), -1, -1)]
+    best = (None, 0)
+    for folder, (limit, usage) in folders:
+        try:
+            with open(os.path.join(folder, limit)) as f:
+                cap = f.read().strip()
+        except OSError:
+            continue
+        if not (cap.isdigit() and int(cap) < 2**60) or (
+            best[0] is not None and int(cap) >= best[0]
+        ):
+            continue
+        try:
+            with open(os.path.join(folder, usage)) as f:
+                used = int(f.read().strip())
+        except (OSError, ValueError):
+            used = 0
+        best = (int(cap), used)
+    return best
+
+
 def check_memory(cfg: Config, available: int | None = None) -> int:
     """Refuse (ConfigError) a config whose estimate exceeds ``available`` bytes (default: this
     machine's memory); returns the estimate. The error names the field behind the largest part, or
@@ -143,40 +208,6 @@ def _process_sizes() -> dict[str, int]:
     return out
 
 
-def _cgroup_room() -> int | None:
-    """What this process's cgroup (v2 memory.max, v1 memory.limit_in_bytes) leaves above its usage;
-    None without a limit. Two small reads: cheap."""
-    try:
-        with open("/proc/self/cgroup") as f:
-            lines = f.read().splitlines()
-    except OSError:
-        return None
-    for line in lines:
-        _, controllers, path = line.split(":", 2)
-        if controllers == "":  # v2: one hierarchy
-            folder, limit, usage = "/sys/fs/cgroup", "memory.max", "memory.current"
-        elif "memory" in controllers.split(","):
-            folder, limit, usage = (
-                "/sys/fs/cgroup/memory",
-                "memory.limit_in_bytes",
-                "memory.usage_in_bytes",
-            )
-        else:
-            continue
-        folder = os.path.join(folder, path.lstrip("/"))
-        try:
-            with open(os.path.join(folder, limit)) as f:
-                cap = f.read().strip()
-            with open(os.path.join(folder, usage)) as f:
-                used = int(f.read().strip())
-        except (OSError, ValueError):
-            continue
-        # "max" (v2) or a huge number (v1): no limit.
-        if cap.isdigit() and int(cap) < 2**60:
-            return max(0, int(cap) - used)
-    return None
-
-
 def process_memory_bytes() -> int | None:
     """The memory this process may still take (bytes): the least of the machine's available memory
     (MemAvailable; its total where that is unknown), what RLIMIT_AS and RLIMIT_DATA (``ulimit -v``,
@@ -194,6 +225,7 @@ def process_memory_bytes() -> int | None:
             soft = resource.getrlimit(limit)[0]
             if soft != resource.RLIM_INFINITY and soft >= 0:
                 room.append(max(0, soft - sizes.get(used, 0)))
-    room.append(_cgroup_room())
+    cap, used = _cgroup_memory()
+    room.append(None if cap is None else max(0, cap - used))
     known = [r for r in room if r is not None]
     return min(known) if known else None

@@ -168,6 +168,17 @@ class KinematicsConfig:
         (-1.7453, 0.0), range_(lo=-math.pi, hi=math.pi), unit="rad"
     )  # -100 .. 0 deg
 
+    def differing_legs(self, legs: dict) -> list[tuple[str, float, float]]:
+        """(field, this value, the value in ``legs``) of each LEG_FIELDS length that differs from
+        ``legs`` (field: metres) by more than a micrometre (a file's rounding): a policy's moves, a
+        swing's joint angles and its foot's clearance hold only for the legs they were made for."""
+        out = [(f, float(getattr(self, f)), float(legs[f])) for f in LEG_FIELDS]
+        return [(f, a, b) for f, a, b in out if not abs(a - b) <= 1e-6]
+
+
+# The legs' lengths in [kinematics] (KinematicsConfig.differing_legs).
+LEG_FIELDS = ("thigh", "shin", "foot_length")
+
 
 # The thesis's joint limits to the last bit (the declared defaults above are rounded to 0.1 mrad) as a
 # [kinematics] table states them: what the thesis configs hold, for configs stated in full.

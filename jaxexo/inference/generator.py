@@ -23,7 +23,7 @@ from jaxexo.physics.scene import Scene, check_clearance, stack_scenes, with_clea
 from jaxexo.physics.transition import scalar
 from jaxexo.shield import ShieldStats, make_shield
 from jaxexo.shield.rows import take_rows
-from jaxexo.storage.policy_check import load_checked
+from jaxexo.storage.policy_check import check_policy_legs, load_checked
 from jaxexo.storage.policy_file import QPolicy
 from jaxexo.swing import smoothing as sm
 from jaxexo.swing.finish import PathFinisher
@@ -41,6 +41,7 @@ class TrajectoryGenerator(SceneMaker):
     _exact = False
 
     def __init__(self, policy: QPolicy, config, source: str = "<policy>"):
+        check_policy_legs(policy, config, source)
         self.policy = policy
         self.config = config
         self.source = source

@@ -8,8 +8,29 @@ from pathlib import Path
 
 import numpy as np
 
+from jaxexo.config.sections import LEG_FIELDS
 from jaxexo.physics import actions
 from jaxexo.storage.policy_file import PolicyFileError, QPolicy, load_policy, policy_config
+
+
+def check_policy_legs(policy: QPolicy, config, source: str) -> None:
+    """``config`` given beside an exported ``policy`` (read from ``source``) must have the legs of
+    the config it was trained with (its metadata.config_toml); ValueError naming each differing
+    kinematics field with both values. A policy without a stored config is not checked."""
+    meta = getattr(policy, "metadata", None)
+    if not isinstance(meta, dict) or "config_toml" not in meta:
+        return
+    trained = policy_config(meta, source).kinematics
+    bad = config.kinematics.differing_legs({f: getattr(trained, f) for f in LEG_FIELDS})
+    if bad:
+        raise ValueError(
+            "config: "
+            + ", ".join(f"kinematics.{f} = {a:g} m" for f, a, _ in bad)
+            + f", but the policy {source} was trained with "
+            + ", ".join(f"kinematics.{f} = {b:g} m" for f, _, b in bad)
+            + "; a policy drives only the legs it was trained for: use its own config "
+            "(TrajectoryGenerator.load), or train one for these legs"
+        )
 
 
 def load_checked(path: str | Path) -> tuple[QPolicy, object]:

@@ -35,6 +35,19 @@ def default_memory_budget() -> int:
     return 2 * 2**30
 
 
+def check_memory_budget(budget: int, typed, where: str) -> None:
+    """A memory budget (bytes) no larger than this process can use (jaxexo.config.memory's
+    ``process_memory_limit``): ConfigError naming ``where`` and the value as ``typed``."""
+    from jaxexo.config.memory import process_memory_limit
+
+    have, what = process_memory_limit()
+    if have is not None and budget > have:
+        raise ConfigError(
+            f"{where}: {typed} is more memory than this process can use ({have / 2**30:.1f} GiB, "
+            f"{what}); give at most {have // 2**20} MiB, or leave it out (half the available memory)"
+        )
+
+
 def local_cpu_count() -> int:
     return (
         len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)

@@ -12,7 +12,13 @@ from pathlib import Path
 from jaxexo.config import ConfigError
 from jaxexo.storage.rundir import RunDirError, contents, describe, run_lock
 from jaxexo.sweep import results as R
-from jaxexo.sweep.plan import Chunk, default_memory_budget, local_cpu_count, make_plan
+from jaxexo.sweep.plan import (
+    Chunk,
+    check_memory_budget,
+    default_memory_budget,
+    local_cpu_count,
+    make_plan,
+)
 from jaxexo.sweep.spec import Sweep, sweep_from_dict
 
 BACKENDS = ("local", "ray")
@@ -169,6 +175,8 @@ def run_sweep(
     out = Path(out)
     _check_heatmap(sweep, heatmap)
     budget = memory_budget or sweep.memory_budget or default_memory_budget()
+    if backend == "local" and (memory_budget or sweep.memory_budget):
+        check_memory_budget(budget, f"{budget / 2**30:.4g} GiB", "memory_budget")
     if backend == "local":
         import jax
 

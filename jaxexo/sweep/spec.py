@@ -326,7 +326,9 @@ def parse_bytes(v: Any, where: str = "--memory-budget") -> int:
     """A memory size: a number of bytes or a string such as "512MiB", "4 GiB", "2GB"."""
     if isinstance(v, (int, float)) and not isinstance(v, bool):
         n, unit = float(v), ""
-    elif isinstance(v, str) and (m := re.fullmatch(r"\s*([0-9]*\.?[0-9]+)\s*([a-zA-Z]*)\s*", v)):
+    elif isinstance(v, str) and (
+        m := re.fullmatch(r"\s*([+-]?[0-9]*\.?[0-9]+)\s*([a-zA-Z]*)\s*", v)
+    ):
         n, unit = float(m.group(1)), m.group(2).lower()
     else:
         raise ConfigError(f'{where}: expected a size such as "4GiB" or "512MiB", got {v!r}')

@@ -261,7 +261,33 @@ def _checked_inputs(trajs, config, rate, limits):
             raise ValueError(
                 f"trajs[{i}].heel: expected a finite (N >= 2, 2) path, got shape {h.shape}"
             )
+    for i, t in enumerate(trajs):
+        _check_legs(t, config, f"trajs[{i}]")
     return trajs, rate, limits
+
+
+def _check_legs(traj, config, where: str) -> None:
+    """A swing is timed with the legs it was made for: its stance leg (hip, stance knee, pivot
+    heel) and its foot (heel to toe) measured at the start against ``config.kinematics``; ValueError
+    naming each differing field with both values. A swing without those points is not checked."""
+    if not all(hasattr(traj, a) for a in ("hip", "knee_stance", "toe")):
+        return
+    hip, knee = np.asarray(traj.hip[0], float), np.asarray(traj.knee_stance[0], float)
+    pivot = np.array([float(traj.scene.pivot_y), 0.0])
+    legs = {
+        "thigh": np.linalg.norm(hip - knee),
+        "shin": np.linalg.norm(knee - pivot),
+        "foot_length": np.linalg.norm(np.asarray(traj.toe[0], float) - traj.heel[0]),
+    }
+    bad = config.kinematics.differing_legs(legs)
+    if bad:
+        raise ValueError(
+            "config: "
+            + ", ".join(f"kinematics.{f} = {a:g} m" for f, a, _ in bad)
+            + f", but {where} was made for legs with "
+            + ", ".join(f"{f} {b:.6g} m" for f, _, b in bad)
+            + "; time a swing with its generator's config (generator.config)"
+        )
 
 
 def time_swings(

@@ -138,7 +138,7 @@ class _Run:
         ts = self.place.resume(serialization.from_state_dict(fresh, raw["state"]))
         self.chunks_done = raw["book"]["chunks_done"]
         self.wall_before = F.resumed_clock(self.ckpt, self.book_path, self.chunks_done, self.total)
-        self.rows = F.read_metrics_rows(self.metrics_path, self.chunks_done)
+        self.rows = raw["rows"]  # checked against the checkpoint by F.prepare_dir
         # Lines written after the checkpoint are recomputed identically: drop them (a torn last line too).
         atomic_write(self.metrics_path, "".join(F.metrics_line(r) for r in self.rows))
         return ts

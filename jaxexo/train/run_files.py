@@ -190,15 +190,22 @@ def _nan_for_null(d: dict) -> dict:
 def read_metrics_rows(metrics_path: Path, chunks_done: int) -> list[dict]:
     """The rows of a run's metrics.jsonl up to its checkpoint's ``chunks_done`` (later lines, a torn
     last line among them, are recomputed by the resumed run). ConfigError naming the file when it is
-    damaged within those rows, or not a regular file (a symbolic link in its place is named)."""
+    damaged within those rows, when they are not the checkpoint's chunks 1..``chunks_done`` in order
+    (rows deleted, the file cut short or emptied: the log no longer matches the checkpoint), or when
+    it is not a regular file (a symbolic link in its place is named)."""
     if not metrics_path.exists() and not metrics_path.is_symlink():
+        if chunks_done:
+            raise ConfigError(
+                f"--resume: {metrics_path} is missing, but the checkpoint holds {chunks_done} "
+                "chunk(s) whose rows it must hold; it cannot be rebuilt, start a new run"
+            )
         return []
     try:
         data = read_input(metrics_path, "metrics log", MAX_LOG_BYTES, follow_links=False)
     except InputFileError as e:
         raise ConfigError(f"--resume: {e}; it cannot be rebuilt, start a new run") from None
     try:
-        return [
+        rows = [
             json.loads(x, object_hook=_nan_for_null)
             for x in data.decode("utf-8").splitlines()[:chunks_done]
         ]
@@ -212,6 +219,39 @@ def read_metrics_rows(metrics_path: Path, chunks_done: int) -> list[dict]:
             f"--resume: {metrics_path} is damaged within the checkpoint's {chunks_done} "
             "chunk(s); it cannot be rebuilt, start a new run"
         ) from None
+    _check_rows(metrics_path, rows, chunks_done)
+    return rows
+
+
+def _check_rows(metrics_path: Path, rows: list, chunks_done: int) -> None:
+    """The log's first rows must be the checkpoint's chunks 1..``chunks_done``, one each, in order: a
+    resume appends to them, and a log with a gap would describe another run than the checkpoint's."""
+    numbers = [r.get("chunk") if isinstance(r, dict) else None for r in rows]
+    if numbers == list(range(1, chunks_done + 1)):
+        return
+    missing = sorted(set(range(1, chunks_done + 1)) - set(numbers))
+    if not rows:
+        what = "holds no rows"
+    elif missing:
+        what = f"lacks the rows of chunk(s) {_spans(missing)} (rows deleted, or the file cut short)"
+    else:
+        i = next(i for i, n in enumerate(numbers) if n != i + 1)
+        what = f"has chunk {numbers[i]!r} on line {i + 1}, where chunk {i + 1} belongs"
+    raise ConfigError(
+        f"--resume: {metrics_path} {what}, but the checkpoint holds chunks 1..{chunks_done}: the "
+        "log no longer matches the checkpoint; put the run's own metrics.jsonl back, or start a "
+        "new run"
+    )
+
+
+def _spans(numbers: list[int]) -> str:
+    """Sorted chunk numbers as runs: ``1..3, 5``."""
+    out, start = [], numbers[0]
+    for a, b in zip(numbers, [*numbers[1:], None], strict=True):
+        if b != a + 1:
+            out.append(str(a) if a == start else f"{start}..{a}")
+            start = b
+    return ", ".join(out)
 
 
 def read_checkpoint(path: Path) -> dict:
@@ -278,8 +318,9 @@ WRITTEN = (
 
 
 def prepare_dir(out: Path, cfg: Config, seed: int, resume: bool):
-    """Check the (locked) run directory; return the checkpoint's content on resume, else None (a new
-    run, or a resume of a run stopped before its first checkpoint: it starts again from scratch)."""
+    """Check the (locked) run directory; return the checkpoint's content on resume, its ``rows`` the
+    metrics.jsonl rows it proves (read_metrics_rows), else None (a new run, or a resume of a run
+    stopped before its first checkpoint: it starts again from scratch)."""
     cfg_path, ckpt = out / "config.toml", out / CHECKPOINT
     if resume:
         # Temporary files of a killed writer (atomic_write removes its own on an error, not on SIGKILL);
@@ -329,6 +370,8 @@ def prepare_dir(out: Path, cfg: Config, seed: int, resume: bool):
                 )
         if raw["book"]["seed"] != seed:
             raise ConfigError(f"--resume: the run used --seed {raw['book']['seed']}, not {seed}")
+        # The log checked against the checkpoint before anything is compiled or written.
+        raw["rows"] = read_metrics_rows(out / "metrics.jsonl", raw["book"]["chunks_done"])
         return raw
     if ckpt.exists():
         raise ConfigError(
