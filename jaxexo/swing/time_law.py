@@ -63,23 +63,54 @@ def _affine_steps(dq, ddq, amax, ds):
     return 1.0 - 2.0 * ds * c, 2.0 * ds * r, 1.0 + 2.0 * ds * c, 2.0 * ds * r
 
 
-def _scan_floats(a, b, bound, order) -> list:
-    """One path's scan (K, J) as Python floats (``_min_affine_scan``)."""
+def _from_bound(a, b, bound):
+    """Per step of a scan in order (a, b (K, J), bound (K,)): where a step from x = bound[p] lands
+    (clipped as the scan clips), and whether that step may be taken from this table (every value
+    finite, the scan's own comparisons then give exactly these minima)."""
+    t = a[:-1] * bound[:-1, None] + b[:-1]
+    y = np.minimum(bound[1:], t.min(axis=-1))
+    y = np.where(y > 0.0, y, 0.0)
+    usable = np.isfinite(t).all(axis=-1) & np.isfinite(bound[:-1]) & np.isfinite(bound[1:])
+    return y, usable
+
+
+def _scan_floats(a, b, bound, order) -> np.ndarray:
+    """One path's scan (K, J) as Python floats (``_min_affine_scan``). A step from a point on its
+    bound lands where ``_from_bound`` says, so a run of such steps that each land on their bound
+    again (the passes riding the limit curve) is jumped over in one slice."""
     k, nj = a.shape
-    ub = bound.tolist()
+    a, b, bound = a[order], b[order], bound[order]  # in scan order: position p steps to p + 1
+    fb, usable = _from_bound(a, b, bound)
+    chain = usable & (fb == bound[1:])
+    # Per position, the first position at or after it whose step leaves the bound (or k - 1).
+    breaks = np.append(np.flatnonzero(~chain), k - 1)
+    next_break = breaks[np.searchsorted(breaks, np.arange(k - 1))].tolist()
+    ub, fb, chain, usable = bound.tolist(), fb.tolist(), chain.tolist(), usable.tolist()
+    rows = list(zip(a.tolist(), b.tolist()))
     out = [0.0] * k
     xi = 0.0
-    rows = list(zip(a.tolist(), b.tolist()))
-    for src, dst in zip(order[:-1], order[1:]):
-        y = ub[dst]
-        ra, rb = rows[src]
-        for j in range(nj):
-            t = ra[j] * xi + rb[j]
-            if t < y:
-                y = t
-        xi = y if y > 0.0 else 0.0
-        out[dst] = xi
-    return out
+    p = 0
+    while p < k - 1:
+        if xi == ub[p] and usable[p]:
+            if chain[p]:
+                q = next_break[p]  # steps p .. q - 1 each land on their bound
+                out[p + 1 : q + 1] = ub[p + 1 : q + 1]
+                xi, p = ub[q], q
+                continue
+            xi = fb[p]
+        else:
+            y = ub[p + 1]
+            ra, rb = rows[p]
+            for j in range(nj):
+                t = ra[j] * xi + rb[j]
+                if t < y:
+                    y = t
+            xi = y if y > 0.0 else 0.0
+        p += 1
+        out[p] = xi
+    res = np.empty(k)
+    res[order] = out
+    return res
 
 
 def _min_affine_scan(a, b, bound, order):
