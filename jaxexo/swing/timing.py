@@ -319,12 +319,13 @@ def _time_chunk(trajs, sp, rate: float, device: DeviceLimits, qs) -> list[TimedS
             break
         plans = _run_passes(plans, redo, passes, window)
     checks = _path_checks(trajs, plans, sp)
-    finals = [final_law(p, planned, rate, t) for p, t in zip(plans, t_opt)]
+    most = max_samples()  # once per batch: it reads a few /proc files
+    finals = [final_law(p, planned, rate, t, most) for p, t in zip(plans, t_opt)]
     curves = [
         SwingCurve(p.path, f.law, float(t.scene.pivot_y), (sp.thigh, sp.shin), sp.foot_length)
         for t, p, f in zip(trajs, plans, finals)
     ]
-    samples = _samples(curves, rate)
+    samples = _samples(curves, rate, most)
     return [
         _timed(
             trajs[i],
@@ -532,16 +533,17 @@ class _Samples:
         }
 
 
-def _samples(curves, rate: float) -> list[_Samples]:
+def _samples(curves, rate: float, most: int | None = None) -> list[_Samples]:
     """Each curve's samples at ``rate``: t = k / rate from 0 to the first period at or after
-    touch-down (all curves in one evaluation)."""
+    touch-down (all curves in one evaluation); ``most``: ``max_samples()`` when known."""
+    most = max_samples() if most is None else most
     times = []
     for c in curves:
         periods = max(2, math.ceil(c.duration * rate - 1e-9))
-        if not periods < max_samples():
+        if not periods < most:
             raise ValueError(
                 f"rate: a {c.duration:.4g} s swing at {rate:g} Hz needs {periods} samples, more "
-                f"than half the memory this process may use holds ({max_samples()}); lower the rate"
+                f"than half the memory this process may use holds ({most}); lower the rate"
             )
         times.append(np.arange(periods + 1) / rate)
     # the last sample is at or after touch-down: the legs at rest in the landing pose
