@@ -524,10 +524,10 @@ def paths_at(paths, params, order: int = 3) -> list[list[np.ndarray]]:
     return [list(x) for x in zip(*(np.split(r, cut) for r in res))]
 
 
-def joints_at(paths, laws, times) -> list[tuple]:
+def joints_at(paths, laws, times, lv=None) -> list[tuple]:
     """For each (path, law) at its times: s (n_b,) and [q, q-dot, q-ddot, q-dddot] (n_b, J) each,
-    the chain rule on q(s(t))."""
-    lv = laws_at(laws, times)
+    the chain rule on q(s(t)); ``lv``: ``laws_at(laws, times)`` when known."""
+    lv = laws_at(laws, times) if lv is None else lv
     flat = paths_at(paths, [x[0] for x in lv], 3)
     one = len(paths) == 1
     cat = (lambda xs: xs[0]) if one else np.concatenate

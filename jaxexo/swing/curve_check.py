@@ -63,10 +63,12 @@ def column_max(a: np.ndarray) -> np.ndarray:
     return np.array([a[:, j].max() for j in range(a.shape[1])])
 
 
-def check_times(paths, laws) -> list[np.ndarray]:
+def check_times(paths, laws) -> list[tuple[np.ndarray, tuple]]:
     """Where each curve is checked: every CHECK_DT, and both sides of every breakpoint of the law
     and of every knot of the path (where the jerk may jump), so that between check times the
-    velocity, acceleration and jerk are smooth and their maxima are caught to second order."""
+    velocity, acceleration and jerk are smooth and their maxima are caught to second order. Per
+    curve: the times, sorted, and the law's four values there (``laws_at``; the grid's are those
+    the knots were placed with: a time's values depend on it alone)."""
     # At most CHECK_PER_NODE points per node of the law: a very slow law (limits near zero, a
     # path that nearly stops) is checked as finely relative to its own pieces, in bounded memory.
     grids = [
@@ -79,13 +81,20 @@ def check_times(paths, laws) -> list[np.ndarray]:
         )
         for law in laws
     ]
-    out = []
-    for path, law, grid, lv in zip(paths, laws, grids, laws_at(laws, grids)):
+    on_grid = laws_at(laws, grids)
+    sides = []
+    for path, law, grid, lv in zip(paths, laws, grids, on_grid):
         d = law.duration
         knots = np.interp(path.knots[1:-1], lv[0], grid)
         b = np.concatenate([law.breakpoints(), knots])
         eps = 1e-9 * max(d, 1e-9)
-        out.append(np.sort(np.clip(np.concatenate([grid, b - eps, b + eps]), 0.0, d)))
+        sides.append(np.clip(np.concatenate([b - eps, b + eps]), 0.0, d))
+    out = []
+    # The grid lies in [0, duration] (linspace ends on it exactly): clipped, it is itself.
+    for grid, side, lg, ls in zip(grids, sides, on_grid, laws_at(laws, sides)):
+        t = np.concatenate([grid, side])
+        order = np.argsort(t, kind="stable")
+        out.append((t[order], tuple(np.concatenate([x, y])[order] for x, y in zip(lg, ls))))
     return out
 
 
@@ -94,8 +103,9 @@ def with_checks(plans, idx) -> list[Plan]:
     plans = list(plans)
     idx = list(idx)
     paths, laws = [plans[i].path for i in idx], [plans[i].law for i in idx]
-    times = check_times(paths, laws)
-    for i, t, (s, derivs) in zip(idx, times, joints_at(paths, laws, times)):
+    checked = check_times(paths, laws)
+    times, values = [t for t, _ in checked], [v for _, v in checked]
+    for i, t, (s, derivs) in zip(idx, times, joints_at(paths, laws, times, values)):
         peaks = tuple(column_max(np.abs(d)) for d in derivs[1:])
         plans[i] = replace(plans[i], check=CurveCheck(t, s, tuple(derivs), peaks))
     return plans
