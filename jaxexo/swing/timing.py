@@ -198,6 +198,26 @@ def _scalars(config):
     return scalar_params(config)
 
 
+@functools.lru_cache(maxsize=8)
+def _config_limits(config) -> DeviceLimits:
+    """DeviceLimits.from_config, kept (a frozen config, frozen limits: building and validating
+    them cost as much as a tenth of a swing's passes)."""
+    return DeviceLimits.from_config(config)
+
+
+@functools.lru_cache(maxsize=8)
+def _planned(device: DeviceLimits):
+    """What a swing is timed against, kept per (frozen) limits: the planned limits, the time law's
+    window, the passes' and the check's constraints."""
+    planned = device.planned()
+    return (
+        planned,
+        blend_window(planned),
+        planned.constraints(SAFETY),
+        planned.constraints(1.0 - CHECK_MARGIN),
+    )
+
+
 def _on_floor(points: np.ndarray) -> None:
     """Heights (points[:, 1]) within GROUND_ROUNDING of the floor set to it, in place: the forward
     kinematics' rounding, not a motion."""
@@ -252,7 +272,7 @@ def _checked_inputs(trajs, config, rate, limits):
             f"config: expected a jaxexo Config (the generator's .config), got {type(config).__name__}"
         )
     rate = check_rate(config.device.control_rate if rate is None else rate)
-    limits = DeviceLimits.from_config(config) if limits is None else limits
+    limits = _config_limits(config) if limits is None else limits
     if not isinstance(limits, DeviceLimits):
         raise ValueError(f"limits: expected a DeviceLimits, got {type(limits).__name__}")
     for i, t in enumerate(trajs):
@@ -297,10 +317,7 @@ def _chunks(sizes) -> list[range]:
 
 def _time_chunk(trajs, sp, rate: float, device: DeviceLimits, qs) -> list[TimedSwing]:
     """``time_swings`` of a few swings, checked, in one batch."""
-    planned = device.planned()
-    window = blend_window(planned)
-    passes = planned.constraints(SAFETY)
-    check = planned.constraints(1.0 - CHECK_MARGIN)
+    planned, window, passes, check = _planned(device)
     plans = _joint_paths(trajs, sp, qs)
     plans = _run_passes(plans, range(len(plans)), passes, window)
     t_opt = [p.law.duration for p in plans]
