@@ -508,9 +508,10 @@ def paths_at(paths, params, order: int = 3) -> list[list[np.ndarray]]:
         i = np.searchsorted(keys, np.clip(s, 0.0, 1.0) + 2.0 * item, side="right") - 1
         i = np.clip(i, start, start + pieces[item] - 1)
         d = (s - knots[i])[:, None]  # as one path computes it: batch = single, bit for bit
-    # Each coefficient gathered from its own contiguous (P, J) table: arithmetic on contiguous
-    # rows, not on the strided columns of coef[i] (several times slower; the same values).
-    c0, c1, c2, c3 = (np.ascontiguousarray(coef[:, k])[i] for k in range(4))
+    # Gathered by np.take from the (4, P, J) layout: each coefficient a contiguous (n, J) block
+    # (the same values; fancy indexing, or arithmetic on the strided columns of coef[i], cost
+    # several times as much).
+    c0, c1, c2, c3 = np.take(np.ascontiguousarray(coef.transpose(1, 0, 2)), i, axis=1)
     res = [((c3 * d + c2) * d + c1) * d + c0]
     if order >= 1:
         res.append((3.0 * c3 * d + 2.0 * c2) * d + c1)
