@@ -367,7 +367,7 @@ def _joint_samples(sp, traj) -> np.ndarray:
     heel = np.asarray(traj.heel, np.float64)
     # A dense path (n_points in the thousands) is thinned first (curve.MAX_PATH_SAMPLES).
     keep = thinned(len(q))
-    q, heel = q[keep], heel[keep]
+    q, heel = np.take(q, keep, axis=0), np.take(heel, keep, axis=0)  # rows (take: no fancy index)
     step = np.linalg.norm(np.diff(q, axis=0), axis=1)
     moving = step[step > 0]
     long = np.flatnonzero(step > REFINE * np.median(moving)) if moving.size else []
@@ -397,7 +397,7 @@ def _joint_paths(trajs, sp, samples=None) -> list[Plan]:
     qs, knots = [], []
     for j, t in enumerate(trajs):
         q = _joint_samples(sp, t) if samples is None else samples[j]
-        q = q[distinct_samples(q)]
+        q = np.take(q, distinct_samples(q), axis=0)
         qs.append(q)
         knots.append(chord_knots(q))
     paths: list = [None] * len(trajs)
