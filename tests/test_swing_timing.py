@@ -482,3 +482,36 @@ def test_topp_passes_row_by_row_equal_the_batched_passes_and_the_plain_recurrenc
             x[j + 1] = min(max(x[j] + 2.0 * ds * hi, 0.0), reach[j + 1])
         np.testing.assert_allclose(big[i], x, rtol=1e-9, atol=1e-12)
     assert np.all(np.isfinite(floor_big)) and np.all(big >= 0)
+
+
+def test_the_row_scan_jumping_along_its_bound_equals_the_step_by_step_scan():
+    """The Python-float scan jumps over runs of steps that land on their bound (a smooth path's
+    passes ride the limit curve); it must give, bit for bit, the vectorised scan's values, which
+    take every step, on paths where most steps ride the bound and some leave it."""
+    from jaxexo.swing import time_law as tl
+
+    rng = np.random.default_rng(5)
+    k = 400
+    s = np.linspace(0.0, 1.0, k)
+    rows = tl.SCALAR_ROWS + 1  # vectorised: every step taken
+    dq = np.stack(
+        [np.cos(3.0 * s + p)[:, None] * [1.0, 0.6, -0.8, 0.4] for p in rng.uniform(0, 3, rows)]
+    )
+    ddq = np.gradient(dq, s, axis=1)
+    dq[:, 150:160, 1] = 0.0  # a joint standing still for a stretch
+    vmax, amax, ds = (
+        np.array([3.0, 4.0, 3.0, 4.0]),
+        np.array([15.0, 20.0, 15.0, 20.0]),
+        1.0 / (k - 1),
+    )
+    xmax = tl.max_speed_curve(dq, ddq, vmax, amax)
+    fa, fb, ba, bb = tl._affine_steps(dq, ddq, amax, ds)
+    backward, forward = list(range(k - 1, -1, -1)), list(range(k))
+    reach = tl._min_affine_scan(ba, bb, xmax, backward)
+    x = tl._min_affine_scan(fa, fb, reach, forward)
+    for r in range(rows):
+        np.testing.assert_array_equal(tl._scan_floats(ba[r], bb[r], xmax[r], backward), reach[r])
+        np.testing.assert_array_equal(tl._scan_floats(fa[r], fb[r], reach[r], forward), x[r])
+    # The jump is exercised: most forward steps ride their bound, and some do not.
+    on = x[:, 1:] == reach[:, 1:]
+    assert 0.5 < on.mean() < 1.0

@@ -3,6 +3,7 @@ alternating in CPU time, by part, and ``time_swings`` of a batch. Method: docs/b
 
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 
@@ -17,29 +18,38 @@ OPTIONS = (
     ("--batch", "batch", "swings timed in one time_swings call"),
     ("--rate", "rate", "control rate, Hz"),
 )
-# The timing's parts: the jaxexo.swing.timing functions each one's CPU time is read from (the
-# joint samples are made before the chunks, the splines in each).
+# The timing's stages: the jaxexo.swing.timing functions (module globals, so wrapping them there
+# reaches every call) each one's CPU time is read from, exclusive of the stages nested in it (the
+# passes call the check). "other": the rest of time_swing (inputs, curves, records).
 PARTS = {
-    "paths": ("_joint_samples", "_joint_paths"),
-    "passes": ("_run_passes",),
-    "checks": ("_path_checks",),
+    "path": ("_joint_samples", "_joint_paths"),
+    "passes": ("_run_passes", "lowered_cap"),
+    "check": ("with_checks",),
+    "final law": ("final_law",),
     "samples": ("_samples",),
+    "verdict": ("_path_checks", "_curve_verdict"),
 }
+STAGES = (*PARTS, "other")
 _FUNCTIONS = {n: k for k, names in PARTS.items() for n in names}
 
 
 def _split_timing(swing_timing):
-    """Wrap the timing's parts to accumulate their CPU time (restored by the returned undo)."""
+    """Wrap the timing's stages to accumulate their exclusive CPU time (restored by the returned
+    undo)."""
     acc = dict.fromkeys(PARTS, 0.0)
     saved = {n: getattr(swing_timing, n) for n in _FUNCTIONS}
+    nested = [0.0]  # CPU time of wrapped calls inside the running one
 
     def wrap(key, fn):
         def inner(*a, **k):
+            outer, nested[0] = nested[0], 0.0
             t0 = time.process_time()
             try:
                 return fn(*a, **k)
             finally:
-                acc[key] += time.process_time() - t0
+                spent = time.process_time() - t0
+                acc[key] += spent - nested[0]
+                nested[0] = outer + spent
 
         return inner
 
@@ -51,6 +61,18 @@ def _split_timing(swing_timing):
             setattr(swing_timing, n, saved[n])
 
     return acc, undo
+
+
+def _staged(swing_timing, fn) -> tuple[float, dict]:
+    """CPU seconds of fn() and their split by stage (``STAGES``)."""
+    acc, undo = _split_timing(swing_timing)
+    try:
+        t0 = time.process_time()
+        fn()
+        total = time.process_time() - t0
+    finally:
+        undo()
+    return total, acc | {"other": total - sum(acc.values())}
 
 
 def rate_table(rl, cf, n: int) -> list[dict]:
@@ -80,23 +102,21 @@ def rate_table(rl, cf, n: int) -> list[dict]:
 
 
 def _per_swing(gens, sc, cfg, rate: float, swing_timing) -> dict:
-    """Per scene, both generators alternating: generate + time_swing CPU ms, and the parts."""
+    """Per scene, both generators alternating: generate + time_swing CPU ms, and time_swing's
+    stages (mean ms)."""
     total = {k: [] for k in gens}
     gen_ms = {k: [] for k in gens}
-    parts = {name: dict.fromkeys(PARTS, 0.0) for name in gens}
+    parts = {name: dict.fromkeys(STAGES, 0.0) for name in gens}
     for s in sc:
         for name, g in gens.items():
-            acc, undo = _split_timing(swing_timing)
-            try:
-                t0 = time.process_time()
-                traj = g(s)
-                t1 = time.process_time()
-                swing_timing.time_swing(traj, cfg, rate=rate)
-                t2 = time.process_time()
-            finally:
-                undo()
-            total[name].append(1e3 * (t2 - t0))
-            gen_ms[name].append(1e3 * (t1 - t0))
+            t0 = time.process_time()
+            traj = g(s)
+            gen = time.process_time() - t0
+            timed, acc = _staged(
+                swing_timing, lambda: swing_timing.time_swing(traj, cfg, rate=rate)
+            )
+            total[name].append(1e3 * (gen + timed))
+            gen_ms[name].append(1e3 * gen)
             for k, v in acc.items():
                 parts[name][k] += 1e3 * v / len(sc)
     ready = {k: Summary.of(v) for k, v in total.items()}
@@ -119,6 +139,7 @@ def run_device_ready_benchmark(
     from jaxexo.inference.scenarios import safety_scenarios
     from jaxexo.swing import timing as swing_timing
 
+    load_before = _load()
     rl = TrajectoryGenerator.load(policy)
     cfg = rl.config
     cf = CFFTG(cfg)
@@ -130,28 +151,48 @@ def run_device_ready_benchmark(
     }
     for g in gens.values():  # warm caches (config scalars, smoothing bases)
         swing_timing.time_swing(g(sc[0]), cfg, rate=rate)
+    # Every scene generated once first: a scene's first generation compiles for its shapes (on
+    # threads whose CPU time the process time counts), which the first rate measured would carry.
+    for s in sc:
+        for g in gens.values():
+            g(s)
     rates = sorted({float(rate), 1000.0})
     by_rate = {f"{r:g}": _per_swing(gens, sc, cfg, r, swing_timing) for r in rates}
     trajs = [gens["rl"](s) for s in (sc * (batch // len(sc) + 1))[:batch]]
-    batch_s = {}
+    batch_s, batch_cpu, batch_parts = {}, {}, {}
     for r in rates:
         t0 = time.perf_counter()
-        swing_timing.time_swings(trajs, cfg, rate=r)
+        cpu, acc = _staged(swing_timing, lambda: swing_timing.time_swings(trajs, cfg, rate=r))
         batch_s[f"{r:g}"] = time.perf_counter() - t0
+        batch_cpu[f"{r:g}"], batch_parts[f"{r:g}"] = cpu, acc
     payload = {
         "policy": str(policy),
         "n": len(sc),
         "scenes": "unseen shapes (safety_scenarios unseen=True)",
         "by_rate_hz": by_rate,
-        "time_swings_batch": {"n": batch, "seconds_by_rate_hz": batch_s},
+        "time_swings_batch": {
+            "n": batch,
+            "seconds_by_rate_hz": batch_s,
+            "cpu_seconds_by_rate_hz": batch_cpu,
+            "stages_cpu_s_by_rate_hz": batch_parts,
+        },
         "durations_by_rate": rate_table(rl, cf, n),
         "targets": TARGETS,
         "machine": machine_info(),
+        # 1/5/15-minute load averages (os.getloadavg) at the start and the end: a shared machine
+        "load_average": {"start": load_before, "end": _load()},
     }
     md = _markdown(payload, policy)
     write_result("device_ready", payload, md, out_dir)
     print(md)
     return payload
+
+
+def _load() -> list[float] | None:
+    try:
+        return [round(x, 2) for x in os.getloadavg()]
+    except (AttributeError, OSError):  # not on this platform
+        return None
 
 
 def _markdown(payload: dict, policy) -> str:
@@ -161,8 +202,9 @@ def _markdown(payload: dict, policy) -> str:
         "",
         f"Policy `{policy}`; {payload['n']} unseen-shape scenes, both generators alternating scene "
         f"by scene in one process; CPU ms per swing (process time); machine: {m['cpu']}, "
-        f"{m['cores']} cores; other jobs may have run. The time law is the passes with their check "
-        "on the curve.",
+        f"{m['cores']} cores; other jobs may have run (load average 1/5/15 min: "
+        f"{payload['load_average']['start']} at the start, {payload['load_average']['end']} at "
+        "the end). The time law is the passes with their check on the curve.",
         "",
         *table(
             RATE_HEADER, [_rate_cells(r, f, k) for r, f in by_rate.items() for k in gens], "rlrrrl"
@@ -179,7 +221,15 @@ def _markdown(payload: dict, policy) -> str:
         "",
         f"time_swings of {b['n']} RL swings: "
         + ", ".join(f"{v:.2f} s at {k} Hz" for k, v in b["seconds_by_rate_hz"].items())
-        + f" (target <= {TARGETS['batch_1000_s']} s).",
+        + f" (target <= {TARGETS['batch_1000_s']} s). CPU s by stage ("
+        + " / ".join(STAGES)
+        + "): "
+        + "; ".join(
+            f"{k} Hz {b['cpu_seconds_by_rate_hz'][k]:.2f} = "
+            + " / ".join(f"{v[x]:.2f}" for x in STAGES)
+            for k, v in b["stages_cpu_s_by_rate_hz"].items()
+        )
+        + ".",
         "",
         "Timed swings (safe swings of each generator, RL alone) at 100 Hz and 1 kHz: duration "
         "median and p95 (s), the 1 kHz / 100 Hz ratio of each, and the shares within the limits on "
@@ -192,7 +242,7 @@ def _markdown(payload: dict, policy) -> str:
 
 RATE_HEADER = (
     *("rate Hz", "generator", "device-ready median ms", "p95 ms", "of which generate (median)"),
-    "timing parts (mean ms): paths / time law (passes + curve check) / path checks / samples",
+    "time_swing by stage (mean ms): " + " / ".join(STAGES),
 )
 DURATION_HEADER = (
     *("set", "generator", "n", "median 100 Hz", "p95 100 Hz", "median 1 kHz", "p95 1 kHz"),
@@ -204,7 +254,7 @@ def _rate_cells(r: str, f: dict, k: str) -> tuple[str, ...]:
     """Rate ``r``'s row of generator ``k``: device-ready median and p95, generate, the parts (ms)."""
     p = f["timing_parts_ms_mean"][k]
     ms = (f["device_ready_ms_median"][k], f["device_ready_ms_p95"][k], f["generate_ms_median"][k])
-    return (r, k, *(f"{x:.2f}" for x in ms), " / ".join(f"{p[x]:.2f}" for x in PARTS))
+    return (r, k, *(f"{x:.2f}" for x in ms), " / ".join(f"{p[x]:.2f}" for x in STAGES))
 
 
 def _duration_cells(r: dict) -> tuple[str, ...]:

@@ -220,10 +220,11 @@ def process_memory_bytes() -> int | None:
     except ImportError:  # not on this platform: the machine's figure alone
         resource = None
     if resource is not None:
-        sizes = _process_sizes()
+        sizes = None  # read only under a limit (/proc/self/status: a third of this call's cost)
         for limit, used in ((resource.RLIMIT_AS, "VmSize"), (resource.RLIMIT_DATA, "VmData")):
             soft = resource.getrlimit(limit)[0]
             if soft != resource.RLIM_INFINITY and soft >= 0:
+                sizes = _process_sizes() if sizes is None else sizes
                 room.append(max(0, soft - sizes.get(used, 0)))
     cap, used = _cgroup_memory()
     room.append(None if cap is None else max(0, cap - used))

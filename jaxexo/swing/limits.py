@@ -17,6 +17,7 @@ import numpy as np
 
 from jaxexo.config import MAX_SWING_DURATION, MAX_TRACKING_HEADROOM
 from jaxexo.swing.export import JOINT_NAMES
+from jaxexo.swing.time_law import lane_max, lane_min
 
 
 @dataclass(frozen=True)
@@ -51,7 +52,7 @@ class JointVelocity:
         adq = np.abs(view.dq)
         with np.errstate(divide="ignore"):
             cap = np.where(adq > 1e-12, (self.limit / np.maximum(adq, 1e-300)) ** 2, np.inf)
-        return PathBounds(x_cap=cap.min(axis=-1))
+        return PathBounds(x_cap=lane_min(cap))
 
     def value(self, derivs) -> np.ndarray:
         return derivs[1]
@@ -93,7 +94,7 @@ def speed_ratio(constraints, derivs) -> np.ndarray:
     the joints' [q, q-dot, q-ddot, q-dddot] (n, J) each: max (|value| / limit)^(1 / power)."""
     r = np.zeros(len(derivs[0]))
     for c in constraints:
-        x = (np.abs(c.value(derivs)) / c.limit).max(axis=1)
+        x = lane_max(np.abs(c.value(derivs)) / c.limit)
         r = np.maximum(r, x if c.power == 1.0 else x ** (1.0 / c.power))
     return r
 

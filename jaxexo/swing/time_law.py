@@ -5,10 +5,24 @@ the smoothed time law s(t). The method: docs/device-timing.md (how the timing is
 
 from __future__ import annotations
 
+from functools import reduce
+
 import numpy as np
 
 SCALAR_ROWS = 24  # batches up to this size scan row by row as Python floats (faster there)
 X_CAP = 1e6  # 1/s^2: cap on s'^2 where no joint moves (s' <= 1000 /s)
+
+
+def lane_min(x: np.ndarray) -> np.ndarray:
+    """``x.min(axis=-1)`` over a short last axis (the joints), column by column: the same values
+    (a minimum is exact, in any order; NaN propagates either way), where NumPy's reduction across
+    a short row costs many times more."""
+    return reduce(np.minimum, (x[..., j] for j in range(x.shape[-1])))
+
+
+def lane_max(x: np.ndarray) -> np.ndarray:
+    """``x.max(axis=-1)`` over a short last axis, column by column (``lane_min``)."""
+    return reduce(np.maximum, (x[..., j] for j in range(x.shape[-1])))
 
 
 # --------------------------------------------------------------------------------------------
@@ -24,7 +38,7 @@ def _accel_bounds(dq, ddq, amax, x):
     lo = (-amax - ddq * x[..., None]) / safe
     hi = (amax - ddq * x[..., None]) / safe
     lo, hi = np.minimum(lo, hi), np.maximum(lo, hi)
-    return (np.where(moving, lo, -np.inf).max(axis=-1), np.where(moving, hi, np.inf).min(axis=-1))
+    return lane_max(np.where(moving, lo, -np.inf)), lane_min(np.where(moving, hi, np.inf))
 
 
 def max_speed_curve(
@@ -36,18 +50,18 @@ def max_speed_curve(
     adq = np.abs(dq)
     moving = adq > 1e-12
     with np.errstate(divide="ignore"):
-        x_vel = np.where(moving, (vmax / np.where(moving, adq, 1.0)) ** 2, np.inf).min(axis=-1)
+        x_vel = lane_min(np.where(moving, (vmax / np.where(moving, adq, 1.0)) ** 2, np.inf))
         # Joints that do not move: |q'' x| <= a.
-        still = np.where(
-            ~moving & (np.abs(ddq) > 0), amax / np.abs(np.where(moving, 1.0, ddq)), np.inf
-        ).min(axis=-1)
+        still = lane_min(
+            np.where(~moving & (np.abs(ddq) > 0), amax / np.abs(np.where(moving, 1.0, ddq)), np.inf)
+        )
         # L_j(x) = -a_j/|q'_j| - (q''_j/q'_j) x, U_k(x) = a_k/|q'_k| - (q''_k/q'_k) x.
         r = np.where(moving, amax / np.where(moving, adq, 1.0), np.inf)
         c = np.where(moving, ddq / np.where(moving, dq, 1.0), 0.0)
         slope = c[..., None, :] - c[..., :, None]  # (..., j, k): (c_k - c_j) x <= r_j + r_k
         room = r[..., :, None] + r[..., None, :]
-        x_acc = np.where(slope > 0, room / np.where(slope > 0, slope, 1.0), np.inf).min(
-            axis=(-1, -2)
+        x_acc = lane_min(
+            lane_min(np.where(slope > 0, room / np.where(slope > 0, slope, 1.0), np.inf))
         )
     return np.minimum(np.minimum(x_vel, still), np.minimum(x_acc, X_CAP))
 
@@ -63,23 +77,55 @@ def _affine_steps(dq, ddq, amax, ds):
     return 1.0 - 2.0 * ds * c, 2.0 * ds * r, 1.0 + 2.0 * ds * c, 2.0 * ds * r
 
 
-def _scan_floats(a, b, bound, order) -> list:
-    """One path's scan (K, J) as Python floats (``_min_affine_scan``)."""
+def _from_bound(a, b, bound):
+    """Per step of a scan in order (a, b (K, J), bound (K,)): where a step from x = bound[p] lands
+    (clipped as the scan clips), and whether that table may stand for the step (no NaN: the scan's
+    comparisons skip a NaN, a minimum does not). Column by column: a reduction across a short row
+    is several times slower in NumPy, and a minimum is the same in any order."""
+    t = a[:-1] * bound[:-1, None] + b[:-1]
+    y = bound[1:]
+    for j in range(t.shape[1]):
+        y = np.minimum(y, t[:, j])
+    return np.where(y > 0.0, y, 0.0), ~np.isnan(y)
+
+
+def _scan_floats(a, b, bound, order) -> np.ndarray:
+    """One path's scan (K, J) as Python floats (``_min_affine_scan``). A step from a point on its
+    bound lands where ``_from_bound`` says, so a run of such steps that each land on their bound
+    again (the passes riding the limit curve: two steps in three) is jumped over in one slice."""
     k, nj = a.shape
-    ub = bound.tolist()
+    order = np.asarray(order)
+    a, b, bound = a[order], b[order], bound[order]  # in scan order: position p steps to p + 1
+    fb, usable = _from_bound(a, b, bound)
+    chain = usable & (fb == bound[1:])
+    # Per position, the first position at or after it whose step leaves the bound (or k - 1).
+    breaks = np.append(np.flatnonzero(~chain), k - 1)
+    next_break = breaks[np.searchsorted(breaks, np.arange(k - 1))].tolist()
+    ub, fb, chain, usable = bound.tolist(), fb.tolist(), chain.tolist(), usable.tolist()
+    af, bf = a.ravel().tolist(), b.ravel().tolist()  # flat: row p is [p * nj, (p + 1) * nj)
     out = [0.0] * k
     xi = 0.0
-    rows = list(zip(a.tolist(), b.tolist()))
-    for src, dst in zip(order[:-1], order[1:]):
-        y = ub[dst]
-        ra, rb = rows[src]
-        for j in range(nj):
-            t = ra[j] * xi + rb[j]
-            if t < y:
-                y = t
-        xi = y if y > 0.0 else 0.0
-        out[dst] = xi
-    return out
+    p = 0
+    while p < k - 1:
+        if xi == ub[p] and usable[p]:
+            if chain[p]:
+                q = next_break[p]  # steps p .. q - 1 each land on their bound
+                out[p + 1 : q + 1] = ub[p + 1 : q + 1]
+                xi, p = ub[q], q
+                continue
+            xi = fb[p]
+        else:
+            y = ub[p + 1]
+            for j in range(p * nj, (p + 1) * nj):
+                t = af[j] * xi + bf[j]
+                if t < y:
+                    y = t
+            xi = y if y > 0.0 else 0.0
+        p += 1
+        out[p] = xi
+    res = np.empty(k)
+    res[order] = out
+    return res
 
 
 def _min_affine_scan(a, b, bound, order):

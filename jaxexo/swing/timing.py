@@ -198,6 +198,26 @@ def _scalars(config):
     return scalar_params(config)
 
 
+@functools.lru_cache(maxsize=8)
+def _config_limits(config) -> DeviceLimits:
+    """DeviceLimits.from_config, kept (a frozen config, frozen limits: building and validating
+    them cost as much as a tenth of a swing's passes)."""
+    return DeviceLimits.from_config(config)
+
+
+@functools.lru_cache(maxsize=8)
+def _planned(device: DeviceLimits):
+    """What a swing is timed against, kept per (frozen) limits: the planned limits, the time law's
+    window, the passes' and the check's constraints."""
+    planned = device.planned()
+    return (
+        planned,
+        blend_window(planned),
+        planned.constraints(SAFETY),
+        planned.constraints(1.0 - CHECK_MARGIN),
+    )
+
+
 def _on_floor(points: np.ndarray) -> None:
     """Heights (points[:, 1]) within GROUND_ROUNDING of the floor set to it, in place: the forward
     kinematics' rounding, not a motion."""
@@ -252,7 +272,7 @@ def _checked_inputs(trajs, config, rate, limits):
             f"config: expected a jaxexo Config (the generator's .config), got {type(config).__name__}"
         )
     rate = check_rate(config.device.control_rate if rate is None else rate)
-    limits = DeviceLimits.from_config(config) if limits is None else limits
+    limits = _config_limits(config) if limits is None else limits
     if not isinstance(limits, DeviceLimits):
         raise ValueError(f"limits: expected a DeviceLimits, got {type(limits).__name__}")
     for i, t in enumerate(trajs):
@@ -323,10 +343,7 @@ def _chunks(sizes) -> list[range]:
 
 def _time_chunk(trajs, sp, rate: float, device: DeviceLimits, qs) -> list[TimedSwing]:
     """``time_swings`` of a few swings, checked, in one batch."""
-    planned = device.planned()
-    window = blend_window(planned)
-    passes = planned.constraints(SAFETY)
-    check = planned.constraints(1.0 - CHECK_MARGIN)
+    planned, window, passes, check = _planned(device)
     plans = _joint_paths(trajs, sp, qs)
     plans = _run_passes(plans, range(len(plans)), passes, window)
     t_opt = [p.law.duration for p in plans]
@@ -345,12 +362,13 @@ def _time_chunk(trajs, sp, rate: float, device: DeviceLimits, qs) -> list[TimedS
             break
         plans = _run_passes(plans, redo, passes, window)
     checks = _path_checks(trajs, plans, sp)
-    finals = [final_law(p, planned, rate, t) for p, t in zip(plans, t_opt)]
+    most = max_samples()  # once per batch: it reads a few /proc files
+    finals = [final_law(p, planned, rate, t, most) for p, t in zip(plans, t_opt)]
     curves = [
         SwingCurve(p.path, f.law, float(t.scene.pivot_y), (sp.thigh, sp.shin), sp.foot_length)
         for t, p, f in zip(trajs, plans, finals)
     ]
-    samples = _samples(curves, rate)
+    samples = _samples(curves, rate, most)
     return [
         _timed(
             trajs[i],
@@ -375,7 +393,7 @@ def _joint_samples(sp, traj) -> np.ndarray:
     heel = np.asarray(traj.heel, np.float64)
     # A dense path (n_points in the thousands) is thinned first (curve.MAX_PATH_SAMPLES).
     keep = thinned(len(q))
-    q, heel = q[keep], heel[keep]
+    q, heel = np.take(q, keep, axis=0), np.take(heel, keep, axis=0)  # rows (take: no fancy index)
     step = np.linalg.norm(np.diff(q, axis=0), axis=1)
     moving = step[step > 0]
     long = np.flatnonzero(step > REFINE * np.median(moving)) if moving.size else []
@@ -405,7 +423,7 @@ def _joint_paths(trajs, sp, samples=None) -> list[Plan]:
     qs, knots = [], []
     for j, t in enumerate(trajs):
         q = _joint_samples(sp, t) if samples is None else samples[j]
-        q = q[distinct_samples(q)]
+        q = np.take(q, distinct_samples(q), axis=0)
         qs.append(q)
         knots.append(chord_knots(q))
     paths: list = [None] * len(trajs)
@@ -558,16 +576,17 @@ class _Samples:
         }
 
 
-def _samples(curves, rate: float) -> list[_Samples]:
+def _samples(curves, rate: float, most: int | None = None) -> list[_Samples]:
     """Each curve's samples at ``rate``: t = k / rate from 0 to the first period at or after
-    touch-down (all curves in one evaluation)."""
+    touch-down (all curves in one evaluation); ``most``: ``max_samples()`` when known."""
+    most = max_samples() if most is None else most
     times = []
     for c in curves:
         periods = max(2, math.ceil(c.duration * rate - 1e-9))
-        if not periods < max_samples():
+        if not periods < most:
             raise ValueError(
                 f"rate: a {c.duration:.4g} s swing at {rate:g} Hz needs {periods} samples, more "
-                f"than half the memory this process may use holds ({max_samples()}); lower the rate"
+                f"than half the memory this process may use holds ({most}); lower the rate"
             )
         times.append(np.arange(periods + 1) / rate)
     # the last sample is at or after touch-down: the legs at rest in the landing pose
