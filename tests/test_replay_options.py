@@ -125,9 +125,9 @@ def test_a_swing_is_timed_only_with_the_legs_it_was_made_for():
     traj = CFFTG(cfg).generate(Obstacle.named("base1"))
     assert time_swing(traj, cfg).ok
     with pytest.raises(ValueError, match=r"config: kinematics.thigh = 0.45 m, but trajs\[0\] was "
-                       r"made for legs with thigh 0.5 m"):  # fmt: skip
+                       r"made for legs with kinematics.thigh = 0.5 m"):  # fmt: skip
         time_swing(traj, with_legs(cfg, thigh=0.45))
     with pytest.raises(ValueError, match=r"kinematics.foot_length = 0.3 m, but trajs\[1\] was "
-                       r"made for legs with foot_length 0.2 m"):  # fmt: skip
+                       r"made for legs with kinematics.foot_length = 0.2 m"):  # fmt: skip
         time_swings([CFFTG(with_legs(cfg, foot_length=0.3)).generate(Obstacle.named("base1")),
                      traj], with_legs(cfg, foot_length=0.3))  # fmt: skip

@@ -175,6 +175,19 @@ class KinematicsConfig:
         out = [(f, float(getattr(self, f)), float(legs[f])) for f in LEG_FIELDS]
         return [(f, a, b) for f, a, b in out if not abs(a - b) <= 1e-6]
 
+    def check_legs(self, legs: dict, made_for: str, advice: str) -> None:
+        """ValueError naming each ``differing_legs`` field with both values: "config: kinematics.thigh
+        = 0.45 m, but ``made_for`` kinematics.thigh = 0.5 m; ``advice``"."""
+        bad = self.differing_legs(legs)
+        if bad:
+            raise ValueError(
+                "config: "
+                + ", ".join(f"kinematics.{f} = {a:g} m" for f, a, _ in bad)
+                + f", but {made_for} "
+                + ", ".join(f"kinematics.{f} = {b:.6g} m" for f, _, b in bad)
+                + f"; {advice}"
+            )
+
 
 # The legs' lengths in [kinematics] (KinematicsConfig.differing_legs).
 LEG_FIELDS = ("thigh", "shin", "foot_length")

@@ -21,16 +21,12 @@ def check_policy_legs(policy: QPolicy, config, source: str) -> None:
     if not isinstance(meta, dict) or "config_toml" not in meta:
         return
     trained = policy_config(meta, source).kinematics
-    bad = config.kinematics.differing_legs({f: getattr(trained, f) for f in LEG_FIELDS})
-    if bad:
-        raise ValueError(
-            "config: "
-            + ", ".join(f"kinematics.{f} = {a:g} m" for f, a, _ in bad)
-            + f", but the policy {source} was trained with "
-            + ", ".join(f"kinematics.{f} = {b:g} m" for f, _, b in bad)
-            + "; a policy drives only the legs it was trained for: use its own config "
-            "(TrajectoryGenerator.load), or train one for these legs"
-        )
+    config.kinematics.check_legs(
+        {f: getattr(trained, f) for f in LEG_FIELDS},
+        f"the policy {source} was trained with",
+        "a policy drives only the legs it was trained for: use its own config "
+        "(TrajectoryGenerator.load), or train one for these legs",
+    )
 
 
 def load_checked(path: str | Path) -> tuple[QPolicy, object]:

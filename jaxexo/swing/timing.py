@@ -299,15 +299,11 @@ def _check_legs(traj, config, where: str) -> None:
         "shin": np.linalg.norm(knee - pivot),
         "foot_length": np.linalg.norm(np.asarray(traj.toe[0], float) - traj.heel[0]),
     }
-    bad = config.kinematics.differing_legs(legs)
-    if bad:
-        raise ValueError(
-            "config: "
-            + ", ".join(f"kinematics.{f} = {a:g} m" for f, a, _ in bad)
-            + f", but {where} was made for legs with "
-            + ", ".join(f"{f} {b:.6g} m" for f, _, b in bad)
-            + "; time a swing with its generator's config (generator.config)"
-        )
+    config.kinematics.check_legs(
+        legs,
+        f"{where} was made for legs with",
+        "time a swing with its generator's config (generator.config)",
+    )
 
 
 def time_swings(
