@@ -208,12 +208,16 @@ def _process_sizes() -> dict[str, int]:
     return out
 
 
-def process_memory_bytes() -> int | None:
+# What the size guards assume where no figure of this process's memory can be read.
+UNKNOWN_MEMORY = 8 * 2**30
+
+
+def process_memory_bytes() -> int:
     """The memory this process may still take (bytes): the least of the machine's available memory
     (MemAvailable; its total where that is unknown), what RLIMIT_AS and RLIMIT_DATA (``ulimit -v``,
-    ``ulimit -d``) leave above the process's present size, and what its cgroup's limit leaves; None
-    if none is known. A size guard counts this, not the machine: under a process limit the machine's
-    memory is not the process's."""
+    ``ulimit -d``) leave above the process's present size, and what its cgroup's limit leaves;
+    UNKNOWN_MEMORY if none is known. A size guard counts this, not the machine: under a process
+    limit the machine's memory is not the process's."""
     room = [_meminfo("MemAvailable") or machine_memory_bytes()]
     try:
         import resource
@@ -229,4 +233,4 @@ def process_memory_bytes() -> int | None:
     cap, used = _cgroup_memory()
     room.append(None if cap is None else max(0, cap - used))
     known = [r for r in room if r is not None]
-    return min(known) if known else None
+    return min(known) if known else UNKNOWN_MEMORY

@@ -204,7 +204,6 @@ def check_walk_size(
     from jaxexo.config.memory import process_memory_bytes
 
     room = process_memory_bytes()
-    room = 8 * 2**30 if room is None else room
     need = size.rows * row_bytes
     if need <= room // 2:
         return

@@ -280,7 +280,13 @@ def as_given(value) -> str:
     short = f"{v:g}"
     if not math.isfinite(v) or float(short) == v:
         return short
-    text = repr(v)
+    return exact_text(v)
+
+
+def exact_text(value) -> str:
+    """A float64 as the shortest text that reads back to the same bits (Python's repr), a whole
+    number without its ".0"."""
+    text = repr(float(value))
     return text[:-2] if text.endswith(".0") else text
 
 

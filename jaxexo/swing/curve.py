@@ -559,7 +559,7 @@ def _shown(v) -> str:
     return r if len(r) <= 80 else r[:77] + "..."
 
 
-def check_times(t, name: str = "t") -> np.ndarray:
+def checked_times(t, name: str = "t") -> np.ndarray:
     """Times (s) as a 1-D float64 array: a real number, or a 1-D sequence or array of real numbers,
     all finite. TypeError naming ``name`` and the value as given for a string, a bool, None or a
     complex number (NumPy would read "0.4" as 0.4 and True as 1 s); ValueError for NaN, infinities,
@@ -578,8 +578,7 @@ def check_times(t, name: str = "t") -> np.ndarray:
         raise ValueError(f"{what}, got an array of shape {arr.shape}")
     from jaxexo.config.memory import process_memory_bytes
 
-    room = process_memory_bytes()
-    most = (8 * 2**30 if room is None else room) // 2 // BYTES_PER_TIME
+    most = process_memory_bytes() // 2 // BYTES_PER_TIME
     if arr.size > most:
         raise ValueError(
             f"{name}: {arr.size} times need about {arr.size * BYTES_PER_TIME / 2**30:.3g} GiB, more "
@@ -634,9 +633,9 @@ class SwingCurve:
 
     def at(self, t) -> CurveState:
         """Every joint and the heel/toe, with their derivatives, at times t (s: a real number or a
-        1-D array of them, ``check_times``). Before the swing starts and after it lands the legs
+        1-D array of them, ``checked_times``). Before the swing starts and after it lands the legs
         rest: the end poses, every derivative zero."""
-        return curves_at([self], [check_times(t)])[0]
+        return curves_at([self], [checked_times(t)])[0]
 
     def piecewise(self) -> dict:
         """The piecewise-polynomial form for a controller that evaluates the curve itself:

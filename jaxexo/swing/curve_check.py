@@ -25,12 +25,11 @@ BYTES_PER_SAMPLE = 1024  # twice what timing holds per exported sample (docs/rel
 def max_samples() -> int:
     """The most samples one timed swing may have: half the memory this process may still use
     (jaxexo.config.memory.process_memory_bytes: the machine's available memory, ``ulimit -v`` and
-    the cgroup's limit; 8 GiB if unknown) at BYTES_PER_SAMPLE, and at least 100,000 (10 s at 10 kHz)
+    the cgroup's limit) at BYTES_PER_SAMPLE, and at least 100,000 (10 s at 10 kHz)
     where that many fit."""
     from jaxexo.config.memory import process_memory_bytes
 
     room = process_memory_bytes()
-    room = 8 * 2**30 if room is None else room
     return max(min(100_000, room // BYTES_PER_SAMPLE), room // 2 // BYTES_PER_SAMPLE)
 
 

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from jaxexo.physics.geometry import exact_text
 from jaxexo.storage.atomic import atomic_write
 
 JOINT_NAMES = ("hip_swing", "knee_swing", "hip_stance", "knee_stance")
@@ -87,12 +88,10 @@ def write_timed_csv(swing, path: str | Path | None = None) -> str:
     return write_csv(TIMED_CSV_COLUMNS, timed_table(swing), path)
 
 
-def csv_number(x) -> str:
-    """A float64 as the shortest text that reads back to the same bits (Python's repr), a whole
-    number without its ".0": finite differences of the read values at 10 kHz then hold the limits
-    as the curve does (9 digits broke the jerk limit 15-fold)."""
-    text = repr(float(x))
-    return text[:-2] if text.endswith(".0") else text
+# A CSV number (geometry.exact_text): the shortest text that reads back to the same float64, so
+# that finite differences of the read values at 10 kHz hold the limits as the curve does (9 digits
+# broke the jerk limit 15-fold).
+csv_number = exact_text
 
 
 def write_csv(columns, table: np.ndarray, path: str | Path | None = None) -> str:

@@ -82,10 +82,7 @@ def _from_bound(a, b, bound):
     (clipped as the scan clips), and whether that table may stand for the step (no NaN: the scan's
     comparisons skip a NaN, a minimum does not). Column by column: a reduction across a short row
     is several times slower in NumPy, and a minimum is the same in any order."""
-    t = a[:-1] * bound[:-1, None] + b[:-1]
-    y = bound[1:]
-    for j in range(t.shape[1]):
-        y = np.minimum(y, t[:, j])
+    y = np.minimum(bound[1:], lane_min(a[:-1] * bound[:-1, None] + b[:-1]))
     return np.where(y > 0.0, y, 0.0), ~np.isnan(y)
 
 
