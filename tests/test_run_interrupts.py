@@ -348,3 +348,27 @@ def test_the_bound_is_the_process_limit_where_one_is_set(tmp_path):
     assert_refused(r, "--memory-budget: 5GiB is more memory than this process can use (4.0 GiB, "
                    "the process's limit, ulimit -v)")  # fmt: skip
     assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("where", ["reading the command line", "running the command"])
+def test_ctrl_c_anywhere_in_main_is_one_line_and_exit_130(monkeypatch, capsys, where):
+    """A KeyboardInterrupt raised in main itself (its imports and argument parsing run before
+    train's own handling is set up; other commands have none): the one line and exit 130, not a
+    traceback. (A SIGINT that landed in main's imports once ended in Python's traceback through
+    main.)"""
+    import jaxexo.cli as cli
+
+    def interrupted(*_a, **_k):
+        raise KeyboardInterrupt
+
+    if where == "reading the command line":
+        monkeypatch.setattr(cli, "build_parser", interrupted)
+    else:
+        monkeypatch.setattr(cli.generate, "cmd_generate", interrupted)
+        monkeypatch.setattr(cli, "cmd_generate", interrupted)
+    try:
+        code = cli.main(["generate", "--method", "cfftg", "--obstacle", "base1", "--out", "x.csv"])
+    except KeyboardInterrupt:  # caught here: pytest would take it for the user's own Ctrl-C
+        pytest.fail("main let the KeyboardInterrupt through (a traceback on the command line)")
+    err = capsys.readouterr().err
+    assert code == 130 and err == "jaxexo: interrupted\n", (code, err)

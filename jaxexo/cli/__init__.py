@@ -93,6 +93,19 @@ def _warning_line(message, category, filename, lineno, file=None, line=None) -> 
 
 
 def main(argv=None) -> int:
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:
+        # Ctrl-C before a command's own handling took over (jaxexo.cli.interrupt: train's, from its
+        # first line) or in a command without one: one line, not a traceback; every file written so
+        # far is whole (jaxexo.storage.atomic removes its temporary file on any exception).
+        from jaxexo.cli.interrupt import EXIT_CODE
+
+        print("jaxexo: interrupted", file=sys.stderr)
+        return EXIT_CODE
+
+
+def _main(argv) -> int:
     import warnings
 
     args = build_parser().parse_args(argv)
