@@ -11,7 +11,15 @@ import numpy as np
 
 from jaxexo.summary import Summary, table
 
-TARGETS = {"rl_device_ready_ms": 4.0, "rl_over_cfftg": 1.5, "batch_1000_s": 1.0}
+# Issue 58's targets: time_swing alone per swing (ms, both generators) by rate, the device-ready
+# swing (generate + time_swing at 100 Hz), generate alone RL / CFFTG, time_swings of 1000 by rate.
+TARGETS = {
+    "time_swing_ms": {"100": 1.5, "1000": 2.0},
+    "rl_device_ready_ms": 4.0,
+    "rl_over_cfftg": 1.3,
+    "rl_generate_over_cfftg": 2.0,
+    "batch_1000_s": {"100": 1.0, "1000": 1.5},
+}
 # benchmarks/bench_device_ready.py's options (jaxexo.benchmarks.runner.run_script).
 OPTIONS = (
     ("--n", "n", "unseen-shape scenes"),
@@ -80,6 +88,7 @@ def rate_table(rl, cf, n: int) -> list[dict]:
     from jaxexo.benchmarks.scenes import batch_kwargs, safety_sets
     from jaxexo.swing.timing import time_swings
 
+    optimum = _optimum()
     rows = []
     for name, scenes in safety_sets(rl.config, n).items():
         obs, kw = [s["obstacle"] for s in scenes], batch_kwargs(scenes)
@@ -94,6 +103,9 @@ def rate_table(rl, cf, n: int) -> list[dict]:
                 timed = time_swings(safe, rl.config, rate=float(r))
                 d = Summary.of([t.duration for t in timed])
                 row[f"median_{r}"], row[f"p95_{r}"] = d.median, d.p95
+                if optimum is not None:
+                    o = Summary.of([t.duration / optimum(t) for t in timed])
+                    row[f"optimum_median_{r}"], row[f"optimum_max_{r}"] = o.median, o.max
                 if r == 1000:
                     row["within"] = float(np.mean([t.within_limits for t in timed]))
                     row["safe"] = float(np.mean([t.ok for t in timed]))
@@ -101,11 +113,24 @@ def rate_table(rl, cf, n: int) -> list[dict]:
     return rows
 
 
+def _optimum():
+    """toppra's velocity-acceleration optimum of a timed swing (jaxexo.benchmarks.toppra_reference),
+    or None where toppra is not installed (the bench extra installs it)."""
+    try:
+        import toppra  # noqa: F401
+    except ImportError:
+        return None
+    from jaxexo.benchmarks.toppra_reference import va_optimum
+
+    return va_optimum
+
+
 def _per_swing(gens, sc, cfg, rate: float, swing_timing) -> dict:
     """Per scene, both generators alternating: generate + time_swing CPU ms, and time_swing's
     stages (mean ms)."""
     total = {k: [] for k in gens}
     gen_ms = {k: [] for k in gens}
+    timing_ms = {k: [] for k in gens}
     parts = {name: dict.fromkeys(STAGES, 0.0) for name in gens}
     for s in sc:
         for name, g in gens.items():
@@ -117,13 +142,17 @@ def _per_swing(gens, sc, cfg, rate: float, swing_timing) -> dict:
             )
             total[name].append(1e3 * (gen + timed))
             gen_ms[name].append(1e3 * gen)
+            timing_ms[name].append(1e3 * timed)
             for k, v in acc.items():
                 parts[name][k] += 1e3 * v / len(sc)
     ready = {k: Summary.of(v) for k, v in total.items()}
+    gen = {k: Summary.of(v) for k, v in gen_ms.items()}
     return {
         "device_ready_ms_median": {k: v.median for k, v in ready.items()},
         "device_ready_ms_p95": {k: v.p95 for k, v in ready.items()},
-        "generate_ms_median": {k: Summary.of(v).median for k, v in gen_ms.items()},
+        "generate_ms_median": {k: v.median for k, v in gen.items()},
+        "time_swing_ms_median": {k: Summary.of(v).median for k, v in timing_ms.items()},
+        "rl_generate_over_cfftg": gen["rl"].over(gen["cfftg"]).median,
         "timing_parts_ms_mean": parts,
         "rl_over_cfftg": ready["rl"].over(ready["cfftg"]).median,
     }
@@ -207,21 +236,19 @@ def _markdown(payload: dict, policy) -> str:
         "the end). The time law is the passes with their check on the curve.",
         "",
         *table(
-            RATE_HEADER, [_rate_cells(r, f, k) for r, f in by_rate.items() for k in gens], "rlrrrl"
+            RATE_HEADER, [_rate_cells(r, f, k) for r, f in by_rate.items() for k in gens], "rlrrrrl"
         ),
         "",
-    ] + [
-        f"{r} Hz: RL / CFFTG device-ready median **{f['rl_over_cfftg']:.2f}** (target <= "
-        f"{TARGETS['rl_over_cfftg']}); RL median {f['device_ready_ms_median']['rl']:.2f} ms "
-        f"(target <= {TARGETS['rl_device_ready_ms']} ms)."
-        for r, f in payload["by_rate_hz"].items()
-    ]
+    ] + [_rate_line(r, f) for r, f in by_rate.items()]
     b = payload["time_swings_batch"]
     lines += [
         "",
         f"time_swings of {b['n']} RL swings: "
-        + ", ".join(f"{v:.2f} s at {k} Hz" for k, v in b["seconds_by_rate_hz"].items())
-        + f" (target <= {TARGETS['batch_1000_s']} s). CPU s by stage ("
+        + ", ".join(
+            f"{v:.2f} s at {k} Hz (target <= {TARGETS['batch_1000_s'].get(k, float('nan'))} s)"
+            for k, v in b["seconds_by_rate_hz"].items()
+        )
+        + ". CPU s by stage ("
         + " / ".join(STAGES)
         + "): "
         + "; ".join(
@@ -232,28 +259,52 @@ def _markdown(payload: dict, policy) -> str:
         + ".",
         "",
         "Timed swings (safe swings of each generator, RL alone) at 100 Hz and 1 kHz: duration "
-        "median and p95 (s), the 1 kHz / 100 Hz ratio of each, and the shares within the limits on "
-        "the curve and safe.",
+        "median and p95 (s), the 1 kHz / 100 Hz ratio of each, the duration over toppra's "
+        "velocity-acceleration optimum on the same joint path at the same (planned) limits "
+        "(median and largest; jaxexo.benchmarks.toppra_reference; n/a without toppra), and the "
+        "shares within the limits on the curve and safe.",
         "",
-        *table(DURATION_HEADER, map(_duration_cells, payload["durations_by_rate"]), "ll" + "r" * 9),
+        *table(
+            DURATION_HEADER, map(_duration_cells, payload["durations_by_rate"]), "ll" + "r" * 13
+        ),
     ]
     return "\n".join(lines + [""])
 
 
 RATE_HEADER = (
     *("rate Hz", "generator", "device-ready median ms", "p95 ms", "of which generate (median)"),
+    "time_swing alone (median)",
     "time_swing by stage (mean ms): " + " / ".join(STAGES),
 )
 DURATION_HEADER = (
     *("set", "generator", "n", "median 100 Hz", "p95 100 Hz", "median 1 kHz", "p95 1 kHz"),
-    *("ratio median", "ratio p95", "within", "safe"),
+    *("ratio median", "ratio p95"),
+    *("/ optimum 100 Hz median", "max", "/ optimum 1 kHz median", "max"),
+    *("within", "safe"),
 )
+
+
+def _rate_line(r: str, f: dict) -> str:
+    """Rate ``r``'s figures against their targets."""
+    t, ms = TARGETS, f["time_swing_ms_median"]
+    return (
+        f"{r} Hz: time_swing alone median RL {ms['rl']:.2f} ms, CFFTG {ms['cfftg']:.2f} ms (target "
+        f"<= {t['time_swing_ms'].get(r, float('nan'))} ms); device-ready RL median "
+        f"{f['device_ready_ms_median']['rl']:.2f} ms (target <= {t['rl_device_ready_ms']} ms), "
+        f"RL / CFFTG **{f['rl_over_cfftg']:.2f}** (target <= {t['rl_over_cfftg']}); generate "
+        f"RL / CFFTG {f['rl_generate_over_cfftg']:.2f} (target <= {t['rl_generate_over_cfftg']})."
+    )
 
 
 def _rate_cells(r: str, f: dict, k: str) -> tuple[str, ...]:
     """Rate ``r``'s row of generator ``k``: device-ready median and p95, generate, the parts (ms)."""
     p = f["timing_parts_ms_mean"][k]
-    ms = (f["device_ready_ms_median"][k], f["device_ready_ms_p95"][k], f["generate_ms_median"][k])
+    ms = (
+        f["device_ready_ms_median"][k],
+        f["device_ready_ms_p95"][k],
+        f["generate_ms_median"][k],
+        f["time_swing_ms_median"][k],
+    )
     return (r, k, *(f"{x:.2f}" for x in ms), " / ".join(f"{p[x]:.2f}" for x in STAGES))
 
 
@@ -265,5 +316,14 @@ def _duration_cells(r: dict) -> tuple[str, ...]:
         *(r["set"], r["generator"], str(r["n"])),
         *(f"{x:.3f}" for x in d),
         *(f"{x:.4f}" for x in ratios),
+        *(
+            f"{r[k]:.3f}" if k in r else "n/a"
+            for k in (
+                "optimum_median_100",
+                "optimum_max_100",
+                "optimum_median_1000",
+                "optimum_max_1000",
+            )
+        ),
         *(f"{r[k]:.3f}" for k in ("within", "safe")),
     )
