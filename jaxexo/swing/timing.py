@@ -189,6 +189,24 @@ def blend_window(limits: DeviceLimits) -> float:
     return max(BLEND_S, max(a / j for a, j in zip(limits.acceleration, limits.jerk)))
 
 
+def _kept(fn):
+    """``fn`` (an lru_cache of one frozen argument) with its last argument's result kept by
+    identity: hashing a frozen config or limits costs a few microseconds a swing, and a caller
+    times its swings with one config."""
+    last = [(object(), None)]  # one tuple, swapped whole: a reader never sees half an update
+
+    @functools.wraps(fn)
+    def get(arg):
+        key, value = last[0]
+        if key is not arg:
+            value = fn(arg)
+            last[0] = (arg, value)
+        return value
+
+    return get
+
+
+@_kept
 @functools.lru_cache(maxsize=8)
 def _scalars(config):
     """scalar_params of a config, kept: a config is frozen, and the view costs as much as timing a
@@ -198,6 +216,7 @@ def _scalars(config):
     return scalar_params(config)
 
 
+@_kept
 @functools.lru_cache(maxsize=8)
 def _config_limits(config) -> DeviceLimits:
     """DeviceLimits.from_config, kept (a frozen config, frozen limits: building and validating
@@ -205,6 +224,7 @@ def _config_limits(config) -> DeviceLimits:
     return DeviceLimits.from_config(config)
 
 
+@_kept
 @functools.lru_cache(maxsize=8)
 def _planned(device: DeviceLimits):
     """What a swing is timed against, kept per (frozen) limits: the planned limits, the time law's
@@ -277,7 +297,7 @@ def _checked_inputs(trajs, config, rate, limits):
         raise ValueError(f"limits: expected a DeviceLimits, got {type(limits).__name__}")
     for i, t in enumerate(trajs):
         h = np.asarray(t.heel, np.float64)
-        if h.ndim != 2 or h.shape[1] != 2 or len(h) < 2 or not np.all(np.isfinite(h)):
+        if h.ndim != 2 or h.shape[1] != 2 or len(h) < 2 or not np.isfinite(h).all():
             raise ValueError(
                 f"trajs[{i}].heel: expected a finite (N >= 2, 2) path, got shape {h.shape}"
             )
@@ -292,12 +312,16 @@ def _check_legs(traj, config, where: str) -> None:
     naming each differing field with both values. A swing without those points is not checked."""
     if not all(hasattr(traj, a) for a in ("hip", "knee_stance", "toe")):
         return
-    hip, knee = np.asarray(traj.hip[0], float), np.asarray(traj.knee_stance[0], float)
-    pivot = np.array([float(traj.scene.pivot_y), 0.0])
+    # Python floats: three np.linalg.norm calls cost more than the rest of the check.
+    hy, hz = (float(v) for v in traj.hip[0])
+    ky, kz = (float(v) for v in traj.knee_stance[0])
+    ty, tz = (float(v) for v in traj.toe[0])
+    ey, ez = (float(v) for v in traj.heel[0])
+    py = float(traj.scene.pivot_y)
     legs = {
-        "thigh": np.linalg.norm(hip - knee),
-        "shin": np.linalg.norm(knee - pivot),
-        "foot_length": np.linalg.norm(np.asarray(traj.toe[0], float) - traj.heel[0]),
+        "thigh": math.sqrt((hy - ky) ** 2 + (hz - kz) ** 2),
+        "shin": math.sqrt((ky - py) ** 2 + kz**2),
+        "foot_length": math.sqrt((ty - ey) ** 2 + (tz - ez) ** 2),
     }
     config.kinematics.check_legs(
         legs,
