@@ -678,7 +678,7 @@ class CurveState:
     heel: np.ndarray
     heel_velocity: np.ndarray
     heel_acceleration: np.ndarray
-    heel_jerk: np.ndarray
+    heel_jerk: np.ndarray | None  # None where not asked (curves_at)
     toe: np.ndarray
     hip: np.ndarray
     knee_swing: np.ndarray
@@ -723,9 +723,10 @@ class SwingCurve:
         }
 
 
-def curves_at(curves, times) -> list[CurveState]:
+def curves_at(curves, times, heel_jerk: bool = True) -> list[CurveState]:
     """``SwingCurve.at`` of each curve at its times, in one evaluation (the curves share their
-    leg lengths and foot)."""
+    leg lengths and foot); ``heel_jerk=False``: the states' ``heel_jerk`` None (samples do not
+    export it, and its cube of the angle rates costs half the forward kinematics)."""
     counts = [len(t) for t in times]
     lv = _laws_flat([c.law for c in curves], times, counts)
     qs = _chain([c.path for c in curves], lv, counts)
@@ -733,12 +734,13 @@ def curves_at(curves, times) -> list[CurveState]:
     # The pivot: a number for one curve, one per row for many (the same sums).
     pivot = curves[0].pivot_y if one else np.repeat([c.pivot_y for c in curves], counts)
     e = segments(qs[0])  # one forward kinematics for the heel and the leg points
-    h = heel_derivatives(curves[0].lengths, pivot, qs, e)
+    h = heel_derivatives(curves[0].lengths, pivot, qs if heel_jerk else qs[:3], e)
+    h += [None] * (4 - len(h))
     toe = h[0].copy()
     toe[:, 0] += curves[0].foot_length
     legs = leg_points(curves[0].lengths, pivot, e)
     cols = (lv[0], *qs, *h, toe, *legs)
     if one:
         return [CurveState(times[0], *cols)]
-    cols = [_split(x, counts) for x in cols]
+    cols = [[None] * len(curves) if x is None else _split(x, counts) for x in cols]
     return [CurveState(t, *(c[b] for c in cols)) for b, t in enumerate(times)]

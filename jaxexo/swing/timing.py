@@ -612,7 +612,7 @@ def _samples(curves, rate: float, most: int | None = None) -> list[_Samples]:
     # the last sample is at or after touch-down: the legs at rest in the landing pose
     at = [np.concatenate([t[:-1], [c.duration]]) for t, c in zip(times, curves)]
     out = []
-    for c, t, st in zip(curves, times, curves_at(curves, at)):
+    for c, t, st in zip(curves, times, curves_at(curves, at, heel_jerk=False)):
         for h in (st.heel, st.toe):  # the forward kinematics' rounding at the floor
             _on_floor(h)
         out.append(_Samples(c.duration, t, st))
