@@ -524,10 +524,13 @@ def _path_checks(trajs, plans, sp) -> _PathChecks:
         _on_floor(h)
         heels.append(h)
         grids.append(s)
-    n = max(len(h) for h in heels)
-    padded = np.stack([np.concatenate([h, np.repeat(h[-1:], n - len(h), axis=0)]) for h in heels])
+    if len(heels) == 1:  # nothing to pad
+        padded, pad = heels[0][None], grids[0][None]
+    else:
+        n = max(len(h) for h in heels)
+        padded = np.stack([np.concatenate([h, np.repeat(h[-1:], n - len(h), 0)]) for h in heels])
+        pad = np.stack([np.concatenate([g, np.ones(n - len(g))]) for g in grids])
     m = measure_paths(sp, padded, [t.scene for t in trajs], np.full(len(trajs), CURVE_TOL))
-    pad = np.stack([np.concatenate([g, np.ones(n - len(g))]) for g in grids])
     return _PathChecks(m, padded, pad, outside)
 
 
