@@ -191,6 +191,36 @@ def test_a_batch_times_each_swing_as_it_is_timed_alone(swings):
         np.testing.assert_array_equal(alone.peak_jerk, sw.peak_jerk)
 
 
+def test_one_curve_evaluates_as_in_a_batch_bit_for_bit(swings):
+    """curves_at of one curve (its own scalar path, no offsets or splits) gives every field of the
+    state bit for bit what the same curve gives in a batch of several, and without the heel's jerk
+    the same other fields; laws_at of one law what it gives among several. Times: the samples, a
+    dense grid with both ends, and times before and after the swing."""
+    from dataclasses import fields
+
+    from jaxexo.swing.curve import curves_at, laws_at
+
+    config, trajs = swings
+    curves = [sw.curve for sw in time_swings(trajs["rl"][:4] + trajs["cfftg"][:4], config)]
+    times = [
+        np.concatenate([[-0.1, 0.0], np.linspace(0.0, c.duration, 997), [c.duration + 0.2]])
+        for c in curves
+    ]
+    together = curves_at(curves, times)
+    laws = laws_at([c.law for c in curves], times)
+    for c, t, st, law in zip(curves, times, together, laws):
+        (alone,) = curves_at([c], [t])
+        (lean,) = curves_at([c], [t], heel_jerk=False)
+        assert lean.heel_jerk is None
+        for f in fields(st):
+            np.testing.assert_array_equal(getattr(alone, f.name), getattr(st, f.name), f.name)
+            if f.name != "heel_jerk":
+                np.testing.assert_array_equal(getattr(lean, f.name), getattr(st, f.name), f.name)
+        for x, y in zip(laws_at([c.law], [t])[0], law):
+            np.testing.assert_array_equal(x, y)
+        assert alone.path_parameter[0] == 0.0 and alone.path_parameter[-1] == 1.0
+
+
 def test_cli_writes_the_ros_layout_and_refuses_it_untimed(tmp_path):
     from conftest import run_cli
 

@@ -48,14 +48,16 @@ class JointPath:
         """Per piece, max |q'| and max |q''| over the piece (P, J): q'' is linear on a piece (its
         ends), q' quadratic (its ends and its vertex)."""
         h = np.diff(self.knots)[:, None]
-        c1, c2, c3 = self.coef[:, 1], self.coef[:, 2], self.coef[:, 3]
-        d1_end = c1 + (2.0 * c2 + 3.0 * c3 * h) * h
+        # Contiguous coefficients, each product once: the same values at fewer, cheaper calls.
+        _, c1, c2, c3 = np.ascontiguousarray(self.coef.transpose(1, 0, 2))
+        c2x2, c3x3 = 2.0 * c2, 3.0 * c3
+        d1_end = c1 + (c2x2 + c3x3 * h) * h
         with np.errstate(divide="ignore", invalid="ignore"):
-            dv = np.where(c3 != 0.0, -c2 / (3.0 * c3), 0.0)
-        dv = np.clip(dv, 0.0, h)
-        d1_mid = c1 + (2.0 * c2 + 3.0 * c3 * dv) * dv
+            dv = np.where(c3 != 0.0, -c2 / c3x3, 0.0)
+        dv = np.minimum(np.maximum(dv, 0.0), h)  # np.clip's values (dv is never NaN)
+        d1_mid = c1 + (c2x2 + c3x3 * dv) * dv
         d1 = np.maximum(np.maximum(np.abs(c1), np.abs(d1_end)), np.abs(d1_mid))
-        d2 = np.maximum(np.abs(2.0 * c2), np.abs(2.0 * c2 + 6.0 * c3 * h))
+        d2 = np.maximum(np.abs(c2x2), np.abs(c2x2 + 6.0 * c3 * h))
         return d1, d2
 
 
@@ -433,13 +435,23 @@ def laws_at(laws, times) -> list[tuple]:
     s(t) = (P(t) - P(t - w)) / w with P the integral of S = integral of v (TimeLaw). At t the
     law is either inside the passes' nodes or past them at rest (S = total, P grows linearly);
     at t - w it is inside them or before the start (all zero)."""
-    counts = np.array([len(t) for t in times])
+    counts = [len(t) for t in times]
+    res = _laws_flat(laws, times, counts)
+    if len(laws) == 1:
+        return [tuple(res)]
+    return list(zip(*(_split(x, counts) for x in res)))
+
+
+def _laws_flat(laws, times, counts) -> list[np.ndarray]:
+    """``laws_at``'s four values of all laws at all their times, concatenated (n,) each."""
+    if len(laws) == 1:
+        return _law_at(laws[0], times[0])
+    counts = np.array(counts)
     lens = np.array([len(law.nodes) for law in laws])
     w = np.array([law.window for law in laws])
     end = np.array([law.nodes[-1] for law in laws])
     off = np.concatenate([[0.0], np.cumsum(end + 1.0)[:-1]])
-    one = len(laws) == 1
-    cat = (lambda xs: xs[0]) if one else np.concatenate
+    cat = np.concatenate
     nodes = cat([law.nodes for law in laws])
     speed = cat([law.speed for law in laws])
     acc = cat([np.append(law._acc, 0.0) for law in laws])
@@ -449,10 +461,10 @@ def laws_at(laws, times) -> list[tuple]:
     t = np.clip(t_in, 0.0, (end + w)[item])
     last = start + lens[item] - 1
     total, end_i, w_i = big_s[last], end[item], w[item]
-    keys = nodes if one else nodes + np.repeat(off, lens)
+    keys = nodes + np.repeat(off, lens)
 
     def piece(local):
-        i = np.searchsorted(keys, local if one else local + off[item], side="right") - 1
+        i = np.searchsorted(keys, local + off[item], side="right") - 1
         i = np.minimum(i, last - 1)
         d = local - nodes[i]
         a = acc[i]
@@ -483,30 +495,86 @@ def laws_at(laws, times) -> list[tuple]:
     if early.any():
         for x in res:
             x[early] = 0.0
-    if one:
-        return [tuple(res)]
-    cut = np.cumsum(counts)[:-1]
-    return list(zip(*(np.split(x, cut) for x in res)))
+    return res
+
+
+def _law_at(law, t_in) -> list[np.ndarray]:
+    """``_laws_flat`` of one law: the same arithmetic on scalars where the batch has one value per
+    query (a law's window, end and total), without the batch's offsets."""
+    nodes, speed, acc, big_s, big_p = law.nodes, law.speed, law._acc, law._S, law._P
+    last = len(nodes) - 1
+    w, end = law.window, nodes[-1]
+    total = big_s[last]
+    t = np.clip(t_in, 0.0, end + w)
+
+    def piece(local):
+        # rows by np.take (the values of fancy indexing, at less cost); i < last: within acc
+        i = np.minimum(np.searchsorted(nodes, local, side="right") - 1, last - 1)
+        d = local - np.take(nodes, i)
+        a = np.take(acc, i)
+        v0 = np.take(speed, i)
+        bs = np.take(big_s, i)
+        return (
+            np.take(big_p, i) + (bs + (0.5 * v0 + a * d / 6.0) * d) * d,
+            bs + (v0 + 0.5 * a * d) * d,
+            v0 + a * d,
+            a,
+        )
+
+    past = t >= end
+    p1, s1, v1, a1 = piece(np.minimum(t, end))
+    p1 = p1 + total * np.maximum(t - end, 0.0)
+    v1[past] = 0.0
+    a1 = np.where(past, 0.0, a1)
+    lag = t - w
+    p0, s0, v0, a0 = piece(np.maximum(lag, 0.0))
+    a0 = np.where(lag < 0.0, 0.0, a0)
+    k = 1.0 / (w * total)
+    res = [np.clip((p1 - p0) * k, 0.0, 1.0), (s1 - s0) * k, (v1 - v0) * k, (a1 - a0) * k]
+    landed = t >= end + w
+    for x, val in zip(res, (1.0, 0.0, 0.0, 0.0)):
+        x[landed] = val
+    early = t_in < 0.0
+    if early.any():
+        for x in res:
+            x[early] = 0.0
+    return res
+
+
+def _split(x: np.ndarray, counts) -> list[np.ndarray]:
+    """x cut along its first axis into consecutive parts of ``counts`` rows: views, as np.split
+    gives, at a fraction of its cost per call."""
+    out, start = [], 0
+    for n in counts:
+        out.append(x[start : start + n])
+        start += n
+    return out
 
 
 def paths_at(paths, params, order: int = 3) -> list[list[np.ndarray]]:
     """q and its s-derivatives up to ``order`` of each path at its parameters: a list of lists of
     (n_b, J) arrays."""
-    counts = np.array([len(s) for s in params])
-    one = len(paths) == 1
-    if one:
+    if len(paths) == 1:
+        return [_paths_flat(paths, np.asarray(params[0], np.float64), None, order)]
+    counts = [len(s) for s in params]
+    res = _paths_flat(paths, np.concatenate(params), counts, order)
+    return [list(x) for x in zip(*(_split(r, counts) for r in res))]
+
+
+def _paths_flat(paths, s: np.ndarray, counts, order: int) -> list[np.ndarray]:
+    """``paths_at`` of all paths at all their parameters s (concatenated, ``counts`` each; None
+    for one path): q and its derivatives (n, J) each."""
+    if len(paths) == 1:
         knots, coef = paths[0].knots[:-1], paths[0].coef
-        s = np.asarray(params[0], np.float64)
         i = np.maximum(np.searchsorted(knots, s, side="right") - 1, 0)
         i = np.minimum(i, len(coef) - 1)
-        d = (s - knots[i])[:, None]
+        d = (s - np.take(knots, i))[:, None]
     else:
         pieces = np.array([len(p.coef) for p in paths])
         knots = np.concatenate([p.knots[:-1] for p in paths])
         keys = knots + np.repeat(2.0 * np.arange(len(paths)), pieces)  # for the search only
         coef = np.concatenate([p.coef for p in paths])
         start, item = _segments(pieces, counts)
-        s = np.concatenate(params)
         i = np.searchsorted(keys, np.clip(s, 0.0, 1.0) + 2.0 * item, side="right") - 1
         i = np.clip(i, start, start + pieces[item] - 1)
         d = (s - knots[i])[:, None]  # as one path computes it: batch = single, bit for bit
@@ -521,28 +589,34 @@ def paths_at(paths, params, order: int = 3) -> list[list[np.ndarray]]:
         res.append(6.0 * c3 * d + 2.0 * c2)
     if order >= 3:
         res.append(6.0 * c3)
-    if one:
-        return [res]
-    cut = np.cumsum(counts)[:-1]
-    return [list(x) for x in zip(*(np.split(r, cut) for r in res))]
+    return res
 
 
 def joints_at(paths, laws, times, lv=None) -> list[tuple]:
     """For each (path, law) at its times: s (n_b,) and [q, q-dot, q-ddot, q-dddot] (n_b, J) each,
     the chain rule on q(s(t)); ``lv``: ``laws_at(laws, times)`` when known."""
-    lv = laws_at(laws, times) if lv is None else lv
-    flat = paths_at(paths, [x[0] for x in lv], 3)
+    counts = [len(t) for t in times]
+    if lv is None:
+        flat = _laws_flat(laws, times, counts)
+    elif len(paths) == 1:
+        flat = list(lv[0])
+    else:
+        flat = [np.concatenate(list(x)) for x in zip(*lv)]
+    derivs = _chain(paths, flat, counts)
+    if len(paths) == 1:
+        return [(flat[0], derivs)]
+    split = [_split(x, counts) for x in derivs]
+    return [(s, [split[o][b] for o in range(4)]) for b, s in enumerate(_split(flat[0], counts))]
+
+
+def _chain(paths, law_values, counts) -> list[np.ndarray]:
+    """q and its three time derivatives (n, J) each, by the chain rule, of all paths at their
+    laws' four values (``_laws_flat``) at all their times (concatenated, ``counts`` each)."""
     one = len(paths) == 1
-    cat = (lambda xs: xs[0]) if one else np.concatenate
-    _, s1, s2, s3 = (cat(list(x))[:, None] for x in zip(*lv))
-    d0, d1, d2, d3 = (cat(list(x)) for x in zip(*flat))
+    d0, d1, d2, d3 = _paths_flat(paths, law_values[0], None if one else counts, 3)
+    _, s1, s2, s3 = (x[:, None] for x in law_values)
     s1s1 = s1 * s1
-    derivs = [d0, d1 * s1, d2 * s1s1 + d1 * s2, (d3 * s1s1 + 3.0 * d2 * s2) * s1 + d1 * s3]
-    if one:
-        return [(lv[0][0], derivs)]
-    cut = np.cumsum([len(t) for t in times])[:-1]
-    split = [np.split(x, cut) for x in derivs]
-    return [(x[0], [split[o][b] for o in range(4)]) for b, x in enumerate(lv)]
+    return [d0, d1 * s1, d2 * s1s1 + d1 * s2, (d3 * s1s1 + 3.0 * d2 * s2) * s1 + d1 * s3]
 
 
 # --------------------------------------------------------------------------------------------
@@ -606,7 +680,7 @@ class CurveState:
     heel: np.ndarray
     heel_velocity: np.ndarray
     heel_acceleration: np.ndarray
-    heel_jerk: np.ndarray
+    heel_jerk: np.ndarray | None  # None where not asked (curves_at)
     toe: np.ndarray
     hip: np.ndarray
     knee_swing: np.ndarray
@@ -651,18 +725,24 @@ class SwingCurve:
         }
 
 
-def curves_at(curves, times) -> list[CurveState]:
+def curves_at(curves, times, heel_jerk: bool = True) -> list[CurveState]:
     """``SwingCurve.at`` of each curve at its times, in one evaluation (the curves share their
-    leg lengths and foot)."""
-    res = joints_at([c.path for c in curves], [c.law for c in curves], times)
+    leg lengths and foot); ``heel_jerk=False``: the states' ``heel_jerk`` None (samples do not
+    export it, and its cube of the angle rates costs half the forward kinematics)."""
     counts = [len(t) for t in times]
-    pivot = np.repeat([c.pivot_y for c in curves], counts)
-    qs = [np.concatenate([r[1][o] for r in res]) for o in range(4)]
+    lv = _laws_flat([c.law for c in curves], times, counts)
+    qs = _chain([c.path for c in curves], lv, counts)
+    one = len(curves) == 1
+    # The pivot: a number for one curve, one per row for many (the same sums).
+    pivot = curves[0].pivot_y if one else np.repeat([c.pivot_y for c in curves], counts)
     e = segments(qs[0])  # one forward kinematics for the heel and the leg points
-    h = heel_derivatives(curves[0].lengths, pivot, qs, e)
+    h = heel_derivatives(curves[0].lengths, pivot, qs if heel_jerk else qs[:3], e)
+    h += [None] * (4 - len(h))
     toe = h[0].copy()
     toe[:, 0] += curves[0].foot_length
-    cut = np.cumsum(counts)[:-1]
     legs = leg_points(curves[0].lengths, pivot, e)
-    cols = [np.split(x, cut) for x in (*qs, *h, toe, *legs)]
-    return [CurveState(t, r[0], *(c[b] for c in cols)) for b, (t, r) in enumerate(zip(times, res))]
+    cols = (lv[0], *qs, *h, toe, *legs)
+    if one:
+        return [CurveState(times[0], *cols)]
+    cols = [[None] * len(curves) if x is None else _split(x, counts) for x in cols]
+    return [CurveState(t, *(c[b] for c in cols)) for b, t in enumerate(times)]

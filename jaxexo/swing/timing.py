@@ -189,6 +189,24 @@ def blend_window(limits: DeviceLimits) -> float:
     return max(BLEND_S, max(a / j for a, j in zip(limits.acceleration, limits.jerk)))
 
 
+def _kept(fn):
+    """``fn`` (an lru_cache of one frozen argument) with its last argument's result kept by
+    identity: hashing a frozen config or limits costs a few microseconds a swing, and a caller
+    times its swings with one config."""
+    last = [(object(), None)]  # one tuple, swapped whole: a reader never sees half an update
+
+    @functools.wraps(fn)
+    def get(arg):
+        key, value = last[0]
+        if key is not arg:
+            value = fn(arg)
+            last[0] = (arg, value)
+        return value
+
+    return get
+
+
+@_kept
 @functools.lru_cache(maxsize=8)
 def _scalars(config):
     """scalar_params of a config, kept: a config is frozen, and the view costs as much as timing a
@@ -198,6 +216,7 @@ def _scalars(config):
     return scalar_params(config)
 
 
+@_kept
 @functools.lru_cache(maxsize=8)
 def _config_limits(config) -> DeviceLimits:
     """DeviceLimits.from_config, kept (a frozen config, frozen limits: building and validating
@@ -205,6 +224,7 @@ def _config_limits(config) -> DeviceLimits:
     return DeviceLimits.from_config(config)
 
 
+@_kept
 @functools.lru_cache(maxsize=8)
 def _planned(device: DeviceLimits):
     """What a swing is timed against, kept per (frozen) limits: the planned limits, the time law's
@@ -277,7 +297,7 @@ def _checked_inputs(trajs, config, rate, limits):
         raise ValueError(f"limits: expected a DeviceLimits, got {type(limits).__name__}")
     for i, t in enumerate(trajs):
         h = np.asarray(t.heel, np.float64)
-        if h.ndim != 2 or h.shape[1] != 2 or len(h) < 2 or not np.all(np.isfinite(h)):
+        if h.ndim != 2 or h.shape[1] != 2 or len(h) < 2 or not np.isfinite(h).all():
             raise ValueError(
                 f"trajs[{i}].heel: expected a finite (N >= 2, 2) path, got shape {h.shape}"
             )
@@ -292,12 +312,16 @@ def _check_legs(traj, config, where: str) -> None:
     naming each differing field with both values. A swing without those points is not checked."""
     if not all(hasattr(traj, a) for a in ("hip", "knee_stance", "toe")):
         return
-    hip, knee = np.asarray(traj.hip[0], float), np.asarray(traj.knee_stance[0], float)
-    pivot = np.array([float(traj.scene.pivot_y), 0.0])
+    # Python floats: three np.linalg.norm calls cost more than the rest of the check.
+    hy, hz = (float(v) for v in traj.hip[0])
+    ky, kz = (float(v) for v in traj.knee_stance[0])
+    ty, tz = (float(v) for v in traj.toe[0])
+    ey, ez = (float(v) for v in traj.heel[0])
+    py = float(traj.scene.pivot_y)
     legs = {
-        "thigh": np.linalg.norm(hip - knee),
-        "shin": np.linalg.norm(knee - pivot),
-        "foot_length": np.linalg.norm(np.asarray(traj.toe[0], float) - traj.heel[0]),
+        "thigh": math.sqrt((hy - ky) ** 2 + (hz - kz) ** 2),
+        "shin": math.sqrt((ky - py) ** 2 + kz**2),
+        "foot_length": math.sqrt((ty - ey) ** 2 + (tz - ez) ** 2),
     }
     config.kinematics.check_legs(
         legs,
@@ -500,10 +524,13 @@ def _path_checks(trajs, plans, sp) -> _PathChecks:
         _on_floor(h)
         heels.append(h)
         grids.append(s)
-    n = max(len(h) for h in heels)
-    padded = np.stack([np.concatenate([h, np.repeat(h[-1:], n - len(h), axis=0)]) for h in heels])
+    if len(heels) == 1:  # nothing to pad
+        padded, pad = heels[0][None], grids[0][None]
+    else:
+        n = max(len(h) for h in heels)
+        padded = np.stack([np.concatenate([h, np.repeat(h[-1:], n - len(h), 0)]) for h in heels])
+        pad = np.stack([np.concatenate([g, np.ones(n - len(g))]) for g in grids])
     m = measure_paths(sp, padded, [t.scene for t in trajs], np.full(len(trajs), CURVE_TOL))
-    pad = np.stack([np.concatenate([g, np.ones(n - len(g))]) for g in grids])
     return _PathChecks(m, padded, pad, outside)
 
 
@@ -588,7 +615,7 @@ def _samples(curves, rate: float, most: int | None = None) -> list[_Samples]:
     # the last sample is at or after touch-down: the legs at rest in the landing pose
     at = [np.concatenate([t[:-1], [c.duration]]) for t, c in zip(times, curves)]
     out = []
-    for c, t, st in zip(curves, times, curves_at(curves, at)):
+    for c, t, st in zip(curves, times, curves_at(curves, at, heel_jerk=False)):
         for h in (st.heel, st.toe):  # the forward kinematics' rounding at the floor
             _on_floor(h)
         out.append(_Samples(c.duration, t, st))
