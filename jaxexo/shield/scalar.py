@@ -3,8 +3,11 @@ Python floats, checking only the move that will be taken; the NumPy generator's 
 
 It decides as the rows form's float32 mask (jaxexo.shield.rows): the rule's own pieces
 (``rule.end_conditions``, ``transition.keep_in_world``, kinematics' limits, ``rule.clearance_need``)
-called with the plain-float array module on the float32 heel, each comparison exact or certified
-against float32's rounding, and the full mask on the steps too close to call.
+on the float32 heel in Python floats, each comparison exact or certified against float32's
+rounding, and the full mask on the steps too close to call. The per-move pieces (the end
+conditions, keep_in_world's clip, the joint-limit tests) are inlined with the same operations, a
+function call costing more than their arithmetic; tests/test_fast_rollout.py holds them to the
+rule's and kinematics' functions.
 Method: docs/generation.md#speed.
 """
 
