@@ -338,3 +338,28 @@ def test_the_first_round_measures_the_requested_smoothings_own_spline():
             np.testing.assert_array_equal(g.path, p0)
         checked += 1
     assert checked > 250
+
+
+def test_one_systems_dual_is_the_stacked_dual_bit_for_bit():
+    """_dual and _solve_same of one system (their one-row paths) against the same system solved
+    among others (the general paths): the same multipliers and solutions, bit for bit, on
+    well-conditioned, rank-deficient and repeated constraints, with inactive ones."""
+    from jaxexo.swing.clearing import _dual, _solve_same
+
+    rng = np.random.default_rng(8)
+    one_row_only = 0
+    for rank, k in ((12, 8), (6, 10), (3, 9), (20, 20), (2, 3)):
+        f = rng.normal(size=(40, k, rank))
+        f[::5, 1] = f[::5, 0]  # a repeated constraint
+        a = f @ f.transpose(0, 2, 1)
+        need = rng.normal(size=(40, k))
+        valid = rng.uniform(size=(40, k)) < 0.9
+        both = _dual(a, need, valid)
+        solved = _solve_same(a, need)
+        for i in range(len(a)):
+            np.testing.assert_array_equal(
+                _dual(a[i : i + 1], need[i : i + 1], valid[i : i + 1])[0], both[i]
+            )
+            np.testing.assert_array_equal(_solve_same(a[i : i + 1], need[i : i + 1])[0], solved[i])
+            one_row_only += bool(np.any(both[i] > 0.0))
+    assert one_row_only > 50

@@ -162,9 +162,21 @@ class TrajectoryGenerator(SceneMaker):
             if self.terminate_on_collision
             else None
         )
+        # The loop's rules on Python floats, inlined (per-step calls cost more than their
+        # arithmetic): transition.move_heel (each direction's step_size * direction precomputed, the
+        # same product), keep_in_world's clip, in_mid_goal, goal_reached, terminated and truncated,
+        # with the same operations in the same order. tests/test_fast_rollout.py holds them to the
+        # transition functions.
+        offsets = [(sp.step_size * dy, sp.step_size * dz) for dy, dz in self.directions]
+        (y_lo, y_hi), z_hi = sp.bounds_y, sp.max_z_world
+        mid_hy, mid_hz = sp.mid_goal_half_size
+        goal_y, (goal_dy, goal_dz) = scene.goal_y, sp.goal_tolerance[:2]
+        ends_on_collision = self._term_p.terminate_on_collision
+        max_steps, q_values = self.max_steps, step.q_values
+        choose = None if single is None else single.choose
         while True:
-            if single is not None:
-                a = single.choose(hy, hz, step.q_values(hy, hz, t, 1.0 if visited else 0.0), last)
+            if choose is not None:
+                a = choose(hy, hz, q_values(hy, hz, t, 1.0 if visited else 0.0), last)
             elif self.shield:
                 mask = rows.admissible(
                     np.array([hy], np.float32),
@@ -176,21 +188,24 @@ class TrajectoryGenerator(SceneMaker):
             else:
                 a = self._explore(step.greedy(hy, hz, t, 1.0 if visited else 0.0))
             prev = (hy, hz)
-            hy, hz = transition.move_heel(scalar, sp, hy, hz, *self.directions[a])
+            dy, dz = offsets[a]
+            hy, hz = hy + dy, hz + dz
+            hy = y_lo if hy < y_lo else (y_hi if hy > y_hi else hy)
+            hz = 0.0 if hz < 0.0 else (z_hi if hz > z_hi else hz)
             t += 1
-            visited = visited or transition.in_mid_goal(scalar, sp, hy, hz, mid_y, mid_z)
+            visited = visited or (abs(hy - mid_y) <= mid_hy and abs(hz - mid_z) <= mid_hz)
             pts.append((hy, hz))
-            acts.append(a)
             last = int(a)
-            # The environment's termination (transition.terminated, .truncated); the move's clearance
-            # is only computed where a collision ends the episode.
-            collided = box is not None and self._move_touches(box, scene.outline, prev, (hy, hz))
-            if transition.terminated(
-                scalar,
-                self._term_p,
-                transition.goal_reached(scalar, sp, hy, hz, scene.goal_y),
-                collided,
-            ) or transition.truncated(t, self.max_steps):
+            acts.append(a)
+            # The environment's termination; the move's clearance is only computed where a
+            # collision ends the episode.
+            if (abs(hy - goal_y) <= goal_dy and hz <= goal_dz) or t >= max_steps:
+                break
+            if (
+                box is not None
+                and ends_on_collision
+                and self._move_touches(box, scene.outline, prev, (hy, hz))
+            ):
                 break
         return np.asarray(pts), np.asarray(acts, dtype=np.int64)
 

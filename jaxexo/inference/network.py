@@ -115,19 +115,22 @@ class StepNetwork:
     def q_values(self, heel_y: float, heel_z: float, time: float, visited: float) -> np.ndarray:
         """Q (NUM_ACTIONS,) float32 for one observation (a buffer, overwritten by the next call)."""
         c = self.c
-        c[0] = heel_y
-        c[1] = heel_z
-        c[2] = time
-        c[3] = visited
+        c[:4] = (heel_y, heel_z, time, visited)  # each rounded to float32, as one by one
         x = c
         eps = self.net.eps
-        dot, maximum, sqrt = np.dot, np.maximum, math.sqrt
+        dot, multiply, maximum, f32, sqrt = np.dot, np.multiply, np.maximum, np.float32, math.sqrt
+        zero = _ZERO
         for (w, pre, out, shift, inv_h), buf in zip(self._layers, self.bufs):
             dot(x, w, out=pre)
             if shift is not None:
-                pre *= 1.0 / sqrt(float(dot(pre, pre)) * inv_h + eps)
+                # a Python float scales a float32 array as that float rounded to float32 (NumPy's
+                # weak scalars): the same product as ``pre *= scale``, without its conversion
+                multiply(pre, f32(1.0 / sqrt(float(dot(pre, pre)) * inv_h + eps)), out=pre)
                 pre += shift
-            maximum(pre, 0.0, out=out)
+            maximum(pre, zero, out=out)
             x = buf
         dot(x, self.net.weights[-1], out=self.q)
         return self.q
+
+
+_ZERO = np.float32(0.0)  # ReLU's floor, converted once

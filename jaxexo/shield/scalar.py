@@ -3,8 +3,11 @@ Python floats, checking only the move that will be taken; the NumPy generator's 
 
 It decides as the rows form's float32 mask (jaxexo.shield.rows): the rule's own pieces
 (``rule.end_conditions``, ``transition.keep_in_world``, kinematics' limits, ``rule.clearance_need``)
-called with the plain-float array module on the float32 heel, each comparison exact or certified
-against float32's rounding, and the full mask on the steps too close to call.
+on the float32 heel in Python floats, each comparison exact or certified against float32's
+rounding, and the full mask on the steps too close to call. The per-move pieces (the end
+conditions, keep_in_world's clip, the joint-limit tests) are inlined with the same operations, a
+function call costing more than their arithmetic; tests/test_fast_rollout.py holds them to the
+rule's and kinematics' functions.
 Method: docs/generation.md#speed.
 """
 
@@ -149,6 +152,13 @@ class SwingShield:
         self.knee_hi_free = sp.knee_limits[1] + kinematics.ANGLE_EPS >= 1e-5
         self.limits = (*sp.hip_limits, *sp.knee_limits)
         self.pivot = float(np.float32(scene.pivot_y))
+        # ``_admissible``'s inlined rule pieces (keep_in_world's clip, end_conditions with the goal
+        # box moved by END_MARGIN either way): their constants, each sum computed as the rule does
+        f = self.form
+        self._world = (sp.bounds_y[0], sp.bounds_y[1], sp.max_z_world)
+        self._floor = sp.floor_clearance
+        self._tol_in, self._tol_out = f.ends_in.goal_tolerance[0], f.ends_out.goal_tolerance[0]
+        self._far_in, self._far_out = self.goal + self._tol_in, self.goal + self._tol_out
         ol = np.asarray(scene.outline, np.float32).astype(np.float64)
         self.vy, self.vz = ol[:, 0].tolist(), ol[:, 1].tolist()
         self.box = (min(self.vy), max(self.vy), min(min(self.vz), 0.0), max(self.vz))
@@ -304,16 +314,26 @@ class SwingShield:
         hy = 0.5 * (p + y)
         unsure = False
         h0, h1, k0, k1 = self.limits
+        eps = kinematics.ANGLE_EPS
         swing, stance = self._leg(hy, hz, y, z), self._leg(hy, hz, p, 0.0)
         for _, hip, knee, e_h, e_k, straight in (swing, stance):
             # The knee is built on its flexing side (knee angle <= 0 up to rounding of a few 1e-7
             # rad), so a near-straight leg never exceeds an upper limit >= 1e-5 rad.
             k = math.inf if straight and self.knee_hi_free and knee <= 1e-5 else k1
-            if kinematics.joint_limit_violation(
-                scalar, hip, knee, h0 + e_h, h1 - e_h, k0 + e_k, k - e_k
-            ):  # not certainly within: certainly outside, or too close to call
-                if kinematics.joint_limit_violation(
-                    scalar, hip, knee, h0 - e_h, h1 + e_h, k0 - e_k, k + e_k
+            # kinematics.joint_limit_violation with limits narrowed by the error bounds (not
+            # certainly within: certainly outside with them widened, or too close to call); inlined,
+            # the same sums and comparisons
+            if (
+                hip > (h1 - e_h) + eps
+                or hip < (h0 + e_h) - eps
+                or knee > (k - e_k) + eps
+                or knee < (k0 + e_k) - eps
+            ):
+                if (
+                    hip > (h1 + e_h) + eps
+                    or hip < (h0 - e_h) - eps
+                    or knee > (k + e_k) + eps
+                    or knee < (k0 - e_k) - eps
                 ):
                     return -1
                 unsure = True
@@ -342,7 +362,7 @@ class SwingShield:
     def _heel(self, hy: float, hz: float) -> _Heel:
         """The heel (hy, hz) rounded to float32, as the reference rounds it."""
         h = _Heel()
-        h.y, h.z, h.need = _f32(hy), _f32(hz), None
+        h.y, h.z, h.need = _unpack(_pack(hy))[0], _unpack(_pack(hz))[0], None  # _f32, inlined
         # Far from the obstacle's box no move of one step comes within the shield's clearance.
         h.far = (
             self._box_distance(h.y, h.y + self.fl, h.z, h.z) - self.step >= self.shield_c + MARGIN
@@ -401,11 +421,19 @@ class SwingShield:
 
     def _admissible(self, a: int, heel: _Heel):
         """True / False / None (too close to call) for forward move a from ``heel``."""
-        # the float32 heel plus a float32 offset is exact in float64, then rounded as float32 rounds it
+        # The float32 heel plus a float32 offset is exact in float64, then rounded as float32 rounds
+        # it (``_f32``); then transition.keep_in_world and rule.end_conditions (certainly true with
+        # ``ends_in``, possibly with ``ends_out``), inlined with the same comparisons
+        # (tests/test_fast_rollout.py holds them to the rule's functions).
         py, pz = self.offsets[a]
-        y, z = transition.keep_in_world(scalar, self.sp, _f32(heel.y + py), _f32(heel.z + pz))
-        if not rule.end_conditions(scalar, self.form.ends_in, heel.y, heel.z, y, z, self.goal):
-            if rule.end_conditions(scalar, self.form.ends_out, heel.y, heel.z, y, z, self.goal):
+        y, z = _unpack(_pack(heel.y + py))[0], _unpack(_pack(heel.z + pz))[0]
+        y_lo, y_hi, z_hi = self._world
+        y = y_lo if y < y_lo else (y_hi if y > y_hi else y)
+        z = 0.0 if z < 0.0 else (z_hi if z > z_hi else z)
+        moved = abs(y - heel.y) > transition.MOVE_EPS or abs(z - heel.z) > transition.MOVE_EPS
+        off_floor, to_goal = z >= self._floor, abs(y - self.goal)
+        if not (y <= self._far_in and moved and (off_floor or to_goal <= self._tol_in)):
+            if y <= self._far_out and moved and (off_floor or to_goal <= self._tol_out):
                 return None
             return False
         k = self.reachable(y, z)

@@ -54,7 +54,7 @@ def _solve_stack(a: np.ndarray, b: np.ndarray, act: np.ndarray) -> np.ndarray:
     if g == 1:  # one swing: the same system, fewer NumPy calls
         on = np.flatnonzero(act[0])
         if on.size:
-            x[0, on] = _solve_same(a[0][np.ix_(on, on)][None], b[0, on][None])[0]
+            x[0, on] = _solve_same(a[0][on[:, None], on][None], b[0, on][None])[0]
         return x
     order = np.argsort(~act, axis=1, kind="stable")  # each row's active constraints first, in order
     count = act.sum(axis=1)
@@ -76,6 +76,10 @@ def _solve_same(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     Cholesky and LU per system (docs/generation.md#speed); the curve is judged by the exact verdict
     whatever the solve."""
     g = len(a)
+    if g == 1:  # one system: the same LAPACK calls on the same matrix, fewer NumPy calls
+        x = _solve_one(a, b)
+        if x is not None:
+            return x
     try:
         low = np.linalg.cholesky(a)
         pd = np.ones(g, bool)
@@ -98,6 +102,21 @@ def _solve_same(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return x
 
 
+def _solve_one(a: np.ndarray, b: np.ndarray):
+    """``_solve_same`` of one system (1, k, k) where its Cholesky factor exists, is not degenerate
+    and the LU solution is finite (the same factor, test and solve); None otherwise (then
+    ``_solve_same``'s general path decides)."""
+    try:
+        d = np.diagonal(np.linalg.cholesky(a)[0])
+    except np.linalg.LinAlgError:
+        return None
+    lo, hi = float(d.min()), float(d.max())
+    if not lo * lo > _PD_RATIO * (hi * hi):
+        return None
+    x = np.linalg.solve(a, b[..., None])[..., 0]
+    return x if np.isfinite(x).all() else None
+
+
 def _dual(a: np.ndarray, need: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """Per row, mu >= 0 minimising 1/2 mu' a mu - need' mu over the ``valid`` constraints (a (G, k, k)
     positive semi-definite, padded past each row's constraints): an active-set solve, every
@@ -110,6 +129,17 @@ def _dual(a: np.ndarray, need: np.ndarray, valid: np.ndarray) -> np.ndarray:
     # A constraint the spline cannot meet (no freedom along it: a path smoothed to its straight line
     # keeps only the linear modes) gets no multiplier; the verdict then sends the path to the retries.
     act = valid & (diag > _MIN_DIAG * np.maximum(top, 1e-300))
+    if g == 1:  # one swing: the same steps without the bookkeeping of rows still to settle
+        ac = act
+        for _ in range(_ACTIVE_SET_STEPS):
+            if not ac.any():
+                break
+            sol = _solve_stack(a, need, ac)
+            if np.all((sol >= 0.0) | ~ac):
+                mu[:] = np.where(ac, sol, 0.0)
+                break
+            ac = ac & (sol > 0.0)
+        return mu
     todo = np.arange(g)
     for _ in range(_ACTIVE_SET_STEPS):
         todo = todo[act[todo].any(axis=1)]
