@@ -224,6 +224,8 @@ def test_reproduce_tabulates_beside_the_thesis(trained_run, tmp_path):
     eps = TrajectoryGenerator.load(trained_run / "policy.npz").config.train.eps_end
     assert res["a"]["test_epsilon"] == eps and f"ε = {eps:g}" in md
     assert res["a"]["rl_eps"]["n"] == 15 and "by_kind_pivot" not in res["a"]["rl"]
+    # The exploring swings are not timed for the device (no table reads it); the greedy ones are.
+    assert "device" not in res["a"]["rl_eps"] and "device" in res["a"]["rl"]
     assert json.loads((tmp_path / "reproduce.json").read_text())["a"]["rl"]["n"] == 15
     # A second call reuses each run's kept evaluation (same n, seed, batch size), and only then.
     said = []

@@ -124,8 +124,11 @@ def evaluate_generators(
     scenarios: list[dict],
     batch_size: int = BATCH,
     batch_repeats: int = BATCH_REPEATS,
+    device: bool = True,
 ) -> tuple[dict, dict]:
-    """The report's figures per generator, and the trajectories (for figures)."""
+    """The report's figures per generator, and the trajectories (for figures). ``device``: time
+    every swing for the device too (jaxexo.swing.timing; the report's "device" figures), off where
+    no table reads them (the epsilon-greedy protocol's exploring swings)."""
     runs = run_generators(generators, scenarios)
     kinds = np.array([s["kind"] for s in scenarios])
     pivots = np.array([s["pivot"] for s in scenarios])
@@ -143,9 +146,10 @@ def evaluate_generators(
     for name, run in runs.items():
         gen, tr, times = generators[name], run.trajectories, run.wall_s
         m = trajectory_metrics(tr)
-        dm = device_metrics(tr, gen.config)
+        dm = device_metrics(tr, gen.config) if device else None
         entry = summarize(m, times, np.ones(len(tr), bool))
-        entry["device"] = summarize_device(dm, np.ones(len(tr), bool))
+        if device:
+            entry["device"] = summarize_device(dm, np.ones(len(tr), bool))
         entry["batch_1000_ms"] = (
             batch_time(gen, scenarios, batch_size, batch_repeats) if batch_size else None
         )
@@ -154,7 +158,8 @@ def evaluate_generators(
             entry[key] = {}
             for g, mask in masks.items():
                 entry[key][g] = summarize(m, times, mask)
-                entry[key][g]["device"] = summarize_device(dm, mask)
+                if device:
+                    entry[key][g]["device"] = summarize_device(dm, mask)
                 # The group's own scenarios in one generate_batch call, scaled to 1000.
                 sub = [scenarios[i] for i in np.flatnonzero(mask)]
                 entry[key][g]["batch_1000_ms"] = (

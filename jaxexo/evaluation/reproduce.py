@@ -478,10 +478,15 @@ def evaluate_run(name: str, run: Path, ev: dict, p: Protocol) -> dict:
     report, _ = evaluate_generators(
         gens, scenarios, batch_size=p.batch_size if len(gens) > 1 else 0
     )
-    # The thesis's test protocol (2.6): epsilon-greedy, with the run's final training epsilon.
+    # The thesis's test protocol (2.6): epsilon-greedy, with the run's final training epsilon. Its
+    # swings are not timed for the device: no table reads their timing, and an exploring policy's
+    # swing wanders (each random move a stop and a turn for the time law).
     eps = float(gen.config.train.eps_end)
     eps_report, _ = evaluate_generators(
-        {"rl": WithFallback(gen.exploring(eps, seed=p.seed), None)}, scenarios, batch_size=0
+        {"rl": WithFallback(gen.exploring(eps, seed=p.seed), None)},
+        scenarios,
+        batch_size=0,
+        device=False,
     )
     result = {
         **{k: compact(v) for k, v in report.items()},

@@ -119,19 +119,45 @@ def lowered_cap(p: Plan, ratio, s, t) -> np.ndarray:
     bad = np.flatnonzero(ratio > 1.0)
     w = p.law.window
     grid = p.view.s
+    # Per point over a limit, the grid cells [lo, hi) its window reaches. The times are sorted and
+    # s(t) never decreases, so lo and hi never decrease from one point to the next.
     lo = np.searchsorted(grid, np.interp(t[bad] - w, t, s), side="left") - 1
     hi = np.searchsorted(grid, np.interp(t[bad] + w, t, s), side="right") + 1
     lo, hi = np.maximum(lo, 0), np.minimum(hi, len(grid))
-    count = np.maximum(hi - lo, 0)
-    idx = np.repeat(lo - (np.cumsum(count) - count), count) + np.arange(int(count.sum()))
     # At most LOCAL_SLOWEST slower per pass: a point far over a limit (a degenerate path) is left
     # to the uniform slow-down, which is bounded, rather than crawled through at no speed.
-    factor = np.repeat((1.0 / np.minimum(ratio[bad], LOCAL_SLOWEST)) ** 2, count)
+    factor = (1.0 / np.minimum(ratio[bad], LOCAL_SLOWEST)) ** 2
+    # A cell's points are then a run of them: those with lo <= cell < hi, [first, last). The least
+    # factor of each run by a range-minimum table: linear in the points and cells, where listing
+    # every (point, cell) pair grew with their product (a wandering swing: 0.4 s a call).
+    cells = np.arange(len(grid))
+    first = np.searchsorted(hi, cells, side="right")
+    last = np.searchsorted(lo, cells, side="right")
+    hit = np.flatnonzero(first < last)
+    least = _range_min(factor, first[hit], last[hit])
     # Where the passes already stop (s'^2 = 0: the rest ends, a cusp) a lower cap changes nothing
-    # but the floor of the cells around it, which would then be crossed at no speed.
-    moving = p.x[idx] > 0.0
-    np.minimum.at(cap, idx[moving], p.x[idx[moving]] * factor[moving])
+    # but the floor of the cells around it, which would then be crossed at no speed. x * least is
+    # the least of x * factor (x >= 0: a product's rounding keeps the order).
+    x = p.x[hit]
+    moving = x > 0.0
+    cells = hit[moving]
+    cap[cells] = np.minimum(cap[cells], x[moving] * least[moving])
     return cap
+
+
+def _range_min(f: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """min(f[a_k:b_k]) for each k (a_k < b_k): a sparse table of minima over spans of 2^j."""
+    levels = [f]
+    while 2 * (span := 1 << (len(levels) - 1)) <= len(f):
+        prev = levels[-1]
+        levels.append(np.minimum(prev[:-span], prev[span:]))
+    k = np.frexp((b - a).astype(np.float64))[1] - 1  # floor(log2(b - a)), exactly
+    out = np.empty(len(a))
+    for j in np.unique(k):
+        sel = np.flatnonzero(k == j)
+        lv = levels[j]
+        out[sel] = np.minimum(lv[a[sel]], lv[b[sel] - (1 << int(j))])
+    return out
 
 
 @dataclass(frozen=True)
