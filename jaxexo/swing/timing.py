@@ -22,7 +22,6 @@ from jaxexo.swing.curve import (
     SwingCurve,
     check_grid,
     chord_knots,
-    cubic_paths,
     curves_at,
     distinct_samples,
     heel_derivatives,
@@ -48,6 +47,7 @@ from jaxexo.swing.export import (
     write_timed_csv,
     write_timed_json,
 )
+from jaxexo.swing.knots import few_knot_path
 from jaxexo.swing.limits import DeviceLimits, GridView, peak_ratio, speed_ratio
 from jaxexo.swing.time_law import topp
 from jaxexo.swing.trajectory import (
@@ -58,7 +58,9 @@ from jaxexo.swing.trajectory import (
     measure_paths,
 )
 
-GRID_PER_KNOT = 2  # TOPP grid points per interval of the joint path's knots
+GRID_PER_KNOT = 3  # TOPP grid points per piece of the joint path, ...
+GRID_MIN = 192  # ... at least this many, ...
+GRID_STEP = 32  # ... a multiple of this (plus the end)
 REFINE = 2.0  # a sample interval with a joint step over this many median steps is subdivided ...
 # ... into parts of at least 1/REFINE_BUDGET of the whole joint path: at most REFINE_BUDGET + N
 # joint samples (the most a swing of tests/reference_outputs.py has: 1,279, a CFFTG swing)
@@ -414,30 +416,29 @@ def _joint_samples(sp, traj) -> np.ndarray:
 
 
 def _joint_paths(trajs, sp, samples=None) -> list[Plan]:
-    """The joint paths of the swings (splines batched by sample count) and their passes' grids;
-    ``samples``: each swing's ``_joint_samples`` when known."""
-    qs, knots = [], []
+    """The joint paths of the swings, each in the few pieces its geometry needs
+    (knots.few_knot_path), and their passes' grids (``grid_size``); ``samples``: each swing's
+    ``_joint_samples`` when known. Each swing's path is its own: a batch gives each what it gets
+    alone."""
+    plans = []
+    lengths = (sp.thigh, sp.shin)
     for j, t in enumerate(trajs):
         q = _joint_samples(sp, t) if samples is None else samples[j]
         q = np.take(q, distinct_samples(q), axis=0)
-        qs.append(q)
-        knots.append(chord_knots(q))
-    paths: list = [None] * len(trajs)
-    sizes = np.array([len(q) for q in qs])
-    for n in np.unique(sizes):
-        idx = np.flatnonzero(sizes == n)
-        for i, p in zip(
-            idx, cubic_paths(np.stack([knots[i] for i in idx]), np.stack([qs[i] for i in idx]))
-        ):
-            paths[i] = p
-    plans = []
-    for p in paths:
-        k = GRID_PER_KNOT * (len(p.knots) - 1) + 1
+        p = few_knot_path(q, chord_knots(q), lengths)
+        k = grid_size(len(p.knots) - 1)
         s = np.linspace(0.0, 1.0, k)
         _, dq, ddq = p.derivatives(s, 2)
         view = GridView(s, dq[None], ddq[None])
         plans.append(Plan(p, view, np.full(k, np.inf), np.zeros(k), None))
     return plans
+
+
+def grid_size(pieces: int) -> int:
+    """The passes' grid points for a joint path of ``pieces`` pieces: GRID_PER_KNOT per piece, at
+    least GRID_MIN, rounded up to a multiple of GRID_STEP (a batch's passes run per grid size)."""
+    k = max(GRID_MIN, GRID_PER_KNOT * pieces)
+    return -(-k // GRID_STEP) * GRID_STEP + 1
 
 
 def _run_passes(plans, idx, constraints, window: float) -> list[Plan]:
@@ -463,7 +464,7 @@ def _run_passes(plans, idx, constraints, window: float) -> list[Plan]:
                 rows_b.append(pb.b)
                 bounds.append(np.broadcast_to(pb.bound, pb.a.shape[-1:]))
         a, b, bound = (np.concatenate(r, axis=-1) for r in (rows_a, rows_b, bounds))
-        x, floor = topp(a, b, np.inf, bound, 1.0 / (k - 1), cap)
+        x, floor = topp(a, b, np.inf, bound, 1.0 / (k - 1), cap, both_ends=True)
         for j, i in enumerate(sub):
             law = law_from_speeds(view.s, x[j], floor[j], window, BLEND_FRACTION)
             plans[i] = replace(plans[i], x=x[j], law=law)
