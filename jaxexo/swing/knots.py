@@ -29,35 +29,34 @@ ROUNDS = 4  # rounds of inserting knots where the spline strays; then every samp
 FEWEST = 8  # a path of at most this many samples keeps them all
 
 
-def heel_bound(dq: np.ndarray) -> np.ndarray:
-    """Per row of joint differences dq (n, 4), the weights (n, 4) whose sum with (thigh, shin,
-    thigh, shin) bounds the heel's displacement: the heel is a sum of L_i e(phi_i) with
-    phi = (q0, q0 + q1, q2, q2 + q3), and |e(a) - e(b)| <= |a - b| for a unit vector e."""
-    return np.abs(np.stack([dq[:, 0], dq[:, 0] + dq[:, 1], dq[:, 2], dq[:, 2] + dq[:, 3]], axis=1))
+# q @ _PHASES: the legs' segment angles phi = (q0, q0 + q1, q2, q2 + q3) (curve.segments).
+_PHASES = np.array([[1.0, 1.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 1.0], [0, 0, 0, 1]])
 
 
 def _score(dq: np.ndarray, lengths) -> np.ndarray:
-    """Per row (n,), the largest of the heel bound over TOL_HEEL and |dq_j| over TOL_JOINT."""
+    """Per row of joint differences dq (n, 4), the larger of the heel's displacement bound over
+    TOL_HEEL and max_j |dq_j| over TOL_JOINT. The bound: the heel is a sum of L_i e(phi_i) with
+    L = (thigh, shin, thigh, shin) and e a unit vector, and |e(a) - e(b)| <= |a - b|, so the heel
+    moves by at most sum_i L_i |d phi_i|."""
     thigh, shin = lengths
-    w = np.array([thigh, shin, thigh, shin]) / TOL_HEEL
-    return np.maximum(heel_bound(dq) @ w, lane_max(np.abs(dq)) / TOL_JOINT)
+    heel = np.abs(dq @ _PHASES) @ (np.array([thigh, shin, thigh, shin]) / TOL_HEEL)
+    return np.maximum(heel, lane_max(np.abs(dq)) / TOL_JOINT)
 
 
 def _first_knots(q: np.ndarray, s: np.ndarray, lengths) -> np.ndarray:
-    """Indices of the first knots: spread so that each interval's estimated error h^4 |q''''| / 384
-    is about the tolerance, with ``_score``'s weights (the ends kept: END_KNOTS)."""
+    """Indices of the first knots: spread so that each interval's estimated error h^4 |D4| / 384
+    is about the tolerance (D4: the fourth derivative of q, from the samples' fourth divided
+    differences, with ``_score``'s weights), the ends kept (END_KNOTS)."""
     n = len(s)
     d = q
-    for k in range(1, 5):  # divided differences: the fourth, times 4!, estimates q''''
+    for k in range(1, 5):  # divided differences: the fourth, times 4!, estimates D4
         d = np.diff(d, axis=0) / (s[k:] - s[:-k])[:, None]
-    m = _score(24.0 * d, lengths)  # (n - 4,): the fourth difference over samples i .. i + 4
-    # Per sample interval, the largest estimate among the stencils that span it.
-    need = np.zeros(n - 1)
-    for o in range(4):
-        need[o : o + n - 4] = np.maximum(need[o : o + n - 4], m)
-    per_s = DENSITY * (need / 384.0) ** 0.25  # knots per unit of s
-    count = np.concatenate([[0.0], np.cumsum(per_s * np.diff(s))])
-    at = np.searchsorted(count, np.arange(1.0, count[-1]))
+    # Per sample interval, the largest estimate among the stencils that span it (the fourth
+    # difference k spans samples k .. k + 4).
+    m = np.concatenate([np.zeros(3), _score(24.0 * d, lengths), np.zeros(3)])
+    need = np.maximum(np.maximum(m[: n - 1], m[1:n]), np.maximum(m[2 : n + 1], m[3 : n + 2]))
+    count = np.cumsum(DENSITY * np.sqrt(np.sqrt(need / 384.0)) * np.diff(s))  # knots by s[i + 1]
+    at = np.searchsorted(count, np.arange(1.0, count[-1])) + 1
     ends = np.r_[np.arange(END_KNOTS + 1), np.arange(n - END_KNOTS - 1, n)]
     return np.unique(np.concatenate([ends, at]))
 

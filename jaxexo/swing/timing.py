@@ -26,9 +26,11 @@ from jaxexo.swing.curve import (
     distinct_samples,
     heel_derivatives,
     law_from_speeds,
+    median,
     pchip_eval,
     pchip_slopes,
     thinned,
+    unwrapped,
 )
 from jaxexo.swing.curve_check import (
     CHECK_MARGIN,
@@ -387,28 +389,29 @@ def _joint_samples(sp, traj) -> np.ndarray:
     the samples, the joints there by the kinematics. Near a leg
     straightening on the floor a small heel step is a large joint step (a square root); without
     the points in between, a cubic through that chord swings wide of it."""
-    q = np.unwrap(np.asarray(traj.joint_angles, np.float64), axis=0)
+    q = unwrapped(np.asarray(traj.joint_angles, np.float64))
     heel = np.asarray(traj.heel, np.float64)
     # A dense path (n_points in the thousands) is thinned first (curve.MAX_PATH_SAMPLES).
     keep = thinned(len(q))
     q, heel = np.take(q, keep, axis=0), np.take(heel, keep, axis=0)  # rows (take: no fancy index)
     step = np.linalg.norm(np.diff(q, axis=0), axis=1)
     moving = step[step > 0]
-    long = np.flatnonzero(step > REFINE * np.median(moving)) if moving.size else []
+    mid = median(moving) if moving.size else 0.0
+    long = np.flatnonzero(step > REFINE * mid) if moving.size else []
     if not len(long):
         return q
     parts = np.ones(len(step), np.int64)
     # Parts no shorter than 1/REFINE_BUDGET of the path: a path that mostly stands still (a median
     # step of rounding noise) would otherwise ask for billions; so at most REFINE_BUDGET + N
     # samples (far more than a normal swing needs: REFINE_BUDGET).
-    unit = max(float(np.median(moving)), float(step.sum()) / REFINE_BUDGET)
+    unit = max(mid, float(step.sum()) / REFINE_BUDGET)
     parts[long] = np.ceil(step[long] / unit).astype(np.int64)
     i = np.repeat(np.arange(len(step)), parts)
     x = (np.arange(len(i)) - np.repeat(np.cumsum(parts) - parts, parts)) / parts[i]
     # Along the heel's monotone cubic through the samples (C1, never beyond the samples), graded
     # towards both ends of the interval (a smoothstep), where a straightening leg moves fastest.
     pts = pchip_eval(heel, pchip_slopes(heel), np.append(i + x * x * (3.0 - 2.0 * x), len(step)))
-    fine = np.unwrap(leg_angles(sp, traj.scene.pivot_y, pts), axis=0)
+    fine = unwrapped(leg_angles(sp, traj.scene.pivot_y, pts))
     fine += q[0] - fine[0]  # the same branch of each angle as the trajectory's (whole turns)
     # The trajectory's own joints at its samples (the same kinematics; kept exactly).
     fine[np.concatenate([np.cumsum(parts) - parts, [len(pts) - 1]])] = q
