@@ -15,9 +15,9 @@ from jaxexo.baselines import CFFTG
 from jaxexo.benchmarks.scenes import batch_kwargs, safety_sets
 from jaxexo.config import scalar_params
 from jaxexo.inference import TrajectoryGenerator
-from jaxexo.swing.curve import JointPath, chord_knots, cubic_paths, distinct_samples
+from jaxexo.swing.curve import JointPath
 from jaxexo.swing.limits import DeviceLimits
-from jaxexo.swing.timing import _joint_samples, time_swings
+from jaxexo.swing.timing import _joint_paths, time_swings
 
 from conftest import ROOT
 
@@ -40,15 +40,9 @@ def swings():
 
 
 def _paths(trajs, config) -> list[JointPath]:
-    """The joint paths the timing builds: the trajectory's joints, refined where a leg straightens
-    (timing._joint_samples), less the samples that nearly repeat."""
-    sp = scalar_params(config)
-    paths = []
-    for t in trajs:
-        q = _joint_samples(sp, t)
-        q = q[distinct_samples(q)]
-        paths += cubic_paths(chord_knots(q)[None], q[None])
-    return paths
+    """The joint paths the timing builds: through the few of the trajectory's joints, refined where
+    a leg straightens, that the geometry needs (timing._joint_paths, jaxexo.swing.knots)."""
+    return [p.path for p in _joint_paths(trajs, scalar_params(config))]
 
 
 @pytest.mark.parametrize("method", ["rl", "cfftg"])

@@ -77,6 +77,29 @@ def _affine_steps(dq, ddq, amax, ds):
     return 1.0 - 2.0 * ds * c, 2.0 * ds * r, 1.0 + 2.0 * ds * c, 2.0 * ds * r
 
 
+def _far_end_steps(fa, fb, ba, bb):
+    """The passes' steps (``_affine_steps``) with each cell's acceleration limits held at its far end
+    too: a step of s'' = u from x over a cell needs u <= U_k(x + 2 ds u) = r_k - c_k (x + 2 ds u) at
+    the next point, i.e. x + 2 ds u <= (x + 2 ds r_k) / (1 + 2 ds c_k) where 1 + 2 ds c_k > 0 (else
+    the far end bounds nothing this way), and the backward step likewise with L at the point before.
+    Each step becomes the minimum over 2 J affine maps (B, K, 2 J), the far end's moved to the
+    position the scan steps from: forward from point i, the maps of point i + 1; backward from point
+    i, those of point i - 1."""
+    # From the near-end maps: 2 ds c = 1 - fa = ba - 1 and 2 ds r = fb = bb.
+    grow = np.concatenate([ba[:, 1:], ba[:, -1:]], axis=1)  # 1 + 2 ds c at the next point
+    shrink = np.concatenate([fa[:, :1], fa[:, :-1]], axis=1)  # 1 - 2 ds c at the point before
+    r_next = np.concatenate([bb[:, 1:], bb[:, -1:]], axis=1)
+    r_prev = np.concatenate([fb[:, :1], fb[:, :-1]], axis=1)
+    fwd_ok, bwd_ok = grow > 0.0, shrink > 0.0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        fa2 = np.where(fwd_ok, 1.0 / np.where(fwd_ok, grow, 1.0), 0.0)
+        ba2 = np.where(bwd_ok, 1.0 / np.where(bwd_ok, shrink, 1.0), 0.0)
+        fb2 = np.where(fwd_ok, r_next * fa2, np.inf)
+        bb2 = np.where(bwd_ok, r_prev * ba2, np.inf)
+    cat = lambda u, v: np.concatenate([u, v], axis=-1)  # noqa: E731
+    return cat(fa, fa2), cat(fb, fb2), cat(ba, ba2), cat(bb, bb2)
+
+
 def _from_bound(a, b, bound):
     """Per step of a scan in order (a, b (K, J), bound (K,)): where a step from x = bound[p] lands
     (clipped as the scan clips), and whether that table may stand for the step (no NaN: the scan's
@@ -145,11 +168,21 @@ def _min_affine_scan(a, b, bound, order):
 
 
 def topp(
-    dq: np.ndarray, ddq: np.ndarray, vmax, amax, ds: float, cap: np.ndarray | None = None
+    dq: np.ndarray,
+    ddq: np.ndarray,
+    vmax,
+    amax,
+    ds: float,
+    cap: np.ndarray | None = None,
+    *,
+    both_ends: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The time-optimal rest-to-rest law on a uniform s grid (spacing ds) for joint derivatives
     dq, ddq (B, K, J): s'^2 (B, K), and per cell the least speed (B, K-1) of a cell crossed from
-    rest to rest (the passes: module docstring). ``cap`` (B, K): further upper bounds on s'^2."""
+    rest to rest (the passes: module docstring). ``cap`` (B, K): further upper bounds on s'^2.
+    ``both_ends``: each cell's constant s'' within the acceleration limits at both of its ends
+    (``_far_end_steps``), not only where the pass enters it: on a coarse grid the far end's
+    excess, first order in ds, is what the check would otherwise slow the swing for."""
     vmax = np.asarray(vmax, np.float64)
     amax = np.asarray(amax, np.float64)
     xmax = max_speed_curve(dq, ddq, vmax, amax)
@@ -157,6 +190,8 @@ def topp(
         xmax = np.minimum(xmax, cap)
     b, k = xmax.shape
     fa, fb, ba, bb = _affine_steps(dq, ddq, amax, ds)
+    if both_ends:
+        fa, fb, ba, bb = _far_end_steps(fa, fb, ba, bb)
     # Backward from rest at the end: reach[i-1] = clip(reach[i] - 2 ds L_i(reach[i]), 0, xmax[i-1]).
     backward = list(range(k - 1, -1, -1))
     reach = _min_affine_scan(ba, bb, xmax, backward)

@@ -22,14 +22,15 @@ from jaxexo.swing.curve import (
     SwingCurve,
     check_grid,
     chord_knots,
-    cubic_paths,
     curves_at,
     distinct_samples,
     heel_derivatives,
     law_from_speeds,
+    median,
     pchip_eval,
     pchip_slopes,
     thinned,
+    unwrapped,
 )
 from jaxexo.swing.curve_check import (
     CHECK_MARGIN,
@@ -48,6 +49,7 @@ from jaxexo.swing.export import (
     write_timed_csv,
     write_timed_json,
 )
+from jaxexo.swing.knots import few_knot_path
 from jaxexo.swing.limits import DeviceLimits, GridView, peak_ratio, speed_ratio
 from jaxexo.swing.time_law import topp
 from jaxexo.swing.trajectory import (
@@ -58,7 +60,9 @@ from jaxexo.swing.trajectory import (
     measure_paths,
 )
 
-GRID_PER_KNOT = 2  # TOPP grid points per interval of the joint path's knots
+GRID_PER_KNOT = 3  # TOPP grid points per piece of the joint path, ...
+GRID_MIN = 192  # ... at least this many, ...
+GRID_STEP = 32  # ... a multiple of this (plus the end)
 REFINE = 2.0  # a sample interval with a joint step over this many median steps is subdivided ...
 # ... into parts of at least 1/REFINE_BUDGET of the whole joint path: at most REFINE_BUDGET + N
 # joint samples (the most a swing of tests/reference_outputs.py has: 1,279, a CFFTG swing)
@@ -409,28 +413,29 @@ def _joint_samples(sp, traj) -> np.ndarray:
     the samples, the joints there by the kinematics. Near a leg
     straightening on the floor a small heel step is a large joint step (a square root); without
     the points in between, a cubic through that chord swings wide of it."""
-    q = np.unwrap(np.asarray(traj.joint_angles, np.float64), axis=0)
+    q = unwrapped(np.asarray(traj.joint_angles, np.float64))
     heel = np.asarray(traj.heel, np.float64)
     # A dense path (n_points in the thousands) is thinned first (curve.MAX_PATH_SAMPLES).
     keep = thinned(len(q))
     q, heel = np.take(q, keep, axis=0), np.take(heel, keep, axis=0)  # rows (take: no fancy index)
     step = np.linalg.norm(np.diff(q, axis=0), axis=1)
     moving = step[step > 0]
-    long = np.flatnonzero(step > REFINE * np.median(moving)) if moving.size else []
+    mid = median(moving) if moving.size else 0.0
+    long = np.flatnonzero(step > REFINE * mid) if moving.size else []
     if not len(long):
         return q
     parts = np.ones(len(step), np.int64)
     # Parts no shorter than 1/REFINE_BUDGET of the path: a path that mostly stands still (a median
     # step of rounding noise) would otherwise ask for billions; so at most REFINE_BUDGET + N
     # samples (far more than a normal swing needs: REFINE_BUDGET).
-    unit = max(float(np.median(moving)), float(step.sum()) / REFINE_BUDGET)
+    unit = max(mid, float(step.sum()) / REFINE_BUDGET)
     parts[long] = np.ceil(step[long] / unit).astype(np.int64)
     i = np.repeat(np.arange(len(step)), parts)
     x = (np.arange(len(i)) - np.repeat(np.cumsum(parts) - parts, parts)) / parts[i]
     # Along the heel's monotone cubic through the samples (C1, never beyond the samples), graded
     # towards both ends of the interval (a smoothstep), where a straightening leg moves fastest.
     pts = pchip_eval(heel, pchip_slopes(heel), np.append(i + x * x * (3.0 - 2.0 * x), len(step)))
-    fine = np.unwrap(leg_angles(sp, traj.scene.pivot_y, pts), axis=0)
+    fine = unwrapped(leg_angles(sp, traj.scene.pivot_y, pts))
     fine += q[0] - fine[0]  # the same branch of each angle as the trajectory's (whole turns)
     # The trajectory's own joints at its samples (the same kinematics; kept exactly).
     fine[np.concatenate([np.cumsum(parts) - parts, [len(pts) - 1]])] = q
@@ -438,30 +443,29 @@ def _joint_samples(sp, traj) -> np.ndarray:
 
 
 def _joint_paths(trajs, sp, samples=None) -> list[Plan]:
-    """The joint paths of the swings (splines batched by sample count) and their passes' grids;
-    ``samples``: each swing's ``_joint_samples`` when known."""
-    qs, knots = [], []
+    """The joint paths of the swings, each in the few pieces its geometry needs
+    (knots.few_knot_path), and their passes' grids (``grid_size``); ``samples``: each swing's
+    ``_joint_samples`` when known. Each swing's path is its own: a batch gives each what it gets
+    alone."""
+    plans = []
+    lengths = (sp.thigh, sp.shin)
     for j, t in enumerate(trajs):
         q = _joint_samples(sp, t) if samples is None else samples[j]
         q = np.take(q, distinct_samples(q), axis=0)
-        qs.append(q)
-        knots.append(chord_knots(q))
-    paths: list = [None] * len(trajs)
-    sizes = np.array([len(q) for q in qs])
-    for n in np.unique(sizes):
-        idx = np.flatnonzero(sizes == n)
-        for i, p in zip(
-            idx, cubic_paths(np.stack([knots[i] for i in idx]), np.stack([qs[i] for i in idx]))
-        ):
-            paths[i] = p
-    plans = []
-    for p in paths:
-        k = GRID_PER_KNOT * (len(p.knots) - 1) + 1
+        p = few_knot_path(q, chord_knots(q), lengths)
+        k = grid_size(len(p.knots) - 1)
         s = np.linspace(0.0, 1.0, k)
         _, dq, ddq = p.derivatives(s, 2)
         view = GridView(s, dq[None], ddq[None])
         plans.append(Plan(p, view, np.full(k, np.inf), np.zeros(k), None))
     return plans
+
+
+def grid_size(pieces: int) -> int:
+    """The passes' grid points for a joint path of ``pieces`` pieces: GRID_PER_KNOT per piece, at
+    least GRID_MIN, rounded up to a multiple of GRID_STEP (a batch's passes run per grid size)."""
+    k = max(GRID_MIN, GRID_PER_KNOT * pieces)
+    return -(-k // GRID_STEP) * GRID_STEP + 1
 
 
 def _run_passes(plans, idx, constraints, window: float) -> list[Plan]:
@@ -487,7 +491,7 @@ def _run_passes(plans, idx, constraints, window: float) -> list[Plan]:
                 rows_b.append(pb.b)
                 bounds.append(np.broadcast_to(pb.bound, pb.a.shape[-1:]))
         a, b, bound = (np.concatenate(r, axis=-1) for r in (rows_a, rows_b, bounds))
-        x, floor = topp(a, b, np.inf, bound, 1.0 / (k - 1), cap)
+        x, floor = topp(a, b, np.inf, bound, 1.0 / (k - 1), cap, both_ends=True)
         for j, i in enumerate(sub):
             law = law_from_speeds(view.s, x[j], floor[j], window, BLEND_FRACTION)
             plans[i] = replace(plans[i], x=x[j], law=law)

@@ -1,0 +1,89 @@
+"""The joint path in few pieces (NumPy only): a C2 cubic spline through the subset of a swing's
+joint samples that its geometry needs, chosen so that the spline stays within a tolerance of every
+sample (the heel in metres, each joint in radians). Used by jaxexo.swing.timing; the method and
+the measurements: docs/device-timing.md ("A swing in few pieces").
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from jaxexo.swing.curve import JointPath, cubic_paths, paths_at
+from jaxexo.swing.time_law import lane_max
+
+# The spline may stray from a joint sample by at most these (checked at every sample):
+# - the heel: a tenth of the 0.5 mm the generators keep above the clearance margin for the curve
+#   through their samples (the same 0.05 mm the verdict's polyline is allowed: timing.CURVE_TOL);
+TOL_HEEL = 5e-5  # m
+# - each joint: a fifth of the joint-range check's slack at a straight knee (kinematics.ANGLE_EPS,
+#   1e-4 rad: a straight leg is exactly at the knee's 0 limit at lift-off and touch-down).
+TOL_JOINT = 2e-5  # rad
+# The first and last this many sample intervals are kept as they are: there the legs straighten on
+# the floor (the joints move like a square root of the heel's height). With 0 an end piece dipped
+# the heel below the floor by up to 0.04 um; with 2, by 1.3 pm near touch-down (more than the
+# kinematics' rounding that tests/test_swing_curve.py allows, 1 pm); with 4, by 0.5 pm at most,
+# as the spline through every sample did (0.56 pm), on the tests' swings.
+END_KNOTS = 4
+# The first knots are spread by an estimate of the spline's error, h^4 |q''''| / 384 per interval
+# of length h (q'''' from the samples' fourth divided differences), this much denser than it asks.
+DENSITY = 1.5
+ROUNDS = 4  # rounds of inserting knots where the spline strays; then every sample is a knot
+FEWEST = 8  # a path of at most this many samples keeps them all
+
+
+# q @ _PHASES: the legs' segment angles phi = (q0, q0 + q1, q2, q2 + q3) (curve.segments).
+_PHASES = np.array([[1.0, 1.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 1.0], [0, 0, 0, 1]])
+
+
+def _score(dq: np.ndarray, lengths) -> np.ndarray:
+    """Per row of joint differences dq (n, 4), the larger of the heel's displacement bound over
+    TOL_HEEL and max_j |dq_j| over TOL_JOINT. The bound: the heel is a sum of L_i e(phi_i) with
+    L = (thigh, shin, thigh, shin) and e a unit vector, and |e(a) - e(b)| <= |a - b|, so the heel
+    moves by at most sum_i L_i |d phi_i|."""
+    thigh, shin = lengths
+    heel = np.abs(dq @ _PHASES) @ (np.array([thigh, shin, thigh, shin]) / TOL_HEEL)
+    return np.maximum(heel, lane_max(np.abs(dq)) / TOL_JOINT)
+
+
+def _first_knots(q: np.ndarray, s: np.ndarray, lengths) -> np.ndarray:
+    """Indices of the first knots: spread so that each interval's estimated error h^4 |D4| / 384
+    is about the tolerance (D4: the fourth derivative of q, from the samples' fourth divided
+    differences, with ``_score``'s weights), the ends kept (END_KNOTS)."""
+    n = len(s)
+    d = q
+    for k in range(1, 5):  # divided differences: the fourth, times 4!, estimates D4
+        d = np.diff(d, axis=0) / (s[k:] - s[:-k])[:, None]
+    # Per sample interval, the largest estimate among the stencils that span it (the fourth
+    # difference k spans samples k .. k + 4).
+    m = np.concatenate([np.zeros(3), _score(24.0 * d, lengths), np.zeros(3)])
+    need = np.maximum(np.maximum(m[: n - 1], m[1:n]), np.maximum(m[2 : n + 1], m[3 : n + 2]))
+    count = np.cumsum(DENSITY * np.sqrt(np.sqrt(need / 384.0)) * np.diff(s))  # knots by s[i + 1]
+    at = np.searchsorted(count, np.arange(1.0, count[-1])) + 1
+    ends = np.r_[np.arange(END_KNOTS + 1), np.arange(n - END_KNOTS - 1, n)]
+    return np.unique(np.concatenate([ends, at]))
+
+
+def few_knot_path(q: np.ndarray, s: np.ndarray, lengths) -> JointPath:
+    """The C2 not-a-knot spline through a subset of the joint samples q (N, 4) at parameters s (N,)
+    (increasing, 0 to 1), within TOL_HEEL and TOL_JOINT of every sample: the first knots from the
+    error estimate (``_first_knots``), then, ROUNDS times at most, the sample that strays most in
+    each interval over the tolerance made a knot. A path still over it is the spline through every
+    sample (exact at them)."""
+    n = len(s)
+    if n <= FEWEST + 2 * END_KNOTS:
+        return cubic_paths(s[None], q[None])[0]
+    idx = _first_knots(q, s, lengths)
+    for _ in range(ROUNDS):
+        (path,) = cubic_paths(np.take(s, idx)[None], np.take(q, idx, axis=0)[None])
+        score = _score(paths_at([path], [s], 0)[0][0] - q, lengths)
+        over = score > 1.0
+        if not over.any():
+            return path
+        # Per knot interval, its sample that strays most (the intervals' samples are contiguous).
+        piece = np.searchsorted(idx, np.arange(n), side="right") - 1
+        worst = np.flatnonzero(over)
+        order = np.lexsort((score[worst], piece[worst]))
+        worst = worst[order]
+        last = np.r_[piece[worst][1:] != piece[worst][:-1], True]
+        idx = np.union1d(idx, worst[last])
+    return cubic_paths(s[None], q[None])[0]
