@@ -16,6 +16,8 @@ ROW = "one Markdown table row's cells"
 # (path under jaxexo/, function): why it may return a wide dict or tuple.
 ALLOWED = {
     ("benchmarks/course_bench.py", "independent_checks"): JSON,
+    ("benchmarks/device_ready_bench.py", "_per_swing"): JSON,
+    ("benchmarks/device_ready_bench.py", "_duration_cells"): ROW,
     ("benchmarks/course_bench.py", "summarize"): JSON,
     ("benchmarks/generate_bench.py", "set_figures"): JSON,
     ("benchmarks/model_study_bench.py", "verdicts"): JSON,

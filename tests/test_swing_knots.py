@@ -15,7 +15,7 @@ from jaxexo.benchmarks.scenes import batch_kwargs, safety_sets
 from jaxexo.config import scalar_params
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.swing import knots, time_law
-from jaxexo.swing.curve import chord_knots, distinct_samples
+from jaxexo.swing.curve import chord_knots, cubic_paths, cubic_paths_ragged, distinct_samples
 from jaxexo.swing.timing import _joint_paths, _joint_samples
 
 from conftest import ROOT
@@ -167,3 +167,22 @@ def test_topp_with_both_ends_equals_a_plain_bisection_row_by_row_and_batched():
             big[i], _plain_passes(dq[i], ddq[i], xmax, amax, ds), rtol=1e-9, atol=1e-12
         )
     assert np.all(np.isfinite(floor)) and np.all(big >= 0)
+
+
+@pytest.mark.parametrize("size", [1, 3, 5, 9])
+def test_ragged_splines_equal_each_path_solved_alone(size):
+    """curve.cubic_paths_ragged (the batch's few-knot rounds: systems of different sizes padded to
+    one) gives each path bit for bit what cubic_paths gives it alone, for batches solved as Python
+    floats (up to 4) and vectorised."""
+    rng = np.random.default_rng(size)
+    for _ in range(25):
+        ks, qs = [], []
+        for _ in range(size):
+            n = int(rng.integers(4, 60))
+            k = np.sort(rng.uniform(0.0, 1.0, n))
+            ks.append((k - k[0]) / (k[-1] - k[0]))
+            qs.append(rng.normal(size=(n, 4)))
+        for k, q, p in zip(ks, qs, cubic_paths_ragged(ks, qs)):
+            (alone,) = cubic_paths(k[None], q[None])
+            np.testing.assert_array_equal(p.knots, alone.knots)
+            np.testing.assert_array_equal(p.coef, alone.coef)

@@ -161,6 +161,53 @@ def cubic_paths(knots: np.ndarray, q: np.ndarray) -> list[JointPath]:
     return [JointPath(knots[i].copy(), coef[i]) for i in range(b)]
 
 
+def cubic_paths_ragged(knots: list, q: list) -> list[JointPath]:
+    """``cubic_paths`` of paths with different sample counts (each (N_b,) and (N_b, J), N_b >= 4),
+    in one solve: each system padded to the longest with rows x = 0 that no real row reaches (its
+    last row's upper term is 0), so that every path's slopes are the very numbers its own solve
+    gives (the same operations on the same values; the padding adds and subtracts exact zeros)."""
+    sizes = np.array([len(k) for k in knots])
+    b, n, nj = len(knots), int(sizes.max()), q[0].shape[1]
+    kk, qq = np.empty((b, n)), np.empty((b, n, nj))
+    for j, (k, v) in enumerate(zip(knots, q)):
+        m = len(k)
+        kk[j, :m], qq[j, :m] = k, v
+        kk[j, m:] = k[-1] + np.arange(1, n - m + 1)  # unit steps past the end (no division by 0)
+        qq[j, m:] = v[-1]
+    h = np.diff(kk, axis=1)
+    delta = np.diff(qq, axis=1) / h[..., None]
+    lower, diag, upper = np.zeros((b, n)), np.ones((b, n)), np.zeros((b, n))
+    rhs = np.zeros((b, n, nj))
+    lower[:, 1:-1], diag[:, 1:-1] = h[:, 1:], 2.0 * (h[:, :-1] + h[:, 1:])
+    upper[:, 1:-1] = h[:, :-1]
+    rhs[:, 1:-1] = 3.0 * (h[:, 1:, None] * delta[:, :-1] + h[:, :-1, None] * delta[:, 1:])
+    w0, w1 = (
+        1.0 / h[:, 0] ** 2,
+        1.0 / h[:, 1] ** 2,
+    )  # the not-a-knot rows, as cubic_paths builds them
+    f = w1 / h[:, 0]
+    diag[:, 0] = w0 + f * h[:, 1]
+    upper[:, 0] = w0 - w1 + f * 2.0 * (h[:, 0] + h[:, 1])
+    rhs[:, 0] = 2.0 * (w0[:, None] * delta[:, 0] - w1[:, None] * delta[:, 1])
+    rhs[:, 0] += f[:, None] * rhs[:, 1]
+    rows, e = np.arange(b), sizes - 1  # each path's last row
+    ha, hb = h[rows, e - 2], h[rows, e - 1]
+    wa, wb = 1.0 / ha**2, 1.0 / hb**2
+    g = wa / hb
+    end = 2.0 * (wa[:, None] * delta[rows, e - 2] - wb[:, None] * delta[rows, e - 1])
+    end -= g[:, None] * rhs[rows, e - 1]
+    pad = np.arange(n)[None, :] > e[:, None]
+    lower[pad], diag[pad], upper[pad], rhs[pad] = 0.0, 1.0, 0.0, 0.0
+    lower[rows, e], diag[rows, e], upper[rows, e] = wa - wb - g * 2.0 * (ha + hb), -wb - g * ha, 0.0
+    rhs[rows, e] = end
+    m = tridiagonal_solve(lower, diag, upper, rhs)
+    hh = h[..., None]
+    c2 = (3.0 * delta - 2.0 * m[:, :-1] - m[:, 1:]) / hh
+    c3 = (m[:, :-1] + m[:, 1:] - 2.0 * delta) / (hh * hh)
+    coef = np.stack([qq[:, :-1], m[:, :-1], c2, c3], axis=2)
+    return [JointPath(np.array(knots[j], np.float64), coef[j, : sizes[j] - 1]) for j in range(b)]
+
+
 def tridiagonal_solve(lower, diag, upper, rhs) -> np.ndarray:
     """x with lower[i] x[i-1] + diag[i] x[i] + upper[i] x[i+1] = rhs[i] (Thomas algorithm), for
     systems (B, N) with right-hand sides (B, N, J). A few systems run as Python floats (a row costs

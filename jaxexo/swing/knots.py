@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from jaxexo.swing.curve import JointPath, cubic_paths, paths_at
+from jaxexo.swing.curve import JointPath, cubic_paths, cubic_paths_ragged, paths_at
 from jaxexo.swing.time_law import lane_max
 
 # The spline may stray from a joint sample by at most these (checked at every sample):
@@ -69,21 +69,43 @@ def few_knot_path(q: np.ndarray, s: np.ndarray, lengths) -> JointPath:
     error estimate (``_first_knots``), then, ROUNDS times at most, the sample that strays most in
     each interval over the tolerance made a knot. A path still over it is the spline through every
     sample (exact at them)."""
-    n = len(s)
-    if n <= FEWEST + 2 * END_KNOTS:
-        return cubic_paths(s[None], q[None])[0]
-    idx = _first_knots(q, s, lengths)
+    return few_knot_paths([q], [s], lengths)[0]
+
+
+def few_knot_paths(qs: list, ss: list, lengths) -> list[JointPath]:
+    """``few_knot_path`` of several swings (q (N_b, 4), s (N_b,) each), their rounds' splines
+    solved together (curve.cubic_paths_ragged) and evaluated together: each swing gets the very
+    path it gets alone."""
+    out: list = [None] * len(qs)
+    idx = {}
+    for b, (q, s) in enumerate(zip(qs, ss)):
+        if len(s) <= FEWEST + 2 * END_KNOTS:
+            out[b] = cubic_paths(s[None], q[None])[0]
+        else:
+            idx[b] = _first_knots(q, s, lengths)
     for _ in range(ROUNDS):
-        (path,) = cubic_paths(np.take(s, idx)[None], np.take(q, idx, axis=0)[None])
-        score = _score(paths_at([path], [s], 0)[0][0] - q, lengths)
-        over = score > 1.0
-        if not over.any():
-            return path
-        # Per knot interval, its sample that strays most (the intervals' samples are contiguous).
-        piece = np.searchsorted(idx, np.arange(n), side="right") - 1
-        worst = np.flatnonzero(over)
-        order = np.lexsort((score[worst], piece[worst]))
-        worst = worst[order]
-        last = np.r_[piece[worst][1:] != piece[worst][:-1], True]
-        idx = np.union1d(idx, worst[last])
-    return cubic_paths(s[None], q[None])[0]
+        if not idx:
+            return out
+        todo = list(idx)
+        paths = cubic_paths_ragged(
+            [np.take(ss[b], idx[b]) for b in todo], [np.take(qs[b], idx[b], axis=0) for b in todo]
+        )
+        values = paths_at(paths, [ss[b] for b in todo], 0)
+        for b, path, (v,) in zip(todo, paths, values):
+            score = _score(v - qs[b], lengths)
+            over = score > 1.0
+            if not over.any():
+                out[b] = path
+                del idx[b]
+                continue
+            # Per knot interval, its sample that strays most (the intervals' samples are
+            # contiguous).
+            piece = np.searchsorted(idx[b], np.arange(len(score)), side="right") - 1
+            worst = np.flatnonzero(over)
+            worst = worst[np.lexsort((score[worst], piece[worst]))]
+            last = np.r_[piece[worst][1:] != piece[worst][:-1], True]
+            idx[b] = np.union1d(idx[b], worst[last])
+    if idx:  # still over the tolerance: the spline through every sample
+        for b, path in zip(idx, cubic_paths_ragged([ss[b] for b in idx], [qs[b] for b in idx])):
+            out[b] = path
+    return out

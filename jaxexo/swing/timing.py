@@ -27,6 +27,7 @@ from jaxexo.swing.curve import (
     heel_derivatives,
     law_from_speeds,
     median,
+    paths_at,
     pchip_eval,
     pchip_slopes,
     thinned,
@@ -49,7 +50,7 @@ from jaxexo.swing.export import (
     write_timed_csv,
     write_timed_json,
 )
-from jaxexo.swing.knots import few_knot_path
+from jaxexo.swing.knots import few_knot_paths
 from jaxexo.swing.limits import DeviceLimits, GridView, peak_ratio, speed_ratio
 from jaxexo.swing.time_law import topp
 from jaxexo.swing.trajectory import (
@@ -444,20 +445,23 @@ def _joint_samples(sp, traj) -> np.ndarray:
 
 def _joint_paths(trajs, sp, samples=None) -> list[Plan]:
     """The joint paths of the swings, each in the few pieces its geometry needs
-    (knots.few_knot_path), and their passes' grids (``grid_size``); ``samples``: each swing's
+    (knots.few_knot_paths), and their passes' grids (``grid_size``); ``samples``: each swing's
     ``_joint_samples`` when known. Each swing's path is its own: a batch gives each what it gets
-    alone."""
-    plans = []
-    lengths = (sp.thigh, sp.shin)
+    alone (the batch's splines and evaluations are the single swing's, bit for bit)."""
+    qs, ss = [], []
     for j, t in enumerate(trajs):
         q = _joint_samples(sp, t) if samples is None else samples[j]
         q = np.take(q, distinct_samples(q), axis=0)
-        p = few_knot_path(q, chord_knots(q), lengths)
-        k = grid_size(len(p.knots) - 1)
-        s = np.linspace(0.0, 1.0, k)
-        _, dq, ddq = p.derivatives(s, 2)
-        view = GridView(s, dq[None], ddq[None])
-        plans.append(Plan(p, view, np.full(k, np.inf), np.zeros(k), None))
+        qs.append(q)
+        ss.append(chord_knots(q))
+    paths = few_knot_paths(qs, ss, (sp.thigh, sp.shin))
+    grids = [np.linspace(0.0, 1.0, grid_size(len(p.knots) - 1)) for p in paths]
+    plans = []
+    for p, s, (_, dq, ddq) in zip(paths, grids, paths_at(paths, grids, 2)):
+        k = len(s)
+        plans.append(
+            Plan(p, GridView(s, dq[None], ddq[None]), np.full(k, np.inf), np.zeros(k), None)
+        )
     return plans
 
 
