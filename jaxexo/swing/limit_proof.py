@@ -10,10 +10,11 @@ U1 sigma + U2 sigma^2 + U3 sigma^3, q = Q(S(c)) + G1 u + G2 u^2 + G3 u^3 (G1 = Q
 G3 = Q'''/6 at S(c)). For |sigma| <= 1, |d^k/dsigma^k sigma^j| <= j!/(j-k)!, and
 d^k/dt^k = H^-k d^k/dsigma^k, so |q^(k)| <= H^-k sum_j j!/(j-k)! |p_j| at every instant of the
 piece: the rows p_1..p_4 exactly, the small rows p_5..p_9 (higher powers of the short piece) by
-the triangle inequality over their three terms.
+the triangle inequality over their terms, with the largest of G2 and G3 over the joints.
 
-The pieces: each piece of the law (between its breakpoints) is paired with every piece of the path
-its s range touches. Where it crosses a knot, each pair covers its side of the crossing (found on
+The pieces: each piece of the law (between its breakpoints; a long one cut in equal parts) is
+paired with every piece of the path its s range touches.
+ Where it crosses a knot, each pair covers its side of the crossing (found on
 the law's cubic, and widened by CROSS_WIDTH where the cubic is checked to be past the knot there),
 or the whole law piece where that check fails: each instant's own pair covers it.
 """
@@ -33,7 +34,9 @@ from jaxexo.swing.curve import laws_at
 # difference over its window: about 1e-14); the pieces' ends are known to an ulp of t, which
 # 1e-9 of a piece's half-width covers many times over (widening a piece by 1e-9 of its
 # half-width raises the bound by at most 9e-9 of itself, and the margin is applied to all nine
-# rows). Measured: the 100 kHz curve's largest value over its bound (tests/test_limit_proof.py).
+# rows). Measured (tests/test_limit_proof.py, 100 kHz): the curve reaches its bound less the slack
+# times 1 + 1.3e-14 at most, where the end of a piece is its largest value.
+
 ROUNDING = 1e-9
 # A law piece is paired with every path piece within this of its s range (s in [0, 1]): the
 # curve's s at an instant near a knot rounds to either side of it by far less.
@@ -47,9 +50,11 @@ CROSS_WIDTH = 1e-4
 # Law pieces bounded in one vectorised step at most (the arrays are a few x 4 x pieces floats): a
 # batch's memory stays bounded whatever its swings (a wandering one has tens of thousands).
 GROUP_PIECES = 1 << 15
-# A piece of the law longer than this fraction of the swing is bounded in equal parts, at most
-# MAX_PARTS (the first and last pieces, and the slow stretches, are the long ones).
-PIECE_FRACTION = 3e-3
+# A piece of the law longer than this fraction of its window is bounded in equal parts, at most
+# MAX_PARTS (the window is the time scale on which the law's acceleration changes; the first and
+# last pieces, and the slow stretches, are the long ones).
+PIECE_FRACTION = 0.1
+
 MAX_PARTS = 4
 
 
@@ -116,11 +121,12 @@ def _pairs(paths, lo, hi, counts):
 def _spans(law, knot, s, u, lo, hi):
     """Per pair (N,), the stretch [a, b] of its law piece's sigma in [-1, 1] where its path piece
     may hold: from the crossing of its first knot to that of the next (Newton's steps on the law's
-    cubic from its chord's crossing), each widened by CROSS_WIDTH and kept only where the law's cubic there is
-    S_SLACK past the knot (so the curve's own s, within rounding of the cubic's, is on the knot's
-    side: S is non-decreasing); elsewhere the whole law piece. ``knot``: each pair's path piece's
-    first knot; per law piece, ``s`` = S(c), ``u`` (3, L) = U1..U3, ``lo`` and ``hi`` = S at its
-    ends."""
+    cubic from its chord's crossing), each widened by CROSS_WIDTH and kept only where the law's
+    cubic there is S_SLACK past the knot (so the curve's own s, within rounding of the cubic's, is
+    on the knot's side: S is non-decreasing); elsewhere the whole law piece. ``knot``: each pair's
+    path piece's first knot; per law piece, ``s`` = S(c), ``u`` (3, L) = U1..U3, ``lo`` and ``hi``
+    = S at its ends."""
+
     a, b = np.full(len(law), -1.0), np.full(len(law), 1.0)
     cross = np.flatnonzero(law[1:] == law[:-1]) + 1  # a pair whose knot its law piece crosses
     if not len(cross):
@@ -196,12 +202,13 @@ def _series(v, half, g2, g3):
     return rows[:8], weights, tails[:, None, :]
 
 
-def _split(b: np.ndarray) -> np.ndarray:
-    """Breakpoints ``b`` with each piece longer than PIECE_FRACTION of the whole cut into equal
-    parts that are not, MAX_PARTS at most (the same cubic on each part: a shorter part's bound is
-    tighter, the Taylor terms beyond the linear one shrinking with its length squared)."""
+def _split(b: np.ndarray, window: float) -> np.ndarray:
+    """Breakpoints ``b`` with each piece longer than PIECE_FRACTION of the law's ``window`` cut
+    into equal parts that are not, MAX_PARTS at most (the same cubic on each part: a shorter
+    part's bound is tighter, the Taylor terms beyond the linear one shrinking with its length
+    squared)."""
     width = np.diff(b)
-    parts = np.minimum(np.ceil(width / (PIECE_FRACTION * (b[-1] - b[0]))), MAX_PARTS)
+    parts = np.minimum(np.ceil(width / (PIECE_FRACTION * window)), MAX_PARTS)
     if not np.any(parts > 1):
         return b
     parts = parts.astype(np.int64)
@@ -212,7 +219,7 @@ def _split(b: np.ndarray) -> np.ndarray:
 
 def _bounds(paths, laws) -> list[CurveBound]:
     """``curve_bounds`` of one group, in one vectorised step."""
-    b = [_split(law.breakpoints()) for law in laws]
+    b = [_split(law.breakpoints(), law.window) for law in laws]
 
     half = [0.5 * np.diff(x) for x in b]
     centre = [x[:-1] + h for x, h in zip(b, half)]
