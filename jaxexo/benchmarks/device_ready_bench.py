@@ -32,7 +32,7 @@ OPTIONS = (
 PARTS = {
     "path": ("_joint_samples", "_joint_paths"),
     "passes": ("_run_passes", "lowered_cap"),
-    "check": ("with_checks",),
+    "proof": ("with_bounds",),
     "final law": ("final_law",),
     "samples": ("_samples",),
     "verdict": ("_path_checks", "_curve_verdict"),

@@ -54,9 +54,6 @@ class JointVelocity:
             cap = np.where(adq > 1e-12, (self.limit / np.maximum(adq, 1e-300)) ** 2, np.inf)
         return PathBounds(x_cap=lane_min(cap))
 
-    def value(self, derivs) -> np.ndarray:
-        return derivs[1]
-
 
 @dataclass(frozen=True)
 class JointAcceleration:
@@ -68,9 +65,6 @@ class JointAcceleration:
 
     def path_bounds(self, view: GridView) -> PathBounds:
         return PathBounds(a=view.dq, b=view.ddq, bound=self.limit)
-
-    def value(self, derivs) -> np.ndarray:
-        return derivs[2]
 
 
 @dataclass(frozen=True)
@@ -85,16 +79,14 @@ class JointJerk:
     def path_bounds(self, view: GridView) -> PathBounds:
         return PathBounds()
 
-    def value(self, derivs) -> np.ndarray:
-        return derivs[3]
 
-
-def speed_ratio(constraints, derivs) -> np.ndarray:
-    """Per time (n,), the largest factor by which the swing's speed exceeds any constraint, from
-    the joints' [q, q-dot, q-ddot, q-dddot] (n, J) each: max (|value| / limit)^(1 / power)."""
-    r = np.zeros(len(derivs[0]))
+def speed_ratio(constraints, bound) -> np.ndarray:
+    """Per piece of a curve (n,), the largest factor by which the swing's speed may exceed any
+    constraint, from the bounds on |q-dot|, |q-ddot|, |q-dddot| (3, J, n) there
+    (jaxexo.swing.limit_proof): max over the joints of (bound / limit)^(1 / power)."""
+    r = np.zeros(bound.shape[-1])
     for c in constraints:
-        x = lane_max(np.abs(c.value(derivs)) / c.limit)
+        x = lane_max((bound[int(c.power) - 1] / c.limit[:, None]).T)
         r = np.maximum(r, x if c.power == 1.0 else x ** (1.0 / c.power))
     return r
 

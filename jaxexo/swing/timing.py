@@ -40,7 +40,7 @@ from jaxexo.swing.curve_check import (
     final_law,
     lowered_cap,
     max_samples,
-    with_checks,
+    with_bounds,
 )
 from jaxexo.swing.export import (
     JOINT_NAMES,
@@ -83,7 +83,9 @@ GROUND_ROUNDING = 1e-12  # m: the forward kinematics' rounding at the floor (a p
 class TimedSwing:
     """A swing timed at the device's limits: the curve (``at(t)``, any instant) and its samples at
     one control rate, one row per period from lift-off (t = 0) to touch-down, both at rest.
-    ``checks`` and ``within_limits`` are made on the curve, so they hold at any rate."""
+    ``checks`` and ``within_limits`` are made on the curve, so they hold at any rate: the peaks are
+    proven bounds on the curve's maxima (jaxexo.swing.limit_proof: never below them, at most a
+    fraction of a percent above), so a swing within the limits is within them at every instant."""
 
     method: str
     scene: Scene
@@ -104,12 +106,12 @@ class TimedSwing:
     path_parameter: np.ndarray  # (n,) s(t) in [0, 1]
     checks: TrajectoryChecks  # path checks (goal, clearance, joint range, leg length) on the curve
     within_limits: bool  # velocity, acceleration and jerk within the planned limits on the curve
-    peak_velocity: np.ndarray  # (4,) rad/s, on the curve
-    peak_acceleration: np.ndarray  # (4,) rad/s^2
+    peak_velocity: np.ndarray  # (4,) rad/s: a proven upper bound on max |q-dot| over the curve
+    peak_acceleration: np.ndarray  # (4,) rad/s^2: the same for |q-ddot|
     # Uniform slow-down applied after the passes and local corrections (>= 1; < 1: a path the
     # limits cannot cross within MAX_SWING_DURATION, sped up to it, notes and within_limits say so).
     slowdown: float
-    peak_jerk: np.ndarray | None = None  # (4,) rad/s^3, on the curve
+    peak_jerk: np.ndarray | None = None  # (4,) rad/s^3: the same for |q-dddot|
     notes: tuple[str, ...] = field(default=())
     curve: SwingCurve | None = None
     joint_jerk: np.ndarray | None = None  # (n, 4) rad/s^3
@@ -380,8 +382,8 @@ def _time_chunk(trajs, sp, rate: float, device: DeviceLimits, qs) -> list[TimedS
                 p.law.duration <= MAX_SWING_DURATION
                 and peak_ratio(check, p.check.peaks) > LOCAL_FROM
             ):
-                ratio = speed_ratio(check, p.check.derivs)
-                plans[i] = replace(p, cap=lowered_cap(p, ratio, p.check.s, p.check.t))
+                ratio = speed_ratio(check, p.check.bound)  # per piece of the curve
+                plans[i] = replace(p, cap=lowered_cap(p, ratio))
                 redo.append(i)
         if not redo:
             break
@@ -499,7 +501,7 @@ def _run_passes(plans, idx, constraints, window: float) -> list[Plan]:
         for j, i in enumerate(sub):
             law = law_from_speeds(view.s, x[j], floor[j], window, BLEND_FRACTION)
             plans[i] = replace(plans[i], x=x[j], law=law)
-    return with_checks(plans, idx)
+    return with_bounds(plans, idx)
 
 
 @dataclass(frozen=True)
