@@ -13,6 +13,7 @@ import numpy as np
 # phi = (hip_swing, hip_swing + knee_swing, hip_stance, hip_stance + knee_stance), L = (thigh,
 # shin, thigh, shin), e(phi) = (sin phi, -cos phi): the thigh and shank directions of eq 2.49.
 _SIGN = np.array([1.0, 1.0, -1.0, -1.0])
+GROUND_ROUNDING = 1e-12  # m: the forward kinematics' rounding at the floor (a picometre)
 
 # How a controller evaluates SwingCurve.piecewise() (the JSON's "piecewise"), word for word in the
 # export; tests/test_piecewise_export.py is an evaluator written from this text alone.
@@ -43,22 +44,6 @@ class JointPath:
     def derivatives(self, s: np.ndarray, order: int = 3) -> list[np.ndarray]:
         """q and its s-derivatives up to ``order`` at s (n,): a list of (n, J) arrays."""
         return paths_at([self], [np.asarray(s, np.float64)], order)[0]
-
-    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """Per piece, max |q'| and max |q''| over the piece (P, J): q'' is linear on a piece (its
-        ends), q' quadratic (its ends and its vertex)."""
-        h = np.diff(self.knots)[:, None]
-        # Contiguous coefficients, each product once: the same values at fewer, cheaper calls.
-        _, c1, c2, c3 = np.ascontiguousarray(self.coef.transpose(1, 0, 2))
-        c2x2, c3x3 = 2.0 * c2, 3.0 * c3
-        d1_end = c1 + (c2x2 + c3x3 * h) * h
-        with np.errstate(divide="ignore", invalid="ignore"):
-            dv = np.where(c3 != 0.0, -c2 / c3x3, 0.0)
-        dv = np.minimum(np.maximum(dv, 0.0), h)  # np.clip's values (dv is never NaN)
-        d1_mid = c1 + (c2x2 + c3x3 * dv) * dv
-        d1 = np.maximum(np.maximum(np.abs(c1), np.abs(d1_end)), np.abs(d1_mid))
-        d2 = np.maximum(np.abs(c2x2), np.abs(c2x2 + 6.0 * c3 * h))
-        return d1, d2
 
 
 def chord_knots(q: np.ndarray) -> np.ndarray:
@@ -312,27 +297,57 @@ def leg_points(lengths, pivot_y: float, e: np.ndarray) -> tuple[np.ndarray, ...]
     return hip, hip + thigh * e[:, 0], hip + thigh * e[:, 2]
 
 
+# phi = q @ _PHASE: the absolute segment angles (hip, hip + knee of each leg) of joint values (or of
+# their derivatives, or of bounds on them: sums of bounds bound the summed angles).
+_PHASE = np.array(
+    [[1.0, 1.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 1.0], [0.0, 0.0, 0.0, 1.0]]
+)
+
+
 def heel_second_derivative_bounds(lengths, path: JointPath) -> np.ndarray:
-    """Per piece of the path (P,), an upper bound on |d2 heel / ds2| (m): per leg term
-    L (|phi''| + phi'^2), with the joints' per-piece bounds (sums of bounds bound the summed
-    angles)."""
-    d1, d2 = path.bounds()
-    a1, a2 = _phases(d1), _phases(d2)
-    ln = np.abs(np.array([lengths[0], lengths[1], lengths[0], lengths[1]]))
-    return np.sum(ln * (a2 + a1 * a1), axis=-1)
+    """Per piece of the path (P,), an upper bound on |d2 heel / ds2| (m): the leg terms
+    L (phi'' e_perp - phi'^2 e) summed, each of length L sqrt(phi''^2 + phi'^4) (e, e_perp
+    orthonormal), with per-piece bounds on the joints' |q'| <= |c1| + 2 |c2| h + 3 |c3| h^2 and
+    |q''| <= 2 |c2| + 6 |c3| h (h the piece's length; sums of bounds bound the summed angles)."""
+    h = np.diff(path.knots)[:, None]
+    a = np.abs(path.coef)
+    c2x2, c3x3h = 2.0 * a[:, 2], 3.0 * h * a[:, 3]
+    mid = c2x2 + c3x3h
+    a1 = (a[:, 1] + mid * h) @ _PHASE
+    a1 *= a1
+    a2 = (mid + c3x3h) @ _PHASE
+    ln = np.array([lengths[0], lengths[1], lengths[0], lengths[1]])
+    return np.sqrt(a2 * a2 + a1 * a1) @ np.abs(ln)
 
 
-def check_grid(lengths, path: JointPath, tol: float) -> np.ndarray:
-    """Path parameters (n,) from 0 to 1, every knot among them, spaced so that the heel curve
-    strays at most ``tol`` (m) from the polyline through them: on a piece with |h''| <= B, a chord
-    over Delta s deviates by at most Delta s^2 B / 8."""
+def check_points(lengths, pivot_y: float, path: JointPath, tol: float):
+    """The verdict's polyline on the curve: path parameters s (n,) from 0 to 1, every knot among
+    them, spaced so that the heel curve strays at most ``tol`` (m) from the polyline through them
+    (on a piece with |h''| <= B, a chord over Delta s deviates by at most Delta s^2 B / 8), with
+    the joints q (n, J) and the heel (n, 2) there (heights within GROUND_ROUNDING of the floor on
+    it). Each point is evaluated on its own piece at its offset (no search)."""
     h = np.diff(path.knots)
     bound = heel_second_derivative_bounds(lengths, path)
-    n = np.maximum(1, np.ceil(h * np.sqrt(bound / (8.0 * tol)))).astype(np.int64)
-    start = np.repeat(path.knots[:-1], n)
-    step = np.repeat(h / n, n)
-    j = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)
-    return np.concatenate([start + j * step, [1.0]])
+    n = np.maximum(np.ceil(h * np.sqrt(bound * (0.125 / tol))), 1.0).astype(np.int64)
+    m = n.copy()
+    m[-1] += 1  # the last piece also holds s = 1
+    j = np.arange(int(m.sum())) - np.repeat(np.cumsum(n) - n, m)
+    piece = np.repeat(np.arange(len(h)), m)
+    d = j * np.repeat(h / n, m)
+    d[-1] = h[-1]
+    s = path.knots[piece] + d
+    s[-1] = 1.0
+    c = np.take(path.coef, piece, axis=0)
+    d = d[:, None]
+    q = ((c[:, 3] * d + c[:, 2]) * d + c[:, 1]) * d + c[:, 0]
+    phi = q @ _PHASE
+    ln = _SIGN * np.array([lengths[0], lengths[1], lengths[0], lengths[1]])
+    heel = np.empty((len(s), 2))
+    heel[:, 0] = np.sin(phi) @ ln + pivot_y
+    z = np.cos(phi) @ -ln
+    # The forward kinematics' rounding at the floor (a picometre), not a motion.
+    heel[:, 1] = np.where(np.abs(z) < GROUND_ROUNDING, 0.0, z)
+    return s, q, heel
 
 
 # --------------------------------------------------------------------------------------------
