@@ -310,23 +310,21 @@ def _cummax(xp, y):
 @dataclass(frozen=True)
 class FootReach:
     """The heels whose flat foot [heel, heel + (f, 0)] meets an outline: the outline swept back by
-    the foot, a union of parallelograms (each edge with itself moved back by f). Their sides lie on
-    S segments a + t e, t in [0, 1] (the edges, the edges moved back by f, and the horizontal
-    segments from each vertex back by f), rows (1, S); the segments' ends are the V points w, rows
-    (1, V); ``box`` (y0, y1, z1): the heels' box [y0, y1] x [0, z1] around them. For a heel outside
-    every parallelogram the foot's distance to the outline is the heel's distance to the S
-    segments (the heel and the toe to the edges, the vertices to the foot); for a heel move that
-    stays outside them, the swept foot's distance is the least of its ends' and of the w's
-    distances to the move (the vertices to the heel's and the toe's chords), as ``swept_distance``
-    computes it."""
+    the foot, a union of parallelograms (each edge with itself moved back by f). Points are complex
+    numbers y + iz here (a product or a difference is one NumPy call). The parallelograms' sides lie
+    on S segments a + t e, t in [0, 1] (the edges, the edges moved back by f, and the horizontal
+    segments from each vertex back by f), rows (1, S), with ``ce`` = conj(e) / |e|^2 (0 for a
+    point); the segments' ends are the V points w, a row (1, V); ``box`` (y0, y1, z1): the heels'
+    box [y0, y1] x [0, z1] around them. For a heel outside every parallelogram the foot's distance
+    to the outline is the heel's distance to the S segments (the heel and the toe to the edges, the
+    vertices to the foot); for a heel move that stays outside them, the swept foot's distance is
+    the least of its ends' and of the w's distances to the move (the vertices to the heel's and the
+    toe's chords), the terms of ``swept_distance``."""
 
-    ay: np.ndarray
-    az: np.ndarray
-    ey: np.ndarray
-    ez: np.ndarray
-    inv: np.ndarray
-    wy: np.ndarray
-    wz: np.ndarray
+    a: np.ndarray
+    e: np.ndarray
+    ce: np.ndarray
+    w: np.ndarray
     box: tuple
 
 
@@ -350,29 +348,29 @@ def _foot_reach(outline: np.ndarray, f: float) -> FootReach:
         keep = np.ones(len(outline), bool)
         keep[1:] = np.any(outline[1:] != outline[:-1], axis=1)
         outline = outline[keep]
-    back = outline - np.array([f, 0.0])
-    a = np.concatenate([outline[:-1], back])  # the edges, and from each vertex back by f ...
-    a = np.concatenate([a, back[:-1]])  # ... and the edges moved back by f
-    e = np.concatenate([outline[1:], outline, back[1:]]) - a
-    ey, ez = e[:, 0], e[:, 1]
-    w = np.concatenate([outline, back])
-    hi = outline.max(axis=0)
+    v = outline[:, 0] + 1j * outline[:, 1]
+    back = v - f
+    a = np.concatenate([v[:-1], back, back[:-1]])  # the edges, from each vertex back, moved back
+    e = np.concatenate([v[1:], v, back[1:]]) - a
+    len2 = e.real * e.real + e.imag * e.imag
+    ok = len2 > 1e-24  # shorter: a point (as geometry._inv_edge_len2)
+    ce = np.where(ok, e.conj() / np.where(ok, len2, 1.0), 0.0)
     return FootReach(
-        ay=a[None, :, 0],
-        az=a[None, :, 1],
-        ey=ey[None],
-        ez=ez[None],
-        inv=_inv_edge_len2(np, ey, ez)[None],
-        wy=w[None, :, 0],
-        wz=w[None, :, 1],
-        box=(float(back[:, 0].min()), float(hi[0]), float(hi[1])),
+        a=a[None],
+        e=e[None],
+        ce=ce[None],
+        w=np.concatenate([v, back])[None],
+        box=(float(back.real.min()), float(outline[:, 0].max()), float(outline[:, 1].max())),
     )
 
 
-def _reach_distance(r: FootReach, p: np.ndarray) -> np.ndarray:
-    """Distance (M,) of heels p (M, 2) to the S segments of ``r``."""
-    d2 = _point_edge_dist2(np, p[:, 0:1], p[:, 1:2], r.ay, r.az, r.ey, r.ez, r.inv)
-    return np.sqrt(d2.min(axis=1))
+def _segment_distance2(p, a, e, ce) -> np.ndarray:
+    """Squared distances of points p to segments a + t e, t in [0, 1] (complex, broadcast;
+    ce = conj(e) / |e|^2): the rows' least (M,)."""
+    ap = p - a
+    t = (ap * ce).real
+    w = ap - np.minimum(np.maximum(t, 0.0), 1.0) * e
+    return (w.real * w.real + w.imag * w.imag).min(axis=1)
 
 
 def polyline_clearances(heel, foot_length, outline, step: float = 0.02, slack: float = 1e-9):
@@ -398,15 +396,16 @@ def polyline_clearances(heel, foot_length, outline, step: float = 0.02, slack: f
     hy, hz = float(heel[0, 0]), float(heel[0, 1])
     if n < 2 or (y0 <= hy <= y1 and hz <= z1) or not heel[:, 1].min() >= 0.0:
         return None
-    d = heel[1:] - heel[:-1]
-    length = np.hypot(d[:, 0], d[:, 1])
+    p = np.ascontiguousarray(heel, np.float64).view(np.complex128)  # (N, 1): y + iz
+    d = p[1:] - p[:-1]
+    length = np.sqrt(d.real * d.real + d.imag * d.imag)[:, 0]
     arc = np.zeros(n)
     np.cumsum(length, out=arc[1:])
     if not arc[-1] > 0.0:  # a heel that does not move
         return None
     # The first heel at or past each multiple of step (a long move may repeat one), and the last.
     co = np.concatenate([np.searchsorted(arc, np.arange(0.0, arc[-1], step)), [n - 1]])
-    dc = _reach_distance(r, heel[co])
+    dc = np.sqrt(_segment_distance2(p[co], r.a, r.e, r.ce))
     ac = arc[co]
     g = 0.5 * (dc[:-1] + dc[1:] - (ac[1:] - ac[:-1]))
     if not g.min() > slack:
@@ -414,14 +413,12 @@ def polyline_clearances(heel, foot_length, outline, step: float = 0.02, slack: f
     count = co[1:] - co[:-1]  # the moves of each stretch
     j = np.flatnonzero(np.repeat(g <= dc.min() + slack, count))
     m = len(j)
-    ends = _reach_distance(r, heel[np.concatenate([j, j + 1])])
+    ends = _segment_distance2(p[np.concatenate([j, j + 1])], r.a, r.e, r.ce)
     u = d[j]
-    uy, uz = u[:, 0:1], u[:, 1:2]
     lj = length[j, None]
-    inv = 1.0 / np.maximum(lj * lj, 1e-300)  # a move of length 0: t = 0, the distance to its end
-    p0 = heel[j]
-    dw = _point_edge_dist2(np, r.wy, r.wz, p0[:, 0:1], p0[:, 1:2], uy, uz, inv)
+    # The w points to the moves (a move of length 0: t = 0, the distance to its start).
+    dw = _segment_distance2(r.w, p[j], u, u.conj() / np.maximum(lj * lj, 1e-300))
     sw = np.repeat(g, count)
-    sw[j] = np.minimum(np.minimum(ends[:m], ends[m:]), np.sqrt(dw.min(axis=1)))
+    sw[j] = np.sqrt(np.minimum(np.minimum(ends[:m], ends[m:]), dw))
     # A point's clearance is at least that of a move it ends.
     return np.concatenate([sw, sw[-1:]]), sw

@@ -304,20 +304,32 @@ _PHASE = np.array(
 )
 
 
-def heel_second_derivative_bounds(lengths, path: JointPath) -> np.ndarray:
-    """Per piece of the path (P,), an upper bound on |d2 heel / ds2| (m): the leg terms
+def heel_second_derivative_bounds(lengths, h: np.ndarray, coef: np.ndarray) -> np.ndarray:
+    """Per piece of a joint path (P,), an upper bound on |d2 heel / ds2| (m): the leg terms
     L (phi'' e_perp - phi'^2 e) summed, each of length L sqrt(phi''^2 + phi'^4) (e, e_perp
     orthonormal), with per-piece bounds on the joints' |q'| <= |c1| + 2 |c2| h + 3 |c3| h^2 and
-    |q''| <= 2 |c2| + 6 |c3| h (h the piece's length; sums of bounds bound the summed angles)."""
-    h = np.diff(path.knots)[:, None]
-    a = np.abs(path.coef)
-    c2x2, c3x3h = 2.0 * a[:, 2], 3.0 * h * a[:, 3]
+    |q''| <= 2 |c2| + 6 |c3| h (sums of bounds bound the summed angles). ``h`` (P, 1): the pieces'
+    lengths; ``coef`` (4, P, J): the path's coefficients c0..c3, each a contiguous block."""
+    _, c1, c2, c3 = np.abs(coef)
+    c2x2, c3x3h = 2.0 * c2, (3.0 * h) * c3
     mid = c2x2 + c3x3h
-    a1 = (a[:, 1] + mid * h) @ _PHASE
+    a1 = (c1 + mid * h) @ _PHASE
     a1 *= a1
     a2 = (mid + c3x3h) @ _PHASE
-    ln = np.array([lengths[0], lengths[1], lengths[0], lengths[1]])
-    return np.sqrt(a2 * a2 + a1 * a1) @ np.abs(ln)
+    return np.sqrt(a2 * a2 + a1 * a1) @ _leg_terms(lengths)[1]
+
+
+def _leg_terms(lengths) -> tuple[np.ndarray, np.ndarray]:
+    """The heel's leg terms sign_i L_i (4,) and their lengths |L_i|, per (thigh, shin), kept."""
+    key = (float(lengths[0]), float(lengths[1]))
+    out = _LEG_TERMS.get(key)
+    if out is None:
+        ln = np.array([key[0], key[1], key[0], key[1]])
+        out = _LEG_TERMS[key] = (_SIGN * ln, np.abs(ln))
+    return out
+
+
+_LEG_TERMS: dict = {}
 
 
 def check_points(lengths, pivot_y: float, path: JointPath, tol: float):
@@ -326,25 +338,27 @@ def check_points(lengths, pivot_y: float, path: JointPath, tol: float):
     (on a piece with |h''| <= B, a chord over Delta s deviates by at most Delta s^2 B / 8), with
     the joints q (n, J) and the heel (n, 2) there (heights within GROUND_ROUNDING of the floor on
     it). Each point is evaluated on its own piece at its offset (no search)."""
-    h = np.diff(path.knots)
-    bound = heel_second_derivative_bounds(lengths, path)
+    knots = path.knots
+    h = knots[1:] - knots[:-1]
+    ct = np.ascontiguousarray(path.coef.transpose(1, 0, 2))  # (4, P, J): contiguous blocks
+    bound = heel_second_derivative_bounds(lengths, h[:, None], ct)
     n = np.maximum(np.ceil(h * np.sqrt(bound * (0.125 / tol))), 1.0).astype(np.int64)
     m = n.copy()
     m[-1] += 1  # the last piece also holds s = 1
-    j = np.arange(int(m.sum())) - np.repeat(np.cumsum(n) - n, m)
     piece = np.repeat(np.arange(len(h)), m)
-    d = j * np.repeat(h / n, m)
+    j = np.arange(len(piece)) - (np.cumsum(n) - n)[piece]
+    d = j * (h / n)[piece]
     d[-1] = h[-1]
-    s = path.knots[piece] + d
+    s = knots[piece] + d
     s[-1] = 1.0
-    c = np.take(path.coef, piece, axis=0)
+    c0, c1, c2, c3 = np.take(ct, piece, axis=1)
     d = d[:, None]
-    q = ((c[:, 3] * d + c[:, 2]) * d + c[:, 1]) * d + c[:, 0]
+    q = ((c3 * d + c2) * d + c1) * d + c0
     phi = q @ _PHASE
-    ln = _SIGN * np.array([lengths[0], lengths[1], lengths[0], lengths[1]])
+    ln = _leg_terms(lengths)[0]
     heel = np.empty((len(s), 2))
     heel[:, 0] = np.sin(phi) @ ln + pivot_y
-    z = np.cos(phi) @ -ln
+    z = -(np.cos(phi) @ ln)
     # The forward kinematics' rounding at the floor (a picometre), not a motion.
     heel[:, 1] = np.where(np.abs(z) < GROUND_ROUNDING, 0.0, z)
     return s, q, heel
