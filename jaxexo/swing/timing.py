@@ -554,7 +554,7 @@ def _curve_verdict(traj, p: Plan, chk: _PathChecks, j: int, scale: float, sp) ->
         t_out = float(np.interp(outside, s_chk, t_chk) * scale)
         reasons += (f"the joints leave their range at t={t_out:.3f} s",)
     checks = TrajectoryChecks.row(m, j, reasons)
-    return replace(checks, joint_limits_ok=checks.joint_limits_ok and outside is None)
+    return checks if outside is None else replace(checks, joint_limits_ok=False)
 
 
 def _timed(traj, checks, f: FinalLaw, curve, samples, device, rate) -> TimedSwing:
