@@ -178,8 +178,8 @@ def test_exports_piecewise_form_and_joint_trajectory(swings, tmp_path):
 
 def test_a_batch_times_each_swing_as_it_is_timed_alone(swings):
     """time_swings of a batch (both generators mixed) gives every swing bit for bit what
-    time_swing gives it alone: the stacked evaluation only finds pieces, the arithmetic is each
-    curve's own."""
+    time_swing gives it alone, its verdict included: the stacked evaluation only finds pieces, the
+    arithmetic is each curve's own."""
     config, trajs = swings
     batch = trajs["rl"][:7] + trajs["cfftg"][:7]
     together = time_swings(batch, config, rate=250.0)
@@ -189,6 +189,7 @@ def test_a_batch_times_each_swing_as_it_is_timed_alone(swings):
         np.testing.assert_array_equal(alone.joint_angles, sw.joint_angles)
         np.testing.assert_array_equal(alone.joint_jerk, sw.joint_jerk)
         np.testing.assert_array_equal(alone.peak_jerk, sw.peak_jerk)
+        assert alone.checks == sw.checks  # the verdict too (its polyline padded in the batch)
 
 
 def test_one_curve_evaluates_as_in_a_batch_bit_for_bit(swings):
