@@ -76,6 +76,50 @@ def test_pruned_swept_minimum_matches_the_full_swept_clearance():
     assert np.array_equal(np.argmin(fast, axis=1), np.argmin(full, axis=1))
 
 
+def _random_outline(rng, i):
+    """A rectangle, a triangle, a half-ellipse or a random (non-convex) profile, by i."""
+    c, w, h = rng.uniform(0.35, 0.55), rng.uniform(0.02, 0.25), rng.uniform(0.02, 0.25)
+    if i % 4 < 3:
+        kind = ("rectangle", "triangle", "half_ellipse")[i % 4]
+        return getattr(geometry.Obstacle, kind)(w, h, center_y=c).outline
+    y = np.linspace(c - w / 2, c + w / 2, int(rng.integers(2, 9)))
+    return geometry.Obstacle.profile(np.column_stack([y, rng.uniform(0.01, 0.25, len(y))])).outline
+
+
+def test_one_polylines_clearance_equals_the_exact_swept_clearance():
+    """swept.polyline_clearances (the timed verdict's: distances to the foot's reach at a few heels,
+    exact only on the stretches that can hold the closest move) against the exact clearance of every
+    move and sample (swept.path_swept_clearance): the same minimum to rounding, at a move whose
+    exact clearance is that minimum, lower bounds everywhere; and None (the caller then takes the
+    exact functions) on every path that touches the obstacle, and only near it."""
+    rng = np.random.default_rng(1)
+    fast = touching = 0
+    for i, path in enumerate(_random_paths(rng, 1200, int(rng.integers(100, 400)))):
+        outline = _random_outline(rng, i)
+        c = geometry.foot_clearance(np, path, FOOT, outline[None])
+        full = swept.path_swept_clearance(np, path, FOOT, outline, c)
+        got = swept.polyline_clearances(path, FOOT, outline)
+        touching += int(full.min() <= 0.0)
+        if got is None:
+            # Not taken: the path comes within a stretch's length of the outline, or starts in
+            # the outline's box.
+            continue
+        points, moves = got
+        assert full.min() > 0.0
+        assert moves.shape == full.shape and points.shape == c.shape
+        assert abs(moves.min() - full.min()) <= 1e-15
+        assert full[np.argmin(moves)] <= full.min() + 1e-15
+        assert np.all(moves <= full + 1e-15) and np.all(points <= c + 1e-15)
+        fast += 1
+    assert touching > 500 and fast > 0.8 * (1200 - touching)  # taken on most that keep off
+    # Below the floor, or not moving: not taken.
+    path = np.column_stack([np.linspace(0.0, 0.8, 50), np.full(50, 0.3)])
+    assert swept.polyline_clearances(path, FOOT, _random_outline(rng, 0)) is not None
+    path[10, 1] = -1e-9
+    assert swept.polyline_clearances(path, FOOT, _random_outline(rng, 0)) is None
+    assert swept.polyline_clearances(np.zeros((5, 2)), FOOT, _random_outline(rng, 0)) is None
+
+
 def _same(a, b):
     """Two trajectories agree: samples to 1e-9 m, every check and reason, the method used."""
     assert a.method == b.method

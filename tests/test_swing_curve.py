@@ -172,8 +172,8 @@ def test_exports_piecewise_form_and_joint_trajectory(swings, tmp_path):
 
 def test_a_batch_times_each_swing_as_it_is_timed_alone(swings):
     """time_swings of a batch (both generators mixed) gives every swing bit for bit what
-    time_swing gives it alone: the stacked evaluation only finds pieces, the arithmetic is each
-    curve's own."""
+    time_swing gives it alone, its verdict included: the stacked evaluation only finds pieces, the
+    arithmetic is each curve's own."""
     config, trajs = swings
     batch = trajs["rl"][:7] + trajs["cfftg"][:7]
     together = time_swings(batch, config, rate=250.0)
@@ -183,6 +183,7 @@ def test_a_batch_times_each_swing_as_it_is_timed_alone(swings):
         np.testing.assert_array_equal(alone.joint_angles, sw.joint_angles)
         np.testing.assert_array_equal(alone.joint_jerk, sw.joint_jerk)
         np.testing.assert_array_equal(alone.peak_jerk, sw.peak_jerk)
+        assert alone.checks == sw.checks  # the verdict too (its polyline padded in the batch)
 
 
 def test_one_curve_evaluates_as_in_a_batch_bit_for_bit(swings):
@@ -251,3 +252,136 @@ def test_the_guaranteed_clearance_holds_on_the_curve_sampled_densely(swings, met
         c = geometry.foot_clearance(np, st.heel, config.kinematics.foot_length, sw.scene.outline)
         assert c.min() >= sw.checks.min_clearance, (c.min(), sw.checks.min_clearance)
         assert st.heel[:, 1].min() >= -1e-12  # above the floor, to the kinematics' rounding
+
+
+def _foot_clearance_brute(heel, foot, outline):
+    """Independent of jaxexo.physics: the flat foot [heel, heel + (foot, 0)] (n, 2) against the
+    outline polyline, edge by edge: the least of the four end-to-segment distances, 0 where the
+    foot crosses an edge; negative where the heel lies under the outline (the closed polygon's
+    crossing number)."""
+
+    def to_segment(p, a, b):  # p (n, 2), a and b (2,) or (n, 2)
+        ab = b - a
+        t = np.clip(((p - a) * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-300), 0.0, 1.0)
+        return np.linalg.norm(p - a - t[:, None] * ab, axis=-1)
+
+    def side(a, b, p):
+        return (b[..., 0] - a[..., 0]) * (p[..., 1] - a[..., 1]) - (b[..., 1] - a[..., 1]) * (
+            p[..., 0] - a[..., 0]
+        )
+
+    toe = heel + np.array([foot, 0.0])
+    best = np.full(len(heel), np.inf)
+    for a, b in zip(outline[:-1], outline[1:]):
+        d = np.minimum(to_segment(heel, a, b), to_segment(toe, a, b))
+        d = np.minimum(
+            d, np.minimum(to_segment(a[None], heel, toe), to_segment(b[None], heel, toe))
+        )
+        cross = (side(a, b, heel) * side(a, b, toe) < 0) & (
+            side(heel, toe, a) * side(heel, toe, b) < 0
+        )
+        best = np.minimum(best, np.where(cross, 0.0, d))
+    closed = np.vstack([outline, outline[:1]])
+    under = np.zeros(len(heel), bool)
+    for a, b in zip(closed[:-1], closed[1:]):
+        if a[1] != b[1]:
+            y = a[0] + (heel[:, 1] - a[1]) * (b[0] - a[0]) / (b[1] - a[1])
+            under ^= ((a[1] > heel[:, 1]) != (b[1] > heel[:, 1])) & (heel[:, 0] < y)
+    return np.where(under, -best, best)
+
+
+def _dense_clearance(sw, foot):
+    """The least foot clearance (``_foot_clearance_brute``) over the timed curve: every 200 us,
+    then every 10 us (100 kHz) within 200 us of each 200-us sample that may hold the least (the
+    clearance changes no faster than the heel moves: within the largest heel speed x 200 us)."""
+    dt = 2e-4
+    t = np.append(np.arange(0.0, sw.duration, dt), sw.duration)
+    st = sw.at(t)
+    c = _foot_clearance_brute(st.heel, foot, sw.scene.outline)
+    near = np.round(t[c <= c.min() + np.linalg.norm(st.heel_velocity, axis=1).max() * dt] / 1e-5)
+    fine = np.unique(np.clip((near[:, None] + np.arange(-20, 21)).ravel() * 1e-5, 0, sw.duration))
+    return min(c.min(), _foot_clearance_brute(sw.at(fine).heel, foot, sw.scene.outline).min())
+
+
+def _tie_shift(traj, config, c0: float, margin: float, k: int) -> float:
+    """How much to grow the swing's obstacle (``_grown``, at most by 30 %) for the verdict's
+    clearance to be 1e-5 m above the margin (k odd) or below it (k even): secant steps."""
+    want = margin + (1e-5 if k % 2 else -1e-5)
+    a, ca, b = 0.0, c0, 0.01
+    for _ in range(6):
+        cb = time_swings([_grown(traj, b)], config, rate=100.0)[0].checks.min_clearance
+        if abs(cb - want) < 5e-6 or cb == ca:
+            return b
+        a, ca, b = b, cb, float(np.clip(b + (want - cb) * (b - a) / (cb - ca), -0.3, 0.3))
+    return b
+
+
+def _grown(traj, k: float):
+    """The swing with its obstacle scaled by 1 + k about the middle of its base (the verdict's
+    scene; the obstacle stays on the ground)."""
+    import dataclasses
+
+    o = traj.scene.outline
+    base = np.array([0.5 * (o[:, 0].min() + o[:, 0].max()), 0.0])
+    scene = dataclasses.replace(traj.scene, outline=base + (1.0 + k) * (o - base))
+    return dataclasses.replace(traj, scene=scene)
+
+
+@pytest.mark.parametrize("method", ["rl", "cfftg"])
+def test_no_swing_is_ok_where_a_dense_look_finds_the_foot_closer_than_the_margin(swings, method):
+    """The timed verdict against an independent look at the curve (the foot's distance to the
+    outline by brute force, ``_dense_clearance``: 5 kHz, 1 MHz near the closest): the clearance
+    it guarantees is never above what the dense look finds, on 80 swings per generator (the 50
+    closest to the margin among them) and on 30 near-ties made by growing each obstacle until the
+    verdict's clearance is within 2e-5 m of env.min_clearance, either side. So no swing is ok
+    with the foot closer than the margin anywhere on its curve."""
+    config, trajs = swings
+    foot, margin = config.kinematics.foot_length, config.env.min_clearance
+    pool = sorted(trajs[method], key=lambda t: t.checks.min_clearance)
+    rng = np.random.default_rng(2)
+    pick = pool[:50] + [pool[i] for i in rng.choice(np.arange(50, len(pool)), 30, replace=False)]
+    timed = time_swings(pick, config, rate=100.0)
+    ties = []
+    for k, (t, sw) in enumerate(zip(pick, timed)):
+        assert _dense_clearance(sw, foot) >= sw.checks.min_clearance, k
+        if k < 30:  # a near-tie: the obstacle grown by the secant on the verdict's clearance
+            ties.append(_grown(t, _tie_shift(t, config, sw.checks.min_clearance, margin, k)))
+    near = ok = 0
+    for sw in time_swings(ties, config, rate=100.0):
+        dense = _dense_clearance(sw, foot)
+        assert dense >= sw.checks.min_clearance
+        assert not sw.checks.clearance_ok or dense >= margin
+        if abs(sw.checks.min_clearance - margin) < 2e-5:
+            near += 1
+            ok += int(sw.checks.clearance_ok)
+    # Most searches end within 2e-5 m of the margin, on both sides of it.
+    assert near >= 24 and min(ok, near - ok) >= 10, (near, ok)
+
+
+def test_the_check_polyline_strays_at_most_its_tolerance_from_the_heel_curve(swings):
+    """curve.check_points' polyline (every knot, spaced by the per-piece bound on |heel''|) against
+    the heel curve evaluated at 16 points inside every chord, on 300 swings of both generators:
+    never farther than CURVE_TOL from its chord; and not over-resolved (most chords need most of
+    their tolerance's square root: the points are not ten times too dense)."""
+    from jaxexo.swing.curve import check_points, heel_derivatives
+    from jaxexo.swing.timing import CURVE_TOL
+
+    config, trajs = swings
+    sp = scalar_params(config)
+    lengths = (sp.thigh, sp.shin)
+    worst, used = 0.0, []
+    for p in _paths(trajs["rl"][:150] + trajs["cfftg"][:150], config):
+        s, q, heel = check_points(lengths, 0.3, p, CURVE_TOL)
+        assert s[0] == 0.0 and s[-1] == 1.0 and np.all(np.diff(s) > 0)
+        assert np.isin(p.knots, s).all()
+        u = np.linspace(0.0, 1.0, 18)[1:-1]
+        inner = (s[:-1, None] + u * np.diff(s)[:, None]).ravel()
+        h = heel_derivatives(lengths, 0.3, p.derivatives(inner, 0))[0].reshape(-1, 16, 2)
+        a, b = heel[:-1, None], heel[1:, None]
+        ab = b - a
+        t = np.clip(((h - a) * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-300), 0.0, 1.0)
+        dev = np.linalg.norm(h - a - t[..., None] * ab, axis=-1).max(axis=1)
+        worst = max(worst, dev.max())
+        used.append(np.median(dev) / CURVE_TOL)
+    assert worst <= CURVE_TOL, worst
+    assert np.median(used) > 1e-3, np.median(used)

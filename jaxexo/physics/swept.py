@@ -6,6 +6,8 @@ broadcasts: h0, h1 (..., 2), outline (..., K, 2). ``swept_clearance`` is signed 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from jaxexo.physics.geometry import (
@@ -298,3 +300,125 @@ def _cummax(xp, y):
     import jax
 
     return jax.lax.cummax(y, axis=y.ndim - 1)
+
+
+# --------------------------------------------------------------------------------------------
+# One heel polyline's clearance with few NumPy calls (the timed swing's verdict)
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class FootReach:
+    """The heels whose flat foot [heel, heel + (f, 0)] meets an outline: the outline swept back by
+    the foot, a union of parallelograms (each edge with itself moved back by f). Points are complex
+    numbers y + iz here (a product or a difference is one NumPy call). The parallelograms' sides lie
+    on S segments a + t e, t in [0, 1] (the edges, the edges moved back by f, and the horizontal
+    segments from each vertex back by f), rows (1, S), with ``ce`` = conj(e) / |e|^2 (0 for a
+    point); the segments' ends are the V points w, a row (1, V); ``box`` (y0, y1, z1): the heels'
+    box [y0, y1] x [0, z1] around them. For a heel outside every parallelogram the foot's distance
+    to the outline is the heel's distance to the S segments (the heel and the toe to the edges, the
+    vertices to the foot); for a heel move that stays outside them, the swept foot's distance is
+    the least of its ends' and of the w's distances to the move (the vertices to the heel's and the
+    toe's chords), the terms of ``swept_distance``."""
+
+    a: np.ndarray
+    e: np.ndarray
+    ce: np.ndarray
+    w: np.ndarray
+    box: tuple
+
+
+_REACH: dict = {}
+
+
+def foot_reach(outline: np.ndarray, foot_length: float) -> FootReach:
+    """``FootReach`` of an outline (K, 2) (padding repeats dropped), remembered per outline: the
+    same scene recurs across a batch."""
+    key = (outline.tobytes(), foot_length)
+    out = _REACH.get(key)
+    if out is None:
+        if len(_REACH) > 256:
+            _REACH.clear()
+        out = _REACH[key] = _foot_reach(np.asarray(outline, np.float64), float(foot_length))
+    return out
+
+
+def _foot_reach(outline: np.ndarray, f: float) -> FootReach:
+    if len(outline) > 2 and (outline[-1] == outline[-2]).all():  # padded: repeats dropped
+        keep = np.ones(len(outline), bool)
+        keep[1:] = np.any(outline[1:] != outline[:-1], axis=1)
+        outline = outline[keep]
+    v = outline[:, 0] + 1j * outline[:, 1]
+    back = v - f
+    a = np.concatenate([v[:-1], back, back[:-1]])  # the edges, from each vertex back, moved back
+    e = np.concatenate([v[1:], v, back[1:]]) - a
+    len2 = e.real * e.real + e.imag * e.imag
+    ok = len2 > 1e-24  # shorter: a point (as geometry._inv_edge_len2)
+    ce = np.where(ok, e.conj() / np.where(ok, len2, 1.0), 0.0)
+    return FootReach(
+        a=a[None],
+        e=e[None],
+        ce=ce[None],
+        w=np.concatenate([v, back])[None],
+        box=(float(back.real.min()), float(outline[:, 0].max()), float(outline[:, 1].max())),
+    )
+
+
+def _segment_distance2(p, a, e, ce) -> np.ndarray:
+    """Squared distances of points p to segments a + t e, t in [0, 1] (complex, broadcast;
+    ce = conj(e) / |e|^2): the rows' least (M,)."""
+    ap = p - a
+    t = (ap * ce).real
+    w = ap - np.minimum(np.maximum(t, 0.0), 1.0) * e
+    return (w.real * w.real + w.imag * w.imag).min(axis=1)
+
+
+def polyline_clearances(heel, foot_length, outline, step: float = 0.02, slack: float = 1e-9):
+    """NumPy, one heel path (N, 2): (point clearances (N,), per-move clearances (N-1,)) with
+    ``path_swept_min``'s guarantee for the moves (the smallest move and its value exact; elsewhere
+    lower bounds above it; the points' are lower bounds), or None where this shortcut does not
+    apply (the caller then takes the exact functions): a heel below the floor, the first heel in
+    the outline's box, or a stretch of the path that may come within reach of the outline (a
+    swing that touches it, or nearly).
+
+    The distances d to the ``FootReach`` segments of the first heel at or past each multiple of
+    ``step`` (m) along the path, and of the last. The path between two of them, a length l apart
+    along it, keeps at least g = (d_a + d_b - l) / 2 from the segments (the distance is
+    1-Lipschitz). Where every g > 0 the path never meets a segment, so, from a first heel outside
+    the box (hence outside the reach and the obstacle), it never enters the reach, and a heel's or
+    a move's distance to the segments is the foot's clearance there. The moves of a stretch whose
+    g is not over the least d (an upper bound on the smallest move) get their exact clearance: the
+    least of their ends' distances and the w points' distances to the move (``swept_distance``'s
+    terms); the others g, below their clearance and above the smallest."""
+    r = foot_reach(outline, foot_length)
+    n = len(heel)
+    y0, y1, z1 = r.box
+    hy, hz = float(heel[0, 0]), float(heel[0, 1])
+    if n < 2 or (y0 <= hy <= y1 and hz <= z1) or not heel[:, 1].min() >= 0.0:
+        return None
+    p = np.ascontiguousarray(heel, np.float64).view(np.complex128)  # (N, 1): y + iz
+    d = p[1:] - p[:-1]
+    length = np.sqrt(d.real * d.real + d.imag * d.imag)[:, 0]
+    arc = np.zeros(n)
+    np.cumsum(length, out=arc[1:])
+    if not arc[-1] > 0.0:  # a heel that does not move
+        return None
+    # The first heel at or past each multiple of step (a long move may repeat one), and the last.
+    co = np.concatenate([np.searchsorted(arc, np.arange(0.0, arc[-1], step)), [n - 1]])
+    dc = np.sqrt(_segment_distance2(p[co], r.a, r.e, r.ce))
+    ac = arc[co]
+    g = 0.5 * (dc[:-1] + dc[1:] - (ac[1:] - ac[:-1]))
+    if not g.min() > slack:
+        return None
+    count = co[1:] - co[:-1]  # the moves of each stretch
+    j = np.flatnonzero(np.repeat(g <= dc.min() + slack, count))
+    m = len(j)
+    ends = _segment_distance2(p[np.concatenate([j, j + 1])], r.a, r.e, r.ce)
+    u = d[j]
+    lj = length[j, None]
+    # The w points to the moves (a move of length 0: t = 0, the distance to its start).
+    dw = _segment_distance2(r.w, p[j], u, u.conj() / np.maximum(lj * lj, 1e-300))
+    sw = np.repeat(g, count)
+    sw[j] = np.sqrt(np.minimum(np.minimum(ends[:m], ends[m:]), dw))
+    # A point's clearance is at least that of a move it ends.
+    return np.concatenate([sw, sw[-1:]]), sw

@@ -13,6 +13,7 @@ import numpy as np
 # phi = (hip_swing, hip_swing + knee_swing, hip_stance, hip_stance + knee_stance), L = (thigh,
 # shin, thigh, shin), e(phi) = (sin phi, -cos phi): the thigh and shank directions of eq 2.49.
 _SIGN = np.array([1.0, 1.0, -1.0, -1.0])
+GROUND_ROUNDING = 1e-12  # m: the forward kinematics' rounding at the floor (a picometre)
 
 # How a controller evaluates SwingCurve.piecewise() (the JSON's "piecewise"), word for word in the
 # export; tests/test_piecewise_export.py is an evaluator written from this text alone.
@@ -43,22 +44,6 @@ class JointPath:
     def derivatives(self, s: np.ndarray, order: int = 3) -> list[np.ndarray]:
         """q and its s-derivatives up to ``order`` at s (n,): a list of (n, J) arrays."""
         return paths_at([self], [np.asarray(s, np.float64)], order)[0]
-
-    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """Per piece, max |q'| and max |q''| over the piece (P, J): q'' is linear on a piece (its
-        ends), q' quadratic (its ends and its vertex)."""
-        h = np.diff(self.knots)[:, None]
-        # Contiguous coefficients, each product once: the same values at fewer, cheaper calls.
-        _, c1, c2, c3 = np.ascontiguousarray(self.coef.transpose(1, 0, 2))
-        c2x2, c3x3 = 2.0 * c2, 3.0 * c3
-        d1_end = c1 + (c2x2 + c3x3 * h) * h
-        with np.errstate(divide="ignore", invalid="ignore"):
-            dv = np.where(c3 != 0.0, -c2 / c3x3, 0.0)
-        dv = np.minimum(np.maximum(dv, 0.0), h)  # np.clip's values (dv is never NaN)
-        d1_mid = c1 + (c2x2 + c3x3 * dv) * dv
-        d1 = np.maximum(np.maximum(np.abs(c1), np.abs(d1_end)), np.abs(d1_mid))
-        d2 = np.maximum(np.abs(c2x2), np.abs(c2x2 + 6.0 * c3 * h))
-        return d1, d2
 
 
 def median(x: np.ndarray) -> float:
@@ -378,27 +363,71 @@ def leg_points(lengths, pivot_y: float, e: np.ndarray) -> tuple[np.ndarray, ...]
     return hip, hip + thigh * e[:, 0], hip + thigh * e[:, 2]
 
 
-def heel_second_derivative_bounds(lengths, path: JointPath) -> np.ndarray:
-    """Per piece of the path (P,), an upper bound on |d2 heel / ds2| (m): per leg term
-    L (|phi''| + phi'^2), with the joints' per-piece bounds (sums of bounds bound the summed
-    angles)."""
-    d1, d2 = path.bounds()
-    a1, a2 = _phases(d1), _phases(d2)
-    ln = np.abs(np.array([lengths[0], lengths[1], lengths[0], lengths[1]]))
-    return np.sum(ln * (a2 + a1 * a1), axis=-1)
+# phi = q @ _PHASE: the absolute segment angles (hip, hip + knee of each leg) of joint values (or of
+# their derivatives, or of bounds on them: sums of bounds bound the summed angles).
+_PHASE = np.array(
+    [[1.0, 1.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 1.0], [0.0, 0.0, 0.0, 1.0]]
+)
 
 
-def check_grid(lengths, path: JointPath, tol: float) -> np.ndarray:
-    """Path parameters (n,) from 0 to 1, every knot among them, spaced so that the heel curve
-    strays at most ``tol`` (m) from the polyline through them: on a piece with |h''| <= B, a chord
-    over Delta s deviates by at most Delta s^2 B / 8."""
-    h = np.diff(path.knots)
-    bound = heel_second_derivative_bounds(lengths, path)
-    n = np.maximum(1, np.ceil(h * np.sqrt(bound / (8.0 * tol)))).astype(np.int64)
-    start = np.repeat(path.knots[:-1], n)
-    step = np.repeat(h / n, n)
-    j = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)
-    return np.concatenate([start + j * step, [1.0]])
+def heel_second_derivative_bounds(lengths, h: np.ndarray, coef: np.ndarray) -> np.ndarray:
+    """Per piece of a joint path (P,), an upper bound on |d2 heel / ds2| (m): the leg terms
+    L (phi'' e_perp - phi'^2 e) summed, each of length L sqrt(phi''^2 + phi'^4) (e, e_perp
+    orthonormal), with per-piece bounds on the joints' |q'| <= |c1| + 2 |c2| h + 3 |c3| h^2 and
+    |q''| <= 2 |c2| + 6 |c3| h (sums of bounds bound the summed angles). ``h`` (P, 1): the pieces'
+    lengths; ``coef`` (4, P, J): the path's coefficients c0..c3, each a contiguous block."""
+    _, c1, c2, c3 = np.abs(coef)
+    c2x2, c3x3h = 2.0 * c2, (3.0 * h) * c3
+    mid = c2x2 + c3x3h
+    a1 = (c1 + mid * h) @ _PHASE
+    a1 *= a1
+    a2 = (mid + c3x3h) @ _PHASE
+    return np.sqrt(a2 * a2 + a1 * a1) @ _leg_terms(lengths)[1]
+
+
+def _leg_terms(lengths) -> tuple[np.ndarray, np.ndarray]:
+    """The heel's leg terms sign_i L_i (4,) and their lengths |L_i|, per (thigh, shin), kept."""
+    key = (float(lengths[0]), float(lengths[1]))
+    out = _LEG_TERMS.get(key)
+    if out is None:
+        ln = np.array([key[0], key[1], key[0], key[1]])
+        out = _LEG_TERMS[key] = (_SIGN * ln, np.abs(ln))
+    return out
+
+
+_LEG_TERMS: dict = {}
+
+
+def check_points(lengths, pivot_y: float, path: JointPath, tol: float):
+    """The verdict's polyline on the curve: path parameters s (n,) from 0 to 1, every knot among
+    them, spaced so that the heel curve strays at most ``tol`` (m) from the polyline through them
+    (on a piece with |h''| <= B, a chord over Delta s deviates by at most Delta s^2 B / 8), with
+    the joints q (n, J) and the heel (n, 2) there (heights within GROUND_ROUNDING of the floor on
+    it). Each point is evaluated on its own piece at its offset (no search)."""
+    knots = path.knots
+    h = knots[1:] - knots[:-1]
+    ct = np.ascontiguousarray(path.coef.transpose(1, 0, 2))  # (4, P, J): contiguous blocks
+    bound = heel_second_derivative_bounds(lengths, h[:, None], ct)
+    n = np.maximum(np.ceil(h * np.sqrt(bound * (0.125 / tol))), 1.0).astype(np.int64)
+    m = n.copy()
+    m[-1] += 1  # the last piece also holds s = 1
+    piece = np.repeat(np.arange(len(h)), m)
+    j = np.arange(len(piece)) - (np.cumsum(n) - n)[piece]
+    d = j * (h / n)[piece]
+    d[-1] = h[-1]
+    s = knots[piece] + d
+    s[-1] = 1.0
+    c0, c1, c2, c3 = np.take(ct, piece, axis=1)
+    d = d[:, None]
+    q = ((c3 * d + c2) * d + c1) * d + c0
+    phi = q @ _PHASE
+    ln = _leg_terms(lengths)[0]
+    heel = np.empty((len(s), 2))
+    heel[:, 0] = np.sin(phi) @ ln + pivot_y
+    z = -(np.cos(phi) @ ln)
+    # The forward kinematics' rounding at the floor (a picometre), not a motion.
+    heel[:, 1] = np.where(np.abs(z) < GROUND_ROUNDING, 0.0, z)
+    return s, q, heel
 
 
 # --------------------------------------------------------------------------------------------

@@ -17,14 +17,15 @@ from jaxexo.config import MAX_CONTROL_RATE, MAX_SWING_DURATION, MIN_CONTROL_RATE
 from jaxexo.physics import kinematics
 from jaxexo.physics.geometry import as_given
 from jaxexo.physics.scene import Scene
+from jaxexo.physics.swept import polyline_clearances
 from jaxexo.swing.curve import (
+    GROUND_ROUNDING,
     CurveState,
     SwingCurve,
-    check_grid,
+    check_points,
     chord_knots,
     curves_at,
     distinct_samples,
-    heel_derivatives,
     law_from_speeds,
     median,
     paths_at,
@@ -58,7 +59,9 @@ from jaxexo.swing.trajectory import (
     TrajectoryBatch,
     TrajectoryChecks,
     failure_reasons,
+    joints_outside,
     measure_paths,
+    path_clearances,
 )
 
 GRID_PER_KNOT = 3  # TOPP grid points per piece of the joint path, ...
@@ -76,7 +79,6 @@ LOCAL_FROM = 1.02  # ... for a curve over a limit by more than this factor (less
 BLEND_S = 0.03  # s: the time law's smoothing window, or longer where the jerk limit asks ...
 BLEND_FRACTION = 0.1  # ... at most this fraction of the time-optimal duration
 CURVE_TOL = 5e-5  # m: the checked polyline's largest distance from the heel curve
-GROUND_ROUNDING = 1e-12  # m: the forward kinematics' rounding at the floor (a picometre)
 
 
 @dataclass(frozen=True)
@@ -517,30 +519,36 @@ class _PathChecks:
 
 
 def _path_checks(trajs, plans, sp) -> _PathChecks:
-    """The safe-swing checks of each curve, batched: the heel at ``curve.check_grid`` (every knot,
-    and spaced so that the curve strays at most CURVE_TOL from the polyline through them), measured
-    as that polyline less CURVE_TOL. Paths are padded with their last point to a common length (a
-    repeated point adds no motion)."""
+    """The safe-swing checks of each curve, batched: the heel at ``curve.check_points`` (every
+    knot, and spaced so that the curve strays at most CURVE_TOL from the polyline through them),
+    measured as that polyline less CURVE_TOL, its clearances by ``swept.polyline_clearances`` (or
+    the exact functions where that does not apply). Paths are padded with their last point to a
+    common length (a repeated point adds no motion; its moves are not the closest)."""
     lengths = (sp.thigh, sp.shin)
-    heels, grids, outside = [], [], []
+    heels, grids, outside, clear = [], [], [], []
     for t, p in zip(trajs, plans):
-        s = check_grid(lengths, p.path, CURVE_TOL)
-        q = p.path.derivatives(s, 0)
+        s, q, h = check_points(lengths, t.scene.pivot_y, p.path, CURVE_TOL)
         # The joint range on the joints the drives follow (the verdict's own angles are the
         # inverse kinematics of the heel, with the hip of eq 2.42).
-        bad = kinematics.legs_outside_limits(np, q[0], sp.hip_limits, sp.knee_limits)
+        bad = joints_outside(q, sp)
         outside.append(float(s[np.argmax(bad)]) if bad.any() else None)
-        h = heel_derivatives(lengths, t.scene.pivot_y, q)[0]
-        _on_floor(h)
+        c = polyline_clearances(h, sp.foot_length, t.scene.outline)
+        if c is None:
+            c = tuple(x[0] for x in path_clearances(sp.foot_length, h[None], [t.scene]))
         heels.append(h)
         grids.append(s)
+        clear.append(c)
     if len(heels) == 1:  # nothing to pad
         padded, pad = heels[0][None], grids[0][None]
+        c, sw = (x[None] for x in clear[0])
     else:
         n = max(len(h) for h in heels)
         padded = np.stack([np.concatenate([h, np.repeat(h[-1:], n - len(h), 0)]) for h in heels])
         pad = np.stack([np.concatenate([g, np.ones(n - len(g))]) for g in grids])
-    m = measure_paths(sp, padded, [t.scene for t in trajs], np.full(len(trajs), CURVE_TOL))
+        c = np.stack([np.concatenate([a, np.repeat(a[-1:], n - len(a))]) for a, _ in clear])
+        sw = np.stack([np.concatenate([b, np.full(n - 1 - len(b), np.inf)]) for _, b in clear])
+    scenes = [t.scene for t in trajs]
+    m = measure_paths(sp, padded, scenes, np.full(len(trajs), CURVE_TOL), (c, sw))
     return _PathChecks(m, padded, pad, outside)
 
 
@@ -548,13 +556,15 @@ def _curve_verdict(traj, p: Plan, chk: _PathChecks, j: int, scale: float, sp) ->
     """Curve j's path checks (``_path_checks``), with their times on the final law."""
     m, outside = chk.measured, chk.outside[j]
     s_chk, t_chk = p.check.s, p.check.t
-    t_grid = np.interp(chk.s[j], s_chk, t_chk) * scale
-    reasons = failure_reasons(m, j, chk.heel[j], traj.scene.goal_y, t_grid, sp)
+    reasons = ()
+    if not m.ok[j]:  # the times only where a reason says them
+        t_grid = np.interp(chk.s[j], s_chk, t_chk) * scale
+        reasons = failure_reasons(m, j, chk.heel[j], traj.scene.goal_y, t_grid, sp)
     if outside is not None and m.joint_limits_ok[j]:
         t_out = float(np.interp(outside, s_chk, t_chk) * scale)
         reasons += (f"the joints leave their range at t={t_out:.3f} s",)
     checks = TrajectoryChecks.row(m, j, reasons)
-    return replace(checks, joint_limits_ok=checks.joint_limits_ok and outside is None)
+    return checks if outside is None else replace(checks, joint_limits_ok=False)
 
 
 def _timed(traj, checks, f: FinalLaw, curve, samples, device, rate) -> TimedSwing:

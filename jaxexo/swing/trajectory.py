@@ -301,6 +301,27 @@ def backward_bound(heel: np.ndarray, deviation) -> np.ndarray:
     return swept.backward_motion(np, heel[..., 0]) + 2.0 * np.asarray(deviation)
 
 
+def joints_outside(angles: np.ndarray, sp) -> np.ndarray:
+    """Where joint angles (..., 4) (JOINT_NAMES) leave their range: kinematics.legs_outside_limits's
+    comparisons (eq 2.50, ANGLE_EPS), the same booleans, in a few NumPy calls for all four joints."""
+    (h0, h1), (k0, k1) = sp.hip_limits, sp.knee_limits
+    lo, hi = _joint_bounds(float(h0), float(h1), float(k0), float(k1))
+    bad = (angles < lo) | (angles > hi)
+    # Any of a row's four booleans (bytes 0 or 1, made contiguous): its four bytes as one integer.
+    return np.ascontiguousarray(bad).view(np.uint32)[..., 0] != 0
+
+
+@functools.lru_cache(maxsize=16)
+def _joint_bounds(h0: float, h1: float, k0: float, k1: float) -> tuple[np.ndarray, np.ndarray]:
+    """The (4,) bounds ``joints_outside`` compares against, per hip and knee limits (read-only)."""
+    eps = kinematics.ANGLE_EPS
+    lo = np.array([h0 - eps, k0 - eps, h0 - eps, k0 - eps])
+    hi = np.array([h1 + eps, k1 + eps, h1 + eps, k1 + eps])
+    lo.setflags(write=False)
+    hi.setflags(write=False)
+    return lo, hi
+
+
 def measure(
     sp,
     heel: np.ndarray,
@@ -332,7 +353,7 @@ def measure(
         heel.shape[:-1] + (4,)
     )  # JOINT_NAMES order (filled in place: cheaper than stack)
     angles[..., 0], angles[..., 1], angles[..., 2], angles[..., 3] = hips[0], qs[0], hips[1], qs[1]
-    limit_bad = kinematics.legs_outside_limits(np, angles, sp.hip_limits, sp.knee_limits)
+    limit_bad = joints_outside(angles, sp)
     leg_bad = kinematics.leg_too_long(
         np, legs[0], legs[1], sp.thigh, sp.shin, sp.leg_length_tolerance
     )
