@@ -11,7 +11,7 @@ import numpy as np
 
 from jaxexo.summary import Summary, table
 
-# Issue 58's targets: time_swing alone per swing (ms, both generators) by rate, the device-ready
+# The targets: time_swing alone per swing (ms, both generators) by rate, the device-ready
 # swing (generate + time_swing at 100 Hz), generate alone RL / CFFTG, time_swings of 1000 by rate.
 TARGETS = {
     "time_swing_ms": {"100": 1.5, "1000": 2.0},
