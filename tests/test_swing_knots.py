@@ -6,6 +6,8 @@ passes' cells hold the acceleration limits at both ends, against a plain bisecti
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from scipy.interpolate import CubicSpline
@@ -16,7 +18,7 @@ from jaxexo.config import scalar_params
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.swing import knots, time_law
 from jaxexo.swing.curve import chord_knots, cubic_paths, cubic_paths_ragged, distinct_samples
-from jaxexo.swing.timing import _joint_paths, _joint_samples
+from jaxexo.swing.timing import _joint_paths, _joint_samples, time_swings
 
 from conftest import ROOT
 
@@ -96,15 +98,16 @@ def test_the_few_knot_path_stays_within_its_tolerance_of_every_joint_sample(samp
 
 
 def test_the_knots_are_few(samples):
-    """A few dozen knots per swing, not the ~200 joint samples: median at most 60 and at most 100
-    for either generator (measured on the benchmark sets: medians 55 RL / 49 CFFTG, at most 84),
-    and the passes' grid of GRID_MIN + 1 points unless a path has more pieces."""
+    """A few dozen knots per swing, not the ~200 joint samples: median at most 70 and at most 100
+    for either generator (the first knots every STRIDE-th sample, then the rounds; measured on the
+    fixed benchmark swings: medians 64 RL / 55 CFFTG, at most 91), and the passes' grid of
+    GRID_MIN + 1 points unless a path has more pieces."""
     sp, out = samples
     for method, rows in out.items():
         plans = _joint_paths([t for t, _, _ in rows], sp, [q for _, q, _ in rows])
         counts = np.array([len(p.path.knots) for p in plans])
         sizes = np.array([len(q) for _, q, _ in rows])
-        assert np.median(counts) <= 60 and counts.max() <= 100, (method, counts.max())
+        assert np.median(counts) <= 70 and counts.max() <= 100, (method, counts.max())
         assert np.median(sizes) > 2 * np.median(counts)
         assert all(len(p.view.s) == 193 for p in plans if len(p.path.knots) <= 65)
 
@@ -186,3 +189,29 @@ def test_ragged_splines_equal_each_path_solved_alone(size):
             (alone,) = cubic_paths(k[None], q[None])
             np.testing.assert_array_equal(p.knots, alone.knots)
             np.testing.assert_array_equal(p.coef, alone.coef)
+
+
+@pytest.mark.parametrize("method", ["rl", "cfftg"])
+def test_a_rounding_of_the_heel_leaves_the_knots_and_the_timed_swing(samples, method):
+    """The knots are chosen from the samples' places and the spline's deviation, not from their
+    fourth differences: the stance leg's inverse kinematics (its knee nearly straight mid-swing)
+    turns a 1e-16 m change of the heel into 1e-7 rad of joint samples, which moved knots chosen from
+    an error estimate, and with them the timed swing by up to 1e-2 rad or a control period (36 of
+    tests/reference_outputs.py's 400 timed swings). The heel moved by 16 ulps: the same knots, the
+    same sample count, joint angles within 1e-4 rad."""
+    sp, out = samples
+    rng = np.random.default_rng(7)
+    rows = out[method][:60]
+    trajs = [t for t, _, _ in rows]
+    moved = []
+    for t in trajs:
+        heel = np.array(t.heel, np.float64)
+        step = 16 * np.finfo(np.float64).eps * np.abs(heel).max()
+        heel[1:-1] += step * rng.choice([-1.0, 1.0], heel[1:-1].shape)
+        moved.append(dataclasses.replace(t, heel=heel))
+    config = TrajectoryGenerator.load(POLICY).config
+    for a, b in zip(time_swings(trajs, config), time_swings(moved, config)):
+        assert len(a.curve.path.knots) == len(b.curve.path.knots)
+        np.testing.assert_allclose(a.curve.path.knots, b.curve.path.knots, rtol=0, atol=1e-9)
+        assert len(a.time) == len(b.time) and a.ok == b.ok
+        np.testing.assert_allclose(a.joint_angles, b.joint_angles, rtol=0, atol=1e-4)
