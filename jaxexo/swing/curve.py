@@ -152,6 +152,8 @@ def cubic_paths_ragged(knots: list, q: list) -> list[JointPath]:
     last row's upper term is 0), so that every path's slopes are the very numbers its own solve
     gives (the same operations on the same values; the padding adds and subtracts exact zeros)."""
     sizes = np.array([len(k) for k in knots])
+    if np.all(sizes == sizes[0]):  # one size (one path): no padding
+        return cubic_paths(np.stack(knots), np.stack(q))
     b, n, nj = len(knots), int(sizes.max()), q[0].shape[1]
     kk, qq = np.empty((b, n)), np.empty((b, n, nj))
     for j, (k, v) in enumerate(zip(knots, q)):
