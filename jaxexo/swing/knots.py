@@ -1,7 +1,7 @@
 """The joint path in few pieces (NumPy only): a C2 cubic spline through the subset of a swing's
 joint samples that its geometry needs, chosen so that the spline stays within a tolerance of every
 sample (the heel in metres, each joint in radians). Used by jaxexo.swing.timing; the method and
-the measurements: docs/device-timing.md ("A swing in few pieces").
+the measurements: docs/device-timing.md ("The joint path in few pieces").
 """
 
 from __future__ import annotations

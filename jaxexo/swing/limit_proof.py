@@ -1,7 +1,7 @@
 """A proof that a timed swing keeps its limits (NumPy only): per polynomial piece of the curve
 q(t) = Q(S(t)), an upper bound on |q'|, |q''| and |q'''| that is never below their largest value
 on the piece, vectorised over every piece of a batch of swings. Used by jaxexo.swing.curve_check;
-the method and its measured tightness: docs/device-timing.md, "A proof, not a sample".
+the method and its measured tightness: docs/device-timing.md, "The limits proved per piece".
 
 On a piece of time [c - H, c + H] where the law S and the path Q are each one cubic,
 q(c + H sigma) = sum_j p_j sigma^j is a polynomial of degree 9 in sigma, composed exactly from the
