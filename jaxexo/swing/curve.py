@@ -573,19 +573,26 @@ def _laws_flat(laws, times, counts) -> list[np.ndarray]:
             a,
         )
 
-    past = t >= end_i  # at rest after the passes' last node
-    p1, s1, v1, a1 = piece(np.minimum(t, end_i))
-    p1 = p1 + total * np.maximum(t - end_i, 0.0)
+    return _windowed(piece, t, t_in, end_i, w_i, total)
+
+
+def _windowed(piece, t, t_in, end, w, total) -> list[np.ndarray]:
+    """The law's four values at clamped times t (queries t_in) from ``piece`` (P, S, v and v' of
+    the passes' law within it), the law's end (its last node), window w and total S: arrays per
+    query for a batch, numbers for one law (the same operations either way)."""
+    past = t >= end  # at rest after the passes' last node
+    p1, s1, v1, a1 = piece(np.minimum(t, end))
+    p1 = p1 + total * np.maximum(t - end, 0.0)
     v1[past] = 0.0
     a1 = np.where(past, 0.0, a1)
-    lag = t - w_i
+    lag = t - w
     p0, s0, v0, a0 = piece(np.maximum(lag, 0.0))  # all zero at the start, but the piece's v'
     a0 = np.where(lag < 0.0, 0.0, a0)
-    k = 1.0 / (w_i * total)
+    k = 1.0 / (w * total)
     res = [np.clip((p1 - p0) * k, 0.0, 1.0), (s1 - s0) * k, (v1 - v0) * k, (a1 - a0) * k]
     # At touch-down exactly at rest (t - w rounds to a hair before the last node); before lift-off
     # too (clamped to t = 0, the jerk there is the first piece's, not the rest's).
-    landed = t >= end_i + w_i
+    landed = t >= end + w
     for x, val in zip(res, (1.0, 0.0, 0.0, 0.0)):
         x[landed] = val
     early = t_in < 0.0
@@ -618,24 +625,7 @@ def _law_at(law, t_in) -> list[np.ndarray]:
             a,
         )
 
-    past = t >= end
-    p1, s1, v1, a1 = piece(np.minimum(t, end))
-    p1 = p1 + total * np.maximum(t - end, 0.0)
-    v1[past] = 0.0
-    a1 = np.where(past, 0.0, a1)
-    lag = t - w
-    p0, s0, v0, a0 = piece(np.maximum(lag, 0.0))
-    a0 = np.where(lag < 0.0, 0.0, a0)
-    k = 1.0 / (w * total)
-    res = [np.clip((p1 - p0) * k, 0.0, 1.0), (s1 - s0) * k, (v1 - v0) * k, (a1 - a0) * k]
-    landed = t >= end + w
-    for x, val in zip(res, (1.0, 0.0, 0.0, 0.0)):
-        x[landed] = val
-    early = t_in < 0.0
-    if early.any():
-        for x in res:
-            x[early] = 0.0
-    return res
+    return _windowed(piece, t, t_in, end, w, total)
 
 
 def _split(x: np.ndarray, counts) -> list[np.ndarray]:
