@@ -463,3 +463,25 @@ def random_generator(config, seed: int = 0):
         metadata={},
     )
     return TrajectoryGenerator(pol, config)
+
+
+def recorded_swing(sp, rec: dict, heel=None):
+    """The RL trajectory of a swing recorded in tests/data (its obstacle outline, pivot, start,
+    goal, heel path and deviation), assembled with the kinematics ``sp`` (scalar_params);
+    ``heel``: another path in its place."""
+    import numpy as np
+
+    from jaxexo.inference import Obstacle
+    from jaxexo.physics.scene import make_scene
+    from jaxexo.swing.trajectory import assemble
+
+    scene = make_scene(
+        Obstacle.profile(rec["obstacle_outline"]),
+        rec["pivot_y"],
+        rec["start_y"],
+        rec["goal_y"] - rec["start_y"],
+        foot_length=sp.foot_length,
+    )
+    heel = np.asarray(rec["heel"] if heel is None else heel, np.float64)
+    dev = np.array([rec["deviation"]])
+    return assemble("rl", sp, [scene], [heel], heel[None], [float("nan")], deviation=dev)[0]

@@ -23,7 +23,7 @@ from jaxexo.swing.export import TIMED_CSV_COLUMNS
 from jaxexo.swing.timing import DeviceLimits, time_swing, time_swings, uniform_peaks
 from jaxexo.swing.trajectory import assemble
 
-from conftest import ROOT, legacy_raw
+from conftest import ROOT, legacy_raw, recorded_swing
 
 CFG = load_config(ROOT / "configs" / "default.toml")
 SP = scalar_params(CFG)
@@ -110,23 +110,7 @@ def test_the_safety_net_slows_by_whole_control_periods():
     of the TOPP passes 0.13 % over the hip's acceleration limit at 100 Hz, and was left flagged not
     within the limits when the net's slow-downs stayed inside one period."""
     rec = json.loads((ROOT / "tests" / "data" / "stuck_swing.json").read_text())
-    scene = make_scene(
-        Obstacle.profile(rec["obstacle_outline"]),
-        rec["pivot_y"],
-        rec["start_y"],
-        rec["goal_y"] - rec["start_y"],
-        foot_length=SP.foot_length,
-    )
-    heel = np.asarray(rec["heel"])
-    traj = assemble(
-        "rl",
-        SP,
-        [scene],
-        [heel],
-        heel[None],
-        [float("nan")],
-        deviation=np.array([rec["deviation"]]),
-    )[0]
+    traj = recorded_swing(SP, rec)
     planned = DeviceLimits.from_config(CFG).planned()
     sw = time_swing(traj, CFG, rate=100.0)
     v, a = fd(sw.joint_angles, 100.0)

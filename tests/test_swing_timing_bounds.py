@@ -13,13 +13,10 @@ import numpy as np
 
 from jaxexo.config import MAX_SWING_DURATION, load_config, packaged_config, scalar_params
 from jaxexo.evaluation.metrics import device_metrics
-from jaxexo.inference import Obstacle
-from jaxexo.physics.scene import make_scene
 from jaxexo.swing import timing
 from jaxexo.swing.timing import time_swings
-from jaxexo.swing.trajectory import assemble
 
-from conftest import ROOT
+from conftest import ROOT, recorded_swing
 
 THESIS_3 = load_config(packaged_config("thesis/3"))
 SP = scalar_params(THESIS_3)
@@ -27,16 +24,7 @@ RATE = 100.0
 
 
 def _swing(rec: dict, heel=None):
-    scene = make_scene(
-        Obstacle.profile(rec["obstacle_outline"]),
-        rec["pivot_y"],
-        rec["start_y"],
-        rec["goal_y"] - rec["start_y"],
-        foot_length=SP.foot_length,
-    )
-    heel = np.asarray(rec["heel"] if heel is None else heel, np.float64)
-    dev = np.array([rec["deviation"]])
-    return assemble("rl", SP, [scene], [heel], heel[None], [float("nan")], deviation=dev)[0]
+    return recorded_swing(SP, rec, heel)
 
 
 RECORDS = json.loads((ROOT / "tests" / "data" / "wandering_swings.json").read_text())["swings"]
