@@ -113,36 +113,8 @@ def cubic_paths(knots: np.ndarray, q: np.ndarray) -> list[JointPath]:
     """C2 cubic splines through joint samples q (B, N, J) at knots (B, N), not-a-knot ends (the
     third derivative continuous across the second and the second-last knots), so that a path with
     a cubic shape is reproduced. The slopes solve one tridiagonal system per path."""
-    b, n, nj = q.shape
-    h = np.diff(knots, axis=1)  # (B, N-1)
-    delta = np.diff(q, axis=1) / h[..., None]  # (B, N-1, J)
-    if n < 4:  # a line or a parabola through the samples: one piece per interval, exact
-        m = _low_order_slopes(knots, q, delta)
-    else:
-        lower, diag, upper = np.zeros((b, n)), np.zeros((b, n)), np.zeros((b, n))
-        rhs = np.zeros((b, n, nj))
-        lower[:, 1:-1], diag[:, 1:-1] = h[:, 1:], 2.0 * (h[:, :-1] + h[:, 1:])
-        upper[:, 1:-1] = h[:, :-1]
-        rhs[:, 1:-1] = 3.0 * (h[:, 1:, None] * delta[:, :-1] + h[:, :-1, None] * delta[:, 1:])
-        # Not-a-knot: (m0 + m1 - 2 D0) / h0^2 = (m1 + m2 - 2 D1) / h1^2, with m2 eliminated by the
-        # next row; its mirror at the end with m[n-3] eliminated. Both rows become two-term.
-        w0, w1 = 1.0 / h[:, 0] ** 2, 1.0 / h[:, 1] ** 2
-        f = w1 / h[:, 0]
-        diag[:, 0] = w0 + f * h[:, 1]
-        upper[:, 0] = w0 - w1 + f * 2.0 * (h[:, 0] + h[:, 1])
-        rhs[:, 0] = 2.0 * (w0[:, None] * delta[:, 0] - w1[:, None] * delta[:, 1])
-        rhs[:, 0] += f[:, None] * rhs[:, 1]
-        wa, wb = 1.0 / h[:, -2] ** 2, 1.0 / h[:, -1] ** 2
-        g = wa / h[:, -1]
-        lower[:, -1] = wa - wb - g * 2.0 * (h[:, -2] + h[:, -1])
-        diag[:, -1] = -wb - g * h[:, -2]
-        rhs[:, -1] = 2.0 * (wa[:, None] * delta[:, -2] - wb[:, None] * delta[:, -1])
-        rhs[:, -1] -= g[:, None] * rhs[:, -2]
-        m = tridiagonal_solve(lower, diag, upper, rhs)
-    hh = h[..., None]
-    c2 = (3.0 * delta - 2.0 * m[:, :-1] - m[:, 1:]) / hh
-    c3 = (m[:, :-1] + m[:, 1:] - 2.0 * delta) / (hh * hh)
-    coef = np.stack([q[:, :-1], m[:, :-1], c2, c3], axis=2)  # (B, N-1, 4, J)
+    b, n, _ = q.shape
+    coef = _spline_coefficients(knots, q, np.full(b, n - 1))
     return [JointPath(knots[i].copy(), coef[i]) for i in range(b)]
 
 
@@ -152,8 +124,6 @@ def cubic_paths_ragged(knots: list, q: list) -> list[JointPath]:
     last row's upper term is 0), so that every path's slopes are the very numbers its own solve
     gives (the same operations on the same values; the padding adds and subtracts exact zeros)."""
     sizes = np.array([len(k) for k in knots])
-    if np.all(sizes == sizes[0]):  # one size (one path): no padding
-        return cubic_paths(np.stack(knots), np.stack(q))
     b, n, nj = len(knots), int(sizes.max()), q[0].shape[1]
     kk, qq = np.empty((b, n)), np.empty((b, n, nj))
     for j, (k, v) in enumerate(zip(knots, q)):
@@ -161,38 +131,48 @@ def cubic_paths_ragged(knots: list, q: list) -> list[JointPath]:
         kk[j, :m], qq[j, :m] = k, v
         kk[j, m:] = k[-1] + np.arange(1, n - m + 1)  # unit steps past the end (no division by 0)
         qq[j, m:] = v[-1]
-    h = np.diff(kk, axis=1)
-    delta = np.diff(qq, axis=1) / h[..., None]
-    lower, diag, upper = np.zeros((b, n)), np.ones((b, n)), np.zeros((b, n))
-    rhs = np.zeros((b, n, nj))
-    lower[:, 1:-1], diag[:, 1:-1] = h[:, 1:], 2.0 * (h[:, :-1] + h[:, 1:])
-    upper[:, 1:-1] = h[:, :-1]
-    rhs[:, 1:-1] = 3.0 * (h[:, 1:, None] * delta[:, :-1] + h[:, :-1, None] * delta[:, 1:])
-    w0, w1 = (
-        1.0 / h[:, 0] ** 2,
-        1.0 / h[:, 1] ** 2,
-    )  # the not-a-knot rows, as cubic_paths builds them
-    f = w1 / h[:, 0]
-    diag[:, 0] = w0 + f * h[:, 1]
-    upper[:, 0] = w0 - w1 + f * 2.0 * (h[:, 0] + h[:, 1])
-    rhs[:, 0] = 2.0 * (w0[:, None] * delta[:, 0] - w1[:, None] * delta[:, 1])
-    rhs[:, 0] += f[:, None] * rhs[:, 1]
-    rows, e = np.arange(b), sizes - 1  # each path's last row
-    ha, hb = h[rows, e - 2], h[rows, e - 1]
-    wa, wb = 1.0 / ha**2, 1.0 / hb**2
-    g = wa / hb
-    end = 2.0 * (wa[:, None] * delta[rows, e - 2] - wb[:, None] * delta[rows, e - 1])
-    end -= g[:, None] * rhs[rows, e - 1]
-    pad = np.arange(n)[None, :] > e[:, None]
-    lower[pad], diag[pad], upper[pad], rhs[pad] = 0.0, 1.0, 0.0, 0.0
-    lower[rows, e], diag[rows, e], upper[rows, e] = wa - wb - g * 2.0 * (ha + hb), -wb - g * ha, 0.0
-    rhs[rows, e] = end
-    m = tridiagonal_solve(lower, diag, upper, rhs)
+    coef = _spline_coefficients(kk, qq, sizes - 1)
+    return [JointPath(np.array(knots[j], np.float64), coef[j, : sizes[j] - 1]) for j in range(b)]
+
+
+def _spline_coefficients(knots: np.ndarray, q: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """The pieces' coefficients (B, N-1, 4, J) of the not-a-knot splines through q (B, N, J) at
+    knots (B, N) whose last sample is row ``ends`` (B,) (the rows past it padding: x = 0 there)."""
+    b, n, nj = q.shape
+    h = np.diff(knots, axis=1)  # (B, N-1)
+    delta = np.diff(q, axis=1) / h[..., None]  # (B, N-1, J)
+    if n < 4:  # a line or a parabola through the samples: one piece per interval, exact
+        m = _low_order_slopes(knots, q, delta)
+    else:
+        lower, diag, upper = np.zeros((b, n)), np.ones((b, n)), np.zeros((b, n))
+        rhs = np.zeros((b, n, nj))
+        lower[:, 1:-1], diag[:, 1:-1] = h[:, 1:], 2.0 * (h[:, :-1] + h[:, 1:])
+        upper[:, 1:-1] = h[:, :-1]
+        rhs[:, 1:-1] = 3.0 * (h[:, 1:, None] * delta[:, :-1] + h[:, :-1, None] * delta[:, 1:])
+        # Not-a-knot: (m0 + m1 - 2 D0) / h0^2 = (m1 + m2 - 2 D1) / h1^2, with m2 eliminated by the
+        # next row; its mirror at the end with m[e-2] eliminated. Both rows become two-term.
+        w0, w1 = 1.0 / h[:, 0] ** 2, 1.0 / h[:, 1] ** 2
+        f = w1 / h[:, 0]
+        diag[:, 0] = w0 + f * h[:, 1]
+        upper[:, 0] = w0 - w1 + f * 2.0 * (h[:, 0] + h[:, 1])
+        rhs[:, 0] = 2.0 * (w0[:, None] * delta[:, 0] - w1[:, None] * delta[:, 1])
+        rhs[:, 0] += f[:, None] * rhs[:, 1]
+        rows, e = np.arange(b), ends
+        ha, hb = h[rows, e - 2], h[rows, e - 1]
+        wa, wb = 1.0 / ha**2, 1.0 / hb**2
+        g = wa / hb
+        end = 2.0 * (wa[:, None] * delta[rows, e - 2] - wb[:, None] * delta[rows, e - 1])
+        end -= g[:, None] * rhs[rows, e - 1]
+        pad = np.arange(n)[None, :] > e[:, None]
+        lower[pad], diag[pad], upper[pad], rhs[pad] = 0.0, 1.0, 0.0, 0.0
+        lower[rows, e], diag[rows, e] = wa - wb - g * 2.0 * (ha + hb), -wb - g * ha
+        upper[rows, e] = 0.0
+        rhs[rows, e] = end
+        m = tridiagonal_solve(lower, diag, upper, rhs)
     hh = h[..., None]
     c2 = (3.0 * delta - 2.0 * m[:, :-1] - m[:, 1:]) / hh
     c3 = (m[:, :-1] + m[:, 1:] - 2.0 * delta) / (hh * hh)
-    coef = np.stack([qq[:, :-1], m[:, :-1], c2, c3], axis=2)
-    return [JointPath(np.array(knots[j], np.float64), coef[j, : sizes[j] - 1]) for j in range(b)]
+    return np.stack([q[:, :-1], m[:, :-1], c2, c3], axis=2)  # (B, N-1, 4, J)
 
 
 def tridiagonal_solve(lower, diag, upper, rhs) -> np.ndarray:
