@@ -478,7 +478,19 @@ def law_from_speeds(
     law), each cell's mean speed at least ``floor`` (K - 1,): a cell where the floor binds is crossed
     at a peak in its middle (two linear pieces) so that it still covers its length. Then averaged
     over ``window`` (s), at most ``fraction`` of the passes' duration."""
+    nodes, speed = speed_nodes(s_grid, x, floor)
+    t_end = nodes[-1]
+    return TimeLaw(nodes, speed, float(min(window, fraction * t_end)) if t_end > 0 else window)
+
+
+def speed_nodes(
+    s_grid: np.ndarray, x: np.ndarray, floor: np.ndarray, start: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """``law_from_speeds``' piecewise-linear speed before its averaging: nodes (M + 1,) s from 0 and
+    speeds (M + 1,) 1/s, from ``start`` (1/s: a law that continues a moving one, its speed there
+    exactly; 0: rest) to rest at the end."""
     v = np.sqrt(np.maximum(x, 0.0))
+    v[0] = start
     ds = np.diff(s_grid)
     mean = np.maximum(0.5 * (v[:-1] + v[1:]), np.maximum(floor, 1e-12))
     dt = ds / mean
@@ -488,8 +500,8 @@ def law_from_speeds(
     # A cell where the floor binds gets a middle node at the speed that makes its area ds.
     nodes = np.insert(t, bind + 1, t[bind] + 0.5 * dt[bind])
     speed = np.insert(v, bind + 1, 2.0 * mean[bind] - lin[bind])
-    speed[0] = speed[-1] = 0.0
-    return TimeLaw(nodes, speed, float(min(window, fraction * t[-1])) if t[-1] > 0 else window)
+    speed[-1] = 0.0
+    return nodes, speed
 
 
 # --------------------------------------------------------------------------------------------

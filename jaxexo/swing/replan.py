@@ -7,9 +7,27 @@ obstacle. Method and measurements: docs/replanning.md.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, replace
 
 import numpy as np
+
+from jaxexo.config import MAX_SWING_DURATION
+from jaxexo.swing import timing
+from jaxexo.swing.curve import (
+    JointPath,
+    SwingCurve,
+    TimeLaw,
+    check_points,
+    chord_knots,
+    distinct_samples,
+    paths_at,
+    speed_nodes,
+)
+from jaxexo.swing.curve_check import FinalLaw, Plan, lowered_cap, max_samples, with_bounds
+from jaxexo.swing.knots import few_knot_paths
+from jaxexo.swing.limits import DeviceLimits, GridView, peak_ratio, speed_ratio
+from jaxexo.swing.time_law import topp
 
 
 @dataclass(frozen=True)
@@ -28,3 +46,266 @@ class FootState:
     joint_velocity: np.ndarray
     joint_acceleration: np.ndarray
     past_heel: np.ndarray
+
+
+# s: the continuation leaves the old path's direction over the joints' travel in this long at
+# the speed they have at the switch (the first knots of the new path within it are dropped, and
+# one free knot takes their place): long enough that the turn to the new path asks no more
+# acceleration than the passes allow, short enough that the foot is on the new path soon.
+BLEND_TIME = 0.08
+# The continuation's path parameter speeds from the old path's (at the switch) to its own over
+# this fraction of the new path (an exponential approach): the passes' grid is uniform in s.
+BLEND_PARAMETER = 0.1
+# A switch needs this much of the path still to go at the unfiltered speed profile's position.
+MIN_TO_GO = 1e-3
+LIMIT_PASSES = 3  # the passes re-run with caps lowered by a curve's excess, at most this often
+
+
+@dataclass(frozen=True)
+class _Split:
+    """An old time law cut at the switch t0: its speed nodes and speeds up to t0 (the last ones
+    t0 and the speed there), the speed v0 (1/s) and the unfiltered position S0 at t0, and the
+    path parameter s0 = s(t0) where the old path is cut."""
+
+    nodes: np.ndarray
+    speed: np.ndarray
+    v0: float
+    big_s0: float
+    s0: float
+
+
+def _split_law(law: TimeLaw, t0: float) -> _Split:
+    """``law`` cut at t0 (between its first and last speed node)."""
+    k = int(np.searchsorted(law.nodes, t0, side="right"))
+    d = t0 - float(law.nodes[k - 1])
+    a = float(law._acc[k - 1])
+    v_prev = float(law.speed[k - 1])
+    v0 = v_prev + a * d
+    big_s0 = float(law._S[k - 1]) + v_prev * d + a * d * d / 2.0
+    nodes, speed = law.nodes[:k], law.speed[:k]
+    if d > 0.0:
+        nodes, speed = np.append(nodes, t0), np.append(speed, v0)
+    s0 = float(law.at(np.array([t0]))[0][0])
+    return _Split(nodes, speed, v0, big_s0, s0)
+
+
+def _cut_path(path: JointPath, s0: float):
+    """The old path up to s0: its knots (ending at s0) and pieces, and q, q', q'' there (J,)."""
+    m = min(int(np.searchsorted(path.knots, s0, side="right")) - 1, len(path.coef) - 1)
+    c0, c1, c2, c3 = path.coef[m]
+    d = s0 - float(path.knots[m])
+    q = ((c3 * d + c2) * d + c1) * d + c0
+    dq = (3.0 * c3 * d + 2.0 * c2) * d + c1
+    ddq = 6.0 * c3 * d + 2.0 * c2
+    if d > 0.0:
+        knots, coef = np.append(path.knots[: m + 1], s0), path.coef[: m + 1]
+    else:
+        knots, coef = path.knots[: m + 1], path.coef[:m]
+    return knots, coef, (q, dq, ddq)
+
+
+def _parameter_map(frac: np.ndarray, rho: float) -> np.ndarray:
+    """phi (n,) of chord fractions frac in [0, 1]: phi(0) = 0, phi(1) = 1, phi'(0) = rho, phi'
+    approaching a constant c over BLEND_PARAMETER (phi' = c + (rho - c) exp(-x / beta)),
+    increasing for any rho > 0."""
+    beta = min(BLEND_PARAMETER, 0.9 / rho)
+    e = beta * -np.expm1(-1.0 / beta)
+    c = (1.0 - rho * e) / (1.0 - e)
+    phi = c * frac + (rho - c) * beta * -np.expm1(-frac / beta)
+    phi[-1] = 1.0
+    return phi
+
+
+def start_conditioned_spline(
+    knots: np.ndarray, values: np.ndarray, dq0: np.ndarray, ddq0: np.ndarray
+) -> JointPath:
+    """The C2 cubic spline on ``knots`` (N + 1,) whose value, first and second derivative at
+    knots[0] are values[0] (J,), dq0, ddq0, through values[2:] at knots[2:], free at knots[1] (its
+    value solved for: the three start conditions need one more unknown), not-a-knot at the end.
+    Unknowns: the slopes m_0..m_N and the value y_1, one dense solve for every joint."""
+    n = len(knots) - 1
+    h = np.diff(knots)
+    nj = values.shape[1]
+    a = np.zeros((n + 2, n + 2))  # columns: m_0..m_N, y_1
+    rhs = np.zeros((n + 2, nj))
+    y1 = n + 1
+    # delta_i = (y_{i+1} - y_i) / h_i as (coefficient on y_1, known part).
+    known = values.copy()
+    known[1] = 0.0
+    dk = np.diff(known, axis=0) / h[:, None]
+    dy = np.zeros(n)
+    dy[0], dy[1] = 1.0 / h[0], -1.0 / h[1]
+    a[0, 0] = 1.0
+    rhs[0] = dq0
+    # c2 of piece 0 = (3 delta_0 - 2 m_0 - m_1) / h_0 = q''(0) / 2
+    a[1, 0], a[1, 1], a[1, y1] = -2.0 / h[0], -1.0 / h[0], 3.0 * dy[0] / h[0]
+    rhs[1] = ddq0 / 2.0 - 3.0 * dk[0] / h[0]
+    for i in range(1, n):  # C2 at knot i
+        r = i + 1
+        a[r, i - 1], a[r, i], a[r, i + 1] = h[i], 2.0 * (h[i - 1] + h[i]), h[i - 1]
+        a[r, y1] = -3.0 * (h[i] * dy[i - 1] + h[i - 1] * dy[i])
+        rhs[r] = 3.0 * (h[i] * dk[i - 1] + h[i - 1] * dk[i])
+    # not-a-knot at knot N-1: c3 equal on the last two pieces, c3_i = (m_i + m_{i+1} - 2 d_i)/h_i^2
+    wa, wb = 1.0 / h[n - 2] ** 2, 1.0 / h[n - 1] ** 2
+    a[n + 1, n - 2], a[n + 1, n - 1], a[n + 1, n] = wa, wa - wb, -wb
+    a[n + 1, y1] = -2.0 * (wa * dy[n - 2] - wb * dy[n - 1])
+    rhs[n + 1] = 2.0 * (wa * dk[n - 2] - wb * dk[n - 1])
+    sol = np.linalg.solve(a, rhs)
+    m = sol[: n + 1]
+    q = values.copy()
+    q[1] = sol[y1]
+    delta = np.diff(q, axis=0) / h[:, None]
+    hh = h[:, None]
+    c2 = (3.0 * delta - 2.0 * m[:-1] - m[1:]) / hh
+    c3 = (m[:-1] + m[1:] - 2.0 * delta) / (hh * hh)
+    m[0], c2[0] = dq0, ddq0 / 2.0  # the start's own values (the solve gives them to rounding)
+    return JointPath(np.asarray(knots, np.float64), np.stack([q[:-1], m[:-1], c2, c3], axis=1))
+
+
+def _continuation_path(
+    old: JointPath, s0: float, q_c: np.ndarray, lengths, blend: float
+) -> JointPath:
+    """The joint path of the replanned swing: ``old`` up to s0, then a C2 spline from the old
+    path's q, q', q'' at s0 through the continuation's joint samples q_c (M, J) (its first sample
+    replaced by the old path's value at s0), over s in [s0, 1]; the samples within ``blend`` (rad,
+    joint-space chord) of the start are left to the spline's turn onto the new path."""
+    knots, coef, (q0, dq0, ddq0) = _cut_path(old, s0)
+    q_c = q_c + 2.0 * np.pi * np.round((q0 - q_c[0]) / (2.0 * np.pi))  # the old path's branch
+    frac = chord_knots(q_c)
+    chord = float(np.sqrt((np.diff(q_c, axis=0) ** 2).sum(axis=1)).sum())
+    picked = few_knot_paths([q_c], [frac], lengths)[0].knots
+    idx = np.searchsorted(frac, picked)
+    # The new path's first knots within the blend are dropped (the free knot replaces them).
+    speed0 = float(np.sqrt(dq0 @ dq0))  # |dq/ds| at s0
+    keep = np.r_[0, idx[1:][(frac[idx[1:]] * chord >= blend) | (idx[1:] == idx[-1])]]
+    if len(keep) < 4:
+        keep = np.r_[0, idx[-3:]] if len(idx) >= 4 else idx
+    rho = chord / max((1.0 - s0) * speed0, 1e-12)
+    sk = s0 + (1.0 - s0) * _parameter_map(frac[keep], rho)
+    sk[0], sk[-1] = s0, 1.0
+    values = q_c[keep].copy()
+    values[0] = q0
+    sk = np.insert(sk, 1, 0.5 * (sk[0] + sk[1]))
+    values = np.insert(values, 1, values[0], axis=0)  # solved for
+    new = start_conditioned_spline(sk, values, dq0, ddq0)
+    return JointPath(np.concatenate([knots, sk[1:]]), np.concatenate([coef, new.coef]))
+
+
+def _passes(path: JointPath, grid: np.ndarray, cap: np.ndarray, x0: float, constraints):
+    """The passes on the continuation's grid (K,) of s from a moving start (s'^2 = x0 at
+    grid[0]): s'^2 (K,), the cells' floors (K - 1,) and the grid's view."""
+    _, dq, ddq = paths_at([path], [grid], 2)[0]
+    view = GridView(grid, dq[None], ddq[None])
+    cap = cap[None].copy()
+    rows_a, rows_b, bounds = [], [], []
+    for c in constraints:
+        pb = c.path_bounds(view)
+        if pb.x_cap is not None:
+            cap = np.minimum(cap, pb.x_cap)
+        if pb.a is not None:
+            rows_a.append(pb.a)
+            rows_b.append(pb.b)
+            bounds.append(np.broadcast_to(pb.bound, pb.a.shape[-1:]))
+    a, b, bound = (np.concatenate(r, axis=-1) for r in (rows_a, rows_b, bounds))
+    ds = (grid[-1] - grid[0]) / (len(grid) - 1)
+    x, floor = topp(a, b, np.inf, bound, ds, cap, both_ends=True, start=np.array([x0]))
+    return x[0], floor[0], view
+
+
+def _law(split: _Split, grid, x, floor, window: float) -> TimeLaw:
+    """The replanned swing's time law: the old speed nodes up to the switch, then the passes'."""
+    nodes, speed = speed_nodes(grid, x, floor, start=split.v0)
+    t0 = float(split.nodes[-1])
+    return TimeLaw(
+        np.concatenate([split.nodes, t0 + nodes[1:]]),
+        np.concatenate([split.speed, speed[1:]]),
+        window,
+    )
+
+
+def _timed_law(split: _Split, path: JointPath, window: float, device: DeviceLimits) -> Plan:
+    """The continuation's passes from the moving start, then local corrections where the proven
+    bounds exceed a limit (``curve_check.lowered_cap``) and, while still over, every cap lowered
+    by the excess (a swing cannot be slowed uniformly: its start is fixed): a Plan with the
+    curve's bounds."""
+    _, _, passes, check = timing._planned(device)
+    k = timing.grid_size(int(np.count_nonzero(path.knots > split.s0)))
+    grid = np.linspace(split.big_s0, 1.0, k)
+    cap = np.full(k, np.inf)
+    x0 = split.v0 * split.v0
+    plan = None
+    for attempt in range(timing.LOCAL_PASSES + LIMIT_PASSES + 1):
+        x, floor, view = _passes(path, grid, cap, x0, passes)
+        law = _law(split, grid, x, floor, window)
+        plan = with_bounds([Plan(path, view, cap, x, law)], [0])[0]
+        ratio = peak_ratio(check, plan.check.peaks)
+        if ratio <= 1.0 or law.duration > MAX_SWING_DURATION:
+            break
+        if attempt < timing.LOCAL_PASSES and ratio > timing.LOCAL_FROM:
+            cap = lowered_cap(plan, speed_ratio(check, plan.check.bound))
+        else:
+            cap = np.minimum(cap, np.where(x > 0.0, x / (ratio * ratio), cap))
+    return plan
+
+
+def _final(plan: Plan, device: DeviceLimits, rate: float) -> FinalLaw:
+    """The continuation's law as it is (no uniform slow-down: the start is fixed), its peaks and
+    whether they are within the planned limits."""
+    planned = device.planned()
+    law = plan.law
+    notes = []
+    peaks = plan.check.peaks
+    within = bool(
+        np.all(peaks[0] <= planned.velocity)
+        and np.all(peaks[1] <= planned.acceleration)
+        and (planned.jerk is None or np.all(peaks[2] <= planned.jerk))
+    )
+    if law.duration > MAX_SWING_DURATION:
+        notes.append(
+            f"the continuation needs {law.duration:.4g} s, longer than the longest swing "
+            f"({MAX_SWING_DURATION:g} s)"
+        )
+        within = False
+    n = law.duration * rate
+    if not n < max_samples():
+        raise ValueError(
+            f"rate: a {law.duration:.4g} s swing at {rate:g} Hz needs {math.ceil(n)} samples, more "
+            "than half the memory this process may use holds; lower the rate"
+        )
+    return FinalLaw(law, 1.0, 1.0, peaks, within, tuple(notes))
+
+
+def continue_swing(swing, traj, *, at: float, sp, rate: float | None = None):
+    """The swing ``swing`` (a TimedSwing) replanned at t = ``at`` (s, validated by the caller) onto
+    the continuation ``traj`` (a Trajectory from the foot's state at ``at`` over the new scene to
+    the same goal): identical to ``swing`` on [0, at], C2 there, the continuation timed from the
+    moving state within ``swing.limits``, the whole swing judged against ``traj.scene``, sampled at
+    ``rate`` (default: the swing's)."""
+    rate = timing.check_rate(swing.rate if rate is None else rate)
+    curve, device = swing.curve, swing.limits
+    split = _split_law(curve.law, float(at))
+    if split.big_s0 > 1.0 - MIN_TO_GO:
+        raise ValueError(
+            f"at: the swing has reached its landing by t={at:g} s (s = {split.s0:.4f} of the path); "
+            "too late to replan it"
+        )
+    q_c = timing._joint_samples(sp, traj)
+    q_c = np.take(q_c, distinct_samples(q_c), axis=0)
+    # The joints' speed at the switch: |q'(s0)| s'(t0) with s'(t0) the averaged law's.
+    s_dot = float(curve.law.at(np.array([at]))[1][0])
+    _, _, (_, dq0, _) = _cut_path(curve.path, split.s0)
+    blend = BLEND_TIME * s_dot * float(np.sqrt(dq0 @ dq0))
+    path = _continuation_path(curve.path, split.s0, q_c, curve.lengths, blend)
+    plan = _timed_law(split, path, curve.law.window, device)
+    final = _final(plan, device, rate)
+    new_curve = SwingCurve(path, final.law, curve.pivot_y, curve.lengths, curve.foot_length)
+    chk = timing._path_checks([traj], [plan], sp)
+    checks = timing._curve_verdict(traj, plan, chk, 0, 1.0, sp)
+    samples = timing._samples([new_curve], rate)[0]
+    note = f"replanned at t={at:.4f} s ({traj.method} continuation)"
+    out = timing._timed(traj, checks, final, new_curve, samples, device, rate)
+    return replace(
+        out,
+        notes=swing.notes + (note,) + out.notes,
+        switch_times=swing.switch_times + (float(at),),
+    )

@@ -109,8 +109,8 @@ def _from_bound(a, b, bound):
     return np.where(y > 0.0, y, 0.0), ~np.isnan(y)
 
 
-def _scan_floats(a, b, bound, order) -> np.ndarray:
-    """One path's scan (K, J) as Python floats (``_min_affine_scan``). A step from a point on its
+def _scan_floats(a, b, bound, order, start: float = 0.0) -> np.ndarray:
+    """One path's scan (K, J) as Python floats (``_min_affine_scan``), from x = ``start``. A step from a point on its
     bound lands where ``_from_bound`` says, so a run of such steps that each land on their bound
     again (the passes riding the limit curve: two steps in three) is jumped over in one slice."""
     k, nj = a.shape
@@ -124,7 +124,7 @@ def _scan_floats(a, b, bound, order) -> np.ndarray:
     ub, fb, chain, usable = bound.tolist(), fb.tolist(), chain.tolist(), usable.tolist()
     af, bf = a.ravel().tolist(), b.ravel().tolist()  # flat: row p is [p * nj, (p + 1) * nj)
     out = [0.0] * k
-    xi = 0.0
+    xi = out[0] = float(start)
     p = 0
     while p < k - 1:
         if xi == ub[p] and usable[p]:
@@ -148,19 +148,21 @@ def _scan_floats(a, b, bound, order) -> np.ndarray:
     return res
 
 
-def _min_affine_scan(a, b, bound, order):
-    """x_next = clip(min_j (a_j x + b_j), 0, bound) over the grid points in ``order``, from x = 0,
-    for a batch: a, b (B, K, J), bound (B, K). Returns x (B, K). A small batch runs row by row as
+def _min_affine_scan(a, b, bound, order, start=None):
+    """x_next = clip(min_j (a_j x + b_j), 0, bound) over the grid points in ``order``, from x = 0
+    (or ``start`` (B,): a moving start, kept as it is even above its bound), for a batch: a, b
+    (B, K, J), bound (B, K). Returns x (B, K). A small batch runs row by row as
     Python floats, where a grid point's few float operations cost less than a vectorised step's
     several NumPy calls (docs/decisions.md); a large one runs one vectorised step per grid point.
     Both do the same IEEE operations (a product, a sum, exact minima), so they agree bit for bit."""
     bsz, k, nj = a.shape
     x = np.empty((bsz, k))
+    start = np.zeros(bsz) if start is None else np.asarray(start, np.float64)
     if bsz <= SCALAR_ROWS:
         for row in range(bsz):
-            x[row] = _scan_floats(a[row], b[row], bound[row], order)
+            x[row] = _scan_floats(a[row], b[row], bound[row], order, start[row])
         return x
-    x[:, order[0]] = 0.0
+    x[:, order[0]] = start
     for src, dst in zip(order[:-1], order[1:]):
         y = (a[:, src] * x[:, src, None] + b[:, src]).min(axis=-1)
         x[:, dst] = np.clip(y, 0.0, bound[:, dst])
@@ -176,13 +178,16 @@ def topp(
     cap: np.ndarray | None = None,
     *,
     both_ends: bool = False,
+    start: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The time-optimal rest-to-rest law on a uniform s grid (spacing ds) for joint derivatives
     dq, ddq (B, K, J): s'^2 (B, K), and per cell the least speed (B, K-1) of a cell crossed from
     rest to rest (the passes: module docstring). ``cap`` (B, K): further upper bounds on s'^2.
     ``both_ends``: each cell's constant s'' within the acceleration limits at both of its ends
     (``_far_end_steps``), not only where the pass enters it: on a coarse grid the far end's
-    excess, first order in ds, is what the check would otherwise slow the swing for."""
+    excess, first order in ds, is what the check would otherwise slow the swing for. ``start``
+    (B,): s'^2 at the first grid point of a law that starts moving (a swing replanned in flight,
+    jaxexo.swing.replan), kept there; None: from rest."""
     vmax = np.asarray(vmax, np.float64)
     amax = np.asarray(amax, np.float64)
     xmax = max_speed_curve(dq, ddq, vmax, amax)
@@ -195,8 +200,8 @@ def topp(
     # Backward from rest at the end: reach[i-1] = clip(reach[i] - 2 ds L_i(reach[i]), 0, xmax[i-1]).
     backward = list(range(k - 1, -1, -1))
     reach = _min_affine_scan(ba, bb, xmax, backward)
-    # Forward from rest at the start under the reachable speeds.
-    x = _min_affine_scan(fa, fb, reach, list(range(k)))
+    # Forward from rest (or the given start) under the reachable speeds.
+    x = _min_affine_scan(fa, fb, reach, list(range(k)), start)
     # A cell entered and left at rest (a cusp, or the two ends of a very short path) takes
     # 2 sqrt(ds / u0) at the largest s'' from rest, u0: its mean speed is sqrt(ds u0) / 2.
     _, u0 = _accel_bounds(dq[:, :-1], ddq[:, :-1], amax, np.zeros((b, k - 1)))

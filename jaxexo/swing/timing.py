@@ -117,6 +117,8 @@ class TimedSwing:
     notes: tuple[str, ...] = field(default=())
     curve: SwingCurve | None = None
     joint_jerk: np.ndarray | None = None  # (n, 4) rad/s^3
+    # s: where the swing was replanned in flight (jaxexo.swing.replan), in order; () for none
+    switch_times: tuple[float, ...] = ()
 
     @property
     def ok(self) -> bool:
