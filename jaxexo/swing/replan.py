@@ -283,11 +283,11 @@ def continue_swing(swing, traj, *, at: float, sp, rate: float | None = None):
     ``rate`` (default: the swing's)."""
     rate = timing.check_rate(swing.rate if rate is None else rate)
     curve, device = swing.curve, swing.limits
-    split = _split_law(curve.law, float(at))
-    if split.big_s0 > 1.0 - MIN_TO_GO:
+    split = None if at >= curve.law.nodes[-1] else _split_law(curve.law, float(at))
+    if split is None or split.big_s0 > 1.0 - MIN_TO_GO:
         raise ValueError(
-            f"at: the swing has reached its landing by t={at:g} s (s = {split.s0:.4f} of the path); "
-            "too late to replan it"
+            f"at: the swing is landing by t={at:g} s (it lands at {swing.duration:.4f} s, its "
+            f"speed profile ends at {curve.law.nodes[-1]:.4f} s); too late to replan it"
         )
     q_c = timing._joint_samples(sp, traj)
     q_c = np.take(q_c, distinct_samples(q_c), axis=0)
@@ -309,3 +309,113 @@ def continue_swing(swing, traj, *, at: float, sp, rate: float | None = None):
         notes=swing.notes + (note,) + out.notes,
         switch_times=swing.switch_times + (float(at),),
     )
+
+
+# --------------------------------------------------------------------------------------------
+# The public replanning: inputs checked, the foot's state, a generator's continuation
+# --------------------------------------------------------------------------------------------
+
+# generate's options that a replan keeps from the swing (its scene's pivot, start and goal)
+_SCENE_OPTIONS = ("pivot", "pivot_y", "start_y", "step_length")
+
+
+def foot_state(swing, at: float) -> FootState:
+    """The swing's FootState at t = ``at`` (s, within the swing; ``checked_switch``)."""
+    curve = swing.curve
+    st = curve.at(np.array([at]))
+    s0 = float(st.path_parameter[0])
+    s, _, heel = check_points(curve.lengths, curve.pivot_y, curve.path, timing.CURVE_TOL)
+    return FootState(
+        time=float(at),
+        path_parameter=s0,
+        heel=st.heel[0],
+        heel_velocity=st.heel_velocity[0],
+        heel_acceleration=st.heel_acceleration[0],
+        joints=st.joint_angles[0],
+        joint_velocity=st.joint_velocity[0],
+        joint_acceleration=st.joint_acceleration[0],
+        past_heel=np.vstack([heel[s < s0], st.heel[:1]]),
+    )
+
+
+def checked_switch(swing, at, config) -> float:
+    """``at`` as a switch time of ``swing`` made with ``config``'s legs: TypeError or ValueError
+    naming ``swing`` or ``at`` (a time within the swing, after its last switch, before it
+    lands)."""
+    from jaxexo.physics.geometry import as_given
+
+    if not isinstance(swing, timing.TimedSwing) or swing.curve is None:
+        raise TypeError(
+            f"swing: expected a TimedSwing (from time_swing or replan), got {type(swing).__name__}"
+        )
+    curve = swing.curve
+    config.kinematics.check_legs(
+        {"thigh": curve.lengths[0], "shin": curve.lengths[1], "foot_length": curve.foot_length},
+        "the swing was timed for",
+        "replan a swing with the generator that made it",
+    )
+    if isinstance(at, (bool, np.bool_)) or not isinstance(
+        at, (int, float, np.integer, np.floating)
+    ):
+        raise TypeError(f"at: expected a time in seconds, got {at!r}")
+    t = float(at)
+    last = swing.switch_times[-1] if swing.switch_times else 0.0
+    if not (math.isfinite(t) and last < t < swing.duration):
+        after = f"after its last switch at {last:.4f} s" if swing.switch_times else "after 0"
+        raise ValueError(
+            f"at: expected a time in s within the swing ({after} and before it lands at "
+            f"{swing.duration:.4f} s), got {as_given(at)}"
+        )
+    return t
+
+
+def _checked_obstacle_scene(gen, swing, obstacle, state: FootState):
+    """The new obstacle's scene, with the swing's pivot, start and goal; ValueError naming
+    ``obstacle`` when the foot is already inside it at the switch."""
+    from jaxexo.physics.geometry import foot_clearance
+
+    sc = swing.scene
+    scene = gen.scene(
+        obstacle, pivot_y=sc.pivot_y, start_y=sc.start_y, step_length=sc.goal_y - sc.start_y
+    )
+    scene = replace(scene, goal_y=sc.goal_y, pivot_kind=sc.pivot_kind)
+    c = float(foot_clearance(np, state.heel[None], gen.sp.foot_length, scene.outline[None])[0])
+    if c <= 0.0:
+        raise ValueError(
+            f"obstacle: the foot is already inside the new obstacle at t={state.time:.4f} s "
+            f"(heel at y={state.heel[0]:.4f} m, z={state.heel[1]:.4f} m); no continuation from there"
+        )
+    return scene
+
+
+def replan_swing(gen, swing, obstacle, *, at, options, overrides: dict, where: str, fallback_of):
+    """A generator's ``replan`` (TrajectoryGenerator's, CFFTG's): the swing continued at ``at``
+    over ``obstacle`` by ``gen.continuation``; where that swing is not safe and ``options``' fallback
+    is "cfftg", by ``fallback_of(gen)``'s (a CFFTG; None: no fallback) when that one is."""
+    from jaxexo.swing.options import GenerateOptions
+
+    for name in _SCENE_OPTIONS:
+        if name in overrides:
+            raise TypeError(
+                f"{name}: not an option of {where}: a replanned swing keeps the pivot, start and "
+                "goal of the swing it continues"
+            )
+    overrides = dict(overrides)
+    rate = overrides.pop("rate", None)
+    o = GenerateOptions.given(options, overrides, where)
+    t = checked_switch(swing, at, gen.config)
+    if rate is not None:
+        timing.check_rate(rate)
+    g = gen.at_clearance(o.clearance)
+    state = foot_state(swing, t)
+    scene = _checked_obstacle_scene(g, swing, obstacle, state)
+    cont = g.continuation(scene, state, options=o)
+    new = continue_swing(swing, cont, at=t, sp=g.sp, rate=rate)
+    other = fallback_of(g) if o.fallback == "cfftg" else None
+    if not new.ok and other is not None and cont.method != other.method:
+        alt = continue_swing(
+            swing, other.continuation(scene, state, options=o), at=t, sp=g.sp, rate=rate
+        )
+        if alt.ok:
+            new = replace(alt, notes=alt.notes + (f"the {cont.method} continuation was not safe",))
+    return o.checked(new)
