@@ -47,13 +47,14 @@ class Plan:
     check: CurveBound | None = None  # the law's proven bounds (``with_bounds``)
 
 
-def with_bounds(plans, idx) -> list[Plan]:
+def with_bounds(plans, idx, since=None) -> list[Plan]:
     """plans[idx] with their curves' proven bounds (``limit_proof.curve_bounds``, all of them in
-    one vectorised step: each curve's bounds are those it has alone)."""
+    one vectorised step: each curve's bounds are those it has alone; ``since``: theirs from those
+    times on)."""
     plans = list(plans)
     idx = list(idx)
     for i, bound in zip(
-        idx, curve_bounds([plans[i].path for i in idx], [plans[i].law for i in idx])
+        idx, curve_bounds([plans[i].path for i in idx], [plans[i].law for i in idx], since)
     ):
         plans[i] = replace(plans[i], check=bound)
     return plans

@@ -77,19 +77,22 @@ class CurveBound:
     peaks: tuple
 
 
-def curve_bounds(paths, laws) -> list[CurveBound]:
+def curve_bounds(paths, laws, since=None) -> list[CurveBound]:
     """The proven bounds of each curve (path, law): in groups of at most GROUP_PIECES law pieces
     (or one curve); each curve's bounds do not depend on the others (elementwise arithmetic, exact
-    maxima), so a batch gives every curve what it gives it alone."""
+    maxima), so a batch gives every curve what it gives it alone. ``since`` (one time per curve,
+    s): only the law pieces that end after it (a replanned swing's, whose curve before the switch
+    is the old swing's, already bounded)."""
+    since = [None] * len(laws) if since is None else list(since)
     out, group, size = [], [], 0
     for i, law in enumerate(laws):
         n = 2 * MAX_PARTS * len(law.nodes)  # its pieces at most
         if group and size + n > GROUP_PIECES:
-            out += _bounds([paths[j] for j in group], [laws[j] for j in group])
+            out += _bounds(*([x[j] for j in group] for x in (paths, laws, since)))
             group, size = [], 0
         group.append(i)
         size += n
-    return out + _bounds([paths[j] for j in group], [laws[j] for j in group])
+    return out + _bounds(*([x[j] for j in group] for x in (paths, laws, since)))
 
 
 def _cat(xs):
@@ -218,9 +221,16 @@ def _split(b: np.ndarray, window: float) -> np.ndarray:
     return np.append(np.repeat(b[:-1], parts) + k * step, b[-1])
 
 
-def _bounds(paths, laws) -> list[CurveBound]:
+def _from(b: np.ndarray, since) -> np.ndarray:
+    """Breakpoints ``b`` from the piece holding ``since`` on (all of them for None)."""
+    if since is None:
+        return b
+    return b[max(0, int(np.searchsorted(b, since, side="right")) - 1) :]
+
+
+def _bounds(paths, laws, since) -> list[CurveBound]:
     """``curve_bounds`` of one group, in one vectorised step."""
-    b = [_split(law.breakpoints(), law.window) for law in laws]
+    b = [_from(_split(law.breakpoints(), law.window), t) for law, t in zip(laws, since)]
 
     half = [0.5 * np.diff(x) for x in b]
     centre = [x[:-1] + h for x, h in zip(b, half)]

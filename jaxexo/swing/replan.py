@@ -237,7 +237,8 @@ def _timed_law(split: _Split, path: JointPath, window: float, device: DeviceLimi
     for attempt in range(timing.LOCAL_PASSES + LIMIT_PASSES + 1):
         x, floor, view = _passes(path, grid, cap, x0, passes)
         law = _law(split, grid, x, floor, window)
-        plan = with_bounds([Plan(path, view, cap, x, law)], [0])[0]
+        # The curve before the switch is the old swing's (its peaks bound it): bounded from there.
+        plan = with_bounds([Plan(path, view, cap, x, law)], [0], [float(split.nodes[-1])])[0]
         ratio = peak_ratio(check, plan.check.peaks)
         if ratio <= 1.0 or law.duration > MAX_SWING_DURATION:
             break
@@ -248,13 +249,17 @@ def _timed_law(split: _Split, path: JointPath, window: float, device: DeviceLimi
     return plan
 
 
-def _final(plan: Plan, device: DeviceLimits, rate: float) -> FinalLaw:
-    """The continuation's law as it is (no uniform slow-down: the start is fixed), its peaks and
-    whether they are within the planned limits."""
-    planned = device.planned()
+def _final(plan: Plan, old, rate: float) -> FinalLaw:
+    """The continuation's law as it is (no uniform slow-down: the start is fixed), the swing's
+    peaks (the old swing's before the switch, the continuation's proven ones after) and whether
+    they are within the planned limits."""
+    planned = old.limits.planned()
     law = plan.law
     notes = []
-    peaks = plan.check.peaks
+    before = (old.peak_velocity, old.peak_acceleration, old.peak_jerk)
+    peaks = tuple(
+        after if b is None else np.maximum(b, after) for b, after in zip(before, plan.check.peaks)
+    )
     within = bool(
         np.all(peaks[0] <= planned.velocity)
         and np.all(peaks[1] <= planned.acceleration)
@@ -297,7 +302,7 @@ def continue_swing(swing, traj, *, at: float, sp, rate: float | None = None):
     blend = BLEND_TIME * s_dot * float(np.sqrt(dq0 @ dq0))
     path = _continuation_path(curve.path, split.s0, q_c, curve.lengths, blend)
     plan = _timed_law(split, path, curve.law.window, device)
-    final = _final(plan, device, rate)
+    final = _final(plan, swing, rate)
     new_curve = SwingCurve(path, final.law, curve.pivot_y, curve.lengths, curve.foot_length)
     chk = timing._path_checks([traj], [plan], sp)
     checks = timing._curve_verdict(traj, plan, chk, 0, 1.0, sp)
