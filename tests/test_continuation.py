@@ -240,3 +240,16 @@ def test_continuations_refuse_bad_input(cases):
     with pytest.raises(ValueError, match="smoothing must be >= 0"):
         gen.continuation(new, st, smoothing=-1.0)
     assert z > 0.0
+
+
+def test_cfftgs_batch_is_its_continuations_one_by_one(cases):
+    _, cf, rows = cases
+    scenes, states = [r[1] for r in rows], [r[2] for r in rows]
+    batch = cf.continuation_batch(scenes, states, swing_scenes=[r[0] for r in rows])
+    for i, (old, new, st) in enumerate(rows):
+        one = cf.continuation(new, st, swing_scene=old)
+        # the same plans (a batched product may round the last bit differently), the same verdicts
+        np.testing.assert_allclose(batch.heel[i], one.heel, rtol=0, atol=1e-12)
+        assert batch.ok[i] == one.ok and np.array_equal(batch.heel[i, 0], st.heel)
+    with pytest.raises(ValueError, match="one state .* per scene"):
+        cf.continuation_batch(scenes, states[:-1])

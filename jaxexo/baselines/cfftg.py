@@ -408,11 +408,27 @@ class CFFTG(SceneMaker):
         )
 
     def continuation_batch(
-        self, scenes, states, *, n_points: int = DEFAULT_POINTS, duration: float = DEFAULT_DURATION
+        self,
+        scenes,
+        states,
+        *,
+        n_points: int = DEFAULT_POINTS,
+        duration: float = DEFAULT_DURATION,
+        swing_scenes=None,
     ) -> TrajectoryBatch:
-        """Checked continuations of foot states (jaxexo.swing.replan.FootState, one per scene, checked
-        by the caller: jaxexo.swing.continuation.check_state) over their scenes, planned together
-        (``plan_continuation``), with a note per state of the plans it took, T_c and the height."""
+        """``continuation`` of many foot states, one per scene (and, when given, one swing scene
+        each), planned together (``plan_continuation``), with a note per state of the plans it
+        took, T_c, the height and the apex term."""
+        n_points, duration = check_points(n_points), check_duration(duration)
+        scenes, states = list(scenes), list(states)
+        olds = [None] * len(scenes) if swing_scenes is None else list(swing_scenes)
+        if not (len(scenes) == len(states) == len(olds)) or not scenes:
+            raise ValueError(
+                f"scenes, states, swing_scenes: one state (and swing scene) per scene, got "
+                f"{len(scenes)} scenes, {len(states)} states and {len(olds)} swing scenes"
+            )
+        for sc, st, old in zip(scenes, states, olds):
+            check_state(st, sc, self.sp, old)
         p = self.plan_continuation(scenes, states, n_points)
         notes, vias = [], []
         for i in range(len(scenes)):
@@ -422,7 +438,7 @@ class CFFTG(SceneMaker):
             )
             gave_up = (f"; gave up after {self.max_plans} plans",) if p.gave_up[i] else ()
             notes.append((note + "".join(gave_up),))
-            vias.append(p.paths[i, [0, n_points // 2, -1]])
+            vias.append(p.paths[i, [0, n_points // 2, -1]])  # start, u = 1/2 (the apex), goal
         return assemble(
             "cfftg",
             self.sp,
@@ -448,12 +464,13 @@ class CFFTG(SceneMaker):
         over ``scene`` (the new obstacle, laid out with the swing's pivot, start and goal: with
         ``swing_scene``, the swing's own scene, that is checked) to the goal, landing at rest:
         quintic y and z matching the heel's position, velocity and acceleration at its start (scaled
-        by T_c) plus CFFTG's height term, checked and re-planned (``plan_continuation``). Its
-        heel[0] is the state's heel exactly. ValueError for a foot already within the margin of the
-        new obstacle, a scene with other feet, bad n_points or duration."""
-        n_points, duration = check_points(n_points), check_duration(duration)
-        check_state(state, scene, self.sp, swing_scene)
-        return self.continuation_batch([scene], [state], n_points=n_points, duration=duration)[0]
+        by T_c) plus CFFTG's height term, checked and re-planned (``plan_continuation``;
+        docs/replanning.md, Continuation paths). Its heel[0] is the state's heel exactly.
+        ValueError (jaxexo.swing.continuation.check_state) for a foot already within the margin of
+        the new obstacle, a scene with other feet, bad n_points or duration."""
+        return self.continuation_batch(
+            [scene], [state], n_points=n_points, duration=duration, swing_scenes=[swing_scene]
+        )[0]
 
     def generate(
         self, obstacle: geometry.Obstacle, options: SwingOptions | None = None, **overrides
