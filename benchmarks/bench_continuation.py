@@ -1,4 +1,4 @@
-"""Continuation paths benchmark (jaxexo issue 59): RL swings planned over unseen shapes, the obstacle
+"""Continuation paths benchmark (replanning in flight): RL swings planned over unseen shapes, the obstacle
 then made 30-60 % taller than planned and the foot's state taken at 20-40 % of the swing where the
 foot is still clear of the taller one; from each state the RL continuation alone
 (``TrajectoryGenerator.continuation(..., fallback=None)``), CFFTG's (``CFFTG.continuation``) and the
@@ -14,16 +14,14 @@ Run: python benchmarks/bench_continuation.py [--policy tests/data/reference/poli
 
 import argparse
 import dataclasses
-import json
 import os
-import platform
 import time
-from datetime import date
 from pathlib import Path
 
 import numpy as np
 
 from jaxexo.baselines.cfftg import CFFTG
+from jaxexo.evaluation.machine import write_result
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.inference.scenarios import safety_scenarios
 from jaxexo.physics import geometry
@@ -134,10 +132,6 @@ def main():
             "cpu_ms_p99": float(np.percentile(times, 99)),
             "calls_timed": len(times),
         }
-    machine = platform.processor() or platform.machine()
-    stem = Path(a.out) / f"continuation_{date.today().isoformat()}_{machine.replace(' ', '-')}"
-    stem.parent.mkdir(parents=True, exist_ok=True)
-    stem.with_suffix(".json").write_text(json.dumps(report, indent=2) + "\n")
     lines = [
         f"# Continuation paths ({len(rows)} mid-swing states, obstacle 30-60 % taller, at "
         "20-40 % of the swing)",
@@ -150,8 +144,9 @@ def main():
             f"| {name} | {m['ok']}/{len(rows)} ({m['ok_pct']:.1f} %) | "
             f"{m['ok_but_dense_within_margin']} | {m['cpu_ms_median']:.2f} | {m['cpu_ms_p99']:.2f} |"
         )
-    stem.with_suffix(".md").write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    report["load_average"] = os.getloadavg()
+    paths = write_result("continuation", report, "\n".join(lines), a.out)
+    print("\n".join(lines), *paths, sep="\n")
 
 
 if __name__ == "__main__":
