@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from jaxexo.baselines import quintic as q5
 from jaxexo.config import Config, load_config, scalar_params
 from jaxexo.physics import geometry
 from jaxexo.physics.scene import (
@@ -21,8 +22,16 @@ from jaxexo.physics.scene import (
     with_clearance,
 )
 from jaxexo.storage.policy_check import load_checked
-from jaxexo.swing.options import SceneMaker, SwingOptions, scenes_for
+from jaxexo.swing.continuation import check_state
+from jaxexo.swing.options import (
+    SceneMaker,
+    SwingOptions,
+    check_duration,
+    check_points,
+    scenes_for,
+)
 from jaxexo.swing.trajectory import (
+    DEFAULT_DURATION,
     Measured,
     Trajectory,
     TrajectoryBatch,
@@ -140,6 +149,61 @@ class Plans:
     checks: Measured
 
 
+def continuation_paths(
+    heel, velocity, acceleration, goal_y, tc, c, margin, outline, foot_length, n_points
+):
+    """Heel paths (B, N, 2), heights h (B,) and deviation bounds (B,) m of continuation plans
+    (jaxexo.baselines.quintic): y = y0 H0 + T_c y' H1 + T_c^2 y'' H2 + goal H3 + c D g and
+    z = z0 H0 + T_c z' H1 + T_c^2 z'' H2 + h phi_k, the heel's state (B, 2 each) scaled by T_c
+    ``tc`` (B,). h is the least that keeps the foot's shadow ``margin`` above the profile at every
+    sample after the start (plan_paths's rule on what the quintic z leaves short), for the flatness
+    k needing the lowest h, and never negative. The ends are the state's heel and the goal on the
+    floor, exactly."""
+    values, _, high = q5.continuation_basis(n_points, FLATNESS)
+    wy = q5.y_weights(heel, velocity, acceleration, goal_y, tc, c)
+    wz = np.zeros((len(tc), len(values)))
+    wz[:, :4] = q5.z_weights(heel, velocity, acceleration, tc)
+    y = wy @ values[: q5.BASE]
+    zq = wz[:, :4] @ values[:4]
+    m = margin[:, None]
+    # The shadow's reach beside the foot grows from none at the start to the margin at u = 1/2
+    # (q5.ramp): the foot starts where it is, beside the obstacle perhaps closer than the margin
+    # (never within env.min_clearance: check_state), and cannot jump away; over the obstacle the
+    # margin is kept in full. The exact checks judge the curve.
+    mh = m * q5.ramp(n_points)
+    need = profile_max(y - mh, y + foot_length + mh, outline)
+    req = np.where(need > 0.0, need + m, 0.0)[:, None, 1:]  # the start is the state's own
+    short = req - zq[:, None, 1:]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # inf where the foot must already be up at the goal (phi_k = 0 there)
+        ratio = np.where(short > 0.0, short / values[q5.BASE :, 1:], 0.0)
+    h_k = ratio.max(axis=-1)  # (B, len(FLATNESS))
+    best = np.argmin(h_k, axis=1)
+    h = h_k[np.arange(len(best)), best]
+    h = np.where(np.isfinite(h), h, 0.0)  # infeasible: the checks report it
+    wz[np.arange(len(best)), q5.BASE + best] = h
+    paths = np.stack([y, wz @ values], axis=-1)
+    paths[:, 0] = heel
+    paths[:, -1, 0], paths[:, -1, 1] = goal_y, 0.0
+    return paths, h, q5.curve_deviation(wy, wz, high, n_points)
+
+
+@dataclass(frozen=True)
+class ContinuationPlans:
+    """``CFFTG.plan_continuation`` of B states: the final paths (B, N, 2), the continuation's duration
+    T_c (B,) s that scales the heel's derivatives (the path's dp/du = T_c dp/dt at u = 0), the apex
+    term's c (B,), the height h (B,) m, the plans each state needed (B,), whether it gave up (B,)
+    and the final paths' checks."""
+
+    paths: np.ndarray
+    tc: np.ndarray
+    apex_c: np.ndarray
+    height: np.ndarray
+    plans: np.ndarray
+    gave_up: np.ndarray
+    checks: Measured
+
+
 class CFFTG(SceneMaker):
     """The polynomial generator. ``config`` supplies the kinematics (thigh, shin, foot, joint limits),
     the goal tolerance and the safety distance; pass the RL policy's config to compare like with like."""
@@ -251,6 +315,62 @@ class CFFTG(SceneMaker):
         )
         return Plans(paths=paths, via=via, plans=plans, gave_up=gave_up, checks=checks)
 
+    def plan_continuation(
+        self, scenes, states, n_points: int = DEFAULT_POINTS
+    ) -> ContinuationPlans:
+        """Plan, check and re-plan the continuation of every foot state (B; jaxexo.swing.replan
+        FootState, checked by the caller) over its scene, as ``plan`` re-plans: a plan that touches
+        the obstacle again with the margin raised by margin_step, one past a joint limit or the
+        leg's length with the apex moved by apex_step, alternately towards and away from the pivot
+        (within the range where y stays monotone). T_c: quintic.estimate_tc, halved until y is
+        monotone (quintic.monotone_tc); docs/replanning.md (Continuation paths)."""
+        arr = stack_scenes(scenes, np.float64)
+        heel, vel, acc = (
+            np.stack([np.asarray(getattr(st, k), np.float64) for st in states])
+            for k in ("heel", "heel_velocity", "heel_acceleration")
+        )
+        b, foot, goal = len(scenes), float(self.sp.foot_length), arr.goal_y
+        margin = np.full(b, self.margin)
+        tc0 = q5.estimate_tc(heel, vel, goal, arr.height + margin)
+        tc = q5.monotone_tc(heel, vel, acc, goal, tc0)
+        lo, hi = q5.apex_range(heel, vel, acc, goal, tc)
+        dist = np.maximum(goal - heel[:, 0], 1e-9)
+        # The apex starts over the middle of the heel positions at which the foot overlaps the
+        # obstacle (``plan``'s rule): c moves y at u = 1/2, where the height shapes peak, there.
+        target = arr.center_y - 0.5 * foot
+        y_half = q5.y_weights(heel, vel, acc, goal, tc, np.zeros(b))[:, :4] @ q5.HALF
+        c0 = 64.0 * (target - y_half) / dist
+        toward_pivot = np.where(arr.pivot_y > target, 1.0, -1.0)
+        c, moves = np.clip(c0, lo, hi), np.zeros(b, np.int64)
+        plans, paths = np.zeros(b, np.int64), np.zeros((b, n_points, 2))
+        height, dev, todo, checks = np.zeros(b), np.zeros(b), np.arange(b), None
+        sizes = np.array([len(sc.outline) for sc in scenes])
+        for _ in range(self.max_plans):
+            for k in np.unique(sizes[todo]):
+                g = todo[sizes[todo] == k]
+                outline = np.stack([scenes[i].outline for i in g])
+                paths[g], height[g], dev[g] = continuation_paths(
+                    heel[g], vel[g], acc[g], goal[g], tc[g], c[g], margin[g], outline, foot,
+                    n_points,
+                )  # fmt: skip
+            plans[todo] += 1
+            m = measure_paths(self.sp, paths[todo], [scenes[i] for i in todo], dev[todo])
+            checks = m if checks is None else _scatter(checks, m, todo)
+            fail, bad_kin = todo[~m.ok], ~(m.joint_limits_ok & m.leg_length_ok)[~m.ok]
+            mv = fail[bad_kin]
+            moves[mv] += 1
+            k = moves[mv]
+            sign = np.where(k % 2 == 1, 1.0, -1.0) * toward_pivot[mv]
+            c[mv] = np.clip(c0[mv] + sign * 64.0 * ((k + 1) // 2) * self.apex_step / dist[mv],
+                            lo[mv], hi[mv])  # fmt: skip
+            margin[fail[~bad_kin]] += self.margin_step
+            todo = fail
+            if todo.size == 0:
+                break
+        gave_up = np.zeros(b, bool)
+        gave_up[todo] = True
+        return ContinuationPlans(paths, tc, c, height, plans, gave_up, checks)
+
     def at_clearance(self, clearance: float | None) -> "CFFTG":
         """This generator for swings that must keep ``clearance`` (m; None: env.min_clearance): the
         verdict judges against it, and the plan's margin keeps the same excess above it as the
@@ -286,6 +406,71 @@ class CFFTG(SceneMaker):
             notes,
             measured=p.checks,
         )
+
+    def continuation_batch(
+        self,
+        scenes,
+        states,
+        *,
+        n_points: int = DEFAULT_POINTS,
+        duration: float = DEFAULT_DURATION,
+        swing_scenes=None,
+    ) -> TrajectoryBatch:
+        """``continuation`` of many foot states, one per scene (and, when given, one swing scene
+        each), planned together (``plan_continuation``), with a note per state of the plans it
+        took, T_c, the height and the apex term."""
+        n_points, duration = check_points(n_points), check_duration(duration)
+        scenes, states = list(scenes), list(states)
+        olds = [None] * len(scenes) if swing_scenes is None else list(swing_scenes)
+        if not (len(scenes) == len(states) == len(olds)) or not scenes:
+            raise ValueError(
+                f"scenes, states, swing_scenes: one state (and swing scene) per scene, got "
+                f"{len(scenes)} scenes, {len(states)} states and {len(olds)} swing scenes"
+            )
+        for sc, st, old in zip(scenes, states, olds):
+            check_state(st, sc, self.sp, old)
+        p = self.plan_continuation(scenes, states, n_points)
+        notes, vias = [], []
+        for i in range(len(scenes)):
+            note = (
+                f"cfftg continuation: {p.plans[i]} plan(s); T_c={p.tc[i]:.3f} s, "
+                f"height term {p.height[i]:.3f} m, apex term c={p.apex_c[i]:.2f}"
+            )
+            gave_up = (f"; gave up after {self.max_plans} plans",) if p.gave_up[i] else ()
+            notes.append((note + "".join(gave_up),))
+            vias.append(p.paths[i, [0, n_points // 2, -1]])  # start, u = 1/2 (the apex), goal
+        return assemble(
+            "cfftg",
+            self.sp,
+            scenes,
+            vias,
+            p.paths,
+            np.zeros(len(scenes)),
+            duration,
+            notes,
+            measured=p.checks,
+        )
+
+    def continuation(
+        self,
+        scene,
+        state,
+        *,
+        n_points: int = DEFAULT_POINTS,
+        duration: float = DEFAULT_DURATION,
+        swing_scene=None,
+    ) -> Trajectory:
+        """CFFTG's heel path from the foot's state (jaxexo.swing.replan.FootState: mid-air, moving)
+        over ``scene`` (the new obstacle, laid out with the swing's pivot, start and goal: with
+        ``swing_scene``, the swing's own scene, that is checked) to the goal, landing at rest:
+        quintic y and z matching the heel's position, velocity and acceleration at its start (scaled
+        by T_c) plus CFFTG's height term, checked and re-planned (``plan_continuation``;
+        docs/replanning.md, Continuation paths). Its heel[0] is the state's heel exactly.
+        ValueError (jaxexo.swing.continuation.check_state) for a foot already within the margin of
+        the new obstacle, a scene with other feet, bad n_points or duration."""
+        return self.continuation_batch(
+            [scene], [state], n_points=n_points, duration=duration, swing_scenes=[swing_scene]
+        )[0]
 
     def generate(
         self, obstacle: geometry.Obstacle, options: SwingOptions | None = None, **overrides

@@ -26,9 +26,18 @@ from jaxexo.shield.rows import take_rows
 from jaxexo.storage.policy_check import check_policy_legs, load_checked
 from jaxexo.storage.policy_file import QPolicy
 from jaxexo.swing import smoothing as sm
+from jaxexo.swing.continuation import check_state, policy_clock
 from jaxexo.swing.finish import PathFinisher
-from jaxexo.swing.options import GenerateOptions, SceneMaker, scenes_for
-from jaxexo.swing.trajectory import Trajectory, TrajectoryBatch
+from jaxexo.swing.options import (
+    GenerateOptions,
+    SceneMaker,
+    check_duration,
+    check_fallback,
+    check_points,
+    check_smoothing,
+    scenes_for,
+)
+from jaxexo.swing.trajectory import DEFAULT_DURATION, Trajectory, TrajectoryBatch
 
 
 class TrajectoryGenerator(SceneMaker):
@@ -146,10 +155,19 @@ class TrajectoryGenerator(SceneMaker):
         admissible (jaxexo.shield.scalar: the same move as the full mask, which it computes
         instead on the rare steps it cannot decide); ``plain_reference`` computes the full mask
         every step."""
+        return self.rollout_from(scene, heel=(float(scene.start_y), 0.0), steps=0, visited=False)
+
+    def rollout_from(
+        self, scene: Scene, *, heel: tuple[float, float], steps: int, visited: bool
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``rollout``'s greedy raw path from any heel (y, z) (m, Python floats, on no lattice), with
+        the policy's clock at ``steps`` moves made and the mid-goal flag ``visited``: the episode as
+        if it had reached that state (``continuation``). From the start (heel (start_y, 0), 0
+        steps, not visited) it is ``rollout``, bit for bit."""
         sp, step = self.sp, self.step_net
         step.set_scene(self._basis(scene))
         mid_y, mid_z = transition.mid_goal(scalar, sp, scene.center_y, scene.height)
-        hy, hz, t, visited = float(scene.start_y), 0.0, 0, False
+        hy, hz, t, visited = float(heel[0]), float(heel[1]), int(steps), bool(visited)
         pts, acts = [(hy, hz)], []
         last = -1  # the move just made (the shield never undoes it)
         one = stack_scenes([scene], np.float32) if self.shield else None
@@ -355,6 +373,40 @@ class TrajectoryGenerator(SceneMaker):
             gen.finish([scene], [raw], o.n_points, smoothing, o.duration, o.fallback)[0]
         )
 
+    def continuation(
+        self,
+        scene: Scene,
+        state,
+        *,
+        n_points: int = sm.DEFAULT_POINTS,
+        smoothing: float | None = None,
+        duration: float = DEFAULT_DURATION,
+        fallback: str | None = "cfftg",
+        swing_scene: Scene | None = None,
+    ) -> Trajectory:
+        """The policy's heel path from the foot's state (jaxexo.swing.replan.FootState: mid-air, moving)
+        over ``scene`` (the new obstacle, laid out with the swing's pivot, start and goal; with
+        ``swing_scene``, the swing's own scene, that is checked) to the goal: the greedy shielded
+        rollout from the state's heel with the step count and mid-goal flag its path so far implies
+        (jaxexo.swing.continuation.policy_clock), finished as ``generate`` finishes (landing,
+        smoothing, retries) and checked on ``scene``; with ``fallback="cfftg"``, CFFTG's
+        continuation from the same state where the policy's fails its checks and CFFTG's passes.
+        Its heel[0] is the state's heel exactly (every finished curve keeps the raw path's first
+        point). ValueError for a foot already within the margin of the new obstacle, a scene with
+        other feet, or bad options (named as typed)."""
+        n_points, duration = check_points(n_points), check_duration(duration)
+        smoothing, fallback = check_smoothing(smoothing), check_fallback(fallback)
+        check_state(state, scene, self.sp, swing_scene)
+        steps, visited = policy_clock(state, scene, self.sp, self.max_steps)
+        heel = (float(state.heel[0]), float(state.heel[1]))
+        raw, _ = self.rollout_from(scene, heel=heel, steps=steps, visited=visited)
+        s = self.smoothing if smoothing is None else smoothing
+        batch = self.finish([scene], [raw], n_points, s, duration, fallback=None)
+        if fallback == "cfftg":
+            planner = _FromStates(self._fallback_planner(), [state])
+            batch = replace_failures(batch, planner, n_points, duration)
+        return batch[0]
+
     def generate_batch(
         self, obstacles, options: GenerateOptions | None = None, **overrides
     ) -> TrajectoryBatch:
@@ -367,6 +419,19 @@ class TrajectoryGenerator(SceneMaker):
             raws, _ = gen.rollout_batch(scenes)
             batch = gen.finish(scenes, raws, o.n_points, smoothing, o.duration, o.fallback)
         return o.checked(batch)
+
+
+class _FromStates:
+    """CFFTG's continuations from fixed foot states as a planner for ``replace_failures``
+    (``finish(scenes, n_points, duration)``, one state per scene it is given)."""
+
+    def __init__(self, cfftg, states):
+        self.cfftg, self.states = cfftg, states
+
+    def finish(self, scenes, n_points: int, duration: float) -> TrajectoryBatch:
+        return self.cfftg.continuation_batch(
+            scenes, self.states, n_points=n_points, duration=duration
+        )
 
 
 # m: how far under the touch tolerance ``move_collides``' cheap bound may fall by rounding (float32
