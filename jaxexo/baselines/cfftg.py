@@ -30,6 +30,7 @@ from jaxexo.swing.options import (
     check_points,
     scenes_for,
 )
+from jaxexo.swing.replan import replan_swing
 from jaxexo.swing.trajectory import (
     DEFAULT_DURATION,
     Measured,
@@ -491,6 +492,30 @@ class CFFTG(SceneMaker):
         o = SwingOptions.given(options, overrides, "CFFTG.generate_batch")
         scenes = scenes_for(self.scene, obstacles, o)
         return o.checked(self.at_clearance(o.clearance).finish(scenes, o.n_points, o.duration))
+
+    def replan(self, swing, obstacle, options=None, *, at, **overrides):
+        """``swing`` (a TimedSwing) replanned in flight at t = ``at`` (s) over ``obstacle``: kept on
+        [0, at], continued from the foot's state there by CFFTG's polynomial (``continuation``) to
+        the same goal, C2 at ``at``, timed within the swing's limits, judged whole against the new
+        obstacle (jaxexo.swing.replan; docs/replanning.md). Options as ``generate``'s (not the
+        scene's) and ``rate``; ``strict`` raises TrajectoryError for a swing that is not safe."""
+        return replan_swing(
+            self,
+            swing,
+            obstacle,
+            at=at,
+            options=options,
+            overrides=overrides,
+            where="CFFTG.replan",
+            continuation=_continuation,
+        )
+
+
+def _continuation(gen: CFFTG, scene, state, o, swing_scene) -> Trajectory:
+    """``replan``'s continuation with ``o``'s options (replan_swing's callback)."""
+    return gen.continuation(
+        scene, state, n_points=o.n_points, duration=o.duration, swing_scene=swing_scene
+    )
 
 
 def _scatter(full: Measured, part: Measured, idx: np.ndarray) -> Measured:

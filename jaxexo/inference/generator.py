@@ -37,6 +37,7 @@ from jaxexo.swing.options import (
     check_smoothing,
     scenes_for,
 )
+from jaxexo.swing.replan import replan_swing
 from jaxexo.swing.trajectory import DEFAULT_DURATION, Trajectory, TrajectoryBatch
 
 
@@ -420,6 +421,24 @@ class TrajectoryGenerator(SceneMaker):
             batch = gen.finish(scenes, raws, o.n_points, smoothing, o.duration, o.fallback)
         return o.checked(batch)
 
+    def replan(self, swing, obstacle, options=None, *, at, **overrides):
+        """``swing`` (a TimedSwing) replanned in flight at t = ``at`` (s) over ``obstacle``: kept on
+        [0, at], continued from the foot's state there by the policy (``continuation``) to the
+        same goal, C2 at ``at``, timed within the swing's limits, judged whole against the new
+        obstacle (jaxexo.swing.replan; docs/replanning.md). Options as ``generate``'s (not the
+        scene's) and ``rate``; with ``fallback="cfftg"`` CFFTG's continuation where the policy's is
+        not safe; ``strict`` raises TrajectoryError for a swing that is not safe."""
+        return replan_swing(
+            self,
+            swing,
+            obstacle,
+            at=at,
+            options=options,
+            overrides=overrides,
+            where="replan",
+            continuation=_continuation,
+        )
+
 
 class _FromStates:
     """CFFTG's continuations from fixed foot states as a planner for ``replace_failures``
@@ -432,6 +451,19 @@ class _FromStates:
         return self.cfftg.continuation_batch(
             scenes, self.states, n_points=n_points, duration=duration
         )
+
+
+def _continuation(gen: TrajectoryGenerator, scene, state, o, swing_scene) -> Trajectory:
+    """``replan``'s continuation with ``o``'s options (replan_swing's callback)."""
+    return gen.continuation(
+        scene,
+        state,
+        n_points=o.n_points,
+        smoothing=o.smoothing,
+        duration=o.duration,
+        fallback=o.fallback,
+        swing_scene=swing_scene,
+    )
 
 
 # m: how far under the touch tolerance ``move_collides``' cheap bound may fall by rounding (float32

@@ -376,7 +376,8 @@ def checked_switch(swing, at, config) -> float:
 
 def _checked_obstacle_scene(gen, swing, obstacle, state: FootState):
     """The new obstacle's scene, with the swing's pivot, start and goal; ValueError naming
-    ``obstacle`` when the foot is already inside it at the switch."""
+    ``obstacle`` when the foot is already within the margin of it at the switch (no continuation
+    from there keeps the margin)."""
     from jaxexo.physics.geometry import foot_clearance
 
     sc = swing.scene
@@ -385,18 +386,21 @@ def _checked_obstacle_scene(gen, swing, obstacle, state: FootState):
     )
     scene = replace(scene, goal_y=sc.goal_y, pivot_kind=sc.pivot_kind)
     c = float(foot_clearance(np, state.heel[None], gen.sp.foot_length, scene.outline[None])[0])
-    if c <= 0.0:
+    if c < gen.sp.min_clearance:
+        where = "inside" if c < 0.0 else f"{c:.4f} m from"
         raise ValueError(
-            f"obstacle: the foot is already inside the new obstacle at t={state.time:.4f} s "
-            f"(heel at y={state.heel[0]:.4f} m, z={state.heel[1]:.4f} m); no continuation from there"
+            f"obstacle: at t={state.time:.4f} s the foot (heel y={state.heel[0]:.4f} m, "
+            f"z={state.heel[1]:.4f} m) is already {where} the new obstacle, within the margin "
+            f"{gen.sp.min_clearance:g} m: no continuation from there keeps it"
         )
     return scene
 
 
-def replan_swing(gen, swing, obstacle, *, at, options, overrides: dict, where: str, fallback_of):
+def replan_swing(gen, swing, obstacle, *, at, options, overrides: dict, where: str, continuation):
     """A generator's ``replan`` (TrajectoryGenerator's, CFFTG's): the swing continued at ``at``
-    over ``obstacle`` by ``gen.continuation``; where that swing is not safe and ``options``' fallback
-    is "cfftg", by ``fallback_of(gen)``'s (a CFFTG; None: no fallback) when that one is."""
+    over ``obstacle`` along ``continuation(gen, scene, state, options, swing_scene)`` (the
+    generator at the options' clearance); where the joined swing is not safe and ``options``'
+    fallback is "cfftg", along CFFTG's continuation from the same state when that swing is."""
     from jaxexo.swing.options import GenerateOptions
 
     for name in _SCENE_OPTIONS:
@@ -414,13 +418,16 @@ def replan_swing(gen, swing, obstacle, *, at, options, overrides: dict, where: s
     g = gen.at_clearance(o.clearance)
     state = foot_state(swing, t)
     scene = _checked_obstacle_scene(g, swing, obstacle, state)
-    cont = g.continuation(scene, state, options=o)
+    cont = continuation(g, scene, state, o, swing.scene)
     new = continue_swing(swing, cont, at=t, sp=g.sp, rate=rate)
-    other = fallback_of(g) if o.fallback == "cfftg" else None
-    if not new.ok and other is not None and cont.method != other.method:
+    if not new.ok and o.fallback == "cfftg" and not cont.method.startswith("cfftg"):
+        other = g._fallback_planner().continuation(
+            scene, state, n_points=o.n_points, duration=o.duration, swing_scene=swing.scene
+        )
         alt = continue_swing(
-            swing, other.continuation(scene, state, options=o), at=t, sp=g.sp, rate=rate
+            swing, replace(other, method="cfftg-fallback"), at=t, sp=g.sp, rate=rate
         )
         if alt.ok:
-            new = replace(alt, notes=alt.notes + (f"the {cont.method} continuation was not safe",))
+            note = f"the {cont.method} continuation joined was not safe: {new.reasons[0]}"
+            new = replace(alt, notes=alt.notes + (note,))
     return o.checked(new)
