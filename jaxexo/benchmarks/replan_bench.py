@@ -103,7 +103,9 @@ def _point_segment(p, a, b):
 
 
 def _crosses(p0, p1, a, b):
-    """(n, E): whether segments p0 -> p1 (n, 2) and a -> b (E, 2) intersect (orientation signs)."""
+    """(n, E): whether segments p0 -> p1 (n, 2) and a -> b (E, 2) cross properly (each one's ends
+    strictly on both sides of the other's line); touching and collinear overlaps are the
+    end-to-segment distances' zeros."""
 
     def orient(u, v, w):
         return (v[..., 0] - u[..., 0]) * (w[..., 1] - u[..., 1]) - (v[..., 1] - u[..., 1]) * (
@@ -113,7 +115,7 @@ def _crosses(p0, p1, a, b):
     P0, P1, A, B = p0[:, None], p1[:, None], a[None], b[None]
     d1, d2 = orient(A, B, P0), orient(A, B, P1)
     d3, d4 = orient(P0, P1, A), orient(P0, P1, B)
-    return (d1 * d2 <= 0.0) & (d3 * d4 <= 0.0)
+    return (d1 * d2 < 0.0) & (d3 * d4 < 0.0)
 
 
 def dense_clearance(heel: np.ndarray, foot_length: float, outline: np.ndarray) -> np.ndarray:
@@ -239,6 +241,7 @@ class Row(Record):
     flagged_ok: bool
     safe: bool
     method: str
+    reasons: tuple
     scratch_duration: float | None
     scratch_lift: float | None
 
@@ -289,7 +292,7 @@ def _row(name, plan, re, s: Surprise, cfg, rate, margin, foot) -> Row | None:
         new = re(old, s.true, at)
     except ValueError as e:
         cpu = time.process_time() - t0
-        return Row(s.kind, name, feasible, left, str(e), cpu, None, False, False, "", sd, sl)
+        return Row(s.kind, name, feasible, left, str(e), cpu, None, False, False, "", (), sd, sl)
     cpu = time.process_time() - t0
     j = judge(old, new, at, outline, old.scene.goal_y, foot)
     return Row(
@@ -303,6 +306,7 @@ def _row(name, plan, re, s: Surprise, cfg, rate, margin, foot) -> Row | None:
         bool(new.ok),
         safe_by_check(j, margin),
         new.method,
+        tuple(new.reasons),
         sd,
         sl,
     )
@@ -340,7 +344,7 @@ def _figures(rows: list[Row]) -> dict:
         "flagged_ok": sum(r.flagged_ok for r in f),
         "lies": sum(r.flagged_ok and not r.safe for r in rows),
         "refused": sum(r.refused is not None for r in f),
-        "fell_back": sum(r.method == "cfftg" for r in done if r.generator != "cfftg"),
+        "fell_back": sum(r.method.startswith("cfftg") for r in done if r.generator != "cfftg"),
         "left_alone_within_margin": sum(r.left_alone <= 0.02 for r in f),
         "latency_median_ms": float(np.median(cpu)) if len(cpu) else None,
         "latency_p99_ms": float(np.percentile(cpu, 99)) if len(cpu) else None,

@@ -27,7 +27,7 @@ from jaxexo.swing.curve import (
 from jaxexo.swing.curve_check import FinalLaw, Plan, lowered_cap, max_samples, with_bounds
 from jaxexo.swing.knots import few_knot_paths
 from jaxexo.swing.limits import DeviceLimits, GridView, peak_ratio, speed_ratio
-from jaxexo.swing.time_law import topp
+from jaxexo.swing.time_law import max_speed_curve, topp
 
 
 @dataclass(frozen=True)
@@ -53,12 +53,23 @@ class FootState:
 # one free knot takes their place): long enough that the turn to the new path asks no more
 # acceleration than the passes allow, short enough that the foot is on the new path soon.
 BLEND_TIME = 0.08
+# The share of the smallest acceleration limit the turn onto the continuation is planned with (the
+# rest: the law's deceleration, which the averaging window lags).
+TURN_SHARE = 0.5
 # The continuation's path parameter speeds from the old path's (at the switch) to its own over
 # this fraction of the new path (an exponential approach): the passes' grid is uniform in s.
 BLEND_PARAMETER = 0.1
 # A switch needs this much of the path still to go at the unfiltered speed profile's position.
 MIN_TO_GO = 1e-3
 LIMIT_PASSES = 3  # the passes re-run with caps lowered by a curve's excess, at most this often
+OVERSHOOT = 1.002  # ... lowered by the excess squared times this (an excess of 1 + 1e-6 then ends)
+# The corrections never lower a cap below the speed the law sheds from its moving start at this
+# share of the smallest acceleration limit (``_shed``).
+SHED_SHARE = 0.5
+# The continuation's first passes keep this fraction of the planned velocity and acceleration
+# limits where the start allows (timing.SAFETY: 0.95 for a swing from rest): the averaged law lags
+# the passes' by half its window, and a continuation cannot be slowed uniformly afterwards.
+START_SAFETY = 0.85
 
 
 @dataclass(frozen=True)
@@ -191,6 +202,27 @@ def _continuation_path(
     return JointPath(np.concatenate([knots, sk[1:]]), np.concatenate([coef, new.coef]))
 
 
+def _blend(qdot: np.ndarray, q_c: np.ndarray, accel: float) -> float:
+    """The joint-space chord (rad) over which the continuation turns from the old swing's
+    direction onto its own: the joints' travel at their speed |qdot| (rad/s) at the switch in the
+    time that turning their velocity (the change |qdot| |u_old - u_new| of the unit directions, the
+    new one towards the continuation's sample at that chord) takes at TURN_SHARE of ``accel``
+    (rad/s^2, the smallest acceleration limit), and at least BLEND_TIME; two fixed-point rounds."""
+    speed = float(np.sqrt(qdot @ qdot))
+    if speed <= 0.0:
+        return 0.0
+    u_old = qdot / speed
+    d = q_c - q_c[0]
+    chord = np.concatenate([[0.0], np.cumsum(np.sqrt((np.diff(q_c, axis=0) ** 2).sum(axis=1)))])
+    blend = BLEND_TIME * speed
+    for _ in range(2):
+        i = min(int(np.searchsorted(chord, blend)), len(q_c) - 1)
+        norm = float(np.sqrt(d[i] @ d[i]))
+        turn = speed * float(np.sqrt(((u_old - d[i] / norm) ** 2).sum())) if norm > 0 else 0.0
+        blend = speed * max(BLEND_TIME, turn / (TURN_SHARE * accel))
+    return min(blend, 0.5 * float(chord[-1]))
+
+
 def _passes(path: JointPath, grid: np.ndarray, cap: np.ndarray, x0: float, constraints):
     """The passes on the continuation's grid (K,) of s from a moving start (s'^2 = x0 at
     grid[0]): s'^2 (K,), the cells' floors (K - 1,) and the grid's view."""
@@ -228,11 +260,12 @@ def _timed_law(split: _Split, path: JointPath, window: float, device: DeviceLimi
     bounds exceed a limit (``curve_check.lowered_cap``) and, while still over, every cap lowered
     by the excess (a swing cannot be slowed uniformly: its start is fixed): a Plan with the
     curve's bounds."""
-    _, _, passes, check = timing._planned(device)
+    planned, _, passes, check = timing._planned(device)
     k = timing.grid_size(int(np.count_nonzero(path.knots > split.s0)))
     grid = np.linspace(split.big_s0, 1.0, k)
-    cap = np.full(k, np.inf)
     x0 = split.v0 * split.v0
+    cap, view = _first_caps(path, grid, x0, planned)
+    least = _shed(view, x0, min(planned.acceleration))
     plan = None
     for attempt in range(timing.LOCAL_PASSES + LIMIT_PASSES + 1):
         x, floor, view = _passes(path, grid, cap, x0, passes)
@@ -243,10 +276,34 @@ def _timed_law(split: _Split, path: JointPath, window: float, device: DeviceLimi
         if ratio <= 1.0 or law.duration > MAX_SWING_DURATION:
             break
         if attempt < timing.LOCAL_PASSES and ratio > timing.LOCAL_FROM:
-            cap = lowered_cap(plan, speed_ratio(check, plan.check.bound))
+            lower = lowered_cap(plan, speed_ratio(check, plan.check.bound))
         else:
-            cap = np.minimum(cap, np.where(x > 0.0, x / (ratio * ratio), cap))
+            lower = np.where(x > 0.0, x / (ratio * ratio * OVERSHOOT), cap)
+        # Never below what the law can shed from its moving start: a cap under it makes the
+        # passes drop the speed in one cell, the curve's acceleration at the switch far over.
+        cap = np.minimum(cap, np.maximum(lower, least))
     return plan
+
+
+def _first_caps(path: JointPath, grid: np.ndarray, x0: float, planned: DeviceLimits):
+    """The first passes' caps on s'^2 (K,): the largest speeds within START_SAFETY of the planned
+    velocity and acceleration limits (the passes' own are within timing.SAFETY), but never below
+    what the law sheds from its moving start (``_shed``); and the grid's view."""
+    _, dq, ddq = paths_at([path], [grid], 2)[0]
+    view = GridView(grid, dq[None], ddq[None])
+    f = START_SAFETY
+    x = max_speed_curve(
+        dq, ddq, np.asarray(planned.velocity) * f, np.asarray(planned.acceleration) * f
+    )
+    return np.maximum(x, _shed(view, x0, min(planned.acceleration))), view
+
+
+def _shed(view: GridView, x0: float, accel: float) -> np.ndarray:
+    """(K,) the least cap on s'^2 the corrections set: s'^2 falling from x0 at the start at
+    SHED_SHARE of ``accel`` (rad/s^2, the smallest limit) over the path's largest |q'| (s'^2
+    falls by 2 u ds at s'' = -u)."""
+    u = SHED_SHARE * accel / max(float(np.abs(view.dq).max()), 1e-12)
+    return np.maximum(x0 - 2.0 * u * (view.s - view.s[0]), 0.0)
 
 
 def _final(plan: Plan, old, rate: float) -> FinalLaw:
@@ -296,10 +353,9 @@ def continue_swing(swing, traj, *, at: float, sp, rate: float | None = None):
         )
     q_c = timing._joint_samples(sp, traj)
     q_c = np.take(q_c, distinct_samples(q_c), axis=0)
-    # The joints' speed at the switch: |q'(s0)| s'(t0) with s'(t0) the averaged law's.
     s_dot = float(curve.law.at(np.array([at]))[1][0])
     _, _, (_, dq0, _) = _cut_path(curve.path, split.s0)
-    blend = BLEND_TIME * s_dot * float(np.sqrt(dq0 @ dq0))
+    blend = _blend(dq0 * s_dot, q_c, min(device.planned().acceleration))
     path = _continuation_path(curve.path, split.s0, q_c, curve.lengths, blend)
     plan = _timed_law(split, path, curve.law.window, device)
     final = _final(plan, swing, rate)
