@@ -149,7 +149,7 @@ def plan_course(
     rate = timed[0].rate if timed else float(config.device.control_rate if rate is None else rate)
     walk = _Walk(trajs, meta, timed, stopped, [None] * len(trajs))
     ctx = _Context(gen, rl, fallback, plan, r, ds, rate, limits)
-    for i, u in enumerate(updates):
+    for i, u in updates:
         walk = _apply_update(ctx, walk, u, i)
     trajs, meta, timed, stopped = walk.trajs, walk.meta, walk.timed, walk.stopped
     samples, spans, jump = walk_table(timed, meta, ds, rate)
@@ -174,7 +174,7 @@ def plan_course(
         tuple(reasons),
         _time.perf_counter() - t0,
         notes + walk.notes,
-        updates,
+        tuple(u for _, u in updates),
     )
 
 
@@ -288,8 +288,9 @@ class _Walk:
 
 
 def _checked_updates(updates) -> tuple:
-    """``updates`` (None, a TerrainUpdate or a list of them) as TerrainUpdates of a read Terrain at
-    distinct times >= 0, in time order; CourseError naming ``updates[i]`` otherwise."""
+    """``updates`` (None, a TerrainUpdate or a list of them) as (i, TerrainUpdate) with the
+    terrain read, at distinct times >= 0, in time order (i: its place in the list given, which
+    messages name); CourseError naming ``updates[i]`` otherwise."""
     if updates is None:
         return ()
     if isinstance(updates, TerrainUpdate):
@@ -311,7 +312,7 @@ def _checked_updates(updates) -> tuple:
                 f"updates[{j}]: at t = {geometry.as_given(t)} s, the time of updates[{i}] too; "
                 "give one terrain per instant"
             )
-    return tuple(u for _, _, u in out)
+    return tuple((i, u) for _, i, u in out)
 
 
 def _apply_update(ctx: _Context, walk: _Walk, u: TerrainUpdate, i: int) -> _Walk:

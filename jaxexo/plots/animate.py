@@ -101,6 +101,11 @@ def animate_course(
     fig, ax = plt.subplots(figsize=(min(2.0 + 1.6 * length, 16.0), 3.2))
     ax.fill_between(ter.y * CM, 0.0, ter.z * CM, color="0.6", lw=0)
     ax.axhline(0.0, color="k", lw=0.8)
+    # Each terrain update appears at its time (dashed): the walk goes on over it from then.
+    news = [
+        (u.time, ax.plot(u.terrain.y * CM, u.terrain.z * CM, color="tab:red", ls="--", lw=1)[0])
+        for u in course.updates
+    ]
     legs, traces = [], []
     for base, knee, c in ((3, 13, "tab:blue"), (7, 15, "tab:orange")):
         legs.append((base, knee, ax.plot([], [], "-o", color=c, ms=2, lw=2)[0]))
@@ -130,6 +135,8 @@ def animate_course(
         for base, line in traces:
             line.set_data(s[: j + 1, base], s[: j + 1, base + 1])
             out.append(line)
+        for at, line in news:
+            line.set_visible(t[j] >= at)
         label.set_text(f"t = {t[j]:.2f} s, step {int(course.samples[j, 1])}")
         return out + [label]
 

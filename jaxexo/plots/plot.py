@@ -145,6 +145,7 @@ def plot_course(course, path: str | Path | None = None):
         )
     for leg, c in LEG_COLORS.items():
         ax.plot([], [], color=c, lw=3, label=f"{leg} foot: heel path, foothold")
+    _course_updates(ax, course)
     ax.set_aspect("equal")
     ax.set_ylim(-15, max(float(ter.z.max()) * CM + 25, 30))
     ax.set_xlabel("y, along the course (cm)")
@@ -173,6 +174,29 @@ def plot_course(course, path: str | Path | None = None):
     axq.legend(fontsize=7, ncol=4)
     axq.grid(alpha=0.3)
     return _save(fig, path, 100)
+
+
+def _course_updates(ax, course) -> None:
+    """A walk's terrain updates on its figure: each new terrain (dashed), and for each swing
+    replanned in flight its old plan (dotted) and where it switched."""
+    for u in course.updates:
+        ax.plot(
+            u.terrain.y * CM,
+            u.terrain.z * CM,
+            color="tab:red",
+            ls="--",
+            lw=1.0,
+            label=f"terrain from t = {u.time:.2f} s",
+        )
+    for st in course.steps:
+        if st.replanned_from is None:
+            continue
+        h = st.replanned_from.heel * CM
+        ax.plot(h[:, 0], h[:, 1], color="0.3", ls=":", lw=1.0)
+        hs = st.timed.at(np.asarray(st.timed.switch_times)).heel * CM
+        ax.plot(hs[:, 0], hs[:, 1], "o", mfc="none", mec="tab:red", ms=7, mew=1.5)
+    if any(st.replanned_from is not None for st in course.steps):
+        ax.plot([], [], color="0.3", ls=":", label="old plan (replanned at the circle)")
 
 
 def _save(fig, path, dpi: int):
