@@ -208,7 +208,7 @@ def animate_replan(
         shape_old.set_alpha(1.0 if t < at else 0.0)
         cursor.set_xdata([t, t])
         label.set_text(f"t = {t:.2f} s" + ("" if t < at else ": replanned"))
-        return swing_leg, stance_leg, trace, cursor, label
+        return [swing_leg, stance_leg, trace, cursor, label]
 
     return _save(fig, draw, len(idx), path, fps, dpi)
 
