@@ -164,7 +164,7 @@ def animate_replan(
     o_old, o_new = old.scene.obstacle.outline * CM, new.scene.obstacle.outline * CM
     (shape_old,) = ax.fill(o_old[:, 0], o_old[:, 1], color="0.75", label="estimated obstacle")
     (shape_new,) = ax.fill(o_new[:, 0], o_new[:, 1], color="0.45", label="obstacle (updated)")
-    ax.plot(o_old[:, 0], o_old[:, 1], color="0.3", ls="--", lw=0.8)
+    ax.plot(o_old[:, 0], o_old[:, 1], color="tab:purple", ls="--", lw=1.0)
     ax.axhline(0.0, color="k", lw=0.8)
     heel, oh = new.heel * CM, old.heel * CM
     ax.plot(oh[:, 0], oh[:, 1], color="0.3", ls="--", lw=0.9, label="old plan")

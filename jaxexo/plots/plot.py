@@ -263,7 +263,7 @@ def _replan_title(old, new, at: float) -> str:
 def _replan_scene(ax, old, new, at: float, n_poses: int) -> None:
     """The legs' panel of ``plot_replan``: both obstacles, both heel paths, the switch, poses of
     the replanned swing."""
-    for sw, style in ((old, dict(fill=False, ec="0.35", ls="--", lw=1.2)), (new, {})):
+    for sw, style in ((old, dict(fill=False, ec="tab:purple", ls="--", lw=1.5)), (new, {})):
         o = sw.scene.obstacle.outline * CM
         label = f"{'old' if sw is old else 'new'} obstacle ({sw.scene.obstacle.kind})"
         if sw is old:
