@@ -44,27 +44,54 @@ def _same_before(base, new, t: float) -> None:
     np.testing.assert_allclose(new.samples[:n], base.samples[:n], rtol=0, atol=1e-12)
 
 
+def _gen(method):
+    return CFFTG(CFG) if method == "cfftg" else TrajectoryGenerator.load(POLICY)
+
+
 @pytest.mark.parametrize("method", ["cfftg", "rl"])
 def test_the_swing_in_flight_is_replanned_and_the_walk_stays_continuous(method):
-    gen = CFFTG(CFG) if method == "cfftg" else TrajectoryGenerator.load(POLICY)
-    base, new, t = _walks(gen)
+    base, new, t = _walks(_gen(method), 0.2)
     assert base.ok, base.reasons
+    assert new.ok, new.reasons
     st = new.steps[0]
     assert st.replanned_from is not None and st.timed.switch_times == (pytest.approx(t),)
     assert st.timed.scene.height == pytest.approx(0.13)
     assert st.replanned_from.scene.height == pytest.approx(0.10)
+    np.testing.assert_array_equal(st.replanned_from.joint_angles, base.steps[0].timed.joint_angles)
     _same_before(base, new, t)
+    # Independent of the planner: continuous and within the limits across the switch and the
+    # hand-over, at rest at both ends.
     assert new.junction_jump <= 1e-6
-    if new.ok:
-        _check_walk_samples(new.samples, 50.0, new.limits)
-        # The footholds stay; the swing after the update is planned on the new terrain.
-        assert new.footholds == base.footholds and len(new.steps) == len(base.steps)
-        assert new.steps[1].replanned_from is None and new.steps[1].trajectory.ok
-    else:  # a replan with no safe continuation says why and stops the walk there
-        assert new.reasons and not st.ok and len(new.steps) == 1
+    _check_walk_samples(new.samples, 50.0, new.limits)
+    # The footholds stay; the swing after the update is planned on the new terrain.
+    assert new.footholds == base.footholds and len(new.steps) == len(base.steps)
+    assert new.steps[1].replanned_from is None and new.steps[1].timed.scene.height == 0.13
     doc = json.loads(new.to_json())
     assert doc["updates"][0]["time_s"] == t
     assert doc["steps"][0]["switch_times_s"] == [pytest.approx(t)]
+    assert doc["steps"][1]["switch_times_s"] == []
+
+
+# The block 30 cm tall, known late in the first swing: no continuation clears it.
+WALL = [[0.0, 0.0], [0.5, 0.0], [0.55, 0.3], [0.65, 0.3], [0.7, 0.0], [1.4, 0.0]]
+
+
+@pytest.mark.parametrize("method", ["cfftg", "rl"])
+def test_a_replan_with_no_safe_continuation_stops_the_walk_saying_why(method):
+    gen = _gen(method)
+    ter = Terrain.from_points(BLOCK)
+    base = plan_course(gen, ter, rate=50)
+    t = 0.4 * base.steps[0].timed.duration
+    new = plan_course(
+        gen, ter, rate=50, updates=[TerrainUpdate(t, WALL), TerrainUpdate(2.0, BLOCK)]
+    )
+    st = new.steps[0]
+    assert not new.ok and not st.ok and len(new.steps) == 1 and st.timed.switch_times
+    assert new.reasons[0].startswith("step 1 (") and "steps 2-2 not planned" in new.reasons[-1]
+    # The swing was under way: its samples are the walk's, the same as planned before t.
+    _same_before(base, new, t)
+    assert new.duration == pytest.approx(st.timed.time[-1])
+    assert new.notes[-1].startswith("updates[1] (t = 2 s) not applied: the walk stopped")
 
 
 def test_an_update_between_swings_replans_nothing_and_plans_the_next_swing_on_it():

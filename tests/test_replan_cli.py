@@ -163,7 +163,13 @@ REFUSED = [
     (
         ["--replan-at", "0.5", "--replan-obstacle", "rectangle", "--replan-width", "0.3"]
         + ["--replan-height", "0.5", "--replan-center-y", "0.42"],
-        "--replan-obstacle: the foot is already inside the new obstacle",
+        "--replan-obstacle: at t=0.5000 s the foot (heel y=",
+    ),
+    # ... or only within the margin of one that ends just below the heel.
+    (
+        ["--replan-at", "0.5", "--replan-obstacle", "rectangle", "--replan-width", "0.3"]
+        + ["--replan-height", "0.095", "--replan-center-y", "0.42"],
+        "0.02 m: no continuation from there keeps it",
     ),
 ]
 
