@@ -19,11 +19,19 @@ from jaxexo.cli.common import (
     whole,
     write_outputs,
 )
+from jaxexo.cli.replan import add_replan_args, replan_request, replanned, report_replan
 from jaxexo.cli.scene import add_scene_args, obstacle_from_args
 
 
 def cmd_generate(args) -> int:
-    outputs = swing_outputs(args, [("--policy", args.policy), ("--profile", args.profile)])
+    outputs = swing_outputs(
+        args,
+        [
+            ("--policy", args.policy),
+            ("--profile", args.profile),
+            ("--replan-profile", args.replan_profile),
+        ],
+    )
     if args.obstacle is not None and args.profile is not None:
         raise ValueError(
             "--obstacle, --profile: give one of them (a named shape, or a profile file)"
@@ -44,6 +52,7 @@ def cmd_generate(args) -> int:
     check_points(args.points, "--points")
     check_duration(args.duration, "--duration")
     obstacle = obstacle_from_args(args)
+    request = replan_request(args)
     # An output on standard output (-, /dev/stdout) keeps it for the data: messages go to stderr.
     report = sys.stderr if any(writes_to_stdout(v) for _, v in outputs) else sys.stdout
     common = option_values(
@@ -62,22 +71,32 @@ def cmd_generate(args) -> int:
         traj = gen.generate(obstacle, **common)
     else:
         traj = gen.generate(obstacle, smoothing=args.smoothing, fallback=fallback_method, **common)
-    timed = _timed_swing(args, traj, gen.config)
-    from jaxexo.plots.animate import animate_swing
-    from jaxexo.plots.plot import plot_trajectory
-
-    written = write_outputs(
-        args,
-        timed or traj,
-        lambda path: plot_trajectory(traj, path),
-        lambda path: animate_swing(timed, path),
+    timed = _timed_swing(args, traj, gen.config, request is not None)
+    # The swing as planned (``old``) is kept beside the replanned one for the figure and the GIF.
+    old, timed = (
+        (timed, replanned(gen, timed, request, args, fallback_method)) if request else (None, timed)
     )
+    written = write_outputs(args, timed or traj, *_drawings(traj, old, timed))
     if args.ros:
         timed.to_joint_trajectory(args.ros, joint_names=joint_names)
         written.append(args.ros)
-    ok = _report_swing(traj, timed, report)
+    ok = _report_swing(traj, old or timed, report)
+    if old is not None:
+        ok = report_replan(old, timed, report)
     print("wrote " + ", ".join(written), file=report)
     return 0 if ok else 1
+
+
+def _drawings(traj, old, timed):
+    """--plot's and --animate's writers: of the swing, or of the swing replanned (old beside new)."""
+    from jaxexo.plots.animate import animate_replan, animate_swing
+    from jaxexo.plots.plot import plot_replan, plot_trajectory
+
+    if old is None:
+        return (lambda path: plot_trajectory(traj, path)), (lambda path: animate_swing(timed, path))
+    return (lambda path: plot_replan(old, timed, path)), (
+        lambda path: animate_replan(old, timed, path)
+    )
 
 
 def _joint_names(args):
@@ -92,10 +111,11 @@ def _joint_names(args):
     return check_joint_names(names, "--joint-names", repr(args.joint_names))
 
 
-def _timed_swing(args, traj, config):
+def _timed_swing(args, traj, config, replan: bool):
     """The swing timed for the device ([device] limits of the config) at --rate (default: the
-    config's control_rate) when --rate or --animate is asked for; else None (uniform time stamps)."""
-    if args.rate is None and not args.animate:
+    config's control_rate) when --rate, --animate or a replan (of a timed swing) is asked for; else
+    None (uniform time stamps)."""
+    if args.rate is None and not args.animate and not replan:
         return None
     from jaxexo.swing.timing import time_swing
 
@@ -196,4 +216,5 @@ def add_options(g) -> None:
         "(default: those names)",
     )
     g.add_argument("--plot", help="also draw the legs, the foot path and the joint angles (PNG)")
+    add_replan_args(g)
     g.set_defaults(func=cmd_generate)

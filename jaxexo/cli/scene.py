@@ -12,7 +12,7 @@ GENERAL_SHAPES = (
 DEFAULT_SIZE = (0.20, 0.15)  # m, width and height of a general shape
 
 
-def _profile_obstacle(path):
+def _profile_obstacle(path, option: str = "--profile"):
     """--profile's obstacle: the file read by the terrain rules, then held to the one outline rule
     of every command (jaxexo.sim.pieces.check_simple, as replay and the MJCF scene hold it: a closed
     outline of one obstacle); an error names the option and the file."""
@@ -25,51 +25,51 @@ def _profile_obstacle(path):
         obstacle = Obstacle.profile(t.points)
         check_simple(obstacle.outline_array(len(obstacle.unit_vertices)))
     except GeometryError as e:
-        raise ValueError(f"--profile: {path}: {e}") from None
+        raise ValueError(f"{option}: {path}: {e}") from None
     return obstacle
 
 
-def obstacle_from_args(args):
+def obstacle_from_args(args, prefix: str = ""):
     """An Obstacle from --obstacle/--width/--height/--center-y (metres); thesis shapes keep their
     Table 3.1 size unless --width/--height are given. Sizes within the one obstacle-size bound
-    (jaxexo.physics.geometry.MAX_OBSTACLE_WIDTH, _HEIGHT); errors name the option."""
+    (jaxexo.physics.geometry.MAX_OBSTACLE_WIDTH, _HEIGHT); errors name the option. ``prefix``
+    ("replan_"): the same options of another obstacle (--replan-obstacle, --replan-width, ...)."""
     from jaxexo.physics.geometry import THESIS_OBSTACLES, GeometryError, Obstacle
 
-    if getattr(args, "profile", None) is not None:
-        given = [
-            o
-            for o, v in (
-                ("--width", args.width),
-                ("--height", args.height),
-                ("--center-y", args.center_y),
-            )
-            if v is not None
-        ]
+    def value(name):
+        return getattr(args, prefix + name, None)
+
+    def option(name):
+        return "--" + (prefix + name).replace("_", "-")
+
+    sizes = ("width", "height", "center_y")
+    if value("profile") is not None:
+        given = [option(n) for n in sizes if value(n) is not None]
         if given:
             raise ValueError(
-                f"{given[0]}: not with --profile (the profile file gives the obstacle's shape and place)"
+                f"{given[0]}: not with {option('profile')} (the profile file gives the obstacle's "
+                "shape and place)"
             )
-        return _profile_obstacle(args.profile)
-    if args.obstacle is None:
+        return _profile_obstacle(value("profile"), option("profile"))
+    if value("obstacle") is None:
         raise ValueError(
-            "--obstacle or --profile: give the obstacle (a named shape, or a profile file)"
+            f"{option('obstacle')} or {option('profile')}: give the "
+            f"{'new ' if prefix else ''}obstacle (a named shape, or a profile file)"
         )
-    kind = args.obstacle
-    center = 0.45 if args.center_y is None else args.center_y
+    kind, width, height = value("obstacle"), value("width"), value("height")
+    center = 0.45 if value("center_y") is None else value("center_y")
     try:
-        if kind in THESIS_OBSTACLES and args.width is None and args.height is None:
+        if kind in THESIS_OBSTACLES and width is None and height is None:
             return Obstacle.named(kind, center_y=center)
         shape, default_w, default_h = (
             THESIS_OBSTACLES[kind] if kind in THESIS_OBSTACLES else (kind, *DEFAULT_SIZE)
         )
-        w = default_w if args.width is None else args.width
-        h = default_h if args.height is None else args.height
+        w = default_w if width is None else width
+        h = default_h if height is None else height
         return getattr(Obstacle, shape)(w, h, center_y=center)
     except GeometryError as e:
-        option = {"width": "--width", "height": "--height", "center_y": "--center-y"}.get(
-            str(e).split()[0], "--obstacle"
-        )
-        raise ValueError(f"{option}: {e}") from None
+        field = str(e).split()[0]
+        raise ValueError(f"{option(field if field in sizes else 'obstacle')}: {e}") from None
 
 
 def scene_from_args(args, config):

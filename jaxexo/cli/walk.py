@@ -7,8 +7,13 @@ from jaxexo.cli import common
 
 
 def cmd_walk(args) -> int:
-    common.swing_outputs(args, [("--policy", args.policy), ("--terrain", args.terrain)])
+    common.swing_outputs(
+        args,
+        [("--policy", args.policy), ("--terrain", args.terrain)]
+        + [("--update-terrain", t) for t in args.update_terrain or ()],
+    )
     common.check_rate(args.rate, "--rate")
+    _check_updates(args)
     fallback_method = common.fallback(args)
     from jaxexo.course.ground import check_double_support, check_number
 
@@ -19,7 +24,7 @@ def cmd_walk(args) -> int:
     check_double_support("--double-support", args.double_support)
     gen = common.generator(args)
     common.check_clearance(args.clearance, gen.config)
-    from jaxexo.course import plan_course
+    from jaxexo.course import CourseError, plan_course
     from jaxexo.storage.terrain_file import read_terrain
 
     terrain = read_terrain(args.terrain)
@@ -27,11 +32,13 @@ def cmd_walk(args) -> int:
     kw = common.option_values(
         args, "start_y", "goal_y", "steps", "rate", "clearance", "double_support"
     )
+    kw["updates"] = _updates(args)
     if args.method == "rl":
         kw["fallback"] = fallback_method
-    course = plan_course(
-        gen, terrain, **kw
-    )  # an infeasible course is refused here: nothing written
+    try:  # an infeasible course is refused here: nothing written
+        course = plan_course(gen, terrain, **kw)
+    except CourseError as e:
+        raise CourseError(_as_typed_update(str(e), args)) from None
     _check_size(args, gen.config, terrain, course)
     from jaxexo.plots.animate import animate_course
     from jaxexo.plots.plot import plot_course
@@ -45,6 +52,59 @@ def cmd_walk(args) -> int:
     _report_course(course, terrain.source)
     print("wrote " + ", ".join(written))
     return 0 if course.ok else 1
+
+
+def _check_updates(args) -> None:
+    """--update-at and --update-terrain, before any work: given in pairs (the n-th time with the
+    n-th terrain file), each time a finite number of s >= 0 on the walk's clock."""
+    from jaxexo.course.ground import check_number
+
+    at, files = args.update_at or [], args.update_terrain or []
+    if len(at) != len(files):
+        short, other = (
+            ("--update-terrain", "--update-at")
+            if len(at) > len(files)
+            else ("--update-at", "--update-terrain")
+        )
+        raise ValueError(
+            f"{short}: give one per {other} (the n-th time with the n-th terrain file), got "
+            f"{len(at)} --update-at and {len(files)} --update-terrain"
+        )
+    for t in at:
+        check_number("--update-at", t, 0.0)
+    from jaxexo.physics.geometry import as_given
+
+    for i, t in enumerate(at):
+        if t in at[:i]:
+            raise ValueError(
+                f"--update-at: {as_given(t)} s is given twice; give one terrain per instant"
+            )
+
+
+def _as_typed_update(message: str, args) -> str:
+    """A refusal naming ``updates[i] (t = ...)`` worded as the command line gave that update."""
+    import re
+
+    from jaxexo.physics.geometry import as_given
+
+    def typed(m):
+        i = int(m.group(1))
+        return (
+            f"--update-at {as_given(args.update_at[i])} (--update-terrain {args.update_terrain[i]})"
+        )
+
+    return re.sub(r"updates\[(\d+)\](?: \(t = [^)]*\))?", typed, message)
+
+
+def _updates(args):
+    """The terrain updates of --update-at/--update-terrain (each file read and checked)."""
+    from jaxexo.course import TerrainUpdate
+    from jaxexo.storage.terrain_file import read_terrain
+
+    return [
+        TerrainUpdate(t, read_terrain(f))
+        for t, f in zip(args.update_at or [], args.update_terrain or [])
+    ]
 
 
 def _check_size(args, config, terrain, course=None) -> None:
@@ -107,9 +167,11 @@ def _report_course(course, source) -> None:
         f"{course.rate:g} Hz, {'ok' if course.ok else 'FAILED'}"
     )
     for st in course.steps:
+        switched = st.timed.switch_times if st.replanned_from is not None else ()
         print(
             f"  step {st.index + 1:2d} {st.leg:5s} {st.start_y:6.2f} -> {st.landing_y:6.2f} m (pivot {st.pivot_y:.2f} m)"
             f" {st.method:14s} {st.end_s - st.start_s:5.2f} s{'' if st.ok else '  FAILED'}"
+            + "".join(f", replanned at {st.start_s + t:.3f} s" for t in switched)
         )
     for r in course.reasons:
         print(f"  {r}")
@@ -167,6 +229,19 @@ def add_options(w) -> None:
     w.add_argument(
         "--json",
         help="also write JSON (footholds, ok, and each step's samples, landing and method)",
+    )
+    w.add_argument(
+        "--update-at",
+        type=common.real,
+        action="append",
+        help="s on the walk's clock (0: the first lift-off) from which the terrain is "
+        "--update-terrain's: the swing in flight is replanned over it, later swings planned on "
+        "it, the footholds kept; repeat both for several updates",
+    )
+    w.add_argument(
+        "--update-terrain",
+        action="append",
+        help="the terrain known from --update-at on (a file as --terrain takes)",
     )
     w.add_argument("--plot", help="also draw the footholds and the swings over the terrain (PNG)")
     w.add_argument(

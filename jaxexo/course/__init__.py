@@ -9,7 +9,7 @@ CourseError), ``search`` (the shortest path over footholds), ``placement`` (``fo
 from jaxexo.course.ground import CourseError, FootholdRules, flat_obstacle, obstacles_of
 from jaxexo.course.placement import Footholds, footholds
 from jaxexo.course.plan import plan_course
-from jaxexo.course.record import WALK_COLUMNS, Course, CourseStep
+from jaxexo.course.record import WALK_COLUMNS, Course, CourseStep, TerrainUpdate
 from jaxexo.storage.terrain_file import Terrain, read_terrain
 
 __all__ = [
@@ -19,6 +19,7 @@ __all__ = [
     "Footholds",
     "FootholdRules",
     "Terrain",
+    "TerrainUpdate",
     "WALK_COLUMNS",
     "footholds",
     "obstacles_of",

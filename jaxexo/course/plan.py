@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import time as _time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +23,15 @@ from jaxexo.course.ground import (
     walk_size,
 )
 from jaxexo.course.placement import footholds
-from jaxexo.course.record import JUNCTION_TOL, LEGS, WALK_COLUMNS, Course, CourseStep, walk_table
+from jaxexo.course.record import (
+    JUNCTION_TOL,
+    LEGS,
+    WALK_COLUMNS,
+    Course,
+    CourseStep,
+    TerrainUpdate,
+    walk_table,
+)
 from jaxexo.physics import geometry
 from jaxexo.storage.terrain_file import Terrain, read_terrain
 from jaxexo.swing.trajectory import Trajectory, assemble
@@ -99,6 +108,7 @@ def plan_course(
     limits=None,
     clearance: float | None = None,
     double_support: float = 0.0,
+    updates=None,
 ) -> Course:
     """Plan a walk over ``terrain`` (a Terrain, a terrain file's path or (y, z) points) with
     ``generator`` (a TrajectoryGenerator, or a CFFTG for its swings on the same footholds): the
@@ -106,7 +116,9 @@ def plan_course(
     timed at the device ``limits`` (default: the config's [device]) and sampled at ``rate`` Hz
     (default: its control rate), with a ``double_support`` dwell (s) at each landing. Infeasible
     courses and bad options raise CourseError (TerrainFileError for bad points) before any swing is
-    planned; a walk whose swings fail is returned with ``ok`` False and the reasons."""
+    planned; a walk whose swings fail is returned with ``ok`` False and the reasons. ``updates``: a
+    TerrainUpdate or a list of them: from each one's time on the walk goes on over its terrain, the
+    swing in flight replanned (``_apply_update``)."""
     from jaxexo.baselines.cfftg import CFFTG
     from jaxexo.inference.generator import TrajectoryGenerator
     from jaxexo.swing.options import check_fallback
@@ -126,6 +138,7 @@ def plan_course(
     gen = generator.at_clearance(clearance)
     r = FootholdRules.of(config, clearance)
     _check_size(terrain, config, r, limits, rate, start_y, goal_y, steps, ds)
+    updates = _checked_updates(updates)
     plan = footholds(
         terrain, config, start_y=start_y, goal_y=goal_y, steps=steps, clearance=clearance
     )
@@ -134,8 +147,13 @@ def plan_course(
     good = [t for t in trajs if t.ok]
     timed = time_swings(good, config, rate=rate, limits=limits, sp=gen.sp) if good else []
     rate = timed[0].rate if timed else float(config.device.control_rate if rate is None else rate)
+    walk = _Walk(trajs, meta, timed, stopped, [None] * len(trajs))
+    ctx = _Context(gen, rl, fallback, plan, r, ds, rate, limits)
+    for i, u in updates:
+        walk = _apply_update(ctx, walk, u, i)
+    trajs, meta, timed, stopped = walk.trajs, walk.meta, walk.timed, walk.stopped
     samples, spans, jump = walk_table(timed, meta, ds, rate)
-    steps_out, reasons = _steps(trajs, meta, timed, spans, stopped, len(plan))
+    steps_out, reasons = _steps(trajs, meta, timed, spans, stopped, len(plan), walk.before)
     if jump > JUNCTION_TOL:
         reasons.append(
             f"the joint angles jump by {jump:.2e} rad where one swing hands over to the next"
@@ -155,7 +173,8 @@ def plan_course(
         jump,
         tuple(reasons),
         _time.perf_counter() - t0,
-        notes,
+        notes + walk.notes,
+        tuple(u for _, u in updates),
     )
 
 
@@ -184,13 +203,14 @@ def _check_size(terrain, config, r, limits, rate, start_y, goal_y, steps, dwell)
     check_walk_size(size, columns=len(WALK_COLUMNS), row_bytes=ROW_BYTES, names=SIZE_NAMES)
 
 
-def _swings(gen, rl: bool, fallback, plan, terrain: Terrain, r: FootholdRules):
-    """Each swing of the walk in order, until one fails: (trajectories, each swing's (index, leg,
+def _swings(gen, rl: bool, fallback, plan, terrain: Terrain, r: FootholdRules, first=0, feet=None):
+    """Each swing of the walk in order from ``first`` (the feet's heel y then: ``feet``, left and
+    right; default both at the start), until one fails: (trajectories, each swing's (index, leg,
     start, pivot, goal, landing, flat), the index of the failed swing or None)."""
-    feet = [plan.start_y, plan.start_y]  # heel y of the left and right foot
+    feet = [plan.start_y, plan.start_y] if feet is None else list(feet)
     obs = obstacles_of(terrain)
     trajs, meta, stopped = [], [], None
-    for k in range(len(plan)):
+    for k in range(first, len(plan)):
         leg = k % 2
         start, pivot, goal = feet[leg], feet[1 - leg], plan.landings[k]
         ob, flat = _swing_obstacle(obs, start, goal, r, terrain)
@@ -209,15 +229,18 @@ def _swings(gen, rl: bool, fallback, plan, terrain: Terrain, r: FootholdRules):
     return trajs, meta, stopped
 
 
-def _steps(trajs, meta, timed, spans, stopped, n_planned: int):
-    """The walk's steps (CourseStep, the swings not timed with no time of their own) and the reasons
-    of those that failed, and of the steps not planned after a failed swing."""
+def _steps(trajs, meta, timed, spans, stopped, n_planned: int, before):
+    """The walk's steps (CourseStep, the swings not timed with no time of their own; ``before``:
+    each one's swing before a replan, or None) and the reasons of those that failed, and of the
+    steps not planned after a failed swing."""
     end = spans[-1][1] if spans else 0.0
     timed = timed + [None] * (len(trajs) - len(timed))
     spans = spans + [(end, end)] * (len(trajs) - len(spans))
     steps_out, reasons = [], []
-    for (k, leg, start, pivot, goal, land, flat), traj, t, span in zip(meta, trajs, timed, spans):
-        st = CourseStep(k, leg, start, pivot, goal, land, flat, traj, t, *span)
+    for (k, leg, start, pivot, goal, land, flat), traj, t, span, old in zip(
+        meta, trajs, timed, spans, before
+    ):
+        st = CourseStep(k, leg, start, pivot, goal, land, flat, traj, t, *span, old)
         steps_out.append(st)
         if not st.ok:
             reasons.append(
@@ -229,3 +252,196 @@ def _steps(trajs, meta, timed, spans, stopped, n_planned: int):
             f"steps {stopped + 2}-{n_planned} not planned: the walk cannot go on from a failed swing"
         )
     return steps_out, reasons
+
+
+# --------------------------------------------------------------------------------------------
+# Terrain updates: the swing in flight replanned, the swings after planned on the new terrain
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _Context:
+    """What a walk's swings are planned and timed with (``plan_course``'s, checked)."""
+
+    gen: object
+    rl: bool
+    fallback: str | None
+    plan: object  # Footholds
+    rules: FootholdRules
+    double_support: float
+    rate: float
+    limits: object
+
+
+@dataclass(frozen=True)
+class _Walk:
+    """A walk being planned: the swings' trajectories, their (index, leg, start, pivot, goal,
+    landing, flat), the timed swings (the first len(timed)), the failed swing's index or None,
+    each swing's TimedSwing before a replan (or None), and notes."""
+
+    trajs: list
+    meta: list
+    timed: list
+    stopped: int | None
+    before: list
+    notes: tuple = ()
+
+
+def _checked_updates(updates) -> tuple:
+    """``updates`` (None, a TerrainUpdate or a list of them) as (i, TerrainUpdate) with the
+    terrain read, at distinct times >= 0, in time order (i: its place in the list given, which
+    messages name); CourseError naming ``updates[i]`` otherwise."""
+    if updates is None:
+        return ()
+    if isinstance(updates, TerrainUpdate):
+        updates = [updates]
+    if not isinstance(updates, (list, tuple)):
+        raise CourseError(
+            f"updates: expected a TerrainUpdate or a list of them, got {type(updates).__name__}"
+        )
+    out = []
+    for i, u in enumerate(updates):
+        if not isinstance(u, TerrainUpdate):
+            raise CourseError(f"updates[{i}]: expected a TerrainUpdate, got {type(u).__name__}")
+        t = check_number(f"updates[{i}].time", u.time, 0.0)
+        out.append((t, i, TerrainUpdate(t, _as_terrain(u.terrain))))
+    out.sort(key=lambda x: x[0])
+    for (t, i, _), (t2, j, _) in zip(out, out[1:]):
+        if t == t2:
+            raise CourseError(
+                f"updates[{j}]: at t = {geometry.as_given(t)} s, the time of updates[{i}] too; "
+                "give one terrain per instant"
+            )
+    return tuple((i, u) for _, i, u in out)
+
+
+def _apply_update(ctx: _Context, walk: _Walk, u: TerrainUpdate, i: int) -> _Walk:
+    """The walk with update ``u`` (``updates[i]``) applied: the swing in flight at u.time (lifted
+    off before it, landing after it) replanned at that instant over u.terrain's obstacle for it
+    (``_swing_obstacle``'s rule), the swings not yet started planned on u.terrain with the same
+    footholds. Refused (CourseError) where a place a foot stands on from then on is not flat ground
+    on the new terrain, or after the walk's end; not applied after a failed swing (a note)."""
+    spans = walk_table(walk.timed, walk.meta, ctx.double_support, ctx.rate)[1]
+    name = f"updates[{i}] (t = {geometry.as_given(u.time)} s)"
+    k = next(
+        (j for j, (a, t) in enumerate(zip(spans, walk.timed)) if a[0] + t.duration > u.time), None
+    )
+    if k is None or (walk.stopped is not None and k >= walk.stopped):
+        if walk.stopped is not None:
+            note = f"{name} not applied: the walk stopped at the failed step {walk.stopped + 1}"
+            return dataclasses.replace(walk, notes=walk.notes + (note,))
+        end = spans[-1][0] + walk.timed[-1].duration if spans else 0.0
+        raise CourseError(
+            f"{name}: the walk has landed by then (its last swing lands at {end:.3f} s)"
+        )
+    _check_footholds(ctx, walk.meta, k, u.terrain, name)
+    trajs, meta, timed = walk.trajs[:k], walk.meta[:k], walk.timed[:k]
+    before = walk.before[:k]
+    first, feet = k, _feet(ctx.plan, meta)
+    if spans[k][0] < u.time:  # in flight: replanned
+        new, flat = _replanned(ctx, walk.timed[k], walk.meta[k], u, u.time - spans[k][0], name)
+        idx, leg, start, pivot, goal, _, _ = walk.meta[k]
+        land = float(new.heel[-1, 0])
+        trajs, meta, timed = (
+            trajs + [walk.trajs[k]],
+            meta + [(idx, leg, start, pivot, goal, land, flat)],
+            timed + [new],
+        )
+        before = before + [walk.timed[k] if walk.before[k] is None else walk.before[k]]
+        if not new.ok:  # the walk stops there, as at any failed swing (timed: it is under way)
+            return _Walk(trajs, meta, timed, k, before, walk.notes)
+        first, feet = k + 1, _feet(ctx.plan, meta)
+    more, more_meta, stopped = _swings(
+        ctx.gen, ctx.rl, ctx.fallback, ctx.plan, u.terrain, ctx.rules, first, feet
+    )
+    from jaxexo.swing.timing import time_swings
+
+    good = [t for t in more if t.ok]
+    g = ctx.gen
+    more_timed = (
+        time_swings(good, g.config, rate=ctx.rate, limits=ctx.limits, sp=g.sp) if good else []
+    )
+    return _Walk(
+        trajs + more,
+        meta + more_meta,
+        timed + more_timed,
+        stopped,
+        before + [None] * len(more),
+        walk.notes,
+    )
+
+
+def _feet(plan, meta) -> list[float]:
+    """The heel y of the left and right foot after the swings of ``meta``."""
+    feet = [plan.start_y, plan.start_y]
+    for m in meta:
+        feet[LEGS.index(m[1])] = m[5]
+    return feet
+
+
+def _check_footholds(ctx: _Context, meta, k: int, terrain: Terrain, name: str) -> None:
+    """Every place a foot stands on from swing k on (its start and pivot, as the feet stand, and
+    each landing still to come, within the landing tolerance) on flat ground of ``terrain`` by the
+    footholds' rule (the foot and FootholdRules.stand either side clear of every obstacle), and on
+    the course: the footholds are not moved by an update; CourseError otherwise."""
+    r = ctx.rules
+    obs = obstacles_of(terrain)
+    _, _, start, pivot, _, _, _ = meta[k]
+    places = [(start, 0.0, "stands"), (pivot, 0.0, "stands")]
+    places += [(y, r.tolerance, "lands") for y in ctx.plan.landings[k:]]
+    y0, y1 = float(terrain.y[0]), float(terrain.y[-1])
+    for y, tol, does in places:
+        lo, hi = y - tol - r.stand, y + r.foot + tol + r.stand
+        if lo + r.stand < y0 or hi - r.stand > y1:
+            raise CourseError(
+                f"{name}: a foot {does} at y = {y:.3f} m, off its terrain ({terrain.source}: y = "
+                f"{y0:.3f} to {y1:.3f} m); an update keeps the footholds"
+            )
+        for ob in obs:
+            if ob[0, 0] < hi and ob[-1, 0] > lo:
+                raise CourseError(
+                    f"{name}: a foot {does} at y = {y:.3f} m, on or within {r.stand * 100:.1f} cm "
+                    f"of {describe(ob)} of {terrain.source}; an update keeps the footholds (plan "
+                    "the walk again from where the feet are)"
+                )
+
+
+def _moved(swing, gen, dy: float):
+    """The TimedSwing ``swing`` moved by ``dy`` along the course: its scene (obstacle, pivot, start,
+    goal), the curve's pivot and every sampled position; the joints, times and verdict as they are
+    (the legs' motion does not depend on where along the floor it happens)."""
+    sc = swing.scene
+    scene = gen.scene(
+        _shifted(sc.obstacle, dy),
+        pivot_y=sc.pivot_y + dy,
+        start_y=sc.start_y + dy,
+        step_length=sc.goal_y - sc.start_y,
+    )
+    scene = dataclasses.replace(scene, goal_y=sc.goal_y + dy, pivot_kind=sc.pivot_kind)
+    shift = np.array([dy, 0.0])
+    return dataclasses.replace(
+        swing,
+        scene=scene,
+        curve=dataclasses.replace(swing.curve, pivot_y=swing.curve.pivot_y + dy),
+        **{
+            f: getattr(swing, f) + shift
+            for f in ("heel", "toe", "hip", "knee_swing", "knee_stance")
+        },
+    )
+
+
+def _replanned(ctx: _Context, swing, m, u: TerrainUpdate, at: float, name: str):
+    """Swing ``m`` (its meta) replanned at ``at`` (s, swing time) over u.terrain's obstacle for it:
+    in its own frame, as it was planned (the policy observes positions from its start), by the
+    generator's ``replan``; (the replanned TimedSwing on the course, whether it is flat)."""
+    k, _, start, _, goal, _, _ = m
+    ob, flat = _swing_obstacle(obstacles_of(u.terrain), start, goal, ctx.rules, u.terrain)
+    kw = {"fallback": ctx.fallback} if ctx.rl else {}
+    local = _moved(swing, ctx.gen, -start)
+    try:
+        new = ctx.gen.replan(local, _shifted(ob, -start), at=at, **kw)
+    except ValueError as e:
+        raise CourseError(
+            f"{name}: step {k + 1}'s swing in flight cannot be replanned: {e}"
+        ) from None
+    return _moved(new, ctx.gen, start), flat

@@ -44,6 +44,17 @@ WALK_COLUMNS = (
 
 
 @dataclass(frozen=True)
+class TerrainUpdate:
+    """The terrain as known from ``time`` on (s on the walk's clock: 0 at the first lift-off): a
+    Terrain, a terrain file's path or (y, z) points, as ``plan_course`` takes its terrain. The swing
+    in flight then is replanned over it, the swings after are planned on it; the footholds stay
+    (docs/replanning.md, "Command line and walks")."""
+
+    time: float
+    terrain: object
+
+
+@dataclass(frozen=True)
 class CourseStep:
     """One swing of the walk: which leg, where it starts, pivots and lands (m), the checked path
     (``trajectory``), its device timing (``timed``, a TimedSwing) and when it runs in the walk (s)."""
@@ -59,6 +70,9 @@ class CourseStep:
     timed: object  # TimedSwing; None for a failed swing (not timed)
     start_s: float
     end_s: float
+    # The swing as planned before a terrain update replanned it in flight (a TimedSwing; None: not
+    # replanned); ``timed`` is then the replanned swing (``timed.switch_times``, swing time).
+    replanned_from: object = None
 
     @property
     def method(self) -> str:
@@ -94,6 +108,8 @@ class Course:
     reasons: tuple[str, ...]
     plan_seconds: float = 0.0
     notes: tuple[str, ...] = field(default=())
+    # The terrain updates applied (TerrainUpdate, their terrain read; in time order)
+    updates: tuple = ()
 
     @property
     def ok(self) -> bool:
@@ -152,6 +168,10 @@ class Course:
             "junction_jump_rad": self.junction_jump,
             "plan_seconds": self.plan_seconds,
             "notes": list(self.notes),
+            "updates": [
+                {"time_s": u.time, "terrain": u.terrain.source, "points": u.terrain.points.tolist()}
+                for u in self.updates
+            ],
             "columns": list(WALK_COLUMNS),
             "samples": self.samples.tolist(),
             "steps": steps,

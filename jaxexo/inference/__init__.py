@@ -29,6 +29,7 @@ _LAZY = {
     "footholds": "jaxexo.course",
     "Terrain": "jaxexo.course",
     "read_terrain": "jaxexo.course",
+    "TerrainUpdate": "jaxexo.course",
 }
 
 
@@ -66,4 +67,5 @@ __all__ = [
     "footholds",
     "Terrain",
     "read_terrain",
+    "TerrainUpdate",
 ]

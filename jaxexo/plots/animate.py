@@ -101,6 +101,11 @@ def animate_course(
     fig, ax = plt.subplots(figsize=(min(2.0 + 1.6 * length, 16.0), 3.2))
     ax.fill_between(ter.y * CM, 0.0, ter.z * CM, color="0.6", lw=0)
     ax.axhline(0.0, color="k", lw=0.8)
+    # Each terrain update appears at its time (dashed): the walk goes on over it from then.
+    news = [
+        (u.time, ax.plot(u.terrain.y * CM, u.terrain.z * CM, color="tab:red", ls="--", lw=1)[0])
+        for u in course.updates
+    ]
     legs, traces = [], []
     for base, knee, c in ((3, 13, "tab:blue"), (7, 15, "tab:orange")):
         legs.append((base, knee, ax.plot([], [], "-o", color=c, ms=2, lw=2)[0]))
@@ -130,10 +135,97 @@ def animate_course(
         for base, line in traces:
             line.set_data(s[: j + 1, base], s[: j + 1, base + 1])
             out.append(line)
+        for at, line in news:
+            line.set_visible(t[j] >= at)
         label.set_text(f"t = {t[j]:.2f} s, step {int(course.samples[j, 1])}")
         return out + [label]
 
     return _save(fig, draw, len(idx), path, fps, dpi)
+
+
+def animate_replan(
+    old, new, path: str | Path, fps: float = 25.0, hold_s: float = 0.4, dpi: int = 64
+) -> Path:
+    """Write a GIF of a swing replanned in flight (jaxexo.swing.replan) to ``path`` in real time:
+    the legs follow ``new`` (the replanned TimedSwing; ``old`` before its last switch, the same
+    curve there); until the update the old obstacle and the old plan (dashed) are shown, from it the
+    new obstacle, a marker where the heel was, and the new plan; beside, the swing joints' angles,
+    old dashed and new solid, with a line at the update. Returns the path."""
+    if not np.isfinite(fps) or fps <= 0:
+        raise ValueError(f"fps: must be > 0, got {fps!r}")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    at = new.switch_times[-1]
+    idx = _frames(new.time, fps, hold_s)
+    fig, (ax, axq) = plt.subplots(1, 2, figsize=(9, 3.6), gridspec_kw={"width_ratios": [1.7, 1]})
+    o_old, o_new = old.scene.obstacle.outline * CM, new.scene.obstacle.outline * CM
+    (shape_old,) = ax.fill(o_old[:, 0], o_old[:, 1], color="0.75", label="estimated obstacle")
+    (shape_new,) = ax.fill(o_new[:, 0], o_new[:, 1], color="0.45", label="obstacle (updated)")
+    ax.plot(o_old[:, 0], o_old[:, 1], color="tab:purple", ls="--", lw=1.0)
+    ax.axhline(0.0, color="k", lw=0.8)
+    heel, oh = new.heel * CM, old.heel * CM
+    ax.plot(oh[:, 0], oh[:, 1], color="0.3", ls="--", lw=0.9, label="old plan")
+    after = new.time >= at
+    (new_path,) = ax.plot(heel[after, 0], heel[after, 1], color="tab:red", lw=0.7, alpha=0.5)
+    hs = new.at(np.array([at])).heel[0] * CM
+    (mark,) = ax.plot([hs[0]], [hs[1]], "o", mfc="none", mec="tab:red", ms=8, mew=1.6)
+    (trace,) = ax.plot([], [], color="tab:red", lw=1.4)
+    (swing_leg,) = ax.plot([], [], "-o", color="tab:blue", ms=3, lw=2.5)
+    (stance_leg,) = ax.plot([], [], "-o", color="0.35", ms=3, lw=2.5)
+    label = ax.text(0.02, 0.95, "", transform=ax.transAxes, fontsize=8, va="top")
+    ys = np.concatenate(
+        [new.hip[:, 0], new.heel[:, 0], new.toe[:, 0], old.toe[:, 0], [new.scene.pivot_y + 0.2]]
+    )
+    ax.set_xlim(ys.min() * CM - 10, ys.max() * CM + 10)
+    ax.set_ylim(-3, max(new.hip[:, 1].max() * CM + 5, 30))
+    ax.set_aspect("equal")
+    ax.set_xlabel("y, forward (cm)")
+    ax.set_ylabel("z, up (cm)")
+    ax.legend(fontsize=6, loc="center right")
+    ax.set_title(
+        f"replanned at t = {at:.2f} s: {old.duration:.2f} s -> {new.duration:.2f} s swing "
+        f"({'ok' if new.ok else 'FAILED'})",
+        fontsize=9,
+    )
+    cursor = _angle_panel(axq, old, new)
+    fig.tight_layout()
+    shown = (shape_new, new_path, mark)
+
+    def draw(k):
+        j = idx[k]
+        t = new.time[j]
+        hip, ks, kt = new.hip[j] * CM, new.knee_swing[j] * CM, new.knee_stance[j] * CM
+        h, toe = heel[j], new.toe[j] * CM
+        swing_leg.set_data([hip[0], ks[0], h[0], toe[0]], [hip[1], ks[1], h[1], toe[1]])
+        p = new.scene.pivot_y * CM
+        stance_leg.set_data([hip[0], kt[0], p, p + toe[0] - h[0]], [hip[1], kt[1], 0.0, 0.0])
+        trace.set_data(heel[: j + 1, 0], heel[: j + 1, 1])
+        for artist in shown:
+            artist.set_visible(t >= at)
+        shape_old.set_alpha(1.0 if t < at else 0.0)
+        cursor.set_xdata([t, t])
+        label.set_text(f"t = {t:.2f} s" + ("" if t < at else ": replanned"))
+        return [swing_leg, stance_leg, trace, cursor, label]
+
+    return _save(fig, draw, len(idx), path, fps, dpi)
+
+
+def _angle_panel(axq, old, new):
+    """The swing joints' angles of ``old`` (dashed) and ``new`` (solid), a line at each switch;
+    returns the time cursor."""
+    for col, name, c in ((0, "hip", "tab:green"), (1, "knee", "tab:blue")):
+        axq.plot(old.time, np.degrees(old.joint_angles[:, col]), color=c, ls="--", lw=0.9)
+        axq.plot(new.time, np.degrees(new.joint_angles[:, col]), color=c, label=f"swing {name}")
+    for t in new.switch_times:
+        axq.axvline(t, color="tab:red", ls=":", lw=0.9)
+    axq.set_xlabel("time (s)")
+    axq.set_ylabel("joint angle (deg); dashed: old plan")
+    axq.legend(fontsize=7, loc="lower left")
+    axq.grid(alpha=0.3)
+    return axq.axvline(0.0, color="k", lw=0.8)
 
 
 def _frames(time: np.ndarray, fps: float, hold_s: float) -> np.ndarray:

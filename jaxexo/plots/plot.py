@@ -145,6 +145,7 @@ def plot_course(course, path: str | Path | None = None):
         )
     for leg, c in LEG_COLORS.items():
         ax.plot([], [], color=c, lw=3, label=f"{leg} foot: heel path, foothold")
+    _course_updates(ax, course)
     ax.set_aspect("equal")
     ax.set_ylim(-15, max(float(ter.z.max()) * CM + 25, 30))
     ax.set_xlabel("y, along the course (cm)")
@@ -175,6 +176,29 @@ def plot_course(course, path: str | Path | None = None):
     return _save(fig, path, 100)
 
 
+def _course_updates(ax, course) -> None:
+    """A walk's terrain updates on its figure: each new terrain (dashed), and for each swing
+    replanned in flight its old plan (dotted) and where it switched."""
+    for u in course.updates:
+        ax.plot(
+            u.terrain.y * CM,
+            u.terrain.z * CM,
+            color="tab:red",
+            ls="--",
+            lw=1.0,
+            label=f"terrain from t = {u.time:.2f} s",
+        )
+    for st in course.steps:
+        if st.replanned_from is None:
+            continue
+        h = st.replanned_from.heel * CM
+        ax.plot(h[:, 0], h[:, 1], color="0.3", ls=":", lw=1.0)
+        hs = st.timed.at(np.asarray(st.timed.switch_times)).heel * CM
+        ax.plot(hs[:, 0], hs[:, 1], "o", mfc="none", mec="tab:red", ms=7, mew=1.5)
+    if any(st.replanned_from is not None for st in course.steps):
+        ax.plot([], [], color="0.3", ls=":", label="old plan (replanned at the circle)")
+
+
 def _save(fig, path, dpi: int):
     """Lay ``fig`` out and, when ``path`` is given, write it there and close it; returns the figure."""
     fig.tight_layout()
@@ -184,3 +208,101 @@ def _save(fig, path, dpi: int):
         write_figure(path, fig, dpi=dpi)
         plt.close(fig)
     return fig
+
+
+def plot_replan(
+    old, new, path: str | Path | None = None, n_poses: int = 6, title: str | None = None
+):
+    """Draw a swing replanned in flight (jaxexo.swing.replan): ``old`` (the TimedSwing it continues)
+    dashed over its own obstacle, ``new`` (the replanned TimedSwing) solid over the new one, the
+    moment of the update (its last switch) as a marker on the heel path and a vertical line in the
+    joint-angle panels. Saves to ``path`` when given and returns the figure."""
+    import matplotlib
+
+    if path is not None:
+        matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax, ax_h, ax_k) = plt.subplots(
+        1, 3, figsize=(15, 4.8), gridspec_kw={"width_ratios": [1.6, 1, 1]}
+    )
+    at = new.switch_times[-1]
+    _replan_scene(ax, old, new, at, n_poses)
+    ax.set_title(title or _replan_title(old, new, at), fontsize=9)
+    t_old, q_old = old.time, np.degrees(old.joint_angles)
+    t_new, q_new = new.time, np.degrees(new.joint_angles)
+    for axis, col, name in ((ax_h, 0, "hip"), (ax_k, 1, "knee")):
+        for off, leg, c in ((0, "swing", "tab:blue"), (2, "stance", "tab:gray")):
+            axis.plot(t_old, q_old[:, col + off], color=c, ls="--", lw=1.0, alpha=0.7)
+            axis.plot(t_new, q_new[:, col + off], color=c, label=f"{leg} {name}")
+        for t in new.switch_times:
+            axis.axvline(t, color="tab:red", lw=0.9, ls=":")
+        axis.plot([], [], color="0.3", ls="--", label="old plan")
+        axis.plot([], [], color="tab:red", ls=":", label="update")
+        axis.set_xlabel("time (s)")
+        axis.set_ylabel(f"{name} angle (deg, flexion {'+' if name == 'hip' else '-'})")
+        axis.grid(alpha=0.3)
+        axis.legend(fontsize=7)
+    ax_h.set_title("Hip angles: old plan dashed, replanned solid", fontsize=9)
+    ax_k.set_title("Knee angles", fontsize=9)
+    return _save(fig, path, 110)
+
+
+def _replan_title(old, new, at: float) -> str:
+    """The title: where it switched, both durations and the verdict (its reasons wrapped)."""
+    import textwrap
+
+    head = (
+        f"replanned at t = {at:.3f} s ({new.method} continuation): {old.duration:.2f} s swing "
+        f"-> {new.duration:.2f} s, {'ok' if new.ok else 'FAILED'}"
+    )
+    why = "; ".join(new.reasons)
+    return head if new.ok else head + "\n" + textwrap.shorten(why, 90, placeholder=" ...")
+
+
+def _replan_scene(ax, old, new, at: float, n_poses: int) -> None:
+    """The legs' panel of ``plot_replan``: both obstacles, both heel paths, the switch, poses of
+    the replanned swing."""
+    for sw, style in ((old, dict(fill=False, ec="tab:purple", ls="--", lw=1.5)), (new, {})):
+        o = sw.scene.obstacle.outline * CM
+        label = f"{'old' if sw is old else 'new'} obstacle ({sw.scene.obstacle.kind})"
+        if sw is old:
+            ax.fill(o[:, 0], o[:, 1], label=label, **style)
+        else:
+            ax.fill(o[:, 0], o[:, 1], color="0.55", alpha=0.6, label=label, zorder=0)
+    ax.axhline(0.0, color="k", lw=0.8)
+    for j in np.linspace(0, len(new.heel) - 1, n_poses).round().astype(int):
+        a = 0.25 + 0.75 * j / (len(new.heel) - 1)
+        hip, ks, kt, heel, toe = (
+            x[j] * CM for x in (new.hip, new.knee_swing, new.knee_stance, new.heel, new.toe)
+        )
+        p = new.scene.pivot_y * CM
+        ax.plot(
+            [hip[0], ks[0], heel[0], toe[0]],
+            [hip[1], ks[1], heel[1], toe[1]],
+            "-o",
+            color="tab:blue",
+            alpha=a,
+            ms=3,
+        )
+        ax.plot([hip[0], kt[0], p], [hip[1], kt[1], 0.0], "-o", color="tab:gray", alpha=a, ms=3)
+    oh, nh = old.heel * CM, new.heel * CM
+    ax.plot(oh[:, 0], oh[:, 1], color="0.3", ls="--", lw=1.2, label="old plan (heel)")
+    ax.plot(nh[:, 0], nh[:, 1], color="tab:red", lw=1.5, label="replanned (heel)")
+    ax.plot(new.toe[:, 0] * CM, new.toe[:, 1] * CM, color="tab:red", lw=0.8, ls=":", label="toe")
+    hs = new.at(np.asarray(new.switch_times)).heel * CM
+    ax.plot(
+        hs[:, 0],
+        hs[:, 1],
+        "o",
+        mfc="none",
+        mec="tab:red",
+        ms=9,
+        mew=1.8,
+        label=f"update at t = {at:.3f} s",
+    )
+    ax.plot([new.scene.goal_y * CM], [0.0], "g*", ms=12, label="goal")
+    ax.set_aspect("equal")
+    ax.set_xlabel("y, forward (cm)")
+    ax.set_ylabel("z, up (cm)")
+    ax.legend(fontsize=7, loc="upper left")

@@ -144,6 +144,8 @@ def timed_dict(swing) -> dict:
             "reasons": list(swing.reasons),
         },
         "notes": list(swing.notes),
+        # s: where the swing was replanned in flight (jaxexo.swing.replan); [] for none
+        "switch_times_s": list(swing.switch_times),
         "columns": list(TIMED_CSV_COLUMNS),
         "samples": timed_table(swing).tolist(),
         # The curve itself, for a controller that evaluates it at its own rate.
