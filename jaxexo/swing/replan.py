@@ -61,6 +61,8 @@ TURN_SHARE = 0.5
 BLEND_PARAMETER = 0.1
 # A switch needs this much of the path still to go at the unfiltered speed profile's position.
 MIN_TO_GO = 1e-3
+BLEND_TRIES = 3  # the turn onto the continuation made twice as long, at most this often in all
+START_WINDOWS = 3.0  # ... while a limit is exceeded within this many law windows of the switch
 LIMIT_PASSES = 3  # the passes re-run with caps lowered by a curve's excess, at most this often
 OVERSHOOT = 1.002  # ... lowered by the excess squared times this (an excess of 1 + 1e-6 then ends)
 # The corrections never lower a cap below the speed the law sheds from its moving start at this
@@ -264,17 +266,18 @@ def _timed_law(split: _Split, path: JointPath, window: float, device: DeviceLimi
     k = timing.grid_size(int(np.count_nonzero(path.knots > split.s0)))
     grid = np.linspace(split.big_s0, 1.0, k)
     x0 = split.v0 * split.v0
-    cap, view = _first_caps(path, grid, x0, planned)
-    least = _shed(view, x0, min(planned.acceleration))
-    plan = None
+    reach = split.v0 * START_WINDOWS * window
+    cap, view, least = _first_caps(path, grid, x0, planned, reach)
+    plan, last = None, np.inf
     for attempt in range(timing.LOCAL_PASSES + LIMIT_PASSES + 1):
         x, floor, view = _passes(path, grid, cap, x0, passes)
         law = _law(split, grid, x, floor, window)
         # The curve before the switch is the old swing's (its peaks bound it): bounded from there.
         plan = with_bounds([Plan(path, view, cap, x, law)], [0], [float(split.nodes[-1])])[0]
         ratio = peak_ratio(check, plan.check.peaks)
-        if ratio <= 1.0 or law.duration > MAX_SWING_DURATION:
-            break
+        if ratio <= 1.0 or law.duration > MAX_SWING_DURATION or ratio >= last * (1.0 - 1e-6):
+            break  # within; or the caps no longer help (the excess where the start holds them)
+        last = ratio
         if attempt < timing.LOCAL_PASSES and ratio > timing.LOCAL_FROM:
             lower = lowered_cap(plan, speed_ratio(check, plan.check.bound))
         else:
@@ -285,25 +288,30 @@ def _timed_law(split: _Split, path: JointPath, window: float, device: DeviceLimi
     return plan
 
 
-def _first_caps(path: JointPath, grid: np.ndarray, x0: float, planned: DeviceLimits):
+def _first_caps(path: JointPath, grid: np.ndarray, x0: float, planned: DeviceLimits, reach):
     """The first passes' caps on s'^2 (K,): the largest speeds within START_SAFETY of the planned
     velocity and acceleration limits (the passes' own are within timing.SAFETY), but never below
-    what the law sheds from its moving start (``_shed``); and the grid's view."""
+    what the law sheds from its moving start (``_shed``, over ``reach`` of s); the grid's view,
+    and that floor."""
     _, dq, ddq = paths_at([path], [grid], 2)[0]
     view = GridView(grid, dq[None], ddq[None])
     f = START_SAFETY
     x = max_speed_curve(
         dq, ddq, np.asarray(planned.velocity) * f, np.asarray(planned.acceleration) * f
     )
-    return np.maximum(x, _shed(view, x0, min(planned.acceleration))), view
+    least = _shed(view, x0, min(planned.acceleration), reach)
+    return np.maximum(x, least), view, least
 
 
-def _shed(view: GridView, x0: float, accel: float) -> np.ndarray:
+def _shed(view: GridView, x0: float, accel: float, reach: float) -> np.ndarray:
     """(K,) the least cap on s'^2 the corrections set: s'^2 falling from x0 at the start at
-    SHED_SHARE of ``accel`` (rad/s^2, the smallest limit) over the path's largest |q'| (s'^2
-    falls by 2 u ds at s'' = -u)."""
-    u = SHED_SHARE * accel / max(float(np.abs(view.dq).max()), 1e-12)
-    return np.maximum(x0 - 2.0 * u * (view.s - view.s[0]), 0.0)
+    SHED_SHARE of ``accel`` (rad/s^2, the smallest limit) over each cell's largest |q'| (s'^2
+    falls by 2 u ds over a cell at s'' = -u), over the first ``reach`` of s (what the law covers
+    in START_WINDOWS of its window at the start's speed); 0 past it."""
+    u = SHED_SHARE * accel / np.maximum(np.abs(view.dq[0]).max(axis=1), 1e-12)
+    ds = np.diff(view.s)
+    drop = np.concatenate([[0.0], np.cumsum(2.0 * u[:-1] * ds)])
+    return np.where(view.s <= view.s[0] + reach, np.maximum(x0 - drop, 0.0), 0.0)
 
 
 def _final(plan: Plan, old, rate: float) -> FinalLaw:
@@ -337,6 +345,27 @@ def _final(plan: Plan, old, rate: float) -> FinalLaw:
     return FinalLaw(law, 1.0, 1.0, peaks, within, tuple(notes))
 
 
+def _joined(curve: SwingCurve, split: _Split, q_c: np.ndarray, qdot, device) -> Plan:
+    """The joined path and its timed law (a Plan): the turn onto the continuation over
+    ``_blend``'s chord, twice as long (BLEND_TRIES times at most) while the curve exceeds a limit
+    within START_WINDOWS law windows of the switch (where the start's speed is fixed: a turn taken
+    faster than the limits allow there can only be made gentler)."""
+    accel = min(device.planned().acceleration)
+    blend = _blend(qdot, q_c, accel)
+    chord = float(np.sqrt((np.diff(q_c, axis=0) ** 2).sum(axis=1)).sum())
+    check = timing._planned(device)[3]
+    t0 = float(split.nodes[-1])
+    for _ in range(BLEND_TRIES):
+        path = _continuation_path(curve.path, split.s0, q_c, curve.lengths, blend)
+        plan = _timed_law(split, path, curve.law.window, device)
+        over = speed_ratio(check, plan.check.bound) > 1.0
+        near = plan.check.t0 < t0 + START_WINDOWS * curve.law.window
+        if not np.any(over & near) or blend >= 0.5 * chord:
+            break
+        blend = min(2.0 * blend, 0.5 * chord)
+    return plan
+
+
 def continue_swing(swing, traj, *, at: float, sp, rate: float | None = None):
     """The swing ``swing`` (a TimedSwing) replanned at t = ``at`` (s, validated by the caller) onto
     the continuation ``traj`` (a Trajectory from the foot's state at ``at`` over the new scene to
@@ -355,9 +384,8 @@ def continue_swing(swing, traj, *, at: float, sp, rate: float | None = None):
     q_c = np.take(q_c, distinct_samples(q_c), axis=0)
     s_dot = float(curve.law.at(np.array([at]))[1][0])
     _, _, (_, dq0, _) = _cut_path(curve.path, split.s0)
-    blend = _blend(dq0 * s_dot, q_c, min(device.planned().acceleration))
-    path = _continuation_path(curve.path, split.s0, q_c, curve.lengths, blend)
-    plan = _timed_law(split, path, curve.law.window, device)
+    plan = _joined(curve, split, q_c, dq0 * s_dot, device)
+    path = plan.path
     final = _final(plan, swing, rate)
     new_curve = SwingCurve(path, final.law, curve.pivot_y, curve.lengths, curve.foot_length)
     chk = timing._path_checks([traj], [plan], sp)
