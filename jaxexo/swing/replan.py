@@ -345,25 +345,32 @@ def _final(plan: Plan, old, rate: float) -> FinalLaw:
     return FinalLaw(law, 1.0, 1.0, peaks, within, tuple(notes))
 
 
-def _joined(curve: SwingCurve, split: _Split, q_c: np.ndarray, qdot, device) -> Plan:
-    """The joined path and its timed law (a Plan): the turn onto the continuation over
-    ``_blend``'s chord, twice as long (BLEND_TRIES times at most) while the curve exceeds a limit
-    within START_WINDOWS law windows of the switch (where the start's speed is fixed: a turn taken
-    faster than the limits allow there can only be made gentler)."""
+def _candidates(blend: float, chord: float) -> list[float]:
+    """The turns tried, in order: ``blend``, then longer ones (a turn too fast for the limits where
+    the switch fixes the speed) and a shorter one (a turn that cuts into the margin)."""
+    longer = [min(blend * 2.0**k, 0.5 * chord) for k in range(1, BLEND_TRIES)]
+    return [blend, *dict.fromkeys(b for b in longer if b > blend), 0.5 * blend]
+
+
+def _joined(curve: SwingCurve, split: _Split, q_c: np.ndarray, qdot, device, judge):
+    """The joined path, its timed law (a Plan) and its verdict (``judge(plan)``: TrajectoryChecks):
+    the first of ``_candidates``' turns onto the continuation whose swing is within the limits and
+    passes, else the first one's."""
     accel = min(device.planned().acceleration)
     blend = _blend(qdot, q_c, accel)
     chord = float(np.sqrt((np.diff(q_c, axis=0) ** 2).sum(axis=1)).sum())
-    check = timing._planned(device)[3]
-    t0 = float(split.nodes[-1])
-    for _ in range(BLEND_TRIES):
-        path = _continuation_path(curve.path, split.s0, q_c, curve.lengths, blend)
+    planned = device.planned()
+    first = None
+    for b in _candidates(blend, chord):
+        path = _continuation_path(curve.path, split.s0, q_c, curve.lengths, b)
         plan = _timed_law(split, path, curve.law.window, device)
-        over = speed_ratio(check, plan.check.bound) > 1.0
-        near = plan.check.t0 < t0 + START_WINDOWS * curve.law.window
-        if not np.any(over & near) or blend >= 0.5 * chord:
-            break
-        blend = min(2.0 * blend, 0.5 * chord)
-    return plan
+        within = peak_ratio(planned.constraints(1.0), plan.check.peaks) <= 1.0
+        checks = judge(plan) if within or first is None else None
+        if first is None:
+            first = (plan, checks)
+        if within and checks.ok:
+            return plan, checks
+    return first
 
 
 def continue_swing(swing, traj, *, at: float, sp, rate: float | None = None):
@@ -384,12 +391,15 @@ def continue_swing(swing, traj, *, at: float, sp, rate: float | None = None):
     q_c = np.take(q_c, distinct_samples(q_c), axis=0)
     s_dot = float(curve.law.at(np.array([at]))[1][0])
     _, _, (_, dq0, _) = _cut_path(curve.path, split.s0)
-    plan = _joined(curve, split, q_c, dq0 * s_dot, device)
-    path = plan.path
+
+    def judge(plan):
+        return timing._curve_verdict(
+            traj, plan, timing._path_checks([traj], [plan], sp), 0, 1.0, sp
+        )
+
+    plan, checks = _joined(curve, split, q_c, dq0 * s_dot, device, judge)
     final = _final(plan, swing, rate)
-    new_curve = SwingCurve(path, final.law, curve.pivot_y, curve.lengths, curve.foot_length)
-    chk = timing._path_checks([traj], [plan], sp)
-    checks = timing._curve_verdict(traj, plan, chk, 0, 1.0, sp)
+    new_curve = SwingCurve(plan.path, final.law, curve.pivot_y, curve.lengths, curve.foot_length)
     samples = timing._samples([new_curve], rate)[0]
     note = f"replanned at t={at:.4f} s ({traj.method} continuation)"
     out = timing._timed(traj, checks, final, new_curve, samples, device, rate)
