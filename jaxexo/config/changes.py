@@ -29,7 +29,7 @@ class ChangeSpec:
     ``wider`` and it moves by ``move`` metres along y (all three at once)."""
 
     chance: float = 0.5
-    steps: tuple[int, int] = (5, 15)
+    steps: tuple[int, int] = (5, 14)
     taller: tuple[float, float] = (0.0, 0.6)
     wider: tuple[float, float] = (0.0, 0.5)
     move: tuple[float, float] = (0.0, 0.05)
