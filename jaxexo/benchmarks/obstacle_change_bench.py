@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import time
 import types
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -51,11 +52,23 @@ def _network(policy):
     return net, {"params": {k: {n: jnp.asarray(v) for n, v in d.items()} for k, d in p.items()}}
 
 
+class Episodes(NamedTuple):
+    """Greedy episodes' outcomes, each [N]: steps, goal reached, the obstacle switched, the smallest
+    clearance after the switch (m; inf without one), the heel's highest point after it above the new
+    obstacle's top (m), a joint limit violated, the strict verdict of the whole episode."""
+
+    steps: Any
+    reached: Any
+    fired: Any
+    post_clearance: Any
+    post_lift: Any
+    limits: Any
+    success: Any
+
+
 def _greedy(env, net, max_steps: int):
-    """``run(q_params, layouts, change, params)``: greedy episodes (N) from the layouts with their changes,
-    per episode: steps, reached, fired (the obstacle switched), the smallest clearance after the
-    switch (m; inf without one), the heel's highest point after it above the new obstacle's top (m),
-    a joint limit violated and the strict verdict of the whole episode."""
+    """``run(q_params, layouts, change, params)``: the ``Episodes`` of greedy episodes (N) from the
+    layouts with their changes, the policy's moves inside the shield's mask when the config has it."""
     import jax
     import jax.numpy as jnp
 
@@ -102,15 +115,15 @@ def _greedy(env, net, max_steps: int):
         )
         (state, _, _, acc, post, top, steps), _ = jax.lax.scan(step, carry, None, length=max_steps)
         v = outcome.episode_verdict(jnp, acc, **outcome.rule(params))
-        return {
-            "steps": steps,
-            "reached": acc["reached_goal"],
-            "fired": switched(state),
-            "post_clearance": post,
-            "post_lift": top,
-            "limits": acc["limits"],
-            "success": v.success,
-        }
+        return Episodes(
+            steps=steps,
+            reached=acc["reached_goal"],
+            fired=switched(state),
+            post_clearance=post,
+            post_lift=top,
+            limits=acc["limits"],
+            success=v.success,
+        )
 
     return jax.jit(run)
 
@@ -220,8 +233,8 @@ def _spec_on():
     return ChangeSpec(chance=1.0)
 
 
-def _host(d: dict) -> dict:
-    return {k: np.asarray(v) for k, v in d.items()}
+def _host(e: Episodes) -> dict:
+    return {k: np.asarray(v) for k, v in e._asdict().items()}
 
 
 def safety(policies: dict, paths: dict, cfg, n: int) -> dict:

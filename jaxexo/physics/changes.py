@@ -84,7 +84,7 @@ def _grown(xp, p, lay, u):
     outline = xp.stack(
         [(c + d)[..., None] + sy[..., None] * (y - c[..., None]), sz[..., None] * z], axis=-1
     )
-    return outline, sz[..., None] * lay.shape, c + d, sy * w, top
+    return Changed(outline, sz[..., None] * lay.shape, c + d, sy * w, top, at=None)
 
 
 def _second(xp, p, lay, u):
@@ -124,7 +124,7 @@ def _second(xp, p, lay, u):
     shape = geometry.profile_height(
         xp, center[..., None] + width[..., None] * frac, outline[..., None, :, :]
     )
-    return (outline, shape, center, width, top), fits
+    return Changed(outline, shape, center, width, top, at=None), fits
 
 
 def changed_layout(xp, p, lay, u) -> Changed:
@@ -140,7 +140,7 @@ def changed_layout(xp, p, lay, u) -> Changed:
     happens = (u[..., 0] < p.change_chance) & (fits | ~use_second)
     pick = [
         xp.where(use_second.reshape(use_second.shape + (1,) * (a.ndim - use_second.ndim)), a, b)
-        for a, b in zip(second, grown)
+        for a, b in zip(second[:5], grown[:5])
     ]
     return Changed(*pick, at=xp.where(happens, step, -1).astype(np.int32))
 
