@@ -175,7 +175,8 @@ def continuation(policies: dict, cfg, n: int = 1000, seed: int = 0) -> dict:
     episode, joint limits, the lift over the new obstacle; also on the scenes fired for every
     policy."""
     env_cfg = dataclasses.replace(cfg.env, obstacle_change=_spec_on())
-    return {"n": n, **_continuation(policies, dataclasses.replace(cfg, env=env_cfg), n, seed)}
+    out = _continuation(policies, dataclasses.replace(cfg, env=env_cfg), n, seed)
+    return {"n": n, "shield": bool(cfg.env.shield), **out}
 
 
 def _continuation(policies: dict, on, n: int, seed: int) -> dict:
@@ -292,7 +293,8 @@ def markdown(res: dict) -> str:
 def _continuation_table(c: dict, names) -> list[str]:
     lines = [
         "",
-        f"## (b) Mid-swing continuation, shielded ({c['n']} training-distribution layouts, seed "
+        f"## (b) Mid-swing continuation, {'shielded' if c['shield'] else 'no shield (the config has none)'} "
+        f"({c['n']} training-distribution layouts, seed "
         f"{SCENE_SEED}; the change at {AT_FRACTION[0]:.0%}-{AT_FRACTION[1]:.0%} of the swing)",
         "",
         "Unchanged scenes: "
@@ -327,10 +329,10 @@ def _continuation_table(c: dict, names) -> list[str]:
 
 
 def run_obstacle_change_benchmark(
-    paths: dict, out_dir, n_safety: int = 600, n_change: int = 1000
+    paths: dict, out_dir, n_safety: int = 600, n_change: int = 1000, tag: str = ""
 ) -> dict:
     """Both measurements for the policies ``paths`` ({name: policy.npz}), printed and (when
-    ``out_dir``) written as obstacle_change_<date>_<machine>.{json,md}."""
+    ``out_dir``) written as obstacle_change[_tag]_<date>_<machine>.{json,md}."""
     from jaxexo.storage.policy_file import load_policy
 
     policies = {k: load_policy(p) for k, p in paths.items()}
@@ -346,5 +348,5 @@ def run_obstacle_change_benchmark(
     text = markdown(res)
     print(text)
     if out_dir:
-        write_result("obstacle_change", res, text, out_dir)
+        write_result("obstacle_change" + (f"_{tag}" if tag else ""), res, text, out_dir)
     return res

@@ -533,7 +533,8 @@ def static_settings(cfg: Config) -> tuple:
 
 
 def to_toml_values(section_obj) -> list[tuple[str, Any]]:
-    """(name, TOML-writable value) for every field of a section, by its declaration."""
+    """(name, TOML-writable value) for every field of a section, by its declaration (a field declared
+    ``omit_default`` is left out at its default)."""
     out = []
     for f in fields(section_obj):
         s, v = spec_of(f), getattr(section_obj, f.name)
