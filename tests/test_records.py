@@ -25,6 +25,8 @@ ALLOWED = {
     ("benchmarks/safety_bench.py", "generator_figures"): JSON,
     ("config/obstacles.py", "write_terrain"): "the terrain table as TOML",
     ("config/obstacles.py", "terrain_params"): "EnvParams's fields by name, for EnvParams(**...)",
+    ("config/changes.py", "change_params"): "EnvParams's fields by name, for EnvParams(**...)",
+    ("benchmarks/obstacle_change_bench.py", "_rates"): JSON,
     ("course/record.py", "to_dict"): JSON,
     ("evaluation/metrics.py", "summarize"): JSON + " (an eval report's entry)",
     ("evaluation/metrics.py", "summarize_device"): JSON + " (an eval report's entry)",

@@ -73,6 +73,12 @@ def validate(cfg: Config) -> None:
             f"{env.min_clearance} m; the safety term (eq 2.35) must pay the policy to keep the "
             "margin that a safe swing needs, not only to avoid contact"
         )
+    change = env.obstacle_change
+    if change is not None and change.steps[1] >= env.max_steps:
+        raise ConfigError(
+            f"env.obstacle_change.steps: a change at step {change.steps[1]} is not before "
+            f"env.max_steps = {env.max_steps}, the episode's last step"
+        )
     if env.max_steps < rew.step_threshold:
         raise ConfigError(
             f"env.max_steps: {env.max_steps} is below reward.step_threshold = {rew.step_threshold}"

@@ -35,6 +35,11 @@ class FieldSpec:
     write: Callable[[Any], Any] | None = None  # value -> TOML-writable value (default: as is)
     # (EnvParams name, "section.field") for a parameter that ``to_param`` takes from another field
     params_from: tuple[tuple[str, str], ...] = ()
+    # A field added after configs and policies were written, whose default (off) is what they meant:
+    # the writer leaves it out at its default, so that a config that does not use it writes (and a
+    # run trains and exports) byte for byte what it did before the field existed, and a resolved
+    # config or policy file that lacks it reads the default.
+    omit_default: bool = False
 
     @property
     def leaf(self) -> bool:

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from jaxexo.config.changes import ChangeSpec, change_params, parse_change, write_change
 from jaxexo.config.checks import (
     ConfigError,
     below_one,
@@ -151,6 +152,18 @@ class EnvConfig:
     # column, so the heel never skims the floor before the goal (0: off); below env.step_size
     # (validated), so that the first move off the floor can clear it.
     floor_clearance: float = declare(0.02, number(nonneg=True, hi=0.10), unit="m")
+    # Training episodes whose obstacle changes at a random step (jaxexo.config.changes): None (0 in a
+    # file, off) or a ChangeSpec. Static (on or off is a different program) and leaves (its ranges);
+    # left out of a written config when off, so every config written before it reads the same.
+    obstacle_change: ChangeSpec | None = declare(
+        None,
+        parse_change,
+        role="static+leaf",
+        to_param=change_params,
+        write=write_change,
+        params_from=(("change_max_height", "layout.terrain"),),
+        omit_default=True,
+    )
 
 
 @dataclass(frozen=True)
@@ -520,9 +533,12 @@ def static_settings(cfg: Config) -> tuple:
 
 
 def to_toml_values(section_obj) -> list[tuple[str, Any]]:
-    """(name, TOML-writable value) for every field of a section, by its declaration."""
+    """(name, TOML-writable value) for every field of a section, by its declaration (a field declared
+    ``omit_default`` is left out at its default)."""
     out = []
     for f in fields(section_obj):
         s, v = spec_of(f), getattr(section_obj, f.name)
+        if s.omit_default and v == f.default:
+            continue
         out.append((f.name, s.write(v) if s.write else v))
     return out

@@ -14,7 +14,7 @@ from flax import struct
 from jaxexo.config import Config
 from jaxexo.env import spaces
 from jaxexo.env.params import EnvParams
-from jaxexo.physics import actions, geometry, scenarios, transition
+from jaxexo.physics import actions, changes, geometry, scenarios, transition
 from jaxexo.physics.actions import LENGTH_SCALE, NUM_ACTIONS, THESIS_OBS_CENTER  # noqa: F401 (re-exported)
 from jaxexo.physics.scene import make_scene
 from jaxexo.shield import compact, make_shield, rule
@@ -45,6 +45,15 @@ class Layout:
 
 
 @struct.dataclass
+class ObstacleChange:
+    """The obstacle an episode switches to ([env] obstacle_change): ``layout`` from step count ``at``
+    on (-1: never), unless the foot is too close to it then (jaxexo.physics.changes.fires)."""
+
+    at: jnp.ndarray
+    layout: Layout
+
+
+@struct.dataclass
 class EnvState:
     heel: jnp.ndarray  # (2,) swing heel (y, z), m
     time: jnp.ndarray  # steps taken this episode (gymnax name)
@@ -52,6 +61,9 @@ class EnvState:
     max_y: jnp.ndarray  # the heel's largest y this episode (backward motion)
     last_action: jnp.ndarray  # the move just made (-1 at the start): the shield never undoes it
     layout: Layout
+    # With [env] obstacle_change on: the change this episode may see; None (no leaves) when off, so
+    # that the environment without it is the program it was before the option existed.
+    change: ObstacleChange | None = None
 
 
 class ExoStepEnv:
@@ -68,6 +80,8 @@ class ExoStepEnv:
         self.max_vertices = self.config.outline_vertices
         # static: without the shield no mask is computed at all (its cost is a swept check per move)
         self.shield = bool(self.config.env.shield)
+        # static: episodes whose obstacle changes mid-swing (jaxexo.physics.changes)
+        self.obstacle_change = self.config.env.obstacle_change is not None
         self._default_params = None
 
     # gymnax-style properties --------------------------------------------------------------
@@ -101,9 +115,34 @@ class ExoStepEnv:
         """Draw one scene from the layout distribution in params (obstacle kind and size, position
         jitter, pivot condition, start shift, step length) by jaxexo.physics.scenarios, the one
         scenario generator: the scene of the key's two words, which NumPy tools draw identically."""
+        return self.layout_from_uniforms(self._uniforms(key, params, 0), params)
+
+    @staticmethod
+    def _uniforms(key, params: EnvParams, extra: int):
+        """The scene's uniform numbers and ``extra`` more after them (the first ones are the same
+        whatever ``extra``: Threefry of the counter)."""
         words = jax.random.key_data(key) if jnp.issubdtype(key.dtype, jax.dtypes.prng_key) else key
-        u = scenarios.uniforms(jnp, words[..., 0], words[..., 1], scenarios.n_uniforms(params))
-        return self.layout_from_uniforms(u, params)
+        n = scenarios.n_uniforms(params) + extra
+        return scenarios.uniforms(jnp, words[..., 0], words[..., 1], n)
+
+    def change_from_uniforms(self, layout: Layout, u, params: EnvParams) -> ObstacleChange:
+        """The obstacle change of an episode on ``layout`` from uniform numbers u
+        (..., changes.N_UNIFORMS) (jaxexo.physics.changes.changed_layout)."""
+        c = changes.changed_layout(jnp, params, layout, u)
+        return ObstacleChange(
+            at=c.at,
+            layout=layout.replace(
+                outline=c.outline,
+                shape=c.shape,
+                center_y=c.center_y,
+                width=c.width,
+                height=c.height,
+            ),
+        )
+
+    def no_change(self, layout: Layout) -> ObstacleChange:
+        """An episode on ``layout`` whose obstacle never changes."""
+        return ObstacleChange(at=jnp.full(jnp.shape(layout.center_y), -1, jnp.int32), layout=layout)
 
     def layout_from_uniforms(self, u, params: EnvParams, kind=None, pivot_kind=None) -> Layout:
         """The scene of uniform numbers u (..., scenarios.n_uniforms(params))
@@ -115,8 +154,16 @@ class ExoStepEnv:
             )._asdict()
         )
 
-    def init_state(self, layout: Layout, params: EnvParams) -> tuple[jnp.ndarray, EnvState]:
-        """Start an episode on a given layout: the heel on the ground at the start."""
+    def init_state(
+        self, layout: Layout, params: EnvParams, change: ObstacleChange | None = None
+    ) -> tuple[jnp.ndarray, EnvState]:
+        """Start an episode on a given layout: the heel on the ground at the start. With [env]
+        obstacle_change on, ``change`` is the obstacle it switches to (None: it never does); off,
+        ``change`` must be None."""
+        if self.obstacle_change and change is None:
+            change = self.no_change(layout)
+        if change is not None and not self.obstacle_change:
+            raise ValueError("change: this environment's config has env.obstacle_change off")
         heel = jnp.stack([layout.start_y, jnp.zeros_like(layout.start_y)])
         state = EnvState(
             heel=heel,
@@ -125,6 +172,7 @@ class ExoStepEnv:
             max_y=heel[0],
             last_action=jnp.asarray(-1, jnp.int32),
             layout=layout,
+            change=change,
         )
         return self.get_obs(state, params), state
 
@@ -166,7 +214,15 @@ class ExoStepEnv:
 
     # gymnax transitions ----------------------------------------------------------------------
     def reset_env(self, key, params: EnvParams):
-        return self.init_state(self.sample_layout(key, params), params)
+        if not self.obstacle_change:
+            return self.init_state(self.sample_layout(key, params), params)
+        # The scene's numbers as without the change, the change's after them.
+        u = self._uniforms(key, params, changes.N_UNIFORMS)
+        n = scenarios.n_uniforms(params)
+        layout = self.layout_from_uniforms(u[..., :n], params)
+        return self.init_state(
+            layout, params, self.change_from_uniforms(layout, u[..., n:], params)
+        )
 
     def reset(self, key, params: EnvParams | None = None):
         params = self.default_params if params is None else params
@@ -196,6 +252,10 @@ class ExoStepEnv:
             last_action=state.last_action,
         )
         visited, reward, terminated = out["visited_mid"], out["reward"], out["terminated"]
+        if state.change is not None:  # from this step on, the changed obstacle (if it fires)
+            new = state.change.layout
+            fire = changes.fires(jnp, params, heel, time, state.change.at, new.outline)
+            lay = jax.tree.map(lambda a, b: jnp.where(fire, a, b), new, lay)
         new_state = EnvState(
             heel=heel,
             time=time,
@@ -203,6 +263,7 @@ class ExoStepEnv:
             max_y=out["max_y"],
             last_action=jnp.asarray(action, jnp.int32),
             layout=lay,
+            change=state.change,
         )
         info = out["info"]
         return self.get_obs(new_state, params), new_state, reward, terminated, info

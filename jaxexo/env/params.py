@@ -35,6 +35,13 @@ class EnvParams:
     shield: jnp.ndarray                 # bool (): env.shield
     shield_clearance: jnp.ndarray       # float32 (): env.shield_clearance, m
     floor_clearance: jnp.ndarray        # float32 (): env.floor_clearance, m
+    change_chance: jnp.ndarray          # float32 (): env.obstacle_change
+    change_steps: jnp.ndarray           # int32 (2,): env.obstacle_change
+    change_taller: jnp.ndarray          # float32 (2,): env.obstacle_change
+    change_wider: jnp.ndarray           # float32 (2,): env.obstacle_change
+    change_move: jnp.ndarray            # float32 (2,): env.obstacle_change
+    change_second: jnp.ndarray          # float32 (): env.obstacle_change
+    change_max_height: jnp.ndarray      # float32 (): layout.terrain
     thigh: jnp.ndarray                  # float32 (): kinematics.thigh, m
     shin: jnp.ndarray                   # float32 (): kinematics.shin, m
     foot_length: jnp.ndarray            # float32 (): kinematics.foot_length, m

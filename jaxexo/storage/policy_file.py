@@ -244,6 +244,8 @@ def policy_config(meta: dict, path):
                     continue
                 if (section, name) in FORMER_MEANING and isinstance(raw.get(section), dict):
                     raw[section].setdefault(name, FORMER_MEANING[section, name])
+                if spec.omit_default and isinstance(raw.get(section), dict):
+                    continue  # left out at its default (off) by the writer
                 if not isinstance(raw.get(section), dict) or name not in raw[section]:
                     raise ConfigError(
                         f"{section}.{name} is not stated: not the resolved training config that "
