@@ -477,5 +477,5 @@ def run_replan_benchmark(
         "figures": {g: f.to_dict() for g, f in fig.items()},
         "rows": {g: [r.to_dict() for r in rs] for g, rs in rows.items()},
     }
-    write_result("replan", payload, _markdown(fig, n, seed, rate), out_dir)
+    write_result(f"replan-seed{seed}", payload, _markdown(fig, n, seed, rate), out_dir)
     return payload

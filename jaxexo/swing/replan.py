@@ -481,7 +481,7 @@ def _checked_obstacle_scene(gen, swing, obstacle, state: FootState):
     scene = replace(scene, goal_y=sc.goal_y, pivot_kind=sc.pivot_kind)
     c = float(foot_clearance(np, state.heel[None], gen.sp.foot_length, scene.outline[None])[0])
     if c < gen.sp.min_clearance:
-        where = "inside" if c < 0.0 else f"{c:.4f} m from"
+        where = "inside (or touching)" if c <= 0.0 else f"{c:.4f} m from"
         raise ValueError(
             f"obstacle: at t={state.time:.4f} s the foot (heel y={state.heel[0]:.4f} m, "
             f"z={state.heel[1]:.4f} m) is already {where} the new obstacle, within the margin "
