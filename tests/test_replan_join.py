@@ -44,7 +44,7 @@ def lifted(gen, swing, at: float, lift: float):
     heel[:, 1] += lift * 16.0 * u * u * (1.0 - u) ** 2
     q = leg_angles(gen.sp, swing.scene.pivot_y, heel)
     return types.SimpleNamespace(
-        method="test", scene=swing.scene, heel=heel, joint_angles=q, notes=(), raw=heel
+        method="test", scene=swing.scene, heel=heel, joint_angles=q, notes=(), raw=heel, ok=True
     )
 
 

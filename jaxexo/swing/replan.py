@@ -352,16 +352,17 @@ def _candidates(blend: float, chord: float) -> list[float]:
     return [blend, *dict.fromkeys(b for b in longer if b > blend), 0.5 * blend]
 
 
-def _joined(curve: SwingCurve, split: _Split, q_c: np.ndarray, qdot, device, judge):
+def _joined(curve: SwingCurve, split: _Split, q_c: np.ndarray, qdot, device, judge, retry: bool):
     """The joined path, its timed law (a Plan) and its verdict (``judge(plan)``: TrajectoryChecks):
     the first of ``_candidates``' turns onto the continuation whose swing is within the limits and
-    passes, else the first one's."""
+    passes, else the first one's (only the first with ``retry`` False: a continuation that fails
+    its own checks, whose joined swing cannot pass)."""
     accel = min(device.planned().acceleration)
     blend = _blend(qdot, q_c, accel)
     chord = float(np.sqrt((np.diff(q_c, axis=0) ** 2).sum(axis=1)).sum())
     planned = device.planned()
     first = None
-    for b in _candidates(blend, chord):
+    for b in _candidates(blend, chord)[: None if retry else 1]:
         path = _continuation_path(curve.path, split.s0, q_c, curve.lengths, b)
         plan = _timed_law(split, path, curve.law.window, device)
         within = peak_ratio(planned.constraints(1.0), plan.check.peaks) <= 1.0
@@ -397,7 +398,7 @@ def continue_swing(swing, traj, *, at: float, sp, rate: float | None = None):
             traj, plan, timing._path_checks([traj], [plan], sp), 0, 1.0, sp
         )
 
-    plan, checks = _joined(curve, split, q_c, dq0 * s_dot, device, judge)
+    plan, checks = _joined(curve, split, q_c, dq0 * s_dot, device, judge, bool(traj.ok))
     final = _final(plan, swing, rate)
     new_curve = SwingCurve(plan.path, final.law, curve.pivot_y, curve.lengths, curve.foot_length)
     samples = timing._samples([new_curve], rate)[0]
@@ -518,10 +519,11 @@ def replan_swing(gen, swing, obstacle, *, at, options, overrides: dict, where: s
         other = g._fallback_planner().continuation(
             scene, state, n_points=o.n_points, duration=o.duration, swing_scene=swing.scene
         )
-        alt = continue_swing(
+        # Only a continuation that passes its own checks can give a joined swing that passes.
+        alt = other.ok and continue_swing(
             swing, replace(other, method="cfftg-fallback"), at=t, sp=g.sp, rate=rate
         )
-        if alt.ok:
+        if alt and alt.ok:
             note = f"the {cont.method} continuation joined was not safe: {new.reasons[0]}"
             new = replace(alt, notes=alt.notes + (note,))
     return o.checked(new)
