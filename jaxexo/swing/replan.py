@@ -67,7 +67,7 @@ LIMIT_PASSES = 3  # the passes re-run with caps lowered by a curve's excess, at 
 OVERSHOOT = 1.002  # ... lowered by the excess squared times this (an excess of 1 + 1e-6 then ends)
 # The corrections never lower a cap below the speed the law sheds from its moving start at this
 # share of the smallest acceleration limit (``_shed``).
-SHED_SHARE = 0.5
+SHED_SHARE = 0.8
 # The continuation's first passes keep this fraction of the planned velocity and acceleration
 # limits where the start allows (timing.SAFETY: 0.95 for a swing from rest): the averaged law lags
 # the passes' by half its window, and a continuation cannot be slowed uniformly afterwards.
