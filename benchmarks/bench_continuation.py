@@ -26,25 +26,10 @@ from jaxexo.inference import TrajectoryGenerator
 from jaxexo.inference.scenarios import safety_scenarios
 from jaxexo.physics import geometry
 from jaxexo.physics.geometry import Obstacle
-from jaxexo.swing.replan import FootState
+from jaxexo.swing.replan import foot_state
 from jaxexo.swing.timing import time_swing
 
 ROOT = Path(__file__).resolve().parent.parent
-
-
-def foot_state(sw, t):
-    st = sw.at(t)
-    return FootState(
-        time=t,
-        path_parameter=float(st.path_parameter[0]),
-        heel=st.heel[0],
-        heel_velocity=st.heel_velocity[0],
-        heel_acceleration=st.heel_acceleration[0],
-        joints=st.joint_angles[0],
-        joint_velocity=st.joint_velocity[0],
-        joint_acceleration=st.joint_acceleration[0],
-        past_heel=sw.at(np.linspace(0.0, t, 200)).heel,
-    )
 
 
 def taller(ob, factor):

@@ -19,29 +19,13 @@ from jaxexo.physics.geometry import Obstacle
 from jaxexo.physics.scene import stack_scenes
 from jaxexo.physics.transition import scalar
 from jaxexo.swing.continuation import policy_clock
-from jaxexo.swing.replan import FootState
+from jaxexo.swing.replan import foot_state
 from jaxexo.swing.timing import time_swing
 
 from conftest import ROOT
 from test_fast_rollout import _plain_q
 
 POLICY = ROOT / "tests" / "data" / "reference" / "policy.npz"
-
-
-def foot_state(sw, t: float) -> FootState:
-    """The timed swing's state at t, its heel's path so far sampled densely (200 points)."""
-    st = sw.at(t)
-    return FootState(
-        time=t,
-        path_parameter=float(st.path_parameter[0]),
-        heel=st.heel[0],
-        heel_velocity=st.heel_velocity[0],
-        heel_acceleration=st.heel_acceleration[0],
-        joints=st.joint_angles[0],
-        joint_velocity=st.joint_velocity[0],
-        joint_acceleration=st.joint_acceleration[0],
-        past_heel=sw.at(np.linspace(0.0, t, 200)).heel,
-    )
 
 
 def taller(ob: Obstacle, factor: float) -> Obstacle:

@@ -80,6 +80,23 @@ class JointJerk:
         return PathBounds()
 
 
+def passes_rows(constraints, view: GridView, cap: np.ndarray):
+    """What the passes read from ``constraints`` on a grid's ``view``: the caps on s'^2 (B, K)
+    (``cap`` lowered by each constraint's own), and the acceleration rows a, b (B, K, R) with their
+    bounds (R,), every constraint's rows side by side."""
+    rows_a, rows_b, bounds = [], [], []
+    for c in constraints:
+        pb = c.path_bounds(view)
+        if pb.x_cap is not None:
+            cap = np.minimum(cap, pb.x_cap)
+        if pb.a is not None:
+            rows_a.append(pb.a)
+            rows_b.append(pb.b)
+            bounds.append(np.broadcast_to(pb.bound, pb.a.shape[-1:]))
+    a, b, bound = (np.concatenate(r, axis=-1) for r in (rows_a, rows_b, bounds))
+    return cap, a, b, bound
+
+
 def speed_ratio(constraints, bound) -> np.ndarray:
     """Per piece of a curve (n,), the largest factor by which the swing's speed may exceed any
     constraint, from the bounds on |q-dot|, |q-ddot|, |q-dddot| (3, J, n) there

@@ -26,7 +26,7 @@ from jaxexo.swing.curve import (
 )
 from jaxexo.swing.curve_check import FinalLaw, Plan, lowered_cap, max_samples, with_bounds
 from jaxexo.swing.knots import few_knot_paths
-from jaxexo.swing.limits import DeviceLimits, GridView, peak_ratio, speed_ratio
+from jaxexo.swing.limits import DeviceLimits, GridView, passes_rows, peak_ratio, speed_ratio
 from jaxexo.swing.time_law import max_speed_curve, topp
 
 
@@ -230,17 +230,7 @@ def _passes(path: JointPath, grid: np.ndarray, cap: np.ndarray, x0: float, const
     grid[0]): s'^2 (K,), the cells' floors (K - 1,) and the grid's view."""
     _, dq, ddq = paths_at([path], [grid], 2)[0]
     view = GridView(grid, dq[None], ddq[None])
-    cap = cap[None].copy()
-    rows_a, rows_b, bounds = [], [], []
-    for c in constraints:
-        pb = c.path_bounds(view)
-        if pb.x_cap is not None:
-            cap = np.minimum(cap, pb.x_cap)
-        if pb.a is not None:
-            rows_a.append(pb.a)
-            rows_b.append(pb.b)
-            bounds.append(np.broadcast_to(pb.bound, pb.a.shape[-1:]))
-    a, b, bound = (np.concatenate(r, axis=-1) for r in (rows_a, rows_b, bounds))
+    cap, a, b, bound = passes_rows(constraints, view, cap[None])
     ds = (grid[-1] - grid[0]) / (len(grid) - 1)
     x, floor = topp(a, b, np.inf, bound, ds, cap, both_ends=True, start=np.array([x0]))
     return x[0], floor[0], view

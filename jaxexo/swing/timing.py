@@ -52,7 +52,7 @@ from jaxexo.swing.export import (
     write_timed_json,
 )
 from jaxexo.swing.knots import few_knot_paths
-from jaxexo.swing.limits import DeviceLimits, GridView, peak_ratio, speed_ratio
+from jaxexo.swing.limits import DeviceLimits, GridView, passes_rows, peak_ratio, speed_ratio
 from jaxexo.swing.time_law import topp
 from jaxexo.swing.trajectory import (
     Measured,
@@ -490,17 +490,7 @@ def _run_passes(plans, idx, constraints, window: float) -> list[Plan]:
             np.concatenate([plans[i].view.dq for i in sub]),
             np.concatenate([plans[i].view.ddq for i in sub]),
         )
-        cap = np.stack([plans[i].cap for i in sub])
-        rows_a, rows_b, bounds = [], [], []
-        for c in constraints:
-            pb = c.path_bounds(view)
-            if pb.x_cap is not None:
-                cap = np.minimum(cap, pb.x_cap)
-            if pb.a is not None:
-                rows_a.append(pb.a)
-                rows_b.append(pb.b)
-                bounds.append(np.broadcast_to(pb.bound, pb.a.shape[-1:]))
-        a, b, bound = (np.concatenate(r, axis=-1) for r in (rows_a, rows_b, bounds))
+        cap, a, b, bound = passes_rows(constraints, view, np.stack([plans[i].cap for i in sub]))
         x, floor = topp(a, b, np.inf, bound, 1.0 / (k - 1), cap, both_ends=True)
         for j, i in enumerate(sub):
             law = law_from_speeds(view.s, x[j], floor[j], window, BLEND_FRACTION)
