@@ -61,8 +61,8 @@ TURN_SHARE = 0.5
 BLEND_PARAMETER = 0.1
 # A switch needs this much of the path still to go at the unfiltered speed profile's position.
 MIN_TO_GO = 1e-3
-BLEND_TRIES = 3  # the turn onto the continuation made twice as long, at most this often in all
-START_WINDOWS = 2.0  # ... while a limit is exceeded within this many law windows of the switch
+BLEND_TRIES = 3  # turns tried: the estimate and BLEND_TRIES - 1 longer ones (then a shorter one)
+START_WINDOWS = 2.0  # law windows after the switch where the start's speed holds the caps up
 LIMIT_PASSES = 3  # the passes re-run with caps lowered by a curve's excess, at most this often
 OVERSHOOT = 1.002  # ... lowered by the excess squared times this (an excess of 1 + 1e-6 then ends)
 # The corrections never lower a cap below the speed the law sheds from its moving start at this
