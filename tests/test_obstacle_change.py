@@ -324,3 +324,23 @@ def test_training_with_obstacle_change_runs():
     ts, m = jax.jit(trainer.run, static_argnums=2)(ts, hyper, 2)
     assert int(trainer.env_steps(ts)) == 2 * TINY_N * TINY_T
     assert all(np.isfinite(np.asarray(x)).all() for x in jax.tree.leaves(ts.params))
+
+
+def test_a_checkpoint_from_before_the_change_field_fits_a_state_without_changes():
+    """A state dict with env_state.change None (obstacle changes off) is matched by a checkpoint
+    that has the field as None, and by one written before the field existed (the key missing);
+    a checkpoint whose field holds something where this config has nothing is refused."""
+    from jaxexo.train.run_files import tree_mismatch, with_empty_fields
+
+    template = {"env_state": {"heel": np.zeros(3), "change": None}, "step": np.zeros((), np.int32)}
+    saved = {"env_state": {"heel": np.ones(3), "change": None}, "step": np.ones((), np.int32)}
+    assert tree_mismatch(template, saved) is None
+    old = {"env_state": {"heel": np.ones(3)}, "step": np.ones((), np.int32)}
+    assert "keys differ" in tree_mismatch(template, old)
+    filled = with_empty_fields(template, old)
+    assert tree_mismatch(template, filled) is None and filled["env_state"]["change"] is None
+    other = {
+        "env_state": {"heel": np.ones(3), "change": {"at": np.ones(())}},
+        "step": saved["step"],
+    }
+    assert "expected nothing, found dict" in tree_mismatch(template, other)

@@ -124,6 +124,7 @@ class _Run:
         # A checkpoint of another network or state layout (another config's, a foreign file) must not
         # be poured into this one: flax would accept mismatched shapes silently.
         noun = "training state" if self.agents.one else "population state"
+        raw = dict(raw, state=F.with_empty_fields(serialization.to_state_dict(fresh), raw["state"]))
         for name, template in (
             ("state", serialization.to_state_dict(fresh)),
             ("best_params", serialization.to_state_dict(fresh.params)),

@@ -116,6 +116,21 @@ def export_policy(path: Path, cfg: Config, trainer: Trainer, params) -> Path:
     )
 
 
+def with_empty_fields(template, loaded):
+    """``loaded`` (a nested dict read from a checkpoint) with every key whose ``template`` value is
+    None (a field with no leaves, as env_state.change with [env] obstacle_change off) added as
+    None where it is missing: a checkpoint written before such a field existed fits it."""
+    if not isinstance(template, dict) or not isinstance(loaded, dict):
+        return loaded
+    out = dict(loaded)
+    for k, v in template.items():
+        if k not in out and v is None:
+            out[k] = None
+        elif k in out:
+            out[k] = with_empty_fields(v, out[k])
+    return out
+
+
 def tree_mismatch(template, loaded, where: str = "") -> str | None:
     """Where two state dicts (nested dicts of arrays) differ in keys, shapes or dtypes; None if they agree."""
     if isinstance(template, dict):
@@ -132,6 +147,10 @@ def tree_mismatch(template, loaded, where: str = "") -> str | None:
             if bad:
                 return bad
         return None
+    if template is None:  # a field with no leaves (env_state.change with obstacle changes off)
+        return (
+            None if loaded is None else f"{where}: expected nothing, found {type(loaded).__name__}"
+        )
     t, x = np.asarray(template), loaded
     if not isinstance(x, np.ndarray) and not np.isscalar(x):
         return f"{where}: expected an array, found {type(x).__name__}"
