@@ -75,6 +75,19 @@ def quintic_coefficients(p: np.ndarray, v: np.ndarray, a: np.ndarray, period: fl
     return np.stack([c0, c1, c2, c3, c4, c5], axis=1)
 
 
+def coefficients(kind: str, p, v, a, period) -> np.ndarray:
+    """The polynomial pieces in u of ``interpolate``'s ``kind`` through the samples p (n, 4) with
+    velocities v and accelerations a (those the kind does not use may be None), ``period`` apart
+    (s; a scalar, or (n - 1, 1, 1) for pieces of their own lengths)."""
+    if kind == "linear":
+        return linear_coefficients(p)
+    if kind == "cubic":
+        return cubic_coefficients(p, v, period)
+    if kind == "quintic":
+        return quintic_coefficients(p, v, a, period)
+    raise SimError(f"kind: expected linear, cubic or quintic, got {kind!r}")
+
+
 def interpolate(kind: str, samples, period: float, t) -> tuple[np.ndarray, ...]:
     """Position, velocity and acceleration (len(t), 4 each) at times t (s) of samples ``period``
     apart from t = 0, interpolated as a drive does: "linear" (positions), "cubic" (the cubic
@@ -82,14 +95,7 @@ def interpolate(kind: str, samples, period: float, t) -> tuple[np.ndarray, ...]:
     velocities and accelerations); ``samples``: (positions, velocities, accelerations), (n, 4)
     each (those the kind does not use may be None). Held at the first and last sample outside."""
     p, v, a = (None if x is None else np.asarray(x, np.float64) for x in samples)
-    if kind == "linear":
-        coef = linear_coefficients(p)
-    elif kind == "cubic":
-        coef = cubic_coefficients(p, v, period)
-    elif kind == "quintic":
-        coef = quintic_coefficients(p, v, a, period)
-    else:
-        raise SimError(f"kind: expected linear, cubic or quintic, got {kind!r}")
+    coef = coefficients(kind, p, v, a, period)
     return _polynomial(coef, *_interval(t, period, len(p)), period)
 
 
@@ -102,18 +108,67 @@ def hermite(ref: np.ndarray, ref_v: np.ndarray, period: float, t: np.ndarray) ->
 REFERENCES = ("curve", "quintic", "cubic", "linear")
 
 
-def reference_states(timed, t, reference: str = "curve", rate: float | None = None):
+def _samples(timed, rate: float | None):
+    """The swing's joint samples (positions, velocities, accelerations) at ``rate`` Hz (None: its
+    own rate) and their period (s)."""
+    sw = timed if rate is None or float(rate) == float(timed.rate) else timed.sample(rate)
+    return (sw.joint_angles, sw.joint_velocity, sw.joint_acceleration), 1.0 / float(sw.rate)
+
+
+def reference_states(timed, t, reference: str = "curve", rate: float | None = None, *, before=None):
     """The driven replay's reference at times t (s): joint angles, velocities and accelerations
     (len(t), 4 each). "curve": the timed swing's curve itself (``timed.at(t)``); "quintic",
     "cubic", "linear": its samples at ``rate`` Hz (``timed.sample(rate)``; None: the swing's own
-    rate) interpolated as a drive or a ROS 2 joint_trajectory_controller does (``interpolate``)."""
+    rate) interpolated as a drive or a ROS 2 joint_trajectory_controller does (``interpolate``).
+    ``before``: the swing ``timed`` was replanned from, followed until the switch
+    (``switched_states``)."""
     t = np.asarray(t, np.float64)
+    if before is not None:
+        return switched_states(before, timed, t, reference, rate)
     if reference == "curve":
         st = timed.at(t)
         return st.joint_angles, st.joint_velocity, st.joint_acceleration
-    sw = timed if rate is None or float(rate) == float(timed.rate) else timed.sample(rate)
-    cols = (sw.joint_angles, sw.joint_velocity, sw.joint_acceleration)
-    return interpolate(reference, cols, 1.0 / float(sw.rate), t)
+    cols, period = _samples(timed, rate)
+    return interpolate(reference, cols, period, t)
+
+
+def switched_states(before, timed, t, reference: str = "curve", rate: float | None = None):
+    """The reference of a swing replanned in flight as a drive follows it (``reference_states``'
+    three arrays): ``before`` (the swing as planned) until the switch (``timed``'s last switch
+    time), ``timed`` (the replanned swing) from it. "curve": each swing's curve on its side. The
+    sampled references: ``before``'s samples until the switch; then, as a drive that receives new
+    samples interpolates from its own desired state (a ROS 2 joint_trajectory_controller's
+    interpolate_from_desired_state), one piece of the same kind from the old reference's position,
+    velocity and acceleration at the switch to the first of ``timed``'s samples at least half a
+    period after it (a shorter piece would ask for more acceleration than a period does); then
+    ``timed``'s samples."""
+    t = np.asarray(t, np.float64)
+    at = float(timed.switch_times[-1])
+    after = t >= at
+    out = tuple(x.copy() for x in reference_states(before, t, reference, rate))
+    for o, x in zip(out, reference_states(timed, t[after], reference, rate)):
+        o[after] = x
+    if reference == "curve":
+        return out
+    cols, period = _samples(timed, rate)
+    k = min(math.ceil(at / period + 0.5 - 1e-9), len(cols[0]) - 1)
+    h = k * period - at
+    span = after & (t < k * period)
+    if h <= 0.0 or not span.any():  # no new sample after the switch: the new swing's hold
+        return out
+    start = reference_states(before, np.array([at]), reference, rate)
+    pts = [np.vstack([s0[:1], np.asarray(c[k : k + 1], np.float64)]) for s0, c in zip(start, cols)]
+    m = int(span.sum())
+    piece = _polynomial(
+        coefficients(reference, *pts, h),
+        np.zeros(m, dtype=int),
+        ((t[span] - at) / h)[:, None],
+        np.ones((m, 1), dtype=bool),
+        h,
+    )
+    for o, x in zip(out, piece):
+        o[span] = x
+    return out
 
 
 def setpoints(ref: np.ndarray, dt: float, vmax, amax):
@@ -279,13 +334,40 @@ def check_reference(timed, reference, reference_rate) -> float | None:
         raise SimError(str(e)) from None
 
 
+def check_before(timed, before, reference: str) -> None:
+    """``before`` checked as the swing that ``timed`` was replanned from (SimError naming it): a
+    TimedSwing with ``timed``'s switch times but the last, which falls before it lands; carrying
+    its curve for the "curve" reference."""
+    from jaxexo.swing.timing import TimedSwing
+
+    if not isinstance(before, TimedSwing):
+        raise SimError(
+            f"before: expected the TimedSwing that was replanned, got {type(before).__name__}"
+        )
+    sw = tuple(getattr(timed, "switch_times", ()))
+    if not sw:
+        raise SimError("before: the swing replayed was not replanned (it has no switch time)")
+    if tuple(before.switch_times) != sw[:-1]:
+        raise SimError(
+            f"before: expected the swing replanned at {sw[-1]:.4f} s (switch times {list(sw[:-1])}), "
+            f"got one with switch times {list(before.switch_times)}"
+        )
+    if not sw[-1] < before.duration:
+        raise SimError(
+            f"before: lands at {before.duration:.4f} s, before the switch at {sw[-1]:.4f} s"
+        )
+    if reference == "curve" and before.curve is None:
+        raise SimError("before: the 'curve' reference needs a TimedSwing that carries its curve")
+
+
 @dataclasses.dataclass(frozen=True)
 class DrivenRun:
     """A driven replay's simulation: MuJoCo's sensor data after each physics step (the start's
     first), the physics step ``dt``, ``sub`` physics steps per control sample, the ``steps``
     simulated, where the setpoint generator clipped the acceleration and the velocity (per step),
-    the feed-forward torque's peak per actuated joint (pd_ff; None for the servo), and the
-    reference's joint angles at every physics step (``reference_states``)."""
+    the feed-forward torque's peak per actuated joint (pd_ff; None for the servo), the
+    reference's joint angles at every physics step (``reference_states``) and the setpoints
+    (``setpoints``; the command of each step, at its end)."""
 
     sens: np.ndarray
     dt: float
@@ -295,6 +377,7 @@ class DrivenRun:
     clip_v: np.ndarray
     torque_peak: list | None
     reference: np.ndarray | None = None  # (steps + 2, 4) rad: the reference's joint angles
+    command: np.ndarray | None = None  # (steps, 4) rad: the setpoints
 
     def sensor(self, legs: Legs, name: str) -> np.ndarray:
         """The first three columns of sensor ``name`` at every physics step."""
@@ -315,10 +398,19 @@ def qpos_derivatives(legs: Legs, q, qd, qdd, h: float = 1e-4):
 
 
 def _simulate(
-    timed, legs: Legs, limits, settle: float, controller: str, reference="curve", ref_rate=None
+    timed,
+    legs: Legs,
+    limits,
+    settle: float,
+    controller: str,
+    reference="curve",
+    ref_rate=None,
+    *,
+    before=None,
 ) -> DrivenRun:
     """The commands of a driven replay (they do not depend on the simulation), then MuJoCo's
-    rollout of the model under them (``driven_replay``)."""
+    rollout of the model under them (``driven_replay``; ``before``: the swing followed until
+    the switch, ``switched_states``)."""
     m = legs.model
     rate = float(timed.rate)
     sub = max(1, math.ceil(1.0 / (rate * PHYSICS_PER_SAMPLE_MAX_DT) - 1e-9))
@@ -327,7 +419,9 @@ def _simulate(
     n = len(timed.joint_angles)
     steps = (n - 1) * sub + int(round(settle / dt))
     # The reference at every physics step, and one step beyond for the velocity at each step's end.
-    q, qd, qdd = reference_states(timed, np.arange(steps + 2) * dt, reference, ref_rate)
+    q, qd, qdd = reference_states(
+        timed, np.arange(steps + 2) * dt, reference, ref_rate, before=before
+    )
     if reference == "linear":  # its velocity jumps at the samples: the derivatives of its steps
         qd = np.gradient(q, dt, axis=0, edge_order=2)
         qdd = np.gradient(qd, dt, axis=0, edge_order=2)
@@ -353,7 +447,9 @@ def _simulate(
         qvel_ref = qvel[1 : steps + 1][:, legs.actuated_dofs]
         sens = _rollout(legs, qpos0, cmd[:steps] + (kd / kp) * qvel_ref + tau / kp, (kp, kd))
         torque_peak = np.abs(tau).max(axis=0).tolist()
-    return DrivenRun(sens, dt, sub, steps, clip_a[:steps], clip_v[:steps], torque_peak, q)
+    return DrivenRun(
+        sens, dt, sub, steps, clip_a[:steps], clip_v[:steps], torque_peak, q, cmd[:steps]
+    )
 
 
 @dataclasses.dataclass(frozen=True)
@@ -386,10 +482,87 @@ class DrivenFigures:
 
 
 @dataclasses.dataclass(frozen=True)
+class SwitchFigures:
+    """A driven replay through a switch (``switch_figures``), any joint: the switch time (s); the
+    reference's jumps there in position (rad), velocity (rad/s) and acceleration (rad/s^2), its
+    two sides read SWITCH_EPS either side of it (0 for a C2 join, to the next derivative times
+    2 SWITCH_EPS); the
+    commanded acceleration (the setpoints' second difference over the physics step, rad/s^2):
+    its largest step between two physics steps whose differences reach across the switch (the
+    jerk there times the step), the largest step elsewhere in the replay, the first over the
+    second (at most 1: no worse than an ordinary step); its largest change over a control period
+    (the swing's sample period) across the switch, elsewhere, and the first over the second."""
+
+    switch_time_s: float
+    position_jump_rad: float
+    velocity_jump_rad_s: float
+    acceleration_jump_rad_s2: float
+    switch_step_rad_s2: float
+    step_elsewhere_rad_s2: float
+    step_ratio: float
+    period_change_rad_s2: float
+    period_change_elsewhere_rad_s2: float
+    period_ratio: float
+
+
+SWITCH_EPS = 1e-7  # s: each side of a switch where the reference's jumps are read
+
+
+def reference_jumps(timed, before, reference: str = "curve", rate: float | None = None):
+    """The largest jump (any joint) of the switched reference (``switched_states``) in position,
+    velocity and acceleration at ``timed``'s last switch: its values SWITCH_EPS after it less
+    ``before``'s SWITCH_EPS before it."""
+    at = float(timed.switch_times[-1])
+    left = reference_states(before, np.array([at - SWITCH_EPS]), reference, rate)
+    right = reference_states(timed, np.array([at + SWITCH_EPS]), reference, rate, before=before)
+    return tuple(float(np.abs(r - x).max()) for r, x in zip(right, left))
+
+
+def commanded_acceleration(run: DrivenRun) -> np.ndarray:
+    """The setpoints' acceleration (steps - 1, 4) rad/s^2 at t = dt, 2 dt, ...: their second
+    difference over the physics step, the reference's start as the setpoint at t = 0."""
+    c = np.concatenate([run.reference[:1], run.command])
+    return np.diff(c, n=2, axis=0) / run.dt**2
+
+
+def _changes(acc: np.ndarray, dt: float, at: float, w: int) -> tuple[float, float]:
+    """The largest change of ``acc`` (at t = dt, 2 dt, ...) over ``w`` physics steps across t =
+    ``at`` and elsewhere. Change i, from the acceleration at (i + 1) dt to (i + 1 + w) dt, takes
+    the setpoints at i dt to (i + w + 2) dt: it reaches across ``at`` where those span it."""
+    change = np.abs(acc[w:] - acc[:-w]).max(axis=1)
+    i = np.arange(len(change))
+    across = (i * dt <= at) & (at <= (i + w + 2) * dt)
+    return float(change[across].max(initial=0.0)), float(change[~across].max(initial=0.0))
+
+
+def switch_figures(run: DrivenRun, at: float, jumps=(0.0, 0.0, 0.0)) -> SwitchFigures:
+    """A SwitchFigures of the replay ``run`` through the switch at t = ``at`` (s): the reference's
+    ``jumps`` there (``reference_jumps``), and the commanded acceleration's largest change across
+    it and elsewhere over a physics step and over a control period (``run.sub`` steps)."""
+    acc = commanded_acceleration(run)
+    ratio = lambda a, b: a / b if b > 0.0 else math.inf  # noqa: E731
+    step, other = _changes(acc, run.dt, at, 1)
+    period, period_other = _changes(acc, run.dt, at, run.sub)
+    return SwitchFigures(
+        switch_time_s=float(at),
+        position_jump_rad=jumps[0],
+        velocity_jump_rad_s=jumps[1],
+        acceleration_jump_rad_s2=jumps[2],
+        switch_step_rad_s2=step,
+        step_elsewhere_rad_s2=other,
+        step_ratio=ratio(step, other),
+        period_change_rad_s2=period,
+        period_change_elsewhere_rad_s2=period_other,
+        period_ratio=ratio(period, period_other),
+    )
+
+
+@dataclasses.dataclass(frozen=True)
 class DrivenReplay:
     """A driven replay (``driven_replay``): the swing's method and jaxexo's verdict, the margin (m),
     the controller, the reference and its rate (Hz; None for the curve), the drives' limits, the
-    physics step and the settle (s), MuJoCo's figures and the replay's wall time (s)."""
+    physics step and the settle (s), MuJoCo's figures, the replay's wall time (s) and, for a swing
+    replayed through its switch (``before``), the commanded acceleration there."""
 
     method: str
     flagged_ok: bool
@@ -402,12 +575,17 @@ class DrivenReplay:
     settle_s: float
     figures: DrivenFigures
     seconds: float
+    switch: SwitchFigures | None = None
 
     def to_dict(self) -> dict:
-        """The JSON entry: the fields in order, the limits as their dict, the figures spread flat."""
-        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)[:-2]}
+        """The JSON entry: the fields in order, the limits as their dict, the figures spread flat;
+        the switch's figures, where replayed through one, as their dict."""
+        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)[:-3]}
         out["limits"] = self.limits.to_dict()
-        return {**out, **dataclasses.asdict(self.figures), "seconds": self.seconds}
+        out = {**out, **dataclasses.asdict(self.figures), "seconds": self.seconds}
+        if self.switch is not None:
+            out["switch"] = dataclasses.asdict(self.switch)
+        return out
 
 
 def _driven_figures(timed, config, legs: Legs, run: DrivenRun) -> DrivenFigures:
@@ -463,6 +641,7 @@ def driven_replay(
     *,
     reference: str = "curve",
     reference_rate: float | None = None,
+    before=None,
 ) -> DrivenReplay:
     """The driven replay of a TimedSwing (docs/safety.md): a setpoint generator (``setpoints``)
     moves each command towards the ``reference`` (``reference_states``: "curve", the timed curve at
@@ -471,14 +650,23 @@ def driven_replay(
     default: the config's [device]), and the ``controller`` drives the legs after it: "pd_ff",
     inverse-dynamics feed-forward (``feed_forward``) plus a PD loop (``_pd_gains``); "servo", stiff
     position servos on the positions alone (they lag a moving reference by 2 / omega times its
-    speed). The commands are computed first (they do not depend on the simulation), then MuJoCo
-    rolls the model out in one call. SI units."""
+    speed). ``before``: for a swing replanned in flight (``timed``), the swing it was replanned
+    from; the reference follows it until the switch and ``timed`` after (``switched_states``), in
+    ``timed``'s scene from the start, and the replay measures the commanded acceleration across
+    the switch (``switch_figures``). The commands are computed first (they do not depend on the
+    simulation), then MuJoCo rolls the model out in one call. SI units."""
     limits = _check_driven(config, limits, settle, controller)
     ref_rate = check_reference(timed, reference, reference_rate)
+    if before is not None:
+        check_before(timed, before, reference)
     t0 = time.perf_counter()
     legs = Legs(config, timed.scene) if legs is None else legs
-    run = _simulate(timed, legs, limits, settle, controller, reference, ref_rate)
+    run = _simulate(timed, legs, limits, settle, controller, reference, ref_rate, before=before)
     figures = _driven_figures(timed, config, legs, run)
+    switch = None
+    if before is not None:
+        jumps = reference_jumps(timed, before, reference, ref_rate)
+        switch = switch_figures(run, float(timed.switch_times[-1]), jumps)
     return DrivenReplay(
         method=timed.method,
         flagged_ok=bool(timed.ok),
@@ -491,4 +679,5 @@ def driven_replay(
         settle_s=float(settle),
         figures=figures,
         seconds=time.perf_counter() - t0,
+        switch=switch,
     )
