@@ -485,3 +485,30 @@ def recorded_swing(sp, rec: dict, heel=None):
     heel = np.asarray(rec["heel"] if heel is None else heel, np.float64)
     dev = np.array([rec["deviation"]])
     return assemble("rl", sp, [scene], [heel], heel[None], [float("nan")], deviation=dev)[0]
+
+
+def lifted_continuation(gen, swing, at: float, lift: float, scene=None):
+    """A test continuation of a timed swing from its heel at ``at`` (jaxexo.swing.replan's
+    continue_swing takes it as a generator's Trajectory): the swing's own heel path from there,
+    raised by ``lift`` * 16 u^2 (1 - u)^2 (u from 0 to 1 along it), over ``scene`` (default: the
+    swing's), its joints by the legs' inverse kinematics."""
+    import types
+
+    import numpy as np
+
+    from jaxexo.swing.timing import leg_angles
+
+    t = np.linspace(at, swing.duration, 150)
+    heel = swing.at(t).heel.copy()
+    u = np.linspace(0.0, 1.0, len(t))
+    heel[:, 1] += lift * 16.0 * u * u * (1.0 - u) ** 2
+    q = leg_angles(gen.sp, swing.scene.pivot_y, heel)
+    return types.SimpleNamespace(
+        method="test",
+        scene=scene or swing.scene,
+        heel=heel,
+        joint_angles=q,
+        notes=(),
+        raw=heel,
+        ok=True,
+    )

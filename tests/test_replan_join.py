@@ -7,8 +7,6 @@ piece by piece. Refusals of bad switch times."""
 
 from __future__ import annotations
 
-import types
-
 import numpy as np
 import pytest
 
@@ -16,9 +14,9 @@ from jaxexo.baselines import CFFTG
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.physics.geometry import Obstacle
 from jaxexo.swing import replan
-from jaxexo.swing.timing import leg_angles, time_swing
+from jaxexo.swing.timing import time_swing
 
-from conftest import ROOT
+from conftest import ROOT, lifted_continuation
 
 POLICY = ROOT / "tests" / "data" / "reference" / "policy.npz"
 
@@ -35,17 +33,7 @@ def swings():
     return gen, out
 
 
-def lifted(gen, swing, at: float, lift: float):
-    """A continuation from the swing's heel at ``at``: its own heel path from there, raised by
-    ``lift`` * 16 u^2 (1 - u)^2 (u from 0 to 1 along it)."""
-    t = np.linspace(at, swing.duration, 150)
-    heel = swing.at(t).heel.copy()
-    u = np.linspace(0.0, 1.0, len(t))
-    heel[:, 1] += lift * 16.0 * u * u * (1.0 - u) ** 2
-    q = leg_angles(gen.sp, swing.scene.pivot_y, heel)
-    return types.SimpleNamespace(
-        method="test", scene=swing.scene, heel=heel, joint_angles=q, notes=(), raw=heel, ok=True
-    )
+lifted = lifted_continuation
 
 
 CASES = [(i, f, lift) for i in range(6) for f in (0.15, 0.4, 0.6) for lift in (0.0, 0.03)]

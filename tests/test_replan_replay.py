@@ -17,9 +17,9 @@ from jaxexo.baselines import CFFTG
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.physics.geometry import Obstacle
 from jaxexo.swing import replan
-from jaxexo.swing.timing import leg_angles, time_swing
+from jaxexo.swing.timing import time_swing
 
-from conftest import ROOT
+from conftest import ROOT, lifted_continuation
 
 mujoco = pytest.importorskip("mujoco")
 
@@ -36,23 +36,7 @@ POLICY = ROOT / "tests" / "data" / "reference" / "policy.npz"
 FRAC = 0.2  # the switch, as a fraction of the old swing
 
 
-def continuation(gen, swing, at: float, lift: float, scene=None):
-    """A continuation from the swing's heel at ``at``: its own heel path from there raised by
-    ``lift`` * 16 u^2 (1 - u)^2 (u from 0 to 1 along it), over ``scene`` (default: the swing's)."""
-    t = np.linspace(at, swing.duration, 150)
-    heel = swing.at(t).heel.copy()
-    u = np.linspace(0.0, 1.0, len(t))
-    heel[:, 1] += lift * 16.0 * u * u * (1.0 - u) ** 2
-    q = leg_angles(gen.sp, swing.scene.pivot_y, heel)
-    return types.SimpleNamespace(
-        method="test",
-        scene=scene or swing.scene,
-        heel=heel,
-        joint_angles=q,
-        notes=(),
-        raw=heel,
-        ok=True,
-    )
+continuation = lifted_continuation
 
 
 def taller_scene(gen, swing, obstacle):
