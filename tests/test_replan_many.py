@@ -6,7 +6,7 @@ differences at 1 kHz stay within the proven peaks and, for a swing within the li
 planned limits; and every swing flagged ok is found clear of the true obstacle by the margin by a
 dense look at 5 kHz (segment distances written in the benchmark, not jaxexo.physics), above the
 ground and at rest on the floor within 5 cm of the goal. JAXEXO_REPLAN_SCALE=k multiplies the
-scenes (the CI run replans about 200 swings; a run at scale 10, about 2,000, is quoted in
+scenes (the CI run replans about 165 swings; a run at scale 10, 1,658, is quoted in
 docs/replanning.md)."""
 
 from __future__ import annotations
