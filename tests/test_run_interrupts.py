@@ -372,3 +372,27 @@ def test_ctrl_c_anywhere_in_main_is_one_line_and_exit_130(monkeypatch, capsys, w
         pytest.fail("main let the KeyboardInterrupt through (a traceback on the command line)")
     err = capsys.readouterr().err
     assert code == 130 and err == "jaxexo: interrupted\n", (code, err)
+
+
+def test_a_ctrl_c_wrapped_by_a_class_definition_ends_with_the_one_line(monkeypatch, capsys):
+    """A KeyboardInterrupt raised while an import makes a class reaches main as a RuntimeError
+    (Python 3.11 wraps an exception in __set_name__): still one line and exit 130; any other
+    RuntimeError is not an interrupt and propagates."""
+    import jaxexo.cli as cli
+
+    def wrapped(argv):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as e:
+            raise RuntimeError("Error calling __set_name__ on 'Field' instance") from e
+
+    monkeypatch.setattr(cli, "_main", wrapped)
+    assert cli.main([]) == 130
+    assert capsys.readouterr().err == "jaxexo: interrupted\n"
+
+    def other(argv):
+        raise RuntimeError("a real error")
+
+    monkeypatch.setattr(cli, "_main", other)
+    with pytest.raises(RuntimeError, match="a real error"):
+        cli.main([])

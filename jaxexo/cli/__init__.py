@@ -95,14 +95,27 @@ def _warning_line(message, category, filename, lineno, file=None, line=None) -> 
 def main(argv=None) -> int:
     try:
         return _main(argv)
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, RuntimeError) as e:
         # Ctrl-C before a command's own handling took over (jaxexo.cli.interrupt: train's, from its
         # first line) or in a command without one: one line, not a traceback; every file written so
-        # far is whole (jaxexo.storage.atomic removes its temporary file on any exception).
+        # far is whole (jaxexo.storage.atomic removes its temporary file on any exception). A
+        # Ctrl-C while an import makes a class reaches here wrapped (Python 3.11 raises a
+        # RuntimeError from an exception in __set_name__).
+        if not interrupted(e):
+            raise
         from jaxexo.cli.interrupt import EXIT_CODE
 
         print("jaxexo: interrupted", file=sys.stderr)
         return EXIT_CODE
+
+
+def interrupted(e: BaseException) -> bool:
+    """Whether ``e`` is a Ctrl-C: a KeyboardInterrupt, or an exception raised from one."""
+    while e is not None:
+        if isinstance(e, KeyboardInterrupt):
+            return True
+        e = e.__cause__
+    return False
 
 
 def _main(argv) -> int:
