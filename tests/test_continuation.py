@@ -16,14 +16,13 @@ from jaxexo.inference import TrajectoryGenerator
 from jaxexo.inference.scenarios import safety_scenarios
 from jaxexo.physics import geometry, transition
 from jaxexo.physics.geometry import Obstacle
-from jaxexo.physics.scene import stack_scenes
 from jaxexo.physics.transition import scalar
 from jaxexo.swing.continuation import policy_clock
 from jaxexo.swing.replan import foot_state
 from jaxexo.swing.timing import time_swing
 
 from conftest import ROOT
-from test_fast_rollout import _plain_q
+from test_fast_rollout import _reference_rollout
 
 POLICY = ROOT / "tests" / "data" / "reference" / "policy.npz"
 
@@ -65,29 +64,6 @@ def cases():
     return gen, cf, out
 
 
-def _reference_from(gen, scene, heel, steps, visited):
-    """``rollout_from``'s loop written with jaxexo.physics.transition's functions themselves."""
-    sp, step = gen.sp, gen.step_net
-    step.set_scene(gen._basis(scene))
-    mid_y, mid_z = transition.mid_goal(scalar, sp, scene.center_y, scene.height)
-    (hy, hz), t, last = heel, steps, -1
-    pts = [(hy, hz)]
-    single = gen._shield("scalar").swing(scene, stack_scenes([scene], np.float32))
-    while True:
-        a = single.choose(hy, hz, _plain_q(step, hy, hz, t, 1.0 if visited else 0.0), last)
-        hy, hz = transition.move_heel(scalar, sp, hy, hz, *gen.directions[a])
-        t += 1
-        visited = visited or transition.in_mid_goal(scalar, sp, hy, hz, mid_y, mid_z)
-        pts.append((hy, hz))
-        last = int(a)
-        reached = transition.goal_reached(scalar, sp, hy, hz, scene.goal_y)
-        if transition.terminated(scalar, gen._term_p, reached, False) or transition.truncated(
-            t, gen.max_steps
-        ):
-            break
-    return np.asarray(pts)
-
-
 def test_rollout_from_the_start_is_the_rollout_and_from_mid_air_the_rules_loop(cases):
     gen, _, rows = cases
     for old, new, st in rows[:4]:
@@ -100,7 +76,7 @@ def test_rollout_from_the_start_is_the_rollout_and_from_mid_air_the_rules_loop(c
         steps, visited = policy_clock(st, new, gen.sp, gen.max_steps)
         heel = (float(st.heel[0]), float(st.heel[1]))
         got, _ = gen.rollout_from(new, heel=heel, steps=steps, visited=visited)
-        assert np.array_equal(got, _reference_from(gen, new, heel, steps, visited))
+        assert np.array_equal(got, _reference_rollout(gen, new, heel, steps, visited)[0])
         assert 0 < steps < gen.max_steps and got[0].tolist() == list(heel)
 
 

@@ -35,12 +35,15 @@ def gen_scenes():
     ]
 
 
-def _reference_rollout(gen, scene):
-    """``TrajectoryGenerator.rollout``'s loop written with the transition functions themselves."""
+def _reference_rollout(gen, scene, heel=None, steps: int = 0, visited: bool = False):
+    """``TrajectoryGenerator.rollout``'s loop (``rollout_from``'s, from ``heel`` with the clock at
+    ``steps`` and the mid-goal flag ``visited``; None: the scene's start) written with the
+    transition functions themselves."""
     sp, step = gen.sp, gen.step_net
     step.set_scene(gen._basis(scene))
     mid_y, mid_z = transition.mid_goal(scalar, sp, scene.center_y, scene.height)
-    hy, hz, t, visited, last = float(scene.start_y), 0.0, 0, False, -1
+    (hy, hz) = (float(scene.start_y), 0.0) if heel is None else heel
+    t, last = steps, -1
     pts, acts = [(hy, hz)], []
     single = gen._shield("scalar").swing(scene, stack_scenes([scene], np.float32))
     while True:
