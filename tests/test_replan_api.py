@@ -98,3 +98,42 @@ def test_a_foot_already_at_the_new_obstacle_and_other_legs_are_refused(setup):
         gen.replan(
             gen.generate(Obstacle.rectangle(0.10, 0.05)), Obstacle.rectangle(0.1, 0.09), at=0.3
         )
+
+
+@pytest.mark.parametrize("rate", [500.0, 1000.0])
+def test_a_replanned_swings_exports_read_back_by_independent_clients(setup, tmp_path, rate):
+    """The replanned swing's JSON curve, evaluated as its `evaluate` text says by the evaluator of
+    tests/test_piecewise_export.py, is the swing's curve (C2 at every breakpoint, the switch's
+    included, within the limits it claims), and its ROS 2 JointTrajectory is built and read back
+    with rosbags (tests/test_export_clients.py's reader) bit for bit, at 500 Hz and 1 kHz."""
+    import json
+
+    from rosbags.typesys import Stores, get_typestore
+
+    from jaxexo.swing.export import JOINT_NAMES
+
+    from test_export_clients import JT, _check_message, _message
+    from test_piecewise_export import JsonCurve, _agreement, _c2_jumps
+
+    gen, cf, swing = setup
+    old_cf = time_swing(cf.generate(Obstacle.rectangle(0.10, 0.05)), gen.config)
+    for g, old in ((gen, swing), (cf, old_cf)):
+        new = g.replan(old, Obstacle.rectangle(0.10, 0.09), at=0.25, rate=rate)
+        assert new.ok
+        doc = json.loads(new.to_json(tmp_path / "replanned.json"))
+        assert doc["switch_times_s"] == [0.25]
+        curve = JsonCurve(doc)
+        err = _agreement(new, curve, dense=True)
+        assert err[0] <= 1e-12 and err[1] <= 1e-9 and err[2] <= 1e-9, err
+        assert max(_c2_jumps(curve)) < 1e-9
+        planned = new.limits.planned()
+        grid = np.arange(0.0, curve.duration, 1.0 / 20_000.0)
+        _, v, a, j = curve.joints(np.concatenate([grid, curve.tb]))
+        for x, lim in zip((v, a, j), (planned.velocity, planned.acceleration, planned.jerk)):
+            assert np.all(np.abs(x) <= np.asarray(lim) * (1.0 + 1e-9))
+        before = np.linspace(0.0, 0.25, 300)
+        assert np.abs(curve.joints(before)[0] - old.at(before).joint_angles).max() <= 1e-12
+        store = get_typestore(Stores.ROS2_HUMBLE)
+        msg = _message(store, JT, json.loads(new.to_joint_trajectory(tmp_path / "ros.json")))
+        back = store.deserialize_cdr(store.serialize_cdr(msg, JT), JT)
+        _check_message(back, new, JOINT_NAMES)
