@@ -225,15 +225,14 @@ def _blend(qdot: np.ndarray, q_c: np.ndarray, accel: float) -> float:
     return min(blend, 0.5 * float(chord[-1]))
 
 
-def _passes(path: JointPath, grid: np.ndarray, cap: np.ndarray, x0: float, constraints):
-    """The passes on the continuation's grid (K,) of s from a moving start (s'^2 = x0 at
-    grid[0]): s'^2 (K,), the cells' floors (K - 1,) and the grid's view."""
-    _, dq, ddq = paths_at([path], [grid], 2)[0]
-    view = GridView(grid, dq[None], ddq[None])
+def _passes(view: GridView, cap: np.ndarray, x0: float, constraints):
+    """The passes on the continuation's grid (``view``: its s (K,) and the path's derivatives
+    there) from a moving start (s'^2 = x0 at s[0]): s'^2 (K,) and the cells' floors (K - 1,)."""
     cap, a, b, bound = passes_rows(constraints, view, cap[None])
+    grid = view.s
     ds = (grid[-1] - grid[0]) / (len(grid) - 1)
     x, floor = topp(a, b, np.inf, bound, ds, cap, both_ends=True, start=np.array([x0]))
-    return x[0], floor[0], view
+    return x[0], floor[0]
 
 
 def _law(split: _Split, grid, x, floor, window: float) -> TimeLaw:
@@ -260,7 +259,7 @@ def _timed_law(split: _Split, path: JointPath, window: float, device: DeviceLimi
     cap, view, least = _first_caps(path, grid, x0, planned, reach)
     plan, last = None, np.inf
     for attempt in range(timing.LOCAL_PASSES + LIMIT_PASSES + 1):
-        x, floor, view = _passes(path, grid, cap, x0, passes)
+        x, floor = _passes(view, cap, x0, passes)
         law = _law(split, grid, x, floor, window)
         # The curve before the switch is the old swing's (its peaks bound it): bounded from there.
         plan = with_bounds([Plan(path, view, cap, x, law)], [0], [float(split.nodes[-1])])[0]
