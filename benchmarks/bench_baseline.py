@@ -11,8 +11,8 @@ from jaxexo.train.devices import use_all_cpu_cores
 
 use_all_cpu_cores()
 
-from jaxexo.benchmarks.baseline_bench import run_baseline_benchmark  # noqa: E402
-from jaxexo.benchmarks.runner import parser  # noqa: E402
+from benchlib.baseline_bench import run_baseline_benchmark  # noqa: E402
+from benchlib.runner import parser  # noqa: E402
 
 if __name__ == "__main__":
     root = Path(__file__).resolve().parent.parent

@@ -10,14 +10,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from jaxexo.benchmarks.course_bench import (
+from benchlib.course_bench import (
     markdown,
     run_course_benchmark,
     run_pivot_benchmark,
     run_swing_breakdown,
     summarize_log,
 )
-from jaxexo.benchmarks.runner import parser
+from benchlib.runner import parser
 
 OUT = Path(__file__).resolve().parent / "results"
 

@@ -5,8 +5,8 @@ Run: python benchmarks/bench_device_ready.py RUN_DIR/policy.npz [--n 300] [--rat
 
 from pathlib import Path
 
-from jaxexo.benchmarks.device_ready_bench import OPTIONS, run_device_ready_benchmark
-from jaxexo.benchmarks.runner import run_script
+from benchlib.device_ready_bench import OPTIONS, run_device_ready_benchmark
+from benchlib.runner import run_script
 
 if __name__ == "__main__":
     results = Path(__file__).resolve().parent / "results"

@@ -6,8 +6,8 @@ Run: python benchmarks/bench_generate.py RUN_DIR/policy.npz
 
 from pathlib import Path
 
-from jaxexo.benchmarks.generate_bench import run_generate_benchmark
-from jaxexo.benchmarks.runner import parser
+from benchlib.generate_bench import run_generate_benchmark
+from benchlib.runner import parser
 
 if __name__ == "__main__":
     p = parser(__doc__)

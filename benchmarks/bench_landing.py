@@ -11,8 +11,8 @@ Run: python benchmarks/bench_landing.py RUN_DIR/policy.npz [--n 300] [--tag NAME
 
 from pathlib import Path
 
-from jaxexo.benchmarks.landing_bench import run_landing_benchmark
-from jaxexo.benchmarks.runner import parser
+from benchlib.landing_bench import run_landing_benchmark
+from benchlib.runner import parser
 
 if __name__ == "__main__":
     p = parser(__doc__)

@@ -16,8 +16,8 @@ from jaxexo.train.devices import use_all_cpu_cores
 
 use_all_cpu_cores()
 
-from jaxexo.benchmarks.runner import parser  # noqa: E402
-from jaxexo.benchmarks.sweep_bench import run_lanes_benchmark  # noqa: E402
+from benchlib.runner import parser  # noqa: E402
+from benchlib.sweep_bench import run_lanes_benchmark  # noqa: E402
 
 if __name__ == "__main__":
     parser(__doc__, policy=False).parse_args()

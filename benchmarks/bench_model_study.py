@@ -11,8 +11,8 @@ Run: python benchmarks/bench_model_study.py SWEEP_DIR [--n 120] [--time-n 80] [-
 
 from pathlib import Path
 
-from jaxexo.benchmarks.model_study_bench import rerender, run_model_study
-from jaxexo.benchmarks.runner import parser
+from benchlib.model_study_bench import rerender, run_model_study
+from benchlib.runner import parser
 
 if __name__ == "__main__":
     ap = parser(__doc__.split("\n\n")[0], policy=False)

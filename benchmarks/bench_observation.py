@@ -11,8 +11,8 @@ from jaxexo.train.devices import use_all_cpu_cores
 
 use_all_cpu_cores()
 
-from jaxexo.benchmarks.observation_bench import run_observation_study  # noqa: E402
-from jaxexo.benchmarks.runner import parser  # noqa: E402
+from benchlib.observation_bench import run_observation_study  # noqa: E402
+from benchlib.runner import parser  # noqa: E402
 
 if __name__ == "__main__":
     root = Path(__file__).resolve().parent.parent

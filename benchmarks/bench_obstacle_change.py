@@ -12,7 +12,7 @@ Run: python benchmarks/bench_obstacle_change.py off=RUN_OFF/policy.npz on=RUN_ON
 import argparse
 from pathlib import Path
 
-from jaxexo.benchmarks.obstacle_change_bench import run_obstacle_change_benchmark
+from benchlib.obstacle_change_bench import run_obstacle_change_benchmark
 
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(

@@ -16,8 +16,8 @@ from jaxexo.train.devices import use_all_cpu_cores
 
 use_all_cpu_cores()
 
-from jaxexo.benchmarks.population_bench import run_population_benchmark  # noqa: E402
-from jaxexo.benchmarks.runner import parser  # noqa: E402
+from benchlib.population_bench import run_population_benchmark  # noqa: E402
+from benchlib.runner import parser  # noqa: E402
 
 if __name__ == "__main__":
     p = parser(__doc__, policy=False)

@@ -7,8 +7,8 @@ Run: python benchmarks/bench_replan.py RUN_DIR/policy.npz [--n 300] [--seed 5917
 
 from pathlib import Path
 
-from jaxexo.benchmarks.replan_bench import OPTIONS, run_replan_benchmark
-from jaxexo.benchmarks.runner import run_script
+from benchlib.replan_bench import OPTIONS, run_replan_benchmark
+from benchlib.runner import run_script
 
 if __name__ == "__main__":
     results = Path(__file__).resolve().parent / "results"

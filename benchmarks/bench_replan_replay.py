@@ -15,8 +15,8 @@ Run: python benchmarks/bench_replan_replay.py RUN_DIR/policy.npz [--n 200] [--se
 
 from pathlib import Path
 
-from jaxexo.benchmarks.replan_replay_bench import run_replan_replay_benchmark
-from jaxexo.benchmarks.runner import run_script
+from benchlib.replan_replay_bench import run_replan_replay_benchmark
+from benchlib.runner import run_script
 
 if __name__ == "__main__":
     run_script(

@@ -11,8 +11,8 @@ Run: python benchmarks/bench_replay.py RUN_DIR/policy.npz [--n 1000] [--rate 100
 
 from pathlib import Path
 
-from jaxexo.benchmarks.replay_bench import run_replay_benchmark
-from jaxexo.benchmarks.runner import parser
+from benchlib.replay_bench import run_replay_benchmark
+from benchlib.runner import parser
 
 if __name__ == "__main__":
     p = parser(__doc__)

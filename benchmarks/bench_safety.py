@@ -14,8 +14,8 @@ Run: python benchmarks/bench_safety.py RUN_DIR/policy.npz [--n 2000]
 
 from pathlib import Path
 
-from jaxexo.benchmarks.runner import parser
-from jaxexo.benchmarks.safety_bench import run_safety_benchmark
+from benchlib.runner import parser
+from benchlib.safety_bench import run_safety_benchmark
 
 if __name__ == "__main__":
     p = parser(__doc__)

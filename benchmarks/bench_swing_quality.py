@@ -16,8 +16,8 @@ Run: python benchmarks/bench_swing_quality.py RUN_DIR/policy.npz [--n 600] [--cl
 
 from pathlib import Path
 
-from jaxexo.benchmarks.runner import parser
-from jaxexo.benchmarks.swing_quality_bench import run_swing_quality_benchmark
+from benchlib.runner import parser
+from benchlib.swing_quality_bench import run_swing_quality_benchmark
 
 if __name__ == "__main__":
     ap = parser(__doc__.split("\n\n")[0])

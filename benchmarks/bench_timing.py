@@ -8,8 +8,8 @@ Run: python benchmarks/bench_timing.py RUN_DIR/policy.npz
 
 from pathlib import Path
 
-from jaxexo.benchmarks.runner import run_script
-from jaxexo.benchmarks.timing_bench import OPTIONS, run_timing_benchmark
+from benchlib.runner import run_script
+from benchlib.timing_bench import OPTIONS, run_timing_benchmark
 
 if __name__ == "__main__":
     results = Path(__file__).resolve().parent / "results"

@@ -5,8 +5,8 @@ Run: python benchmarks/bench_tracking.py RUN_DIR/policy.npz [--n 100] [--rate 10
 
 from pathlib import Path
 
-from jaxexo.benchmarks.runner import parser
-from jaxexo.benchmarks.tracking_bench import run_tracking_benchmark
+from benchlib.runner import parser
+from benchlib.tracking_bench import run_tracking_benchmark
 
 if __name__ == "__main__":
     p = parser(__doc__)

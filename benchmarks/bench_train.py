@@ -60,15 +60,15 @@ if __name__ == "__main__":
     if a.steady:
         steady_module().run_train_steady(a.steady, a.budget, a.label, Path(a.out))
     elif a.mask_ab:
-        from jaxexo.benchmarks.train_bench import run_mask_ab_benchmark
+        from benchlib.train_bench import run_mask_ab_benchmark
 
         run_mask_ab_benchmark(a.mask_ab, a.updates, a.rounds, Path(a.out))
     elif a.breakdown:
-        from jaxexo.benchmarks.train_bench import run_breakdown_benchmark
+        from benchlib.train_bench import run_breakdown_benchmark
 
         run_breakdown_benchmark(a.breakdown, a.label, Path(a.out))
     else:
-        from jaxexo.benchmarks.train_bench import run_train_benchmark
+        from benchlib.train_bench import run_train_benchmark
 
         thesis = [
             str(ROOT / "configs" / "thesis" / f"{n}.toml")

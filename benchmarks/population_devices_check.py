@@ -13,8 +13,8 @@ Run: python benchmarks/population_devices_check.py
 
 from pathlib import Path
 
-from jaxexo.benchmarks.population_bench import run_population_devices_check
-from jaxexo.benchmarks.runner import parser
+from benchlib.population_bench import run_population_devices_check
+from benchlib.runner import parser
 
 if __name__ == "__main__":
     parser(__doc__, policy=False).parse_args()

@@ -5,8 +5,8 @@ to the tabulated figures (< 100 KB). Used when the models were reproduced in par
 
 Run: python benchmarks/reproduce_combine.py DIR [DIR ...]"""
 
-from jaxexo.benchmarks.runner import parser
-from jaxexo.benchmarks.thesis_reports import combine_reproduce
+from benchlib.runner import parser
+from benchlib.thesis_reports import combine_reproduce
 
 if __name__ == "__main__":
     p = parser(__doc__, policy=False)

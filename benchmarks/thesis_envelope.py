@@ -7,8 +7,8 @@ Run: python benchmarks/thesis_envelope.py"""
 
 from pathlib import Path
 
-from jaxexo.benchmarks.runner import parser
-from jaxexo.benchmarks.thesis_reports import run_envelope
+from benchlib.runner import parser
+from benchlib.thesis_reports import run_envelope
 
 if __name__ == "__main__":
     parser(__doc__, policy=False).parse_args()

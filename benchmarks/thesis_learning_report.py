@@ -11,8 +11,8 @@ Run: python benchmarks/thesis_learning_report.py STUDY SWEEP_FILE SWEEP_DIR [NOT
 
 from pathlib import Path
 
-from jaxexo.benchmarks.runner import parser
-from jaxexo.benchmarks.thesis_reports import learning_report
+from benchlib.runner import parser
+from benchlib.thesis_reports import learning_report
 
 if __name__ == "__main__":
     p = parser(__doc__, policy=False)

@@ -11,8 +11,8 @@ Run: python benchmarks/thesis_seed_check.py NOTE MODEL=RUN_DIR:SEED [MODEL=RUN_D
 
 from pathlib import Path
 
-from jaxexo.benchmarks.runner import parser
-from jaxexo.benchmarks.thesis_reports import seed_check
+from benchlib.runner import parser
+from benchlib.thesis_reports import seed_check
 
 if __name__ == "__main__":
     p = parser(__doc__, policy=False)

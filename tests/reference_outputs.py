@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxexo.baselines import CFFTG
-from jaxexo.benchmarks.scenes import batch_kwargs, safety_sets
+from benchlib.scenes import batch_kwargs, safety_sets
 from jaxexo.inference import GenerateOptions, TrajectoryGenerator, time_swings
 from jaxexo.inference.scenarios import training_scenarios
 

@@ -34,7 +34,6 @@ LAYERS = (
     ),  # exports policies for the generator, and picks them as it swings (selection)
     ("jaxexo.sim",),
     ("jaxexo.sweep", "jaxexo.evaluation"),
-    ("jaxexo.benchmarks",),
     ("jaxexo.cli", "jaxexo"),
 )
 

@@ -9,7 +9,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from jaxexo.benchmarks.thesis_baseline import ReplayBuffer, truncated_lambda_returns
+from benchlib.thesis_baseline import ReplayBuffer, truncated_lambda_returns
 from jaxexo.config import load_config
 
 from conftest import ROOT, get_mixed_config
@@ -17,7 +17,7 @@ from conftest import ROOT, get_mixed_config
 jax = pytest.importorskip("jax")
 import jax.numpy as jnp  # noqa: E402
 
-from jaxexo.benchmarks.thesis_baseline import NumpyExoEnv, layout_pool  # noqa: E402
+from benchlib.thesis_baseline import NumpyExoEnv, layout_pool  # noqa: E402
 from jaxexo.env import ExoStepEnv  # noqa: E402
 from jaxexo.env.exo_step import Layout  # noqa: E402
 from jaxexo.train import td_lambda  # noqa: E402
@@ -124,7 +124,7 @@ def test_numpy_environment_steps_like_the_jax_environment(which):
 
 
 def _learner(cfg, seed):
-    from jaxexo.benchmarks.baseline_bench import make_baseline
+    from benchlib.baseline_bench import make_baseline
 
     return make_baseline(cfg, layout_pool(cfg, 64, seed=2), eps_decay_steps=300, seed=seed)
 

@@ -273,7 +273,7 @@ def test_exploring_generator_is_seeded_and_differs_from_greedy(trained_run):
 
 @pytest.mark.slow
 def test_bench_summary_from_the_compare_part(trained_run, tmp_path):
-    from jaxexo.benchmarks.run_all import run_all
+    from benchlib.run_all import run_all
 
     with pytest.raises(ValueError, match="--skip"):
         run_all(tmp_path, skip="gpu")
@@ -307,8 +307,8 @@ def test_bench_keeps_the_policy_it_trained_until_the_course_part_has_run(tmp_pat
     removed). Training is stood in for by a policy file written where it would be."""
     from pathlib import Path
 
-    from jaxexo.benchmarks import course_bench
-    from jaxexo.benchmarks.run_all import run_all
+    from benchlib import course_bench
+    from benchlib.run_all import run_all
     from jaxexo.train import driver
 
     from test_reliability_inputs import make_policy

@@ -406,8 +406,8 @@ def test_cli_generate_takes_a_profile_file(tmp_path, capsys):
 
 
 def test_course_benchmark_figures_follow_from_its_rows(tmp_path, monkeypatch):
-    from jaxexo.benchmarks import course_bench
-    from jaxexo.benchmarks.run_all import summary_rows
+    from benchlib import course_bench
+    from benchlib.run_all import summary_rows
 
     from test_reliability_inputs import make_policy
 
@@ -432,7 +432,7 @@ def test_course_benchmark_figures_follow_from_its_rows(tmp_path, monkeypatch):
 
 
 def test_drawn_courses_have_their_obstacles_on_the_floor():
-    from jaxexo.benchmarks.course_bench import GAP, draw_course
+    from benchlib.course_bench import GAP, draw_course
 
     rng = np.random.default_rng(1)
     for _ in range(20):

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from jaxexo.baselines import CFFTG
-from jaxexo.benchmarks.scenes import batch_kwargs, safety_sets
+from benchlib.scenes import batch_kwargs, safety_sets
 from jaxexo.inference import Obstacle, TrajectoryGenerator
 from jaxexo.swing.limits import DeviceLimits
 from jaxexo.swing.timing import time_swing, time_swings

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from jaxexo.baselines import CFFTG
-from jaxexo.benchmarks.replan_bench import C2_EPS, dense_clearance, judge, surprise_scenes
+from benchlib.replan_bench import C2_EPS, dense_clearance, judge, surprise_scenes
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.swing.timing import time_swing
 

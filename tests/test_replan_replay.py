@@ -238,7 +238,7 @@ def test_a_bad_before_is_refused_naming_it(pairs):
 
 
 def test_the_benchmarks_surprise_scenes_are_what_they_say():
-    from jaxexo.benchmarks import replan_replay_bench as bench
+    from benchlib import replan_replay_bench as bench
     from jaxexo.physics.scene import make_scene
 
     foot = 0.2
@@ -265,7 +265,7 @@ def test_the_benchmark_replays_a_replanned_swing_through_its_switch(pairs):
     """The benchmark's scene through the public replan of both generators: the old swing over the
     estimate, the replan over the true obstacle at the scene's fraction, both references replayed
     through the switch in the true scene."""
-    from jaxexo.benchmarks import replan_replay_bench as bench
+    from benchlib import replan_replay_bench as bench
 
     gen, _ = pairs
     gens = {"rl": gen, "cfftg": CFFTG(gen.config)}

@@ -206,7 +206,7 @@ def test_thesis_baseline_environment_ends_where_the_rollouts_end(episodes):
     """The thesis-style NumPy environment (jaxexo.benchmarks.thesis_baseline.NumpyExoEnv, stepped one
     action at a time through jaxexo.physics.transition) replaying the rollouts' actions ends each
     episode on the same step, clipped corners included."""
-    from jaxexo.benchmarks.thesis_baseline import NumpyExoEnv
+    from benchlib.thesis_baseline import NumpyExoEnv
 
     e = episodes[0]
     gen, lay, paths, acts = e["gen"], e["lay"], e["paths"], e["acts"]

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from jaxexo.baselines import CFFTG
-from jaxexo.benchmarks.scenes import batch_kwargs, safety_sets
+from benchlib.scenes import batch_kwargs, safety_sets
 from jaxexo.config import scalar_params
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.swing.curve import JointPath

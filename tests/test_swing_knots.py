@@ -13,7 +13,7 @@ import pytest
 from scipy.interpolate import CubicSpline
 
 from jaxexo.baselines import CFFTG
-from jaxexo.benchmarks.scenes import batch_kwargs, safety_sets
+from benchlib.scenes import batch_kwargs, safety_sets
 from jaxexo.config import scalar_params
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.swing import knots, time_law

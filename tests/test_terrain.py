@@ -378,7 +378,7 @@ def test_a_config_of_drawn_profiles_round_trips_through_toml():
     numbers (it wrote ``np.float64(...)``, which made such a policy file unloadable)."""
     import tomllib
 
-    from jaxexo.benchmarks.observation_bench import study_config
+    from benchlib.observation_bench import study_config
     from jaxexo.config import config_from_dict
     from jaxexo.config.toml_io import config_to_toml
     from tests.conftest import ROOT

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from jaxexo.baselines import CFFTG
-from jaxexo.benchmarks.scenes import batch_kwargs, safety_sets
-from jaxexo.benchmarks.toppra_reference import va_optimum
+from benchlib.scenes import batch_kwargs, safety_sets
+from benchlib.toppra_reference import va_optimum
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.swing.timing import time_swings
 

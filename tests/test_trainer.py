@@ -339,7 +339,7 @@ def test_update_breakdown_refuses_the_backward_view_naming_the_field():
     the call, naming train.trace, before anything is compiled."""
     import dataclasses
 
-    from jaxexo.benchmarks.train_bench import update_breakdown
+    from benchlib.train_bench import update_breakdown
 
     cfg = load_config(ROOT / "configs" / "quick.toml")
     cfg = dataclasses.replace(cfg, train=dataclasses.replace(cfg.train, trace="backward"))

@@ -27,7 +27,7 @@ def cmd_bench_env(args) -> int:
 
     use_all_cpu_cores()
     cfg, name = load(args.config)
-    from jaxexo.benchmarks.env_bench import run_env_benchmark
+    from benchlib.env_bench import run_env_benchmark
 
     run_env_benchmark(
         cfg, Path(name).stem, args.envs, args.out, name=args.name, mixed=not args.no_mixed
@@ -46,7 +46,7 @@ def cmd_bench(args) -> int:
         )
     check_count(args.courses, "--courses")
     use_all_cpu_cores()
-    from jaxexo.benchmarks.run_all import run_all
+    from benchlib.run_all import run_all
 
     run_all(
         args.out,

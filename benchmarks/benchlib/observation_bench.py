@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxexo.benchmarks.scenes import set_table
+from benchlib.scenes import set_table
 from jaxexo.config import config_from_dict
 from jaxexo.evaluation.unseen import family_cells
 from jaxexo.physics import terrain

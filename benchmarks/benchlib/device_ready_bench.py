@@ -85,7 +85,7 @@ def _staged(swing_timing, fn) -> tuple[float, dict]:
 
 def rate_table(rl, cf, n: int) -> list[dict]:
     """Per benchmark set and generator, the safe swings timed at 100 Hz and at 1 kHz."""
-    from jaxexo.benchmarks.scenes import batch_kwargs, safety_sets
+    from benchlib.scenes import batch_kwargs, safety_sets
     from jaxexo.swing.timing import time_swings
 
     optimum = _optimum()
@@ -120,7 +120,7 @@ def _optimum():
         import toppra  # noqa: F401
     except ImportError:
         return None
-    from jaxexo.benchmarks.toppra_reference import va_optimum
+    from benchlib.toppra_reference import va_optimum
 
     return va_optimum
 

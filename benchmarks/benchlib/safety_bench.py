@@ -9,8 +9,8 @@ import numpy as np
 
 from jaxexo.baselines import CFFTG
 from jaxexo.baselines.cfftg import plan_basis
-from jaxexo.benchmarks.scenes import SHAPES, THESIS_FIVE, batch_kwargs
-from jaxexo.benchmarks.swing_quality_bench import CLEARING
+from benchlib.scenes import SHAPES, THESIS_FIVE, batch_kwargs
+from benchlib.swing_quality_bench import CLEARING
 from jaxexo.evaluation.machine import machine_info, write_result
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.inference.scenarios import safety_scenarios

@@ -186,14 +186,14 @@ def parse_skip(skip: str) -> frozenset:
 
 
 def _env_part(b: BenchRun) -> dict:
-    from jaxexo.benchmarks.env_bench import run_env_benchmark
+    from benchlib.env_bench import run_env_benchmark
     from jaxexo.config import load_config
 
     return run_env_benchmark(load_config(b.default), "default", [1, 256, 4096, 16384], b.out_dir)
 
 
 def _train_part(b: BenchRun) -> dict:
-    from jaxexo.benchmarks.train_bench import run_train_benchmark
+    from benchlib.train_bench import run_train_benchmark
 
     thesis = [
         str(ROOT / "configs" / "thesis" / f"{n}.toml")
@@ -234,13 +234,13 @@ def _policy_parts(b: BenchRun, policy) -> dict:
             run_training(load_config(b.default), Path(tmp) / "run", progress=False)
             policy = Path(tmp) / "run" / "policy.npz"
         if b.runs("generate"):
-            from jaxexo.benchmarks.generate_bench import run_generate_benchmark
+            from benchlib.generate_bench import run_generate_benchmark
 
             res["generate"] = run_generate_benchmark(policy, b.out_dir, b.n, b.progress)
         if b.runs("compare"):
             res["compare"] = _compare_part(b, policy, Path(tmp))
         if b.runs("course"):
-            from jaxexo.benchmarks.course_bench import run_course_benchmark
+            from benchlib.course_bench import run_course_benchmark
 
             res["course"] = run_course_benchmark(policy, b.out_dir, b.courses, progress=b.progress)
     return res
@@ -253,7 +253,7 @@ def _baseline_part(b: BenchRun, notes: list[str]) -> dict | None:
     except ImportError:
         notes.append('baseline skipped: PyTorch is not installed (pip install -e ".[train,bench]")')
         return None
-    from jaxexo.benchmarks.baseline_bench import run_baseline_benchmark
+    from benchlib.baseline_bench import run_baseline_benchmark
 
     return run_baseline_benchmark(
         b.out_dir, str(b.default), baseline_seconds=b.baseline_seconds, progress=b.progress

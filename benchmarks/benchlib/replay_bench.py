@@ -8,7 +8,7 @@ import time
 import numpy as np
 
 from jaxexo.baselines import CFFTG
-from jaxexo.benchmarks.scenes import batch_kwargs, safety_sets
+from benchlib.scenes import batch_kwargs, safety_sets
 from jaxexo.evaluation.machine import machine_info, write_result
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.physics import geometry

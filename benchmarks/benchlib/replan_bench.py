@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxexo.benchmarks.runner import Record
+from benchlib.runner import Record
 from jaxexo.summary import table
 
 # The surprises: how the estimate differs from the true obstacle (heights scaled by a factor, the

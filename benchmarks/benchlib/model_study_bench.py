@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxexo.baselines import CFFTG
-from jaxexo.benchmarks.swing_quality_bench import run_set, scene_sets
+from benchlib.swing_quality_bench import run_set, scene_sets
 from jaxexo.evaluation.compare import WithFallback, run_generators
 from jaxexo.evaluation.machine import machine_info, write_result
 from jaxexo.inference import TrajectoryGenerator

@@ -49,7 +49,7 @@ def time_import(repeats: int = 7) -> list[float]:
 
 _BATCH_CODE = """
 import json, sys
-from jaxexo.benchmarks.generate_bench import _batch_ms
+from benchlib.generate_bench import _batch_ms
 print(json.dumps(_batch_ms(sys.argv[1], int(sys.argv[2]))))
 """
 

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxexo.benchmarks.runner import Record
-from jaxexo.benchmarks.thesis_baseline import (
+from benchlib.runner import Record
+from benchlib.thesis_baseline import (
     BaselineSettings,
     NumpyExoEnv,
     SequentialTDLambda,
@@ -118,7 +118,7 @@ def throughput_figures(base: Config, b: Budgets) -> dict:
     """Env-steps/s of jaxexo's trainer and of the baseline on the thesis network, and their ratio."""
     import jax
 
-    from jaxexo.benchmarks.train_bench import thesis_network_config, throughput
+    from benchlib.train_bench import thesis_network_config, throughput
 
     tcfg = thesis_network_config(base, "forward")
     jx = throughput(tcfg, 10, repeats=3, devices=jax.local_devices()).to_dict()

@@ -12,8 +12,8 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from jaxexo.benchmarks.runner import Record, timed_calls
-from jaxexo.benchmarks.train_bench import throughput
+from benchlib.runner import Record, timed_calls
+from benchlib.train_bench import throughput
 from jaxexo.config import Config
 from jaxexo.summary import Summary, table
 from jaxexo.sweep.spec import load_sweep, sweep_from_dict

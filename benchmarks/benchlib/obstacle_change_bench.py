@@ -15,7 +15,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from jaxexo.benchmarks.swing_quality_bench import run_set, scene_sets
+from benchlib.swing_quality_bench import run_set, scene_sets
 from jaxexo.config import numpy_params
 from jaxexo.evaluation.machine import machine_info, write_result
 from jaxexo.inference import TrajectoryGenerator

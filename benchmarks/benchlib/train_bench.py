@@ -10,7 +10,7 @@ from pathlib import Path
 
 import jax
 
-from jaxexo.benchmarks.runner import Record, timed_calls
+from benchlib.runner import Record, timed_calls
 from jaxexo.config import Config
 from jaxexo.summary import Summary, table
 from jaxexo.train.trainer import Hyperparams, Trainer

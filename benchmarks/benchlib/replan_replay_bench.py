@@ -13,7 +13,7 @@ import time
 import numpy as np
 
 from jaxexo.baselines import CFFTG
-from jaxexo.benchmarks.runner import Record
+from benchlib.runner import Record
 from jaxexo.evaluation.machine import write_result
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.physics.geometry import Obstacle

@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 
 from jaxexo.baselines import CFFTG
-from jaxexo.benchmarks.runner import Record
-from jaxexo.benchmarks.scenes import (
+from benchlib.runner import Record
+from benchlib.scenes import (
     FAMILIES,
     SHAPES,
     THESIS_FIVE,
