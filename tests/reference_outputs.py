@@ -25,9 +25,10 @@ from pathlib import Path
 import numpy as np
 
 from jaxexo.baselines import CFFTG
-from benchlib.scenes import batch_kwargs, safety_sets
 from jaxexo.inference import GenerateOptions, TrajectoryGenerator, time_swings
 from jaxexo.inference.scenarios import training_scenarios
+
+from benchlib.scenes import batch_kwargs, safety_sets
 
 DATA = Path(__file__).resolve().parent / "data" / "reference"
 POLICY = DATA / "policy.npz"

@@ -42,7 +42,8 @@ LAYERS = (
 # matches anything, so this list can only shrink.
 KNOWN_EXCEPTIONS: set = set()
 
-SCRIPT_DIRS = ("benchmarks",)  # scripts outside the package: any import, but no private names
+# Scripts and the benchmark modules outside the package: any import, but no private names.
+SCRIPT_DIRS = ("benchmarks",)
 
 
 def _module_name(path: Path) -> str:
@@ -177,7 +178,7 @@ def test_no_import_cycles():
 
 def test_no_private_names_across_packages():
     files = [(n, p) for n, p in MODULES.items()]
-    files += [(f"{d}.{p.stem}", p) for d in SCRIPT_DIRS for p in sorted((ROOT / d).glob("*.py"))]
+    files += [(f"{d}.{p.stem}", p) for d in SCRIPT_DIRS for p in sorted((ROOT / d).rglob("*.py"))]
     bad = []
     for name, path in files:
         for target, private, line in _imports(name, path):
@@ -200,3 +201,24 @@ def test_known_exceptions_still_exist():
     }
     stale = sorted(KNOWN_EXCEPTIONS - found)
     assert not stale, f"remove these from KNOWN_EXCEPTIONS, their imports are gone: {stale}"
+
+
+def test_the_package_imports_neither_tests_nor_benchmarks():
+    """What a user imports is the package alone: no module of it imports a test module or a benchmark
+    one, but the benchmark commands (jaxexo.cli.bench), which run a source checkout's suite."""
+    outside = {p.stem for d in ("tests", "benchmarks") for p in (ROOT / d).glob("*.py")}
+    outside.add("benchlib")
+    bad = []
+    for name, path in MODULES.items():
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and not node.level:
+                targets = [node.module or ""]
+            else:
+                continue
+            for t in targets:
+                suite = name == "jaxexo.cli.bench" and t.startswith("benchlib.")
+                if t.split(".")[0] in outside and not suite:
+                    bad.append(f"{path.relative_to(ROOT)}:{node.lineno}: {name} imports {t}")
+    assert not bad, "the package imports from outside it:\n" + "\n".join(bad)

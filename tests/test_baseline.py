@@ -9,18 +9,19 @@ import dataclasses
 import numpy as np
 import pytest
 
-from benchlib.thesis_baseline import ReplayBuffer, truncated_lambda_returns
 from jaxexo.config import load_config
 
+from benchlib.thesis_baseline import ReplayBuffer, truncated_lambda_returns
 from conftest import ROOT, get_mixed_config
 
 jax = pytest.importorskip("jax")
 import jax.numpy as jnp  # noqa: E402
 
-from benchlib.thesis_baseline import NumpyExoEnv, layout_pool  # noqa: E402
 from jaxexo.env import ExoStepEnv  # noqa: E402
 from jaxexo.env.exo_step import Layout  # noqa: E402
 from jaxexo.train import td_lambda  # noqa: E402
+
+from benchlib.thesis_baseline import NumpyExoEnv, layout_pool  # noqa: E402
 
 
 def test_truncated_lambda_returns_equal_jaxexos_lambda_returns():

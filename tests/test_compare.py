@@ -307,10 +307,10 @@ def test_bench_keeps_the_policy_it_trained_until_the_course_part_has_run(tmp_pat
     removed). Training is stood in for by a policy file written where it would be."""
     from pathlib import Path
 
-    from benchlib import course_bench
-    from benchlib.run_all import run_all
     from jaxexo.train import driver
 
+    from benchlib import course_bench
+    from benchlib.run_all import run_all
     from test_reliability_inputs import make_policy
 
     def train(cfg, out, **_):

@@ -408,7 +408,6 @@ def test_cli_generate_takes_a_profile_file(tmp_path, capsys):
 def test_course_benchmark_figures_follow_from_its_rows(tmp_path, monkeypatch):
     from benchlib import course_bench
     from benchlib.run_all import summary_rows
-
     from test_reliability_inputs import make_policy
 
     # One short course with one obstacle: a few swings (the part's own sizes are for `jaxexo bench`).

@@ -1,6 +1,6 @@
-"""No dead functions: every function and method defined in the package (and every helper a test module
-defines) is named somewhere else, in the package, a test, a benchmark script or pyproject.toml (the CLI
-entry point), read from the source with ``ast``.
+"""No dead functions: every function and method defined in the package and the benchmark modules
+(benchmarks/benchlib), and every helper a test module defines, is named somewhere else, in the package,
+the benchmarks, a test or pyproject.toml (the CLI entry point), read from the source with ``ast``.
 
 A name counts as a reference where it is loaded (``f``), an attribute (``x.f``), an imported name, or a
 word inside a string that is not a docstring (``getattr(obj, "f")``, the entry point
@@ -97,6 +97,7 @@ def dead_functions(
 
 def test_every_function_is_reached():
     package = sorted((ROOT / "jaxexo").rglob("*.py"))
+    package += sorted((ROOT / "benchmarks" / "benchlib").rglob("*.py"))  # the benchmark modules
     tests = sorted((ROOT / "tests").rglob("*.py"))
     scripts = sorted((ROOT / "benchmarks").glob("*.py"))
     dead = {

@@ -170,7 +170,7 @@ def _prose_files():
         ("jaxexo", "**/*.py"),
         ("jaxexo", "**/*.toml"),
         ("tests", "*.py"),
-        ("benchmarks", "*.py"),
+        ("benchmarks", "**/*.py"),
         ("configs", "**/*.toml"),
         ("docs", "*.md"),
     ):

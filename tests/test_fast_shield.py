@@ -281,6 +281,7 @@ def test_time_breakdown_replays_the_rollouts_own_steps():
     """bench_generate's breakdown (jaxexo.benchmarks.generate_bench.time_breakdown) times the parts of
     real swings: its step count is the rollout's own (an independent count here), every part positive."""
     from jaxexo.baselines import CFFTG
+
     from benchlib.generate_bench import scene_set, time_breakdown
 
     gen = _random_generator()

@@ -14,12 +14,12 @@ import numpy as np
 import pytest
 
 from jaxexo.baselines import CFFTG
-from benchlib.scenes import batch_kwargs, safety_sets
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.swing.curve import JointPath, TimeLaw, cubic_paths, joints_at, law_from_speeds
 from jaxexo.swing.limit_proof import ROUNDING, curve_bounds
 from jaxexo.swing.timing import time_swings
 
+from benchlib.scenes import batch_kwargs, safety_sets
 from conftest import ROOT
 
 POLICY = ROOT / "tests" / "data" / "reference" / "policy.npz"

@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 
 from jaxexo.baselines import CFFTG
-from benchlib.scenes import batch_kwargs, safety_sets
 from jaxexo.inference import Obstacle, TrajectoryGenerator
 from jaxexo.swing.limits import DeviceLimits
 from jaxexo.swing.timing import time_swing, time_swings
 
+from benchlib.scenes import batch_kwargs, safety_sets
 from conftest import ROOT
 
 POLICY = ROOT / "tests" / "data" / "reference" / "policy.npz"

@@ -1,6 +1,6 @@
 """What travels between modules is a typed record (docs/architecture.md, "Records"), read from the
-source with ``ast``: no function in jaxexo/ returns a dict of more than five keys or a tuple of more
-than four, except the JSON documents, table rows and contracts listed in ALLOWED with their reason.
+source with ``ast``: no function in jaxexo/ or the benchmark modules (benchmarks/benchlib) returns a
+dict of more than five keys or a tuple of more than four, except the JSON documents, table rows and contracts listed in ALLOWED with their reason.
 An entry that no longer returns such a value must leave the list."""
 
 from __future__ import annotations
@@ -13,20 +13,21 @@ MAX_KEYS, MAX_ITEMS = 5, 4
 
 JSON = "a JSON document: written to a file as it is built"
 ROW = "one Markdown table row's cells"
-# (path under jaxexo/, function): why it may return a wide dict or tuple.
+# (path under jaxexo/, or benchmarks/benchlib/... for the benchmark modules, function): why it may
+# return a wide dict or tuple.
 ALLOWED = {
-    ("benchmarks/course_bench.py", "independent_checks"): JSON,
-    ("benchmarks/device_ready_bench.py", "_per_swing"): JSON,
-    ("benchmarks/device_ready_bench.py", "_duration_cells"): ROW,
-    ("benchmarks/course_bench.py", "summarize"): JSON,
-    ("benchmarks/generate_bench.py", "set_figures"): JSON,
-    ("benchmarks/model_study_bench.py", "verdicts"): JSON,
-    ("benchmarks/population_bench.py", "population_row"): JSON,
-    ("benchmarks/safety_bench.py", "generator_figures"): JSON,
+    ("benchmarks/benchlib/course_bench.py", "independent_checks"): JSON,
+    ("benchmarks/benchlib/device_ready_bench.py", "_per_swing"): JSON,
+    ("benchmarks/benchlib/device_ready_bench.py", "_duration_cells"): ROW,
+    ("benchmarks/benchlib/course_bench.py", "summarize"): JSON,
+    ("benchmarks/benchlib/generate_bench.py", "set_figures"): JSON,
+    ("benchmarks/benchlib/model_study_bench.py", "verdicts"): JSON,
+    ("benchmarks/benchlib/population_bench.py", "population_row"): JSON,
+    ("benchmarks/benchlib/safety_bench.py", "generator_figures"): JSON,
     ("config/obstacles.py", "write_terrain"): "the terrain table as TOML",
     ("config/obstacles.py", "terrain_params"): "EnvParams's fields by name, for EnvParams(**...)",
     ("config/changes.py", "change_params"): "EnvParams's fields by name, for EnvParams(**...)",
-    ("benchmarks/obstacle_change_bench.py", "_rates"): JSON,
+    ("benchmarks/benchlib/obstacle_change_bench.py", "_rates"): JSON,
     ("course/record.py", "to_dict"): JSON,
     ("evaluation/metrics.py", "summarize"): JSON + " (an eval report's entry)",
     ("evaluation/metrics.py", "summarize_device"): JSON + " (an eval report's entry)",
@@ -39,17 +40,17 @@ ALLOWED = {
     ("train/evaluate.py", "summarize"): JSON + " (eval.json)",
     ("train/run_files.py", "chunk_row"): JSON + " (a metrics.jsonl line)",
     ("train/records.py", "progress"): "the progress bar's postfix: formatted text by label",
-    ("benchmarks/landing_bench.py", "_cells"): ROW,
-    ("benchmarks/population_bench.py", "_cost_cells"): ROW,
-    ("benchmarks/replay_bench.py", "_driven"): ROW,
-    ("benchmarks/safety_bench.py", "_cells"): ROW,
-    ("benchmarks/timing_bench.py", "_cells"): ROW,
-    ("benchmarks/tracking_bench.py", "_cells"): ROW,
-    ("benchmarks/train_steady_bench.py", "_steady_cells"): ROW,
+    ("benchmarks/benchlib/landing_bench.py", "_cells"): ROW,
+    ("benchmarks/benchlib/population_bench.py", "_cost_cells"): ROW,
+    ("benchmarks/benchlib/replay_bench.py", "_driven"): ROW,
+    ("benchmarks/benchlib/safety_bench.py", "_cells"): ROW,
+    ("benchmarks/benchlib/timing_bench.py", "_cells"): ROW,
+    ("benchmarks/benchlib/tracking_bench.py", "_cells"): ROW,
+    ("benchmarks/benchlib/train_steady_bench.py", "_steady_cells"): ROW,
     ("env/exo_step.py", "step_env"): "the gymnax step: (obs, state, reward, done, info)",
     ("env/exo_step.py", "_step_outputs"): "step_env's outputs, inside its module",
     (
-        "benchmarks/thesis_baseline.py",
+        "benchmarks/benchlib/thesis_baseline.py",
         "step",
     ): "the gym step: (obs, reward, terminated, truncated, info)",
     ("plots/animate.py", "draw"): "matplotlib's blitted artists",
@@ -76,8 +77,10 @@ def _width(node: ast.expr) -> tuple[str, int] | None:
 def _wide_returns() -> dict[tuple[str, str], str]:
     found = {}
     pkg = ROOT / "jaxexo"
-    for path in sorted(pkg.rglob("*.py")):
-        rel = path.relative_to(pkg).as_posix()
+    for path in sorted(pkg.rglob("*.py")) + sorted(
+        (ROOT / "benchmarks" / "benchlib").rglob("*.py")
+    ):
+        rel = path.relative_to(pkg if path.is_relative_to(pkg) else ROOT).as_posix()
         for fn in ast.walk(ast.parse(path.read_text(), str(path))):
             if not isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
                 continue

@@ -17,10 +17,10 @@ import numpy as np
 import pytest
 
 from jaxexo.baselines import CFFTG
-from benchlib.replan_bench import C2_EPS, dense_clearance, judge, surprise_scenes
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.swing.timing import time_swing
 
+from benchlib.replan_bench import C2_EPS, dense_clearance, judge, surprise_scenes
 from conftest import ROOT
 
 POLICY = ROOT / "tests" / "data" / "reference" / "policy.npz"

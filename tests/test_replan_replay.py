@@ -238,8 +238,9 @@ def test_a_bad_before_is_refused_naming_it(pairs):
 
 
 def test_the_benchmarks_surprise_scenes_are_what_they_say():
-    from benchlib import replan_replay_bench as bench
     from jaxexo.physics.scene import make_scene
+
+    from benchlib import replan_replay_bench as bench
 
     foot = 0.2
     scenes = bench.surprise_scenes(foot, 48, seed=3)

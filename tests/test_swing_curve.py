@@ -12,13 +12,13 @@ import numpy as np
 import pytest
 
 from jaxexo.baselines import CFFTG
-from benchlib.scenes import batch_kwargs, safety_sets
 from jaxexo.config import scalar_params
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.swing.curve import JointPath
 from jaxexo.swing.limits import DeviceLimits
 from jaxexo.swing.timing import _joint_paths, time_swings
 
+from benchlib.scenes import batch_kwargs, safety_sets
 from conftest import ROOT
 
 POLICY = ROOT / "tests" / "data" / "reference" / "policy.npz"

@@ -13,13 +13,13 @@ import pytest
 from scipy.interpolate import CubicSpline
 
 from jaxexo.baselines import CFFTG
-from benchlib.scenes import batch_kwargs, safety_sets
 from jaxexo.config import scalar_params
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.swing import knots, time_law
 from jaxexo.swing.curve import chord_knots, cubic_paths, cubic_paths_ragged, distinct_samples
 from jaxexo.swing.timing import _joint_paths, _joint_samples, time_swings
 
+from benchlib.scenes import batch_kwargs, safety_sets
 from conftest import ROOT
 
 POLICY = ROOT / "tests" / "data" / "reference" / "policy.npz"

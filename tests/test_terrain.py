@@ -378,10 +378,11 @@ def test_a_config_of_drawn_profiles_round_trips_through_toml():
     numbers (it wrote ``np.float64(...)``, which made such a policy file unloadable)."""
     import tomllib
 
-    from benchlib.observation_bench import study_config
     from jaxexo.config import config_from_dict
     from jaxexo.config.toml_io import config_to_toml
     from tests.conftest import ROOT
+
+    from benchlib.observation_bench import study_config
 
     cfg = study_config(ROOT / "configs" / "default.toml", "shape", 1_000_000, per_family=2)
     assert len(cfg.layout.obstacles) == 2 * len(TRAIN_FAMILIES)

@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 
 from jaxexo.baselines import CFFTG
-from benchlib.scenes import batch_kwargs, safety_sets
-from benchlib.toppra_reference import va_optimum
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.swing.timing import time_swings
 
+from benchlib.scenes import batch_kwargs, safety_sets
+from benchlib.toppra_reference import va_optimum
 from conftest import ROOT
 
 POLICY = ROOT / "tests" / "data" / "reference" / "policy.npz"

@@ -14,6 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
+from jaxexo.config import Config, load_config
+from jaxexo.physics.actions import NUM_ACTIONS
+from jaxexo.summary import table
+
 from benchlib.runner import Record
 from benchlib.thesis_baseline import (
     BaselineSettings,
@@ -21,9 +25,6 @@ from benchlib.thesis_baseline import (
     SequentialTDLambda,
     layout_pool,
 )
-from jaxexo.config import Config, load_config
-from jaxexo.physics.actions import NUM_ACTIONS
-from jaxexo.summary import table
 
 POOL = 20_000
 

@@ -85,8 +85,9 @@ def _staged(swing_timing, fn) -> tuple[float, dict]:
 
 def rate_table(rl, cf, n: int) -> list[dict]:
     """Per benchmark set and generator, the safe swings timed at 100 Hz and at 1 kHz."""
-    from benchlib.scenes import batch_kwargs, safety_sets
     from jaxexo.swing.timing import time_swings
+
+    from benchlib.scenes import batch_kwargs, safety_sets
 
     optimum = _optimum()
     rows = []

@@ -8,11 +8,12 @@ import time
 import numpy as np
 
 from jaxexo.baselines import CFFTG
-from benchlib.scenes import batch_kwargs, safety_sets
 from jaxexo.evaluation.machine import write_result
 from jaxexo.inference import TrajectoryGenerator, time_swings
 from jaxexo.summary import Summary, table
 from jaxexo.swing.trajectory import assemble
+
+from benchlib.scenes import batch_kwargs, safety_sets
 
 
 def approach(heel: np.ndarray, drop: float = 0.02) -> float:

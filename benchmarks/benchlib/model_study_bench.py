@@ -12,12 +12,13 @@ from pathlib import Path
 import numpy as np
 
 from jaxexo.baselines import CFFTG
-from benchlib.swing_quality_bench import run_set, scene_sets
 from jaxexo.evaluation.compare import WithFallback, run_generators
 from jaxexo.evaluation.machine import machine_info, write_result
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.storage.atomic import atomic_write, write_figure
 from jaxexo.summary import Summary, table
+
+from benchlib.swing_quality_bench import run_set, scene_sets
 
 # The wearer's targets against CFFTG on the scenes both swing safely (lift and timed median <= CFFTG's,
 # timed p95 <= 1.1x), the longest RL swing on all scenes, RL alone's safe share on every set.

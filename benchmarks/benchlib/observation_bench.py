@@ -8,11 +8,12 @@ from pathlib import Path
 
 import numpy as np
 
-from benchlib.scenes import set_table
 from jaxexo.config import config_from_dict
 from jaxexo.evaluation.unseen import family_cells
 from jaxexo.physics import terrain
 from jaxexo.summary import table
+
+from benchlib.scenes import set_table
 
 STUDY_SEED = 7
 SEEN_SEED = 31_337

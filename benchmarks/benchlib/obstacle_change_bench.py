@@ -15,13 +15,14 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from benchlib.swing_quality_bench import run_set, scene_sets
 from jaxexo.config import numpy_params
 from jaxexo.evaluation.machine import machine_info, write_result
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.physics import changes, geometry, outcome
 from jaxexo.summary import table
 from jaxexo.train.evaluate import layout_set
+
+from benchlib.swing_quality_bench import run_set, scene_sets
 
 # The changes of (b): the [env] obstacle_change ranges of each (chance 1), the tallest obstacle
 # allowed (m) not capped at the training's so that "taller" means 30-60 % taller.

@@ -13,8 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
-from benchlib.runner import Record
 from jaxexo.summary import table
+
+from benchlib.runner import Record
 
 # The surprises: how the estimate differs from the true obstacle (heights scaled by a factor, the
 # width scaled, the obstacle moved in y by metres), each drawn per scene.

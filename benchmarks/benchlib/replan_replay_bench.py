@@ -13,7 +13,6 @@ import time
 import numpy as np
 
 from jaxexo.baselines import CFFTG
-from benchlib.runner import Record
 from jaxexo.evaluation.machine import write_result
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.physics.geometry import Obstacle
@@ -22,6 +21,8 @@ from jaxexo.physics.terrain import FAR_MARGIN, NEAR_MARGIN
 from jaxexo.sim.replay import Legs, driven_replay, summarize_driven
 from jaxexo.summary import Summary, table
 from jaxexo.swing.timing import time_swing
+
+from benchlib.runner import Record
 
 # Shapes of the held-out families (none is a training family: jaxexo.physics.terrain), drawn
 # wider and taller than those: a pole, stairs up or down, two or three bumps, a smooth bump.

@@ -8,7 +8,6 @@ import time
 import numpy as np
 
 from jaxexo.baselines import CFFTG
-from benchlib.scenes import batch_kwargs, safety_sets
 from jaxexo.evaluation.machine import machine_info, write_result
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.physics import geometry
@@ -22,6 +21,8 @@ from jaxexo.sim.replay import (
 )
 from jaxexo.summary import Summary, table
 from jaxexo.swing.timing import DeviceLimits, time_swings
+
+from benchlib.scenes import batch_kwargs, safety_sets
 
 
 def replay_set(sc, rl, cfftg, config, rate: float, driven: bool) -> dict:

@@ -186,8 +186,9 @@ def parse_skip(skip: str) -> frozenset:
 
 
 def _env_part(b: BenchRun) -> dict:
-    from benchlib.env_bench import run_env_benchmark
     from jaxexo.config import load_config
+
+    from benchlib.env_bench import run_env_benchmark
 
     return run_env_benchmark(load_config(b.default), "default", [1, 256, 4096, 16384], b.out_dir)
 

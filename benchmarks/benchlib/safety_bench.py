@@ -9,8 +9,6 @@ import numpy as np
 
 from jaxexo.baselines import CFFTG
 from jaxexo.baselines.cfftg import plan_basis
-from benchlib.scenes import SHAPES, THESIS_FIVE, batch_kwargs
-from benchlib.swing_quality_bench import CLEARING
 from jaxexo.evaluation.machine import machine_info, write_result
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.inference.scenarios import safety_scenarios
@@ -18,6 +16,9 @@ from jaxexo.physics import geometry, swept
 from jaxexo.summary import Summary, table
 from jaxexo.swing import smoothing as sm
 from jaxexo.swing.clearing import clear_smooth
+
+from benchlib.scenes import SHAPES, THESIS_FIVE, batch_kwargs
+from benchlib.swing_quality_bench import CLEARING
 
 FACTOR = 10
 

@@ -12,13 +12,14 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from benchlib.runner import Record, timed_calls
-from benchlib.train_bench import throughput
 from jaxexo.config import Config
 from jaxexo.summary import Summary, table
 from jaxexo.sweep.spec import load_sweep, sweep_from_dict
 from jaxexo.train.lanes import LANES, over_agents, over_lanes
 from jaxexo.train.trainer import Hyperparams, Trainer
+
+from benchlib.runner import Record, timed_calls
+from benchlib.train_bench import throughput
 
 TARGET_S = 600.0
 

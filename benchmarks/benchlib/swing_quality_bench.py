@@ -11,6 +11,13 @@ from pathlib import Path
 import numpy as np
 
 from jaxexo.baselines import CFFTG
+from jaxexo.evaluation.machine import machine_info, write_result
+from jaxexo.inference import TrajectoryGenerator, time_swings
+from jaxexo.physics import geometry, swept
+from jaxexo.storage.atomic import write_figure
+from jaxexo.summary import Summary
+from jaxexo.swing.timing import joint_jerk
+
 from benchlib.runner import Record
 from benchlib.scenes import (
     FAMILIES,
@@ -20,12 +27,6 @@ from benchlib.scenes import (
     safety_sets,
     set_table,
 )
-from jaxexo.evaluation.machine import machine_info, write_result
-from jaxexo.inference import TrajectoryGenerator, time_swings
-from jaxexo.physics import geometry, swept
-from jaxexo.storage.atomic import write_figure
-from jaxexo.summary import Summary
-from jaxexo.swing.timing import joint_jerk
 
 # RL swings whose smoothing a clearing pass corrected carry this module in their notes.
 CLEARING = "jaxexo.swing.clearing"

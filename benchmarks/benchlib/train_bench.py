@@ -10,10 +10,11 @@ from pathlib import Path
 
 import jax
 
-from benchlib.runner import Record, timed_calls
 from jaxexo.config import Config
 from jaxexo.summary import Summary, table
 from jaxexo.train.trainer import Hyperparams, Trainer
+
+from benchlib.runner import Record, timed_calls
 
 
 @dataclasses.dataclass(frozen=True)

@@ -1,13 +1,31 @@
 """``jaxexo bench-env`` (environment steps per second) and ``jaxexo bench`` (every benchmark into
-benchmarks/results with a summary table). What they measure: docs/benchmarks.md."""
+benchmarks/results with a summary table): both run the benchmark suite of a source checkout
+(benchmarks/benchlib beside the package), which an installed jaxexo does not carry. What they
+measure: docs/benchmarks.md."""
 
 from __future__ import annotations
 
 import argparse
 import math
+import sys
 from pathlib import Path
 
 from jaxexo.cli.common import check_count, load, real, whole
+
+# The checkout's benchmarks/ folder, whose benchlib package holds the suite.
+SUITE = Path(__file__).resolve().parents[2] / "benchmarks"
+
+
+def _use_suite(command: str) -> None:
+    """Puts the checkout's benchmarks/ on the import path; outside a checkout, an error naming the
+    folder it lacks."""
+    if not (SUITE / "benchlib").is_dir():
+        raise FileNotFoundError(
+            f"{command} runs the benchmark suite of a source checkout: there is no {SUITE}/benchlib "
+            "beside this jaxexo (clone the repository, pip install -e . and run it there)"
+        )
+    if str(SUITE) not in sys.path:
+        sys.path.insert(0, str(SUITE))
 
 
 def _sizes(text: str) -> list[int]:
@@ -25,6 +43,7 @@ def _sizes(text: str) -> list[int]:
 def cmd_bench_env(args) -> int:
     from jaxexo.train.devices import use_all_cpu_cores
 
+    _use_suite("jaxexo bench-env")
     use_all_cpu_cores()
     cfg, name = load(args.config)
     from benchlib.env_bench import run_env_benchmark
@@ -45,6 +64,7 @@ def cmd_bench(args) -> int:
             f"got {as_given(args.baseline_seconds)}"
         )
     check_count(args.courses, "--courses")
+    _use_suite("jaxexo bench")
     use_all_cpu_cores()
     from benchlib.run_all import run_all
 
