@@ -133,3 +133,16 @@ def test_version():
         "Obstacle",
         "GeometryError",
     }
+
+
+def test_the_benchmark_commands_outside_a_checkout_name_the_missing_folder(
+    tmp_path, monkeypatch, capsys
+):
+    """An installed jaxexo has no benchmark suite: bench and bench-env say which folder they lack."""
+    from jaxexo.cli import bench, main
+
+    monkeypatch.setattr(bench, "SUITE", tmp_path / "benchmarks")
+    for argv in (["bench-env", "--envs", "1"], ["bench", "--skip", "env"]):
+        assert main(argv) == 1
+        err = capsys.readouterr().err
+        assert f"no {tmp_path}/benchmarks/benchlib" in err and "source checkout" in err, err
