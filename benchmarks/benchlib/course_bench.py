@@ -318,49 +318,90 @@ def summarize(rows, refused, n, seed) -> dict:
     }
 
 
+def _table_rows(res: dict) -> list[tuple]:
+    """The summary table's rows: (figure, RL alone, CFFTG, target)."""
+    d, rr = res["duration_s_median"], res["duration_ratio_rl_over_cfftg"]
+    rows = [
+        (
+            "courses with every swing safe (strict verdict, 2 cm)",
+            *(_pct(res[k]) for k in ("rl_alone_success", "cfftg_success")),
+            "RL >= 99 %",
+        ),
+        (
+            f"walk duration at the device limits, median (both ok, n = {rr['n']})",
+            *(_num(d[g], "{:.2f} s") for g in ("rl", "cfftg")),
+            "RL <= CFFTG",
+        ),
+        (
+            "RL / CFFTG duration per course: median, max",
+            f"{_num(rr['median'])}, {_num(rr['max'])}",
+            "",
+            "<= 1",
+        ),
+        (
+            "planning CPU time per step (footholds and timing included), median",
+            f"{_num(res['plan_s_per_step_median'])} s",
+            "",
+            "",
+        ),
+        (
+            f"one swing alone (generate + time_swing), CPU, median of {res['reference_courses']} "
+            "courses' first steps",
+            f"{_num(res['one_swing_s_median'])} s",
+            "",
+            "",
+        ),
+        (
+            "per step / one swing, median",
+            _num(res["per_step_over_one_swing_median"], "{:.2f}x"),
+            "",
+            "<= 1.5x",
+        ),
+    ]
+    for label in ("rl", "cfftg"):
+        c = res["checks"][label]
+        rows.append(
+            (
+                f"{label}: walks checked independently: landings on flat ground, within the limits "
+                "(finite differences), uniform time",
+                f"{c['landings_ok']}, {c['within_limits']}, {c['uniform_time']} of {c['walks']}",
+                "",
+                "all",
+            )
+        )
+        rows.append(
+            (
+                f"{label}: least foot clearance at the samples; largest joint step per sample; peak "
+                "velocity and acceleration / limit",
+                f"{_num(c['min_sample_clearance_m'], '{:.4f} m')}; "
+                f"{_num(c['max_joint_step_rad'], '{:.4f} rad')}; {_num(c['max_velocity_ratio'])}, "
+                f"{_num(c['max_acceleration_ratio'])}",
+                "",
+                ">= 0.02 m; -; <= 1",
+            )
+        )
+    return rows
+
+
+def _pct(x) -> str:
+    return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{100 * x:.1f} %"
+
+
+def _num(x, fmt="{:.3f}") -> str:
+    return "-" if x is None else fmt.format(x)
+
+
 def markdown(res: dict) -> str:
-    def pct(x):
-        return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{100 * x:.1f} %"
-
-    def num(x, fmt="{:.3f}"):
-        return "-" if x is None else fmt.format(x)
-
-    d = res["duration_s_median"]
-    rr = res["duration_ratio_rl_over_cfftg"]
     lines = [
         "# Walks over courses: RL alone against CFFTG on the same footholds",
         "",
         f"{res['courses_drawn']} courses drawn (seed {res['seed']}; 3-8 m, 2-8 obstacles from the held-out families "
         f"and random profiles); {res['planned']} planned, {res['refused']} refused before any swing "
-        f"(slowest refusal {num(res['refusal_seconds_max'])} s CPU). Median {num(res['steps_median'], '{:.0f}')} swings "
+        f"(slowest refusal {_num(res['refusal_seconds_max'])} s CPU). Median {_num(res['steps_median'], '{:.0f}')} swings "
         "per course.",
         "",
-        "| figure | RL alone | CFFTG | target |",
-        "|---|---|---|---|",
-        f"| courses with every swing safe (strict verdict, 2 cm) | {pct(res['rl_alone_success'])} | "
-        f"{pct(res['cfftg_success'])} | RL >= 99 % |",
-        f"| walk duration at the device limits, median (both ok, n = {rr['n']}) | {num(d['rl'], '{:.2f} s')} | "
-        f"{num(d['cfftg'], '{:.2f} s')} | RL <= CFFTG |",
-        f"| RL / CFFTG duration per course: median, max | {num(rr['median'])}, {num(rr['max'])} | | <= 1 |",
-        f"| planning CPU time per step (footholds and timing included), median | {num(res['plan_s_per_step_median'])} s "
-        f"| | |",
-        f"| one swing alone (generate + time_swing), CPU, median of {res['reference_courses']} courses' first steps | "
-        f"{num(res['one_swing_s_median'])} s | | |",
-        f"| per step / one swing, median | {num(res['per_step_over_one_swing_median'], '{:.2f}x')} | | <= 1.5x |",
+        *md_table(("figure", "RL alone", "CFFTG", "target"), _table_rows(res), "llll"),
     ]
-    for label in ("rl", "cfftg"):
-        c = res["checks"][label]
-        lines.append(
-            f"| {label}: walks checked independently: landings on flat ground, within the limits (finite "
-            f"differences), uniform time | {c['landings_ok']}, {c['within_limits']}, {c['uniform_time']} of "
-            f"{c['walks']} | | all |"
-        )
-        lines.append(
-            f"| {label}: least foot clearance at the samples; largest joint step per sample; peak velocity and "
-            f"acceleration / limit | {num(c['min_sample_clearance_m'], '{:.4f} m')}; "
-            f"{num(c['max_joint_step_rad'], '{:.4f} rad')}; {num(c['max_velocity_ratio'])}, "
-            f"{num(c['max_acceleration_ratio'])} | | >= 0.02 m; -; <= 1 |"
-        )
     if res["rl_failed_courses"]:
         lines += ["", "RL-alone failures (course, step, first reason):", ""]
         lines += [
