@@ -10,12 +10,10 @@ from __future__ import annotations
 
 import dataclasses
 import time
-import types
 from typing import Any, NamedTuple
 
 import numpy as np
 
-from jaxexo.config import numpy_params
 from jaxexo.evaluation.machine import machine_info, write_result
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.physics import changes, geometry, outcome
@@ -129,13 +127,14 @@ def _greedy(env, net, max_steps: int):
     return jax.jit(run)
 
 
-def _changes(cfg, layouts, at, which: dict, rng):
+def _changes(params, layouts, at, which: dict, rng):
     """The ObstacleChange of each layout for one kind of change (``which``: the change_* params it
-    sets, the rest off), switching at step ``at`` (-1 where the change finds no room)."""
+    sets, the rest off), switching at step ``at`` (-1 where the change finds no room); drawn in
+    NumPy from the environment's ``params`` (EnvParams) and ``layouts`` (Layout [N])."""
+    import jax
     import jax.numpy as jnp
 
-    base = dict(
-        vars(numpy_params(cfg)),
+    off = dict(
         change_chance=np.float32(1.0),
         change_taller=np.zeros(2, np.float32),
         change_wider=np.zeros(2, np.float32),
@@ -144,11 +143,11 @@ def _changes(cfg, layouts, at, which: dict, rng):
         change_max_height=np.float32(geometry.MAX_OBSTACLE_HEIGHT),
         change_steps=np.asarray([1, 1], np.int32),
     )
-    base.update({k: np.asarray(v, np.float32) for k, v in which.items()})
-    p = types.SimpleNamespace(**base)
+    off.update({k: np.asarray(v, np.float32) for k, v in which.items()})
+    p = jax.tree.map(np.asarray, params.replace(**off))
     n = len(at)
     u = rng.random((n, changes.N_UNIFORMS), dtype=np.float32)
-    lay = types.SimpleNamespace(**{k: np.asarray(v) for k, v in vars(layouts).items()})
+    lay = jax.tree.map(np.asarray, layouts)
     c = changes.changed_layout(np, p, lay, u)
     new = layouts.replace(
         outline=jnp.asarray(c.outline, jnp.float32),
@@ -203,7 +202,7 @@ def _continuation(policies: dict, on, n: int, seed: int) -> dict:
     }
     margin = float(on.env.min_clearance)
     for kind, which in CHANGES.items():
-        change, geo = _changes(on, layouts, at, which, rng)
+        change, geo = _changes(params, layouts, at, which, rng)
         res = {name: _host(run(q, layouts, change, params)) for name, q in qs.items()}
         all_fired = np.logical_and.reduce([r["fired"] for r in res.values()])
         row = {"geometry": geo, "fired_all": int(all_fired.sum())}
