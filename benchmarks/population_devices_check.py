@@ -1,5 +1,5 @@
 """Does a population member's arithmetic depend on the number of CPU devices?
-(jaxexo.benchmarks.population_bench.run_population_devices_check)
+(benchlib.population_bench.run_population_devices_check)
 
 tests/test_population.py checks group-size independence in one process (one device). This script
 trains the test's tiny config in fresh processes with 1, 2 and 4 CPU devices: seed 3 alone and as
@@ -19,4 +19,4 @@ from benchlib.runner import parser
 if __name__ == "__main__":
     parser(__doc__, policy=False).parse_args()
     root = Path(__file__).resolve().parent.parent
-    run_population_devices_check(root / "benchmarks" / "results", root / "tests")
+    run_population_devices_check(root / "benchmarks" / "results")

@@ -65,6 +65,17 @@ def same(a, b) -> bool:
     )
 
 
+def test_the_devices_check_trains_this_config():
+    """benchmarks/population_devices_check.py trains, across device counts, the config of these tests
+    (written out in benchmarks/benchlib/population_devices.toml, as a script reads it)."""
+    from jaxexo.config import load_config
+
+    from benchlib.population_bench import DEVICES_CHECK
+    from benchlib.population_bench import SEED as CHECKED
+
+    assert load_config(DEVICES_CHECK) == config_from_dict(raw()) and CHECKED == SEED
+
+
 def test_a_member_trains_identically_alone_in_populations_of_2_and_5_and_in_a_sweep_group_of_8():
     alone = train_members([SEED])[0]
     neighbour, pair = train_members([SEED - 1, SEED])  # pair: the second lane of the block

@@ -12,7 +12,9 @@ import sys
 import tempfile
 from pathlib import Path
 
-from jaxexo.config import load_config, packaged_config, with_population
+import numpy as np
+
+from jaxexo.config import load_config, num_updates, packaged_config, with_population
 from jaxexo.evaluation.machine import write_result
 from jaxexo.summary import Summary, table
 
@@ -125,31 +127,49 @@ def run_population_benchmark(
     return payload
 
 
-# The child process: the test's members trained on every device it has, their bytes hashed.
-CHILD = r"""
-import hashlib, json, sys
-sys.path.insert(0, sys.argv[1])
-import numpy as np
-import jax
-import test_population as T
-from jaxexo.train import population as P
-
-P.population_devices = lambda n, devices: list(devices)    # every device of the process
-five = T.train_members([0, 1, 2, T.SEED, 4])[T.SEED]
-one = T.train_members([T.SEED])[0]
-digest = lambda m: hashlib.sha256(b"".join(np.ascontiguousarray(x).tobytes() for x in T.leaves(m["params"]))
-                                  + m["metrics"].tobytes()).hexdigest()
-print("RESULT " + json.dumps({"devices": len(jax.local_devices()), "alone": digest(one), "fourth_of_five": digest(five)}))
-"""
+# The devices check's config: tests/test_population.py's tiny config, written out (the test checks).
+DEVICES_CHECK = Path(__file__).with_name("population_devices.toml")
+SEED = 3  # the member compared, alone and as the fourth of five
 
 
-def member_digests(devices: int, tests_dir: Path) -> dict:
+def member_digest(seeds, i: int) -> str:
+    """sha256 of member ``i``'s final parameters and per-update metrics [chunks, U, metrics] (in
+    METRICS order) after a Population of ``seeds`` trained on every device of this process."""
+    import hashlib
+
+    import jax
+
+    from jaxexo.train.population import Population
+    from jaxexo.train.trainer import METRICS
+
+    cfg = load_config(DEVICES_CHECK)
+    pop = Population(cfg, seeds, devices=jax.local_devices())
+    ts, metrics = pop.init(), []
+    for _ in range(num_updates(cfg) // cfg.train.chunk_updates):
+        ts, m, _, _ = pop.chunk(ts)
+        metrics.append(np.stack([np.asarray(getattr(m, k)) for k in METRICS], axis=-1)[i])
+    params = jax.tree.map(lambda x: x[i], pop.real(ts.params))
+    leaves = [np.ascontiguousarray(np.asarray(x)).tobytes() for x in jax.tree.leaves(params)]
+    return hashlib.sha256(b"".join(leaves) + np.stack(metrics).tobytes()).hexdigest()
+
+
+def print_member_digests() -> None:
+    """The child process's work: the member alone and as the fourth of five, as one RESULT line."""
+    import jax
+
+    five, one = member_digest([0, 1, 2, SEED, 4], 3), member_digest([SEED], 0)
+    result = {"devices": len(jax.local_devices()), "alone": one, "fourth_of_five": five}
+    print("RESULT " + json.dumps(result), flush=True)
+
+
+def member_digests(devices: int) -> dict:
     """The child's digests in a fresh process with ``devices`` CPU devices."""
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
     env["XLA_FLAGS"] = f"--xla_force_host_platform_device_count={devices}"
+    child = "from benchlib.population_bench import print_member_digests; print_member_digests()"
     out = subprocess.run(
-        [sys.executable, "-c", CHILD, str(tests_dir)],
-        cwd=tests_dir,
+        [sys.executable, "-c", child],
+        cwd=Path(__file__).resolve().parents[1],  # benchmarks/, where benchlib is
         env=env,
         capture_output=True,
         text=True,
@@ -160,10 +180,9 @@ def member_digests(devices: int, tests_dir: Path) -> dict:
     return json.loads(next(x for x in out.stdout.splitlines() if x.startswith("RESULT "))[7:])
 
 
-def run_population_devices_check(out_dir, tests_dir) -> dict:
-    """Digests on 1, 2 and 4 devices (tests_dir: the repository's tests/, for test_population), written
-    as population-devices_<date>_<machine>.{json,md}."""
-    rows = [member_digests(d, Path(tests_dir)) for d in (1, 2, 4)]
+def run_population_devices_check(out_dir) -> dict:
+    """Digests on 1, 2 and 4 devices, written as population-devices_<date>_<machine>.{json,md}."""
+    rows = [member_digests(d) for d in (1, 2, 4)]
     lines = [
         "# Population members across device counts",
         "",

@@ -37,16 +37,17 @@ class Population:
     """The compiled programs of a population of one config: ``init(seeds)`` and ``chunk(state)``.
 
     The state has a leading member axis padded to ``padded`` (copies of the first member, whose
-    results are dropped); ``real(x)`` cuts any output back to the real members."""
+    results are dropped); ``real(x)`` cuts any output back to the real members. ``devices``: the
+    devices to spread over as given (a check across device counts), by default population_devices
+    of the local ones."""
 
     def __init__(self, cfg: Config, seeds, devices=None, n_chunk: int | None = None):
         self.cfg, self.seeds = cfg, [int(s) for s in seeds]
         if not self.seeds:
             raise ConfigError("train.population: a population needs at least one member")
         self.trainer = Trainer(cfg)  # one device per member: no data parallelism inside a member
-        self.devices = population_devices(
-            len(self.seeds), devices if devices is not None else jax.local_devices()
-        )
+        local = population_devices(len(self.seeds), jax.local_devices())
+        self.devices = local if devices is None else list(devices)
         self.padded = padded_agents(len(self.seeds), len(self.devices))
         self.n_chunk = n_chunk if n_chunk is not None else F.chunking(cfg, self.trainer)[0]
         hyper = Hyperparams.from_config(cfg)
