@@ -1,4 +1,4 @@
-"""Walks over courses: RL alone against CFFTG on the same footholds (jaxexo.benchmarks.course_bench,
+"""Walks over courses: RL alone against CFFTG on the same footholds (benchlib.course_bench,
 also ``jaxexo bench``'s ``course`` part). Writes benchmarks/results/course_<date>_<machine>.{json,md}.
 
 Run: python benchmarks/bench_course.py RUN_DIR/policy.npz [--n 200] [--seed 0] [--log FILE] [--pivots | --swings]

@@ -1,4 +1,4 @@
-"""Device-ready swing benchmark (jaxexo.benchmarks.device_ready_bench): generate + time_swing per
+"""Device-ready swing benchmark (benchlib.device_ready_bench): generate + time_swing per
 swing, RL alone vs CFFTG alternating in one process, and time_swings of a batch of 1000.
 
 Run: python benchmarks/bench_device_ready.py RUN_DIR/policy.npz [--n 300] [--rate 100]"""

@@ -1,4 +1,4 @@
-"""Landing benchmark (jaxexo.benchmarks.landing_bench): where the RL swing ends and what a complete
+"""Landing benchmark (benchlib.landing_bench): where the RL swing ends and what a complete
 swing costs beside CFFTG's, on the safety scene sets (the thesis five shifted, shapes never trained
 on, the held-out families), RL alone (``fallback=None``) and CFFTG on the same scenes: safe and goal
 %, final heel height, lift, timed duration (and with a vertical touch-down appended), the landing's

@@ -1,4 +1,4 @@
-"""What group-size independence costs in throughput (jaxexo.benchmarks.sweep_bench.run_lanes_benchmark):
+"""What group-size independence costs in throughput (benchlib.sweep_bench.run_lanes_benchmark):
 the same agents trained by one vmapped batch per device (``over_agents``, what sweeps ran before) and by
 fixed blocks of LANES (``over_lanes``, what sweeps and populations run now), in one process, medians of
 repeated compiled calls after a compiling one.

@@ -1,4 +1,4 @@
-"""The model study's measurements (jaxexo.benchmarks.model_study_bench): every agent of a finished
+"""The model study's measurements (benchlib.model_study_bench): every agent of a finished
 model-study sweep (exported with ``jaxexo sweep configs/sweeps/model_study.toml --out DIR --export-all``)
 screened (one swing timed against CFFTG, RL alone safe on the screen's scenes) and, where the screen
 passes, measured beside CFFTG on the swing-quality benchmark's three sets.

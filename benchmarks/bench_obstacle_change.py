@@ -1,4 +1,4 @@
-"""Training with obstacle changes (jaxexo.benchmarks.obstacle_change_bench): policies trained without and
+"""Training with obstacle changes (benchlib.obstacle_change_bench): policies trained without and
 with [env] obstacle_change, side by side on the hidden safety sets (RL alone: safe %, lift, timed
 duration) and on mid-swing continuation in the environment (the obstacle taller, moved, wider or
 doubled at 15-45 % of the swing).

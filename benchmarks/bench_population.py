@@ -1,4 +1,4 @@
-"""The population cost target (jaxexo.benchmarks.population_bench): a population of K costs at most
+"""The population cost target (benchlib.population_bench): a population of K costs at most
 1.5 + (K - 1) x 0.25 times the wall time of one agent of the same config (``jaxexo train`` with
 population 1, data parallel over the cores), each K trained by ``jaxexo train``'s driver in this one
 process, every CPU core a JAX device; wall and steady chunk times, their ratios to K = 1 and the

@@ -1,4 +1,4 @@
-"""Replanning benchmark (jaxexo.benchmarks.replan_bench): swings planned over an estimate of the
+"""Replanning benchmark (benchlib.replan_bench): swings planned over an estimate of the
 obstacle, replanned mid-swing over the true one by the RL generator (alone, and with the CFFTG
 fallback) and by CFFTG side by side, each replanned swing judged by an independent dense check;
 latency, duration over a swing planned from the start, lift.

@@ -1,4 +1,4 @@
-"""Replanned swings driven through the switch (jaxexo.benchmarks.replan_replay_bench): surprise
+"""Replanned swings driven through the switch (benchlib.replan_replay_bench): surprise
 scenes of shapes never trained on (poles, stairs, bumps, smooth bumps; the true obstacle 30-60 %
 taller than estimated, or 3-5 cm from where it was estimated, known at 15-40 % of the swing), a
 swing planned and timed over the estimate and replanned over the true obstacle by the policy

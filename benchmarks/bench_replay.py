@@ -1,4 +1,4 @@
-"""MuJoCo replay benchmark (jaxexo.benchmarks.replay_bench): every swing of the safety sets (the thesis
+"""MuJoCo replay benchmark (benchlib.replay_bench): every swing of the safety sets (the thesis
 five shifted, unseen shapes, the held-out families), RL alone and CFFTG, timed for the device and
 replayed in MuJoCo (jaxexo.sim.replay): kinematically (MuJoCo's distance against jaxexo's, swings
 flagged ok that come within the margin) and, for the swings flagged ok, driven at the [device] limits

@@ -1,4 +1,4 @@
-"""Safe-swing benchmark (jaxexo.benchmarks.safety_bench): how often each generator returns a safe swing
+"""Safe-swing benchmark (benchlib.safety_bench): how often each generator returns a safe swing
 (exact clearance of the moving foot >= env.min_clearance, goal, no backward heel, joint limits, leg
 length), and the number of swings flagged safe that a 10x denser look at the same curve contradicts
 (must be 0).

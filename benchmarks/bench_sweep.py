@@ -1,4 +1,4 @@
-"""Sweep benchmarks (jaxexo.benchmarks.sweep_bench): 64 vmapped configurations against one large run,
+"""Sweep benchmarks (benchlib.sweep_bench): 64 vmapped configurations against one large run,
 one CPU device against all, agents trained per minute for 1, 8, 64 and 256 configurations, and the
 64 x 4 seeds x 256 envs x 2 M env-steps run of configs/sweeps/benchmark.toml timed against 10 minutes.
 Writes benchmarks/results/sweep_<date>_<machine>.json and .md. Takes about 20 minutes on 2 cores; run it on

@@ -1,4 +1,4 @@
-"""Swing-quality benchmark (jaxexo.benchmarks.swing_quality_bench): what a wearer feels of the RL swing
+"""Swing-quality benchmark (benchlib.swing_quality_bench): what a wearer feels of the RL swing
 beside CFFTG's (safe %, lift, timed duration, jerk) on the held-out terrain families, the thesis five
 shifted and unseen shapes, RL alone (``fallback=None``) and CFFTG on the same scenes.
 

@@ -1,4 +1,4 @@
-"""Tracking-room study (jaxexo.benchmarks.tracking_bench): the [device] tracking headroom and jerk
+"""Tracking-room study (benchlib.tracking_bench): the [device] tracking headroom and jerk
 limit against duration, setpoint clipping and tracking error under the feed-forward controller.
 
 Run: python benchmarks/bench_tracking.py RUN_DIR/policy.npz [--n 100] [--rate 100]"""

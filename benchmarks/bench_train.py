@@ -20,7 +20,7 @@ Where an update's time goes (rollout, environment, network passes, optimizer), p
   python benchmarks/bench_train.py --breakdown configs/quick.toml configs/default.toml [--label NAME]
 writes benchmarks/results/train-breakdown[-NAME]_<date>_<machine>.json and .md.
 
-The code: jaxexo.benchmarks.train_bench and train_steady_bench."""
+The code: benchlib.train_bench and train_steady_bench."""
 
 import argparse
 import importlib.util

@@ -1,7 +1,7 @@
 """Merge the per-run evaluations (runs/<name>/reproduce_entry.json, or a reproduce.json) of several
 `jaxexo reproduce --out DIR` folders into one benchmarks/results/reproduce_<date>_<machine>.{json,md}, slimmed
 to the tabulated figures (< 100 KB). Used when the models were reproduced in parallel processes
-(jaxexo.benchmarks.thesis_reports.combine_reproduce).
+(benchlib.thesis_reports.combine_reproduce).
 
 Run: python benchmarks/reproduce_combine.py DIR [DIR ...]"""
 

@@ -1,5 +1,5 @@
 """Why the heel-only thesis models need a wider safety margin to clear the test obstacles
-(jaxexo.benchmarks.thesis_reports.run_envelope): on a dense grid of flat-foot positions, whether every
+(benchlib.thesis_reports.run_envelope): on a dense grid of flat-foot positions, whether every
 position that keeps min_dt from Base 1-3 (or from Base 3 alone) is also clear of the test triangle and
 half-circle. Writes benchmarks/results/thesis-learning-envelope_<date>_<machine>.{json,md}.
 

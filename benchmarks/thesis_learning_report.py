@@ -1,7 +1,7 @@
 """Evidence: why the faithful thesis configs do not learn, and which switches make them learn.
 
 Turns finished ``jaxexo sweep`` directories (configs/sweeps/thesis_*.toml) into one result per study
-(jaxexo.benchmarks.thesis_reports.learning_report),
+(benchlib.thesis_reports.learning_report),
 benchmarks/results/thesis-learning-<study>_<date>_<machine>.{json,md}: the sweep file, the command, every
 agent's row (greedy strict success and eq 3.1 accuracy on the 1000 thesis test layouts, held-out success,
 behaviour-policy success over the last tenth of training, episodes, updates, wall time) and the mean

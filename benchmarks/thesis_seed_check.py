@@ -2,7 +2,7 @@
 uses: model selection on validation layouts, the best chunk exported) with several seeds, so that a
 target met or missed by ``jaxexo reproduce``'s seed 0 is not read as a property of the config.
 
-Each row (jaxexo.benchmarks.thesis_reports.seed_check): one run directory's eval.json (greedy JAX
+Each row (benchlib.thesis_reports.seed_check): one run directory's eval.json (greedy JAX
 rollouts of the exported policy on the 1000 test layouts: strict success of the raw moves, eq 3.1
 accuracy, goal reached, held-out triangle and half-circle), the chunk selected, the training time.
 Writes benchmarks/results/thesis-seeds_<date>_<machine>.{json,md}.

@@ -1,4 +1,4 @@
-"""The thesis-style baseline trainer (jaxexo.benchmarks.thesis_baseline): its lambda-returns agree with
+"""The thesis-style baseline trainer (benchlib.thesis_baseline): its lambda-returns agree with
 jaxexo's, replay windows stay inside episodes, its NumPy environment steps exactly like the JAX one,
 and (with PyTorch installed) the learner is deterministic and scored through the same network."""
 

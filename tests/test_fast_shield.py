@@ -278,7 +278,7 @@ def test_a_swing_short_of_the_goal_is_not_retried_down_to_the_raw_polyline(clear
 
 
 def test_time_breakdown_replays_the_rollouts_own_steps():
-    """bench_generate's breakdown (jaxexo.benchmarks.generate_bench.time_breakdown) times the parts of
+    """bench_generate's breakdown (benchlib.generate_bench.time_breakdown) times the parts of
     real swings: its step count is the rollout's own (an independent count here), every part positive."""
     from jaxexo.baselines import CFFTG
 

@@ -1,4 +1,4 @@
-"""Replans of both generators over surprise scenes (jaxexo.benchmarks.replan_bench: shapes never
+"""Replans of both generators over surprise scenes (benchlib.replan_bench: shapes never
 trained on, planned over an estimate, replanned mid-swing over the true obstacle), each held to
 checks independent of the replan: the swing before the switch equals the old one, the joints are
 C2 across it (both sides evaluated apart, against the proven jerk), the samples' finite

@@ -203,7 +203,7 @@ def test_single_swing_rollout_ends_where_the_batch_ends(episodes):
 
 
 def test_thesis_baseline_environment_ends_where_the_rollouts_end(episodes):
-    """The thesis-style NumPy environment (jaxexo.benchmarks.thesis_baseline.NumpyExoEnv, stepped one
+    """The thesis-style NumPy environment (benchlib.thesis_baseline.NumpyExoEnv, stepped one
     action at a time through jaxexo.physics.transition) replaying the rollouts' actions ends each
     episode on the same step, clipped corners included."""
     from benchlib.thesis_baseline import NumpyExoEnv

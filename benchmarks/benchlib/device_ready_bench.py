@@ -20,7 +20,7 @@ TARGETS = {
     "rl_generate_over_cfftg": 2.0,
     "batch_1000_s": {"100": 1.0, "1000": 1.5},
 }
-# benchmarks/bench_device_ready.py's options (jaxexo.benchmarks.runner.run_script).
+# benchmarks/bench_device_ready.py's options (benchlib.runner.run_script).
 OPTIONS = (
     ("--n", "n", "unseen-shape scenes"),
     ("--batch", "batch", "swings timed in one time_swings call"),
@@ -115,7 +115,7 @@ def rate_table(rl, cf, n: int) -> list[dict]:
 
 
 def _optimum():
-    """toppra's velocity-acceleration optimum of a timed swing (jaxexo.benchmarks.toppra_reference),
+    """toppra's velocity-acceleration optimum of a timed swing (benchlib.toppra_reference),
     or None where toppra is not installed (the bench extra installs it)."""
     try:
         import toppra  # noqa: F401
@@ -262,7 +262,7 @@ def _markdown(payload: dict, policy) -> str:
         "Timed swings (safe swings of each generator, RL alone) at 100 Hz and 1 kHz: duration "
         "median and p95 (s), the 1 kHz / 100 Hz ratio of each, the duration over toppra's "
         "velocity-acceleration optimum on the same joint path at the same (planned) limits "
-        "(median and largest; jaxexo.benchmarks.toppra_reference; n/a without toppra), and the "
+        "(median and largest; benchlib.toppra_reference; n/a without toppra), and the "
         "shares within the limits on the curve and safe.",
         "",
         *table(

@@ -11,7 +11,7 @@ import numpy as np
 from jaxexo.physics.scenarios import shape_scenarios
 from jaxexo.summary import Summary, table
 
-# benchmarks/bench_timing.py's options (jaxexo.benchmarks.runner.run_script).
+# benchmarks/bench_timing.py's options (benchlib.runner.run_script).
 OPTIONS = (
     ("--n", "n", "thesis-obstacle scenes"),
     ("--unseen", "n_unseen", "unseen-shape scenes"),
