@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import re
 import subprocess
 import sys
@@ -146,3 +147,21 @@ def test_the_benchmark_commands_outside_a_checkout_name_the_missing_folder(
         assert main(argv) == 1
         err = capsys.readouterr().err
         assert f"no {tmp_path}/benchmarks/benchlib" in err and "source checkout" in err, err
+
+
+def test_bench_runs_the_checkouts_suite_from_any_folder(tmp_path):
+    """``jaxexo bench`` from outside the checkout's root: the suite (benchmarks/benchlib) is found
+    beside the package; every part skipped, it writes the (empty) summary."""
+    skip = "env,train,generate,compare,baseline,course"
+    out = subprocess.run(
+        [sys.executable, "-m", "jaxexo.cli", "bench", "--skip", skip, "--out", str(tmp_path / "r")],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+        timeout=300,
+    )
+    assert out.returncode == 0, out.stderr
+    assert "# jaxexo benchmark summary" in out.stdout and list(
+        (tmp_path / "r").glob("summary_*.md")
+    )
