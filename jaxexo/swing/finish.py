@@ -150,19 +150,17 @@ class PathFinisher:
             self.sp, path, c, np.array([scene.pivot_y]), np.array([scene.goal_y]), sw, dev
         )
 
-    def _other_candidates(self, scene, paths, dev, ok, c, sw):
-        """The requested smoothing's check (ok, point and move clearances, each (1, ...)) followed by
-        those of the other candidates ``paths[1:]`` (checked together)."""
-        if len(paths) == 1:
-            return ok, c, sw
-        rest, c_rest, sw_rest = self.margin_ok(
-            [scene] * (len(paths) - 1), paths[1:], dev[1:], with_clearances=True
-        )
-        return (
-            np.concatenate([ok, rest]),
-            np.concatenate([c, c_rest]),
-            np.concatenate([sw, sw_rest]),
-        )
+    def _best_candidate(self, scene, paths, dev, checked, smoothing: float, cands) -> _Retry:
+        """``_first_passing`` of one swing's candidates ``paths`` (C, N, 2) from the requested one's
+        check (ok, point and move clearances, each (1, ...)): the others checked together where it
+        fails."""
+        ok, c, sw = checked
+        if not ok[0] and len(paths) > 1:
+            rest = self.margin_ok(
+                [scene] * (len(paths) - 1), paths[1:], dev[1:], with_clearances=True
+            )
+            ok, c, sw = (np.concatenate(x) for x in zip((ok, c, sw), rest))
+        return _first_passing(paths, dev, ok, smoothing, cands, (c, sw))
 
     def _one_pass(self, scene, raw, n_points: int, smoothing: float) -> _Chosen:
         """One swing's candidates smoothed together (smoothing.smooth_candidates); the first that passes
@@ -197,22 +195,18 @@ class PathFinisher:
         if cleared:
             return cleared[0][1]
         paths, dev = sm.smooth_candidates(raw, n_points, cands)
-        ok, c, sw = self._other_candidates(
-            scene, paths, dev, np.zeros(1, bool), c0[None], sw0[None]
-        )
-        return _first_passing(paths, dev, ok, smoothing, cands, (c, sw))
+        checked = (np.zeros(1, bool), c0[None], sw0[None])
+        return self._best_candidate(scene, paths, dev, checked, smoothing, cands)
 
     def _requested_first(self, scene, raw, n_points: int, smoothing: float, cands):
         """The fast path's requested spline checked alone, then (where it fails) its correction,
         then the other candidates (_Retry)."""
         paths, dev = sm.smooth_candidates(raw, n_points, cands)
-        ok, c, sw = self.margin_ok([scene], paths[:1], dev[:1], with_clearances=True)
-        if not ok[0]:
-            corrected = self._corrected(scene, raw, n_points, smoothing)
-            if corrected is not None:
-                return corrected
-            ok, c, sw = self._other_candidates(scene, paths, dev, ok, c, sw)
-        return _first_passing(paths, dev, ok, smoothing, cands, (c, sw))
+        checked = self.margin_ok([scene], paths[:1], dev[:1], with_clearances=True)
+        corrected = None if checked[0][0] else self._corrected(scene, raw, n_points, smoothing)
+        if corrected is not None:
+            return corrected
+        return self._best_candidate(scene, paths, dev, checked, smoothing, cands)
 
     def _exact_pass(self, scene, raw, n_points: int, smoothing: float, cands):
         """The reference: every candidate checked, the correction where the requested one fails,

@@ -1,17 +1,12 @@
 """The device's limits on a timed swing (NumPy only): ``DeviceLimits`` (the config's [device]
-section) and the constraint objects the time law's passes, its final law and the check read.
+section) and the constraint objects the passes, the check and the final law read.
 
-The contract (docs/device-timing.md, "Adding a limit"): a constraint bounds a measure m of the
-swing, |m| <= ``limit`` (R,) row by row, where m is a time derivative of order ``order`` (1: a
-speed, 2: an acceleration, 3: a jerk) of something along the path. It gives
-- ``rows(view)``: m in the path parameter's speed at each grid point of the passes (B, K, R each):
-  order 1, m = a s'; order 2, m = a s'' + b s'^2 + c (c: an offset, such as gravity's torque;
-  None for none); order 3: None (the passes do not see a jerk; the law's window does);
-- ``curve_bound(d)``: from the proof's bounds d on |q-dot|, |q-ddot|, |q-dddot| (J, ...) each
-  (jaxexo.swing.limit_proof), a bound on |m| as ``scaled + offset`` (R, ...) (offset None: 0),
-  where a swing slowed by k divides ``scaled`` by k^order and leaves ``offset``.
-The passes, the slow-down, the local corrections and the verdict read only that: a new limit (a
-torque, a heel speed) is a new constraint class, given to ``DeviceLimits(extra=...)``.
+The contract (docs/device-timing.md, "Limits as constraint objects"): a constraint bounds |m| <=
+``limit`` (R,), m a time derivative of order ``order`` (1 speed, 2 acceleration, 3 jerk). It gives
+``rows(view)``, m at the passes' grid points, a s' (order 1) or a s'' + b s'^2 + c (order 2; c an
+offset), None for order 3; and ``curve_bound(d)``, a bound ``scaled + offset`` on |m| from the
+proof's bounds d on |q-dot|, |q-ddot|, |q-dddot| (jaxexo.swing.limit_proof), where slowing the
+swing k times divides ``scaled`` by k^order. A new limit is a new class (``DeviceLimits.extra``).
 """
 
 from __future__ import annotations
@@ -38,8 +33,7 @@ class GridView:
 
 @dataclass(frozen=True)
 class Rows:
-    """A constraint's measure at each grid point (``rows``), a, b and c (B, K, R) each: a s'
-    (order 1), a s'' + b s'^2 + c (order 2; c None: no offset)."""
+    """A constraint's m at each grid point, a, b, c (B, K, R): a s' or a s'' + b s'^2 + c."""
 
     a: np.ndarray
     b: np.ndarray | None = None
@@ -47,49 +41,40 @@ class Rows:
 
 
 @dataclass(frozen=True)
-class JointVelocity:
-    """|q_j'(s) s'| <= limit_j (rad/s)."""
+class _JointLimit:
+    """|d^order q_j / dt^order| <= limit_j (J,): the proof's own bounds, row by joint."""
 
     limit: np.ndarray
-    order = 1
-    label = "joint velocity"
+
+    def curve_bound(self, d):
+        return d[self.order - 1], None
+
+
+class JointVelocity(_JointLimit):
+    """|q_j'(s) s'| <= limit_j (rad/s)."""
+
+    order, label = 1, "joint velocity"
 
     def rows(self, view: GridView) -> Rows:
         return Rows(view.dq)
 
-    def curve_bound(self, d):
-        return d[0], None
 
+class JointAcceleration(_JointLimit):
+    """|q_j' s'' + q_j'' s'^2| <= limit_j (rad/s^2)."""
 
-@dataclass(frozen=True)
-class JointAcceleration:
-    """|q_j'' s'^2 + q_j' s''| <= limit_j (rad/s^2)."""
-
-    limit: np.ndarray
-    order = 2
-    label = "joint acceleration"
+    order, label = 2, "joint acceleration"
 
     def rows(self, view: GridView) -> Rows:
         return Rows(view.dq, view.ddq)
 
-    def curve_bound(self, d):
-        return d[1], None
 
+class JointJerk(_JointLimit):
+    """|d3 q_j / dt3| <= limit_j (rad/s^3): the time law's window and the check see it."""
 
-@dataclass(frozen=True)
-class JointJerk:
-    """|d3 q_j / dt3| <= limit_j (rad/s^3): the passes do not see it; the time law's window and the
-    check do."""
-
-    limit: np.ndarray
-    order = 3
-    label = "joint jerk"
+    order, label = 3, "joint jerk"
 
     def rows(self, view: GridView) -> None:
         return None
-
-    def curve_bound(self, d):
-        return d[2], None
 
 
 def passes_rows(constraints, view: GridView, cap: np.ndarray):
@@ -103,21 +88,19 @@ def passes_rows(constraints, view: GridView, cap: np.ndarray):
             continue
         if c.order == 1:
             ar = np.abs(r.a)
-            with np.errstate(divide="ignore"):
-                x = np.where(ar > 1e-12, (c.limit / np.maximum(ar, 1e-300)) ** 2, np.inf)
+            moving = ar > 1e-12
+            x = np.where(moving, (c.limit / np.where(moving, ar, 1.0)) ** 2, np.inf)
             cap = np.minimum(cap, lane_min(x))
         else:
             rows_a.append(r.a)
             rows_b.append(r.b)
             rows_c.append(r.c)
             bounds.append(np.broadcast_to(c.limit, r.a.shape[-1:]))
-    offset = None
-    if any(x is not None for x in rows_c):
-        offset = np.concatenate(
-            [np.zeros_like(a) if x is None else x for a, x in zip(rows_a, rows_c)], axis=-1
-        )
     a, b, bound = (np.concatenate(r, axis=-1) for r in (rows_a, rows_b, bounds))
-    return cap, PassRows(a, b, bound, offset)
+    if all(x is None for x in rows_c):
+        return cap, PassRows(a, b, bound)
+    off = [np.zeros_like(a) if x is None else x for a, x in zip(rows_a, rows_c)]
+    return cap, PassRows(a, b, bound, np.concatenate(off, axis=-1))
 
 
 def _excess(c, d):
@@ -253,14 +236,7 @@ class DeviceLimits:
     def planned(self) -> "DeviceLimits":
         """What a timed reference may use: (1 - headroom) of each limit, no headroom left to take."""
         f = 1.0 - self.headroom
-        return DeviceLimits(
-            tuple(f * v for v in self.velocity),
-            tuple(f * a for a in self.acceleration),
-            self.min_duration,
-            None if self.jerk is None else tuple(f * j for j in self.jerk),
-            0.0,
-            _times(self.extra, f),
-        )
+        return replace(self.scaled(f, f, f), headroom=0.0, extra=_times(self.extra, f))
 
     def constraints(self, factor: float = 1.0) -> tuple:
         """These limits (times ``factor``) as constraint objects, the ``extra`` ones last."""

@@ -45,9 +45,8 @@ class PassRows:
 
 def _lines(rows: PassRows):
     """Per grid point and row, the admissible s'' as lines in x = s'^2 (B, K, R) each: which rows
-    bound s'' (a != 0), c = b / a, and U = up - c x, L = -down - c x from the row's bounds over |a|
-    (inf where a row does not bound s''): up = (bound - c) / a, down = (bound + c) / a for a > 0,
-    the two swapped for a < 0."""
+    bound s'' (a != 0), c = b / a, and U = up - c x, L = -down - c x, up and down = (bound -+
+    sign(a) offset) / |a| (inf where a row does not bound s'')."""
     a = rows.a
     moving = np.abs(a) > 1e-12
     mag = np.where(moving, np.abs(a), 1.0)
@@ -55,10 +54,8 @@ def _lines(rows: PassRows):
     if rows.offset is None:
         up = np.where(moving, rows.bound / mag, np.inf)
         return moving, c, up, up
-    hi, lo = rows.bound - rows.offset, -rows.bound - rows.offset
-    pos = a > 0.0
-    up = np.where(moving, np.where(pos, hi, -lo) / mag, np.inf)
-    down = np.where(moving, np.where(pos, -lo, hi) / mag, np.inf)
+    shift = np.sign(a) * rows.offset
+    up, down = (np.where(moving, (rows.bound + f * shift) / mag, np.inf) for f in (-1.0, 1.0))
     return moving, c, up, down
 
 
@@ -68,16 +65,11 @@ def max_speed_curve(rows: PassRows, lines=None) -> np.ndarray:
     (L_j(x) <= U_k(x) for every pair, each linear in x). ``lines``: ``_lines(rows)`` when known."""
     moving, c, up, down = _lines(rows) if lines is None else lines
     b = rows.b
-    if rows.offset is None:
-        room_still = rows.bound
-    else:
-        room_still = np.where(b > 0.0, rows.bound - rows.offset, rows.bound + rows.offset)
+    still = rows.bound if rows.offset is None else rows.bound - np.sign(b) * rows.offset
     with np.errstate(divide="ignore"):
         # Rows that do not bound s'': |b x + c| <= bound.
         still = lane_min(
-            np.where(
-                ~moving & (np.abs(b) > 0), room_still / np.abs(np.where(moving, 1.0, b)), np.inf
-            )
+            np.where(~moving & (np.abs(b) > 0), still / np.abs(np.where(moving, 1.0, b)), np.inf)
         )
         slope = c[..., None, :] - c[..., :, None]  # (..., j, k): (c_k - c_j) x <= down_j + up_k
         room = down[..., :, None] + up[..., None, :]
