@@ -103,9 +103,8 @@ def _candidate_note(smoothing, used):
 
 
 def _first_passing(paths, dev, ok, smoothing: float, cands, clearances) -> _Retry:
-    """The first of one swing's candidate curves ``paths`` (C, N, 2) that passes (``ok`` (C,) or
-    fewer: those checked), the requested one (the first) when none does; ``clearances``: their
-    (point, move) clearances, None where not measured."""
+    """The first of one swing's candidates ``paths`` (C, N, 2) that passes (``ok``: the first ones'),
+    else the requested one (the first); ``clearances``: (point, move), None: not measured."""
     j = int(np.argmax(ok)) if ok.any() else 0
     clear = None if clearances is None else (clearances[0][j], clearances[1][j])
     return _Retry(
@@ -151,16 +150,15 @@ class PathFinisher:
         )
 
     def _best_candidate(self, scene, paths, dev, checked, smoothing: float, cands) -> _Retry:
-        """``_first_passing`` of one swing's candidates ``paths`` (C, N, 2) from the requested one's
-        check (ok, point and move clearances, each (1, ...)): the others checked together where it
-        fails."""
+        """``_first_passing`` from the first candidates' check (ok, point and move clearances or
+        None): the others checked together where the requested one fails."""
         ok, c, sw = checked
-        if not ok[0] and len(paths) > 1:
+        if not ok[0] and len(ok) < len(paths):
             rest = self.margin_ok(
                 [scene] * (len(paths) - 1), paths[1:], dev[1:], with_clearances=True
             )
             ok, c, sw = (np.concatenate(x) for x in zip((ok, c, sw), rest))
-        return _first_passing(paths, dev, ok, smoothing, cands, (c, sw))
+        return _first_passing(paths, dev, ok, smoothing, cands, None if c is None else (c, sw))
 
     def _one_pass(self, scene, raw, n_points: int, smoothing: float) -> _Chosen:
         """One swing's candidates smoothed together (smoothing.smooth_candidates); the first that passes
@@ -174,8 +172,7 @@ class PathFinisher:
         if not self.exact and self.clearing:
             chosen = self._through_correction(scene, raw, n_points, smoothing, cands)
         if chosen is None:
-            step = self._exact_pass if self.exact else self._requested_first
-            chosen = step(scene, raw, n_points, smoothing, cands)
+            chosen = self._requested_first(scene, raw, n_points, smoothing, cands)
         return self._chosen_one(scene, chosen)
 
     def _through_correction(self, scene, raw, n_points: int, smoothing: float, cands):
@@ -199,29 +196,19 @@ class PathFinisher:
         return self._best_candidate(scene, paths, dev, checked, smoothing, cands)
 
     def _requested_first(self, scene, raw, n_points: int, smoothing: float, cands):
-        """The fast path's requested spline checked alone, then (where it fails) its correction,
-        then the other candidates (_Retry)."""
+        """The requested spline checked (the fast path: alone, with its clearances; the reference:
+        with every candidate), then its correction where it fails, then the other candidates
+        (_Retry)."""
         paths, dev = sm.smooth_candidates(raw, n_points, cands)
-        checked = self.margin_ok([scene], paths[:1], dev[:1], with_clearances=True)
-        corrected = None if checked[0][0] else self._corrected(scene, raw, n_points, smoothing)
-        if corrected is not None:
-            return corrected
+        if self.exact:
+            checked = (self.margin_ok([scene] * len(cands), paths, dev), None, None)
+        else:
+            checked = self.margin_ok([scene], paths[:1], dev[:1], with_clearances=True)
+        ok = checked[0][0]
+        cleared = [] if ok else self._cleared_rows([scene], [raw], [0], n_points, smoothing)
+        if cleared:
+            return cleared[0][1]
         return self._best_candidate(scene, paths, dev, checked, smoothing, cands)
-
-    def _exact_pass(self, scene, raw, n_points: int, smoothing: float, cands):
-        """The reference: every candidate checked, the correction where the requested one fails,
-        else the first candidate that passes (_Retry; assemble measures it)."""
-        paths, dev = sm.smooth_candidates(raw, n_points, cands)
-        ok = self.margin_ok([scene] * len(cands), paths, dev)
-        corrected = None if ok[0] else self._corrected(scene, raw, n_points, smoothing)
-        if corrected is not None:
-            return corrected
-        return _first_passing(paths, dev, ok, smoothing, cands, None)
-
-    def _corrected(self, scene, raw, n_points: int, smoothing: float):
-        """One swing's requested spline corrected (``_cleared_rows``): a _Retry if it passes."""
-        cleared = self._cleared_rows([scene], [raw], [0], n_points, smoothing)
-        return cleared[0][1] if cleared else None
 
     def _chosen_one(self, scene, r: _Retry) -> _Chosen:
         """One swing's chosen curve ``r``, measured from its clearances when known."""

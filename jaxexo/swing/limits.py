@@ -18,7 +18,7 @@ import numpy as np
 
 from jaxexo.config import MAX_SWING_DURATION, MAX_TRACKING_HEADROOM
 from jaxexo.swing.export import JOINT_NAMES
-from jaxexo.swing.time_law import PassRows, lane_max, lane_min
+from jaxexo.swing.time_law import Rows, lane_max, lane_min
 
 
 @dataclass(frozen=True)
@@ -32,22 +32,16 @@ class GridView:
 
 
 @dataclass(frozen=True)
-class Rows:
-    """A constraint's m at each grid point, a, b, c (B, K, R): a s' or a s'' + b s'^2 + c."""
-
-    a: np.ndarray
-    b: np.ndarray | None = None
-    c: np.ndarray | None = None
-
-
-@dataclass(frozen=True)
 class _JointLimit:
-    """|d^order q_j / dt^order| <= limit_j (J,): the proof's own bounds, row by joint."""
+    """|d^order q_j / dt^order| <= limit_j (J,): the proof's own bounds, one row per joint."""
 
     limit: np.ndarray
 
     def curve_bound(self, d):
         return d[self.order - 1], None
+
+    def rows(self, view: GridView) -> None:
+        return None
 
 
 class JointVelocity(_JointLimit):
@@ -73,15 +67,12 @@ class JointJerk(_JointLimit):
 
     order, label = 3, "joint jerk"
 
-    def rows(self, view: GridView) -> None:
-        return None
-
 
 def passes_rows(constraints, view: GridView, cap: np.ndarray):
     """What the passes read from ``constraints`` on a grid's ``view``: the caps on s'^2 (B, K)
     (``cap`` lowered by every order-1 row's, (limit / |a|)^2), and every order-2 row side by side
-    (time_law.PassRows: a, b, c (B, K, R), bounds (R,))."""
-    rows_a, rows_b, rows_c, bounds = [], [], [], []
+    (time_law.Rows: a, b, c (B, K, R), bound (R,))."""
+    second = []
     for c in constraints:
         r = c.rows(view)
         if r is None:
@@ -92,20 +83,17 @@ def passes_rows(constraints, view: GridView, cap: np.ndarray):
             x = np.where(moving, (c.limit / np.where(moving, ar, 1.0)) ** 2, np.inf)
             cap = np.minimum(cap, lane_min(x))
         else:
-            rows_a.append(r.a)
-            rows_b.append(r.b)
-            rows_c.append(r.c)
-            bounds.append(np.broadcast_to(c.limit, r.a.shape[-1:]))
+            second.append((r.a, r.b, r.c, np.broadcast_to(c.limit, r.a.shape[-1:])))
+    rows_a, rows_b, rows_c, bounds = zip(*second)
     a, b, bound = (np.concatenate(r, axis=-1) for r in (rows_a, rows_b, bounds))
     if all(x is None for x in rows_c):
-        return cap, PassRows(a, b, bound)
+        return cap, Rows(a, b, None, bound)
     off = [np.zeros_like(a) if x is None else x for a, x in zip(rows_a, rows_c)]
-    return cap, PassRows(a, b, bound, np.concatenate(off, axis=-1))
+    return cap, Rows(a, b, np.concatenate(off, axis=-1), bound)
 
 
 def _excess(c, d):
-    """Constraint ``c``'s bound over its limit from the proof's bounds ``d``, (R, ...): scaled /
-    (limit - offset), inf where the offset alone reaches the limit."""
+    """``c``'s scaled / (limit - offset) (R, ...) from the proof's bounds ``d`` (inf: no room)."""
     scaled, offset = c.curve_bound(d)
     limit = c.limit if scaled.ndim == 1 else c.limit[:, None]
     if offset is None:
@@ -126,9 +114,8 @@ def speed_ratio(constraints, bound) -> np.ndarray:
 
 
 def peak_ratio(constraints, peaks) -> float:
-    """``speed_ratio``'s largest value from the peaks max |q-dot|, max |q-ddot|, max |q-dddot| (J,)
-    each (a constraint's bound is monotone in each value, so the ratio of the peaks bounds the
-    peak of the ratio; for the joints' own limits they are equal)."""
+    """A bound on ``speed_ratio``'s largest value from the peaks max |q-dot|, |q-ddot|, |q-dddot|
+    (J,) each (a bound is monotone in each; for the joints' own limits, that value exactly)."""
     r = 0.0
     for c in constraints:
         x = float(_excess(c, peaks).max())
@@ -136,7 +123,7 @@ def peak_ratio(constraints, peaks) -> float:
     return r
 
 
-def all_within(constraints, peaks) -> bool:
+def holds(constraints, peaks) -> bool:
     """Whether every constraint's bound from the peaks (``peak_ratio``) is within its limit."""
     for c in constraints:
         scaled, offset = c.curve_bound(peaks)
@@ -240,13 +227,12 @@ class DeviceLimits:
 
     def constraints(self, factor: float = 1.0) -> tuple:
         """These limits (times ``factor``) as constraint objects, the ``extra`` ones last."""
-        out = [
-            JointVelocity(factor * np.asarray(self.velocity)),
-            JointAcceleration(factor * np.asarray(self.acceleration)),
-        ]
-        if self.jerk is not None:
-            out.append(JointJerk(factor * np.asarray(self.jerk)))
-        return (*out, *_times(self.extra, factor))
+        own = zip(
+            (JointVelocity, JointAcceleration, JointJerk),
+            (self.velocity, self.acceleration, self.jerk),
+        )
+        out = tuple(kind(factor * np.asarray(v)) for kind, v in own if v is not None)
+        return out + _times(self.extra, factor)
 
     def to_dict(self) -> dict:
         return {

@@ -26,14 +26,7 @@ from jaxexo.swing.curve import (
 )
 from jaxexo.swing.curve_check import FinalLaw, Plan, lowered_cap, max_samples, with_bounds
 from jaxexo.swing.knots import few_knot_paths
-from jaxexo.swing.limits import (
-    DeviceLimits,
-    GridView,
-    all_within,
-    passes_rows,
-    peak_ratio,
-    speed_ratio,
-)
+from jaxexo.swing.limits import DeviceLimits, GridView, holds, passes_rows, peak_ratio, speed_ratio
 from jaxexo.swing.time_law import max_speed_curve, topp
 
 
@@ -321,7 +314,7 @@ def _final(plan: Plan, old, rate: float) -> FinalLaw:
     peaks = tuple(
         after if b is None else np.maximum(b, after) for b, after in zip(before, plan.check.peaks)
     )
-    ok = all_within(planned.constraints(1.0), peaks)
+    ok = holds(planned.constraints(1.0), peaks)
     if law.duration > MAX_SWING_DURATION:
         notes.append(
             f"the continuation needs {law.duration:.4g} s, longer than the longest swing "

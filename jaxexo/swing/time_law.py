@@ -1,7 +1,6 @@
 """The time-optimal passes (TOPP) of a device-ready swing: the rest-to-rest speeds s'^2 of a joint
-path on a uniform s grid under the constraints' rows (jaxexo.swing.limits), which
-jaxexo.swing.curve turns into the smoothed time law s(t). The method: docs/device-timing.md (how
-the timing is computed).
+path on a uniform s grid under the limits' rows (jaxexo.swing.limits), which jaxexo.swing.curve
+turns into the smoothed time law s(t). The method: docs/device-timing.md (how timing is computed).
 """
 
 from __future__ import annotations
@@ -33,45 +32,45 @@ def lane_max(x: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class PassRows:
-    """What the passes bound (jaxexo.swing.limits.passes_rows): rows |a s'' + b s'^2 + c| <= bound
-    at each grid point, a, b and c (B, K, R) (c None: no offset), bound (R,)."""
+class Rows:
+    """Constraint rows at each grid point, a, b, c (B, K, R): m = a s' (order 1) or m = a s'' +
+    b s'^2 + c (order 2; c None: no offset), each |m| <= bound (R,) (None: a constraint's own)."""
 
     a: np.ndarray
-    b: np.ndarray
-    bound: np.ndarray
-    offset: np.ndarray | None = None
+    b: np.ndarray | None = None
+    c: np.ndarray | None = None
+    bound: np.ndarray | None = None
 
 
-def _lines(rows: PassRows):
+def _lines(rows: Rows):
     """Per grid point and row, the admissible s'' as lines in x = s'^2 (B, K, R) each: which rows
-    bound s'' (a != 0), c = b / a, and U = up - c x, L = -down - c x, up and down = (bound -+
-    sign(a) offset) / |a| (inf where a row does not bound s'')."""
+    bound s'' (a != 0), k = b / a, and U = up - k x, L = -down - k x, up and down = (bound -+
+    sign(a) c) / |a| (inf where a row does not bound s'')."""
     a = rows.a
     moving = np.abs(a) > 1e-12
     mag = np.where(moving, np.abs(a), 1.0)
-    c = np.where(moving, rows.b / np.where(moving, a, 1.0), 0.0)
-    if rows.offset is None:
+    k = np.where(moving, rows.b / np.where(moving, a, 1.0), 0.0)
+    if rows.c is None:
         up = np.where(moving, rows.bound / mag, np.inf)
-        return moving, c, up, up
-    shift = np.sign(a) * rows.offset
+        return moving, k, up, up
+    shift = np.sign(a) * rows.c
     up, down = (np.where(moving, (rows.bound + f * shift) / mag, np.inf) for f in (-1.0, 1.0))
-    return moving, c, up, down
+    return moving, k, up, down
 
 
-def max_speed_curve(rows: PassRows, lines=None) -> np.ndarray:
+def max_speed_curve(rows: Rows, lines=None) -> np.ndarray:
     """Largest admissible x = s'^2 at each grid point (..., K) for ``rows`` (..., K, R): the rows
     with a = 0 (|b x + c| <= bound), and the condition that some s'' satisfies every row
-    (L_j(x) <= U_k(x) for every pair, each linear in x). ``lines``: ``_lines(rows)`` when known."""
-    moving, c, up, down = _lines(rows) if lines is None else lines
+    (L_i(x) <= U_j(x) for every pair, each linear in x). ``lines``: ``_lines(rows)`` when known."""
+    moving, k, up, down = _lines(rows) if lines is None else lines
     b = rows.b
-    still = rows.bound if rows.offset is None else rows.bound - np.sign(b) * rows.offset
+    still = rows.bound if rows.c is None else rows.bound - np.sign(b) * rows.c
     with np.errstate(divide="ignore"):
         # Rows that do not bound s'': |b x + c| <= bound.
         still = lane_min(
             np.where(~moving & (np.abs(b) > 0), still / np.abs(np.where(moving, 1.0, b)), np.inf)
         )
-        slope = c[..., None, :] - c[..., :, None]  # (..., j, k): (c_k - c_j) x <= down_j + up_k
+        slope = k[..., None, :] - k[..., :, None]  # (..., i, j): (k_j - k_i) x <= down_i + up_j
         room = down[..., :, None] + up[..., None, :]
         x_acc = lane_min(
             lane_min(np.where(slope > 0, room / np.where(slope > 0, slope, 1.0), np.inf))
@@ -82,23 +81,22 @@ def max_speed_curve(rows: PassRows, lines=None) -> np.ndarray:
 def _affine_steps(lines, ds):
     """Per grid point and row, the passes' update as affine maps of x = s'^2 (B, K, R) each:
     forward x + 2 ds U(x) = min_j (fa_j x + fb_j), backward x - 2 ds L(x) = min_j (ba_j x + bb_j),
-    from ``_lines``' U_j(x) = up_j - c_j x and L_j(x) = -down_j - c_j x (a row that does not bound
-    s'' bounds nothing: its offset is inf)."""
-    _, c, up, down = lines
-    return 1.0 - 2.0 * ds * c, 2.0 * ds * up, 1.0 + 2.0 * ds * c, 2.0 * ds * down
+    from ``_lines``' U_j(x) = up_j - k_j x and L_j(x) = -down_j - k_j x (inf: no bound)."""
+    _, k, up, down = lines
+    return 1.0 - 2.0 * ds * k, 2.0 * ds * up, 1.0 + 2.0 * ds * k, 2.0 * ds * down
 
 
 def _far_end_steps(fa, fb, ba, bb):
     """The passes' steps (``_affine_steps``) with each cell's acceleration limits held at its far end
-    too: a step of s'' = u from x over a cell needs u <= U_k(x + 2 ds u) = up_k - c_k (x + 2 ds u) at
-    the next point, i.e. x + 2 ds u <= (x + 2 ds up_k) / (1 + 2 ds c_k) where 1 + 2 ds c_k > 0 (else
+    too: a step of s'' = u from x over a cell needs u <= U_j(x + 2 ds u) = up_j - k_j (x + 2 ds u) at
+    the next point, i.e. x + 2 ds u <= (x + 2 ds up_j) / (1 + 2 ds k_j) where 1 + 2 ds k_j > 0 (else
     the far end bounds nothing this way), and the backward step likewise with L at the point before.
     Each step becomes the minimum over 2 J affine maps (B, K, 2 J), the far end's moved to the
     position the scan steps from: forward from point i, the maps of point i + 1; backward from point
     i, those of point i - 1."""
-    # From the near-end maps: 2 ds c = 1 - fa = ba - 1, 2 ds up = fb and 2 ds down = bb.
-    grow = np.concatenate([ba[:, 1:], ba[:, -1:]], axis=1)  # 1 + 2 ds c at the next point
-    shrink = np.concatenate([fa[:, :1], fa[:, :-1]], axis=1)  # 1 - 2 ds c at the point before
+    # From the near-end maps: 2 ds k = 1 - fa = ba - 1, 2 ds up = fb and 2 ds down = bb.
+    grow = np.concatenate([ba[:, 1:], ba[:, -1:]], axis=1)  # 1 + 2 ds k at the next point
+    shrink = np.concatenate([fa[:, :1], fa[:, :-1]], axis=1)  # 1 - 2 ds k at the point before
     r_next = np.concatenate([fb[:, 1:], fb[:, -1:]], axis=1)
     r_prev = np.concatenate([bb[:, :1], bb[:, :-1]], axis=1)
     fwd_ok, bwd_ok = grow > 0.0, shrink > 0.0
@@ -181,7 +179,7 @@ def _min_affine_scan(a, b, bound, order, start=None):
 
 
 def topp(
-    rows: PassRows,
+    rows: Rows,
     ds: float,
     cap: np.ndarray | None = None,
     *,
