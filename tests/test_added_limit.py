@@ -2,7 +2,7 @@
 passes, the final law or the proof: the swing heel's speed. A swing timed with it keeps it on its
 curve sampled densely (finite differences at 2 kHz, independent of the timing's own bounds), is
 slower than without it, and a limit that never binds leaves every timed swing bit for bit as the
-default limits time it."""
+default limits time it. Rows with an offset (a torque's gravity) in the passes: the plain recurrence."""
 
 from __future__ import annotations
 
@@ -101,3 +101,38 @@ def test_a_limit_that_never_binds_changes_no_timed_swing(swings):
         assert a.duration == b.duration and a.within_limits == b.within_limits
         np.testing.assert_array_equal(a.joint_angles, b.joint_angles)
         np.testing.assert_array_equal(a.peak_jerk, b.peak_jerk)
+
+
+def test_the_passes_with_an_offset_equal_the_plain_recurrence():
+    """Rows with an offset (a torque's gravity: -bound <= a s'' + b s'^2 + c <= bound): the passes
+    equal the plain recurrence on the admissible s'' interval, reach[i-1] = clip(reach[i] - 2 ds
+    L_i(reach[i])), x[i+1] = clip(x[i] + 2 ds U_i(x[i])), under the same largest speeds."""
+    from jaxexo.swing.time_law import max_speed_curve, topp
+
+    rng = np.random.default_rng(4)
+    b, k = 3, 120
+    a = rng.uniform(0.5, 2.0, (b, k, 4)) * rng.choice([-1.0, 1.0], (b, k, 4))
+    bb = 5.0 * rng.normal(size=(b, k, 4))
+    bound = np.array([15.0, 20.0, 15.0, 20.0])
+    c = rng.uniform(-0.6, 0.6, (b, k, 4)) * bound
+    ds = 1.0 / (k - 1)
+    rows = Rows(a, bb, c, bound)
+    x, _ = topp(rows, ds)
+    xmax = max_speed_curve(rows)
+
+    def interval(i, j, v):
+        ends = np.stack([(-bound - c[i, j] - bb[i, j] * v), (bound - c[i, j] - bb[i, j] * v)])
+        ends = ends / a[i, j]
+        return ends.min(axis=0).max(), ends.max(axis=0).min()
+
+    for i in range(b):
+        reach = np.zeros(k)
+        for j in range(k - 1, 0, -1):
+            step = reach[j] - 2.0 * ds * interval(i, j, reach[j])[0]
+            reach[j - 1] = min(max(step, 0.0), xmax[i, j - 1])
+        plain = np.zeros(k)
+        for j in range(k - 1):
+            step = plain[j] + 2.0 * ds * interval(i, j, plain[j])[1]
+            plain[j + 1] = min(max(step, 0.0), reach[j + 1])
+        np.testing.assert_allclose(x[i], plain, rtol=1e-9, atol=1e-12)
+        assert plain[1:-1].min() > 0.0
