@@ -21,6 +21,7 @@ from jaxexo.swing.timing import _joint_paths, _joint_samples, time_swings
 
 from benchlib.scenes import batch_kwargs, safety_sets
 from conftest import ROOT
+from test_swing_timing import _passes, joint_xmax
 
 POLICY = ROOT / "tests" / "data" / "reference" / "policy.npz"
 
@@ -154,18 +155,18 @@ def test_topp_with_both_ends_equals_a_plain_bisection_row_by_row_and_batched():
     dq = rng.uniform(0.5, 2.0, size=(b, k, 4)) * rng.choice([-1.0, 1.0], size=(b, k, 4))
     ddq = 5.0 * rng.normal(size=(b, k, 4))
     vmax, amax, ds = np.array([3.0, 4.0, 3.0, 4.0]), np.array([15.0, 20.0, 15.0, 20.0]), 1 / (k - 1)
-    big, floor = time_law.topp(dq, ddq, vmax, amax, ds, both_ends=True)
+    big, floor = _passes(dq, ddq, vmax, amax, ds, both_ends=True)
     small = np.concatenate(
         [
-            time_law.topp(dq[i : i + 1], ddq[i : i + 1], vmax, amax, ds, both_ends=True)[0]
+            _passes(dq[i : i + 1], ddq[i : i + 1], vmax, amax, ds, both_ends=True)[0]
             for i in range(b)
         ]
     )
     np.testing.assert_array_equal(big, small)
-    plain_end = time_law.topp(dq, ddq, vmax, amax, ds)[0]
+    plain_end = _passes(dq, ddq, vmax, amax, ds)[0]
     assert np.all(big <= plain_end * (1 + 1e-12)) and np.any(big < plain_end * (1 - 1e-6))
     for i in range(0, b, 9):
-        xmax = time_law.max_speed_curve(dq[i], ddq[i], vmax, amax)
+        xmax = joint_xmax(dq[i], ddq[i], vmax, amax)[0]
         np.testing.assert_allclose(
             big[i], _plain_passes(dq[i], ddq[i], xmax, amax, ds), rtol=1e-9, atol=1e-12
         )

@@ -414,6 +414,35 @@ def test_cli_generate_rate_and_animation(trained_run, tmp_path):
     assert generate(-5) == 2
 
 
+def joint_passes(dq, ddq, vmax, amax):
+    """The passes' rows and caps (limits.passes_rows) of joint velocity and acceleration limits for
+    joint derivatives dq, ddq (B, K, J) (or (K, J): one path): (rows, cap (B, K))."""
+    from jaxexo.swing.limits import GridView, JointAcceleration, JointVelocity, passes_rows
+
+    if dq.ndim == 2:
+        dq, ddq = dq[None], ddq[None]
+    view = GridView(np.linspace(0.0, 1.0, dq.shape[1]), np.zeros_like(dq), dq, ddq)
+    cap = np.full(dq.shape[:2], np.inf)
+    cap, rows = passes_rows((JointVelocity(vmax), JointAcceleration(amax)), view, cap)
+    return rows, cap
+
+
+def _passes(dq, ddq, vmax, amax, ds, **kw):
+    """time_law.topp of joint velocity and acceleration limits (``joint_passes``)."""
+    from jaxexo.swing import time_law as tl
+
+    rows, cap = joint_passes(dq, ddq, vmax, amax)
+    return tl.topp(rows, ds, cap, **kw)
+
+
+def joint_xmax(dq, ddq, vmax, amax):
+    """The passes' largest s'^2 (B, K) for joint limits (time_law.max_speed_curve, the caps)."""
+    from jaxexo.swing import time_law as tl
+
+    rows, cap = joint_passes(dq, ddq, vmax, amax)
+    return np.minimum(tl.max_speed_curve(rows), cap)
+
+
 def test_topp_passes_row_by_row_equal_the_batched_passes_and_the_plain_recurrence():
     """The TOPP passes run as Python floats for small batches and vectorised for large ones
     (jaxexo.swing.time_law._min_affine_scan): both must give the same law bit for bit, and both
@@ -431,9 +460,9 @@ def test_topp_passes_row_by_row_equal_the_batched_passes_and_the_plain_recurrenc
         np.array([15.0, 20.0, 15.0, 20.0]),
         1.0 / (k - 1),
     )
-    big, floor_big = tl.topp(dq, ddq, vmax, amax, ds)
+    big, floor_big = _passes(dq, ddq, vmax, amax, ds)
     small = np.concatenate(
-        [tl.topp(dq[i : i + 1], ddq[i : i + 1], vmax, amax, ds)[0] for i in range(b)]
+        [_passes(dq[i : i + 1], ddq[i : i + 1], vmax, amax, ds)[0] for i in range(b)]
     )
     np.testing.assert_array_equal(big, small)
 
@@ -455,7 +484,7 @@ def test_topp_passes_row_by_row_equal_the_batched_passes_and_the_plain_recurrenc
         return max(min(e) for e in ends), min(max(e) for e in ends)
 
     for i in range(0, b, 7):
-        xmax = tl.max_speed_curve(dq[i], ddq[i], vmax, amax)
+        xmax = joint_xmax(dq[i], ddq[i], vmax, amax)[0]
         reach = np.zeros(k)
         for j in range(k - 1, 0, -1):
             lo = interval(i, j, reach[j])[0]
@@ -488,8 +517,9 @@ def test_the_row_scan_jumping_along_its_bound_equals_the_step_by_step_scan():
         np.array([15.0, 20.0, 15.0, 20.0]),
         1.0 / (k - 1),
     )
-    xmax = tl.max_speed_curve(dq, ddq, vmax, amax)
-    fa, fb, ba, bb = tl._affine_steps(dq, ddq, amax, ds)
+    limit_rows, cap = joint_passes(dq, ddq, vmax, amax)
+    xmax = np.minimum(tl.max_speed_curve(limit_rows), cap)
+    fa, fb, ba, bb = tl._affine_steps(tl._lines(limit_rows), ds)
     backward, forward = list(range(k - 1, -1, -1)), list(range(k))
     reach = tl._min_affine_scan(ba, bb, xmax, backward)
     x = tl._min_affine_scan(fa, fb, reach, forward)

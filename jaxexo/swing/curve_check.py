@@ -15,7 +15,7 @@ import numpy as np
 from jaxexo.config import MAX_SWING_DURATION
 from jaxexo.swing.curve import JointPath, TimeLaw
 from jaxexo.swing.limit_proof import CurveBound, curve_bounds
-from jaxexo.swing.limits import DeviceLimits, GridView, peak_ratio
+from jaxexo.swing.limits import DeviceLimits, GridView, holds, peak_ratio
 
 # The passes' curve must stay within (1 - this) of each limit (its proven bounds, every instant):
 # headroom for the slow-down, so that the passes' local corrections leave few swings to slow.
@@ -167,9 +167,5 @@ def final_law(
     peaks = tuple(pk / scale**o for o, pk in zip((1, 2, 3), p.check.peaks))
     # A law cut short is never within the limits, whatever its peaks say: the limits need longer
     # than the longest swing.
-    within = not cut_short and bool(
-        np.all(peaks[0] <= planned.velocity)
-        and np.all(peaks[1] <= planned.acceleration)
-        and (planned.jerk is None or np.all(peaks[2] <= planned.jerk))
-    )
-    return FinalLaw(law.slowed(scale), scale, slow, peaks, within, tuple(notes))
+    ok = not cut_short and holds(planned.constraints(1.0), peaks)
+    return FinalLaw(law.slowed(scale), scale, slow, peaks, ok, tuple(notes))

@@ -40,9 +40,9 @@ CLEARED_NOTE = (
 
 @dataclass(frozen=True)
 class _Retry:
-    """One row's retried curve: its path (N, 2), the smoothing used (m^2; nan: the raw polyline),
-    notes, deviation bound (m) and, where its correction measured them, its (point, move)
-    clearances."""
+    """One row's chosen or retried curve: its path (N, 2), the smoothing used (m^2; nan: the raw
+    polyline), notes, deviation bound (m) and, where a check or its correction measured them, its
+    (point, move) clearances."""
 
     path: np.ndarray
     smoothing: float
@@ -102,6 +102,16 @@ def _candidate_note(smoothing, used):
     )
 
 
+def _first_passing(paths, dev, ok, smoothing: float, cands, clearances) -> _Retry:
+    """The first of one swing's candidates ``paths`` (C, N, 2) that passes (``ok``: the first ones'),
+    else the requested one (the first); ``clearances``: (point, move), None: not measured."""
+    j = int(np.argmax(ok)) if ok.any() else 0
+    clear = None if clearances is None else (clearances[0][j], clearances[1][j])
+    return _Retry(
+        paths[j], cands[j], _candidate_note(smoothing, cands[j]) if j else (), dev[j], clear
+    )
+
+
 class PathFinisher:
     """Smooth, check and retry raw paths for the constants ``sp`` (jaxexo.config.scalar_params,
     at the swing's clearance); ``clearing``: try the corrected spline first;
@@ -139,96 +149,71 @@ class PathFinisher:
             self.sp, path, c, np.array([scene.pivot_y]), np.array([scene.goal_y]), sw, dev
         )
 
-    def _other_candidates(self, scene, paths, dev, ok, c, sw):
-        """The requested smoothing's check (ok, point and move clearances, each (1, ...)) followed by
-        those of the other candidates ``paths[1:]`` (checked together)."""
-        if len(paths) == 1:
-            return ok, c, sw
-        rest, c_rest, sw_rest = self.margin_ok(
-            [scene] * (len(paths) - 1), paths[1:], dev[1:], with_clearances=True
-        )
-        return (
-            np.concatenate([ok, rest]),
-            np.concatenate([c, c_rest]),
-            np.concatenate([sw, sw_rest]),
-        )
+    def _best_candidate(self, scene, paths, dev, checked, smoothing: float, cands) -> _Retry:
+        """``_first_passing`` from the first candidates' check (ok, point and move clearances or
+        None): the others checked together where the requested one fails."""
+        ok, c, sw = checked
+        if not ok[0] and len(ok) < len(paths):
+            rest = self.margin_ok(
+                [scene] * (len(paths) - 1), paths[1:], dev[1:], with_clearances=True
+            )
+            ok, c, sw = (np.concatenate(x) for x in zip((ok, c, sw), rest))
+        return _first_passing(paths, dev, ok, smoothing, cands, None if c is None else (c, sw))
 
-    def _one_pass(self, scene, raw, n_points: int, smoothing: float):
+    def _one_pass(self, scene, raw, n_points: int, smoothing: float) -> _Chosen:
         """One swing's candidates smoothed together (smoothing.smooth_candidates); the first that passes
         is used (the requested smoothing when none does: the retries then follow), except that the
         requested spline corrected comes before the other candidates when the requested one fails.
         The fast path checks the requested smoothing first (through the correction's first round,
-        which measures that very spline), then the correction, and the other candidates only when
-        both fail. Returns the chosen curve (_Chosen, one row)."""
+        which measures that very spline, where it does), then the correction, and the other
+        candidates only when both fail. Returns the chosen curve (_Chosen, one row)."""
         cands = candidates(raw, smoothing)
+        chosen = None
         if not self.exact and self.clearing:
-            got = clear_rows(
-                [raw],
-                [scene.outline],
-                self.sp.foot_length,
-                self.sp.min_clearance,
-                n_points,
-                smoothing,
-            )[0]
-            if got.initial is not None:
-                p0, d0, c0, sw0 = got.initial
-                if trajectory.passes(
-                    self.sp, sw0.min(), d0, trajectory.backward_bound(p0, d0), ACCEPT_HEADROOM
-                ):
-                    return _Chosen(
-                        p0[None],
-                        np.array([d0]),
-                        [cands[0]],
-                        [()],
-                        self._measured(scene, p0[None], c0[None], sw0[None], np.array([d0])),
-                    )
-                cleared = self._judge_cleared([scene], [0], [got], smoothing)
-                if cleared:
-                    return self._one_retry(scene, cleared[0][1])
-                paths, dev = sm.smooth_candidates(raw, n_points, cands)
-                ok, c, sw = self._other_candidates(
-                    scene, paths, dev, np.zeros(1, bool), c0[None], sw0[None]
-                )
-                j = int(np.argmax(ok)) if ok.any() else 0
-                notes = [_candidate_note(smoothing, cands[j])] if j else [()]
-                return _Chosen(
-                    paths[j : j + 1],
-                    dev[j : j + 1],
-                    [cands[j]],
-                    notes,
-                    self._measured(
-                        scene, paths[j : j + 1], c[j : j + 1], sw[j : j + 1], dev[j : j + 1]
-                    ),
-                )
-        paths, dev = sm.smooth_candidates(raw, n_points, cands)
-        if not self.exact:
-            ok, c, sw = self.margin_ok([scene], paths[:1], dev[:1], with_clearances=True)
-            if not ok[0]:
-                cleared = self._cleared_rows([scene], [raw], [0], n_points, smoothing)
-                if cleared:
-                    return self._one_retry(scene, cleared[0][1])
-                ok, c, sw = self._other_candidates(scene, paths, dev, ok, c, sw)
-        else:
-            ok = self.margin_ok([scene] * len(cands), paths, dev)
-            if not ok[0]:
-                cleared = self._cleared_rows([scene], [raw], [0], n_points, smoothing)
-                if cleared:  # assemble measures it
-                    return self._one_retry(scene, cleared[0][1], measure=False)
-        j = int(np.argmax(ok)) if ok.any() else 0
-        measured = (
-            None
-            if self.exact
-            else self._measured(
-                scene, paths[j : j + 1], c[j : j + 1], sw[j : j + 1], dev[j : j + 1]
-            )
-        )
-        notes = [_candidate_note(smoothing, cands[j])] if j else [()]
-        return _Chosen(paths[j : j + 1], dev[j : j + 1], [cands[j]], notes, measured)
+            chosen = self._through_correction(scene, raw, n_points, smoothing, cands)
+        if chosen is None:
+            chosen = self._requested_first(scene, raw, n_points, smoothing, cands)
+        return self._chosen_one(scene, chosen)
 
-    def _one_retry(self, scene, r: _Retry, measure: bool = True) -> _Chosen:
-        """One swing's retried curve ``r`` as chosen, measured from its clearances when known."""
+    def _through_correction(self, scene, raw, n_points: int, smoothing: float, cands):
+        """The fast path where the correction's first round measured the requested spline: that
+        spline if it passes, else its correction if that passes, else the first other candidate
+        that passes (_Retry); None where the first round measured no spline."""
+        sp = self.sp
+        got = clear_rows(
+            [raw], [scene.outline], sp.foot_length, sp.min_clearance, n_points, smoothing
+        )[0]
+        if got.initial is None:
+            return None
+        p0, d0, c0, sw0 = got.initial
+        if trajectory.passes(sp, sw0.min(), d0, trajectory.backward_bound(p0, d0), ACCEPT_HEADROOM):
+            return _Retry(p0, cands[0], (), d0, (c0, sw0))
+        cleared = self._judge_cleared([scene], [0], [got], smoothing)
+        if cleared:
+            return cleared[0][1]
+        paths, dev = sm.smooth_candidates(raw, n_points, cands)
+        checked = (np.zeros(1, bool), c0[None], sw0[None])
+        return self._best_candidate(scene, paths, dev, checked, smoothing, cands)
+
+    def _requested_first(self, scene, raw, n_points: int, smoothing: float, cands):
+        """The requested spline checked (the fast path: alone, with its clearances; the reference:
+        with every candidate), then its correction where it fails, then the other candidates
+        (_Retry)."""
+        paths, dev = sm.smooth_candidates(raw, n_points, cands)
+        if self.exact:
+            checked = (self.margin_ok([scene] * len(cands), paths, dev), None, None)
+        else:
+            checked = self.margin_ok([scene], paths[:1], dev[:1], with_clearances=True)
+        ok = checked[0][0]
+        cleared = [] if ok else self._cleared_rows([scene], [raw], [0], n_points, smoothing)
+        if cleared:
+            return cleared[0][1]
+        return self._best_candidate(scene, paths, dev, checked, smoothing, cands)
+
+    def _chosen_one(self, scene, r: _Retry) -> _Chosen:
+        """One swing's chosen curve ``r``, measured from its clearances when known."""
         measured = None
-        if measure and r.clearances is not None:
+        if r.clearances is not None:
             c, sw = r.clearances
             measured = self._measured(
                 scene, r.path[None], c[None], sw[None], np.array([r.deviation])

@@ -1,122 +1,135 @@
 """The device's limits on a timed swing (NumPy only): ``DeviceLimits`` (the config's [device]
-section) and the constraint objects the time law's passes and checks read.
+section) and the constraint objects the passes, the check and the final law read.
 
-A constraint gives the TOPP passes what it asks of the path's speed s' (a cap on s'^2, or rows
-|a(s) s'' + b(s) s'^2| <= bound) and gives the check its ratio on the curve in speed units (the
-factor by which the swing must be slowed to meet it: a velocity scales with 1/k, an acceleration
-with 1/k^2, a jerk with 1/k^3). A new limit (a torque, a heel speed) is a new constraint class; the
-passes and the check do not change.
+The contract (docs/device-timing.md, "Limits as constraint objects"): a constraint bounds |m| <=
+``limit`` (R,), m a time derivative of order ``order`` (1 speed, 2 acceleration, 3 jerk). It gives
+``rows(view)``, m at the passes' grid points, a s' (order 1) or a s'' + b s'^2 + c (order 2; c an
+offset), None for order 3; and ``curve_bound(d)``, a bound ``scaled + offset`` on |m| from the
+proof's bounds d on |q-dot|, |q-ddot|, |q-dddot| (jaxexo.swing.limit_proof), where slowing the
+swing k times divides ``scaled`` by k^order. A new limit is a new class (``DeviceLimits.extra``).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from jaxexo.config import MAX_SWING_DURATION, MAX_TRACKING_HEADROOM
 from jaxexo.swing.export import JOINT_NAMES
-from jaxexo.swing.time_law import lane_max, lane_min
+from jaxexo.swing.time_law import Rows, lane_max, lane_min
 
 
 @dataclass(frozen=True)
 class GridView:
-    """What the passes know of a path on their grid: s (K,), q' and q'' (B, K, J)."""
+    """What the passes know of a path on their grid: s (K,), q, q' and q'' (B, K, J)."""
 
     s: np.ndarray
+    q: np.ndarray
     dq: np.ndarray
     ddq: np.ndarray
 
 
 @dataclass(frozen=True)
-class PathBounds:
-    """A constraint's demands on the passes: caps on s'^2 (B, K) or None, and acceleration rows
-    |a s'' + b s'^2| <= bound, a and b (B, K, R), bound (R,) (None: no rows)."""
+class _JointLimit:
+    """|d^order q_j / dt^order| <= limit_j (J,): the proof's own bounds, one row per joint."""
 
-    x_cap: np.ndarray | None = None
-    a: np.ndarray | None = None
-    b: np.ndarray | None = None
-    bound: np.ndarray | None = None
+    limit: np.ndarray
+
+    def curve_bound(self, d):
+        return d[self.order - 1], None
+
+    def rows(self, view: GridView) -> None:
+        return None
 
 
-@dataclass(frozen=True)
-class JointVelocity:
+class JointVelocity(_JointLimit):
     """|q_j'(s) s'| <= limit_j (rad/s)."""
 
-    limit: np.ndarray
-    power = 1.0
-    label = "joint velocity"
+    order, label = 1, "joint velocity"
 
-    def path_bounds(self, view: GridView) -> PathBounds:
-        adq = np.abs(view.dq)
-        with np.errstate(divide="ignore"):
-            cap = np.where(adq > 1e-12, (self.limit / np.maximum(adq, 1e-300)) ** 2, np.inf)
-        return PathBounds(x_cap=lane_min(cap))
+    def rows(self, view: GridView) -> Rows:
+        return Rows(view.dq)
 
 
-@dataclass(frozen=True)
-class JointAcceleration:
-    """|q_j'' s'^2 + q_j' s''| <= limit_j (rad/s^2)."""
+class JointAcceleration(_JointLimit):
+    """|q_j' s'' + q_j'' s'^2| <= limit_j (rad/s^2)."""
 
-    limit: np.ndarray
-    power = 2.0
-    label = "joint acceleration"
+    order, label = 2, "joint acceleration"
 
-    def path_bounds(self, view: GridView) -> PathBounds:
-        return PathBounds(a=view.dq, b=view.ddq, bound=self.limit)
+    def rows(self, view: GridView) -> Rows:
+        return Rows(view.dq, view.ddq)
 
 
-@dataclass(frozen=True)
-class JointJerk:
-    """|d3 q_j / dt3| <= limit_j (rad/s^3): the passes do not see it; the time law's window and the
-    check do."""
+class JointJerk(_JointLimit):
+    """|d3 q_j / dt3| <= limit_j (rad/s^3): the time law's window and the check see it."""
 
-    limit: np.ndarray
-    power = 3.0
-    label = "joint jerk"
-
-    def path_bounds(self, view: GridView) -> PathBounds:
-        return PathBounds()
+    order, label = 3, "joint jerk"
 
 
 def passes_rows(constraints, view: GridView, cap: np.ndarray):
     """What the passes read from ``constraints`` on a grid's ``view``: the caps on s'^2 (B, K)
-    (``cap`` lowered by each constraint's own), and the acceleration rows a, b (B, K, R) with their
-    bounds (R,), every constraint's rows side by side."""
-    rows_a, rows_b, bounds = [], [], []
+    (``cap`` lowered by every order-1 row's, (limit / |a|)^2), and every order-2 row side by side
+    (time_law.Rows: a, b, c (B, K, R), bound (R,))."""
+    second = []
     for c in constraints:
-        pb = c.path_bounds(view)
-        if pb.x_cap is not None:
-            cap = np.minimum(cap, pb.x_cap)
-        if pb.a is not None:
-            rows_a.append(pb.a)
-            rows_b.append(pb.b)
-            bounds.append(np.broadcast_to(pb.bound, pb.a.shape[-1:]))
+        r = c.rows(view)
+        if r is None:
+            continue
+        if c.order == 1:
+            ar = np.abs(r.a)
+            moving = ar > 1e-12
+            x = np.where(moving, (c.limit / np.where(moving, ar, 1.0)) ** 2, np.inf)
+            cap = np.minimum(cap, lane_min(x))
+        else:
+            second.append((r.a, r.b, r.c, np.broadcast_to(c.limit, r.a.shape[-1:])))
+    rows_a, rows_b, rows_c, bounds = zip(*second)
     a, b, bound = (np.concatenate(r, axis=-1) for r in (rows_a, rows_b, bounds))
-    return cap, a, b, bound
+    if all(x is None for x in rows_c):
+        return cap, Rows(a, b, None, bound)
+    off = [np.zeros_like(a) if x is None else x for a, x in zip(rows_a, rows_c)]
+    return cap, Rows(a, b, np.concatenate(off, axis=-1), bound)
+
+
+def _excess(c, d):
+    """``c``'s scaled / (limit - offset) (R, ...) from the proof's bounds ``d`` (inf: no room)."""
+    scaled, offset = c.curve_bound(d)
+    limit = c.limit if scaled.ndim == 1 else c.limit[:, None]
+    if offset is None:
+        return scaled / limit
+    room = limit - offset
+    return np.where(room > 0.0, scaled / np.where(room > 0.0, room, 1.0), np.inf)
 
 
 def speed_ratio(constraints, bound) -> np.ndarray:
     """Per piece of a curve (n,), the largest factor by which the swing's speed may exceed any
-    constraint, from the bounds on |q-dot|, |q-ddot|, |q-dddot| (3, J, n) there
-    (jaxexo.swing.limit_proof): max over the joints of (bound / limit)^(1 / power)."""
+    constraint, from the proof's bounds on |q-dot|, |q-ddot|, |q-dddot| (3, J, n) there
+    (jaxexo.swing.limit_proof): max over the rows of (scaled / (limit - offset))^(1 / order)."""
     r = np.zeros(bound.shape[-1])
     for c in constraints:
-        x = lane_max((bound[int(c.power) - 1] / c.limit[:, None]).T)
-        r = np.maximum(r, x if c.power == 1.0 else x ** (1.0 / c.power))
+        x = lane_max(_excess(c, bound).T)
+        r = np.maximum(r, x if c.order == 1 else x ** (1.0 / c.order))
     return r
 
 
 def peak_ratio(constraints, peaks) -> float:
-    """``speed_ratio``'s largest value from the peaks max |q-dot|, max |q-ddot|, max |q-dddot| (J,)
-    each (the ratio is monotone in each value, so the peak of the ratio is the ratio of the
-    peaks)."""
+    """A bound on ``speed_ratio``'s largest value from the peaks max |q-dot|, |q-ddot|, |q-dddot|
+    (J,) each (a bound is monotone in each; for the joints' own limits, that value exactly)."""
     r = 0.0
     for c in constraints:
-        x = float((peaks[int(c.power) - 1] / c.limit).max())
-        r = max(r, x ** (1.0 / c.power))
+        x = float(_excess(c, peaks).max())
+        r = max(r, x ** (1.0 / c.order))
     return r
+
+
+def holds(constraints, peaks) -> bool:
+    """Whether every constraint's bound from the peaks (``peak_ratio``) is within its limit."""
+    for c in constraints:
+        scaled, offset = c.curve_bound(peaks)
+        if not np.all((scaled if offset is None else scaled + offset) <= c.limit):
+            return False
+    return True
 
 
 def _positive_vector(name: str, v) -> tuple[float, ...]:
@@ -139,13 +152,16 @@ class DeviceLimits:
     """Peak joint velocity (rad/s), acceleration (rad/s^2) and jerk (rad/s^3; None: unbounded) per
     joint of JOINT_NAMES, the shortest swing allowed (s), and the tracking headroom: the fraction of
     each limit the timed reference leaves free for the feedback controller (a swing is timed, and
-    its curve checked, against the ``planned`` limits, (1 - headroom) of these)."""
+    its curve checked, against the ``planned`` limits, (1 - headroom) of these); ``extra``: further
+    constraint objects (module docstring), scaled with the rest by ``planned`` and ``constraints``
+    (hashable: a frozen dataclass with eq=False, say)."""
 
     velocity: tuple[float, float, float, float]
     acceleration: tuple[float, float, float, float]
     min_duration: float = 0.0
     jerk: tuple[float, float, float, float] | None = None
     headroom: float = 0.0
+    extra: tuple = ()
 
     def __post_init__(self):
         h = self.headroom
@@ -159,6 +175,7 @@ class DeviceLimits:
                 f"of each limit), got {h!r}"
             )
         object.__setattr__(self, "headroom", float(h))
+        object.__setattr__(self, "extra", tuple(self.extra))
         for name in ("velocity", "acceleration", "jerk"):
             v = getattr(self, name)
             if not (v is None and name == "jerk"):
@@ -200,28 +217,22 @@ class DeviceLimits:
             self.min_duration,
             None if self.jerk is None else tuple(jerk * j for j in self.jerk),
             self.headroom,
+            self.extra,
         )
 
     def planned(self) -> "DeviceLimits":
         """What a timed reference may use: (1 - headroom) of each limit, no headroom left to take."""
         f = 1.0 - self.headroom
-        return DeviceLimits(
-            tuple(f * v for v in self.velocity),
-            tuple(f * a for a in self.acceleration),
-            self.min_duration,
-            None if self.jerk is None else tuple(f * j for j in self.jerk),
-            0.0,
-        )
+        return replace(self.scaled(f, f, f), headroom=0.0, extra=_times(self.extra, f))
 
     def constraints(self, factor: float = 1.0) -> tuple:
-        """These limits (times ``factor``) as constraint objects."""
-        out = [
-            JointVelocity(factor * np.asarray(self.velocity)),
-            JointAcceleration(factor * np.asarray(self.acceleration)),
-        ]
-        if self.jerk is not None:
-            out.append(JointJerk(factor * np.asarray(self.jerk)))
-        return tuple(out)
+        """These limits (times ``factor``) as constraint objects, the ``extra`` ones last."""
+        own = zip(
+            (JointVelocity, JointAcceleration, JointJerk),
+            (self.velocity, self.acceleration, self.jerk),
+        )
+        out = tuple(kind(factor * np.asarray(v)) for kind, v in own if v is not None)
+        return out + _times(self.extra, factor)
 
     def to_dict(self) -> dict:
         return {
@@ -231,4 +242,10 @@ class DeviceLimits:
             "joint_jerk_rad_s3": None if self.jerk is None else list(self.jerk),
             "tracking_headroom": self.headroom,
             "min_duration_s": self.min_duration,
+            **({"other": [c.label for c in self.extra]} if self.extra else {}),
         }
+
+
+def _times(constraints, factor: float) -> tuple:
+    """Constraint objects with their limits times ``factor``."""
+    return tuple(replace(c, limit=factor * np.asarray(c.limit)) for c in constraints)

@@ -26,7 +26,7 @@ from jaxexo.swing.curve import (
 )
 from jaxexo.swing.curve_check import FinalLaw, Plan, lowered_cap, max_samples, with_bounds
 from jaxexo.swing.knots import few_knot_paths
-from jaxexo.swing.limits import DeviceLimits, GridView, passes_rows, peak_ratio, speed_ratio
+from jaxexo.swing.limits import DeviceLimits, GridView, holds, passes_rows, peak_ratio, speed_ratio
 from jaxexo.swing.time_law import max_speed_curve, topp
 
 
@@ -228,10 +228,10 @@ def _blend(qdot: np.ndarray, q_c: np.ndarray, accel: float) -> float:
 def _passes(view: GridView, cap: np.ndarray, x0: float, constraints):
     """The passes on the continuation's grid (``view``: its s (K,) and the path's derivatives
     there) from a moving start (s'^2 = x0 at s[0]): s'^2 (K,) and the cells' floors (K - 1,)."""
-    cap, a, b, bound = passes_rows(constraints, view, cap[None])
+    cap, rows = passes_rows(constraints, view, cap[None])
     grid = view.s
     ds = (grid[-1] - grid[0]) / (len(grid) - 1)
-    x, floor = topp(a, b, np.inf, bound, ds, cap, both_ends=True, start=np.array([x0]))
+    x, floor = topp(rows, ds, cap, both_ends=True, start=np.array([x0]))
     return x[0], floor[0]
 
 
@@ -282,12 +282,12 @@ def _first_caps(path: JointPath, grid: np.ndarray, x0: float, planned: DeviceLim
     velocity and acceleration limits (the passes' own are within timing.SAFETY), but never below
     what the law sheds from its moving start (``_shed``, over ``reach`` of s); the grid's view,
     and that floor."""
-    _, dq, ddq = paths_at([path], [grid], 2)[0]
-    view = GridView(grid, dq[None], ddq[None])
-    f = START_SAFETY
-    x = max_speed_curve(
-        dq, ddq, np.asarray(planned.velocity) * f, np.asarray(planned.acceleration) * f
+    q, dq, ddq = paths_at([path], [grid], 2)[0]
+    view = GridView(grid, q[None], dq[None], ddq[None])
+    cap, rows = passes_rows(
+        planned.constraints(START_SAFETY), view, np.full((1, len(grid)), np.inf)
     )
+    x = np.minimum(max_speed_curve(rows), cap)[0]
     least = _shed(view, x0, min(planned.acceleration), reach)
     return np.maximum(x, least), view, least
 
@@ -314,24 +314,20 @@ def _final(plan: Plan, old, rate: float) -> FinalLaw:
     peaks = tuple(
         after if b is None else np.maximum(b, after) for b, after in zip(before, plan.check.peaks)
     )
-    within = bool(
-        np.all(peaks[0] <= planned.velocity)
-        and np.all(peaks[1] <= planned.acceleration)
-        and (planned.jerk is None or np.all(peaks[2] <= planned.jerk))
-    )
+    ok = holds(planned.constraints(1.0), peaks)
     if law.duration > MAX_SWING_DURATION:
         notes.append(
             f"the continuation needs {law.duration:.4g} s, longer than the longest swing "
             f"({MAX_SWING_DURATION:g} s)"
         )
-        within = False
+        ok = False
     n = law.duration * rate
     if not n < max_samples():
         raise ValueError(
             f"rate: a {law.duration:.4g} s swing at {rate:g} Hz needs {math.ceil(n)} samples, more "
             "than half the memory this process may use holds; lower the rate"
         )
-    return FinalLaw(law, 1.0, 1.0, peaks, within, tuple(notes))
+    return FinalLaw(law, 1.0, 1.0, peaks, ok, tuple(notes))
 
 
 def _candidates(blend: float, chord: float) -> list[float]:

@@ -1,10 +1,11 @@
 """The time-optimal passes (TOPP) of a device-ready swing: the rest-to-rest speeds s'^2 of a joint
-path on a uniform s grid under velocity and acceleration limits, which jaxexo.swing.curve turns into
-the smoothed time law s(t). The method: docs/device-timing.md (how the timing is computed).
+path on a uniform s grid under the limits' rows (jaxexo.swing.limits), which jaxexo.swing.curve
+turns into the smoothed time law s(t). The method: docs/device-timing.md (how timing is computed).
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import reduce
 
 import numpy as np
@@ -30,66 +31,74 @@ def lane_max(x: np.ndarray) -> np.ndarray:
 # --------------------------------------------------------------------------------------------
 
 
-def _accel_bounds(dq, ddq, amax, x):
-    """The admissible s'' interval [L, U] at s'^2 = x for joint paths with derivatives dq, ddq
-    (..., J); joints with q' = 0 do not bound s''."""
-    moving = np.abs(dq) > 1e-12
-    safe = np.where(moving, dq, 1.0)
-    lo = (-amax - ddq * x[..., None]) / safe
-    hi = (amax - ddq * x[..., None]) / safe
-    lo, hi = np.minimum(lo, hi), np.maximum(lo, hi)
-    return lane_max(np.where(moving, lo, -np.inf)), lane_min(np.where(moving, hi, np.inf))
+@dataclass(frozen=True)
+class Rows:
+    """Constraint rows at each grid point, a, b, c (B, K, R): m = a s' (order 1) or m = a s'' +
+    b s'^2 + c (order 2; c None: no offset), each |m| <= bound (R,) (None: a constraint's own)."""
+
+    a: np.ndarray
+    b: np.ndarray | None = None
+    c: np.ndarray | None = None
+    bound: np.ndarray | None = None
 
 
-def max_speed_curve(
-    dq: np.ndarray, ddq: np.ndarray, vmax: np.ndarray, amax: np.ndarray
-) -> np.ndarray:
-    """Largest admissible x = s'^2 at each grid point (..., K) from joint derivatives (..., K, J):
-    the velocity limits, and the acceleration limits' condition that some s'' satisfies every joint
-    (L_j(x) <= U_k(x) for every pair, each linear in x)."""
-    adq = np.abs(dq)
-    moving = adq > 1e-12
+def _lines(rows: Rows):
+    """Per grid point and row, the admissible s'' as lines in x = s'^2 (B, K, R) each: which rows
+    bound s'' (a != 0), k = b / a, and U = up - k x, L = -down - k x, up and down = (bound -+
+    sign(a) c) / |a| (inf where a row does not bound s'')."""
+    a = rows.a
+    moving = np.abs(a) > 1e-12
+    mag = np.where(moving, np.abs(a), 1.0)
+    k = np.where(moving, rows.b / np.where(moving, a, 1.0), 0.0)
+    if rows.c is None:
+        up = np.where(moving, rows.bound / mag, np.inf)
+        return moving, k, up, up
+    shift = np.sign(a) * rows.c
+    up, down = (np.where(moving, (rows.bound + f * shift) / mag, np.inf) for f in (-1.0, 1.0))
+    return moving, k, up, down
+
+
+def max_speed_curve(rows: Rows, lines=None) -> np.ndarray:
+    """Largest admissible x = s'^2 at each grid point (..., K) for ``rows`` (..., K, R): the rows
+    with a = 0 (|b x + c| <= bound), and the condition that some s'' satisfies every row
+    (L_i(x) <= U_j(x) for every pair, each linear in x). ``lines``: ``_lines(rows)`` when known."""
+    moving, k, up, down = _lines(rows) if lines is None else lines
+    b = rows.b
+    still = rows.bound if rows.c is None else rows.bound - np.sign(b) * rows.c
     with np.errstate(divide="ignore"):
-        x_vel = lane_min(np.where(moving, (vmax / np.where(moving, adq, 1.0)) ** 2, np.inf))
-        # Joints that do not move: |q'' x| <= a.
+        # Rows that do not bound s'': |b x + c| <= bound.
         still = lane_min(
-            np.where(~moving & (np.abs(ddq) > 0), amax / np.abs(np.where(moving, 1.0, ddq)), np.inf)
+            np.where(~moving & (np.abs(b) > 0), still / np.abs(np.where(moving, 1.0, b)), np.inf)
         )
-        # L_j(x) = -a_j/|q'_j| - (q''_j/q'_j) x, U_k(x) = a_k/|q'_k| - (q''_k/q'_k) x.
-        r = np.where(moving, amax / np.where(moving, adq, 1.0), np.inf)
-        c = np.where(moving, ddq / np.where(moving, dq, 1.0), 0.0)
-        slope = c[..., None, :] - c[..., :, None]  # (..., j, k): (c_k - c_j) x <= r_j + r_k
-        room = r[..., :, None] + r[..., None, :]
+        slope = k[..., None, :] - k[..., :, None]  # (..., i, j): (k_j - k_i) x <= down_i + up_j
+        room = down[..., :, None] + up[..., None, :]
         x_acc = lane_min(
             lane_min(np.where(slope > 0, room / np.where(slope > 0, slope, 1.0), np.inf))
         )
-    return np.minimum(np.minimum(x_vel, still), np.minimum(x_acc, X_CAP))
+    return np.minimum(still, np.minimum(x_acc, X_CAP))
 
 
-def _affine_steps(dq, ddq, amax, ds):
-    """Per grid point and joint, the passes' update as affine maps of x = s'^2 (B, K, J) each:
+def _affine_steps(lines, ds):
+    """Per grid point and row, the passes' update as affine maps of x = s'^2 (B, K, R) each:
     forward x + 2 ds U(x) = min_j (fa_j x + fb_j), backward x - 2 ds L(x) = min_j (ba_j x + bb_j),
-    from U_j(x) = r_j - c_j x and L_j(x) = -r_j - c_j x with r = a / |q'|, c = q'' / q' (moving joints
-    only: a still joint bounds nothing, its offset is inf)."""
-    moving = np.abs(dq) > 1e-12
-    r = np.where(moving, amax / np.where(moving, np.abs(dq), 1.0), np.inf)
-    c = np.where(moving, ddq / np.where(moving, dq, 1.0), 0.0)
-    return 1.0 - 2.0 * ds * c, 2.0 * ds * r, 1.0 + 2.0 * ds * c, 2.0 * ds * r
+    from ``_lines``' U_j(x) = up_j - k_j x and L_j(x) = -down_j - k_j x (inf: no bound)."""
+    _, k, up, down = lines
+    return 1.0 - 2.0 * ds * k, 2.0 * ds * up, 1.0 + 2.0 * ds * k, 2.0 * ds * down
 
 
 def _far_end_steps(fa, fb, ba, bb):
     """The passes' steps (``_affine_steps``) with each cell's acceleration limits held at its far end
-    too: a step of s'' = u from x over a cell needs u <= U_k(x + 2 ds u) = r_k - c_k (x + 2 ds u) at
-    the next point, i.e. x + 2 ds u <= (x + 2 ds r_k) / (1 + 2 ds c_k) where 1 + 2 ds c_k > 0 (else
+    too: a step of s'' = u from x over a cell needs u <= U_j(x + 2 ds u) = up_j - k_j (x + 2 ds u) at
+    the next point, i.e. x + 2 ds u <= (x + 2 ds up_j) / (1 + 2 ds k_j) where 1 + 2 ds k_j > 0 (else
     the far end bounds nothing this way), and the backward step likewise with L at the point before.
     Each step becomes the minimum over 2 J affine maps (B, K, 2 J), the far end's moved to the
     position the scan steps from: forward from point i, the maps of point i + 1; backward from point
     i, those of point i - 1."""
-    # From the near-end maps: 2 ds c = 1 - fa = ba - 1 and 2 ds r = fb = bb.
-    grow = np.concatenate([ba[:, 1:], ba[:, -1:]], axis=1)  # 1 + 2 ds c at the next point
-    shrink = np.concatenate([fa[:, :1], fa[:, :-1]], axis=1)  # 1 - 2 ds c at the point before
-    r_next = np.concatenate([bb[:, 1:], bb[:, -1:]], axis=1)
-    r_prev = np.concatenate([fb[:, :1], fb[:, :-1]], axis=1)
+    # From the near-end maps: 2 ds k = 1 - fa = ba - 1, 2 ds up = fb and 2 ds down = bb.
+    grow = np.concatenate([ba[:, 1:], ba[:, -1:]], axis=1)  # 1 + 2 ds k at the next point
+    shrink = np.concatenate([fa[:, :1], fa[:, :-1]], axis=1)  # 1 - 2 ds k at the point before
+    r_next = np.concatenate([fb[:, 1:], fb[:, -1:]], axis=1)
+    r_prev = np.concatenate([bb[:, :1], bb[:, :-1]], axis=1)
     fwd_ok, bwd_ok = grow > 0.0, shrink > 0.0
     with np.errstate(divide="ignore", invalid="ignore"):
         fa2 = np.where(fwd_ok, 1.0 / np.where(fwd_ok, grow, 1.0), 0.0)
@@ -170,31 +179,27 @@ def _min_affine_scan(a, b, bound, order, start=None):
 
 
 def topp(
-    dq: np.ndarray,
-    ddq: np.ndarray,
-    vmax,
-    amax,
+    rows: Rows,
     ds: float,
     cap: np.ndarray | None = None,
     *,
     both_ends: bool = False,
     start: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The time-optimal rest-to-rest law on a uniform s grid (spacing ds) for joint derivatives
-    dq, ddq (B, K, J): s'^2 (B, K), and per cell the least speed (B, K-1) of a cell crossed from
-    rest to rest (the passes: module docstring). ``cap`` (B, K): further upper bounds on s'^2.
-    ``both_ends``: each cell's constant s'' within the acceleration limits at both of its ends
-    (``_far_end_steps``), not only where the pass enters it: on a coarse grid the far end's
-    excess, first order in ds, is what the check would otherwise slow the swing for. ``start``
-    (B,): s'^2 at the first grid point of a law that starts moving (a swing replanned in flight,
-    jaxexo.swing.replan), kept there; None: from rest."""
-    vmax = np.asarray(vmax, np.float64)
-    amax = np.asarray(amax, np.float64)
-    xmax = max_speed_curve(dq, ddq, vmax, amax)
+    """The time-optimal rest-to-rest law on a uniform s grid (spacing ds) under ``rows``
+    (B, K, R: jaxexo.swing.limits.passes_rows): s'^2 (B, K), and per cell the least speed (B, K-1)
+    of a cell crossed from rest to rest (the passes: module docstring). ``cap`` (B, K): further
+    upper bounds on s'^2 (the speed limits'). ``both_ends``: each cell's constant s'' within the
+    rows at both of its ends (``_far_end_steps``), not only where the pass enters it: on a coarse
+    grid the far end's excess, first order in ds, is what the check would otherwise slow the swing
+    for. ``start`` (B,): s'^2 at the first grid point of a law that starts moving (a swing
+    replanned in flight, jaxexo.swing.replan), kept there; None: from rest."""
+    lines = _lines(rows)
+    xmax = max_speed_curve(rows, lines)
     if cap is not None:
         xmax = np.minimum(xmax, cap)
     b, k = xmax.shape
-    fa, fb, ba, bb = _affine_steps(dq, ddq, amax, ds)
+    fa, fb, ba, bb = _affine_steps(lines, ds)
     if both_ends:
         fa, fb, ba, bb = _far_end_steps(fa, fb, ba, bb)
     # Backward from rest at the end: reach[i-1] = clip(reach[i] - 2 ds L_i(reach[i]), 0, xmax[i-1]).
@@ -203,8 +208,9 @@ def topp(
     # Forward from rest (or the given start) under the reachable speeds.
     x = _min_affine_scan(fa, fb, reach, list(range(k)), start)
     # A cell entered and left at rest (a cusp, or the two ends of a very short path) takes
-    # 2 sqrt(ds / u0) at the largest s'' from rest, u0: its mean speed is sqrt(ds u0) / 2.
-    _, u0 = _accel_bounds(dq[:, :-1], ddq[:, :-1], amax, np.zeros((b, k - 1)))
+    # 2 sqrt(ds / u0) at the largest s'' from rest, u0 = min_j up_j: its mean speed is
+    # sqrt(ds u0) / 2.
+    u0 = lane_min(lines[2][:, :-1])
     floor = 0.5 * np.sqrt(ds * np.minimum(u0, X_CAP))
     if cap is not None:
         # A capped cell (see time_swings) is crossed no faster than its caps allow, cusps included.

@@ -107,7 +107,7 @@ class TimedSwing:
     heel_acceleration: np.ndarray  # (n, 2) m/s^2
     path_parameter: np.ndarray  # (n,) s(t) in [0, 1]
     checks: TrajectoryChecks  # path checks (goal, clearance, joint range, leg length) on the curve
-    within_limits: bool  # velocity, acceleration and jerk within the planned limits on the curve
+    within_limits: bool  # every constraint (limits.DeviceLimits.constraints) within, on the curve
     peak_velocity: np.ndarray  # (4,) rad/s: a proven upper bound on max |q-dot| over the curve
     peak_acceleration: np.ndarray  # (4,) rad/s^2: the same for |q-ddot|
     # Uniform slow-down applied after the passes and local corrections (>= 1; < 1: a path the
@@ -463,11 +463,10 @@ def _joint_paths(trajs, sp, samples=None) -> list[Plan]:
     paths = few_knot_paths(qs, ss, (sp.thigh, sp.shin))
     grids = [np.linspace(0.0, 1.0, grid_size(len(p.knots) - 1)) for p in paths]
     plans = []
-    for p, s, (_, dq, ddq) in zip(paths, grids, paths_at(paths, grids, 2)):
+    for p, s, (q, dq, ddq) in zip(paths, grids, paths_at(paths, grids, 2)):
         k = len(s)
-        plans.append(
-            Plan(p, GridView(s, dq[None], ddq[None]), np.full(k, np.inf), np.zeros(k), None)
-        )
+        view = GridView(s, q[None], dq[None], ddq[None])
+        plans.append(Plan(p, view, np.full(k, np.inf), np.zeros(k), None))
     return plans
 
 
@@ -487,11 +486,10 @@ def _run_passes(plans, idx, constraints, window: float) -> list[Plan]:
         sub = [i for i, n in zip(idx, sizes) if n == k]
         view = GridView(
             plans[sub[0]].view.s,
-            np.concatenate([plans[i].view.dq for i in sub]),
-            np.concatenate([plans[i].view.ddq for i in sub]),
+            *(np.concatenate([getattr(plans[i].view, f) for i in sub]) for f in ("q", "dq", "ddq")),
         )
-        cap, a, b, bound = passes_rows(constraints, view, np.stack([plans[i].cap for i in sub]))
-        x, floor = topp(a, b, np.inf, bound, 1.0 / (k - 1), cap, both_ends=True)
+        cap, rows = passes_rows(constraints, view, np.stack([plans[i].cap for i in sub]))
+        x, floor = topp(rows, 1.0 / (k - 1), cap, both_ends=True)
         for j, i in enumerate(sub):
             law = law_from_speeds(view.s, x[j], floor[j], window, BLEND_FRACTION)
             plans[i] = replace(plans[i], x=x[j], law=law)
