@@ -417,7 +417,7 @@ def _moved(swing, gen, dy: float):
         start_y=sc.start_y + dy,
         step_length=sc.goal_y - sc.start_y,
     )
-    scene = dataclasses.replace(scene, goal_y=sc.goal_y + dy, pivot_kind=sc.pivot_kind)
+    scene = scene._replace(goal_y=sc.goal_y + dy, pivot_kind=sc.pivot_kind)
     shift = np.array([dy, 0.0])
     return dataclasses.replace(
         swing,
