@@ -9,6 +9,7 @@ replaced by CFFTG's (jaxexo.inference.fallback). Method: docs/generation.md.
 from __future__ import annotations
 
 import copy
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -70,7 +71,9 @@ class TrajectoryGenerator(SceneMaker):
         self.clearing = True
         # terminated()'s one parameter as a Python bool: a NumPy bool would make every step's test
         # a NumPy scalar operation.
-        self._ends_on_collision = bool(self.np_params.terminate_on_collision)
+        self._term_p = dataclasses.replace(
+            self.sp, terminate_on_collision=bool(self.np_params.terminate_on_collision)
+        )
         self.epsilon = 0.0  # 0: greedy (the default; a device's generator must not explore)
         self.shield = bool(config.env.shield)
         # The spline's smoothing when a call does not give one (m^2, thesis 2.7's s).
@@ -187,7 +190,7 @@ class TrajectoryGenerator(SceneMaker):
         (y_lo, y_hi), z_hi = sp.bounds_y, sp.max_z_world
         mid_hy, mid_hz = sp.mid_goal_half_size
         goal_y, (goal_dy, goal_dz) = scene.goal_y, sp.goal_tolerance[:2]
-        ends_on_collision = self._ends_on_collision
+        ends_on_collision = self._term_p.terminate_on_collision
         max_steps, q_values = self.max_steps, step.q_values
         choose = None if single is None else single.choose
         while True:
