@@ -223,17 +223,8 @@ def _swings(gen, rl: bool, fallback, plan, terrain: Terrain, r: FootholdRules, f
         traj = _in_course(traj, gen, ob, start, pivot, goal)
         feet[leg] = float(traj.heel[-1, 0])
         trajs.append(traj)
-        meta.append(
-            SwingPlace(
-                index=k,
-                leg=LEGS[leg],
-                start_y=start,
-                pivot_y=pivot,
-                goal_y=goal,
-                landing_y=feet[leg],
-                flat=flat,
-            )
-        )
+        place = dict(index=k, leg=LEGS[leg], start_y=start, pivot_y=pivot, goal_y=goal)
+        meta.append(SwingPlace(**place, landing_y=feet[leg], flat=flat))
         if not traj.ok:
             stopped = k
             break

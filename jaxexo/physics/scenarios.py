@@ -204,34 +204,21 @@ def scene_kwargs(lay: Scene, obstacles=None) -> list[dict]:
     out = []
     for i in range(len(lay.start_y)):
         w, h, center = (float(getattr(lay, k)[i]) for k in ("width", "height", "center_y"))
-        start_y = float(lay.start_y[i])
         if obstacles is None:  # kind is the family id; the outline is world-frame
             local = np.asarray(lay.outline[i], dtype=np.float64) - np.array([center, 0.0])
-            out.append(
-                {
-                    "kind": terrain.FAMILY_NAMES[int(lay.kind[i])],
-                    "obstacle": terrain.to_obstacle(local, center),
-                    "pivot": PIVOT_CONDITIONS[int(lay.pivot_kind[i])],
-                    "start_y": start_y,
-                    "step_length": float(lay.goal_y[i]) - start_y,
-                }
-            )
-            continue
-        spec = obstacles[int(lay.kind[i])]
-        if spec.shape == "profile":
-            ob = Obstacle("profile", "profile", center, w, h, spec.unit_vertices())
+            kind, ob = terrain.FAMILY_NAMES[int(lay.kind[i])], terrain.to_obstacle(local, center)
+        elif (spec := obstacles[int(lay.kind[i])]).shape == "profile":
+            kind, ob = spec.kind, Obstacle("profile", "profile", center, w, h, spec.unit_vertices())
         else:
-            ob = getattr(Obstacle, spec.shape)(w, h, center_y=center)
-        out.append(
-            {
-                "kind": spec.kind,
-                "obstacle": ob,
-                "pivot": PIVOT_CONDITIONS[int(lay.pivot_kind[i])],
-                "start_y": start_y,
-                "step_length": float(lay.goal_y[i]) - start_y,
-            }
-        )
+            kind, ob = spec.kind, getattr(Obstacle, spec.shape)(w, h, center_y=center)
+        pivot, start = PIVOT_CONDITIONS[int(lay.pivot_kind[i])], float(lay.start_y[i])
+        out.append(_scene(kind, ob, pivot, start, float(lay.goal_y[i]) - start))
     return out
+
+
+def _scene(kind: str, obstacle: Obstacle, pivot: str, start_y: float, step_length: float) -> dict:
+    """A scene as ``generate``'s keyword arguments plus ``kind``."""
+    return dict(kind=kind, obstacle=obstacle, pivot=pivot, start_y=start_y, step_length=step_length)
 
 
 UNSEEN_SHAPES = ("rectangle", "wedge", "pole", "bumps")
@@ -285,15 +272,8 @@ def safety_scenes(
         )
         if not unseen:
             ob = Obstacle.named(kind, center_y=center)
-        out.append(
-            {
-                "kind": kind,
-                "obstacle": ob,
-                "pivot": PIVOT_CONDITIONS[(i // len(kinds)) % 3],
-                "start_y": float(start),
-                "step_length": float(step),
-            }
-        )
+        pivot = PIVOT_CONDITIONS[(i // len(kinds)) % 3]
+        out.append(_scene(kind, ob, pivot, float(start), float(step)))
     return out
 
 
@@ -349,16 +329,9 @@ def unseen_scenarios(
                         start, L, c = terrain.place(
                             np, u, width[i], UNSEEN_START_SHIFT, UNSEEN_STEP_LENGTH, foot_length
                         )
-                        out.append(
-                            {
-                                "kind": fam,
-                                "obstacle": terrain.to_obstacle(outline[i], float(c)),
-                                "pivot": pivot,
-                                "start_y": float(start),
-                                "step_length": float(L),
-                                "family_u": u_shape[i].tolist(),
-                            }
-                        )
+                        ob = terrain.to_obstacle(outline[i], float(c))
+                        scene = _scene(fam, ob, pivot, float(start), float(L))
+                        out.append({**scene, "family_u": u_shape[i].tolist()})
                         i += 1
     return out
 
