@@ -134,7 +134,7 @@ def _changes(cfg, layouts, at, which: dict, rng):
     import jax.numpy as jnp
 
     base = dict(
-        vars(numpy_params(cfg)),
+        dataclasses.asdict(numpy_params(cfg)),
         change_chance=np.float32(1.0),
         change_taller=np.zeros(2, np.float32),
         change_wider=np.zeros(2, np.float32),
@@ -147,9 +147,9 @@ def _changes(cfg, layouts, at, which: dict, rng):
     p = types.SimpleNamespace(**base)
     n = len(at)
     u = rng.random((n, changes.N_UNIFORMS), dtype=np.float32)
-    lay = types.SimpleNamespace(**{k: np.asarray(v) for k, v in vars(layouts).items()})
+    lay = types.SimpleNamespace(**{k: np.asarray(v) for k, v in layouts._asdict().items()})
     c = changes.changed_layout(np, p, lay, u)
-    new = layouts.replace(
+    new = layouts._replace(
         outline=jnp.asarray(c.outline, jnp.float32),
         shape=jnp.asarray(c.shape, jnp.float32),
         center_y=jnp.asarray(c.center_y, jnp.float32),
