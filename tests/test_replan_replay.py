@@ -45,7 +45,7 @@ def taller_scene(gen, swing, obstacle):
     s = gen.scene(
         obstacle, pivot_y=sc.pivot_y, start_y=sc.start_y, step_length=sc.goal_y - sc.start_y
     )
-    return dataclasses.replace(s, goal_y=sc.goal_y, pivot_kind=sc.pivot_kind)
+    return s._replace(goal_y=sc.goal_y, pivot_kind=sc.pivot_kind)
 
 
 @pytest.fixture(scope="module")

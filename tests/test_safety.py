@@ -14,6 +14,7 @@ from jaxexo.inference import Obstacle, TrajectoryGenerator
 from jaxexo.inference.scenarios import safety_scenarios
 from jaxexo.physics import geometry, outcome, swept, transition
 from jaxexo.physics.scene import make_scene, stack_scenes
+from jaxexo.shield.rows import take_rows
 from jaxexo.swing import smoothing as sm
 from jaxexo.swing.trajectory import assemble
 
@@ -182,12 +183,12 @@ def _step(xp, cfg, prev, heel, max_y=None):
     p = numpy_params(cfg)
     scene = make_scene(Obstacle.named("base1"), "obstacle", foot_length=FOOT)  # [0.35, 0.55] x 0.10
     lay = stack_scenes([scene], np.float32)
-    lay = type(lay)(**{k: v[0] for k, v in vars(lay).items()})
+    lay = take_rows(lay, 0)
     if xp is not np:
         from jaxexo.env.params import EnvParams
 
         p = EnvParams.from_config(cfg)
-        lay = type(lay)(**{k: xp.asarray(v) for k, v in vars(lay).items()})
+        lay = lay._replace(**{k: xp.asarray(v) for k, v in lay._asdict().items() if v is not None})
     out = transition.transition(
         xp,
         p,

@@ -16,8 +16,9 @@ import pytest
 
 from jaxexo.config import load_config
 from jaxexo.inference.scenarios import sample_scenarios, training_scenarios
-from jaxexo.physics import geometry, scenarios, swept, transition
+from jaxexo.physics import geometry, swept, transition
 from jaxexo.physics.scene import stack_scenes
+from jaxexo.shield.rows import take_rows
 
 from conftest import ROOT, random_generator
 
@@ -64,8 +65,7 @@ def _scenes(gen, seed: int):
     scenes = [
         gen.scene(s["obstacle"], s["pivot"], None, s["start_y"], s["step_length"]) for s in sc
     ]
-    st = stack_scenes(scenes, np.float32)
-    lay = scenarios.Layouts(**vars(st), kind=np.zeros(len(scenes), np.int32))
+    lay = stack_scenes(scenes, np.float32)._replace(kind=np.zeros(len(scenes), np.int32))
     return scenes, lay
 
 
@@ -214,7 +214,7 @@ def test_thesis_baseline_environment_ends_where_the_rollouts_end(episodes):
     pick = np.r_[np.flatnonzero(clip), np.flatnonzero(~clip)[:: len(paths) // 24]]
     assert clip.sum() >= 20
     for i in pick:
-        pool = scenarios.Layouts(*(np.asarray(v)[i : i + 1] for v in lay))
+        pool = take_rows(lay, slice(i, i + 1))
         env = NumpyExoEnv(gen.config, pool)
         env.reset()
         for k, a in enumerate(acts[i]):

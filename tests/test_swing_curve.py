@@ -323,7 +323,7 @@ def _grown(traj, k: float):
 
     o = traj.scene.outline
     base = np.array([0.5 * (o[:, 0].min() + o[:, 0].max()), 0.0])
-    scene = dataclasses.replace(traj.scene, outline=base + (1.0 + k) * (o - base))
+    scene = traj.scene._replace(outline=base + (1.0 + k) * (o - base))
     return dataclasses.replace(traj, scene=scene)
 
 

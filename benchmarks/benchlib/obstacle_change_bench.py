@@ -149,7 +149,7 @@ def _changes(params, layouts, at, which: dict, rng):
     u = rng.random((n, changes.N_UNIFORMS), dtype=np.float32)
     lay = jax.tree.map(np.asarray, layouts)
     c = changes.changed_layout(np, p, lay, u)
-    new = layouts.replace(
+    new = layouts._replace(
         outline=jnp.asarray(c.outline, jnp.float32),
         shape=jnp.asarray(c.shape, jnp.float32),
         center_y=jnp.asarray(c.center_y, jnp.float32),

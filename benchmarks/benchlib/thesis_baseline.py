@@ -109,14 +109,19 @@ class NumpyExoEnv:
         self.p = numpy_params(cfg)
         self.obs_mode = cfg.env.obs_mode
         self.max_steps = int(cfg.env.max_steps)
-        self.pool = type(pool)(*(np.asarray(v) for v in pool))  # scenarios.Layouts, leading axis
+        # a physics Scene [N]
+        self.pool = pool._replace(
+            **{k: np.asarray(v) for k, v in pool._asdict().items() if v is not None}
+        )
         self.n_layouts = len(self.pool.start_y)
         self.rng = np.random.default_rng(seed)
         self.order = self.rng.permutation(self.n_layouts)
         self.next = 0
 
     def _layout(self, i: int):
-        return type(self.pool)(*(v[i] for v in self.pool))
+        return self.pool._replace(
+            **{k: v[i] for k, v in self.pool._asdict().items() if v is not None}
+        )
 
     def _obs(self):
         return self.actions.observation(

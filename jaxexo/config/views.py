@@ -6,7 +6,7 @@ obstacles (Table 3.1). NumPy-only: the physics is given these values, it never r
 from __future__ import annotations
 
 import dataclasses
-import types
+from typing import Any
 
 import numpy as np
 
@@ -32,21 +32,33 @@ def param_values(cfg: Config) -> dict[str, np.ndarray]:
     return out
 
 
-def numpy_params(cfg: Config) -> types.SimpleNamespace:
+# The NumPy and plain-float views' one record: a frozen dataclass whose fields are param_values'
+# names (those of EnvParams), derived here from the declarations rather than written out again.
+ParamView = dataclasses.make_dataclass(
+    "ParamView", [(k, Any) for k in param_values(Config())], frozen=True, slots=True, kw_only=True
+)
+ParamView.__module__ = __name__
+ParamView.__doc__ = """The environment parameters of a config outside JAX, one field per name of
+``param_values`` (EnvParams's): NumPy values (``numpy_params``) or Python floats (``scalar_params``).
+Changed with ``dataclasses.replace``."""
+
+
+def numpy_params(cfg: Config) -> ParamView:
     """The environment parameters as NumPy arrays, attribute-accessible like EnvParams."""
-    return types.SimpleNamespace(**param_values(cfg))
+    return ParamView(**param_values(cfg))
 
 
-def scalar_params(cfg: Config) -> types.SimpleNamespace:
-    """The transition constants as Python floats (for ``xp=transition.scalar``); vectors become tuples.
+def scalar_params(cfg: Config) -> ParamView:
+    """The transition constants as Python floats (for ``xp=transition.scalar``); vectors become tuples,
+    and the parameters that are not float32 scalars or vectors None.
 
     Values are rounded through float32 first, so that the scalar loop starts from exactly the
     constants the float32 JAX environment uses."""
     out = {}
     for k, v in param_values(cfg).items():
-        if v.dtype == np.float32 and v.ndim <= 1:
-            out[k] = float(v) if v.ndim == 0 else tuple(float(x) for x in v)
-    return types.SimpleNamespace(**out)
+        scalar = v.dtype == np.float32 and v.ndim <= 1
+        out[k] = None if not scalar else float(v) if v.ndim == 0 else tuple(float(x) for x in v)
+    return ParamView(**out)
 
 
 def test_config(cfg: Config) -> Config:

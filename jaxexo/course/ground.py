@@ -191,7 +191,9 @@ def walk_size(
         swings = int(steps)
     rate = float(config.device.control_rate if rate is None else rate)
     least = swings * _least_swing(r, limits.planned(), r.hi) + (swings - 1) * max(dwell, 0.0)
-    return WalkSize(start, goal, swings, least, int(least * rate) + 1, rate)
+    return WalkSize(
+        start=start, goal=goal, swings=swings, duration=least, rows=int(least * rate) + 1, rate=rate
+    )
 
 
 def check_walk_size(

@@ -29,6 +29,7 @@ from jaxexo.course.record import (
     WALK_COLUMNS,
     Course,
     CourseStep,
+    SwingPlace,
     TerrainUpdate,
     walk_table,
 )
@@ -162,19 +163,19 @@ def plan_course(
         f"step {s.index + 1}: {s.method}" for s in steps_out if s.method == "cfftg-fallback"
     )
     return Course(
-        terrain,
-        plan,
-        tuple(steps_out),
-        float(rate),
-        limits,
-        ds,
-        "rl" if rl else "cfftg",
-        samples,
-        jump,
-        tuple(reasons),
-        _time.perf_counter() - t0,
-        notes + walk.notes,
-        tuple(u for _, u in updates),
+        terrain=terrain,
+        footholds=plan,
+        steps=tuple(steps_out),
+        rate=float(rate),
+        limits=limits,
+        double_support=ds,
+        method="rl" if rl else "cfftg",
+        samples=samples,
+        junction_jump=jump,
+        reasons=tuple(reasons),
+        plan_seconds=_time.perf_counter() - t0,
+        notes=notes + walk.notes,
+        updates=tuple(u for _, u in updates),
     )
 
 
@@ -205,8 +206,8 @@ def _check_size(terrain, config, r, limits, rate, start_y, goal_y, steps, dwell)
 
 def _swings(gen, rl: bool, fallback, plan, terrain: Terrain, r: FootholdRules, first=0, feet=None):
     """Each swing of the walk in order from ``first`` (the feet's heel y then: ``feet``, left and
-    right; default both at the start), until one fails: (trajectories, each swing's (index, leg,
-    start, pivot, goal, landing, flat), the index of the failed swing or None)."""
+    right; default both at the start), until one fails: (trajectories, each swing's SwingPlace,
+    the index of the failed swing or None)."""
     feet = [plan.start_y, plan.start_y] if feet is None else list(feet)
     obs = obstacles_of(terrain)
     trajs, meta, stopped = [], [], None
@@ -222,7 +223,8 @@ def _swings(gen, rl: bool, fallback, plan, terrain: Terrain, r: FootholdRules, f
         traj = _in_course(traj, gen, ob, start, pivot, goal)
         feet[leg] = float(traj.heel[-1, 0])
         trajs.append(traj)
-        meta.append((k, LEGS[leg], start, pivot, goal, feet[leg], flat))
+        place = dict(index=k, leg=LEGS[leg], start_y=start, pivot_y=pivot, goal_y=goal)
+        meta.append(SwingPlace(**place, landing_y=feet[leg], flat=flat))
         if not traj.ok:
             stopped = k
             break
@@ -237,15 +239,15 @@ def _steps(trajs, meta, timed, spans, stopped, n_planned: int, before):
     timed = timed + [None] * (len(trajs) - len(timed))
     spans = spans + [(end, end)] * (len(trajs) - len(spans))
     steps_out, reasons = [], []
-    for (k, leg, start, pivot, goal, land, flat), traj, t, span, old in zip(
-        meta, trajs, timed, spans, before
-    ):
-        st = CourseStep(k, leg, start, pivot, goal, land, flat, traj, t, *span, old)
+    for m, traj, t, span, old in zip(meta, trajs, timed, spans, before):
+        st = CourseStep(
+            **vars(m), trajectory=traj, timed=t, start_s=span[0], end_s=span[1], replanned_from=old
+        )
         steps_out.append(st)
         if not st.ok:
             reasons.append(
-                f"step {k + 1} ({leg} foot, y = {start:.2f} -> {land:.2f} m, {st.method}): "
-                + "; ".join(st.reasons)
+                f"step {m.index + 1} ({m.leg} foot, y = {m.start_y:.2f} -> {m.landing_y:.2f} m, "
+                f"{st.method}): " + "; ".join(st.reasons)
             )
     if stopped is not None and stopped + 1 < n_planned:
         reasons.append(
@@ -275,8 +277,7 @@ class _Context:
 
 @dataclass(frozen=True)
 class _Walk:
-    """A walk being planned: the swings' trajectories, their (index, leg, start, pivot, goal,
-    landing, flat), the timed swings (the first len(timed)), the failed swing's index or None,
+    """A walk being planned: the swings' trajectories, their SwingPlaces, the timed swings (the first len(timed)), the failed swing's index or None,
     each swing's TimedSwing before a replan (or None), and notes."""
 
     trajs: list
@@ -340,11 +341,10 @@ def _apply_update(ctx: _Context, walk: _Walk, u: TerrainUpdate, i: int) -> _Walk
     first, feet = k, _feet(ctx.plan, meta)
     if spans[k][0] < u.time:  # in flight: replanned
         new, flat = _replanned(ctx, walk.timed[k], walk.meta[k], u, u.time - spans[k][0], name)
-        idx, leg, start, pivot, goal, _, _ = walk.meta[k]
-        land = float(new.heel[-1, 0])
+        place = dataclasses.replace(walk.meta[k], landing_y=float(new.heel[-1, 0]), flat=flat)
         trajs, meta, timed = (
             trajs + [walk.trajs[k]],
-            meta + [(idx, leg, start, pivot, goal, land, flat)],
+            meta + [place],
             timed + [new],
         )
         before = before + [walk.timed[k] if walk.before[k] is None else walk.before[k]]
@@ -375,7 +375,7 @@ def _feet(plan, meta) -> list[float]:
     """The heel y of the left and right foot after the swings of ``meta``."""
     feet = [plan.start_y, plan.start_y]
     for m in meta:
-        feet[LEGS.index(m[1])] = m[5]
+        feet[LEGS.index(m.leg)] = m.landing_y
     return feet
 
 
@@ -386,8 +386,7 @@ def _check_footholds(ctx: _Context, meta, k: int, terrain: Terrain, name: str) -
     the course: the footholds are not moved by an update; CourseError otherwise."""
     r = ctx.rules
     obs = obstacles_of(terrain)
-    _, _, start, pivot, _, _, _ = meta[k]
-    places = [(start, 0.0, "stands"), (pivot, 0.0, "stands")]
+    places = [(meta[k].start_y, 0.0, "stands"), (meta[k].pivot_y, 0.0, "stands")]
     places += [(y, r.tolerance, "lands") for y in ctx.plan.landings[k:]]
     y0, y1 = float(terrain.y[0]), float(terrain.y[-1])
     for y, tol, does in places:
@@ -417,7 +416,7 @@ def _moved(swing, gen, dy: float):
         start_y=sc.start_y + dy,
         step_length=sc.goal_y - sc.start_y,
     )
-    scene = dataclasses.replace(scene, goal_y=sc.goal_y + dy, pivot_kind=sc.pivot_kind)
+    scene = scene._replace(goal_y=sc.goal_y + dy, pivot_kind=sc.pivot_kind)
     shift = np.array([dy, 0.0])
     return dataclasses.replace(
         swing,
@@ -431,11 +430,11 @@ def _moved(swing, gen, dy: float):
 
 
 def _replanned(ctx: _Context, swing, m, u: TerrainUpdate, at: float, name: str):
-    """Swing ``m`` (its meta) replanned at ``at`` (s, swing time) over u.terrain's obstacle for it:
+    """Swing ``m`` (its SwingPlace) replanned at ``at`` (s, swing time) over u.terrain's obstacle for it:
     in its own frame, as it was planned (the policy observes positions from its start), by the
     generator's ``replan``; (the replanned TimedSwing on the course, whether it is flat)."""
-    k, _, start, _, goal, _, _ = m
-    ob, flat = _swing_obstacle(obstacles_of(u.terrain), start, goal, ctx.rules, u.terrain)
+    k, start = m.index, m.start_y
+    ob, flat = _swing_obstacle(obstacles_of(u.terrain), start, m.goal_y, ctx.rules, u.terrain)
     kw = {"fallback": ctx.fallback} if ctx.rl else {}
     local = _moved(swing, ctx.gen, -start)
     try:

@@ -55,9 +55,8 @@ class TerrainUpdate:
 
 
 @dataclass(frozen=True)
-class CourseStep:
-    """One swing of the walk: which leg, where it starts, pivots and lands (m), the checked path
-    (``trajectory``), its device timing (``timed``, a TimedSwing) and when it runs in the walk (s)."""
+class SwingPlace:
+    """Where one swing of the walk goes: its index, which leg, where it starts, pivots and lands (m)."""
 
     index: int
     leg: str
@@ -66,6 +65,13 @@ class CourseStep:
     goal_y: float  # the planned foothold
     landing_y: float  # where the heel came down
     flat: bool  # no obstacle under the swing (planned over FLAT_OBSTACLE)
+
+
+@dataclass(frozen=True)
+class CourseStep(SwingPlace):
+    """One swing of the walk: its place (``SwingPlace``), the checked path (``trajectory``), its
+    device timing (``timed``, a TimedSwing) and when it runs in the walk (s)."""
+
     trajectory: Trajectory
     timed: object  # TimedSwing; None for a failed swing (not timed)
     start_s: float
@@ -181,23 +187,24 @@ class Course:
         return write_json(self.to_dict(), path)
 
 
-def walk_table(timed, meta, double_support: float, rate: float):
+def walk_table(timed, places, double_support: float, rate: float):
     """The whole walk as one table (WALK_COLUMNS): each swing's samples in walk time, the swing
     leg's columns on its side; a landing's pose held ``double_support`` s; the first sample of a
     swing (its lift-off, the same instant and pose as the landing before) kept once. Returns the
-    table, each step's (start, end) in s, and the largest joint-angle jump at a hand-over (rad)."""
+    table, each step's (start, end) in s, and the largest joint-angle jump at a hand-over (rad).
+    ``timed``: the TimedSwings, ``places``: their SwingPlaces."""
     rows, spans = [np.zeros((0, len(WALK_COLUMNS)))], []
     offset, jump = 0.0, 0.0
     last = None
-    for t, (k, leg, start, pivot, goal, land, flat) in zip(timed, meta):
+    for t, m in zip(timed, places):
         n = len(t.time)
-        side = LEGS.index(leg)
+        side = LEGS.index(m.leg)
         block = np.zeros((n, len(WALK_COLUMNS)))
         block[:, 0] = t.time + offset
-        block[:, 1] = k + 1
+        block[:, 1] = m.index + 1
         block[:, 2] = side
         stance = np.zeros_like(t.heel)
-        stance[:, 0] = pivot
+        stance[:, 0] = m.pivot_y
         feet = [None, None]
         feet[side], feet[1 - side] = t.heel, stance
         for i, h in enumerate(feet):

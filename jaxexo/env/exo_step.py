@@ -16,6 +16,7 @@ from jaxexo.env import spaces
 from jaxexo.env.params import EnvParams
 from jaxexo.physics import actions, changes, geometry, scenarios, transition
 from jaxexo.physics.actions import LENGTH_SCALE, NUM_ACTIONS, THESIS_OBS_CENTER  # noqa: F401 (re-exported)
+from jaxexo.physics.scene import Scene as Layout  # one episode's scene: physics's one scene record
 from jaxexo.physics.scene import make_scene
 from jaxexo.shield import compact, make_shield, rule
 
@@ -24,24 +25,6 @@ OBS_BOUND = 10.0
 # Fresh scenes drawn per round of step_batch's auto-reset, as a fraction of the batch (episodes last
 # tens of steps, so a few per cent of the environments end at a step).
 RESET_BUFFER_FRACTION = 0.0625
-
-
-@struct.dataclass
-class Layout:
-    """One episode's scene. ``outline`` is world-frame (K, 2); ``shape`` the obstacle's heights (m)
-    at equally spaced fractions of its width; ``kind`` indexes the config's obstacle mixture
-    (-1 for an obstacle given directly); ``pivot_kind`` indexes PIVOT_CONDITIONS."""
-
-    outline: jnp.ndarray
-    shape: jnp.ndarray
-    center_y: jnp.ndarray
-    width: jnp.ndarray
-    height: jnp.ndarray
-    kind: jnp.ndarray
-    pivot_kind: jnp.ndarray
-    pivot_y: jnp.ndarray
-    start_y: jnp.ndarray
-    goal_y: jnp.ndarray
 
 
 @struct.dataclass
@@ -131,7 +114,7 @@ class ExoStepEnv:
         c = changes.changed_layout(jnp, params, layout, u)
         return ObstacleChange(
             at=c.at,
-            layout=layout.replace(
+            layout=layout._replace(
                 outline=c.outline,
                 shape=c.shape,
                 center_y=c.center_y,
@@ -148,10 +131,8 @@ class ExoStepEnv:
         """The scene of uniform numbers u (..., scenarios.n_uniforms(params))
         (jaxexo.physics.scenarios.layout_from_uniforms; procedural terrain when the config has it)."""
         t = self.config.layout.terrain  # static: evaluate only the outlines of its families
-        return Layout(
-            **scenarios.layout_from_uniforms(
-                jnp, params, u, kind, pivot_kind, None if t is None else t.families
-            )._asdict()
+        return scenarios.layout_from_uniforms(
+            jnp, params, u, kind, pivot_kind, None if t is None else t.families
         )
 
     def init_state(

@@ -9,7 +9,7 @@ replaced by CFFTG's (jaxexo.inference.fallback). Method: docs/generation.md.
 from __future__ import annotations
 
 import copy
-import types
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -71,8 +71,8 @@ class TrajectoryGenerator(SceneMaker):
         self.clearing = True
         # terminated()'s one parameter as a Python bool: a NumPy bool would make every step's test
         # a NumPy scalar operation.
-        self._term_p = types.SimpleNamespace(
-            terminate_on_collision=bool(self.np_params.terminate_on_collision)
+        self._term_p = dataclasses.replace(
+            self.sp, terminate_on_collision=bool(self.np_params.terminate_on_collision)
         )
         self.epsilon = 0.0  # 0: greedy (the default; a device's generator must not explore)
         self.shield = bool(config.env.shield)

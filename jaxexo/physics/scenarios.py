@@ -10,13 +10,13 @@ timing shapes). Why and how: docs/training.md#the-environment.
 from __future__ import annotations
 
 import math
-from typing import Any, NamedTuple
 
 import numpy as np
 
 from jaxexo.physics import geometry, terrain
 from jaxexo.physics.geometry import Obstacle
 from jaxexo.physics.kinematics import PIVOT_CONDITIONS, pivot_position
+from jaxexo.physics.scene import Scene
 
 # The five thesis obstacles (Table 3.1; Base 1-3 seen in training, triangle and half-circle held out).
 TEST_KINDS = ("base1", "base2", "base3", "triangle", "half_circle")
@@ -96,23 +96,7 @@ def _kind_and_pivot(xp, u, kind, pivot_kind, kind_cdf, pivot_cdf):
     return xp.asarray(kind, dtype=xp.int32), xp.asarray(pivot_kind, dtype=xp.int32)
 
 
-class Layouts(NamedTuple):
-    """Scenes' layouts as arrays with any leading shape ``...`` (env.Layout's fields; a NamedTuple,
-    so a pytree for JAX without importing it). m, except the indices ``kind`` and ``pivot_kind``."""
-
-    outline: Any  # (..., K, 2) world frame
-    shape: Any  # (..., S) heights at equally spaced fractions of the width
-    center_y: Any
-    width: Any
-    height: Any
-    kind: Any  # the config's obstacle index, or the terrain family id
-    pivot_kind: Any  # index into PIVOT_CONDITIONS
-    pivot_y: Any
-    start_y: Any
-    goal_y: Any
-
-
-def terrain_layout_from_uniforms(xp, p, u, kind=None, pivot_kind=None, families=None) -> Layouts:
+def terrain_layout_from_uniforms(xp, p, u, kind=None, pivot_kind=None, families=None) -> Scene:
     """A procedural-terrain scene from uniform numbers u (..., N_TERRAIN_UNIFORMS): the family (by
     ``terrain_cdf`` over ``terrain_ids``; ``kind`` fixes the index into terrain_ids), its outline
     (terrain.family_outline), the pivot condition, and the placement (terrain.place: start shift,
@@ -134,7 +118,7 @@ def terrain_layout_from_uniforms(xp, p, u, kind=None, pivot_kind=None, families=
         p.terrain_margins[..., 1],
     )
     outline = xp.stack([local[..., 0] + center[..., None], local[..., 1]], axis=-1)
-    return Layouts(
+    return Scene(
         outline=outline,
         shape=terrain.shape(xp, local, width, p.kind_shape.shape[-1]),
         center_y=center,
@@ -148,9 +132,9 @@ def terrain_layout_from_uniforms(xp, p, u, kind=None, pivot_kind=None, families=
     )
 
 
-def layout_from_uniforms(xp, p, u, kind=None, pivot_kind=None, families=None) -> Layouts:
+def layout_from_uniforms(xp, p, u, kind=None, pivot_kind=None, families=None) -> Scene:
     """A scene from uniform numbers u (..., N_UNIFORMS) and the layout distribution in ``p``
-    (jaxexo.config.param_values' fields): the scenes as ``Layouts`` (...). ``kind``/``pivot_kind``
+    (jaxexo.config.param_values' fields): the scenes as a ``Scene`` [...]. ``kind``/``pivot_kind``
     (...) fix the obstacle kind / pivot condition instead of drawing them from u[0] / u[1]. With
     procedural terrain (``uses_terrain(p)``) the scene is terrain_layout_from_uniforms'."""
     if uses_terrain(p):
@@ -169,7 +153,7 @@ def layout_from_uniforms(xp, p, u, kind=None, pivot_kind=None, families=None) ->
         [center[..., None] + width[..., None] * unit[..., 0], height[..., None] * unit[..., 1]],
         axis=-1,
     )
-    return Layouts(
+    return Scene(
         outline=outline,
         shape=height[..., None] * p.kind_shape[kind],
         center_y=center,
@@ -185,7 +169,7 @@ def layout_from_uniforms(xp, p, u, kind=None, pivot_kind=None, families=None) ->
 
 def scenario_layouts(
     xp, p, seed: int, n: int, cycle: bool = False, kinds=None, pivots=None
-) -> Layouts:
+) -> Scene:
     """Scene i (i < n) of the set ``seed``: the scene reset draws from the key words (seed, i).
     ``cycle``: kinds and pivot conditions in turn instead of drawn (test sets): kind
     kinds[i % len(kinds)], pivot pivots[(i // len(kinds)) % len(pivots)], by default every kind of
@@ -212,42 +196,29 @@ def scenario_layouts(
 # --------------------------------------------------------------------------------------------
 
 
-def scene_kwargs(lay: Layouts, obstacles=None) -> list[dict]:
-    """Layouts ``lay`` (``scenario_layouts``' arrays) as keyword arguments of ``generate`` plus
+def scene_kwargs(lay: Scene, obstacles=None) -> list[dict]:
+    """Scenes ``lay`` [N] (``scenario_layouts``') as keyword arguments of ``generate`` plus
     ``kind``: ``obstacles`` are the layout's obstacle mixture (objects with ``kind``, ``shape`` and
     ``unit_vertices()``, indexed by the layouts' ``kind``), None for procedural terrain (``kind`` is
     the family id and the outline is in the world frame)."""
     out = []
     for i in range(len(lay.start_y)):
         w, h, center = (float(getattr(lay, k)[i]) for k in ("width", "height", "center_y"))
-        start_y = float(lay.start_y[i])
         if obstacles is None:  # kind is the family id; the outline is world-frame
             local = np.asarray(lay.outline[i], dtype=np.float64) - np.array([center, 0.0])
-            out.append(
-                {
-                    "kind": terrain.FAMILY_NAMES[int(lay.kind[i])],
-                    "obstacle": terrain.to_obstacle(local, center),
-                    "pivot": PIVOT_CONDITIONS[int(lay.pivot_kind[i])],
-                    "start_y": start_y,
-                    "step_length": float(lay.goal_y[i]) - start_y,
-                }
-            )
-            continue
-        spec = obstacles[int(lay.kind[i])]
-        if spec.shape == "profile":
-            ob = Obstacle("profile", "profile", center, w, h, spec.unit_vertices())
+            kind, ob = terrain.FAMILY_NAMES[int(lay.kind[i])], terrain.to_obstacle(local, center)
+        elif (spec := obstacles[int(lay.kind[i])]).shape == "profile":
+            kind, ob = spec.kind, Obstacle("profile", "profile", center, w, h, spec.unit_vertices())
         else:
-            ob = getattr(Obstacle, spec.shape)(w, h, center_y=center)
-        out.append(
-            {
-                "kind": spec.kind,
-                "obstacle": ob,
-                "pivot": PIVOT_CONDITIONS[int(lay.pivot_kind[i])],
-                "start_y": start_y,
-                "step_length": float(lay.goal_y[i]) - start_y,
-            }
-        )
+            kind, ob = spec.kind, getattr(Obstacle, spec.shape)(w, h, center_y=center)
+        pivot, start = PIVOT_CONDITIONS[int(lay.pivot_kind[i])], float(lay.start_y[i])
+        out.append(_scene(kind, ob, pivot, start, float(lay.goal_y[i]) - start))
     return out
+
+
+def _scene(kind: str, obstacle: Obstacle, pivot: str, start_y: float, step_length: float) -> dict:
+    """A scene as ``generate``'s keyword arguments plus ``kind``."""
+    return dict(kind=kind, obstacle=obstacle, pivot=pivot, start_y=start_y, step_length=step_length)
 
 
 UNSEEN_SHAPES = ("rectangle", "wedge", "pole", "bumps")
@@ -301,15 +272,8 @@ def safety_scenes(
         )
         if not unseen:
             ob = Obstacle.named(kind, center_y=center)
-        out.append(
-            {
-                "kind": kind,
-                "obstacle": ob,
-                "pivot": PIVOT_CONDITIONS[(i // len(kinds)) % 3],
-                "start_y": float(start),
-                "step_length": float(step),
-            }
-        )
+        pivot = PIVOT_CONDITIONS[(i // len(kinds)) % 3]
+        out.append(_scene(kind, ob, pivot, float(start), float(step)))
     return out
 
 
@@ -365,16 +329,9 @@ def unseen_scenarios(
                         start, L, c = terrain.place(
                             np, u, width[i], UNSEEN_START_SHIFT, UNSEEN_STEP_LENGTH, foot_length
                         )
-                        out.append(
-                            {
-                                "kind": fam,
-                                "obstacle": terrain.to_obstacle(outline[i], float(c)),
-                                "pivot": pivot,
-                                "start_y": float(start),
-                                "step_length": float(L),
-                                "family_u": u_shape[i].tolist(),
-                            }
-                        )
+                        ob = terrain.to_obstacle(outline[i], float(c))
+                        scene = _scene(fam, ob, pivot, float(start), float(L))
+                        out.append({**scene, "family_u": u_shape[i].tolist()})
                         i += 1
     return out
 
@@ -419,7 +376,6 @@ __all__ = [
     "seed_words",
     "uses_terrain",
     "n_uniforms",
-    "Layouts",
     "layout_from_uniforms",
     "terrain_layout_from_uniforms",
     "scenario_layouts",

@@ -1,14 +1,15 @@
-"""Fixed scenes: ``make_scene``, the one place where a scene (an Obstacle, a pivot condition or pivot
-y, a start and a step length) is validated and laid out, ``stack_scenes`` (scenes as batched arrays
-in the environment's Layout fields), and the clearance a caller may ask of a swing
+"""Scenes: ``Scene``, the one record of a scene (one, or many on a leading axis: the environment's
+episodes, the scenario draws, a generator's batch), ``make_scene``, the one place where a scene (an
+Obstacle, a pivot condition or pivot y, a start and a step length) is validated and laid out,
+``stack_scenes`` (scenes on a leading axis), and the clearance a caller may ask of a swing
 (``check_clearance``, ``with_clearance``). NumPy-only.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
-import types
-from dataclasses import dataclass
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -52,34 +53,44 @@ def with_clearance(p, clearance: float | None):
         if isinstance(p.min_clearance, np.ndarray)
         else float
     )
-    return types.SimpleNamespace(
-        **{
-            **vars(p),
-            "min_clearance": cast(clearance),
-            "shield_clearance": cast(float(p.shield_clearance) + extra),
-        }
+    return dataclasses.replace(
+        p,
+        min_clearance=cast(clearance),
+        shield_clearance=cast(float(p.shield_clearance) + extra),
     )
 
 
-@dataclass(frozen=True)
-class Scene:
-    """One fixed scenario in world coordinates (metres): the obstacle, where the pivot (stance) heel
-    stands, where the swing heel starts and where it must land. Fields match the environment's
-    Layout, so the same observation and transition code reads either."""
+class Scene(NamedTuple):
+    """Scenes in world coordinates (m, but the indices ``kind`` and ``pivot_kind``), each field with
+    the same leading shape ``...``: none for one scene (``make_scene``: Python floats), ``[N]`` for
+    many (``stack_scenes``, the scenario draws, the environment's episodes under vmap). A NamedTuple,
+    so JAX takes it as a pytree while this floor imports NumPy only; the same observation, transition
+    and checks read one scene or many.
 
-    obstacle: geometry.Obstacle
-    outline: np.ndarray  # (K, 2) world-frame outline, padded to K vertices
-    shape: np.ndarray  # (P,) heights at equally spaced fractions of the width
-    center_y: float
-    width: float
-    height: float
-    pivot_kind: int  # index into PIVOT_CONDITIONS, -1 for a pivot given as a y
-    pivot_y: float
-    start_y: float
-    goal_y: float
+    outline [..., K, 2]  the obstacle's world-frame outline, padded to K vertices
+    shape [..., P]       its heights at P equally spaced fractions of its width
+    center_y, width, height [...]
+    kind [...]           the config's obstacle index, the terrain family id, or -1 (given directly)
+    pivot_kind [...]     index into PIVOT_CONDITIONS, -1 for a pivot given as a y
+    pivot_y, start_y, goal_y [...]  the pivot (stance) heel, the swing heel's start and its goal
+    obstacle             the geometry.Obstacle of one scene (make_scene), None for many
+    """
+
+    outline: Any
+    shape: Any
+    center_y: Any
+    width: Any
+    height: Any
+    kind: Any
+    pivot_kind: Any
+    pivot_y: Any
+    start_y: Any
+    goal_y: Any
+    obstacle: Any = None
 
     @property
     def pivot(self) -> str:
+        """One scene's pivot condition in words."""
         return (
             PIVOT_CONDITIONS[self.pivot_kind] if self.pivot_kind >= 0 else f"y={self.pivot_y:.3f} m"
         )
@@ -138,32 +149,35 @@ def make_scene(
         )
     shape = obstacle.height * geometry.cached_shape_descriptor(obstacle.unit_vertices, shape_points)
     return Scene(
-        obstacle=obstacle,
         outline=obstacle.outline_array(max_vertices),
         shape=shape,
         center_y=obstacle.center_y,
         width=obstacle.width,
         height=obstacle.height,
+        kind=-1,
         pivot_kind=pk,
         pivot_y=float(py),
         start_y=start_y,
         goal_y=start_y + step_length,
+        obstacle=obstacle,
     )
 
 
-def stack_scenes(scenes, dtype=np.float32) -> types.SimpleNamespace:
-    """Scenes as arrays with a leading batch axis (outlines padded to the largest vertex count), in
-    the Layout field layout that ``observation`` and the checks read."""
+def stack_scenes(scenes, dtype=np.float32) -> Scene:
+    """Single scenes as one ``Scene`` [N] (outlines padded to the largest vertex count; the indices
+    int32, the rest ``dtype``; no obstacles)."""
     k = max(len(s.outline) for s in scenes)
     f = lambda name: np.asarray([getattr(s, name) for s in scenes], dtype=dtype)  # noqa: E731
-    return types.SimpleNamespace(
+    i32 = lambda name: np.asarray([getattr(s, name) for s in scenes], dtype=np.int32)  # noqa: E731
+    return Scene(
         outline=np.stack([geometry.pad_outline(s.outline, k) for s in scenes]).astype(dtype),
         shape=np.stack([s.shape for s in scenes]).astype(dtype),
         center_y=f("center_y"),
         width=f("width"),
         height=f("height"),
+        kind=i32("kind"),
+        pivot_kind=i32("pivot_kind"),
         pivot_y=f("pivot_y"),
         start_y=f("start_y"),
         goal_y=f("goal_y"),
-        pivot_kind=np.asarray([s.pivot_kind for s in scenes], dtype=np.int32),
     )

@@ -20,10 +20,15 @@ from jaxexo.shield import rule
 
 def take_rows(rec, idx, shared=()):
     """Rows ``idx`` of a record whose fields have a leading axis (stacked scenes, a trajectory
-    batch): arrays indexed, tuples row by row; the fields named in ``shared`` are every row's."""
+    batch): arrays indexed, tuples row by row; the fields named in ``shared`` (and None) are every
+    row's."""
     return type(rec)(
         **{
-            k: v if k in shared else tuple(v[i] for i in idx) if isinstance(v, tuple) else v[idx]
+            k: v
+            if k in shared or v is None
+            else tuple(v[i] for i in idx)
+            if isinstance(v, tuple)
+            else v[idx]
             for k, v in (rec._asdict() if hasattr(rec, "_asdict") else vars(rec)).items()
         }
     )

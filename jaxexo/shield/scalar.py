@@ -13,9 +13,9 @@ Method: docs/generation.md#speed.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import struct
-import types
 
 import numpy as np
 
@@ -46,12 +46,12 @@ _ORIENT_TOL = 1e-9
 END_MARGIN = 1e-6
 
 
-def goal_tolerance_moved(sp, by: float) -> types.SimpleNamespace:
+def goal_tolerance_moved(sp, by: float):
     """``sp`` with the goal box's half width (goal_tolerance[0]) widened by ``by`` (m; negative:
     narrowed): the rule's end conditions on float64 values, with it moved by END_MARGIN either way,
     bound their float32 decision (the other comparisons they make are exact on float32 values)."""
     tol = sp.goal_tolerance
-    return types.SimpleNamespace(**{**vars(sp), "goal_tolerance": (tol[0] + by, *tol[1:])})
+    return dataclasses.replace(sp, goal_tolerance=(tol[0] + by, *tol[1:]))
 
 
 _F32 = struct.Struct("f")

@@ -464,7 +464,7 @@ def _checked_obstacle_scene(gen, swing, obstacle, state: FootState):
     scene = gen.scene(
         obstacle, pivot_y=sc.pivot_y, start_y=sc.start_y, step_length=sc.goal_y - sc.start_y
     )
-    scene = replace(scene, goal_y=sc.goal_y, pivot_kind=sc.pivot_kind)
+    scene = scene._replace(goal_y=sc.goal_y, pivot_kind=sc.pivot_kind)
     c = float(foot_clearance(np, state.heel[None], gen.sp.foot_length, scene.outline[None])[0])
     if c < gen.sp.min_clearance:
         where = "inside (or touching)" if c <= 0.0 else f"{c:.4f} m from"
