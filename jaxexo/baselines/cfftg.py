@@ -5,32 +5,19 @@ generator. Its path, apex and re-planning: docs/generation.md (CFFTG, the polyno
 
 from __future__ import annotations
 
-import copy
 import functools
 import os
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from jaxexo.baselines import quintic as q5
 from jaxexo.config import Config, load_config, scalar_params
 from jaxexo.physics import geometry
-from jaxexo.physics.scene import (
-    check_clearance,
-    stack_scenes,
-    with_clearance,
-)
-from jaxexo.storage.policy_check import load_checked
+from jaxexo.physics.scene import check_clearance, stack_scenes, with_clearance
 from jaxexo.swing.continuation import check_state
-from jaxexo.swing.options import (
-    SceneMaker,
-    SwingOptions,
-    check_duration,
-    check_points,
-    scenes_for,
-)
-from jaxexo.swing.replan import replan_swing
+from jaxexo.swing.generator import SwingGenerator
+from jaxexo.swing.options import SwingOptions, check_duration, check_points
 from jaxexo.swing.trajectory import (
     DEFAULT_DURATION,
     Measured,
@@ -205,11 +192,20 @@ class ContinuationPlans:
     checks: Measured
 
 
-class CFFTG(SceneMaker):
+class CFFTG(SwingGenerator):
     """The polynomial generator. ``config`` supplies the kinematics (thigh, shin, foot, joint limits),
-    the goal tolerance and the safety distance; pass the RL policy's config to compare like with like."""
+    the goal tolerance and the safety distance; pass the RL policy's config to compare like with like.
+    ``clearance`` (m; None: env.min_clearance): the margin its swings keep; the verdict judges
+    against it, and the plan's margin keeps the same excess above it as the config's
+    (reward.safety_distance over env.min_clearance). ``defaults``: generate's options where a call
+    gives none. ``sp``: the config's scalar view, when already derived (``with_options``)."""
 
-    method = "cfftg"
+    name = "cfftg"
+    where = "CFFTG."
+    not_taken = {
+        "smoothing": "CFFTG's polynomial path is not smoothed",
+        "fallback": "CFFTG plans every swing itself",
+    }
 
     def __init__(
         self,
@@ -219,6 +215,9 @@ class CFFTG(SceneMaker):
         margin_step: float = 0.01,
         apex_step: float = 0.02,
         max_plans: int = 10,
+        clearance: float | None = None,
+        defaults: SwingOptions | None = None,
+        sp=None,
     ):
         if isinstance(config, (str, os.PathLike)):
             config = load_config(config)  # a config file's path: the obvious intent
@@ -229,12 +228,16 @@ class CFFTG(SceneMaker):
                 f"config: expected a jaxexo Config or a config file's path, got {type(config).__name__}"
             )
         self.config = config
-        self.sp = scalar_params(self.config)
+        self._base_sp = scalar_params(config) if sp is None else sp
+        self.clearance = check_clearance(clearance, config.env.min_clearance)
+        self.sp = with_clearance(self._base_sp, self.clearance)
         self.margin = geometry.finite(
-            "margin", self.config.reward.safety_distance if margin is None else margin
+            "margin", config.reward.safety_distance if margin is None else margin
         )
         if self.margin < 0:
             raise ValueError(f"margin must be >= 0 metres, got {self.margin}")
+        if self.clearance is not None:
+            self.margin = self.margin + (self.clearance - config.env.min_clearance)
         self.margin_step = geometry.finite_positive("margin_step", margin_step)
         self.apex_step = geometry.finite_positive("apex_step", apex_step)
         if (
@@ -244,12 +247,19 @@ class CFFTG(SceneMaker):
         ):
             raise ValueError(f"max_plans must be an integer >= 1, got {max_plans!r}")
         self.max_plans = int(max_plans)
+        self.defaults = SwingOptions() if defaults is None else defaults
+        self._settings = dict(
+            margin=margin,
+            margin_step=margin_step,
+            apex_step=apex_step,
+            max_plans=max_plans,
+            clearance=clearance,
+            defaults=self.defaults,
+        )
 
-    @classmethod
-    def from_policy(cls, path: str | Path, **kwargs) -> "CFFTG":
-        """A CFFTG with the kinematics of an exported policy's config (read and checked as the RL
-        generator reads it; NumPy only)."""
-        return cls(load_checked(path)[1], **kwargs)
+    def with_options(self, **changes) -> "CFFTG":
+        """A new CFFTG, this one's construction with ``changes`` (the constructor's keywords)."""
+        return CFFTG(self.config, **{**self._settings, **changes}, sp=self._base_sp)
 
     # Planning ---------------------------------------------------------------------------------------
     def plan(self, scenes, n_points: int = DEFAULT_POINTS) -> Plans:
@@ -372,18 +382,6 @@ class CFFTG(SceneMaker):
         gave_up[todo] = True
         return ContinuationPlans(paths, tc, c, height, plans, gave_up, checks)
 
-    def at_clearance(self, clearance: float | None) -> "CFFTG":
-        """This generator for swings that must keep ``clearance`` (m; None: env.min_clearance): the
-        verdict judges against it, and the plan's margin keeps the same excess above it as the
-        config's (reward.safety_distance over env.min_clearance)."""
-        c = check_clearance(clearance, self.config.env.min_clearance)
-        if c is None:
-            return self
-        out = copy.copy(self)
-        out.sp = with_clearance(self.sp, c)
-        out.margin = self.margin + (c - self.config.env.min_clearance)
-        return out
-
     # Trajectories -----------------------------------------------------------------------------------
     def finish(self, scenes, n_points: int, duration: float) -> TrajectoryBatch:
         """Checked trajectories of validated scenes: planned, checked and re-planned (``plan``), with a
@@ -397,7 +395,7 @@ class CFFTG(SceneMaker):
                 (note + f"; gave up after {self.max_plans} plans",) if p.gave_up[i] else (note,)
             )
         return assemble(
-            self.method,
+            self.name,
             self.sp,
             scenes,
             list(p.via),
@@ -441,7 +439,7 @@ class CFFTG(SceneMaker):
             notes.append((note + "".join(gave_up),))
             vias.append(p.paths[i, [0, n_points // 2, -1]])  # start, u = 1/2 (the apex), goal
         return assemble(
-            "cfftg",
+            self.name,
             self.sp,
             scenes,
             vias,
@@ -473,49 +471,18 @@ class CFFTG(SceneMaker):
             [scene], [state], n_points=n_points, duration=duration, swing_scenes=[swing_scene]
         )[0]
 
-    def generate(
-        self, obstacle: geometry.Obstacle, options: SwingOptions | None = None, **overrides
-    ) -> Trajectory:
-        """One checked trajectory (metres, radians, seconds) for ``options``
-        (jaxexo.swing.options.SwingOptions; a GenerateOptions lends the fields CFFTG has), whose
-        fields the keywords replace; ``strict`` raises TrajectoryError instead of returning one that
-        fails a check; ``clearance`` (m) the margin to keep (``at_clearance``)."""
-        o = SwingOptions.given(options, overrides, "CFFTG.generate")
-        scene = self.scene(obstacle, *o.scene_args)
-        return o.checked(self.at_clearance(o.clearance).finish([scene], o.n_points, o.duration)[0])
+    def describe(self, traj) -> str:
+        return "polynomial path (CFFTG)"
 
-    def generate_batch(
-        self, obstacles, options: SwingOptions | None = None, **overrides
-    ) -> TrajectoryBatch:
-        """Trajectories for many scenarios, vectorised, with ``generate``'s options; each scene field
-        (pivot, pivot_y, start_y, step_length) is one value or one per obstacle."""
-        o = SwingOptions.given(options, overrides, "CFFTG.generate_batch")
-        scenes = scenes_for(self.scene, obstacles, o)
-        return o.checked(self.at_clearance(o.clearance).finish(scenes, o.n_points, o.duration))
+    def plan_batch(self, scenes, o: SwingOptions) -> TrajectoryBatch:
+        """``finish`` with the options' n_points and duration (the generator interface's step)."""
+        return self.finish(scenes, o.n_points, o.duration)
 
-    def replan(self, swing, obstacle, options=None, *, at, **overrides):
-        """``swing`` (a TimedSwing) replanned in flight at t = ``at`` (s) over ``obstacle``: kept on
-        [0, at], continued from the foot's state there by CFFTG's polynomial (``continuation``) to
-        the same goal, C2 at ``at``, timed within the swing's limits, judged whole against the new
-        obstacle (jaxexo.swing.replan; docs/replanning.md). Options as ``generate``'s (not the
-        scene's) and ``rate``; ``strict`` raises TrajectoryError for a swing that is not safe."""
-        return replan_swing(
-            self,
-            swing,
-            obstacle,
-            at=at,
-            options=options,
-            overrides=overrides,
-            where="CFFTG.replan",
-            continuation=_continuation,
+    def continue_from(self, scene, state, o, swing_scene) -> Trajectory:
+        """``continuation`` with the options' n_points and duration (``replan``'s step)."""
+        return self.continuation(
+            scene, state, n_points=o.n_points, duration=o.duration, swing_scene=swing_scene
         )
-
-
-def _continuation(gen: CFFTG, scene, state, o, swing_scene) -> Trajectory:
-    """``replan``'s continuation with ``o``'s options (replan_swing's callback)."""
-    return gen.continuation(
-        scene, state, n_points=o.n_points, duration=o.duration, swing_scene=swing_scene
-    )
 
 
 def _scatter(full: Measured, part: Measured, idx: np.ndarray) -> Measured:

@@ -1,6 +1,6 @@
-"""The fallback composition: the RL generator's swings, with a planner's swing (CFFTG, or anything
-with ``finish(scenes, n_points, duration) -> TrajectoryBatch``) wherever the RL one fails the
-safe-swing check and the planner's passes; its notes keep both failures.
+"""The fallback composition: the RL generator's swings, with another generator's swing (its
+``fallback_generator``'s: CFFTG's plan or continuation) wherever the RL one fails the safe-swing
+check and the other's passes; its notes keep both failures.
 """
 
 from __future__ import annotations
@@ -12,14 +12,13 @@ import numpy as np
 from jaxexo.swing.trajectory import TrajectoryBatch
 
 
-def replace_failures(
-    batch: TrajectoryBatch, planner, n_points: int, duration: float
-) -> TrajectoryBatch:
-    """``batch`` with each failing row replaced by ``planner``'s swing for its scene where that passes."""
+def replace_failures(batch: TrajectoryBatch, planner, label: str) -> TrajectoryBatch:
+    """``batch`` with each failing row replaced by the swing ``planner(scenes)`` (a TrajectoryBatch,
+    one row per scene) plans for its scene where that passes, its method ``label``."""
     bad = np.flatnonzero(~batch.ok)
     if not bad.size:
         return batch
-    plan = planner.finish([batch.scenes[i] for i in bad], n_points, duration)
+    plan = planner([batch.scenes[i] for i in bad])
     take = [j for j in range(len(bad)) if plan.ok[j]]
     notes = list(batch.notes)
     for j, i in enumerate(bad):
@@ -32,7 +31,7 @@ def replace_failures(
     batch = dataclasses.replace(batch, notes=tuple(notes))
     if not take:
         return batch
-    sub = dataclasses.replace(plan, method="cfftg-fallback", row_methods=()).take(take)
+    sub = dataclasses.replace(plan, method=label, row_methods=()).take(take)
     sub = dataclasses.replace(
         sub, notes=tuple(notes[bad[j]] + sub.notes[n] for n, j in enumerate(take))
     )
