@@ -285,11 +285,29 @@ def add_policy(p) -> None:
     )
 
 
-def add_method(p, helptext: str) -> None:
-    """generate's and walk's --method: a registered generator (jaxexo.inference.registry)."""
-    from jaxexo.inference.registry import names
+class Registered:
+    """The names of the registered generators (jaxexo.inference.registry) that ``keep(cls)``, as an
+    option's choices: read when the option is checked or its help shown (the registry imports the
+    generators, which a command line that does not generate need not)."""
 
-    p.add_argument("--method", choices=names(), default="rl", help=helptext)
+    def __init__(self, keep=lambda cls: True):
+        self.keep = keep
+
+    def _names(self) -> list[str]:
+        from jaxexo.inference.registry import generator_class, names
+
+        return [n for n in names() if self.keep(generator_class(n))]
+
+    def __iter__(self):
+        return iter(self._names())
+
+    def __contains__(self, name) -> bool:
+        return name in self._names()
+
+
+def add_method(p, helptext: str) -> None:
+    """generate's and walk's --method: a registered generator."""
+    p.add_argument("--method", choices=Registered(), default="rl", help=helptext)
 
 
 def add_fallback(p, helptext: str) -> None:
