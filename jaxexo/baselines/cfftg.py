@@ -273,47 +273,20 @@ class CFFTG(SwingGenerator):
         step = arr.goal_y - arr.start_y
         frac0 = (0.5 * (left - foot + right) - arr.start_y) / step
         toward_pivot = np.where(arr.pivot_y > arr.start_y + frac0 * step, 1.0, -1.0)
-        margin = np.full(b, self.margin)
-        moves = np.zeros(b, np.int64)  # apex moves so far
-        frac = frac0.copy()
-        plans = np.zeros(b, np.int64)
-        paths = np.zeros((b, n_points, 2))
-        apex_h = np.zeros(b)
-        todo = np.arange(b)
-        checks = None
-        sizes = np.array([len(sc.outline) for sc in scenes])
-        for _ in range(self.max_plans):
-            # Scenes grouped by outline size, so that a 16-vertex half-ellipse does not pad rectangles.
-            for k in np.unique(sizes[todo]):
-                g = todo[sizes[todo] == k]
-                outline = np.stack([scenes[i].outline for i in g])
-                paths[g], apex_h[g] = plan_paths(
-                    arr.start_y[g], arr.goal_y[g], outline, frac[g], margin[g], foot, n_points
-                )
-            p = paths[todo]
-            plans[todo] += 1
-            dev = plan_deviation(
-                arr.start_y[todo], arr.goal_y[todo], frac[todo], apex_h[todo], n_points
+        margin, frac = np.full(b, self.margin), frac0.copy()
+        paths, apex_h, dev = np.zeros((b, n_points, 2)), np.zeros(b), np.zeros(b)
+
+        def plan_group(g, outline):
+            paths[g], apex_h[g] = plan_paths(
+                arr.start_y[g], arr.goal_y[g], outline, frac[g], margin[g], foot, n_points
             )
-            m = measure_paths(self.sp, p, [scenes[i] for i in todo], dev)
-            checks = m if checks is None else _scatter(checks, m, todo)
-            ok = m.ok  # the one strict-success verdict (jaxexo.physics.outcome)
-            bad_kin = ~(m.joint_limits_ok & m.leg_length_ok)
-            fail = todo[~ok]
-            # Joint limits or leg length: move the apex (alternately towards and away from the pivot).
-            mv = fail[bad_kin[~ok]]
-            moves[mv] += 1
-            k = moves[mv]
-            sign = np.where(k % 2 == 1, 1.0, -1.0) * toward_pivot[mv]
-            frac[mv] = frac0[mv] + sign * ((k + 1) // 2) * self.apex_step / step[mv]
-            # The foot touches the obstacle (kinematics fine): raise the apex.
-            up = fail[~bad_kin[~ok]]
-            margin[up] += self.margin_step
-            todo = fail
-            if todo.size == 0:
-                break
-        gave_up = np.zeros(b, bool)
-        gave_up[todo] = True
+            dev[g] = plan_deviation(arr.start_y[g], arr.goal_y[g], frac[g], apex_h[g], n_points)
+
+        def move_apex(mv, alternate, n):
+            sign = alternate * toward_pivot[mv]
+            frac[mv] = frac0[mv] + sign * n * self.apex_step / step[mv]
+
+        plans, gave_up, checks = self._rounds(scenes, paths, dev, margin, plan_group, move_apex)
         frac_used = np.clip(frac, *APEX_FRAC_RANGE)
         apex = np.stack([arr.start_y + frac_used * step, apex_h], axis=-1)
         via = np.stack(
@@ -352,35 +325,57 @@ class CFFTG(SwingGenerator):
         y_half = q5.y_weights(heel, vel, acc, goal, tc, np.zeros(b))[:, :4] @ q5.HALF
         c0 = 64.0 * (target - y_half) / dist
         toward_pivot = np.where(arr.pivot_y > target, 1.0, -1.0)
-        c, moves = np.clip(c0, lo, hi), np.zeros(b, np.int64)
-        plans, paths = np.zeros(b, np.int64), np.zeros((b, n_points, 2))
-        height, dev, todo, checks = np.zeros(b), np.zeros(b), np.arange(b), None
+        c, paths = np.clip(c0, lo, hi), np.zeros((b, n_points, 2))
+        height, dev = np.zeros(b), np.zeros(b)
+
+        def plan_group(g, outline):
+            paths[g], height[g], dev[g] = continuation_paths(
+                heel[g], vel[g], acc[g], goal[g], tc[g], c[g], margin[g], outline, foot, n_points
+            )
+
+        def move_apex(mv, alternate, n):
+            sign = alternate * toward_pivot[mv]
+            c[mv] = np.clip(c0[mv] + sign * 64.0 * n * self.apex_step / dist[mv], lo[mv], hi[mv])
+
+        plans, gave_up, checks = self._rounds(scenes, paths, dev, margin, plan_group, move_apex)
+        return ContinuationPlans(paths, tc, c, height, plans, gave_up, checks)
+
+    def _rounds(self, scenes, paths, dev, margin, plan_group, move_apex):
+        """The rounds of ``plan`` and ``plan_continuation``, at most max_plans: ``plan_group(g,
+        outlines)`` plans the scenes g still to do into ``paths`` (B, N, 2) and ``dev`` (B,) (the
+        scenes grouped by outline size, so that a 16-vertex half-ellipse does not pad rectangles),
+        each is checked; one past a joint limit or the leg's length moves its apex (``move_apex(mv,
+        alternate, n)``: n apex steps, alternately towards and away from the pivot), one that
+        touches the obstacle (kinematics fine) has ``margin`` (B,) raised by margin_step. The plans
+        each scene took (B,), whether it gave up (B,) and the final paths' checks."""
+        b = len(scenes)
+        plans, moves, todo, checks = (
+            np.zeros(b, np.int64),
+            np.zeros(b, np.int64),
+            np.arange(b),
+            None,
+        )
         sizes = np.array([len(sc.outline) for sc in scenes])
         for _ in range(self.max_plans):
             for k in np.unique(sizes[todo]):
                 g = todo[sizes[todo] == k]
-                outline = np.stack([scenes[i].outline for i in g])
-                paths[g], height[g], dev[g] = continuation_paths(
-                    heel[g], vel[g], acc[g], goal[g], tc[g], c[g], margin[g], outline, foot,
-                    n_points,
-                )  # fmt: skip
+                plan_group(g, np.stack([scenes[i].outline for i in g]))
             plans[todo] += 1
             m = measure_paths(self.sp, paths[todo], [scenes[i] for i in todo], dev[todo])
             checks = m if checks is None else _scatter(checks, m, todo)
+            # m.ok: the one strict-success verdict (jaxexo.physics.outcome)
             fail, bad_kin = todo[~m.ok], ~(m.joint_limits_ok & m.leg_length_ok)[~m.ok]
             mv = fail[bad_kin]
             moves[mv] += 1
             k = moves[mv]
-            sign = np.where(k % 2 == 1, 1.0, -1.0) * toward_pivot[mv]
-            c[mv] = np.clip(c0[mv] + sign * 64.0 * ((k + 1) // 2) * self.apex_step / dist[mv],
-                            lo[mv], hi[mv])  # fmt: skip
+            move_apex(mv, np.where(k % 2 == 1, 1.0, -1.0), (k + 1) // 2)
             margin[fail[~bad_kin]] += self.margin_step
             todo = fail
             if todo.size == 0:
                 break
         gave_up = np.zeros(b, bool)
         gave_up[todo] = True
-        return ContinuationPlans(paths, tc, c, height, plans, gave_up, checks)
+        return plans, gave_up, checks
 
     # Trajectories -----------------------------------------------------------------------------------
     def finish(self, scenes, n_points: int, duration: float) -> TrajectoryBatch:
