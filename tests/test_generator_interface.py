@@ -38,10 +38,6 @@ class LiftOver(SwingGenerator):
         self.lift = lift
         self.defaults = SwingOptions() if defaults is None else defaults
 
-    def with_options(self, **changes):
-        kw = dict(clearance=self.clearance, lift=self.lift, defaults=self.defaults)
-        return LiftOver(self.config, **{**kw, **changes})
-
     def _assemble(self, scenes, paths, duration):
         dev = np.full(len(scenes), 1e-3)  # a generous bound on the curve between samples
         vias = [p[[0, len(p) // 2, -1]] for p in paths]

@@ -248,18 +248,11 @@ class CFFTG(SwingGenerator):
             raise ValueError(f"max_plans must be an integer >= 1, got {max_plans!r}")
         self.max_plans = int(max_plans)
         self.defaults = SwingOptions() if defaults is None else defaults
-        self._settings = dict(
-            margin=margin,
-            margin_step=margin_step,
-            apex_step=apex_step,
-            max_plans=max_plans,
-            clearance=clearance,
-            defaults=self.defaults,
-        )
 
     def with_options(self, **changes) -> "CFFTG":
-        """A new CFFTG, this one's construction with ``changes`` (the constructor's keywords)."""
-        return CFFTG(self.config, **{**self._settings, **changes}, sp=self._base_sp)
+        """A new CFFTG, this one's construction with ``changes`` (the constructor's keywords), for
+        its config as read (not read again from a path) and its scalar view."""
+        return CFFTG(self.config, **{**self._made[1], "sp": self._base_sp, **changes})
 
     # Planning ---------------------------------------------------------------------------------------
     def plan(self, scenes, n_points: int = DEFAULT_POINTS) -> Plans:

@@ -316,13 +316,6 @@ def add_fallback(p, helptext: str) -> None:
     p.add_argument("--fallback", choices=("cfftg", "none"), help=helptext + " (default: cfftg)")
 
 
-def takers(option: str) -> str:
-    """The --method values whose generator takes ``option`` (for a refusal that names them)."""
-    from jaxexo.inference.registry import generator_class, names
-
-    return ", ".join(n for n in names() if generator_class(n).takes(option))
-
-
 def refuse_unused(args, option: str, got: str = "") -> None:
     """--``option`` given (not None) with a --method whose generator does not take it: ValueError
     saying which do and why not this one (and ``got``, the values as typed)."""
@@ -330,8 +323,9 @@ def refuse_unused(args, option: str, got: str = "") -> None:
 
     cls = generator_class(args.method)
     if getattr(args, option) is not None and not cls.takes(option):
+        takers = ", ".join(Registered(lambda c: c.takes(option)))
         raise ValueError(
-            f"--{option}: applies to --method {takers(option)} only ({cls.why_not(option)}){got}"
+            f"--{option}: applies to --method {takers} only ({cls.why_not(option)}){got}"
         )
 
 

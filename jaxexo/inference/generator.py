@@ -3,18 +3,18 @@
 The rollout follows the training environment's rules (jaxexo.physics) with the exported Q-network's
 greedy action, shielded (jaxexo.shield's scalar form for one swing, its rows form for a batch); the
 raw path is finished (jaxexo.swing.finish) and, with ``fallback="cfftg"``, a failing swing is
-replaced by CFFTG's (jaxexo.inference.fallback). Method: docs/generation.md.
+replaced by CFFTG's (``replace_failures``). Method: docs/generation.md.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
 
 from jaxexo.config import numpy_params, scalar_params
 from jaxexo.inference import blas
-from jaxexo.inference.fallback import replace_failures
 from jaxexo.inference.network import FoldedQNetwork, StepNetwork
 from jaxexo.physics import actions, geometry, swept, transition
 from jaxexo.physics.scene import Scene, check_clearance, stack_scenes, with_clearance
@@ -97,10 +97,6 @@ class TrajectoryGenerator(SwingGenerator):
         self._exact, self.clearing = bool(exact), bool(clearing)
         self.batch_blas_threads = batch_blas_threads
         self.defaults = GenerateOptions() if defaults is None else defaults
-        self._settings = dict(
-            clearance=clearance, epsilon=epsilon, seed=seed, exact=exact, clearing=clearing,
-            batch_blas_threads=batch_blas_threads, defaults=self.defaults,
-        )  # fmt: skip
         self.obs_mode = config.env.obs_mode
         self.max_steps = int(config.env.max_steps)
         self.terminate_on_collision = config.env.collision == "terminate"
@@ -115,10 +111,7 @@ class TrajectoryGenerator(SwingGenerator):
     def with_options(self, **changes) -> "TrajectoryGenerator":
         """A new generator, this one's construction with ``changes`` (the constructor's keywords),
         sharing its policy's network and statistics."""
-        settings = {**self._settings, **changes}
-        return TrajectoryGenerator(
-            self.policy, self.config, self.source, **settings, parts=self._parts
-        )
+        return super().with_options(parts=self._parts, **changes)
 
     def exploring(self, epsilon: float, seed: int = 0) -> "TrajectoryGenerator":
         """A generator that acts epsilon-greedily (thesis 2.6 tests that way): each step a uniformly
@@ -365,7 +358,7 @@ class TrajectoryGenerator(SwingGenerator):
     ) -> TrajectoryBatch:
         """Checked trajectories of raw paths on their scenes: smoothed, checked and retried
         (jaxexo.swing.finish), then, with ``fallback="cfftg"``, CFFTG's plan wherever the RL
-        swing still fails (jaxexo.inference.fallback)."""
+        swing still fails and CFFTG's passes (``replace_failures``)."""
         finisher = PathFinisher(self.sp, self.clearing, exact=self._exact)
         batch = finisher.finish(self.name, scenes, raws, n_points, smoothing, duration)
         if fallback is not None:
@@ -407,15 +400,12 @@ class TrajectoryGenerator(SwingGenerator):
         fallback: str | None = "cfftg",
         swing_scene: Scene | None = None,
     ) -> Trajectory:
-        """The policy's heel path from the foot's state (jaxexo.swing.replan.FootState: mid-air, moving)
-        over ``scene`` (the new obstacle, laid out with the swing's pivot, start and goal; with
-        ``swing_scene``, the swing's own scene, that is checked) to the goal: the greedy shielded
-        rollout from the state's heel with the step count and mid-goal flag its path so far implies
-        (jaxexo.swing.continuation.policy_clock), finished as ``generate`` finishes (landing,
-        smoothing, retries) and checked on ``scene``; with ``fallback="cfftg"``, CFFTG's
-        continuation from the same state where the policy's fails its checks and CFFTG's passes.
-        Its heel[0] is the state's heel exactly (every finished curve keeps the raw path's first
-        point). ValueError for a foot already within the margin of the new obstacle, a scene with
+        """The policy's heel path from the foot's state (``continue_from``'s arguments): the greedy
+        shielded rollout from the state's heel with the step count and mid-goal flag its path so
+        far implies (jaxexo.swing.continuation.policy_clock), finished as ``generate`` finishes and
+        checked on ``scene``; with ``fallback="cfftg"``, CFFTG's continuation from the same state
+        where the policy's fails its checks and CFFTG's passes. Its heel[0] is the state's heel
+        exactly. ValueError for a foot already within the margin of the new obstacle, a scene with
         other feet, or bad options (named as typed)."""
         n_points, duration = check_points(n_points), check_duration(duration)
         smoothing, fallback = check_smoothing(smoothing), check_fallback(fallback)
@@ -436,15 +426,34 @@ class TrajectoryGenerator(SwingGenerator):
 
     def continue_from(self, scene: Scene, state, o, swing_scene) -> Trajectory:
         """``continuation`` with ``o``'s options (``replan``'s step)."""
-        return self.continuation(
-            scene,
-            state,
-            n_points=o.n_points,
-            smoothing=o.smoothing,
-            duration=o.duration,
-            fallback=o.fallback,
-            swing_scene=swing_scene,
+        kw = dict(n_points=o.n_points, smoothing=o.smoothing, duration=o.duration)
+        return self.continuation(scene, state, **kw, fallback=o.fallback, swing_scene=swing_scene)
+
+
+def replace_failures(batch: TrajectoryBatch, planner, label: str) -> TrajectoryBatch:
+    """``batch`` with each failing row replaced by the swing ``planner(scenes)`` (a TrajectoryBatch,
+    one row per scene) plans for its scene where that passes, its method ``label``."""
+    bad = np.flatnonzero(~batch.ok)
+    if not bad.size:
+        return batch
+    plan = planner([batch.scenes[i] for i in bad])
+    take = [j for j in range(len(bad)) if plan.ok[j]]
+    notes = list(batch.notes)
+    for j, i in enumerate(bad):
+        rl_fail = "RL swing failed the safe-swing check: " + "; ".join(batch.reasons[i])
+        notes[i] = notes[i] + (
+            (rl_fail + "; CFFTG's plan is returned",)
+            if j in take
+            else (rl_fail, "CFFTG fallback failed too: " + "; ".join(plan.reasons[j]))
         )
+    batch = dataclasses.replace(batch, notes=tuple(notes))
+    if not take:
+        return batch
+    sub = dataclasses.replace(plan, method=label, row_methods=()).take(take)
+    sub = dataclasses.replace(
+        sub, notes=tuple(notes[bad[j]] + sub.notes[n] for n, j in enumerate(take))
+    )
+    return batch.with_rows([bad[j] for j in take], sub)
 
 
 # m: how far under the touch tolerance ``move_collides``' cheap bound may fall by rounding (float32

@@ -36,7 +36,8 @@ class SwingGenerator:
     """A swing generator for a jaxexo ``config`` (its legs, margins and limits; ``sp``: its scalar
     parameter view at the generator's clearance). Subclasses set ``name`` (the method label its swings
     carry), ``options_type`` (what its ``generate`` takes) and ``where`` (how messages name its
-    methods), and write ``with_options``, ``plan_batch`` and ``continue_from``."""
+    methods), take ``clearance`` and ``defaults`` keywords and write ``plan_batch`` and
+    ``continue_from``."""
 
     name: ClassVar[str] = ""
     options_type: ClassVar[type[SwingOptions]] = SwingOptions
@@ -49,6 +50,11 @@ class SwingGenerator:
     defaults: SwingOptions  # generate's options where a call gives none (``with_defaults``)
 
     # Construction ----------------------------------------------------------------------------
+    def __new__(cls, *args, **kwargs):
+        self = super().__new__(cls)
+        self._made = (args, kwargs)  # the construction ``with_options`` repeats with changes
+        return self
+
     @classmethod
     def from_config(cls, config, **settings) -> "SwingGenerator":
         """This generator for ``config`` (a jaxexo Config), with ``settings`` (its constructor's)."""
@@ -61,8 +67,9 @@ class SwingGenerator:
         return cls.from_config(load_checked(path)[1], **settings)
 
     def with_options(self, **changes) -> "SwingGenerator":
-        """A new generator, this one's construction with ``changes`` (its constructor's keywords)."""
-        raise NotImplementedError
+        """A new generator: this one's construction with ``changes`` (its constructor's keywords)."""
+        args, kwargs = self._made
+        return type(self)(*args, **{**kwargs, **changes})
 
     def with_defaults(self, **fields) -> "SwingGenerator":
         """A new generator whose ``generate`` / ``generate_batch`` / ``replan`` take ``fields``
