@@ -71,7 +71,7 @@ def cmd_generate(args) -> int:
     timed = _timed_swing(args, traj, gen.config, request is not None)
     # The swing as planned (``old``) is kept beside the replanned one for the figure and the GIF.
     old, timed = (
-        (timed, replanned(gen, timed, request, args, fallback_method)) if request else (None, timed)
+        (timed, replanned(gen, timed, request, args, own)) if request else (None, timed)
     )
     written = write_outputs(args, timed or traj, *_drawings(traj, old, timed))
     if args.ros:
