@@ -55,7 +55,7 @@ def _reference_rollout(gen, scene, heel=None, steps: int = 0, visited: bool = Fa
         acts.append(a)
         last = int(a)
         reached = transition.goal_reached(scalar, sp, hy, hz, scene.goal_y)
-        if transition.terminated(scalar, gen._term_p, reached, False) or transition.truncated(
+        if transition.terminated(scalar, gen.np_params, reached, False) or transition.truncated(
             t, gen.max_steps
         ):
             break

@@ -154,8 +154,7 @@ def test_fast_generation_with_candidate_smoothings_matches_the_reference(clearin
     path: by smoothing it with its reported smoothing, or by the correction (jaxexo.swing.clearing)."""
     from jaxexo.swing.clearing import clear_smooth
 
-    gen = _random_generator(seed=6)
-    gen.clearing = clearing
+    gen = _random_generator(seed=6).with_options(clearing=clearing)
     sc, _ = _scenes(gen, 700, 700)
     args = {k: [s[k] for s in sc] for k in ("obstacle", "pivot", "start_y", "step_length")}
     kw = {k: args[k] for k in ("pivot", "start_y", "step_length")}
@@ -250,8 +249,7 @@ def test_a_swing_short_of_the_goal_is_not_retried_down_to_the_raw_polyline(clear
     (without the correction: down to less smoothing), and fast equals the reference."""
     from jaxexo.inference import Obstacle
 
-    gen = _random_generator()
-    gen.clearing = clearing
+    gen = _random_generator().with_options(clearing=clearing)
     scene = gen.scene(Obstacle.rectangle(0.10, 0.20, center_y=0.40), pivot="obstacle")
     up = [(0.12, z) for z in np.arange(0.0, 0.231, 0.03)]
     over = [(y, 0.23) for y in np.arange(0.15, 0.46, 0.03)]

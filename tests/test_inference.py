@@ -314,7 +314,7 @@ def test_smoothing_that_would_touch_the_obstacle_falls_back(trained_policy):
     assert t.smoothing == 0.05 and any("jaxexo.swing.clearing" in n for n in t.notes)
     assert t.checks.clearance_ok and t.checks.min_clearance >= gen.config.env.min_clearance
     # The retries below it (less smoothing, down to the raw polyline), with the correction off.
-    gen.clearing = False
+    gen = gen.with_options(clearing=False)
     t = gen.finish([scene], [raw], 100, 0.05, 1.0, None)[0]
     assert t.checks.collision_free and t.checks.min_clearance > geometry.TOUCH_EPS
     assert (np.isnan(t.smoothing) or t.smoothing < 0.05) and t.notes

@@ -256,8 +256,9 @@ def test_generate_batch_runs_blas_on_one_thread_and_restores_it(tmp_path, monkey
     limited = gen.generate_batch(obstacles)
     assert seen == [[1] * len(before)]
     assert blas.blas_threads() == before
-    gen.batch_blas_threads = None
-    free = gen.generate_batch(obstacles)
+    free_gen = gen.with_options(batch_blas_threads=None)
+    monkeypatch.setattr(free_gen, "rollout_batch", spy)
+    free = free_gen.generate_batch(obstacles)
     assert seen[-1] == before
     np.testing.assert_array_equal(limited.heel, free.heel)
     np.testing.assert_array_equal(limited.ok, free.ok)

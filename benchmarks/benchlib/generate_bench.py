@@ -58,13 +58,10 @@ def _batch_ms(policy, n: int, repeats: int = 5) -> dict:
     """Median ms per generate_batch of n held-out scenes (RL alone: ``fallback=None``), RL and CFFTG
     alternating, this process. ``rl_process_blas``: the RL batch with ``batch_blas_threads = None``,
     i.e. on the process's own BLAS threads instead of generate_batch's one (jaxexo.inference.blas)."""
-    import copy
-
     from jaxexo.baselines.cfftg import CFFTG
 
     gen = TrajectoryGenerator.load(policy)
-    free = copy.copy(gen)
-    free.batch_blas_threads = None
+    free = gen.with_options(batch_blas_threads=None)
     sc = scene_set(gen.config, "unseen", n)
     cf = CFFTG(gen.config)
     runs = (
@@ -253,19 +250,19 @@ def set_figures(gen, cf, scenarios: list[dict], n: int) -> dict:
     scene, medians of 3 passes (wall and CPU time); the plain reference (``plain_reference``) against
     the fast generator on the first quarter of the n scenes; smoothing counts, safe swings and the
     shield's steps left to the full mask."""
-    from jaxexo.evaluation.compare import WithFallback, run_generators
+    from jaxexo.evaluation.compare import run_generators
     from jaxexo.inference.generator import plain_reference
 
-    gens = {"rl": WithFallback(gen, None), "cfftg": cf}
+    gens = {"rl": gen.with_defaults(fallback=None), "cfftg": cf}
     stats = gen.shield_stats
     before = (stats.steps, stats.steps_to_full_mask)
     passes = [run_generators(gens, scenarios) for _ in range(3)]
     steps = (stats.steps - before[0], stats.steps_to_full_mask - before[1])
     single = {k: np.median([p[k].wall_s for p in passes], axis=0) for k in gens}
     cpu = {k: np.median([p[k].cpu_s for p in passes], axis=0) for k in gens}
-    plain = WithFallback(plain_reference(gen), None)
+    plain = plain_reference(gen).with_defaults(fallback=None)
     ref = run_generators(
-        {"rl": WithFallback(gen, None), "rl_reference": plain}, scenarios[: max(1, n // 4)]
+        {"rl": gen.with_defaults(fallback=None), "rl_reference": plain}, scenarios[: max(1, n // 4)]
     )
     trajs = passes[-1]["rl"].trajectories
     return {

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxexo.baselines import CFFTG
-from jaxexo.evaluation.compare import WithFallback, run_generators
+from jaxexo.evaluation.compare import run_generators
 from jaxexo.evaluation.machine import machine_info, write_result
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.storage.atomic import atomic_write, write_figure
@@ -47,7 +47,7 @@ def screen_agent(gen: TrajectoryGenerator, time_n: int) -> dict:
     timing = {}
     for name in ("held-out families", "unseen shapes"):
         runs = run_generators(
-            {"rl": WithFallback(gen, None), "cfftg": cf}, scenes[name][:time_n], warmup=10
+            {"rl": gen.with_defaults(fallback=None), "cfftg": cf}, scenes[name][:time_n], warmup=10
         )
         wall = {g: Summary.of(runs[g].wall_s) for g in ("rl", "cfftg")}
         cpu = {g: Summary.of(runs[g].cpu_s) for g in ("rl", "cfftg")}

@@ -5,32 +5,19 @@ generator. Its path, apex and re-planning: docs/generation.md (CFFTG, the polyno
 
 from __future__ import annotations
 
-import copy
 import functools
 import os
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from jaxexo.baselines import quintic as q5
 from jaxexo.config import Config, load_config, scalar_params
 from jaxexo.physics import geometry
-from jaxexo.physics.scene import (
-    check_clearance,
-    stack_scenes,
-    with_clearance,
-)
-from jaxexo.storage.policy_check import load_checked
+from jaxexo.physics.scene import check_clearance, stack_scenes, with_clearance
 from jaxexo.swing.continuation import check_state
-from jaxexo.swing.options import (
-    SceneMaker,
-    SwingOptions,
-    check_duration,
-    check_points,
-    scenes_for,
-)
-from jaxexo.swing.replan import replan_swing
+from jaxexo.swing.generator import SwingGenerator
+from jaxexo.swing.options import SwingOptions, check_duration, check_points
 from jaxexo.swing.trajectory import (
     DEFAULT_DURATION,
     Measured,
@@ -205,11 +192,20 @@ class ContinuationPlans:
     checks: Measured
 
 
-class CFFTG(SceneMaker):
+class CFFTG(SwingGenerator):
     """The polynomial generator. ``config`` supplies the kinematics (thigh, shin, foot, joint limits),
-    the goal tolerance and the safety distance; pass the RL policy's config to compare like with like."""
+    the goal tolerance and the safety distance; pass the RL policy's config to compare like with like.
+    ``clearance`` (m; None: env.min_clearance): the margin its swings keep; the verdict judges
+    against it, and the plan's margin keeps the same excess above it as the config's
+    (reward.safety_distance over env.min_clearance). ``defaults``: generate's options where a call
+    gives none. ``sp``: the config's scalar view, when already derived (``with_options``)."""
 
-    method = "cfftg"
+    name = "cfftg"
+    where = "CFFTG."
+    not_taken = {
+        "smoothing": "CFFTG's polynomial path is not smoothed",
+        "fallback": "CFFTG plans every swing itself",
+    }
 
     def __init__(
         self,
@@ -219,6 +215,9 @@ class CFFTG(SceneMaker):
         margin_step: float = 0.01,
         apex_step: float = 0.02,
         max_plans: int = 10,
+        clearance: float | None = None,
+        defaults: SwingOptions | None = None,
+        sp=None,
     ):
         if isinstance(config, (str, os.PathLike)):
             config = load_config(config)  # a config file's path: the obvious intent
@@ -229,12 +228,16 @@ class CFFTG(SceneMaker):
                 f"config: expected a jaxexo Config or a config file's path, got {type(config).__name__}"
             )
         self.config = config
-        self.sp = scalar_params(self.config)
+        self._base_sp = scalar_params(config) if sp is None else sp
+        self.clearance = check_clearance(clearance, config.env.min_clearance)
+        self.sp = with_clearance(self._base_sp, self.clearance)
         self.margin = geometry.finite(
-            "margin", self.config.reward.safety_distance if margin is None else margin
+            "margin", config.reward.safety_distance if margin is None else margin
         )
         if self.margin < 0:
             raise ValueError(f"margin must be >= 0 metres, got {self.margin}")
+        if self.clearance is not None:
+            self.margin = self.margin + (self.clearance - config.env.min_clearance)
         self.margin_step = geometry.finite_positive("margin_step", margin_step)
         self.apex_step = geometry.finite_positive("apex_step", apex_step)
         if (
@@ -244,12 +247,12 @@ class CFFTG(SceneMaker):
         ):
             raise ValueError(f"max_plans must be an integer >= 1, got {max_plans!r}")
         self.max_plans = int(max_plans)
+        self.defaults = SwingOptions() if defaults is None else defaults
 
-    @classmethod
-    def from_policy(cls, path: str | Path, **kwargs) -> "CFFTG":
-        """A CFFTG with the kinematics of an exported policy's config (read and checked as the RL
-        generator reads it; NumPy only)."""
-        return cls(load_checked(path)[1], **kwargs)
+    def with_options(self, **changes) -> "CFFTG":
+        """A new CFFTG, this one's construction with ``changes`` (the constructor's keywords), for
+        its config as read (not read again from a path) and its scalar view."""
+        return CFFTG(self.config, **{**self._made[1], "sp": self._base_sp, **changes})
 
     # Planning ---------------------------------------------------------------------------------------
     def plan(self, scenes, n_points: int = DEFAULT_POINTS) -> Plans:
@@ -263,47 +266,20 @@ class CFFTG(SceneMaker):
         step = arr.goal_y - arr.start_y
         frac0 = (0.5 * (left - foot + right) - arr.start_y) / step
         toward_pivot = np.where(arr.pivot_y > arr.start_y + frac0 * step, 1.0, -1.0)
-        margin = np.full(b, self.margin)
-        moves = np.zeros(b, np.int64)  # apex moves so far
-        frac = frac0.copy()
-        plans = np.zeros(b, np.int64)
-        paths = np.zeros((b, n_points, 2))
-        apex_h = np.zeros(b)
-        todo = np.arange(b)
-        checks = None
-        sizes = np.array([len(sc.outline) for sc in scenes])
-        for _ in range(self.max_plans):
-            # Scenes grouped by outline size, so that a 16-vertex half-ellipse does not pad rectangles.
-            for k in np.unique(sizes[todo]):
-                g = todo[sizes[todo] == k]
-                outline = np.stack([scenes[i].outline for i in g])
-                paths[g], apex_h[g] = plan_paths(
-                    arr.start_y[g], arr.goal_y[g], outline, frac[g], margin[g], foot, n_points
-                )
-            p = paths[todo]
-            plans[todo] += 1
-            dev = plan_deviation(
-                arr.start_y[todo], arr.goal_y[todo], frac[todo], apex_h[todo], n_points
+        margin, frac = np.full(b, self.margin), frac0.copy()
+        paths, apex_h, dev = np.zeros((b, n_points, 2)), np.zeros(b), np.zeros(b)
+
+        def plan_group(g, outline):
+            paths[g], apex_h[g] = plan_paths(
+                arr.start_y[g], arr.goal_y[g], outline, frac[g], margin[g], foot, n_points
             )
-            m = measure_paths(self.sp, p, [scenes[i] for i in todo], dev)
-            checks = m if checks is None else _scatter(checks, m, todo)
-            ok = m.ok  # the one strict-success verdict (jaxexo.physics.outcome)
-            bad_kin = ~(m.joint_limits_ok & m.leg_length_ok)
-            fail = todo[~ok]
-            # Joint limits or leg length: move the apex (alternately towards and away from the pivot).
-            mv = fail[bad_kin[~ok]]
-            moves[mv] += 1
-            k = moves[mv]
-            sign = np.where(k % 2 == 1, 1.0, -1.0) * toward_pivot[mv]
-            frac[mv] = frac0[mv] + sign * ((k + 1) // 2) * self.apex_step / step[mv]
-            # The foot touches the obstacle (kinematics fine): raise the apex.
-            up = fail[~bad_kin[~ok]]
-            margin[up] += self.margin_step
-            todo = fail
-            if todo.size == 0:
-                break
-        gave_up = np.zeros(b, bool)
-        gave_up[todo] = True
+            dev[g] = plan_deviation(arr.start_y[g], arr.goal_y[g], frac[g], apex_h[g], n_points)
+
+        def move_apex(mv, alternate, n):
+            sign = alternate * toward_pivot[mv]
+            frac[mv] = frac0[mv] + sign * n * self.apex_step / step[mv]
+
+        plans, gave_up, checks = self._rounds(scenes, paths, dev, margin, plan_group, move_apex)
         frac_used = np.clip(frac, *APEX_FRAC_RANGE)
         apex = np.stack([arr.start_y + frac_used * step, apex_h], axis=-1)
         via = np.stack(
@@ -342,47 +318,57 @@ class CFFTG(SceneMaker):
         y_half = q5.y_weights(heel, vel, acc, goal, tc, np.zeros(b))[:, :4] @ q5.HALF
         c0 = 64.0 * (target - y_half) / dist
         toward_pivot = np.where(arr.pivot_y > target, 1.0, -1.0)
-        c, moves = np.clip(c0, lo, hi), np.zeros(b, np.int64)
-        plans, paths = np.zeros(b, np.int64), np.zeros((b, n_points, 2))
-        height, dev, todo, checks = np.zeros(b), np.zeros(b), np.arange(b), None
+        c, paths = np.clip(c0, lo, hi), np.zeros((b, n_points, 2))
+        height, dev = np.zeros(b), np.zeros(b)
+
+        def plan_group(g, outline):
+            paths[g], height[g], dev[g] = continuation_paths(
+                heel[g], vel[g], acc[g], goal[g], tc[g], c[g], margin[g], outline, foot, n_points
+            )
+
+        def move_apex(mv, alternate, n):
+            sign = alternate * toward_pivot[mv]
+            c[mv] = np.clip(c0[mv] + sign * 64.0 * n * self.apex_step / dist[mv], lo[mv], hi[mv])
+
+        plans, gave_up, checks = self._rounds(scenes, paths, dev, margin, plan_group, move_apex)
+        return ContinuationPlans(paths, tc, c, height, plans, gave_up, checks)
+
+    def _rounds(self, scenes, paths, dev, margin, plan_group, move_apex):
+        """The rounds of ``plan`` and ``plan_continuation``, at most max_plans: ``plan_group(g,
+        outlines)`` plans the scenes g still to do into ``paths`` (B, N, 2) and ``dev`` (B,) (the
+        scenes grouped by outline size, so that a 16-vertex half-ellipse does not pad rectangles),
+        each is checked; one past a joint limit or the leg's length moves its apex (``move_apex(mv,
+        alternate, n)``: n apex steps, alternately towards and away from the pivot), one that
+        touches the obstacle (kinematics fine) has ``margin`` (B,) raised by margin_step. The plans
+        each scene took (B,), whether it gave up (B,) and the final paths' checks."""
+        b = len(scenes)
+        plans, moves, todo, checks = (
+            np.zeros(b, np.int64),
+            np.zeros(b, np.int64),
+            np.arange(b),
+            None,
+        )
         sizes = np.array([len(sc.outline) for sc in scenes])
         for _ in range(self.max_plans):
             for k in np.unique(sizes[todo]):
                 g = todo[sizes[todo] == k]
-                outline = np.stack([scenes[i].outline for i in g])
-                paths[g], height[g], dev[g] = continuation_paths(
-                    heel[g], vel[g], acc[g], goal[g], tc[g], c[g], margin[g], outline, foot,
-                    n_points,
-                )  # fmt: skip
+                plan_group(g, np.stack([scenes[i].outline for i in g]))
             plans[todo] += 1
             m = measure_paths(self.sp, paths[todo], [scenes[i] for i in todo], dev[todo])
             checks = m if checks is None else _scatter(checks, m, todo)
+            # m.ok: the one strict-success verdict (jaxexo.physics.outcome)
             fail, bad_kin = todo[~m.ok], ~(m.joint_limits_ok & m.leg_length_ok)[~m.ok]
             mv = fail[bad_kin]
             moves[mv] += 1
             k = moves[mv]
-            sign = np.where(k % 2 == 1, 1.0, -1.0) * toward_pivot[mv]
-            c[mv] = np.clip(c0[mv] + sign * 64.0 * ((k + 1) // 2) * self.apex_step / dist[mv],
-                            lo[mv], hi[mv])  # fmt: skip
+            move_apex(mv, np.where(k % 2 == 1, 1.0, -1.0), (k + 1) // 2)
             margin[fail[~bad_kin]] += self.margin_step
             todo = fail
             if todo.size == 0:
                 break
         gave_up = np.zeros(b, bool)
         gave_up[todo] = True
-        return ContinuationPlans(paths, tc, c, height, plans, gave_up, checks)
-
-    def at_clearance(self, clearance: float | None) -> "CFFTG":
-        """This generator for swings that must keep ``clearance`` (m; None: env.min_clearance): the
-        verdict judges against it, and the plan's margin keeps the same excess above it as the
-        config's (reward.safety_distance over env.min_clearance)."""
-        c = check_clearance(clearance, self.config.env.min_clearance)
-        if c is None:
-            return self
-        out = copy.copy(self)
-        out.sp = with_clearance(self.sp, c)
-        out.margin = self.margin + (c - self.config.env.min_clearance)
-        return out
+        return plans, gave_up, checks
 
     # Trajectories -----------------------------------------------------------------------------------
     def finish(self, scenes, n_points: int, duration: float) -> TrajectoryBatch:
@@ -397,7 +383,7 @@ class CFFTG(SceneMaker):
                 (note + f"; gave up after {self.max_plans} plans",) if p.gave_up[i] else (note,)
             )
         return assemble(
-            self.method,
+            self.name,
             self.sp,
             scenes,
             list(p.via),
@@ -441,7 +427,7 @@ class CFFTG(SceneMaker):
             notes.append((note + "".join(gave_up),))
             vias.append(p.paths[i, [0, n_points // 2, -1]])  # start, u = 1/2 (the apex), goal
         return assemble(
-            "cfftg",
+            self.name,
             self.sp,
             scenes,
             vias,
@@ -473,49 +459,18 @@ class CFFTG(SceneMaker):
             [scene], [state], n_points=n_points, duration=duration, swing_scenes=[swing_scene]
         )[0]
 
-    def generate(
-        self, obstacle: geometry.Obstacle, options: SwingOptions | None = None, **overrides
-    ) -> Trajectory:
-        """One checked trajectory (metres, radians, seconds) for ``options``
-        (jaxexo.swing.options.SwingOptions; a GenerateOptions lends the fields CFFTG has), whose
-        fields the keywords replace; ``strict`` raises TrajectoryError instead of returning one that
-        fails a check; ``clearance`` (m) the margin to keep (``at_clearance``)."""
-        o = SwingOptions.given(options, overrides, "CFFTG.generate")
-        scene = self.scene(obstacle, *o.scene_args)
-        return o.checked(self.at_clearance(o.clearance).finish([scene], o.n_points, o.duration)[0])
+    def describe(self, traj) -> str:
+        return "polynomial path (CFFTG)"
 
-    def generate_batch(
-        self, obstacles, options: SwingOptions | None = None, **overrides
-    ) -> TrajectoryBatch:
-        """Trajectories for many scenarios, vectorised, with ``generate``'s options; each scene field
-        (pivot, pivot_y, start_y, step_length) is one value or one per obstacle."""
-        o = SwingOptions.given(options, overrides, "CFFTG.generate_batch")
-        scenes = scenes_for(self.scene, obstacles, o)
-        return o.checked(self.at_clearance(o.clearance).finish(scenes, o.n_points, o.duration))
+    def plan_batch(self, scenes, o: SwingOptions) -> TrajectoryBatch:
+        """``finish`` with the options' n_points and duration (the generator interface's step)."""
+        return self.finish(scenes, o.n_points, o.duration)
 
-    def replan(self, swing, obstacle, options=None, *, at, **overrides):
-        """``swing`` (a TimedSwing) replanned in flight at t = ``at`` (s) over ``obstacle``: kept on
-        [0, at], continued from the foot's state there by CFFTG's polynomial (``continuation``) to
-        the same goal, C2 at ``at``, timed within the swing's limits, judged whole against the new
-        obstacle (jaxexo.swing.replan; docs/replanning.md). Options as ``generate``'s (not the
-        scene's) and ``rate``; ``strict`` raises TrajectoryError for a swing that is not safe."""
-        return replan_swing(
-            self,
-            swing,
-            obstacle,
-            at=at,
-            options=options,
-            overrides=overrides,
-            where="CFFTG.replan",
-            continuation=_continuation,
+    def continue_from(self, scene, state, o, swing_scene) -> Trajectory:
+        """``continuation`` with the options' n_points and duration (``replan``'s step)."""
+        return self.continuation(
+            scene, state, n_points=o.n_points, duration=o.duration, swing_scene=swing_scene
         )
-
-
-def _continuation(gen: CFFTG, scene, state, o, swing_scene) -> Trajectory:
-    """``replan``'s continuation with ``o``'s options (replan_swing's callback)."""
-    return gen.continuation(
-        scene, state, n_points=o.n_points, duration=o.duration, swing_scene=swing_scene
-    )
 
 
 def _scatter(full: Measured, part: Measured, idx: np.ndarray) -> Measured:

@@ -253,17 +253,15 @@ def swing_outputs(args, inputs):
 
 
 def generator(args):
-    """The generator --method names: CFFTG (with the kinematics and joint limits of --policy's
-    config when one is given) or the trained policy."""
-    if args.method == "cfftg":
-        from jaxexo.baselines import CFFTG
+    """The generator --method names (jaxexo.inference.registry): the trained policy, or one with
+    the kinematics and joint limits of --policy's config when one is given (else the default
+    config's)."""
+    from jaxexo.inference.registry import generator_class
 
-        return CFFTG.from_policy(args.policy) if args.policy else CFFTG(load(None)[0])
-    if not args.policy:
-        raise ValueError("--policy: required with --method rl (the trained policy.npz)")
-    from jaxexo.inference import TrajectoryGenerator
-
-    return TrajectoryGenerator.load(args.policy)
+    cls = generator_class(args.method)
+    if cls.needs_policy and not args.policy:
+        raise ValueError(f"--policy: required with --method {args.method} (the trained policy.npz)")
+    return cls.from_policy(args.policy) if args.policy else cls.from_config(load(None)[0])
 
 
 def write_outputs(args, data, draw, animate) -> list[str]:
@@ -287,9 +285,29 @@ def add_policy(p) -> None:
     )
 
 
+class Registered:
+    """The names of the registered generators (jaxexo.inference.registry) that ``keep(cls)``, as an
+    option's choices: read when the option is checked or its help shown (the registry imports the
+    generators, which a command line that does not generate need not)."""
+
+    def __init__(self, keep=lambda cls: True):
+        self.keep = keep
+
+    def _names(self) -> list[str]:
+        from jaxexo.inference.registry import generator_class, names
+
+        return [n for n in names() if self.keep(generator_class(n))]
+
+    def __iter__(self):
+        return iter(self._names())
+
+    def __contains__(self, name) -> bool:
+        return name in self._names()
+
+
 def add_method(p, helptext: str) -> None:
-    """generate's and walk's --method: the RL generator or CFFTG."""
-    p.add_argument("--method", choices=("rl", "cfftg"), default="rl", help=helptext)
+    """generate's and walk's --method: a registered generator."""
+    p.add_argument("--method", choices=Registered(), default="rl", help=helptext)
 
 
 def add_fallback(p, helptext: str) -> None:
@@ -298,12 +316,26 @@ def add_fallback(p, helptext: str) -> None:
     p.add_argument("--fallback", choices=("cfftg", "none"), help=helptext + " (default: cfftg)")
 
 
-def fallback(args) -> str | None:
-    """--fallback's one rule for generate and walk: --method rl only (given with --method cfftg it is
-    refused, whatever its value); not given, "cfftg"; "none" is None."""
-    if args.method == "cfftg" and args.fallback is not None:
+def refuse_unused(args, option: str, got: str = "") -> None:
+    """--``option`` given (not None) with a --method whose generator does not take it: ValueError
+    saying which do and why not this one (and ``got``, the values as typed)."""
+    from jaxexo.inference.registry import generator_class
+
+    cls = generator_class(args.method)
+    if getattr(args, option) is not None and not cls.takes(option):
+        takers = ", ".join(Registered(lambda c: c.takes(option)))
         raise ValueError(
-            f"--fallback: applies to --method rl only (CFFTG plans every swing itself), got "
-            f"--fallback {args.fallback} with --method cfftg"
+            f"--{option}: applies to --method {takers} only ({cls.why_not(option)}){got}"
         )
+
+
+def fallback(args) -> str | None:
+    """--fallback's one rule for generate and walk: for a generator that takes it only (given with
+    --method cfftg it is refused, whatever its value); not given, "cfftg"; "none" is None."""
+    refuse_unused(args, "fallback", f", got --fallback {args.fallback} with --method {args.method}")
     return None if args.fallback == "none" else "cfftg"
+
+
+def method_options(gen, **options) -> dict:
+    """Of ``options`` (generate's keywords), those the generator ``gen`` takes."""
+    return {k: v for k, v in options.items() if gen.takes(k)}

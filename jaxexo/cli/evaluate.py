@@ -3,7 +3,7 @@ the training distribution or the unseen families; report.md/.json and figures. d
 
 from __future__ import annotations
 
-from jaxexo.cli.common import whole
+from jaxexo.cli.common import Registered, whole
 
 
 def cmd_eval(args) -> int:
@@ -38,7 +38,9 @@ def add_options(e) -> None:
     """The `jaxexo eval` options."""
     e.add_argument("--policy", required=True, help="policy.npz written by jaxexo train")
     e.add_argument(
-        "--against", choices=("cfftg",), help="also evaluate this baseline on the same scenarios"
+        "--against",
+        choices=Registered(lambda cls: not cls.needs_policy),
+        help="also evaluate this baseline on the same scenarios",
     )
     e.add_argument(
         "--scenarios",

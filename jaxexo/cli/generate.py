@@ -13,8 +13,10 @@ from jaxexo.cli.common import (
     check_rate,
     fallback,
     generator,
+    method_options,
     option_values,
     real,
+    refuse_unused,
     swing_outputs,
     whole,
     write_outputs,
@@ -36,10 +38,7 @@ def cmd_generate(args) -> int:
         raise ValueError(
             "--obstacle, --profile: give one of them (a named shape, or a profile file)"
         )
-    if args.method == "cfftg" and args.smoothing is not None:
-        raise ValueError(
-            "--smoothing: applies to --method rl only (CFFTG's polynomial path is not smoothed)"
-        )
+    refuse_unused(args, "smoothing")
     fallback_method = fallback(args)
     from jaxexo.storage.atomic import writes_to_stdout
     from jaxexo.swing.options import check_duration, check_points
@@ -67,20 +66,16 @@ def cmd_generate(args) -> int:
     )
     gen = generator(args)
     check_clearance(args.clearance, gen.config)
-    if args.method == "cfftg":
-        traj = gen.generate(obstacle, **common)
-    else:
-        traj = gen.generate(obstacle, smoothing=args.smoothing, fallback=fallback_method, **common)
+    own = method_options(gen, smoothing=args.smoothing, fallback=fallback_method)
+    traj = gen.generate(obstacle, **own, **common)
     timed = _timed_swing(args, traj, gen.config, request is not None)
     # The swing as planned (``old``) is kept beside the replanned one for the figure and the GIF.
-    old, timed = (
-        (timed, replanned(gen, timed, request, args, fallback_method)) if request else (None, timed)
-    )
+    old, timed = (timed, replanned(gen, timed, request, args, own)) if request else (None, timed)
     written = write_outputs(args, timed or traj, *_drawings(traj, old, timed))
     if args.ros:
         timed.to_joint_trajectory(args.ros, joint_names=joint_names)
         written.append(args.ros)
-    ok = _report_swing(traj, old or timed, report)
+    ok = _report_swing(gen, traj, old or timed, report)
     if old is not None:
         ok = report_replan(old, timed, report)
     print("wrote " + ", ".join(written), file=report)
@@ -122,20 +117,12 @@ def _timed_swing(args, traj, config, replan: bool):
     return time_swing(traj, config, rate=args.rate)
 
 
-def _report_swing(traj, timed, report) -> bool:
+def _report_swing(gen, traj, timed, report) -> bool:
     """The summary of a swing (and its device timing) on ``report``; whether it is ok."""
     import numpy as np
 
     c = traj.checks
-    moves = (
-        f"{len(traj.raw) - 1} agent moves"
-        if traj.method == "rl"
-        else (
-            "polynomial path (CFFTG fallback: the RL swing was not safe)"
-            if traj.method == "cfftg-fallback"
-            else "polynomial path (CFFTG)"
-        )
-    )
+    moves = gen.describe(traj)
     print(
         f"{traj.scene.obstacle.kind} {traj.scene.width * 100:.1f} x {traj.scene.height * 100:.1f} cm, pivot "
         f"{traj.scene.pivot}: {moves}, min clearance (between samples, guaranteed) {c.min_clearance * 100:.1f} cm, "

@@ -65,14 +65,12 @@ def replan_request(args) -> ReplanRequest | None:
     return ReplanRequest(float(at), obstacle_from_args(args, "replan_"), option)
 
 
-def replanned(gen, swing, request: ReplanRequest, args, fallback):
+def replanned(gen, swing, request: ReplanRequest, args, own: dict):
     """``swing`` (a TimedSwing) replanned by ``gen`` at request.at over request.obstacle with
-    generate's options (--clearance, --points; --smoothing and --fallback for --method rl); a
-    refusal of the library names the option as typed (at: --replan-at, obstacle: the option that
-    gave it)."""
-    kw = option_values(args, "clearance", n_points="points")
-    if args.method == "rl":
-        kw.update(smoothing=args.smoothing, fallback=fallback)
+    generate's options (--clearance, --points, and ``own``: those of --smoothing and --fallback its
+    generator takes); a refusal of the library names the option as typed (at: --replan-at,
+    obstacle: the option that gave it)."""
+    kw = {**option_values(args, "clearance", n_points="points"), **own}
     try:
         return gen.replan(swing, request.obstacle, at=request.at, **kw)
     except ValueError as e:

@@ -6,8 +6,10 @@ from __future__ import annotations
 
 from argparse import ArgumentTypeError
 
-from jaxexo.cli.common import check_paths, check_rate, option_values, real
+from jaxexo.cli.common import check_paths, check_rate, method_options, option_values, real
 from jaxexo.cli.scene import add_scene_args, add_sim_policy, scene_from_args
+
+METHODS = ("rl", "cfftg", "both")  # --method: a registered generator, or both of these two
 
 
 def _check_drive_options(args) -> None:
@@ -63,8 +65,8 @@ def cmd_replay(args) -> int:
     from jaxexo.sim.replay import require_mujoco
 
     require_mujoco()  # a clear error before any work
-    from jaxexo.baselines import CFFTG
     from jaxexo.inference import TrajectoryGenerator
+    from jaxexo.inference.registry import generator_class
     from jaxexo.sim.report import replay_document, replay_swing
 
     rl = TrajectoryGenerator.load(args.policy)
@@ -75,16 +77,20 @@ def cmd_replay(args) -> int:
         start_y=args.start_y,
         step_length=args.step_length,
     )
-    gens = {
-        "rl": lambda: rl.generate(scene.obstacle, fallback=None, **common),
-        "cfftg": lambda: CFFTG(config).generate(scene.obstacle, **common),
-    }
+
+    def swing(name):  # the swing alone: no fallback
+        cls = generator_class(name)
+        gen = rl if cls.needs_policy else cls.from_config(config)
+        return gen.with_defaults(**method_options(gen, fallback=None)).generate(
+            scene.obstacle, **common
+        )
+
     options = option_values(args, "rate", "driven", "half_limits", "reference_rate")
     if args.driven:
         options.update(controller=args.controller or "pd_ff", reference=args.reference or "curve")
     replays = []
-    for name in ("rl", "cfftg") if args.method == "both" else (args.method,):
-        r = replay_swing(name, gens[name](), config, **options)
+    for name in METHODS[:-1] if args.method == "both" else (args.method,):
+        r = replay_swing(name, swing(name), config, **options)
         print("\n".join(r.lines()))
         replays.append(r)
     if args.json:
@@ -101,7 +107,7 @@ def add_options(x) -> None:
     add_scene_args(x)
     x.add_argument(
         "--method",
-        choices=("rl", "cfftg", "both"),
+        choices=METHODS,
         default="rl",
         help="the RL swing alone (no fallback), CFFTG's, or both",
     )

@@ -33,8 +33,7 @@ def cmd_walk(args) -> int:
         args, "start_y", "goal_y", "steps", "rate", "clearance", "double_support"
     )
     kw["updates"] = _updates(args)
-    if args.method == "rl":
-        kw["fallback"] = fallback_method
+    kw.update(common.method_options(gen, fallback=fallback_method))
     try:  # an infeasible course is refused here: nothing written
         course = plan_course(gen, terrain, **kw)
     except CourseError as e:

@@ -112,44 +112,45 @@ def plan_course(
     updates=None,
 ) -> Course:
     """Plan a walk over ``terrain`` (a Terrain, a terrain file's path or (y, z) points) with
-    ``generator`` (a TrajectoryGenerator, or a CFFTG for its swings on the same footholds): the
-    footholds (``footholds``), each swing (``fallback``: "cfftg" or None, the RL generator only),
+    ``generator`` (a swing generator: TrajectoryGenerator, CFFTG, ...): the footholds
+    (``footholds``), each swing (``fallback``: "cfftg" or None, for a generator that takes it),
     timed at the device ``limits`` (default: the config's [device]) and sampled at ``rate`` Hz
     (default: its control rate), with a ``double_support`` dwell (s) at each landing. Infeasible
     courses and bad options raise CourseError (TerrainFileError for bad points) before any swing is
     planned; a walk whose swings fail is returned with ``ok`` False and the reasons. ``updates``: a
     TerrainUpdate or a list of them: from each one's time on the walk goes on over its terrain, the
     swing in flight replanned (``_apply_update``)."""
-    from jaxexo.baselines.cfftg import CFFTG
-    from jaxexo.inference.generator import TrajectoryGenerator
+    from jaxexo.swing.generator import SwingGenerator
     from jaxexo.swing.options import check_fallback
     from jaxexo.swing.timing import DeviceLimits, time_swings
 
     t0 = _time.perf_counter()
-    if not isinstance(generator, (TrajectoryGenerator, CFFTG)):
+    if not isinstance(generator, SwingGenerator):
         raise CourseError(
-            f"generator: expected a TrajectoryGenerator or CFFTG, got {type(generator).__name__}"
+            f"generator: expected a swing generator (a TrajectoryGenerator, CFFTG, ...), got "
+            f"{type(generator).__name__}"
         )
     config = generator.config
-    rl = isinstance(generator, TrajectoryGenerator)
     fallback = check_fallback(fallback)
     terrain = _as_terrain(terrain)
     ds = check_double_support("double_support", double_support)
     limits = DeviceLimits.from_config(config) if limits is None else limits
     gen = generator.at_clearance(clearance)
+    if gen.takes("fallback"):
+        gen = gen.with_defaults(fallback=fallback)
     r = FootholdRules.of(config, clearance)
     _check_size(terrain, config, r, limits, rate, start_y, goal_y, steps, ds)
     updates = _checked_updates(updates)
     plan = footholds(
         terrain, config, start_y=start_y, goal_y=goal_y, steps=steps, clearance=clearance
     )
-    trajs, meta, stopped = _swings(gen, rl, fallback, plan, terrain, r)
+    trajs, meta, stopped = _swings(gen, plan, terrain, r)
     # A failed swing is not timed (its path may not be one a drive can follow).
     good = [t for t in trajs if t.ok]
     timed = time_swings(good, config, rate=rate, limits=limits, sp=gen.sp) if good else []
     rate = timed[0].rate if timed else float(config.device.control_rate if rate is None else rate)
     walk = _Walk(trajs, meta, timed, stopped, [None] * len(trajs))
-    ctx = _Context(gen, rl, fallback, plan, r, ds, rate, limits)
+    ctx = _Context(gen, plan, r, ds, rate, limits)
     for i, u in updates:
         walk = _apply_update(ctx, walk, u, i)
     trajs, meta, timed, stopped = walk.trajs, walk.meta, walk.timed, walk.stopped
@@ -160,7 +161,7 @@ def plan_course(
             f"the joint angles jump by {jump:.2e} rad where one swing hands over to the next"
         )
     notes = tuple(
-        f"step {s.index + 1}: {s.method}" for s in steps_out if s.method == "cfftg-fallback"
+        f"step {s.index + 1}: {s.method}" for s in steps_out if s.method != generator.name
     )
     return Course(
         terrain=terrain,
@@ -169,7 +170,7 @@ def plan_course(
         rate=float(rate),
         limits=limits,
         double_support=ds,
-        method="rl" if rl else "cfftg",
+        method=generator.name,
         samples=samples,
         junction_jump=jump,
         reasons=tuple(reasons),
@@ -204,7 +205,7 @@ def _check_size(terrain, config, r, limits, rate, start_y, goal_y, steps, dwell)
     check_walk_size(size, columns=len(WALK_COLUMNS), row_bytes=ROW_BYTES, names=SIZE_NAMES)
 
 
-def _swings(gen, rl: bool, fallback, plan, terrain: Terrain, r: FootholdRules, first=0, feet=None):
+def _swings(gen, plan, terrain: Terrain, r: FootholdRules, first=0, feet=None):
     """Each swing of the walk in order from ``first`` (the feet's heel y then: ``feet``, left and
     right; default both at the start), until one fails: (trajectories, each swing's SwingPlace,
     the index of the failed swing or None)."""
@@ -219,7 +220,7 @@ def _swings(gen, rl: bool, fallback, plan, terrain: Terrain, r: FootholdRules, f
         # planned in its own frame, starting at y = 0, and placed on the course after.
         kw = dict(pivot_y=pivot - start, start_y=0.0, step_length=goal - start)
         local = _shifted(ob, -start)
-        traj = gen.generate(local, fallback=fallback, **kw) if rl else gen.generate(local, **kw)
+        traj = gen.generate(local, **kw)
         traj = _in_course(traj, gen, ob, start, pivot, goal)
         feet[leg] = float(traj.heel[-1, 0])
         trajs.append(traj)
@@ -265,9 +266,7 @@ def _steps(trajs, meta, timed, spans, stopped, n_planned: int, before):
 class _Context:
     """What a walk's swings are planned and timed with (``plan_course``'s, checked)."""
 
-    gen: object
-    rl: bool
-    fallback: str | None
+    gen: object  # the generator at the walk's clearance, with its fallback option
     plan: object  # Footholds
     rules: FootholdRules
     double_support: float
@@ -351,9 +350,7 @@ def _apply_update(ctx: _Context, walk: _Walk, u: TerrainUpdate, i: int) -> _Walk
         if not new.ok:  # the walk stops there, as at any failed swing (timed: it is under way)
             return _Walk(trajs, meta, timed, k, before, walk.notes)
         first, feet = k + 1, _feet(ctx.plan, meta)
-    more, more_meta, stopped = _swings(
-        ctx.gen, ctx.rl, ctx.fallback, ctx.plan, u.terrain, ctx.rules, first, feet
-    )
+    more, more_meta, stopped = _swings(ctx.gen, ctx.plan, u.terrain, ctx.rules, first, feet)
     from jaxexo.swing.timing import time_swings
 
     good = [t for t in more if t.ok]
@@ -435,10 +432,9 @@ def _replanned(ctx: _Context, swing, m, u: TerrainUpdate, at: float, name: str):
     generator's ``replan``; (the replanned TimedSwing on the course, whether it is flat)."""
     k, start = m.index, m.start_y
     ob, flat = _swing_obstacle(obstacles_of(u.terrain), start, m.goal_y, ctx.rules, u.terrain)
-    kw = {"fallback": ctx.fallback} if ctx.rl else {}
     local = _moved(swing, ctx.gen, -start)
     try:
-        new = ctx.gen.replan(local, _shifted(ob, -start), at=at, **kw)
+        new = ctx.gen.replan(local, _shifted(ob, -start), at=at)
     except ValueError as e:
         raise CourseError(
             f"{name}: step {k + 1}'s swing in flight cannot be replanned: {e}"

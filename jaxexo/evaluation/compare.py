@@ -64,21 +64,6 @@ def make_scenarios(cfg: Config, which: str, n: int, seed: int = 12345) -> list[d
     return out
 
 
-class WithFallback:
-    """A TrajectoryGenerator with its ``fallback`` fixed, so that compare can time and score the RL
-    swing alone ("rl", fallback None) and the combination ("rl+cfftg") side by side."""
-
-    def __init__(self, gen, fallback):
-        self.gen, self.fallback = gen, fallback
-        self.config = gen.config
-
-    def generate(self, *a, **kw):
-        return self.gen.generate(*a, fallback=self.fallback, **kw)
-
-    def generate_batch(self, *a, **kw):
-        return self.gen.generate_batch(*a, fallback=self.fallback, **kw)
-
-
 def batch_time(
     gen, scenarios: list[dict], size: int = BATCH, repeats: int = BATCH_REPEATS
 ) -> float:
@@ -194,6 +179,24 @@ def check_eval_counts(n, batch, n_option: str = "--n", batch_option: str = "--ba
             )
 
 
+def compared_generators(rl, against: str | None) -> dict:
+    """The generators ``jaxexo eval`` runs, by their report's names: ``rl``'s swing alone (its
+    fallback off), and with ``against`` (the name of a registered generator built from ``rl``'s
+    config) that one too, and where it is ``rl``'s fallback generator the two combined
+    ("rl+cfftg": ``rl`` with its fallback on, the option's default)."""
+    from jaxexo.inference.registry import generator_class, names
+
+    gens = {rl.name: rl.with_defaults(fallback=None)}
+    if against is None:
+        return gens
+    if against not in names() or generator_class(against).needs_policy:
+        raise ValueError(f"against must be 'cfftg' or None, got {against!r}")
+    if rl.fallback_generator().name == against:
+        gens[f"{rl.name}+{against}"] = rl
+    gens[against] = generator_class(against).from_config(rl.config)
+    return gens
+
+
 def run_eval(
     policy: str | Path,
     out: str | Path,
@@ -215,17 +218,11 @@ def run_eval(
         from jaxexo.sim.replay import require_mujoco
 
         require_mujoco()  # refused before any work
-    from jaxexo.baselines import CFFTG
     from jaxexo.evaluation.machine import machine_info
-    from jaxexo.inference import TrajectoryGenerator
+    from jaxexo.inference.registry import generator_class
 
-    rl = TrajectoryGenerator.load(policy)
-    gens = {"rl": WithFallback(rl, None)}
-    if against == "cfftg":
-        gens["rl+cfftg"] = WithFallback(rl, "cfftg")
-        gens["cfftg"] = CFFTG(rl.config)
-    elif against is not None:
-        raise ValueError(f"against must be 'cfftg' or None, got {against!r}")
+    rl = generator_class("rl").from_policy(policy)
+    gens = compared_generators(rl, against)
     sc = make_scenarios(rl.config, scenarios, n, seed)
     report, trajs = evaluate_generators(gens, sc, batch_size)
     info = machine_info()

@@ -466,14 +466,16 @@ def kept_evaluation(entry: Path, key: dict, ev: dict) -> dict | None:
 def evaluate_run(name: str, run: Path, ev: dict, p: Protocol) -> dict:
     """A run's figures: its policy greedy (beside CFFTG for the compared models) and
     epsilon-greedy on the n test scenarios, its training figures and its population."""
-    from jaxexo.baselines import CFFTG
-    from jaxexo.evaluation.compare import WithFallback, evaluate_generators, make_scenarios
-    from jaxexo.inference import TrajectoryGenerator
+    from jaxexo.evaluation.compare import evaluate_generators, make_scenarios
+    from jaxexo.inference.registry import generator_class
 
-    gen = TrajectoryGenerator.load(run / "policy.npz")
-    gens = {"rl": WithFallback(gen, None)}  # the thesis tables score the RL swing alone
+    gen = generator_class("rl").from_policy(run / "policy.npz")
+    gens = {
+        gen.name: gen.with_defaults(fallback=None)
+    }  # the thesis tables score the RL swing alone
     if p.compared(name):
-        gens["cfftg"] = CFFTG(gen.config)
+        cf = generator_class("cfftg").from_config(gen.config)
+        gens[cf.name] = cf
     scenarios = make_scenarios(gen.config, "test", p.n)
     report, _ = evaluate_generators(
         gens, scenarios, batch_size=p.batch_size if len(gens) > 1 else 0
@@ -483,7 +485,7 @@ def evaluate_run(name: str, run: Path, ev: dict, p: Protocol) -> dict:
     # swing wanders (each random move a stop and a turn for the time law).
     eps = float(gen.config.train.eps_end)
     eps_report, _ = evaluate_generators(
-        {"rl": WithFallback(gen.exploring(eps, seed=p.seed), None)},
+        {"rl": gen.exploring(eps, seed=p.seed).with_defaults(fallback=None)},
         scenarios,
         batch_size=0,
         device=False,

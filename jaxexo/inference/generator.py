@@ -3,12 +3,11 @@
 The rollout follows the training environment's rules (jaxexo.physics) with the exported Q-network's
 greedy action, shielded (jaxexo.shield's scalar form for one swing, its rows form for a batch); the
 raw path is finished (jaxexo.swing.finish) and, with ``fallback="cfftg"``, a failing swing is
-replaced by CFFTG's (jaxexo.inference.fallback). Method: docs/generation.md.
+replaced by CFFTG's (``replace_failures``). Method: docs/generation.md.
 """
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 from pathlib import Path
 
@@ -16,7 +15,6 @@ import numpy as np
 
 from jaxexo.config import numpy_params, scalar_params
 from jaxexo.inference import blas
-from jaxexo.inference.fallback import replace_failures
 from jaxexo.inference.network import FoldedQNetwork, StepNetwork
 from jaxexo.physics import actions, geometry, swept, transition
 from jaxexo.physics.scene import Scene, check_clearance, stack_scenes, with_clearance
@@ -28,71 +26,98 @@ from jaxexo.storage.policy_file import QPolicy
 from jaxexo.swing import smoothing as sm
 from jaxexo.swing.continuation import check_state, policy_clock
 from jaxexo.swing.finish import PathFinisher
+from jaxexo.swing.generator import SwingGenerator
 from jaxexo.swing.options import (
     GenerateOptions,
-    SceneMaker,
     check_duration,
     check_fallback,
     check_points,
     check_smoothing,
-    scenes_for,
 )
-from jaxexo.swing.replan import replan_swing
 from jaxexo.swing.trajectory import DEFAULT_DURATION, Trajectory, TrajectoryBatch
 
 
-class TrajectoryGenerator(SceneMaker):
-    """Greedy trajectories from an exported Q-network. Build with ``TrajectoryGenerator.load(path)``."""
+class _PolicyParts:
+    """What a generator derives from its policy and config alone, shared by every generator
+    ``with_options`` makes from it: the parameter views at the config's clearance, the folded
+    network and its one-step form, the observation's linear rows (``_basis``, found once) and the
+    shield's statistics."""
 
-    # BLAS threads for generate_batch (jaxexo.inference.blas: default threads were 4x slower on a
-    # busy 2-core machine); None leaves the process's BLAS as it is.
-    batch_blas_threads: int | None = 1
-    # True only in ``plain_reference``'s copy: every move's clearance exact, the full shield mask
-    _exact = False
-
-    def __init__(self, policy: QPolicy, config, source: str = "<policy>"):
+    def __init__(self, policy: QPolicy, config, source: str):
         check_policy_legs(policy, config, source)
-        self.policy = policy
-        self.config = config
-        self.source = source
         self.np_params = numpy_params(config)
         self.sp = scalar_params(config)
+        self.net = FoldedQNetwork(policy)
+        self.step_net = StepNetwork(self.net)
+        self.linear = None
+        self.shield_stats = ShieldStats()  # the fast shield's steps, and those it could not decide
+
+
+class TrajectoryGenerator(SwingGenerator):
+    """Greedy trajectories from an exported Q-network. Build with ``TrajectoryGenerator.load(path)``;
+    configure with ``with_options`` (a new generator): ``clearance`` (m; None: env.min_clearance;
+    ``at_clearance``), ``epsilon`` and ``seed`` (``exploring``), ``exact`` (``plain_reference``),
+    ``clearing`` (the requested spline corrected where it cuts the margin, jaxexo.swing.clearing,
+    before any smaller smoothing is tried; False: the candidates and retries alone),
+    ``batch_blas_threads`` (BLAS threads for generate_batch, jaxexo.inference.blas: default threads
+    were 4x slower on a busy 2-core machine; None leaves the process's BLAS as it is) and
+    ``defaults`` (generate's options where a call gives none)."""
+
+    name = "rl"
+    options_type = GenerateOptions
+    needs_policy = True
+
+    def __init__(
+        self,
+        policy: QPolicy,
+        config,
+        source: str = "<policy>",
+        *,
+        clearance: float | None = None,
+        epsilon: float = 0.0,
+        seed: int = 0,
+        exact: bool = False,
+        clearing: bool = True,
+        batch_blas_threads: int | None = 1,
+        defaults: GenerateOptions | None = None,
+        parts: _PolicyParts | None = None,
+    ):
+        self._parts = _PolicyParts(policy, config, source) if parts is None else parts
+        self.policy, self.config, self.source = policy, config, source
+        self.clearance = check_clearance(clearance, config.env.min_clearance)
+        self.np_params = with_clearance(self._parts.np_params, self.clearance)
+        self.sp = with_clearance(self._parts.sp, self.clearance)
+        self.net, self.step_net = self._parts.net, self._parts.step_net
+        self.shield_stats = self._parts.shield_stats
+        self.epsilon = float(epsilon)
+        if not 0.0 <= self.epsilon <= 1.0:
+            raise ValueError(f"epsilon must be in [0, 1], got {epsilon!r}")
+        # 0: greedy (the default; a device's generator must not explore)
+        self._rng = np.random.default_rng(seed) if self.epsilon > 0.0 else None
+        self._exact, self.clearing = bool(exact), bool(clearing)
+        self.batch_blas_threads = batch_blas_threads
+        self.defaults = GenerateOptions() if defaults is None else defaults
         self.obs_mode = config.env.obs_mode
         self.max_steps = int(config.env.max_steps)
         self.terminate_on_collision = config.env.collision == "terminate"
         self.directions = [tuple(float(x) for x in d) for d in self.np_params.directions]
-        self.net = FoldedQNetwork(policy)
-        self.step_net = StepNetwork(self.net)
-        self._linear = None
         self._cfftg = None  # built on the first fallback (its constants cost ~ms to derive)
-        self.clearance = None  # m, or None: env.min_clearance (at_clearance)
-        # the requested spline corrected where it cuts the margin (jaxexo.swing.clearing) before
-        # any smaller smoothing is tried; False: the candidates and retries alone
-        self.clearing = True
-        # terminated()'s one parameter as a Python bool: a NumPy bool would make every step's test
-        # a NumPy scalar operation.
-        self._term_p = dataclasses.replace(
-            self.sp, terminate_on_collision=bool(self.np_params.terminate_on_collision)
-        )
-        self.epsilon = 0.0  # 0: greedy (the default; a device's generator must not explore)
         self.shield = bool(config.env.shield)
         # The spline's smoothing when a call does not give one (m^2, thesis 2.7's s).
         self.smoothing = model_smoothing(
             config.env.shield_clearance, config.env.min_clearance, self.shield, config.env.step_size
         )
-        self._rng = None
-        self.shield_stats = ShieldStats()  # the fast shield's steps, and those it could not decide
+
+    def with_options(self, **changes) -> "TrajectoryGenerator":
+        """A new generator, this one's construction with ``changes`` (the constructor's keywords),
+        sharing its policy's network and statistics."""
+        return super().with_options(parts=self._parts, **changes)
 
     def exploring(self, epsilon: float, seed: int = 0) -> "TrajectoryGenerator":
-        """A copy that acts epsilon-greedily (thesis 2.6 tests that way): each step a uniformly
+        """A generator that acts epsilon-greedily (thesis 2.6 tests that way): each step a uniformly
         random action with probability ``epsilon``, from its own seeded stream (deterministic for a
         given seed and scenario order). For reproducing the thesis's test protocol only."""
-        eps = float(epsilon)
-        if not 0.0 <= eps <= 1.0:
-            raise ValueError(f"epsilon must be in [0, 1], got {epsilon!r}")
-        out = copy.copy(self)
-        out.epsilon, out._rng = eps, np.random.default_rng(seed)
-        return out
+        return self.with_options(epsilon=epsilon, seed=seed)
 
     def _explore(self, greedy, mask=None):
         """Replace greedy actions (an int or an array) by random ones with probability epsilon (uniform
@@ -110,19 +135,25 @@ class TrajectoryGenerator(SceneMaker):
         return int(pick) if pick.ndim == 0 else pick
 
     @classmethod
-    def load(cls, path: str | Path) -> "TrajectoryGenerator":
+    def from_policy(cls, path: str | Path, **settings) -> "TrajectoryGenerator":
         """Read policy.npz (no pickle) and check that it is a policy this generator can drive."""
         policy, config = load_checked(path)
-        return cls(policy, config, str(path))
+        return cls(policy, config, str(path), **settings)
 
-    # Scenes (``scene``: SceneMaker's) -----------------------------------------------------------
+    load = from_policy
+
+    @classmethod
+    def from_config(cls, config, **settings):
+        raise TypeError("the RL generator needs a trained policy: TrajectoryGenerator.load(path)")
+
+    # Scenes (``scene``: SwingGenerator's) --------------------------------------------------------
     def _basis(self, scene: Scene) -> np.ndarray:
         """(5, D): the observation as c @ basis for c = (heel_y, heel_z, time, visited, 1).
 
         The observation is affine in c with coefficients that do not depend on the scene (they are
         1/LENGTH_SCALE, 1/max_steps, ...), so the linear rows are found once, from unit vectors,
         and only the origin row is computed per scene."""
-        if self._linear is None:
+        if self._parts.linear is None:
             e = np.eye(5)  # rows: unit heel_y, heel_z, time, visited, then the origin
             obs = actions.observation(
                 np,
@@ -134,7 +165,7 @@ class TrajectoryGenerator(SceneMaker):
                 e[:, 3],
                 stack_scenes([scene] * 5, np.float64),
             )
-            self._linear = obs[:4] - obs[4]
+            self._parts.linear = obs[:4] - obs[4]
         z = np.zeros(1)
         origin = actions.observation(
             np,
@@ -146,7 +177,7 @@ class TrajectoryGenerator(SceneMaker):
             z,
             stack_scenes([scene], np.float64),
         )
-        return np.vstack([self._linear, origin])
+        return np.vstack([self._parts.linear, origin])
 
     # Rollouts -----------------------------------------------------------------------------------
     def rollout(self, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
@@ -190,7 +221,7 @@ class TrajectoryGenerator(SceneMaker):
         (y_lo, y_hi), z_hi = sp.bounds_y, sp.max_z_world
         mid_hy, mid_hz = sp.mid_goal_half_size
         goal_y, (goal_dy, goal_dz) = scene.goal_y, sp.goal_tolerance[:2]
-        ends_on_collision = self._term_p.terminate_on_collision
+        ends_on_collision = self.terminate_on_collision
         max_steps, q_values = self.max_steps, step.q_values
         choose = None if single is None else single.choose
         while True:
@@ -292,13 +323,13 @@ class TrajectoryGenerator(SceneMaker):
         paths = [path[: length[i], i].astype(np.float64) for i in range(b)]
         return paths, [acts[: length[i] - 1, i] for i in range(b)]
 
-    def _fallback_planner(self):
-        """CFFTG for this generator's config and clearance, built on the first fallback (its constants
-        cost ~ms to derive)."""
+    def fallback_generator(self):
+        """CFFTG for this generator's config and clearance, built on the first fallback (its
+        constants cost ~ms to derive)."""
         if self._cfftg is None:
             from jaxexo.baselines.cfftg import CFFTG  # built only when a swing falls back
 
-            self._cfftg = CFFTG(self.config).at_clearance(self.clearance)
+            self._cfftg = CFFTG(self.config, clearance=self.clearance)
         return self._cfftg
 
     def _move_touches(self, box: tuple, outline: np.ndarray, prev: tuple, heel: tuple) -> bool:
@@ -315,21 +346,6 @@ class TrajectoryGenerator(SceneMaker):
             return False
         return bool(move_collides(self.sp, np.array([prev]), np.array([heel]), outline[None])[0])
 
-    def at_clearance(self, clearance: float | None) -> "TrajectoryGenerator":
-        """This generator for swings that must keep ``clearance`` (m; None: the model's env.min_clearance;
-        refused below it or above MAX_CLEARANCE): the verdict judges against it, the shield
-        keeps the same excess above it as in training (env.shield_clearance - env.min_clearance), and
-        the CFFTG fallback plans for it too. The policy's input is unchanged."""
-        c = check_clearance(clearance, self.config.env.min_clearance)
-        if c is None:
-            return self
-        out = copy.copy(self)
-        out.sp = with_clearance(self.sp, c)
-        out.np_params = with_clearance(self.np_params, c)
-        out._cfftg = None
-        out.clearance = c
-        return out
-
     # Trajectories ---------------------------------------------------------------------------------
     def finish(
         self,
@@ -342,37 +358,36 @@ class TrajectoryGenerator(SceneMaker):
     ) -> TrajectoryBatch:
         """Checked trajectories of raw paths on their scenes: smoothed, checked and retried
         (jaxexo.swing.finish), then, with ``fallback="cfftg"``, CFFTG's plan wherever the RL
-        swing still fails (jaxexo.inference.fallback)."""
+        swing still fails and CFFTG's passes (``replace_failures``)."""
         finisher = PathFinisher(self.sp, self.clearing, exact=self._exact)
-        batch = finisher.finish("rl", scenes, raws, n_points, smoothing, duration)
-        if fallback == "cfftg":
-            batch = replace_failures(batch, self._fallback_planner(), n_points, duration)
+        batch = finisher.finish(self.name, scenes, raws, n_points, smoothing, duration)
+        if fallback is not None:
+            fb = self.fallback_generator()
+            batch = replace_failures(
+                batch, lambda sc: fb.finish(sc, n_points, duration), fb.fallback_label
+            )
         return batch
 
-    def _prepared(self, options, overrides: dict, where: str):
-        """(this generator at the options' clearance, the options checked, the smoothing to use)."""
-        o = GenerateOptions.given(options, overrides, where)
-        return (
-            self.at_clearance(o.clearance),
-            o,
-            self.smoothing if o.smoothing is None else o.smoothing,
-        )
+    def describe(self, traj: Trajectory) -> str:
+        if traj.method == self.name:
+            return f"{len(traj.raw) - 1} agent moves"
+        return "polynomial path (CFFTG fallback: the RL swing was not safe)"
 
-    def generate(
-        self, obstacle: geometry.Obstacle, options: GenerateOptions | None = None, **overrides
-    ) -> Trajectory:
-        """One smoothed, checked trajectory (metres, radians, seconds) for ``options``
-        (jaxexo.swing.options.GenerateOptions), whose fields the keywords replace:
-        ``generate(obstacle, pivot="between", fallback=None)``. ``strict`` raises TrajectoryError
-        instead of returning a trajectory that fails a check; ``fallback``: "cfftg" (CFFTG's plan
-        when the RL swing is not safe) or None (docs/generation.md, clearance and fallback); ``clearance`` (m): the margin the
-        swing keeps (``at_clearance``); ``smoothing`` (m^2; None: the model's, ``self.smoothing``)."""
-        gen, o, smoothing = self._prepared(options, overrides, "generate")
-        scene = gen.scene(obstacle, *o.scene_args)
-        raw, _ = gen.rollout(scene)
-        return o.checked(
-            gen.finish([scene], [raw], o.n_points, smoothing, o.duration, o.fallback)[0]
-        )
+    def _smoothing(self, o: GenerateOptions) -> float:
+        return self.smoothing if o.smoothing is None else o.smoothing
+
+    def plan_swing(self, scene: Scene, o: GenerateOptions) -> Trajectory:
+        """The greedy rollout (``rollout``) finished (``finish``) with ``o``'s options."""
+        raw, _ = self.rollout(scene)
+        return self.finish([scene], [raw], o.n_points, self._smoothing(o), o.duration, o.fallback)[
+            0
+        ]
+
+    def plan_batch(self, scenes, o: GenerateOptions) -> TrajectoryBatch:
+        """The batched greedy rollouts (``rollout_batch``) finished with ``o``'s options."""
+        with blas.limited(self.batch_blas_threads):
+            raws, _ = self.rollout_batch(scenes)
+            return self.finish(scenes, raws, o.n_points, self._smoothing(o), o.duration, o.fallback)
 
     def continuation(
         self,
@@ -385,15 +400,12 @@ class TrajectoryGenerator(SceneMaker):
         fallback: str | None = "cfftg",
         swing_scene: Scene | None = None,
     ) -> Trajectory:
-        """The policy's heel path from the foot's state (jaxexo.swing.replan.FootState: mid-air, moving)
-        over ``scene`` (the new obstacle, laid out with the swing's pivot, start and goal; with
-        ``swing_scene``, the swing's own scene, that is checked) to the goal: the greedy shielded
-        rollout from the state's heel with the step count and mid-goal flag its path so far implies
-        (jaxexo.swing.continuation.policy_clock), finished as ``generate`` finishes (landing,
-        smoothing, retries) and checked on ``scene``; with ``fallback="cfftg"``, CFFTG's
-        continuation from the same state where the policy's fails its checks and CFFTG's passes.
-        Its heel[0] is the state's heel exactly (every finished curve keeps the raw path's first
-        point). ValueError for a foot already within the margin of the new obstacle, a scene with
+        """The policy's heel path from the foot's state (``continue_from``'s arguments): the greedy
+        shielded rollout from the state's heel with the step count and mid-goal flag its path so
+        far implies (jaxexo.swing.continuation.policy_clock), finished as ``generate`` finishes and
+        checked on ``scene``; with ``fallback="cfftg"``, CFFTG's continuation from the same state
+        where the policy's fails its checks and CFFTG's passes. Its heel[0] is the state's heel
+        exactly. ValueError for a foot already within the margin of the new obstacle, a scene with
         other feet, or bad options (named as typed)."""
         n_points, duration = check_points(n_points), check_duration(duration)
         smoothing, fallback = check_smoothing(smoothing), check_fallback(fallback)
@@ -403,67 +415,45 @@ class TrajectoryGenerator(SceneMaker):
         raw, _ = self.rollout_from(scene, heel=heel, steps=steps, visited=visited)
         s = self.smoothing if smoothing is None else smoothing
         batch = self.finish([scene], [raw], n_points, s, duration, fallback=None)
-        if fallback == "cfftg":
-            planner = _FromStates(self._fallback_planner(), [state])
-            batch = replace_failures(batch, planner, n_points, duration)
+        if fallback is not None:
+            fb = self.fallback_generator()
+
+            def plan(scenes):
+                return fb.continuation_batch(scenes, [state], n_points=n_points, duration=duration)
+
+            batch = replace_failures(batch, plan, fb.fallback_label)
         return batch[0]
 
-    def generate_batch(
-        self, obstacles, options: GenerateOptions | None = None, **overrides
-    ) -> TrajectoryBatch:
-        """Trajectories for many scenarios, with ``generate``'s options; each scene field (pivot,
-        pivot_y, start_y, step_length) is one value or one per obstacle. ``strict`` raises
-        TrajectoryError on the first swing that fails a check."""
-        gen, o, smoothing = self._prepared(options, overrides, "generate_batch")
-        scenes = scenes_for(gen.scene, obstacles, o)
-        with blas.limited(gen.batch_blas_threads):
-            raws, _ = gen.rollout_batch(scenes)
-            batch = gen.finish(scenes, raws, o.n_points, smoothing, o.duration, o.fallback)
-        return o.checked(batch)
+    def continue_from(self, scene: Scene, state, o, swing_scene) -> Trajectory:
+        """``continuation`` with ``o``'s options (``replan``'s step)."""
+        kw = dict(n_points=o.n_points, smoothing=o.smoothing, duration=o.duration)
+        return self.continuation(scene, state, **kw, fallback=o.fallback, swing_scene=swing_scene)
 
-    def replan(self, swing, obstacle, options=None, *, at, **overrides):
-        """``swing`` (a TimedSwing) replanned in flight at t = ``at`` (s) over ``obstacle``: kept on
-        [0, at], continued from the foot's state there by the policy (``continuation``) to the
-        same goal, C2 at ``at``, timed within the swing's limits, judged whole against the new
-        obstacle (jaxexo.swing.replan; docs/replanning.md). Options as ``generate``'s (not the
-        scene's) and ``rate``; with ``fallback="cfftg"`` CFFTG's continuation where the policy's is
-        not safe; ``strict`` raises TrajectoryError for a swing that is not safe."""
-        return replan_swing(
-            self,
-            swing,
-            obstacle,
-            at=at,
-            options=options,
-            overrides=overrides,
-            where="replan",
-            continuation=_continuation,
+
+def replace_failures(batch: TrajectoryBatch, planner, label: str) -> TrajectoryBatch:
+    """``batch`` with each failing row replaced by the swing ``planner(scenes)`` (a TrajectoryBatch,
+    one row per scene) plans for its scene where that passes, its method ``label``."""
+    bad = np.flatnonzero(~batch.ok)
+    if not bad.size:
+        return batch
+    plan = planner([batch.scenes[i] for i in bad])
+    take = [j for j in range(len(bad)) if plan.ok[j]]
+    notes = list(batch.notes)
+    for j, i in enumerate(bad):
+        rl_fail = "RL swing failed the safe-swing check: " + "; ".join(batch.reasons[i])
+        notes[i] = notes[i] + (
+            (rl_fail + "; CFFTG's plan is returned",)
+            if j in take
+            else (rl_fail, "CFFTG fallback failed too: " + "; ".join(plan.reasons[j]))
         )
-
-
-class _FromStates:
-    """CFFTG's continuations from fixed foot states as a planner for ``replace_failures``
-    (``finish(scenes, n_points, duration)``, one state per scene it is given)."""
-
-    def __init__(self, cfftg, states):
-        self.cfftg, self.states = cfftg, states
-
-    def finish(self, scenes, n_points: int, duration: float) -> TrajectoryBatch:
-        return self.cfftg.continuation_batch(
-            scenes, self.states, n_points=n_points, duration=duration
-        )
-
-
-def _continuation(gen: TrajectoryGenerator, scene, state, o, swing_scene) -> Trajectory:
-    """``replan``'s continuation with ``o``'s options (replan_swing's callback)."""
-    return gen.continuation(
-        scene,
-        state,
-        n_points=o.n_points,
-        smoothing=o.smoothing,
-        duration=o.duration,
-        fallback=o.fallback,
-        swing_scene=swing_scene,
+    batch = dataclasses.replace(batch, notes=tuple(notes))
+    if not take:
+        return batch
+    sub = dataclasses.replace(plan, method=label, row_methods=()).take(take)
+    sub = dataclasses.replace(
+        sub, notes=tuple(notes[bad[j]] + sub.notes[n] for n, j in enumerate(take))
     )
+    return batch.with_rows([bad[j] for j in take], sub)
 
 
 # m: how far under the touch tolerance ``move_collides``' cheap bound may fall by rounding (float32
@@ -497,9 +487,7 @@ def plain_reference(gen: TrajectoryGenerator) -> TrajectoryGenerator:
     every move's clearance exact, each curve measured afresh. It gives the same actions, samples
     and verdicts as the fast paths; for the tests and the benchmark that compare against it, not
     part of the generator's API."""
-    out = copy.copy(gen)
-    out._exact = True
-    return out
+    return gen.with_options(exact=True)
 
 
 # The raw path of a long swing (m): 40 moves of 3 cm (a typical one has 25-35): the budget below holds

@@ -1,11 +1,11 @@
-"""The options shared by every generator (the RL policy, CFFTG): one frozen record, its checks and scenes.
+"""The options shared by every generator (the RL policy, CFFTG): one frozen record and its checks.
 
 ``generate(obstacle, options, **overrides)`` takes a ``SwingOptions`` (CFFTG) or ``GenerateOptions``
 (the RL generator: also its smoothing and fallback), checked once when made: an error names the
 field. A swing is asked for by an obstacle and where the feet are: the pivot (stance) heel, the
 swing heel's start and the step length; their defaults are jaxexo.physics.scene's (DEFAULT_PIVOT,
 DEFAULT_START_Y, DEFAULT_STEP_LENGTH), and they are checked with the obstacle when its scene is laid
-out (``SceneMaker.scene``, ``scenes_for``: jaxexo.physics.scene.make_scene).
+out (the generators' ``scene``, jaxexo.swing.generator: jaxexo.physics.scene.make_scene).
 """
 
 from __future__ import annotations
@@ -21,12 +21,9 @@ from jaxexo.config import MAX_SWING_DURATION
 from jaxexo.physics import geometry
 from jaxexo.physics.kinematics import PIVOT_CONDITIONS
 from jaxexo.physics.scene import (
-    DEFAULT_PIVOT,
     DEFAULT_START_Y,
     DEFAULT_STEP_LENGTH,
     MAX_CLEARANCE,
-    Scene,
-    make_scene,
 )
 from jaxexo.swing.smoothing import DEFAULT_POINTS
 from jaxexo.swing.trajectory import DEFAULT_DURATION, TrajectoryBatch, TrajectoryError
@@ -41,72 +38,6 @@ MIN_POINTS = 20
 MIN_DURATION = 0.01
 
 FALLBACKS = ("cfftg", None)
-
-
-def pivot_of(pivot, pivot_y):
-    """The scene's pivot: a condition (default DEFAULT_PIVOT) or ``pivot_y`` in metres, not both."""
-    if pivot_y is None:
-        return DEFAULT_PIVOT if pivot is None else pivot
-    if pivot is not None:
-        raise ValueError(
-            f"pivot, pivot_y: give one of them (a condition or a y in metres), got pivot={pivot!r} "
-            f"and pivot_y={pivot_y!r}"
-        )
-    return pivot_y
-
-
-class SceneMaker:
-    """The ``scene`` of every generator (TrajectoryGenerator, CFFTG): a scenario validated and laid out
-    for the generator's ``config`` (its foot length and shape descriptor)."""
-
-    def scene(
-        self,
-        obstacle: geometry.Obstacle,
-        pivot: str | float | None = None,
-        pivot_y: float | None = None,
-        start_y: float = DEFAULT_START_Y,
-        step_length: float = DEFAULT_STEP_LENGTH,
-    ) -> Scene:
-        """Validate one scenario (metres). ``pivot_y``, when given, overrides the ``pivot`` condition."""
-        return make_scene(
-            obstacle,
-            pivot_of(pivot, pivot_y),
-            start_y,
-            step_length,
-            foot_length=self.config.kinematics.foot_length,
-            shape_points=self.config.env.shape_points,
-        )
-
-
-def scenes_for(make, obstacles, options: SwingOptions) -> list[Scene]:
-    """Scenes for many obstacles with ``make(obstacle, pivot, pivot_y, start_y, step_length)``; each
-    of ``options``' scene fields is one value for all or one per obstacle (every generator's
-    generate_batch)."""
-    if isinstance(obstacles, geometry.Obstacle):
-        raise TypeError(
-            "obstacles: expected a list of Obstacle objects, got one Obstacle (use generate() for "
-            "one scenario, or pass [obstacle])"
-        )
-    try:
-        obstacles = list(obstacles)
-    except TypeError:
-        raise TypeError(
-            f"obstacles: expected a list of Obstacle objects, got {type(obstacles).__name__}"
-        ) from None
-    n = len(obstacles)
-    if n == 0:
-        raise ValueError("obstacles: need at least one scenario")
-
-    def per(name, v):
-        if np.ndim(v) == 0 or isinstance(v, str):
-            return [v] * n
-        v = list(v)
-        if len(v) != n:
-            raise ValueError(f"{name}: {len(v)} values for {n} obstacles")
-        return v
-
-    columns = [per(name, v) for name, v in zip(SwingOptions.SCENE_FIELDS, options.scene_args)]
-    return [make(o, *args) for o, *args in zip(obstacles, *columns)]
 
 
 def check_points(n_points, name: str = "n_points") -> int:
@@ -249,7 +180,7 @@ class SwingOptions:
     """What every generator's ``generate`` / ``generate_batch`` takes besides the obstacles (metres,
     seconds), checked when made (``CHECKS``, in order; an error names the field). The scene's fields
     (``SCENE_FIELDS``) are one value, or in generate_batch one per obstacle; ``pivot_y``, when given,
-    replaces the ``pivot`` condition; they are checked with the obstacle (``SceneMaker.scene``).
+    replaces the ``pivot`` condition; they are checked with the obstacle (the generators' ``scene``).
     ``strict`` raises TrajectoryError instead of returning a swing that fails a check (``checked``);
     ``clearance`` (m; None: the model's env.min_clearance) is the margin the swing keeps
     (the generators' ``at_clearance``, which checks it against the model)."""

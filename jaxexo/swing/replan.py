@@ -397,11 +397,9 @@ def continue_swing(swing, traj, *, at: float, sp, rate: float | None = None):
 
 
 # --------------------------------------------------------------------------------------------
-# The public replanning: inputs checked, the foot's state, a generator's continuation
+# The public replanning's pieces: inputs checked, the foot's state (jaxexo.swing.generator's
+# ``replan`` joins a generator's continuation)
 # --------------------------------------------------------------------------------------------
-
-# generate's options that a replan keeps from the swing (its scene's pivot, start and goal)
-_SCENE_OPTIONS = ("pivot", "pivot_y", "start_y", "step_length")
 
 
 def foot_state(swing, at: float) -> FootState:
@@ -454,7 +452,7 @@ def checked_switch(swing, at, config) -> float:
     return t
 
 
-def _checked_obstacle_scene(gen, swing, obstacle, state: FootState):
+def checked_obstacle_scene(gen, swing, obstacle, state: FootState):
     """The new obstacle's scene, with the swing's pivot, start and goal; ValueError naming
     ``obstacle`` when the foot is already within the margin of it at the switch (no continuation
     from there keeps the margin)."""
@@ -474,41 +472,3 @@ def _checked_obstacle_scene(gen, swing, obstacle, state: FootState):
             f"{gen.sp.min_clearance:g} m: no continuation from there keeps it"
         )
     return scene
-
-
-def replan_swing(gen, swing, obstacle, *, at, options, overrides: dict, where: str, continuation):
-    """A generator's ``replan`` (TrajectoryGenerator's, CFFTG's): the swing continued at ``at``
-    over ``obstacle`` along ``continuation(gen, scene, state, options, swing_scene)`` (the
-    generator at the options' clearance); where the joined swing is not safe and ``options``'
-    fallback is "cfftg", along CFFTG's continuation from the same state when that swing is."""
-    from jaxexo.swing.options import GenerateOptions
-
-    for name in _SCENE_OPTIONS:
-        if name in overrides:
-            raise TypeError(
-                f"{name}: not an option of {where}: a replanned swing keeps the pivot, start and "
-                "goal of the swing it continues"
-            )
-    overrides = dict(overrides)
-    rate = overrides.pop("rate", None)
-    o = GenerateOptions.given(options, overrides, where)
-    t = checked_switch(swing, at, gen.config)
-    if rate is not None:
-        timing.check_rate(rate)
-    g = gen.at_clearance(o.clearance)
-    state = foot_state(swing, t)
-    scene = _checked_obstacle_scene(g, swing, obstacle, state)
-    cont = continuation(g, scene, state, o, swing.scene)
-    new = continue_swing(swing, cont, at=t, sp=g.sp, rate=rate)
-    if not new.ok and o.fallback == "cfftg" and not cont.method.startswith("cfftg"):
-        other = g._fallback_planner().continuation(
-            scene, state, n_points=o.n_points, duration=o.duration, swing_scene=swing.scene
-        )
-        # Only a continuation that passes its own checks can give a joined swing that passes.
-        alt = other.ok and continue_swing(
-            swing, replace(other, method="cfftg-fallback"), at=t, sp=g.sp, rate=rate
-        )
-        if alt and alt.ok:
-            note = f"the {cont.method} continuation joined was not safe: {new.reasons[0]}"
-            new = replace(alt, notes=alt.notes + (note,))
-    return o.checked(new)

@@ -15,9 +15,9 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from jaxexo.baselines.cfftg import CFFTG
 from jaxexo.config import Config
-from jaxexo.inference import TrajectoryGenerator, time_swing, time_swings
+from jaxexo.inference import time_swing, time_swings
+from jaxexo.inference.registry import generator_class
 from jaxexo.inference.scenarios import training_scenarios
 from jaxexo.summary import Summary
 
@@ -118,12 +118,12 @@ def wearer_scores(cfg: Config, candidates: list[Candidate]) -> list[WearerScore]
     """Each candidate scored on SELECTION_SCENES scenes of ``cfg``'s training distribution (seed
     SELECTION_SEED), in the order given."""
     scenes = training_scenarios(cfg, SELECTION_SCENES, SELECTION_SEED)
-    ref = _swing(CFFTG(cfg), scenes, cfg)
+    ref = _swing(generator_class("cfftg").from_config(cfg), scenes, cfg)
     return [
         _score(
             c.seed,
             c.validation_success,
-            _swing(TrajectoryGenerator.load(c.policy), scenes, cfg, fallback=None),
+            _swing(generator_class("rl").from_policy(c.policy), scenes, cfg, fallback=None),
             ref,
         )
         for c in candidates
