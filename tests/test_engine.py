@@ -14,8 +14,8 @@ jax = pytest.importorskip("jax")
 import jax.numpy as jnp  # noqa: E402
 
 from jaxexo.train.lanes import finite  # noqa: E402
+from jaxexo.train.metrics_log import Counters, chunk_row  # noqa: E402
 from jaxexo.train.records import Track  # noqa: E402
-from jaxexo.train.run_files import Counters, chunk_row  # noqa: E402
 from jaxexo.train.trainer import METRICS, UpdateMetrics  # noqa: E402
 
 

@@ -21,11 +21,12 @@ jax = pytest.importorskip("jax")
 
 from jaxexo.sweep.program import run_chunk, unflatten  # noqa: E402
 from jaxexo.sweep.spec import sweep_from_dict  # noqa: E402
-from jaxexo.train import driver, run_files  # noqa: E402
+from jaxexo.train import checkpoints, driver, run_dir  # noqa: E402
 from jaxexo.train.lanes import LANES, padded_agents  # noqa: E402
 from jaxexo.train.network import dense_layers  # noqa: E402
 from jaxexo.train.population import Population, population_devices  # noqa: E402
 from jaxexo.train.records import Track  # noqa: E402
+from jaxexo.train.trainer import METRICS  # noqa: E402
 
 UPDATES, CHUNK = FORWARD_UPDATES, 2
 SEED = 3
@@ -69,10 +70,8 @@ def test_a_member_trains_identically_alone_in_populations_of_2_and_5_and_in_a_sw
     alone = train_members([SEED])[0]
     neighbour, pair = train_members([SEED - 1, SEED])  # pair: the second lane of the block
     five = train_members([0, 1, 2, SEED, 4])[SEED]  # second block of three, on one device
-    assert alone["metrics"].shape == (UPDATES // CHUNK, CHUNK, len(run_files.METRICS))
-    assert alone["metrics"][
-        ..., run_files.METRICS.index("loss")
-    ].all()  # it trained: every update had a loss
+    assert alone["metrics"].shape == (UPDATES // CHUNK, CHUNK, len(METRICS))
+    assert alone["metrics"][..., METRICS.index("loss")].all()  # it trained: every update had a loss
     for other in (pair, five):
         assert same(alone["params"], other["params"])
         assert np.array_equal(alone["metrics"], other["metrics"])
@@ -188,19 +187,19 @@ def test_the_driver_exports_the_best_member_records_every_member_and_resumes(tmp
             policy[f"dense_{j}_bias"], b
         )
     # Interrupted after its second checkpoint and resumed: the same files as the uninterrupted run.
-    real, calls = run_files.checkpoint_write, []
+    real, calls = checkpoints.checkpoint_write, []
 
     def killed_after_second_checkpoint(path, data):
-        if path.name == run_files.BOOKKEEPING:
+        if path.name == run_dir.BOOKKEEPING:
             calls.append(path)
             if len(calls) == 2:
                 raise RuntimeError("killed")
         return real(path, data)
 
-    monkeypatch.setattr(run_files, "checkpoint_write", killed_after_second_checkpoint)
+    monkeypatch.setattr(checkpoints, "checkpoint_write", killed_after_second_checkpoint)
     with pytest.raises(RuntimeError, match="killed"):
         driver.run_training(cfg, tmp_path / "cut", seed=SEED, progress=False)
-    monkeypatch.setattr(run_files, "checkpoint_write", real)
+    monkeypatch.setattr(checkpoints, "checkpoint_write", real)
     with pytest.raises(ConfigError, match="--seed 3"):
         driver.run_training(cfg, tmp_path / "cut", seed=SEED + 1, resume=True, progress=False)
     resumed = driver.run_training(cfg, tmp_path / "cut", seed=SEED, resume=True, progress=False)

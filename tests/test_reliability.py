@@ -511,7 +511,7 @@ def _counters(path) -> list[dict]:
 
 def assert_same_run(a, b):
     """Bit-identical results: checkpoint, policy arrays, metrics counters, evaluation."""
-    from jaxexo.train.run_files import CHECKPOINT
+    from jaxexo.train.run_dir import CHECKPOINT
 
     assert (a / CHECKPOINT).read_bytes() == (b / CHECKPOINT).read_bytes()
     pa, pb = _files(a / "policy.npz"), _files(b / "policy.npz")
@@ -529,8 +529,9 @@ def assert_same_run(a, b):
 def test_resume_refuses_foreign_corrupt_and_incomplete_run_directories(reference, tmp_path):
     from flax import serialization
 
+    from jaxexo.train.checkpoints import read_checkpoint
     from jaxexo.train.driver import run_training
-    from jaxexo.train.run_files import CHECKPOINT, read_checkpoint
+    from jaxexo.train.run_dir import CHECKPOINT
 
     cfg = tiny_config()
     run = tmp_path / "run"
@@ -610,7 +611,7 @@ def test_sigkill_mid_run_then_resume_is_bit_identical(reference, tmp_path):
 def test_run_stopped_before_its_first_checkpoint_resumes_from_scratch(reference, tmp_path):
     """Killed (here: interrupted) after chunk 1's metrics row but before its checkpoint: a new run there is
     refused (it is not empty) with a hint, --resume starts again and ends as the uninterrupted run."""
-    from jaxexo.train import driver, run_files
+    from jaxexo.train import checkpoints, driver
 
     cfg = tiny_config()
     run = tmp_path / "run"
@@ -619,7 +620,7 @@ def test_run_stopped_before_its_first_checkpoint_resumes_from_scratch(reference,
         raise KeyboardInterrupt
 
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(run_files, "checkpoint_write", interrupt)
+        mp.setattr(checkpoints, "checkpoint_write", interrupt)
         with pytest.raises(KeyboardInterrupt):
             driver.run_training(cfg, run, seed=SEED, progress=False)
     # as a SIGKILL mid-write leaves it (atomic_write's temporary name for checkpoint.msgpack)
@@ -659,12 +660,12 @@ def test_full_disk_fails_cleanly_and_keeps_the_last_checkpoint(reference, tmp_pa
     """Chunk 1 checkpointed; the resumed process may not write files as large as a checkpoint: it fails
     on chunk 2's checkpoint with a message naming the file (exit 1, no traceback), the chunk-1 checkpoint
     is intact, no temporary file is left, and a later resume ends bit-identical to the uninterrupted run."""
-    from jaxexo.train import driver, run_files
+    from jaxexo.train import checkpoints, driver, run_dir
 
     cfg = tiny_config()
     run = tmp_path / "run"
     calls = {"n": 0}
-    real = run_files.checkpoint_write
+    real = checkpoints.checkpoint_write
 
     def stop_after_chunk_1(path, data):  # checkpoint, bookkeeping of chunk 1, then stop
         calls["n"] += 1
@@ -673,12 +674,12 @@ def test_full_disk_fails_cleanly_and_keeps_the_last_checkpoint(reference, tmp_pa
         return real(path, data)
 
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(run_files, "checkpoint_write", stop_after_chunk_1)
+        mp.setattr(checkpoints, "checkpoint_write", stop_after_chunk_1)
         with pytest.raises(KeyboardInterrupt):
             driver.run_training(cfg, run, seed=SEED, progress=False)
-    ckpt = run / run_files.CHECKPOINT
+    ckpt = run / run_dir.CHECKPOINT
     saved = ckpt.read_bytes()
-    assert run_files.read_checkpoint(ckpt)["book"]["chunks_done"] == 1
+    assert checkpoints.read_checkpoint(ckpt)["book"]["chunks_done"] == 1
     r = subprocess.run(
         limited_fsize(
             len(saved) - 1,
@@ -734,7 +735,7 @@ def test_divergence_after_a_good_chunk_keeps_the_best_finite_parameters(tmp_path
     import jax
     import jax.numpy as jnp
 
-    from jaxexo.train import driver, run_files
+    from jaxexo.train import checkpoints, driver, run_dir
     from jaxexo.train.trainer import Trainer
 
     real_run = Trainer.run
@@ -752,13 +753,13 @@ def test_divergence_after_a_good_chunk_keeps_the_best_finite_parameters(tmp_path
         driver.run_training(tiny_config(), run, seed=SEED, progress=False)
     rows = [json.loads(x) for x in (run / "metrics.jsonl").read_text().splitlines()]
     assert [x["diverged"] for x in rows] == [False, True]
-    assert run_files.read_checkpoint(run / run_files.CHECKPOINT)["book"]["chunks_done"] == 1
+    assert checkpoints.read_checkpoint(run / run_dir.CHECKPOINT)["book"]["chunks_done"] == 1
     pol = load_policy(run / "policy.npz")
     assert all(np.all(np.isfinite(k)) for k in pol.kernels)
     res = json.loads((run / "eval.json").read_text())
     assert res["selected_chunk"] == 1 and res["diverged_chunk"] == 2
     # The exported network is chunk 1's (the checkpoint's best parameters): the same Q-values.
-    best = run_files.read_checkpoint(run / run_files.CHECKPOINT)["best_params"]
+    best = checkpoints.read_checkpoint(run / run_dir.CHECKPOINT)["best_params"]
     trainer = Trainer(tiny_config())
     obs = np.random.default_rng(0).normal(size=(64, trainer.env.obs_dim)).astype(np.float32)
     np.testing.assert_allclose(
@@ -774,7 +775,7 @@ def test_resume_refuses_an_edited_config_a_deleted_checkpoint_and_undecodable_me
     learning rates), checkpoint.msgpack deleted from a run of several chunks (it used to restart from
     scratch silently), random bytes in metrics.jsonl (named, not "'utf-8' codec can't decode")."""
     from jaxexo.train.driver import run_training
-    from jaxexo.train.run_files import BOOKKEEPING, CHECKPOINT
+    from jaxexo.train.run_dir import BOOKKEEPING, CHECKPOINT
 
     run = tmp_path / "run"
     shutil.copytree(reference["run"], run)
