@@ -21,6 +21,7 @@ from jaxexo.train.evaluate import HELD_OUT, TEST_KINDS  # noqa: E402
 
 pytestmark = pytest.mark.slow  # training runs and a background ``jaxexo train`` subprocess
 
+from conftest import metrics_without_clock
 from train_helpers import *  # noqa: F401,F403 (the shared tiny config, helpers and fixtures)
 from train_helpers import _npz
 
@@ -73,8 +74,8 @@ def driver_runs(tiny_reference, tmp_path_factory):
 
 
 def _counters(path) -> list[dict]:
-    rows = [json.loads(x) for x in path.read_text().splitlines()]
-    return [{k: v for k, v in r.items() if k not in ("wall_s", "env_steps_per_s")} for r in rows]
+    """The one agent's metrics rows, without the clock."""
+    return [r["members"][0] for r in metrics_without_clock(path)]
 
 
 @pytest.mark.parametrize("which", ["full", "part"])
@@ -154,7 +155,9 @@ def test_eval_json(driver_runs):
         assert 0.0 <= fig["success_raw"] <= fig["accuracy"] <= 1.0
     assert res["success"] == res["success_raw"]  # the old name, kept for existing readers
     assert res["env_steps"] == TINY_UPDATES * TINY_N * TINY_T
-    ck = json.loads((driver_runs["full"] / "metrics.jsonl").read_text().splitlines()[-1])
+    ck = json.loads((driver_runs["full"] / "metrics.jsonl").read_text().splitlines()[-1])[
+        "members"
+    ][0]
     assert res["episodes"] == ck["episodes"]
     assert res["train_seconds"] > 0 and res["seed"] == SEED
 
@@ -168,10 +171,12 @@ def test_exported_policy_matches_the_checkpoint(driver_runs, tiny):
     template = tiny["init"](jax.random.PRNGKey(0), hyper)
     from jaxexo.storage.checkpoint import unpack_checkpoint
 
+    agents = jax.tree.map(lambda x: np.asarray(x)[None], template)  # one agent: K = 1
     saved = serialization.from_bytes(
-        {"state": template, "best_params": template.params},
+        {"state": agents, "best_params": agents.params},
         unpack_checkpoint((full / run_dir.CHECKPOINT).read_bytes(), "ckpt"),
     )
+    saved = jax.tree.map(lambda x: x[0], saved)
     assert int(saved["state"].update) == TINY_UPDATES
     pol = load_policy(full / "policy.npz")
     assert pol.metadata["layer_norm"] is True and pol.metadata["layers"] == [

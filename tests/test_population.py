@@ -14,7 +14,7 @@ import pytest
 
 from jaxexo.config import ConfigError, config_from_dict
 
-from conftest import FORWARD_UPDATES, forward_raw
+from conftest import FORWARD_UPDATES, forward_raw, metrics_without_clock
 from train_helpers import leaves, metric_array
 
 jax = pytest.importorskip("jax")
@@ -211,22 +211,9 @@ def test_the_driver_exports_the_best_member_records_every_member_and_resumes(tmp
     assert (tmp_path / "cut" / "policy.npz").read_bytes() == (
         tmp_path / "run" / "policy.npz"
     ).read_bytes()
-    assert _without_clock((tmp_path / "cut" / "metrics.jsonl").read_text()) == _without_clock(
-        (tmp_path / "run" / "metrics.jsonl").read_text()
+    assert metrics_without_clock(tmp_path / "cut" / "metrics.jsonl") == metrics_without_clock(
+        tmp_path / "run" / "metrics.jsonl"
     )
-
-
-def _without_clock(text: str) -> list:
-    """metrics.jsonl rows without the wall-clock fields (the only ones a resumed run may change)."""
-    clock = {"wall_s", "env_steps_per_s"}
-    rows = [json.loads(x) for x in text.splitlines()]
-    return [
-        {
-            **{k: v for k, v in r.items() if k not in clock},
-            "members": [{k: v for k, v in m.items() if k not in clock} for m in r["members"]],
-        }
-        for r in rows
-    ]
 
 
 def test_a_sweep_refuses_a_population():

@@ -38,7 +38,6 @@ ALLOWED = {
     ("swing/trajectory.py", "to_dict"): JSON,
     ("train/evaluate.py", "summarize"): JSON + " (eval.json)",
     ("train/metrics_log.py", "chunk_row"): JSON + " (a metrics.jsonl line)",
-    ("train/records.py", "progress"): "the progress bar's postfix: formatted text by label",
     ("benchmarks/landing_bench.py", "_cells"): ROW,
     ("benchmarks/population_bench.py", "_cost_cells"): ROW,
     ("benchmarks/replay_bench.py", "_driven"): ROW,

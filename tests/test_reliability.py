@@ -28,7 +28,15 @@ from jaxexo.storage.checkpoint import CheckpointError, pack_checkpoint, unpack_c
 from jaxexo.storage.policy_file import PolicyFileError, load_policy, policy_checksum
 from jaxexo.storage.rundir import LOCK_NAME, RunDirError, run_lock
 
-from conftest import ROOT, SEED, cli_cmd, run_cli, tiny_config, without_compilation_cache
+from conftest import (
+    ROOT,
+    SEED,
+    cli_cmd,
+    metrics_without_clock,
+    run_cli,
+    tiny_config,
+    without_compilation_cache,
+)
 
 
 def start_training(cfg_path, run, stdout) -> subprocess.Popen:
@@ -504,11 +512,6 @@ def reference(tiny_reference):
     return {"run": tiny_reference["run"], "cfg_path": tiny_reference["cfg_path"]}
 
 
-def _counters(path) -> list[dict]:
-    rows = [json.loads(x) for x in path.read_text().splitlines()]
-    return [{k: v for k, v in r.items() if k not in ("wall_s", "env_steps_per_s")} for r in rows]
-
-
 def assert_same_run(a, b):
     """Bit-identical results: checkpoint, policy arrays, metrics counters, evaluation."""
     from jaxexo.train.run_dir import CHECKPOINT
@@ -518,7 +521,7 @@ def assert_same_run(a, b):
     assert sorted(pa) == sorted(pb)
     for k in pa:
         assert pa[k].dtype == pb[k].dtype and np.array_equal(pa[k], pb[k]), k
-    assert _counters(a / "metrics.jsonl") == _counters(b / "metrics.jsonl")
+    assert metrics_without_clock(a / "metrics.jsonl") == metrics_without_clock(b / "metrics.jsonl")
     drop = lambda r: {k: v for k, v in r.items() if k != "train_seconds"}  # noqa: E731
     assert drop(json.loads((a / "eval.json").read_text())) == drop(
         json.loads((b / "eval.json").read_text())
@@ -724,7 +727,9 @@ def test_diverged_run_says_so_and_exports_nothing_non_finite(tmp_path):
 
     lines = (run / "metrics.jsonl").read_text().splitlines()
     rows = [json.loads(x, parse_constant=strict) for x in lines]
-    assert [x["diverged"] for x in rows] == [True] and rows[0]["validation_success_raw"] is None
+    (agent,) = rows[0]["members"]
+    assert [x["members"][0]["diverged"] for x in rows] == [True]
+    assert agent["validation_success_raw"] is None
     assert not (run / "policy.npz").exists() and not (run / "checkpoint.msgpack").exists()
 
 
@@ -752,14 +757,15 @@ def test_divergence_after_a_good_chunk_keeps_the_best_finite_parameters(tmp_path
     ):
         driver.run_training(tiny_config(), run, seed=SEED, progress=False)
     rows = [json.loads(x) for x in (run / "metrics.jsonl").read_text().splitlines()]
-    assert [x["diverged"] for x in rows] == [False, True]
+    assert [x["members"][0]["diverged"] for x in rows] == [False, True]
     assert checkpoints.read_checkpoint(run / run_dir.CHECKPOINT)["book"]["chunks_done"] == 1
     pol = load_policy(run / "policy.npz")
     assert all(np.all(np.isfinite(k)) for k in pol.kernels)
     res = json.loads((run / "eval.json").read_text())
-    assert res["selected_chunk"] == 1 and res["diverged_chunk"] == 2
+    assert res["selected_chunk"] == 1 and res["members"][0]["diverged_chunk"] == 2
     # The exported network is chunk 1's (the checkpoint's best parameters): the same Q-values.
     best = checkpoints.read_checkpoint(run / run_dir.CHECKPOINT)["best_params"]
+    best = jax.tree.map(lambda x: x[0], best)  # the agent axis: one agent is a population of one
     trainer = Trainer(tiny_config())
     obs = np.random.default_rng(0).normal(size=(64, trainer.env.obs_dim)).astype(np.float32)
     np.testing.assert_allclose(
@@ -782,7 +788,8 @@ def test_resume_refuses_an_edited_config_a_deleted_checkpoint_and_undecodable_me
     edited = tiny_config(lr=5e-4)
     (run / "config.toml").write_text(config_to_toml(edited))
     with pytest.raises(
-        ConfigError, match="train.lr differs from the value the run .* started with"
+        ConfigError,
+        match=r"the config differs from the run's config recorded in .*checkpoint.msgpack in train.lr",
     ):
         run_training(edited, run, seed=SEED, resume=True, progress=False)
     (run / "config.toml").write_bytes((reference["run"] / "config.toml").read_bytes())
