@@ -72,6 +72,21 @@ settings.register_profile(
 settings.load_profile("jaxexo")
 
 
+def metrics_without_clock(path: Path) -> list[dict]:
+    """A run's metrics.jsonl rows without the wall-clock fields, the only ones a resumed run may
+    change (each row's and each of its members')."""
+    import json
+
+    clock = {"wall_s", "env_steps_per_s"}
+    return [
+        {
+            **{k: v for k, v in r.items() if k not in clock},
+            "members": [{k: v for k, v in m.items() if k not in clock} for m in r["members"]],
+        }
+        for r in map(json.loads, path.read_text().splitlines())
+    ]
+
+
 def cli_cmd(*args) -> list[str]:
     """The command line ``python -m jaxexo.cli ARGS`` (each argument as text)."""
     return [sys.executable, "-m", "jaxexo.cli", *map(str, args)]

@@ -36,9 +36,9 @@ def test_every_writer_uses_it():
     from jaxexo.storage import policy_file
     from jaxexo.sweep import results
     from jaxexo.swing import export
-    from jaxexo.train import run_files
+    from jaxexo.train import checkpoints
 
     assert results.atomic_write is atomic.atomic_write
     assert export.atomic_write is atomic.atomic_write
     assert policy_file.atomic_write is atomic.atomic_write
-    assert run_files.checkpoint_write is atomic.atomic_write
+    assert checkpoints.checkpoint_write is atomic.atomic_write

@@ -40,7 +40,7 @@ SCRIPT = textwrap.dedent(r"""
     monitoring.register_event_duration_secs_listener(listen)
 
     from train_helpers import TINY_N, TINY_T, tiny_config
-    from jaxexo.train import driver, run_files
+    from jaxexo.train import checkpoints, driver, run_dir
     from jaxexo.sweep.runner import run_sweep
     from jaxexo.sweep.spec import sweep_from_dict
 
@@ -50,7 +50,7 @@ SCRIPT = textwrap.dedent(r"""
 
     class Interrupt:   # stop while writing chunk 2's checkpoint (as tests/test_driver.py does)
         def __init__(self):
-            self.calls, self.real = 0, run_files.checkpoint_write
+            self.calls, self.real = 0, checkpoints.checkpoint_write
         def __call__(self, path, data):
             self.calls += 1
             if self.calls == 3:
@@ -61,17 +61,17 @@ SCRIPT = textwrap.dedent(r"""
     out["new"] = dict(counts)
     out["new_chunks"] = len((tmp / "full" / "metrics.jsonl").read_text().splitlines())
     counts.clear()
-    run_files.checkpoint_write = Interrupt()
+    checkpoints.checkpoint_write = Interrupt()
     try:
         driver.run_training(cfg, tmp / "part", seed=3, progress=False, eval_episodes=20)
     except KeyboardInterrupt:
         pass
-    run_files.checkpoint_write = run_files.atomic_write
+    checkpoints.checkpoint_write = checkpoints.atomic_write
     counts.clear()
     driver.run_training(cfg, tmp / "part", seed=3, resume=True, progress=False, eval_episodes=20)
     out["resume"] = dict(counts)
-    out["resume_same"] = ((tmp / "full" / run_files.CHECKPOINT).read_bytes()
-                          == (tmp / "part" / run_files.CHECKPOINT).read_bytes())
+    out["resume_same"] = ((tmp / "full" / run_dir.CHECKPOINT).read_bytes()
+                          == (tmp / "part" / run_dir.CHECKPOINT).read_bytes())
     counts.clear()
     raw = {"env": {"obs_mode": "thesis"}, "layout": {"obstacles": ["base1"], "pivot": ["obstacle"]},
            "train": {"num_envs": 16, "rollout_steps": 4, "num_minibatches": 2, "hidden": [16],

@@ -16,11 +16,12 @@ from jaxexo.storage.policy_file import load_policy
 
 jax = pytest.importorskip("jax")
 
-from jaxexo.train import driver, run_files  # noqa: E402
+from jaxexo.train import checkpoints, driver, run_dir  # noqa: E402
 from jaxexo.train.evaluate import HELD_OUT, TEST_KINDS  # noqa: E402
 
 pytestmark = pytest.mark.slow  # training runs and a background ``jaxexo train`` subprocess
 
+from conftest import metrics_without_clock
 from train_helpers import *  # noqa: F401,F403 (the shared tiny config, helpers and fixtures)
 from train_helpers import _npz
 
@@ -30,12 +31,12 @@ from train_helpers import _npz
 
 
 class _Interrupt:
-    """Patches run_files.checkpoint_write to raise KeyboardInterrupt on its ``at``-th call (calls go
+    """Patches checkpoints.checkpoint_write to raise KeyboardInterrupt on its ``at``-th call (calls go
     checkpoint, bookkeeping, checkpoint, bookkeeping, ... one pair per finished chunk)."""
 
     def __init__(self, at: int):
         self.at, self.calls = at, 0
-        self.real = run_files.checkpoint_write
+        self.real = checkpoints.checkpoint_write
 
     def __call__(self, path, data):
         self.calls += 1
@@ -46,11 +47,11 @@ class _Interrupt:
 
 def _interrupted_then_resumed(cfg, out, at: int) -> dict:
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(run_files, "checkpoint_write", _Interrupt(at))
+        mp.setattr(checkpoints, "checkpoint_write", _Interrupt(at))
         with pytest.raises(KeyboardInterrupt):
             driver.run_training(cfg, out, seed=SEED, progress=False, eval_episodes=20)
     before = {
-        "book": json.loads((out / run_files.BOOKKEEPING).read_text()),
+        "book": json.loads((out / run_dir.BOOKKEEPING).read_text()),
         "metric_lines": len((out / "metrics.jsonl").read_text().splitlines()),
         "policy": (out / "policy.npz").exists(),
     }
@@ -73,8 +74,8 @@ def driver_runs(tiny_reference, tmp_path_factory):
 
 
 def _counters(path) -> list[dict]:
-    rows = [json.loads(x) for x in path.read_text().splitlines()]
-    return [{k: v for k, v in r.items() if k not in ("wall_s", "env_steps_per_s")} for r in rows]
+    """The one agent's metrics rows, without the clock."""
+    return [r["members"][0] for r in metrics_without_clock(path)]
 
 
 @pytest.mark.parametrize("which", ["full", "part"])
@@ -87,7 +88,7 @@ def test_run_directory_is_complete(driver_runs, which):
     assert [r["updates"] for r in rows] == [2, 4, 6]
     assert [r["env_steps"] for r in rows] == [k * 2 * TINY_N * TINY_T for k in (1, 2, 3)]
     assert all(0.0 <= r["validation_success_raw"] <= 1.0 for r in rows)
-    book = json.loads((out / run_files.BOOKKEEPING).read_text())
+    book = json.loads((out / run_dir.BOOKKEEPING).read_text())
     assert book["chunks_done"] == 3 and book["seed"] == SEED
     assert (out / "training_curve.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
@@ -100,7 +101,7 @@ def test_resume_is_bit_identical(driver_runs):
     assert (
         before["book"]["chunks_done"] == 1 and before["metric_lines"] == 2 and not before["policy"]
     )
-    assert (full / run_files.CHECKPOINT).read_bytes() == (part / run_files.CHECKPOINT).read_bytes()
+    assert (full / run_dir.CHECKPOINT).read_bytes() == (part / run_dir.CHECKPOINT).read_bytes()
     pf, pp = _npz(full / "policy.npz"), _npz(part / "policy.npz")
     assert sorted(pf) == sorted(pp) and len(pf) >= 7
     for k in pf:
@@ -117,7 +118,7 @@ def test_resume_after_an_interrupt_between_checkpoint_and_bookkeeping(driver_run
     bookkeeping was a separate file that resume read, it lost a metrics row)."""
     out = tmp_path / "run"
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(run_files, "checkpoint_write", _Interrupt(4))
+        mp.setattr(checkpoints, "checkpoint_write", _Interrupt(4))
         with pytest.raises(KeyboardInterrupt):
             driver.run_training(
                 driver_runs["cfg"], out, seed=SEED, progress=False, eval_episodes=20
@@ -126,8 +127,8 @@ def test_resume_after_an_interrupt_between_checkpoint_and_bookkeeping(driver_run
         driver_runs["cfg"], out, seed=SEED, resume=True, progress=False, eval_episodes=20
     )
     assert _counters(driver_runs["full"] / "metrics.jsonl") == _counters(out / "metrics.jsonl")
-    assert (driver_runs["full"] / run_files.CHECKPOINT).read_bytes() == (
-        out / run_files.CHECKPOINT
+    assert (driver_runs["full"] / run_dir.CHECKPOINT).read_bytes() == (
+        out / run_dir.CHECKPOINT
     ).read_bytes()
 
 
@@ -154,7 +155,9 @@ def test_eval_json(driver_runs):
         assert 0.0 <= fig["success_raw"] <= fig["accuracy"] <= 1.0
     assert res["success"] == res["success_raw"]  # the old name, kept for existing readers
     assert res["env_steps"] == TINY_UPDATES * TINY_N * TINY_T
-    ck = json.loads((driver_runs["full"] / "metrics.jsonl").read_text().splitlines()[-1])
+    ck = json.loads((driver_runs["full"] / "metrics.jsonl").read_text().splitlines()[-1])[
+        "members"
+    ][0]
     assert res["episodes"] == ck["episodes"]
     assert res["train_seconds"] > 0 and res["seed"] == SEED
 
@@ -168,10 +171,12 @@ def test_exported_policy_matches_the_checkpoint(driver_runs, tiny):
     template = tiny["init"](jax.random.PRNGKey(0), hyper)
     from jaxexo.storage.checkpoint import unpack_checkpoint
 
+    agents = jax.tree.map(lambda x: np.asarray(x)[None], template)  # one agent: K = 1
     saved = serialization.from_bytes(
-        {"state": template, "best_params": template.params},
-        unpack_checkpoint((full / run_files.CHECKPOINT).read_bytes(), "ckpt"),
+        {"state": agents, "best_params": agents.params},
+        unpack_checkpoint((full / run_dir.CHECKPOINT).read_bytes(), "ckpt"),
     )
+    saved = jax.tree.map(lambda x: x[0], saved)
     assert int(saved["state"].update) == TINY_UPDATES
     pol = load_policy(full / "policy.npz")
     assert pol.metadata["layer_norm"] is True and pol.metadata["layers"] == [
@@ -209,9 +214,9 @@ def test_run_training_refuses_to_overwrite_or_mix_runs(driver_runs, tmp_path):
     from jaxexo.storage.checkpoint import pack_checkpoint, unpack_checkpoint
 
     raw = serialization.msgpack_restore(
-        unpack_checkpoint((run / run_files.CHECKPOINT).read_bytes(), "ckpt")
+        unpack_checkpoint((run / run_dir.CHECKPOINT).read_bytes(), "ckpt")
     )
     raw["book"]["devices"] = 2
-    (run / run_files.CHECKPOINT).write_bytes(pack_checkpoint(serialization.msgpack_serialize(raw)))
+    (run / run_dir.CHECKPOINT).write_bytes(pack_checkpoint(serialization.msgpack_serialize(raw)))
     with pytest.raises(ConfigError, match="2 device"):
         driver.run_training(cfg, run, seed=SEED, resume=True, progress=False)

@@ -14,8 +14,8 @@ jax = pytest.importorskip("jax")
 import jax.numpy as jnp  # noqa: E402
 
 from jaxexo.train.lanes import finite  # noqa: E402
+from jaxexo.train.metrics_log import Counters, chunk_row  # noqa: E402
 from jaxexo.train.records import Track  # noqa: E402
-from jaxexo.train.run_files import Counters, chunk_row  # noqa: E402
 from jaxexo.train.trainer import METRICS, UpdateMetrics  # noqa: E402
 
 
@@ -71,3 +71,20 @@ def test_candidates_finished_a_chunk_and_never_diverged():
         None, np.array([0.5, 0.9, 0.7, -1.0]), np.array([2, 3, 1, 0]), np.array([0, 4, 0, 0])
     )
     assert track.candidates() == [0, 2]
+
+
+def test_a_checkpoint_of_the_earlier_single_agent_format_is_refused_naming_it(tmp_path):
+    """An earlier jaxexo wrote one agent's checkpoint without the agent axis and the per-agent table
+    (``members``): refused in one line naming that format, not poured into a state [1, ...]."""
+    from flax import serialization
+
+    from jaxexo.storage.checkpoint import CheckpointError, pack_checkpoint
+    from jaxexo.train.checkpoints import read_checkpoint
+
+    book = {"seed": 0, "chunks_done": 1, "best_score": 0.5, "best_chunk": 1, "devices": 2}
+    payload = {"state": {"update": np.int32(55)}, "best_params": {}, "book": book}
+    path = tmp_path / "checkpoint.msgpack"
+    path.write_bytes(pack_checkpoint(serialization.msgpack_serialize(payload)))
+    with pytest.raises(CheckpointError, match="single-agent format of an earlier jaxexo") as e:
+        read_checkpoint(path)
+    assert str(e.value).startswith(f"{path}: ") and "\n" not in str(e.value)

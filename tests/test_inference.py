@@ -26,7 +26,7 @@ jax = pytest.importorskip("jax")
 import jax.numpy as jnp  # noqa: E402
 
 from jaxexo.env import ExoStepEnv  # noqa: E402
-from jaxexo.train import run_files  # noqa: E402
+from jaxexo.train import export  # noqa: E402
 from jaxexo.train.evaluate import make_rollout  # noqa: E402
 from jaxexo.train.network import QNetwork  # noqa: E402
 from jaxexo.train.trainer import Trainer  # noqa: E402
@@ -75,7 +75,7 @@ def export_random(path, cfg, seed=0, scale_signs=False):
             return x
 
         params = jax.tree_util.tree_map_with_path(f, params)
-    return run_files.export_policy(path, cfg, trainer, params)
+    return export.export_policy(path, cfg, trainer, params)
 
 
 def small_config(shield: bool = False, **train):

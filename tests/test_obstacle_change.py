@@ -330,7 +330,7 @@ def test_a_checkpoint_from_before_the_change_field_fits_a_state_without_changes(
     """A state dict with env_state.change None (obstacle changes off) is matched by a checkpoint
     that has the field as None, and by one written before the field existed (the key missing);
     a checkpoint whose field holds something where this config has nothing is refused."""
-    from jaxexo.train.run_files import tree_mismatch, with_empty_fields
+    from jaxexo.train.checkpoints import tree_mismatch, with_empty_fields
 
     template = {"env_state": {"heel": np.zeros(3), "change": None}, "step": np.zeros((), np.int32)}
     saved = {"env_state": {"heel": np.ones(3), "change": None}, "step": np.ones((), np.int32)}

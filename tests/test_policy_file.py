@@ -14,7 +14,7 @@ from jaxexo.storage.policy_file import FORMAT_VERSION, PolicyFileError, load_pol
 jax = pytest.importorskip("jax")
 import jax.numpy as jnp  # noqa: E402
 
-from jaxexo.train import run_files  # noqa: E402
+from jaxexo.train import export  # noqa: E402
 from jaxexo.train.trainer import Trainer  # noqa: E402
 
 from train_helpers import *  # noqa: F401,F403 (the shared tiny config, helpers and fixtures)
@@ -27,7 +27,7 @@ def test_policy_round_trip(tmp_path, layer_norm):
     trainer = Trainer(cfg)
     d = trainer.env.obs_dim
     params = random_params(trainer.net, d, seed=1)
-    path = run_files.export_policy(tmp_path / "policy.npz", cfg, trainer, params)
+    path = export.export_policy(tmp_path / "policy.npz", cfg, trainer, params)
     with zipfile.ZipFile(path) as z:  # plain arrays, no pickled objects
         assert all(n.endswith(".npy") for n in z.namelist())
     pol = load_policy(path)
@@ -58,9 +58,7 @@ def good_policy(tmp_path_factory):
     cfg = tiny_config(hidden=[8], layer_norm=True)
     trainer = Trainer(cfg)
     params = random_params(trainer.net, trainer.env.obs_dim, seed=0)
-    path = run_files.export_policy(
-        tmp_path_factory.mktemp("pol") / "policy.npz", cfg, trainer, params
-    )
+    path = export.export_policy(tmp_path_factory.mktemp("pol") / "policy.npz", cfg, trainer, params)
     load_policy(path)
     return path
 

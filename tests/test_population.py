@@ -14,18 +14,19 @@ import pytest
 
 from jaxexo.config import ConfigError, config_from_dict
 
-from conftest import FORWARD_UPDATES, forward_raw
+from conftest import FORWARD_UPDATES, forward_raw, metrics_without_clock
 from train_helpers import leaves, metric_array
 
 jax = pytest.importorskip("jax")
 
 from jaxexo.sweep.program import run_chunk, unflatten  # noqa: E402
 from jaxexo.sweep.spec import sweep_from_dict  # noqa: E402
-from jaxexo.train import driver, run_files  # noqa: E402
+from jaxexo.train import checkpoints, driver, run_dir  # noqa: E402
 from jaxexo.train.lanes import LANES, padded_agents  # noqa: E402
 from jaxexo.train.network import dense_layers  # noqa: E402
 from jaxexo.train.population import Population, population_devices  # noqa: E402
 from jaxexo.train.records import Track  # noqa: E402
+from jaxexo.train.trainer import METRICS  # noqa: E402
 
 UPDATES, CHUNK = FORWARD_UPDATES, 2
 SEED = 3
@@ -80,10 +81,8 @@ def test_a_member_trains_identically_alone_in_populations_of_2_and_5_and_in_a_sw
     alone = train_members([SEED])[0]
     neighbour, pair = train_members([SEED - 1, SEED])  # pair: the second lane of the block
     five = train_members([0, 1, 2, SEED, 4])[SEED]  # second block of three, on one device
-    assert alone["metrics"].shape == (UPDATES // CHUNK, CHUNK, len(run_files.METRICS))
-    assert alone["metrics"][
-        ..., run_files.METRICS.index("loss")
-    ].all()  # it trained: every update had a loss
+    assert alone["metrics"].shape == (UPDATES // CHUNK, CHUNK, len(METRICS))
+    assert alone["metrics"][..., METRICS.index("loss")].all()  # it trained: every update had a loss
     for other in (pair, five):
         assert same(alone["params"], other["params"])
         assert np.array_equal(alone["metrics"], other["metrics"])
@@ -199,19 +198,19 @@ def test_the_driver_exports_the_best_member_records_every_member_and_resumes(tmp
             policy[f"dense_{j}_bias"], b
         )
     # Interrupted after its second checkpoint and resumed: the same files as the uninterrupted run.
-    real, calls = run_files.checkpoint_write, []
+    real, calls = checkpoints.checkpoint_write, []
 
     def killed_after_second_checkpoint(path, data):
-        if path.name == run_files.BOOKKEEPING:
+        if path.name == run_dir.BOOKKEEPING:
             calls.append(path)
             if len(calls) == 2:
                 raise RuntimeError("killed")
         return real(path, data)
 
-    monkeypatch.setattr(run_files, "checkpoint_write", killed_after_second_checkpoint)
+    monkeypatch.setattr(checkpoints, "checkpoint_write", killed_after_second_checkpoint)
     with pytest.raises(RuntimeError, match="killed"):
         driver.run_training(cfg, tmp_path / "cut", seed=SEED, progress=False)
-    monkeypatch.setattr(run_files, "checkpoint_write", real)
+    monkeypatch.setattr(checkpoints, "checkpoint_write", real)
     with pytest.raises(ConfigError, match="--seed 3"):
         driver.run_training(cfg, tmp_path / "cut", seed=SEED + 1, resume=True, progress=False)
     resumed = driver.run_training(cfg, tmp_path / "cut", seed=SEED, resume=True, progress=False)
@@ -223,22 +222,9 @@ def test_the_driver_exports_the_best_member_records_every_member_and_resumes(tmp
     assert (tmp_path / "cut" / "policy.npz").read_bytes() == (
         tmp_path / "run" / "policy.npz"
     ).read_bytes()
-    assert _without_clock((tmp_path / "cut" / "metrics.jsonl").read_text()) == _without_clock(
-        (tmp_path / "run" / "metrics.jsonl").read_text()
+    assert metrics_without_clock(tmp_path / "cut" / "metrics.jsonl") == metrics_without_clock(
+        tmp_path / "run" / "metrics.jsonl"
     )
-
-
-def _without_clock(text: str) -> list:
-    """metrics.jsonl rows without the wall-clock fields (the only ones a resumed run may change)."""
-    clock = {"wall_s", "env_steps_per_s"}
-    rows = [json.loads(x) for x in text.splitlines()]
-    return [
-        {
-            **{k: v for k, v in r.items() if k not in clock},
-            "members": [{k: v for k, v in m.items() if k not in clock} for m in r["members"]],
-        }
-        for r in rows
-    ]
 
 
 def test_a_sweep_refuses_a_population():

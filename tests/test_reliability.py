@@ -28,7 +28,15 @@ from jaxexo.storage.checkpoint import CheckpointError, pack_checkpoint, unpack_c
 from jaxexo.storage.policy_file import PolicyFileError, load_policy, policy_checksum
 from jaxexo.storage.rundir import LOCK_NAME, RunDirError, run_lock
 
-from conftest import ROOT, SEED, cli_cmd, run_cli, tiny_config, without_compilation_cache
+from conftest import (
+    ROOT,
+    SEED,
+    cli_cmd,
+    metrics_without_clock,
+    run_cli,
+    tiny_config,
+    without_compilation_cache,
+)
 
 
 def start_training(cfg_path, run, stdout) -> subprocess.Popen:
@@ -504,21 +512,16 @@ def reference(tiny_reference):
     return {"run": tiny_reference["run"], "cfg_path": tiny_reference["cfg_path"]}
 
 
-def _counters(path) -> list[dict]:
-    rows = [json.loads(x) for x in path.read_text().splitlines()]
-    return [{k: v for k, v in r.items() if k not in ("wall_s", "env_steps_per_s")} for r in rows]
-
-
 def assert_same_run(a, b):
     """Bit-identical results: checkpoint, policy arrays, metrics counters, evaluation."""
-    from jaxexo.train.run_files import CHECKPOINT
+    from jaxexo.train.run_dir import CHECKPOINT
 
     assert (a / CHECKPOINT).read_bytes() == (b / CHECKPOINT).read_bytes()
     pa, pb = _files(a / "policy.npz"), _files(b / "policy.npz")
     assert sorted(pa) == sorted(pb)
     for k in pa:
         assert pa[k].dtype == pb[k].dtype and np.array_equal(pa[k], pb[k]), k
-    assert _counters(a / "metrics.jsonl") == _counters(b / "metrics.jsonl")
+    assert metrics_without_clock(a / "metrics.jsonl") == metrics_without_clock(b / "metrics.jsonl")
     drop = lambda r: {k: v for k, v in r.items() if k != "train_seconds"}  # noqa: E731
     assert drop(json.loads((a / "eval.json").read_text())) == drop(
         json.loads((b / "eval.json").read_text())
@@ -529,8 +532,9 @@ def assert_same_run(a, b):
 def test_resume_refuses_foreign_corrupt_and_incomplete_run_directories(reference, tmp_path):
     from flax import serialization
 
+    from jaxexo.train.checkpoints import read_checkpoint
     from jaxexo.train.driver import run_training
-    from jaxexo.train.run_files import CHECKPOINT, read_checkpoint
+    from jaxexo.train.run_dir import CHECKPOINT
 
     cfg = tiny_config()
     run = tmp_path / "run"
@@ -610,7 +614,7 @@ def test_sigkill_mid_run_then_resume_is_bit_identical(reference, tmp_path):
 def test_run_stopped_before_its_first_checkpoint_resumes_from_scratch(reference, tmp_path):
     """Killed (here: interrupted) after chunk 1's metrics row but before its checkpoint: a new run there is
     refused (it is not empty) with a hint, --resume starts again and ends as the uninterrupted run."""
-    from jaxexo.train import driver, run_files
+    from jaxexo.train import checkpoints, driver
 
     cfg = tiny_config()
     run = tmp_path / "run"
@@ -619,7 +623,7 @@ def test_run_stopped_before_its_first_checkpoint_resumes_from_scratch(reference,
         raise KeyboardInterrupt
 
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(run_files, "checkpoint_write", interrupt)
+        mp.setattr(checkpoints, "checkpoint_write", interrupt)
         with pytest.raises(KeyboardInterrupt):
             driver.run_training(cfg, run, seed=SEED, progress=False)
     # as a SIGKILL mid-write leaves it (atomic_write's temporary name for checkpoint.msgpack)
@@ -659,12 +663,12 @@ def test_full_disk_fails_cleanly_and_keeps_the_last_checkpoint(reference, tmp_pa
     """Chunk 1 checkpointed; the resumed process may not write files as large as a checkpoint: it fails
     on chunk 2's checkpoint with a message naming the file (exit 1, no traceback), the chunk-1 checkpoint
     is intact, no temporary file is left, and a later resume ends bit-identical to the uninterrupted run."""
-    from jaxexo.train import driver, run_files
+    from jaxexo.train import checkpoints, driver, run_dir
 
     cfg = tiny_config()
     run = tmp_path / "run"
     calls = {"n": 0}
-    real = run_files.checkpoint_write
+    real = checkpoints.checkpoint_write
 
     def stop_after_chunk_1(path, data):  # checkpoint, bookkeeping of chunk 1, then stop
         calls["n"] += 1
@@ -673,12 +677,12 @@ def test_full_disk_fails_cleanly_and_keeps_the_last_checkpoint(reference, tmp_pa
         return real(path, data)
 
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(run_files, "checkpoint_write", stop_after_chunk_1)
+        mp.setattr(checkpoints, "checkpoint_write", stop_after_chunk_1)
         with pytest.raises(KeyboardInterrupt):
             driver.run_training(cfg, run, seed=SEED, progress=False)
-    ckpt = run / run_files.CHECKPOINT
+    ckpt = run / run_dir.CHECKPOINT
     saved = ckpt.read_bytes()
-    assert run_files.read_checkpoint(ckpt)["book"]["chunks_done"] == 1
+    assert checkpoints.read_checkpoint(ckpt)["book"]["chunks_done"] == 1
     r = subprocess.run(
         limited_fsize(
             len(saved) - 1,
@@ -723,7 +727,9 @@ def test_diverged_run_says_so_and_exports_nothing_non_finite(tmp_path):
 
     lines = (run / "metrics.jsonl").read_text().splitlines()
     rows = [json.loads(x, parse_constant=strict) for x in lines]
-    assert [x["diverged"] for x in rows] == [True] and rows[0]["validation_success_raw"] is None
+    (agent,) = rows[0]["members"]
+    assert [x["members"][0]["diverged"] for x in rows] == [True]
+    assert agent["validation_success_raw"] is None
     assert not (run / "policy.npz").exists() and not (run / "checkpoint.msgpack").exists()
 
 
@@ -734,7 +740,7 @@ def test_divergence_after_a_good_chunk_keeps_the_best_finite_parameters(tmp_path
     import jax
     import jax.numpy as jnp
 
-    from jaxexo.train import driver, run_files
+    from jaxexo.train import checkpoints, driver, run_dir
     from jaxexo.train.trainer import Trainer
 
     real_run = Trainer.run
@@ -751,14 +757,15 @@ def test_divergence_after_a_good_chunk_keeps_the_best_finite_parameters(tmp_path
     ):
         driver.run_training(tiny_config(), run, seed=SEED, progress=False)
     rows = [json.loads(x) for x in (run / "metrics.jsonl").read_text().splitlines()]
-    assert [x["diverged"] for x in rows] == [False, True]
-    assert run_files.read_checkpoint(run / run_files.CHECKPOINT)["book"]["chunks_done"] == 1
+    assert [x["members"][0]["diverged"] for x in rows] == [False, True]
+    assert checkpoints.read_checkpoint(run / run_dir.CHECKPOINT)["book"]["chunks_done"] == 1
     pol = load_policy(run / "policy.npz")
     assert all(np.all(np.isfinite(k)) for k in pol.kernels)
     res = json.loads((run / "eval.json").read_text())
-    assert res["selected_chunk"] == 1 and res["diverged_chunk"] == 2
+    assert res["selected_chunk"] == 1 and res["members"][0]["diverged_chunk"] == 2
     # The exported network is chunk 1's (the checkpoint's best parameters): the same Q-values.
-    best = run_files.read_checkpoint(run / run_files.CHECKPOINT)["best_params"]
+    best = checkpoints.read_checkpoint(run / run_dir.CHECKPOINT)["best_params"]
+    best = jax.tree.map(lambda x: x[0], best)  # the agent axis: one agent is a population of one
     trainer = Trainer(tiny_config())
     obs = np.random.default_rng(0).normal(size=(64, trainer.env.obs_dim)).astype(np.float32)
     np.testing.assert_allclose(
@@ -774,14 +781,15 @@ def test_resume_refuses_an_edited_config_a_deleted_checkpoint_and_undecodable_me
     learning rates), checkpoint.msgpack deleted from a run of several chunks (it used to restart from
     scratch silently), random bytes in metrics.jsonl (named, not "'utf-8' codec can't decode")."""
     from jaxexo.train.driver import run_training
-    from jaxexo.train.run_files import BOOKKEEPING, CHECKPOINT
+    from jaxexo.train.run_dir import BOOKKEEPING, CHECKPOINT
 
     run = tmp_path / "run"
     shutil.copytree(reference["run"], run)
     edited = tiny_config(lr=5e-4)
     (run / "config.toml").write_text(config_to_toml(edited))
     with pytest.raises(
-        ConfigError, match="train.lr differs from the value the run .* started with"
+        ConfigError,
+        match=r"the config differs from the run's config recorded in .*checkpoint.msgpack in train.lr",
     ):
         run_training(edited, run, seed=SEED, resume=True, progress=False)
     (run / "config.toml").write_bytes((reference["run"] / "config.toml").read_bytes())

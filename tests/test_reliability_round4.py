@@ -159,18 +159,18 @@ def test_a_diverged_rows_non_finite_numbers_are_written_as_null_and_read_back(tm
     import json
     import math
 
-    from jaxexo.train import run_files as F
+    from jaxexo.train import metrics_log
 
     def strict(constant):
         raise AssertionError(f"{constant} is not JSON")
 
     row = {"chunk": 1, "loss": float("nan"), "q_mean": float("inf"), "accuracy": 0.5, "label": "x"}
     row["members"] = [{"loss": float("-inf"), "validation_success_raw": None}]
-    line = F.metrics_line(row)
+    line = metrics_log.metrics_line(row)
     parsed = json.loads(line, parse_constant=strict)
     assert parsed["loss"] is None and parsed["members"][0]["loss"] is None
     (tmp_path / "metrics.jsonl").write_text(line)
-    back = F.read_metrics_rows(tmp_path / "metrics.jsonl", 1)[0]
+    back = metrics_log.read_metrics_rows(tmp_path / "metrics.jsonl", 1)[0]
     assert math.isnan(back["loss"]) and math.isnan(back["q_mean"]) and back["accuracy"] == 0.5
     assert back["members"][0]["validation_success_raw"] is None  # a null that means "none"
 

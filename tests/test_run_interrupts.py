@@ -277,7 +277,7 @@ def test_cli_resume_over_a_cut_log_exits_2_naming_the_file(finished_run):
 def test_rows_past_the_checkpoint_are_still_cut_back(tmp_path):
     """A killed run's rows after its checkpoint (a torn last line among them) are not a mismatch:
     the resumed run recomputes them."""
-    from jaxexo.train.run_files import metrics_line, read_metrics_rows
+    from jaxexo.train.metrics_log import metrics_line, read_metrics_rows
 
     log = tmp_path / "metrics.jsonl"
     rows = [{"chunk": n, "loss": 0.5} for n in (1, 2, 3)]

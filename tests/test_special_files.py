@@ -247,7 +247,7 @@ def test_generator_load_takes_a_path_only(arg):
 
 
 def test_a_metrics_log_replaced_by_a_link_is_named_on_resume(tmp_path):
-    from jaxexo.train.run_files import read_metrics_rows
+    from jaxexo.train.metrics_log import read_metrics_rows
 
     victim = tmp_path / "victim.jsonl"
     victim.write_text('{"chunk": 1}\n')

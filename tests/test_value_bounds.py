@@ -435,7 +435,7 @@ def test_resume_with_another_config_names_the_field_and_both_values(tmp_path):
     import dataclasses
 
     from jaxexo.config.toml_io import config_to_toml
-    from jaxexo.train.run_files import prepare_dir
+    from jaxexo.train.run_dir import prepare_dir
 
     cfg = load_config(ROOT / "configs" / "quick.toml")
     (tmp_path / "config.toml").write_text(config_to_toml(cfg))

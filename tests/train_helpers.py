@@ -46,7 +46,7 @@ from conftest import (  # noqa: F401 (the shared tiny config, for the star impor
 jax = pytest.importorskip("jax")
 import jax.numpy as jnp  # noqa: E402
 
-from jaxexo.train import driver, run_files  # noqa: E402
+from jaxexo.train import driver, run_dir  # noqa: E402
 from jaxexo.train.evaluate import HELD_OUT, TEST_KINDS, make_rollout  # noqa: E402
 from jaxexo.train.trainer import METRICS, Hyperparams, Trainer, make_train  # noqa: E402
 
@@ -66,8 +66,8 @@ def assert_run_files(out) -> None:
         "policy.npz",
         "training_curve.png",
         "eval.json",
-        run_files.CHECKPOINT,
-        run_files.BOOKKEEPING,
+        run_dir.CHECKPOINT,
+        run_dir.BOOKKEEPING,
     ):
         assert (out / name).is_file(), name
 

@@ -143,7 +143,8 @@ def jaxexo_curve(base: Config, b: Budgets) -> tuple[list[dict], float]:
 
     with tempfile.TemporaryDirectory() as d:
         res = run_training(base, d, seed=0, progress=False)
-        rows = [json.loads(x) for x in (Path(d) / "metrics.jsonl").read_text().splitlines()]
+        lines = [json.loads(x) for x in (Path(d) / "metrics.jsonl").read_text().splitlines()]
+    rows = [r["members"][res["exported_member"]] for r in lines]  # the exported agent's rows
     curve = [
         {
             "env_steps": r["env_steps"],

@@ -60,12 +60,7 @@ def population_row(base, k: int, work: Path) -> dict:
     chunks = [json.loads(x) for x in (work / f"k{k}" / "metrics.jsonl").read_text().splitlines()]
     walls = [c["wall_s"] for c in chunks]
     steady = [b - a for a, b in zip(walls[:-1], walls[1:])][1:] or [walls[-1]]
-    members = ev.get("members") or [
-        {
-            "seed": ev["seed"],
-            "test": {"success_raw": ev["success_raw"], "reached_goal": ev["reached_goal"]},
-        }
-    ]
+    members = ev["members"]
     return {
         "k": k,
         "train_seconds": ev["train_seconds"],

@@ -93,7 +93,7 @@ def _print_result(res: dict, k: int, out) -> None:
         f"success_raw {res['success_raw']:.3f}, accuracy {res['accuracy']:.3f}"
         + (f"; held-out triangle/half-circle success_raw {held['success_raw']:.3f}" if held else "")
     )
-    if "members" in res:
+    if k > 1:
         ok = [m for m in res["members"] if m["diverged_chunk"] is None]
         print(
             f"exported member {res['exported_member']} (seed {res['seed']}, chunk {res['selected_chunk']}, "

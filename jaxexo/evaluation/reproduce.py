@@ -501,7 +501,7 @@ def evaluate_run(name: str, run: Path, ev: dict, p: Protocol) -> dict:
         "env_steps": ev.get("env_steps"),
         "eval_json": {k: ev[k] for k in ("accuracy", "success")},
     }
-    if "members" in ev:
+    if ev.get("population", 1) > 1:  # one agent's eval.json (any jaxexo's) has no other member
         result["population"] = population_summary(ev, model_of(name))
     return result
 

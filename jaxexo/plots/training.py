@@ -1,5 +1,5 @@
-"""The figures of a training run: training_curve.png of one agent (thesis Fig. 3.4) and of a
-population (matplotlib, imported on first use; the run directory: docs/training.md)."""
+"""The figure of a training run, training_curve.png, the same for one agent and a population
+(matplotlib, imported on first use; the run directory: docs/training.md)."""
 
 from __future__ import annotations
 
@@ -10,39 +10,9 @@ import numpy as np
 from jaxexo.storage.atomic import write_figure
 
 
-def plot_training_curve(path: Path, rows: list[dict]) -> None:
-    """Return and success rate per chunk against the episodes."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    ep = [r["episodes"] for r in rows]
-    fig, (a1, a2) = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
-    a1.plot(ep, [r["return_mean"] for r in rows], color="tab:blue")
-    a1.set_ylabel("mean episode return")
-    a1.set_title("Training (thesis Fig. 3.4): return and success per chunk")
-    a1.grid(alpha=0.3)
-    a2.plot(
-        ep,
-        [r["success_raw_rate"] for r in rows],
-        label="strict success, raw moves",
-        color="tab:green",
-    )
-    a2.plot(ep, [r["accuracy"] for r in rows], label="accuracy (eq 3.1)", color="tab:orange")
-    a2.set_ylim(-0.02, 1.02)
-    a2.set_xlabel("episodes")
-    a2.set_ylabel("share of finished episodes")
-    a2.legend(loc="lower right")
-    a2.grid(alpha=0.3)
-    fig.tight_layout()
-    write_figure(path, fig, dpi=110)
-    plt.close(fig)
-
-
-def plot_population_curve(path: Path, rows: list[dict], exported: int | None) -> None:
-    """Every member's training success and validation success against its episodes; the exported
-    member drawn bold."""
+def plot_training_curve(path: Path, rows: list[dict], exported: int | None) -> None:
+    """training_curve.png: every member's training success and validation success against its
+    episodes (metrics.jsonl's ``rows``); the exported member drawn bold."""
     import matplotlib
 
     matplotlib.use("Agg")

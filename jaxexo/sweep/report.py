@@ -312,7 +312,7 @@ def _export_agent(sweep: Sweep, chunk: dict, row: dict, dest: Path, trainer=None
     """Write one agent's final parameters (from its loaded ``chunk``, ``R.load_chunk``) as dest/policy.npz
     and its resolved config as dest/config.toml; ``trainer``: its configuration's Trainer, if built."""
     from jaxexo.sweep.program import unflatten
-    from jaxexo.train.run_files import export_policy
+    from jaxexo.train.export import export_policy
     from jaxexo.train.trainer import Trainer
 
     cid, seed = int(row["config_id"]), int(row["seed"])

@@ -1,16 +1,16 @@
 """The chunk loop of every ``jaxexo train`` run: resume, checkpoints, the divergence rule, the progress
 bar, each agent's best chunk, the choice of the agent to export, the export and eval.json.
 
-One agent is a population of one: the loop and the records (jaxexo.train.records) treat K agents
-alike, and a ``Placement`` says only where they live (one agent split over the CPU devices,
-jaxexo.train.driver.OneAgent; K members vmapped in lanes, jaxexo.train.population.Members). The run
-directory's files and checks are jaxexo.train.run_files'; its formats are in docs/training.md.
+One agent is a population of one: the loop, the records (jaxexo.train.records) and the run
+directory's files treat K agents alike, with a leading agent axis, and a ``Placement`` says only
+where they live (jaxexo.train.placements). The files' formats are in docs/training.md.
 """
 
 from __future__ import annotations
 
 import abc
 import json
+import math
 import time
 from pathlib import Path
 from typing import Any
@@ -22,21 +22,38 @@ from flax import serialization
 from jaxexo.config import Config
 from jaxexo.config.toml_io import config_to_toml
 from jaxexo.storage.atomic import append_line, atomic_write
-from jaxexo.storage.checkpoint import CheckpointError, pack_checkpoint
+from jaxexo.storage.checkpoint import pack_checkpoint
 from jaxexo.storage.rundir import TrainingDiverged
-from jaxexo.train import run_files as F
+from jaxexo.train import checkpoints
 from jaxexo.train.evaluate import make_evaluator
+from jaxexo.train.export import export_policy
+from jaxexo.train.metrics_log import Counters, chunk_row, json_safe, metrics_line
 from jaxexo.train.records import Agents, ChunkOut, Track
-from jaxexo.train.trainer import Hyperparams
+from jaxexo.train.run_dir import BOOKKEEPING, CHECKPOINT, LOG, prepare_dir
+from jaxexo.train.trainer import Hyperparams, Trainer
+
+# Aim for chunks of about this many env steps: frequent enough for a live progress bar.
+CHUNK_ENV_STEPS = 1_000_000
+
+
+def chunking(cfg: Config, trainer: Trainer) -> tuple[int, int]:
+    """(updates per chunk, chunks): every chunk has the same length, so one program is compiled;
+    updates past the budget are masked inside the program."""
+    per = cfg.train.num_envs * cfg.train.rollout_steps
+    target = cfg.train.chunk_updates or max(1, CHUNK_ENV_STEPS // per)
+    chunks = math.ceil(trainer.num_updates / min(target, trainer.num_updates))
+    return math.ceil(trainer.num_updates / chunks), chunks
 
 
 class Placement(abc.ABC):
     """Where a run's K agents live: how their state is made, run, saved and restored. Set by a
-    subclass: ``trainer`` (one agent's Trainer), ``size`` (K), ``n_devices`` (in the checkpoint)."""
+    subclass: ``trainer`` (one agent's Trainer), ``size`` (K), ``n_devices`` (in the checkpoint),
+    ``title`` (the progress bar's)."""
 
     trainer: Any
     size: int
     n_devices: int
+    title: str
 
     @abc.abstractmethod
     def init(self):
@@ -48,7 +65,7 @@ class Placement(abc.ABC):
 
     @abc.abstractmethod
     def saved(self, ts):
-        """The TrainState a checkpoint holds: one agent's, or the K members' with a leading axis."""
+        """The K agents' TrainState as a checkpoint holds it: host arrays [K, ...]."""
 
     @abc.abstractmethod
     def check_resume(self, raw: dict, ckpt: Path) -> None:
@@ -56,7 +73,7 @@ class Placement(abc.ABC):
 
     @abc.abstractmethod
     def resume(self, saved):
-        """The state to continue from, given a checkpoint's ``saved`` TrainState."""
+        """The state to continue from, given a checkpoint's ``saved`` TrainState [K, ...]."""
 
 
 def run_chunks(
@@ -64,7 +81,7 @@ def run_chunks(
 ) -> dict:
     """Train ``placement(cfg, seed)``'s agents in chunks into the (locked) run directory ``out``, export
     and evaluate; return eval.json's content. Raises TrainingDiverged after writing what can be trusted."""
-    raw = F.prepare_dir(out, cfg, seed, resume)
+    raw = prepare_dir(out, cfg, seed, resume)
     run = _Run(cfg, out, seed, time.perf_counter(), placement(cfg, seed))
     run.start(raw, resume)
     run.train(progress)
@@ -81,111 +98,54 @@ class _Run:
         # The budget check before each chunk: one compiled program (tests/test_compile_once.py).
         self._active = jax.jit(place.trainer.active)
         self.ckpt, self.book_path, self.metrics_path = (
-            out / F.CHECKPOINT,
-            out / F.BOOKKEEPING,
-            out / "metrics.jsonl",
+            out / CHECKPOINT,
+            out / BOOKKEEPING,
+            out / LOG,
         )
         self.rows: list[dict] = []
         self.chunks_done, self.wall_before, self.train_seconds = 0, 0.0, 0.0
 
-    def _leading(self, tree):
-        """``tree`` (one agent's, or the members' with their leading axis) as host arrays [K, ...]."""
-        return jax.tree.map(
-            lambda x: np.asarray(x)[None] if self.agents.one else np.asarray(x), tree
-        )
-
-    def _as_saved(self, tree):
-        """[K, ...] host arrays as a checkpoint holds them (one agent's without the agent axis)."""
-        return jax.tree.map(lambda x: x[0], tree) if self.agents.one else tree
-
-    def _counts(self, ts) -> F.Counters:
+    def _counts(self, ts) -> Counters:
         """Every agent's counters [K]."""
-        s, k = self.place.saved(ts), self.place.size
-        return F.Counters(
-            np.asarray(s.update).reshape(k),
-            np.asarray(s.episodes).reshape(k),
-            self.place.trainer.steps_per_update,
-        )
+        s = self.place.saved(ts)
+        return Counters(s.update, s.episodes, self.place.trainer.steps_per_update)
 
     def start(self, raw: dict | None, resume: bool) -> None:
         place = self.place
         if raw is not None:
             place.check_resume(raw, self.ckpt)
         ts = place.init()
-        self.total = F.chunking(self.cfg, place.trainer)[1]
+        self.total = chunking(self.cfg, place.trainer)[1]
         saved = place.saved(ts)
-        self.track = Track.start(self._leading(saved.params), place.size)
+        self.track = Track.start(saved.params, place.size)
         if resume and raw is None:
             # Rows of a run that never reached its first checkpoint.
             atomic_write(self.metrics_path, "")
         self.ts = ts if raw is None else self._restore(raw, saved)
 
     def _restore(self, raw: dict, fresh):
-        # A checkpoint of another network or state layout (another config's, a foreign file) must not
-        # be poured into this one: flax would accept mismatched shapes silently.
-        noun = "training state" if self.agents.one else "population state"
-        raw = dict(raw, state=F.with_empty_fields(serialization.to_state_dict(fresh), raw["state"]))
-        for name, template in (
-            ("state", serialization.to_state_dict(fresh)),
-            ("best_params", serialization.to_state_dict(fresh.params)),
-        ):
-            bad = F.tree_mismatch(template, raw[name])
-            if bad:
-                raise CheckpointError(
-                    f"{self.ckpt}: does not fit this config's {noun} ({name}{bad})"
-                )
-        best = serialization.from_state_dict(fresh.params, raw["best_params"])
-        self.track = self._restore_track(raw, self._leading(best))
-        ts = self.place.resume(serialization.from_state_dict(fresh, raw["state"]))
+        state, self.track = checkpoints.restored(raw, fresh, self.ckpt)
+        ts = self.place.resume(state)
         self.chunks_done = raw["book"]["chunks_done"]
-        self.wall_before = F.resumed_clock(self.ckpt, self.book_path, self.chunks_done, self.total)
-        self.rows = raw["rows"]  # checked against the checkpoint by F.prepare_dir
-        # Lines written after the checkpoint are recomputed identically: drop them (a torn last line too).
-        atomic_write(self.metrics_path, "".join(F.metrics_line(r) for r in self.rows))
-        return ts
-
-    def _restore_track(self, raw: dict, params) -> Track:
-        """The checkpoint's Track: one agent's best chunk is the book's (a diverged chunk is never
-        checkpointed), the members' their own table. Copies: msgpack's arrays are read-only."""
-        if self.agents.one:
-            book = raw["book"]
-            score, chunk = [book["best_score"]], [book["best_chunk"]]
-            return Track(
-                params,
-                np.array(score, np.float64),
-                np.array(chunk, np.int64),
-                np.zeros(1, np.int64),
-            )
-        members, k = raw["members"], self.place.size
-        for name in ("best_score", "best_chunk", "diverged"):
-            if not isinstance(members, dict) or np.shape(members.get(name)) != (k,):
-                raise CheckpointError(
-                    f"{self.ckpt}: the checkpoint's per-member bookkeeping lacks {name!r} for {k} members"
-                )
-        return Track(
-            params,
-            np.array(members["best_score"], np.float64),
-            np.array(members["best_chunk"], np.int64),
-            np.array(members["diverged"], np.int64),
+        self.wall_before = checkpoints.resumed_clock(
+            self.ckpt, self.book_path, self.chunks_done, self.total
         )
+        self.rows = raw["rows"]  # checked against the checkpoint by prepare_dir
+        # Lines written after the checkpoint are recomputed identically: drop them (a torn last line too).
+        atomic_write(self.metrics_path, "".join(metrics_line(r) for r in self.rows))
+        return ts
 
     def train(self, progress: bool) -> None:
         bar = None
         if progress:
             from tqdm.auto import tqdm
 
-            t, k = self.cfg.train, self.place.size
-            desc = (
-                f"train {t.trace} {t.control}"
-                if self.agents.one
-                else f"train population of {k} ({self.place.n_devices} device(s))"
-            )
             bar = tqdm(
                 total=self.total,
                 initial=self.chunks_done,
                 unit="chunk",
                 dynamic_ncols=True,
-                desc=desc,
+                desc=self.place.title,
             )
         try:
             while self.chunks_done < self.total and self._going():
@@ -216,14 +176,14 @@ class _Run:
                 track.diverged[i] = n
             agent_rows.append(
                 {
-                    **F.chunk_row(
+                    **chunk_row(
                         jax.tree.map(lambda x: x[i], out.metrics),
                         jax.tree.map(lambda x: x[i], counts),
                         n,
                         wall,
                         seconds,
                     ),
-                    **self.agents.label(i),
+                    "seed": self.seed + i,
                     "diverged": not ok,
                     "validation_success_raw": float(out.score[i]) if ok else None,
                 }
@@ -231,28 +191,26 @@ class _Run:
             if ok and out.score[i] >= track.score[i]:  # later chunks win ties
                 track.score[i], track.chunk[i] = float(out.score[i]), n
                 if params is None:
-                    params = self._leading(place.saved(out.state).params)
+                    params = place.saved(out.state).params
                 track.params = jax.tree.map(lambda b, p: _set(b, i, p[i]), track.params, params)
         lead = track.lead()
         row = self.agents.row(n, wall, lead, agent_rows)
         self.rows.append(row)
-        append_line(self.metrics_path, F.metrics_line(row))
+        append_line(self.metrics_path, metrics_line(row))
         stopped = bool((track.diverged > 0).all())
         if not stopped:
             # No checkpoint of a state in which every agent diverged: a resume would only diverge again.
             self._checkpoint(wall, lead)
-        postfix = self.agents.progress(row, out, track, stopped)
         if bar is not None:
             if not stopped:
                 bar.update(1)
-            if postfix is not None:
-                bar.set_postfix(**postfix)
+            bar.set_postfix(**self.agents.progress(out, track))
         return not stopped
 
     def _checkpoint(self, wall: float, lead: int | None) -> None:
         """State, best parameters and bookkeeping in one atomic write, checksummed: a run stopped at any
         point resumes from a consistent checkpoint (wall time, which differs run to run, stays out)."""
-        track, one = self.track, self.agents.one
+        track = self.track
         i = lead if lead is not None else 0
         book = {
             "seed": self.seed,
@@ -260,58 +218,48 @@ class _Run:
             "best_score": float(track.score[i]),
             "best_chunk": int(track.chunk[i]),
             "devices": self.place.n_devices,
-            **({} if one else {"population": self.place.size}),
+            "population": self.place.size,
         }
         members = {"best_score": track.score, "best_chunk": track.chunk, "diverged": track.diverged}
-        F.checkpoint_write(
+        payload = {
+            "state": serialization.to_state_dict(self.place.saved(self.ts)),
+            "best_params": serialization.to_state_dict(track.params),
+            "members": members,
+            "book": book,
+            "config_toml": config_to_toml(self.cfg),
+        }
+        checkpoints.write_checkpoint(
             self.ckpt,
-            pack_checkpoint(
-                serialization.msgpack_serialize(
-                    {
-                        "state": serialization.to_state_dict(self.place.saved(self.ts)),
-                        "best_params": serialization.to_state_dict(self._as_saved(track.params)),
-                        **({} if one else {"members": members}),
-                        "book": book,
-                        "config_toml": config_to_toml(self.cfg),
-                    }
-                )
-            ),
-        )
-        F.checkpoint_write(
-            self.book_path, json.dumps({**book, "train_seconds": wall}, indent=1).encode()
+            self.book_path,
+            pack_checkpoint(serialization.msgpack_serialize(payload)),
+            book,
+            wall,
         )
 
     def _select(self):
-        """The agent to export (None: none can be) and, for a population, the wearer's choice
-        (jaxexo.train.selection): one agent whose chunk diverged after a finite one exports that chunk."""
-        track = self.track
-        if self.agents.one:
-            return (None if track.diverged[0] and track.chunk[0] == 0 else 0), None
-        if track.lead() is None:
-            return None, None
-        from jaxexo.train.selection import choose_member
+        """(the agent to export, None where none can be; the Selection): the wearer's choice among the
+        agents that never diverged (jaxexo.train.selection); where every agent diverged, the best
+        finite chunk of any (exported, then TrainingDiverged)."""
+        from jaxexo.train.selection import Selection, choose_member
 
+        track = self.track
+        if track.lead() is None:
+            return track.best_finite(), Selection(track.best_finite(), [], 0.0)
         chosen = choose_member(self.cfg, self.out, self.place.trainer, track, self.agents.seeds)
         return chosen.exported, chosen
 
     def finish(self, eval_episodes) -> dict:
         """Choose, plot, export, evaluate, write eval.json; TrainingDiverged where the run diverged."""
-        from jaxexo.plots import training as plots
+        from jaxexo.plots.training import plot_training_curve
 
         place, track, cfg, agents = self.place, self.track, self.cfg, self.agents
         exported, selection = self._select()
         if self.rows:
-            path = self.out / "training_curve.png"
-            if agents.one:
-                plots.plot_training_curve(
-                    path, [r for r in self.rows if not r["diverged"]] or self.rows
-                )
-            else:
-                plots.plot_population_curve(path, self.rows, exported)
+            plot_training_curve(self.out / "training_curve.png", self.rows, exported)
         if exported is None:
             raise TrainingDiverged(agents.nothing_exported(self.metrics_path, track))
         params = [jax.tree.map(lambda x: x[i], track.params) for i in range(place.size)]
-        F.export_policy(self.out / "policy.npz", cfg, place.trainer, params[exported])
+        export_policy(self.out / "policy.npz", cfg, place.trainer, params[exported])
         # Every agent scored by the same compiled evaluation, one at a time (its figures never depend on K).
         evaluate = make_evaluator(cfg, place.trainer.net, eval_episodes or cfg.train.eval_episodes)
         figures = [
@@ -325,7 +273,8 @@ class _Run:
                 "episodes": int(counts.episodes[exported]),
                 "env_steps": int(counts.env_steps[exported]),
                 "train_seconds": round(self.train_seconds, 3),
-                **agents.identity(exported),
+                "seed": self.seed + exported,
+                "base_seed": self.seed,
                 "selected_chunk": int(track.chunk[exported]),
                 "validation_success_raw": float(track.score[exported]),
                 "devices": place.n_devices,
@@ -334,10 +283,10 @@ class _Run:
         )
         atomic_write(
             self.out / "eval.json",
-            json.dumps(F.json_safe(result), indent=2, allow_nan=False) + "\n",
+            json.dumps(json_safe(result), indent=2, allow_nan=False) + "\n",
         )
         if track.diverged[exported]:
-            raise TrainingDiverged(agents.diverged_after(self.metrics_path, track))
+            raise TrainingDiverged(agents.diverged_after(self.metrics_path, track, exported))
         return result
 
 

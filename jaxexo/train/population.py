@@ -1,25 +1,20 @@
 """``[train] population = K``: K agents of one config (seeds seed .. seed + K - 1) trained as one
 compiled program (``Population``: ``jit(shard_map(lax.map(vmap(member))))`` over the CPU devices in
-blocks of LANES, jaxexo.train.lanes), and ``Members``, the chunk loop's placement of them
-(jaxexo.train.engine). Why populations, their run directory and the choice of the exported member:
-docs/training.md (Populations); the choice itself: jaxexo.train.selection.
+blocks of LANES, jaxexo.train.lanes), placed in the chunk loop by jaxexo.train.placements.Members.
+Why populations and the choice of the exported member: docs/training.md (Populations); the choice
+itself: jaxexo.train.selection.
 """
 
 from __future__ import annotations
-
-from pathlib import Path
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from jaxexo.config import Config, ConfigError
-from jaxexo.storage.checkpoint import CheckpointError
-from jaxexo.train import run_files as F
-from jaxexo.train.engine import Placement, run_chunks
+from jaxexo.train.engine import chunking
 from jaxexo.train.evaluate import make_rollouts, validation_set
 from jaxexo.train.lanes import LANES, agent_program, over_lanes, padded_agents
-from jaxexo.train.records import ChunkOut
 from jaxexo.train.trainer import Hyperparams, Trainer
 
 
@@ -49,7 +44,7 @@ class Population:
         local = population_devices(len(self.seeds), jax.local_devices())
         self.devices = local if devices is None else list(devices)
         self.padded = padded_agents(len(self.seeds), len(self.devices))
-        self.n_chunk = n_chunk if n_chunk is not None else F.chunking(cfg, self.trainer)[0]
+        self.n_chunk = n_chunk if n_chunk is not None else chunking(cfg, self.trainer)[0]
         hyper = Hyperparams.from_config(cfg)
         self.hyper = jax.tree.map(lambda x: np.stack([np.asarray(x)] * self.padded), hyper)
         env, self.val_params, self.val_layouts = validation_set(cfg)
@@ -85,49 +80,3 @@ class Population:
         """One chunk for every member: the state, UpdateMetrics [padded, n_chunk], validation
         success [padded] and ``finite`` [padded]."""
         return self._chunk(ts, self.hyper, self.val_layouts, self.val_params)
-
-
-def run_population(
-    cfg: Config, out: Path, seed: int, resume: bool, progress: bool, eval_episodes
-) -> dict:
-    """The population driver, called by ``driver.run_training`` (which holds the directory's lock)."""
-    from jaxexo.config.memory import check_memory
-
-    check_memory(cfg)
-    return run_chunks(cfg, out, seed, resume, progress, eval_episodes, Members)
-
-
-class Members(Placement):
-    """The engine's placement of a population: K members vmapped in lanes (``Population``)."""
-
-    def __init__(self, cfg: Config, seed: int):
-        self.size = cfg.train.population
-        self.pop = Population(cfg, range(seed, seed + self.size))
-        self.trainer, self.n_devices = self.pop.trainer, len(self.pop.devices)
-
-    def check_resume(self, raw, ckpt):
-        if "members" not in raw:
-            raise CheckpointError(
-                f"{ckpt}: a one-agent checkpoint; this config trains a population of {self.size}"
-            )
-        if (raw["book"]["devices"] == 1) != (self.n_devices == 1):
-            # One device compiles an unpartitioned program, several a partitioned one: their arithmetic
-            # differs in the last bits (population_devices), so the rest of the run would not be this run's.
-            need = "one CPU device" if raw["book"]["devices"] == 1 else "two or more CPU devices"
-            raise ConfigError(
-                f"--resume: the population ran on {raw['book']['devices']} device(s), this process "
-                f"gives it {self.n_devices}; resume it with {need}"
-            )
-
-    def init(self):
-        return self.pop.init()
-
-    def saved(self, ts):
-        return self.pop.real(ts)
-
-    def resume(self, saved):
-        return jax.device_put(self.pop.pad(saved))
-
-    def chunk(self, ts):
-        ts, m, score, ok = self.pop.chunk(ts)
-        return ChunkOut(ts, self.pop.real(m), self.pop.real(score), self.pop.real(ok))

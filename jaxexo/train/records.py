@@ -1,6 +1,6 @@
-"""What a ``jaxexo train`` run records of its K agents, written once for one agent (K = 1) and a
-population: the chunk's metrics line, the progress bar's postfix, eval.json's fields and the
-TrainingDiverged messages. Their formats are the run directory's (docs/training.md)."""
+"""What a ``jaxexo train`` run records of its K agents, written once for any K (one agent is K = 1):
+the chunk's metrics line, the progress bar's postfix, eval.json's fields and the TrainingDiverged
+messages. Their formats are the run directory's (docs/training.md)."""
 
 from __future__ import annotations
 
@@ -33,8 +33,15 @@ class Track:
 
     def lead(self) -> int | None:
         """The best candidate on validation (the lowest index on a tie); None if there is none."""
-        ok = self.candidates()
-        return max(ok, key=lambda i: (self.score[i], -i)) if ok else None
+        return self._best(self.candidates())
+
+    def best_finite(self) -> int | None:
+        """The agent with the best finite chunk, diverged later or not (the lowest index on a tie);
+        None if no chunk was finite."""
+        return self._best([i for i in range(len(self.score)) if self.chunk[i] > 0])
+
+    def _best(self, agents: list[int]) -> int | None:
+        return max(agents, key=lambda i: (self.score[i], -i)) if agents else None
 
 
 @dataclass(frozen=True)
@@ -49,7 +56,7 @@ class ChunkOut:
 
 @dataclass(frozen=True)
 class Agents:
-    """Who a run trains: seeds ``seed .. seed + K - 1`` (one agent: K = 1, its records unnamed)."""
+    """Who a run trains: seeds ``seed .. seed + K - 1``."""
 
     cfg: Config
     seed: int
@@ -59,18 +66,8 @@ class Agents:
     def seeds(self) -> list[int]:
         return list(range(self.seed, self.seed + self.size))
 
-    @property
-    def one(self) -> bool:
-        return self.size == 1
-
-    def label(self, i: int) -> dict:
-        """What names agent ``i`` in its row."""
-        return {} if self.one else {"seed": self.seed + i}
-
     def row(self, chunk: int, wall: float, lead: int | None, agent_rows: list[dict]) -> dict:
         """metrics.jsonl's line for a chunk, from each agent's row."""
-        if self.one:
-            return agent_rows[0]
         return {
             "chunk": chunk,
             "wall_s": wall,
@@ -79,42 +76,19 @@ class Agents:
             "members": agent_rows,
         }
 
-    def progress(self, row: dict, out: ChunkOut, track: Track, stopped: bool) -> dict | None:
-        """The progress bar's postfix after a chunk (``stopped``: every agent diverged); None: none."""
-        if self.one:
-            if stopped:
-                return dict(diverged=f"chunk {row['chunk']}", loss=row["loss"])
-            return dict(
-                episodes=row["episodes"],
-                steps_per_s=f"{row['env_steps_per_s']:.3g}",
-                ret=f"{row['return_mean']:.2f}",
-                success_raw=f"{row['success_raw_rate']:.3f}",
-                eps=f"{row['epsilon']:.3f}",
-                val=f"{row['validation_success_raw']:.3f}",
-            )
-        if stopped:
-            return None
+    def progress(self, out: ChunkOut, track: Track) -> dict:
+        """The progress bar's postfix after a chunk: the best agent so far, each agent's validation
+        success, how many diverged."""
         lead = track.lead()
-        i = lead if lead is not None else 0
         return dict(
-            best=f"seed {self.seed + i}: {track.score[i]:.3f}",
+            best="-" if lead is None else f"seed {self.seed + lead}: {track.score[lead]:.3f}",
             val=" ".join(f"{s:.2f}" for s in out.score),
             diverged=int((track.diverged > 0).sum()),
         )
 
-    def identity(self, exported: int) -> dict:
-        """eval.json's fields naming the exported agent."""
-        return (
-            {"seed": self.seed}
-            if self.one
-            else {"seed": self.seed + exported, "base_seed": self.seed}
-        )
-
     def report(self, exported: int, track: Track, rows: list[dict], counts, figures, selection):
         """eval.json's last fields (``counts``: Counters [K]; ``figures``: each agent's test figures;
-        ``selection``: jaxexo.train.selection.Selection, a population's only)."""
-        if self.one:
-            return {"diverged_chunk": int(track.diverged[0])} if track.diverged[0] else {}
+        ``selection``: jaxexo.train.selection.Selection)."""
         keys = ("accuracy", "success_raw", "reached_goal", "held_out", "mean_steps", "by_obstacle")
         members = [
             {
@@ -138,33 +112,30 @@ class Agents:
         }
 
     def nothing_exported(self, metrics_path: Path, track: Track) -> str:
-        """TrainingDiverged's message when no agent can be exported."""
-        if self.one:
-            return self._diverged(
-                metrics_path,
-                track,
-                "no chunk finished with finite parameters, so no policy was exported",
-            )
-        return (
-            f"every member of the population of {self.size} diverged (non-finite loss or parameters; "
-            f'{metrics_path}: the members\' "diverged"), and a diverged member is never exported, so no policy '
-            f"was. {divergence_remedy(self.cfg)}"
-        )
-
-    def diverged_after(self, metrics_path: Path, track: Track) -> str:
-        """TrainingDiverged's message when the exported agent (one agent's only: a diverged member is
-        never exported) diverged after its best chunk."""
+        """TrainingDiverged's message when no agent can be exported (every one diverged before a
+        finite chunk)."""
         return self._diverged(
             metrics_path,
             track,
-            f"policy.npz and eval.json hold the best finite parameters, from chunk {track.chunk[0]} "
-            f"(validation success on raw moves {track.score[0]:.3f})",
+            "no chunk finished with finite parameters, so no policy was exported",
+        )
+
+    def diverged_after(self, metrics_path: Path, track: Track, exported: int) -> str:
+        """TrainingDiverged's message when every agent diverged and the exported one did so after
+        its best chunk."""
+        return self._diverged(
+            metrics_path,
+            track,
+            f"policy.npz and eval.json hold the best finite parameters, from chunk "
+            f"{track.chunk[exported]} of seed {self.seed + exported} (validation success on raw "
+            f"moves {track.score[exported]:.3f})",
         )
 
     def _diverged(self, metrics_path: Path, track: Track, what: str) -> str:
+        n = int(track.diverged.max())
         return (
-            f"training diverged in chunk {track.diverged[0]} (non-finite loss or parameters; {metrics_path} row "
-            f'{track.diverged[0]} has "diverged": true); {what}. {divergence_remedy(self.cfg)}'
+            f"training diverged in chunk {n} (non-finite loss or parameters; {metrics_path} row {n} "
+            f'has "diverged": true for every member); {what}. {divergence_remedy(self.cfg)}'
         )
 
 

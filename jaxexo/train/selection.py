@@ -156,7 +156,7 @@ def choose_member(cfg: Config, out: Path, trainer, track, seeds: list[int]) -> S
     """The member to export of a population with candidates (jaxexo.train.records.Track): every
     candidate (a member that finished a chunk and never diverged) exported to
     ``members/seed_<seed>.npz`` and scored as a wearer gets it; one candidate is exported unscored."""
-    from jaxexo.train.run_files import export_policy
+    from jaxexo.train.export import export_policy
 
     t0 = time.perf_counter()
     ok = track.candidates()
