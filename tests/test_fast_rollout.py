@@ -55,7 +55,9 @@ def _reference_rollout(gen, scene, heel=None, steps: int = 0, visited: bool = Fa
         acts.append(a)
         last = int(a)
         reached = transition.goal_reached(scalar, sp, hy, hz, scene.goal_y)
-        if transition.terminated(scalar, gen._term_p, reached, False) or transition.truncated(
+        if transition.terminated(
+            scalar, reached, False, gen._term_p.terminate_on_collision
+        ) or transition.truncated(
             t, gen.max_steps
         ):
             break
