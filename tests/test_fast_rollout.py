@@ -57,9 +57,7 @@ def _reference_rollout(gen, scene, heel=None, steps: int = 0, visited: bool = Fa
         reached = transition.goal_reached(scalar, sp, hy, hz, scene.goal_y)
         if transition.terminated(
             scalar, reached, False, gen._term_p.terminate_on_collision
-        ) or transition.truncated(
-            t, gen.max_steps
-        ):
+        ) or transition.truncated(t, gen.max_steps):
             break
     return np.asarray(pts), np.asarray(acts, dtype=np.int64)
 

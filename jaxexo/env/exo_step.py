@@ -10,10 +10,10 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 from flax import struct
+from gymnax.environments import spaces
 from gymnax.environments.environment import Environment
 
 from jaxexo.config import Config
-from jaxexo.env import spaces
 from jaxexo.env.params import EnvParams
 from jaxexo.physics import actions, changes, geometry, scenarios, transition
 from jaxexo.physics.actions import LENGTH_SCALE, NUM_ACTIONS, THESIS_OBS_CENTER  # noqa: F401 (re-exported)
@@ -105,11 +105,11 @@ class ExoStepEnv(Environment):
         return actions.obs_dim(self.obs_mode, self.shape_points)
 
     def action_space(self, params: EnvParams | None = None):
-        return spaces.discrete(NUM_ACTIONS)
+        return spaces.Discrete(NUM_ACTIONS)
 
     def observation_space(self, params: EnvParams | None = None):
         # Observations are lengths / LENGTH_SCALE inside the world bounds, flags and progress in [0, 1].
-        return spaces.box(-OBS_BOUND, OBS_BOUND, (self.obs_dim,), jnp.float32)
+        return spaces.Box(-OBS_BOUND, OBS_BOUND, (self.obs_dim,), jnp.float32)
 
     # Layout sampling ----------------------------------------------------------------------
     def sample_layout(self, key, params: EnvParams) -> Layout:
