@@ -104,9 +104,9 @@ def heel_moved(xp, heel_y, heel_z, end_y, end_z):
 def move_clearance(xp, p, prev, heel, outline):
     """Signed clearance (m) of the whole move from heel ``prev`` to ``heel`` (..., 2) against
     ``outline`` (..., K, 2): the region the flat foot sweeps (jaxexo.physics.swept), so that a move
-    cannot jump through a corner of the obstacle. The one collision test of every step sequence: the
-    JAX environment's ``transition`` and the NumPy rollouts (jaxexo.inference) end a colliding
-    episode on it (``geometry.foot_collides``) at the same step."""
+    cannot jump through a corner of the obstacle. The one collision test of ``step``: the JAX environment
+    and the NumPy rollouts (jaxexo.inference) end a colliding episode on it
+    (``geometry.foot_collides``) at the same step."""
     return swept.swept_clearance(xp, prev, heel, p.foot_length, outline)
 
 
@@ -182,7 +182,7 @@ def step(
 
     ``collides`` None scores the step (the JAX and the thesis-style environments): collision and
     clearance of the whole move (jaxexo.physics.swept: the region the flat foot sweeps, so that a
-    move cannot jump through a corner of the obstacle), the reward terms and the info (``transition``,
+    move cannot jump through a corner of the obstacle), the reward terms and the info (``score``,
     with ``action`` and ``last_action`` for the turn cost; None: no turn is counted). The NumPy
     rollouts, which need only where an episode ends, give ``collides(layout, prev_y, prev_z, y, z)``:
     the same swept collision of the moves a collision ends (cheap bounds before the exact test), or
@@ -213,7 +213,7 @@ def step(
     if collides is not None:
         return out
     run_max = xp.maximum(heel_y if max_y is None else max_y, heel_y)
-    reward, info = transition(
+    reward, info = score(
         xp,
         p,
         prev,
@@ -233,7 +233,7 @@ def step(
     return out._replace(reward=reward, info=info, max_y=xp.maximum(run_max, y))
 
 
-def transition(
+def score(
     xp,
     p,
     prev,
@@ -249,12 +249,12 @@ def transition(
     run_max,
     turn,
 ) -> tuple[Any, StepInfo]:
-    """The reward [...] and info of ``step``'s move from heel ``prev`` to ``heel`` [..., 2], which
+    """The reward [...] and info of ``step``'s move from heel ``prev`` to ``heel`` [..., 2], as
     ``out`` (the step's flags), ``clearance`` (m), ``collided``, ``reached`` (the goal) and the
-    mid-goal centre ``mid`` decided: the 8 + 4
-    reward terms (eq 2.29-2.52), the wearer's costs (rewards.wearer_terms, ``turn`` the turn's
-    cost or None), the optional shaping, and the per-step diagnostics the one safe-swing verdict
-    reads (jaxexo.physics.outcome.accumulate). ``run_max``: the heel's furthest y before the move."""
+    mid-goal centre ``mid`` decided: the 8 + 4 reward terms (eq 2.29-2.52), the wearer's costs
+    (rewards.wearer_terms, ``turn`` the turn's cost or None), the optional shaping, and the
+    per-step diagnostics the one safe-swing verdict reads (jaxexo.physics.outcome.accumulate).
+    ``run_max``: the heel's furthest y before the move."""
     lay, (mid_y, mid_z) = layout, mid
     kin = kinematics.leg_state(xp, lay.pivot_y, heel, p.thigh, p.shin)
     angles = kinematics.both_legs_angles(xp, kin)
