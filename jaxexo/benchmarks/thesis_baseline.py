@@ -138,17 +138,11 @@ class NumpyExoEnv:
 
     def step(self, action: int):
         p = self.p
-        d = p.directions[action]
+        at = (*self.heel, p.directions[action], self.time, self.visited, self.lay)
         out = self.transition.step(
             np,
             p,
-            self.heel[0],
-            self.heel[1],
-            d[0],
-            d[1],
-            self.time,
-            self.visited,
-            self.lay,
+            *at,
             max_steps=self.max_steps,
             max_y=self.max_y,
             action=action,

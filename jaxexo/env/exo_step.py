@@ -225,32 +225,15 @@ class ExoStepEnv(Environment):
             layout, params, self.change_from_uniforms(layout, u[..., n:], params)
         )
 
-    def mid_goal(self, layout: Layout, params: EnvParams):
-        """Centre of the mid-goal box (thesis 2.2): above the obstacle centre, at a safe height."""
-        return jnp.stack(transition.mid_goal(jnp, params, layout.center_y, layout.height))
-
     def advance(
         self, state: EnvState, action, params: EnvParams
     ) -> tuple[jnp.ndarray, EnvState, transition.Step]:
         """One step without reset (deterministic): the observation, the next state and the step's
         record (jaxexo.physics.transition.step: reward, flags, info)."""
-        lay, prev = state.layout, state.heel
-        d = params.directions[action]
-        out = transition.step(
-            jnp,
-            params,
-            prev[0],
-            prev[1],
-            d[0],
-            d[1],
-            state.time,
-            state.visited_mid,
-            lay,
-            max_steps=params.max_steps_in_episode,
-            max_y=state.max_y,
-            action=action,
-            last_action=state.last_action,
-        )
+        lay, heel = state.layout, state.heel
+        at = (heel[0], heel[1], params.directions[action], state.time, state.visited_mid, lay)
+        kw = {"max_y": state.max_y, "action": action, "last_action": state.last_action}
+        out = transition.step(jnp, params, *at, max_steps=params.max_steps_in_episode, **kw)
         heel = out.info.heel
         if state.change is not None:  # from this step on, the changed obstacle (if it fires)
             new = state.change.layout

@@ -194,20 +194,8 @@ class TrajectoryGenerator(SceneMaker):
                 a = self._explore(step.greedy(hy, hz, t, 1.0 if visited else 0.0, mask), mask)
             else:
                 a = self._explore(step.greedy(hy, hz, t, 1.0 if visited else 0.0))
-            d = self.directions[a]
-            out = transition.step(
-                scalar,
-                sp,
-                hy,
-                hz,
-                d[0],
-                d[1],
-                t,
-                visited,
-                scene,
-                max_steps=max_steps,
-                collides=collides,
-            )
+            at = (hy, hz, self.directions[a], t, visited, scene)
+            out = transition.step(scalar, sp, *at, max_steps=max_steps, collides=collides)
             hy, hz, t, visited, last = out.heel_y, out.heel_z, out.time, out.visited_mid, int(a)
             pts.append((hy, hz))
             acts.append(a)
@@ -259,19 +247,8 @@ class TrajectoryGenerator(SceneMaker):
                     else None
                 )
                 a = self._explore(actions.greedy_action(np, self.net.q(obs), mask), mask)
-            out = transition.step(
-                np,
-                p,
-                hy[alive],
-                hz[alive],
-                dirs[a, 0],
-                dirs[a, 1],
-                t[alive],
-                visited[alive],
-                sub,
-                max_steps=self.max_steps,
-                collides=collides,
-            )
+            at = (hy[alive], hz[alive], dirs[a].T, t[alive], visited[alive], sub)
+            out = transition.step(np, p, *at, max_steps=self.max_steps, collides=collides)
             hy[alive], hz[alive], t[alive] = out.heel_y, out.heel_z, out.time
             visited[alive] = out.visited_mid
             path[k + 1, alive, 0], path[k + 1, alive, 1] = out.heel_y, out.heel_z

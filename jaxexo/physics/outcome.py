@@ -103,13 +103,8 @@ class Running(NamedTuple):
 def start(xp, shape=(), dtype="float32") -> Running:
     """An episode's running aggregates before its first step (``shape``: the batch of episodes)."""
     no = xp.zeros(shape, dtype=bool)
-    return Running(
-        reached_goal=no,
-        limits=no,
-        leg=no,
-        min_clearance=xp.full(shape, xp.inf, dtype=dtype),
-        max_backward=xp.zeros(shape, dtype=dtype),
-    )
+    inf, zero = xp.full(shape, xp.inf, dtype=dtype), xp.zeros(shape, dtype=dtype)
+    return Running(reached_goal=no, limits=no, leg=no, min_clearance=inf, max_backward=zero)
 
 
 def accumulate(xp, acc: Running, info, alive=True) -> Running:
@@ -130,13 +125,7 @@ def accumulate(xp, acc: Running, info, alive=True) -> Running:
 def episode_verdict(xp, acc: Running, **rule) -> Verdict:
     """The verdict on episodes from their running aggregates (``accumulate``)."""
     return verdict(
-        xp,
-        acc.reached_goal,
-        acc.min_clearance,
-        ~acc.limits,
-        ~acc.leg,
-        acc.max_backward,
-        **rule,
+        xp, acc.reached_goal, acc.min_clearance, ~acc.limits, ~acc.leg, acc.max_backward, **rule
     )
 
 
