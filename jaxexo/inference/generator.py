@@ -178,7 +178,10 @@ class TrajectoryGenerator(SceneMaker):
         if self.terminate_on_collision and self._term_p.terminate_on_collision:
             ol = scene.outline
             box = (ol[:, 0].min(), ol[:, 0].max(), ol[:, 1].max())
-            collides = lambda lay, y0, z0, y1, z1: self._move_touches(box, ol, (y0, z0), (y1, z1))  # noqa: E731
+
+            def collides(lay, y0, z0, y1, z1):
+                return self._move_touches(box, ol, (y0, z0), (y1, z1))
+
         max_steps, q_values = self.max_steps, step.q_values
         choose = None if single is None else single.choose
         while True:
