@@ -41,9 +41,17 @@ def _shape(v) -> str:
     return "(" + ", ".join(str(n) for n in v.shape) + ("," if v.ndim == 1 else "") + ")"
 
 
+def _default(v) -> str:
+    """The default config's value of a parameter of at most four numbers (`` = 0.03``), else ''."""
+    if v.size > 4:
+        return ""
+    x = [str(bool(e)).lower() if v.dtype == bool else f"{e:.6g}" for e in v.ravel().tolist()]
+    return " = " + (x[0] if v.ndim == 0 else "[" + ", ".join(x) + "]")
+
+
 def env_params_lines() -> list[str]:
     """One field per parameter of the default config, in param_values' order, with the config field it
-    comes from and its dtype and shape there."""
+    comes from, its dtype and shape there and, for a few numbers, its default value."""
     cfg = Config()
     values = param_values(cfg)
     origin = {"directions": "the move directions (thesis 2.1)"}
@@ -62,7 +70,7 @@ def env_params_lines() -> list[str]:
                 others = dict(spec.params_from)
                 for p in spec.params(name, getattr(getattr(cfg, section), name), cfg):
                     origin[p] = label(others.get(p, f"{section}.{name}"))
-    return [_line(k, f"{v.dtype} {_shape(v)}: {origin[k]}") for k, v in values.items()]
+    return [_line(k, f"{v.dtype} {_shape(v)}{_default(v)}: {origin[k]}") for k, v in values.items()]
 
 
 def hyperparams_lines() -> list[str]:

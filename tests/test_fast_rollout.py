@@ -55,9 +55,9 @@ def _reference_rollout(gen, scene, heel=None, steps: int = 0, visited: bool = Fa
         acts.append(a)
         last = int(a)
         reached = transition.goal_reached(scalar, sp, hy, hz, scene.goal_y)
-        if transition.terminated(scalar, gen.np_params, reached, False) or transition.truncated(
-            t, gen.max_steps
-        ):
+        if transition.terminated(
+            scalar, reached, False, bool(gen.np_params.terminate_on_collision)
+        ) or transition.truncated(t, gen.max_steps):
             break
     return np.asarray(pts), np.asarray(acts, dtype=np.int64)
 

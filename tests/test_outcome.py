@@ -7,7 +7,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from jaxexo.physics import geometry, outcome, swept
+from jaxexo.physics import geometry, outcome, swept, transition
 
 
 def _reference(reached, clearance, limit_bad, leg_bad, heel_y, margin=0.0, back_tol=np.inf):
@@ -122,6 +122,11 @@ def test_margin_and_backward_tolerance_fail_the_right_check():
     np.testing.assert_allclose(v.max_backward, [0.01])
 
 
+def _info(**fields) -> transition.StepInfo:
+    """A step's info with the given fields, the others None (the verdict reads five)."""
+    return transition.StepInfo(**{**dict.fromkeys(transition.StepInfo._fields), **fields})
+
+
 def test_step_by_step_equals_samples_and_jax_equals_numpy():
     """Folding per-step env flags (``accumulate``, with steps after the end masked) gives the verdict
     of reducing the same steps as samples; jax.numpy gives NumPy's verdict."""
@@ -131,19 +136,19 @@ def test_step_by_step_equals_samples_and_jax_equals_numpy():
     end = rng.integers(5, 20, size=200)  # episode length; later steps are junk
     goal_step = np.zeros((200, 20), bool)
     goal_step[np.arange(200), end - 1] = reached
-    # transition's info["backward"]: how far the heel is behind its furthest y before the step
+    # the step's info.backward: how far the heel is behind its furthest y before the step
     furthest = np.maximum.accumulate(np.concatenate([hy[:, :1], hy[:, :-1]], axis=1), axis=1)
     rule = {"min_clearance_margin": 0.01, "backward_tolerance": 0.02}
     for xp in (np, jnp):
         acc = outcome.start(xp, (200,))
         for j in range(20):
-            info = {
-                "goal_reached": xp.asarray(goal_step[:, j]),
-                "clearance": xp.asarray(c[:, j], dtype=xp.float32),
-                "joint_limit_violation": xp.asarray(lb[:, j]),
-                "leg_length_violation": xp.asarray(gb[:, j]),
-                "backward": xp.asarray(furthest[:, j] - hy[:, j], dtype=xp.float32),
-            }
+            info = _info(
+                goal_reached=xp.asarray(goal_step[:, j]),
+                clearance=xp.asarray(c[:, j], dtype=xp.float32),
+                joint_limit_violation=xp.asarray(lb[:, j]),
+                leg_length_violation=xp.asarray(gb[:, j]),
+                backward=xp.asarray(furthest[:, j] - hy[:, j], dtype=xp.float32),
+            )
             acc = outcome.accumulate(xp, acc, info, xp.asarray(j < end))
         v = outcome.episode_verdict(xp, acc, **rule)
         ref = [
@@ -180,16 +185,24 @@ def test_trainer_counts_successes_with_the_verdict():
     for _ in range(T):
         goal = rng.uniform(size=n) < 0.15
         trunc = (steps_in_ep + 1 >= 8) & ~goal
-        info = {
-            "goal_reached": jnp.asarray(goal),
-            "clearance": jnp.asarray(rng.uniform(-0.002, 0.2, n), jnp.float32),
-            "collision": None,
-            "joint_limit_violation": jnp.asarray(rng.uniform(size=n) < 0.02),
-            "leg_length_violation": jnp.asarray(rng.uniform(size=n) < 0.02),
-            "backward": jnp.zeros(n),
-        }
-        info["collision"] = info["clearance"] <= geometry.TOUCH_EPS
-        stats, row = step(stats, jnp.ones(n), jnp.asarray(goal), jnp.asarray(trunc), info)
+        clearance = jnp.asarray(rng.uniform(-0.002, 0.2, n), jnp.float32)
+        info = _info(
+            goal_reached=jnp.asarray(goal),
+            clearance=clearance,
+            collision=clearance <= geometry.TOUCH_EPS,
+            joint_limit_violation=jnp.asarray(rng.uniform(size=n) < 0.02),
+            leg_length_violation=jnp.asarray(rng.uniform(size=n) < 0.02),
+            backward=jnp.zeros(n),
+        )
+        out = transition.Step(
+            *(None,) * 4,
+            terminated=jnp.asarray(goal),
+            truncated=jnp.asarray(trunc),
+            reward=jnp.ones(n),
+            info=info,
+            max_y=None,
+        )
+        stats, row = step(stats, out)
         total += [
             float(row.episodes),
             float(row.return_sum),
@@ -198,9 +211,9 @@ def test_trainer_counts_successes_with_the_verdict():
         ]
         for i in range(n):
             e = ep[i]
-            e["c"].append(float(info["clearance"][i]))
-            e["lb"].append(bool(info["joint_limit_violation"][i]))
-            e["gb"].append(bool(info["leg_length_violation"][i]))
+            e["c"].append(float(info.clearance[i]))
+            e["lb"].append(bool(info.joint_limit_violation[i]))
+            e["gb"].append(bool(info.leg_length_violation[i]))
             if goal[i] or trunc[i]:
                 want_done += 1
                 ok = _reference(goal[i], e["c"], e["lb"], e["gb"], np.zeros(len(e["c"])))

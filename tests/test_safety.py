@@ -189,20 +189,24 @@ def _step(xp, cfg, prev, heel, max_y=None):
 
         p = EnvParams.from_config(cfg)
         lay = lay._replace(**{k: xp.asarray(v) for k, v in lay._asdict().items() if v is not None})
-    out = transition.transition(
+    # the move from prev to heel as one step along (heel - prev) / step_size
+    d = xp.asarray((np.asarray(heel) - prev) / float(np.asarray(p.step_size)), xp.float32)
+    prev = xp.asarray(prev, xp.float32)
+    out = transition.step(
         xp,
         p,
-        xp.asarray(prev, xp.float32),
-        xp.asarray(heel, xp.float32),
-        xp.asarray(1),
+        prev[0],
+        prev[1],
+        d,
+        xp.asarray(0),
         xp.asarray(False),
         lay,
-        max_y,
+        max_steps=cfg.env.max_steps,
+        max_y=max_y,
     )
     info = {
-        k: np.asarray(v)
-        for k, v in out["info"].items()
-        if k in ("collision", "clearance", "backward", "traj_terms")
+        k: np.asarray(getattr(out.info, k))
+        for k in ("collision", "clearance", "backward", "traj_terms")
     }
     # What the one verdict (jaxexo.physics.outcome) makes of this move: its margin and backward checks.
     v = outcome.verdict(

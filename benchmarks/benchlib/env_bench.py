@@ -71,10 +71,8 @@ def _rollout(env, num_envs, num_steps, key, params, mask="none"):
             actions = jax.random.categorical(
                 ka, jnp.where(masks(state, params), 0.0, -jnp.inf), axis=-1
             )
-        _, state, reward, term, trunc, info = env.step_batch(
-            jax.random.split(ks, num_envs), state, actions, params
-        )
-        acc = acc + jnp.stack([reward.sum(), term.sum(), info["collision"].sum()])
+        _, state, out, _ = env.step_batch(jax.random.split(ks, num_envs), state, actions, params)
+        acc = acc + jnp.stack([out.reward.sum(), out.terminated.sum(), out.info.collision.sum()])
         return (state, key, acc), None
 
     (state, _, acc), _ = jax.lax.scan(body, (state, key, jnp.zeros(3)), None, length=num_steps)

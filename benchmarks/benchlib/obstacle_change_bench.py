@@ -86,13 +86,10 @@ def _greedy(env, net, max_steps: int):
             state, obs, alive, acc, post, top, steps = carry
             mask = env.action_masks(state, params) if env.shield else None
             a = actions.greedy_action(jnp, net.apply(q_params, obs), mask)
-            obs2, state2, _, term, info = jax.vmap(env.step_env, in_axes=(None, 0, 0, None))(
-                jax.random.PRNGKey(0), state, a, params
-            )
-            trunc = state2.time >= params.max_steps_in_episode
-            acc = outcome.accumulate(jnp, acc, info, alive)
+            obs2, state2, out = jax.vmap(env.advance, in_axes=(0, 0, None))(state, a, params)
+            acc = outcome.accumulate(jnp, acc, out.info, alive)
             after = alive & switched(state)
-            post = jnp.where(after, jnp.minimum(post, info["clearance"]), post)
+            post = jnp.where(after, jnp.minimum(post, out.info.clearance), post)
             top = jnp.where(after, jnp.maximum(top, state2.heel[:, 1] - new_height), top)
             keep = lambda new, old: jnp.where(  # noqa: E731
                 alive.reshape(alive.shape + (1,) * (new.ndim - 1)), new, old
@@ -100,7 +97,7 @@ def _greedy(env, net, max_steps: int):
             state = jax.tree.map(keep, state2, state)
             obs = jnp.where(alive[:, None], obs2, obs)
             steps = steps + alive
-            alive = alive & ~term & ~trunc
+            alive = alive & ~out.terminated & ~out.truncated
             return (state, obs, alive, acc, post, top, steps), None
 
         carry = (
@@ -116,11 +113,11 @@ def _greedy(env, net, max_steps: int):
         v = outcome.episode_verdict(jnp, acc, **outcome.rule(params))
         return Episodes(
             steps=steps,
-            reached=acc["reached_goal"],
+            reached=acc.reached_goal,
             fired=switched(state),
             post_clearance=post,
             post_lift=top,
-            limits=acc["limits"],
+            limits=acc.limits,
             success=v.success,
         )
 

@@ -143,33 +143,27 @@ class NumpyExoEnv:
 
     def step(self, action: int):
         p = self.p
-        d = p.directions[action]
-        prev = self.heel
-        self.heel = np.stack(self.transition.move_heel(np, p, prev[0], prev[1], d[0], d[1]))
-        self.time = self.time + np.int32(1)
-        out = self.transition.transition(
+        at = (*self.heel, p.directions[action], self.time, self.visited, self.lay)
+        out = self.transition.step(
             np,
             p,
-            prev,
-            self.heel,
-            self.time,
-            self.visited,
-            self.lay,
-            self.max_y,
+            *at,
+            max_steps=self.max_steps,
+            max_y=self.max_y,
             action=action,
             last_action=self.last,
         )
-        self.last = action
-        self.visited, self.max_y = out["visited_mid"], out["max_y"]
-        info = out["info"]
-        self.outcome = self.dyn_outcome.accumulate(np, self.outcome, info)
-        terminated = bool(out["terminated"])
-        truncated = (not terminated) and int(self.time) >= self.max_steps
+        self.heel, self.time, self.last = out.info.heel, out.time, action
+        self.visited, self.max_y = out.visited_mid, out.max_y
+        self.outcome = self.dyn_outcome.accumulate(np, self.outcome, out.info)
+        terminated = bool(out.terminated)
+        truncated = (not terminated) and bool(out.truncated)  # gym's: not both
         # The one strict-success verdict (jaxexo.physics.outcome), as the JAX trainer counts it.
+        info = out.info._asdict()
         info["success"] = (terminated or truncated) and bool(
             self.dyn_outcome.episode_verdict(np, self.outcome, **self.dyn_outcome.rule(p)).success
         )
-        return self._obs(), float(out["reward"]), terminated, truncated, info
+        return self._obs(), float(out.reward), terminated, truncated, info
 
 
 def layout_pool(cfg, n: int, seed: int = 0):

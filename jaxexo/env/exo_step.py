@@ -1,6 +1,6 @@
 """ExoStepEnv: the swing heel of a lower-limb exoskeleton stepping over a low obstacle (thesis
-ch. 2), in pure JAX with the gymnax 1.0 contract (auto-reset ``step``; ``step_env`` and
-``reset_env`` without). State, layout and params are flax.struct pytrees, so it jits and vmaps over
+ch. 2), in pure JAX on gymnax's ``Environment`` (its auto-reset ``step`` and ``reset``; ``step_env``
+and ``reset_env`` here). State, layout and params are flax.struct pytrees, so it jits and vmaps over
 episodes and configs; the rules come from jaxexo.physics. How it behaves:
 docs/training.md#the-environment.
 """
@@ -10,9 +10,10 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 from flax import struct
+from gymnax.environments import spaces
+from gymnax.environments.environment import Environment
 
 from jaxexo.config import Config
-from jaxexo.env import spaces
 from jaxexo.env.params import EnvParams
 from jaxexo.physics import actions, changes, geometry, scenarios, transition
 from jaxexo.physics.actions import LENGTH_SCALE, NUM_ACTIONS, THESIS_OBS_CENTER  # noqa: F401 (re-exported)
@@ -49,7 +50,7 @@ class EnvState:
     change: ObstacleChange | None = None
 
 
-class ExoStepEnv:
+class ExoStepEnv(Environment):
     """The stepping environment. Static settings (shapes) live on the instance; the rest in EnvParams.
 
     ``obs_mode``: ``"thesis"`` observes the heel's (y, z) only, as the thesis network;
@@ -87,11 +88,11 @@ class ExoStepEnv:
         return actions.obs_dim(self.obs_mode, self.shape_points)
 
     def action_space(self, params: EnvParams | None = None):
-        return spaces.discrete(NUM_ACTIONS)
+        return spaces.Discrete(NUM_ACTIONS)
 
     def observation_space(self, params: EnvParams | None = None):
         # Observations are lengths / LENGTH_SCALE inside the world bounds, flags and progress in [0, 1].
-        return spaces.box(-OBS_BOUND, OBS_BOUND, (self.obs_dim,), jnp.float32)
+        return spaces.Box(-OBS_BOUND, OBS_BOUND, (self.obs_dim,), jnp.float32)
 
     # Layout sampling ----------------------------------------------------------------------
     def sample_layout(self, key, params: EnvParams) -> Layout:
@@ -193,7 +194,7 @@ class ExoStepEnv:
             goal_y=f(sc.goal_y),
         )
 
-    # gymnax transitions ----------------------------------------------------------------------
+    # gymnax transitions (``step`` and ``reset``: gymnax's, with its auto-reset) -------------------
     def reset_env(self, key, params: EnvParams):
         if not self.obstacle_change:
             return self.init_state(self.sample_layout(key, params), params)
@@ -205,104 +206,62 @@ class ExoStepEnv:
             layout, params, self.change_from_uniforms(layout, u[..., n:], params)
         )
 
-    def reset(self, key, params: EnvParams | None = None):
-        params = self.default_params if params is None else params
-        return self.reset_env(key, params)
-
-    def mid_goal(self, layout: Layout, params: EnvParams):
-        """Centre of the mid-goal box (thesis 2.2): above the obstacle centre, at a safe height."""
-        return jnp.stack(transition.mid_goal(jnp, params, layout.center_y, layout.height))
-
-    def step_env(self, key, state: EnvState, action, params: EnvParams):
-        lay = state.layout
-        prev = state.heel
-        d = params.directions[action]
-        heel = jnp.stack(transition.move_heel(jnp, params, prev[0], prev[1], d[0], d[1]))
-        time = state.time + 1
-
-        out = transition.transition(
-            jnp,
-            params,
-            prev,
-            heel,
-            time,
-            state.visited_mid,
-            lay,
-            state.max_y,
-            action=action,
-            last_action=state.last_action,
-        )
-        visited, reward, terminated = out["visited_mid"], out["reward"], out["terminated"]
+    def advance(
+        self, state: EnvState, action, params: EnvParams
+    ) -> tuple[jnp.ndarray, EnvState, transition.Step]:
+        """One step without reset (deterministic): the observation, the next state and the step's
+        record (jaxexo.physics.transition.step: reward, flags, info)."""
+        lay, heel = state.layout, state.heel
+        at = (heel[0], heel[1], params.directions[action], state.time, state.visited_mid, lay)
+        kw = {"max_y": state.max_y, "action": action, "last_action": state.last_action}
+        out = transition.step(jnp, params, *at, max_steps=params.max_steps_in_episode, **kw)
+        heel = out.info.heel
         if state.change is not None:  # from this step on, the changed obstacle (if it fires)
             new = state.change.layout
-            fire = changes.fires(jnp, params, heel, time, state.change.at, new.outline)
+            fire = changes.fires(jnp, params, heel, out.time, state.change.at, new.outline)
             lay = jax.tree.map(lambda a, b: jnp.where(fire, a, b), new, lay)
         new_state = EnvState(
             heel=heel,
-            time=time,
-            visited_mid=visited,
-            max_y=out["max_y"],
+            time=out.time,
+            visited_mid=out.visited_mid,
+            max_y=out.max_y,
             last_action=jnp.asarray(action, jnp.int32),
             layout=lay,
             change=state.change,
         )
-        info = out["info"]
-        return self.get_obs(new_state, params), new_state, reward, terminated, info
+        return self.get_obs(new_state, params), new_state, out
 
-    def is_truncated(self, state: EnvState, params: EnvParams):
-        """The step limit (elementwise: a batch of states gives a batch of flags)."""
-        return transition.truncated(state.time, params.max_steps_in_episode)
+    def step_env(self, key, state: EnvState, action, params: EnvParams):
+        """gymnax's step without reset: (obs, state, reward, terminated, info) with the info
+        the step's (jaxexo.physics.transition.StepInfo) by field name."""
+        obs, state, out = self.advance(state, action, params)
+        return obs, state, out.reward, out.terminated, out.info._asdict()
 
-    @staticmethod
-    def _step_outputs(obs, state, reward, terminated, truncated, info, obs_st):
-        """What ``step`` and ``step_batch`` return: (obs, state, reward, terminated, truncated, info)
-        with the info the transition's, the two flags, and the finished episode's last observation
-        (for bootstrapping through truncation)."""
-        info = {
-            **info,
-            "terminated": terminated,
-            "truncated": truncated,
-            "final_observation": obs_st,
-        }
-        return obs, state, reward, terminated, truncated, info
-
-    def step(self, key, state: EnvState, action, params: EnvParams | None = None):
-        """One transition with auto-reset (gymnax 1.0): a finished episode is replaced by a fresh one;
-        ``info["final_observation"]`` keeps the finished episode's last observation, so that a learner
-        can bootstrap through truncation."""
-        params = self.default_params if params is None else params
-        # step_env is deterministic, so the whole key goes to the auto-reset (no split needed).
-        obs_st, state_st, reward, terminated, info = self.step_env(key, state, action, params)
-        # As gymnax 1.0.1: truncation from the step count alone, so a goal reached on the step that
-        # hits the limit is both terminated and truncated (learners mask bootstrapping on terminated).
-        truncated = self.is_truncated(state_st, params)
-        done = terminated | truncated
-        obs_re, state_re = self.reset_env(key, params)
-        state = jax.tree.map(lambda r, s: jax.lax.select(done, r, s), state_re, state_st)
-        obs = jax.lax.select(done, obs_re, obs_st)
-        return self._step_outputs(obs, state, reward, terminated, truncated, info, obs_st)
-
-    def step_batch(self, keys, states: EnvState, actions, params: EnvParams | None = None):
-        """``step`` of a batch of N environments (keys, states and actions with a leading N), equal to
-        ``jax.vmap(step)`` bit for bit at a fraction of the cost: the auto-reset draws fresh scenes only
-        for the environments whose episode ended (jaxexo.shield.compact), where ``step`` under vmap draws
-        one for every environment at every step (for procedural terrain, most of a step's time:
-        docs/training.md). The trainer's step."""
+    def step_batch(self, reset_keys, states: EnvState, actions, params: EnvParams | None = None):
+        """The trainer's step of a batch of N environments (reset keys, states and actions with a
+        leading N): ``(obs, state, step, final_obs)`` with ``step`` the transition's record
+        (transition.Step [N]) and ``final_obs`` the finished episodes' last observations (for
+        bootstrapping through truncation). Equal to ``jax.vmap(step)`` bit for bit (given the keys that
+        ``step`` splits off for its reset) at a fraction of the cost: the auto-reset draws fresh scenes
+        only for the environments whose episode ended (jaxexo.shield.compact), where ``step`` under
+        vmap draws one for every environment at every step (for procedural terrain, most of a step's
+        time: docs/training.md)."""
         params = self.default_params if params is None else params
         n = actions.shape[0]
-        obs_st, state_st, reward, terminated, info = jax.vmap(
-            self.step_env, in_axes=(0, 0, 0, None)
-        )(keys, states, actions, params)
-        truncated = self.is_truncated(state_st, params)
-        done = terminated | truncated
+        obs_st, state_st, out = jax.vmap(self.advance, in_axes=(0, 0, None))(
+            states, actions, params
+        )
 
         def fresh(idx):
-            return jax.vmap(self.reset_env, in_axes=(0, None))(keys[idx], params)
+            return jax.vmap(self.reset_env, in_axes=(0, None))(reset_keys[idx], params)
 
         obs, state = compact.compacted(
-            done, fresh, (obs_st, state_st), compact.buffer_size(n, RESET_BUFFER_FRACTION)
+            out.terminated | out.truncated,
+            fresh,
+            (obs_st, state_st),
+            compact.buffer_size(n, RESET_BUFFER_FRACTION),
         )
-        return self._step_outputs(obs, state, reward, terminated, truncated, info, obs_st)
+        return obs, state, out, obs_st
 
     def action_mask(self, state: EnvState, params: EnvParams | None = None):
         """(NUM_ACTIONS,) bool: the moves the agent may choose in ``state``

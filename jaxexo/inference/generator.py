@@ -198,30 +198,21 @@ class TrajectoryGenerator(SwingGenerator):
         steps, not visited) it is ``rollout``, bit for bit."""
         sp, step = self.sp, self.step_net
         step.set_scene(self._basis(scene))
-        mid_y, mid_z = transition.mid_goal(scalar, sp, scene.center_y, scene.height)
         hy, hz, t, visited = float(heel[0]), float(heel[1]), int(steps), bool(visited)
         pts, acts = [(hy, hz)], []
         last = -1  # the move just made (the shield never undoes it)
         one = stack_scenes([scene], np.float32) if self.shield else None
         rows = self._shield("rows") if self.shield else None
         single = self._shield("scalar").swing(scene, one) if self._shield_first() else None
-        # the outline's extent (y from, y to, top), where a collision ends the episode
-        ol = scene.outline
-        box = (
-            (ol[:, 0].min(), ol[:, 0].max(), ol[:, 1].max())
-            if self.terminate_on_collision
-            else None
-        )
-        # The loop's rules on Python floats, inlined (per-step calls cost more than their
-        # arithmetic): transition.move_heel (each direction's step_size * direction precomputed, the
-        # same product), keep_in_world's clip, in_mid_goal, goal_reached, terminated and truncated,
-        # with the same operations in the same order. tests/test_fast_rollout.py holds them to the
-        # transition functions.
-        offsets = [(sp.step_size * dy, sp.step_size * dz) for dy, dz in self.directions]
-        (y_lo, y_hi), z_hi = sp.bounds_y, sp.max_z_world
-        mid_hy, mid_hz = sp.mid_goal_half_size
-        goal_y, (goal_dy, goal_dz) = scene.goal_y, sp.goal_tolerance[:2]
-        ends_on_collision = self.terminate_on_collision
+        # where a collision ends the episode: the move's clearance, the outline's extent first
+        collides = transition.never
+        if self.terminate_on_collision:
+            ol = scene.outline
+            box = (ol[:, 0].min(), ol[:, 0].max(), ol[:, 1].max())
+
+            def collides(lay, y0, z0, y1, z1):
+                return self._move_touches(box, ol, (y0, z0), (y1, z1))
+
         max_steps, q_values = self.max_steps, step.q_values
         choose = None if single is None else single.choose
         while True:
@@ -237,25 +228,12 @@ class TrajectoryGenerator(SwingGenerator):
                 a = self._explore(step.greedy(hy, hz, t, 1.0 if visited else 0.0, mask), mask)
             else:
                 a = self._explore(step.greedy(hy, hz, t, 1.0 if visited else 0.0))
-            prev = (hy, hz)
-            dy, dz = offsets[a]
-            hy, hz = hy + dy, hz + dz
-            hy = y_lo if hy < y_lo else (y_hi if hy > y_hi else hy)
-            hz = 0.0 if hz < 0.0 else (z_hi if hz > z_hi else hz)
-            t += 1
-            visited = visited or (abs(hy - mid_y) <= mid_hy and abs(hz - mid_z) <= mid_hz)
+            at = (hy, hz, self.directions[a], t, visited, scene)
+            out = transition.step(scalar, sp, *at, max_steps=max_steps, collides=collides)
+            hy, hz, t, visited, last = out.heel_y, out.heel_z, out.time, out.visited_mid, int(a)
             pts.append((hy, hz))
-            last = int(a)
             acts.append(a)
-            # The environment's termination; the move's clearance is only computed where a
-            # collision ends the episode.
-            if (abs(hy - goal_y) <= goal_dy and hz <= goal_dz) or t >= max_steps:
-                break
-            if (
-                box is not None
-                and ends_on_collision
-                and self._move_touches(box, scene.outline, prev, (hy, hz))
-            ):
+            if out.terminated or out.truncated:
                 break
         return np.asarray(pts), np.asarray(acts, dtype=np.int64)
 
@@ -281,13 +259,14 @@ class TrajectoryGenerator(SwingGenerator):
         hz = np.zeros(b, np.float32)
         t = np.zeros(b, np.int32)
         visited = np.zeros(b, bool)
-        mid_y, mid_z = transition.mid_goal(np, p, lay.center_y, lay.height)
         path = np.empty((self.max_steps + 1, b, 2), np.float32)
         acts = np.zeros((self.max_steps, b), np.int64)
         last = np.full(b, -1, np.int64)  # the move just made (the shield never undoes it)
         path[0, :, 0], path[0, :, 1] = hy, hz
         length = np.ones(b, np.int64)
         alive = np.arange(b)
+        # the clearance only where a collision ends the episode
+        collides = _rows_collide(p) if self.terminate_on_collision else transition.never
         for k in range(self.max_steps):
             sub = take_rows(lay, alive)
             obs = actions.observation(
@@ -302,22 +281,15 @@ class TrajectoryGenerator(SwingGenerator):
                     else None
                 )
                 a = self._explore(actions.greedy_action(np, self.net.q(obs), mask), mask)
-            prev = np.stack([hy[alive], hz[alive]], -1)
-            ny, nz = transition.move_heel(np, p, hy[alive], hz[alive], dirs[a, 0], dirs[a, 1])
-            hy[alive], hz[alive] = ny, nz
-            t[alive] += 1
-            visited[alive] |= transition.in_mid_goal(np, p, ny, nz, mid_y[alive], mid_z[alive])
-            path[k + 1, alive, 0], path[k + 1, alive, 1] = ny, nz
+            at = (hy[alive], hz[alive], dirs[a].T, t[alive], visited[alive], sub)
+            out = transition.step(np, p, *at, max_steps=self.max_steps, collides=collides)
+            hy[alive], hz[alive], t[alive] = out.heel_y, out.heel_z, out.time
+            visited[alive] = out.visited_mid
+            path[k + 1, alive, 0], path[k + 1, alive, 1] = out.heel_y, out.heel_z
             acts[k, alive] = a
             last[alive] = a
             length[alive] += 1
-            collided = False
-            if self.terminate_on_collision:  # the clearance only where a collision ends the episode
-                collided = move_collides(p, prev, np.stack([ny, nz], -1), sub.outline)
-            done = transition.terminated(
-                np, p, transition.goal_reached(np, p, ny, nz, sub.goal_y), collided
-            ) | transition.truncated(t[alive], self.max_steps)
-            alive = alive[~done]
+            alive = alive[~(out.terminated | out.truncated)]
             if alive.size == 0:
                 break
         paths = [path[: length[i], i].astype(np.float64) for i in range(b)]
@@ -460,6 +432,13 @@ def replace_failures(batch: TrajectoryBatch, planner, label: str) -> TrajectoryB
 # heels a metre from the origin round by ~1e-7 m; the margin only sends a few more moves to the
 # exact test, never changes a decision).
 BOUND_SLACK = 1e-4
+
+
+def _rows_collide(p):
+    """``transition.step``'s ``collides`` of a batch of rows: ``move_collides``."""
+    return lambda lay, y0, z0, y1, z1: move_collides(
+        p, np.stack([y0, z0], -1), np.stack([y1, z1], -1), lay.outline
+    )
 
 
 def move_collides(p, prev, heel, outline) -> np.ndarray:

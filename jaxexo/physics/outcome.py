@@ -90,45 +90,42 @@ def verdict(
     )
 
 
-def start(xp, shape=(), dtype="float32") -> dict:
+class Running(NamedTuple):
+    """An episode's running aggregates ``[...]`` (the batch of episodes), folded by ``accumulate``."""
+
+    reached_goal: Any  # [...] bool
+    limits: Any  # [...] bool: a joint limit was violated
+    leg: Any  # [...] bool: a leg was too long
+    min_clearance: Any  # [...] m, the smallest clearance of the foot's motion
+    max_backward: Any  # [...] m, the largest fall of the heel behind its furthest y
+
+
+def start(xp, shape=(), dtype="float32") -> Running:
     """An episode's running aggregates before its first step (``shape``: the batch of episodes)."""
     no = xp.zeros(shape, dtype=bool)
-    return {
-        "reached_goal": no,
-        "limits": no,
-        "leg": no,
-        "min_clearance": xp.full(shape, xp.inf, dtype=dtype),
-        "max_backward": xp.zeros(shape, dtype=dtype),
-    }
+    inf, zero = xp.full(shape, xp.inf, dtype=dtype), xp.zeros(shape, dtype=dtype)
+    return Running(reached_goal=no, limits=no, leg=no, min_clearance=inf, max_backward=zero)
 
 
-def accumulate(xp, acc: dict, info: dict, alive=True) -> dict:
-    """Fold one environment step's ``info`` (jaxexo.physics.transition.transition's) into ``acc``;
+def accumulate(xp, acc: Running, info, alive=True) -> Running:
+    """Fold one environment step's ``info`` (jaxexo.physics.transition.StepInfo) into ``acc``;
     steps where ``alive`` is False (after the episode ended) leave it unchanged."""
-    return {
-        "reached_goal": acc["reached_goal"] | (alive & info["goal_reached"]),
-        "limits": acc["limits"] | (alive & info["joint_limit_violation"]),
-        "leg": acc["leg"] | (alive & info["leg_length_violation"]),
-        "min_clearance": xp.where(
-            alive, xp.minimum(acc["min_clearance"], info["clearance"]), acc["min_clearance"]
+    return Running(
+        reached_goal=acc.reached_goal | (alive & info.goal_reached),
+        limits=acc.limits | (alive & info.joint_limit_violation),
+        leg=acc.leg | (alive & info.leg_length_violation),
+        min_clearance=xp.where(
+            alive, xp.minimum(acc.min_clearance, info.clearance), acc.min_clearance
         ),
-        # info["backward"]: how far the heel is behind its furthest y so far (transition's running max)
-        "max_backward": xp.where(
-            alive, xp.maximum(acc["max_backward"], info["backward"]), acc["max_backward"]
-        ),
-    }
+        # info.backward: how far the heel is behind its furthest y so far (the step's running max)
+        max_backward=xp.where(alive, xp.maximum(acc.max_backward, info.backward), acc.max_backward),
+    )
 
 
-def episode_verdict(xp, acc: dict, **rule) -> Verdict:
+def episode_verdict(xp, acc: Running, **rule) -> Verdict:
     """The verdict on episodes from their running aggregates (``accumulate``)."""
     return verdict(
-        xp,
-        acc["reached_goal"],
-        acc["min_clearance"],
-        ~acc["limits"],
-        ~acc["leg"],
-        acc["max_backward"],
-        **rule,
+        xp, acc.reached_goal, acc.min_clearance, ~acc.limits, ~acc.leg, acc.max_backward, **rule
     )
 
 

@@ -13,7 +13,7 @@ import time
 import jax
 import jax.numpy as jnp
 import numpy as np
-from flax import serialization
+from flax import serialization, struct
 
 from jaxexo.config import Config, static_settings, test_config
 from jaxexo.env import ExoStepEnv
@@ -33,7 +33,18 @@ MIN_WINDOW_EPISODES = 20
 _PROGRAMS: dict = {}
 
 
-def reduce_metrics(m: UpdateMetrics, min_episodes: int) -> dict:
+@struct.dataclass
+class TrainFigures:
+    """An agent's training figures (``reduce_metrics``): scalars, and the curve [CURVE_POINTS]."""
+
+    train_success: jnp.ndarray  # strict success per episode over the last active updates
+    train_return: jnp.ndarray  # undiscounted return per episode over them
+    episodes_to_90: jnp.ndarray  # episodes until TARGET_SUCCESS (nan: never)
+    updates: jnp.ndarray  # the active updates
+    curve: UpdateMetrics  # [CURVE_POINTS], each bin a sum
+
+
+def reduce_metrics(m: UpdateMetrics, min_episodes: int) -> TrainFigures:
     """Per-update metrics [U] -> the agent's training figures and its learning curve (UpdateMetrics
     [CURVE_POINTS], each bin a sum).
     The active updates (before the budget ran out) are a prefix of the scan. The final training
@@ -71,13 +82,13 @@ def reduce_metrics(m: UpdateMetrics, min_episodes: int) -> dict:
     curve = jax.tree.map(
         lambda x: jax.ops.segment_sum(x, jnp.asarray(bins), num_segments=CURVE_POINTS), m
     )
-    return {
-        "train_success": train_success,
-        "train_return": train_return,
-        "episodes_to_90": episodes_to,
-        "updates": n_active.astype(jnp.float32),
-        "curve": curve,
-    }
+    return TrainFigures(
+        train_success=train_success,
+        train_return=train_return,
+        episodes_to_90=episodes_to,
+        updates=n_active.astype(jnp.float32),
+        curve=curve,
+    )
 
 
 def chunk_program(cfg: Config, devices):
@@ -113,9 +124,12 @@ def _build(cfg: Config, devices):
             "episodes": ts.episodes,
             "env_steps": ts.update,  # updates done: run_chunk scales it to env steps in integers
             "diverged": ~ok,
-            **{k: v for k, v in red.items() if k != "curve"},
+            "train_success": red.train_success,
+            "train_return": red.train_return,
+            "episodes_to_90": red.episodes_to_90,
+            "updates": red.updates,
         }
-        return {"scalars": scalars, "curve": red["curve"], "params": ts.params}
+        return {"scalars": scalars, "curve": red.curve, "params": ts.params}
 
     return over_lanes(agent, devices, n_args=3)
 

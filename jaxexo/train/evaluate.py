@@ -68,40 +68,34 @@ def make_rollouts(env: ExoStepEnv, q_apply, max_steps: int, record: bool = False
             # greedy over the admissible moves (all of them without the shield)
             mask = env.action_masks(state, params) if env.shield else None
             a = actions.greedy_action(jnp, q_apply(q_params, obs), mask)
-            obs2, state2, r, term, info = jax.vmap(env.step_env, in_axes=(None, 0, 0, None))(
-                jax.random.PRNGKey(0), state, a, params
+            obs2, state2, s = jax.vmap(env.advance, in_axes=(0, 0, None))(state, a, params)
+            acc, steps, ret = out
+            out = (
+                outcome.accumulate(jnp, acc, s.info, alive),
+                steps + alive,
+                ret + jnp.where(alive, s.reward, 0.0),
             )
-            truncated = jax.vmap(env.is_truncated, in_axes=(0, None))(state2, params)
-            out = {
-                "outcome": outcome.accumulate(jnp, out["outcome"], info, alive),
-                "steps": out["steps"] + alive,
-                "return": out["return"] + jnp.where(alive, r, 0.0),
-            }
             state = jax.tree.map(
                 lambda new, old: jnp.where(rows(alive, new), new, old), state2, state
             )
             obs = jnp.where(alive[:, None], obs2, obs)
-            alive = alive & ~term & ~truncated
+            alive = alive & ~s.terminated & ~s.truncated
             return (state, obs, alive, out), (state.heel if record else None)
 
-        out0 = {
-            "outcome": outcome.start(jnp, (n,)),
-            "steps": jnp.zeros(n, jnp.int32),
-            "return": jnp.zeros(n, jnp.float32),
-        }
-        (_, _, _, out), path = jax.lax.scan(
+        # (running outcome, steps, return) of each episode
+        out0 = (outcome.start(jnp, (n,)), jnp.zeros(n, jnp.int32), jnp.zeros(n, jnp.float32))
+        (_, _, _, (acc, steps, ret)), path = jax.lax.scan(
             step, (state, obs, jnp.ones(n, bool), out0), None, length=max_steps
         )
-        acc = out["outcome"]
         v = outcome.episode_verdict(jnp, acc, **outcome.rule(params))
         out = Rollouts(
-            steps=out["steps"],
-            episode_return=out["return"],
-            reached=acc["reached_goal"],
+            steps=steps,
+            episode_return=ret,
+            reached=acc.reached_goal,
             collided=~v.collision_free,
-            limits=acc["limits"],
-            leg=acc["leg"],
-            min_clearance=acc["min_clearance"],
+            limits=acc.limits,
+            leg=acc.leg,
+            min_clearance=acc.min_clearance,
             accurate=v.collision_free,
             success=v.success,
         )

@@ -19,7 +19,7 @@ from flax import struct
 
 from jaxexo.config import HYPER_FIELDS, Config, TrainConfig, declared_fields, num_updates
 from jaxexo.env import EnvParams, ExoStepEnv
-from jaxexo.physics import actions, outcome
+from jaxexo.physics import actions, outcome, transition
 from jaxexo.shield import rule
 from jaxexo.train import td_lambda
 from jaxexo.train.network import QNetwork
@@ -103,7 +103,7 @@ class Hyperparams:
 @struct.dataclass
 class EpisodeStats:
     ret: jnp.ndarray  # (N,) running return
-    outcome: dict  # (N,) running aggregates of jaxexo.physics.outcome (clearance, limits, goal)
+    outcome: outcome.Running  # (N,) running aggregates of jaxexo.physics.outcome
 
 
 @struct.dataclass
@@ -279,19 +279,20 @@ class Trainer:
         return a.astype(jnp.int32), a == greedy
 
     def _env_step(self, key, env_state, action, hyper):
-        # vmap(env.step)'s transitions, drawing fresh scenes only where an episode ended.
+        # vmap(env.step)'s transitions, drawing fresh scenes only where an episode ended:
+        # (obs, env_state, transition.Step [N], final observations).
         return self.env.step_batch(
             jax.random.split(key, action.shape[0]), env_state, action, hyper.env
         )
 
     @staticmethod
-    def _episode_stats(stats: EpisodeStats, reward, terminated, truncated, info, env_params):
-        ret = stats.ret + reward
-        acc = outcome.accumulate(jnp, stats.outcome, info)
+    def _episode_stats(stats: EpisodeStats, out: transition.Step, env_params):
+        ret = stats.ret + out.reward
+        acc = outcome.accumulate(jnp, stats.outcome, out.info)
         # The strict-success verdict of the episodes that ended here (jaxexo.physics.outcome, the one
         # definition), on the agent's raw moves under the behaviour policy.
         v = outcome.episode_verdict(jnp, acc, **outcome.rule(env_params))
-        done = terminated | truncated
+        done = out.terminated | out.truncated
         counts = EpisodeCounts(
             episodes=done.sum().astype(jnp.float32),
             return_sum=jnp.where(done, ret, 0.0).sum().astype(jnp.float32),
@@ -355,13 +356,14 @@ class Trainer:
             key, kl = jax.random.split(c.key)
             ka, ke = jax.random.split(self._local_key(kl))
             a, g = self._act(ts.params, c.obs, ka, eps, mask)
-            obs2, env_state, r, term, trunc, info = self._env_step(ke, c.env_state, a, hyper)
-            stats, counts = self._episode_stats(c.stats, r, term, trunc, info, hyper.env)
+            obs2, env_state, out, final_obs = self._env_step(ke, c.env_state, a, hyper)
+            r, term, trunc = out.reward, out.terminated, out.truncated
+            stats, counts = self._episode_stats(c.stats, out, hyper.env)
             mask2 = self._mask(env_state, hyper)
             # The bootstrap's target-network pass runs here, on this step's N observations, rather than
             # on all T x N after the rollout: the same arithmetic on a working set that stays in cache.
             q_final = td_lambda.restrict(
-                self.net.apply(ts.target_params, info["final_observation"]),
+                self.net.apply(ts.target_params, final_obs),
                 self._final_mask(mask2, term | trunc),
             )  # (N, A)
             tq = jnp.max(q_final, axis=-1) if self.off_policy else q_final
@@ -467,13 +469,14 @@ class Trainer:
                 grads,
                 self.tc.trace_kind,
             )
-            obs2, env_state, r, term, trunc, info = self._env_step(ke, c.env_state, c.action, hyper)
-            stats, counts = self._episode_stats(c.stats, r, term, trunc, info, hyper.env)
+            obs2, env_state, out, final_obs = self._env_step(ke, c.env_state, c.action, hyper)
+            r, term, trunc = out.reward, out.terminated, out.truncated
+            stats, counts = self._episode_stats(c.stats, out, hyper.env)
             done = term | trunc
             mask2 = self._mask(env_state, hyper)
             a2, greedy2 = self._act(c.params, obs2, ka, eps, mask2)
             q_final = td_lambda.restrict(
-                self.net.apply(ts.target_params, info["final_observation"]),
+                self.net.apply(ts.target_params, final_obs),
                 self._final_mask(mask2, done),
             )
             boot = self._bootstrap(q_final, a2, done, eps)
