@@ -62,10 +62,13 @@ class _Walker:
         return [_walked(p.heel, sc.goal_y, self.gen.sp) for p, sc in zip(plans, scenes)]
 
     def install(self, monkeypatch):
+        # on the class: a walk plans with generators built from this one (with_options), which
+        # share its policy but not its instance attributes
         none = np.zeros(0, np.int64)
-        monkeypatch.setattr(self.gen, "rollout", lambda scene: (self.raws([scene])[0], none))
+        cls = type(self.gen)
+        monkeypatch.setattr(cls, "rollout", lambda g, scene: (self.raws([scene])[0], none))
         monkeypatch.setattr(
-            self.gen, "rollout_batch", lambda scenes: (self.raws(scenes), [none] * len(scenes))
+            cls, "rollout_batch", lambda g, scenes: (self.raws(scenes), [none] * len(scenes))
         )
 
 

@@ -74,7 +74,8 @@ def test_env_reset_draws_the_numpy_scenario_list(which, mixed_config):
     ref = scenarios.scenario_layouts(np, numpy_params(cfg), seed, n)
     key = lambda i: jax.random.wrap_key_data(jnp.stack([jnp.uint32(seed), jnp.uint32(i)]))  # noqa: E731
     for i in (0, 1, 17, 299):
-        _, st = env.reset(key(i), env.default_params)
+        # reset_env: the reset itself, eager (gymnax's reset is the same under jit)
+        _, st = env.reset_env(key(i), env.default_params)
         for f in FIELDS:
             np.testing.assert_array_equal(
                 np.asarray(getattr(st.layout, f)), getattr(ref, f)[i], err_msg=f"{f}, scene {i}"
