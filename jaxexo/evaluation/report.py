@@ -13,7 +13,6 @@ import numpy as np
 
 from jaxexo.evaluation.metrics import BACKWARD_REPORT
 from jaxexo.evaluation.timing import BATCH
-from jaxexo.physics.scenarios import Scenario
 from jaxexo.storage.atomic import atomic_write, write_figure
 from jaxexo.storage.rundir import blocking_file
 from jaxexo.summary import table
@@ -212,7 +211,7 @@ def markdown(report: dict, title: str, context: list[str], sections: list[str] =
     return "\n".join(lines) + "\n"
 
 
-def plot_overlays(path: Path, trajs: dict, scenarios: list[Scenario], per_kind: int = 25) -> None:
+def plot_overlays(path: Path, trajs: dict, scenarios: list, per_kind: int = 25) -> None:
     """Heel paths over the obstacle, one panel per kind, each generator in its colour (Fig. 3.29).
     ``rl+cfftg`` is, scene by scene, either the RL swing or CFFTG's plan, so its own lines would hide
     under (or over) identical ones: with ``rl`` beside it, the RL paths it replaced are drawn dotted
@@ -279,9 +278,7 @@ def plot_overlays(path: Path, trajs: dict, scenarios: list[Scenario], per_kind: 
     plt.close(fig)
 
 
-def plot_joint_profiles(
-    path: Path, trajs: dict, scenarios: list[Scenario], per_kind: int = 10
-) -> None:
+def plot_joint_profiles(path: Path, trajs: dict, scenarios: list, per_kind: int = 10) -> None:
     """Swing hip and knee angles over the swing, per generator and kind (thesis Fig. 3.11-3.28)."""
     import matplotlib
 
@@ -359,7 +356,7 @@ def write_report(
     out: str | Path,
     report: dict,
     trajs: dict,
-    scenarios: list[Scenario],
+    scenarios: list,
     title: str,
     context: list[str],
     figures: bool = True,

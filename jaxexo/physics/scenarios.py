@@ -221,10 +221,11 @@ def batch_options(scenes) -> dict[str, list]:
     return {k: [getattr(s, k) for s in scenes] for k in ("pivot", "start_y", "step_length")}
 
 
-def scene_kwargs(lay: Scene, obstacles=None) -> list[Scenario]:
-    """Scenes ``lay`` [N] (``scenario_layouts``') as Scenarios: ``obstacles`` are the layout's obstacle mixture (objects with ``kind``, ``shape`` and
-    ``unit_vertices()``, indexed by the layouts' ``kind``), None for procedural terrain (``kind`` is
-    the family id and the outline is in the world frame)."""
+def as_scenarios(lay: Scene, obstacles=None) -> list[Scenario]:
+    """Scenes ``lay`` [N] (``scenario_layouts``') as Scenarios: ``obstacles`` are the layout's
+    obstacle mixture (objects with ``kind``, ``shape`` and ``unit_vertices()``, indexed by the
+    layouts' ``kind``), None for procedural terrain (``kind`` is the family id and the outline is in
+    the world frame)."""
     out = []
     for i in range(len(lay.start_y)):
         w, h, center = (float(getattr(lay, k)[i]) for k in ("width", "height", "center_y"))
@@ -348,8 +349,8 @@ def unseen_scenarios(
                             np, u, width[i], UNSEEN_START_SHIFT, UNSEEN_STEP_LENGTH, foot_length
                         )
                         ob = terrain.to_obstacle(outline[i], float(c))
-                        scene = Scenario(fam, ob, pivot, float(start), float(L))
-                        out.append(scene._replace(family_u=u_shape[i].tolist()))
+                        u = u_shape[i].tolist()
+                        out.append(Scenario(fam, ob, pivot, float(start), float(L), u))
                         i += 1
     return out
 
@@ -391,7 +392,7 @@ __all__ = [
     "scenario_layouts",
     "Scenario",
     "batch_options",
-    "scene_kwargs",
+    "as_scenarios",
     "safety_scenes",
     "UNSEEN_SHAPES",
     "UNSEEN_SEED",
