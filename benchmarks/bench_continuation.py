@@ -49,16 +49,14 @@ def cases(gen, n, seed=59):
     rng = np.random.default_rng(seed)
     out, tried = [], 0
     for s in safety_scenarios(gen.config, 4 * n, seed=seed, unseen=True):
-        tr = gen.generate(
-            s["obstacle"], pivot=s["pivot"], start_y=s["start_y"], step_length=s["step_length"]
-        )
+        tr = gen.generate(s.obstacle, pivot=s.pivot, start_y=s.start_y, step_length=s.step_length)
         tried += 1
         if not tr.ok:
             continue
         sw = time_swing(tr, gen.config)
         old = tr.scene
         new = gen.scene(
-            taller(s["obstacle"], rng.uniform(1.3, 1.6)),
+            taller(s.obstacle, rng.uniform(1.3, 1.6)),
             pivot_y=old.pivot_y,
             start_y=old.start_y,
             step_length=old.goal_y - old.start_y,

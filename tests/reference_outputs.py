@@ -27,8 +27,9 @@ import numpy as np
 from jaxexo.baselines import CFFTG
 from jaxexo.inference import GenerateOptions, TrajectoryGenerator, time_swings
 from jaxexo.inference.scenarios import training_scenarios
+from jaxexo.physics.scenarios import batch_options
 
-from benchlib.scenes import batch_kwargs, safety_sets
+from benchlib.scenes import safety_sets
 
 DATA = Path(__file__).resolve().parent / "data" / "reference"
 POLICY = DATA / "policy.npz"
@@ -107,9 +108,9 @@ def outputs(policy: Path = POLICY, sensitivity: dict | None = None) -> dict[str,
     generators = {"rl": rl, "cfftg": CFFTG.from_policy(policy)}
     out = {}
     for set_name, (scenes, options) in scene_sets(rl.config).items():
-        obstacles = [s["obstacle"] for s in scenes]
+        obstacles = [s.obstacle for s in scenes]
         for gen_name, gen in generators.items():
-            batch = gen.generate_batch(obstacles, options, **batch_kwargs(scenes))
+            batch = gen.generate_batch(obstacles, options, **batch_options(scenes))
             key = f"{gen_name}/{set_name}"
             out[f"{key}/heel"] = np.asarray(batch.heel, np.float32)
             methods = batch.row_methods or (batch.method,) * len(batch)

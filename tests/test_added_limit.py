@@ -55,10 +55,10 @@ def swings():
     config = load_config(ROOT / "configs" / "default.toml")
     scenes = training_scenarios(config, 6, seed=3)
     batch = CFFTG(config).generate_batch(
-        [s["obstacle"] for s in scenes],
-        pivot=[s["pivot"] for s in scenes],
-        start_y=[s["start_y"] for s in scenes],
-        step_length=[s["step_length"] for s in scenes],
+        [s.obstacle for s in scenes],
+        pivot=[s.pivot for s in scenes],
+        start_y=[s.start_y for s in scenes],
+        step_length=[s.step_length for s in scenes],
     )
     return config, [batch[i] for i in range(len(batch))]
 

@@ -16,6 +16,7 @@ from jaxexo.inference import Obstacle, TrajectoryError
 from jaxexo.inference.scenarios import sample_scenarios, training_scenarios
 from jaxexo.physics import geometry
 from jaxexo.physics.kinematics import PIVOT_CONDITIONS
+from jaxexo.physics.scenarios import Scenario
 
 from conftest import ROOT
 
@@ -32,10 +33,10 @@ def gen(cfg):
 
 def _batch(gen, scenarios):
     return gen.generate_batch(
-        [s["obstacle"] for s in scenarios],
-        pivot=[s["pivot"] for s in scenarios],
-        start_y=[s["start_y"] for s in scenarios],
-        step_length=[s["step_length"] for s in scenarios],
+        [s.obstacle for s in scenarios],
+        pivot=[s.pivot for s in scenarios],
+        start_y=[s.start_y for s in scenarios],
+        step_length=[s.step_length for s in scenarios],
     )
 
 
@@ -72,7 +73,7 @@ def test_always_valid_on_training_and_test_obstacles(gen, cfg, which):
     )
     assert c.min() >= gen.margin - 1e-9
     assert b.min_clearance.min() >= cfg.env.min_clearance
-    assert {s["pivot"] for s in sc} == set(PIVOT_CONDITIONS)
+    assert {s.pivot for s in sc} == set(PIVOT_CONDITIONS)
 
 
 def _end_rates(t):
@@ -159,19 +160,11 @@ def test_impossible_obstacle_is_a_reported_failure(gen):
 
 def test_batch_equals_single(gen, cfg):
     sc = sample_scenarios(cfg, 15, seed=3) + [
-        {
-            "kind": "x",
-            "obstacle": Obstacle.rectangle(0.2, 0.5),
-            "pivot": "agent",
-            "start_y": 0.0,
-            "step_length": 0.7,
-        }
+        Scenario("x", Obstacle.rectangle(0.2, 0.5), "agent", 0.0, 0.7)
     ]
     b = _batch(gen, sc)
     for i, s in enumerate(sc):
-        t = gen.generate(
-            s["obstacle"], pivot=s["pivot"], start_y=s["start_y"], step_length=s["step_length"]
-        )
+        t = gen.generate(s.obstacle, pivot=s.pivot, start_y=s.start_y, step_length=s.step_length)
         np.testing.assert_array_equal(t.heel, b.heel[i])
         np.testing.assert_array_equal(t.joint_angles, b.joint_angles[i])
         assert t.checks.reasons == b.reasons[i] and t.notes == b.notes[i]

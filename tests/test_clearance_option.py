@@ -64,12 +64,12 @@ def test_shielded_raw_moves_keep_the_clearance_asked(clearance):
     foot = cfg.kinematics.foot_length
     sc = safety_scenarios(cfg, 60, seed=5)
     batch = gen.generate_batch(
-        [s["obstacle"] for s in sc],
+        [s.obstacle for s in sc],
         fallback=None,
         clearance=clearance,
-        pivot=[s["pivot"] for s in sc],
-        start_y=[s["start_y"] for s in sc],
-        step_length=[s["step_length"] for s in sc],
+        pivot=[s.pivot for s in sc],
+        start_y=[s.start_y for s in sc],
+        step_length=[s.step_length for s in sc],
     )
     for t in batch:
         outline = np.asarray(t.scene.outline, float)
@@ -93,13 +93,13 @@ def test_swings_called_ok_keep_the_clearance_under_a_denser_look(trained_run, cl
     foot = gen.config.kinematics.foot_length
     sc = safety_scenarios(gen.config, 150, seed=9)
     kw = dict(
-        pivot=[s["pivot"] for s in sc],
-        start_y=[s["start_y"] for s in sc],
-        step_length=[s["step_length"] for s in sc],
+        pivot=[s.pivot for s in sc],
+        start_y=[s.start_y for s in sc],
+        step_length=[s.step_length for s in sc],
     )
     n_ok = 0
     for g, extra in ((gen, {"fallback": None}), (CFFTG(gen.config), {})):
-        batch = g.generate_batch([s["obstacle"] for s in sc], clearance=clearance, **kw, **extra)
+        batch = g.generate_batch([s.obstacle for s in sc], clearance=clearance, **kw, **extra)
         for t in batch:
             if t.ok:
                 n_ok += 1

@@ -138,10 +138,10 @@ def test_eval_figures_match_the_generators_own_outputs(trained_run):
     report, trajs = evaluate_generators(gens, sc, batch_size=0)
     for name, g in gens.items():
         b = g.generate_batch(
-            [s["obstacle"] for s in sc],
-            pivot=[s["pivot"] for s in sc],
-            start_y=[s["start_y"] for s in sc],
-            step_length=[s["step_length"] for s in sc],
+            [s.obstacle for s in sc],
+            pivot=[s.pivot for s in sc],
+            start_y=[s.start_y for s in sc],
+            step_length=[s.step_length for s in sc],
         )
         assert report[name]["success"] == pytest.approx(b.ok.mean())
         assert report[name]["accuracy"] == pytest.approx(b.collision_free.mean())
@@ -389,9 +389,7 @@ def test_device_metrics_time_the_moving_swings_and_count_a_still_one_as_zero(tra
     rl = TrajectoryGenerator.load(trained_run / "policy.npz")
     sc = make_scenarios(rl.config, "test", 2)
     moving = [
-        rl.generate(
-            s["obstacle"], pivot=s["pivot"], start_y=s["start_y"], step_length=s["step_length"]
-        )
+        rl.generate(s.obstacle, pivot=s.pivot, start_y=s.start_y, step_length=s.step_length)
         for s in sc
     ]
     t = moving[0]

@@ -51,11 +51,9 @@ def cases():
     rng = np.random.default_rng(7)
     out = []
     for s in safety_scenarios(gen.config, 14, unseen=True):
-        tr = gen.generate(
-            s["obstacle"], pivot=s["pivot"], start_y=s["start_y"], step_length=s["step_length"]
-        )
+        tr = gen.generate(s.obstacle, pivot=s.pivot, start_y=s.start_y, step_length=s.step_length)
         sw = time_swing(tr, gen.config)
-        new = same_feet(gen, tr.scene, taller(s["obstacle"], rng.uniform(1.3, 1.6)))
+        new = same_feet(gen, tr.scene, taller(s.obstacle, rng.uniform(1.3, 1.6)))
         st = foot_state(sw, rng.uniform(0.2, 0.4) * sw.duration)
         c = geometry.foot_clearance(np, st.heel[None], gen.sp.foot_length, new.outline)[0]
         if tr.ok and c >= gen.sp.min_clearance:

@@ -28,9 +28,7 @@ def gen_scenes():
     gen = TrajectoryGenerator.load(POLICY)
     sc = safety_scenarios(gen.config, 40, unseen=True)
     return gen, [
-        gen.scene(
-            s["obstacle"], pivot=s["pivot"], start_y=s["start_y"], step_length=s["step_length"]
-        )
+        gen.scene(s.obstacle, pivot=s.pivot, start_y=s.start_y, step_length=s.step_length)
         for s in sc
     ]
 

@@ -52,9 +52,7 @@ def _scenes(gen, n_train, n_unseen, seed=5):
         make_scenarios(gen.config, "train", n_train, seed)
         + make_scenarios(gen.config, "unseen", n_unseen)[:n_unseen]
     )
-    return sc, [
-        gen.scene(s["obstacle"], s["pivot"], None, s["start_y"], s["step_length"]) for s in sc
-    ]
+    return sc, [gen.scene(s.obstacle, s.pivot, None, s.start_y, s.step_length) for s in sc]
 
 
 def test_scalar_shield_picks_the_full_masks_greedy_move():
@@ -156,20 +154,19 @@ def test_fast_generation_with_candidate_smoothings_matches_the_reference(clearin
 
     gen = _random_generator(seed=6).with_options(clearing=clearing)
     sc, _ = _scenes(gen, 700, 700)
-    args = {k: [s[k] for s in sc] for k in ("obstacle", "pivot", "start_y", "step_length")}
-    kw = {k: args[k] for k in ("pivot", "start_y", "step_length")}
-    fast = gen.generate_batch(args["obstacle"], fallback=None, **kw)
+    obstacles, kw = [s.obstacle for s in sc], scenarios.batch_options(sc)
+    fast = gen.generate_batch(obstacles, fallback=None, **kw)
     plain = plain_reference(gen)
-    ref = plain.generate_batch(args["obstacle"], fallback=None, **kw)
+    ref = plain.generate_batch(obstacles, fallback=None, **kw)
     for a, b in zip(fast, ref):
         _same(a, b)
     cleared = "jaxexo.swing.clearing"  # the note of a swing the correction moved
     marker = cleared if clearing else "per-path candidate"
     assert any(any(marker in n for n in t.notes) for t in fast)
     for s in sc[::7]:
-        one = {k: s[k] for k in ("pivot", "start_y", "step_length")}
-        a = gen.generate(s["obstacle"], fallback=None, **one)
-        _same(a, plain.generate(s["obstacle"], fallback=None, **one))
+        one = s.options()
+        a = gen.generate(s.obstacle, fallback=None, **one)
+        _same(a, plain.generate(s.obstacle, fallback=None, **one))
         if any(cleared in n for n in a.notes):
             again = clear_smooth(
                 a.raw,
@@ -229,11 +226,11 @@ def test_a_shielded_models_smoothing_is_its_clearance_budget():
     assert gen.smoothing < sm.DEFAULT_SMOOTHING
     assert model_smoothing(0.025, 0.02, False) == sm.DEFAULT_SMOOTHING
     s = make_scenarios(gen.config, "train", 3, 11)
-    kw = [dict(pivot=x["pivot"], start_y=x["start_y"], step_length=x["step_length"]) for x in s]
+    kw = [dict(pivot=x.pivot, start_y=x.start_y, step_length=x.step_length) for x in s]
     for x, k in zip(s, kw):
-        a = gen.generate(x["obstacle"], fallback=None, **k)
-        _same(a, gen.generate(x["obstacle"], fallback=None, smoothing=gen.smoothing, **k))
-    obstacles, per = [x["obstacle"] for x in s], {key: [k[key] for k in kw] for key in kw[0]}
+        a = gen.generate(x.obstacle, fallback=None, **k)
+        _same(a, gen.generate(x.obstacle, fallback=None, smoothing=gen.smoothing, **k))
+    obstacles, per = [x.obstacle for x in s], {key: [k[key] for k in kw] for key in kw[0]}
     for a, b in zip(
         gen.generate_batch(obstacles, fallback=None, **per),
         gen.generate_batch(obstacles, fallback=None, smoothing=gen.smoothing, **per),
@@ -286,11 +283,7 @@ def test_time_breakdown_replays_the_rollouts_own_steps():
     sc = scene_set(gen.config, "unseen", 3)
     b = time_breakdown(gen, CFFTG(gen.config), sc, repeats=1)
     steps = [
-        len(
-            gen.rollout(gen.scene(s["obstacle"], s["pivot"], None, s["start_y"], s["step_length"]))[
-                1
-            ]
-        )
+        len(gen.rollout(gen.scene(s.obstacle, s.pivot, None, s.start_y, s.step_length))[1])
         for s in sc
     ]
     assert b["steps"] == float(np.median(steps))

@@ -81,9 +81,9 @@ def _scene_sets(n=40):
 
 def _kw(sc):
     return dict(
-        pivot=[s["pivot"] for s in sc],
-        start_y=[s["start_y"] for s in sc],
-        step_length=[s["step_length"] for s in sc],
+        pivot=[s.pivot for s in sc],
+        start_y=[s.start_y for s in sc],
+        step_length=[s.step_length for s in sc],
     )
 
 
@@ -120,14 +120,13 @@ def test_generated_swings_end_on_the_floor_in_the_goal_and_keep_the_verdict(name
     walker = _Walker(gen)
     walker.install(monkeypatch)
     scenes = [
-        gen.scene(s["obstacle"], s["pivot"], start_y=s["start_y"], step_length=s["step_length"])
-        for s in sc
+        gen.scene(s.obstacle, s.pivot, start_y=s.start_y, step_length=s.step_length) for s in sc
     ]
     raws = walker.raws(scenes)
     above = np.array([r[-1, 1] > FLOOR_TOL for r in raws])
     assert above.mean() > 0.3  # the premise: many rollouts stop above the floor
     cfftg_ok = CFFTG(CFG).finish(scenes, N_POINTS, 1.0).ok
-    batch = gen.generate_batch([s["obstacle"] for s in sc], fallback=None, **_kw(sc))
+    batch = gen.generate_batch([s.obstacle for s in sc], fallback=None, **_kw(sc))
     assert (
         len(batch) == len(sc) and batch.heel.shape[1] == N_POINTS
     )  # nothing appended to the curve
@@ -170,10 +169,10 @@ def test_generated_swings_end_on_the_floor_in_the_goal_and_keep_the_verdict(name
     # One swing at a time lands the same way.
     for i in np.flatnonzero(above)[:5]:
         one = gen.generate(
-            sc[i]["obstacle"],
-            pivot=sc[i]["pivot"],
-            start_y=sc[i]["start_y"],
-            step_length=sc[i]["step_length"],
+            sc[i].obstacle,
+            pivot=sc[i].pivot,
+            start_y=sc[i].start_y,
+            step_length=sc[i].step_length,
             fallback=None,
         )
         np.testing.assert_allclose(one.heel, batch.heel[i], atol=1e-9)

@@ -15,11 +15,12 @@ import pytest
 
 from jaxexo.baselines import CFFTG
 from jaxexo.inference import TrajectoryGenerator
+from jaxexo.physics.scenarios import batch_options
 from jaxexo.swing.curve import JointPath, TimeLaw, cubic_paths, joints_at, law_from_speeds
 from jaxexo.swing.limit_proof import ROUNDING, curve_bounds
 from jaxexo.swing.timing import time_swings
 
-from benchlib.scenes import batch_kwargs, safety_sets
+from benchlib.scenes import safety_sets
 from conftest import ROOT
 
 POLICY = ROOT / "tests" / "data" / "reference" / "policy.npz"
@@ -146,8 +147,8 @@ def timed():
     cf = CFFTG(rl.config)
     out = {"rl": [], "cfftg": []}
     for scenes in safety_sets(rl.config, SCENES).values():
-        obs = [s["obstacle"] for s in scenes]
-        kw = batch_kwargs(scenes)
+        obs = [s.obstacle for s in scenes]
+        kw = batch_options(scenes)
         out["rl"] += [t for t in rl.generate_batch(obs, fallback=None, **kw) if t.ok]
         out["cfftg"] += [t for t in cf.generate_batch(obs, **kw) if t.ok]
     return {g: time_swings(trajs, rl.config, rate=100.0) for g, trajs in out.items()}

@@ -15,10 +15,11 @@ import pytest
 
 from jaxexo.baselines import CFFTG
 from jaxexo.inference import Obstacle, TrajectoryGenerator
+from jaxexo.physics.scenarios import batch_options
 from jaxexo.swing.limits import DeviceLimits
 from jaxexo.swing.timing import time_swing, time_swings
 
-from benchlib.scenes import batch_kwargs, safety_sets
+from benchlib.scenes import safety_sets
 from conftest import ROOT
 
 POLICY = ROOT / "tests" / "data" / "reference" / "policy.npz"
@@ -85,7 +86,7 @@ def _swings(rate: float) -> list:
     trajs = {"rl": [], "cfftg": []}
     # Each rate its own scenes (the unseen shapes and held-out families drawn with its own seed).
     for scenes in safety_sets(rl.config, n, shapes_seed=int(rate)).values():
-        obs, kw = [s["obstacle"] for s in scenes], batch_kwargs(scenes)
+        obs, kw = [s.obstacle for s in scenes], batch_options(scenes)
         trajs["rl"] += [t for t in rl.generate_batch(obs, fallback=None, **kw) if t.ok]
         trajs["cfftg"] += [t for t in cf.generate_batch(obs, **kw) if t.ok]
     pick = trajs["rl"][:n] + trajs["cfftg"][:n]

@@ -300,10 +300,10 @@ def test_no_rl_trajectory_flagged_safe_fails_at_10x_density(trained_run, unseen)
     gen = TrajectoryGenerator.load(trained_run / "policy.npz")
     sc = safety_scenarios(gen.config, 150, unseen=unseen)
     b = gen.generate_batch(
-        [s["obstacle"] for s in sc],
-        pivot=[s["pivot"] for s in sc],
-        start_y=[s["start_y"] for s in sc],
-        step_length=[s["step_length"] for s in sc],
+        [s.obstacle for s in sc],
+        pivot=[s.pivot for s in sc],
+        start_y=[s.start_y for s in sc],
+        step_length=[s.step_length for s in sc],
         fallback=None,
     )
     margin, tol = gen.config.env.min_clearance, gen.config.env.backward_tolerance

@@ -117,15 +117,15 @@ def test_eval_test_set_is_the_numpy_test_set():
     n, seed = 60, 12345
     lay = test_layouts(views.test_config(cfg), n, seed)
     sc = sample_scenarios(cfg, n, seed)
-    assert [s["kind"] for s in sc] == [TEST_KINDS[k] for k in np.asarray(lay.kind)]
-    assert [s["kind"] for s in sc[:5]] == list(TEST_KINDS)
-    assert [s["pivot"] for s in sc] == [PIVOT_CONDITIONS[k] for k in np.asarray(lay.pivot_kind)]
+    assert [s.kind for s in sc] == [TEST_KINDS[k] for k in np.asarray(lay.kind)]
+    assert [s.kind for s in sc[:5]] == list(TEST_KINDS)
+    assert [s.pivot for s in sc] == [PIVOT_CONDITIONS[k] for k in np.asarray(lay.pivot_kind)]
     f32 = lambda xs: np.asarray(xs, np.float32)  # noqa: E731
-    np.testing.assert_array_equal(f32([s["obstacle"].center_y for s in sc]), lay.center_y)
-    np.testing.assert_array_equal(f32([s["obstacle"].width for s in sc]), lay.width)
-    np.testing.assert_array_equal(f32([s["obstacle"].height for s in sc]), lay.height)
-    np.testing.assert_array_equal(f32([s["start_y"] for s in sc]), lay.start_y)
-    np.testing.assert_array_equal(f32([s["start_y"] + s["step_length"] for s in sc]), lay.goal_y)
+    np.testing.assert_array_equal(f32([s.obstacle.center_y for s in sc]), lay.center_y)
+    np.testing.assert_array_equal(f32([s.obstacle.width for s in sc]), lay.width)
+    np.testing.assert_array_equal(f32([s.obstacle.height for s in sc]), lay.height)
+    np.testing.assert_array_equal(f32([s.start_y for s in sc]), lay.start_y)
+    np.testing.assert_array_equal(f32([s.start_y + s.step_length for s in sc]), lay.goal_y)
     # And the JAX side drawing the same set itself agrees (kinds, pivots exactly; sizes to 2 ulp).
     tenv_params = numpy_params(views.test_config(cfg))
     jl = scenarios.scenario_layouts(jnp, tenv_params, seed, n, cycle=True)

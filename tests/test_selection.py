@@ -14,6 +14,7 @@ import pytest
 from jaxexo.config.toml_io import config_to_toml
 from jaxexo.inference import TrajectoryGenerator, time_swings
 from jaxexo.inference.scenarios import training_scenarios
+from jaxexo.physics.scenarios import batch_options
 from jaxexo.storage.policy_file import load_policy, save_policy
 from jaxexo.train import selection
 from jaxexo.train.selection import WearerScore, choose_for_wearer, score_record
@@ -110,8 +111,8 @@ def test_a_swing_that_cannot_be_timed_costs_its_own_scene_only(tmp_path):
     stuck = TrajectoryGenerator.load(policy_that_pushes_into_the_ground(tmp_path / "stuck.npz"))
     gen = TrajectoryGenerator.load(REFERENCE_POLICY)
     scenes = training_scenarios(gen.config, 4, 5)
-    kw = {k: [s[k] for s in scenes] for k in ("pivot", "start_y", "step_length")}
-    obstacles = [s["obstacle"] for s in scenes]
+    kw = batch_options(scenes)
+    obstacles = [s.obstacle for s in scenes]
     moving = list(gen.generate_batch(obstacles, **kw))
     still = list(stuck.generate_batch(obstacles, fallback=None, **kw))
     assert np.all(still[2].heel == still[2].heel[0])  # the heel never leaves its start

@@ -226,9 +226,7 @@ def test_shielded_generator_never_falls_back_and_keeps_clearance(tmp_path):
     sc = safety_scenarios(cfg, 60, seed=11)
     n_checked = 0
     for s in sc:
-        scene = gen.scene(
-            s["obstacle"], pivot=s["pivot"], start_y=s["start_y"], step_length=s["step_length"]
-        )
+        scene = gen.scene(s.obstacle, pivot=s.pivot, start_y=s.start_y, step_length=s.step_length)
         raw, acts = gen.rollout(scene)
         assert np.all(np.diff(raw[:, 0]) >= -1e-6)
         c0 = float(
@@ -330,9 +328,7 @@ def test_batched_jax_mask_decides_exactly_like_the_plain_one():
     )(st)
     batches += [jax.tree.map(lambda x, t=t: x[t], seen) for t in range(0, 24, 3)]
     scenes = unseen_scenarios(cfg.kinematics.foot_length, repeats=4)
-    held = [
-        env.layout_for(s["obstacle"], s["pivot"], s["start_y"], s["step_length"]) for s in scenes
-    ]
+    held = [env.layout_for(s.obstacle, s.pivot, s.start_y, s.step_length) for s in scenes]
     lay = jax.tree.map(lambda *x: jnp.stack(x), *held)
     st_held = jax.tree.map(lambda x: x[: len(held)], st).replace(layout=lay)
     batches += [around(st_held, len(held)) for _ in range(4)]

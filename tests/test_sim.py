@@ -108,7 +108,7 @@ def _inside_piece(p, poly):
 def test_convex_pieces_cover_the_outline_exactly():
     rng = np.random.default_rng(0)
     outlines = [Obstacle.named(k).outline for k in geometry.THESIS_OBSTACLES]
-    outlines += [s["obstacle"].outline for s in scenarios.unseen_scenarios(0.2, 1)[::9]]
+    outlines += [s.obstacle.outline for s in scenarios.unseen_scenarios(0.2, 1)[::9]]
     for o in outlines:
         pieces = convex_pieces(o)
         lo, hi = o.min(axis=0), o.max(axis=0)

@@ -149,9 +149,10 @@ def _fast_and_plain(gen, scenes, **options):
     """``generate_batch`` of ``gen`` (the fast paths) and of its plain_reference on ``scenes``,
     compared row by row (_same); the fast batch."""
     from jaxexo.inference.generator import plain_reference
+    from jaxexo.physics.scenarios import batch_options
 
-    args = {k: [s[k] for s in scenes] for k in ("pivot", "start_y", "step_length")}
-    obstacles = [s["obstacle"] for s in scenes]
+    args = batch_options(scenes)
+    obstacles = [s.obstacle for s in scenes]
     fast = gen.generate_batch(obstacles, **args, **options)
     ref = plain_reference(gen).generate_batch(obstacles, **args, **options)
     assert len(fast) == len(ref) == len(scenes)
@@ -187,10 +188,10 @@ def test_fast_generation_matches_the_reference_on_thousands_of_scenes(trained_ru
     plain = plain_reference(gen)
     for fallback in ("cfftg", None):
         for s in sc[:1000]:
-            kw = {k: s[k] for k in ("pivot", "start_y", "step_length")}
+            kw = s.options()
             _same(
-                gen.generate(s["obstacle"], fallback=fallback, **kw),
-                plain.generate(s["obstacle"], fallback=fallback, **kw),
+                gen.generate(s.obstacle, fallback=fallback, **kw),
+                plain.generate(s.obstacle, fallback=fallback, **kw),
             )
 
 

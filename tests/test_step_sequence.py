@@ -62,9 +62,7 @@ def _scenes(gen, seed: int):
         + training_scenarios(mixture, q, seed + 100)
         + sample_scenarios(cfg, q, seed + 200)
     )
-    scenes = [
-        gen.scene(s["obstacle"], s["pivot"], None, s["start_y"], s["step_length"]) for s in sc
-    ]
+    scenes = [gen.scene(s.obstacle, s.pivot, None, s.start_y, s.step_length) for s in sc]
     lay = stack_scenes(scenes, np.float32)._replace(kind=np.zeros(len(scenes), np.int32))
     return scenes, lay
 

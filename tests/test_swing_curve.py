@@ -14,11 +14,12 @@ import pytest
 from jaxexo.baselines import CFFTG
 from jaxexo.config import scalar_params
 from jaxexo.inference import TrajectoryGenerator
+from jaxexo.physics.scenarios import batch_options
 from jaxexo.swing.curve import JointPath
 from jaxexo.swing.limits import DeviceLimits
 from jaxexo.swing.timing import _joint_paths, time_swings
 
-from benchlib.scenes import batch_kwargs, safety_sets
+from benchlib.scenes import safety_sets
 from conftest import ROOT
 
 POLICY = ROOT / "tests" / "data" / "reference" / "policy.npz"
@@ -32,8 +33,8 @@ def swings():
     cf = CFFTG(rl.config)
     out = {"rl": [], "cfftg": []}
     for scenes in safety_sets(rl.config, 400).values():
-        obs = [s["obstacle"] for s in scenes]
-        kw = batch_kwargs(scenes)
+        obs = [s.obstacle for s in scenes]
+        kw = batch_options(scenes)
         out["rl"] += [t for t in rl.generate_batch(obs, fallback=None, **kw) if t.ok]
         out["cfftg"] += [t for t in cf.generate_batch(obs, **kw) if t.ok]
     return rl.config, out

@@ -15,11 +15,12 @@ from scipy.interpolate import CubicSpline
 from jaxexo.baselines import CFFTG
 from jaxexo.config import scalar_params
 from jaxexo.inference import TrajectoryGenerator
+from jaxexo.physics.scenarios import batch_options
 from jaxexo.swing import knots, time_law
 from jaxexo.swing.curve import chord_knots, cubic_paths, cubic_paths_ragged, distinct_samples
 from jaxexo.swing.timing import _joint_paths, _joint_samples, time_swings
 
-from benchlib.scenes import batch_kwargs, safety_sets
+from benchlib.scenes import safety_sets
 from conftest import ROOT
 from test_swing_timing import _passes, joint_xmax
 
@@ -35,8 +36,8 @@ def samples():
     sp = scalar_params(rl.config)
     out = {"rl": [], "cfftg": []}
     for scenes in safety_sets(rl.config, 60).values():
-        obs = [s["obstacle"] for s in scenes]
-        kw = batch_kwargs(scenes)
+        obs = [s.obstacle for s in scenes]
+        kw = batch_options(scenes)
         for name, batch in (
             ("rl", rl.generate_batch(obs, fallback=None, **kw)),
             ("cfftg", cf.generate_batch(obs, **kw)),

@@ -286,31 +286,31 @@ def test_unseen_set_is_fixed_held_out_and_accepted_by_the_generators():
     a = unseen_scenarios(FOOT, 2)
     b = unseen_scenarios(FOOT, 2)
     assert len(a) == len(HELD_OUT_FAMILIES) * CELLS_PER_FAMILY * 2
-    assert {s["kind"] for s in a} == set(HELD_OUT_FAMILIES)
+    assert {s.kind for s in a} == set(HELD_OUT_FAMILIES)
     for x, y in zip(a, b):  # deterministic
-        np.testing.assert_array_equal(x["obstacle"].outline, y["obstacle"].outline)
-        assert (x["pivot"], x["start_y"], x["step_length"]) == (
-            y["pivot"],
-            y["start_y"],
-            y["step_length"],
+        np.testing.assert_array_equal(x.obstacle.outline, y.obstacle.outline)
+        assert (x.pivot, x.start_y, x.step_length) == (
+            y.pivot,
+            y.start_y,
+            y.step_length,
         )
     # The shape numbers reproduce the outline through the JAX-side function (same u, same outline).
     for s in a[::17]:
         o, _, _ = terrain.one_family_outline(
-            np, s["kind"], np.asarray(s["family_u"], np.float32).astype(np.float64)
+            np, s.kind, np.asarray(s.family_u, np.float32).astype(np.float64)
         )
-        got = s["obstacle"].outline - [s["obstacle"].center_y, 0.0]
+        got = s.obstacle.outline - [s.obstacle.center_y, 0.0]
         np.testing.assert_allclose(got, terrain.unpad(o), atol=1e-12)
     for p in kinematics.PIVOT_CONDITIONS:
-        starts = {round(s["start_y"], 9) for s in a if s["pivot"] == p}
+        starts = {round(s.start_y, 9) for s in a if s.pivot == p}
         assert starts == {0.0, 0.06, 0.12}
     assert repeats_for(1) == 1 and repeats_for(len(HELD_OUT_FAMILIES) * CELLS_PER_FAMILY + 1) == 2
     cf = CFFTG(config_from_dict(legacy_raw()))
     batch = cf.generate_batch(
-        [s["obstacle"] for s in a[:40]],
-        pivot=[s["pivot"] for s in a[:40]],
-        start_y=[s["start_y"] for s in a[:40]],
-        step_length=[s["step_length"] for s in a[:40]],
+        [s.obstacle for s in a[:40]],
+        pivot=[s.pivot for s in a[:40]],
+        start_y=[s.start_y for s in a[:40]],
+        step_length=[s.step_length for s in a[:40]],
     )
     assert len(batch.ok) == 40
 
@@ -353,15 +353,13 @@ def test_eval_unseen_reports_per_family_end_to_end(unseen_eval):
     )
     # Recompute one family's figures independently from fresh trajectories of the same scenes.
     gen = TrajectoryGenerator.load(report["rl"]["policy"])
-    sc = [
-        s for s in unseen_scenarios(gen.config.kinematics.foot_length, 1) if s["kind"] == "stairs"
-    ]
+    sc = [s for s in unseen_scenarios(gen.config.kinematics.foot_length, 1) if s.kind == "stairs"]
     tr = [
         gen.generate(
-            s["obstacle"],
-            pivot=s["pivot"],
-            start_y=s["start_y"],
-            step_length=s["step_length"],
+            s.obstacle,
+            pivot=s.pivot,
+            start_y=s.start_y,
+            step_length=s.step_length,
             fallback=None,
         )
         for s in sc

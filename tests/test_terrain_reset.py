@@ -131,11 +131,11 @@ def test_reset_draws_the_numpy_tools_scenes(terrain_kw):
         np, numpy_params(cfg), 11, 12, cycle=True, kinds=list(range(len(t.families))), pivots=pivots
     )
     for i, s in enumerate(sc):
-        assert s["kind"] == terrain.FAMILY_NAMES[int(lc.kind[i])]
-        assert s["obstacle"].width == pytest.approx(float(lc.width[i]), abs=1e-6)
-        assert s["obstacle"].height == pytest.approx(float(lc.height[i]), abs=1e-6)
-        assert s["step_length"] == pytest.approx(float(lc.goal_y[i] - lc.start_y[i]), abs=1e-6)
-    assert {s["kind"] for s in sc} == set(t.families)
+        assert s.kind == terrain.FAMILY_NAMES[int(lc.kind[i])]
+        assert s.obstacle.width == pytest.approx(float(lc.width[i]), abs=1e-6)
+        assert s.obstacle.height == pytest.approx(float(lc.height[i]), abs=1e-6)
+        assert s.step_length == pytest.approx(float(lc.goal_y[i] - lc.start_y[i]), abs=1e-6)
+    assert {s.kind for s in sc} == set(t.families)
     assert {terrain.FAMILY_NAMES[k] for k in np.asarray(lj.kind)} == set(t.families)
 
 

@@ -13,9 +13,10 @@ import pytest
 
 from jaxexo.baselines import CFFTG
 from jaxexo.inference import TrajectoryGenerator
+from jaxexo.physics.scenarios import batch_options
 from jaxexo.swing.timing import time_swings
 
-from benchlib.scenes import batch_kwargs, safety_sets
+from benchlib.scenes import safety_sets
 from benchlib.toppra_reference import va_optimum
 from conftest import ROOT
 
@@ -29,7 +30,7 @@ def swings():
     cf = CFFTG(rl.config)
     out = {}
     for name, scenes in safety_sets(rl.config, 12).items():
-        obs, kw = [s["obstacle"] for s in scenes], batch_kwargs(scenes)
+        obs, kw = [s.obstacle for s in scenes], batch_options(scenes)
         out[name, "rl"] = [t for t in rl.generate_batch(obs, fallback=None, **kw) if t.ok]
         out[name, "cfftg"] = [t for t in cf.generate_batch(obs, **kw) if t.ok]
     return rl.config, out

@@ -85,14 +85,15 @@ def _staged(swing_timing, fn) -> tuple[float, dict]:
 
 def rate_table(rl, cf, n: int) -> list[dict]:
     """Per benchmark set and generator, the safe swings timed at 100 Hz and at 1 kHz."""
+    from jaxexo.physics.scenarios import batch_options
     from jaxexo.swing.timing import time_swings
 
-    from benchlib.scenes import batch_kwargs, safety_sets
+    from benchlib.scenes import safety_sets
 
     optimum = _optimum()
     rows = []
     for name, scenes in safety_sets(rl.config, n).items():
-        obs, kw = [s["obstacle"] for s in scenes], batch_kwargs(scenes)
+        obs, kw = [s.obstacle for s in scenes], batch_options(scenes)
         batches = {
             "rl": rl.generate_batch(obs, fallback=None, **kw),
             "cfftg": cf.generate_batch(obs, **kw),
@@ -174,10 +175,9 @@ def run_device_ready_benchmark(
     cfg = rl.config
     cf = CFFTG(cfg)
     sc = safety_scenarios(cfg, n, unseen=True)
-    kw = lambda s: {k: s[k] for k in ("pivot", "start_y", "step_length")}  # noqa: E731
     gens = {
-        "rl": lambda s: rl.generate(s["obstacle"], fallback=None, **kw(s)),
-        "cfftg": lambda s: cf.generate(s["obstacle"], **kw(s)),
+        "rl": lambda s: rl.generate(s.obstacle, fallback=None, **s.options()),
+        "cfftg": lambda s: cf.generate(s.obstacle, **s.options()),
     }
     for g in gens.values():  # warm caches (config scalars, smoothing bases)
         swing_timing.time_swing(g(sc[0]), cfg, rate=rate)

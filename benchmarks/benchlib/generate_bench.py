@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxexo.evaluation.timing import scene_options, time_batch
+from jaxexo.evaluation.timing import time_batch
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.inference.blas import blas_threads
 from jaxexo.summary import Summary, table
@@ -165,7 +165,7 @@ def time_breakdown(gen, cf, scenarios: list[dict], repeats: int = 3) -> dict:
         )
     }
     for s in scenarios:
-        scene = gen.scene(s["obstacle"], s["pivot"], None, s["start_y"], s["step_length"])
+        scene = gen.scene(s.obstacle, s.pivot, None, s.start_y, s.step_length)
         raw, acts = gen.rollout(scene)
         k = len(acts)
         states = rollout_states(sp, scene, raw, acts)
@@ -189,13 +189,13 @@ def time_breakdown(gen, cf, scenarios: list[dict], repeats: int = 3) -> dict:
         )
         rows["smoothing_correction"].append(cl)
         rows["verdict_angles"].append(max(fin - cl, 0.0))
-        at = scene_options(s)
-        rows["rl_total"].append(best(lambda: gen.generate(s["obstacle"], **at, fallback=None)))
+        at = s.options()
+        rows["rl_total"].append(best(lambda: gen.generate(s.obstacle, **at, fallback=None)))
         plan = best(lambda: cf.plan([scene]))
         tot = best(lambda: cf.finish([scene], n_pts, 1.0))
         rows["cfftg_plan"].append(plan)
         rows["cfftg_assemble"].append(max(tot - plan, 0.0))
-        rows["cfftg_total"].append(best(lambda: cf.generate(s["obstacle"], **at)))
+        rows["cfftg_total"].append(best(lambda: cf.generate(s.obstacle, **at)))
     return {k: Summary.of(v).median for k, v in rows.items() if v}
 
 

@@ -10,10 +10,11 @@ import numpy as np
 from jaxexo.baselines import CFFTG
 from jaxexo.evaluation.machine import write_result
 from jaxexo.inference import TrajectoryGenerator, time_swings
+from jaxexo.physics.scenarios import batch_options
 from jaxexo.summary import Summary, table
 from jaxexo.swing.trajectory import assemble
 
-from benchlib.scenes import batch_kwargs, safety_sets
+from benchlib.scenes import safety_sets
 
 
 def approach(heel: np.ndarray, drop: float = 0.02) -> float:
@@ -51,8 +52,8 @@ def with_touch_down(batch, gen, points: int = 6) -> list:
 
 
 def run_set(gens, scenes, config) -> dict:
-    kw = batch_kwargs(scenes)
-    obs = [s["obstacle"] for s in scenes]
+    kw = batch_options(scenes)
+    obs = [s.obstacle for s in scenes]
     out, dur = {}, {}
     for name, gen in gens.items():
         t0 = time.perf_counter()

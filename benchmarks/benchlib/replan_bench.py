@@ -64,7 +64,7 @@ def surprise_scenes(config, n: int, seed: int = DEFAULT_SEED) -> list[Surprise]:
     out = []
     for i, s in enumerate(safety_scenarios(config, n, seed=seed, unseen=True)):
         kind = SURPRISES[i % len(SURPRISES)]
-        true = s["obstacle"]
+        true = s.obstacle
         if kind == "lower":
             est = _transformed(true, height=rng.uniform(0.4, 0.5))
         elif kind == "much lower":
@@ -80,9 +80,9 @@ def surprise_scenes(config, n: int, seed: int = DEFAULT_SEED) -> list[Surprise]:
                 kind,
                 est,
                 true,
-                s["pivot"],
-                s["start_y"],
-                s["step_length"],
+                s.pivot,
+                s.start_y,
+                s.step_length,
                 float(rng.uniform(0.15, 0.45)),
             )
         )

@@ -11,6 +11,7 @@ from jaxexo.baselines import CFFTG
 from jaxexo.evaluation.machine import machine_info, write_result
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.physics import geometry
+from jaxexo.physics.scenarios import batch_options
 from jaxexo.sim.replay import (
     Legs,
     brute_force_distance,
@@ -22,12 +23,12 @@ from jaxexo.sim.replay import (
 from jaxexo.summary import Summary, table
 from jaxexo.swing.timing import DeviceLimits, time_swings
 
-from benchlib.scenes import batch_kwargs, safety_sets
+from benchlib.scenes import safety_sets
 
 
 def replay_set(sc, rl, cfftg, config, rate: float, driven: bool) -> dict:
-    kw = batch_kwargs(sc)
-    obs = [s["obstacle"] for s in sc]
+    kw = batch_options(sc)
+    obs = [s.obstacle for s in sc]
     default = DeviceLimits.from_config(config)
     out = {}
     legs_cache = {}

@@ -13,11 +13,12 @@ from jaxexo.evaluation.machine import machine_info, write_result
 from jaxexo.inference import TrajectoryGenerator
 from jaxexo.inference.scenarios import safety_scenarios
 from jaxexo.physics import geometry, swept
+from jaxexo.physics.scenarios import batch_options
 from jaxexo.summary import Summary, table
 from jaxexo.swing import smoothing as sm
 from jaxexo.swing.clearing import clear_smooth
 
-from benchlib.scenes import SHAPES, THESIS_FIVE, batch_kwargs
+from benchlib.scenes import SHAPES, THESIS_FIVE
 from benchlib.swing_quality_bench import CLEARING
 
 FACTOR = 10
@@ -141,8 +142,8 @@ def run_safety_benchmark(policy, out_dir, n: int = 2000) -> dict:
     )
     for name, unseen in ((THESIS_FIVE, False), (SHAPES, True)):
         sc = safety_scenarios(rl.config, n, unseen=unseen)
-        kw = batch_kwargs(sc)
-        obs = [s["obstacle"] for s in sc]
+        kw = batch_options(sc)
+        obs = [s.obstacle for s in sc]
         out = {}
         for gname, make in (
             ("rl", lambda: rl.generate_batch(obs, fallback=None, **kw)),

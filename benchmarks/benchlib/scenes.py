@@ -1,7 +1,6 @@
 """The scene sets the swing benchmarks share: the thesis five with shifted layouts, shapes never
 trained on (both jaxexo.inference.scenarios.safety_scenarios) and the held-out terrain families
-(jaxexo.physics.scenarios.unseen_scenarios), the keyword lists a batch of scenes is generated
-with, and the Markdown table of figures per scene set and generator."""
+(jaxexo.physics.scenarios.unseen_scenarios), and the Markdown table of figures per scene set and generator."""
 
 from __future__ import annotations
 
@@ -14,7 +13,7 @@ from jaxexo.summary import table
 THESIS_FIVE, SHAPES, FAMILIES = "thesis five, shifted", "unseen shapes", "held-out families"
 
 
-def held_out_families(config, n: int, pick: bool = True) -> list[dict]:
+def held_out_families(config, n: int, pick: bool = True) -> list[scenarios.Scenario]:
     """The held-out families in whole cells of at least ``n`` scenes; with ``pick``, ``n`` of them
     drawn at random (seed 0, kept in order)."""
     fam = scenarios.unseen_scenarios(
@@ -28,7 +27,7 @@ def held_out_families(config, n: int, pick: bool = True) -> list[dict]:
 
 def safety_sets(
     config, n: int, shapes_seed: int = 2024, pick: bool = True
-) -> dict[str, list[dict]]:
+) -> dict[str, list[scenarios.Scenario]]:
     """The three sets by name: ``n`` scenes of the thesis five and of unseen shapes (drawn with
     ``shapes_seed``), and the held-out families (see held_out_families)."""
     return {
@@ -36,11 +35,6 @@ def safety_sets(
         SHAPES: safety_scenarios(config, n, seed=shapes_seed, unseen=True),
         FAMILIES: held_out_families(config, n, pick),
     }
-
-
-def batch_kwargs(scenes: list[dict]) -> dict[str, list]:
-    """generate_batch's per-scene keywords (pivot, start_y, step_length) of a scene list."""
-    return {k: [s[k] for s in scenes] for k in ("pivot", "start_y", "step_length")}
 
 
 def set_table(columns, sets: dict, cells) -> list[str]:

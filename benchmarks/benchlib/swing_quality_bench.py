@@ -14,6 +14,7 @@ from jaxexo.baselines import CFFTG
 from jaxexo.evaluation.machine import machine_info, write_result
 from jaxexo.inference import TrajectoryGenerator, time_swings
 from jaxexo.physics import geometry, swept
+from jaxexo.physics.scenarios import batch_options
 from jaxexo.storage.atomic import write_figure
 from jaxexo.summary import Summary
 from jaxexo.swing.timing import joint_jerk
@@ -23,7 +24,6 @@ from benchlib.scenes import (
     FAMILIES,
     SHAPES,
     THESIS_FIVE,
-    batch_kwargs,
     safety_sets,
     set_table,
 )
@@ -163,13 +163,13 @@ def run_set(
     """Both generators' figures on one scene set, by generator name; ``arrays`` (a dict), when given,
     receives each generator's per-scene (safe, lift m, duration s) for the figure."""
     out, per = {}, {}
-    true = [s["obstacle"] for s in scenes]
+    true = [s.obstacle for s in scenes]
     seen = (
         true
         if error == 0
         else [perturbed(o, error, 1.0 if i % 2 else -1.0) for i, o in enumerate(true)]
     )
-    kw = batch_kwargs(scenes)
+    kw = batch_options(scenes)
     if clearance is not None:
         kw["clearance"] = clearance
     for name, gen in gens.items():

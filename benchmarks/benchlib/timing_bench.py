@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxexo.physics.scenarios import shape_scenarios
+from jaxexo.physics.scenarios import batch_options, shape_scenarios
 from jaxexo.summary import Summary, table
 
 # benchmarks/bench_timing.py's options (benchlib.runner.run_script).
@@ -111,22 +111,16 @@ def run_timing_benchmark(
     ]
     rows = []
     for set_name, sc in sets.items():
-        args = {k: [s[k] for s in sc] for k in ("obstacle", "pivot", "start_y", "step_length")}
         res, durs = {}, {}
         for name, g in gens.items():
-            batch = g.generate_batch(
-                args["obstacle"],
-                pivot=args["pivot"],
-                start_y=args["start_y"],
-                step_length=args["step_length"],
-            )
+            batch = g.generate_batch([s.obstacle for s in sc], **batch_options(sc))
             trajs = list(batch)
             t0 = time.perf_counter()
             timed = time_swings(trajs, g.config, rate=rate)
             ms = (time.perf_counter() - t0) * 1e3 / len(trajs)
             fig, durs[name] = _figures(trajs, timed, rate)
             fig["timing_ms_per_swing"] = ms
-            kinds = np.array([s["kind"] for s in sc])
+            kinds = np.array([s.kind for s in sc])
             fig["by_kind_swing_s_mean"] = {
                 k: float(durs[name][kinds == k].mean()) for k in dict.fromkeys(kinds)
             }

@@ -50,14 +50,15 @@ def run_tracking_benchmark(
     from jaxexo.evaluation.machine import machine_info, write_result
     from jaxexo.inference import TrajectoryGenerator
     from jaxexo.inference.scenarios import safety_scenarios
+    from jaxexo.physics.scenarios import batch_options
     from jaxexo.sim.replay import Legs, driven_replay
     from jaxexo.swing.timing import DeviceLimits, time_swings
 
     rl = TrajectoryGenerator.load(policy)
     cfg = rl.config
     sc = safety_scenarios(cfg, n, unseen=True)
-    kw = {k: [s[k] for s in sc] for k in ("pivot", "start_y", "step_length")}
-    obs = [s["obstacle"] for s in sc]
+    kw = batch_options(sc)
+    obs = [s.obstacle for s in sc]
     batches = {
         "rl": rl.generate_batch(obs, fallback=None, **kw),
         "cfftg": CFFTG(cfg).generate_batch(obs, **kw),

@@ -25,9 +25,10 @@ from jaxexo.evaluation.thesis_results import (
     THESIS_CFFTG_MS,
     THESIS_T32,
 )
-from jaxexo.evaluation.timing import BATCH, scene_options
+from jaxexo.evaluation.timing import BATCH
 from jaxexo.inference.scenarios import sample_scenarios, training_scenarios
 from jaxexo.physics.kinematics import PIVOT_CONDITIONS
+from jaxexo.physics.scenarios import Scenario
 from jaxexo.summary import Summary, table
 
 BATCH_REPEATS = 3
@@ -44,19 +45,18 @@ THESIS_REFERENCE = (
 )
 
 
-def make_scenarios(cfg: Config, which: str, n: int, seed: int = 12345) -> list[dict]:
+def make_scenarios(cfg: Config, which: str, n: int, seed: int = 12345) -> list[Scenario]:
     """``test``: n scenarios of jaxexo.inference.scenarios.sample_scenarios (the five thesis obstacles
     over the three pivot conditions); ``train``: n of the config's training distribution; ``all``:
     both (2 n); ``unseen``: the fixed held-out benchmark of jaxexo.evaluation.unseen (at least n
-    scenes; its seed is fixed, ``seed`` does not apply). Each a dict of ``generate``'s keyword
-    arguments plus ``kind``."""
+    scenes; its seed is fixed, ``seed`` does not apply). Each a jaxexo.physics.scenarios.Scenario."""
     if which not in SCENARIO_SETS:
         raise ValueError(f"scenarios must be one of {SCENARIO_SETS}, got {which!r}")
     if which == "unseen":
         from jaxexo.physics.scenarios import repeats_for, unseen_scenarios
 
         return unseen_scenarios(cfg.kinematics.foot_length, repeats_for(n))
-    out: list[dict] = []
+    out: list[Scenario] = []
     if which in ("test", "all"):
         out += sample_scenarios(cfg, n, seed)
     if which in ("train", "all"):
@@ -65,7 +65,7 @@ def make_scenarios(cfg: Config, which: str, n: int, seed: int = 12345) -> list[d
 
 
 def batch_time(
-    gen, scenarios: list[dict], size: int = BATCH, repeats: int = BATCH_REPEATS
+    gen, scenarios: list[Scenario], size: int = BATCH, repeats: int = BATCH_REPEATS
 ) -> float:
     """Median wall time (ms) of ``generate_batch`` on ``size`` scenarios (cycled if fewer), timed by
     the generator benchmark's own function, scaled to a batch of 1000 (exact when size = 1000)."""
@@ -87,18 +87,18 @@ class GeneratorRun:
 
 
 def run_generators(
-    generators: dict, scenarios: list[dict], warmup: int = 20
+    generators: dict, scenarios: list[Scenario], warmup: int = 20
 ) -> dict[str, GeneratorRun]:
     """Generate every scenario with every generator, alternating their order per scenario."""
     names = list(generators)
     for s in scenarios[:warmup]:
         for g in generators.values():
-            g.generate(s["obstacle"], **scene_options(s))
+            g.generate(s.obstacle, **s.options())
     out = {n: GeneratorRun([], np.empty(len(scenarios)), np.empty(len(scenarios))) for n in names}
     for i, s in enumerate(scenarios):
         for n in names if i % 2 == 0 else names[::-1]:
             c0, t0 = time.process_time(), time.perf_counter()
-            tr = generators[n].generate(s["obstacle"], **scene_options(s))
+            tr = generators[n].generate(s.obstacle, **s.options())
             out[n].wall_s[i], out[n].cpu_s[i] = time.perf_counter() - t0, time.process_time() - c0
             out[n].trajectories.append(tr)
     return out
@@ -106,7 +106,7 @@ def run_generators(
 
 def evaluate_generators(
     generators: dict,
-    scenarios: list[dict],
+    scenarios: list[Scenario],
     batch_size: int = BATCH,
     batch_repeats: int = BATCH_REPEATS,
     device: bool = True,
@@ -115,8 +115,8 @@ def evaluate_generators(
     every swing for the device too (jaxexo.swing.timing; the report's "device" figures), off where
     no table reads them (the epsilon-greedy protocol's exploring swings)."""
     runs = run_generators(generators, scenarios)
-    kinds = np.array([s["kind"] for s in scenarios])
-    pivots = np.array([s["pivot"] for s in scenarios])
+    kinds = np.array([s.kind for s in scenarios])
+    pivots = np.array([s.pivot for s in scenarios])
     report, trajs = {}, {}
     groups = {
         "by_kind": {k: kinds == k for k in dict.fromkeys(kinds)},

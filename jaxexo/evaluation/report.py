@@ -211,7 +211,7 @@ def markdown(report: dict, title: str, context: list[str], sections: list[str] =
     return "\n".join(lines) + "\n"
 
 
-def plot_overlays(path: Path, trajs: dict, scenarios: list[dict], per_kind: int = 25) -> None:
+def plot_overlays(path: Path, trajs: dict, scenarios: list, per_kind: int = 25) -> None:
     """Heel paths over the obstacle, one panel per kind, each generator in its colour (Fig. 3.29).
     ``rl+cfftg`` is, scene by scene, either the RL swing or CFFTG's plan, so its own lines would hide
     under (or over) identical ones: with ``rl`` beside it, the RL paths it replaced are drawn dotted
@@ -222,7 +222,7 @@ def plot_overlays(path: Path, trajs: dict, scenarios: list[dict], per_kind: int 
     import matplotlib.pyplot as plt
     from matplotlib.lines import Line2D
 
-    kinds = list(dict.fromkeys(s["kind"] for s in scenarios))
+    kinds = list(dict.fromkeys(s.kind for s in scenarios))
     cols = min(3, len(kinds))
     rows = -(-len(kinds) // cols)
     fig, axes = plt.subplots(rows, cols, figsize=(5.0 * cols, 3.4 * rows + 0.8), squeeze=False)
@@ -245,9 +245,9 @@ def plot_overlays(path: Path, trajs: dict, scenarios: list[dict], per_kind: int 
             ),
         )
     for ax, k in zip(axes.flat, kinds):
-        idx = [i for i, s in enumerate(scenarios) if s["kind"] == k][:per_kind]
+        idx = [i for i, s in enumerate(scenarios) if s.kind == k][:per_kind]
         for i in idx:
-            o = scenarios[i]["obstacle"].outline
+            o = scenarios[i].obstacle.outline
             ax.fill(o[:, 0] * 100, o[:, 1] * 100, color="0.85", zorder=0)
         for name in drawn:
             for i in idx:
@@ -278,14 +278,14 @@ def plot_overlays(path: Path, trajs: dict, scenarios: list[dict], per_kind: int 
     plt.close(fig)
 
 
-def plot_joint_profiles(path: Path, trajs: dict, scenarios: list[dict], per_kind: int = 10) -> None:
+def plot_joint_profiles(path: Path, trajs: dict, scenarios: list, per_kind: int = 10) -> None:
     """Swing hip and knee angles over the swing, per generator and kind (thesis Fig. 3.11-3.28)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    kinds = list(dict.fromkeys(s["kind"] for s in scenarios))
+    kinds = list(dict.fromkeys(s.kind for s in scenarios))
     names = list(trajs)
     fig, axes = plt.subplots(
         2 * len(names),
@@ -295,7 +295,7 @@ def plot_joint_profiles(path: Path, trajs: dict, scenarios: list[dict], per_kind
         sharex=True,
     )
     for c, k in enumerate(kinds):
-        idx = [i for i, s in enumerate(scenarios) if s["kind"] == k][:per_kind]
+        idx = [i for i, s in enumerate(scenarios) if s.kind == k][:per_kind]
         for r, name in enumerate(names):
             for j, (col, label) in enumerate(((0, "hip swing"), (1, "knee swing"))):
                 ax = axes[2 * r + j, c]
@@ -356,7 +356,7 @@ def write_report(
     out: str | Path,
     report: dict,
     trajs: dict,
-    scenarios: list[dict],
+    scenarios: list,
     title: str,
     context: list[str],
     figures: bool = True,

@@ -8,14 +8,15 @@ from __future__ import annotations
 import numpy as np
 
 from jaxexo.evaluation.metrics import path_length
+from jaxexo.physics.scenarios import Scenario
 from jaxexo.summary import Summary
 from jaxexo.summary import table as md_table
 
 
-def family_table(trajs: dict, scenarios: list[dict]) -> dict:
+def family_table(trajs: dict, scenarios: list[Scenario]) -> dict:
     """Per family and generator: n, success, accuracy, clearance min/p5/median (m), path length
     mean/median (m). ``trajs``: {generator: [Trajectory per scenario]}."""
-    kinds = np.array([s["kind"] for s in scenarios])
+    kinds = np.array([s.kind for s in scenarios])
     table = {}
     for fam in dict.fromkeys(kinds):
         mask = kinds == fam

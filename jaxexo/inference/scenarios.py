@@ -9,16 +9,16 @@ import numpy as np
 
 from jaxexo.config import Config, numpy_params, test_config
 from jaxexo.physics import scenarios
+from jaxexo.physics.scenarios import Scenario
 
 
-def sample_scenarios(config: Config, n: int, seed: int = 12345) -> list[dict]:
-    """n test scenarios as keyword arguments of ``TrajectoryGenerator.generate`` plus ``kind``: kind
-    i % 5, pivot (i // 5) % 3, the rest drawn from the config's layout distribution."""
+def sample_scenarios(config: Config, n: int, seed: int = 12345) -> list[Scenario]:
+    """n test scenarios: kind i % 5, pivot (i // 5) % 3, the rest drawn from the config's layouts."""
     tcfg = test_config(config)
     return _kwargs(tcfg, scenarios.scenario_layouts(np, numpy_params(tcfg), seed, n, cycle=True))
 
 
-def training_scenarios(config: Config, n: int, seed: int = 54321) -> list[dict]:
+def training_scenarios(config: Config, n: int, seed: int = 54321) -> list[Scenario]:
     """n scenarios of the config's own training distribution: its obstacle mixture (every entry of
     positive weight in turn, sizes drawn from its ranges) and the pivot conditions it trains on (in
     turn), the rest drawn as the environment's reset draws it."""
@@ -37,14 +37,14 @@ def training_scenarios(config: Config, n: int, seed: int = 54321) -> list[dict]:
     )
 
 
-def safety_scenarios(config: Config, n: int, seed: int = 2024, unseen: bool = False) -> list[dict]:
+def safety_scenarios(
+    config: Config, n: int, seed: int = 2024, unseen: bool = False
+) -> list[Scenario]:
     """jaxexo.physics.scenarios.safety_scenes for the config's foot length and step lengths."""
     return scenarios.safety_scenes(
         config.kinematics.foot_length, config.layout.step_length, n, seed, unseen
     )
 
 
-def _kwargs(cfg: Config, lay) -> list[dict]:
-    return scenarios.scene_kwargs(
-        lay, None if cfg.layout.terrain is not None else cfg.layout.obstacles
-    )
+def _kwargs(cfg: Config, lay) -> list[Scenario]:
+    return scenarios.as_scenarios(lay, cfg.layout.obstacles if cfg.layout.terrain is None else None)

@@ -10,6 +10,7 @@ timing shapes). Why and how: docs/training.md#the-environment.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -192,15 +193,39 @@ def scenario_layouts(
 
 
 # --------------------------------------------------------------------------------------------
-# Scene sets as keyword arguments of ``generate`` (NumPy only: tools, tests, benchmarks)
+# Scene sets as ``Scenario`` records, ``generate``'s arguments (NumPy only: tools, tests, benchmarks)
 # --------------------------------------------------------------------------------------------
 
 
-def scene_kwargs(lay: Scene, obstacles=None) -> list[dict]:
-    """Scenes ``lay`` [N] (``scenario_layouts``') as keyword arguments of ``generate`` plus
-    ``kind``: ``obstacles`` are the layout's obstacle mixture (objects with ``kind``, ``shape`` and
-    ``unit_vertices()``, indexed by the layouts' ``kind``), None for procedural terrain (``kind`` is
-    the family id and the outline is in the world frame)."""
+class Scenario(NamedTuple):
+    """One scene of a NumPy scene set, as ``generate`` takes it: ``kind`` (the obstacle kind, or the
+    terrain family's name), ``obstacle`` (a geometry.Obstacle in the world frame, m), ``pivot`` (one
+    of PIVOT_CONDITIONS), ``start_y`` (m, the swing heel's start) and ``step_length`` (m);
+    ``family_u`` [D_MAX] the terrain family's shape numbers (terrain.family_outline), held-out sets
+    only, else None."""
+
+    kind: str
+    obstacle: Obstacle
+    pivot: str
+    start_y: float
+    step_length: float
+    family_u: list[float] | None = None
+
+    def options(self) -> dict:
+        """``generate``'s keyword arguments after the obstacle: pivot, start_y, step_length."""
+        return {"pivot": self.pivot, "start_y": self.start_y, "step_length": self.step_length}
+
+
+def batch_options(scenes) -> dict[str, list]:
+    """``generate_batch``'s per-scene keyword arguments (pivot, start_y, step_length) of Scenarios."""
+    return {k: [getattr(s, k) for s in scenes] for k in ("pivot", "start_y", "step_length")}
+
+
+def as_scenarios(lay: Scene, obstacles=None) -> list[Scenario]:
+    """Scenes ``lay`` [N] (``scenario_layouts``') as Scenarios: ``obstacles`` are the layout's
+    obstacle mixture (objects with ``kind``, ``shape`` and ``unit_vertices()``, indexed by the
+    layouts' ``kind``), None for procedural terrain (``kind`` is the family id and the outline is in
+    the world frame)."""
     out = []
     for i in range(len(lay.start_y)):
         w, h, center = (float(getattr(lay, k)[i]) for k in ("width", "height", "center_y"))
@@ -212,13 +237,8 @@ def scene_kwargs(lay: Scene, obstacles=None) -> list[dict]:
         else:
             kind, ob = spec.kind, getattr(Obstacle, spec.shape)(w, h, center_y=center)
         pivot, start = PIVOT_CONDITIONS[int(lay.pivot_kind[i])], float(lay.start_y[i])
-        out.append(_scene(kind, ob, pivot, start, float(lay.goal_y[i]) - start))
+        out.append(Scenario(kind, ob, pivot, start, float(lay.goal_y[i]) - start))
     return out
-
-
-def _scene(kind: str, obstacle: Obstacle, pivot: str, start_y: float, step_length: float) -> dict:
-    """A scene as ``generate``'s keyword arguments plus ``kind``."""
-    return dict(kind=kind, obstacle=obstacle, pivot=pivot, start_y=start_y, step_length=step_length)
 
 
 UNSEEN_SHAPES = ("rectangle", "wedge", "pole", "bumps")
@@ -244,7 +264,7 @@ def _unseen_obstacle(rng, shape: str, center: float) -> Obstacle:
 
 def safety_scenes(
     foot_length: float, step_length, n: int, seed: int = 2024, unseen: bool = False
-) -> list[dict]:
+) -> list[Scenario]:
     """n shifted layouts for the safe-swing checks (``foot_length`` m, ``step_length`` a range [lo, hi] m): the start anywhere in 0-10 cm, the obstacle anywhere
     in the gap between the toe at the start and the goal (terrain.NEAR_MARGIN = 2.5 cm from the toe,
     terrain.FAR_MARGIN = 6 cm from the goal: procedural terrain's placement margins), every pivot condition in
@@ -273,7 +293,7 @@ def safety_scenes(
         if not unseen:
             ob = Obstacle.named(kind, center_y=center)
         pivot = PIVOT_CONDITIONS[(i // len(kinds)) % 3]
-        out.append(_scene(kind, ob, pivot, float(start), float(step)))
+        out.append(Scenario(kind, ob, pivot, float(start), float(step)))
     return out
 
 
@@ -300,15 +320,14 @@ def unseen_scenarios(
     repeats: int = 2,
     seed: int = UNSEEN_SEED,
     families=terrain.HELD_OUT_FAMILIES,
-) -> list[dict]:
+) -> list[Scenario]:
     """The held-out scene set: families x pivots x starts x step lengths x ``repeats`` draws (shape
     and position). The families are terrain.HELD_OUT_FAMILIES (excluded from training by
     construction), the starts 0, 6 and 12 cm closer to the obstacle, the step lengths the shortest
     that fits the drawn obstacle, the middle and the longest of 0.55-0.85 m; shapes and positions in
     the gap come from NumPy Generators seeded with the fixed ``UNSEEN_SEED``, so numbers are
-    comparable between models (do not tune a model to it). Scenes are dicts of ``generate``'s keyword
-    arguments plus ``kind`` (the family name) and ``family_u`` (the shape's uniform numbers, for
-    reproducing it with terrain.family_outline)."""
+    comparable between models (do not tune a model to it). Scenarios with ``kind`` the family name
+    and ``family_u`` the shape's uniform numbers (to reproduce it with terrain.family_outline)."""
     if repeats < 1:
         raise ValueError(f"repeats must be >= 1, got {repeats}")
     for f in families:
@@ -330,13 +349,13 @@ def unseen_scenarios(
                             np, u, width[i], UNSEEN_START_SHIFT, UNSEEN_STEP_LENGTH, foot_length
                         )
                         ob = terrain.to_obstacle(outline[i], float(c))
-                        scene = _scene(fam, ob, pivot, float(start), float(L))
-                        out.append({**scene, "family_u": u_shape[i].tolist()})
+                        u = u_shape[i].tolist()
+                        out.append(Scenario(fam, ob, pivot, float(start), float(L), u))
                         i += 1
     return out
 
 
-def shape_scenarios(n: int, seed: int = 2024) -> list[dict]:
+def shape_scenarios(n: int, seed: int = 2024) -> list[Scenario]:
     """n scenes for device timing, shapes and sizes outside the thesis set: triangles, half-ellipses and four-point profiles of
     random size (width 8-22 cm, height 5-25 cm), the three pivot conditions in turn."""
     rng = np.random.default_rng(seed)
@@ -354,15 +373,7 @@ def shape_scenarios(n: int, seed: int = 2024) -> list[dict]:
                 [(c - w / 2, 0.0), (c + a, h), (c + b, rng.uniform(0.5, 1.0) * h), (c + w / 2, 0.0)]
             )
             kind = "profile"
-        out.append(
-            {
-                "obstacle": ob,
-                "kind": kind,
-                "pivot": PIVOT_CONDITIONS[(i // 3) % 3],
-                "start_y": 0.0,
-                "step_length": 0.70,
-            }
-        )
+        out.append(Scenario(kind, ob, PIVOT_CONDITIONS[(i // 3) % 3], 0.0, 0.70))
     return out
 
 
@@ -379,7 +390,9 @@ __all__ = [
     "layout_from_uniforms",
     "terrain_layout_from_uniforms",
     "scenario_layouts",
-    "scene_kwargs",
+    "Scenario",
+    "batch_options",
+    "as_scenarios",
     "safety_scenes",
     "UNSEEN_SHAPES",
     "UNSEEN_SEED",

@@ -19,6 +19,7 @@ from jaxexo.config import Config
 from jaxexo.inference import time_swing, time_swings
 from jaxexo.inference.registry import generator_class
 from jaxexo.inference.scenarios import training_scenarios
+from jaxexo.physics.scenarios import Scenario, batch_options
 from jaxexo.summary import Summary
 
 # Scenes every candidate is swung on: enough that one unsafe swing in a hundred shows, few enough that
@@ -52,17 +53,9 @@ class _Figures:
     lift: np.ndarray  # (n,) m
 
 
-def _swing(gen, scenes: list[dict], cfg: Config, **options) -> _Figures:
-    obstacles = [s["obstacle"] for s in scenes]
-    batch = list(
-        gen.generate_batch(
-            obstacles,
-            pivot=[s["pivot"] for s in scenes],
-            start_y=[s["start_y"] for s in scenes],
-            step_length=[s["step_length"] for s in scenes],
-            **options,
-        )
-    )
+def _swing(gen, scenes: list[Scenario], cfg: Config, **options) -> _Figures:
+    obstacles = [s.obstacle for s in scenes]
+    batch = list(gen.generate_batch(obstacles, **batch_options(scenes), **options))
     duration = _durations(batch, cfg)
     lift = np.array([t.heel[:, 1].max() - o.height for t, o in zip(batch, obstacles)])
     # A swing that cannot be timed is not one a wearer can be given: unsafe on its scene.
