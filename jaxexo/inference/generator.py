@@ -101,6 +101,7 @@ class TrajectoryGenerator(SwingGenerator):
         self.max_steps = int(config.env.max_steps)
         self.terminate_on_collision = config.env.collision == "terminate"
         self.directions = [tuple(float(x) for x in d) for d in self.np_params.directions]
+        self._shields = {}  # the shield's NumPy forms by kind (``_shield``)
         self._cfftg = None  # built on the first fallback (its constants cost ~ms to derive)
         self.shield = bool(config.env.shield)
         # The spline's smoothing when a call does not give one (m^2, thesis 2.7's s).
@@ -238,8 +239,12 @@ class TrajectoryGenerator(SwingGenerator):
         return np.asarray(pts), np.asarray(acts, dtype=np.int64)
 
     def _shield(self, kind: str):
-        """The shield's form ``kind`` (jaxexo.shield.make_shield), counting in ``shield_stats``."""
-        return make_shield(kind, self.np_params, self.sp, self.shield_stats)
+        """The shield's form ``kind`` (jaxexo.shield.make_shield), counting in ``shield_stats``; built
+        once per generator (the forms keep no state of a swing, and the scalar one derives two
+        parameter views on construction, 0.1 ms a swing)."""
+        if kind not in self._shields:
+            self._shields[kind] = make_shield(kind, self.np_params, self.sp, self.shield_stats)
+        return self._shields[kind]
 
     def _shield_first(self) -> bool:
         """Whether the rollouts check the shield's moves in order of Q (greedy only; not in
