@@ -8,7 +8,7 @@ jaxexo.physics.changes'. What it does: docs/training.md#obstacle-changes-in-trai
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -92,7 +92,19 @@ def write_change(spec: ChangeSpec | None) -> Any:
     return {k: list(x) if isinstance(x, tuple) else x for k, x in vars(spec).items()}
 
 
-def change_params(spec: ChangeSpec | None, cfg) -> dict[str, np.ndarray]:
+class ChangeLeaves(NamedTuple):
+    """The obstacle change's EnvParams leaves."""
+
+    change_chance: np.ndarray  # () the chance an episode's obstacle changes
+    change_steps: np.ndarray  # [2] int32, the step range of the switch
+    change_taller: np.ndarray  # [2] the height's growth range (fraction)
+    change_wider: np.ndarray  # [2] the width's growth range (fraction)
+    change_move: np.ndarray  # [2] m, the move range
+    change_second: np.ndarray  # () the chance of a second obstacle
+    change_max_height: np.ndarray  # () m, the tallest obstacle the layout draws
+
+
+def change_params(spec: ChangeSpec | None, cfg) -> ChangeLeaves:
     """The change as EnvParams leaves (off: ChangeSpec's defaults at chance 0, never read: the switch
     is static, jaxexo.env's ``obstacle_change``) and the tallest obstacle the layout draws, which a
     taller obstacle or a second one never exceeds (the config's checks make that one clearable)."""
@@ -104,15 +116,15 @@ def change_params(spec: ChangeSpec | None, cfg) -> dict[str, np.ndarray]:
         else max(o.height[1] * (1.0 + lay.size_jitter) for o in lay.obstacles)
     )
     f = lambda x: np.asarray(x, dtype=np.float32)  # noqa: E731
-    return {
-        "change_chance": f(s.chance),
-        "change_steps": np.asarray(s.steps, dtype=np.int32),
-        "change_taller": f(s.taller),
-        "change_wider": f(s.wider),
-        "change_move": f(s.move),
-        "change_second": f(s.second),
-        "change_max_height": f(tallest),
-    }
+    return ChangeLeaves(
+        change_chance=f(s.chance),
+        change_steps=np.asarray(s.steps, dtype=np.int32),
+        change_taller=f(s.taller),
+        change_wider=f(s.wider),
+        change_move=f(s.move),
+        change_second=f(s.second),
+        change_max_height=f(tallest),
+    )
 
 
 __all__ = ["ChangeSpec", "CHANGE_KEYS", "parse_change", "write_change", "change_params"]

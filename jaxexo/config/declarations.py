@@ -29,8 +29,9 @@ class FieldSpec:
     unit: str = ""
     role: str = "leaf"
     param: str | None = None  # EnvParams name when it differs from the field name
-    # value -> {EnvParams name: NumPy value}; ``cfg`` is passed for values that need other fields.
-    to_param: Callable[[Any, Any], dict] | None = None
+    # value -> {EnvParams name: NumPy value}, or a NamedTuple of them (a section's several leaves);
+    # ``cfg`` is passed for values that need other fields.
+    to_param: Callable[[Any, Any], Any] | None = None
     dtype: str = "float32"  # of the pytree leaf
     write: Callable[[Any], Any] | None = None  # value -> TOML-writable value (default: as is)
     # (EnvParams name, "section.field") for a parameter that ``to_param`` takes from another field
@@ -51,7 +52,8 @@ class FieldSpec:
 
     def params(self, name: str, value, cfg) -> dict[str, np.ndarray]:
         if self.to_param is not None:
-            return self.to_param(value, cfg)
+            out = self.to_param(value, cfg)
+            return out if isinstance(out, dict) else out._asdict()
         return {self.param or name: np.asarray(value, dtype=self.dtype)}
 
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -153,7 +153,17 @@ def parse_obstacles(path: str, v: Any) -> tuple[ObstacleSpec, ...]:
     )
 
 
-def obstacle_params(obstacles: tuple[ObstacleSpec, ...], cfg) -> dict[str, np.ndarray]:
+class ObstacleLeaves(NamedTuple):
+    """The obstacle mixture's EnvParams leaves (B kinds, K outline vertices, P shape points)."""
+
+    kind_outlines: np.ndarray  # [B, K, 2] padded unit outlines
+    kind_shape: np.ndarray  # [B, P] shape descriptors
+    kind_cdf: np.ndarray  # [B] the kinds' cumulative probabilities
+    kind_width: np.ndarray  # [B, 2] m, width range
+    kind_height: np.ndarray  # [B, 2] m, height range
+
+
+def obstacle_params(obstacles: tuple[ObstacleSpec, ...], cfg) -> ObstacleLeaves:
     """The layout's obstacle mixture as EnvParams leaves: padded unit outlines (B, K, 2), shape
     descriptors (B, P), the kinds' cumulative probabilities and their size ranges (m)."""
     outlines = np.stack(
@@ -161,13 +171,13 @@ def obstacle_params(obstacles: tuple[ObstacleSpec, ...], cfg) -> dict[str, np.nd
     )
     shapes = np.stack([geometry.shape_descriptor(u, cfg.env.shape_points) for u in outlines])
     f = lambda x: np.asarray(x, dtype=np.float32)  # noqa: E731
-    return {
-        "kind_outlines": f(outlines),
-        "kind_shape": f(shapes),
-        "kind_cdf": cdf([o.weight for o in obstacles]),
-        "kind_width": f([o.width for o in obstacles]),
-        "kind_height": f([o.height for o in obstacles]),
-    }
+    return ObstacleLeaves(
+        kind_outlines=f(outlines),
+        kind_shape=f(shapes),
+        kind_cdf=cdf([o.weight for o in obstacles]),
+        kind_width=f([o.width for o in obstacles]),
+        kind_height=f([o.height for o in obstacles]),
+    )
 
 
 def default_obstacles() -> tuple[ObstacleSpec, ...]:
@@ -396,24 +406,35 @@ def write_terrain(spec) -> Any:
     }
 
 
-def terrain_params(spec, cfg) -> dict[str, np.ndarray]:
+class TerrainLeaves(NamedTuple):
+    """The terrain's EnvParams leaves (F families drawn; 0 for terrain off)."""
+
+    terrain_ids: np.ndarray  # [F] int32 family ids
+    terrain_cdf: np.ndarray  # [F] their cumulative probabilities
+    terrain_start_shift: np.ndarray  # [2] m
+    terrain_step_length: np.ndarray  # [2] m
+    terrain_pivot_cdf: np.ndarray  # [3]
+    terrain_margins: np.ndarray  # [2] m, near and far
+
+
+def terrain_params(spec, cfg) -> TerrainLeaves:
     """The terrain description as EnvParams leaves. Off: ``terrain_ids`` has length 0, which
     jaxexo.physics.scenarios reads as a static (shape) switch back to the obstacle mixture."""
     f = lambda x: np.asarray(x, dtype=np.float32)  # noqa: E731
     if spec is None:
-        return {
-            "terrain_ids": np.zeros((0,), np.int32),
-            "terrain_cdf": f(np.zeros((0,))),
-            "terrain_start_shift": f([0.0, 0.0]),
-            "terrain_step_length": f([0.0, 0.0]),
-            "terrain_pivot_cdf": cdf([1.0, 1.0, 1.0]),
-            "terrain_margins": f([0.0, 0.0]),
-        }
-    return {
-        "terrain_ids": spec.ids.astype(np.int32),
-        "terrain_cdf": f(spec.cdf),
-        "terrain_start_shift": f(spec.start_shift),
-        "terrain_step_length": f(spec.step_length),
-        "terrain_pivot_cdf": cdf(spec.pivot),
-        "terrain_margins": f([spec.near_margin, spec.far_margin]),
-    }
+        return TerrainLeaves(
+            terrain_ids=np.zeros((0,), np.int32),
+            terrain_cdf=f(np.zeros((0,))),
+            terrain_start_shift=f([0.0, 0.0]),
+            terrain_step_length=f([0.0, 0.0]),
+            terrain_pivot_cdf=cdf([1.0, 1.0, 1.0]),
+            terrain_margins=f([0.0, 0.0]),
+        )
+    return TerrainLeaves(
+        terrain_ids=spec.ids.astype(np.int32),
+        terrain_cdf=f(spec.cdf),
+        terrain_start_shift=f(spec.start_shift),
+        terrain_step_length=f(spec.step_length),
+        terrain_pivot_cdf=cdf(spec.pivot),
+        terrain_margins=f([spec.near_margin, spec.far_margin]),
+    )
