@@ -396,3 +396,39 @@ def test_a_ctrl_c_wrapped_by_a_class_definition_ends_with_the_one_line(monkeypat
     monkeypatch.setattr(cli, "_main", other)
     with pytest.raises(RuntimeError, match="a real error"):
         cli.main([])
+
+
+def test_a_ctrl_c_handled_after_it_landed_in_generated_code_ends_with_130(tmp_path):
+    """A Ctrl-C that lands in code run from a string (a dataclass's generated methods, exec'd while
+    the imports run) and is handled by main: the process ends with 130 and main's one line. Python
+    run with -m would otherwise end such a process by SIGINT whatever its exit status (seen as a
+    returncode of -2 after the message, in CI)."""
+    (tmp_path / "ctrl_c_in_exec.py").write_text(
+        textwrap.dedent(
+            """
+            import os, signal, sys
+            import jaxexo.cli as cli
+
+            def main(argv=None):
+                try:
+                    exec("import os, signal\\nos.kill(os.getpid(), signal.SIGINT)\\nx = 1")
+                except KeyboardInterrupt:
+                    print("jaxexo: interrupted", file=sys.stderr)
+                    return 130
+                return 0
+
+            cli.main = main
+            cli.run()
+            """
+        )
+    )
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), str(tmp_path)])}
+    p = subprocess.run(
+        [sys.executable, "-m", "ctrl_c_in_exec"],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+    )
+    assert p.returncode == 130, (p.returncode, p.stderr[-2000:])
+    assert p.stderr.strip().splitlines() == ["jaxexo: interrupted"]

@@ -5,6 +5,7 @@ name the user typed. Subcommands import JAX lazily, after the CPU-device setup."
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 from jaxexo.cli import bench, evaluate, generate, mjcf, replay, reproduce, sweep, train, walk
@@ -107,6 +108,23 @@ def main(argv=None) -> int:
 
         print("jaxexo: interrupted", file=sys.stderr)
         return EXIT_CODE
+
+
+def run() -> None:
+    """The ``jaxexo`` command: ``main`` on the command line's arguments, its status the process's.
+    A Ctrl-C that main handled (its one line said) ends the process with 130 at once: one that
+    landed in code run from a string (a dataclass's or a namedtuple's generated methods, made by
+    exec or eval while the imports run) marks the interpreter as interrupted for good, and its
+    normal exit would then end the process by SIGINT whatever the status. Every file written is
+    whole (jaxexo.storage.atomic)."""
+    from jaxexo.cli.interrupt import EXIT_CODE
+
+    code = main()
+    if code == EXIT_CODE:
+        for stream in (sys.stdout, sys.stderr):
+            stream.flush()
+        os._exit(code)
+    sys.exit(code)
 
 
 def interrupted(e: BaseException) -> bool:

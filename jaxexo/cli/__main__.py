@@ -1,9 +1,7 @@
 """``python -m jaxexo.cli``: the ``jaxexo`` command."""
 
-import sys
-
 try:
-    from jaxexo.cli import main
+    from jaxexo.cli import run
 except RuntimeError as e:
     # Ctrl-C while the imports make a class arrives wrapped (Python 3.11 raises a RuntimeError from
     # an exception in __set_name__): Python's own interrupt, as a Ctrl-C anywhere else in them.
@@ -11,4 +9,4 @@ except RuntimeError as e:
         raise e.__cause__ from None
     raise
 
-sys.exit(main())
+run()
